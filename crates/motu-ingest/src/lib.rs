@@ -1,0 +1,1 @@
+//! motu-ingest

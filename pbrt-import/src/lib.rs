@@ -1,0 +1,1 @@
+//! pbrt-import
