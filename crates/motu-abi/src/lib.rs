@@ -1,1 +1,28 @@
-//! motu-abi
+//! The compiled traversal hierarchy as flat, `Pod`, `#[repr(C)]` tables: what the compiler
+//! writes, the package stores, the CPU oracle walks and the GPU shaders read. This crate is the
+//! one source of truth for those layouts: `shaders/generated/abi.glsl` is generated from
+//! [`glsl::abi_glsl`] and a test fails if the committed file differs (set
+//! `MOTU_UPDATE_GLSL=1` to rewrite it).
+//!
+//! # The hierarchy
+//! - A **TLAS** ([`TlasRecord`], even level) holds instances ([`InstanceRecord`]), each a BLAS
+//!   with a `tlas_from_blas` transform. A TLAS's instances are the contiguous range
+//!   `instance_base .. instance_base + instance_count` of the instance table; on the GPU the
+//!   instance index within the TLAS (`gl_InstanceID`, < 2^24) is added to `instance_base`
+//!   (a 32-bit per-TLAS record table: node ids never travel in 24-bit fields).
+//! - A **BLAS** ([`BlasRecord`], odd level) holds either triangles (one geometry per compiled
+//!   mesh, [`GeometryRecord`]) or AABBs: **programmable instances** ([`PiRecord`]), each
+//!   continuing traversal in another TLAS (multi-level instancing) or in a LOD selector.
+//!   Vulkan forbids both kinds in one BLAS, so they never mix.
+//! - A **LOD selector** ([`LodSelectorRecord`]) picks one of `level_count` TLASes (finest
+//!   first) by projected size ([`lod::select_lod`]).
+//! - **Meshes** ([`MeshRecord`]) are compiled meshes: every source mesh (LOD 0) and its
+//!   simplified levels; the hit identity is `(source_mesh, primitive)` plus the LOD.
+
+pub mod aov;
+pub mod camera;
+pub mod glsl;
+pub mod lod;
+mod records;
+
+pub use records::*;

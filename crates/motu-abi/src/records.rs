@@ -1,0 +1,260 @@
+//! The table records. All are `Pod`, 16-byte multiples, with explicit padding, so std430 GLSL
+//! structs have identical offsets (checked by `glsl::tests`).
+
+use bytemuck::{Pod, Zeroable};
+
+/// A sentinel for "none" in 32-bit index fields.
+pub const NONE_U32: u32 = u32::MAX;
+/// A sentinel for "none" in 64-bit offset fields.
+pub const NONE_U64: u64 = u64::MAX;
+
+/// Kinds of BLAS.
+pub const BLAS_TRIANGLES: u32 = 0;
+pub const BLAS_AABBS: u32 = 1;
+
+/// Kinds of programmable instance.
+pub const PI_TLAS: u32 = 0;
+pub const PI_LOD_SELECTOR: u32 = 1;
+
+/// Flag bits of [`InstanceRecord::flags`] and [`MeshRecord::flags`].
+pub const FLAG_NEEDS_ANY_HIT: u32 = 1; // alpha-tested: triangles may not be forced opaque
+pub const FLAG_HAS_NORMALS: u32 = 2;
+pub const FLAG_HAS_UVS: u32 = 4;
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct TlasRecord {
+    pub instance_base: u32,
+    pub instance_count: u32,
+    /// Even: 0 for the root.
+    pub level: u32,
+    /// The element this TLAS belongs to, or `NONE_U32` when shared by several.
+    pub element: u32,
+    /// Bounds in this TLAS's space.
+    pub bounds_min: [f32; 3],
+    pub _pad0: u32,
+    pub bounds_max: [f32; 3],
+    pub _pad1: u32,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct InstanceRecord {
+    /// Row-major 3×4 (the `VkTransformMatrixKHR` layout).
+    pub tlas_from_blas: [f32; 12],
+    pub blas: u32,
+    pub flags: u32,
+    pub _pad: [u32; 2],
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct BlasRecord {
+    /// `BLAS_TRIANGLES` or `BLAS_AABBS`.
+    pub kind: u32,
+    /// First entry in the geometry table (triangles) or the PI table (AABBs).
+    pub item_base: u32,
+    pub item_count: u32,
+    /// Odd.
+    pub level: u32,
+    pub bounds_min: [f32; 3],
+    /// Total triangles (triangle BLAS) or AABBs.
+    pub primitive_count: u32,
+    pub bounds_max: [f32; 3],
+    pub _pad: u32,
+}
+
+/// Geometry `j` of a triangle BLAS is `geometries[item_base + j]`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct GeometryRecord {
+    /// Index into the compiled mesh table.
+    pub mesh: u32,
+    pub _pad: [u32; 3],
+}
+
+/// A programmable instance: an AABB in its BLAS that continues traversal elsewhere.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct PiRecord {
+    /// Transforms a ray from the BLAS's space into the child's space (stored inverted so no
+    /// shader ever inverts a matrix).
+    pub child_from_parent: [f32; 12],
+    pub aabb_min: [f32; 3],
+    /// `PI_TLAS` or `PI_LOD_SELECTOR`.
+    pub kind: u32,
+    pub aabb_max: [f32; 3],
+    /// A TLAS id or a LOD-selector id, by `kind`.
+    pub target: u32,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct LodSelectorRecord {
+    /// Bounding sphere in the selector's space, used for projected size.
+    pub center: [f32; 3],
+    pub radius: f32,
+    /// Levels are `lod_levels[level_base .. level_base + level_count]` (TLAS ids), finest first.
+    pub level_base: u32,
+    pub level_count: u32,
+    pub source_mesh: u32,
+    pub _pad: u32,
+}
+
+/// A compiled mesh: positions (`[f32; 3]`, tightly packed) and `u32` triangle indices, stored
+/// in package chunks ready for upload.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct MeshRecord {
+    /// The mesh id in the imported scene (stable across compile settings).
+    pub source_mesh: u32,
+    /// 0 = the source mesh itself.
+    pub lod: u32,
+    pub material: u32,
+    pub flags: u32,
+    pub vertex_count: u32,
+    pub triangle_count: u32,
+    /// Package chunk holding the data.
+    pub chunk: u32,
+    pub element: u32,
+    pub positions_offset: u64,
+    pub indices_offset: u64,
+    /// `NONE_U64` when the mesh has no normals.
+    pub normals_offset: u64,
+    pub _pad: u64,
+    pub bounds_min: [f32; 3],
+    pub _pad1: u32,
+    pub bounds_max: [f32; 3],
+    pub _pad2: u32,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct MaterialRecord {
+    pub base_color: [f32; 3],
+    pub opacity: f32,
+}
+
+/// Applies a row-major 3×4 transform to a point.
+#[inline]
+pub fn xform_point(m: &[f32; 12], p: [f32; 3]) -> [f32; 3] {
+    [
+        m[0] * p[0] + m[1] * p[1] + m[2] * p[2] + m[3],
+        m[4] * p[0] + m[5] * p[1] + m[6] * p[2] + m[7],
+        m[8] * p[0] + m[9] * p[1] + m[10] * p[2] + m[11],
+    ]
+}
+
+/// Applies the linear part of a row-major 3×4 transform to a direction.
+#[inline]
+pub fn xform_vector(m: &[f32; 12], v: [f32; 3]) -> [f32; 3] {
+    [
+        m[0] * v[0] + m[1] * v[1] + m[2] * v[2],
+        m[4] * v[0] + m[5] * v[1] + m[6] * v[2],
+        m[8] * v[0] + m[9] * v[1] + m[10] * v[2],
+    ]
+}
+
+/// All tables of a compiled hierarchy, borrowed (from a `CompiledScene` in memory or from a
+/// mapped package), so the CPU oracle and the GPU uploader read one shape.
+#[derive(Clone, Copy, Debug)]
+pub struct HierarchyView<'a> {
+    pub root_tlas: u32,
+    pub tlases: &'a [TlasRecord],
+    pub instances: &'a [InstanceRecord],
+    pub blases: &'a [BlasRecord],
+    pub geometries: &'a [GeometryRecord],
+    pub pis: &'a [PiRecord],
+    pub lod_selectors: &'a [LodSelectorRecord],
+    pub lod_levels: &'a [u32],
+    pub meshes: &'a [MeshRecord],
+    pub materials: &'a [MaterialRecord],
+}
+
+/// A broken reference in a hierarchy (from a corrupt package or a compiler bug).
+#[derive(Debug, thiserror::Error)]
+#[error("hierarchy: {table}[{index}]: {reason}")]
+pub struct HierarchyError {
+    pub table: &'static str,
+    pub index: usize,
+    pub reason: String,
+}
+
+impl HierarchyView<'_> {
+    /// Checks every cross-table reference is in range, so traversal can index without panics.
+    pub fn check_references(&self) -> Result<(), HierarchyError> {
+        let err = |table, index, reason: String| {
+            Err(HierarchyError {
+                table,
+                index,
+                reason,
+            })
+        };
+        let in_range =
+            |base: u32, count: u32, len: usize| (base as u64 + count as u64) <= len as u64;
+        if self.root_tlas as usize >= self.tlases.len() {
+            return err(
+                "root",
+                0,
+                format!("root TLAS {} of {}", self.root_tlas, self.tlases.len()),
+            );
+        }
+        for (i, t) in self.tlases.iter().enumerate() {
+            if !in_range(t.instance_base, t.instance_count, self.instances.len()) {
+                return err("tlases", i, "instance range out of bounds".into());
+            }
+        }
+        for (i, inst) in self.instances.iter().enumerate() {
+            if inst.blas as usize >= self.blases.len() {
+                return err("instances", i, format!("BLAS {} out of range", inst.blas));
+            }
+        }
+        for (i, b) in self.blases.iter().enumerate() {
+            let len = if b.kind == BLAS_TRIANGLES {
+                self.geometries.len()
+            } else if b.kind == BLAS_AABBS {
+                self.pis.len()
+            } else {
+                return err("blases", i, format!("unknown kind {}", b.kind));
+            };
+            if !in_range(b.item_base, b.item_count, len) {
+                return err("blases", i, "item range out of bounds".into());
+            }
+        }
+        for (i, g) in self.geometries.iter().enumerate() {
+            if g.mesh as usize >= self.meshes.len() {
+                return err("geometries", i, format!("mesh {} out of range", g.mesh));
+            }
+        }
+        for (i, p) in self.pis.iter().enumerate() {
+            let ok = match p.kind {
+                PI_TLAS => (p.target as usize) < self.tlases.len(),
+                PI_LOD_SELECTOR => (p.target as usize) < self.lod_selectors.len(),
+                _ => false,
+            };
+            if !ok {
+                return err(
+                    "pis",
+                    i,
+                    format!("kind {} target {} invalid", p.kind, p.target),
+                );
+            }
+        }
+        for (i, s) in self.lod_selectors.iter().enumerate() {
+            if s.level_count == 0 || !in_range(s.level_base, s.level_count, self.lod_levels.len()) {
+                return err("lod_selectors", i, "level range invalid".into());
+            }
+        }
+        for (i, &t) in self.lod_levels.iter().enumerate() {
+            if t as usize >= self.tlases.len() {
+                return err("lod_levels", i, format!("TLAS {t} out of range"));
+            }
+        }
+        for (i, m) in self.meshes.iter().enumerate() {
+            if m.material as usize >= self.materials.len() {
+                return err("meshes", i, format!("material {} out of range", m.material));
+            }
+        }
+        Ok(())
+    }
+}
