@@ -34,7 +34,8 @@ struct InstanceRecord {
     float tlas_from_blas[12];
     uint blas;
     uint flags;
-    uint _pad[2];
+    uint element;
+    uint _pad;
 };
 
 // 48 bytes

@@ -84,7 +84,8 @@ pub fn structs() -> Vec<StructDef> {
                 (FloatArray(12), tlas_from_blas),
                 (Uint, blas),
                 (Uint, flags),
-                (UintArray(2), _pad)
+                (Uint, element),
+                (Uint, _pad)
             ]
         ),
         def!(

@@ -28,7 +28,8 @@ pub struct TlasRecord {
     pub instance_count: u32,
     /// Even: 0 for the root.
     pub level: u32,
-    /// The element this TLAS belongs to, or `NONE_U32` when shared by several.
+    /// The element this TLAS belongs to, or `NONE_U32` when shared by several; a PI into a
+    /// TLAS of an unselected element is dropped by `--subset`.
     pub element: u32,
     /// Bounds in this TLAS's space.
     pub bounds_min: [f32; 3],
@@ -44,7 +45,10 @@ pub struct InstanceRecord {
     pub tlas_from_blas: [f32; 12],
     pub blas: u32,
     pub flags: u32,
-    pub _pad: [u32; 2],
+    /// The element this placement belongs to (root-level items always carry one), or
+    /// `NONE_U32` below the root where the parent decides; `--subset` filters on it.
+    pub element: u32,
+    pub _pad: u32,
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]

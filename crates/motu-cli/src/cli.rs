@@ -1,0 +1,301 @@
+//! The argument grammar (clap derive), one struct per subcommand.
+
+use crate::size::parse_size;
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+#[derive(Parser, Debug)]
+#[command(name = "motu", version, about = "Make Moana-scale instanced scenes usable on one GPU", long_about = None)]
+pub struct Cli {
+    /// More logging (-v info, -vv debug, -vvv trace); MOTU_LOG overrides.
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    pub verbose: u8,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// List Vulkan devices, their ray-tracing support, limits and heap budgets.
+    Devices(DevicesArgs),
+    /// Write a procedural pbrt scene (DIR/scene.pbrt + PLY files).
+    Gen(GenArgs),
+    /// Import a pbrt-v3/v4 or OBJ scene into a compiled, chunked scene package.
+    Import(ImportArgs),
+    /// Show a package's structure and sizes.
+    Info(InfoArgs),
+    /// Check every checksum, offset and padding byte of a package.
+    Verify(VerifyArgs),
+    /// VRAM-budget report: what a scene costs on a GPU and what fits.
+    Report(ReportArgs),
+    /// Render a package headless to PNG (and AOV/stats).
+    Render(RenderArgs),
+    /// Compare two AOV files pixel by pixel.
+    Compare(CompareArgs),
+    /// Repeatable measurements.
+    Bench(BenchArgs),
+    /// Generate the default scene, import it and render demo.png, showing where time and memory went.
+    Demo(DemoArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct DevicesArgs {
+    /// One JSON object on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GenKindArg {
+    Forest,
+    Sphereflake,
+    LodGrid,
+    Island,
+}
+
+#[derive(Args, Debug)]
+pub struct GenArgs {
+    pub kind: GenKindArg,
+    /// Output directory (created).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// forest: instancing levels above the leaves (the thesis layout is 3).
+    #[arg(long)]
+    pub levels: Option<u32>,
+    /// forest: copies per level as a WxH grid (the thesis layout is 4x3).
+    #[arg(long)]
+    pub grid: Option<String>,
+    /// forest: leaves per tree.
+    #[arg(long)]
+    pub leaves: Option<u32>,
+    /// sphereflake: recursion depth.
+    #[arg(long)]
+    pub depth: Option<u32>,
+    /// island: 1 approximates Moana's counts (~28M instances, ~36 GB of pbrt).
+    #[arg(long)]
+    pub scale: Option<f64>,
+    /// lod-grid: grid side (instances per row).
+    #[arg(long)]
+    pub count: Option<u32>,
+    /// lod-grid: triangles of the dense mesh (approximate).
+    #[arg(long)]
+    pub triangles: Option<u32>,
+    /// Write standard single-level pbrt (no nested ObjectInstance).
+    #[arg(long)]
+    pub flat: bool,
+    /// Random seed (generation is deterministic for a seed).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Image width written to the Film.
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height written to the Film.
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Worker threads (island placement files are written in parallel).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum LevelsArg {
+    Ml,
+    Sl,
+    N(u32),
+}
+
+fn parse_levels(s: &str) -> Result<LevelsArg, String> {
+    match s {
+        "ml" => Ok(LevelsArg::Ml),
+        "sl" => Ok(LevelsArg::Sl),
+        n => match n.parse::<u32>() {
+            Ok(v) if v >= 1 => Ok(LevelsArg::N(v)),
+            _ => Err(format!("'{s}': expected ml, sl or a number of levels ≥ 1")),
+        },
+    }
+}
+
+fn parse_threshold(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if (0.0..=1.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("{v} is not a fraction in [0, 1]"))
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct ImportArgs {
+    /// The entry .pbrt (or .pbrt.gz) file, or an .obj file.
+    pub scene: PathBuf,
+    /// Output package path.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// ml: keep the instancing graph; sl: flatten to one level; N: at most N levels.
+    #[arg(long, default_value = "ml", value_parser = parse_levels)]
+    pub levels: LevelsArg,
+    /// Instances per TLAS before it is split (default: the spec's 2^24−1).
+    #[arg(long, default_value_t = (1 << 24) - 1)]
+    pub max_instances: u32,
+    /// Build N LOD levels for heavy meshes.
+    #[arg(long)]
+    pub lod: Option<u32>,
+    /// Compress chunks with zstd at this level (1–22).
+    #[arg(long)]
+    pub zstd: Option<i32>,
+    /// Warn about missing referenced files and skip their shapes instead of failing.
+    #[arg(long)]
+    pub allow_missing: bool,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Keep only these elements (comma-separated names).
+    #[arg(long, value_delimiter = ',')]
+    pub subset: Vec<String>,
+    /// Force the pbrt version instead of detecting it.
+    #[arg(long)]
+    pub pbrt_version: Option<u32>,
+    /// Chunk target size.
+    #[arg(long, value_parser = parse_size, default_value = "64MiB")]
+    pub chunk_size: u64,
+    /// One JSON object on stdout describing the import.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct InfoArgs {
+    pub package: PathBuf,
+    #[arg(long)]
+    pub json: bool,
+    /// List the scene's elements with instance and triangle counts.
+    #[arg(long)]
+    pub elements: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct VerifyArgs {
+    pub package: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub struct ReportArgs {
+    pub package: PathBuf,
+    /// VRAM budget to fit the scene into.
+    #[arg(long, value_parser = parse_size)]
+    pub budget: Option<u64>,
+    /// Vulkan device index.
+    #[arg(long, env = "MOTU_DEVICE")]
+    pub device: Option<usize>,
+    #[arg(long)]
+    pub json: bool,
+    /// Write a self-contained HTML report.
+    #[arg(long)]
+    pub html: Option<PathBuf>,
+    /// Build the structures to measure real (compacted) sizes.
+    #[arg(long)]
+    pub measure: bool,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BackendArg {
+    Pipeline,
+    Query,
+    Cpu,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ViewArg {
+    Shaded,
+    Heatmap,
+    Lod,
+    Ids,
+}
+
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    pub package: PathBuf,
+    /// Output PNG.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Camera name (default: the scene's active camera).
+    #[arg(long)]
+    pub camera: Option<String>,
+    #[arg(long)]
+    pub width: Option<u32>,
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Default: query where available, else pipeline.
+    #[arg(long, value_enum)]
+    pub backend: Option<BackendArg>,
+    #[arg(long, value_enum, default_value = "shaded")]
+    pub view: ViewArg,
+    /// Write the per-pixel hit record (FORMAT.md, "AOV file").
+    #[arg(long)]
+    pub aov: Option<PathBuf>,
+    #[arg(long, value_parser = parse_size)]
+    pub vram_budget: Option<u64>,
+    /// Cap on VkDeviceMemory allocations (lower than the device's, for testing).
+    #[arg(long)]
+    pub max_allocations: Option<u32>,
+    /// Build only what rays touch and evict under the budget.
+    #[arg(long)]
+    pub stream: bool,
+    /// Frames to render (timing; with --stream, along the camera path).
+    #[arg(long, default_value_t = 1)]
+    pub frames: u32,
+    /// Write statistics JSON.
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
+    /// Render only these elements (comma-separated).
+    #[arg(long, value_delimiter = ',')]
+    pub subset: Vec<String>,
+    /// Force every LOD selector to this level.
+    #[arg(long)]
+    pub lod: Option<u32>,
+    /// Traversal stack entries per ray.
+    #[arg(long, default_value_t = 16)]
+    pub stack_size: u32,
+    /// Vulkan device index.
+    #[arg(long, env = "MOTU_DEVICE")]
+    pub device: Option<usize>,
+}
+
+#[derive(Args, Debug)]
+pub struct CompareArgs {
+    pub a: PathBuf,
+    pub b: PathBuf,
+    /// Exit non-zero above this fraction of mismatched pixels.
+    #[arg(long, default_value = "0.001", value_parser = parse_threshold)]
+    pub max_mismatch: f64,
+    /// Relative depth tolerance.
+    #[arg(long, default_value_t = 1e-3)]
+    pub depth_epsilon: f32,
+    /// Write a difference image.
+    #[arg(long)]
+    pub diff: Option<PathBuf>,
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// Suite to run.
+    #[arg(default_value = "default")]
+    pub suite: String,
+    #[arg(long)]
+    pub json: bool,
+    /// Where to keep generated scenes and packages.
+    #[arg(long)]
+    pub work_dir: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub struct DemoArgs {
+    /// Working directory for the generated scene and package.
+    #[arg(long, default_value = "demo-out")]
+    pub work_dir: PathBuf,
+    /// The image to write.
+    #[arg(short, long, default_value = "demo.png")]
+    pub output: PathBuf,
+}

@@ -1,0 +1,83 @@
+//! Human sizes on the command line: `64MiB`, `8GiB`, `1.5GB`, plain bytes.
+
+/// Parses a size in bytes. Binary (`KiB`, `MiB`, `GiB`, `TiB`) and decimal (`KB`, `MB`, `GB`,
+/// `TB`) suffixes, case-insensitive; `K`/`M`/`G`/`T` alone are binary.
+pub fn parse_size(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let split = t
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(t.len());
+    let (num, unit) = t.split_at(split);
+    if num.is_empty() {
+        return Err(format!(
+            "'{s}' is not a size (expected e.g. 64MiB, 8GiB or 1048576)"
+        ));
+    }
+    let mult: u64 =
+        match unit.trim().to_ascii_lowercase().as_str() {
+            "" | "b" => 1,
+            "k" | "kib" => 1 << 10,
+            "m" | "mib" => 1 << 20,
+            "g" | "gib" => 1 << 30,
+            "t" | "tib" => 1 << 40,
+            "kb" => 1_000,
+            "mb" => 1_000_000,
+            "gb" => 1_000_000_000,
+            "tb" => 1_000_000_000_000,
+            other => return Err(format!(
+                "unknown size unit '{other}' in '{s}' (use B, KiB, MiB, GiB, TiB, KB, MB, GB, TB)"
+            )),
+        };
+    if num.contains('.') {
+        let v: f64 = num.parse().map_err(|_| format!("'{s}' is not a size"))?;
+        let bytes = v * mult as f64;
+        if !(0.0..1.8e19).contains(&bytes) {
+            return Err(format!("'{s}' is out of range"));
+        }
+        Ok(bytes.round() as u64)
+    } else {
+        let v: u64 = num.parse().map_err(|_| format!("'{s}' is not a size"))?;
+        v.checked_mul(mult)
+            .ok_or_else(|| format!("'{s}' is out of range"))
+    }
+}
+
+/// `1536` → `1.5 KiB`.
+pub fn format_size(bytes: u64) -> String {
+    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
+    let mut v = bytes as f64;
+    let mut u = 0;
+    while v >= 1024.0 && u + 1 < UNITS.len() {
+        v /= 1024.0;
+        u += 1;
+    }
+    if u == 0 {
+        format!("{bytes} B")
+    } else {
+        format!("{v:.1} {}", UNITS[u])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes() {
+        for (s, want) in [
+            ("64MiB", 64 << 20),
+            ("8GiB", 8 << 30),
+            ("1048576", 1 << 20),
+            ("1.5KiB", 1536),
+            ("2gb", 2_000_000_000),
+            ("16 M", 16 << 20),
+        ] {
+            assert_eq!(parse_size(s), Ok(want), "{s}");
+        }
+        for bad in ["", "MiB", "12XB", "-1", "99999999999TiB"] {
+            assert!(parse_size(bad).is_err(), "{bad}");
+        }
+        assert_eq!(format_size(1536), "1.5 KiB");
+        assert_eq!(format_size(12), "12 B");
+    }
+}

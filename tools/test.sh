@@ -1,0 +1,16 @@
+#!/usr/bin/env bash
+# The README's test command: installs what is missing, then runs every check CI runs.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash tools/setup.sh
+export CARGO_TERM_COLOR=${CARGO_TERM_COLOR:-never}
+# GPU tests must run (lavapipe is installed above) with validation on: a missing device or any
+# validation message fails them instead of skipping.
+export MOTU_REQUIRE_GPU=1 MOTU_VALIDATION=1
+echo "== cargo fmt --check"
+cargo fmt --all -- --check
+echo "== cargo clippy -D warnings"
+cargo clippy --workspace --all-targets --locked -- -D warnings
+echo "== cargo test (unit, integration, doc; benches run once each in test mode)"
+cargo test --workspace --all-targets --locked
+cargo test --workspace --doc --locked
