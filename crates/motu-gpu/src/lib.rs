@@ -1,1 +1,53 @@
-//! motu-gpu
+//! motu-gpu: the Vulkan device layer, and the only crate in motu that uses `ash`.
+//!
+//! Everything public is safe Rust: a [`Context`] (instance + device + queue, validation
+//! messages collected), RAII resources ([`Buffer`], [`DeviceMemory`], [`ComputePipeline`],
+//! [`BindingSet`], [`TimestampQueries`]), fenced one-shot submission ([`CommandRecorder`]),
+//! device reports for `motu devices` ([`list_devices`]) and the embedded SPIR-V ([`shaders`]).
+//!
+//! Invariants: every Vulkan handle is owned by one RAII value that destroys it; every resource
+//! holds an `Arc` to the device, so the device is destroyed last; resources recorded into a
+//! command buffer are borrowed until the submission's fence signalled.
+//!
+//! Environment: `MOTU_DEVICE` (index), `MOTU_VALIDATION` (`1` forces the validation layer; any
+//! validation error then fails [`Context::check_validation`] and the tests), `MOTU_MAX_*`
+//! (lower limits for testing, see [`LimitOverrides`]), `MOTU_REQUIRE_GPU` (tests fail instead of
+//! skipping without a device).
+
+mod accel;
+mod command;
+mod context;
+mod error;
+mod instance;
+mod limits;
+mod memory;
+mod pipeline;
+mod probe;
+mod query;
+mod report;
+pub mod shaders;
+pub mod testing;
+
+#[cfg(test)]
+mod gpu_tests;
+
+pub use accel::{
+    AsBuildFlags, AsBuildSizes, BlasGeometry, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
+    INSTANCE_RECORD_SIZE_BYTES,
+};
+pub use command::CommandRecorder;
+pub use context::{Context, ContextOptions, Requirement, ENV_DEVICE};
+pub use error::{GpuError, Result};
+pub use instance::{ValidationRequest, ENV_VALIDATION};
+pub use limits::{
+    parse_size, LimitOverrides, Limits, ENV_MAX_ALLOCATIONS, ENV_MAX_ALLOCATION_SIZE,
+    ENV_MAX_INSTANCE_COUNT, ENV_MAX_PRIMITIVE_COUNT, ENV_MAX_STORAGE_BUFFER_RANGE,
+};
+pub use memory::{
+    Buffer, BufferDesc, BufferUsage, DeviceAddress, DeviceMemory, MemoryLocation,
+    MemoryRequirements,
+};
+pub use pipeline::{BindingSet, ComputePipeline, ComputePipelineDesc};
+pub use probe::{Caps, HeapReport};
+pub use query::TimestampQueries;
+pub use report::{list_devices, DeviceReport};

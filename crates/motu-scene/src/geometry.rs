@@ -74,8 +74,9 @@ pub struct MeshLocation {
 
 /// Holds mesh data outside the skeleton.
 pub trait GeometryStore: Send + Sync {
-    /// Stores a mesh's data and returns where it went.
-    fn store(&mut self, id: MeshId, data: &MeshData) -> Result<MeshLocation, String>;
+    /// Stores a mesh's data and returns where it went. `group` is a locality hint (the mesh's
+    /// element): stores keep a group's data together so subsets read only their own chunks.
+    fn store(&mut self, id: MeshId, group: u32, data: &MeshData) -> Result<MeshLocation, String>;
     /// Reads a mesh back.
     fn load(&self, id: MeshId, at: MeshLocation) -> Result<MeshData, String>;
 }
@@ -93,7 +94,7 @@ impl InMemoryGeometry {
 }
 
 impl GeometryStore for InMemoryGeometry {
-    fn store(&mut self, _id: MeshId, data: &MeshData) -> Result<MeshLocation, String> {
+    fn store(&mut self, _id: MeshId, _group: u32, data: &MeshData) -> Result<MeshLocation, String> {
         self.meshes.push(data.clone());
         Ok(MeshLocation {
             a: (self.meshes.len() - 1) as u64,

@@ -4,7 +4,7 @@ use crate::{
     Aabb, Camera, ElementId, GeometryStore, Light, Material, MaterialId, MeshData, MeshId,
     MeshLocation, PrototypeId, Transform34,
 };
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::ops::Range;
 
 #[derive(Debug, thiserror::Error)]
@@ -69,7 +69,7 @@ pub struct Element {
 }
 
 /// Counts that `motu info` reports.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SceneStats {
     /// Instance edges in the graph.
     pub instances: u64,

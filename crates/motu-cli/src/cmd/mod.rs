@@ -3,6 +3,8 @@
 use crate::cli::{Cli, Command};
 use anyhow::bail;
 
+mod devices;
+
 /// An honest failure for a command whose issue has not landed yet.
 fn not_implemented(what: &str, issue: u32) -> anyhow::Result<()> {
     bail!("{what} is not implemented yet: see issue {issue}")
@@ -10,7 +12,7 @@ fn not_implemented(what: &str, issue: u32) -> anyhow::Result<()> {
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
-        Command::Devices(_) => not_implemented("motu devices", 2),
+        Command::Devices(a) => devices::run(a),
         Command::Gen(_) => not_implemented("motu gen", 2),
         Command::Import(_) => not_implemented("motu import", 4),
         Command::Info(_) => not_implemented("motu info", 4),

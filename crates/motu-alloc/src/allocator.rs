@@ -1,0 +1,820 @@
+//! The budgeted block sub-allocator.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+
+use serde::Serialize;
+
+use crate::error::{AllocError, LimitsError};
+use crate::kind::{AllocKind, AllocationId, BlockId, MemoryClass};
+use crate::limits::{standard_block_size_bytes, AllocLimits, AllocPolicy, MIB};
+use crate::stats::{AllocReport, ClassStats, KindStats};
+
+/// Free ranges tried in best-fit order before jumping to one that fits whatever its padding:
+/// bounds the work per allocation when many ranges are just too small once aligned.
+const PADDED_PROBES: usize = 8;
+
+/// What the caller wants.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct AllocRequest {
+    /// Bytes (the `VkMemoryRequirements::size` of the buffer).
+    pub size_bytes: u64,
+    /// Offset alignment: a non-zero power of two (`VkMemoryRequirements::alignment`, raised to
+    /// 256 for AS storage and to `minAccelerationStructureScratchOffsetAlignment` for scratch).
+    pub alignment_bytes: u64,
+    /// What it is for (accounting only).
+    pub kind: AllocKind,
+    /// Which pool it comes from.
+    pub class: MemoryClass,
+}
+
+impl AllocRequest {
+    /// A device-local request.
+    pub fn device_local(kind: AllocKind, size_bytes: u64, alignment_bytes: u64) -> Self {
+        AllocRequest {
+            size_bytes,
+            alignment_bytes,
+            kind,
+            class: MemoryClass::DeviceLocal,
+        }
+    }
+
+    /// A host-visible request.
+    pub fn host_visible(kind: AllocKind, size_bytes: u64, alignment_bytes: u64) -> Self {
+        AllocRequest {
+            size_bytes,
+            alignment_bytes,
+            kind,
+            class: MemoryClass::HostVisible,
+        }
+    }
+}
+
+/// A live sub-allocation: bind the buffer to `block`'s memory at `offset_bytes`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub struct Allocation {
+    /// Handle for [`Allocator::free`].
+    pub id: AllocationId,
+    /// The block (one `VkDeviceMemory`).
+    pub block: BlockId,
+    /// Offset inside the block, a multiple of the requested alignment.
+    pub offset_bytes: u64,
+    /// Bytes, as requested.
+    pub size_bytes: u64,
+    /// What it is for.
+    pub kind: AllocKind,
+    /// Which pool it came from.
+    pub class: MemoryClass,
+}
+
+/// What the GPU layer must do to the real memory, in order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum BlockEvent {
+    /// Call `vkAllocateMemory` of `size_bytes` in a memory type of `class` for `block`.
+    Created {
+        /// The new block.
+        block: BlockId,
+        /// Its size.
+        size_bytes: u64,
+        /// Which memory type class.
+        class: MemoryClass,
+        /// Whether it holds exactly one allocation larger than the standard block.
+        dedicated: bool,
+    },
+    /// Call `vkFreeMemory` on `block`'s memory: nothing lives in it any more.
+    Destroyed {
+        /// The block.
+        block: BlockId,
+        /// Its size.
+        size_bytes: u64,
+        /// Which memory type class.
+        class: MemoryClass,
+    },
+}
+
+#[derive(Debug)]
+struct Block {
+    class: MemoryClass,
+    size_bytes: u64,
+    /// Holds exactly one allocation at offset 0 and is destroyed when it is freed.
+    dedicated: bool,
+    /// Free ranges: offset -> size; adjacent ranges are always coalesced.
+    free_by_offset: BTreeMap<u64, u64>,
+    used_bytes: u64,
+    live_count: u32,
+}
+
+#[derive(Debug, Default)]
+struct Pool {
+    /// Every free range of every non-dedicated block of the pool, for best fit across blocks
+    /// in O(log n): (size, block, offset).
+    free_by_size: BTreeSet<(u64, BlockId, u64)>,
+    block_count: u32,
+    dedicated_block_count: u32,
+    block_bytes: u64,
+    in_use_bytes: u64,
+    /// Non-dedicated blocks without live allocations (kept to avoid churn).
+    empty_blocks: BTreeSet<BlockId>,
+    peak_block_bytes: u64,
+    peak_in_use_bytes: u64,
+}
+
+/// Budgeted block sub-allocator (see the crate docs for the design).
+#[derive(Debug)]
+pub struct Allocator {
+    limits: AllocLimits,
+    policy: AllocPolicy,
+    standard_block_bytes: [u64; 2],
+    blocks: HashMap<BlockId, Block>,
+    pools: [Pool; 2],
+    live: HashMap<AllocationId, Allocation>,
+    next_block: u32,
+    next_allocation: u64,
+    events: Vec<BlockEvent>,
+    kinds: [KindStats; 8],
+    peak_block_count: u32,
+    peak_budgeted_block_bytes: u64,
+    peak_budgeted_in_use_bytes: u64,
+}
+
+impl Allocator {
+    /// An empty allocator; no block exists until the first allocation.
+    pub fn new(limits: AllocLimits, policy: AllocPolicy) -> Result<Self, LimitsError> {
+        for (name, value) in [
+            (
+                "max_allocation_count",
+                u64::from(limits.max_allocation_count),
+            ),
+            (
+                "max_allocation_size_bytes",
+                limits.max_allocation_size_bytes,
+            ),
+            ("budget_bytes", limits.budget_bytes),
+        ] {
+            if value == 0 {
+                return Err(LimitsError::Zero { name });
+            }
+        }
+        if policy.block_size_bytes == Some(0) {
+            return Err(LimitsError::Zero {
+                name: "block_size_bytes",
+            });
+        }
+        let mut allocator = Allocator {
+            limits,
+            policy,
+            standard_block_bytes: [0; 2],
+            blocks: HashMap::new(),
+            pools: Default::default(),
+            live: HashMap::new(),
+            next_block: 0,
+            next_allocation: 0,
+            events: Vec::new(),
+            kinds: Default::default(),
+            peak_block_count: 0,
+            peak_budgeted_block_bytes: 0,
+            peak_budgeted_in_use_bytes: 0,
+        };
+        for class in MemoryClass::ALL {
+            let budget = allocator.budget_bytes(class);
+            let max_block = limits.max_allocation_size_bytes.min(budget).max(1);
+            allocator.standard_block_bytes[class.index()] = match policy.block_size_bytes {
+                Some(size) => size.min(max_block),
+                None => standard_block_size_bytes(
+                    budget,
+                    limits.max_allocation_count,
+                    limits.max_allocation_size_bytes,
+                ),
+            };
+        }
+        tracing::debug!(
+            budget_bytes = limits.budget_bytes,
+            max_allocation_count = limits.max_allocation_count,
+            device_block_bytes = allocator.standard_block_bytes[0],
+            host_block_bytes = allocator.standard_block_bytes[1],
+            "allocator created"
+        );
+        Ok(allocator)
+    }
+
+    /// The limits in force.
+    pub fn limits(&self) -> AllocLimits {
+        self.limits
+    }
+
+    /// The policy in force.
+    pub fn policy(&self) -> AllocPolicy {
+        self.policy
+    }
+
+    /// The standard block size of a class.
+    pub fn standard_block_bytes(&self, class: MemoryClass) -> u64 {
+        self.standard_block_bytes[class.index()]
+    }
+
+    /// Whether the class's blocks count against `budget_bytes`.
+    pub fn counts_against_budget(&self, class: MemoryClass) -> bool {
+        class == MemoryClass::DeviceLocal || self.policy.host_visible_counts_against_budget
+    }
+
+    /// The budget that the class's blocks count against.
+    pub fn budget_bytes(&self, class: MemoryClass) -> u64 {
+        if self.counts_against_budget(class) {
+            self.limits.budget_bytes
+        } else {
+            self.limits.host_visible_budget_bytes
+        }
+    }
+
+    /// Bytes of blocks that count against the same budget as `class`.
+    pub fn reserved_bytes(&self, class: MemoryClass) -> u64 {
+        self.budget_group(class)
+            .map(|c| self.pools[c.index()].block_bytes)
+            .sum()
+    }
+
+    /// Bytes of live allocations that count against the same budget as `class`.
+    pub fn in_use_bytes(&self, class: MemoryClass) -> u64 {
+        self.budget_group(class)
+            .map(|c| self.pools[c.index()].in_use_bytes)
+            .sum()
+    }
+
+    /// Blocks that exist now, all classes.
+    pub fn block_count(&self) -> u32 {
+        self.pools.iter().map(|pool| pool.block_count).sum()
+    }
+
+    /// Live allocations, all classes.
+    pub fn live_allocation_count(&self) -> usize {
+        self.live.len()
+    }
+
+    /// A live allocation.
+    pub fn allocation(&self, id: AllocationId) -> Option<&Allocation> {
+        self.live.get(&id)
+    }
+
+    /// Size of a block that exists.
+    pub fn block_size_bytes(&self, block: BlockId) -> Option<u64> {
+        self.blocks.get(&block).map(|b| b.size_bytes)
+    }
+
+    /// Block events not yet taken, oldest first. Apply them in order after every
+    /// [`alloc`](Self::alloc), [`free`](Self::free) or [`trim`](Self::trim): a `Created` block
+    /// must exist before the allocation returned with it is bound.
+    pub fn drain_events(&mut self) -> std::vec::Drain<'_, BlockEvent> {
+        self.events.drain(..)
+    }
+
+    /// Whether events are waiting.
+    pub fn has_pending_events(&self) -> bool {
+        !self.events.is_empty()
+    }
+
+    fn budget_group(&self, class: MemoryClass) -> impl Iterator<Item = MemoryClass> + '_ {
+        let counted = self.counts_against_budget(class);
+        MemoryClass::ALL
+            .into_iter()
+            .filter(move |&c| self.counts_against_budget(c) == counted)
+    }
+
+    /// Allocates `request.size_bytes` at an offset aligned to `request.alignment_bytes`.
+    ///
+    /// Best fit over the free ranges of the class's blocks; if none fits, a new block
+    /// (standard size, or a dedicated block of exactly the request's size when it is larger
+    /// than the standard block) after releasing kept empty blocks if the budget or the count
+    /// cap requires it. Never exceeds the budget or the count cap.
+    pub fn alloc(&mut self, request: AllocRequest) -> Result<Allocation, AllocError> {
+        let AllocRequest {
+            size_bytes,
+            alignment_bytes,
+            kind,
+            class,
+        } = request;
+        if size_bytes == 0 {
+            return Err(AllocError::ZeroSize { kind });
+        }
+        if !alignment_bytes.is_power_of_two() {
+            return Err(AllocError::BadAlignment {
+                alignment_bytes,
+                kind,
+            });
+        }
+        let max_allocation_size = self
+            .limits
+            .max_allocation_size_bytes
+            .min(self.budget_bytes(class));
+        if size_bytes > max_allocation_size {
+            return Err(AllocError::TooLarge {
+                requested: size_bytes,
+                max_allocation_size,
+                kind,
+            });
+        }
+        let standard = self.standard_block_bytes[class.index()];
+        let placed = if size_bytes <= standard {
+            match self.find_fit(class, size_bytes, alignment_bytes) {
+                Some(fit) => fit,
+                None => {
+                    let block = self.create_block(request, standard, false)?;
+                    let size = self.blocks.get(&block).map_or(0, |b| b.size_bytes);
+                    // A fresh block is one free range at offset 0, which fits any alignment.
+                    Fit {
+                        block,
+                        range_offset: 0,
+                        range_size: size,
+                        offset: 0,
+                    }
+                }
+            }
+        } else {
+            let block = self.create_block(request, size_bytes, true)?;
+            Fit {
+                block,
+                range_offset: 0,
+                range_size: size_bytes,
+                offset: 0,
+            }
+        };
+        self.take_range(class, placed, size_bytes);
+
+        let id = AllocationId(self.next_allocation);
+        self.next_allocation += 1;
+        let allocation = Allocation {
+            id,
+            block: placed.block,
+            offset_bytes: placed.offset,
+            size_bytes,
+            kind,
+            class,
+        };
+        self.live.insert(id, allocation);
+        self.kinds[kind.index()].add(size_bytes);
+        let pool = &mut self.pools[class.index()];
+        pool.in_use_bytes += size_bytes;
+        pool.peak_in_use_bytes = pool.peak_in_use_bytes.max(pool.in_use_bytes);
+        self.update_peaks();
+        tracing::trace!(
+            id = id.0,
+            block = placed.block.0,
+            offset_bytes = placed.offset,
+            size_bytes,
+            kind = kind.name(),
+            "alloc"
+        );
+        Ok(allocation)
+    }
+
+    /// Frees a live allocation. Its block is destroyed (a `Destroyed` event) when it becomes
+    /// empty, unless it is a standard block and fewer than
+    /// [`AllocPolicy::keep_empty_blocks_per_class`] empty blocks are kept.
+    pub fn free(&mut self, id: AllocationId) -> Result<(), AllocError> {
+        let allocation = self
+            .live
+            .remove(&id)
+            .ok_or(AllocError::UnknownAllocation(id))?;
+        self.release_range(&allocation);
+        let class = allocation.class;
+        let Some(block) = self.blocks.get(&allocation.block) else {
+            return Ok(());
+        };
+        if block.live_count == 0 {
+            let keep = !block.dedicated
+                && self.pools[class.index()].empty_blocks.len()
+                    < self.policy.keep_empty_blocks_per_class as usize;
+            if keep {
+                self.pools[class.index()]
+                    .empty_blocks
+                    .insert(allocation.block);
+            } else {
+                self.destroy_block(allocation.block, true);
+            }
+        }
+        Ok(())
+    }
+
+    /// Destroys every kept empty block (e.g. before a phase that needs dedicated blocks, or at
+    /// the end of a frame under memory pressure).
+    pub fn trim(&mut self) {
+        for class in MemoryClass::ALL {
+            let empty: Vec<BlockId> = self.pools[class.index()]
+                .empty_blocks
+                .iter()
+                .copied()
+                .collect();
+            for block in empty {
+                self.destroy_block(block, true);
+            }
+        }
+    }
+
+    /// Rolls back a block the GPU layer failed to create (`vkAllocateMemory` failed after a
+    /// `Created` event): the block and every allocation in it are dropped without a
+    /// `Destroyed` event. Returns the dropped allocations, whose buffers the caller must not
+    /// bind. O(live allocations); meant for the failure path only.
+    pub fn forget_block(&mut self, block: BlockId) -> Result<Vec<Allocation>, AllocError> {
+        if !self.blocks.contains_key(&block) {
+            return Err(AllocError::UnknownBlock(block));
+        }
+        let dropped: Vec<Allocation> = self
+            .live
+            .values()
+            .filter(|a| a.block == block)
+            .copied()
+            .collect();
+        for allocation in &dropped {
+            self.live.remove(&allocation.id);
+            self.release_range(allocation);
+        }
+        self.destroy_block(block, false);
+        Ok(dropped)
+    }
+
+    /// Returns an allocation's range to its block (coalescing) and updates the accounting.
+    fn release_range(&mut self, allocation: &Allocation) {
+        let class = allocation.class;
+        self.kinds[allocation.kind.index()].remove(allocation.size_bytes);
+        let pool = &mut self.pools[class.index()];
+        pool.in_use_bytes -= allocation.size_bytes;
+        let Some(block) = self.blocks.get_mut(&allocation.block) else {
+            return;
+        };
+        block.used_bytes -= allocation.size_bytes;
+        block.live_count -= 1;
+        if block.dedicated {
+            return;
+        }
+        let mut start = allocation.offset_bytes;
+        let mut end = allocation.offset_bytes + allocation.size_bytes;
+        if let Some((&prev_offset, &prev_size)) = block.free_by_offset.range(..start).next_back() {
+            if prev_offset + prev_size == start {
+                block.free_by_offset.remove(&prev_offset);
+                pool.free_by_size
+                    .remove(&(prev_size, allocation.block, prev_offset));
+                start = prev_offset;
+            }
+        }
+        if let Some(next_size) = block.free_by_offset.remove(&end) {
+            pool.free_by_size
+                .remove(&(next_size, allocation.block, end));
+            end += next_size;
+        }
+        block.free_by_offset.insert(start, end - start);
+        pool.free_by_size
+            .insert((end - start, allocation.block, start));
+    }
+
+    /// Best fit in the class's free ranges, honouring alignment.
+    fn find_fit(&self, class: MemoryClass, size_bytes: u64, alignment_bytes: u64) -> Option<Fit> {
+        let free = &self.pools[class.index()].free_by_size;
+        let fit_in = |&(range_size, block, range_offset): &(u64, BlockId, u64)| {
+            let offset = align_up(range_offset, alignment_bytes)?;
+            let end = offset.checked_add(size_bytes)?;
+            (end <= range_offset + range_size).then_some(Fit {
+                block,
+                range_offset,
+                range_size,
+                offset,
+            })
+        };
+        let start = (size_bytes, BlockId(0), 0);
+        if let Some(fit) = free.range(start..).take(PADDED_PROBES).find_map(fit_in) {
+            return Some(fit);
+        }
+        // Any range at least size + alignment - 1 long fits whatever its offset.
+        let padded = size_bytes.checked_add(alignment_bytes - 1)?;
+        free.range((padded, BlockId(0), 0)..)
+            .next()
+            .and_then(fit_in)
+    }
+
+    fn take_range(&mut self, class: MemoryClass, fit: Fit, size_bytes: u64) {
+        let pool = &mut self.pools[class.index()];
+        let Some(block) = self.blocks.get_mut(&fit.block) else {
+            return;
+        };
+        if !block.dedicated {
+            pool.free_by_size
+                .remove(&(fit.range_size, fit.block, fit.range_offset));
+            block.free_by_offset.remove(&fit.range_offset);
+            if fit.offset > fit.range_offset {
+                let pad = fit.offset - fit.range_offset;
+                block.free_by_offset.insert(fit.range_offset, pad);
+                pool.free_by_size.insert((pad, fit.block, fit.range_offset));
+            }
+            let end = fit.offset + size_bytes;
+            let range_end = fit.range_offset + fit.range_size;
+            if range_end > end {
+                block.free_by_offset.insert(end, range_end - end);
+                pool.free_by_size.insert((range_end - end, fit.block, end));
+            }
+        }
+        if block.live_count == 0 {
+            pool.empty_blocks.remove(&fit.block);
+        }
+        block.used_bytes += size_bytes;
+        block.live_count += 1;
+    }
+
+    /// Creates a block for `request`: `preferred_bytes` if the budget allows, else (for a
+    /// standard block) a smaller tail block of what is left of the budget if the request fits.
+    fn create_block(
+        &mut self,
+        request: AllocRequest,
+        preferred_bytes: u64,
+        dedicated: bool,
+    ) -> Result<BlockId, AllocError> {
+        let class = request.class;
+        loop {
+            let count_ok = self.block_count() < self.limits.max_allocation_count;
+            let budget = self.budget_bytes(class);
+            let remaining = budget.saturating_sub(self.reserved_bytes(class));
+            let size = if preferred_bytes <= remaining {
+                Some(preferred_bytes)
+            } else if !dedicated && request.size_bytes <= remaining {
+                // Tail block: whole MiBs of what is left, at least the request.
+                Some((remaining / MIB * MIB).max(request.size_bytes))
+            } else {
+                None
+            };
+            if let (true, Some(size_bytes)) = (count_ok, size) {
+                return self.insert_block(class, size_bytes, dedicated);
+            }
+            // Kept empty blocks give way before we fail.
+            if let Some(victim) = self.empty_block_to_release(class, !count_ok) {
+                self.destroy_block(victim, true);
+                continue;
+            }
+            return Err(if count_ok {
+                AllocError::OverBudget {
+                    requested_bytes: request.size_bytes,
+                    in_use_bytes: self.in_use_bytes(class),
+                    reserved_bytes: self.reserved_bytes(class),
+                    budget_bytes: budget,
+                    kind: request.kind,
+                    class,
+                }
+            } else {
+                AllocError::TooManyAllocations {
+                    limit: self.limits.max_allocation_count,
+                    block_count: self.block_count(),
+                    requested_bytes: request.size_bytes,
+                    in_use_bytes: self.pools.iter().map(|p| p.in_use_bytes).sum(),
+                    kind: request.kind,
+                    class,
+                }
+            });
+        }
+    }
+
+    /// An empty kept block whose release helps: any class when the count cap is the problem,
+    /// else one counted against the same budget.
+    fn empty_block_to_release(&self, class: MemoryClass, count_bound: bool) -> Option<BlockId> {
+        let counted = self.counts_against_budget(class);
+        MemoryClass::ALL
+            .into_iter()
+            .filter(|&c| count_bound || self.counts_against_budget(c) == counted)
+            .find_map(|c| self.pools[c.index()].empty_blocks.iter().next().copied())
+    }
+
+    fn insert_block(
+        &mut self,
+        class: MemoryClass,
+        size_bytes: u64,
+        dedicated: bool,
+    ) -> Result<BlockId, AllocError> {
+        let block = BlockId(self.next_block);
+        self.next_block = self
+            .next_block
+            .checked_add(1)
+            .ok_or(AllocError::BlockIdsExhausted)?;
+        let mut free_by_offset = BTreeMap::new();
+        let pool = &mut self.pools[class.index()];
+        if !dedicated {
+            free_by_offset.insert(0, size_bytes);
+            pool.free_by_size.insert((size_bytes, block, 0));
+        }
+        pool.block_count += 1;
+        pool.block_bytes += size_bytes;
+        if dedicated {
+            pool.dedicated_block_count += 1;
+        }
+        pool.peak_block_bytes = pool.peak_block_bytes.max(pool.block_bytes);
+        self.blocks.insert(
+            block,
+            Block {
+                class,
+                size_bytes,
+                dedicated,
+                free_by_offset,
+                used_bytes: 0,
+                live_count: 0,
+            },
+        );
+        self.events.push(BlockEvent::Created {
+            block,
+            size_bytes,
+            class,
+            dedicated,
+        });
+        tracing::debug!(
+            block = block.0,
+            size_bytes,
+            class = class.name(),
+            dedicated,
+            block_count = self.block_count(),
+            "memory block created"
+        );
+        self.update_peaks();
+        Ok(block)
+    }
+
+    fn destroy_block(&mut self, block_id: BlockId, emit: bool) {
+        let Some(block) = self.blocks.remove(&block_id) else {
+            return;
+        };
+        let pool = &mut self.pools[block.class.index()];
+        for (&offset, &size) in &block.free_by_offset {
+            pool.free_by_size.remove(&(size, block_id, offset));
+        }
+        pool.empty_blocks.remove(&block_id);
+        pool.block_count -= 1;
+        pool.block_bytes -= block.size_bytes;
+        if block.dedicated {
+            pool.dedicated_block_count -= 1;
+        }
+        if emit {
+            self.events.push(BlockEvent::Destroyed {
+                block: block_id,
+                size_bytes: block.size_bytes,
+                class: block.class,
+            });
+        }
+        tracing::debug!(
+            block = block_id.0,
+            size_bytes = block.size_bytes,
+            class = block.class.name(),
+            "memory block destroyed"
+        );
+    }
+
+    fn update_peaks(&mut self) {
+        self.peak_block_count = self.peak_block_count.max(self.block_count());
+        self.peak_budgeted_block_bytes = self
+            .peak_budgeted_block_bytes
+            .max(self.reserved_bytes(MemoryClass::DeviceLocal));
+        self.peak_budgeted_in_use_bytes = self
+            .peak_budgeted_in_use_bytes
+            .max(self.in_use_bytes(MemoryClass::DeviceLocal));
+    }
+
+    /// Statistics for `--stats` (O(blocks + free ranges of one lookup per class)).
+    pub fn report(&self) -> AllocReport {
+        let classes = MemoryClass::ALL
+            .into_iter()
+            .map(|class| {
+                let pool = &self.pools[class.index()];
+                let largest_free_range_bytes =
+                    pool.free_by_size.last().map_or(0, |&(size, _, _)| size);
+                // Dedicated blocks are always exactly full, so free bytes are block minus use.
+                let free_bytes = pool.block_bytes - pool.in_use_bytes;
+                let fragmentation = if free_bytes == 0 {
+                    0.0
+                } else {
+                    1.0 - largest_free_range_bytes as f64 / free_bytes as f64
+                };
+                let stats = ClassStats {
+                    counts_against_budget: self.counts_against_budget(class),
+                    budget_bytes: self.budget_bytes(class),
+                    standard_block_bytes: self.standard_block_bytes[class.index()],
+                    block_count: pool.block_count,
+                    dedicated_block_count: pool.dedicated_block_count,
+                    empty_block_count: pool.empty_blocks.len() as u32,
+                    block_bytes: pool.block_bytes,
+                    in_use_bytes: pool.in_use_bytes,
+                    free_bytes,
+                    free_range_count: pool.free_by_size.len() as u64,
+                    largest_free_range_bytes,
+                    fragmentation,
+                    peak_block_bytes: pool.peak_block_bytes,
+                    peak_in_use_bytes: pool.peak_in_use_bytes,
+                };
+                (class, stats)
+            })
+            .collect();
+        let kinds = AllocKind::ALL
+            .into_iter()
+            .map(|kind| (kind, self.kinds[kind.index()]))
+            .collect();
+        AllocReport {
+            budget_bytes: self.limits.budget_bytes,
+            max_allocation_count: self.limits.max_allocation_count,
+            max_allocation_size_bytes: self.limits.max_allocation_size_bytes,
+            allocation_count: self.block_count(),
+            peak_allocation_count: self.peak_block_count,
+            live_suballocation_count: self.live.len() as u64,
+            budget_block_bytes: self.reserved_bytes(MemoryClass::DeviceLocal),
+            budget_in_use_bytes: self.in_use_bytes(MemoryClass::DeviceLocal),
+            peak_block_bytes: self.peak_budgeted_block_bytes,
+            peak_in_use_bytes: self.peak_budgeted_in_use_bytes,
+            classes,
+            kinds,
+        }
+    }
+
+    /// Checks every internal invariant; for tests and debug assertions in callers.
+    /// O(everything).
+    pub fn check_consistency(&self) -> Result<(), String> {
+        let mut pool_blocks = [0u32; 2];
+        let mut pool_bytes = [0u64; 2];
+        let mut pool_used = [0u64; 2];
+        let mut pool_free_ranges = [0usize; 2];
+        for (&id, block) in &self.blocks {
+            let c = block.class.index();
+            pool_blocks[c] += 1;
+            pool_bytes[c] += block.size_bytes;
+            pool_used[c] += block.used_bytes;
+            pool_free_ranges[c] += block.free_by_offset.len();
+            let mut previous_end = None;
+            let mut free_total = 0;
+            for (&offset, &size) in &block.free_by_offset {
+                if size == 0 || offset + size > block.size_bytes {
+                    return Err(format!("{id}: bad free range {offset}+{size}"));
+                }
+                if previous_end.is_some_and(|end| end >= offset) {
+                    return Err(format!(
+                        "{id}: free ranges overlap or are not coalesced at {offset}"
+                    ));
+                }
+                if !self.pools[c].free_by_size.contains(&(size, id, offset)) {
+                    return Err(format!(
+                        "{id}: free range {offset}+{size} missing from the size index"
+                    ));
+                }
+                previous_end = Some(offset + size);
+                free_total += size;
+            }
+            let expected_free = if block.dedicated {
+                0
+            } else {
+                block.size_bytes - block.used_bytes
+            };
+            if free_total != expected_free {
+                return Err(format!(
+                    "{id}: free {free_total} != size - used {expected_free}"
+                ));
+            }
+            let empty = self.pools[c].empty_blocks.contains(&id);
+            if empty != (block.live_count == 0) {
+                return Err(format!(
+                    "{id}: empty-set membership {empty} with {} live",
+                    block.live_count
+                ));
+            }
+        }
+        for class in MemoryClass::ALL {
+            let pool = &self.pools[class.index()];
+            let c = class.index();
+            if pool.block_count != pool_blocks[c]
+                || pool.block_bytes != pool_bytes[c]
+                || pool.in_use_bytes != pool_used[c]
+                || pool.free_by_size.len() != pool_free_ranges[c]
+            {
+                return Err(format!("{class}: pool totals disagree with blocks"));
+            }
+            if self.reserved_bytes(class) > self.budget_bytes(class) {
+                return Err(format!("{class}: over budget"));
+            }
+        }
+        if self.block_count() > self.limits.max_allocation_count {
+            return Err("over the allocation-count cap".to_owned());
+        }
+        let live_bytes: u64 = self.live.values().map(|a| a.size_bytes).sum();
+        let kind_bytes: u64 = self.kinds.iter().map(|k| k.bytes).sum();
+        let kind_count: u64 = self.kinds.iter().map(|k| k.count).sum();
+        if live_bytes != kind_bytes || self.live.len() as u64 != kind_count {
+            return Err("per-kind totals disagree with live allocations".to_owned());
+        }
+        if live_bytes != pool_used.iter().sum::<u64>() {
+            return Err("live allocations disagree with block use".to_owned());
+        }
+        Ok(())
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Fit {
+    block: BlockId,
+    range_offset: u64,
+    range_size: u64,
+    offset: u64,
+}
+
+/// `value` rounded up to a multiple of the power of two `alignment`; `None` on overflow.
+pub(crate) fn align_up(value: u64, alignment: u64) -> Option<u64> {
+    let mask = alignment - 1;
+    value.checked_add(mask).map(|v| v & !mask)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,162 @@
+//! What an allocation is for, which memory it lives in, and the ids handed out.
+
+use serde::Serialize;
+use std::fmt;
+
+/// What an allocation holds; used for per-kind accounting only (alignment comes from the caller).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AllocKind {
+    /// Bottom-level acceleration structure storage (offset alignment 256).
+    BlasStorage,
+    /// Top-level acceleration structure storage (offset alignment 256).
+    TlasStorage,
+    /// Build scratch (`minAccelerationStructureScratchOffsetAlignment`).
+    Scratch,
+    /// TLAS instance buffers.
+    InstanceBuffer,
+    /// Vertex, index and AABB buffers.
+    Geometry,
+    /// Traversal node tables read by the traversal shader.
+    NodeTable,
+    /// Host-visible staging for uploads.
+    Staging,
+    /// Anything else.
+    Other,
+}
+
+impl AllocKind {
+    /// Every kind, in declaration order (the index used by per-kind tables).
+    pub const ALL: [AllocKind; 8] = [
+        AllocKind::BlasStorage,
+        AllocKind::TlasStorage,
+        AllocKind::Scratch,
+        AllocKind::InstanceBuffer,
+        AllocKind::Geometry,
+        AllocKind::NodeTable,
+        AllocKind::Staging,
+        AllocKind::Other,
+    ];
+
+    pub(crate) fn index(self) -> usize {
+        self as usize
+    }
+
+    /// The snake_case name used in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            AllocKind::BlasStorage => "blas_storage",
+            AllocKind::TlasStorage => "tlas_storage",
+            AllocKind::Scratch => "scratch",
+            AllocKind::InstanceBuffer => "instance_buffer",
+            AllocKind::Geometry => "geometry",
+            AllocKind::NodeTable => "node_table",
+            AllocKind::Staging => "staging",
+            AllocKind::Other => "other",
+        }
+    }
+}
+
+impl fmt::Display for AllocKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Which memory a block lives in. Each class is a separate pool of blocks; all pools share the
+/// allocation-count cap.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MemoryClass {
+    /// `DEVICE_LOCAL` memory: acceleration structures, scratch, geometry, tables.
+    DeviceLocal,
+    /// `HOST_VISIBLE | HOST_COHERENT` memory: staging and readback.
+    HostVisible,
+}
+
+impl MemoryClass {
+    /// Every class, in declaration order.
+    pub const ALL: [MemoryClass; 2] = [MemoryClass::DeviceLocal, MemoryClass::HostVisible];
+
+    pub(crate) fn index(self) -> usize {
+        self as usize
+    }
+
+    /// The snake_case name used in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            MemoryClass::DeviceLocal => "device_local",
+            MemoryClass::HostVisible => "host_visible",
+        }
+    }
+}
+
+impl fmt::Display for MemoryClass {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A memory block: one future `VkDeviceMemory`. Never reused within one allocator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+pub struct BlockId(pub u32);
+
+impl fmt::Display for BlockId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "block {}", self.0)
+    }
+}
+
+/// One live sub-allocation. Never reused within one allocator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+pub struct AllocationId(pub u64);
+
+impl fmt::Display for AllocationId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "allocation {}", self.0)
+    }
+}
+
+/// A byte count displayed as `N bytes (X.Y MiB)` in messages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ByteSize(pub u64);
+
+impl fmt::Display for ByteSize {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let mib = self.0 as f64 / (1u64 << 20) as f64;
+        write!(f, "{} bytes ({mib:.1} MiB)", self.0)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn kind_indices_match_all_table() {
+        for (index, kind) in AllocKind::ALL.iter().enumerate() {
+            assert_eq!(kind.index(), index);
+        }
+        for (index, class) in MemoryClass::ALL.iter().enumerate() {
+            assert_eq!(class.index(), index);
+        }
+    }
+
+    #[test]
+    fn names_match_serde() {
+        for kind in AllocKind::ALL {
+            assert_eq!(serde_json::to_string(&kind).unwrap(), format!("\"{kind}\""));
+        }
+        for class in MemoryClass::ALL {
+            assert_eq!(
+                serde_json::to_string(&class).unwrap(),
+                format!("\"{class}\"")
+            );
+        }
+    }
+
+    #[test]
+    fn byte_size_shows_bytes_and_mib() {
+        assert_eq!(ByteSize(3 << 19).to_string(), "1572864 bytes (1.5 MiB)");
+    }
+}
