@@ -1,1 +1,221 @@
-//! pbrt-import
+//! Streaming pbrt-v3/pbrt-v4 scene parser.
+//!
+//! `pbrt-import` reads pbrt scene text (memory-mapped, or `.gz`), resolves the
+//! graphics state (transforms, materials, area lights, named coordinate systems,
+//! object definitions) and hands the result to a caller-implemented
+//! [`SceneSink`], one event at a time. Mesh data is never accumulated: each
+//! [`ShapeEvent`] owns its geometry and is moved into the sink.
+//!
+//! ```no_run
+//! use pbrt_import::{parse_file, CollectSink, ParseOptions};
+//! let mut sink = CollectSink::default();
+//! let stats = parse_file("scene.pbrt".as_ref(), &ParseOptions::default(), &mut sink)?;
+//! println!("{} shapes, {} instances", stats.shapes, stats.instances);
+//! # Ok::<(), pbrt_import::Error>(())
+//! ```
+//!
+//! Depends on no other motu crate; an adapter maps events into the scene model.
+//!
+//! Paths in `Include`, `Import`, `plymesh` and spectrum files resolve relative to
+//! the including file's directory first, then to the entry file's directory (what
+//! pbrt itself does), so both layouts found in published scenes work.
+
+mod color;
+mod error;
+mod events;
+pub mod lexer;
+mod math;
+pub mod params;
+mod parser;
+pub mod ply;
+mod shapes;
+mod source;
+pub mod writer;
+
+use std::path::{Path, PathBuf};
+
+pub use error::{Error, Location, MissingFile, ParseError, ParseErrorKind, PlyError, SinkError};
+pub use events::{
+    AreaLight, CameraEvent, CollectSink, Curve, FileEvent, Geometry, InstanceEvent, LightEvent,
+    Material, Mesh, ObjectEvent, SceneSink, ShapeEvent, Via, Warning,
+};
+pub use lexer::Loc;
+pub use math::Mat4;
+pub use source::SourceBytes;
+
+/// Index of an input file in [`ParseStats::files`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct FileId(pub u32);
+
+/// An object (`ObjectBegin` name), unique per definition.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct ObjectId(pub u32);
+
+/// A material; `MaterialId(0)` is the default material.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct MaterialId(pub u32);
+
+/// An element: a file included from the entry file's world block, named by its stem.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct ElementId(pub u32);
+
+/// pbrt scene format version.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PbrtVersion {
+    /// pbrt-v3.
+    V3,
+    /// pbrt-v4.
+    V4,
+}
+
+/// Which version's semantics to apply.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum VersionOption {
+    /// Start with pbrt-v3 semantics and switch to pbrt-v4 for the rest of the parse at the
+    /// first v4-only construct (`Import`, `ColorSpace`, `Option`, `Attribute`, v4 type
+    /// spellings such as `point3`, v4 material/film names). The entry file is pre-scanned.
+    #[default]
+    Auto,
+    /// Force pbrt-v3.
+    V3,
+    /// Force pbrt-v4.
+    V4,
+}
+
+/// How `plymesh` files are loaded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlyLoading {
+    /// Load each PLY when its `Shape` is parsed; all events in document order.
+    Sequential,
+    /// Queue PLY shapes and load a batch in parallel (rayon) once the queued files
+    /// reach `batch_bytes` (and at the end). PLY shapes then arrive after later
+    /// events; [`ShapeEvent::seq`] gives their document order.
+    Parallel {
+        /// Queued PLY bytes that trigger a batch load (bounds memory).
+        batch_bytes: u64,
+    },
+}
+
+impl Default for PlyLoading {
+    fn default() -> Self {
+        PlyLoading::Parallel {
+            batch_bytes: 256 << 20,
+        }
+    }
+}
+
+/// Parse options.
+#[derive(Clone, Debug)]
+pub struct ParseOptions {
+    /// Version semantics.
+    pub version: VersionOption,
+    /// Missing `Include`/`Import`/PLY files become warnings and are skipped.
+    /// Otherwise the parse fails with [`Error::MissingFiles`] listing all of them.
+    pub allow_missing: bool,
+    /// PLY loading strategy.
+    pub ply_loading: PlyLoading,
+    /// Segments around the axis for tessellated spheres, disks and cylinders (>= 3).
+    pub tessellation_segments: u32,
+    /// Maximum `Include`/`Import` nesting (guards against cycles and stack overflow).
+    pub max_include_depth: u32,
+}
+
+impl Default for ParseOptions {
+    fn default() -> Self {
+        ParseOptions {
+            version: VersionOption::Auto,
+            allow_missing: false,
+            ply_loading: PlyLoading::default(),
+            tessellation_segments: 32,
+            max_include_depth: 64,
+        }
+    }
+}
+
+/// Counts from one parse.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ParseStats {
+    /// Version whose semantics were in effect at the end.
+    pub version: Option<PbrtVersion>,
+    /// Files read; index = [`FileId`]. PLY files are not included.
+    pub files: Vec<PathBuf>,
+    /// Bytes of scene text read (decompressed).
+    pub text_bytes: u64,
+    /// Bytes of PLY files read.
+    pub ply_bytes: u64,
+    /// Shape events delivered (including unsupported).
+    pub shapes: u64,
+    /// Triangles across all mesh shapes.
+    pub triangles: u64,
+    /// `curve` shapes.
+    pub curves: u64,
+    /// Shapes of unsupported types.
+    pub unsupported_shapes: u64,
+    /// Shapes skipped (missing file with `allow_missing`, invalid data).
+    pub skipped_shapes: u64,
+    /// `ObjectBegin` definitions.
+    pub objects: u64,
+    /// `ObjectInstance` directives.
+    pub instances: u64,
+    /// Cameras.
+    pub cameras: u64,
+    /// Light sources (not counting area lights).
+    pub lights: u64,
+    /// Warnings emitted.
+    pub warnings: u64,
+    /// Missing files (only non-empty with `allow_missing`).
+    pub missing: Vec<MissingFile>,
+}
+
+impl ParseStats {
+    /// Path of a file id.
+    pub fn path(&self, file: FileId) -> Option<&Path> {
+        self.files.get(file.0 as usize).map(PathBuf::as_path)
+    }
+}
+
+/// Parse the scene starting at `path`, streaming it into `sink`.
+pub fn parse_file(
+    path: &Path,
+    options: &ParseOptions,
+    sink: &mut dyn SceneSink,
+) -> Result<ParseStats, Error> {
+    parser::parse_entry(parser::Entry::Path(path), options, sink)
+}
+
+/// Parse scene text held in memory; relative paths resolve against `base_dir`.
+pub fn parse_str(
+    text: &str,
+    base_dir: &Path,
+    options: &ParseOptions,
+    sink: &mut dyn SceneSink,
+) -> Result<ParseStats, Error> {
+    parser::parse_entry(
+        parser::Entry::Text {
+            text: text.as_bytes(),
+            base_dir,
+        },
+        options,
+        sink,
+    )
+}
+
+/// Parse scene bytes held in memory; relative paths resolve against `base_dir`.
+pub fn parse_bytes(
+    bytes: &[u8],
+    base_dir: &Path,
+    options: &ParseOptions,
+    sink: &mut dyn SceneSink,
+) -> Result<ParseStats, Error> {
+    parser::parse_entry(
+        parser::Entry::Text {
+            text: bytes,
+            base_dir,
+        },
+        options,
+        sink,
+    )
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,341 @@
+//! pbrt events → scene model.
+
+use crate::{IngestError, IngestOptions, IngestReport};
+use glam::{Mat3, Mat4, Vec3};
+use motu_scene::{
+    Camera, ElementId, GeometryStore, Light, LightKind, Material, MaterialId, MeshData,
+    PrototypeId, Scene, SceneBuilder, SceneError, Transform34,
+};
+use pbrt_import::{
+    CameraEvent, FileEvent, Geometry, InstanceEvent, LightEvent, ObjectEvent, ParseOptions,
+    PlyLoading, SceneSink, ShapeEvent, SinkError, VersionOption, Warning,
+};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Warnings kept verbatim in the report (all are counted and logged).
+const KEPT_WARNINGS: usize = 200;
+
+struct Adapter {
+    b: SceneBuilder,
+    objects: HashMap<pbrt_import::ObjectId, PrototypeId>,
+    materials: HashMap<pbrt_import::MaterialId, MaterialId>,
+    elements: HashMap<pbrt_import::ElementId, ElementId>,
+    files: HashMap<pbrt_import::FileId, PathBuf>,
+    camera_names: HashMap<String, u32>,
+    cameras: Vec<Camera>,
+    report: IngestReport,
+}
+
+fn mat4(m: &pbrt_import::Mat4) -> Mat4 {
+    Mat4::from_cols_array(&m.to_cols_array())
+}
+
+fn is_affine(m: &Mat4) -> bool {
+    let r = m.row(3);
+    r.x == 0.0 && r.y == 0.0 && r.z == 0.0 && r.w == 1.0
+}
+
+fn sink_err(e: SceneError) -> SinkError {
+    SinkError::new(e.to_string())
+}
+
+impl Adapter {
+    fn warn(&mut self, msg: String) {
+        tracing::warn!("{msg}");
+        if self.report.warnings.len() < KEPT_WARNINGS {
+            self.report.warnings.push(msg);
+        }
+    }
+
+    fn where_(&self, loc: &pbrt_import::Loc) -> String {
+        let path = self
+            .files
+            .get(&loc.file)
+            .map(|p| p.display().to_string())
+            .unwrap_or_default();
+        format!("{path}:{}:{}", loc.line, loc.column)
+    }
+
+    fn element(&self, e: Option<pbrt_import::ElementId>) -> ElementId {
+        e.and_then(|e| self.elements.get(&e).copied())
+            .unwrap_or(Scene::MAIN_ELEMENT)
+    }
+
+    fn prototype(
+        &mut self,
+        object: pbrt_import::ObjectId,
+        name: &str,
+        element: Option<pbrt_import::ElementId>,
+    ) -> Result<PrototypeId, SinkError> {
+        if let Some(&p) = self.objects.get(&object) {
+            return Ok(p);
+        }
+        let e = self.element(element);
+        let p = self.b.add_prototype(name, e).map_err(sink_err)?;
+        self.objects.insert(object, p);
+        Ok(p)
+    }
+
+    fn material(&mut self, m: &Arc<pbrt_import::Material>) -> Result<MaterialId, SinkError> {
+        if let Some(&id) = self.materials.get(&m.id) {
+            return Ok(id);
+        }
+        let opacity = m.opacity.map(|o| (o[0] + o[1] + o[2]) / 3.0).unwrap_or(1.0);
+        let id = self
+            .b
+            .add_material(Material {
+                name: m
+                    .name
+                    .clone()
+                    .unwrap_or_else(|| format!("{}#{}", m.kind, m.id.0)),
+                base_color: m.base_color.unwrap_or([0.5; 3]),
+                opacity,
+                alpha_texture: None,
+            })
+            .map_err(sink_err)?;
+        self.materials.insert(m.id, id);
+        Ok(id)
+    }
+}
+
+impl SceneSink for Adapter {
+    fn file_enter(&mut self, e: &FileEvent<'_>) -> Result<(), SinkError> {
+        self.files.insert(e.file, e.path.to_path_buf());
+        self.report.files += 1;
+        if let (Some(id), Some(name)) = (e.element, e.element_name) {
+            if !self.elements.contains_key(&id) {
+                let el = self.b.element(name).map_err(sink_err)?;
+                self.elements.insert(id, el);
+            }
+        }
+        Ok(())
+    }
+
+    fn shape(&mut self, s: ShapeEvent) -> Result<(), SinkError> {
+        self.report.shapes += 1;
+        let mesh = match s.geometry {
+            Geometry::Mesh(m) => m,
+            Geometry::Curve(_) => {
+                self.report.curves += 1;
+                return Ok(());
+            }
+            Geometry::Unsupported => {
+                self.report.unsupported_shapes += 1;
+                return Ok(());
+            }
+        };
+        let at = self.where_(&s.loc);
+        let m = mat4(&s.parent_from_shape);
+        if !is_affine(&m) || !m.is_finite() {
+            self.report.skipped_shapes += 1;
+            self.warn(format!(
+                "{at}: shape '{}' has a projective or non-finite transform; skipped",
+                s.kind
+            ));
+            return Ok(());
+        }
+        if mesh.indices.is_empty() {
+            self.report.degenerate_meshes += 1;
+            return Ok(());
+        }
+        let positions = mesh
+            .positions
+            .iter()
+            .map(|p| m.transform_point3(Vec3::from_array(*p)).to_array())
+            .collect();
+        let normal_m = Mat3::from_mat4(m).inverse().transpose();
+        let normals = mesh.normals.map(|ns| {
+            ns.iter()
+                .map(|n| {
+                    (normal_m * Vec3::from_array(*n))
+                        .normalize_or_zero()
+                        .to_array()
+                })
+                .collect()
+        });
+        let data = MeshData {
+            positions,
+            normals,
+            uvs: mesh.uvs,
+            indices: mesh.indices,
+        };
+        let material = self.material(&s.material)?;
+        let element = self.element(s.element);
+        let proto = match s.object {
+            Some(o) => self.prototype(o, "object", s.element)?,
+            None => Scene::ROOT,
+        };
+        let name = match &s.source_path {
+            Some(p) => p
+                .file_stem()
+                .map(|x| x.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            None => format!("{}@{}", s.kind, at),
+        };
+        match self.b.add_mesh(proto, &name, material, element, &data) {
+            Ok(_) => self.report.meshes += 1,
+            Err(SceneError::BadMesh { reason, .. }) => {
+                self.report.skipped_shapes += 1;
+                self.warn(format!("{at}: shape '{}' skipped: {reason}", s.kind));
+            }
+            Err(e) => return Err(SinkError::new(format!("{at}: {e}"))),
+        }
+        Ok(())
+    }
+
+    fn object_begin(&mut self, e: &ObjectEvent<'_>) -> Result<(), SinkError> {
+        self.prototype(e.object, e.name, e.element).map(|_| ())
+    }
+
+    fn object_instance(&mut self, e: &InstanceEvent<'_>) -> Result<(), SinkError> {
+        let child = self.prototype(e.object, e.name, e.element)?;
+        let parent = match e.inside {
+            Some(o) => self.prototype(o, "object", e.element)?,
+            None => Scene::ROOT,
+        };
+        let m = mat4(&e.parent_from_instance);
+        if !is_affine(&m) || !m.is_finite() {
+            let at = self.where_(&e.loc);
+            self.warn(format!(
+                "{at}: instance of '{}' has a projective or non-finite transform; skipped",
+                e.name
+            ));
+            return Ok(());
+        }
+        let element = self.element(e.element);
+        self.b
+            .add_instance(parent, child, Transform34::from_mat4(m), element)
+            .map_err(|err| SinkError::new(format!("{}: {err}", self.where_(&e.loc))))
+    }
+
+    fn camera(&mut self, e: &CameraEvent<'_>) -> Result<(), SinkError> {
+        let w = mat4(&e.world_from_camera);
+        let eye = w.transform_point3(Vec3::ZERO);
+        let forward = w.transform_vector3(Vec3::Z).normalize_or(Vec3::Z);
+        let up = w.transform_vector3(Vec3::Y).normalize_or(Vec3::Y);
+        let x = w.transform_vector3(Vec3::X);
+        let mirror_x = x.dot(up.cross(forward)) < 0.0;
+        let stem = e
+            .path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "camera".into());
+        let n = self.camera_names.entry(stem.clone()).or_insert(0);
+        *n += 1;
+        let name = if *n == 1 { stem } else { format!("{stem}_{n}") };
+        if e.kind != "perspective" {
+            let at = self.where_(&e.loc);
+            self.warn(format!(
+                "{at}: camera '{}' is rendered as perspective",
+                e.kind
+            ));
+        }
+        let mut cam = Camera::look_at(
+            &name,
+            eye,
+            eye + forward,
+            up,
+            e.fov_deg.unwrap_or(90.0),
+            e.resolution[0],
+            e.resolution[1],
+        );
+        cam.mirror_x = mirror_x;
+        self.cameras.push(cam);
+        Ok(())
+    }
+
+    fn light(&mut self, e: &LightEvent) -> Result<(), SinkError> {
+        let w = mat4(&e.world_from_light);
+        let kind = match e.kind.as_str() {
+            "distant" => LightKind::Distant,
+            "point" => LightKind::Point,
+            "spot" => LightKind::Spot,
+            "infinite" => LightKind::Infinite,
+            _ => LightKind::Other,
+        };
+        let from = Vec3::from_array(e.from.unwrap_or([0.0; 3]));
+        let to = Vec3::from_array(e.to.unwrap_or([0.0, 0.0, 1.0]));
+        let dir = w.transform_vector3(to - from).normalize_or_zero();
+        let color = e.color.unwrap_or([1.0; 3]);
+        let intensity = color.iter().cloned().fold(0.0f32, f32::max);
+        let color = if intensity > 0.0 {
+            color.map(|c| c / intensity)
+        } else {
+            color
+        };
+        self.b.add_light(Light {
+            kind,
+            color,
+            intensity,
+            world_direction: dir.to_array(),
+            world_position: w.transform_point3(from).to_array(),
+        });
+        Ok(())
+    }
+
+    fn warning(&mut self, w: &Warning) {
+        let msg = match &w.loc {
+            Some(loc) => format!("{}: {}", self.where_(loc), w.message),
+            None => w.message.clone(),
+        };
+        if self.report.warnings.len() < KEPT_WARNINGS {
+            self.report.warnings.push(msg);
+        }
+    }
+}
+
+/// Imports a pbrt-v3/v4 scene.
+pub fn ingest_pbrt(
+    path: &Path,
+    options: &IngestOptions,
+    geometry: Box<dyn GeometryStore>,
+) -> Result<(Scene, IngestReport), IngestError> {
+    let _span = tracing::info_span!("parse", path = %path.display()).entered();
+    let parse_options = ParseOptions {
+        version: match options.pbrt_version {
+            Some(3) => VersionOption::V3,
+            Some(4) => VersionOption::V4,
+            _ => VersionOption::Auto,
+        },
+        allow_missing: options.allow_missing,
+        ply_loading: if options.parallel {
+            PlyLoading::Parallel {
+                batch_bytes: 256 << 20,
+            }
+        } else {
+            PlyLoading::Sequential
+        },
+        ..Default::default()
+    };
+    let mut a = Adapter {
+        b: SceneBuilder::new(geometry),
+        objects: HashMap::new(),
+        materials: HashMap::new(),
+        elements: HashMap::new(),
+        files: HashMap::new(),
+        camera_names: HashMap::new(),
+        cameras: Vec::new(),
+        report: IngestReport::default(),
+    };
+    let stats = pbrt_import::parse_file(path, &parse_options, &mut a)?;
+    a.report.text_bytes = stats.text_bytes;
+    a.report.ply_bytes = stats.ply_bytes;
+    for m in &stats.missing {
+        a.warn(format!(
+            "{}: missing file skipped: {}",
+            m.referenced_at,
+            m.path.display()
+        ));
+    }
+    // pbrt renders with the last camera: list it first so it is the default.
+    for cam in a.cameras.drain(..).rev() {
+        a.b.add_camera(cam);
+    }
+    let at = path.display().to_string();
+    let scene =
+        a.b.finish()
+            .map_err(|source| IngestError::Scene { at, source })?;
+    Ok((scene, a.report))
+}

@@ -1,0 +1,564 @@
+//! Zero-copy tokenizer for pbrt scene text.
+//!
+//! Tokens borrow from the input bytes; nothing is allocated per token. Large
+//! numeric arrays are read straight into `Vec<f32>`/`Vec<u32>` by
+//! [`Lexer::read_f32_array`] / [`Lexer::read_u32_array`] without creating
+//! tokens at all, which is what keeps multi-hundred-MB inline `trianglemesh`
+//! files fast.
+
+use std::borrow::Cow;
+
+use crate::FileId;
+
+/// Token category.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TokenKind {
+    /// A bare word: a directive name, `true`/`false`, or a number.
+    Word,
+    /// A quoted string; [`Token::bytes`] excludes the quotes, escapes are raw.
+    String,
+    /// `[`
+    Open,
+    /// `]`
+    Close,
+}
+
+/// Where a token starts: file, 1-based line and 1-based byte column.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct Loc {
+    /// File the token came from (see [`crate::ParseStats::files`]).
+    pub file: FileId,
+    /// 1-based line.
+    pub line: u32,
+    /// 1-based column, counted in bytes.
+    pub column: u32,
+}
+
+/// One token, borrowing its text from the input.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Token<'a> {
+    /// Token category.
+    pub kind: TokenKind,
+    /// Raw text (for strings: between the quotes, escapes not yet applied).
+    pub bytes: &'a [u8],
+    /// Start position.
+    pub loc: Loc,
+}
+
+impl<'a> Token<'a> {
+    /// Text for error messages (lossy, quoted strings re-quoted).
+    pub fn display(&self) -> String {
+        let text = String::from_utf8_lossy(&self.bytes[..self.bytes.len().min(64)]);
+        match self.kind {
+            TokenKind::String => format!("\"{text}\""),
+            _ => text.into_owned(),
+        }
+    }
+
+    /// String contents with escapes applied; `None` when not valid UTF-8.
+    pub fn unescaped(&self) -> Option<Cow<'a, str>> {
+        if !self.bytes.contains(&b'\\') {
+            return std::str::from_utf8(self.bytes).ok().map(Cow::Borrowed);
+        }
+        let mut out = Vec::with_capacity(self.bytes.len());
+        let mut it = self.bytes.iter();
+        while let Some(&b) = it.next() {
+            if b != b'\\' {
+                out.push(b);
+                continue;
+            }
+            match it.next() {
+                Some(b'n') => out.push(b'\n'),
+                Some(b't') => out.push(b'\t'),
+                Some(b'r') => out.push(b'\r'),
+                Some(b'b') => out.push(8),
+                Some(b'f') => out.push(12),
+                Some(&c) => out.push(c),
+                None => out.push(b'\\'),
+            }
+        }
+        String::from_utf8(out).ok().map(Cow::Owned)
+    }
+
+    /// Parse as a number (bare words only).
+    pub fn as_f64(&self) -> Option<f64> {
+        if self.kind != TokenKind::Word {
+            return None;
+        }
+        parse_f64(self.bytes)
+    }
+}
+
+/// Tokenizer failures; the parser turns them into located errors.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LexErrorKind {
+    /// A string ran into a newline or the end of input.
+    UnterminatedString,
+    /// A numeric array held something that is not a number.
+    ExpectedNumber,
+    /// A numeric array ended without `]`.
+    UnterminatedArray,
+    /// An integer array element is negative, fractional or too large.
+    BadInteger,
+}
+
+/// Lexer error with its position and the offending text.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct LexError {
+    /// What went wrong.
+    pub kind: LexErrorKind,
+    /// Where.
+    pub loc: Loc,
+    /// Offending text (truncated).
+    pub token: String,
+}
+
+// Byte classes: 1 = whitespace, 2 = delimiter that ends a word (`"[]#`), 0 = word byte.
+const CLASS: [u8; 256] = {
+    let mut t = [0u8; 256];
+    t[b' ' as usize] = 1;
+    t[b'\t' as usize] = 1;
+    t[b'\r' as usize] = 1;
+    t[b'\n' as usize] = 1;
+    t[0x0b] = 1;
+    t[0x0c] = 1;
+    t[b'"' as usize] = 2;
+    t[b'[' as usize] = 2;
+    t[b']' as usize] = 2;
+    t[b'#' as usize] = 2;
+    t
+};
+
+fn is_word_end(b: u8) -> bool {
+    CLASS[b as usize] != 0
+}
+
+/// Parse a bare number as f64 (whole slice must be consumed).
+pub fn parse_f64(bytes: &[u8]) -> Option<f64> {
+    let b = bytes.strip_prefix(b"+").unwrap_or(bytes);
+    match fast_float2::parse_partial::<f64, _>(b) {
+        Ok((v, n)) if n == b.len() && n > 0 => Some(v),
+        _ => None,
+    }
+}
+
+/// Streaming tokenizer over one file's bytes.
+#[derive(Clone)]
+pub struct Lexer<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+    line: u32,
+    line_start: usize,
+    file: FileId,
+}
+
+impl<'a> Lexer<'a> {
+    /// Tokenize `bytes`, reporting positions in `file`.
+    pub fn new(bytes: &'a [u8], file: FileId) -> Self {
+        // A UTF-8 byte order mark is not part of the scene.
+        let pos = if bytes.starts_with(&[0xef, 0xbb, 0xbf]) {
+            3
+        } else {
+            0
+        };
+        Lexer {
+            bytes,
+            pos,
+            line: 1,
+            line_start: pos,
+            file,
+        }
+    }
+
+    /// Byte offset of the next unread byte.
+    pub fn offset(&self) -> usize {
+        self.pos
+    }
+
+    /// Current position (after skipping nothing).
+    pub fn loc(&self) -> Loc {
+        Loc {
+            file: self.file,
+            line: self.line,
+            column: (self.pos - self.line_start + 1) as u32,
+        }
+    }
+
+    fn error(&self, kind: LexErrorKind, start: usize, loc: Loc) -> LexError {
+        let end = (start + 32).min(self.bytes.len());
+        let mut stop = start;
+        while stop < end && !matches!(self.bytes[stop], b'\n' | b'\r') {
+            stop += 1;
+        }
+        LexError {
+            kind,
+            loc,
+            token: String::from_utf8_lossy(&self.bytes[start..stop]).into_owned(),
+        }
+    }
+
+    /// Skip whitespace and comments, counting lines.
+    #[inline]
+    fn skip_ws(&mut self) {
+        let bytes = self.bytes;
+        let mut pos = self.pos;
+        while pos < bytes.len() {
+            let b = bytes[pos];
+            if b == b'\n' {
+                pos += 1;
+                self.line += 1;
+                self.line_start = pos;
+            } else if CLASS[b as usize] == 1 {
+                pos += 1;
+            } else if b == b'#' {
+                // Comments run to the end of the line; the newline is counted above.
+                pos += bytes[pos..]
+                    .iter()
+                    .position(|&c| c == b'\n')
+                    .unwrap_or(bytes.len() - pos);
+            } else {
+                break;
+            }
+        }
+        self.pos = pos;
+    }
+
+    /// Next token, `Ok(None)` at end of input.
+    #[inline]
+    pub fn next_token(&mut self) -> Result<Option<Token<'a>>, LexError> {
+        self.skip_ws();
+        let bytes = self.bytes;
+        let start = self.pos;
+        let Some(&b) = bytes.get(start) else {
+            return Ok(None);
+        };
+        let loc = self.loc();
+        let (kind, text) = match b {
+            b'[' => {
+                self.pos += 1;
+                (TokenKind::Open, &bytes[start..start + 1])
+            }
+            b']' => {
+                self.pos += 1;
+                (TokenKind::Close, &bytes[start..start + 1])
+            }
+            b'"' => {
+                let mut p = start + 1;
+                loop {
+                    match bytes.get(p) {
+                        None | Some(b'\n') => {
+                            return Err(self.error(LexErrorKind::UnterminatedString, start, loc));
+                        }
+                        Some(b'"') => break,
+                        Some(b'\\') => p += 2,
+                        Some(_) => p += 1,
+                    }
+                }
+                if p >= bytes.len() {
+                    return Err(self.error(LexErrorKind::UnterminatedString, start, loc));
+                }
+                self.pos = p + 1;
+                (TokenKind::String, &bytes[start + 1..p])
+            }
+            _ => {
+                let mut p = start + 1;
+                while p < bytes.len() && !is_word_end(bytes[p]) {
+                    p += 1;
+                }
+                self.pos = p;
+                (TokenKind::Word, &bytes[start..p])
+            }
+        };
+        Ok(Some(Token {
+            kind,
+            bytes: text,
+            loc,
+        }))
+    }
+
+    /// Look at the next token without consuming it.
+    pub fn peek_token(&mut self) -> Result<Option<Token<'a>>, LexError> {
+        let saved = self.clone();
+        let t = self.next_token();
+        *self = saved;
+        t
+    }
+
+    /// Kind of the next token without consuming anything but whitespace.
+    pub fn peek_byte(&mut self) -> Option<u8> {
+        self.skip_ws();
+        self.bytes.get(self.pos).copied()
+    }
+
+    /// Read numbers until `]` (consumed) into `out`; the `[` must already be consumed.
+    ///
+    /// Hot path for mesh arrays: no tokens, one pass, fast float parsing.
+    pub fn read_f32_array(&mut self, out: &mut Vec<f32>) -> Result<(), LexError> {
+        loop {
+            self.skip_ws();
+            let start = self.pos;
+            let Some(&b) = self.bytes.get(start) else {
+                let loc = self.loc();
+                return Err(self.error(LexErrorKind::UnterminatedArray, start, loc));
+            };
+            if b == b']' {
+                self.pos += 1;
+                return Ok(());
+            }
+            let v = self.read_f32_at(start)?;
+            out.push(v);
+        }
+    }
+
+    #[inline]
+    fn read_f32_at(&mut self, start: usize) -> Result<f32, LexError> {
+        let rest = &self.bytes[start..];
+        let (skip, rest) = match rest.first() {
+            Some(b'+') => (1, &rest[1..]),
+            _ => (0, rest),
+        };
+        match fast_float2::parse_partial::<f32, _>(rest) {
+            Ok((v, n)) if n > 0 && rest.get(n).is_none_or(|&c| is_word_end(c)) => {
+                self.pos = start + skip + n;
+                Ok(v)
+            }
+            _ => {
+                let loc = self.loc();
+                Err(self.error(LexErrorKind::ExpectedNumber, start, loc))
+            }
+        }
+    }
+
+    /// Read one bare number as f64 (directive arguments such as `Transform`'s 16 values).
+    /// `None` when the next token is not a number (nothing consumed but whitespace).
+    #[inline]
+    pub fn read_f64(&mut self) -> Option<f64> {
+        self.skip_ws();
+        let start = self.pos;
+        let rest = &self.bytes[start..];
+        let (skip, rest) = match rest.first() {
+            Some(b'+') => (1, &rest[1..]),
+            _ => (0, rest),
+        };
+        match fast_float2::parse_partial::<f64, _>(rest) {
+            Ok((v, n)) if n > 0 && rest.get(n).is_none_or(|&c| is_word_end(c)) => {
+                self.pos = start + skip + n;
+                Some(v)
+            }
+            _ => None,
+        }
+    }
+
+    /// Read non-negative integers until `]` (consumed) into `out`.
+    pub fn read_u32_array(&mut self, out: &mut Vec<u32>) -> Result<(), LexError> {
+        loop {
+            self.skip_ws();
+            let start = self.pos;
+            let Some(&b) = self.bytes.get(start) else {
+                let loc = self.loc();
+                return Err(self.error(LexErrorKind::UnterminatedArray, start, loc));
+            };
+            if b == b']' {
+                self.pos += 1;
+                return Ok(());
+            }
+            let v = self.read_i64_at(start)?;
+            match u32::try_from(v) {
+                Ok(v) => out.push(v),
+                Err(_) => {
+                    self.pos = start;
+                    let loc = self.loc();
+                    return Err(self.error(LexErrorKind::BadInteger, start, loc));
+                }
+            }
+        }
+    }
+
+    /// Read integers until `]` (consumed) into `out`.
+    pub fn read_i32_array(&mut self, out: &mut Vec<i32>) -> Result<(), LexError> {
+        loop {
+            self.skip_ws();
+            let start = self.pos;
+            let Some(&b) = self.bytes.get(start) else {
+                let loc = self.loc();
+                return Err(self.error(LexErrorKind::UnterminatedArray, start, loc));
+            };
+            if b == b']' {
+                self.pos += 1;
+                return Ok(());
+            }
+            let v = self.read_i64_at(start)?;
+            match i32::try_from(v) {
+                Ok(v) => out.push(v),
+                Err(_) => {
+                    self.pos = start;
+                    let loc = self.loc();
+                    return Err(self.error(LexErrorKind::BadInteger, start, loc));
+                }
+            }
+        }
+    }
+
+    /// One integer; accepts integral floats like `3.0` (some exporters write them).
+    #[inline]
+    fn read_i64_at(&mut self, start: usize) -> Result<i64, LexError> {
+        let bytes = self.bytes;
+        let mut p = start;
+        let neg = match bytes.get(p) {
+            Some(b'-') => {
+                p += 1;
+                true
+            }
+            Some(b'+') => {
+                p += 1;
+                false
+            }
+            _ => false,
+        };
+        let digits_start = p;
+        let mut v: i64 = 0;
+        while let Some(&c) = bytes.get(p) {
+            if !c.is_ascii_digit() || p - digits_start >= 18 {
+                break;
+            }
+            v = v * 10 + i64::from(c - b'0');
+            p += 1;
+        }
+        if p > digits_start && bytes.get(p).is_none_or(|&c| is_word_end(c)) {
+            self.pos = p;
+            return Ok(if neg { -v } else { v });
+        }
+        // Slow path: `3.0`, `1e2`.
+        let loc = self.loc();
+        let mut end = start;
+        while end < bytes.len() && !is_word_end(bytes[end]) {
+            end += 1;
+        }
+        match parse_f64(&bytes[start..end]) {
+            Some(f) if f.fract() == 0.0 && f.abs() < 9.0e15 => {
+                self.pos = end;
+                Ok(f as i64)
+            }
+            Some(_) => Err(self.error(LexErrorKind::BadInteger, start, loc)),
+            None => Err(self.error(LexErrorKind::ExpectedNumber, start, loc)),
+        }
+    }
+
+    /// Count all tokens to the end (benchmark helper; equivalent to draining `next_token`).
+    pub fn count_tokens(mut self) -> Result<u64, LexError> {
+        let mut n = 0;
+        while self.next_token()?.is_some() {
+            n += 1;
+        }
+        Ok(n)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn kinds(src: &str) -> Vec<(TokenKind, String, u32, u32)> {
+        let mut lx = Lexer::new(src.as_bytes(), FileId(0));
+        let mut out = Vec::new();
+        while let Some(t) = lx.next_token().unwrap() {
+            out.push((
+                t.kind,
+                String::from_utf8_lossy(t.bytes).into_owned(),
+                t.loc.line,
+                t.loc.column,
+            ));
+        }
+        out
+    }
+
+    #[test]
+    fn tokens_with_positions() {
+        let toks = kinds("Shape \"sphere\" # c\n  \"float radius\" [ 2.5 ]");
+        assert_eq!(
+            toks,
+            vec![
+                (TokenKind::Word, "Shape".into(), 1, 1),
+                (TokenKind::String, "sphere".into(), 1, 7),
+                (TokenKind::String, "float radius".into(), 2, 3),
+                (TokenKind::Open, "[".into(), 2, 18),
+                (TokenKind::Word, "2.5".into(), 2, 20),
+                (TokenKind::Close, "]".into(), 2, 24),
+            ]
+        );
+    }
+
+    #[test]
+    fn word_ends_at_bracket_and_quote() {
+        let toks = kinds("[1 2]\"a\"x#c");
+        let words: Vec<_> = toks.iter().map(|t| t.1.as_str()).collect();
+        assert_eq!(words, ["[", "1", "2", "]", "a", "x"]);
+    }
+
+    #[test]
+    fn escapes() {
+        let mut lx = Lexer::new(br#""a\"b\\c\n""#, FileId(0));
+        let t = lx.next_token().unwrap().unwrap();
+        assert_eq!(t.unescaped().unwrap(), "a\"b\\c\n");
+    }
+
+    #[test]
+    fn unterminated_string_is_error() {
+        let mut lx = Lexer::new(b"  \"abc\n\"", FileId(0));
+        let e = lx.next_token().unwrap_err();
+        assert_eq!(e.kind, LexErrorKind::UnterminatedString);
+        assert_eq!((e.loc.line, e.loc.column), (1, 3));
+        let mut lx = Lexer::new(b"\"abc\\", FileId(0));
+        assert!(lx.next_token().is_err());
+    }
+
+    #[test]
+    fn float_array_fast_path() {
+        let mut lx = Lexer::new(b" 1 -2.5 +3e2 .5\n 1e-3 ] x", FileId(0));
+        let mut v = Vec::new();
+        lx.read_f32_array(&mut v).unwrap();
+        assert_eq!(v, vec![1.0, -2.5, 300.0, 0.5, 0.001]);
+        assert_eq!(lx.next_token().unwrap().unwrap().loc.line, 2);
+    }
+
+    #[test]
+    fn float_array_errors() {
+        let mut lx = Lexer::new(b" 1 2x ]", FileId(0));
+        let e = lx.read_f32_array(&mut Vec::new()).unwrap_err();
+        assert_eq!(
+            (e.kind, e.loc.column, e.token.as_str()),
+            (LexErrorKind::ExpectedNumber, 4, "2x ]")
+        );
+        let mut lx = Lexer::new(b" 1 2", FileId(0));
+        assert_eq!(
+            lx.read_f32_array(&mut Vec::new()).unwrap_err().kind,
+            LexErrorKind::UnterminatedArray
+        );
+    }
+
+    #[test]
+    fn int_arrays() {
+        let mut lx = Lexer::new(b"0 1 2.0 4294967295 ]", FileId(0));
+        let mut v = Vec::new();
+        lx.read_u32_array(&mut v).unwrap();
+        assert_eq!(v, vec![0, 1, 2, u32::MAX]);
+        let mut lx = Lexer::new(b"0 -1 ]", FileId(0));
+        assert_eq!(
+            lx.read_u32_array(&mut Vec::new()).unwrap_err().kind,
+            LexErrorKind::BadInteger
+        );
+        let mut lx = Lexer::new(b"1.5 ]", FileId(0));
+        assert_eq!(
+            lx.read_i32_array(&mut Vec::new()).unwrap_err().kind,
+            LexErrorKind::BadInteger
+        );
+        let mut lx = Lexer::new(b"-7 99999999999999999999 ]", FileId(0));
+        assert!(lx.read_i32_array(&mut Vec::new()).is_err());
+    }
+
+    #[test]
+    fn count_matches_next() {
+        let src = b"A [1 2 3] \"s\" # x\nB";
+        assert_eq!(Lexer::new(src, FileId(0)).count_tokens().unwrap(), 8);
+    }
+}

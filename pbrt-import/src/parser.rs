@@ -1,0 +1,1567 @@
+//! The directive interpreter: graphics state, version semantics, includes, events.
+
+use std::borrow::Cow;
+use std::collections::{HashMap, HashSet};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use rayon::prelude::*;
+
+use crate::color;
+use crate::error::{Error, Location, MissingFile, ParseError, ParseErrorKind};
+use crate::events::*;
+use crate::lexer::{LexError, LexErrorKind, Lexer, Loc, Token, TokenKind};
+use crate::math::{self, M64};
+use crate::params::{Param, ParamError, ParamList, ParamType, Values};
+use crate::shapes;
+use crate::source::SourceBytes;
+use crate::{
+    ElementId, FileId, MaterialId, ObjectId, ParseOptions, ParseStats, PbrtVersion, PlyLoading,
+    VersionOption,
+};
+
+pub(crate) enum Entry<'a> {
+    Path(&'a Path),
+    Text { text: &'a [u8], base_dir: &'a Path },
+}
+
+type Result<T> = std::result::Result<T, Error>;
+
+#[derive(Clone)]
+struct GState {
+    reverse_orientation: bool,
+    material: Arc<Material>,
+    area_light: Option<Arc<AreaLight>>,
+}
+
+#[derive(Clone, Copy)]
+struct XState {
+    ctm: [M64; 2],
+    /// Bit 0: start transform active, bit 1: end transform active.
+    active: u8,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum BlockKind {
+    Attribute,
+    Transform,
+    Object,
+}
+
+impl BlockKind {
+    fn begin(self) -> &'static str {
+        match self {
+            BlockKind::Attribute => "AttributeBegin",
+            BlockKind::Transform => "TransformBegin",
+            BlockKind::Object => "ObjectBegin",
+        }
+    }
+}
+
+struct PendingCamera {
+    kind: String,
+    camera_from_world: M64,
+    fov_deg: Option<f32>,
+    screen_window: Option<[f32; 4]>,
+    lens_radius: f32,
+    focal_distance: Option<f32>,
+    loc: Loc,
+}
+
+struct PendingPly {
+    path: PathBuf,
+    event: ShapeEvent,
+}
+
+/// v4-only material and film names; seeing one switches `Auto` to v4.
+const V4_NAMES: &[&[u8]] = &[
+    b"coateddiffuse",
+    b"coatedconductor",
+    b"conductor",
+    b"dielectric",
+    b"thindielectric",
+    b"diffusetransmission",
+    b"gbuffer",
+    b"spectral",
+    b"bilinearmesh",
+];
+
+const V4_DIRECTIVES: &[&[u8]] = &[b"Import", b"ColorSpace", b"Option", b"Attribute"];
+
+/// Find pbrt-v4-only constructs in (the start of) a file.
+fn prescan_is_v4(bytes: &[u8]) -> bool {
+    let mut lx = Lexer::new(&bytes[..bytes.len().min(16 << 20)], FileId(0));
+    while let Ok(Some(t)) = lx.next_token() {
+        match t.kind {
+            TokenKind::Word if V4_DIRECTIVES.contains(&t.bytes) => return true,
+            TokenKind::String
+                if V4_NAMES.contains(&t.bytes)
+                    || [
+                        &b"point3 "[..],
+                        b"point2 ",
+                        b"normal3 ",
+                        b"vector3 ",
+                        b"vector2 ",
+                    ]
+                    .iter()
+                    .any(|p| t.bytes.starts_with(p)) =>
+            {
+                return true
+            }
+            _ => {}
+        }
+    }
+    false
+}
+
+pub(crate) fn parse_entry(
+    entry: Entry<'_>,
+    opts: &ParseOptions,
+    sink: &mut dyn SceneSink,
+) -> Result<ParseStats> {
+    let span = tracing::info_span!("pbrt_parse");
+    let _guard = span.enter();
+    let (path, base_dir, owned_src);
+    let bytes: &[u8] = match entry {
+        Entry::Path(p) => {
+            owned_src = SourceBytes::open(p).map_err(|source| Error::Io {
+                path: p.to_path_buf(),
+                source,
+            })?;
+            path = p.to_path_buf();
+            base_dir = p.parent().map(Path::to_path_buf).unwrap_or_default();
+            owned_src.bytes()
+        }
+        Entry::Text {
+            text,
+            base_dir: dir,
+        } => {
+            path = dir.join("<input>");
+            base_dir = dir.to_path_buf();
+            text
+        }
+    };
+    let version = match opts.version {
+        VersionOption::V3 => PbrtVersion::V3,
+        VersionOption::V4 => PbrtVersion::V4,
+        VersionOption::Auto if prescan_is_v4(bytes) => PbrtVersion::V4,
+        VersionOption::Auto => PbrtVersion::V3,
+    };
+    let mut p = Parser::new(opts, sink, base_dir, version);
+    p.sink.material(&p.gs.material)?;
+    p.run_file(path, bytes, Via::Entry, None)?;
+    p.finish()
+}
+
+struct Parser<'s> {
+    opts: &'s ParseOptions,
+    sink: &'s mut dyn SceneSink,
+    version: PbrtVersion,
+    stats: ParseStats,
+    entry_dir: PathBuf,
+    dirs: Vec<PathBuf>,
+    depth: u32,
+    open_files: Vec<PathBuf>,
+    in_world: bool,
+    gs: GState,
+    xs: XState,
+    attr_stack: Vec<GState>,
+    xform_stack: Vec<XState>,
+    blocks: Vec<(BlockKind, Loc)>,
+    named_coords: HashMap<String, [M64; 2]>,
+    named_materials: HashMap<String, Arc<Material>>,
+    next_material: u32,
+    float_textures: HashMap<String, [f32; 3]>,
+    color_textures: HashMap<String, [f32; 3]>,
+    objects: HashMap<String, ObjectId>,
+    object_names: Vec<String>,
+    object_defined: Vec<bool>,
+    forward_refs: Vec<(ObjectId, Loc, String)>,
+    current_object: Option<ObjectId>,
+    cameras: Vec<PendingCamera>,
+    film_resolution: [u32; 2],
+    element: Option<ElementId>,
+    element_names: Vec<String>,
+    missing: Vec<MissingFile>,
+    ply_queue: Vec<PendingPly>,
+    ply_queue_bytes: u64,
+    next_seq: u64,
+    warned: HashSet<String>,
+    spectrum_cache: HashMap<PathBuf, Option<[f32; 3]>>,
+}
+
+fn default_material(version: PbrtVersion) -> Material {
+    let kind = if version == PbrtVersion::V4 {
+        "diffuse"
+    } else {
+        "matte"
+    };
+    Material {
+        id: MaterialId(0),
+        name: None,
+        kind: kind.into(),
+        base_color: Some([0.5; 3]),
+        base_color_texture: None,
+        opacity: None,
+        loc: Loc::default(),
+    }
+}
+
+impl<'s> Parser<'s> {
+    fn new(
+        opts: &'s ParseOptions,
+        sink: &'s mut dyn SceneSink,
+        entry_dir: PathBuf,
+        version: PbrtVersion,
+    ) -> Self {
+        let mut named_coords = HashMap::new();
+        named_coords.insert("world".to_owned(), [math::IDENTITY; 2]);
+        Parser {
+            opts,
+            sink,
+            version,
+            stats: ParseStats::default(),
+            entry_dir,
+            dirs: Vec::new(),
+            depth: 0,
+            open_files: Vec::new(),
+            in_world: false,
+            gs: GState {
+                reverse_orientation: false,
+                material: Arc::new(default_material(version)),
+                area_light: None,
+            },
+            xs: XState {
+                ctm: [math::IDENTITY; 2],
+                active: 3,
+            },
+            attr_stack: Vec::new(),
+            xform_stack: Vec::new(),
+            blocks: Vec::new(),
+            named_coords,
+            named_materials: HashMap::new(),
+            next_material: 1,
+            float_textures: HashMap::new(),
+            color_textures: HashMap::new(),
+            objects: HashMap::new(),
+            object_names: Vec::new(),
+            object_defined: Vec::new(),
+            forward_refs: Vec::new(),
+            current_object: None,
+            cameras: Vec::new(),
+            film_resolution: [1280, 720],
+            element: None,
+            element_names: Vec::new(),
+            missing: Vec::new(),
+            ply_queue: Vec::new(),
+            ply_queue_bytes: 0,
+            next_seq: 0,
+            warned: HashSet::new(),
+            spectrum_cache: HashMap::new(),
+        }
+    }
+
+    fn v4(&self) -> bool {
+        self.version == PbrtVersion::V4
+    }
+
+    fn hint_v4(&mut self, why: &str) {
+        if self.opts.version == VersionOption::Auto && self.version == PbrtVersion::V3 {
+            tracing::info!(reason = why, "switching to pbrt-v4 semantics");
+            self.version = PbrtVersion::V4;
+        }
+    }
+
+    // ---- errors and warnings -------------------------------------------------------
+
+    fn location(&self, loc: Loc) -> Location {
+        Location {
+            path: self
+                .stats
+                .files
+                .get(loc.file.0 as usize)
+                .cloned()
+                .unwrap_or_default(),
+            line: loc.line,
+            column: loc.column,
+        }
+    }
+
+    fn err(&self, tok: &Token<'_>, kind: ParseErrorKind) -> Error {
+        Error::Parse(Box::new(ParseError {
+            loc: self.location(tok.loc),
+            token: tok.display(),
+            kind,
+        }))
+    }
+
+    fn err_at(&self, loc: Loc, token: &str, kind: ParseErrorKind) -> Error {
+        Error::Parse(Box::new(ParseError {
+            loc: self.location(loc),
+            token: token.to_owned(),
+            kind,
+        }))
+    }
+
+    fn lex_err(&self, e: LexError) -> Error {
+        let kind = match e.kind {
+            LexErrorKind::UnterminatedString => ParseErrorKind::BadString,
+            LexErrorKind::ExpectedNumber => {
+                ParseErrorKind::BadParameter("expected a number".into())
+            }
+            LexErrorKind::UnterminatedArray => ParseErrorKind::Unexpected { expected: "`]`" },
+            LexErrorKind::BadInteger => {
+                ParseErrorKind::BadParameter("expected an integer in range".into())
+            }
+        };
+        Error::Parse(Box::new(ParseError {
+            loc: self.location(e.loc),
+            token: e.token,
+            kind,
+        }))
+    }
+
+    fn param_err(&self, e: ParamError<'_>) -> Error {
+        match e {
+            ParamError::Lex(e) => self.lex_err(e),
+            ParamError::Bad(t, m) => self.err(&t, ParseErrorKind::BadParameter(m)),
+        }
+    }
+
+    fn warn(&mut self, loc: Option<Loc>, message: String) {
+        self.stats.warnings += 1;
+        match loc {
+            Some(l) => tracing::warn!("{}: {message}", self.location(l)),
+            None => tracing::warn!("{message}"),
+        }
+        self.sink.warning(&Warning { loc, message });
+    }
+
+    /// Warn once per `key` (repeated constructs in huge scenes).
+    fn warn_once(&mut self, key: &str, loc: Option<Loc>, message: String) {
+        if self.warned.insert(key.to_owned()) {
+            self.warn(loc, message);
+        }
+    }
+
+    fn missing_file(&mut self, path: PathBuf, loc: Loc) {
+        if self.opts.allow_missing {
+            self.warn(
+                Some(loc),
+                format!("missing file {} (skipped)", path.display()),
+            );
+        }
+        let referenced_at = self.location(loc);
+        self.missing.push(MissingFile {
+            path,
+            referenced_at,
+        });
+    }
+
+    // ---- token helpers ----------------------------------------------------------------
+
+    fn next<'b>(
+        &self,
+        lx: &mut Lexer<'b>,
+        what: &'static str,
+        after: &Token<'b>,
+    ) -> Result<Token<'b>> {
+        match lx.next_token().map_err(|e| self.lex_err(e))? {
+            Some(t) => Ok(t),
+            None => Err(self.err(after, ParseErrorKind::Unexpected { expected: what })),
+        }
+    }
+
+    fn string<'b>(
+        &self,
+        lx: &mut Lexer<'b>,
+        after: &Token<'b>,
+    ) -> Result<(Cow<'b, str>, Token<'b>)> {
+        let t = self.next(lx, "a quoted string", after)?;
+        if t.kind != TokenKind::String {
+            return Err(self.err(
+                &t,
+                ParseErrorKind::Unexpected {
+                    expected: "a quoted string",
+                },
+            ));
+        }
+        match t.unescaped() {
+            Some(s) => Ok((s, t)),
+            None => Err(self.err(&t, ParseErrorKind::BadString)),
+        }
+    }
+
+    /// `n` numbers, optionally inside `[ ]`.
+    fn numbers<'b>(&self, lx: &mut Lexer<'b>, n: usize, after: &Token<'b>) -> Result<Vec<f64>> {
+        let bracketed = lx.peek_byte() == Some(b'[');
+        if bracketed {
+            lx.next_token().map_err(|e| self.lex_err(e))?;
+        }
+        let mut out = Vec::with_capacity(n);
+        for _ in 0..n {
+            // Fast path straight from the bytes; build a token only to report an error.
+            match lx.read_f64() {
+                Some(v) => out.push(v),
+                None => {
+                    let t = self.next(lx, "a number", after)?;
+                    return Err(self.err(
+                        &t,
+                        ParseErrorKind::Unexpected {
+                            expected: "a number",
+                        },
+                    ));
+                }
+            }
+        }
+        if bracketed {
+            let t = self.next(lx, "`]`", after)?;
+            if t.kind != TokenKind::Close {
+                return Err(self.err(&t, ParseErrorKind::Unexpected { expected: "`]`" }));
+            }
+        }
+        Ok(out)
+    }
+
+    fn params<'b>(&mut self, lx: &mut Lexer<'b>) -> Result<ParamList<'b>> {
+        let p = ParamList::parse(lx).map_err(|e| self.param_err(e))?;
+        if p.v4_spelling {
+            self.hint_v4("v4 parameter type");
+        }
+        Ok(p)
+    }
+
+    // ---- files ------------------------------------------------------------------------
+
+    fn resolve(&self, name: &str) -> PathBuf {
+        let p = Path::new(name);
+        if p.is_absolute() {
+            return p.to_path_buf();
+        }
+        let here = self.dirs.last().unwrap_or(&self.entry_dir).join(p);
+        if here.exists() {
+            return here;
+        }
+        let entry = self.entry_dir.join(p);
+        if entry.exists() {
+            return entry;
+        }
+        here
+    }
+
+    fn run_file(
+        &mut self,
+        path: PathBuf,
+        bytes: &[u8],
+        via: Via,
+        element: Option<ElementId>,
+    ) -> Result<()> {
+        let file = FileId(self.stats.files.len() as u32);
+        self.stats.files.push(path.clone());
+        self.stats.text_bytes += bytes.len() as u64;
+        let saved_element = self.element;
+        if element.is_some() {
+            self.element = element;
+        }
+        self.dirs
+            .push(path.parent().map(Path::to_path_buf).unwrap_or_default());
+        let from_entry_world = element.is_some();
+        let event = FileEvent {
+            file,
+            path: &path,
+            depth: self.depth,
+            via,
+            from_entry_world,
+            element: self.element,
+            element_name: self
+                .element
+                .and_then(|e| self.element_names.get(e.0 as usize))
+                .map(String::as_str),
+            size_bytes: bytes.len() as u64,
+        };
+        self.sink.file_enter(&event)?;
+        let _span =
+            tracing::debug_span!("pbrt_file", path = %path.display(), size_bytes = bytes.len())
+                .entered();
+        self.parse_tokens(bytes, file)?;
+        let event = FileEvent {
+            file,
+            path: &path,
+            depth: self.depth,
+            via,
+            from_entry_world,
+            element: self.element,
+            element_name: self
+                .element
+                .and_then(|e| self.element_names.get(e.0 as usize))
+                .map(String::as_str),
+            size_bytes: bytes.len() as u64,
+        };
+        self.sink.file_exit(&event)?;
+        self.dirs.pop();
+        self.element = saved_element;
+        Ok(())
+    }
+
+    fn include<'b>(&mut self, lx: &mut Lexer<'b>, tok: &Token<'b>, via: Via) -> Result<()> {
+        let (name, stok) = self.string(lx, tok)?;
+        let path = self.resolve(&name);
+        if !path.is_file() {
+            self.missing_file(path, stok.loc);
+            return Ok(());
+        }
+        if self.depth + 1 > self.opts.max_include_depth {
+            return Err(self.err(
+                &stok,
+                ParseErrorKind::Misplaced(format!(
+                    "include depth over {}",
+                    self.opts.max_include_depth
+                )),
+            ));
+        }
+        let canonical = path.canonicalize().unwrap_or_else(|_| path.clone());
+        if self.open_files.contains(&canonical) {
+            return Err(self.err(
+                &stok,
+                ParseErrorKind::Invalid("recursive Include/Import".into()),
+            ));
+        }
+        let src = SourceBytes::open(&path).map_err(|source| Error::Io {
+            path: path.clone(),
+            source,
+        })?;
+        let element = if self.depth == 0 && self.in_world {
+            let stem = path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            let stem = stem
+                .strip_suffix(".pbrt")
+                .map(str::to_owned)
+                .unwrap_or(stem);
+            let id = match self.element_names.iter().position(|n| *n == stem) {
+                Some(i) => ElementId(i as u32),
+                None => {
+                    self.element_names.push(stem);
+                    ElementId(self.element_names.len() as u32 - 1)
+                }
+            };
+            Some(id)
+        } else {
+            None
+        };
+        if via == Via::Import {
+            self.attr_stack.push(self.gs.clone());
+            self.xform_stack.push(self.xs);
+        }
+        self.open_files.push(canonical);
+        self.depth += 1;
+        let r = self.run_file(path, src.bytes(), via, element);
+        self.depth -= 1;
+        self.open_files.pop();
+        if via == Via::Import {
+            if let (Some(g), Some(x)) = (self.attr_stack.pop(), self.xform_stack.pop()) {
+                self.gs = g;
+                self.xs = x;
+            }
+        }
+        r
+    }
+
+    fn finish(mut self) -> Result<ParseStats> {
+        self.flush_plys()?;
+        self.emit_cameras()?;
+        if let Some(&(kind, loc)) = self.blocks.last() {
+            return Err(self.err_at(
+                loc,
+                kind.begin(),
+                ParseErrorKind::Unbalanced(format!("{} never closed", kind.begin())),
+            ));
+        }
+        for (id, loc, name) in std::mem::take(&mut self.forward_refs) {
+            if !self
+                .object_defined
+                .get(id.0 as usize)
+                .copied()
+                .unwrap_or(false)
+            {
+                return Err(self.err_at(
+                    loc,
+                    &format!("\"{name}\""),
+                    ParseErrorKind::UnknownObject,
+                ));
+            }
+        }
+        if !self.missing.is_empty() && !self.opts.allow_missing {
+            return Err(Error::MissingFiles {
+                files: std::mem::take(&mut self.missing),
+            });
+        }
+        self.stats.missing = std::mem::take(&mut self.missing);
+        self.stats.version = Some(self.version);
+        tracing::info!(
+            files = self.stats.files.len(),
+            text_bytes = self.stats.text_bytes,
+            shapes = self.stats.shapes,
+            triangles = self.stats.triangles,
+            instances = self.stats.instances,
+            "pbrt parse done"
+        );
+        Ok(self.stats)
+    }
+
+    // ---- main loop ----------------------------------------------------------------------
+
+    fn parse_tokens(&mut self, bytes: &[u8], file: FileId) -> Result<()> {
+        let mut lx = Lexer::new(bytes, file);
+        while let Some(tok) = lx.next_token().map_err(|e| self.lex_err(e))? {
+            if tok.kind != TokenKind::Word {
+                return Err(self.err(
+                    &tok,
+                    ParseErrorKind::Unexpected {
+                        expected: "a directive",
+                    },
+                ));
+            }
+            self.directive(&mut lx, &tok)?;
+        }
+        Ok(())
+    }
+
+    fn apply(&mut self, m: M64) {
+        for i in 0..2 {
+            if self.xs.active & (1 << i) != 0 {
+                self.xs.ctm[i] = math::mul(&self.xs.ctm[i], &m);
+            }
+        }
+    }
+
+    fn set(&mut self, m: M64) {
+        for i in 0..2 {
+            if self.xs.active & (1 << i) != 0 {
+                self.xs.ctm[i] = m;
+            }
+        }
+    }
+
+    fn require_world(&mut self, tok: &Token<'_>) {
+        if !self.in_world {
+            let name = String::from_utf8_lossy(tok.bytes).into_owned();
+            self.warn_once(
+                &format!("world:{name}"),
+                Some(tok.loc),
+                format!("{name} before WorldBegin"),
+            );
+        }
+    }
+
+    fn directive<'b>(&mut self, lx: &mut Lexer<'b>, tok: &Token<'b>) -> Result<()> {
+        match tok.bytes {
+            b"AttributeBegin" => {
+                self.attr_stack.push(self.gs.clone());
+                self.xform_stack.push(self.xs);
+                self.blocks.push((BlockKind::Attribute, tok.loc));
+            }
+            b"AttributeEnd" => self.pop_block(tok, BlockKind::Attribute)?,
+            b"TransformBegin" => {
+                self.xform_stack.push(self.xs);
+                self.blocks.push((BlockKind::Transform, tok.loc));
+            }
+            b"TransformEnd" => self.pop_block(tok, BlockKind::Transform)?,
+            b"Translate" => {
+                let v = self.numbers(lx, 3, tok)?;
+                self.apply(math::translate([v[0], v[1], v[2]]));
+            }
+            b"Scale" => {
+                let v = self.numbers(lx, 3, tok)?;
+                self.apply(math::scale([v[0], v[1], v[2]]));
+            }
+            b"Rotate" => {
+                let v = self.numbers(lx, 4, tok)?;
+                self.apply(math::rotate(v[0], [v[1], v[2], v[3]]));
+            }
+            b"LookAt" => {
+                let v = self.numbers(lx, 9, tok)?;
+                match math::look_at([v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]) {
+                    Some(m) => self.apply(m),
+                    None => self.warn(
+                        Some(tok.loc),
+                        "LookAt: up vector parallel to view direction; ignored".into(),
+                    ),
+                }
+            }
+            b"Transform" | b"ConcatTransform" => {
+                let v = self.numbers(lx, 16, tok)?;
+                let arr: [f64; 16] = std::array::from_fn(|i| v[i]);
+                let m = math::from_pbrt(&arr);
+                if tok.bytes == b"Transform" {
+                    self.set(m);
+                } else {
+                    self.apply(m);
+                }
+            }
+            b"Identity" => self.set(math::IDENTITY),
+            b"CoordinateSystem" => {
+                let (name, _) = self.string(lx, tok)?;
+                self.named_coords.insert(name.into_owned(), self.xs.ctm);
+            }
+            b"CoordSysTransform" => {
+                let (name, stok) = self.string(lx, tok)?;
+                match self.named_coords.get(name.as_ref()) {
+                    Some(m) => self.xs.ctm = *m,
+                    None => self.warn(
+                        Some(stok.loc),
+                        format!("unknown coordinate system \"{name}\""),
+                    ),
+                }
+            }
+            b"ActiveTransform" => {
+                let t = self.next(lx, "StartTime, EndTime or All", tok)?;
+                self.xs.active = match t.bytes {
+                    b"StartTime" => 1,
+                    b"EndTime" => 2,
+                    b"All" => 3,
+                    _ => {
+                        return Err(self.err(
+                            &t,
+                            ParseErrorKind::Unexpected {
+                                expected: "StartTime, EndTime or All",
+                            },
+                        ))
+                    }
+                };
+            }
+            b"TransformTimes" => {
+                self.numbers(lx, 2, tok)?;
+            }
+            b"ReverseOrientation" => self.gs.reverse_orientation = !self.gs.reverse_orientation,
+            b"WorldBegin" => {
+                if self.in_world {
+                    self.warn(Some(tok.loc), "second WorldBegin".into());
+                }
+                self.in_world = true;
+                self.xs.ctm = [math::IDENTITY; 2];
+                self.xs.active = 3;
+                self.named_coords
+                    .insert("world".into(), [math::IDENTITY; 2]);
+                self.emit_cameras()?;
+            }
+            b"WorldEnd" => {
+                if !self.v4() {
+                    self.flush_plys()?;
+                    while let Some((kind, _)) = self.blocks.last().copied() {
+                        if kind == BlockKind::Object {
+                            break;
+                        }
+                        self.warn(
+                            Some(tok.loc),
+                            format!("WorldEnd: missing end to {}", kind.begin()),
+                        );
+                        self.pop_block(tok, kind)?;
+                    }
+                }
+            }
+            b"Include" => self.include(lx, tok, Via::Include)?,
+            b"Import" => {
+                self.hint_v4("Import");
+                self.include(lx, tok, Via::Import)?;
+            }
+            b"Camera" => self.camera(lx, tok)?,
+            b"Film" => {
+                let (kind, _) = self.string(lx, tok)?;
+                if V4_NAMES.contains(&kind.as_bytes()) || kind == "rgb" {
+                    self.hint_v4("v4 film");
+                }
+                let p = self.params(lx)?;
+                let x = p.int("xresolution").unwrap_or(1280).max(1) as u32;
+                let y = p.int("yresolution").unwrap_or(720).max(1) as u32;
+                self.film_resolution = [x, y];
+            }
+            b"Sampler" | b"Accelerator" | b"Integrator" | b"PixelFilter" | b"SurfaceIntegrator"
+            | b"VolumeIntegrator" | b"Renderer" => {
+                // Rendering settings: validated, then ignored by design.
+                self.string(lx, tok)?;
+                self.params(lx)?;
+            }
+            b"ColorSpace" => {
+                self.hint_v4("ColorSpace");
+                self.string(lx, tok)?;
+            }
+            b"Option" => {
+                self.hint_v4("Option");
+                self.params(lx)?;
+            }
+            b"Attribute" => {
+                self.hint_v4("Attribute");
+                let (target, t) = self.string(lx, tok)?;
+                if !matches!(
+                    target.as_ref(),
+                    "shape" | "light" | "material" | "medium" | "texture"
+                ) {
+                    return Err(self.err(
+                        &t,
+                        ParseErrorKind::Invalid("unknown Attribute target".into()),
+                    ));
+                }
+                self.params(lx)?;
+                self.warn_once(
+                    "Attribute",
+                    Some(tok.loc),
+                    "Attribute defaults are not applied".into(),
+                );
+            }
+            b"MakeNamedMedium" => {
+                self.string(lx, tok)?;
+                self.params(lx)?;
+            }
+            b"MediumInterface" => {
+                self.string(lx, tok)?;
+                if lx.peek_byte() == Some(b'"') {
+                    self.string(lx, tok)?;
+                }
+            }
+            b"Texture" => self.texture(lx, tok)?,
+            b"Material" => {
+                self.require_world(tok);
+                let (kind, t) = self.string(lx, tok)?;
+                if V4_NAMES.contains(&kind.as_bytes()) {
+                    self.hint_v4("v4 material");
+                }
+                let p = self.params(lx)?;
+                let m = self.make_material(None, &kind, &p, t.loc);
+                self.sink.material(&m)?;
+                self.gs.material = m;
+            }
+            b"MakeNamedMaterial" => {
+                let (name, t) = self.string(lx, tok)?;
+                let p = self.params(lx)?;
+                let Some(kind) = p.string("type").map(str::to_owned) else {
+                    return Err(self.err(
+                        &t,
+                        ParseErrorKind::BadParameter(
+                            "MakeNamedMaterial needs \"string type\"".into(),
+                        ),
+                    ));
+                };
+                if V4_NAMES.contains(&kind.as_bytes()) {
+                    self.hint_v4("v4 material");
+                }
+                if self.named_materials.contains_key(name.as_ref()) {
+                    if self.v4() {
+                        return Err(self.err(
+                            &t,
+                            ParseErrorKind::Invalid("named material redefined".into()),
+                        ));
+                    }
+                    self.warn(Some(t.loc), format!("named material \"{name}\" redefined"));
+                }
+                let m = self.make_material(Some(name.to_string()), &kind, &p, t.loc);
+                self.sink.material(&m)?;
+                self.named_materials.insert(name.into_owned(), m);
+            }
+            b"NamedMaterial" => {
+                let (name, t) = self.string(lx, tok)?;
+                match self.named_materials.get(name.as_ref()) {
+                    Some(m) => self.gs.material = m.clone(),
+                    None => {
+                        self.warn(
+                            Some(t.loc),
+                            format!("unknown named material \"{name}\"; using the default"),
+                        );
+                        self.gs.material = Arc::new(default_material(self.version));
+                    }
+                }
+            }
+            b"LightSource" => self.light(lx, tok)?,
+            b"AreaLightSource" => {
+                let (kind, _) = self.string(lx, tok)?;
+                let p = self.params(lx)?;
+                let radiance = self.emission(&p, "L");
+                let two_sided = p.bool("twosided").unwrap_or(false);
+                self.gs.area_light = Some(Arc::new(AreaLight {
+                    kind: kind.into_owned(),
+                    radiance,
+                    two_sided,
+                }));
+            }
+            b"Shape" => self.shape(lx, tok)?,
+            b"ObjectBegin" => self.object_begin(lx, tok)?,
+            b"ObjectEnd" => {
+                let Some(id) = self.current_object else {
+                    return Err(self.err(
+                        tok,
+                        ParseErrorKind::Unbalanced("ObjectEnd without ObjectBegin".into()),
+                    ));
+                };
+                self.pop_block(tok, BlockKind::Object)?;
+                self.current_object = None;
+                let name = self.object_names[id.0 as usize].clone();
+                self.sink.object_end(&ObjectEvent {
+                    object: id,
+                    name: &name,
+                    element: self.element,
+                    loc: tok.loc,
+                })?;
+            }
+            b"ObjectInstance" => self.object_instance(lx, tok)?,
+            _ => return Err(self.err(tok, ParseErrorKind::UnknownDirective)),
+        }
+        Ok(())
+    }
+
+    fn pop_block(&mut self, tok: &Token<'_>, kind: BlockKind) -> Result<()> {
+        let Some(&(top, _)) = self.blocks.last() else {
+            let what = String::from_utf8_lossy(tok.bytes);
+            return Err(self.err(
+                tok,
+                ParseErrorKind::Unbalanced(format!("{what} without a matching begin")),
+            ));
+        };
+        // pbrt-v3 keeps separate attribute and transform stacks and lets ObjectBegin/End
+        // interleave with AttributeBegin/End; pbrt-v4 requires proper nesting.
+        if top != kind && (self.v4() || kind == BlockKind::Transform || top == BlockKind::Transform)
+        {
+            let what = String::from_utf8_lossy(tok.bytes);
+            return Err(self.err(
+                tok,
+                ParseErrorKind::Unbalanced(format!("{what} closes {}", top.begin())),
+            ));
+        }
+        self.blocks.pop();
+        match kind {
+            BlockKind::Transform => {
+                if let Some(x) = self.xform_stack.pop() {
+                    self.xs = x;
+                }
+            }
+            BlockKind::Attribute | BlockKind::Object => {
+                if let (Some(g), Some(x)) = (self.attr_stack.pop(), self.xform_stack.pop()) {
+                    self.gs = g;
+                    self.xs = x;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    // ---- cameras and lights -------------------------------------------------------------
+
+    fn camera<'b>(&mut self, lx: &mut Lexer<'b>, tok: &Token<'b>) -> Result<()> {
+        let (kind, _) = self.string(lx, tok)?;
+        let p = self.params(lx)?;
+        if self.in_world {
+            self.warn(Some(tok.loc), "Camera inside the world block".into());
+        }
+        let camera_from_world = self.xs.ctm[0];
+        if let Some(inv) = math::inverse(&camera_from_world) {
+            self.named_coords.insert("camera".into(), [inv; 2]);
+        }
+        let sw = p
+            .nums("screenwindow")
+            .filter(|v| v.len() == 4)
+            .map(|v| [v[0], v[1], v[2], v[3]]);
+        self.cameras.push(PendingCamera {
+            fov_deg: (kind == "perspective").then(|| p.float("fov").unwrap_or(90.0)),
+            kind: kind.into_owned(),
+            camera_from_world,
+            screen_window: sw,
+            lens_radius: p.float("lensradius").unwrap_or(0.0),
+            focal_distance: p.float("focaldistance"),
+            loc: tok.loc,
+        });
+        Ok(())
+    }
+
+    fn emit_cameras(&mut self) -> Result<()> {
+        for c in std::mem::take(&mut self.cameras) {
+            let world_from_camera = match math::inverse(&c.camera_from_world) {
+                Some(m) => m,
+                None => {
+                    self.warn(Some(c.loc), "singular camera transform".into());
+                    math::IDENTITY
+                }
+            };
+            self.stats.cameras += 1;
+            let ev = CameraEvent {
+                kind: c.kind,
+                camera_from_world: math::to_f32(&c.camera_from_world),
+                world_from_camera: math::to_f32(&world_from_camera),
+                fov_deg: c.fov_deg,
+                screen_window: c.screen_window,
+                lens_radius: c.lens_radius,
+                focal_distance: c.focal_distance,
+                resolution: self.film_resolution,
+                path: self
+                    .stats
+                    .files
+                    .get(c.loc.file.0 as usize)
+                    .map(PathBuf::as_path)
+                    .unwrap_or(Path::new("")),
+                loc: c.loc,
+            };
+            self.sink.camera(&ev)?;
+        }
+        Ok(())
+    }
+
+    /// `L`/`I` times `scale` (v3: spectrum scale; v4: float scale).
+    fn emission(&mut self, p: &ParamList<'_>, name: &str) -> Option<[f32; 3]> {
+        let base = match p.get(name) {
+            Some(param) => self.color_of(param)?.0,
+            None => [1.0; 3],
+        };
+        let scale = match p.get("scale") {
+            Some(param) if param.ty == ParamType::Float => p.float("scale").map(|s| [s; 3]),
+            Some(param) => self.color_of(param).map(|c| c.0),
+            None => None,
+        }
+        .unwrap_or([1.0; 3]);
+        Some([base[0] * scale[0], base[1] * scale[1], base[2] * scale[2]])
+    }
+
+    fn light<'b>(&mut self, lx: &mut Lexer<'b>, tok: &Token<'b>) -> Result<()> {
+        self.require_world(tok);
+        let (kind, _) = self.string(lx, tok)?;
+        let p = self.params(lx)?;
+        let which = if p.get("I").is_some() { "I" } else { "L" };
+        let color = self.emission(&p, which);
+        let pt = |n: &str| {
+            p.nums(n)
+                .filter(|v| v.len() == 3)
+                .map(|v| [v[0], v[1], v[2]])
+        };
+        let ev = LightEvent {
+            world_from_light: math::to_f32(&self.xs.ctm[0]),
+            color,
+            from: pt("from"),
+            to: pt("to"),
+            map: p
+                .string("mapname")
+                .or(p.string("filename"))
+                .map(str::to_owned),
+            object: self.current_object,
+            element: self.element,
+            loc: tok.loc,
+            kind: kind.into_owned(),
+        };
+        self.stats.lights += 1;
+        self.sink.light(&ev)?;
+        Ok(())
+    }
+
+    // ---- colours, textures, materials ----------------------------------------------------
+
+    /// A colour from a parameter; the second value names a texture it came from.
+    fn color_of(&mut self, p: &Param<'_>) -> Option<([f32; 3], Option<String>)> {
+        match (&p.values, p.ty) {
+            (Values::Nums(v), ParamType::Rgb) if v.len() >= 3 => Some(([v[0], v[1], v[2]], None)),
+            (Values::Nums(v), ParamType::Xyz) if v.len() >= 3 => {
+                Some((color::xyz_to_rgb([v[0], v[1], v[2]]), None))
+            }
+            (Values::Nums(v), ParamType::Blackbody) if !v.is_empty() => {
+                let scale = if v.len() >= 2 && !self.v4() {
+                    v[1]
+                } else {
+                    1.0
+                };
+                if v.len() == 1 {
+                    self.hint_v4("one-value blackbody");
+                }
+                Some((color::blackbody_rgb(v[0]).map(|c| c * scale), None))
+            }
+            (Values::Nums(v), ParamType::Spectrum) => {
+                let pairs: Vec<(f32, f32)> = v.chunks_exact(2).map(|c| (c[0], c[1])).collect();
+                color::spectrum_rgb(&pairs).map(|c| (c, None))
+            }
+            (Values::Nums(v), ParamType::Float) => v.first().map(|&f| ([f; 3], None)),
+            (Values::Strs(s), ParamType::Spectrum) => {
+                let name = s.first()?.to_string();
+                let path = self.resolve(&name);
+                if let Some(c) = self.spectrum_cache.get(&path) {
+                    return c.map(|c| (c, None));
+                }
+                let rgb = match std::fs::read(&path) {
+                    Ok(bytes) => {
+                        color::parse_spd(&bytes).and_then(|pairs| color::spectrum_rgb(&pairs))
+                    }
+                    Err(_) => None,
+                };
+                if rgb.is_none() {
+                    self.warn_once(
+                        &format!("spd:{name}"),
+                        Some(p.loc),
+                        format!(
+                            "spectrum \"{name}\" is not a readable spectrum file; colour unknown"
+                        ),
+                    );
+                }
+                self.spectrum_cache.insert(path, rgb);
+                rgb.map(|c| (c, None))
+            }
+            (Values::Strs(s), ParamType::Texture) => {
+                let name = s.first()?;
+                let rgb = self
+                    .color_textures
+                    .get(name.as_ref())
+                    .or_else(|| self.float_textures.get(name.as_ref()))
+                    .copied();
+                match rgb {
+                    Some(c) => Some((c, Some(name.to_string()))),
+                    None => {
+                        let n = name.to_string();
+                        self.warn_once(
+                            &format!("tex:{n}"),
+                            Some(p.loc),
+                            format!("unknown texture \"{n}\"; grey"),
+                        );
+                        Some(([0.5; 3], Some(n)))
+                    }
+                }
+            }
+            _ => None,
+        }
+    }
+
+    fn make_material(
+        &mut self,
+        name: Option<String>,
+        kind: &str,
+        p: &ParamList<'_>,
+        loc: Loc,
+    ) -> Arc<Material> {
+        let id = MaterialId(self.next_material);
+        self.next_material += 1;
+        let mut base_color = None;
+        let mut base_color_texture = None;
+        for key in ["Kd", "reflectance", "color", "Kr"] {
+            if let Some(param) = p.get(key) {
+                if let Some((c, tex)) = self.color_of(param) {
+                    base_color = Some(c);
+                    base_color_texture = tex;
+                    break;
+                }
+            }
+        }
+        if base_color.is_none() && kind == "mix" {
+            // v3: namedmaterial1/2; v4: "string materials" [a b].
+            let names: Vec<String> = match p.get("materials").map(|p| &p.values) {
+                Some(Values::Strs(v)) => v.iter().map(|s| s.to_string()).collect(),
+                _ => ["namedmaterial1", "namedmaterial2"]
+                    .iter()
+                    .filter_map(|k| p.string(k).map(str::to_owned))
+                    .collect(),
+            };
+            let colors: Vec<[f32; 3]> = names
+                .iter()
+                .filter_map(|n| self.named_materials.get(n).and_then(|m| m.base_color))
+                .collect();
+            if colors.len() == 2 {
+                let amount = p
+                    .get("amount")
+                    .and_then(|a| self.color_of(a))
+                    .map(|c| c.0)
+                    .unwrap_or([0.5; 3]);
+                base_color = Some(std::array::from_fn(|i| {
+                    colors[0][i] * (1.0 - amount[i]) + colors[1][i] * amount[i]
+                }));
+            }
+        }
+        if base_color.is_none() {
+            base_color = match kind {
+                "matte" | "diffuse" | "coateddiffuse" | "substrate" | "disney" | "translucent" => {
+                    Some([0.5; 3])
+                }
+                "plastic" | "uber" => Some([0.25; 3]),
+                "mirror" => Some([0.9; 3]),
+                _ => None,
+            };
+        }
+        let opacity = p.get("opacity").and_then(|o| self.color_of(o)).map(|c| c.0);
+        Arc::new(Material {
+            id,
+            name,
+            kind: kind.to_owned(),
+            base_color,
+            base_color_texture,
+            opacity,
+            loc,
+        })
+    }
+
+    fn texture<'b>(&mut self, lx: &mut Lexer<'b>, tok: &Token<'b>) -> Result<()> {
+        let (name, ntok) = self.string(lx, tok)?;
+        let (ty, ttok) = self.string(lx, tok)?;
+        let (class, _) = self.string(lx, tok)?;
+        let p = self.params(lx)?;
+        let is_float = match ty.as_ref() {
+            "float" => true,
+            "color" | "spectrum" | "rgb" => false,
+            _ => {
+                return Err(self.err(
+                    &ttok,
+                    ParseErrorKind::Invalid("texture type must be float, color or spectrum".into()),
+                ))
+            }
+        };
+        let operand = |this: &mut Self, key: &str, default: f32| -> [f32; 3] {
+            p.get(key)
+                .and_then(|param| this.color_of(param))
+                .map(|c| c.0)
+                .unwrap_or([default; 3])
+        };
+        let avg =
+            |a: [f32; 3], b: [f32; 3]| -> [f32; 3] { std::array::from_fn(|i| 0.5 * (a[i] + b[i])) };
+        let value = match class.as_ref() {
+            "constant" => operand(self, "value", 1.0),
+            "imagemap" | "ptex" => {
+                let file = p.string("filename").unwrap_or("").to_owned();
+                let exists = !file.is_empty() && self.resolve(&file).is_file();
+                let why = if exists {
+                    "image textures are reduced to constant grey"
+                } else {
+                    "texture file missing; constant grey"
+                };
+                self.warn_once(
+                    &format!("img:{file}"),
+                    Some(tok.loc),
+                    format!("texture \"{name}\" ({file}): {why}"),
+                );
+                [0.5; 3]
+            }
+            "scale" => {
+                let (a, b) = if p.get("tex").is_some() || self.v4() {
+                    (operand(self, "tex", 1.0), operand(self, "scale", 1.0))
+                } else {
+                    (operand(self, "tex1", 1.0), operand(self, "tex2", 1.0))
+                };
+                std::array::from_fn(|i| a[i] * b[i])
+            }
+            "mix" | "directionmix" => {
+                let (a, b) = (operand(self, "tex1", 0.0), operand(self, "tex2", 1.0));
+                match p.get("amount").and_then(|x| self.color_of(x)) {
+                    Some((t, _)) => std::array::from_fn(|i| a[i] * (1.0 - t[i]) + b[i] * t[i]),
+                    None => avg(a, b),
+                }
+            }
+            "checkerboard" => avg(operand(self, "tex1", 1.0), operand(self, "tex2", 0.0)),
+            "dots" => avg(operand(self, "inside", 1.0), operand(self, "outside", 0.0)),
+            "bilerp" => {
+                let (a, b) = (operand(self, "v00", 0.0), operand(self, "v01", 1.0));
+                let (c, d) = (operand(self, "v10", 0.0), operand(self, "v11", 1.0));
+                avg(avg(a, b), avg(c, d))
+            }
+            _ => [0.5; 3],
+        };
+        let table = if is_float {
+            &mut self.float_textures
+        } else {
+            &mut self.color_textures
+        };
+        let redefined = table.insert(name.to_string(), value).is_some();
+        if redefined {
+            if self.v4() {
+                return Err(self.err(
+                    &ntok,
+                    ParseErrorKind::Invalid("named texture redefined".into()),
+                ));
+            }
+            // v3 scenes (Moana) redefine textures; the later definition wins.
+            self.warn_once(
+                &format!("texredef:{name}"),
+                Some(ntok.loc),
+                format!("texture \"{name}\" redefined"),
+            );
+        }
+        Ok(())
+    }
+
+    // ---- shapes and objects ---------------------------------------------------------------
+
+    fn shape<'b>(&mut self, lx: &mut Lexer<'b>, tok: &Token<'b>) -> Result<()> {
+        self.require_world(tok);
+        let (kind, ktok) = self.string(lx, tok)?;
+        let mut p = self.params(lx)?;
+        let seq = self.next_seq;
+        self.next_seq += 1;
+        let mut material = self.gs.material.clone();
+        if !self.v4()
+            && ["Kd", "reflectance", "color", "Kr", "opacity"]
+                .iter()
+                .any(|k| p.get(k).is_some())
+        {
+            // pbrt-v3: material parameters on a Shape override the current material's.
+            let merged = ParamList {
+                params: p
+                    .params
+                    .iter()
+                    .filter(|q| !matches!(q.values, Values::Nums(ref v) if v.len() > 64))
+                    .cloned()
+                    .collect(),
+                v4_spelling: false,
+            };
+            let derived = self.make_material(
+                material.name.clone(),
+                &material.kind.clone(),
+                &merged,
+                ktok.loc,
+            );
+            let keep_base = derived.base_color.is_none()
+                || !["Kd", "reflectance", "color", "Kr"]
+                    .iter()
+                    .any(|k| p.get(k).is_some());
+            let m = Material {
+                base_color: if keep_base {
+                    material.base_color
+                } else {
+                    derived.base_color
+                },
+                base_color_texture: if keep_base {
+                    material.base_color_texture.clone()
+                } else {
+                    derived.base_color_texture.clone()
+                },
+                opacity: derived.opacity.or(material.opacity),
+                ..(*derived).clone()
+            };
+            material = Arc::new(m);
+            self.sink.material(&material)?;
+        }
+        let mut event = ShapeEvent {
+            seq,
+            kind: String::new(),
+            parent_from_shape: math::to_f32(&self.xs.ctm[0]),
+            reverse_orientation: self.gs.reverse_orientation,
+            material,
+            alpha_texture: p.texture("alpha").map(str::to_owned),
+            alpha: p.float("alpha"),
+            area_light: self.gs.area_light.clone(),
+            object: self.current_object,
+            element: self.element,
+            source_path: None,
+            loc: tok.loc,
+            geometry: Geometry::Unsupported,
+        };
+        let segs = self.opts.tessellation_segments.max(3);
+        let mut notes = Vec::new();
+        let built: std::result::Result<Geometry, String> = match kind.as_ref() {
+            "trianglemesh" => shapes::triangle_mesh(&mut p, &mut notes).map(Geometry::Mesh),
+            "loopsubdiv" => shapes::triangle_mesh(&mut p, &mut notes).map(Geometry::Mesh),
+            "bilinearmesh" => {
+                self.hint_v4("bilinearmesh");
+                shapes::bilinear_mesh(&mut p, &mut notes).map(Geometry::Mesh)
+            }
+            "sphere" => Ok(Geometry::Mesh(shapes::sphere(&p, segs))),
+            "disk" => Ok(Geometry::Mesh(shapes::disk(&p, segs))),
+            "cylinder" => Ok(Geometry::Mesh(shapes::cylinder(&p, segs))),
+            "curve" => shapes::curve(&mut p).map(Geometry::Curve),
+            "plymesh" => {
+                event.kind = kind.into_owned();
+                return self.plymesh(&p, &ktok, event);
+            }
+            other => {
+                let known = matches!(
+                    other,
+                    "cone" | "paraboloid" | "hyperboloid" | "heightfield" | "nurbs"
+                );
+                let msg = if known {
+                    "not converted"
+                } else {
+                    "unknown shape type"
+                };
+                self.warn_once(
+                    &format!("shape:{other}"),
+                    Some(ktok.loc),
+                    format!("shape \"{other}\": {msg}; counted as unsupported"),
+                );
+                Ok(Geometry::Unsupported)
+            }
+        };
+        for n in notes {
+            self.warn(Some(ktok.loc), format!("{kind}: {n}"));
+        }
+        match built {
+            Ok(g) => {
+                event.kind = kind.into_owned();
+                event.geometry = g;
+                self.emit_shape(event)
+            }
+            Err(m) => {
+                self.stats.skipped_shapes += 1;
+                self.warn(Some(ktok.loc), format!("{kind}: {m}; shape skipped"));
+                Ok(())
+            }
+        }
+    }
+
+    fn emit_shape(&mut self, event: ShapeEvent) -> Result<()> {
+        self.stats.shapes += 1;
+        match &event.geometry {
+            Geometry::Mesh(m) => self.stats.triangles += m.triangle_count() as u64,
+            Geometry::Curve(_) => self.stats.curves += 1,
+            Geometry::Unsupported => self.stats.unsupported_shapes += 1,
+        }
+        self.sink.shape(event)?;
+        Ok(())
+    }
+
+    fn plymesh(
+        &mut self,
+        p: &ParamList<'_>,
+        ktok: &Token<'_>,
+        mut event: ShapeEvent,
+    ) -> Result<()> {
+        let Some(name) = p.string("filename") else {
+            return Err(self.err(
+                ktok,
+                ParseErrorKind::BadParameter("plymesh needs \"string filename\"".into()),
+            ));
+        };
+        if p.get("displacement").is_some() {
+            self.warn_once(
+                "displacement",
+                Some(ktok.loc),
+                "plymesh displacement recorded but not applied".into(),
+            );
+        }
+        let path = self.resolve(name);
+        let size = match std::fs::metadata(&path) {
+            Ok(m) if m.is_file() => m.len(),
+            _ => {
+                self.missing_file(path, ktok.loc);
+                self.stats.skipped_shapes += 1;
+                return Ok(());
+            }
+        };
+        event.source_path = Some(path.clone());
+        match self.opts.ply_loading {
+            PlyLoading::Sequential => {
+                self.stats.ply_bytes += size;
+                let mesh = crate::ply::read_ply(&path).map_err(|source| Error::Ply {
+                    path,
+                    referenced_at: Box::new(self.location(ktok.loc)),
+                    source: Box::new(source),
+                })?;
+                event.geometry = Geometry::Mesh(mesh);
+                self.emit_shape(event)
+            }
+            PlyLoading::Parallel { batch_bytes } => {
+                self.ply_queue.push(PendingPly { path, event });
+                self.ply_queue_bytes += size;
+                if self.ply_queue_bytes >= batch_bytes {
+                    self.flush_plys()?;
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// Load the queued PLY files in parallel, then emit their shapes in queue order.
+    fn flush_plys(&mut self) -> Result<()> {
+        if self.ply_queue.is_empty() {
+            return Ok(());
+        }
+        let queue = std::mem::take(&mut self.ply_queue);
+        self.stats.ply_bytes += self.ply_queue_bytes;
+        self.ply_queue_bytes = 0;
+        let _span = tracing::debug_span!("ply_batch", files = queue.len()).entered();
+        let loaded: Vec<_> = queue
+            .par_iter()
+            .map(|job| crate::ply::read_ply(&job.path))
+            .collect();
+        for (job, mesh) in queue.into_iter().zip(loaded) {
+            match mesh {
+                Ok(m) => {
+                    let mut ev = job.event;
+                    ev.geometry = Geometry::Mesh(m);
+                    self.emit_shape(ev)?;
+                }
+                Err(source) => {
+                    return Err(Error::Ply {
+                        path: job.path,
+                        referenced_at: Box::new(self.location(job.event.loc)),
+                        source: Box::new(source),
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn object_begin<'b>(&mut self, lx: &mut Lexer<'b>, tok: &Token<'b>) -> Result<()> {
+        self.require_world(tok);
+        let (name, ntok) = self.string(lx, tok)?;
+        if self.current_object.is_some() {
+            return Err(self.err(
+                tok,
+                ParseErrorKind::Misplaced("ObjectBegin inside an object definition".into()),
+            ));
+        }
+        self.attr_stack.push(self.gs.clone());
+        self.xform_stack.push(self.xs);
+        self.blocks.push((BlockKind::Object, tok.loc));
+        let id = match self.objects.get(name.as_ref()).copied() {
+            Some(id) if self.object_defined[id.0 as usize] => {
+                if self.v4() {
+                    return Err(self.err(&ntok, ParseErrorKind::Invalid("object redefined".into())));
+                }
+                self.warn(
+                    Some(ntok.loc),
+                    format!("object \"{name}\" redefined; the later definition wins"),
+                );
+                self.new_object(&name)
+            }
+            Some(id) => id,
+            None => self.new_object(&name),
+        };
+        self.object_defined[id.0 as usize] = true;
+        self.current_object = Some(id);
+        self.stats.objects += 1;
+        self.sink.object_begin(&ObjectEvent {
+            object: id,
+            name: &name,
+            element: self.element,
+            loc: tok.loc,
+        })?;
+        Ok(())
+    }
+
+    fn new_object(&mut self, name: &str) -> ObjectId {
+        let id = ObjectId(self.object_names.len() as u32);
+        self.object_names.push(name.to_owned());
+        self.object_defined.push(false);
+        self.objects.insert(name.to_owned(), id);
+        id
+    }
+
+    fn object_instance<'b>(&mut self, lx: &mut Lexer<'b>, tok: &Token<'b>) -> Result<()> {
+        self.require_world(tok);
+        let (name, ntok) = self.string(lx, tok)?;
+        let id = match self.objects.get(name.as_ref()).copied() {
+            Some(id) => id,
+            None if self.v4() => {
+                // pbrt-v4 resolves instances after parsing: forward references are legal.
+                let id = self.new_object(&name);
+                self.forward_refs.push((id, ntok.loc, name.to_string()));
+                id
+            }
+            None => return Err(self.err(&ntok, ParseErrorKind::UnknownObject)),
+        };
+        if Some(id) == self.current_object {
+            return Err(self.err(
+                &ntok,
+                ParseErrorKind::Invalid("object instances itself".into()),
+            ));
+        }
+        self.stats.instances += 1;
+        let ev = InstanceEvent {
+            object: id,
+            name: &name,
+            parent_from_instance: math::to_f32(&self.xs.ctm[0]),
+            inside: self.current_object,
+            element: self.element,
+            loc: tok.loc,
+        };
+        self.sink.object_instance(&ev)?;
+        Ok(())
+    }
+}

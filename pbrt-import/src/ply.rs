@@ -1,0 +1,604 @@
+//! PLY reader: ASCII and binary (little/big endian), `.ply.gz`, any property types.
+//!
+//! Faces (triangles, quads, polygons) are fan-triangulated. Vertex normals come
+//! from `nx ny nz`; texture coordinates from any of pbrt's names (`u v`, `s t`,
+//! `texture_u texture_v`, `texture_s texture_t`). `face_indices` and other
+//! properties/elements are read and skipped.
+
+use std::path::Path;
+
+use crate::error::PlyError;
+use crate::events::Mesh;
+use crate::source::SourceBytes;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Scalar {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    fn parse(s: &str) -> Option<Scalar> {
+        Some(match s {
+            "char" | "int8" => Scalar::I8,
+            "uchar" | "uint8" => Scalar::U8,
+            "short" | "int16" => Scalar::I16,
+            "ushort" | "uint16" => Scalar::U16,
+            "int" | "int32" => Scalar::I32,
+            "uint" | "uint32" => Scalar::U32,
+            "float" | "float32" => Scalar::F32,
+            "double" | "float64" => Scalar::F64,
+            _ => return None,
+        })
+    }
+
+    fn size(self) -> usize {
+        match self {
+            Scalar::I8 | Scalar::U8 => 1,
+            Scalar::I16 | Scalar::U16 => 2,
+            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
+            Scalar::F64 => 8,
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+enum PropKind {
+    Scalar(Scalar),
+    List { count: Scalar, item: Scalar },
+}
+
+#[derive(Clone, Debug)]
+struct Property {
+    name: String,
+    kind: PropKind,
+}
+
+#[derive(Clone, Debug)]
+struct Element {
+    name: String,
+    count: usize,
+    props: Vec<Property>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Format {
+    Ascii,
+    BinaryLe,
+    BinaryBe,
+}
+
+/// Read a PLY file (`.ply` memory-mapped, `.ply.gz` decompressed).
+pub fn read_ply(path: &Path) -> Result<Mesh, PlyError> {
+    let src =
+        SourceBytes::open(path).map_err(|e| PlyError::Content(format!("cannot read: {e}")))?;
+    parse_ply(src.bytes())
+}
+
+fn header_err(line: usize, message: impl Into<String>) -> PlyError {
+    PlyError::Header {
+        line,
+        message: message.into(),
+    }
+}
+
+fn parse_header(bytes: &[u8]) -> Result<(Format, Vec<Element>, usize), PlyError> {
+    let mut pos = 0;
+    let mut line_no = 0;
+    let mut format = None;
+    let mut elements: Vec<Element> = Vec::new();
+    loop {
+        line_no += 1;
+        let Some(nl) = bytes[pos..].iter().position(|&b| b == b'\n') else {
+            return Err(header_err(line_no, "header ends without `end_header`"));
+        };
+        let raw = &bytes[pos..pos + nl];
+        pos += nl + 1;
+        let line = std::str::from_utf8(raw)
+            .map_err(|_| header_err(line_no, "not UTF-8"))?
+            .trim_end_matches('\r');
+        let words: Vec<&str> = line.split_ascii_whitespace().collect();
+        if line_no == 1 {
+            if words != ["ply"] {
+                return Err(header_err(1, "missing `ply` magic"));
+            }
+            continue;
+        }
+        match words.as_slice() {
+            [] => {}
+            ["comment", ..] | ["obj_info", ..] => {}
+            ["format", f, _version] => {
+                format = Some(match *f {
+                    "ascii" => Format::Ascii,
+                    "binary_little_endian" => Format::BinaryLe,
+                    "binary_big_endian" => Format::BinaryBe,
+                    other => return Err(header_err(line_no, format!("unknown format `{other}`"))),
+                });
+            }
+            ["element", name, count] => {
+                let count = count
+                    .parse()
+                    .map_err(|_| header_err(line_no, format!("bad element count `{count}`")))?;
+                elements.push(Element {
+                    name: (*name).to_owned(),
+                    count,
+                    props: Vec::new(),
+                });
+            }
+            ["property", "list", ct, it, name] => {
+                let el = elements
+                    .last_mut()
+                    .ok_or_else(|| header_err(line_no, "property before element"))?;
+                let count = Scalar::parse(ct)
+                    .ok_or_else(|| header_err(line_no, format!("unknown type `{ct}`")))?;
+                let item = Scalar::parse(it)
+                    .ok_or_else(|| header_err(line_no, format!("unknown type `{it}`")))?;
+                if matches!(count, Scalar::F32 | Scalar::F64) {
+                    return Err(header_err(line_no, "list count type must be an integer"));
+                }
+                el.props.push(Property {
+                    name: (*name).to_owned(),
+                    kind: PropKind::List { count, item },
+                });
+            }
+            ["property", ty, name] => {
+                let el = elements
+                    .last_mut()
+                    .ok_or_else(|| header_err(line_no, "property before element"))?;
+                let s = Scalar::parse(ty)
+                    .ok_or_else(|| header_err(line_no, format!("unknown type `{ty}`")))?;
+                el.props.push(Property {
+                    name: (*name).to_owned(),
+                    kind: PropKind::Scalar(s),
+                });
+            }
+            ["end_header"] => break,
+            _ => return Err(header_err(line_no, format!("unrecognised line `{line}`"))),
+        }
+    }
+    let format = format.ok_or_else(|| header_err(line_no, "no `format` line"))?;
+    Ok((format, elements, pos))
+}
+
+/// Value source over the body: ASCII words or binary scalars.
+struct Body<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+    format: Format,
+}
+
+impl Body<'_> {
+    #[inline]
+    fn read(&mut self, s: Scalar) -> Option<f64> {
+        if self.format == Format::Ascii {
+            return self.read_ascii();
+        }
+        let n = s.size();
+        let b = self.bytes.get(self.pos..self.pos + n)?;
+        self.pos += n;
+        decode(b, s, self.format == Format::BinaryLe)
+    }
+
+    fn read_ascii(&mut self) -> Option<f64> {
+        let bytes = self.bytes;
+        while self.pos < bytes.len() && bytes[self.pos].is_ascii_whitespace() {
+            self.pos += 1;
+        }
+        let start = self.pos;
+        while self.pos < bytes.len() && !bytes[self.pos].is_ascii_whitespace() {
+            self.pos += 1;
+        }
+        crate::lexer::parse_f64(&bytes[start..self.pos])
+    }
+}
+
+/// Decode one binary scalar from the start of `b`.
+#[inline]
+fn decode(b: &[u8], s: Scalar, le: bool) -> Option<f64> {
+    macro_rules! get {
+        ($t:ty) => {{
+            let arr = b.get(..std::mem::size_of::<$t>())?.try_into().ok()?;
+            if le {
+                <$t>::from_le_bytes(arr)
+            } else {
+                <$t>::from_be_bytes(arr)
+            }
+        }};
+    }
+    Some(match s {
+        Scalar::I8 => f64::from(*b.first()? as i8),
+        Scalar::U8 => f64::from(*b.first()?),
+        Scalar::I16 => f64::from(get!(i16)),
+        Scalar::U16 => f64::from(get!(u16)),
+        Scalar::I32 => f64::from(get!(i32)),
+        Scalar::U32 => f64::from(get!(u32)),
+        Scalar::F32 => f64::from(get!(f32)),
+        Scalar::F64 => get!(f64),
+    })
+}
+
+fn body_err(el: &Element, prop: &Property, index: usize, message: &str) -> PlyError {
+    PlyError::Body {
+        element: el.name.clone(),
+        property: prop.name.clone(),
+        index,
+        message: message.into(),
+    }
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Role {
+    Skip,
+    Coord(usize),
+    Normal(usize),
+    Uv(usize),
+}
+
+/// Parse PLY bytes into a triangle mesh.
+pub fn parse_ply(bytes: &[u8]) -> Result<Mesh, PlyError> {
+    let (format, elements, body_start) = parse_header(bytes)?;
+    let mut body = Body {
+        bytes,
+        pos: body_start,
+        format,
+    };
+    let mut mesh = Mesh::default();
+    let mut normals: Vec<[f32; 3]> = Vec::new();
+    let mut uvs: Vec<[f32; 2]> = Vec::new();
+    let (mut have_normals, mut have_uvs) = (false, false);
+    let mut vertex_count = None;
+    // A header can claim any count; never reserve more than the body could hold.
+    let reserve_cap = bytes.len().saturating_sub(body_start) / 3;
+    for el in &elements {
+        match el.name.as_str() {
+            "vertex" => {
+                let roles: Vec<Role> = el.props.iter().map(|p| vertex_role(&p.name)).collect();
+                let has = |r: Role| roles.contains(&r);
+                if !(has(Role::Coord(0)) && has(Role::Coord(1)) && has(Role::Coord(2))) {
+                    return Err(PlyError::Content("vertex element lacks x, y or z".into()));
+                }
+                have_normals = (0..3).all(|i| has(Role::Normal(i)));
+                have_uvs = (0..2).all(|i| has(Role::Uv(i)));
+                let n = el.count.min(reserve_cap);
+                mesh.positions.reserve(n);
+                if have_normals {
+                    normals.reserve(n);
+                }
+                if have_uvs {
+                    uvs.reserve(n);
+                }
+                let fixed = format != Format::Ascii
+                    && el
+                        .props
+                        .iter()
+                        .all(|p| matches!(p.kind, PropKind::Scalar(_)));
+                if fixed {
+                    // Fixed stride: decode only the used properties at known offsets.
+                    let mut used = Vec::new();
+                    let mut stride = 0;
+                    for (prop, role) in el.props.iter().zip(&roles) {
+                        if let PropKind::Scalar(s) = prop.kind {
+                            if *role != Role::Skip {
+                                used.push((stride, s, *role));
+                            }
+                            stride += s.size();
+                        }
+                    }
+                    let avail = (bytes.len() - body.pos) / stride.max(1);
+                    if avail < el.count {
+                        return Err(body_err(el, &el.props[0], avail, "truncated"));
+                    }
+                    let le = format == Format::BinaryLe;
+                    let data = &bytes[body.pos..body.pos + stride * el.count];
+                    for item in data.chunks_exact(stride.max(1)).take(el.count) {
+                        let (mut p, mut nrm, mut uv) = ([0f32; 3], [0f32; 3], [0f32; 2]);
+                        for &(off, s, role) in &used {
+                            let v = decode(&item[off..], s, le).unwrap_or(0.0) as f32;
+                            match role {
+                                Role::Coord(i) => p[i] = v,
+                                Role::Normal(i) => nrm[i] = v,
+                                Role::Uv(i) => uv[i] = v,
+                                Role::Skip => {}
+                            }
+                        }
+                        mesh.positions.push(p);
+                        if have_normals {
+                            normals.push(nrm);
+                        }
+                        if have_uvs {
+                            uvs.push(uv);
+                        }
+                    }
+                    body.pos += stride * el.count;
+                    vertex_count = Some(el.count);
+                    continue;
+                }
+                for index in 0..el.count {
+                    let (mut p, mut nrm, mut uv) = ([0f32; 3], [0f32; 3], [0f32; 2]);
+                    for (prop, role) in el.props.iter().zip(&roles) {
+                        match (&prop.kind, role) {
+                            (PropKind::Scalar(s), role) => {
+                                let v = body.read(*s).ok_or_else(|| {
+                                    body_err(el, prop, index, "truncated or malformed")
+                                })? as f32;
+                                match *role {
+                                    Role::Coord(i) => p[i] = v,
+                                    Role::Normal(i) => nrm[i] = v,
+                                    Role::Uv(i) => uv[i] = v,
+                                    Role::Skip => {}
+                                }
+                            }
+                            (PropKind::List { count, item }, _) => {
+                                skip_list(&mut body, *count, *item, el, prop, index)?
+                            }
+                        }
+                    }
+                    mesh.positions.push(p);
+                    if have_normals {
+                        normals.push(nrm);
+                    }
+                    if have_uvs {
+                        uvs.push(uv);
+                    }
+                }
+                vertex_count = Some(el.count);
+            }
+            "face" => {
+                let nv = vertex_count.ok_or_else(|| {
+                    PlyError::Content("face element before vertex element".into())
+                })?;
+                mesh.indices.reserve(el.count.min(reserve_cap) * 3);
+                let mut poly: Vec<u32> = Vec::with_capacity(8);
+                for index in 0..el.count {
+                    for prop in &el.props {
+                        match (&prop.kind, prop.name.as_str()) {
+                            (PropKind::List { count, item }, "vertex_indices" | "vertex_index") => {
+                                poly.clear();
+                                let n = read_count(&mut body, *count, el, prop, index)?;
+                                for _ in 0..n {
+                                    let v = body.read(*item).ok_or_else(|| {
+                                        body_err(el, prop, index, "truncated or malformed")
+                                    })?;
+                                    if !(v >= 0.0 && (v as usize) < nv && v.fract() == 0.0) {
+                                        return Err(body_err(
+                                            el,
+                                            prop,
+                                            index,
+                                            &format!(
+                                                "vertex index {v} out of range ({nv} vertices)"
+                                            ),
+                                        ));
+                                    }
+                                    poly.push(v as u32);
+                                }
+                                for k in 2..poly.len() {
+                                    mesh.indices.extend_from_slice(&[
+                                        poly[0],
+                                        poly[k - 1],
+                                        poly[k],
+                                    ]);
+                                }
+                            }
+                            (PropKind::List { count, item }, _) => {
+                                skip_list(&mut body, *count, *item, el, prop, index)?
+                            }
+                            (PropKind::Scalar(s), _) => {
+                                body.read(*s).ok_or_else(|| {
+                                    body_err(el, prop, index, "truncated or malformed")
+                                })?;
+                            }
+                        }
+                    }
+                }
+            }
+            _ => {
+                for index in 0..el.count {
+                    for prop in &el.props {
+                        match &prop.kind {
+                            PropKind::Scalar(s) => {
+                                body.read(*s).ok_or_else(|| {
+                                    body_err(el, prop, index, "truncated or malformed")
+                                })?;
+                            }
+                            PropKind::List { count, item } => {
+                                skip_list(&mut body, *count, *item, el, prop, index)?
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    if vertex_count.is_none() {
+        return Err(PlyError::Content("no vertex element".into()));
+    }
+    mesh.normals = have_normals.then_some(normals);
+    mesh.uvs = have_uvs.then_some(uvs);
+    Ok(mesh)
+}
+
+fn vertex_role(name: &str) -> Role {
+    match name {
+        "x" => Role::Coord(0),
+        "y" => Role::Coord(1),
+        "z" => Role::Coord(2),
+        "nx" => Role::Normal(0),
+        "ny" => Role::Normal(1),
+        "nz" => Role::Normal(2),
+        "u" | "s" | "texture_u" | "texture_s" => Role::Uv(0),
+        "v" | "t" | "texture_v" | "texture_t" => Role::Uv(1),
+        _ => Role::Skip,
+    }
+}
+
+fn read_count(
+    body: &mut Body<'_>,
+    count: Scalar,
+    el: &Element,
+    prop: &Property,
+    index: usize,
+) -> Result<usize, PlyError> {
+    let n = body
+        .read(count)
+        .ok_or_else(|| body_err(el, prop, index, "truncated list count"))?;
+    if !(n >= 0.0 && n.fract() == 0.0 && n < 1e9) {
+        return Err(body_err(el, prop, index, &format!("bad list count {n}")));
+    }
+    Ok(n as usize)
+}
+
+fn skip_list(
+    body: &mut Body<'_>,
+    count: Scalar,
+    item: Scalar,
+    el: &Element,
+    prop: &Property,
+    index: usize,
+) -> Result<(), PlyError> {
+    let n = read_count(body, count, el, prop, index)?;
+    if body.format == Format::Ascii {
+        for _ in 0..n {
+            body.read_ascii()
+                .ok_or_else(|| body_err(el, prop, index, "truncated or malformed"))?;
+        }
+    } else {
+        let len = n * item.size();
+        if body.pos + len > body.bytes.len() {
+            return Err(body_err(el, prop, index, "truncated list"));
+        }
+        body.pos += len;
+    }
+    Ok(())
+}
+
+/// Write a mesh as binary little-endian PLY (tests, fuzz seeds, the pbrt writer).
+pub fn write_ply_binary_le(mesh: &Mesh) -> Vec<u8> {
+    let mut out = Vec::new();
+    let mut header = format!(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\n",
+        mesh.positions.len()
+    );
+    header.push_str("property float x\nproperty float y\nproperty float z\n");
+    if mesh.normals.is_some() {
+        header.push_str("property float nx\nproperty float ny\nproperty float nz\n");
+    }
+    if mesh.uvs.is_some() {
+        header.push_str("property float u\nproperty float v\n");
+    }
+    header.push_str(&format!(
+        "element face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        mesh.indices.len() / 3
+    ));
+    out.extend_from_slice(header.as_bytes());
+    for (i, p) in mesh.positions.iter().enumerate() {
+        p.iter()
+            .for_each(|c| out.extend_from_slice(&c.to_le_bytes()));
+        if let Some(n) = mesh.normals.as_ref().and_then(|n| n.get(i)) {
+            n.iter()
+                .for_each(|c| out.extend_from_slice(&c.to_le_bytes()));
+        }
+        if let Some(uv) = mesh.uvs.as_ref().and_then(|u| u.get(i)) {
+            uv.iter()
+                .for_each(|c| out.extend_from_slice(&c.to_le_bytes()));
+        }
+    }
+    for t in mesh.indices.chunks_exact(3) {
+        out.push(3);
+        t.iter()
+            .for_each(|&i| out.extend_from_slice(&(i as i32).to_le_bytes()));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const ASCII_QUAD: &str = "ply\nformat ascii 1.0\ncomment x\nelement vertex 4\nproperty float x\nproperty float y\n\
+        property float z\nproperty float s\nproperty float t\nelement face 1\nproperty list uchar int vertex_indices\n\
+        end_header\n0 0 0 0 0\n1 0 0 1 0\n1 1 0 1 1\n0 1 0 0 1\n4 0 1 2 3\n";
+
+    #[test]
+    fn ascii_quad_with_st() {
+        let m = parse_ply(ASCII_QUAD.as_bytes()).unwrap();
+        assert_eq!(m.positions.len(), 4);
+        assert_eq!(m.indices, [0, 1, 2, 0, 2, 3]);
+        assert_eq!(m.uvs.unwrap()[2], [1.0, 1.0]);
+        assert!(m.normals.is_none());
+    }
+
+    #[test]
+    fn binary_le_roundtrip() {
+        let mesh = Mesh {
+            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            normals: Some(vec![[0.0, 0.0, 1.0]; 3]),
+            uvs: Some(vec![[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]),
+            indices: vec![0, 1, 2],
+        };
+        assert_eq!(parse_ply(&write_ply_binary_le(&mesh)).unwrap(), mesh);
+    }
+
+    #[test]
+    fn binary_be_with_extra_props_and_elements() {
+        let mut b = b"ply\nformat binary_big_endian 1.0\nelement vertex 3\nproperty double x\nproperty double y\n\
+            property double z\nproperty uchar red\nelement face 1\nproperty list uint short vertex_indices\n\
+            property list uchar int face_indices\nelement edge 1\nproperty int a\nend_header\n"
+            .to_vec();
+        for p in [[0.0f64, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 2.0, 0.0]] {
+            p.iter().for_each(|c| b.extend_from_slice(&c.to_be_bytes()));
+            b.push(255);
+        }
+        b.extend_from_slice(&3u32.to_be_bytes());
+        for i in [2i16, 1, 0] {
+            b.extend_from_slice(&i.to_be_bytes());
+        }
+        b.push(1);
+        b.extend_from_slice(&7i32.to_be_bytes());
+        b.extend_from_slice(&9i32.to_be_bytes());
+        let m = parse_ply(&b).unwrap();
+        assert_eq!(m.positions[1], [2.0, 0.0, 0.0]);
+        assert_eq!(m.indices, [2, 1, 0]);
+    }
+
+    #[test]
+    fn errors_name_element_and_property() {
+        let bad = ASCII_QUAD.replace("4 0 1 2 3", "4 0 1 2 9");
+        let e = parse_ply(bad.as_bytes()).unwrap_err().to_string();
+        assert!(
+            e.contains("`face` property `vertex_indices`") && e.contains("out of range"),
+            "{e}"
+        );
+        let trunc = &ASCII_QUAD.as_bytes()[..ASCII_QUAD.len() - 8];
+        assert!(parse_ply(trunc)
+            .unwrap_err()
+            .to_string()
+            .contains("vertex_indices"));
+        assert!(parse_ply(
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty foo x\nend_header\n"
+        )
+        .is_err());
+        assert!(parse_ply(b"plx\n").is_err());
+        assert!(parse_ply(b"ply\nformat ascii 1.0\nelement vertex 99999999999\nproperty float x\nproperty float y\nproperty float z\nend_header\n").is_err());
+        assert!(parse_ply(b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\nend_header\n").is_err());
+    }
+
+    #[test]
+    fn gz_file() {
+        use std::io::Write;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("m.ply.gz");
+        let mut enc = flate2::write::GzEncoder::new(
+            std::fs::File::create(&path).unwrap(),
+            flate2::Compression::fast(),
+        );
+        enc.write_all(ASCII_QUAD.as_bytes()).unwrap();
+        enc.finish().unwrap();
+        assert_eq!(read_ply(&path).unwrap().triangle_count(), 2);
+    }
+}

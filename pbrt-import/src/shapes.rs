@@ -1,0 +1,323 @@
+//! Building geometry from `Shape` parameters (everything but `plymesh`).
+
+use crate::events::{Curve, Mesh};
+use crate::params::{ParamList, Values};
+
+/// Move a float array out of the list (no copy of the big vector).
+fn take_nums(params: &mut ParamList<'_>, name: &str) -> Option<Vec<f32>> {
+    let i = params
+        .params
+        .iter()
+        .position(|p| p.name == name && matches!(p.values, Values::Nums(_)))?;
+    match params.params.swap_remove(i).values {
+        Values::Nums(v) => Some(v),
+        _ => None,
+    }
+}
+
+fn take_ints(params: &mut ParamList<'_>, name: &str) -> Option<Vec<i32>> {
+    let i = params
+        .params
+        .iter()
+        .position(|p| p.name == name && matches!(p.values, Values::Ints(_)))?;
+    match params.params.swap_remove(i).values {
+        Values::Ints(v) => Some(v),
+        _ => None,
+    }
+}
+
+fn to3(v: &[f32]) -> Vec<[f32; 3]> {
+    v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
+}
+
+fn to2(v: &[f32]) -> Vec<[f32; 2]> {
+    v.chunks_exact(2).map(|c| [c[0], c[1]]).collect()
+}
+
+/// Shared vertex attributes: `P`, `N`, `uv`/`st`. Mismatched optional arrays are dropped
+/// with a message in `notes`.
+fn vertices(params: &mut ParamList<'_>, notes: &mut Vec<String>) -> Result<Mesh, String> {
+    let p = take_nums(params, "P").ok_or("missing \"P\"")?;
+    if p.len() % 3 != 0 {
+        return Err(format!("\"P\" has {} values, not a multiple of 3", p.len()));
+    }
+    let positions = to3(&p);
+    drop(p);
+    let n_verts = positions.len();
+    let normals = take_nums(params, "N").and_then(|n| {
+        if n.len() == n_verts * 3 {
+            Some(to3(&n))
+        } else {
+            notes.push(format!(
+                "\"N\" has {} values for {n_verts} vertices; ignored",
+                n.len()
+            ));
+            None
+        }
+    });
+    let uv = take_nums(params, "uv").or_else(|| take_nums(params, "st"));
+    let uvs = uv.and_then(|uv| {
+        if uv.len() == n_verts * 2 {
+            Some(to2(&uv))
+        } else {
+            notes.push(format!(
+                "\"uv\" has {} values for {n_verts} vertices; ignored",
+                uv.len()
+            ));
+            None
+        }
+    });
+    Ok(Mesh {
+        positions,
+        normals,
+        uvs,
+        indices: Vec::new(),
+    })
+}
+
+fn checked_indices(raw: Vec<i32>, n_verts: usize) -> Result<Vec<u32>, String> {
+    let mut out = Vec::with_capacity(raw.len());
+    for i in raw {
+        if i < 0 || i as usize >= n_verts {
+            return Err(format!(
+                "vertex index {i} out of range ({n_verts} vertices)"
+            ));
+        }
+        out.push(i as u32);
+    }
+    Ok(out)
+}
+
+/// `trianglemesh` (and `loopsubdiv`'s base cage).
+pub(crate) fn triangle_mesh(
+    params: &mut ParamList<'_>,
+    notes: &mut Vec<String>,
+) -> Result<Mesh, String> {
+    let mut mesh = vertices(params, notes)?;
+    let n = mesh.positions.len();
+    mesh.indices = match take_ints(params, "indices") {
+        Some(raw) => checked_indices(raw, n)?,
+        None if n == 3 => vec![0, 1, 2],
+        None => return Err("missing \"indices\"".into()),
+    };
+    if mesh.indices.len() % 3 != 0 {
+        return Err(format!(
+            "{} indices, not a multiple of 3",
+            mesh.indices.len()
+        ));
+    }
+    Ok(mesh)
+}
+
+/// `bilinearmesh`: each patch `v00 v10 v01 v11` becomes two triangles.
+pub(crate) fn bilinear_mesh(
+    params: &mut ParamList<'_>,
+    notes: &mut Vec<String>,
+) -> Result<Mesh, String> {
+    let mut mesh = vertices(params, notes)?;
+    let n = mesh.positions.len();
+    let quads = match take_ints(params, "indices") {
+        Some(raw) => checked_indices(raw, n)?,
+        None if n == 4 => vec![0, 1, 2, 3],
+        None => return Err("missing \"indices\"".into()),
+    };
+    if quads.len() % 4 != 0 {
+        return Err(format!("{} indices, not a multiple of 4", quads.len()));
+    }
+    mesh.indices = quads
+        .chunks_exact(4)
+        .flat_map(|q| [q[0], q[1], q[3], q[0], q[3], q[2]])
+        .collect();
+    Ok(mesh)
+}
+
+/// A grid of `rings+1` x `segs+1` vertices from `f(u, v) -> (position, normal)`.
+fn grid(segs: u32, rings: u32, f: impl Fn(f32, f32) -> ([f32; 3], [f32; 3])) -> Mesh {
+    let mut m = Mesh {
+        normals: Some(Vec::new()),
+        uvs: Some(Vec::new()),
+        ..Default::default()
+    };
+    for j in 0..=rings {
+        for i in 0..=segs {
+            let (u, v) = (i as f32 / segs as f32, j as f32 / rings as f32);
+            let (p, n) = f(u, v);
+            m.positions.push(p);
+            if let Some(ns) = m.normals.as_mut() {
+                ns.push(n);
+            }
+            if let Some(uv) = m.uvs.as_mut() {
+                uv.push([u, v]);
+            }
+        }
+    }
+    let w = segs + 1;
+    for j in 0..rings {
+        for i in 0..segs {
+            let a = j * w + i;
+            m.indices
+                .extend_from_slice(&[a, a + 1, a + w + 1, a, a + w + 1, a + w]);
+        }
+    }
+    m
+}
+
+fn phi_max(params: &ParamList<'_>) -> f32 {
+    params
+        .float("phimax")
+        .unwrap_or(360.0)
+        .clamp(0.0, 360.0)
+        .to_radians()
+}
+
+/// `sphere` (radius, zmin, zmax, phimax).
+pub(crate) fn sphere(params: &ParamList<'_>, segs: u32) -> Mesh {
+    let r = params.float("radius").unwrap_or(1.0);
+    let zmin = params.float("zmin").unwrap_or(-r).clamp(-r.abs(), r.abs());
+    let zmax = params.float("zmax").unwrap_or(r).clamp(-r.abs(), r.abs());
+    let theta0 = (zmin / r).clamp(-1.0, 1.0).acos();
+    let theta1 = (zmax / r).clamp(-1.0, 1.0).acos();
+    let phimax = phi_max(params);
+    grid(segs, (segs / 2).max(2), |u, v| {
+        let phi = u * phimax;
+        let theta = theta0 + (theta1 - theta0) * v;
+        let n = [
+            theta.sin() * phi.cos(),
+            theta.sin() * phi.sin(),
+            theta.cos(),
+        ];
+        ([n[0] * r, n[1] * r, n[2] * r], n)
+    })
+}
+
+/// `disk` (height, radius, innerradius, phimax).
+pub(crate) fn disk(params: &ParamList<'_>, segs: u32) -> Mesh {
+    let h = params.float("height").unwrap_or(0.0);
+    let r = params.float("radius").unwrap_or(1.0);
+    let ri = params.float("innerradius").unwrap_or(0.0);
+    let phimax = phi_max(params);
+    grid(segs, 1, |u, v| {
+        let phi = u * phimax;
+        let rad = r + (ri - r) * v;
+        ([rad * phi.cos(), rad * phi.sin(), h], [0.0, 0.0, 1.0])
+    })
+}
+
+/// `cylinder` (radius, zmin, zmax, phimax).
+pub(crate) fn cylinder(params: &ParamList<'_>, segs: u32) -> Mesh {
+    let r = params.float("radius").unwrap_or(1.0);
+    let zmin = params.float("zmin").unwrap_or(-1.0);
+    let zmax = params.float("zmax").unwrap_or(1.0);
+    let phimax = phi_max(params);
+    grid(segs, 1, |u, v| {
+        let phi = u * phimax;
+        (
+            [r * phi.cos(), r * phi.sin(), zmin + (zmax - zmin) * v],
+            [phi.cos(), phi.sin(), 0.0],
+        )
+    })
+}
+
+/// `curve`.
+pub(crate) fn curve(params: &mut ParamList<'_>) -> Result<Curve, String> {
+    let p = take_nums(params, "P").ok_or("missing \"P\"")?;
+    let degree = params.int("degree").unwrap_or(3);
+    if !(degree == 2 || degree == 3) {
+        return Err(format!("curve degree {degree} (must be 2 or 3)"));
+    }
+    let basis = params.string("basis").unwrap_or("bezier").to_owned();
+    let n_cp = p.len() / 3;
+    let ok = match basis.as_str() {
+        "bezier" => n_cp > degree as usize && (n_cp - 1 - degree as usize) % degree as usize == 0,
+        "bspline" => n_cp > degree as usize,
+        other => return Err(format!("unknown curve basis `{other}`")),
+    };
+    if !ok || p.len() % 3 != 0 {
+        return Err(format!(
+            "{n_cp} control points do not fit a degree {degree} {basis} curve"
+        ));
+    }
+    let width = params.float("width").unwrap_or(1.0);
+    let normals = take_nums(params, "N").map(|n| to3(&n));
+    Ok(Curve {
+        basis,
+        curve_type: params.string("type").unwrap_or("flat").to_owned(),
+        degree: degree as u32,
+        control_points: to3(&p),
+        width0: params.float("width0").unwrap_or(width),
+        width1: params.float("width1").unwrap_or(width),
+        normals,
+    })
+}
+
+/// Sanity check used by tests: every index is in range.
+#[cfg(test)]
+pub(crate) fn valid(m: &Mesh) -> bool {
+    m.indices.len() % 3 == 0 && m.indices.iter().all(|&i| (i as usize) < m.positions.len())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lexer::Lexer;
+    use crate::FileId;
+
+    fn params(src: &str) -> ParamList<'_> {
+        let mut lx = Lexer::new(src.as_bytes(), FileId(0));
+        ParamList::parse(&mut lx).unwrap_or_else(|_| panic!("bad test params"))
+    }
+
+    #[test]
+    fn trianglemesh_basic_and_errors() {
+        let mut notes = Vec::new();
+        let mut p =
+            params(r#""point3 P" [0 0 0 1 0 0 0 1 0] "normal N" [0 0 1] "float uv" [0 0 1 0 0 1]"#);
+        let m = triangle_mesh(&mut p, &mut notes).unwrap();
+        assert_eq!(m.indices, [0, 1, 2]);
+        assert!(m.normals.is_none() && notes.len() == 1);
+        assert_eq!(m.uvs.unwrap()[1], [1.0, 0.0]);
+        let mut p = params(r#""integer indices" [0 1 5] "point P" [0 0 0 1 0 0 0 1 0]"#);
+        assert!(triangle_mesh(&mut p, &mut notes)
+            .unwrap_err()
+            .contains("out of range"));
+        let mut p = params(r#""integer indices" [0 1 2 3] "point P" [0 0 0 1 0 0 0 1 0 1 1 1]"#);
+        assert!(triangle_mesh(&mut p, &mut notes)
+            .unwrap_err()
+            .contains("multiple of 3"));
+    }
+
+    #[test]
+    fn bilinear_to_triangles() {
+        let mut p = params(r#""point3 P" [0 0 0 1 0 0 0 1 0 1 1 0]"#);
+        let m = bilinear_mesh(&mut p, &mut Vec::new()).unwrap();
+        assert_eq!(m.indices, [0, 1, 3, 0, 3, 2]);
+    }
+
+    #[test]
+    fn quadrics_are_valid_and_sized() {
+        let s = sphere(&params(r#""float radius" 2"#), 16);
+        assert!(valid(&s));
+        for p in &s.positions {
+            let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            assert!((r - 2.0).abs() < 1e-4);
+        }
+        let d = disk(&params(r#""float radius" 3 "float height" 1"#), 8);
+        assert!(valid(&d) && d.positions.iter().all(|p| p[2] == 1.0));
+        let c = cylinder(&params(r#""float zmax" 5"#), 8);
+        assert_eq!(c.triangle_count(), 16);
+    }
+
+    #[test]
+    fn curves() {
+        let mut p = params(
+            r#""point3 P" [0 0 0 1 0 0 2 0 0 3 0 0] "float width" 0.1 "string type" "ribbon""#,
+        );
+        let c = curve(&mut p).unwrap();
+        assert_eq!(
+            (c.control_points.len(), c.width0, c.curve_type.as_str()),
+            (4, 0.1, "ribbon")
+        );
+        let mut p = params(r#""point3 P" [0 0 0 1 0 0]"#);
+        assert!(curve(&mut p).is_err());
+    }
+}
