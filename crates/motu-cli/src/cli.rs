@@ -59,28 +59,38 @@ pub struct GenArgs {
     /// Output directory (created).
     #[arg(short, long)]
     pub output: PathBuf,
-    /// forest: instancing levels above the leaves (the thesis layout is 3).
+    /// forest: grid levels above the tree; trees = (W·H)^N (the thesis layout is 3).
     #[arg(long)]
     pub levels: Option<u32>,
-    /// forest: copies per level as a WxH grid (the thesis layout is 4x3).
+    /// forest: copies per level as a WxH grid (the thesis layout is 4x3); lod-grid: W across,
+    /// H rows going away from the camera.
     #[arg(long)]
     pub grid: Option<String>,
-    /// forest: leaves per tree.
+    /// forest: leaf instances per tree.
     #[arg(long)]
     pub leaves: Option<u32>,
-    /// sphereflake: recursion depth.
+    /// forest: trunk detail (3..=512).
+    #[arg(long)]
+    pub trunk_segments: Option<u32>,
+    /// sphereflake: recursion depth (spheres = 1 + 9 + … + 9^N).
     #[arg(long)]
     pub depth: Option<u32>,
+    /// sphereflake: sphere tessellation.
+    #[arg(long)]
+    pub sphere_segments: Option<u32>,
     /// island: 1 approximates Moana's counts (~28M instances, ~36 GB of pbrt).
     #[arg(long)]
     pub scale: Option<f64>,
-    /// lod-grid: grid side (instances per row).
+    /// island: number of elements (1–20, Moana's names).
     #[arg(long)]
-    pub count: Option<u32>,
-    /// lod-grid: triangles of the dense mesh (approximate).
+    pub elements: Option<u32>,
+    /// lod-grid: target triangles of the dense mesh.
     #[arg(long)]
     pub triangles: Option<u32>,
-    /// Write standard single-level pbrt (no nested ObjectInstance).
+    /// lod-grid: distance between copies.
+    #[arg(long)]
+    pub spacing: Option<f64>,
+    /// forest, sphereflake: write standard single-level pbrt (no nested ObjectInstance).
     #[arg(long)]
     pub flat: bool,
     /// Random seed (generation is deterministic for a seed).
@@ -92,9 +102,12 @@ pub struct GenArgs {
     /// Image height written to the Film.
     #[arg(long)]
     pub height: Option<u32>,
-    /// Worker threads (island placement files are written in parallel).
+    /// island: writer threads.
     #[arg(long)]
     pub threads: Option<usize>,
+    /// One JSON object on stdout describing what was written.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Clone, Debug, PartialEq, Eq)]

@@ -4,6 +4,7 @@ use crate::cli::{Cli, Command};
 use anyhow::bail;
 
 mod devices;
+mod gen;
 
 /// An honest failure for a command whose issue has not landed yet.
 fn not_implemented(what: &str, issue: u32) -> anyhow::Result<()> {
@@ -13,7 +14,7 @@ fn not_implemented(what: &str, issue: u32) -> anyhow::Result<()> {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Devices(a) => devices::run(a),
-        Command::Gen(_) => not_implemented("motu gen", 2),
+        Command::Gen(a) => gen::run(a),
         Command::Import(_) => not_implemented("motu import", 4),
         Command::Info(_) => not_implemented("motu info", 4),
         Command::Verify(_) => not_implemented("motu verify", 4),
