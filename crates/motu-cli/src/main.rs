@@ -3,6 +3,7 @@
 
 mod cli;
 mod cmd;
+mod pipeline;
 mod progress;
 mod size;
 

@@ -1,1 +1,296 @@
-//! motu-compile
+//! The scene compiler: turns a [`motu_scene::Scene`] (a DAG of prototypes) into the multi-level
+//! traversal hierarchy of [`motu_abi`] (thesis ch. 4.2–4.5): TLASes at even levels, BLASes at
+//! odd levels, programmable instances (PIs) where traversal continues in another TLAS.
+//!
+//! # The mapping
+//! Every prototype `P` that is reached through a programmable instance (and the root) becomes
+//! `TLAS(P)`. Its content is produced by a walk from `P` that **expands** some child edges into
+//! the TLAS itself (composing transforms) and turns the others into PIs:
+//! - `P`'s own meshes: one instance of the triangle BLAS `G(P)` (one geometry per mesh).
+//!   `G(P)` is built once and shared by every TLAS that instances it.
+//! - an edge to plain geometry `C` (meshes, no children): always expanded, i.e. an instance of
+//!   `G(C)` placed directly in the TLAS: the **instance list** of thesis 4.4.4.
+//! - an edge to a prototype with children: a PI, an AABB in an AABB BLAS of the TLAS (one per
+//!   TLAS that needs PIs, instanced with identity) pointing at `TLAS(C)` with
+//!   `child_from_parent = M⁻¹`. `TLAS(C)` is shared by all PIs that target it: the memory win
+//!   of multi-level instancing. A prototype with meshes and children thus yields a triangle
+//!   BLAS and an AABB BLAS (Vulkan forbids mixing: the "two BLASes").
+//! - **identity collapse**: an edge with an identity transform to a prototype with exactly one
+//!   incoming edge is expanded (it costs a PI level and saves no memory). This covers pbrt
+//!   elements (each included once under the root) and applies at every level.
+//! - [`Levels::N`] expands, at any level, the edges whose target's ML subtree would need more
+//!   TLAS levels than remain (thesis "ML-RE": the top levels are inlined, the bottom kept);
+//!   [`Levels::Sl`] expands everything into the root TLAS.
+//!
+//! All instance lists of one TLAS share its single acceleration structure, so the thesis's
+//! merging of overlapping instance lists with the same parents (4.4.5) is implicit; the split
+//! below then re-partitions them spatially.
+//!
+//! Subtrees without geometry are pruned, edges with non-invertible transforms are dropped
+//! (counted in [`CompileReport::dropped_degenerate_instances`]). A composed transform that
+//! underflows to singular where a PI needs its inverse is inlined instead (no inverse needed).
+//!
+//! # Elements
+//! Every instance of the root TLAS carries the element it came from (the root edge's, or the
+//! root mesh's: `G(root)` and the root's AABB BLASes are grouped per element), so `--subset`
+//! can also filter at run time; instances below the root carry `NONE_U32`. A split root is
+//! split per element first. [`CompileOptions::subset`] filters at compile time instead.
+//!
+//! # Memory and time
+//! All passes are O(prototypes + edges + output) with per-prototype arrays, no per-edge
+//! allocation or hashing. The instance table, the one large allocation, is reserved once from
+//! an exact count made before emission (which also rejects tables over `u32` early); a TLAS
+//! walk keeps one frame per graph level. LOD meshes go to the caller's sink as they are made.
+//!
+//! # Why no dummy nodes
+//! The thesis assigns levels to *source* nodes and inserts identity dummies where a child has
+//! the wrong parity. Here levels belong to *compiled* nodes, and the compiled graph is
+//! bipartite by construction: a TLAS only instances BLASes and a BLAS only holds geometry or
+//! PIs into TLASes (or LOD selectors whose levels are TLASes). With levels computed as
+//! `level(child) = max over parents (level(parent) + 1)` from root level 0, every TLAS is even
+//! and every BLAS odd by induction, whatever depth a shared `G(P)` is instanced at.
+//! [`validate`] checks this anyway.
+//!
+//! # Splitting
+//! A TLAS over the instance cap (or its scratch estimate over the budget) is split: its
+//! instance range is partitioned in place at the median instance centre along the largest
+//! axis (`select_nth_unstable_by`; a plain index split when all centres coincide, so it always
+//! halves and always terminates) until each piece fits; the pieces become child TLASes (their
+//! instance ranges are sub-ranges of the original: nothing is copied) reached through PIs of
+//! new AABB BLASes instanced by the original TLAS. AABB BLASes over the primitive cap are split
+//! the same way. Split levels add TLAS levels below the `Levels::N` budget.
+//!
+//! # Numbering
+//! TLASes are numbered depth-first from the root, the children of a TLAS (PI targets, split
+//! pieces, LOD levels) getting consecutive ids when the TLAS is emitted (thesis 2.6.3); BLASes
+//! and mesh records are numbered in the same walk, so a subtree's records are close together.
+//! All indices are 32-bit and every table is checked against `u32`.
+
+mod analyze;
+mod emit;
+mod finalize;
+mod flatten;
+mod lod;
+mod split;
+mod validate;
+mod xform;
+
+#[cfg(test)]
+mod testutil;
+
+#[cfg(test)]
+mod proptests;
+
+pub use flatten::{flatten_compiled, flatten_source};
+pub use validate::{validate, validate_with, Limits, ValidateError};
+
+use motu_abi::{
+    BlasRecord, GeometryRecord, HierarchyView, InstanceRecord, LodSelectorRecord, MaterialRecord,
+    MeshRecord, PiRecord, TlasRecord,
+};
+use motu_scene::{ElementId, MeshData, Scene};
+use serde::Serialize;
+
+/// The Vulkan-safe default for instances per TLAS and primitives per BLAS (2^24 − 1).
+pub const DEFAULT_MAX_PER_NODE: u32 = (1 << 24) - 1;
+
+/// How many instancing levels to keep.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum Levels {
+    /// Keep the graph (multi-level instancing).
+    Ml,
+    /// Flatten everything into one TLAS (the single-level baseline).
+    Sl,
+    /// At most this many TLAS levels on any root-to-leaf path (before splitting); `N(1)` is `Sl`.
+    N(u32),
+}
+
+#[derive(Clone, Debug)]
+pub struct CompileOptions {
+    pub levels: Levels,
+    /// Instances per TLAS (Vulkan's `maxInstanceCount`; at least 2).
+    pub max_instances_per_tlas: u32,
+    /// Primitives per AABB BLAS (`maxPrimitiveCount`; at least 2).
+    pub max_primitives_per_blas: u32,
+    /// Estimated TLAS build scratch per instance, for `max_tlas_scratch_bytes`.
+    pub scratch_bytes_per_instance: u64,
+    /// A TLAS whose estimated scratch exceeds this is split.
+    pub max_tlas_scratch_bytes: u64,
+    /// Total LOD levels (level 0 included) for meshes over `lod_triangle_threshold`; `None` or
+    /// fewer than 2 disables LOD.
+    pub lod_levels: Option<u32>,
+    pub lod_triangle_threshold: u32,
+    /// Keep only root edges and root meshes tagged with these elements.
+    pub subset: Option<Vec<ElementId>>,
+    /// Tolerance for "identity" in identity collapse.
+    pub identity_tolerance: f32,
+}
+
+impl Default for CompileOptions {
+    fn default() -> Self {
+        Self {
+            levels: Levels::Ml,
+            max_instances_per_tlas: DEFAULT_MAX_PER_NODE,
+            max_primitives_per_blas: DEFAULT_MAX_PER_NODE,
+            scratch_bytes_per_instance: 128,
+            max_tlas_scratch_bytes: u64::MAX,
+            lod_levels: None,
+            lod_triangle_threshold: 100_000,
+            subset: None,
+            identity_tolerance: 1e-6,
+        }
+    }
+}
+
+impl CompileOptions {
+    /// The instance cap after the scratch budget.
+    pub fn effective_instance_cap(&self) -> u64 {
+        let by_scratch = self
+            .max_tlas_scratch_bytes
+            .checked_div(self.scratch_bytes_per_instance.max(1))
+            .unwrap_or(u64::MAX);
+        (self.max_instances_per_tlas as u64).min(by_scratch)
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum CompileError {
+    #[error("invalid compile options: {0}")]
+    InvalidOptions(String),
+    #[error("too many {what} for 32-bit indices: {count}; use fewer flattened levels (--levels ml) or a subset")]
+    TooMany { what: &'static str, count: u64 },
+    #[error("cannot allocate {bytes} bytes for the {what} table; use fewer flattened levels (--levels ml) or a subset")]
+    OutOfMemory { what: &'static str, bytes: u64 },
+    #[error("mesh {mesh}: {reason}")]
+    Mesh { mesh: u32, reason: String },
+    #[error("mesh sink rejected LOD mesh record {mesh_record}: {reason}")]
+    Sink { mesh_record: u32, reason: String },
+    #[error("internal compiler error: {0}")]
+    Internal(String),
+}
+
+/// What a compile did, for `motu import`/`motu info` and benchmarks.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct CompileReport {
+    pub levels: String,
+    pub tlas_count: u64,
+    pub blas_count: u64,
+    pub triangle_blas_count: u64,
+    pub aabb_blas_count: u64,
+    pub instance_count: u64,
+    pub geometry_count: u64,
+    pub pi_count: u64,
+    pub lod_selector_count: u64,
+    pub mesh_count: u64,
+    pub material_count: u64,
+    /// Highest node level (root TLAS = 0).
+    pub max_level: u32,
+    /// TLASes on the longest root-to-leaf path.
+    pub tlas_levels: u32,
+    pub max_instances_per_tlas: u64,
+    pub max_primitives_per_blas: u64,
+    /// TLASes that were split, and the pieces made.
+    pub split_tlases: u64,
+    pub split_pieces: u64,
+    /// AABB BLASes over the primitive cap that were split into groups.
+    pub split_aabb_blases: u64,
+    pub dropped_degenerate_instances: u64,
+    /// Prototypes inlined by identity collapse (single parent, identity transform).
+    pub collapsed_prototypes: u64,
+    /// Source meshes given a LOD chain, and the simplified meshes made.
+    pub lod_source_meshes: u64,
+    pub lod_meshes_made: u64,
+    /// Leaf placements after full flattening (root-to-prototype paths to prototypes with
+    /// meshes, root excluded), within the subset. Saturating.
+    pub flattened_instances: u64,
+    pub time_ms: f64,
+}
+
+/// The compiled hierarchy: the tables of [`motu_abi`], owned.
+#[derive(Clone, Debug, Default)]
+pub struct CompiledScene {
+    pub root_tlas: u32,
+    pub tlases: Vec<TlasRecord>,
+    pub instances: Vec<InstanceRecord>,
+    pub blases: Vec<BlasRecord>,
+    pub geometries: Vec<GeometryRecord>,
+    pub pis: Vec<PiRecord>,
+    pub lod_selectors: Vec<LodSelectorRecord>,
+    pub lod_levels: Vec<u32>,
+    pub meshes: Vec<MeshRecord>,
+    pub materials: Vec<MaterialRecord>,
+    pub report: CompileReport,
+}
+
+impl CompiledScene {
+    pub fn view(&self) -> HierarchyView<'_> {
+        HierarchyView {
+            root_tlas: self.root_tlas,
+            tlases: &self.tlases,
+            instances: &self.instances,
+            blases: &self.blases,
+            geometries: &self.geometries,
+            pis: &self.pis,
+            lod_selectors: &self.lod_selectors,
+            lod_levels: &self.lod_levels,
+            meshes: &self.meshes,
+            materials: &self.materials,
+        }
+    }
+}
+
+/// Receives each simplified LOD mesh (`lod > 0`) once, with its index in
+/// [`CompiledScene::meshes`], as soon as it is made; the compiler keeps no LOD data. Source
+/// meshes (`lod == 0`) are not passed: their data is in the scene's geometry store.
+pub type MeshSink<'a> = dyn FnMut(u32, &MeshData) -> Result<(), String> + 'a;
+
+/// Compiles `scene`. Mesh records' `chunk` and `*_offset` fields are left `NONE` for the
+/// packer to fill.
+pub fn compile(
+    scene: &Scene,
+    opts: &CompileOptions,
+    sink: &mut MeshSink<'_>,
+) -> Result<CompiledScene, CompileError> {
+    let _span = tracing::info_span!(
+        "compile",
+        edges = scene.all_edges().len(),
+        prototypes = scene.prototypes().len(),
+        levels = ?opts.levels
+    )
+    .entered();
+    let start = std::time::Instant::now();
+    check_options(opts)?;
+    let plan = analyze::Plan::new(scene, opts)?;
+    let mut out = emit::Emitter::new(&plan, sink).run()?;
+    finalize::finalize(&mut out)?;
+    out.report.time_ms = start.elapsed().as_secs_f64() * 1e3;
+    tracing::info!(
+        tlases = out.tlases.len(),
+        blases = out.blases.len(),
+        instances = out.instances.len(),
+        pis = out.pis.len(),
+        time_ms = out.report.time_ms,
+        "compiled"
+    );
+    Ok(out)
+}
+
+fn check_options(opts: &CompileOptions) -> Result<(), CompileError> {
+    if opts.effective_instance_cap() < 2 {
+        return Err(CompileError::InvalidOptions(format!(
+            "at most {} instances per TLAS (after the scratch budget); need at least 2",
+            opts.effective_instance_cap()
+        )));
+    }
+    if opts.max_primitives_per_blas < 2 {
+        return Err(CompileError::InvalidOptions(
+            "max_primitives_per_blas must be at least 2".into(),
+        ));
+    }
+    if opts.levels == Levels::N(0) {
+        return Err(CompileError::InvalidOptions(
+            "--levels 0: at least one TLAS level is needed".into(),
+        ));
+    }
+    Ok(())
+}

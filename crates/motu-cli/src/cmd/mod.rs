@@ -5,6 +5,8 @@ use anyhow::bail;
 
 mod devices;
 mod gen;
+mod import;
+mod info;
 
 /// An honest failure for a command whose issue has not landed yet.
 fn not_implemented(what: &str, issue: u32) -> anyhow::Result<()> {
@@ -15,9 +17,9 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Devices(a) => devices::run(a),
         Command::Gen(a) => gen::run(a),
-        Command::Import(_) => not_implemented("motu import", 4),
-        Command::Info(_) => not_implemented("motu info", 4),
-        Command::Verify(_) => not_implemented("motu verify", 4),
+        Command::Import(a) => import::run(a),
+        Command::Info(a) => info::run(a),
+        Command::Verify(a) => info::verify(a),
         Command::Report(_) => not_implemented("motu report", 9),
         Command::Render(_) => not_implemented("motu render", 7),
         Command::Compare(_) => not_implemented("motu compare", 5),

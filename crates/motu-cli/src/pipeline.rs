@@ -1,0 +1,371 @@
+//! The import pipeline: parse → scene (geometry streamed into the package) → compile → pack.
+//! Nothing here holds more than the instance skeleton in memory: mesh data goes to chunks as it
+//! is parsed and LOD meshes go to chunks as they are made.
+
+use anyhow::{bail, Context};
+use motu_abi::MeshRecord;
+use motu_compile::{CompileOptions, CompiledScene, Levels};
+use motu_ingest::{IngestOptions, IngestReport};
+use motu_pack::{place_mesh_record, ElementMeta, PackageGeometry, PackageMeta, ScenePackage};
+use motu_package::{PackageWriter, WriteSummary, WriterOptions};
+use motu_scene::{ElementId, MeshLocation, PrototypeId, Scene};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Chunk group for LOD meshes the compiler makes (kept apart from element groups).
+const LOD_GROUP: u32 = u32::MAX - 1;
+
+pub struct ImportOptions {
+    pub levels: Levels,
+    pub levels_text: String,
+    pub max_instances: u32,
+    pub lod_levels: Option<u32>,
+    pub zstd_level: Option<i32>,
+    pub allow_missing: bool,
+    pub pbrt_version: Option<u32>,
+    pub subset: Vec<String>,
+    pub chunk_bytes: u64,
+    pub parallel: bool,
+}
+
+#[derive(Debug, serde::Serialize)]
+pub struct ImportSummary {
+    pub package: String,
+    pub file_bytes: u64,
+    pub chunks: u32,
+    pub parse_ms: f64,
+    pub compile_ms: f64,
+    pub pack_ms: f64,
+    pub meshes: u64,
+    pub instances: u64,
+    pub flattened_instances: u64,
+    pub tlas_count: u64,
+    pub blas_count: u64,
+    pub warnings: usize,
+    pub curves_not_converted: u64,
+    pub unsupported_shapes: u64,
+    pub skipped_shapes: u64,
+}
+
+fn writer_options(o: &ImportOptions) -> WriterOptions {
+    WriterOptions {
+        target_chunk_bytes: o.chunk_bytes,
+        zstd_level: o.zstd_level,
+        ..Default::default()
+    }
+}
+
+/// Resolves element names; unknown names are an error listing the valid ones.
+pub fn resolve_subset(names: &[String], known: &[String]) -> anyhow::Result<Vec<u32>> {
+    let mut ids = Vec::new();
+    let mut unknown = Vec::new();
+    for n in names {
+        match known.iter().position(|k| k == n) {
+            Some(i) => ids.push(i as u32),
+            None => unknown.push(n.as_str()),
+        }
+    }
+    if !unknown.is_empty() {
+        bail!(
+            "unknown element(s) {}: valid elements are {}",
+            unknown.join(", "),
+            known.join(", ")
+        );
+    }
+    Ok(ids)
+}
+
+pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Result<ImportSummary> {
+    if !scene_path.exists() {
+        bail!(
+            "{} does not exist: give the entry .pbrt (or .obj) file",
+            scene_path.display()
+        );
+    }
+    // With --subset, geometry is first streamed into a scratch package beside the output, and
+    // only what the subset references is copied into the real one.
+    let direct = o.subset.is_empty();
+    let first_target: PathBuf = if direct {
+        out.to_path_buf()
+    } else {
+        out.with_extension("subset-scratch.motu")
+    };
+    let t0 = Instant::now();
+    let writer = PackageWriter::create(&first_target, writer_options(o))
+        .with_context(|| format!("creating {}", first_target.display()))?;
+    let geometry = PackageGeometry::new(writer);
+    let ingest_opts = IngestOptions {
+        allow_missing: o.allow_missing,
+        pbrt_version: o.pbrt_version,
+        parallel: o.parallel,
+    };
+    let (scene, report) =
+        motu_ingest::ingest_file(scene_path, &ingest_opts, Box::new(geometry.clone()))
+            .with_context(|| format!("importing {}", scene_path.display()))?;
+    let parse_ms = t0.elapsed().as_secs_f64() * 1e3;
+
+    let element_names: Vec<String> = scene.elements().iter().map(|e| e.name.clone()).collect();
+    let subset_ids = resolve_subset(&o.subset, &element_names)?;
+    let copts = CompileOptions {
+        levels: o.levels,
+        max_instances_per_tlas: o.max_instances,
+        lod_levels: o.lod_levels,
+        subset: (!direct).then(|| subset_ids.iter().map(|&i| ElementId(i)).collect()),
+        ..Default::default()
+    };
+
+    let t1 = Instant::now();
+    let (summary, compiled) = if direct {
+        let mut lod_locations: HashMap<u32, MeshLocation> = HashMap::new();
+        let g = geometry.clone();
+        let mut sink = |rec: u32, data: &motu_scene::MeshData| -> Result<(), String> {
+            lod_locations.insert(rec, g.append_mesh(LOD_GROUP, data)?);
+            Ok(())
+        };
+        let mut compiled = motu_compile::compile(&scene, &copts, &mut sink)
+            .context("compiling the instancing graph")?;
+        let compile_ms = t1.elapsed().as_secs_f64() * 1e3;
+        place_meshes(&scene, &mut compiled.meshes, |rec, m| {
+            if m.lod == 0 {
+                Some(scene.mesh(motu_scene::MeshId(m.source_mesh)).location)
+            } else {
+                lod_locations.get(&rec).copied()
+            }
+        })?;
+        let t2 = Instant::now();
+        let writer = geometry.take_writer().map_err(anyhow::Error::msg)?;
+        let s = finish(writer, &scene, &compiled, &report, scene_path, o)?;
+        (
+            summary(s, &scene, &compiled, &report, parse_ms, compile_ms, t2),
+            compiled,
+        )
+    } else {
+        // Finish the scratch package so its chunks can be read back.
+        let scratch_writer = geometry.take_writer().map_err(anyhow::Error::msg)?;
+        scratch_writer
+            .finish()
+            .context("finishing the scratch package")?;
+        let result = (|| {
+            let scratch = motu_package::Package::open(&first_target)?;
+            let final_geo = PackageGeometry::new(
+                PackageWriter::create(out, writer_options(o))
+                    .with_context(|| format!("creating {}", out.display()))?,
+            );
+            let mut lod_locations: HashMap<u32, MeshLocation> = HashMap::new();
+            let g = final_geo.clone();
+            let mut sink = |rec: u32, data: &motu_scene::MeshData| -> Result<(), String> {
+                lod_locations.insert(rec, g.append_mesh(LOD_GROUP, data)?);
+                Ok(())
+            };
+            let mut compiled =
+                motu_compile::compile(&scene, &copts, &mut sink).context("compiling the subset")?;
+            let compile_ms = t1.elapsed().as_secs_f64() * 1e3;
+            // Copy the referenced source meshes' blobs.
+            let mut copied: HashMap<u32, MeshLocation> = HashMap::new();
+            for m in compiled.meshes.iter().filter(|m| m.lod == 0) {
+                if copied.contains_key(&m.source_mesh) {
+                    continue;
+                }
+                let info = scene.mesh(motu_scene::MeshId(m.source_mesh));
+                let data = motu_pack::read_mesh_blob(
+                    &scratch,
+                    info.location,
+                    info.vertex_count,
+                    info.triangle_count,
+                    info.has_normals,
+                )?;
+                let group = m.element;
+                copied.insert(
+                    m.source_mesh,
+                    final_geo
+                        .append_mesh(group, &data)
+                        .map_err(anyhow::Error::msg)?,
+                );
+            }
+            place_meshes(&scene, &mut compiled.meshes, |rec, m| {
+                if m.lod == 0 {
+                    copied.get(&m.source_mesh).copied()
+                } else {
+                    lod_locations.get(&rec).copied()
+                }
+            })?;
+            let t2 = Instant::now();
+            let writer = final_geo.take_writer().map_err(anyhow::Error::msg)?;
+            let s = finish(writer, &scene, &compiled, &report, scene_path, o)?;
+            Ok::<_, anyhow::Error>((
+                summary(s, &scene, &compiled, &report, parse_ms, compile_ms, t2),
+                compiled,
+            ))
+        })();
+        let _ = std::fs::remove_file(&first_target);
+        result?
+    };
+    drop(compiled);
+    Ok(summary)
+}
+
+fn place_meshes(
+    _scene: &Scene,
+    meshes: &mut [MeshRecord],
+    locate: impl Fn(u32, &MeshRecord) -> Option<MeshLocation>,
+) -> anyhow::Result<()> {
+    for (i, m) in meshes.iter_mut().enumerate() {
+        let at = locate(i as u32, m).with_context(|| {
+            format!(
+                "internal: mesh record {i} (source mesh {}, LOD {}) has no stored data",
+                m.source_mesh, m.lod
+            )
+        })?;
+        place_mesh_record(m, at);
+    }
+    Ok(())
+}
+
+fn summary(
+    s: WriteSummary,
+    scene: &Scene,
+    compiled: &CompiledScene,
+    report: &IngestReport,
+    parse_ms: f64,
+    compile_ms: f64,
+    pack_start: Instant,
+) -> ImportSummary {
+    let st = scene.stats();
+    ImportSummary {
+        package: s.path.display().to_string(),
+        file_bytes: s.file_bytes,
+        chunks: s.chunk_count,
+        parse_ms,
+        compile_ms,
+        pack_ms: pack_start.elapsed().as_secs_f64() * 1e3,
+        meshes: st.meshes,
+        instances: st.instances,
+        flattened_instances: st.flattened_instances,
+        tlas_count: compiled.report.tlas_count,
+        blas_count: compiled.report.blas_count,
+        warnings: report.warnings.len(),
+        curves_not_converted: report.curves,
+        unsupported_shapes: report.unsupported_shapes,
+        skipped_shapes: report.skipped_shapes,
+    }
+}
+
+fn finish(
+    mut writer: PackageWriter,
+    scene: &Scene,
+    compiled: &CompiledScene,
+    report: &IngestReport,
+    source: &Path,
+    o: &ImportOptions,
+) -> anyhow::Result<WriteSummary> {
+    let meta = PackageMeta {
+        schema: motu_pack::SCHEMA.into(),
+        source: source.display().to_string(),
+        levels: o.levels_text.clone(),
+        max_instances_per_tlas: o.max_instances,
+        lod_levels: o.lod_levels.unwrap_or(1),
+        root_tlas: compiled.root_tlas,
+        cameras: scene.cameras().to_vec(),
+        lights: scene.lights().to_vec(),
+        material_names: scene.materials().iter().map(|m| m.name.clone()).collect(),
+        mesh_names: scene.meshes().iter().map(|m| m.name.clone()).collect(),
+        elements: element_stats(scene),
+        scene: scene.stats(),
+        compile: serde_json::to_value(&compiled.report)?,
+        warnings: report.warnings.clone(),
+    };
+    motu_pack::write_hierarchy(&mut writer, &compiled.view(), &meta)?;
+    Ok(writer.finish().context("writing the package")?)
+}
+
+/// Per-element counts: each element's root edges and root meshes, and everything they reach.
+pub fn element_stats(scene: &Scene) -> Vec<ElementMeta> {
+    let n_proto = scene.prototypes().len();
+    let root = scene.root();
+    let root_edges = scene.edges(root);
+    let root_meshes = scene.meshes_of(root);
+    let tris = |p: PrototypeId| -> u64 {
+        scene
+            .meshes_of(p)
+            .iter()
+            .map(|&m| scene.mesh(m).triangle_count as u64)
+            .sum()
+    };
+    let blob = |m: motu_scene::MeshId| -> u64 {
+        let i = scene.mesh(m);
+        motu_pack::MeshBlobLayout::new(
+            i.vertex_count as u64,
+            i.triangle_count as u64,
+            i.has_normals,
+        )
+        .len
+    };
+    scene
+        .elements()
+        .iter()
+        .enumerate()
+        .map(|(ei, e)| {
+            let ei = ElementId(ei as u32);
+            let mut paths = vec![0u64; n_proto];
+            for (edge, &el) in root_edges.iter().zip(scene.root_edge_elements()) {
+                if el == ei {
+                    paths[edge.child.index()] = paths[edge.child.index()].saturating_add(1);
+                }
+            }
+            // Parents before children: the reverse of the topological order.
+            for &p in scene.topo_order().iter().rev() {
+                if p == root || paths[p.index()] == 0 {
+                    continue;
+                }
+                let n = paths[p.index()];
+                for edge in scene.edges(p) {
+                    paths[edge.child.index()] = paths[edge.child.index()].saturating_add(n);
+                }
+            }
+            let mut m = ElementMeta {
+                name: e.name.clone(),
+                ..Default::default()
+            };
+            m.instances = root_edges.len() as u64 - 0;
+            m.instances = scene
+                .root_edge_elements()
+                .iter()
+                .filter(|&&x| x == ei)
+                .count() as u64;
+            for (mid, &el) in root_meshes.iter().zip(scene.root_mesh_elements()) {
+                if el == ei {
+                    let t = scene.mesh(*mid).triangle_count as u64;
+                    m.unique_triangles += t;
+                    m.instanced_triangles += t;
+                    m.meshes += 1;
+                    m.mesh_bytes += blob(*mid);
+                }
+            }
+            for p in scene.prototype_ids() {
+                if p == root || paths[p.index()] == 0 {
+                    continue;
+                }
+                let t = tris(p);
+                m.instances += scene.edges(p).len() as u64;
+                m.unique_triangles += t;
+                m.instanced_triangles = m
+                    .instanced_triangles
+                    .saturating_add(paths[p.index()].saturating_mul(t));
+                if t > 0 {
+                    m.flattened_instances = m.flattened_instances.saturating_add(paths[p.index()]);
+                }
+                for &mid in scene.meshes_of(p) {
+                    m.meshes += 1;
+                    m.mesh_bytes += blob(mid);
+                }
+            }
+            m
+        })
+        .collect()
+}
+
+/// Opens a package with a message that says what to do.
+pub fn open(path: &Path) -> anyhow::Result<ScenePackage> {
+    ScenePackage::open(path).with_context(|| format!("opening package {}", path.display()))
+}

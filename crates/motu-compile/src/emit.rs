@@ -1,0 +1,765 @@
+//! Emission: one walk per TLAS, depth-first from the root, writing straight into the output
+//! tables (the instance table is the only large allocation; the walk itself keeps one frame per
+//! graph level). Levels and exact bounds are filled in by `finalize`.
+
+use crate::analyze::{edge_ref, Plan};
+use crate::split::median_partition;
+use crate::{lod, xform, CompileError, CompiledScene, MeshSink};
+use motu_abi::{
+    BlasRecord, GeometryRecord, InstanceRecord, LodSelectorRecord, MaterialRecord, MeshRecord,
+    PiRecord, TlasRecord, BLAS_AABBS, BLAS_TRIANGLES, FLAG_HAS_NORMALS, FLAG_HAS_UVS,
+    FLAG_NEEDS_ANY_HIT, NONE_U32, NONE_U64, PI_LOD_SELECTOR, PI_TLAS,
+};
+use motu_scene::{Aabb, MeshData, MeshId, PrototypeId, Scene, Transform34};
+
+/// What a TLAS holds, decided when it is first referenced and emitted later (depth-first).
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum Job {
+    /// `TLAS(P)`: the walk from prototype `P`.
+    Proto(PrototypeId),
+    /// One LOD level: an instance of a one-mesh triangle BLAS.
+    Lod(u32),
+}
+
+struct Frame {
+    proto: PrototypeId,
+    next_edge: usize,
+    end_edge: usize,
+    tlas_from_proto: Transform34,
+    /// In the root TLAS: the element of the root edge this walk came through.
+    element: u32,
+}
+
+/// Checked conversion of a table length to the next 32-bit id.
+pub(crate) fn next_id(len: usize, what: &'static str) -> Result<u32, CompileError> {
+    u32::try_from(len)
+        .ok()
+        .filter(|&id| id != u32::MAX)
+        .ok_or(CompileError::TooMany {
+            what,
+            count: len as u64,
+        })
+}
+
+pub(crate) fn set_bounds(min: &mut [f32; 3], max: &mut [f32; 3], b: &Aabb) {
+    *min = b.min;
+    *max = b.max;
+}
+
+pub(crate) struct Emitter<'p, 's, 'k, 'f> {
+    plan: &'p Plan<'s>,
+    sink: &'k mut MeshSink<'f>,
+    pub out: CompiledScene,
+    tlas_of_proto: Vec<u32>,
+    /// `G(P)` as a range of BLAS ids (several when the triangle cap splits it); count 0 = none.
+    g_of_proto: Vec<(u32, u32)>,
+    record_of_mesh: Vec<u32>,
+    selector_of_mesh: Vec<u32>,
+    /// Instance flags per BLAS.
+    blas_flags: Vec<u32>,
+    /// Element of each BLAS made for root content (`G(root)` groups), else `NONE_U32`.
+    blas_element: Vec<u32>,
+    /// Emitting the root TLAS: its instances and PIs carry elements (`--subset` at run time).
+    in_root: bool,
+    /// Element of each PI pushed while `in_root`, parallel to `pis[root_pi_base..]`.
+    pi_elements: Vec<u32>,
+    new_children: Vec<(u32, Job)>,
+    frames: Vec<Frame>,
+    root_element: u32,
+    instance_cap: usize,
+}
+
+impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
+    pub fn new(plan: &'p Plan<'s>, sink: &'k mut MeshSink<'f>) -> Self {
+        let scene = plan.scene;
+        let n = scene.prototypes().len();
+        let out = CompiledScene {
+            materials: scene
+                .materials()
+                .iter()
+                .map(|m| MaterialRecord {
+                    base_color: m.base_color,
+                    opacity: m.opacity,
+                })
+                .collect(),
+            ..Default::default()
+        };
+        Self {
+            plan,
+            sink,
+            out,
+            tlas_of_proto: vec![NONE_U32; n],
+            g_of_proto: vec![(NONE_U32, 0); n],
+            record_of_mesh: vec![NONE_U32; scene.meshes().len()],
+            selector_of_mesh: vec![NONE_U32; scene.meshes().len()],
+            blas_flags: Vec::new(),
+            blas_element: Vec::new(),
+            in_root: false,
+            pi_elements: Vec::new(),
+            new_children: Vec::new(),
+            frames: Vec::new(),
+            root_element: root_element(plan),
+            instance_cap: usize::try_from(plan.opts.effective_instance_cap()).unwrap_or(usize::MAX),
+        }
+    }
+
+    pub fn run(mut self) -> Result<CompiledScene, CompileError> {
+        let _span = tracing::info_span!("emit").entered();
+        // The instance table is the one large allocation: reserve it once (splits add a few
+        // AABB-BLAS instances per cap-sized piece), and fail cleanly if it cannot be had.
+        let estimate = self.plan.instance_estimate;
+        let reserve =
+            estimate + estimate / (self.plan.opts.effective_instance_cap().max(4) / 4) + 64;
+        let reserve = reserve.min(u64::from(u32::MAX)) as usize;
+        self.out
+            .instances
+            .try_reserve_exact(reserve)
+            .map_err(|_| CompileError::OutOfMemory {
+                what: "instances",
+                bytes: reserve as u64 * std::mem::size_of::<InstanceRecord>() as u64,
+            })?;
+        let root = self.tlas_for_proto(Scene::ROOT)?;
+        self.out.root_tlas = root;
+        let mut jobs = std::mem::take(&mut self.new_children);
+        while let Some((tlas, job)) = jobs.pop() {
+            self.emit_tlas(tlas, job)?;
+            // Children got consecutive ids; push reversed so the first is emitted next.
+            jobs.extend(self.new_children.drain(..).rev());
+        }
+        let r = &mut self.out.report;
+        r.dropped_degenerate_instances += self.plan.dropped_degenerate;
+        r.collapsed_prototypes = self.plan.collapsed_prototypes;
+        r.flattened_instances = self.plan.flattened_instances;
+        r.levels = format!("{:?}", self.plan.opts.levels).to_lowercase();
+        Ok(self.out)
+    }
+
+    fn new_tlas(&mut self, job: Job, element: u32) -> Result<u32, CompileError> {
+        let id = next_id(self.out.tlases.len(), "TLASes")?;
+        self.out.tlases.push(TlasRecord {
+            element,
+            ..Default::default()
+        });
+        self.new_children.push((id, job));
+        Ok(id)
+    }
+
+    fn tlas_for_proto(&mut self, p: PrototypeId) -> Result<u32, CompileError> {
+        let t = self.tlas_of_proto[p.index()];
+        if t != NONE_U32 {
+            return Ok(t);
+        }
+        let element = if p == Scene::ROOT {
+            self.root_element
+        } else {
+            self.plan.scene.prototype(p).element.0
+        };
+        let t = self.new_tlas(Job::Proto(p), element)?;
+        self.tlas_of_proto[p.index()] = t;
+        Ok(t)
+    }
+
+    /// `element` is the placement's element in the root TLAS (`NONE_U32`: the BLAS's own).
+    fn push_instance(
+        &mut self,
+        blas: u32,
+        tlas_from_blas: &Transform34,
+        element: u32,
+    ) -> Result<(), CompileError> {
+        next_id(self.out.instances.len(), "instances")?;
+        let element = match (self.in_root, element) {
+            (false, _) => NONE_U32,
+            (true, NONE_U32) => self.blas_element[blas as usize],
+            (true, e) => e,
+        };
+        self.out.instances.push(InstanceRecord {
+            tlas_from_blas: xform::to_array(tlas_from_blas),
+            blas,
+            flags: self.blas_flags[blas as usize],
+            element,
+            _pad: 0,
+        });
+        Ok(())
+    }
+
+    fn push_pi(&mut self, pi: PiRecord, element: u32) -> Result<(), CompileError> {
+        next_id(self.out.pis.len(), "programmable instances")?;
+        self.out.pis.push(pi);
+        if self.in_root {
+            self.pi_elements.push(element);
+        }
+        Ok(())
+    }
+
+    fn emit_tlas(&mut self, tlas: u32, job: Job) -> Result<(), CompileError> {
+        let base = self.out.instances.len();
+        let pi_base = self.out.pis.len();
+        self.in_root = tlas == self.out.root_tlas;
+        self.pi_elements.clear();
+        match job {
+            Job::Proto(p) => self.walk(p)?,
+            Job::Lod(record) => {
+                let blas = self.triangle_blas(&[record], NONE_U32)?;
+                self.push_instance(blas, &Transform34::IDENTITY, NONE_U32)?;
+            }
+        }
+        let pi_end = self.out.pis.len();
+        if pi_end > pi_base {
+            self.aabb_blases(pi_base, pi_end)?;
+        }
+        let t = &mut self.out.tlases[tlas as usize];
+        t.instance_base = next_id(base, "instances")?;
+        t.instance_count = next_id(self.out.instances.len() - base, "instances")?;
+        self.split_tlas(tlas)?;
+        self.in_root = false;
+        Ok(())
+    }
+
+    /// The walk from `root` with identity: expanded edges add their content, the others PIs.
+    fn walk(&mut self, root: PrototypeId) -> Result<(), CompileError> {
+        let scene = self.plan.scene;
+        let edges = scene.all_edges();
+        self.visit(root, &Transform34::IDENTITY, NONE_U32)?;
+        self.push_frame(root, Transform34::IDENTITY, NONE_U32);
+        while let Some(top) = self.frames.last_mut() {
+            if top.next_edge == top.end_edge {
+                self.frames.pop();
+                continue;
+            }
+            let i = top.next_edge;
+            top.next_edge += 1;
+            let (parent, tlas_from_parent) = (top.proto, top.tlas_from_proto);
+            let mut element = top.element;
+            let e = &edges[i];
+            if !self.plan.edge_kept(parent, i, edge_ref!(e)) {
+                continue;
+            }
+            if self.in_root && parent == Scene::ROOT {
+                let local = i - scene.edge_base(Scene::ROOT) as usize;
+                element = scene
+                    .root_edge_elements()
+                    .get(local)
+                    .map_or(NONE_U32, |e| e.0);
+            }
+            let tlas_from_child = xform::compose(&tlas_from_parent, &e.parent_from_child);
+            let child_from_tlas = if self.plan.expands(edge_ref!(e)) {
+                None
+            } else {
+                // A composition can underflow to singular even when every edge is invertible:
+                // such a child is expanded instead, which needs no inverse.
+                xform::inverse(&tlas_from_child)
+            };
+            match child_from_tlas {
+                None => {
+                    self.visit(e.child, &tlas_from_child, element)?;
+                    self.push_frame(e.child, tlas_from_child, element);
+                }
+                Some(child_from_tlas) => {
+                    let target = self.tlas_for_proto(e.child)?;
+                    let aabb = scene.bounds(e.child).transformed(&tlas_from_child);
+                    self.push_pi(
+                        PiRecord {
+                            child_from_parent: xform::to_array(&child_from_tlas),
+                            aabb_min: aabb.min,
+                            kind: PI_TLAS,
+                            aabb_max: aabb.max,
+                            target,
+                        },
+                        element,
+                    )?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn push_frame(&mut self, proto: PrototypeId, tlas_from_proto: Transform34, element: u32) {
+        let scene = self.plan.scene;
+        let begin = scene.edge_base(proto) as usize;
+        self.frames.push(Frame {
+            proto,
+            next_edge: begin,
+            end_edge: begin + scene.edges(proto).len(),
+            tlas_from_proto,
+            element,
+        });
+    }
+
+    /// `p`'s own meshes placed at `tlas_from_proto`.
+    /// `element`: the root edge's element in the root TLAS (`NONE_U32` for the root's meshes,
+    /// whose BLASes carry their own).
+    fn visit(
+        &mut self,
+        p: PrototypeId,
+        tlas_from_proto: &Transform34,
+        element: u32,
+    ) -> Result<(), CompileError> {
+        if self.plan.lod_mesh_count[p.index()] > 0 {
+            let scene = self.plan.scene;
+            let inv = xform::inverse(tlas_from_proto);
+            for (j, &m) in scene.meshes_of(p).iter().enumerate() {
+                if !self.plan.mesh_kept(p, j, m) || !self.plan.mesh_gets_lod(m) {
+                    continue;
+                }
+                let Some(proto_from_tlas) = inv else {
+                    self.out.report.dropped_degenerate_instances += 1;
+                    continue;
+                };
+                let selector = self.selector_for(p, j, m)?;
+                let aabb = scene.mesh(m).bounds.transformed(tlas_from_proto);
+                let element = if element == NONE_U32 {
+                    self.mesh_element(p, j)
+                } else {
+                    element
+                };
+                self.push_pi(
+                    PiRecord {
+                        child_from_parent: xform::to_array(&proto_from_tlas),
+                        aabb_min: aabb.min,
+                        kind: PI_LOD_SELECTOR,
+                        aabb_max: aabb.max,
+                        target: selector,
+                    },
+                    element,
+                )?;
+            }
+        }
+        if self.plan.g_mesh_count[p.index()] > 0 {
+            let (first, count) = self.g_for_proto(p)?;
+            for b in first..first + count {
+                self.push_instance(b, tlas_from_proto, element)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn mesh_element(&self, p: PrototypeId, j: usize) -> u32 {
+        let scene = self.plan.scene;
+        if p == Scene::ROOT {
+            scene.root_mesh_elements().get(j).map_or(NONE_U32, |e| e.0)
+        } else {
+            scene.prototype(p).element.0
+        }
+    }
+
+    fn record_for(&mut self, p: PrototypeId, j: usize, m: MeshId) -> Result<u32, CompileError> {
+        let r = self.record_of_mesh[m.index()];
+        if r != NONE_U32 {
+            return Ok(r);
+        }
+        let info = self.plan.scene.mesh(m);
+        let mut flags = self.material_flags(info.material.0);
+        if info.has_normals {
+            flags |= FLAG_HAS_NORMALS;
+        }
+        if info.has_uvs {
+            flags |= FLAG_HAS_UVS;
+        }
+        let rec = MeshRecord {
+            source_mesh: m.0,
+            lod: 0,
+            material: info.material.0,
+            flags,
+            vertex_count: info.vertex_count,
+            triangle_count: info.triangle_count,
+            element: self.mesh_element(p, j),
+            ..empty_mesh_record(&info.bounds)
+        };
+        let id = next_id(self.out.meshes.len(), "meshes")?;
+        self.out.meshes.push(rec);
+        self.record_of_mesh[m.index()] = id;
+        Ok(id)
+    }
+
+    fn material_flags(&self, material: u32) -> u32 {
+        match self.plan.scene.materials().get(material as usize) {
+            Some(mat) if mat.opacity < 1.0 || mat.alpha_texture.is_some() => FLAG_NEEDS_ANY_HIT,
+            _ => 0,
+        }
+    }
+
+    /// `G(P)`: `P`'s non-LOD meshes, one geometry each, grouped under the triangle cap (and,
+    /// for the root, by element, so every root placement has one element).
+    fn g_for_proto(&mut self, p: PrototypeId) -> Result<(u32, u32), CompileError> {
+        let g = self.g_of_proto[p.index()];
+        if g.1 > 0 {
+            return Ok(g);
+        }
+        let scene = self.plan.scene;
+        let cap = u64::from(self.plan.opts.max_primitives_per_blas);
+        // (element, record, triangles); few per prototype.
+        let mut items: Vec<(u32, u32, u64)> = Vec::new();
+        for (j, &m) in scene.meshes_of(p).iter().enumerate() {
+            if !self.plan.mesh_kept(p, j, m) || self.plan.mesh_gets_lod(m) {
+                continue;
+            }
+            let tris = u64::from(scene.mesh(m).triangle_count);
+            if tris > cap {
+                tracing::warn!(
+                    mesh = m.0,
+                    triangles = tris,
+                    cap,
+                    "mesh over the BLAS primitive cap"
+                );
+            }
+            let element = if p == Scene::ROOT {
+                self.mesh_element(p, j)
+            } else {
+                NONE_U32
+            };
+            items.push((element, self.record_for(p, j, m)?, tris));
+        }
+        items.sort_by_key(|it| it.0);
+        let first = next_id(self.out.blases.len(), "BLASes")?;
+        let mut count = 0u32;
+        let mut group: Vec<u32> = Vec::new();
+        let mut group_tris = 0u64;
+        for (k, &(element, record, tris)) in items.iter().enumerate() {
+            group.push(record);
+            group_tris += tris;
+            let next = items.get(k + 1);
+            let close = next.is_none_or(|n| n.0 != element || group_tris + n.2 > cap);
+            if close {
+                self.triangle_blas(&group, element)?;
+                count += 1;
+                group.clear();
+                group_tris = 0;
+            }
+        }
+        self.g_of_proto[p.index()] = (first, count);
+        Ok((first, count))
+    }
+
+    fn triangle_blas(&mut self, records: &[u32], element: u32) -> Result<u32, CompileError> {
+        let id = next_id(self.out.blases.len(), "BLASes")?;
+        let item_base = next_id(self.out.geometries.len(), "geometries")?;
+        let mut bounds = Aabb::EMPTY;
+        let (mut tris, mut flags) = (0u64, 0u32);
+        for &r in records {
+            next_id(self.out.geometries.len(), "geometries")?;
+            self.out.geometries.push(GeometryRecord {
+                mesh: r,
+                _pad: [0; 3],
+            });
+            let m = &self.out.meshes[r as usize];
+            bounds = bounds.union(&xform::aabb_from_record(m.bounds_min, m.bounds_max));
+            tris += u64::from(m.triangle_count);
+            flags |= m.flags & FLAG_NEEDS_ANY_HIT;
+        }
+        let primitive_count = u32::try_from(tris).map_err(|_| CompileError::TooMany {
+            what: "triangles in one BLAS",
+            count: tris,
+        })?;
+        let mut rec = BlasRecord {
+            kind: BLAS_TRIANGLES,
+            item_base,
+            item_count: records.len() as u32,
+            primitive_count,
+            ..Default::default()
+        };
+        set_bounds(&mut rec.bounds_min, &mut rec.bounds_max, &bounds);
+        self.out.blases.push(rec);
+        self.blas_flags.push(flags);
+        self.blas_element.push(element);
+        Ok(id)
+    }
+
+    /// One AABB BLAS over `pis[begin..end]`, instanced with identity by the TLAS being emitted;
+    /// several (median-split by AABB centre) when over the primitive cap, and in the root TLAS
+    /// one group per element.
+    fn aabb_blases(&mut self, begin: usize, end: usize) -> Result<(), CompileError> {
+        let cap = self.plan.opts.max_primitives_per_blas as usize;
+        // Runs of one element: (begin, end, element).
+        let mut runs: Vec<(usize, usize, u32)> = Vec::new();
+        if self.in_root && self.pi_elements.len() == end - begin {
+            let mut tagged: Vec<(u32, PiRecord)> = self
+                .pi_elements
+                .iter()
+                .copied()
+                .zip(self.out.pis[begin..end].iter().copied())
+                .collect();
+            tagged.sort_by_key(|t| t.0);
+            for (k, (element, pi)) in tagged.iter().enumerate() {
+                self.out.pis[begin + k] = *pi;
+                match runs.last_mut() {
+                    Some(run) if run.2 == *element => run.1 += 1,
+                    _ => runs.push((begin + k, begin + k + 1, *element)),
+                }
+            }
+        } else {
+            runs.push((begin, end, NONE_U32));
+        }
+        let mut ranges = Vec::new();
+        for (a, b, element) in runs {
+            ranges.clear();
+            if b - a > cap {
+                self.out.report.split_aabb_blases += 1;
+                median_partition(&mut self.out.pis[a..b], pi_centre, cap, &mut ranges);
+            } else {
+                ranges.push((0, b - a));
+            }
+            for &(x, y) in &ranges {
+                let blas = self.aabb_blas(a + x, a + y)?;
+                self.push_instance(blas, &Transform34::IDENTITY, element)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn aabb_blas(&mut self, begin: usize, end: usize) -> Result<u32, CompileError> {
+        let id = next_id(self.out.blases.len(), "BLASes")?;
+        let bounds = self.out.pis[begin..end].iter().fold(Aabb::EMPTY, |b, pi| {
+            b.union(&xform::aabb_from_record(pi.aabb_min, pi.aabb_max))
+        });
+        let count = next_id(end - begin, "PIs in one BLAS")?;
+        let mut rec = BlasRecord {
+            kind: BLAS_AABBS,
+            item_base: next_id(begin, "programmable instances")?,
+            item_count: count,
+            primitive_count: count,
+            ..Default::default()
+        };
+        set_bounds(&mut rec.bounds_min, &mut rec.bounds_max, &bounds);
+        self.out.blases.push(rec);
+        self.blas_flags.push(0);
+        self.blas_element.push(NONE_U32);
+        Ok(id)
+    }
+
+    /// Splits `tlas` until its instance count fits the cap (see the crate docs). The root is
+    /// split per element first (pieces and their PIs then have one element each), unless the
+    /// elements alone are more than the cap.
+    fn split_tlas(&mut self, tlas: u32) -> Result<(), CompileError> {
+        let cap = self.instance_cap;
+        let per_blas = self.plan.opts.max_primitives_per_blas as usize;
+        let mut by_element = self.in_root;
+        let mut ranges: Vec<(usize, usize)> = Vec::new();
+        let mut runs: Vec<(usize, usize, u32)> = Vec::new();
+        let mut first_round = true;
+        loop {
+            let t = self.out.tlases[tlas as usize];
+            let (base, count) = (t.instance_base as usize, t.instance_count as usize);
+            if count <= cap {
+                return Ok(());
+            }
+            let _span = tracing::debug_span!("split", tlas, instances = count).entered();
+            if first_round {
+                self.out.report.split_tlases += 1;
+                first_round = false;
+            }
+            let slice = &mut self.out.instances[base..base + count];
+            runs.clear();
+            if by_element {
+                slice.sort_unstable_by_key(|inst| inst.element);
+                for (k, inst) in slice.iter().enumerate() {
+                    match runs.last_mut() {
+                        Some(run) if run.2 == inst.element => run.1 += 1,
+                        _ => runs.push((k, k + 1, inst.element)),
+                    }
+                }
+                if runs.len() > cap {
+                    by_element = false;
+                }
+            }
+            if !by_element {
+                runs.clear();
+                runs.push((0, count, t.element));
+            }
+            // Pieces: child TLASes over sub-ranges, in spatial order; grouped per run.
+            let first_piece = self.out.tlases.len();
+            let mut piece_runs: Vec<(usize, usize, u32)> = Vec::new();
+            for &(a, b, element) in &runs {
+                ranges.clear();
+                {
+                    let blases = &self.out.blases;
+                    median_partition(
+                        &mut self.out.instances[base + a..base + b],
+                        |inst| instance_centre(blases, inst),
+                        cap,
+                        &mut ranges,
+                    );
+                }
+                let run_first = self.out.tlases.len();
+                for &(x, y) in &ranges {
+                    let (x, y) = (base + a + x, base + a + y);
+                    next_id(self.out.tlases.len(), "TLASes")?;
+                    let bounds = self.out.instances[x..y]
+                        .iter()
+                        .fold(Aabb::EMPTY, |acc, inst| {
+                            acc.union(&instance_bounds(&self.out.blases, inst))
+                        });
+                    let mut rec = TlasRecord {
+                        instance_base: x as u32,
+                        instance_count: (y - x) as u32,
+                        element: if by_element { element } else { t.element },
+                        ..Default::default()
+                    };
+                    set_bounds(&mut rec.bounds_min, &mut rec.bounds_max, &bounds);
+                    self.out.tlases.push(rec);
+                }
+                piece_runs.push((run_first, self.out.tlases.len(), element));
+            }
+            self.out.report.split_pieces += (self.out.tlases.len() - first_piece) as u64;
+            // PIs to the pieces, grouped into AABB BLASes; the TLAS now instances those.
+            let new_base = self.out.instances.len();
+            for (run_first, run_end, element) in piece_runs {
+                let mut piece = run_first;
+                while piece < run_end {
+                    let group_end = (piece + per_blas).min(run_end);
+                    let pi_begin = self.out.pis.len();
+                    for target in piece..group_end {
+                        let pt = &self.out.tlases[target];
+                        let pi = PiRecord {
+                            child_from_parent: xform::to_array(&Transform34::IDENTITY),
+                            aabb_min: pt.bounds_min,
+                            kind: PI_TLAS,
+                            aabb_max: pt.bounds_max,
+                            target: target as u32,
+                        };
+                        next_id(self.out.pis.len(), "programmable instances")?;
+                        self.out.pis.push(pi);
+                    }
+                    let blas = self.aabb_blas(pi_begin, self.out.pis.len())?;
+                    let element = if by_element { element } else { NONE_U32 };
+                    self.push_instance(blas, &Transform34::IDENTITY, element)?;
+                    piece = group_end;
+                }
+            }
+            let t = &mut self.out.tlases[tlas as usize];
+            t.instance_base = next_id(new_base, "instances")?;
+            t.instance_count = next_id(self.out.instances.len() - new_base, "instances")?;
+            if t.instance_count as usize >= count {
+                // Element grouping made no progress: split spatially from now on.
+                by_element = false;
+            }
+        }
+    }
+
+    /// The LOD selector of mesh `m` (its chain is built, and handed to the sink, on first use).
+    fn selector_for(&mut self, p: PrototypeId, j: usize, m: MeshId) -> Result<u32, CompileError> {
+        let s = self.selector_of_mesh[m.index()];
+        if s != NONE_U32 {
+            return Ok(s);
+        }
+        let scene = self.plan.scene;
+        let levels = self.plan.opts.lod_levels.unwrap_or(1);
+        let level0 = self.record_for(p, j, m)?;
+        let base_rec = self.out.meshes[level0 as usize];
+        let data = scene.mesh_data(m).map_err(|e| CompileError::Mesh {
+            mesh: m.0,
+            reason: e.to_string(),
+        })?;
+        let mut records = vec![level0];
+        {
+            let meshes = &mut self.out.meshes;
+            let sink = &mut *self.sink;
+            let made = &mut self.out.report.lod_meshes_made;
+            lod::build_chain(m, data, levels, &mut |lod, level: &MeshData| {
+                let id = next_id(meshes.len(), "meshes")?;
+                let bounds = level.bounds();
+                meshes.push(MeshRecord {
+                    lod,
+                    vertex_count: level.positions.len() as u32,
+                    triangle_count: level.triangle_count() as u32,
+                    ..MeshRecord {
+                        bounds_min: bounds.min,
+                        bounds_max: bounds.max,
+                        ..base_rec
+                    }
+                });
+                sink(id, level).map_err(|reason| CompileError::Sink {
+                    mesh_record: id,
+                    reason,
+                })?;
+                *made += 1;
+                records.push(id);
+                Ok(())
+            })?;
+        }
+        self.out.report.lod_source_meshes += 1;
+        let id = next_id(self.out.lod_selectors.len(), "LOD selectors")?;
+        let level_base = next_id(self.out.lod_levels.len(), "LOD levels")?;
+        let element = base_rec.element;
+        for &r in &records {
+            let t = self.new_tlas(Job::Lod(r), element)?;
+            self.out.lod_levels.push(t);
+        }
+        let b = xform::aabb_from_record(base_rec.bounds_min, base_rec.bounds_max);
+        self.out.lod_selectors.push(LodSelectorRecord {
+            center: b.center().to_array(),
+            radius: b.extent().length() * 0.5,
+            level_base,
+            level_count: records.len() as u32,
+            source_mesh: m.0,
+            _pad: 0,
+        });
+        self.selector_of_mesh[m.index()] = id;
+        Ok(id)
+    }
+}
+
+pub(crate) fn empty_mesh_record(bounds: &Aabb) -> MeshRecord {
+    MeshRecord {
+        chunk: NONE_U32,
+        positions_offset: NONE_U64,
+        indices_offset: NONE_U64,
+        normals_offset: NONE_U64,
+        bounds_min: bounds.min,
+        bounds_max: bounds.max,
+        ..Default::default()
+    }
+}
+
+fn pi_centre(pi: &PiRecord) -> [f32; 3] {
+    std::array::from_fn(|i| 0.5 * (pi.aabb_min[i] + pi.aabb_max[i]))
+}
+
+/// The centre of an instance's transformed bounds: an affine image of a box is symmetric about
+/// the image of the box's centre, so one point transform suffices (hot in median selection).
+fn instance_centre(blases: &[BlasRecord], inst: &InstanceRecord) -> [f32; 3] {
+    let b = &blases[inst.blas as usize];
+    let c = std::array::from_fn(|i| 0.5 * (b.bounds_min[i] + b.bounds_max[i]));
+    motu_abi::xform_point(&inst.tlas_from_blas, c)
+}
+
+pub(crate) fn instance_bounds(blases: &[BlasRecord], inst: &InstanceRecord) -> Aabb {
+    let b = &blases[inst.blas as usize];
+    xform::aabb_from_record(b.bounds_min, b.bounds_max)
+        .transformed(&xform::from_array(&inst.tlas_from_blas))
+}
+
+/// The root TLAS's element: the one element all kept root content comes from, else none.
+fn root_element(plan: &Plan<'_>) -> u32 {
+    let scene = plan.scene;
+    let root = Scene::ROOT;
+    let base = scene.edge_base(root) as usize;
+    let mut found: Option<u32> = None;
+    let mut mixed = false;
+    let mut see = |e: u32| match found {
+        None => found = Some(e),
+        Some(f) if f != e => mixed = true,
+        _ => {}
+    };
+    for (i, e) in scene.edges(root).iter().enumerate() {
+        if plan.edge_kept(root, base + i, edge_ref!(e)) {
+            if let Some(el) = scene.root_edge_elements().get(i) {
+                see(el.0);
+            }
+        }
+    }
+    for (j, &m) in scene.meshes_of(root).iter().enumerate() {
+        if plan.mesh_kept(root, j, m) {
+            if let Some(el) = scene.root_mesh_elements().get(j) {
+                see(el.0);
+            }
+        }
+    }
+    match (found, mixed) {
+        (Some(e), false) => e,
+        _ => NONE_U32,
+    }
+}
+
+#[cfg(test)]
+#[path = "emit_tests.rs"]
+mod tests;

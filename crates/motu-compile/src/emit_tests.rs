@@ -1,0 +1,515 @@
+//! Each pass on tiny hand-made graphs.
+
+use crate::testutil::{assert_same_placements, builder, compile_ok, grid_mesh, triangle};
+use crate::{compile, flatten_compiled, flatten_source, CompileError, CompileOptions, Levels};
+use glam::{Mat4, Quat, Vec3};
+use motu_abi::{BLAS_AABBS, BLAS_TRIANGLES, NONE_U32, PI_LOD_SELECTOR, PI_TLAS};
+use motu_scene::{MeshData, PrototypeId, Scene, Transform34};
+
+fn t(x: f32, y: f32, z: f32) -> Transform34 {
+    Transform34::from_translation(Vec3::new(x, y, z))
+}
+
+fn rot(angle: f32, x: f32) -> Transform34 {
+    Transform34::from_mat4(Mat4::from_scale_rotation_translation(
+        Vec3::new(1.0, 2.0, 0.5),
+        Quat::from_rotation_y(angle),
+        Vec3::new(x, 1.0, -2.0),
+    ))
+}
+
+/// leaf (one triangle) ← tree (trunk mesh + 3 leaves) ← root (4 trees + 1 leaf).
+fn forest() -> (Scene, PrototypeId, PrototypeId) {
+    let mut b = builder();
+    let (m, main) = (b.default_material(), Scene::MAIN_ELEMENT);
+    let leaf = b.add_prototype("leaf", main).unwrap();
+    b.add_mesh(leaf, "leaf", m, main, &triangle()).unwrap();
+    let tree = b.add_prototype("tree", main).unwrap();
+    b.add_mesh(tree, "trunk", m, main, &triangle()).unwrap();
+    for i in 0..3 {
+        b.add_instance(tree, leaf, rot(i as f32, i as f32), main)
+            .unwrap();
+    }
+    for i in 0..4 {
+        b.add_instance(b.root(), tree, rot(0.3 * i as f32, 10.0 * i as f32), main)
+            .unwrap();
+    }
+    b.add_instance(b.root(), leaf, t(0.0, 0.0, 5.0), main)
+        .unwrap();
+    (b.finish().unwrap(), leaf, tree)
+}
+
+fn check_flatten(scene: &Scene, opts: &CompileOptions) -> crate::CompiledScene {
+    let c = compile_ok(scene, opts);
+    assert_same_placements(&flatten_source(scene), &flatten_compiled(&c.view(), 0));
+    c
+}
+
+fn opts(levels: Levels) -> CompileOptions {
+    CompileOptions {
+        levels,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn ml_puts_plain_geometry_in_instance_lists_and_the_rest_behind_pis() {
+    let (scene, _, _) = forest();
+    let c = check_flatten(&scene, &opts(Levels::Ml));
+    // TLAS(root) and the shared TLAS(tree); G(leaf), G(tree) and A(root).
+    assert_eq!(c.tlases.len(), 2);
+    assert_eq!(c.root_tlas, 0);
+    assert_eq!(c.blases.len(), 3);
+    let root = c.tlases[0];
+    assert_eq!(root.instance_count, 2, "G(leaf) + A(root)");
+    let tree = c.tlases[1];
+    assert_eq!(
+        tree.instance_count, 4,
+        "G(tree) + 3 × G(leaf): an instance list"
+    );
+    let aabb: Vec<_> = c.blases.iter().filter(|b| b.kind == BLAS_AABBS).collect();
+    assert_eq!(aabb.len(), 1);
+    assert_eq!(aabb[0].item_count, 4);
+    assert!(c.pis.iter().all(|p| p.kind == PI_TLAS && p.target == 1));
+    // G(leaf) is shared by the root (level 0) and TLAS(tree) (level 2): level 3.
+    let g_leaf = c.instances[root.instance_base as usize].blas as usize;
+    assert_eq!(c.blases[g_leaf].kind, BLAS_TRIANGLES);
+    assert_eq!(c.blases[g_leaf].level, 3);
+    assert_eq!(tree.level, 2);
+    assert_eq!(c.report.tlas_levels, 2);
+    assert_eq!(
+        c.report.flattened_instances,
+        scene.stats().flattened_instances
+    );
+    assert_eq!(c.meshes.len(), 2);
+}
+
+#[test]
+fn sl_flattens_everything_into_the_root() {
+    let (scene, _, _) = forest();
+    let c = check_flatten(&scene, &opts(Levels::Sl));
+    assert_eq!(c.tlases.len(), 1);
+    assert!(c.pis.is_empty());
+    // 4 trees × (trunk + 3 leaves) + 1 leaf.
+    assert_eq!(c.instances.len(), 17);
+    assert_eq!(c.report.tlas_levels, 1);
+}
+
+/// root → a → b → c → leaf, two edges per level, no identities: 4 TLAS levels in ML.
+fn chain() -> Scene {
+    let mut b = builder();
+    let (m, main) = (b.default_material(), Scene::MAIN_ELEMENT);
+    let leaf = b.add_prototype("leaf", main).unwrap();
+    b.add_mesh(leaf, "leaf", m, main, &triangle()).unwrap();
+    let mut child = leaf;
+    for name in ["c", "b", "a"] {
+        let p = b.add_prototype(name, main).unwrap();
+        b.add_instance(p, child, t(1.0, 0.0, 0.0), main).unwrap();
+        b.add_instance(p, child, rot(0.5, -3.0), main).unwrap();
+        child = p;
+    }
+    b.add_instance(b.root(), child, t(0.0, 2.0, 0.0), main)
+        .unwrap();
+    b.add_instance(b.root(), child, t(0.0, -2.0, 0.0), main)
+        .unwrap();
+    b.finish().unwrap()
+}
+
+#[test]
+fn levels_n_inlines_the_top_levels_and_keeps_the_bottom() {
+    let scene = chain();
+    let ml = check_flatten(&scene, &opts(Levels::Ml));
+    assert_eq!(ml.report.tlas_levels, 4);
+    for n in 1..=5 {
+        let c = check_flatten(&scene, &opts(Levels::N(n)));
+        assert_eq!(c.report.tlas_levels, n.min(4), "N({n})");
+    }
+    let n2 = check_flatten(&scene, &opts(Levels::N(2)));
+    // The bottom TLAS(c) is kept and shared; a and b are inlined into the root.
+    assert_eq!(n2.tlases.len(), 2);
+    assert_eq!(n2.pis.len(), 8);
+}
+
+#[test]
+fn identity_edges_to_single_parent_prototypes_are_collapsed() {
+    let (m, main) = (motu_scene::MaterialId(0), Scene::MAIN_ELEMENT);
+    let build = |shared: bool| {
+        let mut b = builder();
+        let el = b.element("isBeach").unwrap();
+        let leaf = b.add_prototype("leaf", el).unwrap();
+        b.add_mesh(leaf, "leaf", m, main, &triangle()).unwrap();
+        let tree = b.add_prototype("tree", el).unwrap();
+        b.add_instance(tree, leaf, t(1.0, 0.0, 0.0), el).unwrap();
+        b.add_instance(tree, leaf, t(2.0, 0.0, 0.0), el).unwrap();
+        let element = b.add_prototype("isBeach", el).unwrap();
+        b.add_instance(element, tree, t(0.0, 0.0, 3.0), el).unwrap();
+        b.add_instance(element, tree, t(0.0, 0.0, 6.0), el).unwrap();
+        b.add_instance(b.root(), element, Transform34::IDENTITY, el)
+            .unwrap();
+        if shared {
+            b.add_instance(b.root(), element, Transform34::IDENTITY, el)
+                .unwrap();
+        }
+        b.finish().unwrap()
+    };
+    let c = check_flatten(&build(false), &opts(Levels::Ml));
+    assert_eq!(c.report.collapsed_prototypes, 1);
+    assert_eq!(
+        c.tlases.len(),
+        2,
+        "root (with isBeach inlined) and TLAS(tree)"
+    );
+    assert_eq!(c.report.tlas_levels, 2);
+    let el = c.tlases[0].element;
+    assert_ne!(el, NONE_U32, "all root content is from one element");
+    assert!(c.instances[c.tlases[0].instance_base as usize..]
+        [..c.tlases[0].instance_count as usize]
+        .iter()
+        .all(|i| i.element == el));
+    // Shared by two edges: a PI level again (inlining would duplicate it).
+    let shared = check_flatten(&build(true), &opts(Levels::Ml));
+    assert_eq!(shared.report.collapsed_prototypes, 0);
+    assert_eq!(shared.tlases.len(), 3);
+}
+
+#[test]
+fn prunes_empty_subtrees_and_drops_degenerate_instances() {
+    let mut b = builder();
+    let (m, main) = (b.default_material(), Scene::MAIN_ELEMENT);
+    let leaf = b.add_prototype("leaf", main).unwrap();
+    b.add_mesh(leaf, "leaf", m, main, &triangle()).unwrap();
+    let empty = b.add_prototype("empty", main).unwrap();
+    let holder = b.add_prototype("holder", main).unwrap();
+    b.add_instance(holder, empty, t(1.0, 0.0, 0.0), main)
+        .unwrap();
+    b.add_instance(b.root(), holder, t(1.0, 0.0, 0.0), main)
+        .unwrap();
+    b.add_instance(b.root(), empty, t(2.0, 0.0, 0.0), main)
+        .unwrap();
+    let mut flat = t(3.0, 0.0, 0.0);
+    flat.rows[1][1] = 0.0;
+    b.add_instance(b.root(), leaf, flat, main).unwrap();
+    b.add_instance(b.root(), leaf, t(4.0, 0.0, 0.0), main)
+        .unwrap();
+    let scene = b.finish().unwrap();
+    let c = check_flatten(&scene, &opts(Levels::Ml));
+    assert_eq!(c.report.dropped_degenerate_instances, 1);
+    assert_eq!(c.tlases.len(), 1);
+    assert_eq!(c.instances.len(), 1);
+    assert_eq!(c.blases.len(), 1);
+}
+
+fn scattered(n: usize, same_place: bool) -> Scene {
+    let mut b = builder();
+    let (m, main) = (b.default_material(), Scene::MAIN_ELEMENT);
+    let leaf = b.add_prototype("leaf", main).unwrap();
+    b.add_mesh(leaf, "leaf", m, main, &triangle()).unwrap();
+    let mut state = 12345u32;
+    let mut rnd = || {
+        state = state.wrapping_mul(1664525).wrapping_add(1013904223);
+        (state >> 8) as f32 / (1u32 << 24) as f32 * 100.0
+    };
+    for _ in 0..n {
+        let at = if same_place {
+            t(1.0, 2.0, 3.0)
+        } else {
+            t(rnd(), rnd(), rnd())
+        };
+        b.add_instance(b.root(), leaf, at, main).unwrap();
+    }
+    b.finish().unwrap()
+}
+
+#[test]
+fn split_10000_instances_under_a_cap_of_1000() {
+    for same_place in [false, true] {
+        let scene = scattered(10_000, same_place);
+        let o = CompileOptions {
+            max_instances_per_tlas: 1000,
+            ..Default::default()
+        };
+        let c = check_flatten(&scene, &o);
+        assert!(c.tlases.iter().all(|t| t.instance_count <= 1000));
+        assert!(c.tlases.len() >= 11, "{}", c.tlases.len());
+        assert_eq!(flatten_compiled(&c.view(), 0).len(), 10_000);
+        assert_eq!(c.report.split_tlases, 1);
+        // Median pieces: between half the cap and the cap.
+        let leaves: Vec<_> = c.tlases[1..].iter().map(|t| t.instance_count).collect();
+        assert!(
+            leaves.iter().all(|&n| (500..=1000).contains(&n)),
+            "{leaves:?}"
+        );
+        // The pieces' instances are spatially separated when positions differ.
+        if !same_place {
+            let vol = |t: &motu_abi::TlasRecord| {
+                (0..3)
+                    .map(|k| t.bounds_max[k] - t.bounds_min[k])
+                    .product::<f32>()
+            };
+            assert!(c.tlases[1..]
+                .iter()
+                .all(|t| vol(t) < 0.5 * vol(&c.tlases[0])));
+        }
+    }
+}
+
+#[test]
+fn tiny_caps_recurse_and_split_aabb_blases() {
+    let scene = scattered(200, false);
+    let o = CompileOptions {
+        max_instances_per_tlas: 2,
+        max_primitives_per_blas: 2,
+        ..Default::default()
+    };
+    let c = check_flatten(&scene, &o);
+    assert!(c.report.tlas_levels >= 4, "{:?}", c.report);
+    let (forest, _, _) = forest();
+    check_flatten(&forest, &o);
+    let scratch = CompileOptions {
+        max_tlas_scratch_bytes: 3 * 128,
+        ..Default::default()
+    };
+    let c = check_flatten(&scattered(50, false), &scratch);
+    assert!(c.tlases.iter().all(|t| t.instance_count <= 3));
+}
+
+#[test]
+fn invalid_options_are_errors() {
+    let scene = scattered(3, false);
+    let mut sink = |_: u32, _: &MeshData| Ok(());
+    for o in [
+        CompileOptions {
+            max_instances_per_tlas: 1,
+            ..Default::default()
+        },
+        CompileOptions {
+            max_primitives_per_blas: 0,
+            ..Default::default()
+        },
+        CompileOptions {
+            levels: Levels::N(0),
+            ..Default::default()
+        },
+    ] {
+        assert!(matches!(
+            compile(&scene, &o, &mut sink),
+            Err(CompileError::InvalidOptions(_))
+        ));
+    }
+}
+
+/// Two elements under the root, each with a tree and a root mesh.
+fn two_elements() -> (Scene, motu_scene::ElementId, motu_scene::ElementId) {
+    let mut b = builder();
+    let m = b.default_material();
+    let ea = b.element("a").unwrap();
+    let eb = b.element("b").unwrap();
+    let leaf = b.add_prototype("leaf", ea).unwrap();
+    b.add_mesh(leaf, "leaf", m, ea, &triangle()).unwrap();
+    let tree = b.add_prototype("tree", ea).unwrap();
+    b.add_instance(tree, leaf, t(1.0, 0.0, 0.0), ea).unwrap();
+    b.add_instance(tree, leaf, t(0.0, 1.0, 0.0), ea).unwrap();
+    for (i, el) in [ea, eb, ea, eb].into_iter().enumerate() {
+        b.add_instance(b.root(), tree, t(5.0 * i as f32, 0.0, 0.0), el)
+            .unwrap();
+    }
+    b.add_mesh(b.root(), "ground-a", m, ea, &triangle())
+        .unwrap();
+    b.add_mesh(b.root(), "ground-b", m, eb, &triangle())
+        .unwrap();
+    (b.finish().unwrap(), ea, eb)
+}
+
+#[test]
+fn root_placements_carry_their_element() {
+    let (scene, ea, eb) = two_elements();
+    let c = check_flatten(&scene, &opts(Levels::Ml));
+    let root = c.tlases[c.root_tlas as usize];
+    assert_eq!(root.element, NONE_U32, "mixed");
+    let insts = &c.instances[root.instance_base as usize..][..root.instance_count as usize];
+    // G(root) is split per element, and A(root) too.
+    assert_eq!(insts.len(), 4);
+    for el in [ea, eb] {
+        assert_eq!(insts.iter().filter(|i| i.element == el.0).count(), 2);
+    }
+    // Below the root the parent decides.
+    let tree = c.tlases[1];
+    assert!(c.instances[tree.instance_base as usize..][..2]
+        .iter()
+        .all(|i| i.element == NONE_U32));
+    // Splitting the root keeps one element per piece.
+    let o = CompileOptions {
+        levels: Levels::Sl,
+        max_instances_per_tlas: 3,
+        ..Default::default()
+    };
+    let c = check_flatten(&scene, &o);
+    for piece in &c.tlases[1..] {
+        let range =
+            piece.instance_base as usize..(piece.instance_base + piece.instance_count) as usize;
+        assert!(c.instances[range]
+            .iter()
+            .all(|i| i.element == piece.element));
+    }
+}
+
+#[test]
+fn subset_keeps_only_the_selected_elements() {
+    let (scene, ea, _) = two_elements();
+    let o = CompileOptions {
+        subset: Some(vec![ea]),
+        ..Default::default()
+    };
+    let c = compile_ok(&scene, &o);
+    let placed = flatten_compiled(&c.view(), 0);
+    // Two trees of two leaves, and ground-a.
+    assert_eq!(placed.len(), 5);
+    assert_eq!(c.report.flattened_instances, 4);
+    assert_eq!(c.tlases[c.root_tlas as usize].element, ea.0);
+    assert!(c.meshes.iter().all(|m| m.element == ea.0));
+}
+
+#[test]
+fn node_order_is_depth_first_with_children_contiguous() {
+    // root → {x, y} (non-plain, distinct), x → z, y → z: children of root are TLAS 1, 2.
+    let mut b = builder();
+    let (m, main) = (b.default_material(), Scene::MAIN_ELEMENT);
+    let leaf = b.add_prototype("leaf", main).unwrap();
+    b.add_mesh(leaf, "leaf", m, main, &triangle()).unwrap();
+    let z = b.add_prototype("z", main).unwrap();
+    b.add_instance(z, leaf, t(1.0, 0.0, 0.0), main).unwrap();
+    let mut xy = Vec::new();
+    for name in ["x", "y"] {
+        let p = b.add_prototype(name, main).unwrap();
+        b.add_instance(p, z, t(0.0, 1.0, 0.0), main).unwrap();
+        b.add_instance(p, z, t(0.0, 2.0, 0.0), main).unwrap();
+        xy.push(p);
+    }
+    for &p in &xy {
+        b.add_instance(b.root(), p, t(0.0, 0.0, 1.0), main).unwrap();
+        b.add_instance(b.root(), p, t(0.0, 0.0, 2.0), main).unwrap();
+    }
+    let scene = b.finish().unwrap();
+    let c = check_flatten(&scene, &opts(Levels::Ml));
+    let root = c.tlases[0];
+    let a = c.blases[c.instances[root.instance_base as usize].blas as usize];
+    let targets: Vec<u32> = c.pis[a.item_base as usize..][..a.item_count as usize]
+        .iter()
+        .map(|p| p.target)
+        .collect();
+    assert_eq!(targets, vec![1, 1, 2, 2]);
+    // z is first referenced by x (TLAS 1), so it is numbered right after the root's children
+    // and emitted (instance table) before y.
+    assert_eq!(c.tlases.len(), 4);
+    assert!(c.tlases[3].instance_base < c.tlases[2].instance_base);
+}
+
+#[test]
+fn lod_chains_replace_heavy_meshes_with_selectors() {
+    let mut b = builder();
+    let (m, main) = (b.default_material(), Scene::MAIN_ELEMENT);
+    let dense = b.add_prototype("dense", main).unwrap();
+    let grid = grid_mesh(64, false);
+    b.add_mesh(dense, "grid", m, main, &grid).unwrap();
+    b.add_mesh(dense, "small", m, main, &triangle()).unwrap();
+    for i in 0..4 {
+        b.add_instance(b.root(), dense, rot(i as f32, 3.0 * i as f32), main)
+            .unwrap();
+    }
+    let scene = b.finish().unwrap();
+    let o = CompileOptions {
+        lod_levels: Some(3),
+        lod_triangle_threshold: 1000,
+        ..Default::default()
+    };
+    let mut got: Vec<(u32, usize)> = Vec::new();
+    let mut sink = |record: u32, data: &MeshData| {
+        got.push((record, data.triangle_count()));
+        Ok(())
+    };
+    let c = compile(&scene, &o, &mut sink).unwrap();
+    crate::validate(&c.view()).unwrap();
+    assert_eq!(
+        c.lod_selectors.len(),
+        1,
+        "one chain, shared by 4 placements"
+    );
+    let s = c.lod_selectors[0];
+    assert_eq!(s.level_count, 3);
+    assert_eq!(got.len(), 2);
+    assert_eq!(c.report.lod_meshes_made, 2);
+    let mut tris = vec![grid.triangle_count()];
+    for (lod, &(record, n)) in got.iter().enumerate() {
+        let r = c.meshes[record as usize];
+        assert_eq!(
+            (r.lod, r.source_mesh, r.triangle_count as usize),
+            (lod as u32 + 1, 0, n)
+        );
+        tris.push(n);
+    }
+    for w in tris.windows(2) {
+        let ratio = w[0] as f64 / w[1] as f64;
+        assert!((2.5..=6.0).contains(&ratio), "{tris:?}");
+    }
+    assert_eq!(
+        c.pis.iter().filter(|p| p.kind == PI_LOD_SELECTOR).count(),
+        4
+    );
+    // The finest level reproduces the scene; coarser levels keep the placements.
+    assert_same_placements(&flatten_source(&scene), &flatten_compiled(&c.view(), 0));
+    assert_eq!(flatten_compiled(&c.view(), 2).len(), 8);
+    // The selector's sphere encloses the mesh.
+    let half_diag = (Vec3::from_array(scene.mesh(motu_scene::MeshId(0)).bounds.max)
+        - Vec3::from_array(scene.mesh(motu_scene::MeshId(0)).bounds.min))
+    .length()
+        * 0.5;
+    assert!((s.radius - half_diag).abs() < 1e-5);
+    // Sink errors surface.
+    let mut failing = |_: u32, _: &MeshData| Err("disk full".to_string());
+    assert!(matches!(
+        compile(&scene, &o, &mut failing),
+        Err(CompileError::Sink { .. })
+    ));
+}
+
+#[test]
+fn buddha_fractal_shape_splits_into_at_least_26_tlases() {
+    // The acceptance shape: one plain prototype placed 25,250 times under the root.
+    let scene = scattered(25_250, false);
+    let o = CompileOptions {
+        max_instances_per_tlas: 1000,
+        ..Default::default()
+    };
+    let c = compile_ok(&scene, &o);
+    assert!(c.tlases.len() >= 26, "{}", c.tlases.len());
+    assert!(c.tlases.iter().all(|t| t.instance_count <= 1000));
+    assert_eq!(c.report.flattened_instances, 25_250);
+    assert_eq!(flatten_compiled(&c.view(), 0).len(), 25_250);
+}
+
+#[test]
+fn singular_compositions_are_inlined_not_dropped() {
+    // Every edge is invertible, but root∘a∘b underflows the determinant: the PI to c that
+    // `N(2)` would make cannot store an inverse, so c is inlined instead.
+    let mut b = builder();
+    let (m, main) = (b.default_material(), Scene::MAIN_ELEMENT);
+    let leaf = b.add_prototype("leaf", main).unwrap();
+    b.add_mesh(leaf, "leaf", m, main, &triangle()).unwrap();
+    let tiny = Transform34::from_mat4(Mat4::from_scale(Vec3::splat(1e-6)));
+    let mut child = leaf;
+    for name in ["c", "b", "a"] {
+        let p = b.add_prototype(name, main).unwrap();
+        b.add_instance(p, child, tiny, main).unwrap();
+        b.add_instance(p, child, tiny.mul(&t(1.0, 0.0, 0.0)), main)
+            .unwrap();
+        child = p;
+    }
+    b.add_instance(b.root(), child, tiny, main).unwrap();
+    b.add_instance(b.root(), child, t(1.0, 0.0, 0.0), main)
+        .unwrap();
+    let scene = b.finish().unwrap();
+    for levels in [Levels::Ml, Levels::N(2), Levels::Sl] {
+        let c = check_flatten(&scene, &opts(levels));
+        assert_eq!(c.report.dropped_degenerate_instances, 0);
+    }
+}

@@ -1,0 +1,97 @@
+//! Scene fixtures and the multiset comparison of flattened placements.
+
+use crate::{compile, CompileOptions, CompiledScene};
+use motu_scene::{MeshData, MeshId, Scene, SceneBuilder, Transform34};
+
+/// An `n`×`n`-quad grid in the XY plane with a gentle bump (so it is not trivially planar for
+/// the simplifier's error metric, but smooth).
+pub fn grid_mesh(n: u32, normals: bool) -> MeshData {
+    let mut positions = Vec::new();
+    for y in 0..=n {
+        for x in 0..=n {
+            let (u, v) = (x as f32 / n as f32, y as f32 / n as f32);
+            positions.push([u, v, 0.01 * (u * 3.0).sin() * (v * 2.0).cos()]);
+        }
+    }
+    let mut indices = Vec::new();
+    let w = n + 1;
+    for y in 0..n {
+        for x in 0..n {
+            let a = y * w + x;
+            indices.extend_from_slice(&[a, a + 1, a + w + 1, a, a + w + 1, a + w]);
+        }
+    }
+    let count = positions.len();
+    MeshData {
+        positions,
+        normals: normals.then(|| vec![[0.0, 0.0, 1.0]; count]),
+        uvs: None,
+        indices,
+    }
+}
+
+pub fn triangle() -> MeshData {
+    MeshData {
+        positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.5]],
+        indices: vec![0, 1, 2],
+        ..Default::default()
+    }
+}
+
+pub fn builder() -> SceneBuilder {
+    SceneBuilder::default()
+}
+
+pub fn compile_ok(scene: &Scene, opts: &CompileOptions) -> CompiledScene {
+    let mut sink = |_: u32, _: &MeshData| Ok(());
+    let c = compile(scene, opts, &mut sink).unwrap();
+    crate::validate_with(
+        &c.view(),
+        &crate::Limits {
+            max_instances_per_tlas: opts.effective_instance_cap().min(u32::MAX as u64) as u32,
+            max_primitives_per_blas: opts.max_primitives_per_blas,
+        },
+    )
+    .unwrap_or_else(|e| panic!("invalid hierarchy: {e}\n{:#?}", c.report));
+    c
+}
+
+fn close(a: &Transform34, b: &Transform34) -> bool {
+    let scale = a
+        .rows
+        .iter()
+        .flatten()
+        .chain(b.rows.iter().flatten())
+        .fold(1.0f32, |m, v| m.max(v.abs()));
+    a.rows
+        .iter()
+        .flatten()
+        .zip(b.rows.iter().flatten())
+        .all(|(x, y)| (x - y).abs() <= 2e-4 * scale)
+}
+
+/// Asserts the two placement lists are equal as multisets (transforms within a tolerance).
+pub fn assert_same_placements(source: &[(Transform34, MeshId)], compiled: &[(Transform34, u32)]) {
+    assert_eq!(source.len(), compiled.len(), "placement counts differ");
+    let key = |t: &Transform34| t.rows[0][3] + 0.37 * t.rows[1][3] + 0.11 * t.rows[2][3];
+    let mut a: Vec<(u32, f32, Transform34)> =
+        source.iter().map(|(t, m)| (m.0, key(t), *t)).collect();
+    let mut b: Vec<(u32, f32, Transform34, bool)> = compiled
+        .iter()
+        .map(|(t, m)| (*m, key(t), *t, false))
+        .collect();
+    a.sort_by(|x, y| x.0.cmp(&y.0).then(x.1.total_cmp(&y.1)));
+    b.sort_by(|x, y| x.0.cmp(&y.0).then(x.1.total_cmp(&y.1)));
+    for (mesh, k, t) in &a {
+        // Candidates: same mesh, key within tolerance; the sorted order bounds the scan.
+        let lo = b.partition_point(|x| (x.0, x.1) < (*mesh, k - 1e-2 * (1.0 + k.abs())));
+        let found = b[lo..]
+            .iter_mut()
+            .take_while(|x| x.0 == *mesh && x.1 <= k + 1e-2 * (1.0 + k.abs()))
+            .find(|x| !x.3 && close(&x.2, t));
+        match found {
+            Some(x) => x.3 = true,
+            None => panic!("source placement of mesh {mesh} at {t:?} missing from compiled"),
+        }
+    }
+}

@@ -1,0 +1,37 @@
+//! The motu scene package schema, on top of the `motu-package` container: which sections a
+//! package holds, how mesh data is laid out in chunks, and how to read a compiled hierarchy
+//! back as a zero-copy [`motu_abi::HierarchyView`].
+//!
+//! Sections (kinds are stable; FORMAT.md "Sections defined by the compiler"):
+//! the nine record tables of `motu-abi` (TLASes, instances, BLASes, geometries, PIs, LOD
+//! selectors, LOD levels, meshes, materials) as `Pod` arrays, plus one JSON section, `meta`,
+//! with everything that is not per-record (cameras, lights, elements, names, statistics).
+//!
+//! Mesh data: one **mesh blob** per compiled mesh, appended to a chunk: positions
+//! (`[f32; 3]` × vertices), then `u32` indices (3 per triangle) at the next 16-byte boundary,
+//! then optional normals likewise — GPU-upload-ready, readable in place from a raw chunk.
+
+mod blob;
+mod meta;
+mod read;
+mod sections;
+mod store;
+mod write;
+
+pub use blob::{MeshBlobLayout, MESH_BLOB_ALIGN};
+pub use meta::{ElementMeta, PackageMeta, SCHEMA};
+pub use read::{read_mesh_blob, MeshGeometry, ScenePackage};
+pub use sections::*;
+pub use store::{place_mesh_record, PackageGeometry};
+pub use write::write_hierarchy;
+
+/// Errors reading or writing the package schema.
+#[derive(Debug, thiserror::Error)]
+pub enum PackError {
+    #[error(transparent)]
+    Package(#[from] motu_package::PackageError),
+    #[error("package {path}: {reason}")]
+    Schema { path: String, reason: String },
+    #[error("mesh {mesh}: {reason}")]
+    Mesh { mesh: u32, reason: String },
+}

@@ -1,0 +1,180 @@
+//! Reading a scene package: the meta, a zero-copy hierarchy view, mesh data by chunk.
+
+use crate::blob::MeshBlobLayout;
+use crate::meta::{PackageMeta, SCHEMA};
+use crate::sections::*;
+use crate::PackError;
+use motu_abi::{HierarchyView, MeshRecord, NONE_U64};
+use motu_package::{ChunkId, Package};
+use std::path::Path;
+
+/// One compiled mesh's data, copied out of its chunk.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MeshGeometry {
+    pub positions: Vec<[f32; 3]>,
+    pub indices: Vec<u32>,
+    pub normals: Option<Vec<[f32; 3]>>,
+}
+
+/// An opened scene package.
+#[derive(Debug)]
+pub struct ScenePackage {
+    package: Package,
+    meta: PackageMeta,
+    path: String,
+}
+
+impl ScenePackage {
+    /// Maps the package, checks the container and the schema, and checks every cross-table
+    /// reference so later traversal can index without panics. O(manifest + tables).
+    pub fn open(path: &Path) -> Result<Self, PackError> {
+        let _span = tracing::info_span!("open_package", path = %path.display()).entered();
+        let package = Package::open(path)?;
+        let shown = path.display().to_string();
+        let schema_err = |reason: String| PackError::Schema {
+            path: shown.clone(),
+            reason,
+        };
+        let meta_bytes = package.section_bytes(SECTION_META)?;
+        let meta: PackageMeta = serde_json::from_slice(meta_bytes)
+            .map_err(|e| schema_err(format!("meta section is not valid: {e}")))?;
+        if meta.schema != SCHEMA {
+            return Err(schema_err(format!(
+                "schema '{}' is not supported (this build reads '{SCHEMA}')",
+                meta.schema
+            )));
+        }
+        let me = Self {
+            package,
+            meta,
+            path: shown.clone(),
+        };
+        let view = me.view()?;
+        view.check_references()
+            .map_err(|e| schema_err(e.to_string()))?;
+        for (i, m) in view.meshes.iter().enumerate() {
+            me.check_mesh(i as u32, m)?;
+        }
+        Ok(me)
+    }
+
+    pub fn package(&self) -> &Package {
+        &self.package
+    }
+
+    pub fn meta(&self) -> &PackageMeta {
+        &self.meta
+    }
+
+    pub fn path(&self) -> &str {
+        &self.path
+    }
+
+    /// The hierarchy tables, borrowed from the map.
+    pub fn view(&self) -> Result<HierarchyView<'_>, PackError> {
+        let p = &self.package;
+        Ok(HierarchyView {
+            root_tlas: self.meta.root_tlas,
+            tlases: p.section_as(SECTION_TLASES)?,
+            instances: p.section_as(SECTION_INSTANCES)?,
+            blases: p.section_as(SECTION_BLASES)?,
+            geometries: p.section_as(SECTION_GEOMETRIES)?,
+            pis: p.section_as(SECTION_PIS)?,
+            lod_selectors: p.section_as(SECTION_LOD_SELECTORS)?,
+            lod_levels: p.section_as(SECTION_LOD_LEVELS)?,
+            meshes: p.section_as(SECTION_MESHES)?,
+            materials: p.section_as(SECTION_MATERIALS)?,
+        })
+    }
+
+    fn layout(m: &MeshRecord) -> MeshBlobLayout {
+        MeshBlobLayout::new(
+            m.vertex_count as u64,
+            m.triangle_count as u64,
+            m.normals_offset != NONE_U64,
+        )
+    }
+
+    /// Mesh records must point inside their chunk with the blob layout's offsets.
+    fn check_mesh(&self, index: u32, m: &MeshRecord) -> Result<(), PackError> {
+        let err = |reason: String| PackError::Mesh {
+            mesh: index,
+            reason,
+        };
+        let info = self
+            .package
+            .chunk_info(ChunkId(m.chunk))
+            .map_err(|e| err(e.to_string()))?;
+        let l = Self::layout(m);
+        let base = m.positions_offset;
+        let ok = m.indices_offset == base + l.indices
+            && (m.normals_offset == NONE_U64 || m.normals_offset == base + l.normals)
+            && base
+                .checked_add(l.len)
+                .is_some_and(|end| end <= info.raw_len);
+        if ok {
+            Ok(())
+        } else {
+            Err(err(format!(
+                "offsets {}/{}/{} do not fit chunk {} ({} bytes)",
+                m.positions_offset, m.indices_offset, m.normals_offset, m.chunk, info.raw_len
+            )))
+        }
+    }
+
+    /// Copies a compiled mesh's data out of its chunk (decompressing it if needed).
+    pub fn mesh_geometry(&self, mesh_record: u32) -> Result<MeshGeometry, PackError> {
+        let meshes: &[MeshRecord] = self.package.section_as(SECTION_MESHES)?;
+        let m = meshes
+            .get(mesh_record as usize)
+            .ok_or_else(|| PackError::Mesh {
+                mesh: mesh_record,
+                reason: format!("only {} meshes", meshes.len()),
+            })?;
+        let chunk = self.package.chunk(ChunkId(m.chunk))?;
+        let l = Self::layout(m);
+        let start = m.positions_offset as usize;
+        let blob = chunk
+            .get(start..start + l.len as usize)
+            .ok_or_else(|| PackError::Mesh {
+                mesh: mesh_record,
+                reason: "blob outside its chunk".into(),
+            })?;
+        let data = l.decode(blob).map_err(|reason| PackError::Mesh {
+            mesh: mesh_record,
+            reason,
+        })?;
+        Ok(MeshGeometry {
+            positions: data.positions,
+            indices: data.indices,
+            normals: data.normals,
+        })
+    }
+}
+
+/// Reads the mesh blob a [`crate::PackageGeometry`] stored at `at` from a finished package
+/// (used to copy a subset's meshes into a new package).
+pub fn read_mesh_blob(
+    package: &Package,
+    at: motu_scene::MeshLocation,
+    vertex_count: u32,
+    triangle_count: u32,
+    has_normals: bool,
+) -> Result<motu_scene::MeshData, PackError> {
+    let l = MeshBlobLayout::new(vertex_count as u64, triangle_count as u64, has_normals);
+    let chunk = package.chunk(ChunkId(at.a as u32))?;
+    let start = at.b as usize;
+    let blob = chunk
+        .get(start..start + l.len as usize)
+        .ok_or_else(|| PackError::Mesh {
+            mesh: u32::MAX,
+            reason: format!(
+                "blob at chunk {} offset {} is outside its chunk",
+                at.a, at.b
+            ),
+        })?;
+    l.decode(blob).map_err(|reason| PackError::Mesh {
+        mesh: u32::MAX,
+        reason,
+    })
+}

@@ -1,0 +1,14 @@
+//! Section kinds of a motu scene package. Numbers are part of the format: never reuse one.
+
+use motu_package::SectionKind;
+
+pub const SECTION_META: SectionKind = SectionKind(1);
+pub const SECTION_TLASES: SectionKind = SectionKind(2);
+pub const SECTION_INSTANCES: SectionKind = SectionKind(3);
+pub const SECTION_BLASES: SectionKind = SectionKind(4);
+pub const SECTION_GEOMETRIES: SectionKind = SectionKind(5);
+pub const SECTION_PIS: SectionKind = SectionKind(6);
+pub const SECTION_LOD_SELECTORS: SectionKind = SectionKind(7);
+pub const SECTION_LOD_LEVELS: SectionKind = SectionKind(8);
+pub const SECTION_MESHES: SectionKind = SectionKind(9);
+pub const SECTION_MATERIALS: SectionKind = SectionKind(10);
