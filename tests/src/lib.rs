@@ -1,1 +1,79 @@
-//! Shared helpers for the workspace integration tests.
+//! Shared helpers for the workspace integration tests: they drive the real `motu` binary on
+//! real (`shared/scenes`) and generated scenes.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+/// The `motu` binary of this workspace, built once if the test run did not build it.
+pub fn motu_bin() -> PathBuf {
+    static BIN: OnceLock<PathBuf> = OnceLock::new();
+    BIN.get_or_init(|| {
+        // target/<profile>/deps/<test-exe> → target/<profile>/motu
+        let exe = std::env::current_exe().expect("test executable path");
+        let profile_dir = exe
+            .parent()
+            .and_then(Path::parent)
+            .expect("target/<profile>");
+        let bin = profile_dir.join("motu");
+        if !bin.exists() {
+            let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+            let status = Command::new(cargo)
+                .args(["build", "-p", "motu-cli"])
+                .status()
+                .expect("running cargo build -p motu-cli");
+            assert!(status.success(), "cargo build -p motu-cli failed");
+        }
+        assert!(bin.exists(), "{} missing after build", bin.display());
+        bin
+    })
+    .clone()
+}
+
+/// Runs `motu` with `args`; returns the output whatever the exit status.
+pub fn motu(args: &[&str]) -> Output {
+    Command::new(motu_bin())
+        .args(args)
+        .output()
+        .expect("spawning motu")
+}
+
+/// Runs `motu` and asserts success, returning stdout.
+pub fn motu_ok(args: &[&str]) -> String {
+    let out = motu(args);
+    assert!(
+        out.status.success(),
+        "motu {} failed:\nstdout: {}\nstderr: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).expect("utf-8 stdout")
+}
+
+/// Runs `motu ... --json` and parses the one object it prints.
+pub fn motu_json(args: &[&str]) -> serde_json::Value {
+    let out = motu_ok(args);
+    serde_json::from_str(&out)
+        .unwrap_or_else(|e| panic!("motu {} printed non-JSON ({e}): {out}", args.join(" ")))
+}
+
+/// A scene from `shared/scenes` beside the checkout; `None` (with a loud line) if absent.
+pub fn shared_scene(rel: &str) -> Option<PathBuf> {
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../shared/scenes")
+        .join(rel);
+    if p.exists() {
+        Some(p)
+    } else {
+        eprintln!(
+            "SKIPPED: {} not found (shared/scenes is not beside the checkout)",
+            p.display()
+        );
+        None
+    }
+}
+
+pub fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}

@@ -259,6 +259,17 @@ fn finish(
     source: &Path,
     o: &ImportOptions,
 ) -> anyhow::Result<WriteSummary> {
+    // A subset package describes only what it holds.
+    let mut elements = element_stats(scene);
+    let mut scene_stats = scene.stats();
+    if !o.subset.is_empty() {
+        elements.retain(|e| o.subset.contains(&e.name));
+        scene_stats.instances = elements.iter().map(|e| e.instances).sum();
+        scene_stats.flattened_instances = compiled.report.flattened_instances;
+        scene_stats.unique_triangles = elements.iter().map(|e| e.unique_triangles).sum();
+        scene_stats.instanced_triangles = elements.iter().map(|e| e.instanced_triangles).sum();
+        scene_stats.meshes = elements.iter().map(|e| e.meshes).sum();
+    }
     let meta = PackageMeta {
         schema: motu_pack::SCHEMA.into(),
         source: source.display().to_string(),
@@ -270,8 +281,8 @@ fn finish(
         lights: scene.lights().to_vec(),
         material_names: scene.materials().iter().map(|m| m.name.clone()).collect(),
         mesh_names: scene.meshes().iter().map(|m| m.name.clone()).collect(),
-        elements: element_stats(scene),
-        scene: scene.stats(),
+        elements: elements.clone(),
+        scene: scene_stats,
         compile: serde_json::to_value(&compiled.report)?,
         warnings: report.warnings.clone(),
     };
@@ -327,7 +338,6 @@ pub fn element_stats(scene: &Scene) -> Vec<ElementMeta> {
                 name: e.name.clone(),
                 ..Default::default()
             };
-            m.instances = root_edges.len() as u64 - 0;
             m.instances = scene
                 .root_edge_elements()
                 .iter()

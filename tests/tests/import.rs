@@ -1,0 +1,227 @@
+//! Import, info, verify on real and generated scenes (issues 3, 4, 11).
+
+use motu_tests::{motu, motu_json, motu_ok, s, shared_scene};
+
+#[test]
+fn buddha_fractal_counts() {
+    let Some(scene) = shared_scene("buddha-fractal/buddha-fractal.pbrt") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = dir.path().join("buddha.motu");
+    motu_ok(&["import", s(&scene), "-o", s(&pkg)]);
+    let info = motu_json(&["info", s(&pkg), "--json"]);
+    assert_eq!(info["instances"], 25_250);
+    assert_eq!(info["flattened_instances"], 25_250);
+    assert_eq!(info["unique_triangles"], 29_890 + 2);
+    assert_eq!(info["instanced_triangles"], 25_250u64 * 29_890 + 2);
+    assert_eq!(info["cameras"][0], "buddha-fractal");
+    for key in [
+        "format_version",
+        "meshes",
+        "nodes",
+        "levels",
+        "tlas_count",
+        "blas_count",
+        "max_instances_per_tlas",
+        "chunks",
+        "file_bytes",
+        "elements",
+    ] {
+        assert!(!info[key].is_null(), "info --json lacks {key}");
+    }
+    let elements = motu_json(&["info", s(&pkg), "--elements", "--json"]);
+    let geometry = elements["elements"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["name"] == "geometry")
+        .unwrap();
+    assert_eq!(geometry["instances"], 25_250);
+    motu_ok(&["verify", s(&pkg)]);
+}
+
+#[test]
+fn buddha_fractal_split_at_1000_instances() {
+    let Some(scene) = shared_scene("buddha-fractal/buddha-fractal.pbrt") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = dir.path().join("b1000.motu");
+    motu_ok(&[
+        "import",
+        s(&scene),
+        "-o",
+        s(&pkg),
+        "--max-instances",
+        "1000",
+    ]);
+    let info = motu_json(&["info", s(&pkg), "--json"]);
+    assert!(info["tlas_count"].as_u64().unwrap() >= 26, "{info}");
+    assert!(
+        info["max_instances_per_tlas"].as_u64().unwrap() <= 1000,
+        "{info}"
+    );
+    assert_eq!(info["flattened_instances"], 25_250);
+}
+
+#[test]
+fn missing_files_fail_unless_allowed() {
+    for (scene, what) in [
+        ("ecosys/ecosys.pbrt", ".ply"),
+        ("kroken-v4/camera-1.pbrt", ".ply"),
+    ] {
+        let Some(scene) = shared_scene(scene) else {
+            return;
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let pkg = dir.path().join("x.motu");
+        let out = motu(&["import", s(&scene), "-o", s(&pkg)]);
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(what) && err.contains("missing"), "{err}");
+        assert!(!pkg.exists(), "a failed import must leave no package");
+        assert!(
+            std::fs::read_dir(dir.path()).unwrap().next().is_none(),
+            "a failed import must leave no temp file"
+        );
+        motu_ok(&["import", s(&scene), "-o", s(&pkg), "--allow-missing"]);
+        motu_ok(&["verify", s(&pkg)]);
+    }
+}
+
+#[test]
+fn bmw_m6_imports() {
+    let Some(scene) = shared_scene("bmw-m6/bmw-m6.pbrt") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = dir.path().join("bmw.motu");
+    motu_ok(&["import", s(&scene), "-o", s(&pkg), "--zstd", "3"]);
+    let info = motu_json(&["info", s(&pkg), "--json"]);
+    assert!(
+        info["unique_triangles"].as_u64().unwrap() > 100_000,
+        "{info}"
+    );
+    assert!(
+        info["chunk_stored_bytes"].as_u64() < info["chunk_raw_bytes"].as_u64(),
+        "zstd: {info}"
+    );
+    motu_ok(&["verify", s(&pkg)]);
+}
+
+#[test]
+fn corruption_and_truncation_are_detected() {
+    let dir = tempfile::tempdir().unwrap();
+    let gen = dir.path().join("flake");
+    let pkg = dir.path().join("flake.motu");
+    motu_ok(&["gen", "sphereflake", "-o", s(&gen), "--depth", "2"]);
+    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    motu_ok(&["verify", s(&pkg)]);
+    let good = std::fs::read(&pkg).unwrap();
+    let bad = dir.path().join("bad.motu");
+    // Sample positions across header, chunk data, padding, sections, manifest and trailer.
+    let n = good.len();
+    let mut positions: Vec<usize> = (0..64).map(|i| i * n / 64).collect();
+    positions.extend([0, 8, n - 1, n - 24, n - 48, 4096, 4097]);
+    for &at in &positions {
+        let mut b = good.clone();
+        b[at] ^= 0x5a;
+        std::fs::write(&bad, &b).unwrap();
+        let out = motu(&["verify", s(&bad)]);
+        assert!(
+            !out.status.success(),
+            "flipping byte {at} of {n} went unnoticed"
+        );
+    }
+    for cut in [0, 10, 4096, n / 2, n - 1] {
+        std::fs::write(&bad, &good[..cut]).unwrap();
+        assert!(
+            !motu(&["verify", s(&bad)]).status.success(),
+            "truncation at {cut} went unnoticed"
+        );
+    }
+}
+
+#[test]
+fn subset_import_and_unknown_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let gen = dir.path().join("island");
+    motu_ok(&["gen", "island", "-o", s(&gen)]);
+    let scene = gen.join("scene.pbrt");
+    let full = dir.path().join("full.motu");
+    let beach = dir.path().join("beach.motu");
+    motu_ok(&["import", s(&scene), "-o", s(&full)]);
+    let out = motu(&[
+        "import",
+        s(&scene),
+        "-o",
+        s(&beach),
+        "--subset",
+        "isBeach,isNowhere",
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("isNowhere") && err.contains("isBeach") && err.contains("osOcean"),
+        "{err}"
+    );
+    motu_ok(&["import", s(&scene), "-o", s(&beach), "--subset", "isBeach"]);
+    let f = motu_json(&["info", s(&full), "--json"]);
+    let b = motu_json(&["info", s(&beach), "--json"]);
+    assert_eq!(b["elements"], serde_json::json!(["isBeach"]));
+    assert!(b["file_bytes"].as_u64() < f["file_bytes"].as_u64());
+    assert!(b["instances"].as_u64() < f["instances"].as_u64());
+    let el = motu_json(&["info", s(&full), "--elements", "--json"]);
+    let want = el["elements"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["name"] == "isBeach")
+        .unwrap()
+        .clone();
+    assert_eq!(b["instances"], want["instances"]);
+}
+
+#[test]
+fn levels_and_caps_keep_the_flattened_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let gen = dir.path().join("forest");
+    motu_ok(&[
+        "gen",
+        "forest",
+        "-o",
+        s(&gen),
+        "--levels",
+        "2",
+        "--grid",
+        "2x2",
+        "--leaves",
+        "50",
+    ]);
+    let scene = gen.join("scene.pbrt");
+    let mut flattened = Vec::new();
+    for (name, extra) in [
+        ("ml", vec![]),
+        ("sl", vec!["--levels", "sl"]),
+        ("l2", vec!["--levels", "2"]),
+        ("cap", vec!["--max-instances", "7"]),
+    ] {
+        let pkg = dir.path().join(format!("{name}.motu"));
+        let mut args = vec!["import", s(&scene), "-o", s(&pkg)];
+        args.extend(extra);
+        motu_ok(&args);
+        let info = motu_json(&["info", s(&pkg), "--json"]);
+        flattened.push(info["flattened_instances"].as_u64().unwrap());
+        if name == "sl" {
+            assert_eq!(info["levels"], 1, "{info}");
+        }
+        if name == "cap" {
+            assert!(
+                info["max_instances_per_tlas"].as_u64().unwrap() <= 7,
+                "{info}"
+            );
+        }
+    }
+    assert!(flattened.windows(2).all(|w| w[0] == w[1]), "{flattened:?}");
+}
