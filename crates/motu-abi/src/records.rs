@@ -262,3 +262,72 @@ impl HierarchyView<'_> {
         Ok(())
     }
 }
+
+/// The TLAS and instance tables of a hierarchy whose root keeps only some elements' placements
+/// (`motu render --subset`). Root-level instances carry their element; those of other elements
+/// are dropped and nothing below them is ever reached. Other tables are borrowed unchanged.
+#[derive(Clone, Debug)]
+pub struct RootSubset {
+    pub tlases: Vec<TlasRecord>,
+    pub instances: Vec<InstanceRecord>,
+    pub root_tlas: u32,
+    /// Root instances kept and dropped.
+    pub kept: u32,
+    pub dropped: u32,
+}
+
+impl RootSubset {
+    /// Appends a filtered copy of the root TLAS (a new record and a new instance range).
+    /// Instances whose element is `NONE_U32` (shared) are kept.
+    pub fn new(
+        view: &HierarchyView<'_>,
+        keep_element: impl Fn(u32) -> bool,
+    ) -> Result<Self, HierarchyError> {
+        view.check_references()?;
+        let root = view.tlases[view.root_tlas as usize];
+        let mut tlases = view.tlases.to_vec();
+        let mut instances = view.instances.to_vec();
+        let base = instances.len();
+        let range =
+            root.instance_base as usize..(root.instance_base + root.instance_count) as usize;
+        let mut dropped = 0u32;
+        for i in range {
+            let inst = view.instances[i];
+            if inst.element == NONE_U32 || keep_element(inst.element) {
+                instances.push(inst);
+            } else {
+                dropped += 1;
+            }
+        }
+        let kept = (instances.len() - base) as u32;
+        let too_many = |what: &str| HierarchyError {
+            table: "subset",
+            index: 0,
+            reason: format!("too many {what}"),
+        };
+        let new_root = TlasRecord {
+            instance_base: u32::try_from(base).map_err(|_| too_many("instances"))?,
+            instance_count: kept,
+            ..root
+        };
+        tlases.push(new_root);
+        let root_tlas = u32::try_from(tlases.len() - 1).map_err(|_| too_many("TLASes"))?;
+        Ok(Self {
+            tlases,
+            instances,
+            root_tlas,
+            kept,
+            dropped,
+        })
+    }
+
+    /// The hierarchy seen through the filtered root.
+    pub fn view<'a>(&'a self, base: &HierarchyView<'a>) -> HierarchyView<'a> {
+        HierarchyView {
+            root_tlas: self.root_tlas,
+            tlases: &self.tlases,
+            instances: &self.instances,
+            ..*base
+        }
+    }
+}

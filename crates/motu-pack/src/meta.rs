@@ -8,6 +8,8 @@ pub const SCHEMA: &str = "motu-scene/1";
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ElementMeta {
+    /// The element's id in the imported scene (what records' `element` fields hold).
+    pub id: u32,
     pub name: String,
     /// Instance edges in the element's subtree (its root-level edges plus every edge of the
     /// prototypes it reaches, each prototype once).

@@ -7,6 +7,7 @@ mod devices;
 mod gen;
 mod import;
 mod info;
+mod render;
 
 /// An honest failure for a command whose issue has not landed yet.
 fn not_implemented(what: &str, issue: u32) -> anyhow::Result<()> {
@@ -21,8 +22,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Info(a) => info::run(a),
         Command::Verify(a) => info::verify(a),
         Command::Report(_) => not_implemented("motu report", 9),
-        Command::Render(_) => not_implemented("motu render", 7),
-        Command::Compare(_) => not_implemented("motu compare", 5),
+        Command::Render(a) => render::run(a),
+        Command::Compare(a) => render::compare(a),
         Command::Bench(_) => not_implemented("motu bench", 10),
         Command::Demo(_) => not_implemented("motu demo", 2),
     }

@@ -1,0 +1,260 @@
+//! `motu render` and `motu compare`.
+
+use crate::cli::{BackendArg, CompareArgs, RenderArgs, ViewArg};
+use crate::pipeline;
+use anyhow::{bail, Context};
+use glam::Vec3;
+use motu_abi::aov::Aov;
+use motu_abi::camera::CameraParams;
+use motu_abi::lod::LodParams;
+use motu_abi::{HierarchyView, RootSubset};
+use motu_pack::ScenePackage;
+use serde_json::{json, Value};
+
+/// Mesh data for the tracers, straight from the package's chunks.
+pub struct PackageMeshes<'a>(pub &'a ScenePackage);
+
+impl motu_trace::MeshSource for PackageMeshes<'_> {
+    fn load(&self, mesh_record: u32) -> Result<motu_trace::MeshGeometry, String> {
+        let g = self
+            .0
+            .mesh_geometry(mesh_record)
+            .map_err(|e| e.to_string())?;
+        Ok(motu_trace::MeshGeometry {
+            positions: g.positions,
+            indices: g.indices,
+            normals: g.normals,
+        })
+    }
+}
+
+/// The camera to render: by name, else the scene's active camera, else a view of the bounds.
+pub fn camera_params(
+    pkg: &ScenePackage,
+    view: &HierarchyView<'_>,
+    name: Option<&str>,
+    width: Option<u32>,
+    height: Option<u32>,
+) -> anyhow::Result<CameraParams> {
+    let meta = pkg.meta();
+    let cam = match name {
+        Some(n) => Some(meta.cameras.iter().find(|c| c.name == n).with_context(|| {
+            let names: Vec<&str> = meta.cameras.iter().map(|c| c.name.as_str()).collect();
+            format!(
+                "no camera named '{n}': the scene has {}",
+                if names.is_empty() {
+                    "none".to_string()
+                } else {
+                    names.join(", ")
+                }
+            )
+        })?),
+        None => meta.cameras.first(),
+    };
+    let (eye, fwd, up, fov, mirror, cw, ch) = match cam {
+        Some(c) => (
+            Vec3::from_array(c.world_eye),
+            Vec3::from_array(c.world_forward),
+            Vec3::from_array(c.world_up),
+            c.fov_deg,
+            c.mirror_x,
+            c.width,
+            c.height,
+        ),
+        None => {
+            // No camera in the scene: look at the root's bounds from the front.
+            let r = &view.tlases[view.root_tlas as usize];
+            let (lo, hi) = (
+                Vec3::from_array(r.bounds_min),
+                Vec3::from_array(r.bounds_max),
+            );
+            let c = (lo + hi) * 0.5;
+            let radius = ((hi - lo).length() * 0.5).max(1e-3);
+            let eye = c + Vec3::new(0.3, 0.4, 1.0).normalize() * radius * 2.2;
+            (eye, (c - eye).normalize(), Vec3::Y, 50.0, false, 640, 480)
+        }
+    };
+    let aspect = cw.max(1) as f64 / ch.max(1) as f64;
+    let (w, h) = match (width, height) {
+        (Some(w), Some(h)) => (w, h),
+        (Some(w), None) => (w, ((w as f64 / aspect).round() as u32).max(1)),
+        (None, Some(h)) => (((h as f64 * aspect).round() as u32).max(1), h),
+        (None, None) => (cw, ch),
+    };
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        bail!("image size {w}×{h} is out of range (1–16384 per side)");
+    }
+    Ok(CameraParams::new(eye, fwd, up, fov, mirror, w, h))
+}
+
+fn view_name(v: ViewArg) -> &'static str {
+    match v {
+        ViewArg::Shaded => "shaded",
+        ViewArg::Heatmap => "heatmap",
+        ViewArg::Lod => "lod",
+        ViewArg::Ids => "ids",
+    }
+}
+
+/// Adds the contract's keys to a backend's stats object.
+fn contract_stats(mut stats: Value, extra: Value) -> Value {
+    if let (Some(s), Some(e)) = (stats.as_object_mut(), extra.as_object()) {
+        for (k, v) in e {
+            s.entry(k.clone()).or_insert(v.clone());
+        }
+    }
+    stats
+}
+
+pub fn run(a: RenderArgs) -> anyhow::Result<()> {
+    let pkg = pipeline::open(&a.package)?;
+    let base = pkg.view()?;
+    let names: Vec<String> = pkg.meta().elements.iter().map(|e| e.name.clone()).collect();
+    let subset = if a.subset.is_empty() {
+        None
+    } else {
+        pipeline::resolve_subset(&a.subset, &names)?;
+        // Records hold the imported scene's element ids; `meta` maps names to them.
+        let keep: Vec<u32> = pkg
+            .meta()
+            .elements
+            .iter()
+            .filter(|e| a.subset.contains(&e.name))
+            .map(|e| e.id)
+            .collect();
+        Some(
+            RootSubset::new(&base, |e| keep.contains(&e))
+                .context("filtering the root for --subset")?,
+        )
+    };
+    let view = match &subset {
+        Some(s) => s.view(&base),
+        None => base,
+    };
+    let camera = camera_params(&pkg, &view, a.camera.as_deref(), a.width, a.height)?;
+    let lod = LodParams {
+        forced_lod: a
+            .lod
+            .map(|l| l as i32)
+            .unwrap_or(motu_abi::lod::LOD_NOT_FORCED),
+        ..Default::default()
+    };
+    let backend = match a.backend {
+        Some(b) => b,
+        None => BackendArg::Cpu,
+    };
+    if a.stream {
+        bail!("--stream is not implemented yet: see issue 8");
+    }
+    if a.frames == 0 {
+        bail!("--frames must be at least 1");
+    }
+    let (aov, rgba8, stats): (Aov, Vec<u8>, Value) = match backend {
+        BackendArg::Cpu => {
+            let meshes = PackageMeshes(&pkg);
+            let tracer =
+                motu_trace::Tracer::new(view, &meshes).context("preparing the CPU tracer")?;
+            let opts = motu_trace::RenderOptions {
+                view: view_name(a.view).parse().map_err(anyhow::Error::msg)?,
+                lod,
+                ..Default::default()
+            };
+            let mut out =
+                motu_trace::render_with(&tracer, &camera, &opts).context("rendering on the CPU")?;
+            let mut times = vec![out.stats.ms_per_frame];
+            for _ in 1..a.frames {
+                let o = motu_trace::render_with(
+                    &tracer,
+                    &camera,
+                    &motu_trace::RenderOptions {
+                        prepare: false,
+                        ..opts
+                    },
+                )?;
+                times.push(o.stats.ms_per_frame);
+                out = o;
+            }
+            times.sort_by(f64::total_cmp);
+            let median = times[times.len() / 2];
+            let mut stats = serde_json::to_value(&out.stats)?;
+            stats["ms_per_frame"] = json!(median);
+            stats["frames"] = json!(a.frames);
+            (out.aov, out.rgba8, stats)
+        }
+        BackendArg::Pipeline | BackendArg::Query => {
+            bail!("the GPU backends are not wired yet: see issue 7 (use --backend cpu)")
+        }
+    };
+    let stats = contract_stats(
+        stats,
+        json!({
+            "backend": match backend { BackendArg::Cpu => "cpu", BackendArg::Pipeline => "pipeline", BackendArg::Query => "query" },
+            "view": view_name(a.view),
+            "vram_budget_bytes": a.vram_budget.unwrap_or(0),
+            "vram_peak_bytes": 0,
+            "allocation_count": 0,
+            "as_bytes": 0,
+            "passes": 1,
+            "subset": a.subset,
+            "package": a.package.display().to_string(),
+        }),
+    );
+    motu_trace::write_png(&a.output, camera.width, camera.height, &rgba8)
+        .with_context(|| format!("writing {}", a.output.display()))?;
+    if let Some(p) = &a.aov {
+        aov.save(p)
+            .with_context(|| format!("writing {}", p.display()))?;
+    }
+    if let Some(p) = &a.stats {
+        std::fs::write(p, serde_json::to_string_pretty(&stats)?)
+            .with_context(|| format!("writing {}", p.display()))?;
+    }
+    eprintln!(
+        "rendered {} ({}×{}, {}): {:.1} ms/frame, {:.2} Mrays/s, {:.2} traces/ray",
+        a.output.display(),
+        camera.width,
+        camera.height,
+        stats["backend"].as_str().unwrap_or("?"),
+        stats["ms_per_frame"].as_f64().unwrap_or(0.0),
+        stats["rays_per_second"].as_f64().unwrap_or(0.0) / 1e6,
+        stats["traces_per_ray"].as_f64().unwrap_or(0.0),
+    );
+    Ok(())
+}
+
+pub fn compare(a: CompareArgs) -> anyhow::Result<()> {
+    let x = Aov::load(&a.a).with_context(|| format!("reading {}", a.a.display()))?;
+    let y = Aov::load(&a.b).with_context(|| format!("reading {}", a.b.display()))?;
+    let r = motu_trace::compare(&x, &y, a.depth_epsilon).context("comparing")?;
+    if let Some(p) = &a.diff {
+        motu_trace::write_png(p, x.width, x.height, &r.diff_rgba8)
+            .with_context(|| format!("writing {}", p.display()))?;
+    }
+    let ok = r.fraction <= a.max_mismatch;
+    if a.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&json!({
+                "mismatched": r.mismatched, "total": r.total, "fraction": r.fraction,
+                "bbox": r.bbox, "max_mismatch": a.max_mismatch, "pass": ok,
+            }))?
+        );
+    } else {
+        let bbox = r
+            .bbox
+            .map(|b| format!(" in [{}, {}]–[{}, {}]", b[0], b[1], b[2], b[3]))
+            .unwrap_or_default();
+        println!(
+            "mismatch {:.6} ({} of {} pixels){bbox}",
+            r.fraction, r.mismatched, r.total
+        );
+    }
+    if !ok {
+        bail!(
+            "mismatch fraction {:.6} is above --max-mismatch {}",
+            r.fraction,
+            a.max_mismatch
+        );
+    }
+    Ok(())
+}
