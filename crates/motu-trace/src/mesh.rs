@@ -1,0 +1,260 @@
+//! Mesh geometry access (implemented by the caller, e.g. the package reader over mapped chunks)
+//! and the per-mesh triangle BVH.
+
+use crate::bvh::{Aabb, BuildParams, Bvh, BvhNode};
+use crate::ray::LocalRay;
+
+/// One compiled mesh's geometry in its own space.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MeshGeometry {
+    pub positions: Vec<[f32; 3]>,
+    /// Three per triangle.
+    pub indices: Vec<u32>,
+    pub normals: Option<Vec<[f32; 3]>>,
+}
+
+/// Loads the geometry of a compiled mesh, by its index in the hierarchy's mesh table.
+/// Called at most once per mesh per [`crate::Tracer`], possibly from several threads.
+pub trait MeshSource: Sync {
+    fn load(&self, mesh_record: u32) -> Result<MeshGeometry, String>;
+}
+
+/// A triangle BVH with the triangles copied in leaf order (9 floats each) so a leaf reads one
+/// contiguous run.
+#[derive(Clone, Debug)]
+pub struct MeshBvh {
+    pub nodes: Vec<BvhNode>,
+    /// Vertices of triangle slot `i`: `tri_verts[i]`.
+    pub tri_verts: Vec<[[f32; 3]; 3]>,
+    /// The triangle index within the mesh of slot `i`.
+    pub tri_prim: Vec<u32>,
+    pub bounds: Aabb,
+}
+
+/// Why a mesh could not be used.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MeshError {
+    #[error("loading failed: {0}")]
+    Load(String),
+    #[error("index count {0} is not a multiple of 3")]
+    IndexCount(usize),
+    #[error("triangle {triangle} uses vertex {index} of {vertex_count}")]
+    IndexRange {
+        triangle: usize,
+        index: u32,
+        vertex_count: usize,
+    },
+    #[error("vertex {0} is not finite")]
+    NotFinite(usize),
+    #[error("geometry bounds {actual:?} exceed the mesh record's bounds {record:?}")]
+    Bounds { actual: Aabb, record: Aabb },
+}
+
+impl MeshBvh {
+    /// Validates `g` and builds its BVH. `record_bounds`, when given, must contain the geometry
+    /// (TLAS and BLAS boxes are derived from mesh records, so a record that lies would make the
+    /// oracle miss hits the GPU finds).
+    pub fn build(
+        g: &MeshGeometry,
+        record_bounds: Option<Aabb>,
+        params: BuildParams,
+    ) -> Result<Self, MeshError> {
+        if g.indices.len() % 3 != 0 {
+            return Err(MeshError::IndexCount(g.indices.len()));
+        }
+        if let Some(i) = g
+            .positions
+            .iter()
+            .position(|p| !p.iter().all(|v| v.is_finite()))
+        {
+            return Err(MeshError::NotFinite(i));
+        }
+        let tri_count = g.indices.len() / 3;
+        let mut verts = Vec::with_capacity(tri_count);
+        let mut boxes = Vec::with_capacity(tri_count);
+        for (t, tri) in g.indices.chunks_exact(3).enumerate() {
+            let mut v = [[0.0f32; 3]; 3];
+            let mut b = Aabb::EMPTY;
+            for k in 0..3 {
+                let p = *g
+                    .positions
+                    .get(tri[k] as usize)
+                    .ok_or(MeshError::IndexRange {
+                        triangle: t,
+                        index: tri[k],
+                        vertex_count: g.positions.len(),
+                    })?;
+                v[k] = p;
+                b.grow_point(p);
+            }
+            verts.push(v);
+            boxes.push(b);
+        }
+        let bvh = Bvh::build(&boxes, params);
+        let bounds = bvh.bounds();
+        if let Some(record) = record_bounds {
+            let mag = (0..3)
+                .map(|a| record.min[a].abs().max(record.max[a].abs()))
+                .fold(0.0f32, f32::max);
+            if !bounds.is_empty() && !record.contains(&bounds, 1e-5 * mag.max(1.0)) {
+                return Err(MeshError::Bounds {
+                    actual: bounds,
+                    record,
+                });
+            }
+        }
+        Ok(Self {
+            tri_verts: bvh.order.iter().map(|&i| verts[i as usize]).collect(),
+            tri_prim: bvh.order,
+            nodes: bvh.nodes,
+            bounds,
+        })
+    }
+
+    /// Closest hit in `(t_min, *t_max)`: shrinks `t_max` and returns the triangle slot.
+    /// With `any_hit`, returns at the first hit found. `stack` is scratch.
+    #[inline]
+    pub fn intersect(
+        &self,
+        ray: &LocalRay,
+        t_min: f32,
+        t_max: &mut f32,
+        any_hit: bool,
+        stack: &mut Vec<u32>,
+    ) -> Option<u32> {
+        let root = self.nodes.first()?;
+        ray.hit_box(&root.min, &root.max, t_min, *t_max)?;
+        let mut found = None;
+        stack.clear();
+        let mut node = 0u32;
+        loop {
+            let n = self.nodes[node as usize];
+            if n.is_leaf() {
+                for slot in n.first..n.first + n.count {
+                    let [v0, v1, v2] = self.tri_verts[slot as usize];
+                    if let Some(t) = ray.hit_triangle(v0, v1, v2, t_min, *t_max) {
+                        *t_max = t;
+                        found = Some(slot);
+                        if any_hit {
+                            return found;
+                        }
+                    }
+                }
+            } else {
+                let (a, b) = (n.first, n.first + 1);
+                let na = &self.nodes[a as usize];
+                let nb = &self.nodes[b as usize];
+                let ha = ray.hit_box(&na.min, &na.max, t_min, *t_max);
+                let hb = ray.hit_box(&nb.min, &nb.max, t_min, *t_max);
+                match (ha, hb) {
+                    (Some(ta), Some(tb)) => {
+                        let (near, far) = if ta <= tb { (a, b) } else { (b, a) };
+                        stack.push(far);
+                        node = near;
+                        continue;
+                    }
+                    (Some(_), None) => {
+                        node = a;
+                        continue;
+                    }
+                    (None, Some(_)) => {
+                        node = b;
+                        continue;
+                    }
+                    (None, None) => {}
+                }
+            }
+            // Pop until a node still in reach (t_max may have shrunk since the push).
+            loop {
+                let Some(next) = stack.pop() else {
+                    return found;
+                };
+                let nn = &self.nodes[next as usize];
+                if ray.hit_box(&nn.min, &nn.max, t_min, *t_max).is_some() {
+                    node = next;
+                    break;
+                }
+            }
+        }
+    }
+
+    /// Geometric normal (unnormalised, mesh space, winding `v0 → v1 → v2`) of a slot.
+    pub fn geometric_normal(&self, slot: u32) -> [f32; 3] {
+        let [v0, v1, v2] = self.tri_verts[slot as usize];
+        crate::ray::cross(crate::ray::sub(v1, v0), crate::ray::sub(v2, v0))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid(n: usize) -> MeshGeometry {
+        let mut positions = Vec::new();
+        for y in 0..=n {
+            for x in 0..=n {
+                positions.push([x as f32, y as f32, ((x * y) % 3) as f32 * 0.1]);
+            }
+        }
+        let mut indices = Vec::new();
+        let w = n as u32 + 1;
+        for y in 0..n as u32 {
+            for x in 0..n as u32 {
+                let i = y * w + x;
+                indices.extend([i, i + 1, i + w, i + 1, i + w + 1, i + w]);
+            }
+        }
+        MeshGeometry {
+            positions,
+            indices,
+            normals: None,
+        }
+    }
+
+    #[test]
+    fn bvh_matches_linear_scan() {
+        let g = grid(40);
+        let bvh = MeshBvh::build(&g, None, BuildParams::default()).unwrap();
+        let mut stack = Vec::new();
+        for i in 0..500 {
+            let f = i as f32;
+            let org = [(f * 0.37).fract() * 40.0, (f * 0.61).fract() * 40.0, 5.0];
+            let dir = [(f * 0.13).fract() - 0.5, (f * 0.29).fract() - 0.5, -1.0];
+            let ray = LocalRay::new(org, dir);
+            let mut t = f32::INFINITY;
+            let hit = bvh.intersect(&ray, 0.0, &mut t, false, &mut stack);
+            let mut best = (f32::INFINITY, None);
+            for (slot, v) in bvh.tri_verts.iter().enumerate() {
+                if let Some(tt) = ray.hit_triangle(v[0], v[1], v[2], 0.0, best.0) {
+                    best = (tt, Some(slot as u32));
+                }
+            }
+            assert_eq!(t == f32::INFINITY, best.1.is_none());
+            if hit.is_some() {
+                assert_eq!(t, best.0);
+            }
+        }
+    }
+
+    #[test]
+    fn rejects_bad_geometry() {
+        let mut g = grid(1);
+        g.indices.push(0);
+        assert_eq!(
+            MeshBvh::build(&g, None, BuildParams::default()).unwrap_err(),
+            MeshError::IndexCount(7)
+        );
+        let mut g = grid(1);
+        g.indices[0] = 99;
+        assert!(matches!(
+            MeshBvh::build(&g, None, BuildParams::default()),
+            Err(MeshError::IndexRange { index: 99, .. })
+        ));
+        let g = grid(2);
+        let small = Aabb::new([0.0; 3], [1.0; 3]);
+        assert!(matches!(
+            MeshBvh::build(&g, Some(small), BuildParams::default()),
+            Err(MeshError::Bounds { .. })
+        ));
+    }
+}

@@ -1,0 +1,477 @@
+//! The CPU renderer: one primary ray per pixel centre (`CameraParams::primary_dir`, offset 0.5),
+//! the AOV hit record, and the PNG views shared with the GPU backends.
+
+use std::path::Path;
+use std::time::Instant;
+
+use motu_abi::aov::{Aov, AovRecord};
+use motu_abi::camera::CameraParams;
+use motu_abi::lod::{LodParams, RAY_PRIMARY, RAY_SHADOW};
+use motu_abi::HierarchyView;
+use rayon::prelude::*;
+
+use crate::mesh::MeshSource;
+use crate::ray::{dot, normalize};
+use crate::traverse::{Hit, RayQuery, Scratch, Tracer};
+use crate::TraceError;
+
+/// What the PNG shows.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum View {
+    /// Base colour × (ambient + sun N·L × shadow), one shadow ray per hit.
+    #[default]
+    Shaded,
+    /// A hashed colour per (mesh, primitive).
+    Ids,
+    /// A colour per LOD level.
+    Lod,
+    /// Traces per pixel, blue (0) to red (the frame's maximum, reported in stats).
+    Heatmap,
+}
+
+impl std::str::FromStr for View {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "shaded" => Ok(Self::Shaded),
+            "ids" => Ok(Self::Ids),
+            "lod" => Ok(Self::Lod),
+            "heatmap" => Ok(Self::Heatmap),
+            _ => Err(format!(
+                "unknown view {s:?} (expected shaded, ids, lod or heatmap)"
+            )),
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct RenderOptions {
+    pub view: View,
+    /// World direction towards the sun (normalised here).
+    pub sun_dir_world: [f32; 3],
+    pub sun_intensity: f32,
+    pub ambient: f32,
+    /// Trace shadow rays in the shaded view.
+    pub shadows: bool,
+    /// LOD rule for primary rays (and shadow rays, with `RAY_SHADOW` bias).
+    pub lod: LodParams,
+    /// Force shadow rays to the primary hit's LOD (prevents LOD self-shadowing).
+    pub shadow_lod_from_primary: bool,
+    /// Build every reachable acceleration structure in parallel before tracing.
+    pub prepare: bool,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        Self {
+            view: View::Shaded,
+            sun_dir_world: [0.4, 0.8, 0.45],
+            sun_intensity: 0.8,
+            ambient: 0.25,
+            shadows: true,
+            lod: LodParams::default(),
+            shadow_lod_from_primary: true,
+            prepare: true,
+        }
+    }
+}
+
+/// Key names follow the CLI's `--stats` contract where they overlap.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct RenderStats {
+    pub width: u32,
+    pub height: u32,
+    pub backend: &'static str,
+    pub view: View,
+    /// Tracing only (after `prepare`).
+    pub ms_per_frame: f64,
+    pub prepare_ms: f64,
+    /// Primary plus shadow rays.
+    pub rays: u64,
+    pub primary_rays: u64,
+    pub shadow_rays: u64,
+    pub hits: u64,
+    /// TLAS walks in total.
+    pub traces: u64,
+    pub traces_per_ray: f64,
+    pub rays_per_second: f64,
+    /// Always 0: the CPU stack grows as needed (see `max_stack_depth`).
+    pub stack_overflows: u64,
+    pub max_stack_depth: u32,
+    /// The heatmap's red end: the most traces spent on one pixel.
+    pub heatmap_max_traces: u32,
+    pub meshes_built: usize,
+    pub threads: usize,
+}
+
+#[derive(Clone, Debug)]
+pub struct RenderOutput {
+    pub aov: Aov,
+    /// `width × height × 4`, row 0 at the top.
+    pub rgba8: Vec<u8>,
+    pub stats: RenderStats,
+}
+
+/// Renders `view` as seen by `camera`.
+pub fn render(
+    view: HierarchyView<'_>,
+    source: &dyn MeshSource,
+    camera: &CameraParams,
+    opts: &RenderOptions,
+) -> Result<RenderOutput, TraceError> {
+    let tracer = Tracer::new(view, source)?;
+    render_with(&tracer, camera, opts)
+}
+
+#[derive(Default)]
+struct RowStats {
+    primary: u64,
+    shadow: u64,
+    hits: u64,
+    traces: u64,
+    max_stack: u32,
+}
+
+impl RowStats {
+    fn merge(mut self, o: Self) -> Self {
+        self.primary += o.primary;
+        self.shadow += o.shadow;
+        self.hits += o.hits;
+        self.traces += o.traces;
+        self.max_stack = self.max_stack.max(o.max_stack);
+        self
+    }
+}
+
+/// Renders with an existing tracer (its built structures are reused across frames).
+pub fn render_with(
+    tracer: &Tracer<'_>,
+    camera: &CameraParams,
+    opts: &RenderOptions,
+) -> Result<RenderOutput, TraceError> {
+    let (w, h) = (camera.width, camera.height);
+    if w == 0 || h == 0 || (w as u64) * (h as u64) > (1 << 28) {
+        return Err(TraceError::Camera(format!("image size {w}×{h} is invalid")));
+    }
+    let _span = tracing::info_span!("render", backend = "cpu", width = w, height = h).entered();
+    let t0 = Instant::now();
+    if opts.prepare {
+        tracer.prepare()?;
+    }
+    let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
+
+    let t1 = Instant::now();
+    let mut aov = Aov::new(w, h);
+    let mut rgba8 = vec![0u8; w as usize * h as usize * 4];
+    let sun = normalize(opts.sun_dir_world);
+    let materials = tracer.view().materials;
+    let meshes = tracer.view().meshes;
+    let totals = aov
+        .records
+        .par_chunks_mut(w as usize)
+        .zip(rgba8.par_chunks_mut(w as usize * 4))
+        .enumerate()
+        .map_init(Scratch::default, |scratch, (y, (rec_row, px_row))| {
+            let mut st = RowStats::default();
+            for x in 0..w {
+                let dir = camera.primary_dir(x, y as u32, 0.5, 0.5).to_array();
+                let q = RayQuery {
+                    kind: RAY_PRIMARY,
+                    lod: opts.lod,
+                    pixels_per_unit_at_1: camera.pixels_per_unit_at_1,
+                    lod_u: pixel_dither(x, y as u32),
+                    ..RayQuery::default()
+                };
+                let hit = tracer.trace(camera.world_eye, dir, &q, scratch);
+                st.primary += 1;
+                st.traces += hit.traces as u64;
+                st.max_stack = st.max_stack.max(hit.max_stack);
+                let mut traces = hit.traces;
+                let colour = if !hit.is_hit() {
+                    sky(dir)
+                } else {
+                    st.hits += 1;
+                    match opts.view {
+                        View::Shaded => {
+                            let rec = &meshes[hit.mesh_record as usize];
+                            let base = materials
+                                .get(rec.material as usize)
+                                .map_or([0.7; 3], |m| m.base_color);
+                            let (light, shadow) =
+                                shade(tracer, camera, opts, sun, &hit, dir, scratch);
+                            if let Some(s) = shadow {
+                                st.shadow += 1;
+                                st.traces += s.traces as u64;
+                                st.max_stack = st.max_stack.max(s.max_stack);
+                                traces += s.traces;
+                            }
+                            base.map(|c| c * light)
+                        }
+                        View::Ids => id_colour(hit.source_mesh, hit.primitive),
+                        View::Lod => lod_colour(hit.lod),
+                        // Filled in once the frame's maximum is known.
+                        View::Heatmap => [0.0; 3],
+                    }
+                };
+                rec_row[x as usize] = if hit.is_hit() {
+                    AovRecord {
+                        mesh: hit.source_mesh,
+                        primitive: hit.primitive,
+                        t: hit.t,
+                        lod: hit.lod.min(255) as u8,
+                        _pad: 0,
+                        traces: traces.min(u16::MAX as u32) as u16,
+                    }
+                } else {
+                    AovRecord {
+                        traces: traces.min(u16::MAX as u32) as u16,
+                        ..AovRecord::MISS
+                    }
+                };
+                let px = &mut px_row[x as usize * 4..x as usize * 4 + 4];
+                px[..3].copy_from_slice(&encode_srgb(colour));
+                px[3] = 255;
+            }
+            st
+        })
+        .reduce(RowStats::default, RowStats::merge);
+    let heatmap_max = aov
+        .records
+        .iter()
+        .map(|r| r.traces as u32)
+        .max()
+        .unwrap_or(0);
+    if opts.view == View::Heatmap {
+        for (r, px) in aov.records.iter().zip(rgba8.chunks_exact_mut(4)) {
+            let c = heat_colour(r.traces as f32 / heatmap_max.max(1) as f32);
+            px[..3].copy_from_slice(&c.map(|v| (v * 255.0 + 0.5) as u8));
+        }
+    }
+    let secs = t1.elapsed().as_secs_f64();
+    tracer.first_error()?;
+    let rays = totals.primary + totals.shadow;
+    let stats = RenderStats {
+        width: w,
+        height: h,
+        backend: "cpu",
+        view: opts.view,
+        ms_per_frame: secs * 1e3,
+        prepare_ms,
+        rays,
+        primary_rays: totals.primary,
+        shadow_rays: totals.shadow,
+        hits: totals.hits,
+        traces: totals.traces,
+        traces_per_ray: totals.traces as f64 / rays.max(1) as f64,
+        rays_per_second: rays as f64 / secs.max(1e-9),
+        stack_overflows: 0,
+        max_stack_depth: totals.max_stack,
+        heatmap_max_traces: heatmap_max,
+        meshes_built: tracer.meshes_built(),
+        threads: rayon::current_num_threads(),
+    };
+    tracing::info!(
+        rays = stats.rays,
+        ms = stats.ms_per_frame,
+        rays_per_second = stats.rays_per_second,
+        "cpu render done"
+    );
+    Ok(RenderOutput { aov, rgba8, stats })
+}
+
+/// Returns the light factor and the shadow ray's hit (when one was traced).
+fn shade(
+    tracer: &Tracer<'_>,
+    camera: &CameraParams,
+    opts: &RenderOptions,
+    sun: [f32; 3],
+    hit: &Hit,
+    dir: [f32; 3],
+    scratch: &mut Scratch,
+) -> (f32, Option<Hit>) {
+    let mut n = hit.world_normal();
+    if dot(n, dir) > 0.0 {
+        n = n.map(|v| -v);
+    }
+    let ndl = dot(n, sun);
+    if ndl <= 0.0 {
+        return (opts.ambient, None);
+    }
+    if !opts.shadows {
+        return (opts.ambient + opts.sun_intensity * ndl, None);
+    }
+    let eye = camera.world_eye;
+    let p = [
+        eye[0] + dir[0] * hit.t,
+        eye[1] + dir[1] * hit.t,
+        eye[2] + dir[2] * hit.t,
+    ];
+    let q = RayQuery {
+        kind: RAY_SHADOW,
+        any_hit: true,
+        lod: LodParams {
+            forced_lod: if opts.shadow_lod_from_primary {
+                hit.lod as i32
+            } else {
+                opts.lod.forced_lod
+            },
+            ..opts.lod
+        },
+        pixels_per_unit_at_1: camera.pixels_per_unit_at_1,
+        ..RayQuery::default()
+    };
+    let s = tracer.trace(shadow_offset(p, n), sun, &q, scratch);
+    let visible = if s.is_hit() { 0.0 } else { 1.0 };
+    (opts.ambient + opts.sun_intensity * ndl * visible, Some(s))
+}
+
+/// Moves a hit point off its surface along the face-forwarded normal `n` (Wächter & Binder,
+/// "A Fast and Robust Method for Avoiding Self-Intersection", Ray Tracing Gems ch. 6): an
+/// offset of 256 ULPs per unit of normal, a small absolute one near the origin. The GPU
+/// mirrors this, so shadow rays start at the same point.
+pub fn shadow_offset(p: [f32; 3], n: [f32; 3]) -> [f32; 3] {
+    const ORIGIN: f32 = 1.0 / 32.0;
+    const FLOAT_SCALE: f32 = 1.0 / 65536.0;
+    const INT_SCALE: f32 = 256.0;
+    std::array::from_fn(|a| {
+        if p[a].abs() < ORIGIN {
+            p[a] + FLOAT_SCALE * n[a]
+        } else {
+            let of = (INT_SCALE * n[a]) as i32;
+            let bits = p[a].to_bits() as i32;
+            f32::from_bits((if p[a] < 0.0 { bits - of } else { bits + of }) as u32)
+        }
+    })
+}
+
+/// A per-pixel uniform number in [0, 1) for stochastic LOD (a PCG hash of the pixel).
+pub fn pixel_dither(x: u32, y: u32) -> f32 {
+    (hash_u32(x.wrapping_mul(0x8da6_b343) ^ y.wrapping_mul(0xd816_3841)) >> 8) as f32
+        / (1u32 << 24) as f32
+}
+
+/// PCG-style integer hash (also used for id colours).
+pub fn hash_u32(v: u32) -> u32 {
+    let state = v.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
+    let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277_803_737);
+    (word >> 22) ^ word
+}
+
+/// A stable colour per (mesh, primitive), linear RGB.
+pub fn id_colour(mesh: u32, primitive: u32) -> [f32; 3] {
+    let h = hash_u32(hash_u32(mesh) ^ primitive);
+    [
+        0.15 + 0.85 * (h & 0xff) as f32 / 255.0,
+        0.15 + 0.85 * ((h >> 8) & 0xff) as f32 / 255.0,
+        0.15 + 0.85 * ((h >> 16) & 0xff) as f32 / 255.0,
+    ]
+}
+
+/// A colour per LOD level (linear RGB), repeating after 8.
+pub fn lod_colour(level: u32) -> [f32; 3] {
+    const PALETTE: [[f32; 3]; 8] = [
+        [0.1, 0.8, 0.1],
+        [0.1, 0.4, 0.9],
+        [0.9, 0.8, 0.1],
+        [0.9, 0.4, 0.1],
+        [0.8, 0.1, 0.1],
+        [0.7, 0.1, 0.8],
+        [0.1, 0.8, 0.8],
+        [0.6, 0.6, 0.6],
+    ];
+    PALETTE[level as usize % PALETTE.len()]
+}
+
+/// Blue → cyan → green → yellow → red for `v` in [0, 1] (display values, not linear).
+pub fn heat_colour(v: f32) -> [f32; 3] {
+    let v = v.clamp(0.0, 1.0) * 4.0;
+    let f = v.fract();
+    match v as u32 {
+        0 => [0.0, f, 1.0],
+        1 => [0.0, 1.0, 1.0 - f],
+        2 => [f, 1.0, 0.0],
+        3 => [1.0, 1.0 - f, 0.0],
+        _ => [1.0, 0.0, 0.0],
+    }
+}
+
+fn sky(dir: [f32; 3]) -> [f32; 3] {
+    let t = 0.5 * (dir[1].clamp(-1.0, 1.0) + 1.0);
+    [0.55 + 0.25 * t, 0.65 + 0.2 * t, 0.8 + 0.15 * t].map(|c| c * 0.8)
+}
+
+fn encode_srgb(c: [f32; 3]) -> [u8; 3] {
+    c.map(|v| {
+        let v = v.clamp(0.0, 1.0);
+        let s = if v <= 0.003_130_8 {
+            12.92 * v
+        } else {
+            1.055 * v.powf(1.0 / 2.4) - 0.055
+        };
+        (s * 255.0 + 0.5) as u8
+    })
+}
+
+/// Writes an 8-bit RGBA PNG.
+pub fn write_png(path: &Path, width: u32, height: u32, rgba8: &[u8]) -> Result<(), TraceError> {
+    let err = |reason: String| TraceError::Png {
+        path: path.display().to_string(),
+        reason,
+    };
+    if rgba8.len() != width as usize * height as usize * 4 {
+        return Err(err(format!(
+            "{} bytes for {width}×{height} RGBA",
+            rgba8.len()
+        )));
+    }
+    let file = std::fs::File::create(path).map_err(|e| err(e.to_string()))?;
+    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), width, height);
+    enc.set_color(png::ColorType::Rgba);
+    enc.set_depth(png::BitDepth::Eight);
+    let mut w = enc.write_header().map_err(|e| err(e.to_string()))?;
+    w.write_image_data(rgba8).map_err(|e| err(e.to_string()))?;
+    w.finish().map_err(|e| err(e.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shadow_offset_moves_along_the_normal() {
+        for p in [[0.0, 0.0, 0.0], [100.0, -2000.0, 3.5], [1e-3, 5.0, -0.01]] {
+            let n = [0.0, 1.0, 0.0];
+            let o = shadow_offset(p, n);
+            assert!(o[1] > p[1], "{p:?} -> {o:?}");
+            assert_eq!(o[0], p[0]);
+        }
+        let n = normalize([1.0, -1.0, 0.5]);
+        let o = shadow_offset([10.0, 10.0, 10.0], n);
+        assert!(o[0] > 10.0 && o[1] < 10.0 && o[2] > 10.0);
+    }
+
+    #[test]
+    fn colours_and_views() {
+        assert_ne!(id_colour(1, 2), id_colour(1, 3));
+        assert_eq!(id_colour(4, 5), id_colour(4, 5));
+        assert_eq!(heat_colour(0.0), [0.0, 0.0, 1.0]);
+        assert_eq!(heat_colour(1.0), [1.0, 0.0, 0.0]);
+        assert_ne!(lod_colour(0), lod_colour(1));
+        assert_eq!("heatmap".parse::<View>(), Ok(View::Heatmap));
+        assert!("x".parse::<View>().is_err());
+        let d: Vec<f32> = (0..100).map(|i| pixel_dither(i, 7)).collect();
+        assert!(d.iter().all(|&u| (0.0..1.0).contains(&u)));
+    }
+
+    #[test]
+    fn png_round_trip_size_check() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.png");
+        write_png(&path, 2, 1, &[255, 0, 0, 255, 0, 255, 0, 255]).unwrap();
+        let dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&path).unwrap()));
+        let reader = dec.read_info().unwrap();
+        assert_eq!((reader.info().width, reader.info().height), (2, 1));
+        assert!(write_png(&path, 3, 3, &[0; 4]).is_err());
+    }
+}
