@@ -3,6 +3,7 @@
 use crate::cli::{Cli, Command};
 use anyhow::bail;
 
+mod demo;
 mod devices;
 mod gen;
 mod import;
@@ -25,6 +26,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Render(a) => render::run(a),
         Command::Compare(a) => render::compare(a),
         Command::Bench(_) => not_implemented("motu bench", 10),
-        Command::Demo(_) => not_implemented("motu demo", 2),
+        Command::Demo(a) => demo::run(a),
     }
 }

@@ -87,6 +87,17 @@ pub fn camera_params(
     Ok(CameraParams::new(eye, fwd, up, fov, mirror, w, h))
 }
 
+/// `query` where a device has ray queries (usually fastest on RTX), else `pipeline`, else the CPU.
+pub fn best_backend(devices: &[motu_gpu::DeviceReport]) -> BackendArg {
+    if devices.iter().any(|d| d.ray_query) {
+        BackendArg::Query
+    } else if devices.iter().any(|d| d.ray_pipeline) {
+        BackendArg::Pipeline
+    } else {
+        BackendArg::Cpu
+    }
+}
+
 fn view_name(v: ViewArg) -> &'static str {
     match v {
         ViewArg::Shaded => "shaded",

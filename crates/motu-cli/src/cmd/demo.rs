@@ -1,0 +1,140 @@
+//! `motu demo`: the README's main job on the embedded default scene — generate, import, render
+//! with the best available backend — printing where time and memory went.
+
+use crate::cli::{BackendArg, DemoArgs, GenArgs, GenKindArg, RenderArgs, ViewArg};
+use crate::pipeline::{self, ImportOptions};
+use crate::size::format_size;
+use anyhow::Context;
+use std::time::Instant;
+
+/// Peak resident memory of this process so far (Linux `VmHWM`), if known.
+pub fn peak_rss_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
+fn step(name: &str, t: Instant) {
+    let rss = peak_rss_bytes()
+        .map(format_size)
+        .unwrap_or_else(|| "?".into());
+    println!(
+        "  {name:<34} {:>9.1} ms   peak RSS {rss}",
+        t.elapsed().as_secs_f64() * 1e3
+    );
+}
+
+pub fn run(a: DemoArgs) -> anyhow::Result<()> {
+    std::fs::create_dir_all(&a.work_dir)
+        .with_context(|| format!("creating {}", a.work_dir.display()))?;
+    let scene_dir = a.work_dir.join("forest");
+    let pkg = a.work_dir.join("forest.motu");
+    println!(
+        "motu demo: a nested-instancing forest (trees of instanced leaves, instanced in groups)"
+    );
+
+    let t = Instant::now();
+    let gen = GenArgs {
+        kind: GenKindArg::Forest,
+        output: scene_dir.clone(),
+        levels: None,
+        grid: None,
+        leaves: None,
+        trunk_segments: None,
+        depth: None,
+        sphere_segments: None,
+        scale: None,
+        elements: None,
+        triangles: None,
+        spacing: None,
+        flat: false,
+        seed: None,
+        width: Some(640),
+        height: Some(360),
+        threads: None,
+        json: false,
+    };
+    let kind = super::gen::options(&gen)?;
+    let summary =
+        motu_gen::generate(&kind, &scene_dir, &mut |_| {}).context("generating the demo scene")?;
+    step(
+        &format!("gen forest ({})", format_size(summary.bytes_written)),
+        t,
+    );
+
+    let t = Instant::now();
+    let opts = ImportOptions {
+        levels: motu_compile::Levels::Ml,
+        levels_text: "ml".into(),
+        max_instances: (1 << 24) - 1,
+        lod_levels: None,
+        zstd_level: None,
+        allow_missing: false,
+        pbrt_version: None,
+        subset: Vec::new(),
+        chunk_bytes: 64 << 20,
+        parallel: true,
+    };
+    let s = pipeline::import(&summary.scene_path, &pkg, &opts)?;
+    step(
+        &format!("import → {} ({})", pkg.display(), format_size(s.file_bytes)),
+        t,
+    );
+    println!(
+        "    {} instance edges → {} flattened instances ({} instanced triangles) in {} TLAS + {} BLAS",
+        s.instances, s.flattened_instances, summary.instanced_triangles, s.tlas_count, s.blas_count
+    );
+
+    let backend = match motu_gpu::list_devices() {
+        Ok(devices) => {
+            for d in &devices {
+                println!(
+                    "    device {}: {} (ray pipeline: {}, ray query: {})",
+                    d.index, d.name, d.ray_pipeline, d.ray_query
+                );
+            }
+            crate::cmd::render::best_backend(&devices)
+        }
+        Err(e) => {
+            println!("    no Vulkan device ({e}); rendering on the CPU");
+            BackendArg::Cpu
+        }
+    };
+
+    let t = Instant::now();
+    let stats_path = a.work_dir.join("demo-stats.json");
+    let args = |backend| RenderArgs {
+        package: pkg.clone(),
+        output: a.output.clone(),
+        camera: None,
+        width: Some(320),
+        height: None,
+        backend: Some(backend),
+        view: ViewArg::Shaded,
+        aov: Some(a.work_dir.join("demo.aov")),
+        vram_budget: None,
+        max_allocations: None,
+        stream: false,
+        frames: 1,
+        stats: Some(stats_path.clone()),
+        subset: Vec::new(),
+        lod: None,
+        stack_size: 16,
+        device: None,
+    };
+    if let Err(e) = super::render::run(args(backend)) {
+        if backend == BackendArg::Cpu {
+            return Err(e);
+        }
+        println!("    the GPU backend failed ({e:#}); rendering on the CPU instead");
+        super::render::run(args(BackendArg::Cpu))?;
+    }
+    step(&format!("render {}", a.output.display()), t);
+    println!(
+        "wrote {} (statistics in {})",
+        a.output.display(),
+        stats_path.display()
+    );
+    Ok(())
+}
