@@ -46,6 +46,8 @@ pub struct ImportSummary {
     pub curves_not_converted: u64,
     pub unsupported_shapes: u64,
     pub skipped_shapes: u64,
+    /// Peak resident memory of the importing process (Linux `VmHWM`), 0 if unknown.
+    pub peak_rss_bytes: u64,
 }
 
 fn writer_options(o: &ImportOptions) -> WriterOptions {
@@ -248,6 +250,7 @@ fn summary(
         curves_not_converted: report.curves,
         unsupported_shapes: report.unsupported_shapes,
         skipped_shapes: report.skipped_shapes,
+        peak_rss_bytes: crate::cmd::demo::peak_rss_bytes().unwrap_or(0),
     }
 }
 

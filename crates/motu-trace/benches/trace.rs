@@ -27,7 +27,12 @@ fn grid_scene(count: usize, segments: u32, two_level: bool) -> OwnedHierarchy {
     let root = if two_level {
         let row = b.tlas(
             &(0..side)
-                .map(|x| (srt(0.4, x as f32, [x as f32 - side as f32 / 2.0, 0.4, 0.0]), blas))
+                .map(|x| {
+                    (
+                        srt(0.4, x as f32, [x as f32 - side as f32 / 2.0, 0.4, 0.0]),
+                        blas,
+                    )
+                })
                 .collect::<Vec<_>>(),
         );
         let pis: Vec<_> = (0..count.div_ceil(side))

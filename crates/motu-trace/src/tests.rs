@@ -137,7 +137,10 @@ fn check_against_brute_force(h: &OwnedHierarchy, seed: u64) -> Result<(), TestCa
                 prop_assert!(err < 1e-4 * w.t + 1e-5 * scale, "t {} vs {}", got.t, w.t);
                 // A different triangle only at a tie (shared edge or coincident surfaces).
                 if (got.mesh_record, got.primitive) != (w.mesh_record, w.primitive) {
-                    prop_assert!(err < 1e-5 * (w.t + scale), "different triangle at different t");
+                    prop_assert!(
+                        err < 1e-5 * (w.t + scale),
+                        "different triangle at different t"
+                    );
                 }
             }
         }
@@ -561,3 +564,35 @@ fn broken_hierarchies_are_errors() {
     ));
 }
 
+#[test]
+fn very_deep_nesting_uses_the_explicit_stack() {
+    let mut b = HierarchyBuilder::new();
+    let m = b.mesh(0, 0, 0, uv_sphere(8));
+    let blas = b.triangle_blas(&[m]);
+    let mut tlas = b.tlas(&[(IDENTITY_3X4, blas)]);
+    let depth = 300;
+    for _ in 0..depth {
+        let pb = b.pi_blas(&[(srt(1.0, 0.0, [0.01, 0.0, 0.0]), PiTarget::Tlas(tlas))]);
+        tlas = b.tlas(&[(IDENTITY_3X4, pb)]);
+    }
+    let h = b.finish(tlas);
+    let tracer = Tracer::new(h.view(), &h).unwrap();
+    let mut s = Scratch::default();
+    // The sphere sits at x = 3 after 300 shifts of 0.01.
+    let hit = tracer.trace(
+        [3.0, 0.0, 10.0],
+        [0.0, 0.0, -1.0],
+        &RayQuery::default(),
+        &mut s,
+    );
+    assert!(hit.is_hit());
+    assert!((hit.t - 9.0).abs() < 0.01, "{}", hit.t);
+    assert_eq!(hit.traces, depth + 1);
+    let miss = tracer.trace(
+        [0.0, 0.0, 10.0],
+        [0.0, 0.0, -1.0],
+        &RayQuery::default(),
+        &mut s,
+    );
+    assert!(!miss.is_hit());
+}

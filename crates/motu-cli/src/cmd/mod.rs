@@ -3,7 +3,7 @@
 use crate::cli::{Cli, Command};
 use anyhow::bail;
 
-mod demo;
+pub mod demo;
 mod devices;
 mod gen;
 mod import;
