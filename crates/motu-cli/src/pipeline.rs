@@ -338,6 +338,7 @@ pub fn element_stats(scene: &Scene) -> Vec<ElementMeta> {
                 }
             }
             let mut m = ElementMeta {
+                id: ei.0,
                 name: e.name.clone(),
                 ..Default::default()
             };

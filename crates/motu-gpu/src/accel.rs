@@ -87,7 +87,7 @@ pub struct AsBuildSizes {
 }
 
 impl Context {
-    fn accel_device(&self) -> Result<&ash::khr::acceleration_structure::Device> {
+    pub(crate) fn accel_device(&self) -> Result<&ash::khr::acceleration_structure::Device> {
         self.shared
             .accel
             .as_ref()

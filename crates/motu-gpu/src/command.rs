@@ -80,6 +80,17 @@ impl<'a> CommandRecorder<'a> {
         &self.ctx.shared.device
     }
 
+    /// The raw command buffer, for recording commands this module has no safe wrapper for.
+    /// Callers must keep every resource they record alive until `submit_and_wait` returns.
+    pub(crate) fn raw(&self) -> (&'a Context, vk::CommandBuffer) {
+        (self.ctx, self.cmd)
+    }
+
+    /// The phase label given to [`Context::record`].
+    pub fn label(&self) -> &str {
+        &self.label
+    }
+
     fn check_buffer(&self, buffer: &Buffer, usage: BufferUsage, what: &str) -> Result<()> {
         if !buffer.same_device(&self.ctx.shared) {
             return Err(GpuError::InvalidRequest(format!(
@@ -283,10 +294,7 @@ impl<'a> CommandRecorder<'a> {
         unsafe { device.wait_for_fences(&[self.fence], true, u64::MAX) }.map_err(|result| {
             // Name the phase, not just the code (VK_ERROR_DEVICE_LOST otherwise says nothing).
             tracing::error!(label = %self.label, ?result, "waiting for the submission failed");
-            GpuError::Vulkan {
-                call: "vkWaitForFences",
-                result,
-            }
+            GpuError::from_submit("vkWaitForFences", result, &self.label)
         })?;
         Ok(())
     }

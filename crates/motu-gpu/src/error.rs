@@ -79,8 +79,19 @@ pub enum GpuError {
         limit: u64,
     },
 
+    /// The VRAM budget or the allocation-count cap refused a request (what was asked, what is
+    /// in use, the budget).
+    #[error("VRAM budget: {0}")]
+    Budget(String),
+
     #[error("invalid request: {0}")]
     InvalidRequest(String),
+
+    #[error(
+        "the GPU device was lost (VK_ERROR_DEVICE_LOST) during phase {phase:?}: the driver reset \
+         the device (a shader fault or a timeout); the last submitted work was that phase"
+    )]
+    DeviceLost { phase: String },
 
     #[error("{call} failed: {result}")]
     Vulkan {
@@ -90,6 +101,17 @@ pub enum GpuError {
 }
 
 impl GpuError {
+    /// A failed submission or wait of the phase `label` (device loss names the phase).
+    pub(crate) fn from_submit(call: &'static str, result: vk::Result, label: &str) -> GpuError {
+        if result == vk::Result::ERROR_DEVICE_LOST {
+            GpuError::DeviceLost {
+                phase: label.to_string(),
+            }
+        } else {
+            GpuError::Vulkan { call, result }
+        }
+    }
+
     pub(crate) fn vk(call: &'static str) -> impl FnOnce(vk::Result) -> GpuError {
         move |result| GpuError::Vulkan { call, result }
     }

@@ -18,18 +18,24 @@ mod accel;
 mod command;
 mod context;
 mod error;
+mod heap;
 mod instance;
 mod limits;
 mod memory;
 mod pipeline;
 mod probe;
 mod query;
+mod render;
 mod report;
+mod rt_pipeline;
+mod scene;
 pub mod shaders;
 pub mod testing;
 
 #[cfg(test)]
 mod gpu_tests;
+#[cfg(test)]
+mod render_tests;
 
 pub use accel::{
     AsBuildFlags, AsBuildSizes, BlasGeometry, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
@@ -38,6 +44,7 @@ pub use accel::{
 pub use command::CommandRecorder;
 pub use context::{Context, ContextOptions, Requirement, ENV_DEVICE};
 pub use error::{GpuError, Result};
+pub use heap::{GpuHeap, HeapBuffer};
 pub use instance::{ValidationRequest, ENV_VALIDATION};
 pub use limits::{
     parse_size, LimitOverrides, Limits, ENV_MAX_ALLOCATIONS, ENV_MAX_ALLOCATION_SIZE,
@@ -50,4 +57,7 @@ pub use memory::{
 pub use pipeline::{BindingSet, ComputePipeline, ComputePipelineDesc};
 pub use probe::{Caps, HeapReport};
 pub use query::TimestampQueries;
+
+pub use render::{heat_colour, render, Backend, RenderOptions, RenderOutput, RenderStats, View};
 pub use report::{list_devices, DeviceReport};
+pub use scene::{BuildOptions, GpuScene, MeshBlobSource, ResourceReport};

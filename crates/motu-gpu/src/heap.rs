@@ -1,0 +1,204 @@
+//! Budgeted GPU memory: applies `motu_alloc`'s block sub-allocation policy to real
+//! `VkDeviceMemory` (one allocation per block), so the budget and the allocation-count cap hold
+//! by construction.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use motu_alloc::{
+    AllocKind, AllocLimits, AllocPolicy, AllocReport, AllocRequest, AllocationId, Allocator,
+    BlockEvent, BlockId, MemoryClass,
+};
+
+use crate::context::Context;
+use crate::error::{GpuError, Result};
+use crate::memory::{Buffer, BufferDesc, BufferUsage, DeviceMemory, MemoryLocation};
+
+/// A buffer placed in a heap block; give it back with [`GpuHeap::free`] (dropping it without
+/// freeing only leaks its range in the policy, never device memory).
+#[derive(Debug)]
+pub struct HeapBuffer {
+    pub buffer: Buffer,
+    pub(crate) id: AllocationId,
+    pub kind: AllocKind,
+}
+
+impl std::ops::Deref for HeapBuffer {
+    type Target = Buffer;
+    fn deref(&self) -> &Buffer {
+        &self.buffer
+    }
+}
+
+/// Every usage a heap buffer may have: blocks get a memory type all of them accept.
+const ALL_USAGES: BufferUsage = BufferUsage::TRANSFER_SRC
+    .union(BufferUsage::TRANSFER_DST)
+    .union(BufferUsage::STORAGE)
+    .union(BufferUsage::DEVICE_ADDRESS)
+    .union(BufferUsage::ACCELERATION_STRUCTURE_STORAGE)
+    .union(BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT)
+    .union(BufferUsage::SHADER_BINDING_TABLE);
+
+/// The allocator policy plus the memory blocks it decided to create.
+pub struct GpuHeap {
+    ctx: Context,
+    allocator: Allocator,
+    blocks: HashMap<BlockId, Arc<DeviceMemory>>,
+    type_index: [u32; 2],
+}
+
+impl std::fmt::Debug for GpuHeap {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuHeap")
+            .field("blocks", &self.blocks.len())
+            .field("limits", &self.allocator.limits())
+            .finish()
+    }
+}
+
+impl GpuHeap {
+    /// A heap under `limits` (already combined with the device's limits by the caller).
+    pub fn new(ctx: &Context, limits: AllocLimits) -> Result<GpuHeap> {
+        let probe = Buffer::new(
+            ctx,
+            "heap-probe",
+            &BufferDesc {
+                size_bytes: 256,
+                usage: ALL_USAGES,
+            },
+        )?;
+        let bits = probe.memory_requirements().memory_type_bits;
+        let device_local = ctx.memory_type_index(MemoryLocation::DeviceLocal, bits)?;
+        let upload = ctx.memory_type_index(MemoryLocation::Upload, bits)?;
+        // Unified memory (lavapipe, integrated GPUs): host-visible blocks use the same heap.
+        let unified = device_local == upload;
+        let policy = AllocPolicy {
+            host_visible_counts_against_budget: unified,
+            ..AllocPolicy::default()
+        };
+        let allocator = Allocator::new(limits, policy)
+            .map_err(|e| GpuError::InvalidRequest(format!("allocation limits: {e}")))?;
+        Ok(GpuHeap {
+            ctx: ctx.clone(),
+            allocator,
+            blocks: HashMap::new(),
+            type_index: [device_local, upload],
+        })
+    }
+
+    /// Creates a buffer of `size_bytes` in `class` memory, aligned to at least `alignment`.
+    pub fn alloc_buffer(
+        &mut self,
+        label: &str,
+        size_bytes: u64,
+        usage: BufferUsage,
+        kind: AllocKind,
+        class: MemoryClass,
+        alignment: u64,
+    ) -> Result<HeapBuffer> {
+        let mut buffer = Buffer::new(
+            &self.ctx,
+            label,
+            &BufferDesc {
+                size_bytes: size_bytes.max(4),
+                usage,
+            },
+        )?;
+        let req = buffer.memory_requirements();
+        let align = req
+            .alignment_bytes
+            .max(alignment)
+            .max(1)
+            .next_power_of_two();
+        let request = match class {
+            MemoryClass::DeviceLocal => AllocRequest::device_local(kind, req.size_bytes, align),
+            MemoryClass::HostVisible => AllocRequest::host_visible(kind, req.size_bytes, align),
+        };
+        let alloc = self
+            .allocator
+            .alloc(request)
+            .map_err(|e| GpuError::Budget(format!("{label}: {e}")))?;
+        if let Err(e) = self.apply_events() {
+            let _ = self.allocator.free(alloc.id);
+            return Err(e);
+        }
+        let Some(memory) = self.blocks.get(&alloc.block) else {
+            let _ = self.allocator.free(alloc.id);
+            return Err(GpuError::InvalidRequest(format!(
+                "{label}: block {} has no memory",
+                alloc.block.0
+            )));
+        };
+        if let Err(e) = buffer.bind(memory, alloc.offset_bytes) {
+            let _ = self.allocator.free(alloc.id);
+            let _ = self.apply_events();
+            return Err(e);
+        }
+        Ok(HeapBuffer {
+            buffer,
+            id: alloc.id,
+            kind,
+        })
+    }
+
+    /// Destroys the buffer and returns its range (and maybe its block) to the policy.
+    pub fn free(&mut self, buffer: HeapBuffer) {
+        let id = buffer.id;
+        drop(buffer.buffer);
+        if let Err(e) = self.allocator.free(id) {
+            tracing::warn!(%e, "heap free");
+        }
+        if let Err(e) = self.apply_events() {
+            tracing::warn!(%e, "heap free events");
+        }
+    }
+
+    fn apply_events(&mut self) -> Result<()> {
+        let events: Vec<BlockEvent> = self.allocator.drain_events().collect();
+        for event in events {
+            match event {
+                BlockEvent::Created {
+                    block,
+                    size_bytes,
+                    class,
+                    ..
+                } => {
+                    let location = match class {
+                        MemoryClass::DeviceLocal => MemoryLocation::DeviceLocal,
+                        MemoryClass::HostVisible => MemoryLocation::Upload,
+                    };
+                    let type_index = self.type_index[class as usize];
+                    match DeviceMemory::allocate(&self.ctx, size_bytes, type_index, location) {
+                        Ok(memory) => {
+                            self.blocks.insert(block, memory);
+                        }
+                        Err(e) => {
+                            let _ = self.allocator.forget_block(block);
+                            let _ = self.allocator.drain_events().count();
+                            return Err(e);
+                        }
+                    }
+                }
+                BlockEvent::Destroyed { block, .. } => {
+                    // Buffers bound to it hold their own Arc; none is live (policy invariant).
+                    self.blocks.remove(&block);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The policy's statistics (per kind, peaks, budget).
+    pub fn report(&self) -> AllocReport {
+        self.allocator.report()
+    }
+
+    pub fn limits(&self) -> AllocLimits {
+        self.allocator.limits()
+    }
+
+    /// Live `VkDeviceMemory` blocks of this heap.
+    pub fn block_count(&self) -> usize {
+        self.blocks.len()
+    }
+}

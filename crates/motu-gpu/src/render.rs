@@ -1,0 +1,500 @@
+//! The GPU renderer: one primary ray per pixel centre through the traversal-shader emulation
+//! (backend `pipeline` or `query`), an optional shadow ray, the AOV hit record and the views
+//! of the CPU renderer (same hash, palettes, sky and sRGB encoding as motu-trace).
+//!
+//! Everything stays on the GPU until one final copy of the AOV, the colours and the counters;
+//! frame times come from timestamps around each dispatch (median over `frames`).
+
+use bytemuck::{Pod, Zeroable};
+use motu_abi::aov::{Aov, AovRecord};
+use motu_abi::camera::CameraParams;
+use motu_abi::lod::LodParams;
+use motu_alloc::{AllocKind, MemoryClass};
+use serde::Serialize;
+
+use crate::command::CommandRecorder;
+use crate::context::Context;
+use crate::error::{GpuError, Result};
+use crate::heap::{GpuHeap, HeapBuffer};
+use crate::memory::BufferUsage;
+use crate::pipeline::{ComputePipeline, ComputePipelineDesc};
+use crate::query::TimestampQueries;
+use crate::rt_pipeline::{rt_stages, RtPipeline, PUSH_CONSTANT_BYTES};
+use crate::scene::{GpuScene, Slot, SLOT_COUNT};
+use crate::shaders;
+
+/// Which traversal backend traces.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Backend {
+    /// Ray-tracing pipeline: raygen owns the stack (every RT device; the only one on the H200).
+    Pipeline,
+    /// Compute shader with ray queries (the thesis's form).
+    Query,
+}
+
+impl Backend {
+    /// `query` where the device has ray queries, else `pipeline`.
+    pub fn best(ctx: &Context) -> Option<Backend> {
+        if ctx.caps().ray_query {
+            Some(Backend::Query)
+        } else if ctx.caps().ray_pipeline {
+            Some(Backend::Pipeline)
+        } else {
+            None
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Backend::Pipeline => "pipeline",
+            Backend::Query => "query",
+        }
+    }
+}
+
+impl std::str::FromStr for Backend {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "pipeline" => Ok(Backend::Pipeline),
+            "query" => Ok(Backend::Query),
+            _ => Err(format!(
+                "unknown GPU backend {s:?} (expected pipeline or query)"
+            )),
+        }
+    }
+}
+
+/// What the image shows (values match `VIEW_*` in `common.glsl`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum View {
+    #[default]
+    Shaded,
+    Ids,
+    Lod,
+    /// Traces per pixel, blue (0) to red (the frame's maximum, `heatmap_max` in stats).
+    Heatmap,
+}
+
+impl View {
+    fn code(self) -> u32 {
+        match self {
+            View::Shaded => 0,
+            View::Ids => 1,
+            View::Lod => 2,
+            View::Heatmap => 3,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct RenderOptions {
+    pub backend: Backend,
+    pub view: View,
+    pub lod: LodParams,
+    /// Traversal stack entries (a specialisation constant).
+    pub stack_size: u32,
+    /// Frames traced (for timing); the outputs are the last frame's.
+    pub frames: u32,
+    /// World direction towards the sun (normalised here).
+    pub sun_dir_world: [f32; 3],
+    pub sun_intensity: f32,
+    pub ambient: f32,
+    pub shadows: bool,
+    /// Shadow rays use the primary hit's LOD (prevents LOD self-shadowing).
+    pub shadow_lod_from_primary: bool,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        Self {
+            backend: Backend::Pipeline,
+            view: View::Shaded,
+            lod: LodParams::default(),
+            stack_size: 16,
+            frames: 1,
+            sun_dir_world: [0.4, 0.8, 0.45],
+            sun_intensity: 0.8,
+            ambient: 0.25,
+            shadows: true,
+            shadow_lod_from_primary: true,
+        }
+    }
+}
+
+/// `--stats` keys of the CLI contract, plus detail.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct RenderStats {
+    pub width: u32,
+    pub height: u32,
+    pub backend: &'static str,
+    pub view: View,
+    pub frames: u32,
+    /// Median GPU time of one frame's dispatch (timestamps).
+    pub ms_per_frame: f64,
+    /// Primary plus shadow rays of one frame.
+    pub rays: u64,
+    pub primary_rays: u64,
+    pub shadow_rays: u64,
+    pub rays_per_second: f64,
+    /// TLAS walks (traceRayEXT / ray queries) of one frame.
+    pub traces: u64,
+    pub traces_per_ray: f64,
+    pub stack_size: u32,
+    pub stack_overflows: u64,
+    /// TLAS walks whose candidate list was full (re-walked for the rest, never dropped).
+    pub pi_list_overflows: u64,
+    /// The heatmap's red end: the most traces spent on one pixel.
+    pub heatmap_max: u32,
+    pub as_bytes: u64,
+    pub vram_budget_bytes: u64,
+    pub vram_peak_bytes: u64,
+    pub allocation_count: u32,
+    pub passes: u32,
+}
+
+#[derive(Clone, Debug)]
+pub struct RenderOutput {
+    pub aov: Aov,
+    /// `width × height × 4`, row 0 at the top.
+    pub rgba8: Vec<u8>,
+    pub stats: RenderStats,
+}
+
+/// `FrameParams` of `common.glsl` (std430, 128 bytes).
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+#[repr(C)]
+struct FrameParams {
+    camera: CameraParams,
+    lod: LodParams,
+    sun_dir_intensity: [f32; 4],
+    view: u32,
+    shadows: u32,
+    shadow_lod_from_primary: u32,
+    ambient: f32,
+    root_tlas: u32,
+    _pad: [u32; 3],
+}
+
+const STAT_WORDS: usize = 4;
+
+struct Frame {
+    params: HeapBuffer,
+    aov: HeapBuffer,
+    rgba: HeapBuffer,
+    stats: HeapBuffer,
+    readback: HeapBuffer,
+}
+
+impl Frame {
+    fn release(self, heap: &mut GpuHeap) {
+        for b in [self.params, self.aov, self.rgba, self.stats, self.readback] {
+            heap.free(b);
+        }
+    }
+}
+
+fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams) -> Result<Frame> {
+    let out = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS | BufferUsage::TRANSFER_SRC;
+    let p = heap.alloc_buffer(
+        "frame-params",
+        std::mem::size_of::<FrameParams>() as u64,
+        BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
+        AllocKind::Other,
+        MemoryClass::HostVisible,
+        16,
+    )?;
+    p.write(0, std::slice::from_ref(params))?;
+    let mut bufs = vec![p];
+    let sizes = [pixels * 16, pixels * 4, (STAT_WORDS * 4) as u64];
+    for (i, size) in sizes.into_iter().enumerate() {
+        let usage = if i == 2 {
+            out | BufferUsage::TRANSFER_DST
+        } else {
+            out
+        };
+        match heap.alloc_buffer(
+            ["aov", "rgba", "stats"][i],
+            size,
+            usage,
+            AllocKind::Other,
+            MemoryClass::DeviceLocal,
+            16,
+        ) {
+            Ok(b) => bufs.push(b),
+            Err(e) => {
+                bufs.into_iter().for_each(|b| heap.free(b));
+                return Err(e);
+            }
+        }
+    }
+    let readback = match heap.alloc_buffer(
+        "readback",
+        pixels * 20 + (STAT_WORDS * 4) as u64,
+        BufferUsage::TRANSFER_DST,
+        AllocKind::Staging,
+        MemoryClass::HostVisible,
+        16,
+    ) {
+        Ok(b) => b,
+        Err(e) => {
+            bufs.into_iter().for_each(|b| heap.free(b));
+            return Err(e);
+        }
+    };
+    let mut it = bufs.into_iter();
+    let (Some(params), Some(aov), Some(rgba), Some(stats)) =
+        (it.next(), it.next(), it.next(), it.next())
+    else {
+        return Err(GpuError::InvalidRequest("frame buffers".into()));
+    };
+    Ok(Frame {
+        params,
+        aov,
+        rgba,
+        stats,
+        readback,
+    })
+}
+
+enum Tracer {
+    Pipeline(Box<RtPipeline>),
+    Query(ComputePipeline),
+}
+
+/// Renders `scene` as seen by `camera`.
+pub fn render(
+    ctx: &Context,
+    scene: &GpuScene,
+    camera: &CameraParams,
+    opts: &RenderOptions,
+) -> Result<RenderOutput> {
+    let (w, h) = (camera.width, camera.height);
+    if w == 0 || h == 0 || u64::from(w) * u64::from(h) > (1 << 28) {
+        return Err(GpuError::InvalidRequest(format!(
+            "image size {w}×{h} is invalid"
+        )));
+    }
+    let span = tracing::info_span!(
+        "render",
+        backend = opts.backend.name(),
+        width = w,
+        height = h
+    );
+    let _g = span.enter();
+    let sun = {
+        let s = opts.sun_dir_world;
+        let l = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt().max(1e-20);
+        [s[0] / l, s[1] / l, s[2] / l, opts.sun_intensity]
+    };
+    let params = FrameParams {
+        camera: *camera,
+        lod: opts.lod,
+        sun_dir_intensity: sun,
+        view: opts.view.code(),
+        shadows: u32::from(opts.shadows),
+        shadow_lod_from_primary: u32::from(opts.shadow_lod_from_primary),
+        ambient: opts.ambient,
+        root_tlas: scene.root_tlas,
+        _pad: [0; 3],
+    };
+    let pixels = u64::from(w) * u64::from(h);
+    let frames = opts.frames.max(1);
+    let mut heap = scene.heap();
+    let tracer = match opts.backend {
+        Backend::Pipeline => {
+            Tracer::Pipeline(Box::new(RtPipeline::new(ctx, &mut heap, opts.stack_size)?))
+        }
+        Backend::Query => {
+            if !ctx.caps().ray_query {
+                return Err(GpuError::MissingFeature {
+                    what: "ray queries (VK_KHR_ray_query) for backend `query`; use `pipeline`"
+                        .into(),
+                    details: ctx.device_name().to_string(),
+                });
+            }
+            Tracer::Query(ComputePipeline::new(
+                ctx,
+                &ComputePipelineDesc {
+                    label: "traversal query",
+                    spirv: shaders::QUERY_TRACE_COMP,
+                    storage_buffer_count: 0,
+                    push_constant_size_bytes: PUSH_CONSTANT_BYTES,
+                    specialization: &[(0, opts.stack_size.max(1))],
+                },
+            )?)
+        }
+    };
+    let frame = match alloc_frame(&mut heap, pixels, &params) {
+        Ok(f) => f,
+        Err(e) => {
+            if let Tracer::Pipeline(p) = tracer {
+                p.release(&mut heap);
+            }
+            return Err(e);
+        }
+    };
+    let result = run_frames(ctx, scene, &tracer, &frame, w, h, frames);
+    let alloc = heap.report();
+    frame.release(&mut heap);
+    if let Tracer::Pipeline(p) = tracer {
+        p.release(&mut heap);
+    }
+    drop(heap);
+    let (records, rgba_words, counters, frame_ns) = result?;
+
+    let mut aov = Aov::new(w, h);
+    aov.records = records;
+    let heatmap_max = aov
+        .records
+        .iter()
+        .map(|r| u32::from(r.traces))
+        .max()
+        .unwrap_or(0);
+    let mut rgba8: Vec<u8> = bytemuck::cast_slice(&rgba_words).to_vec();
+    if opts.view == View::Heatmap {
+        for (r, px) in aov.records.iter().zip(rgba8.chunks_exact_mut(4)) {
+            let c = heat_colour(f32::from(r.traces) / heatmap_max.max(1) as f32);
+            px[..3].copy_from_slice(&c.map(|v| (v * 255.0 + 0.5) as u8));
+            px[3] = 255;
+        }
+    }
+    let mut sorted = frame_ns.clone();
+    sorted.sort_by(f64::total_cmp);
+    let ms = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0) / 1e6;
+    let shadow = u64::from(counters[2]);
+    let rays = pixels + shadow;
+    let traces: u64 = aov.records.iter().map(|r| u64::from(r.traces)).sum();
+    let stats = RenderStats {
+        width: w,
+        height: h,
+        backend: opts.backend.name(),
+        view: opts.view,
+        frames,
+        ms_per_frame: ms,
+        rays,
+        primary_rays: pixels,
+        shadow_rays: shadow,
+        rays_per_second: if ms > 0.0 {
+            rays as f64 / (ms / 1e3)
+        } else {
+            0.0
+        },
+        traces,
+        traces_per_ray: traces as f64 / rays.max(1) as f64,
+        stack_size: opts.stack_size,
+        stack_overflows: u64::from(counters[0]),
+        pi_list_overflows: u64::from(counters[1]),
+        heatmap_max,
+        as_bytes: scene.report().as_bytes,
+        vram_budget_bytes: alloc.budget_bytes,
+        vram_peak_bytes: alloc.peak_block_bytes,
+        allocation_count: alloc.peak_allocation_count,
+        passes: 1,
+    };
+    tracing::info!(
+        ms = stats.ms_per_frame,
+        rays = stats.rays,
+        overflows = stats.stack_overflows,
+        "gpu render done"
+    );
+    Ok(RenderOutput { aov, rgba8, stats })
+}
+
+type FrameResult = (Vec<AovRecord>, Vec<u32>, Vec<u32>, Vec<f64>);
+
+fn run_frames(
+    ctx: &Context,
+    scene: &GpuScene,
+    tracer: &Tracer,
+    frame: &Frame,
+    w: u32,
+    h: u32,
+    frames: u32,
+) -> Result<FrameResult> {
+    let mut addresses = scene.addresses;
+    addresses[Slot::Frame as usize] = frame.params.device_address()?.0;
+    addresses[Slot::Aov as usize] = frame.aov.device_address()?.0;
+    addresses[Slot::Rgba as usize] = frame.rgba.device_address()?.0;
+    addresses[Slot::Stats as usize] = frame.stats.device_address()?.0;
+    let push: [u64; SLOT_COUNT] = addresses;
+    let push_bytes: &[u8] = bytemuck::cast_slice(&push);
+    let pixels = u64::from(w) * u64::from(h);
+    let timestamps = TimestampQueries::new(ctx, 2 * frames)?;
+    let mut rec: CommandRecorder<'_> = ctx.record(match tracer {
+        Tracer::Pipeline(_) => "trace (pipeline)",
+        Tracer::Query(_) => "trace (query)",
+    })?;
+    rec.reset_queries(&timestamps);
+    for f in 0..frames {
+        rec.fill_buffer(&frame.stats, 0, (STAT_WORDS * 4) as u64, 0)?;
+        rec.barrier();
+        rec.write_timestamp(&timestamps, 2 * f)?;
+        match tracer {
+            Tracer::Pipeline(p) => {
+                let (c, cmd) = rec.raw();
+                let device = &c.shared.device;
+                // SAFETY: recording state; the pipeline, its layout and SBT, and every buffer
+                // behind the pushed addresses live until the fenced submission returns.
+                unsafe {
+                    device.cmd_bind_pipeline(
+                        cmd,
+                        ash::vk::PipelineBindPoint::RAY_TRACING_KHR,
+                        p.pipeline,
+                    );
+                    device.cmd_push_constants(cmd, p.layout, rt_stages(), 0, push_bytes);
+                    p.rt.cmd_trace_rays(
+                        cmd,
+                        &p.regions[0],
+                        &p.regions[1],
+                        &p.regions[2],
+                        &p.regions[3],
+                        w,
+                        h,
+                        1,
+                    );
+                }
+            }
+            Tracer::Query(q) => {
+                rec.dispatch(q, None, push_bytes, [w.div_ceil(8), h.div_ceil(8), 1])?;
+            }
+        }
+        rec.write_timestamp(&timestamps, 2 * f + 1)?;
+        rec.barrier();
+    }
+    let rgba_off = pixels * 16;
+    let stats_off = pixels * 20;
+    rec.copy_buffer(&frame.aov, 0, &frame.readback, 0, pixels * 16)?;
+    rec.copy_buffer(&frame.rgba, 0, &frame.readback, rgba_off, pixels * 4)?;
+    rec.copy_buffer(
+        &frame.stats,
+        0,
+        &frame.readback,
+        stats_off,
+        (STAT_WORDS * 4) as u64,
+    )?;
+    rec.submit_and_wait()?;
+    let records: Vec<AovRecord> = frame.readback.read_vec(0, pixels as usize)?;
+    let rgba: Vec<u32> = frame.readback.read_vec(rgba_off, pixels as usize)?;
+    let counters: Vec<u32> = frame.readback.read_vec(stats_off, STAT_WORDS)?;
+    let ticks = timestamps.read_ticks()?;
+    let frame_ns = (0..frames)
+        .map(|f| timestamps.elapsed_ns(&ticks, 2 * f, 2 * f + 1))
+        .collect::<Result<Vec<f64>>>()?;
+    Ok((records, rgba, counters, frame_ns))
+}
+
+/// Blue → cyan → green → yellow → red for `v` in [0, 1] (motu-trace's heat colours).
+pub fn heat_colour(v: f32) -> [f32; 3] {
+    let v = v.clamp(0.0, 1.0) * 4.0;
+    let f = v.fract();
+    match v as u32 {
+        0 => [0.0, f, 1.0],
+        1 => [0.0, 1.0, 1.0 - f],
+        2 => [f, 1.0, 0.0],
+        3 => [1.0, 1.0 - f, 0.0],
+        _ => [1.0, 0.0, 0.0],
+    }
+}

@@ -1,0 +1,256 @@
+//! The ray-tracing pipeline of the `pipeline` backend and its shader binding table.
+//!
+//! Groups: raygen (`pipeline/trace.rgen`), miss, hit group 0 = triangles (closest-hit only;
+//! instances `FORCE_OPAQUE`, SBT offset 0), hit group 1 = programmable instances
+//! (intersection + any-hit; instances `FORCE_NO_OPAQUE`, SBT offset 1). No descriptor sets:
+//! everything is reached through 128 bytes of push-constant device addresses.
+
+use ash::vk;
+use motu_alloc::{AllocKind, MemoryClass};
+
+use crate::context::Context;
+use crate::error::{GpuError, Result};
+use crate::heap::{GpuHeap, HeapBuffer};
+use crate::memory::BufferUsage;
+use crate::shaders;
+
+pub(crate) const PUSH_CONSTANT_BYTES: u32 = 128;
+
+pub(crate) fn rt_stages() -> vk::ShaderStageFlags {
+    vk::ShaderStageFlags::RAYGEN_KHR
+        | vk::ShaderStageFlags::MISS_KHR
+        | vk::ShaderStageFlags::CLOSEST_HIT_KHR
+        | vk::ShaderStageFlags::ANY_HIT_KHR
+        | vk::ShaderStageFlags::INTERSECTION_KHR
+}
+
+pub(crate) struct RtPipeline {
+    ctx: Context,
+    pub(crate) rt: ash::khr::ray_tracing_pipeline::Device,
+    pub(crate) pipeline: vk::Pipeline,
+    pub(crate) layout: vk::PipelineLayout,
+    /// raygen, miss, hit, callable (empty).
+    pub(crate) regions: [vk::StridedDeviceAddressRegionKHR; 4],
+    sbt: Option<HeapBuffer>,
+}
+
+impl RtPipeline {
+    pub(crate) fn new(ctx: &Context, heap: &mut GpuHeap, stack_size: u32) -> Result<RtPipeline> {
+        if !ctx.caps().ray_pipeline {
+            return Err(GpuError::MissingFeature {
+                what: "the ray-tracing pipeline (VK_KHR_ray_tracing_pipeline)".into(),
+                details: ctx.device_name().to_string(),
+            });
+        }
+        let shared = &ctx.shared;
+        let device = &shared.device;
+        let rt = ash::khr::ray_tracing_pipeline::Device::new(&shared.instance.instance, device);
+        let mut p = RtPipeline {
+            ctx: ctx.clone(),
+            rt,
+            pipeline: vk::Pipeline::null(),
+            layout: vk::PipelineLayout::null(),
+            regions: [vk::StridedDeviceAddressRegionKHR::default(); 4],
+            sbt: None,
+        };
+        let ranges = [vk::PushConstantRange::default()
+            .stage_flags(rt_stages())
+            .offset(0)
+            .size(PUSH_CONSTANT_BYTES)];
+        let layout_info = vk::PipelineLayoutCreateInfo::default().push_constant_ranges(&ranges);
+        // SAFETY: valid create info; the layout is owned by `p`.
+        p.layout = unsafe { device.create_pipeline_layout(&layout_info, None) }
+            .map_err(GpuError::vk("vkCreatePipelineLayout"))?;
+
+        let sources: [(&[u32], vk::ShaderStageFlags); 5] = [
+            (
+                shaders::PIPELINE_TRACE_RGEN,
+                vk::ShaderStageFlags::RAYGEN_KHR,
+            ),
+            (shaders::PIPELINE_MISS_RMISS, vk::ShaderStageFlags::MISS_KHR),
+            (
+                shaders::PIPELINE_TRIANGLE_RCHIT,
+                vk::ShaderStageFlags::CLOSEST_HIT_KHR,
+            ),
+            (
+                shaders::PIPELINE_PI_RINT,
+                vk::ShaderStageFlags::INTERSECTION_KHR,
+            ),
+            (
+                shaders::PIPELINE_PI_RAHIT,
+                vk::ShaderStageFlags::ANY_HIT_KHR,
+            ),
+        ];
+        let mut modules = Vec::with_capacity(sources.len());
+        for (words, _) in &sources {
+            let info = vk::ShaderModuleCreateInfo::default().code(words);
+            // SAFETY: embedded SPIR-V validated by spirv-val at build time.
+            match unsafe { device.create_shader_module(&info, None) } {
+                Ok(m) => modules.push(m),
+                Err(e) => {
+                    for m in modules {
+                        // SAFETY: created above, unused.
+                        unsafe { device.destroy_shader_module(m, None) };
+                    }
+                    return Err(GpuError::Vulkan {
+                        call: "vkCreateShaderModule",
+                        result: e,
+                    });
+                }
+            }
+        }
+        let spec_entries = [vk::SpecializationMapEntry {
+            constant_id: 0,
+            offset: 0,
+            size: 4,
+        }];
+        let spec_data = stack_size.max(1).to_ne_bytes();
+        let spec = vk::SpecializationInfo::default()
+            .map_entries(&spec_entries)
+            .data(&spec_data);
+        let stages: Vec<_> = sources
+            .iter()
+            .zip(&modules)
+            .map(|((_, stage), m)| {
+                let s = vk::PipelineShaderStageCreateInfo::default()
+                    .stage(*stage)
+                    .module(*m)
+                    .name(c"main");
+                if *stage == vk::ShaderStageFlags::RAYGEN_KHR {
+                    s.specialization_info(&spec)
+                } else {
+                    s
+                }
+            })
+            .collect();
+        let unused = vk::SHADER_UNUSED_KHR;
+        let general = |i: u32| {
+            vk::RayTracingShaderGroupCreateInfoKHR::default()
+                .ty(vk::RayTracingShaderGroupTypeKHR::GENERAL)
+                .general_shader(i)
+                .closest_hit_shader(unused)
+                .any_hit_shader(unused)
+                .intersection_shader(unused)
+        };
+        let groups = [
+            general(0),
+            general(1),
+            vk::RayTracingShaderGroupCreateInfoKHR::default()
+                .ty(vk::RayTracingShaderGroupTypeKHR::TRIANGLES_HIT_GROUP)
+                .general_shader(unused)
+                .closest_hit_shader(2)
+                .any_hit_shader(unused)
+                .intersection_shader(unused),
+            vk::RayTracingShaderGroupCreateInfoKHR::default()
+                .ty(vk::RayTracingShaderGroupTypeKHR::PROCEDURAL_HIT_GROUP)
+                .general_shader(unused)
+                .closest_hit_shader(unused)
+                .any_hit_shader(4)
+                .intersection_shader(3),
+        ];
+        let info = vk::RayTracingPipelineCreateInfoKHR::default()
+            .stages(&stages)
+            .groups(&groups)
+            .max_pipeline_ray_recursion_depth(1)
+            .layout(p.layout);
+        // SAFETY: modules, layout and infos are live for the call; recursion depth 1 (raygen
+        // traces, no hit shader does).
+        let result = unsafe {
+            p.rt.create_ray_tracing_pipelines(
+                vk::DeferredOperationKHR::null(),
+                vk::PipelineCache::null(),
+                &[info],
+                None,
+            )
+        };
+        for m in modules {
+            // SAFETY: only needed during creation.
+            unsafe { device.destroy_shader_module(m, None) };
+        }
+        p.pipeline = result.map_err(|(_, e)| GpuError::Vulkan {
+            call: "vkCreateRayTracingPipelinesKHR",
+            result: e,
+        })?[0];
+        shared.set_name(p.pipeline, "traversal pipeline");
+
+        // Shader binding table.
+        let limits = ctx.limits();
+        let handle_size = limits.shader_group_handle_size as u64;
+        let handle_align = u64::from(limits.shader_group_handle_alignment.max(1));
+        let base_align = u64::from(limits.shader_group_base_alignment.max(1));
+        let stride = handle_size.div_ceil(handle_align) * handle_align;
+        let group_count = groups.len() as u32;
+        // SAFETY: the pipeline has `group_count` groups; the output holds their handles.
+        let handles = unsafe {
+            p.rt.get_ray_tracing_shader_group_handles(
+                p.pipeline,
+                0,
+                group_count,
+                (handle_size * u64::from(group_count)) as usize,
+            )
+        }
+        .map_err(GpuError::vk("vkGetRayTracingShaderGroupHandlesKHR"))?;
+        let align = |v: u64| v.div_ceil(base_align) * base_align;
+        let raygen_off = 0u64;
+        let miss_off = align(stride);
+        let hit_off = miss_off + align(stride);
+        let total = hit_off + 2 * stride;
+        let sbt = heap.alloc_buffer(
+            "sbt",
+            total,
+            BufferUsage::SHADER_BINDING_TABLE | BufferUsage::DEVICE_ADDRESS,
+            AllocKind::Other,
+            MemoryClass::HostVisible,
+            base_align,
+        )?;
+        let mut bytes = vec![0u8; total as usize];
+        let h = |i: usize| &handles[i * handle_size as usize..(i + 1) * handle_size as usize];
+        let put = |bytes: &mut Vec<u8>, off: u64, i: usize| {
+            bytes[off as usize..(off + handle_size) as usize].copy_from_slice(h(i));
+        };
+        put(&mut bytes, raygen_off, 0);
+        put(&mut bytes, miss_off, 1);
+        put(&mut bytes, hit_off, 2);
+        put(&mut bytes, hit_off + stride, 3);
+        sbt.write_bytes(0, &bytes)?;
+        let base = sbt.device_address()?.0;
+        p.regions = [
+            vk::StridedDeviceAddressRegionKHR {
+                device_address: base + raygen_off,
+                stride: align(stride),
+                size: align(stride),
+            },
+            vk::StridedDeviceAddressRegionKHR {
+                device_address: base + miss_off,
+                stride,
+                size: stride,
+            },
+            vk::StridedDeviceAddressRegionKHR {
+                device_address: base + hit_off,
+                stride,
+                size: 2 * stride,
+            },
+            vk::StridedDeviceAddressRegionKHR::default(),
+        ];
+        p.sbt = Some(sbt);
+        Ok(p)
+    }
+
+    /// Returns the SBT's memory to the heap (call before dropping when the heap lives on).
+    pub(crate) fn release(mut self, heap: &mut GpuHeap) {
+        if let Some(b) = self.sbt.take() {
+            heap.free(b);
+        }
+    }
+}
+
+impl Drop for RtPipeline {
+    fn drop(&mut self) {
+        let device = &self.ctx.shared.device;
+        // SAFETY: created from this device; every trace using it was fenced.
+        unsafe {
+            device.destroy_pipeline(self.pipeline, None);
+            device.destroy_pipeline_layout(self.layout, None);
+        }
+    }
+}

@@ -1,0 +1,1134 @@
+//! A compiled hierarchy on the GPU: tables, geometry and acceleration structures, built under a
+//! VRAM budget, an allocation-count cap and a scratch budget.
+//!
+//! Build order: node tables and geometry are uploaded through a bounded host-visible staging
+//! ring; BLASes (one per `BlasRecord`: triangles, one geometry per mesh, or the AABBs of its
+//! programmable instances) are built in batches planned by `motu_alloc::plan_build_batches`
+//! with one shared scratch pool, each batch fenced (no queue-wait-idle), then compacted
+//! (compacted sizes queried, copied, originals freed) before the next batch, so the peak stays
+//! near the compacted total. TLASes follow the same path with per-batch instance buffers.
+//! TLASes are independent objects: a PI's target TLAS is reached at trace time through the
+//! per-TLAS device-address table.
+
+use std::borrow::Cow;
+use std::sync::{Mutex, MutexGuard};
+use std::time::Instant;
+
+use ash::vk;
+use motu_abi::{HierarchyView, BLAS_AABBS, BLAS_TRIANGLES, FLAG_NEEDS_ANY_HIT};
+use motu_alloc::{
+    effective_budget_bytes, plan_build_batches, AllocKind, AllocLimits, AllocReport, BatchLimits,
+    BuildSize, MemoryClass, SafetyMargin, MIB,
+};
+use serde::Serialize;
+
+use crate::accel::{AsBuildFlags, BlasGeometry, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT};
+use crate::context::Context;
+use crate::error::{GpuError, Result};
+use crate::heap::{GpuHeap, HeapBuffer};
+use crate::memory::BufferUsage;
+
+/// Geometry of one compiled mesh, by its index in the hierarchy's mesh table (e.g. slices of a
+/// mapped package chunk, borrowed).
+pub trait MeshBlobSource {
+    /// Positions (`vertex_count` of them) and `3 × triangle_count` indices.
+    #[allow(clippy::type_complexity)]
+    fn mesh_data(
+        &self,
+        mesh_record: u32,
+    ) -> std::result::Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), String>;
+}
+
+/// How to build a [`GpuScene`].
+#[derive(Clone, Copy, Debug)]
+pub struct BuildOptions {
+    /// The user's VRAM budget (`--vram-budget`); the device's available budget minus a margin
+    /// lowers it further.
+    pub budget_bytes: u64,
+    /// Cap on `VkDeviceMemory` allocations (`--max-allocations`); the device limit lowers it.
+    pub max_allocations: u32,
+    /// Scratch bytes one build batch may use (the shared scratch pool).
+    pub scratch_budget_bytes: u64,
+    /// Summed result bytes of one batch before compaction.
+    pub max_batch_result_bytes: u64,
+    /// Host-visible staging ring size.
+    pub staging_bytes: u64,
+    /// Compact acceleration structures after building.
+    pub compact: bool,
+}
+
+impl Default for BuildOptions {
+    fn default() -> Self {
+        Self {
+            budget_bytes: u64::MAX,
+            max_allocations: 4096,
+            scratch_budget_bytes: 128 * MIB,
+            max_batch_result_bytes: 256 * MIB,
+            staging_bytes: 16 * MIB,
+            compact: true,
+        }
+    }
+}
+
+/// Bytes and counts per kind of resource (`--stats`).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ResourceReport {
+    pub budget_bytes: u64,
+    pub max_allocations: u32,
+    pub blas_count: u32,
+    pub tlas_count: u32,
+    /// BLAS bytes as built (before compaction).
+    pub blas_bytes: u64,
+    /// BLAS bytes after compaction (= `blas_bytes` without compaction).
+    pub blas_compacted_bytes: u64,
+    pub tlas_bytes: u64,
+    pub tlas_compacted_bytes: u64,
+    /// Acceleration-structure bytes resident now.
+    pub as_bytes: u64,
+    pub scratch_peak_bytes: u64,
+    pub instance_buffer_peak_bytes: u64,
+    pub geometry_bytes: u64,
+    pub table_bytes: u64,
+    pub build_batches: u32,
+    /// Highest bytes in memory blocks counted against the budget.
+    pub peak_bytes: u64,
+    /// `VkDeviceMemory` allocations now / at the peak.
+    pub allocation_count: u32,
+    pub peak_allocation_count: u32,
+    pub build_ms: f64,
+    /// The allocator's own statistics, per kind and class.
+    pub alloc: Option<AllocReport>,
+}
+
+/// Table slots in the shaders' push constants (`common.glsl`, same order).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(usize)]
+pub(crate) enum Slot {
+    Frame = 0,
+    Tlases,
+    Instances,
+    Blases,
+    Geometries,
+    Pis,
+    Selectors,
+    LodLevels,
+    Meshes,
+    Materials,
+    MeshGeo,
+    TlasAddresses,
+    Aov,
+    Rgba,
+    Stats,
+}
+
+pub(crate) const SLOT_COUNT: usize = 16;
+
+/// An acceleration structure in a heap buffer. Destroyed before its buffer (Drop order).
+pub(crate) struct AccelStruct {
+    ctx: Context,
+    handle: vk::AccelerationStructureKHR,
+    pub(crate) address: u64,
+    pub(crate) size_bytes: u64,
+    buffer: Option<HeapBuffer>,
+}
+
+impl AccelStruct {
+    fn new(
+        ctx: &Context,
+        heap: &mut GpuHeap,
+        label: &str,
+        size_bytes: u64,
+        ty: vk::AccelerationStructureTypeKHR,
+    ) -> Result<AccelStruct> {
+        let kind = if ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL {
+            AllocKind::TlasStorage
+        } else {
+            AllocKind::BlasStorage
+        };
+        let buffer = heap.alloc_buffer(
+            label,
+            size_bytes,
+            BufferUsage::ACCELERATION_STRUCTURE_STORAGE,
+            kind,
+            MemoryClass::DeviceLocal,
+            ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
+        )?;
+        let accel = ctx.accel_device()?;
+        let info = vk::AccelerationStructureCreateInfoKHR::default()
+            .buffer(buffer.handle())
+            .offset(0)
+            .size(size_bytes)
+            .ty(ty);
+        // SAFETY: the buffer is bound, has AS-storage usage and holds `size_bytes`.
+        let handle = match unsafe { accel.create_acceleration_structure(&info, None) } {
+            Ok(h) => h,
+            Err(e) => {
+                heap.free(buffer);
+                return Err(GpuError::Vulkan {
+                    call: "vkCreateAccelerationStructureKHR",
+                    result: e,
+                });
+            }
+        };
+        ctx.shared.set_name(handle, label);
+        let addr_info =
+            vk::AccelerationStructureDeviceAddressInfoKHR::default().acceleration_structure(handle);
+        // SAFETY: the handle was just created from this device.
+        let address = unsafe { accel.get_acceleration_structure_device_address(&addr_info) };
+        Ok(AccelStruct {
+            ctx: ctx.clone(),
+            handle,
+            address,
+            size_bytes,
+            buffer: Some(buffer),
+        })
+    }
+
+    /// Destroys the structure and returns its memory to the heap.
+    fn release(mut self, heap: &mut GpuHeap) {
+        self.destroy_handle();
+        if let Some(b) = self.buffer.take() {
+            heap.free(b);
+        }
+    }
+
+    fn destroy_handle(&mut self) {
+        if self.handle == vk::AccelerationStructureKHR::null() {
+            return;
+        }
+        if let Ok(accel) = self.ctx.accel_device() {
+            // SAFETY: every submission using it was fenced before its owner let go of it.
+            unsafe { accel.destroy_acceleration_structure(self.handle, None) };
+        }
+        self.handle = vk::AccelerationStructureKHR::null();
+    }
+}
+
+impl Drop for AccelStruct {
+    fn drop(&mut self) {
+        self.destroy_handle();
+    }
+}
+
+/// A compacted-size query pool.
+struct SizeQueries {
+    ctx: Context,
+    pool: vk::QueryPool,
+    count: u32,
+}
+
+impl SizeQueries {
+    fn new(ctx: &Context, count: u32) -> Result<SizeQueries> {
+        let info = vk::QueryPoolCreateInfo::default()
+            .query_type(vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR)
+            .query_count(count.max(1));
+        // SAFETY: valid create info; the AS extension is enabled (caller checked).
+        let pool = unsafe { ctx.shared.device.create_query_pool(&info, None) }
+            .map_err(GpuError::vk("vkCreateQueryPool"))?;
+        Ok(SizeQueries {
+            ctx: ctx.clone(),
+            pool,
+            count: count.max(1),
+        })
+    }
+
+    fn read(&self, n: u32) -> Result<Vec<u64>> {
+        let mut out = vec![0u64; n as usize];
+        if n == 0 {
+            return Ok(out);
+        }
+        // SAFETY: the first n queries were written by a fenced submission.
+        unsafe {
+            self.ctx.shared.device.get_query_pool_results(
+                self.pool,
+                0,
+                &mut out,
+                vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
+            )
+        }
+        .map_err(GpuError::vk("vkGetQueryPoolResults"))?;
+        Ok(out)
+    }
+}
+
+impl Drop for SizeQueries {
+    fn drop(&mut self) {
+        // SAFETY: no pending submission uses the pool (all are fenced).
+        unsafe { self.ctx.shared.device.destroy_query_pool(self.pool, None) };
+    }
+}
+
+/// Bounded host-visible staging ring: copies are queued and flushed (one fenced submission)
+/// whenever the ring is full, so host memory never holds more than the ring.
+struct Uploader {
+    staging: HeapBuffer,
+    cursor: u64,
+    pending: Vec<(vk::Buffer, u64, u64, u64)>,
+    flushes: u32,
+}
+
+impl Uploader {
+    fn new(heap: &mut GpuHeap, size_bytes: u64) -> Result<Uploader> {
+        let staging = heap.alloc_buffer(
+            "staging-ring",
+            size_bytes.max(64 * 1024),
+            BufferUsage::TRANSFER_SRC,
+            AllocKind::Staging,
+            MemoryClass::HostVisible,
+            16,
+        )?;
+        Ok(Uploader {
+            staging,
+            cursor: 0,
+            pending: Vec::new(),
+            flushes: 0,
+        })
+    }
+
+    /// Queues `bytes` for `dst` at `dst_offset`. `dst` must stay alive until the next `flush`.
+    fn upload(
+        &mut self,
+        ctx: &Context,
+        dst: &HeapBuffer,
+        dst_offset: u64,
+        bytes: &[u8],
+    ) -> Result<()> {
+        let cap = self.staging.size_bytes();
+        let mut done = 0usize;
+        while done < bytes.len() {
+            if self.cursor >= cap {
+                self.flush(ctx)?;
+            }
+            let n = ((cap - self.cursor) as usize).min(bytes.len() - done);
+            self.staging
+                .write_bytes(self.cursor, &bytes[done..done + n])?;
+            self.pending.push((
+                dst.handle(),
+                self.cursor,
+                dst_offset + done as u64,
+                n as u64,
+            ));
+            // Keep copies 16-byte aligned in the ring.
+            self.cursor = (self.cursor + n as u64).div_ceil(16) * 16;
+            done += n;
+        }
+        Ok(())
+    }
+
+    fn flush(&mut self, ctx: &Context) -> Result<()> {
+        if self.pending.is_empty() {
+            self.cursor = 0;
+            return Ok(());
+        }
+        let rec = ctx.record("upload")?;
+        let (c, cmd) = rec.raw();
+        for &(dst, src_off, dst_off, size) in &self.pending {
+            let region = vk::BufferCopy {
+                src_offset: src_off,
+                dst_offset: dst_off,
+                size,
+            };
+            // SAFETY: recording state; the staging buffer and every queued destination are alive
+            // until this function returns (callers keep them; the submission is waited on).
+            unsafe {
+                c.shared
+                    .device
+                    .cmd_copy_buffer(cmd, self.staging.handle(), dst, &[region])
+            };
+        }
+        rec.submit_and_wait()?;
+        self.pending.clear();
+        self.cursor = 0;
+        self.flushes += 1;
+        Ok(())
+    }
+}
+
+/// Per compiled mesh on the GPU.
+struct MeshGpu {
+    buffer: HeapBuffer,
+    positions_address: u64,
+    indices_address: u64,
+    vertex_count: u32,
+    triangle_count: u32,
+}
+
+/// Everything one compiled hierarchy needs on the GPU. Drop releases it all.
+pub struct GpuScene {
+    // Acceleration structures first: destroyed before the buffers and blocks they live in.
+    pub(crate) blases: Vec<Option<AccelStruct>>,
+    pub(crate) tlases: Vec<AccelStruct>,
+    meshes: Vec<Option<MeshGpu>>,
+    tables: Vec<HeapBuffer>,
+    pub(crate) addresses: [u64; SLOT_COUNT],
+    pub(crate) root_tlas: u32,
+    pub(crate) heap: Mutex<GpuHeap>,
+    report: ResourceReport,
+    ctx: Context,
+}
+
+impl std::fmt::Debug for GpuScene {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuScene")
+            .field("blases", &self.blases.len())
+            .field("tlases", &self.tlases.len())
+            .field("as_bytes", &self.report.as_bytes)
+            .finish()
+    }
+}
+
+fn table_usage() -> BufferUsage {
+    BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS | BufferUsage::TRANSFER_DST
+}
+
+struct Pending {
+    accel: AccelStruct,
+    index: usize,
+}
+
+impl GpuScene {
+    /// Uploads `view` and builds every acceleration structure (see the module docs).
+    pub fn build(
+        ctx: &Context,
+        view: &HierarchyView<'_>,
+        meshes: &dyn MeshBlobSource,
+        opts: &BuildOptions,
+    ) -> Result<GpuScene> {
+        let span = tracing::info_span!(
+            "gpu_build",
+            tlases = view.tlases.len(),
+            blases = view.blases.len()
+        );
+        let _g = span.enter();
+        let t0 = Instant::now();
+        view.check_references()
+            .map_err(|e| GpuError::InvalidRequest(e.to_string()))?;
+        if !ctx.caps().acceleration_structure || !ctx.caps().buffer_device_address {
+            return Err(GpuError::MissingFeature {
+                what: "acceleration structures with buffer device address".into(),
+                details: ctx.device_name().to_string(),
+            });
+        }
+        let device_available = ctx
+            .heaps()
+            .iter()
+            .filter(|h| h.device_local)
+            .filter_map(|h| {
+                h.budget_bytes
+                    .map(|b| b.saturating_sub(h.usage_bytes.unwrap_or(0)))
+            })
+            .max();
+        let budget = effective_budget_bytes(
+            Some(opts.budget_bytes),
+            device_available,
+            SafetyMargin::default(),
+        )
+        .unwrap_or(opts.budget_bytes);
+        let device_cap = ctx
+            .limits()
+            .max_memory_allocation_count
+            .saturating_sub(ctx.allocation_count());
+        let limits = AllocLimits {
+            max_allocation_count: opts.max_allocations.min(device_cap).max(1),
+            max_allocation_size_bytes: ctx.limits().max_memory_allocation_size,
+            budget_bytes: budget,
+            host_visible_budget_bytes: opts.staging_bytes.max(64 * MIB) * 4,
+        };
+        let mut heap = GpuHeap::new(ctx, limits)?;
+        let mut scene = GpuScene {
+            blases: Vec::new(),
+            tlases: Vec::new(),
+            meshes: Vec::new(),
+            tables: Vec::new(),
+            addresses: [0; SLOT_COUNT],
+            root_tlas: view.root_tlas,
+            heap: Mutex::new(GpuHeap::new(ctx, limits)?),
+            report: ResourceReport {
+                budget_bytes: budget,
+                max_allocations: limits.max_allocation_count,
+                ..Default::default()
+            },
+            ctx: ctx.clone(),
+        };
+        // The placeholder heap above holds no blocks; the real one moves in at the end so a
+        // failure anywhere drops everything built so far.
+        let result = scene.build_into(&mut heap, view, meshes, opts);
+        if let Err(e) = result {
+            drop(scene);
+            drop(heap);
+            return Err(e);
+        }
+        scene.report.build_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let alloc = heap.report();
+        scene.report.peak_bytes = alloc.peak_block_bytes;
+        scene.report.allocation_count = alloc.allocation_count;
+        scene.report.peak_allocation_count = alloc.peak_allocation_count;
+        scene.report.alloc = Some(alloc);
+        *scene.heap.get_mut().unwrap_or_else(|e| e.into_inner()) = heap;
+        tracing::info!(
+            as_bytes = scene.report.as_bytes,
+            peak_bytes = scene.report.peak_bytes,
+            allocations = scene.report.peak_allocation_count,
+            ms = scene.report.build_ms,
+            "GPU scene built"
+        );
+        Ok(scene)
+    }
+
+    fn build_into(
+        &mut self,
+        heap: &mut GpuHeap,
+        view: &HierarchyView<'_>,
+        source: &dyn MeshBlobSource,
+        opts: &BuildOptions,
+    ) -> Result<()> {
+        let ctx = self.ctx.clone();
+        let mut up = Uploader::new(heap, opts.staging_bytes)?;
+        let result = self.build_steps(&ctx, heap, &mut up, view, source, opts);
+        heap.free(up.staging);
+        result
+    }
+
+    fn upload_table(
+        &mut self,
+        ctx: &Context,
+        heap: &mut GpuHeap,
+        up: &mut Uploader,
+        slot: Slot,
+        bytes: &[u8],
+    ) -> Result<()> {
+        if bytes.is_empty() {
+            return Ok(());
+        }
+        let buf = heap.alloc_buffer(
+            &format!("table-{slot:?}"),
+            bytes.len() as u64,
+            table_usage(),
+            AllocKind::NodeTable,
+            MemoryClass::DeviceLocal,
+            16,
+        )?;
+        self.addresses[slot as usize] = buf.device_address()?.0;
+        self.report.table_bytes += bytes.len() as u64;
+        up.upload(ctx, &buf, 0, bytes)?;
+        self.tables.push(buf);
+        Ok(())
+    }
+
+    fn build_steps(
+        &mut self,
+        ctx: &Context,
+        heap: &mut GpuHeap,
+        up: &mut Uploader,
+        view: &HierarchyView<'_>,
+        source: &dyn MeshBlobSource,
+        opts: &BuildOptions,
+    ) -> Result<()> {
+        use bytemuck::cast_slice;
+        // 1. Node tables.
+        let tables: [(Slot, &[u8]); 9] = [
+            (Slot::Tlases, cast_slice(view.tlases)),
+            (Slot::Instances, cast_slice(view.instances)),
+            (Slot::Blases, cast_slice(view.blases)),
+            (Slot::Geometries, cast_slice(view.geometries)),
+            (Slot::Pis, cast_slice(view.pis)),
+            (Slot::Selectors, cast_slice(view.lod_selectors)),
+            (Slot::LodLevels, cast_slice(view.lod_levels)),
+            (Slot::Meshes, cast_slice(view.meshes)),
+            (Slot::Materials, cast_slice(view.materials)),
+        ];
+        for (slot, bytes) in tables {
+            self.upload_table(ctx, heap, up, slot, bytes)?;
+        }
+
+        // 2. Geometry of every mesh a triangle BLAS uses: allocate from the records' counts,
+        // then load and upload one mesh at a time through the ring.
+        let mut used = vec![false; view.meshes.len()];
+        for b in view.blases.iter().filter(|b| b.kind == BLAS_TRIANGLES) {
+            for g in &view.geometries[b.item_base as usize..(b.item_base + b.item_count) as usize] {
+                used[g.mesh as usize] = true;
+            }
+        }
+        self.meshes = (0..view.meshes.len()).map(|_| None).collect();
+        for (m, rec) in view.meshes.iter().enumerate() {
+            if !used[m] || rec.triangle_count == 0 || rec.vertex_count == 0 {
+                continue;
+            }
+            let pos_bytes = u64::from(rec.vertex_count) * 12;
+            let idx_offset = pos_bytes.div_ceil(16) * 16;
+            let size = idx_offset + u64::from(rec.triangle_count) * 12;
+            let buf = heap.alloc_buffer(
+                &format!("mesh-{m}"),
+                size,
+                BufferUsage::STORAGE
+                    | BufferUsage::DEVICE_ADDRESS
+                    | BufferUsage::TRANSFER_DST
+                    | BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT,
+                AllocKind::Geometry,
+                MemoryClass::DeviceLocal,
+                16,
+            )?;
+            let base = buf.device_address()?.0;
+            self.report.geometry_bytes += size;
+            self.meshes[m] = Some(MeshGpu {
+                buffer: buf,
+                positions_address: base,
+                indices_address: base + idx_offset,
+                vertex_count: rec.vertex_count,
+                triangle_count: rec.triangle_count,
+            });
+        }
+        for (m, slot) in self.meshes.iter().enumerate() {
+            let Some(g) = slot else { continue };
+            let (positions, indices) = source
+                .mesh_data(m as u32)
+                .map_err(|e| GpuError::InvalidRequest(format!("mesh record {m}: {e}")))?;
+            if positions.len() != g.vertex_count as usize
+                || indices.len() != 3 * g.triangle_count as usize
+            {
+                return Err(GpuError::InvalidRequest(format!(
+                    "mesh record {m}: {} positions and {} indices, the record says {} and {}",
+                    positions.len(),
+                    indices.len(),
+                    g.vertex_count,
+                    3 * g.triangle_count
+                )));
+            }
+            if let Some(bad) = indices.iter().find(|&&i| i >= g.vertex_count) {
+                return Err(GpuError::InvalidRequest(format!(
+                    "mesh record {m}: index {bad} >= vertex count {}",
+                    g.vertex_count
+                )));
+            }
+            up.upload(ctx, &g.buffer, 0, cast_slice(&positions[..]))?;
+            let idx_off = g.indices_address - g.positions_address;
+            up.upload(ctx, &g.buffer, idx_off, cast_slice(&indices[..]))?;
+        }
+        let mut mesh_geo = vec![0u64; 2 * view.meshes.len()];
+        for (m, g) in self.meshes.iter().enumerate() {
+            if let Some(g) = g {
+                mesh_geo[2 * m] = g.positions_address;
+                mesh_geo[2 * m + 1] = g.indices_address;
+            }
+        }
+        self.upload_table(ctx, heap, up, Slot::MeshGeo, cast_slice(&mesh_geo))?;
+
+        // 3. AABBs of programmable instances (build input only).
+        let aabbs: Vec<[f32; 6]> = view
+            .pis
+            .iter()
+            .map(|p| {
+                [
+                    p.aabb_min[0],
+                    p.aabb_min[1],
+                    p.aabb_min[2],
+                    p.aabb_max[0],
+                    p.aabb_max[1],
+                    p.aabb_max[2],
+                ]
+            })
+            .collect();
+        let aabb_buf = if aabbs.is_empty() {
+            None
+        } else {
+            let b = heap.alloc_buffer(
+                "pi-aabbs",
+                (aabbs.len() * 24) as u64,
+                BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT | BufferUsage::TRANSFER_DST,
+                AllocKind::Geometry,
+                MemoryClass::DeviceLocal,
+                16,
+            )?;
+            up.upload(ctx, &b, 0, cast_slice(&aabbs))?;
+            Some(b)
+        };
+        up.flush(ctx)?;
+
+        // 4. BLASes.
+        let r = self.build_blases(ctx, heap, view, aabb_buf.as_ref(), opts);
+        if let Some(b) = aabb_buf {
+            heap.free(b);
+        }
+        r?;
+
+        // 5. TLASes, then their address table.
+        self.build_tlases(ctx, heap, up, view, opts)?;
+        let addrs: Vec<u64> = self.tlases.iter().map(|t| t.address).collect();
+        self.upload_table(ctx, heap, up, Slot::TlasAddresses, cast_slice(&addrs))?;
+        up.flush(ctx)?;
+        self.report.as_bytes = self
+            .blases
+            .iter()
+            .flatten()
+            .map(|a| a.size_bytes)
+            .sum::<u64>()
+            + self.tlases.iter().map(|a| a.size_bytes).sum::<u64>();
+        Ok(())
+    }
+
+    fn build_blases(
+        &mut self,
+        ctx: &Context,
+        heap: &mut GpuHeap,
+        view: &HierarchyView<'_>,
+        aabb_buf: Option<&HeapBuffer>,
+        opts: &BuildOptions,
+    ) -> Result<()> {
+        let aabb_base = match aabb_buf {
+            Some(b) => b.device_address()?.0,
+            None => 0,
+        };
+        // Geometry descriptions (with addresses) per BLAS; None for empty ones.
+        let mut descs: Vec<Option<(Vec<vk::AccelerationStructureGeometryKHR<'static>>, Vec<u32>)>> =
+            Vec::with_capacity(view.blases.len());
+        let mut sizes = Vec::new();
+        let mut order = Vec::new();
+        for (i, b) in view.blases.iter().enumerate() {
+            let range = b.item_base as usize..(b.item_base + b.item_count) as usize;
+            let (geoms, counts, shape): (Vec<_>, Vec<u32>, Vec<BlasGeometry>) = if b.kind
+                == BLAS_AABBS
+            {
+                if b.item_count == 0 {
+                    (Vec::new(), Vec::new(), Vec::new())
+                } else {
+                    let aabbs = vk::AccelerationStructureGeometryAabbsDataKHR::default()
+                        .data(vk::DeviceOrHostAddressConstKHR {
+                            device_address: aabb_base + u64::from(b.item_base) * 24,
+                        })
+                        .stride(24);
+                    (
+                        vec![vk::AccelerationStructureGeometryKHR::default()
+                            .geometry_type(vk::GeometryTypeKHR::AABBS)
+                            .geometry(vk::AccelerationStructureGeometryDataKHR { aabbs })
+                            .flags(vk::GeometryFlagsKHR::NO_DUPLICATE_ANY_HIT_INVOCATION)],
+                        vec![b.item_count],
+                        vec![BlasGeometry::Aabbs {
+                            aabb_count: b.item_count,
+                            opaque: false,
+                        }],
+                    )
+                }
+            } else {
+                let mut g = Vec::new();
+                let mut c = Vec::new();
+                let mut s = Vec::new();
+                for geo in &view.geometries[range] {
+                    let Some(m) = &self.meshes[geo.mesh as usize] else {
+                        continue;
+                    };
+                    let opaque = view.meshes[geo.mesh as usize].flags & FLAG_NEEDS_ANY_HIT == 0;
+                    let tri = vk::AccelerationStructureGeometryTrianglesDataKHR::default()
+                        .vertex_format(vk::Format::R32G32B32_SFLOAT)
+                        .vertex_data(vk::DeviceOrHostAddressConstKHR {
+                            device_address: m.positions_address,
+                        })
+                        .vertex_stride(12)
+                        .max_vertex(m.vertex_count - 1)
+                        .index_type(vk::IndexType::UINT32)
+                        .index_data(vk::DeviceOrHostAddressConstKHR {
+                            device_address: m.indices_address,
+                        });
+                    g.push(
+                        vk::AccelerationStructureGeometryKHR::default()
+                            .geometry_type(vk::GeometryTypeKHR::TRIANGLES)
+                            .geometry(vk::AccelerationStructureGeometryDataKHR { triangles: tri })
+                            .flags(if opaque {
+                                vk::GeometryFlagsKHR::OPAQUE
+                            } else {
+                                vk::GeometryFlagsKHR::NO_DUPLICATE_ANY_HIT_INVOCATION
+                            }),
+                    );
+                    c.push(m.triangle_count);
+                    s.push(BlasGeometry::Triangles {
+                        vertex_count: m.vertex_count,
+                        triangle_count: m.triangle_count,
+                        indexed: true,
+                        opaque,
+                    });
+                }
+                // A geometry index must equal its position in the record (gl_GeometryIndexEXT
+                // resolves the mesh), so an empty mesh inside a BLAS is an error.
+                if g.len() != b.item_count as usize {
+                    return Err(GpuError::InvalidRequest(format!(
+                        "BLAS {i}: {} of its {} meshes are empty",
+                        b.item_count as usize - g.len(),
+                        b.item_count
+                    )));
+                }
+                (g, c, s)
+            };
+            if geoms.is_empty() {
+                descs.push(None);
+                continue;
+            }
+            let sz = ctx.blas_build_sizes(&shape, AsBuildFlags::default())?;
+            sizes.push(BuildSize {
+                result_bytes: sz.acceleration_structure_size_bytes,
+                scratch_bytes: sz.build_scratch_size_bytes,
+            });
+            order.push(i);
+            descs.push(Some((geoms, counts)));
+        }
+        self.blases = (0..view.blases.len()).map(|_| None).collect();
+        let built = self.build_batched(
+            ctx,
+            heap,
+            &sizes,
+            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            opts,
+            |k| {
+                let (g, c) = descs[order[k]]
+                    .as_ref()
+                    .map(|(g, c)| (g.as_slice(), c.clone()))
+                    .unwrap_or((&[], Vec::new()));
+                (g.to_vec(), c)
+            },
+            |_, _| Ok(()),
+        )?;
+        for (k, accel) in built {
+            self.report.blas_count += 1;
+            self.report.blas_bytes += sizes[k].result_bytes;
+            self.report.blas_compacted_bytes += accel.size_bytes;
+            self.blases[order[k]] = Some(accel);
+        }
+        Ok(())
+    }
+
+    fn build_tlases(
+        &mut self,
+        ctx: &Context,
+        heap: &mut GpuHeap,
+        up: &mut Uploader,
+        view: &HierarchyView<'_>,
+        opts: &BuildOptions,
+    ) -> Result<()> {
+        let mut sizes = Vec::with_capacity(view.tlases.len());
+        for t in view.tlases {
+            let s = ctx.tlas_build_sizes(t.instance_count, AsBuildFlags::default())?;
+            sizes.push(BuildSize {
+                result_bytes: s.acceleration_structure_size_bytes,
+                scratch_bytes: s.build_scratch_size_bytes,
+            });
+        }
+        // Instance records (VkAccelerationStructureInstanceKHR, 64 bytes) of every TLAS.
+        let blas_addr: Vec<u64> = self
+            .blases
+            .iter()
+            .map(|b| b.as_ref().map_or(0, |a| a.address))
+            .collect();
+        let instance_bytes = |t: usize| -> Vec<u8> {
+            let rec = &view.tlases[t];
+            let mut out = Vec::with_capacity(rec.instance_count as usize * 64);
+            for inst in &view.instances
+                [rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize]
+            {
+                let blas = &view.blases[inst.blas as usize];
+                let (sbt, flags) = if blas.kind == BLAS_AABBS {
+                    (1u32, vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE)
+                } else if inst.flags & FLAG_NEEDS_ANY_HIT != 0 {
+                    (
+                        0,
+                        vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE,
+                    )
+                } else {
+                    (
+                        0,
+                        vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE
+                            | vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE,
+                    )
+                };
+                for v in inst.tlas_from_blas {
+                    out.extend_from_slice(&v.to_le_bytes());
+                }
+                // Custom index 0 (node ids never travel in 24 bits), mask 0xFF.
+                out.extend_from_slice(&(0xFFu32 << 24).to_le_bytes());
+                out.extend_from_slice(&(sbt | (flags.as_raw() << 24)).to_le_bytes());
+                out.extend_from_slice(&blas_addr[inst.blas as usize].to_le_bytes());
+            }
+            out
+        };
+        // Per batch: one instance buffer holding its TLASes' instances, uploaded then freed.
+        let inst_offsets: std::cell::RefCell<Vec<u64>> =
+            std::cell::RefCell::new(vec![0; view.tlases.len()]);
+        let inst_addr: std::cell::Cell<u64> = std::cell::Cell::new(0);
+        let inst_buf: std::cell::RefCell<Option<HeapBuffer>> = std::cell::RefCell::new(None);
+        let peak = std::cell::Cell::new(0u64);
+        let built = self.build_batched(
+            ctx,
+            heap,
+            &sizes,
+            vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+            opts,
+            |k| {
+                let instances = vk::AccelerationStructureGeometryInstancesDataKHR::default()
+                    .array_of_pointers(false)
+                    .data(vk::DeviceOrHostAddressConstKHR {
+                        device_address: inst_addr.get() + inst_offsets.borrow()[k],
+                    });
+                (
+                    vec![vk::AccelerationStructureGeometryKHR::default()
+                        .geometry_type(vk::GeometryTypeKHR::INSTANCES)
+                        .geometry(vk::AccelerationStructureGeometryDataKHR { instances })],
+                    vec![view.tlases[k].instance_count],
+                )
+            },
+            |heap: &mut GpuHeap, range: std::ops::Range<usize>| {
+                if let Some(b) = inst_buf.borrow_mut().take() {
+                    heap.free(b);
+                }
+                let total: u64 = range
+                    .clone()
+                    .map(|t| u64::from(view.tlases[t].instance_count) * 64)
+                    .sum();
+                if total == 0 {
+                    return Ok(());
+                }
+                let b = heap.alloc_buffer(
+                    "tlas-instances",
+                    total,
+                    BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT | BufferUsage::TRANSFER_DST,
+                    AllocKind::InstanceBuffer,
+                    MemoryClass::DeviceLocal,
+                    16,
+                )?;
+                peak.set(peak.get().max(total));
+                inst_addr.set(b.device_address()?.0);
+                let mut off = 0u64;
+                for t in range {
+                    inst_offsets.borrow_mut()[t] = off;
+                    let bytes = instance_bytes(t);
+                    if !bytes.is_empty() {
+                        up.upload(ctx, &b, off, &bytes)?;
+                    }
+                    off += bytes.len() as u64;
+                }
+                up.flush(ctx)?;
+                *inst_buf.borrow_mut() = Some(b);
+                Ok(())
+            },
+        );
+        if let Some(b) = inst_buf.borrow_mut().take() {
+            heap.free(b);
+        }
+        let built = built?;
+        self.report.instance_buffer_peak_bytes = peak.get();
+        let mut tl: Vec<Option<AccelStruct>> = (0..view.tlases.len()).map(|_| None).collect();
+        for (k, accel) in built {
+            self.report.tlas_count += 1;
+            self.report.tlas_bytes += sizes[k].result_bytes;
+            self.report.tlas_compacted_bytes += accel.size_bytes;
+            tl[k] = Some(accel);
+        }
+        self.tlases = tl
+            .into_iter()
+            .enumerate()
+            .map(|(k, a)| {
+                a.ok_or_else(|| GpuError::InvalidRequest(format!("TLAS {k} was not built")))
+            })
+            .collect::<Result<_>>()?;
+        Ok(())
+    }
+
+    /// Builds `sizes.len()` structures in batches under the scratch budget, compacting each
+    /// batch before the next. `geometry(k)` describes build k (addresses valid once
+    /// `prepare(heap, batch_range)` ran for its batch). Returns (k, structure) pairs.
+    #[allow(clippy::too_many_arguments)]
+    fn build_batched<'g>(
+        &mut self,
+        ctx: &Context,
+        heap: &mut GpuHeap,
+        sizes: &[BuildSize],
+        ty: vk::AccelerationStructureTypeKHR,
+        opts: &BuildOptions,
+        geometry: impl Fn(usize) -> (Vec<vk::AccelerationStructureGeometryKHR<'g>>, Vec<u32>),
+        mut prepare: impl FnMut(&mut GpuHeap, std::ops::Range<usize>) -> Result<()>,
+    ) -> Result<Vec<(usize, AccelStruct)>> {
+        if sizes.is_empty() {
+            return Ok(Vec::new());
+        }
+        let accel = ctx.accel_device()?;
+        let scratch_align = u64::from(
+            ctx.limits()
+                .min_acceleration_structure_scratch_offset_alignment
+                .max(1),
+        )
+        .next_power_of_two();
+        let plan = plan_build_batches(
+            sizes,
+            BatchLimits {
+                scratch_budget_bytes: opts.scratch_budget_bytes,
+                scratch_alignment_bytes: scratch_align,
+                scratch_pool_max_bytes: heap.limits().budget_bytes,
+                max_batch_result_bytes: Some(opts.max_batch_result_bytes),
+            },
+        )
+        .map_err(|e| GpuError::Budget(e.to_string()))?;
+        let scratch = heap.alloc_buffer(
+            "scratch-pool",
+            plan.scratch_pool_bytes.max(scratch_align),
+            BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
+            AllocKind::Scratch,
+            MemoryClass::DeviceLocal,
+            scratch_align,
+        )?;
+        self.report.scratch_peak_bytes = self.report.scratch_peak_bytes.max(scratch.size_bytes());
+        let result = (|| -> Result<Vec<(usize, AccelStruct)>> {
+            let scratch_base = scratch.device_address()?.0.div_ceil(scratch_align) * scratch_align;
+            let kind = if ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL {
+                "tlas"
+            } else {
+                "blas"
+            };
+            let mut out = Vec::with_capacity(sizes.len());
+            for (bi, batch) in plan.batches.iter().enumerate() {
+                self.report.build_batches += 1;
+                prepare(heap, batch.builds.clone())?;
+                let mut pending: Vec<Pending> = Vec::new();
+                for k in batch.builds.clone() {
+                    let a = AccelStruct::new(
+                        ctx,
+                        heap,
+                        &format!("{kind}-{k}"),
+                        sizes[k].result_bytes,
+                        ty,
+                    )?;
+                    pending.push(Pending { accel: a, index: k });
+                }
+                let descs: Vec<_> = batch.builds.clone().map(&geometry).collect();
+                let ranges: Vec<Vec<vk::AccelerationStructureBuildRangeInfoKHR>> = descs
+                    .iter()
+                    .map(|(_, counts)| {
+                        counts
+                            .iter()
+                            .map(|&n| {
+                                vk::AccelerationStructureBuildRangeInfoKHR::default()
+                                    .primitive_count(n)
+                            })
+                            .collect()
+                    })
+                    .collect();
+                let infos: Vec<_> = descs
+                    .iter()
+                    .zip(&pending)
+                    .map(|((g, _), p)| {
+                        vk::AccelerationStructureBuildGeometryInfoKHR::default()
+                            .ty(ty)
+                            .flags(
+                                vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE
+                                    | vk::BuildAccelerationStructureFlagsKHR::ALLOW_COMPACTION,
+                            )
+                            .mode(vk::BuildAccelerationStructureModeKHR::BUILD)
+                            .dst_acceleration_structure(p.accel.handle)
+                            .geometries(g)
+                            .scratch_data(vk::DeviceOrHostAddressKHR {
+                                device_address: scratch_base + plan.scratch_offsets_bytes[p.index],
+                            })
+                    })
+                    .collect();
+                let range_refs: Vec<&[vk::AccelerationStructureBuildRangeInfoKHR]> =
+                    ranges.iter().map(|r| r.as_slice()).collect();
+                let queries = SizeQueries::new(ctx, pending.len() as u32)?;
+                let handles: Vec<_> = pending.iter().map(|p| p.accel.handle).collect();
+                let rec = ctx.record(&format!("{kind} build batch {bi}"))?;
+                let (c, cmd) = rec.raw();
+                let device = &c.shared.device;
+                // SAFETY: recording state; destinations, scratch slices (disjoint, aligned),
+                // inputs and the query pool live until the fenced submission below returns.
+                unsafe {
+                    full_barrier(device, cmd);
+                    accel.cmd_build_acceleration_structures(cmd, &infos, &range_refs);
+                    full_barrier(device, cmd);
+                    device.cmd_reset_query_pool(cmd, queries.pool, 0, queries.count);
+                    accel.cmd_write_acceleration_structures_properties(
+                        cmd,
+                        &handles,
+                        vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR,
+                        queries.pool,
+                        0,
+                    );
+                }
+                rec.submit_and_wait()?;
+                if !opts.compact {
+                    out.extend(pending.into_iter().map(|p| (p.index, p.accel)));
+                    continue;
+                }
+                let compacted = queries.read(pending.len() as u32)?;
+                let mut copies = Vec::with_capacity(pending.len());
+                for (p, &size) in pending.iter().zip(&compacted) {
+                    let size = size.max(1).min(p.accel.size_bytes);
+                    copies.push(AccelStruct::new(
+                        ctx,
+                        heap,
+                        &format!("{kind}-{}-compact", p.index),
+                        size,
+                        ty,
+                    )?);
+                }
+                let rec = ctx.record(&format!("{kind} compaction batch {bi}"))?;
+                let (_, cmd) = rec.raw();
+                for (p, dst) in pending.iter().zip(&copies) {
+                    let info = vk::CopyAccelerationStructureInfoKHR::default()
+                        .src(p.accel.handle)
+                        .dst(dst.handle)
+                        .mode(vk::CopyAccelerationStructureModeKHR::COMPACT);
+                    // SAFETY: both structures live until the fenced submission returns; the
+                    // source was built with ALLOW_COMPACTION and dst holds its compacted size.
+                    unsafe { accel.cmd_copy_acceleration_structure(cmd, &info) };
+                }
+                rec.submit_and_wait()?;
+                for (p, dst) in pending.into_iter().zip(copies) {
+                    p.accel.release(heap);
+                    out.push((p.index, dst));
+                }
+            }
+            Ok(out)
+        })();
+        heap.free(scratch);
+        result
+    }
+
+    /// Bytes and counts per kind of resource.
+    pub fn report(&self) -> &ResourceReport {
+        &self.report
+    }
+
+    /// The allocator's statistics now (includes per-render buffers while a render runs).
+    pub fn alloc_report(&self) -> AllocReport {
+        self.heap().report()
+    }
+
+    pub(crate) fn heap(&self) -> MutexGuard<'_, GpuHeap> {
+        self.heap.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    pub fn context(&self) -> &Context {
+        &self.ctx
+    }
+
+    /// Device address of TLAS `id`'s acceleration structure.
+    pub fn tlas_address(&self, id: u32) -> Option<u64> {
+        self.tlases.get(id as usize).map(|t| t.address)
+    }
+}
+
+/// A full memory barrier (coarse: builds are few and large).
+///
+/// # Safety
+/// `cmd` must be in the recording state on `device`.
+pub(crate) unsafe fn full_barrier(device: &ash::Device, cmd: vk::CommandBuffer) {
+    let barrier = vk::MemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::MEMORY_WRITE)
+        .dst_access_mask(vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE);
+    // SAFETY: per the function contract.
+    unsafe {
+        device.cmd_pipeline_barrier(
+            cmd,
+            vk::PipelineStageFlags::ALL_COMMANDS,
+            vk::PipelineStageFlags::ALL_COMMANDS,
+            vk::DependencyFlags::empty(),
+            &[barrier],
+            &[],
+            &[],
+        )
+    };
+}

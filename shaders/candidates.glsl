@@ -1,0 +1,35 @@
+// Candidate recording, shared by the pipeline backend's any-hit shader and the query
+// backend's rayQueryProceedEXT loop. Expects `Payload pl` declared by the includer.
+#ifndef MOTU_CANDIDATES_GLSL
+#define MOTU_CANDIDATES_GLSL
+#include "common.glsl"
+
+// Records a candidate in the payload, keeping the PI_CAPACITY nearest (called from any-hit or
+// from the ray-query loop).
+void record_candidate(uint pi, float t_near, uint instance) {
+    if (t_near <= pl.t_floor) {
+        return;
+    }
+    if (pl.count < PI_CAPACITY) {
+        pl.c[pl.count] = PiCandidate(pi, t_near, instance, 0u);
+        pl.count += 1u;
+        return;
+    }
+    pl.truncated = 1u;
+    uint far_i = 0u;
+    for (uint i = 1u; i < PI_CAPACITY; ++i) {
+        if (pl.c[i].t_near > pl.c[far_i].t_near) {
+            far_i = i;
+        }
+    }
+    if (t_near < pl.c[far_i].t_near) {
+        pl.c[far_i] = PiCandidate(pi, t_near, instance, 0u);
+    }
+}
+
+// The global PI index of primitive `primitive` of instance `instance` of TLAS `tlas`.
+uint pi_index(uint tlas, uint instance, uint primitive) {
+    uint blas = push.instances.r[push.tlases.r[tlas].instance_base + instance].blas;
+    return push.blases.r[blas].item_base + primitive;
+}
+#endif

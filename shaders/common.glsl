@@ -1,0 +1,220 @@
+// Shared declarations of both traversal backends: the hierarchy tables reached by device
+// address (push constants), the frame parameters, the traversal payload and small helpers
+// (id hash, palettes, sRGB, shadow-ray offset) mirrored from the CPU renderer (motu-trace).
+#ifndef MOTU_COMMON_GLSL
+#define MOTU_COMMON_GLSL
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+#include "generated/abi.glsl"
+
+// Candidates one TLAS walk can record before the list is truncated (the remainder is found by
+// a re-walk of the same TLAS, see traverse.glsl).
+#define PI_CAPACITY 8
+
+#define VIEW_SHADED 0u
+#define VIEW_IDS 1u
+#define VIEW_LOD 2u
+#define VIEW_HEATMAP 3u
+
+// Indices of the stats buffer (u32 counters, reset every frame).
+#define STAT_STACK_OVERFLOWS 0
+#define STAT_PI_LIST_OVERFLOWS 1
+#define STAT_SHADOW_RAYS 2
+#define STAT_HITS 3
+
+#define T_INFINITY 3.0e38
+
+struct FrameParams {
+    CameraParams camera;
+    LodParams lod;
+    vec4 sun_dir_intensity;  // xyz: unit world direction towards the sun; w: intensity
+    uint view;
+    uint shadows;
+    uint shadow_lod_from_primary;
+    float ambient;
+    uint root_tlas;
+    uint _pad0;
+    uint _pad1;
+    uint _pad2;
+};
+
+struct MeshGeo {
+    uint64_t positions;  // [f32; 3] tightly packed
+    uint64_t indices;    // u32 × 3 per triangle
+};
+
+// One recorded programmable-instance candidate: 12 bytes (+4 padding).
+struct PiCandidate {
+    uint pi;        // global PI index
+    float t_near;   // world distance (t is invariant under the non-renormalised transforms)
+    uint instance;  // instance index within the walked TLAS (gl_InstanceID)
+    uint _pad;
+};
+
+// The traversal payload (rayPayloadEXT in the pipeline backend, a plain global in the query
+// backend): 16 + 16 + 16 × PI_CAPACITY = 160 bytes. Written by raygen before the trace
+// (tlas, t_floor, counters) and by any-hit (candidates) and closest-hit (the hit) during it.
+struct Payload {
+    uint tlas;
+    uint count;
+    float t_floor;   // record only candidates with t_near > t_floor (re-walk after truncation)
+    uint truncated;  // the list was full: farther candidates were dropped
+    float hit_t;     // < 0: no triangle hit
+    uint hit_instance;
+    uint hit_geometry;
+    uint hit_primitive;
+    PiCandidate c[PI_CAPACITY];
+};
+
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer FrameRef { FrameParams f; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer TlasTable { TlasRecord r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer InstanceTable { InstanceRecord r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer BlasTable { BlasRecord r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer GeometryTable { GeometryRecord r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer PiTable { PiRecord r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer SelectorTable { LodSelectorRecord r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer U32Table { uint r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer MeshTable { MeshRecord r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer MaterialTable { MaterialRecord r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer MeshGeoTable { MeshGeo r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer U64Table { uint64_t r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer Positions { float v[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) writeonly buffer AovOut { uvec4 r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 4) writeonly buffer RgbaOut { uint r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 4) buffer Stats { uint n[]; };
+
+// 16 device addresses = 128 bytes, the guaranteed push-constant size. Order = Rust `Slot`.
+layout(push_constant) uniform Push {
+    FrameRef frame;
+    TlasTable tlases;
+    InstanceTable instances;
+    BlasTable blases;
+    GeometryTable geometries;
+    PiTable pis;
+    SelectorTable selectors;
+    U32Table lod_levels;
+    MeshTable meshes;
+    MaterialTable materials;
+    MeshGeoTable mesh_geo;
+    U64Table tlas_addresses;
+    AovOut aov;
+    RgbaOut rgba;
+    Stats stats;
+    uint64_t _spare;
+} push;
+
+// Row-major 3×4 as three rows.
+struct Affine {
+    vec4 r0;
+    vec4 r1;
+    vec4 r2;
+};
+
+Affine affine_identity() {
+    return Affine(vec4(1, 0, 0, 0), vec4(0, 1, 0, 0), vec4(0, 0, 1, 0));
+}
+
+Affine affine_from_array(float m[12]) {
+    return Affine(vec4(m[0], m[1], m[2], m[3]), vec4(m[4], m[5], m[6], m[7]),
+                  vec4(m[8], m[9], m[10], m[11]));
+}
+
+vec3 xform_point(Affine m, vec3 p) {
+    return vec3(dot(m.r0.xyz, p) + m.r0.w, dot(m.r1.xyz, p) + m.r1.w, dot(m.r2.xyz, p) + m.r2.w);
+}
+
+vec3 xform_vector(Affine m, vec3 v) {
+    return vec3(dot(m.r0.xyz, v), dot(m.r1.xyz, v), dot(m.r2.xyz, v));
+}
+
+// mᵀ n for the linear part: the normal transform by object_from_world without inverting.
+vec3 transpose_vector(Affine m, vec3 n) {
+    return m.r0.xyz * n.x + m.r1.xyz * n.y + m.r2.xyz * n.z;
+}
+
+// a ∘ b (apply b first).
+Affine compose(Affine a, Affine b) {
+    mat3 la = mat3(a.r0.xyz, a.r1.xyz, a.r2.xyz);  // columns = rows of a: la is aᵀ
+    mat3 lb = mat3(b.r0.xyz, b.r1.xyz, b.r2.xyz);
+    mat3 l = lb * la;  // (a·b)ᵀ = bᵀ·aᵀ
+    vec3 t = xform_vector(a, vec3(b.r0.w, b.r1.w, b.r2.w)) + vec3(a.r0.w, a.r1.w, a.r2.w);
+    return Affine(vec4(l[0], t.x), vec4(l[1], t.y), vec4(l[2], t.z));
+}
+
+Affine affine_inverse(Affine m) {
+    mat3 lt = mat3(m.r0.xyz, m.r1.xyz, m.r2.xyz);  // transpose of the linear part
+    mat3 inv_t = inverse(lt);                       // = (L⁻¹)ᵀ: its columns are rows of L⁻¹
+    vec3 t = vec3(m.r0.w, m.r1.w, m.r2.w);
+    Affine r = Affine(vec4(inv_t[0], 0.0), vec4(inv_t[1], 0.0), vec4(inv_t[2], 0.0));
+    vec3 it = -xform_vector(r, t);
+    r.r0.w = it.x;
+    r.r1.w = it.y;
+    r.r2.w = it.z;
+    return r;
+}
+
+// Slab test mirrored from motu-trace's LocalRay::hit_box; returns t_near or -1.
+float slab_near(vec3 org, vec3 dir, vec3 bmin, vec3 bmax, float t_min, float t_max) {
+    vec3 inv = 1.0 / dir;
+    vec3 n = (bmin - org) * inv;
+    vec3 f = (bmax - org) * inv;
+    vec3 lo = min(n, f);
+    vec3 hi = max(n, f) * 1.0000004;
+    float t0 = max(max(max(t_min, lo.x), lo.y), lo.z);
+    float t1 = min(min(min(t_max, hi.x), hi.y), hi.z);
+    return t0 <= t1 ? t0 : -1.0;
+}
+
+uint hash_u32(uint v) {
+    uint state = v * 747796405u + 2891336453u;
+    uint word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+
+float pixel_dither(uint x, uint y) {
+    return float(hash_u32((x * 0x8da6b343u) ^ (y * 0xd8163841u)) >> 8u) / 16777216.0;
+}
+
+vec3 id_colour(uint mesh, uint primitive) {
+    uint h = hash_u32(hash_u32(mesh) ^ primitive);
+    return vec3(0.15) + 0.85 * vec3(float(h & 0xffu), float((h >> 8u) & 0xffu),
+                                    float((h >> 16u) & 0xffu)) / 255.0;
+}
+
+vec3 lod_colour(uint level) {
+    const vec3 palette[8] = vec3[8](vec3(0.1, 0.8, 0.1), vec3(0.1, 0.4, 0.9), vec3(0.9, 0.8, 0.1),
+                                    vec3(0.9, 0.4, 0.1), vec3(0.8, 0.1, 0.1), vec3(0.7, 0.1, 0.8),
+                                    vec3(0.1, 0.8, 0.8), vec3(0.6, 0.6, 0.6));
+    return palette[level % 8u];
+}
+
+vec3 sky(vec3 dir) {
+    float t = 0.5 * (clamp(dir.y, -1.0, 1.0) + 1.0);
+    return vec3(0.55 + 0.25 * t, 0.65 + 0.2 * t, 0.8 + 0.15 * t) * 0.8;
+}
+
+uint encode_srgb8(vec3 c) {
+    uvec3 b;
+    for (int i = 0; i < 3; ++i) {
+        float v = clamp(c[i], 0.0, 1.0);
+        float s = v <= 0.0031308 ? 12.92 * v : 1.055 * pow(v, 1.0 / 2.4) - 0.055;
+        b[i] = uint(s * 255.0 + 0.5);
+    }
+    return b.x | (b.y << 8u) | (b.z << 16u) | (255u << 24u);
+}
+
+// Wächter & Binder's offset, mirrored from motu_trace::render::shadow_offset.
+vec3 shadow_offset(vec3 p, vec3 n) {
+    vec3 o;
+    for (int a = 0; a < 3; ++a) {
+        if (abs(p[a]) < 1.0 / 32.0) {
+            o[a] = p[a] + (1.0 / 65536.0) * n[a];
+        } else {
+            int of = int(256.0 * n[a]);
+            int bits = floatBitsToInt(p[a]);
+            o[a] = intBitsToFloat(p[a] < 0.0 ? bits - of : bits + of);
+        }
+    }
+    return o;
+}
+#endif

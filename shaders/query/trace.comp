@@ -1,0 +1,51 @@
+#version 460
+// Backend `query`: the traversal loop in a compute shader with GL_EXT_ray_query (the thesis's
+// form, for devices with ray queries). Candidates of programmable instances (AABBs) are
+// slab-tested and recorded during rayQueryProceedEXT; the instance shader (traverse.glsl) runs
+// after each query.
+#extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_ray_query : require
+layout(local_size_x = 8, local_size_y = 8) in;
+#include "common.glsl"
+
+Payload pl;
+#include "candidates.glsl"
+
+void backend_trace(uint tlas, vec3 org, vec3 dir, float t_max, bool first_hit) {
+    rayQueryEXT rq;
+    uint flags = first_hit ? gl_RayFlagsTerminateOnFirstHitEXT : gl_RayFlagsNoneEXT;
+    rayQueryInitializeEXT(rq, accelerationStructureEXT(push.tlas_addresses.r[tlas]), flags, 0xFFu,
+                          org, 0.0, dir, t_max);
+    while (rayQueryProceedEXT(rq)) {
+        if (rayQueryGetIntersectionTypeEXT(rq, false) == gl_RayQueryCandidateIntersectionAABBEXT) {
+            uint instance = rayQueryGetIntersectionInstanceIdEXT(rq, false);
+            uint pi = pi_index(tlas, instance, rayQueryGetIntersectionPrimitiveIndexEXT(rq, false));
+            PiRecord r = push.pis.r[pi];
+            float t_hi = rayQueryGetIntersectionTypeEXT(rq, true) ==
+                                 gl_RayQueryCommittedIntersectionTriangleEXT
+                             ? rayQueryGetIntersectionTEXT(rq, true)
+                             : t_max;
+            float t_near = slab_near(rayQueryGetIntersectionObjectRayOriginEXT(rq, false),
+                                     rayQueryGetIntersectionObjectRayDirectionEXT(rq, false),
+                                     r.aabb_min, r.aabb_max, 0.0, t_hi);
+            if (t_near >= 0.0) {
+                record_candidate(pi, t_near, instance);
+            }
+        } else {
+            // Non-opaque triangles (alpha not supported yet): accept.
+            rayQueryConfirmIntersectionEXT(rq);
+        }
+    }
+    if (rayQueryGetIntersectionTypeEXT(rq, true) == gl_RayQueryCommittedIntersectionTriangleEXT) {
+        pl.hit_t = rayQueryGetIntersectionTEXT(rq, true);
+        pl.hit_instance = rayQueryGetIntersectionInstanceIdEXT(rq, true);
+        pl.hit_geometry = rayQueryGetIntersectionGeometryIndexEXT(rq, true);
+        pl.hit_primitive = rayQueryGetIntersectionPrimitiveIndexEXT(rq, true);
+    }
+}
+
+#include "render_pixel.glsl"
+
+void main() {
+    render_pixel(gl_GlobalInvocationID.xy);
+}

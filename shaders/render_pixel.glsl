@@ -1,0 +1,98 @@
+// One pixel: primary ray, optional shadow ray, AOV record and colour. Shared by both backends
+// (included after traverse.glsl).
+#ifndef MOTU_RENDER_PIXEL_GLSL
+#define MOTU_RENDER_PIXEL_GLSL
+#include "camera.glsl"
+#include "traverse.glsl"
+
+// Resolved hit: mesh record and world geometric normal (not face-forwarded).
+struct Surface {
+    uint mesh_record;
+    vec3 world_normal;
+};
+
+Surface resolve(TraceHit h) {
+    InstanceRecord inst = push.instances.r[push.tlases.r[h.tlas].instance_base + h.instance];
+    uint mesh = push.geometries.r[push.blases.r[inst.blas].item_base + h.geometry].mesh;
+    Surface s;
+    s.mesh_record = mesh;
+    MeshGeo g = push.mesh_geo.r[mesh];
+    U32Table idx = U32Table(g.indices);
+    Positions pos = Positions(g.positions);
+    uint i0 = idx.r[3u * h.primitive];
+    uint i1 = idx.r[3u * h.primitive + 1u];
+    uint i2 = idx.r[3u * h.primitive + 2u];
+    vec3 v0 = vec3(pos.v[3u * i0], pos.v[3u * i0 + 1u], pos.v[3u * i0 + 2u]);
+    vec3 v1 = vec3(pos.v[3u * i1], pos.v[3u * i1 + 1u], pos.v[3u * i1 + 2u]);
+    vec3 v2 = vec3(pos.v[3u * i2], pos.v[3u * i2 + 1u], pos.v[3u * i2 + 2u]);
+    vec3 n_object = cross(v1 - v0, v2 - v0);
+    Affine object_from_world =
+        compose(affine_inverse(affine_from_array(inst.tlas_from_blas)), h.tlas_from_world);
+    s.world_normal = normalize(transpose_vector(object_from_world, n_object));
+    return s;
+}
+
+void render_pixel(uvec2 px) {
+    FrameParams f = push.frame.f;
+    uint width = f.camera.width;
+    if (px.x >= width || px.y >= f.camera.height) {
+        return;
+    }
+    uint pixel = px.y * width + px.x;
+    vec3 org = f.camera.world_eye;
+    vec3 dir = camera_primary_dir(f.camera, px.x, px.y, 0.5, 0.5);
+    uint traces = 0u;
+    uint overflows = 0u;
+    uint truncations = 0u;
+    TraceHit h = traverse(f.root_tlas, org, dir, RAY_PRIMARY, f.lod, f.camera.pixels_per_unit_at_1,
+                          pixel_dither(px.x, px.y), false, traces, overflows, truncations);
+    vec3 colour;
+    uvec4 rec = uvec4(AOV_MISS, 0u, 0u, 0u);
+    if (h.t < T_INFINITY) {
+        Surface s = resolve(h);
+        MeshRecord m = push.meshes.r[s.mesh_record];
+        uint lod = h.lod == NONE_U32 ? m.lod : h.lod;
+        rec.xyz = uvec3(m.source_mesh, h.primitive, floatBitsToUint(h.t));
+        rec.w = min(lod, 255u);
+        if (f.view == VIEW_SHADED) {
+            vec3 base = push.materials.r[m.material].base_color;
+            vec3 n = dot(s.world_normal, dir) > 0.0 ? -s.world_normal : s.world_normal;
+            vec3 sun = f.sun_dir_intensity.xyz;
+            float ndl = dot(n, sun);
+            float light = f.ambient;
+            if (ndl > 0.0) {
+                float visible = 1.0;
+                if (f.shadows != 0u) {
+                    vec3 p = org + dir * h.t;
+                    LodParams sl = f.lod;
+                    if (f.shadow_lod_from_primary != 0u) {
+                        sl.forced_lod = int(lod);
+                    }
+                    TraceHit sh = traverse(f.root_tlas, shadow_offset(p, n), sun, RAY_SHADOW, sl,
+                                           f.camera.pixels_per_unit_at_1, 0.0, true, traces,
+                                           overflows, truncations);
+                    visible = sh.t < T_INFINITY ? 0.0 : 1.0;
+                    atomicAdd(push.stats.n[STAT_SHADOW_RAYS], 1u);
+                }
+                light = f.ambient + f.sun_dir_intensity.w * ndl * visible;
+            }
+            colour = base * light;
+        } else if (f.view == VIEW_IDS) {
+            colour = id_colour(m.source_mesh, h.primitive);
+        } else {
+            colour = lod_colour(lod);
+        }
+    } else {
+        colour = sky(dir);
+    }
+    rec.w |= min(traces, 65535u) << 16u;
+    push.aov.r[pixel] = rec;
+    push.rgba.r[pixel] = encode_srgb8(colour);
+    if (overflows != 0u) {
+        atomicAdd(push.stats.n[STAT_STACK_OVERFLOWS], overflows);
+    }
+    if (truncations != 0u) {
+        atomicAdd(push.stats.n[STAT_PI_LIST_OVERFLOWS], truncations);
+    }
+}
+#endif

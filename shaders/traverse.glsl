@@ -1,0 +1,141 @@
+// The traversal-shader core shared by both backends (thesis ch. 4: the "traversal loop" and
+// the "instance shader"), emulated on today's APIs with an explicit stack.
+//
+// Contract: before including this file, a backend declares `Payload pl` (rayPayloadEXT in the
+// pipeline backend) and defines
+//     void backend_trace(uint tlas, vec3 org, vec3 dir, float t_max, bool first_hit)
+// which walks TLAS `tlas` (its address is push.tlas_addresses.r[tlas]) with the ray already
+// in that TLAS's space, t in [0, t_max], and fills `pl`: the closest triangle hit (hit_*) and
+// up to PI_CAPACITY programmable-instance candidates with t_near > pl.t_floor (the nearest
+// ones; `truncated` set when more were found).
+//
+// Semantics mirror motu-trace (the CPU oracle): rays move between spaces by affine 3×4
+// matrices without renormalising the direction, so every t is a world distance; entries whose
+// t_near >= best t are skipped; candidates are pushed farthest first so the nearest pops
+// next; a LOD selector picks its level with select_lod at the candidate's t_near.
+#ifndef MOTU_TRAVERSE_GLSL
+#define MOTU_TRAVERSE_GLSL
+#include "common.glsl"
+#include "lod.glsl"
+
+// Entries of the explicit stack; overflow drops the entry and is counted in the stats buffer.
+layout(constant_id = 0) const uint STACK_SIZE = 16u;
+
+// One pending TLAS walk: 64 bytes.
+struct Entry {
+    Affine tlas_from_world;
+    float t_near;
+    uint tlas;
+    uint lod;       // level of the innermost selector on the path, NONE_U32 if none
+    float t_floor;  // -1, or the re-walk floor after a truncated candidate list
+};
+
+struct TraceHit {
+    float t;  // T_INFINITY: miss
+    uint tlas;
+    uint instance;
+    uint geometry;
+    uint primitive;
+    uint lod;
+    Affine tlas_from_world;
+};
+
+TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams lodp, float pixels_per_unit_at_1,
+                  float lod_u, bool first_hit, inout uint traces, inout uint overflows,
+                  inout uint truncations) {
+    Entry stack[STACK_SIZE];
+    stack[0] = Entry(affine_identity(), 0.0, root_tlas, NONE_U32, -1.0);
+    uint sp = 1u;
+    TraceHit hit;
+    hit.t = T_INFINITY;
+    hit.lod = NONE_U32;
+    while (sp > 0u) {
+        sp -= 1u;
+        Entry e = stack[sp];
+        if (e.t_near >= hit.t) {
+            continue;
+        }
+        traces += 1u;
+        pl.tlas = e.tlas;
+        pl.count = 0u;
+        pl.t_floor = e.t_floor;
+        pl.truncated = 0u;
+        pl.hit_t = -1.0;
+        backend_trace(e.tlas, xform_point(e.tlas_from_world, org),
+                      xform_vector(e.tlas_from_world, dir), hit.t, first_hit);
+        if (pl.hit_t >= 0.0 && pl.hit_t < hit.t) {
+            hit.t = pl.hit_t;
+            hit.tlas = e.tlas;
+            hit.instance = pl.hit_instance;
+            hit.geometry = pl.hit_geometry;
+            hit.primitive = pl.hit_primitive;
+            hit.lod = e.lod;
+            hit.tlas_from_world = e.tlas_from_world;
+            if (first_hit) {
+                break;
+            }
+        }
+        // Candidates that can still beat the best hit, farthest first (insertion sort).
+        uint order[PI_CAPACITY];
+        uint n = 0u;
+        float t_kept_max = -1.0;
+        for (uint i = 0u; i < pl.count; ++i) {
+            float t = pl.c[i].t_near;
+            t_kept_max = max(t_kept_max, t);
+            if (t >= hit.t) {
+                continue;
+            }
+            uint j = n;
+            while (j > 0u && pl.c[order[j - 1u]].t_near < t) {
+                order[j] = order[j - 1u];
+                j -= 1u;
+            }
+            order[j] = i;
+            n += 1u;
+        }
+        if (pl.truncated != 0u) {
+            // Candidates beyond the kept ones were dropped: walk this TLAS again later for
+            // those only (t_near > the farthest kept one).
+            truncations += 1u;
+            if (t_kept_max < hit.t) {
+                if (sp < STACK_SIZE) {
+                    stack[sp] = Entry(e.tlas_from_world, t_kept_max, e.tlas, e.lod, t_kept_max);
+                    sp += 1u;
+                } else {
+                    overflows += 1u;
+                }
+            }
+        }
+        if (n == 0u) {
+            continue;
+        }
+        uint inst_base = push.tlases.r[e.tlas].instance_base;
+        for (uint k = 0u; k < n; ++k) {
+            PiCandidate cd = pl.c[order[k]];
+            if (sp >= STACK_SIZE) {
+                overflows += 1u;
+                continue;
+            }
+            InstanceRecord inst = push.instances.r[inst_base + cd.instance];
+            Affine blas_from_tlas = affine_inverse(affine_from_array(inst.tlas_from_blas));
+            PiRecord pi = push.pis.r[cd.pi];
+            Affine child_from_world = compose(affine_from_array(pi.child_from_parent),
+                                              compose(blas_from_tlas, e.tlas_from_world));
+            uint tlas = pi.target;
+            uint lod = e.lod;
+            if (pi.kind == PI_LOD_SELECTOR) {
+                LodSelectorRecord sel = push.selectors.r[pi.target];
+                float dir_len = length(xform_vector(child_from_world, dir));
+                uint level = select_lod(lodp, pixels_per_unit_at_1, sel.radius, dir_len,
+                                        cd.t_near, sel.level_count, ray_kind, lod_u);
+                tlas = push.lod_levels.r[sel.level_base + level];
+                lod = level;
+            }
+            stack[sp] = Entry(child_from_world, cd.t_near, tlas, lod, -1.0);
+            sp += 1u;
+        }
+    }
+    return hit;
+}
+
+#endif

@@ -1,0 +1,171 @@
+//! The CPU oracle end to end (issue 5): differently compiled packages of one scene render the
+//! same hits, pixel by pixel.
+
+use motu_tests::{motu, motu_json, motu_ok, s, shared_scene};
+use std::path::Path;
+
+fn import(scene: &Path, pkg: &Path, extra: &[&str]) {
+    let mut args = vec!["import", s(scene), "-o", s(pkg)];
+    args.extend(extra);
+    motu_ok(&args);
+}
+
+fn render_aov(pkg: &Path, aov: &Path, extra: &[&str]) -> serde_json::Value {
+    let png = aov.with_extension("png");
+    let stats = aov.with_extension("json");
+    let mut args = vec![
+        "render",
+        s(pkg),
+        "-o",
+        s(&png),
+        "--backend",
+        "cpu",
+        "--aov",
+        s(aov),
+        "--stats",
+        s(&stats),
+    ];
+    args.extend(extra);
+    motu_ok(&args);
+    serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap()
+}
+
+#[test]
+fn forest_ml_sl_levels_and_splits_agree() {
+    let dir = tempfile::tempdir().unwrap();
+    let gen = dir.path().join("forest");
+    motu_ok(&[
+        "gen",
+        "forest",
+        "-o",
+        s(&gen),
+        "--levels",
+        "2",
+        "--grid",
+        "3x2",
+        "--leaves",
+        "120",
+    ]);
+    let scene = gen.join("scene.pbrt");
+    let configs: [(&str, &[&str]); 4] = [
+        ("ml", &[]),
+        ("sl", &["--levels", "sl"]),
+        ("l2", &["--levels", "2"]),
+        ("cap", &["--max-instances", "9"]),
+    ];
+    let mut aovs = Vec::new();
+    for (name, extra) in configs {
+        let pkg = dir.path().join(format!("{name}.motu"));
+        import(&scene, &pkg, extra);
+        let aov = dir.path().join(format!("{name}.aov"));
+        let stats = render_aov(&pkg, &aov, &["--width", "96", "--view", "ids"]);
+        for key in [
+            "width",
+            "height",
+            "backend",
+            "ms_per_frame",
+            "rays",
+            "rays_per_second",
+            "traces_per_ray",
+            "stack_overflows",
+            "vram_budget_bytes",
+            "vram_peak_bytes",
+            "allocation_count",
+            "as_bytes",
+            "passes",
+        ] {
+            assert!(!stats[key].is_null(), "--stats lacks {key}");
+        }
+        if name == "ml" {
+            assert!(
+                stats["traces_per_ray"].as_f64().unwrap() > 1.0,
+                "ml should trace several levels: {stats}"
+            );
+        }
+        aovs.push(aov);
+    }
+    for other in &aovs[1..] {
+        let out = motu_ok(&["compare", s(&aovs[0]), s(other), "--max-mismatch", "0.001"]);
+        assert!(out.contains("mismatch"), "{out}");
+    }
+    // The comparison can fail: a different scene does not match.
+    let flake = dir.path().join("flake");
+    motu_ok(&["gen", "sphereflake", "-o", s(&flake), "--depth", "1"]);
+    let fpkg = dir.path().join("flake.motu");
+    import(&flake.join("scene.pbrt"), &fpkg, &[]);
+    let faov = dir.path().join("flake.aov");
+    render_aov(&fpkg, &faov, &["--width", "96", "--height", "54"]);
+    let out = motu(&["compare", s(&aovs[0]), s(&faov)]);
+    assert!(
+        !out.status.success(),
+        "different scenes must not compare equal"
+    );
+}
+
+#[test]
+fn buddha_fractal_renders_with_its_camera() {
+    let Some(scene) = shared_scene("buddha-fractal/buddha-fractal.pbrt") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let ml = dir.path().join("ml.motu");
+    let sl = dir.path().join("sl.motu");
+    import(&scene, &ml, &[]);
+    import(&scene, &sl, &["--levels", "sl", "--max-instances", "1000"]);
+    let a = dir.path().join("ml.aov");
+    let b = dir.path().join("sl.aov");
+    let stats = render_aov(&ml, &a, &["--width", "128", "--camera", "buddha-fractal"]);
+    assert_eq!(
+        stats["height"], 205,
+        "height follows the camera's 750×1200 aspect"
+    );
+    render_aov(&sl, &b, &["--width", "128"]);
+    motu_ok(&["compare", s(&a), s(&b)]);
+    let out = motu(&[
+        "render",
+        s(&ml),
+        "-o",
+        s(&dir.path().join("x.png")),
+        "--camera",
+        "nope",
+    ]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("buddha-fractal"));
+}
+
+#[test]
+fn subset_render_equals_subset_import() {
+    let dir = tempfile::tempdir().unwrap();
+    let gen = dir.path().join("island");
+    motu_ok(&["gen", "island", "-o", s(&gen)]);
+    let scene = gen.join("scene.pbrt");
+    let full = dir.path().join("full.motu");
+    let coral = dir.path().join("coral.motu");
+    import(&scene, &full, &[]);
+    import(&scene, &coral, &["--subset", "isCoral"]);
+    let a = dir.path().join("a.aov");
+    let b = dir.path().join("b.aov");
+    let c = dir.path().join("c.aov");
+    render_aov(
+        &full,
+        &a,
+        &["--width", "128", "--subset", "isCoral", "--view", "ids"],
+    );
+    render_aov(&coral, &b, &["--width", "128", "--view", "ids"]);
+    render_aov(&full, &c, &["--width", "128", "--view", "ids"]);
+    motu_ok(&["compare", s(&a), s(&b)]);
+    assert!(
+        !motu(&["compare", s(&a), s(&c)]).status.success(),
+        "the subset must differ from the whole"
+    );
+    let bad = motu(&[
+        "render",
+        s(&full),
+        "-o",
+        s(&dir.path().join("x.png")),
+        "--subset",
+        "isAtlantis",
+    ]);
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("osOcean"));
+    let info = motu_json(&["info", s(&coral), "--json"]);
+    assert_eq!(info["elements"], serde_json::json!(["isCoral"]));
+}
