@@ -58,6 +58,7 @@ struct Payload {
     uint tlas;
     uint count;
     float t_floor;   // record only candidates with t_near > t_floor (re-walk after truncation)
+    float t_max;     // the trace's t_max (in any-hit, gl_RayTmaxEXT is the candidate's reported t)
     uint truncated;  // the list was full: farther candidates were dropped
     float hit_t;     // < 0: no triangle hit
     uint hit_instance;

@@ -59,6 +59,7 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
         pl.tlas = e.tlas;
         pl.count = 0u;
         pl.t_floor = e.t_floor;
+        pl.t_max = hit.t;
         pl.truncated = 0u;
         pl.hit_t = -1.0;
         backend_trace(e.tlas, xform_point(e.tlas_from_world, org),

@@ -178,3 +178,54 @@ pub fn read_mesh_blob(
         reason,
     })
 }
+
+impl ScenePackage {
+    /// A compiled mesh's positions and indices: borrowed from the map for raw chunks (zero
+    /// copy, straight into a staging buffer), decoded copies for compressed ones.
+    #[allow(clippy::type_complexity)]
+    pub fn mesh_slices(
+        &self,
+        mesh_record: u32,
+    ) -> Result<
+        (
+            std::borrow::Cow<'_, [[f32; 3]]>,
+            std::borrow::Cow<'_, [u32]>,
+        ),
+        PackError,
+    > {
+        use std::borrow::Cow;
+        let meshes: &[MeshRecord] = self.package.section_as(SECTION_MESHES)?;
+        let err = |reason: String| PackError::Mesh {
+            mesh: mesh_record,
+            reason,
+        };
+        let m = meshes
+            .get(mesh_record as usize)
+            .ok_or_else(|| err(format!("only {} meshes", meshes.len())))?;
+        let (vb, ib) = (m.vertex_count as u64 * 12, m.triangle_count as u64 * 12);
+        match self.package.chunk(ChunkId(m.chunk))? {
+            motu_package::ChunkBytes::Borrowed(bytes) => {
+                let slice = |at: u64, n: u64| -> Result<&[u8], PackError> {
+                    bytes
+                        .get(at as usize..(at + n) as usize)
+                        .ok_or_else(|| err("blob outside its chunk".into()))
+                };
+                let p: &[[f32; 3]] = bytemuck::try_cast_slice(slice(m.positions_offset, vb)?)
+                    .map_err(|e| err(format!("positions: {e}")))?;
+                let i: &[u32] = bytemuck::try_cast_slice(slice(m.indices_offset, ib)?)
+                    .map_err(|e| err(format!("indices: {e}")))?;
+                Ok((Cow::Borrowed(p), Cow::Borrowed(i)))
+            }
+            owned => {
+                let get = |at: u64, n: u64| {
+                    owned
+                        .get(at as usize..(at + n) as usize)
+                        .ok_or_else(|| err("blob outside its chunk".into()))
+                };
+                let p: Vec<[f32; 3]> = bytemuck::pod_collect_to_vec(get(m.positions_offset, vb)?);
+                let i: Vec<u32> = bytemuck::pod_collect_to_vec(get(m.indices_offset, ib)?);
+                Ok((Cow::Owned(p), Cow::Owned(i)))
+            }
+        }
+    }
+}

@@ -87,6 +87,77 @@ pub fn camera_params(
     Ok(CameraParams::new(eye, fwd, up, fov, mirror, w, h))
 }
 
+impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
+    fn mesh_data(
+        &self,
+        mesh_record: u32,
+    ) -> Result<
+        (
+            std::borrow::Cow<'_, [[f32; 3]]>,
+            std::borrow::Cow<'_, [u32]>,
+        ),
+        String,
+    > {
+        self.0.mesh_slices(mesh_record).map_err(|e| e.to_string())
+    }
+}
+
+/// Builds the package's structures on the GPU under the budget and renders with a traversal
+/// shader backend.
+fn render_gpu(
+    a: &RenderArgs,
+    pkg: &ScenePackage,
+    view: &HierarchyView<'_>,
+    camera: &CameraParams,
+    lod: LodParams,
+    backend: BackendArg,
+) -> anyhow::Result<(Aov, Vec<u8>, Value)> {
+    use motu_gpu::{Context as GpuContext, ContextOptions, LimitOverrides, Requirement};
+    let ctx = GpuContext::new(&ContextOptions {
+        device_index: a.device,
+        limit_overrides: LimitOverrides { max_memory_allocation_count: a.max_allocations, ..Default::default() },
+        require: match backend {
+            BackendArg::Query => Requirement::RayQuery,
+            _ => Requirement::RayPipeline,
+        },
+        ..Default::default()
+    })
+    .context("opening a Vulkan device for ray tracing (`motu devices` lists them; `--backend cpu` needs none)")?;
+    let build = motu_gpu::BuildOptions {
+        budget_bytes: a.vram_budget.unwrap_or(u64::MAX),
+        max_allocations: a
+            .max_allocations
+            .unwrap_or(motu_gpu::BuildOptions::default().max_allocations),
+        ..Default::default()
+    };
+    let meshes = PackageMeshes(pkg);
+    let scene = motu_gpu::GpuScene::build(&ctx, view, &meshes, &build)
+        .context("building acceleration structures")?;
+    let opts = motu_gpu::RenderOptions {
+        backend: match backend {
+            BackendArg::Query => motu_gpu::Backend::Query,
+            _ => motu_gpu::Backend::Pipeline,
+        },
+        view: match a.view {
+            ViewArg::Shaded => motu_gpu::View::Shaded,
+            ViewArg::Ids => motu_gpu::View::Ids,
+            ViewArg::Lod => motu_gpu::View::Lod,
+            ViewArg::Heatmap => motu_gpu::View::Heatmap,
+        },
+        lod,
+        stack_size: a.stack_size,
+        frames: a.frames,
+        ..Default::default()
+    };
+    let out = motu_gpu::render(&ctx, &scene, camera, &opts).context("rendering on the GPU")?;
+    let mut stats = serde_json::to_value(&out.stats)?;
+    stats["resources"] = serde_json::to_value(scene.report())?;
+    drop(scene);
+    ctx.check_validation()
+        .context("Vulkan validation reported errors")?;
+    Ok((out.aov, out.rgba8, stats))
+}
+
 /// `query` where a device has ray queries (usually fastest on RTX), else `pipeline`, else the CPU.
 pub fn best_backend(devices: &[motu_gpu::DeviceReport]) -> BackendArg {
     if devices.iter().any(|d| d.ray_query) {
@@ -152,8 +223,20 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     };
     let backend = match a.backend {
         Some(b) => b,
-        None => BackendArg::Cpu,
+        None => match motu_gpu::list_devices() {
+            Ok(devices) => match a.device {
+                Some(i) => best_backend(devices.get(i..i + 1).unwrap_or(&[])),
+                None => best_backend(&devices),
+            },
+            Err(e) => {
+                eprintln!("warning: no Vulkan ray-tracing device ({e}); rendering on the CPU");
+                BackendArg::Cpu
+            }
+        },
     };
+    if backend == BackendArg::Cpu && a.backend.is_none() {
+        eprintln!("warning: no device with ray tracing; rendering with the CPU reference backend");
+    }
     if a.stream {
         bail!("--stream is not implemented yet: see issue 8");
     }
@@ -193,7 +276,8 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             (out.aov, out.rgba8, stats)
         }
         BackendArg::Pipeline | BackendArg::Query => {
-            bail!("the GPU backends are not wired yet: see issue 7 (use --backend cpu)")
+            let (aov, rgba8, stats) = render_gpu(&a, &pkg, &view, &camera, lod, backend)?;
+            (aov, rgba8, stats)
         }
     };
     let stats = contract_stats(

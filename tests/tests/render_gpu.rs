@@ -1,0 +1,213 @@
+//! The GPU backends against the CPU oracle on real packages (issue 7), on whatever Vulkan
+//! device exists (lavapipe in CI, with validation on via MOTU_VALIDATION=1 from tools/test.sh).
+
+use motu_tests::{motu, motu_ok, s, shared_scene};
+use std::path::Path;
+
+/// False (with a loud line) when no ray-tracing device exists and the run does not require one.
+fn gpu_available() -> bool {
+    let out = motu(&["devices", "--json"]);
+    let ok = out.status.success()
+        && String::from_utf8_lossy(&out.stdout).contains("\"ray_pipeline\": true");
+    if !ok {
+        assert!(
+            std::env::var_os("MOTU_REQUIRE_GPU").is_none(),
+            "MOTU_REQUIRE_GPU is set but no ray-tracing device was found"
+        );
+        eprintln!("SKIPPED: no Vulkan ray-tracing device");
+    }
+    ok
+}
+
+fn has_ray_query() -> bool {
+    String::from_utf8_lossy(&motu(&["devices", "--json"]).stdout).contains("\"ray_query\": true")
+}
+
+fn render(pkg: &Path, backend: &str, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let stats = out.with_extension("json");
+    let png = out.with_extension("png");
+    let mut args = vec![
+        "render",
+        s(pkg),
+        "-o",
+        s(&png),
+        "--backend",
+        backend,
+        "--aov",
+        s(out),
+        "--stats",
+        s(&stats),
+    ];
+    args.extend(extra);
+    motu_ok(&args);
+    serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap()
+}
+
+/// Every backend renders `pkg` the same way (and equal to `reference`, if given).
+fn all_backends_agree(dir: &Path, name: &str, pkg: &Path, extra: &[&str]) -> std::path::PathBuf {
+    let cpu = dir.join(format!("{name}-cpu.aov"));
+    render(pkg, "cpu", &cpu, extra);
+    let mut backends = vec!["pipeline"];
+    if has_ray_query() {
+        backends.push("query");
+    }
+    for b in backends {
+        let aov = dir.join(format!("{name}-{b}.aov"));
+        let stats = render(pkg, b, &aov, extra);
+        assert_eq!(stats["backend"], b);
+        assert_eq!(stats["stack_overflows"], 0, "{stats}");
+        assert!(stats["as_bytes"].as_u64().unwrap() > 0, "{stats}");
+        let out = motu_ok(&["compare", s(&cpu), s(&aov), "--max-mismatch", "0.001"]);
+        eprintln!("{name} cpu vs {b}: {out}");
+    }
+    cpu
+}
+
+#[test]
+fn pipeline_matches_cpu_on_a_forest_package() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let gen = dir.path().join("forest");
+    motu_ok(&[
+        "gen",
+        "forest",
+        "-o",
+        s(&gen),
+        "--levels",
+        "2",
+        "--grid",
+        "3x2",
+        "--leaves",
+        "100",
+    ]);
+    let ml = dir.path().join("ml.motu");
+    let sl = dir.path().join("sl.motu");
+    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&ml)]);
+    motu_ok(&[
+        "import",
+        s(&gen.join("scene.pbrt")),
+        "-o",
+        s(&sl),
+        "--levels",
+        "sl",
+    ]);
+    let a = all_backends_agree(dir.path(), "ml", &ml, &["--width", "96"]);
+    let b = all_backends_agree(dir.path(), "sl", &sl, &["--width", "96"]);
+    motu_ok(&["compare", s(&a), s(&b)]);
+}
+
+#[test]
+fn sphereflake_and_lod_grid_agree() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let flake = dir.path().join("flake");
+    motu_ok(&["gen", "sphereflake", "-o", s(&flake), "--depth", "3"]);
+    let pkg = dir.path().join("flake.motu");
+    motu_ok(&["import", s(&flake.join("scene.pbrt")), "-o", s(&pkg)]);
+    all_backends_agree(
+        dir.path(),
+        "flake",
+        &pkg,
+        &["--width", "64", "--view", "ids"],
+    );
+
+    let grid = dir.path().join("grid");
+    motu_ok(&[
+        "gen",
+        "lod-grid",
+        "-o",
+        s(&grid),
+        "--grid",
+        "6x12",
+        "--triangles",
+        "20000",
+    ]);
+    let lod = dir.path().join("lod.motu");
+    motu_ok(&[
+        "import",
+        s(&grid.join("scene.pbrt")),
+        "-o",
+        s(&lod),
+        "--lod",
+        "3",
+    ]);
+    all_backends_agree(dir.path(), "lod0", &lod, &["--width", "80", "--lod", "0"]);
+}
+
+#[test]
+fn buddha_fractal_backends_agree() {
+    let Some(scene) = shared_scene("buddha-fractal/buddha-fractal.pbrt") else {
+        return;
+    };
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = dir.path().join("buddha.motu");
+    motu_ok(&[
+        "import",
+        s(&scene),
+        "-o",
+        s(&pkg),
+        "--max-instances",
+        "1000",
+    ]);
+    all_backends_agree(dir.path(), "buddha", &pkg, &["--width", "48"]);
+}
+
+#[test]
+fn allocation_cap_and_budget_are_respected() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let gen = dir.path().join("forest");
+    motu_ok(&[
+        "gen",
+        "forest",
+        "-o",
+        s(&gen),
+        "--levels",
+        "1",
+        "--leaves",
+        "200",
+    ]);
+    let pkg = dir.path().join("f.motu");
+    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    let aov = dir.path().join("capped.aov");
+    let stats = render(
+        &pkg,
+        "pipeline",
+        &aov,
+        &[
+            "--width",
+            "48",
+            "--max-allocations",
+            "8",
+            "--vram-budget",
+            "64MiB",
+        ],
+    );
+    assert!(stats["allocation_count"].as_u64().unwrap() <= 8, "{stats}");
+    assert!(
+        stats["vram_peak_bytes"].as_u64().unwrap() <= 64 << 20,
+        "{stats}"
+    );
+    let out = motu(&[
+        "render",
+        s(&pkg),
+        "-o",
+        s(&dir.path().join("x.png")),
+        "--backend",
+        "pipeline",
+        "--vram-budget",
+        "64KiB",
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("budget") && !err.contains("panicked"), "{err}");
+}
