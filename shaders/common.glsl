@@ -204,8 +204,12 @@ uint encode_srgb8(vec3 c) {
     return b.x | (b.y << 8u) | (b.z << 16u) | (255u << 24u);
 }
 
-// Wächter & Binder's offset, mirrored from motu_trace::render::shadow_offset.
-vec3 shadow_offset(vec3 p, vec3 n) {
+// Wächter & Binder's offset after a push of 2^-18 × `reach` along n, mirrored from
+// motu_trace::render::shadow_offset. `reach` (largest |origin| component + hit distance) bounds
+// the error of p = origin + t·dir, which W&B alone (made for exact p) does not cover: without it
+// far hits on a plane at y = 0 shadowed themselves (speckled ground at 1080p).
+vec3 shadow_offset(vec3 p, vec3 n, float reach) {
+    p += n * (reach * (1.0 / 262144.0));
     vec3 o;
     for (int a = 0; a < 3; ++a) {
         if (abs(p[a]) < 1.0 / 32.0) {

@@ -68,7 +68,7 @@ void render_pixel(uvec2 px) {
                     if (f.shadow_lod_from_primary != 0u) {
                         sl.forced_lod = int(lod);
                     }
-                    TraceHit sh = traverse(f.root_tlas, shadow_offset(p, n), sun, RAY_SHADOW, sl,
+                    TraceHit sh = traverse(f.root_tlas, shadow_offset(p, n, max(max(abs(org.x), abs(org.y)), abs(org.z)) + h.t), sun, RAY_SHADOW, sl,
                                            f.camera.pixels_per_unit_at_1, 0.0, true, traces,
                                            overflows, truncations);
                     visible = sh.t < T_INFINITY ? 0.0 : 1.0;

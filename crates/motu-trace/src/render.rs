@@ -321,7 +321,8 @@ fn shade(
         pixels_per_unit_at_1: camera.pixels_per_unit_at_1,
         ..RayQuery::default()
     };
-    let s = tracer.trace(shadow_offset(p, n), sun, &q, scratch);
+    let reach = eye[0].abs().max(eye[1].abs()).max(eye[2].abs()) + hit.t;
+    let s = tracer.trace(shadow_offset(p, n, reach), sun, &q, scratch);
     let visible = if s.is_hit() { 0.0 } else { 1.0 };
     (opts.ambient + opts.sun_intensity * ndl * visible, Some(s))
 }
@@ -330,7 +331,10 @@ fn shade(
 /// "A Fast and Robust Method for Avoiding Self-Intersection", Ray Tracing Gems ch. 6): an
 /// offset of 256 ULPs per unit of normal, a small absolute one near the origin. The GPU
 /// mirrors this, so shadow rays start at the same point.
-pub fn shadow_offset(p: [f32; 3], n: [f32; 3]) -> [f32; 3] {
+pub fn shadow_offset(p: [f32; 3], n: [f32; 3], reach: f32) -> [f32; 3] {
+    // `reach` (largest |origin| component + hit distance) bounds the error of p = o + t·d,
+    // which Wächter & Binder's offset (made for exact p) does not cover.
+    let p: [f32; 3] = std::array::from_fn(|a| p[a] + n[a] * (reach * (1.0 / 262_144.0)));
     const ORIGIN: f32 = 1.0 / 32.0;
     const FLOAT_SCALE: f32 = 1.0 / 65536.0;
     const INT_SCALE: f32 = 256.0;
@@ -442,12 +446,15 @@ mod tests {
     fn shadow_offset_moves_along_the_normal() {
         for p in [[0.0, 0.0, 0.0], [100.0, -2000.0, 3.5], [1e-3, 5.0, -0.01]] {
             let n = [0.0, 1.0, 0.0];
-            let o = shadow_offset(p, n);
+            let o = shadow_offset(p, n, 0.0);
             assert!(o[1] > p[1], "{p:?} -> {o:?}");
             assert_eq!(o[0], p[0]);
         }
         let n = normalize([1.0, -1.0, 0.5]);
-        let o = shadow_offset([10.0, 10.0, 10.0], n);
+        let o = shadow_offset([10.0, 10.0, 10.0], n, 0.0);
+        // Far hits move further: the reach term covers the error of o + t·d.
+        let far = shadow_offset([0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 1000.0);
+        assert!(far[1] >= 1000.0 / 262_144.0, "{far:?}");
         assert!(o[0] > 10.0 && o[1] < 10.0 && o[2] > 10.0);
     }
 
