@@ -113,6 +113,7 @@ pub struct GenArgs {
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum LevelsArg {
     Ml,
+    Auto,
     Sl,
     N(u32),
 }
@@ -120,10 +121,11 @@ pub enum LevelsArg {
 fn parse_levels(s: &str) -> Result<LevelsArg, String> {
     match s {
         "ml" => Ok(LevelsArg::Ml),
+        "auto" => Ok(LevelsArg::Auto),
         "sl" => Ok(LevelsArg::Sl),
         n => match n.parse::<u32>() {
             Ok(v) if v >= 1 => Ok(LevelsArg::N(v)),
-            _ => Err(format!("'{s}': expected ml, sl or a number of levels ≥ 1")),
+            _ => Err(format!("'{s}': expected ml, auto, sl or a number of levels ≥ 1")),
         },
     }
 }
@@ -144,7 +146,8 @@ pub struct ImportArgs {
     /// Output package path.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// ml: keep the instancing graph; sl: flatten to one level; N: at most N levels.
+    /// ml: keep the instancing graph; auto: ml with cheap grouping levels inlined (fewer traces
+    /// per ray, geometry still shared); sl: flatten to one level; N: at most N levels.
     #[arg(long, default_value = "ml", value_parser = parse_levels)]
     pub levels: LevelsArg,
     /// Instances per TLAS before it is split (default: the spec's 2^24−1).
@@ -293,14 +296,67 @@ pub struct CompareArgs {
 
 #[derive(Args, Debug)]
 pub struct BenchArgs {
-    /// Suite to run.
-    #[arg(default_value = "default")]
+    /// Suite: `gpu` (the full device suite, 1920×1080), `quick` (tiny versions of the same, minutes
+    /// on lavapipe), `cpu` (import/compile/pack and the CPU renderer).
+    #[arg(default_value = "quick")]
     pub suite: String,
+    /// One JSON object on stdout (the whole report).
     #[arg(long)]
     pub json: bool,
-    /// Where to keep generated scenes and packages.
+    /// Where to keep generated scenes, packages, logs and renders (default: ./motu-bench).
     #[arg(long)]
     pub work_dir: Option<PathBuf>,
+    /// Tiny versions of the suite's scenes (`motu bench gpu --quick` is the `quick` suite).
+    #[arg(long)]
+    pub quick: bool,
+    /// Also write the results as a Markdown table (for BENCHMARKS.md).
+    #[arg(long)]
+    pub markdown: Option<PathBuf>,
+    /// Run only these scenes (comma-separated: forest, sphereflake, lod-grid, island, buddha-fractal).
+    #[arg(long, value_delimiter = ',')]
+    pub only: Vec<String>,
+    /// Timed frames per render (default: 21 for gpu, fewer for quick/cpu).
+    #[arg(long)]
+    pub frames: Option<u32>,
+    /// Untimed warm-up frames, submitted before the timed ones.
+    #[arg(long)]
+    pub warmup: Option<u32>,
+    #[arg(long)]
+    pub width: Option<u32>,
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Render backend (default: the best the device has; `cpu` for the cpu suite).
+    #[arg(long, value_enum)]
+    pub backend: Option<BackendArg>,
+    /// `motu gen island --scale` for the island scene (default: just over 2^24 flattened instances
+    /// in the gpu suite).
+    #[arg(long)]
+    pub island_scale: Option<f64>,
+    /// Directory holding `buddha-fractal/` (default: shared/scenes beside or above the working
+    /// directory or the binary).
+    #[arg(long)]
+    pub scenes: Option<PathBuf>,
+    /// Kill a step (gen, import, render) that runs longer than this and record it as failed.
+    #[arg(long)]
+    pub step_timeout_s: Option<u64>,
+    /// Keep packages after rendering them (default: deleted, to bound disk use).
+    #[arg(long)]
+    pub keep: bool,
+    /// Print the plan (scenes, configurations, commands) and exit.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// One line per step on stderr even when stderr is not a terminal.
+    #[arg(long)]
+    pub progress: bool,
+    /// Internal: render one package and write its measurements (the child process of a render step).
+    #[arg(long, hide = true)]
+    pub child_render: Option<PathBuf>,
+    /// Internal: where the child writes its measurements (JSON).
+    #[arg(long, hide = true)]
+    pub child_stats: Option<PathBuf>,
+    /// Internal: where the child writes the last frame (PNG).
+    #[arg(long, hide = true)]
+    pub child_png: Option<PathBuf>,
 }
 
 #[derive(Args, Debug)]

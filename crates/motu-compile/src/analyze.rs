@@ -38,6 +38,8 @@ pub(crate) struct Plan<'s> {
     plain: Vec<bool>,
     /// TLAS levels of `TLAS(P)`'s subtree under the ML rules.
     tlas_height: Vec<u32>,
+    /// [`Levels::Auto`]: the prototype is a cheap grouping level, inlined into its parents.
+    auto_inline: Vec<bool>,
     /// Kept meshes of a prototype that get a LOD chain / that go into `G(P)`.
     pub lod_mesh_count: Vec<u32>,
     pub g_mesh_count: Vec<u32>,
@@ -70,6 +72,7 @@ impl<'s> Plan<'s> {
             indeg: vec![0; n],
             plain: vec![false; n],
             tlas_height: vec![0; n],
+            auto_inline: vec![false; n],
             lod_mesh_count: vec![0; n],
             g_mesh_count: vec![0; n],
             dropped_degenerate: 0,
@@ -155,6 +158,9 @@ impl<'s> Plan<'s> {
             }
             plan.tlas_height[p.index()] = below + 1;
         }
+        if plan.opts.levels == Levels::Auto {
+            plan.plan_auto_inlining();
+        }
         plan.estimate_instances()?;
         Ok(plan)
     }
@@ -222,9 +228,39 @@ impl<'s> Plan<'s> {
         match self.opts.levels {
             Levels::Sl => true,
             Levels::Ml => self.expands_ml(e),
+            Levels::Auto => self.expands_ml(e) || self.auto_inline[e.child.index()],
             Levels::N(n) => {
                 self.expands_ml(e) || self.tlas_height[e.child.index()] > n.saturating_sub(1)
             }
+        }
+    }
+
+    /// Bottom-up: the entries TLAS(p) would hold under `Auto` (own meshes' BLAS, expanded
+    /// children's entries, one PI per other child) decide whether a mesh-less `p` is inlined.
+    fn plan_auto_inlining(&mut self) {
+        let scene = self.scene;
+        let mut entries = vec![0u64; scene.prototypes().len()];
+        for &p in scene.topo_order() {
+            if !self.reachable[p.index()] {
+                continue;
+            }
+            let mut count = u64::from(self.g_mesh_count[p.index()] > 0)
+                + u64::from(self.lod_mesh_count[p.index()]);
+            let base = scene.edge_base(p) as usize;
+            for (k, e) in scene.edges(p).iter().enumerate() {
+                if !self.edge_kept(p, base + k, edge_ref!(e)) {
+                    continue;
+                }
+                count = count.saturating_add(if self.expands(edge_ref!(e)) {
+                    entries[e.child.index()]
+                } else {
+                    1
+                });
+            }
+            entries[p.index()] = count;
+            self.auto_inline[p.index()] = p != Scene::ROOT
+                && !self.has_own_meshes(p)
+                && count <= self.opts.auto_inline_max_entries;
         }
     }
 

@@ -513,3 +513,51 @@ fn singular_compositions_are_inlined_not_dropped() {
         assert_eq!(c.report.dropped_degenerate_instances, 0);
     }
 }
+
+#[test]
+fn auto_inlines_grouping_levels_but_keeps_geometry_shared() {
+    // world → 3 groups → 4 trees each; a tree = trunk mesh + 5 leaf placements.
+    let mut b = motu_scene::SceneBuilder::default();
+    let main = motu_scene::Scene::MAIN_ELEMENT;
+    let mat = b.default_material();
+    let tri = motu_scene::MeshData {
+        positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        indices: vec![0, 1, 2],
+        ..Default::default()
+    };
+    let leaf = b.add_prototype("leaf", main).unwrap();
+    b.add_mesh(leaf, "leaf", mat, main, &tri).unwrap();
+    let tree = b.add_prototype("tree", main).unwrap();
+    b.add_mesh(tree, "trunk", mat, main, &tri).unwrap();
+    let t = |x: f32, y: f32| motu_scene::Transform34::from_translation(glam::Vec3::new(x, y, 0.0));
+    for i in 0..5 {
+        b.add_instance(tree, leaf, t(i as f32, 1.0), main).unwrap();
+    }
+    let group = b.add_prototype("group", main).unwrap();
+    for i in 0..4 {
+        b.add_instance(group, tree, t(0.0, 3.0 * i as f32), main)
+            .unwrap();
+    }
+    for i in 0..3 {
+        b.add_instance(b.root(), group, t(10.0 * i as f32, 0.0), main)
+            .unwrap();
+    }
+    let scene = b.finish().unwrap();
+    let ml = check_flatten(&scene, &opts(Levels::Ml));
+    let auto = check_flatten(&scene, &opts(Levels::Auto));
+    // Ml: root → group TLAS → tree TLAS. Auto: root holds the 12 tree PIs directly.
+    assert_eq!(ml.report.tlas_levels, 3, "{:?}", ml.report);
+    assert_eq!(auto.report.tlas_levels, 2, "{:?}", auto.report);
+    assert_eq!(auto.pis.len(), 12);
+    // The trees stay shared: one tree TLAS.
+    assert_eq!(auto.tlases.len(), 2);
+    // A tight entry cap keeps the group level.
+    let tight = check_flatten(
+        &scene,
+        &CompileOptions {
+            auto_inline_max_entries: 3,
+            ..opts(Levels::Auto)
+        },
+    );
+    assert_eq!(tight.report.tlas_levels, 3);
+}

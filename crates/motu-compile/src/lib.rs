@@ -103,6 +103,12 @@ pub enum Levels {
     Sl,
     /// At most this many TLAS levels on any root-to-leaf path (before splitting); `N(1)` is `Sl`.
     N(u32),
+    /// `Ml`, plus inlining of pure grouping levels: a prototype without meshes of its own whose
+    /// TLAS would hold at most [`CompileOptions::auto_inline_max_entries`] entries is expanded
+    /// into its parents. Such levels save no memory worth a trace (the thesis forest's group
+    /// levels: 12 PIs each) but cost every ray one more `traceRayEXT`; geometry-bearing
+    /// prototypes (where instancing saves memory) stay shared.
+    Auto,
 }
 
 #[derive(Clone, Debug)]
@@ -124,6 +130,9 @@ pub struct CompileOptions {
     pub subset: Option<Vec<ElementId>>,
     /// Tolerance for "identity" in identity collapse.
     pub identity_tolerance: f32,
+    /// [`Levels::Auto`]: the largest TLAS (instances + PIs) of a mesh-less prototype that is
+    /// still inlined into its parents.
+    pub auto_inline_max_entries: u64,
 }
 
 impl Default for CompileOptions {
@@ -138,6 +147,7 @@ impl Default for CompileOptions {
             lod_triangle_threshold: 100_000,
             subset: None,
             identity_tolerance: 1e-6,
+            auto_inline_max_entries: 256,
         }
     }
 }

@@ -147,9 +147,15 @@ fn modes() -> Vec<CompileOptions> {
             levels: Levels::N(2),
             ..Default::default()
         },
+        CompileOptions {
+            levels: Levels::Auto,
+            auto_inline_max_entries: 3,
+            ..Default::default()
+        },
         capped(Levels::Ml),
         capped(Levels::Sl),
         capped(Levels::N(2)),
+        capped(Levels::Auto),
     ]
 }
 

@@ -15,6 +15,7 @@ pub fn run(a: ImportArgs) -> anyhow::Result<()> {
     let (levels, levels_text) = match a.levels {
         LevelsArg::Ml => (Levels::Ml, "ml".to_string()),
         LevelsArg::Sl => (Levels::Sl, "sl".to_string()),
+        LevelsArg::Auto => (Levels::Auto, "auto".to_string()),
         LevelsArg::N(n) => (Levels::N(n), n.to_string()),
     };
     if a.max_instances < 2 {
