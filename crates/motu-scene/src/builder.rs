@@ -139,8 +139,15 @@ impl SceneBuilder {
         })?;
         self.check(proto.0, self.prototypes.len(), "prototype")?;
         let id = MeshId(checked_id(self.meshes.len(), "meshes")?);
-        let group = if proto == Scene::ROOT { element } else { self.prototypes[proto.index()].element };
-        let location = self.geometry.store(id, group.0, data).map_err(SceneError::Store)?;
+        let group = if proto == Scene::ROOT {
+            element
+        } else {
+            self.prototypes[proto.index()].element
+        };
+        let location = self
+            .geometry
+            .store(id, group.0, data)
+            .map_err(SceneError::Store)?;
         self.add_stored_mesh(
             proto,
             element,
