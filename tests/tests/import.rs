@@ -225,3 +225,51 @@ fn levels_and_caps_keep_the_flattened_count() {
     }
     assert!(flattened.windows(2).all(|w| w[0] == w[1]), "{flattened:?}");
 }
+
+#[test]
+fn obj_with_mtl_imports_and_renders() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("m.mtl"),
+        "newmtl red\nKd 0.8 0.1 0.1\nnewmtl blue\nKd 0.1 0.1 0.9\n",
+    )
+    .unwrap();
+    let obj = dir.path().join("model.obj");
+    std::fs::write(
+        &obj,
+        "mtllib m.mtl\n\
+         o quad\nusemtl red\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n\
+         o tri\nusemtl blue\nv 0 0 1\nv 1 0 1\nv 0 1 1\nf 5 6 7\n",
+    )
+    .unwrap();
+    let pkg = dir.path().join("model.motu");
+    motu_ok(&["import", s(&obj), "-o", s(&pkg)]);
+    let info = motu_json(&["info", s(&pkg), "--json"]);
+    assert_eq!(info["meshes"], 2);
+    assert_eq!(
+        info["unique_triangles"], 3,
+        "the quad is split into two triangles: {info}"
+    );
+    assert_eq!(info["instances"], 0);
+    motu_ok(&["verify", s(&pkg)]);
+    // No camera in an OBJ: render frames the bounds.
+    let aov = dir.path().join("m.aov");
+    motu_ok(&[
+        "render",
+        s(&pkg),
+        "-o",
+        s(&dir.path().join("m.png")),
+        "--backend",
+        "cpu",
+        "--width",
+        "32",
+        "--aov",
+        s(&aov),
+    ]);
+    let bytes = std::fs::read(&aov).unwrap();
+    let hits = bytes[32..]
+        .chunks_exact(16)
+        .filter(|r| u32::from_le_bytes([r[0], r[1], r[2], r[3]]) != u32::MAX)
+        .count();
+    assert!(hits > 0, "the model is in view");
+}

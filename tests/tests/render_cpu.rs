@@ -169,3 +169,46 @@ fn subset_render_equals_subset_import() {
     let info = motu_json(&["info", s(&coral), "--json"]);
     assert_eq!(info["elements"], serde_json::json!(["isCoral"]));
 }
+
+#[test]
+fn lod_grid_gets_coarser_with_distance() {
+    let dir = tempfile::tempdir().unwrap();
+    let gen = dir.path().join("grid");
+    motu_ok(&[
+        "gen",
+        "lod-grid",
+        "-o",
+        s(&gen),
+        "--grid",
+        "6x24",
+        "--triangles",
+        "20000",
+    ]);
+    let pkg = dir.path().join("lod.motu");
+    import(&gen.join("scene.pbrt"), &pkg, &["--lod", "4"]);
+    let info = motu_json(&["info", s(&pkg), "--json"]);
+    assert!(info["lod_selectors"].as_u64().unwrap() >= 1, "{info}");
+    let aov = dir.path().join("lod.aov");
+    render_aov(&pkg, &aov, &["--width", "192", "--view", "lod"]);
+    let bytes = std::fs::read(&aov).unwrap();
+    // (t, lod) of every hit, then: the nearest quarter of hits uses finer levels than the farthest.
+    let mut hits: Vec<(f32, u8)> = bytes[32..]
+        .chunks_exact(16)
+        .filter(|r| u32::from_le_bytes([r[0], r[1], r[2], r[3]]) != u32::MAX)
+        .map(|r| (f32::from_le_bytes([r[8], r[9], r[10], r[11]]), r[12]))
+        .collect();
+    assert!(hits.len() > 100);
+    hits.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let q = hits.len() / 4;
+    let mean = |s: &[(f32, u8)]| s.iter().map(|h| h.1 as f64).sum::<f64>() / s.len() as f64;
+    let (near, far) = (mean(&hits[..q]), mean(&hits[hits.len() - q..]));
+    assert!(
+        far > near + 0.4,
+        "LOD should coarsen with distance: near {near:.2}, far {far:.2}"
+    );
+    // Forcing level 0 everywhere gives only level-0 hits.
+    let forced = dir.path().join("forced.aov");
+    render_aov(&pkg, &forced, &["--width", "96", "--lod", "0"]);
+    let b = std::fs::read(&forced).unwrap();
+    assert!(b[32..].chunks_exact(16).all(|r| r[12] == 0));
+}

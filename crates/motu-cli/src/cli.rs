@@ -125,7 +125,9 @@ fn parse_levels(s: &str) -> Result<LevelsArg, String> {
         "sl" => Ok(LevelsArg::Sl),
         n => match n.parse::<u32>() {
             Ok(v) if v >= 1 => Ok(LevelsArg::N(v)),
-            _ => Err(format!("'{s}': expected ml, auto, sl or a number of levels ≥ 1")),
+            _ => Err(format!(
+                "'{s}': expected ml, auto, sl or a number of levels ≥ 1"
+            )),
         },
     }
 }
@@ -156,6 +158,9 @@ pub struct ImportArgs {
     /// Build N LOD levels for heavy meshes.
     #[arg(long)]
     pub lod: Option<u32>,
+    /// With --lod: meshes with more triangles than this get a LOD chain.
+    #[arg(long, default_value_t = 10_000)]
+    pub lod_min_triangles: u32,
     /// Compress chunks with zstd at this level (1–22).
     #[arg(long)]
     pub zstd: Option<i32>,

@@ -21,6 +21,7 @@ pub struct ImportOptions {
     pub levels_text: String,
     pub max_instances: u32,
     pub lod_levels: Option<u32>,
+    pub lod_min_triangles: u32,
     pub zstd_level: Option<i32>,
     pub allow_missing: bool,
     pub pbrt_version: Option<u32>,
@@ -113,6 +114,7 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
         levels: o.levels,
         max_instances_per_tlas: o.max_instances,
         lod_levels: o.lod_levels,
+        lod_triangle_threshold: o.lod_min_triangles,
         subset: (!direct).then(|| subset_ids.iter().map(|&i| ElementId(i)).collect()),
         ..Default::default()
     };

@@ -69,6 +69,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         levels_text: "ml".into(),
         max_instances: (1 << 24) - 1,
         lod_levels: None,
+        lod_min_triangles: 10_000,
         zstd_level: None,
         allow_missing: false,
         pbrt_version: None,

@@ -34,6 +34,7 @@ pub fn run(a: ImportArgs) -> anyhow::Result<()> {
         levels_text,
         max_instances: a.max_instances,
         lod_levels: a.lod,
+        lod_min_triangles: a.lod_min_triangles,
         zstd_level: a.zstd,
         allow_missing: a.allow_missing,
         pbrt_version: a.pbrt_version,
