@@ -107,6 +107,11 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
         motu_ingest::ingest_file(scene_path, &ingest_opts, Box::new(geometry.clone()))
             .with_context(|| format!("importing {}", scene_path.display()))?;
     let parse_ms = t0.elapsed().as_secs_f64() * 1e3;
+    tracing::info!(
+        parse_ms,
+        peak_rss_bytes = crate::cmd::demo::peak_rss_bytes(),
+        "parsed"
+    );
 
     let element_names: Vec<String> = scene.elements().iter().map(|e| e.name.clone()).collect();
     let subset_ids = resolve_subset(&o.subset, &element_names)?;
@@ -130,6 +135,11 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
         let mut compiled = motu_compile::compile(&scene, &copts, &mut sink)
             .context("compiling the instancing graph")?;
         let compile_ms = t1.elapsed().as_secs_f64() * 1e3;
+        tracing::info!(
+            compile_ms,
+            peak_rss_bytes = crate::cmd::demo::peak_rss_bytes(),
+            "compiled"
+        );
         place_meshes(&scene, &mut compiled.meshes, |rec, m| {
             if m.lod == 0 {
                 Some(scene.mesh(motu_scene::MeshId(m.source_mesh)).location)

@@ -28,6 +28,9 @@ impl std::fmt::Debug for PackageGeometry {
     }
 }
 
+/// Memory all element streams' open chunks may hold together during an import.
+pub const OPEN_CHUNK_BUDGET_BYTES: u64 = 128 << 20;
+
 /// Packs a chunk id and an offset into the scene's opaque location.
 pub(crate) fn location(chunk: ChunkId, offset: u64) -> MeshLocation {
     MeshLocation {
@@ -72,6 +75,21 @@ impl PackageGeometry {
             .map_err(|e| e.to_string())?;
         let at = location(loc.chunk, loc.offset_in_chunk);
         layouts.insert((at.a, at.b), layout);
+        // One open chunk per element could hold elements × 64 MiB in memory: past the budget,
+        // write out the fullest open chunk early (a smaller chunk, same data).
+        let mut open: Vec<(u64, StreamId)> = streams
+            .values()
+            .map(|&s| (writer.open_chunk_bytes(s), s))
+            .collect();
+        let mut total: u64 = open.iter().map(|o| o.0).sum();
+        open.sort_unstable_by(|a, b| b.0.cmp(&a.0));
+        for (bytes, s) in open {
+            if total <= OPEN_CHUNK_BUDGET_BYTES {
+                break;
+            }
+            writer.seal_chunk(s).map_err(|e| e.to_string())?;
+            total -= bytes;
+        }
         Ok(at)
     }
 

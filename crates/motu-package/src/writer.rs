@@ -70,8 +70,6 @@ struct Stream {
     tag: u32,
     group: u32,
     open: Option<OpenChunk>,
-    /// Capacity kept between chunks so a stream does not re-fault its buffer per chunk.
-    spare: Vec<u8>,
 }
 
 struct OpenChunk {
@@ -92,6 +90,8 @@ pub struct PackageWriter {
     sections: Vec<SectionEntry>,
     names: Vec<u8>,
     streams: Vec<Option<Stream>>,
+    /// Capacity kept between chunks so a new chunk does not re-fault its buffer.
+    spare: Vec<u8>,
     compressor: Option<zstd::bulk::Compressor<'static>>,
     compress_buf: Vec<u8>,
     /// Set after an I/O error: the temp file's contents are unknown, so refuse more work.
@@ -141,6 +141,7 @@ impl PackageWriter {
             sections: Vec::new(),
             names: Vec::new(),
             streams: Vec::new(),
+            spare: Vec::new(),
             compressor,
             compress_buf: Vec::new(),
             failed: false,
@@ -164,7 +165,6 @@ impl PackageWriter {
             tag,
             group,
             open: None,
-            spare: Vec::new(),
         }));
         id
     }
@@ -233,16 +233,17 @@ impl PackageWriter {
         let next_id = ChunkId(u32::try_from(self.chunks.len()).map_err(|_| {
             PackageError::InvalidArgument("more than 2^32 chunks in one package".into())
         })?);
-        let state = self.stream_mut(stream)?;
-        let mut opened = false;
-        let open = state.open.get_or_insert_with(|| {
-            opened = true;
-            let mut data = std::mem::take(&mut state.spare);
+        let opened = self.stream_mut(stream)?.open.is_none();
+        if opened {
+            let mut data = std::mem::take(&mut self.spare);
             data.clear();
             // Virtual reservation only: pages are committed as they are written.
             data.reserve_exact(target as usize);
-            OpenChunk { id: next_id, data }
-        });
+            self.stream_mut(stream)?.open = Some(OpenChunk { id: next_id, data });
+        }
+        let open = self.stream_mut(stream)?.open.as_mut().ok_or_else(|| {
+            PackageError::InvalidArgument("internal: stream has no open chunk".into())
+        })?;
         // `fits` or a fresh chunk guarantee start + len <= target, which fits in usize.
         let start = align_up(open.data.len() as u64, align).unwrap_or(u64::MAX) as usize;
         open.data.resize(start, 0);
@@ -271,9 +272,9 @@ impl PackageWriter {
         let id = open.id;
         let mut data = open.data;
         data.clear();
-        if let Ok(state) = self.stream_mut(stream) {
-            state.spare = data;
-        }
+        // One spare buffer for the whole writer, not one per stream: each kept buffer stays
+        // resident (its pages were written), and an import has a stream per element.
+        self.spare = data;
         if result.is_err() {
             // The chunk's directory entry is lost, so the package cannot be completed.
             self.failed = true;
@@ -335,6 +336,15 @@ impl PackageWriter {
             stored
         };
         Ok(raw[range(raw.len())?].to_vec())
+    }
+
+    /// Bytes in the stream's open (not yet written) chunk: what the stream holds in memory.
+    pub fn open_chunk_bytes(&self, stream: StreamId) -> u64 {
+        self.streams
+            .get(stream.0 as usize)
+            .and_then(|s| s.as_ref())
+            .and_then(|s| s.open.as_ref())
+            .map_or(0, |o| o.data.len() as u64)
     }
 
     /// Seals the stream's open chunk and frees its buffer; the id becomes invalid.
