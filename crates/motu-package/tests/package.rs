@@ -209,11 +209,12 @@ fn locators_respect_alignment_and_chunk_target() {
     let chunk0 = package.chunk(ChunkId(0)).unwrap();
     assert_eq!(&chunk0[..], [&[1u8; 10][..], &[0; 54], &[2; 10]].concat());
     assert_eq!(&package.chunk(ChunkId(1)).unwrap()[..], &[3u8; 930][..]);
+    assert_eq!(package.chunk(ChunkId(2)).unwrap().len(), 1001);
     assert!(matches!(
-        package.chunk(ChunkId(2)),
+        package.chunk(ChunkId(3)),
         Err(PackageError::NoSuchChunk {
-            id: ChunkId(2),
-            count: 2
+            id: ChunkId(3),
+            count: 3
         })
     ));
 }
