@@ -24,6 +24,29 @@
 
 #define T_INFINITY 3.0e38
 
+// Streaming (motu-gpu's stream module): a programmable instance of this kind stands for a
+// non-resident triangle BLAS (`target`) in its TLAS's proxy BLAS; meeting it in front of the
+// best hit makes the ray incomplete.
+#define PI_EMPTY_BLAS 2u
+// Packed pixel coordinates of a pass's pixel list are biased by this (guard-band pixels lie
+// outside the image).
+#define GUARD_BIAS 4096
+
+// Per-pass streaming parameters (Rust: stream::StreamParams, 64 bytes). Present only when
+// push.stream != 0.
+struct StreamParams {
+    uint64_t blas_stamps;   // u32 per BLAS: 2 × stamp + 1 (needed) or 2 × stamp (guard band)
+    uint64_t tlas_stamps;   // u32 per TLAS, same encoding
+    uint64_t pixel_list;    // u32 packed (x + GUARD_BIAS) | (y + GUARD_BIAS) << 16
+    uint64_t incomplete;    // u32 count, then u32 packed pixels (unbiased x | y << 16)
+    uint stamp;
+    uint full_count;        // items [0, full_count) are the image's pixels in row order
+    uint list_count;        // items [full_count, full_count + list_count) come from pixel_list
+    uint _pad0;
+    uint64_t _pad1;
+    uint64_t _pad2;
+};
+
 struct FrameParams {
     CameraParams camera;
     LodParams lod;
@@ -83,6 +106,9 @@ layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer Pos
 layout(buffer_reference, std430, buffer_reference_align = 16) writeonly buffer AovOut { uvec4 r[]; };
 layout(buffer_reference, std430, buffer_reference_align = 4) writeonly buffer RgbaOut { uint r[]; };
 layout(buffer_reference, std430, buffer_reference_align = 4) buffer Stats { uint n[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer StreamRef { StreamParams s; };
+layout(buffer_reference, std430, buffer_reference_align = 4) buffer StampTable { uint r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 4) buffer IncompleteList { uint count; uint r[]; };
 
 // 16 device addresses = 128 bytes, the guaranteed push-constant size. Order = Rust `Slot`.
 layout(push_constant) uniform Push {
@@ -101,7 +127,7 @@ layout(push_constant) uniform Push {
     AovOut aov;
     RgbaOut rgba;
     Stats stats;
-    uint64_t _spare;
+    uint64_t stream;  // StreamParams address, 0 outside streaming
 } push;
 
 // Row-major 3×4 as three rows.

@@ -32,7 +32,14 @@ Surface resolve(TraceHit h) {
     return s;
 }
 
-void render_pixel(uvec2 px) {
+// Streaming: an incomplete pixel goes on the next pass's list and writes nothing.
+void stream_defer(uvec2 px) {
+    IncompleteList l = IncompleteList(StreamRef(push.stream).s.incomplete);
+    uint k = atomicAdd(l.count, 1u);
+    l.r[k] = px.x | (px.y << 16u);
+}
+
+void render_pixel_impl(uvec2 px) {
     FrameParams f = push.frame.f;
     uint width = f.camera.width;
     if (px.x >= width || px.y >= f.camera.height) {
@@ -46,6 +53,11 @@ void render_pixel(uvec2 px) {
     uint truncations = 0u;
     TraceHit h = traverse(f.root_tlas, org, dir, RAY_PRIMARY, f.lod, f.camera.pixels_per_unit_at_1,
                           pixel_dither(px.x, px.y), false, traces, overflows, truncations);
+    if (g_incomplete) {
+        // Shading and shadow rays would be wasted: the pixel is re-shot next pass.
+        stream_defer(px);
+        return;
+    }
     vec3 colour;
     uvec4 rec = uvec4(AOV_MISS, 0u, 0u, 0u);
     if (h.t < T_INFINITY) {
@@ -72,6 +84,12 @@ void render_pixel(uvec2 px) {
                                            f.camera.pixels_per_unit_at_1, 0.0, true, traces,
                                            overflows, truncations);
                     visible = sh.t < T_INFINITY ? 0.0 : 1.0;
+                    if (sh.t < T_INFINITY) {
+                        g_incomplete = false;  // occluded whatever the empty instances hold
+                    } else if (g_incomplete) {
+                        stream_defer(px);
+                        return;
+                    }
                     atomicAdd(push.stats.n[STAT_SHADOW_RAYS], 1u);
                 }
                 light = f.ambient + f.sun_dir_intensity.w * ndl * visible;
@@ -94,5 +112,47 @@ void render_pixel(uvec2 px) {
     if (truncations != 0u) {
         atomicAdd(push.stats.n[STAT_PI_LIST_OVERFLOWS], truncations);
     }
+}
+void render_pixel(uvec2 px) {
+    g_streaming = false;
+    render_pixel_impl(px);
+}
+
+// Streaming work item `i` of a pass: an image pixel (written unless incomplete) or a
+// guard-band pixel outside the image (primary ray only: it marks what the camera is about to
+// see, for prefetching, and writes nothing).
+void render_stream_item(uint i) {
+    StreamParams s = StreamRef(push.stream).s;
+    if (i >= s.full_count + s.list_count) {
+        return;
+    }
+    CameraParams c = push.frame.f.camera;
+    int x;
+    int y;
+    if (i < s.full_count) {
+        x = int(i % c.width);
+        y = int(i / c.width);
+    } else {
+        uint v = U32Table(s.pixel_list).r[i - s.full_count];
+        x = int(v & 0xffffu) - GUARD_BIAS;
+        y = int(v >> 16u) - GUARD_BIAS;
+    }
+    bool guard = x < 0 || y < 0 || x >= int(c.width) || y >= int(c.height);
+    g_streaming = true;
+    g_incomplete = false;
+    g_empty_t = T_INFINITY;
+    g_mark = 2u * s.stamp + (guard ? 0u : 1u);
+    if (!guard) {
+        render_pixel_impl(uvec2(x, y));
+        return;
+    }
+    vec3 dir = normalize(c.world_dir00 + c.world_du * (float(x) + 0.5) +
+                         c.world_dv * (float(y) + 0.5));
+    uint traces = 0u;
+    uint overflows = 0u;
+    uint truncations = 0u;
+    FrameParams f = push.frame.f;
+    traverse(f.root_tlas, c.world_eye, dir, RAY_PRIMARY, f.lod, c.pixels_per_unit_at_1, 0.5,
+             false, traces, overflows, truncations);
 }
 #endif

@@ -30,6 +30,42 @@ struct Entry {
     float t_floor;  // -1, or the re-walk floor after a truncated candidate list
 };
 
+// Streaming state of the current ray (the paper's `trav_valid`, inverted): set by the backend
+// entry point; traverse() marks what it walks and flags rays that met a non-resident structure
+// in front of their best hit.
+bool g_streaming = false;
+bool g_incomplete = false;
+uint g_mark = 0u;  // stamp value written by this ray (StreamParams)
+// Nearest empty instance met so far: only empties at or before it are needed now. Behind the
+// nearest one the ray's outcome is unknown until it is built (it may occlude them), so they
+// are only prefetch candidates; the next pass finds them again if they matter. Costs a pass
+// per depth layer on a cold start.
+float g_empty_t = T_INFINITY;
+
+// Records `id` as visible in this pass (read first: most marks are repeats, and an atomic on
+// the root's slot from every ray would serialise).
+void stream_mark_as(uint64_t table, uint id, uint mark) {
+    StampTable t = StampTable(table);
+    if (t.r[id] < mark) {
+        atomicMax(t.r[id], mark);
+    }
+}
+
+void stream_mark(uint64_t table, uint id) {
+    stream_mark_as(table, id, g_mark);
+}
+
+// An empty instance at `t_near`: the nearest so far is needed now; one behind it is marked
+// for prefetching only (built after the frame if it fits without evicting this frame's set).
+void stream_mark_empty(uint64_t table, uint id, float t_near) {
+    if (t_near <= g_empty_t) {
+        g_empty_t = t_near;
+        stream_mark(table, id);
+    } else {
+        stream_mark_as(table, id, g_mark & ~1u);
+    }
+}
+
 struct TraceHit {
     float t;  // T_INFINITY: miss
     uint tlas;
@@ -56,6 +92,9 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
             continue;
         }
         traces += 1u;
+        if (g_streaming) {
+            stream_mark(StreamRef(push.stream).s.tlas_stamps, e.tlas);
+        }
         pl.tlas = e.tlas;
         pl.count = 0u;
         pl.t_floor = e.t_floor;
@@ -113,13 +152,23 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
         uint inst_base = push.tlases.r[e.tlas].instance_base;
         for (uint k = 0u; k < n; ++k) {
             PiCandidate cd = pl.c[order[k]];
+            PiRecord pi = push.pis.r[cd.pi];
+            if (pi.kind == PI_EMPTY_BLAS) {
+                // A non-resident triangle BLAS in front of the best hit: this ray cannot
+                // complete in this pass; mark the BLAS for building and keep walking to find
+                // the other structures the next pass needs.
+                if (g_streaming) {
+                    stream_mark_empty(StreamRef(push.stream).s.blas_stamps, pi.target, cd.t_near);
+                    g_incomplete = true;
+                }
+                continue;
+            }
             if (sp >= STACK_SIZE) {
                 overflows += 1u;
                 continue;
             }
             InstanceRecord inst = push.instances.r[inst_base + cd.instance];
             Affine blas_from_tlas = affine_inverse(affine_from_array(inst.tlas_from_blas));
-            PiRecord pi = push.pis.r[cd.pi];
             Affine child_from_world = compose(affine_from_array(pi.child_from_parent),
                                               compose(blas_from_tlas, e.tlas_from_world));
             uint tlas = pi.target;
@@ -132,9 +181,21 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
                 tlas = push.lod_levels.r[sel.level_base + level];
                 lod = level;
             }
+            if (g_streaming && push.tlas_addresses.r[tlas] == 0ul) {
+                // A non-resident child TLAS (empty instance).
+                stream_mark_empty(StreamRef(push.stream).s.tlas_stamps, tlas, cd.t_near);
+                g_incomplete = true;
+                continue;
+            }
             stack[sp] = Entry(child_from_world, cd.t_near, tlas, lod, -1.0);
             sp += 1u;
         }
+    }
+    if (g_streaming && hit.t < T_INFINITY) {
+        // Resident triangle BLASes are walked by the hardware without a shader callback: the
+        // one hit is the one marked (see stream.rs on what this means for eviction).
+        uint blas = push.instances.r[push.tlases.r[hit.tlas].instance_base + hit.instance].blas;
+        stream_mark(StreamRef(push.stream).s.blas_stamps, blas);
     }
     return hit;
 }

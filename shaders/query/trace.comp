@@ -47,5 +47,11 @@ void backend_trace(uint tlas, vec3 org, vec3 dir, float t_max, bool first_hit) {
 #include "render_pixel.glsl"
 
 void main() {
+    if (push.stream != 0ul) {
+        // Streaming passes dispatch a 1-D item list (8 × 8 items per group, groups in 2-D).
+        uint group = gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
+        render_stream_item(group * 64u + gl_LocalInvocationIndex);
+        return;
+    }
     render_pixel(gl_GlobalInvocationID.xy);
 }

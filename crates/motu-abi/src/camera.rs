@@ -78,6 +78,77 @@ impl CameraParams {
     }
 }
 
+/// A camera as the user states it (before the image size is known): what a camera path moves.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraPose {
+    pub world_eye: Vec3,
+    /// Viewing direction (need not be normalised).
+    pub world_forward: Vec3,
+    pub world_up: Vec3,
+    pub fov_deg: f32,
+    pub mirror_x: bool,
+}
+
+impl CameraPose {
+    /// The frame camera for a `width × height` image.
+    pub fn params(&self, width: u32, height: u32) -> CameraParams {
+        CameraParams::new(
+            self.world_eye,
+            self.world_forward,
+            self.world_up,
+            self.fov_deg,
+            self.mirror_x,
+            width,
+            height,
+        )
+    }
+}
+
+/// How [`camera_path`] moves a camera over the frames.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CameraPath {
+    /// Total yaw about the up vector, swept linearly from `-sweep/2` (first frame) to
+    /// `+sweep/2` (last frame).
+    pub yaw_sweep_deg: f32,
+    /// World distance the eye travels along the (yawed) viewing direction by the last frame.
+    pub dolly_world: f32,
+}
+
+impl CameraPath {
+    /// A 40° sweep and a dolly of `fraction` of `distance` (e.g. the eye's distance to the
+    /// scene's centre), so a path sees different parts of a scene and moves into it.
+    pub fn sweep_and_dolly(distance: f32, fraction: f32) -> Self {
+        Self {
+            yaw_sweep_deg: 40.0,
+            dolly_world: (distance * fraction).max(0.0),
+        }
+    }
+}
+
+/// Frame `frame` of `frame_count` along `path` from `base`: deterministic (pure f32 arithmetic
+/// on the inputs), so the CPU oracle and the GPU render the same frames. A single-frame path
+/// is `base` itself.
+pub fn camera_path(
+    base: &CameraPose,
+    path: &CameraPath,
+    frame: u32,
+    frame_count: u32,
+) -> CameraPose {
+    if frame_count <= 1 {
+        return *base;
+    }
+    let s = frame.min(frame_count - 1) as f32 / (frame_count - 1) as f32;
+    let yaw = (path.yaw_sweep_deg * (s - 0.5)).to_radians();
+    let up = base.world_up.normalize_or(Vec3::Y);
+    let forward =
+        glam::Quat::from_axis_angle(up, yaw) * base.world_forward.normalize_or(Vec3::NEG_Z);
+    CameraPose {
+        world_eye: base.world_eye + forward * (path.dolly_world * s),
+        world_forward: forward,
+        ..*base
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -104,5 +175,41 @@ mod tests {
         let angle = top.normalize().angle_between(Vec3::Z).to_degrees();
         assert!((angle - 45.0).abs() < 1e-3, "{angle}");
         assert!((c.pixels_per_unit_at_1 - 50.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn camera_path_sweeps_and_dollies_deterministically() {
+        let base = CameraPose {
+            world_eye: Vec3::new(0.0, 1.0, 10.0),
+            world_forward: Vec3::NEG_Z,
+            world_up: Vec3::Y,
+            fov_deg: 45.0,
+            mirror_x: false,
+        };
+        let path = CameraPath::sweep_and_dolly(10.0, 0.3);
+        assert_eq!(camera_path(&base, &path, 0, 1), base);
+        let first = camera_path(&base, &path, 0, 30);
+        let mid = camera_path(&base, &path, 15, 30);
+        let last = camera_path(&base, &path, 29, 30);
+        let yaw = |p: &CameraPose| p.world_forward.x.atan2(-p.world_forward.z).to_degrees();
+        // Yaw about +Y turns -Z towards -X for positive angles.
+        assert!((yaw(&first) - 20.0).abs() < 1e-3, "{}", yaw(&first));
+        assert!((yaw(&last) + 20.0).abs() < 1e-3, "{}", yaw(&last));
+        assert!(yaw(&mid).abs() < 1.5);
+        // The eye moves 3 units by the last frame, along the viewing direction.
+        assert!((last.world_eye - base.world_eye).length() - 3.0 < 1e-4);
+        assert_eq!(first.world_eye, base.world_eye);
+        assert!(
+            (last.world_eye - base.world_eye)
+                .normalize()
+                .dot(last.world_forward)
+                > 0.999
+        );
+        // Same inputs, same frame.
+        assert_eq!(
+            camera_path(&base, &path, 7, 30),
+            camera_path(&base, &path, 7, 30)
+        );
+        assert_eq!(first.params(8, 8), first.params(8, 8));
     }
 }

@@ -30,12 +30,15 @@ mod report;
 mod rt_pipeline;
 mod scene;
 pub mod shaders;
+mod stream;
 pub mod testing;
 
 #[cfg(test)]
 mod gpu_tests;
 #[cfg(test)]
 mod render_tests;
+#[cfg(test)]
+mod stream_tests;
 
 pub use accel::{
     AsBuildFlags, AsBuildSizes, BlasGeometry, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
@@ -61,3 +64,4 @@ pub use query::TimestampQueries;
 pub use render::{heat_colour, render, Backend, RenderOptions, RenderOutput, RenderStats, View};
 pub use report::{list_devices, DeviceReport};
 pub use scene::{BuildOptions, GpuScene, MeshBlobSource, ResourceReport};
+pub use stream::{FrameStreamStats, StreamOptions, StreamTotals, StreamingRenderer, PI_EMPTY_BLAS};

@@ -166,7 +166,7 @@ pub struct RenderOutput {
 /// `FrameParams` of `common.glsl` (std430, 128 bytes).
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 #[repr(C)]
-struct FrameParams {
+pub(crate) struct FrameParams {
     camera: CameraParams,
     lod: LodParams,
     sun_dir_intensity: [f32; 4],
@@ -178,7 +178,7 @@ struct FrameParams {
     _pad: [u32; 3],
 }
 
-const STAT_WORDS: usize = 4;
+pub(crate) const STAT_WORDS: usize = 4;
 
 struct Frame {
     params: HeapBuffer,
@@ -259,9 +259,111 @@ fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams) -> Result<
     })
 }
 
-enum Tracer {
+pub(crate) enum Tracer {
     Pipeline(Box<RtPipeline>),
     Query(ComputePipeline),
+}
+
+impl Tracer {
+    /// The pipeline of `opts.backend` (its SBT, if any, from `heap`).
+    pub(crate) fn new(ctx: &Context, heap: &mut GpuHeap, opts: &RenderOptions) -> Result<Tracer> {
+        Ok(match opts.backend {
+            Backend::Pipeline => {
+                Tracer::Pipeline(Box::new(RtPipeline::new(ctx, heap, opts.stack_size)?))
+            }
+            Backend::Query => {
+                if !ctx.caps().ray_query {
+                    return Err(GpuError::MissingFeature {
+                        what: "ray queries (VK_KHR_ray_query) for backend `query`; use `pipeline`"
+                            .into(),
+                        details: ctx.device_name().to_string(),
+                    });
+                }
+                Tracer::Query(ComputePipeline::new(
+                    ctx,
+                    &ComputePipelineDesc {
+                        label: "traversal query",
+                        spirv: shaders::QUERY_TRACE_COMP,
+                        storage_buffer_count: 0,
+                        push_constant_size_bytes: PUSH_CONSTANT_BYTES,
+                        specialization: &[(0, opts.stack_size.max(1))],
+                    },
+                )?)
+            }
+        })
+    }
+
+    pub(crate) fn release(self, heap: &mut GpuHeap) {
+        if let Tracer::Pipeline(p) = self {
+            p.release(heap);
+        }
+    }
+
+    /// Records one trace of `dims` invocations (pipeline: a launch of `dims`; query: 8 × 8
+    /// groups covering `dims`, or `groups` verbatim when given).
+    pub(crate) fn record<'a>(
+        &'a self,
+        rec: &mut CommandRecorder<'a>,
+        push_bytes: &[u8],
+        dims: [u32; 2],
+        groups: Option<[u32; 2]>,
+    ) -> Result<()> {
+        match self {
+            Tracer::Pipeline(p) => {
+                let (c, cmd) = rec.raw();
+                let device = &c.shared.device;
+                // SAFETY: recording state; the pipeline, its layout and SBT, and every buffer
+                // behind the pushed addresses live until the fenced submission returns.
+                unsafe {
+                    device.cmd_bind_pipeline(
+                        cmd,
+                        ash::vk::PipelineBindPoint::RAY_TRACING_KHR,
+                        p.pipeline,
+                    );
+                    device.cmd_push_constants(cmd, p.layout, rt_stages(), 0, push_bytes);
+                    p.rt.cmd_trace_rays(
+                        cmd,
+                        &p.regions[0],
+                        &p.regions[1],
+                        &p.regions[2],
+                        &p.regions[3],
+                        dims[0],
+                        dims[1],
+                        1,
+                    );
+                }
+                Ok(())
+            }
+            Tracer::Query(q) => {
+                let g = groups.unwrap_or([dims[0].div_ceil(8), dims[1].div_ceil(8)]);
+                rec.dispatch(q, None, push_bytes, [g[0], g[1], 1])
+            }
+        }
+    }
+}
+
+/// The frame parameters of `common.glsl` for `camera` and `opts`.
+pub(crate) fn frame_params(
+    camera: &CameraParams,
+    opts: &RenderOptions,
+    root_tlas: u32,
+) -> FrameParams {
+    let sun = {
+        let s = opts.sun_dir_world;
+        let l = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt().max(1e-20);
+        [s[0] / l, s[1] / l, s[2] / l, opts.sun_intensity]
+    };
+    FrameParams {
+        camera: *camera,
+        lod: opts.lod,
+        sun_dir_intensity: sun,
+        view: opts.view.code(),
+        shadows: u32::from(opts.shadows),
+        shadow_lod_from_primary: u32::from(opts.shadow_lod_from_primary),
+        ambient: opts.ambient,
+        root_tlas,
+        _pad: [0; 3],
+    }
 }
 
 /// Renders `scene` as seen by `camera`.
@@ -284,49 +386,11 @@ pub fn render(
         height = h
     );
     let _g = span.enter();
-    let sun = {
-        let s = opts.sun_dir_world;
-        let l = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt().max(1e-20);
-        [s[0] / l, s[1] / l, s[2] / l, opts.sun_intensity]
-    };
-    let params = FrameParams {
-        camera: *camera,
-        lod: opts.lod,
-        sun_dir_intensity: sun,
-        view: opts.view.code(),
-        shadows: u32::from(opts.shadows),
-        shadow_lod_from_primary: u32::from(opts.shadow_lod_from_primary),
-        ambient: opts.ambient,
-        root_tlas: scene.root_tlas,
-        _pad: [0; 3],
-    };
+    let params = frame_params(camera, opts, scene.root_tlas);
     let pixels = u64::from(w) * u64::from(h);
     let frames = opts.frames.max(1);
     let mut heap = scene.heap();
-    let tracer = match opts.backend {
-        Backend::Pipeline => {
-            Tracer::Pipeline(Box::new(RtPipeline::new(ctx, &mut heap, opts.stack_size)?))
-        }
-        Backend::Query => {
-            if !ctx.caps().ray_query {
-                return Err(GpuError::MissingFeature {
-                    what: "ray queries (VK_KHR_ray_query) for backend `query`; use `pipeline`"
-                        .into(),
-                    details: ctx.device_name().to_string(),
-                });
-            }
-            Tracer::Query(ComputePipeline::new(
-                ctx,
-                &ComputePipelineDesc {
-                    label: "traversal query",
-                    spirv: shaders::QUERY_TRACE_COMP,
-                    storage_buffer_count: 0,
-                    push_constant_size_bytes: PUSH_CONSTANT_BYTES,
-                    specialization: &[(0, opts.stack_size.max(1))],
-                },
-            )?)
-        }
-    };
+    let tracer = Tracer::new(ctx, &mut heap, opts)?;
     let frame = match alloc_frame(&mut heap, pixels, &params) {
         Ok(f) => f,
         Err(e) => {
@@ -432,35 +496,7 @@ fn run_frames(
         rec.fill_buffer(&frame.stats, 0, (STAT_WORDS * 4) as u64, 0)?;
         rec.barrier();
         rec.write_timestamp(&timestamps, 2 * f)?;
-        match tracer {
-            Tracer::Pipeline(p) => {
-                let (c, cmd) = rec.raw();
-                let device = &c.shared.device;
-                // SAFETY: recording state; the pipeline, its layout and SBT, and every buffer
-                // behind the pushed addresses live until the fenced submission returns.
-                unsafe {
-                    device.cmd_bind_pipeline(
-                        cmd,
-                        ash::vk::PipelineBindPoint::RAY_TRACING_KHR,
-                        p.pipeline,
-                    );
-                    device.cmd_push_constants(cmd, p.layout, rt_stages(), 0, push_bytes);
-                    p.rt.cmd_trace_rays(
-                        cmd,
-                        &p.regions[0],
-                        &p.regions[1],
-                        &p.regions[2],
-                        &p.regions[3],
-                        w,
-                        h,
-                        1,
-                    );
-                }
-            }
-            Tracer::Query(q) => {
-                rec.dispatch(q, None, push_bytes, [w.div_ceil(8), h.div_ceil(8), 1])?;
-            }
-        }
+        tracer.record(&mut rec, push_bytes, [w, h], None)?;
         rec.write_timestamp(&timestamps, 2 * f + 1)?;
         rec.barrier();
     }

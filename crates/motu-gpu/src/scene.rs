@@ -15,7 +15,7 @@ use std::sync::{Mutex, MutexGuard};
 use std::time::Instant;
 
 use ash::vk;
-use motu_abi::{HierarchyView, BLAS_AABBS, BLAS_TRIANGLES, FLAG_NEEDS_ANY_HIT};
+use motu_abi::{HierarchyView, MeshRecord, BLAS_AABBS, BLAS_TRIANGLES, FLAG_NEEDS_ANY_HIT};
 use motu_alloc::{
     effective_budget_bytes, plan_build_batches, AllocKind, AllocLimits, AllocReport, BatchLimits,
     BuildSize, MemoryClass, SafetyMargin, MIB,
@@ -119,6 +119,8 @@ pub(crate) enum Slot {
     Aov,
     Rgba,
     Stats,
+    /// Streaming parameters (`stream.rs`); 0 outside streaming.
+    Stream,
 }
 
 pub(crate) const SLOT_COUNT: usize = 16;
@@ -126,14 +128,14 @@ pub(crate) const SLOT_COUNT: usize = 16;
 /// An acceleration structure in a heap buffer. Destroyed before its buffer (Drop order).
 pub(crate) struct AccelStruct {
     ctx: Context,
-    handle: vk::AccelerationStructureKHR,
+    pub(crate) handle: vk::AccelerationStructureKHR,
     pub(crate) address: u64,
     pub(crate) size_bytes: u64,
     buffer: Option<HeapBuffer>,
 }
 
 impl AccelStruct {
-    fn new(
+    pub(crate) fn new(
         ctx: &Context,
         heap: &mut GpuHeap,
         label: &str,
@@ -185,7 +187,7 @@ impl AccelStruct {
     }
 
     /// Destroys the structure and returns its memory to the heap.
-    fn release(mut self, heap: &mut GpuHeap) {
+    pub(crate) fn release(mut self, heap: &mut GpuHeap) {
         self.destroy_handle();
         if let Some(b) = self.buffer.take() {
             heap.free(b);
@@ -260,15 +262,15 @@ impl Drop for SizeQueries {
 
 /// Bounded host-visible staging ring: copies are queued and flushed (one fenced submission)
 /// whenever the ring is full, so host memory never holds more than the ring.
-struct Uploader {
-    staging: HeapBuffer,
+pub(crate) struct Uploader {
+    pub(crate) staging: HeapBuffer,
     cursor: u64,
     pending: Vec<(vk::Buffer, u64, u64, u64)>,
     flushes: u32,
 }
 
 impl Uploader {
-    fn new(heap: &mut GpuHeap, size_bytes: u64) -> Result<Uploader> {
+    pub(crate) fn new(heap: &mut GpuHeap, size_bytes: u64) -> Result<Uploader> {
         let staging = heap.alloc_buffer(
             "staging-ring",
             size_bytes.max(64 * 1024),
@@ -286,7 +288,7 @@ impl Uploader {
     }
 
     /// Queues `bytes` for `dst` at `dst_offset`. `dst` must stay alive until the next `flush`.
-    fn upload(
+    pub(crate) fn upload(
         &mut self,
         ctx: &Context,
         dst: &HeapBuffer,
@@ -315,7 +317,7 @@ impl Uploader {
         Ok(())
     }
 
-    fn flush(&mut self, ctx: &Context) -> Result<()> {
+    pub(crate) fn flush(&mut self, ctx: &Context) -> Result<()> {
         if self.pending.is_empty() {
             self.cursor = 0;
             return Ok(());
@@ -345,12 +347,86 @@ impl Uploader {
 }
 
 /// Per compiled mesh on the GPU.
-struct MeshGpu {
-    buffer: HeapBuffer,
-    positions_address: u64,
-    indices_address: u64,
-    vertex_count: u32,
-    triangle_count: u32,
+pub(crate) struct MeshGpu {
+    pub(crate) buffer: HeapBuffer,
+    pub(crate) positions_address: u64,
+    pub(crate) indices_address: u64,
+    pub(crate) vertex_count: u32,
+    pub(crate) triangle_count: u32,
+}
+
+impl MeshGpu {
+    /// Allocates the buffer of mesh record `m` (positions, then indices at a 16-byte offset).
+    pub(crate) fn alloc(heap: &mut GpuHeap, m: usize, rec: &MeshRecord) -> Result<MeshGpu> {
+        let pos_bytes = u64::from(rec.vertex_count) * 12;
+        let idx_offset = pos_bytes.div_ceil(16) * 16;
+        let size = idx_offset + u64::from(rec.triangle_count) * 12;
+        let buf = heap.alloc_buffer(
+            &format!("mesh-{m}"),
+            size,
+            BufferUsage::STORAGE
+                | BufferUsage::DEVICE_ADDRESS
+                | BufferUsage::TRANSFER_DST
+                | BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT,
+            AllocKind::Geometry,
+            MemoryClass::DeviceLocal,
+            16,
+        )?;
+        let base = match buf.device_address() {
+            Ok(a) => a.0,
+            Err(e) => {
+                heap.free(buf);
+                return Err(e);
+            }
+        };
+        Ok(MeshGpu {
+            buffer: buf,
+            positions_address: base,
+            indices_address: base + idx_offset,
+            vertex_count: rec.vertex_count,
+            triangle_count: rec.triangle_count,
+        })
+    }
+
+    /// Bytes of its buffer.
+    pub(crate) fn size_bytes(&self) -> u64 {
+        self.buffer.size_bytes()
+    }
+
+    /// Loads mesh record `m` from `source`, checks it against the record and queues its upload.
+    pub(crate) fn upload(
+        &self,
+        ctx: &Context,
+        up: &mut Uploader,
+        source: &dyn MeshBlobSource,
+        m: usize,
+    ) -> Result<u64> {
+        use bytemuck::cast_slice;
+        let (positions, indices) = source
+            .mesh_data(m as u32)
+            .map_err(|e| GpuError::InvalidRequest(format!("mesh record {m}: {e}")))?;
+        if positions.len() != self.vertex_count as usize
+            || indices.len() != 3 * self.triangle_count as usize
+        {
+            return Err(GpuError::InvalidRequest(format!(
+                "mesh record {m}: {} positions and {} indices, the record says {} and {}",
+                positions.len(),
+                indices.len(),
+                self.vertex_count,
+                3 * self.triangle_count
+            )));
+        }
+        if let Some(bad) = indices.iter().find(|&&i| i >= self.vertex_count) {
+            return Err(GpuError::InvalidRequest(format!(
+                "mesh record {m}: index {bad} >= vertex count {}",
+                self.vertex_count
+            )));
+        }
+        up.upload(ctx, &self.buffer, 0, cast_slice(&positions[..]))?;
+        let idx_off = self.indices_address - self.positions_address;
+        up.upload(ctx, &self.buffer, idx_off, cast_slice(&indices[..]))?;
+        Ok((positions.len() * 12 + indices.len() * 4) as u64)
+    }
 }
 
 /// Everything one compiled hierarchy needs on the GPU. Drop releases it all.
@@ -377,7 +453,7 @@ impl std::fmt::Debug for GpuScene {
     }
 }
 
-fn table_usage() -> BufferUsage {
+pub(crate) fn table_usage() -> BufferUsage {
     BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS | BufferUsage::TRANSFER_DST
 }
 
@@ -554,55 +630,13 @@ impl GpuScene {
             if !used[m] || rec.triangle_count == 0 || rec.vertex_count == 0 {
                 continue;
             }
-            let pos_bytes = u64::from(rec.vertex_count) * 12;
-            let idx_offset = pos_bytes.div_ceil(16) * 16;
-            let size = idx_offset + u64::from(rec.triangle_count) * 12;
-            let buf = heap.alloc_buffer(
-                &format!("mesh-{m}"),
-                size,
-                BufferUsage::STORAGE
-                    | BufferUsage::DEVICE_ADDRESS
-                    | BufferUsage::TRANSFER_DST
-                    | BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT,
-                AllocKind::Geometry,
-                MemoryClass::DeviceLocal,
-                16,
-            )?;
-            let base = buf.device_address()?.0;
-            self.report.geometry_bytes += size;
-            self.meshes[m] = Some(MeshGpu {
-                buffer: buf,
-                positions_address: base,
-                indices_address: base + idx_offset,
-                vertex_count: rec.vertex_count,
-                triangle_count: rec.triangle_count,
-            });
+            let g = MeshGpu::alloc(heap, m, rec)?;
+            self.report.geometry_bytes += g.size_bytes();
+            self.meshes[m] = Some(g);
         }
         for (m, slot) in self.meshes.iter().enumerate() {
             let Some(g) = slot else { continue };
-            let (positions, indices) = source
-                .mesh_data(m as u32)
-                .map_err(|e| GpuError::InvalidRequest(format!("mesh record {m}: {e}")))?;
-            if positions.len() != g.vertex_count as usize
-                || indices.len() != 3 * g.triangle_count as usize
-            {
-                return Err(GpuError::InvalidRequest(format!(
-                    "mesh record {m}: {} positions and {} indices, the record says {} and {}",
-                    positions.len(),
-                    indices.len(),
-                    g.vertex_count,
-                    3 * g.triangle_count
-                )));
-            }
-            if let Some(bad) = indices.iter().find(|&&i| i >= g.vertex_count) {
-                return Err(GpuError::InvalidRequest(format!(
-                    "mesh record {m}: index {bad} >= vertex count {}",
-                    g.vertex_count
-                )));
-            }
-            up.upload(ctx, &g.buffer, 0, cast_slice(&positions[..]))?;
-            let idx_off = g.indices_address - g.positions_address;
-            up.upload(ctx, &g.buffer, idx_off, cast_slice(&indices[..]))?;
+            g.upload(ctx, up, source, m)?;
         }
         let mut mesh_geo = vec![0u64; 2 * view.meshes.len()];
         for (m, g) in self.meshes.iter().enumerate() {
@@ -683,84 +717,13 @@ impl GpuScene {
             Vec::with_capacity(view.blases.len());
         let mut sizes = Vec::new();
         let mut order = Vec::new();
-        for (i, b) in view.blases.iter().enumerate() {
-            let range = b.item_base as usize..(b.item_base + b.item_count) as usize;
-            let (geoms, counts, shape): (Vec<_>, Vec<u32>, Vec<BlasGeometry>) = if b.kind
-                == BLAS_AABBS
-            {
-                if b.item_count == 0 {
-                    (Vec::new(), Vec::new(), Vec::new())
-                } else {
-                    let aabbs = vk::AccelerationStructureGeometryAabbsDataKHR::default()
-                        .data(vk::DeviceOrHostAddressConstKHR {
-                            device_address: aabb_base + u64::from(b.item_base) * 24,
-                        })
-                        .stride(24);
-                    (
-                        vec![vk::AccelerationStructureGeometryKHR::default()
-                            .geometry_type(vk::GeometryTypeKHR::AABBS)
-                            .geometry(vk::AccelerationStructureGeometryDataKHR { aabbs })
-                            .flags(vk::GeometryFlagsKHR::NO_DUPLICATE_ANY_HIT_INVOCATION)],
-                        vec![b.item_count],
-                        vec![BlasGeometry::Aabbs {
-                            aabb_count: b.item_count,
-                            opaque: false,
-                        }],
-                    )
-                }
-            } else {
-                let mut g = Vec::new();
-                let mut c = Vec::new();
-                let mut s = Vec::new();
-                for geo in &view.geometries[range] {
-                    let Some(m) = &self.meshes[geo.mesh as usize] else {
-                        continue;
-                    };
-                    let opaque = view.meshes[geo.mesh as usize].flags & FLAG_NEEDS_ANY_HIT == 0;
-                    let tri = vk::AccelerationStructureGeometryTrianglesDataKHR::default()
-                        .vertex_format(vk::Format::R32G32B32_SFLOAT)
-                        .vertex_data(vk::DeviceOrHostAddressConstKHR {
-                            device_address: m.positions_address,
-                        })
-                        .vertex_stride(12)
-                        .max_vertex(m.vertex_count - 1)
-                        .index_type(vk::IndexType::UINT32)
-                        .index_data(vk::DeviceOrHostAddressConstKHR {
-                            device_address: m.indices_address,
-                        });
-                    g.push(
-                        vk::AccelerationStructureGeometryKHR::default()
-                            .geometry_type(vk::GeometryTypeKHR::TRIANGLES)
-                            .geometry(vk::AccelerationStructureGeometryDataKHR { triangles: tri })
-                            .flags(if opaque {
-                                vk::GeometryFlagsKHR::OPAQUE
-                            } else {
-                                vk::GeometryFlagsKHR::NO_DUPLICATE_ANY_HIT_INVOCATION
-                            }),
-                    );
-                    c.push(m.triangle_count);
-                    s.push(BlasGeometry::Triangles {
-                        vertex_count: m.vertex_count,
-                        triangle_count: m.triangle_count,
-                        indexed: true,
-                        opaque,
-                    });
-                }
-                // A geometry index must equal its position in the record (gl_GeometryIndexEXT
-                // resolves the mesh), so an empty mesh inside a BLAS is an error.
-                if g.len() != b.item_count as usize {
-                    return Err(GpuError::InvalidRequest(format!(
-                        "BLAS {i}: {} of its {} meshes are empty",
-                        b.item_count as usize - g.len(),
-                        b.item_count
-                    )));
-                }
-                (g, c, s)
-            };
-            if geoms.is_empty() {
+        for i in 0..view.blases.len() {
+            let Some((geoms, counts, shape)) =
+                blas_geometry(view, i, |m| self.meshes[m].as_ref(), aabb_base)?
+            else {
                 descs.push(None);
                 continue;
-            }
+            };
             let sz = ctx.blas_build_sizes(&shape, AsBuildFlags::default())?;
             sizes.push(BuildSize {
                 result_bytes: sz.acceleration_structure_size_bytes,
@@ -770,9 +733,10 @@ impl GpuScene {
             descs.push(Some((geoms, counts)));
         }
         self.blases = (0..view.blases.len()).map(|_| None).collect();
-        let built = self.build_batched(
+        let built = build_batched(
             ctx,
             heap,
+            &mut self.report,
             &sizes,
             vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
             opts,
@@ -822,28 +786,13 @@ impl GpuScene {
             for inst in &view.instances
                 [rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize]
             {
-                let blas = &view.blases[inst.blas as usize];
-                let (sbt, flags) = if blas.kind == BLAS_AABBS {
-                    (1u32, vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE)
-                } else if inst.flags & FLAG_NEEDS_ANY_HIT != 0 {
-                    (
-                        0,
-                        vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE,
-                    )
-                } else {
-                    (
-                        0,
-                        vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE
-                            | vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE,
-                    )
-                };
-                for v in inst.tlas_from_blas {
-                    out.extend_from_slice(&v.to_le_bytes());
-                }
-                // Custom index 0 (node ids never travel in 24 bits), mask 0xFF.
-                out.extend_from_slice(&(0xFFu32 << 24).to_le_bytes());
-                out.extend_from_slice(&(sbt | (flags.as_raw() << 24)).to_le_bytes());
-                out.extend_from_slice(&blas_addr[inst.blas as usize].to_le_bytes());
+                let aabbs = view.blases[inst.blas as usize].kind == BLAS_AABBS;
+                out.extend_from_slice(&encode_instance(
+                    &inst.tlas_from_blas,
+                    aabbs,
+                    inst.flags & FLAG_NEEDS_ANY_HIT != 0,
+                    blas_addr[inst.blas as usize],
+                ));
             }
             out
         };
@@ -853,9 +802,10 @@ impl GpuScene {
         let inst_addr: std::cell::Cell<u64> = std::cell::Cell::new(0);
         let inst_buf: std::cell::RefCell<Option<HeapBuffer>> = std::cell::RefCell::new(None);
         let peak = std::cell::Cell::new(0u64);
-        let built = self.build_batched(
+        let built = build_batched(
             ctx,
             heap,
+            &mut self.report,
             &sizes,
             vk::AccelerationStructureTypeKHR::TOP_LEVEL,
             opts,
@@ -929,164 +879,6 @@ impl GpuScene {
         Ok(())
     }
 
-    /// Builds `sizes.len()` structures in batches under the scratch budget, compacting each
-    /// batch before the next. `geometry(k)` describes build k (addresses valid once
-    /// `prepare(heap, batch_range)` ran for its batch). Returns (k, structure) pairs.
-    #[allow(clippy::too_many_arguments)]
-    fn build_batched<'g>(
-        &mut self,
-        ctx: &Context,
-        heap: &mut GpuHeap,
-        sizes: &[BuildSize],
-        ty: vk::AccelerationStructureTypeKHR,
-        opts: &BuildOptions,
-        geometry: impl Fn(usize) -> (Vec<vk::AccelerationStructureGeometryKHR<'g>>, Vec<u32>),
-        mut prepare: impl FnMut(&mut GpuHeap, std::ops::Range<usize>) -> Result<()>,
-    ) -> Result<Vec<(usize, AccelStruct)>> {
-        if sizes.is_empty() {
-            return Ok(Vec::new());
-        }
-        let accel = ctx.accel_device()?;
-        let scratch_align = u64::from(
-            ctx.limits()
-                .min_acceleration_structure_scratch_offset_alignment
-                .max(1),
-        )
-        .next_power_of_two();
-        let plan = plan_build_batches(
-            sizes,
-            BatchLimits {
-                scratch_budget_bytes: opts.scratch_budget_bytes,
-                scratch_alignment_bytes: scratch_align,
-                scratch_pool_max_bytes: heap.limits().budget_bytes,
-                max_batch_result_bytes: Some(opts.max_batch_result_bytes),
-            },
-        )
-        .map_err(|e| GpuError::Budget(e.to_string()))?;
-        let scratch = heap.alloc_buffer(
-            "scratch-pool",
-            plan.scratch_pool_bytes.max(scratch_align),
-            BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
-            AllocKind::Scratch,
-            MemoryClass::DeviceLocal,
-            scratch_align,
-        )?;
-        self.report.scratch_peak_bytes = self.report.scratch_peak_bytes.max(scratch.size_bytes());
-        let result = (|| -> Result<Vec<(usize, AccelStruct)>> {
-            let scratch_base = scratch.device_address()?.0.div_ceil(scratch_align) * scratch_align;
-            let kind = if ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL {
-                "tlas"
-            } else {
-                "blas"
-            };
-            let mut out = Vec::with_capacity(sizes.len());
-            for (bi, batch) in plan.batches.iter().enumerate() {
-                self.report.build_batches += 1;
-                prepare(heap, batch.builds.clone())?;
-                let mut pending: Vec<Pending> = Vec::new();
-                for k in batch.builds.clone() {
-                    let a = AccelStruct::new(
-                        ctx,
-                        heap,
-                        &format!("{kind}-{k}"),
-                        sizes[k].result_bytes,
-                        ty,
-                    )?;
-                    pending.push(Pending { accel: a, index: k });
-                }
-                let descs: Vec<_> = batch.builds.clone().map(&geometry).collect();
-                let ranges: Vec<Vec<vk::AccelerationStructureBuildRangeInfoKHR>> = descs
-                    .iter()
-                    .map(|(_, counts)| {
-                        counts
-                            .iter()
-                            .map(|&n| {
-                                vk::AccelerationStructureBuildRangeInfoKHR::default()
-                                    .primitive_count(n)
-                            })
-                            .collect()
-                    })
-                    .collect();
-                let infos: Vec<_> = descs
-                    .iter()
-                    .zip(&pending)
-                    .map(|((g, _), p)| {
-                        vk::AccelerationStructureBuildGeometryInfoKHR::default()
-                            .ty(ty)
-                            .flags(
-                                vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE
-                                    | vk::BuildAccelerationStructureFlagsKHR::ALLOW_COMPACTION,
-                            )
-                            .mode(vk::BuildAccelerationStructureModeKHR::BUILD)
-                            .dst_acceleration_structure(p.accel.handle)
-                            .geometries(g)
-                            .scratch_data(vk::DeviceOrHostAddressKHR {
-                                device_address: scratch_base + plan.scratch_offsets_bytes[p.index],
-                            })
-                    })
-                    .collect();
-                let range_refs: Vec<&[vk::AccelerationStructureBuildRangeInfoKHR]> =
-                    ranges.iter().map(|r| r.as_slice()).collect();
-                let queries = SizeQueries::new(ctx, pending.len() as u32)?;
-                let handles: Vec<_> = pending.iter().map(|p| p.accel.handle).collect();
-                let rec = ctx.record(&format!("{kind} build batch {bi}"))?;
-                let (c, cmd) = rec.raw();
-                let device = &c.shared.device;
-                // SAFETY: recording state; destinations, scratch slices (disjoint, aligned),
-                // inputs and the query pool live until the fenced submission below returns.
-                unsafe {
-                    full_barrier(device, cmd);
-                    accel.cmd_build_acceleration_structures(cmd, &infos, &range_refs);
-                    full_barrier(device, cmd);
-                    device.cmd_reset_query_pool(cmd, queries.pool, 0, queries.count);
-                    accel.cmd_write_acceleration_structures_properties(
-                        cmd,
-                        &handles,
-                        vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR,
-                        queries.pool,
-                        0,
-                    );
-                }
-                rec.submit_and_wait()?;
-                if !opts.compact {
-                    out.extend(pending.into_iter().map(|p| (p.index, p.accel)));
-                    continue;
-                }
-                let compacted = queries.read(pending.len() as u32)?;
-                let mut copies = Vec::with_capacity(pending.len());
-                for (p, &size) in pending.iter().zip(&compacted) {
-                    let size = size.max(1).min(p.accel.size_bytes);
-                    copies.push(AccelStruct::new(
-                        ctx,
-                        heap,
-                        &format!("{kind}-{}-compact", p.index),
-                        size,
-                        ty,
-                    )?);
-                }
-                let rec = ctx.record(&format!("{kind} compaction batch {bi}"))?;
-                let (_, cmd) = rec.raw();
-                for (p, dst) in pending.iter().zip(&copies) {
-                    let info = vk::CopyAccelerationStructureInfoKHR::default()
-                        .src(p.accel.handle)
-                        .dst(dst.handle)
-                        .mode(vk::CopyAccelerationStructureModeKHR::COMPACT);
-                    // SAFETY: both structures live until the fenced submission returns; the
-                    // source was built with ALLOW_COMPACTION and dst holds its compacted size.
-                    unsafe { accel.cmd_copy_acceleration_structure(cmd, &info) };
-                }
-                rec.submit_and_wait()?;
-                for (p, dst) in pending.into_iter().zip(copies) {
-                    p.accel.release(heap);
-                    out.push((p.index, dst));
-                }
-            }
-            Ok(out)
-        })();
-        heap.free(scratch);
-        result
-    }
-
     /// Bytes and counts per kind of resource.
     pub fn report(&self) -> &ResourceReport {
         &self.report
@@ -1109,6 +901,339 @@ impl GpuScene {
     pub fn tlas_address(&self, id: u32) -> Option<u64> {
         self.tlases.get(id as usize).map(|t| t.address)
     }
+}
+
+/// Builds `sizes.len()` structures in batches under the scratch budget, compacting each
+/// batch before the next. `geometry(k)` describes build k (addresses valid once
+/// `prepare(heap, batch_range)` ran for its batch). Returns (k, structure) pairs. On failure
+/// every structure this call created is released before the error returns (a streaming caller
+/// evicts and retries).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn build_batched<'g>(
+    ctx: &Context,
+    heap: &mut GpuHeap,
+    report: &mut ResourceReport,
+    sizes: &[BuildSize],
+    ty: vk::AccelerationStructureTypeKHR,
+    opts: &BuildOptions,
+    geometry: impl Fn(usize) -> (Vec<vk::AccelerationStructureGeometryKHR<'g>>, Vec<u32>),
+    mut prepare: impl FnMut(&mut GpuHeap, std::ops::Range<usize>) -> Result<()>,
+) -> Result<Vec<(usize, AccelStruct)>> {
+    if sizes.is_empty() {
+        return Ok(Vec::new());
+    }
+    let accel = ctx.accel_device()?;
+    let scratch_align = u64::from(
+        ctx.limits()
+            .min_acceleration_structure_scratch_offset_alignment
+            .max(1),
+    )
+    .next_power_of_two();
+    let plan = plan_build_batches(
+        sizes,
+        BatchLimits {
+            scratch_budget_bytes: opts.scratch_budget_bytes,
+            scratch_alignment_bytes: scratch_align,
+            scratch_pool_max_bytes: heap.limits().budget_bytes,
+            max_batch_result_bytes: Some(opts.max_batch_result_bytes),
+        },
+    )
+    .map_err(|e| GpuError::Budget(e.to_string()))?;
+    let scratch = heap.alloc_buffer(
+        "scratch-pool",
+        plan.scratch_pool_bytes.max(scratch_align),
+        BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
+        AllocKind::Scratch,
+        MemoryClass::DeviceLocal,
+        scratch_align,
+    )?;
+    report.scratch_peak_bytes = report.scratch_peak_bytes.max(scratch.size_bytes());
+    let mut out: Vec<(usize, AccelStruct)> = Vec::with_capacity(sizes.len());
+    let mut in_flight: Vec<AccelStruct> = Vec::new();
+    let result = (|| -> Result<()> {
+        let scratch_base = scratch.device_address()?.0.div_ceil(scratch_align) * scratch_align;
+        let kind = if ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL {
+            "tlas"
+        } else {
+            "blas"
+        };
+        for (bi, batch) in plan.batches.iter().enumerate() {
+            report.build_batches += 1;
+            prepare(heap, batch.builds.clone())?;
+            let mut pending: Vec<Pending> = Vec::new();
+            for k in batch.builds.clone() {
+                match AccelStruct::new(ctx, heap, &format!("{kind}-{k}"), sizes[k].result_bytes, ty)
+                {
+                    Ok(a) => pending.push(Pending { accel: a, index: k }),
+                    Err(e) => {
+                        in_flight.extend(pending.into_iter().map(|p| p.accel));
+                        return Err(e);
+                    }
+                }
+            }
+            // From here on a failure releases this batch through `in_flight`.
+            let pending_ref = &pending;
+            let run = (|| -> Result<Vec<AccelStruct>> {
+                let descs: Vec<_> = batch.builds.clone().map(&geometry).collect();
+                let ranges: Vec<Vec<vk::AccelerationStructureBuildRangeInfoKHR>> = descs
+                    .iter()
+                    .map(|(_, counts)| {
+                        counts
+                            .iter()
+                            .map(|&n| {
+                                vk::AccelerationStructureBuildRangeInfoKHR::default()
+                                    .primitive_count(n)
+                            })
+                            .collect()
+                    })
+                    .collect();
+                let infos: Vec<_> = descs
+                    .iter()
+                    .zip(pending_ref)
+                    .map(|((g, _), p)| {
+                        vk::AccelerationStructureBuildGeometryInfoKHR::default()
+                            .ty(ty)
+                            .flags(
+                                vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE
+                                    | vk::BuildAccelerationStructureFlagsKHR::ALLOW_COMPACTION,
+                            )
+                            .mode(vk::BuildAccelerationStructureModeKHR::BUILD)
+                            .dst_acceleration_structure(p.accel.handle)
+                            .geometries(g)
+                            .scratch_data(vk::DeviceOrHostAddressKHR {
+                                device_address: scratch_base + plan.scratch_offsets_bytes[p.index],
+                            })
+                    })
+                    .collect();
+                let range_refs: Vec<&[vk::AccelerationStructureBuildRangeInfoKHR]> =
+                    ranges.iter().map(|r| r.as_slice()).collect();
+                let queries = SizeQueries::new(ctx, pending_ref.len() as u32)?;
+                let handles: Vec<_> = pending_ref.iter().map(|p| p.accel.handle).collect();
+                let rec = ctx.record(&format!("{kind} build batch {bi}"))?;
+                let (c, cmd) = rec.raw();
+                let device = &c.shared.device;
+                // SAFETY: recording state; destinations, scratch slices (disjoint, aligned),
+                // inputs and the query pool live until the fenced submission below returns.
+                unsafe {
+                    full_barrier(device, cmd);
+                    accel.cmd_build_acceleration_structures(cmd, &infos, &range_refs);
+                    full_barrier(device, cmd);
+                    device.cmd_reset_query_pool(cmd, queries.pool, 0, queries.count);
+                    accel.cmd_write_acceleration_structures_properties(
+                        cmd,
+                        &handles,
+                        vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR,
+                        queries.pool,
+                        0,
+                    );
+                }
+                rec.submit_and_wait()?;
+                if !opts.compact {
+                    return Ok(Vec::new());
+                }
+                let compacted = queries.read(pending_ref.len() as u32)?;
+                let mut copies = Vec::with_capacity(pending_ref.len());
+                for (p, &size) in pending_ref.iter().zip(&compacted) {
+                    let size = size.max(1).min(p.accel.size_bytes);
+                    match AccelStruct::new(
+                        ctx,
+                        heap,
+                        &format!("{kind}-{}-compact", p.index),
+                        size,
+                        ty,
+                    ) {
+                        Ok(a) => copies.push(a),
+                        Err(e) => {
+                            copies.into_iter().for_each(|c| c.release(heap));
+                            return Err(e);
+                        }
+                    }
+                }
+                let rec = match ctx.record(&format!("{kind} compaction batch {bi}")) {
+                    Ok(r) => r,
+                    Err(e) => {
+                        copies.into_iter().for_each(|c| c.release(heap));
+                        return Err(e);
+                    }
+                };
+                let (_, cmd) = rec.raw();
+                for (p, dst) in pending_ref.iter().zip(&copies) {
+                    let info = vk::CopyAccelerationStructureInfoKHR::default()
+                        .src(p.accel.handle)
+                        .dst(dst.handle)
+                        .mode(vk::CopyAccelerationStructureModeKHR::COMPACT);
+                    // SAFETY: both structures live until the fenced submission returns; the
+                    // source was built with ALLOW_COMPACTION and dst holds its compacted size.
+                    unsafe { accel.cmd_copy_acceleration_structure(cmd, &info) };
+                }
+                if let Err(e) = rec.submit_and_wait() {
+                    copies.into_iter().for_each(|c| c.release(heap));
+                    return Err(e);
+                }
+                Ok(copies)
+            })();
+            match run {
+                Ok(copies) if copies.is_empty() => {
+                    out.extend(pending.into_iter().map(|p| (p.index, p.accel)));
+                }
+                Ok(copies) => {
+                    for (p, dst) in pending.into_iter().zip(copies) {
+                        p.accel.release(heap);
+                        out.push((p.index, dst));
+                    }
+                }
+                Err(e) => {
+                    in_flight.extend(pending.into_iter().map(|p| p.accel));
+                    return Err(e);
+                }
+            }
+        }
+        Ok(())
+    })();
+    heap.free(scratch);
+    match result {
+        Ok(()) => Ok(out),
+        Err(e) => {
+            for a in in_flight {
+                a.release(heap);
+            }
+            for (_, a) in out {
+                a.release(heap);
+            }
+            Err(e)
+        }
+    }
+}
+
+/// Vulkan geometry of one BLAS.
+pub(crate) type BlasDesc = (
+    Vec<vk::AccelerationStructureGeometryKHR<'static>>,
+    Vec<u32>,
+    Vec<BlasGeometry>,
+);
+
+/// Geometry of BLAS `i` of `view`: one triangle geometry per mesh (`mesh(m)` is mesh record
+/// `m` on the GPU) or the AABBs of its programmable instances, read at `aabb_base + 24 × item`.
+/// `None` for a BLAS without primitives.
+pub(crate) fn blas_geometry<'m>(
+    view: &HierarchyView<'_>,
+    i: usize,
+    mesh: impl Fn(usize) -> Option<&'m MeshGpu>,
+    aabb_base: u64,
+) -> Result<Option<BlasDesc>> {
+    let b = &view.blases[i];
+    let range = b.item_base as usize..(b.item_base + b.item_count) as usize;
+    let (geoms, counts, shape): (Vec<_>, Vec<u32>, Vec<BlasGeometry>) = if b.kind == BLAS_AABBS {
+        if b.item_count == 0 {
+            (Vec::new(), Vec::new(), Vec::new())
+        } else {
+            let aabbs = vk::AccelerationStructureGeometryAabbsDataKHR::default()
+                .data(vk::DeviceOrHostAddressConstKHR {
+                    device_address: aabb_base + u64::from(b.item_base) * 24,
+                })
+                .stride(24);
+            (
+                vec![vk::AccelerationStructureGeometryKHR::default()
+                    .geometry_type(vk::GeometryTypeKHR::AABBS)
+                    .geometry(vk::AccelerationStructureGeometryDataKHR { aabbs })
+                    .flags(vk::GeometryFlagsKHR::NO_DUPLICATE_ANY_HIT_INVOCATION)],
+                vec![b.item_count],
+                vec![BlasGeometry::Aabbs {
+                    aabb_count: b.item_count,
+                    opaque: false,
+                }],
+            )
+        }
+    } else {
+        let mut g = Vec::new();
+        let mut c = Vec::new();
+        let mut s = Vec::new();
+        for geo in &view.geometries[range] {
+            let Some(m) = mesh(geo.mesh as usize) else {
+                continue;
+            };
+            let opaque = view.meshes[geo.mesh as usize].flags & FLAG_NEEDS_ANY_HIT == 0;
+            let tri = vk::AccelerationStructureGeometryTrianglesDataKHR::default()
+                .vertex_format(vk::Format::R32G32B32_SFLOAT)
+                .vertex_data(vk::DeviceOrHostAddressConstKHR {
+                    device_address: m.positions_address,
+                })
+                .vertex_stride(12)
+                .max_vertex(m.vertex_count - 1)
+                .index_type(vk::IndexType::UINT32)
+                .index_data(vk::DeviceOrHostAddressConstKHR {
+                    device_address: m.indices_address,
+                });
+            g.push(
+                vk::AccelerationStructureGeometryKHR::default()
+                    .geometry_type(vk::GeometryTypeKHR::TRIANGLES)
+                    .geometry(vk::AccelerationStructureGeometryDataKHR { triangles: tri })
+                    .flags(if opaque {
+                        vk::GeometryFlagsKHR::OPAQUE
+                    } else {
+                        vk::GeometryFlagsKHR::NO_DUPLICATE_ANY_HIT_INVOCATION
+                    }),
+            );
+            c.push(m.triangle_count);
+            s.push(BlasGeometry::Triangles {
+                vertex_count: m.vertex_count,
+                triangle_count: m.triangle_count,
+                indexed: true,
+                opaque,
+            });
+        }
+        // A geometry index must equal its position in the record (gl_GeometryIndexEXT
+        // resolves the mesh), so an empty mesh inside a BLAS is an error.
+        if g.len() != b.item_count as usize {
+            return Err(GpuError::InvalidRequest(format!(
+                "BLAS {i}: {} of its {} meshes are empty",
+                b.item_count as usize - g.len(),
+                b.item_count
+            )));
+        }
+        (g, c, s)
+    };
+    Ok(if geoms.is_empty() {
+        None
+    } else {
+        Some((geoms, counts, shape))
+    })
+}
+
+/// One `VkAccelerationStructureInstanceKHR` (64 bytes): triangles use hit group 0 (opaque unless
+/// `needs_any_hit`), programmable instances (`aabbs`) hit group 1, never opaque. A
+/// `blas_address` of 0 makes the instance inactive (mask 0 as well: some drivers only check
+/// the mask).
+pub(crate) fn encode_instance(
+    tlas_from_blas: &[f32; 12],
+    aabbs: bool,
+    needs_any_hit: bool,
+    blas_address: u64,
+) -> [u8; 64] {
+    let (sbt, flags) = if aabbs {
+        (1u32, vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE)
+    } else if needs_any_hit {
+        (
+            0,
+            vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE,
+        )
+    } else {
+        (
+            0,
+            vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE
+                | vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE,
+        )
+    };
+    let mut out = [0u8; 64];
+    for (i, v) in tlas_from_blas.iter().enumerate() {
+        out[4 * i..4 * i + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    // Custom index 0 (node ids never travel in 24 bits), mask 0xFF.
+    let mask = if blas_address == 0 { 0u32 } else { 0xFF };
+    out[48..52].copy_from_slice(&(mask << 24).to_le_bytes());
+    out[52..56].copy_from_slice(&(sbt | (flags.as_raw() << 24)).to_le_bytes());
+    out[56..64].copy_from_slice(&blas_address.to_le_bytes());
+    out
 }
 
 /// A full memory barrier (coarse: builds are few and large).

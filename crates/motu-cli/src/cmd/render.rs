@@ -5,7 +5,7 @@ use crate::pipeline;
 use anyhow::{bail, Context};
 use glam::Vec3;
 use motu_abi::aov::Aov;
-use motu_abi::camera::CameraParams;
+use motu_abi::camera::{camera_path, CameraParams, CameraPath, CameraPose};
 use motu_abi::lod::LodParams;
 use motu_abi::{HierarchyView, RootSubset};
 use motu_pack::ScenePackage;
@@ -36,6 +36,18 @@ pub fn camera_params(
     width: Option<u32>,
     height: Option<u32>,
 ) -> anyhow::Result<CameraParams> {
+    let (pose, w, h) = camera_pose(pkg, view, name, width, height)?;
+    Ok(pose.params(w, h))
+}
+
+/// The camera as a pose (for camera paths) and the image size.
+pub fn camera_pose(
+    pkg: &ScenePackage,
+    view: &HierarchyView<'_>,
+    name: Option<&str>,
+    width: Option<u32>,
+    height: Option<u32>,
+) -> anyhow::Result<(CameraPose, u32, u32)> {
     let meta = pkg.meta();
     let cam = match name {
         Some(n) => Some(meta.cameras.iter().find(|c| c.name == n).with_context(|| {
@@ -84,7 +96,14 @@ pub fn camera_params(
     if w == 0 || h == 0 || w > 16384 || h > 16384 {
         bail!("image size {w}×{h} is out of range (1–16384 per side)");
     }
-    Ok(CameraParams::new(eye, fwd, up, fov, mirror, w, h))
+    let pose = CameraPose {
+        world_eye: eye,
+        world_forward: fwd,
+        world_up: up,
+        fov_deg: fov,
+        mirror_x: mirror,
+    };
+    Ok((pose, w, h))
 }
 
 impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
@@ -102,38 +121,30 @@ impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
     }
 }
 
-/// Builds the package's structures on the GPU under the budget and renders with a traversal
-/// shader backend.
-fn render_gpu(
-    a: &RenderArgs,
-    pkg: &ScenePackage,
-    view: &HierarchyView<'_>,
-    camera: &CameraParams,
-    lod: LodParams,
-    backend: BackendArg,
-) -> anyhow::Result<(Aov, Vec<u8>, Value)> {
-    use motu_gpu::{Context as GpuContext, ContextOptions, LimitOverrides, Requirement};
-    let ctx = GpuContext::new(&ContextOptions {
+fn gpu_context(a: &RenderArgs, backend: BackendArg) -> anyhow::Result<motu_gpu::Context> {
+    use motu_gpu::{ContextOptions, LimitOverrides, Requirement};
+    motu_gpu::Context::new(&ContextOptions {
         device_index: a.device,
-        limit_overrides: LimitOverrides { max_memory_allocation_count: a.max_allocations, ..Default::default() },
+        limit_overrides: LimitOverrides {
+            max_memory_allocation_count: a.max_allocations,
+            ..Default::default()
+        },
         require: match backend {
             BackendArg::Query => Requirement::RayQuery,
             _ => Requirement::RayPipeline,
         },
         ..Default::default()
     })
-    .context("opening a Vulkan device for ray tracing (`motu devices` lists them; `--backend cpu` needs none)")?;
-    let build = motu_gpu::BuildOptions {
-        budget_bytes: a.vram_budget.unwrap_or(u64::MAX),
-        max_allocations: a
-            .max_allocations
-            .unwrap_or(motu_gpu::BuildOptions::default().max_allocations),
-        ..Default::default()
-    };
-    let meshes = PackageMeshes(pkg);
-    let scene = motu_gpu::GpuScene::build(&ctx, view, &meshes, &build)
-        .context("building acceleration structures")?;
-    let opts = motu_gpu::RenderOptions {
+    .context("opening a Vulkan device for ray tracing (`motu devices` lists them; `--backend cpu` needs none)")
+}
+
+fn gpu_render_options(
+    a: &RenderArgs,
+    lod: LodParams,
+    backend: BackendArg,
+    frames: u32,
+) -> motu_gpu::RenderOptions {
+    motu_gpu::RenderOptions {
         backend: match backend {
             BackendArg::Query => motu_gpu::Backend::Query,
             _ => motu_gpu::Backend::Pipeline,
@@ -146,9 +157,99 @@ fn render_gpu(
         },
         lod,
         stack_size: a.stack_size,
-        frames: a.frames,
+        frames,
+        ..Default::default()
+    }
+}
+
+/// `--stream`: builds only what rays touch, evicting under the budget, frame by frame along a
+/// camera path (`--frames N`; one frame renders the camera itself).
+fn render_streaming(
+    a: &RenderArgs,
+    pkg: &ScenePackage,
+    view: &HierarchyView<'_>,
+    lod: LodParams,
+    backend: BackendArg,
+) -> anyhow::Result<(Aov, Vec<u8>, Value)> {
+    let ctx = gpu_context(a, backend)?;
+    let (pose, w, h) = camera_pose(pkg, view, a.camera.as_deref(), a.width, a.height)?;
+    let root = &view.tlases[view.root_tlas as usize];
+    let centre = (Vec3::from_array(root.bounds_min) + Vec3::from_array(root.bounds_max)) * 0.5;
+    let path = CameraPath::sweep_and_dolly((centre - pose.world_eye).length(), 0.3);
+    let meshes = PackageMeshes(pkg);
+    let opts = motu_gpu::StreamOptions {
+        budget_bytes: a.vram_budget.unwrap_or(u64::MAX),
+        max_allocations: a
+            .max_allocations
+            .unwrap_or(motu_gpu::StreamOptions::default().max_allocations),
         ..Default::default()
     };
+    let mut sr = motu_gpu::StreamingRenderer::new(&ctx, *view, &meshes, &opts)
+        .context("setting up streaming (the resident skeleton must fit the budget)")?;
+    let ropts = gpu_render_options(a, lod, backend, 1);
+    let mut frames = Vec::new();
+    let mut last = None;
+    for f in 0..a.frames {
+        let cam = camera_path(&pose, &path, f, a.frames).params(w, h);
+        let (out, st) = sr
+            .render_frame(&cam, &ropts)
+            .with_context(|| format!("streaming frame {f}"))?;
+        eprintln!(
+            "frame {f}: {} passes{}, {} BLAS + {} TLAS built, {} evicted, {} streamed, {:.1} ms building, VRAM {} of {}",
+            st.passes,
+            if st.complete { "" } else { " (incomplete: pass cap)" },
+            st.blas_built,
+            st.tlas_built,
+            st.evicted,
+            crate::size::format_size(st.bytes_streamed),
+            st.build_ms,
+            crate::size::format_size(st.vram_peak_bytes),
+            crate::size::format_size(st.vram_budget_bytes),
+        );
+        frames.push(serde_json::to_value(&st)?);
+        last = Some(out);
+    }
+    let out = last.context("no frame rendered")?;
+    let mut stats = serde_json::to_value(&out.stats)?;
+    let totals = sr.totals();
+    let after_first: Vec<f64> = frames
+        .iter()
+        .skip(1)
+        .filter_map(|f| f["passes"].as_f64())
+        .collect();
+    stats["stream"] = json!({
+        "frames": frames,
+        "totals": totals,
+        "mean_passes_after_first": if after_first.is_empty() { Value::Null } else { json!(after_first.iter().sum::<f64>() / after_first.len() as f64) },
+    });
+    drop(sr);
+    ctx.check_validation()
+        .context("Vulkan validation reported errors")?;
+    Ok((out.aov, out.rgba8, stats))
+}
+
+/// Builds the package's structures on the GPU under the budget and renders with a traversal
+/// shader backend.
+fn render_gpu(
+    a: &RenderArgs,
+    pkg: &ScenePackage,
+    view: &HierarchyView<'_>,
+    camera: &CameraParams,
+    lod: LodParams,
+    backend: BackendArg,
+) -> anyhow::Result<(Aov, Vec<u8>, Value)> {
+    let ctx = gpu_context(a, backend)?;
+    let build = motu_gpu::BuildOptions {
+        budget_bytes: a.vram_budget.unwrap_or(u64::MAX),
+        max_allocations: a
+            .max_allocations
+            .unwrap_or(motu_gpu::BuildOptions::default().max_allocations),
+        ..Default::default()
+    };
+    let meshes = PackageMeshes(pkg);
+    let scene = motu_gpu::GpuScene::build(&ctx, view, &meshes, &build)
+        .context("building acceleration structures")?;
+    let opts = gpu_render_options(a, lod, backend, a.frames);
     let out = motu_gpu::render(&ctx, &scene, camera, &opts).context("rendering on the GPU")?;
     let mut stats = serde_json::to_value(&out.stats)?;
     stats["resources"] = serde_json::to_value(scene.report())?;
@@ -237,8 +338,8 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     if backend == BackendArg::Cpu && a.backend.is_none() {
         eprintln!("warning: no device with ray tracing; rendering with the CPU reference backend");
     }
-    if a.stream {
-        bail!("--stream is not implemented yet: see issue 8");
+    if a.stream && backend == BackendArg::Cpu {
+        bail!("--stream builds acceleration structures on a GPU: use --backend pipeline or query");
     }
     if a.frames == 0 {
         bail!("--frames must be at least 1");
@@ -275,9 +376,11 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             stats["frames"] = json!(a.frames);
             (out.aov, out.rgba8, stats)
         }
+        BackendArg::Pipeline | BackendArg::Query if a.stream => {
+            render_streaming(&a, &pkg, &view, lod, backend)?
+        }
         BackendArg::Pipeline | BackendArg::Query => {
-            let (aov, rgba8, stats) = render_gpu(&a, &pkg, &view, &camera, lod, backend)?;
-            (aov, rgba8, stats)
+            render_gpu(&a, &pkg, &view, &camera, lod, backend)?
         }
     };
     let stats = contract_stats(
