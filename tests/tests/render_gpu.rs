@@ -211,3 +211,60 @@ fn allocation_cap_and_budget_are_respected() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("budget") && !err.contains("panicked"), "{err}");
 }
+
+#[test]
+fn subset_builds_and_streams_only_its_elements() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let gen = dir.path().join("island");
+    motu_ok(&["gen", "island", "-o", s(&gen)]);
+    let pkg = dir.path().join("isl.motu");
+    let coral = dir.path().join("coral.motu");
+    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    motu_ok(&[
+        "import",
+        s(&gen.join("scene.pbrt")),
+        "-o",
+        s(&coral),
+        "--subset",
+        "isCoral",
+    ]);
+    let full = render(
+        &pkg,
+        "pipeline",
+        &dir.path().join("full.aov"),
+        &["--width", "64", "--view", "ids"],
+    );
+    let sub = render(
+        &pkg,
+        "pipeline",
+        &dir.path().join("sub.aov"),
+        &["--width", "64", "--view", "ids", "--subset", "isCoral"],
+    );
+    let imp = render(
+        &coral,
+        "pipeline",
+        &dir.path().join("imp.aov"),
+        &["--width", "64", "--view", "ids"],
+    );
+    motu_ok(&[
+        "compare",
+        s(&dir.path().join("sub.aov")),
+        s(&dir.path().join("imp.aov")),
+    ]);
+    let as_bytes = |v: &serde_json::Value| v["as_bytes"].as_u64().unwrap();
+    let geo = |v: &serde_json::Value| v["resources"]["geometry_bytes"].as_u64().unwrap();
+    assert!(as_bytes(&sub) < as_bytes(&full), "{sub}");
+    assert!(
+        geo(&sub) < geo(&full),
+        "mesh bytes streamed to the GPU: {sub}"
+    );
+    assert_eq!(
+        geo(&sub),
+        geo(&imp),
+        "a subset render uploads exactly what the subset package holds"
+    );
+    assert!(sub["resources"]["unreachable_blases"].as_u64().unwrap() > 0);
+}

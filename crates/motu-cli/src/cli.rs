@@ -341,6 +341,13 @@ pub struct BenchArgs {
     /// directory or the binary).
     #[arg(long)]
     pub scenes: Option<PathBuf>,
+    /// Run only these configurations (comma-separated labels: sl, ml, levels2, sl+lod, ml+lod).
+    #[arg(long, value_delimiter = ',')]
+    pub configs: Vec<String>,
+    /// Start no step after this many seconds: the rest is recorded as skipped, so a time-limited
+    /// machine still returns every result measured so far.
+    #[arg(long)]
+    pub deadline_s: Option<u64>,
     /// Kill a step (gen, import, render) that runs longer than this and record it as failed.
     #[arg(long)]
     pub step_timeout_s: Option<u64>,

@@ -55,7 +55,6 @@ fn writer_options(o: &ImportOptions) -> WriterOptions {
     WriterOptions {
         target_chunk_bytes: o.chunk_bytes,
         zstd_level: o.zstd_level,
-        ..Default::default()
     }
 }
 
@@ -302,7 +301,7 @@ fn finish(
         warnings: report.warnings.clone(),
     };
     motu_pack::write_hierarchy(&mut writer, &compiled.view(), &meta)?;
-    Ok(writer.finish().context("writing the package")?)
+    writer.finish().context("writing the package")
 }
 
 /// Per-element counts: each element's root edges and root meshes, and everything they reach.

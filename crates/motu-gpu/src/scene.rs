@@ -73,6 +73,9 @@ impl Default for BuildOptions {
 /// Bytes and counts per kind of resource (`--stats`).
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct ResourceReport {
+    /// Structures the root cannot reach (e.g. other elements under `--subset`): not built.
+    pub unreachable_tlases: u64,
+    pub unreachable_blases: u64,
     pub budget_bytes: u64,
     pub max_allocations: u32,
     pub blas_count: u32,
@@ -617,10 +620,19 @@ impl GpuScene {
             self.upload_table(ctx, heap, up, slot, bytes)?;
         }
 
-        // 2. Geometry of every mesh a triangle BLAS uses: allocate from the records' counts,
-        // then load and upload one mesh at a time through the ring.
+        // 2. Geometry of every mesh a reachable triangle BLAS uses: allocate from the records'
+        // counts, then load and upload one mesh at a time through the ring. Only what the root
+        // reaches is built (`--subset` roots leave the rest of the package on disk).
+        let (reach_tlas, reach_blas) = reachable(view);
+        self.report.unreachable_tlases = reach_tlas.iter().filter(|r| !**r).count() as u64;
+        self.report.unreachable_blases = reach_blas.iter().filter(|r| !**r).count() as u64;
         let mut used = vec![false; view.meshes.len()];
-        for b in view.blases.iter().filter(|b| b.kind == BLAS_TRIANGLES) {
+        for (_, b) in view
+            .blases
+            .iter()
+            .enumerate()
+            .filter(|(i, b)| b.kind == BLAS_TRIANGLES && reach_blas[*i])
+        {
             for g in &view.geometries[b.item_base as usize..(b.item_base + b.item_count) as usize] {
                 used[g.mesh as usize] = true;
             }
@@ -679,14 +691,14 @@ impl GpuScene {
         up.flush(ctx)?;
 
         // 4. BLASes.
-        let r = self.build_blases(ctx, heap, view, aabb_buf.as_ref(), opts);
+        let r = self.build_blases(ctx, heap, view, aabb_buf.as_ref(), &reach_blas, opts);
         if let Some(b) = aabb_buf {
             heap.free(b);
         }
         r?;
 
         // 5. TLASes, then their address table.
-        self.build_tlases(ctx, heap, up, view, opts)?;
+        self.build_tlases(ctx, heap, up, view, &reach_tlas, opts)?;
         let addrs: Vec<u64> = self.tlases.iter().map(|t| t.address).collect();
         self.upload_table(ctx, heap, up, Slot::TlasAddresses, cast_slice(&addrs))?;
         up.flush(ctx)?;
@@ -706,6 +718,7 @@ impl GpuScene {
         heap: &mut GpuHeap,
         view: &HierarchyView<'_>,
         aabb_buf: Option<&HeapBuffer>,
+        reach: &[bool],
         opts: &BuildOptions,
     ) -> Result<()> {
         let aabb_base = match aabb_buf {
@@ -717,7 +730,11 @@ impl GpuScene {
             Vec::with_capacity(view.blases.len());
         let mut sizes = Vec::new();
         let mut order = Vec::new();
-        for i in 0..view.blases.len() {
+        for (i, &reached) in reach.iter().enumerate().take(view.blases.len()) {
+            if !reached {
+                descs.push(None);
+                continue;
+            }
             let Some((geoms, counts, shape)) =
                 blas_geometry(view, i, |m| self.meshes[m].as_ref(), aabb_base)?
             else {
@@ -764,11 +781,20 @@ impl GpuScene {
         heap: &mut GpuHeap,
         up: &mut Uploader,
         view: &HierarchyView<'_>,
+        reach: &[bool],
         opts: &BuildOptions,
     ) -> Result<()> {
+        // An unreachable TLAS is built empty: it keeps its id (and a valid address) for free.
+        let count = |t: usize| {
+            if reach[t] {
+                view.tlases[t].instance_count
+            } else {
+                0
+            }
+        };
         let mut sizes = Vec::with_capacity(view.tlases.len());
-        for t in view.tlases {
-            let s = ctx.tlas_build_sizes(t.instance_count, AsBuildFlags::default())?;
+        for t in 0..view.tlases.len() {
+            let s = ctx.tlas_build_sizes(count(t), AsBuildFlags::default())?;
             sizes.push(BuildSize {
                 result_bytes: s.acceleration_structure_size_bytes,
                 scratch_bytes: s.build_scratch_size_bytes,
@@ -782,9 +808,10 @@ impl GpuScene {
             .collect();
         let instance_bytes = |t: usize| -> Vec<u8> {
             let rec = &view.tlases[t];
-            let mut out = Vec::with_capacity(rec.instance_count as usize * 64);
-            for inst in &view.instances
-                [rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize]
+            let n = count(t);
+            let mut out = Vec::with_capacity(n as usize * 64);
+            for inst in
+                &view.instances[rec.instance_base as usize..(rec.instance_base + n) as usize]
             {
                 let aabbs = view.blases[inst.blas as usize].kind == BLAS_AABBS;
                 out.extend_from_slice(&encode_instance(
@@ -819,17 +846,14 @@ impl GpuScene {
                     vec![vk::AccelerationStructureGeometryKHR::default()
                         .geometry_type(vk::GeometryTypeKHR::INSTANCES)
                         .geometry(vk::AccelerationStructureGeometryDataKHR { instances })],
-                    vec![view.tlases[k].instance_count],
+                    vec![count(k)],
                 )
             },
             |heap: &mut GpuHeap, range: std::ops::Range<usize>| {
                 if let Some(b) = inst_buf.borrow_mut().take() {
                     heap.free(b);
                 }
-                let total: u64 = range
-                    .clone()
-                    .map(|t| u64::from(view.tlases[t].instance_count) * 64)
-                    .sum();
+                let total: u64 = range.clone().map(|t| u64::from(count(t)) * 64).sum();
                 if total == 0 {
                     return Ok(());
                 }
@@ -1256,4 +1280,47 @@ pub(crate) unsafe fn full_barrier(device: &ash::Device, cmd: vk::CommandBuffer) 
             &[],
         )
     };
+}
+
+/// TLASes and BLASes reachable from the root: through instances, PIs, LOD levels.
+pub(crate) fn reachable(view: &HierarchyView<'_>) -> (Vec<bool>, Vec<bool>) {
+    let mut tlas = vec![false; view.tlases.len()];
+    let mut blas = vec![false; view.blases.len()];
+    let mut todo = vec![view.root_tlas as usize];
+    if let Some(r) = tlas.get_mut(view.root_tlas as usize) {
+        *r = true;
+    }
+    let visit = |t: usize, tlas: &mut Vec<bool>, todo: &mut Vec<usize>| {
+        if t < tlas.len() && !tlas[t] {
+            tlas[t] = true;
+            todo.push(t);
+        }
+    };
+    while let Some(t) = todo.pop() {
+        let rec = &view.tlases[t];
+        let range = rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize;
+        for inst in view.instances.get(range).unwrap_or(&[]) {
+            let b = inst.blas as usize;
+            if b >= blas.len() || blas[b] {
+                continue;
+            }
+            blas[b] = true;
+            let br = &view.blases[b];
+            if br.kind != BLAS_AABBS {
+                continue;
+            }
+            let items = br.item_base as usize..(br.item_base + br.item_count) as usize;
+            for pi in view.pis.get(items).unwrap_or(&[]) {
+                if pi.kind == motu_abi::PI_TLAS {
+                    visit(pi.target as usize, &mut tlas, &mut todo);
+                } else if let Some(s) = view.lod_selectors.get(pi.target as usize) {
+                    let levels = s.level_base as usize..(s.level_base + s.level_count) as usize;
+                    for &lt in view.lod_levels.get(levels).unwrap_or(&[]) {
+                        visit(lt as usize, &mut tlas, &mut todo);
+                    }
+                }
+            }
+        }
+    }
+    (tlas, blas)
 }

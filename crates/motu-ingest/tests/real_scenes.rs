@@ -53,7 +53,7 @@ fn buddha_fractal_counts_elements_and_camera() {
     assert!(cam.mirror_x);
     assert!((cam.fov_deg - 30.2642).abs() < 1e-4);
     let floor = s.materials().iter().find(|m| m.name == "Floor").unwrap();
-    assert!((floor.base_color[0] - 0.70196098).abs() < 1e-6);
+    assert!((floor.base_color[0] - 0.701_961).abs() < 1e-6);
 }
 
 #[test]
@@ -66,8 +66,7 @@ fn ecosys_needs_allow_missing() {
         &IngestOptions::default(),
         Box::new(InMemoryGeometry::new()),
     )
-    .err()
-    .expect("missing PLYs must fail");
+    .expect_err("missing PLYs must fail");
     let msg = err.to_string();
     assert!(msg.contains(".ply"), "{msg}");
     let s = load("ecosys/ecosys.pbrt", true).unwrap();

@@ -82,7 +82,7 @@ impl PackageGeometry {
             .map(|&s| (writer.open_chunk_bytes(s), s))
             .collect();
         let mut total: u64 = open.iter().map(|o| o.0).sum();
-        open.sort_unstable_by(|a, b| b.0.cmp(&a.0));
+        open.sort_unstable_by_key(|o| std::cmp::Reverse(o.0));
         for (bytes, s) in open {
             if total <= OPEN_CHUNK_BUDGET_BYTES {
                 break;

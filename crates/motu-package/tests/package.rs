@@ -800,7 +800,6 @@ fn read_back_and_oversized_blobs() {
         let opts = WriterOptions {
             target_chunk_bytes: 4096,
             zstd_level,
-            ..Default::default()
         };
         let mut w = PackageWriter::create(&path, opts).unwrap();
         let s = w.open_stream(1, 2);

@@ -3,6 +3,7 @@
 use crate::cli::{Cli, Command};
 use anyhow::bail;
 
+mod bench;
 pub mod demo;
 mod devices;
 mod gen;
@@ -25,7 +26,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Report(_) => not_implemented("motu report", 9),
         Command::Render(a) => render::run(a),
         Command::Compare(a) => render::compare(a),
-        Command::Bench(_) => not_implemented("motu bench", 10),
+        Command::Bench(a) => bench::run(a),
         Command::Demo(a) => demo::run(a),
     }
 }
