@@ -27,6 +27,8 @@ command -v glslangValidator >/dev/null 2>&1 || missing+=(glslang-tools)
 command -v spirv-val >/dev/null 2>&1 || missing+=(spirv-tools)
 command -v vulkaninfo >/dev/null 2>&1 || missing+=(vulkan-tools)
 dpkg-query -W -f='${Status}' libvulkan1 2>/dev/null | grep -q "ok installed" || missing+=(libvulkan1)
+# The VRAM report's HTML is checked in a real headless browser.
+command -v chromium >/dev/null 2>&1 || missing+=(chromium)
 backports_needed=0
 have_rt_lavapipe || backports_needed=1
 
@@ -67,7 +69,7 @@ fi
 export DEBIAN_FRONTEND=noninteractive
 log "apt-get update"
 $SUDO apt-get update -qq
-pkgs=(libvulkan1 glslang-tools spirv-tools vulkan-tools)
+pkgs=(libvulkan1 glslang-tools spirv-tools vulkan-tools chromium)
 log "installing ${pkgs[*]} and mesa-vulkan-drivers from bookworm-backports"
 $SUDO apt-get install -y -qq --no-install-recommends "${pkgs[@]}" >/dev/null
 $SUDO apt-get install -y -qq --no-install-recommends -t bookworm-backports mesa-vulkan-drivers >/dev/null

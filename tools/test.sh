@@ -5,8 +5,8 @@ cd "$(dirname "$0")/.."
 bash tools/setup.sh
 export CARGO_TERM_COLOR=${CARGO_TERM_COLOR:-never}
 # GPU tests must run (lavapipe is installed above) with validation on: a missing device or any
-# validation message fails them instead of skipping.
-export MOTU_REQUIRE_GPU=1 MOTU_VALIDATION=1
+# validation message fails them instead of skipping; so must the headless-browser test.
+export MOTU_REQUIRE_GPU=1 MOTU_VALIDATION=1 MOTU_REQUIRE_BROWSER=1
 echo "== cargo fmt --check"
 cargo fmt --all -- --check
 echo "== cargo clippy -D warnings"

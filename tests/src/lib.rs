@@ -77,3 +77,86 @@ pub fn shared_scene(rel: &str) -> Option<PathBuf> {
 pub fn s(p: &Path) -> &str {
     p.to_str().expect("utf-8 path")
 }
+
+/// Where tests leave files for people to look at (screenshots): `MOTU_TEST_ARTIFACTS`, else
+/// `target/<profile>/test-artifacts`.
+pub fn artifacts_dir() -> PathBuf {
+    let dir = std::env::var_os("MOTU_TEST_ARTIFACTS")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            let exe = std::env::current_exe().expect("test executable path");
+            exe.parent()
+                .and_then(Path::parent)
+                .expect("target/<profile>")
+                .join("test-artifacts")
+        });
+    std::fs::create_dir_all(&dir).expect("artifacts dir");
+    dir
+}
+
+/// Whether Debian's chromium is here; without it the test says so loudly, or fails when
+/// `MOTU_REQUIRE_BROWSER=1` (CI).
+pub fn chromium_available(test: &str) -> bool {
+    let found = Command::new("chromium")
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !found {
+        assert!(
+            std::env::var("MOTU_REQUIRE_BROWSER").map_or(true, |v| v.trim() != "1"),
+            "MOTU_REQUIRE_BROWSER=1 but chromium is not installed (tools/setup.sh installs it)"
+        );
+        eprintln!("SKIPPED: chromium not installed: {test}");
+    }
+    found
+}
+
+/// Headless chromium on a local page with `mode` (`--dump-dom` or `--screenshot=FILE`);
+/// returns (stdout, stderr). Flags keep it off the network.
+pub fn chromium(page: &Path, mode: &str) -> (String, String) {
+    let profile = tempfile_dir();
+    let out = Command::new("timeout")
+        .arg("120")
+        .arg("chromium")
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--enable-logging=stderr",
+            "--v=0",
+            "--window-size=1200,900",
+        ])
+        .arg(format!("--user-data-dir={}", profile.display()))
+        .arg(mode)
+        .arg(format!("file://{}", page.display()))
+        .output()
+        .expect("run chromium");
+    let _ = std::fs::remove_dir_all(&profile);
+    assert!(
+        out.status.success(),
+        "chromium failed ({}): {}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn tempfile_dir() -> PathBuf {
+    use std::sync::atomic::{AtomicU32, Ordering};
+    static N: AtomicU32 = AtomicU32::new(0);
+    let dir = std::env::temp_dir().join(format!(
+        "motu-chromium-{}-{}",
+        std::process::id(),
+        N.fetch_add(1, Ordering::Relaxed)
+    ));
+    std::fs::create_dir_all(&dir).expect("profile dir");
+    dir
+}

@@ -1,7 +1,6 @@
 //! One module per subcommand; each returns `anyhow::Result` with context saying where.
 
 use crate::cli::{Cli, Command};
-use anyhow::bail;
 
 mod bench;
 pub mod demo;
@@ -10,11 +9,7 @@ mod gen;
 mod import;
 mod info;
 mod render;
-
-/// An honest failure for a command whose issue has not landed yet.
-fn not_implemented(what: &str, issue: u32) -> anyhow::Result<()> {
-    bail!("{what} is not implemented yet: see issue {issue}")
-}
+mod report;
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
@@ -23,7 +18,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Import(a) => import::run(a),
         Command::Info(a) => info::run(a),
         Command::Verify(a) => info::verify(a),
-        Command::Report(_) => not_implemented("motu report", 9),
+        Command::Report(a) => report::run(a),
         Command::Render(a) => render::run(a),
         Command::Compare(a) => render::compare(a),
         Command::Bench(a) => bench::run(a),

@@ -1,0 +1,536 @@
+//! Building a [`Report`] from a hierarchy: per-element costs, variants, budget and streaming.
+
+use std::collections::{BTreeMap, HashMap};
+
+use motu_abi::{HierarchyView, InstanceRecord, PiRecord, NONE_U32};
+use serde::Serialize;
+
+use crate::budget::{plan_budget, BudgetReport, SubsetCoster};
+use crate::cost::{blas_cost_of, tlas_cost, Cost, Graph, Node, Ownership, SHARED};
+use crate::sizes::{BlasShape, SizeSource, SizeSourceInfo};
+use crate::ReportError;
+
+/// What the report needs besides the tables (a package's meta, or hand-made in tests).
+#[derive(Clone, Debug, Default)]
+pub struct ReportInput {
+    /// Shown as the report's subject (the package path).
+    pub package: String,
+    /// How the package was compiled (`ml`, `sl`, a number).
+    pub levels: String,
+    /// Element names by element id.
+    pub element_names: Vec<String>,
+}
+
+/// One row of the per-element table.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ElementReport {
+    pub name: String,
+    /// The element id (`None` for the `shared` row).
+    pub id: Option<u32>,
+    /// `element`, `shared` (nodes used by several elements, plus global tables) or `untagged`
+    /// (root instances without an element; always needed).
+    pub kind: String,
+    /// Instances of the element in the root TLAS.
+    pub root_instances: u64,
+    /// Triangle-BLAS placements after full flattening.
+    pub flattened_instances: u64,
+    /// Triangles after full flattening (visible geometry; LOD selectors at their finest level).
+    pub instanced_triangles: u64,
+    /// Triangles in the BLASes the element owns.
+    pub unique_triangles: u64,
+    pub meshes: u64,
+    /// The element's costs as compiled (owned nodes + its share of the root TLAS). The shared
+    /// row holds what several elements use.
+    pub ml: Cost,
+    /// Its flattened instances as one TLAS (split at `maxInstanceCount`), AS + instance buffer.
+    pub sl_tlas_bytes: u64,
+    /// Rendering this element alone (`--subset NAME`): owned + the shared nodes it uses + its
+    /// own root TLAS + global tables. Not set on the shared row.
+    pub alone: Option<Cost>,
+}
+
+/// A whole-scene variant: as compiled, `--levels 2`, `sl`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct VariantReport {
+    /// `as_compiled`, `levels_2` or `sl`.
+    pub name: String,
+    /// The `--levels` value this corresponds to.
+    pub levels: String,
+    /// Instances in the top-level TLAS (before splitting).
+    pub top_instances: u64,
+    /// TLASes the top level needs at `maxInstanceCount` (1 = no split).
+    pub top_tlas_pieces: u64,
+    pub exceeds_max_instance_count: bool,
+    pub cost: Cost,
+}
+
+/// What streaming would need at least.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StreamingReport {
+    /// Always resident while rendering anything: every record table, the root TLAS and its
+    /// instance buffer, and untagged items.
+    pub always_resident_bytes: u64,
+    /// The BLAS with the largest build working set (inputs + uncompacted + scratch).
+    pub largest_blas_build_bytes: u64,
+    pub largest_blas_compacted_bytes: u64,
+    /// Its owner (an element name or `shared`).
+    pub largest_blas_owner: String,
+    /// `always_resident_bytes + largest_blas_build_bytes`: the floor for per-BLAS streaming.
+    pub min_resident_bytes: u64,
+    /// The element with the largest `alone.peak_bytes` (the floor for per-element streaming).
+    pub largest_element: Option<String>,
+    pub largest_element_peak_bytes: u64,
+}
+
+/// The VRAM-budget report (`motu report --json` prints it as one object).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Report {
+    pub package: String,
+    /// `levels` as compiled.
+    pub levels: String,
+    pub sizes: SizeSourceInfo,
+    pub max_instance_count: u64,
+    pub max_primitive_count: u64,
+    pub unique_triangles: u64,
+    pub instanced_triangles: u64,
+    pub flattened_instances: u64,
+    /// Elements in id order, then `untagged` (if any), then `shared`.
+    pub elements: Vec<ElementReport>,
+    /// `as_compiled`, `levels_2`, `sl`.
+    pub variants: Vec<VariantReport>,
+    pub budget: Option<BudgetReport>,
+    pub streaming: StreamingReport,
+    pub warnings: Vec<String>,
+}
+
+impl Report {
+    /// The variant named `name`.
+    pub fn variant(&self, name: &str) -> Option<&VariantReport> {
+        self.variants.iter().find(|v| v.name == name)
+    }
+    /// The as-compiled totals.
+    pub fn total(&self) -> Cost {
+        self.variant("as_compiled")
+            .map(|v| v.cost)
+            .unwrap_or_default()
+    }
+}
+
+/// Builds the report for a package (see [`build_report_from_view`]).
+pub fn build_report(
+    pkg: &motu_pack::ScenePackage,
+    sizes: &dyn SizeSource,
+    budget_bytes: Option<u64>,
+) -> Result<Report, ReportError> {
+    let meta = pkg.meta();
+    let input = ReportInput {
+        package: pkg.path().to_string(),
+        levels: meta.levels.clone(),
+        element_names: meta.elements.iter().map(|e| e.name.clone()).collect(),
+    };
+    build_report_from_view(&pkg.view()?, &input, sizes, budget_bytes)
+}
+
+/// The element label of untagged root instances (after every real element id).
+fn untagged_label(input: &ReportInput, view: &HierarchyView<'_>) -> u32 {
+    let max_tag = view
+        .instances
+        .iter()
+        .map(|i| i.element)
+        .filter(|&e| e != NONE_U32)
+        .max()
+        .map_or(0, |e| e + 1);
+    (input.element_names.len() as u32).max(max_tag)
+}
+
+/// Builds the report from hierarchy tables. Sizes are asked of `sizes` for every BLAS and TLAS
+/// (sources cache repeats). O(nodes × elements sharing them).
+pub fn build_report_from_view(
+    view: &HierarchyView<'_>,
+    input: &ReportInput,
+    sizes: &dyn SizeSource,
+    budget_bytes: Option<u64>,
+) -> Result<Report, ReportError> {
+    let _span = tracing::info_span!("report", package = %input.package).entered();
+    let g = Graph::new(*view, sizes)?;
+    let mut warnings = Vec::new();
+    let root = view.root_tlas;
+    let root_rec = view.tlases[root as usize];
+    let root_range = root_rec.instance_base as usize
+        ..(root_rec.instance_base + root_rec.instance_count) as usize;
+    let untagged = untagged_label(input, view);
+    let labelled: Vec<(u32, usize)> = root_range
+        .clone()
+        .map(|i| {
+            let e = view.instances[i].element;
+            (if e == NONE_U32 { untagged } else { e }, i)
+        })
+        .collect();
+    let own = Ownership::compute(&g, &labelled);
+
+    // Labels present, in id order (named elements with no instances still get a row).
+    let mut labels: Vec<u32> = (0..input.element_names.len() as u32).collect();
+    for &(l, _) in &labelled {
+        if !labels.contains(&l) {
+            labels.push(l);
+        }
+    }
+    labels.sort_unstable();
+    let name_of = |l: u32| -> String {
+        if l == untagged {
+            "(untagged)".into()
+        } else {
+            input
+                .element_names
+                .get(l as usize)
+                .cloned()
+                .unwrap_or_else(|| format!("element#{l}"))
+        }
+    };
+    if labels
+        .iter()
+        .any(|&l| l != untagged && l as usize >= input.element_names.len())
+    {
+        warnings.push("root instances name element ids the package's meta does not list".into());
+    }
+
+    // Owned costs per label and shared groups by element set.
+    let mut owned: BTreeMap<u32, Cost> = labels.iter().map(|&l| (l, Cost::default())).collect();
+    let mut unique_tris: HashMap<u32, u64> = HashMap::new();
+    let mut mesh_counts: HashMap<u32, u64> = HashMap::new();
+    let mut groups: HashMap<Vec<u32>, Cost> = HashMap::new();
+    for (&n, &o) in &own.owner {
+        let c = g.cost(n);
+        if o == SHARED {
+            if let Some(set) = own.shared_sets.get(&n) {
+                groups.entry(set.clone()).or_default().add(c);
+            }
+        } else {
+            owned.entry(o).or_default().add(c);
+            if let Node::Blas(_) = n {
+                *unique_tris.entry(o).or_default() += c.blas_triangles;
+            }
+            if let Node::Mesh(_) = n {
+                *mesh_counts.entry(o).or_default() += 1;
+            }
+        }
+    }
+    // Root instance records belong to their element.
+    let mut root_count: BTreeMap<u32, u64> = BTreeMap::new();
+    for &(l, _) in &labelled {
+        *root_count.entry(l).or_default() += 1;
+        let c = owned.entry(l).or_default();
+        c.table_bytes += std::mem::size_of::<InstanceRecord>() as u64;
+        c.seal();
+    }
+    let mut group_list: Vec<(Vec<u32>, Cost)> = groups.into_iter().collect();
+    group_list.sort_by(|a, b| a.0.cmp(&b.0));
+    let global = g.global_tables();
+
+    // Flattening per element (SL) and for the whole scene.
+    let expanded_sl = g.expansions(1);
+    let mut flat: BTreeMap<u32, crate::cost::Expansion> = BTreeMap::new();
+    for &(l, i) in &labelled {
+        let e = g.expand_instances(std::iter::once(i), 1, &expanded_sl);
+        let f = flat.entry(l).or_default();
+        f.tri_instances = f.tri_instances.saturating_add(e.tri_instances);
+        f.instanced_triangles = f.instanced_triangles.saturating_add(e.instanced_triangles);
+    }
+
+    // The root TLAS as compiled, its share per element by root instance count.
+    let (mut root_cost, root_pieces) = tlas_cost(sizes, u64::from(root_rec.instance_count))?;
+    root_cost.table_bytes += std::mem::size_of::<motu_abi::TlasRecord>() as u64;
+    // Instance buffer and count are attributed to elements with their instance records.
+    root_cost.instance_buffer_bytes = 0;
+    root_cost.instances = 0;
+    root_cost.seal();
+    let root_total = u64::from(root_rec.instance_count).max(1);
+
+    let coster = SubsetCoster {
+        owned: owned.clone(),
+        root_count: root_count.clone(),
+        groups: group_list.clone(),
+        global,
+        forced: if root_count.contains_key(&untagged) {
+            vec![untagged]
+        } else {
+            vec![]
+        },
+        table_bytes_per_root_instance: std::mem::size_of::<motu_abi::TlasRecord>() as u64,
+    };
+
+    let mut elements = Vec::new();
+    let mut share_sum = Cost::default();
+    for &l in &labels {
+        let n_root = root_count.get(&l).copied().unwrap_or(0);
+        let mut ml = owned.get(&l).copied().unwrap_or_default();
+        ml.instance_buffer_bytes += n_root * crate::sizes::INSTANCE_RECORD_SIZE_BYTES;
+        let share = Cost {
+            // u128: AS bytes × instances can pass u64 at Moana scale.
+            tlas_bytes: (u128::from(root_cost.tlas_bytes) * u128::from(n_root)
+                / u128::from(root_total)) as u64,
+            ..Default::default()
+        };
+        ml.tlas_bytes += share.tlas_bytes;
+        ml.instances += n_root;
+        ml.seal();
+        share_sum.tlas_bytes += share.tlas_bytes;
+        let f = flat.get(&l).copied().unwrap_or_default();
+        let (sl_tlas, _) = tlas_cost(sizes, f.tri_instances)?;
+        let alone = if n_root > 0 {
+            Some(coster.cost(&[l], sizes)?)
+        } else {
+            None
+        };
+        elements.push(ElementReport {
+            name: name_of(l),
+            id: (l != untagged).then_some(l),
+            kind: if l == untagged { "untagged" } else { "element" }.into(),
+            root_instances: n_root,
+            flattened_instances: f.tri_instances,
+            instanced_triangles: f.instanced_triangles,
+            unique_triangles: unique_tris.get(&l).copied().unwrap_or(0),
+            meshes: mesh_counts.get(&l).copied().unwrap_or(0),
+            ml,
+            sl_tlas_bytes: sl_tlas.tlas_total_bytes(),
+            alone,
+        });
+    }
+    // The rounding rest of the root TLAS's shares goes to the element with most root instances.
+    let rest = root_cost.tlas_bytes.saturating_sub(share_sum.tlas_bytes);
+    if let Some(e) = elements
+        .iter_mut()
+        .filter(|e| e.root_instances > 0)
+        .max_by_key(|e| e.root_instances)
+    {
+        e.ml.tlas_bytes += rest;
+        e.ml.seal();
+        share_sum.tlas_bytes += rest;
+    }
+    // The shared row: shared nodes, global tables, the root TLAS's record and scratch.
+    let mut shared = Cost::sum(group_list.iter().map(|(_, c)| c));
+    shared.add(&global);
+    let mut root_rest = root_cost;
+    root_rest.tlas_bytes -= share_sum.tlas_bytes.min(root_rest.tlas_bytes);
+    shared.add(&root_rest);
+    let shared_tris: u64 = own
+        .owner
+        .iter()
+        .filter(|(n, &o)| o == SHARED && matches!(n, Node::Blas(_)))
+        .map(|(n, _)| g.cost(*n).blas_triangles)
+        .sum();
+    let shared_meshes = own
+        .owner
+        .iter()
+        .filter(|(n, &o)| o == SHARED && matches!(n, Node::Mesh(_)))
+        .count();
+    elements.push(ElementReport {
+        name: "shared".into(),
+        id: None,
+        kind: "shared".into(),
+        root_instances: 0,
+        flattened_instances: 0,
+        instanced_triangles: 0,
+        unique_triangles: shared_tris,
+        meshes: shared_meshes as u64,
+        ml: shared,
+        sl_tlas_bytes: 0,
+        alone: None,
+    });
+
+    // Variants.
+    let as_compiled = {
+        let mut c = Cost::sum(elements.iter().map(|e| &e.ml));
+        c.seal();
+        VariantReport {
+            name: "as_compiled".into(),
+            levels: input.levels.clone(),
+            top_instances: u64::from(root_rec.instance_count),
+            top_tlas_pieces: root_pieces,
+            exceeds_max_instance_count: u64::from(root_rec.instance_count)
+                > sizes.max_instance_count(),
+            cost: c,
+        }
+    };
+    if as_compiled.exceeds_max_instance_count {
+        warnings.push(format!(
+            "the root TLAS has {} instances, over this device's maxInstanceCount {}: reimport with --max-instances",
+            root_rec.instance_count,
+            sizes.max_instance_count()
+        ));
+    }
+    let mut variants = vec![as_compiled];
+    for (name, levels) in [("levels_2", 2u32), ("sl", 1)] {
+        variants.push(flattened_variant(
+            &g,
+            root_range.clone(),
+            name,
+            levels,
+            sizes,
+        )?);
+    }
+    let sl = flat
+        .values()
+        .fold(crate::cost::Expansion::default(), |mut a, e| {
+            a.tri_instances = a.tri_instances.saturating_add(e.tri_instances);
+            a.instanced_triangles = a.instanced_triangles.saturating_add(e.instanced_triangles);
+            a
+        });
+
+    let streaming = streaming_report(&g, &own, &elements, &variants[0].cost, &root_cost, &name_of);
+    let budget = budget_bytes
+        .map(|b| {
+            plan_budget(
+                b,
+                &coster,
+                &elements,
+                &variants,
+                sizes,
+                &name_of,
+                streaming.min_resident_bytes,
+            )
+        })
+        .transpose()?;
+    let info = sizes.info();
+    Ok(Report {
+        package: input.package.clone(),
+        levels: input.levels.clone(),
+        sizes: info,
+        max_instance_count: sizes.max_instance_count(),
+        max_primitive_count: sizes.max_primitive_count(),
+        unique_triangles: view
+            .blases
+            .iter()
+            .filter(|b| b.kind == motu_abi::BLAS_TRIANGLES)
+            .map(|b| u64::from(b.primitive_count))
+            .sum(),
+        instanced_triangles: sl.instanced_triangles,
+        flattened_instances: sl.tri_instances,
+        elements,
+        variants,
+        budget,
+        streaming,
+        warnings,
+    })
+}
+
+/// The whole scene flattened to `levels` TLAS levels (see `cost` module docs).
+fn flattened_variant(
+    g: &Graph<'_>,
+    root_range: std::ops::Range<usize>,
+    name: &str,
+    levels: u32,
+    sizes: &dyn SizeSource,
+) -> Result<VariantReport, ReportError> {
+    let expanded = g.expansions(levels);
+    let e = g.expand_instances(root_range.clone(), levels, &expanded);
+    let (tri_blas, kept) = g.expansion_nodes(root_range, levels);
+    let mut starts: Vec<Node> = tri_blas.iter().map(|&b| Node::Blas(b)).collect();
+    starts.extend(kept.iter().map(|&t| Node::Tlas(t)));
+    let mut c = Cost::sum(g.reachable(starts).iter().map(|&n| g.cost(n)));
+    // Kept PIs sit in AABB BLASes of the top TLAS (split at maxPrimitiveCount).
+    let mut top_instances = e.tri_instances;
+    if e.kept_pis > 0 {
+        let max_prims = sizes.max_primitive_count().max(1);
+        let blases = e.kept_pis.div_ceil(max_prims);
+        let full = blases - 1;
+        let last = e.kept_pis - full * max_prims;
+        for (count, times) in [(max_prims, full), (last, 1)] {
+            if times == 0 {
+                continue;
+            }
+            let shape = BlasShape::Aabbs {
+                box_count: u32::try_from(count).unwrap_or(u32::MAX),
+            };
+            let mut one = blas_cost_of(sizes, &shape, 0)?;
+            one.table_bytes += count * std::mem::size_of::<PiRecord>() as u64;
+            one.seal();
+            for _ in 0..times {
+                c.add(&one);
+            }
+        }
+        top_instances += blases;
+    }
+    let (mut top, pieces) = tlas_cost(sizes, top_instances)?;
+    top.table_bytes += std::mem::size_of::<motu_abi::TlasRecord>() as u64
+        + top_instances * std::mem::size_of::<InstanceRecord>() as u64;
+    top.seal();
+    c.add(&top);
+    c.add(&g.global_tables());
+    Ok(VariantReport {
+        name: name.into(),
+        levels: if levels == 1 {
+            "sl".into()
+        } else {
+            levels.to_string()
+        },
+        top_instances,
+        top_tlas_pieces: pieces,
+        exceeds_max_instance_count: top_instances > sizes.max_instance_count(),
+        cost: c,
+    })
+}
+
+fn streaming_report(
+    g: &Graph<'_>,
+    own: &Ownership,
+    elements: &[ElementReport],
+    total: &Cost,
+    root: &Cost,
+    name_of: &dyn Fn(u32) -> String,
+) -> StreamingReport {
+    let untagged: u64 = elements
+        .iter()
+        .filter(|e| e.kind == "untagged")
+        .map(|e| e.ml.resident_bytes)
+        .sum();
+    let root_instances: u64 = elements.iter().map(|e| e.root_instances).sum();
+    let always = total.table_bytes
+        + root.tlas_bytes
+        + root_instances * crate::sizes::INSTANCE_RECORD_SIZE_BYTES
+        + untagged;
+    let mut best: Option<(u64, u64, Node)> = None;
+    for (&n, _) in own.owner.iter().filter(|(n, _)| matches!(n, Node::Blas(_))) {
+        let c = g.cost(n);
+        let inputs: u64 = {
+            let mut kids = Vec::new();
+            g.children(n, &mut kids);
+            kids.iter()
+                .filter(|k| matches!(k, Node::Mesh(_)))
+                .map(|&k| g.cost(k).geometry_bytes)
+                .sum()
+        };
+        let build = inputs + c.geometry_bytes + c.build_transient_peak_bytes;
+        if best.is_none_or(|b| build > b.0) {
+            best = Some((build, c.blas_compacted_bytes, n));
+        }
+    }
+    let (build, compacted, owner) = match best {
+        Some((b, c, n)) => {
+            let o = own.owner.get(&n).copied().unwrap_or(SHARED);
+            (
+                b,
+                c,
+                if o == SHARED {
+                    "shared".into()
+                } else {
+                    name_of(o)
+                },
+            )
+        }
+        None => (0, 0, String::new()),
+    };
+    let largest = elements
+        .iter()
+        .filter_map(|e| e.alone.map(|a| (e.name.clone(), a.peak_bytes)))
+        .max_by_key(|x| x.1);
+    StreamingReport {
+        always_resident_bytes: always,
+        largest_blas_build_bytes: build,
+        largest_blas_compacted_bytes: compacted,
+        largest_blas_owner: owner,
+        min_resident_bytes: always + build,
+        largest_element: largest.as_ref().map(|l| l.0.clone()),
+        largest_element_peak_bytes: largest.map_or(0, |l| l.1),
+    }
+}

@@ -1,0 +1,462 @@
+//! Where acceleration-structure sizes come from: a [`SizeSource`] answers "how big is this
+//! BLAS/TLAS and its build scratch". [`ModelSizes`] answers from a linear model fitted on a
+//! real driver ([`ModelPreset`]); `GpuSizes` (in `gpu`) asks the driver itself.
+//!
+//! # The model
+//! Every size is `base + per_item × items` with `items` = triangles (triangle BLAS), boxes
+//! (AABB BLAS) or instances (TLAS); triangle BLASes add `per_geometry` for each geometry
+//! beyond the first. Compaction is a constant ratio of the built BLAS size. The constants were
+//! fitted by least squares on relative error over sizes from 1 to 2^20 items with motu's build
+//! flags (fast trace + allow compaction); `fit_*` in this module's tests refits them
+//! (`cargo test -p motu-report -- --ignored --nocapture fit_presets`).
+
+use std::borrow::Cow;
+
+use serde::Serialize;
+
+use crate::ReportError;
+
+/// Bytes per `VkAccelerationStructureInstanceKHR` in a TLAS build input.
+pub const INSTANCE_RECORD_SIZE_BYTES: u64 = 64;
+/// Bytes per `VkAabbPositionsKHR` in an AABB BLAS build input.
+pub const AABB_RECORD_SIZE_BYTES: u64 = 24;
+/// Acceleration structures start at multiples of this in their buffer (Vulkan spec).
+pub const AS_ALIGNMENT_BYTES: u64 = 256;
+
+/// What one acceleration-structure build needs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct AsSizes {
+    /// The structure as built (before compaction).
+    pub size_bytes: u64,
+    pub build_scratch_bytes: u64,
+}
+
+/// One triangle geometry of a BLAS, by counts (what a size query needs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+pub struct TriangleGeometry {
+    pub vertex_count: u32,
+    pub triangle_count: u32,
+    /// Alpha-tested meshes are not opaque (changes flags, not sizes, on known drivers).
+    pub opaque: bool,
+}
+
+/// A bottom-level structure by shape.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub enum BlasShape {
+    Triangles(Vec<TriangleGeometry>),
+    Aabbs { box_count: u32 },
+}
+
+impl BlasShape {
+    pub fn primitive_count(&self) -> u64 {
+        match self {
+            BlasShape::Triangles(g) => g.iter().map(|g| u64::from(g.triangle_count)).sum(),
+            BlasShape::Aabbs { box_count } => u64::from(*box_count),
+        }
+    }
+}
+
+/// Where sizes came from, for the report's header and JSON.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SizeSourceInfo {
+    /// `driver` (vkGetAccelerationStructureBuildSizesKHR) or `model`.
+    pub kind: String,
+    /// The device the sizes are for (the queried one, or the one the model was fitted on).
+    pub device: String,
+    /// The model preset, for `model`.
+    pub preset: Option<String>,
+    /// Compacted sizes: how they were obtained.
+    pub compaction: String,
+    /// Caveats (a fallback, an unmeasured ratio).
+    pub notes: Vec<String>,
+}
+
+/// Answers size questions for the report. Implementations may cache (sizes repeat a lot).
+pub trait SizeSource {
+    fn info(&self) -> SizeSourceInfo;
+    fn blas_sizes(&self, shape: &BlasShape) -> Result<AsSizes, ReportError>;
+    /// `instance_count` never exceeds [`SizeSource::max_instance_count`] (callers split).
+    fn tlas_sizes(&self, instance_count: u64) -> Result<AsSizes, ReportError>;
+    /// The compacted size of a BLAS built with `built`.
+    fn compacted_blas_bytes(&self, shape: &BlasShape, built: AsSizes) -> u64;
+    /// `maxInstanceCount` of the target device.
+    fn max_instance_count(&self) -> u64;
+    /// `maxPrimitiveCount` of the target device.
+    fn max_primitive_count(&self) -> u64;
+}
+
+/// A size curve in bytes over an item count: the sizes measured at small counts (up to
+/// [`FIT_TAIL_FROM`] items, interpolated between; drivers have fixed-size headers and node
+/// granularity there) and `base + per_item × items` above, where every driver seen is linear.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Linear {
+    /// `(items, bytes)`, ascending items, at least one entry.
+    pub small: Cow<'static, [(u64, u64)]>,
+    pub base_bytes: f64,
+    pub bytes_per_item: f64,
+}
+
+impl Linear {
+    pub const fn new(small: &'static [(u64, u64)], base_bytes: f64, bytes_per_item: f64) -> Self {
+        Self {
+            small: Cow::Borrowed(small),
+            base_bytes,
+            bytes_per_item,
+        }
+    }
+    /// A line alone (tests, hand-made presets).
+    pub fn line(base_bytes: f64, bytes_per_item: f64) -> Self {
+        let at = |n: u64| (base_bytes + bytes_per_item * n as f64).max(0.0).round() as u64;
+        Self {
+            small: Cow::Owned(vec![(1, at(1))]),
+            base_bytes,
+            bytes_per_item,
+        }
+    }
+    pub fn eval(&self, items: u64) -> u64 {
+        let line = || {
+            (self.base_bytes + self.bytes_per_item * items as f64)
+                .max(0.0)
+                .round() as u64
+        };
+        let (Some(&first), Some(&last)) = (self.small.first(), self.small.last()) else {
+            return line();
+        };
+        if items > last.0 {
+            return line();
+        }
+        if items <= first.0 {
+            return first.1;
+        }
+        let mut prev = first;
+        for &p in &self.small[1..] {
+            if items <= p.0 {
+                let t = (items - prev.0) as f64 / (p.0 - prev.0).max(1) as f64;
+                return (prev.1 as f64 + t * (p.1 as f64 - prev.1 as f64)).round() as u64;
+            }
+            prev = p;
+        }
+        last.1
+    }
+}
+
+/// A size model fitted on one device and driver.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ModelPreset {
+    pub name: &'static str,
+    pub device: &'static str,
+    pub driver: &'static str,
+    /// Opaque triangles (motu's default).
+    pub blas_triangles: Linear,
+    pub blas_triangles_scratch: Linear,
+    /// Non-opaque triangles (alpha-tested meshes; NVIDIA builds them ~25% smaller).
+    pub blas_triangles_nonopaque: Linear,
+    pub blas_triangles_nonopaque_scratch: Linear,
+    /// Scratch of triangle BLASes with two or more geometries (NVIDIA: ~8× one geometry's).
+    pub blas_triangles_multi_scratch: Linear,
+    /// Added per geometry beyond the first.
+    pub blas_bytes_per_extra_geometry: f64,
+    pub blas_aabbs: Linear,
+    pub blas_aabbs_scratch: Linear,
+    pub tlas: Linear,
+    pub tlas_scratch: Linear,
+    /// Compacted / built BLAS size.
+    pub compaction_ratio: f64,
+    /// Whether `compaction_ratio` was measured (else an assumption, see its doc).
+    pub compaction_measured: bool,
+    pub max_instance_count: u64,
+    pub max_primitive_count: u64,
+    /// The largest relative error of the model against the sizes it was fitted on.
+    pub fitted_max_relative_error: f64,
+    /// The measured `(items, bytes)` behind each curve, by curve name (re-checked by tests).
+    #[serde(skip)]
+    pub measured: &'static [(&'static str, &'static [(u64, u64)])],
+}
+
+pub use crate::presets::{LAVAPIPE, NVIDIA_H200};
+
+impl ModelPreset {
+    /// The curve named as in [`crate::FittedCurve::what`].
+    pub fn curve(&self, what: &str) -> Option<&Linear> {
+        Some(match what {
+            "blas_triangles" => &self.blas_triangles,
+            "blas_triangles_scratch" => &self.blas_triangles_scratch,
+            "blas_triangles_nonopaque" => &self.blas_triangles_nonopaque,
+            "blas_triangles_nonopaque_scratch" => &self.blas_triangles_nonopaque_scratch,
+            "blas_triangles_multi_scratch" => &self.blas_triangles_multi_scratch,
+            "blas_aabbs" => &self.blas_aabbs,
+            "blas_aabbs_scratch" => &self.blas_aabbs_scratch,
+            "tlas" => &self.tlas,
+            "tlas_scratch" => &self.tlas_scratch,
+            _ => return None,
+        })
+    }
+}
+
+/// Every built-in preset.
+pub static PRESETS: [&ModelPreset; 2] = [&LAVAPIPE, &NVIDIA_H200];
+
+/// Finds a preset by name (`lavapipe`, `nvidia-h200`).
+pub fn preset(name: &str) -> Option<&'static ModelPreset> {
+    PRESETS
+        .iter()
+        .copied()
+        .find(|p| p.name.eq_ignore_ascii_case(name))
+}
+
+impl ModelPreset {
+    pub fn blas_sizes(&self, shape: &BlasShape) -> AsSizes {
+        match shape {
+            BlasShape::Triangles(geoms) => {
+                // Opaque and non-opaque triangles cost differently; a mixed BLAS is modelled
+                // as the triangle-weighted mix of both curves at its total count.
+                let tris = shape.primitive_count();
+                let opaque: u64 = geoms
+                    .iter()
+                    .filter(|g| g.opaque)
+                    .map(|g| u64::from(g.triangle_count))
+                    .sum();
+                let w = if tris == 0 {
+                    1.0
+                } else {
+                    opaque as f64 / tris as f64
+                };
+                let mix = |a: &Linear, b: &Linear| {
+                    (a.eval(tris) as f64 * w + b.eval(tris) as f64 * (1.0 - w)).round() as u64
+                };
+                let extra =
+                    geoms.len().saturating_sub(1) as f64 * self.blas_bytes_per_extra_geometry;
+                AsSizes {
+                    size_bytes: mix(&self.blas_triangles, &self.blas_triangles_nonopaque)
+                        + extra.round() as u64,
+                    build_scratch_bytes: if geoms.len() > 1 {
+                        self.blas_triangles_multi_scratch.eval(tris)
+                    } else {
+                        mix(
+                            &self.blas_triangles_scratch,
+                            &self.blas_triangles_nonopaque_scratch,
+                        )
+                    },
+                }
+            }
+            BlasShape::Aabbs { box_count } => AsSizes {
+                size_bytes: self.blas_aabbs.eval(u64::from(*box_count)),
+                build_scratch_bytes: self.blas_aabbs_scratch.eval(u64::from(*box_count)),
+            },
+        }
+    }
+
+    pub fn tlas_sizes(&self, instance_count: u64) -> AsSizes {
+        AsSizes {
+            size_bytes: self.tlas.eval(instance_count),
+            build_scratch_bytes: self.tlas_scratch.eval(instance_count),
+        }
+    }
+}
+
+/// Sizes from a fitted model: no device needed.
+#[derive(Clone, Debug)]
+pub struct ModelSizes {
+    pub preset: &'static ModelPreset,
+    /// Shown with the report's size notes (e.g. why no device was used).
+    pub notes: Vec<String>,
+}
+
+impl ModelSizes {
+    pub fn new(preset: &'static ModelPreset) -> Self {
+        Self {
+            preset,
+            notes: Vec::new(),
+        }
+    }
+}
+
+impl SizeSource for ModelSizes {
+    fn info(&self) -> SizeSourceInfo {
+        let p = self.preset;
+        let mut notes = self.notes.clone();
+        notes.push(format!(
+            "modelled sizes (fitted on {} / {}; largest error on the fitting sizes {:.1}%)",
+            p.device,
+            p.driver,
+            p.fitted_max_relative_error * 100.0
+        ));
+        if !p.compaction_measured {
+            notes.push(format!(
+                "compacted BLAS = {:.2} × built size (an assumption, not measured)",
+                p.compaction_ratio
+            ));
+        }
+        SizeSourceInfo {
+            kind: "model".into(),
+            device: p.device.into(),
+            preset: Some(p.name.into()),
+            compaction: compaction_text(p),
+            notes,
+        }
+    }
+    fn blas_sizes(&self, shape: &BlasShape) -> Result<AsSizes, ReportError> {
+        Ok(self.preset.blas_sizes(shape))
+    }
+    fn tlas_sizes(&self, instance_count: u64) -> Result<AsSizes, ReportError> {
+        Ok(self.preset.tlas_sizes(instance_count))
+    }
+    fn compacted_blas_bytes(&self, _shape: &BlasShape, built: AsSizes) -> u64 {
+        compact(self.preset, built)
+    }
+    fn max_instance_count(&self) -> u64 {
+        self.preset.max_instance_count
+    }
+    fn max_primitive_count(&self) -> u64 {
+        self.preset.max_primitive_count
+    }
+}
+
+pub(crate) fn compaction_text(p: &ModelPreset) -> String {
+    format!(
+        "ratio {:.2} of the built size ({}, preset {})",
+        p.compaction_ratio,
+        if p.compaction_measured {
+            "measured"
+        } else {
+            "assumed"
+        },
+        p.name
+    )
+}
+
+pub(crate) fn compact(p: &ModelPreset, built: AsSizes) -> u64 {
+    (built.size_bytes as f64 * p.compaction_ratio).round() as u64
+}
+
+/// Fits [`Linear`] to `(items, bytes)` (ascending items): the points up to
+/// [`FIT_TAIL_FROM`] items become the small table, and a least-squares line minimising
+/// relative error is fitted over the points from [`FIT_TAIL_FROM`] up. Returns the largest
+/// relative error over all points. Used to refit presets.
+pub fn fit_linear(points: &[(u64, u64)]) -> (Linear, f64) {
+    let tail: Vec<(u64, u64)> = points
+        .iter()
+        .copied()
+        .filter(|p| p.0 >= FIT_TAIL_FROM)
+        .collect();
+    let fit_on = if tail.len() >= 2 { &tail[..] } else { points };
+    // Weighted least squares with weights 1/y² (relative error).
+    let (mut sw, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for &(x, y) in fit_on {
+        let (x, y) = (x as f64, y as f64);
+        let w = 1.0 / y.max(1.0).powi(2);
+        sw += w;
+        sx += w * x;
+        sy += w * y;
+        sxx += w * x * x;
+        sxy += w * x * y;
+    }
+    let det = sw * sxx - sx * sx;
+    let (base, per) = if det.abs() < f64::EPSILON {
+        (if sw > 0.0 { sy / sw } else { 0.0 }, 0.0)
+    } else {
+        ((sxx * sy - sx * sxy) / det, (sw * sxy - sx * sy) / det)
+    };
+    let small: Vec<(u64, u64)> = points
+        .iter()
+        .copied()
+        .filter(|p| p.0 <= FIT_TAIL_FROM)
+        .collect();
+    let line = Linear {
+        small: Cow::Owned(small),
+        base_bytes: base,
+        bytes_per_item: per,
+    };
+    let err = points
+        .iter()
+        .map(|&(x, y)| relative_error(line.eval(x), y))
+        .fold(0.0, f64::max);
+    (line, err)
+}
+
+/// Fits use points from this many items up (see [`fit_linear`]).
+pub const FIT_TAIL_FROM: u64 = 256;
+
+/// `|model − measured| / measured` (0 when both are 0).
+pub fn relative_error(model: u64, measured: u64) -> f64 {
+    if measured == 0 {
+        return if model == 0 { 0.0 } else { 1.0 };
+    }
+    (model as f64 - measured as f64).abs() / measured as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fit_recovers_a_line_and_reports_its_error() {
+        let pts: Vec<(u64, u64)> = [1u64, 4, 16, 64, 1000, 100_000]
+            .iter()
+            .map(|&n| (n, 500 + 90 * n))
+            .collect();
+        let (line, err) = fit_linear(&pts);
+        assert!((line.bytes_per_item - 90.0).abs() < 1e-6, "{line:?}");
+        assert!((line.base_bytes - 500.0).abs() < 1e-3, "{line:?}");
+        assert!(err < 1e-9);
+        // The H200's shape: a header-dominated start, linear from 64 items.
+        let h200 = [
+            (1, 1408),
+            (4, 2432),
+            (16, 3328),
+            (64, 7680),
+            (256, 25216),
+            (4096, 377344),
+        ];
+        let (line, err) = fit_linear(&h200);
+        assert_eq!(line.eval(1), 1408);
+        assert_eq!(line.eval(10), 2880);
+        assert!(err < 0.02, "{err} {line:?}");
+        let (_, err) = fit_linear(&[(256, 100), (512, 100), (1024, 400)]);
+        assert!(err > 0.1, "a bent curve has error: {err}");
+    }
+
+    #[test]
+    fn presets_grow_with_counts_and_are_found_by_name() {
+        for p in PRESETS {
+            assert_eq!(preset(p.name).map(|q| q.name), Some(p.name));
+            let small = p.blas_sizes(&BlasShape::Triangles(vec![TriangleGeometry {
+                vertex_count: 30,
+                triangle_count: 10,
+                opaque: true,
+            }]));
+            let big = p.blas_sizes(&BlasShape::Triangles(vec![TriangleGeometry {
+                vertex_count: 30_000,
+                triangle_count: 10_000,
+                opaque: true,
+            }]));
+            assert!(big.size_bytes > 100 * small.size_bytes / 2, "{}", p.name);
+            assert!(p.tlas_sizes(1000).size_bytes > p.tlas_sizes(10).size_bytes);
+            assert!(p.compaction_ratio > 0.0 && p.compaction_ratio <= 1.0);
+        }
+        assert!(preset("nope").is_none());
+    }
+
+    #[test]
+    fn presets_match_their_recorded_driver_sizes() {
+        for p in PRESETS {
+            assert!(p.measured.len() >= 8, "{}: every curve is recorded", p.name);
+            for (what, points) in p.measured {
+                let curve = p.curve(what).expect("known curve");
+                for &(n, measured) in *points {
+                    let err = relative_error(curve.eval(n), measured);
+                    assert!(
+                        err <= p.fitted_max_relative_error + 1e-4,
+                        "{} {what} at {n}: model {} vs measured {measured} ({:.2}%)",
+                        p.name,
+                        curve.eval(n),
+                        err * 100.0
+                    );
+                }
+                // The preset is what the fit gives on these points.
+                let (refit, _) = fit_linear(points);
+                assert_eq!(&refit, curve, "{} {what}", p.name);
+            }
+        }
+    }
+}
