@@ -35,16 +35,19 @@
 // Per-pass streaming parameters (Rust: stream::StreamParams, 64 bytes). Present only when
 // push.stream != 0.
 struct StreamParams {
-    uint64_t blas_stamps;   // u32 per BLAS: 2 × stamp + 1 (needed) or 2 × stamp (guard band)
+    // u32 per BLAS: 2 × stamp + 1 when an incomplete pixel needs it (the nearest empty one a
+    // ray met, or the best hit of a deferred ray), else 2 × stamp (seen: guard band, or
+    // walked by a ray that completed)
+    uint64_t blas_stamps;
     uint64_t tlas_stamps;   // u32 per TLAS, same encoding
     uint64_t pixel_list;    // u32 packed (x + GUARD_BIAS) | (y + GUARD_BIAS) << 16
     uint64_t incomplete;    // u32 count, then u32 packed pixels (unbiased x | y << 16)
     uint stamp;
     uint full_count;        // items [0, full_count) are the image's pixels in row order
     uint list_count;        // items [full_count, full_count + list_count) come from pixel_list
-    uint _pad0;
-    uint64_t _pad1;
-    uint64_t _pad2;
+    uint blas_count;        // requests of TLAS t are at index blas_count + t
+    uint64_t requests;      // u32 per BLAS, then per TLAS: rays needing it now (build order)
+    uint64_t resume;        // vec2 per pixel: primary and shadow ray t_min for the next pass
 };
 
 struct FrameParams {
@@ -109,6 +112,7 @@ layout(buffer_reference, std430, buffer_reference_align = 4) buffer Stats { uint
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer StreamRef { StreamParams s; };
 layout(buffer_reference, std430, buffer_reference_align = 4) buffer StampTable { uint r[]; };
 layout(buffer_reference, std430, buffer_reference_align = 4) buffer IncompleteList { uint count; uint r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 8) buffer ResumeTable { vec2 r[]; };
 
 // 16 device addresses = 128 bytes, the guaranteed push-constant size. Order = Rust `Slot`.
 layout(push_constant) uniform Push {

@@ -32,6 +32,13 @@ Surface resolve(TraceHit h) {
     return s;
 }
 
+// A resumed ray starts a hair before where the last pass stopped.
+#define RESUME_BACKOFF 0.99999
+
+void stream_resume(uint pixel, vec2 t) {
+    ResumeTable(StreamRef(push.stream).s.resume).r[pixel] = t;
+}
+
 // Streaming: an incomplete pixel goes on the next pass's list and writes nothing.
 void stream_defer(uvec2 px) {
     IncompleteList l = IncompleteList(StreamRef(push.stream).s.incomplete);
@@ -51,13 +58,23 @@ void render_pixel_impl(uvec2 px) {
     uint traces = 0u;
     uint overflows = 0u;
     uint truncations = 0u;
+    // Streaming: where this pixel's rays resume (0 on the frame's first pass).
+    vec2 resume = vec2(0.0);
+    if (g_streaming) {
+        resume = ResumeTable(StreamRef(push.stream).s.resume).r[pixel];
+    }
+    g_t_min = resume.x;
     TraceHit h = traverse(f.root_tlas, org, dir, RAY_PRIMARY, f.lod, f.camera.pixels_per_unit_at_1,
                           pixel_dither(px.x, px.y), false, traces, overflows, truncations);
     if (g_incomplete) {
-        // Shading and shadow rays would be wasted: the pixel is re-shot next pass.
+        // Shading and shadow rays would be wasted: the pixel is re-shot next pass, from just
+        // before its nearest empty instance (its shadow ray from the start).
+        stream_pin_hit(h);
+        stream_resume(pixel, vec2(max(resume.x, RESUME_BACKOFF * min(g_empty_t, h.t)), 0.0));
         stream_defer(px);
         return;
     }
+    g_t_min = 0.0;
     vec3 colour;
     uvec4 rec = uvec4(AOV_MISS, 0u, 0u, 0u);
     if (h.t < T_INFINITY) {
@@ -80,6 +97,8 @@ void render_pixel_impl(uvec2 px) {
                     if (f.shadow_lod_from_primary != 0u) {
                         sl.forced_lod = int(lod);
                     }
+                    g_t_min = resume.y;
+                    g_empty_t = T_INFINITY;
                     TraceHit sh = traverse(f.root_tlas, shadow_offset(p, n, max(max(abs(org.x), abs(org.y)), abs(org.z)) + h.t), sun, RAY_SHADOW, sl,
                                            f.camera.pixels_per_unit_at_1, 0.0, true, traces,
                                            overflows, truncations);
@@ -87,9 +106,14 @@ void render_pixel_impl(uvec2 px) {
                     if (sh.t < T_INFINITY) {
                         g_incomplete = false;  // occluded whatever the empty instances hold
                     } else if (g_incomplete) {
+                        // The primary hit is final; the shadow ray resumes where it stopped.
+                        stream_pin_hit(h);
+                        stream_resume(pixel,
+                                      vec2(resume.x, max(resume.y, RESUME_BACKOFF * g_empty_t)));
                         stream_defer(px);
                         return;
                     }
+                    g_t_min = 0.0;
                     atomicAdd(push.stats.n[STAT_SHADOW_RAYS], 1u);
                 }
                 light = f.ambient + f.sun_dir_intensity.w * ndl * visible;
@@ -115,6 +139,7 @@ void render_pixel_impl(uvec2 px) {
 }
 void render_pixel(uvec2 px) {
     g_streaming = false;
+    g_t_min = 0.0;
     render_pixel_impl(px);
 }
 

@@ -3,9 +3,9 @@
 //
 // Contract: before including this file, a backend declares `Payload pl` (rayPayloadEXT in the
 // pipeline backend) and defines
-//     void backend_trace(uint tlas, vec3 org, vec3 dir, float t_max, bool first_hit)
+//     void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool first_hit)
 // which walks TLAS `tlas` (its address is push.tlas_addresses.r[tlas]) with the ray already
-// in that TLAS's space, t in [0, t_max], and fills `pl`: the closest triangle hit (hit_*) and
+// in that TLAS's space, t in [t_min, t_max], and fills `pl`: the closest triangle hit (hit_*) and
 // up to PI_CAPACITY programmable-instance candidates with t_near > pl.t_floor (the nearest
 // ones; `truncated` set when more were found).
 //
@@ -41,6 +41,10 @@ uint g_mark = 0u;  // stamp value written by this ray (StreamParams)
 // are only prefetch candidates; the next pass finds them again if they matter. Costs a pass
 // per depth layer on a cold start.
 float g_empty_t = T_INFINITY;
+// Where the ray starts (0 outside streaming). A deferred ray has no hit before its nearest
+// empty instance (none in front of it, and no resident one hit), so its next pass resumes
+// there: structures it already passed may be evicted without costing it anything.
+float g_t_min = 0.0;
 
 // Records `id` as visible in this pass (read first: most marks are repeats, and an atomic on
 // the root's slot from every ray would serialise).
@@ -55,12 +59,17 @@ void stream_mark(uint64_t table, uint id) {
     stream_mark_as(table, id, g_mark);
 }
 
-// An empty instance at `t_near`: the nearest so far is needed now; one behind it is marked
-// for prefetching only (built after the frame if it fits without evicting this frame's set).
-void stream_mark_empty(uint64_t table, uint id, float t_near) {
+// An empty instance at `t_near`: the nearest so far is needed now (and counted, so the host
+// builds the most requested first when not all fit); one behind it is marked for prefetching
+// only (built after the frame if it fits without evicting this frame's set). `request` is its
+// index in the requests table.
+void stream_mark_empty(uint64_t table, uint id, uint request, float t_near) {
     if (t_near <= g_empty_t) {
         g_empty_t = t_near;
         stream_mark(table, id);
+        if ((g_mark & 1u) != 0u) {
+            atomicAdd(StampTable(StreamRef(push.stream).s.requests).r[request], 1u);
+        }
     } else {
         stream_mark_as(table, id, g_mark & ~1u);
     }
@@ -75,6 +84,10 @@ struct TraceHit {
     uint lod;
     Affine tlas_from_world;
 };
+
+uint hit_blas(TraceHit hit) {
+    return push.instances.r[push.tlases.r[hit.tlas].instance_base + hit.instance].blas;
+}
 
 TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams lodp, float pixels_per_unit_at_1,
                   float lod_u, bool first_hit, inout uint traces, inout uint overflows,
@@ -101,7 +114,7 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
         pl.t_max = hit.t;
         pl.truncated = 0u;
         pl.hit_t = -1.0;
-        backend_trace(e.tlas, xform_point(e.tlas_from_world, org),
+        backend_trace(e.tlas, xform_point(e.tlas_from_world, org), g_t_min,
                       xform_vector(e.tlas_from_world, dir), hit.t, first_hit);
         if (pl.hit_t >= 0.0 && pl.hit_t < hit.t) {
             hit.t = pl.hit_t;
@@ -158,7 +171,8 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
                 // complete in this pass; mark the BLAS for building and keep walking to find
                 // the other structures the next pass needs.
                 if (g_streaming) {
-                    stream_mark_empty(StreamRef(push.stream).s.blas_stamps, pi.target, cd.t_near);
+                    stream_mark_empty(StreamRef(push.stream).s.blas_stamps, pi.target, pi.target,
+                                      cd.t_near);
                     g_incomplete = true;
                 }
                 continue;
@@ -183,7 +197,8 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
             }
             if (g_streaming && push.tlas_addresses.r[tlas] == 0ul) {
                 // A non-resident child TLAS (empty instance).
-                stream_mark_empty(StreamRef(push.stream).s.tlas_stamps, tlas, cd.t_near);
+                StreamParams sp = StreamRef(push.stream).s;
+                stream_mark_empty(sp.tlas_stamps, tlas, sp.blas_count + tlas, cd.t_near);
                 g_incomplete = true;
                 continue;
             }
@@ -193,11 +208,19 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
     }
     if (g_streaming && hit.t < T_INFINITY) {
         // Resident triangle BLASes are walked by the hardware without a shader callback: the
-        // one hit is the one marked (see stream.rs on what this means for eviction).
-        uint blas = push.instances.r[push.tlases.r[hit.tlas].instance_base + hit.instance].blas;
-        stream_mark(StreamRef(push.stream).s.blas_stamps, blas);
+        // one hit is the one marked (see stream.rs on what this means for eviction). Seen, not
+        // needed: a ray that ends up incomplete pins its hit with stream_pin_hit.
+        stream_mark_as(StreamRef(push.stream).s.blas_stamps, hit_blas(hit), g_mark & ~1u);
     }
     return hit;
+}
+
+// A deferred ray's best hit so far is what it falls back on next pass: needed, so the host
+// keeps it resident while building the ray's empty instances.
+void stream_pin_hit(TraceHit hit) {
+    if (g_streaming && hit.t < T_INFINITY) {
+        stream_mark(StreamRef(push.stream).s.blas_stamps, hit_blas(hit));
+    }
 }
 
 #endif

@@ -3,6 +3,10 @@
 //! `cargo bench -p pbrt-import -- --quick`
 //! Inputs: buddha-fractal's `geometry.pbrt` (instance-heavy, when present) and a
 //! generated inline `trianglemesh` (Moana-v3-like huge arrays).
+//!
+//! Large generated files (the documented island measurement):
+//! `cargo run --release -p motu-gen --example gen -- island -o /tmp/isl --scale 0.01`, then
+//! `cargo run --release -p pbrt-import --example parse_throughput -- /tmp/isl/isIronwoodA1/isIronwoodA1_xgLeaves.pbrt`.
 
 use std::hint::black_box;
 use std::path::{Path, PathBuf};

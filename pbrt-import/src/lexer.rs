@@ -133,6 +133,12 @@ fn is_word_end(b: u8) -> bool {
     CLASS[b as usize] != 0
 }
 
+/// Whether `b` ends a bare word (whitespace, `"`, `[`, `]`, `#`).
+#[inline]
+pub(crate) fn is_word_end_byte(b: u8) -> bool {
+    is_word_end(b)
+}
+
 /// Parse a bare number as f64 (whole slice must be consumed).
 pub fn parse_f64(bytes: &[u8]) -> Option<f64> {
     let b = bytes.strip_prefix(b"+").unwrap_or(bytes);
@@ -140,6 +146,62 @@ pub fn parse_f64(bytes: &[u8]) -> Option<f64> {
         Ok((v, n)) if n == b.len() && n > 0 => Some(v),
         _ => None,
     }
+}
+
+/// Exact powers of ten (every one up to 1e22 is representable in f64).
+const POW10: [f64; 23] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+];
+
+/// Fast path for the plain decimals that dominate scene text (`-12.5`, `0.7339349`, `1`):
+/// `[+-]?digits[.digits]` ending at a word end, at most 19 digits in all. When the digits
+/// form an integer `m < 2^53` and there are `k <= 22` fraction digits, `m` and `10^k` are
+/// exact and `m / 10^k` is one correctly rounded IEEE division (Clinger's fast path), so
+/// the result equals `fast_float`'s. Returns the value and the end offset; `None` sends
+/// the caller to the general parser.
+#[inline]
+fn simple_decimal(bytes: &[u8], start: usize) -> Option<(f64, usize)> {
+    let s = bytes.get(start..)?;
+    let (neg, mut i) = match s.first() {
+        Some(b'-') => (true, 1),
+        Some(b'+') => (false, 1),
+        _ => (false, 0),
+    };
+    let mut m: u64 = 0;
+    let int_start = i;
+    while i < s.len() {
+        let d = s[i].wrapping_sub(b'0');
+        if d > 9 {
+            break;
+        }
+        m = m.wrapping_mul(10).wrapping_add(u64::from(d));
+        i += 1;
+    }
+    let int_digits = i - int_start;
+    let mut frac_digits = 0;
+    if s.get(i) == Some(&b'.') {
+        i += 1;
+        let frac_start = i;
+        while i < s.len() {
+            let d = s[i].wrapping_sub(b'0');
+            if d > 9 {
+                break;
+            }
+            m = m.wrapping_mul(10).wrapping_add(u64::from(d));
+            i += 1;
+        }
+        frac_digits = i - frac_start;
+    }
+    // At most 19 digits cannot wrap a u64; `m < 2^53` is exact in f64.
+    if int_digits + frac_digits == 0 || int_digits + frac_digits > 19 || frac_digits > 22 {
+        return None;
+    }
+    if m >= 1 << 53 || s.get(i).is_some_and(|&c| !is_word_end(c)) {
+        return None; // long mantissa, exponent, `inf`, garbage: the general parser decides
+    }
+    let v = m as f64 / POW10[frac_digits];
+    Some((if neg { -v } else { v }, start + i))
 }
 
 /// Streaming tokenizer over one file's bytes.
@@ -335,6 +397,10 @@ impl<'a> Lexer<'a> {
     pub fn read_f64(&mut self) -> Option<f64> {
         self.skip_ws();
         let start = self.pos;
+        if let Some((v, end)) = simple_decimal(self.bytes, start) {
+            self.pos = end;
+            return Some(v);
+        }
         let rest = &self.bytes[start..];
         let (skip, rest) = match rest.first() {
             Some(b'+') => (1, &rest[1..]),
@@ -560,5 +626,71 @@ mod tests {
     fn count_matches_next() {
         let src = b"A [1 2 3] \"s\" # x\nB";
         assert_eq!(Lexer::new(src, FileId(0)).count_tokens().unwrap(), 8);
+    }
+}
+
+#[cfg(test)]
+mod simple_decimal_tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn general(text: &str) -> Option<f64> {
+        parse_f64(text.as_bytes())
+    }
+
+    #[test]
+    fn simple_decimal_matches_the_general_parser() {
+        for text in [
+            "0",
+            "-0",
+            "+1",
+            "1.",
+            ".5",
+            "-.5",
+            "28.5746002",
+            "0.7339349",
+            "-0.0176519",
+            "123456789012345",
+            "0.000000000000000000001",
+            "9007199254740991",
+            "1e5",
+            "1.5e-3",
+            "0.1",
+            "0.3",
+            "1234567.890123",
+        ] {
+            let fast = simple_decimal(text.as_bytes(), 0).map(|(v, _)| v);
+            if let Some(v) = fast {
+                assert_eq!(Some(v.to_bits()), general(text).map(f64::to_bits), "{text}");
+            }
+        }
+        // Exponents, long mantissas and words go to the general parser.
+        for text in [
+            "1e5",
+            "12345678901234567890",
+            "9007199254740993",
+            "inf",
+            "nan",
+            "1.2.3",
+            "-",
+            ".",
+        ] {
+            assert_eq!(simple_decimal(text.as_bytes(), 0), None, "{text}");
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn simple_decimal_is_exact(int in 0u64..10_000_000, frac in 0u64..100_000_000, zeros in 0usize..6, neg: bool) {
+            let text = format!("{}{int}.{}{frac}", if neg { "-" } else { "" }, "0".repeat(zeros));
+            match simple_decimal(text.as_bytes(), 0) {
+                Some((v, end)) => {
+                    prop_assert_eq!(end, text.len());
+                    prop_assert_eq!(Some(v.to_bits()), general(&text).map(f64::to_bits));
+                }
+                // Only mantissas past 15 digits may leave the fast path.
+                None => prop_assert!(text.bytes().filter(u8::is_ascii_digit).count() > 15),
+            }
+        }
     }
 }

@@ -118,6 +118,22 @@ pub struct ParseOptions {
     pub tessellation_segments: u32,
     /// Maximum `Include`/`Import` nesting (guards against cycles and stack overflow).
     pub max_include_depth: u32,
+    /// Turn a file that one file includes (or imports) several times into a shared object
+    /// instead of a copy per inclusion (Moana places element copies this way).
+    ///
+    /// When on, the first inclusion of such a file emits `object_begin` for a synthesized
+    /// object (named by the file's stem, not reachable by `ObjectInstance`), the file's
+    /// shapes and instances in the include's frame (`parent_from_shape` relative to the CTM
+    /// at the `Include`), `object_end`, then an `object_instance` with the CTM at the
+    /// `Include` as `parent_from_instance`; each later inclusion emits only another
+    /// `object_instance` and is not read again. Flattening gives the same world-space
+    /// geometry as re-parsing. Only files that cannot leak or depend on other state qualify
+    /// (only shapes, instances and, inside balanced blocks, relative transforms and
+    /// materials), and only inclusions in the world block, outside object definitions,
+    /// without motion or area light, under the same material and orientation as the
+    /// first; everything else is parsed as before. Known limit: a named material or object
+    /// redefined (pbrt-v3) between two inclusions keeps its first meaning for the copies.
+    pub share_repeated_includes: bool,
 }
 
 impl Default for ParseOptions {
@@ -128,6 +144,7 @@ impl Default for ParseOptions {
             ply_loading: PlyLoading::default(),
             tessellation_segments: 32,
             max_include_depth: 64,
+            share_repeated_includes: false,
         }
     }
 }
@@ -163,6 +180,10 @@ pub struct ParseStats {
     pub lights: u64,
     /// Warnings emitted.
     pub warnings: u64,
+    /// Files turned into shared objects ([`ParseOptions::share_repeated_includes`]).
+    pub shared_includes: u64,
+    /// Inclusions placed as instances of a shared object (first inclusions included).
+    pub include_instances: u64,
     /// Missing files (only non-empty with `allow_missing`).
     pub missing: Vec<MissingFile>,
 }

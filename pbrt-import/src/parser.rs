@@ -89,30 +89,184 @@ const V4_NAMES: &[&[u8]] = &[
 const V4_DIRECTIVES: &[&[u8]] = &[b"Import", b"ColorSpace", b"Option", b"Attribute"];
 
 /// Find pbrt-v4-only constructs in (the start of) a file.
+///
+/// A byte scanner rather than the lexer: it only looks at words that start with an
+/// upper-case letter (directives) and at quoted strings, and skips numbers without
+/// building tokens, so it costs a fraction of a parse even on instance-heavy files.
 fn prescan_is_v4(bytes: &[u8]) -> bool {
-    let mut lx = Lexer::new(&bytes[..bytes.len().min(16 << 20)], FileId(0));
-    while let Ok(Some(t)) = lx.next_token() {
-        match t.kind {
-            TokenKind::Word if V4_DIRECTIVES.contains(&t.bytes) => return true,
-            TokenKind::String
-                if V4_NAMES.contains(&t.bytes)
-                    || [
-                        &b"point3 "[..],
-                        b"point2 ",
-                        b"normal3 ",
-                        b"vector3 ",
-                        b"vector2 ",
-                    ]
+    let bytes = &bytes[..bytes.len().min(16 << 20)];
+    let mut pos = 0;
+    while pos < bytes.len() {
+        let b = bytes[pos];
+        match b {
+            b'#' => {
+                pos += bytes[pos..]
                     .iter()
-                    .any(|p| t.bytes.starts_with(p)) =>
-            {
-                return true
+                    .position(|&c| c == b'\n')
+                    .unwrap_or(bytes.len() - pos);
             }
-            _ => {}
+            b'"' => {
+                let start = pos + 1;
+                let mut p = start;
+                while p < bytes.len() && !matches!(bytes[p], b'"' | b'\n') {
+                    p += if bytes[p] == b'\\' { 2 } else { 1 };
+                }
+                if p >= bytes.len() || bytes[p] == b'\n' {
+                    return false; // unterminated string: the lexer stops here too
+                }
+                let text = &bytes[start..p];
+                if V4_NAMES.contains(&text) || V4_TYPE_PREFIXES.iter().any(|t| text.starts_with(t))
+                {
+                    return true;
+                }
+                pos = p + 1;
+            }
+            b'A'..=b'Z' => {
+                let start = pos;
+                while pos < bytes.len() && !crate::lexer::is_word_end_byte(bytes[pos]) {
+                    pos += 1;
+                }
+                if V4_DIRECTIVES.contains(&&bytes[start..pos]) {
+                    return true;
+                }
+            }
+            _ if crate::lexer::is_word_end_byte(b) => pos += 1,
+            _ => {
+                // Numbers and lower-case words: skip the whole word, then every 8-byte run
+                // without a quote, `#` or upper-case letter (pure numbers and whitespace).
+                while pos < bytes.len() && !crate::lexer::is_word_end_byte(bytes[pos]) {
+                    pos += 1;
+                }
+                while let Some(chunk) = bytes.get(pos..pos + 8) {
+                    let x = u64::from_le_bytes(chunk.try_into().unwrap_or([b'"'; 8]));
+                    if swar_interesting(x) {
+                        break;
+                    }
+                    pos += 8;
+                }
+                // A skip may stop inside a word (`abcdefghXyz`): finish that word, so an
+                // upper-case letter is only taken for a directive at a word start.
+                while pos > 0
+                    && pos < bytes.len()
+                    && !crate::lexer::is_word_end_byte(bytes[pos - 1])
+                    && !crate::lexer::is_word_end_byte(bytes[pos])
+                {
+                    pos += 1;
+                }
+            }
         }
     }
     false
 }
+
+/// Whether any byte of `x` is `"`, `#` or `A`..=`Z` (exact: no false positives or negatives
+/// for "any"; bytes >= 0x80 never match). Word boundaries are rechecked byte by byte.
+#[inline]
+fn swar_interesting(x: u64) -> bool {
+    const LO: u64 = 0x0101_0101_0101_0101;
+    const HI: u64 = 0x8080_8080_8080_8080;
+    let has_zero = |v: u64| v.wrapping_sub(LO) & !v & HI != 0;
+    let quote = has_zero(x ^ (LO * u64::from(b'"')));
+    let hash = has_zero(x ^ (LO * u64::from(b'#')));
+    // Bytes c with 'A' <= c <= 'Z': (c & 0x7f) + (0x7f - 'Z') has bit 7 clear and
+    // (c & 0x7f) + (0x80 - 'A') has bit 7 set, and c itself has bit 7 clear.
+    let low7 = x & (LO * 0x7f);
+    let above_z = low7 + LO * u64::from(0x7f - b'Z');
+    let from_a = low7 + LO * u64::from(0x80 - b'A');
+    let upper = !above_z & from_a & !x & HI != 0;
+    quote || hash || upper
+}
+
+/// How often each raw `Include`/`Import` file name occurs in `bytes`. A heuristic that
+/// only decides whether sharing is attempted (a wrong count costs a prototype or a copy,
+/// never correctness); files without either word are not tokenized.
+fn count_includes(bytes: &[u8]) -> HashMap<Vec<u8>, u32> {
+    let mut counts = HashMap::new();
+    if !mentions_include(bytes) {
+        return counts;
+    }
+    let mut lx = Lexer::new(bytes, FileId(0));
+    let mut after_include = false;
+    while let Ok(Some(t)) = lx.next_token() {
+        if after_include && t.kind == TokenKind::String {
+            *counts.entry(t.bytes.to_vec()).or_insert(0) += 1;
+        }
+        after_include = t.kind == TokenKind::Word && matches!(t.bytes, b"Include" | b"Import");
+    }
+    counts
+}
+
+/// Whether `bytes` contain `Import` or `Include` anywhere: a SWAR scan for `I`, 8 bytes a
+/// step, so the huge number-only files Moana is made of cost next to nothing.
+fn mentions_include(bytes: &[u8]) -> bool {
+    const LO: u64 = 0x0101_0101_0101_0101;
+    const HI: u64 = 0x8080_8080_8080_8080;
+    let mut pos = 0;
+    while pos < bytes.len() {
+        if let Some(chunk) = bytes.get(pos..pos + 8) {
+            let x =
+                u64::from_le_bytes(chunk.try_into().unwrap_or([b'I'; 8])) ^ (LO * u64::from(b'I'));
+            if x.wrapping_sub(LO) & !x & HI == 0 {
+                pos += 8;
+                continue;
+            }
+        }
+        let end = (pos + 8).min(bytes.len());
+        for i in pos..end {
+            let rest = &bytes[i..];
+            if rest.starts_with(b"Import") || rest.starts_with(b"Include") {
+                return true;
+            }
+        }
+        pos = end;
+    }
+    false
+}
+
+/// Whether a file's meaning depends only on the CTM and graphics state at its inclusion and
+/// it changes nothing visible after it, so that one parse in its own frame can stand for
+/// every inclusion. Deliberately narrow: shapes and instances, inside balanced blocks
+/// any relative transforms, and material changes only inside `AttributeBegin` blocks.
+/// Absolute transforms (`Transform`, `Identity`, `CoordSysTransform`), definitions
+/// (objects, named materials, textures, media, coordinate systems), lights, nested
+/// includes and anything else disqualify the file.
+fn shareable(bytes: &[u8]) -> bool {
+    let mut lx = Lexer::new(bytes, FileId(0));
+    let mut blocks: Vec<BlockKind> = Vec::new();
+    let mut any = false;
+    loop {
+        let t = match lx.next_token() {
+            Ok(Some(t)) => t,
+            Ok(None) => break,
+            Err(_) => return false,
+        };
+        if t.kind != TokenKind::Word || !t.bytes.first().is_some_and(u8::is_ascii_uppercase) {
+            continue; // parameters and values
+        }
+        let in_attribute = blocks.contains(&BlockKind::Attribute);
+        match t.bytes {
+            b"AttributeBegin" => blocks.push(BlockKind::Attribute),
+            b"TransformBegin" => blocks.push(BlockKind::Transform),
+            b"AttributeEnd" if blocks.pop() == Some(BlockKind::Attribute) => {}
+            b"TransformEnd" if blocks.pop() == Some(BlockKind::Transform) => {}
+            b"Shape" | b"ObjectInstance" => any = true,
+            b"Translate" | b"Scale" | b"Rotate" | b"ConcatTransform" | b"LookAt"
+                if !blocks.is_empty() => {}
+            b"Material" | b"NamedMaterial" | b"ReverseOrientation" if in_attribute => {}
+            _ => return false,
+        }
+    }
+    any && blocks.is_empty()
+}
+
+/// Parameter type spellings only pbrt-v4 uses (a parameter declaration starts with one).
+const V4_TYPE_PREFIXES: &[&[u8]] = &[
+    b"point3 ",
+    b"point2 ",
+    b"normal3 ",
+    b"vector3 ",
+    b"vector2 ",
+];
 
 pub(crate) fn parse_entry(
     entry: Entry<'_>,
@@ -188,6 +342,26 @@ struct Parser<'s> {
     next_seq: u64,
     warned: HashSet<String>,
     spectrum_cache: HashMap<PathBuf, Option<[f32; 3]>>,
+    /// Raw name token and id of the last resolved `ObjectInstance` (see `object_instance`).
+    last_instance: Option<(Vec<u8>, ObjectId)>,
+    /// Per open file (with `share_repeated_includes`): how often each raw `Include`/`Import`
+    /// name occurs in it.
+    include_counts: Vec<HashMap<Vec<u8>, u32>>,
+    /// Files whose content became a shared object, by canonical path.
+    shared: HashMap<PathBuf, SharedInclude>,
+}
+
+/// Graphics state that a shared include's shapes inherit; a repeat under a different
+/// state is parsed again (a copy) rather than instanced.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct ShareKey {
+    material: MaterialId,
+    reverse_orientation: bool,
+}
+
+struct SharedInclude {
+    object: ObjectId,
+    key: ShareKey,
 }
 
 fn default_material(version: PbrtVersion) -> Material {
@@ -258,6 +432,9 @@ impl<'s> Parser<'s> {
             next_seq: 0,
             warned: HashSet::new(),
             spectrum_cache: HashMap::new(),
+            last_instance: None,
+            include_counts: Vec::new(),
+            shared: HashMap::new(),
         }
     }
 
@@ -392,17 +569,21 @@ impl<'s> Parser<'s> {
         }
     }
 
-    /// `n` numbers, optionally inside `[ ]`.
-    fn numbers<'b>(&self, lx: &mut Lexer<'b>, n: usize, after: &Token<'b>) -> Result<Vec<f64>> {
+    /// `N` numbers, optionally inside `[ ]` (no allocation: this is the per-directive path).
+    fn numbers<'b, const N: usize>(
+        &self,
+        lx: &mut Lexer<'b>,
+        after: &Token<'b>,
+    ) -> Result<[f64; N]> {
         let bracketed = lx.peek_byte() == Some(b'[');
         if bracketed {
             lx.next_token().map_err(|e| self.lex_err(e))?;
         }
-        let mut out = Vec::with_capacity(n);
-        for _ in 0..n {
+        let mut out = [0.0; N];
+        for slot in &mut out {
             // Fast path straight from the bytes; build a token only to report an error.
             match lx.read_f64() {
-                Some(v) => out.push(v),
+                Some(v) => *slot = v,
                 None => {
                     let t = self.next(lx, "a number", after)?;
                     return Err(self.err(
@@ -480,10 +661,17 @@ impl<'s> Parser<'s> {
             size_bytes: bytes.len() as u64,
         };
         self.sink.file_enter(&event)?;
+        if self.opts.share_repeated_includes {
+            self.include_counts.push(count_includes(bytes));
+        }
         let _span =
             tracing::debug_span!("pbrt_file", path = %path.display(), size_bytes = bytes.len())
                 .entered();
-        self.parse_tokens(bytes, file)?;
+        let parsed = self.parse_tokens(bytes, file);
+        if self.opts.share_repeated_includes {
+            self.include_counts.pop();
+        }
+        parsed?;
         let event = FileEvent {
             file,
             path: &path,
@@ -526,37 +714,142 @@ impl<'s> Parser<'s> {
                 ParseErrorKind::Invalid("recursive Include/Import".into()),
             ));
         }
+        let share_key = self.share_key();
+        if let (Some(key), Some(shared)) = (share_key, self.shared.get(&canonical)) {
+            if shared.key == key {
+                // A repeat of a shared file: one more instance edge, no re-parse.
+                let object = shared.object;
+                let element = self.element_for(&path);
+                return self.emit_include_instance(object, element, stok.loc);
+            }
+        }
         let src = SourceBytes::open(&path).map_err(|source| Error::Io {
             path: path.clone(),
             source,
         })?;
-        let element = if self.depth == 0 && self.in_world {
-            let stem = path
-                .file_stem()
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            let stem = stem
-                .strip_suffix(".pbrt")
-                .map(str::to_owned)
-                .unwrap_or(stem);
-            let id = match self.element_names.iter().position(|n| *n == stem) {
-                Some(i) => ElementId(i as u32),
-                None => {
-                    self.element_names.push(stem);
-                    ElementId(self.element_names.len() as u32 - 1)
-                }
-            };
-            Some(id)
-        } else {
-            None
+        let repeated = self
+            .include_counts
+            .last()
+            .and_then(|counts| counts.get(stok.bytes))
+            .is_some_and(|&n| n >= 2);
+        let share = share_key.filter(|_| {
+            repeated && !self.shared.contains_key(&canonical) && shareable(src.bytes())
+        });
+        let element = self.element_for(&path);
+        let Some(key) = share else {
+            return self.run_include(path, canonical, src.bytes(), via, element);
         };
+        // First inclusion of a shared file: its content becomes an object defined in the
+        // include's frame, placed by an instance; later inclusions add instances only.
+        let object = ObjectId(self.object_names.len() as u32);
+        let stem = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        self.object_names.push(stem);
+        self.object_defined.push(true);
+        self.sink.object_begin(&ObjectEvent {
+            object,
+            name: &self.object_names[object.0 as usize],
+            element: element.or(self.element),
+            loc: stok.loc,
+        })?;
+        let (saved_gs, saved_xs) = (self.gs.clone(), self.xs);
+        self.xs.ctm = [math::IDENTITY; 2];
+        self.current_object = Some(object);
+        let r = self.run_include(path, canonical.clone(), src.bytes(), via, element);
+        self.current_object = None;
+        self.gs = saved_gs;
+        self.xs = saved_xs;
+        r?;
+        self.sink.object_end(&ObjectEvent {
+            object,
+            name: &self.object_names[object.0 as usize],
+            element: element.or(self.element),
+            loc: stok.loc,
+        })?;
+        self.shared.insert(canonical, SharedInclude { object, key });
+        self.stats.shared_includes += 1;
+        self.emit_include_instance(object, element, stok.loc)
+    }
+
+    /// The graphics state a shared include's content depends on, or `None` where sharing
+    /// is off or the state could not be shared: outside the world block, inside an object
+    /// definition, under motion (`ActiveTransform`), or with an area light (emitters
+    /// cannot be instanced).
+    fn share_key(&self) -> Option<ShareKey> {
+        let ok = self.opts.share_repeated_includes
+            && self.in_world
+            && self.current_object.is_none()
+            && self.xs.active == 3
+            && self.xs.ctm[0] == self.xs.ctm[1]
+            && self.gs.area_light.is_none();
+        ok.then_some(ShareKey {
+            material: self.gs.material.id,
+            reverse_orientation: self.gs.reverse_orientation,
+        })
+    }
+
+    fn emit_include_instance(
+        &mut self,
+        object: ObjectId,
+        element: Option<ElementId>,
+        loc: Loc,
+    ) -> Result<()> {
+        self.stats.include_instances += 1;
+        let ev = InstanceEvent {
+            object,
+            name: self
+                .object_names
+                .get(object.0 as usize)
+                .map_or("", String::as_str),
+            parent_from_instance: math::to_f32(&self.xs.ctm[0]),
+            inside: None,
+            element: element.or(self.element),
+            loc,
+        };
+        self.sink.object_instance(&ev)?;
+        Ok(())
+    }
+
+    /// The element of a file included from the entry file's world block (named by its stem).
+    fn element_for(&mut self, path: &Path) -> Option<ElementId> {
+        if self.depth != 0 || !self.in_world {
+            return None;
+        }
+        let stem = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let stem = stem
+            .strip_suffix(".pbrt")
+            .map(str::to_owned)
+            .unwrap_or(stem);
+        let id = match self.element_names.iter().position(|n| *n == stem) {
+            Some(i) => ElementId(i as u32),
+            None => {
+                self.element_names.push(stem);
+                ElementId(self.element_names.len() as u32 - 1)
+            }
+        };
+        Some(id)
+    }
+
+    fn run_include(
+        &mut self,
+        path: PathBuf,
+        canonical: PathBuf,
+        bytes: &[u8],
+        via: Via,
+        element: Option<ElementId>,
+    ) -> Result<()> {
         if via == Via::Import {
             self.attr_stack.push(self.gs.clone());
-            self.xform_stack.push(self.xs);
+            self.push_xform();
         }
         self.open_files.push(canonical);
         self.depth += 1;
-        let r = self.run_file(path, src.bytes(), via, element);
+        let r = self.run_file(path, bytes, via, element);
         self.depth -= 1;
         self.open_files.pop();
         if via == Via::Import {
@@ -659,29 +952,29 @@ impl<'s> Parser<'s> {
         match tok.bytes {
             b"AttributeBegin" => {
                 self.attr_stack.push(self.gs.clone());
-                self.xform_stack.push(self.xs);
+                self.push_xform();
                 self.blocks.push((BlockKind::Attribute, tok.loc));
             }
             b"AttributeEnd" => self.pop_block(tok, BlockKind::Attribute)?,
             b"TransformBegin" => {
-                self.xform_stack.push(self.xs);
+                self.push_xform();
                 self.blocks.push((BlockKind::Transform, tok.loc));
             }
             b"TransformEnd" => self.pop_block(tok, BlockKind::Transform)?,
             b"Translate" => {
-                let v = self.numbers(lx, 3, tok)?;
+                let v = self.numbers::<3>(lx, tok)?;
                 self.apply(math::translate([v[0], v[1], v[2]]));
             }
             b"Scale" => {
-                let v = self.numbers(lx, 3, tok)?;
+                let v = self.numbers::<3>(lx, tok)?;
                 self.apply(math::scale([v[0], v[1], v[2]]));
             }
             b"Rotate" => {
-                let v = self.numbers(lx, 4, tok)?;
+                let v = self.numbers::<4>(lx, tok)?;
                 self.apply(math::rotate(v[0], [v[1], v[2], v[3]]));
             }
             b"LookAt" => {
-                let v = self.numbers(lx, 9, tok)?;
+                let v = self.numbers::<9>(lx, tok)?;
                 match math::look_at([v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]) {
                     Some(m) => self.apply(m),
                     None => self.warn(
@@ -691,9 +984,8 @@ impl<'s> Parser<'s> {
                 }
             }
             b"Transform" | b"ConcatTransform" => {
-                let v = self.numbers(lx, 16, tok)?;
-                let arr: [f64; 16] = std::array::from_fn(|i| v[i]);
-                let m = math::from_pbrt(&arr);
+                let v = self.numbers::<16>(lx, tok)?;
+                let m = math::from_pbrt(&v);
                 if tok.bytes == b"Transform" {
                     self.set(m);
                 } else {
@@ -732,7 +1024,7 @@ impl<'s> Parser<'s> {
                 };
             }
             b"TransformTimes" => {
-                self.numbers(lx, 2, tok)?;
+                self.numbers::<2>(lx, tok)?;
             }
             b"ReverseOrientation" => self.gs.reverse_orientation = !self.gs.reverse_orientation,
             b"WorldBegin" => {
@@ -929,19 +1221,32 @@ impl<'s> Parser<'s> {
         }
         self.blocks.pop();
         match kind {
-            BlockKind::Transform => {
-                if let Some(x) = self.xform_stack.pop() {
-                    self.xs = x;
-                }
-            }
+            BlockKind::Transform => self.pop_xform(),
             BlockKind::Attribute | BlockKind::Object => {
-                if let (Some(g), Some(x)) = (self.attr_stack.pop(), self.xform_stack.pop()) {
+                if let Some(g) = self.attr_stack.pop() {
                     self.gs = g;
-                    self.xs = x;
+                    self.pop_xform();
                 }
             }
         }
         Ok(())
+    }
+
+    /// Save the transform state. `XState` is 264 bytes and this runs twice per
+    /// `AttributeBegin`/`End` pair: copy it once, straight into the stack's slot.
+    #[inline]
+    fn push_xform(&mut self) {
+        self.xform_stack
+            .extend_from_slice(std::slice::from_ref(&self.xs));
+    }
+
+    /// Restore the saved transform state (one copy, from the stack's slot).
+    #[inline]
+    fn pop_xform(&mut self) {
+        if let Some(x) = self.xform_stack.last() {
+            self.xs = *x;
+            self.xform_stack.truncate(self.xform_stack.len() - 1);
+        }
     }
 
     // ---- cameras and lights -------------------------------------------------------------
@@ -1350,9 +1655,9 @@ impl<'s> Parser<'s> {
                 self.hint_v4("bilinearmesh");
                 shapes::bilinear_mesh(&mut p, &mut notes).map(Geometry::Mesh)
             }
-            "sphere" => Ok(Geometry::Mesh(shapes::sphere(&p, segs))),
-            "disk" => Ok(Geometry::Mesh(shapes::disk(&p, segs))),
-            "cylinder" => Ok(Geometry::Mesh(shapes::cylinder(&p, segs))),
+            "sphere" => shapes::sphere(&p, segs).map(Geometry::Mesh),
+            "disk" => shapes::disk(&p, segs).map(Geometry::Mesh),
+            "cylinder" => shapes::cylinder(&p, segs).map(Geometry::Mesh),
             "curve" => shapes::curve(&mut p).map(Geometry::Curve),
             "plymesh" => {
                 event.kind = kind.into_owned();
@@ -1497,7 +1802,7 @@ impl<'s> Parser<'s> {
             ));
         }
         self.attr_stack.push(self.gs.clone());
-        self.xform_stack.push(self.xs);
+        self.push_xform();
         self.blocks.push((BlockKind::Object, tok.loc));
         let id = match self.objects.get(name.as_ref()).copied() {
             Some(id) if self.object_defined[id.0 as usize] => {
@@ -1526,6 +1831,8 @@ impl<'s> Parser<'s> {
     }
 
     fn new_object(&mut self, name: &str) -> ObjectId {
+        // A (v3) redefinition gives the name a new id.
+        self.last_instance = None;
         let id = ObjectId(self.object_names.len() as u32);
         self.object_names.push(name.to_owned());
         self.object_defined.push(false);
@@ -1535,9 +1842,25 @@ impl<'s> Parser<'s> {
 
     fn object_instance<'b>(&mut self, lx: &mut Lexer<'b>, tok: &Token<'b>) -> Result<()> {
         self.require_world(tok);
+        // Instance-heavy files name the same object over and over: compare the raw token
+        // with the last one instead of unescaping, validating and hashing it again.
+        let mut peek = lx.clone();
+        if let (Ok(Some(t)), Some((raw, id))) = (peek.next_token(), &self.last_instance) {
+            if t.kind == TokenKind::String
+                && t.bytes == raw.as_slice()
+                && self.current_object != Some(*id)
+            {
+                let id = *id;
+                *lx = peek;
+                return self.emit_instance(id, tok);
+            }
+        }
         let (name, ntok) = self.string(lx, tok)?;
         let id = match self.objects.get(name.as_ref()).copied() {
-            Some(id) => id,
+            Some(id) => {
+                self.last_instance = Some((ntok.bytes.to_vec(), id));
+                id
+            }
             None if self.v4() => {
                 // pbrt-v4 resolves instances after parsing: forward references are legal.
                 let id = self.new_object(&name);
@@ -1552,10 +1875,17 @@ impl<'s> Parser<'s> {
                 ParseErrorKind::Invalid("object instances itself".into()),
             ));
         }
+        self.emit_instance(id, tok)
+    }
+
+    fn emit_instance(&mut self, id: ObjectId, tok: &Token<'_>) -> Result<()> {
         self.stats.instances += 1;
         let ev = InstanceEvent {
             object: id,
-            name: &name,
+            name: self
+                .object_names
+                .get(id.0 as usize)
+                .map_or("", String::as_str),
             parent_from_instance: math::to_f32(&self.xs.ctm[0]),
             inside: self.current_object,
             element: self.element,
@@ -1563,5 +1893,107 @@ impl<'s> Parser<'s> {
         };
         self.sink.object_instance(&ev)?;
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod prescan_tests {
+    use super::*;
+
+    /// The token-based definition the byte scanner must agree with.
+    fn reference(bytes: &[u8]) -> bool {
+        let mut lx = Lexer::new(bytes, FileId(0));
+        while let Ok(Some(t)) = lx.next_token() {
+            match t.kind {
+                TokenKind::Word if V4_DIRECTIVES.contains(&t.bytes) => return true,
+                TokenKind::String
+                    if V4_NAMES.contains(&t.bytes)
+                        || V4_TYPE_PREFIXES.iter().any(|p| t.bytes.starts_with(p)) =>
+                {
+                    return true
+                }
+                _ => {}
+            }
+        }
+        false
+    }
+
+    #[test]
+    fn mentions_include_finds_the_word_at_any_offset() {
+        for pad in 0..20 {
+            for word in ["Include", "Import"] {
+                let text = format!("{}{word} \"x\"", "1 ".repeat(pad));
+                assert!(mentions_include(text.as_bytes()), "{text}");
+                // Straddling the end of the buffer.
+                assert!(mentions_include(&text.as_bytes()[..pad * 2 + word.len()]));
+            }
+            let text = format!("{}Incl Impor IInclud", "0 ".repeat(pad));
+            assert!(!mentions_include(text.as_bytes()), "{text}");
+        }
+    }
+
+    #[test]
+    fn swar_interesting_is_exact_per_byte() {
+        for b in 0..=255u8 {
+            let want = b == b'"' || b == b'#' || b.is_ascii_uppercase();
+            for lane in 0..8 {
+                let mut chunk = [b'0'; 8];
+                chunk[lane] = b;
+                assert_eq!(
+                    swar_interesting(u64::from_le_bytes(chunk)),
+                    want,
+                    "{b:#x} at {lane}"
+                );
+            }
+        }
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn prescan_agrees_with_the_lexer_on_token_soup(
+            parts in proptest::collection::vec(
+                proptest::prop_oneof![
+                    proptest::strategy::Just("Import".to_owned()),
+                    proptest::strategy::Just("Option".to_owned()),
+                    proptest::strategy::Just("\"point3 P\"".to_owned()),
+                    proptest::strategy::Just("\"conductor\"".to_owned()),
+                    proptest::strategy::Just("# Import\n".to_owned()),
+                    "[a-zA-Z0-9.\\-]{0,12}",
+                    "[ \n\t\"\\[\\]#]{0,2}",
+                ],
+                0..24,
+            )
+        ) {
+            let text = parts.concat();
+            proptest::prop_assert_eq!(prescan_is_v4(text.as_bytes()), reference(text.as_bytes()), "{}", text);
+        }
+    }
+
+    #[test]
+    fn prescan_matches_the_token_definition() {
+        let cases: &[&str] = &[
+            "WorldBegin Shape \"sphere\"",
+            "WorldBegin Import \"x.pbrt\"",
+            "# Import \"x\"\nShape \"sphere\"",
+            "Shape \"trianglemesh\" \"point3 P\" [0 0 0]",
+            "Shape \"trianglemesh\" \"point P\" [0 0 0]",
+            "Translate 1E5 2 3 Attribute \"shape\"",
+            "Material \"coateddiffuse\"",
+            "Texture \"a\" \"color\" \"imagemap\" \"string filename\" \"Import\"",
+            "ColorSpaceX 1",
+            "Transform [ 1 0 0 0 0 1 0 0 0 0 1 0 10.1657 2.08030009 28.5746002 1 ] Option 1",
+            "1234567812345678Option",
+            "x abcdefghImport 1",
+            "1 abcdefgImport 1",
+            "0.5 0.25 0.125 0.0625 abcdefghijklmnopOption Import",
+            "\"unterminated\nOption",
+        ];
+        for case in cases {
+            assert_eq!(
+                prescan_is_v4(case.as_bytes()),
+                reference(case.as_bytes()),
+                "{case}"
+            );
+        }
     }
 }

@@ -256,6 +256,22 @@ pub fn parse_ply(bytes: &[u8]) -> Result<Mesh, PlyError> {
     // A header can claim any count; never reserve more than the body could hold.
     let reserve_cap = bytes.len().saturating_sub(body_start) / 3;
     for el in &elements {
+        // Every item of an element with properties consumes at least one byte: a count
+        // beyond the bytes left is a hostile header, not a reason to loop 10^17 times.
+        let remaining = bytes.len().saturating_sub(body.pos);
+        if let Some(first) = el.props.first() {
+            if el.count > remaining {
+                return Err(body_err(
+                    el,
+                    first,
+                    remaining,
+                    &format!(
+                        "truncated: {} items declared, {remaining} bytes left",
+                        el.count
+                    ),
+                ));
+            }
+        }
         match el.name.as_str() {
             "vertex" => {
                 let roles: Vec<Role> = el.props.iter().map(|p| vertex_role(&p.name)).collect();
@@ -296,10 +312,22 @@ pub fn parse_ply(bytes: &[u8]) -> Result<Mesh, PlyError> {
                     }
                     let le = format == Format::BinaryLe;
                     let data = &bytes[body.pos..body.pos + stride * el.count];
+                    let all_f32 = used.iter().all(|&(_, s, _)| s == Scalar::F32);
                     for item in data.chunks_exact(stride.max(1)).take(el.count) {
                         let (mut p, mut nrm, mut uv) = ([0f32; 3], [0f32; 3], [0f32; 2]);
                         for &(off, s, role) in &used {
-                            let v = decode(&item[off..], s, le).unwrap_or(0.0) as f32;
+                            // The common all-float layout skips the generic f64 decode.
+                            let v = match (all_f32, item.get(off..off + 4)) {
+                                (true, Some(b)) => {
+                                    let b: [u8; 4] = [b[0], b[1], b[2], b[3]];
+                                    if le {
+                                        f32::from_le_bytes(b)
+                                    } else {
+                                        f32::from_be_bytes(b)
+                                    }
+                                }
+                                _ => decode(&item[off..], s, le).unwrap_or(0.0) as f32,
+                            };
                             match role {
                                 Role::Coord(i) => p[i] = v,
                                 Role::Normal(i) => nrm[i] = v,
@@ -353,8 +381,69 @@ pub fn parse_ply(bytes: &[u8]) -> Result<Mesh, PlyError> {
                 let nv = vertex_count.ok_or_else(|| {
                     PlyError::Content("face element before vertex element".into())
                 })?;
+                if el.props.is_empty() {
+                    continue;
+                }
                 mesh.indices.reserve(el.count.min(reserve_cap) * 3);
                 let mut poly: Vec<u32> = Vec::with_capacity(8);
+                if let [prop @ Property {
+                    kind:
+                        PropKind::List {
+                            count: Scalar::U8,
+                            item: item @ (Scalar::I32 | Scalar::U32),
+                        },
+                    ..
+                }] = el.props.as_slice()
+                {
+                    if format != Format::Ascii
+                        && matches!(prop.name.as_str(), "vertex_indices" | "vertex_index")
+                    {
+                        // The layout nearly every binary PLY uses: no f64 round trip.
+                        let le = format == Format::BinaryLe;
+                        for index in 0..el.count {
+                            let n = *bytes
+                                .get(body.pos)
+                                .ok_or_else(|| body_err(el, prop, index, "truncated list count"))?
+                                as usize;
+                            let start = body.pos + 1;
+                            let data = bytes.get(start..start + 4 * n).ok_or_else(|| {
+                                body_err(el, prop, index, "truncated or malformed")
+                            })?;
+                            body.pos = start + 4 * n;
+                            poly.clear();
+                            for c in data.chunks_exact(4) {
+                                let c = [c[0], c[1], c[2], c[3]];
+                                let v = if le {
+                                    u32::from_le_bytes(c)
+                                } else {
+                                    u32::from_be_bytes(c)
+                                };
+                                let negative = *item == Scalar::I32 && (v as i32) < 0;
+                                if negative || v as usize >= nv {
+                                    let shown = if negative {
+                                        i64::from(v as i32)
+                                    } else {
+                                        i64::from(v)
+                                    };
+                                    return Err(body_err(
+                                        el,
+                                        prop,
+                                        index,
+                                        &format!(
+                                            "vertex index {shown} out of range ({nv} vertices)"
+                                        ),
+                                    ));
+                                }
+                                poly.push(v);
+                            }
+                            for k in 2..poly.len() {
+                                mesh.indices
+                                    .extend_from_slice(&[poly[0], poly[k - 1], poly[k]]);
+                            }
+                        }
+                        continue;
+                    }
+                }
                 for index in 0..el.count {
                     for prop in &el.props {
                         match (&prop.kind, prop.name.as_str()) {
@@ -397,6 +486,7 @@ pub fn parse_ply(bytes: &[u8]) -> Result<Mesh, PlyError> {
                     }
                 }
             }
+            _ if el.props.is_empty() => {} // nothing stored per item
             _ => {
                 for index in 0..el.count {
                     for prop in &el.props {
@@ -586,6 +676,90 @@ mod tests {
         assert!(parse_ply(b"plx\n").is_err());
         assert!(parse_ply(b"ply\nformat ascii 1.0\nelement vertex 99999999999\nproperty float x\nproperty float y\nproperty float z\nend_header\n").is_err());
         assert!(parse_ply(b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\nend_header\n").is_err());
+    }
+
+    /// Binary `uchar`/`int` and `uchar`/`uint` face lists take a fast path; it must agree
+    /// with the generic reader (ASCII) on quads, bounds and negative indices.
+    #[test]
+    fn binary_face_fast_path_matches_generic_reader() {
+        let header = |format: &str, item: &str| {
+            format!(
+                "ply\nformat {format} 1.0\nelement vertex 4\nproperty float x\nproperty float y\n\
+                 property float z\nelement face 2\nproperty list uchar {item} vertex_indices\nend_header\n"
+            )
+        };
+        let faces: [&[i32]; 2] = [&[0, 1, 2, 3], &[3, 2, 1]];
+        let positions = [
+            [0.0f32, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+        ];
+        let binary = |le: bool, item: &str, faces: &[&[i32]]| {
+            let format = if le {
+                "binary_little_endian"
+            } else {
+                "binary_big_endian"
+            };
+            let mut b = header(format, item).into_bytes();
+            for p in positions.iter().flatten() {
+                b.extend_from_slice(&if le { p.to_le_bytes() } else { p.to_be_bytes() });
+            }
+            for f in faces {
+                b.push(f.len() as u8);
+                for i in *f {
+                    b.extend_from_slice(&if le { i.to_le_bytes() } else { i.to_be_bytes() });
+                }
+            }
+            b
+        };
+        let mut ascii = header("ascii", "int");
+        for p in positions {
+            ascii += &format!("{} {} {}\n", p[0], p[1], p[2]);
+        }
+        for f in faces {
+            let list: Vec<String> = f.iter().map(i32::to_string).collect();
+            ascii += &format!("{} {}\n", f.len(), list.join(" "));
+        }
+        let generic = parse_ply(ascii.as_bytes()).unwrap();
+        assert_eq!(generic.indices, [0, 1, 2, 0, 2, 3, 3, 2, 1]);
+        for le in [true, false] {
+            for item in ["int", "uint"] {
+                assert_eq!(parse_ply(&binary(le, item, &faces)).unwrap(), generic);
+                for bad in [-1, 4] {
+                    let e = parse_ply(&binary(le, item, &[&[0, 1, bad], &[0, 1, 2]]))
+                        .unwrap_err()
+                        .to_string();
+                    assert!(
+                        e.contains("out of range") && e.contains("vertex_indices"),
+                        "{e}"
+                    );
+                }
+                let whole = binary(le, item, &faces);
+                let e = parse_ply(&whole[..whole.len() - 2])
+                    .unwrap_err()
+                    .to_string();
+                assert!(e.contains("truncated"), "{e}");
+            }
+        }
+    }
+
+    /// Fuzz finding (ply target, timeout): `element ve2rtex 433333333333333334` with no
+    /// properties looped 4e17 times doing nothing; and a property-carrying element whose
+    /// count exceeds the bytes left now fails at once instead of item by item.
+    #[test]
+    fn regression_ply_huge_element_count_timeout() {
+        let no_props =
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
+              property float z\nelement ve2rtex 433333333333333334\nend_header\n0 0 0\n";
+        let started = std::time::Instant::now();
+        assert_eq!(parse_ply(no_props).unwrap().positions.len(), 1);
+        let face = b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\n\
+              property float y\nproperty float z\nelement face 4000000000\n\
+              property list uchar int vertex_indices\nend_header\n\0\0\0\0\0\0\0\0\0\0\0\0";
+        let e = parse_ply(face).unwrap_err().to_string();
+        assert!(e.contains("4000000000 items declared"), "{e}");
+        assert!(started.elapsed() < std::time::Duration::from_secs(1));
     }
 
     #[test]

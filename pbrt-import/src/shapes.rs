@@ -162,23 +162,41 @@ fn grid(segs: u32, rings: u32, f: impl Fn(f32, f32) -> ([f32; 3], [f32; 3])) -> 
     m
 }
 
-fn phi_max(params: &ParamList<'_>) -> f32 {
-    params
-        .float("phimax")
-        .unwrap_or(360.0)
+/// A float parameter that must be finite: NaN or infinite radii and heights would make
+/// non-finite geometry (and NaN bounds panic `f32::clamp`).
+fn finite(params: &ParamList<'_>, name: &str, default: f32) -> Result<f32, String> {
+    let v = params.float(name).unwrap_or(default);
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(format!("\"{name}\" is {v}, not a finite number"))
+    }
+}
+
+fn phi_max(params: &ParamList<'_>) -> Result<f32, String> {
+    Ok(finite(params, "phimax", 360.0)?
         .clamp(0.0, 360.0)
-        .to_radians()
+        .to_radians())
 }
 
 /// `sphere` (radius, zmin, zmax, phimax).
-pub(crate) fn sphere(params: &ParamList<'_>, segs: u32) -> Mesh {
-    let r = params.float("radius").unwrap_or(1.0);
-    let zmin = params.float("zmin").unwrap_or(-r).clamp(-r.abs(), r.abs());
-    let zmax = params.float("zmax").unwrap_or(r).clamp(-r.abs(), r.abs());
-    let theta0 = (zmin / r).clamp(-1.0, 1.0).acos();
-    let theta1 = (zmax / r).clamp(-1.0, 1.0).acos();
-    let phimax = phi_max(params);
-    grid(segs, (segs / 2).max(2), |u, v| {
+pub(crate) fn sphere(params: &ParamList<'_>, segs: u32) -> Result<Mesh, String> {
+    let r = finite(params, "radius", 1.0)?;
+    let zmin = finite(params, "zmin", -r)?.clamp(-r.abs(), r.abs());
+    let zmax = finite(params, "zmax", r)?.clamp(-r.abs(), r.abs());
+    // r == 0 gives 0/0 = NaN here; clamp passes NaN through, and a zero-radius sphere's
+    // vertices are all at the origin (n * r) whatever theta is.
+    let cos_theta = |z: f32| {
+        if r == 0.0 {
+            1.0
+        } else {
+            (z / r).clamp(-1.0, 1.0)
+        }
+    };
+    let theta0 = cos_theta(zmin).acos();
+    let theta1 = cos_theta(zmax).acos();
+    let phimax = phi_max(params)?;
+    Ok(grid(segs, (segs / 2).max(2), |u, v| {
         let phi = u * phimax;
         let theta = theta0 + (theta1 - theta0) * v;
         let n = [
@@ -187,35 +205,35 @@ pub(crate) fn sphere(params: &ParamList<'_>, segs: u32) -> Mesh {
             theta.cos(),
         ];
         ([n[0] * r, n[1] * r, n[2] * r], n)
-    })
+    }))
 }
 
 /// `disk` (height, radius, innerradius, phimax).
-pub(crate) fn disk(params: &ParamList<'_>, segs: u32) -> Mesh {
-    let h = params.float("height").unwrap_or(0.0);
-    let r = params.float("radius").unwrap_or(1.0);
-    let ri = params.float("innerradius").unwrap_or(0.0);
-    let phimax = phi_max(params);
-    grid(segs, 1, |u, v| {
+pub(crate) fn disk(params: &ParamList<'_>, segs: u32) -> Result<Mesh, String> {
+    let h = finite(params, "height", 0.0)?;
+    let r = finite(params, "radius", 1.0)?;
+    let ri = finite(params, "innerradius", 0.0)?;
+    let phimax = phi_max(params)?;
+    Ok(grid(segs, 1, |u, v| {
         let phi = u * phimax;
         let rad = r + (ri - r) * v;
         ([rad * phi.cos(), rad * phi.sin(), h], [0.0, 0.0, 1.0])
-    })
+    }))
 }
 
 /// `cylinder` (radius, zmin, zmax, phimax).
-pub(crate) fn cylinder(params: &ParamList<'_>, segs: u32) -> Mesh {
-    let r = params.float("radius").unwrap_or(1.0);
-    let zmin = params.float("zmin").unwrap_or(-1.0);
-    let zmax = params.float("zmax").unwrap_or(1.0);
-    let phimax = phi_max(params);
-    grid(segs, 1, |u, v| {
+pub(crate) fn cylinder(params: &ParamList<'_>, segs: u32) -> Result<Mesh, String> {
+    let r = finite(params, "radius", 1.0)?;
+    let zmin = finite(params, "zmin", -1.0)?;
+    let zmax = finite(params, "zmax", 1.0)?;
+    let phimax = phi_max(params)?;
+    Ok(grid(segs, 1, |u, v| {
         let phi = u * phimax;
         (
             [r * phi.cos(), r * phi.sin(), zmin + (zmax - zmin) * v],
             [phi.cos(), phi.sin(), 0.0],
         )
-    })
+    }))
 }
 
 /// `curve`.
@@ -295,15 +313,15 @@ mod tests {
 
     #[test]
     fn quadrics_are_valid_and_sized() {
-        let s = sphere(&params(r#""float radius" 2"#), 16);
+        let s = sphere(&params(r#""float radius" 2"#), 16).unwrap();
         assert!(valid(&s));
         for p in &s.positions {
             let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
             assert!((r - 2.0).abs() < 1e-4);
         }
-        let d = disk(&params(r#""float radius" 3 "float height" 1"#), 8);
+        let d = disk(&params(r#""float radius" 3 "float height" 1"#), 8).unwrap();
         assert!(valid(&d) && d.positions.iter().all(|p| p[2] == 1.0));
-        let c = cylinder(&params(r#""float zmax" 5"#), 8);
+        let c = cylinder(&params(r#""float zmax" 5"#), 8).unwrap();
         assert_eq!(c.triangle_count(), 16);
     }
 

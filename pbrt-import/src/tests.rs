@@ -630,3 +630,186 @@ mod props {
         }
     }
 }
+
+/// Fuzz finding (parse target): `Shape "sphere" "float radius" nan` panicked in
+/// `f32::clamp` (NaN bounds). Non-finite quadric parameters now skip the shape with a warning.
+#[test]
+fn regression_sphere_nan_radius_clamp_panic() {
+    for shape in [
+        r#"Shape "sphere" "float radius" nan"#,
+        r#"Shape "sphere" "float radius" 1 "float zmin" inf"#,
+        r#"Shape "disk" "float innerradius" -inf"#,
+        r#"Shape "cylinder" "float phimax" nan"#,
+    ] {
+        let (sink, stats) = run(&format!("WorldBegin\n{shape}\n"));
+        assert_eq!(stats.skipped_shapes, 1, "{shape}");
+        assert!(sink.shapes.is_empty(), "{shape}");
+        assert!(
+            sink.warnings
+                .iter()
+                .any(|w| w.message.contains("not a finite number")),
+            "{shape}: {:?}",
+            sink.warnings
+        );
+    }
+    // A zero radius is finite: a degenerate but valid mesh, no NaN normals.
+    let (sink, _) = run("WorldBegin\nShape \"sphere\" \"float radius\" 0\n");
+    let Geometry::Mesh(m) = &sink.shapes[0].geometry else {
+        panic!("sphere is a mesh")
+    };
+    assert!(m.positions.iter().flatten().all(|v| v.is_finite()));
+    assert!(m.normals.iter().flatten().flatten().all(|v| v.is_finite()));
+}
+
+// ---- shared prototypes for repeated includes ---------------------------------------------
+
+/// World-space triangles of a parse: shapes outside objects directly, shapes of objects
+/// once per instance (one level, as the shared-include objects are).
+fn world_triangles(sink: &CollectSink) -> Vec<[[f32; 3]; 3]> {
+    let mut out = Vec::new();
+    let tris = |s: &ShapeEvent, world_from_parent: Option<&Mat4>, out: &mut Vec<_>| {
+        let Geometry::Mesh(m) = &s.geometry else {
+            return;
+        };
+        for t in m.indices.chunks_exact(3) {
+            out.push(std::array::from_fn(|k| {
+                let p = s
+                    .parent_from_shape
+                    .transform_point(m.positions[t[k] as usize]);
+                world_from_parent.map_or(p, |w| w.transform_point(p))
+            }));
+        }
+    };
+    for s in &sink.shapes {
+        match s.object {
+            None => tris(s, None, &mut out),
+            Some(o) => {
+                for (id, _, world_from_instance, inside) in &sink.instances {
+                    assert!(inside.is_none(), "test scenes have one instancing level");
+                    if *id == o {
+                        tris(s, Some(world_from_instance), &mut out);
+                    }
+                }
+            }
+        }
+    }
+    out.sort_by(|a, b| a.partial_cmp(b).expect("finite"));
+    out
+}
+
+fn parse_dir(dir: &Path, share: bool) -> (CollectSink, ParseStats) {
+    let mut sink = CollectSink::default();
+    let options = ParseOptions {
+        share_repeated_includes: share,
+        ..opts(VersionOption::Auto)
+    };
+    let stats = parse_file(&dir.join("main.pbrt"), &options, &mut sink).unwrap();
+    (sink, stats)
+}
+
+fn write(dir: &Path, name: &str, text: &str) {
+    std::fs::write(dir.join(name), text).unwrap();
+}
+
+const COPY: &str = r#"AttributeBegin
+  Translate 0 0 2
+  Rotate 30 0 1 0
+  Shape "trianglemesh" "point P" [0 0 0 1 0 0 0 1 0] "integer indices" [0 1 2]
+AttributeEnd
+Shape "trianglemesh" "point P" [0 0 0 0 0 1 1 0 0] "integer indices" [0 1 2]
+"#;
+
+#[test]
+fn repeated_include_becomes_one_prototype_and_an_edge_per_inclusion() {
+    let dir = tempfile::tempdir().unwrap();
+    write(dir.path(), "copy.pbrt", COPY);
+    write(
+        dir.path(),
+        "main.pbrt",
+        r#"WorldBegin
+AttributeBegin
+  Translate 10 0 0
+  Include "copy.pbrt"
+AttributeEnd
+AttributeBegin
+  Rotate 90 0 0 1
+  Scale 2 2 2
+  Include "copy.pbrt"
+AttributeEnd
+Include "copy.pbrt"
+"#,
+    );
+    let (copied, copy_stats) = parse_dir(dir.path(), false);
+    assert_eq!((copy_stats.shared_includes, copied.shapes.len()), (0, 6));
+    let (shared, stats) = parse_dir(dir.path(), true);
+    assert_eq!(stats.shared_includes, 1);
+    assert_eq!(stats.include_instances, 3);
+    assert_eq!(shared.objects.len(), 1, "one prototype");
+    assert_eq!(shared.objects[0].1, "copy");
+    assert_eq!(shared.shapes.len(), 2, "the file's shapes once");
+    assert!(shared
+        .shapes
+        .iter()
+        .all(|s| s.object == Some(shared.objects[0].0)));
+    assert_eq!(shared.instances.len(), 3, "an edge per inclusion");
+    assert_eq!(origin_of(&shared.instances[0].2), [10.0, 0.0, 0.0]);
+    // The file is read once.
+    assert_eq!(stats.files.len(), 2);
+    let (a, b) = (world_triangles(&copied), world_triangles(&shared));
+    assert_eq!(a.len(), b.len());
+    for (x, y) in a.iter().zip(&b) {
+        for k in 0..3 {
+            assert!(close3(x[k], y[k]), "{x:?} vs {y:?}");
+        }
+    }
+}
+
+#[test]
+fn include_sharing_is_conservative() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // An absolute transform, a leaking material and a definition each disqualify a file.
+    write(
+        d,
+        "absolute.pbrt",
+        &format!(
+            "AttributeBegin\nTransform [1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1]\n{TRI}\nAttributeEnd\n"
+        ),
+    );
+    write(d, "leak.pbrt", &format!("Material \"matte\"\n{TRI}\n"));
+    write(
+        d,
+        "defines.pbrt",
+        &format!("MakeNamedMaterial \"m\" \"string type\" \"matte\"\n{TRI}\n"),
+    );
+    write(d, "ok.pbrt", &format!("{TRI}\n"));
+    write(d, "once.pbrt", &format!("{TRI}\n"));
+    write(
+        d,
+        "main.pbrt",
+        r#"WorldBegin
+Include "absolute.pbrt"
+Include "absolute.pbrt"
+Include "leak.pbrt"
+Include "leak.pbrt"
+Include "defines.pbrt"
+Include "once.pbrt"
+Include "ok.pbrt"
+AttributeBegin
+  Material "plastic"
+  Include "ok.pbrt"
+AttributeEnd
+Include "ok.pbrt"
+"#,
+    );
+    let (sink, stats) = parse_dir(d, true);
+    // Only ok.pbrt is shared; its repeat under another material is parsed as a copy.
+    assert_eq!(stats.shared_includes, 1);
+    assert_eq!(stats.include_instances, 2);
+    assert_eq!(sink.objects.len(), 1);
+    assert_eq!(sink.objects[0].1, "ok");
+    let world_shapes = sink.shapes.iter().filter(|s| s.object.is_none()).count();
+    assert_eq!(world_shapes, 2 + 2 + 1 + 1 + 1);
+    let (copied, _) = parse_dir(d, false);
+    assert_eq!(world_triangles(&copied).len(), world_triangles(&sink).len());
+}

@@ -11,11 +11,11 @@ layout(local_size_x = 8, local_size_y = 8) in;
 Payload pl;
 #include "candidates.glsl"
 
-void backend_trace(uint tlas, vec3 org, vec3 dir, float t_max, bool first_hit) {
+void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool first_hit) {
     rayQueryEXT rq;
     uint flags = first_hit ? gl_RayFlagsTerminateOnFirstHitEXT : gl_RayFlagsNoneEXT;
     rayQueryInitializeEXT(rq, accelerationStructureEXT(push.tlas_addresses.r[tlas]), flags, 0xFFu,
-                          org, 0.0, dir, t_max);
+                          org, t_min, dir, t_max);
     while (rayQueryProceedEXT(rq)) {
         if (rayQueryGetIntersectionTypeEXT(rq, false) == gl_RayQueryCandidateIntersectionAABBEXT) {
             uint instance = rayQueryGetIntersectionInstanceIdEXT(rq, false);
@@ -27,7 +27,7 @@ void backend_trace(uint tlas, vec3 org, vec3 dir, float t_max, bool first_hit) {
                              : t_max;
             float t_near = slab_near(rayQueryGetIntersectionObjectRayOriginEXT(rq, false),
                                      rayQueryGetIntersectionObjectRayDirectionEXT(rq, false),
-                                     r.aabb_min, r.aabb_max, 0.0, t_hi);
+                                     r.aabb_min, r.aabb_max, t_min, t_hi);
             if (t_near >= 0.0) {
                 record_candidate(pi, t_near, instance);
             }

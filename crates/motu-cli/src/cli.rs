@@ -105,6 +105,14 @@ pub struct GenArgs {
     /// island: writer threads.
     #[arg(long)]
     pub threads: Option<usize>,
+    /// island: triangles per terrain patch / trunk section before it is split (64..=2^30;
+    /// default 1000000).
+    #[arg(long)]
+    pub max_mesh_triangles: Option<u32>,
+    /// island: wrap each terrain geometry file in its own object instanced once, so every
+    /// patch gets its own BLAS (the unit `--stream` builds and evicts).
+    #[arg(long)]
+    pub terrain_objects: bool,
     /// One JSON object on stdout describing what was written.
     #[arg(long)]
     pub json: bool,

@@ -57,6 +57,11 @@ pub struct IslandOptions {
     pub max_instances_per_file: u64,
     /// Triangles per mesh (terrain patch, trunk section) before it is split.
     pub max_mesh_triangles: u32,
+    /// Wrap each terrain geometry file (an inline group of patches or one PLY patch) in an
+    /// object of its own, instanced once where it lies: importers then give every patch its
+    /// own BLAS, the unit that out-of-core streaming builds and evicts. Off by default: Moana
+    /// puts terrain at world level, which importers merge into a few huge BLASes.
+    pub terrain_objects: bool,
     /// Writer threads (`None`: rayon's default, one per core).
     pub threads: Option<usize>,
     pub width: u32,
@@ -71,6 +76,7 @@ impl Default for IslandOptions {
             elements: None,
             max_instances_per_file: 500_000,
             max_mesh_triangles: 1_000_000,
+            terrain_objects: false,
             threads: None,
             width: 1024,
             height: 429,
@@ -1222,19 +1228,21 @@ fn cameras(terrain: &Terrain) -> Vec<(&'static str, CameraSpec)> {
                     target: ground(1800.0, -700.0, 2.0),
                     fov_deg: 45.0,
                 },
+                // Close-ups, as Moana's are: looking down at a few metres of ground, so only
+                // a small part of the island is visible (what out-of-core streaming needs).
                 "grassCam" => CameraSpec {
-                    eye: ground(-900.0, 600.0, 1.5),
-                    target: ground(-920.0, 560.0, 0.5),
+                    eye: ground(-900.0, 600.0, 4.0),
+                    target: ground(-903.0, 597.0, 0.0),
                     fov_deg: 50.0,
                 },
                 "palmsCam" => CameraSpec {
-                    eye: ground(600.0, 1400.0, 4.0),
-                    target: ground(400.0, 1000.0, 30.0),
-                    fov_deg: 55.0,
+                    eye: ground(600.0, 1400.0, 150.0),
+                    target: ground(450.0, 1100.0, 5.0),
+                    fov_deg: 12.0,
                 },
                 _ => CameraSpec {
-                    eye: ground(-300.0, 1200.0, 1.0),
-                    target: ground(-320.0, 1150.0, 1.5),
+                    eye: ground(-300.0, 1200.0, 3.0),
+                    target: ground(-302.0, 1197.5, 0.3),
                     fov_deg: 60.0,
                 },
             };
@@ -1287,18 +1295,36 @@ fn write_camera_file(ctx: &Ctx<'_>, name: &str, spec: &CameraSpec) -> Result<Tal
     Ok(Tally::file(out.finish()?))
 }
 
-fn write_element_file(ctx: &Ctx<'_>, e: &ElementPlan) -> Result<Tally, GenError> {
+fn write_element_file(
+    o: &IslandOptions,
+    ctx: &Ctx<'_>,
+    e: &ElementPlan,
+) -> Result<Tally, GenError> {
     let mut out = OutFile::create(ctx.root, &format!("{0}/{0}.pbrt", e.name), ctx.live)?;
     let mut s = format!("# element {}\nAttributeBegin\n", e.name);
     for a in &e.archives {
         s += &format!("Include \"{}\"\n", a.file);
     }
     s += &format!("AttributeBegin\nNamedMaterial \"{}\"\n", e.material);
-    for (file, _) in &e.inline_files {
-        s += &format!("Include \"{file}\"\n");
-    }
-    for (file, _) in &e.ply_patches {
-        s += &format!("Shape \"plymesh\" \"string filename\" [ \"{file}\" ]\n");
+    let terrain = e
+        .inline_files
+        .iter()
+        .map(|(file, _)| format!("Include \"{file}\"\n"))
+        .chain(
+            e.ply_patches
+                .iter()
+                .map(|(file, _)| format!("Shape \"plymesh\" \"string filename\" [ \"{file}\" ]\n")),
+        );
+    let mut terrain_instances = 0u64;
+    for (n, shapes) in terrain.enumerate() {
+        if o.terrain_objects {
+            // One object per geometry file, instanced once in place (the CTM is the identity).
+            let object = format!("{}_terrain_{n:05}", e.name);
+            s += &format!("ObjectBegin \"{object}\"\n{shapes}ObjectEnd\nObjectInstance \"{object}\"\n");
+            terrain_instances += 1;
+        } else {
+            s += &shapes;
+        }
     }
     s += "AttributeEnd\n";
     for list in &e.lists {
@@ -1308,7 +1334,11 @@ fn write_element_file(ctx: &Ctx<'_>, e: &ElementPlan) -> Result<Tally, GenError>
     }
     s += "AttributeEnd\n";
     out.write_str(&s)?;
-    Ok(Tally::file(out.finish()?))
+    Ok(Tally {
+        object_instances: terrain_instances,
+        flattened_instances: terrain_instances,
+        ..Tally::file(out.finish()?)
+    })
 }
 
 fn write_archive_file(ctx: &Ctx<'_>, a: &Archive) -> Result<Tally, GenError> {
@@ -1510,7 +1540,7 @@ pub(crate) fn generate(
         for a in &e.archives {
             jobs.push(Box::new(move |ctx: &Ctx<'_>| write_archive_file(ctx, a)));
         }
-        jobs.push(Box::new(move |ctx: &Ctx<'_>| write_element_file(ctx, e)));
+        jobs.push(Box::new(move |ctx: &Ctx<'_>| write_element_file(o, ctx, e)));
     }
     for (name, spec) in cam_ref {
         jobs.push(Box::new(move |ctx: &Ctx<'_>| {

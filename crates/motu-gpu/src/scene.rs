@@ -1056,6 +1056,15 @@ pub(crate) fn build_batched<'g>(
                     return Ok(Vec::new());
                 }
                 let compacted = queries.read(pending_ref.len() as u32)?;
+                // Nothing to gain (lavapipe reports the built size): keep the originals and
+                // skip the copies' second allocation, which would double the peak.
+                if pending_ref
+                    .iter()
+                    .zip(&compacted)
+                    .all(|(p, &size)| size.max(1) >= p.accel.size_bytes)
+                {
+                    return Ok(Vec::new());
+                }
                 let mut copies = Vec::with_capacity(pending_ref.len());
                 for (p, &size) in pending_ref.iter().zip(&compacted) {
                     let size = size.max(1).min(p.accel.size_bytes);
@@ -1067,6 +1076,13 @@ pub(crate) fn build_batched<'g>(
                         ty,
                     ) {
                         Ok(a) => copies.push(a),
+                        Err(GpuError::Budget(msg)) => {
+                            // No room for both copies: the uncompacted ones are valid as they
+                            // are, and the budget holds.
+                            tracing::debug!(%msg, "compaction skipped under the budget");
+                            copies.into_iter().for_each(|c| c.release(heap));
+                            return Ok(Vec::new());
+                        }
                         Err(e) => {
                             copies.into_iter().for_each(|c| c.release(heap));
                             return Err(e);

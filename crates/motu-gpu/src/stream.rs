@@ -91,8 +91,11 @@ struct StreamParams {
     stamp: u32,
     full_count: u32,
     list_count: u32,
-    _pad0: u32,
-    _pad1: [u64; 2],
+    /// Requests of TLAS `t` are at index `blas_count + t`.
+    blas_count: u32,
+    /// u32 per BLAS, then per TLAS: rays of the pass that need it (build priority).
+    requests: u64,
+    _pad2: u64,
 }
 
 /// How a [`StreamingRenderer`] works.
@@ -104,9 +107,10 @@ pub struct StreamOptions {
     pub max_allocations: u32,
     /// Build–traverse passes per frame before giving up on the remaining pixels.
     pub max_passes: u32,
-    /// Scratch bytes one build batch may use.
+    /// Scratch bytes one build batch may use (capped at an eighth of the budget).
     pub scratch_budget_bytes: u64,
-    /// Host-visible staging ring (mesh data streams through it).
+    /// Host-visible staging ring (mesh data streams through it). Capped at an eighth of the
+    /// budget: on unified-memory devices (lavapipe, integrated GPUs) it counts against it.
     pub staging_bytes: u64,
     /// Width in pixels of the guard band traced around the image in pass 1 (every other pixel
     /// of it) to prefetch what the camera is about to see; 0 disables prefetching.
@@ -153,6 +157,9 @@ pub struct FrameStreamStats {
     pub prefetched: u32,
     /// Structures evicted (BLASes and TLASes).
     pub evicted: u32,
+    /// Demanded structures left unbuilt in a pass because they did not fit next to what the
+    /// pass's incomplete pixels need (built in a later pass, once those pixels completed).
+    pub deferred: u32,
     /// Mesh bytes streamed from the source to the device.
     pub bytes_streamed: u64,
     /// Triangles in the BLASes built.
@@ -178,6 +185,9 @@ pub struct StreamTotals {
     pub tlas_built: u64,
     pub tlas_rebuilt: u64,
     pub evicted: u64,
+    pub deferred: u64,
+    /// Frames that ran out of passes with pixels still incomplete.
+    pub incomplete_frames: u64,
     pub bytes_streamed: u64,
     pub triangles_built: u64,
     pub build_ms: f64,
@@ -195,16 +205,27 @@ struct TlasGpu {
     proxy: Option<AccelStruct>,
 }
 
-/// Work of one build step.
+/// Work of one build step: (id, requests) pairs, most requested first.
 #[derive(Default)]
 struct Demand {
-    blases: BTreeSet<u32>,
-    tlases: BTreeSet<u32>,
+    blases: Vec<(u32, u32)>,
+    tlases: Vec<(u32, u32)>,
 }
 
 impl Demand {
     fn is_empty(&self) -> bool {
         self.blases.is_empty() && self.tlases.is_empty()
+    }
+
+    fn len(&self) -> usize {
+        self.blases.len() + self.tlases.len()
+    }
+
+    /// Most requested first (ties: lower id first, so runs are deterministic).
+    fn sort(&mut self) {
+        for v in [&mut self.blases, &mut self.tlases] {
+            v.sort_unstable_by_key(|&(id, n)| (std::cmp::Reverse(n), id));
+        }
     }
 }
 
@@ -216,6 +237,7 @@ struct FrameBuffers {
     rgba: HeapBuffer,
     stats: HeapBuffer,
     incomplete: HeapBuffer,
+    requests: HeapBuffer,
     pixel_list: HeapBuffer,
     readback: HeapBuffer,
 }
@@ -229,6 +251,7 @@ impl FrameBuffers {
             self.rgba,
             self.stats,
             self.incomplete,
+            self.requests,
             self.pixel_list,
             self.readback,
         ] {
@@ -274,15 +297,16 @@ pub struct StreamingRenderer<'a> {
     last_seen: Vec<u32>,
     /// Resident TLASes whose instance set changed since their build.
     dirty: BTreeSet<u32>,
-    /// Pins of the current build step (items that must not be evicted), and the relaxed set.
+    /// Pins of the current build step (items that must not be evicted): what the latest
+    /// pass's incomplete pixels need (or, when prefetching, everything this frame saw), plus
+    /// what the step built.
     pinned: Vec<bool>,
-    relaxed: Option<Vec<bool>>,
+    /// Items the current build step made resident, in build (priority) order.
+    built_now: Vec<u32>,
     stamp: u32,
     frame_first_stamp: u32,
     /// Set when a failed build step left the root TLAS referencing freed memory.
     poisoned: Option<String>,
-    /// Prefetching: only structures not visible in this frame may be evicted (no relaxing).
-    prefetching: bool,
     frame: u64,
     frame_stats: FrameStreamStats,
     totals: StreamTotals,
@@ -355,6 +379,13 @@ impl<'a> StreamingRenderer<'a> {
             SafetyMargin::default(),
         )
         .unwrap_or(opts.budget_bytes);
+        // Staging and scratch come out of the budget (staging does on unified memory): an
+        // eighth each at most, so small budgets leave room for the structures themselves.
+        let opts = &StreamOptions {
+            staging_bytes: opts.staging_bytes.min(budget / 8).max(64 * 1024),
+            scratch_budget_bytes: opts.scratch_budget_bytes.min(budget / 8).max(64 * 1024),
+            ..*opts
+        };
         let device_cap = ctx
             .limits()
             .max_memory_allocation_count
@@ -446,7 +477,7 @@ impl<'a> StreamingRenderer<'a> {
             budget_bytes: budget,
             max_allocations: limits.max_allocation_count,
             scratch_budget_bytes: opts.scratch_budget_bytes,
-            max_batch_result_bytes: opts.scratch_budget_bytes.max(MIB) * 2,
+            max_batch_result_bytes: (opts.scratch_budget_bytes.max(MIB) * 2).min(budget / 4),
             staging_bytes: opts.staging_bytes,
             compact: opts.compact,
         };
@@ -485,11 +516,10 @@ impl<'a> StreamingRenderer<'a> {
             last_seen: vec![0; nb + nt],
             dirty: BTreeSet::new(),
             pinned: vec![false; nb + nt],
-            relaxed: None,
+            built_now: Vec::new(),
             stamp: 0,
             frame_first_stamp: 1,
             poisoned: None,
-            prefetching: false,
             frame: 0,
             frame_stats: FrameStreamStats::default(),
             totals: StreamTotals {
@@ -944,17 +974,16 @@ impl<'a> StreamingRenderer<'a> {
     /// Evicts least-recently-visible unpinned structures (at least `bytes` of them, or all that
     /// are left). Returns false when nothing could be evicted.
     fn evict_some(&mut self, bytes: u64) -> Result<bool> {
-        let nb = self.view.blases.len();
-        let pins = self.relaxed.as_ref().unwrap_or(&self.pinned);
-        let victims = match self.residency.choose_victims_excluding(bytes.max(1), |id| {
-            pins.get(id.0 as usize).copied().unwrap_or(true)
-        }) {
+        let pins = &self.pinned;
+        let pinned = |id: ItemId| pins.get(id.0 as usize).copied().unwrap_or(true);
+        let victims = match self
+            .residency
+            .choose_victims_excluding(bytes.max(1), pinned)
+        {
             Ok(v) => v,
             Err(e) if e.evictable_bytes > 0 => self
                 .residency
-                .choose_victims_excluding(e.evictable_bytes, |id| {
-                    pins.get(id.0 as usize).copied().unwrap_or(true)
-                })
+                .choose_victims_excluding(e.evictable_bytes, pinned)
                 .unwrap_or_default(),
             Err(_) => Vec::new(),
         };
@@ -962,36 +991,47 @@ impl<'a> StreamingRenderer<'a> {
             return Ok(false);
         }
         for id in victims {
-            self.residency.remove(id);
-            self.frame_stats.evicted += 1;
-            let i = id.0 as usize;
-            if i < nb {
-                if let Some(a) = self.blas[i].take() {
-                    a.release(&mut self.heap);
-                }
-                for g in self.blas_meshes(i) {
-                    self.mesh_refs[g] = self.mesh_refs[g].saturating_sub(1);
-                    if self.mesh_refs[g] == 0 {
-                        if let Some(m) = self.meshes[g].take() {
-                            self.heap.free(m.buffer);
-                        }
-                    }
-                }
-                for &p in &self.parents[i] {
-                    if self.tlas[p as usize].is_some() {
-                        self.dirty.insert(p);
-                    }
-                }
-            } else if let Some(t) = self.tlas[i - nb].take() {
-                t.accel.release(&mut self.heap);
-                if let Some(p) = t.proxy {
-                    p.release(&mut self.heap);
-                }
-                self.dirty.remove(&((i - nb) as u32));
-            }
+            self.evict(id.0 as usize);
         }
         tracing::debug!(resident = self.residency.len(), "evicted");
         Ok(true)
+    }
+
+    /// Releases item `i` (a BLAS with the meshes only it used, or a child TLAS with its proxy);
+    /// resident parents of a BLAS become dirty.
+    fn evict(&mut self, i: usize) {
+        let nb = self.view.blases.len();
+        self.residency.remove(ItemId(i as u32));
+        self.frame_stats.evicted += 1;
+        if i < nb {
+            if let Some(a) = self.blas[i].take() {
+                a.release(&mut self.heap);
+            }
+            self.release_blas_meshes(i);
+            for &p in &self.parents[i] {
+                if self.tlas[p as usize].is_some() {
+                    self.dirty.insert(p);
+                }
+            }
+        } else if let Some(t) = self.tlas[i - nb].take() {
+            t.accel.release(&mut self.heap);
+            if let Some(p) = t.proxy {
+                p.release(&mut self.heap);
+            }
+            self.dirty.remove(&((i - nb) as u32));
+        }
+    }
+
+    /// Drops BLAS `b`'s references to its meshes, freeing those no other BLAS holds.
+    fn release_blas_meshes(&mut self, b: usize) {
+        for g in self.blas_meshes(b) {
+            self.mesh_refs[g] = self.mesh_refs[g].saturating_sub(1);
+            if self.mesh_refs[g] == 0 {
+                if let Some(m) = self.meshes[g].take() {
+                    self.heap.free(m.buffer);
+                }
+            }
+        }
     }
 
     fn blas_meshes(&self, b: usize) -> Vec<usize> {
@@ -1005,86 +1045,53 @@ impl<'a> StreamingRenderer<'a> {
             .collect()
     }
 
-    /// Runs `f`, evicting and retrying while the budget refuses it. `what` names it in the
-    /// error when even the relaxed pins leave nothing to evict.
-    fn with_eviction<T>(
-        &mut self,
-        what: &str,
-        mut f: impl FnMut(&mut Self) -> Result<T>,
-    ) -> Result<T> {
+    /// Runs `f`, evicting unpinned structures and retrying while the budget refuses it;
+    /// returns the budget error once nothing unpinned is left.
+    fn with_eviction<T>(&mut self, mut f: impl FnMut(&mut Self) -> Result<T>) -> Result<T> {
         loop {
             match f(self) {
                 Err(GpuError::Budget(msg)) => {
-                    let step = self.build_opts.budget_bytes / 16;
+                    let step = (self.build_opts.budget_bytes / 32).max(1);
                     if self.evict_some(step)? {
                         continue;
                     }
-                    if self.relaxed.is_none() && !self.prefetching {
-                        // Pixels finished earlier in this frame no longer need theirs.
-                        let latest = self.stamp;
-                        let mut relaxed = self.pinned.clone();
-                        for (i, r) in relaxed.iter_mut().enumerate() {
-                            if self.last_seen[i] < latest {
-                                *r = false;
-                            }
-                        }
-                        self.relaxed = Some(relaxed);
-                        if self.evict_some(step)? {
-                            continue;
-                        }
-                    }
-                    let report = self.heap.report();
-                    return Err(GpuError::Budget(format!(
-                        "streaming: {what} does not fit: the structures the current pass needs \
-                         ({} resident) leave nothing to evict under the budget of {} bytes \
-                         ({} bytes in blocks, skeleton {} bytes); raise --vram-budget or render \
-                         a smaller --subset ({msg})",
-                        self.residency.len(),
-                        report.budget_bytes,
-                        report.budget_block_bytes,
-                        self.totals.skeleton_bytes,
-                    )));
+                    return Err(GpuError::Budget(msg));
                 }
                 r => return r,
             }
         }
     }
 
-    /// Makes `demand` resident (streams meshes, builds BLASes, builds or rebuilds TLASes),
-    /// evicting under the budget; then rebuilds every dirty TLAS and uploads the tables.
-    fn make_resident(&mut self, demand: &Demand, prefetch: bool) -> Result<()> {
-        let t0 = Instant::now();
-        let nb = self.view.blases.len();
-        let frame_first = self.frame_first_stamp();
-        self.pinned = (0..self.item_count())
-            .map(|i| self.last_seen[i] >= frame_first)
-            .collect();
-        for &b in &demand.blases {
-            self.pinned[b as usize] = true;
-            self.last_seen[b as usize] = self.stamp;
+    /// [`with_eviction`](Self::with_eviction) when `evict`, else `f` once.
+    fn maybe_evicting<T>(
+        &mut self,
+        evict: bool,
+        mut f: impl FnMut(&mut Self) -> Result<T>,
+    ) -> Result<T> {
+        if evict {
+            self.with_eviction(f)
+        } else {
+            f(self)
         }
-        for &t in &demand.tlases {
-            self.pinned[nb + t as usize] = true;
-            self.last_seen[nb + t as usize] = self.stamp;
-        }
-        self.relaxed = None;
-        // 1. BLASes: meshes then builds, one batch of at most a budget/8 of triangles' worth at
-        // a time so eviction can make room between batches.
-        let blases: Vec<u32> = demand
-            .blases
-            .iter()
-            .copied()
-            .filter(|&b| self.blas[b as usize].is_none() && self.buildable[b as usize])
-            .collect();
-        for group in blases.chunks(64) {
+    }
+
+    /// Streams the meshes of BLASes `group` (each BLAS takes a reference on its meshes) and
+    /// builds them, pinned, evicting for room when `evict`. On failure the group's references
+    /// and the meshes only it held are released: nothing of it stays resident.
+    fn build_group(&mut self, group: &[u32], evict: bool) -> Result<()> {
+        let mut taken: Vec<usize> = Vec::new();
+        let loaded = (|| -> Result<()> {
             for &b in group {
                 for m in self.blas_meshes(b as usize) {
+                    // Referenced before loading: evicting a BLAS that shares it keeps it.
+                    self.mesh_refs[m] += 1;
+                    taken.push(m);
                     if self.meshes[m].is_some() {
                         continue;
                     }
                     let rec = self.view.meshes[m];
-                    let g = self
-                        .with_eviction("mesh geometry", |s| MeshGpu::alloc(&mut s.heap, m, &rec))?;
+                    let g =
+                        self.maybe_evicting(evict, |s| MeshGpu::alloc(&mut s.heap, m, &rec))?;
                     let ctx = self.ctx.clone();
                     let source = self.source;
                     let up = self.up_mut()?;
@@ -1100,95 +1107,278 @@ impl<'a> StreamingRenderer<'a> {
                 }
             }
             let ctx = self.ctx.clone();
-            self.up_mut()?.flush(&ctx)?;
+            self.up_mut()?.flush(&ctx)
+        })();
+        let built = loaded.and_then(|()| {
             let ids: Vec<usize> = group.iter().map(|&b| b as usize).collect();
-            let built = self.with_eviction("BLAS builds", |s| s.build_blas_set(&ids, 0))?;
-            for (b, accel) in built {
-                let mesh_bytes: u64 = self
-                    .blas_meshes(b)
-                    .into_iter()
-                    .map(|m| {
-                        self.mesh_refs[m] += 1;
-                        self.meshes[m].as_ref().map_or(0, |g| g.size_bytes())
-                    })
-                    .sum();
-                let bytes = accel.size_bytes + mesh_bytes;
-                self.frame_stats.blas_built += 1;
-                self.frame_stats.triangles_built += u64::from(self.view.blases[b].primitive_count);
-                self.blas[b] = Some(accel);
-                let _ = self.residency.insert(ItemId(b as u32), bytes, self.frame);
-                for &p in &self.parents[b] {
-                    if self.tlas[p as usize].is_some() {
-                        self.dirty.insert(p);
+            self.maybe_evicting(evict, |s| s.build_blas_set(&ids, 0))
+        });
+        let built = match built {
+            Ok(b) => b,
+            Err(e) => {
+                for m in taken {
+                    self.mesh_refs[m] = self.mesh_refs[m].saturating_sub(1);
+                    if self.mesh_refs[m] == 0 {
+                        if let Some(g) = self.meshes[m].take() {
+                            self.heap.free(g.buffer);
+                        }
                     }
                 }
+                return Err(e);
             }
-        }
-        // Meshes whose BLAS build was evicted in between are released with their refs; a mesh
-        // loaded for a BLAS that then was not built (nothing to build) is freed here.
-        for m in 0..self.meshes.len() {
-            if self.mesh_refs[m] == 0 {
-                if let Some(g) = self.meshes[m].take() {
-                    self.heap.free(g.buffer);
+        };
+        let mut built_ids = BTreeSet::new();
+        for (b, accel) in built {
+            let mesh_bytes: u64 = self
+                .blas_meshes(b)
+                .into_iter()
+                .map(|m| self.meshes[m].as_ref().map_or(0, |g| g.size_bytes()))
+                .sum();
+            let bytes = accel.size_bytes + mesh_bytes;
+            self.frame_stats.blas_built += 1;
+            self.frame_stats.triangles_built += u64::from(self.view.blases[b].primitive_count);
+            self.blas[b] = Some(accel);
+            let _ = self
+                .residency
+                .insert(ItemId(b as u32), bytes, u64::from(self.stamp));
+            self.pinned[b] = true;
+            self.built_now.push(b as u32);
+            built_ids.insert(b as u32);
+            for &p in &self.parents[b] {
+                if self.tlas[p as usize].is_some() {
+                    self.dirty.insert(p);
                 }
             }
         }
-        // 2. New TLASes, then dirty ones, until none is dirty (a rebuild's eviction may dirty
-        // others; each round evicts something or finishes, so this ends).
-        let mut new_tlases: Vec<u32> = demand
-            .tlases
-            .iter()
-            .copied()
-            .filter(|&t| self.tlas[t as usize].is_none())
-            .collect();
+        // A BLAS with nothing to build keeps no references.
+        for &b in group {
+            if !built_ids.contains(&b) {
+                self.release_blas_meshes(b as usize);
+            }
+        }
+        Ok(())
+    }
+
+    /// Builds the BLASes of `queue` (priority order) in groups that halve when the budget
+    /// refuses them; groups use free memory only, single BLASes evict for room (so eviction
+    /// frees about what one build needs). Stops at the first single BLAS that does not fit
+    /// (left for a later pass) and returns how many were left. `must_progress`: when nothing
+    /// was built yet, evict the current pass's pins too before giving up, then fail with the
+    /// numbers.
+    fn build_blas_queue(&mut self, queue: &[u32], must_progress: bool) -> Result<usize> {
+        let mut i = 0;
+        let mut chunk = 16usize;
+        let mut relaxed = false;
+        while i < queue.len() {
+            let group = &queue[i..(i + chunk).min(queue.len())];
+            match self.build_group(group, group.len() == 1) {
+                Ok(()) => {
+                    i += group.len();
+                    chunk = (chunk * 2).min(64);
+                }
+                Err(GpuError::Budget(_)) if group.len() > 1 => chunk = group.len() / 2,
+                Err(GpuError::Budget(msg)) => {
+                    if !self.built_now.is_empty() || !must_progress {
+                        return Ok(queue.len() - i);
+                    }
+                    if !relaxed {
+                        // Nothing fits next to what the incomplete pixels hold: let those go
+                        // (their pixels re-demand them later) rather than fail.
+                        relaxed = true;
+                        self.pinned.iter_mut().for_each(|p| *p = false);
+                        continue;
+                    }
+                    return Err(self.does_not_fit(queue[i], &msg));
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(0)
+    }
+
+    /// The error for BLAS `b` not fitting next to the skeleton alone.
+    fn does_not_fit(&self, b: u32, msg: &str) -> GpuError {
+        let rec = &self.view.blases[b as usize];
+        let mesh_bytes: u64 = self
+            .blas_meshes(b as usize)
+            .into_iter()
+            .map(|m| {
+                let r = &self.view.meshes[m];
+                u64::from(r.vertex_count) * 12 + u64::from(r.triangle_count) * 12
+            })
+            .sum();
+        let report = self.heap.report();
+        GpuError::Budget(format!(
+            "streaming: BLAS {b} ({} triangles, {mesh_bytes} bytes of meshes plus its \
+             acceleration structure and build scratch) does not fit under the budget of {} \
+             bytes even with every other structure evicted: {} bytes stay in use (resident \
+             skeleton {} bytes, frame buffers, trace pipeline, staging ring); raise \
+             --vram-budget or split the scene's meshes finer ({msg})",
+            rec.primitive_count,
+            report.budget_bytes,
+            report.budget_in_use_bytes,
+            self.totals.skeleton_bytes,
+        ))
+    }
+
+    /// Rebuilds every dirty TLAS. When the budget refuses even with everything unpinned
+    /// evicted, gives back structures this step built, least requested first (their pixels
+    /// stay incomplete); fails only when none is left.
+    fn rebuild_dirty(&mut self) -> Result<()> {
         let mut rounds = 0;
-        while !new_tlases.is_empty() || !self.dirty.is_empty() {
+        while !self.dirty.is_empty() {
             rounds += 1;
             if rounds > 64 + self.item_count() {
                 return Err(GpuError::InvalidRequest(
                     "streaming: TLAS rebuilds do not settle".into(),
                 ));
             }
-            let mut ids: Vec<u32> = new_tlases.clone();
-            ids.extend(self.dirty.iter().copied());
-            ids.sort_unstable();
-            ids.dedup();
-            let rebuilt = ids
-                .iter()
-                .filter(|&&t| self.tlas[t as usize].is_some())
-                .count() as u32;
-            self.with_eviction("TLAS builds", |s| {
-                // Eviction may have removed some of the resident ones: rebuild only what is
-                // still wanted.
+            let ids: Vec<u32> = self.dirty.iter().copied().collect();
+            let rebuilt = ids.len() as u32;
+            match self.with_eviction(|s| {
+                // Eviction may have removed some: rebuild only what is still resident.
                 let now: Vec<u32> = ids
                     .iter()
                     .copied()
-                    .filter(|&t| s.tlas[t as usize].is_some() || new_tlases.contains(&t))
+                    .filter(|&t| s.tlas[t as usize].is_some())
                     .collect();
                 s.build_tlases(&now)
-            })?;
-            for &t in &new_tlases {
-                if self.tlas[t as usize].is_some() && !self.residency.contains(item_of_tlas(nb, t))
-                {
+            }) {
+                Ok(()) => self.frame_stats.tlas_rebuilt += rebuilt,
+                Err(GpuError::Budget(msg)) => {
+                    let Some(last) = self.built_now.pop() else {
+                        let report = self.heap.report();
+                        return Err(GpuError::Budget(format!(
+                            "streaming: rebuilding {} TLAS(es) does not fit under the budget of \
+                             {} bytes with every evictable structure evicted ({} bytes in use, \
+                             skeleton {} bytes); raise --vram-budget ({msg})",
+                            ids.len(),
+                            report.budget_bytes,
+                            report.budget_in_use_bytes,
+                            self.totals.skeleton_bytes
+                        )));
+                    };
+                    self.frame_stats.deferred += 1;
+                    if self.residency.contains(ItemId(last)) {
+                        self.evict(last as usize);
+                        // Given back, not evicted for room: count it as deferred only.
+                        self.frame_stats.evicted -= 1;
+                    }
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+
+    /// Makes `demand` resident (streams meshes, builds BLASes, builds child TLASes), most
+    /// requested first, evicting least-recently-visible unpinned structures under the budget;
+    /// then rebuilds every dirty TLAS and uploads the tables. `pass_pins`: what the latest
+    /// pass's incomplete pixels need (never evicted; a step that cannot build anything next
+    /// to them lets them go before failing). `None` prefetches: only structures this frame did
+    /// not see may be evicted, and what does not fit is skipped.
+    fn make_resident(&mut self, demand: &Demand, pass_pins: Option<&[bool]>) -> Result<()> {
+        let t0 = Instant::now();
+        let nb = self.view.blases.len();
+        let prefetch = pass_pins.is_none();
+        self.pinned = match pass_pins {
+            Some(p) => p.to_vec(),
+            None => {
+                let first = self.frame_first_stamp();
+                (0..self.item_count())
+                    .map(|i| self.last_seen[i] >= first)
+                    .collect()
+            }
+        };
+        self.built_now.clear();
+        for &(b, _) in &demand.blases {
+            self.last_seen[b as usize] = self.stamp;
+        }
+        for &(t, _) in &demand.tlases {
+            self.last_seen[nb + t as usize] = self.stamp;
+        }
+        // 1. BLASes, most requested first.
+        let queue: Vec<u32> = demand
+            .blases
+            .iter()
+            .map(|&(b, _)| b)
+            .filter(|&b| self.blas[b as usize].is_none() && self.buildable[b as usize])
+            .collect();
+        let left = self.build_blas_queue(&queue, !prefetch)?;
+        let mut deferred = left;
+        // 2. Child TLASes (their parents reach them through the address table).
+        let new_tlases: Vec<u32> = demand
+            .tlases
+            .iter()
+            .map(|&(t, _)| t)
+            .filter(|&t| self.tlas[t as usize].is_none())
+            .collect();
+        for (k, &t) in new_tlases.iter().enumerate() {
+            match self.with_eviction(|s| s.build_tlases(&[t])) {
+                Ok(()) => {
                     let bytes = self.tlas[t as usize].as_ref().map_or(0, |g| {
                         g.accel.size_bytes + g.proxy.as_ref().map_or(0, |p| p.size_bytes)
                     });
-                    let _ = self
-                        .residency
-                        .insert(item_of_tlas(nb, t), bytes, self.frame);
+                    let item = item_of_tlas(nb, t);
+                    let _ = self.residency.insert(item, bytes, u64::from(self.stamp));
+                    self.pinned[item.0 as usize] = true;
+                    self.built_now.push(item.0);
                     self.frame_stats.tlas_built += 1;
                 }
+                Err(GpuError::Budget(msg)) => {
+                    if self.built_now.is_empty() && !prefetch {
+                        let report = self.heap.report();
+                        return Err(GpuError::Budget(format!(
+                            "streaming: TLAS {t} does not fit under the budget of {} bytes with \
+                             every other structure evicted ({} bytes in use, skeleton {} \
+                             bytes); raise --vram-budget ({msg})",
+                            report.budget_bytes,
+                            report.budget_in_use_bytes,
+                            self.totals.skeleton_bytes
+                        )));
+                    }
+                    deferred += new_tlases.len() - k;
+                    break;
+                }
+                Err(e) => return Err(e),
             }
-            self.frame_stats.tlas_rebuilt += rebuilt;
-            new_tlases.clear();
         }
+        // 3. Parents whose instance set changed (builds or evictions).
+        self.rebuild_dirty()?;
         self.upload_tlas_addresses()?;
-        let ms = t0.elapsed().as_secs_f64() * 1e3;
-        self.frame_stats.build_ms += ms;
         if prefetch {
-            self.frame_stats.prefetched += (demand.blases.len() + demand.tlases.len()) as u32;
+            self.frame_stats.prefetched += self.built_now.len() as u32;
+        } else {
+            self.frame_stats.deferred += deferred as u32;
         }
+        self.frame_stats.build_ms += t0.elapsed().as_secs_f64() * 1e3;
+        tracing::debug!(
+            demanded = demand.len(),
+            built = self.built_now.len(),
+            deferred,
+            prefetch,
+            "build step"
+        );
         Ok(())
+    }
+
+    /// A per-frame allocation (frame buffers, trace pipeline) that does not fit even with
+    /// every structure evicted: the budget is too small for the skeleton itself.
+    fn skeleton_error(&self, what: &str, e: GpuError) -> GpuError {
+        match e {
+            GpuError::Budget(msg) => {
+                let report = self.heap.report();
+                GpuError::Budget(format!(
+                    "streaming: {what} do not fit under the budget of {} bytes next to the \
+                     resident skeleton ({} bytes) with every structure evicted ({} bytes in \
+                     use); raise --vram-budget or render smaller images ({msg})",
+                    report.budget_bytes,
+                    self.totals.skeleton_bytes,
+                    report.budget_in_use_bytes
+                ))
+            }
+            e => e,
+        }
     }
 
     fn frame_first_stamp(&self) -> u32 {
@@ -1255,23 +1445,21 @@ impl<'a> StreamingRenderer<'a> {
                 t.release(&mut self.heap);
             }
             self.pinned = vec![false; self.item_count()];
-            self.relaxed = None;
-            let t = self.with_eviction("the trace pipeline", |s| {
-                Tracer::new(&s.ctx.clone(), &mut s.heap, opts)
-            })?;
+            let t = self
+                .with_eviction(|s| Tracer::new(&s.ctx.clone(), &mut s.heap, opts))
+                .map_err(|e| self.skeleton_error("the trace pipeline", e))?;
             self.tracer = Some((opts.backend, opts.stack_size, t));
         }
         let pixels = u64::from(w) * u64::from(h);
         let guard = guard_pixels(w, h, self.opts.guard_band_px);
         let params = frame_params(camera, opts, self.view.root_tlas);
-        self.pinned = (0..self.item_count())
-            .map(|i| self.last_seen[i] >= self.frame_first_stamp)
-            .collect();
-        self.relaxed = None;
+        self.pinned = vec![false; self.item_count()];
         let nitems = self.item_count() as u64;
-        let fb = self.with_eviction("the frame buffers", |s| {
-            alloc_frame_buffers(&mut s.heap, pixels, guard.len() as u64, nitems, &params)
-        })?;
+        let fb = self
+            .with_eviction(|s| {
+                alloc_frame_buffers(&mut s.heap, pixels, guard.len() as u64, nitems, &params)
+            })
+            .map_err(|e| self.skeleton_error("the frame buffers", e))?;
         let result = self.run_passes(&fb, w, h, &guard);
         let out = match result {
             Ok(r) => r,
@@ -1282,18 +1470,12 @@ impl<'a> StreamingRenderer<'a> {
         };
         fb.release(&mut self.heap);
         let (records, rgba_words, counters, guard_demand) = out;
-        // Prefetch: what the guard band saw, evicting only what this frame did not see.
+        // Prefetch: what the guard band saw, evicting only what this frame did not see (what
+        // does not fit is skipped).
         if !guard_demand.is_empty() && self.frame_stats.complete {
-            self.prefetching = true;
-            let r = self.make_resident(&guard_demand, true);
-            self.prefetching = false;
-            match r {
-                Ok(()) => {}
-                Err(GpuError::Budget(msg)) => {
-                    tracing::debug!(%msg, "prefetch skipped: no room without evicting");
-                    self.make_resident(&Demand::default(), false)?;
-                }
-                Err(e) => return Err(e),
+            if let Err(e) = self.make_resident(&guard_demand, None) {
+                self.quarantine_after_failure(&e);
+                return Err(e);
             }
         }
         let report = self.heap.report();
@@ -1327,6 +1509,8 @@ impl<'a> StreamingRenderer<'a> {
         tot.tlas_built += u64::from(st.tlas_built);
         tot.tlas_rebuilt += u64::from(st.tlas_rebuilt);
         tot.evicted += u64::from(st.evicted);
+        tot.deferred += u64::from(st.deferred);
+        tot.incomplete_frames += u64::from(!st.complete);
         tot.bytes_streamed += st.bytes_streamed;
         tot.triangles_built += st.triangles_built;
         tot.build_ms += st.build_ms;
@@ -1407,7 +1591,8 @@ impl<'a> StreamingRenderer<'a> {
         let nt = self.view.tlases.len();
         let pixels = u64::from(w) * u64::from(h);
         let stamps_bytes = ((nb + nt) * 4) as u64;
-        let inc_off = stamps_bytes.div_ceil(16) * 16;
+        let req_off = stamps_bytes.div_ceil(16) * 16;
+        let inc_off = req_off + req_off;
         let final_off = (inc_off + 4 + 4 * pixels).div_ceil(16) * 16;
         let mut full_count = pixels as u32;
         let mut list: Vec<u32> = guard.to_vec();
@@ -1432,6 +1617,8 @@ impl<'a> StreamingRenderer<'a> {
                 stamp: self.stamp,
                 full_count,
                 list_count: list.len() as u32,
+                blas_count: nb as u32,
+                requests: fb.requests.device_address()?.0,
                 ..Default::default()
             };
             fb.stream.write(0, std::slice::from_ref(&sp))?;
@@ -1464,6 +1651,7 @@ impl<'a> StreamingRenderer<'a> {
                 rec.fill_buffer(&fb.stats, 0, (STAT_WORDS * 4) as u64, 0)?;
             }
             rec.fill_buffer(&fb.incomplete, 0, 4, 0)?;
+            rec.fill_buffer(&fb.requests, 0, stamps_bytes.max(4), 0)?;
             rec.barrier();
             tracer.record(&mut rec, push_bytes, dims, groups)?;
             rec.barrier();
@@ -1475,10 +1663,14 @@ impl<'a> StreamingRenderer<'a> {
                     rec.copy_buffer(ts, 0, &fb.readback, (nb * 4) as u64, (nt * 4) as u64)?;
                 }
             }
+            if nb + nt > 0 {
+                rec.copy_buffer(&fb.requests, 0, &fb.readback, req_off, stamps_bytes)?;
+            }
             rec.copy_buffer(&fb.incomplete, 0, &fb.readback, inc_off, 4 + 4 * pixels)?;
             rec.submit_and_wait()?;
             self.frame_stats.trace_ms += t0.elapsed().as_secs_f64() * 1e3;
             let stamps: Vec<u32> = fb.readback.read_vec(0, nb + nt)?;
+            let requests: Vec<u32> = fb.readback.read_vec(req_off, nb + nt)?;
             let count = fb
                 .readback
                 .read_vec::<u32>(inc_off, 1)?
@@ -1487,9 +1679,11 @@ impl<'a> StreamingRenderer<'a> {
                 .unwrap_or(0);
             let count = count.min(pixels as u32);
             let incomplete: Vec<u32> = fb.readback.read_vec(inc_off + 4, count as usize)?;
-            // Visible sets: resident ones refresh their LRU age; empty ones are demanded
-            // (a real pixel met them) or prefetched (only the guard band did).
+            // Visible sets: resident ones refresh their LRU age and are pinned when an
+            // incomplete pixel needs them (its best hit so far; every walked TLAS); empty ones
+            // are demanded (a real pixel needs them) or prefetched (only seen).
             let mut demand = Demand::default();
+            let mut pass_pins = vec![false; nb + nt];
             for (i, &v) in stamps.iter().enumerate() {
                 if v >> 1 != self.stamp {
                     continue;
@@ -1504,7 +1698,9 @@ impl<'a> StreamingRenderer<'a> {
                 };
                 if resident {
                     if i >= nb || self.buildable[i] {
-                        self.residency.mark_visible(ItemId(i as u32), self.frame);
+                        self.residency
+                            .mark_visible(ItemId(i as u32), u64::from(self.stamp));
+                        pass_pins[i] = needed || i >= nb;
                     }
                     continue;
                 }
@@ -1513,15 +1709,19 @@ impl<'a> StreamingRenderer<'a> {
                 }
                 let set = if needed {
                     &mut demand
-                } else {
+                } else if first {
                     &mut guard_demand
-                };
-                if i < nb {
-                    set.blases.insert(i as u32);
                 } else {
-                    set.tlases.insert((i - nb) as u32);
+                    continue;
+                };
+                let n = requests.get(i).copied().unwrap_or(0);
+                if i < nb {
+                    set.blases.push((i as u32, n));
+                } else {
+                    set.tlases.push(((i - nb) as u32, n));
                 }
             }
+            demand.sort();
             if count == 0 {
                 self.frame_stats.complete = true;
                 break;
@@ -1536,7 +1736,7 @@ impl<'a> StreamingRenderer<'a> {
                 list = incomplete;
                 break;
             }
-            if let Err(e) = self.make_resident(&demand, false) {
+            if let Err(e) = self.make_resident(&demand, Some(&pass_pins)) {
                 self.quarantine_after_failure(&e);
                 return Err(e);
             }
@@ -1551,6 +1751,7 @@ impl<'a> StreamingRenderer<'a> {
                 .collect();
         }
         // Final readback of the image.
+        guard_demand.sort();
         let mut rec = self.ctx.record("stream readback")?;
         rec.copy_buffer(&fb.aov, 0, &fb.readback, final_off, pixels * 16)?;
         rec.copy_buffer(
@@ -1662,8 +1863,8 @@ fn alloc_frame_buffers(
     let host = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS;
     let stamps_bytes = (items * 4).div_ceil(16) * 16;
     let inc_bytes = 4 + 4 * pixels;
-    let readback_bytes = (stamps_bytes + inc_bytes).div_ceil(16) * 16 + pixels * 20 + 16;
-    let specs: [(&str, u64, BufferUsage, AllocKind, MemoryClass); 8] = [
+    let readback_bytes = (2 * stamps_bytes + inc_bytes).div_ceil(16) * 16 + pixels * 20 + 16;
+    let specs: [(&str, u64, BufferUsage, AllocKind, MemoryClass); 9] = [
         (
             "frame-params",
             std::mem::size_of::<crate::render::FrameParams>() as u64,
@@ -1707,6 +1908,13 @@ fn alloc_frame_buffers(
             MemoryClass::DeviceLocal,
         ),
         (
+            "requests",
+            (items * 4).max(4),
+            dev | BufferUsage::TRANSFER_DST,
+            AllocKind::Other,
+            MemoryClass::DeviceLocal,
+        ),
+        (
             "pixel-list",
             4 * pixels.max(guard_count).max(1),
             host,
@@ -1744,6 +1952,7 @@ fn alloc_frame_buffers(
         rgba: next()?,
         stats: next()?,
         incomplete: next()?,
+        requests: next()?,
         pixel_list: next()?,
         readback: next()?,
     })

@@ -53,6 +53,8 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         width: Some(640),
         height: Some(360),
         threads: None,
+        max_mesh_triangles: None,
+        terrain_objects: false,
         json: false,
     };
     let kind = super::gen::options(&gen)?;

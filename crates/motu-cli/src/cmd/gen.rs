@@ -23,6 +23,16 @@ pub fn options(a: &GenArgs) -> anyhow::Result<GenKind> {
                 .map_err(|e| anyhow::anyhow!("--grid {g}: {e}"))
         })
         .transpose()?;
+    if !matches!(a.kind, GenKindArg::Island) {
+        let kind = clap::ValueEnum::to_possible_value(&a.kind)
+            .map_or_else(String::new, |v| v.get_name().to_string());
+        reject(
+            "--max-mesh-triangles",
+            a.max_mesh_triangles.is_some(),
+            &kind,
+        )?;
+        reject("--terrain-objects", a.terrain_objects, &kind)?;
+    }
     let kind = match a.kind {
         GenKindArg::Forest => {
             let mut o = ForestOptions::default();
@@ -76,6 +86,8 @@ pub fn options(a: &GenArgs) -> anyhow::Result<GenKind> {
             o.scale = a.scale.unwrap_or(o.scale);
             o.elements = a.elements.or(o.elements);
             o.threads = a.threads.or(o.threads);
+            o.max_mesh_triangles = a.max_mesh_triangles.unwrap_or(o.max_mesh_triangles);
+            o.terrain_objects = a.terrain_objects;
             o.seed = a.seed.unwrap_or(o.seed);
             o.width = a.width.unwrap_or(o.width);
             o.height = a.height.unwrap_or(o.height);
