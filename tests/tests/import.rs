@@ -273,3 +273,28 @@ fn obj_with_mtl_imports_and_renders() {
         .count();
     assert!(hits > 0, "the model is in view");
 }
+
+#[test]
+fn tlas_scratch_budget_splits_tlases() {
+    let Some(scene) = shared_scene("buddha-fractal/buddha-fractal.pbrt") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = dir.path().join("b.motu");
+    // 128 B of estimated scratch per instance: 256 KiB allows 2,048 instances per TLAS.
+    motu_ok(&[
+        "import",
+        s(&scene),
+        "-o",
+        s(&pkg),
+        "--max-tlas-scratch",
+        "256KiB",
+    ]);
+    let info = motu_json(&["info", s(&pkg), "--json"]);
+    assert!(
+        info["max_instances_per_tlas"].as_u64().unwrap() <= 2048,
+        "{info}"
+    );
+    assert!(info["tlas_count"].as_u64().unwrap() >= 13, "{info}");
+    assert_eq!(info["flattened_instances"], 25_250);
+}

@@ -157,6 +157,27 @@ fn buddha_fractal_backends_agree() {
         "1000",
     ]);
     all_backends_agree(dir.path(), "buddha", &pkg, &["--width", "48"]);
+    // Every structure built inside 8 allocations and a 64 MiB budget (issue 6).
+    let capped = dir.path().join("capped.aov");
+    let stats = render(
+        &pkg,
+        "pipeline",
+        &capped,
+        &[
+            "--width",
+            "48",
+            "--max-allocations",
+            "8",
+            "--vram-budget",
+            "64MiB",
+        ],
+    );
+    assert!(stats["allocation_count"].as_u64().unwrap() <= 8, "{stats}");
+    assert!(
+        stats["vram_peak_bytes"].as_u64().unwrap() <= 64 << 20,
+        "{stats}"
+    );
+    motu_ok(&["compare", s(&dir.path().join("buddha-cpu.aov")), s(&capped)]);
 }
 
 #[test]

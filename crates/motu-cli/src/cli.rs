@@ -163,6 +163,9 @@ pub struct ImportArgs {
     /// Instances per TLAS before it is split (default: the spec's 2^24−1).
     #[arg(long, default_value_t = (1 << 24) - 1)]
     pub max_instances: u32,
+    /// Also split a TLAS whose estimated build scratch would exceed this (128 B per instance).
+    #[arg(long, value_parser = parse_size)]
+    pub max_tlas_scratch: Option<u64>,
     /// Build N LOD levels for heavy meshes.
     #[arg(long)]
     pub lod: Option<u32>,

@@ -20,6 +20,7 @@ pub struct ImportOptions {
     pub levels: Levels,
     pub levels_text: String,
     pub max_instances: u32,
+    pub max_tlas_scratch_bytes: Option<u64>,
     pub lod_levels: Option<u32>,
     pub lod_min_triangles: u32,
     pub zstd_level: Option<i32>,
@@ -117,6 +118,7 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
     let copts = CompileOptions {
         levels: o.levels,
         max_instances_per_tlas: o.max_instances,
+        max_tlas_scratch_bytes: o.max_tlas_scratch_bytes.unwrap_or(u64::MAX),
         lod_levels: o.lod_levels,
         lod_triangle_threshold: o.lod_min_triangles,
         subset: (!direct).then(|| subset_ids.iter().map(|&i| ElementId(i)).collect()),

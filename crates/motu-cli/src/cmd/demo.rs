@@ -70,6 +70,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         levels: motu_compile::Levels::Ml,
         levels_text: "ml".into(),
         max_instances: (1 << 24) - 1,
+        max_tlas_scratch_bytes: None,
         lod_levels: None,
         lod_min_triangles: 10_000,
         zstd_level: None,

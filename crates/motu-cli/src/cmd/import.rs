@@ -33,6 +33,7 @@ pub fn run(a: ImportArgs) -> anyhow::Result<()> {
         levels,
         levels_text,
         max_instances: a.max_instances,
+        max_tlas_scratch_bytes: a.max_tlas_scratch,
         lod_levels: a.lod,
         lod_min_triangles: a.lod_min_triangles,
         zstd_level: a.zstd,
