@@ -77,3 +77,23 @@ fn report_json_compares_single_and_multi_level_and_suggests_a_subset() {
     let out = motu_ok(&["report", s(&ipkg), "--budget", "24MiB"]);
     assert!(out.contains("--subset "), "a ready --subset list: {out}");
 }
+
+#[test]
+fn measure_builds_and_compacts_on_the_device() {
+    let out = motu_tests::motu(&["devices", "--json"]);
+    if !String::from_utf8_lossy(&out.stdout).contains("\"ray_pipeline\": true") {
+        assert!(
+            std::env::var_os("MOTU_REQUIRE_GPU").is_none(),
+            "MOTU_REQUIRE_GPU set but no ray-tracing device"
+        );
+        eprintln!("SKIPPED: no Vulkan ray-tracing device");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let gen = dir.path().join("flake");
+    motu_ok(&["gen", "sphereflake", "-o", s(&gen), "--depth", "2"]);
+    let pkg = dir.path().join("f.motu");
+    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    let r = motu_json(&["report", s(&pkg), "--json", "--measure"]);
+    assert!(r.to_string().contains("measured on this device"), "{r}");
+}

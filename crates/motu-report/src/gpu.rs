@@ -13,12 +13,15 @@ use crate::sizes::{
 };
 use crate::ReportError;
 
-/// Real driver sizes. Compacted sizes need built structures (`--measure`, once motu-gpu builds
-/// them); until then they use the ratio of the preset closest to this device.
+/// Real driver sizes. Compacted sizes are measured by building and compacting the package's
+/// structures on the device ([`GpuSizes::measure_compaction`], `--measure`); without that they
+/// use the ratio of the preset closest to this device.
 pub struct GpuSizes {
     ctx: Context,
     flags: AsBuildFlags,
     compaction: &'static ModelPreset,
+    /// Compacted ÷ built BLAS bytes, measured on this device for this package.
+    measured_compaction: Option<f64>,
     blas_cache: RefCell<HashMap<BlasShape, AsSizes>>,
     tlas_cache: RefCell<HashMap<u64, AsSizes>>,
 }
@@ -46,6 +49,7 @@ impl GpuSizes {
             ctx,
             flags: AsBuildFlags::default(),
             compaction,
+            measured_compaction: None,
             blas_cache: RefCell::default(),
             tlas_cache: RefCell::default(),
         }
@@ -53,6 +57,49 @@ impl GpuSizes {
 
     pub fn context(&self) -> &Context {
         &self.ctx
+    }
+
+    /// Builds every BLAS and TLAS of `pkg` on the device with compaction (as `motu render`
+    /// does) and from then on sizes compacted BLASes with the measured ratio. Returns it.
+    pub fn measure_compaction(
+        &mut self,
+        pkg: &motu_pack::ScenePackage,
+    ) -> Result<f64, ReportError> {
+        struct Blobs<'a>(&'a motu_pack::ScenePackage);
+        impl motu_gpu::MeshBlobSource for Blobs<'_> {
+            fn mesh_data(
+                &self,
+                mesh_record: u32,
+            ) -> Result<
+                (
+                    std::borrow::Cow<'_, [[f32; 3]]>,
+                    std::borrow::Cow<'_, [u32]>,
+                ),
+                String,
+            > {
+                self.0.mesh_slices(mesh_record).map_err(|e| e.to_string())
+            }
+        }
+        let view = pkg.view()?;
+        let opts = motu_gpu::BuildOptions {
+            compact: true,
+            ..Default::default()
+        };
+        let scene = motu_gpu::GpuScene::build(&self.ctx, &view, &Blobs(pkg), &opts)?;
+        let r = scene.report();
+        let ratio = if r.blas_bytes > 0 {
+            r.blas_compacted_bytes as f64 / r.blas_bytes as f64
+        } else {
+            1.0
+        };
+        tracing::info!(
+            built = r.blas_bytes,
+            compacted = r.blas_compacted_bytes,
+            ratio,
+            "measured BLAS compaction"
+        );
+        self.measured_compaction = Some(ratio);
+        Ok(ratio)
     }
 }
 
@@ -106,10 +153,14 @@ fn from_gpu(s: motu_gpu::AsBuildSizes) -> AsSizes {
 impl SizeSource for GpuSizes {
     fn info(&self) -> SizeSourceInfo {
         let mut notes = Vec::new();
-        if !self.compaction.compaction_measured {
+        if let Some(r) = self.measured_compaction {
             notes.push(format!(
-                "compacted BLAS = {:.2} × built size (assumed; `--measure` will measure it once \
-                 motu-gpu builds structures)",
+                "compacted BLAS = {r:.3} × built size (measured: this package built and compacted on this device)"
+            ));
+        } else if !self.compaction.compaction_measured {
+            notes.push(format!(
+                "compacted BLAS = {:.2} × built size (assumed; `--measure` builds and compacts \
+                 the package on the device to measure it)",
                 self.compaction.compaction_ratio
             ));
         }
@@ -117,7 +168,10 @@ impl SizeSource for GpuSizes {
             kind: "driver".into(),
             device: format!("#{} {}", self.ctx.device_index(), self.ctx.device_name()),
             preset: None,
-            compaction: compaction_text(self.compaction),
+            compaction: match self.measured_compaction {
+                Some(r) => format!("ratio {r:.3} of the built size (measured on this device)"),
+                None => compaction_text(self.compaction),
+            },
             notes,
         }
     }
@@ -146,7 +200,10 @@ impl SizeSource for GpuSizes {
     }
 
     fn compacted_blas_bytes(&self, _shape: &BlasShape, built: AsSizes) -> u64 {
-        compact(self.compaction, built)
+        match self.measured_compaction {
+            Some(r) => (built.size_bytes as f64 * r).round() as u64,
+            None => compact(self.compaction, built),
+        }
     }
 
     fn max_instance_count(&self) -> u64 {

@@ -5,12 +5,20 @@ use crate::cli::ReportArgs;
 use anyhow::Context;
 
 pub fn run(a: ReportArgs) -> anyhow::Result<()> {
-    if a.measure {
-        eprintln!("note: --measure (built and compacted sizes) is not implemented yet; sizes come from the driver's build-size queries, compaction from the model");
-    }
     let pkg = crate::pipeline::open(&a.package)?;
-    let sizes = motu_report::size_source_for_cli(a.device)
-        .context("opening the --device for acceleration-structure size queries")?;
+    let sizes: Box<dyn motu_report::SizeSource> = if a.measure {
+        // Build and compact everything on the device: compacted sizes are measured, not modelled.
+        let mut g = motu_report::GpuSizes::open(a.device)
+            .context("--measure needs a ray-tracing device")?;
+        let ratio = g
+            .measure_compaction(&pkg)
+            .context("building the package on the device for --measure")?;
+        eprintln!("measured BLAS compaction on this device: {ratio:.3} of the built size");
+        Box::new(g)
+    } else {
+        motu_report::size_source_for_cli(a.device)
+            .context("opening the --device for acceleration-structure size queries")?
+    };
     let r = motu_report::build_report(&pkg, sizes.as_ref(), a.budget)
         .with_context(|| format!("VRAM report of {}", a.package.display()))?;
     if let Some(p) = &a.html {
