@@ -48,7 +48,7 @@ fn bench_quick_json_reports_every_configuration_with_sane_values() {
             .iter()
             .map(|c| c["label"].as_str().unwrap())
             .collect();
-        assert_eq!(labels, ["sl", "ml", "levels2"], "{sc}");
+        assert_eq!(labels, ["sl", "ml", "levels2", "auto"], "{sc}");
         let flattened = sc["gen"]["flattened_instances"].as_u64().unwrap();
         for c in sc["configs"].as_array().unwrap() {
             let ctx = format!("{}/{}: {c:#}", sc["name"], c["label"]);
