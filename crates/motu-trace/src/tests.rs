@@ -596,3 +596,77 @@ fn very_deep_nesting_uses_the_explicit_stack() {
     );
     assert!(!miss.is_hit());
 }
+
+/// A LOD level may bulge outside the finer one (here: level 1 is a 15% larger shell). A shadow
+/// ray leaving the level-0 surface that picks its own (biased, coarser) level starts inside
+/// that shell and shadows its own surface; forcing the primary hit's level (what the renderer
+/// does, `shadow_lod_from_primary`) removes that self-shadowing.
+#[test]
+fn forced_shadow_lod_removes_lod_self_shadowing() {
+    let mut b = HierarchyBuilder::new();
+    let fine = b.mesh(0, 0, 0, uv_sphere(32));
+    let mut shell = uv_sphere(8);
+    for p in &mut shell.positions {
+        *p = [p[0] * 1.15, p[1] * 1.15, p[2] * 1.15];
+    }
+    let coarse = b.mesh(0, 1, 0, shell);
+    let levels: Vec<u32> = [fine, coarse]
+        .iter()
+        .map(|&m| {
+            let blas = b.triangle_blas(&[m]);
+            b.tlas(&[(IDENTITY_3X4, blas)])
+        })
+        .collect();
+    let sel = b.lod_selector(&levels, 0);
+    let blas = b.pi_blas(&[(IDENTITY_3X4, PiTarget::LodSelector(sel))]);
+    let root = b.tlas(&[(IDENTITY_3X4, blas)]);
+    let h = b.finish(root);
+    let tracer = Tracer::new(h.view(), &h).unwrap();
+    let mut s = Scratch::default();
+    let lod = LodParams {
+        r_max_px: 1.0,
+        shadow_bias: 1.0,
+        ..Default::default()
+    };
+    let sun = [0.0, 1.0, 0.0];
+    let (mut biased_shadowed, mut forced_shadowed, mut samples) = (0, 0, 0);
+    for i in 0..64 {
+        // Points on the sun-facing cap, reached by primary rays from above.
+        let a = i as f32 * 0.37;
+        let org = [0.6 * a.cos(), 5.0, 0.6 * a.sin()];
+        let primary = RayQuery {
+            lod,
+            pixels_per_unit_at_1: 500.0,
+            ..Default::default()
+        };
+        let hit = tracer.trace(org, [0.0, -1.0, 0.0], &primary, &mut s);
+        assert!(hit.is_hit());
+        assert_eq!(hit.lod, 0, "close up, primary rays see the fine level");
+        let p = [org[0], org[1] - hit.t, org[2]];
+        let n = hit.world_normal();
+        let n = if n[1] < 0.0 { [-n[0], -n[1], -n[2]] } else { n };
+        let start = crate::render::shadow_offset(p, n, 5.0 + hit.t);
+        let shadow = RayQuery {
+            kind: RAY_SHADOW,
+            any_hit: true,
+            lod,
+            pixels_per_unit_at_1: 500.0,
+            ..Default::default()
+        };
+        let forced = RayQuery {
+            lod: LodParams {
+                forced_lod: hit.lod as i32,
+                ..lod
+            },
+            ..shadow
+        };
+        biased_shadowed += tracer.trace(start, sun, &shadow, &mut s).is_hit() as u32;
+        forced_shadowed += tracer.trace(start, sun, &forced, &mut s).is_hit() as u32;
+        samples += 1;
+    }
+    assert!(
+        biased_shadowed > samples / 2,
+        "the coarse shell shadows the surface: {biased_shadowed}/{samples}"
+    );
+    assert_eq!(forced_shadowed, 0, "forced LOD: no self-shadowing");
+}
