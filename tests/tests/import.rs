@@ -298,3 +298,51 @@ fn tlas_scratch_budget_splits_tlases() {
     assert!(info["tlas_count"].as_u64().unwrap() >= 13, "{info}");
     assert_eq!(info["flattened_instances"], 25_250);
 }
+
+#[test]
+fn curves_are_counted_or_tessellated_into_ribbons() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("grass.pbrt");
+    let mut text = String::from(
+        "LookAt 0 1 -5  0 1 0  0 1 0\nCamera \"perspective\" \"float fov\" [40]\nWorldBegin\n",
+    );
+    for i in 0..50 {
+        let x = i as f32 * 0.1 - 2.5;
+        text += &format!(
+            "Shape \"curve\" \"point P\" [{x} 0 0 {x} 0.6 0.1 {x} 1.2 0.1 {x} 1.8 0] \"float width0\" 0.05 \"float width1\" 0.0\n"
+        );
+    }
+    text += "Shape \"trianglemesh\" \"integer indices\" [0 1 2 0 2 3] \"point P\" [-5 0 -5 5 0 -5 5 0 5 -5 0 5]\n";
+    std::fs::write(&scene, text).unwrap();
+    let skip = dir.path().join("skip.motu");
+    let ribbons = dir.path().join("ribbons.motu");
+    let out = motu_ok(&["import", s(&scene), "-o", s(&skip)]);
+    assert!(out.contains("50 curve shapes were counted"), "{out}");
+    let a = motu_json(&["info", s(&skip), "--json"]);
+    assert_eq!(a["unique_triangles"], 2);
+    motu_ok(&[
+        "import",
+        s(&scene),
+        "-o",
+        s(&ribbons),
+        "--curves",
+        "ribbons",
+    ]);
+    let b = motu_json(&["info", s(&ribbons), "--json"]);
+    // 50 ribbons of 4 quads, gathered into one mesh, plus the ground.
+    assert_eq!(b["unique_triangles"], 2 + 50 * 8, "{b}");
+    assert_eq!(b["meshes"], 2, "{b}");
+    let aov = dir.path().join("g.aov");
+    motu_ok(&[
+        "render",
+        s(&ribbons),
+        "-o",
+        s(&dir.path().join("g.png")),
+        "--backend",
+        "cpu",
+        "--width",
+        "64",
+        "--aov",
+        s(&aov),
+    ]);
+}

@@ -118,6 +118,12 @@ pub struct GenArgs {
     pub json: bool,
 }
 
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CurvesArg {
+    Skip,
+    Ribbons,
+}
+
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum LevelsArg {
     Ml,
@@ -175,6 +181,10 @@ pub struct ImportArgs {
     /// Compress chunks with zstd at this level (1–22).
     #[arg(long)]
     pub zstd: Option<i32>,
+    /// `curve` shapes: `skip` counts them (motu traces triangles), `ribbons` tessellates flat
+    /// ribbons.
+    #[arg(long, value_enum, default_value = "skip")]
+    pub curves: CurvesArg,
     /// Warn about missing referenced files and skip their shapes instead of failing.
     #[arg(long)]
     pub allow_missing: bool,

@@ -29,6 +29,7 @@ pub struct ImportOptions {
     pub subset: Vec<String>,
     pub chunk_bytes: u64,
     pub parallel: bool,
+    pub curve_ribbons: bool,
 }
 
 #[derive(Debug, serde::Serialize)]
@@ -46,6 +47,7 @@ pub struct ImportSummary {
     pub blas_count: u64,
     pub warnings: usize,
     pub curves_not_converted: u64,
+    pub curve_ribbons: u64,
     pub unsupported_shapes: u64,
     pub skipped_shapes: u64,
     /// Peak resident memory of the importing process (Linux `VmHWM`), 0 if unknown.
@@ -102,6 +104,7 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
         allow_missing: o.allow_missing,
         pbrt_version: o.pbrt_version,
         parallel: o.parallel,
+        curve_ribbons: o.curve_ribbons,
     };
     let (scene, report) =
         motu_ingest::ingest_file(scene_path, &ingest_opts, Box::new(geometry.clone()))
@@ -260,7 +263,8 @@ fn summary(
         tlas_count: compiled.report.tlas_count,
         blas_count: compiled.report.blas_count,
         warnings: report.warnings.len(),
-        curves_not_converted: report.curves,
+        curves_not_converted: report.curves - report.curve_ribbons,
+        curve_ribbons: report.curve_ribbons,
         unsupported_shapes: report.unsupported_shapes,
         skipped_shapes: report.skipped_shapes,
         peak_rss_bytes: crate::cmd::demo::peak_rss_bytes().unwrap_or(0),

@@ -12,9 +12,11 @@
 //!   path stem; everything else is `main`.
 //! - Cameras are named by the stem of the file holding the `Camera` directive (`_2`, `_3`… for
 //!   repeats); the last one in the scene is the active one (pbrt's rule) and is listed first.
-//! - Curves are counted, not converted (no ribbon tessellation yet); unsupported shapes are
-//!   counted and warned about. `ReverseOrientation` does not matter: shading is two-sided.
+//! - Curves are counted and skipped, or (`curve_ribbons`) tessellated into flat ribbon meshes;
+//!   unsupported shapes are counted and warned about. `ReverseOrientation` does not matter:
+//!   shading is two-sided.
 
+mod curves;
 mod obj;
 mod pbrt;
 
@@ -44,6 +46,8 @@ pub struct IngestOptions {
     pub pbrt_version: Option<u32>,
     /// Parallel PLY loading (rayon) when true.
     pub parallel: bool,
+    /// Tessellate `curve` shapes into flat ribbons (otherwise they are counted and skipped).
+    pub curve_ribbons: bool,
 }
 
 /// What an import saw, for `motu import` and `motu info`.
@@ -55,6 +59,8 @@ pub struct IngestReport {
     pub shapes: u64,
     pub meshes: u64,
     pub curves: u64,
+    /// Curves turned into ribbon meshes (`curve_ribbons`).
+    pub curve_ribbons: u64,
     pub unsupported_shapes: u64,
     pub skipped_shapes: u64,
     pub degenerate_meshes: u64,

@@ -26,7 +26,13 @@ struct Adapter {
     camera_names: HashMap<String, u32>,
     cameras: Vec<Camera>,
     report: IngestReport,
+    curve_ribbons: bool,
+    /// Curve ribbons gathered per (prototype, material, element), flushed as meshes.
+    curve_meshes: HashMap<(PrototypeId, MaterialId, ElementId), MeshData>,
 }
+
+/// Ribbon triangles gathered into one mesh before it is stored.
+const CURVE_MESH_TRIANGLES: usize = 1 << 20;
 
 fn mat4(m: &pbrt_import::Mat4) -> Mat4 {
     Mat4::from_cols_array(&m.to_cols_array())
@@ -100,6 +106,37 @@ impl Adapter {
     }
 }
 
+impl Adapter {
+    /// Stores gathered curve ribbons: one group, or all of them (`None`).
+    fn flush_curves(
+        &mut self,
+        only: Option<(PrototypeId, MaterialId, ElementId)>,
+    ) -> Result<(), SinkError> {
+        let keys: Vec<_> = match only {
+            Some(k) => vec![k],
+            None => {
+                let mut k: Vec<_> = self.curve_meshes.keys().copied().collect();
+                k.sort_unstable(); // deterministic mesh ids
+                k
+            }
+        };
+        for key in keys {
+            let Some(data) = self.curve_meshes.remove(&key) else {
+                continue;
+            };
+            if data.indices.is_empty() {
+                continue;
+            }
+            let (proto, material, element) = key;
+            self.b
+                .add_mesh(proto, "curves", material, element, &data)
+                .map_err(sink_err)?;
+            self.report.meshes += 1;
+        }
+        Ok(())
+    }
+}
+
 impl SceneSink for Adapter {
     fn file_enter(&mut self, e: &FileEvent<'_>) -> Result<(), SinkError> {
         self.files.insert(e.file, e.path.to_path_buf());
@@ -115,11 +152,26 @@ impl SceneSink for Adapter {
 
     fn shape(&mut self, s: ShapeEvent) -> Result<(), SinkError> {
         self.report.shapes += 1;
+        let is_curve = matches!(s.geometry, Geometry::Curve(_));
         let mesh = match s.geometry {
             Geometry::Mesh(m) => m,
-            Geometry::Curve(_) => {
+            Geometry::Curve(c) => {
                 self.report.curves += 1;
-                return Ok(());
+                if !self.curve_ribbons {
+                    return Ok(());
+                }
+                match crate::curves::ribbon(&c) {
+                    Some(m) => {
+                        self.report.curve_ribbons += 1;
+                        pbrt_import::Mesh {
+                            positions: m.positions,
+                            normals: None,
+                            uvs: None,
+                            indices: m.indices,
+                        }
+                    }
+                    None => return Ok(()),
+                }
             }
             Geometry::Unsupported => {
                 self.report.unsupported_shapes += 1;
@@ -167,6 +219,21 @@ impl SceneSink for Adapter {
             Some(o) => self.prototype(o, "object", s.element)?,
             None => Scene::ROOT,
         };
+        if is_curve {
+            // Ribbons of one prototype, material and element share meshes: one mesh per curve
+            // would cost a mesh record and a BLAS geometry per ten triangles.
+            let acc = self
+                .curve_meshes
+                .entry((proto, material, element))
+                .or_default();
+            let base = acc.positions.len() as u32;
+            acc.positions.extend_from_slice(&data.positions);
+            acc.indices.extend(data.indices.iter().map(|i| i + base));
+            if acc.triangle_count() >= CURVE_MESH_TRIANGLES {
+                self.flush_curves(Some((proto, material, element)))?;
+            }
+            return Ok(());
+        }
         let name = match &s.source_path {
             Some(p) => p
                 .file_stem()
@@ -331,8 +398,20 @@ fn ingest_pbrt_with(
         camera_names: HashMap::new(),
         cameras: Vec::new(),
         report: IngestReport::default(),
+        curve_ribbons: options.curve_ribbons,
+        curve_meshes: HashMap::new(),
     };
     let stats = pbrt_import::parse_file(path, &parse_options, &mut a)?;
+    a.flush_curves(None).map_err(|e| IngestError::Scene {
+        at: path.display().to_string(),
+        source: motu_scene::SceneError::Store(e.0.to_string()),
+    })?;
+    let skipped_curves = a.report.curves - a.report.curve_ribbons;
+    if skipped_curves > 0 {
+        a.warn(format!(
+            "{skipped_curves} curve shapes counted but not converted (import with --curves ribbons to tessellate them)"
+        ));
+    }
     a.report.text_bytes = stats.text_bytes;
     a.report.ply_bytes = stats.ply_bytes;
     for m in &stats.missing {

@@ -79,6 +79,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         subset: Vec::new(),
         chunk_bytes: 64 << 20,
         parallel: true,
+        curve_ribbons: false,
     };
     let s = pipeline::import(&summary.scene_path, &pkg, &opts)?;
     step(

@@ -42,6 +42,7 @@ pub fn run(a: ImportArgs) -> anyhow::Result<()> {
         subset: a.subset.clone(),
         chunk_bytes: a.chunk_size,
         parallel: a.threads != Some(1),
+        curve_ribbons: a.curves == crate::cli::CurvesArg::Ribbons,
     };
     let s = pipeline::import(&a.scene, &a.output, &o)?;
     if a.json {
@@ -64,7 +65,7 @@ pub fn run(a: ImportArgs) -> anyhow::Result<()> {
         );
         if s.curves_not_converted > 0 {
             println!(
-                "note: {} curve shapes were counted but not converted to triangles",
+                "note: {} curve shapes were counted but not converted to triangles (--curves ribbons tessellates them)",
                 s.curves_not_converted
             );
         }
