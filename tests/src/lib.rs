@@ -160,3 +160,54 @@ fn tempfile_dir() -> PathBuf {
     std::fs::create_dir_all(&dir).expect("profile dir");
     dir
 }
+
+/// False (with a loud line) when no ray-tracing device exists and the run does not require one
+/// (`MOTU_REQUIRE_GPU`, set by CI, turns that into a failure).
+pub fn gpu_available() -> bool {
+    let out = motu(&["devices", "--json"]);
+    let ok = out.status.success()
+        && String::from_utf8_lossy(&out.stdout).contains("\"ray_pipeline\": true");
+    if !ok {
+        assert!(
+            std::env::var_os("MOTU_REQUIRE_GPU").is_none(),
+            "MOTU_REQUIRE_GPU is set but no ray-tracing device was found"
+        );
+        eprintln!("SKIPPED: no Vulkan ray-tracing device");
+    }
+    ok
+}
+
+/// Whether some device has ray queries (the `query` backend).
+pub fn has_ray_query() -> bool {
+    String::from_utf8_lossy(&motu(&["devices", "--json"]).stdout).contains("\"ray_query\": true")
+}
+
+/// `motu import SCENE -o PKG EXTRA...`, asserting success.
+pub fn import(scene: &Path, pkg: &Path, extra: &[&str]) {
+    let mut args = vec!["import", s(scene), "-o", s(pkg)];
+    args.extend(extra);
+    motu_ok(&args);
+}
+
+/// `motu render` with `backend`, writing the AOV to `aov` (PNG and stats JSON beside it);
+/// returns the stats.
+pub fn render(pkg: &Path, backend: &str, aov: &Path, extra: &[&str]) -> serde_json::Value {
+    let stats = aov.with_extension("json");
+    let png = aov.with_extension("png");
+    let mut args = vec![
+        "render",
+        s(pkg),
+        "-o",
+        s(&png),
+        "--backend",
+        backend,
+        "--aov",
+        s(aov),
+        "--stats",
+        s(&stats),
+    ];
+    args.extend(extra);
+    motu_ok(&args);
+    serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats written"))
+        .expect("stats JSON")
+}

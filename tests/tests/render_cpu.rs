@@ -1,33 +1,11 @@
 //! The CPU oracle end to end (issue 5): differently compiled packages of one scene render the
 //! same hits, pixel by pixel.
 
-use motu_tests::{motu, motu_json, motu_ok, s, shared_scene};
+use motu_tests::{import, motu, motu_json, motu_ok, render, s, shared_scene};
 use std::path::Path;
 
-fn import(scene: &Path, pkg: &Path, extra: &[&str]) {
-    let mut args = vec!["import", s(scene), "-o", s(pkg)];
-    args.extend(extra);
-    motu_ok(&args);
-}
-
 fn render_aov(pkg: &Path, aov: &Path, extra: &[&str]) -> serde_json::Value {
-    let png = aov.with_extension("png");
-    let stats = aov.with_extension("json");
-    let mut args = vec![
-        "render",
-        s(pkg),
-        "-o",
-        s(&png),
-        "--backend",
-        "cpu",
-        "--aov",
-        s(aov),
-        "--stats",
-        s(&stats),
-    ];
-    args.extend(extra);
-    motu_ok(&args);
-    serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap()
+    render(pkg, "cpu", aov, extra)
 }
 
 #[test]

@@ -1,47 +1,8 @@
 //! The GPU backends against the CPU oracle on real packages (issue 7), on whatever Vulkan
 //! device exists (lavapipe in CI, with validation on via MOTU_VALIDATION=1 from tools/test.sh).
 
-use motu_tests::{motu, motu_ok, s, shared_scene};
+use motu_tests::{gpu_available, has_ray_query, motu, motu_ok, render, s, shared_scene};
 use std::path::Path;
-
-/// False (with a loud line) when no ray-tracing device exists and the run does not require one.
-fn gpu_available() -> bool {
-    let out = motu(&["devices", "--json"]);
-    let ok = out.status.success()
-        && String::from_utf8_lossy(&out.stdout).contains("\"ray_pipeline\": true");
-    if !ok {
-        assert!(
-            std::env::var_os("MOTU_REQUIRE_GPU").is_none(),
-            "MOTU_REQUIRE_GPU is set but no ray-tracing device was found"
-        );
-        eprintln!("SKIPPED: no Vulkan ray-tracing device");
-    }
-    ok
-}
-
-fn has_ray_query() -> bool {
-    String::from_utf8_lossy(&motu(&["devices", "--json"]).stdout).contains("\"ray_query\": true")
-}
-
-fn render(pkg: &Path, backend: &str, out: &Path, extra: &[&str]) -> serde_json::Value {
-    let stats = out.with_extension("json");
-    let png = out.with_extension("png");
-    let mut args = vec![
-        "render",
-        s(pkg),
-        "-o",
-        s(&png),
-        "--backend",
-        backend,
-        "--aov",
-        s(out),
-        "--stats",
-        s(&stats),
-    ];
-    args.extend(extra);
-    motu_ok(&args);
-    serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap()
-}
 
 /// Every backend renders `pkg` the same way (and equal to `reference`, if given).
 fn all_backends_agree(dir: &Path, name: &str, pkg: &Path, extra: &[&str]) -> std::path::PathBuf {

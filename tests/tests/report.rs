@@ -80,13 +80,7 @@ fn report_json_compares_single_and_multi_level_and_suggests_a_subset() {
 
 #[test]
 fn measure_builds_and_compacts_on_the_device() {
-    let out = motu_tests::motu(&["devices", "--json"]);
-    if !String::from_utf8_lossy(&out.stdout).contains("\"ray_pipeline\": true") {
-        assert!(
-            std::env::var_os("MOTU_REQUIRE_GPU").is_none(),
-            "MOTU_REQUIRE_GPU set but no ray-tracing device"
-        );
-        eprintln!("SKIPPED: no Vulkan ray-tracing device");
+    if !motu_tests::gpu_available() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
