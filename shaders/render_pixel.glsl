@@ -166,6 +166,7 @@ void render_stream_item(uint i) {
     g_streaming = true;
     g_incomplete = false;
     g_empty_t = T_INFINITY;
+    g_t_min = 0.0;
     g_mark = 2u * s.stamp + (guard ? 0u : 1u);
     if (!guard) {
         render_pixel_impl(uvec2(x, y));

@@ -1228,21 +1228,24 @@ fn cameras(terrain: &Terrain) -> Vec<(&'static str, CameraSpec)> {
                     target: ground(1800.0, -700.0, 2.0),
                     fov_deg: 45.0,
                 },
-                // Close-ups, as Moana's are: looking down at a few metres of ground, so only
-                // a small part of the island is visible (what out-of-core streaming needs).
+                // Close-ups, as Moana's are: each sees a small part of the island (what
+                // out-of-core streaming needs). grassCam and rootsCam look down at a few metres
+                // of ground; palmsCam looks down on the hills near the centre from above the
+                // palms, close enough to the scene's centre that a dolly towards it (`motu
+                // render --frames`) stays above ground.
                 "grassCam" => CameraSpec {
                     eye: ground(-900.0, 600.0, 4.0),
                     target: ground(-903.0, 597.0, 0.0),
                     fov_deg: 50.0,
                 },
                 "palmsCam" => CameraSpec {
-                    eye: ground(600.0, 1400.0, 150.0),
-                    target: ground(450.0, 1100.0, 5.0),
-                    fov_deg: 12.0,
+                    eye: ground(150.0, 250.0, 120.0),
+                    target: ground(100.0, 170.0, 0.0),
+                    fov_deg: 30.0,
                 },
                 _ => CameraSpec {
                     eye: ground(-300.0, 1200.0, 3.0),
-                    target: ground(-302.0, 1197.5, 0.3),
+                    target: ground(-301.0, 1198.5, 0.0),
                     fov_deg: 60.0,
                 },
             };
@@ -1306,21 +1309,21 @@ fn write_element_file(
         s += &format!("Include \"{}\"\n", a.file);
     }
     s += &format!("AttributeBegin\nNamedMaterial \"{}\"\n", e.material);
-    let terrain = e
-        .inline_files
-        .iter()
-        .map(|(file, _)| format!("Include \"{file}\"\n"))
-        .chain(
-            e.ply_patches
-                .iter()
-                .map(|(file, _)| format!("Shape \"plymesh\" \"string filename\" [ \"{file}\" ]\n")),
-        );
+    let terrain =
+        e.inline_files
+            .iter()
+            .map(|(file, _)| format!("Include \"{file}\"\n"))
+            .chain(e.ply_patches.iter().map(|(file, _)| {
+                format!("Shape \"plymesh\" \"string filename\" [ \"{file}\" ]\n")
+            }));
     let mut terrain_instances = 0u64;
     for (n, shapes) in terrain.enumerate() {
         if o.terrain_objects {
             // One object per geometry file, instanced once in place (the CTM is the identity).
             let object = format!("{}_terrain_{n:05}", e.name);
-            s += &format!("ObjectBegin \"{object}\"\n{shapes}ObjectEnd\nObjectInstance \"{object}\"\n");
+            s += &format!(
+                "ObjectBegin \"{object}\"\n{shapes}ObjectEnd\nObjectInstance \"{object}\"\n"
+            );
             terrain_instances += 1;
         } else {
             s += &shapes;
@@ -1700,6 +1703,65 @@ mod tests {
         let total: u64 = inline.iter().chain(&ply).map(Patch::triangles).sum();
         assert!((60_000..100_000).contains(&total), "{total}");
         assert!(!ply.is_empty() && !inline.is_empty());
+    }
+
+    #[test]
+    fn terrain_objects_instance_each_patch_once_and_counts_still_match() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let plain = tempfile::tempdir().expect("tempdir");
+        let o = tiny(0.0002);
+        let a = gen(&GenKind::Island(o.clone()), plain.path(), &mut |_| {}).expect("plain");
+        let s = gen(
+            &GenKind::Island(IslandOptions {
+                terrain_objects: true,
+                ..o.clone()
+            }),
+            dir.path(),
+            &mut |_| {},
+        )
+        .expect("objects");
+        let p = check_scene(&s.scene_path);
+        assert!(!p.nested, "still single-level pbrt-v3");
+        assert_eq!(p.object_instances, s.object_instances);
+        assert_eq!(p.flattened_instances, s.flattened_instances);
+        assert_eq!(p.unique_triangles, s.unique_triangles);
+        assert_eq!(p.instanced_triangles, s.instanced_triangles);
+        // One instance per terrain geometry file, the same triangles.
+        let files: usize = plan(&o)
+            .iter()
+            .map(|e| e.inline_files.len() + e.ply_patches.len())
+            .sum();
+        assert!(files > 8, "{files}");
+        assert_eq!(s.object_instances, a.object_instances + files as u64);
+        assert_eq!(s.unique_triangles, a.unique_triangles);
+        assert_eq!(s.instanced_triangles, a.instanced_triangles);
+        let beach =
+            std::fs::read_to_string(dir.path().join("isBeach/isBeach.pbrt")).unwrap_or_default();
+        assert!(
+            beach.contains("ObjectBegin \"isBeach_terrain_00000\""),
+            "{beach}"
+        );
+    }
+
+    #[test]
+    fn close_up_cameras_look_down_at_the_ground_nearby() {
+        let terrain = Terrain::new(1);
+        for (name, c) in cameras(&terrain) {
+            if !["grassCam", "rootsCam", "palmsCam"].contains(&name) {
+                continue;
+            }
+            let d = [
+                c.target[0] - c.eye[0],
+                c.target[1] - c.eye[1],
+                c.target[2] - c.eye[2],
+            ];
+            let horizontal = (d[0] * d[0] + d[2] * d[2]).sqrt();
+            // Pitched down by more than half the field of view: no ray reaches the horizon.
+            let pitch_down = (-d[1]).atan2(horizontal).to_degrees();
+            assert!(pitch_down > 0.5 * c.fov_deg + 10.0, "{name}: {pitch_down}");
+            let above = c.eye[1] - terrain.height(c.eye[0], c.eye[2]).max(0.0);
+            assert!((1.0..=150.0).contains(&above), "{name}: {above}");
+        }
     }
 
     #[test]

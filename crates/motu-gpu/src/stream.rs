@@ -13,35 +13,49 @@
 //!
 //! # Traversal (both backends, `traverse.glsl`)
 //! Every walked TLAS and the BLAS of every closest hit are stamped visible (`atomicMax` of a
-//! per-pass stamp). A ray meeting an empty instance in front of its best hit stamps it, becomes
-//! *incomplete* (the paper's `trav_valid = false`) and keeps walking only to discover the other
-//! empty structures the next pass needs: it skips shading and shadow rays and writes nothing;
-//! its pixel goes on the next pass's list. Resident triangle BLASes are walked by the hardware
-//! without a shader callback, so only the one hit is stamped: a resident BLAS that rays cross
-//! without hitting ages in the LRU order and may be evicted under pressure, after which a ray
-//! meeting its proxy in front of its hit builds it again (one extra pass, never a wrong pixel).
+//! per-pass stamp). A ray meeting an empty instance in front of its best hit stamps the nearest
+//! such instance *needed* (and counts a request for it), becomes *incomplete* (the paper's
+//! `trav_valid = false`) and keeps walking only to discover prefetch candidates: it skips
+//! shading and shadow rays, stamps its best hit so far *needed* (a pin), records where it
+//! stopped and writes nothing; its pixel goes on the next pass's list. An incomplete ray has no
+//! hit before its nearest empty instance (none in front of it, no resident one hit), so its
+//! next pass *resumes* there (per-pixel `t_min`, primary and shadow ray): what it already
+//! passed may be evicted without costing it anything, and each pass moves it forward. Resident
+//! triangle BLASes are walked by the hardware without a shader callback, so only the one hit
+//! is stamped: a resident BLAS that rays cross without hitting ages in the LRU order.
 //!
 //! # Build–traverse loop ([`StreamingRenderer::render_frame`])
 //! Pass 1 traces every pixel plus a sparse *guard band* of primary rays around the image.
-//! After each pass the host reads the stamps and the incomplete-pixel list, streams the meshes
-//! of the visible-but-empty BLASes through the staging ring, builds them (batched under the
-//! scratch budget and compacted, the code `GpuScene` uses), builds newly visible TLASes and
-//! rebuilds each resident TLAS whose instance set changed together with its proxy BLAS (a TLAS
-//! rebuild costs one pass over its instances — small next to BLAS builds over triangles, so
-//! rebuilding beats tracking refits), then re-shoots only the incomplete pixels. The loop ends
-//! when no pixel is incomplete or after `max_passes` (reported; remaining pixels are misses).
-//! Structures the guard band saw are built after the frame as a prefetch (evicting only what
-//! this frame did not see; skipped when that is not enough), and everything stays
-//! resident until evicted, so on a camera path later frames mostly need one pass.
+//! After each pass the host reads the stamps, the request counts and the incomplete-pixel
+//! list, and builds the needed-but-empty structures **most requested first**: meshes stream
+//! through the staging ring, BLASes build in groups that halve when the budget refuses them
+//! (groups use free memory only; single builds evict for room), uncompacted when compaction
+//! saves nothing or does not fit. What does not fit is *deferred*: its pixels stay incomplete
+//! and the next pass, once the pixels now served are complete, builds it. Then each resident
+//! TLAS whose instance set changed is rebuilt with its proxy BLAS (the old one freed first, so
+//! the root's rebuild never needs two roots' memory; a TLAS rebuild costs one pass over its
+//! instances, small next to BLAS builds over triangles), and only the incomplete pixels are
+//! re-shot. The loop ends when no pixel is incomplete or after `max_passes` (reported in
+//! [`FrameStreamStats::complete`] and `StreamTotals::incomplete_frames`; remaining pixels are
+//! misses, magenta in colour). Structures the guard band saw are built after the frame as a
+//! prefetch (evicting only what this frame did not see; what does not fit is skipped), and
+//! everything stays resident until evicted, so on a camera path later frames mostly need one
+//! pass.
 //!
-//! # Eviction
-//! Allocations go through `motu-alloc`, whose blocks never exceed the budget. When one fails,
-//! the least-recently-visible resident structures (BLAS with its meshes, or child TLAS) are
-//! evicted and it is retried. Structures visible in the current frame are pinned; if nothing
-//! else is left, the pins shrink to what the latest pass saw (pixels finished earlier in the
-//! frame do not need theirs again). If the latest pass's own set does not fit, the frame fails
-//! with [`GpuError::Budget`] naming the bytes: motu does not silently render a coarser image.
-//! Evicting a BLAS rebuilds its resident parents before the next trace.
+//! # Eviction and the budget
+//! Allocations go through `motu-alloc`, whose blocks never exceed the budget (host-visible
+//! staging counts against it on unified-memory devices; staging and scratch are each capped
+//! at an eighth of it). When one fails, the least-recently-visible unpinned structures (BLAS
+//! with the meshes only it uses, or child TLAS) are evicted and it is retried. Pinned in a
+//! build step: what the latest pass's incomplete pixels need (their best hits, walked TLASes)
+//! and what the step built; pixels completed earlier in the frame are final, so what only they
+//! used may go. When not even one structure fits next to those pins, the pins go too (their
+//! pixels find them again); when a TLAS rebuild does not fit, the step's least requested builds
+//! are given back. Only when a single structure does not fit next to the resident skeleton
+//! (tables, PI BLASes, root TLAS and proxies, frame buffers, trace pipeline, staging ring) does
+//! the frame fail, with [`GpuError::Budget`] naming the structure and the bytes: motu does not
+//! silently render a coarser image. Evicting a BLAS rebuilds its resident parents before the
+//! next trace.
 
 use std::collections::BTreeSet;
 use std::time::Instant;
@@ -95,7 +109,8 @@ struct StreamParams {
     blas_count: u32,
     /// u32 per BLAS, then per TLAS: rays of the pass that need it (build priority).
     requests: u64,
-    _pad2: u64,
+    /// `[f32; 2]` per pixel: where its primary and shadow rays resume next pass.
+    resume: u64,
 }
 
 /// How a [`StreamingRenderer`] works.
@@ -238,6 +253,7 @@ struct FrameBuffers {
     stats: HeapBuffer,
     incomplete: HeapBuffer,
     requests: HeapBuffer,
+    resume: HeapBuffer,
     pixel_list: HeapBuffer,
     readback: HeapBuffer,
 }
@@ -252,6 +268,7 @@ impl FrameBuffers {
             self.stats,
             self.incomplete,
             self.requests,
+            self.resume,
             self.pixel_list,
             self.readback,
         ] {
@@ -303,6 +320,8 @@ pub struct StreamingRenderer<'a> {
     pinned: Vec<bool>,
     /// Items the current build step made resident, in build (priority) order.
     built_now: Vec<u32>,
+    /// BLASes per build group to try first (see `build_blas_queue`).
+    group_hint: usize,
     stamp: u32,
     frame_first_stamp: u32,
     /// Set when a failed build step left the root TLAS referencing freed memory.
@@ -517,6 +536,7 @@ impl<'a> StreamingRenderer<'a> {
             dirty: BTreeSet::new(),
             pinned: vec![false; nb + nt],
             built_now: Vec::new(),
+            group_hint: 16,
             stamp: 0,
             frame_first_stamp: 1,
             poisoned: None,
@@ -709,12 +729,23 @@ impl<'a> StreamingRenderer<'a> {
         Ok(built.into_iter().map(|(k, a)| (order[k], a)).collect())
     }
 
-    /// (Re)builds TLASes `ids` with their proxies from the current residency; the old ones are
-    /// released after. On failure the old ones stay.
+    /// (Re)builds TLASes `ids` with their proxies from the current residency. The old ones are
+    /// released first (old and new together would double the largest transient of a small
+    /// budget, the root's); on failure they stay absent and dirty for the caller to retry with
+    /// less resident (never traced: the caller rebuilds or poisons before the next trace).
     fn build_tlases(&mut self, ids: &[u32]) -> Result<()> {
         use bytemuck::cast_slice;
         let ctx = self.ctx.clone();
         let view = self.view;
+        for &t in ids {
+            if let Some(old) = self.tlas[t as usize].take() {
+                old.accel.release(&mut self.heap);
+                if let Some(p) = old.proxy {
+                    p.release(&mut self.heap);
+                }
+                self.dirty.insert(t);
+            }
+        }
         // 1. Proxy BLASes: boxes of the non-resident triangle instances, compacted; their PI
         // slots are rewritten to match.
         let mut proxy_boxes: Vec<[f32; 6]> = Vec::new();
@@ -1013,11 +1044,14 @@ impl<'a> StreamingRenderer<'a> {
                     self.dirty.insert(p);
                 }
             }
-        } else if let Some(t) = self.tlas[i - nb].take() {
-            t.accel.release(&mut self.heap);
-            if let Some(p) = t.proxy {
-                p.release(&mut self.heap);
+        } else {
+            if let Some(t) = self.tlas[i - nb].take() {
+                t.accel.release(&mut self.heap);
+                if let Some(p) = t.proxy {
+                    p.release(&mut self.heap);
+                }
             }
+            // Also when a failed rebuild left it absent: it is no longer wanted.
             self.dirty.remove(&((i - nb) as u32));
         }
     }
@@ -1090,14 +1124,15 @@ impl<'a> StreamingRenderer<'a> {
                         continue;
                     }
                     let rec = self.view.meshes[m];
-                    let g =
-                        self.maybe_evicting(evict, |s| MeshGpu::alloc(&mut s.heap, m, &rec))?;
+                    let g = self.maybe_evicting(evict, |s| MeshGpu::alloc(&mut s.heap, m, &rec))?;
                     let ctx = self.ctx.clone();
                     let source = self.source;
                     let up = self.up_mut()?;
                     let bytes = match g.upload(&ctx, up, source, m) {
                         Ok(n) => n,
                         Err(e) => {
+                            // Queued copies into it must land before it is destroyed.
+                            let _ = up.flush(&ctx);
                             self.heap.free(g.buffer);
                             return Err(e);
                         }
@@ -1109,6 +1144,13 @@ impl<'a> StreamingRenderer<'a> {
             let ctx = self.ctx.clone();
             self.up_mut()?.flush(&ctx)
         })();
+        if loaded.is_err() {
+            // Copies still queued for the group's meshes must land before any is freed.
+            let ctx = self.ctx.clone();
+            if let Some(up) = self.up.as_mut() {
+                up.flush(&ctx)?;
+            }
+        }
         let built = loaded.and_then(|()| {
             let ids: Vec<usize> = group.iter().map(|&b| b as usize).collect();
             self.maybe_evicting(evict, |s| s.build_blas_set(&ids, 0))
@@ -1167,7 +1209,9 @@ impl<'a> StreamingRenderer<'a> {
     /// numbers.
     fn build_blas_queue(&mut self, queue: &[u32], must_progress: bool) -> Result<usize> {
         let mut i = 0;
-        let mut chunk = 16usize;
+        // Group size carries over between steps: a full budget keeps failing large groups,
+        // and each failure streams their meshes for nothing.
+        let mut chunk = self.group_hint.clamp(1, 64);
         let mut relaxed = false;
         while i < queue.len() {
             let group = &queue[i..(i + chunk).min(queue.len())];
@@ -1175,17 +1219,21 @@ impl<'a> StreamingRenderer<'a> {
                 Ok(()) => {
                     i += group.len();
                     chunk = (chunk * 2).min(64);
+                    self.group_hint = chunk;
                 }
-                Err(GpuError::Budget(_)) if group.len() > 1 => chunk = group.len() / 2,
+                Err(GpuError::Budget(_)) if group.len() > 1 => {
+                    chunk = group.len() / 2;
+                    self.group_hint = chunk;
+                }
                 Err(GpuError::Budget(msg)) => {
                     if !self.built_now.is_empty() || !must_progress {
                         return Ok(queue.len() - i);
                     }
                     if !relaxed {
                         // Nothing fits next to what the incomplete pixels hold: let those go
-                        // (their pixels re-demand them later) rather than fail.
+                        // (their pixels find them again later) rather than fail.
                         relaxed = true;
-                        self.pinned.iter_mut().for_each(|p| *p = false);
+                        self.unpin_pass_pins();
                         continue;
                     }
                     return Err(self.does_not_fit(queue[i], &msg));
@@ -1236,15 +1284,12 @@ impl<'a> StreamingRenderer<'a> {
             let ids: Vec<u32> = self.dirty.iter().copied().collect();
             let rebuilt = ids.len() as u32;
             match self.with_eviction(|s| {
-                // Eviction may have removed some: rebuild only what is still resident.
-                let now: Vec<u32> = ids
-                    .iter()
-                    .copied()
-                    .filter(|&t| s.tlas[t as usize].is_some())
-                    .collect();
+                // Eviction may have given some up (a child TLAS): rebuild what is still dirty.
+                let now: Vec<u32> = s.dirty.iter().copied().collect();
                 s.build_tlases(&now)
             }) {
                 Ok(()) => self.frame_stats.tlas_rebuilt += rebuilt,
+                Err(GpuError::Budget(_)) if self.unpin_pass_pins() => {}
                 Err(GpuError::Budget(msg)) => {
                     let Some(last) = self.built_now.pop() else {
                         let report = self.heap.report();
@@ -1269,6 +1314,20 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         Ok(())
+    }
+
+    /// Drops the pins that are not this step's builds (the incomplete pixels' best hits: they
+    /// are found again later). Returns false if there were none.
+    fn unpin_pass_pins(&mut self) -> bool {
+        let mut keep = vec![false; self.pinned.len()];
+        for &i in &self.built_now {
+            if let Some(k) = keep.get_mut(i as usize) {
+                *k = true;
+            }
+        }
+        let changed = self.pinned.iter().zip(&keep).any(|(&p, &k)| p && !k);
+        self.pinned = keep;
+        changed
     }
 
     /// Makes `demand` resident (streams meshes, builds BLASes, builds child TLASes), most
@@ -1372,9 +1431,7 @@ impl<'a> StreamingRenderer<'a> {
                     "streaming: {what} do not fit under the budget of {} bytes next to the \
                      resident skeleton ({} bytes) with every structure evicted ({} bytes in \
                      use); raise --vram-budget or render smaller images ({msg})",
-                    report.budget_bytes,
-                    self.totals.skeleton_bytes,
-                    report.budget_in_use_bytes
+                    report.budget_bytes, self.totals.skeleton_bytes, report.budget_in_use_bytes
                 ))
             }
             e => e,
@@ -1460,6 +1517,18 @@ impl<'a> StreamingRenderer<'a> {
                 alloc_frame_buffers(&mut s.heap, pixels, guard.len() as u64, nitems, &params)
             })
             .map_err(|e| self.skeleton_error("the frame buffers", e))?;
+        // Making room for the frame may have evicted BLASes that TLASes still reference.
+        if !self.dirty.is_empty() {
+            self.built_now.clear();
+            if let Err(e) = self
+                .rebuild_dirty()
+                .and_then(|()| self.upload_tlas_addresses())
+            {
+                fb.release(&mut self.heap);
+                self.quarantine_after_failure(&e);
+                return Err(e);
+            }
+        }
         let result = self.run_passes(&fb, w, h, &guard);
         let out = match result {
             Ok(r) => r,
@@ -1619,7 +1688,7 @@ impl<'a> StreamingRenderer<'a> {
                 list_count: list.len() as u32,
                 blas_count: nb as u32,
                 requests: fb.requests.device_address()?.0,
-                ..Default::default()
+                resume: fb.resume.device_address()?.0,
             };
             fb.stream.write(0, std::slice::from_ref(&sp))?;
             let mut addresses = self.addresses;
@@ -1649,6 +1718,7 @@ impl<'a> StreamingRenderer<'a> {
             let mut rec = self.ctx.record("stream pass")?;
             if first {
                 rec.fill_buffer(&fb.stats, 0, (STAT_WORDS * 4) as u64, 0)?;
+                rec.fill_buffer(&fb.resume, 0, pixels * 8, 0)?;
             }
             rec.fill_buffer(&fb.incomplete, 0, 4, 0)?;
             rec.fill_buffer(&fb.requests, 0, stamps_bytes.max(4), 0)?;
@@ -1864,7 +1934,7 @@ fn alloc_frame_buffers(
     let stamps_bytes = (items * 4).div_ceil(16) * 16;
     let inc_bytes = 4 + 4 * pixels;
     let readback_bytes = (2 * stamps_bytes + inc_bytes).div_ceil(16) * 16 + pixels * 20 + 16;
-    let specs: [(&str, u64, BufferUsage, AllocKind, MemoryClass); 9] = [
+    let specs: [(&str, u64, BufferUsage, AllocKind, MemoryClass); 10] = [
         (
             "frame-params",
             std::mem::size_of::<crate::render::FrameParams>() as u64,
@@ -1915,6 +1985,13 @@ fn alloc_frame_buffers(
             MemoryClass::DeviceLocal,
         ),
         (
+            "resume",
+            pixels * 8,
+            dev | BufferUsage::TRANSFER_DST,
+            AllocKind::Other,
+            MemoryClass::DeviceLocal,
+        ),
+        (
             "pixel-list",
             4 * pixels.max(guard_count).max(1),
             host,
@@ -1953,6 +2030,7 @@ fn alloc_frame_buffers(
         stats: next()?,
         incomplete: next()?,
         requests: next()?,
+        resume: next()?,
         pixel_list: next()?,
         readback: next()?,
     })

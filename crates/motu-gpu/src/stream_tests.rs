@@ -255,3 +255,43 @@ fn camera_path_reuses_last_frames_structures_and_evicts_under_the_budget() {
     assert!(sr.alloc_report().peak_block_bytes <= budget);
     assert_no_validation_errors(&ctx);
 }
+
+/// Regression (issue 8): a pass whose requests exceed what is free built nothing and failed
+/// with "0 resident" on a generated island. Now a budget of 1/16 of the full build still
+/// completes the frame: each pass builds what fits, most requested first, evicting what only
+/// already-completed pixels used, and the image equals the full build's.
+#[test]
+fn a_frame_under_a_sixteenth_of_the_full_build_evicts_mid_frame_and_completes() {
+    let Some(ctx) = context_or_skip("stream_pass_over_budget", Requirement::RayTracing) else {
+        return;
+    };
+    let h = field(10, 16, 30);
+    let blobs = Blobs(&h);
+    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
+    let budget = full_build_needs(&full) / 16;
+    let opts = ids_opts(backend(&ctx));
+    let cam = base_pose().params(SIZE, SIZE);
+    let reference = render(&ctx, &full, &cam, &opts).expect("full render");
+    let mut sr = StreamingRenderer::new(
+        &ctx,
+        h.view(),
+        &blobs,
+        &StreamOptions {
+            budget_bytes: budget,
+            ..Default::default()
+        },
+    )
+    .expect("streaming renderer (staging and scratch sized from the budget)");
+    let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
+    eprintln!("{}", serde_json::to_string(&st).unwrap_or_default());
+    assert!(st.complete, "{st:?}");
+    assert!(
+        st.evicted > 0,
+        "the frame's set does not fit at once: {st:?}"
+    );
+    assert!(st.vram_peak_bytes <= budget, "{st:?}");
+    let cmp =
+        motu_trace::compare(&reference.aov, &out.aov, motu_trace::DEFAULT_REL_EPS).expect("sizes");
+    assert!(cmp.fraction <= 0.001, "{} of {}", cmp.mismatched, cmp.total);
+    assert_no_validation_errors(&ctx);
+}
