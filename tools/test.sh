@@ -11,6 +11,8 @@ echo "== cargo fmt --check"
 cargo fmt --all -- --check
 echo "== cargo clippy -D warnings"
 cargo clippy --workspace --all-targets --locked -- -D warnings
+echo "== fuzz smoke (parser, PLY reader, package reader; 30 s each)"
+FUZZ_SECONDS=${FUZZ_SECONDS:-30} bash tools/fuzz-smoke.sh
 echo "== cargo test (unit, integration, doc; benches run once each in test mode)"
 cargo test --workspace --all-targets --locked
 cargo test --workspace --doc --locked
