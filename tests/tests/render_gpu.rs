@@ -97,6 +97,13 @@ fn sphereflake_and_lod_grid_agree() {
         "3",
     ]);
     all_backends_agree(dir.path(), "lod0", &lod, &["--width", "80", "--lod", "0"]);
+    // LOD chosen by size (not forced), with stochastic dithering: the same hash on every backend.
+    all_backends_agree(
+        dir.path(),
+        "lod-dither",
+        &lod,
+        &["--width", "80", "--lod-stochastic", "--lod-r-max", "64"],
+    );
 }
 
 #[test]

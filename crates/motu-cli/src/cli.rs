@@ -295,6 +295,16 @@ pub struct RenderArgs {
     /// Force every LOD selector to this level.
     #[arg(long)]
     pub lod: Option<u32>,
+    /// LOD rule: projected radius (pixels) at and above which the finest level is used; one
+    /// level coarser per halving.
+    #[arg(long, default_value_t = 256.0)]
+    pub lod_r_max: f32,
+    /// Levels added for shadow rays (when they do not take the primary hit's level).
+    #[arg(long, default_value_t = 1.0)]
+    pub shadow_lod_bias: f32,
+    /// Dither between the two nearest LOD levels (hashed per pixel) instead of rounding down.
+    #[arg(long)]
+    pub lod_stochastic: bool,
     /// Traversal stack entries per ray.
     #[arg(long, default_value_t = 16)]
     pub stack_size: u32,

@@ -125,6 +125,9 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         stats: Some(stats_path.clone()),
         subset: Vec::new(),
         lod: None,
+        lod_r_max: 256.0,
+        shadow_lod_bias: 1.0,
+        lod_stochastic: false,
         stack_size: 16,
         device: None,
     };

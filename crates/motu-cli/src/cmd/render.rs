@@ -320,8 +320,13 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             .lod
             .map(|l| l as i32)
             .unwrap_or(motu_abi::lod::LOD_NOT_FORCED),
-        ..Default::default()
+        r_max_px: a.lod_r_max,
+        shadow_bias: a.shadow_lod_bias,
+        stochastic: u32::from(a.lod_stochastic),
     };
+    if !(a.lod_r_max > 0.0 && a.lod_r_max.is_finite()) || !(a.shadow_lod_bias >= 0.0) {
+        bail!("--lod-r-max must be a positive number of pixels and --shadow-lod-bias ≥ 0");
+    }
     let backend = match a.backend {
         Some(b) => b,
         None => match motu_gpu::list_devices() {
