@@ -324,7 +324,9 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         shadow_bias: a.shadow_lod_bias,
         stochastic: u32::from(a.lod_stochastic),
     };
-    if !(a.lod_r_max > 0.0 && a.lod_r_max.is_finite()) || !(a.shadow_lod_bias >= 0.0) {
+    let r_max_ok = a.lod_r_max.is_finite() && a.lod_r_max > 0.0;
+    let bias_ok = a.shadow_lod_bias.is_finite() && a.shadow_lod_bias >= 0.0;
+    if !r_max_ok || !bias_ok {
         bail!("--lod-r-max must be a positive number of pixels and --shadow-lod-bias ≥ 0");
     }
     let backend = match a.backend {
