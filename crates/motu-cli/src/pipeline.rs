@@ -100,7 +100,17 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
     let writer = PackageWriter::create(&first_target, writer_options(o))
         .with_context(|| format!("creating {}", first_target.display()))?;
     let geometry = PackageGeometry::new(writer);
+    // The bar's total: the scene text beside the entry file (an estimate: files there that the
+    // scene never includes count too, and PLY data is not in it).
+    let progress = crate::progress::Progress::bytes_of_total("parsing pbrt");
+    let total = scene_text_bytes(scene_path.parent().unwrap_or(Path::new(".")));
+    let bar = progress.clone();
     let ingest_opts = IngestOptions {
+        progress: Some(motu_ingest::ProgressFn(std::sync::Arc::new(
+            move |bytes, _files| {
+                bar.set(bytes, Some(total.max(bytes)));
+            },
+        ))),
         allow_missing: o.allow_missing,
         pbrt_version: o.pbrt_version,
         parallel: o.parallel,
@@ -109,6 +119,7 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
     let (scene, report) =
         motu_ingest::ingest_file(scene_path, &ingest_opts, Box::new(geometry.clone()))
             .with_context(|| format!("importing {}", scene_path.display()))?;
+    progress.finish();
     let parse_ms = t0.elapsed().as_secs_f64() * 1e3;
     tracing::info!(
         parse_ms,
@@ -394,6 +405,36 @@ pub fn element_stats(scene: &Scene) -> Vec<ElementMeta> {
             m
         })
         .collect()
+}
+
+/// Bytes of `.pbrt`/`.pbrt.gz` text under `dir` (bounded walk: 100k entries).
+fn scene_text_bytes(dir: &Path) -> u64 {
+    let mut total = 0u64;
+    let mut seen = 0u32;
+    let mut todo = vec![dir.to_path_buf()];
+    while let Some(d) = todo.pop() {
+        let Ok(entries) = std::fs::read_dir(&d) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            seen += 1;
+            if seen > 100_000 {
+                return total;
+            }
+            let p = e.path();
+            match e.file_type() {
+                Ok(t) if t.is_dir() => todo.push(p),
+                Ok(t) if t.is_file() => {
+                    let name = p.to_string_lossy();
+                    if name.ends_with(".pbrt") || name.ends_with(".pbrt.gz") {
+                        total += e.metadata().map_or(0, |m| m.len());
+                    }
+                }
+                _ => {}
+            }
+        }
+    }
+    total
 }
 
 /// Opens a package with a message that says what to do.

@@ -3,6 +3,7 @@
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::IsTerminal;
 
+#[derive(Clone)]
 pub struct Progress {
     bar: Option<ProgressBar>,
 }
@@ -10,15 +11,27 @@ pub struct Progress {
 impl Progress {
     /// A byte-counting bar, shown only when stderr is a terminal.
     pub fn bytes(label: &str) -> Self {
+        Self::with_template(
+            label,
+            "{msg} {bytes} {binary_bytes_per_sec} [{elapsed_precise}]",
+        )
+    }
+
+    /// A bar of bytes done out of a known (estimated) total.
+    pub fn bytes_of_total(label: &str) -> Self {
+        Self::with_template(
+            label,
+            "{msg} [{bar:30}] {bytes}/{total_bytes} {binary_bytes_per_sec} eta {eta}",
+        )
+    }
+
+    fn with_template(label: &str, template: &str) -> Self {
         if !std::io::stderr().is_terminal() {
             return Self { bar: None };
         }
         let bar = ProgressBar::new(0);
         bar.set_style(
-            ProgressStyle::with_template(
-                "{msg} {bytes} {binary_bytes_per_sec} [{elapsed_precise}]",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_bar()),
         );
         bar.set_message(label.to_string());
         Self { bar: Some(bar) }

@@ -39,8 +39,21 @@ pub enum IngestError {
     },
 }
 
+/// Called with (scene-text bytes entered so far, files entered so far) as the parse reaches
+/// each file (PLY bytes are not counted: they load in parallel batches).
+#[derive(Clone)]
+pub struct ProgressFn(pub std::sync::Arc<dyn Fn(u64, u64) + Send + Sync>);
+
+impl std::fmt::Debug for ProgressFn {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("ProgressFn")
+    }
+}
+
 #[derive(Clone, Debug, Default)]
 pub struct IngestOptions {
+    /// Progress reports (the CLI's progress bar).
+    pub progress: Option<ProgressFn>,
     pub allow_missing: bool,
     /// 3 or 4 forces a pbrt version; `None` detects it.
     pub pbrt_version: Option<u32>,

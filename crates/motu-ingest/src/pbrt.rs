@@ -29,6 +29,8 @@ struct Adapter {
     curve_ribbons: bool,
     /// Curve ribbons gathered per (prototype, material, element), flushed as meshes.
     curve_meshes: HashMap<(PrototypeId, MaterialId, ElementId), MeshData>,
+    progress: Option<crate::ProgressFn>,
+    bytes_entered: u64,
 }
 
 /// Ribbon triangles gathered into one mesh before it is stored.
@@ -141,6 +143,10 @@ impl SceneSink for Adapter {
     fn file_enter(&mut self, e: &FileEvent<'_>) -> Result<(), SinkError> {
         self.files.insert(e.file, e.path.to_path_buf());
         self.report.files += 1;
+        self.bytes_entered += e.size_bytes;
+        if let Some(p) = &self.progress {
+            (p.0)(self.bytes_entered, self.report.files);
+        }
         if let (Some(id), Some(name)) = (e.element, e.element_name) {
             if !self.elements.contains_key(&id) {
                 let el = self.b.element(name).map_err(sink_err)?;
@@ -400,6 +406,8 @@ fn ingest_pbrt_with(
         report: IngestReport::default(),
         curve_ribbons: options.curve_ribbons,
         curve_meshes: HashMap::new(),
+        progress: options.progress.clone(),
+        bytes_entered: 0,
     };
     let stats = pbrt_import::parse_file(path, &parse_options, &mut a)?;
     a.flush_curves(None).map_err(|e| IngestError::Scene {
