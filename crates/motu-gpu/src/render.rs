@@ -3,7 +3,8 @@
 //! of the CPU renderer (same hash, palettes, sky and sRGB encoding as motu-trace).
 //!
 //! Everything stays on the GPU until one final copy of the AOV, the colours and the counters;
-//! frame times come from timestamps around each dispatch (median over `frames`).
+//! frame times come from timestamps around each dispatch (median over `frames`, the first of
+//! several being a warm-up left out).
 
 use bytemuck::{Pod, Zeroable};
 use motu_abi::aov::{Aov, AovRecord};
@@ -425,7 +426,8 @@ pub fn render(
             px[3] = 255;
         }
     }
-    let mut sorted = frame_ns.clone();
+    // The first of several frames is a warm-up (caches, pipeline first use): not in the median.
+    let mut sorted = if frame_ns.len() > 1 { frame_ns[1..].to_vec() } else { frame_ns.clone() };
     sorted.sort_by(f64::total_cmp);
     let ms = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0) / 1e6;
     let shadow = u64::from(counters[2]);
