@@ -268,7 +268,14 @@ impl<'a> CommandRecorder<'a> {
     }
 
     /// Ends recording, submits, and waits on the fence (not on the queue).
-    pub fn submit_and_wait(mut self) -> Result<()> {
+    pub fn submit_and_wait(self) -> Result<()> {
+        self.submit()?.wait()
+    }
+
+    /// Ends recording and submits without waiting: the CPU goes on (e.g. stages the next build
+    /// batch) while the GPU runs it. Callers keep every resource recorded alive until
+    /// [`Submitted::wait`] returns; dropping a [`Submitted`] unwaited waits for the device.
+    pub(crate) fn submit(mut self) -> Result<Submitted<'a>> {
         let span = tracing::debug_span!("submit", label = %self.label);
         let _g = span.enter();
         let device = &self.ctx.shared.device;
@@ -290,11 +297,25 @@ impl<'a> CommandRecorder<'a> {
             })?;
         }
         self.submitted = true;
-        // SAFETY: the fence was submitted above.
-        unsafe { device.wait_for_fences(&[self.fence], true, u64::MAX) }.map_err(|result| {
+        Ok(Submitted { rec: self })
+    }
+}
+
+/// A submitted command buffer whose fence has not been waited on yet.
+#[derive(Debug)]
+pub(crate) struct Submitted<'a> {
+    rec: CommandRecorder<'a>,
+}
+
+impl Submitted<'_> {
+    /// Waits on the submission's fence (not on the queue).
+    pub(crate) fn wait(self) -> Result<()> {
+        let device = &self.rec.ctx.shared.device;
+        // SAFETY: the fence was submitted by `CommandRecorder::submit`.
+        unsafe { device.wait_for_fences(&[self.rec.fence], true, u64::MAX) }.map_err(|result| {
             // Name the phase, not just the code (VK_ERROR_DEVICE_LOST otherwise says nothing).
-            tracing::error!(label = %self.label, ?result, "waiting for the submission failed");
-            GpuError::from_submit("vkWaitForFences", result, &self.label)
+            tracing::error!(label = %self.rec.label, ?result, "waiting for the submission failed");
+            GpuError::from_submit("vkWaitForFences", result, &self.rec.label)
         })?;
         Ok(())
     }

@@ -427,7 +427,11 @@ pub fn render(
         }
     }
     // The first of several frames is a warm-up (caches, pipeline first use): not in the median.
-    let mut sorted = if frame_ns.len() > 1 { frame_ns[1..].to_vec() } else { frame_ns.clone() };
+    let mut sorted = if frame_ns.len() > 1 {
+        frame_ns[1..].to_vec()
+    } else {
+        frame_ns.clone()
+    };
     sorted.sort_by(f64::total_cmp);
     let ms = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0) / 1e6;
     let shadow = u64::from(counters[2]);

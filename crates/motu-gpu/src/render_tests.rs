@@ -390,6 +390,130 @@ fn budget_cap_and_compaction() {
     assert_no_validation_errors(&ctx);
 }
 
+/// One build per batch (`max_batch_result_bytes: 1`): each batch's meshes are loaded and
+/// staged while the previous batch builds, through a ring whose halves are smaller than the
+/// largest mesh (so staging also flushes mid-batch); meshes shared with earlier batches are
+/// not staged again, and the image still matches the CPU oracle.
+#[test]
+fn uploads_overlap_blas_builds_across_batches() {
+    let Some(ctx) = ctx_or_skip("uploads_overlap_blas_builds_across_batches") else {
+        return;
+    };
+    let mut b = HierarchyBuilder::new();
+    let green = b.material([0.3, 0.7, 0.4]);
+    let meshes: Vec<u32> = (0..5u32)
+        .map(|i| b.mesh(i, 0, green, uv_sphere(12 + 6 * i)))
+        .collect();
+    let mut instances = Vec::new();
+    for (i, &m) in meshes.iter().enumerate() {
+        let blas = b.triangle_blas(&[m]);
+        instances.push((srt(0.45, 0.3 * i as f32, [i as f32 - 2.0, 0.0, 0.0]), blas));
+    }
+    // Its meshes were staged for earlier batches.
+    let shared = b.triangle_blas(&[meshes[0], meshes[4]]);
+    instances.push((srt(0.5, 0.0, [0.0, 1.3, 0.0]), shared));
+    let root = b.tlas(&instances);
+    let h = b.finish(root);
+    let opts = BuildOptions {
+        max_batch_result_bytes: 1,
+        staging_bytes: 64 * 1024,
+        ..Default::default()
+    };
+    let scene = GpuScene::build(&ctx, &h.view(), &Blobs(&h), &opts).expect("build");
+    let r = scene.report();
+    assert_eq!(r.blas_count, 6, "{r:?}");
+    // Six BLAS batches and one TLAS batch.
+    assert_eq!(r.build_batches, 7, "{r:?}");
+    // Batches 1..=5 were staged while their predecessors built.
+    assert_eq!(r.upload_build_overlap_batches, 5, "{r:?}");
+    let mesh_bytes = |m: u32| {
+        let g = &h.geometry[m as usize];
+        (g.positions.len() * 12 + g.indices.len() * 4) as u64
+    };
+    // Meshes 1..=4 in flight (mesh 0 before the first batch; the shared BLAS stages nothing).
+    let expected: u64 = meshes[1..].iter().map(|&m| mesh_bytes(m)).sum();
+    assert_eq!(r.upload_overlap_bytes, expected, "{r:?}");
+    assert!(
+        mesh_bytes(meshes[4]) > 32 * 1024,
+        "the largest mesh overflows a ring half"
+    );
+    assert!(r.upload_overlap_ms > 0.0, "{r:?}");
+    let cam = camera([0.0, 0.6, 6.0], [0.0, 0.3, 0.0], 32);
+    let cpu = cpu_render(&h, &cam, View::Shaded, LodParams::default());
+    let hits = cpu.records.iter().filter(|r| r.mesh != MISS).count();
+    assert!(hits > 100, "the camera sees the spheres: {hits} hits");
+    let out = render(
+        &ctx,
+        &scene,
+        &cam,
+        &RenderOptions {
+            backend: backends(&ctx)[0],
+            view: View::Shaded,
+            ..Default::default()
+        },
+    )
+    .expect("render");
+    let cmp = motu_trace::compare(&cpu, &out.aov, motu_trace::DEFAULT_REL_EPS).expect("sizes");
+    assert!(
+        cmp.mismatched <= 2,
+        "{} of {} pixels differ from the CPU oracle",
+        cmp.mismatched,
+        cmp.total
+    );
+    drop(scene);
+    assert_no_validation_errors(&ctx);
+}
+
+/// Fails to load one mesh: with one build per batch, that mesh is staged while an earlier
+/// batch is on the GPU.
+struct FailingBlobs<'a>(Blobs<'a>, u32);
+
+impl MeshBlobSource for FailingBlobs<'_> {
+    fn mesh_data(&self, mesh_record: u32) -> Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), String> {
+        if mesh_record == self.1 {
+            return Err("chunk checksum mismatch".into());
+        }
+        self.0.mesh_data(mesh_record)
+    }
+}
+
+#[test]
+fn a_load_failure_while_a_batch_builds_releases_everything() {
+    let Some(ctx) = ctx_or_skip("a_load_failure_while_a_batch_builds_releases_everything") else {
+        return;
+    };
+    let mut b = HierarchyBuilder::new();
+    let red = b.material([0.8, 0.2, 0.2]);
+    let mut instances = Vec::new();
+    for i in 0..4u32 {
+        let m = b.mesh(i, 0, red, uv_sphere(8 + i));
+        let blas = b.triangle_blas(&[m]);
+        instances.push((srt(0.4, 0.0, [i as f32, 0.0, 0.0]), blas));
+    }
+    let root = b.tlas(&instances);
+    let h = b.finish(root);
+    let opts = BuildOptions {
+        max_batch_result_bytes: 1,
+        ..Default::default()
+    };
+    let err = GpuScene::build(&ctx, &h.view(), &FailingBlobs(Blobs(&h), 2), &opts)
+        .expect_err("mesh 2 cannot load");
+    assert!(
+        err.to_string().contains("mesh record 2") && err.to_string().contains("checksum"),
+        "{err}"
+    );
+    assert_eq!(
+        ctx.allocation_count(),
+        0,
+        "a failed build releases everything"
+    );
+    let scene = GpuScene::build(&ctx, &h.view(), &Blobs(&h), &opts).expect("second build");
+    assert_eq!(scene.report().blas_count, 4);
+    assert_eq!(scene.report().upload_build_overlap_batches, 3);
+    drop(scene);
+    assert_no_validation_errors(&ctx);
+}
+
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct LodCase {

@@ -1,12 +1,16 @@
 //! A compiled hierarchy on the GPU: tables, geometry and acceleration structures, built under a
 //! VRAM budget, an allocation-count cap and a scratch budget.
 //!
-//! Build order: node tables and geometry are uploaded through a bounded host-visible staging
-//! ring; BLASes (one per `BlasRecord`: triangles, one geometry per mesh, or the AABBs of its
-//! programmable instances) are built in batches planned by `motu_alloc::plan_build_batches`
-//! with one shared scratch pool, each batch fenced (no queue-wait-idle), then compacted
-//! (compacted sizes queried, copied, originals freed) before the next batch, so the peak stays
-//! near the compacted total. TLASes follow the same path with per-batch instance buffers.
+//! Build order: node tables are uploaded through a bounded host-visible staging ring; BLASes
+//! (one per `BlasRecord`: triangles, one geometry per mesh, or the AABBs of its programmable
+//! instances) are built in batches planned by `motu_alloc::plan_build_batches` with one shared
+//! scratch pool. Uploads and builds are pipelined: batch k's mesh copies (from one half of the
+//! ring), a `TRANSFER → ACCELERATION_STRUCTURE_BUILD` barrier and its builds go in one
+//! submission that is not waited on while the CPU loads, checks and stages batch k+1's meshes
+//! into the other half; batch k's fence is waited on only before its compacted sizes are read
+//! (no queue-wait-idle). Each batch is then compacted (sizes queried, copied, originals freed)
+//! before the next, so the peak stays near the compacted total. The report's
+//! `upload_build_overlap_batches`/`upload_overlap_ms` show the overlap. TLASes follow the same path with per-batch instance buffers.
 //! TLASes are independent objects: a PI's target TLAS is reached at trace time through the
 //! per-TLAS device-address table.
 
@@ -99,6 +103,17 @@ pub struct ResourceReport {
     pub allocation_count: u32,
     pub peak_allocation_count: u32,
     pub build_ms: f64,
+    /// Build batches during which the next batch's geometry was loaded, checked and staged on
+    /// the CPU while the GPU built (pipelined uploads); 0 with a single batch.
+    pub upload_build_overlap_batches: u32,
+    /// Geometry bytes staged while a build batch was in flight.
+    pub upload_overlap_bytes: u64,
+    /// CPU milliseconds spent loading, checking and staging while a build batch was in flight
+    /// (not counting `upload_stall_ms`).
+    pub upload_overlap_ms: f64,
+    /// Milliseconds that staging waited behind the batch in flight because the next batch's
+    /// geometry outgrew its half of the staging ring (a larger `staging_bytes` removes it).
+    pub upload_stall_ms: f64,
     /// The allocator's own statistics, per kind and class.
     pub alloc: Option<AllocReport>,
 }
@@ -265,11 +280,20 @@ impl Drop for SizeQueries {
 
 /// Bounded host-visible staging ring: copies are queued and flushed (one fenced submission)
 /// whenever the ring is full, so host memory never holds more than the ring.
+///
+/// Double-buffered mode (pipelined builds) splits the ring in two halves: the copies queued in
+/// one half are recorded into a build batch's command buffer ([`Uploader::record_pending`]),
+/// and the next batch is staged into the other half while that batch runs on the GPU.
 pub(crate) struct Uploader {
     pub(crate) staging: HeapBuffer,
     cursor: u64,
     pending: Vec<(vk::Buffer, u64, u64, u64)>,
     flushes: u32,
+    /// Time spent in fenced flushes (submission and wait).
+    flush_wait: std::time::Duration,
+    double_buffered: bool,
+    /// The half being filled (double-buffered mode).
+    half: u64,
 }
 
 impl Uploader {
@@ -287,10 +311,38 @@ impl Uploader {
             cursor: 0,
             pending: Vec::new(),
             flushes: 0,
+            flush_wait: std::time::Duration::ZERO,
+            double_buffered: false,
+            half: 0,
         })
     }
 
-    /// Queues `bytes` for `dst` at `dst_offset`. `dst` must stay alive until the next `flush`.
+    /// The byte range of the ring being filled.
+    fn region(&self) -> (u64, u64) {
+        let cap = self.staging.size_bytes();
+        if !self.double_buffered {
+            return (0, cap);
+        }
+        let mid = cap / 2 / 16 * 16;
+        if self.half == 0 {
+            (0, mid)
+        } else {
+            (mid, cap)
+        }
+    }
+
+    /// Switches between one ring and two halves. Call with nothing queued (after a flush or
+    /// `record_pending`) and every earlier copy out of the ring complete.
+    pub(crate) fn set_double_buffered(&mut self, on: bool) {
+        debug_assert!(self.pending.is_empty());
+        self.pending.clear();
+        self.double_buffered = on;
+        self.half = 0;
+        self.cursor = self.region().0;
+    }
+
+    /// Queues `bytes` for `dst` at `dst_offset`. `dst` must stay alive until the next `flush`
+    /// (or until the submission `record_pending` recorded into completes).
     pub(crate) fn upload(
         &mut self,
         ctx: &Context,
@@ -298,13 +350,13 @@ impl Uploader {
         dst_offset: u64,
         bytes: &[u8],
     ) -> Result<()> {
-        let cap = self.staging.size_bytes();
         let mut done = 0usize;
         while done < bytes.len() {
-            if self.cursor >= cap {
+            let (_, end) = self.region();
+            if self.cursor >= end {
                 self.flush(ctx)?;
             }
-            let n = ((cap - self.cursor) as usize).min(bytes.len() - done);
+            let n = ((end - self.cursor) as usize).min(bytes.len() - done);
             self.staging
                 .write_bytes(self.cursor, &bytes[done..done + n])?;
             self.pending.push((
@@ -320,9 +372,45 @@ impl Uploader {
         Ok(())
     }
 
+    /// Records the queued copies into `cmd` (whose submission the caller fences before the
+    /// ring region is reused) and moves to the other half. Returns whether anything was recorded.
+    ///
+    /// # Safety
+    /// `cmd` must be in the recording state on `device`, and every queued destination must
+    /// stay alive until that submission completes.
+    pub(crate) unsafe fn record_pending(
+        &mut self,
+        device: &ash::Device,
+        cmd: vk::CommandBuffer,
+    ) -> bool {
+        let any = !self.pending.is_empty();
+        for &(dst, src_off, dst_off, size) in &self.pending {
+            let region = vk::BufferCopy {
+                src_offset: src_off,
+                dst_offset: dst_off,
+                size,
+            };
+            // SAFETY: per the function contract; the staging buffer outlives the submission
+            // (freed only after every build batch was waited on).
+            unsafe { device.cmd_copy_buffer(cmd, self.staging.handle(), dst, &[region]) };
+        }
+        self.pending.clear();
+        if self.double_buffered {
+            self.half ^= 1;
+        }
+        self.cursor = self.region().0;
+        any
+    }
+
+    /// Forgets queued copies (their destinations are about to be freed after a failure).
+    pub(crate) fn abandon(&mut self) {
+        self.pending.clear();
+        self.cursor = self.region().0;
+    }
+
     pub(crate) fn flush(&mut self, ctx: &Context) -> Result<()> {
         if self.pending.is_empty() {
-            self.cursor = 0;
+            self.cursor = self.region().0;
             return Ok(());
         }
         let rec = ctx.record("upload")?;
@@ -341,11 +429,65 @@ impl Uploader {
                     .cmd_copy_buffer(cmd, self.staging.handle(), dst, &[region])
             };
         }
-        rec.submit_and_wait()?;
+        let t = Instant::now();
+        let r = rec.submit_and_wait();
+        self.flush_wait += t.elapsed();
         self.pending.clear();
-        self.cursor = 0;
+        self.cursor = self.region().0;
+        r?;
         self.flushes += 1;
         Ok(())
+    }
+}
+
+/// Stages the meshes of each BLAS build batch (each mesh once, at its first batch) through
+/// the double-buffered ring.
+struct MeshStager<'s, 'v> {
+    ctx: &'s Context,
+    up: &'s mut Uploader,
+    source: &'s dyn MeshBlobSource,
+    view: &'s HierarchyView<'v>,
+    /// Build index → BLAS index.
+    order: &'s [usize],
+    meshes: &'s [Option<MeshGpu>],
+    staged: Vec<bool>,
+}
+
+impl BatchStager for MeshStager<'_, '_> {
+    fn stage(&mut self, builds: std::ops::Range<usize>) -> Result<(u64, std::time::Duration)> {
+        let stalled_before = self.up.flush_wait;
+        let mut bytes = 0u64;
+        for k in builds {
+            let Some(&b) = self.order.get(k) else {
+                continue;
+            };
+            let rec = &self.view.blases[b];
+            if rec.kind != BLAS_TRIANGLES {
+                continue;
+            }
+            let items = rec.item_base as usize..(rec.item_base + rec.item_count) as usize;
+            for geo in self.view.geometries.get(items).unwrap_or(&[]) {
+                let m = geo.mesh as usize;
+                let Some(Some(g)) = self.meshes.get(m) else {
+                    continue;
+                };
+                if self.staged[m] {
+                    continue;
+                }
+                bytes += g.upload(self.ctx, self.up, self.source, m)?;
+                self.staged[m] = true;
+            }
+        }
+        Ok((bytes, self.up.flush_wait.saturating_sub(stalled_before)))
+    }
+
+    unsafe fn record(&mut self, device: &ash::Device, cmd: vk::CommandBuffer) -> bool {
+        // SAFETY: per the trait contract; the mesh buffers live in the scene being built.
+        unsafe { self.up.record_pending(device, cmd) }
+    }
+
+    fn abandon(&mut self) {
+        self.up.abandon();
     }
 }
 
@@ -646,10 +788,8 @@ impl GpuScene {
             self.report.geometry_bytes += g.size_bytes();
             self.meshes[m] = Some(g);
         }
-        for (m, slot) in self.meshes.iter().enumerate() {
-            let Some(g) = slot else { continue };
-            g.upload(ctx, up, source, m)?;
-        }
+        // Their data is loaded and uploaded per BLAS build batch (step 4), overlapping the
+        // previous batch's build.
         let mut mesh_geo = vec![0u64; 2 * view.meshes.len()];
         for (m, g) in self.meshes.iter().enumerate() {
             if let Some(g) = g {
@@ -690,8 +830,20 @@ impl GpuScene {
         };
         up.flush(ctx)?;
 
-        // 4. BLASes.
-        let r = self.build_blases(ctx, heap, view, aabb_buf.as_ref(), &reach_blas, opts);
+        // 4. BLASes, each batch's meshes staged while the previous batch builds.
+        up.set_double_buffered(true);
+        let r = self.build_blases(
+            ctx,
+            heap,
+            up,
+            view,
+            source,
+            aabb_buf.as_ref(),
+            &reach_blas,
+            opts,
+        );
+        up.abandon();
+        up.set_double_buffered(false);
         if let Some(b) = aabb_buf {
             heap.free(b);
         }
@@ -712,11 +864,14 @@ impl GpuScene {
         Ok(())
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn build_blases(
         &mut self,
         ctx: &Context,
         heap: &mut GpuHeap,
+        up: &mut Uploader,
         view: &HierarchyView<'_>,
+        source: &dyn MeshBlobSource,
         aabb_buf: Option<&HeapBuffer>,
         reach: &[bool],
         opts: &BuildOptions,
@@ -750,7 +905,16 @@ impl GpuScene {
             descs.push(Some((geoms, counts)));
         }
         self.blases = (0..view.blases.len()).map(|_| None).collect();
-        let built = build_batched(
+        let mut stager = MeshStager {
+            ctx,
+            up,
+            source,
+            view,
+            order: &order,
+            meshes: &self.meshes,
+            staged: vec![false; view.meshes.len()],
+        };
+        let built = build_pipelined(
             ctx,
             heap,
             &mut self.report,
@@ -765,7 +929,26 @@ impl GpuScene {
                 (g.to_vec(), c)
             },
             |_, _| Ok(()),
-        )?;
+            Some(&mut stager),
+        );
+        // Meshes no build used (none today: every uploaded mesh belongs to a built BLAS) still
+        // get their data, for the shaders.
+        let leftover = built.and_then(|b| {
+            for (m, g) in stager.meshes.iter().enumerate() {
+                if let (Some(g), false) = (g, stager.staged[m]) {
+                    g.upload(ctx, stager.up, source, m)?;
+                }
+            }
+            stager.up.flush(ctx)?;
+            Ok(b)
+        });
+        let built = match leftover {
+            Ok(b) => b,
+            Err(e) => {
+                stager.up.abandon();
+                return Err(e);
+            }
+        };
         for (k, accel) in built {
             self.report.blas_count += 1;
             self.report.blas_bytes += sizes[k].result_bytes;
@@ -927,6 +1110,24 @@ impl GpuScene {
     }
 }
 
+/// Build inputs staged one batch ahead: `stage` loads batch k+1's inputs into host-visible
+/// staging while batch k builds on the GPU; `record` puts the staged copies into the batch's
+/// own command buffer, ahead of its build.
+pub(crate) trait BatchStager {
+    /// Loads and stages the inputs of builds `builds`; returns the bytes staged and the time
+    /// spent blocked on the GPU (a full ring region flushes behind the batch in flight). Runs
+    /// while the previous batch may still be on the GPU, so it must not touch its resources.
+    fn stage(&mut self, builds: std::ops::Range<usize>) -> Result<(u64, std::time::Duration)>;
+    /// Records the staged copies into `cmd`; returns whether anything was recorded.
+    ///
+    /// # Safety
+    /// `cmd` is recording on `device`; the caller waits on its submission before the staged
+    /// region is reused and before any destination is freed.
+    unsafe fn record(&mut self, device: &ash::Device, cmd: vk::CommandBuffer) -> bool;
+    /// Drops whatever was staged but not recorded (after a failure).
+    fn abandon(&mut self);
+}
+
 /// Builds `sizes.len()` structures in batches under the scratch budget, compacting each
 /// batch before the next. `geometry(k)` describes build k (addresses valid once
 /// `prepare(heap, batch_range)` ran for its batch). Returns (k, structure) pairs. On failure
@@ -941,7 +1142,25 @@ pub(crate) fn build_batched<'g>(
     ty: vk::AccelerationStructureTypeKHR,
     opts: &BuildOptions,
     geometry: impl Fn(usize) -> (Vec<vk::AccelerationStructureGeometryKHR<'g>>, Vec<u32>),
+    prepare: impl FnMut(&mut GpuHeap, std::ops::Range<usize>) -> Result<()>,
+) -> Result<Vec<(usize, AccelStruct)>> {
+    build_pipelined(ctx, heap, report, sizes, ty, opts, geometry, prepare, None)
+}
+
+/// [`build_batched`] with inputs staged one batch ahead by `stager`: batch k's copies and build
+/// go in one submission that is not waited on until batch k+1 is staged (the wait comes before
+/// the compacted-size read, the compaction copies and the next batch's submission).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn build_pipelined<'g>(
+    ctx: &Context,
+    heap: &mut GpuHeap,
+    report: &mut ResourceReport,
+    sizes: &[BuildSize],
+    ty: vk::AccelerationStructureTypeKHR,
+    opts: &BuildOptions,
+    geometry: impl Fn(usize) -> (Vec<vk::AccelerationStructureGeometryKHR<'g>>, Vec<u32>),
     mut prepare: impl FnMut(&mut GpuHeap, std::ops::Range<usize>) -> Result<()>,
+    mut stager: Option<&mut dyn BatchStager>,
 ) -> Result<Vec<(usize, AccelStruct)>> {
     if sizes.is_empty() {
         return Ok(Vec::new());
@@ -981,6 +1200,9 @@ pub(crate) fn build_batched<'g>(
         } else {
             "blas"
         };
+        if let (Some(st), Some(first)) = (stager.as_deref_mut(), plan.batches.first()) {
+            st.stage(first.builds.clone())?;
+        }
         for (bi, batch) in plan.batches.iter().enumerate() {
             report.build_batches += 1;
             prepare(heap, batch.builds.clone())?;
@@ -1037,8 +1259,14 @@ pub(crate) fn build_batched<'g>(
                 let (c, cmd) = rec.raw();
                 let device = &c.shared.device;
                 // SAFETY: recording state; destinations, scratch slices (disjoint, aligned),
-                // inputs and the query pool live until the fenced submission below returns.
+                // inputs, staged copies and the query pool live until the submission below is
+                // waited on (also on every error path: `Submitted` waits when dropped).
                 unsafe {
+                    if let Some(st) = stager.as_deref_mut() {
+                        if st.record(device, cmd) {
+                            transfer_to_build_barrier(device, cmd);
+                        }
+                    }
                     full_barrier(device, cmd);
                     accel.cmd_build_acceleration_structures(cmd, &infos, &range_refs);
                     full_barrier(device, cmd);
@@ -1051,7 +1279,27 @@ pub(crate) fn build_batched<'g>(
                         0,
                     );
                 }
-                rec.submit_and_wait()?;
+                let submitted = rec.submit()?;
+                // While the GPU builds this batch, load and stage the next one.
+                if let (Some(st), Some(next)) = (stager.as_deref_mut(), plan.batches.get(bi + 1)) {
+                    let t = Instant::now();
+                    match st.stage(next.builds.clone()) {
+                        Ok((bytes, stalled)) => {
+                            report.upload_build_overlap_batches += 1;
+                            report.upload_overlap_bytes += bytes;
+                            report.upload_overlap_ms +=
+                                t.elapsed().saturating_sub(stalled).as_secs_f64() * 1e3;
+                            report.upload_stall_ms += stalled.as_secs_f64() * 1e3;
+                        }
+                        Err(e) => {
+                            st.abandon();
+                            // This batch's resources are released by the caller: wait first.
+                            let _ = submitted.wait();
+                            return Err(e);
+                        }
+                    }
+                }
+                submitted.wait()?;
                 if !opts.compact {
                     return Ok(Vec::new());
                 }
@@ -1274,6 +1522,30 @@ pub(crate) fn encode_instance(
     out[52..56].copy_from_slice(&(sbt | (flags.as_raw() << 24)).to_le_bytes());
     out[56..64].copy_from_slice(&blas_address.to_le_bytes());
     out
+}
+
+/// Transfer writes (staged geometry copies) before acceleration-structure builds read them.
+///
+/// # Safety
+/// `cmd` must be in the recording state on `device`.
+pub(crate) unsafe fn transfer_to_build_barrier(device: &ash::Device, cmd: vk::CommandBuffer) {
+    let barrier = vk::MemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+        .dst_access_mask(
+            vk::AccessFlags::ACCELERATION_STRUCTURE_READ_KHR | vk::AccessFlags::SHADER_READ,
+        );
+    // SAFETY: per the function contract.
+    unsafe {
+        device.cmd_pipeline_barrier(
+            cmd,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR,
+            vk::DependencyFlags::empty(),
+            &[barrier],
+            &[],
+            &[],
+        )
+    };
 }
 
 /// A full memory barrier (coarse: builds are few and large).
