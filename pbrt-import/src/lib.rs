@@ -25,6 +25,7 @@ mod error;
 mod events;
 pub mod lexer;
 mod math;
+mod parallel;
 pub mod params;
 mod parser;
 pub mod ply;
@@ -134,6 +135,20 @@ pub struct ParseOptions {
     /// first; everything else is parsed as before. Known limit: a named material or object
     /// redefined (pbrt-v3) between two inclusions keeps its first meaning for the copies.
     pub share_repeated_includes: bool,
+    /// Parse *state-neutral* `Include`d/`Import`ed files on the rayon pool (when it has
+    /// more than one thread) and replay their events in document order, so sinks see
+    /// exactly the events of a sequential parse. A file qualifies when, included in the
+    /// world block outside object definitions and motion, it only places shapes
+    /// (`trianglemesh`, `loopsubdiv`, quadrics, `curve`, v4 `bilinearmesh`) and
+    /// `ObjectInstance`s, with transforms and `ReverseOrientation` only inside balanced
+    /// blocks (Moana's and `motu gen island`'s placement files); anything else, and any
+    /// error, is parsed sequentially (same messages and positions). Runs of consecutive
+    /// includes are processed as a sliding window of at most 256 MiB of input; files are
+    /// cut into pieces of about [`ParseOptions::parallel_chunk_bytes`] at directive lines,
+    /// one worker each; files over 128 MiB (and `.gz`) are parsed sequentially.
+    pub parallel_includes: bool,
+    /// Target size of the pieces a file is cut into for [`ParseOptions::parallel_includes`].
+    pub parallel_chunk_bytes: usize,
 }
 
 impl Default for ParseOptions {
@@ -145,6 +160,8 @@ impl Default for ParseOptions {
             tessellation_segments: 32,
             max_include_depth: 64,
             share_repeated_includes: false,
+            parallel_includes: true,
+            parallel_chunk_bytes: 4 << 20,
         }
     }
 }
@@ -184,6 +201,9 @@ pub struct ParseStats {
     pub shared_includes: u64,
     /// Inclusions placed as instances of a shared object (first inclusions included).
     pub include_instances: u64,
+    /// Included files whose events came from a worker thread
+    /// ([`ParseOptions::parallel_includes`]).
+    pub parallel_files: u64,
     /// Missing files (only non-empty with `allow_missing`).
     pub missing: Vec<MissingFile>,
 }

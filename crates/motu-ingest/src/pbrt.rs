@@ -393,6 +393,7 @@ fn ingest_pbrt_with(
             PlyLoading::Sequential
         },
         share_repeated_includes,
+        parallel_includes: options.parallel,
         ..Default::default()
     };
     let mut a = Adapter {

@@ -1,0 +1,582 @@
+//! Parallel parsing of *state-neutral* included files ([`crate::ParseOptions::parallel_includes`]).
+//!
+//! A neutral file only places shapes and instances under the graphics state current at
+//! its `Include`/`Import` and leaves that state exactly as it found it. Such a file can be
+//! parsed on a worker thread against a [`Snapshot`] of the state into a [`Parsed`] buffer;
+//! the main thread replays the buffer in document order, so sinks see the same events in
+//! the same order as a sequential parse. Everything order-dependent (shape `seq`, object
+//! name resolution, statistics, file ids) is done at replay time.
+//!
+//! The worker is deliberately narrow and is the authority on neutrality: any directive,
+//! construct or error outside the supported subset makes it give up ([`Outcome::Fallback`])
+//! and the main thread parses the file sequentially, so errors keep their exact positions
+//! and messages. [`prescan_neutral`] is only a cheap byte-level filter that avoids wasting
+//! a worker parse on files that are obviously not neutral.
+
+use std::sync::Arc;
+
+use crate::events::{AreaLight, Geometry, Material, ShapeEvent};
+use crate::lexer::{is_word_end_byte, Lexer, Loc, TokenKind};
+use crate::math::{self, M64};
+use crate::params::ParamList;
+use crate::shapes;
+use crate::{FileId, PbrtVersion};
+
+/// The graphics state a neutral file is parsed against.
+#[derive(Clone)]
+pub(crate) struct Snapshot {
+    pub version: PbrtVersion,
+    pub ctm: M64,
+    pub material: Arc<Material>,
+    pub reverse_orientation: bool,
+    pub area_light: Option<Arc<AreaLight>>,
+    pub tessellation_segments: u32,
+}
+
+impl Snapshot {
+    /// Whether a buffer parsed against `self` is valid under `other` (the state at replay).
+    pub fn same_as(&self, other: &Snapshot) -> bool {
+        self.version == other.version
+            && self.ctm == other.ctm
+            && Arc::ptr_eq(&self.material, &other.material)
+            && self.reverse_orientation == other.reverse_orientation
+            && match (&self.area_light, &other.area_light) {
+                (None, None) => true,
+                (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+                _ => false,
+            }
+            && self.tessellation_segments == other.tessellation_segments
+    }
+}
+
+/// One buffered event. Locations carry a placeholder file id, patched at replay.
+pub(crate) enum Buffered {
+    /// `ObjectInstance`: index into [`Parsed::names`], CTM, directive and name locations.
+    Instance {
+        name: u32,
+        parent_from_instance: crate::Mat4,
+        loc: Loc,
+        name_loc: Loc,
+    },
+    /// A shape (`seq`, `element` and the file id are set at replay).
+    Shape(Box<ShapeEvent>),
+    /// A warning about a shape (`notes` from the shape builders).
+    Warn { loc: Loc, message: String },
+    /// A shape skipped for invalid data, with its warning.
+    Skipped { loc: Loc, message: String },
+}
+
+/// A neutral file, parsed.
+#[derive(Default)]
+pub(crate) struct Parsed {
+    /// Object names referenced, each once.
+    pub names: Vec<String>,
+    pub events: Vec<Buffered>,
+    /// Newlines in the piece parsed (locations are relative to its first line).
+    pub lines: u32,
+}
+
+/// What a worker made of a file.
+pub(crate) enum Outcome {
+    /// Neutral and parsed.
+    Parsed(Parsed),
+    /// Not neutral, or not in the supported subset, or malformed: parse it sequentially.
+    Fallback,
+}
+
+/// Placeholder file id for buffered locations.
+const PLACEHOLDER: FileId = FileId(u32::MAX);
+
+/// Parse `bytes` as a neutral file against `snap`.
+pub(crate) fn parse_neutral(bytes: &[u8], snap: &Snapshot) -> Outcome {
+    if !prescan_neutral(bytes) {
+        return Outcome::Fallback;
+    }
+    match Worker::new(snap).run(bytes) {
+        Some(p) => Outcome::Parsed(p),
+        None => Outcome::Fallback,
+    }
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Block {
+    Attribute,
+    Transform,
+}
+
+struct Worker<'s> {
+    snap: &'s Snapshot,
+    ctm: M64,
+    reverse_orientation: bool,
+    /// Per open block: its kind and the state it restores.
+    stack: Vec<(Block, M64, bool)>,
+    names: std::collections::HashMap<String, u32>,
+    out: Parsed,
+}
+
+impl<'s> Worker<'s> {
+    fn new(snap: &'s Snapshot) -> Self {
+        Worker {
+            snap,
+            ctm: snap.ctm,
+            reverse_orientation: snap.reverse_orientation,
+            stack: Vec::new(),
+            names: std::collections::HashMap::new(),
+            out: Parsed::default(),
+        }
+    }
+
+    fn v4(&self) -> bool {
+        self.snap.version == PbrtVersion::V4
+    }
+
+    /// `None`: fall back to the sequential parser.
+    fn run(mut self, bytes: &[u8]) -> Option<Parsed> {
+        let mut lx = Lexer::new(bytes, PLACEHOLDER);
+        while let Some(tok) = lx.next_token().ok()? {
+            if tok.kind != TokenKind::Word {
+                return None;
+            }
+            match tok.bytes {
+                b"AttributeBegin" => {
+                    self.stack
+                        .push((Block::Attribute, self.ctm, self.reverse_orientation));
+                }
+                b"TransformBegin" => {
+                    self.stack
+                        .push((Block::Transform, self.ctm, self.reverse_orientation));
+                }
+                b"AttributeEnd" | b"TransformEnd" => {
+                    let want = if tok.bytes == b"AttributeEnd" {
+                        Block::Attribute
+                    } else {
+                        Block::Transform
+                    };
+                    let (kind, ctm, rev) = self.stack.pop()?;
+                    if kind != want {
+                        return None;
+                    }
+                    self.ctm = ctm;
+                    if kind == Block::Attribute {
+                        self.reverse_orientation = rev;
+                    }
+                }
+                b"Translate" => {
+                    let v = numbers::<3>(&mut lx)?;
+                    self.apply(math::translate([v[0], v[1], v[2]]))?;
+                }
+                b"Scale" => {
+                    let v = numbers::<3>(&mut lx)?;
+                    self.apply(math::scale([v[0], v[1], v[2]]))?;
+                }
+                b"Rotate" => {
+                    let v = numbers::<4>(&mut lx)?;
+                    self.apply(math::rotate(v[0], [v[1], v[2], v[3]]))?;
+                }
+                b"Transform" | b"ConcatTransform" => {
+                    let v = numbers::<16>(&mut lx)?;
+                    let m = math::from_pbrt(&v);
+                    if tok.bytes == b"Transform" {
+                        self.in_block()?;
+                        self.ctm = m;
+                    } else {
+                        self.apply(m)?;
+                    }
+                }
+                b"Identity" => {
+                    self.in_block()?;
+                    self.ctm = math::IDENTITY;
+                }
+                b"ReverseOrientation" => {
+                    // Only an attribute block restores the orientation.
+                    if !self.stack.iter().any(|b| b.0 == Block::Attribute) {
+                        return None;
+                    }
+                    self.reverse_orientation = !self.reverse_orientation;
+                }
+                b"ObjectInstance" => self.instance(&mut lx, tok.loc)?,
+                b"Shape" => self.shape(&mut lx, tok.loc)?,
+                _ => return None,
+            }
+        }
+        if !self.stack.is_empty() {
+            return None;
+        }
+        // All whitespace is consumed at the end: the line count is the newline count.
+        self.out.lines = lx.loc().line.saturating_sub(1);
+        Some(self.out)
+    }
+
+    /// Transforms must not leak: only inside blocks.
+    fn in_block(&self) -> Option<()> {
+        (!self.stack.is_empty()).then_some(())
+    }
+
+    fn apply(&mut self, m: M64) -> Option<()> {
+        self.in_block()?;
+        self.ctm = math::mul(&self.ctm, &m);
+        Some(())
+    }
+
+    fn instance(&mut self, lx: &mut Lexer<'_>, loc: Loc) -> Option<()> {
+        let t = lx.next_token().ok()??;
+        if t.kind != TokenKind::String {
+            return None;
+        }
+        let name = t.unescaped()?;
+        let idx = match self.names.get(name.as_ref()) {
+            Some(&i) => i,
+            None => {
+                let i = self.out.names.len() as u32;
+                self.names.insert(name.to_string(), i);
+                self.out.names.push(name.into_owned());
+                i
+            }
+        };
+        self.out.events.push(Buffered::Instance {
+            name: idx,
+            parent_from_instance: math::to_f32(&self.ctm),
+            loc,
+            name_loc: t.loc,
+        });
+        Some(())
+    }
+
+    /// Mirrors `Parser::shape` for the cases that need no shared state.
+    fn shape(&mut self, lx: &mut Lexer<'_>, loc: Loc) -> Option<()> {
+        let ktok = lx.next_token().ok()??;
+        if ktok.kind != TokenKind::String {
+            return None;
+        }
+        let kind = ktok.unescaped()?;
+        let mut p = ParamList::parse(lx).ok()?;
+        if p.v4_spelling && !self.v4() {
+            return None; // a version switch: let the main parser see it
+        }
+        if !self.v4()
+            && ["Kd", "reflectance", "color", "Kr", "opacity"]
+                .iter()
+                .any(|k| p.get(k).is_some())
+        {
+            return None; // v3 shape-level material override: needs material ids
+        }
+        let mut event = ShapeEvent {
+            seq: 0,
+            kind: String::new(),
+            parent_from_shape: math::to_f32(&self.ctm),
+            reverse_orientation: self.reverse_orientation,
+            material: self.snap.material.clone(),
+            alpha_texture: p.texture("alpha").map(str::to_owned),
+            alpha: p.float("alpha"),
+            area_light: self.snap.area_light.clone(),
+            object: None,
+            element: None,
+            source_path: None,
+            loc,
+            geometry: Geometry::Unsupported,
+        };
+        let segs = self.snap.tessellation_segments.max(3);
+        let mut notes = Vec::new();
+        let built: Result<Geometry, String> = match kind.as_ref() {
+            "trianglemesh" | "loopsubdiv" => {
+                shapes::triangle_mesh(&mut p, &mut notes).map(Geometry::Mesh)
+            }
+            "bilinearmesh" if self.v4() => {
+                shapes::bilinear_mesh(&mut p, &mut notes).map(Geometry::Mesh)
+            }
+            "sphere" => shapes::sphere(&p, segs).map(Geometry::Mesh),
+            "disk" => shapes::disk(&p, segs).map(Geometry::Mesh),
+            "cylinder" => shapes::cylinder(&p, segs).map(Geometry::Mesh),
+            "curve" => shapes::curve(&mut p).map(Geometry::Curve),
+            // plymesh (file access, PLY queue), unsupported kinds (warn once) and
+            // v3 bilinearmesh (version switch) stay on the main thread.
+            _ => return None,
+        };
+        for n in notes {
+            self.out.events.push(Buffered::Warn {
+                loc: ktok.loc,
+                message: format!("{kind}: {n}"),
+            });
+        }
+        match built {
+            Ok(g) => {
+                event.kind = kind.into_owned();
+                event.geometry = g;
+                self.out.events.push(Buffered::Shape(Box::new(event)));
+            }
+            Err(m) => self.out.events.push(Buffered::Skipped {
+                loc: ktok.loc,
+                message: format!("{kind}: {m}; shape skipped"),
+            }),
+        }
+        Some(())
+    }
+}
+
+/// `N` numbers, optionally inside `[ ]`, as `Parser::numbers` reads them.
+fn numbers<const N: usize>(lx: &mut Lexer<'_>) -> Option<[f64; N]> {
+    let bracketed = lx.peek_byte() == Some(b'[');
+    if bracketed {
+        lx.next_token().ok()?;
+    }
+    let mut out = [0.0; N];
+    for slot in &mut out {
+        *slot = lx.read_f64()?;
+    }
+    if bracketed {
+        let t = lx.next_token().ok()??;
+        if t.kind != TokenKind::Close {
+            return None;
+        }
+    }
+    Some(out)
+}
+
+/// Where to cut a file into pieces of about `target` bytes for separate workers: offsets
+/// (the first is 0) of lines that start with a directive that can begin a top-level
+/// statement of a neutral file (`AttributeBegin`, `TransformBegin`, `Shape`,
+/// `ObjectInstance`) at column 1. A cut inside a token or block cannot go unnoticed: the piece before it
+/// then ends in an unterminated string or array, an argument-less directive or an open
+/// block, and its worker gives up, so the whole file is parsed sequentially. Pieces of a
+/// neutral file each start at block depth 0, where the state is the include's.
+pub(crate) fn split_points(bytes: &[u8], target: usize) -> Vec<usize> {
+    let mut starts = vec![0];
+    let mut pos = target;
+    while pos < bytes.len() {
+        let Some(nl) = bytes[pos..].iter().position(|&b| b == b'\n') else {
+            break;
+        };
+        let next = pos + nl + 1;
+        let rest = bytes.get(next..).unwrap_or_default();
+        if [
+            &b"AttributeBegin"[..],
+            b"TransformBegin",
+            b"Shape",
+            b"ObjectInstance",
+        ]
+        .iter()
+        .any(|w| rest.starts_with(w))
+        {
+            starts.push(next);
+            pos = next + target;
+        } else {
+            pos = next;
+        }
+    }
+    starts
+}
+
+/// Cheap byte-level filter: `false` when `bytes` cannot be neutral. Looks only at bare
+/// words that start with an upper-case letter (directives), skipping strings, comments
+/// and numbers. Allows shapes and instances anywhere, transforms and `ReverseOrientation`
+/// only inside blocks, and balanced `AttributeBegin`/`TransformBegin` blocks; anything
+/// else (materials, definitions, lights, includes, cameras, `WorldEnd`, ...) rejects.
+/// `true` is not a promise: the worker parse decides.
+pub(crate) fn prescan_neutral(bytes: &[u8]) -> bool {
+    let mut depth = 0u32;
+    let mut pos = 0;
+    let mut any = false;
+    while pos < bytes.len() {
+        match bytes[pos] {
+            b'#' => {
+                pos += bytes[pos..]
+                    .iter()
+                    .position(|&c| c == b'\n')
+                    .unwrap_or(bytes.len() - pos);
+            }
+            b'"' => {
+                let mut p = pos + 1;
+                while p < bytes.len() && !matches!(bytes[p], b'"' | b'\n') {
+                    p += if bytes[p] == b'\\' { 2 } else { 1 };
+                }
+                if p >= bytes.len() || bytes[p] == b'\n' {
+                    return false; // unterminated string: an error, reported sequentially
+                }
+                pos = p + 1;
+            }
+            b'A'..=b'Z' => {
+                let start = pos;
+                while pos < bytes.len() && !is_word_end_byte(bytes[pos]) {
+                    pos += 1;
+                }
+                match &bytes[start..pos] {
+                    b"AttributeBegin" | b"TransformBegin" => depth += 1,
+                    b"AttributeEnd" | b"TransformEnd" => {
+                        if depth == 0 {
+                            return false;
+                        }
+                        depth -= 1;
+                    }
+                    b"Shape" | b"ObjectInstance" => any = true,
+                    b"Translate"
+                    | b"Scale"
+                    | b"Rotate"
+                    | b"Transform"
+                    | b"ConcatTransform"
+                    | b"Identity"
+                    | b"ReverseOrientation"
+                        if depth > 0 => {}
+                    _ => return false,
+                }
+            }
+            b if is_word_end_byte(b) => pos += 1,
+            _ => {
+                // Numbers and lower-case words, then 8-byte runs of plain bytes.
+                while pos < bytes.len() && !is_word_end_byte(bytes[pos]) {
+                    pos += 1;
+                }
+                while let Some(chunk) = bytes.get(pos..pos + 8) {
+                    let x = u64::from_le_bytes(chunk.try_into().unwrap_or([b'"'; 8]));
+                    if crate::parser::swar_interesting(x) {
+                        break;
+                    }
+                    pos += 8;
+                }
+                // A skip may stop inside a word: finish it, so an upper-case letter
+                // is only taken for a directive at a word start.
+                while pos > 0
+                    && pos < bytes.len()
+                    && !is_word_end_byte(bytes[pos - 1])
+                    && !is_word_end_byte(bytes[pos])
+                {
+                    pos += 1;
+                }
+            }
+        }
+    }
+    any && depth == 0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn snap(version: PbrtVersion) -> Snapshot {
+        Snapshot {
+            version,
+            ctm: math::IDENTITY,
+            material: Arc::new(Material {
+                id: crate::MaterialId(0),
+                name: None,
+                kind: "matte".into(),
+                base_color: None,
+                base_color_texture: None,
+                opacity: None,
+                loc: Loc::default(),
+            }),
+            reverse_orientation: false,
+            area_light: None,
+            tessellation_segments: 8,
+        }
+    }
+
+    #[test]
+    fn prescan_accepts_placements_and_shapes() {
+        let yes: &[&str] = &[
+            "AttributeBegin Transform [1 0 0 0 0 1 0 0 0 0 1 0 5 6 7 1] ObjectInstance \"a\" AttributeEnd\n",
+            "# c\nShape \"sphere\" \"float radius\" 2\nObjectInstance \"Material\"",
+            "TransformBegin Translate 1 2 3 Shape \"trianglemesh\" \"point P\" [0 0 0 1 0 0 0 1 0] TransformEnd",
+            "AttributeBegin ReverseOrientation Scale 1E5 1 1 Shape \"disk\" AttributeEnd",
+            "Shape \"trianglemesh\" \"point P\" [0.5 1e-3 2 3 4 5 6 7 8 9 10 11 12 13 14]",
+        ];
+        for t in yes {
+            assert!(prescan_neutral(t.as_bytes()), "{t}");
+        }
+    }
+
+    #[test]
+    fn prescan_rejects_state_changes_and_definitions() {
+        let no: &[&str] = &[
+            "Material \"matte\" Shape \"sphere\"",
+            "AttributeBegin Material \"matte\" Shape \"sphere\" AttributeEnd",
+            "NamedMaterial \"x\" Shape \"sphere\"",
+            "ObjectBegin \"a\" Shape \"sphere\" ObjectEnd",
+            "Translate 1 2 3 Shape \"sphere\"",
+            "Transform [1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1] ObjectInstance \"a\"",
+            "ReverseOrientation Shape \"sphere\"",
+            "AttributeBegin Shape \"sphere\"",
+            "AttributeEnd Shape \"sphere\"",
+            "Include \"x.pbrt\"",
+            "AttributeBegin LightSource \"point\" AttributeEnd Shape \"sphere\"",
+            "AttributeBegin AreaLightSource \"diffuse\" Shape \"sphere\" AttributeEnd",
+            "Camera \"perspective\" Shape \"sphere\"",
+            "MakeNamedMaterial \"m\" \"string type\" \"matte\" Shape \"sphere\"",
+            "Texture \"t\" \"color\" \"constant\" Shape \"sphere\"",
+            "CoordinateSystem \"c\" Shape \"sphere\"",
+            "Shape \"sphere\" WorldEnd",
+            "Shape \"sphere\" \"string x\" \"unterminated\n",
+            "# only a comment\n",
+            "",
+        ];
+        for t in no {
+            assert!(!prescan_neutral(t.as_bytes()), "{t}");
+        }
+    }
+
+    #[test]
+    fn split_points_cut_at_directive_lines() {
+        let text = "AttributeBegin\n  Translate 1 2 3\n  Shape \"sphere\"\nAttributeEnd\n\
+                    Shape \"disk\"\n# Comment\nObjectInstance \"a\"\n";
+        let cuts = split_points(text.as_bytes(), 1);
+        let lines: Vec<&str> = cuts[1..]
+            .iter()
+            .map(|&c| text[c..].lines().next().unwrap_or(""))
+            .collect();
+        assert_eq!(cuts[0], 0);
+        assert_eq!(lines, ["Shape \"disk\"", "ObjectInstance \"a\""]);
+        assert_eq!(split_points(text.as_bytes(), 1 << 20), [0]);
+        assert_eq!(split_points(b"", 4), [0]);
+    }
+
+    #[test]
+    fn worker_falls_back_on_what_needs_shared_state() {
+        let v3 = snap(PbrtVersion::V3);
+        let fallback: &[&str] = &[
+            "Shape \"plymesh\" \"string filename\" \"a.ply\"",
+            "Shape \"nurbs\"",
+            "Shape \"bilinearmesh\" \"point P\" [0 0 0 1 0 0 0 1 0 1 1 0]",
+            "Shape \"trianglemesh\" \"point3 P\" [0 0 0 1 0 0 0 1 0]",
+            "Shape \"sphere\" \"rgb Kd\" [1 0 0]",
+            "AttributeBegin Translate 1 2 AttributeEnd Shape \"sphere\"",
+            "TransformBegin AttributeEnd Shape \"sphere\"",
+            "ObjectInstance 3",
+        ];
+        for t in fallback {
+            assert!(
+                matches!(parse_neutral(t.as_bytes(), &v3), Outcome::Fallback),
+                "{t}"
+            );
+        }
+        let text = "AttributeBegin Translate 1 2 3 ObjectInstance \"a\" AttributeEnd \
+                    ObjectInstance \"b\" ObjectInstance \"a\" Shape \"sphere\"";
+        let Outcome::Parsed(p) = parse_neutral(text.as_bytes(), &v3) else {
+            panic!("neutral file not parsed");
+        };
+        assert_eq!(p.names, ["a", "b"]);
+        assert_eq!(p.events.len(), 4);
+        match &p.events[0] {
+            Buffered::Instance {
+                name,
+                parent_from_instance,
+                loc,
+                ..
+            } => {
+                assert_eq!(*name, 0);
+                assert_eq!(
+                    parent_from_instance.to_cols_array()[12..15],
+                    [1.0, 2.0, 3.0]
+                );
+                assert_eq!((loc.line, loc.column), (1, 32));
+            }
+            _ => panic!("expected an instance"),
+        }
+        match &p.events[1] {
+            Buffered::Instance {
+                parent_from_instance,
+                ..
+            } => assert_eq!(*parent_from_instance, crate::Mat4::IDENTITY),
+            _ => panic!("expected an instance"),
+        }
+        assert!(matches!(&p.events[3], Buffered::Shape(s) if s.kind == "sphere"));
+    }
+}
