@@ -239,11 +239,15 @@ fn render_gpu(
     backend: BackendArg,
 ) -> anyhow::Result<(Aov, Vec<u8>, Value)> {
     let ctx = gpu_context(a, backend)?;
+    let budget = a.vram_budget.unwrap_or(u64::MAX);
     let build = motu_gpu::BuildOptions {
-        budget_bytes: a.vram_budget.unwrap_or(u64::MAX),
+        budget_bytes: budget,
         max_allocations: a
             .max_allocations
             .unwrap_or(motu_gpu::BuildOptions::default().max_allocations),
+        // Each half of the staging ring should hold a build batch's geometry so uploads overlap
+        // builds; host-visible memory counts against the budget on unified-memory devices.
+        staging_bytes: (budget / 8).clamp(4 << 20, 64 << 20),
         ..Default::default()
     };
     let meshes = PackageMeshes(pkg);
