@@ -139,116 +139,96 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
         ..Default::default()
     };
 
-    let t1 = Instant::now();
-    let (summary, compiled) = if direct {
-        let mut lod_locations: HashMap<u32, MeshLocation> = HashMap::new();
-        let g = geometry.clone();
-        let mut sink = |rec: u32, data: &motu_scene::MeshData| -> Result<(), String> {
-            lod_locations.insert(rec, g.append_mesh(LOD_GROUP, data)?);
-            Ok(())
-        };
-        let mut compiled = motu_compile::compile(&scene, &copts, &mut sink)
-            .context("compiling the instancing graph")?;
-        let compile_ms = t1.elapsed().as_secs_f64() * 1e3;
-        tracing::info!(
-            compile_ms,
-            peak_rss_bytes = crate::cmd::demo::peak_rss_bytes(),
-            "compiled"
-        );
-        place_meshes(&scene, &mut compiled.meshes, |rec, m| {
-            if m.lod == 0 {
-                Some(scene.mesh(motu_scene::MeshId(m.source_mesh)).location)
-            } else {
-                lod_locations.get(&rec).copied()
-            }
+    if direct {
+        let (compiled, compile_ms) = compile_into(&scene, &copts, &geometry, |m| {
+            Ok(scene.mesh(motu_scene::MeshId(m.source_mesh)).location)
         })?;
         let t2 = Instant::now();
         let writer = geometry.take_writer().map_err(anyhow::Error::msg)?;
         let s = finish(writer, &scene, &compiled, &report, scene_path, o)?;
-        (
-            summary(s, &scene, &compiled, &report, parse_ms, compile_ms, t2),
-            compiled,
-        )
-    } else {
-        // Finish the scratch package so its chunks can be read back.
-        let scratch_writer = geometry.take_writer().map_err(anyhow::Error::msg)?;
-        scratch_writer
-            .finish()
-            .context("finishing the scratch package")?;
-        let result = (|| {
-            let scratch = motu_package::Package::open(&first_target)?;
-            let final_geo = PackageGeometry::new(
-                PackageWriter::create(out, writer_options(o))
-                    .with_context(|| format!("creating {}", out.display()))?,
-            );
-            let mut lod_locations: HashMap<u32, MeshLocation> = HashMap::new();
-            let g = final_geo.clone();
-            let mut sink = |rec: u32, data: &motu_scene::MeshData| -> Result<(), String> {
-                lod_locations.insert(rec, g.append_mesh(LOD_GROUP, data)?);
-                Ok(())
-            };
-            let mut compiled =
-                motu_compile::compile(&scene, &copts, &mut sink).context("compiling the subset")?;
-            let compile_ms = t1.elapsed().as_secs_f64() * 1e3;
-            // Copy the referenced source meshes' blobs.
-            let mut copied: HashMap<u32, MeshLocation> = HashMap::new();
-            for m in compiled.meshes.iter().filter(|m| m.lod == 0) {
-                if copied.contains_key(&m.source_mesh) {
-                    continue;
-                }
-                let info = scene.mesh(motu_scene::MeshId(m.source_mesh));
-                let data = motu_pack::read_mesh_blob(
-                    &scratch,
-                    info.location,
-                    info.vertex_count,
-                    info.triangle_count,
-                    info.has_normals,
-                )?;
-                let group = m.element;
-                copied.insert(
-                    m.source_mesh,
-                    final_geo
-                        .append_mesh(group, &data)
-                        .map_err(anyhow::Error::msg)?,
-                );
+        return Ok(summary(
+            s, &scene, &compiled, &report, parse_ms, compile_ms, t2,
+        ));
+    }
+    // Finish the scratch package so its chunks can be read back, then copy only the blobs the
+    // subset references into the real package.
+    let scratch_writer = geometry.take_writer().map_err(anyhow::Error::msg)?;
+    scratch_writer
+        .finish()
+        .context("finishing the scratch package")?;
+    let result = (|| {
+        let scratch = motu_package::Package::open(&first_target)?;
+        let final_geo = PackageGeometry::new(
+            PackageWriter::create(out, writer_options(o))
+                .with_context(|| format!("creating {}", out.display()))?,
+        );
+        let mut copied: HashMap<u32, MeshLocation> = HashMap::new();
+        let (compiled, compile_ms) = compile_into(&scene, &copts, &final_geo, |m| {
+            if let Some(&at) = copied.get(&m.source_mesh) {
+                return Ok(at);
             }
-            place_meshes(&scene, &mut compiled.meshes, |rec, m| {
-                if m.lod == 0 {
-                    copied.get(&m.source_mesh).copied()
-                } else {
-                    lod_locations.get(&rec).copied()
-                }
-            })?;
-            let t2 = Instant::now();
-            let writer = final_geo.take_writer().map_err(anyhow::Error::msg)?;
-            let s = finish(writer, &scene, &compiled, &report, scene_path, o)?;
-            Ok::<_, anyhow::Error>((
-                summary(s, &scene, &compiled, &report, parse_ms, compile_ms, t2),
-                compiled,
-            ))
-        })();
-        let _ = std::fs::remove_file(&first_target);
-        result?
-    };
-    drop(compiled);
-    Ok(summary)
+            let info = scene.mesh(motu_scene::MeshId(m.source_mesh));
+            let data = motu_pack::read_mesh_blob(
+                &scratch,
+                info.location,
+                info.vertex_count,
+                info.triangle_count,
+                info.has_normals,
+            )?;
+            let at = final_geo
+                .append_mesh(m.element, &data)
+                .map_err(anyhow::Error::msg)?;
+            copied.insert(m.source_mesh, at);
+            Ok(at)
+        })?;
+        let t2 = Instant::now();
+        let writer = final_geo.take_writer().map_err(anyhow::Error::msg)?;
+        let s = finish(writer, &scene, &compiled, &report, scene_path, o)?;
+        Ok(summary(
+            s, &scene, &compiled, &report, parse_ms, compile_ms, t2,
+        ))
+    })();
+    let _ = std::fs::remove_file(&first_target);
+    result
 }
 
-fn place_meshes(
-    _scene: &Scene,
-    meshes: &mut [MeshRecord],
-    locate: impl Fn(u32, &MeshRecord) -> Option<MeshLocation>,
-) -> anyhow::Result<()> {
-    for (i, m) in meshes.iter_mut().enumerate() {
-        let at = locate(i as u32, m).with_context(|| {
-            format!(
-                "internal: mesh record {i} (source mesh {}, LOD {}) has no stored data",
-                m.source_mesh, m.lod
-            )
-        })?;
+/// Compiles `scene`, appending the LOD meshes the compiler makes to `geo` as they come, and
+/// points every mesh record at its blob: source meshes (LOD 0) where `source_location` says,
+/// LOD meshes where they were appended. Returns the compiled scene and the compile time.
+fn compile_into(
+    scene: &Scene,
+    copts: &CompileOptions,
+    geo: &PackageGeometry,
+    mut source_location: impl FnMut(&MeshRecord) -> anyhow::Result<MeshLocation>,
+) -> anyhow::Result<(CompiledScene, f64)> {
+    let t = Instant::now();
+    let mut lod_locations: HashMap<u32, MeshLocation> = HashMap::new();
+    let mut sink = |rec: u32, data: &motu_scene::MeshData| -> Result<(), String> {
+        lod_locations.insert(rec, geo.append_mesh(LOD_GROUP, data)?);
+        Ok(())
+    };
+    let mut compiled =
+        motu_compile::compile(scene, copts, &mut sink).context("compiling the instancing graph")?;
+    let compile_ms = t.elapsed().as_secs_f64() * 1e3;
+    tracing::info!(
+        compile_ms,
+        peak_rss_bytes = crate::cmd::demo::peak_rss_bytes(),
+        "compiled"
+    );
+    for (i, m) in compiled.meshes.iter_mut().enumerate() {
+        let at = if m.lod == 0 {
+            source_location(m)?
+        } else {
+            *lod_locations.get(&(i as u32)).with_context(|| {
+                format!(
+                    "internal: LOD mesh record {i} (source mesh {}) was never stored",
+                    m.source_mesh
+                )
+            })?
+        };
         place_mesh_record(m, at);
     }
-    Ok(())
+    Ok((compiled, compile_ms))
 }
 
 fn summary(
