@@ -705,8 +705,11 @@ pub static NVIDIA_H200: ModelPreset = ModelPreset {
         68.26389408683886,
     ),
     blas_bytes_per_extra_geometry: 0.0,
-    compaction_ratio: 0.6,
-    compaction_measured: false,
+    // Measured on the H200 (driver 580.159.04) by building and compacting real packages:
+    // bmw-m6 0.843, a generated island 0.830, lod-grid 0.856 (`motu report --measure`,
+    // `motu bench`); NVIDIA's ">= 50 %" is for game BLASes, not these meshes.
+    compaction_ratio: 0.84,
+    compaction_measured: true,
     max_instance_count: 16777215,
     max_primitive_count: 536870911,
     fitted_max_relative_error: 0.008049242424242424,
