@@ -410,22 +410,7 @@ pub fn render(
     drop(heap);
     let (records, rgba_words, counters, frame_ns) = result?;
 
-    let mut aov = Aov::new(w, h);
-    aov.records = records;
-    let heatmap_max = aov
-        .records
-        .iter()
-        .map(|r| u32::from(r.traces))
-        .max()
-        .unwrap_or(0);
-    let mut rgba8: Vec<u8> = bytemuck::cast_slice(&rgba_words).to_vec();
-    if opts.view == View::Heatmap {
-        for (r, px) in aov.records.iter().zip(rgba8.chunks_exact_mut(4)) {
-            let c = heat_colour(f32::from(r.traces) / heatmap_max.max(1) as f32);
-            px[..3].copy_from_slice(&c.map(|v| (v * 255.0 + 0.5) as u8));
-            px[3] = 255;
-        }
-    }
+    let (aov, rgba8, heatmap_max) = frame_outputs(w, h, records, &rgba_words, opts.view);
     // The first of several frames is a warm-up (caches, pipeline first use): not in the median.
     let mut sorted = if frame_ns.len() > 1 {
         frame_ns[1..].to_vec()
@@ -526,6 +511,34 @@ fn run_frames(
         .map(|f| timestamps.elapsed_ns(&ticks, 2 * f, 2 * f + 1))
         .collect::<Result<Vec<f64>>>()?;
     Ok((records, rgba, counters, frame_ns))
+}
+
+/// The frame's AOV and image from the read-back records and colours; the heatmap view is
+/// coloured here, against the frame's most traces (returned).
+pub(crate) fn frame_outputs(
+    w: u32,
+    h: u32,
+    records: Vec<AovRecord>,
+    rgba_words: &[u32],
+    view: View,
+) -> (Aov, Vec<u8>, u32) {
+    let mut aov = Aov::new(w, h);
+    aov.records = records;
+    let heatmap_max = aov
+        .records
+        .iter()
+        .map(|r| u32::from(r.traces))
+        .max()
+        .unwrap_or(0);
+    let mut rgba8: Vec<u8> = bytemuck::cast_slice(rgba_words).to_vec();
+    if view == View::Heatmap {
+        for (r, px) in aov.records.iter().zip(rgba8.chunks_exact_mut(4)) {
+            let c = heat_colour(f32::from(r.traces) / heatmap_max.max(1) as f32);
+            px[..3].copy_from_slice(&c.map(|v| (v * 255.0 + 0.5) as u8));
+            px[3] = 255;
+        }
+    }
+    (aov, rgba8, heatmap_max)
 }
 
 /// Blue → cyan → green → yellow → red for `v` in [0, 1] (motu-trace's heat colours).

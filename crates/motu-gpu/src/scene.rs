@@ -624,27 +624,7 @@ impl GpuScene {
         let t0 = Instant::now();
         view.check_references()
             .map_err(|e| GpuError::InvalidRequest(e.to_string()))?;
-        if !ctx.caps().acceleration_structure || !ctx.caps().buffer_device_address {
-            return Err(GpuError::MissingFeature {
-                what: "acceleration structures with buffer device address".into(),
-                details: ctx.device_name().to_string(),
-            });
-        }
-        let device_available = ctx
-            .heaps()
-            .iter()
-            .filter(|h| h.device_local)
-            .filter_map(|h| {
-                h.budget_bytes
-                    .map(|b| b.saturating_sub(h.usage_bytes.unwrap_or(0)))
-            })
-            .max();
-        let budget = effective_budget_bytes(
-            Some(opts.budget_bytes),
-            device_available,
-            SafetyMargin::default(),
-        )
-        .unwrap_or(opts.budget_bytes);
+        let budget = usable_budget_bytes(ctx, opts.budget_bytes)?;
         let device_cap = ctx
             .limits()
             .max_memory_allocation_count
@@ -1611,4 +1591,31 @@ pub(crate) fn reachable(view: &HierarchyView<'_>) -> (Vec<bool>, Vec<bool>) {
         }
     }
     (tlas, blas)
+}
+
+/// The budget a build may use: the user's, lowered to what `VK_EXT_memory_budget` says is
+/// available on the device-local heaps minus a safety margin. Errors when the device lacks
+/// what every build needs.
+pub(crate) fn usable_budget_bytes(ctx: &Context, user_budget_bytes: u64) -> Result<u64> {
+    if !ctx.caps().acceleration_structure || !ctx.caps().buffer_device_address {
+        return Err(GpuError::MissingFeature {
+            what: "acceleration structures with buffer device address".into(),
+            details: ctx.device_name().to_string(),
+        });
+    }
+    let device_available = ctx
+        .heaps()
+        .iter()
+        .filter(|h| h.device_local)
+        .filter_map(|h| {
+            h.budget_bytes
+                .map(|b| b.saturating_sub(h.usage_bytes.unwrap_or(0)))
+        })
+        .max();
+    Ok(effective_budget_bytes(
+        Some(user_budget_bytes),
+        device_available,
+        SafetyMargin::default(),
+    )
+    .unwrap_or(user_budget_bytes))
 }

@@ -62,16 +62,13 @@ use std::time::Instant;
 
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
-use motu_abi::aov::{Aov, AovRecord};
+use motu_abi::aov::AovRecord;
 use motu_abi::camera::CameraParams;
 use motu_abi::{
     BlasRecord, HierarchyView, InstanceRecord, PiRecord, TlasRecord, BLAS_AABBS, BLAS_TRIANGLES,
     FLAG_NEEDS_ANY_HIT, NONE_U32,
 };
-use motu_alloc::{
-    effective_budget_bytes, AllocKind, AllocLimits, BuildSize, ItemId, MemoryClass, Residency,
-    SafetyMargin, MIB,
-};
+use motu_alloc::{AllocKind, AllocLimits, BuildSize, ItemId, MemoryClass, Residency, MIB};
 use serde::Serialize;
 
 use crate::accel::AsBuildFlags;
@@ -80,8 +77,7 @@ use crate::error::{GpuError, Result};
 use crate::heap::{GpuHeap, HeapBuffer};
 use crate::memory::BufferUsage;
 use crate::render::{
-    frame_params, heat_colour, Backend, RenderOptions, RenderOutput, RenderStats, Tracer, View,
-    STAT_WORDS,
+    frame_params, Backend, RenderOptions, RenderOutput, RenderStats, Tracer, STAT_WORDS,
 };
 use crate::scene::{
     blas_geometry, build_batched, encode_instance, table_usage, AccelStruct, BuildOptions,
@@ -376,28 +372,8 @@ impl<'a> StreamingRenderer<'a> {
         let _g = span.enter();
         view.check_references()
             .map_err(|e| GpuError::InvalidRequest(e.to_string()))?;
-        if !ctx.caps().acceleration_structure || !ctx.caps().buffer_device_address {
-            return Err(GpuError::MissingFeature {
-                what: "acceleration structures with buffer device address".into(),
-                details: ctx.device_name().to_string(),
-            });
-        }
         let too_many = |what: &str| GpuError::InvalidRequest(format!("streaming: too many {what}"));
-        let device_available = ctx
-            .heaps()
-            .iter()
-            .filter(|h| h.device_local)
-            .filter_map(|h| {
-                h.budget_bytes
-                    .map(|b| b.saturating_sub(h.usage_bytes.unwrap_or(0)))
-            })
-            .max();
-        let budget = effective_budget_bytes(
-            Some(opts.budget_bytes),
-            device_available,
-            SafetyMargin::default(),
-        )
-        .unwrap_or(opts.budget_bytes);
+        let budget = crate::scene::usable_budget_bytes(ctx, opts.budget_bytes)?;
         // Staging and scratch come out of the budget (staging does on unified memory): an
         // eighth each at most, so small budgets leave room for the structures themselves.
         let opts = &StreamOptions {
@@ -1585,22 +1561,8 @@ impl<'a> StreamingRenderer<'a> {
         tot.build_ms += st.build_ms;
         tot.vram_peak_bytes = report.peak_block_bytes;
 
-        let mut aov = Aov::new(w, h);
-        aov.records = records;
-        let heatmap_max = aov
-            .records
-            .iter()
-            .map(|r| u32::from(r.traces))
-            .max()
-            .unwrap_or(0);
-        let mut rgba8: Vec<u8> = bytemuck::cast_slice(&rgba_words).to_vec();
-        if opts.view == View::Heatmap {
-            for (r, px) in aov.records.iter().zip(rgba8.chunks_exact_mut(4)) {
-                let c = heat_colour(f32::from(r.traces) / heatmap_max.max(1) as f32);
-                px[..3].copy_from_slice(&c.map(|v| (v * 255.0 + 0.5) as u8));
-                px[3] = 255;
-            }
-        }
+        let (aov, rgba8, heatmap_max) =
+            crate::render::frame_outputs(w, h, records, &rgba_words, opts.view);
         let shadow = u64::from(counters[2]);
         let rays = pixels + self.frame_stats.reshot_pixels + shadow;
         let traces: u64 = aov.records.iter().map(|r| u64::from(r.traces)).sum();
