@@ -780,20 +780,7 @@ impl GpuScene {
         self.upload_table(ctx, heap, up, Slot::MeshGeo, cast_slice(&mesh_geo))?;
 
         // 3. AABBs of programmable instances (build input only).
-        let aabbs: Vec<[f32; 6]> = view
-            .pis
-            .iter()
-            .map(|p| {
-                [
-                    p.aabb_min[0],
-                    p.aabb_min[1],
-                    p.aabb_min[2],
-                    p.aabb_max[0],
-                    p.aabb_max[1],
-                    p.aabb_max[2],
-                ]
-            })
-            .collect();
+        let aabbs = pi_aabbs(view);
         let aabb_buf = if aabbs.is_empty() {
             None
         } else {
@@ -1618,4 +1605,16 @@ pub(crate) fn usable_budget_bytes(ctx: &Context, user_budget_bytes: u64) -> Resu
         SafetyMargin::default(),
     )
     .unwrap_or(user_budget_bytes))
+}
+
+/// The AABB build input of every programmable instance (`VkAabbPositionsKHR`: min then max),
+/// indexed like the PI table.
+pub(crate) fn pi_aabbs(view: &HierarchyView<'_>) -> Vec<[f32; 6]> {
+    view.pis
+        .iter()
+        .map(|p| {
+            let (a, b) = (p.aabb_min, p.aabb_max);
+            [a[0], a[1], a[2], b[0], b[1], b[2]]
+        })
+        .collect()
 }

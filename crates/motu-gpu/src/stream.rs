@@ -614,20 +614,7 @@ impl<'a> StreamingRenderer<'a> {
         self.up_mut()?.flush(&ctx)?;
 
         // PI BLASes: the skeleton, built once from the PI boxes (input freed after).
-        let aabbs: Vec<[f32; 6]> = view
-            .pis
-            .iter()
-            .map(|p| {
-                [
-                    p.aabb_min[0],
-                    p.aabb_min[1],
-                    p.aabb_min[2],
-                    p.aabb_max[0],
-                    p.aabb_max[1],
-                    p.aabb_max[2],
-                ]
-            })
-            .collect();
+        let aabbs = crate::scene::pi_aabbs(&view);
         if !aabbs.is_empty() {
             let buf = self.heap.alloc_buffer(
                 "pi-aabbs",
