@@ -417,31 +417,17 @@ impl<'a> Lexer<'a> {
 
     /// Read non-negative integers until `]` (consumed) into `out`.
     pub fn read_u32_array(&mut self, out: &mut Vec<u32>) -> Result<(), LexError> {
-        loop {
-            self.skip_ws();
-            let start = self.pos;
-            let Some(&b) = self.bytes.get(start) else {
-                let loc = self.loc();
-                return Err(self.error(LexErrorKind::UnterminatedArray, start, loc));
-            };
-            if b == b']' {
-                self.pos += 1;
-                return Ok(());
-            }
-            let v = self.read_i64_at(start)?;
-            match u32::try_from(v) {
-                Ok(v) => out.push(v),
-                Err(_) => {
-                    self.pos = start;
-                    let loc = self.loc();
-                    return Err(self.error(LexErrorKind::BadInteger, start, loc));
-                }
-            }
-        }
+        self.read_int_array(out)
     }
 
     /// Read integers until `]` (consumed) into `out`.
     pub fn read_i32_array(&mut self, out: &mut Vec<i32>) -> Result<(), LexError> {
+        self.read_int_array(out)
+    }
+
+    /// Read integers that fit `T` until `]` (consumed) into `out`; one out of range is an error
+    /// at its position.
+    fn read_int_array<T: TryFrom<i64>>(&mut self, out: &mut Vec<T>) -> Result<(), LexError> {
         loop {
             self.skip_ws();
             let start = self.pos;
@@ -454,7 +440,7 @@ impl<'a> Lexer<'a> {
                 return Ok(());
             }
             let v = self.read_i64_at(start)?;
-            match i32::try_from(v) {
+            match T::try_from(v) {
                 Ok(v) => out.push(v),
                 Err(_) => {
                     self.pos = start;
