@@ -1,0 +1,156 @@
+//! Per-frame buffers (parameters, AOV, colour, stats, streaming lists, readback).
+
+use motu_alloc::{AllocKind, MemoryClass};
+
+use super::passes::StreamParams;
+use crate::error::{GpuError, Result};
+use crate::heap::{GpuHeap, HeapBuffer};
+use crate::memory::BufferUsage;
+use crate::render::STAT_WORDS;
+
+/// Buffers of one frame, freed at its end.
+pub(super) struct FrameBuffers {
+    pub(super) params: HeapBuffer,
+    pub(super) stream: HeapBuffer,
+    pub(super) aov: HeapBuffer,
+    pub(super) rgba: HeapBuffer,
+    pub(super) stats: HeapBuffer,
+    pub(super) incomplete: HeapBuffer,
+    pub(super) requests: HeapBuffer,
+    pub(super) resume: HeapBuffer,
+    pub(super) pixel_list: HeapBuffer,
+    pub(super) readback: HeapBuffer,
+}
+
+impl FrameBuffers {
+    pub(super) fn release(self, heap: &mut GpuHeap) {
+        for b in [
+            self.params,
+            self.stream,
+            self.aov,
+            self.rgba,
+            self.stats,
+            self.incomplete,
+            self.requests,
+            self.resume,
+            self.pixel_list,
+            self.readback,
+        ] {
+            heap.free(b);
+        }
+    }
+}
+
+pub(super) fn alloc_frame_buffers(
+    heap: &mut GpuHeap,
+    pixels: u64,
+    guard_count: u64,
+    items: u64,
+    params: &crate::render::FrameParams,
+) -> Result<FrameBuffers> {
+    let dev = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS | BufferUsage::TRANSFER_SRC;
+    let host = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS;
+    let stamps_bytes = (items * 4).div_ceil(16) * 16;
+    let inc_bytes = 4 + 4 * pixels;
+    let readback_bytes = (2 * stamps_bytes + inc_bytes).div_ceil(16) * 16 + pixels * 20 + 16;
+    let specs: [(&str, u64, BufferUsage, AllocKind, MemoryClass); 10] = [
+        (
+            "frame-params",
+            std::mem::size_of::<crate::render::FrameParams>() as u64,
+            host,
+            AllocKind::Other,
+            MemoryClass::HostVisible,
+        ),
+        (
+            "stream-params",
+            std::mem::size_of::<StreamParams>() as u64,
+            host,
+            AllocKind::Other,
+            MemoryClass::HostVisible,
+        ),
+        (
+            "aov",
+            pixels * 16,
+            dev,
+            AllocKind::Other,
+            MemoryClass::DeviceLocal,
+        ),
+        (
+            "rgba",
+            pixels * 4,
+            dev,
+            AllocKind::Other,
+            MemoryClass::DeviceLocal,
+        ),
+        (
+            "stats",
+            (STAT_WORDS * 4) as u64,
+            dev | BufferUsage::TRANSFER_DST,
+            AllocKind::Other,
+            MemoryClass::DeviceLocal,
+        ),
+        (
+            "incomplete",
+            inc_bytes,
+            dev | BufferUsage::TRANSFER_DST,
+            AllocKind::Other,
+            MemoryClass::DeviceLocal,
+        ),
+        (
+            "requests",
+            (items * 4).max(4),
+            dev | BufferUsage::TRANSFER_DST,
+            AllocKind::Other,
+            MemoryClass::DeviceLocal,
+        ),
+        (
+            "resume",
+            pixels * 8,
+            dev | BufferUsage::TRANSFER_DST,
+            AllocKind::Other,
+            MemoryClass::DeviceLocal,
+        ),
+        (
+            "pixel-list",
+            4 * pixels.max(guard_count).max(1),
+            host,
+            AllocKind::Other,
+            MemoryClass::HostVisible,
+        ),
+        (
+            "stream-readback",
+            readback_bytes,
+            BufferUsage::TRANSFER_DST,
+            AllocKind::Staging,
+            MemoryClass::HostVisible,
+        ),
+    ];
+    let mut bufs: Vec<HeapBuffer> = Vec::with_capacity(specs.len());
+    for (label, size, usage, kind, class) in specs {
+        match heap.alloc_buffer(label, size, usage, kind, class, 16) {
+            Ok(b) => bufs.push(b),
+            Err(e) => {
+                bufs.into_iter().for_each(|b| heap.free(b));
+                return Err(e);
+            }
+        }
+    }
+    bufs[0].write(0, std::slice::from_ref(params))?;
+    let mut it = bufs.into_iter();
+    let mut next = || {
+        it.next()
+            .ok_or_else(|| GpuError::InvalidRequest("frame buffers".into()))
+    };
+    Ok(FrameBuffers {
+        params: next()?,
+        stream: next()?,
+        aov: next()?,
+        rgba: next()?,
+        stats: next()?,
+        incomplete: next()?,
+        requests: next()?,
+        resume: next()?,
+        pixel_list: next()?,
+        readback: next()?,
+    })
+}

@@ -1,0 +1,182 @@
+//! One frame: trace pipeline and frame buffers, the passes, the prefetch, the statistics.
+
+use motu_abi::camera::CameraParams;
+
+use super::buffers::alloc_frame_buffers;
+use super::passes::guard_pixels;
+use super::{FrameStreamStats, StreamingRenderer};
+use crate::error::{GpuError, Result};
+use crate::render::{frame_params, RenderOptions, RenderOutput, RenderStats, Tracer};
+
+impl<'a> StreamingRenderer<'a> {
+    /// Renders one frame: build–traverse passes until every pixel is complete (or
+    /// `max_passes`), then a prefetch of what the guard band saw. `opts.frames` is ignored
+    /// (one frame per call: a camera path calls this per frame).
+    pub fn render_frame(
+        &mut self,
+        camera: &CameraParams,
+        opts: &RenderOptions,
+    ) -> Result<(RenderOutput, FrameStreamStats)> {
+        if let Some(why) = &self.poisoned {
+            return Err(GpuError::InvalidRequest(format!(
+                "streaming renderer unusable after an earlier failure: {why}"
+            )));
+        }
+        let (w, h) = (camera.width, camera.height);
+        if w == 0 || h == 0 || w >= 1 << 15 || h >= 1 << 15 {
+            return Err(GpuError::InvalidRequest(format!(
+                "image size {w}×{h} is invalid for streaming (each side 1 to 32767)"
+            )));
+        }
+        let span = tracing::info_span!(
+            "stream_frame",
+            frame = self.frame + 1,
+            width = w,
+            height = h
+        );
+        let _g = span.enter();
+        self.frame += 1;
+        self.frame_stats = FrameStreamStats {
+            frame: self.frame,
+            ..Default::default()
+        };
+        self.frame_first_stamp = self.stamp + 1;
+        let need_tracer =
+            !matches!(&self.tracer, Some((b, s, _)) if *b == opts.backend && *s == opts.stack_size);
+        if need_tracer {
+            if let Some((_, _, t)) = self.tracer.take() {
+                t.release(&mut self.heap);
+            }
+            self.pinned = vec![false; self.item_count()];
+            let t = self
+                .with_eviction(|s| Tracer::new(&s.ctx.clone(), &mut s.heap, opts))
+                .map_err(|e| self.skeleton_error("the trace pipeline", e))?;
+            self.tracer = Some((opts.backend, opts.stack_size, t));
+        }
+        let pixels = u64::from(w) * u64::from(h);
+        let guard = guard_pixels(w, h, self.opts.guard_band_px);
+        let params = frame_params(camera, opts, self.view.root_tlas);
+        self.pinned = vec![false; self.item_count()];
+        let nitems = self.item_count() as u64;
+        let fb = self
+            .with_eviction(|s| {
+                alloc_frame_buffers(&mut s.heap, pixels, guard.len() as u64, nitems, &params)
+            })
+            .map_err(|e| self.skeleton_error("the frame buffers", e))?;
+        // Making room for the frame may have evicted BLASes that TLASes still reference.
+        if !self.dirty.is_empty() {
+            self.built_now.clear();
+            if let Err(e) = self
+                .rebuild_dirty()
+                .and_then(|()| self.upload_tlas_addresses())
+            {
+                fb.release(&mut self.heap);
+                self.quarantine_after_failure(&e);
+                return Err(e);
+            }
+        }
+        let result = self.run_passes(&fb, w, h, &guard);
+        let out = match result {
+            Ok(r) => r,
+            Err(e) => {
+                fb.release(&mut self.heap);
+                return Err(e);
+            }
+        };
+        fb.release(&mut self.heap);
+        let (records, rgba_words, counters, guard_demand) = out;
+        // Prefetch: what the guard band saw, evicting only what this frame did not see (what
+        // does not fit is skipped).
+        if !guard_demand.is_empty() && self.frame_stats.complete {
+            if let Err(e) = self.make_resident(&guard_demand, None) {
+                self.quarantine_after_failure(&e);
+                return Err(e);
+            }
+        }
+        let report = self.heap.report();
+        let st = &mut self.frame_stats;
+        st.resident_blases = self
+            .blas
+            .iter()
+            .zip(&self.buildable)
+            .filter(|(b, &ok)| ok && b.is_some())
+            .count() as u32;
+        st.resident_tlases = self.tlas.iter().filter(|t| t.is_some()).count() as u32;
+        st.resident_bytes = self
+            .blas
+            .iter()
+            .flatten()
+            .map(|a| a.size_bytes)
+            .chain(
+                self.tlas
+                    .iter()
+                    .flatten()
+                    .map(|t| t.accel.size_bytes + t.proxy.as_ref().map_or(0, |p| p.size_bytes)),
+            )
+            .chain(self.meshes.iter().flatten().map(|m| m.size_bytes()))
+            .sum();
+        st.vram_peak_bytes = report.peak_block_bytes;
+        st.vram_budget_bytes = report.budget_bytes;
+        let tot = &mut self.totals;
+        tot.frames += 1;
+        tot.passes += u64::from(st.passes);
+        tot.blas_built += u64::from(st.blas_built);
+        tot.tlas_built += u64::from(st.tlas_built);
+        tot.tlas_rebuilt += u64::from(st.tlas_rebuilt);
+        tot.evicted += u64::from(st.evicted);
+        tot.deferred += u64::from(st.deferred);
+        tot.incomplete_frames += u64::from(!st.complete);
+        tot.bytes_streamed += st.bytes_streamed;
+        tot.triangles_built += st.triangles_built;
+        tot.build_ms += st.build_ms;
+        tot.vram_peak_bytes = report.peak_block_bytes;
+
+        let (aov, rgba8, heatmap_max) =
+            crate::render::frame_outputs(w, h, records, &rgba_words, opts.view);
+        let shadow = u64::from(counters[2]);
+        let rays = pixels + self.frame_stats.reshot_pixels + shadow;
+        let traces: u64 = aov.records.iter().map(|r| u64::from(r.traces)).sum();
+        let ms = self.frame_stats.trace_ms;
+        let stats = RenderStats {
+            width: w,
+            height: h,
+            backend: opts.backend.name(),
+            view: opts.view,
+            frames: 1,
+            ms_per_frame: ms,
+            rays,
+            primary_rays: pixels + self.frame_stats.reshot_pixels,
+            shadow_rays: shadow,
+            rays_per_second: if ms > 0.0 {
+                rays as f64 / (ms / 1e3)
+            } else {
+                0.0
+            },
+            traces,
+            traces_per_ray: traces as f64 / rays.max(1) as f64,
+            stack_size: opts.stack_size,
+            stack_overflows: u64::from(counters[0]),
+            pi_list_overflows: u64::from(counters[1]),
+            heatmap_max,
+            as_bytes: self
+                .blas
+                .iter()
+                .flatten()
+                .map(|a| a.size_bytes)
+                .chain(self.tlas.iter().flatten().map(|t| t.accel.size_bytes))
+                .sum(),
+            vram_budget_bytes: report.budget_bytes,
+            vram_peak_bytes: report.peak_block_bytes,
+            allocation_count: report.peak_allocation_count,
+            passes: self.frame_stats.passes,
+        };
+        tracing::info!(
+            frame = self.frame,
+            passes = self.frame_stats.passes,
+            blas_built = self.frame_stats.blas_built,
+            evicted = self.frame_stats.evicted,
+            "stream frame done"
+        );
+        Ok((RenderOutput { aov, rgba8, stats }, self.frame_stats.clone()))
+    }
+}

@@ -1,0 +1,276 @@
+//! The build–traverse pass loop: per-pass parameters, pixel lists (with the guard band),
+//! readback of stamps, requests and incomplete pixels.
+
+use std::time::Instant;
+
+use bytemuck::{Pod, Zeroable};
+use motu_abi::aov::AovRecord;
+use motu_alloc::ItemId;
+
+use super::buffers::FrameBuffers;
+use super::demand::Demand;
+use super::{StreamingRenderer, GUARD_BIAS};
+use crate::error::{GpuError, Result};
+use crate::render::{Tracer, STAT_WORDS};
+use crate::scene::Slot;
+
+/// `StreamParams` of `common.glsl` (64 bytes).
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+#[repr(C)]
+pub(super) struct StreamParams {
+    pub(super) blas_stamps: u64,
+    pub(super) tlas_stamps: u64,
+    pub(super) pixel_list: u64,
+    pub(super) incomplete: u64,
+    pub(super) stamp: u32,
+    pub(super) full_count: u32,
+    pub(super) list_count: u32,
+    /// Requests of TLAS `t` are at index `blas_count + t`.
+    pub(super) blas_count: u32,
+    /// u32 per BLAS, then per TLAS: rays of the pass that need it (build priority).
+    pub(super) requests: u64,
+    /// `[f32; 2]` per pixel: where its primary and shadow rays resume next pass.
+    pub(super) resume: u64,
+}
+
+impl<'a> StreamingRenderer<'a> {
+    #[allow(clippy::type_complexity)]
+    pub(super) fn run_passes(
+        &mut self,
+        fb: &FrameBuffers,
+        w: u32,
+        h: u32,
+        guard: &[u32],
+    ) -> Result<(Vec<AovRecord>, Vec<u32>, Vec<u32>, Demand)> {
+        let nb = self.view.blases.len();
+        let nt = self.view.tlases.len();
+        let pixels = u64::from(w) * u64::from(h);
+        let stamps_bytes = ((nb + nt) * 4) as u64;
+        let req_off = stamps_bytes.div_ceil(16) * 16;
+        let inc_off = req_off + req_off;
+        let final_off = (inc_off + 4 + 4 * pixels).div_ceil(16) * 16;
+        let mut full_count = pixels as u32;
+        let mut list: Vec<u32> = guard.to_vec();
+        self.frame_stats.guard_rays = guard.len() as u64;
+        let mut guard_demand = Demand::default();
+        loop {
+            self.stamp += 1;
+            self.frame_stats.passes += 1;
+            let first = self.frame_stats.passes == 1;
+            fb.pixel_list.write(0, &list)?;
+            let sp = StreamParams {
+                blas_stamps: self
+                    .blas_stamps
+                    .as_ref()
+                    .map_or(Ok(0), |b| b.device_address().map(|a| a.0))?,
+                tlas_stamps: self
+                    .tlas_stamps
+                    .as_ref()
+                    .map_or(Ok(0), |b| b.device_address().map(|a| a.0))?,
+                pixel_list: fb.pixel_list.device_address()?.0,
+                incomplete: fb.incomplete.device_address()?.0,
+                stamp: self.stamp,
+                full_count,
+                list_count: list.len() as u32,
+                blas_count: nb as u32,
+                requests: fb.requests.device_address()?.0,
+                resume: fb.resume.device_address()?.0,
+            };
+            fb.stream.write(0, std::slice::from_ref(&sp))?;
+            let mut addresses = self.addresses;
+            addresses[Slot::Frame as usize] = fb.params.device_address()?.0;
+            addresses[Slot::Aov as usize] = fb.aov.device_address()?.0;
+            addresses[Slot::Rgba as usize] = fb.rgba.device_address()?.0;
+            addresses[Slot::Stats as usize] = fb.stats.device_address()?.0;
+            addresses[Slot::Stream as usize] = fb.stream.device_address()?.0;
+            let push_bytes: &[u8] = bytemuck::cast_slice(&addresses);
+            let n = full_count + list.len() as u32;
+            let Some((_, _, tracer)) = &self.tracer else {
+                return Err(GpuError::InvalidRequest(
+                    "streaming: no trace pipeline".into(),
+                ));
+            };
+            let (dims, groups) = match tracer {
+                Tracer::Pipeline(_) => {
+                    let width = n.clamp(1, 4096);
+                    ([width, n.div_ceil(width).max(1)], None)
+                }
+                Tracer::Query(_) => {
+                    let g = n.div_ceil(64).max(1);
+                    ([0, 0], Some([g.min(65535), g.div_ceil(65535)]))
+                }
+            };
+            let t0 = Instant::now();
+            let mut rec = self.ctx.record("stream pass")?;
+            if first {
+                rec.fill_buffer(&fb.stats, 0, (STAT_WORDS * 4) as u64, 0)?;
+                rec.fill_buffer(&fb.resume, 0, pixels * 8, 0)?;
+            }
+            rec.fill_buffer(&fb.incomplete, 0, 4, 0)?;
+            rec.fill_buffer(&fb.requests, 0, stamps_bytes.max(4), 0)?;
+            rec.barrier();
+            tracer.record(&mut rec, push_bytes, dims, groups)?;
+            rec.barrier();
+            if let (Some(bs), Some(ts)) = (&self.blas_stamps, &self.tlas_stamps) {
+                if nb > 0 {
+                    rec.copy_buffer(bs, 0, &fb.readback, 0, (nb * 4) as u64)?;
+                }
+                if nt > 0 {
+                    rec.copy_buffer(ts, 0, &fb.readback, (nb * 4) as u64, (nt * 4) as u64)?;
+                }
+            }
+            if nb + nt > 0 {
+                rec.copy_buffer(&fb.requests, 0, &fb.readback, req_off, stamps_bytes)?;
+            }
+            rec.copy_buffer(&fb.incomplete, 0, &fb.readback, inc_off, 4 + 4 * pixels)?;
+            rec.submit_and_wait()?;
+            self.frame_stats.trace_ms += t0.elapsed().as_secs_f64() * 1e3;
+            let stamps: Vec<u32> = fb.readback.read_vec(0, nb + nt)?;
+            let requests: Vec<u32> = fb.readback.read_vec(req_off, nb + nt)?;
+            let count = fb
+                .readback
+                .read_vec::<u32>(inc_off, 1)?
+                .first()
+                .copied()
+                .unwrap_or(0);
+            let count = count.min(pixels as u32);
+            let incomplete: Vec<u32> = fb.readback.read_vec(inc_off + 4, count as usize)?;
+            // Visible sets: resident ones refresh their LRU age and are pinned when an
+            // incomplete pixel needs them (its best hit so far; every walked TLAS); empty ones
+            // are demanded (a real pixel needs them) or prefetched (only seen).
+            let mut demand = Demand::default();
+            let mut pass_pins = vec![false; nb + nt];
+            for (i, &v) in stamps.iter().enumerate() {
+                if v >> 1 != self.stamp {
+                    continue;
+                }
+                self.last_seen[i] = self.stamp;
+                let needed = v & 1 == 1;
+                let (resident, wanted) = if i < nb {
+                    (self.blas[i].is_some(), self.buildable[i])
+                } else {
+                    let t = (i - nb) as u32;
+                    (self.tlas[t as usize].is_some(), t != self.view.root_tlas)
+                };
+                if resident {
+                    if i >= nb || self.buildable[i] {
+                        self.residency
+                            .mark_visible(ItemId(i as u32), u64::from(self.stamp));
+                        pass_pins[i] = needed || i >= nb;
+                    }
+                    continue;
+                }
+                if !wanted {
+                    continue;
+                }
+                let set = if needed {
+                    &mut demand
+                } else if first {
+                    &mut guard_demand
+                } else {
+                    continue;
+                };
+                let n = requests.get(i).copied().unwrap_or(0);
+                if i < nb {
+                    set.blases.push((i as u32, n));
+                } else {
+                    set.tlases.push(((i - nb) as u32, n));
+                }
+            }
+            demand.sort();
+            if count == 0 {
+                self.frame_stats.complete = true;
+                break;
+            }
+            if self.frame_stats.passes >= self.opts.max_passes.max(1) {
+                self.frame_stats.incomplete_pixels = u64::from(count);
+                tracing::warn!(
+                    incomplete = count,
+                    passes = self.frame_stats.passes,
+                    "stream pass cap reached: remaining pixels are rendered as misses"
+                );
+                list = incomplete;
+                break;
+            }
+            if let Err(e) = self.make_resident(&demand, Some(&pass_pins)) {
+                self.quarantine_after_failure(&e);
+                return Err(e);
+            }
+            self.frame_stats.reshot_pixels += u64::from(count);
+            full_count = 0;
+            list = incomplete
+                .iter()
+                .map(|&v| {
+                    let (x, y) = ((v & 0xffff) as i32, (v >> 16) as i32);
+                    pack_biased(x, y)
+                })
+                .collect();
+        }
+        // Final readback of the image.
+        guard_demand.sort();
+        let mut rec = self.ctx.record("stream readback")?;
+        rec.copy_buffer(&fb.aov, 0, &fb.readback, final_off, pixels * 16)?;
+        rec.copy_buffer(
+            &fb.rgba,
+            0,
+            &fb.readback,
+            final_off + pixels * 16,
+            pixels * 4,
+        )?;
+        rec.copy_buffer(
+            &fb.stats,
+            0,
+            &fb.readback,
+            final_off + pixels * 20,
+            (STAT_WORDS * 4) as u64,
+        )?;
+        rec.submit_and_wait()?;
+        let mut records: Vec<AovRecord> = fb.readback.read_vec(final_off, pixels as usize)?;
+        let mut rgba: Vec<u32> = fb
+            .readback
+            .read_vec(final_off + pixels * 16, pixels as usize)?;
+        let counters: Vec<u32> = fb.readback.read_vec(final_off + pixels * 20, STAT_WORDS)?;
+        if !self.frame_stats.complete {
+            // Never written: misses, magenta so they are not mistaken for sky.
+            // `list` holds the last pass's incomplete pixels, unbiased.
+            for &v in &list {
+                let (x, y) = (v & 0xffff, v >> 16);
+                if x < w && y < h {
+                    let i = y as usize * w as usize + x as usize;
+                    records[i] = AovRecord::MISS;
+                    rgba[i] = 0xFFFF_00FF;
+                }
+            }
+        }
+        Ok((records, rgba, counters, guard_demand))
+    }
+}
+
+/// Packs image coordinates (possibly outside the image) for the pass's pixel list.
+pub(super) fn pack_biased(x: i32, y: i32) -> u32 {
+    let bx = (x + GUARD_BIAS).clamp(0, 0xffff) as u32;
+    let by = (y + GUARD_BIAS).clamp(0, 0xffff) as u32;
+    bx | (by << 16)
+}
+
+/// Every other pixel of a `band`-pixel ring around a `w × h` image (primary rays only).
+pub(super) fn guard_pixels(w: u32, h: u32, band: u32) -> Vec<u32> {
+    let band = band.min(GUARD_BIAS as u32 / 2) as i32;
+    if band == 0 {
+        return Vec::new();
+    }
+    let (w, h) = (w as i32, h as i32);
+    let mut out = Vec::new();
+    let mut y = -band;
+    while y < h + band {
+        let mut x = -band;
+        while x < w + band {
+            if x < 0 || y < 0 || x >= w || y >= h {
+                out.push(pack_biased(x, y));
+            }
+            x += 2;
+        }
+        y += 2;
+    }
+    out
+}

@@ -1,0 +1,331 @@
+//! Acceleration-structure builds: triangle and PI BLAS sets, TLASes with their proxy BLASes,
+//! and rebuilding the TLASes whose instance set changed.
+
+use ash::vk;
+use motu_abi::{PiRecord, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
+use motu_alloc::{AllocKind, BuildSize, ItemId, MemoryClass};
+
+use super::skeleton::proxy_pi;
+use super::{StreamingRenderer, TlasGpu, IDENTITY};
+use crate::accel::AsBuildFlags;
+use crate::error::{GpuError, Result};
+use crate::memory::BufferUsage;
+use crate::scene::{blas_geometry, build_batched, encode_instance, AccelStruct, ResourceReport};
+
+impl<'a> StreamingRenderer<'a> {
+    /// Builds the BLASes `ids` of the original hierarchy (meshes must be resident; `aabb_base`
+    /// for PI BLASes) in batches. On failure nothing is left allocated.
+    pub(super) fn build_blas_set(
+        &mut self,
+        ids: &[usize],
+        aabb_base: u64,
+    ) -> Result<Vec<(usize, AccelStruct)>> {
+        let mut descs = Vec::with_capacity(ids.len());
+        let mut sizes = Vec::with_capacity(ids.len());
+        let mut order = Vec::with_capacity(ids.len());
+        for &b in ids {
+            let meshes = &self.meshes;
+            let Some((g, c, shape)) =
+                blas_geometry(&self.view, b, |m| meshes[m].as_ref(), aabb_base)?
+            else {
+                continue;
+            };
+            let sz = self.ctx.blas_build_sizes(&shape, AsBuildFlags::default())?;
+            sizes.push(BuildSize {
+                result_bytes: sz.acceleration_structure_size_bytes,
+                scratch_bytes: sz.build_scratch_size_bytes,
+            });
+            descs.push((g, c));
+            order.push(b);
+        }
+        let mut report = ResourceReport::default();
+        let built = build_batched(
+            &self.ctx,
+            &mut self.heap,
+            &mut report,
+            &sizes,
+            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            &self.build_opts,
+            |k| (descs[k].0.clone(), descs[k].1.clone()),
+            |_, _| Ok(()),
+        )?;
+        Ok(built.into_iter().map(|(k, a)| (order[k], a)).collect())
+    }
+
+    /// (Re)builds TLASes `ids` with their proxies from the current residency. The old ones are
+    /// released first (old and new together would double the largest transient of a small
+    /// budget, the root's); on failure they stay absent and dirty for the caller to retry with
+    /// less resident (never traced: the caller rebuilds or poisons before the next trace).
+    pub(super) fn build_tlases(&mut self, ids: &[u32]) -> Result<()> {
+        use bytemuck::cast_slice;
+        let ctx = self.ctx.clone();
+        let view = self.view;
+        for &t in ids {
+            if let Some(old) = self.tlas[t as usize].take() {
+                old.accel.release(&mut self.heap);
+                if let Some(p) = old.proxy {
+                    p.release(&mut self.heap);
+                }
+                self.dirty.insert(t);
+            }
+        }
+        // 1. Proxy BLASes: boxes of the non-resident triangle instances, compacted; their PI
+        // slots are rewritten to match.
+        let mut proxy_boxes: Vec<[f32; 6]> = Vec::new();
+        let mut proxy_items: Vec<(u32, u32, u32)> = Vec::new(); // (tlas, first box, count)
+        let mut pi_rewrites: Vec<(u32, Vec<PiRecord>)> = Vec::new();
+        for &t in ids {
+            let rec = &view.tlases[t as usize];
+            let first = proxy_boxes.len() as u32;
+            let mut pis = Vec::new();
+            for &k in &self.tri_instances[t as usize] {
+                let i = (rec.instance_base + k) as usize;
+                let b = view.instances[i].blas as usize;
+                if self.blas[b].is_none() {
+                    proxy_boxes.push(self.instance_boxes[i]);
+                    pis.push(proxy_pi(b as u32, &self.instance_boxes[i]));
+                }
+            }
+            if !pis.is_empty() {
+                proxy_items.push((t, first, pis.len() as u32));
+                pi_rewrites.push((t, pis));
+            }
+        }
+        let mut proxies: Vec<(u32, AccelStruct)> = Vec::new();
+        if !proxy_boxes.is_empty() {
+            let buf = self.heap.alloc_buffer(
+                "proxy-aabbs",
+                (proxy_boxes.len() * 24) as u64,
+                BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT | BufferUsage::TRANSFER_DST,
+                AllocKind::Geometry,
+                MemoryClass::DeviceLocal,
+                16,
+            )?;
+            let r = (|| -> Result<Vec<(usize, AccelStruct)>> {
+                self.up_mut()?
+                    .upload(&ctx, &buf, 0, cast_slice(&proxy_boxes))?;
+                self.up_mut()?.flush(&ctx)?;
+                let base = buf.device_address()?.0;
+                let mut descs = Vec::new();
+                let mut sizes = Vec::new();
+                for &(_, first, n) in &proxy_items {
+                    let aabbs = vk::AccelerationStructureGeometryAabbsDataKHR::default()
+                        .data(vk::DeviceOrHostAddressConstKHR {
+                            device_address: base + u64::from(first) * 24,
+                        })
+                        .stride(24);
+                    descs.push((
+                        vec![vk::AccelerationStructureGeometryKHR::default()
+                            .geometry_type(vk::GeometryTypeKHR::AABBS)
+                            .geometry(vk::AccelerationStructureGeometryDataKHR { aabbs })
+                            .flags(vk::GeometryFlagsKHR::NO_DUPLICATE_ANY_HIT_INVOCATION)],
+                        vec![n],
+                    ));
+                    let sz = ctx.blas_build_sizes(
+                        &[crate::accel::BlasGeometry::Aabbs {
+                            aabb_count: n,
+                            opaque: false,
+                        }],
+                        AsBuildFlags::default(),
+                    )?;
+                    sizes.push(BuildSize {
+                        result_bytes: sz.acceleration_structure_size_bytes,
+                        scratch_bytes: sz.build_scratch_size_bytes,
+                    });
+                }
+                let mut report = ResourceReport::default();
+                build_batched(
+                    &ctx,
+                    &mut self.heap,
+                    &mut report,
+                    &sizes,
+                    vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+                    &self.build_opts,
+                    |k| (descs[k].0.clone(), descs[k].1.clone()),
+                    |_, _| Ok(()),
+                )
+            })();
+            self.heap.free(buf);
+            for (k, a) in r? {
+                proxies.push((proxy_items[k].0, a));
+            }
+        }
+        // 2. TLASes over the resident BLASes (inactive where not) plus the proxy instance.
+        let instance_bytes: Vec<Vec<u8>> = ids
+            .iter()
+            .map(|&t| {
+                let rec = &view.tlases[t as usize];
+                let mut out = Vec::with_capacity((rec.instance_count as usize + 1) * 64);
+                for inst in &view.instances
+                    [rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize]
+                {
+                    let b = inst.blas as usize;
+                    let addr = self.blas[b].as_ref().map_or(0, |a| a.address);
+                    out.extend_from_slice(&encode_instance(
+                        &inst.tlas_from_blas,
+                        view.blases[b].kind == BLAS_AABBS,
+                        inst.flags & FLAG_NEEDS_ANY_HIT != 0,
+                        addr,
+                    ));
+                }
+                if !self.tri_instances[t as usize].is_empty() {
+                    let addr = proxies
+                        .iter()
+                        .find(|(pt, _)| *pt == t)
+                        .map_or(0, |(_, a)| a.address);
+                    out.extend_from_slice(&encode_instance(&IDENTITY, true, false, addr));
+                }
+                out
+            })
+            .collect();
+        let mut sizes = Vec::with_capacity(ids.len());
+        for bytes in &instance_bytes {
+            let s = ctx.tlas_build_sizes((bytes.len() / 64) as u32, AsBuildFlags::default())?;
+            sizes.push(BuildSize {
+                result_bytes: s.acceleration_structure_size_bytes,
+                scratch_bytes: s.build_scratch_size_bytes,
+            });
+        }
+        let total: u64 = instance_bytes.iter().map(|b| b.len() as u64).sum();
+        let mut offsets = Vec::with_capacity(ids.len());
+        let mut off = 0u64;
+        for b in &instance_bytes {
+            offsets.push(off);
+            off += b.len() as u64;
+        }
+        let inst_buf = match self.heap.alloc_buffer(
+            "stream-tlas-instances",
+            total.max(64),
+            BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT | BufferUsage::TRANSFER_DST,
+            AllocKind::InstanceBuffer,
+            MemoryClass::DeviceLocal,
+            16,
+        ) {
+            Ok(b) => b,
+            Err(e) => {
+                proxies
+                    .into_iter()
+                    .for_each(|(_, a)| a.release(&mut self.heap));
+                return Err(e);
+            }
+        };
+        let built = (|| -> Result<Vec<(usize, AccelStruct)>> {
+            for (b, &o) in instance_bytes.iter().zip(&offsets) {
+                if !b.is_empty() {
+                    self.up_mut()?.upload(&ctx, &inst_buf, o, b)?;
+                }
+            }
+            self.up_mut()?.flush(&ctx)?;
+            let inst_addr = inst_buf.device_address()?.0;
+            let counts: Vec<u32> = instance_bytes
+                .iter()
+                .map(|b| (b.len() / 64) as u32)
+                .collect();
+            let mut report = ResourceReport::default();
+            build_batched(
+                &ctx,
+                &mut self.heap,
+                &mut report,
+                &sizes,
+                vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+                &self.build_opts,
+                |k| {
+                    let instances = vk::AccelerationStructureGeometryInstancesDataKHR::default()
+                        .array_of_pointers(false)
+                        .data(vk::DeviceOrHostAddressConstKHR {
+                            device_address: inst_addr + offsets[k],
+                        });
+                    (
+                        vec![vk::AccelerationStructureGeometryKHR::default()
+                            .geometry_type(vk::GeometryTypeKHR::INSTANCES)
+                            .geometry(vk::AccelerationStructureGeometryDataKHR { instances })],
+                        vec![counts[k]],
+                    )
+                },
+                |_, _| Ok(()),
+            )
+        })();
+        self.heap.free(inst_buf);
+        let built = match built {
+            Ok(b) => b,
+            Err(e) => {
+                proxies
+                    .into_iter()
+                    .for_each(|(_, a)| a.release(&mut self.heap));
+                return Err(e);
+            }
+        };
+        // 3. Swap in; rewrite the proxy PI slots.
+        for (t, pis) in &pi_rewrites {
+            let base = u64::from(self.proxy_pi_base[*t as usize]);
+            let pis_buf = &self.tables[self.pis_table];
+            self.up
+                .as_mut()
+                .ok_or_else(|| GpuError::InvalidRequest("streaming: staging ring released".into()))?
+                .upload(&ctx, pis_buf, base * 80, cast_slice(pis))?;
+        }
+        self.up_mut()?.flush(&ctx)?;
+        for (k, accel) in built {
+            let t = ids[k];
+            let proxy = proxies
+                .iter()
+                .position(|(pt, _)| *pt == t)
+                .map(|p| proxies.swap_remove(p).1);
+            if let Some(old) = self.tlas[t as usize].replace(TlasGpu { accel, proxy }) {
+                old.accel.release(&mut self.heap);
+                if let Some(p) = old.proxy {
+                    p.release(&mut self.heap);
+                }
+            }
+            self.dirty.remove(&t);
+        }
+        Ok(())
+    }
+
+    /// Rebuilds every dirty TLAS. When the budget refuses even with everything unpinned
+    /// evicted, gives back structures this step built, least requested first (their pixels
+    /// stay incomplete); fails only when none is left.
+    pub(super) fn rebuild_dirty(&mut self) -> Result<()> {
+        let mut rounds = 0;
+        while !self.dirty.is_empty() {
+            rounds += 1;
+            if rounds > 64 + self.item_count() {
+                return Err(GpuError::InvalidRequest(
+                    "streaming: TLAS rebuilds do not settle".into(),
+                ));
+            }
+            let ids: Vec<u32> = self.dirty.iter().copied().collect();
+            let rebuilt = ids.len() as u32;
+            match self.with_eviction(|s| {
+                // Eviction may have given some up (a child TLAS): rebuild what is still dirty.
+                let now: Vec<u32> = s.dirty.iter().copied().collect();
+                s.build_tlases(&now)
+            }) {
+                Ok(()) => self.frame_stats.tlas_rebuilt += rebuilt,
+                Err(GpuError::Budget(_)) if self.unpin_pass_pins() => {}
+                Err(GpuError::Budget(msg)) => {
+                    let Some(last) = self.built_now.pop() else {
+                        let report = self.heap.report();
+                        return Err(GpuError::Budget(format!(
+                            "streaming: rebuilding {} TLAS(es) does not fit under the budget of \
+                             {} bytes with every evictable structure evicted ({} bytes in use, \
+                             skeleton {} bytes); raise --vram-budget ({msg})",
+                            ids.len(),
+                            report.budget_bytes,
+                            report.budget_in_use_bytes,
+                            self.totals.skeleton_bytes
+                        )));
+                    };
+                    self.frame_stats.deferred += 1;
+                    if self.residency.contains(ItemId(last)) {
+                        self.evict(last as usize);
+                        // Given back, not evicted for room: count it as deferred only.
+                        self.frame_stats.evicted -= 1;
+                    }
+                }
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,157 @@
+//! Residency: LRU eviction under the budget, pins, mesh reference counts, and quarantine of
+//! TLASes left inconsistent by a failed build step.
+
+use motu_abi::BLAS_TRIANGLES;
+use motu_alloc::ItemId;
+
+use super::{item_of_tlas, StreamingRenderer};
+use crate::error::{GpuError, Result};
+
+impl<'a> StreamingRenderer<'a> {
+    /// Evicts least-recently-visible unpinned structures (at least `bytes` of them, or all that
+    /// are left). Returns false when nothing could be evicted.
+    pub(super) fn evict_some(&mut self, bytes: u64) -> Result<bool> {
+        let pins = &self.pinned;
+        let pinned = |id: ItemId| pins.get(id.0 as usize).copied().unwrap_or(true);
+        let victims = match self
+            .residency
+            .choose_victims_excluding(bytes.max(1), pinned)
+        {
+            Ok(v) => v,
+            Err(e) if e.evictable_bytes > 0 => self
+                .residency
+                .choose_victims_excluding(e.evictable_bytes, pinned)
+                .unwrap_or_default(),
+            Err(_) => Vec::new(),
+        };
+        if victims.is_empty() {
+            return Ok(false);
+        }
+        for id in victims {
+            self.evict(id.0 as usize);
+        }
+        tracing::debug!(resident = self.residency.len(), "evicted");
+        Ok(true)
+    }
+
+    /// Releases item `i` (a BLAS with the meshes only it used, or a child TLAS with its proxy);
+    /// resident parents of a BLAS become dirty.
+    pub(super) fn evict(&mut self, i: usize) {
+        let nb = self.view.blases.len();
+        self.residency.remove(ItemId(i as u32));
+        self.frame_stats.evicted += 1;
+        if i < nb {
+            if let Some(a) = self.blas[i].take() {
+                a.release(&mut self.heap);
+            }
+            self.release_blas_meshes(i);
+            for &p in &self.parents[i] {
+                if self.tlas[p as usize].is_some() {
+                    self.dirty.insert(p);
+                }
+            }
+        } else {
+            if let Some(t) = self.tlas[i - nb].take() {
+                t.accel.release(&mut self.heap);
+                if let Some(p) = t.proxy {
+                    p.release(&mut self.heap);
+                }
+            }
+            // Also when a failed rebuild left it absent: it is no longer wanted.
+            self.dirty.remove(&((i - nb) as u32));
+        }
+    }
+
+    /// Drops BLAS `b`'s references to its meshes, freeing those no other BLAS holds.
+    pub(super) fn release_blas_meshes(&mut self, b: usize) {
+        for g in self.blas_meshes(b) {
+            self.mesh_refs[g] = self.mesh_refs[g].saturating_sub(1);
+            if self.mesh_refs[g] == 0 {
+                if let Some(m) = self.meshes[g].take() {
+                    self.heap.free(m.buffer);
+                }
+            }
+        }
+    }
+
+    pub(super) fn blas_meshes(&self, b: usize) -> Vec<usize> {
+        let r = &self.view.blases[b];
+        if r.kind != BLAS_TRIANGLES {
+            return Vec::new();
+        }
+        self.view.geometries[r.item_base as usize..(r.item_base + r.item_count) as usize]
+            .iter()
+            .map(|g| g.mesh as usize)
+            .collect()
+    }
+
+    /// Runs `f`, evicting unpinned structures and retrying while the budget refuses it;
+    /// returns the budget error once nothing unpinned is left.
+    pub(super) fn with_eviction<T>(
+        &mut self,
+        mut f: impl FnMut(&mut Self) -> Result<T>,
+    ) -> Result<T> {
+        loop {
+            match f(self) {
+                Err(GpuError::Budget(msg)) => {
+                    let step = (self.build_opts.budget_bytes / 32).max(1);
+                    if self.evict_some(step)? {
+                        continue;
+                    }
+                    return Err(GpuError::Budget(msg));
+                }
+                r => return r,
+            }
+        }
+    }
+
+    /// [`with_eviction`](Self::with_eviction) when `evict`, else `f` once.
+    pub(super) fn maybe_evicting<T>(
+        &mut self,
+        evict: bool,
+        mut f: impl FnMut(&mut Self) -> Result<T>,
+    ) -> Result<T> {
+        if evict {
+            self.with_eviction(f)
+        } else {
+            f(self)
+        }
+    }
+
+    /// Drops the pins that are not this step's builds (the incomplete pixels' best hits: they
+    /// are found again later). Returns false if there were none.
+    pub(super) fn unpin_pass_pins(&mut self) -> bool {
+        let mut keep = vec![false; self.pinned.len()];
+        for &i in &self.built_now {
+            if let Some(k) = keep.get_mut(i as usize) {
+                *k = true;
+            }
+        }
+        let changed = self.pinned.iter().zip(&keep).any(|(&p, &k)| p && !k);
+        self.pinned = keep;
+        changed
+    }
+
+    /// After a failed build step, TLASes still referencing evicted BLASes must never be traced:
+    /// child ones are evicted (they become empty); a dirty root poisons the renderer.
+    pub(super) fn quarantine_after_failure(&mut self, e: &GpuError) {
+        let nb = self.view.blases.len();
+        let dirty: Vec<u32> = std::mem::take(&mut self.dirty).into_iter().collect();
+        for t in dirty {
+            if t == self.view.root_tlas {
+                self.poisoned = Some(e.to_string());
+                continue;
+            }
+            if let Some(g) = self.tlas[t as usize].take() {
+                g.accel.release(&mut self.heap);
+                if let Some(p) = g.proxy {
+                    p.release(&mut self.heap);
+                }
+                self.residency.remove(item_of_tlas(nb, t));
+            }
+        }
+        if self.poisoned.is_none() {
+            let _ = self.upload_tlas_addresses();
+        }
+    }
+}

@@ -1,0 +1,391 @@
+//! The resident skeleton: node tables (GPU copies with proxy instances), stamps, PI BLASes and
+//! the root TLAS, built once by [`StreamingRenderer::new`]; the address tables rewritten as
+//! structures come and go.
+
+use std::collections::BTreeSet;
+
+use motu_abi::{
+    BlasRecord, HierarchyView, InstanceRecord, PiRecord, TlasRecord, BLAS_AABBS, BLAS_TRIANGLES,
+    NONE_U32,
+};
+use motu_alloc::{AllocKind, AllocLimits, MemoryClass, Residency, MIB};
+
+use super::{
+    FrameStreamStats, StreamOptions, StreamTotals, StreamingRenderer, IDENTITY, PI_EMPTY_BLAS,
+};
+use crate::context::Context;
+use crate::error::{GpuError, Result};
+use crate::heap::GpuHeap;
+use crate::memory::BufferUsage;
+use crate::scene::{table_usage, BuildOptions, MeshBlobSource, Slot, Uploader, SLOT_COUNT};
+
+pub(super) fn transformed_box(m: &[f32; 12], lo: [f32; 3], hi: [f32; 3]) -> [f32; 6] {
+    let mut out = [
+        f32::INFINITY,
+        f32::INFINITY,
+        f32::INFINITY,
+        -f32::INFINITY,
+        -f32::INFINITY,
+        -f32::INFINITY,
+    ];
+    for c in 0..8 {
+        let p = [
+            if c & 1 == 0 { lo[0] } else { hi[0] },
+            if c & 2 == 0 { lo[1] } else { hi[1] },
+            if c & 4 == 0 { lo[2] } else { hi[2] },
+        ];
+        let q = motu_abi::xform_point(m, p);
+        for a in 0..3 {
+            out[a] = out[a].min(q[a]);
+            out[3 + a] = out[3 + a].max(q[a]);
+        }
+    }
+    out
+}
+
+impl<'a> StreamingRenderer<'a> {
+    /// Uploads the skeleton (tables, PI BLASes, the root TLAS with its proxy) under the budget.
+    pub fn new(
+        ctx: &Context,
+        view: HierarchyView<'a>,
+        source: &'a dyn MeshBlobSource,
+        opts: &StreamOptions,
+    ) -> Result<StreamingRenderer<'a>> {
+        let span = tracing::info_span!(
+            "stream_init",
+            blases = view.blases.len(),
+            tlases = view.tlases.len()
+        );
+        let _g = span.enter();
+        view.check_references()
+            .map_err(|e| GpuError::InvalidRequest(e.to_string()))?;
+        let too_many = |what: &str| GpuError::InvalidRequest(format!("streaming: too many {what}"));
+        let budget = crate::scene::usable_budget_bytes(ctx, opts.budget_bytes)?;
+        // Staging and scratch come out of the budget (staging does on unified memory): an
+        // eighth each at most, so small budgets leave room for the structures themselves.
+        let opts = &StreamOptions {
+            staging_bytes: opts.staging_bytes.min(budget / 8).max(64 * 1024),
+            scratch_budget_bytes: opts.scratch_budget_bytes.min(budget / 8).max(64 * 1024),
+            ..*opts
+        };
+        let device_cap = ctx
+            .limits()
+            .max_memory_allocation_count
+            .saturating_sub(ctx.allocation_count());
+        let limits = AllocLimits {
+            max_allocation_count: opts.max_allocations.min(device_cap).max(1),
+            max_allocation_size_bytes: ctx.limits().max_memory_allocation_size,
+            budget_bytes: budget,
+            host_visible_budget_bytes: opts.staging_bytes.max(64 * MIB) * 4,
+        };
+        let heap = GpuHeap::new(ctx, limits)?;
+        let nb = view.blases.len();
+        let nt = view.tlases.len();
+
+        // Derived structure: triangle instances per TLAS, parents per BLAS, proxy ids.
+        let buildable: Vec<bool> = view
+            .blases
+            .iter()
+            .map(|b| b.kind == BLAS_TRIANGLES && b.item_count > 0)
+            .collect();
+        let mut tri_instances = vec![Vec::new(); nt];
+        let mut parents = vec![Vec::new(); nb];
+        let mut instance_boxes = vec![[0.0f32; 6]; view.instances.len()];
+        for (t, rec) in view.tlases.iter().enumerate() {
+            for k in 0..rec.instance_count {
+                let i = (rec.instance_base + k) as usize;
+                let inst = &view.instances[i];
+                let b = inst.blas as usize;
+                if !parents[b].contains(&(t as u32)) {
+                    parents[b].push(t as u32);
+                }
+                if buildable[b] {
+                    tri_instances[t].push(k);
+                    let br = &view.blases[b];
+                    instance_boxes[i] =
+                        transformed_box(&inst.tlas_from_blas, br.bounds_min, br.bounds_max);
+                }
+            }
+        }
+        // GPU tables: TLAS ranges grow by the proxy instance; proxy BLASes and PI slots follow
+        // the originals.
+        let mut gpu_tlases: Vec<TlasRecord> = Vec::with_capacity(nt);
+        let mut gpu_instances: Vec<InstanceRecord> = Vec::with_capacity(view.instances.len() + nt);
+        let mut gpu_blases: Vec<BlasRecord> = view.blases.to_vec();
+        let mut gpu_pis: Vec<PiRecord> = view.pis.to_vec();
+        let mut proxy_pi_base = vec![NONE_U32; nt];
+        for (t, rec) in view.tlases.iter().enumerate() {
+            let base = u32::try_from(gpu_instances.len()).map_err(|_| too_many("instances"))?;
+            let range =
+                rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize;
+            gpu_instances.extend_from_slice(&view.instances[range]);
+            let mut count = rec.instance_count;
+            if !tri_instances[t].is_empty() {
+                let pi_base = u32::try_from(gpu_pis.len()).map_err(|_| too_many("PIs"))?;
+                let blas_id = u32::try_from(gpu_blases.len()).map_err(|_| too_many("BLASes"))?;
+                proxy_pi_base[t] = pi_base;
+                for &k in &tri_instances[t] {
+                    let i = (rec.instance_base + k) as usize;
+                    gpu_pis.push(proxy_pi(view.instances[i].blas, &instance_boxes[i]));
+                }
+                let n = tri_instances[t].len() as u32;
+                gpu_blases.push(BlasRecord {
+                    kind: BLAS_AABBS,
+                    item_base: pi_base,
+                    item_count: n,
+                    level: rec.level + 1,
+                    bounds_min: rec.bounds_min,
+                    primitive_count: n,
+                    bounds_max: rec.bounds_max,
+                    _pad: 0,
+                });
+                gpu_instances.push(InstanceRecord {
+                    tlas_from_blas: IDENTITY,
+                    blas: blas_id,
+                    flags: 0,
+                    element: NONE_U32,
+                    _pad: 0,
+                });
+                count += 1;
+            }
+            gpu_tlases.push(TlasRecord {
+                instance_base: base,
+                instance_count: count,
+                ..*rec
+            });
+        }
+
+        let build_opts = BuildOptions {
+            budget_bytes: budget,
+            max_allocations: limits.max_allocation_count,
+            scratch_budget_bytes: opts.scratch_budget_bytes,
+            max_batch_result_bytes: (opts.scratch_budget_bytes.max(MIB) * 2).min(budget / 4),
+            staging_bytes: opts.staging_bytes,
+            compact: opts.compact,
+        };
+        let scene_triangles = view
+            .blases
+            .iter()
+            .zip(&buildable)
+            .filter(|(_, &ok)| ok)
+            .map(|(b, _)| u64::from(b.primitive_count))
+            .sum();
+        let mut r = StreamingRenderer {
+            blas: (0..nb).map(|_| None).collect(),
+            tlas: (0..nt).map(|_| None).collect(),
+            meshes: (0..view.meshes.len()).map(|_| None).collect(),
+            mesh_refs: vec![0; view.meshes.len()],
+            tables: Vec::new(),
+            blas_stamps: None,
+            tlas_stamps: None,
+            up: None,
+            tracer: None,
+            heap,
+            addresses: [0; SLOT_COUNT],
+            pis_table: 0,
+            mesh_geo_table: 0,
+            tlas_addr_table: 0,
+            view,
+            source,
+            opts: *opts,
+            build_opts,
+            tri_instances,
+            proxy_pi_base,
+            parents,
+            instance_boxes,
+            buildable,
+            residency: Residency::new(),
+            last_seen: vec![0; nb + nt],
+            dirty: BTreeSet::new(),
+            pinned: vec![false; nb + nt],
+            built_now: Vec::new(),
+            group_hint: 16,
+            stamp: 0,
+            frame_first_stamp: 1,
+            poisoned: None,
+            frame: 0,
+            frame_stats: FrameStreamStats::default(),
+            totals: StreamTotals {
+                scene_triangles,
+                vram_budget_bytes: budget,
+                ..Default::default()
+            },
+            ctx: ctx.clone(),
+        };
+        r.init_skeleton(&gpu_tlases, &gpu_instances, &gpu_blases, &gpu_pis)?;
+        let report = r.heap.report();
+        r.totals.skeleton_bytes = report.budget_in_use_bytes;
+        tracing::info!(
+            skeleton_bytes = r.totals.skeleton_bytes,
+            budget_bytes = budget,
+            scene_triangles,
+            "streaming skeleton resident"
+        );
+        Ok(r)
+    }
+
+    pub(super) fn init_skeleton(
+        &mut self,
+        gpu_tlases: &[TlasRecord],
+        gpu_instances: &[InstanceRecord],
+        gpu_blases: &[BlasRecord],
+        gpu_pis: &[PiRecord],
+    ) -> Result<()> {
+        use bytemuck::cast_slice;
+        let ctx = self.ctx.clone();
+        let view = self.view;
+        self.up = Some(Uploader::new(&mut self.heap, self.opts.staging_bytes)?);
+        let mesh_geo = vec![0u64; 2 * view.meshes.len()];
+        let tlas_addrs = vec![0u64; view.tlases.len()];
+        let tables: [(Slot, &[u8]); 11] = [
+            (Slot::Tlases, cast_slice(gpu_tlases)),
+            (Slot::Instances, cast_slice(gpu_instances)),
+            (Slot::Blases, cast_slice(gpu_blases)),
+            (Slot::Geometries, cast_slice(view.geometries)),
+            (Slot::Pis, cast_slice(gpu_pis)),
+            (Slot::Selectors, cast_slice(view.lod_selectors)),
+            (Slot::LodLevels, cast_slice(view.lod_levels)),
+            (Slot::Meshes, cast_slice(view.meshes)),
+            (Slot::Materials, cast_slice(view.materials)),
+            (Slot::MeshGeo, cast_slice(&mesh_geo)),
+            (Slot::TlasAddresses, cast_slice(&tlas_addrs)),
+        ];
+        for (slot, bytes) in tables {
+            if bytes.is_empty() {
+                continue;
+            }
+            let buf = self.heap.alloc_buffer(
+                &format!("stream-table-{slot:?}"),
+                bytes.len() as u64,
+                table_usage(),
+                AllocKind::NodeTable,
+                MemoryClass::DeviceLocal,
+                16,
+            )?;
+            self.addresses[slot as usize] = buf.device_address()?.0;
+            self.up_mut()?.upload(&ctx, &buf, 0, bytes)?;
+            match slot {
+                Slot::Pis => self.pis_table = self.tables.len(),
+                Slot::MeshGeo => self.mesh_geo_table = self.tables.len(),
+                Slot::TlasAddresses => self.tlas_addr_table = self.tables.len(),
+                _ => {}
+            }
+            self.tables.push(buf);
+        }
+        let stamp_usage = BufferUsage::STORAGE
+            | BufferUsage::DEVICE_ADDRESS
+            | BufferUsage::TRANSFER_SRC
+            | BufferUsage::TRANSFER_DST;
+        for (i, n) in [view.blases.len(), view.tlases.len()]
+            .into_iter()
+            .enumerate()
+        {
+            let buf = self.heap.alloc_buffer(
+                ["blas-stamps", "tlas-stamps"][i],
+                (n.max(1) * 4) as u64,
+                stamp_usage,
+                AllocKind::Other,
+                MemoryClass::DeviceLocal,
+                16,
+            )?;
+            let rec = ctx.record("clear stamps")?;
+            let mut rec = rec;
+            rec.fill_buffer(&buf, 0, (n.max(1) * 4) as u64, 0)?;
+            rec.submit_and_wait()?;
+            if i == 0 {
+                self.blas_stamps = Some(buf);
+            } else {
+                self.tlas_stamps = Some(buf);
+            }
+        }
+        self.up_mut()?.flush(&ctx)?;
+
+        // PI BLASes: the skeleton, built once from the PI boxes (input freed after).
+        let aabbs = crate::scene::pi_aabbs(&view);
+        if !aabbs.is_empty() {
+            let buf = self.heap.alloc_buffer(
+                "pi-aabbs",
+                (aabbs.len() * 24) as u64,
+                BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT | BufferUsage::TRANSFER_DST,
+                AllocKind::Geometry,
+                MemoryClass::DeviceLocal,
+                16,
+            )?;
+            let r = (|| -> Result<()> {
+                self.up_mut()?.upload(&ctx, &buf, 0, cast_slice(&aabbs))?;
+                self.up_mut()?.flush(&ctx)?;
+                let base = buf.device_address()?.0;
+                let ids: Vec<usize> = (0..view.blases.len())
+                    .filter(|&b| view.blases[b].kind == BLAS_AABBS && view.blases[b].item_count > 0)
+                    .collect();
+                let built = self.build_blas_set(&ids, base)?;
+                for (b, a) in built {
+                    self.blas[b] = Some(a);
+                }
+                Ok(())
+            })();
+            self.heap.free(buf);
+            r?;
+        }
+        // The root TLAS (all its triangle instances empty).
+        let root = view.root_tlas;
+        self.build_tlases(&[root])?;
+        self.upload_tlas_addresses()?;
+        Ok(())
+    }
+
+    pub(super) fn up_mut(&mut self) -> Result<&mut Uploader> {
+        self.up
+            .as_mut()
+            .ok_or_else(|| GpuError::InvalidRequest("streaming: staging ring released".into()))
+    }
+
+    pub(super) fn upload_tlas_addresses(&mut self) -> Result<()> {
+        use bytemuck::cast_slice;
+        let ctx = self.ctx.clone();
+        let addrs: Vec<u64> = self
+            .tlas
+            .iter()
+            .map(|t| t.as_ref().map_or(0, |t| t.accel.address))
+            .collect();
+        let mut mesh_geo = vec![0u64; 2 * self.meshes.len()];
+        for (m, g) in self.meshes.iter().enumerate() {
+            if let Some(g) = g {
+                mesh_geo[2 * m] = g.positions_address;
+                mesh_geo[2 * m + 1] = g.indices_address;
+            }
+        }
+        let Some(up) = self.up.as_mut() else {
+            return Err(GpuError::InvalidRequest(
+                "streaming: staging ring released".into(),
+            ));
+        };
+        if !addrs.is_empty() {
+            up.upload(
+                &ctx,
+                &self.tables[self.tlas_addr_table],
+                0,
+                cast_slice(&addrs),
+            )?;
+        }
+        if !mesh_geo.is_empty() {
+            up.upload(
+                &ctx,
+                &self.tables[self.mesh_geo_table],
+                0,
+                cast_slice(&mesh_geo),
+            )?;
+        }
+        up.flush(&ctx)
+    }
+}
+
+pub(super) fn proxy_pi(blas: u32, b: &[f32; 6]) -> PiRecord {
+    PiRecord {
+        child_from_parent: [0.0; 12],
+        aabb_min: [b[0], b[1], b[2]],
+        kind: PI_EMPTY_BLAS,
+        aabb_max: [b[3], b[4], b[5]],
+        target: blas,
+    }
+}
