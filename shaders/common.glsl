@@ -26,28 +26,30 @@
 
 // Streaming (motu-gpu's stream module): a programmable instance of this kind stands for a
 // non-resident triangle BLAS (`target`) in its TLAS's proxy BLAS; meeting it in front of the
-// best hit makes the ray incomplete.
+// best hit leaves the ray open until a pass walks that BLAS.
 #define PI_EMPTY_BLAS 2u
 // Packed pixel coordinates of a pass's pixel list are biased by this (guard-band pixels lie
 // outside the image).
 #define GUARD_BIAS 4096
+// Levels of a BLAS stamp (`4 × stamp + level`, atomicMax keeps the highest): seen (guard band,
+// or the hit of a walk), open (some pixel still needs it), needed (some pixel's nearest open).
+#define STREAM_SEEN 0u
+#define STREAM_OPEN 1u
+#define STREAM_NEEDED 2u
 
 // Per-pass streaming parameters (Rust: stream::StreamParams, 64 bytes). Present only when
 // push.stream != 0.
 struct StreamParams {
-    // u32 per BLAS: 2 × stamp + 1 when an incomplete pixel needs it (the nearest empty one a
-    // ray met, or the best hit of a deferred ray), else 2 × stamp (seen: guard band, or
-    // walked by a ray that completed)
-    uint64_t blas_stamps;
-    uint64_t tlas_stamps;   // u32 per TLAS, same encoding
+    uint64_t blas_stamps;   // u32 per BLAS: 4 × stamp + STREAM_* level
+    uint64_t walked;        // u32 per BLAS: the latest stamp of a pass it was resident in
     uint64_t pixel_list;    // u32 packed (x + GUARD_BIAS) | (y + GUARD_BIAS) << 16
     uint64_t incomplete;    // u32 count, then u32 packed pixels (unbiased x | y << 16)
     uint stamp;
     uint full_count;        // items [0, full_count) are the image's pixels in row order
     uint list_count;        // items [full_count, full_count + list_count) come from pixel_list
-    uint blas_count;        // requests of TLAS t are at index blas_count + t
-    uint64_t requests;      // u32 per BLAS, then per TLAS: rays needing it now (build order)
-    uint64_t resume;        // vec2 per pixel: primary and shadow ray t_min for the next pass
+    uint blas_count;
+    uint64_t requests;      // u32 per BLAS: pixels whose nearest open structure it is (build order)
+    uint64_t carry;         // Carry per pixel (render_pixel.glsl), zeroed at the frame's start
 };
 
 struct FrameParams {
@@ -112,7 +114,6 @@ layout(buffer_reference, std430, buffer_reference_align = 4) buffer Stats { uint
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer StreamRef { StreamParams s; };
 layout(buffer_reference, std430, buffer_reference_align = 4) buffer StampTable { uint r[]; };
 layout(buffer_reference, std430, buffer_reference_align = 4) buffer IncompleteList { uint count; uint r[]; };
-layout(buffer_reference, std430, buffer_reference_align = 8) buffer ResumeTable { vec2 r[]; };
 
 // 16 device addresses = 128 bytes, the guaranteed push-constant size. Order = Rust `Slot`.
 layout(push_constant) uniform Push {

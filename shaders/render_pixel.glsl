@@ -32,16 +32,21 @@ Surface resolve(TraceHit h) {
     return s;
 }
 
-// A resumed ray starts a hair before where the last pass stopped.
-#define RESUME_BACKOFF 0.99999
+// A pixel's state carried across streaming passes (48 bytes; zeroed at the frame's start): the
+// primary ray's best hit resolved while its BLAS was resident (so the BLAS may go), and which
+// ray is open since which pass.
+struct Carry {
+    vec4 hit;   // x: best t (T_INFINITY: none), yzw: world geometric normal
+    uvec4 rec;  // source mesh, primitive, LOD level, material
+    uvec4 st;   // x: 0 fresh, 1 primary open, 2 shadow open; y: stamp its ray started; z: traces
+};
+layout(buffer_reference, std430, buffer_reference_align = 16) buffer CarryTable { Carry r[]; };
 
-void stream_resume(uint pixel, vec2 t) {
-    ResumeTable(StreamRef(push.stream).s.resume).r[pixel] = t;
-}
-
-// Streaming: an incomplete pixel goes on the next pass's list and writes nothing.
-void stream_defer(uvec2 px) {
-    IncompleteList l = IncompleteList(StreamRef(push.stream).s.incomplete);
+// Streaming: an open pixel keeps its state and goes on the next pass's list; it writes nothing.
+void stream_defer(uvec2 px, uint pixel, Carry c) {
+    StreamParams s = StreamRef(push.stream).s;
+    CarryTable(s.carry).r[pixel] = c;
+    IncompleteList l = IncompleteList(s.incomplete);
     uint k = atomicAdd(l.count, 1u);
     l.r[k] = px.x | (px.y << 16u);
 }
@@ -58,69 +63,81 @@ void render_pixel_impl(uvec2 px) {
     uint traces = 0u;
     uint overflows = 0u;
     uint truncations = 0u;
-    // Streaming: where this pixel's rays resume (0 on the frame's first pass).
-    vec2 resume = vec2(0.0);
+    Carry c;
+    c.hit = vec4(T_INFINITY, 0.0, 0.0, 0.0);
+    c.rec = uvec4(0u);
+    c.st = uvec4(1u, g_stamp, 0u, 0u);
     if (g_streaming) {
-        resume = ResumeTable(StreamRef(push.stream).s.resume).r[pixel];
+        Carry old = CarryTable(StreamRef(push.stream).s.carry).r[pixel];
+        if (old.st.x != 0u) {
+            c = old;
+        }
+        traces = c.st.z;
     }
-    g_t_min = resume.x;
-    TraceHit h = traverse(f.root_tlas, org, dir, RAY_PRIMARY, f.lod, f.camera.pixels_per_unit_at_1,
-                          pixel_dither(px.x, px.y), false, traces, overflows, truncations);
-    if (g_incomplete) {
-        // Shading and shadow rays would be wasted: the pixel is re-shot next pass, from just
-        // before its nearest empty instance (its shadow ray from the start).
-        stream_pin_hit(h);
-        stream_resume(pixel, vec2(max(resume.x, RESUME_BACKOFF * min(g_empty_t, h.t)), 0.0));
-        stream_defer(px);
-        return;
+    if (c.st.x == 1u) {
+        g_best_t = c.hit.x;
+        g_start = c.st.y;
+        g_empty_t = T_INFINITY;
+        TraceHit h = traverse(f.root_tlas, org, dir, RAY_PRIMARY, f.lod,
+                              f.camera.pixels_per_unit_at_1, pixel_dither(px.x, px.y), false,
+                              traces, overflows, truncations);
+        if (h.tlas != NONE_U32) {
+            // Resolved now, while its BLAS and meshes are resident.
+            Surface s = resolve(h);
+            MeshRecord m = push.meshes.r[s.mesh_record];
+            c.hit = vec4(h.t, s.world_normal);
+            c.rec = uvec4(m.source_mesh, h.primitive, h.lod == NONE_U32 ? m.lod : h.lod,
+                          m.material);
+        }
+        if (stream_still_open(c.hit.x)) {
+            // Shading and shadow rays wait until the primary hit is final.
+            c.st.z = traces;
+            stream_defer(px, pixel, c);
+            return;
+        }
+        c.st.xy = uvec2(2u, g_stamp);
     }
-    g_t_min = 0.0;
     vec3 colour;
     uvec4 rec = uvec4(AOV_MISS, 0u, 0u, 0u);
-    if (h.t < T_INFINITY) {
-        Surface s = resolve(h);
-        MeshRecord m = push.meshes.r[s.mesh_record];
-        uint lod = h.lod == NONE_U32 ? m.lod : h.lod;
-        rec.xyz = uvec3(m.source_mesh, h.primitive, floatBitsToUint(h.t));
+    if (c.hit.x < T_INFINITY) {
+        uint lod = c.rec.z;
+        rec.xyz = uvec3(c.rec.x, c.rec.y, floatBitsToUint(c.hit.x));
         rec.w = min(lod, 255u);
         if (f.view == VIEW_SHADED) {
-            vec3 base = push.materials.r[m.material].base_color;
-            vec3 n = dot(s.world_normal, dir) > 0.0 ? -s.world_normal : s.world_normal;
+            vec3 base = push.materials.r[c.rec.w].base_color;
+            vec3 world_normal = c.hit.yzw;
+            vec3 n = dot(world_normal, dir) > 0.0 ? -world_normal : world_normal;
             vec3 sun = f.sun_dir_intensity.xyz;
             float ndl = dot(n, sun);
             float light = f.ambient;
             if (ndl > 0.0) {
                 float visible = 1.0;
                 if (f.shadows != 0u) {
-                    vec3 p = org + dir * h.t;
+                    vec3 p = org + dir * c.hit.x;
                     LodParams sl = f.lod;
                     if (f.shadow_lod_from_primary != 0u) {
                         sl.forced_lod = int(lod);
                     }
-                    g_t_min = resume.y;
+                    g_best_t = T_INFINITY;
+                    g_start = c.st.y;
                     g_empty_t = T_INFINITY;
-                    TraceHit sh = traverse(f.root_tlas, shadow_offset(p, n, max(max(abs(org.x), abs(org.y)), abs(org.z)) + h.t), sun, RAY_SHADOW, sl,
+                    TraceHit sh = traverse(f.root_tlas, shadow_offset(p, n, max(max(abs(org.x), abs(org.y)), abs(org.z)) + c.hit.x), sun, RAY_SHADOW, sl,
                                            f.camera.pixels_per_unit_at_1, 0.0, true, traces,
                                            overflows, truncations);
                     visible = sh.t < T_INFINITY ? 0.0 : 1.0;
-                    if (sh.t < T_INFINITY) {
-                        g_incomplete = false;  // occluded whatever the empty instances hold
-                    } else if (g_incomplete) {
-                        // The primary hit is final; the shadow ray resumes where it stopped.
-                        stream_pin_hit(h);
-                        stream_resume(pixel,
-                                      vec2(resume.x, max(resume.y, RESUME_BACKOFF * g_empty_t)));
-                        stream_defer(px);
+                    // Occluded is final whatever the open structures hold.
+                    if (sh.t == T_INFINITY && stream_still_open(T_INFINITY)) {
+                        c.st.z = traces;
+                        stream_defer(px, pixel, c);
                         return;
                     }
-                    g_t_min = 0.0;
                     atomicAdd(push.stats.n[STAT_SHADOW_RAYS], 1u);
                 }
                 light = f.ambient + f.sun_dir_intensity.w * ndl * visible;
             }
             colour = base * light;
         } else if (f.view == VIEW_IDS) {
-            colour = id_colour(m.source_mesh, h.primitive);
+            colour = id_colour(c.rec.x, c.rec.y);
         } else {
             colour = lod_colour(lod);
         }
@@ -139,7 +156,7 @@ void render_pixel_impl(uvec2 px) {
 }
 void render_pixel(uvec2 px) {
     g_streaming = false;
-    g_t_min = 0.0;
+    g_guard = false;
     render_pixel_impl(px);
 }
 
@@ -164,10 +181,11 @@ void render_stream_item(uint i) {
     }
     bool guard = x < 0 || y < 0 || x >= int(c.width) || y >= int(c.height);
     g_streaming = true;
-    g_incomplete = false;
+    g_guard = guard;
+    g_stamp = s.stamp;
+    g_best_t = T_INFINITY;
+    g_start = s.stamp;
     g_empty_t = T_INFINITY;
-    g_t_min = 0.0;
-    g_mark = 2u * s.stamp + (guard ? 0u : 1u);
     if (!guard) {
         render_pixel_impl(uvec2(x, y));
         return;

@@ -30,54 +30,60 @@ struct Entry {
     float t_floor;  // -1, or the re-walk floor after a truncated candidate list
 };
 
-// Streaming state of the current ray (the paper's `trav_valid`, inverted): set by the backend
-// entry point; traverse() marks what it walks and flags rays that met a non-resident structure
-// in front of their best hit.
+// Streaming state of the current ray (carried hits, see motu-gpu's stream module): a pass walks
+// what is resident now against the pixel's best hit carried from earlier passes. A
+// non-resident BLAS in front of the best hit is *open* unless it was resident in a pass since
+// this ray started (`walked` ≥ g_start): that pass walked it, so its hits are already carried.
 bool g_streaming = false;
-bool g_incomplete = false;
-uint g_mark = 0u;  // stamp value written by this ray (StreamParams)
-// Nearest empty instance met so far: only empties at or before it are needed now. Behind the
-// nearest one the ray's outcome is unknown until it is built (it may occlude them), so they
-// are only prefetch candidates; the next pass finds them again if they matter. Costs a pass
-// per depth layer on a cold start.
+bool g_guard = false;   // a guard-band ray (prefetch probe): marks only
+uint g_stamp = 0u;      // this pass's stamp
+uint g_start = 0u;      // the stamp of the pass this ray (primary or shadow) started in
+float g_best_t = T_INFINITY;  // the carried best hit's t (culls this walk)
+// The nearest open structure: the pixel's request for the next pass.
 float g_empty_t = T_INFINITY;
-// Where the ray starts (0 outside streaming). A deferred ray has no hit before its nearest
-// empty instance (none in front of it, and no resident one hit), so its next pass resumes
-// there: structures it already passed may be evicted without costing it anything.
-float g_t_min = 0.0;
+uint g_empty_id = NONE_U32;
 
-// Records `id` as visible in this pass (read first: most marks are repeats, and an atomic on
-// the root's slot from every ray would serialise).
-void stream_mark_as(uint64_t table, uint id, uint mark) {
+// Records `id` at `level` in this pass (read first: most marks are repeats).
+void stream_mark_as(uint64_t table, uint id, uint level) {
     StampTable t = StampTable(table);
+    uint mark = 4u * g_stamp + level;
     if (t.r[id] < mark) {
         atomicMax(t.r[id], mark);
     }
 }
 
-void stream_mark(uint64_t table, uint id) {
-    stream_mark_as(table, id, g_mark);
+// A non-resident BLAS at `t_near` in front of the best hit so far.
+void stream_empty_blas(uint blas, float t_near) {
+    StreamParams s = StreamRef(push.stream).s;
+    if (g_guard) {
+        stream_mark_as(s.blas_stamps, blas, STREAM_SEEN);
+        return;
+    }
+    if (StampTable(s.walked).r[blas] >= g_start) {
+        return;  // walked by this ray in an earlier pass: resolved
+    }
+    if (t_near < g_empty_t) {
+        g_empty_t = t_near;
+        g_empty_id = blas;
+    }
+    stream_mark_as(s.blas_stamps, blas, STREAM_OPEN);
 }
 
-// An empty instance at `t_near`: the nearest so far is needed now (and counted, so the host
-// builds the most requested first when not all fit); one behind it is marked for prefetching
-// only (built after the frame if it fits without evicting this frame's set). `request` is its
-// index in the requests table.
-void stream_mark_empty(uint64_t table, uint id, uint request, float t_near) {
-    if (t_near <= g_empty_t) {
-        g_empty_t = t_near;
-        stream_mark(table, id);
-        if ((g_mark & 1u) != 0u) {
-            atomicAdd(StampTable(StreamRef(push.stream).s.requests).r[request], 1u);
-        }
-    } else {
-        stream_mark_as(table, id, g_mark & ~1u);
+// After a walk: whether an open structure lies in front of the best hit `best_t`; if so its
+// nearest is requested (needed, counted so the host builds the most requested first).
+bool stream_still_open(float best_t) {
+    if (!g_streaming || g_guard || g_empty_t >= best_t) {
+        return false;
     }
+    StreamParams s = StreamRef(push.stream).s;
+    stream_mark_as(s.blas_stamps, g_empty_id, STREAM_NEEDED);
+    atomicAdd(StampTable(s.requests).r[g_empty_id], 1u);
+    return true;
 }
 
 struct TraceHit {
     float t;  // T_INFINITY: miss
-    uint tlas;
+    uint tlas;  // NONE_U32: no hit closer than the carried one (streaming) or none at all
     uint instance;
     uint geometry;
     uint primitive;
@@ -96,7 +102,8 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
     stack[0] = Entry(affine_identity(), 0.0, root_tlas, NONE_U32, -1.0);
     uint sp = 1u;
     TraceHit hit;
-    hit.t = T_INFINITY;
+    hit.t = g_streaming ? g_best_t : T_INFINITY;
+    hit.tlas = NONE_U32;
     hit.lod = NONE_U32;
     while (sp > 0u) {
         sp -= 1u;
@@ -105,16 +112,13 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
             continue;
         }
         traces += 1u;
-        if (g_streaming) {
-            stream_mark(StreamRef(push.stream).s.tlas_stamps, e.tlas);
-        }
         pl.tlas = e.tlas;
         pl.count = 0u;
         pl.t_floor = e.t_floor;
         pl.t_max = hit.t;
         pl.truncated = 0u;
         pl.hit_t = -1.0;
-        backend_trace(e.tlas, xform_point(e.tlas_from_world, org), g_t_min,
+        backend_trace(e.tlas, xform_point(e.tlas_from_world, org), 0.0,
                       xform_vector(e.tlas_from_world, dir), hit.t, first_hit);
         if (pl.hit_t >= 0.0 && pl.hit_t < hit.t) {
             hit.t = pl.hit_t;
@@ -167,13 +171,10 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
             PiCandidate cd = pl.c[order[k]];
             PiRecord pi = push.pis.r[cd.pi];
             if (pi.kind == PI_EMPTY_BLAS) {
-                // A non-resident triangle BLAS in front of the best hit: this ray cannot
-                // complete in this pass; mark the BLAS for building and keep walking to find
-                // the other structures the next pass needs.
+                // A non-resident triangle BLAS in front of the best hit: open unless already
+                // walked (streaming only; every TLAS is resident).
                 if (g_streaming) {
-                    stream_mark_empty(StreamRef(push.stream).s.blas_stamps, pi.target, pi.target,
-                                      cd.t_near);
-                    g_incomplete = true;
+                    stream_empty_blas(pi.target, cd.t_near);
                 }
                 continue;
             }
@@ -195,32 +196,16 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
                 tlas = push.lod_levels.r[sel.level_base + level];
                 lod = level;
             }
-            if (g_streaming && push.tlas_addresses.r[tlas] == 0ul) {
-                // A non-resident child TLAS (empty instance).
-                StreamParams sp = StreamRef(push.stream).s;
-                stream_mark_empty(sp.tlas_stamps, tlas, sp.blas_count + tlas, cd.t_near);
-                g_incomplete = true;
-                continue;
-            }
             stack[sp] = Entry(child_from_world, cd.t_near, tlas, lod, -1.0);
             sp += 1u;
         }
     }
-    if (g_streaming && hit.t < T_INFINITY) {
+    if (g_streaming && hit.tlas != NONE_U32) {
         // Resident triangle BLASes are walked by the hardware without a shader callback: the
-        // one hit is the one marked (see stream.rs on what this means for eviction). Seen, not
-        // needed: a ray that ends up incomplete pins its hit with stream_pin_hit.
-        stream_mark_as(StreamRef(push.stream).s.blas_stamps, hit_blas(hit), g_mark & ~1u);
+        // one hit is what refreshes its BLAS's LRU age (see the stream module).
+        stream_mark_as(StreamRef(push.stream).s.blas_stamps, hit_blas(hit), STREAM_SEEN);
     }
     return hit;
-}
-
-// A deferred ray's best hit so far is what it falls back on next pass: needed, so the host
-// keeps it resident while building the ray's empty instances.
-void stream_pin_hit(TraceHit hit) {
-    if (g_streaming && hit.t < T_INFINITY) {
-        stream_mark(StreamRef(push.stream).s.blas_stamps, hit_blas(hit));
-    }
 }
 
 #endif

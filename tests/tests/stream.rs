@@ -7,9 +7,10 @@
 use motu_tests::{motu, motu_ok, s};
 use std::path::{Path, PathBuf};
 
-/// The streaming budget: the full build below needs more than 4× this.
-const BUDGET_BYTES: u64 = 16 << 20;
-const BUDGET: &str = "16MiB";
+/// The streaming budget (above the floor, 16.1 MiB at 64 px wide): the full build below needs
+/// more than 4× this.
+const BUDGET_BYTES: u64 = 17 << 20;
+const BUDGET: &str = "17MiB";
 /// The camera path's budget: still about half what the full build needs, so the path evicts,
 /// but room for a frame's set next to the last frames' (at 16 MiB the skeleton's transients
 /// leave too little, and path frames need 2–3 passes).

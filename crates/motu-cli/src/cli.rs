@@ -237,6 +237,12 @@ pub struct ReportArgs {
     /// Build the structures to measure real (compacted) sizes.
     #[arg(long)]
     pub measure: bool,
+    /// Image width the streaming floor is computed for (default: the first camera's).
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height the streaming floor is computed for (default: the first camera's).
+    #[arg(long)]
+    pub height: Option<u32>,
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -283,6 +289,14 @@ pub struct RenderArgs {
     /// Build only what rays touch and evict under the budget.
     #[arg(long)]
     pub stream: bool,
+    /// With --stream: write the image even when a frame ends with unfinished pixels (they are
+    /// magenta misses; a loud, counted warning). Without it such a frame is an error.
+    #[arg(long)]
+    pub allow_incomplete: bool,
+    /// With --stream: build–traverse passes per frame before a frame gives up (testing; by
+    /// default sized from the scene's structure count).
+    #[arg(long, hide = true)]
+    pub stream_max_passes: Option<u32>,
     /// Frames to render (timing; with --stream, along the camera path).
     #[arg(long, default_value_t = 1)]
     pub frames: u32,

@@ -59,6 +59,17 @@ impl std::fmt::Debug for GpuHeap {
 impl GpuHeap {
     /// A heap under `limits` (already combined with the device's limits by the caller).
     pub fn new(ctx: &Context, limits: AllocLimits) -> Result<GpuHeap> {
+        Self::with_block_size(ctx, limits, None)
+    }
+
+    /// [`new`](Self::new) with standard blocks of `block_size_bytes` (`None`: the allocator's
+    /// default, a 16th of the budget). Streaming uses smaller blocks: partly used blocks count
+    /// against its floor.
+    pub fn with_block_size(
+        ctx: &Context,
+        limits: AllocLimits,
+        block_size_bytes: Option<u64>,
+    ) -> Result<GpuHeap> {
         let probe = Buffer::new(
             ctx,
             "heap-probe",
@@ -74,6 +85,7 @@ impl GpuHeap {
         let unified = device_local == upload;
         let policy = AllocPolicy {
             host_visible_counts_against_budget: unified,
+            block_size_bytes,
             ..AllocPolicy::default()
         };
         let allocator = Allocator::new(limits, policy)

@@ -64,4 +64,7 @@ pub use query::TimestampQueries;
 pub use render::{heat_colour, render, Backend, RenderOptions, RenderOutput, RenderStats, View};
 pub use report::{list_devices, DeviceReport};
 pub use scene::{BuildOptions, GpuScene, MeshBlobSource, ResourceReport};
-pub use stream::{FrameStreamStats, StreamOptions, StreamTotals, StreamingRenderer, PI_EMPTY_BLAS};
+pub use stream::{
+    streaming_floor, FloorSizes, FrameStreamStats, StreamFloor, StreamOptions, StreamTotals,
+    StreamingRenderer, PI_EMPTY_BLAS,
+};

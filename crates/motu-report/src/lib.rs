@@ -61,8 +61,8 @@ pub use gpu::{
 };
 pub use html::render_html;
 pub use report::{
-    build_report, build_report_from_view, ElementReport, Report, ReportInput, StreamingReport,
-    VariantReport,
+    build_report, build_report_at, build_report_from_view, ElementReport, Report, ReportInput,
+    StreamingReport, VariantReport, DEFAULT_FLOOR_IMAGE,
 };
 pub use sizes::*;
 pub use text::{human_bytes, human_count, render_text};

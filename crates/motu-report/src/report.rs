@@ -7,7 +7,7 @@ use serde::Serialize;
 
 use crate::budget::{plan_budget, BudgetReport, SubsetCoster};
 use crate::cost::{blas_cost_of, tlas_cost, Cost, Graph, Node, Ownership, SHARED};
-use crate::sizes::{BlasShape, SizeSource, SizeSourceInfo};
+use crate::sizes::{BlasShape, SizeSource, SizeSourceInfo, TriangleGeometry};
 use crate::ReportError;
 
 /// What the report needs besides the tables (a package's meta, or hand-made in tests).
@@ -19,7 +19,12 @@ pub struct ReportInput {
     pub levels: String,
     /// Element names by element id.
     pub element_names: Vec<String>,
+    /// Image size the streaming floor is computed for (frame buffers scale with it).
+    pub floor_image: (u32, u32),
 }
+
+/// Image size of the streaming floor when the package has no camera.
+pub const DEFAULT_FLOOR_IMAGE: (u32, u32) = (640, 480);
 
 /// One row of the per-element table.
 #[derive(Clone, Debug, PartialEq, Serialize)]
@@ -75,8 +80,11 @@ pub struct StreamingReport {
     pub largest_blas_compacted_bytes: u64,
     /// Its owner (an element name or `shared`).
     pub largest_blas_owner: String,
-    /// `always_resident_bytes + largest_blas_build_bytes`: the floor for per-BLAS streaming.
+    /// The floor of `motu render --stream` (`floor.min_resident_bytes`): every budget at or
+    /// above it completes every frame at `floor`'s image size.
     pub min_resident_bytes: u64,
+    /// Its parts, as `motu_gpu::streaming_floor` computes them for the renderer.
+    pub floor: motu_gpu::StreamFloor,
     /// The element with the largest `alone.peak_bytes` (the floor for per-element streaming).
     pub largest_element: Option<String>,
     pub largest_element_peak_bytes: u64,
@@ -116,17 +124,34 @@ impl Report {
     }
 }
 
-/// Builds the report for a package (see [`build_report_from_view`]).
+/// Builds the report for a package (see [`build_report_from_view`]); the streaming floor is
+/// for the first camera's image size.
 pub fn build_report(
     pkg: &motu_pack::ScenePackage,
     sizes: &dyn SizeSource,
     budget_bytes: Option<u64>,
+) -> Result<Report, ReportError> {
+    build_report_at(pkg, sizes, budget_bytes, None)
+}
+
+/// [`build_report`] with the streaming floor for `floor_image` (width, height; `None`: the
+/// first camera's size, else [`DEFAULT_FLOOR_IMAGE`]).
+pub fn build_report_at(
+    pkg: &motu_pack::ScenePackage,
+    sizes: &dyn SizeSource,
+    budget_bytes: Option<u64>,
+    floor_image: Option<(u32, u32)>,
 ) -> Result<Report, ReportError> {
     let meta = pkg.meta();
     let input = ReportInput {
         package: pkg.path().to_string(),
         levels: meta.levels.clone(),
         element_names: meta.elements.iter().map(|e| e.name.clone()).collect(),
+        floor_image: floor_image.unwrap_or_else(|| {
+            meta.cameras
+                .first()
+                .map_or(DEFAULT_FLOOR_IMAGE, |c| (c.width.max(1), c.height.max(1)))
+        }),
     };
     build_report_from_view(&pkg.view()?, &input, sizes, budget_bytes)
 }
@@ -377,7 +402,21 @@ pub fn build_report_from_view(
             a
         });
 
-    let streaming = streaming_report(&g, &own, &elements, &variants[0].cost, &root_cost, &name_of);
+    let mut streaming =
+        streaming_report(&g, &own, &elements, &variants[0].cost, &root_cost, &name_of);
+    // The floor the renderer enforces, from the same function and (on a device) the same
+    // driver size queries.
+    let (fw, fh) = input.floor_image;
+    let floor = motu_gpu::streaming_floor(
+        view,
+        &FloorAdapter(sizes),
+        fw,
+        fh,
+        motu_gpu::StreamOptions::default().staging_bytes,
+    )
+    .map_err(|e| ReportError::Invalid(format!("streaming floor: {e}")))?;
+    streaming.min_resident_bytes = floor.min_resident_bytes;
+    streaming.floor = floor;
     let budget = budget_bytes
         .map(|b| {
             plan_budget(
@@ -530,7 +569,51 @@ fn streaming_report(
         largest_blas_compacted_bytes: compacted,
         largest_blas_owner: owner,
         min_resident_bytes: always + build,
+        floor: motu_gpu::StreamFloor::default(),
         largest_element: largest.as_ref().map(|l| l.0.clone()),
         largest_element_peak_bytes: largest.map_or(0, |l| l.1),
+    }
+}
+
+/// A [`SizeSource`] as the floor's size queries.
+struct FloorAdapter<'a>(&'a dyn SizeSource);
+
+impl motu_gpu::FloorSizes for FloorAdapter<'_> {
+    fn blas(&self, geometry: &[motu_gpu::BlasGeometry]) -> motu_gpu::Result<(u64, u64)> {
+        let mut tris = Vec::new();
+        let mut boxes = 0u32;
+        for g in geometry {
+            match *g {
+                motu_gpu::BlasGeometry::Triangles {
+                    vertex_count,
+                    triangle_count,
+                    opaque,
+                    ..
+                } => tris.push(TriangleGeometry {
+                    vertex_count,
+                    triangle_count,
+                    opaque,
+                }),
+                motu_gpu::BlasGeometry::Aabbs { aabb_count, .. } => boxes += aabb_count,
+            }
+        }
+        let shape = if tris.is_empty() {
+            BlasShape::Aabbs { box_count: boxes }
+        } else {
+            BlasShape::Triangles(tris)
+        };
+        let s = self
+            .0
+            .blas_sizes(&shape)
+            .map_err(|e| motu_gpu::GpuError::InvalidRequest(e.to_string()))?;
+        Ok((s.size_bytes, s.build_scratch_bytes))
+    }
+
+    fn tlas(&self, instance_count: u32) -> motu_gpu::Result<(u64, u64)> {
+        let s = self
+            .0
+            .tlas_sizes(u64::from(instance_count))
+            .map_err(|e| motu_gpu::GpuError::InvalidRequest(e.to_string()))?;
+        Ok((s.size_bytes, s.build_scratch_bytes))
     }
 }

@@ -120,6 +120,7 @@ impl Scene {
             package: "test".into(),
             levels: "ml".into(),
             element_names: self.names.clone(),
+            floor_image: crate::report::DEFAULT_FLOOR_IMAGE,
         }
     }
     pub fn report(&self, sizes: &dyn SizeSource, budget: Option<u64>) -> Report {

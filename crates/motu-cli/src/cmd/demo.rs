@@ -121,6 +121,8 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         vram_budget: None,
         max_allocations: None,
         stream: false,
+        allow_incomplete: false,
+        stream_max_passes: None,
         frames: 1,
         stats: Some(stats_path.clone()),
         subset: Vec::new(),

@@ -182,10 +182,37 @@ fn render_streaming(
         max_allocations: a
             .max_allocations
             .unwrap_or(motu_gpu::StreamOptions::default().max_allocations),
+        max_passes: a.stream_max_passes.unwrap_or(0),
         ..Default::default()
     };
-    let mut sr = motu_gpu::StreamingRenderer::new(&ctx, *view, &meshes, &opts)
-        .context("setting up streaming (the resident skeleton must fit the budget)")?;
+    // Refused up front below the floor: under it some frame could not complete.
+    let floor = motu_gpu::streaming_floor(view, &ctx, w, h, opts.staging_bytes)
+        .context("computing the streaming floor")?;
+    if let Some(budget) = a.vram_budget {
+        if budget < floor.min_resident_bytes {
+            bail!(
+                "--vram-budget {} is below the streaming floor of {} ({} bytes) for {w}×{h}: \
+                 the resident skeleton ({} of tables, {} of TLASes, proxies and PI BLASes), the \
+                 largest BLAS build ({}), TLAS rebuilds ({}), frame buffers ({}), staging and \
+                 allocator slack; raise --vram-budget to at least the floor (`motu report` \
+                 prints it as streaming.min_resident_bytes)",
+                crate::size::format_size(budget),
+                crate::size::format_size(floor.min_resident_bytes),
+                floor.min_resident_bytes,
+                crate::size::format_size(floor.tables_bytes),
+                crate::size::format_size(floor.skeleton_structures_bytes),
+                crate::size::format_size(floor.largest_blas_build_bytes),
+                crate::size::format_size(floor.tlas_rebuild_bytes),
+                crate::size::format_size(floor.frame_bytes),
+            );
+        }
+    }
+    let mut sr = motu_gpu::StreamingRenderer::new(&ctx, *view, &meshes, &opts).with_context(|| {
+        format!(
+            "setting up streaming (the resident skeleton must fit the budget; the floor is {} bytes)",
+            floor.min_resident_bytes
+        )
+    })?;
     let ropts = gpu_render_options(a, lod, backend, 1);
     let mut frames = Vec::new();
     let mut last = None;
@@ -206,6 +233,24 @@ fn render_streaming(
             crate::size::format_size(st.vram_peak_bytes),
             crate::size::format_size(st.vram_budget_bytes),
         );
+        if !st.complete {
+            // A wrong image never exits 0 silently.
+            if !a.allow_incomplete {
+                bail!(
+                    "frame {f}: {} pixels unfinished after {} passes (the pass cap, {}): the image \
+                     would be wrong; nothing written (--allow-incomplete writes it with those \
+                     pixels magenta)",
+                    st.incomplete_pixels,
+                    st.passes,
+                    sr.max_passes()
+                );
+            }
+            eprintln!(
+                "WARNING: frame {f}: {} pixels UNFINISHED after {} passes (pass cap): written as \
+                 magenta misses (--allow-incomplete)",
+                st.incomplete_pixels, st.passes
+            );
+        }
         frames.push(serde_json::to_value(&st)?);
         last = Some(out);
     }
@@ -220,6 +265,8 @@ fn render_streaming(
     stats["stream"] = json!({
         "frames": frames,
         "totals": totals,
+        "floor": floor,
+        "max_passes": sr.max_passes(),
         "mean_passes_after_first": if after_first.is_empty() { Value::Null } else { json!(after_first.iter().sum::<f64>() / after_first.len() as f64) },
     });
     drop(sr);

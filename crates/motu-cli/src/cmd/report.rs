@@ -19,7 +19,15 @@ pub fn run(a: ReportArgs) -> anyhow::Result<()> {
         motu_report::size_source_for_cli(a.device)
             .context("opening the --device for acceleration-structure size queries")?
     };
-    let r = motu_report::build_report(&pkg, sizes.as_ref(), a.budget)
+    // The floor's image size as `motu render` picks it (camera film, one side scaled).
+    let floor_image = if a.width.is_some() || a.height.is_some() {
+        let view = pkg.view().context("reading the package's hierarchy")?;
+        let (_, w, h) = crate::cmd::render::camera_pose(&pkg, &view, None, a.width, a.height)?;
+        Some((w, h))
+    } else {
+        None
+    };
+    let r = motu_report::build_report_at(&pkg, sizes.as_ref(), a.budget, floor_image)
         .with_context(|| format!("VRAM report of {}", a.package.display()))?;
     if let Some(p) = &a.html {
         std::fs::write(p, motu_report::render_html(&r))

@@ -2,7 +2,7 @@
 
 use motu_alloc::{AllocKind, MemoryClass};
 
-use super::passes::StreamParams;
+use super::passes::{StreamParams, CARRY_BYTES};
 use crate::error::{GpuError, Result};
 use crate::heap::{GpuHeap, HeapBuffer};
 use crate::memory::BufferUsage;
@@ -17,7 +17,7 @@ pub(super) struct FrameBuffers {
     pub(super) stats: HeapBuffer,
     pub(super) incomplete: HeapBuffer,
     pub(super) requests: HeapBuffer,
-    pub(super) resume: HeapBuffer,
+    pub(super) carry: HeapBuffer,
     pub(super) pixel_list: HeapBuffer,
     pub(super) readback: HeapBuffer,
 }
@@ -32,7 +32,7 @@ impl FrameBuffers {
             self.stats,
             self.incomplete,
             self.requests,
-            self.resume,
+            self.carry,
             self.pixel_list,
             self.readback,
         ] {
@@ -41,19 +41,16 @@ impl FrameBuffers {
     }
 }
 
-pub(super) fn alloc_frame_buffers(
-    heap: &mut GpuHeap,
-    pixels: u64,
-    guard_count: u64,
-    items: u64,
-    params: &crate::render::FrameParams,
-) -> Result<FrameBuffers> {
+type Spec = (&'static str, u64, BufferUsage, AllocKind, MemoryClass);
+
+/// The frame's buffers: label, bytes, usage, kind, memory class.
+fn frame_buffer_specs(pixels: u64, guard_count: u64, items: u64) -> [Spec; 10] {
     let dev = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS | BufferUsage::TRANSFER_SRC;
     let host = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS;
     let stamps_bytes = (items * 4).div_ceil(16) * 16;
     let inc_bytes = 4 + 4 * pixels;
     let readback_bytes = (2 * stamps_bytes + inc_bytes).div_ceil(16) * 16 + pixels * 20 + 16;
-    let specs: [(&str, u64, BufferUsage, AllocKind, MemoryClass); 10] = [
+    [
         (
             "frame-params",
             std::mem::size_of::<crate::render::FrameParams>() as u64,
@@ -104,8 +101,8 @@ pub(super) fn alloc_frame_buffers(
             MemoryClass::DeviceLocal,
         ),
         (
-            "resume",
-            pixels * 8,
+            "carry",
+            pixels * CARRY_BYTES,
             dev | BufferUsage::TRANSFER_DST,
             AllocKind::Other,
             MemoryClass::DeviceLocal,
@@ -124,7 +121,25 @@ pub(super) fn alloc_frame_buffers(
             AllocKind::Staging,
             MemoryClass::HostVisible,
         ),
-    ];
+    ]
+}
+
+/// Bytes of the frame's buffers (16-byte aligned each), for the floor.
+pub(super) fn frame_buffer_bytes(pixels: u64, guard_count: u64, items: u64) -> u64 {
+    frame_buffer_specs(pixels, guard_count, items)
+        .iter()
+        .map(|s| s.1.max(16).div_ceil(16) * 16)
+        .sum()
+}
+
+pub(super) fn alloc_frame_buffers(
+    heap: &mut GpuHeap,
+    pixels: u64,
+    guard_count: u64,
+    items: u64,
+    params: &crate::render::FrameParams,
+) -> Result<FrameBuffers> {
+    let specs = frame_buffer_specs(pixels, guard_count, items);
     let mut bufs: Vec<HeapBuffer> = Vec::with_capacity(specs.len());
     for (label, size, usage, kind, class) in specs {
         match heap.alloc_buffer(label, size, usage, kind, class, 16) {
@@ -149,7 +164,7 @@ pub(super) fn alloc_frame_buffers(
         stats: next()?,
         incomplete: next()?,
         requests: next()?,
-        resume: next()?,
+        carry: next()?,
         pixel_list: next()?,
         readback: next()?,
     })

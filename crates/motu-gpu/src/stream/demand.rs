@@ -6,29 +6,32 @@ use std::time::Instant;
 
 use motu_alloc::ItemId;
 
-use super::{item_of_tlas, StreamingRenderer};
+use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
 use crate::scene::MeshGpu;
 
-/// Work of one build step: (id, requests) pairs, most requested first.
+/// Work of one build step: (BLAS, requests) pairs, most requested first.
 #[derive(Default)]
 pub(super) struct Demand {
+    /// Some pixel's nearest open structure: built first, at least one per step.
     pub(super) blases: Vec<(u32, u32)>,
-    pub(super) tlases: Vec<(u32, u32)>,
+    /// Open for some pixel but not its nearest: built when they fit, so later passes have
+    /// less to do.
+    pub(super) later: Vec<(u32, u32)>,
 }
 
 impl Demand {
     pub(super) fn is_empty(&self) -> bool {
-        self.blases.is_empty() && self.tlases.is_empty()
+        self.blases.is_empty() && self.later.is_empty()
     }
 
     pub(super) fn len(&self) -> usize {
-        self.blases.len() + self.tlases.len()
+        self.blases.len() + self.later.len()
     }
 
     /// Most requested first (ties: lower id first, so runs are deterministic).
     pub(super) fn sort(&mut self) {
-        for v in [&mut self.blases, &mut self.tlases] {
+        for v in [&mut self.blases, &mut self.later] {
             v.sort_unstable_by_key(|&(id, n)| (std::cmp::Reverse(n), id));
         }
     }
@@ -195,83 +198,38 @@ impl<'a> StreamingRenderer<'a> {
         ))
     }
 
-    /// Makes `demand` resident (streams meshes, builds BLASes, builds child TLASes), most
-    /// requested first, evicting least-recently-visible unpinned structures under the budget;
-    /// then rebuilds every dirty TLAS and uploads the tables. `pass_pins`: what the latest
-    /// pass's incomplete pixels need (never evicted; a step that cannot build anything next
-    /// to them lets them go before failing). `None` prefetches: only structures this frame did
-    /// not see may be evicted, and what does not fit is skipped.
-    pub(super) fn make_resident(
-        &mut self,
-        demand: &Demand,
-        pass_pins: Option<&[bool]>,
-    ) -> Result<()> {
+    /// Makes `demand` resident (streams meshes, builds BLASes), needed first and most requested
+    /// first, evicting least-recently-visible structures under the budget; then rebuilds every
+    /// dirty TLAS and uploads the tables. Pins: only what this step built (carried hits mean
+    /// no pixel needs anything else kept). `prefetch`: only structures this frame did not see
+    /// may be evicted, and what does not fit is skipped.
+    pub(super) fn make_resident(&mut self, demand: &Demand, prefetch: bool) -> Result<()> {
         let t0 = Instant::now();
-        let nb = self.view.blases.len();
-        let prefetch = pass_pins.is_none();
-        self.pinned = match pass_pins {
-            Some(p) => p.to_vec(),
-            None => {
-                let first = self.frame_first_stamp();
-                (0..self.item_count())
-                    .map(|i| self.last_seen[i] >= first)
-                    .collect()
-            }
+        self.pinned = if prefetch {
+            let first = self.frame_first_stamp();
+            (0..self.item_count())
+                .map(|i| self.last_seen[i] >= first)
+                .collect()
+        } else {
+            vec![false; self.item_count()]
         };
         self.built_now.clear();
-        for &(b, _) in &demand.blases {
+        for &(b, _) in demand.blases.iter().chain(&demand.later) {
             self.last_seen[b as usize] = self.stamp;
         }
-        for &(t, _) in &demand.tlases {
-            self.last_seen[nb + t as usize] = self.stamp;
+        let queue = |v: &[(u32, u32)]| -> Vec<u32> {
+            v.iter()
+                .map(|&(b, _)| b)
+                .filter(|&b| self.blas[b as usize].is_none() && self.buildable[b as usize])
+                .collect()
+        };
+        let (needed, later) = (queue(&demand.blases), queue(&demand.later));
+        let deferred = self.build_blas_queue(&needed, !prefetch)?;
+        if deferred == 0 && !later.is_empty() && self.opts.build_open_early {
+            // What fits of the rest, without giving up anything built above.
+            self.build_blas_queue(&later, false)?;
         }
-        // 1. BLASes, most requested first.
-        let queue: Vec<u32> = demand
-            .blases
-            .iter()
-            .map(|&(b, _)| b)
-            .filter(|&b| self.blas[b as usize].is_none() && self.buildable[b as usize])
-            .collect();
-        let left = self.build_blas_queue(&queue, !prefetch)?;
-        let mut deferred = left;
-        // 2. Child TLASes (their parents reach them through the address table).
-        let new_tlases: Vec<u32> = demand
-            .tlases
-            .iter()
-            .map(|&(t, _)| t)
-            .filter(|&t| self.tlas[t as usize].is_none())
-            .collect();
-        for (k, &t) in new_tlases.iter().enumerate() {
-            match self.with_eviction(|s| s.build_tlases(&[t])) {
-                Ok(()) => {
-                    let bytes = self.tlas[t as usize].as_ref().map_or(0, |g| {
-                        g.accel.size_bytes + g.proxy.as_ref().map_or(0, |p| p.size_bytes)
-                    });
-                    let item = item_of_tlas(nb, t);
-                    let _ = self.residency.insert(item, bytes, u64::from(self.stamp));
-                    self.pinned[item.0 as usize] = true;
-                    self.built_now.push(item.0);
-                    self.frame_stats.tlas_built += 1;
-                }
-                Err(GpuError::Budget(msg)) => {
-                    if self.built_now.is_empty() && !prefetch {
-                        let report = self.heap.report();
-                        return Err(GpuError::Budget(format!(
-                            "streaming: TLAS {t} does not fit under the budget of {} bytes with \
-                             every other structure evicted ({} bytes in use, skeleton {} \
-                             bytes); raise --vram-budget ({msg})",
-                            report.budget_bytes,
-                            report.budget_in_use_bytes,
-                            self.totals.skeleton_bytes
-                        )));
-                    }
-                    deferred += new_tlases.len() - k;
-                    break;
-                }
-                Err(e) => return Err(e),
-            }
-        }
-        // 3. Parents whose instance set changed (builds or evictions).
+        // Parents whose instance set changed (builds or evictions).
         self.rebuild_dirty()?;
         self.upload_tlas_addresses()?;
         if prefetch {

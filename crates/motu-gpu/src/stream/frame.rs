@@ -88,7 +88,7 @@ impl<'a> StreamingRenderer<'a> {
         // Prefetch: what the guard band saw, evicting only what this frame did not see (what
         // does not fit is skipped).
         if !guard_demand.is_empty() && self.frame_stats.complete {
-            if let Err(e) = self.make_resident(&guard_demand, None) {
+            if let Err(e) = self.make_resident(&guard_demand, true) {
                 self.quarantine_after_failure(&e);
                 return Err(e);
             }

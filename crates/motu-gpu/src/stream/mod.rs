@@ -3,76 +3,69 @@
 //! multi-level hierarchy).
 //!
 //! # Empty instances
-//! Every triangle BLAS and every non-root TLAS starts non-resident. PI (AABB) BLASes, the root
-//! TLAS and the node tables form the resident *skeleton*. In the GPU's copy of the tables each
-//! TLAS with triangle instances gets one extra instance: a *proxy* AABB BLAS with one box per
+//! Every triangle BLAS starts non-resident. PI (AABB) BLASes, every TLAS and the node tables
+//! form the resident *skeleton* (TLASes are the instance skeleton: never evicted, so every ray
+//! reaches every BLAS box and only BLASes stream). In the GPU's copy of the tables each TLAS
+//! with triangle instances gets one extra instance: a *proxy* AABB BLAS with one box per
 //! non-resident triangle instance (the BLAS bounds in TLAS space), whose PI record has kind
 //! `PI_EMPTY_BLAS` and names the BLAS. The real instance stays in place with a null BLAS
-//! reference (inactive), so instance indices never move. A PI into a non-resident TLAS stays a
-//! PI; the TLAS's entry in the address table is 0.
+//! reference (inactive), so instance indices never move.
 //!
-//! # Traversal (both backends, `traverse.glsl`)
-//! Every walked TLAS and the BLAS of every closest hit are stamped visible (`atomicMax` of a
-//! per-pass stamp). A ray meeting an empty instance in front of its best hit stamps the nearest
-//! such instance *needed* (and counts a request for it), becomes *incomplete* (the paper's
-//! `trav_valid = false`) and keeps walking only to discover prefetch candidates: it skips
-//! shading and shadow rays, stamps its best hit so far *needed* (a pin), records where it
-//! stopped and writes nothing; its pixel goes on the next pass's list. An incomplete ray has no
-//! hit before its nearest empty instance (none in front of it, no resident one hit), so its
-//! next pass *resumes* there (per-pixel `t_min`, primary and shadow ray): what it already
-//! passed may be evicted without costing it anything, and each pass moves it forward. Resident
-//! triangle BLASes are walked by the hardware without a shader callback, so only the one hit
-//! is stamped: a resident BLAS that rays cross without hitting ages in the LRU order.
+//! # Carried hits (both backends, `traverse.glsl`, `render_pixel.glsl`)
+//! Each pixel keeps its state across the passes of a frame (`Carry`, 48 bytes): the primary
+//! ray's best hit so far, *resolved* (source mesh, primitive, LOD, material, normal) while its
+//! BLAS was resident, and which ray is open (primary, then shadow) since which pass. A pass
+//! walks what is resident now against that best hit (it only culls with the carried t, never
+//! with an empty instance's box). A ray that was traced in every pass since it started has
+//! walked every BLAS resident in any of those passes, so a non-resident BLAS is *open* for it
+//! only when it was not resident in any pass since the ray started (`walked[b]` < the ray's
+//! start stamp) and its box lies in front of the best hit; the nearest open one is the pixel's
+//! request (needed, counted), the rest are marked open. The closest hit over BLASes processed
+//! in different passes is the minimum over the passes, so the image equals the full build's,
+//! and a pixel never needs two BLASes resident at once: anything may be evicted between
+//! passes. Shadow rays start when the primary hit is final and stop at the first occluder.
 //!
 //! # Build–traverse loop ([`StreamingRenderer::render_frame`])
 //! Pass 1 traces every pixel plus a sparse *guard band* of primary rays around the image.
-//! After each pass the host reads the stamps, the request counts and the incomplete-pixel
-//! list, and builds the needed-but-empty structures **most requested first**: meshes stream
-//! through the staging ring, BLASes build in groups that halve when the budget refuses them
-//! (groups use free memory only; single builds evict for room), uncompacted when compaction
-//! saves nothing or does not fit. What does not fit is *deferred*: its pixels stay incomplete
-//! and the next pass, once the pixels now served are complete, builds it. Then each resident
-//! TLAS whose instance set changed is rebuilt with its proxy BLAS (the old one freed first, so
-//! the root's rebuild never needs two roots' memory; a TLAS rebuild costs one pass over its
-//! instances, small next to BLAS builds over triangles), and only the incomplete pixels are
-//! re-shot. The loop ends when no pixel is incomplete or after `max_passes` (reported in
-//! [`FrameStreamStats::complete`] and `StreamTotals::incomplete_frames`; remaining pixels are
-//! misses, magenta in colour). Structures the guard band saw are built after the frame as a
-//! prefetch (evicting only what this frame did not see; what does not fit is skipped), and
-//! everything stays resident until evicted, so on a camera path later frames mostly need one
-//! pass.
+//! After each pass the host reads the stamps, the request counts and the open-pixel list and
+//! builds the needed structures most requested first (meshes stream through the staging ring;
+//! BLASes build in groups that halve when the budget refuses them; single builds evict least
+//! recently visible BLASes for room), then what fits of the open ones; each TLAS whose
+//! instance set changed is rebuilt with its proxy, and only open pixels are traced again.
+//! Each pass builds at least one needed BLAS, so a budget at or above the floor
+//! ([`streaming_floor`]) completes; the pass cap ([`StreamingRenderer::max_passes`]) is a
+//! safety net sized from the BLAS count, and a frame that reaches it reports its unfinished
+//! pixels ([`FrameStreamStats::complete`], `incomplete_pixels`; the CLI exits non-zero).
+//! Structures the guard band (or pass 1's open marks) saw are built after the frame as a
+//! prefetch, evicting only what this frame did not see, so later frames of a camera path
+//! mostly need one pass.
 //!
 //! # Eviction and the budget
-//! Allocations go through `motu-alloc`, whose blocks never exceed the budget (host-visible
-//! staging counts against it on unified-memory devices; staging and scratch are each capped
-//! at an eighth of it). When one fails, the least-recently-visible unpinned structures (BLAS
-//! with the meshes only it uses, or child TLAS) are evicted and it is retried. Pinned in a
-//! build step: what the latest pass's incomplete pixels need (their best hits, walked TLASes)
-//! and what the step built; pixels completed earlier in the frame are final, so what only they
-//! used may go. When not even one structure fits next to those pins, the pins go too (their
-//! pixels find them again); when a TLAS rebuild does not fit, the step's least requested builds
-//! are given back. Only when a single structure does not fit next to the resident skeleton
-//! (tables, PI BLASes, root TLAS and proxies, frame buffers, trace pipeline, staging ring) does
-//! the frame fail, with [`GpuError::Budget`] naming the structure and the bytes: motu does not
-//! silently render a coarser image. Evicting a BLAS rebuilds its resident parents before the
-//! next trace.
+//! Allocations go through `motu-alloc` (standard blocks a 64th of the budget), whose blocks
+//! never exceed the budget (host-visible staging counts against it on unified-memory devices).
+//! When one fails, the least-recently-visible BLASes not built in the current step are evicted
+//! and it is retried. Only when a single BLAS does not fit next to the skeleton does the frame
+//! fail with [`GpuError::Budget`] naming it; the CLI refuses a budget below the floor up front.
 
 mod buffers;
 mod demand;
+mod floor;
 mod frame;
 mod passes;
 mod rebuild;
 mod residency;
 mod skeleton;
 
+pub use floor::{streaming_floor, FloorSizes, StreamFloor};
+
 use std::collections::BTreeSet;
 
 use motu_abi::HierarchyView;
-use motu_alloc::{ItemId, Residency, MIB};
+use motu_alloc::{Residency, MIB};
 use serde::Serialize;
 
 use crate::context::Context;
-use crate::error::GpuError;
+use crate::error::{GpuError, Result};
 use crate::heap::{GpuHeap, HeapBuffer};
 use crate::render::{Backend, Tracer};
 use crate::scene::{AccelStruct, BuildOptions, MeshBlobSource, MeshGpu, Uploader, SLOT_COUNT};
@@ -90,7 +83,8 @@ pub struct StreamOptions {
     pub budget_bytes: u64,
     /// Cap on `VkDeviceMemory` allocations.
     pub max_allocations: u32,
-    /// Build–traverse passes per frame before giving up on the remaining pixels.
+    /// Build–traverse passes per frame before giving up on the remaining pixels; 0: sized
+    /// from the structure count (see [`StreamingRenderer::max_passes`]).
     pub max_passes: u32,
     /// Scratch bytes one build batch may use (capped at an eighth of the budget).
     pub scratch_budget_bytes: u64,
@@ -102,6 +96,10 @@ pub struct StreamOptions {
     pub guard_band_px: u32,
     /// Compact acceleration structures after building.
     pub compact: bool,
+    /// Also build, in a pass's build step, what fits of the structures pixels will need
+    /// after their nearest (fewer passes on a cold frame; off: they are only prefetched after
+    /// the frame).
+    pub build_open_early: bool,
 }
 
 impl Default for StreamOptions {
@@ -109,11 +107,12 @@ impl Default for StreamOptions {
         Self {
             budget_bytes: 512 * MIB,
             max_allocations: 4096,
-            max_passes: 16,
+            max_passes: 0,
             scratch_budget_bytes: 32 * MIB,
             staging_bytes: 8 * MIB,
             guard_band_px: 8,
             compact: true,
+            build_open_early: true,
         }
     }
 }
@@ -200,7 +199,9 @@ pub struct StreamingRenderer<'a> {
     mesh_refs: Vec<u32>,
     tables: Vec<HeapBuffer>,
     blas_stamps: Option<HeapBuffer>,
-    tlas_stamps: Option<HeapBuffer>,
+    /// Per BLAS: the latest pass stamp it was resident in (host copy of `walked_buf`).
+    walked: Vec<u32>,
+    walked_buf: Option<HeapBuffer>,
     up: Option<Uploader>,
     tracer: Option<(Backend, u32, Tracer)>,
     heap: GpuHeap,
@@ -245,11 +246,26 @@ pub struct StreamingRenderer<'a> {
     ctx: Context,
 }
 
-fn item_of_tlas(blas_count: usize, t: u32) -> ItemId {
-    ItemId((blas_count as u32).saturating_add(t))
-}
-
 impl<'a> StreamingRenderer<'a> {
+    fn walked_table(&self) -> Result<&HeapBuffer> {
+        self.walked_buf
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidRequest("streaming: no walked table".into()))
+    }
+
+    /// The pass cap of a frame: `StreamOptions::max_passes`, or (0) a safety net sized from
+    /// the structure count. Every pass builds at least one structure some pixel still needs,
+    /// so a frame needs about as many passes as BLASes at worst (primary rays once each,
+    /// shadow rays that start late once more); a frame that hits the cap reports its
+    /// unfinished pixels.
+    pub fn max_passes(&self) -> u32 {
+        if self.opts.max_passes > 0 {
+            return self.opts.max_passes;
+        }
+        let n = self.buildable.iter().filter(|&&b| b).count() as u32;
+        n.saturating_mul(4).saturating_add(16)
+    }
+
     fn item_count(&self) -> usize {
         self.view.blases.len() + self.view.tlases.len()
     }

@@ -18,22 +18,32 @@ use crate::scene::Slot;
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 #[repr(C)]
 pub(super) struct StreamParams {
+    /// u32 per BLAS: `4 × stamp + level` (seen 0, open 1, needed 2) of the latest pass.
     pub(super) blas_stamps: u64,
-    pub(super) tlas_stamps: u64,
+    /// u32 per BLAS: the latest stamp of a pass it was resident (walked) in.
+    pub(super) walked: u64,
     pub(super) pixel_list: u64,
     pub(super) incomplete: u64,
     pub(super) stamp: u32,
     pub(super) full_count: u32,
     pub(super) list_count: u32,
-    /// Requests of TLAS `t` are at index `blas_count + t`.
     pub(super) blas_count: u32,
-    /// u32 per BLAS, then per TLAS: rays of the pass that need it (build priority).
+    /// u32 per BLAS: pixels of the pass whose nearest open structure it is (build priority).
     pub(super) requests: u64,
-    /// `[f32; 2]` per pixel: where its primary and shadow rays resume next pass.
-    pub(super) resume: u64,
+    /// [`CARRY_BYTES`] per pixel: the state carried across passes (`Carry` of
+    /// `render_pixel.glsl`).
+    pub(super) carry: u64,
 }
 
+/// Bytes of one pixel's `Carry` (`render_pixel.glsl`).
+pub(super) const CARRY_BYTES: u64 = 48;
+/// Stamp levels of `common.glsl` (`STREAM_*`).
+const LEVEL_OPEN: u32 = 1;
+const LEVEL_NEEDED: u32 = 2;
+
 impl<'a> StreamingRenderer<'a> {
+    /// The frame's build–traverse passes. Returns the image (AOV records, colour words), the
+    /// stats counters and what the guard band saw (the prefetch).
     #[allow(clippy::type_complexity)]
     pub(super) fn run_passes(
         &mut self,
@@ -43,9 +53,8 @@ impl<'a> StreamingRenderer<'a> {
         guard: &[u32],
     ) -> Result<(Vec<AovRecord>, Vec<u32>, Vec<u32>, Demand)> {
         let nb = self.view.blases.len();
-        let nt = self.view.tlases.len();
         let pixels = u64::from(w) * u64::from(h);
-        let stamps_bytes = ((nb + nt) * 4) as u64;
+        let stamps_bytes = (nb * 4) as u64;
         let req_off = stamps_bytes.div_ceil(16) * 16;
         let inc_off = req_off + req_off;
         let final_off = (inc_off + 4 + 4 * pixels).div_ceil(16) * 16;
@@ -53,20 +62,29 @@ impl<'a> StreamingRenderer<'a> {
         let mut list: Vec<u32> = guard.to_vec();
         self.frame_stats.guard_rays = guard.len() as u64;
         let mut guard_demand = Demand::default();
+        let max_passes = self.max_passes();
         loop {
             self.stamp += 1;
             self.frame_stats.passes += 1;
             let first = self.frame_stats.passes == 1;
+            // Every resident BLAS is walked by every ray of this pass that reaches its box in
+            // front of its best hit: a ray that started by now needs it no more.
+            for b in 0..nb {
+                if self.blas[b].is_some() && self.buildable[b] {
+                    self.walked[b] = self.stamp;
+                }
+            }
+            let walked = self.walked_table()?;
+            if nb > 0 {
+                walked.write(0, &self.walked)?;
+            }
             fb.pixel_list.write(0, &list)?;
             let sp = StreamParams {
                 blas_stamps: self
                     .blas_stamps
                     .as_ref()
                     .map_or(Ok(0), |b| b.device_address().map(|a| a.0))?,
-                tlas_stamps: self
-                    .tlas_stamps
-                    .as_ref()
-                    .map_or(Ok(0), |b| b.device_address().map(|a| a.0))?,
+                walked: walked.device_address()?.0,
                 pixel_list: fb.pixel_list.device_address()?.0,
                 incomplete: fb.incomplete.device_address()?.0,
                 stamp: self.stamp,
@@ -74,7 +92,7 @@ impl<'a> StreamingRenderer<'a> {
                 list_count: list.len() as u32,
                 blas_count: nb as u32,
                 requests: fb.requests.device_address()?.0,
-                resume: fb.resume.device_address()?.0,
+                carry: fb.carry.device_address()?.0,
             };
             fb.stream.write(0, std::slice::from_ref(&sp))?;
             let mut addresses = self.addresses;
@@ -104,29 +122,24 @@ impl<'a> StreamingRenderer<'a> {
             let mut rec = self.ctx.record("stream pass")?;
             if first {
                 rec.fill_buffer(&fb.stats, 0, (STAT_WORDS * 4) as u64, 0)?;
-                rec.fill_buffer(&fb.resume, 0, pixels * 8, 0)?;
+                rec.fill_buffer(&fb.carry, 0, pixels * CARRY_BYTES, 0)?;
             }
             rec.fill_buffer(&fb.incomplete, 0, 4, 0)?;
             rec.fill_buffer(&fb.requests, 0, stamps_bytes.max(4), 0)?;
             rec.barrier();
             tracer.record(&mut rec, push_bytes, dims, groups)?;
             rec.barrier();
-            if let (Some(bs), Some(ts)) = (&self.blas_stamps, &self.tlas_stamps) {
+            if let Some(bs) = &self.blas_stamps {
                 if nb > 0 {
-                    rec.copy_buffer(bs, 0, &fb.readback, 0, (nb * 4) as u64)?;
+                    rec.copy_buffer(bs, 0, &fb.readback, 0, stamps_bytes)?;
+                    rec.copy_buffer(&fb.requests, 0, &fb.readback, req_off, stamps_bytes)?;
                 }
-                if nt > 0 {
-                    rec.copy_buffer(ts, 0, &fb.readback, (nb * 4) as u64, (nt * 4) as u64)?;
-                }
-            }
-            if nb + nt > 0 {
-                rec.copy_buffer(&fb.requests, 0, &fb.readback, req_off, stamps_bytes)?;
             }
             rec.copy_buffer(&fb.incomplete, 0, &fb.readback, inc_off, 4 + 4 * pixels)?;
             rec.submit_and_wait()?;
             self.frame_stats.trace_ms += t0.elapsed().as_secs_f64() * 1e3;
-            let stamps: Vec<u32> = fb.readback.read_vec(0, nb + nt)?;
-            let requests: Vec<u32> = fb.readback.read_vec(req_off, nb + nt)?;
+            let stamps: Vec<u32> = fb.readback.read_vec(0, nb)?;
+            let requests: Vec<u32> = fb.readback.read_vec(req_off, nb)?;
             let count = fb
                 .readback
                 .read_vec::<u32>(inc_off, 1)?
@@ -135,46 +148,37 @@ impl<'a> StreamingRenderer<'a> {
                 .unwrap_or(0);
             let count = count.min(pixels as u32);
             let incomplete: Vec<u32> = fb.readback.read_vec(inc_off + 4, count as usize)?;
-            // Visible sets: resident ones refresh their LRU age and are pinned when an
-            // incomplete pixel needs them (its best hit so far; every walked TLAS); empty ones
-            // are demanded (a real pixel needs them) or prefetched (only seen).
+            // Resident BLASes seen refresh their LRU age; empty ones are needed (some pixel's
+            // nearest open one), open (needed later) or, in pass 1, prefetch candidates (the
+            // guard band saw them).
             let mut demand = Demand::default();
-            let mut pass_pins = vec![false; nb + nt];
-            for (i, &v) in stamps.iter().enumerate() {
-                if v >> 1 != self.stamp {
+            for (b, &v) in stamps.iter().enumerate() {
+                if v >> 2 != self.stamp {
                     continue;
                 }
-                self.last_seen[i] = self.stamp;
-                let needed = v & 1 == 1;
-                let (resident, wanted) = if i < nb {
-                    (self.blas[i].is_some(), self.buildable[i])
-                } else {
-                    let t = (i - nb) as u32;
-                    (self.tlas[t as usize].is_some(), t != self.view.root_tlas)
-                };
-                if resident {
-                    if i >= nb || self.buildable[i] {
+                self.last_seen[b] = self.stamp;
+                if self.blas[b].is_some() {
+                    if self.buildable[b] {
                         self.residency
-                            .mark_visible(ItemId(i as u32), u64::from(self.stamp));
-                        pass_pins[i] = needed || i >= nb;
+                            .mark_visible(ItemId(b as u32), u64::from(self.stamp));
                     }
                     continue;
                 }
-                if !wanted {
+                if !self.buildable[b] {
                     continue;
                 }
-                let set = if needed {
-                    &mut demand
-                } else if first {
-                    &mut guard_demand
-                } else {
-                    continue;
-                };
-                let n = requests.get(i).copied().unwrap_or(0);
-                if i < nb {
-                    set.blases.push((i as u32, n));
-                } else {
-                    set.tlases.push(((i - nb) as u32, n));
+                let n = requests.get(b).copied().unwrap_or(0);
+                match v & 3 {
+                    LEVEL_NEEDED => demand.blases.push((b as u32, n)),
+                    LEVEL_OPEN => {
+                        demand.later.push((b as u32, 0));
+                        if first {
+                            // Also a prefetch candidate when the frame completes without it.
+                            guard_demand.blases.push((b as u32, 0));
+                        }
+                    }
+                    _ if first => guard_demand.blases.push((b as u32, 0)),
+                    _ => {}
                 }
             }
             demand.sort();
@@ -182,17 +186,17 @@ impl<'a> StreamingRenderer<'a> {
                 self.frame_stats.complete = true;
                 break;
             }
-            if self.frame_stats.passes >= self.opts.max_passes.max(1) {
+            if self.frame_stats.passes >= max_passes {
                 self.frame_stats.incomplete_pixels = u64::from(count);
                 tracing::warn!(
                     incomplete = count,
                     passes = self.frame_stats.passes,
-                    "stream pass cap reached: remaining pixels are rendered as misses"
+                    "stream pass cap reached with pixels unfinished"
                 );
                 list = incomplete;
                 break;
             }
-            if let Err(e) = self.make_resident(&demand, Some(&pass_pins)) {
+            if let Err(e) = self.make_resident(&demand, false) {
                 self.quarantine_after_failure(&e);
                 return Err(e);
             }

@@ -4,7 +4,7 @@
 use motu_abi::BLAS_TRIANGLES;
 use motu_alloc::ItemId;
 
-use super::{item_of_tlas, StreamingRenderer};
+use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
 
 impl<'a> StreamingRenderer<'a> {
@@ -34,31 +34,18 @@ impl<'a> StreamingRenderer<'a> {
         Ok(true)
     }
 
-    /// Releases item `i` (a BLAS with the meshes only it used, or a child TLAS with its proxy);
-    /// resident parents of a BLAS become dirty.
-    pub(super) fn evict(&mut self, i: usize) {
-        let nb = self.view.blases.len();
-        self.residency.remove(ItemId(i as u32));
+    /// Releases BLAS `b` with the meshes only it used; its resident parents become dirty.
+    pub(super) fn evict(&mut self, b: usize) {
+        self.residency.remove(ItemId(b as u32));
         self.frame_stats.evicted += 1;
-        if i < nb {
-            if let Some(a) = self.blas[i].take() {
-                a.release(&mut self.heap);
+        if let Some(a) = self.blas.get_mut(b).and_then(Option::take) {
+            a.release(&mut self.heap);
+        }
+        self.release_blas_meshes(b);
+        for &p in &self.parents[b] {
+            if self.tlas[p as usize].is_some() {
+                self.dirty.insert(p);
             }
-            self.release_blas_meshes(i);
-            for &p in &self.parents[i] {
-                if self.tlas[p as usize].is_some() {
-                    self.dirty.insert(p);
-                }
-            }
-        } else {
-            if let Some(t) = self.tlas[i - nb].take() {
-                t.accel.release(&mut self.heap);
-                if let Some(p) = t.proxy {
-                    p.release(&mut self.heap);
-                }
-            }
-            // Also when a failed rebuild left it absent: it is no longer wanted.
-            self.dirty.remove(&((i - nb) as u32));
         }
     }
 
@@ -132,26 +119,11 @@ impl<'a> StreamingRenderer<'a> {
         changed
     }
 
-    /// After a failed build step, TLASes still referencing evicted BLASes must never be traced:
-    /// child ones are evicted (they become empty); a dirty root poisons the renderer.
+    /// After a failed build step, a TLAS left dirty (absent, or referencing evicted BLASes)
+    /// must never be traced: every TLAS is part of the skeleton, so the renderer is poisoned.
     pub(super) fn quarantine_after_failure(&mut self, e: &GpuError) {
-        let nb = self.view.blases.len();
-        let dirty: Vec<u32> = std::mem::take(&mut self.dirty).into_iter().collect();
-        for t in dirty {
-            if t == self.view.root_tlas {
-                self.poisoned = Some(e.to_string());
-                continue;
-            }
-            if let Some(g) = self.tlas[t as usize].take() {
-                g.accel.release(&mut self.heap);
-                if let Some(p) = g.proxy {
-                    p.release(&mut self.heap);
-                }
-                self.residency.remove(item_of_tlas(nb, t));
-            }
-        }
-        if self.poisoned.is_none() {
-            let _ = self.upload_tlas_addresses();
+        if !self.dirty.is_empty() {
+            self.poisoned = Some(e.to_string());
         }
     }
 }

@@ -10,9 +10,8 @@ use motu_abi::{
 };
 use motu_alloc::{AllocKind, AllocLimits, MemoryClass, Residency, MIB};
 
-use super::{
-    FrameStreamStats, StreamOptions, StreamTotals, StreamingRenderer, IDENTITY, PI_EMPTY_BLAS,
-};
+use super::PI_EMPTY_BLAS;
+use super::{FrameStreamStats, StreamOptions, StreamTotals, StreamingRenderer, IDENTITY};
 use crate::context::Context;
 use crate::error::{GpuError, Result};
 use crate::heap::GpuHeap;
@@ -78,7 +77,8 @@ impl<'a> StreamingRenderer<'a> {
             budget_bytes: budget,
             host_visible_budget_bytes: opts.staging_bytes.max(64 * MIB) * 4,
         };
-        let heap = GpuHeap::new(ctx, limits)?;
+        let block = (budget / super::floor::BLOCKS_PER_BUDGET).clamp(256 * 1024, 256 * MIB);
+        let heap = GpuHeap::with_block_size(ctx, limits, Some(block))?;
         let nb = view.blases.len();
         let nt = view.tlases.len();
 
@@ -177,7 +177,8 @@ impl<'a> StreamingRenderer<'a> {
             mesh_refs: vec![0; view.meshes.len()],
             tables: Vec::new(),
             blas_stamps: None,
-            tlas_stamps: None,
+            walked_buf: None,
+            walked: vec![0; nb],
             up: None,
             tracer: None,
             heap,
@@ -276,28 +277,30 @@ impl<'a> StreamingRenderer<'a> {
             | BufferUsage::DEVICE_ADDRESS
             | BufferUsage::TRANSFER_SRC
             | BufferUsage::TRANSFER_DST;
-        for (i, n) in [view.blases.len(), view.tlases.len()]
-            .into_iter()
-            .enumerate()
-        {
-            let buf = self.heap.alloc_buffer(
-                ["blas-stamps", "tlas-stamps"][i],
-                (n.max(1) * 4) as u64,
-                stamp_usage,
-                AllocKind::Other,
-                MemoryClass::DeviceLocal,
-                16,
-            )?;
-            let rec = ctx.record("clear stamps")?;
-            let mut rec = rec;
-            rec.fill_buffer(&buf, 0, (n.max(1) * 4) as u64, 0)?;
-            rec.submit_and_wait()?;
-            if i == 0 {
-                self.blas_stamps = Some(buf);
-            } else {
-                self.tlas_stamps = Some(buf);
-            }
-        }
+        let stamp_bytes = (view.blases.len().max(1) * 4) as u64;
+        let buf = self.heap.alloc_buffer(
+            "blas-stamps",
+            stamp_bytes,
+            stamp_usage,
+            AllocKind::Other,
+            MemoryClass::DeviceLocal,
+            16,
+        )?;
+        let mut rec = ctx.record("clear stamps")?;
+        rec.fill_buffer(&buf, 0, stamp_bytes, 0)?;
+        rec.submit_and_wait()?;
+        self.blas_stamps = Some(buf);
+        // Written by the host before each pass (which BLASes that pass walks).
+        let walked = self.heap.alloc_buffer(
+            "blas-walked",
+            stamp_bytes,
+            BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
+            AllocKind::Other,
+            MemoryClass::HostVisible,
+            16,
+        )?;
+        walked.write(0, &vec![0u32; view.blases.len().max(1)])?;
+        self.walked_buf = Some(walked);
         self.up_mut()?.flush(&ctx)?;
 
         // PI BLASes: the skeleton, built once from the PI boxes (input freed after).
@@ -327,9 +330,10 @@ impl<'a> StreamingRenderer<'a> {
             self.heap.free(buf);
             r?;
         }
-        // The root TLAS (all its triangle instances empty).
-        let root = view.root_tlas;
-        self.build_tlases(&[root])?;
+        // Every TLAS (all their triangle instances empty): TLASes are the instance skeleton,
+        // never evicted, so a ray reaches every BLAS box and only BLASes stream.
+        let all: Vec<u32> = (0..view.tlases.len() as u32).collect();
+        self.build_tlases(&all)?;
         self.upload_tlas_addresses()?;
         Ok(())
     }

@@ -1,0 +1,235 @@
+//! The streaming floor: the least `--vram-budget` under which every frame completes, identical
+//! to the full build (carried hits need one BLAS resident at a time next to the skeleton).
+//!
+//! One function, [`streaming_floor`], serves the renderer (sizes from the device; a budget
+//! below the floor is refused up front) and `motu report` (`streaming.min_resident_bytes`,
+//! sizes from its size source, the same driver query on a device), so the two cannot drift.
+
+use motu_abi::{HierarchyView, BLAS_AABBS, BLAS_TRIANGLES, FLAG_NEEDS_ANY_HIT};
+use motu_alloc::MIB;
+use serde::Serialize;
+
+use super::buffers::frame_buffer_bytes;
+use crate::accel::BlasGeometry;
+use crate::error::Result;
+
+/// Acceleration-structure sizes (as built, before compaction; build scratch) the floor needs.
+pub trait FloorSizes {
+    fn blas(&self, geometry: &[BlasGeometry]) -> Result<(u64, u64)>;
+    fn tlas(&self, instance_count: u32) -> Result<(u64, u64)>;
+}
+
+impl FloorSizes for crate::context::Context {
+    fn blas(&self, geometry: &[BlasGeometry]) -> Result<(u64, u64)> {
+        let s = self.blas_build_sizes(geometry, crate::accel::AsBuildFlags::default())?;
+        Ok((
+            s.acceleration_structure_size_bytes,
+            s.build_scratch_size_bytes,
+        ))
+    }
+
+    fn tlas(&self, instance_count: u32) -> Result<(u64, u64)> {
+        let s = self.tlas_build_sizes(instance_count, crate::accel::AsBuildFlags::default())?;
+        Ok((
+            s.acceleration_structure_size_bytes,
+            s.build_scratch_size_bytes,
+        ))
+    }
+}
+
+/// The parts of the floor (bytes), for reports and error messages.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct StreamFloor {
+    /// Node tables (with the proxies' records), stamps and walked tables.
+    pub tables_bytes: u64,
+    /// PI BLASes, every TLAS and every proxy BLAS (all triangle instances empty): the
+    /// resident skeleton besides the tables.
+    pub skeleton_structures_bytes: u64,
+    /// The triangle BLAS with the largest build working set (meshes, structure, scratch;
+    /// compaction is skipped when its copy does not fit).
+    pub largest_blas: Option<u32>,
+    pub largest_blas_build_bytes: u64,
+    /// Rebuilding every TLAS with its proxy (instance buffer, proxy boxes, scratch) next to
+    /// the largest BLAS resident.
+    pub tlas_rebuild_bytes: u64,
+    /// Frame buffers at the image size (carried hits, lists, AOV, colour, readback).
+    pub frame_bytes: u64,
+    pub width: u32,
+    pub height: u32,
+    /// Trace pipeline and shader binding tables (allowance).
+    pub pipeline_bytes: u64,
+    /// Staging ring at the floor (an eighth of the budget, at most the default ring).
+    pub staging_bytes: u64,
+    /// Partly used allocator blocks (block size is a 64th of the budget; two classes, two
+    /// blocks each).
+    pub allocator_slack_bytes: u64,
+    /// The floor: a budget at or above it completes every frame.
+    pub min_resident_bytes: u64,
+}
+
+/// Allowance for the trace pipeline (shader binding table, small buffers).
+const PIPELINE_BYTES: u64 = MIB;
+/// Least staging ring the renderer uses.
+const MIN_STAGING_BYTES: u64 = 64 * 1024;
+/// Standard allocator blocks of a streaming heap are this fraction of the budget.
+pub(super) const BLOCKS_PER_BUDGET: u64 = 64;
+
+fn align(v: u64, a: u64) -> u64 {
+    v.div_ceil(a) * a
+}
+
+/// The floor of streaming `view` at `width × height` with a staging ring of at most
+/// `staging_cap_bytes` (see the module docs).
+pub fn streaming_floor(
+    view: &HierarchyView<'_>,
+    sizes: &dyn FloorSizes,
+    width: u32,
+    height: u32,
+    staging_cap_bytes: u64,
+) -> Result<StreamFloor> {
+    let as_align = |v: u64| align(v, 256);
+    let nb = view.blases.len() as u64;
+    let nt = view.tlases.len() as u64;
+    // Triangle instances per TLAS (each gets a proxy box), as the renderer's tables.
+    let buildable = |b: usize| {
+        let r = &view.blases[b];
+        r.kind == BLAS_TRIANGLES && r.item_count > 0
+    };
+    let mut proxies_total = 0u64;
+    let mut skeleton = 0u64;
+    let mut rebuild_instances = 0u64;
+    let mut rebuild_scratch_max = 0u64;
+    let mut rebuild_scratch_sum = 0u64;
+    for rec in view.tlases {
+        let range = rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize;
+        let tri = view.instances[range]
+            .iter()
+            .filter(|i| buildable(i.blas as usize))
+            .count() as u32;
+        let count = rec.instance_count + u32::from(tri > 0);
+        let (t_bytes, t_scratch) = sizes.tlas(count.max(1))?;
+        skeleton += as_align(t_bytes);
+        rebuild_instances += u64::from(count) * 64;
+        let mut scratch = t_scratch;
+        if tri > 0 {
+            proxies_total += u64::from(tri);
+            let (p_bytes, p_scratch) = sizes.blas(&[BlasGeometry::Aabbs {
+                aabb_count: tri,
+                opaque: false,
+            }])?;
+            skeleton += as_align(p_bytes);
+            scratch = scratch.max(p_scratch);
+        }
+        rebuild_scratch_max = rebuild_scratch_max.max(scratch);
+        rebuild_scratch_sum += align(scratch, 256);
+    }
+    for (b, r) in view.blases.iter().enumerate() {
+        if r.kind == BLAS_AABBS && r.item_count > 0 {
+            let (bytes, _) = sizes.blas(&[BlasGeometry::Aabbs {
+                aabb_count: r.item_count,
+                opaque: false,
+            }])?;
+            skeleton += as_align(bytes);
+        }
+        let _ = b;
+    }
+    let rec_bytes = |n: u64, size: u64| align(n * size, 16);
+    let tables = rec_bytes(nt, std::mem::size_of::<motu_abi::TlasRecord>() as u64)
+        + rec_bytes(
+            view.instances.len() as u64 + nt,
+            std::mem::size_of::<motu_abi::InstanceRecord>() as u64,
+        )
+        + rec_bytes(nb + nt, std::mem::size_of::<motu_abi::BlasRecord>() as u64)
+        + rec_bytes(
+            view.geometries.len() as u64,
+            std::mem::size_of::<motu_abi::GeometryRecord>() as u64,
+        )
+        + rec_bytes(
+            view.pis.len() as u64 + proxies_total,
+            std::mem::size_of::<motu_abi::PiRecord>() as u64,
+        )
+        + rec_bytes(
+            view.lod_selectors.len() as u64,
+            std::mem::size_of::<motu_abi::LodSelectorRecord>() as u64,
+        )
+        + rec_bytes(view.lod_levels.len() as u64, 4)
+        + rec_bytes(
+            view.meshes.len() as u64,
+            std::mem::size_of::<motu_abi::MeshRecord>() as u64,
+        )
+        + rec_bytes(
+            view.materials.len() as u64,
+            std::mem::size_of::<motu_abi::MaterialRecord>() as u64,
+        )
+        + rec_bytes(view.meshes.len() as u64, 16)
+        + rec_bytes(nt, 8)
+        + 2 * rec_bytes(nb.max(1), 4);
+    // The largest triangle BLAS build: meshes, structure, scratch.
+    let mut largest: Option<(u32, u64, u64)> = None;
+    for (b, r) in view.blases.iter().enumerate() {
+        if !buildable(b) {
+            continue;
+        }
+        let range = r.item_base as usize..(r.item_base + r.item_count) as usize;
+        let mut shape = Vec::new();
+        let mut mesh_bytes = 0u64;
+        for g in &view.geometries[range] {
+            let m = &view.meshes[g.mesh as usize];
+            shape.push(BlasGeometry::Triangles {
+                vertex_count: m.vertex_count,
+                triangle_count: m.triangle_count,
+                indexed: true,
+                opaque: m.flags & FLAG_NEEDS_ANY_HIT == 0,
+            });
+            mesh_bytes += align(
+                align(u64::from(m.vertex_count) * 12, 16) + u64::from(m.triangle_count) * 12,
+                16,
+            );
+        }
+        let (bytes, scratch) = sizes.blas(&shape)?;
+        let build = mesh_bytes + as_align(bytes) + align(scratch, 256);
+        let resident = mesh_bytes + as_align(bytes);
+        if largest.is_none_or(|l| build > l.1) {
+            largest = Some((b as u32, build, resident));
+        }
+    }
+    let (largest_blas, blas_build, blas_resident) = match largest {
+        Some((b, build, res)) => (Some(b), build, res),
+        None => (None, 0, 0),
+    };
+    let pixels = u64::from(width) * u64::from(height);
+    let guard = u64::from(width + 16) * u64::from(height + 16) / 4;
+    let frame = frame_buffer_bytes(pixels, guard, nb + nt);
+    let base = tables + skeleton + frame + PIPELINE_BYTES;
+    // Budget-dependent parts: staging (an eighth), TLAS rebuild scratch batches (an eighth),
+    // allocator slack (four blocks of a 64th): iterate to the fixed point.
+    let mut floor = base + blas_build;
+    let mut parts = (0, 0, 0);
+    for _ in 0..64 {
+        let staging =
+            (floor / 8).clamp(MIN_STAGING_BYTES, staging_cap_bytes.max(MIN_STAGING_BYTES));
+        let rebuild_scratch = rebuild_scratch_max.max(rebuild_scratch_sum.min(floor / 8));
+        let rebuild = rebuild_instances + proxies_total * 24 + rebuild_scratch;
+        let slack = 4 * (floor / BLOCKS_PER_BUDGET).max(256 * 1024);
+        let next = base + staging + slack + blas_build.max(blas_resident + rebuild);
+        parts = (staging, rebuild, slack);
+        if next <= floor {
+            break;
+        }
+        floor = next;
+    }
+    Ok(StreamFloor {
+        tables_bytes: tables,
+        skeleton_structures_bytes: skeleton,
+        largest_blas,
+        largest_blas_build_bytes: blas_build,
+        tlas_rebuild_bytes: parts.1,
+        frame_bytes: frame,
+        width,
+        height,
+        pipeline_bytes: PIPELINE_BYTES,
+        staging_bytes: parts.0,
+        allocator_slack_bytes: parts.2,
+        min_resident_bytes: floor,
+    })
+}

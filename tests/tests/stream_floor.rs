@@ -1,0 +1,188 @@
+//! Issue 14 acceptance on lavapipe (validation on via MOTU_VALIDATION=1), defaults only (no
+//! generator or import flags): carried hits make every budget at or above the report's
+//! streaming floor complete with the full build's AOV (0 mismatches, peak ≤ budget, exit 0);
+//! a budget below the floor is refused naming it; a frame that runs out of passes is an error.
+
+use motu_tests::{motu, motu_json, motu_ok, s};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+const W: &str = "96";
+const H: &str = "64";
+
+/// False (with a loud line) when no ray-tracing device exists and the run does not require one.
+fn gpu_available() -> bool {
+    let out = motu(&["devices", "--json"]);
+    let ok = out.status.success()
+        && String::from_utf8_lossy(&out.stdout).contains("\"ray_pipeline\": true");
+    if !ok {
+        assert!(
+            std::env::var_os("MOTU_REQUIRE_GPU").is_none(),
+            "MOTU_REQUIRE_GPU is set but no ray-tracing device was found"
+        );
+        eprintln!("SKIPPED: no Vulkan ray-tracing device");
+    }
+    ok
+}
+
+/// The default island (`motu gen island --scale 0.002`, default import).
+fn default_island(dir: &Path) -> PathBuf {
+    let gen = dir.join("island");
+    motu_ok(&["gen", "island", "--scale", "0.002", "-o", s(&gen)]);
+    let pkg = dir.join("island.motu");
+    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    pkg
+}
+
+fn u(v: &serde_json::Value) -> u64 {
+    v.as_u64()
+        .unwrap_or_else(|| panic!("expected an unsigned integer, got {v}"))
+}
+
+/// (full-build peak, streaming floor) as `motu report` prints them for a W×H image.
+fn report(pkg: &Path) -> (u64, u64) {
+    let r = motu_json(&["report", s(pkg), "--json", "--width", W, "--height", H]);
+    let peak = u(&r["variants"][0]["cost"]["peak_bytes"]);
+    let floor = u(&r["streaming"]["min_resident_bytes"]);
+    assert_eq!(
+        floor,
+        u(&r["streaming"]["floor"]["min_resident_bytes"]),
+        "{}",
+        r["streaming"]
+    );
+    eprintln!("report: full-build peak {peak} bytes, streaming floor {floor} bytes");
+    (peak, floor)
+}
+
+fn render_args<'a>(pkg: &'a Path, png: &'a Path, aov: &'a Path, backend: &'a str) -> Vec<&'a str> {
+    vec![
+        "render",
+        s(pkg),
+        "-o",
+        s(png),
+        "--backend",
+        backend,
+        "--width",
+        W,
+        "--height",
+        H,
+        "--aov",
+        s(aov),
+    ]
+}
+
+/// Streams at `budget` and checks the result equals `full_aov` exactly, under the budget.
+fn stream_matches(pkg: &Path, dir: &Path, full_aov: &Path, budget: u64, backend: &str) {
+    let t0 = Instant::now();
+    let tag = format!("{backend}-{budget}");
+    let png = dir.join(format!("{tag}.png"));
+    let aov = dir.join(format!("{tag}.aov"));
+    let stats = dir.join(format!("{tag}.json"));
+    let b = budget.to_string();
+    let mut args = render_args(pkg, &png, &aov, backend);
+    args.extend(["--stream", "--vram-budget", &b, "--stats", s(&stats)]);
+    motu_ok(&args);
+    let st: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
+    let frame = &st["stream"]["frames"][0];
+    assert_eq!(frame["complete"], true, "{frame}");
+    assert!(u(&st["vram_peak_bytes"]) <= budget, "{st}");
+    let out = motu_ok(&["compare", s(full_aov), s(&aov), "--max-mismatch", "0"]);
+    assert!(out.contains("(0 of "), "{out}");
+    eprintln!(
+        "{backend} at {budget} bytes: {} passes, {} BLAS built, {} evicted, peak {}; {:.1} s",
+        frame["passes"],
+        frame["blas_built"],
+        frame["evicted"],
+        frame["vram_peak_bytes"],
+        t0.elapsed().as_secs_f64()
+    );
+}
+
+#[test]
+fn default_island_streams_at_fractions_of_its_full_build_and_at_the_floor() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = default_island(dir.path());
+    let (peak, floor) = report(&pkg);
+    let full_aov = dir.path().join("full.aov");
+    let full_png = dir.path().join("full.png");
+    motu_ok(&render_args(&pkg, &full_png, &full_aov, "query"));
+    // 1.05× the floor on both backends; the fractions of the full build on one.
+    let at_floor = floor + floor / 20;
+    stream_matches(&pkg, dir.path(), &full_aov, at_floor, "query");
+    stream_matches(&pkg, dir.path(), &full_aov, at_floor, "pipeline");
+    for (name, budget) in [("50%", peak / 2), ("25%", peak / 4), ("10%", peak / 10)] {
+        if budget >= floor {
+            stream_matches(&pkg, dir.path(), &full_aov, budget, "query");
+        } else {
+            // Below the floor the renderer must refuse up front, naming it. (The floor comes
+            // down when the partitioner bounds the largest BLAS: issue 14 item 1.)
+            eprintln!(
+                "NOT MET: {name} of the full build ({budget} bytes) is below the floor \
+                 ({floor} bytes) on this compile"
+            );
+            below_floor_is_refused(&pkg, dir.path(), budget, floor);
+        }
+    }
+}
+
+fn below_floor_is_refused(pkg: &Path, dir: &Path, budget: u64, floor: u64) {
+    let png = dir.join("refused.png");
+    let aov = dir.join("refused.aov");
+    let b = budget.to_string();
+    let mut args = render_args(pkg, &png, &aov, "query");
+    args.extend(["--stream", "--vram-budget", &b]);
+    let out = motu(&args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.contains("below the streaming floor") && err.contains(&floor.to_string()),
+        "the refusal names the floor ({floor}): {err}"
+    );
+    assert!(!png.exists() && !aov.exists(), "nothing written");
+}
+
+#[test]
+fn below_the_floor_is_refused_and_an_unfinished_frame_is_an_error() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = default_island(dir.path());
+    let (peak, floor) = report(&pkg);
+    below_floor_is_refused(&pkg, dir.path(), floor - floor / 50, floor);
+
+    // Pass cap 1 (a hidden testing option): pass 1 meets empty instances, so pixels are left.
+    let budget = peak.max(floor + floor / 20).to_string();
+    let png = dir.path().join("capped.png");
+    let aov = dir.path().join("capped.aov");
+    let mut args = render_args(&pkg, &png, &aov, "query");
+    args.extend([
+        "--stream",
+        "--vram-budget",
+        &budget,
+        "--stream-max-passes",
+        "1",
+    ]);
+    let out = motu(&args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success(),
+        "an unfinished frame exits non-zero: {err}"
+    );
+    assert!(
+        err.contains("pixels unfinished after 1 passes"),
+        "names the count: {err}"
+    );
+    assert!(!png.exists() && !aov.exists(), "nothing written");
+    // Opted in: written, with a loud counted warning.
+    args.push("--allow-incomplete");
+    let out = motu(&args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("UNFINISHED"), "{err}");
+    assert!(png.exists() && aov.exists());
+}
