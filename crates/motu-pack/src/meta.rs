@@ -4,7 +4,11 @@ use motu_scene::{Camera, Light, SceneStats};
 use serde::{Deserialize, Serialize};
 
 /// Identifies the section layout this build writes; readers reject other schemas.
-pub const SCHEMA: &str = "motu-scene/1";
+/// `motu-scene/2` added partitioned meshes (clusters with a primitive map, `FLAG_PRIMITIVE_MAP`);
+/// a `/1` package is still read (it has no clusters), while a `/1` reader refuses `/2`.
+pub const SCHEMA: &str = "motu-scene/2";
+/// Older schemas this build still reads.
+pub const SCHEMA_READABLE: &[&str] = &["motu-scene/1", SCHEMA];
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ElementMeta {

@@ -58,8 +58,28 @@ impl PackageGeometry {
 
     /// Appends an arbitrary mesh (e.g. a LOD level the compiler made) to `group`'s stream.
     pub fn append_mesh(&self, group: u32, data: &MeshData) -> Result<MeshLocation, String> {
-        let layout = MeshBlobLayout::of(data);
-        let blob = layout.encode(data);
+        self.append_mesh_mapped(group, data, None)
+    }
+
+    /// Appends a compiled mesh with an optional primitive map (a partitioned mesh's cluster;
+    /// see [`MeshBlobLayout::with_map`]).
+    pub fn append_mesh_mapped(
+        &self,
+        group: u32,
+        data: &MeshData,
+        primitive_map: Option<&[u32]>,
+    ) -> Result<MeshLocation, String> {
+        if let Some(map) = primitive_map {
+            if map.len() != data.triangle_count() {
+                return Err(format!(
+                    "primitive map has {} entries for {} triangles",
+                    map.len(),
+                    data.triangle_count()
+                ));
+            }
+        }
+        let layout = MeshBlobLayout::of_mapped(data, primitive_map);
+        let blob = layout.encode_mapped(data, primitive_map);
         let mut inner = self.lock()?;
         let Inner {
             writer,
@@ -126,18 +146,25 @@ impl GeometryStore for PackageGeometry {
     }
 }
 
-/// Points a mesh record at the blob stored at `at` (offsets follow [`MeshBlobLayout`]).
+/// Points a mesh record at the blob stored at `at` (offsets follow [`MeshBlobLayout`]; the
+/// record's flags say whether the blob has normals and a primitive map).
 pub fn place_mesh_record(rec: &mut motu_abi::MeshRecord, at: MeshLocation) {
-    let l = MeshBlobLayout::new(
+    let l = MeshBlobLayout::with_map(
         rec.vertex_count as u64,
         rec.triangle_count as u64,
         rec.flags & motu_abi::FLAG_HAS_NORMALS != 0,
+        rec.flags & motu_abi::FLAG_PRIMITIVE_MAP != 0,
     );
     rec.chunk = at.a as u32;
     rec.positions_offset = at.b + l.positions;
     rec.indices_offset = at.b + l.indices;
     rec.normals_offset = if l.has_normals {
         at.b + l.normals
+    } else {
+        motu_abi::NONE_U64
+    };
+    rec.primitive_map_offset = if l.has_primitive_map {
+        at.b + l.primitive_map
     } else {
         motu_abi::NONE_U64
     };

@@ -24,6 +24,7 @@ impl motu_trace::MeshSource for PackageMeshes<'_> {
             positions: g.positions,
             indices: g.indices,
             normals: g.normals,
+            primitive_map: g.primitive_map,
         })
     }
 }
@@ -118,6 +119,15 @@ impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
         String,
     > {
         self.0.mesh_slices(mesh_record).map_err(|e| e.to_string())
+    }
+
+    fn primitive_map(
+        &self,
+        mesh_record: u32,
+    ) -> Result<Option<std::borrow::Cow<'_, [u32]>>, String> {
+        self.0
+            .primitive_map_slice(mesh_record)
+            .map_err(|e| e.to_string())
     }
 }
 
