@@ -102,7 +102,17 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
     let t0 = Instant::now();
     let writer = PackageWriter::create(&first_target, writer_options(o))
         .with_context(|| format!("creating {}", first_target.display()))?;
-    let geometry = PackageGeometry::new(writer);
+    // Meshes over the partitioner's bound are only ever stored as clusters: in a direct import
+    // their whole data goes to a spill file that is dropped after compiling, not the package.
+    let geometry = if direct {
+        let spill_path = out.with_extension("partition-spill.motu");
+        let spill = PackageWriter::create(&spill_path, writer_options(o))
+            .with_context(|| format!("creating a scratch file beside {}", out.display()))?;
+        let bound = o.max_blas_triangles.min(motu_compile::DEFAULT_MAX_PER_NODE);
+        PackageGeometry::new(writer).with_spill(spill, u64::from(bound))
+    } else {
+        PackageGeometry::new(writer)
+    };
     // The bar's total: the scene text beside the entry file (an estimate: files there that the
     // scene never includes count too, and PLY data is not in it).
     let progress = crate::progress::Progress::bytes_of_total("parsing pbrt");
@@ -146,7 +156,14 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
     if direct {
         let load = |m| scene.mesh_data(m).map_err(|e| e.to_string());
         let (compiled, compile_ms) = compile_into(&scene, &copts, &geometry, &load, |m| {
-            Ok(scene.mesh(motu_scene::MeshId(m.source_mesh)).location)
+            let at = scene.mesh(motu_scene::MeshId(m.source_mesh)).location;
+            if PackageGeometry::is_spilled(at) {
+                bail!(
+                    "internal: mesh {} over the BLAS bound was compiled whole",
+                    m.source_mesh
+                );
+            }
+            Ok(at)
         })?;
         let t2 = Instant::now();
         let writer = geometry.take_writer().map_err(anyhow::Error::msg)?;
