@@ -69,6 +69,7 @@ void render_pixel_impl(uvec2 px) {
     uint traces = 0u;
     uint overflows = 0u;
     uint truncations = 0u;
+    g_truncated = false;
     // Streaming: where this pixel's rays resume (0 on the frame's first pass).
     vec2 resume = vec2(0.0);
     if (g_streaming) {
@@ -147,6 +148,9 @@ void render_pixel_impl(uvec2 px) {
     }
     if (truncations != 0u) {
         atomicAdd(push.stats.n[STAT_PI_LIST_OVERFLOWS], truncations);
+    }
+    if (overflows != 0u || g_truncated) {
+        atomicAdd(push.stats.n[STAT_TRUNCATED_RAYS], 1u);
     }
 }
 void render_pixel(uvec2 px) {

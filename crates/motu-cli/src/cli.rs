@@ -146,6 +146,18 @@ fn parse_levels(s: &str) -> Result<LevelsArg, String> {
     }
 }
 
+/// `--depth-epsilon`: a finite relative tolerance ≥ 0.
+fn parse_depth_epsilon(s: &str) -> Result<f32, String> {
+    let v: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if v.is_finite() && v >= 0.0 {
+        Ok(v)
+    } else {
+        Err(format!(
+            "{s} is not a relative depth tolerance: it must be a finite number ≥ 0 (e.g. 0.001)"
+        ))
+    }
+}
+
 fn parse_threshold(s: &str) -> Result<f64, String> {
     let v: f64 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
     if (0.0..=1.0).contains(&v) {
@@ -201,8 +213,8 @@ pub struct ImportArgs {
     /// Keep only these elements (comma-separated names).
     #[arg(long, value_delimiter = ',')]
     pub subset: Vec<String>,
-    /// Force the pbrt version instead of detecting it.
-    #[arg(long)]
+    /// Force the pbrt version instead of detecting it (3 or 4).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(3..=4))]
     pub pbrt_version: Option<u32>,
     /// Chunk target size.
     #[arg(long, value_parser = parse_size, default_value = "64MiB")]
@@ -312,9 +324,19 @@ pub struct RenderArgs {
     /// Dither between the two nearest LOD levels (hashed per pixel) instead of rounding down.
     #[arg(long)]
     pub lod_stochastic: bool,
-    /// Traversal stack entries per ray.
-    #[arg(long, default_value_t = 16)]
+    /// Traversal stack entries per ray (1–256: 64 bytes of private shader memory each).
+    #[arg(long, default_value_t = 16,
+          value_parser = clap::value_parser!(u32).range(1..=i64::from(motu_gpu::MAX_STACK_SIZE)))]
     pub stack_size: u32,
+    /// TLAS walks one ray may make before it is cut short (bounds a frame's work on
+    /// exponentially deep instancing); cut rays are counted as `truncated_rays`.
+    #[arg(long, default_value_t = motu_abi::DEFAULT_MAX_TRACES_PER_RAY,
+          value_parser = clap::value_parser!(u32).range(1..))]
+    pub max_traces_per_ray: u32,
+    /// Write the image even when rays were truncated (stack overflow or --max-traces-per-ray):
+    /// a counted warning instead of an error.
+    #[arg(long)]
+    pub allow_truncated: bool,
     /// Vulkan device index.
     #[arg(long, env = "MOTU_DEVICE")]
     pub device: Option<usize>,
@@ -327,8 +349,8 @@ pub struct CompareArgs {
     /// Exit non-zero above this fraction of mismatched pixels.
     #[arg(long, default_value = "0.001", value_parser = parse_threshold)]
     pub max_mismatch: f64,
-    /// Relative depth tolerance.
-    #[arg(long, default_value_t = 1e-3)]
+    /// Relative depth tolerance (finite, ≥ 0).
+    #[arg(long, default_value = "0.001", value_parser = parse_depth_epsilon, allow_hyphen_values = true)]
     pub depth_epsilon: f32,
     /// Write a difference image.
     #[arg(long)]

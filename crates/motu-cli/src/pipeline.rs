@@ -66,6 +66,12 @@ fn writer_options(o: &ImportOptions) -> WriterOptions {
 
 /// Resolves element names; unknown names are an error listing the valid ones.
 pub fn resolve_subset(names: &[String], known: &[String]) -> anyhow::Result<Vec<u32>> {
+    if names.iter().any(|n| n.trim().is_empty()) {
+        bail!(
+            "--subset needs element names, comma-separated (got an empty name): valid elements are {}",
+            known.join(", ")
+        );
+    }
     let mut ids = Vec::new();
     let mut unknown = Vec::new();
     for n in names {
@@ -85,11 +91,18 @@ pub fn resolve_subset(names: &[String], known: &[String]) -> anyhow::Result<Vec<
 }
 
 pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Result<ImportSummary> {
-    if !scene_path.exists() {
-        bail!(
+    match std::fs::metadata(scene_path) {
+        Ok(m) if m.is_file() => {}
+        Ok(m) => bail!(
+            "{} is {}, not a scene file: give the entry .pbrt (or .obj) file",
+            scene_path.display(),
+            crate::output::describe_file_type(&m.file_type())
+        ),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!(
             "{} does not exist: give the entry .pbrt (or .obj) file",
             scene_path.display()
-        );
+        ),
+        Err(e) => bail!("{}: {e}", scene_path.display()),
     }
     // With --subset, geometry is first streamed into a scratch package beside the output, and
     // only what the subset references is copied into the real one.
@@ -129,10 +142,13 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
         parallel: o.parallel,
         curve_ribbons: o.curve_ribbons,
     };
-    let (scene, report) =
+    let (scene, mut report) =
         motu_ingest::ingest_file(scene_path, &ingest_opts, Box::new(geometry.clone()))
             .with_context(|| format!("importing {}", scene_path.display()))?;
     progress.finish();
+    // Inputs known only now (PLY, included files): the package must not replace one.
+    crate::output::check_not_an_input("-o", out, report.input_files.iter().map(PathBuf::as_path))?;
+    warn_on_count_overflow(&scene, &mut report);
     let parse_ms = t0.elapsed().as_secs_f64() * 1e3;
     tracing::info!(
         parse_ms,
@@ -225,6 +241,33 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
     })();
     let _ = std::fs::remove_file(&first_target);
     result
+}
+
+/// Flattened counts that saturate 2^64 mean exponentially deep instancing (each level
+/// instancing the one below several times): importable, but every flattened figure is a lower
+/// bound and a full traversal cannot finish; renders bound each ray's work and fail on truncated
+/// rays unless allowed.
+fn warn_on_count_overflow(scene: &Scene, report: &mut IngestReport) {
+    let st = scene.stats();
+    let mut over = Vec::new();
+    if st.flattened_instances == u64::MAX {
+        over.push("flattened instances");
+    }
+    if st.instanced_triangles == u64::MAX {
+        over.push("instanced triangles");
+    }
+    if over.is_empty() {
+        return;
+    }
+    let msg = format!(
+        "{} overflow 2^64 (exponentially deep instancing: {} levels, {} prototypes, {} instance edges); the counts shown are saturated, and renders cut each ray short after --max-traces-per-ray walks (an error unless --allow-truncated)",
+        over.join(" and "),
+        st.max_depth,
+        st.prototypes,
+        st.instances
+    );
+    tracing::warn!("{msg}");
+    report.warnings.push(msg);
 }
 
 /// Compiles `scene` (source meshes read by `load`, one at a time, for LOD chains and the

@@ -61,7 +61,10 @@ pub use pipeline::{BindingSet, ComputePipeline, ComputePipelineDesc};
 pub use probe::{Caps, HeapReport};
 pub use query::TimestampQueries;
 
-pub use render::{heat_colour, render, Backend, RenderOptions, RenderOutput, RenderStats, View};
+pub use render::{
+    heat_colour, render, render_counted, Backend, RayCounts, RenderOptions, RenderOutput,
+    RenderStats, View, MAX_STACK_SIZE,
+};
 pub use report::{list_devices, DeviceReport};
 pub use scene::{BuildOptions, GpuScene, MeshBlobSource, ResourceReport};
 pub use stream::{FrameStreamStats, StreamOptions, StreamTotals, StreamingRenderer, PI_EMPTY_BLAS};

@@ -1,7 +1,7 @@
 //! Reading a scene package: the meta, a zero-copy hierarchy view, mesh data by chunk.
 
 use crate::blob::MeshBlobLayout;
-use crate::meta::{PackageMeta, SCHEMA, SCHEMA_READABLE};
+use crate::meta::PackageMeta;
 use crate::sections::*;
 use crate::PackError;
 use motu_abi::{HierarchyView, MeshRecord, FLAG_PRIMITIVE_MAP, NONE_U64};
@@ -38,14 +38,7 @@ impl ScenePackage {
             reason,
         };
         let meta_bytes = package.section_bytes(SECTION_META)?;
-        let meta: PackageMeta = serde_json::from_slice(meta_bytes)
-            .map_err(|e| schema_err(format!("meta section is not valid: {e}")))?;
-        if !SCHEMA_READABLE.contains(&meta.schema.as_str()) {
-            return Err(schema_err(format!(
-                "schema '{}' is not supported (this build reads '{SCHEMA}')",
-                meta.schema
-            )));
-        }
+        let meta = crate::meta::parse_meta(meta_bytes).map_err(schema_err)?;
         let me = Self {
             package,
             meta,

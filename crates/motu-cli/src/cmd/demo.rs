@@ -130,6 +130,8 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         shadow_lod_bias: 1.0,
         lod_stochastic: false,
         stack_size: 16,
+        max_traces_per_ray: motu_abi::DEFAULT_MAX_TRACES_PER_RAY,
+        allow_truncated: false,
         device: None,
     };
     if let Err(e) = super::render::run(args(backend)) {

@@ -1,6 +1,7 @@
 //! `motu render` and `motu compare`.
 
 use crate::cli::{BackendArg, CompareArgs, RenderArgs, ViewArg};
+use crate::output;
 use crate::pipeline;
 use anyhow::{bail, Context};
 use glam::Vec3;
@@ -146,6 +147,32 @@ fn gpu_context(a: &RenderArgs, backend: BackendArg) -> anyhow::Result<motu_gpu::
         ..Default::default()
     })
     .context("opening a Vulkan device for ray tracing (`motu devices` lists them; `--backend cpu` needs none)")
+    .and_then(|ctx| {
+        check_vram_budget(a.vram_budget, &ctx)?;
+        Ok(ctx)
+    })
+}
+
+/// `--vram-budget` above what the device has is a mistake (a unit typo), not a wish to clamp.
+fn check_vram_budget(budget: Option<u64>, ctx: &motu_gpu::Context) -> anyhow::Result<()> {
+    let Some(b) = budget else { return Ok(()) };
+    let device_bytes = ctx
+        .heaps()
+        .iter()
+        .filter(|h| h.device_local)
+        .map(|h| h.size_bytes)
+        .max()
+        .unwrap_or(0);
+    if device_bytes > 0 && b > device_bytes {
+        bail!(
+            "--vram-budget {} is more than {} has ({} of device-local memory): give at most {}, or omit it to use what is free",
+            crate::size::format_size(b),
+            ctx.device_name(),
+            crate::size::format_size(device_bytes),
+            crate::size::format_size(device_bytes),
+        );
+    }
+    Ok(())
 }
 
 fn gpu_render_options(
@@ -167,6 +194,7 @@ fn gpu_render_options(
         },
         lod,
         stack_size: a.stack_size,
+        max_traces_per_ray: a.max_traces_per_ray,
         frames,
         ..Default::default()
     }
@@ -264,8 +292,10 @@ fn render_gpu(
     let scene = motu_gpu::GpuScene::build(&ctx, view, &meshes, &build)
         .context("building acceleration structures")?;
     let opts = gpu_render_options(a, lod, backend, a.frames);
-    let out = motu_gpu::render(&ctx, &scene, camera, &opts).context("rendering on the GPU")?;
+    let (out, counts) =
+        motu_gpu::render_counted(&ctx, &scene, camera, &opts).context("rendering on the GPU")?;
     let mut stats = serde_json::to_value(&out.stats)?;
+    stats["truncated_rays"] = json!(counts.truncated_rays);
     stats["resources"] = serde_json::to_value(scene.report())?;
     drop(scene);
     ctx.check_validation()
@@ -304,6 +334,10 @@ fn contract_stats(mut stats: Value, extra: Value) -> Value {
 }
 
 pub fn run(a: RenderArgs) -> anyhow::Result<()> {
+    let mut outputs = vec![("-o", a.output.as_path())];
+    outputs.extend(a.aov.as_deref().map(|p| ("--aov", p)));
+    outputs.extend(a.stats.as_deref().map(|p| ("--stats", p)));
+    output::check_outputs(&[("package", &a.package)], &outputs)?;
     let pkg = pipeline::open(&a.package)?;
     let base = pkg.view()?;
     let names: Vec<String> = pkg.meta().elements.iter().map(|e| e.name.clone()).collect();
@@ -347,9 +381,15 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         Some(b) => b,
         None => match motu_gpu::list_devices() {
             Ok(devices) => match a.device {
-                Some(i) => best_backend(devices.get(i..i + 1).unwrap_or(&[])),
+                Some(i) => best_backend(std::slice::from_ref(device_at(&devices, i)?)),
                 None => best_backend(&devices),
             },
+            Err(e) if a.device.is_some() => {
+                return Err(anyhow::Error::new(e).context(format!(
+                    "--device {} (or MOTU_DEVICE): no Vulkan device can be listed",
+                    a.device.unwrap_or(0)
+                )))
+            }
             Err(e) => {
                 eprintln!("warning: no Vulkan ray-tracing device ({e}); rendering on the CPU");
                 BackendArg::Cpu
@@ -373,6 +413,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             let opts = motu_trace::RenderOptions {
                 view: view_name(a.view).parse().map_err(anyhow::Error::msg)?,
                 lod,
+                max_traces_per_ray: a.max_traces_per_ray,
                 ..Default::default()
             };
             let mut out =
@@ -418,15 +459,25 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             "package": a.package.display().to_string(),
         }),
     );
-    motu_trace::write_png(&a.output, camera.width, camera.height, &rgba8)
-        .with_context(|| format!("writing {}", a.output.display()))?;
+    // A truncated traversal is a wrong image: an error unless explicitly allowed.
+    let truncated = stats["truncated_rays"].as_u64().unwrap_or(0);
+    let overflows = stats["stack_overflows"].as_u64().unwrap_or(0);
+    if truncated > 0 || overflows > 0 {
+        let what = format!(
+            "{truncated} ray(s) were cut short ({overflows} traversal stack overflows with --stack-size {}; --max-traces-per-ray {}): their hits may be wrong (exponentially deep instancing?)",
+            a.stack_size, a.max_traces_per_ray
+        );
+        if !a.allow_truncated {
+            bail!("{what}; nothing was written. Raise --stack-size/--max-traces-per-ray, or pass --allow-truncated to write the image anyway");
+        }
+        eprintln!("warning: {what}; written anyway (--allow-truncated)");
+    }
+    output::write_png(&a.output, camera.width, camera.height, &rgba8)?;
     if let Some(p) = &a.aov {
-        aov.save(p)
-            .with_context(|| format!("writing {}", p.display()))?;
+        output::write(p, &aov.to_bytes())?;
     }
     if let Some(p) = &a.stats {
-        std::fs::write(p, serde_json::to_string_pretty(&stats)?)
-            .with_context(|| format!("writing {}", p.display()))?;
+        output::write(p, serde_json::to_string_pretty(&stats)?.as_bytes())?;
     }
     eprintln!(
         "rendered {} ({}×{}, {}): {:.1} ms/frame, {:.2} Mrays/s, {:.2} traces/ray",
@@ -442,12 +493,14 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
 }
 
 pub fn compare(a: CompareArgs) -> anyhow::Result<()> {
+    if let Some(p) = &a.diff {
+        output::check_outputs(&[("A", &a.a), ("B", &a.b)], &[("--diff", p)])?;
+    }
     let x = Aov::load(&a.a).with_context(|| format!("reading {}", a.a.display()))?;
     let y = Aov::load(&a.b).with_context(|| format!("reading {}", a.b.display()))?;
     let r = motu_trace::compare(&x, &y, a.depth_epsilon).context("comparing")?;
     if let Some(p) = &a.diff {
-        motu_trace::write_png(p, x.width, x.height, &r.diff_rgba8)
-            .with_context(|| format!("writing {}", p.display()))?;
+        output::write_png(p, x.width, x.height, &r.diff_rgba8)?;
     }
     let ok = r.fraction <= a.max_mismatch;
     if a.json {
@@ -476,4 +529,23 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// Device `index` of `devices`, or an error naming the bad index and the devices there are.
+pub fn device_at(
+    devices: &[motu_gpu::DeviceReport],
+    index: usize,
+) -> anyhow::Result<&motu_gpu::DeviceReport> {
+    devices.get(index).with_context(|| {
+        let list: Vec<String> = devices
+            .iter()
+            .enumerate()
+            .map(|(i, d)| format!("{i}: {}", d.name))
+            .collect();
+        format!(
+            "--device {index} (or MOTU_DEVICE={index}): no such device; this machine has {} ({}); `motu devices` lists them",
+            devices.len(),
+            if list.is_empty() { "none".to_string() } else { list.join(", ") }
+        )
+    })
 }
