@@ -130,6 +130,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         lod_stochastic: false,
         stack_size: 16,
         device: None,
+        camera_path: None,
     };
     if let Err(e) = super::render::run(args(backend)) {
         if backend == BackendArg::Cpu {
