@@ -325,6 +325,25 @@ fn a_recorded_camera_path_replays_identically_in_view_and_render() {
             assert_eq!(flat(&again), flat(&original));
         }
     }
+    // The same flight as a benchmark: one timed frame per pose.
+    let b = motu_tests::motu_json(&[
+        "bench",
+        "--camera-path",
+        s(&path),
+        "--package",
+        s(&pkg),
+        "--backend",
+        "pipeline",
+        "--warmup",
+        "1",
+        "--json",
+    ]);
+    assert_eq!(b["kind"], "flight", "{b}");
+    assert_eq!(b["frames"], 4, "{b}");
+    let ms = b["frame_ms"].as_array().unwrap();
+    assert_eq!(ms.len(), 4, "{b}");
+    assert!(ms.iter().all(|m| m.as_f64().unwrap() > 0.0), "{b}");
+    assert!(b["traces_per_ray_mean"].as_f64().unwrap() >= 1.0, "{b}");
     // The path moves: its last frame is not its first pose.
     let first = d.join("first.aov");
     let one = d.join("one.json");

@@ -466,6 +466,13 @@ pub struct BenchArgs {
     /// One line per step on stderr even when stderr is not a terminal.
     #[arg(long)]
     pub progress: bool,
+    /// Replay this recorded camera path (`motu view --record`) on `--package` as a benchmark
+    /// (frame times along the flight) instead of running a suite.
+    #[arg(long, requires = "package")]
+    pub camera_path: Option<PathBuf>,
+    /// The package a `--camera-path` flight is flown through.
+    #[arg(long, requires = "camera_path")]
+    pub package: Option<PathBuf>,
     /// Internal: render one package and write its measurements (the child process of a render step).
     #[arg(long, hide = true)]
     pub child_render: Option<PathBuf>,
