@@ -42,6 +42,11 @@ pub enum ViewError {
     #[error("{0}")]
     Source(String),
     #[error(
+        "the last frame is incomplete ({0} pixels unfinished after the streaming pass cap): \
+         render more frames (--frames) or raise --vram-budget; a wrong image is not written"
+    )]
+    Incomplete(u64),
+    #[error(
         "the window is {got_w}×{got_h}, not the requested {want_w}×{want_h} (a window manager \
          resized it?): the screenshot would not show the requested frame"
     )]
@@ -74,6 +79,9 @@ pub struct SourceStats {
     pub passes: u32,
     /// Streaming: structures built and evicted this frame; `None` for a full build.
     pub streaming: Option<(u32, u32)>,
+    /// Pixels left unfinished by the frame's pass cap (streaming; refined by later frames).
+    /// Shown while flying; a scripted run fails if its last frame has any.
+    pub incomplete_pixels: u64,
 }
 
 /// One rendered frame.
@@ -412,6 +420,9 @@ impl<S: FrameSource> App<S> {
             .render(&camera, &self.opts.render, &self.opts.elements_on)
             .map_err(ViewError::Source)?;
         let last = automated && self.opts.frames == Some(self.result.frames_shown as u32 + 1);
+        if last && frame.stats.incomplete_pixels > 0 {
+            return Err(ViewError::Incomplete(frame.stats.incomplete_pixels));
+        }
         let mut shown = frame.output.rgba8.clone();
         if self.opts.overlay {
             let lines = self.overlay_lines(&frame, w, h);
@@ -476,8 +487,13 @@ impl<S: FrameSource> App<S> {
             .collect();
         let stream = match s.streaming {
             Some((built, evicted)) => format!(
-                "streaming: {} passes, {built} built, {evicted} evicted",
-                s.passes
+                "streaming: {} passes, {built} built, {evicted} evicted{}",
+                s.passes,
+                if s.incomplete_pixels > 0 {
+                    format!(", {} px refining", s.incomplete_pixels)
+                } else {
+                    String::new()
+                }
             ),
             None => "full build (no streaming)".into(),
         };
@@ -519,8 +535,9 @@ impl<S: FrameSource> App<S> {
             ),
             format!("elements: {}", elements.join(" ")),
             format!("speed {:.3}/s  {}", self.fly.speed, self.message),
-            "WASD/QE move  drag look  wheel speed  1-9 cameras  V/F1-4 view".into(),
-            "L lod  K dither  H shadows  Shift+1-9 elements  Tab overlay  Esc quit".into(),
+            "WASD/QE move, drag look, wheel speed, 1-9 cameras".into(),
+            "V/F1-F4 view, L lod, K dither, H shadows".into(),
+            "Shift+1-9 elements, Tab overlay, Esc quit".into(),
         ]
     }
 }
