@@ -426,6 +426,66 @@ fn view_streams_under_a_vram_budget_with_the_full_builds_image() {
 }
 
 #[test]
+fn streaming_refines_over_frames_and_never_writes_an_unfinished_frame() {
+    if !gpu_available() {
+        return;
+    }
+    let Some(x) = xvfb("streaming_refines_over_frames_and_never_writes_an_unfinished_frame") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pkg = forest(d);
+    // A budget far below the full build (as in the render streaming tests): the first frame
+    // needs several build-trace passes.
+    let common = [
+        s(&pkg),
+        "--width",
+        "64",
+        "--backend",
+        "pipeline",
+        "--vram-budget",
+        "3MiB",
+        "--stream-passes",
+        "2",
+    ];
+    let bad = d.join("bad.aov");
+    let mut args = vec!["view"];
+    args.extend_from_slice(&common);
+    args.extend_from_slice(&["--frames", "1", "--aov", s(&bad)]);
+    let out = motu_on_display(&x.display, &args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success(),
+        "two passes cannot finish the first frame: {err}"
+    );
+    assert!(err.contains("incomplete"), "{err}");
+    assert!(!bad.exists(), "an unfinished frame was written");
+    // Two passes per frame: the first frames show unfinished pixels, later ones are complete.
+    let (vaov, vstats, raov) = (d.join("v.aov"), d.join("v.json"), d.join("r.aov"));
+    let mut args = common.to_vec();
+    args.extend_from_slice(&["--frames", "8", "--aov", s(&vaov), "--stats", s(&vstats)]);
+    view_ok(&x.display, &args);
+    let st = read_json(&vstats);
+    assert!(st["incomplete_frames"].as_u64().unwrap() >= 1, "{st}");
+    assert_eq!(st["detail"]["complete"], true, "{st}");
+    assert!(st["vram_used_bytes"].as_u64().unwrap() <= 3 << 20, "{st}");
+    motu_ok(&[
+        "render",
+        s(&pkg),
+        "-o",
+        s(&d.join("r.png")),
+        "--aov",
+        s(&raov),
+        "--width",
+        "64",
+        "--backend",
+        "pipeline",
+    ]);
+    compare_exact(&vaov, &raov);
+}
+
+#[test]
 fn bad_camera_paths_fail_with_the_reason() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

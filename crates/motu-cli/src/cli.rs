@@ -341,6 +341,10 @@ pub struct ViewArgs {
     /// Build only what rays touch and evict under the budget.
     #[arg(long)]
     pub stream: bool,
+    /// Streaming: build–trace passes per frame, the bound on a frame's build work (default: 2
+    /// while flying, so the window stays responsive and later frames refine; 16 with --frames).
+    #[arg(long)]
+    pub stream_passes: Option<u32>,
     #[arg(long)]
     pub max_allocations: Option<u32>,
     /// Elements shown at the start (comma-separated; Shift+1–9 toggle them live).

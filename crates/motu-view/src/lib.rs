@@ -147,6 +147,8 @@ pub struct ViewResult {
     pub poses: Vec<CameraPose>,
     /// Wall-clock milliseconds per shown frame (render + present).
     pub frame_ms: Vec<f64>,
+    /// Frames shown with pixels still refining (streaming pass cap).
+    pub incomplete_frames: u64,
 }
 
 /// Opens the window and runs until it is closed (or `opts.frames` frames were shown).
@@ -441,6 +443,7 @@ impl<S: FrameSource> App<S> {
                 self.last_frame_ms = t0.elapsed().as_secs_f64() * 1e3;
                 self.result.frame_ms.push(self.last_frame_ms);
                 self.result.frames_shown += 1;
+                self.result.incomplete_frames += u64::from(frame.stats.incomplete_pixels > 0);
                 self.result.poses.push(pose);
                 self.result.last_size = [w, h];
                 if last {

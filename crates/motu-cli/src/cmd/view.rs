@@ -82,11 +82,11 @@ impl<'p> PackageSource<'p> {
                     budget_bytes: budget,
                     // Interactive: bounded build work per frame keeps the window responsive;
                     // the next frames go on refining (what was built stays resident).
-                    max_passes: if a.frames.is_none() {
+                    max_passes: a.stream_passes.unwrap_or(if a.frames.is_none() {
                         STREAM_PASSES_INTERACTIVE
                     } else {
                         motu_gpu::StreamOptions::default().max_passes
-                    },
+                    }),
                     max_allocations: a
                         .max_allocations
                         .unwrap_or(motu_gpu::StreamOptions::default().max_allocations),
@@ -214,6 +214,10 @@ fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
 pub fn run(a: ViewArgs) -> anyhow::Result<()> {
     // Before any work: without a display the answer is `motu render`.
     motu_view::check_display()?;
+    if a.stream_passes.is_some_and(|p| p < 2) {
+        // The streaming renderer builds between passes: one pass per frame never builds.
+        bail!("--stream-passes must be at least 2 (structures are built between a frame's passes)");
+    }
     if a.frames == Some(0) {
         bail!("--frames must be at least 1");
     }
@@ -398,6 +402,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         stats["resident_structures"] = json!(last.stats.resident_structures);
         stats["total_structures"] = json!(last.stats.total_structures);
         stats["streaming"] = json!(last.stats.streaming.is_some());
+        stats["incomplete_frames"] = json!(result.incomplete_frames);
         if let Some(d) = &last.detail {
             stats["detail"] = serde_json::from_str(d).unwrap_or(json!(null));
         }
