@@ -486,6 +486,63 @@ fn streaming_refines_over_frames_and_never_writes_an_unfinished_frame() {
 }
 
 #[test]
+fn view_subsets_equal_render_subsets() {
+    if !gpu_available() {
+        return;
+    }
+    let Some(x) = xvfb("view_subsets_equal_render_subsets") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let gen = d.join("island");
+    motu_ok(&["gen", "island", "-o", s(&gen)]);
+    let pkg = d.join("island.motu");
+    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    let raov = d.join("r.aov");
+    motu_ok(&[
+        "render",
+        s(&pkg),
+        "-o",
+        s(&d.join("r.png")),
+        "--aov",
+        s(&raov),
+        "--width",
+        "64",
+        "--backend",
+        "pipeline",
+        "--subset",
+        "isBeach,isMountainA",
+    ]);
+    for extra in [&[][..], &["--stream"][..]] {
+        let vaov = d.join(format!("v{}.aov", extra.len()));
+        let mut args = vec![
+            s(&pkg),
+            "--width",
+            "64",
+            "--backend",
+            "pipeline",
+            "--subset",
+            "isBeach,isMountainA",
+            "--frames",
+            "2",
+            "--aov",
+            s(&vaov),
+        ];
+        args.extend_from_slice(extra);
+        view_ok(&x.display, &args);
+        compare_exact(&vaov, &raov);
+    }
+    // An unknown element is a clear error.
+    let out = motu_on_display(
+        &x.display,
+        &["view", s(&pkg), "--subset", "nope", "--frames", "1"],
+    );
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("nope"));
+}
+
+#[test]
 fn bad_camera_paths_fail_with_the_reason() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();

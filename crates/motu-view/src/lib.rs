@@ -172,22 +172,20 @@ where
         .as_raw();
     opts.display = Some(display);
     let source = make_source(&opts).map_err(ViewError::Source)?;
-    let fly = FlyCamera::new(opts.start, opts.speed);
+    let ctl = Controls::new(&opts);
     let mut app = App {
         source,
-        fly,
+        ctl,
         window: None,
         presenter: None,
         result: ViewResult::default(),
         error: None,
-        keys: Default::default(),
         modifiers: ModifiersState::empty(),
         dragging: false,
         cursor: None,
         last_tick: Instant::now(),
         last_frame_ms: 0.0,
         skips: 0,
-        message: String::new(),
         opts,
     };
     event_loop.set_control_flow(ControlFlow::Poll);
@@ -203,8 +201,9 @@ where
     Ok(app.result)
 }
 
-#[derive(Default)]
-struct Keys {
+/// Movement keys held down.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Keys {
     forward: bool,
     back: bool,
     left: bool,
@@ -213,21 +212,133 @@ struct Keys {
     down: bool,
 }
 
+/// What the keys change: the next frame's options, the camera, the element set, the overlay.
+#[derive(Debug)]
+pub struct Controls {
+    pub render: RenderOptions,
+    pub overlay: bool,
+    pub elements: Vec<String>,
+    pub elements_on: Vec<bool>,
+    pub cameras: Vec<(String, CameraPose)>,
+    pub fly: FlyCamera,
+    pub keys: Keys,
+    /// The last action, for the overlay.
+    pub message: String,
+}
+
+impl Controls {
+    pub fn new(opts: &ViewOptions) -> Controls {
+        Controls {
+            render: opts.render,
+            overlay: opts.overlay,
+            elements: opts.elements.clone(),
+            elements_on: opts.elements_on.clone(),
+            cameras: opts.cameras.clone(),
+            fly: FlyCamera::new(opts.start, opts.speed),
+            keys: Keys::default(),
+            message: String::new(),
+        }
+    }
+
+    /// Applies a key press or release; true when the key asks to quit.
+    pub fn key(&mut self, code: KeyCode, pressed: bool, shift: bool) -> bool {
+        let k = &mut self.keys;
+        match code {
+            KeyCode::KeyW => k.forward = pressed,
+            KeyCode::KeyS => k.back = pressed,
+            KeyCode::KeyA => k.left = pressed,
+            KeyCode::KeyD => k.right = pressed,
+            KeyCode::KeyE => k.up = pressed,
+            KeyCode::KeyQ => k.down = pressed,
+            _ => {}
+        }
+        if !pressed {
+            return false;
+        }
+        let r = &mut self.render;
+        let digit = match code {
+            KeyCode::Digit1 => Some(0),
+            KeyCode::Digit2 => Some(1),
+            KeyCode::Digit3 => Some(2),
+            KeyCode::Digit4 => Some(3),
+            KeyCode::Digit5 => Some(4),
+            KeyCode::Digit6 => Some(5),
+            KeyCode::Digit7 => Some(6),
+            KeyCode::Digit8 => Some(7),
+            KeyCode::Digit9 => Some(8),
+            KeyCode::Digit0 => Some(usize::MAX),
+            _ => None,
+        };
+        match code {
+            KeyCode::Escape => return true,
+            KeyCode::KeyV => {
+                let i = VIEWS.iter().position(|v| *v == r.view).unwrap_or(0);
+                r.view = VIEWS[(i + 1) % VIEWS.len()];
+            }
+            KeyCode::F1 => r.view = View::Shaded,
+            KeyCode::F2 => r.view = View::Ids,
+            KeyCode::F3 => r.view = View::Lod,
+            KeyCode::F4 => r.view = View::Heatmap,
+            KeyCode::KeyL => {
+                // auto → 0 → 1 → … → 7 → auto
+                r.lod.forced_lod = match r.lod.forced_lod {
+                    f if f < 0 => 0,
+                    f if f >= 7 => motu_abi::lod::LOD_NOT_FORCED,
+                    f => f + 1,
+                };
+            }
+            KeyCode::KeyK => r.lod.stochastic ^= 1,
+            KeyCode::KeyH => r.shadows = !r.shadows,
+            KeyCode::Tab => self.overlay = !self.overlay,
+            _ => {}
+        }
+        if let Some(d) = digit {
+            if shift {
+                self.toggle_element(d);
+            } else if let Some((name, pose)) = self.cameras.get(d) {
+                self.fly.pose = *pose;
+                self.message = format!("camera {name}");
+            }
+        }
+        false
+    }
+
+    pub fn toggle_element(&mut self, d: usize) {
+        let on = &mut self.elements_on;
+        if d == usize::MAX {
+            on.iter_mut().for_each(|e| *e = true);
+            self.message = "all elements on".into();
+            return;
+        }
+        if d >= on.len() {
+            return;
+        }
+        if on[d] && on.iter().filter(|e| **e).count() == 1 {
+            self.message = "the last element stays on".into();
+            return;
+        }
+        on[d] = !on[d];
+        self.message = format!(
+            "element {} {}",
+            self.elements[d],
+            if on[d] { "on" } else { "off" }
+        );
+    }
+}
+
 struct App<S: FrameSource> {
     source: S,
-    fly: FlyCamera,
+    ctl: Controls,
     window: Option<Window>,
     presenter: Option<Presenter>,
     result: ViewResult,
     error: Option<ViewError>,
-    keys: Keys,
     modifiers: ModifiersState,
     dragging: bool,
     cursor: Option<(f64, f64)>,
     last_tick: Instant,
     last_frame_ms: f64,
     skips: u32,
-    message: String,
     opts: ViewOptions,
 }
 
@@ -291,86 +402,9 @@ impl<S: FrameSource> App<S> {
     }
 
     fn on_key(&mut self, el: &ActiveEventLoop, code: KeyCode, pressed: bool) {
-        let k = &mut self.keys;
-        match code {
-            KeyCode::KeyW => k.forward = pressed,
-            KeyCode::KeyS => k.back = pressed,
-            KeyCode::KeyA => k.left = pressed,
-            KeyCode::KeyD => k.right = pressed,
-            KeyCode::KeyE => k.up = pressed,
-            KeyCode::KeyQ => k.down = pressed,
-            _ => {}
+        if self.ctl.key(code, pressed, self.modifiers.shift_key()) {
+            el.exit();
         }
-        if !pressed {
-            return;
-        }
-        let r = &mut self.opts.render;
-        let digit = match code {
-            KeyCode::Digit1 => Some(0),
-            KeyCode::Digit2 => Some(1),
-            KeyCode::Digit3 => Some(2),
-            KeyCode::Digit4 => Some(3),
-            KeyCode::Digit5 => Some(4),
-            KeyCode::Digit6 => Some(5),
-            KeyCode::Digit7 => Some(6),
-            KeyCode::Digit8 => Some(7),
-            KeyCode::Digit9 => Some(8),
-            KeyCode::Digit0 => Some(usize::MAX),
-            _ => None,
-        };
-        match code {
-            KeyCode::Escape => el.exit(),
-            KeyCode::KeyV => {
-                let i = VIEWS.iter().position(|v| *v == r.view).unwrap_or(0);
-                r.view = VIEWS[(i + 1) % VIEWS.len()];
-            }
-            KeyCode::F1 => r.view = View::Shaded,
-            KeyCode::F2 => r.view = View::Ids,
-            KeyCode::F3 => r.view = View::Lod,
-            KeyCode::F4 => r.view = View::Heatmap,
-            KeyCode::KeyL => {
-                // auto → 0 → 1 → … → 7 → auto
-                r.lod.forced_lod = match r.lod.forced_lod {
-                    f if f < 0 => 0,
-                    f if f >= 7 => motu_abi::lod::LOD_NOT_FORCED,
-                    f => f + 1,
-                };
-            }
-            KeyCode::KeyK => r.lod.stochastic ^= 1,
-            KeyCode::KeyH => r.shadows = !r.shadows,
-            KeyCode::Tab => self.opts.overlay = !self.opts.overlay,
-            _ => {}
-        }
-        if let Some(d) = digit {
-            if self.modifiers.shift_key() {
-                self.toggle_element(d);
-            } else if let Some((name, pose)) = self.opts.cameras.get(d) {
-                self.fly.pose = *pose;
-                self.message = format!("camera {name}");
-            }
-        }
-    }
-
-    fn toggle_element(&mut self, d: usize) {
-        let on = &mut self.opts.elements_on;
-        if d == usize::MAX {
-            on.iter_mut().for_each(|e| *e = true);
-            self.message = "all elements on".into();
-            return;
-        }
-        if d >= on.len() {
-            return;
-        }
-        if on[d] && on.iter().filter(|e| **e).count() == 1 {
-            self.message = "the last element stays on".into();
-            return;
-        }
-        on[d] = !on[d];
-        self.message = format!(
-            "element {} {}",
-            self.opts.elements[d],
-            if on[d] { "on" } else { "off" }
-        );
     }
 
     fn frame(&mut self, el: &ActiveEventLoop) -> Result<(), ViewError> {
@@ -399,7 +433,7 @@ impl<S: FrameSource> App<S> {
                 want_h: h,
             });
         }
-        let k = &self.keys;
+        let k = &self.ctl.keys;
         let axis = |a: bool, b: bool| f32::from(u8::from(a)) - f32::from(u8::from(b));
         let motion = Motion {
             right: axis(k.right, k.left),
@@ -407,26 +441,26 @@ impl<S: FrameSource> App<S> {
             forward: axis(k.forward, k.back),
         };
         let fast = if self.modifiers.shift_key() { 4.0 } else { 1.0 };
-        self.fly.speed *= fast;
-        self.fly.step(motion, dt);
-        self.fly.speed /= fast;
+        self.ctl.fly.speed *= fast;
+        self.ctl.fly.step(motion, dt);
+        self.ctl.fly.speed /= fast;
         let index = self.result.frames_shown as usize;
         let pose = match &self.opts.replay {
             Some(p) if !p.is_empty() => p[index.min(p.len() - 1)],
-            _ => self.fly.pose,
+            _ => self.ctl.fly.pose,
         };
         let camera = pose.params(w, h);
         let t0 = Instant::now();
         let frame = self
             .source
-            .render(&camera, &self.opts.render, &self.opts.elements_on)
+            .render(&camera, &self.ctl.render, &self.ctl.elements_on)
             .map_err(ViewError::Source)?;
         let last = automated && self.opts.frames == Some(self.result.frames_shown as u32 + 1);
         if last && frame.stats.incomplete_pixels > 0 {
             return Err(ViewError::Incomplete(frame.stats.incomplete_pixels));
         }
         let mut shown = frame.output.rgba8.clone();
-        if self.opts.overlay {
+        if self.ctl.overlay {
             let lines = self.overlay_lines(&frame, w, h);
             draw_text(&mut shown, w, h, &lines, if w >= 1600 { 2 } else { 1 });
         }
@@ -473,7 +507,7 @@ impl<S: FrameSource> App<S> {
     fn overlay_lines(&self, f: &SourceFrame, w: u32, h: u32) -> Vec<String> {
         let st = &f.output.stats;
         let s = &f.stats;
-        let r = &self.opts.render;
+        let r = &self.ctl.render;
         let lod = if r.lod.forced_lod < 0 {
             format!("auto (r_max {} px)", r.lod.r_max_px)
         } else {
@@ -483,7 +517,7 @@ impl<S: FrameSource> App<S> {
             .opts
             .elements
             .iter()
-            .zip(&self.opts.elements_on)
+            .zip(&self.ctl.elements_on)
             .take(9)
             .enumerate()
             .map(|(i, (n, on))| format!("{}{}{}", i + 1, if *on { "+" } else { "-" }, n))
@@ -537,7 +571,7 @@ impl<S: FrameSource> App<S> {
                 if r.shadows { "on" } else { "off" }
             ),
             format!("elements: {}", elements.join(" ")),
-            format!("speed {:.3}/s  {}", self.fly.speed, self.message),
+            format!("speed {:.3}/s  {}", self.ctl.fly.speed, self.ctl.message),
             "WASD/QE move, drag look, wheel speed, 1-9 cameras".into(),
             "V/F1-F4 view, L lod, K dither, H shadows".into(),
             "Shift+1-9 elements, Tab overlay, Esc quit".into(),
@@ -578,7 +612,8 @@ impl<S: FrameSource> ApplicationHandler for App<S> {
             WindowEvent::CursorMoved { position, .. } => {
                 if let (true, Some((x, y))) = (self.dragging, self.cursor) {
                     let rad_per_px = 0.004;
-                    self.fly
+                    self.ctl
+                        .fly
                         .look((position.x - x) as f32, (position.y - y) as f32, rad_per_px);
                 }
                 self.cursor = Some((position.x, position.y));
@@ -588,7 +623,7 @@ impl<S: FrameSource> ApplicationHandler for App<S> {
                     MouseScrollDelta::LineDelta(_, y) => y,
                     MouseScrollDelta::PixelDelta(p) => (p.y / 40.0) as f32,
                 };
-                self.fly.speed = (self.fly.speed * 1.25f32.powf(notches)).clamp(1e-6, 1e9);
+                self.ctl.fly.speed = (self.ctl.fly.speed * 1.25f32.powf(notches)).clamp(1e-6, 1e9);
             }
             WindowEvent::RedrawRequested => {
                 if let Err(e) = self.frame(el) {
@@ -603,5 +638,95 @@ impl<S: FrameSource> ApplicationHandler for App<S> {
         if let Some(w) = &self.window {
             w.request_redraw();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    fn pose(z: f32) -> CameraPose {
+        CameraPose {
+            world_eye: Vec3::new(0.0, 0.0, z),
+            world_forward: Vec3::NEG_Z,
+            world_up: Vec3::Y,
+            fov_deg: 45.0,
+            mirror_x: false,
+        }
+    }
+
+    fn controls() -> Controls {
+        Controls::new(&ViewOptions {
+            title: String::new(),
+            width: 8,
+            height: 8,
+            start: pose(0.0),
+            cameras: vec![("a".into(), pose(1.0)), ("b".into(), pose(2.0))],
+            render: RenderOptions::default(),
+            elements: vec!["x".into(), "y".into()],
+            elements_on: vec![true, true],
+            speed: 1.0,
+            frames: None,
+            replay: None,
+            overlay: true,
+            vsync: true,
+            display: None,
+        })
+    }
+
+    fn press(c: &mut Controls, code: KeyCode, shift: bool) -> bool {
+        let quit = c.key(code, true, shift);
+        c.key(code, false, shift);
+        quit
+    }
+
+    #[test]
+    fn keys_switch_views_lod_cameras_elements_and_overlay() {
+        let mut c = controls();
+        press(&mut c, KeyCode::KeyV, false);
+        assert_eq!(c.render.view, View::Ids);
+        press(&mut c, KeyCode::F4, false);
+        assert_eq!(c.render.view, View::Heatmap);
+        press(&mut c, KeyCode::KeyV, false);
+        assert_eq!(c.render.view, View::Shaded);
+        // LOD: auto → 0 → 1 … → 7 → auto.
+        assert!(c.render.lod.forced_lod < 0);
+        press(&mut c, KeyCode::KeyL, false);
+        assert_eq!(c.render.lod.forced_lod, 0);
+        for _ in 0..7 {
+            press(&mut c, KeyCode::KeyL, false);
+        }
+        assert_eq!(c.render.lod.forced_lod, 7);
+        press(&mut c, KeyCode::KeyL, false);
+        assert!(c.render.lod.forced_lod < 0);
+        // Cameras on digits; a missing one changes nothing.
+        press(&mut c, KeyCode::Digit2, false);
+        assert_eq!(c.fly.pose, pose(2.0));
+        press(&mut c, KeyCode::Digit9, false);
+        assert_eq!(c.fly.pose, pose(2.0));
+        // Elements on Shift+digits; the last one stays on; Shift+0 turns all on.
+        press(&mut c, KeyCode::Digit1, true);
+        assert_eq!(c.elements_on, [false, true]);
+        press(&mut c, KeyCode::Digit2, true);
+        assert_eq!(c.elements_on, [false, true], "{}", c.message);
+        press(&mut c, KeyCode::Digit0, true);
+        assert_eq!(c.elements_on, [true, true]);
+        assert_eq!(c.fly.pose, pose(2.0), "Shift+digit is not a camera");
+        press(&mut c, KeyCode::Tab, false);
+        assert!(!c.overlay);
+        press(&mut c, KeyCode::KeyH, false);
+        assert!(!c.render.shadows);
+        assert!(press(&mut c, KeyCode::Escape, false));
+    }
+
+    #[test]
+    fn movement_keys_hold_until_released() {
+        let mut c = controls();
+        c.key(KeyCode::KeyW, true, false);
+        c.key(KeyCode::KeyE, true, false);
+        assert!(c.keys.forward && c.keys.up);
+        c.key(KeyCode::KeyW, false, false);
+        assert!(!c.keys.forward && c.keys.up);
     }
 }
