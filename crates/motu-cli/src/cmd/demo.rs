@@ -133,6 +133,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         max_traces_per_ray: motu_abi::DEFAULT_MAX_TRACES_PER_RAY,
         allow_truncated: false,
         device: None,
+        camera_path: None,
     };
     if let Err(e) = super::render::run(args(backend)) {
         if backend == BackendArg::Cpu {
