@@ -32,6 +32,17 @@ Surface resolve(TraceHit h) {
     return s;
 }
 
+// The hit's primitive as hit records name it: a cluster of a partitioned mesh maps its own
+// triangle to the source mesh's through its primitive map, which follows its indices in the
+// mesh buffer (motu-gpu's MeshGpu).
+uint source_primitive(MeshRecord m, uint mesh_record, uint primitive) {
+    if ((m.flags & FLAG_PRIMITIVE_MAP) == 0u) {
+        return primitive;
+    }
+    uint64_t map = push.mesh_geo.r[mesh_record].indices + 12ul * uint64_t(m.triangle_count);
+    return U32Table(map).r[primitive];
+}
+
 // A pixel's state carried across streaming passes (48 bytes; zeroed at the frame's start): the
 // primary ray's best hit resolved while its BLAS was resident (so the BLAS may go), and which
 // ray is open since which pass.
@@ -63,6 +74,7 @@ void render_pixel_impl(uvec2 px) {
     uint traces = 0u;
     uint overflows = 0u;
     uint truncations = 0u;
+    g_truncated = false;
     Carry c;
     c.hit = vec4(T_INFINITY, 0.0, 0.0, 0.0);
     c.rec = uvec4(0u);
@@ -86,8 +98,8 @@ void render_pixel_impl(uvec2 px) {
             Surface s = resolve(h);
             MeshRecord m = push.meshes.r[s.mesh_record];
             c.hit = vec4(h.t, s.world_normal);
-            c.rec = uvec4(m.source_mesh, h.primitive, h.lod == NONE_U32 ? m.lod : h.lod,
-                          m.material);
+            c.rec = uvec4(m.source_mesh, source_primitive(m, s.mesh_record, h.primitive),
+                          h.lod == NONE_U32 ? m.lod : h.lod, m.material);
         }
         if (stream_still_open(c.hit.x)) {
             // Shading and shadow rays wait until the primary hit is final.
@@ -152,6 +164,9 @@ void render_pixel_impl(uvec2 px) {
     }
     if (truncations != 0u) {
         atomicAdd(push.stats.n[STAT_PI_LIST_OVERFLOWS], truncations);
+    }
+    if (overflows != 0u || g_truncated) {
+        atomicAdd(push.stats.n[STAT_TRUNCATED_RAYS], 1u);
     }
 }
 void render_pixel(uvec2 px) {

@@ -49,7 +49,8 @@ fn frame_buffer_specs(pixels: u64, guard_count: u64, items: u64) -> [Spec; 10] {
     let host = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS;
     let stamps_bytes = (items * 4).div_ceil(16) * 16;
     let inc_bytes = 4 + 4 * pixels;
-    let readback_bytes = (2 * stamps_bytes + inc_bytes).div_ceil(16) * 16 + pixels * 20 + 16;
+    let readback_bytes =
+        (2 * stamps_bytes + inc_bytes).div_ceil(16) * 16 + pixels * 20 + (STAT_WORDS as u64) * 4;
     [
         (
             "frame-params",

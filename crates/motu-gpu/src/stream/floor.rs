@@ -181,8 +181,14 @@ pub fn streaming_floor(
                 indexed: true,
                 opaque: m.flags & FLAG_NEEDS_ANY_HIT == 0,
             });
+            // As MeshGpu lays it out: positions, indices, the primitive map of a cluster.
+            let map = if m.flags & motu_abi::FLAG_PRIMITIVE_MAP != 0 {
+                u64::from(m.triangle_count) * 4
+            } else {
+                0
+            };
             mesh_bytes += align(
-                align(u64::from(m.vertex_count) * 12, 16) + u64::from(m.triangle_count) * 12,
+                align(u64::from(m.vertex_count) * 12, 16) + u64::from(m.triangle_count) * 12 + map,
                 16,
             );
         }
