@@ -216,6 +216,8 @@ pub fn render(pkg: &Path, backend: &str, aov: &Path, extra: &[&str]) -> serde_js
 /// (`-displayfd`), killed on drop.
 pub struct Xvfb {
     child: std::process::Child,
+    /// Xvfb's stdout, kept open: a closed pipe would kill it (SIGPIPE) if it wrote again.
+    _stdout: std::io::BufReader<std::process::ChildStdout>,
     /// The `DISPLAY` value (`:N`).
     pub display: String,
 }
@@ -257,12 +259,14 @@ pub fn xvfb(test: &str) -> Option<Xvfb> {
     };
     // Xvfb writes the display number once it accepts connections.
     let mut line = String::new();
-    let read = child
-        .stdout
-        .take()
-        .map(|o| std::io::BufReader::new(o).read_line(&mut line));
-    let n = line.trim();
-    if !matches!(read, Some(Ok(_))) || n.is_empty() {
+    let Some(mut stdout) = child.stdout.take().map(std::io::BufReader::new) else {
+        let _ = child.kill();
+        let _ = child.wait();
+        panic!("Xvfb has no stdout pipe");
+    };
+    let read = stdout.read_line(&mut line);
+    let n = line.trim().to_string();
+    if read.is_err() || n.is_empty() {
         let _ = child.kill();
         let _ = child.wait();
         panic!("Xvfb started but reported no display number ({read:?})");
@@ -270,6 +274,7 @@ pub fn xvfb(test: &str) -> Option<Xvfb> {
     Some(Xvfb {
         display: format!(":{n}"),
         child,
+        _stdout: stdout,
     })
 }
 
