@@ -4,6 +4,7 @@
 #define MOTU_RENDER_PIXEL_GLSL
 #include "camera.glsl"
 #include "traverse.glsl"
+#include "shade.glsl"
 
 // Resolved hit: mesh record and world geometric normal (not face-forwarded).
 struct Surface {
@@ -46,6 +47,36 @@ void stream_defer(uvec2 px) {
     l.r[k] = px.x | (px.y << 16u);
 }
 
+// Samples 1 .. spp - 1 of a shaded pixel (jittered primary rays; sample 0, the pixel centre,
+// gave the hit record and `first`); streaming passes shade one sample (see shade.glsl).
+vec3 shade_samples(vec3 first, uvec2 px, uint pixel, inout uint traces, inout uint overflows,
+                   inout uint truncations) {
+    FrameParams f = push.frame.f;
+    if (f.spp <= 1u || g_streaming) {
+        return first;
+    }
+    vec3 sum = first;
+    for (uint smp = 1u; smp < f.spp; ++smp) {
+        vec3 org = f.camera.world_eye;
+        vec3 dir = camera_primary_dir(f.camera, px.x, px.y, rand01(pixel, smp, 0u),
+                                      rand01(pixel, smp, 1u));
+        g_t_min = 0.0;
+        TraceHit h = traverse(f.root_tlas, org, dir, RAY_PRIMARY, f.lod,
+                              f.camera.pixels_per_unit_at_1, pixel_dither(px.x, px.y), false,
+                              traces, overflows, truncations);
+        if (h.t < T_INFINITY) {
+            Surface s = resolve(h);
+            MeshRecord m = push.meshes.r[s.mesh_record];
+            uint lod = h.lod == NONE_U32 ? m.lod : h.lod;
+            sum += shade_hit(h, s.mesh_record, org, dir, pixel, smp, lod, traces, overflows,
+                             truncations);
+        } else {
+            sum += shaded_background(dir);
+        }
+    }
+    return sum / float(f.spp);
+}
+
 void render_pixel_impl(uvec2 px) {
     FrameParams f = push.frame.f;
     uint width = f.camera.width;
@@ -84,52 +115,39 @@ void render_pixel_impl(uvec2 px) {
         rec.xyz = uvec3(m.source_mesh, h.primitive, floatBitsToUint(h.t));
         rec.w = min(lod, 255u);
         if (f.view == VIEW_SHADED) {
-            vec3 base = push.materials.r[m.material].base_color;
-            vec3 n = dot(s.world_normal, dir) > 0.0 ? -s.world_normal : s.world_normal;
-            vec3 sun = f.sun_dir_intensity.xyz;
-            float ndl = dot(n, sun);
-            float light = f.ambient;
-            if (ndl > 0.0) {
-                float visible = 1.0;
-                if (f.shadows != 0u) {
-                    vec3 p = org + dir * h.t;
-                    LodParams sl = f.lod;
-                    if (f.shadow_lod_from_primary != 0u) {
-                        sl.forced_lod = int(lod);
-                    }
-                    g_t_min = resume.y;
-                    g_empty_t = T_INFINITY;
-                    TraceHit sh = traverse(f.root_tlas, shadow_offset(p, n, max(max(abs(org.x), abs(org.y)), abs(org.z)) + h.t), sun, RAY_SHADOW, sl,
-                                           f.camera.pixels_per_unit_at_1, 0.0, true, traces,
-                                           overflows, truncations);
-                    visible = sh.t < T_INFINITY ? 0.0 : 1.0;
-                    if (sh.t < T_INFINITY) {
-                        g_incomplete = false;  // occluded whatever the empty instances hold
-                    } else if (g_incomplete) {
-                        // The primary hit is final; the shadow ray resumes where it stopped.
-                        stream_pin_hit(h);
-                        stream_resume(pixel,
-                                      vec2(resume.x, max(resume.y, RESUME_BACKOFF * g_empty_t)));
-                        stream_defer(px);
-                        return;
-                    }
-                    g_t_min = 0.0;
-                    atomicAdd(push.stats.n[STAT_SHADOW_RAYS], 1u);
-                }
-                light = f.ambient + f.sun_dir_intensity.w * ndl * visible;
+            g_secondary_rays = 0u;
+            g_secondary_incomplete = false;
+            colour = shade_hit(h, s.mesh_record, org, dir, pixel, 0u, lod, traces, overflows,
+                               truncations);
+            if (g_secondary_incomplete) {
+                // The primary hit is final; its secondary rays are traced again next pass.
+                stream_pin_hit(h);
+                stream_resume(pixel, vec2(resume.x, 0.0));
+                stream_defer(px);
+                return;
             }
-            colour = base * light;
+            colour = shade_samples(colour, px, pixel, traces, overflows, truncations);
+            if (g_secondary_rays != 0u) {
+                atomicAdd(push.stats.n[STAT_SHADOW_RAYS], g_secondary_rays);
+            }
         } else if (f.view == VIEW_IDS) {
             colour = id_colour(m.source_mesh, h.primitive);
         } else {
             colour = lod_colour(lod);
+        }
+    } else if (f.view == VIEW_SHADED) {
+        g_secondary_rays = 0u;
+        colour = shade_samples(shaded_background(dir), px, pixel, traces, overflows, truncations);
+        if (g_secondary_rays != 0u) {
+            atomicAdd(push.stats.n[STAT_SHADOW_RAYS], g_secondary_rays);
         }
     } else {
         colour = sky(dir);
     }
     rec.w |= min(traces, 65535u) << 16u;
     push.aov.r[pixel] = rec;
-    push.rgba.r[pixel] = encode_srgb8(colour);
+    push.rgba.r[pixel] = f.view == VIEW_SHADED ? tone_map(colour, f.exposure_scale)
+                                               : encode_srgb8(colour);
     if (overflows != 0u) {
         atomicAdd(push.stats.n[STAT_STACK_OVERFLOWS], overflows);
     }

@@ -45,6 +45,8 @@ float g_empty_t = T_INFINITY;
 // empty instance (none in front of it, and no resident one hit), so its next pass resumes
 // there: structures it already passed may be evicted without costing it anything.
 float g_t_min = 0.0;
+// Where the ray ends (shadow rays towards a point light); T_INFINITY otherwise.
+float g_t_max = T_INFINITY;
 
 // Records `id` as visible in this pass (read first: most marks are repeats, and an atomic on
 // the root's slot from every ray would serialise).
@@ -96,7 +98,7 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
     stack[0] = Entry(affine_identity(), 0.0, root_tlas, NONE_U32, -1.0);
     uint sp = 1u;
     TraceHit hit;
-    hit.t = T_INFINITY;
+    hit.t = g_t_max;
     hit.lod = NONE_U32;
     while (sp > 0u) {
         sp -= 1u;

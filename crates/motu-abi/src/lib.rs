@@ -24,5 +24,7 @@ pub mod camera;
 pub mod glsl;
 pub mod lod;
 mod records;
+pub mod shade;
 
 pub use records::*;
+pub use shade::{LightRecord, TextureRecord};

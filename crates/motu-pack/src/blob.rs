@@ -15,10 +15,13 @@ pub struct MeshBlobLayout {
     pub vertex_count: u64,
     pub triangle_count: u64,
     pub has_normals: bool,
+    pub has_uvs: bool,
     pub positions: u64,
     pub indices: u64,
-    /// Equal to `len` when there are no normals.
+    /// Equal to `uvs` when there are no normals.
     pub normals: u64,
+    /// `[f32; 2]` per vertex after the normals; equal to `len` when there are none.
+    pub uvs: u64,
     pub len: u64,
 }
 
@@ -27,8 +30,8 @@ impl MeshBlobLayout {
         let positions = 0;
         let indices = align16(vertex_count * 12);
         let normals = align16(indices + triangle_count * 12);
-        let len = if has_normals {
-            normals + vertex_count * 12
+        let uvs = if has_normals {
+            align16(normals + vertex_count * 12)
         } else {
             normals
         };
@@ -36,11 +39,26 @@ impl MeshBlobLayout {
             vertex_count,
             triangle_count,
             has_normals,
+            has_uvs: false,
             positions,
             indices,
             normals,
-            len,
+            uvs,
+            len: if has_normals {
+                normals + vertex_count * 12
+            } else {
+                normals
+            },
         }
+    }
+
+    /// The same layout with texture coordinates after the normals (or not).
+    pub fn with_uvs(mut self, has_uvs: bool) -> Self {
+        self.has_uvs = has_uvs;
+        if has_uvs {
+            self.len = self.uvs + self.vertex_count * 8;
+        }
+        self
     }
 
     pub fn of(mesh: &MeshData) -> Self {
@@ -48,6 +66,11 @@ impl MeshBlobLayout {
             mesh.positions.len() as u64,
             mesh.triangle_count() as u64,
             mesh.normals.is_some(),
+        )
+        .with_uvs(
+            mesh.uvs
+                .as_ref()
+                .is_some_and(|u| u.len() == mesh.positions.len()),
         )
     }
 
@@ -65,6 +88,9 @@ impl MeshBlobLayout {
         put(&mut out, self.indices, bytemuck::cast_slice(&mesh.indices));
         if let Some(n) = &mesh.normals {
             put(&mut out, self.normals, bytemuck::cast_slice(n));
+        }
+        if let (true, Some(uv)) = (self.has_uvs, &mesh.uvs) {
+            put(&mut out, self.uvs, bytemuck::cast_slice(uv));
         }
         out
     }
@@ -86,10 +112,13 @@ impl MeshBlobLayout {
         let normals = self
             .has_normals
             .then(|| bytemuck::pod_collect_to_vec(slice(self.normals, self.vertex_count * 12)));
+        let uvs = self
+            .has_uvs
+            .then(|| bytemuck::pod_collect_to_vec(slice(self.uvs, self.vertex_count * 8)));
         Ok(MeshData {
             positions,
             normals,
-            uvs: None,
+            uvs,
             indices,
         })
     }
@@ -111,5 +140,12 @@ mod tests {
         assert_eq!((l.indices, l.normals, l.len), (48, 64, 100));
         assert_eq!(l.decode(&l.encode(&m)).unwrap(), m);
         assert!(l.decode(&[0u8; 10]).is_err());
+        let with_uvs = MeshData {
+            uvs: Some(vec![[0.0, 1.0], [0.5, 0.5], [1.0, 0.0]]),
+            ..m
+        };
+        let l = MeshBlobLayout::of(&with_uvs);
+        assert_eq!((l.normals, l.uvs, l.len), (64, 112, 136));
+        assert_eq!(l.decode(&l.encode(&with_uvs)).unwrap(), with_uvs);
     }
 }

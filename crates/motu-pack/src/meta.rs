@@ -4,7 +4,7 @@ use motu_scene::{Camera, Light, SceneStats};
 use serde::{Deserialize, Serialize};
 
 /// Identifies the section layout this build writes; readers reject other schemas.
-pub const SCHEMA: &str = "motu-scene/1";
+pub const SCHEMA: &str = "motu-scene/2";
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ElementMeta {

@@ -132,12 +132,18 @@ pub fn place_mesh_record(rec: &mut motu_abi::MeshRecord, at: MeshLocation) {
         rec.vertex_count as u64,
         rec.triangle_count as u64,
         rec.flags & motu_abi::FLAG_HAS_NORMALS != 0,
-    );
+    )
+    .with_uvs(rec.flags & motu_abi::FLAG_HAS_UVS != 0);
     rec.chunk = at.a as u32;
     rec.positions_offset = at.b + l.positions;
     rec.indices_offset = at.b + l.indices;
     rec.normals_offset = if l.has_normals {
         at.b + l.normals
+    } else {
+        motu_abi::NONE_U64
+    };
+    rec.uvs_offset = if l.has_uvs {
+        at.b + l.uvs
     } else {
         motu_abi::NONE_U64
     };

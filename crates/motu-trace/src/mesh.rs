@@ -11,6 +11,8 @@ pub struct MeshGeometry {
     /// Three per triangle.
     pub indices: Vec<u32>,
     pub normals: Option<Vec<[f32; 3]>>,
+    /// Per-vertex texture coordinates.
+    pub uvs: Option<Vec<[f32; 2]>>,
 }
 
 /// Loads the geometry of a compiled mesh, by its index in the hierarchy's mesh table.
@@ -28,7 +30,20 @@ pub struct MeshBvh {
     pub tri_verts: Vec<[[f32; 3]; 3]>,
     /// The triangle index within the mesh of slot `i`.
     pub tri_prim: Vec<u32>,
+    /// The slot of triangle `i` (the inverse of `tri_prim`).
+    pub slot_of_prim: Vec<u32>,
+    /// Per-vertex attributes for shading (kept only when the mesh has some).
+    pub attributes: Option<Box<VertexAttributes>>,
     pub bounds: Aabb,
+}
+
+/// What shading interpolates: the mesh's indices with its per-vertex normals and texture
+/// coordinates (in the mesh's space).
+#[derive(Clone, Debug, Default)]
+pub struct VertexAttributes {
+    pub indices: Vec<u32>,
+    pub normals: Option<Vec<[f32; 3]>>,
+    pub uvs: Option<Vec<[f32; 2]>>,
 }
 
 /// Why a mesh could not be used.
@@ -103,9 +118,25 @@ impl MeshBvh {
                 });
             }
         }
+        let mut slot_of_prim = vec![0u32; bvh.order.len()];
+        for (slot, &prim) in bvh.order.iter().enumerate() {
+            slot_of_prim[prim as usize] = slot as u32;
+        }
+        let nv = g.positions.len();
+        let normals = g.normals.clone().filter(|n| n.len() == nv);
+        let uvs = g.uvs.clone().filter(|u| u.len() == nv);
+        let attributes = (normals.is_some() || uvs.is_some()).then(|| {
+            Box::new(VertexAttributes {
+                indices: g.indices.clone(),
+                normals,
+                uvs,
+            })
+        });
         Ok(Self {
             tri_verts: bvh.order.iter().map(|&i| verts[i as usize]).collect(),
             tri_prim: bvh.order,
+            slot_of_prim,
+            attributes,
             nodes: bvh.nodes,
             bounds,
         })
@@ -122,6 +153,21 @@ impl MeshBvh {
         any_hit: bool,
         stack: &mut Vec<u32>,
     ) -> Option<u32> {
+        self.intersect_filtered(ray, t_min, t_max, any_hit, stack, None)
+    }
+
+    /// [`MeshBvh::intersect`] where `accept(slot, barycentrics)` may reject a candidate hit
+    /// (alpha cut-outs: the GPU's any-hit test), so traversal looks past it.
+    #[inline]
+    pub fn intersect_filtered(
+        &self,
+        ray: &LocalRay,
+        t_min: f32,
+        t_max: &mut f32,
+        any_hit: bool,
+        stack: &mut Vec<u32>,
+        accept: Option<&dyn Fn(u32, [f32; 3]) -> bool>,
+    ) -> Option<u32> {
         let root = self.nodes.first()?;
         ray.hit_box(&root.min, &root.max, t_min, *t_max)?;
         let mut found = None;
@@ -132,7 +178,10 @@ impl MeshBvh {
             if n.is_leaf() {
                 for slot in n.first..n.first + n.count {
                     let [v0, v1, v2] = self.tri_verts[slot as usize];
-                    if let Some(t) = ray.hit_triangle(v0, v1, v2, t_min, *t_max) {
+                    if let Some((t, b)) = ray.hit_triangle_bary(v0, v1, v2, t_min, *t_max) {
+                        if accept.is_some_and(|f| !f(slot, b)) {
+                            continue;
+                        }
                         *t_max = t;
                         found = Some(slot);
                         if any_hit {
@@ -208,6 +257,7 @@ mod tests {
             positions,
             indices,
             normals: None,
+            uvs: None,
         }
     }
 

@@ -4,7 +4,10 @@
 use std::sync::OnceLock;
 
 use motu_abi::lod::{select_lod, LodParams, RAY_PRIMARY};
-use motu_abi::{xform_vector, HierarchyView, BLAS_TRIANGLES, NONE_U32, PI_LOD_SELECTOR, PI_TLAS};
+use motu_abi::{
+    xform_vector, HierarchyView, BLAS_TRIANGLES, FLAG_NEEDS_ANY_HIT, NONE_U32, PI_LOD_SELECTOR,
+    PI_TLAS,
+};
 use rayon::prelude::*;
 
 use crate::bvh::{Aabb, BuildParams, Bvh, BvhNode};
@@ -252,6 +255,12 @@ impl<'a> Tracer<'a> {
         MeshBvh::build(&g, Some(record_box(rec.bounds_min, rec.bounds_max)), params)
     }
 
+    /// Mesh record `m`'s triangles and shading attributes (loaded on first use); `None`
+    /// when it failed to load (reported by [`Tracer::first_error`]).
+    pub fn mesh_bvh(&self, m: u32) -> Option<&MeshBvh> {
+        self.mesh(m)
+    }
+
     fn mesh(&self, m: u32) -> Option<&MeshBvh> {
         self.meshes[m as usize]
             .get_or_init(|| self.load_mesh(m, BuildParams::default().serial()))
@@ -395,12 +404,23 @@ impl<'a> Tracer<'a> {
                                 let Some(mesh) = self.mesh(mesh_record) else {
                                     return false;
                                 };
-                                let Some(slot) = mesh
-                                    .intersect(&blas_ray, q.t_min, best_t, q.any_hit, mesh_stack)
-                                else {
+                                let rec = &v.meshes[mesh_record as usize];
+                                // Alpha-tested meshes: the GPU's any-hit coverage test.
+                                let alpha = |slot: u32, b: [f32; 3]| {
+                                    crate::shade::coverage(v, mesh, rec, slot, b)
+                                        >= motu_abi::shade::ALPHA_CUTOFF
+                                };
+                                let accept: Option<&dyn Fn(u32, [f32; 3]) -> bool> =
+                                    if rec.flags & FLAG_NEEDS_ANY_HIT != 0 {
+                                        Some(&alpha)
+                                    } else {
+                                        None
+                                    };
+                                let Some(slot) = mesh.intersect_filtered(
+                                    &blas_ray, q.t_min, best_t, q.any_hit, mesh_stack, accept,
+                                ) else {
                                     return false;
                                 };
-                                let rec = &v.meshes[mesh_record as usize];
                                 hit = Hit {
                                     t: *best_t,
                                     mesh_record,

@@ -80,6 +80,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         chunk_bytes: 64 << 20,
         parallel: true,
         curve_ribbons: false,
+        texture_max: 1024,
     };
     let s = pipeline::import(&summary.scene_path, &pkg, &opts)?;
     step(
@@ -129,6 +130,9 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         shadow_lod_bias: 1.0,
         lod_stochastic: false,
         stack_size: 16,
+        spp: 1,
+        ao_samples: 1,
+        exposure: 0.0,
         device: None,
     };
     if let Err(e) = super::render::run(args(backend)) {
