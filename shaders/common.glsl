@@ -62,9 +62,14 @@ struct FrameParams {
     uint shadow_lod_from_primary;
     float ambient;
     uint root_tlas;
-    uint _pad0;
-    uint _pad1;
-    uint _pad2;
+    uint light_count;
+    uint64_t shading;        // ShadingRef (shade.glsl), 0: none
+    vec4 sky;                // rgb: sky radiance of the ambient term; w: 1 = also the background
+    uint ao_samples;
+    uint spp;
+    float ao_distance;
+    float exposure_scale;
+    LightRecord lights[MAX_LIGHTS];
 };
 
 struct MeshGeo {

@@ -4,6 +4,7 @@
 #define MOTU_RENDER_PIXEL_GLSL
 #include "camera.glsl"
 #include "traverse.glsl"
+#include "shade.glsl"
 
 // Resolved hit: mesh record and world geometric normal (not face-forwarded).
 struct Surface {
@@ -62,6 +63,35 @@ void stream_defer(uvec2 px, uint pixel, Carry c) {
     l.r[k] = px.x | (px.y << 16u);
 }
 
+// Samples 1 .. spp - 1 of a shaded pixel (jittered primary rays; sample 0, the pixel centre,
+// gave the hit record and `first`); streaming passes shade one sample (see shade.glsl).
+vec3 shade_samples(vec3 first, uvec2 px, uint pixel, inout uint traces, inout uint overflows,
+                   inout uint truncations) {
+    FrameParams f = push.frame.f;
+    if (f.spp <= 1u || g_streaming) {
+        return first;
+    }
+    vec3 sum = first;
+    for (uint smp = 1u; smp < f.spp; ++smp) {
+        vec3 org = f.camera.world_eye;
+        vec3 dir = camera_primary_dir(f.camera, px.x, px.y, rand01(pixel, smp, 0u),
+                                      rand01(pixel, smp, 1u));
+        TraceHit h = traverse(f.root_tlas, org, dir, RAY_PRIMARY, f.lod,
+                              f.camera.pixels_per_unit_at_1, pixel_dither(px.x, px.y), false,
+                              traces, overflows, truncations);
+        if (h.t < T_INFINITY) {
+            Surface s = resolve(h);
+            MeshRecord m = push.meshes.r[s.mesh_record];
+            uint lod = h.lod == NONE_U32 ? m.lod : h.lod;
+            sum += shade_hit(h, s.mesh_record, org, dir, pixel, smp, lod, traces, overflows,
+                             truncations);
+        } else {
+            sum += shaded_background(dir);
+        }
+    }
+    return sum / float(f.spp);
+}
+
 void render_pixel_impl(uvec2 px) {
     FrameParams f = push.frame.f;
     uint width = f.camera.width;
@@ -86,16 +116,22 @@ void render_pixel_impl(uvec2 px) {
         }
         traces = c.st.z;
     }
+    // The full build's primary hit, for the full shading model (streaming shades from the
+    // carried record: its BLAS may be gone by the time the pixel is final).
+    TraceHit h;
+    h.t = T_INFINITY;
+    uint h_mesh = NONE_U32;
     if (c.st.x == 1u) {
         g_best_t = c.hit.x;
         g_start = c.st.y;
         g_empty_t = T_INFINITY;
-        TraceHit h = traverse(f.root_tlas, org, dir, RAY_PRIMARY, f.lod,
+        h = traverse(f.root_tlas, org, dir, RAY_PRIMARY, f.lod,
                               f.camera.pixels_per_unit_at_1, pixel_dither(px.x, px.y), false,
                               traces, overflows, truncations);
         if (h.tlas != NONE_U32) {
             // Resolved now, while its BLAS and meshes are resident.
             Surface s = resolve(h);
+            h_mesh = s.mesh_record;
             MeshRecord m = push.meshes.r[s.mesh_record];
             c.hit = vec4(h.t, s.world_normal);
             c.rec = uvec4(m.source_mesh, source_primitive(m, s.mesh_record, h.primitive),
@@ -115,7 +151,18 @@ void render_pixel_impl(uvec2 px) {
         uint lod = c.rec.z;
         rec.xyz = uvec3(c.rec.x, c.rec.y, floatBitsToUint(c.hit.x));
         rec.w = min(lod, 255u);
-        if (f.view == VIEW_SHADED) {
+        if (f.view == VIEW_SHADED && !g_streaming) {
+            // Materials, textures, shading normals, the scene's lights and sky (shade.glsl).
+            g_secondary_rays = 0u;
+            colour = shade_hit(h, h_mesh, org, dir, pixel, 0u, lod, traces, overflows,
+                               truncations);
+            colour = shade_samples(colour, px, pixel, traces, overflows, truncations);
+            if (g_secondary_rays != 0u) {
+                atomicAdd(push.stats.n[STAT_SHADOW_RAYS], g_secondary_rays);
+            }
+        } else if (f.view == VIEW_SHADED) {
+            // Streaming: base colour and the key light with one shadow ray, from the carried
+            // record.
             vec3 base = push.materials.r[c.rec.w].base_color;
             vec3 world_normal = c.hit.yzw;
             vec3 n = dot(world_normal, dir) > 0.0 ? -world_normal : world_normal;
@@ -153,12 +200,20 @@ void render_pixel_impl(uvec2 px) {
         } else {
             colour = lod_colour(lod);
         }
+    } else if (f.view == VIEW_SHADED && !g_streaming) {
+        g_secondary_rays = 0u;
+        colour = shade_samples(shaded_background(dir), px, pixel, traces, overflows, truncations);
+        if (g_secondary_rays != 0u) {
+            atomicAdd(push.stats.n[STAT_SHADOW_RAYS], g_secondary_rays);
+        }
     } else {
         colour = sky(dir);
     }
     rec.w |= min(traces, 65535u) << 16u;
     push.aov.r[pixel] = rec;
-    push.rgba.r[pixel] = encode_srgb8(colour);
+    push.rgba.r[pixel] = f.view == VIEW_SHADED && !g_streaming
+                             ? tone_map(colour, f.exposure_scale)
+                             : encode_srgb8(colour);
     if (overflows != 0u) {
         atomicAdd(push.stats.n[STAT_STACK_OVERFLOWS], overflows);
     }

@@ -46,6 +46,8 @@ float g_best_t = T_INFINITY;  // the carried best hit's t (culls this walk)
 // The nearest open structure: the pixel's request for the next pass.
 float g_empty_t = T_INFINITY;
 uint g_empty_id = NONE_U32;
+// Where the ray ends (shadow rays towards a point light); T_INFINITY otherwise.
+float g_t_max = T_INFINITY;
 
 // Records `id` at `level` in this pass (read first: most marks are repeats).
 void stream_mark_as(uint64_t table, uint id, uint level) {
@@ -106,7 +108,7 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
     stack[0] = Entry(affine_identity(), 0.0, root_tlas, NONE_U32, -1.0);
     uint sp = 1u;
     TraceHit hit;
-    hit.t = g_streaming ? g_best_t : T_INFINITY;
+    hit.t = g_streaming ? min(g_best_t, g_t_max) : g_t_max;
     hit.tlas = NONE_U32;
     hit.lod = NONE_U32;
     uint traces_at_start = traces;

@@ -56,6 +56,14 @@ pub struct Material {
     pub base_color_texture: Option<String>,
     /// `opacity` (v3 `uber`) where given.
     pub opacity: Option<[f32; 3]>,
+    /// Image file the base colour comes from (an `imagemap` texture, possibly scaled: the
+    /// image is multiplied by `base_color`), resolved against the scene file; `None` when the
+    /// colour is constant or the file is missing.
+    pub base_color_image: Option<std::path::PathBuf>,
+    /// Perceptual roughness in [0, 1] where the model has one (defaults per model applied).
+    pub roughness: Option<f32>,
+    /// Metalness in [0, 1] (1 for `metal`/`conductor`/`mirror`, `metallic` for `disney`).
+    pub metallic: Option<f32>,
     /// Where it was defined.
     pub loc: Loc,
 }
@@ -139,8 +147,10 @@ pub struct ShapeEvent {
     pub material: Arc<Material>,
     /// `texture alpha` name.
     pub alpha_texture: Option<String>,
-    /// Constant `float alpha`, when given.
+    /// Constant `float alpha`, when given (also a constant float texture's value).
     pub alpha: Option<f32>,
+    /// Image file of the `texture alpha` (an `imagemap` float texture), resolved.
+    pub alpha_image: Option<std::path::PathBuf>,
     /// Area light attached to the shape.
     pub area_light: Option<Arc<AreaLight>>,
     /// The object being defined, if the shape is inside `ObjectBegin`.
@@ -227,6 +237,10 @@ pub struct LightEvent {
     pub to: Option<[f32; 3]>,
     /// Environment map (`mapname` v3 / `filename` v4), if given.
     pub map: Option<String>,
+    /// `map` resolved against the scene file.
+    pub map_path: Option<std::path::PathBuf>,
+    /// Spot: `coneangle` and `conedelta` in degrees (defaults 30 and 5).
+    pub cone_deg: Option<[f32; 2]>,
     /// Inside `ObjectBegin` (pbrt ignores these; reported for completeness).
     pub object: Option<ObjectId>,
     /// Element.

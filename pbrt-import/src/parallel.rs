@@ -254,11 +254,14 @@ impl<'s> Worker<'s> {
             return None; // a version switch: let the main parser see it
         }
         if !self.v4()
-            && ["Kd", "reflectance", "color", "Kr", "opacity"]
+            && ["Kd", "reflectance", "color", "Kr", "opacity", "roughness"]
                 .iter()
                 .any(|k| p.get(k).is_some())
         {
             return None; // v3 shape-level material override: needs material ids
+        }
+        if p.texture("alpha").is_some() {
+            return None; // alpha textures resolve through the named-texture tables
         }
         let mut event = ShapeEvent {
             seq: 0,
@@ -268,6 +271,7 @@ impl<'s> Worker<'s> {
             material: self.snap.material.clone(),
             alpha_texture: p.texture("alpha").map(str::to_owned),
             alpha: p.float("alpha"),
+            alpha_image: None,
             area_light: self.snap.area_light.clone(),
             object: None,
             element: None,
@@ -462,6 +466,9 @@ mod tests {
                 base_color: None,
                 base_color_texture: None,
                 opacity: None,
+                base_color_image: None,
+                roughness: None,
+                metallic: None,
                 loc: Loc::default(),
             }),
             reverse_orientation: false,

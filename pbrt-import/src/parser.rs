@@ -334,6 +334,9 @@ struct Parser<'s> {
     next_material: u32,
     float_textures: HashMap<String, [f32; 3]>,
     color_textures: HashMap<String, [f32; 3]>,
+    /// Textures whose value is an image file times a constant, by (is float, name). Their
+    /// entry in `float_textures`/`color_textures` is the constant colour used without it.
+    image_textures: HashMap<(bool, String), (PathBuf, [f32; 3])>,
     objects: HashMap<String, ObjectId>,
     object_names: Vec<String>,
     object_defined: Vec<bool>,
@@ -464,6 +467,9 @@ fn default_material(version: PbrtVersion) -> Material {
         base_color: Some([0.5; 3]),
         base_color_texture: None,
         opacity: None,
+        base_color_image: None,
+        roughness: Some(1.0),
+        metallic: Some(0.0),
         loc: Loc::default(),
     }
 }
@@ -504,6 +510,7 @@ impl<'s> Parser<'s> {
             next_material: 1,
             float_textures: HashMap::new(),
             color_textures: HashMap::new(),
+            image_textures: HashMap::new(),
             objects: HashMap::new(),
             object_names: Vec::new(),
             object_defined: Vec::new(),
@@ -1764,6 +1771,16 @@ impl<'s> Parser<'s> {
                 .string("mapname")
                 .or(p.string("filename"))
                 .map(str::to_owned),
+            map_path: p
+                .string("mapname")
+                .or(p.string("filename"))
+                .map(|f| self.resolve(f)),
+            cone_deg: (kind == "spot").then(|| {
+                [
+                    p.float("coneangle").unwrap_or(30.0),
+                    p.float("conedelta").unwrap_or(5.0),
+                ]
+            }),
             object: self.current_object,
             element: self.element,
             loc: tok.loc,
@@ -1847,6 +1864,28 @@ impl<'s> Parser<'s> {
         }
     }
 
+    /// The image behind a texture-valued parameter, if it names an image texture.
+    fn image_of(&self, p: &Param<'_>) -> Option<(PathBuf, [f32; 3])> {
+        let Values::Strs(v) = &p.values else {
+            return None;
+        };
+        if p.ty != ParamType::Texture {
+            return None;
+        }
+        let n = v.first()?.to_string();
+        self.image_textures
+            .get(&(false, n.clone()))
+            .or_else(|| self.image_textures.get(&(true, n)))
+            .cloned()
+    }
+
+    /// A scalar parameter (a float, or a texture's constant value).
+    fn scalar_of(&mut self, p: &ParamList<'_>, key: &str) -> Option<f32> {
+        let param = p.get(key)?;
+        self.color_of(param)
+            .map(|c| (c.0[0] + c.0[1] + c.0[2]) / 3.0)
+    }
+
     fn make_material(
         &mut self,
         name: Option<String>,
@@ -1858,17 +1897,33 @@ impl<'s> Parser<'s> {
         self.next_material += 1;
         let mut base_color = None;
         let mut base_color_texture = None;
-        for key in ["Kd", "reflectance", "color", "Kr"] {
+        let mut base_color_image = None;
+        let colour_keys: &[&str] = match kind {
+            "glass" | "dielectric" | "thindielectric" => &["Kt", "Kr"],
+            _ => &["Kd", "reflectance", "color", "Kr"],
+        };
+        for &key in colour_keys {
             if let Some(param) = p.get(key) {
                 if let Some((c, tex)) = self.color_of(param) {
                     base_color = Some(c);
                     base_color_texture = tex;
+                    if let Some((path, factor)) = self.image_of(param) {
+                        base_color = Some(factor);
+                        base_color_image = Some(path);
+                    }
                     break;
                 }
             }
         }
-        if base_color.is_none() && kind == "mix" {
-            // v3: namedmaterial1/2; v4: "string materials" [a b].
+        // Roughness: v3 `roughness` (or the mean of `uroughness`/`vroughness`), v4 likewise.
+        let mut roughness = self.scalar_of(p, "roughness").or_else(|| {
+            let u = self.scalar_of(p, "uroughness")?;
+            let v = self.scalar_of(p, "vroughness").unwrap_or(u);
+            Some(0.5 * (u + v))
+        });
+        let mut metallic = self.scalar_of(p, "metallic");
+        if kind == "mix" {
+            // The dominant side (amount < 0.5: the first material), whole.
             let names: Vec<String> = match p.get("materials").map(|p| &p.values) {
                 Some(Values::Strs(v)) => v.iter().map(|s| s.to_string()).collect(),
                 _ => ["namedmaterial1", "namedmaterial2"]
@@ -1876,31 +1931,67 @@ impl<'s> Parser<'s> {
                     .filter_map(|k| p.string(k).map(str::to_owned))
                     .collect(),
             };
-            let colors: Vec<[f32; 3]> = names
-                .iter()
-                .filter_map(|n| self.named_materials.get(n).and_then(|m| m.base_color))
-                .collect();
-            if colors.len() == 2 {
-                let amount = p
-                    .get("amount")
-                    .and_then(|a| self.color_of(a))
-                    .map(|c| c.0)
-                    .unwrap_or([0.5; 3]);
-                base_color = Some(std::array::from_fn(|i| {
-                    colors[0][i] * (1.0 - amount[i]) + colors[1][i] * amount[i]
-                }));
+            let amount = self.scalar_of(p, "amount").unwrap_or(0.5);
+            let pick = if amount < 0.5 { 0 } else { 1 };
+            let side = names
+                .get(pick)
+                .or(names.first())
+                .and_then(|n| self.named_materials.get(n))
+                .cloned();
+            if let Some(m) = side {
+                if base_color.is_none() {
+                    base_color = m.base_color;
+                    base_color_texture = m.base_color_texture.clone();
+                    base_color_image = m.base_color_image.clone();
+                }
+                roughness = roughness.or(m.roughness);
+                metallic = metallic.or(m.metallic);
             }
+        }
+        let is_metal = matches!(kind, "metal" | "conductor");
+        if base_color.is_none() && is_metal {
+            base_color = Some(self.metal_colour(p));
         }
         if base_color.is_none() {
             base_color = match kind {
-                "matte" | "diffuse" | "coateddiffuse" | "substrate" | "disney" | "translucent" => {
-                    Some([0.5; 3])
-                }
+                "matte"
+                | "diffuse"
+                | "coateddiffuse"
+                | "substrate"
+                | "disney"
+                | "translucent"
+                | "diffusetransmission"
+                | "subsurface"
+                | "kdsubsurface"
+                | "hair" => Some([0.5; 3]),
                 "plastic" | "uber" => Some([0.25; 3]),
                 "mirror" => Some([0.9; 3]),
+                "glass" | "dielectric" | "thindielectric" => Some([1.0; 3]),
+                "coatedconductor" => Some(self.metal_colour(p)),
                 _ => None,
             };
         }
+        if matches!(kind, "glass" | "dielectric" | "thindielectric") {
+            // Shown as dark gloss (no refraction here): a little of the transmitted colour.
+            base_color = base_color.map(|c| c.map(|v| 0.15 * v));
+        }
+        let roughness = roughness
+            .or(match kind {
+                "matte" | "diffuse" | "translucent" | "diffusetransmission" => Some(1.0),
+                "plastic" | "substrate" | "uber" | "metal" => Some(0.1),
+                "disney" => Some(0.5),
+                "mirror" | "glass" | "dielectric" | "thindielectric" | "coateddiffuse" => Some(0.0),
+                "conductor" | "coatedconductor" => Some(0.0),
+                _ => None,
+            })
+            .map(|r| r.clamp(0.0, 1.0));
+        let metallic = metallic
+            .or(match kind {
+                "metal" | "conductor" | "mirror" | "coatedconductor" => Some(1.0),
+                "mix" | "interface" | "" | "none" => None,
+                _ => Some(0.0),
+            })
+            .map(|m| m.clamp(0.0, 1.0));
         let opacity = p.get("opacity").and_then(|o| self.color_of(o)).map(|c| c.0);
         Arc::new(Material {
             id,
@@ -1909,8 +2000,53 @@ impl<'s> Parser<'s> {
             base_color,
             base_color_texture,
             opacity,
+            base_color_image,
+            roughness,
+            metallic,
             loc,
         })
+    }
+
+    /// A conductor's colour: `reflectance` (v4), else normal-incidence Fresnel of `eta`/`k`
+    /// (RGB, or the usual named metal spectra), else copper (pbrt's default).
+    fn metal_colour(&mut self, p: &ParamList<'_>) -> [f32; 3] {
+        const COPPER: [f32; 3] = [0.955, 0.638, 0.538];
+        let named = |s: &str| -> Option<[f32; 3]> {
+            let s = s.to_ascii_lowercase();
+            let table: [(&str, [f32; 3]); 7] = [
+                ("cuzn", [0.887, 0.789, 0.434]),
+                ("au", [1.0, 0.766, 0.336]),
+                ("ag", [0.972, 0.960, 0.915]),
+                ("al", [0.913, 0.922, 0.924]),
+                ("cu", COPPER),
+                ("mgo", [0.08, 0.08, 0.08]),
+                ("tio2", [0.2, 0.2, 0.2]),
+            ];
+            table
+                .iter()
+                .find(|(k, _)| s.contains(&format!("-{k}-")) || s.starts_with(&format!("{k}-")))
+                .map(|(_, c)| *c)
+        };
+        for key in ["eta", "k"] {
+            if let Some(Param {
+                values: Values::Strs(v),
+                ..
+            }) = p.get(key)
+            {
+                if let Some(c) = v.first().and_then(|s| named(s)) {
+                    return c;
+                }
+            }
+        }
+        let eta = p.get("eta").and_then(|x| self.color_of(x)).map(|c| c.0);
+        let k = p.get("k").and_then(|x| self.color_of(x)).map(|c| c.0);
+        match (eta, k) {
+            (Some(n), Some(k)) => std::array::from_fn(|i| {
+                let (n, k) = (n[i], k[i]);
+                (((n - 1.0) * (n - 1.0) + k * k) / ((n + 1.0) * (n + 1.0) + k * k)).clamp(0.0, 1.0)
+            }),
+            _ => COPPER,
+        }
     }
 
     fn texture<'b>(&mut self, lx: &mut Lexer<'b>, tok: &Token<'b>) -> Result<()> {
@@ -1934,37 +2070,79 @@ impl<'s> Parser<'s> {
                 .map(|c| c.0)
                 .unwrap_or([default; 3])
         };
+        // The image (and its constant factor) behind a texture-valued operand.
+        let image_of = |this: &Self, key: &str| -> Option<(PathBuf, [f32; 3])> {
+            let param = p.get(key)?;
+            let Values::Strs(v) = &param.values else {
+                return None;
+            };
+            let n = v.first()?.to_string();
+            this.image_textures
+                .get(&(false, n.clone()))
+                .or_else(|| this.image_textures.get(&(true, n)))
+                .cloned()
+        };
         let avg =
             |a: [f32; 3], b: [f32; 3]| -> [f32; 3] { std::array::from_fn(|i| 0.5 * (a[i] + b[i])) };
+        let mul = |a: [f32; 3], b: [f32; 3]| -> [f32; 3] { std::array::from_fn(|i| a[i] * b[i]) };
+        let mut image: Option<(PathBuf, [f32; 3])> = None;
         let value = match class.as_ref() {
             "constant" => operand(self, "value", 1.0),
-            "imagemap" | "ptex" => {
+            "imagemap" => {
                 let file = p.string("filename").unwrap_or("").to_owned();
-                let exists = !file.is_empty() && self.resolve(&file).is_file();
-                let why = if exists {
-                    "image textures are reduced to constant grey"
+                let path = self.resolve(&file);
+                let scale = p.float("scale").unwrap_or(1.0);
+                if !file.is_empty() && path.is_file() {
+                    image = Some((path, [scale; 3]));
                 } else {
-                    "texture file missing; constant grey"
-                };
+                    self.warn_once(
+                        &format!("img:{file}"),
+                        Some(tok.loc),
+                        format!(
+                            "texture \"{name}\" ({file}): texture file missing; the material's constant colour is used"
+                        ),
+                    );
+                }
+                [0.5; 3]
+            }
+            "ptex" => {
+                let file = p.string("filename").unwrap_or("").to_owned();
                 self.warn_once(
-                    &format!("img:{file}"),
+                    "ptex",
                     Some(tok.loc),
-                    format!("texture \"{name}\" ({file}): {why}"),
+                    format!(
+                        "texture \"{name}\" ({file}): ptex textures are not read (no Rust ptex reader); the material's constant colour is used"
+                    ),
                 );
                 [0.5; 3]
             }
             "scale" => {
-                let (a, b) = if p.get("tex").is_some() || self.v4() {
-                    (operand(self, "tex", 1.0), operand(self, "scale", 1.0))
+                let (ka, kb) = if p.get("tex").is_some() || self.v4() {
+                    ("tex", "scale")
                 } else {
-                    (operand(self, "tex1", 1.0), operand(self, "tex2", 1.0))
+                    ("tex1", "tex2")
                 };
-                std::array::from_fn(|i| a[i] * b[i])
+                let (a, b) = (operand(self, ka, 1.0), operand(self, kb, 1.0));
+                image = match (image_of(self, ka), image_of(self, kb)) {
+                    (Some((path, f)), _) => Some((path, mul(f, b))),
+                    (None, Some((path, f))) => Some((path, mul(f, a))),
+                    (None, None) => None,
+                };
+                mul(a, b)
             }
             "mix" | "directionmix" => {
                 let (a, b) = (operand(self, "tex1", 0.0), operand(self, "tex2", 1.0));
-                match p.get("amount").and_then(|x| self.color_of(x)) {
-                    Some((t, _)) => std::array::from_fn(|i| a[i] * (1.0 - t[i]) + b[i] * t[i]),
+                let amount = p.get("amount").and_then(|x| self.color_of(x)).map(|t| t.0);
+                // An image operand: the dominant side's image (amount < 0.5: tex1).
+                let t = amount.map_or(0.5, |t| (t[0] + t[1] + t[2]) / 3.0);
+                let (first, second) = (image_of(self, "tex1"), image_of(self, "tex2"));
+                image = if t < 0.5 {
+                    first.or(second)
+                } else {
+                    second.or(first)
+                };
+                match amount {
+                    Some(t) => std::array::from_fn(|i| a[i] * (1.0 - t[i]) + b[i] * t[i]),
                     None => avg(a, b),
                 }
             }
@@ -1977,6 +2155,15 @@ impl<'s> Parser<'s> {
             }
             _ => [0.5; 3],
         };
+        match image {
+            Some(img) => {
+                self.image_textures
+                    .insert((is_float, name.to_string()), img);
+            }
+            None => {
+                self.image_textures.remove(&(is_float, name.to_string()));
+            }
+        }
         let table = if is_float {
             &mut self.float_textures
         } else {
@@ -2010,7 +2197,7 @@ impl<'s> Parser<'s> {
         self.next_seq += 1;
         let mut material = self.gs.material.clone();
         if !self.v4()
-            && ["Kd", "reflectance", "color", "Kr", "opacity"]
+            && ["Kd", "reflectance", "color", "Kr", "opacity", "roughness"]
                 .iter()
                 .any(|k| p.get(k).is_some())
         {
@@ -2045,6 +2232,17 @@ impl<'s> Parser<'s> {
                 } else {
                     derived.base_color_texture.clone()
                 },
+                base_color_image: if keep_base {
+                    material.base_color_image.clone()
+                } else {
+                    derived.base_color_image.clone()
+                },
+                roughness: if p.get("roughness").is_some() {
+                    derived.roughness
+                } else {
+                    material.roughness
+                },
+                metallic: material.metallic,
                 opacity: derived.opacity.or(material.opacity),
                 ..(*derived).clone()
             };
@@ -2058,7 +2256,20 @@ impl<'s> Parser<'s> {
             reverse_orientation: self.gs.reverse_orientation,
             material,
             alpha_texture: p.texture("alpha").map(str::to_owned),
-            alpha: p.float("alpha"),
+            alpha: match p.get("alpha") {
+                Some(param) if param.ty == ParamType::Texture => {
+                    if self.image_of(param).is_some() {
+                        None
+                    } else {
+                        self.color_of(param).map(|c| c.0[0])
+                    }
+                }
+                _ => p.float("alpha"),
+            },
+            alpha_image: p
+                .get("alpha")
+                .and_then(|param| self.image_of(param))
+                .map(|i| i.0),
             area_light: self.gs.area_light.clone(),
             object: self.current_object,
             element: self.element,

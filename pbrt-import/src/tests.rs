@@ -210,7 +210,8 @@ fn colour_parameter_types() {
     };
     assert!(close3(by("x"), [1.0; 3]));
     assert!(close3(by("s"), [0.3; 3]));
-    assert!(close3(by("m"), [0.65; 3]));
+    // mix takes its dominant side whole (amount ≥ 0.5: the second material).
+    assert!(close3(by("m"), [0.3; 3]));
     let bb = s.lights[0].color.unwrap();
     assert_eq!(bb[0], 2.0);
     assert!(bb[2] < bb[0]);
@@ -861,4 +862,66 @@ Include "ok.pbrt"
     assert_eq!(world_shapes, 2 + 2 + 1 + 1 + 1);
     let (copied, _) = parse_dir(d, false);
     assert_eq!(world_triangles(&copied).len(), world_triangles(&sink).len());
+}
+
+#[test]
+fn materials_resolve_colour_roughness_metalness_textures_and_mix() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("wood.png"), b"not decoded by the parser").unwrap();
+    let src = r#"WorldBegin
+Texture "wood" "spectrum" "imagemap" "string filename" "wood.png"
+Texture "dim" "spectrum" "scale" "texture tex1" "wood" "rgb tex2" [0.5 0.5 0.5]
+Texture "gone" "spectrum" "imagemap" "string filename" "missing.png"
+Texture "half" "float" "constant" "float value" 0.25
+MakeNamedMaterial "red" "string type" "matte" "rgb Kd" [0.8 0.1 0.1]
+MakeNamedMaterial "gold" "string type" "metal" "spectrum eta" "metal-Au-eta" "spectrum k" "metal-Au-k" "float roughness" 0.3
+MakeNamedMaterial "mostlygold" "string type" "mix" "string namedmaterial1" "red" "string namedmaterial2" "gold" "float amount" 0.8
+MakeNamedMaterial "plank" "string type" "plastic" "texture Kd" "dim"
+MakeNamedMaterial "lost" "string type" "matte" "texture Kd" "gone"
+MakeNamedMaterial "glass" "string type" "glass"
+NamedMaterial "plank"
+Shape "trianglemesh" "integer indices" [0 1 2] "point P" [0 0 0 1 0 0 0 1 0] "texture alpha" "half"
+"#;
+    let main = dir.path().join("main.pbrt");
+    std::fs::write(&main, src).unwrap();
+    let mut sink = CollectSink::default();
+    parse_file(&main, &opts(VersionOption::V3), &mut sink).unwrap();
+    let by = |n: &str| {
+        sink.materials
+            .iter()
+            .find(|m| m.name.as_deref() == Some(n))
+            .unwrap_or_else(|| panic!("material {n}"))
+            .clone()
+    };
+    let red = by("red");
+    assert_eq!(red.base_color, Some([0.8, 0.1, 0.1]));
+    assert_eq!((red.roughness, red.metallic), (Some(1.0), Some(0.0)));
+    let gold = by("gold");
+    assert_eq!((gold.roughness, gold.metallic), (Some(0.3), Some(1.0)));
+    assert_eq!(gold.base_color, Some([1.0, 0.766, 0.336]));
+    // mix: the dominant side (amount 0.8 → the second), whole.
+    let mix = by("mostlygold");
+    assert_eq!(mix.base_color, gold.base_color);
+    assert_eq!((mix.roughness, mix.metallic), (Some(0.3), Some(1.0)));
+    // A scaled image texture: the image, times the constant factor.
+    let plank = by("plank");
+    assert_eq!(
+        plank.base_color_image.as_deref(),
+        Some(dir.path().join("wood.png").as_path())
+    );
+    assert_eq!(plank.base_color, Some([0.5; 3]));
+    assert_eq!(plank.roughness, Some(0.1));
+    // A missing image: no image, the material's constant colour, and a warning.
+    let lost = by("lost");
+    assert!(lost.base_color_image.is_none());
+    assert!(sink
+        .warnings
+        .iter()
+        .any(|w| w.message.contains("missing.png") && w.message.contains("texture file missing")));
+    let glass = by("glass");
+    assert_eq!(glass.metallic, Some(0.0));
+    assert!(glass.base_color.unwrap()[0] < 0.5);
+    // A constant float texture as alpha is a constant coverage.
+    assert_eq!(sink.shapes[0].alpha, Some(0.25));
+    assert!(sink.shapes[0].alpha_image.is_none());
 }

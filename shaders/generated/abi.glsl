@@ -12,6 +12,12 @@
 #define FLAG_HAS_NORMALS 2u
 #define FLAG_HAS_UVS 4u
 #define FLAG_PRIMITIVE_MAP 8u
+#define LIGHT_DISTANT 0u
+#define LIGHT_POINT 1u
+#define LIGHT_SPOT 2u
+#define LIGHT_AREA 3u
+#define MAX_LIGHTS 8
+#define ALPHA_CUTOFF 0.5
 #define RAY_PRIMARY 0u
 #define RAY_SHADOW 1u
 #define LOD_NOT_FORCED -1
@@ -76,7 +82,7 @@ struct LodSelectorRecord {
     uint _pad;
 };
 
-// 96 bytes
+// 112 bytes
 struct MeshRecord {
     uint source_mesh;
     uint lod;
@@ -90,16 +96,42 @@ struct MeshRecord {
     uvec2 indices_offset;
     uvec2 normals_offset;
     uvec2 primitive_map_offset;
+    uvec2 uvs_offset;
+    uvec2 _pad_uv;
     vec3 bounds_min;
     uint _pad1;
     vec3 bounds_max;
     uint _pad2;
 };
 
-// 16 bytes
+// 48 bytes
 struct MaterialRecord {
     vec3 base_color;
     float opacity;
+    vec3 emission;
+    float roughness;
+    float metallic;
+    uint base_color_texture;
+    uint alpha_texture;
+    uint _pad;
+};
+
+// 48 bytes
+struct LightRecord {
+    vec3 world_position;
+    uint kind;
+    vec3 world_direction;
+    float cos_total;
+    vec3 radiance;
+    float cos_falloff;
+};
+
+// 16 bytes
+struct TextureRecord {
+    uint texel_offset;
+    uint width;
+    uint height;
+    uint mip_count;
 };
 
 // 64 bytes

@@ -10,6 +10,7 @@ layout(local_size_x = 8, local_size_y = 8) in;
 
 Payload pl;
 #include "candidates.glsl"
+#include "texture.glsl"
 
 void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool first_hit) {
     rayQueryEXT rq;
@@ -31,8 +32,11 @@ void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool
             if (t_near >= 0.0) {
                 record_candidate(pi, t_near, instance);
             }
-        } else {
-            // Non-opaque triangles (alpha not supported yet): accept.
+        } else if (alpha_passes(tlas, rayQueryGetIntersectionInstanceIdEXT(rq, false),
+                                rayQueryGetIntersectionGeometryIndexEXT(rq, false),
+                                rayQueryGetIntersectionPrimitiveIndexEXT(rq, false),
+                                rayQueryGetIntersectionBarycentricsEXT(rq, false))) {
+            // A non-opaque (alpha-tested) triangle whose texel covers the hit.
             rayQueryConfirmIntersectionEXT(rq);
         }
     }

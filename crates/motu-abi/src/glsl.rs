@@ -138,13 +138,47 @@ pub fn structs() -> Vec<StructDef> {
                 (U64, indices_offset),
                 (U64, normals_offset),
                 (U64, primitive_map_offset),
+                (U64, uvs_offset),
+                (U64, _pad_uv),
                 (Vec3, bounds_min),
                 (Uint, _pad1),
                 (Vec3, bounds_max),
                 (Uint, _pad2)
             ]
         ),
-        def!(MaterialRecord, [(Vec3, base_color), (Float, opacity)]),
+        def!(
+            MaterialRecord,
+            [
+                (Vec3, base_color),
+                (Float, opacity),
+                (Vec3, emission),
+                (Float, roughness),
+                (Float, metallic),
+                (Uint, base_color_texture),
+                (Uint, alpha_texture),
+                (Uint, _pad)
+            ]
+        ),
+        def!(
+            LightRecord,
+            [
+                (Vec3, world_position),
+                (Uint, kind),
+                (Vec3, world_direction),
+                (Float, cos_total),
+                (Vec3, radiance),
+                (Float, cos_falloff)
+            ]
+        ),
+        def!(
+            TextureRecord,
+            [
+                (Uint, texel_offset),
+                (Uint, width),
+                (Uint, height),
+                (Uint, mip_count)
+            ]
+        ),
         def!(
             CameraParams,
             [
@@ -182,6 +216,12 @@ pub fn constants() -> Vec<(&'static str, String)> {
         ("FLAG_HAS_NORMALS", format!("{FLAG_HAS_NORMALS}u")),
         ("FLAG_HAS_UVS", format!("{FLAG_HAS_UVS}u")),
         ("FLAG_PRIMITIVE_MAP", format!("{FLAG_PRIMITIVE_MAP}u")),
+        ("LIGHT_DISTANT", format!("{}u", shade::LIGHT_DISTANT)),
+        ("LIGHT_POINT", format!("{}u", shade::LIGHT_POINT)),
+        ("LIGHT_SPOT", format!("{}u", shade::LIGHT_SPOT)),
+        ("LIGHT_AREA", format!("{}u", shade::LIGHT_AREA)),
+        ("MAX_LIGHTS", format!("{}", shade::MAX_LIGHTS)),
+        ("ALPHA_CUTOFF", format!("{:?}", shade::ALPHA_CUTOFF)),
         ("RAY_PRIMARY", format!("{}u", lod::RAY_PRIMARY)),
         ("RAY_SHADOW", format!("{}u", lod::RAY_SHADOW)),
         ("LOD_NOT_FORCED", format!("{}", lod::LOD_NOT_FORCED)),

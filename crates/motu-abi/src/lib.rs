@@ -24,6 +24,7 @@ pub mod camera;
 pub mod glsl;
 pub mod lod;
 mod records;
+pub mod shade;
 
 pub use records::*;
 
@@ -31,3 +32,4 @@ pub use records::*;
 /// frame's work on exponentially deep instancing. Real scenes spend tens of walks per ray;
 /// cut rays are counted (`truncated_rays`) and a render with any fails unless allowed.
 pub const DEFAULT_MAX_TRACES_PER_RAY: u32 = 4096;
+pub use shade::{LightRecord, TextureRecord};

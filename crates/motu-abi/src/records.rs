@@ -134,17 +134,50 @@ pub struct MeshRecord {
     /// With [`FLAG_PRIMITIVE_MAP`]: the cluster's `u32` per triangle (its triangle index in
     /// the source mesh, or in the LOD level's mesh when `lod > 0`); else `NONE_U64`.
     pub primitive_map_offset: u64,
+    /// `[f32; 2]` per vertex; meaningful only with `FLAG_HAS_UVS`.
+    pub uvs_offset: u64,
+    pub _pad_uv: u64,
     pub bounds_min: [f32; 3],
     pub _pad1: u32,
     pub bounds_max: [f32; 3],
     pub _pad2: u32,
 }
 
-#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+/// What a surface looks like (resolved at import: constant, scale and mix textures are folded
+/// into the constants; image textures are referenced by index).
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct MaterialRecord {
+    /// Linear RGB reflectance (multiplied by the base-colour texture where there is one).
     pub base_color: [f32; 3],
+    /// Constant coverage (`float alpha` / `opacity`): below `ALPHA_CUTOFF` the surface is cut out.
     pub opacity: f32,
+    /// Emitted radiance (area lights), linear RGB.
+    pub emission: [f32; 3],
+    /// Perceptual roughness in [0, 1].
+    pub roughness: f32,
+    /// 0 dielectric, 1 metal.
+    pub metallic: f32,
+    /// Index into the texture table, or `NONE_U32`.
+    pub base_color_texture: u32,
+    /// Coverage texture (its first channel, or alpha where it has one), or `NONE_U32`.
+    pub alpha_texture: u32,
+    pub _pad: u32,
+}
+
+impl Default for MaterialRecord {
+    fn default() -> Self {
+        Self {
+            base_color: [0.5; 3],
+            opacity: 1.0,
+            emission: [0.0; 3],
+            roughness: 0.5,
+            metallic: 0.0,
+            base_color_texture: NONE_U32,
+            alpha_texture: NONE_U32,
+            _pad: 0,
+        }
+    }
 }
 
 /// Applies a row-major 3×4 transform to a point.
@@ -181,6 +214,10 @@ pub struct HierarchyView<'a> {
     pub lod_levels: &'a [u32],
     pub meshes: &'a [MeshRecord],
     pub materials: &'a [MaterialRecord],
+    /// Image textures (texels in [`HierarchyView::texels`]).
+    pub textures: &'a [crate::shade::TextureRecord],
+    /// RGBA8 texels of every texture's mip chain, one `u32` each (R in the low byte).
+    pub texels: &'a [u32],
 }
 
 /// A broken reference in a hierarchy (from a corrupt package or a compiler bug).
@@ -265,6 +302,20 @@ impl HierarchyView<'_> {
         for (i, m) in self.meshes.iter().enumerate() {
             if m.material as usize >= self.materials.len() {
                 return err("meshes", i, format!("material {} out of range", m.material));
+            }
+        }
+        for (i, t) in self.textures.iter().enumerate() {
+            if t.mip_count == 0
+                || t.texel_offset as u64 + t.texel_count() > self.texels.len() as u64
+            {
+                return err("textures", i, "texel range out of bounds".into());
+            }
+        }
+        for (i, m) in self.materials.iter().enumerate() {
+            for t in [m.base_color_texture, m.alpha_texture] {
+                if t != NONE_U32 && t as usize >= self.textures.len() {
+                    return err("materials", i, format!("texture {t} out of range"));
+                }
             }
         }
         Ok(())

@@ -130,7 +130,7 @@ pub struct Allocator {
     next_block: u32,
     next_allocation: u64,
     events: Vec<BlockEvent>,
-    kinds: [KindStats; 8],
+    kinds: [KindStats; 9],
     peak_block_count: u32,
     peak_budgeted_block_bytes: u64,
     peak_budgeted_in_use_bytes: u64,

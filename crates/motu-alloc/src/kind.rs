@@ -21,13 +21,15 @@ pub enum AllocKind {
     NodeTable,
     /// Host-visible staging for uploads.
     Staging,
+    /// Image textures and per-vertex shading attributes (normals, texture coordinates).
+    Texture,
     /// Anything else.
     Other,
 }
 
 impl AllocKind {
     /// Every kind, in declaration order (the index used by per-kind tables).
-    pub const ALL: [AllocKind; 8] = [
+    pub const ALL: [AllocKind; 9] = [
         AllocKind::BlasStorage,
         AllocKind::TlasStorage,
         AllocKind::Scratch,
@@ -35,6 +37,7 @@ impl AllocKind {
         AllocKind::Geometry,
         AllocKind::NodeTable,
         AllocKind::Staging,
+        AllocKind::Texture,
         AllocKind::Other,
     ];
 
@@ -52,6 +55,7 @@ impl AllocKind {
             AllocKind::Geometry => "geometry",
             AllocKind::NodeTable => "node_table",
             AllocKind::Staging => "staging",
+            AllocKind::Texture => "texture",
             AllocKind::Other => "other",
         }
     }

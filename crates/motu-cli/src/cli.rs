@@ -221,6 +221,10 @@ pub struct ImportArgs {
     /// Chunk target size.
     #[arg(long, value_parser = parse_size, default_value = "64MiB")]
     pub chunk_size: u64,
+    /// Image textures are stored as mip chains whose finest level has at most this many
+    /// texels per side (larger images are halved until they fit).
+    #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(1..=16384))]
+    pub texture_max: u32,
     /// One JSON object on stdout describing the import.
     #[arg(long)]
     pub json: bool,
@@ -353,6 +357,15 @@ pub struct RenderArgs {
     /// a counted warning instead of an error.
     #[arg(long)]
     pub allow_truncated: bool,
+    /// Samples per pixel of the shaded view (the first, at the pixel centre, gives the AOV).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub spp: u32,
+    /// Ambient-occlusion rays per sample for the sky term (0: unoccluded sky light).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=256))]
+    pub ao_samples: u32,
+    /// Exposure in stops: the shaded image is scaled by 2^EV before the sRGB transfer.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub exposure: f32,
     /// Vulkan device index.
     #[arg(long, env = "MOTU_DEVICE")]
     pub device: Option<usize>,

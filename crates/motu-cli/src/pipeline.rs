@@ -33,6 +33,8 @@ pub struct ImportOptions {
     pub chunk_bytes: u64,
     pub parallel: bool,
     pub curve_ribbons: bool,
+    /// Largest side of an image texture's finest mip level (`--texture-max`).
+    pub texture_max: u32,
 }
 
 #[derive(Debug, serde::Serialize)]
@@ -211,6 +213,7 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
                 info.vertex_count,
                 info.triangle_count,
                 info.has_normals,
+                info.has_uvs,
             )
             .map_err(|e| e.to_string())
         };
@@ -225,6 +228,7 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
                 info.vertex_count,
                 info.triangle_count,
                 info.has_normals,
+                info.has_uvs,
             )?;
             let at = final_geo
                 .append_mesh(m.element, &data)
@@ -385,8 +389,70 @@ fn finish(
         compile: serde_json::to_value(&compiled.report)?,
         warnings: report.warnings.clone(),
     };
-    motu_pack::write_hierarchy(&mut writer, &compiled.view(), &meta)?;
+    let mut meta = meta;
+    let (textures, texels) = load_textures(scene, o.texture_max, &mut meta.warnings)?;
+    let mut view = compiled.view();
+    view.textures = &textures;
+    view.texels = &texels;
+    motu_pack::write_hierarchy(&mut writer, &view, &meta)?;
     writer.finish().context("writing the package")
+}
+
+/// Reads every scene texture into a capped mip chain (several at a time), in scene order so
+/// materials' texture indices hold. A file that cannot be read becomes a neutral 1×1 texture
+/// (white, opaque: the material's constant colour shows) with a warning.
+fn load_textures(
+    scene: &Scene,
+    max_size: u32,
+    warnings: &mut Vec<String>,
+) -> anyhow::Result<(Vec<motu_abi::TextureRecord>, Vec<u32>)> {
+    use rayon::prelude::*;
+    let list = scene.textures();
+    let mut records = Vec::with_capacity(list.len());
+    let mut texels: Vec<u32> = Vec::new();
+    // A bounded batch keeps at most this many decoded images in memory at once.
+    const BATCH: usize = 8;
+    for batch in list.chunks(BATCH) {
+        let chains: Vec<_> = batch
+            .par_iter()
+            .map(|t| motu_texture::load(&t.path, max_size, t.is_alpha))
+            .collect();
+        for (t, chain) in batch.iter().zip(chains) {
+            let chain = match chain {
+                Ok(c) => c,
+                Err(e) => {
+                    let msg =
+                        format!("texture not read ({e}); the material's constant colour is used");
+                    tracing::warn!("{msg}");
+                    warnings.push(msg);
+                    motu_texture::MipChain {
+                        width: 1,
+                        height: 1,
+                        levels: vec![vec![u32::MAX]],
+                    }
+                }
+            };
+            let texel_offset = u32::try_from(texels.len())
+                .ok()
+                .filter(|&o| (o as u64) + (chain.texel_count() as u64) <= u32::MAX as u64)
+                .with_context(|| {
+                    format!(
+                        "textures exceed 2^32 texels at {} (lower --texture-max)",
+                        t.path.display()
+                    )
+                })?;
+            records.push(motu_abi::TextureRecord {
+                texel_offset,
+                width: chain.width,
+                height: chain.height,
+                mip_count: chain.levels.len() as u32,
+            });
+            for level in chain.levels {
+                texels.extend_from_slice(&level);
+            }
+        }
+    }
+    Ok((records, texels))
 }
 
 /// Per-element counts: each element's root edges and root meshes, and everything they reach.
@@ -409,6 +475,7 @@ pub fn element_stats(scene: &Scene) -> Vec<ElementMeta> {
             i.triangle_count as u64,
             i.has_normals,
         )
+        .with_uvs(i.has_uvs)
         .len
     };
     scene

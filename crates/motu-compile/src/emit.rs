@@ -83,6 +83,12 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
                 .map(|m| MaterialRecord {
                     base_color: m.base_color,
                     opacity: m.opacity,
+                    emission: m.emission,
+                    roughness: m.roughness,
+                    metallic: m.metallic,
+                    base_color_texture: m.base_color_texture.unwrap_or(NONE_U32),
+                    alpha_texture: m.alpha_texture.unwrap_or(NONE_U32),
+                    _pad: 0,
                 })
                 .collect(),
             ..Default::default()

@@ -249,6 +249,10 @@ pub struct CompiledScene {
     pub lod_levels: Vec<u32>,
     pub meshes: Vec<MeshRecord>,
     pub materials: Vec<MaterialRecord>,
+    /// One record per scene texture (filled by the packer, which reads the images; the
+    /// compiler leaves both empty and materials refer to scene texture indices).
+    pub textures: Vec<motu_abi::TextureRecord>,
+    pub texels: Vec<u32>,
     pub report: CompileReport,
 }
 
@@ -265,6 +269,8 @@ impl CompiledScene {
             lod_levels: &self.lod_levels,
             meshes: &self.meshes,
             materials: &self.materials,
+            textures: &self.textures,
+            texels: &self.texels,
         }
     }
 }
@@ -308,6 +314,17 @@ pub fn compile_with_loader(
     check_options(opts)?;
     let plan = analyze::Plan::new(scene, opts)?;
     let mut out = emit::Emitter::new(&plan, load, sink).run()?;
+    // A neutral 1×1 texture per scene texture until the packer reads the images
+    // (`CompiledScene::textures`): the hierarchy is complete without them.
+    out.textures = (0..scene.textures().len() as u32)
+        .map(|i| motu_abi::TextureRecord {
+            texel_offset: i,
+            width: 1,
+            height: 1,
+            mip_count: 1,
+        })
+        .collect();
+    out.texels = vec![u32::MAX; scene.textures().len()];
     finalize::finalize(&mut out)?;
     out.report.time_ms = start.elapsed().as_secs_f64() * 1e3;
     tracing::info!(

@@ -32,6 +32,7 @@ mod report;
 mod rt_pipeline;
 mod scene;
 pub mod shaders;
+mod shading;
 mod stream;
 pub mod testing;
 

@@ -10,6 +10,8 @@ use bytemuck::{Pod, Zeroable};
 use motu_abi::aov::{Aov, AovRecord};
 use motu_abi::camera::CameraParams;
 use motu_abi::lod::LodParams;
+use motu_abi::shade::{Shading, MAX_LIGHTS};
+use motu_abi::LightRecord;
 use motu_alloc::{AllocKind, MemoryClass};
 use serde::Serialize;
 
@@ -108,6 +110,8 @@ pub struct RenderOptions {
     pub shadows: bool,
     /// Shadow rays use the primary hit's LOD (prevents LOD self-shadowing).
     pub shadow_lod_from_primary: bool,
+    /// Scene lights, sky, ambient occlusion, samples per pixel and exposure (shaded view).
+    pub shading: Shading,
 }
 
 impl Default for RenderOptions {
@@ -124,6 +128,7 @@ impl Default for RenderOptions {
             ambient: 0.25,
             shadows: true,
             shadow_lod_from_primary: true,
+            shading: Shading::default(),
         }
     }
 }
@@ -167,7 +172,7 @@ pub struct RenderOutput {
     pub stats: RenderStats,
 }
 
-/// `FrameParams` of `common.glsl` (std430, 128 bytes).
+/// `FrameParams` of `common.glsl` (std430, 544 bytes).
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 #[repr(C)]
 pub(crate) struct FrameParams {
@@ -179,7 +184,15 @@ pub(crate) struct FrameParams {
     shadow_lod_from_primary: u32,
     ambient: f32,
     root_tlas: u32,
-    _pad: [u32; 3],
+    light_count: u32,
+    /// Address of the scene's shading tables (`shade.glsl`'s `ShadingRef`), 0 for none.
+    pub(crate) shading: u64,
+    sky: [f32; 4],
+    ao_samples: u32,
+    spp: u32,
+    ao_distance: f32,
+    exposure_scale: f32,
+    lights: [LightRecord; MAX_LIGHTS],
 }
 
 pub(crate) const STAT_WORDS: usize = 5;
@@ -376,6 +389,9 @@ pub(crate) fn frame_params(
         let l = (s[0] * s[0] + s[1] * s[1] + s[2] * s[2]).sqrt().max(1e-20);
         [s[0] / l, s[1] / l, s[2] / l, opts.sun_intensity]
     };
+    let sh = &opts.shading;
+    let (lights, light_count) = sh.frame_lights(opts.sun_dir_world, opts.sun_intensity);
+    let sky = sh.sky_radiance(opts.ambient);
     FrameParams {
         camera: *camera,
         lod: opts.lod,
@@ -385,7 +401,20 @@ pub(crate) fn frame_params(
         shadow_lod_from_primary: u32::from(opts.shadow_lod_from_primary),
         ambient: opts.ambient,
         root_tlas,
-        _pad: [0; 3],
+        light_count,
+        shading: 0,
+        sky: [
+            sky[0],
+            sky[1],
+            sky[2],
+            if sh.sky.is_some() { 1.0 } else { 0.0 },
+        ],
+        ao_samples: sh.ao_samples,
+        spp: sh.spp.max(1),
+        // GLSL has no infinity literal here: T_INFINITY (3e38) stands for it.
+        ao_distance: sh.ao_distance.min(3.0e38),
+        exposure_scale: sh.exposure_scale(),
+        lights,
     }
 }
 
@@ -419,7 +448,8 @@ pub fn render_counted(
         height = h
     );
     let _g = span.enter();
-    let params = frame_params(camera, opts, scene.root_tlas);
+    let mut params = frame_params(camera, opts, scene.root_tlas);
+    params.shading = scene.shading_address;
     let pixels = u64::from(w) * u64::from(h);
     let frames = opts.frames.max(1);
     let mut heap = scene.heap();

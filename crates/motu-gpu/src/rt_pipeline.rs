@@ -1,7 +1,8 @@
 //! The ray-tracing pipeline of the `pipeline` backend and its shader binding table.
 //!
-//! Groups: raygen (`pipeline/trace.rgen`), miss, hit group 0 = triangles (closest-hit only;
-//! instances `FORCE_OPAQUE`, SBT offset 0), hit group 1 = programmable instances
+//! Groups: raygen (`pipeline/trace.rgen`), miss, hit group 0 = triangles (closest-hit, and
+//! an any-hit alpha test that only non-opaque geometry runs; opaque instances `FORCE_OPAQUE`,
+//! SBT offset 0), hit group 1 = programmable instances
 //! (intersection + any-hit; instances `FORCE_NO_OPAQUE`, SBT offset 1). No descriptor sets:
 //! everything is reached through 128 bytes of push-constant device addresses.
 
@@ -67,7 +68,7 @@ impl RtPipeline {
         p.layout = unsafe { device.create_pipeline_layout(&layout_info, None) }
             .map_err(GpuError::vk("vkCreatePipelineLayout"))?;
 
-        let sources: [(&[u32], vk::ShaderStageFlags); 5] = [
+        let sources: [(&[u32], vk::ShaderStageFlags); 6] = [
             (
                 shaders::PIPELINE_TRACE_RGEN,
                 vk::ShaderStageFlags::RAYGEN_KHR,
@@ -83,6 +84,10 @@ impl RtPipeline {
             ),
             (
                 shaders::PIPELINE_PI_RAHIT,
+                vk::ShaderStageFlags::ANY_HIT_KHR,
+            ),
+            (
+                shaders::PIPELINE_TRIANGLE_RAHIT,
                 vk::ShaderStageFlags::ANY_HIT_KHR,
             ),
         ];
@@ -151,7 +156,7 @@ impl RtPipeline {
                 .ty(vk::RayTracingShaderGroupTypeKHR::TRIANGLES_HIT_GROUP)
                 .general_shader(unused)
                 .closest_hit_shader(2)
-                .any_hit_shader(unused)
+                .any_hit_shader(5)
                 .intersection_shader(unused),
             vk::RayTracingShaderGroupCreateInfoKHR::default()
                 .ty(vk::RayTracingShaderGroupTypeKHR::PROCEDURAL_HIT_GROUP)

@@ -52,6 +52,17 @@ pub trait MeshBlobSource {
     ) -> std::result::Result<Option<Cow<'_, [u32]>>, String> {
         Ok(None)
     }
+
+    /// Per-vertex normals and texture coordinates for shading, where the mesh has them
+    /// (default: none, so shading uses geometric normals and constant colours).
+    #[allow(clippy::type_complexity)]
+    fn mesh_shading(
+        &self,
+        _mesh_record: u32,
+    ) -> std::result::Result<(Option<Cow<'_, [[f32; 3]]>>, Option<Cow<'_, [[f32; 2]]>>), String>
+    {
+        Ok((None, None))
+    }
 }
 
 /// How to build a [`GpuScene`].
@@ -107,6 +118,10 @@ pub struct ResourceReport {
     pub instance_buffer_peak_bytes: u64,
     pub geometry_bytes: u64,
     pub table_bytes: u64,
+    /// Image textures (records and mip chains) resident for shading.
+    pub texture_bytes: u64,
+    /// Per-vertex normals and texture coordinates resident for shading.
+    pub shading_attribute_bytes: u64,
     pub build_batches: u32,
     /// Highest bytes in memory blocks counted against the budget.
     pub peak_bytes: u64,
@@ -630,6 +645,8 @@ pub struct GpuScene {
     tables: Vec<HeapBuffer>,
     pub(crate) addresses: [u64; SLOT_COUNT],
     pub(crate) root_tlas: u32,
+    /// `FrameParams::shading`: the shading tables' header (`shading.rs`).
+    pub(crate) shading_address: u64,
     pub(crate) heap: Mutex<GpuHeap>,
     report: ResourceReport,
     ctx: Context,
@@ -690,6 +707,7 @@ impl GpuScene {
             tables: Vec::new(),
             addresses: [0; SLOT_COUNT],
             root_tlas: view.root_tlas,
+            shading_address: 0,
             heap: Mutex::new(GpuHeap::new(ctx, limits)?),
             report: ResourceReport {
                 budget_bytes: budget,
@@ -825,6 +843,11 @@ impl GpuScene {
             }
         }
         self.upload_table(ctx, heap, up, Slot::MeshGeo, cast_slice(&mesh_geo))?;
+        let shading = crate::shading::upload(ctx, heap, up, view, source, &used)?;
+        self.shading_address = shading.address;
+        self.report.texture_bytes = shading.texture_bytes;
+        self.report.shading_attribute_bytes = shading.attribute_bytes;
+        self.tables.extend(shading.buffers);
 
         // 3. AABBs of programmable instances (build input only).
         let aabbs = pi_aabbs(view);

@@ -56,15 +56,41 @@ pub fn ingest_obj(
     }
     let mut b = SceneBuilder::new(geometry);
     let mut mat_ids = Vec::new();
+    let dir = path.parent().unwrap_or(Path::new("."));
     match materials {
         Ok(ms) => {
             for m in ms {
+                // MTL map names are relative to the OBJ; a missing file falls back to Kd.
+                let mut texture = |name: &Option<String>, is_alpha: bool| {
+                    let name = name.as_ref()?;
+                    let file = dir.join(name);
+                    if !file.is_file() {
+                        report.warnings.push(format!(
+                            "{shown}: texture file missing: {}; the material's constant colour is used",
+                            file.display()
+                        ));
+                        return None;
+                    }
+                    Some(b.add_texture(motu_scene::Texture {
+                        path: file,
+                        is_alpha,
+                    }))
+                };
+                let base_color_texture = texture(&m.diffuse_texture, false);
+                let alpha_texture = texture(&m.dissolve_texture, true);
+                // Phong exponent to roughness (Ns 0 → 1, Ns 1000 → ~0.06).
+                let roughness = m
+                    .shininess
+                    .map_or(1.0, |ns| (2.0 / (ns.max(0.0) + 2.0)).sqrt().clamp(0.0, 1.0));
                 let id = b
                     .add_material(Material {
                         name: m.name.clone(),
                         base_color: m.diffuse.unwrap_or([0.5; 3]),
                         opacity: m.dissolve.unwrap_or(1.0),
-                        alpha_texture: m.dissolve_texture.clone(),
+                        alpha_texture,
+                        base_color_texture,
+                        roughness,
+                        ..Material::default()
                     })
                     .map_err(|e| IngestError::Scene {
                         at: shown.clone(),

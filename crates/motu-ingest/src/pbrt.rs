@@ -4,7 +4,7 @@ use crate::{IngestError, IngestOptions, IngestReport};
 use glam::{Mat3, Mat4, Vec3};
 use motu_scene::{
     Camera, ElementId, GeometryStore, Light, LightKind, Material, MaterialId, MeshData,
-    PrototypeId, Scene, SceneBuilder, SceneError, Transform34,
+    PrototypeId, Scene, SceneBuilder, SceneError, Texture, Transform34,
 };
 use pbrt_import::{
     CameraEvent, FileEvent, Geometry, InstanceEvent, LightEvent, ObjectEvent, ParseOptions,
@@ -21,6 +21,8 @@ struct Adapter {
     b: SceneBuilder,
     objects: HashMap<pbrt_import::ObjectId, PrototypeId>,
     materials: HashMap<pbrt_import::MaterialId, MaterialId>,
+    /// Materials derived per shape: (material, alpha image, alpha bits, emission bits).
+    derived: HashMap<DerivedKey, MaterialId>,
     elements: HashMap<pbrt_import::ElementId, ElementId>,
     files: HashMap<pbrt_import::FileId, PathBuf>,
     camera_names: HashMap<String, u32>,
@@ -32,6 +34,44 @@ struct Adapter {
     progress: Option<crate::ProgressFn>,
     bytes_entered: u64,
 }
+
+/// Shapes that stand for smooth surfaces: tessellated quadrics and subdivision surfaces get
+/// smoothed vertex normals when they carry none (a triangle mesh without `N` stays faceted,
+/// as pbrt renders it).
+fn asks_for_smooth_normals(kind: &str) -> bool {
+    matches!(
+        kind,
+        "loopsubdiv" | "sphere" | "cylinder" | "disk" | "cone" | "paraboloid" | "hyperboloid"
+    )
+}
+
+/// Area-weighted averages of the faces around each vertex (zero-area vertices get +z).
+fn smooth_normals(positions: &[[f32; 3]], indices: &[u32]) -> Vec<[f32; 3]> {
+    let mut acc = vec![Vec3::ZERO; positions.len()];
+    for t in indices.chunks_exact(3) {
+        let (Some(a), Some(b), Some(c)) = (
+            positions.get(t[0] as usize),
+            positions.get(t[1] as usize),
+            positions.get(t[2] as usize),
+        ) else {
+            continue;
+        };
+        let (a, b, c) = (
+            Vec3::from_array(*a),
+            Vec3::from_array(*b),
+            Vec3::from_array(*c),
+        );
+        let n = (b - a).cross(c - a);
+        for &i in t {
+            acc[i as usize] += n;
+        }
+    }
+    acc.into_iter()
+        .map(|n| n.try_normalize().unwrap_or(Vec3::Z).to_array())
+        .collect()
+}
+
+type DerivedKey = (MaterialId, Option<PathBuf>, u32, [u32; 3]);
 
 /// Ribbon triangles gathered into one mesh before it is stored.
 const CURVE_MESH_TRIANGLES: usize = 1 << 20;
@@ -91,6 +131,12 @@ impl Adapter {
             return Ok(id);
         }
         let opacity = m.opacity.map(|o| (o[0] + o[1] + o[2]) / 3.0).unwrap_or(1.0);
+        let base_color_texture = m.base_color_image.as_ref().map(|path| {
+            self.b.add_texture(Texture {
+                path: path.clone(),
+                is_alpha: false,
+            })
+        });
         let id = self
             .b
             .add_material(Material {
@@ -101,9 +147,52 @@ impl Adapter {
                 base_color: m.base_color.unwrap_or([0.5; 3]),
                 opacity,
                 alpha_texture: None,
+                base_color_texture,
+                roughness: m.roughness.unwrap_or(0.5),
+                metallic: m.metallic.unwrap_or(0.0),
+                emission: [0.0; 3],
             })
             .map_err(sink_err)?;
         self.materials.insert(m.id, id);
+        Ok(id)
+    }
+
+    /// The shape's material with its own coverage (`alpha`) and emission (area light), which
+    /// pbrt attaches to shapes and motu to materials: one derived material per combination.
+    fn shape_material(
+        &mut self,
+        base: MaterialId,
+        alpha_image: Option<&PathBuf>,
+        alpha: Option<f32>,
+        emission: Option<[f32; 3]>,
+    ) -> Result<MaterialId, SinkError> {
+        let alpha = alpha.filter(|a| *a < 1.0);
+        if alpha_image.is_none() && alpha.is_none() && emission.is_none() {
+            return Ok(base);
+        }
+        let e = emission.unwrap_or([0.0; 3]);
+        let key: DerivedKey = (
+            base,
+            alpha_image.cloned(),
+            alpha.unwrap_or(1.0).to_bits(),
+            e.map(f32::to_bits),
+        );
+        if let Some(&id) = self.derived.get(&key) {
+            return Ok(id);
+        }
+        let mut m = self.b.material(base).clone();
+        if let Some(path) = alpha_image {
+            m.alpha_texture = Some(self.b.add_texture(Texture {
+                path: path.clone(),
+                is_alpha: true,
+            }));
+        }
+        if let Some(a) = alpha {
+            m.opacity = m.opacity.min(a);
+        }
+        m.emission = e;
+        let id = self.b.add_material(m).map_err(sink_err)?;
+        self.derived.insert(key, id);
         Ok(id)
     }
 }
@@ -207,6 +296,10 @@ impl SceneSink for Adapter {
             .map(|p| m.transform_point3(Vec3::from_array(*p)).to_array())
             .collect();
         let normal_m = Mat3::from_mat4(m).inverse().transpose();
+        let mut mesh = mesh;
+        if mesh.normals.is_none() && asks_for_smooth_normals(&s.kind) {
+            mesh.normals = Some(smooth_normals(&mesh.positions, &mesh.indices));
+        }
         let normals = mesh.normals.map(|ns| {
             ns.iter()
                 .map(|n| {
@@ -222,7 +315,45 @@ impl SceneSink for Adapter {
             uvs: mesh.uvs,
             indices: mesh.indices,
         };
-        let material = self.material(&s.material)?;
+        let emission = s
+            .area_light
+            .as_ref()
+            .map(|l| l.radiance.unwrap_or([1.0; 3]));
+        if let (Some(l), None) = (emission, s.object) {
+            // An emitter outside any object also lights the scene: a point light at its centre
+            // with its power (L × area, two-sided emitters twice).
+            let mut area = 0.0f32;
+            let mut centre = Vec3::ZERO;
+            for t in data.indices.chunks_exact(3) {
+                let [a, b, c] = [0, 1, 2].map(|k| Vec3::from_array(data.positions[t[k] as usize]));
+                let ta = 0.5 * (b - a).cross(c - a).length();
+                area += ta;
+                centre += ta * (a + b + c) / 3.0;
+            }
+            let two_sided = s.area_light.as_ref().is_some_and(|l| l.two_sided);
+            let power = area * if two_sided { 2.0 } else { 1.0 };
+            let peak = l.iter().cloned().fold(0.0f32, f32::max);
+            if area > 0.0 && peak > 0.0 {
+                let centre = centre / area;
+                let radius = data
+                    .positions
+                    .iter()
+                    .map(|p| Vec3::from_array(*p).distance(centre))
+                    .fold(0.0f32, f32::max);
+                self.b.add_light(Light {
+                    kind: LightKind::Area,
+                    color: l.map(|c| c / peak),
+                    intensity: peak * power,
+                    world_direction: [0.0; 3],
+                    world_position: centre.to_array(),
+                    cone_deg: None,
+                    radius,
+                });
+            }
+        }
+        let base_material = self.material(&s.material)?;
+        let material =
+            self.shape_material(base_material, s.alpha_image.as_ref(), s.alpha, emission)?;
         let element = self.element(s.element);
         let proto = match s.object {
             Some(o) => self.prototype(o, "object", s.element)?,
@@ -334,7 +465,19 @@ impl SceneSink for Adapter {
         let from = Vec3::from_array(e.from.unwrap_or([0.0; 3]));
         let to = Vec3::from_array(e.to.unwrap_or([0.0, 0.0, 1.0]));
         let dir = w.transform_vector3(to - from).normalize_or_zero();
-        let color = e.color.unwrap_or([1.0; 3]);
+        let mut color = e.color.unwrap_or([1.0; 3]);
+        if let (LightKind::Infinite, Some(path)) = (kind, &e.map_path) {
+            // An environment map lights as its average colour.
+            match motu_texture::average(path) {
+                Ok(avg) => color = std::array::from_fn(|i| color[i] * avg[i]),
+                Err(err) => {
+                    let at = self.where_(&e.loc);
+                    self.warn(format!(
+                        "{at}: environment map not read ({err}); its constant colour is used"
+                    ));
+                }
+            }
+        }
         let intensity = color.iter().cloned().fold(0.0f32, f32::max);
         let color = if intensity > 0.0 {
             color.map(|c| c / intensity)
@@ -347,6 +490,8 @@ impl SceneSink for Adapter {
             intensity,
             world_direction: dir.to_array(),
             world_position: w.transform_point3(from).to_array(),
+            cone_deg: e.cone_deg,
+            radius: 0.0,
         });
         Ok(())
     }
@@ -403,6 +548,7 @@ fn ingest_pbrt_with(
         b: SceneBuilder::new(geometry),
         objects: HashMap::new(),
         materials: HashMap::new(),
+        derived: HashMap::new(),
         elements: HashMap::new(),
         files: HashMap::new(),
         camera_names: HashMap::new(),

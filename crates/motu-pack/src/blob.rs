@@ -9,26 +9,30 @@ fn align16(v: u64) -> u64 {
     v.div_ceil(MESH_BLOB_ALIGN) * MESH_BLOB_ALIGN
 }
 
-/// Byte offsets of the arrays inside a blob, derived from the counts alone.
+/// Byte offsets of the arrays inside a blob, derived from the counts alone. Order: positions,
+/// indices, normals, texture coordinates, primitive map; each present array starts 16-aligned.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct MeshBlobLayout {
     pub vertex_count: u64,
     pub triangle_count: u64,
     pub has_normals: bool,
+    pub has_uvs: bool,
     pub has_primitive_map: bool,
     pub positions: u64,
     pub indices: u64,
     /// Equal to the end of the indices (16-aligned) when there are no normals.
     pub normals: u64,
+    /// `[f32; 2]` per vertex after the normals; meaningful only with `has_uvs`.
+    pub uvs: u64,
     /// The primitive map (`u32` per triangle) of a cluster: at the next 16-byte boundary after
-    /// the normals (or indices); equal to `len` when there is none.
+    /// the arrays before it; equal to `len` when there is none.
     pub primitive_map: u64,
     pub len: u64,
 }
 
 impl MeshBlobLayout {
     pub fn new(vertex_count: u64, triangle_count: u64, has_normals: bool) -> Self {
-        Self::with_map(vertex_count, triangle_count, has_normals, false)
+        Self::full(vertex_count, triangle_count, has_normals, false, false)
     }
 
     /// The layout of a blob that may carry a primitive map (a partitioned mesh's cluster).
@@ -36,6 +40,33 @@ impl MeshBlobLayout {
         vertex_count: u64,
         triangle_count: u64,
         has_normals: bool,
+        has_primitive_map: bool,
+    ) -> Self {
+        Self::full(
+            vertex_count,
+            triangle_count,
+            has_normals,
+            false,
+            has_primitive_map,
+        )
+    }
+
+    /// The same layout with texture coordinates after the normals (or not).
+    pub fn with_uvs(self, has_uvs: bool) -> Self {
+        Self::full(
+            self.vertex_count,
+            self.triangle_count,
+            self.has_normals,
+            has_uvs,
+            self.has_primitive_map,
+        )
+    }
+
+    fn full(
+        vertex_count: u64,
+        triangle_count: u64,
+        has_normals: bool,
+        has_uvs: bool,
         has_primitive_map: bool,
     ) -> Self {
         let positions = 0;
@@ -46,39 +77,50 @@ impl MeshBlobLayout {
         } else {
             normals
         };
+        let uvs = align16(normals_end);
+        let uvs_end = if has_uvs {
+            uvs + vertex_count * 8
+        } else {
+            normals_end
+        };
         let (primitive_map, len) = if has_primitive_map {
-            let at = align16(normals_end);
+            let at = align16(uvs_end);
             (at, at + triangle_count * 4)
         } else {
-            (normals_end, normals_end)
+            (uvs_end, uvs_end)
         };
         Self {
             vertex_count,
             triangle_count,
             has_normals,
+            has_uvs,
             has_primitive_map,
             positions,
             indices,
             normals,
+            uvs,
             primitive_map,
             len,
         }
     }
 
+    fn mesh_has_uvs(mesh: &MeshData) -> bool {
+        mesh.uvs
+            .as_ref()
+            .is_some_and(|u| u.len() == mesh.positions.len())
+    }
+
     pub fn of(mesh: &MeshData) -> Self {
-        Self::new(
-            mesh.positions.len() as u64,
-            mesh.triangle_count() as u64,
-            mesh.normals.is_some(),
-        )
+        Self::of_mapped(mesh, None)
     }
 
     /// The layout of `mesh` with `primitive_map` (one `u32` per triangle) after its arrays.
     pub fn of_mapped(mesh: &MeshData, primitive_map: Option<&[u32]>) -> Self {
-        Self::with_map(
+        Self::full(
             mesh.positions.len() as u64,
             mesh.triangle_count() as u64,
             mesh.normals.is_some(),
+            Self::mesh_has_uvs(mesh),
             primitive_map.is_some(),
         )
     }
@@ -125,6 +167,9 @@ impl MeshBlobLayout {
         if let Some(n) = &mesh.normals {
             put(&mut out, self.normals, bytemuck::cast_slice(n));
         }
+        if let (true, Some(uv)) = (self.has_uvs, &mesh.uvs) {
+            put(&mut out, self.uvs, bytemuck::cast_slice(uv));
+        }
         out
     }
 
@@ -145,10 +190,13 @@ impl MeshBlobLayout {
         let normals = self
             .has_normals
             .then(|| bytemuck::pod_collect_to_vec(slice(self.normals, self.vertex_count * 12)));
+        let uvs = self
+            .has_uvs
+            .then(|| bytemuck::pod_collect_to_vec(slice(self.uvs, self.vertex_count * 8)));
         Ok(MeshData {
             positions,
             normals,
-            uvs: None,
+            uvs,
             indices,
         })
     }
@@ -170,6 +218,13 @@ mod tests {
         assert_eq!((l.indices, l.normals, l.len), (48, 64, 100));
         assert_eq!(l.decode(&l.encode(&m)).unwrap(), m);
         assert!(l.decode(&[0u8; 10]).is_err());
+        let with_uvs = MeshData {
+            uvs: Some(vec![[0.0, 1.0], [0.5, 0.5], [1.0, 0.0]]),
+            ..m.clone()
+        };
+        let l = MeshBlobLayout::of(&with_uvs);
+        assert_eq!((l.normals, l.uvs, l.len), (64, 112, 136));
+        assert_eq!(l.decode(&l.encode(&with_uvs)).unwrap(), with_uvs);
         assert_eq!(l.decode_primitive_map(&l.encode(&m)).unwrap(), None);
     }
 

@@ -5,10 +5,12 @@ use serde::{Deserialize, Serialize};
 
 /// Identifies the section layout this build writes; readers reject other schemas.
 /// `motu-scene/2` added partitioned meshes (clusters with a primitive map, `FLAG_PRIMITIVE_MAP`);
-/// a `/1` package is still read (it has no clusters), while a `/1` reader refuses `/2`.
-pub const SCHEMA: &str = "motu-scene/2";
-/// Older schemas this build still reads.
-pub const SCHEMA_READABLE: &[&str] = &["motu-scene/1", SCHEMA];
+/// `motu-scene/3` added shading data (texture coordinates in mesh blobs, `MeshRecord::uvs_offset`
+/// which grew the mesh record to 112 bytes, material parameters, lights, textures and texels).
+/// Older packages have the 96-byte mesh record, so they are refused with a re-import hint.
+pub const SCHEMA: &str = "motu-scene/3";
+/// Schemas this build reads.
+pub const SCHEMA_READABLE: &[&str] = &[SCHEMA];
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ElementMeta {
@@ -51,15 +53,17 @@ pub struct PackageMeta {
 
 /// Parses the `meta` section as every reader does: valid JSON of this schema.
 pub(crate) fn parse_meta(bytes: &[u8]) -> Result<PackageMeta, String> {
-    let meta: PackageMeta =
+    // The schema first: an older package's meta lacks newer fields, and "missing field" would
+    // hide the real reason.
+    let value: serde_json::Value =
         serde_json::from_slice(bytes).map_err(|e| format!("meta section is not valid: {e}"))?;
-    if !SCHEMA_READABLE.contains(&meta.schema.as_str()) {
+    let schema = value.get("schema").and_then(|s| s.as_str()).unwrap_or("");
+    if !SCHEMA_READABLE.contains(&schema) {
         return Err(format!(
-            "schema '{}' is not supported (this build reads '{SCHEMA}')",
-            meta.schema
+            "schema '{schema}' is not supported (this build reads '{SCHEMA}'): re-import the scene with this build"
         ));
     }
-    Ok(meta)
+    serde_json::from_value(value).map_err(|e| format!("meta section is not valid: {e}"))
 }
 
 /// Serialises `meta` and proves the reader accepts it: JSON has no NaN or infinity (serde

@@ -16,6 +16,7 @@ pub struct MeshGeometry {
     pub normals: Option<Vec<[f32; 3]>>,
     /// A cluster's source primitive per triangle (`FLAG_PRIMITIVE_MAP`), else `None`.
     pub primitive_map: Option<Vec<u32>>,
+    pub uvs: Option<Vec<[f32; 2]>>,
 }
 
 /// An opened scene package.
@@ -86,6 +87,8 @@ impl ScenePackage {
             lod_levels: p.section_as(SECTION_LOD_LEVELS)?,
             meshes: p.section_as(SECTION_MESHES)?,
             materials: p.section_as(SECTION_MATERIALS)?,
+            textures: p.section_as(SECTION_TEXTURES)?,
+            texels: p.section_as(SECTION_TEXELS)?,
         })
     }
 
@@ -96,6 +99,7 @@ impl ScenePackage {
             m.normals_offset != NONE_U64,
             m.flags & FLAG_PRIMITIVE_MAP != 0,
         )
+        .with_uvs(m.flags & motu_abi::FLAG_HAS_UVS != 0)
     }
 
     /// Mesh records must point inside their chunk with the blob layout's offsets.
@@ -113,6 +117,7 @@ impl ScenePackage {
         let ok = m.indices_offset == base + l.indices
             && (m.normals_offset == NONE_U64 || m.normals_offset == base + l.normals)
             && (!l.has_primitive_map || m.primitive_map_offset == base + l.primitive_map)
+            && (!l.has_uvs || m.uvs_offset == base + l.uvs)
             && base
                 .checked_add(l.len)
                 .is_some_and(|end| end <= info.raw_len);
@@ -155,6 +160,7 @@ impl ScenePackage {
             indices: data.indices,
             normals: data.normals,
             primitive_map,
+            uvs: data.uvs,
         })
     }
 }
@@ -167,8 +173,10 @@ pub fn read_mesh_blob(
     vertex_count: u32,
     triangle_count: u32,
     has_normals: bool,
+    has_uvs: bool,
 ) -> Result<motu_scene::MeshData, PackError> {
-    let l = MeshBlobLayout::new(vertex_count as u64, triangle_count as u64, has_normals);
+    let l = MeshBlobLayout::new(vertex_count as u64, triangle_count as u64, has_normals)
+        .with_uvs(has_uvs);
     let chunk = package.chunk(ChunkId(at.a as u32))?;
     let start = at.b as usize;
     let blob = chunk
@@ -234,6 +242,55 @@ impl ScenePackage {
                 Ok((Cow::Owned(p), Cow::Owned(i)))
             }
         }
+    }
+
+    /// A compiled mesh's per-vertex normals and texture coordinates, where it has them
+    /// (borrowed from raw chunks, copied from compressed ones).
+    #[allow(clippy::type_complexity)]
+    pub fn mesh_shading_slices(
+        &self,
+        mesh_record: u32,
+    ) -> Result<
+        (
+            Option<std::borrow::Cow<'_, [[f32; 3]]>>,
+            Option<std::borrow::Cow<'_, [[f32; 2]]>>,
+        ),
+        PackError,
+    > {
+        use std::borrow::Cow;
+        let meshes: &[MeshRecord] = self.package.section_as(SECTION_MESHES)?;
+        let err = |reason: String| PackError::Mesh {
+            mesh: mesh_record,
+            reason,
+        };
+        let m = meshes
+            .get(mesh_record as usize)
+            .ok_or_else(|| err(format!("only {} meshes", meshes.len())))?;
+        let has_n = m.normals_offset != NONE_U64;
+        let has_uv = m.flags & motu_abi::FLAG_HAS_UVS != 0;
+        if !has_n && !has_uv {
+            return Ok((None, None));
+        }
+        let vc = m.vertex_count as u64;
+        let chunk = self.package.chunk(ChunkId(m.chunk))?;
+        let get = |at: u64, n: u64| -> Result<&[u8], PackError> {
+            chunk
+                .get(at as usize..(at + n) as usize)
+                .ok_or_else(|| err("blob outside its chunk".into()))
+        };
+        let normals = if has_n {
+            let b = get(m.normals_offset, vc * 12)?;
+            Some(Cow::Owned(bytemuck::pod_collect_to_vec(b)))
+        } else {
+            None
+        };
+        let uvs = if has_uv {
+            let b = get(m.uvs_offset, vc * 8)?;
+            Some(Cow::Owned(bytemuck::pod_collect_to_vec(b)))
+        } else {
+            None
+        };
+        Ok((normals, uvs))
     }
 
     /// A cluster's primitive map (`FLAG_PRIMITIVE_MAP`): borrowed from raw chunks, copied from

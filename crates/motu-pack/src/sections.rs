@@ -12,3 +12,7 @@ pub const SECTION_LOD_SELECTORS: SectionKind = SectionKind(7);
 pub const SECTION_LOD_LEVELS: SectionKind = SectionKind(8);
 pub const SECTION_MESHES: SectionKind = SectionKind(9);
 pub const SECTION_MATERIALS: SectionKind = SectionKind(10);
+/// `motu_abi::TextureRecord` per image texture.
+pub const SECTION_TEXTURES: SectionKind = SectionKind(11);
+/// RGBA8 texels (`u32`) of every texture's mip chain.
+pub const SECTION_TEXELS: SectionKind = SectionKind(12);

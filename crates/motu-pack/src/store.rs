@@ -230,7 +230,8 @@ pub fn place_mesh_record(rec: &mut motu_abi::MeshRecord, at: MeshLocation) {
         rec.triangle_count as u64,
         rec.flags & motu_abi::FLAG_HAS_NORMALS != 0,
         rec.flags & motu_abi::FLAG_PRIMITIVE_MAP != 0,
-    );
+    )
+    .with_uvs(rec.flags & motu_abi::FLAG_HAS_UVS != 0);
     rec.chunk = at.a as u32;
     rec.positions_offset = at.b + l.positions;
     rec.indices_offset = at.b + l.indices;
@@ -241,6 +242,11 @@ pub fn place_mesh_record(rec: &mut motu_abi::MeshRecord, at: MeshLocation) {
     };
     rec.primitive_map_offset = if l.has_primitive_map {
         at.b + l.primitive_map
+    } else {
+        motu_abi::NONE_U64
+    };
+    rec.uvs_offset = if l.has_uvs {
+        at.b + l.uvs
     } else {
         motu_abi::NONE_U64
     };

@@ -28,6 +28,8 @@ pub fn write_hierarchy(
     writer.add_section_slice(SECTION_LOD_LEVELS, "lod_levels", view.lod_levels)?;
     writer.add_section_slice(SECTION_MESHES, "meshes", view.meshes)?;
     writer.add_section_slice(SECTION_MATERIALS, "materials", view.materials)?;
+    writer.add_section_slice(SECTION_TEXTURES, "textures", view.textures)?;
+    writer.add_section_slice(SECTION_TEXELS, "texels", view.texels)?;
     let json = crate::meta::serialise_meta(meta).map_err(|reason| PackError::Schema {
         path: String::new(),
         reason,

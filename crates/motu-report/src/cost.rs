@@ -45,6 +45,8 @@ pub struct Cost {
     /// motu's record tables the traversal shader reads (TLAS, instance, BLAS, geometry, PI,
     /// LOD, mesh and material records).
     pub table_bytes: u64,
+    /// Image textures for shading: texture records and every mip chain's texels.
+    pub texture_bytes: u64,
     /// The largest build scratch of any one structure.
     pub build_scratch_peak_bytes: u64,
     /// The most one build adds on top of the resident bytes: a BLAS's uncompacted size plus
@@ -70,6 +72,7 @@ impl Cost {
         self.tlas_bytes += o.tlas_bytes;
         self.instance_buffer_bytes += o.instance_buffer_bytes;
         self.table_bytes += o.table_bytes;
+        self.texture_bytes += o.texture_bytes;
         self.build_scratch_peak_bytes = self
             .build_scratch_peak_bytes
             .max(o.build_scratch_peak_bytes);
@@ -97,7 +100,8 @@ impl Cost {
             + self.blas_compacted_bytes
             + self.tlas_bytes
             + self.instance_buffer_bytes
-            + self.table_bytes;
+            + self.table_bytes
+            + self.texture_bytes;
         self.peak_bytes = self.resident_bytes + self.build_transient_peak_bytes;
     }
 
@@ -603,10 +607,12 @@ impl<'a> Graph<'a> {
         out
     }
 
-    /// The global tables every render uploads whatever the subset (materials).
+    /// The global tables every render uploads whatever the subset (materials, textures).
     pub fn global_tables(&self) -> Cost {
         let mut c = Cost {
             table_bytes: self.view.materials.len() as u64 * rec::<MaterialRecord>(),
+            texture_bytes: self.view.textures.len() as u64 * rec::<motu_abi::TextureRecord>()
+                + self.view.texels.len() as u64 * 4,
             ..Default::default()
         };
         c.seal();
@@ -635,8 +641,13 @@ fn mesh_cost(m: &MeshRecord) -> Cost {
     } else {
         0
     };
+    let uvs = if m.flags & motu_abi::FLAG_HAS_UVS != 0 {
+        v * 8
+    } else {
+        0
+    };
     let mut c = Cost {
-        geometry_bytes: v * 12 + normals + u64::from(m.triangle_count) * 12 + map,
+        geometry_bytes: v * 12 + normals + uvs + u64::from(m.triangle_count) * 12 + map,
         table_bytes: rec::<MeshRecord>(),
         ..Default::default()
     };

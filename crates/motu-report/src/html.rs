@@ -9,11 +9,12 @@ use crate::text::{human_bytes, human_count};
 
 /// The stacked segments of every bar: (CSS class, label, bytes of a cost).
 type Segment = (&'static str, &'static str, fn(&Cost) -> u64);
-const SEGMENTS: [Segment; 5] = [
+const SEGMENTS: [Segment; 6] = [
     ("seg-geometry", "geometry", |c| c.geometry_bytes),
     ("seg-blas", "BLAS (compacted)", |c| c.blas_compacted_bytes),
     ("seg-tlas", "TLAS + instances", |c| c.tlas_total_bytes()),
     ("seg-tables", "record tables", |c| c.table_bytes),
+    ("seg-textures", "textures", |c| c.texture_bytes),
     ("seg-transient", "build transient", |c| {
         c.build_transient_peak_bytes
     }),
@@ -129,6 +130,7 @@ fn cost_table(head: &str, rows: &[(String, Vec<String>, Cost)], extra: &[&str]) 
         "BLAS compacted",
         "TLAS + inst",
         "tables",
+        "textures",
         "scratch peak",
         "resident",
         "peak",
@@ -147,6 +149,7 @@ fn cost_table(head: &str, rows: &[(String, Vec<String>, Cost)], extra: &[&str]) 
             c.blas_compacted_bytes,
             c.tlas_total_bytes(),
             c.table_bytes,
+            c.texture_bytes,
             c.build_scratch_peak_bytes,
             c.resident_bytes,
             c.peak_bytes,
@@ -166,7 +169,7 @@ h1{font-size:22px;margin:0 0 4px}h2{font-size:17px;margin:28px 0 8px}
 figure{margin:8px 0;background:#fff;border:1px solid #dde1e6;border-radius:6px;padding:8px}
 figcaption{font-weight:600;margin-bottom:4px}
 .chart text{font-size:12px;fill:#1d2330}.chart .value{fill:#555}
-.seg-geometry{fill:#4c78a8}.seg-blas{fill:#f58518}.seg-tlas{fill:#54a24b}.seg-tables{fill:#b279a2}.seg-transient{fill:#c7c7c7}
+.seg-geometry{fill:#4c78a8}.seg-blas{fill:#f58518}.seg-tlas{fill:#54a24b}.seg-tables{fill:#b279a2}.seg-textures{fill:#e45756}.seg-transient{fill:#c7c7c7}
 .bar{stroke:#fff;stroke-width:.5}.bar.dim{opacity:.25}
 .budget{stroke:#d62728;stroke-width:2;stroke-dasharray:5 3}.budget-label{fill:#d62728!important;font-weight:600}
 .legend{margin:6px 0}.key{margin-right:16px;cursor:pointer;user-select:none}.key svg{vertical-align:-2px}

@@ -525,6 +525,7 @@ fn streaming_report(
         .sum();
     let root_instances: u64 = elements.iter().map(|e| e.root_instances).sum();
     let always = total.table_bytes
+        + total.texture_bytes
         + root.tlas_bytes
         + root_instances * crate::sizes::INSTANCE_RECORD_SIZE_BYTES
         + untagged;

@@ -17,6 +17,8 @@ pub(crate) struct Scene {
     pis: Vec<PiRecord>,
     meshes: Vec<MeshRecord>,
     materials: Vec<MaterialRecord>,
+    textures: Vec<motu_abi::TextureRecord>,
+    texels: Vec<u32>,
     root: u32,
     names: Vec<String>,
 }
@@ -113,6 +115,8 @@ impl Scene {
             lod_levels: &[],
             meshes: &self.meshes,
             materials: &self.materials,
+            textures: &self.textures,
+            texels: &self.texels,
         }
     }
     pub fn input(&self) -> ReportInput {

@@ -68,18 +68,20 @@ fn cost_cells(c: &Cost) -> Vec<String> {
         human_bytes(c.blas_compacted_bytes),
         human_bytes(c.tlas_total_bytes()),
         human_bytes(c.table_bytes),
+        human_bytes(c.texture_bytes),
         human_bytes(c.build_scratch_peak_bytes),
         human_bytes(c.resident_bytes),
         human_bytes(c.peak_bytes),
     ]
 }
 
-const COST_HEADER: [&str; 8] = [
+const COST_HEADER: [&str; 9] = [
     "geometry",
     "BLAS",
     "BLAS compact",
     "TLAS+inst",
     "tables",
+    "textures",
     "scratch",
     "resident",
     "peak",

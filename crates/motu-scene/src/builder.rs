@@ -19,6 +19,7 @@ pub struct SceneBuilder {
     materials: Vec<Material>,
     cameras: Vec<Camera>,
     lights: Vec<Light>,
+    textures: Vec<crate::Texture>,
     elements: Vec<Element>,
     geometry: Box<dyn GeometryStore>,
 }
@@ -63,6 +64,7 @@ impl SceneBuilder {
             materials: vec![Material::default()],
             cameras: Vec::new(),
             lights: Vec::new(),
+            textures: Vec::new(),
             elements: vec![Element {
                 name: "main".into(),
             }],
@@ -226,6 +228,20 @@ impl SceneBuilder {
         CameraId(self.cameras.len() as u32 - 1)
     }
 
+    /// A material added so far (the default one is id 0).
+    pub fn material(&self, id: MaterialId) -> &Material {
+        &self.materials[(id.0 as usize).min(self.materials.len() - 1)]
+    }
+
+    /// Registers an image texture file (once per path and use) and returns its index.
+    pub fn add_texture(&mut self, t: crate::Texture) -> u32 {
+        if let Some(i) = self.textures.iter().position(|x| *x == t) {
+            return i as u32;
+        }
+        self.textures.push(t);
+        self.textures.len() as u32 - 1
+    }
+
     pub fn add_light(&mut self, l: Light) -> LightId {
         self.lights.push(l);
         LightId(self.lights.len() as u32 - 1)
@@ -301,6 +317,7 @@ impl SceneBuilder {
             materials: self.materials,
             cameras: self.cameras,
             lights: self.lights,
+            textures: self.textures,
             elements: self.elements,
             bounds: Vec::new(),
             topo_order: Vec::new(),

@@ -1,15 +1,26 @@
-//! What things look like: materials and lights (base colours only; motu shades simply).
+//! What things look like: materials (a base colour, roughness, metalness, emission, image
+//! textures by index), image textures (files read when the package is written) and lights.
 
 use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Material {
     pub name: String,
-    /// Linear RGB reflectance in [0, 1].
+    /// Linear RGB reflectance in [0, 1] (multiplied by the base-colour texture, if any).
     pub base_color: [f32; 3],
-    /// 1 = opaque. Alpha-textured materials record their texture name as well.
+    /// Constant coverage; 1 = opaque.
     pub opacity: f32,
-    pub alpha_texture: Option<String>,
+    /// Coverage texture (index into [`crate::Scene::textures`]): the material is alpha-tested.
+    pub alpha_texture: Option<u32>,
+    /// Base-colour texture (index into [`crate::Scene::textures`]).
+    pub base_color_texture: Option<u32>,
+    /// Perceptual roughness in [0, 1].
+    pub roughness: f32,
+    /// 0 dielectric, 1 metal.
+    pub metallic: f32,
+    /// Emitted radiance, linear RGB (area lights).
+    pub emission: [f32; 3],
 }
 
 impl Default for Material {
@@ -19,8 +30,22 @@ impl Default for Material {
             base_color: [0.5; 3],
             opacity: 1.0,
             alpha_texture: None,
+            base_color_texture: None,
+            roughness: 0.5,
+            metallic: 0.0,
+            emission: [0.0; 3],
         }
     }
+}
+
+/// An image texture file a material uses; read (and reduced to a capped mip chain) when the
+/// package is written.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Texture {
+    /// The file, resolved against the scene file that named it.
+    pub path: PathBuf,
+    /// Used as coverage (alpha) rather than colour.
+    pub is_alpha: bool,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -30,6 +55,7 @@ pub enum LightKind {
     Point,
     Spot,
     Infinite,
+    /// An emitting shape, lit as a point light at its centre with its power.
     Area,
     Other,
 }
@@ -42,6 +68,12 @@ pub struct Light {
     pub intensity: f32,
     /// World-space direction the light travels (distant, spot), normalised; zero if none.
     pub world_direction: [f32; 3],
-    /// World-space position (point, spot); zero if none.
+    /// World-space position (point, spot, area); zero if none.
     pub world_position: [f32; 3],
+    /// Spot: full cone angle and falloff start, in degrees (pbrt `coneangle`, `conedelta`).
+    #[serde(default)]
+    pub cone_deg: Option<[f32; 2]>,
+    /// Area: the emitter's bounding radius about `world_position`.
+    #[serde(default)]
+    pub radius: f32,
 }

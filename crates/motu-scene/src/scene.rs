@@ -96,6 +96,7 @@ pub struct Scene {
     pub(crate) materials: Vec<Material>,
     pub(crate) cameras: Vec<Camera>,
     pub(crate) lights: Vec<Light>,
+    pub(crate) textures: Vec<crate::Texture>,
     pub(crate) elements: Vec<Element>,
     pub(crate) bounds: Vec<Aabb>,
     /// Children before parents.
@@ -204,6 +205,11 @@ impl Scene {
 
     pub fn lights(&self) -> &[Light] {
         &self.lights
+    }
+
+    /// Image texture files materials refer to by index.
+    pub fn textures(&self) -> &[crate::Texture] {
+        &self.textures
     }
 
     pub fn elements(&self) -> &[Element] {

@@ -24,6 +24,8 @@ pub struct OwnedHierarchy {
     pub lod_levels: Vec<u32>,
     pub meshes: Vec<MeshRecord>,
     pub materials: Vec<MaterialRecord>,
+    pub textures: Vec<motu_abi::TextureRecord>,
+    pub texels: Vec<u32>,
     /// Geometry of mesh record `i`.
     pub geometry: Vec<MeshGeometry>,
 }
@@ -41,6 +43,8 @@ impl OwnedHierarchy {
             lod_levels: &self.lod_levels,
             meshes: &self.meshes,
             materials: &self.materials,
+            textures: &self.textures,
+            texels: &self.texels,
         }
     }
 }
@@ -82,6 +86,7 @@ impl HierarchyBuilder {
         self.h.materials.push(MaterialRecord {
             base_color,
             opacity: 1.0,
+            ..MaterialRecord::default()
         });
         self.h.materials.len() as u32 - 1
     }
@@ -448,5 +453,6 @@ pub fn uv_sphere(n: u32) -> MeshGeometry {
         indices,
         normals: None,
         primitive_map: None,
+        uvs: None,
     }
 }

@@ -43,6 +43,7 @@ pub mod fixtures;
 pub mod mesh;
 pub mod ray;
 pub mod render;
+pub mod shade;
 mod traverse;
 
 #[cfg(test)]

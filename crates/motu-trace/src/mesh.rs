@@ -14,6 +14,8 @@ pub struct MeshGeometry {
     /// A cluster of a partitioned mesh (`FLAG_PRIMITIVE_MAP`): each triangle's index in the
     /// source mesh, which hits report instead of the cluster's own index.
     pub primitive_map: Option<Vec<u32>>,
+    /// Per-vertex texture coordinates.
+    pub uvs: Option<Vec<[f32; 2]>>,
 }
 
 /// Loads the geometry of a compiled mesh, by its index in the hierarchy's mesh table.
@@ -31,7 +33,21 @@ pub struct MeshBvh {
     pub tri_verts: Vec<[[f32; 3]; 3]>,
     /// The triangle index within the mesh of slot `i` (within the source mesh for a cluster).
     pub tri_prim: Vec<u32>,
+    /// The triangle index within this compiled mesh of slot `i` (differs from `tri_prim` for
+    /// a cluster, whose hits report source primitives): what shading reads attributes by.
+    pub tri_local: Vec<u32>,
+    /// Per-vertex attributes for shading (kept only when the mesh has some).
+    pub attributes: Option<Box<VertexAttributes>>,
     pub bounds: Aabb,
+}
+
+/// What shading interpolates: the mesh's indices with its per-vertex normals and texture
+/// coordinates (in the mesh's space).
+#[derive(Clone, Debug, Default)]
+pub struct VertexAttributes {
+    pub indices: Vec<u32>,
+    pub normals: Option<Vec<[f32; 3]>>,
+    pub uvs: Option<Vec<[f32; 2]>>,
 }
 
 /// Why a mesh could not be used.
@@ -116,12 +132,24 @@ impl MeshBvh {
                 });
             }
         }
+        let nv = g.positions.len();
+        let normals = g.normals.clone().filter(|n| n.len() == nv);
+        let uvs = g.uvs.clone().filter(|u| u.len() == nv);
+        let attributes = (normals.is_some() || uvs.is_some()).then(|| {
+            Box::new(VertexAttributes {
+                indices: g.indices.clone(),
+                normals,
+                uvs,
+            })
+        });
         Ok(Self {
             tri_verts: bvh.order.iter().map(|&i| verts[i as usize]).collect(),
             tri_prim: match &g.primitive_map {
                 Some(map) => bvh.order.iter().map(|&i| map[i as usize]).collect(),
-                None => bvh.order,
+                None => bvh.order.clone(),
             },
+            tri_local: bvh.order,
+            attributes,
             nodes: bvh.nodes,
             bounds,
         })
@@ -138,6 +166,21 @@ impl MeshBvh {
         any_hit: bool,
         stack: &mut Vec<u32>,
     ) -> Option<u32> {
+        self.intersect_filtered(ray, t_min, t_max, any_hit, stack, None)
+    }
+
+    /// [`MeshBvh::intersect`] where `accept(slot, barycentrics)` may reject a candidate hit
+    /// (alpha cut-outs: the GPU's any-hit test), so traversal looks past it.
+    #[inline]
+    pub fn intersect_filtered(
+        &self,
+        ray: &LocalRay,
+        t_min: f32,
+        t_max: &mut f32,
+        any_hit: bool,
+        stack: &mut Vec<u32>,
+        accept: Option<&dyn Fn(u32, [f32; 3]) -> bool>,
+    ) -> Option<u32> {
         let root = self.nodes.first()?;
         ray.hit_box(&root.min, &root.max, t_min, *t_max)?;
         let mut found = None;
@@ -148,7 +191,10 @@ impl MeshBvh {
             if n.is_leaf() {
                 for slot in n.first..n.first + n.count {
                     let [v0, v1, v2] = self.tri_verts[slot as usize];
-                    if let Some(t) = ray.hit_triangle(v0, v1, v2, t_min, *t_max) {
+                    if let Some((t, b)) = ray.hit_triangle_bary(v0, v1, v2, t_min, *t_max) {
+                        if accept.is_some_and(|f| !f(slot, b)) {
+                            continue;
+                        }
                         *t_max = t;
                         found = Some(slot);
                         if any_hit {
@@ -225,6 +271,7 @@ mod tests {
             indices,
             normals: None,
             primitive_map: None,
+            uvs: None,
         }
     }
 

@@ -184,6 +184,20 @@ impl LocalRay {
         t_min: f32,
         t_max: f32,
     ) -> Option<f32> {
+        self.hit_triangle_bary(v0, v1, v2, t_min, t_max)
+            .map(|h| h.0)
+    }
+
+    /// [`LocalRay::hit_triangle`] with the hit's barycentric weights of `v0`, `v1`, `v2`.
+    #[inline]
+    pub fn hit_triangle_bary(
+        &self,
+        v0: [f32; 3],
+        v1: [f32; 3],
+        v2: [f32; 3],
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<(f32, [f32; 3])> {
         let (kx, ky, kz) = (self.kx, self.ky, self.kz);
         let a = sub(v0, self.org);
         let b = sub(v1, self.org);
@@ -217,7 +231,7 @@ impl LocalRay {
         let bz = self.sz * b[kz];
         let cz = self.sz * c[kz];
         let t = (u * az + v * bz + w * cz) / det;
-        (t > t_min && t < t_max).then_some(t)
+        (t > t_min && t < t_max).then_some((t, [u / det, v / det, w / det]))
     }
 }
 

@@ -6,20 +6,23 @@ use std::time::Instant;
 
 use motu_abi::aov::{Aov, AovRecord};
 use motu_abi::camera::CameraParams;
-use motu_abi::lod::{LodParams, RAY_PRIMARY, RAY_SHADOW};
+use motu_abi::lod::{LodParams, RAY_PRIMARY};
+use motu_abi::shade::{rand01, tone_map, Shading};
 use motu_abi::HierarchyView;
 use rayon::prelude::*;
 
 use crate::mesh::MeshSource;
-use crate::ray::{dot, normalize};
-use crate::traverse::{Hit, RayQuery, Scratch, Tracer};
+use crate::ray::normalize;
+use crate::shade::{shade_hit, ShadeRays};
+use crate::traverse::{RayQuery, Scratch, Tracer};
 use crate::TraceError;
 
 /// What the PNG shows.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum View {
-    /// Base colour × (ambient + sun N·L × shadow), one shadow ray per hit.
+    /// Materials and image textures lit by the scene's lights (or a key light) with shadow
+    /// rays, plus a sky term with ambient occlusion (`shade.rs`).
     #[default]
     Shaded,
     /// A hashed colour per (mesh, primitive).
@@ -62,6 +65,8 @@ pub struct RenderOptions {
     pub prepare: bool,
     /// TLAS walks one ray may make before it is cut short (counted in `truncated_rays`).
     pub max_traces_per_ray: u32,
+    /// Scene lights, sky, ambient occlusion, samples per pixel and exposure (shaded view).
+    pub shading: Shading,
 }
 
 impl Default for RenderOptions {
@@ -76,6 +81,7 @@ impl Default for RenderOptions {
             shadow_lod_from_primary: true,
             prepare: true,
             max_traces_per_ray: motu_abi::DEFAULT_MAX_TRACES_PER_RAY,
+            shading: Shading::default(),
         }
     }
 }
@@ -171,9 +177,8 @@ pub fn render_with(
     let t1 = Instant::now();
     let mut aov = Aov::new(w, h);
     let mut rgba8 = vec![0u8; w as usize * h as usize * 4];
-    let sun = normalize(opts.sun_dir_world);
-    let materials = tracer.view().materials;
-    let meshes = tracer.view().meshes;
+    let exposure = opts.shading.exposure_scale();
+    let spp = opts.shading.spp.max(1);
     let totals = aov
         .records
         .par_chunks_mut(w as usize)
@@ -182,6 +187,7 @@ pub fn render_with(
         .map_init(Scratch::default, |scratch, (y, (rec_row, px_row))| {
             let mut st = RowStats::default();
             for x in 0..w {
+                let pixel = y as u32 * w + x;
                 let dir = camera.primary_dir(x, y as u32, 0.5, 0.5).to_array();
                 let q = RayQuery {
                     kind: RAY_PRIMARY,
@@ -197,32 +203,66 @@ pub fn render_with(
                 st.traces += hit.traces as u64;
                 st.max_stack = st.max_stack.max(hit.max_stack);
                 let mut traces = hit.traces;
-                let colour = if !hit.is_hit() {
-                    sky(dir)
-                } else {
+                if hit.is_hit() {
                     st.hits += 1;
-                    match opts.view {
-                        View::Shaded => {
-                            let rec = &meshes[hit.mesh_record as usize];
-                            let base = materials
-                                .get(rec.material as usize)
-                                .map_or([0.7; 3], |m| m.base_color);
-                            let (light, shadow) =
-                                shade(tracer, camera, opts, sun, &hit, dir, scratch);
-                            if let Some(s) = shadow {
-                                st.shadow += 1;
-                                st.traces += s.traces as u64;
-                                st.max_stack = st.max_stack.max(s.max_stack);
-                                traces += s.traces;
-                                truncated |= s.truncated;
+                }
+                let colour = match opts.view {
+                    View::Shaded => {
+                        let mut sum = [0.0f32; 3];
+                        for sample in 0..spp {
+                            // Sample 0 is the pixel centre (the hit record's ray).
+                            let (h, d) = if sample == 0 {
+                                (hit, dir)
+                            } else {
+                                let d = camera
+                                    .primary_dir(
+                                        x,
+                                        y as u32,
+                                        rand01(pixel, sample, 0),
+                                        rand01(pixel, sample, 1),
+                                    )
+                                    .to_array();
+                                let h = tracer.trace(camera.world_eye, d, &q, scratch);
+                                truncated |= h.truncated;
+                                st.primary += 1;
+                                st.traces += h.traces as u64;
+                                traces += h.traces;
+                                (h, normalize(d))
+                            };
+                            let c = if h.is_hit() {
+                                let mut rays = ShadeRays::default();
+                                let c = shade_hit(
+                                    tracer,
+                                    camera,
+                                    opts,
+                                    &h,
+                                    camera.world_eye,
+                                    normalize(d),
+                                    pixel,
+                                    sample,
+                                    scratch,
+                                    &mut rays,
+                                );
+                                st.shadow += rays.rays;
+                                st.traces += rays.traces as u64;
+                                st.max_stack = st.max_stack.max(rays.max_stack);
+                                traces += rays.traces;
+                                truncated |= rays.truncated;
+                                c
+                            } else {
+                                background(opts, d)
+                            };
+                            for (s, v) in sum.iter_mut().zip(c) {
+                                *s += v / spp as f32;
                             }
-                            base.map(|c| c * light)
                         }
-                        View::Ids => id_colour(hit.source_mesh, hit.primitive),
-                        View::Lod => lod_colour(hit.lod),
-                        // Filled in once the frame's maximum is known.
-                        View::Heatmap => [0.0; 3],
+                        sum
                     }
+                    _ if !hit.is_hit() => sky(dir),
+                    View::Ids => id_colour(hit.source_mesh, hit.primitive),
+                    View::Lod => lod_colour(hit.lod),
+                    // Filled in once the frame's maximum is known.
+                    View::Heatmap => [0.0; 3],
                 };
                 rec_row[x as usize] = if hit.is_hit() {
                     AovRecord {
@@ -241,7 +281,11 @@ pub fn render_with(
                 };
                 st.truncated += u64::from(truncated);
                 let px = &mut px_row[x as usize * 4..x as usize * 4 + 4];
-                px[..3].copy_from_slice(&encode_srgb(colour));
+                px[..3].copy_from_slice(&if opts.view == View::Shaded {
+                    tone_map(colour, exposure)
+                } else {
+                    encode_srgb(colour)
+                });
                 px[3] = 255;
             }
             st
@@ -292,52 +336,10 @@ pub fn render_with(
     Ok(RenderOutput { aov, rgba8, stats })
 }
 
-/// Returns the light factor and the shadow ray's hit (when one was traced).
-fn shade(
-    tracer: &Tracer<'_>,
-    camera: &CameraParams,
-    opts: &RenderOptions,
-    sun: [f32; 3],
-    hit: &Hit,
-    dir: [f32; 3],
-    scratch: &mut Scratch,
-) -> (f32, Option<Hit>) {
-    let mut n = hit.world_normal();
-    if dot(n, dir) > 0.0 {
-        n = n.map(|v| -v);
-    }
-    let ndl = dot(n, sun);
-    if ndl <= 0.0 {
-        return (opts.ambient, None);
-    }
-    if !opts.shadows {
-        return (opts.ambient + opts.sun_intensity * ndl, None);
-    }
-    let eye = camera.world_eye;
-    let p = [
-        eye[0] + dir[0] * hit.t,
-        eye[1] + dir[1] * hit.t,
-        eye[2] + dir[2] * hit.t,
-    ];
-    let q = RayQuery {
-        kind: RAY_SHADOW,
-        any_hit: true,
-        lod: LodParams {
-            forced_lod: if opts.shadow_lod_from_primary {
-                hit.lod as i32
-            } else {
-                opts.lod.forced_lod
-            },
-            ..opts.lod
-        },
-        pixels_per_unit_at_1: camera.pixels_per_unit_at_1,
-        max_traces: opts.max_traces_per_ray,
-        ..RayQuery::default()
-    };
-    let reach = eye[0].abs().max(eye[1].abs()).max(eye[2].abs()) + hit.t;
-    let s = tracer.trace(shadow_offset(p, n, reach), sun, &q, scratch);
-    let visible = if s.is_hit() { 0.0 } else { 1.0 };
-    (opts.ambient + opts.sun_intensity * ndl * visible, Some(s))
+/// What a primary ray that hits nothing shows in the shaded view: the scene's sky colour, else
+/// the gradient sky.
+fn background(opts: &RenderOptions, dir: [f32; 3]) -> [f32; 3] {
+    opts.shading.sky.unwrap_or_else(|| sky(dir))
 }
 
 /// Moves a hit point off its surface along the face-forwarded normal `n` (Wächter & Binder,

@@ -41,6 +41,7 @@ fn soup(rng: &mut Rng, tris: usize) -> MeshGeometry {
         positions,
         normals: None,
         primitive_map: None,
+        uvs: None,
     }
 }
 
@@ -206,6 +207,7 @@ fn ray_through_shared_vertex_and_edges_of_a_fan_hits_exactly_once() {
         indices: indices.clone(),
         normals: None,
         primitive_map: None,
+        uvs: None,
     };
     let mut b = HierarchyBuilder::new();
     let m = b.mesh(0, 0, 0, g);
@@ -472,6 +474,7 @@ fn shadow_ray_darkens_the_ground_under_an_occluder() {
         indices: vec![0, 1, 2, 0, 2, 3],
         normals: None,
         primitive_map: None,
+        uvs: None,
     };
     let g = b.mesh(0, 0, 0, ground);
     let s = b.mesh(1, 0, 0, uv_sphere(16));

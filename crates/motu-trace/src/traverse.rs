@@ -4,7 +4,10 @@
 use std::sync::OnceLock;
 
 use motu_abi::lod::{select_lod, LodParams, RAY_PRIMARY};
-use motu_abi::{xform_vector, HierarchyView, BLAS_TRIANGLES, NONE_U32, PI_LOD_SELECTOR, PI_TLAS};
+use motu_abi::{
+    xform_vector, HierarchyView, BLAS_TRIANGLES, FLAG_NEEDS_ANY_HIT, NONE_U32, PI_LOD_SELECTOR,
+    PI_TLAS,
+};
 use rayon::prelude::*;
 
 use crate::bvh::{Aabb, BuildParams, Bvh, BvhNode};
@@ -57,8 +60,12 @@ pub struct Hit {
     pub mesh_record: u32,
     /// `MeshRecord::source_mesh` of the hit mesh.
     pub source_mesh: u32,
-    /// Triangle index within the hit compiled mesh.
+    /// Triangle index reported for the hit: within the source mesh (a cluster's primitive map
+    /// applied).
     pub primitive: u32,
+    /// The hit triangle's BVH slot in the hit compiled mesh (`MeshBvh::tri_verts`,
+    /// `tri_local`): how shading finds the triangle's attributes.
+    pub slot: u32,
     /// The level chosen by the innermost LOD selector on the path, else `MeshRecord::lod`.
     pub lod: u32,
     /// Composed transform from world into the hit mesh's space.
@@ -79,6 +86,7 @@ impl Hit {
         mesh_record: NONE_U32,
         source_mesh: NONE_U32,
         primitive: 0,
+        slot: 0,
         lod: 0,
         object_from_world: IDENTITY_3X4,
         object_normal: [0.0, 0.0, 1.0],
@@ -275,6 +283,12 @@ impl<'a> Tracer<'a> {
         MeshBvh::build(&g, Some(record_box(rec.bounds_min, rec.bounds_max)), params)
     }
 
+    /// Mesh record `m`'s triangles and shading attributes (loaded on first use); `None`
+    /// when it failed to load (reported by [`Tracer::first_error`]).
+    pub fn mesh_bvh(&self, m: u32) -> Option<&MeshBvh> {
+        self.mesh(m)
+    }
+
     fn mesh(&self, m: u32) -> Option<&MeshBvh> {
         self.meshes[m as usize]
             .get_or_init(|| self.load_mesh(m, BuildParams::default().serial()))
@@ -423,17 +437,29 @@ impl<'a> Tracer<'a> {
                                 let Some(mesh) = self.mesh(mesh_record) else {
                                     return false;
                                 };
-                                let Some(slot) = mesh
-                                    .intersect(&blas_ray, q.t_min, best_t, q.any_hit, mesh_stack)
-                                else {
+                                let rec = &v.meshes[mesh_record as usize];
+                                // Alpha-tested meshes: the GPU's any-hit coverage test.
+                                let alpha = |slot: u32, b: [f32; 3]| {
+                                    crate::shade::coverage(v, mesh, rec, slot, b)
+                                        >= motu_abi::shade::ALPHA_CUTOFF
+                                };
+                                let accept: Option<&dyn Fn(u32, [f32; 3]) -> bool> =
+                                    if rec.flags & FLAG_NEEDS_ANY_HIT != 0 {
+                                        Some(&alpha)
+                                    } else {
+                                        None
+                                    };
+                                let Some(slot) = mesh.intersect_filtered(
+                                    &blas_ray, q.t_min, best_t, q.any_hit, mesh_stack, accept,
+                                ) else {
                                     return false;
                                 };
-                                let rec = &v.meshes[mesh_record as usize];
                                 hit = Hit {
                                     t: *best_t,
                                     mesh_record,
                                     source_mesh: rec.source_mesh,
                                     primitive: mesh.tri_prim[slot as usize],
+                                    slot,
                                     lod: if e.lod == NONE_U32 { rec.lod } else { e.lod },
                                     object_from_world: compose(blas_from_tlas, &e.tlas_from_world),
                                     object_normal: mesh.geometric_normal(slot),

@@ -81,6 +81,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         chunk_bytes: 64 << 20,
         parallel: true,
         curve_ribbons: false,
+        texture_max: 1024,
     };
     let s = pipeline::import(&summary.scene_path, &pkg, &opts)?;
     step(
@@ -134,6 +135,9 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         stack_size: 16,
         max_traces_per_ray: motu_abi::DEFAULT_MAX_TRACES_PER_RAY,
         allow_truncated: false,
+        spp: 1,
+        ao_samples: 1,
+        exposure: 0.0,
         device: None,
         camera_path: None,
     };

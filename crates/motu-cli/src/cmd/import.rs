@@ -59,6 +59,7 @@ pub fn run(a: ImportArgs) -> anyhow::Result<()> {
         chunk_bytes: a.chunk_size,
         parallel: a.threads != Some(1),
         curve_ribbons: a.curves == crate::cli::CurvesArg::Ribbons,
+        texture_max: a.texture_max,
     };
     let s = pipeline::import(&a.scene, &a.output, &o)?;
     if a.json {

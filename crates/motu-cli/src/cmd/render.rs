@@ -26,6 +26,7 @@ impl motu_trace::MeshSource for PackageMeshes<'_> {
             indices: g.indices,
             normals: g.normals,
             primitive_map: g.primitive_map,
+            uvs: g.uvs,
         })
     }
 }
@@ -130,6 +131,124 @@ impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
             .primitive_map_slice(mesh_record)
             .map_err(|e| e.to_string())
     }
+    fn mesh_shading(
+        &self,
+        mesh_record: u32,
+    ) -> Result<
+        (
+            Option<std::borrow::Cow<'_, [[f32; 3]]>>,
+            Option<std::borrow::Cow<'_, [[f32; 2]]>>,
+        ),
+        String,
+    > {
+        self.0
+            .mesh_shading_slices(mesh_record)
+            .map_err(|e| e.to_string())
+    }
+}
+
+/// How the shaded view is lit: the scene's lights (the brightest `MAX_LIGHTS`; infinite
+/// lights become the sky colour), ambient occlusion reaching a fifth of the scene's diagonal,
+/// and the sampling and exposure options. A scene without lights gets the renderers' key
+/// light and sky.
+pub fn scene_shading(
+    a: &RenderArgs,
+    pkg: &ScenePackage,
+    view: &HierarchyView<'_>,
+) -> motu_abi::shade::Shading {
+    use motu_abi::shade::{
+        Shading, LIGHT_AREA, LIGHT_DISTANT, LIGHT_POINT, LIGHT_SPOT, MAX_LIGHTS,
+    };
+    use motu_scene::LightKind;
+    let mut sh = Shading {
+        ao_samples: a.ao_samples,
+        spp: a.spp.max(1),
+        exposure_ev: a.exposure,
+        ..Default::default()
+    };
+    if let Some(root) = view.tlases.get(view.root_tlas as usize) {
+        let d = Vec3::from_array(root.bounds_max) - Vec3::from_array(root.bounds_min);
+        if d.is_finite() && d.length() > 0.0 {
+            sh.ao_distance = 0.2 * d.length();
+        }
+    }
+    let mut lights = Vec::new();
+    let mut sky: Option<[f32; 3]> = None;
+    let mut skipped = 0usize;
+    for l in &pkg.meta().lights {
+        let radiance = l.color.map(|c| c * l.intensity);
+        let rec = motu_abi::LightRecord {
+            world_position: l.world_position,
+            world_direction: Vec3::from_array(l.world_direction)
+                .normalize_or(Vec3::NEG_Y)
+                .to_array(),
+            radiance,
+            ..Default::default()
+        };
+        let rec = match l.kind {
+            LightKind::Distant => motu_abi::LightRecord {
+                kind: LIGHT_DISTANT,
+                ..rec
+            },
+            LightKind::Point => motu_abi::LightRecord {
+                kind: LIGHT_POINT,
+                ..rec
+            },
+            LightKind::Spot => {
+                let [cone, delta] = l.cone_deg.unwrap_or([30.0, 5.0]);
+                motu_abi::LightRecord {
+                    kind: LIGHT_SPOT,
+                    cos_total: cone.to_radians().cos(),
+                    cos_falloff: (cone - delta).max(0.0).to_radians().cos(),
+                    ..rec
+                }
+            }
+            LightKind::Area => motu_abi::LightRecord {
+                kind: LIGHT_AREA,
+                cos_total: l.radius,
+                ..rec
+            },
+            LightKind::Infinite => {
+                let s = sky.get_or_insert([0.0; 3]);
+                for (s, r) in s.iter_mut().zip(radiance) {
+                    *s += r;
+                }
+                continue;
+            }
+            LightKind::Other => {
+                skipped += 1;
+                continue;
+            }
+        };
+        lights.push(rec);
+    }
+    if skipped > 0 {
+        eprintln!("warning: {skipped} light(s) of a kind motu does not shade (goniometric, projection, ...) left out");
+    }
+    if lights.len() > MAX_LIGHTS {
+        let peak = |r: &motu_abi::LightRecord| r.radiance.iter().cloned().fold(0.0f32, f32::max);
+        lights.sort_by(|x, y| peak(y).total_cmp(&peak(x)));
+        eprintln!(
+            "warning: the scene has {} lights; shading with the {MAX_LIGHTS} brightest",
+            lights.len()
+        );
+        lights.truncate(MAX_LIGHTS);
+    }
+    if lights.is_empty() && sky.is_some() {
+        // Sky light only: no key light (the sky term lights the scene).
+        lights.push(motu_abi::LightRecord {
+            kind: LIGHT_DISTANT,
+            world_direction: [0.0, -1.0, 0.0],
+            radiance: [0.0; 3],
+            ..Default::default()
+        });
+    }
+    for (i, l) in lights.iter().enumerate() {
+        sh.lights[i] = *l;
+    }
+    sh.light_count = lights.len() as u32;
+    sh.sky = sky;
+    sh
 }
 
 fn gpu_context(a: &RenderArgs, backend: BackendArg) -> anyhow::Result<motu_gpu::Context> {
@@ -180,6 +299,7 @@ fn gpu_render_options(
     lod: LodParams,
     backend: BackendArg,
     frames: u32,
+    shading: motu_abi::shade::Shading,
 ) -> motu_gpu::RenderOptions {
     motu_gpu::RenderOptions {
         backend: match backend {
@@ -196,6 +316,7 @@ fn gpu_render_options(
         stack_size: a.stack_size,
         max_traces_per_ray: a.max_traces_per_ray,
         frames,
+        shading,
         ..Default::default()
     }
 }
@@ -252,7 +373,13 @@ fn render_streaming(
             floor.min_resident_bytes
         )
     })?;
-    let ropts = gpu_render_options(a, lod, backend, 1);
+    let ropts = gpu_render_options(a, lod, backend, 1, scene_shading(a, pkg, view));
+    if a.spp > 1 {
+        eprintln!(
+            "warning: --stream renders one sample per pixel (--spp {} ignored)",
+            a.spp
+        );
+    }
     let mut frames = Vec::new();
     let mut last = None;
     let frame_count = recorded.map_or(a.frames, |r| r.len() as u32);
@@ -343,7 +470,7 @@ fn render_gpu(
     let meshes = PackageMeshes(pkg);
     let scene = motu_gpu::GpuScene::build(&ctx, view, &meshes, &build)
         .context("building acceleration structures")?;
-    let opts = gpu_render_options(a, lod, backend, a.frames);
+    let opts = gpu_render_options(a, lod, backend, a.frames, scene_shading(a, pkg, view));
     let (out, counts) =
         motu_gpu::render_counted(&ctx, &scene, camera, &opts).context("rendering on the GPU")?;
     let mut stats = serde_json::to_value(&out.stats)?;
@@ -403,7 +530,7 @@ fn render_gpu_path(
     let meshes = PackageMeshes(pkg);
     let scene = motu_gpu::GpuScene::build(&ctx, view, &meshes, &build)
         .context("building acceleration structures")?;
-    let opts = gpu_render_options(a, lod, backend, 1);
+    let opts = gpu_render_options(a, lod, backend, 1, scene_shading(a, pkg, view));
     let mut live = motu_gpu::LiveRenderer::new(scene);
     let mut times = Vec::with_capacity(cams.len());
     let mut last = None;
@@ -541,6 +668,9 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     if a.frames == 0 {
         bail!("--frames must be at least 1");
     }
+    if !a.exposure.is_finite() {
+        bail!("--exposure must be a finite number of stops");
+    }
     let (aov, rgba8, stats): (Aov, Vec<u8>, Value) = match backend {
         BackendArg::Cpu => {
             let meshes = PackageMeshes(&pkg);
@@ -550,6 +680,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
                 view: view_name(a.view).parse().map_err(anyhow::Error::msg)?,
                 lod,
                 max_traces_per_ray: a.max_traces_per_ray,
+                shading: scene_shading(&a, &pkg, &view),
                 ..Default::default()
             };
             let cams = recorded

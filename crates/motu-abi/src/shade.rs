@@ -1,0 +1,315 @@
+//! The shading rules shared by the GPU (`shaders/shade.glsl`) and the CPU renderer
+//! (`motu-trace`): light and texture records, the frame's light list, the per-pixel random
+//! numbers, texture addressing and the tone map. The GLSL mirrors these functions line by
+//! line; integer parts (hashes, texel addressing, mip selection) are bit-identical, floating
+//! parts agree to rounding.
+
+use bytemuck::{Pod, Zeroable};
+
+/// Light kinds of [`LightRecord::kind`].
+pub const LIGHT_DISTANT: u32 = 0;
+pub const LIGHT_POINT: u32 = 1;
+pub const LIGHT_SPOT: u32 = 2;
+/// An emitting shape lit as a point at its centre; shadow rays stop `cos_total` (its bounding
+/// radius) short of it so the emitter does not shadow its own light.
+pub const LIGHT_AREA: u32 = 3;
+
+/// Lights a frame shades with (the brightest ones; the rest are dropped with a warning).
+pub const MAX_LIGHTS: usize = 8;
+
+/// Coverage below which an alpha-tested surface is cut out.
+pub const ALPHA_CUTOFF: f32 = 0.5;
+
+/// A light of the frame. Distant lights carry irradiance (`radiance` = pbrt `L` × `scale`,
+/// arriving perpendicular); point and spot lights carry intensity (`I` × `scale`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct LightRecord {
+    pub world_position: [f32; 3],
+    pub kind: u32,
+    /// Unit direction the light travels (distant, spot).
+    pub world_direction: [f32; 3],
+    /// Spot: cosine of the half-angle where the cone ends. Area: the emitter's bounding radius.
+    pub cos_total: f32,
+    pub radiance: [f32; 3],
+    /// Spot: cosine of the half-angle where falloff starts.
+    pub cos_falloff: f32,
+}
+
+/// One image texture: a mip chain of RGBA8 texels, level 0 first, each level right after the
+/// previous one in [`crate::HierarchyView::texels`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct TextureRecord {
+    /// Index of level 0's first texel.
+    pub texel_offset: u32,
+    pub width: u32,
+    pub height: u32,
+    pub mip_count: u32,
+}
+
+impl TextureRecord {
+    /// Texels of the whole chain.
+    pub fn texel_count(&self) -> u64 {
+        (0..self.mip_count)
+            .map(|l| mip_extent(self.width, l) as u64 * mip_extent(self.height, l) as u64)
+            .sum()
+    }
+}
+
+/// Extent of mip level `level` of an axis of `size` texels.
+pub fn mip_extent(size: u32, level: u32) -> u32 {
+    (size >> level.min(31)).max(1)
+}
+
+/// How a frame is lit and sampled (both renderers take it as is).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Shading {
+    /// The scene's lights; with none, the renderer's key light (its `sun_*` options) is used.
+    pub lights: [LightRecord; MAX_LIGHTS],
+    pub light_count: u32,
+    /// Sky radiance for the ambient term (an infinite light's colour); `None`: the renderer's
+    /// `ambient` grey.
+    pub sky: Option<[f32; 3]>,
+    /// Ambient-occlusion rays per sample (0: the sky term is unoccluded).
+    pub ao_samples: u32,
+    /// Farthest an occluder counts for ambient occlusion, world units.
+    pub ao_distance: f32,
+    /// Samples per pixel (the first at the pixel centre gives the hit record).
+    pub spp: u32,
+    /// Exposure in stops (the image is scaled by 2^ev before the sRGB transfer).
+    pub exposure_ev: f32,
+}
+
+impl Default for Shading {
+    fn default() -> Self {
+        Self {
+            lights: [LightRecord::default(); MAX_LIGHTS],
+            light_count: 0,
+            sky: None,
+            ao_samples: 0,
+            ao_distance: f32::INFINITY,
+            spp: 1,
+            exposure_ev: 0.0,
+        }
+    }
+}
+
+impl Shading {
+    /// The lights to shade with: the scene's, else one distant key light towards `sun_dir`
+    /// whose Lambertian response is `sun_intensity × N·L` (irradiance π × intensity).
+    pub fn frame_lights(
+        &self,
+        sun_dir: [f32; 3],
+        sun_intensity: f32,
+    ) -> ([LightRecord; MAX_LIGHTS], u32) {
+        if self.light_count > 0 {
+            return (self.lights, self.light_count.min(MAX_LIGHTS as u32));
+        }
+        let l = (sun_dir[0] * sun_dir[0] + sun_dir[1] * sun_dir[1] + sun_dir[2] * sun_dir[2])
+            .sqrt()
+            .max(1e-20);
+        let mut lights = [LightRecord::default(); MAX_LIGHTS];
+        lights[0] = LightRecord {
+            kind: LIGHT_DISTANT,
+            world_direction: sun_dir.map(|c| -c / l),
+            radiance: [sun_intensity * std::f32::consts::PI; 3],
+            ..Default::default()
+        };
+        (lights, 1)
+    }
+
+    /// Sky radiance: the scene's, else `ambient` grey.
+    pub fn sky_radiance(&self, ambient: f32) -> [f32; 3] {
+        self.sky.unwrap_or([ambient; 3])
+    }
+
+    /// `2^exposure_ev`.
+    pub fn exposure_scale(&self) -> f32 {
+        self.exposure_ev.exp2()
+    }
+}
+
+/// Phong exponent of a perceptual roughness (the specular lobe of both renderers).
+pub fn shininess(roughness: f32) -> f32 {
+    let a = (roughness * roughness).max(1e-3);
+    (2.0 / (a * a) - 2.0).clamp(1.0, 4096.0)
+}
+
+/// Cosine-weighted direction about unit `n` from two uniform numbers (Duff et al.'s
+/// branchless orthonormal basis).
+pub fn cosine_direction(n: [f32; 3], u1: f32, u2: f32) -> [f32; 3] {
+    let sign = if n[2] >= 0.0 { 1.0f32 } else { -1.0 };
+    let a = -1.0 / (sign + n[2]);
+    let b = n[0] * n[1] * a;
+    let t = [1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]];
+    let bt = [b, sign + n[1] * n[1] * a, -n[1]];
+    let r = u1.sqrt();
+    let phi = 2.0 * std::f32::consts::PI * u2;
+    let (x, y) = (r * phi.cos(), r * phi.sin());
+    let z = (1.0 - u1).max(0.0).sqrt();
+    std::array::from_fn(|i| x * t[i] + y * bt[i] + z * n[i])
+}
+
+/// A uniform number in [0, 1) for pixel `pixel`, sample `sample`, dimension `dim` (a PCG hash
+/// chain; identical on the GPU).
+pub fn rand01(pixel: u32, sample: u32, dim: u32) -> f32 {
+    let h = hash_u32(hash_u32(hash_u32(pixel) ^ sample.wrapping_mul(0x9e37_79b9)) ^ dim);
+    (h >> 8) as f32 / (1u32 << 24) as f32
+}
+
+fn hash_u32(v: u32) -> u32 {
+    let state = v.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
+    let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277_803_737);
+    (word >> 22) ^ word
+}
+
+/// sRGB-encoded 8-bit value to linear.
+pub fn srgb_to_linear(v: f32) -> f32 {
+    if v <= 0.040_45 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// The mip level for a footprint of `texels_per_pixel` level-0 texels (rounded down, clamped).
+pub fn mip_level(texels_per_pixel: f32, mip_count: u32) -> u32 {
+    // NaN and footprints of at most one texel take the finest level.
+    if texels_per_pixel.is_nan() || texels_per_pixel <= 1.0 {
+        return 0;
+    }
+    (texels_per_pixel.log2().floor() as u32).min(mip_count.saturating_sub(1))
+}
+
+/// Bilinear sample (wrapping) of level `level` of `tex` at `uv`, linear RGBA (colour channels
+/// decoded from sRGB, alpha as stored). `v` = 0 is the image's bottom row (pbrt's convention).
+pub fn sample_texture(tex: &TextureRecord, texels: &[u32], uv: [f32; 2], level: u32) -> [f32; 4] {
+    let level = level.min(tex.mip_count.saturating_sub(1));
+    let mut base = tex.texel_offset as usize;
+    for l in 0..level {
+        base += mip_extent(tex.width, l) as usize * mip_extent(tex.height, l) as usize;
+    }
+    let (w, h) = (mip_extent(tex.width, level), mip_extent(tex.height, level));
+    let uv = if uv.iter().all(|c| c.is_finite()) {
+        uv
+    } else {
+        [0.0; 2]
+    };
+    let x = (uv[0] - uv[0].floor()) * w as f32 - 0.5;
+    let y = (1.0 - (uv[1] - uv[1].floor())) * h as f32 - 0.5;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let wrap = |v: i64, n: u32| v.rem_euclid(n as i64) as usize;
+    let fetch = |xi: i64, yi: i64| -> [f32; 4] {
+        let t = texels
+            .get(base + wrap(yi, h) * w as usize + wrap(xi, w))
+            .copied()
+            .unwrap_or(0xff80_8080);
+        let c = |s: u32| ((t >> s) & 0xff) as f32 / 255.0;
+        [
+            srgb_to_linear(c(0)),
+            srgb_to_linear(c(8)),
+            srgb_to_linear(c(16)),
+            c(24),
+        ]
+    };
+    let (xi, yi) = (x0 as i64, y0 as i64);
+    let (a, b, c, d) = (
+        fetch(xi, yi),
+        fetch(xi + 1, yi),
+        fetch(xi, yi + 1),
+        fetch(xi + 1, yi + 1),
+    );
+    std::array::from_fn(|i| {
+        let top = a[i] + (b[i] - a[i]) * fx;
+        let bottom = c[i] + (d[i] - c[i]) * fx;
+        top + (bottom - top) * fy
+    })
+}
+
+/// Exposure and the sRGB transfer (values above 1 after exposure clip).
+pub fn tone_map(c: [f32; 3], exposure_scale: f32) -> [u8; 3] {
+    c.map(|v| {
+        let v = (v * exposure_scale).clamp(0.0, 1.0);
+        let s = if v <= 0.003_130_8 {
+            12.92 * v
+        } else {
+            1.055 * v.powf(1.0 / 2.4) - 0.055
+        };
+        (s * 255.0 + 0.5) as u8
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mips_and_sampling() {
+        let t = TextureRecord {
+            texel_offset: 0,
+            width: 4,
+            height: 2,
+            mip_count: 3,
+        };
+        assert_eq!(t.texel_count(), 8 + 2 + 1);
+        assert_eq!(mip_level(0.5, 3), 0);
+        assert_eq!(mip_level(2.5, 3), 1);
+        assert_eq!(mip_level(1000.0, 3), 2);
+        // Level 0 all red, level 1 green, level 2 blue.
+        let mut texels = vec![0xff00_00ff; 8];
+        texels.extend([0xff00_ff00; 2]);
+        texels.push(0xffff_0000);
+        let red = sample_texture(&t, &texels, [0.3, 0.7], 0);
+        assert!((red[0] - 1.0).abs() < 1e-6 && red[1] == 0.0 && red[3] == 1.0);
+        assert!(sample_texture(&t, &texels, [0.3, 0.7], 1)[1] > 0.999);
+        assert!(sample_texture(&t, &texels, [-4.3, 9.7], 2)[2] > 0.999);
+    }
+
+    #[test]
+    fn random_numbers_are_uniform_ish() {
+        let n = 4096;
+        let mean: f32 = (0..n).map(|i| rand01(i, 3, 1)).sum::<f32>() / n as f32;
+        assert!((mean - 0.5).abs() < 0.02, "{mean}");
+        assert_ne!(rand01(1, 0, 0), rand01(1, 1, 0));
+        assert_ne!(rand01(1, 0, 0), rand01(1, 0, 1));
+    }
+
+    #[test]
+    fn cosine_directions_stay_in_the_hemisphere() {
+        for n in [
+            [0.0, 0.0, 1.0],
+            [0.0, 0.0, -1.0],
+            [0.6, 0.0, 0.8],
+            [0.0, -1.0, 0.0],
+        ] {
+            for i in 0..64 {
+                let d = cosine_direction(n, rand01(i, 0, 0), rand01(i, 0, 1));
+                let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                assert!((len - 1.0).abs() < 1e-4, "{d:?}");
+                assert!(
+                    d[0] * n[0] + d[1] * n[1] + d[2] * n[2] >= 0.0,
+                    "{d:?} vs {n:?}"
+                );
+            }
+        }
+        assert!(shininess(0.0) > shininess(0.5) && shininess(1.0) >= 1.0);
+    }
+
+    #[test]
+    fn default_key_light_matches_the_sun() {
+        let (l, n) = Shading::default().frame_lights([0.0, 2.0, 0.0], 0.8);
+        assert_eq!(n, 1);
+        assert_eq!(l[0].kind, LIGHT_DISTANT);
+        assert_eq!(l[0].world_direction, [0.0, -1.0, 0.0]);
+        assert!((l[0].radiance[0] / std::f32::consts::PI - 0.8).abs() < 1e-6);
+    }
+
+    #[test]
+    fn tone_map_is_srgb_after_exposure() {
+        assert_eq!(tone_map([0.0, 1.0, 2.0], 1.0), [0, 255, 255]);
+        assert_eq!(tone_map([0.5, 0.5, 0.5], 0.5), tone_map([0.25; 3], 1.0));
+        assert_eq!(tone_map([0.2159; 3], 1.0), [128; 3]);
+    }
+}

@@ -1,0 +1,252 @@
+// Shading of one hit: the GPU mirror of motu-trace's shade.rs and motu_abi::shade (same rules,
+// same random numbers, same texel addressing): shading normal (interpolated vertex normals),
+// base colour × image texture (mip level from the pixel footprint, software bilinear over
+// texels reached by device address), the frame's lights with shadow rays, and the sky term
+// with ambient occlusion. Included by render_pixel.glsl after traverse.glsl.
+#ifndef MOTU_SHADE_GLSL
+#define MOTU_SHADE_GLSL
+#include "traverse.glsl"
+#include "texture.glsl"
+
+// Secondary rays of the current pixel (added to the stats once per pixel).
+uint g_secondary_rays = 0u;
+
+float rand01(uint pixel, uint smp, uint dim) {
+    uint h = hash_u32(hash_u32(hash_u32(pixel) ^ (smp * 0x9e3779b9u)) ^ dim);
+    return float(h >> 8u) / 16777216.0;
+}
+
+float shininess(float roughness) {
+    float a = max(roughness * roughness, 1e-3);
+    return clamp(2.0 / (a * a) - 2.0, 1.0, 4096.0);
+}
+
+vec3 cosine_direction(vec3 n, float u1, float u2) {
+    float s = n.z >= 0.0 ? 1.0 : -1.0;
+    float a = -1.0 / (s + n.z);
+    float b = n.x * n.y * a;
+    vec3 t = vec3(1.0 + s * n.x * n.x * a, s * b, -s * n.x);
+    vec3 bt = vec3(b, s + n.y * n.y * a, -n.y);
+    float r = sqrt(u1);
+    float phi = 6.28318530718 * u2;
+    float z = sqrt(max(1.0 - u1, 0.0));
+    return r * cos(phi) * t + r * sin(phi) * bt + z * n;
+}
+
+vec3 barycentrics(vec3 v0, vec3 v1, vec3 v2, vec3 p) {
+    vec3 e0 = v1 - v0;
+    vec3 e1 = v2 - v0;
+    vec3 ep = p - v0;
+    float d00 = dot(e0, e0);
+    float d01 = dot(e0, e1);
+    float d11 = dot(e1, e1);
+    float d20 = dot(ep, e0);
+    float d21 = dot(ep, e1);
+    float den = d00 * d11 - d01 * d01;
+    if (den == 0.0) {
+        return vec3(1.0, 0.0, 0.0);
+    }
+    float b1 = (d11 * d20 - d01 * d21) / den;
+    float b2 = (d00 * d21 - d01 * d20) / den;
+    return vec3(1.0 - b1 - b2, b1, b2);
+}
+
+struct ShadePoint {
+    vec3 p;
+    vec3 ng;  // geometric normal facing the ray origin
+    vec3 ns;  // shading normal, same side
+    bool has_uv;
+    vec2 uv;
+    float uv_per_pixel;
+};
+
+vec3 load_vec3(Floats f, uint i) {
+    return vec3(f.v[3u * i], f.v[3u * i + 1u], f.v[3u * i + 2u]);
+}
+
+ShadePoint surface_point(TraceHit h, uint mesh, vec3 org, vec3 dir) {
+    ShadePoint sp;
+    InstanceRecord inst = push.instances.r[push.tlases.r[h.tlas].instance_base + h.instance];
+    MeshRecord m = push.meshes.r[mesh];
+    MeshGeo g = push.mesh_geo.r[mesh];
+    U32Table idx = U32Table(g.indices);
+    Floats pos = Floats(g.positions);
+    uvec3 tri = uvec3(idx.r[3u * h.primitive], idx.r[3u * h.primitive + 1u],
+                      idx.r[3u * h.primitive + 2u]);
+    vec3 v0 = load_vec3(pos, tri.x);
+    vec3 v1 = load_vec3(pos, tri.y);
+    vec3 v2 = load_vec3(pos, tri.z);
+    Affine object_from_world =
+        compose(affine_inverse(affine_from_array(inst.tlas_from_blas)), h.tlas_from_world);
+    sp.p = org + dir * h.t;
+    vec3 ng = normalize(transpose_vector(object_from_world, cross(v1 - v0, v2 - v0)));
+    if (dot(ng, dir) > 0.0) {
+        ng = -ng;
+    }
+    sp.ng = ng;
+    sp.ns = ng;
+    sp.has_uv = false;
+    sp.uv = vec2(0.0);
+    sp.uv_per_pixel = 0.0;
+    uint64_t shading = push.frame.f.shading;
+    if (shading == 0ul) {
+        return sp;
+    }
+    U64Table attrs = U64Table(ShadingRef(shading).mesh_attrs);
+    uint64_t normals = attrs.r[2u * mesh];
+    uint64_t uvs = attrs.r[2u * mesh + 1u];
+    if (normals == 0ul && uvs == 0ul) {
+        return sp;
+    }
+    vec3 b = barycentrics(v0, v1, v2, xform_point(object_from_world, sp.p));
+    if (normals != 0ul && (m.flags & FLAG_HAS_NORMALS) != 0u) {
+        Floats n = Floats(normals);
+        vec3 n_obj = b.x * load_vec3(n, tri.x) + b.y * load_vec3(n, tri.y) + b.z * load_vec3(n, tri.z);
+        vec3 ns = normalize(transpose_vector(object_from_world, n_obj));
+        if (!any(isnan(ns)) && !any(isinf(ns)) && length(ns) > 0.5) {
+            sp.ns = dot(ns, ng) < 0.0 ? -ns : ns;
+        }
+    }
+    if (uvs != 0ul && (m.flags & FLAG_HAS_UVS) != 0u) {
+        Floats u = Floats(uvs);
+        vec2 t0 = vec2(u.v[2u * tri.x], u.v[2u * tri.x + 1u]);
+        vec2 t1 = vec2(u.v[2u * tri.y], u.v[2u * tri.y + 1u]);
+        vec2 t2 = vec2(u.v[2u * tri.z], u.v[2u * tri.z + 1u]);
+        sp.has_uv = true;
+        sp.uv = b.x * t0 + b.y * t1 + b.z * t2;
+        Affine world_from_object = affine_inverse(object_from_world);
+        vec3 w0 = xform_point(world_from_object, v0);
+        vec3 w1 = xform_point(world_from_object, v1);
+        vec3 w2 = xform_point(world_from_object, v2);
+        float world_area = length(cross(w1 - w0, w2 - w0));
+        vec2 d1 = t1 - t0;
+        vec2 d2 = t2 - t0;
+        float uv_area = abs(d1.x * d2.y - d2.x * d1.y);
+        if (world_area > 0.0) {
+            sp.uv_per_pixel = h.t / push.frame.f.camera.pixels_per_unit_at_1 *
+                              sqrt(uv_area / world_area);
+        }
+    }
+    return sp;
+}
+
+// Direction to the light, shadow-ray length (w) and irradiance at normal incidence; false when
+// it brings nothing (motu_trace::shade::light_incidence).
+bool light_incidence(LightRecord l, vec3 p, out vec4 dir_reach, out vec3 e) {
+    if (l.kind == LIGHT_DISTANT) {
+        dir_reach = vec4(-l.world_direction, T_INFINITY);
+        e = l.radiance;
+        return true;
+    }
+    vec3 to = l.world_position - p;
+    float d2 = dot(to, to);
+    if (d2 <= 0.0) {
+        return false;
+    }
+    float dist = sqrt(d2);
+    vec3 d = to / dist;
+    float scale = 1.0 / d2;
+    float reach = dist;
+    if (l.kind == LIGHT_SPOT) {
+        float c = -dot(d, l.world_direction);
+        float x = clamp((c - l.cos_total) / max(l.cos_falloff - l.cos_total, 1e-6), 0.0, 1.0);
+        scale *= x * x * (3.0 - 2.0 * x);
+    } else if (l.kind == LIGHT_AREA) {
+        reach = dist - l.cos_total;
+        if (reach <= 0.0) {
+            return false;
+        }
+    }
+    if (scale <= 0.0) {
+        return false;
+    }
+    dir_reach = vec4(d, reach);
+    e = l.radiance * scale;
+    return true;
+}
+
+// A secondary (shadow or ambient-occlusion) ray: is anything in (0, t_max)?
+bool occluded(vec3 start, vec3 d, float t_max, LodParams sl, inout uint traces,
+              inout uint overflows, inout uint truncations) {
+    g_t_max = t_max;
+    TraceHit sh = traverse(push.frame.f.root_tlas, start, d, RAY_SHADOW, sl,
+                           push.frame.f.camera.pixels_per_unit_at_1, 0.0, true, traces, overflows,
+                           truncations);
+    g_t_max = T_INFINITY;
+    g_secondary_rays += 1u;
+    return sh.t < t_max;
+}
+
+// Colour (linear, before exposure) of hit `h` on mesh record `mesh` for sample `smp` of
+// `pixel` (motu_trace::shade::shade_hit).
+vec3 shade_hit(TraceHit h, uint mesh, vec3 org, vec3 dir, uint pixel, uint smp, uint lod,
+               inout uint traces, inout uint overflows, inout uint truncations) {
+    FrameParams f = push.frame.f;
+    MeshRecord m = push.meshes.r[mesh];
+    MaterialRecord mat = push.materials.r[m.material];
+    ShadePoint sp = surface_point(h, mesh, org, dir);
+    vec3 albedo = mat.base_color;
+    if (mat.base_color_texture != NONE_U32 && sp.has_uv) {
+        ShadingRef sr = ShadingRef(f.shading);
+        TextureRecord tex = TextureTable(sr.textures).r[mat.base_color_texture];
+        float tpp = sp.uv_per_pixel * sqrt(float(tex.width) * float(tex.height));
+        albedo *= sample_texture(tex, sr.texels, sp.uv, mip_level(tpp, tex.mip_count)).rgb;
+    }
+    vec3 ns = sp.ns;
+    vec3 ng = sp.ng;
+    vec3 diffuse = albedo * (1.0 - mat.metallic);
+    vec3 f0 = vec3(0.04) + (albedo - vec3(0.04)) * mat.metallic;
+    float s = shininess(mat.roughness);
+    float spec_norm = (s + 8.0) / (8.0 * 3.14159265359);
+    float reach = max(max(abs(org.x), abs(org.y)), abs(org.z)) + h.t;
+    vec3 start = shadow_offset(sp.p, ng, reach);
+    LodParams sl = f.lod;
+    if (f.shadow_lod_from_primary != 0u) {
+        sl.forced_lod = int(lod);
+    }
+    vec3 colour = mat.emission;
+    for (uint i = 0u; i < min(f.light_count, uint(MAX_LIGHTS)); ++i) {
+        vec4 dr;
+        vec3 e;
+        if (!light_incidence(f.lights[i], sp.p, dr, e)) {
+            continue;
+        }
+        vec3 ldir = dr.xyz;
+        float ndl = dot(ns, ldir);
+        if (ndl <= 0.0 || dot(ng, ldir) <= 0.0) {
+            continue;
+        }
+        if (f.shadows != 0u && occluded(start, ldir, dr.w, sl, traces, overflows, truncations)) {
+            continue;
+        }
+        vec3 hv = normalize(ldir - dir);
+        float spec = spec_norm * pow(max(dot(ns, hv), 0.0), s);
+        colour += (diffuse / 3.14159265359 + f0 * spec) * e * ndl;
+    }
+    float ao = 1.0;
+    if (f.ao_samples > 0u) {
+        uint open = 0u;
+        for (uint k = 0u; k < f.ao_samples; ++k) {
+            vec3 d = cosine_direction(ns, rand01(pixel, smp, 2u + 2u * k),
+                                      rand01(pixel, smp, 3u + 2u * k));
+            if (dot(d, ng) > 0.0 &&
+                !occluded(start, d, f.ao_distance, sl, traces, overflows, truncations)) {
+                open += 1u;
+            }
+        }
+        ao = float(open) / float(f.ao_samples);
+    }
+    colour += (diffuse + f0) * f.sky.rgb * ao;
+    return colour;
+}
+
+// What a primary ray that hits nothing shows in the shaded view.
+vec3 shaded_background(vec3 dir) {
+    return push.frame.f.sky.w != 0.0 ? push.frame.f.sky.rgb : sky(dir);
+}
+
+// Exposure and the sRGB transfer (motu_abi::shade::tone_map).
+uint tone_map(vec3 c, float exposure_scale) {
+    return encode_srgb8(c * exposure_scale);
+}
+#endif

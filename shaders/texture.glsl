@@ -1,0 +1,104 @@
+// Image textures and per-vertex attributes reached through FrameParams.shading, shared by the
+// shading code (shade.glsl) and the alpha tests of non-opaque triangles (any-hit shader and
+// ray-query loop). Mirrors motu_abi::shade (texel addressing and bilinear sampling).
+#ifndef MOTU_TEXTURE_GLSL
+#define MOTU_TEXTURE_GLSL
+#include "common.glsl"
+
+// FrameParams.shading: per-mesh attribute addresses and the texture tables (0 = none, e.g.
+// in streaming passes: constant colours and geometric normals then).
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer ShadingRef {
+    uint64_t mesh_attrs;  // per mesh record: normals address, uvs address (0: none)
+    uint64_t textures;    // TextureRecord[]
+    uint64_t texels;      // u32 RGBA8
+    uint64_t _pad;
+};
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer TextureTable { TextureRecord r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer Floats { float v[]; };
+
+float srgb_to_linear(float v) {
+    return v <= 0.04045 ? v / 12.92 : pow((v + 0.055) / 1.055, 2.4);
+}
+
+uint mip_extent(uint size, uint level) {
+    return max(size >> min(level, 31u), 1u);
+}
+
+uint mip_level(float texels_per_pixel, uint mip_count) {
+    if (!(texels_per_pixel > 1.0)) {
+        return 0u;
+    }
+    return min(uint(floor(log2(texels_per_pixel))), mip_count - 1u);
+}
+
+vec4 texel_at(U32Table texels, uint base, uint w, uint h, int xi, int yi) {
+    // xi in [-1, w], yi in [-1, h]: one wrap suffices (motu_abi's rem_euclid agrees there).
+    uint x = uint(xi < 0 ? xi + int(w) : (xi >= int(w) ? xi - int(w) : xi));
+    uint y = uint(yi < 0 ? yi + int(h) : (yi >= int(h) ? yi - int(h) : yi));
+    uint t = texels.r[base + y * w + x];
+    vec4 c = vec4(float(t & 0xffu), float((t >> 8u) & 0xffu), float((t >> 16u) & 0xffu),
+                  float(t >> 24u)) / 255.0;
+    return vec4(srgb_to_linear(c.r), srgb_to_linear(c.g), srgb_to_linear(c.b), c.a);
+}
+
+// motu_abi::shade::sample_texture.
+vec4 sample_texture(TextureRecord tex, uint64_t texels_addr, vec2 uv, uint level) {
+    level = min(level, tex.mip_count - 1u);
+    uint base = tex.texel_offset;
+    for (uint l = 0u; l < level; ++l) {
+        base += mip_extent(tex.width, l) * mip_extent(tex.height, l);
+    }
+    uint w = mip_extent(tex.width, level);
+    uint h = mip_extent(tex.height, level);
+    if (any(isnan(uv)) || any(isinf(uv))) {
+        uv = vec2(0.0);
+    }
+    float x = (uv.x - floor(uv.x)) * float(w) - 0.5;
+    float y = (1.0 - (uv.y - floor(uv.y))) * float(h) - 0.5;
+    float x0 = floor(x);
+    float y0 = floor(y);
+    float fx = x - x0;
+    float fy = y - y0;
+    int xi = int(x0);
+    int yi = int(y0);
+    U32Table t = U32Table(texels_addr);
+    vec4 a = texel_at(t, base, w, h, xi, yi);
+    vec4 b = texel_at(t, base, w, h, xi + 1, yi);
+    vec4 c = texel_at(t, base, w, h, xi, yi + 1);
+    vec4 d = texel_at(t, base, w, h, xi + 1, yi + 1);
+    vec4 top = a + (b - a) * fx;
+    vec4 bottom = c + (d - c) * fx;
+    return top + (bottom - top) * fy;
+}
+
+// Coverage of a non-opaque triangle at barycentrics `bary` (Vulkan's: weights of vertices 1
+// and 2): the material's constant opacity times its alpha texture at level 0 (motu-trace's
+// shade::coverage). Streaming passes (no shading tables) test the constant only.
+bool alpha_passes(uint tlas, uint instance, uint geometry, uint primitive, vec2 bary) {
+    InstanceRecord inst = push.instances.r[push.tlases.r[tlas].instance_base + instance];
+    uint mesh = push.geometries.r[push.blases.r[inst.blas].item_base + geometry].mesh;
+    MeshRecord m = push.meshes.r[mesh];
+    MaterialRecord mat = push.materials.r[m.material];
+    float a = mat.opacity;
+    uint64_t shading = push.frame.f.shading;
+    if (mat.alpha_texture != NONE_U32 && shading != 0ul && (m.flags & FLAG_HAS_UVS) != 0u) {
+        ShadingRef sr = ShadingRef(shading);
+        uint64_t uvs = U64Table(sr.mesh_attrs).r[2u * mesh + 1u];
+        if (uvs != 0ul) {
+            MeshGeo g = push.mesh_geo.r[mesh];
+            U32Table idx = U32Table(g.indices);
+            Floats u = Floats(uvs);
+            uint i0 = idx.r[3u * primitive];
+            uint i1 = idx.r[3u * primitive + 1u];
+            uint i2 = idx.r[3u * primitive + 2u];
+            vec2 t0 = vec2(u.v[2u * i0], u.v[2u * i0 + 1u]);
+            vec2 t1 = vec2(u.v[2u * i1], u.v[2u * i1 + 1u]);
+            vec2 t2 = vec2(u.v[2u * i2], u.v[2u * i2 + 1u]);
+            vec2 uv = (1.0 - bary.x - bary.y) * t0 + bary.x * t1 + bary.y * t2;
+            TextureRecord tex = TextureTable(sr.textures).r[mat.alpha_texture];
+            a *= sample_texture(tex, sr.texels, uv, 0u).a;
+        }
+    }
+    return a >= ALPHA_CUTOFF;
+}
+#endif
