@@ -21,8 +21,10 @@ mod error;
 mod heap;
 mod instance;
 mod limits;
+mod live;
 mod memory;
 mod pipeline;
+mod present;
 mod probe;
 mod query;
 mod render;
@@ -53,11 +55,13 @@ pub use limits::{
     parse_size, LimitOverrides, Limits, ENV_MAX_ALLOCATIONS, ENV_MAX_ALLOCATION_SIZE,
     ENV_MAX_INSTANCE_COUNT, ENV_MAX_PRIMITIVE_COUNT, ENV_MAX_STORAGE_BUFFER_RANGE,
 };
+pub use live::LiveRenderer;
 pub use memory::{
     Buffer, BufferDesc, BufferUsage, DeviceAddress, DeviceMemory, MemoryLocation,
     MemoryRequirements,
 };
 pub use pipeline::{BindingSet, ComputePipeline, ComputePipelineDesc};
+pub use present::{Presented, Presenter, RawDisplayHandle, RawWindowHandle};
 pub use probe::{Caps, HeapReport};
 pub use query::TimestampQueries;
 

@@ -201,8 +201,8 @@ pub struct RayCounts {
     pub truncated_rays: u64,
 }
 
-struct Frame {
-    params: HeapBuffer,
+pub(crate) struct Frame {
+    pub(crate) params: HeapBuffer,
     aov: HeapBuffer,
     rgba: HeapBuffer,
     stats: HeapBuffer,
@@ -210,14 +210,14 @@ struct Frame {
 }
 
 impl Frame {
-    fn release(self, heap: &mut GpuHeap) {
+    pub(crate) fn release(self, heap: &mut GpuHeap) {
         for b in [self.params, self.aov, self.rgba, self.stats, self.readback] {
             heap.free(b);
         }
     }
 }
 
-fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams) -> Result<Frame> {
+pub(crate) fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams) -> Result<Frame> {
     let out = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS | BufferUsage::TRANSFER_SRC;
     let p = heap.alloc_buffer(
         "frame-params",
@@ -496,9 +496,9 @@ pub fn render_counted(
     Ok((RenderOutput { aov, rgba8, stats }, counts))
 }
 
-type FrameResult = (Vec<AovRecord>, Vec<u32>, Vec<u32>, Vec<f64>);
+pub(crate) type FrameResult = (Vec<AovRecord>, Vec<u32>, Vec<u32>, Vec<f64>);
 
-fn run_frames(
+pub(crate) fn run_frames(
     ctx: &Context,
     scene: &GpuScene,
     tracer: &Tracer,

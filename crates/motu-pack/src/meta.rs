@@ -4,7 +4,11 @@ use motu_scene::{Camera, Light, SceneStats};
 use serde::{Deserialize, Serialize};
 
 /// Identifies the section layout this build writes; readers reject other schemas.
-pub const SCHEMA: &str = "motu-scene/1";
+/// `motu-scene/2` added partitioned meshes (clusters with a primitive map, `FLAG_PRIMITIVE_MAP`);
+/// a `/1` package is still read (it has no clusters), while a `/1` reader refuses `/2`.
+pub const SCHEMA: &str = "motu-scene/2";
+/// Older schemas this build still reads.
+pub const SCHEMA_READABLE: &[&str] = &["motu-scene/1", SCHEMA];
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ElementMeta {
@@ -49,7 +53,7 @@ pub struct PackageMeta {
 pub(crate) fn parse_meta(bytes: &[u8]) -> Result<PackageMeta, String> {
     let meta: PackageMeta =
         serde_json::from_slice(bytes).map_err(|e| format!("meta section is not valid: {e}"))?;
-    if meta.schema != SCHEMA {
+    if !SCHEMA_READABLE.contains(&meta.schema.as_str()) {
         return Err(format!(
             "schema '{}' is not supported (this build reads '{SCHEMA}')",
             meta.schema

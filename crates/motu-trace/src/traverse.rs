@@ -256,6 +256,22 @@ impl<'a> Tracer<'a> {
                 "triangle count differs from the mesh record"
             );
         }
+        // A cluster's hits name source primitives: without its map they would be wrong.
+        if (rec.flags & motu_abi::FLAG_PRIMITIVE_MAP != 0) != g.primitive_map.is_some() {
+            return Err(MeshError::Load(format!(
+                "mesh record {m}: the record {} a primitive map, the loaded mesh {}",
+                if rec.flags & motu_abi::FLAG_PRIMITIVE_MAP != 0 {
+                    "has"
+                } else {
+                    "has no"
+                },
+                if g.primitive_map.is_some() {
+                    "has one"
+                } else {
+                    "has none"
+                }
+            )));
+        }
         MeshBvh::build(&g, Some(record_box(rec.bounds_min, rec.bounds_max)), params)
     }
 

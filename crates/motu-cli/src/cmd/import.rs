@@ -49,6 +49,7 @@ pub fn run(a: ImportArgs) -> anyhow::Result<()> {
         levels_text,
         max_instances: a.max_instances,
         max_tlas_scratch_bytes: a.max_tlas_scratch,
+        max_blas_triangles: a.max_blas_triangles,
         lod_levels: a.lod,
         lod_min_triangles: a.lod_min_triangles,
         zstd_level: a.zstd,

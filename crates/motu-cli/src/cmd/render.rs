@@ -25,6 +25,7 @@ impl motu_trace::MeshSource for PackageMeshes<'_> {
             positions: g.positions,
             indices: g.indices,
             normals: g.normals,
+            primitive_map: g.primitive_map,
         })
     }
 }
@@ -120,6 +121,15 @@ impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
     > {
         self.0.mesh_slices(mesh_record).map_err(|e| e.to_string())
     }
+
+    fn primitive_map(
+        &self,
+        mesh_record: u32,
+    ) -> Result<Option<std::borrow::Cow<'_, [u32]>>, String> {
+        self.0
+            .primitive_map_slice(mesh_record)
+            .map_err(|e| e.to_string())
+    }
 }
 
 fn gpu_context(a: &RenderArgs, backend: BackendArg) -> anyhow::Result<motu_gpu::Context> {
@@ -198,6 +208,7 @@ fn render_streaming(
     view: &HierarchyView<'_>,
     lod: LodParams,
     backend: BackendArg,
+    recorded: Option<&[CameraParams]>,
 ) -> anyhow::Result<(Aov, Vec<u8>, Value)> {
     let ctx = gpu_context(a, backend)?;
     let (pose, w, h) = camera_pose(pkg, view, a.camera.as_deref(), a.width, a.height)?;
@@ -217,8 +228,12 @@ fn render_streaming(
     let ropts = gpu_render_options(a, lod, backend, 1);
     let mut frames = Vec::new();
     let mut last = None;
-    for f in 0..a.frames {
-        let cam = camera_path(&pose, &path, f, a.frames).params(w, h);
+    let frame_count = recorded.map_or(a.frames, |r| r.len() as u32);
+    for f in 0..frame_count {
+        let cam = match recorded {
+            Some(r) => r[f as usize],
+            None => camera_path(&pose, &path, f, a.frames).params(w, h),
+        };
         let (out, st) = sr
             .render_frame(&cam, &ropts)
             .with_context(|| format!("streaming frame {f}"))?;
@@ -293,6 +308,85 @@ fn render_gpu(
     Ok((out.aov, out.rgba8, stats))
 }
 
+/// `--camera-path`: the frame cameras (None without a path). The image size is --width/--height,
+/// else the path's recorded size, else the camera's.
+fn recorded_cameras(
+    a: &RenderArgs,
+    camera: CameraParams,
+) -> anyhow::Result<Option<Vec<CameraParams>>> {
+    let Some(p) = &a.camera_path else {
+        return Ok(None);
+    };
+    let path = crate::cmd::view::load_camera_path(p)?;
+    let (w, h) = match (a.width, a.height, path.width, path.height) {
+        (None, None, Some(w), Some(h)) => (w, h),
+        _ => (camera.width, camera.height),
+    };
+    let n = if a.frames <= 1 {
+        path.poses.len() as u32
+    } else {
+        a.frames
+    };
+    Ok(Some(
+        (0..n).map(|f| path.sample(f, n).params(w, h)).collect(),
+    ))
+}
+
+/// A recorded camera path on a full GPU build: one frame per camera through the viewer's
+/// renderer (pipeline compiled once); the last frame is the output, every frame's time is in
+/// `path_ms_per_frame`.
+fn render_gpu_path(
+    a: &RenderArgs,
+    pkg: &ScenePackage,
+    view: &HierarchyView<'_>,
+    cams: &[CameraParams],
+    lod: LodParams,
+    backend: BackendArg,
+) -> anyhow::Result<(Aov, Vec<u8>, Value)> {
+    let ctx = gpu_context(a, backend)?;
+    let budget = a.vram_budget.unwrap_or(u64::MAX);
+    let build = motu_gpu::BuildOptions {
+        budget_bytes: budget,
+        max_allocations: a
+            .max_allocations
+            .unwrap_or(motu_gpu::BuildOptions::default().max_allocations),
+        staging_bytes: (budget / 8).clamp(4 << 20, 64 << 20),
+        ..Default::default()
+    };
+    let meshes = PackageMeshes(pkg);
+    let scene = motu_gpu::GpuScene::build(&ctx, view, &meshes, &build)
+        .context("building acceleration structures")?;
+    let opts = gpu_render_options(a, lod, backend, 1);
+    let mut live = motu_gpu::LiveRenderer::new(scene);
+    let mut times = Vec::with_capacity(cams.len());
+    let mut last = None;
+    for (f, cam) in cams.iter().enumerate() {
+        let out = live
+            .render_frame(cam, &opts)
+            .with_context(|| format!("rendering camera-path frame {f}"))?;
+        times.push(out.stats.ms_per_frame);
+        last = Some(out);
+    }
+    let out = last.context("empty camera path")?;
+    let mut stats = serde_json::to_value(&out.stats)?;
+    // The first frame is a warm-up (pipeline first use): left out of the median.
+    let timed = if times.len() > 1 {
+        &times[1..]
+    } else {
+        &times[..]
+    };
+    let mut timed = timed.to_vec();
+    timed.sort_by(f64::total_cmp);
+    stats["ms_per_frame"] = json!(timed[timed.len() / 2]);
+    stats["frames"] = json!(cams.len());
+    stats["path_ms_per_frame"] = json!(times);
+    stats["resources"] = serde_json::to_value(live.scene().report())?;
+    drop(live);
+    ctx.check_validation()
+        .context("Vulkan validation reported errors")?;
+    Ok((out.aov, out.rgba8, stats))
+}
+
 /// `query` where a device has ray queries (usually fastest on RTX), else `pipeline`, else the CPU.
 pub fn best_backend(devices: &[motu_gpu::DeviceReport]) -> BackendArg {
     if devices.iter().any(|d| d.ray_query) {
@@ -352,7 +446,12 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         Some(s) => s.view(&base),
         None => base,
     };
-    let camera = camera_params(&pkg, &view, a.camera.as_deref(), a.width, a.height)?;
+    let mut camera = camera_params(&pkg, &view, a.camera.as_deref(), a.width, a.height)?;
+    // `--camera-path`: the recorded poses over --frames frames (default: one per pose).
+    let recorded = recorded_cameras(&a, camera)?;
+    if let Some(r) = &recorded {
+        camera = *r.last().context("empty camera path")?;
+    }
     let lod = LodParams {
         forced_lod: a
             .lod
@@ -406,13 +505,16 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
                 max_traces_per_ray: a.max_traces_per_ray,
                 ..Default::default()
             };
-            let mut out =
-                motu_trace::render_with(&tracer, &camera, &opts).context("rendering on the CPU")?;
+            let cams = recorded
+                .clone()
+                .unwrap_or_else(|| vec![camera; a.frames as usize]);
+            let mut out = motu_trace::render_with(&tracer, &cams[0], &opts)
+                .context("rendering on the CPU")?;
             let mut times = vec![out.stats.ms_per_frame];
-            for _ in 1..a.frames {
+            for cam in &cams[1..] {
                 let o = motu_trace::render_with(
                     &tracer,
-                    &camera,
+                    cam,
                     &motu_trace::RenderOptions {
                         prepare: false,
                         ..opts
@@ -425,11 +527,15 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             let median = times[times.len() / 2];
             let mut stats = serde_json::to_value(&out.stats)?;
             stats["ms_per_frame"] = json!(median);
-            stats["frames"] = json!(a.frames);
+            stats["frames"] = json!(cams.len());
             (out.aov, out.rgba8, stats)
         }
         BackendArg::Pipeline | BackendArg::Query if a.stream => {
-            render_streaming(&a, &pkg, &view, lod, backend)?
+            render_streaming(&a, &pkg, &view, lod, backend, recorded.as_deref())?
+        }
+        BackendArg::Pipeline | BackendArg::Query if recorded.is_some() => {
+            let cams = recorded.as_deref().unwrap_or_default();
+            render_gpu_path(&a, &pkg, &view, cams, lod, backend)?
         }
         BackendArg::Pipeline | BackendArg::Query => {
             render_gpu(&a, &pkg, &view, &camera, lod, backend)?
