@@ -393,6 +393,58 @@ fn regression_stale_temp_files_removed_by_a_later_import() {
     assert!(live.exists(), "a live process's temp file was removed");
 }
 
+// ---- 6 ------------------------------------------------------------------------------------
+
+#[test]
+fn regression_sigbus_on_truncated_scene_is_an_error_naming_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let sc = slow_scene(dir.path());
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    let mut child = Command::new(motu_bin())
+        .args(["import", s(&sc), "-o", s(&out_dir.join("p.motu"))])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = child.id().to_string();
+    // Once the scene is mapped, stop the process, truncate the file under it, let it go on.
+    let maps = format!("/proc/{pid}/maps");
+    let t = std::time::Instant::now();
+    while !std::fs::read_to_string(&maps).is_ok_and(|m| m.contains(s(&sc))) {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the import ended first"
+        );
+        assert!(t.elapsed().as_secs() < 60);
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
+    assert!(Command::new("kill")
+        .args(["-STOP", &pid])
+        .status()
+        .unwrap()
+        .success());
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(&sc)
+        .unwrap()
+        .set_len(0)
+        .unwrap();
+    assert!(Command::new("kill")
+        .args(["-CONT", &pid])
+        .status()
+        .unwrap()
+        .success());
+    let out = child.wait_with_output().unwrap();
+    let e = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{e}");
+    assert!(e.contains(&format!("bus error reading {}", s(&sc))), "{e}");
+    assert!(
+        temp_files(&out_dir).is_empty(),
+        "{:?}",
+        temp_files(&out_dir)
+    );
+}
+
 // ---- 7 ------------------------------------------------------------------------------------
 
 /// `levels` objects, each instancing the one below twice: 2^levels leaf instances.

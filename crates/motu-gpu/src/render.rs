@@ -195,8 +195,11 @@ pub(crate) struct FrameParams {
     lights: [LightRecord; MAX_LIGHTS],
 }
 
-pub(crate) const STAT_WORDS: usize = 5;
-/// `STAT_TRUNCATED_RAYS` of `common.glsl`: rays cut short by a stack overflow or the trace cap.
+/// Stats words of the streaming renderer's buffers.
+pub(crate) const STAT_WORDS: usize = 4;
+/// Stats words of [`render`]'s buffers: one more, `STAT_TRUNCATED_RAYS` of `common.glsl` (rays
+/// cut short by a stack overflow or the trace cap; the shader writes it outside streaming only).
+const RENDER_STAT_WORDS: usize = 5;
 const STAT_TRUNCATED_RAYS: usize = 4;
 
 /// The largest traversal stack: entries are 64 bytes of private memory per ray, and beyond a
@@ -239,7 +242,7 @@ pub(crate) fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams)
     )?;
     p.write(0, std::slice::from_ref(params))?;
     let mut bufs = vec![p];
-    let sizes = [pixels * 16, pixels * 4, (STAT_WORDS * 4) as u64];
+    let sizes = [pixels * 16, pixels * 4, (RENDER_STAT_WORDS * 4) as u64];
     for (i, size) in sizes.into_iter().enumerate() {
         let usage = if i == 2 {
             out | BufferUsage::TRANSFER_DST
@@ -263,7 +266,7 @@ pub(crate) fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams)
     }
     let readback = match heap.alloc_buffer(
         "readback",
-        pixels * 20 + (STAT_WORDS * 4) as u64,
+        pixels * 20 + (RENDER_STAT_WORDS * 4) as u64,
         BufferUsage::TRANSFER_DST,
         AllocKind::Staging,
         MemoryClass::HostVisible,
@@ -549,7 +552,7 @@ pub(crate) fn run_frames(
     })?;
     rec.reset_queries(&timestamps);
     for f in 0..frames {
-        rec.fill_buffer(&frame.stats, 0, (STAT_WORDS * 4) as u64, 0)?;
+        rec.fill_buffer(&frame.stats, 0, (RENDER_STAT_WORDS * 4) as u64, 0)?;
         rec.barrier();
         rec.write_timestamp(&timestamps, 2 * f)?;
         tracer.record(&mut rec, push_bytes, [w, h], None)?;
@@ -565,12 +568,12 @@ pub(crate) fn run_frames(
         0,
         &frame.readback,
         stats_off,
-        (STAT_WORDS * 4) as u64,
+        (RENDER_STAT_WORDS * 4) as u64,
     )?;
     rec.submit_and_wait()?;
     let records: Vec<AovRecord> = frame.readback.read_vec(0, pixels as usize)?;
     let rgba: Vec<u32> = frame.readback.read_vec(rgba_off, pixels as usize)?;
-    let counters: Vec<u32> = frame.readback.read_vec(stats_off, STAT_WORDS)?;
+    let counters: Vec<u32> = frame.readback.read_vec(stats_off, RENDER_STAT_WORDS)?;
     let ticks = timestamps.read_ticks()?;
     let frame_ns = (0..frames)
         .map(|f| timestamps.elapsed_ns(&ticks, 2 * f, 2 * f + 1))
