@@ -31,8 +31,11 @@ fn backends() -> Vec<&'static str> {
 fn assert_same_renders(dir: &Path, name: &str, partitioned: &Path, whole: &Path, extra: &[&str]) {
     for b in backends() {
         let aov = |tag: &str| -> PathBuf { dir.join(format!("{name}-{tag}-{b}.aov")) };
-        render(partitioned, b, &aov("p"), extra);
+        let stats = render(partitioned, b, &aov("p"), extra);
         render(whole, b, &aov("u"), extra);
+        if b != "cpu" {
+            assert_report_agrees(partitioned, &stats);
+        }
         let (hits, pixels) = aov_hits(&aov("p"));
         assert!(
             4 * hits > pixels,
@@ -46,6 +49,28 @@ fn assert_same_renders(dir: &Path, name: &str, partitioned: &Path, whole: &Path,
         }
         eprintln!("{name} {b}: partitioned vs whole: {out}");
     }
+}
+
+/// `motu report` reads the partitioned package: its AS and geometry bytes for the compiled
+/// hierarchy agree with what the GPU built (within 2%: allocation alignment).
+fn assert_report_agrees(pkg: &Path, stats: &serde_json::Value) {
+    let r = motu_json(&["report", s(pkg), "--json"]);
+    let cost = &r["variants"][0]["cost"];
+    let model_as = cost["blas_bytes"].as_u64().unwrap() + cost["tlas_bytes"].as_u64().unwrap();
+    let model_geo = cost["geometry_bytes"].as_u64().unwrap();
+    let gpu_as = stats["as_bytes"].as_u64().unwrap();
+    let gpu_geo = stats["resources"]["alloc"]["kinds"]["geometry"]["bytes"]
+        .as_u64()
+        .unwrap();
+    let close = |a: u64, b: u64| (a as f64 - b as f64).abs() <= 0.02 * b as f64;
+    assert!(
+        close(model_as, gpu_as),
+        "AS: report {model_as}, GPU {gpu_as}"
+    );
+    assert!(
+        close(model_geo, gpu_geo),
+        "geometry: report {model_geo}, GPU {gpu_geo}"
+    );
 }
 
 /// (hit pixels, pixels) of an AOV file (FORMAT.md "AOV file format": a 32-byte header, then
