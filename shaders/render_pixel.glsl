@@ -220,8 +220,7 @@ void render_pixel_impl(uvec2 px) {
     if (truncations != 0u) {
         atomicAdd(push.stats.n[STAT_PI_LIST_OVERFLOWS], truncations);
     }
-    // Not while streaming: the streaming renderer's stats buffer has no slot for it yet.
-    if (!g_streaming && (overflows != 0u || g_truncated)) {
+    if (overflows != 0u || g_truncated) {
         atomicAdd(push.stats.n[STAT_TRUNCATED_RAYS], 1u);
     }
 }

@@ -195,12 +195,12 @@ pub(crate) struct FrameParams {
     lights: [LightRecord; MAX_LIGHTS],
 }
 
-/// Stats words of the streaming renderer's buffers.
-pub(crate) const STAT_WORDS: usize = 4;
-/// Stats words of [`render`]'s buffers: one more, `STAT_TRUNCATED_RAYS` of `common.glsl` (rays
-/// cut short by a stack overflow or the trace cap; the shader writes it outside streaming only).
-const RENDER_STAT_WORDS: usize = 5;
-const STAT_TRUNCATED_RAYS: usize = 4;
+/// Stats words of every renderer's buffers (full builds, streaming, the viewer): the last,
+/// `STAT_TRUNCATED_RAYS` of `common.glsl`, counts rays cut short by a stack overflow or the
+/// trace cap.
+pub(crate) const STAT_WORDS: usize = 5;
+const RENDER_STAT_WORDS: usize = STAT_WORDS;
+pub(crate) const STAT_TRUNCATED_RAYS: usize = 4;
 
 /// The largest traversal stack: entries are 64 bytes of private memory per ray, and beyond a
 /// few hundred shader compilers spill, stall or fail (2^16 hangs lavapipe's compiler).

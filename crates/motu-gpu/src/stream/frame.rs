@@ -157,6 +157,7 @@ impl<'a> StreamingRenderer<'a> {
             stack_size: opts.stack_size,
             stack_overflows: u64::from(counters[0]),
             pi_list_overflows: u64::from(counters[1]),
+            truncated_rays: u64::from(counters[crate::render::STAT_TRUNCATED_RAYS]),
             heatmap_max,
             as_bytes: self
                 .blas
