@@ -21,6 +21,7 @@
 #define STAT_PI_LIST_OVERFLOWS 1
 #define STAT_SHADOW_RAYS 2
 #define STAT_HITS 3
+#define STAT_TRUNCATED_RAYS 4
 
 #define T_INFINITY 3.0e38
 

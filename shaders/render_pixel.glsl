@@ -32,6 +32,17 @@ Surface resolve(TraceHit h) {
     return s;
 }
 
+// The hit's primitive as hit records name it: a cluster of a partitioned mesh maps its own
+// triangle to the source mesh's through its primitive map, which follows its indices in the
+// mesh buffer (motu-gpu's MeshGpu).
+uint source_primitive(MeshRecord m, uint mesh_record, uint primitive) {
+    if ((m.flags & FLAG_PRIMITIVE_MAP) == 0u) {
+        return primitive;
+    }
+    uint64_t map = push.mesh_geo.r[mesh_record].indices + 12ul * uint64_t(m.triangle_count);
+    return U32Table(map).r[primitive];
+}
+
 // A resumed ray starts a hair before where the last pass stopped.
 #define RESUME_BACKOFF 0.99999
 
@@ -58,6 +69,7 @@ void render_pixel_impl(uvec2 px) {
     uint traces = 0u;
     uint overflows = 0u;
     uint truncations = 0u;
+    g_truncated = false;
     // Streaming: where this pixel's rays resume (0 on the frame's first pass).
     vec2 resume = vec2(0.0);
     if (g_streaming) {
@@ -81,7 +93,8 @@ void render_pixel_impl(uvec2 px) {
         Surface s = resolve(h);
         MeshRecord m = push.meshes.r[s.mesh_record];
         uint lod = h.lod == NONE_U32 ? m.lod : h.lod;
-        rec.xyz = uvec3(m.source_mesh, h.primitive, floatBitsToUint(h.t));
+        uint primitive = source_primitive(m, s.mesh_record, h.primitive);
+        rec.xyz = uvec3(m.source_mesh, primitive, floatBitsToUint(h.t));
         rec.w = min(lod, 255u);
         if (f.view == VIEW_SHADED) {
             vec3 base = push.materials.r[m.material].base_color;
@@ -120,7 +133,7 @@ void render_pixel_impl(uvec2 px) {
             }
             colour = base * light;
         } else if (f.view == VIEW_IDS) {
-            colour = id_colour(m.source_mesh, h.primitive);
+            colour = id_colour(m.source_mesh, primitive);
         } else {
             colour = lod_colour(lod);
         }
@@ -135,6 +148,9 @@ void render_pixel_impl(uvec2 px) {
     }
     if (truncations != 0u) {
         atomicAdd(push.stats.n[STAT_PI_LIST_OVERFLOWS], truncations);
+    }
+    if (overflows != 0u || g_truncated) {
+        atomicAdd(push.stats.n[STAT_TRUNCATED_RAYS], 1u);
     }
 }
 void render_pixel(uvec2 px) {

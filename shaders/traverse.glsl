@@ -20,6 +20,10 @@
 
 // Entries of the explicit stack; overflow drops the entry and is counted in the stats buffer.
 layout(constant_id = 0) const uint STACK_SIZE = 16u;
+// TLAS walks one traverse() may make (bounds a frame on exponential instancing); a ray cut
+// short sets g_truncated, counted per pixel in STAT_TRUNCATED_RAYS.
+layout(constant_id = 1) const uint MAX_TRACES_PER_RAY = 4096u;
+bool g_truncated = false;
 
 // One pending TLAS walk: 64 bytes.
 struct Entry {
@@ -98,11 +102,16 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
     TraceHit hit;
     hit.t = T_INFINITY;
     hit.lod = NONE_U32;
+    uint traces_at_start = traces;
     while (sp > 0u) {
         sp -= 1u;
         Entry e = stack[sp];
         if (e.t_near >= hit.t) {
             continue;
+        }
+        if (traces - traces_at_start >= MAX_TRACES_PER_RAY) {
+            g_truncated = true;
+            break;
         }
         traces += 1u;
         if (g_streaming) {

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Fuzz smoke run for CI: each cargo-fuzz target of pbrt-import/fuzz (pbrt tokenizer+parser,
-# PLY reader, motu package reader) for FUZZ_SECONDS (default 60) on stable Rust, starting
+# PLY reader, motu package reader, AOV reader, OBJ import) for FUZZ_SECONDS (default 60) on stable Rust, starting
 # from the committed corpus (read-only: new inputs go to a temporary directory).
 #
 #   tools/fuzz-smoke.sh                  # all targets, 60 s each
@@ -9,7 +9,7 @@
 # Stable only: RUSTC_BOOTSTRAP=1 lets cargo-fuzz pass its -Z flags; `--sanitizer none`
 # keeps the sancov instrumentation libFuzzer needs without the ASan runtime.
 # Cost from a cold cache on 2 cores: `cargo install cargo-fuzz` ~1.5 min, first build of
-# the targets ~2 min, then FUZZ_SECONDS per target (about 6.5 min in all with defaults).
+# the targets ~2 min, then FUZZ_SECONDS per target (about 8.5 min in all with defaults).
 #
 # Exit status: 0 when every target ran clean, or with a "SKIPPED: <why>" line when the fuzz
 # toolchain cannot be installed; 1 on a finding (the input is printed and kept) or when the
@@ -19,7 +19,7 @@ set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 fuzz_dir=$root/pbrt-import/fuzz
 seconds=${FUZZ_SECONDS:-60}
-targets=${FUZZ_TARGETS:-"parse ply package"}
+targets=${FUZZ_TARGETS:-"parse ply package aov obj"}
 export RUSTC_BOOTSTRAP=1
 
 if ! cargo fuzz --version >/dev/null 2>&1; then

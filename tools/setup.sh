@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs what motu needs on a fresh Debian 12 machine, idempotently:
 # Mesa's lavapipe with ray tracing (only bookworm-backports has it: Mesa >= 24.1),
-# the Vulkan loader, glslang, spirv-tools, vulkan-tools and validation layers when packaged.
+# the Vulkan loader, glslang, spirv-tools, vulkan-tools and validation layers when packaged,
+# chromium (report test) and Xvfb with the X libraries winit loads (the `motu view` tests).
 # It names no package host: the backports entry reuses the URIs of the existing debian.sources.
 set -euo pipefail
 
@@ -29,6 +30,11 @@ command -v vulkaninfo >/dev/null 2>&1 || missing+=(vulkan-tools)
 dpkg-query -W -f='${Status}' libvulkan1 2>/dev/null | grep -q "ok installed" || missing+=(libvulkan1)
 # The VRAM report's HTML is checked in a real headless browser.
 command -v chromium >/dev/null 2>&1 || missing+=(chromium)
+# `motu view` is tested in a real window: Xvfb, plus the X libraries winit loads at run time.
+command -v Xvfb >/dev/null 2>&1 || missing+=(xvfb)
+for p in libx11-xcb1 libxkbcommon-x11-0 libxcursor1 libxrandr2 libxi6; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed" || missing+=("$p")
+done
 backports_needed=0
 have_rt_lavapipe || backports_needed=1
 
@@ -69,7 +75,8 @@ fi
 export DEBIAN_FRONTEND=noninteractive
 log "apt-get update"
 $SUDO apt-get update -qq
-pkgs=(libvulkan1 glslang-tools spirv-tools vulkan-tools chromium)
+pkgs=(libvulkan1 glslang-tools spirv-tools vulkan-tools chromium
+  xvfb libx11-xcb1 libxkbcommon-x11-0 libxcursor1 libxrandr2 libxi6)
 log "installing ${pkgs[*]} and mesa-vulkan-drivers from bookworm-backports"
 $SUDO apt-get install -y -qq --no-install-recommends "${pkgs[@]}" >/dev/null
 $SUDO apt-get install -y -qq --no-install-recommends -t bookworm-backports mesa-vulkan-drivers >/dev/null

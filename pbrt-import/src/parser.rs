@@ -21,6 +21,7 @@ use crate::{
     VersionOption,
 };
 
+#[derive(Clone, Copy)]
 pub(crate) enum Entry<'a> {
     Path(&'a Path),
     Text { text: &'a [u8], base_dir: &'a Path },
@@ -303,6 +304,11 @@ pub(crate) fn parse_entry(
         VersionOption::Auto => PbrtVersion::V3,
     };
     let mut p = Parser::new(opts, sink, base_dir, version);
+    if let Entry::Path(entry) = entry {
+        // The entry file is open too: an include of it is a cycle at its first repeat.
+        p.open_files
+            .push(entry.canonicalize().unwrap_or_else(|_| entry.to_path_buf()));
+    }
     p.sink.material(&p.gs.material)?;
     p.run_file(path, bytes, Via::Entry, None, None)?;
     p.finish()
@@ -682,7 +688,40 @@ impl<'s> Parser<'s> {
                 return Err(self.err(&t, ParseErrorKind::Unexpected { expected: "`]`" }));
             }
         }
+        // A NaN or infinity in a transform poisons every matrix below it.
+        if let Some(i) = out.iter().position(|v| !v.is_finite()) {
+            return Err(self.err(
+                after,
+                ParseErrorKind::Invalid(format!(
+                    "value {} of {} is {}, not a finite number",
+                    i + 1,
+                    after.display(),
+                    out[i]
+                )),
+            ));
+        }
         Ok(out)
+    }
+
+    /// Refuses non-finite numeric parameters of `directive` (camera and light values end up
+    /// in the package's JSON, which has no NaN or infinity).
+    fn require_finite(&self, directive: &str, p: &ParamList<'_>) -> Result<()> {
+        for param in &p.params {
+            if let crate::params::Values::Nums(v) = &param.values {
+                if let Some(bad) = v.iter().find(|x| !x.is_finite()) {
+                    return Err(self.err_at(
+                        param.loc,
+                        param.name,
+                        ParseErrorKind::BadParameter(format!(
+                            "{directive} parameter \"{} {}\" has the value {bad}: it must be a finite number",
+                            param.ty.name(),
+                            param.name
+                        )),
+                    ));
+                }
+            }
+        }
+        Ok(())
     }
 
     fn params<'b>(&mut self, lx: &mut Lexer<'b>) -> Result<ParamList<'b>> {
@@ -800,9 +839,26 @@ impl<'s> Parser<'s> {
             Some(p) => (p.path, Some(p.src), p.parsed),
             None => (self.resolve(name), None, None),
         };
-        if !path.is_file() {
-            self.missing_file(path, stok.loc);
-            return Ok(());
+        match crate::source::classify(&path) {
+            crate::source::FileKind::Regular => {}
+            crate::source::FileKind::Missing => {
+                self.missing_file(path, stok.loc);
+                return Ok(());
+            }
+            crate::source::FileKind::Other(what) => {
+                return Err(self.err(
+                    stok,
+                    ParseErrorKind::Invalid(format!(
+                        "{}: {} is {what}, not a scene file",
+                        if via == Via::Import {
+                            "Import"
+                        } else {
+                            "Include"
+                        },
+                        path.display()
+                    )),
+                ))
+            }
         }
         if self.depth + 1 > self.opts.max_include_depth {
             return Err(self.err(
@@ -1326,7 +1382,14 @@ impl<'s> Parser<'s> {
             }
             b"Rotate" => {
                 let v = self.numbers::<4>(lx, tok)?;
-                self.apply(math::rotate(v[0], [v[1], v[2], v[3]]));
+                if v[1] == 0.0 && v[2] == 0.0 && v[3] == 0.0 {
+                    self.warn(
+                        Some(tok.loc),
+                        format!("Rotate {} about a zero axis; ignored", v[0]),
+                    );
+                } else {
+                    self.apply(math::rotate(v[0], [v[1], v[2], v[3]]));
+                }
             }
             b"LookAt" => {
                 let v = self.numbers::<9>(lx, tok)?;
@@ -1609,6 +1672,7 @@ impl<'s> Parser<'s> {
     fn camera<'b>(&mut self, lx: &mut Lexer<'b>, tok: &Token<'b>) -> Result<()> {
         let (kind, _) = self.string(lx, tok)?;
         let p = self.params(lx)?;
+        self.require_finite("Camera", &p)?;
         if self.in_world {
             self.warn(Some(tok.loc), "Camera inside the world block".into());
         }
@@ -1683,6 +1747,7 @@ impl<'s> Parser<'s> {
         self.require_world(tok);
         let (kind, _) = self.string(lx, tok)?;
         let p = self.params(lx)?;
+        self.require_finite("LightSource", &p)?;
         let which = if p.get("I").is_some() { "I" } else { "L" };
         let color = self.emission(&p, which);
         let pt = |n: &str| {
@@ -2084,23 +2149,40 @@ impl<'s> Parser<'s> {
             );
         }
         let path = self.resolve(name);
-        let size = match std::fs::metadata(&path) {
-            Ok(m) if m.is_file() => m.len(),
-            _ => {
+        let size = match crate::source::classify(&path) {
+            crate::source::FileKind::Regular => std::fs::metadata(&path).map_or(0, |m| m.len()),
+            crate::source::FileKind::Missing => {
                 self.missing_file(path, ktok.loc);
                 self.stats.skipped_shapes += 1;
                 return Ok(());
+            }
+            crate::source::FileKind::Other(what) => {
+                return Err(self.err(
+                    ktok,
+                    ParseErrorKind::Invalid(format!(
+                        "plymesh: {} is {what}, not a PLY file",
+                        path.display()
+                    )),
+                ))
             }
         };
         event.source_path = Some(path.clone());
         match self.opts.ply_loading {
             PlyLoading::Sequential => {
                 self.stats.ply_bytes += size;
-                let mesh = crate::ply::read_ply(&path).map_err(|source| Error::Ply {
-                    path,
-                    referenced_at: Box::new(self.location(ktok.loc)),
-                    source: Box::new(source),
-                })?;
+                let (mesh, report) = match crate::ply::read_ply_report(&path) {
+                    Ok(r) => r,
+                    Err(source) => {
+                        return Err(Error::Ply {
+                            path,
+                            referenced_at: Box::new(self.location(ktok.loc)),
+                            source: Box::new(source),
+                        })
+                    }
+                };
+                if let Some(w) = report.warning() {
+                    self.warn(Some(ktok.loc), format!("{}: {w}", path.display()));
+                }
                 event.geometry = Geometry::Mesh(mesh);
                 self.emit_shape(event)
             }
@@ -2126,11 +2208,14 @@ impl<'s> Parser<'s> {
         let _span = tracing::debug_span!("ply_batch", files = queue.len()).entered();
         let loaded: Vec<_> = queue
             .par_iter()
-            .map(|job| crate::ply::read_ply(&job.path))
+            .map(|job| crate::ply::read_ply_report(&job.path))
             .collect();
         for (job, mesh) in queue.into_iter().zip(loaded) {
             match mesh {
-                Ok(m) => {
+                Ok((m, report)) => {
+                    if let Some(w) = report.warning() {
+                        self.warn(Some(job.event.loc), format!("{}: {w}", job.path.display()));
+                    }
                     let mut ev = job.event;
                     ev.geometry = Geometry::Mesh(m);
                     self.emit_shape(ev)?;

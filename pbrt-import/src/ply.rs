@@ -1,9 +1,11 @@
 //! PLY reader: ASCII and binary (little/big endian), `.ply.gz`, any property types.
 //!
-//! Faces (triangles, quads, polygons) are fan-triangulated. Vertex normals come
-//! from `nx ny nz`; texture coordinates from any of pbrt's names (`u v`, `s t`,
-//! `texture_u texture_v`, `texture_s texture_t`). `face_indices` and other
-//! properties/elements are read and skipped.
+//! Faces (triangles, quads, polygons) are fan-triangulated; `tristrips` elements (strips
+//! separated by -1) are unrolled. Faces of fewer than 3 vertices are dropped and counted
+//! ([`PlyReport`]). Vertex normals come from `nx ny nz`; texture coordinates from any of
+//! pbrt's names (`u v`, `s t`, `texture_u texture_v`, `texture_s texture_t`). `face_indices`
+//! and other properties/elements are read and skipped. ASCII bodies hold one element item
+//! per line (the PLY rule): a missing or extra value is an error naming the line.
 
 use std::path::Path;
 
@@ -74,11 +76,37 @@ enum Format {
     BinaryBe,
 }
 
+/// What a PLY file held that did not become triangles.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct PlyReport {
+    /// Faces with fewer than 3 vertices (dropped).
+    pub dropped_faces: u64,
+    /// Where the first one is: the face's index, and its line in an ASCII file.
+    pub first_dropped: Option<(usize, Option<usize>)>,
+}
+
+impl PlyReport {
+    /// A warning for the caller to show, `None` when nothing was dropped.
+    pub fn warning(&self) -> Option<String> {
+        let (index, line) = self.first_dropped?;
+        Some(format!(
+            "{} face(s) with fewer than 3 vertices dropped (first: face {index}{})",
+            self.dropped_faces,
+            line.map(|l| format!(", line {l}")).unwrap_or_default()
+        ))
+    }
+}
+
 /// Read a PLY file (`.ply` memory-mapped, `.ply.gz` decompressed).
 pub fn read_ply(path: &Path) -> Result<Mesh, PlyError> {
+    read_ply_report(path).map(|(m, _)| m)
+}
+
+/// [`read_ply`], also saying what was dropped.
+pub fn read_ply_report(path: &Path) -> Result<(Mesh, PlyReport), PlyError> {
     let src =
         SourceBytes::open(path).map_err(|e| PlyError::Content(format!("cannot read: {e}")))?;
-    parse_ply(src.bytes())
+    parse_ply_report(src.bytes())
 }
 
 fn header_err(line: usize, message: impl Into<String>) -> PlyError {
@@ -171,9 +199,88 @@ struct Body<'a> {
     bytes: &'a [u8],
     pos: usize,
     format: Format,
+    /// ASCII: the 1-based line at `pos` and the end of the current item's line (values are
+    /// read only up to it).
+    line: usize,
+    line_end: usize,
+}
+
+fn is_space(b: &u8) -> bool {
+    b.is_ascii_whitespace()
 }
 
 impl Body<'_> {
+    /// Runs `f` over one element item. ASCII: the item is the next non-blank line; `f` reads
+    /// only from it, and values left over are an error; errors name the line.
+    fn item<T>(
+        &mut self,
+        el: &Element,
+        index: usize,
+        f: impl FnOnce(&mut Self) -> Result<T, PlyError>,
+    ) -> Result<T, PlyError> {
+        if self.format != Format::Ascii {
+            return f(self);
+        }
+        let first = el.props.first().map_or("", |p| p.name.as_str());
+        let err = |line: usize, message: String| PlyError::Body {
+            element: el.name.clone(),
+            property: first.to_owned(),
+            index,
+            message: format!("line {line}: {message}"),
+        };
+        loop {
+            if self.pos >= self.bytes.len() {
+                return Err(err(
+                    self.line,
+                    format!("the file ends before item {index} of {}", el.count),
+                ));
+            }
+            let end = self.bytes[self.pos..]
+                .iter()
+                .position(|&b| b == b'\n')
+                .map_or(self.bytes.len(), |n| self.pos + n);
+            if self.bytes[self.pos..end].iter().all(is_space) {
+                self.pos = end + 1;
+                self.line += 1;
+                continue;
+            }
+            self.line_end = end;
+            break;
+        }
+        let line = self.line;
+        let r = f(self).map_err(|e| match e {
+            PlyError::Body {
+                element,
+                property,
+                index,
+                message,
+            } => PlyError::Body {
+                element,
+                property,
+                index,
+                message: format!(
+                    "line {line}: {}",
+                    if message == "truncated or malformed" {
+                        "a value is missing or malformed (an ASCII PLY item is one line)"
+                    } else {
+                        &message
+                    }
+                ),
+            },
+            other => other,
+        })?;
+        if !self.bytes[self.pos..self.line_end].iter().all(is_space) {
+            return Err(err(
+                line,
+                "more values than the header declares for this element".into(),
+            ));
+        }
+        self.pos = (self.line_end + 1).min(self.bytes.len());
+        self.line += 1;
+        self.line_end = self.bytes.len();
+        Ok(r)
+    }
+
     #[inline]
     fn read(&mut self, s: Scalar) -> Option<f64> {
         if self.format == Format::Ascii {
@@ -186,7 +293,7 @@ impl Body<'_> {
     }
 
     fn read_ascii(&mut self) -> Option<f64> {
-        let bytes = self.bytes;
+        let bytes = &self.bytes[..self.line_end.min(self.bytes.len())];
         while self.pos < bytes.len() && bytes[self.pos].is_ascii_whitespace() {
             self.pos += 1;
         }
@@ -242,11 +349,38 @@ enum Role {
 
 /// Parse PLY bytes into a triangle mesh.
 pub fn parse_ply(bytes: &[u8]) -> Result<Mesh, PlyError> {
+    parse_ply_report(bytes).map(|(m, _)| m)
+}
+
+/// Appends the triangles of `poly` (a fan), or counts it as dropped when it has < 3 vertices.
+fn add_polygon(
+    mesh: &mut Mesh,
+    report: &mut PlyReport,
+    poly: &[u32],
+    index: usize,
+    line: Option<usize>,
+) {
+    if poly.len() < 3 {
+        report.dropped_faces += 1;
+        report.first_dropped.get_or_insert((index, line));
+        return;
+    }
+    for k in 2..poly.len() {
+        mesh.indices
+            .extend_from_slice(&[poly[0], poly[k - 1], poly[k]]);
+    }
+}
+
+/// [`parse_ply`], also saying what was dropped.
+pub fn parse_ply_report(bytes: &[u8]) -> Result<(Mesh, PlyReport), PlyError> {
     let (format, elements, body_start) = parse_header(bytes)?;
+    let mut report = PlyReport::default();
     let mut body = Body {
         bytes,
         pos: body_start,
         format,
+        line: 1 + bytes[..body_start].iter().filter(|&&b| b == b'\n').count(),
+        line_end: bytes.len(),
     };
     let mut mesh = Mesh::default();
     let mut normals: Vec<[f32; 3]> = Vec::new();
@@ -348,25 +482,28 @@ pub fn parse_ply(bytes: &[u8]) -> Result<Mesh, PlyError> {
                     continue;
                 }
                 for index in 0..el.count {
-                    let (mut p, mut nrm, mut uv) = ([0f32; 3], [0f32; 3], [0f32; 2]);
-                    for (prop, role) in el.props.iter().zip(&roles) {
-                        match (&prop.kind, role) {
-                            (PropKind::Scalar(s), role) => {
-                                let v = body.read(*s).ok_or_else(|| {
-                                    body_err(el, prop, index, "truncated or malformed")
-                                })? as f32;
-                                match *role {
-                                    Role::Coord(i) => p[i] = v,
-                                    Role::Normal(i) => nrm[i] = v,
-                                    Role::Uv(i) => uv[i] = v,
-                                    Role::Skip => {}
+                    let (p, nrm, uv) = body.item(el, index, |body| {
+                        let (mut p, mut nrm, mut uv) = ([0f32; 3], [0f32; 3], [0f32; 2]);
+                        for (prop, role) in el.props.iter().zip(&roles) {
+                            match (&prop.kind, role) {
+                                (PropKind::Scalar(s), role) => {
+                                    let v = body.read(*s).ok_or_else(|| {
+                                        body_err(el, prop, index, "truncated or malformed")
+                                    })? as f32;
+                                    match *role {
+                                        Role::Coord(i) => p[i] = v,
+                                        Role::Normal(i) => nrm[i] = v,
+                                        Role::Uv(i) => uv[i] = v,
+                                        Role::Skip => {}
+                                    }
+                                }
+                                (PropKind::List { count, item }, _) => {
+                                    skip_list(body, *count, *item, el, prop, index)?
                                 }
                             }
-                            (PropKind::List { count, item }, _) => {
-                                skip_list(&mut body, *count, *item, el, prop, index)?
-                            }
                         }
-                    }
+                        Ok((p, nrm, uv))
+                    })?;
                     mesh.positions.push(p);
                     if have_normals {
                         normals.push(nrm);
@@ -436,71 +573,126 @@ pub fn parse_ply(bytes: &[u8]) -> Result<Mesh, PlyError> {
                                 }
                                 poly.push(v);
                             }
-                            for k in 2..poly.len() {
-                                mesh.indices
-                                    .extend_from_slice(&[poly[0], poly[k - 1], poly[k]]);
-                            }
+                            add_polygon(&mut mesh, &mut report, &poly, index, None);
                         }
                         continue;
                     }
                 }
                 for index in 0..el.count {
-                    for prop in &el.props {
-                        match (&prop.kind, prop.name.as_str()) {
-                            (PropKind::List { count, item }, "vertex_indices" | "vertex_index") => {
-                                poly.clear();
-                                let n = read_count(&mut body, *count, el, prop, index)?;
-                                for _ in 0..n {
-                                    let v = body.read(*item).ok_or_else(|| {
+                    let line = (format == Format::Ascii).then_some(body.line);
+                    body.item(el, index, |body| {
+                        for prop in &el.props {
+                            match (&prop.kind, prop.name.as_str()) {
+                                (
+                                    PropKind::List { count, item },
+                                    "vertex_indices" | "vertex_index",
+                                ) => {
+                                    poly.clear();
+                                    let n = read_count(body, *count, el, prop, index)?;
+                                    for _ in 0..n {
+                                        let v = read_index(body, *item, el, prop, index, nv)?;
+                                        poly.push(v);
+                                    }
+                                    // The item's line is known only after `item` found it.
+                                    let line = line.map(|_| body.line);
+                                    add_polygon(&mut mesh, &mut report, &poly, index, line);
+                                }
+                                (PropKind::List { count, item }, _) => {
+                                    skip_list(body, *count, *item, el, prop, index)?
+                                }
+                                (PropKind::Scalar(s), _) => {
+                                    body.read(*s).ok_or_else(|| {
                                         body_err(el, prop, index, "truncated or malformed")
                                     })?;
-                                    if !(v >= 0.0 && (v as usize) < nv && v.fract() == 0.0) {
-                                        return Err(body_err(
-                                            el,
-                                            prop,
-                                            index,
-                                            &format!(
-                                                "vertex index {v} out of range ({nv} vertices)"
-                                            ),
-                                        ));
-                                    }
-                                    poly.push(v as u32);
                                 }
-                                for k in 2..poly.len() {
-                                    mesh.indices.extend_from_slice(&[
-                                        poly[0],
-                                        poly[k - 1],
-                                        poly[k],
-                                    ]);
-                                }
-                            }
-                            (PropKind::List { count, item }, _) => {
-                                skip_list(&mut body, *count, *item, el, prop, index)?
-                            }
-                            (PropKind::Scalar(s), _) => {
-                                body.read(*s).ok_or_else(|| {
-                                    body_err(el, prop, index, "truncated or malformed")
-                                })?;
                             }
                         }
-                    }
+                        Ok(())
+                    })?;
+                }
+            }
+            "tristrips" => {
+                let nv = vertex_count.ok_or_else(|| {
+                    PlyError::Content("tristrips element before vertex element".into())
+                })?;
+                for index in 0..el.count {
+                    body.item(el, index, |body| {
+                        for prop in &el.props {
+                            match (&prop.kind, prop.name.as_str()) {
+                                (
+                                    PropKind::List { count, item },
+                                    "vertex_indices" | "vertex_index",
+                                ) => {
+                                    let n = read_count(body, *count, el, prop, index)?;
+                                    // Strips separated by -1; every triangle alternates its
+                                    // winding; zero-area joins (repeated indices) are skipped.
+                                    let mut strip: Vec<u32> = Vec::new();
+                                    for k in 0..=n {
+                                        let v = if k < n {
+                                            let v = body.read(*item).ok_or_else(|| {
+                                                body_err(el, prop, index, "truncated or malformed")
+                                            })?;
+                                            if v == -1.0 {
+                                                None
+                                            } else {
+                                                Some(check_index(v, el, prop, index, nv)?)
+                                            }
+                                        } else {
+                                            None
+                                        };
+                                        match v {
+                                            Some(v) => strip.push(v),
+                                            None => {
+                                                for j in 2..strip.len() {
+                                                    let (a, b, c) =
+                                                        (strip[j - 2], strip[j - 1], strip[j]);
+                                                    if a == b || b == c || a == c {
+                                                        continue;
+                                                    }
+                                                    let tri = if j % 2 == 0 {
+                                                        [a, b, c]
+                                                    } else {
+                                                        [b, a, c]
+                                                    };
+                                                    mesh.indices.extend_from_slice(&tri);
+                                                }
+                                                strip.clear();
+                                            }
+                                        }
+                                    }
+                                }
+                                (PropKind::List { count, item }, _) => {
+                                    skip_list(body, *count, *item, el, prop, index)?
+                                }
+                                (PropKind::Scalar(s), _) => {
+                                    body.read(*s).ok_or_else(|| {
+                                        body_err(el, prop, index, "truncated or malformed")
+                                    })?;
+                                }
+                            }
+                        }
+                        Ok(())
+                    })?;
                 }
             }
             _ if el.props.is_empty() => {} // nothing stored per item
             _ => {
                 for index in 0..el.count {
-                    for prop in &el.props {
-                        match &prop.kind {
-                            PropKind::Scalar(s) => {
-                                body.read(*s).ok_or_else(|| {
-                                    body_err(el, prop, index, "truncated or malformed")
-                                })?;
-                            }
-                            PropKind::List { count, item } => {
-                                skip_list(&mut body, *count, *item, el, prop, index)?
+                    body.item(el, index, |body| {
+                        for prop in &el.props {
+                            match &prop.kind {
+                                PropKind::Scalar(s) => {
+                                    body.read(*s).ok_or_else(|| {
+                                        body_err(el, prop, index, "truncated or malformed")
+                                    })?;
+                                }
+                                PropKind::List { count, item } => {
+                                    skip_list(body, *count, *item, el, prop, index)?
+                                }
                             }
                         }
-                    }
+                        Ok(())
+                    })?;
                 }
             }
         }
@@ -510,7 +702,40 @@ pub fn parse_ply(bytes: &[u8]) -> Result<Mesh, PlyError> {
     }
     mesh.normals = have_normals.then_some(normals);
     mesh.uvs = have_uvs.then_some(uvs);
-    Ok(mesh)
+    Ok((mesh, report))
+}
+
+/// One vertex index of a face list, checked against the vertex count.
+fn read_index(
+    body: &mut Body<'_>,
+    item: Scalar,
+    el: &Element,
+    prop: &Property,
+    index: usize,
+    nv: usize,
+) -> Result<u32, PlyError> {
+    let v = body
+        .read(item)
+        .ok_or_else(|| body_err(el, prop, index, "truncated or malformed"))?;
+    check_index(v, el, prop, index, nv)
+}
+
+fn check_index(
+    v: f64,
+    el: &Element,
+    prop: &Property,
+    index: usize,
+    nv: usize,
+) -> Result<u32, PlyError> {
+    if !(v >= 0.0 && (v as usize) < nv && v.fract() == 0.0) {
+        return Err(body_err(
+            el,
+            prop,
+            index,
+            &format!("vertex index {v} out of range ({nv} vertices)"),
+        ));
+    }
+    Ok(v as u32)
 }
 
 fn vertex_role(name: &str) -> Role {
@@ -676,6 +901,71 @@ mod tests {
         assert!(parse_ply(b"plx\n").is_err());
         assert!(parse_ply(b"ply\nformat ascii 1.0\nelement vertex 99999999999\nproperty float x\nproperty float y\nproperty float z\nend_header\n").is_err());
         assert!(parse_ply(b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\nend_header\n").is_err());
+    }
+
+    const TRI_HEAD: &str = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n";
+
+    #[test]
+    fn regression_ply_ascii_missing_value_names_the_line() {
+        let ply = format!("{TRI_HEAD}element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0\n1 1 0\n0 1 0\n3 0 1 2\n");
+        let e = parse_ply(ply.as_bytes()).unwrap_err().to_string();
+        assert!(e.contains("line 11") && e.contains("missing"), "{e}");
+        let extra = format!("{TRI_HEAD}element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0 7\n1 1 0\n0 1 0\n3 0 1 2\n");
+        let e = parse_ply(extra.as_bytes()).unwrap_err().to_string();
+        assert!(e.contains("line 11") && e.contains("more values"), "{e}");
+        // Blank lines between items are fine.
+        let blank = format!("{TRI_HEAD}element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n");
+        assert_eq!(parse_ply(blank.as_bytes()).unwrap().indices, vec![0, 1, 2]);
+    }
+
+    #[test]
+    fn regression_ply_tristrips_become_triangles() {
+        // Two strips separated by -1; the second joins back with a repeated index (skipped).
+        let ply = format!("{TRI_HEAD}element tristrips 1\nproperty list int int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n9 0 1 2 3 -1 3 3 2 1\n");
+        let m = parse_ply(ply.as_bytes()).unwrap();
+        assert_eq!(m.indices, vec![0, 1, 2, 2, 1, 3, 2, 3, 1]);
+        // Binary little-endian too.
+        let mut bin = b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement tristrips 1\nproperty list int int vertex_indices\nend_header\n".to_vec();
+        for v in [0f32, 0., 0., 1., 0., 0., 0., 1., 0.] {
+            bin.extend_from_slice(&v.to_le_bytes());
+        }
+        for i in [3i32, 0, 1, 2] {
+            bin.extend_from_slice(&i.to_le_bytes());
+        }
+        assert_eq!(parse_ply(&bin).unwrap().indices, vec![0, 1, 2]);
+        let bad = format!("{TRI_HEAD}element tristrips 1\nproperty list int int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 7\n");
+        assert!(parse_ply(bad.as_bytes())
+            .unwrap_err()
+            .to_string()
+            .contains("out of range"));
+    }
+
+    #[test]
+    fn regression_ply_degenerate_faces_are_counted() {
+        let ply = format!("{TRI_HEAD}element face 3\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n1 1 0\n3 0 1 2\n0\n2 0 1\n");
+        let (m, r) = parse_ply_report(ply.as_bytes()).unwrap();
+        assert_eq!(m.indices, vec![0, 1, 2]);
+        assert_eq!(r.dropped_faces, 2);
+        assert_eq!(r.first_dropped, Some((1, Some(15))));
+        assert!(r.warning().unwrap().contains("2 face(s)"));
+        // The binary fast path counts them too.
+        let mut bin = b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n".to_vec();
+        for v in [0f32, 0., 0., 1., 0., 0., 0., 1., 0.] {
+            bin.extend_from_slice(&v.to_le_bytes());
+        }
+        bin.push(3);
+        for i in [0i32, 1, 2] {
+            bin.extend_from_slice(&i.to_le_bytes());
+        }
+        bin.push(2);
+        for i in [0i32, 1] {
+            bin.extend_from_slice(&i.to_le_bytes());
+        }
+        let (m, r) = parse_ply_report(&bin).unwrap();
+        assert_eq!(
+            (m.indices.len(), r.dropped_faces, r.first_dropped),
+            (3, 1, Some((1, None)))
+        );
     }
 
     /// Binary `uchar`/`int` and `uchar`/`uint` face lists take a fast path; it must agree

@@ -12,11 +12,75 @@ pub enum SourceBytes {
     Owned(Vec<u8>),
 }
 
+/// What a referenced path is, for messages that say so (a directory, FIFO or device named as
+/// an input is an error of its own, not a "missing file").
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FileKind {
+    Regular,
+    Missing,
+    /// Exists but cannot be read as a file: `a directory`, `a FIFO`, `a symlink loop`, ...
+    Other(&'static str),
+}
+
+/// Classifies `path` without opening it (opening a FIFO would block).
+pub fn classify(path: &Path) -> FileKind {
+    match std::fs::metadata(path) {
+        Ok(m) => {
+            let t = m.file_type();
+            if t.is_file() {
+                return FileKind::Regular;
+            }
+            #[cfg(unix)]
+            {
+                use std::os::unix::fs::FileTypeExt;
+                if t.is_fifo() {
+                    return FileKind::Other("a FIFO");
+                }
+                if t.is_char_device() {
+                    return FileKind::Other("a character device");
+                }
+                if t.is_block_device() {
+                    return FileKind::Other("a block device");
+                }
+                if t.is_socket() {
+                    return FileKind::Other("a socket");
+                }
+            }
+            if t.is_dir() {
+                FileKind::Other("a directory")
+            } else {
+                FileKind::Other("not a regular file")
+            }
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            if std::fs::symlink_metadata(path).is_ok() {
+                FileKind::Other("a dangling symbolic link")
+            } else {
+                FileKind::Missing
+            }
+        }
+        // ELOOP (40 on Linux): the name resolves through a cycle of symbolic links.
+        Err(e) if e.raw_os_error() == Some(40) => FileKind::Other("a symbolic-link loop"),
+        Err(_) => FileKind::Other("unreadable"),
+    }
+}
+
 impl SourceBytes {
     /// Open `path`: memory-map it, or stream-decompress it when its name ends in `.gz`.
+    /// Anything but a regular file is refused before opening (a FIFO would block, a
+    /// directory or device cannot be mapped).
     ///
     /// This is the only place the crate maps files.
     pub fn open(path: &Path) -> std::io::Result<Self> {
+        match classify(path) {
+            FileKind::Regular | FileKind::Missing => {}
+            FileKind::Other(what) => {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::InvalidInput,
+                    format!("{what}, not a regular file"),
+                ))
+            }
+        }
         let file = File::open(path)?;
         if path
             .extension()
@@ -33,7 +97,8 @@ impl SourceBytes {
         }
         // SAFETY: the map is read-only and private to this process; scene files are inputs
         // that nobody is expected to truncate while we read them (as in ripgrep). A
-        // concurrent truncation could fault, which we accept as documented.
+        // concurrent truncation faults (SIGBUS); the motu binary turns that into an error
+        // naming the file (FORMAT.md, "Memory-mapped inputs").
         let map = unsafe { memmap2::Mmap::map(&file)? };
         Ok(SourceBytes::Mapped(map))
     }
@@ -68,5 +133,23 @@ mod tests {
         std::fs::write(&empty, b"").unwrap();
         assert!(SourceBytes::open(&empty).unwrap().bytes().is_empty());
         assert!(SourceBytes::open(&dir.path().join("missing.pbrt")).is_err());
+    }
+
+    #[test]
+    fn regression_include_of_directory_fifo_device_or_loop_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(classify(dir.path()), FileKind::Other("a directory"));
+        assert_eq!(
+            classify(Path::new("/dev/zero")),
+            FileKind::Other("a character device")
+        );
+        let a = dir.path().join("a");
+        let b = dir.path().join("b");
+        std::os::unix::fs::symlink(&a, &b).unwrap();
+        std::os::unix::fs::symlink(&b, &a).unwrap();
+        assert_eq!(classify(&a), FileKind::Other("a symbolic-link loop"));
+        assert_eq!(classify(&dir.path().join("none")), FileKind::Missing);
+        let e = SourceBytes::open(dir.path()).err().unwrap();
+        assert!(e.to_string().contains("a directory"), "{e}");
     }
 }

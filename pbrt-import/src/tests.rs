@@ -389,6 +389,55 @@ fn includes_imports_elements_and_missing_files() {
 }
 
 #[test]
+fn regression_nonfinite_camera_light_and_transforms_are_errors() {
+    let (line, col, token, msg) = err(
+        "Camera \"perspective\" \"float fov\" [ nan ]\nWorldBegin\n",
+        VersionOption::Auto,
+    );
+    assert_eq!((line, col, token.as_str()), (1, 22, "fov"), "{msg}");
+    assert!(msg.contains("finite"), "{msg}");
+    let (line, _, _, msg) = err(
+        "WorldBegin\nLightSource \"distant\" \"rgb L\" [inf 1 1]\n",
+        VersionOption::Auto,
+    );
+    assert_eq!(line, 2, "{msg}");
+    let (line, col, _, msg) = err("WorldBegin\nRotate 30 nan 0 1\n", VersionOption::Auto);
+    assert_eq!((line, col), (2, 1), "{msg}");
+    assert!(
+        msg.contains("value 2 of `Rotate`") || msg.contains("value 2 of"),
+        "{msg}"
+    );
+    // A zero axis is warned about (with its location) and ignored.
+    let (sink, stats) = run(&format!("WorldBegin\nRotate 30 0 0 0\n{TRI}\n"));
+    assert_eq!(stats.warnings, 1);
+    assert!(sink
+        .warnings
+        .iter()
+        .any(|w| w.message.contains("zero axis")));
+}
+
+#[test]
+fn regression_include_cycle_detected_at_first_repeat() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("root.pbrt"),
+        "WorldBegin\nInclude \"root.pbrt\"\n",
+    )
+    .unwrap();
+    let mut sink = CollectSink::default();
+    let e = parse_file(
+        &dir.path().join("root.pbrt"),
+        &ParseOptions::default(),
+        &mut sink,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("root.pbrt:2:9"), "{e}");
+    assert!(e.to_string().contains("recursive"), "{e}");
+    // The root was entered once, not parsed a second time.
+    assert_eq!(sink.files.len(), 1, "{:?}", sink.files);
+}
+
+#[test]
 fn include_cycles_are_errors() {
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("a.pbrt"), "Include \"b.pbrt\"\n").unwrap();

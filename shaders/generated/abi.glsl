@@ -11,6 +11,7 @@
 #define FLAG_NEEDS_ANY_HIT 1u
 #define FLAG_HAS_NORMALS 2u
 #define FLAG_HAS_UVS 4u
+#define FLAG_PRIMITIVE_MAP 8u
 #define RAY_PRIMARY 0u
 #define RAY_SHADOW 1u
 #define LOD_NOT_FORCED -1
@@ -88,7 +89,7 @@ struct MeshRecord {
     uvec2 positions_offset;
     uvec2 indices_offset;
     uvec2 normals_offset;
-    uvec2 _pad;
+    uvec2 primitive_map_offset;
     vec3 bounds_min;
     uint _pad1;
     vec3 bounds_max;

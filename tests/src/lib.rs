@@ -211,3 +211,74 @@ pub fn render(pkg: &Path, backend: &str, aov: &Path, extra: &[&str]) -> serde_js
     serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats written"))
         .expect("stats JSON")
 }
+
+/// A private X server for window tests (`motu view`): Xvfb on a display number it picks itself
+/// (`-displayfd`), killed on drop.
+pub struct Xvfb {
+    child: std::process::Child,
+    /// The `DISPLAY` value (`:N`).
+    pub display: String,
+}
+
+impl Drop for Xvfb {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Starts Xvfb; `None` (with a loud line) when it is not installed, a failure when
+/// `MOTU_REQUIRE_GPU` is set (CI: `tools/setup.sh` installs `xvfb`).
+pub fn xvfb(test: &str) -> Option<Xvfb> {
+    use std::io::BufRead;
+    let spawned = Command::new("Xvfb")
+        .args([
+            "-displayfd",
+            "1",
+            "-screen",
+            "0",
+            "1024x768x24",
+            "-nolisten",
+            "tcp",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn();
+    let mut child = match spawned {
+        Ok(c) => c,
+        Err(e) => {
+            assert!(
+                std::env::var_os("MOTU_REQUIRE_GPU").is_none(),
+                "MOTU_REQUIRE_GPU is set but Xvfb cannot start ({e}): tools/setup.sh installs xvfb"
+            );
+            eprintln!("SKIPPED: Xvfb not available ({e}): {test}");
+            return None;
+        }
+    };
+    // Xvfb writes the display number once it accepts connections.
+    let mut line = String::new();
+    let read = child
+        .stdout
+        .take()
+        .map(|o| std::io::BufReader::new(o).read_line(&mut line));
+    let n = line.trim();
+    if !matches!(read, Some(Ok(_))) || n.is_empty() {
+        let _ = child.kill();
+        let _ = child.wait();
+        panic!("Xvfb started but reported no display number ({read:?})");
+    }
+    Some(Xvfb {
+        display: format!(":{n}"),
+        child,
+    })
+}
+
+/// Runs `motu` with `DISPLAY` set to `display` (and no Wayland).
+pub fn motu_on_display(display: &str, args: &[&str]) -> Output {
+    Command::new(motu_bin())
+        .args(args)
+        .env("DISPLAY", display)
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .expect("spawning motu")
+}

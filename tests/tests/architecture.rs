@@ -51,6 +51,19 @@ fn only_motu_gpu_uses_ash() {
 }
 
 #[test]
+fn the_window_system_stays_behind_the_viewer_and_gpu_crates() {
+    let users = |dep: &str| -> Vec<String> {
+        manifests()
+            .into_iter()
+            .filter(|(_, m)| dependencies(m).iter().any(|d| d == dep))
+            .map(|(n, _)| n)
+            .collect()
+    };
+    assert_eq!(users("winit"), ["motu-view"]);
+    assert_eq!(users("ash-window"), ["motu-gpu"]);
+}
+
+#[test]
 fn pbrt_import_depends_on_no_workspace_crate() {
     let (_, m) = manifests()
         .into_iter()

@@ -83,6 +83,30 @@ impl Aov {
     pub fn read_from(mut r: impl Read) -> Result<Self, AovError> {
         let mut h = [0u8; AOV_HEADER_BYTES];
         r.read_exact(&mut h)?;
+        let (width, height) = Self::parse_header(&h)?;
+        let n = (width as u64) * (height as u64);
+        // Read what is there before trusting the header's size: a short stream fails before
+        // anything near the claimed size is allocated.
+        let want = n * std::mem::size_of::<AovRecord>() as u64;
+        let mut bytes = Vec::new();
+        r.take(want).read_to_end(&mut bytes)?;
+        if bytes.len() as u64 != want {
+            return Err(AovError::Header(format!(
+                "{width}×{height} needs {want} bytes of records, the file has {}",
+                bytes.len()
+            )));
+        }
+        let mut records = vec![AovRecord::default(); n as usize];
+        bytemuck::cast_slice_mut(&mut records).copy_from_slice(&bytes);
+        Ok(Self {
+            width,
+            height,
+            records,
+        })
+    }
+
+    /// Checks magic, version, record size and dimensions; returns (width, height).
+    fn parse_header(h: &[u8; AOV_HEADER_BYTES]) -> Result<(u32, u32), AovError> {
         if h[..8] != AOV_MAGIC {
             return Err(AovError::BadMagic);
         }
@@ -94,17 +118,22 @@ impl Aov {
         if rs as usize != std::mem::size_of::<AovRecord>() {
             return Err(AovError::Header(format!("record size {rs}, expected 16")));
         }
+        if width == 0 || height == 0 {
+            return Err(AovError::Header(format!("{width}×{height} has no pixels")));
+        }
         let n = (width as u64) * (height as u64);
         if n > (1 << 28) {
             return Err(AovError::Header(format!("{width}×{height} is too large")));
         }
-        let mut records = vec![AovRecord::default(); n as usize];
-        r.read_exact(bytemuck::cast_slice_mut(&mut records))?;
-        Ok(Self {
-            width,
-            height,
-            records,
-        })
+        Ok((width, height))
+    }
+
+    /// The whole file as bytes (header and records).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(AOV_HEADER_BYTES + self.records.len() * 16);
+        self.write_to(&mut out)
+            .expect("writing to a Vec cannot fail");
+        out
     }
 
     pub fn save(&self, path: &std::path::Path) -> Result<(), AovError> {
@@ -114,8 +143,30 @@ impl Aov {
         Ok(())
     }
 
+    /// Reads an AOV file, checking the header's size against the file's length before
+    /// allocating anything for the records.
     pub fn load(path: &std::path::Path) -> Result<Self, AovError> {
-        Self::read_from(std::io::BufReader::new(std::fs::File::open(path)?))
+        let f = std::fs::File::open(path)?;
+        let len = f.metadata()?.len();
+        let mut r = std::io::BufReader::new(f);
+        let mut h = [0u8; AOV_HEADER_BYTES];
+        r.read_exact(&mut h).map_err(|_| {
+            AovError::Header(format!(
+                "the file has {len} bytes, less than the {AOV_HEADER_BYTES}-byte header"
+            ))
+        })?;
+        let (width, height) = Self::parse_header(&h)?;
+        let want = AOV_HEADER_BYTES as u64
+            + (width as u64) * (height as u64) * std::mem::size_of::<AovRecord>() as u64;
+        if len != want {
+            return Err(AovError::Header(format!(
+                "the header says {width}×{height} ({want} bytes with the header) but the file has {len} bytes"
+            )));
+        }
+        let mut all = h.to_vec();
+        all.reserve_exact((want - AOV_HEADER_BYTES as u64) as usize);
+        r.read_to_end(&mut all)?;
+        Self::read_from(&all[..])
     }
 }
 
@@ -146,5 +197,49 @@ mod tests {
         bad[0] = b'X';
         assert!(matches!(Aov::read_from(&bad[..]), Err(AovError::BadMagic)));
         assert!(Aov::read_from(&bytes[..40]).is_err());
+    }
+
+    #[test]
+    fn regression_compare_trusts_aov_header() {
+        // 96 bytes claiming 16384×16384: refused from the length, before any allocation.
+        let dir = std::env::temp_dir().join(format!("motu-aov-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("liar.aov");
+        let mut bytes = Aov::new(4, 1).to_bytes();
+        bytes[12..16].copy_from_slice(&16384u32.to_le_bytes());
+        bytes[16..20].copy_from_slice(&16384u32.to_le_bytes());
+        assert_eq!(bytes.len(), 96);
+        std::fs::write(&p, &bytes).unwrap();
+        let e = Aov::load(&p).unwrap_err().to_string();
+        assert!(e.contains("16384×16384") && e.contains("96 bytes"), "{e}");
+        // The streaming reader refuses it too (reads what is there, never the claimed size).
+        assert!(Aov::read_from(&bytes[..]).is_err());
+        // 0×0 has no pixels.
+        let mut zero = Aov::new(1, 1).to_bytes();
+        zero[12..20].fill(0);
+        std::fs::write(&p, &zero[..32]).unwrap();
+        assert!(Aov::load(&p).unwrap_err().to_string().contains("no pixels"));
+        // A good file round-trips through load.
+        let good = Aov::new(3, 2);
+        std::fs::write(&p, good.to_bytes()).unwrap();
+        assert_eq!(Aov::load(&p).unwrap(), good);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// The fuzz corpus (`pbrt-import/fuzz/corpus/aov`) replayed on stable: every input is an
+    /// error or a consistent AOV, never a panic or a huge allocation.
+    #[test]
+    fn aov_fuzz_corpus_replays() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../pbrt-import/fuzz/corpus/aov");
+        let mut n = 0;
+        for e in std::fs::read_dir(&dir).unwrap().flatten() {
+            let data = std::fs::read(e.path()).unwrap();
+            if let Ok(a) = Aov::read_from(&data[..]) {
+                assert_eq!(a.records.len(), a.width as usize * a.height as usize);
+            }
+            n += 1;
+        }
+        assert!(n > 0, "the aov corpus must not be empty");
     }
 }

@@ -149,6 +149,163 @@ pub fn camera_path(
     }
 }
 
+/// A recorded camera flight (`motu view --record`): one pose per frame, replayed by
+/// `motu render --camera-path`, `motu view --camera-path` and `motu bench --camera-path`.
+///
+/// JSON form (`format` and `version` are checked; sizes are optional hints):
+/// `{"format": "motu-camera-path", "version": 1, "width": 640, "height": 480,
+///   "frames": [{"eye": [x, y, z], "forward": [x, y, z], "up": [x, y, z], "fov_deg": 45.0,
+///   "mirror_x": false}, ...]}`
+#[derive(Clone, Debug, PartialEq)]
+pub struct RecordedPath {
+    pub poses: Vec<CameraPose>,
+    pub width: Option<u32>,
+    pub height: Option<u32>,
+}
+
+/// Why a camera-path file was rejected.
+#[derive(Debug, thiserror::Error)]
+pub enum PathError {
+    #[error("not a camera path: {0}")]
+    Json(#[from] serde_json::Error),
+    #[error("not a camera path: `format` is {0:?}, expected \"motu-camera-path\"")]
+    Format(String),
+    #[error("camera path version {0} is not supported (this motu reads version 1)")]
+    Version(u32),
+    #[error("the camera path has no frames")]
+    Empty,
+    #[error("frame {frame}: {what}")]
+    Frame { frame: usize, what: String },
+    #[error("`width`/`height` must be 1 to 16384 (got {0}×{1})")]
+    Size(u32, u32),
+}
+
+pub const CAMERA_PATH_FORMAT: &str = "motu-camera-path";
+
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PathFile {
+    format: String,
+    version: u32,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    width: Option<u32>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    height: Option<u32>,
+    frames: Vec<PoseJson>,
+}
+
+#[derive(serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PoseJson {
+    eye: [f32; 3],
+    forward: [f32; 3],
+    up: [f32; 3],
+    fov_deg: f32,
+    #[serde(default)]
+    mirror_x: bool,
+}
+
+impl RecordedPath {
+    /// The JSON form (f32 values print exactly: a written path replays bit-identically).
+    pub fn to_json(&self) -> String {
+        let f = PathFile {
+            format: CAMERA_PATH_FORMAT.into(),
+            version: 1,
+            width: self.width,
+            height: self.height,
+            frames: self
+                .poses
+                .iter()
+                .map(|p| PoseJson {
+                    eye: p.world_eye.to_array(),
+                    forward: p.world_forward.to_array(),
+                    up: p.world_up.to_array(),
+                    fov_deg: p.fov_deg,
+                    mirror_x: p.mirror_x,
+                })
+                .collect(),
+        };
+        serde_json::to_string_pretty(&f).unwrap_or_default()
+    }
+
+    /// Parses and validates the JSON form (errors carry line and column, or the frame).
+    pub fn from_json(text: &str) -> Result<RecordedPath, PathError> {
+        let f: PathFile = serde_json::from_str(text)?;
+        if f.format != CAMERA_PATH_FORMAT {
+            return Err(PathError::Format(f.format));
+        }
+        if f.version != 1 {
+            return Err(PathError::Version(f.version));
+        }
+        if f.frames.is_empty() {
+            return Err(PathError::Empty);
+        }
+        if let (Some(w), Some(h)) = (f.width.or(Some(1)), f.height.or(Some(1))) {
+            if !(1..=16384).contains(&w) || !(1..=16384).contains(&h) {
+                return Err(PathError::Size(w, h));
+            }
+        }
+        let mut poses = Vec::with_capacity(f.frames.len());
+        for (i, p) in f.frames.iter().enumerate() {
+            let bad = |what: String| PathError::Frame { frame: i, what };
+            let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
+            if !finite(&p.eye) || !finite(&p.forward) || !finite(&p.up) || !p.fov_deg.is_finite() {
+                return Err(bad("a value is not a finite number".into()));
+            }
+            let (fwd, up) = (Vec3::from_array(p.forward), Vec3::from_array(p.up));
+            if fwd.length() < 1e-12 {
+                return Err(bad("`forward` is the zero vector".into()));
+            }
+            if fwd.normalize().cross(up.normalize_or_zero()).length() < 1e-6 {
+                return Err(bad("`up` is zero or parallel to `forward`".into()));
+            }
+            if !(p.fov_deg > 0.0 && p.fov_deg < 180.0) {
+                return Err(bad(format!("`fov_deg` {} is outside (0, 180)", p.fov_deg)));
+            }
+            poses.push(CameraPose {
+                world_eye: Vec3::from_array(p.eye),
+                world_forward: fwd,
+                world_up: up,
+                fov_deg: p.fov_deg,
+                mirror_x: p.mirror_x,
+            });
+        }
+        Ok(RecordedPath {
+            poses,
+            width: f.width,
+            height: f.height,
+        })
+    }
+
+    /// Frame `frame` of `frame_count` spread over the recording: the recorded poses themselves
+    /// when `frame_count` equals their number, else linear interpolation between the two
+    /// nearest (pure f32 arithmetic: every replayer gets the same pose).
+    pub fn sample(&self, frame: u32, frame_count: u32) -> CameraPose {
+        let n = self.poses.len();
+        if n == 1 || frame_count <= 1 {
+            return self.poses[0];
+        }
+        if frame_count as usize == n {
+            return self.poses[(frame as usize).min(n - 1)];
+        }
+        let t = frame.min(frame_count - 1) as f32 / (frame_count - 1) as f32 * (n - 1) as f32;
+        let i = (t.floor() as usize).min(n - 2);
+        let s = t - i as f32;
+        let (a, b) = (&self.poses[i], &self.poses[i + 1]);
+        CameraPose {
+            world_eye: a.world_eye.lerp(b.world_eye, s),
+            world_forward: a
+                .world_forward
+                .normalize()
+                .lerp(b.world_forward.normalize(), s)
+                .normalize_or(a.world_forward),
+            world_up: a.world_up.lerp(b.world_up, s).normalize_or(a.world_up),
+            fov_deg: a.fov_deg + (b.fov_deg - a.fov_deg) * s,
+            mirror_x: a.mirror_x,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -211,5 +368,52 @@ mod tests {
             camera_path(&base, &path, 7, 30)
         );
         assert_eq!(first.params(8, 8), first.params(8, 8));
+    }
+
+    fn pose(x: f32) -> CameraPose {
+        CameraPose {
+            world_eye: Vec3::new(x, 1.0 / 3.0, -0.1),
+            world_forward: Vec3::new(0.1, -0.2, -1.0),
+            world_up: Vec3::Y,
+            fov_deg: 37.5,
+            mirror_x: x > 1.0,
+        }
+    }
+
+    #[test]
+    fn recorded_path_round_trips_exactly_and_samples() {
+        let p = RecordedPath {
+            poses: vec![pose(0.0), pose(0.7), pose(2.0)],
+            width: Some(64),
+            height: None,
+        };
+        let back = RecordedPath::from_json(&p.to_json()).expect("parses");
+        assert_eq!(back, p);
+        // Same count: the poses themselves; otherwise interpolated.
+        assert_eq!(p.sample(1, 3), pose(0.7));
+        let mid = p.sample(1, 5);
+        assert!((mid.world_eye.x - 0.35).abs() < 1e-6, "{}", mid.world_eye);
+        assert_eq!(p.sample(4, 5).world_eye, pose(2.0).world_eye);
+    }
+
+    #[test]
+    fn bad_camera_paths_are_rejected_with_reasons() {
+        let err = |t: &str| RecordedPath::from_json(t).unwrap_err().to_string();
+        assert!(err("{").contains("line 1"), "{}", err("{"));
+        assert!(err(r#"{"format":"x","version":1,"frames":[]}"#).contains("format"));
+        assert!(
+            err(r#"{"format":"motu-camera-path","version":2,"frames":[]}"#).contains("version 2")
+        );
+        assert!(
+            err(r#"{"format":"motu-camera-path","version":1,"frames":[]}"#).contains("no frames")
+        );
+        let f = r#"{"format":"motu-camera-path","version":1,"frames":[{"eye":[0,0,0],"forward":[0,1,0],"up":[0,2,0],"fov_deg":40}]}"#;
+        assert!(
+            err(f).contains("frame 0") && err(f).contains("parallel"),
+            "{}",
+            err(f)
+        );
+        let f = r#"{"format":"motu-camera-path","version":1,"frames":[{"eye":[0,0,0],"forward":[0,0,1],"up":[0,1,0],"fov_deg":190}]}"#;
+        assert!(err(f).contains("fov_deg"), "{}", err(f));
     }
 }

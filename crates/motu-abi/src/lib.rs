@@ -29,3 +29,8 @@ pub mod lod;
 mod records;
 
 pub use records::*;
+
+/// TLAS walks one ray may make before its traversal is cut short (every backend): bounds a
+/// frame's work on exponentially deep instancing. Real scenes spend tens of walks per ray;
+/// cut rays are counted (`truncated_rays`) and a render with any fails unless allowed.
+pub const DEFAULT_MAX_TRACES_PER_RAY: u32 = 4096;

@@ -23,6 +23,10 @@ pub const PI_LOD_SELECTOR: u32 = 1;
 pub const FLAG_NEEDS_ANY_HIT: u32 = 1; // alpha-tested: triangles may not be forced opaque
 pub const FLAG_HAS_NORMALS: u32 = 2;
 pub const FLAG_HAS_UVS: u32 = 4;
+/// [`MeshRecord::flags`] only: the mesh is a cluster of a partitioned source mesh (or LOD
+/// level) and `primitive_map_offset` points at its `u32` table from cluster triangle to source
+/// triangle. Hit records name the mapped (source) primitive.
+pub const FLAG_PRIMITIVE_MAP: u32 = 8;
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
@@ -109,7 +113,9 @@ pub struct LodSelectorRecord {
 }
 
 /// A compiled mesh: positions (`[f32; 3]`, tightly packed) and `u32` triangle indices, stored
-/// in package chunks ready for upload.
+/// in package chunks ready for upload. A source mesh over the compiler's BLAS bound becomes
+/// several compiled meshes (spatial clusters), each with the same `source_mesh` and a
+/// primitive map, so hits still name the source mesh and its primitive.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct MeshRecord {
@@ -128,7 +134,9 @@ pub struct MeshRecord {
     pub indices_offset: u64,
     /// `NONE_U64` when the mesh has no normals.
     pub normals_offset: u64,
-    pub _pad: u64,
+    /// With [`FLAG_PRIMITIVE_MAP`]: the cluster's `u32` per triangle (its triangle index in
+    /// the source mesh, or in the LOD level's mesh when `lod > 0`); else `NONE_U64`.
+    pub primitive_map_offset: u64,
     pub bounds_min: [f32; 3],
     pub _pad1: u32,
     pub bounds_max: [f32; 3],

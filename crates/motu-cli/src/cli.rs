@@ -30,6 +30,8 @@ pub enum Command {
     Report(ReportArgs),
     /// Render a package headless to PNG (and AOV/stats).
     Render(RenderArgs),
+    /// Fly through a package in a window (needs a display; `motu render` is the headless path).
+    View(ViewArgs),
     /// Compare two AOV files pixel by pixel.
     Compare(CompareArgs),
     /// Repeatable measurements.
@@ -146,6 +148,18 @@ fn parse_levels(s: &str) -> Result<LevelsArg, String> {
     }
 }
 
+/// `--depth-epsilon`: a finite relative tolerance ≥ 0.
+fn parse_depth_epsilon(s: &str) -> Result<f32, String> {
+    let v: f32 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
+    if v.is_finite() && v >= 0.0 {
+        Ok(v)
+    } else {
+        Err(format!(
+            "{s} is not a relative depth tolerance: it must be a finite number ≥ 0 (e.g. 0.001)"
+        ))
+    }
+}
+
 fn parse_threshold(s: &str) -> Result<f64, String> {
     let v: f64 = s.parse().map_err(|_| format!("'{s}' is not a number"))?;
     if (0.0..=1.0).contains(&v) {
@@ -172,6 +186,13 @@ pub struct ImportArgs {
     /// Also split a TLAS whose estimated build scratch would exceed this (128 B per instance).
     #[arg(long, value_parser = parse_size)]
     pub max_tlas_scratch: Option<u64>,
+    /// Triangles per triangle BLAS (the partitioner's bound): a mesh over it is split into
+    /// spatial clusters, small meshes are grouped by location under it. The default (2^16)
+    /// keeps every BLAS around 6.5 MiB (≤ 12 MiB with build scratch and geometry), so a
+    /// streaming budget far below the full build still holds the largest one.
+    #[arg(long, default_value_t = motu_compile::DEFAULT_MAX_BLAS_TRIANGLES,
+          value_parser = clap::value_parser!(u32).range(1..))]
+    pub max_blas_triangles: u32,
     /// Build N LOD levels for heavy meshes.
     #[arg(long)]
     pub lod: Option<u32>,
@@ -194,8 +215,8 @@ pub struct ImportArgs {
     /// Keep only these elements (comma-separated names).
     #[arg(long, value_delimiter = ',')]
     pub subset: Vec<String>,
-    /// Force the pbrt version instead of detecting it.
-    #[arg(long)]
+    /// Force the pbrt version instead of detecting it (3 or 4).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(3..=4))]
     pub pbrt_version: Option<u32>,
     /// Chunk target size.
     #[arg(long, value_parser = parse_size, default_value = "64MiB")]
@@ -305,12 +326,99 @@ pub struct RenderArgs {
     /// Dither between the two nearest LOD levels (hashed per pixel) instead of rounding down.
     #[arg(long)]
     pub lod_stochastic: bool,
-    /// Traversal stack entries per ray.
-    #[arg(long, default_value_t = 16)]
+    /// Traversal stack entries per ray (1–256: 64 bytes of private shader memory each).
+    #[arg(long, default_value_t = 16,
+          value_parser = clap::value_parser!(u32).range(1..=i64::from(motu_gpu::MAX_STACK_SIZE)))]
     pub stack_size: u32,
+    /// TLAS walks one ray may make before it is cut short (bounds a frame's work on
+    /// exponentially deep instancing); cut rays are counted as `truncated_rays`.
+    #[arg(long, default_value_t = motu_abi::DEFAULT_MAX_TRACES_PER_RAY,
+          value_parser = clap::value_parser!(u32).range(1..))]
+    pub max_traces_per_ray: u32,
+    /// Write the image even when rays were truncated (stack overflow or --max-traces-per-ray):
+    /// a counted warning instead of an error.
+    #[arg(long)]
+    pub allow_truncated: bool,
     /// Vulkan device index.
     #[arg(long, env = "MOTU_DEVICE")]
     pub device: Option<usize>,
+    /// Replay a recorded camera path (`motu view --record`) over `--frames` frames (default:
+    /// one per recorded pose); writes the last frame.
+    #[arg(long)]
+    pub camera_path: Option<PathBuf>,
+}
+
+#[derive(Args, Debug)]
+pub struct ViewArgs {
+    pub package: PathBuf,
+    /// Start at this scene camera (default: the scene's active camera); 1–9 switch cameras.
+    #[arg(long)]
+    pub camera: Option<String>,
+    /// Window size (default: the camera's image size).
+    #[arg(long)]
+    pub width: Option<u32>,
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Default: query where available, else pipeline.
+    #[arg(long, value_enum)]
+    pub backend: Option<BackendArg>,
+    #[arg(long, value_enum, default_value = "shaded")]
+    pub view: ViewArg,
+    /// Stream structures under this VRAM budget (implies --stream).
+    #[arg(long, value_parser = parse_size)]
+    pub vram_budget: Option<u64>,
+    /// Build only what rays touch and evict under the budget.
+    #[arg(long)]
+    pub stream: bool,
+    /// Streaming: build–trace passes per frame, the bound on a frame's build work (default: 2
+    /// while flying, so the window stays responsive and later frames refine; 16 with --frames).
+    #[arg(long)]
+    pub stream_passes: Option<u32>,
+    #[arg(long)]
+    pub max_allocations: Option<u32>,
+    /// Elements shown at the start (comma-separated; Shift+1–9 toggle them live).
+    #[arg(long, value_delimiter = ',')]
+    pub subset: Vec<String>,
+    /// Force every LOD selector to this level (L cycles live).
+    #[arg(long)]
+    pub lod: Option<u32>,
+    #[arg(long, default_value_t = 256.0)]
+    pub lod_r_max: f32,
+    #[arg(long)]
+    pub lod_stochastic: bool,
+    #[arg(long, default_value_t = 16)]
+    pub stack_size: u32,
+    #[arg(long, env = "MOTU_DEVICE")]
+    pub device: Option<usize>,
+    /// Render N frames through the window and swapchain, write the last (--screenshot, --aov,
+    /// --stats) and exit.
+    #[arg(long)]
+    pub frames: Option<u32>,
+    /// With --frames: the last frame as read back from the swapchain image (PNG).
+    #[arg(long)]
+    pub screenshot: Option<PathBuf>,
+    /// With --frames: the last frame's hit records (FORMAT.md, "AOV file").
+    #[arg(long)]
+    pub aov: Option<PathBuf>,
+    /// With --frames: statistics JSON of the last frame.
+    #[arg(long)]
+    pub stats: Option<PathBuf>,
+    /// Write the camera of every frame shown as a camera path (JSON) on exit.
+    #[arg(long)]
+    pub record: Option<PathBuf>,
+    /// Fly along a recorded camera path instead of the fly camera (frames: one per pose, or
+    /// --frames spread over it).
+    #[arg(long)]
+    pub camera_path: Option<PathBuf>,
+    /// Show the overlay in --frames runs too (it is then in the screenshot).
+    #[arg(long)]
+    pub overlay: bool,
+    /// Present as fast as possible (MAILBOX/IMMEDIATE) instead of at the display's rate.
+    #[arg(long)]
+    pub no_vsync: bool,
+    /// Fly speed in world units per second (default: a quarter of the scene's radius).
+    #[arg(long)]
+    pub speed: Option<f32>,
 }
 
 #[derive(Args, Debug)]
@@ -320,8 +428,8 @@ pub struct CompareArgs {
     /// Exit non-zero above this fraction of mismatched pixels.
     #[arg(long, default_value = "0.001", value_parser = parse_threshold)]
     pub max_mismatch: f64,
-    /// Relative depth tolerance.
-    #[arg(long, default_value_t = 1e-3)]
+    /// Relative depth tolerance (finite, ≥ 0).
+    #[arg(long, default_value = "0.001", value_parser = parse_depth_epsilon, allow_hyphen_values = true)]
     pub depth_epsilon: f32,
     /// Write a difference image.
     #[arg(long)]
@@ -391,6 +499,13 @@ pub struct BenchArgs {
     /// One line per step on stderr even when stderr is not a terminal.
     #[arg(long)]
     pub progress: bool,
+    /// Replay this recorded camera path (`motu view --record`) on `--package` as a benchmark
+    /// (frame times along the flight) instead of running a suite.
+    #[arg(long, requires = "package")]
+    pub camera_path: Option<PathBuf>,
+    /// The package a `--camera-path` flight is flown through.
+    #[arg(long, requires = "camera_path")]
+    pub package: Option<PathBuf>,
     /// Internal: render one package and write its measurements (the child process of a render step).
     #[arg(long, hide = true)]
     pub child_render: Option<PathBuf>,

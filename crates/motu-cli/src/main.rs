@@ -3,8 +3,10 @@
 
 mod cli;
 mod cmd;
+mod output;
 mod pipeline;
 mod progress;
+mod signals;
 mod size;
 
 use clap::Parser;
@@ -13,18 +15,31 @@ use std::process::ExitCode;
 fn main() -> ExitCode {
     let args = cli::Cli::parse();
     init_tracing(args.verbose);
+    signals::install();
     match cmd::run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            // One paragraph: what, where, what to do (the contexts carry the where).
-            let mut msg = format!("error: {e}");
-            for cause in e.chain().skip(1) {
-                msg.push_str(&format!(": {cause}"));
-            }
-            eprintln!("{msg}");
+            eprintln!("error: {}", error_paragraph(&e));
             ExitCode::FAILURE
         }
     }
+}
+
+/// One paragraph: what, where, what to do (the contexts carry the where). Library errors often
+/// print their source in their own message too; a cause already shown is not repeated.
+fn error_paragraph(e: &anyhow::Error) -> String {
+    let mut msg = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if msg.contains(&text) {
+            continue;
+        }
+        if !msg.is_empty() {
+            msg.push_str(": ");
+        }
+        msg.push_str(&text);
+    }
+    msg
 }
 
 fn init_tracing(verbose: u8) {
@@ -39,5 +54,23 @@ fn init_tracing(verbose: u8) {
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        // Colour codes only for a person at a terminal, never in logs or captured output.
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn regression_error_text_is_not_repeated() {
+        let io = std::io::Error::other("No such device (os error 19)");
+        let inner = anyhow::Error::new(io).context("scene.pbrt: No such device (os error 19)");
+        let e = inner.context("importing scene.pbrt");
+        assert_eq!(
+            error_paragraph(&e),
+            "importing scene.pbrt: scene.pbrt: No such device (os error 19)"
+        );
+    }
 }

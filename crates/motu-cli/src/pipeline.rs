@@ -15,12 +15,15 @@ use std::time::Instant;
 
 /// Chunk group for LOD meshes the compiler makes (kept apart from element groups).
 const LOD_GROUP: u32 = u32::MAX - 1;
+/// Chunk group for the clusters of partitioned meshes (and LOD levels).
+const CLUSTER_GROUP: u32 = u32::MAX - 2;
 
 pub struct ImportOptions {
     pub levels: Levels,
     pub levels_text: String,
     pub max_instances: u32,
     pub max_tlas_scratch_bytes: Option<u64>,
+    pub max_blas_triangles: u32,
     pub lod_levels: Option<u32>,
     pub lod_min_triangles: u32,
     pub zstd_level: Option<i32>,
@@ -63,6 +66,12 @@ fn writer_options(o: &ImportOptions) -> WriterOptions {
 
 /// Resolves element names; unknown names are an error listing the valid ones.
 pub fn resolve_subset(names: &[String], known: &[String]) -> anyhow::Result<Vec<u32>> {
+    if names.iter().any(|n| n.trim().is_empty()) {
+        bail!(
+            "--subset needs element names, comma-separated (got an empty name): valid elements are {}",
+            known.join(", ")
+        );
+    }
     let mut ids = Vec::new();
     let mut unknown = Vec::new();
     for n in names {
@@ -82,11 +91,18 @@ pub fn resolve_subset(names: &[String], known: &[String]) -> anyhow::Result<Vec<
 }
 
 pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Result<ImportSummary> {
-    if !scene_path.exists() {
-        bail!(
+    match std::fs::metadata(scene_path) {
+        Ok(m) if m.is_file() => {}
+        Ok(m) => bail!(
+            "{} is {}, not a scene file: give the entry .pbrt (or .obj) file",
+            scene_path.display(),
+            crate::output::describe_file_type(&m.file_type())
+        ),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!(
             "{} does not exist: give the entry .pbrt (or .obj) file",
             scene_path.display()
-        );
+        ),
+        Err(e) => bail!("{}: {e}", scene_path.display()),
     }
     // With --subset, geometry is first streamed into a scratch package beside the output, and
     // only what the subset references is copied into the real one.
@@ -99,7 +115,17 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
     let t0 = Instant::now();
     let writer = PackageWriter::create(&first_target, writer_options(o))
         .with_context(|| format!("creating {}", first_target.display()))?;
-    let geometry = PackageGeometry::new(writer);
+    // Meshes over the partitioner's bound are only ever stored as clusters: in a direct import
+    // their whole data goes to a spill file that is dropped after compiling, not the package.
+    let geometry = if direct {
+        let spill_path = out.with_extension("partition-spill.motu");
+        let spill = PackageWriter::create(&spill_path, writer_options(o))
+            .with_context(|| format!("creating a scratch file beside {}", out.display()))?;
+        let bound = o.max_blas_triangles.min(motu_compile::DEFAULT_MAX_PER_NODE);
+        PackageGeometry::new(writer).with_spill(spill, u64::from(bound))
+    } else {
+        PackageGeometry::new(writer)
+    };
     // The bar's total: the scene text beside the entry file (an estimate: files there that the
     // scene never includes count too, and PLY data is not in it).
     let progress = crate::progress::Progress::bytes_of_total("parsing pbrt");
@@ -116,10 +142,13 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
         parallel: o.parallel,
         curve_ribbons: o.curve_ribbons,
     };
-    let (scene, report) =
+    let (scene, mut report) =
         motu_ingest::ingest_file(scene_path, &ingest_opts, Box::new(geometry.clone()))
             .with_context(|| format!("importing {}", scene_path.display()))?;
     progress.finish();
+    // Inputs known only now (PLY, included files): the package must not replace one.
+    crate::output::check_not_an_input("-o", out, report.input_files.iter().map(PathBuf::as_path))?;
+    warn_on_count_overflow(&scene, &mut report);
     let parse_ms = t0.elapsed().as_secs_f64() * 1e3;
     tracing::info!(
         parse_ms,
@@ -133,6 +162,7 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
         levels: o.levels,
         max_instances_per_tlas: o.max_instances,
         max_tlas_scratch_bytes: o.max_tlas_scratch_bytes.unwrap_or(u64::MAX),
+        max_blas_triangles: o.max_blas_triangles,
         lod_levels: o.lod_levels,
         lod_triangle_threshold: o.lod_min_triangles,
         subset: (!direct).then(|| subset_ids.iter().map(|&i| ElementId(i)).collect()),
@@ -140,8 +170,16 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
     };
 
     if direct {
-        let (compiled, compile_ms) = compile_into(&scene, &copts, &geometry, |m| {
-            Ok(scene.mesh(motu_scene::MeshId(m.source_mesh)).location)
+        let load = |m| scene.mesh_data(m).map_err(|e| e.to_string());
+        let (compiled, compile_ms) = compile_into(&scene, &copts, &geometry, &load, |m| {
+            let at = scene.mesh(motu_scene::MeshId(m.source_mesh)).location;
+            if PackageGeometry::is_spilled(at) {
+                bail!(
+                    "internal: mesh {} over the BLAS bound was compiled whole",
+                    m.source_mesh
+                );
+            }
+            Ok(at)
         })?;
         let t2 = Instant::now();
         let writer = geometry.take_writer().map_err(anyhow::Error::msg)?;
@@ -163,7 +201,20 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
                 .with_context(|| format!("creating {}", out.display()))?,
         );
         let mut copied: HashMap<u32, MeshLocation> = HashMap::new();
-        let (compiled, compile_ms) = compile_into(&scene, &copts, &final_geo, |m| {
+        // The scene's store wrote the scratch package, now finished: LOD chains and the
+        // partitioner read source meshes back from it.
+        let load = |m: motu_scene::MeshId| {
+            let info = scene.mesh(m);
+            motu_pack::read_mesh_blob(
+                &scratch,
+                info.location,
+                info.vertex_count,
+                info.triangle_count,
+                info.has_normals,
+            )
+            .map_err(|e| e.to_string())
+        };
+        let (compiled, compile_ms) = compile_into(&scene, &copts, &final_geo, &load, |m| {
             if let Some(&at) = copied.get(&m.source_mesh) {
                 return Ok(at);
             }
@@ -192,23 +243,59 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
     result
 }
 
-/// Compiles `scene`, appending the LOD meshes the compiler makes to `geo` as they come, and
-/// points every mesh record at its blob: source meshes (LOD 0) where `source_location` says,
-/// LOD meshes where they were appended. Returns the compiled scene and the compile time.
+/// Flattened counts that saturate 2^64 mean exponentially deep instancing (each level
+/// instancing the one below several times): importable, but every flattened figure is a lower
+/// bound and a full traversal cannot finish; renders bound each ray's work and fail on truncated
+/// rays unless allowed.
+fn warn_on_count_overflow(scene: &Scene, report: &mut IngestReport) {
+    let st = scene.stats();
+    let mut over = Vec::new();
+    if st.flattened_instances == u64::MAX {
+        over.push("flattened instances");
+    }
+    if st.instanced_triangles == u64::MAX {
+        over.push("instanced triangles");
+    }
+    if over.is_empty() {
+        return;
+    }
+    let msg = format!(
+        "{} overflow 2^64 (exponentially deep instancing: {} levels, {} prototypes, {} instance edges); the counts shown are saturated, and renders cut each ray short after --max-traces-per-ray walks (an error unless --allow-truncated)",
+        over.join(" and "),
+        st.max_depth,
+        st.prototypes,
+        st.instances
+    );
+    tracing::warn!("{msg}");
+    report.warnings.push(msg);
+}
+
+/// Compiles `scene` (source meshes read by `load`, one at a time, for LOD chains and the
+/// partitioner), appending the meshes the compiler makes (LOD levels, clusters) to `geo` as
+/// they come, and points every mesh record at its blob: whole source meshes where
+/// `source_location` says, made meshes where they were appended. Returns the compiled scene
+/// and the compile time.
 fn compile_into(
     scene: &Scene,
     copts: &CompileOptions,
     geo: &PackageGeometry,
+    load: &motu_compile::MeshLoader<'_>,
     mut source_location: impl FnMut(&MeshRecord) -> anyhow::Result<MeshLocation>,
 ) -> anyhow::Result<(CompiledScene, f64)> {
     let t = Instant::now();
-    let mut lod_locations: HashMap<u32, MeshLocation> = HashMap::new();
-    let mut sink = |rec: u32, data: &motu_scene::MeshData| -> Result<(), String> {
-        lod_locations.insert(rec, geo.append_mesh(LOD_GROUP, data)?);
-        Ok(())
-    };
-    let mut compiled =
-        motu_compile::compile(scene, copts, &mut sink).context("compiling the instancing graph")?;
+    let mut made_locations: HashMap<u32, MeshLocation> = HashMap::new();
+    let mut sink =
+        |rec: u32, data: &motu_scene::MeshData, map: Option<&[u32]>| -> Result<(), String> {
+            let group = if map.is_some() {
+                CLUSTER_GROUP
+            } else {
+                LOD_GROUP
+            };
+            made_locations.insert(rec, geo.append_mesh_mapped(group, data, map)?);
+            Ok(())
+        };
+    let mut compiled = motu_compile::compile_with_loader(scene, copts, load, &mut sink)
+        .context("compiling the instancing graph")?;
     let compile_ms = t.elapsed().as_secs_f64() * 1e3;
     tracing::info!(
         compile_ms,
@@ -216,15 +303,16 @@ fn compile_into(
         "compiled"
     );
     for (i, m) in compiled.meshes.iter_mut().enumerate() {
-        let at = if m.lod == 0 {
+        let at = if let Some(&at) = made_locations.get(&(i as u32)) {
+            at
+        } else if m.lod == 0 && m.flags & motu_abi::FLAG_PRIMITIVE_MAP == 0 {
             source_location(m)?
         } else {
-            *lod_locations.get(&(i as u32)).with_context(|| {
-                format!(
-                    "internal: LOD mesh record {i} (source mesh {}) was never stored",
-                    m.source_mesh
-                )
-            })?
+            anyhow::bail!(
+                "internal: compiled mesh record {i} (source mesh {}, LOD {}) was never stored",
+                m.source_mesh,
+                m.lod
+            );
         };
         place_mesh_record(m, at);
     }

@@ -63,7 +63,7 @@ fn bench(c: &mut Criterion) {
     ] {
         g.bench_function(name, |b| {
             b.iter(|| {
-                let mut sink = |_: u32, _: &MeshData| Ok(());
+                let mut sink = |_: u32, _: &MeshData, _: Option<&[u32]>| Ok(());
                 black_box(compile(&scene, &opts, &mut sink).unwrap())
             })
         });

@@ -46,7 +46,8 @@ pub(crate) struct Plan<'s> {
     pub dropped_degenerate: u64,
     pub collapsed_prototypes: u64,
     pub flattened_instances: u64,
-    /// Instance-table size estimate (exact unless composed transforms degenerate).
+    /// Instance-table size estimate (exact unless composed transforms degenerate or location
+    /// grouping makes more groups than the triangle total needs).
     pub instance_estimate: u64,
 }
 
@@ -264,6 +265,29 @@ impl<'s> Plan<'s> {
         }
     }
 
+    /// Triangle BLASes `G(p)` will have (an estimate for reserving the instance table): a
+    /// cluster count per mesh over the bound, the small meshes' triangles over the bound.
+    fn g_blas_estimate(&self, p: PrototypeId) -> u64 {
+        if self.g_mesh_count[p.index()] == 0 {
+            return 0;
+        }
+        let o = self.opts;
+        let bound = o.max_blas_triangles.min(o.max_primitives_per_blas).max(1);
+        let (mut blases, mut small) = (0u64, 0u64);
+        for (j, &m) in self.scene.meshes_of(p).iter().enumerate() {
+            if !self.mesh_kept(p, j, m) || self.mesh_gets_lod(m) {
+                continue;
+            }
+            let t = self.scene.mesh(m).triangle_count;
+            if t > bound {
+                blases += crate::partition::cluster_count(u64::from(t), bound);
+            } else {
+                small += u64::from(t);
+            }
+        }
+        blases + small.div_ceil(u64::from(bound)).max(u64::from(small > 0))
+    }
+
     /// Counts the instances and PIs each TLAS's walk will make; errors early when the tables
     /// would overflow `u32` (e.g. `--levels sl` on a scene with billions of leaf instances).
     fn estimate_instances(&mut self) -> Result<(), CompileError> {
@@ -279,7 +303,7 @@ impl<'s> Plan<'s> {
             if !self.reachable[p.index()] {
                 continue;
             }
-            let mut i = u64::from(self.g_mesh_count[p.index()] > 0);
+            let mut i = self.g_blas_estimate(p);
             let mut q = u64::from(self.lod_mesh_count[p.index()]);
             let base = scene.edge_base(p) as usize;
             for (k, e) in scene.edges(p).iter().enumerate() {

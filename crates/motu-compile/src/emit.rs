@@ -3,12 +3,13 @@
 //! graph level). Levels and exact bounds are filled in by `finalize`.
 
 use crate::analyze::{edge_ref, Plan};
+use crate::partition::{group_by_location, partition_mesh, Cluster, Item};
 use crate::split::{median_partition, sah_partition};
-use crate::{lod, xform, CompileError, CompiledScene, MeshSink};
+use crate::{lod, xform, CompileError, CompiledScene, MeshLoader, MeshSink};
 use motu_abi::{
     BlasRecord, GeometryRecord, InstanceRecord, LodSelectorRecord, MaterialRecord, MeshRecord,
     PiRecord, TlasRecord, BLAS_AABBS, BLAS_TRIANGLES, FLAG_HAS_NORMALS, FLAG_HAS_UVS,
-    FLAG_NEEDS_ANY_HIT, NONE_U32, NONE_U64, PI_LOD_SELECTOR, PI_TLAS,
+    FLAG_NEEDS_ANY_HIT, FLAG_PRIMITIVE_MAP, NONE_U32, NONE_U64, PI_LOD_SELECTOR, PI_TLAS,
 };
 use motu_scene::{Aabb, MeshData, MeshId, PrototypeId, Scene, Transform34};
 
@@ -17,8 +18,9 @@ use motu_scene::{Aabb, MeshData, MeshId, PrototypeId, Scene, Transform34};
 pub(crate) enum Job {
     /// `TLAS(P)`: the walk from prototype `P`.
     Proto(PrototypeId),
-    /// One LOD level: an instance of a one-mesh triangle BLAS.
-    Lod(u32),
+    /// One LOD level: mesh records `first..first + count` (one, or the level's clusters), an
+    /// instance of a one-mesh triangle BLAS each.
+    Lod(u32, u32),
 }
 
 struct Frame {
@@ -48,6 +50,7 @@ pub(crate) fn set_bounds(min: &mut [f32; 3], max: &mut [f32; 3], b: &Aabb) {
 
 pub(crate) struct Emitter<'p, 's, 'k, 'f> {
     plan: &'p Plan<'s>,
+    load: &'k MeshLoader<'f>,
     sink: &'k mut MeshSink<'f>,
     pub out: CompiledScene,
     tlas_of_proto: Vec<u32>,
@@ -70,7 +73,7 @@ pub(crate) struct Emitter<'p, 's, 'k, 'f> {
 }
 
 impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
-    pub fn new(plan: &'p Plan<'s>, sink: &'k mut MeshSink<'f>) -> Self {
+    pub fn new(plan: &'p Plan<'s>, load: &'k MeshLoader<'f>, sink: &'k mut MeshSink<'f>) -> Self {
         let scene = plan.scene;
         let n = scene.prototypes().len();
         let out = CompiledScene {
@@ -86,6 +89,7 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         };
         Self {
             plan,
+            load,
             sink,
             out,
             tlas_of_proto: vec![NONE_U32; n],
@@ -126,11 +130,13 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
             // Children got consecutive ids; push reversed so the first is emitted next.
             jobs.extend(self.new_children.drain(..).rev());
         }
+        let bound = self.bound();
         let r = &mut self.out.report;
         r.dropped_degenerate_instances += self.plan.dropped_degenerate;
         r.collapsed_prototypes = self.plan.collapsed_prototypes;
         r.flattened_instances = self.plan.flattened_instances;
         r.levels = format!("{:?}", self.plan.opts.levels).to_lowercase();
+        r.max_blas_triangles = u64::from(bound);
         Ok(self.out)
     }
 
@@ -198,9 +204,11 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         self.pi_elements.clear();
         match job {
             Job::Proto(p) => self.walk(p)?,
-            Job::Lod(record) => {
-                let blas = self.triangle_blas(&[record], NONE_U32)?;
-                self.push_instance(blas, &Transform34::IDENTITY, NONE_U32)?;
+            Job::Lod(first, count) => {
+                for record in first..first + count {
+                    let blas = self.triangle_blas(&[record], NONE_U32)?;
+                    self.push_instance(blas, &Transform34::IDENTITY, NONE_U32)?;
+                }
             }
         }
         let pi_end = self.out.pis.len();
@@ -342,11 +350,8 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         }
     }
 
-    fn record_for(&mut self, p: PrototypeId, j: usize, m: MeshId) -> Result<u32, CompileError> {
-        let r = self.record_of_mesh[m.index()];
-        if r != NONE_U32 {
-            return Ok(r);
-        }
+    /// The record of source mesh `m` (whole, LOD 0), as it is in the scene.
+    fn source_record(&self, p: PrototypeId, j: usize, m: MeshId) -> MeshRecord {
         let info = self.plan.scene.mesh(m);
         let mut flags = self.material_flags(info.material.0);
         if info.has_normals {
@@ -355,7 +360,7 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         if info.has_uvs {
             flags |= FLAG_HAS_UVS;
         }
-        let rec = MeshRecord {
+        MeshRecord {
             source_mesh: m.0,
             lod: 0,
             material: info.material.0,
@@ -364,11 +369,104 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
             triangle_count: info.triangle_count,
             element: self.mesh_element(p, j),
             ..empty_mesh_record(&info.bounds)
-        };
+        }
+    }
+
+    fn record_for(&mut self, p: PrototypeId, j: usize, m: MeshId) -> Result<u32, CompileError> {
+        let r = self.record_of_mesh[m.index()];
+        if r != NONE_U32 {
+            return Ok(r);
+        }
+        let rec = self.source_record(p, j, m);
         let id = next_id(self.out.meshes.len(), "meshes")?;
         self.out.meshes.push(rec);
         self.record_of_mesh[m.index()] = id;
         Ok(id)
+    }
+
+    /// The partitioner's bound: triangles per triangle BLAS.
+    fn bound(&self) -> u32 {
+        let o = self.plan.opts;
+        o.max_blas_triangles.min(o.max_primitives_per_blas).max(1)
+    }
+
+    fn load_source(&self, m: MeshId) -> Result<MeshData, CompileError> {
+        let data = (self.load)(m).map_err(|reason| CompileError::Mesh { mesh: m.0, reason })?;
+        let info = self.plan.scene.mesh(m);
+        if data.triangle_count() != info.triangle_count as usize
+            || data.positions.len() != info.vertex_count as usize
+        {
+            return Err(CompileError::Mesh {
+                mesh: m.0,
+                reason: format!(
+                    "stored data has {} vertices and {} triangles, the scene says {} and {}",
+                    data.positions.len(),
+                    data.triangle_count(),
+                    info.vertex_count,
+                    info.triangle_count
+                ),
+            });
+        }
+        data.validate()
+            .map_err(|reason| CompileError::Mesh { mesh: m.0, reason })?;
+        Ok(data)
+    }
+
+    /// Compiled mesh records for `data` (source mesh `m` at LOD `lod`, whose record template
+    /// is `template`): one record handed to the sink when within the bound, else one per
+    /// spatial cluster with its primitive map. Returns the records `(first, count)`.
+    fn made_records(
+        &mut self,
+        m: MeshId,
+        template: &MeshRecord,
+        lod: u32,
+        data: &MeshData,
+    ) -> Result<(u32, u32), CompileError> {
+        let first = next_id(self.out.meshes.len(), "meshes")?;
+        let bound = self.bound();
+        let mut flags = template.flags & !(FLAG_HAS_NORMALS | FLAG_PRIMITIVE_MAP);
+        if data.normals.is_some() {
+            flags |= FLAG_HAS_NORMALS;
+        }
+        let meshes = &mut self.out.meshes;
+        let sink = &mut *self.sink;
+        let mut push = |data: &MeshData, map: Option<&[u32]>, bounds: Aabb| {
+            let id = next_id(meshes.len(), "meshes")?;
+            let map_flag = if map.is_some() { FLAG_PRIMITIVE_MAP } else { 0 };
+            meshes.push(MeshRecord {
+                source_mesh: m.0,
+                lod,
+                flags: flags | map_flag,
+                vertex_count: data.positions.len() as u32,
+                triangle_count: data.triangle_count() as u32,
+                bounds_min: bounds.min,
+                bounds_max: bounds.max,
+                ..*template
+            });
+            sink(id, data, map).map_err(|reason| CompileError::Sink {
+                mesh_record: id,
+                reason,
+            })
+        };
+        if data.triangle_count() <= bound as usize {
+            push(data, None, data.bounds())?;
+        } else {
+            let _span = tracing::debug_span!(
+                "partition",
+                mesh = m.0,
+                lod,
+                triangles = data.triangle_count()
+            )
+            .entered();
+            partition_mesh(data, bound, &mut |c: Cluster| {
+                push(&c.data, Some(&c.primitive_map), c.bounds)
+            })?;
+            self.out.report.partitioned_meshes += 1;
+            self.out.report.partition_clusters +=
+                u64::from(next_id(meshes.len(), "meshes")? - first);
+        }
+        let count = next_id(self.out.meshes.len(), "meshes")? - first;
+        Ok((first, count))
     }
 
     fn material_flags(&self, material: u32) -> u32 {
@@ -378,54 +476,80 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         }
     }
 
-    /// `G(P)`: `P`'s non-LOD meshes, one geometry each, grouped under the triangle cap (and,
-    /// for the root, by element, so every root placement has one element).
+    /// `G(P)`: `P`'s non-LOD meshes as triangle BLASes of at most [`Self::bound`] triangles
+    /// (for the root, per element first, so every root placement has one element): a mesh over
+    /// the bound is split into clusters (a BLAS each); the others, one geometry each, are
+    /// grouped by location under the bound.
     fn g_for_proto(&mut self, p: PrototypeId) -> Result<(u32, u32), CompileError> {
         let g = self.g_of_proto[p.index()];
         if g.1 > 0 {
             return Ok(g);
         }
         let scene = self.plan.scene;
-        let cap = u64::from(self.plan.opts.max_primitives_per_blas);
-        // (element, record, triangles); few per prototype.
-        let mut items: Vec<(u32, u32, u64)> = Vec::new();
+        let bound = self.bound();
+        // (element, record, item); few per prototype.
+        let mut small: Vec<(u32, u32, Item)> = Vec::new();
+        let mut big: Vec<(u32, usize, MeshId)> = Vec::new();
         for (j, &m) in scene.meshes_of(p).iter().enumerate() {
             if !self.plan.mesh_kept(p, j, m) || self.plan.mesh_gets_lod(m) {
                 continue;
             }
-            let tris = u64::from(scene.mesh(m).triangle_count);
-            if tris > cap {
-                tracing::warn!(
-                    mesh = m.0,
-                    triangles = tris,
-                    cap,
-                    "mesh over the BLAS primitive cap"
-                );
-            }
+            let info = scene.mesh(m);
             let element = if p == Scene::ROOT {
                 self.mesh_element(p, j)
             } else {
                 NONE_U32
             };
-            items.push((element, self.record_for(p, j, m)?, tris));
+            if info.triangle_count > bound {
+                big.push((element, j, m));
+                continue;
+            }
+            let record = self.record_for(p, j, m)?;
+            let item = Item {
+                index: NONE_U32, // set once sorted by element
+                centre: info.bounds.center().to_array(),
+                triangles: u64::from(info.triangle_count),
+            };
+            small.push((element, record, item));
         }
-        items.sort_by_key(|it| it.0);
         let first = next_id(self.out.blases.len(), "BLASes")?;
-        let mut count = 0u32;
-        let mut group: Vec<u32> = Vec::new();
-        let mut group_tris = 0u64;
-        for (k, &(element, record, tris)) in items.iter().enumerate() {
-            group.push(record);
-            group_tris += tris;
-            let next = items.get(k + 1);
-            let close = next.is_none_or(|n| n.0 != element || group_tris + n.2 > cap);
-            if close {
-                self.triangle_blas(&group, element)?;
-                count += 1;
-                group.clear();
-                group_tris = 0;
+        for (element, j, m) in big {
+            let data = self.load_source(m)?;
+            let template = self.source_record(p, j, m);
+            let (r0, n) = self.made_records(m, &template, 0, &data)?;
+            drop(data);
+            for r in r0..r0 + n {
+                self.triangle_blas(&[r], element)?;
             }
         }
+        small.sort_by_key(|it| it.0);
+        for (k, it) in small.iter_mut().enumerate() {
+            it.2.index = k as u32;
+        }
+        let mut items: Vec<Item> = Vec::new();
+        let mut ranges: Vec<(usize, usize)> = Vec::new();
+        let mut group: Vec<u32> = Vec::new();
+        let mut k = 0;
+        while k < small.len() {
+            let element = small[k].0;
+            let run_end = small[k..]
+                .iter()
+                .position(|it| it.0 != element)
+                .map_or(small.len(), |n| k + n);
+            items.clear();
+            items.extend(small[k..run_end].iter().map(|it| it.2));
+            ranges.clear();
+            group_by_location(&mut items, u64::from(bound), &mut ranges);
+            for &(a, b) in &ranges {
+                group.clear();
+                group.extend(items[a..b].iter().map(|it| small[it.index as usize].1));
+                // Mesh order inside a group: as in the scene (stable ids per geometry).
+                group.sort_unstable();
+                self.triangle_blas(&group, element)?;
+            }
+            k = run_end;
+        }
+        let count = next_id(self.out.blases.len(), "BLASes")? - first;
         self.g_of_proto[p.index()] = (first, count);
         Ok((first, count))
     }
@@ -627,60 +751,45 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
     }
 
     /// The LOD selector of mesh `m` (its chain is built, and handed to the sink, on first use).
+    /// Every level over the bound is partitioned like any mesh: its TLAS instances one BLAS per
+    /// cluster.
     fn selector_for(&mut self, p: PrototypeId, j: usize, m: MeshId) -> Result<u32, CompileError> {
         let s = self.selector_of_mesh[m.index()];
         if s != NONE_U32 {
             return Ok(s);
         }
-        let scene = self.plan.scene;
         let levels = self.plan.opts.lod_levels.unwrap_or(1);
-        let level0 = self.record_for(p, j, m)?;
-        let base_rec = self.out.meshes[level0 as usize];
-        let data = scene.mesh_data(m).map_err(|e| CompileError::Mesh {
-            mesh: m.0,
-            reason: e.to_string(),
-        })?;
-        let mut records = vec![level0];
+        let template = self.source_record(p, j, m);
+        let data = self.load_source(m)?;
+        let mut level_records = Vec::new();
+        if data.triangle_count() > self.bound() as usize {
+            level_records.push(self.made_records(m, &template, 0, &data)?);
+        } else {
+            level_records.push((self.record_for(p, j, m)?, 1));
+        }
         {
-            let meshes = &mut self.out.meshes;
-            let sink = &mut *self.sink;
-            let made = &mut self.out.report.lod_meshes_made;
-            lod::build_chain(m, data, levels, &mut |lod, level: &MeshData| {
-                let id = next_id(meshes.len(), "meshes")?;
-                let bounds = level.bounds();
-                meshes.push(MeshRecord {
-                    lod,
-                    vertex_count: level.positions.len() as u32,
-                    triangle_count: level.triangle_count() as u32,
-                    ..MeshRecord {
-                        bounds_min: bounds.min,
-                        bounds_max: bounds.max,
-                        ..base_rec
-                    }
-                });
-                sink(id, level).map_err(|reason| CompileError::Sink {
-                    mesh_record: id,
-                    reason,
-                })?;
-                *made += 1;
-                records.push(id);
+            let mut emit = |lod, level: &MeshData| -> Result<(), CompileError> {
+                let made = self.made_records(m, &template, lod, level)?;
+                self.out.report.lod_meshes_made += 1;
+                level_records.push(made);
                 Ok(())
-            })?;
+            };
+            lod::build_chain(m, data, levels, &mut emit)?;
         }
         self.out.report.lod_source_meshes += 1;
         let id = next_id(self.out.lod_selectors.len(), "LOD selectors")?;
         let level_base = next_id(self.out.lod_levels.len(), "LOD levels")?;
-        let element = base_rec.element;
-        for &r in &records {
-            let t = self.new_tlas(Job::Lod(r), element)?;
+        let element = template.element;
+        for &(first, count) in &level_records {
+            let t = self.new_tlas(Job::Lod(first, count), element)?;
             self.out.lod_levels.push(t);
         }
-        let b = xform::aabb_from_record(base_rec.bounds_min, base_rec.bounds_max);
+        let b = xform::aabb_from_record(template.bounds_min, template.bounds_max);
         self.out.lod_selectors.push(LodSelectorRecord {
             center: b.center().to_array(),
             radius: b.extent().length() * 0.5,
             level_base,
-            level_count: records.len() as u32,
+            level_count: level_records.len() as u32,
             source_mesh: m.0,
             _pad: 0,
         });
@@ -695,6 +804,7 @@ pub(crate) fn empty_mesh_record(bounds: &Aabb) -> MeshRecord {
         positions_offset: NONE_U64,
         indices_offset: NONE_U64,
         normals_offset: NONE_U64,
+        primitive_map_offset: NONE_U64,
         bounds_min: bounds.min,
         bounds_max: bounds.max,
         ..Default::default()

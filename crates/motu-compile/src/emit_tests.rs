@@ -273,7 +273,7 @@ fn tiny_caps_recurse_and_split_aabb_blases() {
 #[test]
 fn invalid_options_are_errors() {
     let scene = scattered(3, false);
-    let mut sink = |_: u32, _: &MeshData| Ok(());
+    let mut sink = |_: u32, _: &MeshData, _: Option<&[u32]>| Ok(());
     for o in [
         CompileOptions {
             max_instances_per_tlas: 1,
@@ -481,7 +481,7 @@ fn lod_chains_replace_heavy_meshes_with_selectors() {
         ..Default::default()
     };
     let mut got: Vec<(u32, usize)> = Vec::new();
-    let mut sink = |record: u32, data: &MeshData| {
+    let mut sink = |record: u32, data: &MeshData, _: Option<&[u32]>| {
         got.push((record, data.triangle_count()));
         Ok(())
     };
@@ -523,7 +523,7 @@ fn lod_chains_replace_heavy_meshes_with_selectors() {
         * 0.5;
     assert!((s.radius - half_diag).abs() < 1e-5);
     // Sink errors surface.
-    let mut failing = |_: u32, _: &MeshData| Err("disk full".to_string());
+    let mut failing = |_: u32, _: &MeshData, _: Option<&[u32]>| Err("disk full".to_string());
     assert!(matches!(
         compile(&scene, &o, &mut failing),
         Err(CompileError::Sink { .. })
@@ -618,4 +618,225 @@ fn auto_inlines_grouping_levels_but_keeps_geometry_shared() {
         },
     );
     assert_eq!(tight.report.tlas_levels, 3);
+}
+
+/// A big mesh (`grid_mesh(64)`: 8,192 triangles) in a prototype placed 3 times, 40 small meshes
+/// (32 triangles each) at the root in two elements, and one root mesh over the bound.
+fn partition_scene() -> Scene {
+    let mut b = builder();
+    let m = b.default_material();
+    let main = Scene::MAIN_ELEMENT;
+    let other = b.element("other").unwrap();
+    let big = b.add_prototype("big", main).unwrap();
+    b.add_mesh(big, "terrain", m, main, &grid_mesh(64, true))
+        .unwrap();
+    for i in 0..3 {
+        b.add_instance(b.root(), big, rot(i as f32, 3.0 * i as f32), main)
+            .unwrap();
+    }
+    for i in 0..40 {
+        let mut g = grid_mesh(4, false);
+        for p in &mut g.positions {
+            p[0] += (i % 10) as f32 * 2.0;
+            p[1] += (i / 10) as f32 * 2.0;
+        }
+        let element = if i % 4 == 0 { other } else { main };
+        b.add_mesh(b.root(), &format!("small{i}"), m, element, &g)
+            .unwrap();
+    }
+    b.add_mesh(b.root(), "root-big", m, main, &grid_mesh(40, false))
+        .unwrap();
+    b.finish().unwrap()
+}
+
+type Made = Vec<(u32, usize, Option<Vec<u32>>)>;
+
+fn compile_recording(scene: &Scene, o: &CompileOptions) -> (crate::CompiledScene, Made) {
+    let mut made: Made = Vec::new();
+    let mut sink = |record: u32, data: &MeshData, map: Option<&[u32]>| {
+        data.validate().unwrap();
+        made.push((record, data.triangle_count(), map.map(<[u32]>::to_vec)));
+        Ok(())
+    };
+    let c = compile(scene, o, &mut sink).unwrap();
+    crate::validate(&c.view()).unwrap_or_else(|e| panic!("{e}"));
+    (c, made)
+}
+
+#[test]
+fn partitioner_bounds_every_triangle_blas_and_keeps_source_identity() {
+    let scene = partition_scene();
+    let bound = 1000u32;
+    for levels in [Levels::Ml, Levels::Sl, Levels::Auto] {
+        let o = CompileOptions {
+            levels,
+            max_blas_triangles: bound,
+            ..Default::default()
+        };
+        let (c, made) = compile_recording(&scene, &o);
+        // Every triangle BLAS within the bound.
+        for b in c.blases.iter().filter(|b| b.kind == BLAS_TRIANGLES) {
+            assert!(
+                b.primitive_count <= bound,
+                "{levels:?}: {}",
+                b.primitive_count
+            );
+        }
+        assert_eq!(c.report.max_blas_triangles, u64::from(bound));
+        assert!(c.report.max_triangles_per_blas <= u64::from(bound));
+        // The two big meshes (8,192 and 3,200 triangles) became clusters, handed to the sink
+        // with maps that cover each source triangle exactly once.
+        assert_eq!(c.report.partitioned_meshes, 2);
+        for (source, tris) in [(0u32, 8192usize), (41, 3200)] {
+            let mut seen = vec![0u32; tris];
+            let mut clusters = 0;
+            for (record, n, map) in &made {
+                let r = c.meshes[*record as usize];
+                if r.source_mesh != source {
+                    continue;
+                }
+                clusters += 1;
+                assert_eq!(
+                    r.flags & motu_abi::FLAG_PRIMITIVE_MAP,
+                    motu_abi::FLAG_PRIMITIVE_MAP
+                );
+                assert_eq!((r.lod, r.triangle_count as usize), (0, *n));
+                let map = map.as_ref().expect("a cluster has a map");
+                assert_eq!(map.len(), *n);
+                for &p in map {
+                    seen[p as usize] += 1;
+                }
+            }
+            assert_eq!(
+                clusters as u64,
+                crate::partition::cluster_count(tris as u64, bound)
+            );
+            assert!(seen.iter().all(|&s| s == 1), "mesh {source}: coverage");
+            // No whole record of a partitioned mesh is left.
+            assert!(!c
+                .meshes
+                .iter()
+                .any(|r| r.source_mesh == source && r.flags & motu_abi::FLAG_PRIMITIVE_MAP == 0));
+        }
+        // Small meshes: each in exactly one BLAS, grouped by location per element: 30 main
+        // meshes (960 triangles) fit one group, 10 "other" ones another — never one BLAS per
+        // mesh. With a bound of 500 they need several groups each, still far fewer than 40.
+        let small_blases = |c: &crate::CompiledScene| {
+            let mut owner = vec![u32::MAX; 40];
+            for (bi, b) in c.blases.iter().enumerate() {
+                if b.kind != BLAS_TRIANGLES {
+                    continue;
+                }
+                for g in &c.geometries[b.item_base as usize..(b.item_base + b.item_count) as usize]
+                {
+                    let s = c.meshes[g.mesh as usize].source_mesh;
+                    if (1..=40).contains(&s) {
+                        assert_eq!(owner[s as usize - 1], u32::MAX, "mesh {s} in two BLASes");
+                        owner[s as usize - 1] = bi as u32;
+                    }
+                }
+            }
+            assert!(owner.iter().all(|&o| o != u32::MAX));
+            let mut distinct = owner.clone();
+            distinct.sort_unstable();
+            distinct.dedup();
+            distinct.len()
+        };
+        assert_eq!(small_blases(&c), 2, "{levels:?}");
+        let tight = CompileOptions {
+            max_blas_triangles: 500,
+            ..o.clone()
+        };
+        let (c2, _) = compile_recording(&scene, &tight);
+        let groups = small_blases(&c2);
+        assert!((3..=8).contains(&groups), "{groups} groups");
+        // Placements: each source placement once per cluster of its mesh.
+        let mut expected = Vec::new();
+        for (t, m) in flatten_source(&scene) {
+            let k = c
+                .meshes
+                .iter()
+                .filter(|r| r.source_mesh == m.0 && r.lod == 0)
+                .count();
+            expected.extend(std::iter::repeat_n((t, m), k));
+        }
+        assert_same_placements(&expected, &flatten_compiled(&c.view(), 0));
+    }
+}
+
+#[test]
+fn partitioner_splits_every_lod_level_over_the_bound() {
+    let mut b = builder();
+    let (m, main) = (b.default_material(), Scene::MAIN_ELEMENT);
+    let dense = b.add_prototype("dense", main).unwrap();
+    b.add_mesh(dense, "grid", m, main, &grid_mesh(64, false))
+        .unwrap();
+    for i in 0..2 {
+        b.add_instance(b.root(), dense, rot(i as f32, 3.0 * i as f32), main)
+            .unwrap();
+    }
+    let scene = b.finish().unwrap();
+    let o = CompileOptions {
+        lod_levels: Some(3),
+        lod_triangle_threshold: 1000,
+        max_blas_triangles: 1500,
+        ..Default::default()
+    };
+    let (c, made) = compile_recording(&scene, &o);
+    assert_eq!(c.lod_selectors.len(), 1);
+    let s = c.lod_selectors[0];
+    assert_eq!(s.level_count, 3);
+    for (level, &tlas) in c.lod_levels[s.level_base as usize..][..3]
+        .iter()
+        .enumerate()
+    {
+        let t = c.tlases[tlas as usize];
+        let insts = &c.instances[t.instance_base as usize..][..t.instance_count as usize];
+        let mut tris = 0u64;
+        let mut seen: Vec<u32> = Vec::new();
+        for inst in insts {
+            let blas = c.blases[inst.blas as usize];
+            assert_eq!(blas.kind, BLAS_TRIANGLES);
+            assert!(blas.primitive_count <= 1500);
+            tris += u64::from(blas.primitive_count);
+            for g in &c.geometries[blas.item_base as usize..][..blas.item_count as usize] {
+                let r = c.meshes[g.mesh as usize];
+                assert_eq!((r.source_mesh, r.lod), (0, level as u32));
+                if let Some((_, _, Some(map))) = made.iter().find(|x| x.0 == g.mesh) {
+                    seen.extend_from_slice(map);
+                }
+            }
+        }
+        if level == 0 {
+            assert_eq!(tris, 8192);
+            assert!(
+                insts.len() >= 8,
+                "level 0 partitioned: {} units",
+                insts.len()
+            );
+        }
+        if insts.len() > 1 {
+            // The level's clusters cover its triangles once.
+            seen.sort_unstable();
+            assert_eq!(seen, (0..tris as u32).collect::<Vec<_>>(), "level {level}");
+        }
+    }
+    assert!(
+        c.report.partitioned_meshes >= 2,
+        "levels 0 and 1 are over 1,500"
+    );
+}
+
+#[test]
+fn partitioner_bound_of_zero_is_an_error() {
+    let scene = partition_scene();
+    let o = CompileOptions {
+        max_blas_triangles: 0,
+        ..Default::default()
+    };
+    let mut sink = |_: u32, _: &MeshData, _: Option<&[u32]>| Ok(());
+    assert!(matches!(
+        compile(&scene, &o, &mut sink),
+        Err(CompileError::InvalidOptions(_))
+    ));
 }

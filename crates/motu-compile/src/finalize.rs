@@ -180,5 +180,12 @@ pub(crate) fn finalize(out: &mut CompiledScene) -> Result<(), CompileError> {
         .map(|b| b.primitive_count as u64)
         .max()
         .unwrap_or(0);
+    r.max_triangles_per_blas = out
+        .blases
+        .iter()
+        .filter(|b| b.kind == BLAS_TRIANGLES)
+        .map(|b| b.primitive_count as u64)
+        .max()
+        .unwrap_or(0);
     Ok(())
 }

@@ -65,6 +65,13 @@
 //! the primitive cap are split at the median PI centre. Split levels add TLAS levels below the
 //! `Levels::N` budget.
 //!
+//! # Partitioning
+//! Triangle BLASes are bounded by [`CompileOptions::max_blas_triangles`] (see [`partition`]):
+//! `G(P)`'s small meshes are grouped by location under the bound, and a mesh over it (or a LOD
+//! level over it) is split into spatial clusters, each a compiled mesh of its own with
+//! `source_mesh` = the original and a primitive map back to the source triangles (made from the
+//! source data, loaded one mesh at a time and handed to the sink cluster by cluster).
+//!
 //! # Numbering
 //! TLASes are numbered depth-first from the root, the children of a TLAS (PI targets, split
 //! pieces, LOD levels) getting consecutive ids when the TLAS is emitted (thesis 2.6.3); BLASes
@@ -76,6 +83,7 @@ mod emit;
 mod finalize;
 mod flatten;
 mod lod;
+pub mod partition;
 mod split;
 mod validate;
 mod xform;
@@ -87,6 +95,7 @@ mod testutil;
 mod proptests;
 
 pub use flatten::{flatten_compiled, flatten_source};
+pub use partition::DEFAULT_MAX_BLAS_TRIANGLES;
 pub use validate::{validate, validate_with, Limits, ValidateError};
 
 use motu_abi::{
@@ -123,6 +132,9 @@ pub struct CompileOptions {
     pub max_instances_per_tlas: u32,
     /// Primitives per AABB BLAS (`maxPrimitiveCount`; at least 2).
     pub max_primitives_per_blas: u32,
+    /// Triangles per triangle BLAS (the partitioner's bound, at least 1): meshes over it are
+    /// split into spatial clusters, small meshes grouped by location under it.
+    pub max_blas_triangles: u32,
     /// Estimated TLAS build scratch per instance, for `max_tlas_scratch_bytes`.
     pub scratch_bytes_per_instance: u64,
     /// A TLAS whose estimated scratch exceeds this is split.
@@ -146,6 +158,7 @@ impl Default for CompileOptions {
             levels: Levels::Ml,
             max_instances_per_tlas: DEFAULT_MAX_PER_NODE,
             max_primitives_per_blas: DEFAULT_MAX_PER_NODE,
+            max_blas_triangles: DEFAULT_MAX_BLAS_TRIANGLES,
             scratch_bytes_per_instance: 128,
             max_tlas_scratch_bytes: u64::MAX,
             lod_levels: None,
@@ -178,7 +191,7 @@ pub enum CompileError {
     OutOfMemory { what: &'static str, bytes: u64 },
     #[error("mesh {mesh}: {reason}")]
     Mesh { mesh: u32, reason: String },
-    #[error("mesh sink rejected LOD mesh record {mesh_record}: {reason}")]
+    #[error("mesh sink rejected compiled mesh record {mesh_record}: {reason}")]
     Sink { mesh_record: u32, reason: String },
     #[error("internal compiler error: {0}")]
     Internal(String),
@@ -209,6 +222,13 @@ pub struct CompileReport {
     pub split_pieces: u64,
     /// AABB BLASes over the primitive cap that were split into groups.
     pub split_aabb_blases: u64,
+    /// The partitioner's bound ([`CompileOptions::max_blas_triangles`]), the largest triangle
+    /// BLAS made, the meshes (source meshes and LOD levels) split into clusters, and the
+    /// clusters made.
+    pub max_blas_triangles: u64,
+    pub max_triangles_per_blas: u64,
+    pub partitioned_meshes: u64,
+    pub partition_clusters: u64,
     pub dropped_degenerate_instances: u64,
     /// Prototypes inlined by identity collapse (single parent, identity transform).
     pub collapsed_prototypes: u64,
@@ -254,16 +274,32 @@ impl CompiledScene {
     }
 }
 
-/// Receives each simplified LOD mesh (`lod > 0`) once, with its index in
-/// [`CompiledScene::meshes`], as soon as it is made; the compiler keeps no LOD data. Source
-/// meshes (`lod == 0`) are not passed: their data is in the scene's geometry store.
-pub type MeshSink<'a> = dyn FnMut(u32, &MeshData) -> Result<(), String> + 'a;
+/// Receives each mesh the compiler makes, once, with its index in [`CompiledScene::meshes`], as
+/// soon as it is made; the compiler keeps no such data. These are simplified LOD meshes
+/// (`lod > 0`) and the clusters of partitioned meshes (with their primitive map, the
+/// record's `FLAG_PRIMITIVE_MAP`). Whole source meshes (`lod == 0`, no map) are not passed:
+/// their data is in the scene's geometry store.
+pub type MeshSink<'a> = dyn FnMut(u32, &MeshData, Option<&[u32]>) -> Result<(), String> + 'a;
 
-/// Compiles `scene`. Mesh records' `chunk` and `*_offset` fields are left `NONE` for the
-/// packer to fill.
+/// Loads a source mesh's data (for LOD chains and partitioning), one mesh at a time.
+pub type MeshLoader<'a> = dyn Fn(motu_scene::MeshId) -> Result<MeshData, String> + 'a;
+
+/// Compiles `scene`, loading source meshes from its geometry store. Mesh records' `chunk` and
+/// `*_offset` fields are left `NONE` for the packer to fill.
 pub fn compile(
     scene: &Scene,
     opts: &CompileOptions,
+    sink: &mut MeshSink<'_>,
+) -> Result<CompiledScene, CompileError> {
+    let load = |m| scene.mesh_data(m).map_err(|e| e.to_string());
+    compile_with_loader(scene, opts, &load, sink)
+}
+
+/// [`compile`] with source meshes read by `load` (e.g. from a finished scratch package).
+pub fn compile_with_loader(
+    scene: &Scene,
+    opts: &CompileOptions,
+    load: &MeshLoader<'_>,
     sink: &mut MeshSink<'_>,
 ) -> Result<CompiledScene, CompileError> {
     let _span = tracing::info_span!(
@@ -276,7 +312,7 @@ pub fn compile(
     let start = std::time::Instant::now();
     check_options(opts)?;
     let plan = analyze::Plan::new(scene, opts)?;
-    let mut out = emit::Emitter::new(&plan, sink).run()?;
+    let mut out = emit::Emitter::new(&plan, load, sink).run()?;
     finalize::finalize(&mut out)?;
     out.report.time_ms = start.elapsed().as_secs_f64() * 1e3;
     tracing::info!(
@@ -300,6 +336,11 @@ fn check_options(opts: &CompileOptions) -> Result<(), CompileError> {
     if opts.max_primitives_per_blas < 2 {
         return Err(CompileError::InvalidOptions(
             "max_primitives_per_blas must be at least 2".into(),
+        ));
+    }
+    if opts.max_blas_triangles == 0 {
+        return Err(CompileError::InvalidOptions(
+            "max_blas_triangles must be at least 1".into(),
         ));
     }
     if opts.levels == Levels::N(0) {

@@ -43,7 +43,7 @@ pub fn builder() -> SceneBuilder {
 }
 
 pub fn compile_ok(scene: &Scene, opts: &CompileOptions) -> CompiledScene {
-    let mut sink = |_: u32, _: &MeshData| Ok(());
+    let mut sink = |_: u32, _: &MeshData, _: Option<&[u32]>| Ok(());
     let c = compile(scene, opts, &mut sink).unwrap();
     crate::validate_with(
         &c.view(),

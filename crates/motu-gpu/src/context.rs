@@ -57,6 +57,9 @@ pub struct ContextOptions {
     /// Lowered limits (combined with the `MOTU_MAX_*` environment; the smaller wins).
     pub limit_overrides: LimitOverrides,
     pub require: Requirement,
+    /// Open for presenting to windows of this display (`motu view`): enables the surface
+    /// extensions on the instance and `VK_KHR_swapchain` on the device.
+    pub presentation: Option<raw_window_handle::RawDisplayHandle>,
 }
 
 pub(crate) struct DeviceShared {
@@ -151,13 +154,25 @@ impl Context {
                 _ => None,
             },
         };
-        let instance = InstanceShared::new(options.validation)?;
+        let instance = match options.presentation {
+            None => InstanceShared::new(options.validation)?,
+            Some(display) => {
+                let surface_exts =
+                    ash_window::enumerate_required_extensions(display).map_err(|e| {
+                        GpuError::MissingFeature {
+                            what: "a Vulkan surface for this window system".into(),
+                            details: format!("{e:?}"),
+                        }
+                    })?;
+                InstanceShared::with_extensions(options.validation, surface_exts)?
+            }
+        };
         let infos = probe::enumerate(&instance.instance, instance.api_version)?;
         if infos.is_empty() {
             return Err(GpuError::NoDevice);
         }
         let info = select(&infos, index, options.require)?;
-        Self::open(instance, info, &overrides)
+        Self::open(instance, info, &overrides, options.presentation.is_some())
     }
 
     /// Opens the default device with validation as the environment says (`MOTU_VALIDATION`).
@@ -169,6 +184,7 @@ impl Context {
         instance: InstanceShared,
         info: PhysicalInfo,
         overrides: &LimitOverrides,
+        present: bool,
     ) -> Result<Self> {
         let span = tracing::info_span!("open_device", device = %info.name, index = info.index);
         let _guard = span.enter();
@@ -201,6 +217,17 @@ impl Context {
         }
         if !v13 && caps.maintenance4 {
             ext_names.push(ash::khr::maintenance4::NAME);
+        }
+        if present {
+            let name = ash::khr::swapchain::NAME;
+            if !info.extensions.contains(name) {
+                return Err(GpuError::DeviceUnsuitable {
+                    index: info.index,
+                    name: info.name.clone(),
+                    reason: "no VK_KHR_swapchain: it cannot present to a window".into(),
+                });
+            }
+            ext_names.push(name);
         }
         let ext_ptrs: Vec<*const std::ffi::c_char> = ext_names.iter().map(|n| n.as_ptr()).collect();
 

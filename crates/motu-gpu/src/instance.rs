@@ -113,8 +113,8 @@ unsafe extern "system" fn debug_callback(
 
 /// The loader, the instance and (when validation is on) the messenger. Destroyed last.
 pub(crate) struct InstanceShared {
-    /// Keeps the loader library loaded for as long as any handle exists.
-    _entry: ash::Entry,
+    /// Keeps the loader library loaded for as long as any handle exists (and creates surfaces).
+    pub(crate) entry: ash::Entry,
     pub(crate) instance: ash::Instance,
     pub(crate) api_version: u32,
     debug: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
@@ -131,6 +131,14 @@ impl InstanceShared {
 
 impl InstanceShared {
     pub(crate) fn new(validation: ValidationRequest) -> Result<Self> {
+        Self::with_extensions(validation, &[])
+    }
+
+    /// An instance that also enables `extra` (e.g. the window-system surface extensions).
+    pub(crate) fn with_extensions(
+        validation: ValidationRequest,
+        extra: &[*const std::ffi::c_char],
+    ) -> Result<Self> {
         let validation = validation.resolve()?;
         // SAFETY: loading libvulkan runs its initialisers; we trust the system loader.
         let entry = unsafe { ash::Entry::load() }.map_err(|e| GpuError::LoaderMissing {
@@ -194,6 +202,7 @@ impl InstanceShared {
         if use_messenger {
             ext_names.push(ash::ext::debug_utils::NAME.as_ptr());
         }
+        ext_names.extend_from_slice(extra);
 
         let log = Arc::new(ValidationLog::default());
         let app = vk::ApplicationInfo::default()
@@ -258,7 +267,7 @@ impl InstanceShared {
             "Vulkan instance created"
         );
         Ok(Self {
-            _entry: entry,
+            entry,
             instance,
             api_version,
             debug,
@@ -277,7 +286,7 @@ impl Drop for InstanceShared {
         // SAFETY: every child object (devices, messenger) was destroyed before this runs:
         // `DeviceShared` owns the instance and destroys its device first.
         unsafe { self.instance.destroy_instance(None) };
-        // `_entry` (the loader library) is dropped after this, as a field.
+        // `entry` (the loader library) is dropped after this, as a field.
     }
 }
 

@@ -21,8 +21,10 @@ mod error;
 mod heap;
 mod instance;
 mod limits;
+mod live;
 mod memory;
 mod pipeline;
+mod present;
 mod probe;
 mod query;
 mod render;
@@ -53,15 +55,20 @@ pub use limits::{
     parse_size, LimitOverrides, Limits, ENV_MAX_ALLOCATIONS, ENV_MAX_ALLOCATION_SIZE,
     ENV_MAX_INSTANCE_COUNT, ENV_MAX_PRIMITIVE_COUNT, ENV_MAX_STORAGE_BUFFER_RANGE,
 };
+pub use live::LiveRenderer;
 pub use memory::{
     Buffer, BufferDesc, BufferUsage, DeviceAddress, DeviceMemory, MemoryLocation,
     MemoryRequirements,
 };
 pub use pipeline::{BindingSet, ComputePipeline, ComputePipelineDesc};
+pub use present::{Presented, Presenter, RawDisplayHandle, RawWindowHandle};
 pub use probe::{Caps, HeapReport};
 pub use query::TimestampQueries;
 
-pub use render::{heat_colour, render, Backend, RenderOptions, RenderOutput, RenderStats, View};
+pub use render::{
+    heat_colour, render, render_counted, Backend, RayCounts, RenderOptions, RenderOutput,
+    RenderStats, View, MAX_STACK_SIZE,
+};
 pub use report::{list_devices, DeviceReport};
 pub use scene::{BuildOptions, GpuScene, MeshBlobSource, ResourceReport};
 pub use stream::{FrameStreamStats, StreamOptions, StreamTotals, StreamingRenderer, PI_EMPTY_BLAS};

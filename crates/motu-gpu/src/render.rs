@@ -95,8 +95,10 @@ pub struct RenderOptions {
     pub backend: Backend,
     pub view: View,
     pub lod: LodParams,
-    /// Traversal stack entries (a specialisation constant).
+    /// Traversal stack entries (a specialisation constant), 1..=[`MAX_STACK_SIZE`].
     pub stack_size: u32,
+    /// TLAS walks a ray may make before it is cut short (a specialisation constant).
+    pub max_traces_per_ray: u32,
     /// Frames traced (for timing); the outputs are the last frame's.
     pub frames: u32,
     /// World direction towards the sun (normalised here).
@@ -115,6 +117,7 @@ impl Default for RenderOptions {
             view: View::Shaded,
             lod: LodParams::default(),
             stack_size: 16,
+            max_traces_per_ray: motu_abi::DEFAULT_MAX_TRACES_PER_RAY,
             frames: 1,
             sun_dir_world: [0.4, 0.8, 0.45],
             sun_intensity: 0.8,
@@ -179,10 +182,24 @@ pub(crate) struct FrameParams {
     _pad: [u32; 3],
 }
 
-pub(crate) const STAT_WORDS: usize = 4;
+pub(crate) const STAT_WORDS: usize = 5;
+/// `STAT_TRUNCATED_RAYS` of `common.glsl`: rays cut short by a stack overflow or the trace cap.
+const STAT_TRUNCATED_RAYS: usize = 4;
 
-struct Frame {
-    params: HeapBuffer,
+/// The largest traversal stack: entries are 64 bytes of private memory per ray, and beyond a
+/// few hundred shader compilers spill, stall or fail (2^16 hangs lavapipe's compiler).
+pub const MAX_STACK_SIZE: u32 = 256;
+
+/// Counts of one render beyond [`RenderStats`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct RayCounts {
+    /// Rays whose traversal was cut short: a stack overflow dropped an entry, or the ray
+    /// reached `max_traces_per_ray`. Their hit may be wrong.
+    pub truncated_rays: u64,
+}
+
+pub(crate) struct Frame {
+    pub(crate) params: HeapBuffer,
     aov: HeapBuffer,
     rgba: HeapBuffer,
     stats: HeapBuffer,
@@ -190,14 +207,14 @@ struct Frame {
 }
 
 impl Frame {
-    fn release(self, heap: &mut GpuHeap) {
+    pub(crate) fn release(self, heap: &mut GpuHeap) {
         for b in [self.params, self.aov, self.rgba, self.stats, self.readback] {
             heap.free(b);
         }
     }
 }
 
-fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams) -> Result<Frame> {
+pub(crate) fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams) -> Result<Frame> {
     let out = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS | BufferUsage::TRANSFER_SRC;
     let p = heap.alloc_buffer(
         "frame-params",
@@ -268,10 +285,15 @@ pub(crate) enum Tracer {
 impl Tracer {
     /// The pipeline of `opts.backend` (its SBT, if any, from `heap`).
     pub(crate) fn new(ctx: &Context, heap: &mut GpuHeap, opts: &RenderOptions) -> Result<Tracer> {
+        if !(1..=MAX_STACK_SIZE).contains(&opts.stack_size) || opts.max_traces_per_ray == 0 {
+            return Err(GpuError::InvalidRequest(format!(
+                "stack size {} is outside 1..={MAX_STACK_SIZE}, or the trace cap {} is 0",
+                opts.stack_size, opts.max_traces_per_ray
+            )));
+        }
+        let spec = [(0, opts.stack_size), (1, opts.max_traces_per_ray)];
         Ok(match opts.backend {
-            Backend::Pipeline => {
-                Tracer::Pipeline(Box::new(RtPipeline::new(ctx, heap, opts.stack_size)?))
-            }
+            Backend::Pipeline => Tracer::Pipeline(Box::new(RtPipeline::new(ctx, heap, &spec)?)),
             Backend::Query => {
                 if !ctx.caps().ray_query {
                     return Err(GpuError::MissingFeature {
@@ -287,7 +309,7 @@ impl Tracer {
                         spirv: shaders::QUERY_TRACE_COMP,
                         storage_buffer_count: 0,
                         push_constant_size_bytes: PUSH_CONSTANT_BYTES,
-                        specialization: &[(0, opts.stack_size.max(1))],
+                        specialization: &spec,
                     },
                 )?)
             }
@@ -374,6 +396,16 @@ pub fn render(
     camera: &CameraParams,
     opts: &RenderOptions,
 ) -> Result<RenderOutput> {
+    render_counted(ctx, scene, camera, opts).map(|(out, _)| out)
+}
+
+/// [`render`], also returning the [`RayCounts`] of the last frame.
+pub fn render_counted(
+    ctx: &Context,
+    scene: &GpuScene,
+    camera: &CameraParams,
+    opts: &RenderOptions,
+) -> Result<(RenderOutput, RayCounts)> {
     let (w, h) = (camera.width, camera.height);
     if w == 0 || h == 0 || u64::from(w) * u64::from(h) > (1 << 28) {
         return Err(GpuError::InvalidRequest(format!(
@@ -455,12 +487,15 @@ pub fn render(
         overflows = stats.stack_overflows,
         "gpu render done"
     );
-    Ok(RenderOutput { aov, rgba8, stats })
+    let counts = RayCounts {
+        truncated_rays: u64::from(counters[STAT_TRUNCATED_RAYS]),
+    };
+    Ok((RenderOutput { aov, rgba8, stats }, counts))
 }
 
-type FrameResult = (Vec<AovRecord>, Vec<u32>, Vec<u32>, Vec<f64>);
+pub(crate) type FrameResult = (Vec<AovRecord>, Vec<u32>, Vec<u32>, Vec<f64>);
 
-fn run_frames(
+pub(crate) fn run_frames(
     ctx: &Context,
     scene: &GpuScene,
     tracer: &Tracer,

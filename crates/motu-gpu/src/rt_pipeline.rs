@@ -35,7 +35,12 @@ pub(crate) struct RtPipeline {
 }
 
 impl RtPipeline {
-    pub(crate) fn new(ctx: &Context, heap: &mut GpuHeap, stack_size: u32) -> Result<RtPipeline> {
+    /// `specialization`: (constant id, value) pairs for the raygen stage.
+    pub(crate) fn new(
+        ctx: &Context,
+        heap: &mut GpuHeap,
+        specialization: &[(u32, u32)],
+    ) -> Result<RtPipeline> {
         if !ctx.caps().ray_pipeline {
             return Err(GpuError::MissingFeature {
                 what: "the ray-tracing pipeline (VK_KHR_ray_tracing_pipeline)".into(),
@@ -99,12 +104,19 @@ impl RtPipeline {
                 }
             }
         }
-        let spec_entries = [vk::SpecializationMapEntry {
-            constant_id: 0,
-            offset: 0,
-            size: 4,
-        }];
-        let spec_data = stack_size.max(1).to_ne_bytes();
+        let spec_entries: Vec<vk::SpecializationMapEntry> = specialization
+            .iter()
+            .enumerate()
+            .map(|(i, &(id, _))| vk::SpecializationMapEntry {
+                constant_id: id,
+                offset: 4 * i as u32,
+                size: 4,
+            })
+            .collect();
+        let spec_data: Vec<u8> = specialization
+            .iter()
+            .flat_map(|&(_, v)| v.to_ne_bytes())
+            .collect();
         let spec = vk::SpecializationInfo::default()
             .map_entries(&spec_entries)
             .data(&spec_data);

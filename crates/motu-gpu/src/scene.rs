@@ -41,6 +41,17 @@ pub trait MeshBlobSource {
         &self,
         mesh_record: u32,
     ) -> std::result::Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), String>;
+
+    /// The primitive map (`triangle_count` source triangle ids) of a mesh record with
+    /// `FLAG_PRIMITIVE_MAP` (a cluster of a partitioned mesh). Sources without clusters keep
+    /// the default; a record with the flag then fails to upload rather than report cluster
+    /// primitive ids as source ones.
+    fn primitive_map(
+        &self,
+        _mesh_record: u32,
+    ) -> std::result::Result<Option<Cow<'_, [u32]>>, String> {
+        Ok(None)
+    }
 }
 
 /// How to build a [`GpuScene`].
@@ -498,14 +509,24 @@ pub(crate) struct MeshGpu {
     pub(crate) indices_address: u64,
     pub(crate) vertex_count: u32,
     pub(crate) triangle_count: u32,
+    /// A cluster: its primitive map follows the indices (`indices_address + 12 × triangles`,
+    /// where the shaders read it).
+    pub(crate) has_primitive_map: bool,
 }
 
 impl MeshGpu {
-    /// Allocates the buffer of mesh record `m` (positions, then indices at a 16-byte offset).
+    /// Allocates the buffer of mesh record `m` (positions, then indices at a 16-byte offset,
+    /// then a cluster's primitive map).
     pub(crate) fn alloc(heap: &mut GpuHeap, m: usize, rec: &MeshRecord) -> Result<MeshGpu> {
         let pos_bytes = u64::from(rec.vertex_count) * 12;
         let idx_offset = pos_bytes.div_ceil(16) * 16;
-        let size = idx_offset + u64::from(rec.triangle_count) * 12;
+        let has_primitive_map = rec.flags & motu_abi::FLAG_PRIMITIVE_MAP != 0;
+        let map_bytes = if has_primitive_map {
+            u64::from(rec.triangle_count) * 4
+        } else {
+            0
+        };
+        let size = idx_offset + u64::from(rec.triangle_count) * 12 + map_bytes;
         let buf = heap.alloc_buffer(
             &format!("mesh-{m}"),
             size,
@@ -530,6 +551,7 @@ impl MeshGpu {
             indices_address: base + idx_offset,
             vertex_count: rec.vertex_count,
             triangle_count: rec.triangle_count,
+            has_primitive_map,
         })
     }
 
@@ -567,10 +589,35 @@ impl MeshGpu {
                 self.vertex_count
             )));
         }
+        let map = source
+            .primitive_map(m as u32)
+            .map_err(|e| GpuError::InvalidRequest(format!("mesh record {m}: {e}")))?;
+        let map_len = match (&map, self.has_primitive_map) {
+            (Some(map), true) if map.len() == self.triangle_count as usize => map.len(),
+            (None, false) => 0,
+            (got, _) => {
+                return Err(GpuError::InvalidRequest(format!(
+                    "mesh record {m}: the record {} a primitive map of {} entries, the source \
+                     gave {}",
+                    if self.has_primitive_map {
+                        "needs"
+                    } else {
+                        "has no"
+                    },
+                    self.triangle_count,
+                    got.as_ref()
+                        .map_or("none".to_string(), |g| g.len().to_string())
+                )))
+            }
+        };
         up.upload(ctx, &self.buffer, 0, cast_slice(&positions[..]))?;
         let idx_off = self.indices_address - self.positions_address;
         up.upload(ctx, &self.buffer, idx_off, cast_slice(&indices[..]))?;
-        Ok((positions.len() * 12 + indices.len() * 4) as u64)
+        if let Some(map) = &map {
+            let map_off = idx_off + u64::from(self.triangle_count) * 12;
+            up.upload(ctx, &self.buffer, map_off, cast_slice(&map[..]))?;
+        }
+        Ok((positions.len() * 12 + indices.len() * 4 + map_len * 4) as u64)
     }
 }
 

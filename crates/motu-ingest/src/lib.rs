@@ -78,6 +78,8 @@ pub struct IngestReport {
     pub skipped_shapes: u64,
     pub degenerate_meshes: u64,
     pub warnings: Vec<String>,
+    /// Every file the import read (scene text, PLY, OBJ, MTL): an output must not be one.
+    pub input_files: Vec<std::path::PathBuf>,
 }
 
 /// Imports a pbrt scene (`.pbrt`, `.pbrt.gz`) or an OBJ file (`.obj`) by extension.
@@ -90,7 +92,7 @@ pub fn ingest_file(
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("obj"));
     if is_obj {
-        ingest_obj(path, geometry)
+        ingest_obj(path, options.allow_missing, geometry)
     } else {
         ingest_pbrt(path, options, geometry)
     }

@@ -158,6 +158,9 @@ impl SceneSink for Adapter {
 
     fn shape(&mut self, s: ShapeEvent) -> Result<(), SinkError> {
         self.report.shapes += 1;
+        if let Some(p) = &s.source_path {
+            self.report.input_files.push(p.clone());
+        }
         let is_curve = matches!(s.geometry, Geometry::Curve(_));
         let mesh = match s.geometry {
             Geometry::Mesh(m) => m,
@@ -421,6 +424,9 @@ fn ingest_pbrt_with(
             "{skipped_curves} curve shapes counted but not converted (import with --curves ribbons to tessellate them)"
         ));
     }
+    a.report.input_files.extend(stats.files.iter().cloned());
+    a.report.input_files.sort_unstable();
+    a.report.input_files.dedup();
     a.report.text_bytes = stats.text_bytes;
     a.report.ply_bytes = stats.ply_bytes;
     for m in &stats.missing {

@@ -9,7 +9,8 @@
 //!
 //! Mesh data: one **mesh blob** per compiled mesh, appended to a chunk: positions
 //! (`[f32; 3]` × vertices), then `u32` indices (3 per triangle) at the next 16-byte boundary,
-//! then optional normals likewise — GPU-upload-ready, readable in place from a raw chunk.
+//! then optional normals likewise — GPU-upload-ready, readable in place from a raw chunk. A
+//! cluster of a partitioned mesh adds its primitive map (`u32` per triangle) likewise.
 
 mod blob;
 mod meta;
@@ -19,7 +20,7 @@ mod store;
 mod write;
 
 pub use blob::{MeshBlobLayout, MESH_BLOB_ALIGN};
-pub use meta::{ElementMeta, PackageMeta, SCHEMA};
+pub use meta::{ElementMeta, PackageMeta, SCHEMA, SCHEMA_READABLE};
 pub use read::{read_mesh_blob, MeshGeometry, ScenePackage};
 pub use sections::*;
 pub use store::{place_mesh_record, PackageGeometry};

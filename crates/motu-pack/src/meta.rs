@@ -4,7 +4,11 @@ use motu_scene::{Camera, Light, SceneStats};
 use serde::{Deserialize, Serialize};
 
 /// Identifies the section layout this build writes; readers reject other schemas.
-pub const SCHEMA: &str = "motu-scene/1";
+/// `motu-scene/2` added partitioned meshes (clusters with a primitive map, `FLAG_PRIMITIVE_MAP`);
+/// a `/1` package is still read (it has no clusters), while a `/1` reader refuses `/2`.
+pub const SCHEMA: &str = "motu-scene/2";
+/// Older schemas this build still reads.
+pub const SCHEMA_READABLE: &[&str] = &["motu-scene/1", SCHEMA];
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ElementMeta {
@@ -43,4 +47,58 @@ pub struct PackageMeta {
     pub compile: serde_json::Value,
     /// Import warnings (capped) for `motu info`.
     pub warnings: Vec<String>,
+}
+
+/// Parses the `meta` section as every reader does: valid JSON of this schema.
+pub(crate) fn parse_meta(bytes: &[u8]) -> Result<PackageMeta, String> {
+    let meta: PackageMeta =
+        serde_json::from_slice(bytes).map_err(|e| format!("meta section is not valid: {e}"))?;
+    if !SCHEMA_READABLE.contains(&meta.schema.as_str()) {
+        return Err(format!(
+            "schema '{}' is not supported (this build reads '{SCHEMA}')",
+            meta.schema
+        ));
+    }
+    Ok(meta)
+}
+
+/// Serialises `meta` and proves the reader accepts it: JSON has no NaN or infinity (serde
+/// writes them as `null`, which the reader then refuses), so a writer that skipped this check
+/// could produce a package nothing can open.
+pub(crate) fn serialise_meta(meta: &PackageMeta) -> Result<Vec<u8>, String> {
+    let json = serde_json::to_vec(meta).map_err(|e| format!("meta does not serialise: {e}"))?;
+    parse_meta(&json).map_err(|e| {
+        format!("meta would not be readable ({e}); a camera or light value is probably not finite")
+    })?;
+    Ok(json)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn regression_meta_writer_cannot_write_what_reader_refuses() {
+        let mut meta = PackageMeta {
+            schema: SCHEMA.into(),
+            ..Default::default()
+        };
+        meta.cameras.push(motu_scene::Camera {
+            name: "cam".into(),
+            world_eye: [0.0; 3],
+            world_forward: [0.0, 0.0, 1.0],
+            world_up: [0.0, 1.0, 0.0],
+            fov_deg: 45.0,
+            width: 8,
+            height: 8,
+            mirror_x: false,
+        });
+        let good = serialise_meta(&meta).unwrap();
+        assert_eq!(parse_meta(&good).unwrap(), meta);
+        meta.cameras[0].fov_deg = f32::NAN;
+        let e = serialise_meta(&meta).unwrap_err();
+        assert!(e.contains("not finite"), "{e}");
+        meta.cameras[0].fov_deg = f32::INFINITY;
+        assert!(serialise_meta(&meta).is_err());
+    }
 }

@@ -1,10 +1,10 @@
 //! Reading a scene package: the meta, a zero-copy hierarchy view, mesh data by chunk.
 
 use crate::blob::MeshBlobLayout;
-use crate::meta::{PackageMeta, SCHEMA};
+use crate::meta::PackageMeta;
 use crate::sections::*;
 use crate::PackError;
-use motu_abi::{HierarchyView, MeshRecord, NONE_U64};
+use motu_abi::{HierarchyView, MeshRecord, FLAG_PRIMITIVE_MAP, NONE_U64};
 use motu_package::{ChunkId, Package};
 use std::path::Path;
 
@@ -14,6 +14,8 @@ pub struct MeshGeometry {
     pub positions: Vec<[f32; 3]>,
     pub indices: Vec<u32>,
     pub normals: Option<Vec<[f32; 3]>>,
+    /// A cluster's source primitive per triangle (`FLAG_PRIMITIVE_MAP`), else `None`.
+    pub primitive_map: Option<Vec<u32>>,
 }
 
 /// An opened scene package.
@@ -36,14 +38,7 @@ impl ScenePackage {
             reason,
         };
         let meta_bytes = package.section_bytes(SECTION_META)?;
-        let meta: PackageMeta = serde_json::from_slice(meta_bytes)
-            .map_err(|e| schema_err(format!("meta section is not valid: {e}")))?;
-        if meta.schema != SCHEMA {
-            return Err(schema_err(format!(
-                "schema '{}' is not supported (this build reads '{SCHEMA}')",
-                meta.schema
-            )));
-        }
+        let meta = crate::meta::parse_meta(meta_bytes).map_err(schema_err)?;
         let me = Self {
             package,
             meta,
@@ -52,7 +47,14 @@ impl ScenePackage {
         let view = me.view()?;
         view.check_references()
             .map_err(|e| schema_err(e.to_string()))?;
+        let clusters_allowed = me.meta.schema == SCHEMA;
         for (i, m) in view.meshes.iter().enumerate() {
+            if !clusters_allowed && m.flags & FLAG_PRIMITIVE_MAP != 0 {
+                return Err(PackError::Mesh {
+                    mesh: i as u32,
+                    reason: format!("a primitive map in a '{}' package", me.meta.schema),
+                });
+            }
             me.check_mesh(i as u32, m)?;
         }
         Ok(me)
@@ -88,10 +90,11 @@ impl ScenePackage {
     }
 
     fn layout(m: &MeshRecord) -> MeshBlobLayout {
-        MeshBlobLayout::new(
+        MeshBlobLayout::with_map(
             m.vertex_count as u64,
             m.triangle_count as u64,
             m.normals_offset != NONE_U64,
+            m.flags & FLAG_PRIMITIVE_MAP != 0,
         )
     }
 
@@ -109,6 +112,7 @@ impl ScenePackage {
         let base = m.positions_offset;
         let ok = m.indices_offset == base + l.indices
             && (m.normals_offset == NONE_U64 || m.normals_offset == base + l.normals)
+            && (!l.has_primitive_map || m.primitive_map_offset == base + l.primitive_map)
             && base
                 .checked_add(l.len)
                 .is_some_and(|end| end <= info.raw_len);
@@ -140,14 +144,17 @@ impl ScenePackage {
                 mesh: mesh_record,
                 reason: "blob outside its chunk".into(),
             })?;
-        let data = l.decode(blob).map_err(|reason| PackError::Mesh {
+        let err = |reason| PackError::Mesh {
             mesh: mesh_record,
             reason,
-        })?;
+        };
+        let data = l.decode(blob).map_err(err)?;
+        let primitive_map = l.decode_primitive_map(blob).map_err(err)?;
         Ok(MeshGeometry {
             positions: data.positions,
             indices: data.indices,
             normals: data.normals,
+            primitive_map,
         })
     }
 }
@@ -225,6 +232,44 @@ impl ScenePackage {
                 let p: Vec<[f32; 3]> = bytemuck::pod_collect_to_vec(get(m.positions_offset, vb)?);
                 let i: Vec<u32> = bytemuck::pod_collect_to_vec(get(m.indices_offset, ib)?);
                 Ok((Cow::Owned(p), Cow::Owned(i)))
+            }
+        }
+    }
+
+    /// A cluster's primitive map (`FLAG_PRIMITIVE_MAP`): borrowed from raw chunks, copied from
+    /// compressed ones; `None` for a mesh without one.
+    pub fn primitive_map_slice(
+        &self,
+        mesh_record: u32,
+    ) -> Result<Option<std::borrow::Cow<'_, [u32]>>, PackError> {
+        use std::borrow::Cow;
+        let meshes: &[MeshRecord] = self.package.section_as(SECTION_MESHES)?;
+        let err = |reason: String| PackError::Mesh {
+            mesh: mesh_record,
+            reason,
+        };
+        let m = meshes
+            .get(mesh_record as usize)
+            .ok_or_else(|| err(format!("only {} meshes", meshes.len())))?;
+        if m.flags & FLAG_PRIMITIVE_MAP == 0 {
+            return Ok(None);
+        }
+        let (at, n) = (m.primitive_map_offset, m.triangle_count as u64 * 4);
+        let range = at as usize..(at + n) as usize;
+        match self.package.chunk(ChunkId(m.chunk))? {
+            motu_package::ChunkBytes::Borrowed(b) => {
+                let bytes = b
+                    .get(range)
+                    .ok_or_else(|| err("primitive map outside its chunk".into()))?;
+                let map: &[u32] = bytemuck::try_cast_slice(bytes)
+                    .map_err(|e| err(format!("primitive map: {e}")))?;
+                Ok(Some(Cow::Borrowed(map)))
+            }
+            owned => {
+                let bytes = owned
+                    .get(range)
+                    .ok_or_else(|| err("primitive map outside its chunk".into()))?;
+                Ok(Some(Cow::Owned(bytemuck::pod_collect_to_vec(bytes))))
             }
         }
     }

@@ -20,7 +20,20 @@ struct Inner {
     streams: HashMap<u32, StreamId>,
     /// Blob layout per stored blob, keyed by location, for read-back.
     layouts: HashMap<(u64, u64), MeshBlobLayout>,
+    spill: Option<Spill>,
 }
+
+/// Where meshes the compiler will partition go instead of the package (see
+/// [`PackageGeometry::with_spill`]): a writer that is never finished, so its temp file is
+/// removed when it is dropped.
+struct Spill {
+    writer: PackageWriter,
+    stream: Option<StreamId>,
+    over_triangles: u64,
+}
+
+/// Marks a [`MeshLocation`] in the spill writer.
+const SPILL_BIT: u64 = 1 << 63;
 
 impl std::fmt::Debug for PackageGeometry {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -46,8 +59,57 @@ impl PackageGeometry {
                 writer: Some(writer),
                 streams: HashMap::new(),
                 layouts: HashMap::new(),
+                spill: None,
             })),
         }
+    }
+
+    /// Meshes of more than `over_triangles` triangles (those the partitioner will replace by
+    /// clusters, so the package never references them whole) are stored through `spill`
+    /// instead, a writer that is never finished: its temp file goes when this store's writer
+    /// is taken. Each spilled blob is sealed at once, so it costs no memory.
+    pub fn with_spill(self, spill: PackageWriter, over_triangles: u64) -> Self {
+        if let Ok(mut inner) = self.inner.lock() {
+            inner.spill = Some(Spill {
+                writer: spill,
+                stream: None,
+                over_triangles,
+            });
+        }
+        self
+    }
+
+    /// Whether `at` is in the spill writer (not in the package).
+    pub fn is_spilled(at: MeshLocation) -> bool {
+        at.a & SPILL_BIT != 0
+    }
+
+    fn spill_mesh(&self, data: &MeshData) -> Result<Option<MeshLocation>, String> {
+        let mut inner = self.lock()?;
+        let Inner { spill, layouts, .. } = &mut *inner;
+        let Some(sp) = spill.as_mut() else {
+            return Ok(None);
+        };
+        if data.triangle_count() as u64 <= sp.over_triangles {
+            return Ok(None);
+        }
+        let layout = MeshBlobLayout::of(data);
+        let blob = layout.encode(data);
+        let stream = *sp
+            .stream
+            .get_or_insert_with(|| sp.writer.open_stream(0, u32::MAX));
+        let loc = sp
+            .writer
+            .append(stream, &blob, MESH_BLOB_ALIGN)
+            .map_err(|e| e.to_string())?;
+        sp.writer.seal_chunk(stream).map_err(|e| e.to_string())?;
+        let at = location(loc.chunk, loc.offset_in_chunk);
+        let at = MeshLocation {
+            a: at.a | SPILL_BIT,
+            b: at.b,
+        };
+        layouts.insert((at.a, at.b), layout);
+        Ok(Some(at))
     }
 
     fn lock(&self) -> Result<std::sync::MutexGuard<'_, Inner>, String> {
@@ -58,13 +120,34 @@ impl PackageGeometry {
 
     /// Appends an arbitrary mesh (e.g. a LOD level the compiler made) to `group`'s stream.
     pub fn append_mesh(&self, group: u32, data: &MeshData) -> Result<MeshLocation, String> {
-        let layout = MeshBlobLayout::of(data);
-        let blob = layout.encode(data);
+        self.append_mesh_mapped(group, data, None)
+    }
+
+    /// Appends a compiled mesh with an optional primitive map (a partitioned mesh's cluster;
+    /// see [`MeshBlobLayout::with_map`]).
+    pub fn append_mesh_mapped(
+        &self,
+        group: u32,
+        data: &MeshData,
+        primitive_map: Option<&[u32]>,
+    ) -> Result<MeshLocation, String> {
+        if let Some(map) = primitive_map {
+            if map.len() != data.triangle_count() {
+                return Err(format!(
+                    "primitive map has {} entries for {} triangles",
+                    map.len(),
+                    data.triangle_count()
+                ));
+            }
+        }
+        let layout = MeshBlobLayout::of_mapped(data, primitive_map);
+        let blob = layout.encode_mapped(data, primitive_map);
         let mut inner = self.lock()?;
         let Inner {
             writer,
             streams,
             layouts,
+            ..
         } = &mut *inner;
         let writer = writer.as_mut().ok_or("package writer already finished")?;
         let stream = *streams
@@ -93,9 +176,11 @@ impl PackageGeometry {
         Ok(at)
     }
 
-    /// Seals every open stream and hands the writer back (for sections and `finish`).
+    /// Seals every open stream and hands the writer back (for sections and `finish`); drops
+    /// the spill writer (its temp file).
     pub fn take_writer(&self) -> Result<PackageWriter, String> {
         let mut inner = self.lock()?;
+        inner.spill = None;
         let mut writer = inner.writer.take().ok_or("package writer already taken")?;
         for (_, s) in inner.streams.drain() {
             writer.close_stream(s).map_err(|e| e.to_string())?;
@@ -106,6 +191,9 @@ impl PackageGeometry {
 
 impl GeometryStore for PackageGeometry {
     fn store(&mut self, _id: MeshId, group: u32, data: &MeshData) -> Result<MeshLocation, String> {
+        if let Some(at) = self.spill_mesh(data)? {
+            return Ok(at);
+        }
         self.append_mesh(group, data)
     }
 
@@ -115,23 +203,33 @@ impl GeometryStore for PackageGeometry {
             .layouts
             .get(&(at.a, at.b))
             .ok_or_else(|| format!("{id} was not stored in this package"))?;
-        let writer = inner
-            .writer
-            .as_mut()
-            .ok_or("package writer already finished")?;
+        let writer = if Self::is_spilled(at) {
+            &mut inner
+                .spill
+                .as_mut()
+                .ok_or("the spill store was already dropped")?
+                .writer
+        } else {
+            inner
+                .writer
+                .as_mut()
+                .ok_or("package writer already finished")?
+        };
         let bytes = writer
-            .read_back(ChunkId(at.a as u32), at.b, layout.len)
+            .read_back(ChunkId((at.a & !SPILL_BIT) as u32), at.b, layout.len)
             .map_err(|e| e.to_string())?;
         layout.decode(&bytes)
     }
 }
 
-/// Points a mesh record at the blob stored at `at` (offsets follow [`MeshBlobLayout`]).
+/// Points a mesh record at the blob stored at `at` (offsets follow [`MeshBlobLayout`]; the
+/// record's flags say whether the blob has normals and a primitive map).
 pub fn place_mesh_record(rec: &mut motu_abi::MeshRecord, at: MeshLocation) {
-    let l = MeshBlobLayout::new(
+    let l = MeshBlobLayout::with_map(
         rec.vertex_count as u64,
         rec.triangle_count as u64,
         rec.flags & motu_abi::FLAG_HAS_NORMALS != 0,
+        rec.flags & motu_abi::FLAG_PRIMITIVE_MAP != 0,
     );
     rec.chunk = at.a as u32;
     rec.positions_offset = at.b + l.positions;
@@ -141,4 +239,52 @@ pub fn place_mesh_record(rec: &mut motu_abi::MeshRecord, at: MeshLocation) {
     } else {
         motu_abi::NONE_U64
     };
+    rec.primitive_map_offset = if l.has_primitive_map {
+        at.b + l.primitive_map
+    } else {
+        motu_abi::NONE_U64
+    };
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use motu_package::WriterOptions;
+
+    fn mesh(triangles: u32) -> MeshData {
+        MeshData {
+            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            indices: (0..triangles).flat_map(|_| [0, 1, 2]).collect(),
+            ..Default::default()
+        }
+    }
+
+    /// Meshes over the spill bound are read back from the spill file, never written to the
+    /// package, and the spill file is gone once the writer is taken.
+    #[test]
+    fn meshes_over_the_bound_spill_and_vanish() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("p.motu");
+        let opts = WriterOptions::default();
+        let spill = PackageWriter::create(dir.path().join("s.motu"), opts.clone()).unwrap();
+        let mut g =
+            PackageGeometry::new(PackageWriter::create(&out, opts).unwrap()).with_spill(spill, 10);
+        let small = g.store(MeshId(0), 0, &mesh(10)).unwrap();
+        let big = g.store(MeshId(1), 0, &mesh(11)).unwrap();
+        assert!(!PackageGeometry::is_spilled(small));
+        assert!(PackageGeometry::is_spilled(big));
+        assert_eq!(g.load(MeshId(0), small).unwrap(), mesh(10));
+        assert_eq!(g.load(MeshId(1), big).unwrap(), mesh(11));
+        let writer = g.take_writer().unwrap();
+        let s = writer.finish().unwrap();
+        let names: Vec<String> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(names, vec!["p.motu".to_string()], "no spill file left");
+        // Only the small mesh's blob is in the package.
+        let pkg = motu_package::Package::open(&s.path).unwrap();
+        let raw: u64 = pkg.chunks().iter().map(|c| c.raw_len).sum();
+        assert_eq!(raw, MeshBlobLayout::of(&mesh(10)).len);
+    }
 }

@@ -28,9 +28,9 @@ pub fn write_hierarchy(
     writer.add_section_slice(SECTION_LOD_LEVELS, "lod_levels", view.lod_levels)?;
     writer.add_section_slice(SECTION_MESHES, "meshes", view.meshes)?;
     writer.add_section_slice(SECTION_MATERIALS, "materials", view.materials)?;
-    let json = serde_json::to_vec(meta).map_err(|e| PackError::Schema {
+    let json = crate::meta::serialise_meta(meta).map_err(|reason| PackError::Schema {
         path: String::new(),
-        reason: format!("meta does not serialise: {e}"),
+        reason,
     })?;
     writer.add_section(SECTION_META, "meta", 1, &json)?;
     Ok(())

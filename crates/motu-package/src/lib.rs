@@ -23,6 +23,7 @@
 //! # Ok(()) }
 //! ```
 
+pub mod atomic;
 mod error;
 pub mod format;
 mod reader;

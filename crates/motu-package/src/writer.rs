@@ -4,11 +4,10 @@
 //! compression buffer; the manifest is written last. Everything goes to a temp file beside
 //! the target that is renamed over it only by [`PackageWriter::finish`].
 
-use std::fs::File;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use tempfile::NamedTempFile;
+use crate::atomic::AtomicFile;
 
 use crate::format::{
     self, align_up, ChunkEntry, Codec, Header, ManifestHeader, SectionEntry, Trailer, CHUNK_ALIGN,
@@ -81,7 +80,7 @@ struct OpenChunk {
 /// temp file and leaves the target untouched.
 pub struct PackageWriter {
     target: PathBuf,
-    temp: Option<NamedTempFile>,
+    temp: Option<AtomicFile>,
     options: WriterOptions,
     /// Bytes written to the temp file so far.
     pos: u64,
@@ -118,19 +117,7 @@ impl PackageWriter {
             ),
             None => None,
         };
-        let file_name = target.file_name().ok_or_else(|| {
-            PackageError::InvalidArgument(format!("{} has no file name", target.display()))
-        })?;
-        let dir = parent_dir(&target);
-        let prefix = format!(".{}.", file_name.to_string_lossy());
-        let mut builder = tempfile::Builder::new();
-        builder.prefix(&prefix).suffix(".motu-tmp");
-        // Temp files default to 0600; a package is an ordinary file (0666 minus the umask).
-        #[cfg(unix)]
-        builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
-        let temp = builder
-            .tempfile_in(dir)
-            .map_err(|e| PackageError::io("create temp file beside", &target, e))?;
+        let temp = AtomicFile::create(&target)?;
         let span = tracing::info_span!("package_write", path = %target.display());
         let mut writer = PackageWriter {
             target,
@@ -155,7 +142,7 @@ impl PackageWriter {
 
     /// Path of the temp file being written (removed on drop, renamed by `finish`).
     pub fn temp_path(&self) -> Option<&Path> {
-        self.temp.as_ref().map(|t| t.path())
+        self.temp.as_ref().and_then(|t| t.temp_path())
     }
 
     /// Opens a new chunk stream whose chunks carry `tag` and `group` in the directory.
@@ -325,7 +312,7 @@ impl PackageWriter {
         let mut stored = vec![0u8; entry.stored_len as usize];
         {
             use std::os::unix::fs::FileExt;
-            temp.as_file()
+            temp.file()
                 .read_exact_at(&mut stored, entry.offset)
                 .map_err(|e| PackageError::io("read back a chunk of", &self.target, e))?;
         }
@@ -463,13 +450,7 @@ impl PackageWriter {
             .temp
             .take()
             .ok_or_else(|| PackageError::InvalidArgument("writer has no temp file".into()))?;
-        temp.as_file()
-            .sync_all()
-            .map_err(|e| PackageError::io("fsync", temp.path(), e))?;
-        // On failure the returned error owns the temp file, and dropping it removes it.
-        temp.persist(&self.target)
-            .map_err(|e| PackageError::io("rename temp file over", &self.target, e.error))?;
-        sync_dir(parent_dir(&self.target))?;
+        temp.commit()?;
 
         let summary = WriteSummary {
             path: self.target.clone(),
@@ -556,7 +537,8 @@ impl PackageWriter {
         };
         if let Err(e) = temp.write_all(bytes) {
             self.failed = true;
-            return Err(PackageError::io("write", temp.path(), e));
+            let at = temp.temp_path().unwrap_or(&self.target).to_path_buf();
+            return Err(PackageError::io("write", &at, e));
         }
         self.pos += bytes.len() as u64;
         Ok(())
@@ -600,26 +582,4 @@ impl ChunkWriter<'_> {
     pub fn close(self) -> Result<(), PackageError> {
         self.writer.close_stream(self.stream)
     }
-}
-
-fn parent_dir(path: &Path) -> &Path {
-    match path.parent() {
-        Some(parent) if !parent.as_os_str().is_empty() => parent,
-        _ => Path::new("."),
-    }
-}
-
-/// Makes the rename durable: on POSIX a rename is persisted by fsyncing the directory.
-fn sync_dir(dir: &Path) -> Result<(), PackageError> {
-    #[cfg(unix)]
-    {
-        File::open(dir)
-            .and_then(|d| d.sync_all())
-            .map_err(|e| PackageError::io("fsync directory", dir, e))?;
-    }
-    #[cfg(not(unix))]
-    {
-        let _ = (dir, File::open);
-    }
-    Ok(())
 }

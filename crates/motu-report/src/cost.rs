@@ -17,8 +17,8 @@ use std::collections::HashMap;
 
 use motu_abi::{
     BlasRecord, GeometryRecord, HierarchyView, InstanceRecord, LodSelectorRecord, MaterialRecord,
-    MeshRecord, PiRecord, TlasRecord, BLAS_AABBS, BLAS_TRIANGLES, FLAG_NEEDS_ANY_HIT, NONE_U32,
-    NONE_U64, PI_LOD_SELECTOR, PI_TLAS,
+    MeshRecord, PiRecord, TlasRecord, BLAS_AABBS, BLAS_TRIANGLES, FLAG_NEEDS_ANY_HIT,
+    FLAG_PRIMITIVE_MAP, NONE_U32, NONE_U64, PI_LOD_SELECTOR, PI_TLAS,
 };
 use serde::Serialize;
 
@@ -629,8 +629,14 @@ fn mesh_cost(m: &MeshRecord) -> Cost {
     } else {
         0
     };
+    // A cluster's primitive map is uploaded with its indices (u32 per triangle).
+    let map = if m.flags & FLAG_PRIMITIVE_MAP != 0 {
+        u64::from(m.triangle_count) * 4
+    } else {
+        0
+    };
     let mut c = Cost {
-        geometry_bytes: v * 12 + normals + u64::from(m.triangle_count) * 12,
+        geometry_bytes: v * 12 + normals + u64::from(m.triangle_count) * 12 + map,
         table_bytes: rec::<MeshRecord>(),
         ..Default::default()
     };

@@ -79,6 +79,15 @@ impl GpuSizes {
             > {
                 self.0.mesh_slices(mesh_record).map_err(|e| e.to_string())
             }
+
+            fn primitive_map(
+                &self,
+                mesh_record: u32,
+            ) -> Result<Option<std::borrow::Cow<'_, [u32]>>, String> {
+                self.0
+                    .primitive_map_slice(mesh_record)
+                    .map_err(|e| e.to_string())
+            }
         }
         let view = pkg.view()?;
         let opts = motu_gpu::BuildOptions {

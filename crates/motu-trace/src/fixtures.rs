@@ -466,5 +466,6 @@ pub fn uv_sphere(n: u32) -> MeshGeometry {
         positions,
         indices,
         normals: None,
+        primitive_map: None,
     }
 }

@@ -50,7 +50,9 @@ mod tests;
 
 pub use compare::{compare, CompareError, CompareReport, DEFAULT_REL_EPS};
 pub use mesh::{MeshBvh, MeshError, MeshGeometry, MeshSource};
-pub use render::{render, render_with, write_png, RenderOptions, RenderOutput, RenderStats, View};
+pub use render::{
+    encode_png, render, render_with, write_png, RenderOptions, RenderOutput, RenderStats, View,
+};
 pub use traverse::{Hit, RayQuery, Scratch, Tracer};
 
 /// Errors of the CPU tracer.

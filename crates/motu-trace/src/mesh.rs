@@ -11,6 +11,9 @@ pub struct MeshGeometry {
     /// Three per triangle.
     pub indices: Vec<u32>,
     pub normals: Option<Vec<[f32; 3]>>,
+    /// A cluster of a partitioned mesh (`FLAG_PRIMITIVE_MAP`): each triangle's index in the
+    /// source mesh, which hits report instead of the cluster's own index.
+    pub primitive_map: Option<Vec<u32>>,
 }
 
 /// Loads the geometry of a compiled mesh, by its index in the hierarchy's mesh table.
@@ -26,7 +29,7 @@ pub struct MeshBvh {
     pub nodes: Vec<BvhNode>,
     /// Vertices of triangle slot `i`: `tri_verts[i]`.
     pub tri_verts: Vec<[[f32; 3]; 3]>,
-    /// The triangle index within the mesh of slot `i`.
+    /// The triangle index within the mesh of slot `i` (within the source mesh for a cluster).
     pub tri_prim: Vec<u32>,
     pub bounds: Aabb,
 }
@@ -46,6 +49,8 @@ pub enum MeshError {
     },
     #[error("vertex {0} is not finite")]
     NotFinite(usize),
+    #[error("primitive map has {got} entries for {triangles} triangles")]
+    PrimitiveMap { got: usize, triangles: usize },
     #[error("geometry bounds {actual:?} exceed the mesh record's bounds {record:?}")]
     Bounds { actual: Aabb, record: Aabb },
 }
@@ -70,6 +75,14 @@ impl MeshBvh {
             return Err(MeshError::NotFinite(i));
         }
         let tri_count = g.indices.len() / 3;
+        if let Some(map) = &g.primitive_map {
+            if map.len() != tri_count {
+                return Err(MeshError::PrimitiveMap {
+                    got: map.len(),
+                    triangles: tri_count,
+                });
+            }
+        }
         let mut verts = Vec::with_capacity(tri_count);
         let mut boxes = Vec::with_capacity(tri_count);
         for (t, tri) in g.indices.chunks_exact(3).enumerate() {
@@ -105,7 +118,10 @@ impl MeshBvh {
         }
         Ok(Self {
             tri_verts: bvh.order.iter().map(|&i| verts[i as usize]).collect(),
-            tri_prim: bvh.order,
+            tri_prim: match &g.primitive_map {
+                Some(map) => bvh.order.iter().map(|&i| map[i as usize]).collect(),
+                None => bvh.order,
+            },
             nodes: bvh.nodes,
             bounds,
         })
@@ -208,6 +224,7 @@ mod tests {
             positions,
             indices,
             normals: None,
+            primitive_map: None,
         }
     }
 

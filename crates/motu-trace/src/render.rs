@@ -60,6 +60,8 @@ pub struct RenderOptions {
     pub shadow_lod_from_primary: bool,
     /// Build every reachable acceleration structure in parallel before tracing.
     pub prepare: bool,
+    /// TLAS walks one ray may make before it is cut short (counted in `truncated_rays`).
+    pub max_traces_per_ray: u32,
 }
 
 impl Default for RenderOptions {
@@ -73,6 +75,7 @@ impl Default for RenderOptions {
             lod: LodParams::default(),
             shadow_lod_from_primary: true,
             prepare: true,
+            max_traces_per_ray: motu_abi::DEFAULT_MAX_TRACES_PER_RAY,
         }
     }
 }
@@ -98,6 +101,8 @@ pub struct RenderStats {
     pub rays_per_second: f64,
     /// Always 0: the CPU stack grows as needed (see `max_stack_depth`).
     pub stack_overflows: u64,
+    /// Pixels whose primary or shadow ray was cut short at `max_traces_per_ray`.
+    pub truncated_rays: u64,
     pub max_stack_depth: u32,
     /// The heatmap's red end: the most traces spent on one pixel.
     pub heatmap_max_traces: u32,
@@ -131,6 +136,7 @@ struct RowStats {
     hits: u64,
     traces: u64,
     max_stack: u32,
+    truncated: u64,
 }
 
 impl RowStats {
@@ -140,6 +146,7 @@ impl RowStats {
         self.hits += o.hits;
         self.traces += o.traces;
         self.max_stack = self.max_stack.max(o.max_stack);
+        self.truncated += o.truncated;
         self
     }
 }
@@ -181,9 +188,11 @@ pub fn render_with(
                     lod: opts.lod,
                     pixels_per_unit_at_1: camera.pixels_per_unit_at_1,
                     lod_u: pixel_dither(x, y as u32),
+                    max_traces: opts.max_traces_per_ray,
                     ..RayQuery::default()
                 };
                 let hit = tracer.trace(camera.world_eye, dir, &q, scratch);
+                let mut truncated = hit.truncated;
                 st.primary += 1;
                 st.traces += hit.traces as u64;
                 st.max_stack = st.max_stack.max(hit.max_stack);
@@ -205,6 +214,7 @@ pub fn render_with(
                                 st.traces += s.traces as u64;
                                 st.max_stack = st.max_stack.max(s.max_stack);
                                 traces += s.traces;
+                                truncated |= s.truncated;
                             }
                             base.map(|c| c * light)
                         }
@@ -229,6 +239,7 @@ pub fn render_with(
                         ..AovRecord::MISS
                     }
                 };
+                st.truncated += u64::from(truncated);
                 let px = &mut px_row[x as usize * 4..x as usize * 4 + 4];
                 px[..3].copy_from_slice(&encode_srgb(colour));
                 px[3] = 255;
@@ -266,6 +277,7 @@ pub fn render_with(
         traces_per_ray: totals.traces as f64 / rays.max(1) as f64,
         rays_per_second: rays as f64 / secs.max(1e-9),
         stack_overflows: 0,
+        truncated_rays: totals.truncated,
         max_stack_depth: totals.max_stack,
         heatmap_max_traces: heatmap_max,
         meshes_built: tracer.meshes_built(),
@@ -319,6 +331,7 @@ fn shade(
             ..opts.lod
         },
         pixels_per_unit_at_1: camera.pixels_per_unit_at_1,
+        max_traces: opts.max_traces_per_ray,
         ..RayQuery::default()
     };
     let reach = eye[0].abs().max(eye[1].abs()).max(eye[2].abs()) + hit.t;
@@ -419,23 +432,43 @@ fn encode_srgb(c: [f32; 3]) -> [u8; 3] {
 
 /// Writes an 8-bit RGBA PNG.
 pub fn write_png(path: &Path, width: u32, height: u32, rgba8: &[u8]) -> Result<(), TraceError> {
-    let err = |reason: String| TraceError::Png {
+    let bytes = encode_png(width, height, rgba8).map_err(|e| match e {
+        TraceError::Png { reason, .. } => TraceError::Png {
+            path: path.display().to_string(),
+            reason,
+        },
+        other => other,
+    })?;
+    std::fs::write(path, bytes).map_err(|e| TraceError::Png {
         path: path.display().to_string(),
+        reason: e.to_string(),
+    })
+}
+
+/// Encodes an RGBA8 image as PNG in memory (callers write it atomically); a 0-pixel image or
+/// a buffer of the wrong size is an error.
+pub fn encode_png(width: u32, height: u32, rgba8: &[u8]) -> Result<Vec<u8>, TraceError> {
+    let err = |reason: String| TraceError::Png {
+        path: "<memory>".into(),
         reason,
     };
+    if width == 0 || height == 0 {
+        return Err(err(format!("a {width}×{height} image has no pixels")));
+    }
     if rgba8.len() != width as usize * height as usize * 4 {
         return Err(err(format!(
             "{} bytes for {width}×{height} RGBA",
             rgba8.len()
         )));
     }
-    let file = std::fs::File::create(path).map_err(|e| err(e.to_string()))?;
-    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), width, height);
+    let mut out = Vec::new();
+    let mut enc = png::Encoder::new(&mut out, width, height);
     enc.set_color(png::ColorType::Rgba);
     enc.set_depth(png::BitDepth::Eight);
     let mut w = enc.write_header().map_err(|e| err(e.to_string()))?;
     w.write_image_data(rgba8).map_err(|e| err(e.to_string()))?;
-    w.finish().map_err(|e| err(e.to_string()))
+    w.finish().map_err(|e| err(e.to_string()))?;
+    Ok(out)
 }
 
 #[cfg(test)]

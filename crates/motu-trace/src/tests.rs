@@ -40,6 +40,7 @@ fn soup(rng: &mut Rng, tris: usize) -> MeshGeometry {
         indices: (0..positions.len() as u32).collect(),
         positions,
         normals: None,
+        primitive_map: None,
     }
 }
 
@@ -204,6 +205,7 @@ fn ray_through_shared_vertex_and_edges_of_a_fan_hits_exactly_once() {
         positions: positions.clone(),
         indices: indices.clone(),
         normals: None,
+        primitive_map: None,
     };
     let mut b = HierarchyBuilder::new();
     let m = b.mesh(0, 0, 0, g);
@@ -469,6 +471,7 @@ fn shadow_ray_darkens_the_ground_under_an_occluder() {
         ],
         indices: vec![0, 1, 2, 0, 2, 3],
         normals: None,
+        primitive_map: None,
     };
     let g = b.mesh(0, 0, 0, ground);
     let s = b.mesh(1, 0, 0, uv_sphere(16));

@@ -28,6 +28,9 @@ pub struct RayQuery {
     pub pixels_per_unit_at_1: f32,
     /// Uniform number in [0, 1) for stochastic LOD.
     pub lod_u: f32,
+    /// TLAS walks this ray may make before it is cut short ([`Hit::truncated`]), like the
+    /// GPU's `MAX_TRACES_PER_RAY`.
+    pub max_traces: u32,
 }
 
 impl Default for RayQuery {
@@ -40,6 +43,7 @@ impl Default for RayQuery {
             lod: LodParams::default(),
             pixels_per_unit_at_1: 1.0,
             lod_u: 0.0,
+            max_traces: motu_abi::DEFAULT_MAX_TRACES_PER_RAY,
         }
     }
 }
@@ -65,6 +69,8 @@ pub struct Hit {
     pub traces: u32,
     /// Deepest the level stack got for this ray.
     pub max_stack: u32,
+    /// The walk was cut short at `RayQuery::max_traces`: the hit may not be the closest.
+    pub truncated: bool,
 }
 
 impl Hit {
@@ -78,6 +84,7 @@ impl Hit {
         object_normal: [0.0, 0.0, 1.0],
         traces: 0,
         max_stack: 0,
+        truncated: false,
     };
 
     pub fn is_hit(&self) -> bool {
@@ -249,6 +256,22 @@ impl<'a> Tracer<'a> {
                 "triangle count differs from the mesh record"
             );
         }
+        // A cluster's hits name source primitives: without its map they would be wrong.
+        if (rec.flags & motu_abi::FLAG_PRIMITIVE_MAP != 0) != g.primitive_map.is_some() {
+            return Err(MeshError::Load(format!(
+                "mesh record {m}: the record {} a primitive map, the loaded mesh {}",
+                if rec.flags & motu_abi::FLAG_PRIMITIVE_MAP != 0 {
+                    "has"
+                } else {
+                    "has no"
+                },
+                if g.primitive_map.is_some() {
+                    "has one"
+                } else {
+                    "has none"
+                }
+            )));
+        }
         MeshBvh::build(&g, Some(record_box(rec.bounds_min, rec.bounds_max)), params)
     }
 
@@ -358,11 +381,16 @@ impl<'a> Tracer<'a> {
         });
         let mut max_stack = 1usize;
         let mut traces = 0u32;
+        let mut truncated = false;
         let v = &self.view;
         while let Some(e) = levels.pop() {
             // A payload that cannot beat the best hit is skipped without a trace (GPU rule).
             if e.t_near >= best_t {
                 continue;
+            }
+            if traces >= q.max_traces {
+                truncated = true;
+                break;
             }
             traces += 1;
             let tlas_ray = world.transformed(&e.tlas_from_world);
@@ -411,6 +439,7 @@ impl<'a> Tracer<'a> {
                                     object_normal: mesh.geometric_normal(slot),
                                     traces: 0,
                                     max_stack: 0,
+                                    truncated: false,
                                 };
                                 return q.any_hit;
                             }
@@ -466,6 +495,7 @@ impl<'a> Tracer<'a> {
         }
         hit.traces = traces;
         hit.max_stack = max_stack as u32;
+        hit.truncated = truncated;
         hit
     }
 }

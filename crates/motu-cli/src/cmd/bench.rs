@@ -1332,6 +1332,9 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     if let Some(pkg) = &a.child_render {
         return child_render(&a, pkg);
     }
+    if let (Some(path), Some(pkg)) = (&a.camera_path, &a.package) {
+        return super::flight::run(&a, pkg, path);
+    }
     let settings = settings(&a)?;
     let scenes = plan(&settings, &a)?;
     let work = a

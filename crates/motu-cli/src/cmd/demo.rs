@@ -71,6 +71,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         levels_text: "ml".into(),
         max_instances: (1 << 24) - 1,
         max_tlas_scratch_bytes: None,
+        max_blas_triangles: motu_compile::DEFAULT_MAX_BLAS_TRIANGLES,
         lod_levels: None,
         lod_min_triangles: 10_000,
         zstd_level: None,
@@ -129,7 +130,10 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         shadow_lod_bias: 1.0,
         lod_stochastic: false,
         stack_size: 16,
+        max_traces_per_ray: motu_abi::DEFAULT_MAX_TRACES_PER_RAY,
+        allow_truncated: false,
         device: None,
+        camera_path: None,
     };
     if let Err(e) = super::render::run(args(backend)) {
         if backend == BackendArg::Cpu {

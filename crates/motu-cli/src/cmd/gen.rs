@@ -85,7 +85,11 @@ pub fn options(a: &GenArgs) -> anyhow::Result<GenKind> {
             let mut o = IslandOptions::default();
             o.scale = a.scale.unwrap_or(o.scale);
             o.elements = a.elements.or(o.elements);
-            o.threads = a.threads.or(o.threads);
+            o.threads = a
+                .threads
+                .map(|t| super::import::cap_threads("--threads", t))
+                .transpose()?
+                .or(o.threads);
             o.max_mesh_triangles = a.max_mesh_triangles.unwrap_or(o.max_mesh_triangles);
             o.terrain_objects = a.terrain_objects;
             o.seed = a.seed.unwrap_or(o.seed);

@@ -6,11 +6,26 @@ use crate::size::format_size;
 use motu_compile::Levels;
 
 pub fn run(a: ImportArgs) -> anyhow::Result<()> {
+    crate::output::check_outputs(&[("scene", &a.scene)], &[("-o", &a.output)])?;
     if let Some(t) = a.threads {
         rayon::ThreadPoolBuilder::new()
-            .num_threads(t.max(1))
+            .num_threads(cap_threads("--threads", t)?)
             .build_global()
             .ok();
+    }
+    if let Some(b) = a.max_tlas_scratch {
+        // Build scratch the compiler budgets per TLAS instance.
+        let per_instance = motu_compile::CompileOptions::default()
+            .scratch_bytes_per_instance
+            .max(1);
+        if b / per_instance < 2 {
+            anyhow::bail!(
+                "--max-tlas-scratch {} allows {} instance(s) per TLAS at {per_instance} B of build scratch each; a TLAS split needs at least 2, so give at least {} B",
+                crate::size::format_size(b),
+                b / per_instance,
+                2 * per_instance
+            );
+        }
     }
     let (levels, levels_text) = match a.levels {
         LevelsArg::Ml => (Levels::Ml, "ml".to_string()),
@@ -34,6 +49,7 @@ pub fn run(a: ImportArgs) -> anyhow::Result<()> {
         levels_text,
         max_instances: a.max_instances,
         max_tlas_scratch_bytes: a.max_tlas_scratch,
+        max_blas_triangles: a.max_blas_triangles,
         lod_levels: a.lod,
         lod_min_triangles: a.lod_min_triangles,
         zstd_level: a.zstd,
@@ -71,4 +87,21 @@ pub fn run(a: ImportArgs) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// More worker threads than a few per core only add memory and contention: `--threads` above
+/// that is capped, with a message. 0 is refused.
+pub fn cap_threads(option: &str, requested: usize) -> anyhow::Result<usize> {
+    if requested == 0 {
+        anyhow::bail!("{option} 0: give at least 1 (or leave it out to use every core)");
+    }
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let cap = (4 * cores).max(4);
+    if requested > cap {
+        eprintln!(
+            "warning: {option} {requested} capped at {cap} (4× the {cores} cores of this machine)"
+        );
+        return Ok(cap);
+    }
+    Ok(requested)
 }

@@ -60,6 +60,16 @@ pub fn run(a: InfoArgs) -> anyhow::Result<()> {
         "max_instances_per_tlas": view.tlases.iter().map(|t| t.instance_count).max().unwrap_or(0),
         "max_instances_cap": meta.max_instances_per_tlas,
         "split_tlases": num("split_tlases"),
+        "max_blas_triangles": num("max_blas_triangles"),
+        "max_triangles_per_blas": view
+            .blases
+            .iter()
+            .filter(|b| b.kind == motu_abi::BLAS_TRIANGLES)
+            .map(|b| b.primitive_count)
+            .max()
+            .unwrap_or(0),
+        "partitioned_meshes": num("partitioned_meshes"),
+        "partition_clusters": num("partition_clusters"),
         "chunks": p.chunks().len(),
         "chunk_raw_bytes": p.chunks().iter().map(|c| c.raw_len).sum::<u64>(),
         "chunk_stored_bytes": p.chunks().iter().map(|c| c.stored_len).sum::<u64>(),

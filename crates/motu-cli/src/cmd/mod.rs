@@ -5,11 +5,13 @@ use crate::cli::{Cli, Command};
 mod bench;
 pub mod demo;
 mod devices;
+mod flight;
 mod gen;
 mod import;
 mod info;
-mod render;
+pub mod render;
 mod report;
+mod view;
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
@@ -20,6 +22,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Verify(a) => info::verify(a),
         Command::Report(a) => report::run(a),
         Command::Render(a) => render::run(a),
+        Command::View(a) => view::run(a),
         Command::Compare(a) => render::compare(a),
         Command::Bench(a) => bench::run(a),
         Command::Demo(a) => demo::run(a),

@@ -1,6 +1,7 @@
 //! `motu render` and `motu compare`.
 
 use crate::cli::{BackendArg, CompareArgs, RenderArgs, ViewArg};
+use crate::output;
 use crate::pipeline;
 use anyhow::{bail, Context};
 use glam::Vec3;
@@ -24,6 +25,7 @@ impl motu_trace::MeshSource for PackageMeshes<'_> {
             positions: g.positions,
             indices: g.indices,
             normals: g.normals,
+            primitive_map: g.primitive_map,
         })
     }
 }
@@ -119,6 +121,15 @@ impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
     > {
         self.0.mesh_slices(mesh_record).map_err(|e| e.to_string())
     }
+
+    fn primitive_map(
+        &self,
+        mesh_record: u32,
+    ) -> Result<Option<std::borrow::Cow<'_, [u32]>>, String> {
+        self.0
+            .primitive_map_slice(mesh_record)
+            .map_err(|e| e.to_string())
+    }
 }
 
 fn gpu_context(a: &RenderArgs, backend: BackendArg) -> anyhow::Result<motu_gpu::Context> {
@@ -136,6 +147,32 @@ fn gpu_context(a: &RenderArgs, backend: BackendArg) -> anyhow::Result<motu_gpu::
         ..Default::default()
     })
     .context("opening a Vulkan device for ray tracing (`motu devices` lists them; `--backend cpu` needs none)")
+    .and_then(|ctx| {
+        check_vram_budget(a.vram_budget, &ctx)?;
+        Ok(ctx)
+    })
+}
+
+/// `--vram-budget` above what the device has is a mistake (a unit typo), not a wish to clamp.
+fn check_vram_budget(budget: Option<u64>, ctx: &motu_gpu::Context) -> anyhow::Result<()> {
+    let Some(b) = budget else { return Ok(()) };
+    let device_bytes = ctx
+        .heaps()
+        .iter()
+        .filter(|h| h.device_local)
+        .map(|h| h.size_bytes)
+        .max()
+        .unwrap_or(0);
+    if device_bytes > 0 && b > device_bytes {
+        bail!(
+            "--vram-budget {} is more than {} has ({} of device-local memory): give at most {}, or omit it to use what is free",
+            crate::size::format_size(b),
+            ctx.device_name(),
+            crate::size::format_size(device_bytes),
+            crate::size::format_size(device_bytes),
+        );
+    }
+    Ok(())
 }
 
 fn gpu_render_options(
@@ -157,6 +194,7 @@ fn gpu_render_options(
         },
         lod,
         stack_size: a.stack_size,
+        max_traces_per_ray: a.max_traces_per_ray,
         frames,
         ..Default::default()
     }
@@ -170,6 +208,7 @@ fn render_streaming(
     view: &HierarchyView<'_>,
     lod: LodParams,
     backend: BackendArg,
+    recorded: Option<&[CameraParams]>,
 ) -> anyhow::Result<(Aov, Vec<u8>, Value)> {
     let ctx = gpu_context(a, backend)?;
     let (pose, w, h) = camera_pose(pkg, view, a.camera.as_deref(), a.width, a.height)?;
@@ -189,8 +228,12 @@ fn render_streaming(
     let ropts = gpu_render_options(a, lod, backend, 1);
     let mut frames = Vec::new();
     let mut last = None;
-    for f in 0..a.frames {
-        let cam = camera_path(&pose, &path, f, a.frames).params(w, h);
+    let frame_count = recorded.map_or(a.frames, |r| r.len() as u32);
+    for f in 0..frame_count {
+        let cam = match recorded {
+            Some(r) => r[f as usize],
+            None => camera_path(&pose, &path, f, a.frames).params(w, h),
+        };
         let (out, st) = sr
             .render_frame(&cam, &ropts)
             .with_context(|| format!("streaming frame {f}"))?;
@@ -254,10 +297,91 @@ fn render_gpu(
     let scene = motu_gpu::GpuScene::build(&ctx, view, &meshes, &build)
         .context("building acceleration structures")?;
     let opts = gpu_render_options(a, lod, backend, a.frames);
-    let out = motu_gpu::render(&ctx, &scene, camera, &opts).context("rendering on the GPU")?;
+    let (out, counts) =
+        motu_gpu::render_counted(&ctx, &scene, camera, &opts).context("rendering on the GPU")?;
     let mut stats = serde_json::to_value(&out.stats)?;
+    stats["truncated_rays"] = json!(counts.truncated_rays);
     stats["resources"] = serde_json::to_value(scene.report())?;
     drop(scene);
+    ctx.check_validation()
+        .context("Vulkan validation reported errors")?;
+    Ok((out.aov, out.rgba8, stats))
+}
+
+/// `--camera-path`: the frame cameras (None without a path). The image size is --width/--height,
+/// else the path's recorded size, else the camera's.
+fn recorded_cameras(
+    a: &RenderArgs,
+    camera: CameraParams,
+) -> anyhow::Result<Option<Vec<CameraParams>>> {
+    let Some(p) = &a.camera_path else {
+        return Ok(None);
+    };
+    let path = crate::cmd::view::load_camera_path(p)?;
+    let (w, h) = match (a.width, a.height, path.width, path.height) {
+        (None, None, Some(w), Some(h)) => (w, h),
+        _ => (camera.width, camera.height),
+    };
+    let n = if a.frames <= 1 {
+        path.poses.len() as u32
+    } else {
+        a.frames
+    };
+    Ok(Some(
+        (0..n).map(|f| path.sample(f, n).params(w, h)).collect(),
+    ))
+}
+
+/// A recorded camera path on a full GPU build: one frame per camera through the viewer's
+/// renderer (pipeline compiled once); the last frame is the output, every frame's time is in
+/// `path_ms_per_frame`.
+fn render_gpu_path(
+    a: &RenderArgs,
+    pkg: &ScenePackage,
+    view: &HierarchyView<'_>,
+    cams: &[CameraParams],
+    lod: LodParams,
+    backend: BackendArg,
+) -> anyhow::Result<(Aov, Vec<u8>, Value)> {
+    let ctx = gpu_context(a, backend)?;
+    let budget = a.vram_budget.unwrap_or(u64::MAX);
+    let build = motu_gpu::BuildOptions {
+        budget_bytes: budget,
+        max_allocations: a
+            .max_allocations
+            .unwrap_or(motu_gpu::BuildOptions::default().max_allocations),
+        staging_bytes: (budget / 8).clamp(4 << 20, 64 << 20),
+        ..Default::default()
+    };
+    let meshes = PackageMeshes(pkg);
+    let scene = motu_gpu::GpuScene::build(&ctx, view, &meshes, &build)
+        .context("building acceleration structures")?;
+    let opts = gpu_render_options(a, lod, backend, 1);
+    let mut live = motu_gpu::LiveRenderer::new(scene);
+    let mut times = Vec::with_capacity(cams.len());
+    let mut last = None;
+    for (f, cam) in cams.iter().enumerate() {
+        let out = live
+            .render_frame(cam, &opts)
+            .with_context(|| format!("rendering camera-path frame {f}"))?;
+        times.push(out.stats.ms_per_frame);
+        last = Some(out);
+    }
+    let out = last.context("empty camera path")?;
+    let mut stats = serde_json::to_value(&out.stats)?;
+    // The first frame is a warm-up (pipeline first use): left out of the median.
+    let timed = if times.len() > 1 {
+        &times[1..]
+    } else {
+        &times[..]
+    };
+    let mut timed = timed.to_vec();
+    timed.sort_by(f64::total_cmp);
+    stats["ms_per_frame"] = json!(timed[timed.len() / 2]);
+    stats["frames"] = json!(cams.len());
+    stats["path_ms_per_frame"] = json!(times);
+    stats["resources"] = serde_json::to_value(live.scene().report())?;
+    drop(live);
     ctx.check_validation()
         .context("Vulkan validation reported errors")?;
     Ok((out.aov, out.rgba8, stats))
@@ -294,6 +418,10 @@ fn contract_stats(mut stats: Value, extra: Value) -> Value {
 }
 
 pub fn run(a: RenderArgs) -> anyhow::Result<()> {
+    let mut outputs = vec![("-o", a.output.as_path())];
+    outputs.extend(a.aov.as_deref().map(|p| ("--aov", p)));
+    outputs.extend(a.stats.as_deref().map(|p| ("--stats", p)));
+    output::check_outputs(&[("package", &a.package)], &outputs)?;
     let pkg = pipeline::open(&a.package)?;
     let base = pkg.view()?;
     let names: Vec<String> = pkg.meta().elements.iter().map(|e| e.name.clone()).collect();
@@ -318,7 +446,12 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         Some(s) => s.view(&base),
         None => base,
     };
-    let camera = camera_params(&pkg, &view, a.camera.as_deref(), a.width, a.height)?;
+    let mut camera = camera_params(&pkg, &view, a.camera.as_deref(), a.width, a.height)?;
+    // `--camera-path`: the recorded poses over --frames frames (default: one per pose).
+    let recorded = recorded_cameras(&a, camera)?;
+    if let Some(r) = &recorded {
+        camera = *r.last().context("empty camera path")?;
+    }
     let lod = LodParams {
         forced_lod: a
             .lod
@@ -337,9 +470,15 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         Some(b) => b,
         None => match motu_gpu::list_devices() {
             Ok(devices) => match a.device {
-                Some(i) => best_backend(devices.get(i..i + 1).unwrap_or(&[])),
+                Some(i) => best_backend(std::slice::from_ref(device_at(&devices, i)?)),
                 None => best_backend(&devices),
             },
+            Err(e) if a.device.is_some() => {
+                return Err(anyhow::Error::new(e).context(format!(
+                    "--device {} (or MOTU_DEVICE): no Vulkan device can be listed",
+                    a.device.unwrap_or(0)
+                )))
+            }
             Err(e) => {
                 eprintln!("warning: no Vulkan ray-tracing device ({e}); rendering on the CPU");
                 BackendArg::Cpu
@@ -363,15 +502,19 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             let opts = motu_trace::RenderOptions {
                 view: view_name(a.view).parse().map_err(anyhow::Error::msg)?,
                 lod,
+                max_traces_per_ray: a.max_traces_per_ray,
                 ..Default::default()
             };
-            let mut out =
-                motu_trace::render_with(&tracer, &camera, &opts).context("rendering on the CPU")?;
+            let cams = recorded
+                .clone()
+                .unwrap_or_else(|| vec![camera; a.frames as usize]);
+            let mut out = motu_trace::render_with(&tracer, &cams[0], &opts)
+                .context("rendering on the CPU")?;
             let mut times = vec![out.stats.ms_per_frame];
-            for _ in 1..a.frames {
+            for cam in &cams[1..] {
                 let o = motu_trace::render_with(
                     &tracer,
-                    &camera,
+                    cam,
                     &motu_trace::RenderOptions {
                         prepare: false,
                         ..opts
@@ -384,11 +527,15 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             let median = times[times.len() / 2];
             let mut stats = serde_json::to_value(&out.stats)?;
             stats["ms_per_frame"] = json!(median);
-            stats["frames"] = json!(a.frames);
+            stats["frames"] = json!(cams.len());
             (out.aov, out.rgba8, stats)
         }
         BackendArg::Pipeline | BackendArg::Query if a.stream => {
-            render_streaming(&a, &pkg, &view, lod, backend)?
+            render_streaming(&a, &pkg, &view, lod, backend, recorded.as_deref())?
+        }
+        BackendArg::Pipeline | BackendArg::Query if recorded.is_some() => {
+            let cams = recorded.as_deref().unwrap_or_default();
+            render_gpu_path(&a, &pkg, &view, cams, lod, backend)?
         }
         BackendArg::Pipeline | BackendArg::Query => {
             render_gpu(&a, &pkg, &view, &camera, lod, backend)?
@@ -408,15 +555,25 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             "package": a.package.display().to_string(),
         }),
     );
-    motu_trace::write_png(&a.output, camera.width, camera.height, &rgba8)
-        .with_context(|| format!("writing {}", a.output.display()))?;
+    // A truncated traversal is a wrong image: an error unless explicitly allowed.
+    let truncated = stats["truncated_rays"].as_u64().unwrap_or(0);
+    let overflows = stats["stack_overflows"].as_u64().unwrap_or(0);
+    if truncated > 0 || overflows > 0 {
+        let what = format!(
+            "{truncated} ray(s) were cut short ({overflows} traversal stack overflows with --stack-size {}; --max-traces-per-ray {}): their hits may be wrong (exponentially deep instancing?)",
+            a.stack_size, a.max_traces_per_ray
+        );
+        if !a.allow_truncated {
+            bail!("{what}; nothing was written. Raise --stack-size/--max-traces-per-ray, or pass --allow-truncated to write the image anyway");
+        }
+        eprintln!("warning: {what}; written anyway (--allow-truncated)");
+    }
+    output::write_png(&a.output, camera.width, camera.height, &rgba8)?;
     if let Some(p) = &a.aov {
-        aov.save(p)
-            .with_context(|| format!("writing {}", p.display()))?;
+        output::write(p, &aov.to_bytes())?;
     }
     if let Some(p) = &a.stats {
-        std::fs::write(p, serde_json::to_string_pretty(&stats)?)
-            .with_context(|| format!("writing {}", p.display()))?;
+        output::write(p, serde_json::to_string_pretty(&stats)?.as_bytes())?;
     }
     eprintln!(
         "rendered {} ({}×{}, {}): {:.1} ms/frame, {:.2} Mrays/s, {:.2} traces/ray",
@@ -432,12 +589,14 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
 }
 
 pub fn compare(a: CompareArgs) -> anyhow::Result<()> {
+    if let Some(p) = &a.diff {
+        output::check_outputs(&[("A", &a.a), ("B", &a.b)], &[("--diff", p)])?;
+    }
     let x = Aov::load(&a.a).with_context(|| format!("reading {}", a.a.display()))?;
     let y = Aov::load(&a.b).with_context(|| format!("reading {}", a.b.display()))?;
     let r = motu_trace::compare(&x, &y, a.depth_epsilon).context("comparing")?;
     if let Some(p) = &a.diff {
-        motu_trace::write_png(p, x.width, x.height, &r.diff_rgba8)
-            .with_context(|| format!("writing {}", p.display()))?;
+        output::write_png(p, x.width, x.height, &r.diff_rgba8)?;
     }
     let ok = r.fraction <= a.max_mismatch;
     if a.json {
@@ -466,4 +625,23 @@ pub fn compare(a: CompareArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// Device `index` of `devices`, or an error naming the bad index and the devices there are.
+pub fn device_at(
+    devices: &[motu_gpu::DeviceReport],
+    index: usize,
+) -> anyhow::Result<&motu_gpu::DeviceReport> {
+    devices.get(index).with_context(|| {
+        let list: Vec<String> = devices
+            .iter()
+            .enumerate()
+            .map(|(i, d)| format!("{i}: {}", d.name))
+            .collect();
+        format!(
+            "--device {index} (or MOTU_DEVICE={index}): no such device; this machine has {} ({}); `motu devices` lists them",
+            devices.len(),
+            if list.is_empty() { "none".to_string() } else { list.join(", ") }
+        )
+    })
 }

@@ -5,6 +5,9 @@ use crate::cli::ReportArgs;
 use anyhow::Context;
 
 pub fn run(a: ReportArgs) -> anyhow::Result<()> {
+    if let Some(p) = &a.html {
+        crate::output::check_outputs(&[("package", &a.package)], &[("--html", p)])?;
+    }
     let pkg = crate::pipeline::open(&a.package)?;
     let sizes: Box<dyn motu_report::SizeSource> = if a.measure {
         // Build and compact everything on the device: compacted sizes are measured, not modelled.
@@ -22,8 +25,7 @@ pub fn run(a: ReportArgs) -> anyhow::Result<()> {
     let r = motu_report::build_report(&pkg, sizes.as_ref(), a.budget)
         .with_context(|| format!("VRAM report of {}", a.package.display()))?;
     if let Some(p) = &a.html {
-        std::fs::write(p, motu_report::render_html(&r))
-            .with_context(|| format!("writing {}", p.display()))?;
+        crate::output::write(p, motu_report::render_html(&r).as_bytes())?;
     }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&r)?);

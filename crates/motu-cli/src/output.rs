@@ -1,0 +1,206 @@
+//! Output files: checked before any work (never an input of the same command, never another
+//! output of it, never a non-regular file, in a directory that exists), then written through
+//! one atomic path (temp file, fsync, rename: `motu_package::atomic`).
+
+use anyhow::{bail, Context};
+use std::path::{Path, PathBuf};
+
+/// What a path names, for comparing inputs and outputs: an existing file by device and inode
+/// (hard links and symlinks to one file are one file), a new one by its absolute path.
+#[derive(Debug, PartialEq, Eq)]
+enum FileIdentity {
+    Existing { dev: u64, ino: u64 },
+    New(PathBuf),
+}
+
+fn identity_of(meta: &std::fs::Metadata) -> FileIdentity {
+    use std::os::unix::fs::MetadataExt;
+    FileIdentity::Existing {
+        dev: meta.dev(),
+        ino: meta.ino(),
+    }
+}
+
+/// Identity of an input (symlinks followed), `None` if it cannot be read.
+fn input_identity(path: &Path) -> Option<FileIdentity> {
+    std::fs::metadata(path).ok().map(|m| identity_of(&m))
+}
+
+/// Identity of an output path; errors when it is not a plain file or its directory is missing.
+fn output_identity(option: &str, path: &Path) -> anyhow::Result<FileIdentity> {
+    match std::fs::symlink_metadata(path) {
+        Ok(m) if m.file_type().is_file() => Ok(identity_of(&m)),
+        Ok(m) => bail!(
+            "{option} {}: exists and is {}, not a regular file; motu only replaces regular files (remove it or choose another path)",
+            path.display(),
+            describe_file_type(&m.file_type())
+        ),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            let dir = motu_package::atomic::parent_dir(path);
+            let name = path
+                .file_name()
+                .with_context(|| format!("{option} {}: names no file", path.display()))?;
+            match std::fs::metadata(dir) {
+                Ok(d) if d.is_dir() => {}
+                Ok(_) => bail!(
+                    "{option} {}: {} is not a directory",
+                    path.display(),
+                    dir.display()
+                ),
+                Err(_) => bail!(
+                    "{option} {}: the directory {} does not exist (create it first)",
+                    path.display(),
+                    dir.display()
+                ),
+            }
+            let dir = dir
+                .canonicalize()
+                .with_context(|| format!("{option} {}: resolving its directory", path.display()))?;
+            Ok(FileIdentity::New(dir.join(name)))
+        }
+        Err(e) => Err(e).with_context(|| format!("{option} {}", path.display())),
+    }
+}
+
+/// `a directory`, `a symbolic link`, `a FIFO`, … for messages.
+pub fn describe_file_type(t: &std::fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_char_device() {
+            return "a character device";
+        }
+        if t.is_block_device() {
+            return "a block device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if t.is_symlink() {
+        "a symbolic link"
+    } else if t.is_dir() {
+        "a directory"
+    } else if t.is_file() {
+        "a regular file"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// Refuses outputs that are inputs of the same command, repeat another output, exist as
+/// anything but a regular file, or lie in a directory that does not exist. Run before work.
+/// `inputs` and `outputs` pair an option name (`-o`, `--aov`, `package`) with a path.
+pub fn check_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> anyhow::Result<()> {
+    let ins: Vec<(&str, &Path, FileIdentity)> = inputs
+        .iter()
+        .filter_map(|&(o, p)| input_identity(p).map(|id| (o, p, id)))
+        .collect();
+    let mut outs: Vec<(&str, &Path, FileIdentity)> = Vec::new();
+    for &(option, path) in outputs {
+        let id = output_identity(option, path)?;
+        if let Some((io, ip, _)) = ins.iter().find(|(_, _, i)| *i == id) {
+            bail!(
+                "{option} {} is the {io} {}: an output never replaces an input (choose another path)",
+                path.display(),
+                ip.display()
+            );
+        }
+        if let Some((oo, op, _)) = outs.iter().find(|(_, _, i)| *i == id) {
+            bail!(
+                "{option} {} and {oo} {} are the same file: each output needs its own path",
+                path.display(),
+                op.display()
+            );
+        }
+        outs.push((option, path, id));
+    }
+    Ok(())
+}
+
+/// Refuses `output` if it is one of `inputs` (files a command read; checked after reading,
+/// for inputs known only then, such as the PLY files a scene references).
+pub fn check_not_an_input<'a>(
+    option: &str,
+    output: &Path,
+    inputs: impl IntoIterator<Item = &'a Path>,
+) -> anyhow::Result<()> {
+    let Ok(m) = std::fs::symlink_metadata(output) else {
+        return Ok(());
+    };
+    let id = identity_of(&m);
+    for p in inputs {
+        if input_identity(p).as_ref() == Some(&id) {
+            bail!(
+                "{option} {} is {}, a file the scene uses: an output never replaces an input (choose another path)",
+                output.display(),
+                p.display()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Writes `bytes` to `path` atomically.
+pub fn write(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    motu_package::atomic::write_atomic(path, bytes)
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+/// Encodes an RGBA8 image as PNG and writes it atomically.
+pub fn write_png(path: &Path, width: u32, height: u32, rgba8: &[u8]) -> anyhow::Result<()> {
+    let png = motu_trace::encode_png(width, height, rgba8)
+        .with_context(|| format!("encoding {}", path.display()))?;
+    write(path, &png)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn regression_output_equal_to_input_or_other_output_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("p.motu");
+        std::fs::write(&input, b"pkg").unwrap();
+        let e = check_outputs(&[("package", &input)], &[("-o", &input)]).unwrap_err();
+        assert!(e.to_string().contains("never replaces an input"), "{e}");
+        // The same file by another spelling and by a hard link.
+        let dotted = dir.path().join(".").join("p.motu");
+        assert!(check_outputs(&[("package", &input)], &[("-o", &dotted)]).is_err());
+        let link = dir.path().join("hard.motu");
+        std::fs::hard_link(&input, &link).unwrap();
+        assert!(check_outputs(&[("package", &input)], &[("--aov", &link)]).is_err());
+        // Two outputs naming one new file.
+        let x = dir.path().join("x");
+        let e = check_outputs(&[], &[("-o", &x), ("--stats", &dotted.with_file_name("x"))])
+            .unwrap_err();
+        assert!(e.to_string().contains("same file"), "{e}");
+        // Distinct outputs pass.
+        check_outputs(
+            &[("package", &input)],
+            &[("-o", &dir.path().join("a.png")), ("--aov", &x)],
+        )
+        .unwrap();
+    }
+
+    #[test]
+    fn regression_non_regular_outputs_and_missing_dirs_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("t.png");
+        std::fs::write(&target, b"x").unwrap();
+        let link = dir.path().join("link.png");
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        let e = check_outputs(&[], &[("-o", &link)]).unwrap_err();
+        assert!(e.to_string().contains("symbolic link"), "{e}");
+        let e = check_outputs(&[], &[("-o", Path::new("/dev/null"))]).unwrap_err();
+        assert!(e.to_string().contains("character device"), "{e}");
+        let e = check_outputs(&[], &[("-o", dir.path())]).unwrap_err();
+        assert!(e.to_string().contains("a directory"), "{e}");
+        let e = check_outputs(&[], &[("--html", &dir.path().join("no/such/r.html"))]).unwrap_err();
+        assert!(e.to_string().contains("does not exist"), "{e}");
+    }
+}

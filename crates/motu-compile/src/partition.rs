@@ -1,0 +1,335 @@
+//! The partitioner: geometry becomes triangle-BLAS units of at most
+//! [`crate::CompileOptions::max_blas_triangles`] triangles, spatially coherent, so that no single
+//! structure is larger than a streaming budget can hold (issue 14).
+//!
+//! - A mesh over the bound is split into **clusters** by recursive median splits of its
+//!   triangle centroids along the largest axis ([`crate::split::median_partition`]: it halves by
+//!   index, so it always terminates and every cluster gets `≥ bound / 2` triangles). Each
+//!   cluster becomes a compiled mesh of its own (only the vertices it uses) with a **primitive
+//!   map**: cluster triangle → source triangle, ascending, so hit records still name the source
+//!   mesh and its primitive. Only one source mesh's data is in memory at a time, and each
+//!   cluster goes to the sink as soon as it is made.
+//! - Small meshes of one prototype (or one element of the root) are **grouped by location**:
+//!   recursive splits at the triangle-weighted median of the mesh bounds' centres until each
+//!   group is under the bound — never one BLAS per mesh, never one BLAS for everything.
+
+use crate::split::median_partition;
+use motu_scene::{Aabb, MeshData};
+
+/// The default bound: 2^16 triangles. Chosen from the size models (BENCHMARKS.md "VRAM model
+/// vs driver sizes": lavapipe 104 B/triangle built, H200 91.7 B/triangle + 67.8 B/triangle of
+/// build scratch) and the default island (`motu gen island --scale 0.002`, 261 MiB full build,
+/// 16.2 MiB always resident): a 2^16 unit needs ≤ 6.5 MiB of AS (≤ 10.5 MiB with H200 scratch,
+/// plus ~1.2 MiB of geometry), so the island's streaming floor (skeleton + the largest unit)
+/// is ~24 MiB, under 10% of its full build; at 2^17 it would be ~29 MiB, at 2^19 (no split on
+/// that island: its largest BLAS has 448k triangles) ~70 MiB. The cost is small: units only
+/// multiply the instances of prototypes over the bound (island: 55,497 → 55,802 instances,
+/// 34 → 71 BLASes, full build 258 → 261 MiB).
+pub const DEFAULT_MAX_BLAS_TRIANGLES: u32 = 1 << 16;
+
+/// One cluster of a partitioned mesh.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Cluster {
+    /// The cluster's own vertices (those its triangles use, renumbered in first-use order) and
+    /// triangles; normals and UVs follow the vertices.
+    pub data: MeshData,
+    /// For each triangle of `data`, its index in the source mesh (ascending).
+    pub primitive_map: Vec<u32>,
+    pub bounds: Aabb,
+}
+
+/// How many clusters [`partition_mesh`] makes for `triangles` (it halves by index).
+pub fn cluster_count(triangles: u64, bound: u32) -> u64 {
+    let bound = u64::from(bound.max(1));
+    if triangles <= bound {
+        return 1;
+    }
+    let half = triangles / 2;
+    cluster_count(half, bound as u32) + cluster_count(triangles - half, bound as u32)
+}
+
+/// Splits `mesh` into spatial clusters of at most `bound` triangles, calling `emit` for each in
+/// spatial order (left half before right half). A mesh within the bound is one cluster.
+pub fn partition_mesh<E>(
+    mesh: &MeshData,
+    bound: u32,
+    emit: &mut dyn FnMut(Cluster) -> Result<(), E>,
+) -> Result<(), E> {
+    let tris = mesh.triangle_count();
+    let centroid = |t: u32| -> [f32; 3] {
+        let i = 3 * t as usize;
+        let p = |k: usize| mesh.positions[mesh.indices[i + k] as usize];
+        let (a, b, c) = (p(0), p(1), p(2));
+        std::array::from_fn(|k| (a[k] + b[k] + c[k]) * (1.0 / 3.0))
+    };
+    let mut order: Vec<(u32, [f32; 3])> = (0..tris as u32).map(|t| (t, centroid(t))).collect();
+    let mut ranges = Vec::new();
+    median_partition(&mut order, |o| o.1, bound.max(1) as usize, &mut ranges);
+    let mut remap = vec![u32::MAX; mesh.positions.len()];
+    for (a, b) in ranges {
+        let mut prims: Vec<u32> = order[a..b].iter().map(|o| o.0).collect();
+        prims.sort_unstable();
+        emit(cluster_of(mesh, prims, &mut remap))?;
+    }
+    Ok(())
+}
+
+/// The sub-mesh of `prims` (source triangle ids); `remap` is scratch of the source's vertex
+/// count, all `u32::MAX` on entry and on return.
+fn cluster_of(mesh: &MeshData, prims: Vec<u32>, remap: &mut [u32]) -> Cluster {
+    let mut order: Vec<u32> = Vec::new();
+    let mut indices = Vec::with_capacity(prims.len() * 3);
+    for &t in &prims {
+        for k in 0..3 {
+            let v = mesh.indices[3 * t as usize + k];
+            let slot = &mut remap[v as usize];
+            if *slot == u32::MAX {
+                *slot = order.len() as u32;
+                order.push(v);
+            }
+            indices.push(*slot);
+        }
+    }
+    let mut bounds = Aabb::EMPTY;
+    let positions: Vec<[f32; 3]> = order
+        .iter()
+        .map(|&v| {
+            let p = mesh.positions[v as usize];
+            bounds = bounds.union(&Aabb { min: p, max: p });
+            p
+        })
+        .collect();
+    let normals = mesh
+        .normals
+        .as_ref()
+        .map(|n| order.iter().map(|&v| n[v as usize]).collect());
+    let uvs = mesh
+        .uvs
+        .as_ref()
+        .map(|uv| order.iter().map(|&v| uv[v as usize]).collect());
+    for &v in &order {
+        remap[v as usize] = u32::MAX;
+    }
+    Cluster {
+        data: MeshData {
+            positions,
+            normals,
+            uvs,
+            indices,
+        },
+        primitive_map: prims,
+        bounds,
+    }
+}
+
+/// One small mesh to group: its index in the caller's list, bounds centre and triangles.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Item {
+    pub index: u32,
+    pub centre: [f32; 3],
+    pub triangles: u64,
+}
+
+/// Partitions `items` in place into consecutive groups whose triangle sums are at most
+/// `bound` (an item over the bound is a group of its own), appended to `out` as `(begin, end)`
+/// in spatial order: recursive splits at the triangle-weighted median along the largest axis
+/// of the centres. Terminates on any input: each split leaves both sides non-empty.
+pub(crate) fn group_by_location(items: &mut [Item], bound: u64, out: &mut Vec<(usize, usize)>) {
+    let mut stack = vec![(0usize, items.len())];
+    while let Some((begin, end)) = stack.pop() {
+        let slice = &mut items[begin..end];
+        let total: u64 = slice.iter().map(|i| i.triangles).sum();
+        if slice.is_empty() {
+            continue;
+        }
+        if total <= bound || slice.len() == 1 {
+            out.push((begin, end));
+            continue;
+        }
+        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        for it in slice.iter() {
+            for k in 0..3 {
+                lo[k] = lo[k].min(it.centre[k]);
+                hi[k] = hi[k].max(it.centre[k]);
+            }
+        }
+        let extent: [f32; 3] = std::array::from_fn(|k| hi[k] - lo[k]);
+        let axis = (0..3)
+            .filter(|&k| extent[k].is_finite())
+            .max_by(|&a, &b| extent[a].total_cmp(&extent[b]))
+            .unwrap_or(0);
+        // Stable, so coincident centres keep the caller's (mesh) order: deterministic groups.
+        slice.sort_by(|a, b| a.centre[axis].total_cmp(&b.centre[axis]));
+        // The first item whose prefix sum reaches half the total goes to whichever side
+        // leaves the heavier side lighter.
+        let mut acc = 0u64;
+        let mut mid = slice.len() / 2;
+        for (k, it) in slice.iter().enumerate() {
+            acc += it.triangles;
+            if 2 * acc >= total {
+                let before = acc - it.triangles;
+                mid = if before.max(total - before) < acc.max(total - acc) {
+                    k
+                } else {
+                    k + 1
+                };
+                break;
+            }
+        }
+        let mid = mid.clamp(1, slice.len() - 1);
+        // Right first so the left half is popped (and emitted) first.
+        stack.push((begin + mid, end));
+        stack.push((begin, begin + mid));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testutil::grid_mesh;
+
+    fn centroid(m: &MeshData, t: usize) -> [f32; 3] {
+        let p = |k: usize| m.positions[m.indices[3 * t + k] as usize];
+        std::array::from_fn(|a| (p(0)[a] + p(1)[a] + p(2)[a]) / 3.0)
+    }
+
+    /// Bounds respected, every source triangle in exactly one cluster with its own vertices,
+    /// maps ascending; clusters spatially coherent (disjoint centroid boxes along some axis).
+    #[test]
+    fn clusters_cover_every_triangle_once_within_the_bound() {
+        let grid = grid_mesh(64, true); // 2 × 64² triangles
+        let n = grid.triangle_count();
+        for bound in [1u32, 7, 1000, 4096, 8192, 10_000] {
+            let mut seen = vec![0u32; n];
+            let mut clusters = Vec::new();
+            partition_mesh(&grid, bound, &mut |c: Cluster| -> Result<(), ()> {
+                clusters.push(c);
+                Ok(())
+            })
+            .unwrap();
+            assert_eq!(clusters.len() as u64, cluster_count(n as u64, bound));
+            for c in &clusters {
+                let t = c.data.triangle_count();
+                assert!(t >= 1 && t <= bound as usize, "{t} over {bound}");
+                assert!(
+                    t * 2 >= (bound as usize).min(n),
+                    "a median split keeps ≥ half"
+                );
+                c.data.validate().unwrap();
+                assert_eq!(c.primitive_map.len(), t);
+                assert!(c.primitive_map.windows(2).all(|w| w[0] < w[1]));
+                assert_eq!(
+                    c.data.normals.as_ref().map(Vec::len),
+                    Some(c.data.positions.len())
+                );
+                for (local, &src) in c.primitive_map.iter().enumerate() {
+                    seen[src as usize] += 1;
+                    for k in 0..3 {
+                        let a = c.data.positions[c.data.indices[3 * local + k] as usize];
+                        let b = grid.positions[grid.indices[3 * src as usize + k] as usize];
+                        assert_eq!(a, b, "cluster triangle {local} is source {src}");
+                    }
+                }
+                assert!(grid.bounds().contains(&c.bounds, 0.0));
+                assert_eq!(c.bounds, c.data.bounds());
+            }
+            assert!(seen.iter().all(|&s| s == 1), "bound {bound}: coverage");
+            if bound >= 1000 {
+                // Spatial coherence: the clusters' areas sum to about the grid's (a split along
+                // the largest axis of a plane gives tiles; a random split would give overlaps).
+                let area = |b: &Aabb| (b.max[0] - b.min[0]) * (b.max[1] - b.min[1]);
+                let sum: f32 = clusters.iter().map(|c| area(&c.bounds)).sum();
+                let whole = area(&grid.bounds());
+                assert!(sum <= whole * 1.3, "clusters overlap: {sum} vs {whole}");
+                // Centroid boxes of any two clusters are disjoint on some axis.
+                let cbox = |c: &Cluster| {
+                    let mut b = Aabb::EMPTY;
+                    for &t in &c.primitive_map {
+                        let p = centroid(&grid, t as usize);
+                        b = b.union(&Aabb { min: p, max: p });
+                    }
+                    b
+                };
+                let boxes: Vec<Aabb> = clusters.iter().map(cbox).collect();
+                for i in 0..boxes.len() {
+                    for j in i + 1..boxes.len() {
+                        let (a, b) = (&boxes[i], &boxes[j]);
+                        assert!(
+                            (0..3).any(|k| a.max[k] <= b.min[k] || b.max[k] <= a.min[k]),
+                            "clusters {i} and {j} interleave"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn cluster_counts_halve() {
+        assert_eq!(cluster_count(0, 10), 1);
+        assert_eq!(cluster_count(10, 10), 1);
+        assert_eq!(cluster_count(11, 10), 2);
+        assert_eq!(cluster_count(2_000_000, 1 << 19), 4);
+        assert_eq!(cluster_count(2_200_000, 1 << 19), 8);
+        assert_eq!(cluster_count(2_000_000, DEFAULT_MAX_BLAS_TRIANGLES), 32);
+    }
+
+    fn item(index: u32, x: f32, triangles: u64) -> Item {
+        Item {
+            index,
+            centre: [x, 0.0, 0.0],
+            triangles,
+        }
+    }
+
+    #[test]
+    fn small_meshes_group_by_location_under_the_bound() {
+        // 100 meshes of 10 triangles along x, shuffled: groups of ≤ 250 triangles, contiguous
+        // in x, and no more groups than needed twice over.
+        let mut items: Vec<Item> = (0..100u32)
+            .map(|i| item(i, ((i * 37) % 100) as f32, 10))
+            .collect();
+        let mut out = Vec::new();
+        group_by_location(&mut items, 250, &mut out);
+        let mut next = 0;
+        let mut last_max = f32::NEG_INFINITY;
+        for &(a, b) in &out {
+            assert_eq!(a, next);
+            next = b;
+            let g = &items[a..b];
+            let tris: u64 = g.iter().map(|i| i.triangles).sum();
+            assert!(tris <= 250, "{tris}");
+            let min = g.iter().map(|i| i.centre[0]).fold(f32::INFINITY, f32::min);
+            let max = g
+                .iter()
+                .map(|i| i.centre[0])
+                .fold(f32::NEG_INFINITY, f32::max);
+            assert!(min > last_max, "groups are spatially ordered and disjoint");
+            last_max = max;
+        }
+        assert_eq!(next, 100);
+        assert!(out.len() >= 4 && out.len() <= 8, "{} groups", out.len());
+        let mut ids: Vec<u32> = items.iter().map(|i| i.index).collect();
+        ids.sort_unstable();
+        assert_eq!(ids, (0..100).collect::<Vec<_>>());
+
+        // Within the bound: one group; weighted: one heavy item splits off alone.
+        let mut few = vec![item(0, 0.0, 5), item(1, 1.0, 5)];
+        out.clear();
+        group_by_location(&mut few, 10, &mut out);
+        assert_eq!(out, vec![(0, 2)]);
+        let mut heavy = vec![item(0, 0.0, 90), item(1, 1.0, 5), item(2, 2.0, 5)];
+        out.clear();
+        group_by_location(&mut heavy, 50, &mut out);
+        assert_eq!(out, vec![(0, 1), (1, 3)]);
+        // An item over the bound alone, coincident centres and NaN terminate.
+        let mut same = vec![item(0, 1.0, 30); 40];
+        out.clear();
+        group_by_location(&mut same, 100, &mut out);
+        assert!(out.iter().all(|&(a, b)| (b - a) * 30 <= 100));
+        let mut nan = vec![item(0, f32::NAN, 30); 9];
+        out.clear();
+        group_by_location(&mut nan, 31, &mut out);
+        assert_eq!(out.len(), 9);
+    }
+}

@@ -1,0 +1,673 @@
+//! Presenting finished frames to a window (`motu view`): a Vulkan surface and its swapchain.
+//!
+//! The renderers write RGBA8 into buffers that are read back anyway (the AOV, the heatmap
+//! colouring and the statistics are computed from them), so the presenter takes a finished
+//! RGBA8 frame, uploads it into a host-visible buffer and copies it into the acquired swapchain
+//! image: a raw texel copy, since the bytes are already sRGB-encoded (UNORM and SRGB formats
+//! both show them exactly as the headless PNG has them). With `read_back`, the presented image
+//! is copied out again before presentation: that is how `--screenshot` proves the window shows
+//! the same pixels as `motu render`.
+//!
+//! One frame in flight: `present` waits for its own submission, which keeps buffer reuse
+//! trivially safe; the renderer's own fence already serialises the frame.
+
+use std::sync::Arc;
+
+use ash::vk;
+pub use raw_window_handle::{RawDisplayHandle, RawWindowHandle};
+
+use crate::context::Context;
+use crate::error::{GpuError, Result};
+use crate::memory::{Buffer, BufferDesc, BufferUsage, MemoryLocation};
+
+/// What [`Presenter::present`] did.
+#[derive(Debug)]
+pub enum Presented {
+    /// The frame is on screen; with `read_back`, the swapchain image's pixels as RGBA8 (`None`
+    /// when the image could not be read: its size differs from the frame's, or the surface does
+    /// not allow reading swapchain images).
+    Shown { readback: Option<Vec<u8>> },
+    /// The surface is out of date or has zero size (minimised): nothing was shown; the
+    /// swapchain is recreated on the next call.
+    Skipped,
+}
+
+/// A window surface and its swapchain. Drop it before the window.
+pub struct Presenter {
+    ctx: Context,
+    surface_fn: ash::khr::surface::Instance,
+    swapchain_fn: ash::khr::swapchain::Device,
+    surface: vk::SurfaceKHR,
+    swapchain: vk::SwapchainKHR,
+    images: Vec<vk::Image>,
+    format: vk::Format,
+    extent: [u32; 2],
+    readable: bool,
+    pool: vk::CommandPool,
+    cmd: vk::CommandBuffer,
+    fence: vk::Fence,
+    acquired: vk::Semaphore,
+    /// Per swapchain image: signalled by the copy, waited on by presentation.
+    rendered: Vec<vk::Semaphore>,
+    upload: Option<Buffer>,
+    readback: Option<Buffer>,
+    vsync: bool,
+    wanted: [u32; 2],
+    stale: bool,
+}
+
+impl std::fmt::Debug for Presenter {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Presenter")
+            .field("format", &self.format)
+            .field("extent", &self.extent)
+            .field("images", &self.images.len())
+            .finish()
+    }
+}
+
+fn is_bgra(format: vk::Format) -> bool {
+    matches!(
+        format,
+        vk::Format::B8G8R8A8_UNORM | vk::Format::B8G8R8A8_SRGB
+    )
+}
+
+impl Presenter {
+    /// Creates a surface for `window` and a swapchain of `size` (the window's inner size in
+    /// pixels). `ctx` must have been opened with [`crate::ContextOptions::presentation`] set to
+    /// this window's display. `vsync` picks FIFO presentation, else MAILBOX/IMMEDIATE where
+    /// available.
+    ///
+    /// # Safety
+    /// `display` and `window` must be valid handles of a live window that outlives the
+    /// returned `Presenter`.
+    pub unsafe fn new(
+        ctx: &Context,
+        display: RawDisplayHandle,
+        window: RawWindowHandle,
+        size: [u32; 2],
+        vsync: bool,
+    ) -> Result<Presenter> {
+        let shared = &ctx.shared;
+        let inst = &shared.instance;
+        // SAFETY: the caller guarantees live handles outliving the surface (and so this
+        // Presenter, which destroys the surface); the instance enabled the surface extensions
+        // for this display (Context::new with `presentation`).
+        let surface = unsafe {
+            ash_window::create_surface(&inst.entry, &inst.instance, display, window, None)
+        }
+        .map_err(GpuError::vk("vkCreate*SurfaceKHR"))?;
+        let surface_fn = ash::khr::surface::Instance::new(&inst.entry, &inst.instance);
+        let swapchain_fn = ash::khr::swapchain::Device::new(&inst.instance, &shared.device);
+        let mut p = Presenter {
+            ctx: ctx.clone(),
+            surface_fn,
+            swapchain_fn,
+            surface,
+            swapchain: vk::SwapchainKHR::null(),
+            images: Vec::new(),
+            format: vk::Format::UNDEFINED,
+            extent: [0, 0],
+            readable: false,
+            pool: vk::CommandPool::null(),
+            cmd: vk::CommandBuffer::null(),
+            fence: vk::Fence::null(),
+            acquired: vk::Semaphore::null(),
+            rendered: Vec::new(),
+            upload: None,
+            readback: None,
+            vsync,
+            wanted: size,
+            stale: true,
+        };
+        // SAFETY: the surface and the physical device belong to this instance.
+        let supported = unsafe {
+            p.surface_fn.get_physical_device_surface_support(
+                shared.info.handle,
+                shared.queue_family_index,
+                surface,
+            )
+        }
+        .map_err(GpuError::vk("vkGetPhysicalDeviceSurfaceSupportKHR"))?;
+        if !supported {
+            return Err(GpuError::DeviceUnsuitable {
+                index: shared.info.index,
+                name: shared.info.name.clone(),
+                reason: "its compute queue cannot present to this window".into(),
+            });
+        }
+        let device = &shared.device;
+        let pool_info = vk::CommandPoolCreateInfo::default()
+            .queue_family_index(shared.queue_family_index)
+            .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
+        // SAFETY: valid create infos for this device; every object is owned by `p` (Drop).
+        unsafe {
+            p.pool = device
+                .create_command_pool(&pool_info, None)
+                .map_err(GpuError::vk("vkCreateCommandPool"))?;
+            p.cmd = device
+                .allocate_command_buffers(
+                    &vk::CommandBufferAllocateInfo::default()
+                        .command_pool(p.pool)
+                        .level(vk::CommandBufferLevel::PRIMARY)
+                        .command_buffer_count(1),
+                )
+                .map_err(GpuError::vk("vkAllocateCommandBuffers"))?[0];
+            p.fence = device
+                .create_fence(&vk::FenceCreateInfo::default(), None)
+                .map_err(GpuError::vk("vkCreateFence"))?;
+            p.acquired = device
+                .create_semaphore(&vk::SemaphoreCreateInfo::default(), None)
+                .map_err(GpuError::vk("vkCreateSemaphore"))?;
+        }
+        p.recreate()?;
+        Ok(p)
+    }
+
+    /// The swapchain's size in pixels (`[0, 0]` while minimised): render frames of this size.
+    pub fn extent(&self) -> [u32; 2] {
+        self.extent
+    }
+
+    /// The window's new inner size: the swapchain is recreated before the next frame.
+    pub fn resize(&mut self, size: [u32; 2]) {
+        self.wanted = size;
+        self.stale = true;
+    }
+
+    /// Recreates the swapchain if it is out of date; returns the extent to render at.
+    pub fn prepare(&mut self) -> Result<[u32; 2]> {
+        if self.stale {
+            self.recreate()?;
+        }
+        Ok(self.extent)
+    }
+
+    fn recreate(&mut self) -> Result<()> {
+        let shared = Arc::clone(&self.ctx.shared);
+        let phys = shared.info.handle;
+        // SAFETY: surface and physical device belong to this instance.
+        let caps = unsafe {
+            self.surface_fn
+                .get_physical_device_surface_capabilities(phys, self.surface)
+        }
+        .map_err(GpuError::vk("vkGetPhysicalDeviceSurfaceCapabilitiesKHR"))?;
+        // SAFETY: as above.
+        let formats = unsafe {
+            self.surface_fn
+                .get_physical_device_surface_formats(phys, self.surface)
+        }
+        .map_err(GpuError::vk("vkGetPhysicalDeviceSurfaceFormatsKHR"))?;
+        // SAFETY: as above.
+        let modes = unsafe {
+            self.surface_fn
+                .get_physical_device_surface_present_modes(phys, self.surface)
+        }
+        .map_err(GpuError::vk("vkGetPhysicalDeviceSurfacePresentModesKHR"))?;
+        let preference = [
+            vk::Format::B8G8R8A8_UNORM,
+            vk::Format::R8G8B8A8_UNORM,
+            vk::Format::B8G8R8A8_SRGB,
+            vk::Format::R8G8B8A8_SRGB,
+        ];
+        let Some(format) = preference
+            .iter()
+            .find_map(|f| formats.iter().find(|s| s.format == *f))
+            .copied()
+        else {
+            return Err(GpuError::InvalidRequest(format!(
+                "the window surface offers no 8-bit RGBA/BGRA format (it offers {:?})",
+                formats.iter().map(|f| f.format).collect::<Vec<_>>()
+            )));
+        };
+        if !caps
+            .supported_usage_flags
+            .contains(vk::ImageUsageFlags::TRANSFER_DST)
+        {
+            return Err(GpuError::InvalidRequest(
+                "the window surface does not allow copying into swapchain images".into(),
+            ));
+        }
+        let readable = caps
+            .supported_usage_flags
+            .contains(vk::ImageUsageFlags::TRANSFER_SRC);
+        let extent = if caps.current_extent.width != u32::MAX {
+            caps.current_extent
+        } else {
+            vk::Extent2D {
+                width: self.wanted[0].clamp(
+                    caps.min_image_extent.width,
+                    caps.max_image_extent.width.max(1),
+                ),
+                height: self.wanted[1].clamp(
+                    caps.min_image_extent.height,
+                    caps.max_image_extent.height.max(1),
+                ),
+            }
+        };
+        // SAFETY: nothing of ours is pending (every present waited for its fence), but the
+        // presentation engine may still hold old images: wait before destroying them.
+        unsafe { shared.device.device_wait_idle() }.map_err(GpuError::vk("vkDeviceWaitIdle"))?;
+        self.destroy_swapchain();
+        self.extent = [0, 0];
+        self.stale = false;
+        if extent.width == 0 || extent.height == 0 {
+            // Minimised: no swapchain until the window has a size again.
+            self.stale = true;
+            return Ok(());
+        }
+        let mode = if self.vsync {
+            vk::PresentModeKHR::FIFO
+        } else {
+            [vk::PresentModeKHR::MAILBOX, vk::PresentModeKHR::IMMEDIATE]
+                .into_iter()
+                .find(|m| modes.contains(m))
+                .unwrap_or(vk::PresentModeKHR::FIFO)
+        };
+        let mut count = caps.min_image_count + 1;
+        if caps.max_image_count > 0 {
+            count = count.min(caps.max_image_count);
+        }
+        let alpha = [
+            vk::CompositeAlphaFlagsKHR::OPAQUE,
+            vk::CompositeAlphaFlagsKHR::INHERIT,
+            vk::CompositeAlphaFlagsKHR::PRE_MULTIPLIED,
+            vk::CompositeAlphaFlagsKHR::POST_MULTIPLIED,
+        ]
+        .into_iter()
+        .find(|a| caps.supported_composite_alpha.contains(*a))
+        .unwrap_or(vk::CompositeAlphaFlagsKHR::OPAQUE);
+        let mut usage = vk::ImageUsageFlags::TRANSFER_DST;
+        if readable {
+            usage |= vk::ImageUsageFlags::TRANSFER_SRC;
+        }
+        let info = vk::SwapchainCreateInfoKHR::default()
+            .surface(self.surface)
+            .min_image_count(count)
+            .image_format(format.format)
+            .image_color_space(format.color_space)
+            .image_extent(extent)
+            .image_array_layers(1)
+            .image_usage(usage)
+            .image_sharing_mode(vk::SharingMode::EXCLUSIVE)
+            .pre_transform(caps.current_transform)
+            .composite_alpha(alpha)
+            .present_mode(mode)
+            .clipped(true);
+        // SAFETY: the surface is live and supported by this queue family; the info uses only
+        // supported values (queried above); the old swapchain was destroyed.
+        self.swapchain = unsafe { self.swapchain_fn.create_swapchain(&info, None) }
+            .map_err(GpuError::vk("vkCreateSwapchainKHR"))?;
+        // SAFETY: the swapchain was just created.
+        self.images = unsafe { self.swapchain_fn.get_swapchain_images(self.swapchain) }
+            .map_err(GpuError::vk("vkGetSwapchainImagesKHR"))?;
+        for _ in 0..self.images.len() {
+            // SAFETY: valid create info; destroyed with the swapchain.
+            let s = unsafe {
+                shared
+                    .device
+                    .create_semaphore(&vk::SemaphoreCreateInfo::default(), None)
+            }
+            .map_err(GpuError::vk("vkCreateSemaphore"))?;
+            self.rendered.push(s);
+        }
+        self.format = format.format;
+        self.readable = readable;
+        self.extent = [extent.width, extent.height];
+        tracing::info!(
+            width = extent.width,
+            height = extent.height,
+            format = ?format.format,
+            mode = ?mode,
+            images = self.images.len(),
+            "swapchain created"
+        );
+        Ok(())
+    }
+
+    fn destroy_swapchain(&mut self) {
+        let device = &self.ctx.shared.device;
+        for s in self.rendered.drain(..) {
+            // SAFETY: the device is idle (callers wait), so no pending wait uses it.
+            unsafe { device.destroy_semaphore(s, None) };
+        }
+        if self.swapchain != vk::SwapchainKHR::null() {
+            // SAFETY: the device is idle; the images go with the swapchain.
+            unsafe { self.swapchain_fn.destroy_swapchain(self.swapchain, None) };
+            self.swapchain = vk::SwapchainKHR::null();
+        }
+        self.images.clear();
+    }
+
+    fn host_buffer(
+        ctx: &Context,
+        slot: &mut Option<Buffer>,
+        label: &str,
+        size: u64,
+        usage: BufferUsage,
+        location: MemoryLocation,
+    ) -> Result<()> {
+        if slot.as_ref().is_none_or(|b| b.size_bytes() < size) {
+            *slot = None;
+            *slot = Some(Buffer::new_dedicated(
+                ctx,
+                label,
+                &BufferDesc {
+                    size_bytes: size,
+                    usage,
+                },
+                location,
+            )?);
+        }
+        Ok(())
+    }
+
+    /// Shows `rgba8` (`width × height`, row 0 at the top): copied into the next swapchain image
+    /// at the top-left (a frame smaller than the swapchain leaves the rest dark, a larger one
+    /// is cut), then presented. See [`Presented`].
+    pub fn present(
+        &mut self,
+        rgba8: &[u8],
+        width: u32,
+        height: u32,
+        read_back: bool,
+    ) -> Result<Presented> {
+        let pixels = u64::from(width) * u64::from(height);
+        if width == 0 || height == 0 || rgba8.len() as u64 != pixels * 4 {
+            return Err(GpuError::InvalidRequest(format!(
+                "present: {} bytes for a {width}×{height} frame",
+                rgba8.len()
+            )));
+        }
+        if self.stale {
+            self.recreate()?;
+        }
+        if self.swapchain == vk::SwapchainKHR::null() {
+            return Ok(Presented::Skipped);
+        }
+        let ctx = self.ctx.clone();
+        Self::host_buffer(
+            &ctx,
+            &mut self.upload,
+            "present-upload",
+            pixels * 4,
+            BufferUsage::TRANSFER_SRC,
+            MemoryLocation::Upload,
+        )?;
+        let upload = self
+            .upload
+            .as_ref()
+            .ok_or_else(|| GpuError::InvalidRequest("present: no upload buffer".into()))?;
+        if is_bgra(self.format) {
+            let mut bgra = rgba8.to_vec();
+            bgra.chunks_exact_mut(4).for_each(|p| p.swap(0, 2));
+            upload.write_bytes(0, &bgra)?;
+        } else {
+            upload.write_bytes(0, rgba8)?;
+        }
+        let [ew, eh] = self.extent;
+        let readable = read_back && self.readable && [width, height] == [ew, eh];
+        if readable {
+            Self::host_buffer(
+                &ctx,
+                &mut self.readback,
+                "present-readback",
+                pixels * 4,
+                BufferUsage::TRANSFER_DST,
+                MemoryLocation::Readback,
+            )?;
+        }
+        let shared = &ctx.shared;
+        let device = &shared.device;
+        // SAFETY: the swapchain is live; `acquired` is unsignalled (its last wait completed:
+        // the submission that waited on it was fenced).
+        let acquired = unsafe {
+            self.swapchain_fn.acquire_next_image(
+                self.swapchain,
+                u64::MAX,
+                self.acquired,
+                vk::Fence::null(),
+            )
+        };
+        let index = match acquired {
+            Ok((i, suboptimal)) => {
+                if suboptimal {
+                    self.stale = true;
+                }
+                i
+            }
+            Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => {
+                self.stale = true;
+                return Ok(Presented::Skipped);
+            }
+            Err(e) => {
+                return Err(GpuError::Vulkan {
+                    call: "vkAcquireNextImageKHR",
+                    result: e,
+                })
+            }
+        };
+        let image = self.images[index as usize];
+        let rendered = self.rendered[index as usize];
+        let cmd = self.cmd;
+        let range = vk::ImageSubresourceRange::default()
+            .aspect_mask(vk::ImageAspectFlags::COLOR)
+            .level_count(1)
+            .layer_count(1);
+        let barrier = |old, new, src_access, dst_access| {
+            vk::ImageMemoryBarrier::default()
+                .old_layout(old)
+                .new_layout(new)
+                .src_access_mask(src_access)
+                .dst_access_mask(dst_access)
+                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .image(image)
+                .subresource_range(range)
+        };
+        let layers = vk::ImageSubresourceLayers::default()
+            .aspect_mask(vk::ImageAspectFlags::COLOR)
+            .layer_count(1);
+        let copy = vk::BufferImageCopy::default()
+            .buffer_row_length(width)
+            .buffer_image_height(height)
+            .image_subresource(layers)
+            .image_extent(vk::Extent3D {
+                width: width.min(ew),
+                height: height.min(eh),
+                depth: 1,
+            });
+        // SAFETY: the command buffer is not pending (the last submission was fenced); the image
+        // was acquired (its semaphore is waited on below); the buffers live in `self` until the
+        // fence wait at the end of this function.
+        unsafe {
+            device
+                .reset_command_buffer(cmd, vk::CommandBufferResetFlags::empty())
+                .map_err(GpuError::vk("vkResetCommandBuffer"))?;
+            device
+                .begin_command_buffer(
+                    cmd,
+                    &vk::CommandBufferBeginInfo::default()
+                        .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
+                )
+                .map_err(GpuError::vk("vkBeginCommandBuffer"))?;
+            device.cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[barrier(
+                    vk::ImageLayout::UNDEFINED,
+                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                    vk::AccessFlags::empty(),
+                    vk::AccessFlags::TRANSFER_WRITE,
+                )],
+            );
+            if width < ew || height < eh {
+                device.cmd_clear_color_image(
+                    cmd,
+                    image,
+                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                    &vk::ClearColorValue {
+                        float32: [0.05, 0.05, 0.05, 1.0],
+                    },
+                    &[range],
+                );
+                device.cmd_pipeline_barrier(
+                    cmd,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::DependencyFlags::empty(),
+                    &[],
+                    &[],
+                    &[barrier(
+                        vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                        vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                        vk::AccessFlags::TRANSFER_WRITE,
+                        vk::AccessFlags::TRANSFER_WRITE,
+                    )],
+                );
+            }
+            device.cmd_copy_buffer_to_image(
+                cmd,
+                upload.handle(),
+                image,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                &[copy],
+            );
+            let mut last = vk::ImageLayout::TRANSFER_DST_OPTIMAL;
+            if let (true, Some(rb)) = (readable, self.readback.as_ref()) {
+                device.cmd_pipeline_barrier(
+                    cmd,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::DependencyFlags::empty(),
+                    &[],
+                    &[],
+                    &[barrier(
+                        last,
+                        vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                        vk::AccessFlags::TRANSFER_WRITE,
+                        vk::AccessFlags::TRANSFER_READ,
+                    )],
+                );
+                device.cmd_copy_image_to_buffer(
+                    cmd,
+                    image,
+                    vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                    rb.handle(),
+                    &[copy],
+                );
+                let host = vk::BufferMemoryBarrier::default()
+                    .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                    .dst_access_mask(vk::AccessFlags::HOST_READ)
+                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                    .buffer(rb.handle())
+                    .size(vk::WHOLE_SIZE);
+                device.cmd_pipeline_barrier(
+                    cmd,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::PipelineStageFlags::HOST,
+                    vk::DependencyFlags::empty(),
+                    &[],
+                    &[host],
+                    &[],
+                );
+                last = vk::ImageLayout::TRANSFER_SRC_OPTIMAL;
+            }
+            device.cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::BOTTOM_OF_PIPE,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[barrier(
+                    last,
+                    vk::ImageLayout::PRESENT_SRC_KHR,
+                    vk::AccessFlags::TRANSFER_WRITE,
+                    vk::AccessFlags::empty(),
+                )],
+            );
+            device
+                .end_command_buffer(cmd)
+                .map_err(GpuError::vk("vkEndCommandBuffer"))?;
+        }
+        let waits = [self.acquired];
+        let stages = [vk::PipelineStageFlags::TRANSFER];
+        let cmds = [cmd];
+        let signals = [rendered];
+        let submit = vk::SubmitInfo::default()
+            .wait_semaphores(&waits)
+            .wait_dst_stage_mask(&stages)
+            .command_buffers(&cmds)
+            .signal_semaphores(&signals);
+        let swapchains = [self.swapchain];
+        let indices = [index];
+        let present = vk::PresentInfoKHR::default()
+            .wait_semaphores(&signals)
+            .swapchains(&swapchains)
+            .image_indices(&indices);
+        let presented = {
+            let queue = shared.queue();
+            // SAFETY: the queue is externally synchronised by its lock; the fence is unsignalled
+            // (reset after each wait); every handle recorded lives in `self`.
+            unsafe { device.queue_submit(*queue, &[submit], self.fence) }
+                .map_err(GpuError::vk("vkQueueSubmit"))?;
+            // SAFETY: as above; the image was acquired from this swapchain.
+            unsafe { self.swapchain_fn.queue_present(*queue, &present) }
+        };
+        // SAFETY: the fence was submitted just above.
+        unsafe {
+            device
+                .wait_for_fences(&[self.fence], true, u64::MAX)
+                .map_err(|r| GpuError::from_submit("vkWaitForFences", r, "present"))?;
+            device
+                .reset_fences(&[self.fence])
+                .map_err(GpuError::vk("vkResetFences"))?;
+        }
+        match presented {
+            Ok(false) => {}
+            Ok(true) | Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => self.stale = true,
+            Err(e) => {
+                return Err(GpuError::Vulkan {
+                    call: "vkQueuePresentKHR",
+                    result: e,
+                })
+            }
+        }
+        let readback = match (readable, self.readback.as_ref()) {
+            (true, Some(rb)) => {
+                let mut px = vec![0u8; (pixels * 4) as usize];
+                rb.read_bytes(0, &mut px)?;
+                if is_bgra(self.format) {
+                    px.chunks_exact_mut(4).for_each(|p| p.swap(0, 2));
+                }
+                Some(px)
+            }
+            _ => None,
+        };
+        Ok(Presented::Shown { readback })
+    }
+}
+
+impl Drop for Presenter {
+    fn drop(&mut self) {
+        let shared = Arc::clone(&self.ctx.shared);
+        let device = &shared.device;
+        // SAFETY: waiting idle first makes every object unused; each is destroyed once, the
+        // swapchain before its surface.
+        unsafe {
+            let _ = device.device_wait_idle();
+            self.destroy_swapchain();
+            device.destroy_semaphore(self.acquired, None);
+            device.destroy_fence(self.fence, None);
+            device.destroy_command_pool(self.pool, None);
+            self.surface_fn.destroy_surface(self.surface, None);
+        }
+    }
+}

@@ -1,0 +1,732 @@
+//! motu-view: the interactive viewer behind `motu view`.
+//!
+//! A winit window whose frames come from a [`FrameSource`] (the CLI's: a full GPU build or the
+//! streaming renderer, on a [`motu_gpu::Context`] opened for presentation) and reach the screen
+//! through [`motu_gpu::Presenter`] (surface and swapchain live in motu-gpu: no Vulkan here).
+//! A fly camera, the scene's cameras on number keys, views, LOD modes and element toggles
+//! change the next frame's [`RenderOptions`]; an 8×8 bitmap-font overlay shows the frame's
+//! numbers. For tests and scripts, [`ViewOptions::frames`] renders that many frames through the
+//! real window and swapchain, reads the last one back from the swapchain image and exits.
+
+mod fly;
+mod overlay;
+
+use std::time::Instant;
+
+use motu_abi::camera::{CameraParams, CameraPose};
+use motu_gpu::{Presented, Presenter, RenderOptions, RenderOutput, View};
+use winit::application::ApplicationHandler;
+use winit::dpi::PhysicalSize;
+use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
+use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
+use winit::keyboard::{KeyCode, ModifiersState, PhysicalKey};
+use winit::raw_window_handle::{HasDisplayHandle, HasWindowHandle};
+use winit::window::{Window, WindowId};
+
+pub use fly::{FlyCamera, Motion};
+pub use overlay::draw_text;
+
+/// Errors of the viewer; the CLI adds context.
+#[derive(Debug, thiserror::Error)]
+pub enum ViewError {
+    #[error(
+        "no display: neither DISPLAY nor WAYLAND_DISPLAY is set, so `motu view` cannot open a \
+         window. Render headless with `motu render` instead (same --camera, --view, --aov, \
+         --stats; `--camera-path FILE --frames N` replays a recorded flight)"
+    )]
+    NoDisplay,
+    #[error("the window system failed: {0}")]
+    Window(String),
+    #[error(transparent)]
+    Gpu(#[from] motu_gpu::GpuError),
+    #[error("{0}")]
+    Source(String),
+    #[error(
+        "the last frame is incomplete ({0} pixels unfinished after the streaming pass cap): \
+         render more frames (--frames) or raise --vram-budget; a wrong image is not written"
+    )]
+    Incomplete(u64),
+    #[error(
+        "the window is {got_w}×{got_h}, not the requested {want_w}×{want_h} (a window manager \
+         resized it?): the screenshot would not show the requested frame"
+    )]
+    WrongSize {
+        got_w: u32,
+        got_h: u32,
+        want_w: u32,
+        want_h: u32,
+    },
+}
+
+/// Whether a window system is reachable (`DISPLAY` or `WAYLAND_DISPLAY` set and not empty).
+pub fn check_display() -> Result<(), ViewError> {
+    let set = |k: &str| std::env::var_os(k).is_some_and(|v| !v.is_empty());
+    if set("DISPLAY") || set("WAYLAND_DISPLAY") {
+        Ok(())
+    } else {
+        Err(ViewError::NoDisplay)
+    }
+}
+
+/// Numbers for the overlay that only the source knows.
+#[derive(Clone, Debug, Default)]
+pub struct SourceStats {
+    pub vram_used_bytes: u64,
+    pub vram_budget_bytes: u64,
+    pub resident_structures: u64,
+    pub total_structures: u64,
+    /// Streaming: the frame's build–trace passes (1 for a full build).
+    pub passes: u32,
+    /// Streaming: structures built and evicted this frame; `None` for a full build.
+    pub streaming: Option<(u32, u32)>,
+    /// Pixels left unfinished by the frame's pass cap (streaming; refined by later frames).
+    /// Shown while flying; a scripted run fails if its last frame has any.
+    pub incomplete_pixels: u64,
+}
+
+/// One rendered frame.
+#[derive(Debug)]
+pub struct SourceFrame {
+    pub output: RenderOutput,
+    pub stats: SourceStats,
+    /// Extra JSON-able detail for `--stats` (e.g. the streaming frame's statistics).
+    pub detail: Option<String>,
+}
+
+/// What the viewer draws from; implemented by the CLI over a package.
+pub trait FrameSource {
+    /// The device (opened with [`motu_gpu::ContextOptions::presentation`]).
+    fn context(&self) -> &motu_gpu::Context;
+    /// Renders `camera` with `opts`, showing only the elements whose entry in `elements_on` is
+    /// true (a change of the set may rebuild structures).
+    fn render(
+        &mut self,
+        camera: &CameraParams,
+        opts: &RenderOptions,
+        elements_on: &[bool],
+    ) -> Result<SourceFrame, String>;
+}
+
+/// How the viewer starts.
+#[derive(Clone, Debug)]
+pub struct ViewOptions {
+    pub title: String,
+    /// Initial window (and, with `frames`, exact image) size.
+    pub width: u32,
+    pub height: u32,
+    pub start: CameraPose,
+    /// The scene's cameras (number keys 1–9).
+    pub cameras: Vec<(String, CameraPose)>,
+    pub render: RenderOptions,
+    /// Element names and which are on at the start (Shift+1–9 toggle).
+    pub elements: Vec<String>,
+    pub elements_on: Vec<bool>,
+    /// Fly speed in world units per second.
+    pub speed: f32,
+    /// Render this many frames, read the last back from the swapchain, exit.
+    pub frames: Option<u32>,
+    /// Poses to play, one per frame (a replayed camera path); the fly camera otherwise.
+    pub replay: Option<Vec<CameraPose>>,
+    pub overlay: bool,
+    pub vsync: bool,
+    /// Open the window (and create the device) for this display; set by [`run`].
+    pub display: Option<motu_gpu::RawDisplayHandle>,
+}
+
+/// What a run leaves behind.
+#[derive(Debug, Default)]
+pub struct ViewResult {
+    /// Frames rendered and shown.
+    pub frames_shown: u64,
+    /// The last frame as the renderer produced it.
+    pub last: Option<SourceFrame>,
+    /// The last frame as read back from the swapchain image (automation mode).
+    pub screenshot_rgba8: Option<Vec<u8>>,
+    pub last_size: [u32; 2],
+    /// The pose of every frame shown (for `--record`).
+    pub poses: Vec<CameraPose>,
+    /// Wall-clock milliseconds per shown frame (render + present).
+    pub frame_ms: Vec<f64>,
+    /// Frames shown with pixels still refining (streaming pass cap).
+    pub incomplete_frames: u64,
+}
+
+/// Opens the window and runs until it is closed (or `opts.frames` frames were shown).
+/// `make_source` gets the options with [`ViewOptions::display`] set and opens the device and
+/// the scene on it.
+pub fn run<S, F>(mut opts: ViewOptions, make_source: F) -> Result<ViewResult, ViewError>
+where
+    S: FrameSource,
+    F: FnOnce(&ViewOptions) -> Result<S, String>,
+{
+    check_display()?;
+    let event_loop = EventLoop::new().map_err(|e| {
+        ViewError::Window(format!(
+            "{e} (motu view speaks X11; on a Wayland-only session run it under XWayland, or render \
+             headless with `motu render`)"
+        ))
+    })?;
+    let display = event_loop
+        .display_handle()
+        .map_err(|e| ViewError::Window(e.to_string()))?
+        .as_raw();
+    opts.display = Some(display);
+    let source = make_source(&opts).map_err(ViewError::Source)?;
+    let ctl = Controls::new(&opts);
+    let mut app = App {
+        source,
+        ctl,
+        window: None,
+        presenter: None,
+        result: ViewResult::default(),
+        error: None,
+        modifiers: ModifiersState::empty(),
+        dragging: false,
+        cursor: None,
+        last_tick: Instant::now(),
+        last_frame_ms: 0.0,
+        skips: 0,
+        opts,
+    };
+    event_loop.set_control_flow(ControlFlow::Poll);
+    event_loop
+        .run_app(&mut app)
+        .map_err(|e| ViewError::Window(e.to_string()))?;
+    // Destroy the swapchain and surface before the window.
+    app.presenter = None;
+    app.window = None;
+    if let Some(e) = app.error {
+        return Err(e);
+    }
+    Ok(app.result)
+}
+
+/// Movement keys held down.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Keys {
+    forward: bool,
+    back: bool,
+    left: bool,
+    right: bool,
+    up: bool,
+    down: bool,
+}
+
+/// What the keys change: the next frame's options, the camera, the element set, the overlay.
+#[derive(Debug)]
+pub struct Controls {
+    pub render: RenderOptions,
+    pub overlay: bool,
+    pub elements: Vec<String>,
+    pub elements_on: Vec<bool>,
+    pub cameras: Vec<(String, CameraPose)>,
+    pub fly: FlyCamera,
+    pub keys: Keys,
+    /// The last action, for the overlay.
+    pub message: String,
+}
+
+impl Controls {
+    pub fn new(opts: &ViewOptions) -> Controls {
+        Controls {
+            render: opts.render,
+            overlay: opts.overlay,
+            elements: opts.elements.clone(),
+            elements_on: opts.elements_on.clone(),
+            cameras: opts.cameras.clone(),
+            fly: FlyCamera::new(opts.start, opts.speed),
+            keys: Keys::default(),
+            message: String::new(),
+        }
+    }
+
+    /// Applies a key press or release; true when the key asks to quit.
+    pub fn key(&mut self, code: KeyCode, pressed: bool, shift: bool) -> bool {
+        let k = &mut self.keys;
+        match code {
+            KeyCode::KeyW => k.forward = pressed,
+            KeyCode::KeyS => k.back = pressed,
+            KeyCode::KeyA => k.left = pressed,
+            KeyCode::KeyD => k.right = pressed,
+            KeyCode::KeyE => k.up = pressed,
+            KeyCode::KeyQ => k.down = pressed,
+            _ => {}
+        }
+        if !pressed {
+            return false;
+        }
+        let r = &mut self.render;
+        let digit = match code {
+            KeyCode::Digit1 => Some(0),
+            KeyCode::Digit2 => Some(1),
+            KeyCode::Digit3 => Some(2),
+            KeyCode::Digit4 => Some(3),
+            KeyCode::Digit5 => Some(4),
+            KeyCode::Digit6 => Some(5),
+            KeyCode::Digit7 => Some(6),
+            KeyCode::Digit8 => Some(7),
+            KeyCode::Digit9 => Some(8),
+            KeyCode::Digit0 => Some(usize::MAX),
+            _ => None,
+        };
+        match code {
+            KeyCode::Escape => return true,
+            KeyCode::KeyV => {
+                let i = VIEWS.iter().position(|v| *v == r.view).unwrap_or(0);
+                r.view = VIEWS[(i + 1) % VIEWS.len()];
+            }
+            KeyCode::F1 => r.view = View::Shaded,
+            KeyCode::F2 => r.view = View::Ids,
+            KeyCode::F3 => r.view = View::Lod,
+            KeyCode::F4 => r.view = View::Heatmap,
+            KeyCode::KeyL => {
+                // auto → 0 → 1 → … → 7 → auto
+                r.lod.forced_lod = match r.lod.forced_lod {
+                    f if f < 0 => 0,
+                    f if f >= 7 => motu_abi::lod::LOD_NOT_FORCED,
+                    f => f + 1,
+                };
+            }
+            KeyCode::KeyK => r.lod.stochastic ^= 1,
+            KeyCode::KeyH => r.shadows = !r.shadows,
+            KeyCode::Tab => self.overlay = !self.overlay,
+            _ => {}
+        }
+        if let Some(d) = digit {
+            if shift {
+                self.toggle_element(d);
+            } else if let Some((name, pose)) = self.cameras.get(d) {
+                self.fly.pose = *pose;
+                self.message = format!("camera {name}");
+            }
+        }
+        false
+    }
+
+    pub fn toggle_element(&mut self, d: usize) {
+        let on = &mut self.elements_on;
+        if d == usize::MAX {
+            on.iter_mut().for_each(|e| *e = true);
+            self.message = "all elements on".into();
+            return;
+        }
+        if d >= on.len() {
+            return;
+        }
+        if on[d] && on.iter().filter(|e| **e).count() == 1 {
+            self.message = "the last element stays on".into();
+            return;
+        }
+        on[d] = !on[d];
+        self.message = format!(
+            "element {} {}",
+            self.elements[d],
+            if on[d] { "on" } else { "off" }
+        );
+    }
+}
+
+struct App<S: FrameSource> {
+    source: S,
+    ctl: Controls,
+    window: Option<Window>,
+    presenter: Option<Presenter>,
+    result: ViewResult,
+    error: Option<ViewError>,
+    modifiers: ModifiersState,
+    dragging: bool,
+    cursor: Option<(f64, f64)>,
+    last_tick: Instant,
+    last_frame_ms: f64,
+    skips: u32,
+    opts: ViewOptions,
+}
+
+const VIEWS: [View; 4] = [View::Shaded, View::Ids, View::Lod, View::Heatmap];
+
+fn view_name(v: View) -> &'static str {
+    match v {
+        View::Shaded => "shaded",
+        View::Ids => "ids",
+        View::Lod => "lod",
+        View::Heatmap => "heatmap",
+    }
+}
+
+fn mib(b: u64) -> String {
+    if b >= 1 << 30 {
+        format!("{:.2} GiB", b as f64 / (1u64 << 30) as f64)
+    } else {
+        format!("{:.1} MiB", b as f64 / (1u64 << 20) as f64)
+    }
+}
+
+impl<S: FrameSource> App<S> {
+    fn fail(&mut self, el: &ActiveEventLoop, e: ViewError) {
+        if self.error.is_none() {
+            self.error = Some(e);
+        }
+        el.exit();
+    }
+
+    fn open_window(&mut self, el: &ActiveEventLoop) -> Result<(), ViewError> {
+        let attrs = Window::default_attributes()
+            .with_title(self.opts.title.clone())
+            .with_inner_size(PhysicalSize::new(self.opts.width, self.opts.height))
+            .with_resizable(self.opts.frames.is_none());
+        let window = el
+            .create_window(attrs)
+            .map_err(|e| ViewError::Window(e.to_string()))?;
+        let size = window.inner_size();
+        let display = window
+            .display_handle()
+            .map_err(|e| ViewError::Window(e.to_string()))?
+            .as_raw();
+        let handle = window
+            .window_handle()
+            .map_err(|e| ViewError::Window(e.to_string()))?
+            .as_raw();
+        // SAFETY: the handles belong to `window`, which `run` drops only after the presenter.
+        let presenter = unsafe {
+            Presenter::new(
+                self.source.context(),
+                display,
+                handle,
+                [size.width, size.height],
+                self.opts.vsync,
+            )
+        }?;
+        self.presenter = Some(presenter);
+        self.window = Some(window);
+        Ok(())
+    }
+
+    fn on_key(&mut self, el: &ActiveEventLoop, code: KeyCode, pressed: bool) {
+        if self.ctl.key(code, pressed, self.modifiers.shift_key()) {
+            el.exit();
+        }
+    }
+
+    fn frame(&mut self, el: &ActiveEventLoop) -> Result<(), ViewError> {
+        let now = Instant::now();
+        let dt = (now - self.last_tick).as_secs_f32().min(0.25);
+        self.last_tick = now;
+        let Some(presenter) = self.presenter.as_mut() else {
+            return Ok(());
+        };
+        let extent = presenter.prepare()?;
+        let automated = self.opts.frames.is_some();
+        let [w, h] = if automated {
+            [self.opts.width, self.opts.height]
+        } else {
+            extent
+        };
+        if extent == [0, 0] {
+            self.skips += 1;
+            return self.check_skips();
+        }
+        if automated && extent != [w, h] {
+            return Err(ViewError::WrongSize {
+                got_w: extent[0],
+                got_h: extent[1],
+                want_w: w,
+                want_h: h,
+            });
+        }
+        let k = &self.ctl.keys;
+        let axis = |a: bool, b: bool| f32::from(u8::from(a)) - f32::from(u8::from(b));
+        let motion = Motion {
+            right: axis(k.right, k.left),
+            up: axis(k.up, k.down),
+            forward: axis(k.forward, k.back),
+        };
+        let fast = if self.modifiers.shift_key() { 4.0 } else { 1.0 };
+        self.ctl.fly.speed *= fast;
+        self.ctl.fly.step(motion, dt);
+        self.ctl.fly.speed /= fast;
+        let index = self.result.frames_shown as usize;
+        let pose = match &self.opts.replay {
+            Some(p) if !p.is_empty() => p[index.min(p.len() - 1)],
+            _ => self.ctl.fly.pose,
+        };
+        let camera = pose.params(w, h);
+        let t0 = Instant::now();
+        let frame = self
+            .source
+            .render(&camera, &self.ctl.render, &self.ctl.elements_on)
+            .map_err(ViewError::Source)?;
+        let last = automated && self.opts.frames == Some(self.result.frames_shown as u32 + 1);
+        if last && frame.stats.incomplete_pixels > 0 {
+            return Err(ViewError::Incomplete(frame.stats.incomplete_pixels));
+        }
+        let mut shown = frame.output.rgba8.clone();
+        if self.ctl.overlay {
+            let lines = self.overlay_lines(&frame, w, h);
+            draw_text(&mut shown, w, h, &lines, if w >= 1600 { 2 } else { 1 });
+        }
+        let Some(presenter) = self.presenter.as_mut() else {
+            return Ok(());
+        };
+        match presenter.present(&shown, w, h, last)? {
+            Presented::Skipped => {
+                self.skips += 1;
+                return self.check_skips();
+            }
+            Presented::Shown { readback } => {
+                self.skips = 0;
+                self.last_frame_ms = t0.elapsed().as_secs_f64() * 1e3;
+                self.result.frame_ms.push(self.last_frame_ms);
+                self.result.frames_shown += 1;
+                self.result.incomplete_frames += u64::from(frame.stats.incomplete_pixels > 0);
+                self.result.poses.push(pose);
+                self.result.last_size = [w, h];
+                if last {
+                    self.result.screenshot_rgba8 = readback;
+                }
+                self.result.last = Some(frame);
+            }
+        }
+        if let Some(n) = self.opts.frames {
+            if self.result.frames_shown >= u64::from(n) {
+                el.exit();
+            }
+        }
+        Ok(())
+    }
+
+    fn check_skips(&self) -> Result<(), ViewError> {
+        // Minimised interactive windows wait; automation must not spin forever.
+        if self.opts.frames.is_some() && self.skips > 200 {
+            return Err(ViewError::Window(
+                "the window never became presentable (200 frames skipped)".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    fn overlay_lines(&self, f: &SourceFrame, w: u32, h: u32) -> Vec<String> {
+        let st = &f.output.stats;
+        let s = &f.stats;
+        let r = &self.ctl.render;
+        let lod = if r.lod.forced_lod < 0 {
+            format!("auto (r_max {} px)", r.lod.r_max_px)
+        } else {
+            format!("forced {}", r.lod.forced_lod)
+        };
+        let elements: Vec<String> = self
+            .opts
+            .elements
+            .iter()
+            .zip(&self.ctl.elements_on)
+            .take(9)
+            .enumerate()
+            .map(|(i, (n, on))| format!("{}{}{}", i + 1, if *on { "+" } else { "-" }, n))
+            .collect();
+        let stream = match s.streaming {
+            Some((built, evicted)) => format!(
+                "streaming: {} passes, {built} built, {evicted} evicted{}",
+                s.passes,
+                if s.incomplete_pixels > 0 {
+                    format!(", {} px refining", s.incomplete_pixels)
+                } else {
+                    String::new()
+                }
+            ),
+            None => "full build (no streaming)".into(),
+        };
+        vec![
+            format!(
+                "motu view  {}x{}  {}  {}",
+                w,
+                h,
+                st.backend,
+                view_name(r.view)
+            ),
+            format!(
+                "frame {:.1} ms  gpu {:.2} ms  {:.2} Mrays/s  {:.2} traces/ray",
+                self.last_frame_ms,
+                st.ms_per_frame,
+                st.rays_per_second / 1e6,
+                st.traces_per_ray
+            ),
+            format!(
+                "VRAM {} / {}  structures {}/{} resident",
+                mib(s.vram_used_bytes),
+                if s.vram_budget_bytes == 0 || s.vram_budget_bytes == u64::MAX {
+                    "device".to_string()
+                } else {
+                    mib(s.vram_budget_bytes)
+                },
+                s.resident_structures,
+                s.total_structures
+            ),
+            stream,
+            format!(
+                "LOD {lod}{}  shadows {}",
+                if r.lod.stochastic != 0 {
+                    " stochastic"
+                } else {
+                    ""
+                },
+                if r.shadows { "on" } else { "off" }
+            ),
+            format!("elements: {}", elements.join(" ")),
+            format!("speed {:.3}/s  {}", self.ctl.fly.speed, self.ctl.message),
+            "WASD/QE move, drag look, wheel speed, 1-9 cameras".into(),
+            "V/F1-F4 view, L lod, K dither, H shadows".into(),
+            "Shift+1-9 elements, Tab overlay, Esc quit".into(),
+        ]
+    }
+}
+
+impl<S: FrameSource> ApplicationHandler for App<S> {
+    fn resumed(&mut self, el: &ActiveEventLoop) {
+        if self.window.is_none() {
+            if let Err(e) = self.open_window(el) {
+                self.fail(el, e);
+            }
+        }
+    }
+
+    fn window_event(&mut self, el: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        match event {
+            WindowEvent::CloseRequested => el.exit(),
+            WindowEvent::Resized(size) => {
+                if let Some(p) = self.presenter.as_mut() {
+                    p.resize([size.width, size.height]);
+                }
+            }
+            WindowEvent::ModifiersChanged(m) => self.modifiers = m.state(),
+            WindowEvent::KeyboardInput { event, .. } => {
+                if let PhysicalKey::Code(code) = event.physical_key {
+                    if self.opts.frames.is_none() {
+                        self.on_key(el, code, event.state == ElementState::Pressed);
+                    }
+                }
+            }
+            WindowEvent::MouseInput { state, button, .. } => {
+                if matches!(button, MouseButton::Left | MouseButton::Right) {
+                    self.dragging = state == ElementState::Pressed;
+                }
+            }
+            WindowEvent::CursorMoved { position, .. } => {
+                if let (true, Some((x, y))) = (self.dragging, self.cursor) {
+                    let rad_per_px = 0.004;
+                    self.ctl
+                        .fly
+                        .look((position.x - x) as f32, (position.y - y) as f32, rad_per_px);
+                }
+                self.cursor = Some((position.x, position.y));
+            }
+            WindowEvent::MouseWheel { delta, .. } => {
+                let notches = match delta {
+                    MouseScrollDelta::LineDelta(_, y) => y,
+                    MouseScrollDelta::PixelDelta(p) => (p.y / 40.0) as f32,
+                };
+                self.ctl.fly.speed = (self.ctl.fly.speed * 1.25f32.powf(notches)).clamp(1e-6, 1e9);
+            }
+            WindowEvent::RedrawRequested => {
+                if let Err(e) = self.frame(el) {
+                    self.fail(el, e);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn about_to_wait(&mut self, _el: &ActiveEventLoop) {
+        if let Some(w) = &self.window {
+            w.request_redraw();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    fn pose(z: f32) -> CameraPose {
+        CameraPose {
+            world_eye: Vec3::new(0.0, 0.0, z),
+            world_forward: Vec3::NEG_Z,
+            world_up: Vec3::Y,
+            fov_deg: 45.0,
+            mirror_x: false,
+        }
+    }
+
+    fn controls() -> Controls {
+        Controls::new(&ViewOptions {
+            title: String::new(),
+            width: 8,
+            height: 8,
+            start: pose(0.0),
+            cameras: vec![("a".into(), pose(1.0)), ("b".into(), pose(2.0))],
+            render: RenderOptions::default(),
+            elements: vec!["x".into(), "y".into()],
+            elements_on: vec![true, true],
+            speed: 1.0,
+            frames: None,
+            replay: None,
+            overlay: true,
+            vsync: true,
+            display: None,
+        })
+    }
+
+    fn press(c: &mut Controls, code: KeyCode, shift: bool) -> bool {
+        let quit = c.key(code, true, shift);
+        c.key(code, false, shift);
+        quit
+    }
+
+    #[test]
+    fn keys_switch_views_lod_cameras_elements_and_overlay() {
+        let mut c = controls();
+        press(&mut c, KeyCode::KeyV, false);
+        assert_eq!(c.render.view, View::Ids);
+        press(&mut c, KeyCode::F4, false);
+        assert_eq!(c.render.view, View::Heatmap);
+        press(&mut c, KeyCode::KeyV, false);
+        assert_eq!(c.render.view, View::Shaded);
+        // LOD: auto → 0 → 1 … → 7 → auto.
+        assert!(c.render.lod.forced_lod < 0);
+        press(&mut c, KeyCode::KeyL, false);
+        assert_eq!(c.render.lod.forced_lod, 0);
+        for _ in 0..7 {
+            press(&mut c, KeyCode::KeyL, false);
+        }
+        assert_eq!(c.render.lod.forced_lod, 7);
+        press(&mut c, KeyCode::KeyL, false);
+        assert!(c.render.lod.forced_lod < 0);
+        // Cameras on digits; a missing one changes nothing.
+        press(&mut c, KeyCode::Digit2, false);
+        assert_eq!(c.fly.pose, pose(2.0));
+        press(&mut c, KeyCode::Digit9, false);
+        assert_eq!(c.fly.pose, pose(2.0));
+        // Elements on Shift+digits; the last one stays on; Shift+0 turns all on.
+        press(&mut c, KeyCode::Digit1, true);
+        assert_eq!(c.elements_on, [false, true]);
+        press(&mut c, KeyCode::Digit2, true);
+        assert_eq!(c.elements_on, [false, true], "{}", c.message);
+        press(&mut c, KeyCode::Digit0, true);
+        assert_eq!(c.elements_on, [true, true]);
+        assert_eq!(c.fly.pose, pose(2.0), "Shift+digit is not a camera");
+        press(&mut c, KeyCode::Tab, false);
+        assert!(!c.overlay);
+        press(&mut c, KeyCode::KeyH, false);
+        assert!(!c.render.shadows);
+        assert!(press(&mut c, KeyCode::Escape, false));
+    }
+
+    #[test]
+    fn movement_keys_hold_until_released() {
+        let mut c = controls();
+        c.key(KeyCode::KeyW, true, false);
+        c.key(KeyCode::KeyE, true, false);
+        assert!(c.keys.forward && c.keys.up);
+        c.key(KeyCode::KeyW, false, false);
+        assert!(!c.keys.forward && c.keys.up);
+    }
+}

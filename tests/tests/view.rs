@@ -1,0 +1,591 @@
+//! `motu view` (issue 17) through a real window and swapchain: Xvfb on lavapipe in CI. Frames
+//! read back from the swapchain must equal `motu render` per pixel; recorded camera paths must
+//! replay identically in both; without a display the viewer must point at `motu render`.
+
+use motu_tests::{gpu_available, has_ray_query, motu, motu_ok, motu_on_display, s, xvfb};
+use std::path::{Path, PathBuf};
+
+fn forest(dir: &Path) -> PathBuf {
+    let gen = dir.join("forest");
+    motu_ok(&[
+        "gen",
+        "forest",
+        "-o",
+        s(&gen),
+        "--levels",
+        "2",
+        "--grid",
+        "3x2",
+        "--leaves",
+        "60",
+    ]);
+    let pkg = dir.join("forest.motu");
+    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    pkg
+}
+
+/// `motu view` on `display`, asserting success; returns stderr.
+fn view_ok(display: &str, args: &[&str]) -> String {
+    let mut all = vec!["view"];
+    all.extend_from_slice(args);
+    let out = motu_on_display(display, &all);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(
+        out.status.success(),
+        "motu {} failed:\n{err}",
+        all.join(" ")
+    );
+    err
+}
+
+fn compare_exact(a: &Path, b: &Path) {
+    let out = motu_ok(&["compare", s(a), s(b), "--max-mismatch", "0"]);
+    assert!(out.contains("(0 of "), "{out}");
+}
+
+fn read_json(p: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(p).expect("stats file")).expect("stats JSON")
+}
+
+fn decode_png(p: &Path) -> (u32, u32, Vec<u8>) {
+    let dec = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(p).expect("png"),
+    ));
+    let mut r = dec.read_info().expect("png header");
+    let mut buf = vec![0; r.output_buffer_size().expect("png size")];
+    let info = r.next_frame(&mut buf).expect("png frame");
+    buf.truncate(info.buffer_size());
+    (info.width, info.height, buf)
+}
+
+#[test]
+fn view_without_a_display_names_the_headless_path() {
+    let out = std::process::Command::new(motu_tests::motu_bin())
+        .args(["view", "scene.motu", "--frames", "1"])
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .output()
+        .expect("spawning motu");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "must fail without a display: {err}");
+    assert!(err.contains("no display"), "{err}");
+    assert!(
+        err.contains("DISPLAY") && err.contains("WAYLAND_DISPLAY"),
+        "{err}"
+    );
+    assert!(err.contains("motu render"), "{err}");
+}
+
+#[test]
+fn view_frames_through_the_swapchain_equal_render_per_pixel() {
+    if !gpu_available() {
+        return;
+    }
+    let Some(x) = xvfb("view_frames_through_the_swapchain_equal_render_per_pixel") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pkg = forest(d);
+    let mut cases = vec![("pipeline", "shaded"), ("pipeline", "heatmap")];
+    if has_ray_query() {
+        cases.push(("query", "ids"));
+    }
+    for (backend, view) in cases {
+        let tag = format!("{backend}-{view}");
+        let (vpng, vaov, vstats) = (
+            d.join(format!("view-{tag}.png")),
+            d.join(format!("view-{tag}.aov")),
+            d.join(format!("view-{tag}.json")),
+        );
+        view_ok(
+            &x.display,
+            &[
+                s(&pkg),
+                "--width",
+                "96",
+                "--backend",
+                backend,
+                "--view",
+                view,
+                "--frames",
+                "5",
+                "--screenshot",
+                s(&vpng),
+                "--aov",
+                s(&vaov),
+                "--stats",
+                s(&vstats),
+            ],
+        );
+        let (rpng, raov) = (
+            d.join(format!("render-{tag}.png")),
+            d.join(format!("render-{tag}.aov")),
+        );
+        motu_ok(&[
+            "render",
+            s(&pkg),
+            "-o",
+            s(&rpng),
+            "--aov",
+            s(&raov),
+            "--width",
+            "96",
+            "--backend",
+            backend,
+            "--view",
+            view,
+        ]);
+        compare_exact(&vaov, &raov);
+        // The screenshot is the swapchain image read back: the window got the same pixels.
+        let (vw, vh, vpx) = decode_png(&vpng);
+        let (rw, rh, rpx) = decode_png(&rpng);
+        assert_eq!((vw, vh), (rw, rh), "{tag}");
+        assert!(
+            vpx == rpx,
+            "{tag}: the swapchain image differs from motu render's PNG"
+        );
+        let st = read_json(&vstats);
+        assert_eq!(st["frames"], 5, "{st}");
+        assert_eq!(st["backend"], backend, "{st}");
+        assert_eq!(st["window"]["presented_via"], "swapchain", "{st}");
+        assert_eq!(st["streaming"], false, "{st}");
+        assert!(st["traces_per_ray"].as_f64().unwrap() >= 1.0, "{st}");
+        assert!(
+            st["resident_structures"].as_u64().unwrap() > 0
+                && st["resident_structures"] == st["total_structures"],
+            "{st}"
+        );
+    }
+    // The overlay, when asked for in a scripted run, is drawn into the top-left only.
+    let opng = d.join("overlay.png");
+    view_ok(
+        &x.display,
+        &[
+            s(&pkg),
+            "--width",
+            "320",
+            "--backend",
+            "pipeline",
+            "--frames",
+            "2",
+            "--overlay",
+            "--screenshot",
+            s(&opng),
+        ],
+    );
+    let rpng = d.join("overlay-ref.png");
+    motu_ok(&[
+        "render",
+        s(&pkg),
+        "-o",
+        s(&rpng),
+        "--width",
+        "320",
+        "--backend",
+        "pipeline",
+    ]);
+    let (w, h, o) = decode_png(&opng);
+    let (_, _, r) = decode_png(&rpng);
+    let px = |buf: &[u8], x: u32, y: u32| {
+        let i = ((y * w + x) * 4) as usize;
+        buf[i..i + 4].to_vec()
+    };
+    let top_left_differs = (0..20).any(|y| (0..200).any(|x| px(&o, x, y) != px(&r, x, y)));
+    assert!(top_left_differs, "the overlay drew nothing");
+    assert!(h > 120, "{h}");
+    let bottom = (h - 10..h).all(|y| (0..w).all(|x| px(&o, x, y) == px(&r, x, y)));
+    assert!(bottom, "the overlay changed pixels outside its box");
+}
+
+/// A camera path with four distinct poses around the start camera (read from a recording).
+fn scripted_path(d: &Path, display: &str, pkg: &Path) -> PathBuf {
+    let start = d.join("start.json");
+    view_ok(
+        display,
+        &[
+            s(pkg),
+            "--width",
+            "80",
+            "--backend",
+            "pipeline",
+            "--frames",
+            "1",
+            "--record",
+            s(&start),
+        ],
+    );
+    let rec = read_json(&start);
+    assert_eq!(rec["format"], "motu-camera-path", "{rec}");
+    assert_eq!(rec["frames"].as_array().unwrap().len(), 1, "{rec}");
+    let p0 = rec["frames"][0].clone();
+    let f = |v: &serde_json::Value, i: usize| v[i].as_f64().unwrap();
+    let mut frames = Vec::new();
+    for k in 0..4 {
+        let mut p = p0.clone();
+        let t = k as f64 / 3.0;
+        // Walk forward along the view and turn a little: every frame sees something else.
+        for i in 0..3 {
+            p["eye"][i] = (f(&p0["eye"], i) + f(&p0["forward"], i) * t * 20.0).into();
+        }
+        p["forward"][0] = (f(&p0["forward"], 0) + 0.3 * t).into();
+        p["fov_deg"] = (40.0 + 5.0 * t).into();
+        frames.push(p);
+    }
+    let path = d.join("path.json");
+    let file = serde_json::json!({
+        "format": "motu-camera-path", "version": 1, "width": 80, "height": 45, "frames": frames,
+    });
+    std::fs::write(&path, serde_json::to_string_pretty(&file).unwrap()).unwrap();
+    path
+}
+
+#[test]
+fn a_recorded_camera_path_replays_identically_in_view_and_render() {
+    if !gpu_available() {
+        return;
+    }
+    let Some(x) = xvfb("a_recorded_camera_path_replays_identically_in_view_and_render") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pkg = forest(d);
+    let path = scripted_path(d, &x.display, &pkg);
+    // One frame per recorded pose (4), then the same path spread over 7 frames (interpolated).
+    for frames in ["4", "7"] {
+        let (vaov, raov) = (
+            d.join(format!("view-{frames}.aov")),
+            d.join(format!("render-{frames}.aov")),
+        );
+        let again = d.join(format!("again-{frames}.json"));
+        let err = view_ok(
+            &x.display,
+            &[
+                s(&pkg),
+                "--backend",
+                "pipeline",
+                "--camera-path",
+                s(&path),
+                "--frames",
+                frames,
+                "--aov",
+                s(&vaov),
+                "--record",
+                s(&again),
+            ],
+        );
+        assert!(err.contains(&format!("{frames} frames shown")), "{err}");
+        let rstats = d.join(format!("render-{frames}.json"));
+        motu_ok(&[
+            "render",
+            s(&pkg),
+            "-o",
+            s(&d.join(format!("render-{frames}.png"))),
+            "--aov",
+            s(&raov),
+            "--backend",
+            "pipeline",
+            "--camera-path",
+            s(&path),
+            "--frames",
+            frames,
+            "--stats",
+            s(&rstats),
+        ]);
+        compare_exact(&vaov, &raov);
+        let st = read_json(&rstats);
+        assert_eq!(st["frames"].as_u64(), frames.parse().ok(), "{st}");
+        assert_eq!(st["width"], 80, "the path's recorded size: {st}");
+        // What view flew is what the file said: re-recording the replay gives the same poses.
+        let again = read_json(&again);
+        let original = read_json(&path);
+        assert_eq!(
+            again["frames"].as_array().unwrap().len(),
+            frames.parse::<usize>().unwrap()
+        );
+        if frames == "4" {
+            // Poses are f32: the file's decimal values, rounded to f32, exactly.
+            let flat = |v: &serde_json::Value| -> Vec<f32> {
+                let mut out = Vec::new();
+                for fr in v["frames"].as_array().unwrap() {
+                    for k in ["eye", "forward", "up"] {
+                        out.extend(
+                            fr[k]
+                                .as_array()
+                                .unwrap()
+                                .iter()
+                                .map(|x| x.as_f64().unwrap() as f32),
+                        );
+                    }
+                    out.push(fr["fov_deg"].as_f64().unwrap() as f32);
+                }
+                out
+            };
+            assert_eq!(flat(&again), flat(&original));
+        }
+    }
+    // The same flight as a benchmark: one timed frame per pose.
+    let b = motu_tests::motu_json(&[
+        "bench",
+        "--camera-path",
+        s(&path),
+        "--package",
+        s(&pkg),
+        "--backend",
+        "pipeline",
+        "--warmup",
+        "1",
+        "--json",
+    ]);
+    assert_eq!(b["kind"], "flight", "{b}");
+    assert_eq!(b["frames"], 4, "{b}");
+    let ms = b["frame_ms"].as_array().unwrap();
+    assert_eq!(ms.len(), 4, "{b}");
+    assert!(ms.iter().all(|m| m.as_f64().unwrap() > 0.0), "{b}");
+    assert!(b["traces_per_ray_mean"].as_f64().unwrap() >= 1.0, "{b}");
+    // The path moves: its last frame is not its first pose.
+    let first = d.join("first.aov");
+    let one = d.join("one.json");
+    let mut p = read_json(&path);
+    p["frames"] = serde_json::json!([p["frames"][0].clone()]);
+    std::fs::write(&one, p.to_string()).unwrap();
+    motu_ok(&[
+        "render",
+        s(&pkg),
+        "-o",
+        s(&d.join("first.png")),
+        "--aov",
+        s(&first),
+        "--backend",
+        "pipeline",
+        "--camera-path",
+        s(&one),
+    ]);
+    let out = motu(&[
+        "compare",
+        s(&first),
+        s(&d.join("render-4.aov")),
+        "--max-mismatch",
+        "0",
+    ]);
+    assert!(
+        !out.status.success(),
+        "the path's frames are all the same image"
+    );
+}
+
+#[test]
+fn view_streams_under_a_vram_budget_with_the_full_builds_image() {
+    if !gpu_available() {
+        return;
+    }
+    let Some(x) = xvfb("view_streams_under_a_vram_budget_with_the_full_builds_image") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pkg = forest(d);
+    let (vaov, vstats, raov) = (d.join("v.aov"), d.join("v.json"), d.join("r.aov"));
+    view_ok(
+        &x.display,
+        &[
+            s(&pkg),
+            "--width",
+            "64",
+            "--backend",
+            "pipeline",
+            "--vram-budget",
+            "256MiB",
+            "--frames",
+            "3",
+            "--aov",
+            s(&vaov),
+            "--stats",
+            s(&vstats),
+        ],
+    );
+    motu_ok(&[
+        "render",
+        s(&pkg),
+        "-o",
+        s(&d.join("r.png")),
+        "--aov",
+        s(&raov),
+        "--width",
+        "64",
+        "--backend",
+        "pipeline",
+    ]);
+    compare_exact(&vaov, &raov);
+    let st = read_json(&vstats);
+    assert_eq!(st["streaming"], true, "{st}");
+    assert_eq!(st["detail"]["complete"], true, "{st}");
+    assert!(st["detail"]["frame"].as_u64() == Some(3), "{st}");
+    assert!(st["vram_used_bytes"].as_u64().unwrap() <= 256 << 20, "{st}");
+}
+
+#[test]
+fn streaming_refines_over_frames_and_never_writes_an_unfinished_frame() {
+    if !gpu_available() {
+        return;
+    }
+    let Some(x) = xvfb("streaming_refines_over_frames_and_never_writes_an_unfinished_frame") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pkg = forest(d);
+    // A budget far below the full build (as in the render streaming tests): the first frame
+    // needs several build-trace passes.
+    let common = [
+        s(&pkg),
+        "--width",
+        "64",
+        "--backend",
+        "pipeline",
+        "--vram-budget",
+        "3MiB",
+        "--stream-passes",
+        "2",
+    ];
+    let bad = d.join("bad.aov");
+    let mut args = vec!["view"];
+    args.extend_from_slice(&common);
+    args.extend_from_slice(&["--frames", "1", "--aov", s(&bad)]);
+    let out = motu_on_display(&x.display, &args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success(),
+        "two passes cannot finish the first frame: {err}"
+    );
+    assert!(err.contains("incomplete"), "{err}");
+    assert!(!bad.exists(), "an unfinished frame was written");
+    // Two passes per frame: the first frames show unfinished pixels, later ones are complete.
+    let (vaov, vstats, raov) = (d.join("v.aov"), d.join("v.json"), d.join("r.aov"));
+    let mut args = common.to_vec();
+    args.extend_from_slice(&["--frames", "8", "--aov", s(&vaov), "--stats", s(&vstats)]);
+    view_ok(&x.display, &args);
+    let st = read_json(&vstats);
+    assert!(st["incomplete_frames"].as_u64().unwrap() >= 1, "{st}");
+    assert_eq!(st["detail"]["complete"], true, "{st}");
+    assert!(st["vram_used_bytes"].as_u64().unwrap() <= 3 << 20, "{st}");
+    motu_ok(&[
+        "render",
+        s(&pkg),
+        "-o",
+        s(&d.join("r.png")),
+        "--aov",
+        s(&raov),
+        "--width",
+        "64",
+        "--backend",
+        "pipeline",
+    ]);
+    compare_exact(&vaov, &raov);
+}
+
+#[test]
+fn view_subsets_equal_render_subsets() {
+    if !gpu_available() {
+        return;
+    }
+    let Some(x) = xvfb("view_subsets_equal_render_subsets") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let gen = d.join("island");
+    motu_ok(&["gen", "island", "-o", s(&gen)]);
+    let pkg = d.join("island.motu");
+    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    let raov = d.join("r.aov");
+    motu_ok(&[
+        "render",
+        s(&pkg),
+        "-o",
+        s(&d.join("r.png")),
+        "--aov",
+        s(&raov),
+        "--width",
+        "64",
+        "--backend",
+        "pipeline",
+        "--subset",
+        "isBeach,isMountainA",
+    ]);
+    for extra in [&[][..], &["--stream"][..]] {
+        let vaov = d.join(format!("v{}.aov", extra.len()));
+        let mut args = vec![
+            s(&pkg),
+            "--width",
+            "64",
+            "--backend",
+            "pipeline",
+            "--subset",
+            "isBeach,isMountainA",
+            "--frames",
+            "2",
+            "--aov",
+            s(&vaov),
+        ];
+        args.extend_from_slice(extra);
+        view_ok(&x.display, &args);
+        compare_exact(&vaov, &raov);
+    }
+    // An unknown element is a clear error.
+    let out = motu_on_display(
+        &x.display,
+        &["view", s(&pkg), "--subset", "nope", "--frames", "1"],
+    );
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("nope"));
+}
+
+#[test]
+fn bad_camera_paths_fail_with_the_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pkg = forest(d);
+    let bad = d.join("bad.json");
+    std::fs::write(
+        &bad,
+        "{\"format\": \"motu-camera-path\",\n \"version\": 1, \"frames\": [}",
+    )
+    .unwrap();
+    let out = motu(&[
+        "render",
+        s(&pkg),
+        "-o",
+        s(&d.join("x.png")),
+        "--backend",
+        "cpu",
+        "--camera-path",
+        s(&bad),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("camera path") && err.contains("line 2"),
+        "{err}"
+    );
+    assert!(!d.join("x.png").exists(), "no output on bad input");
+    std::fs::write(
+        &bad,
+        r#"{"format":"motu-camera-path","version":1,"frames":[{"eye":[0,0,0],"forward":[0,0,0],"up":[0,1,0],"fov_deg":40}]}"#,
+    )
+    .unwrap();
+    let out = motu(&[
+        "render",
+        s(&pkg),
+        "-o",
+        s(&d.join("x.png")),
+        "--backend",
+        "cpu",
+        "--camera-path",
+        s(&bad),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("frame 0") && err.contains("forward"), "{err}");
+}
