@@ -1882,7 +1882,8 @@ fn alloc_frame_buffers(
     let host = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS;
     let stamps_bytes = (items * 4).div_ceil(16) * 16;
     let inc_bytes = 4 + 4 * pixels;
-    let readback_bytes = (2 * stamps_bytes + inc_bytes).div_ceil(16) * 16 + pixels * 20 + 16;
+    let readback_bytes =
+        (2 * stamps_bytes + inc_bytes).div_ceil(16) * 16 + pixels * 20 + (STAT_WORDS * 4) as u64;
     let specs: [(&str, u64, BufferUsage, AllocKind, MemoryClass); 10] = [
         (
             "frame-params",

@@ -1,7 +1,7 @@
 //! Reading a scene package: the meta, a zero-copy hierarchy view, mesh data by chunk.
 
 use crate::blob::MeshBlobLayout;
-use crate::meta::PackageMeta;
+use crate::meta::{PackageMeta, SCHEMA};
 use crate::sections::*;
 use crate::PackError;
 use motu_abi::{HierarchyView, MeshRecord, FLAG_PRIMITIVE_MAP, NONE_U64};
