@@ -6,12 +6,12 @@
 
 // Records a candidate in the payload, keeping the PI_CAPACITY nearest (called from any-hit or
 // from the ray-query loop).
-void record_candidate(uint pi, float t_near, uint instance) {
+void record_candidate(uint pi, float t_near) {
     if (t_near <= pl.t_floor) {
         return;
     }
     if (pl.count < PI_CAPACITY) {
-        pl.c[pl.count] = PiCandidate(pi, t_near, instance, 0u);
+        pl.c[pl.count] = PiCandidate(pi, t_near);
         pl.count += 1u;
         return;
     }
@@ -23,7 +23,7 @@ void record_candidate(uint pi, float t_near, uint instance) {
         }
     }
     if (t_near < pl.c[far_i].t_near) {
-        pl.c[far_i] = PiCandidate(pi, t_near, instance, 0u);
+        pl.c[far_i] = PiCandidate(pi, t_near);
     }
 }
 

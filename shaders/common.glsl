@@ -77,16 +77,16 @@ struct MeshGeo {
     uint64_t indices;    // u32 × 3 per triangle
 };
 
-// One recorded programmable-instance candidate: 12 bytes (+4 padding).
+// One recorded programmable-instance candidate: 8 bytes. AABB BLASes are instanced with
+// identity (motu-compile's `validate` checks it), so the PI alone gives the child's transform:
+// no instance index, no instance fetch, no inverse per candidate (issue 15: a smaller payload).
 struct PiCandidate {
     uint pi;        // global PI index
     float t_near;   // world distance (t is invariant under the non-renormalised transforms)
-    uint instance;  // instance index within the walked TLAS (gl_InstanceID)
-    uint _pad;
 };
 
 // The traversal payload (rayPayloadEXT in the pipeline backend, a plain global in the query
-// backend): 16 + 16 + 16 × PI_CAPACITY = 160 bytes. Written by raygen before the trace
+// backend): 36 + 8 × PI_CAPACITY = 100 bytes. Written by raygen before the trace
 // (tlas, t_floor, counters) and by any-hit (candidates) and closest-hit (the hit) during it.
 struct Payload {
     uint tlas;

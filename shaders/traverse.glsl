@@ -177,7 +177,6 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
         if (n == 0u) {
             continue;
         }
-        uint inst_base = push.tlases.r[e.tlas].instance_base;
         for (uint k = 0u; k < n; ++k) {
             PiCandidate cd = pl.c[order[k]];
             PiRecord pi = push.pis.r[cd.pi];
@@ -193,10 +192,9 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
                 overflows += 1u;
                 continue;
             }
-            InstanceRecord inst = push.instances.r[inst_base + cd.instance];
-            Affine blas_from_tlas = affine_inverse(affine_from_array(inst.tlas_from_blas));
-            Affine child_from_world = compose(affine_from_array(pi.child_from_parent),
-                                              compose(blas_from_tlas, e.tlas_from_world));
+            // The PI's AABB BLAS is instanced with identity (validated): BLAS space = TLAS space.
+            Affine child_from_world =
+                compose(affine_from_array(pi.child_from_parent), e.tlas_from_world);
             uint tlas = pi.target;
             uint lod = e.lod;
             if (pi.kind == PI_LOD_SELECTOR) {

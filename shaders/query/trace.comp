@@ -30,7 +30,7 @@ void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool
                                      rayQueryGetIntersectionObjectRayDirectionEXT(rq, false),
                                      r.aabb_min, r.aabb_max, t_min, t_hi);
             if (t_near >= 0.0) {
-                record_candidate(pi, t_near, instance);
+                record_candidate(pi, t_near);
             }
         } else if (alpha_passes(tlas, rayQueryGetIntersectionInstanceIdEXT(rq, false),
                                 rayQueryGetIntersectionGeometryIndexEXT(rq, false),

@@ -131,6 +131,19 @@ fn subset_render_equals_subset_import() {
     render_aov(&coral, &b, &["--width", "128", "--view", "ids"]);
     render_aov(&full, &c, &["--width", "128", "--view", "ids"]);
     motu_ok(&["compare", s(&a), s(&b)]);
+    // A split root mixes elements in its pieces (issue 15): the run-time subset still filters
+    // every placement, pieces included.
+    let split = dir.path().join("split.motu");
+    import(&scene, &split, &["--max-instances", "300"]);
+    let info = motu_json(&["info", s(&split), "--json"]);
+    assert!(info["tlas_count"].as_u64().unwrap() > 3, "{info}");
+    let d = dir.path().join("d.aov");
+    render_aov(
+        &split,
+        &d,
+        &["--width", "128", "--subset", "isCoral", "--view", "ids"],
+    );
+    motu_ok(&["compare", s(&d), s(&b)]);
     assert!(
         !motu(&["compare", s(&a), s(&c)]).status.success(),
         "the subset must differ from the whole"

@@ -13,7 +13,10 @@
 //! - A **BLAS** ([`BlasRecord`], odd level) holds either triangles (one geometry per compiled
 //!   mesh, [`GeometryRecord`]) or AABBs: **programmable instances** ([`PiRecord`]), each
 //!   continuing traversal in another TLAS (multi-level instancing) or in a LOD selector.
-//!   Vulkan forbids both kinds in one BLAS, so they never mix.
+//!   Vulkan forbids both kinds in one BLAS, so they never mix. An AABB BLAS is always
+//!   instanced with the identity ([`HierarchyView::check_references`] rejects anything else):
+//!   a PI's `child_from_parent` is then the whole step, and the GPU never inverts an instance
+//!   transform per candidate.
 //! - A **LOD selector** ([`LodSelectorRecord`]) picks one of `level_count` TLASes (finest
 //!   first) by projected size ([`lod::select_lod`]).
 //! - **Meshes** ([`MeshRecord`]) are compiled meshes: every source mesh (LOD 0) and its

@@ -8,6 +8,9 @@ pub const NONE_U32: u32 = u32::MAX;
 /// A sentinel for "none" in 64-bit offset fields.
 pub const NONE_U64: u64 = u64::MAX;
 
+/// The identity as a row-major 3×4 (`InstanceRecord::tlas_from_blas`).
+pub const IDENTITY_3X4: [f32; 12] = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+
 /// Kinds of BLAS.
 pub const BLAS_TRIANGLES: u32 = 0;
 pub const BLAS_AABBS: u32 = 1;
@@ -257,6 +260,18 @@ impl HierarchyView<'_> {
             if inst.blas as usize >= self.blases.len() {
                 return err("instances", i, format!("BLAS {} out of range", inst.blas));
             }
+            if self.blases[inst.blas as usize].kind == BLAS_AABBS
+                && inst.tlas_from_blas != IDENTITY_3X4
+            {
+                return err(
+                    "instances",
+                    i,
+                    format!(
+                        "AABB BLAS {} placed with a non-identity transform",
+                        inst.blas
+                    ),
+                );
+            }
         }
         for (i, b) in self.blases.iter().enumerate() {
             let len = if b.kind == BLAS_TRIANGLES {
@@ -323,51 +338,82 @@ impl HierarchyView<'_> {
 }
 
 /// The TLAS and instance tables of a hierarchy whose root keeps only some elements' placements
-/// (`motu render --subset`). Root-level instances carry their element; those of other elements
-/// are dropped and nothing below them is ever reached. Other tables are borrowed unchanged.
+/// (`motu render --subset`). Root-level placements carry their element, also where a split
+/// moved them into the root's pieces; those of other elements are dropped and nothing below
+/// them is ever reached. Other tables are borrowed unchanged.
 #[derive(Clone, Debug)]
 pub struct RootSubset {
     pub tlases: Vec<TlasRecord>,
     pub instances: Vec<InstanceRecord>,
     pub root_tlas: u32,
-    /// Root instances kept and dropped.
+    /// Tagged placements (root and split pieces) kept and dropped.
     pub kept: u32,
     pub dropped: u32,
 }
 
 impl RootSubset {
-    /// Appends a filtered copy of the root TLAS (a new record and a new instance range).
-    /// Instances whose element is `NONE_U32` (shared) are kept.
+    /// Appends a filtered copy of the root TLAS (a new record and a new instance range), and
+    /// re-points every other TLAS that holds a dropped placement (the pieces of a split root)
+    /// at a filtered copy of its range (a piece may end up empty). Instances whose element is
+    /// `NONE_U32` (shared, or below the root) are kept.
     pub fn new(
         view: &HierarchyView<'_>,
         keep_element: impl Fn(u32) -> bool,
     ) -> Result<Self, HierarchyError> {
         view.check_references()?;
-        let root = view.tlases[view.root_tlas as usize];
-        let mut tlases = view.tlases.to_vec();
-        let mut instances = view.instances.to_vec();
-        let base = instances.len();
-        let range =
-            root.instance_base as usize..(root.instance_base + root.instance_count) as usize;
-        let mut dropped = 0u32;
-        for i in range {
-            let inst = view.instances[i];
-            if inst.element == NONE_U32 || keep_element(inst.element) {
-                instances.push(inst);
-            } else {
-                dropped += 1;
-            }
-        }
-        let kept = (instances.len() - base) as u32;
         let too_many = |what: &str| HierarchyError {
             table: "subset",
             index: 0,
             reason: format!("too many {what}"),
         };
-        let new_root = TlasRecord {
-            instance_base: u32::try_from(base).map_err(|_| too_many("instances"))?,
-            instance_count: kept,
-            ..root
+        let keep = |inst: &InstanceRecord| inst.element == NONE_U32 || keep_element(inst.element);
+        let mut tlases = view.tlases.to_vec();
+        let mut instances = view.instances.to_vec();
+        let (mut kept, mut dropped) = (0u32, 0u32);
+        let root = view.root_tlas as usize;
+        let mut filtered = |rec: &TlasRecord,
+                            instances: &mut Vec<InstanceRecord>|
+         -> Result<Option<TlasRecord>, HierarchyError> {
+            let range =
+                rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize;
+            let src = &view.instances[range];
+            let tagged = src.iter().filter(|i| i.element != NONE_U32).count() as u32;
+            let n_keep = src.iter().filter(|i| keep(i)).count();
+            kept += tagged - (src.len() - n_keep) as u32;
+            dropped += (src.len() - n_keep) as u32;
+            if n_keep == src.len() {
+                return Ok(None);
+            }
+            let base = u32::try_from(instances.len()).map_err(|_| too_many("instances"))?;
+            instances.extend(src.iter().filter(|i| keep(i)));
+            Ok(Some(TlasRecord {
+                instance_base: base,
+                instance_count: n_keep as u32,
+                ..*rec
+            }))
+        };
+        for (t, rec) in view.tlases.iter().enumerate() {
+            if t != root {
+                if let Some(new) = filtered(rec, &mut instances)? {
+                    tlases[t] = new;
+                }
+            }
+        }
+        let root_rec = view.tlases[root];
+        let base = instances.len();
+        let new_root = match filtered(&root_rec, &mut instances)? {
+            Some(new) => new,
+            None => {
+                let base = u32::try_from(base).map_err(|_| too_many("instances"))?;
+                instances.extend_from_within(
+                    root_rec.instance_base as usize
+                        ..(root_rec.instance_base + root_rec.instance_count) as usize,
+                );
+                TlasRecord {
+                    instance_base: base,
+                    ..root_rec
+                }
+            }
         };
         tlases.push(new_root);
         let root_tlas = u32::try_from(tlases.len() - 1).map_err(|_| too_many("TLASes"))?;

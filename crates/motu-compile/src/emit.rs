@@ -4,7 +4,7 @@
 
 use crate::analyze::{edge_ref, Plan};
 use crate::partition::{group_by_location, partition_mesh, Cluster, Item};
-use crate::split::median_partition;
+use crate::split::{median_partition, sah_partition};
 use crate::{lod, xform, CompileError, CompiledScene, MeshLoader, MeshSink};
 use motu_abi::{
     BlasRecord, GeometryRecord, InstanceRecord, LodSelectorRecord, MaterialRecord, MeshRecord,
@@ -656,15 +656,15 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         Ok(id)
     }
 
-    /// Splits `tlas` until its instance count fits the cap (see the crate docs). The root is
-    /// split per element first (pieces and their PIs then have one element each), unless the
-    /// elements alone are more than the cap.
+    /// Splits `tlas` until its instance count fits the cap (see the crate docs): the few
+    /// instances large against the whole (terrain, ocean) stay in `tlas` itself, traced with
+    /// it, and the rest is cut by a binned SAH over instance bounds into pieces that barely
+    /// overlap, so a ray enters few of them and skips those behind its hit. Pieces mix
+    /// elements; their instances keep their element tags, which `--subset` filters on.
     fn split_tlas(&mut self, tlas: u32) -> Result<(), CompileError> {
         let cap = self.instance_cap;
         let per_blas = self.plan.opts.max_primitives_per_blas as usize;
-        let mut by_element = self.in_root;
         let mut ranges: Vec<(usize, usize)> = Vec::new();
-        let mut runs: Vec<(usize, usize, u32)> = Vec::new();
         let mut first_round = true;
         loop {
             let t = self.out.tlases[tlas as usize];
@@ -673,95 +673,86 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
                 return Ok(());
             }
             let _span = tracing::debug_span!("split", tlas, instances = count).entered();
-            if first_round {
+            // The range is the table's tail (just emitted, or the previous round's output), so
+            // what stays direct can sit at its end and the new AABB instances follow it.
+            debug_assert_eq!(base + count, self.out.instances.len());
+            let mut bounds: Vec<([f32; 3], [f32; 3])> = {
+                let blases = &self.out.blases;
+                self.out.instances[base..]
+                    .iter()
+                    .map(|inst| {
+                        let b = instance_bounds(blases, inst);
+                        (b.min, b.max)
+                    })
+                    .collect()
+            };
+            let direct = if first_round {
                 self.out.report.split_tlases += 1;
-                first_round = false;
-            }
-            let slice = &mut self.out.instances[base..base + count];
-            runs.clear();
-            if by_element {
-                slice.sort_unstable_by_key(|inst| inst.element);
-                for (k, inst) in slice.iter().enumerate() {
-                    match runs.last_mut() {
-                        Some(run) if run.2 == inst.element => run.1 += 1,
-                        _ => runs.push((k, k + 1, inst.element)),
-                    }
-                }
-                if runs.len() > cap {
-                    by_element = false;
-                }
-            }
-            if !by_element {
-                runs.clear();
-                runs.push((0, count, t.element));
-            }
-            // Pieces: child TLASes over sub-ranges, in spatial order; grouped per run.
+                keep_large_at_end(&mut self.out.instances[base..], &mut bounds, cap)
+            } else {
+                0
+            };
+            first_round = false;
+            let split_end = base + count - direct;
+            ranges.clear();
+            sah_partition(
+                &mut self.out.instances[base..split_end],
+                &mut bounds[..count - direct],
+                cap,
+                &mut ranges,
+            );
+            drop(bounds);
             let first_piece = self.out.tlases.len();
-            let mut piece_runs: Vec<(usize, usize, u32)> = Vec::new();
-            for &(a, b, element) in &runs {
-                ranges.clear();
-                {
-                    let blases = &self.out.blases;
-                    median_partition(
-                        &mut self.out.instances[base + a..base + b],
-                        |inst| instance_centre(blases, inst),
-                        cap,
-                        &mut ranges,
-                    );
-                }
-                let run_first = self.out.tlases.len();
-                for &(x, y) in &ranges {
-                    let (x, y) = (base + a + x, base + a + y);
-                    next_id(self.out.tlases.len(), "TLASes")?;
-                    let bounds = self.out.instances[x..y]
-                        .iter()
-                        .fold(Aabb::EMPTY, |acc, inst| {
-                            acc.union(&instance_bounds(&self.out.blases, inst))
-                        });
-                    let mut rec = TlasRecord {
-                        instance_base: x as u32,
-                        instance_count: (y - x) as u32,
-                        element: if by_element { element } else { t.element },
-                        ..Default::default()
-                    };
-                    set_bounds(&mut rec.bounds_min, &mut rec.bounds_max, &bounds);
-                    self.out.tlases.push(rec);
-                }
-                piece_runs.push((run_first, self.out.tlases.len(), element));
+            for &(x, y) in &ranges {
+                let (x, y) = (base + x, base + y);
+                next_id(self.out.tlases.len(), "TLASes")?;
+                let insts = &self.out.instances[x..y];
+                let bounds = insts.iter().fold(Aabb::EMPTY, |acc, inst| {
+                    acc.union(&instance_bounds(&self.out.blases, inst))
+                });
+                let mut rec = TlasRecord {
+                    instance_base: x as u32,
+                    instance_count: (y - x) as u32,
+                    element: match common_element(insts.iter().map(|i| i.element)) {
+                        Some(e) if e != NONE_U32 => e,
+                        _ => t.element,
+                    },
+                    ..Default::default()
+                };
+                set_bounds(&mut rec.bounds_min, &mut rec.bounds_max, &bounds);
+                self.out.tlases.push(rec);
             }
-            self.out.report.split_pieces += (self.out.tlases.len() - first_piece) as u64;
-            // PIs to the pieces, grouped into AABB BLASes; the TLAS now instances those.
-            let new_base = self.out.instances.len();
-            for (run_first, run_end, element) in piece_runs {
-                let mut piece = run_first;
-                while piece < run_end {
-                    let group_end = (piece + per_blas).min(run_end);
-                    let pi_begin = self.out.pis.len();
-                    for target in piece..group_end {
-                        let pt = &self.out.tlases[target];
-                        let pi = PiRecord {
-                            child_from_parent: xform::to_array(&Transform34::IDENTITY),
-                            aabb_min: pt.bounds_min,
-                            kind: PI_TLAS,
-                            aabb_max: pt.bounds_max,
-                            target: target as u32,
-                        };
-                        next_id(self.out.pis.len(), "programmable instances")?;
-                        self.out.pis.push(pi);
-                    }
-                    let blas = self.aabb_blas(pi_begin, self.out.pis.len())?;
-                    let element = if by_element { element } else { NONE_U32 };
-                    self.push_instance(blas, &Transform34::IDENTITY, element)?;
-                    piece = group_end;
+            let piece_end = self.out.tlases.len();
+            self.out.report.split_pieces += (piece_end - first_piece) as u64;
+            // PIs to the pieces (in spatial order), grouped into AABB BLASes; the TLAS now
+            // instances those, after the instances it keeps.
+            let mut piece = first_piece;
+            while piece < piece_end {
+                let group_end = (piece + per_blas).min(piece_end);
+                let pi_begin = self.out.pis.len();
+                for target in piece..group_end {
+                    let pt = &self.out.tlases[target];
+                    let pi = PiRecord {
+                        child_from_parent: xform::to_array(&Transform34::IDENTITY),
+                        aabb_min: pt.bounds_min,
+                        kind: PI_TLAS,
+                        aabb_max: pt.bounds_max,
+                        target: target as u32,
+                    };
+                    next_id(self.out.pis.len(), "programmable instances")?;
+                    self.out.pis.push(pi);
                 }
+                let blas = self.aabb_blas(pi_begin, self.out.pis.len())?;
+                let element =
+                    common_element(self.out.tlases[piece..group_end].iter().map(|t| t.element))
+                        .unwrap_or(NONE_U32);
+                self.blas_element[blas as usize] = element;
+                self.push_instance(blas, &Transform34::IDENTITY, element)?;
+                piece = group_end;
             }
             let t = &mut self.out.tlases[tlas as usize];
-            t.instance_base = next_id(new_base, "instances")?;
-            t.instance_count = next_id(self.out.instances.len() - new_base, "instances")?;
-            if t.instance_count as usize >= count {
-                // Element grouping made no progress: split spatially from now on.
-                by_element = false;
-            }
+            t.instance_base = next_id(split_end, "instances")?;
+            t.instance_count = next_id(self.out.instances.len() - split_end, "instances")?;
         }
     }
 
@@ -832,10 +823,49 @@ fn pi_centre(pi: &PiRecord) -> [f32; 3] {
 
 /// The centre of an instance's transformed bounds: an affine image of a box is symmetric about
 /// the image of the box's centre, so one point transform suffices (hot in median selection).
-fn instance_centre(blases: &[BlasRecord], inst: &InstanceRecord) -> [f32; 3] {
-    let b = &blases[inst.blas as usize];
-    let c = std::array::from_fn(|i| 0.5 * (b.bounds_min[i] + b.bounds_max[i]));
-    motu_abi::xform_point(&inst.tlas_from_blas, c)
+/// The one element all of `elements` carry (`NONE_U32` ones included as such), if any.
+fn common_element(mut elements: impl Iterator<Item = u32>) -> Option<u32> {
+    let first = elements.next()?;
+    elements.all(|e| e == first).then_some(first)
+}
+
+/// Moves the instances whose bounds are large against the whole range (terrain, ocean: in
+/// any piece they would make its box span the scene) to the end of `instances` (`bounds`
+/// alongside) and returns how many: those with a surface area of at least the whole's over
+/// the piece count, the largest first, at most a quarter of `cap`, so the parent keeps room
+/// for the pieces' AABB instances.
+fn keep_large_at_end(
+    instances: &mut [InstanceRecord],
+    bounds: &mut [([f32; 3], [f32; 3])],
+    cap: usize,
+) -> usize {
+    let n = instances.len();
+    let area = |b: &([f32; 3], [f32; 3])| Aabb { min: b.0, max: b.1 }.surface_area();
+    let whole = bounds.iter().fold(Aabb::EMPTY, |acc, b| {
+        acc.union(&Aabb { min: b.0, max: b.1 })
+    });
+    let pieces = n.div_ceil(cap.max(1)).max(2);
+    let threshold = whole.surface_area() / pieces as f32;
+    if !(threshold.is_finite() && threshold > 0.0) {
+        return 0;
+    }
+    let mut large: Vec<(f32, usize)> = bounds
+        .iter()
+        .enumerate()
+        .map(|(i, b)| (area(b), i))
+        .filter(|&(a, _)| a >= threshold)
+        .collect();
+    large.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    large.truncate(cap / 4);
+    let mut picked: Vec<usize> = large.into_iter().map(|(_, i)| i).collect();
+    // Swap the picked to the tail, highest index first so none is moved before it is taken.
+    picked.sort_unstable_by(|a, b| b.cmp(a));
+    for (k, &i) in picked.iter().enumerate() {
+        let dst = n - 1 - k;
+        instances.swap(i, dst);
+        bounds.swap(i, dst);
+    }
+    picked.len()
 }
 
 pub(crate) fn instance_bounds(blases: &[BlasRecord], inst: &InstanceRecord) -> Aabb {

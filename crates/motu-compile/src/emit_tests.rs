@@ -233,12 +233,9 @@ fn split_10000_instances_under_a_cap_of_1000() {
         assert!(c.tlases.len() >= 11, "{}", c.tlases.len());
         assert_eq!(flatten_compiled(&c.view(), 0).len(), 10_000);
         assert_eq!(c.report.split_tlases, 1);
-        // Median pieces: between half the cap and the cap.
+        // SAH pieces: within the cap, and not many more than the minimum of 10.
         let leaves: Vec<_> = c.tlases[1..].iter().map(|t| t.instance_count).collect();
-        assert!(
-            leaves.iter().all(|&n| (500..=1000).contains(&n)),
-            "{leaves:?}"
-        );
+        assert!(leaves.len() <= 40, "{leaves:?}");
         // The pieces' instances are spatially separated when positions differ.
         if !same_place {
             let vol = |t: &motu_abi::TlasRecord| {
@@ -337,20 +334,81 @@ fn root_placements_carry_their_element() {
     assert!(c.instances[tree.instance_base as usize..][..2]
         .iter()
         .all(|i| i.element == NONE_U32));
-    // Splitting the root keeps one element per piece.
-    let o = CompileOptions {
+    // Splitting the root keeps every placement's tag (in whichever piece it lands), and a
+    // piece of one element says so.
+    let tags = |c: &crate::CompiledScene| {
+        let mut v: Vec<u32> = c
+            .instances
+            .iter()
+            .map(|i| i.element)
+            .filter(|&e| e != NONE_U32)
+            .collect();
+        v.sort_unstable();
+        v
+    };
+    let sl = |cap| CompileOptions {
         levels: Levels::Sl,
-        max_instances_per_tlas: 3,
+        max_instances_per_tlas: cap,
         ..Default::default()
     };
-    let c = check_flatten(&scene, &o);
+    let whole = check_flatten(&scene, &sl(crate::DEFAULT_MAX_PER_NODE));
+    let c = check_flatten(&scene, &sl(3));
+    assert!(c.report.split_tlases >= 1);
+    assert_eq!(tags(&c), tags(&whole));
     for piece in &c.tlases[1..] {
         let range =
             piece.instance_base as usize..(piece.instance_base + piece.instance_count) as usize;
-        assert!(c.instances[range]
-            .iter()
-            .all(|i| i.element == piece.element));
+        let insts = &c.instances[range];
+        if piece.element != NONE_U32 {
+            assert!(insts.iter().all(|i| i.element == piece.element));
+        }
     }
+}
+
+#[test]
+fn split_keeps_huge_instances_in_the_parent_and_pieces_apart() {
+    // An ocean-like huge slab under 2000 small boxes scattered in a grid: the slab stays in
+    // the root (any piece holding it would span the scene) and the pieces barely overlap.
+    let mut b = builder();
+    let (m, main) = (b.default_material(), Scene::MAIN_ELEMENT);
+    let leaf = b.add_prototype("leaf", main).unwrap();
+    b.add_mesh(leaf, "leaf", m, main, &triangle()).unwrap();
+    let slab = b.add_prototype("slab", main).unwrap();
+    b.add_mesh(slab, "slab", m, main, &triangle()).unwrap();
+    let huge = Transform34::from_mat4(Mat4::from_scale(Vec3::new(200.0, 200.0, 1.0)));
+    b.add_instance(b.root(), slab, huge, main).unwrap();
+    for i in 0..2000 {
+        let (x, y) = ((i % 50) as f32 * 4.0, (i / 50) as f32 * 4.0);
+        b.add_instance(b.root(), leaf, t(x, y, 0.5), main).unwrap();
+    }
+    let scene = b.finish().unwrap();
+    let o = CompileOptions {
+        levels: Levels::Sl,
+        max_instances_per_tlas: 100,
+        ..Default::default()
+    };
+    let c = check_flatten(&scene, &o);
+    assert_eq!(flatten_compiled(&c.view(), 0).len(), 2001);
+    let root = c.tlases[c.root_tlas as usize];
+    let root_blases: Vec<u32> = c.instances[root.instance_base as usize..]
+        [..root.instance_count as usize]
+        .iter()
+        .map(|i| c.blases[i.blas as usize].kind)
+        .collect();
+    assert_eq!(
+        root_blases.iter().filter(|&&k| k == BLAS_TRIANGLES).count(),
+        1,
+        "the slab stays in the root: {root_blases:?}"
+    );
+    // Pieces' footprints (x-y areas) sum to little more than the grid's.
+    let pieces: Vec<_> = c.tlases[1..].to_vec();
+    assert!(pieces.len() >= 20 && pieces.len() <= 80, "{}", pieces.len());
+    let area = |t: &motu_abi::TlasRecord| {
+        (t.bounds_max[0] - t.bounds_min[0]) * (t.bounds_max[1] - t.bounds_min[1])
+    };
+    let sum: f32 = pieces.iter().map(area).sum();
+    let grid = 197.0 * 157.0;
+    assert!(sum < 1.3 * grid, "pieces overlap: {sum} vs {grid}");
 }
 
 #[test]

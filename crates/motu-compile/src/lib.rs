@@ -33,8 +33,10 @@
 //! # Elements
 //! Every instance of the root TLAS carries the element it came from (the root edge's, or the
 //! root mesh's: `G(root)` and the root's AABB BLASes are grouped per element), so `--subset`
-//! can also filter at run time; instances below the root carry `NONE_U32`. A split root is
-//! split per element first. [`CompileOptions::subset`] filters at compile time instead.
+//! can also filter at run time; instances below the root carry `NONE_U32`. A split root's pieces
+//! mix elements (splitting per element made pieces that overlap wherever elements do), and
+//! their instances keep their tags: `RootSubset` filters every tagged instance, pieces included.
+//! [`CompileOptions::subset`] filters at compile time instead.
 //!
 //! # Memory and time
 //! All passes are O(prototypes + edges + output) with per-prototype arrays, no per-edge
@@ -52,13 +54,16 @@
 //! [`validate`] checks this anyway.
 //!
 //! # Splitting
-//! A TLAS over the instance cap (or its scratch estimate over the budget) is split: its
-//! instance range is partitioned in place at the median instance centre along the largest
-//! axis (`select_nth_unstable_by`; a plain index split when all centres coincide, so it always
-//! halves and always terminates) until each piece fits; the pieces become child TLASes (their
-//! instance ranges are sub-ranges of the original: nothing is copied) reached through PIs of
-//! new AABB BLASes instanced by the original TLAS. AABB BLASes over the primitive cap are split
-//! the same way. Split levels add TLAS levels below the `Levels::N` budget.
+//! A TLAS over the instance cap (or its scratch estimate over the budget) is split so that a
+//! ray enters few pieces (issue 15): the instances large against the whole (terrain, ocean;
+//! at most a quarter of the cap) stay in the TLAS itself, and the rest of its instance range
+//! is partitioned in place by a binned SAH over instance bounds (each side at least 1/8 of the
+//! range; an index split when centroids coincide, so it always terminates) until each piece
+//! fits; the pieces become child TLASes (their instance ranges are sub-ranges of the original:
+//! nothing is copied) reached through PIs of new AABB BLASes instanced by the original TLAS,
+//! which traversal enters near-to-far, skipping those behind the best hit. AABB BLASes over
+//! the primitive cap are split at the median PI centre. Split levels add TLAS levels below the
+//! `Levels::N` budget.
 //!
 //! # Partitioning
 //! Triangle BLASes are bounded by [`CompileOptions::max_blas_triangles`] (see [`partition`]):

@@ -72,6 +72,8 @@ pub struct HierarchyBuilder {
     tlas_bounds: Vec<Aabb>,
     blas_bounds: Vec<Aabb>,
     selector_bounds: Vec<Aabb>,
+    /// The `(parent_from_child, target)` list of every PI BLAS, by BLAS id.
+    pi_sources: std::collections::HashMap<u32, Vec<([f32; 12], PiTarget)>>,
 }
 
 impl HierarchyBuilder {
@@ -149,11 +151,26 @@ impl HierarchyBuilder {
         self.h.blases.len() as u32 - 1
     }
 
-    /// A TLAS over `(tlas_from_blas, blas)` instances.
+    /// A TLAS over `(tlas_from_blas, blas)` instances. A PI BLAS placed with a transform other
+    /// than the identity is rebuilt with that transform folded into its PIs (hierarchies place
+    /// AABB BLASes with the identity only: `HierarchyView::check_references`).
     pub fn tlas(&mut self, instances: &[([f32; 12], u32)]) -> u32 {
+        let instances: Vec<([f32; 12], u32)> = instances
+            .iter()
+            .map(|&(m, blas)| match self.pi_sources.get(&blas) {
+                Some(src) if m != crate::ray::IDENTITY_3X4 => {
+                    let folded: Vec<_> = src
+                        .iter()
+                        .map(|(p, t)| (crate::ray::compose(&m, p), *t))
+                        .collect();
+                    (crate::ray::IDENTITY_3X4, self.pi_blas(&folded))
+                }
+                _ => (m, blas),
+            })
+            .collect();
         let base = self.h.instances.len() as u32;
         let mut b = Aabb::EMPTY;
-        for &(m, blas) in instances {
+        for &(m, blas) in &instances {
             self.h.instances.push(InstanceRecord {
                 tlas_from_blas: m,
                 blas,
@@ -198,7 +215,9 @@ impl HierarchyBuilder {
             });
             b = b.union(&aabb);
         }
-        self.push_blas(BLAS_AABBS, base, pis.len() as u32, b, pis.len() as u32)
+        let id = self.push_blas(BLAS_AABBS, base, pis.len() as u32, b, pis.len() as u32);
+        self.pi_sources.insert(id, pis.to_vec());
+        id
     }
 
     /// A selector over TLASes (finest first); its sphere bounds all levels.
