@@ -426,6 +426,11 @@ fn render_streaming(
     }
     let out = last.context("no frame rendered")?;
     let mut stats = serde_json::to_value(&out.stats)?;
+    // The last frame is the image written: its cut rays decide (render's common check).
+    stats["truncated_rays"] = frames
+        .last()
+        .and_then(|f| f["truncated_rays"].as_u64())
+        .map_or(json!(0), |n| json!(n));
     let totals = sr.totals();
     let after_first: Vec<f64> = frames
         .iter()

@@ -134,6 +134,7 @@ impl<'a> StreamingRenderer<'a> {
         let (aov, rgba8, heatmap_max) =
             crate::render::frame_outputs(w, h, records, &rgba_words, opts.view);
         let shadow = u64::from(counters[2]);
+        self.frame_stats.truncated_rays = u64::from(counters[crate::render::STAT_TRUNCATED_RAYS]);
         let rays = pixels + self.frame_stats.reshot_pixels + shadow;
         let traces: u64 = aov.records.iter().map(|r| u64::from(r.traces)).sum();
         let ms = self.frame_stats.trace_ms;
@@ -157,7 +158,6 @@ impl<'a> StreamingRenderer<'a> {
             stack_size: opts.stack_size,
             stack_overflows: u64::from(counters[0]),
             pi_list_overflows: u64::from(counters[1]),
-            truncated_rays: u64::from(counters[crate::render::STAT_TRUNCATED_RAYS]),
             heatmap_max,
             as_bytes: self
                 .blas

@@ -127,6 +127,8 @@ pub struct FrameStreamStats {
     pub complete: bool,
     /// Pixels still incomplete after the last pass (rendered as misses).
     pub incomplete_pixels: u64,
+    /// Pixels whose traversal was cut short this frame (a stack overflow or the trace cap).
+    pub truncated_rays: u64,
     /// Pixels traced again in passes after the first.
     pub reshot_pixels: u64,
     /// Guard-band rays traced (prefetch probes).
