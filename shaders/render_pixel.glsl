@@ -137,7 +137,10 @@ void render_pixel_impl(uvec2 px) {
             c.rec = uvec4(m.source_mesh, source_primitive(m, s.mesh_record, h.primitive),
                           h.lod == NONE_U32 ? m.lod : h.lod, m.material);
         }
-        if (stream_still_open(c.hit.x)) {
+        // A cut-short walk (stack overflow, trace cap) cannot finish in a later pass either:
+        // the pixel ends here and is counted as truncated.
+        bool cut = g_truncated || overflows != 0u;
+        if (!cut && stream_still_open(c.hit.x)) {
             // Shading and shadow rays wait until the primary hit is final.
             c.st.z = traces;
             stream_defer(px, pixel, c);
@@ -185,7 +188,8 @@ void render_pixel_impl(uvec2 px) {
                                            overflows, truncations);
                     visible = sh.t < T_INFINITY ? 0.0 : 1.0;
                     // Occluded is final whatever the open structures hold.
-                    if (sh.t == T_INFINITY && stream_still_open(T_INFINITY)) {
+                    if (sh.t == T_INFINITY && !g_truncated && overflows == 0u &&
+                        stream_still_open(T_INFINITY)) {
                         c.st.z = traces;
                         stream_defer(px, pixel, c);
                         return;

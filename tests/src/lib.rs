@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
 
-/// The `motu` binary of this workspace, built once if the test run did not build it.
+/// The `motu` binary of this workspace, brought up to date once per test process.
 pub fn motu_bin() -> PathBuf {
     static BIN: OnceLock<PathBuf> = OnceLock::new();
     BIN.get_or_init(|| {
@@ -16,7 +16,8 @@ pub fn motu_bin() -> PathBuf {
             .and_then(Path::parent)
             .expect("target/<profile>");
         let bin = profile_dir.join("motu");
-        if !bin.exists() {
+        // Always (once per test process): a binary left from an older build would test old code.
+        {
             let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
             let status = Command::new(cargo)
                 .args(["build", "-p", "motu-cli"])

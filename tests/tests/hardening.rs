@@ -531,6 +531,31 @@ fn regression_exponential_instancing_warns_and_frames_end() {
             "{backend}: {st}"
         );
     }
+    if gpu_available() {
+        // Streaming passes count cut rays too (one stats layout for every renderer).
+        let png = d.join("stream.png");
+        let stats = d.join("stream.json");
+        let args = [
+            "render",
+            s(&pkg),
+            "-o",
+            s(&png),
+            "--backend",
+            "pipeline",
+            "--stream",
+            "--stats",
+            s(&stats),
+        ];
+        fails_with(&args, &["cut short", "--allow-truncated"]);
+        assert!(!png.exists());
+        let mut allowed = args.to_vec();
+        allowed.push("--allow-truncated");
+        let o = motu(&allowed);
+        assert!(o.status.success(), "stream: {}", stderr(&o));
+        let st: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+        assert!(st["truncated_rays"].as_u64().unwrap() > 0, "stream: {st}");
+    }
 }
 
 // ---- 8 ------------------------------------------------------------------------------------
