@@ -446,28 +446,24 @@ fn streaming_refines_over_frames_and_never_writes_an_unfinished_frame() {
         "pipeline",
         "--vram-budget",
         "3MiB",
+    ];
+    let (vaov, vstats, raov) = (d.join("v.aov"), d.join("v.json"), d.join("r.aov"));
+    // With carried hits this small forest completes within two passes at this budget, so the
+    // refinement over several frames is not exercised here (a scene whose working set exceeds
+    // the budget is needed: noted on issue 17).
+    let mut args = common.to_vec();
+    args.extend_from_slice(&[
         "--stream-passes",
         "2",
-    ];
-    let bad = d.join("bad.aov");
-    let mut args = vec!["view"];
-    args.extend_from_slice(&common);
-    args.extend_from_slice(&["--frames", "1", "--aov", s(&bad)]);
-    let out = motu_on_display(&x.display, &args);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        !out.status.success(),
-        "two passes cannot finish the first frame: {err}"
-    );
-    assert!(err.contains("incomplete"), "{err}");
-    assert!(!bad.exists(), "an unfinished frame was written");
-    // Two passes per frame: the first frames show unfinished pixels, later ones are complete.
-    let (vaov, vstats, raov) = (d.join("v.aov"), d.join("v.json"), d.join("r.aov"));
-    let mut args = common.to_vec();
-    args.extend_from_slice(&["--frames", "8", "--aov", s(&vaov), "--stats", s(&vstats)]);
+        "--frames",
+        "8",
+        "--aov",
+        s(&vaov),
+        "--stats",
+        s(&vstats),
+    ]);
     view_ok(&x.display, &args);
     let st = read_json(&vstats);
-    assert!(st["incomplete_frames"].as_u64().unwrap() >= 1, "{st}");
     assert_eq!(st["detail"]["complete"], true, "{st}");
     assert!(st["vram_used_bytes"].as_u64().unwrap() <= 3 << 20, "{st}");
     motu_ok(&[
@@ -483,6 +479,66 @@ fn streaming_refines_over_frames_and_never_writes_an_unfinished_frame() {
         "pipeline",
     ]);
     compare_exact(&vaov, &raov);
+}
+
+/// A scripted run whose last frame is unfinished fails and writes nothing: the default island
+/// just above its streaming floor needs far more than two passes for its first frame.
+#[test]
+fn view_never_writes_an_unfinished_frame() {
+    if !gpu_available() {
+        return;
+    }
+    let Some(x) = xvfb("view_never_writes_an_unfinished_frame") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let gen = d.join("island");
+    motu_ok(&["gen", "island", "-o", s(&gen)]);
+    let pkg = d.join("island.motu");
+    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    let rep = motu_ok(&[
+        "report",
+        s(&pkg),
+        "--json",
+        "--width",
+        "64",
+        "--height",
+        "36",
+    ]);
+    let rep: serde_json::Value = serde_json::from_str(&rep).unwrap();
+    let floor = rep["streaming"]["min_resident_bytes"].as_u64().unwrap();
+    let budget = (floor as f64 * 1.05) as u64;
+    let bad = d.join("bad.aov");
+    let budget_arg = budget.to_string();
+    let out = motu_on_display(
+        &x.display,
+        &[
+            "view",
+            s(&pkg),
+            "--width",
+            "64",
+            "--height",
+            "36",
+            "--backend",
+            "pipeline",
+            "--vram-budget",
+            &budget_arg,
+            "--stream-passes",
+            "2",
+            "--frames",
+            "1",
+            "--aov",
+            s(&bad),
+        ],
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success(),
+        "two passes cannot finish the first frame: {err}"
+    );
+    assert!(err.contains("incomplete"), "{err}");
+    assert!(!bad.exists(), "an unfinished frame was written");
 }
 
 #[test]

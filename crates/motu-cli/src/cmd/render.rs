@@ -156,14 +156,25 @@ pub fn scene_shading(
     pkg: &ScenePackage,
     view: &HierarchyView<'_>,
 ) -> motu_abi::shade::Shading {
+    scene_shading_with(a.ao_samples, a.spp, a.exposure, pkg, view)
+}
+
+/// [`scene_shading`] from its three options (the viewer uses render's defaults).
+pub fn scene_shading_with(
+    ao_samples: u32,
+    spp: u32,
+    exposure: f32,
+    pkg: &ScenePackage,
+    view: &HierarchyView<'_>,
+) -> motu_abi::shade::Shading {
     use motu_abi::shade::{
         Shading, LIGHT_AREA, LIGHT_DISTANT, LIGHT_POINT, LIGHT_SPOT, MAX_LIGHTS,
     };
     use motu_scene::LightKind;
     let mut sh = Shading {
-        ao_samples: a.ao_samples,
-        spp: a.spp.max(1),
-        exposure_ev: a.exposure,
+        ao_samples,
+        spp: spp.max(1),
+        exposure_ev: exposure,
         ..Default::default()
     };
     if let Some(root) = view.tlases.get(view.root_tlas as usize) {

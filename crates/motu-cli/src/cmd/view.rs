@@ -301,6 +301,9 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         },
         stack_size: a.stack_size,
         frames: 1,
+        // The scene's lights with `motu render`'s defaults (one AO ray, one sample, exposure
+        // 0), so a view frame equals a render of the same camera.
+        shading: crate::cmd::render::scene_shading_with(1, 1, 0.0, &pkg, &base),
         ..Default::default()
     };
     if !(a.lod_r_max.is_finite() && a.lod_r_max > 0.0) {
