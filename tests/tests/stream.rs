@@ -4,7 +4,7 @@
 //! 30-frame camera path needs about one pass per frame and builds far fewer triangles than
 //! rebuilding everything per frame.
 
-use motu_tests::{motu, motu_ok, s};
+use motu_tests::{gpu_available, motu_ok, s};
 use std::path::{Path, PathBuf};
 
 /// The streaming budget (above the floor, 16.1 MiB at 64 px wide): the full build below needs
@@ -18,21 +18,6 @@ const PATH_BUDGET_BYTES: u64 = 32 << 20;
 const PATH_BUDGET: &str = "32MiB";
 /// A close-up that sees a small part of the island (`motu gen island`'s cameras).
 const CAMERA: &str = "palmsCam";
-
-/// False (with a loud line) when no ray-tracing device exists and the run does not require one.
-fn gpu_available() -> bool {
-    let out = motu(&["devices", "--json"]);
-    let ok = out.status.success()
-        && String::from_utf8_lossy(&out.stdout).contains("\"ray_pipeline\": true");
-    if !ok {
-        assert!(
-            std::env::var_os("MOTU_REQUIRE_GPU").is_none(),
-            "MOTU_REQUIRE_GPU is set but no ray-tracing device was found"
-        );
-        eprintln!("SKIPPED: no Vulkan ray-tracing device");
-    }
-    ok
-}
 
 /// A small island with one BLAS per terrain patch (what streaming builds and evicts).
 fn island(dir: &Path) -> PathBuf {

@@ -3,27 +3,12 @@
 //! streaming floor complete with the full build's AOV (0 mismatches, peak ≤ budget, exit 0);
 //! a budget below the floor is refused naming it; a frame that runs out of passes is an error.
 
-use motu_tests::{motu, motu_json, motu_ok, s};
+use motu_tests::{gpu_available, motu, motu_json, motu_ok, s};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 const W: &str = "96";
 const H: &str = "64";
-
-/// False (with a loud line) when no ray-tracing device exists and the run does not require one.
-fn gpu_available() -> bool {
-    let out = motu(&["devices", "--json"]);
-    let ok = out.status.success()
-        && String::from_utf8_lossy(&out.stdout).contains("\"ray_pipeline\": true");
-    if !ok {
-        assert!(
-            std::env::var_os("MOTU_REQUIRE_GPU").is_none(),
-            "MOTU_REQUIRE_GPU is set but no ray-tracing device was found"
-        );
-        eprintln!("SKIPPED: no Vulkan ray-tracing device");
-    }
-    ok
-}
 
 /// The default island (`motu gen island --scale 0.002`, default import).
 fn default_island(dir: &Path) -> PathBuf {

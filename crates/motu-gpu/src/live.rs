@@ -6,8 +6,8 @@ use motu_abi::camera::CameraParams;
 
 use crate::error::Result;
 use crate::render::{
-    alloc_frame, frame_outputs, frame_params, run_frames, Frame, RenderOptions, RenderOutput,
-    RenderStats, Tracer,
+    alloc_frame, frame_outputs, frame_params, run_frames, Frame, FrameMeasure, RenderOptions,
+    RenderOutput, RenderStats, Tracer,
 };
 use crate::scene::GpuScene;
 
@@ -87,37 +87,22 @@ impl LiveRenderer {
         let (aov, rgba8, heatmap_max) = frame_outputs(w, h, records, &rgba_words, opts.view);
         let ms = frame_ns.first().copied().unwrap_or(0.0) / 1e6;
         let pixels = u64::from(w) * u64::from(h);
-        let shadow = u64::from(counters[2]);
-        let rays = pixels + shadow;
-        let traces: u64 = aov.records.iter().map(|r| u64::from(r.traces)).sum();
-        let alloc = self.scene.alloc_report();
-        let stats = RenderStats {
-            width: w,
-            height: h,
-            backend: opts.backend.name(),
-            view: opts.view,
-            frames: 1,
-            ms_per_frame: ms,
-            rays,
-            primary_rays: pixels,
-            shadow_rays: shadow,
-            rays_per_second: if ms > 0.0 {
-                rays as f64 / (ms / 1e3)
-            } else {
-                0.0
+        let stats = RenderStats::measured(
+            opts,
+            FrameMeasure {
+                width: w,
+                height: h,
+                frames: 1,
+                ms_per_frame: ms,
+                primary_rays: pixels,
+                aov: &aov,
+                counters: &counters,
+                heatmap_max,
+                as_bytes: self.scene.report().as_bytes,
+                alloc: self.scene.alloc_report(),
+                passes: 1,
             },
-            traces,
-            traces_per_ray: traces as f64 / rays.max(1) as f64,
-            stack_size: opts.stack_size,
-            stack_overflows: u64::from(counters[0]),
-            pi_list_overflows: u64::from(counters[1]),
-            heatmap_max,
-            as_bytes: self.scene.report().as_bytes,
-            vram_budget_bytes: alloc.budget_bytes,
-            vram_peak_bytes: alloc.peak_block_bytes,
-            allocation_count: alloc.peak_allocation_count,
-            passes: 1,
-        };
+        );
         Ok(RenderOutput { aov, rgba8, stats })
     }
 }

@@ -164,6 +164,60 @@ pub struct RenderStats {
     pub passes: u32,
 }
 
+/// What one rendered frame measured (every renderer: full builds, the viewer's live renderer,
+/// streaming), turned into [`RenderStats`] in one place.
+pub(crate) struct FrameMeasure<'a> {
+    pub width: u32,
+    pub height: u32,
+    pub frames: u32,
+    pub ms_per_frame: f64,
+    /// Pixels traced (streaming adds the re-shot ones).
+    pub primary_rays: u64,
+    pub aov: &'a Aov,
+    /// The frame's stats words (`STAT_WORDS`).
+    pub counters: &'a [u32],
+    pub heatmap_max: u32,
+    pub as_bytes: u64,
+    pub alloc: motu_alloc::AllocReport,
+    pub passes: u32,
+}
+
+impl RenderStats {
+    pub(crate) fn measured(opts: &RenderOptions, m: FrameMeasure<'_>) -> Self {
+        let shadow = u64::from(m.counters[2]);
+        let rays = m.primary_rays + shadow;
+        let traces: u64 = m.aov.records.iter().map(|r| u64::from(r.traces)).sum();
+        let ms = m.ms_per_frame;
+        Self {
+            width: m.width,
+            height: m.height,
+            backend: opts.backend.name(),
+            view: opts.view,
+            frames: m.frames,
+            ms_per_frame: ms,
+            rays,
+            primary_rays: m.primary_rays,
+            shadow_rays: shadow,
+            rays_per_second: if ms > 0.0 {
+                rays as f64 / (ms / 1e3)
+            } else {
+                0.0
+            },
+            traces,
+            traces_per_ray: traces as f64 / rays.max(1) as f64,
+            stack_size: opts.stack_size,
+            stack_overflows: u64::from(m.counters[0]),
+            pi_list_overflows: u64::from(m.counters[1]),
+            heatmap_max: m.heatmap_max,
+            as_bytes: m.as_bytes,
+            vram_budget_bytes: m.alloc.budget_bytes,
+            vram_peak_bytes: m.alloc.peak_block_bytes,
+            allocation_count: m.alloc.peak_allocation_count,
+            passes: m.passes,
+        }
+    }
+}
+
 #[derive(Clone, Debug)]
 pub struct RenderOutput {
     pub aov: Aov,
@@ -484,36 +538,22 @@ pub fn render_counted(
     };
     sorted.sort_by(f64::total_cmp);
     let ms = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0) / 1e6;
-    let shadow = u64::from(counters[2]);
-    let rays = pixels + shadow;
-    let traces: u64 = aov.records.iter().map(|r| u64::from(r.traces)).sum();
-    let stats = RenderStats {
-        width: w,
-        height: h,
-        backend: opts.backend.name(),
-        view: opts.view,
-        frames,
-        ms_per_frame: ms,
-        rays,
-        primary_rays: pixels,
-        shadow_rays: shadow,
-        rays_per_second: if ms > 0.0 {
-            rays as f64 / (ms / 1e3)
-        } else {
-            0.0
+    let stats = RenderStats::measured(
+        opts,
+        FrameMeasure {
+            width: w,
+            height: h,
+            frames,
+            ms_per_frame: ms,
+            primary_rays: pixels,
+            aov: &aov,
+            counters: &counters,
+            heatmap_max,
+            as_bytes: scene.report().as_bytes,
+            alloc,
+            passes: 1,
         },
-        traces,
-        traces_per_ray: traces as f64 / rays.max(1) as f64,
-        stack_size: opts.stack_size,
-        stack_overflows: u64::from(counters[0]),
-        pi_list_overflows: u64::from(counters[1]),
-        heatmap_max,
-        as_bytes: scene.report().as_bytes,
-        vram_budget_bytes: alloc.budget_bytes,
-        vram_peak_bytes: alloc.peak_block_bytes,
-        allocation_count: alloc.peak_allocation_count,
-        passes: 1,
-    };
+    );
     tracing::info!(
         ms = stats.ms_per_frame,
         rays = stats.rays,

@@ -461,16 +461,14 @@ fn render_streaming(
     Ok((out.aov, out.rgba8, stats))
 }
 
-/// Builds the package's structures on the GPU under the budget and renders with a traversal
-/// shader backend.
-fn render_gpu(
+/// The device and the package's structures built on it under `--vram-budget` and
+/// `--max-allocations` (a full build: `render` and `render --camera-path`).
+fn build_gpu_scene<'v>(
     a: &RenderArgs,
     pkg: &ScenePackage,
-    view: &HierarchyView<'_>,
-    camera: &CameraParams,
-    lod: LodParams,
+    view: &HierarchyView<'v>,
     backend: BackendArg,
-) -> anyhow::Result<(Aov, Vec<u8>, Value)> {
+) -> anyhow::Result<(motu_gpu::Context, motu_gpu::GpuScene)> {
     let ctx = gpu_context(a, backend)?;
     let budget = a.vram_budget.unwrap_or(u64::MAX);
     let build = motu_gpu::BuildOptions {
@@ -486,6 +484,20 @@ fn render_gpu(
     let meshes = PackageMeshes(pkg);
     let scene = motu_gpu::GpuScene::build(&ctx, view, &meshes, &build)
         .context("building acceleration structures")?;
+    Ok((ctx, scene))
+}
+
+/// Builds the package's structures on the GPU under the budget and renders with a traversal
+/// shader backend.
+fn render_gpu(
+    a: &RenderArgs,
+    pkg: &ScenePackage,
+    view: &HierarchyView<'_>,
+    camera: &CameraParams,
+    lod: LodParams,
+    backend: BackendArg,
+) -> anyhow::Result<(Aov, Vec<u8>, Value)> {
+    let (ctx, scene) = build_gpu_scene(a, pkg, view, backend)?;
     let opts = gpu_render_options(a, lod, backend, a.frames, scene_shading(a, pkg, view));
     let (out, counts) =
         motu_gpu::render_counted(&ctx, &scene, camera, &opts).context("rendering on the GPU")?;
@@ -533,19 +545,7 @@ fn render_gpu_path(
     lod: LodParams,
     backend: BackendArg,
 ) -> anyhow::Result<(Aov, Vec<u8>, Value)> {
-    let ctx = gpu_context(a, backend)?;
-    let budget = a.vram_budget.unwrap_or(u64::MAX);
-    let build = motu_gpu::BuildOptions {
-        budget_bytes: budget,
-        max_allocations: a
-            .max_allocations
-            .unwrap_or(motu_gpu::BuildOptions::default().max_allocations),
-        staging_bytes: (budget / 8).clamp(4 << 20, 64 << 20),
-        ..Default::default()
-    };
-    let meshes = PackageMeshes(pkg);
-    let scene = motu_gpu::GpuScene::build(&ctx, view, &meshes, &build)
-        .context("building acceleration structures")?;
+    let (ctx, scene) = build_gpu_scene(a, pkg, view, backend)?;
     let opts = gpu_render_options(a, lod, backend, 1, scene_shading(a, pkg, view));
     let mut live = motu_gpu::LiveRenderer::new(scene);
     let mut times = Vec::with_capacity(cams.len());

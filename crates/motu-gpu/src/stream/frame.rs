@@ -6,7 +6,7 @@ use super::buffers::alloc_frame_buffers;
 use super::passes::guard_pixels;
 use super::{FrameStreamStats, StreamingRenderer};
 use crate::error::{GpuError, Result};
-use crate::render::{frame_params, RenderOptions, RenderOutput, RenderStats, Tracer};
+use crate::render::{frame_params, FrameMeasure, RenderOptions, RenderOutput, RenderStats, Tracer};
 
 impl<'a> StreamingRenderer<'a> {
     /// Renders one frame: build–traverse passes until every pixel is complete (or
@@ -133,44 +133,29 @@ impl<'a> StreamingRenderer<'a> {
 
         let (aov, rgba8, heatmap_max) =
             crate::render::frame_outputs(w, h, records, &rgba_words, opts.view);
-        let shadow = u64::from(counters[2]);
         self.frame_stats.truncated_rays = u64::from(counters[crate::render::STAT_TRUNCATED_RAYS]);
-        let rays = pixels + self.frame_stats.reshot_pixels + shadow;
-        let traces: u64 = aov.records.iter().map(|r| u64::from(r.traces)).sum();
-        let ms = self.frame_stats.trace_ms;
-        let stats = RenderStats {
-            width: w,
-            height: h,
-            backend: opts.backend.name(),
-            view: opts.view,
-            frames: 1,
-            ms_per_frame: ms,
-            rays,
-            primary_rays: pixels + self.frame_stats.reshot_pixels,
-            shadow_rays: shadow,
-            rays_per_second: if ms > 0.0 {
-                rays as f64 / (ms / 1e3)
-            } else {
-                0.0
+        let stats = RenderStats::measured(
+            opts,
+            FrameMeasure {
+                width: w,
+                height: h,
+                frames: 1,
+                ms_per_frame: self.frame_stats.trace_ms,
+                primary_rays: pixels + self.frame_stats.reshot_pixels,
+                aov: &aov,
+                counters: &counters,
+                heatmap_max,
+                as_bytes: self
+                    .blas
+                    .iter()
+                    .flatten()
+                    .map(|a| a.size_bytes)
+                    .chain(self.tlas.iter().flatten().map(|t| t.accel.size_bytes))
+                    .sum(),
+                alloc: report,
+                passes: self.frame_stats.passes,
             },
-            traces,
-            traces_per_ray: traces as f64 / rays.max(1) as f64,
-            stack_size: opts.stack_size,
-            stack_overflows: u64::from(counters[0]),
-            pi_list_overflows: u64::from(counters[1]),
-            heatmap_max,
-            as_bytes: self
-                .blas
-                .iter()
-                .flatten()
-                .map(|a| a.size_bytes)
-                .chain(self.tlas.iter().flatten().map(|t| t.accel.size_bytes))
-                .sum(),
-            vram_budget_bytes: report.budget_bytes,
-            vram_peak_bytes: report.peak_block_bytes,
-            allocation_count: report.peak_allocation_count,
-            passes: self.frame_stats.passes,
-        };
+        );
         tracing::info!(
             frame = self.frame,
             passes = self.frame_stats.passes,
