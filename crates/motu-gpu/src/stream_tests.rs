@@ -264,8 +264,12 @@ fn camera_path_reuses_last_frames_structures_and_evicts_under_the_budget() {
         mismatched as f64 <= 0.001 * total as f64,
         "{mismatched} of {total}"
     );
-    // Issue 14 item 6 asks ≤ 1.3; carried hits measure 1.345 here (their per-pixel state
-    // leaves about one BLAS less room at this budget): not met yet, see notes/issue-14.md.
+    // Issue 14 item 6 (≤ 1.3) is asserted on the default island in
+    // tests/tests/stream_bounded.rs (1.10 there). This fixture's working set nearly fills a
+    // quarter budget: it measures 1.345, the extra passes being spheres disoccluded between
+    // nearer ones (no guard-band ray sees them coming) and BLASes that rays enter but never
+    // hit (only hits refresh an LRU age), evicted and needed again. Keeping recently needed
+    // BLASes (tried) evicts others instead at this budget; see notes/s3-issue-14-17-interactive.md.
     assert!(avg <= 1.35, "average passes after the first frame: {avg}");
     assert!(ratio >= 3.0, "{ratio}");
     assert!(totals.vram_peak_bytes <= budget);
