@@ -7,13 +7,7 @@ use crate::size::format_size;
 use anyhow::Context;
 use std::time::Instant;
 
-/// Peak resident memory of this process so far (Linux `VmHWM`), if known.
-pub fn peak_rss_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
-}
+pub use motu_import::peak_rss_bytes;
 
 fn step(name: &str, t: Instant) {
     let rss = peak_rss_bytes()
@@ -82,6 +76,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         parallel: true,
         curve_ribbons: false,
         texture_max: 1024,
+        progress: crate::progress::import_bar(),
     };
     let s = pipeline::import(&summary.scene_path, &pkg, &opts)?;
     step(
