@@ -38,15 +38,18 @@
 //! `tlas_count`, `blas_count`, `instances`, `blas_triangles`.
 //!
 //! Module map: `sizes` (sources, curves, fitting), `presets` (fitted models), `gpu` (driver
-//! sizes, the fitting harness), `cost` (per-node costs, ownership, flattening), `report`
-//! (assembly), `budget` (what fits), `text`, `html`.
+//! sizes, the fitting harness), `cost` (per-node costs, ownership, flattening), `rows`
+//! (per-element and per-variant rows), `budget` (what fits), `report` (assembly), `human`
+//! (sizes and counts for people), `text`, `html`. Each file uses only those before it.
 
 mod budget;
 mod cost;
 mod gpu;
 mod html;
+mod human;
 mod presets;
 mod report;
+mod rows;
 mod sizes;
 mod text;
 
@@ -60,12 +63,14 @@ pub use gpu::{
     GpuSizes, ENV_REPORT_MODEL, FIT_COUNTS,
 };
 pub use html::render_html;
+pub use human::{human_bytes, human_count};
 pub use report::{
-    build_report, build_report_at, build_report_from_view, ElementReport, Report, ReportInput,
-    StreamingReport, VariantReport, DEFAULT_FLOOR_IMAGE,
+    build_report, build_report_at, build_report_from_view, Report, ReportInput, StreamingReport,
+    DEFAULT_FLOOR_IMAGE,
 };
+pub use rows::{ElementReport, VariantReport};
 pub use sizes::*;
-pub use text::{human_bytes, human_count, render_text};
+pub use text::render_text;
 
 /// Errors building a report.
 #[derive(Debug, thiserror::Error)]
