@@ -431,7 +431,7 @@ pub(crate) fn prescan_neutral(bytes: &[u8]) -> bool {
                 }
                 while let Some(chunk) = bytes.get(pos..pos + 8) {
                     let x = u64::from_le_bytes(chunk.try_into().unwrap_or([b'"'; 8]));
-                    if crate::parser::swar_interesting(x) {
+                    if crate::prescan::swar_interesting(x) {
                         break;
                     }
                     pos += 8;
