@@ -426,25 +426,7 @@ pub(crate) fn prescan_neutral(bytes: &[u8]) -> bool {
             b if is_word_end_byte(b) => pos += 1,
             _ => {
                 // Numbers and lower-case words, then 8-byte runs of plain bytes.
-                while pos < bytes.len() && !is_word_end_byte(bytes[pos]) {
-                    pos += 1;
-                }
-                while let Some(chunk) = bytes.get(pos..pos + 8) {
-                    let x = u64::from_le_bytes(chunk.try_into().unwrap_or([b'"'; 8]));
-                    if crate::prescan::swar_interesting(x) {
-                        break;
-                    }
-                    pos += 8;
-                }
-                // A skip may stop inside a word: finish it, so an upper-case letter
-                // is only taken for a directive at a word start.
-                while pos > 0
-                    && pos < bytes.len()
-                    && !is_word_end_byte(bytes[pos - 1])
-                    && !is_word_end_byte(bytes[pos])
-                {
-                    pos += 1;
-                }
+                pos = crate::prescan::skip_plain(bytes, pos);
             }
         }
     }

@@ -63,31 +63,38 @@ pub(crate) fn prescan_is_v4(bytes: &[u8]) -> bool {
             }
             _ if is_word_end_byte(b) => pos += 1,
             _ => {
-                // Numbers and lower-case words: skip the whole word, then every 8-byte run
-                // without a quote, `#` or upper-case letter (pure numbers and whitespace).
-                while pos < bytes.len() && !is_word_end_byte(bytes[pos]) {
-                    pos += 1;
-                }
-                while let Some(chunk) = bytes.get(pos..pos + 8) {
-                    let x = u64::from_le_bytes(chunk.try_into().unwrap_or([b'"'; 8]));
-                    if swar_interesting(x) {
-                        break;
-                    }
-                    pos += 8;
-                }
-                // A skip may stop inside a word (`abcdefghXyz`): finish that word, so an
-                // upper-case letter is only taken for a directive at a word start.
-                while pos > 0
-                    && pos < bytes.len()
-                    && !is_word_end_byte(bytes[pos - 1])
-                    && !is_word_end_byte(bytes[pos])
-                {
-                    pos += 1;
-                }
+                pos = skip_plain(bytes, pos);
             }
         }
     }
     false
+}
+
+/// From inside a number or lower-case word at `pos`: skips the whole word, then every 8-byte
+/// run without a quote, `#` or upper-case letter (pure numbers and whitespace), and returns
+/// the next position where a string, comment or directive may start.
+#[inline]
+pub(crate) fn skip_plain(bytes: &[u8], mut pos: usize) -> usize {
+    while pos < bytes.len() && !is_word_end_byte(bytes[pos]) {
+        pos += 1;
+    }
+    while let Some(chunk) = bytes.get(pos..pos + 8) {
+        let x = u64::from_le_bytes(chunk.try_into().unwrap_or([b'"'; 8]));
+        if swar_interesting(x) {
+            break;
+        }
+        pos += 8;
+    }
+    // A skip may stop inside a word (`abcdefghXyz`): finish that word, so an upper-case
+    // letter is only taken for a directive at a word start.
+    while pos > 0
+        && pos < bytes.len()
+        && !is_word_end_byte(bytes[pos - 1])
+        && !is_word_end_byte(bytes[pos])
+    {
+        pos += 1;
+    }
+    pos
 }
 
 /// Whether any byte of `x` is `"`, `#` or `A`..=`Z` (exact: no false positives or negatives

@@ -11,3 +11,6 @@ pub use memory::peak_rss_bytes;
 pub use pipeline::{
     element_stats, import, resolve_subset, ImportOptions, ImportProgress, ImportSummary, ProgressFn,
 };
+
+#[cfg(test)]
+mod tests;

@@ -233,7 +233,7 @@ pub fn import(
         let mut copied: HashMap<u32, MeshLocation> = HashMap::new();
         // The scene's store wrote the scratch package, now finished: LOD chains and the
         // partitioner read source meshes back from it.
-        let load = |m: motu_scene::MeshId| {
+        let read_source = |m: motu_scene::MeshId| {
             let info = scene.mesh(m);
             motu_pack::read_mesh_blob(
                 &scratch,
@@ -243,21 +243,13 @@ pub fn import(
                 info.has_normals,
                 info.has_uvs,
             )
-            .map_err(|e| e.to_string())
         };
+        let load = |m: motu_scene::MeshId| read_source(m).map_err(|e| e.to_string());
         let (compiled, compile_ms) = compile_into(&scene, &copts, &final_geo, &load, |m| {
             if let Some(&at) = copied.get(&m.source_mesh) {
                 return Ok(at);
             }
-            let info = scene.mesh(motu_scene::MeshId(m.source_mesh));
-            let data = motu_pack::read_mesh_blob(
-                &scratch,
-                info.location,
-                info.vertex_count,
-                info.triangle_count,
-                info.has_normals,
-                info.has_uvs,
-            )?;
+            let data = read_source(motu_scene::MeshId(m.source_mesh))?;
             let at = final_geo
                 .append_mesh(m.element, &data)
                 .map_err(ImportError::Geometry)?;
