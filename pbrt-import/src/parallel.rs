@@ -382,17 +382,9 @@ pub(crate) fn prescan_neutral(bytes: &[u8]) -> bool {
     let mut any = false;
     while pos < bytes.len() {
         match bytes[pos] {
-            b'#' => {
-                pos += bytes[pos..]
-                    .iter()
-                    .position(|&c| c == b'\n')
-                    .unwrap_or(bytes.len() - pos);
-            }
+            b'#' => pos = crate::prescan::line_end(bytes, pos),
             b'"' => {
-                let mut p = pos + 1;
-                while p < bytes.len() && !matches!(bytes[p], b'"' | b'\n') {
-                    p += if bytes[p] == b'\\' { 2 } else { 1 };
-                }
+                let p = crate::prescan::string_end(bytes, pos + 1);
                 if p >= bytes.len() || bytes[p] == b'\n' {
                     return false; // unterminated string: an error, reported sequentially
                 }

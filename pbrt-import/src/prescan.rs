@@ -30,18 +30,10 @@ pub(crate) fn prescan_is_v4(bytes: &[u8]) -> bool {
     while pos < bytes.len() {
         let b = bytes[pos];
         match b {
-            b'#' => {
-                pos += bytes[pos..]
-                    .iter()
-                    .position(|&c| c == b'\n')
-                    .unwrap_or(bytes.len() - pos);
-            }
+            b'#' => pos = line_end(bytes, pos),
             b'"' => {
                 let start = pos + 1;
-                let mut p = start;
-                while p < bytes.len() && !matches!(bytes[p], b'"' | b'\n') {
-                    p += if bytes[p] == b'\\' { 2 } else { 1 };
-                }
+                let p = string_end(bytes, start);
                 if p >= bytes.len() || bytes[p] == b'\n' {
                     return false; // unterminated string: the lexer stops here too
                 }
@@ -68,6 +60,26 @@ pub(crate) fn prescan_is_v4(bytes: &[u8]) -> bool {
         }
     }
     false
+}
+
+/// The end of the comment or line at `pos` (its newline, or the end of `bytes`).
+#[inline]
+pub(crate) fn line_end(bytes: &[u8], pos: usize) -> usize {
+    pos + bytes[pos..]
+        .iter()
+        .position(|&c| c == b'\n')
+        .unwrap_or(bytes.len() - pos)
+}
+
+/// Where the string whose text starts at `start` ends: its closing quote, or the newline or
+/// end of `bytes` that leaves it unterminated (the caller tells which). Skips `\` escapes.
+#[inline]
+pub(crate) fn string_end(bytes: &[u8], start: usize) -> usize {
+    let mut p = start;
+    while p < bytes.len() && !matches!(bytes[p], b'"' | b'\n') {
+        p += if bytes[p] == b'\\' { 2 } else { 1 };
+    }
+    p
 }
 
 /// From inside a number or lower-case word at `pos`: skips the whole word, then every 8-byte

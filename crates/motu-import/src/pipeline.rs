@@ -39,6 +39,32 @@ pub struct ImportOptions {
     pub progress: Option<ProgressFn>,
 }
 
+/// `motu import`'s defaults (`shared/CLI.md`): `--levels ml`, the device's 2^24 − 1 instances
+/// per TLAS, 2^16 triangles per BLAS, no LOD, 64 MiB chunks, raw (no zstd), parallel parsing,
+/// curves skipped, textures up to 1024², no progress reports.
+impl Default for ImportOptions {
+    fn default() -> Self {
+        Self {
+            levels: Levels::Ml,
+            levels_text: "ml".into(),
+            max_instances: (1 << 24) - 1,
+            max_tlas_scratch_bytes: None,
+            max_blas_triangles: motu_compile::DEFAULT_MAX_BLAS_TRIANGLES,
+            lod_levels: None,
+            lod_min_triangles: 10_000,
+            zstd_level: None,
+            allow_missing: false,
+            pbrt_version: None,
+            subset: Vec::new(),
+            chunk_bytes: 64 << 20,
+            parallel: true,
+            curve_ribbons: false,
+            texture_max: 1024,
+            progress: None,
+        }
+    }
+}
+
 /// Progress of an import, for a progress bar.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ImportProgress {

@@ -22,22 +22,9 @@ AttributeEnd
 
 fn options() -> ImportOptions {
     ImportOptions {
-        levels: motu_compile::Levels::Ml,
-        levels_text: "ml".into(),
-        max_instances: (1 << 24) - 1,
-        max_tlas_scratch_bytes: None,
-        max_blas_triangles: motu_compile::DEFAULT_MAX_BLAS_TRIANGLES,
-        lod_levels: None,
-        lod_min_triangles: 10_000,
-        zstd_level: None,
-        allow_missing: false,
-        pbrt_version: None,
-        subset: Vec::new(),
         chunk_bytes: 1 << 20,
         parallel: false,
-        curve_ribbons: false,
-        texture_max: 1024,
-        progress: None,
+        ..Default::default()
     }
 }
 
@@ -67,7 +54,12 @@ fn imports_a_scene_into_a_package_that_opens() {
     // Parsing reports end with `Parsed`, once.
     let seen = seen.lock().unwrap();
     assert_eq!(seen.last(), Some(&ImportProgress::Parsed));
-    assert_eq!(seen.iter().filter(|p| **p == ImportProgress::Parsed).count(), 1);
+    assert_eq!(
+        seen.iter()
+            .filter(|p| **p == ImportProgress::Parsed)
+            .count(),
+        1
+    );
     // No scratch or spill file is left beside the package.
     let left: Vec<_> = std::fs::read_dir(dir.path()).unwrap().flatten().collect();
     assert_eq!(left.len(), 2, "{left:?}");
@@ -79,9 +71,16 @@ fn bad_paths_are_errors_that_say_what_to_do() {
     let out = dir.path().join("o.motu");
     let e = import(&dir.path().join("nope.pbrt"), &out, &options()).unwrap_err();
     assert!(matches!(e, ImportError::SceneMissing { .. }), "{e}");
-    assert!(e.to_string().contains("give the entry .pbrt (or .obj) file"), "{e}");
+    assert!(
+        e.to_string()
+            .contains("give the entry .pbrt (or .obj) file"),
+        "{e}"
+    );
     let e = import(dir.path(), &out, &options()).unwrap_err();
-    assert!(e.to_string().contains("is a directory, not a scene file"), "{e}");
+    assert!(
+        e.to_string().contains("is a directory, not a scene file"),
+        "{e}"
+    );
     // The scene itself as the output: refused, and the scene is left whole.
     let scene = write_scene(dir.path());
     let e = import(&scene, &scene, &options()).unwrap_err();
@@ -90,12 +89,36 @@ fn bad_paths_are_errors_that_say_what_to_do() {
     assert_eq!(std::fs::read_to_string(&scene).unwrap(), SCENE);
 }
 
+/// The defaults are the CLI's (`motu import` with no options).
+#[test]
+fn defaults_are_the_cli_defaults() {
+    let o = ImportOptions::default();
+    assert_eq!(
+        (o.levels, o.levels_text.as_str()),
+        (motu_compile::Levels::Ml, "ml")
+    );
+    assert_eq!(o.max_instances, (1 << 24) - 1);
+    assert_eq!(o.max_blas_triangles, 1 << 16);
+    assert_eq!((o.lod_levels, o.lod_min_triangles), (None, 10_000));
+    assert_eq!(
+        (o.chunk_bytes, o.zstd_level, o.texture_max),
+        (64 << 20, None, 1024)
+    );
+    assert!(o.parallel && !o.allow_missing && !o.curve_ribbons && o.subset.is_empty());
+}
+
 #[test]
 fn subsets_name_known_elements() {
     let known = ["a".to_string(), "b".to_string()];
-    assert_eq!(resolve_subset(&["b".into(), "a".into()], &known).unwrap(), [1, 0]);
+    assert_eq!(
+        resolve_subset(&["b".into(), "a".into()], &known).unwrap(),
+        [1, 0]
+    );
     let e = resolve_subset(&["c".into()], &known).unwrap_err();
-    assert_eq!(e.to_string(), "unknown element(s) c: valid elements are a, b");
+    assert_eq!(
+        e.to_string(),
+        "unknown element(s) c: valid elements are a, b"
+    );
     let e = resolve_subset(&[" ".into()], &known).unwrap_err();
     assert!(matches!(e, ImportError::EmptySubsetName { .. }), "{e}");
 }

@@ -580,19 +580,7 @@ impl<'s> Parser<'s> {
                             id
                         }
                     };
-                    self.stats.instances += 1;
-                    let ev = InstanceEvent {
-                        object: id,
-                        name: self
-                            .object_names
-                            .get(id.0 as usize)
-                            .map_or("", String::as_str),
-                        parent_from_instance,
-                        inside: None,
-                        element: self.element,
-                        loc,
-                    };
-                    self.sink.object_instance(&ev)?;
+                    self.emit_instance_at(id, parent_from_instance, None, loc)?;
                 }
                 Buffered::Shape(mut shape) => {
                     shape.seq = self.next_seq;

@@ -95,6 +95,18 @@ impl<'s> Parser<'s> {
     }
 
     fn emit_instance(&mut self, id: ObjectId, tok: &Token<'_>) -> Result<()> {
+        let parent_from_instance = math::to_f32(&self.xs.ctm[0]);
+        self.emit_instance_at(id, parent_from_instance, self.current_object, tok.loc)
+    }
+
+    /// Counts and emits one instance of object `id` (named by its definition).
+    pub(super) fn emit_instance_at(
+        &mut self,
+        id: ObjectId,
+        parent_from_instance: crate::Mat4,
+        inside: Option<ObjectId>,
+        loc: Loc,
+    ) -> Result<()> {
         self.stats.instances += 1;
         let ev = InstanceEvent {
             object: id,
@@ -102,10 +114,10 @@ impl<'s> Parser<'s> {
                 .object_names
                 .get(id.0 as usize)
                 .map_or("", String::as_str),
-            parent_from_instance: math::to_f32(&self.xs.ctm[0]),
-            inside: self.current_object,
+            parent_from_instance,
+            inside,
             element: self.element,
-            loc: tok.loc,
+            loc,
         };
         self.sink.object_instance(&ev)?;
         Ok(())

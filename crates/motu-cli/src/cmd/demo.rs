@@ -60,23 +60,10 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
     );
 
     let t = Instant::now();
+    // `motu import`'s defaults.
     let opts = ImportOptions {
-        levels: motu_compile::Levels::Ml,
-        levels_text: "ml".into(),
-        max_instances: (1 << 24) - 1,
-        max_tlas_scratch_bytes: None,
-        max_blas_triangles: motu_compile::DEFAULT_MAX_BLAS_TRIANGLES,
-        lod_levels: None,
-        lod_min_triangles: 10_000,
-        zstd_level: None,
-        allow_missing: false,
-        pbrt_version: None,
-        subset: Vec::new(),
-        chunk_bytes: 64 << 20,
-        parallel: true,
-        curve_ribbons: false,
-        texture_max: 1024,
         progress: crate::progress::import_bar(),
+        ..Default::default()
     };
     let s = pipeline::import(&summary.scene_path, &pkg, &opts)?;
     step(
