@@ -7,14 +7,17 @@
 //! submits the warm-up frames separately from the timed ones, so the median (GPU timestamps)
 //! covers only warm frames. Ratios compare each configuration with the `sl` configuration of
 //! the same scene measured in the same run.
+//!
+//! The `motu` CLI parses the flags into [`SuiteOptions`] (or a [`ChildRender`] for the hidden
+//! child mode) and prints what [`run_suite`] returns ([`text_table`] or the JSON of
+//! [`BenchReport`]); the children are spawned from `std::env::current_exe()`, i.e. `motu` itself.
 
-use crate::cli::{BackendArg, BenchArgs};
-use crate::pipeline;
-use crate::size::format_size;
-use anyhow::{bail, Context};
+use motu_abi::camera::CameraParams;
+use motu_abi::HierarchyView;
+use motu_import::peak_rss_bytes;
+use motu_report::format_size;
 use serde::Serialize;
 use serde_json::{json, Value};
-use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -28,32 +31,122 @@ const QUICK_ISLAND_MAX_INSTANCES: u32 = 1500;
 const GPU_ISLAND_SCALE: f64 = 0.63;
 const MIB: f64 = 1024.0 * 1024.0;
 
+/// What went wrong in a benchmark run (a failing step is a recorded result, not an error).
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    /// Bad options; the text names the option and the value.
+    #[error("{0}")]
+    Options(String),
+    #[error("{what}")]
+    Io {
+        what: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
+    #[error("{what}")]
+    Gpu {
+        what: &'static str,
+        #[source]
+        source: motu_gpu::GpuError,
+    },
+    #[error("{what}")]
+    Trace {
+        what: &'static str,
+        #[source]
+        source: motu_trace::TraceError,
+    },
+    #[error(transparent)]
+    TraceFrame(motu_trace::TraceError),
+    #[error("{what}")]
+    PngWrite {
+        what: String,
+        #[source]
+        source: motu_trace::TraceError,
+    },
+    #[error("every configuration failed (first: {first}); logs in {}", logs.display())]
+    EveryConfigurationFailed { first: String, logs: PathBuf },
+}
+
+macro_rules! bail {
+    ($($t:tt)*) => {
+        return Err(BenchError::Options(format!($($t)*)))
+    };
+}
+
+fn io(what: String) -> impl FnOnce(std::io::Error) -> BenchError {
+    move |source| BenchError::Io { what, source }
+}
+
+/// A render backend (the CLI's `--backend`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Backend {
+    Pipeline,
+    Query,
+    Cpu,
+}
+
+/// `query` where a device has ray queries (usually fastest on RTX), else `pipeline`, else the CPU.
+pub fn best_backend(devices: &[motu_gpu::DeviceReport]) -> Backend {
+    if devices.iter().any(|d| d.ray_query) {
+        Backend::Query
+    } else if devices.iter().any(|d| d.ray_pipeline) {
+        Backend::Pipeline
+    } else {
+        Backend::Cpu
+    }
+}
+
+/// A suite run: `motu bench`'s flags (see CLI.md for each).
+#[derive(Clone, Debug, Default)]
+pub struct SuiteOptions {
+    pub suite: String,
+    pub work_dir: Option<PathBuf>,
+    pub quick: bool,
+    pub markdown: Option<PathBuf>,
+    pub only: Vec<String>,
+    pub frames: Option<u32>,
+    pub warmup: Option<u32>,
+    pub width: Option<u32>,
+    pub height: Option<u32>,
+    pub backend: Option<Backend>,
+    pub island_scale: Option<f64>,
+    pub scenes: Option<PathBuf>,
+    pub configs: Vec<String>,
+    pub deadline_s: Option<u64>,
+    pub step_timeout_s: Option<u64>,
+    pub keep: bool,
+    /// One line per step on stderr (the CLI also turns it on when stderr is a terminal).
+    pub progress: bool,
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
-enum SuiteKind {
+pub enum SuiteKind {
     Gpu,
     Cpu,
 }
 
 /// What a suite measures and at which size.
 #[derive(Clone, Debug, Serialize)]
-struct Settings {
-    suite: String,
-    kind: SuiteKind,
-    quick: bool,
-    width: u32,
-    height: u32,
-    frames: u32,
-    warmup_frames: u32,
-    backend: &'static str,
-    island_scale: f64,
-    step_timeout_s: u64,
-    keep_packages: bool,
+pub struct Settings {
+    pub suite: String,
+    pub kind: SuiteKind,
+    pub quick: bool,
+    pub width: u32,
+    pub height: u32,
+    pub frames: u32,
+    pub warmup_frames: u32,
+    pub backend: &'static str,
+    pub island_scale: f64,
+    pub step_timeout_s: u64,
+    pub keep_packages: bool,
 }
 
 #[derive(Clone, Debug, Serialize)]
 #[serde(tag = "kind", rename_all = "lowercase")]
-enum Source {
+pub enum Source {
     /// `motu gen <args> -o DIR`.
     Gen { args: Vec<String> },
     /// A scene file from `shared/scenes`.
@@ -61,20 +154,20 @@ enum Source {
 }
 
 #[derive(Clone, Debug, Serialize)]
-struct ConfigSpec {
-    label: String,
+pub struct ConfigSpec {
+    pub label: String,
     /// Extra `motu import` arguments.
-    import_args: Vec<String>,
+    pub import_args: Vec<String>,
 }
 
 #[derive(Clone, Debug, Serialize)]
-struct SceneSpec {
-    name: &'static str,
-    source: Source,
-    configs: Vec<ConfigSpec>,
+pub struct SceneSpec {
+    pub name: &'static str,
+    pub source: Source,
+    pub configs: Vec<ConfigSpec>,
     /// Flattened instances must exceed this for the scene to mean what it should (the island).
-    must_exceed_instances: Option<u64>,
-    note: String,
+    pub must_exceed_instances: Option<u64>,
+    pub note: String,
 }
 
 fn config(label: &str, import_args: &[&str]) -> ConfigSpec {
@@ -90,7 +183,7 @@ fn gen_source(args: &[&str]) -> Source {
     }
 }
 
-fn settings(a: &BenchArgs) -> anyhow::Result<Settings> {
+fn settings(a: &SuiteOptions) -> Result<Settings, BenchError> {
     let (kind, quick) = match a.suite.as_str() {
         "gpu" => (SuiteKind::Gpu, a.quick),
         "quick" => (SuiteKind::Gpu, true),
@@ -107,7 +200,7 @@ fn settings(a: &BenchArgs) -> anyhow::Result<Settings> {
         (Some(b), _) => backend_name(b),
         (None, SuiteKind::Cpu) => "cpu",
         (None, SuiteKind::Gpu) => match motu_gpu::list_devices() {
-            Ok(d) => backend_name(super::render::best_backend(&d)),
+            Ok(d) => backend_name(best_backend(&d)),
             Err(_) => "cpu",
         },
     };
@@ -146,11 +239,11 @@ fn settings(a: &BenchArgs) -> anyhow::Result<Settings> {
     })
 }
 
-fn backend_name(b: BackendArg) -> &'static str {
+fn backend_name(b: Backend) -> &'static str {
     match b {
-        BackendArg::Pipeline => "pipeline",
-        BackendArg::Query => "query",
-        BackendArg::Cpu => "cpu",
+        Backend::Pipeline => "pipeline",
+        Backend::Query => "query",
+        Backend::Cpu => "cpu",
     }
 }
 
@@ -173,7 +266,7 @@ fn find_shared_scenes(explicit: Option<&Path>) -> Option<PathBuf> {
 }
 
 /// The suite's scenes and configurations.
-fn plan(s: &Settings, a: &BenchArgs) -> anyhow::Result<Vec<SceneSpec>> {
+fn plan(s: &Settings, a: &SuiteOptions) -> Result<Vec<SceneSpec>, BenchError> {
     let q = s.quick;
     let std_configs = || {
         vec![
@@ -425,118 +518,118 @@ fn parse_json(stdout: &str) -> Result<Value, String> {
 // ------------------------------------------------------------------------------ results
 
 #[derive(Clone, Debug, Default, Serialize)]
-struct ImportMetrics {
-    wall_s: f64,
-    parse_ms: f64,
-    compile_ms: f64,
-    pack_ms: f64,
-    peak_rss_bytes: u64,
-    file_bytes: u64,
-    instances: u64,
-    flattened_instances: u64,
-    tlas_count: u64,
-    blas_count: u64,
+pub struct ImportMetrics {
+    pub wall_s: f64,
+    pub parse_ms: f64,
+    pub compile_ms: f64,
+    pub pack_ms: f64,
+    pub peak_rss_bytes: u64,
+    pub file_bytes: u64,
+    pub instances: u64,
+    pub flattened_instances: u64,
+    pub tlas_count: u64,
+    pub blas_count: u64,
 }
 
 /// What the render child measures (written as JSON by `--child-render`).
 #[derive(Clone, Debug, Default, Serialize, serde::Deserialize)]
-struct RenderMetrics {
-    backend: String,
-    device: String,
-    width: u32,
-    height: u32,
-    warmup_frames: u32,
-    frames: u32,
+pub struct RenderMetrics {
+    pub backend: String,
+    pub device: String,
+    pub width: u32,
+    pub height: u32,
+    pub warmup_frames: u32,
+    pub frames: u32,
     /// Median of the timed frames (GPU timestamps; wall clock on the CPU backend).
-    ms_per_frame: f64,
-    fps: f64,
-    rays: u64,
-    rays_per_second: f64,
-    traces_per_ray: f64,
-    stack_overflows: u64,
+    pub ms_per_frame: f64,
+    pub fps: f64,
+    pub rays: u64,
+    pub rays_per_second: f64,
+    pub traces_per_ray: f64,
+    pub stack_overflows: u64,
     /// Acceleration-structure bytes resident while rendering (after compaction).
-    as_bytes: u64,
-    blas_bytes: u64,
-    blas_compacted_bytes: u64,
-    tlas_bytes: u64,
-    tlas_compacted_bytes: u64,
-    geometry_bytes: u64,
-    scratch_peak_bytes: u64,
+    pub as_bytes: u64,
+    pub blas_bytes: u64,
+    pub blas_compacted_bytes: u64,
+    pub tlas_bytes: u64,
+    pub tlas_compacted_bytes: u64,
+    pub geometry_bytes: u64,
+    pub scratch_peak_bytes: u64,
     /// AS build (GPU) or BVH preparation (CPU) time.
-    as_build_ms: f64,
-    vram_peak_bytes: u64,
-    allocation_count: u32,
+    pub as_build_ms: f64,
+    pub vram_peak_bytes: u64,
+    pub allocation_count: u32,
     /// Package open → stats written, in the child.
-    wall_s: f64,
-    peak_rss_bytes: u64,
+    pub wall_s: f64,
+    pub peak_rss_bytes: u64,
 }
 
 #[derive(Clone, Debug, Default, Serialize)]
-struct Ratios {
+pub struct Ratios {
     /// rays/s of this configuration ÷ rays/s of `sl`.
-    rays_per_second_vs_sl: Option<f64>,
+    pub rays_per_second_vs_sl: Option<f64>,
     /// AS bytes of `sl` ÷ AS bytes of this configuration.
-    as_bytes_sl_over_this: Option<f64>,
+    pub as_bytes_sl_over_this: Option<f64>,
     /// Import peak RSS of this configuration ÷ that of `sl`.
-    import_peak_rss_vs_sl: Option<f64>,
+    pub import_peak_rss_vs_sl: Option<f64>,
 }
 
 #[derive(Clone, Debug, Serialize)]
-struct ConfigResult {
-    label: String,
-    import_args: Vec<String>,
+pub struct ConfigResult {
+    pub label: String,
+    pub import_args: Vec<String>,
     /// `ok`, or `failed` with `error` saying which step and why.
-    status: &'static str,
-    error: Option<String>,
-    import: Option<ImportMetrics>,
-    render: Option<RenderMetrics>,
-    ratios: Ratios,
+    pub status: &'static str,
+    pub error: Option<String>,
+    pub import: Option<ImportMetrics>,
+    pub render: Option<RenderMetrics>,
+    pub ratios: Ratios,
 }
 
 #[derive(Clone, Debug, Serialize)]
-struct SceneResult {
-    name: &'static str,
-    source: Source,
-    note: String,
-    scene_path: Option<PathBuf>,
-    gen_s: Option<f64>,
-    gen_cached: bool,
+pub struct SceneResult {
+    pub name: &'static str,
+    pub source: Source,
+    pub note: String,
+    pub scene_path: Option<PathBuf>,
+    pub gen_s: Option<f64>,
+    pub gen_cached: bool,
     /// `motu gen --json` output (absent for shared scenes).
-    gen: Option<Value>,
-    error: Option<String>,
-    warnings: Vec<String>,
-    configs: Vec<ConfigResult>,
+    pub gen: Option<Value>,
+    pub error: Option<String>,
+    pub warnings: Vec<String>,
+    pub configs: Vec<ConfigResult>,
 }
 
 #[derive(Clone, Debug, Serialize)]
-struct Machine {
-    hostname: String,
-    os: String,
-    cpu: String,
-    cpu_cores: usize,
-    memory_bytes: u64,
-    device: Option<String>,
-    driver: Option<String>,
-    device_error: Option<String>,
+pub struct Machine {
+    pub hostname: String,
+    pub os: String,
+    pub cpu: String,
+    pub cpu_cores: usize,
+    pub memory_bytes: u64,
+    pub device: Option<String>,
+    pub driver: Option<String>,
+    pub device_error: Option<String>,
 }
 
 #[derive(Clone, Debug, Serialize)]
-struct BenchReport {
-    motu_version: &'static str,
-    suite: String,
-    command: String,
-    commit: String,
-    started_unix_s: u64,
-    machine: Machine,
-    settings: Settings,
-    work_dir: PathBuf,
-    total_s: f64,
-    configurations: usize,
-    failures: usize,
-    skipped: usize,
+pub struct BenchReport {
+    pub motu_version: &'static str,
+    pub suite: String,
+    pub command: String,
+    pub commit: String,
+    pub started_unix_s: u64,
+    pub machine: Machine,
+    pub settings: Settings,
+    pub work_dir: PathBuf,
+    pub total_s: f64,
+    pub configurations: usize,
+    pub failures: usize,
+    pub skipped: usize,
     /// False while the suite is still running (the file is rewritten after every scene).
-    complete: bool,
-    scenes: Vec<SceneResult>,
+    pub complete: bool,
+    pub scenes: Vec<SceneResult>,
 }
 
 fn read_proc(path: &str, key: &str) -> Option<String> {
@@ -961,20 +1054,36 @@ fn fill_ratios(configs: &mut [ConfigResult]) {
 
 // ------------------------------------------------------------------------------ the child render
 
+/// The hidden `--child-render PKG` mode's options.
+#[derive(Clone, Debug)]
+pub struct ChildRender {
+    pub backend: Option<Backend>,
+    pub frames: Option<u32>,
+    pub warmup: Option<u32>,
+    /// Where the [`RenderMetrics`] JSON goes (`--child-stats`).
+    pub stats_path: PathBuf,
+    pub png: Option<PathBuf>,
+    /// When the child started (before opening the package), for `wall_s`.
+    pub started: Instant,
+}
+
 /// `--child-render PKG`: build, warm up, time `frames` frames, write [`RenderMetrics`] as JSON.
-fn child_render(a: &BenchArgs, package: &Path) -> anyhow::Result<()> {
-    let t0 = Instant::now();
-    let stats_path = a
-        .child_stats
-        .as_ref()
-        .context("--child-render needs --child-stats")?;
+/// The caller opens the package and picks the camera (`view`, `camera`, `meshes`).
+pub fn child_render<M>(
+    a: &ChildRender,
+    view: HierarchyView<'_>,
+    camera: &CameraParams,
+    meshes: &M,
+) -> Result<(), BenchError>
+where
+    M: motu_trace::MeshSource + motu_gpu::MeshBlobSource,
+{
+    let t0 = a.started;
+    let stats_path = &a.stats_path;
     let frames = a.frames.unwrap_or(21).max(1);
     let warmup = a.warmup.unwrap_or(1);
-    let pkg = pipeline::open(package)?;
-    let view = pkg.view()?;
-    let camera = super::render::camera_params(&pkg, &view, None, a.width, a.height)?;
-    let meshes = super::render::PackageMeshes(&pkg);
-    let backend = a.backend.unwrap_or(BackendArg::Query);
+    let camera = *camera;
+    let backend = a.backend.unwrap_or(Backend::Query);
     let mut m = RenderMetrics {
         backend: backend_name(backend).into(),
         width: camera.width,
@@ -984,26 +1093,35 @@ fn child_render(a: &BenchArgs, package: &Path) -> anyhow::Result<()> {
         ..Default::default()
     };
     let rgba8 = match backend {
-        BackendArg::Cpu => {
+        Backend::Cpu => {
             let tracer =
-                motu_trace::Tracer::new(view, &meshes).context("preparing the CPU tracer")?;
+                motu_trace::Tracer::new(view, meshes).map_err(|source| BenchError::Trace {
+                    what: "preparing the CPU tracer",
+                    source,
+                })?;
             let opts = motu_trace::RenderOptions::default();
             // The first frame builds every reachable BVH (`prepare`): that is the build time.
-            let first =
-                motu_trace::render_with(&tracer, &camera, &opts).context("rendering on the CPU")?;
+            let first = motu_trace::render_with(&tracer, &camera, &opts).map_err(|source| {
+                BenchError::Trace {
+                    what: "rendering on the CPU",
+                    source,
+                }
+            })?;
             m.as_build_ms = first.stats.prepare_ms;
             let timed = motu_trace::RenderOptions {
                 prepare: false,
                 ..opts
             };
             for _ in 1..warmup {
-                motu_trace::render_with(&tracer, &camera, &timed)?;
+                motu_trace::render_with(&tracer, &camera, &timed)
+                    .map_err(BenchError::TraceFrame)?;
             }
             let mut times = Vec::with_capacity(frames as usize);
             let mut last = first;
             for _ in 0..frames {
                 let t = Instant::now();
-                let o = motu_trace::render_with(&tracer, &camera, &timed)?;
+                let o = motu_trace::render_with(&tracer, &camera, &timed)
+                    .map_err(BenchError::TraceFrame)?;
                 times.push(t.elapsed().as_secs_f64() * 1e3);
                 last = o;
             }
@@ -1014,21 +1132,23 @@ fn child_render(a: &BenchArgs, package: &Path) -> anyhow::Result<()> {
             m.stack_overflows = last.stats.stack_overflows;
             last.rgba8
         }
-        BackendArg::Pipeline | BackendArg::Query => {
+        Backend::Pipeline | Backend::Query => {
             use motu_gpu::{Context as GpuContext, ContextOptions, Requirement};
             let ctx = GpuContext::new(&ContextOptions {
-                require: if backend == BackendArg::Query {
+                require: if backend == Backend::Query {
                     Requirement::RayQuery
                 } else {
                     Requirement::RayPipeline
                 },
                 ..Default::default()
             })
-            .context("opening a Vulkan device for ray tracing (`motu devices` lists them)")?;
+            .map_err(gpu_err(
+                "opening a Vulkan device for ray tracing (`motu devices` lists them)",
+            ))?;
             m.device = ctx.device_name().to_string();
             let scene =
-                motu_gpu::GpuScene::build(&ctx, &view, &meshes, &motu_gpu::BuildOptions::default())
-                    .context("building acceleration structures")?;
+                motu_gpu::GpuScene::build(&ctx, &view, meshes, &motu_gpu::BuildOptions::default())
+                    .map_err(gpu_err("building acceleration structures"))?;
             let res = scene.report();
             m.as_build_ms = res.build_ms;
             m.blas_bytes = res.blas_bytes;
@@ -1038,7 +1158,7 @@ fn child_render(a: &BenchArgs, package: &Path) -> anyhow::Result<()> {
             m.geometry_bytes = res.geometry_bytes;
             m.scratch_peak_bytes = res.scratch_peak_bytes;
             let opts = motu_gpu::RenderOptions {
-                backend: if backend == BackendArg::Query {
+                backend: if backend == Backend::Query {
                     motu_gpu::Backend::Query
                 } else {
                     motu_gpu::Backend::Pipeline
@@ -1048,7 +1168,8 @@ fn child_render(a: &BenchArgs, package: &Path) -> anyhow::Result<()> {
             };
             // Warm-up in its own submission: its frames never enter the timed median.
             if warmup > 0 {
-                motu_gpu::render(&ctx, &scene, &camera, &opts).context("warm-up frames")?;
+                motu_gpu::render(&ctx, &scene, &camera, &opts)
+                    .map_err(gpu_err("warm-up frames"))?;
             }
             let out = motu_gpu::render(
                 &ctx,
@@ -1056,7 +1177,7 @@ fn child_render(a: &BenchArgs, package: &Path) -> anyhow::Result<()> {
                 &camera,
                 &motu_gpu::RenderOptions { frames, ..opts },
             )
-            .context("timed frames")?;
+            .map_err(gpu_err("timed frames"))?;
             let st = &out.stats;
             m.ms_per_frame = st.ms_per_frame;
             m.rays = st.rays;
@@ -1067,7 +1188,7 @@ fn child_render(a: &BenchArgs, package: &Path) -> anyhow::Result<()> {
             m.allocation_count = st.allocation_count;
             drop(scene);
             ctx.check_validation()
-                .context("Vulkan validation reported errors")?;
+                .map_err(gpu_err("Vulkan validation reported errors"))?;
             out.rgba8
         }
     };
@@ -1081,18 +1202,26 @@ fn child_render(a: &BenchArgs, package: &Path) -> anyhow::Result<()> {
     } else {
         0.0
     };
-    if let Some(png) = &a.child_png {
+    if let Some(png) = &a.png {
         if let Some(dir) = png.parent() {
-            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            std::fs::create_dir_all(dir).map_err(io(format!("creating {}", dir.display())))?;
         }
-        motu_trace::write_png(png, camera.width, camera.height, &rgba8)
-            .with_context(|| format!("writing {}", png.display()))?;
+        motu_trace::write_png(png, camera.width, camera.height, &rgba8).map_err(|source| {
+            BenchError::PngWrite {
+                what: format!("writing {}", png.display()),
+                source,
+            }
+        })?;
     }
-    m.peak_rss_bytes = super::demo::peak_rss_bytes().unwrap_or(0);
+    m.peak_rss_bytes = peak_rss_bytes().unwrap_or(0);
     m.wall_s = t0.elapsed().as_secs_f64();
     std::fs::write(stats_path, serde_json::to_string_pretty(&m)?)
-        .with_context(|| format!("writing {}", stats_path.display()))?;
+        .map_err(io(format!("writing {}", stats_path.display())))?;
     Ok(())
+}
+
+fn gpu_err(what: &'static str) -> impl FnOnce(motu_gpu::GpuError) -> BenchError {
+    move |source| BenchError::Gpu { what, source }
 }
 
 fn median(v: &mut [f64]) -> f64 {
@@ -1223,9 +1352,16 @@ fn header_lines(r: &BenchReport) -> Vec<String> {
     ]
 }
 
-fn print_table(r: &BenchReport) {
+/// The terminal table `motu bench` prints (header lines, one row per configuration,
+/// failures, a summary line), each line ending in a newline.
+pub fn text_table(r: &BenchReport) -> String {
+    let mut out = String::new();
+    let mut println = |l: String| {
+        out.push_str(&l);
+        out.push('\n');
+    };
     for l in header_lines(r) {
-        println!("{l}");
+        println(l);
     }
     let rows = rows(r);
     let mut widths: Vec<usize> = HEADER.iter().map(|h| h.chars().count()).collect();
@@ -1249,29 +1385,31 @@ fn print_table(r: &BenchReport) {
         }
         s.trim_end().to_string()
     };
-    println!();
-    println!("{}", line(HEADER.to_vec()));
+    println(String::new());
+    println(line(HEADER.to_vec()));
     for row in &rows {
-        println!("{}", line(row.iter().map(String::as_str).collect()));
+        println(line(row.iter().map(String::as_str).collect()));
     }
     let f = failures(r);
     if !f.is_empty() {
-        println!();
+        println(String::new());
         for l in f {
-            println!("{l}");
+            println(l);
         }
     }
-    println!(
+    println(format!(
         "\n{} configurations, {} failed, {} skipped, {:.1} s in all; logs and renders in {}",
         r.configurations,
         r.failures,
         r.skipped,
         r.total_s,
         r.work_dir.display()
-    );
+    ));
+    out
 }
 
-fn markdown(r: &BenchReport) -> String {
+/// The results as a Markdown table (`--markdown`, for BENCHMARKS.md).
+pub fn markdown(r: &BenchReport) -> String {
     let mut s = String::new();
     for l in header_lines(r) {
         s.push_str(&format!("- {l}\n"));
@@ -1328,36 +1466,38 @@ fn markdown(r: &BenchReport) -> String {
     s
 }
 
-pub fn run(a: BenchArgs) -> anyhow::Result<()> {
-    if let Some(pkg) = &a.child_render {
-        return child_render(&a, pkg);
-    }
-    if let (Some(path), Some(pkg)) = (&a.camera_path, &a.package) {
-        return super::flight::run(&a, pkg, path);
-    }
-    let settings = settings(&a)?;
-    let scenes = plan(&settings, &a)?;
-    let work = a
-        .work_dir
+fn work_dir(a: &SuiteOptions) -> PathBuf {
+    a.work_dir
         .clone()
-        .unwrap_or_else(|| PathBuf::from("motu-bench"));
-    if a.dry_run {
-        let plan = json!({ "settings": settings, "work_dir": work, "scenes": scenes });
-        println!("{}", serde_json::to_string_pretty(&plan)?);
-        return Ok(());
-    }
+        .unwrap_or_else(|| PathBuf::from("motu-bench"))
+}
+
+/// `--dry-run`: the settings, work directory and scenes (with their configurations) a run would
+/// measure, as JSON.
+pub fn dry_run_plan(a: &SuiteOptions) -> Result<Value, BenchError> {
+    let settings = settings(a)?;
+    let scenes = plan(&settings, a)?;
+    let work = work_dir(a);
+    Ok(json!({ "settings": settings, "work_dir": work, "scenes": scenes }))
+}
+
+/// Runs the suite: every step a child process, `bench.json` (and `--markdown`) rewritten after
+/// every scene. Failed configurations are recorded in the report; see [`BenchReport::check`].
+pub fn run_suite(a: &SuiteOptions) -> Result<BenchReport, BenchError> {
+    let settings = settings(a)?;
+    let scenes = plan(&settings, a)?;
+    let work = work_dir(a);
     let logs = work.join("logs");
     for d in [&work, &logs, &work.join("packages"), &work.join("renders")] {
-        std::fs::create_dir_all(d).with_context(|| format!("creating {}", d.display()))?;
+        std::fs::create_dir_all(d).map_err(io(format!("creating {}", d.display())))?;
     }
     // Children are given absolute paths so their logs say where things are.
-    let work =
-        std::fs::canonicalize(&work).with_context(|| format!("resolving {}", work.display()))?;
+    let work = std::fs::canonicalize(&work).map_err(io(format!("resolving {}", work.display())))?;
     let runner = Runner {
         work: work.clone(),
         logs: work.join("logs"),
         t0: Instant::now(),
-        progress: a.progress || std::io::stderr().is_terminal(),
+        progress: a.progress,
         deadline: a.deadline_s.map(Duration::from_secs),
         settings: settings.clone(),
     };
@@ -1405,27 +1545,28 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
         // Written after every scene: a run killed from outside still leaves what it measured.
         write_outputs(&report, &work, a.markdown.as_deref())?;
     }
-    if a.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
-    } else {
-        print_table(&report);
-    }
-    if report.configurations > 0 && report.failures == report.configurations {
-        bail!(
-            "every configuration failed (first: {}); logs in {}",
-            failures_first(&report),
-            work.join("logs").display()
-        );
-    }
-    Ok(())
+    Ok(report)
 }
 
-fn write_outputs(report: &BenchReport, work: &Path, md: Option<&Path>) -> anyhow::Result<()> {
+impl BenchReport {
+    /// An error when every configuration failed (the run measured nothing), else `Ok`.
+    pub fn check(&self) -> Result<(), BenchError> {
+        if self.configurations > 0 && self.failures == self.configurations {
+            return Err(BenchError::EveryConfigurationFailed {
+                first: failures_first(self),
+                logs: self.work_dir.join("logs"),
+            });
+        }
+        Ok(())
+    }
+}
+
+fn write_outputs(report: &BenchReport, work: &Path, md: Option<&Path>) -> Result<(), BenchError> {
     let json_path = work.join("bench.json");
     std::fs::write(&json_path, serde_json::to_string_pretty(report)?)
-        .with_context(|| format!("writing {}", json_path.display()))?;
+        .map_err(io(format!("writing {}", json_path.display())))?;
     if let Some(p) = md {
-        std::fs::write(p, markdown(report)).with_context(|| format!("writing {}", p.display()))?;
+        std::fs::write(p, markdown(report)).map_err(io(format!("writing {}", p.display())))?;
     }
     Ok(())
 }

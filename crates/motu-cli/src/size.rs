@@ -43,21 +43,8 @@ pub fn parse_size(s: &str) -> Result<u64, String> {
     }
 }
 
-/// `1536` → `1.5 KiB`.
-pub fn format_size(bytes: u64) -> String {
-    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
-    let mut v = bytes as f64;
-    let mut u = 0;
-    while v >= 1024.0 && u + 1 < UNITS.len() {
-        v /= 1024.0;
-        u += 1;
-    }
-    if u == 0 {
-        format!("{bytes} B")
-    } else {
-        format!("{v:.1} {}", UNITS[u])
-    }
-}
+/// `1536` → `1.5 KiB` (lives in motu-report so that `motu-bench` prints the same sizes).
+pub use motu_report::format_size;
 
 #[cfg(test)]
 mod tests {

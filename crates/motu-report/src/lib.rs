@@ -64,7 +64,7 @@ pub use gpu::{
     GpuSizes, ENV_REPORT_MODEL, FIT_COUNTS,
 };
 pub use html::render_html;
-pub use human::{human_bytes, human_count};
+pub use human::{format_size, human_bytes, human_count};
 pub use presets::{preset, LAVAPIPE, NVIDIA_H200, PRESETS};
 pub use report::{
     build_report, build_report_at, build_report_from_view, Report, ReportInput, StreamingReport,

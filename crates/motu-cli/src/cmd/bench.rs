@@ -1,0 +1,81 @@
+//! `motu bench`: flags → [`motu_bench`] (the harness) → stdout. A `--camera-path` flight is
+//! `cmd/flight.rs`; the hidden `--child-render` mode opens the package and picks the camera here
+//! (the render command's glue) and times the frames in the library.
+
+use crate::cli::{BackendArg, BenchArgs};
+use crate::pipeline;
+use anyhow::Context;
+use motu_bench::{Backend, ChildRender, SuiteOptions};
+use std::time::Instant;
+
+fn backend(b: BackendArg) -> Backend {
+    match b {
+        BackendArg::Pipeline => Backend::Pipeline,
+        BackendArg::Query => Backend::Query,
+        BackendArg::Cpu => Backend::Cpu,
+    }
+}
+
+pub fn run(a: BenchArgs) -> anyhow::Result<()> {
+    if let Some(pkg) = &a.child_render {
+        return child_render(&a, pkg);
+    }
+    if let (Some(path), Some(pkg)) = (&a.camera_path, &a.package) {
+        return super::flight::run(&a, pkg, path);
+    }
+    let opts = SuiteOptions {
+        suite: a.suite.clone(),
+        work_dir: a.work_dir.clone(),
+        quick: a.quick,
+        markdown: a.markdown.clone(),
+        only: a.only.clone(),
+        frames: a.frames,
+        warmup: a.warmup,
+        width: a.width,
+        height: a.height,
+        backend: a.backend.map(backend),
+        island_scale: a.island_scale,
+        scenes: a.scenes.clone(),
+        configs: a.configs.clone(),
+        deadline_s: a.deadline_s,
+        step_timeout_s: a.step_timeout_s,
+        keep: a.keep,
+        progress: a.progress || std::io::IsTerminal::is_terminal(&std::io::stderr()),
+    };
+    if a.dry_run {
+        let plan = motu_bench::dry_run_plan(&opts)?;
+        println!("{}", serde_json::to_string_pretty(&plan)?);
+        return Ok(());
+    }
+    let report = motu_bench::run_suite(&opts)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", motu_bench::text_table(&report));
+    }
+    report.check()?;
+    Ok(())
+}
+
+/// `--child-render PKG`: the package's default camera at `--width`/`--height`, timed by the library.
+fn child_render(a: &BenchArgs, package: &std::path::Path) -> anyhow::Result<()> {
+    let started = Instant::now();
+    let stats_path = a
+        .child_stats
+        .clone()
+        .context("--child-render needs --child-stats")?;
+    let pkg = pipeline::open(package)?;
+    let view = pkg.view()?;
+    let camera = super::render::camera_params(&pkg, &view, None, a.width, a.height)?;
+    let meshes = super::render::PackageMeshes(&pkg);
+    let opts = ChildRender {
+        backend: a.backend.map(backend),
+        frames: a.frames,
+        warmup: a.warmup,
+        stats_path,
+        png: a.child_png.clone(),
+        started,
+    };
+    motu_bench::child_render(&opts, view, &camera, &meshes)?;
+    Ok(())
+}
