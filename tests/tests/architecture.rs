@@ -109,6 +109,35 @@ fn motu_import_stays_below_the_gpu_and_the_cli() {
     }
 }
 
+/// The bench harness is a library below the CLI: it never reaches up into the CLI or the
+/// viewer, `ash` stays in motu-gpu, and `motu bench` in the CLI only parses, delegates, prints.
+#[test]
+fn motu_bench_stays_below_the_cli() {
+    let all = manifests();
+    let (_, m) = all.iter().find(|(n, _)| n == "motu-bench").unwrap();
+    let deps = dependencies(m);
+    assert!(deps.iter().any(|d| d == "motu-gpu"), "{deps:?}");
+    for above in ["motu-cli", "motu-view", "ash", "anyhow", "clap"] {
+        assert!(!deps.iter().any(|d| d == above), "motu-bench uses {above}");
+    }
+    let (_, cli) = all.iter().find(|(n, _)| n == "motu-cli").unwrap();
+    assert!(dependencies(cli).iter().any(|d| d == "motu-bench"));
+    let cmd = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../crates/motu-cli/src/cmd/bench.rs");
+    let text = std::fs::read_to_string(&cmd).unwrap();
+    for harness in [
+        "std::process::Command",
+        "fn run_step",
+        "fn fill_ratios",
+        "fn median",
+    ] {
+        assert!(
+            !text.contains(harness),
+            "{} holds {harness}: the harness lives in motu-bench",
+            cmd.display()
+        );
+    }
+}
+
 /// The CLI parses arguments and prints; the import pipeline's stages are motu-import's job.
 #[test]
 fn the_cli_calls_the_import_pipeline_not_its_stages() {
