@@ -21,4 +21,13 @@ uint select_lod(LodParams p, float pixels_per_unit_at_1, float radius_local, flo
     }
     return uint(min(whole, float(last)));
 }
+
+// motu_abi::lod_instance::camera_level: a LOD instance slot's level for a camera at `world_eye`.
+uint camera_lod(LodParams p, float pixels_per_unit_at_1, vec3 world_eye, LodSlotRecord slot,
+                uint level_count) {
+    precise vec3 d = slot.center_world - world_eye;
+    precise float dist = sqrt(d.x * d.x + d.y * d.y + d.z * d.z);
+    return select_lod(p, pixels_per_unit_at_1, slot.radius_world, 1.0, dist, level_count,
+                      RAY_PRIMARY, 0.0);
+}
 #endif

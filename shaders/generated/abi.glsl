@@ -83,6 +83,16 @@ struct LodSelectorRecord {
     uint _pad;
 };
 
+// 32 bytes
+struct LodSlotRecord {
+    vec3 center_world;
+    float radius_world;
+    uint selector;
+    uint instance;
+    uint width;
+    uint tlas;
+};
+
 // 112 bytes
 struct MeshRecord {
     uint source_mesh;

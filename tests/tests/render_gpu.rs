@@ -106,6 +106,106 @@ fn sphereflake_and_lod_grid_agree() {
     );
 }
 
+/// Instance-level LOD (issue 15): on lod-grid `--lod 4` the default mode is `instance`; every
+/// GPU backend equals the CPU oracle running the same per-instance camera rule (forced level
+/// and the distance rule at two thresholds, so several levels show), and a primary ray plus
+/// its shadow ray take ≤ 1.1 traces per ray. `--lod-mode traversal`, stochastic LOD and
+/// `--stream` keep (and say) the traversal path, which still equals the CPU oracle.
+#[test]
+fn instance_lod_matches_the_cpu_oracle_in_one_trace() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let grid = dir.path().join("grid");
+    motu_ok(&[
+        "gen",
+        "lod-grid",
+        "-o",
+        s(&grid),
+        "--grid",
+        "6x12",
+        "--triangles",
+        "20000",
+    ]);
+    let pkg = dir.path().join("lod.motu");
+    motu_ok(&[
+        "import",
+        s(&grid.join("scene.pbrt")),
+        "-o",
+        s(&pkg),
+        "--lod",
+        "4",
+    ]);
+    let mut backends = vec!["pipeline"];
+    if has_ray_query() {
+        backends.push("query");
+    }
+    let mut levels_seen = std::collections::BTreeSet::new();
+    for (name, extra) in [
+        ("default", vec![]),
+        ("forced", vec!["--lod", "2"]),
+        ("near", vec!["--lod-r-max", "32"]),
+    ] {
+        let mut args = vec!["--width", "96"];
+        args.extend(&extra);
+        let cpu = dir.path().join(format!("{name}-cpu.aov"));
+        let st = render(&pkg, "cpu", &cpu, &args);
+        assert_eq!(st["lod_mode"], "instance", "{st}");
+        // AOV records (FORMAT.md): 16 bytes after a 32-byte header; mesh u32 at 0, lod u8 at
+        // 12. Mesh 1 is the dense LOD'd mesh (0 the ground).
+        let bytes = std::fs::read(&cpu).unwrap();
+        levels_seen.extend(
+            bytes[32..]
+                .chunks_exact(16)
+                .filter(|r| u32::from_le_bytes([r[0], r[1], r[2], r[3]]) == 1)
+                .map(|r| r[12]),
+        );
+        for b in &backends {
+            let gpu = dir.path().join(format!("{name}-{b}.aov"));
+            let st = render(&pkg, b, &gpu, &args);
+            assert_eq!(st["lod_mode"], "instance", "{st}");
+            assert_eq!(st["lod_instances"], 72, "{st}");
+            let tpr = st["traces_per_ray"].as_f64().unwrap();
+            assert!(tpr <= 1.1, "{name} {b}: {tpr} traces/ray in instance mode");
+            motu_ok(&["compare", s(&cpu), s(&gpu), "--max-mismatch", "0"]);
+        }
+    }
+    assert!(
+        levels_seen.len() >= 3,
+        "the distance rule should show several levels: {levels_seen:?}"
+    );
+    // The traversal path: asked for, forced by stochastic LOD, and by streaming.
+    for (name, extra) in [
+        ("traversal", vec!["--lod-mode", "traversal"]),
+        ("stochastic", vec!["--lod-stochastic", "--lod-r-max", "64"]),
+    ] {
+        let mut args = vec!["--width", "96"];
+        args.extend(&extra);
+        let cpu = dir.path().join(format!("{name}-cpu.aov"));
+        let st = render(&pkg, "cpu", &cpu, &args);
+        assert_eq!(st["lod_mode"], "traversal", "{st}");
+        for b in &backends {
+            let gpu = dir.path().join(format!("{name}-{b}.aov"));
+            let st = render(&pkg, b, &gpu, &args);
+            assert_eq!(st["lod_mode"], "traversal", "{st}");
+            assert!(st["traces_per_ray"].as_f64().unwrap() > 1.5, "{st}");
+            motu_ok(&["compare", s(&cpu), s(&gpu), "--max-mismatch", "0.001"]);
+        }
+    }
+    let st = render(
+        &pkg,
+        "pipeline",
+        &dir.path().join("stream.aov"),
+        &["--width", "48", "--stream"],
+    );
+    assert_eq!(st["lod_mode"], "traversal", "{st}");
+    assert!(
+        st["lod_mode_reason"].as_str().unwrap().contains("--stream"),
+        "{st}"
+    );
+}
+
 #[test]
 fn buddha_fractal_backends_agree() {
     let Some(scene) = shared_scene("buddha-fractal/buddha-fractal.pbrt") else {

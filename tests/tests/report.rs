@@ -91,3 +91,52 @@ fn measure_builds_and_compacts_on_the_device() {
     let r = motu_json(&["report", s(&pkg), "--json", "--measure"]);
     assert!(r.to_string().contains("measured on this device"), "{r}");
 }
+
+/// A split root (issue 15): the pieces' instances keep their elements' tags, so the per-element
+/// rows of a split package count what the unsplit package's rows count; only the split's own
+/// skeleton (piece TLASes and the PI BLAS into them) is "(untagged)", with no triangles.
+#[test]
+fn split_root_keeps_per_element_rows() {
+    let dir = tempfile::tempdir().unwrap();
+    let gen = dir.path().join("island");
+    motu_ok(&["gen", "island", "-o", s(&gen)]);
+    let scene = gen.join("scene.pbrt");
+    let whole = dir.path().join("whole.motu");
+    let split = dir.path().join("split.motu");
+    motu_ok(&["import", s(&scene), "-o", s(&whole)]);
+    motu_ok(&[
+        "import",
+        s(&scene),
+        "-o",
+        s(&split),
+        "--max-instances",
+        "300",
+    ]);
+    let info = motu_json(&["info", s(&split), "--json"]);
+    assert!(info["split_tlases"].as_u64().unwrap() > 0, "{info}");
+    let rows = |pkg: &std::path::Path| {
+        let r = motu_json(&["report", s(pkg), "--json"]);
+        r["elements"].as_array().unwrap().clone()
+    };
+    let (w, sp) = (rows(&whole), rows(&split));
+    let elements: Vec<&serde_json::Value> = w.iter().filter(|e| e["kind"] == "element").collect();
+    assert!(elements.len() > 3, "{w:?}");
+    for e in elements {
+        let other = sp
+            .iter()
+            .find(|x| x["name"] == e["name"])
+            .unwrap_or_else(|| panic!("{} missing from the split report", e["name"]));
+        for key in [
+            "root_instances",
+            "flattened_instances",
+            "instanced_triangles",
+            "unique_triangles",
+        ] {
+            assert_eq!(other[key], e[key], "{} {key}", e["name"]);
+        }
+    }
+    if let Some(u) = sp.iter().find(|x| x["kind"] == "untagged") {
+        assert_eq!(u["instanced_triangles"], 0, "{u}");
+        assert_eq!(u["root_instances"], 0, "{u}");
+    }
+}

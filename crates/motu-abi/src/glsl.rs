@@ -5,6 +5,7 @@
 use crate::aov::AovRecord;
 use crate::camera::CameraParams;
 use crate::lod::LodParams;
+use crate::lod_instance::LodSlotRecord;
 use crate::*;
 use std::mem::{offset_of, size_of};
 
@@ -121,6 +122,17 @@ pub fn structs() -> Vec<StructDef> {
                 (Uint, level_count),
                 (Uint, source_mesh),
                 (Uint, _pad)
+            ]
+        ),
+        def!(
+            LodSlotRecord,
+            [
+                (Vec3, center_world),
+                (Float, radius_world),
+                (Uint, selector),
+                (Uint, instance),
+                (Uint, width),
+                (Uint, tlas)
             ]
         ),
         def!(

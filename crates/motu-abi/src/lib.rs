@@ -26,6 +26,7 @@ pub mod aov;
 pub mod camera;
 pub mod glsl;
 pub mod lod;
+pub mod lod_instance;
 mod records;
 pub mod shade;
 

@@ -47,6 +47,13 @@ pub struct DevicesArgs {
     pub json: bool,
 }
 
+/// `render --lod-mode`.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LodModeArg {
+    Instance,
+    Traversal,
+}
+
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum GenKindArg {
     Forest,
@@ -383,6 +390,13 @@ pub struct RenderArgs {
     /// Dither between the two nearest LOD levels (hashed per pixel) instead of rounding down.
     #[arg(long)]
     pub lod_stochastic: bool,
+    /// How LOD selectors are resolved: `instance` picks each LOD instance's level per frame
+    /// from the camera (a compute pass rewrites the TLAS: one trace, no traversal-shader hop;
+    /// every ray sees an instance at one level, so --shadow-lod-bias does not apply), where the
+    /// rule allows (not with --lod-stochastic or --stream, which use `traversal`: a level per
+    /// ray, chosen in the traversal shader). The mode that ran is `lod_mode` in --stats.
+    #[arg(long, value_enum, default_value_t = LodModeArg::Instance)]
+    pub lod_mode: LodModeArg,
     /// Traversal stack entries per ray (1–256: 64 bytes of private shader memory each).
     #[arg(long, default_value_t = 16,
           value_parser = clap::value_parser!(u32).range(1..=i64::from(motu_gpu::MAX_STACK_SIZE)))]

@@ -22,6 +22,7 @@ mod heap;
 mod instance;
 mod limits;
 mod live;
+mod lod_instances;
 mod memory;
 mod pipeline;
 mod present;

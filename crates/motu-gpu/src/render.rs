@@ -595,6 +595,10 @@ pub(crate) fn run_frames(
         rec.fill_buffer(&frame.stats, 0, (RENDER_STAT_WORDS * 4) as u64, 0)?;
         rec.barrier();
         rec.write_timestamp(&timestamps, 2 * f)?;
+        // Instance-level LOD: this frame's levels (counted in the frame's time).
+        if let Some(lod) = &scene.instance_lod {
+            lod.record(ctx, &mut rec, addresses[Slot::Frame as usize])?;
+        }
         tracer.record(&mut rec, push_bytes, [w, h], None)?;
         rec.write_timestamp(&timestamps, 2 * f + 1)?;
         rec.barrier();

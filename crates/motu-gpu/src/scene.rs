@@ -642,14 +642,16 @@ pub struct GpuScene {
     pub(crate) blases: Vec<Option<AccelStruct>>,
     pub(crate) tlases: Vec<AccelStruct>,
     meshes: Vec<Option<MeshGpu>>,
-    tables: Vec<HeapBuffer>,
+    pub(crate) tables: Vec<HeapBuffer>,
+    /// Instance-level LOD's per-frame pass (`lod_instances.rs`), when enabled.
+    pub(crate) instance_lod: Option<crate::lod_instances::InstanceLodGpu>,
     pub(crate) addresses: [u64; SLOT_COUNT],
     pub(crate) root_tlas: u32,
     /// `FrameParams::shading`: the shading tables' header (`shading.rs`).
     pub(crate) shading_address: u64,
     pub(crate) heap: Mutex<GpuHeap>,
-    report: ResourceReport,
-    ctx: Context,
+    pub(crate) report: ResourceReport,
+    pub(crate) ctx: Context,
 }
 
 impl std::fmt::Debug for GpuScene {
@@ -705,6 +707,7 @@ impl GpuScene {
             tlases: Vec::new(),
             meshes: Vec::new(),
             tables: Vec::new(),
+            instance_lod: None,
             addresses: [0; SLOT_COUNT],
             root_tlas: view.root_tlas,
             shading_address: 0,

@@ -126,6 +126,66 @@ fn untagged_label(input: &ReportInput, view: &HierarchyView<'_>) -> u32 {
     (input.element_names.len() as u32).max(max_tag)
 }
 
+/// Whether TLAS `t` holds root-level placements: below the root instances are untagged, but a
+/// split root's pieces keep their instances' element tags.
+fn holds_root_placements(view: &HierarchyView<'_>, t: u32) -> bool {
+    let r = &view.tlases[t as usize];
+    view.instances[r.instance_base as usize..(r.instance_base + r.instance_count) as usize]
+        .iter()
+        .any(|i| i.element != NONE_U32)
+}
+
+/// The root's placements labelled by element: the root TLAS's own instances and, through a
+/// split root's PI BLASes (identity PIs into TLASes of tagged instances), the instances of its
+/// pieces, which keep their elements' tags. Also returns the split's own nodes.
+fn root_placements(
+    view: &HierarchyView<'_>,
+    root_range: std::ops::Range<usize>,
+    untagged: u32,
+) -> (Vec<(u32, usize)>, Vec<Node>) {
+    let mut labelled = Vec::new();
+    let mut split_nodes = Vec::new();
+    let mut todo = vec![root_range];
+    let mut seen = std::collections::HashSet::new();
+    while let Some(range) = todo.pop() {
+        for i in range {
+            let inst = &view.instances[i];
+            let b = &view.blases[inst.blas as usize];
+            let pis: &[PiRecord] = if b.kind == motu_abi::BLAS_AABBS {
+                view.pis
+                    .get(b.item_base as usize..(b.item_base + b.item_count) as usize)
+                    .unwrap_or(&[])
+            } else {
+                &[]
+            };
+            // A PI BLAS of the split (tagged when all its pieces share an element).
+            let is_split = !pis.is_empty()
+                && pis.iter().all(|p| {
+                    p.kind == motu_abi::PI_TLAS
+                        && p.child_from_parent == motu_abi::IDENTITY_3X4
+                        && p.target != view.root_tlas
+                        && holds_root_placements(view, p.target)
+                });
+            if !is_split {
+                let e = inst.element;
+                labelled.push((if e == NONE_U32 { untagged } else { e }, i));
+                continue;
+            }
+            split_nodes.push(Node::Blas(inst.blas));
+            for p in pis {
+                if seen.insert(p.target) {
+                    split_nodes.push(Node::Tlas(p.target));
+                    let t = &view.tlases[p.target as usize];
+                    todo.push(
+                        t.instance_base as usize..(t.instance_base + t.instance_count) as usize,
+                    );
+                }
+            }
+        }
+    }
+    (labelled, split_nodes)
+}
+
 /// Builds the report from hierarchy tables. Sizes are asked of `sizes` for every BLAS and TLAS
 /// (sources cache repeats). O(nodes × elements sharing them).
 pub fn build_report_from_view(
@@ -142,14 +202,14 @@ pub fn build_report_from_view(
     let root_range = root_rec.instance_base as usize
         ..(root_rec.instance_base + root_rec.instance_count) as usize;
     let untagged = untagged_label(input, view);
-    let labelled: Vec<(u32, usize)> = root_range
-        .clone()
-        .map(|i| {
-            let e = view.instances[i].element;
-            (if e == NONE_U32 { untagged } else { e }, i)
-        })
-        .collect();
-    let own = Ownership::compute(&g, &labelled);
+    let (labelled, split_nodes) = root_placements(view, root_range.clone(), untagged);
+    let mut own = Ownership::compute(&g, &labelled);
+    // A split root's skeleton (the PI BLASes into its pieces, the piece TLASes) is needed by
+    // every subset, like untagged root instances.
+    let split_root = !split_nodes.is_empty();
+    for n in split_nodes {
+        own.owner.entry(n).or_insert(untagged);
+    }
 
     // Labels present, in id order (named elements with no instances still get a row).
     let mut labels: Vec<u32> = (0..input.element_names.len() as u32).collect();
@@ -157,6 +217,9 @@ pub fn build_report_from_view(
         if !labels.contains(&l) {
             labels.push(l);
         }
+    }
+    if split_root && !labels.contains(&untagged) {
+        labels.push(untagged);
     }
     labels.sort_unstable();
     let name_of = |l: u32| -> String {
@@ -227,14 +290,15 @@ pub fn build_report_from_view(
     root_cost.instance_buffer_bytes = 0;
     root_cost.instances = 0;
     root_cost.seal();
-    let root_total = u64::from(root_rec.instance_count).max(1);
+    // Shared by root placements (a split root's pieces' instances included).
+    let root_total = (labelled.len() as u64).max(1);
 
     let coster = SubsetCoster {
         owned: owned.clone(),
         root_count: root_count.clone(),
         groups: group_list.clone(),
         global,
-        forced: if root_count.contains_key(&untagged) {
+        forced: if root_count.contains_key(&untagged) || split_root {
             vec![untagged]
         } else {
             vec![]

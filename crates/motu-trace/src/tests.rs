@@ -461,6 +461,71 @@ fn lod_gets_coarser_with_distance_and_can_be_forced() {
     assert_eq!(sh.lod, (p.lod + 1).min(3));
 }
 
+/// Instance-level LOD (motu_abi::lod_instance): the selectors of `lod_scene` become instance
+/// slots; with the levels the camera rule picks applied, every ray makes one TLAS walk and
+/// hits the level `select_lod` gives for the eye's distance to the selector's sphere.
+#[test]
+fn instance_lod_takes_one_trace_at_the_camera_level() {
+    use motu_abi::lod::select_lod;
+    use motu_abi::lod_instance::InstanceLod;
+    let h = lod_scene();
+    let base = h.view();
+    let il = InstanceLod::new(&base)
+        .unwrap()
+        .expect("the root's selectors qualify");
+    assert_eq!(il.slots.len(), LOD_DISTANCES.len());
+    assert_eq!(il.traversal_selectors, 0);
+    let lod = LodParams {
+        r_max_px: 64.0,
+        ..Default::default()
+    };
+    let ppu = camera(256, 256).pixels_per_unit_at_1;
+    let levels = il.levels(&base, &lod, ppu, [0.0; 3]);
+    let mut frame = il.clone();
+    frame.apply_levels(&base, &levels);
+    let tracer = Tracer::new(frame.view(&base), &h).unwrap();
+    let mut s = Scratch::default();
+    let q = RayQuery {
+        lod,
+        pixels_per_unit_at_1: ppu,
+        ..Default::default()
+    };
+    for (k, (d, angle)) in LOD_DISTANCES.into_iter().enumerate() {
+        let hit = tracer.trace([0.0, 0.0, 0.0], towards(angle), &q, &mut s);
+        assert!(hit.is_hit(), "sphere at {d}");
+        assert_eq!(
+            hit.traces, 1,
+            "sphere at {d}: one walk, no traversal-shader hop"
+        );
+        let centre = d / angle.to_radians().cos();
+        let radius = base.lod_selectors[0].radius;
+        let want = select_lod(&lod, ppu, radius, 1.0, centre, 4, 0, 0.0);
+        assert_eq!(levels[k], want, "sphere at {d}");
+        assert_eq!(hit.lod, want, "sphere at {d}");
+    }
+    assert!(levels[0] < levels[3], "{levels:?}");
+
+    // A selector in a TLAS placed twice has no single camera distance: traversal path.
+    let mut b = HierarchyBuilder::new();
+    let lv: Vec<u32> = (0..2)
+        .map(|l| {
+            let m = b.mesh(0, l, 0, uv_sphere(8 >> l));
+            let blas = b.triangle_blas(&[m]);
+            b.tlas(&[(IDENTITY_3X4, blas)])
+        })
+        .collect();
+    let sel = b.lod_selector(&lv, 0);
+    let inner = b.pi_blas(&[(IDENTITY_3X4, PiTarget::LodSelector(sel))]);
+    let child = b.tlas(&[(IDENTITY_3X4, inner)]);
+    let twice = b.pi_blas(&[
+        (srt(1.0, 0.0, [-2.0, 0.0, -5.0]), PiTarget::Tlas(child)),
+        (srt(1.0, 0.0, [2.0, 0.0, -5.0]), PiTarget::Tlas(child)),
+    ]);
+    let root = b.tlas(&[(IDENTITY_3X4, twice)]);
+    let h2 = b.finish(root);
+    assert!(InstanceLod::new(&h2.view()).unwrap().is_none());
+}
+
 #[test]
 fn shadow_ray_darkens_the_ground_under_an_occluder() {
     let mut b = HierarchyBuilder::new();

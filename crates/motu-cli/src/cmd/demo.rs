@@ -119,6 +119,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         lod_r_max: 256.0,
         shadow_lod_bias: 1.0,
         lod_stochastic: false,
+        lod_mode: crate::cli::LodModeArg::Instance,
         stack_size: 16,
         max_traces_per_ray: motu_abi::DEFAULT_MAX_TRACES_PER_RAY,
         allow_truncated: false,

@@ -1,6 +1,6 @@
 //! `motu render` and `motu compare`.
 
-use crate::cli::{BackendArg, CompareArgs, RenderArgs, ViewArg};
+use crate::cli::{BackendArg, CompareArgs, LodModeArg, RenderArgs, ViewArg};
 use crate::output;
 use crate::pipeline;
 use anyhow::{bail, Context};
@@ -8,6 +8,7 @@ use glam::Vec3;
 use motu_abi::aov::Aov;
 use motu_abi::camera::{camera_path, CameraParams, CameraPath, CameraPose};
 use motu_abi::lod::LodParams;
+use motu_abi::lod_instance::{rule_is_camera_only, InstanceLod};
 use motu_abi::{HierarchyView, RootSubset};
 use motu_pack::ScenePackage;
 use serde_json::{json, Value};
@@ -518,6 +519,7 @@ fn build_gpu_scene<'v>(
     pkg: &ScenePackage,
     view: &HierarchyView<'v>,
     backend: BackendArg,
+    instance_lod: Option<&InstanceLod>,
 ) -> anyhow::Result<(motu_gpu::Context, motu_gpu::GpuScene)> {
     let ctx = gpu_context(a, backend)?;
     let budget = a.vram_budget.unwrap_or(u64::MAX);
@@ -532,8 +534,17 @@ fn build_gpu_scene<'v>(
         ..Default::default()
     };
     let meshes = PackageMeshes(pkg);
-    let scene = motu_gpu::GpuScene::build(&ctx, view, &meshes, &build)
+    let built = match instance_lod {
+        Some(il) => il.view(view),
+        None => *view,
+    };
+    let mut scene = motu_gpu::GpuScene::build(&ctx, &built, &meshes, &build)
         .context("building acceleration structures")?;
+    if let Some(il) = instance_lod {
+        scene
+            .enable_instance_lod(view, il)
+            .context("setting up instance-level LOD")?;
+    }
     Ok((ctx, scene))
 }
 
@@ -546,8 +557,9 @@ fn render_gpu(
     camera: &CameraParams,
     lod: LodParams,
     backend: BackendArg,
+    instance_lod: Option<&InstanceLod>,
 ) -> anyhow::Result<(Aov, Vec<u8>, Value)> {
-    let (ctx, scene) = build_gpu_scene(a, pkg, view, backend)?;
+    let (ctx, scene) = build_gpu_scene(a, pkg, view, backend, instance_lod)?;
     let opts = gpu_render_options(a, lod, backend, a.frames, scene_shading(a, pkg, view));
     let (out, counts) =
         motu_gpu::render_counted(&ctx, &scene, camera, &opts).context("rendering on the GPU")?;
@@ -594,8 +606,9 @@ fn render_gpu_path(
     cams: &[CameraParams],
     lod: LodParams,
     backend: BackendArg,
+    instance_lod: Option<&InstanceLod>,
 ) -> anyhow::Result<(Aov, Vec<u8>, Value)> {
-    let (ctx, scene) = build_gpu_scene(a, pkg, view, backend)?;
+    let (ctx, scene) = build_gpu_scene(a, pkg, view, backend, instance_lod)?;
     let opts = gpu_render_options(a, lod, backend, 1, scene_shading(a, pkg, view));
     let mut live = motu_gpu::LiveRenderer::new(scene);
     let mut times = Vec::with_capacity(cams.len());
@@ -624,6 +637,49 @@ fn render_gpu_path(
     drop(live);
     ctx.check_validation()
         .context("Vulkan validation reported errors")?;
+    Ok((out.aov, out.rgba8, stats))
+}
+
+/// The CPU reference with instance-level LOD: per camera, each slot's level from the same rule
+/// as the GPU's compute pass, then a trace of the rewritten hierarchy.
+fn render_cpu_instance_lod(
+    a: &RenderArgs,
+    pkg: &ScenePackage,
+    view: &HierarchyView<'_>,
+    lod: LodParams,
+    instance_lod: Option<&InstanceLod>,
+    camera: CameraParams,
+    recorded: &Option<Vec<CameraParams>>,
+) -> anyhow::Result<(Aov, Vec<u8>, Value)> {
+    let il = instance_lod.context("instance LOD")?;
+    let meshes = PackageMeshes(pkg);
+    let opts = motu_trace::RenderOptions {
+        view: view_name(a.view).parse().map_err(anyhow::Error::msg)?,
+        lod,
+        max_traces_per_ray: a.max_traces_per_ray,
+        shading: scene_shading(a, pkg, view),
+        ..Default::default()
+    };
+    let cams = recorded
+        .clone()
+        .unwrap_or_else(|| vec![camera; a.frames as usize]);
+    let mut times = Vec::with_capacity(cams.len());
+    let mut last = None;
+    for cam in &cams {
+        let mut frame = il.clone();
+        let levels = frame.levels(view, &lod, cam.pixels_per_unit_at_1, cam.world_eye);
+        frame.apply_levels(view, &levels);
+        let v = frame.view(view);
+        let tracer = motu_trace::Tracer::new(v, &meshes).context("preparing the CPU tracer")?;
+        let out = motu_trace::render_with(&tracer, cam, &opts).context("rendering on the CPU")?;
+        times.push(out.stats.ms_per_frame);
+        last = Some(out);
+    }
+    let out = last.context("no frame rendered")?;
+    times.sort_by(f64::total_cmp);
+    let mut stats = serde_json::to_value(&out.stats)?;
+    stats["ms_per_frame"] = json!(times[times.len() / 2]);
+    stats["frames"] = json!(cams.len());
     Ok((out.aov, out.rgba8, stats))
 }
 
@@ -751,7 +807,56 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     if !a.exposure.is_finite() {
         bail!("--exposure must be a finite number of stops");
     }
+    // Instance-level LOD where the rule allows it; otherwise the traversal path, and why.
+    let selector_pis = view
+        .pis
+        .iter()
+        .filter(|p| p.kind == motu_abi::PI_LOD_SELECTOR)
+        .count() as u32;
+    let (instance_lod, lod_mode, lod_mode_reason) = if selector_pis == 0 {
+        (None, "none", "the package has no LOD selectors")
+    } else if a.lod_mode == LodModeArg::Traversal {
+        (None, "traversal", "--lod-mode traversal")
+    } else if !rule_is_camera_only(&lod) {
+        (
+            None,
+            "traversal",
+            "--lod-stochastic chooses a level per ray",
+        )
+    } else if a.stream {
+        (
+            None,
+            "traversal",
+            "--stream resolves LOD in the traversal shader (instance LOD needs its levels' BLASes resident before the frame)",
+        )
+    } else {
+        match InstanceLod::new(&view).context("rewriting LOD selectors as instances")? {
+            Some(il) => (
+                Some(il),
+                "instance",
+                "the LOD rule depends only on the camera",
+            ),
+            None => (
+                None,
+                "traversal",
+                "no LOD selector qualifies (each sits in a TLAS placed more than once)",
+            ),
+        }
+    };
+    if lod_mode == "traversal" && a.lod_mode == LodModeArg::Instance && a.lod_stochastic | a.stream
+    {
+        eprintln!("note: LOD runs in traversal mode: {lod_mode_reason}");
+    }
     let (aov, rgba8, stats): (Aov, Vec<u8>, Value) = match backend {
+        BackendArg::Cpu if instance_lod.is_some() => render_cpu_instance_lod(
+            &a,
+            &pkg,
+            &view,
+            lod,
+            instance_lod.as_ref(),
+            camera,
+            &recorded,
+        )?,
         BackendArg::Cpu => {
             let meshes = PackageMeshes(&pkg);
             let tracer =
@@ -793,12 +898,25 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         }
         BackendArg::Pipeline | BackendArg::Query if recorded.is_some() => {
             let cams = recorded.as_deref().unwrap_or_default();
-            render_gpu_path(&a, &pkg, &view, cams, lod, backend)?
+            render_gpu_path(&a, &pkg, &view, cams, lod, backend, instance_lod.as_ref())?
         }
-        BackendArg::Pipeline | BackendArg::Query => {
-            render_gpu(&a, &pkg, &view, &camera, lod, backend)?
-        }
+        BackendArg::Pipeline | BackendArg::Query => render_gpu(
+            &a,
+            &pkg,
+            &view,
+            &camera,
+            lod,
+            backend,
+            instance_lod.as_ref(),
+        )?,
     };
+    let mut stats = stats;
+    stats["lod_mode"] = json!(lod_mode);
+    stats["lod_mode_reason"] = json!(lod_mode_reason);
+    stats["lod_instances"] = json!(instance_lod.as_ref().map_or(0, |il| il.slots.len()));
+    stats["lod_traversal_selectors"] = json!(instance_lod
+        .as_ref()
+        .map_or(selector_pis, |il| il.traversal_selectors));
     let stats = contract_stats(
         stats,
         json!({

@@ -1,0 +1,346 @@
+//! Instance-level LOD on the GPU (motu_abi::lod_instance): each frame, before tracing, a
+//! compute pass (`shaders/lod_instances.comp`) picks every slot's level for the frame's camera
+//! and writes that level's BLAS addresses into the TLAS instance buffer (and the instance
+//! table the shaders read), then the slots' TLASes are rebuilt. Rays then reach LOD'd
+//! geometry in one trace, without a traversal-shader hop.
+
+use ash::vk;
+use bytemuck::{cast_slice, Pod, Zeroable};
+use motu_abi::lod_instance::InstanceLod;
+use motu_abi::{HierarchyView, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
+use motu_alloc::{AllocKind, MemoryClass};
+
+use crate::accel::AsBuildFlags;
+use crate::command::CommandRecorder;
+use crate::context::Context;
+use crate::error::{GpuError, Result};
+use crate::heap::{GpuHeap, HeapBuffer};
+use crate::memory::BufferUsage;
+use crate::pipeline::{ComputePipeline, ComputePipelineDesc};
+use crate::scene::{encode_instance, table_usage, AccelStruct, GpuScene, Slot, Uploader};
+use crate::shaders;
+
+/// `lod_instances.comp`'s push constants.
+#[derive(Clone, Copy, Pod, Zeroable)]
+#[repr(C)]
+struct Push {
+    frame: u64,
+    tlases: u64,
+    instances: u64,
+    selectors: u64,
+    lod_levels: u64,
+    slots: u64,
+    blas_addresses: u64,
+    vk_instances: u64,
+    slot_count: u32,
+    lod_instance_base: u32,
+    _pad: [u32; 2],
+}
+
+/// One TLAS rebuilt every frame: its instances at `offset_bytes` in the instance buffer; the
+/// structure itself is `GpuScene::tlases[tlas]` (built without compaction, so a rebuild fits).
+struct LodTlas {
+    handle: vk::AccelerationStructureKHR,
+    count: u32,
+    offset_bytes: u64,
+    scratch_offset_bytes: u64,
+}
+
+/// The per-frame LOD pass's resources (owned by [`GpuScene`]).
+pub(crate) struct InstanceLodGpu {
+    pipeline: ComputePipeline,
+    /// Scratch, BLAS addresses, slots, instance buffer: kept for the scene's life.
+    _buffers: Vec<HeapBuffer>,
+    push: Push,
+    scratch_address: u64,
+    tlases: Vec<LodTlas>,
+    group_count: u32,
+    /// Slots (LOD'd instances), for stats.
+    pub(crate) slot_count: u32,
+}
+
+impl InstanceLodGpu {
+    /// Records the LOD pass for the frame whose parameters are at `frame_address`: pick
+    /// levels, write instances, rebuild the slots' TLASes. Barriers on both sides.
+    pub(crate) fn record<'a>(
+        &'a self,
+        ctx: &Context,
+        rec: &mut CommandRecorder<'a>,
+        frame_address: u64,
+    ) -> Result<()> {
+        let push = Push {
+            frame: frame_address,
+            ..self.push
+        };
+        rec.barrier();
+        rec.dispatch(
+            &self.pipeline,
+            None,
+            bytemuck::bytes_of(&push),
+            [self.group_count, 1, 1],
+        )?;
+        rec.barrier();
+        let accel = ctx.accel_device()?;
+        let geometries: Vec<[vk::AccelerationStructureGeometryKHR<'_>; 1]> = self
+            .tlases
+            .iter()
+            .map(|t| {
+                let instances = vk::AccelerationStructureGeometryInstancesDataKHR::default()
+                    .array_of_pointers(false)
+                    .data(vk::DeviceOrHostAddressConstKHR {
+                        device_address: self.push.vk_instances + t.offset_bytes,
+                    });
+                [vk::AccelerationStructureGeometryKHR::default()
+                    .geometry_type(vk::GeometryTypeKHR::INSTANCES)
+                    .geometry(vk::AccelerationStructureGeometryDataKHR { instances })]
+            })
+            .collect();
+        let ranges: Vec<[vk::AccelerationStructureBuildRangeInfoKHR; 1]> = self
+            .tlases
+            .iter()
+            .map(|t| {
+                [vk::AccelerationStructureBuildRangeInfoKHR::default().primitive_count(t.count)]
+            })
+            .collect();
+        let infos: Vec<vk::AccelerationStructureBuildGeometryInfoKHR<'_>> = self
+            .tlases
+            .iter()
+            .zip(&geometries)
+            .map(|(t, g)| {
+                vk::AccelerationStructureBuildGeometryInfoKHR::default()
+                    .ty(vk::AccelerationStructureTypeKHR::TOP_LEVEL)
+                    .flags(vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE)
+                    .mode(vk::BuildAccelerationStructureModeKHR::BUILD)
+                    .dst_acceleration_structure(t.handle)
+                    .geometries(g)
+                    .scratch_data(vk::DeviceOrHostAddressKHR {
+                        device_address: self.scratch_address + t.scratch_offset_bytes,
+                    })
+            })
+            .collect();
+        let range_refs: Vec<&[vk::AccelerationStructureBuildRangeInfoKHR]> =
+            ranges.iter().map(|r| r.as_slice()).collect();
+        let (_, cmd) = rec.raw();
+        // SAFETY: recording state; the destinations (the scene's TLASes), the instance buffer
+        // and the disjoint, aligned scratch slices live as long as the scene, which outlives
+        // every submission recording this pass (callers wait on it).
+        unsafe { accel.cmd_build_acceleration_structures(cmd, &infos, &range_refs) };
+        rec.barrier();
+        Ok(())
+    }
+}
+
+fn buffer(
+    heap: &mut GpuHeap,
+    label: &str,
+    size_bytes: u64,
+    usage: BufferUsage,
+    kind: AllocKind,
+    alignment: u64,
+) -> Result<HeapBuffer> {
+    heap.alloc_buffer(
+        label,
+        size_bytes.max(16),
+        usage,
+        kind,
+        MemoryClass::DeviceLocal,
+        alignment,
+    )
+}
+
+impl GpuScene {
+    /// Turns on instance-level LOD for a scene built from `lod.view(base)`: the slots' TLASes
+    /// are rebuilt uncompacted (they are rebuilt every frame) and the LOD pass runs before
+    /// each frame's trace of every renderer on this scene.
+    pub fn enable_instance_lod(
+        &mut self,
+        base: &HierarchyView<'_>,
+        lod: &InstanceLod,
+    ) -> Result<()> {
+        if self.instance_lod.is_some() {
+            return Err(GpuError::InvalidRequest(
+                "instance LOD is already enabled on this scene".into(),
+            ));
+        }
+        let view = lod.view(base);
+        if view.tlases.len() != self.tlases.len() || view.blases.len() != self.blases.len() {
+            return Err(GpuError::InvalidRequest(
+                "instance LOD: the scene was not built from this rewrite".into(),
+            ));
+        }
+        let ctx = self.ctx.clone();
+        let mut buffers: Vec<HeapBuffer> = Vec::new();
+        let mut accels: Vec<(u32, AccelStruct)> = Vec::new();
+        let heap = self.heap.get_mut().unwrap_or_else(|e| e.into_inner());
+        let r = (|| -> Result<InstanceLodGpu> {
+            let pipeline = ComputePipeline::new(
+                &ctx,
+                &ComputePipelineDesc {
+                    label: "instance LOD",
+                    spirv: shaders::LOD_INSTANCES_COMP,
+                    storage_buffer_count: 0,
+                    push_constant_size_bytes: std::mem::size_of::<Push>() as u32,
+                    specialization: &[],
+                },
+            )?;
+            // Uncompacted TLASes and their scratch slices.
+            let flags = AsBuildFlags {
+                allow_compaction: false,
+                ..AsBuildFlags::default()
+            };
+            let scratch_align = u64::from(
+                ctx.limits()
+                    .min_acceleration_structure_scratch_offset_alignment
+                    .max(1),
+            )
+            .next_power_of_two();
+            let mut tlases = Vec::new();
+            let mut scratch_bytes = 0u64;
+            for &t in &lod.lod_tlases {
+                let rec = &view.tlases[t as usize];
+                let sz = ctx.tlas_build_sizes(rec.instance_count, flags)?;
+                let a = AccelStruct::new(
+                    &ctx,
+                    heap,
+                    &format!("lod-tlas-{t}"),
+                    sz.acceleration_structure_size_bytes,
+                    vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+                )?;
+                tlases.push(LodTlas {
+                    handle: a.handle,
+                    count: rec.instance_count,
+                    offset_bytes: u64::from(rec.instance_base - lod.lod_instance_base) * 64,
+                    scratch_offset_bytes: scratch_bytes,
+                });
+                scratch_bytes +=
+                    sz.build_scratch_size_bytes.div_ceil(scratch_align) * scratch_align;
+                accels.push((t, a));
+            }
+            let scratch = buffer(
+                heap,
+                "lod-scratch",
+                scratch_bytes + scratch_align,
+                BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
+                AllocKind::Scratch,
+                scratch_align,
+            )?;
+            let scratch_address =
+                scratch.device_address()?.0.div_ceil(scratch_align) * scratch_align;
+            buffers.push(scratch);
+            // The BLAS address table, the slots and the instance buffer (initial levels).
+            let blas_addr: Vec<u64> = self
+                .blases
+                .iter()
+                .map(|b| b.as_ref().map_or(0, |a| a.address))
+                .collect();
+            let vk_bytes: Vec<u8> = view.instances[lod.lod_instance_base as usize..]
+                .iter()
+                .flat_map(|inst| {
+                    encode_instance(
+                        &inst.tlas_from_blas,
+                        view.blases[inst.blas as usize].kind == BLAS_AABBS,
+                        inst.flags & FLAG_NEEDS_ANY_HIT != 0,
+                        blas_addr[inst.blas as usize],
+                    )
+                })
+                .collect();
+            let mut up = Uploader::new(heap, 4 << 20)?;
+            let uploaded = (|| -> Result<[u64; 3]> {
+                let mut addrs = [0u64; 3];
+                for (k, (label, bytes, usage, kind)) in [
+                    (
+                        "lod-blas-addresses",
+                        cast_slice::<u64, u8>(&blas_addr),
+                        table_usage(),
+                        AllocKind::NodeTable,
+                    ),
+                    (
+                        "lod-slots",
+                        cast_slice(&lod.slots),
+                        table_usage(),
+                        AllocKind::NodeTable,
+                    ),
+                    (
+                        "lod-instances",
+                        &vk_bytes[..],
+                        table_usage().union(BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT),
+                        AllocKind::InstanceBuffer,
+                    ),
+                ]
+                .into_iter()
+                .enumerate()
+                {
+                    let b = buffer(heap, label, bytes.len() as u64, usage, kind, 16)?;
+                    addrs[k] = b.device_address()?.0;
+                    if !bytes.is_empty() {
+                        up.upload(&ctx, &b, 0, bytes)?;
+                    }
+                    buffers.push(b);
+                }
+                up.flush(&ctx)?;
+                Ok(addrs)
+            })();
+            heap.free(up.staging);
+            let [blas_addresses, slots, vk_instances] = uploaded?;
+            let push = Push {
+                frame: 0,
+                tlases: self.addresses[Slot::Tlases as usize],
+                instances: self.addresses[Slot::Instances as usize],
+                selectors: self.addresses[Slot::Selectors as usize],
+                lod_levels: self.addresses[Slot::LodLevels as usize],
+                slots,
+                blas_addresses,
+                vk_instances,
+                slot_count: lod.slots.len() as u32,
+                lod_instance_base: lod.lod_instance_base,
+                _pad: [0; 2],
+            };
+            Ok(InstanceLodGpu {
+                pipeline,
+                _buffers: std::mem::take(&mut buffers),
+                push,
+                scratch_address,
+                tlases,
+                group_count: (lod.slots.len() as u32).div_ceil(64),
+                slot_count: lod.slots.len() as u32,
+            })
+        })();
+        let gpu = match r {
+            Ok(g) => g,
+            Err(e) => {
+                buffers.into_iter().for_each(|b| heap.free(b));
+                accels.into_iter().for_each(|(_, a)| a.release(heap));
+                return Err(e);
+            }
+        };
+        // Swap the new structures in (their first build is the first frame's LOD pass) and
+        // point the shaders' address table at them.
+        for (t, a) in accels {
+            self.report.as_bytes =
+                self.report.as_bytes + a.size_bytes - self.tlases[t as usize].size_bytes;
+            let old = std::mem::replace(&mut self.tlases[t as usize], a);
+            old.release(heap);
+        }
+        let addrs: Vec<u64> = self.tlases.iter().map(|t| t.address).collect();
+        let table = self
+            .tables
+            .iter()
+            .find(|b| {
+                b.device_address()
+                    .is_ok_and(|a| a.0 == self.addresses[Slot::TlasAddresses as usize])
+            })
+            .ok_or_else(|| GpuError::InvalidRequest("TLAS address table missing".into()))?;
+        let mut up = Uploader::new(heap, 64 << 10)?;
+        let r = up
+            .upload(&ctx, table, 0, cast_slice(&addrs))
+            .and_then(|_| up.flush(&ctx));
+        heap.free(up.staging);
+        self.instance_lod = Some(gpu);
+        r
+    }
+
+    /// LOD instance slots (instance-level LOD), 0 when it is off.
+    pub fn lod_instance_slots(&self) -> u32 {
+        self.instance_lod.as_ref().map_or(0, |l| l.slot_count)
+    }
+}

@@ -1,0 +1,79 @@
+// Instance-level LOD (motu_abi::lod_instance): per slot, the level for this frame's camera;
+// the slot's TLAS instances (VkAccelerationStructureInstanceKHR) of that level get their BLAS
+// addresses, the other levels' are made inactive (address 0, mask 0). The host rebuilds the
+// slots' TLASes after this pass.
+#version 460
+#extension GL_EXT_buffer_reference : require
+#extension GL_EXT_shader_explicit_arithmetic_types_int64 : require
+#extension GL_GOOGLE_include_directive : require
+#include "lod.glsl"
+
+layout(local_size_x = 64) in;
+
+// The head of common.glsl's FrameParams (same std430 offsets).
+struct FrameHead {
+    CameraParams camera;
+    LodParams lod;
+};
+
+// VkAccelerationStructureInstanceKHR: 64 bytes.
+struct VkInstance {
+    vec4 r0;
+    vec4 r1;
+    vec4 r2;
+    uint custom_mask;  // custom index (low 24 bits) | mask << 24
+    uint sbt_flags;    // SBT offset (low 24 bits) | flags << 24
+    uint64_t reference;
+};
+
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer FrameRef { FrameHead f; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer TlasTable { TlasRecord r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer InstanceTable { InstanceRecord r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer SelectorTable { LodSelectorRecord r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer U32Table { uint r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer SlotTable { LodSlotRecord r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 8) readonly buffer U64Table { uint64_t r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 16) buffer VkInstanceTable { VkInstance r[]; };
+
+// Rust: motu-gpu's lod_instances.rs `Push` (80 bytes).
+layout(push_constant) uniform Push {
+    FrameRef frame;
+    TlasTable tlases;
+    InstanceTable instances;
+    SelectorTable selectors;
+    U32Table lod_levels;
+    SlotTable slots;
+    U64Table blas_addresses;    // per BLAS id, 0 where none is built
+    VkInstanceTable vk_instances;  // instance `lod_instance_base + i` is entry i
+    uint slot_count;
+    uint lod_instance_base;
+    uint pad0_;
+    uint pad1_;
+} push;
+
+void main() {
+    uint i = gl_GlobalInvocationID.x;
+    if (i >= push.slot_count) {
+        return;
+    }
+    LodSlotRecord slot = push.slots.r[i];
+    LodSelectorRecord sel = push.selectors.r[slot.selector];
+    FrameHead fh = push.frame.f;
+    uint level = camera_lod(fh.lod, fh.camera.pixels_per_unit_at_1, fh.camera.world_eye, slot,
+                            sel.level_count);
+    // The slot holds every level's BLASes in order: only the chosen level's are active.
+    uint gi = slot.instance;
+    for (uint l = 0u; l < sel.level_count; ++l) {
+        uint n = push.tlases.r[push.lod_levels.r[sel.level_base + l]].instance_count;
+        for (uint j = 0u; j < n; ++j) {
+            uint64_t addr = 0ul;
+            if (l == level) {
+                addr = push.blas_addresses.r[push.instances.r[gi].blas];
+            }
+            uint vi = gi - push.lod_instance_base;
+            push.vk_instances.r[vi].custom_mask = addr != 0ul ? (0xFFu << 24) : 0u;
+            push.vk_instances.r[vi].reference = addr;
+            gi += 1u;
+        }
+    }
+}
