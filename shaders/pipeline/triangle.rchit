@@ -8,7 +8,7 @@ layout(location = 0) rayPayloadInEXT Payload pl;
 
 void main() {
     pl.hit_t = gl_HitTEXT;
-    pl.hit_instance = gl_InstanceID;
+    pl.hit_instance = gl_InstanceCustomIndexEXT;  // the local instance index (streamed TLASes hold a subset)
     pl.hit_geometry = gl_GeometryIndexEXT;
     pl.hit_primitive = gl_PrimitiveID;
 }

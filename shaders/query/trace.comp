@@ -19,7 +19,7 @@ void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool
                           org, t_min, dir, t_max);
     while (rayQueryProceedEXT(rq)) {
         if (rayQueryGetIntersectionTypeEXT(rq, false) == gl_RayQueryCandidateIntersectionAABBEXT) {
-            uint instance = rayQueryGetIntersectionInstanceIdEXT(rq, false);
+            uint instance = rayQueryGetIntersectionInstanceCustomIndexEXT(rq, false);
             uint pi = pi_index(tlas, instance, rayQueryGetIntersectionPrimitiveIndexEXT(rq, false));
             PiRecord r = push.pis.r[pi];
             float t_hi = rayQueryGetIntersectionTypeEXT(rq, true) ==
@@ -32,7 +32,7 @@ void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool
             if (t_near >= 0.0) {
                 record_candidate(pi, t_near);
             }
-        } else if (alpha_passes(tlas, rayQueryGetIntersectionInstanceIdEXT(rq, false),
+        } else if (alpha_passes(tlas, rayQueryGetIntersectionInstanceCustomIndexEXT(rq, false),
                                 rayQueryGetIntersectionGeometryIndexEXT(rq, false),
                                 rayQueryGetIntersectionPrimitiveIndexEXT(rq, false),
                                 rayQueryGetIntersectionBarycentricsEXT(rq, false))) {
@@ -42,7 +42,7 @@ void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool
     }
     if (rayQueryGetIntersectionTypeEXT(rq, true) == gl_RayQueryCommittedIntersectionTriangleEXT) {
         pl.hit_t = rayQueryGetIntersectionTEXT(rq, true);
-        pl.hit_instance = rayQueryGetIntersectionInstanceIdEXT(rq, true);
+        pl.hit_instance = rayQueryGetIntersectionInstanceCustomIndexEXT(rq, true);
         pl.hit_geometry = rayQueryGetIntersectionGeometryIndexEXT(rq, true);
         pl.hit_primitive = rayQueryGetIntersectionPrimitiveIndexEXT(rq, true);
     }

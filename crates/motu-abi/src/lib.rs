@@ -8,7 +8,8 @@
 //! - A **TLAS** ([`TlasRecord`], even level) holds instances ([`InstanceRecord`]), each a BLAS
 //!   with a `tlas_from_blas` transform. A TLAS's instances are the contiguous range
 //!   `instance_base .. instance_base + instance_count` of the instance table; on the GPU the
-//!   instance index within the TLAS (`gl_InstanceID`, < 2^24) is added to `instance_base`
+//!   instance index within the TLAS (the instance's custom index, < 2^24: a streamed TLAS
+//!   holds only its resident instances) is added to `instance_base`
 //!   (a 32-bit per-TLAS record table: node ids never travel in 24-bit fields).
 //! - A **BLAS** ([`BlasRecord`], odd level) holds either triangles (one geometry per compiled
 //!   mesh, [`GeometryRecord`]) or AABBs: **programmable instances** ([`PiRecord`]), each

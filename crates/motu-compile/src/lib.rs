@@ -96,6 +96,7 @@ mod proptests;
 
 pub use flatten::{flatten_compiled, flatten_source};
 pub use partition::DEFAULT_MAX_BLAS_TRIANGLES;
+pub use split::sah_partition;
 pub use validate::{validate, validate_with, Limits, ValidateError};
 
 use motu_abi::{

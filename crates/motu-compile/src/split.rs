@@ -99,7 +99,7 @@ impl Bin {
 /// sides, centroids binned along each axis) among those leaving at least 1/8 of the items on
 /// either side; when no axis offers one (coincident or non-finite centroids) it splits at the
 /// middle index, so every step shrinks both sides and the partition always terminates.
-pub(crate) fn sah_partition<T>(
+pub fn sah_partition<T>(
     items: &mut [T],
     bounds: &mut [([f32; 3], [f32; 3])],
     cap: usize,

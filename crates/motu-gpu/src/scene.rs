@@ -1033,8 +1033,10 @@ impl GpuScene {
             let rec = &view.tlases[t];
             let n = count(t);
             let mut out = Vec::with_capacity(n as usize * 64);
-            for inst in
-                &view.instances[rec.instance_base as usize..(rec.instance_base + n) as usize]
+            for (k, inst) in view.instances
+                [rec.instance_base as usize..(rec.instance_base + n) as usize]
+                .iter()
+                .enumerate()
             {
                 let aabbs = view.blases[inst.blas as usize].kind == BLAS_AABBS;
                 out.extend_from_slice(&encode_instance(
@@ -1042,6 +1044,7 @@ impl GpuScene {
                     aabbs,
                     inst.flags & FLAG_NEEDS_ANY_HIT != 0,
                     blas_addr[inst.blas as usize],
+                    k as u32,
                 ));
             }
             out
@@ -1531,12 +1534,15 @@ pub(crate) fn blas_geometry<'m>(
 /// One `VkAccelerationStructureInstanceKHR` (64 bytes): triangles use hit group 0 (opaque unless
 /// `needs_any_hit`), programmable instances (`aabbs`) hit group 1, never opaque. A
 /// `blas_address` of 0 makes the instance inactive (mask 0 as well: some drivers only check
-/// the mask).
+/// the mask). The custom index is `local_index`, the instance's index within its TLAS's
+/// record range (< 2^24, which `max_instance_count` bounds): the shaders read it instead of
+/// the position in the built TLAS, so a streamed TLAS may hold only its resident instances.
 pub(crate) fn encode_instance(
     tlas_from_blas: &[f32; 12],
     aabbs: bool,
     needs_any_hit: bool,
     blas_address: u64,
+    local_index: u32,
 ) -> [u8; 64] {
     let (sbt, flags) = if aabbs {
         (1u32, vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE)
@@ -1556,9 +1562,10 @@ pub(crate) fn encode_instance(
     for (i, v) in tlas_from_blas.iter().enumerate() {
         out[4 * i..4 * i + 4].copy_from_slice(&v.to_le_bytes());
     }
-    // Custom index 0 (node ids never travel in 24 bits), mask 0xFF.
+    // Node ids never travel in 24 bits: only the local instance index does.
+    debug_assert!(local_index < 1 << 24, "instance index {local_index} ≥ 2^24");
     let mask = if blas_address == 0 { 0u32 } else { 0xFF };
-    out[48..52].copy_from_slice(&(mask << 24).to_le_bytes());
+    out[48..52].copy_from_slice(&((mask << 24) | (local_index & 0xFF_FFFF)).to_le_bytes());
     out[52..56].copy_from_slice(&(sbt | (flags.as_raw() << 24)).to_le_bytes());
     out[56..64].copy_from_slice(&blas_address.to_le_bytes());
     out

@@ -10,6 +10,7 @@ use motu_alloc::MIB;
 use serde::Serialize;
 
 use super::buffers::frame_buffer_bytes;
+use super::skeleton::proxy_clusters;
 use crate::accel::BlasGeometry;
 use crate::error::Result;
 
@@ -42,15 +43,16 @@ impl FloorSizes for crate::context::Context {
 pub struct StreamFloor {
     /// Node tables (with the proxies' records), stamps and walked tables.
     pub tables_bytes: u64,
-    /// PI BLASes, every TLAS and every proxy BLAS (all triangle instances empty): the
-    /// resident skeleton besides the tables.
+    /// PI BLASes, every TLAS and every proxy BLAS (no triangle instance resident: TLASes hold
+    /// their PI instances and one proxy of clustered boxes): the resident skeleton besides the
+    /// tables.
     pub skeleton_structures_bytes: u64,
     /// The triangle BLAS with the largest build working set (meshes, structure, scratch;
     /// compaction is skipped when its copy does not fit).
     pub largest_blas: Option<u32>,
     pub largest_blas_build_bytes: u64,
-    /// Rebuilding every TLAS with its proxy (instance buffer, proxy boxes, scratch) next to
-    /// the largest BLAS resident.
+    /// Rebuilding every TLAS with its proxy (structures, instance buffer, proxy boxes, scratch)
+    /// with the most instanced BLAS resident, next to the largest BLAS.
     pub tlas_rebuild_bytes: u64,
     /// Frame buffers at the image size (carried hits, lists, AOV, colour, readback).
     pub frame_bytes: u64,
@@ -58,7 +60,7 @@ pub struct StreamFloor {
     pub height: u32,
     /// Trace pipeline and shader binding tables (allowance).
     pub pipeline_bytes: u64,
-    /// Staging ring at the floor (an eighth of the budget, at most the default ring).
+    /// Staging ring at the floor (a 32nd of the budget, at most the default ring).
     pub staging_bytes: u64,
     /// Partly used allocator blocks (block size is a 64th of the budget; two classes, two
     /// blocks each).
@@ -73,6 +75,10 @@ const PIPELINE_BYTES: u64 = MIB;
 const MIN_STAGING_BYTES: u64 = 64 * 1024;
 /// Standard allocator blocks of a streaming heap are this fraction of the budget.
 pub(super) const BLOCKS_PER_BUDGET: u64 = 64;
+/// The staging ring is at most this fraction of the budget (it counts against it on
+/// unified-memory devices; mesh uploads stream through it in ring-sized pieces, so a smaller
+/// ring costs submissions, not correctness).
+pub(super) const STAGING_PER_BUDGET: u64 = 32;
 
 fn align(v: u64, a: u64) -> u64 {
     v.div_ceil(a) * a
@@ -97,27 +103,43 @@ pub fn streaming_floor(
     };
     let mut proxies_total = 0u64;
     let mut skeleton = 0u64;
-    let mut rebuild_instances = 0u64;
+    let mut rebuild_structures = 0u64;
+    let mut rebuild_inputs = 0u64;
     let mut rebuild_scratch_max = 0u64;
     let mut rebuild_scratch_sum = 0u64;
-    for rec in view.tlases {
+    for (t, rec) in view.tlases.iter().enumerate() {
         let range = rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize;
-        let tri = view.instances[range]
-            .iter()
-            .filter(|i| buildable(i.blas as usize))
-            .count() as u32;
-        let count = rec.instance_count + u32::from(tri > 0);
-        let (t_bytes, t_scratch) = sizes.tlas(count.max(1))?;
+        // A streamed TLAS holds its PI instances, the proxy and the resident BLASes' instances:
+        // at the floor one BLAS is resident (the most instanced one bounds its instances).
+        let mut per_blas: std::collections::HashMap<u32, u32> = Default::default();
+        let mut other = 0u32;
+        for i in &view.instances[range] {
+            if buildable(i.blas as usize) {
+                *per_blas.entry(i.blas).or_default() += 1;
+            } else {
+                other += 1;
+            }
+        }
+        let most = per_blas.values().copied().max().unwrap_or(0);
+        let clusters = proxy_clusters(view, t, buildable).len() as u32;
+        let proxy = u32::from(clusters > 0);
+        let (t_bytes, _) = sizes.tlas((other + proxy).max(1))?;
         skeleton += as_align(t_bytes);
-        rebuild_instances += u64::from(count) * 64;
-        let mut scratch = t_scratch;
-        if tri > 0 {
-            proxies_total += u64::from(tri);
+        let count = (other + proxy + most).max(1);
+        let (r_bytes, r_scratch) = sizes.tlas(count)?;
+        rebuild_structures += as_align(r_bytes);
+        rebuild_inputs += u64::from(count) * 64;
+        let mut scratch = r_scratch;
+        if clusters > 0 {
+            proxies_total += u64::from(clusters);
             let (p_bytes, p_scratch) = sizes.blas(&[BlasGeometry::Aabbs {
-                aabb_count: tri,
+                aabb_count: clusters,
                 opaque: false,
             }])?;
             skeleton += as_align(p_bytes);
+            // Rebuilt next to the old one's release: counted again (conservative).
+            rebuild_structures += as_align(p_bytes);
+            rebuild_inputs += align(u64::from(clusters) * 24, 16);
             scratch = scratch.max(p_scratch);
         }
         rebuild_scratch_max = rebuild_scratch_max.max(scratch);
@@ -212,10 +234,10 @@ pub fn streaming_floor(
     let mut floor = base + blas_build;
     let mut parts = (0, 0, 0);
     for _ in 0..64 {
-        let staging =
-            (floor / 8).clamp(MIN_STAGING_BYTES, staging_cap_bytes.max(MIN_STAGING_BYTES));
+        let staging = (floor / STAGING_PER_BUDGET)
+            .clamp(MIN_STAGING_BYTES, staging_cap_bytes.max(MIN_STAGING_BYTES));
         let rebuild_scratch = rebuild_scratch_max.max(rebuild_scratch_sum.min(floor / 8));
-        let rebuild = rebuild_instances + proxies_total * 24 + rebuild_scratch;
+        let rebuild = rebuild_structures + rebuild_inputs + rebuild_scratch;
         let slack = 4 * (floor / BLOCKS_PER_BUDGET).max(256 * 1024);
         let next = base + staging + slack + blas_build.max(blas_resident + rebuild);
         parts = (staging, rebuild, slack);

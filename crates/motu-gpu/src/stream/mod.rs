@@ -7,9 +7,13 @@
 //! form the resident *skeleton* (TLASes are the instance skeleton: never evicted, so every ray
 //! reaches every BLAS box and only BLASes stream). In the GPU's copy of the tables each TLAS
 //! with triangle instances gets one extra instance: a *proxy* AABB BLAS with one box per
-//! non-resident triangle instance (the BLAS bounds in TLAS space), whose PI record has kind
-//! `PI_EMPTY_BLAS` and names the BLAS. The real instance stays in place with a null BLAS
-//! reference (inactive), so instance indices never move.
+//! non-resident *cluster* (up to 16 neighbouring instances of one BLAS, grouped by the
+//! compiler's SAH over instance bounds; the union of their BLAS bounds in TLAS space, padded),
+//! whose PI record has kind `PI_EMPTY_BLAS` and names the BLAS. A built TLAS holds only the
+//! instances of resident BLASes (and PI instances) plus the proxy: each carries its index in
+//! the TLAS's record range as its custom index, which the shaders read, so records never move
+//! and the resident skeleton does not grow with the instance count (only the instance table
+//! does, 64 bytes an instance).
 //!
 //! # Carried hits (both backends, `traverse.glsl`, `render_pixel.glsl`)
 //! Each pixel keeps its state across the passes of a frame (`Carry`, 48 bytes): the primary
@@ -254,14 +258,12 @@ pub struct StreamingRenderer<'a> {
     source: &'a dyn MeshBlobSource,
     opts: StreamOptions,
     build_opts: BuildOptions,
-    /// Per TLAS: local indices of its triangle instances (they get proxies).
-    tri_instances: Vec<Vec<u32>>,
+    /// Per TLAS: its proxy boxes (clusters of triangle instances of one BLAS).
+    clusters: Vec<Vec<skeleton::ProxyCluster>>,
     /// Per TLAS: first proxy PI slot and proxy BLAS id in the GPU tables.
     proxy_pi_base: Vec<u32>,
     /// Per BLAS: TLASes instancing it.
     parents: Vec<Vec<u32>>,
-    /// Per original instance: its BLAS's bounds in its TLAS's space (`[min, max]`).
-    instance_boxes: Vec<[f32; 6]>,
     buildable: Vec<bool>,
     residency: Residency,
     /// Per item (BLAS, then TLAS): the last pass stamp that saw it.

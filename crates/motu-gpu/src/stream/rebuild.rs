@@ -69,21 +69,18 @@ impl<'a> StreamingRenderer<'a> {
                 self.dirty.insert(t);
             }
         }
-        // 1. Proxy BLASes: boxes of the non-resident triangle instances, compacted; their PI
-        // slots are rewritten to match.
+        // 1. Proxy BLASes: the clusters of non-resident BLASes, compacted; their PI slots are
+        // rewritten to match.
         let mut proxy_boxes: Vec<[f32; 6]> = Vec::new();
         let mut proxy_items: Vec<(u32, u32, u32)> = Vec::new(); // (tlas, first box, count)
         let mut pi_rewrites: Vec<(u32, Vec<PiRecord>)> = Vec::new();
         for &t in ids {
-            let rec = &view.tlases[t as usize];
             let first = proxy_boxes.len() as u32;
             let mut pis = Vec::new();
-            for &k in &self.tri_instances[t as usize] {
-                let i = (rec.instance_base + k) as usize;
-                let b = view.instances[i].blas as usize;
-                if self.blas[b].is_none() {
-                    proxy_boxes.push(self.instance_boxes[i]);
-                    pis.push(proxy_pi(b as u32, &self.instance_boxes[i]));
+            for c in &self.clusters[t as usize] {
+                if self.blas[c.blas as usize].is_none() {
+                    proxy_boxes.push(c.bounds);
+                    pis.push(proxy_pi(c.blas, &c.bounds));
                 }
             }
             if !pis.is_empty() {
@@ -150,30 +147,44 @@ impl<'a> StreamingRenderer<'a> {
                 proxies.push((proxy_items[k].0, a));
             }
         }
-        // 2. TLASes over the resident BLASes (inactive where not) plus the proxy instance.
+        // 2. TLASes over the resident BLASes plus the proxy instance. Non-resident instances
+        // are left out (their proxy boxes stand for them), so a TLAS's size follows what is
+        // resident, not its instance count; the custom index keeps each instance's record.
         let instance_bytes: Vec<Vec<u8>> = ids
             .iter()
             .map(|&t| {
                 let rec = &view.tlases[t as usize];
-                let mut out = Vec::with_capacity((rec.instance_count as usize + 1) * 64);
-                for inst in &view.instances
+                let mut out = Vec::new();
+                for (k, inst) in view.instances
                     [rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize]
+                    .iter()
+                    .enumerate()
                 {
                     let b = inst.blas as usize;
-                    let addr = self.blas[b].as_ref().map_or(0, |a| a.address);
+                    let Some(addr) = self.blas[b].as_ref().map(|a| a.address) else {
+                        continue;
+                    };
                     out.extend_from_slice(&encode_instance(
                         &inst.tlas_from_blas,
                         view.blases[b].kind == BLAS_AABBS,
                         inst.flags & FLAG_NEEDS_ANY_HIT != 0,
                         addr,
+                        k as u32,
                     ));
                 }
-                if !self.tri_instances[t as usize].is_empty() {
-                    let addr = proxies
-                        .iter()
-                        .find(|(pt, _)| *pt == t)
-                        .map_or(0, |(_, a)| a.address);
-                    out.extend_from_slice(&encode_instance(&IDENTITY, true, false, addr));
+                if let Some((_, a)) = proxies.iter().find(|(pt, _)| *pt == t) {
+                    // The proxy's record follows the TLAS's own (see `StreamingRenderer::new`).
+                    out.extend_from_slice(&encode_instance(
+                        &IDENTITY,
+                        true,
+                        false,
+                        a.address,
+                        rec.instance_count,
+                    ));
+                }
+                if out.is_empty() {
+                    // Nothing resident: one inactive instance keeps the TLAS valid.
+                    out.extend_from_slice(&encode_instance(&IDENTITY, false, false, 0, 0));
                 }
                 out
             })

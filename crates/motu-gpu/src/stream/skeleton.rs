@@ -42,6 +42,103 @@ pub(super) fn transformed_box(m: &[f32; 12], lo: [f32; 3], hi: [f32; 3]) -> [f32
     out
 }
 
+/// Triangle instances of one BLAS per proxy box at most. One box per instance made the
+/// resident skeleton (proxy BLAS, PI records, and the TLAS sized for every instance) grow with
+/// the instance count: 26 MB of the default island's 46 MB floor. A box over a cluster of
+/// neighbouring instances of the same BLAS stays exact where it matters (the BLAS is open for a
+/// ray that enters the box, a superset of the rays that could hit an instance) and only costs
+/// a build when a ray passes between the instances before the BLAS was walked.
+pub(super) const PROXY_CLUSTER_INSTANCES: usize = 16;
+
+/// One proxy box: a spatially coherent cluster of a TLAS's instances of one triangle BLAS.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct ProxyCluster {
+    pub blas: u32,
+    /// `[min, max]` in the TLAS's space: the union of the instances' transformed BLAS bounds.
+    pub bounds: [f32; 6],
+}
+
+/// The proxy clusters of TLAS `t`: its instances of each buildable BLAS, cut by the compiler's
+/// binned SAH over instance bounds into pieces of at most [`PROXY_CLUSTER_INSTANCES`], in BLAS
+/// order. Deterministic: the renderer and the floor ([`super::streaming_floor`]) both call it.
+pub(super) fn proxy_clusters(
+    view: &HierarchyView<'_>,
+    t: usize,
+    buildable: impl Fn(usize) -> bool,
+) -> Vec<ProxyCluster> {
+    let rec = &view.tlases[t];
+    type Bounds = ([f32; 3], [f32; 3]);
+    let mut by_blas: std::collections::BTreeMap<u32, Vec<Bounds>> = Default::default();
+    for inst in &view.instances
+        [rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize]
+    {
+        let b = inst.blas as usize;
+        if !buildable(b) {
+            continue;
+        }
+        let br = &view.blases[b];
+        let x = transformed_box(&inst.tlas_from_blas, br.bounds_min, br.bounds_max);
+        by_blas
+            .entry(inst.blas)
+            .or_default()
+            .push(([x[0], x[1], x[2]], [x[3], x[4], x[5]]));
+    }
+    let mut out = Vec::new();
+    let mut ranges = Vec::new();
+    for (blas, mut bounds) in by_blas {
+        let mut items = vec![(); bounds.len()];
+        ranges.clear();
+        motu_compile::sah_partition(
+            &mut items,
+            &mut bounds,
+            PROXY_CLUSTER_INSTANCES,
+            &mut ranges,
+        );
+        for &(begin, end) in &ranges {
+            let mut b = [
+                f32::INFINITY,
+                f32::INFINITY,
+                f32::INFINITY,
+                -f32::INFINITY,
+                -f32::INFINITY,
+                -f32::INFINITY,
+            ];
+            for (lo, hi) in &bounds[begin..end] {
+                for a in 0..3 {
+                    b[a] = b[a].min(lo[a]);
+                    b[3 + a] = b[3 + a].max(hi[a]);
+                }
+            }
+            out.push(ProxyCluster {
+                blas,
+                bounds: padded(b),
+            });
+        }
+    }
+    out
+}
+
+/// `b` grown by a little more than float error: a proxy box only has to contain what it
+/// stands for, and a flat one (a ground or ocean plane) is otherwise missed by box tests at
+/// grazing angles where the triangle itself is hit (a far pixel lost its hit at small budgets,
+/// where no neighbour happened to make the BLAS resident).
+fn padded(b: [f32; 6]) -> [f32; 6] {
+    let extent = (0..3).map(|a| b[3 + a] - b[a]).fold(0.0f32, f32::max);
+    let magnitude = b.iter().map(|v| v.abs()).fold(0.0f32, f32::max);
+    let pad = 1e-3 * extent + 1e-5 * magnitude;
+    if !pad.is_finite() {
+        return b;
+    }
+    [
+        b[0] - pad,
+        b[1] - pad,
+        b[2] - pad,
+        b[3] + pad,
+        b[4] + pad,
+        b[5] + pad,
+    ]
+}
+
 impl<'a> StreamingRenderer<'a> {
     /// Uploads the skeleton (tables, PI BLASes, the root TLAS with its proxy) under the budget.
     pub fn new(
@@ -61,9 +158,13 @@ impl<'a> StreamingRenderer<'a> {
         let too_many = |what: &str| GpuError::InvalidRequest(format!("streaming: too many {what}"));
         let budget = crate::scene::usable_budget_bytes(ctx, opts.budget_bytes)?;
         // Staging and scratch come out of the budget (staging does on unified memory): an
-        // eighth each at most, so small budgets leave room for the structures themselves.
+        // eighth (scratch) and a 32nd (staging) at most, so small budgets leave room for the
+        // structures themselves.
         let opts = &StreamOptions {
-            staging_bytes: opts.staging_bytes.min(budget / 8).max(64 * 1024),
+            staging_bytes: opts
+                .staging_bytes
+                .min(budget / super::floor::STAGING_PER_BUDGET)
+                .max(64 * 1024),
             scratch_budget_bytes: opts.scratch_budget_bytes.min(budget / 8).max(64 * 1024),
             ..*opts
         };
@@ -82,33 +183,28 @@ impl<'a> StreamingRenderer<'a> {
         let nb = view.blases.len();
         let nt = view.tlases.len();
 
-        // Derived structure: triangle instances per TLAS, parents per BLAS, proxy ids.
+        // Derived structure: proxy clusters per TLAS, parents per BLAS, proxy ids.
         let buildable: Vec<bool> = view
             .blases
             .iter()
             .map(|b| b.kind == BLAS_TRIANGLES && b.item_count > 0)
             .collect();
-        let mut tri_instances = vec![Vec::new(); nt];
         let mut parents = vec![Vec::new(); nb];
-        let mut instance_boxes = vec![[0.0f32; 6]; view.instances.len()];
         for (t, rec) in view.tlases.iter().enumerate() {
-            for k in 0..rec.instance_count {
-                let i = (rec.instance_base + k) as usize;
-                let inst = &view.instances[i];
+            for inst in &view.instances
+                [rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize]
+            {
                 let b = inst.blas as usize;
                 if !parents[b].contains(&(t as u32)) {
                     parents[b].push(t as u32);
                 }
-                if buildable[b] {
-                    tri_instances[t].push(k);
-                    let br = &view.blases[b];
-                    instance_boxes[i] =
-                        transformed_box(&inst.tlas_from_blas, br.bounds_min, br.bounds_max);
-                }
             }
         }
-        // GPU tables: TLAS ranges grow by the proxy instance; proxy BLASes and PI slots follow
-        // the originals.
+        let clusters: Vec<Vec<ProxyCluster>> = (0..nt)
+            .map(|t| proxy_clusters(&view, t, |b| buildable[b]))
+            .collect();
+        // GPU tables: TLAS ranges grow by the proxy instance; proxy BLASes and PI slots (one
+        // per cluster) follow the originals.
         let mut gpu_tlases: Vec<TlasRecord> = Vec::with_capacity(nt);
         let mut gpu_instances: Vec<InstanceRecord> = Vec::with_capacity(view.instances.len() + nt);
         let mut gpu_blases: Vec<BlasRecord> = view.blases.to_vec();
@@ -120,15 +216,14 @@ impl<'a> StreamingRenderer<'a> {
                 rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize;
             gpu_instances.extend_from_slice(&view.instances[range]);
             let mut count = rec.instance_count;
-            if !tri_instances[t].is_empty() {
+            if !clusters[t].is_empty() {
                 let pi_base = u32::try_from(gpu_pis.len()).map_err(|_| too_many("PIs"))?;
                 let blas_id = u32::try_from(gpu_blases.len()).map_err(|_| too_many("BLASes"))?;
                 proxy_pi_base[t] = pi_base;
-                for &k in &tri_instances[t] {
-                    let i = (rec.instance_base + k) as usize;
-                    gpu_pis.push(proxy_pi(view.instances[i].blas, &instance_boxes[i]));
+                for c in &clusters[t] {
+                    gpu_pis.push(proxy_pi(c.blas, &c.bounds));
                 }
-                let n = tri_instances[t].len() as u32;
+                let n = clusters[t].len() as u32;
                 gpu_blases.push(BlasRecord {
                     kind: BLAS_AABBS,
                     item_base: pi_base,
@@ -190,10 +285,9 @@ impl<'a> StreamingRenderer<'a> {
             source,
             opts: *opts,
             build_opts,
-            tri_instances,
+            clusters,
             proxy_pi_base,
             parents,
-            instance_boxes,
             buildable,
             residency: Residency::new(),
             last_seen: vec![0; nb + nt],
@@ -331,8 +425,8 @@ impl<'a> StreamingRenderer<'a> {
             self.heap.free(buf);
             r?;
         }
-        // Every TLAS (all their triangle instances empty): TLASes are the instance skeleton,
-        // never evicted, so a ray reaches every BLAS box and only BLASes stream.
+        // Every TLAS (no triangle instance resident: only their proxy boxes and PI instances):
+        // TLASes are never evicted, so a ray reaches every BLAS box and only BLASes stream.
         let all: Vec<u32> = (0..view.tlases.len() as u32).collect();
         self.build_tlases(&all)?;
         self.upload_tlas_addresses()?;
