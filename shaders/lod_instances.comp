@@ -71,7 +71,10 @@ void main() {
                 addr = push.blas_addresses.r[push.instances.r[gi].blas];
             }
             uint vi = gi - push.lod_instance_base;
-            push.vk_instances.r[vi].custom_mask = addr != 0ul ? (0xFFu << 24) : 0u;
+            // Keep the custom index (the instance's index in its TLAS, which the hit shaders
+            // read); only the mask switches the level on or off.
+            uint custom = push.vk_instances.r[vi].custom_mask & 0xFFFFFFu;
+            push.vk_instances.r[vi].custom_mask = custom | (addr != 0ul ? (0xFFu << 24) : 0u);
             push.vk_instances.r[vi].reference = addr;
             gi += 1u;
         }

@@ -233,14 +233,33 @@ impl GpuScene {
                 .iter()
                 .map(|b| b.as_ref().map_or(0, |a| a.address))
                 .collect();
-            let vk_bytes: Vec<u8> = view.instances[lod.lod_instance_base as usize..]
+            // Each instance's custom index is its index inside its own TLAS (the hit shaders
+            // find the record from the TLAS's base plus that index).
+            let lod_base = lod.lod_instance_base as usize;
+            let mut local_index: Vec<u32> = (0..view.instances.len() - lod_base)
+                .map(|i| i as u32)
+                .collect();
+            for &t in &lod.lod_tlases {
+                let rec = &view.tlases[t as usize];
+                for k in 0..rec.instance_count {
+                    if let Some(slot) = (rec.instance_base + k)
+                        .checked_sub(lod.lod_instance_base)
+                        .and_then(|vi| local_index.get_mut(vi as usize))
+                    {
+                        *slot = k;
+                    }
+                }
+            }
+            let vk_bytes: Vec<u8> = view.instances[lod_base..]
                 .iter()
-                .flat_map(|inst| {
+                .zip(&local_index)
+                .flat_map(|(inst, &local)| {
                     encode_instance(
                         &inst.tlas_from_blas,
                         view.blases[inst.blas as usize].kind == BLAS_AABBS,
                         inst.flags & FLAG_NEEDS_ANY_HIT != 0,
                         blas_addr[inst.blas as usize],
+                        local,
                     )
                 })
                 .collect();
