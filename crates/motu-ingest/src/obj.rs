@@ -13,6 +13,12 @@ pub fn ingest_obj(
     geometry: Box<dyn GeometryStore>,
 ) -> Result<(Scene, IngestReport), IngestError> {
     let shown = path.display().to_string();
+    if let Some((line, col, detail)) = scan_obj(path, Scan::FaceIndices) {
+        return Err(IngestError::Obj {
+            path: format!("{shown}:{line}:{col}"),
+            reason: format!("face index out of range: {detail}"),
+        });
+    }
     let (models, materials) = tobj::load_obj(
         path,
         &tobj::LoadOptions {
@@ -21,7 +27,7 @@ pub fn ingest_obj(
             ..Default::default()
         },
     )
-    .map_err(|e| match locate_error(path, e) {
+    .map_err(|e| match scan_obj(path, Scan::After(e)) {
         Some((line, col, detail)) => IngestError::Obj {
             path: format!("{shown}:{line}:{col}"),
             reason: format!("{e}: {detail}"),
@@ -166,23 +172,50 @@ fn mtllibs(path: &Path) -> Vec<(usize, PathBuf)> {
         .collect()
 }
 
-/// Finds the line tobj failed on (tobj reports no position): (line, column, what is wrong).
-fn locate_error(path: &Path, e: tobj::LoadError) -> Option<(usize, usize, String)> {
+/// What [`scan_obj`] looks for.
+#[derive(Clone, Copy, PartialEq)]
+enum Scan {
+    /// The line tobj failed on (tobj reports no position).
+    After(tobj::LoadError),
+    /// Face references tobj would resolve outside their arrays: tobj 4 overflows (a panic in
+    /// checked builds, a wrapped index otherwise) on relative or huge texture-coordinate and
+    /// normal indices, so they are refused before tobj sees the file.
+    FaceIndices,
+}
+
+/// Lines of an OBJ, streamed (never the whole file in memory), non-UTF-8 bytes replaced.
+fn obj_lines(path: &Path) -> Option<impl Iterator<Item = String>> {
+    let f = std::fs::File::open(path).ok()?;
+    Some(
+        std::io::BufReader::new(f)
+            .split(b'\n')
+            .map_while(Result::ok)
+            .map(|l| {
+                String::from_utf8_lossy(&l)
+                    .trim_end_matches('\r')
+                    .to_string()
+            }),
+    )
+}
+
+/// Finds the first line with the problem `scan` asks for: (line, column, what is wrong).
+fn scan_obj(path: &Path, scan: Scan) -> Option<(usize, usize, String)> {
     use tobj::LoadError as E;
-    let text = std::fs::read_to_string(path).ok()?;
-    let lines: Vec<&str> = text.lines().collect();
+    let is = |e: E| scan == Scan::After(e);
     // Totals first: face indices are checked against the whole file's counts (tobj's rule),
     // relative (negative) ones against the count so far.
-    let total = |kw: &str| {
-        lines
-            .iter()
-            .filter(|l| l.split_whitespace().next() == Some(kw))
-            .count()
-    };
-    let totals = [total("v"), total("vt"), total("vn")];
+    let mut totals = [0usize; 3];
+    for line in obj_lines(path)? {
+        match line.split_whitespace().next() {
+            Some("v") => totals[0] += 1,
+            Some("vt") => totals[1] += 1,
+            Some("vn") => totals[2] += 1,
+            _ => {}
+        }
+    }
     let mut seen = [0usize; 3];
     let col_of = |line: &str, tok: &str| line.find(tok).map_or(1, |c| c + 1);
-    for (i, line) in lines.iter().enumerate() {
+    for (i, line) in obj_lines(path)?.enumerate() {
         let mut words = line.split_whitespace();
         let Some(kw) = words.next() else { continue };
         let args: Vec<&str> = words.collect();
@@ -191,24 +224,24 @@ fn locate_error(path: &Path, e: tobj::LoadError) -> Option<(usize, usize, String
         match kw {
             "v" => {
                 seen[0] += 1;
-                if e == E::PositionParseError && !floats_ok(3) {
+                if is(E::PositionParseError) && !floats_ok(3) {
                     return Some((i + 1, 1, format!("`{line}` needs 3 numbers")));
                 }
             }
             "vt" => {
                 seen[1] += 1;
-                if e == E::TexcoordParseError && !floats_ok(1) {
+                if is(E::TexcoordParseError) && !floats_ok(1) {
                     return Some((i + 1, 1, format!("`{line}` needs numbers")));
                 }
             }
             "vn" => {
                 seen[2] += 1;
-                if e == E::NormalParseError && !floats_ok(3) {
+                if is(E::NormalParseError) && !floats_ok(3) {
                     return Some((i + 1, 1, format!("`{line}` needs 3 numbers")));
                 }
             }
             "f" => {
-                if e == E::InvalidPolygon && args.len() < 3 {
+                if is(E::InvalidPolygon) && args.len() < 3 {
                     return Some((
                         i + 1,
                         1,
@@ -224,10 +257,10 @@ fn locate_error(path: &Path, e: tobj::LoadError) -> Option<(usize, usize, String
                             continue;
                         }
                         let Ok(v) = part.parse::<i64>() else {
-                            if e == E::FaceParseError {
+                            if is(E::FaceParseError) {
                                 return Some((
                                     i + 1,
-                                    col_of(line, a),
+                                    col_of(line.as_str(), a),
                                     format!("`{a}` is not a vertex reference"),
                                 ));
                             }
@@ -238,11 +271,21 @@ fn locate_error(path: &Path, e: tobj::LoadError) -> Option<(usize, usize, String
                             1 => (totals[1], "texture coordinates", E::FaceTexCoordOutOfBounds),
                             _ => (totals[2], "normals", E::FaceNormalOutOfBounds),
                         };
-                        let resolved = if v < 0 { seen[k] as i64 + v + 1 } else { v };
-                        if (v == 0 || resolved < 1 || resolved > count as i64) && e == err {
+                        let resolved = if v < 0 {
+                            (seen[k] as i64).saturating_add(v).saturating_add(1)
+                        } else {
+                            v
+                        };
+                        let bad = v == 0 || resolved < 1 || resolved > count as i64;
+                        // tobj ignores texture and normal references when the file has none.
+                        let wanted = match scan {
+                            Scan::After(e) => e == err,
+                            Scan::FaceIndices => k == 0 || count > 0,
+                        };
+                        if bad && wanted {
                             return Some((
                                 i + 1,
-                                col_of(line, a),
+                                col_of(line.as_str(), a),
                                 format!("index {v} in `{a}` is outside the file's {count} {what}"),
                             ));
                         }
@@ -283,6 +326,20 @@ mod tests {
         assert!(e.contains("t.obj:1:"), "{e}");
         let e = import(&format!("{tri}f 1 2 -7\n"), false).unwrap_err();
         assert!(e.contains("t.obj:4:"), "{e}");
+        // tobj 4 overflows on these (found by the obj fuzz target): refused before it runs.
+        let e = import(&format!("{tri}vt 0 0\nf 1/-3 2/1 3/1\n"), false).unwrap_err();
+        assert!(
+            e.contains("t.obj:5:3") && e.contains("texture coordinates"),
+            "{e}"
+        );
+        let e = import(
+            &format!("{tri}vn 0 0 1\nf 1//99999999999999999 2//1 3//1\n"),
+            false,
+        )
+        .unwrap_err();
+        assert!(e.contains("t.obj:5:3") && e.contains("normals"), "{e}");
+        // References to an absent kind are ignored, as tobj does.
+        import(&format!("{tri}f 1/5 2/5 3/5\n"), false).unwrap();
     }
 
     #[test]
