@@ -29,6 +29,7 @@ mod parallel;
 pub mod params;
 mod parser;
 pub mod ply;
+mod prescan;
 mod shapes;
 mod source;
 pub mod writer;

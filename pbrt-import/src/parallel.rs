@@ -382,17 +382,9 @@ pub(crate) fn prescan_neutral(bytes: &[u8]) -> bool {
     let mut any = false;
     while pos < bytes.len() {
         match bytes[pos] {
-            b'#' => {
-                pos += bytes[pos..]
-                    .iter()
-                    .position(|&c| c == b'\n')
-                    .unwrap_or(bytes.len() - pos);
-            }
+            b'#' => pos = crate::prescan::line_end(bytes, pos),
             b'"' => {
-                let mut p = pos + 1;
-                while p < bytes.len() && !matches!(bytes[p], b'"' | b'\n') {
-                    p += if bytes[p] == b'\\' { 2 } else { 1 };
-                }
+                let p = crate::prescan::string_end(bytes, pos + 1);
                 if p >= bytes.len() || bytes[p] == b'\n' {
                     return false; // unterminated string: an error, reported sequentially
                 }
@@ -426,25 +418,7 @@ pub(crate) fn prescan_neutral(bytes: &[u8]) -> bool {
             b if is_word_end_byte(b) => pos += 1,
             _ => {
                 // Numbers and lower-case words, then 8-byte runs of plain bytes.
-                while pos < bytes.len() && !is_word_end_byte(bytes[pos]) {
-                    pos += 1;
-                }
-                while let Some(chunk) = bytes.get(pos..pos + 8) {
-                    let x = u64::from_le_bytes(chunk.try_into().unwrap_or([b'"'; 8]));
-                    if crate::parser::swar_interesting(x) {
-                        break;
-                    }
-                    pos += 8;
-                }
-                // A skip may stop inside a word: finish it, so an upper-case letter
-                // is only taken for a directive at a word start.
-                while pos > 0
-                    && pos < bytes.len()
-                    && !is_word_end_byte(bytes[pos - 1])
-                    && !is_word_end_byte(bytes[pos])
-                {
-                    pos += 1;
-                }
+                pos = crate::prescan::skip_plain(bytes, pos);
             }
         }
     }

@@ -4,10 +4,21 @@
 mod cli;
 mod cmd;
 mod output;
-mod pipeline;
 mod progress;
 mod signals;
 mod size;
+
+/// The commands' door to the import pipeline (the `motu-import` crate) and to packages.
+mod pipeline {
+    pub use motu_import::{import, resolve_subset, ImportOptions};
+
+    /// Opens a package with a message that says what to do.
+    pub fn open(path: &std::path::Path) -> anyhow::Result<motu_pack::ScenePackage> {
+        use anyhow::Context;
+        motu_pack::ScenePackage::open(path)
+            .with_context(|| format!("opening package {}", path.display()))
+    }
+}
 
 use clap::Parser;
 use std::process::ExitCode;

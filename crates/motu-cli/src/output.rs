@@ -3,33 +3,13 @@
 //! one atomic path (temp file, fsync, rename: `motu_package::atomic`).
 
 use anyhow::{bail, Context};
-use std::path::{Path, PathBuf};
-
-/// What a path names, for comparing inputs and outputs: an existing file by device and inode
-/// (hard links and symlinks to one file are one file), a new one by its absolute path.
-#[derive(Debug, PartialEq, Eq)]
-enum FileIdentity {
-    Existing { dev: u64, ino: u64 },
-    New(PathBuf),
-}
-
-fn identity_of(meta: &std::fs::Metadata) -> FileIdentity {
-    use std::os::unix::fs::MetadataExt;
-    FileIdentity::Existing {
-        dev: meta.dev(),
-        ino: meta.ino(),
-    }
-}
-
-/// Identity of an input (symlinks followed), `None` if it cannot be read.
-fn input_identity(path: &Path) -> Option<FileIdentity> {
-    std::fs::metadata(path).ok().map(|m| identity_of(&m))
-}
+use motu_package::identity::{describe_file_type, FileIdentity};
+use std::path::Path;
 
 /// Identity of an output path; errors when it is not a plain file or its directory is missing.
 fn output_identity(option: &str, path: &Path) -> anyhow::Result<FileIdentity> {
     match std::fs::symlink_metadata(path) {
-        Ok(m) if m.file_type().is_file() => Ok(identity_of(&m)),
+        Ok(m) if m.file_type().is_file() => Ok(FileIdentity::of(&m)),
         Ok(m) => bail!(
             "{option} {}: exists and is {}, not a regular file; motu only replaces regular files (remove it or choose another path)",
             path.display(),
@@ -62,42 +42,13 @@ fn output_identity(option: &str, path: &Path) -> anyhow::Result<FileIdentity> {
     }
 }
 
-/// `a directory`, `a symbolic link`, `a FIFO`, … for messages.
-pub fn describe_file_type(t: &std::fs::FileType) -> &'static str {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileTypeExt;
-        if t.is_fifo() {
-            return "a FIFO";
-        }
-        if t.is_char_device() {
-            return "a character device";
-        }
-        if t.is_block_device() {
-            return "a block device";
-        }
-        if t.is_socket() {
-            return "a socket";
-        }
-    }
-    if t.is_symlink() {
-        "a symbolic link"
-    } else if t.is_dir() {
-        "a directory"
-    } else if t.is_file() {
-        "a regular file"
-    } else {
-        "not a regular file"
-    }
-}
-
 /// Refuses outputs that are inputs of the same command, repeat another output, exist as
 /// anything but a regular file, or lie in a directory that does not exist. Run before work.
 /// `inputs` and `outputs` pair an option name (`-o`, `--aov`, `package`) with a path.
 pub fn check_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> anyhow::Result<()> {
     let ins: Vec<(&str, &Path, FileIdentity)> = inputs
         .iter()
-        .filter_map(|&(o, p)| input_identity(p).map(|id| (o, p, id)))
+        .filter_map(|&(o, p)| FileIdentity::of_input(p).map(|id| (o, p, id)))
         .collect();
     let mut outs: Vec<(&str, &Path, FileIdentity)> = Vec::new();
     for &(option, path) in outputs {
@@ -117,29 +68,6 @@ pub fn check_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> any
             );
         }
         outs.push((option, path, id));
-    }
-    Ok(())
-}
-
-/// Refuses `output` if it is one of `inputs` (files a command read; checked after reading,
-/// for inputs known only then, such as the PLY files a scene references).
-pub fn check_not_an_input<'a>(
-    option: &str,
-    output: &Path,
-    inputs: impl IntoIterator<Item = &'a Path>,
-) -> anyhow::Result<()> {
-    let Ok(m) = std::fs::symlink_metadata(output) else {
-        return Ok(());
-    };
-    let id = identity_of(&m);
-    for p in inputs {
-        if input_identity(p).as_ref() == Some(&id) {
-            bail!(
-                "{option} {} is {}, a file the scene uses: an output never replaces an input (choose another path)",
-                output.display(),
-                p.display()
-            );
-        }
     }
     Ok(())
 }

@@ -52,3 +52,16 @@ impl Progress {
         }
     }
 }
+
+/// The import's parse bar (bytes parsed out of the scene text's size), cleared when parsing
+/// ends; `None` when stderr is no terminal.
+pub fn import_bar() -> Option<motu_import::ProgressFn> {
+    let bar = Progress::bytes_of_total("parsing pbrt");
+    bar.bar.as_ref()?;
+    Some(std::sync::Arc::new(move |p| match p {
+        motu_import::ImportProgress::Parsing { bytes, total_bytes } => {
+            bar.set(bytes, Some(total_bytes))
+        }
+        motu_import::ImportProgress::Parsed => bar.finish(),
+    }))
+}

@@ -4,7 +4,7 @@ use crate::testutil::{assert_same_placements, builder, compile_ok, grid_mesh, tr
 use crate::{compile, flatten_compiled, flatten_source, CompileError, CompileOptions, Levels};
 use glam::{Mat4, Quat, Vec3};
 use motu_abi::{BLAS_AABBS, BLAS_TRIANGLES, NONE_U32, PI_LOD_SELECTOR, PI_TLAS};
-use motu_scene::{MeshData, PrototypeId, Scene, Transform34};
+use motu_scene::{ElementId, MaterialId, MeshData, PrototypeId, Scene, SceneBuilder, Transform34};
 
 fn t(x: f32, y: f32, z: f32) -> Transform34 {
     Transform34::from_translation(Vec3::new(x, y, z))
@@ -18,12 +18,19 @@ fn rot(angle: f32, x: f32) -> Transform34 {
     ))
 }
 
-/// leaf (one triangle) ← tree (trunk mesh + 3 leaves) ← root (4 trees + 1 leaf).
-fn forest() -> (Scene, PrototypeId, PrototypeId) {
+/// A builder holding a `leaf` prototype (one triangle) in the main element, with the default
+/// material and that element for the rest of the scene.
+fn with_leaf() -> (SceneBuilder, MaterialId, ElementId, PrototypeId) {
     let mut b = builder();
     let (m, main) = (b.default_material(), Scene::MAIN_ELEMENT);
     let leaf = b.add_prototype("leaf", main).unwrap();
     b.add_mesh(leaf, "leaf", m, main, &triangle()).unwrap();
+    (b, m, main, leaf)
+}
+
+/// leaf (one triangle) ← tree (trunk mesh + 3 leaves) ← root (4 trees + 1 leaf).
+fn forest() -> (Scene, PrototypeId, PrototypeId) {
+    let (mut b, m, main, leaf) = with_leaf();
     let tree = b.add_prototype("tree", main).unwrap();
     b.add_mesh(tree, "trunk", m, main, &triangle()).unwrap();
     for i in 0..3 {
@@ -97,10 +104,7 @@ fn sl_flattens_everything_into_the_root() {
 
 /// root → a → b → c → leaf, two edges per level, no identities: 4 TLAS levels in ML.
 fn chain() -> Scene {
-    let mut b = builder();
-    let (m, main) = (b.default_material(), Scene::MAIN_ELEMENT);
-    let leaf = b.add_prototype("leaf", main).unwrap();
-    b.add_mesh(leaf, "leaf", m, main, &triangle()).unwrap();
+    let (mut b, _, main, leaf) = with_leaf();
     let mut child = leaf;
     for name in ["c", "b", "a"] {
         let p = b.add_prototype(name, main).unwrap();
@@ -174,10 +178,7 @@ fn identity_edges_to_single_parent_prototypes_are_collapsed() {
 
 #[test]
 fn prunes_empty_subtrees_and_drops_degenerate_instances() {
-    let mut b = builder();
-    let (m, main) = (b.default_material(), Scene::MAIN_ELEMENT);
-    let leaf = b.add_prototype("leaf", main).unwrap();
-    b.add_mesh(leaf, "leaf", m, main, &triangle()).unwrap();
+    let (mut b, _, main, leaf) = with_leaf();
     let empty = b.add_prototype("empty", main).unwrap();
     let holder = b.add_prototype("holder", main).unwrap();
     b.add_instance(holder, empty, t(1.0, 0.0, 0.0), main)
@@ -200,10 +201,7 @@ fn prunes_empty_subtrees_and_drops_degenerate_instances() {
 }
 
 fn scattered(n: usize, same_place: bool) -> Scene {
-    let mut b = builder();
-    let (m, main) = (b.default_material(), Scene::MAIN_ELEMENT);
-    let leaf = b.add_prototype("leaf", main).unwrap();
-    b.add_mesh(leaf, "leaf", m, main, &triangle()).unwrap();
+    let (mut b, _, main, leaf) = with_leaf();
     let mut state = 12345u32;
     let mut rnd = || {
         state = state.wrapping_mul(1664525).wrapping_add(1013904223);
@@ -369,10 +367,7 @@ fn root_placements_carry_their_element() {
 fn split_keeps_huge_instances_in_the_parent_and_pieces_apart() {
     // An ocean-like huge slab under 2000 small boxes scattered in a grid: the slab stays in
     // the root (any piece holding it would span the scene) and the pieces barely overlap.
-    let mut b = builder();
-    let (m, main) = (b.default_material(), Scene::MAIN_ELEMENT);
-    let leaf = b.add_prototype("leaf", main).unwrap();
-    b.add_mesh(leaf, "leaf", m, main, &triangle()).unwrap();
+    let (mut b, m, main, leaf) = with_leaf();
     let slab = b.add_prototype("slab", main).unwrap();
     b.add_mesh(slab, "slab", m, main, &triangle()).unwrap();
     let huge = Transform34::from_mat4(Mat4::from_scale(Vec3::new(200.0, 200.0, 1.0)));
@@ -430,10 +425,7 @@ fn subset_keeps_only_the_selected_elements() {
 #[test]
 fn node_order_is_depth_first_with_children_contiguous() {
     // root → {x, y} (non-plain, distinct), x → z, y → z: children of root are TLAS 1, 2.
-    let mut b = builder();
-    let (m, main) = (b.default_material(), Scene::MAIN_ELEMENT);
-    let leaf = b.add_prototype("leaf", main).unwrap();
-    b.add_mesh(leaf, "leaf", m, main, &triangle()).unwrap();
+    let (mut b, _, main, leaf) = with_leaf();
     let z = b.add_prototype("z", main).unwrap();
     b.add_instance(z, leaf, t(1.0, 0.0, 0.0), main).unwrap();
     let mut xy = Vec::new();
@@ -549,10 +541,7 @@ fn buddha_fractal_shape_splits_into_at_least_26_tlases() {
 fn singular_compositions_are_inlined_not_dropped() {
     // Every edge is invertible, but root∘a∘b underflows the determinant: the PI to c that
     // `N(2)` would make cannot store an inverse, so c is inlined instead.
-    let mut b = builder();
-    let (m, main) = (b.default_material(), Scene::MAIN_ELEMENT);
-    let leaf = b.add_prototype("leaf", main).unwrap();
-    b.add_mesh(leaf, "leaf", m, main, &triangle()).unwrap();
+    let (mut b, _, main, leaf) = with_leaf();
     let tiny = Transform34::from_mat4(Mat4::from_scale(Vec3::splat(1e-6)));
     let mut child = leaf;
     for name in ["c", "b", "a"] {

@@ -26,6 +26,7 @@
 pub mod atomic;
 mod error;
 pub mod format;
+pub mod identity;
 mod reader;
 mod writer;
 

@@ -13,7 +13,7 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use crate::cost::{tlas_cost, Cost};
-use crate::report::{ElementReport, VariantReport};
+use crate::rows::{ElementReport, VariantReport};
 use crate::sizes::SizeSource;
 use crate::ReportError;
 
@@ -221,7 +221,7 @@ pub(crate) fn plan_budget(
         None => {
             notes.push(format!(
                 "no element fits {} alone; consider streaming or a smaller element split",
-                crate::text::human_bytes(budget)
+                crate::human::human_bytes(budget)
             ));
             None
         }

@@ -7,9 +7,10 @@ use std::collections::HashMap;
 use motu_gpu::{AsBuildFlags, BlasGeometry, Context, ContextOptions, Requirement};
 use serde::Serialize;
 
+use crate::presets::{LAVAPIPE, NVIDIA_H200};
 use crate::sizes::{
     compact, compaction_text, fit_linear, AsSizes, BlasShape, Linear, ModelPreset, ModelSizes,
-    SizeSource, SizeSourceInfo, LAVAPIPE, NVIDIA_H200,
+    SizeSource, SizeSourceInfo,
 };
 use crate::ReportError;
 
@@ -242,10 +243,10 @@ pub fn size_source_for_cli(
             let preset = if wanted.trim().is_empty() {
                 &NVIDIA_H200
             } else {
-                crate::sizes::preset(wanted.trim()).ok_or_else(|| {
+                crate::presets::preset(wanted.trim()).ok_or_else(|| {
                     ReportError::Invalid(format!(
                         "{ENV_REPORT_MODEL}={wanted}: unknown preset (known: {})",
-                        crate::sizes::PRESETS.map(|p| p.name).join(", ")
+                        crate::presets::PRESETS.map(|p| p.name.as_str()).join(", ")
                     ))
                 })?
             };
@@ -294,63 +295,41 @@ impl DeviceFit {
             .fold(0.0, f64::max)
     }
 
-    /// This fit as a `ModelPreset` static in Rust (what `src/presets.rs` holds). Floats are
-    /// written exactly, so the preset equals a refit of its recorded points.
-    pub fn to_rust_preset(&self, ident: &str, name: &str, compaction_ratio: f64) -> String {
-        use std::fmt::Write;
-        let pts = |p: &[(u64, u64)]| {
-            p.iter()
-                .map(|(n, b)| format!("({n}, {b})"))
-                .collect::<Vec<_>>()
-                .join(", ")
+    /// This fit as a [`ModelPreset`] named `name` (its data file is `preset.to_json()`, what
+    /// `presets/NAME.json` holds). Compaction is not fitted: `compaction_ratio` is carried over.
+    pub fn to_preset(&self, name: &str, compaction_ratio: f64) -> Result<ModelPreset, ReportError> {
+        let curve = |what: &str| {
+            self.curves
+                .iter()
+                .find(|c| c.what == what)
+                .map(|c| c.line.clone())
+                .ok_or_else(|| ReportError::Invalid(format!("the fit has no {what} curve")))
         };
-        let mut s = String::new();
-        let _ = writeln!(
-            s,
-            "/// {} ({}), fitted by the `fit_sizes` example over {} item\n/// counts; largest error on the fitting sizes {:.2}%.",
-            self.device,
-            self.driver,
-            FIT_COUNTS.len(),
-            self.max_relative_error() * 100.0
-        );
-        let _ = writeln!(s, "pub static {ident}: ModelPreset = ModelPreset {{");
-        let _ = writeln!(
-            s,
-            "    name: {name:?},\n    device: {:?},\n    driver: {:?},",
-            self.device, self.driver
-        );
-        for c in &self.curves {
-            let _ = writeln!(
-                s,
-                "    {}: Linear::new(&[{}], {:?}, {:?}),",
-                c.what,
-                pts(&c.line.small),
-                c.line.base_bytes,
-                c.line.bytes_per_item
-            );
-        }
-        let _ = writeln!(
-            s,
-            "    blas_bytes_per_extra_geometry: {:?},",
-            self.blas_bytes_per_extra_geometry
-        );
-        let _ = writeln!(
-            s,
-            "    compaction_ratio: {compaction_ratio:?},\n    compaction_measured: false,"
-        );
-        let _ = writeln!(
-            s,
-            "    max_instance_count: {},\n    max_primitive_count: {},\n    fitted_max_relative_error: {:?},",
-            self.max_instance_count,
-            self.max_primitive_count,
-            self.max_relative_error()
-        );
-        let _ = writeln!(s, "    measured: &[");
-        for c in &self.curves {
-            let _ = writeln!(s, "        ({:?}, &[{}]),", c.what, pts(&c.points));
-        }
-        let _ = writeln!(s, "    ],\n}};");
-        s
+        Ok(ModelPreset {
+            name: name.to_string(),
+            device: self.device.clone(),
+            driver: self.driver.clone(),
+            blas_triangles: curve("blas_triangles")?,
+            blas_triangles_scratch: curve("blas_triangles_scratch")?,
+            blas_triangles_nonopaque: curve("blas_triangles_nonopaque")?,
+            blas_triangles_nonopaque_scratch: curve("blas_triangles_nonopaque_scratch")?,
+            blas_triangles_multi_scratch: curve("blas_triangles_multi_scratch")?,
+            blas_bytes_per_extra_geometry: self.blas_bytes_per_extra_geometry,
+            blas_aabbs: curve("blas_aabbs")?,
+            blas_aabbs_scratch: curve("blas_aabbs_scratch")?,
+            tlas: curve("tlas")?,
+            tlas_scratch: curve("tlas_scratch")?,
+            compaction_ratio,
+            compaction_measured: false,
+            max_instance_count: self.max_instance_count,
+            max_primitive_count: self.max_primitive_count,
+            fitted_max_relative_error: self.max_relative_error(),
+            measured: self
+                .curves
+                .iter()
+                .map(|c| (c.what.to_string(), c.points.clone()))
+                .collect(),
+        })
     }
 }
 

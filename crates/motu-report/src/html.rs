@@ -4,8 +4,8 @@
 use std::fmt::Write;
 
 use crate::cost::Cost;
+use crate::human::{human_bytes, human_count};
 use crate::report::Report;
-use crate::text::{human_bytes, human_count};
 
 /// The stacked segments of every bar: (CSS class, label, bytes of a cost).
 type Segment = (&'static str, &'static str, fn(&Cost) -> u64);

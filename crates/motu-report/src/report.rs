@@ -7,6 +7,7 @@ use serde::Serialize;
 
 use crate::budget::{plan_budget, BudgetReport, SubsetCoster};
 use crate::cost::{blas_cost_of, tlas_cost, Cost, Graph, Node, Ownership, SHARED};
+use crate::rows::{ElementReport, VariantReport};
 use crate::sizes::{BlasShape, SizeSource, SizeSourceInfo, TriangleGeometry};
 use crate::ReportError;
 
@@ -25,49 +26,6 @@ pub struct ReportInput {
 
 /// Image size of the streaming floor when the package has no camera.
 pub const DEFAULT_FLOOR_IMAGE: (u32, u32) = (640, 480);
-
-/// One row of the per-element table.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct ElementReport {
-    pub name: String,
-    /// The element id (`None` for the `shared` row).
-    pub id: Option<u32>,
-    /// `element`, `shared` (nodes used by several elements, plus global tables) or `untagged`
-    /// (root instances without an element; always needed).
-    pub kind: String,
-    /// Instances of the element in the root TLAS.
-    pub root_instances: u64,
-    /// Triangle-BLAS placements after full flattening.
-    pub flattened_instances: u64,
-    /// Triangles after full flattening (visible geometry; LOD selectors at their finest level).
-    pub instanced_triangles: u64,
-    /// Triangles in the BLASes the element owns.
-    pub unique_triangles: u64,
-    pub meshes: u64,
-    /// The element's costs as compiled (owned nodes + its share of the root TLAS). The shared
-    /// row holds what several elements use.
-    pub ml: Cost,
-    /// Its flattened instances as one TLAS (split at `maxInstanceCount`), AS + instance buffer.
-    pub sl_tlas_bytes: u64,
-    /// Rendering this element alone (`--subset NAME`): owned + the shared nodes it uses + its
-    /// own root TLAS + global tables. Not set on the shared row.
-    pub alone: Option<Cost>,
-}
-
-/// A whole-scene variant: as compiled, `--levels 2`, `sl`.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct VariantReport {
-    /// `as_compiled`, `levels_2` or `sl`.
-    pub name: String,
-    /// The `--levels` value this corresponds to.
-    pub levels: String,
-    /// Instances in the top-level TLAS (before splitting).
-    pub top_instances: u64,
-    /// TLASes the top level needs at `maxInstanceCount` (1 = no split).
-    pub top_tlas_pieces: u64,
-    pub exceeds_max_instance_count: bool,
-    pub cost: Cost,
-}
 
 /// What streaming would need at least.
 #[derive(Clone, Debug, PartialEq, Serialize)]

@@ -12,7 +12,7 @@
 
 use std::borrow::Cow;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::ReportError;
 
@@ -88,12 +88,40 @@ pub trait SizeSource {
 /// A size curve in bytes over an item count: the sizes measured at small counts (up to
 /// [`FIT_TAIL_FROM`] items, interpolated between; drivers have fixed-size headers and node
 /// granularity there) and `base + per_item × items` above, where every driver seen is linear.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Linear {
     /// `(items, bytes)`, ascending items, at least one entry.
     pub small: Cow<'static, [(u64, u64)]>,
+    #[serde(deserialize_with = "exact_f64::deserialize")]
     pub base_bytes: f64,
+    #[serde(deserialize_with = "exact_f64::deserialize")]
     pub bytes_per_item: f64,
+}
+
+/// Floats in preset data files are decimal strings (`"104.00000000000001"`), parsed by Rust's
+/// correctly rounded `str::parse`: serde_json's own float parsing may be one ulp off, and a
+/// preset must equal the fit of its recorded points exactly. Plain numbers are accepted too.
+mod exact_f64 {
+    use serde::{Deserialize, Deserializer};
+
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum Float {
+        Text(String),
+        Number(f64),
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        match Float::deserialize(d)? {
+            Float::Number(v) => Ok(v),
+            Float::Text(t) => t.parse().map_err(serde::de::Error::custom),
+        }
+    }
+
+    /// How [`deserialize`] wants a float written: exact and shortest.
+    pub fn text(v: f64) -> String {
+        format!("\"{v:?}\"")
+    }
 }
 
 impl Linear {
@@ -140,12 +168,13 @@ impl Linear {
     }
 }
 
-/// A size model fitted on one device and driver.
-#[derive(Clone, Debug, PartialEq, Serialize)]
+/// A size model fitted on one device and driver. The built-in ones are data
+/// (`presets/*.json`, see `presets.rs`); [`ModelPreset::to_json`] writes that file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ModelPreset {
-    pub name: &'static str,
-    pub device: &'static str,
-    pub driver: &'static str,
+    pub name: String,
+    pub device: String,
+    pub driver: String,
     /// Opaque triangles (motu's default).
     pub blas_triangles: Linear,
     pub blas_triangles_scratch: Linear,
@@ -155,27 +184,101 @@ pub struct ModelPreset {
     /// Scratch of triangle BLASes with two or more geometries (NVIDIA: ~8× one geometry's).
     pub blas_triangles_multi_scratch: Linear,
     /// Added per geometry beyond the first.
+    #[serde(deserialize_with = "exact_f64::deserialize")]
     pub blas_bytes_per_extra_geometry: f64,
     pub blas_aabbs: Linear,
     pub blas_aabbs_scratch: Linear,
     pub tlas: Linear,
     pub tlas_scratch: Linear,
     /// Compacted / built BLAS size.
+    #[serde(deserialize_with = "exact_f64::deserialize")]
     pub compaction_ratio: f64,
     /// Whether `compaction_ratio` was measured (else an assumption, see its doc).
     pub compaction_measured: bool,
     pub max_instance_count: u64,
     pub max_primitive_count: u64,
     /// The largest relative error of the model against the sizes it was fitted on.
+    #[serde(deserialize_with = "exact_f64::deserialize")]
     pub fitted_max_relative_error: f64,
     /// The measured `(items, bytes)` behind each curve, by curve name (re-checked by tests).
-    #[serde(skip)]
-    pub measured: &'static [(&'static str, &'static [(u64, u64)])],
+    #[serde(skip_serializing)]
+    pub measured: Vec<(String, Vec<(u64, u64)>)>,
 }
 
-pub use crate::presets::{LAVAPIPE, NVIDIA_H200};
+/// The curves of a [`ModelPreset`], by the names [`ModelPreset::curve`] takes.
+pub const CURVE_NAMES: [&str; 9] = [
+    "blas_triangles",
+    "blas_triangles_scratch",
+    "blas_triangles_nonopaque",
+    "blas_triangles_nonopaque_scratch",
+    "blas_triangles_multi_scratch",
+    "blas_aabbs",
+    "blas_aabbs_scratch",
+    "tlas",
+    "tlas_scratch",
+];
 
 impl ModelPreset {
+    /// The preset as its data file: one field a line, in declaration order, floats written
+    /// exactly (shortest round-trip), so `from_json(to_json(p)) == p`.
+    pub fn to_json(&self) -> String {
+        // Serializing these plain values cannot fail.
+        fn j<T: Serialize + ?Sized>(v: &T) -> String {
+            serde_json::to_string(v).unwrap_or_default()
+        }
+        let mut lines = vec![
+            format!("\"name\": {}", j(&self.name)),
+            format!("\"device\": {}", j(&self.device)),
+            format!("\"driver\": {}", j(&self.driver)),
+        ];
+        for what in CURVE_NAMES {
+            if let Some(c) = self.curve(what) {
+                lines.push(format!(
+                    "\"{what}\": {{\"small\": {}, \"base_bytes\": {}, \"bytes_per_item\": {}}}",
+                    j(&c.small),
+                    exact_f64::text(c.base_bytes),
+                    exact_f64::text(c.bytes_per_item)
+                ));
+            }
+        }
+        lines.push(format!(
+            "\"blas_bytes_per_extra_geometry\": {}",
+            exact_f64::text(self.blas_bytes_per_extra_geometry)
+        ));
+        lines.push(format!(
+            "\"compaction_ratio\": {}",
+            exact_f64::text(self.compaction_ratio)
+        ));
+        lines.push(format!(
+            "\"compaction_measured\": {}",
+            j(&self.compaction_measured)
+        ));
+        lines.push(format!(
+            "\"max_instance_count\": {}",
+            j(&self.max_instance_count)
+        ));
+        lines.push(format!(
+            "\"max_primitive_count\": {}",
+            j(&self.max_primitive_count)
+        ));
+        lines.push(format!(
+            "\"fitted_max_relative_error\": {}",
+            exact_f64::text(self.fitted_max_relative_error)
+        ));
+        let measured: Vec<String> = self
+            .measured
+            .iter()
+            .map(|(what, points)| format!("    [{}, {}]", j(what), j(points)))
+            .collect();
+        lines.push(format!("\"measured\": [\n{}\n  ]", measured.join(",\n")));
+        format!("{{\n  {}\n}}\n", lines.join(",\n  "))
+    }
+
+    /// Reads a preset data file (what [`ModelPreset::to_json`] writes).
+    pub fn from_json(text: &str) -> Result<Self, ReportError> {
+        serde_json::from_str(text).map_err(|e| ReportError::Invalid(format!("size preset: {e}")))
+    }
+
     /// The curve named as in [`crate::FittedCurve::what`].
     pub fn curve(&self, what: &str) -> Option<&Linear> {
         Some(match what {
@@ -191,17 +294,6 @@ impl ModelPreset {
             _ => return None,
         })
     }
-}
-
-/// Every built-in preset.
-pub static PRESETS: [&ModelPreset; 2] = [&LAVAPIPE, &NVIDIA_H200];
-
-/// Finds a preset by name (`lavapipe`, `nvidia-h200`).
-pub fn preset(name: &str) -> Option<&'static ModelPreset> {
-    PRESETS
-        .iter()
-        .copied()
-        .find(|p| p.name.eq_ignore_ascii_case(name))
 }
 
 impl ModelPreset {
@@ -289,8 +381,8 @@ impl SizeSource for ModelSizes {
         }
         SizeSourceInfo {
             kind: "model".into(),
-            device: p.device.into(),
-            preset: Some(p.name.into()),
+            device: p.device.clone(),
+            preset: Some(p.name.clone()),
             compaction: compaction_text(p),
             notes,
         }
@@ -414,49 +506,5 @@ mod tests {
         assert!(err < 0.02, "{err} {line:?}");
         let (_, err) = fit_linear(&[(256, 100), (512, 100), (1024, 400)]);
         assert!(err > 0.1, "a bent curve has error: {err}");
-    }
-
-    #[test]
-    fn presets_grow_with_counts_and_are_found_by_name() {
-        for p in PRESETS {
-            assert_eq!(preset(p.name).map(|q| q.name), Some(p.name));
-            let small = p.blas_sizes(&BlasShape::Triangles(vec![TriangleGeometry {
-                vertex_count: 30,
-                triangle_count: 10,
-                opaque: true,
-            }]));
-            let big = p.blas_sizes(&BlasShape::Triangles(vec![TriangleGeometry {
-                vertex_count: 30_000,
-                triangle_count: 10_000,
-                opaque: true,
-            }]));
-            assert!(big.size_bytes > 100 * small.size_bytes / 2, "{}", p.name);
-            assert!(p.tlas_sizes(1000).size_bytes > p.tlas_sizes(10).size_bytes);
-            assert!(p.compaction_ratio > 0.0 && p.compaction_ratio <= 1.0);
-        }
-        assert!(preset("nope").is_none());
-    }
-
-    #[test]
-    fn presets_match_their_recorded_driver_sizes() {
-        for p in PRESETS {
-            assert!(p.measured.len() >= 8, "{}: every curve is recorded", p.name);
-            for (what, points) in p.measured {
-                let curve = p.curve(what).expect("known curve");
-                for &(n, measured) in *points {
-                    let err = relative_error(curve.eval(n), measured);
-                    assert!(
-                        err <= p.fitted_max_relative_error + 1e-4,
-                        "{} {what} at {n}: model {} vs measured {measured} ({:.2}%)",
-                        p.name,
-                        curve.eval(n),
-                        err * 100.0
-                    );
-                }
-                // The preset is what the fit gives on these points.
-                let (refit, _) = fit_linear(points);
-                assert_eq!(&refit, curve, "{} {what}", p.name);
-            }
-        }
     }
 }

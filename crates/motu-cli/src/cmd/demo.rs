@@ -7,13 +7,7 @@ use crate::size::format_size;
 use anyhow::Context;
 use std::time::Instant;
 
-/// Peak resident memory of this process so far (Linux `VmHWM`), if known.
-pub fn peak_rss_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
-}
+pub use motu_import::peak_rss_bytes;
 
 fn step(name: &str, t: Instant) {
     let rss = peak_rss_bytes()
@@ -66,22 +60,10 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
     );
 
     let t = Instant::now();
+    // `motu import`'s defaults.
     let opts = ImportOptions {
-        levels: motu_compile::Levels::Ml,
-        levels_text: "ml".into(),
-        max_instances: (1 << 24) - 1,
-        max_tlas_scratch_bytes: None,
-        max_blas_triangles: motu_compile::DEFAULT_MAX_BLAS_TRIANGLES,
-        lod_levels: None,
-        lod_min_triangles: 10_000,
-        zstd_level: None,
-        allow_missing: false,
-        pbrt_version: None,
-        subset: Vec::new(),
-        chunk_bytes: 64 << 20,
-        parallel: true,
-        curve_ribbons: false,
-        texture_max: 1024,
+        progress: crate::progress::import_bar(),
+        ..Default::default()
     };
     let s = pipeline::import(&summary.scene_path, &pkg, &opts)?;
     step(

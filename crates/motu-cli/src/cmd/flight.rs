@@ -17,7 +17,7 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
 }
 
 pub fn run(a: &BenchArgs, package: &Path, path_file: &Path) -> anyhow::Result<()> {
-    let path = super::view::load_camera_path(path_file)?;
+    let path = super::render::load_camera_path(path_file)?;
     let pkg = pipeline::open(package)?;
     let view = pkg.view()?;
     let base = super::render::camera_params(&pkg, &view, None, None, None)?;

@@ -60,6 +60,7 @@ pub fn run(a: ImportArgs) -> anyhow::Result<()> {
         parallel: a.threads != Some(1),
         curve_ribbons: a.curves == crate::cli::CurvesArg::Ribbons,
         texture_max: a.texture_max,
+        progress: crate::progress::import_bar(),
     };
     let s = pipeline::import(&a.scene, &a.output, &o)?;
     if a.json {

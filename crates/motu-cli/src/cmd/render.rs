@@ -522,7 +522,7 @@ fn recorded_cameras(
     let Some(p) = &a.camera_path else {
         return Ok(None);
     };
-    let path = crate::cmd::view::load_camera_path(p)?;
+    let path = load_camera_path(p)?;
     let (w, h) = match (a.width, a.height, path.width, path.height) {
         (None, None, Some(w), Some(h)) => (w, h),
         _ => (camera.width, camera.height),
@@ -578,6 +578,14 @@ fn render_gpu_path(
     ctx.check_validation()
         .context("Vulkan validation reported errors")?;
     Ok((out.aov, out.rgba8, stats))
+}
+
+/// Reads a `--camera-path` file with a clear error.
+pub fn load_camera_path(path: &std::path::Path) -> anyhow::Result<motu_abi::camera::RecordedPath> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("reading camera path {}", path.display()))?;
+    motu_abi::camera::RecordedPath::from_json(&text)
+        .with_context(|| format!("camera path {}", path.display()))
 }
 
 /// `query` where a device has ray queries (usually fastest on RTX), else `pipeline`, else the CPU.

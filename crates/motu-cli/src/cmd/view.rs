@@ -2,7 +2,7 @@
 //! the streaming renderer under `--vram-budget`/`--stream`.
 
 use crate::cli::{BackendArg, ViewArg, ViewArgs};
-use crate::cmd::render::{camera_pose, PackageMeshes};
+use crate::cmd::render::{camera_pose, load_camera_path, PackageMeshes};
 use crate::pipeline;
 use anyhow::{bail, Context as _};
 use glam::Vec3;
@@ -182,13 +182,6 @@ impl FrameSource for PackageSource<'_> {
             msg
         })
     }
-}
-
-/// Reads a `--camera-path` file with a clear error.
-pub fn load_camera_path(path: &std::path::Path) -> anyhow::Result<RecordedPath> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("reading camera path {}", path.display()))?;
-    RecordedPath::from_json(&text).with_context(|| format!("camera path {}", path.display()))
 }
 
 /// Writes `bytes` to `path` atomically (temp file, fsync, rename).

@@ -2,11 +2,11 @@
 //! Nothing here holds more than the instance skeleton in memory: mesh data goes to chunks as it
 //! is parsed and LOD meshes go to chunks as they are made.
 
-use anyhow::{bail, Context};
+use crate::ImportError;
 use motu_abi::MeshRecord;
 use motu_compile::{CompileOptions, CompiledScene, Levels};
 use motu_ingest::{IngestOptions, IngestReport};
-use motu_pack::{place_mesh_record, ElementMeta, PackageGeometry, PackageMeta, ScenePackage};
+use motu_pack::{place_mesh_record, ElementMeta, PackageGeometry, PackageMeta};
 use motu_package::{PackageWriter, WriteSummary, WriterOptions};
 use motu_scene::{ElementId, MeshLocation, PrototypeId, Scene};
 use std::collections::HashMap;
@@ -35,7 +35,48 @@ pub struct ImportOptions {
     pub curve_ribbons: bool,
     /// Largest side of an image texture's finest mip level (`--texture-max`).
     pub texture_max: u32,
+    /// Called as parsing advances and once when it is done (the CLI's progress bar).
+    pub progress: Option<ProgressFn>,
 }
+
+/// `motu import`'s defaults (`shared/CLI.md`): `--levels ml`, the device's 2^24 − 1 instances
+/// per TLAS, 2^16 triangles per BLAS, no LOD, 64 MiB chunks, raw (no zstd), parallel parsing,
+/// curves skipped, textures up to 1024², no progress reports.
+impl Default for ImportOptions {
+    fn default() -> Self {
+        Self {
+            levels: Levels::Ml,
+            levels_text: "ml".into(),
+            max_instances: (1 << 24) - 1,
+            max_tlas_scratch_bytes: None,
+            max_blas_triangles: motu_compile::DEFAULT_MAX_BLAS_TRIANGLES,
+            lod_levels: None,
+            lod_min_triangles: 10_000,
+            zstd_level: None,
+            allow_missing: false,
+            pbrt_version: None,
+            subset: Vec::new(),
+            chunk_bytes: 64 << 20,
+            parallel: true,
+            curve_ribbons: false,
+            texture_max: 1024,
+            progress: None,
+        }
+    }
+}
+
+/// Progress of an import, for a progress bar.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ImportProgress {
+    /// Scene bytes parsed so far, out of an estimate (the scene text beside the entry file;
+    /// files there that the scene never includes count too, and PLY data is not in it).
+    Parsing { bytes: u64, total_bytes: u64 },
+    /// Parsing is done; compiling and packing follow.
+    Parsed,
+}
+
+/// Receives [`ImportProgress`] reports (from the parser's threads).
+pub type ProgressFn = std::sync::Arc<dyn Fn(ImportProgress) + Send + Sync>;
 
 #[derive(Debug, serde::Serialize)]
 pub struct ImportSummary {
@@ -67,44 +108,47 @@ fn writer_options(o: &ImportOptions) -> WriterOptions {
 }
 
 /// Resolves element names; unknown names are an error listing the valid ones.
-pub fn resolve_subset(names: &[String], known: &[String]) -> anyhow::Result<Vec<u32>> {
+pub fn resolve_subset(names: &[String], known: &[String]) -> Result<Vec<u32>, ImportError> {
     if names.iter().any(|n| n.trim().is_empty()) {
-        bail!(
-            "--subset needs element names, comma-separated (got an empty name): valid elements are {}",
-            known.join(", ")
-        );
+        return Err(ImportError::EmptySubsetName {
+            known: known.to_vec(),
+        });
     }
     let mut ids = Vec::new();
     let mut unknown = Vec::new();
     for n in names {
         match known.iter().position(|k| k == n) {
             Some(i) => ids.push(i as u32),
-            None => unknown.push(n.as_str()),
+            None => unknown.push(n.clone()),
         }
     }
     if !unknown.is_empty() {
-        bail!(
-            "unknown element(s) {}: valid elements are {}",
-            unknown.join(", "),
-            known.join(", ")
-        );
+        return Err(ImportError::UnknownElements {
+            unknown,
+            known: known.to_vec(),
+        });
     }
     Ok(ids)
 }
 
-pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Result<ImportSummary> {
+pub fn import(
+    scene_path: &Path,
+    out: &Path,
+    o: &ImportOptions,
+) -> Result<ImportSummary, ImportError> {
+    let path = scene_path.to_path_buf();
     match std::fs::metadata(scene_path) {
         Ok(m) if m.is_file() => {}
-        Ok(m) => bail!(
-            "{} is {}, not a scene file: give the entry .pbrt (or .obj) file",
-            scene_path.display(),
-            crate::output::describe_file_type(&m.file_type())
-        ),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!(
-            "{} does not exist: give the entry .pbrt (or .obj) file",
-            scene_path.display()
-        ),
-        Err(e) => bail!("{}: {e}", scene_path.display()),
+        Ok(m) => {
+            return Err(ImportError::NotASceneFile {
+                path,
+                kind: motu_package::identity::describe_file_type(&m.file_type()),
+            })
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(ImportError::SceneMissing { path })
+        }
+        Err(error) => return Err(ImportError::SceneUnreadable { path, error }),
     }
     // With --subset, geometry is first streamed into a scratch package beside the output, and
     // only what the subset references is copied into the real one.
@@ -115,14 +159,22 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
         out.with_extension("subset-scratch.motu")
     };
     let t0 = Instant::now();
-    let writer = PackageWriter::create(&first_target, writer_options(o))
-        .with_context(|| format!("creating {}", first_target.display()))?;
+    let writer = PackageWriter::create(&first_target, writer_options(o)).map_err(|source| {
+        ImportError::CreatePackage {
+            path: first_target.clone(),
+            source,
+        }
+    })?;
     // Meshes over the partitioner's bound are only ever stored as clusters: in a direct import
     // their whole data goes to a spill file that is dropped after compiling, not the package.
     let geometry = if direct {
         let spill_path = out.with_extension("partition-spill.motu");
-        let spill = PackageWriter::create(&spill_path, writer_options(o))
-            .with_context(|| format!("creating a scratch file beside {}", out.display()))?;
+        let spill = PackageWriter::create(&spill_path, writer_options(o)).map_err(|source| {
+            ImportError::CreateScratch {
+                path: out.to_path_buf(),
+                source,
+            }
+        })?;
         let bound = o.max_blas_triangles.min(motu_compile::DEFAULT_MAX_PER_NODE);
         PackageGeometry::new(writer).with_spill(spill, u64::from(bound))
     } else {
@@ -130,15 +182,16 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
     };
     // The bar's total: the scene text beside the entry file (an estimate: files there that the
     // scene never includes count too, and PLY data is not in it).
-    let progress = crate::progress::Progress::bytes_of_total("parsing pbrt");
     let total = scene_text_bytes(scene_path.parent().unwrap_or(Path::new(".")));
-    let bar = progress.clone();
     let ingest_opts = IngestOptions {
-        progress: Some(motu_ingest::ProgressFn(std::sync::Arc::new(
-            move |bytes, _files| {
-                bar.set(bytes, Some(total.max(bytes)));
-            },
-        ))),
+        progress: o.progress.clone().map(|report| {
+            motu_ingest::ProgressFn(std::sync::Arc::new(move |bytes, _files| {
+                report(ImportProgress::Parsing {
+                    bytes,
+                    total_bytes: total.max(bytes),
+                });
+            }))
+        }),
         allow_missing: o.allow_missing,
         pbrt_version: o.pbrt_version,
         parallel: o.parallel,
@@ -146,17 +199,15 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
     };
     let (scene, mut report) =
         motu_ingest::ingest_file(scene_path, &ingest_opts, Box::new(geometry.clone()))
-            .with_context(|| format!("importing {}", scene_path.display()))?;
-    progress.finish();
+            .map_err(|source| ImportError::Ingest { path, source })?;
+    if let Some(report) = &o.progress {
+        report(ImportProgress::Parsed);
+    }
     // Inputs known only now (PLY, included files): the package must not replace one.
-    crate::output::check_not_an_input("-o", out, report.input_files.iter().map(PathBuf::as_path))?;
+    check_not_an_input("-o", out, report.input_files.iter().map(PathBuf::as_path))?;
     warn_on_count_overflow(&scene, &mut report);
     let parse_ms = t0.elapsed().as_secs_f64() * 1e3;
-    tracing::info!(
-        parse_ms,
-        peak_rss_bytes = crate::cmd::demo::peak_rss_bytes(),
-        "parsed"
-    );
+    tracing::info!(parse_ms, peak_rss_bytes = crate::peak_rss_bytes(), "parsed");
 
     let element_names: Vec<String> = scene.elements().iter().map(|e| e.name.clone()).collect();
     let subset_ids = resolve_subset(&o.subset, &element_names)?;
@@ -176,15 +227,15 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
         let (compiled, compile_ms) = compile_into(&scene, &copts, &geometry, &load, |m| {
             let at = scene.mesh(motu_scene::MeshId(m.source_mesh)).location;
             if PackageGeometry::is_spilled(at) {
-                bail!(
-                    "internal: mesh {} over the BLAS bound was compiled whole",
+                return Err(ImportError::Internal(format!(
+                    "mesh {} over the BLAS bound was compiled whole",
                     m.source_mesh
-                );
+                )));
             }
             Ok(at)
         })?;
         let t2 = Instant::now();
-        let writer = geometry.take_writer().map_err(anyhow::Error::msg)?;
+        let writer = geometry.take_writer().map_err(ImportError::Geometry)?;
         let s = finish(writer, &scene, &compiled, &report, scene_path, o)?;
         return Ok(summary(
             s, &scene, &compiled, &report, parse_ms, compile_ms, t2,
@@ -192,20 +243,23 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
     }
     // Finish the scratch package so its chunks can be read back, then copy only the blobs the
     // subset references into the real package.
-    let scratch_writer = geometry.take_writer().map_err(anyhow::Error::msg)?;
+    let scratch_writer = geometry.take_writer().map_err(ImportError::Geometry)?;
     scratch_writer
         .finish()
-        .context("finishing the scratch package")?;
+        .map_err(ImportError::FinishScratch)?;
     let result = (|| {
         let scratch = motu_package::Package::open(&first_target)?;
-        let final_geo = PackageGeometry::new(
-            PackageWriter::create(out, writer_options(o))
-                .with_context(|| format!("creating {}", out.display()))?,
-        );
+        let final_geo =
+            PackageGeometry::new(PackageWriter::create(out, writer_options(o)).map_err(
+                |source| ImportError::CreatePackage {
+                    path: out.to_path_buf(),
+                    source,
+                },
+            )?);
         let mut copied: HashMap<u32, MeshLocation> = HashMap::new();
         // The scene's store wrote the scratch package, now finished: LOD chains and the
         // partitioner read source meshes back from it.
-        let load = |m: motu_scene::MeshId| {
+        let read_source = |m: motu_scene::MeshId| {
             let info = scene.mesh(m);
             motu_pack::read_mesh_blob(
                 &scratch,
@@ -215,29 +269,21 @@ pub fn import(scene_path: &Path, out: &Path, o: &ImportOptions) -> anyhow::Resul
                 info.has_normals,
                 info.has_uvs,
             )
-            .map_err(|e| e.to_string())
         };
+        let load = |m: motu_scene::MeshId| read_source(m).map_err(|e| e.to_string());
         let (compiled, compile_ms) = compile_into(&scene, &copts, &final_geo, &load, |m| {
             if let Some(&at) = copied.get(&m.source_mesh) {
                 return Ok(at);
             }
-            let info = scene.mesh(motu_scene::MeshId(m.source_mesh));
-            let data = motu_pack::read_mesh_blob(
-                &scratch,
-                info.location,
-                info.vertex_count,
-                info.triangle_count,
-                info.has_normals,
-                info.has_uvs,
-            )?;
+            let data = read_source(motu_scene::MeshId(m.source_mesh))?;
             let at = final_geo
                 .append_mesh(m.element, &data)
-                .map_err(anyhow::Error::msg)?;
+                .map_err(ImportError::Geometry)?;
             copied.insert(m.source_mesh, at);
             Ok(at)
         })?;
         let t2 = Instant::now();
-        let writer = final_geo.take_writer().map_err(anyhow::Error::msg)?;
+        let writer = final_geo.take_writer().map_err(ImportError::Geometry)?;
         let s = finish(writer, &scene, &compiled, &report, scene_path, o)?;
         Ok(summary(
             s, &scene, &compiled, &report, parse_ms, compile_ms, t2,
@@ -284,8 +330,8 @@ fn compile_into(
     copts: &CompileOptions,
     geo: &PackageGeometry,
     load: &motu_compile::MeshLoader<'_>,
-    mut source_location: impl FnMut(&MeshRecord) -> anyhow::Result<MeshLocation>,
-) -> anyhow::Result<(CompiledScene, f64)> {
+    mut source_location: impl FnMut(&MeshRecord) -> Result<MeshLocation, ImportError>,
+) -> Result<(CompiledScene, f64), ImportError> {
     let t = Instant::now();
     let mut made_locations: HashMap<u32, MeshLocation> = HashMap::new();
     let mut sink =
@@ -299,11 +345,11 @@ fn compile_into(
             Ok(())
         };
     let mut compiled = motu_compile::compile_with_loader(scene, copts, load, &mut sink)
-        .context("compiling the instancing graph")?;
+        .map_err(ImportError::Compile)?;
     let compile_ms = t.elapsed().as_secs_f64() * 1e3;
     tracing::info!(
         compile_ms,
-        peak_rss_bytes = crate::cmd::demo::peak_rss_bytes(),
+        peak_rss_bytes = crate::peak_rss_bytes(),
         "compiled"
     );
     for (i, m) in compiled.meshes.iter_mut().enumerate() {
@@ -312,11 +358,10 @@ fn compile_into(
         } else if m.lod == 0 && m.flags & motu_abi::FLAG_PRIMITIVE_MAP == 0 {
             source_location(m)?
         } else {
-            anyhow::bail!(
-                "internal: compiled mesh record {i} (source mesh {}, LOD {}) was never stored",
-                m.source_mesh,
-                m.lod
-            );
+            return Err(ImportError::Internal(format!(
+                "compiled mesh record {i} (source mesh {}, LOD {}) was never stored",
+                m.source_mesh, m.lod
+            )));
         };
         place_mesh_record(m, at);
     }
@@ -350,7 +395,7 @@ fn summary(
         curve_ribbons: report.curve_ribbons,
         unsupported_shapes: report.unsupported_shapes,
         skipped_shapes: report.skipped_shapes,
-        peak_rss_bytes: crate::cmd::demo::peak_rss_bytes().unwrap_or(0),
+        peak_rss_bytes: crate::peak_rss_bytes().unwrap_or(0),
     }
 }
 
@@ -361,7 +406,7 @@ fn finish(
     report: &IngestReport,
     source: &Path,
     o: &ImportOptions,
-) -> anyhow::Result<WriteSummary> {
+) -> Result<WriteSummary, ImportError> {
     // A subset package describes only what it holds.
     let mut elements = element_stats(scene);
     let mut scene_stats = scene.stats();
@@ -395,7 +440,7 @@ fn finish(
     view.textures = &textures;
     view.texels = &[];
     motu_pack::write_hierarchy_after_texels(&mut writer, &view, &meta)?;
-    writer.finish().context("writing the package")
+    writer.finish().map_err(ImportError::FinishPackage)
 }
 
 /// Reads every scene texture into a capped mip chain (several at a time), in scene order so
@@ -408,7 +453,7 @@ fn write_textures(
     scene: &Scene,
     max_size: u32,
     warnings: &mut Vec<String>,
-) -> anyhow::Result<Vec<motu_abi::TextureRecord>> {
+) -> Result<Vec<motu_abi::TextureRecord>, ImportError> {
     use rayon::prelude::*;
     let list = scene.textures();
     let mut records = Vec::with_capacity(list.len());
@@ -440,11 +485,8 @@ fn write_textures(
             let texel_offset = u32::try_from(texel_count)
                 .ok()
                 .filter(|&o| (o as u64) + (chain.texel_count() as u64) <= u32::MAX as u64)
-                .with_context(|| {
-                    format!(
-                        "textures exceed 2^32 texels at {} (lower --texture-max)",
-                        t.path.display()
-                    )
+                .ok_or_else(|| ImportError::TooManyTexels {
+                    path: t.path.clone(),
                 })?;
             records.push(motu_abi::TextureRecord {
                 texel_offset,
@@ -580,7 +622,26 @@ fn scene_text_bytes(dir: &Path) -> u64 {
     total
 }
 
-/// Opens a package with a message that says what to do.
-pub fn open(path: &Path) -> anyhow::Result<ScenePackage> {
-    ScenePackage::open(path).with_context(|| format!("opening package {}", path.display()))
+/// Refuses `output` if it is one of `inputs` (files a command read; checked after reading,
+/// for inputs known only then, such as the PLY files a scene references).
+fn check_not_an_input<'a>(
+    option: &str,
+    output: &Path,
+    inputs: impl IntoIterator<Item = &'a Path>,
+) -> Result<(), ImportError> {
+    use motu_package::identity::FileIdentity;
+    let Ok(m) = std::fs::symlink_metadata(output) else {
+        return Ok(());
+    };
+    let id = FileIdentity::of(&m);
+    for p in inputs {
+        if FileIdentity::of_input(p).as_ref() == Some(&id) {
+            return Err(ImportError::OutputIsInput {
+                option: option.to_string(),
+                output: output.to_path_buf(),
+                input: p.to_path_buf(),
+            });
+        }
+    }
+    Ok(())
 }
