@@ -42,8 +42,48 @@ struct Carry {
 };
 layout(buffer_reference, std430, buffer_reference_align = 16) buffer CarryTable { Carry r[]; };
 
-// Streaming: an open pixel keeps its state and goes on the next pass's list; it writes nothing.
+// Streaming fallback (`--stream-fallback coarse`, motu-gpu stream/budget.rs): what an open
+// pixel shows if its frame stops before its structures arrive. Primary ray open: the bounds of
+// its nearest open BLAS (entry distance, LOD AOV_LOD_FALLBACK, hatched); shadow ray open: its
+// final hit lit as if unshadowed. Written on every deferral (later passes overwrite it); the
+// host keeps it only when fallback is on, else the pixel is unfinished.
+void stream_write_fallback(uvec2 px, uint pixel, Carry c) {
+    FrameParams f = push.frame.f;
+    vec3 dir = camera_primary_dir(f.camera, px.x, px.y, 0.5, 0.5);
+    bool hatch = ((px.x + px.y) & 4u) != 0u;
+    uvec4 rec;
+    vec3 colour;
+    if (c.st.x == 1u) {
+        uint mesh = push.geometries.r[push.blases.r[g_empty_id].item_base].mesh;
+        MeshRecord m = push.meshes.r[mesh];
+        rec = uvec4(m.source_mesh, NONE_U32, floatBitsToUint(g_empty_t), AOV_LOD_FALLBACK);
+        if (f.view == VIEW_LOD) {
+            colour = hatch ? vec3(1.0, 0.1, 0.55) : vec3(0.12);
+        } else {
+            colour = f.view == VIEW_IDS
+                         ? id_colour(m.source_mesh, NONE_U32)
+                         : push.materials.r[m.material].base_color *
+                               (f.ambient + 0.5 * f.sun_dir_intensity.w);
+            colour *= hatch ? 0.6 : 1.0;
+        }
+    } else {
+        rec = uvec4(c.rec.x, c.rec.y, floatBitsToUint(c.hit.x), min(c.rec.z, 255u));
+        vec3 n = dot(c.hit.yzw, dir) > 0.0 ? -c.hit.yzw : c.hit.yzw;
+        float ndl = max(dot(n, f.sun_dir_intensity.xyz), 0.0);
+        colour = f.view == VIEW_IDS   ? id_colour(c.rec.x, c.rec.y)
+                 : f.view == VIEW_LOD ? lod_colour(c.rec.z)
+                                      : push.materials.r[c.rec.w].base_color *
+                                            (f.ambient + f.sun_dir_intensity.w * ndl);
+    }
+    rec.w |= min(c.st.z, 65535u) << 16u;
+    push.aov.r[pixel] = rec;
+    push.rgba.r[pixel] = encode_srgb8(colour);
+}
+
+// Streaming: an open pixel keeps its state and goes on the next pass's list; it writes only its
+// fallback.
 void stream_defer(uvec2 px, uint pixel, Carry c) {
+    stream_write_fallback(px, pixel, c);
     StreamParams s = StreamRef(push.stream).s;
     CarryTable(s.carry).r[pixel] = c;
     IncompleteList l = IncompleteList(s.incomplete);

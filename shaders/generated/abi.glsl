@@ -22,6 +22,7 @@
 #define RAY_SHADOW 1u
 #define LOD_NOT_FORCED -1
 #define AOV_MISS 4294967295u
+#define AOV_LOD_FALLBACK 254u
 #define AOV_RECORD_BYTES 16u
 
 // 48 bytes

@@ -645,3 +645,96 @@ fn bad_camera_paths_fail_with_the_reason() {
     assert!(!out.status.success());
     assert!(err.contains("frame 0") && err.contains("forward"), "{err}");
 }
+
+/// Issue 17 item 3: `motu view --stream` with a per-frame build budget traces each frame with
+/// what is resident (`--stream-passes 1`: trace, then build toward the next frame), shows the
+/// counted fallback for the rest, and refines until a frame equals `motu render` of the same
+/// camera per pixel. The default island's first view needs far more than the 2 MiB budget.
+#[test]
+fn view_streams_progressively_within_a_frame_build_budget() {
+    if !gpu_available() {
+        return;
+    }
+    let Some(x) = xvfb("view_streams_progressively_within_a_frame_build_budget") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let gen = d.join("island");
+    motu_ok(&["gen", "island", "-o", s(&gen)]);
+    let pkg = d.join("island.motu");
+    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    // One pose, the start camera (recorded through the window).
+    let start = d.join("start.json");
+    view_ok(
+        &x.display,
+        &[
+            s(&pkg),
+            "--width",
+            "64",
+            "--height",
+            "36",
+            "--backend",
+            "pipeline",
+            "--frames",
+            "1",
+            "--record",
+            s(&start),
+        ],
+    );
+    let raov = d.join("r.aov");
+    motu_ok(&[
+        "render",
+        s(&pkg),
+        "-o",
+        s(&d.join("r.png")),
+        "--backend",
+        "pipeline",
+        "--camera-path",
+        s(&start),
+        "--aov",
+        s(&raov),
+    ]);
+    let vaov = d.join("v.aov");
+    let vstats = d.join("v.json");
+    let err = view_ok(
+        &x.display,
+        &[
+            s(&pkg),
+            "--backend",
+            "pipeline",
+            "--camera-path",
+            s(&start),
+            "--frames",
+            "24",
+            "--stream",
+            "--stream-passes",
+            "1",
+            "--stream-build-budget",
+            "2MiB",
+            "--stream-fallback",
+            "coarse",
+            "--aov",
+            s(&vaov),
+            "--stats",
+            s(&vstats),
+        ],
+    );
+    let st = read_json(&vstats);
+    let per_frame: Vec<u64> = st["incomplete_pixels_per_frame"]
+        .as_array()
+        .expect("per-frame counts")
+        .iter()
+        .map(|v| v.as_u64().unwrap())
+        .collect();
+    eprintln!("pixels refining per frame: {per_frame:?}");
+    assert_eq!(per_frame.len(), 24, "{st}");
+    assert!(
+        per_frame[0] > 0,
+        "frame 1 shows the fallback: {per_frame:?}"
+    );
+    assert_eq!(*per_frame.last().unwrap(), 0, "{per_frame:?}; {err}");
+    assert_eq!(st["detail"]["passes"], 1, "one trace per frame: {st}");
+    assert_eq!(st["detail"]["complete"], true, "{st}");
+    compare_exact(&vaov, &raov);
+}

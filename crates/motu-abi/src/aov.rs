@@ -12,6 +12,10 @@ pub const AOV_VERSION: u32 = 1;
 pub const AOV_HEADER_BYTES: usize = 32;
 /// `mesh` value of a miss.
 pub const MISS: u32 = u32::MAX;
+/// `lod` value of a streaming fallback pixel (`--stream-fallback coarse`): the bounds of a
+/// structure not resident yet, not an exact hit (`mesh` names the structure's first source
+/// mesh, `primitive` is `u32::MAX`, `t` the box's entry distance).
+pub const LOD_FALLBACK: u8 = 254;
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]

@@ -226,6 +226,7 @@ pub fn constants() -> Vec<(&'static str, String)> {
         ("RAY_SHADOW", format!("{}u", lod::RAY_SHADOW)),
         ("LOD_NOT_FORCED", format!("{}", lod::LOD_NOT_FORCED)),
         ("AOV_MISS", format!("{}u", aov::MISS)),
+        ("AOV_LOD_FALLBACK", format!("{}u", aov::LOD_FALLBACK)),
         ("AOV_RECORD_BYTES", format!("{}u", size_of::<AovRecord>())),
     ]
 }

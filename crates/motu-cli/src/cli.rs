@@ -277,6 +277,43 @@ pub enum BackendArg {
     Cpu,
 }
 
+/// `--stream-fallback`.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum FallbackArg {
+    /// Unfinished pixels stay unfinished (an error unless --allow-incomplete).
+    #[default]
+    Off,
+    /// A structure not resident yet shows as its bounds (a box; LOD 254 in the AOV, a hatched
+    /// colour); counted per frame, never silent.
+    Coarse,
+}
+
+/// Bounded streaming work per frame (`render --stream`, `view`): how long a frame may build
+/// and what the pixels still waiting show.
+#[derive(Args, Debug, Clone, Copy)]
+pub struct StreamBoundArgs {
+    /// Streaming: what a structure that is not resident yet shows when a frame stops before
+    /// building it (opt-in: such a frame is not exact; its fallback pixels are counted in
+    /// --stats and on stderr). Later frames of a camera path refine it.
+    #[arg(long, value_enum, default_value = "off")]
+    pub stream_fallback: FallbackArg,
+    /// Streaming: bytes (meshes plus acceleration structures) one frame may build; a frame
+    /// stops when it is spent (at least one structure is built per frame) and later frames go
+    /// on. Default: unbounded.
+    #[arg(long, value_parser = parse_size)]
+    pub stream_build_budget: Option<u64>,
+    /// Streaming: milliseconds of building one frame may spend (same rules). Default: unbounded.
+    #[arg(long, value_parser = parse_build_ms)]
+    pub stream_build_ms: Option<f64>,
+}
+
+fn parse_build_ms(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("{s:?} is not a positive number of milliseconds")),
+    }
+}
+
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ViewArg {
     Shaded,
@@ -322,6 +359,8 @@ pub struct RenderArgs {
     /// default sized from the scene's structure count).
     #[arg(long, hide = true)]
     pub stream_max_passes: Option<u32>,
+    #[command(flatten)]
+    pub stream_bounds: StreamBoundArgs,
     /// Frames to render (timing; with --stream, along the camera path).
     #[arg(long, default_value_t = 1)]
     pub frames: u32,
@@ -397,10 +436,15 @@ pub struct ViewArgs {
     /// Build only what rays touch and evict under the budget.
     #[arg(long)]
     pub stream: bool,
-    /// Streaming: build–trace passes per frame, the bound on a frame's build work (default: 2
-    /// while flying, so the window stays responsive and later frames refine; 16 with --frames).
+    /// Streaming: build–trace passes per frame. 1 (the default while flying): trace with what
+    /// is resident (the rest unfinished, or the --stream-fallback), then build toward the next
+    /// frame within the frame's build budget (--stream-build-budget/--stream-build-ms; 30 ms
+    /// while flying if neither is given), so the window stays responsive and later frames
+    /// refine. With --frames the default is the full pass cap (each frame exact).
     #[arg(long)]
     pub stream_passes: Option<u32>,
+    #[command(flatten)]
+    pub stream_bounds: StreamBoundArgs,
     #[arg(long)]
     pub max_allocations: Option<u32>,
     /// Elements shown at the start (comma-separated; Shift+1–9 toggle them live).
@@ -533,6 +577,15 @@ pub struct BenchArgs {
     /// The package a `--camera-path` flight is flown through.
     #[arg(long, requires = "camera_path")]
     pub package: Option<PathBuf>,
+    /// With --camera-path: fly through the streaming renderer (structures built as rays need
+    /// them, evicted under --vram-budget): per-frame passes, bytes built and build/trace ms.
+    #[arg(long, requires = "camera_path")]
+    pub stream: bool,
+    /// With --camera-path --stream: the VRAM budget (default: unlimited).
+    #[arg(long, value_parser = parse_size, requires = "camera_path")]
+    pub vram_budget: Option<u64>,
+    #[command(flatten)]
+    pub stream_bounds: StreamBoundArgs,
     /// Internal: render one package and write its measurements (the child process of a render step).
     #[arg(long, hide = true)]
     pub child_render: Option<PathBuf>,

@@ -409,8 +409,12 @@ fn camera_path_reuses_last_frames_structures_and_evicts_under_the_budget() {
         mismatched as f64 <= 0.001 * total as f64,
         "{mismatched} of {total}"
     );
-    // Issue 14 item 6 asks ≤ 1.3; carried hits measure 1.345 here (their per-pixel state
-    // leaves about one BLAS less room at this budget): not met yet, see notes/issue-14.md.
+    // Issue 14 item 6 (≤ 1.3) is asserted on the default island in
+    // tests/tests/stream_bounded.rs (1.10 there). This fixture's working set nearly fills a
+    // quarter budget: it measures 1.345, the extra passes being spheres disoccluded between
+    // nearer ones (no guard-band ray sees them coming) and BLASes that rays enter but never
+    // hit (only hits refresh an LRU age), evicted and needed again. Keeping recently needed
+    // BLASes (tried) evicts others instead at this budget; see notes/s3-issue-14-17-interactive.md.
     assert!(avg <= 1.35, "average passes after the first frame: {avg}");
     assert!(ratio >= 3.0, "{ratio}");
     assert!(totals.vram_peak_bytes <= budget);
@@ -455,5 +459,92 @@ fn a_frame_under_a_sixteenth_of_the_full_build_evicts_mid_frame_and_completes() 
     let cmp =
         motu_trace::compare(&reference.aov, &out.aov, motu_trace::DEFAULT_REL_EPS).expect("sizes");
     assert!(cmp.fraction <= 0.001, "{} of {}", cmp.mismatched, cmp.total);
+    assert_no_validation_errors(&ctx);
+}
+
+/// Issue 14 item 5 / issue 17 item 3: a per-frame build budget far below the frame's working
+/// set stops the first frame early; with the coarse fallback its unfinished pixels show the
+/// bounds of what is missing (counted, LOD marked `LOD_FALLBACK`), later frames of the same
+/// camera refine, and the path converges to the full build's exact image. `render_progressive`
+/// (one trace, then a bounded build for the next frame) converges the same way.
+#[test]
+fn a_frame_build_budget_shows_the_fallback_then_converges_to_the_full_build() {
+    let Some(ctx) = context_or_skip("stream_fallback", Requirement::RayTracing) else {
+        return;
+    };
+    let h = field(10, 16, 30);
+    let blobs = Blobs(&h);
+    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
+    let opts = ids_opts(backend(&ctx));
+    let cam = base_pose().params(SIZE, SIZE);
+    let reference = render(&ctx, &full, &cam, &opts).expect("full render");
+    for progressive in [false, true] {
+        let mut sr = StreamingRenderer::new(
+            &ctx,
+            h.view(),
+            &blobs,
+            &StreamOptions {
+                budget_bytes: full_build_needs(&full) / 2,
+                fallback: crate::StreamFallback::Coarse,
+                // About two small spheres per frame.
+                frame_build_bytes: 64 * 1024,
+                ..Default::default()
+            },
+        )
+        .expect("streaming renderer");
+        let mut frames = Vec::new();
+        let mut last = None;
+        for _ in 0..200 {
+            let (out, st) = if progressive {
+                sr.render_progressive(&cam, &opts)
+            } else {
+                sr.render_frame(&cam, &opts)
+            }
+            .expect("frame");
+            assert!(st.built_bytes > 0 || st.complete, "{st:?}");
+            let done = st.complete;
+            if frames.is_empty() {
+                // Primary rays that met a missing structure show its bounds, marked.
+                let marked = out
+                    .aov
+                    .records
+                    .iter()
+                    .filter(|r| r.lod == motu_abi::aov::LOD_FALLBACK)
+                    .count() as u64;
+                assert!(
+                    marked > 0 && marked <= st.fallback_pixels,
+                    "{marked} {st:?}"
+                );
+            }
+            frames.push(st);
+            last = Some(out);
+            if done {
+                break;
+            }
+        }
+        let first = &frames[0];
+        eprintln!(
+            "progressive {progressive}: first {first:?}, {} frames",
+            frames.len()
+        );
+        assert!(!first.complete && first.fallback_pixels > 0, "{first:?}");
+        assert_eq!(first.fallback_pixels, first.incomplete_pixels);
+        assert!(first.build_budget_spent || progressive, "{first:?}");
+        if progressive {
+            assert_eq!(first.passes, 1, "{first:?}");
+        }
+        assert!(frames.len() > 2, "refined over several frames");
+        let out = last.expect("a frame");
+        let st = frames.last().expect("a frame");
+        assert!(
+            st.complete && st.fallback_pixels == 0,
+            "never converged: {st:?}"
+        );
+        let cmp = motu_trace::compare(&reference.aov, &out.aov, motu_trace::DEFAULT_REL_EPS)
+            .expect("sizes");
+        assert_eq!(cmp.mismatched, 0, "{cmp:?}");
+        let totals = sr.totals();
+        assert!(totals.fallback_pixels >= first.fallback_pixels);
+    }
     assert_no_validation_errors(&ctx);
 }

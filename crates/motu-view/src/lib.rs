@@ -147,8 +147,10 @@ pub struct ViewResult {
     pub poses: Vec<CameraPose>,
     /// Wall-clock milliseconds per shown frame (render + present).
     pub frame_ms: Vec<f64>,
-    /// Frames shown with pixels still refining (streaming pass cap).
+    /// Frames shown with pixels still refining (streaming pass cap or frame build budget).
     pub incomplete_frames: u64,
+    /// Per shown frame: its pixels still refining (unfinished, or the streaming fallback).
+    pub incomplete_pixels_per_frame: Vec<u64>,
 }
 
 /// Opens the window and runs until it is closed (or `opts.frames` frames were shown).
@@ -478,6 +480,9 @@ impl<S: FrameSource> App<S> {
                 self.result.frame_ms.push(self.last_frame_ms);
                 self.result.frames_shown += 1;
                 self.result.incomplete_frames += u64::from(frame.stats.incomplete_pixels > 0);
+                self.result
+                    .incomplete_pixels_per_frame
+                    .push(frame.stats.incomplete_pixels);
                 self.result.poses.push(pose);
                 self.result.last_size = [w, h];
                 if last {

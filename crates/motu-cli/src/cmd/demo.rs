@@ -107,6 +107,11 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         stream: false,
         allow_incomplete: false,
         stream_max_passes: None,
+        stream_bounds: crate::cli::StreamBoundArgs {
+            stream_fallback: crate::cli::FallbackArg::Off,
+            stream_build_budget: None,
+            stream_build_ms: None,
+        },
         frames: 1,
         stats: Some(stats_path.clone()),
         subset: Vec::new(),

@@ -49,6 +49,24 @@ pub fn run(a: &BenchArgs, package: &Path, path_file: &Path) -> anyhow::Result<()
     })
     .context("opening a Vulkan device for ray tracing (`motu devices` lists them)")?;
     let meshes = super::render::PackageMeshes(&pkg);
+    if a.stream || a.vram_budget.is_some() {
+        return run_streaming(
+            a,
+            package,
+            path_file,
+            &path,
+            &view,
+            &meshes,
+            &ctx,
+            gpu_backend,
+            (w, h, n, warmup),
+        );
+    }
+    if super::render::stream_bounds_given(&a.stream_bounds) {
+        anyhow::bail!(
+            "--stream-fallback, --stream-build-budget and --stream-build-ms need --stream"
+        );
+    }
     let scene = motu_gpu::GpuScene::build(&ctx, &view, &meshes, &motu_gpu::BuildOptions::default())
         .context("building acceleration structures")?;
     let build_ms = scene.report().build_ms;
@@ -114,6 +132,145 @@ pub fn run(a: &BenchArgs, package: &Path, path_file: &Path) -> anyhow::Result<()
             sorted.last().copied().unwrap_or(0.0),
             percentile(&sorted_mrays, 0.5),
             traces / n as f64
+        );
+    }
+    Ok(())
+}
+
+/// A flight through the streaming renderer: per-frame rows (passes, bytes built, build and
+/// trace ms, GPU ms, fallback pixels) and their means. Warm-up frames run on a renderer that is
+/// then dropped, so the timed flight starts with nothing resident, as a user's would.
+#[allow(clippy::too_many_arguments)]
+fn run_streaming(
+    a: &BenchArgs,
+    package: &Path,
+    path_file: &Path,
+    path: &motu_abi::camera::RecordedPath,
+    view: &motu_abi::HierarchyView<'_>,
+    meshes: &super::render::PackageMeshes<'_>,
+    ctx: &motu_gpu::Context,
+    backend: motu_gpu::Backend,
+    (w, h, n, warmup): (u32, u32, u32, u32),
+) -> anyhow::Result<()> {
+    let opts = motu_gpu::StreamOptions {
+        budget_bytes: a.vram_budget.unwrap_or(u64::MAX),
+        ..super::render::stream_bounds(&a.stream_bounds)
+    };
+    let ropts = motu_gpu::RenderOptions {
+        backend,
+        ..Default::default()
+    };
+    let cams: Vec<_> = (0..n).map(|f| path.sample(f, n).params(w, h)).collect();
+    if warmup > 0 {
+        let mut sr = motu_gpu::StreamingRenderer::new(ctx, *view, meshes, &opts)
+            .context("setting up streaming (the resident skeleton must fit the budget)")?;
+        for _ in 0..warmup {
+            sr.render_frame(&cams[0], &ropts).context("warm-up frame")?;
+        }
+    }
+    let mut sr = motu_gpu::StreamingRenderer::new(ctx, *view, meshes, &opts)
+        .context("setting up streaming (the resident skeleton must fit the budget)")?;
+    let mut rows = Vec::with_capacity(cams.len());
+    for (f, cam) in cams.iter().enumerate() {
+        let t0 = std::time::Instant::now();
+        let (out, st) = sr
+            .render_frame(cam, &ropts)
+            .with_context(|| format!("flight frame {f}"))?;
+        let wall_ms = t0.elapsed().as_secs_f64() * 1e3;
+        rows.push(json!({
+            "frame": f,
+            "passes": st.passes,
+            "complete": st.complete,
+            "incomplete_pixels": st.incomplete_pixels,
+            "fallback_pixels": st.fallback_pixels,
+            "built_bytes": st.built_bytes,
+            "bytes_streamed": st.bytes_streamed,
+            "blas_built": st.blas_built,
+            "evicted": st.evicted,
+            "build_ms": st.build_ms,
+            "trace_ms": st.trace_ms,
+            "wall_ms": wall_ms,
+            "gpu_ms": out.stats.ms_per_frame,
+            "vram_peak_bytes": st.vram_peak_bytes,
+        }));
+    }
+    let totals = sr.totals();
+    drop(sr);
+    ctx.check_validation()
+        .context("Vulkan validation reported errors")?;
+    let mean = |key: &str, skip: usize| -> f64 {
+        let v: Vec<f64> = rows
+            .iter()
+            .skip(skip)
+            .filter_map(|r| r[key].as_f64())
+            .collect();
+        if v.is_empty() {
+            0.0
+        } else {
+            v.iter().sum::<f64>() / v.len() as f64
+        }
+    };
+    let incomplete = rows.iter().filter(|r| r["complete"] == false).count();
+    let report = json!({
+        "kind": "flight-stream",
+        "package": package.display().to_string(),
+        "camera_path": path_file.display().to_string(),
+        "device": ctx.device_name(),
+        "backend": backend_name(backend),
+        "width": w,
+        "height": h,
+        "frames": n,
+        "warmup_frames": warmup,
+        "vram_budget_bytes": totals.vram_budget_bytes,
+        "vram_peak_bytes": totals.vram_peak_bytes,
+        "mean_passes": mean("passes", 0),
+        "mean_passes_after_first": mean("passes", 1),
+        "mean_built_bytes": mean("built_bytes", 0),
+        "mean_built_bytes_after_first": mean("built_bytes", 1),
+        "mean_build_ms": mean("build_ms", 0),
+        "mean_trace_ms": mean("trace_ms", 0),
+        "mean_wall_ms": mean("wall_ms", 0),
+        "mean_wall_ms_after_first": mean("wall_ms", 1),
+        "incomplete_frames": incomplete,
+        "fallback_pixels": totals.fallback_pixels,
+        "totals": totals,
+        "per_frame": rows,
+    });
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        println!(
+            "streaming flight {} on {} ({}, {}×{}, budget {}): {} frames",
+            path_file.display(),
+            ctx.device_name(),
+            backend_name(backend),
+            w,
+            h,
+            crate::size::format_size(totals.vram_budget_bytes),
+            n
+        );
+        println!("frame  passes  built        build ms  trace ms  wall ms  fallback px");
+        for r in &rows {
+            println!(
+                "{:>5}  {:>6}  {:>11}  {:>8.2}  {:>8.2}  {:>7.2}  {:>11}",
+                r["frame"],
+                r["passes"],
+                crate::size::format_size(r["built_bytes"].as_u64().unwrap_or(0)),
+                r["build_ms"].as_f64().unwrap_or(0.0),
+                r["trace_ms"].as_f64().unwrap_or(0.0),
+                r["wall_ms"].as_f64().unwrap_or(0.0),
+                r["fallback_pixels"],
+            );
+        }
+        println!(
+            "mean: {:.3} passes ({:.3} after the first frame), {} built, {:.2} ms building, {:.2} ms tracing, {:.2} ms wall per frame; {} frames incomplete",
+            mean("passes", 0),
+            mean("passes", 1),
+            crate::size::format_size(mean("built_bytes", 0) as u64),
+            mean("build_ms", 0),
+            mean("trace_ms", 0),
+            mean("wall_ms", 0),
+            incomplete
         );
     }
     Ok(())

@@ -354,7 +354,7 @@ fn render_streaming(
             .max_allocations
             .unwrap_or(motu_gpu::StreamOptions::default().max_allocations),
         max_passes: a.stream_max_passes.unwrap_or(0),
-        ..Default::default()
+        ..stream_bounds(&a.stream_bounds)
     };
     // Refused up front below the floor: under it some frame could not complete.
     let floor = motu_gpu::streaming_floor(view, &ctx, w, h, opts.staging_bytes)
@@ -405,28 +405,52 @@ fn render_streaming(
         let (out, st) = sr
             .render_frame(&cam, &ropts)
             .with_context(|| format!("streaming frame {f}"))?;
+        let why = if st.complete {
+            ""
+        } else if st.build_budget_spent {
+            " (incomplete: frame build budget spent)"
+        } else {
+            " (incomplete: pass cap)"
+        };
         eprintln!(
-            "frame {f}: {} passes{}, {} BLAS + {} TLAS built, {} evicted, {} streamed, {:.1} ms building, VRAM {} of {}",
+            "frame {f}: {} passes{why}, {} BLAS + {} TLAS built ({}), {} evicted, {} streamed, {:.1} ms building, VRAM {} of {}",
             st.passes,
-            if st.complete { "" } else { " (incomplete: pass cap)" },
             st.blas_built,
             st.tlas_built,
+            crate::size::format_size(st.built_bytes),
             st.evicted,
             crate::size::format_size(st.bytes_streamed),
             st.build_ms,
             crate::size::format_size(st.vram_peak_bytes),
             crate::size::format_size(st.vram_budget_bytes),
         );
-        if !st.complete {
+        if !st.complete && st.fallback_pixels > 0 {
+            // Opt-in (--stream-fallback): loud and counted, refined by later frames.
+            eprintln!(
+                "WARNING: frame {f}: {} pixels show the coarse FALLBACK (bounds of structures not \
+                 resident yet{}): this frame is not exact (--stream-fallback coarse)",
+                st.fallback_pixels,
+                if st.build_budget_spent {
+                    "; the frame's build budget is spent"
+                } else {
+                    ""
+                }
+            );
+        } else if !st.complete {
             // A wrong image never exits 0 silently.
             if !a.allow_incomplete {
+                let cause = if st.build_budget_spent {
+                    "its build budget (--stream-build-budget/--stream-build-ms) spent".to_string()
+                } else {
+                    format!("the pass cap, {}", sr.max_passes())
+                };
                 bail!(
-                    "frame {f}: {} pixels unfinished after {} passes (the pass cap, {}): the image \
-                     would be wrong; nothing written (--allow-incomplete writes it with those \
-                     pixels magenta)",
+                    "frame {f}: {} pixels unfinished after {} passes ({cause}): the image would be \
+                     wrong; nothing written (--allow-incomplete writes it with those pixels \
+                     magenta; --stream-fallback coarse shows what is missing by its bounds, \
+                     counted)",
                     st.incomplete_pixels,
                     st.passes,
-                    sr.max_passes()
                 );
             }
             eprintln!(
@@ -445,6 +469,11 @@ fn render_streaming(
         .last()
         .and_then(|f| f["truncated_rays"].as_u64())
         .map_or(json!(0), |n| json!(n));
+    // The written frame's fallback pixels (not exact; 0 unless --stream-fallback).
+    stats["fallback_pixels"] = frames
+        .last()
+        .and_then(|f| f["fallback_pixels"].as_u64())
+        .map_or(json!(0), |n| json!(n));
     let totals = sr.totals();
     let after_first: Vec<f64> = frames
         .iter()
@@ -462,6 +491,27 @@ fn render_streaming(
     ctx.check_validation()
         .context("Vulkan validation reported errors")?;
     Ok((out.aov, out.rgba8, stats))
+}
+
+/// The streaming options of `--stream-fallback`, `--stream-build-budget`, `--stream-build-ms`
+/// (the rest default).
+pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_gpu::StreamOptions {
+    motu_gpu::StreamOptions {
+        fallback: match b.stream_fallback {
+            crate::cli::FallbackArg::Off => motu_gpu::StreamFallback::Off,
+            crate::cli::FallbackArg::Coarse => motu_gpu::StreamFallback::Coarse,
+        },
+        frame_build_bytes: b.stream_build_budget.unwrap_or(0),
+        frame_build_ms: b.stream_build_ms.unwrap_or(0.0),
+        ..Default::default()
+    }
+}
+
+/// Whether any of `--stream-fallback`, `--stream-build-budget`, `--stream-build-ms` is given.
+pub fn stream_bounds_given(b: &crate::cli::StreamBoundArgs) -> bool {
+    b.stream_fallback != crate::cli::FallbackArg::Off
+        || b.stream_build_budget.is_some()
+        || b.stream_build_ms.is_some()
 }
 
 /// The device and the package's structures built on it under `--vram-budget` and
@@ -691,6 +741,12 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     }
     if a.stream && backend == BackendArg::Cpu {
         bail!("--stream builds acceleration structures on a GPU: use --backend pipeline or query");
+    }
+    if !a.stream && stream_bounds_given(&a.stream_bounds) {
+        bail!(
+            "--stream-fallback, --stream-build-budget and --stream-build-ms bound streaming \
+             frames: add --stream (with --vram-budget)"
+        );
     }
     if a.frames == 0 {
         bail!("--frames must be at least 1");

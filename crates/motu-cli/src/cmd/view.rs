@@ -13,8 +13,9 @@ use motu_pack::ScenePackage;
 use motu_view::{FrameSource, SourceFrame, SourceStats, ViewOptions};
 use serde_json::json;
 
-/// Build–trace passes per frame while flying (the streaming renderer's unit of bounded work).
-const STREAM_PASSES_INTERACTIVE: u32 = 2;
+/// Milliseconds of building per frame while flying when no build budget is given (at least
+/// one structure is built per frame).
+const INTERACTIVE_BUILD_MS: f64 = 30.0;
 
 enum Renderer<'p> {
     Full(Option<Box<motu_gpu::LiveRenderer>>),
@@ -82,15 +83,26 @@ impl<'p> PackageSource<'p> {
                     budget_bytes: budget,
                     // Interactive: bounded build work per frame keeps the window responsive;
                     // the next frames go on refining (what was built stays resident).
-                    max_passes: a.stream_passes.unwrap_or(if a.frames.is_none() {
-                        STREAM_PASSES_INTERACTIVE
-                    } else {
-                        motu_gpu::StreamOptions::default().max_passes
-                    }),
+                    max_passes: a
+                        .stream_passes
+                        .unwrap_or(motu_gpu::StreamOptions::default().max_passes),
                     max_allocations: a
                         .max_allocations
                         .unwrap_or(motu_gpu::StreamOptions::default().max_allocations),
-                    ..Default::default()
+                    ..crate::cmd::render::stream_bounds(&a.stream_bounds)
+                };
+                let opts = motu_gpu::StreamOptions {
+                    // Flying with no build budget given: one frame's worth of building per
+                    // frame, so the window stays responsive while structures arrive.
+                    frame_build_ms: if progressive(a)
+                        && a.stream_bounds.stream_build_budget.is_none()
+                        && a.stream_bounds.stream_build_ms.is_none()
+                    {
+                        INTERACTIVE_BUILD_MS
+                    } else {
+                        opts.frame_build_ms
+                    },
+                    ..opts
                 };
                 let sr = motu_gpu::StreamingRenderer::new(&self.ctx, view, self.meshes, &opts)
                     .context("setting up streaming (the resident skeleton must fit the budget)")?;
@@ -135,7 +147,13 @@ impl<'p> PackageSource<'p> {
                 })
             }
             Renderer::Stream(Some(sr)) => {
-                let (out, st) = sr.render_frame(camera, opts).context("streaming a frame")?;
+                let (out, st) = if progressive(self.a) {
+                    // Trace with what is resident, build toward the next frame (bounded).
+                    sr.render_progressive(camera, opts)
+                } else {
+                    sr.render_frame(camera, opts)
+                }
+                .context("streaming a frame")?;
                 let alloc = sr.alloc_report();
                 let stats = SourceStats {
                     vram_used_bytes: alloc.budget_block_bytes,
@@ -184,6 +202,13 @@ impl FrameSource for PackageSource<'_> {
     }
 }
 
+/// Whether streaming frames are progressive (one trace with what is resident, then a build
+/// bounded by the frame budget for the next frame): `--stream-passes 1`, or flying without
+/// `--stream-passes`.
+fn progressive(a: &ViewArgs) -> bool {
+    a.stream_passes == Some(1) || (a.frames.is_none() && a.stream_passes.is_none())
+}
+
 /// Writes `bytes` to `path` atomically (temp file, fsync, rename).
 fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
     use std::io::Write;
@@ -207,9 +232,15 @@ fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
 pub fn run(a: ViewArgs) -> anyhow::Result<()> {
     // Before any work: without a display the answer is `motu render`.
     motu_view::check_display()?;
-    if a.stream_passes.is_some_and(|p| p < 2) {
-        // The streaming renderer builds between passes: one pass per frame never builds.
-        bail!("--stream-passes must be at least 2 (structures are built between a frame's passes)");
+    if a.stream_passes == Some(0) {
+        bail!("--stream-passes must be at least 1 (1: trace with what is resident, then build for the next frame)");
+    }
+    let streaming = a.stream || a.vram_budget.is_some();
+    if !streaming && crate::cmd::render::stream_bounds_given(&a.stream_bounds) {
+        bail!(
+            "--stream-fallback, --stream-build-budget and --stream-build-ms bound streaming \
+             frames: add --stream or --vram-budget"
+        );
     }
     if a.frames == Some(0) {
         bail!("--frames must be at least 1");
@@ -324,7 +355,6 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         display: None,
     };
     let meshes = PackageMeshes(&pkg);
-    let streaming = a.stream || a.vram_budget.is_some();
     let total_structures = (base.blases.len() + base.tlases.len()) as u64;
     let result = motu_view::run(opts, |o| {
         let ctx = motu_gpu::Context::new(&motu_gpu::ContextOptions {
@@ -399,6 +429,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         stats["total_structures"] = json!(last.stats.total_structures);
         stats["streaming"] = json!(last.stats.streaming.is_some());
         stats["incomplete_frames"] = json!(result.incomplete_frames);
+        stats["incomplete_pixels_per_frame"] = json!(result.incomplete_pixels_per_frame);
         if let Some(d) = &last.detail {
             stats["detail"] = serde_json::from_str(d).unwrap_or(json!(null));
         }

@@ -68,6 +68,7 @@ impl<'a> StreamingRenderer<'a> {
                         }
                     };
                     self.frame_stats.bytes_streamed += bytes;
+                    self.frame_stats.built_bytes += bytes;
                     self.meshes[m] = Some(g);
                 }
             }
@@ -108,6 +109,7 @@ impl<'a> StreamingRenderer<'a> {
                 .sum();
             let bytes = accel.size_bytes + mesh_bytes;
             self.frame_stats.blas_built += 1;
+            self.frame_stats.built_bytes += accel.size_bytes;
             self.frame_stats.triangles_built += u64::from(self.view.blases[b].primitive_count);
             self.blas[b] = Some(accel);
             let _ = self
@@ -144,7 +146,14 @@ impl<'a> StreamingRenderer<'a> {
         let mut chunk = self.group_hint.clamp(1, 64);
         let mut relaxed = false;
         while i < queue.len() {
-            let group = &queue[i..(i + chunk).min(queue.len())];
+            // The frame's build budget: spent stops the step (a frame that has built nothing
+            // yet and must progress still builds one).
+            if self.frame_build_spent() && (self.frame_stats.blas_built > 0 || !must_progress) {
+                self.frame_stats.build_budget_spent = true;
+                return Ok(queue.len() - i);
+            }
+            let n = self.group_within_frame_budget(&queue[i..], chunk);
+            let group = &queue[i..i + n];
             match self.build_group(group, group.len() == 1) {
                 Ok(()) => {
                     i += group.len();
@@ -206,6 +215,7 @@ impl<'a> StreamingRenderer<'a> {
     /// may be evicted, and what does not fit is skipped.
     pub(super) fn make_resident(&mut self, demand: &Demand, prefetch: bool) -> Result<()> {
         let t0 = Instant::now();
+        self.kept.step_start = Some(t0);
         self.pinned = if prefetch {
             let first = self.frame_first_stamp();
             (0..self.item_count())
@@ -238,6 +248,7 @@ impl<'a> StreamingRenderer<'a> {
         } else {
             self.frame_stats.deferred += deferred as u32;
         }
+        self.kept.step_start = None;
         self.frame_stats.build_ms += t0.elapsed().as_secs_f64() * 1e3;
         tracing::debug!(
             demanded = demand.len(),

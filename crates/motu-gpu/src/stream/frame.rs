@@ -2,7 +2,6 @@
 
 use motu_abi::camera::CameraParams;
 
-use super::buffers::alloc_frame_buffers;
 use super::passes::guard_pixels;
 use super::{FrameStreamStats, StreamingRenderer};
 use crate::error::{GpuError, Result};
@@ -41,6 +40,7 @@ impl<'a> StreamingRenderer<'a> {
             ..Default::default()
         };
         self.frame_first_stamp = self.stamp + 1;
+        self.kept.step_start = None;
         let need_tracer =
             !matches!(&self.tracer, Some((b, s, _)) if *b == opts.backend && *s == opts.stack_size);
         if need_tracer {
@@ -58,12 +58,7 @@ impl<'a> StreamingRenderer<'a> {
         let mut params = frame_params(camera, opts, self.view.root_tlas);
         params.shading = self.shading.address;
         self.pinned = vec![false; self.item_count()];
-        let nitems = self.item_count() as u64;
-        let fb = self
-            .with_eviction(|s| {
-                alloc_frame_buffers(&mut s.heap, pixels, guard.len() as u64, nitems, &params)
-            })
-            .map_err(|e| self.skeleton_error("the frame buffers", e))?;
+        let fb = self.frame_buffers(w, h, guard.len(), &params)?;
         // Making room for the frame may have evicted BLASes that TLASes still reference.
         if !self.dirty.is_empty() {
             self.built_now.clear();
@@ -84,11 +79,11 @@ impl<'a> StreamingRenderer<'a> {
                 return Err(e);
             }
         };
-        fb.release(&mut self.heap);
+        self.keep_frame_buffers(fb, w, h, guard.len());
         let (records, rgba_words, counters, guard_demand) = out;
         // Prefetch: what the guard band saw, evicting only what this frame did not see (what
-        // does not fit is skipped).
-        if !guard_demand.is_empty() && self.frame_stats.complete {
+        // does not fit is skipped), within what is left of the frame's build budget.
+        if !guard_demand.is_empty() && self.frame_stats.complete && !self.frame_build_spent() {
             if let Err(e) = self.make_resident(&guard_demand, true) {
                 self.quarantine_after_failure(&e);
                 return Err(e);
@@ -127,7 +122,9 @@ impl<'a> StreamingRenderer<'a> {
         tot.evicted += u64::from(st.evicted);
         tot.deferred += u64::from(st.deferred);
         tot.incomplete_frames += u64::from(!st.complete);
+        tot.fallback_pixels += st.fallback_pixels;
         tot.bytes_streamed += st.bytes_streamed;
+        tot.built_bytes += st.built_bytes;
         tot.triangles_built += st.triangles_built;
         tot.build_ms += st.build_ms;
         tot.vram_peak_bytes = report.peak_block_bytes;

@@ -50,6 +50,7 @@
 //! and it is retried. Only when a single BLAS does not fit next to the skeleton does the frame
 //! fail with [`GpuError::Budget`] naming it; the CLI refuses a budget below the floor up front.
 
+mod budget;
 mod buffers;
 mod demand;
 mod floor;
@@ -104,6 +105,28 @@ pub struct StreamOptions {
     /// after their nearest (fewer passes on a cold frame; off: they are only prefetched after
     /// the frame).
     pub build_open_early: bool,
+    /// What a pixel whose structures are not resident yet shows when the frame stops before
+    /// it is finished (`--stream-fallback`). Off: such pixels are unfinished (an error for
+    /// the CLI); `Coarse`: the bounds of the nearest missing structure, counted as
+    /// [`FrameStreamStats::fallback_pixels`].
+    pub fallback: StreamFallback,
+    /// Bytes (meshes plus acceleration structures) one frame may build; 0: unbounded. At least
+    /// one structure is built per frame, so a frame may overshoot by one; when it is spent the
+    /// frame stops (unfinished pixels, or fallback) and later frames go on refining.
+    pub frame_build_bytes: u64,
+    /// Milliseconds of building one frame may spend; 0: unbounded (same rules).
+    pub frame_build_ms: f64,
+}
+
+/// See [`StreamOptions::fallback`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum StreamFallback {
+    /// Unfinished pixels stay unfinished (misses, magenta).
+    #[default]
+    Off,
+    /// A not-yet-resident structure is shown by its bounds (a box hit at the box's entry
+    /// distance, LOD `AOV_LOD_FALLBACK`, a hatched colour).
+    Coarse,
 }
 
 impl Default for StreamOptions {
@@ -117,6 +140,9 @@ impl Default for StreamOptions {
             guard_band_px: 8,
             compact: true,
             build_open_early: true,
+            fallback: StreamFallback::Off,
+            frame_build_bytes: 0,
+            frame_build_ms: 0.0,
         }
     }
 }
@@ -129,8 +155,13 @@ pub struct FrameStreamStats {
     pub passes: u32,
     /// False when `max_passes` ran out with pixels still incomplete.
     pub complete: bool,
-    /// Pixels still incomplete after the last pass (rendered as misses).
+    /// Pixels still incomplete after the last pass (rendered as misses, or as the fallback).
     pub incomplete_pixels: u64,
+    /// Of those, pixels shown by the fallback (`StreamOptions::fallback`): not exact.
+    pub fallback_pixels: u64,
+    /// The frame stopped because its build budget (`frame_build_bytes`/`frame_build_ms`) was
+    /// spent.
+    pub build_budget_spent: bool,
     /// Pixels whose traversal was cut short this frame (a stack overflow or the trace cap).
     pub truncated_rays: u64,
     /// Pixels traced again in passes after the first.
@@ -152,6 +183,8 @@ pub struct FrameStreamStats {
     pub deferred: u32,
     /// Mesh bytes streamed from the source to the device.
     pub bytes_streamed: u64,
+    /// Bytes built this frame: acceleration structures plus the meshes streamed for them.
+    pub built_bytes: u64,
     /// Triangles in the BLASes built.
     pub triangles_built: u64,
     pub build_ms: f64,
@@ -178,7 +211,10 @@ pub struct StreamTotals {
     pub deferred: u64,
     /// Frames that ran out of passes with pixels still incomplete.
     pub incomplete_frames: u64,
+    /// Pixels shown by the fallback, over all frames.
+    pub fallback_pixels: u64,
     pub bytes_streamed: u64,
+    pub built_bytes: u64,
     pub triangles_built: u64,
     pub build_ms: f64,
     /// Triangles of every buildable triangle BLAS: what one full build costs.
@@ -210,6 +246,8 @@ pub struct StreamingRenderer<'a> {
     walked_buf: Option<HeapBuffer>,
     up: Option<Uploader>,
     tracer: Option<(Backend, u32, Tracer)>,
+    /// State kept between frames: the frame buffers, the frame's build clock.
+    kept: budget::Kept,
     heap: GpuHeap,
     addresses: [u64; SLOT_COUNT],
     /// GPU table indices (into `tables`) rewritten while streaming.

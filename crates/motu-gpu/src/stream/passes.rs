@@ -9,7 +9,7 @@ use motu_alloc::ItemId;
 
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
-use super::{StreamingRenderer, GUARD_BIAS};
+use super::{StreamFallback, StreamingRenderer, GUARD_BIAS};
 use crate::error::{GpuError, Result};
 use crate::render::{Tracer, STAT_WORDS};
 use crate::scene::Slot;
@@ -62,7 +62,7 @@ impl<'a> StreamingRenderer<'a> {
         let mut list: Vec<u32> = guard.to_vec();
         self.frame_stats.guard_rays = guard.len() as u64;
         let mut guard_demand = Demand::default();
-        let max_passes = self.max_passes();
+        let max_passes = self.frame_pass_cap();
         loop {
             self.stamp += 1;
             self.frame_stats.passes += 1;
@@ -186,13 +186,25 @@ impl<'a> StreamingRenderer<'a> {
                 self.frame_stats.complete = true;
                 break;
             }
-            if self.frame_stats.passes >= max_passes {
+            let spent = self.frame_build_spent();
+            if self.frame_stats.passes >= max_passes || spent {
                 self.frame_stats.incomplete_pixels = u64::from(count);
-                tracing::warn!(
-                    incomplete = count,
-                    passes = self.frame_stats.passes,
-                    "stream pass cap reached with pixels unfinished"
-                );
+                self.frame_stats.build_budget_spent = spent;
+                if self.builds_after_last_pass() {
+                    // Bounded frames: build toward the next frame (what is left of the budget).
+                    if !spent {
+                        if let Err(e) = self.make_resident(&demand, false) {
+                            self.quarantine_after_failure(&e);
+                            return Err(e);
+                        }
+                    }
+                } else {
+                    tracing::warn!(
+                        incomplete = count,
+                        passes = self.frame_stats.passes,
+                        "stream pass cap reached with pixels unfinished"
+                    );
+                }
                 list = incomplete;
                 break;
             }
@@ -234,7 +246,10 @@ impl<'a> StreamingRenderer<'a> {
             .readback
             .read_vec(final_off + pixels * 16, pixels as usize)?;
         let counters: Vec<u32> = fb.readback.read_vec(final_off + pixels * 20, STAT_WORDS)?;
-        if !self.frame_stats.complete {
+        if !self.frame_stats.complete && self.opts.fallback != StreamFallback::Off {
+            // Each wrote its fallback when it was deferred (render_pixel.glsl).
+            self.frame_stats.fallback_pixels = list.len() as u64;
+        } else if !self.frame_stats.complete {
             // Never written: misses, magenta so they are not mistaken for sky.
             // `list` holds the last pass's incomplete pixels, unbiased.
             for &v in &list {

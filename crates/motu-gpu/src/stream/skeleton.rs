@@ -206,6 +206,7 @@ impl<'a> StreamingRenderer<'a> {
             frame_first_stamp: 1,
             poisoned: None,
             frame: 0,
+            kept: Default::default(),
             frame_stats: FrameStreamStats::default(),
             totals: StreamTotals {
                 scene_triangles,

@@ -1,0 +1,144 @@
+//! Bounded work per frame: the frame's build budget (bytes, milliseconds), the progressive
+//! mode ("trace this frame with what is resident, the fallback for the rest, build toward the
+//! next frame"), and the frame buffers kept between frames of one size.
+
+use std::time::Instant;
+
+use motu_abi::camera::CameraParams;
+
+use super::buffers::{alloc_frame_buffers, FrameBuffers};
+use super::{FrameStreamStats, StreamFallback, StreamingRenderer};
+use crate::error::Result;
+use crate::render::{FrameParams, RenderOptions, RenderOutput};
+
+/// State kept between frames.
+#[derive(Default)]
+pub(super) struct Kept {
+    /// The last frame's buffers with the width, height and guard-band length they were made
+    /// for: reused while those stay the same (no allocation per frame, and a prefetch never
+    /// takes the room the next frame's buffers need).
+    frame_buffers: Option<(FrameBuffers, u32, u32, usize)>,
+    /// When the running build step started (its time counts against `frame_build_ms`).
+    pub(super) step_start: Option<Instant>,
+    /// Pass cap of the running frame when set ([`StreamingRenderer::render_progressive`]).
+    pass_cap: Option<u32>,
+}
+
+impl<'a> StreamingRenderer<'a> {
+    /// Renders one frame with the structures resident now and builds toward the next one: one
+    /// trace pass, pixels whose structures are missing show the fallback
+    /// ([`StreamOptions::fallback`](super::StreamOptions::fallback); off: they are unfinished,
+    /// magenta), then one build step for what they need, within the frame's build budget
+    /// (`frame_build_bytes`/`frame_build_ms`). The next call traces with what was built, so a
+    /// viewer stays responsive and the image refines over frames; a frame is exact when
+    /// [`FrameStreamStats::complete`].
+    pub fn render_progressive(
+        &mut self,
+        camera: &CameraParams,
+        opts: &RenderOptions,
+    ) -> Result<(RenderOutput, FrameStreamStats)> {
+        self.kept.pass_cap = Some(1);
+        let r = self.render_frame(camera, opts);
+        self.kept.pass_cap = None;
+        r
+    }
+
+    /// The running frame's pass cap.
+    pub(super) fn frame_pass_cap(&self) -> u32 {
+        self.kept.pass_cap.unwrap_or_else(|| self.max_passes())
+    }
+
+    /// Whether a frame that stops with unfinished pixels still builds what they need (for the
+    /// next frame): with a fallback, a frame build budget or a progressive frame.
+    pub(super) fn builds_after_last_pass(&self) -> bool {
+        self.opts.fallback != StreamFallback::Off
+            || self.opts.frame_build_bytes > 0
+            || self.opts.frame_build_ms > 0.0
+            || self.kept.pass_cap.is_some()
+    }
+
+    /// Milliseconds built this frame, including the running step.
+    fn frame_build_ms_now(&self) -> f64 {
+        self.frame_stats.build_ms
+            + self
+                .kept
+                .step_start
+                .map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3)
+    }
+
+    /// Whether this frame's build budget is spent.
+    pub(super) fn frame_build_spent(&self) -> bool {
+        let o = &self.opts;
+        (o.frame_build_bytes > 0 && self.frame_stats.built_bytes >= o.frame_build_bytes)
+            || (o.frame_build_ms > 0.0 && self.frame_build_ms_now() >= o.frame_build_ms)
+    }
+
+    /// How many BLASes of `queue` (from its start, at most `max`) fit in what is left of the
+    /// frame's byte budget by estimate (meshes plus ~64 bytes of structure per triangle); at
+    /// least one.
+    pub(super) fn group_within_frame_budget(&self, queue: &[u32], max: usize) -> usize {
+        let budget = self.opts.frame_build_bytes;
+        if budget == 0 {
+            return max.min(queue.len());
+        }
+        let mut left = budget.saturating_sub(self.frame_stats.built_bytes);
+        let mut n = 0;
+        for &b in queue.iter().take(max) {
+            let tris = u64::from(self.view.blases[b as usize].primitive_count);
+            let mesh: u64 = self
+                .blas_meshes(b as usize)
+                .into_iter()
+                .filter(|&m| self.meshes[m].is_none())
+                .map(|m| {
+                    let r = &self.view.meshes[m];
+                    u64::from(r.vertex_count) * 12 + u64::from(r.triangle_count) * 12
+                })
+                .sum();
+            let est = mesh + 64 * tris;
+            if n > 0 && est > left {
+                break;
+            }
+            left = left.saturating_sub(est);
+            n += 1;
+        }
+        n.max(1).min(queue.len())
+    }
+
+    /// The frame's buffers: last frame's when the size is unchanged (parameters rewritten),
+    /// else new ones, evicting for room.
+    pub(super) fn frame_buffers(
+        &mut self,
+        w: u32,
+        h: u32,
+        guard_len: usize,
+        params: &FrameParams,
+    ) -> Result<FrameBuffers> {
+        if let Some((fb, fw, fh, fg)) = self.kept.frame_buffers.take() {
+            if (fw, fh, fg) == (w, h, guard_len) {
+                fb.params.write(0, std::slice::from_ref(params))?;
+                return Ok(fb);
+            }
+            fb.release(&mut self.heap);
+        }
+        let pixels = u64::from(w) * u64::from(h);
+        let nitems = self.item_count() as u64;
+        self.with_eviction(|s| {
+            alloc_frame_buffers(&mut s.heap, pixels, guard_len as u64, nitems, params)
+        })
+        .map_err(|e| self.skeleton_error("the frame buffers", e))
+    }
+
+    /// Keeps `fb` for the next frame of the same size.
+    pub(super) fn keep_frame_buffers(
+        &mut self,
+        fb: FrameBuffers,
+        w: u32,
+        h: u32,
+        guard_len: usize,
+    ) {
+        if let Some((old, ..)) = self.kept.frame_buffers.take() {
+            old.release(&mut self.heap);
+        }
+        self.kept.frame_buffers = Some((fb, w, h, guard_len));
+    }
+}
