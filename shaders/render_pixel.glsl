@@ -53,7 +53,7 @@ void stream_write_fallback(uvec2 px, uint pixel, Carry c) {
     bool hatch = ((px.x + px.y) & 4u) != 0u;
     uvec4 rec;
     vec3 colour;
-    if (c.st.x == 1u) {
+    if (c.st.x == 1u && (c.st.w & 0xffffu) == 0u) {
         uint mesh = push.geometries.r[push.blases.r[g_empty_id].item_base].mesh;
         MeshRecord m = push.meshes.r[mesh];
         rec = uvec4(m.source_mesh, NONE_U32, floatBitsToUint(g_empty_t), AOV_LOD_FALLBACK);
@@ -67,13 +67,23 @@ void stream_write_fallback(uvec2 px, uint pixel, Carry c) {
             colour *= hatch ? 0.6 : 1.0;
         }
     } else {
-        rec = uvec4(c.rec.x, c.rec.y, floatBitsToUint(c.hit.x), min(c.rec.z, 255u));
+        // Sample 0's record (final once its secondary rays or later samples run); colour: the
+        // samples finished so far, else the current hit lit as if unshadowed.
+        rec = c.aov;
+        uint smp = c.st.w & 0xffffu;
         vec3 n = dot(c.hit.yzw, dir) > 0.0 ? -c.hit.yzw : c.hit.yzw;
         float ndl = max(dot(n, f.sun_dir_intensity.xyz), 0.0);
-        colour = f.view == VIEW_IDS   ? id_colour(c.rec.x, c.rec.y)
-                 : f.view == VIEW_LOD ? lod_colour(c.rec.z)
-                                      : push.materials.r[c.rec.w].base_color *
-                                            (f.ambient + f.sun_dir_intensity.w * ndl);
+        if (f.view == VIEW_IDS) {
+            colour = rec.x == AOV_MISS ? sky(dir) : id_colour(rec.x, rec.y);
+        } else if (f.view == VIEW_LOD) {
+            colour = rec.x == AOV_MISS ? sky(dir) : lod_colour(rec.w);
+        } else if (smp > 0u) {
+            colour = c.sum.xyz / float(smp);
+        } else if (rec.x == AOV_MISS) {
+            colour = shaded_background(dir);
+        } else {
+            colour = c.albedo.xyz * (f.ambient + f.sun_dir_intensity.w * ndl);
+        }
     }
     rec.w |= min(c.st.z, 65535u) << 16u;
     push.aov.r[pixel] = rec;
