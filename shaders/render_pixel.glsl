@@ -6,31 +6,10 @@
 #include "traverse.glsl"
 #include "shade.glsl"
 
-// Resolved hit: mesh record and world geometric normal (not face-forwarded).
-struct Surface {
-    uint mesh_record;
-    vec3 world_normal;
-};
-
-Surface resolve(TraceHit h) {
+// The mesh record of a hit.
+uint hit_mesh(TraceHit h) {
     InstanceRecord inst = push.instances.r[push.tlases.r[h.tlas].instance_base + h.instance];
-    uint mesh = push.geometries.r[push.blases.r[inst.blas].item_base + h.geometry].mesh;
-    Surface s;
-    s.mesh_record = mesh;
-    MeshGeo g = push.mesh_geo.r[mesh];
-    U32Table idx = U32Table(g.indices);
-    Positions pos = Positions(g.positions);
-    uint i0 = idx.r[3u * h.primitive];
-    uint i1 = idx.r[3u * h.primitive + 1u];
-    uint i2 = idx.r[3u * h.primitive + 2u];
-    vec3 v0 = vec3(pos.v[3u * i0], pos.v[3u * i0 + 1u], pos.v[3u * i0 + 2u]);
-    vec3 v1 = vec3(pos.v[3u * i1], pos.v[3u * i1 + 1u], pos.v[3u * i1 + 2u]);
-    vec3 v2 = vec3(pos.v[3u * i2], pos.v[3u * i2 + 1u], pos.v[3u * i2 + 2u]);
-    vec3 n_object = cross(v1 - v0, v2 - v0);
-    Affine object_from_world =
-        compose(affine_inverse(affine_from_array(inst.tlas_from_blas)), h.tlas_from_world);
-    s.world_normal = normalize(transpose_vector(object_from_world, n_object));
-    return s;
+    return push.geometries.r[push.blases.r[inst.blas].item_base + h.geometry].mesh;
 }
 
 // The hit's primitive as hit records name it: a cluster of a partitioned mesh maps its own
@@ -44,13 +23,22 @@ uint source_primitive(MeshRecord m, uint mesh_record, uint primitive) {
     return U32Table(map).r[primitive];
 }
 
-// A pixel's state carried across streaming passes (48 bytes; zeroed at the frame's start): the
-// primary ray's best hit resolved while its BLAS was resident (so the BLAS may go), and which
-// ray is open since which pass.
+// A pixel's state (128 bytes): carried across streaming passes (zeroed at the frame's start),
+// a local in the full build, which runs the same steps without ever deferring. Per sample: the
+// primary ray's best hit so far, resolved for shading while its BLAS was resident (so the BLAS
+// may go), then its secondary rays in order (lights, then AO), each traced again in later passes
+// while a structure it has not walked may hold an occluder.
 struct Carry {
-    vec4 hit;   // x: best t (T_INFINITY: none), yzw: world geometric normal
-    uvec4 rec;  // source mesh, primitive, LOD level, material
-    uvec4 st;   // x: 0 fresh, 1 primary open, 2 shadow open; y: stamp its ray started; z: traces
+    vec4 hit;     // current sample: x best t (T_INFINITY: none), yzw geometric normal facing the ray
+    vec4 ns;      // xyz shading normal (same side)
+    vec4 albedo;  // xyz textured base colour
+    uvec4 rec;    // current sample: source mesh, primitive, LOD level, material
+    uvec4 aov;    // sample 0's AOV record (without the trace count)
+    vec4 sum;     // xyz: colours of the finished samples
+    vec4 cur;     // xyz: the current sample's colour so far; w: AO rays found open
+    // x: 0 fresh, 1 primary open, 2 secondary rays open; y: stamp of the pass the open ray
+    // started in; z: traces; w: sample | next secondary ray << 16
+    uvec4 st;
 };
 layout(buffer_reference, std430, buffer_reference_align = 16) buffer CarryTable { Carry r[]; };
 
@@ -65,7 +53,7 @@ void stream_write_fallback(uvec2 px, uint pixel, Carry c) {
     bool hatch = ((px.x + px.y) & 4u) != 0u;
     uvec4 rec;
     vec3 colour;
-    if (c.st.x == 1u) {
+    if (c.st.x == 1u && (c.st.w & 0xffffu) == 0u) {
         uint mesh = push.geometries.r[push.blases.r[g_empty_id].item_base].mesh;
         MeshRecord m = push.meshes.r[mesh];
         rec = uvec4(m.source_mesh, NONE_U32, floatBitsToUint(g_empty_t), AOV_LOD_FALLBACK);
@@ -79,13 +67,23 @@ void stream_write_fallback(uvec2 px, uint pixel, Carry c) {
             colour *= hatch ? 0.6 : 1.0;
         }
     } else {
-        rec = uvec4(c.rec.x, c.rec.y, floatBitsToUint(c.hit.x), min(c.rec.z, 255u));
+        // Sample 0's record (final once its secondary rays or later samples run); colour: the
+        // samples finished so far, else the current hit lit as if unshadowed.
+        rec = c.aov;
+        uint smp = c.st.w & 0xffffu;
         vec3 n = dot(c.hit.yzw, dir) > 0.0 ? -c.hit.yzw : c.hit.yzw;
         float ndl = max(dot(n, f.sun_dir_intensity.xyz), 0.0);
-        colour = f.view == VIEW_IDS   ? id_colour(c.rec.x, c.rec.y)
-                 : f.view == VIEW_LOD ? lod_colour(c.rec.z)
-                                      : push.materials.r[c.rec.w].base_color *
-                                            (f.ambient + f.sun_dir_intensity.w * ndl);
+        if (f.view == VIEW_IDS) {
+            colour = rec.x == AOV_MISS ? sky(dir) : id_colour(rec.x, rec.y);
+        } else if (f.view == VIEW_LOD) {
+            colour = rec.x == AOV_MISS ? sky(dir) : lod_colour(rec.w);
+        } else if (smp > 0u) {
+            colour = c.sum.xyz / float(smp);
+        } else if (rec.x == AOV_MISS) {
+            colour = shaded_background(dir);
+        } else {
+            colour = c.albedo.xyz * (f.ambient + f.sun_dir_intensity.w * ndl);
+        }
     }
     rec.w |= min(c.st.z, 65535u) << 16u;
     push.aov.r[pixel] = rec;
@@ -103,33 +101,14 @@ void stream_defer(uvec2 px, uint pixel, Carry c) {
     l.r[k] = px.x | (px.y << 16u);
 }
 
-// Samples 1 .. spp - 1 of a shaded pixel (jittered primary rays; sample 0, the pixel centre,
-// gave the hit record and `first`); streaming passes shade one sample (see shade.glsl).
-vec3 shade_samples(vec3 first, uvec2 px, uint pixel, inout uint traces, inout uint overflows,
-                   inout uint truncations) {
-    FrameParams f = push.frame.f;
-    if (f.spp <= 1u || g_streaming) {
-        return first;
+// Primary ray of sample `smp`: the pixel centre for sample 0 (it gives the AOV record),
+// jittered after.
+vec3 sample_dir(uvec2 px, uint pixel, uint smp) {
+    CameraParams cam = push.frame.f.camera;
+    if (smp == 0u) {
+        return camera_primary_dir(cam, px.x, px.y, 0.5, 0.5);
     }
-    vec3 sum = first;
-    for (uint smp = 1u; smp < f.spp; ++smp) {
-        vec3 org = f.camera.world_eye;
-        vec3 dir = camera_primary_dir(f.camera, px.x, px.y, rand01(pixel, smp, 0u),
-                                      rand01(pixel, smp, 1u));
-        TraceHit h = traverse(f.root_tlas, org, dir, RAY_PRIMARY, f.lod,
-                              f.camera.pixels_per_unit_at_1, pixel_dither(px.x, px.y), false,
-                              traces, overflows, truncations);
-        if (h.t < T_INFINITY) {
-            Surface s = resolve(h);
-            MeshRecord m = push.meshes.r[s.mesh_record];
-            uint lod = h.lod == NONE_U32 ? m.lod : h.lod;
-            sum += shade_hit(h, s.mesh_record, org, dir, pixel, smp, lod, traces, overflows,
-                             truncations);
-        } else {
-            sum += shaded_background(dir);
-        }
-    }
-    return sum / float(f.spp);
+    return camera_primary_dir(cam, px.x, px.y, rand01(pixel, smp, 0u), rand01(pixel, smp, 1u));
 }
 
 void render_pixel_impl(uvec2 px) {
@@ -140,14 +119,21 @@ void render_pixel_impl(uvec2 px) {
     }
     uint pixel = px.y * width + px.x;
     vec3 org = f.camera.world_eye;
-    vec3 dir = camera_primary_dir(f.camera, px.x, px.y, 0.5, 0.5);
+    bool shaded = f.view == VIEW_SHADED;
+    uint spp = shaded ? max(f.spp, 1u) : 1u;
     uint traces = 0u;
     uint overflows = 0u;
     uint truncations = 0u;
     g_truncated = false;
+    g_secondary_rays = 0u;
     Carry c;
     c.hit = vec4(T_INFINITY, 0.0, 0.0, 0.0);
+    c.ns = vec4(0.0);
+    c.albedo = vec4(0.0);
     c.rec = uvec4(0u);
+    c.aov = uvec4(AOV_MISS, 0u, 0u, 0u);
+    c.sum = vec4(0.0);
+    c.cur = vec4(0.0);
     c.st = uvec4(1u, g_stamp, 0u, 0u);
     if (g_streaming) {
         Carry old = CarryTable(StreamRef(push.stream).s.carry).r[pixel];
@@ -156,108 +142,99 @@ void render_pixel_impl(uvec2 px) {
         }
         traces = c.st.z;
     }
-    // The full build's primary hit, for the full shading model (streaming shades from the
-    // carried record: its BLAS may be gone by the time the pixel is final).
-    TraceHit h;
-    h.t = T_INFINITY;
-    uint h_mesh = NONE_U32;
-    if (c.st.x == 1u) {
-        g_best_t = c.hit.x;
-        g_start = c.st.y;
-        g_empty_t = T_INFINITY;
-        h = traverse(f.root_tlas, org, dir, RAY_PRIMARY, f.lod,
-                              f.camera.pixels_per_unit_at_1, pixel_dither(px.x, px.y), false,
-                              traces, overflows, truncations);
-        if (h.tlas != NONE_U32) {
-            // Resolved now, while its BLAS and meshes are resident.
-            Surface s = resolve(h);
-            h_mesh = s.mesh_record;
-            MeshRecord m = push.meshes.r[s.mesh_record];
-            c.hit = vec4(h.t, s.world_normal);
-            c.rec = uvec4(m.source_mesh, source_primitive(m, s.mesh_record, h.primitive),
-                          h.lod == NONE_U32 ? m.lod : h.lod, m.material);
+    bool open = false;
+    while (true) {
+        uint smp = c.st.w & 0xffffu;
+        vec3 dir = sample_dir(px, pixel, smp);
+        if (c.st.x == 1u) {
+            g_best_t = c.hit.x;
+            g_start = c.st.y;
+            g_empty_t = T_INFINITY;
+            TraceHit h = traverse(f.root_tlas, org, dir, RAY_PRIMARY, f.lod,
+                                  f.camera.pixels_per_unit_at_1, pixel_dither(px.x, px.y), false,
+                                  traces, overflows, truncations);
+            if (h.tlas != NONE_U32) {
+                // Resolved now, while its BLAS and meshes are resident.
+                uint mesh = hit_mesh(h);
+                MeshRecord m = push.meshes.r[mesh];
+                c.hit.x = h.t;
+                c.rec = uvec4(m.source_mesh, source_primitive(m, mesh, h.primitive),
+                              h.lod == NONE_U32 ? m.lod : h.lod, m.material);
+                if (shaded) {
+                    ShadeInput si = shade_input(h, mesh, org, dir);
+                    c.hit.yzw = si.ng;
+                    c.ns.xyz = si.ns;
+                    c.albedo.xyz = si.albedo;
+                }
+            }
+            // A cut-short walk (stack overflow, trace cap) cannot finish in a later pass either:
+            // the pixel ends here and is counted as truncated.
+            bool cut = g_truncated || overflows != 0u;
+            if (!cut && stream_still_open(c.hit.x)) {
+                open = true;  // shading waits until the primary hit is final
+                break;
+            }
+            if (smp == 0u && c.hit.x < T_INFINITY) {
+                c.aov = uvec4(c.rec.x, c.rec.y, floatBitsToUint(c.hit.x), min(c.rec.z, 255u));
+            }
+            if (!shaded) {
+                break;
+            }
+            if (c.hit.x < T_INFINITY) {
+                c.cur = vec4(push.materials.r[c.rec.w].emission, 0.0);
+                c.st.xyw = uvec3(2u, g_stamp, smp);
+            } else {
+                c.sum.xyz += shaded_background(dir);
+            }
         }
-        // A cut-short walk (stack overflow, trace cap) cannot finish in a later pass either:
-        // the pixel ends here and is counted as truncated.
-        bool cut = g_truncated || overflows != 0u;
-        if (!cut && stream_still_open(c.hit.x)) {
-            // Shading and shadow rays wait until the primary hit is final.
-            c.st.z = traces;
-            stream_defer(px, pixel, c);
-            return;
+        if (c.st.x == 2u) {
+            ShadeInput si;
+            si.ng = c.hit.yzw;
+            si.ns = c.ns.xyz;
+            si.albedo = c.albedo.xyz;
+            uint ray = c.st.w >> 16u;
+            vec3 colour = c.cur.xyz;
+            uint ao_open = uint(c.cur.w);
+            uint start_stamp = c.st.y;
+            bool done = shade_rays(si, c.rec.w, c.hit.x, c.rec.z, org, dir, pixel, smp, ray,
+                                   colour, ao_open, start_stamp, traces, overflows, truncations);
+            c.cur = vec4(colour, float(ao_open));
+            c.st.yw = uvec2(start_stamp, smp | (ray << 16u));
+            if (!done) {
+                open = true;
+                break;
+            }
+            c.sum.xyz += colour;
         }
-        c.st.xy = uvec2(2u, g_stamp);
+        if (smp + 1u >= spp) {
+            break;
+        }
+        // The next sample's primary ray starts now.
+        c.hit = vec4(T_INFINITY, 0.0, 0.0, 0.0);
+        c.st.xyw = uvec3(1u, g_stamp, smp + 1u);
+    }
+    if (g_secondary_rays != 0u) {
+        atomicAdd(push.stats.n[STAT_SHADOW_RAYS], g_secondary_rays);
+    }
+    if (open) {
+        c.st.z = traces;
+        stream_defer(px, pixel, c);
+        return;
     }
     vec3 colour;
-    uvec4 rec = uvec4(AOV_MISS, 0u, 0u, 0u);
-    if (c.hit.x < T_INFINITY) {
-        uint lod = c.rec.z;
-        rec.xyz = uvec3(c.rec.x, c.rec.y, floatBitsToUint(c.hit.x));
-        rec.w = min(lod, 255u);
-        if (f.view == VIEW_SHADED && !g_streaming) {
-            // Materials, textures, shading normals, the scene's lights and sky (shade.glsl).
-            g_secondary_rays = 0u;
-            colour = shade_hit(h, h_mesh, org, dir, pixel, 0u, lod, traces, overflows,
-                               truncations);
-            colour = shade_samples(colour, px, pixel, traces, overflows, truncations);
-            if (g_secondary_rays != 0u) {
-                atomicAdd(push.stats.n[STAT_SHADOW_RAYS], g_secondary_rays);
-            }
-        } else if (f.view == VIEW_SHADED) {
-            // Streaming: base colour and the key light with one shadow ray, from the carried
-            // record.
-            vec3 base = push.materials.r[c.rec.w].base_color;
-            vec3 world_normal = c.hit.yzw;
-            vec3 n = dot(world_normal, dir) > 0.0 ? -world_normal : world_normal;
-            vec3 sun = f.sun_dir_intensity.xyz;
-            float ndl = dot(n, sun);
-            float light = f.ambient;
-            if (ndl > 0.0) {
-                float visible = 1.0;
-                if (f.shadows != 0u) {
-                    vec3 p = org + dir * c.hit.x;
-                    LodParams sl = f.lod;
-                    if (f.shadow_lod_from_primary != 0u) {
-                        sl.forced_lod = int(lod);
-                    }
-                    g_best_t = T_INFINITY;
-                    g_start = c.st.y;
-                    g_empty_t = T_INFINITY;
-                    TraceHit sh = traverse(f.root_tlas, shadow_offset(p, n, max(max(abs(org.x), abs(org.y)), abs(org.z)) + c.hit.x), sun, RAY_SHADOW, sl,
-                                           f.camera.pixels_per_unit_at_1, 0.0, true, traces,
-                                           overflows, truncations);
-                    visible = sh.t < T_INFINITY ? 0.0 : 1.0;
-                    // Occluded is final whatever the open structures hold.
-                    if (sh.t == T_INFINITY && !g_truncated && overflows == 0u &&
-                        stream_still_open(T_INFINITY)) {
-                        c.st.z = traces;
-                        stream_defer(px, pixel, c);
-                        return;
-                    }
-                    atomicAdd(push.stats.n[STAT_SHADOW_RAYS], 1u);
-                }
-                light = f.ambient + f.sun_dir_intensity.w * ndl * visible;
-            }
-            colour = base * light;
-        } else if (f.view == VIEW_IDS) {
-            colour = id_colour(c.rec.x, c.rec.y);
-        } else {
-            colour = lod_colour(lod);
-        }
-    } else if (f.view == VIEW_SHADED && !g_streaming) {
-        g_secondary_rays = 0u;
-        colour = shade_samples(shaded_background(dir), px, pixel, traces, overflows, truncations);
-        if (g_secondary_rays != 0u) {
-            atomicAdd(push.stats.n[STAT_SHADOW_RAYS], g_secondary_rays);
-        }
+    uvec4 rec = c.aov;
+    if (shaded) {
+        colour = spp > 1u ? c.sum.xyz / float(spp) : c.sum.xyz;
+    } else if (rec.x == AOV_MISS) {
+        colour = sky(sample_dir(px, pixel, 0u));
+    } else if (f.view == VIEW_IDS) {
+        colour = id_colour(rec.x, rec.y);
     } else {
-        colour = sky(dir);
+        colour = lod_colour(rec.w);
     }
     rec.w |= min(traces, 65535u) << 16u;
     push.aov.r[pixel] = rec;
-    push.rgba.r[pixel] = f.view == VIEW_SHADED && !g_streaming
-                             ? tone_map(colour, f.exposure_scale)
-                             : encode_srgb8(colour);
+    push.rgba.r[pixel] = shaded ? tone_map(colour, f.exposure_scale) : encode_srgb8(colour);
     if (overflows != 0u) {
         atomicAdd(push.stats.n[STAT_STACK_OVERFLOWS], overflows);
     }

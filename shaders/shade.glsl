@@ -165,25 +165,17 @@ bool light_incidence(LightRecord l, vec3 p, out vec4 dir_reach, out vec3 e) {
     return true;
 }
 
-// A secondary (shadow or ambient-occlusion) ray: is anything in (0, t_max)?
-bool occluded(vec3 start, vec3 d, float t_max, LodParams sl, inout uint traces,
-              inout uint overflows, inout uint truncations) {
-    g_t_max = t_max;
-    TraceHit sh = traverse(push.frame.f.root_tlas, start, d, RAY_SHADOW, sl,
-                           push.frame.f.camera.pixels_per_unit_at_1, 0.0, true, traces, overflows,
-                           truncations);
-    g_t_max = T_INFINITY;
-    g_secondary_rays += 1u;
-    return sh.t < t_max;
-}
+// What shading needs of a hit, resolved while its BLAS and mesh are resident (streaming carries
+// it across passes): geometric and shading normals facing the ray, textured base colour.
+struct ShadeInput {
+    vec3 ng;
+    vec3 ns;
+    vec3 albedo;
+};
 
-// Colour (linear, before exposure) of hit `h` on mesh record `mesh` for sample `smp` of
-// `pixel` (motu_trace::shade::shade_hit).
-vec3 shade_hit(TraceHit h, uint mesh, vec3 org, vec3 dir, uint pixel, uint smp, uint lod,
-               inout uint traces, inout uint overflows, inout uint truncations) {
+ShadeInput shade_input(TraceHit h, uint mesh, vec3 org, vec3 dir) {
     FrameParams f = push.frame.f;
-    MeshRecord m = push.meshes.r[mesh];
-    MaterialRecord mat = push.materials.r[m.material];
+    MaterialRecord mat = push.materials.r[push.meshes.r[mesh].material];
     ShadePoint sp = surface_point(h, mesh, org, dir);
     vec3 albedo = mat.base_color;
     if (mat.base_color_texture != NONE_U32 && sp.has_uv) {
@@ -192,23 +184,72 @@ vec3 shade_hit(TraceHit h, uint mesh, vec3 org, vec3 dir, uint pixel, uint smp, 
         float tpp = sp.uv_per_pixel * sqrt(float(tex.width) * float(tex.height));
         albedo *= sample_texture(tex, sr.texels, sp.uv, mip_level(tpp, tex.mip_count)).rgb;
     }
-    vec3 ns = sp.ns;
-    vec3 ng = sp.ng;
-    vec3 diffuse = albedo * (1.0 - mat.metallic);
-    vec3 f0 = vec3(0.04) + (albedo - vec3(0.04)) * mat.metallic;
+    ShadeInput si;
+    si.ng = sp.ng;
+    si.ns = sp.ns;
+    si.albedo = albedo;
+    return si;
+}
+
+// Outcomes of a secondary ray.
+const uint RAY_CLEAR = 0u;
+const uint RAY_OCCLUDED = 1u;
+// Streaming only: nothing resident occludes it, but a structure not walked since `start_stamp`
+// lies within its reach: the ray is traced again next pass.
+const uint RAY_OPEN = 2u;
+
+// A secondary (shadow or ambient-occlusion) ray: is anything in (0, t_max)?
+uint occlusion(vec3 start, vec3 d, float t_max, LodParams sl, uint start_stamp,
+               inout uint traces, inout uint overflows, inout uint truncations) {
+    g_t_max = t_max;
+    g_best_t = T_INFINITY;
+    g_start = start_stamp;
+    g_empty_t = T_INFINITY;
+    TraceHit sh = traverse(push.frame.f.root_tlas, start, d, RAY_SHADOW, sl,
+                           push.frame.f.camera.pixels_per_unit_at_1, 0.0, true, traces, overflows,
+                           truncations);
+    g_t_max = T_INFINITY;
+    g_secondary_rays += 1u;
+    if (sh.t < t_max) {
+        return RAY_OCCLUDED;  // final whatever the open structures hold
+    }
+    // A cut-short walk cannot finish in a later pass either (counted as truncated).
+    if (!g_truncated && overflows == 0u && stream_still_open(t_max)) {
+        return RAY_OPEN;
+    }
+    return RAY_CLEAR;
+}
+
+// The secondary rays of one sample's hit (motu_trace::shade::shade_hit): the frame's lights with
+// shadow rays, then the sky term with `ao_samples` ambient-occlusion rays, numbered in that order.
+// Resumable for streaming: starts at ray `ray` with the sample's colour so far in `colour` and
+// the AO rays found open so far in `ao_open`; returns false (state updated) when ray `ray` is
+// open, the full build never does. `start_stamp`: the pass the open ray started in, then the
+// current pass for the rays after it.
+bool shade_rays(ShadeInput si, uint material, float t, uint lod, vec3 org, vec3 dir, uint pixel,
+                uint smp, inout uint ray, inout vec3 colour, inout uint ao_open,
+                inout uint start_stamp, inout uint traces, inout uint overflows,
+                inout uint truncations) {
+    FrameParams f = push.frame.f;
+    MaterialRecord mat = push.materials.r[material];
+    vec3 ns = si.ns;
+    vec3 ng = si.ng;
+    vec3 diffuse = si.albedo * (1.0 - mat.metallic);
+    vec3 f0 = vec3(0.04) + (si.albedo - vec3(0.04)) * mat.metallic;
     float s = shininess(mat.roughness);
     float spec_norm = (s + 8.0) / (8.0 * 3.14159265359);
-    float reach = max(max(abs(org.x), abs(org.y)), abs(org.z)) + h.t;
-    vec3 start = shadow_offset(sp.p, ng, reach);
+    vec3 p = org + dir * t;
+    float reach = max(max(abs(org.x), abs(org.y)), abs(org.z)) + t;
+    vec3 start = shadow_offset(p, ng, reach);
     LodParams sl = f.lod;
     if (f.shadow_lod_from_primary != 0u) {
         sl.forced_lod = int(lod);
     }
-    vec3 colour = mat.emission;
-    for (uint i = 0u; i < min(f.light_count, uint(MAX_LIGHTS)); ++i) {
+    uint nl = min(f.light_count, uint(MAX_LIGHTS));
+    for (; ray < nl; ++ray) {
         vec4 dr;
         vec3 e;
-        if (!light_incidence(f.lights[i], sp.p, dr, e)) {
+        if (!light_incidence(f.lights[ray], p, dr, e)) {
             continue;
         }
         vec3 ldir = dr.xyz;
@@ -216,28 +257,42 @@ vec3 shade_hit(TraceHit h, uint mesh, vec3 org, vec3 dir, uint pixel, uint smp, 
         if (ndl <= 0.0 || dot(ng, ldir) <= 0.0) {
             continue;
         }
-        if (f.shadows != 0u && occluded(start, ldir, dr.w, sl, traces, overflows, truncations)) {
-            continue;
+        if (f.shadows != 0u) {
+            uint o = occlusion(start, ldir, dr.w, sl, start_stamp, traces, overflows, truncations);
+            if (o == RAY_OPEN) {
+                return false;
+            }
+            start_stamp = g_stamp;
+            if (o == RAY_OCCLUDED) {
+                continue;
+            }
         }
         vec3 hv = normalize(ldir - dir);
         float spec = spec_norm * pow(max(dot(ns, hv), 0.0), s);
         colour += (diffuse / 3.14159265359 + f0 * spec) * e * ndl;
     }
-    float ao = 1.0;
-    if (f.ao_samples > 0u) {
-        uint open = 0u;
-        for (uint k = 0u; k < f.ao_samples; ++k) {
-            vec3 d = cosine_direction(ns, rand01(pixel, smp, 2u + 2u * k),
-                                      rand01(pixel, smp, 3u + 2u * k));
-            if (dot(d, ng) > 0.0 &&
-                !occluded(start, d, f.ao_distance, sl, traces, overflows, truncations)) {
-                open += 1u;
+    for (; ray < nl + f.ao_samples; ++ray) {
+        uint k = ray - nl;
+        vec3 d = cosine_direction(ns, rand01(pixel, smp, 2u + 2u * k),
+                                  rand01(pixel, smp, 3u + 2u * k));
+        if (dot(d, ng) > 0.0) {
+            uint o = occlusion(start, d, f.ao_distance, sl, start_stamp, traces, overflows,
+                               truncations);
+            if (o == RAY_OPEN) {
+                return false;
+            }
+            start_stamp = g_stamp;
+            if (o == RAY_CLEAR) {
+                ao_open += 1u;
             }
         }
-        ao = float(open) / float(f.ao_samples);
+    }
+    float ao = 1.0;
+    if (f.ao_samples > 0u) {
+        ao = float(ao_open) / float(f.ao_samples);
     }
     colour += (diffuse + f0) * f.sky.rgb * ao;
-    return colour;
+    return true;
 }
 
 // What a primary ray that hits nothing shows in the shaded view.

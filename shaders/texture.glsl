@@ -5,8 +5,9 @@
 #define MOTU_TEXTURE_GLSL
 #include "common.glsl"
 
-// FrameParams.shading: per-mesh attribute addresses and the texture tables (0 = none, e.g.
-// in streaming passes: constant colours and geometric normals then).
+// FrameParams.shading: per-mesh attribute addresses and the texture tables (0 = none: constant
+// colours and geometric normals then). Streaming rewrites the attribute addresses as meshes
+// come and go (0 while a mesh is not resident; a hit is only resolved while it is).
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer ShadingRef {
     uint64_t mesh_attrs;  // per mesh record: normals address, uvs address (0: none)
     uint64_t textures;    // TextureRecord[]

@@ -156,7 +156,11 @@ fn island_camera_path_needs_about_one_pass_per_frame_under_the_budget() {
     );
     assert_eq!(passes.len() as u64, frames);
     assert_eq!(totals["incomplete_frames"], 0, "{totals}");
-    assert!(mean <= 1.3, "mean passes after the first frame: {mean}");
+    // Shaded frames stream their AO rays too (issue 16): they reach structures around the
+    // visible points that the guard band's primary rays do not prefetch, and at this budget the
+    // working set with them does not all fit (1.03 passes per frame with `--ao-samples 0`,
+    // 1.31 with the default AO ray; see the s3 issue-16 notes).
+    assert!(mean <= 1.35, "mean passes after the first frame: {mean}");
     assert!(ratio >= 3.0, "triangles-built ratio {ratio}");
     assert!(
         u(&totals["vram_peak_bytes"]) <= PATH_BUDGET_BYTES,

@@ -527,12 +527,53 @@ pub(crate) struct MeshGpu {
     /// A cluster: its primitive map follows the indices (`indices_address + 12 × triangles`,
     /// where the shaders read it).
     pub(crate) has_primitive_map: bool,
+    /// Streaming only ([`MeshGpu::alloc_streamed`]): the shading normals and texture
+    /// coordinates after the indices (0: none), so they stream and evict with the mesh.
+    pub(crate) normals_address: u64,
+    pub(crate) uvs_address: u64,
+}
+
+/// Bytes of a streamed mesh's shading attributes (`FLAG_HAS_NORMALS`: 12 per vertex,
+/// `FLAG_HAS_UVS`: 8 per vertex, each 16-byte aligned) after its geometry: what
+/// [`MeshGpu::alloc_streamed`] adds, and the streaming floor's attribute term.
+pub(crate) fn streamed_attribute_bytes(rec: &MeshRecord) -> (u64, u64) {
+    let vc = u64::from(rec.vertex_count);
+    let normals = if rec.flags & motu_abi::FLAG_HAS_NORMALS != 0 {
+        (vc * 12).div_ceil(16) * 16
+    } else {
+        0
+    };
+    let uvs = if rec.flags & motu_abi::FLAG_HAS_UVS != 0 {
+        (vc * 8).div_ceil(16) * 16
+    } else {
+        0
+    };
+    (normals, uvs)
 }
 
 impl MeshGpu {
     /// Allocates the buffer of mesh record `m` (positions, then indices at a 16-byte offset,
     /// then a cluster's primitive map).
     pub(crate) fn alloc(heap: &mut GpuHeap, m: usize, rec: &MeshRecord) -> Result<MeshGpu> {
+        Self::alloc_with(heap, m, rec, false)
+    }
+
+    /// [`MeshGpu::alloc`] plus room for the mesh's shading attributes after its geometry (the
+    /// streaming renderer: they must be resident whenever a hit on the mesh is resolved).
+    pub(crate) fn alloc_streamed(
+        heap: &mut GpuHeap,
+        m: usize,
+        rec: &MeshRecord,
+    ) -> Result<MeshGpu> {
+        Self::alloc_with(heap, m, rec, true)
+    }
+
+    fn alloc_with(
+        heap: &mut GpuHeap,
+        m: usize,
+        rec: &MeshRecord,
+        attributes: bool,
+    ) -> Result<MeshGpu> {
         let pos_bytes = u64::from(rec.vertex_count) * 12;
         let idx_offset = pos_bytes.div_ceil(16) * 16;
         let has_primitive_map = rec.flags & motu_abi::FLAG_PRIMITIVE_MAP != 0;
@@ -541,7 +582,16 @@ impl MeshGpu {
         } else {
             0
         };
-        let size = idx_offset + u64::from(rec.triangle_count) * 12 + map_bytes;
+        let mut geometry = idx_offset + u64::from(rec.triangle_count) * 12 + map_bytes;
+        let (normal_bytes, uv_bytes) = if attributes {
+            streamed_attribute_bytes(rec)
+        } else {
+            (0, 0)
+        };
+        if normal_bytes + uv_bytes > 0 {
+            geometry = geometry.div_ceil(16) * 16;
+        }
+        let size = geometry + normal_bytes + uv_bytes;
         let buf = heap.alloc_buffer(
             &format!("mesh-{m}"),
             size,
@@ -567,7 +617,55 @@ impl MeshGpu {
             vertex_count: rec.vertex_count,
             triangle_count: rec.triangle_count,
             has_primitive_map,
+            normals_address: if normal_bytes > 0 { base + geometry } else { 0 },
+            uvs_address: if uv_bytes > 0 {
+                base + geometry + normal_bytes
+            } else {
+                0
+            },
         })
+    }
+
+    /// [`MeshGpu::upload`] plus the shading attributes of a mesh from
+    /// [`MeshGpu::alloc_streamed`]; an attribute the source lacks (or gives at the wrong
+    /// length) is dropped, as the full build's shading tables drop it.
+    pub(crate) fn upload_streamed(
+        &mut self,
+        ctx: &Context,
+        up: &mut Uploader,
+        source: &dyn MeshBlobSource,
+        m: usize,
+    ) -> Result<u64> {
+        use bytemuck::cast_slice;
+        let mut bytes = self.upload(ctx, up, source, m)?;
+        if self.normals_address == 0 && self.uvs_address == 0 {
+            return Ok(bytes);
+        }
+        let (normals, uvs) = source
+            .mesh_shading(m as u32)
+            .map_err(|e| GpuError::InvalidRequest(format!("mesh record {m}: {e}")))?;
+        let vc = self.vertex_count as usize;
+        let base = self.positions_address;
+        match normals.as_deref().filter(|n| n.len() == vc) {
+            Some(n) if self.normals_address != 0 => {
+                up.upload(
+                    ctx,
+                    &self.buffer,
+                    self.normals_address - base,
+                    cast_slice(n),
+                )?;
+                bytes += (n.len() * 12) as u64;
+            }
+            _ => self.normals_address = 0,
+        }
+        match uvs.as_deref().filter(|u| u.len() == vc) {
+            Some(u) if self.uvs_address != 0 => {
+                up.upload(ctx, &self.buffer, self.uvs_address - base, cast_slice(u))?;
+                bytes += (u.len() * 8) as u64;
+            }
+            _ => self.uvs_address = 0,
+        }
+        Ok(bytes)
     }
 
     /// Bytes of its buffer.

@@ -30,6 +30,21 @@ pub(crate) struct ShadingTables {
     pub(crate) texture_bytes: u64,
     /// Normals and texture coordinates.
     pub(crate) attribute_bytes: u64,
+    /// Index in `buffers` of the per-mesh attribute-address table (the streaming renderer
+    /// rewrites it as meshes come and go).
+    pub(crate) mesh_attrs: Option<usize>,
+}
+
+/// Bytes [`upload`] allocates besides the per-mesh attributes (the attribute-address table,
+/// texture records, texels, header; 16-byte aligned each): what streaming keeps resident for
+/// shading (the floor's `shading_tables_bytes`).
+pub(crate) fn table_bytes(view: &HierarchyView<'_>) -> u64 {
+    let a = |n: u64| n.max(16).div_ceil(16) * 16;
+    let sized = |n: usize| if n == 0 { 0 } else { a(n as u64) };
+    sized(16 * view.meshes.len())
+        + sized(std::mem::size_of_val(view.textures))
+        + sized(std::mem::size_of_val(view.texels))
+        + a(std::mem::size_of::<ShadingHeader>() as u64)
 }
 
 fn alloc(heap: &mut GpuHeap, label: &str, size: u64) -> Result<HeapBuffer> {
@@ -58,6 +73,7 @@ pub(crate) fn upload(
         address: 0,
         texture_bytes: 0,
         attribute_bytes: 0,
+        mesh_attrs: None,
     };
     match fill(ctx, heap, up, view, source, used, &mut out) {
         Ok(()) => Ok(out),
@@ -131,7 +147,10 @@ fn fill(
         )?;
         let a = buf.device_address()?.0;
         match k {
-            0 => header.mesh_attrs = a,
+            0 => {
+                header.mesh_attrs = a;
+                out.mesh_attrs = Some(out.buffers.len());
+            }
             1 => header.textures = a,
             _ => header.texels = a,
         }

@@ -26,6 +26,103 @@ impl MeshBlobSource for Blobs<'_> {
             .ok_or_else(|| format!("no mesh {mesh_record}"))?;
         Ok((Cow::Borrowed(&g.positions), Cow::Borrowed(&g.indices)))
     }
+
+    #[allow(clippy::type_complexity)]
+    fn mesh_shading(
+        &self,
+        mesh_record: u32,
+    ) -> Result<(Option<Cow<'_, [[f32; 3]]>>, Option<Cow<'_, [[f32; 2]]>>), String> {
+        let g = self
+            .0
+            .geometry
+            .get(mesh_record as usize)
+            .ok_or_else(|| format!("no mesh {mesh_record}"))?;
+        Ok((
+            g.normals.as_deref().map(Cow::Borrowed),
+            g.uvs.as_deref().map(Cow::Borrowed),
+        ))
+    }
+}
+
+/// `field` made to exercise the whole shading model: every sphere gets smooth normals and
+/// texture coordinates, every other material an 8×8 checker texture with mips (2 levels), and
+/// a few materials are metallic, rough or emissive.
+fn textured_field(rows: u32, cols: u32, segments: u32) -> OwnedHierarchy {
+    let mut h = field(rows, cols, segments);
+    for (m, g) in h.meshes.iter_mut().zip(h.geometry.iter_mut()) {
+        g.normals = Some(g.positions.clone());
+        g.uvs = Some(
+            g.positions
+                .iter()
+                .map(|p| {
+                    [
+                        0.5 + p[2].atan2(p[0]) / std::f32::consts::TAU,
+                        0.5 + 0.5 * p[1],
+                    ]
+                })
+                .collect(),
+        );
+        m.flags |= motu_abi::FLAG_HAS_NORMALS | motu_abi::FLAG_HAS_UVS;
+    }
+    let mut texels = Vec::new();
+    for (size, a, b) in [
+        (8u32, 0xff20_40e0u32, 0xffe0_e0e0u32),
+        (4, 0xff80_80e0, 0xff80_80e0),
+    ] {
+        for y in 0..size {
+            for x in 0..size {
+                texels.push(if (x + y) % 2 == 0 { a } else { b });
+            }
+        }
+    }
+    h.texels = texels;
+    h.textures = vec![motu_abi::TextureRecord {
+        texel_offset: 0,
+        width: 8,
+        height: 8,
+        mip_count: 2,
+    }];
+    for (i, mat) in h.materials.iter_mut().enumerate() {
+        if i % 2 == 1 {
+            mat.base_color_texture = 0;
+        }
+        mat.roughness = 0.2 + 0.1 * (i % 8) as f32;
+        mat.metallic = if i % 5 == 0 { 1.0 } else { 0.0 };
+        if i % 13 == 0 {
+            mat.emission = [0.05, 0.02, 0.0];
+        }
+    }
+    h
+}
+
+/// The full shading model's inputs: a distant and a point light, a sky with ambient occlusion
+/// (2 rays per sample, reaching 3 units) and 2 samples per pixel.
+fn full_shading() -> motu_abi::shade::Shading {
+    use motu_abi::shade::{LightRecord, Shading, LIGHT_DISTANT, LIGHT_POINT};
+    let mut s = Shading {
+        light_count: 2,
+        sky: Some([0.25, 0.3, 0.4]),
+        ao_samples: 2,
+        ao_distance: 3.0,
+        spp: 2,
+        exposure_ev: 0.5,
+        ..Default::default()
+    };
+    let d = [-0.5f32, -0.7, -0.5];
+    let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    s.lights[0] = LightRecord {
+        kind: LIGHT_DISTANT,
+        world_direction: d.map(|c| c / l),
+        radiance: [2.0, 1.9, 1.7],
+        ..Default::default()
+    };
+    s.lights[1] = LightRecord {
+        kind: LIGHT_POINT,
+        world_position: [1.5, 2.5, 3.0],
+        radiance: [12.0, 10.0, 8.0],
+        ..Default::default()
+    };
+    s
 }
 
 /// A field of `rows × cols` distinct sphere meshes (each its own BLAS): the root holds a few
@@ -101,12 +198,35 @@ fn ids_opts(backend: Backend) -> RenderOptions {
 
 const SIZE: u32 = 48;
 
+/// Streamed shaded colours against the full build's: the same shader code runs the same float
+/// operations in the same order, so they must be equal; the tolerance (one 8-bit step on at most
+/// 0.5% of the pixels) only covers a compiler contracting a multiply-add differently where the
+/// two paths inline it, never a missing term (a shadow, a texture, an AO ray changes far more).
+fn assert_shaded_equal(full: &[u8], streamed: &[u8], what: &str) {
+    assert_eq!(full.len(), streamed.len());
+    let mut off = 0usize;
+    for (a, b) in full.iter().zip(streamed) {
+        let d = a.abs_diff(*b);
+        assert!(d <= 1, "{what}: a channel differs by {d} (> 1)");
+        off += usize::from(d != 0);
+    }
+    eprintln!(
+        "{what}: {off} of {} colour channels differ by one step",
+        full.len()
+    );
+    assert!(
+        off * 200 <= full.len(),
+        "{what}: {off} of {} channels differ",
+        full.len()
+    );
+}
+
 #[test]
 fn streaming_under_a_quarter_of_the_full_build_matches_it_on_both_backends() {
     let Some(ctx) = context_or_skip("streaming_matches_full_build", Requirement::RayTracing) else {
         return;
     };
-    let h = field(10, 16, 30);
+    let h = textured_field(10, 16, 30);
     let blobs = Blobs(&h);
     let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let full_needs = full_build_needs(&full);
@@ -158,24 +278,49 @@ fn streaming_under_a_quarter_of_the_full_build_matches_it_on_both_backends() {
             cmp.mismatched,
             cmp.total
         );
-        // Streaming passes shade the carried record with the key light and one shadow ray
-        // (the full build's shading model needs the hit's BLAS resident): the colours must not
-        // depend on the budget, i.e. on how the shadow rays were split over passes.
-        let mut roomy = StreamingRenderer::new(
+        // The full shading model (textures, smooth normals, two lights with shadow rays, AO,
+        // 2 spp): resolved while each hit's BLAS is resident and its secondary rays deferred
+        // like primary rays, streaming at a quarter of the full build must give the full
+        // build's colours (same rays, same random numbers, same arithmetic).
+        let shaded = RenderOptions {
+            shading: full_shading(),
+            ..opts
+        };
+        // Smaller: every pixel traces up to 2 × (1 + 2 + 2) rays, slow under validation.
+        let small = base_pose().params(32, 32);
+        let full_shaded = render(&ctx, &full, &small, &shaded).expect("full shaded render");
+        // A cold renderer: its secondary rays meet structures not built yet and are deferred.
+        let mut cold = StreamingRenderer::new(
             &ctx,
             h.view(),
             &blobs,
             &StreamOptions {
-                budget_bytes: full_needs * 4,
+                budget_bytes: budget,
+                staging_bytes: 256 * 1024,
+                scratch_budget_bytes: 1 << 20,
+                guard_band_px: 0,
                 ..Default::default()
             },
         )
-        .expect("roomy streaming renderer");
-        let (roomy_out, _) = roomy.render_frame(&cam, &opts).expect("roomy stream frame");
-        drop(roomy);
+        .expect("streaming renderer");
+        let (out_shaded, st_shaded) = cold.render_frame(&small, &shaded).expect("stream shaded");
+        drop(cold);
+        assert!(st_shaded.passes >= 2, "{st_shaded:?}");
+        eprintln!(
+            "{be:?} shaded: {}",
+            serde_json::to_string(&st_shaded).unwrap_or_default()
+        );
+        assert!(st_shaded.complete, "{st_shaded:?}");
+        let cmp = motu_trace::compare(&full_shaded.aov, &out_shaded.aov, 0.0).expect("sizes");
         assert_eq!(
-            out.rgba8, roomy_out.rgba8,
-            "{be:?}: shaded colours (with shadows) agree at a quarter and at a roomy budget"
+            cmp.mismatched, 0,
+            "{be:?}: the shaded frame's AOV equals the full build's"
+        );
+        assert_shaded_equal(&full_shaded.rgba8, &out_shaded.rgba8, &format!("{be:?}"));
+        assert!(
+            out_shaded.stats.shadow_rays > 0,
+            "secondary rays were traced: {:?}",
+            out_shaded.stats
         );
         let alloc = sr.alloc_report();
         assert!(

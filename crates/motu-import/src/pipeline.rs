@@ -435,26 +435,31 @@ fn finish(
         warnings: report.warnings.clone(),
     };
     let mut meta = meta;
-    let (textures, texels) = load_textures(scene, o.texture_max, &mut meta.warnings)?;
+    let textures = write_textures(&mut writer, scene, o.texture_max, &mut meta.warnings)?;
     let mut view = compiled.view();
     view.textures = &textures;
-    view.texels = &texels;
-    motu_pack::write_hierarchy(&mut writer, &view, &meta)?;
+    view.texels = &[];
+    motu_pack::write_hierarchy_after_texels(&mut writer, &view, &meta)?;
     writer.finish().map_err(ImportError::FinishPackage)
 }
 
 /// Reads every scene texture into a capped mip chain (several at a time), in scene order so
-/// materials' texture indices hold. A file that cannot be read becomes a neutral 1×1 texture
-/// (white, opaque: the material's constant colour shows) with a warning.
-fn load_textures(
+/// materials' texture indices hold, and writes its texels to the package's texels section as
+/// soon as it is decoded: at most one batch of chains is in memory, whatever the scene's total
+/// texture size. A file that cannot be read becomes a neutral 1×1 texture (white, opaque: the
+/// material's constant colour shows) with a warning. Returns the texture records.
+fn write_textures(
+    writer: &mut PackageWriter,
     scene: &Scene,
     max_size: u32,
     warnings: &mut Vec<String>,
-) -> Result<(Vec<motu_abi::TextureRecord>, Vec<u32>), ImportError> {
+) -> Result<Vec<motu_abi::TextureRecord>, ImportError> {
     use rayon::prelude::*;
     let list = scene.textures();
     let mut records = Vec::with_capacity(list.len());
-    let mut texels: Vec<u32> = Vec::new();
+    let mut texels = motu_pack::begin_texels(writer)?;
+    // Texels written so far (the next texture's offset).
+    let mut texel_count = 0u64;
     // A bounded batch keeps at most this many decoded images in memory at once.
     const BATCH: usize = 8;
     for batch in list.chunks(BATCH) {
@@ -477,7 +482,7 @@ fn load_textures(
                     }
                 }
             };
-            let texel_offset = u32::try_from(texels.len())
+            let texel_offset = u32::try_from(texel_count)
                 .ok()
                 .filter(|&o| (o as u64) + (chain.texel_count() as u64) <= u32::MAX as u64)
                 .ok_or_else(|| ImportError::TooManyTexels {
@@ -490,11 +495,14 @@ fn load_textures(
                 mip_count: chain.levels.len() as u32,
             });
             for level in chain.levels {
-                texels.extend_from_slice(&level);
+                let bytes: Vec<u8> = level.iter().flat_map(|t| t.to_le_bytes()).collect();
+                texels.write(&bytes)?;
+                texel_count += level.len() as u64;
             }
         }
     }
-    Ok((records, texels))
+    texels.finish()?;
+    Ok(records)
 }
 
 /// Per-element counts: each element's root edges and root meshes, and everything they reach.

@@ -24,7 +24,7 @@ pub use meta::{ElementMeta, PackageMeta, SCHEMA, SCHEMA_READABLE};
 pub use read::{read_mesh_blob, MeshGeometry, ScenePackage};
 pub use sections::*;
 pub use store::{place_mesh_record, PackageGeometry};
-pub use write::write_hierarchy;
+pub use write::{begin_texels, write_hierarchy, write_hierarchy_after_texels};
 
 /// Errors reading or writing the package schema.
 #[derive(Debug, thiserror::Error)]

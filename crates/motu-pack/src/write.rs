@@ -13,6 +13,34 @@ pub fn write_hierarchy(
     view: &HierarchyView<'_>,
     meta: &PackageMeta,
 ) -> Result<(), PackError> {
+    write_tables(writer, view, meta, true)
+}
+
+/// [`write_hierarchy`] for a caller that already wrote the texels section itself, texture by
+/// texture ([`begin_texels`]), so no texel array of the whole scene is ever held: `view.texels`
+/// is ignored, `view.textures` must index that section.
+pub fn write_hierarchy_after_texels(
+    writer: &mut PackageWriter,
+    view: &HierarchyView<'_>,
+    meta: &PackageMeta,
+) -> Result<(), PackError> {
+    write_tables(writer, view, meta, false)
+}
+
+/// Starts the texels section (`u32` RGBA8 texels, every texture's mip chain back to back):
+/// write each chain as it is decoded, then finish it and call [`write_hierarchy_after_texels`].
+pub fn begin_texels(
+    writer: &mut PackageWriter,
+) -> Result<motu_package::SectionWriter<'_>, PackError> {
+    Ok(writer.begin_section(SECTION_TEXELS, "texels", 4)?)
+}
+
+fn write_tables(
+    writer: &mut PackageWriter,
+    view: &HierarchyView<'_>,
+    meta: &PackageMeta,
+    with_texels: bool,
+) -> Result<(), PackError> {
     let _span = tracing::info_span!(
         "pack_sections",
         tlases = view.tlases.len(),
@@ -29,7 +57,9 @@ pub fn write_hierarchy(
     writer.add_section_slice(SECTION_MESHES, "meshes", view.meshes)?;
     writer.add_section_slice(SECTION_MATERIALS, "materials", view.materials)?;
     writer.add_section_slice(SECTION_TEXTURES, "textures", view.textures)?;
-    writer.add_section_slice(SECTION_TEXELS, "texels", view.texels)?;
+    if with_texels {
+        writer.add_section_slice(SECTION_TEXELS, "texels", view.texels)?;
+    }
     let json = crate::meta::serialise_meta(meta).map_err(|reason| PackError::Schema {
         path: String::new(),
         reason,

@@ -34,7 +34,7 @@ pub use error::{FormatVersion, PackageError, Part};
 pub use format::Codec;
 pub use reader::{AlignedBytes, ChunkBytes, ChunkInfo, Package, SectionInfo, VerifyReport};
 pub use writer::{
-    ChunkWriter, Locator, PackageWriter, StreamId, WriteSummary, WriterOptions,
+    ChunkWriter, Locator, PackageWriter, SectionWriter, StreamId, WriteSummary, WriterOptions,
     DEFAULT_TARGET_CHUNK_BYTES,
 };
 

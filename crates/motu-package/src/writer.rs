@@ -350,11 +350,32 @@ impl PackageWriter {
         element_size: u32,
         bytes: &[u8],
     ) -> Result<(), PackageError> {
-        self.check_usable()?;
+        // Checked before anything is written, so a refused section leaves the writer usable.
         if element_size == 0 || bytes.len() % element_size as usize != 0 {
             return Err(PackageError::InvalidArgument(format!(
                 "section {name}: {} bytes is not a whole number of {element_size}-byte elements",
                 bytes.len()
+            )));
+        }
+        let mut section = self.begin_section(kind, name, element_size)?;
+        section.write(bytes)?;
+        section.finish()
+    }
+
+    /// Starts a section written piece by piece ([`SectionWriter::write`]), for a table too
+    /// large to hold in memory at once (an importer's texels); same rules as
+    /// [`add_section`](Self::add_section). The borrow keeps anything else from being written
+    /// until [`SectionWriter::finish`]; dropping it unfinished fails the package.
+    pub fn begin_section(
+        &mut self,
+        kind: SectionKind,
+        name: &str,
+        element_size: u32,
+    ) -> Result<SectionWriter<'_>, PackageError> {
+        self.check_usable()?;
+        if element_size == 0 {
+            return Err(PackageError::InvalidArgument(format!(
+                "section {name}: element size 0"
             )));
         }
         if self.sections.iter().any(|s| s.kind == kind.0) {
@@ -371,20 +392,22 @@ impl PackageWriter {
             ));
         };
         let offset = self.pad_to(SECTION_ALIGN)?;
-        self.write_bytes(bytes)?;
-        self.names.extend_from_slice(name.as_bytes());
-        self.sections.push(SectionEntry {
-            kind: kind.0,
-            element_size,
-            offset,
-            len: bytes.len() as u64,
-            checksum: format::checksum(bytes),
-            name_offset,
-            name_len,
-            reserved: 0,
-        });
-        tracing::debug!(parent: &self.span, kind = kind.0, name, bytes = bytes.len(), "section");
-        Ok(())
+        Ok(SectionWriter {
+            writer: self,
+            entry: SectionEntry {
+                kind: kind.0,
+                element_size,
+                offset,
+                len: 0,
+                checksum: 0,
+                name_offset,
+                name_len,
+                reserved: 0,
+            },
+            name: name.to_string(),
+            hasher: xxhash_rust::xxh3::Xxh3::new(),
+            finished: false,
+        })
     }
 
     /// [`add_section`](Self::add_section) for a slice of `Pod` elements.
@@ -581,5 +604,63 @@ impl ChunkWriter<'_> {
     /// Seals the open chunk and closes the stream.
     pub fn close(self) -> Result<(), PackageError> {
         self.writer.close_stream(self.stream)
+    }
+}
+
+/// One section of a [`PackageWriter`] being written: see [`PackageWriter::begin_section`].
+pub struct SectionWriter<'w> {
+    writer: &'w mut PackageWriter,
+    entry: SectionEntry,
+    name: String,
+    hasher: xxhash_rust::xxh3::Xxh3,
+    finished: bool,
+}
+
+impl SectionWriter<'_> {
+    /// Appends `bytes` to the section.
+    pub fn write(&mut self, bytes: &[u8]) -> Result<(), PackageError> {
+        self.writer.check_usable()?;
+        self.writer.write_bytes(bytes)?;
+        self.hasher.update(bytes);
+        self.entry.len += bytes.len() as u64;
+        Ok(())
+    }
+
+    /// Bytes written so far.
+    pub fn len_bytes(&self) -> u64 {
+        self.entry.len
+    }
+
+    /// Ends the section (its length must be a whole number of elements) and lists it.
+    pub fn finish(mut self) -> Result<(), PackageError> {
+        self.finished = true;
+        let name = std::mem::take(&mut self.name);
+        if self.entry.len % u64::from(self.entry.element_size) != 0 {
+            self.writer.failed = true;
+            return Err(PackageError::InvalidArgument(format!(
+                "section {name}: {} bytes is not a whole number of {}-byte elements",
+                self.entry.len, self.entry.element_size
+            )));
+        }
+        self.entry.checksum = self.hasher.digest();
+        self.writer.names.extend_from_slice(name.as_bytes());
+        self.writer.sections.push(self.entry);
+        tracing::debug!(
+            parent: &self.writer.span,
+            kind = self.entry.kind,
+            name,
+            bytes = self.entry.len,
+            "section"
+        );
+        Ok(())
+    }
+}
+
+impl Drop for SectionWriter<'_> {
+    fn drop(&mut self) {
+        if !self.finished {
+            // Its bytes are in the file but it is not listed: the package cannot be finished.
+            self.writer.failed = true;
+        }
     }
 }

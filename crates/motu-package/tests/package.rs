@@ -829,3 +829,38 @@ fn read_back_and_oversized_blobs() {
         p.verify().unwrap();
     }
 }
+
+#[test]
+fn a_section_written_piece_by_piece_reads_back_like_one_added_whole() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a.motu"), dir.path().join("b.motu"));
+    let data: Vec<u8> = (0..4096u32).flat_map(|i| (i * 7).to_le_bytes()).collect();
+    let mut whole = PackageWriter::create(&a, WriterOptions::default()).unwrap();
+    whole.add_section(NODES, "nodes", 4, &data).unwrap();
+    whole.finish().unwrap();
+    let mut pieces = PackageWriter::create(&b, WriterOptions::default()).unwrap();
+    let mut section = pieces.begin_section(NODES, "nodes", 4).unwrap();
+    for part in data.chunks(1000) {
+        section.write(part).unwrap();
+    }
+    assert_eq!(section.len_bytes(), data.len() as u64);
+    section.finish().unwrap();
+    pieces.finish().unwrap();
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+    let package = Package::open(&b).unwrap();
+    assert_eq!(package.section_info(NODES).unwrap().count, 4096);
+
+    // A section left unfinished (or not a whole number of elements) fails the package: it is
+    // never finished half-listed.
+    let c = dir.path().join("c.motu");
+    let mut w = PackageWriter::create(&c, WriterOptions::default()).unwrap();
+    let mut section = w.begin_section(NODES, "nodes", 4).unwrap();
+    section.write(&[1, 2, 3]).unwrap();
+    assert!(section.finish().is_err());
+    assert!(w.finish().is_err());
+    assert!(!c.exists());
+    let mut w = PackageWriter::create(&c, WriterOptions::default()).unwrap();
+    drop(w.begin_section(NODES, "nodes", 4).unwrap());
+    assert!(w.finish().is_err());
+    assert!(!c.exists());
+}

@@ -49,6 +49,9 @@ pub fn run(a: &BenchArgs, package: &Path, path_file: &Path) -> anyhow::Result<()
     })
     .context("opening a Vulkan device for ray tracing (`motu devices` lists them)")?;
     let meshes = super::render::PackageMeshes(&pkg);
+    // Lit like `motu render`'s default shaded view (its default AO ray included), so a flight's
+    // frames cost what rendered frames cost.
+    let shading = super::render::scene_shading_with(1, 1, 0.0, &pkg, &view);
     if a.stream || a.vram_budget.is_some() {
         return run_streaming(
             a,
@@ -58,7 +61,7 @@ pub fn run(a: &BenchArgs, package: &Path, path_file: &Path) -> anyhow::Result<()
             &view,
             &meshes,
             &ctx,
-            gpu_backend,
+            (gpu_backend, shading),
             (w, h, n, warmup),
         );
     }
@@ -73,6 +76,7 @@ pub fn run(a: &BenchArgs, package: &Path, path_file: &Path) -> anyhow::Result<()
     let mut live = motu_gpu::LiveRenderer::new(scene);
     let opts = motu_gpu::RenderOptions {
         backend: gpu_backend,
+        shading,
         ..Default::default()
     };
     let cams: Vec<_> = (0..n).map(|f| path.sample(f, n).params(w, h)).collect();
@@ -149,7 +153,7 @@ fn run_streaming(
     view: &motu_abi::HierarchyView<'_>,
     meshes: &super::render::PackageMeshes<'_>,
     ctx: &motu_gpu::Context,
-    backend: motu_gpu::Backend,
+    (backend, shading): (motu_gpu::Backend, motu_abi::shade::Shading),
     (w, h, n, warmup): (u32, u32, u32, u32),
 ) -> anyhow::Result<()> {
     let opts = motu_gpu::StreamOptions {
@@ -158,6 +162,7 @@ fn run_streaming(
     };
     let ropts = motu_gpu::RenderOptions {
         backend,
+        shading,
         ..Default::default()
     };
     let cams: Vec<_> = (0..n).map(|f| path.sample(f, n).params(w, h)).collect();

@@ -365,8 +365,8 @@ fn render_streaming(
             bail!(
                 "--vram-budget {} is below the streaming floor of {} ({} bytes) for {w}×{h}: \
                  the resident skeleton ({} of tables, {} of TLASes, proxies and PI BLASes), the \
-                 largest BLAS build ({}), TLAS rebuilds ({}), frame buffers ({}), staging and \
-                 allocator slack; raise --vram-budget to at least the floor (`motu report` \
+                 largest BLAS build ({}), TLAS rebuilds ({}), frame buffers ({}), shading \
+                 tables and attributes ({}), staging and allocator slack; raise --vram-budget to at least the floor (`motu report` \
                  prints it as streaming.min_resident_bytes)",
                 crate::size::format_size(budget),
                 crate::size::format_size(floor.min_resident_bytes),
@@ -376,6 +376,9 @@ fn render_streaming(
                 crate::size::format_size(floor.largest_blas_build_bytes),
                 crate::size::format_size(floor.tlas_rebuild_bytes),
                 crate::size::format_size(floor.frame_bytes),
+                crate::size::format_size(
+                    floor.shading_tables_bytes + floor.shading_attributes_bytes
+                ),
             );
         }
     }

@@ -53,11 +53,12 @@ impl<'a> StreamingRenderer<'a> {
                         continue;
                     }
                     let rec = self.view.meshes[m];
-                    let g = self.maybe_evicting(evict, |s| MeshGpu::alloc(&mut s.heap, m, &rec))?;
+                    let mut g = self
+                        .maybe_evicting(evict, |s| MeshGpu::alloc_streamed(&mut s.heap, m, &rec))?;
                     let ctx = self.ctx.clone();
                     let source = self.source;
                     let up = self.up_mut()?;
-                    let bytes = match g.upload(&ctx, up, source, m) {
+                    let bytes = match g.upload_streamed(&ctx, up, source, m) {
                         Ok(n) => n,
                         Err(e) => {
                             // Queued copies into it must land before it is destroyed.

@@ -56,6 +56,11 @@ pub struct StreamFloor {
     pub tlas_rebuild_bytes: u64,
     /// Frame buffers at the image size (carried hits, lists, AOV, colour, readback).
     pub frame_bytes: u64,
+    /// Shading tables kept resident: texture records, texels, the per-mesh attribute table.
+    pub shading_tables_bytes: u64,
+    /// The most shading-attribute bytes (normals, texture coordinates) the meshes of one
+    /// triangle BLAS stream with (they are resident with its geometry).
+    pub shading_attributes_bytes: u64,
     pub width: u32,
     pub height: u32,
     /// Trace pipeline and shader binding tables (allowance).
@@ -228,7 +233,9 @@ pub fn streaming_floor(
     let pixels = u64::from(width) * u64::from(height);
     let guard = u64::from(width + 16) * u64::from(height + 16) / 4;
     let frame = frame_buffer_bytes(pixels, guard, nb + nt);
-    let base = tables + skeleton + frame + PIPELINE_BYTES;
+    let shading_tables = crate::shading::table_bytes(view);
+    let shading_attributes = largest_blas_attribute_bytes(view);
+    let base = tables + skeleton + frame + PIPELINE_BYTES + shading_tables + shading_attributes;
     // Budget-dependent parts: staging (an eighth), TLAS rebuild scratch batches (an eighth),
     // allocator slack (four blocks of a 64th): iterate to the fixed point.
     let mut floor = base + blas_build;
@@ -253,6 +260,8 @@ pub fn streaming_floor(
         largest_blas_build_bytes: blas_build,
         tlas_rebuild_bytes: parts.1,
         frame_bytes: frame,
+        shading_tables_bytes: shading_tables,
+        shading_attributes_bytes: shading_attributes,
         width,
         height,
         pipeline_bytes: PIPELINE_BYTES,
@@ -260,4 +269,25 @@ pub fn streaming_floor(
         allocator_slack_bytes: parts.2,
         min_resident_bytes: floor,
     })
+}
+
+/// Shading attributes of the triangle BLAS whose meshes have the most (see
+/// `scene::streamed_attribute_bytes`).
+fn largest_blas_attribute_bytes(view: &HierarchyView<'_>) -> u64 {
+    view.blases
+        .iter()
+        .filter(|r| r.kind == BLAS_TRIANGLES && r.item_count > 0)
+        .map(|r| {
+            let range = r.item_base as usize..(r.item_base + r.item_count) as usize;
+            view.geometries[range]
+                .iter()
+                .map(|g| {
+                    let (n, u) =
+                        crate::scene::streamed_attribute_bytes(&view.meshes[g.mesh as usize]);
+                    n + u
+                })
+                .sum::<u64>()
+        })
+        .max()
+        .unwrap_or(0)
 }

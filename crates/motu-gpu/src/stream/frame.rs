@@ -55,7 +55,8 @@ impl<'a> StreamingRenderer<'a> {
         }
         let pixels = u64::from(w) * u64::from(h);
         let guard = guard_pixels(w, h, self.opts.guard_band_px);
-        let params = frame_params(camera, opts, self.view.root_tlas);
+        let mut params = frame_params(camera, opts, self.view.root_tlas);
+        params.shading = self.shading.address;
         self.pinned = vec![false; self.item_count()];
         let fb = self.frame_buffers(w, h, guard.len(), &params)?;
         // Making room for the frame may have evicted BLASes that TLASes still reference.

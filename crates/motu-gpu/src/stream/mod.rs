@@ -16,9 +16,11 @@
 //! does, 64 bytes an instance).
 //!
 //! # Carried hits (both backends, `traverse.glsl`, `render_pixel.glsl`)
-//! Each pixel keeps its state across the passes of a frame (`Carry`, 48 bytes): the primary
-//! ray's best hit so far, *resolved* (source mesh, primitive, LOD, material, normal) while its
-//! BLAS was resident, and which ray is open (primary, then shadow) since which pass. A pass
+//! Each pixel keeps its state across the passes of a frame (`Carry`, 128 bytes):
+//! the current sample's primary best hit so far, *resolved* (source mesh, primitive, LOD,
+//! material, geometric and shading normals, textured base colour) while its BLAS was resident,
+//! sample 0's AOV record, the colour summed so far, and which ray is open (the primary, or the
+//! n-th secondary ray: lights' shadow rays, then AO rays) since which pass. A pass
 //! walks what is resident now against that best hit (it only culls with the carried t, never
 //! with an empty instance's box). A ray that was traced in every pass since it started has
 //! walked every BLAS resident in any of those passes, so a non-resident BLAS is *open* for it
@@ -27,7 +29,8 @@
 //! request (needed, counted), the rest are marked open. The closest hit over BLASes processed
 //! in different passes is the minimum over the passes, so the image equals the full build's,
 //! and a pixel never needs two BLASes resident at once: anything may be evicted between
-//! passes. Shadow rays start when the primary hit is final and stop at the first occluder.
+//! passes. Secondary rays start when their sample's primary hit is final, one after the
+//! other, and stop at the first occluder; the colour is the full build's (docs/shading.md).
 //!
 //! # Build–traverse loop ([`StreamingRenderer::render_frame`])
 //! Pass 1 traces every pixel plus a sparse *guard band* of primary rays around the image.
@@ -59,6 +62,7 @@ mod frame;
 mod passes;
 mod rebuild;
 mod residency;
+mod shading;
 mod skeleton;
 
 pub use floor::{streaming_floor, FloorSizes, StreamFloor};
@@ -254,6 +258,7 @@ pub struct StreamingRenderer<'a> {
     pis_table: usize,
     mesh_geo_table: usize,
     tlas_addr_table: usize,
+    shading: shading::StreamShading,
     view: HierarchyView<'a>,
     source: &'a dyn MeshBlobSource,
     opts: StreamOptions,

@@ -36,7 +36,7 @@ pub(super) struct StreamParams {
 }
 
 /// Bytes of one pixel's `Carry` (`render_pixel.glsl`).
-pub(super) const CARRY_BYTES: u64 = 48;
+pub(super) const CARRY_BYTES: u64 = 128;
 /// Stamp levels of `common.glsl` (`STREAM_*`).
 const LEVEL_OPEN: u32 = 1;
 const LEVEL_NEEDED: u32 = 2;

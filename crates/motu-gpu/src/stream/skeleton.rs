@@ -281,6 +281,7 @@ impl<'a> StreamingRenderer<'a> {
             pis_table: 0,
             mesh_geo_table: 0,
             tlas_addr_table: 0,
+            shading: Default::default(),
             view,
             source,
             opts: *opts,
@@ -396,6 +397,7 @@ impl<'a> StreamingRenderer<'a> {
         )?;
         walked.write(0, &vec![0u32; view.blases.len().max(1)])?;
         self.walked_buf = Some(walked);
+        self.init_shading()?;
         self.up_mut()?.flush(&ctx)?;
 
         // PI BLASes: the skeleton, built once from the PI boxes (input freed after).
@@ -454,6 +456,7 @@ impl<'a> StreamingRenderer<'a> {
                 mesh_geo[2 * m + 1] = g.indices_address;
             }
         }
+        self.queue_mesh_attrs()?;
         let Some(up) = self.up.as_mut() else {
             return Err(GpuError::InvalidRequest(
                 "streaming: staging ring released".into(),
