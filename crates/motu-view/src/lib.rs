@@ -164,8 +164,8 @@ where
     check_display()?;
     let event_loop = EventLoop::new().map_err(|e| {
         ViewError::Window(format!(
-            "{e} (motu view speaks X11; on a Wayland-only session run it under XWayland, or render \
-             headless with `motu render`)"
+            "{e} (motu view opens X11 and Wayland windows: check DISPLAY / WAYLAND_DISPLAY, or \
+             render headless with `motu render`)"
         ))
     })?;
     let display = event_loop
