@@ -138,6 +138,53 @@ fn motu_bench_stays_below_the_cli() {
     }
 }
 
+/// Render set-up (package meshes, cameras, scene shading, streaming bounds) is a library below
+/// the CLI, the viewer and the bench harness; it needs no Vulkan of its own (`ash` stays in
+/// motu-gpu), and the CLI neither holds it nor the camera-path flights.
+#[test]
+fn motu_render_stays_below_the_cli_the_viewer_and_bench() {
+    let all = manifests();
+    let (_, m) = all.iter().find(|(n, _)| n == "motu-render").unwrap();
+    let deps = dependencies(m);
+    assert!(deps.iter().any(|d| d == "motu-pack"), "{deps:?}");
+    for above in [
+        "motu-cli",
+        "motu-view",
+        "motu-bench",
+        "motu-import",
+        "ash",
+        "anyhow",
+        "clap",
+    ] {
+        assert!(!deps.iter().any(|d| d == above), "motu-render uses {above}");
+    }
+    for user in ["motu-cli", "motu-bench"] {
+        let (_, u) = all.iter().find(|(n, _)| n == user).unwrap();
+        assert!(dependencies(u).iter().any(|d| d == "motu-render"), "{user}");
+    }
+    let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../crates/motu-cli/src");
+    assert!(
+        !src.join("cmd/flight.rs").exists(),
+        "flights live in motu-bench"
+    );
+    for (path, text) in rust_files(&src) {
+        for glue in [
+            "impl motu_trace::MeshSource",
+            "impl motu_gpu::MeshBlobSource",
+            "LightKind::",
+            "ao_distance",
+            "fn percentile",
+            "StreamingRenderer::new(ctx, *view",
+        ] {
+            assert!(
+                !text.contains(glue),
+                "{} holds {glue}: render set-up lives in motu-render, flights in motu-bench",
+                path.display()
+            );
+        }
+    }
+}
+
 /// The CLI parses arguments and prints; the import pipeline's stages are motu-import's job.
 #[test]
 fn the_cli_calls_the_import_pipeline_not_its_stages() {

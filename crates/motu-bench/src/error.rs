@@ -36,6 +36,24 @@ pub enum BenchError {
         #[source]
         source: motu_trace::TraceError,
     },
+    #[error("{what}")]
+    GpuFrame {
+        what: String,
+        #[source]
+        source: motu_gpu::GpuError,
+    },
+    #[error(transparent)]
+    Devices(motu_gpu::GpuError),
+    #[error("{what}")]
+    Package {
+        what: String,
+        #[source]
+        source: motu_pack::PackError,
+    },
+    #[error(transparent)]
+    PackageData(motu_pack::PackError),
+    #[error(transparent)]
+    Render(#[from] motu_render::RenderError),
     #[error("every configuration failed (first: {first}); logs in {}", logs.display())]
     EveryConfigurationFailed { first: String, logs: PathBuf },
 }

@@ -15,6 +15,7 @@
 #[macro_use]
 mod error;
 mod child;
+mod flight;
 mod plan;
 mod report;
 mod runner;
@@ -23,6 +24,7 @@ mod tables;
 
 pub use child::{child_render, ChildRender};
 pub use error::BenchError;
+pub use flight::{run_flight, Flight, FlightOptions};
 pub use plan::{
     best_backend, Backend, ConfigSpec, SceneSpec, Settings, Source, SuiteKind, SuiteOptions,
 };
