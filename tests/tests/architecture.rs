@@ -363,8 +363,8 @@ fn no_use_circles_between_files() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
     let mut crates = vec![root.join("pbrt-import/src")];
     for e in std::fs::read_dir(root.join("crates")).unwrap().flatten() {
-        let name = e.file_name().to_string_lossy().into_owned();
-        if !["motu-gpu", "motu-trace"].contains(&name.as_str()) {
+        // motu-gpu still has circles (`scene → lod_instances → scene`, the streaming files).
+        if e.file_name() != "motu-gpu" {
             crates.push(e.path().join("src"));
         }
     }
@@ -390,6 +390,9 @@ fn no_use_circles_between_files() {
         ("motu-report/src", "budget", "rows"),
         ("motu-report/src", "presets", "sizes"),
         ("motu-cli/src", "cmd::demo", "cmd::render"),
+        ("motu-trace/src", "traverse", "coverage"),
+        ("motu-trace/src", "shade", "options"),
+        ("motu-trace/src", "render", "shade"),
     ] {
         assert!(
             all.iter()

@@ -235,6 +235,28 @@ impl LocalRay {
     }
 }
 
+/// Moves a hit point off its surface along the face-forwarded normal `n` (Wächter & Binder,
+/// "A Fast and Robust Method for Avoiding Self-Intersection", Ray Tracing Gems ch. 6): an
+/// offset of 256 ULPs per unit of normal, a small absolute one near the origin. The GPU
+/// mirrors this, so shadow rays start at the same point.
+pub fn shadow_offset(p: [f32; 3], n: [f32; 3], reach: f32) -> [f32; 3] {
+    // `reach` (largest |origin| component + hit distance) bounds the error of p = o + t·d,
+    // which Wächter & Binder's offset (made for exact p) does not cover.
+    let p: [f32; 3] = std::array::from_fn(|a| p[a] + n[a] * (reach * (1.0 / 262_144.0)));
+    const ORIGIN: f32 = 1.0 / 32.0;
+    const FLOAT_SCALE: f32 = 1.0 / 65536.0;
+    const INT_SCALE: f32 = 256.0;
+    std::array::from_fn(|a| {
+        if p[a].abs() < ORIGIN {
+            p[a] + FLOAT_SCALE * n[a]
+        } else {
+            let of = (INT_SCALE * n[a]) as i32;
+            let bits = p[a].to_bits() as i32;
+            f32::from_bits((if p[a] < 0.0 { bits - of } else { bits + of }) as u32)
+        }
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
