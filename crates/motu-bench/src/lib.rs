@@ -222,6 +222,63 @@ mod tests {
         std::fs::remove_dir_all(&dir).ok();
     }
 
+    /// The suite's configurations, pinned: labels and `motu import` arguments per scene.
+    #[test]
+    fn plans_keep_their_configurations() {
+        let configs = |quick: bool| -> Vec<String> {
+            let a = SuiteOptions {
+                suite: "cpu".into(),
+                quick,
+                scenes: Some(PathBuf::from("/nonexistent/shared/scenes")),
+                ..Default::default()
+            };
+            let s = plan::settings(&a).unwrap();
+            plan::plan(&s, &a)
+                .unwrap()
+                .iter()
+                .flat_map(|sc| {
+                    sc.configs
+                        .iter()
+                        .map(|c| format!("{} {}: {}", sc.name, c.label, c.import_args.join(" ")))
+                })
+                .collect()
+        };
+        let std = |scene: &str| {
+            [
+                format!("{scene} sl: --levels sl"),
+                format!("{scene} ml: --levels ml"),
+                format!("{scene} levels2: --levels 2"),
+                format!("{scene} auto: --levels auto"),
+            ]
+        };
+        let mut want: Vec<String> = std("forest")
+            .into_iter()
+            .chain(std("sphereflake"))
+            .collect();
+        want.extend(
+            [
+                "lod-grid sl: --levels sl",
+                "lod-grid ml: --levels ml",
+                "lod-grid sl+lod: --levels sl --lod 4",
+                "lod-grid ml+lod: --levels ml --lod 4",
+                "buddha-fractal sl: --levels sl",
+                "buddha-fractal ml: --levels ml",
+            ]
+            .map(String::from),
+        );
+        let mut full = want.clone();
+        full.extend(["island sl: --levels sl", "island ml: --levels ml"].map(String::from));
+        assert_eq!(configs(false), full);
+        want.extend(
+            [
+                "island sl: --levels sl --max-instances 1500",
+                "island ml: --levels ml --max-instances 1500",
+            ]
+            .map(String::from),
+        );
+        assert_eq!(configs(true), want);
+    }
+
     fn tempdir() -> PathBuf {
         let d = std::env::temp_dir().join(format!("motu-bench-test-{}", std::process::id()));
         std::fs::create_dir_all(&d).ok();

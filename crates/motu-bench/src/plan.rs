@@ -110,6 +110,20 @@ fn config(label: &str, import_args: &[&str]) -> ConfigSpec {
     }
 }
 
+/// One configuration per `--levels` label (`levels2` is `--levels 2`), each with `extra`
+/// import arguments after the level.
+fn by_levels(labels: &[&str], extra: &[&str]) -> Vec<ConfigSpec> {
+    labels
+        .iter()
+        .map(|&label| {
+            let level = if label == "levels2" { "2" } else { label };
+            let mut args = vec!["--levels", level];
+            args.extend_from_slice(extra);
+            config(label, &args)
+        })
+        .collect()
+}
+
 fn gen_source(args: &[&str]) -> Source {
     Source::Gen {
         args: args.iter().map(|s| s.to_string()).collect(),
@@ -201,14 +215,7 @@ fn find_shared_scenes(explicit: Option<&Path>) -> Option<PathBuf> {
 /// The suite's scenes and configurations.
 pub(crate) fn plan(s: &Settings, a: &SuiteOptions) -> Result<Vec<SceneSpec>, BenchError> {
     let q = s.quick;
-    let std_configs = || {
-        vec![
-            config("sl", &["--levels", "sl"]),
-            config("ml", &["--levels", "ml"]),
-            config("levels2", &["--levels", "2"]),
-            config("auto", &["--levels", "auto"]),
-        ]
-    };
+    let std_configs = || by_levels(&["sl", "ml", "levels2", "auto"], &[]);
     let mut scenes = vec![
         SceneSpec {
             name: "forest",
@@ -255,10 +262,7 @@ pub(crate) fn plan(s: &Settings, a: &SuiteOptions) -> Result<Vec<SceneSpec>, Ben
             source: Source::Shared {
                 path: dir.join("buddha-fractal/buddha-fractal.pbrt"),
             },
-            configs: vec![
-                config("sl", &["--levels", "sl"]),
-                config("ml", &["--levels", "ml"]),
-            ],
+            configs: by_levels(&["sl", "ml"], &[]),
             must_exceed_instances: None,
             note: "pbrt-v3-scenes, 25,250 instances of one plymesh".into(),
         }),
@@ -273,26 +277,9 @@ pub(crate) fn plan(s: &Settings, a: &SuiteOptions) -> Result<Vec<SceneSpec>, Ben
     let island_configs = if q {
         // Tiny islands cannot overflow 2^24: a low --max-instances exercises the same TLAS splits.
         let m = QUICK_ISLAND_MAX_INSTANCES.to_string();
-        vec![
-            ConfigSpec {
-                label: "sl".into(),
-                import_args: vec![
-                    "--levels".into(),
-                    "sl".into(),
-                    "--max-instances".into(),
-                    m.clone(),
-                ],
-            },
-            ConfigSpec {
-                label: "ml".into(),
-                import_args: vec!["--levels".into(), "ml".into(), "--max-instances".into(), m],
-            },
-        ]
+        by_levels(&["sl", "ml"], &["--max-instances", &m])
     } else {
-        vec![
-            config("sl", &["--levels", "sl"]),
-            config("ml", &["--levels", "ml"]),
-        ]
+        by_levels(&["sl", "ml"], &[])
     };
     scenes.push(SceneSpec {
         name: "island",

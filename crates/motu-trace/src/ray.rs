@@ -24,33 +24,7 @@ pub fn compose(a: &[f32; 12], b: &[f32; 12]) -> [f32; 12] {
 /// The inverse of a row-major 3×4 affine matrix, computed in f64; `None` when singular or not
 /// finite (such an instance can never be hit).
 pub fn invert(m: &[f32; 12]) -> Option<[f32; 12]> {
-    let a = |r: usize, c: usize| m[r * 4 + c] as f64;
-    let det = a(0, 0) * (a(1, 1) * a(2, 2) - a(1, 2) * a(2, 1))
-        - a(0, 1) * (a(1, 0) * a(2, 2) - a(1, 2) * a(2, 0))
-        + a(0, 2) * (a(1, 0) * a(2, 1) - a(1, 1) * a(2, 0));
-    if !det.is_finite() || det.abs() < 1e-30 {
-        return None;
-    }
-    let inv_det = 1.0 / det;
-    let mut l = [[0.0f64; 3]; 3];
-    l[0][0] = (a(1, 1) * a(2, 2) - a(1, 2) * a(2, 1)) * inv_det;
-    l[0][1] = (a(0, 2) * a(2, 1) - a(0, 1) * a(2, 2)) * inv_det;
-    l[0][2] = (a(0, 1) * a(1, 2) - a(0, 2) * a(1, 1)) * inv_det;
-    l[1][0] = (a(1, 2) * a(2, 0) - a(1, 0) * a(2, 2)) * inv_det;
-    l[1][1] = (a(0, 0) * a(2, 2) - a(0, 2) * a(2, 0)) * inv_det;
-    l[1][2] = (a(0, 2) * a(1, 0) - a(0, 0) * a(1, 2)) * inv_det;
-    l[2][0] = (a(1, 0) * a(2, 1) - a(1, 1) * a(2, 0)) * inv_det;
-    l[2][1] = (a(0, 1) * a(2, 0) - a(0, 0) * a(2, 1)) * inv_det;
-    l[2][2] = (a(0, 0) * a(1, 1) - a(0, 1) * a(1, 0)) * inv_det;
-    let mut r = [0.0f32; 12];
-    for row in 0..3 {
-        let t = -(l[row][0] * a(0, 3) + l[row][1] * a(1, 3) + l[row][2] * a(2, 3));
-        r[row * 4] = l[row][0] as f32;
-        r[row * 4 + 1] = l[row][1] as f32;
-        r[row * 4 + 2] = l[row][2] as f32;
-        r[row * 4 + 3] = t as f32;
-    }
-    r.iter().all(|v| v.is_finite()).then_some(r)
+    motu_abi::invert_3x4(m).filter(|r| r.iter().all(|v| v.is_finite()))
 }
 
 /// `Mᵀ n` of the linear part: turns an object-space normal into world space when `m` is
