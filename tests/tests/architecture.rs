@@ -174,6 +174,8 @@ fn motu_render_stays_below_the_cli_the_viewer_and_bench() {
             "LightKind::",
             "ao_distance",
             "fn percentile",
+            "fn choose_lod_mode",
+            "PI_LOD_SELECTOR",
             "StreamingRenderer::new(ctx, *view",
         ] {
             assert!(

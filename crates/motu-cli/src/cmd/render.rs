@@ -8,12 +8,14 @@ use glam::Vec3;
 use motu_abi::aov::Aov;
 use motu_abi::camera::{camera_path, CameraParams, CameraPath};
 use motu_abi::lod::LodParams;
-use motu_abi::lod_instance::{rule_is_camera_only, InstanceLod};
+use motu_abi::lod_instance::InstanceLod;
 use motu_abi::{HierarchyView, RootSubset};
 use motu_pack::ScenePackage;
 use serde_json::{json, Value};
 
-pub use motu_render::{camera_params, camera_pose, load_camera_path, PackageMeshes};
+pub use motu_render::{
+    camera_params, camera_pose, choose_lod_mode, load_camera_path, LodChoice, PackageMeshes,
+};
 
 /// The shaded view's lighting with `--ao-samples`, `--spp` and `--exposure`
 /// ([`motu_render::scene_shading`]).
@@ -270,6 +272,14 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         },
         frame_build_bytes: b.stream_build_budget,
         frame_build_ms: b.stream_build_ms,
+    }
+}
+
+/// `--lod-mode` as the library's request.
+pub(crate) fn lod_mode(m: LodModeArg) -> motu_render::LodMode {
+    match m {
+        LodModeArg::Instance => motu_render::LodMode::Instance,
+        LodModeArg::Traversal => motu_render::LodMode::Traversal,
     }
 }
 
@@ -560,42 +570,12 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     if !a.exposure.is_finite() {
         bail!("--exposure must be a finite number of stops");
     }
-    // Instance-level LOD where the rule allows it; otherwise the traversal path, and why.
-    let selector_pis = view
-        .pis
-        .iter()
-        .filter(|p| p.kind == motu_abi::PI_LOD_SELECTOR)
-        .count() as u32;
-    let (instance_lod, lod_mode, lod_mode_reason) = if selector_pis == 0 {
-        (None, "none", "the package has no LOD selectors")
-    } else if a.lod_mode == LodModeArg::Traversal {
-        (None, "traversal", "--lod-mode traversal")
-    } else if !rule_is_camera_only(&lod) {
-        (
-            None,
-            "traversal",
-            "--lod-stochastic chooses a level per ray",
-        )
-    } else if a.stream {
-        (
-            None,
-            "traversal",
-            "--stream resolves LOD in the traversal shader (instance LOD needs its levels' BLASes resident before the frame)",
-        )
-    } else {
-        match InstanceLod::new(&view).context("rewriting LOD selectors as instances")? {
-            Some(il) => (
-                Some(il),
-                "instance",
-                "the LOD rule depends only on the camera",
-            ),
-            None => (
-                None,
-                "traversal",
-                "no LOD selector qualifies (each sits in a TLAS placed more than once)",
-            ),
-        }
-    };
+    let LodChoice {
+        instance: instance_lod,
+        mode: lod_mode,
+        reason: lod_mode_reason,
+        selector_pis,
+    } = choose_lod_mode(&view, &lod, lod_mode(a.lod_mode), a.stream)?;
     if lod_mode == "traversal" && a.lod_mode == LodModeArg::Instance && a.lod_stochastic | a.stream
     {
         eprintln!("note: LOD runs in traversal mode: {lod_mode_reason}");
