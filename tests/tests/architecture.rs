@@ -175,6 +175,7 @@ fn motu_render_stays_below_the_cli_the_viewer_and_bench() {
             "ao_distance",
             "fn percentile",
             "fn choose_lod_mode",
+            ".apply_levels(",
             "PI_LOD_SELECTOR",
             "StreamingRenderer::new(ctx, *view",
         ] {

@@ -2,7 +2,7 @@
 
 use crate::RenderError;
 use glam::Vec3;
-use motu_abi::camera::{CameraParams, CameraPose};
+use motu_abi::camera::{CameraParams, CameraPath, CameraPose, RecordedPath};
 use motu_abi::HierarchyView;
 use motu_pack::ScenePackage;
 
@@ -94,4 +94,72 @@ pub fn load_camera_path(
         path: path.to_path_buf(),
         source,
     })
+}
+
+/// The cameras of a recorded path: `frames` samples along it (`frames` ≤ 1: one per recorded
+/// pose), at the path's recorded size when `path_size` and the path has one, else `camera`'s.
+pub fn recorded_path_cameras(
+    path: &RecordedPath,
+    camera: &CameraParams,
+    path_size: bool,
+    frames: u32,
+) -> Vec<CameraParams> {
+    let (w, h) = match (path_size, path.width, path.height) {
+        (true, Some(w), Some(h)) => (w, h),
+        _ => (camera.width, camera.height),
+    };
+    let n = if frames <= 1 {
+        path.poses.len() as u32
+    } else {
+        frames
+    };
+    (0..n).map(|f| path.sample(f, n).params(w, h)).collect()
+}
+
+/// The default camera animation of a streaming render: a sweep and dolly around the centre of
+/// the root's bounds at the camera's distance from it.
+pub fn sweep_around_root(view: &HierarchyView<'_>, pose: &CameraPose) -> CameraPath {
+    let root = &view.tlases[view.root_tlas as usize];
+    let centre = (Vec3::from_array(root.bounds_min) + Vec3::from_array(root.bounds_max)) * 0.5;
+    CameraPath::sweep_and_dolly((centre - pose.world_eye).length(), 0.3)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn path(sized: bool) -> RecordedPath {
+        let size = if sized {
+            r#""width": 80, "height": 45,"#
+        } else {
+            ""
+        };
+        let pose =
+            |z: f32| format!(r#"{{"eye":[0,0,{z}],"forward":[0,0,-1],"up":[0,1,0],"fov_deg":40}}"#);
+        RecordedPath::from_json(&format!(
+            r#"{{"format":"motu-camera-path","version":1,{size}"frames":[{},{},{}]}}"#,
+            pose(3.0),
+            pose(2.0),
+            pose(1.0)
+        ))
+        .unwrap()
+    }
+
+    #[test]
+    fn recorded_path_cameras_take_the_path_size_and_pose_count_unless_told() {
+        let camera = path(false).sample(0, 1).params(64, 36);
+        let c = recorded_path_cameras(&path(true), &camera, true, 1);
+        assert_eq!(c.len(), 3);
+        assert_eq!((c[0].width, c[0].height), (80, 45));
+        assert_eq!(
+            c[2].world_eye,
+            path(true).sample(2, 3).params(80, 45).world_eye
+        );
+        // A size given on the command line wins; so does a frame count above 1.
+        let c = recorded_path_cameras(&path(true), &camera, false, 5);
+        assert_eq!((c.len(), c[4].width, c[4].height), (5, 64, 36));
+        // No recorded size: the camera's.
+        let c = recorded_path_cameras(&path(false), &camera, true, 0);
+        assert_eq!((c.len(), c[0].width), (3, 64));
+    }
 }

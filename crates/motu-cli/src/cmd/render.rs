@@ -4,9 +4,8 @@ use crate::cli::{BackendArg, CompareArgs, LodModeArg, RenderArgs, ViewArg};
 use crate::output;
 use crate::pipeline;
 use anyhow::{bail, Context};
-use glam::Vec3;
 use motu_abi::aov::Aov;
-use motu_abi::camera::{camera_path, CameraParams, CameraPath};
+use motu_abi::camera::{camera_path, CameraParams};
 use motu_abi::lod::LodParams;
 use motu_abi::lod_instance::InstanceLod;
 use motu_abi::{HierarchyView, RootSubset};
@@ -114,9 +113,7 @@ fn render_streaming(
 ) -> anyhow::Result<(Aov, Vec<u8>, Value)> {
     let ctx = gpu_context(a, backend)?;
     let (pose, w, h) = camera_pose(pkg, view, a.camera.as_deref(), a.width, a.height)?;
-    let root = &view.tlases[view.root_tlas as usize];
-    let centre = (Vec3::from_array(root.bounds_min) + Vec3::from_array(root.bounds_max)) * 0.5;
-    let path = CameraPath::sweep_and_dolly((centre - pose.world_eye).length(), 0.3);
+    let path = motu_render::sweep_around_root(view, &pose);
     let meshes = PackageMeshes(pkg);
     let opts = motu_gpu::StreamOptions {
         budget_bytes: a.vram_budget.unwrap_or(u64::MAX),
@@ -353,18 +350,10 @@ fn recorded_cameras(
         return Ok(None);
     };
     let path = load_camera_path(p)?;
-    let (w, h) = match (a.width, a.height, path.width, path.height) {
-        (None, None, Some(w), Some(h)) => (w, h),
-        _ => (camera.width, camera.height),
-    };
-    let n = if a.frames <= 1 {
-        path.poses.len() as u32
-    } else {
-        a.frames
-    };
-    Ok(Some(
-        (0..n).map(|f| path.sample(f, n).params(w, h)).collect(),
-    ))
+    let path_size = a.width.is_none() && a.height.is_none();
+    Ok(Some(motu_render::recorded_path_cameras(
+        &path, &camera, path_size, a.frames,
+    )))
 }
 
 /// A recorded camera path on a full GPU build: one frame per camera through the viewer's
@@ -434,22 +423,9 @@ fn render_cpu_instance_lod(
     let cams = recorded
         .clone()
         .unwrap_or_else(|| vec![camera; a.frames as usize]);
-    let mut times = Vec::with_capacity(cams.len());
-    let mut last = None;
-    for cam in &cams {
-        let mut frame = il.clone();
-        let levels = frame.levels(view, &lod, cam.pixels_per_unit_at_1, cam.world_eye);
-        frame.apply_levels(view, &levels);
-        let v = frame.view(view);
-        let tracer = motu_trace::Tracer::new(v, &meshes).context("preparing the CPU tracer")?;
-        let out = motu_trace::render_with(&tracer, cam, &opts).context("rendering on the CPU")?;
-        times.push(out.stats.ms_per_frame);
-        last = Some(out);
-    }
-    let out = last.context("no frame rendered")?;
-    times.sort_by(f64::total_cmp);
+    let (out, median_ms) = motu_render::render_cpu_instance_lod(view, &meshes, il, &opts, &cams)?;
     let mut stats = serde_json::to_value(&out.stats)?;
-    stats["ms_per_frame"] = json!(times[times.len() / 2]);
+    stats["ms_per_frame"] = json!(median_ms);
     stats["frames"] = json!(cams.len());
     Ok((out.aov, out.rgba8, stats))
 }
