@@ -138,6 +138,56 @@ fn motu_bench_stays_below_the_cli() {
     }
 }
 
+/// Render set-up (package meshes, cameras, scene shading, streaming bounds) is a library below
+/// the CLI, the viewer and the bench harness; it needs no Vulkan of its own (`ash` stays in
+/// motu-gpu), and the CLI neither holds it nor the camera-path flights.
+#[test]
+fn motu_render_stays_below_the_cli_the_viewer_and_bench() {
+    let all = manifests();
+    let (_, m) = all.iter().find(|(n, _)| n == "motu-render").unwrap();
+    let deps = dependencies(m);
+    assert!(deps.iter().any(|d| d == "motu-pack"), "{deps:?}");
+    for above in [
+        "motu-cli",
+        "motu-view",
+        "motu-bench",
+        "motu-import",
+        "ash",
+        "anyhow",
+        "clap",
+    ] {
+        assert!(!deps.iter().any(|d| d == above), "motu-render uses {above}");
+    }
+    for user in ["motu-cli", "motu-bench"] {
+        let (_, u) = all.iter().find(|(n, _)| n == user).unwrap();
+        assert!(dependencies(u).iter().any(|d| d == "motu-render"), "{user}");
+    }
+    let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../crates/motu-cli/src");
+    assert!(
+        !src.join("cmd/flight.rs").exists(),
+        "flights live in motu-bench"
+    );
+    for (path, text) in rust_files(&src) {
+        for glue in [
+            "impl motu_trace::MeshSource",
+            "impl motu_gpu::MeshBlobSource",
+            "LightKind::",
+            "ao_distance",
+            "fn percentile",
+            "fn choose_lod_mode",
+            ".apply_levels(",
+            "PI_LOD_SELECTOR",
+            "StreamingRenderer::new(ctx, *view",
+        ] {
+            assert!(
+                !text.contains(glue),
+                "{} holds {glue}: render set-up lives in motu-render, flights in motu-bench",
+                path.display()
+            );
+        }
+    }
+}
+
 /// The CLI parses arguments and prints; the import pipeline's stages are motu-import's job.
 #[test]
 fn the_cli_calls_the_import_pipeline_not_its_stages() {
@@ -316,8 +366,8 @@ fn no_use_circles_between_files() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
     let mut crates = vec![root.join("pbrt-import/src")];
     for e in std::fs::read_dir(root.join("crates")).unwrap().flatten() {
-        let name = e.file_name().to_string_lossy().into_owned();
-        if !["motu-gpu", "motu-trace"].contains(&name.as_str()) {
+        // motu-gpu still has circles (`scene → lod_instances → scene`, the streaming files).
+        if e.file_name() != "motu-gpu" {
             crates.push(e.path().join("src"));
         }
     }
@@ -343,6 +393,9 @@ fn no_use_circles_between_files() {
         ("motu-report/src", "budget", "rows"),
         ("motu-report/src", "presets", "sizes"),
         ("motu-cli/src", "cmd::demo", "cmd::render"),
+        ("motu-trace/src", "traverse", "coverage"),
+        ("motu-trace/src", "shade", "options"),
+        ("motu-trace/src", "render", "shade"),
     ] {
         assert!(
             all.iter()

@@ -26,6 +26,15 @@ fn forest(dir: &Path) -> PathBuf {
     pkg
 }
 
+/// The default island (`motu gen island`, default import): `DIR/island.motu`.
+fn island(dir: &Path) -> PathBuf {
+    let gen = dir.join("island");
+    motu_ok(&["gen", "island", "-o", s(&gen)]);
+    let pkg = dir.join("island.motu");
+    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    pkg
+}
+
 /// `motu view` on `display`, asserting success; returns stderr.
 fn view_ok(display: &str, args: &[&str]) -> String {
     let mut all = vec!["view"];
@@ -640,10 +649,7 @@ fn view_never_writes_an_unfinished_frame() {
     };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let gen = d.join("island");
-    motu_ok(&["gen", "island", "-o", s(&gen)]);
-    let pkg = d.join("island.motu");
-    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    let pkg = island(d);
     let rep = motu_ok(&[
         "report",
         s(&pkg),
@@ -698,10 +704,7 @@ fn view_subsets_equal_render_subsets() {
     };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let gen = d.join("island");
-    motu_ok(&["gen", "island", "-o", s(&gen)]);
-    let pkg = d.join("island.motu");
-    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    let pkg = island(d);
     let raov = d.join("r.aov");
     motu_ok(&[
         "render",
@@ -807,10 +810,7 @@ fn view_streams_progressively_within_a_frame_build_budget() {
     };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let gen = d.join("island");
-    motu_ok(&["gen", "island", "-o", s(&gen)]);
-    let pkg = d.join("island.motu");
-    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    let pkg = island(d);
     // One pose, the start camera (recorded through the window).
     let start = d.join("start.json");
     view_ok(

@@ -89,35 +89,6 @@ pub struct InstanceLod {
     pub traversal_selectors: u32,
 }
 
-fn inverse(m: &[f32; 12]) -> Option<[f32; 12]> {
-    let a = |r: usize, c: usize| f64::from(m[4 * r + c]);
-    let det = a(0, 0) * (a(1, 1) * a(2, 2) - a(1, 2) * a(2, 1))
-        - a(0, 1) * (a(1, 0) * a(2, 2) - a(1, 2) * a(2, 0))
-        + a(0, 2) * (a(1, 0) * a(2, 1) - a(1, 1) * a(2, 0));
-    if !det.is_finite() || det.abs() < 1e-30 {
-        return None;
-    }
-    let inv_det = 1.0 / det;
-    let mut l = [[0f64; 3]; 3];
-    for (r, row) in l.iter_mut().enumerate() {
-        for (c, v) in row.iter_mut().enumerate() {
-            // Adjugate: cofactor of (c, r).
-            let (r0, r1) = ((c + 1) % 3, (c + 2) % 3);
-            let (c0, c1) = ((r + 1) % 3, (r + 2) % 3);
-            *v = (a(r0, c0) * a(r1, c1) - a(r0, c1) * a(r1, c0)) * inv_det;
-        }
-    }
-    let t = [a(0, 3), a(1, 3), a(2, 3)];
-    let mut out = [0f32; 12];
-    for r in 0..3 {
-        for c in 0..3 {
-            out[4 * r + c] = l[r][c] as f32;
-        }
-        out[4 * r + 3] = -(l[r][0] * t[0] + l[r][1] * t[1] + l[r][2] * t[2]) as f32;
-    }
-    Some(out)
-}
-
 /// `a ∘ b` (apply `b` first), in f64.
 fn compose(a: &[f32; 12], b: &[f32; 12]) -> [f32; 12] {
     let mut out = [0f32; 12];
@@ -225,7 +196,7 @@ impl InstanceLod {
                     if placed[pi.target as usize].is_some() {
                         continue;
                     }
-                    let Some(parent_from_child) = inverse(&pi.child_from_parent) else {
+                    let Some(parent_from_child) = crate::invert_3x4(&pi.child_from_parent) else {
                         continue;
                     };
                     placed[pi.target as usize] = Some(compose(&world_from_t, &parent_from_child));
@@ -309,7 +280,7 @@ impl InstanceLod {
                     } else {
                         None
                     };
-                    match (width, inverse(&pi.child_from_parent)) {
+                    match (width, crate::invert_3x4(&pi.child_from_parent)) {
                         (Some(w), Some(parent_from_child)) => {
                             slots_here.push((*pi, w, parent_from_child, inst.element))
                         }

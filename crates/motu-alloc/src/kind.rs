@@ -132,6 +132,21 @@ impl fmt::Display for ByteSize {
     }
 }
 
+/// The binary units byte sizes are printed in, smallest first.
+pub const BINARY_UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
+
+/// `bytes` in the largest of [`BINARY_UNITS`] it reaches (at most TiB): the scaled value and
+/// the unit. Every byte printer (`human_bytes`, `format_size`, the GPU report) rounds this.
+pub fn binary_scale(bytes: u64) -> (f64, &'static str) {
+    let mut v = bytes as f64;
+    let mut u = 0;
+    while v >= 1024.0 && u + 1 < BINARY_UNITS.len() {
+        v /= 1024.0;
+        u += 1;
+    }
+    (v, BINARY_UNITS[u])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -162,5 +177,14 @@ mod tests {
     #[test]
     fn byte_size_shows_bytes_and_mib() {
         assert_eq!(ByteSize(3 << 19).to_string(), "1572864 bytes (1.5 MiB)");
+    }
+
+    #[test]
+    fn binary_scale_picks_the_largest_unit_reached() {
+        assert_eq!(binary_scale(0), (0.0, "B"));
+        assert_eq!(binary_scale(1023), (1023.0, "B"));
+        assert_eq!(binary_scale(1024), (1.0, "KiB"));
+        assert_eq!(binary_scale(3 << 29), (1.5, "GiB"));
+        assert_eq!(binary_scale(1 << 50), (1024.0, "TiB"));
     }
 }

@@ -84,7 +84,9 @@ mod stats;
 pub use allocator::{AllocRequest, Allocation, Allocator, BlockEvent};
 pub use batch::{plan_build_batches, BatchError, BatchLimits, BatchPlan, BuildBatch, BuildSize};
 pub use error::{AllocError, LimitsError};
-pub use kind::{AllocKind, AllocationId, BlockId, ByteSize, MemoryClass};
+pub use kind::{
+    binary_scale, AllocKind, AllocationId, BlockId, ByteSize, MemoryClass, BINARY_UNITS,
+};
 pub use limits::{
     effective_budget_bytes, standard_block_size_bytes, AllocLimits, AllocPolicy, SafetyMargin, GIB,
     MAX_STANDARD_BLOCK_BYTES, MIB, MIN_STANDARD_BLOCK_BYTES,

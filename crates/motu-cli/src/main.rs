@@ -87,4 +87,44 @@ mod tests {
             "importing scene.pbrt: scene.pbrt: No such device (os error 19)"
         );
     }
+
+    /// The viewer and flights light scenes with `motu_render::ShadingOptions::default()`: it
+    /// must stay `motu render`'s defaults, and the bounds flags map one to one.
+    #[test]
+    fn render_library_defaults_are_the_render_flags_defaults() {
+        let c = cli::Cli::try_parse_from(["motu", "render", "pkg", "-o", "x.png"]).unwrap();
+        let cli::Command::Render(a) = c.command else {
+            panic!("not render")
+        };
+        let o = motu_render::ShadingOptions::default();
+        assert_eq!(
+            (o.ao_samples, o.spp, o.exposure_ev),
+            (a.ao_samples, a.spp, a.exposure)
+        );
+        let b = cmd::render::stream_bounds(&a.stream_bounds);
+        assert!(!b.given());
+        let c = cli::Cli::try_parse_from([
+            "motu",
+            "render",
+            "pkg",
+            "-o",
+            "x.png",
+            "--stream-fallback",
+            "coarse",
+            "--stream-build-budget",
+            "1MiB",
+            "--stream-build-ms",
+            "2.5",
+        ])
+        .unwrap();
+        let cli::Command::Render(a) = c.command else {
+            panic!("not render")
+        };
+        let o = cmd::render::stream_bounds(&a.stream_bounds).options();
+        assert!(cmd::render::stream_bounds(&a.stream_bounds).given());
+        assert_eq!(o.fallback, motu_gpu::StreamFallback::Coarse);
+        assert_eq!(o.frame_build_bytes, 1 << 20);
+        assert_eq!(o.frame_build_ms, 2.5);
+        assert_eq!(o.max_passes, motu_gpu::StreamOptions::default().max_passes);
+    }
 }

@@ -216,17 +216,9 @@ impl DeviceReport {
 
 /// `2.00 GiB (2147483648)`: readable and exact.
 fn bytes(n: u64) -> String {
-    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
-    let mut v = n as f64;
-    let mut unit = 0;
-    while v >= 1024.0 && unit + 1 < UNITS.len() {
-        v /= 1024.0;
-        unit += 1;
-    }
-    if unit == 0 {
-        format!("{n} B")
-    } else {
-        format!("{v:.2} {} ({n})", UNITS[unit])
+    match motu_alloc::binary_scale(n) {
+        (_, "B") => format!("{n} B"),
+        (v, unit) => format!("{v:.2} {unit} ({n})"),
     }
 }
 

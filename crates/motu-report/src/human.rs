@@ -1,35 +1,22 @@
 //! Byte sizes and counts for people (`1.50 GiB`, `15.3G`), shared by every output format.
 
+use motu_alloc::binary_scale;
+
 /// `1.50 GiB`, `12.0 MiB`, `640 B`.
 pub fn human_bytes(bytes: u64) -> String {
-    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
-    let mut v = bytes as f64;
-    let mut u = 0;
-    while v >= 1024.0 && u + 1 < UNITS.len() {
-        v /= 1024.0;
-        u += 1;
-    }
-    match u {
-        0 => format!("{bytes} B"),
-        _ if v >= 100.0 => format!("{v:.0} {}", UNITS[u]),
-        _ if v >= 10.0 => format!("{v:.1} {}", UNITS[u]),
-        _ => format!("{v:.2} {}", UNITS[u]),
+    match binary_scale(bytes) {
+        (_, "B") => format!("{bytes} B"),
+        (v, unit) if v >= 100.0 => format!("{v:.0} {unit}"),
+        (v, unit) if v >= 10.0 => format!("{v:.1} {unit}"),
+        (v, unit) => format!("{v:.2} {unit}"),
     }
 }
 
 /// `1536` → `1.5 KiB`: one decimal at every unit (the command line's progress and summaries).
 pub fn format_size(bytes: u64) -> String {
-    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
-    let mut v = bytes as f64;
-    let mut u = 0;
-    while v >= 1024.0 && u + 1 < UNITS.len() {
-        v /= 1024.0;
-        u += 1;
-    }
-    if u == 0 {
-        format!("{bytes} B")
-    } else {
-        format!("{v:.1} {}", UNITS[u])
+    match binary_scale(bytes) {
+        (_, "B") => format!("{bytes} B"),
+        (v, unit) => format!("{v:.1} {unit}"),
     }
 }
 

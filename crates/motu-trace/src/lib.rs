@@ -39,8 +39,10 @@
 
 pub mod bvh;
 pub mod compare;
+mod coverage;
 pub mod fixtures;
 pub mod mesh;
+mod options;
 pub mod ray;
 pub mod render;
 pub mod shade;

@@ -24,33 +24,7 @@ pub fn compose(a: &[f32; 12], b: &[f32; 12]) -> [f32; 12] {
 /// The inverse of a row-major 3×4 affine matrix, computed in f64; `None` when singular or not
 /// finite (such an instance can never be hit).
 pub fn invert(m: &[f32; 12]) -> Option<[f32; 12]> {
-    let a = |r: usize, c: usize| m[r * 4 + c] as f64;
-    let det = a(0, 0) * (a(1, 1) * a(2, 2) - a(1, 2) * a(2, 1))
-        - a(0, 1) * (a(1, 0) * a(2, 2) - a(1, 2) * a(2, 0))
-        + a(0, 2) * (a(1, 0) * a(2, 1) - a(1, 1) * a(2, 0));
-    if !det.is_finite() || det.abs() < 1e-30 {
-        return None;
-    }
-    let inv_det = 1.0 / det;
-    let mut l = [[0.0f64; 3]; 3];
-    l[0][0] = (a(1, 1) * a(2, 2) - a(1, 2) * a(2, 1)) * inv_det;
-    l[0][1] = (a(0, 2) * a(2, 1) - a(0, 1) * a(2, 2)) * inv_det;
-    l[0][2] = (a(0, 1) * a(1, 2) - a(0, 2) * a(1, 1)) * inv_det;
-    l[1][0] = (a(1, 2) * a(2, 0) - a(1, 0) * a(2, 2)) * inv_det;
-    l[1][1] = (a(0, 0) * a(2, 2) - a(0, 2) * a(2, 0)) * inv_det;
-    l[1][2] = (a(0, 2) * a(1, 0) - a(0, 0) * a(1, 2)) * inv_det;
-    l[2][0] = (a(1, 0) * a(2, 1) - a(1, 1) * a(2, 0)) * inv_det;
-    l[2][1] = (a(0, 1) * a(2, 0) - a(0, 0) * a(2, 1)) * inv_det;
-    l[2][2] = (a(0, 0) * a(1, 1) - a(0, 1) * a(1, 0)) * inv_det;
-    let mut r = [0.0f32; 12];
-    for row in 0..3 {
-        let t = -(l[row][0] * a(0, 3) + l[row][1] * a(1, 3) + l[row][2] * a(2, 3));
-        r[row * 4] = l[row][0] as f32;
-        r[row * 4 + 1] = l[row][1] as f32;
-        r[row * 4 + 2] = l[row][2] as f32;
-        r[row * 4 + 3] = t as f32;
-    }
-    r.iter().all(|v| v.is_finite()).then_some(r)
+    motu_abi::invert_3x4(m).filter(|r| r.iter().all(|v| v.is_finite()))
 }
 
 /// `Mᵀ n` of the linear part: turns an object-space normal into world space when `m` is
@@ -233,6 +207,28 @@ impl LocalRay {
         let t = (u * az + v * bz + w * cz) / det;
         (t > t_min && t < t_max).then_some((t, [u / det, v / det, w / det]))
     }
+}
+
+/// Moves a hit point off its surface along the face-forwarded normal `n` (Wächter & Binder,
+/// "A Fast and Robust Method for Avoiding Self-Intersection", Ray Tracing Gems ch. 6): an
+/// offset of 256 ULPs per unit of normal, a small absolute one near the origin. The GPU
+/// mirrors this, so shadow rays start at the same point.
+pub fn shadow_offset(p: [f32; 3], n: [f32; 3], reach: f32) -> [f32; 3] {
+    // `reach` (largest |origin| component + hit distance) bounds the error of p = o + t·d,
+    // which Wächter & Binder's offset (made for exact p) does not cover.
+    let p: [f32; 3] = std::array::from_fn(|a| p[a] + n[a] * (reach * (1.0 / 262_144.0)));
+    const ORIGIN: f32 = 1.0 / 32.0;
+    const FLOAT_SCALE: f32 = 1.0 / 65536.0;
+    const INT_SCALE: f32 = 256.0;
+    std::array::from_fn(|a| {
+        if p[a].abs() < ORIGIN {
+            p[a] + FLOAT_SCALE * n[a]
+        } else {
+            let of = (INT_SCALE * n[a]) as i32;
+            let bits = p[a].to_bits() as i32;
+            f32::from_bits((if p[a] < 0.0 { bits - of } else { bits + of }) as u32)
+        }
+    })
 }
 
 #[cfg(test)]

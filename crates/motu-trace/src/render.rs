@@ -6,8 +6,8 @@ use std::time::Instant;
 
 use motu_abi::aov::{Aov, AovRecord};
 use motu_abi::camera::CameraParams;
-use motu_abi::lod::{LodParams, RAY_PRIMARY};
-use motu_abi::shade::{rand01, tone_map, Shading};
+use motu_abi::lod::RAY_PRIMARY;
+use motu_abi::shade::{rand01, tone_map};
 use motu_abi::HierarchyView;
 use rayon::prelude::*;
 
@@ -17,74 +17,8 @@ use crate::shade::{shade_hit, ShadeRays};
 use crate::traverse::{RayQuery, Scratch, Tracer};
 use crate::TraceError;
 
-/// What the PNG shows.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum View {
-    /// Materials and image textures lit by the scene's lights (or a key light) with shadow
-    /// rays, plus a sky term with ambient occlusion (`shade.rs`).
-    #[default]
-    Shaded,
-    /// A hashed colour per (mesh, primitive).
-    Ids,
-    /// A colour per LOD level.
-    Lod,
-    /// Traces per pixel, blue (0) to red (the frame's maximum, reported in stats).
-    Heatmap,
-}
-
-impl std::str::FromStr for View {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "shaded" => Ok(Self::Shaded),
-            "ids" => Ok(Self::Ids),
-            "lod" => Ok(Self::Lod),
-            "heatmap" => Ok(Self::Heatmap),
-            _ => Err(format!(
-                "unknown view {s:?} (expected shaded, ids, lod or heatmap)"
-            )),
-        }
-    }
-}
-
-#[derive(Clone, Copy, Debug)]
-pub struct RenderOptions {
-    pub view: View,
-    /// World direction towards the sun (normalised here).
-    pub sun_dir_world: [f32; 3],
-    pub sun_intensity: f32,
-    pub ambient: f32,
-    /// Trace shadow rays in the shaded view.
-    pub shadows: bool,
-    /// LOD rule for primary rays (and shadow rays, with `RAY_SHADOW` bias).
-    pub lod: LodParams,
-    /// Force shadow rays to the primary hit's LOD (prevents LOD self-shadowing).
-    pub shadow_lod_from_primary: bool,
-    /// Build every reachable acceleration structure in parallel before tracing.
-    pub prepare: bool,
-    /// TLAS walks one ray may make before it is cut short (counted in `truncated_rays`).
-    pub max_traces_per_ray: u32,
-    /// Scene lights, sky, ambient occlusion, samples per pixel and exposure (shaded view).
-    pub shading: Shading,
-}
-
-impl Default for RenderOptions {
-    fn default() -> Self {
-        Self {
-            view: View::Shaded,
-            sun_dir_world: [0.4, 0.8, 0.45],
-            sun_intensity: 0.8,
-            ambient: 0.25,
-            shadows: true,
-            lod: LodParams::default(),
-            shadow_lod_from_primary: true,
-            prepare: true,
-            max_traces_per_ray: motu_abi::DEFAULT_MAX_TRACES_PER_RAY,
-            shading: Shading::default(),
-        }
-    }
-}
+pub use crate::options::{RenderOptions, View};
+pub use crate::ray::shadow_offset;
 
 /// Key names follow the CLI's `--stats` contract where they overlap.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
@@ -340,28 +274,6 @@ pub fn render_with(
 /// the gradient sky.
 fn background(opts: &RenderOptions, dir: [f32; 3]) -> [f32; 3] {
     opts.shading.sky.unwrap_or_else(|| sky(dir))
-}
-
-/// Moves a hit point off its surface along the face-forwarded normal `n` (Wächter & Binder,
-/// "A Fast and Robust Method for Avoiding Self-Intersection", Ray Tracing Gems ch. 6): an
-/// offset of 256 ULPs per unit of normal, a small absolute one near the origin. The GPU
-/// mirrors this, so shadow rays start at the same point.
-pub fn shadow_offset(p: [f32; 3], n: [f32; 3], reach: f32) -> [f32; 3] {
-    // `reach` (largest |origin| component + hit distance) bounds the error of p = o + t·d,
-    // which Wächter & Binder's offset (made for exact p) does not cover.
-    let p: [f32; 3] = std::array::from_fn(|a| p[a] + n[a] * (reach * (1.0 / 262_144.0)));
-    const ORIGIN: f32 = 1.0 / 32.0;
-    const FLOAT_SCALE: f32 = 1.0 / 65536.0;
-    const INT_SCALE: f32 = 256.0;
-    std::array::from_fn(|a| {
-        if p[a].abs() < ORIGIN {
-            p[a] + FLOAT_SCALE * n[a]
-        } else {
-            let of = (INT_SCALE * n[a]) as i32;
-            let bits = p[a].to_bits() as i32;
-            f32::from_bits((if p[a] < 0.0 { bits - of } else { bits + of }) as u32)
-        }
-    })
 }
 
 /// A per-pixel uniform number in [0, 1) for stochastic LOD (a PCG hash of the pixel).

@@ -11,8 +11,10 @@ use motu_abi::shade::{
 };
 use motu_abi::{xform_point, FLAG_HAS_NORMALS, FLAG_HAS_UVS, NONE_U32};
 
+pub use crate::coverage::coverage;
+use crate::options::RenderOptions;
+use crate::ray::shadow_offset;
 use crate::ray::{cross, dot, invert, length, normalize, sub, transpose_vector};
-use crate::render::{shadow_offset, RenderOptions};
 use crate::traverse::{Hit, RayQuery, Scratch, Tracer};
 
 /// Where a ray hit, ready to shade.
@@ -260,41 +262,4 @@ pub fn shade_hit(
         ao = open as f32 / n_ao as f32;
     }
     std::array::from_fn(|i| colour[i] + (diffuse[i] + f0[i]) * sky[i] * ao)
-}
-
-/// Coverage of triangle slot `slot` of `mesh` (record `rec`) at barycentrics `b` (weights of
-/// its vertices 0, 1, 2): the material's constant opacity times its alpha texture at level 0
-/// (`texture.glsl`'s `alpha_passes`).
-pub fn coverage(
-    view: &motu_abi::HierarchyView<'_>,
-    mesh: &crate::mesh::MeshBvh,
-    rec: &motu_abi::MeshRecord,
-    slot: u32,
-    b: [f32; 3],
-) -> f32 {
-    let Some(mat) = view.materials.get(rec.material as usize) else {
-        return 1.0;
-    };
-    let mut a = mat.opacity;
-    let tex = (mat.alpha_texture != NONE_U32)
-        .then(|| view.textures.get(mat.alpha_texture as usize))
-        .flatten();
-    let uvs = mesh
-        .attributes
-        .as_deref()
-        .filter(|_| rec.flags & FLAG_HAS_UVS != 0)
-        .and_then(|at| at.uvs.as_ref().map(|u| (&at.indices, u)));
-    if let (Some(tex), Some((indices, uvs))) = (tex, uvs) {
-        let prim = mesh.tri_local[slot as usize] as usize;
-        if let Some(tri) = indices.get(3 * prim..3 * prim + 3) {
-            let t = [
-                uvs[tri[0] as usize],
-                uvs[tri[1] as usize],
-                uvs[tri[2] as usize],
-            ];
-            let uv = std::array::from_fn(|k| b[0] * t[0][k] + b[1] * t[1][k] + b[2] * t[2][k]);
-            a *= sample_texture(tex, view.texels, uv, 0)[3];
-        }
-    }
-    a
 }

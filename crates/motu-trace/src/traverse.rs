@@ -440,7 +440,7 @@ impl<'a> Tracer<'a> {
                                 let rec = &v.meshes[mesh_record as usize];
                                 // Alpha-tested meshes: the GPU's any-hit coverage test.
                                 let alpha = |slot: u32, b: [f32; 3]| {
-                                    crate::shade::coverage(v, mesh, rec, slot, b)
+                                    crate::coverage::coverage(v, mesh, rec, slot, b)
                                         >= motu_abi::shade::ALPHA_CUTOFF
                                 };
                                 let accept: Option<&dyn Fn(u32, [f32; 3]) -> bool> =

@@ -1,11 +1,11 @@
 //! `motu bench`: flags → [`motu_bench`] (the harness) → stdout. A `--camera-path` flight is
-//! `cmd/flight.rs`; the hidden `--child-render` mode opens the package and picks the camera here
+//! [`motu_bench::run_flight`]; the hidden `--child-render` mode opens the package and picks the camera here
 //! (the render command's glue) and times the frames in the library.
 
 use crate::cli::{BackendArg, BenchArgs};
 use crate::pipeline;
 use anyhow::Context;
-use motu_bench::{Backend, ChildRender, SuiteOptions};
+use motu_bench::{Backend, ChildRender, FlightOptions, SuiteOptions};
 use std::time::Instant;
 
 fn backend(b: BackendArg) -> Backend {
@@ -21,7 +21,25 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
         return child_render(&a, pkg);
     }
     if let (Some(path), Some(pkg)) = (&a.camera_path, &a.package) {
-        return super::flight::run(&a, pkg, path);
+        let opts = FlightOptions {
+            package: pkg.clone(),
+            camera_path: path.clone(),
+            width: a.width,
+            height: a.height,
+            frames: a.frames,
+            warmup: a.warmup,
+            backend: a.backend.map(backend),
+            stream: a.stream,
+            vram_budget: a.vram_budget,
+            stream_bounds: super::render::stream_bounds(&a.stream_bounds),
+        };
+        let flight = motu_bench::run_flight(&opts)?;
+        if a.json {
+            println!("{}", serde_json::to_string_pretty(&flight.report)?);
+        } else {
+            print!("{}", flight.text);
+        }
+        return Ok(());
     }
     let opts = SuiteOptions {
         suite: a.suite.clone(),

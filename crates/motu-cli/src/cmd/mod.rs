@@ -5,7 +5,6 @@ use crate::cli::{Cli, Command};
 mod bench;
 pub mod demo;
 mod devices;
-mod flight;
 mod gen;
 mod import;
 mod info;

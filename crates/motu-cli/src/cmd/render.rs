@@ -4,263 +4,31 @@ use crate::cli::{BackendArg, CompareArgs, LodModeArg, RenderArgs, ViewArg};
 use crate::output;
 use crate::pipeline;
 use anyhow::{bail, Context};
-use glam::Vec3;
 use motu_abi::aov::Aov;
-use motu_abi::camera::{camera_path, CameraParams, CameraPath, CameraPose};
+use motu_abi::camera::{camera_path, CameraParams};
 use motu_abi::lod::LodParams;
-use motu_abi::lod_instance::{rule_is_camera_only, InstanceLod};
+use motu_abi::lod_instance::InstanceLod;
 use motu_abi::{HierarchyView, RootSubset};
 use motu_pack::ScenePackage;
 use serde_json::{json, Value};
 
-/// Mesh data for the tracers, straight from the package's chunks.
-pub struct PackageMeshes<'a>(pub &'a ScenePackage);
+pub use motu_render::{
+    camera_params, camera_pose, choose_lod_mode, load_camera_path, LodChoice, PackageMeshes,
+};
 
-impl motu_trace::MeshSource for PackageMeshes<'_> {
-    fn load(&self, mesh_record: u32) -> Result<motu_trace::MeshGeometry, String> {
-        let g = self
-            .0
-            .mesh_geometry(mesh_record)
-            .map_err(|e| e.to_string())?;
-        Ok(motu_trace::MeshGeometry {
-            positions: g.positions,
-            indices: g.indices,
-            normals: g.normals,
-            primitive_map: g.primitive_map,
-            uvs: g.uvs,
-        })
-    }
-}
-
-/// The camera to render: by name, else the scene's active camera, else a view of the bounds.
-pub fn camera_params(
-    pkg: &ScenePackage,
-    view: &HierarchyView<'_>,
-    name: Option<&str>,
-    width: Option<u32>,
-    height: Option<u32>,
-) -> anyhow::Result<CameraParams> {
-    let (pose, w, h) = camera_pose(pkg, view, name, width, height)?;
-    Ok(pose.params(w, h))
-}
-
-/// The camera as a pose (for camera paths) and the image size.
-pub fn camera_pose(
-    pkg: &ScenePackage,
-    view: &HierarchyView<'_>,
-    name: Option<&str>,
-    width: Option<u32>,
-    height: Option<u32>,
-) -> anyhow::Result<(CameraPose, u32, u32)> {
-    let meta = pkg.meta();
-    let cam = match name {
-        Some(n) => Some(meta.cameras.iter().find(|c| c.name == n).with_context(|| {
-            let names: Vec<&str> = meta.cameras.iter().map(|c| c.name.as_str()).collect();
-            format!(
-                "no camera named '{n}': the scene has {}",
-                if names.is_empty() {
-                    "none".to_string()
-                } else {
-                    names.join(", ")
-                }
-            )
-        })?),
-        None => meta.cameras.first(),
-    };
-    let (eye, fwd, up, fov, mirror, cw, ch) = match cam {
-        Some(c) => (
-            Vec3::from_array(c.world_eye),
-            Vec3::from_array(c.world_forward),
-            Vec3::from_array(c.world_up),
-            c.fov_deg,
-            c.mirror_x,
-            c.width,
-            c.height,
-        ),
-        None => {
-            // No camera in the scene: look at the root's bounds from the front.
-            let r = &view.tlases[view.root_tlas as usize];
-            let (lo, hi) = (
-                Vec3::from_array(r.bounds_min),
-                Vec3::from_array(r.bounds_max),
-            );
-            let c = (lo + hi) * 0.5;
-            let radius = ((hi - lo).length() * 0.5).max(1e-3);
-            let eye = c + Vec3::new(0.3, 0.4, 1.0).normalize() * radius * 2.2;
-            (eye, (c - eye).normalize(), Vec3::Y, 50.0, false, 640, 480)
-        }
-    };
-    let aspect = cw.max(1) as f64 / ch.max(1) as f64;
-    let (w, h) = match (width, height) {
-        (Some(w), Some(h)) => (w, h),
-        (Some(w), None) => (w, ((w as f64 / aspect).round() as u32).max(1)),
-        (None, Some(h)) => (((h as f64 * aspect).round() as u32).max(1), h),
-        (None, None) => (cw, ch),
-    };
-    if w == 0 || h == 0 || w > 16384 || h > 16384 {
-        bail!("image size {w}×{h} is out of range (1–16384 per side)");
-    }
-    let pose = CameraPose {
-        world_eye: eye,
-        world_forward: fwd,
-        world_up: up,
-        fov_deg: fov,
-        mirror_x: mirror,
-    };
-    Ok((pose, w, h))
-}
-
-impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
-    fn mesh_data(
-        &self,
-        mesh_record: u32,
-    ) -> Result<
-        (
-            std::borrow::Cow<'_, [[f32; 3]]>,
-            std::borrow::Cow<'_, [u32]>,
-        ),
-        String,
-    > {
-        self.0.mesh_slices(mesh_record).map_err(|e| e.to_string())
-    }
-
-    fn primitive_map(
-        &self,
-        mesh_record: u32,
-    ) -> Result<Option<std::borrow::Cow<'_, [u32]>>, String> {
-        self.0
-            .primitive_map_slice(mesh_record)
-            .map_err(|e| e.to_string())
-    }
-    fn mesh_shading(
-        &self,
-        mesh_record: u32,
-    ) -> Result<
-        (
-            Option<std::borrow::Cow<'_, [[f32; 3]]>>,
-            Option<std::borrow::Cow<'_, [[f32; 2]]>>,
-        ),
-        String,
-    > {
-        self.0
-            .mesh_shading_slices(mesh_record)
-            .map_err(|e| e.to_string())
-    }
-}
-
-/// How the shaded view is lit: the scene's lights (the brightest `MAX_LIGHTS`; infinite
-/// lights become the sky colour), ambient occlusion reaching a fifth of the scene's diagonal,
-/// and the sampling and exposure options. A scene without lights gets the renderers' key
-/// light and sky.
+/// The shaded view's lighting with `--ao-samples`, `--spp` and `--exposure`
+/// ([`motu_render::scene_shading`]).
 pub fn scene_shading(
     a: &RenderArgs,
     pkg: &ScenePackage,
     view: &HierarchyView<'_>,
 ) -> motu_abi::shade::Shading {
-    scene_shading_with(a.ao_samples, a.spp, a.exposure, pkg, view)
-}
-
-/// [`scene_shading`] from its three options (the viewer uses render's defaults).
-pub fn scene_shading_with(
-    ao_samples: u32,
-    spp: u32,
-    exposure: f32,
-    pkg: &ScenePackage,
-    view: &HierarchyView<'_>,
-) -> motu_abi::shade::Shading {
-    use motu_abi::shade::{
-        Shading, LIGHT_AREA, LIGHT_DISTANT, LIGHT_POINT, LIGHT_SPOT, MAX_LIGHTS,
+    let o = motu_render::ShadingOptions {
+        ao_samples: a.ao_samples,
+        spp: a.spp,
+        exposure_ev: a.exposure,
     };
-    use motu_scene::LightKind;
-    let mut sh = Shading {
-        ao_samples,
-        spp: spp.max(1),
-        exposure_ev: exposure,
-        ..Default::default()
-    };
-    if let Some(root) = view.tlases.get(view.root_tlas as usize) {
-        let d = Vec3::from_array(root.bounds_max) - Vec3::from_array(root.bounds_min);
-        if d.is_finite() && d.length() > 0.0 {
-            sh.ao_distance = 0.2 * d.length();
-        }
-    }
-    let mut lights = Vec::new();
-    let mut sky: Option<[f32; 3]> = None;
-    let mut skipped = 0usize;
-    for l in &pkg.meta().lights {
-        let radiance = l.color.map(|c| c * l.intensity);
-        let rec = motu_abi::LightRecord {
-            world_position: l.world_position,
-            world_direction: Vec3::from_array(l.world_direction)
-                .normalize_or(Vec3::NEG_Y)
-                .to_array(),
-            radiance,
-            ..Default::default()
-        };
-        let rec = match l.kind {
-            LightKind::Distant => motu_abi::LightRecord {
-                kind: LIGHT_DISTANT,
-                ..rec
-            },
-            LightKind::Point => motu_abi::LightRecord {
-                kind: LIGHT_POINT,
-                ..rec
-            },
-            LightKind::Spot => {
-                let [cone, delta] = l.cone_deg.unwrap_or([30.0, 5.0]);
-                motu_abi::LightRecord {
-                    kind: LIGHT_SPOT,
-                    cos_total: cone.to_radians().cos(),
-                    cos_falloff: (cone - delta).max(0.0).to_radians().cos(),
-                    ..rec
-                }
-            }
-            LightKind::Area => motu_abi::LightRecord {
-                kind: LIGHT_AREA,
-                cos_total: l.radius,
-                ..rec
-            },
-            LightKind::Infinite => {
-                let s = sky.get_or_insert([0.0; 3]);
-                for (s, r) in s.iter_mut().zip(radiance) {
-                    *s += r;
-                }
-                continue;
-            }
-            LightKind::Other => {
-                skipped += 1;
-                continue;
-            }
-        };
-        lights.push(rec);
-    }
-    if skipped > 0 {
-        eprintln!("warning: {skipped} light(s) of a kind motu does not shade (goniometric, projection, ...) left out");
-    }
-    if lights.len() > MAX_LIGHTS {
-        let peak = |r: &motu_abi::LightRecord| r.radiance.iter().cloned().fold(0.0f32, f32::max);
-        lights.sort_by(|x, y| peak(y).total_cmp(&peak(x)));
-        eprintln!(
-            "warning: the scene has {} lights; shading with the {MAX_LIGHTS} brightest",
-            lights.len()
-        );
-        lights.truncate(MAX_LIGHTS);
-    }
-    if lights.is_empty() && sky.is_some() {
-        // Sky light only: no key light (the sky term lights the scene).
-        lights.push(motu_abi::LightRecord {
-            kind: LIGHT_DISTANT,
-            world_direction: [0.0, -1.0, 0.0],
-            radiance: [0.0; 3],
-            ..Default::default()
-        });
-    }
-    for (i, l) in lights.iter().enumerate() {
-        sh.lights[i] = *l;
-    }
-    sh.light_count = lights.len() as u32;
-    sh.sky = sky;
-    sh
+    motu_render::scene_shading(o, pkg, view)
 }
 
 fn gpu_context(a: &RenderArgs, backend: BackendArg) -> anyhow::Result<motu_gpu::Context> {
@@ -345,9 +113,7 @@ fn render_streaming(
 ) -> anyhow::Result<(Aov, Vec<u8>, Value)> {
     let ctx = gpu_context(a, backend)?;
     let (pose, w, h) = camera_pose(pkg, view, a.camera.as_deref(), a.width, a.height)?;
-    let root = &view.tlases[view.root_tlas as usize];
-    let centre = (Vec3::from_array(root.bounds_min) + Vec3::from_array(root.bounds_max)) * 0.5;
-    let path = CameraPath::sweep_and_dolly((centre - pose.world_eye).length(), 0.3);
+    let path = motu_render::sweep_around_root(view, &pose);
     let meshes = PackageMeshes(pkg);
     let opts = motu_gpu::StreamOptions {
         budget_bytes: a.vram_budget.unwrap_or(u64::MAX),
@@ -355,7 +121,7 @@ fn render_streaming(
             .max_allocations
             .unwrap_or(motu_gpu::StreamOptions::default().max_allocations),
         max_passes: a.stream_max_passes.unwrap_or(0),
-        ..stream_bounds(&a.stream_bounds)
+        ..stream_bounds(&a.stream_bounds).options()
     };
     // Refused up front below the floor: under it some frame could not complete.
     let floor = motu_gpu::streaming_floor(view, &ctx, w, h, opts.staging_bytes)
@@ -496,80 +262,24 @@ fn render_streaming(
     Ok((out.aov, out.rgba8, stats))
 }
 
-/// The streaming options of `--stream-fallback`, `--stream-build-budget`, `--stream-build-ms`
-/// (the rest default).
-pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_gpu::StreamOptions {
-    motu_gpu::StreamOptions {
+/// The streaming bounds of `--stream-fallback`, `--stream-build-budget`, `--stream-build-ms`.
+pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBounds {
+    motu_render::StreamBounds {
         fallback: match b.stream_fallback {
             crate::cli::FallbackArg::Off => motu_gpu::StreamFallback::Off,
             crate::cli::FallbackArg::Coarse => motu_gpu::StreamFallback::Coarse,
         },
-        frame_build_bytes: b.stream_build_budget.unwrap_or(0),
-        frame_build_ms: b.stream_build_ms.unwrap_or(0.0),
-        ..Default::default()
+        frame_build_bytes: b.stream_build_budget,
+        frame_build_ms: b.stream_build_ms,
     }
 }
 
-/// Whether any of `--stream-fallback`, `--stream-build-budget`, `--stream-build-ms` is given.
-pub fn stream_bounds_given(b: &crate::cli::StreamBoundArgs) -> bool {
-    b.stream_fallback != crate::cli::FallbackArg::Off
-        || b.stream_build_budget.is_some()
-        || b.stream_build_ms.is_some()
-}
-
-/// How LOD runs for a frame: instance-level (a per-frame pass picks each instance's level and
-/// the TLASes are rebuilt; one trace) or in the traversal shader, and why.
-pub(crate) struct LodChoice {
-    pub instance: Option<InstanceLod>,
-    /// `instance`, `traversal` or `none` (no LOD selectors).
-    pub mode: &'static str,
-    pub reason: &'static str,
-}
-
-/// Instance-level LOD where the rule allows it; otherwise the traversal path, and why
-/// (`motu render` and `motu view` decide alike).
-pub(crate) fn choose_lod_mode(
-    view: &HierarchyView<'_>,
-    lod: &LodParams,
-    mode: LodModeArg,
-    stream: bool,
-) -> anyhow::Result<LodChoice> {
-    let selector_pis = view
-        .pis
-        .iter()
-        .filter(|p| p.kind == motu_abi::PI_LOD_SELECTOR)
-        .count();
-    let traversal = |reason| LodChoice {
-        instance: None,
-        mode: "traversal",
-        reason,
-    };
-    Ok(if selector_pis == 0 {
-        LodChoice {
-            instance: None,
-            mode: "none",
-            reason: "the package has no LOD selectors",
-        }
-    } else if mode == LodModeArg::Traversal {
-        traversal("--lod-mode traversal")
-    } else if !rule_is_camera_only(lod) {
-        traversal("--lod-stochastic chooses a level per ray")
-    } else if stream {
-        traversal(
-            "--stream resolves LOD in the traversal shader (instance LOD needs its levels' BLASes resident before the frame)",
-        )
-    } else {
-        match InstanceLod::new(view).context("rewriting LOD selectors as instances")? {
-            Some(il) => LodChoice {
-                instance: Some(il),
-                mode: "instance",
-                reason: "the LOD rule depends only on the camera",
-            },
-            None => {
-                traversal("no LOD selector qualifies (each sits in a TLAS placed more than once)")
-            }
-        }
-    })
+/// `--lod-mode` as the library's request.
+pub(crate) fn lod_mode(m: LodModeArg) -> motu_render::LodMode {
+    match m {
+        LodModeArg::Instance => motu_render::LodMode::Instance,
+        LodModeArg::Traversal => motu_render::LodMode::Traversal,
+    }
 }
 
 /// The device and the package's structures built on it under `--vram-budget` and
@@ -643,18 +353,10 @@ fn recorded_cameras(
         return Ok(None);
     };
     let path = load_camera_path(p)?;
-    let (w, h) = match (a.width, a.height, path.width, path.height) {
-        (None, None, Some(w), Some(h)) => (w, h),
-        _ => (camera.width, camera.height),
-    };
-    let n = if a.frames <= 1 {
-        path.poses.len() as u32
-    } else {
-        a.frames
-    };
-    Ok(Some(
-        (0..n).map(|f| path.sample(f, n).params(w, h)).collect(),
-    ))
+    let path_size = a.width.is_none() && a.height.is_none();
+    Ok(Some(motu_render::recorded_path_cameras(
+        &path, &camera, path_size, a.frames,
+    )))
 }
 
 /// Instance-level LOD's per-frame pass: `lod_passes` frames ran it (levels picked, slot TLASes
@@ -733,32 +435,11 @@ fn render_cpu_instance_lod(
     let cams = recorded
         .clone()
         .unwrap_or_else(|| vec![camera; a.frames as usize]);
-    let mut times = Vec::with_capacity(cams.len());
-    let mut last = None;
-    for cam in &cams {
-        let mut frame = il.clone();
-        let levels = frame.levels(view, &lod, cam.pixels_per_unit_at_1, cam.world_eye);
-        frame.apply_levels(view, &levels);
-        let v = frame.view(view);
-        let tracer = motu_trace::Tracer::new(v, &meshes).context("preparing the CPU tracer")?;
-        let out = motu_trace::render_with(&tracer, cam, &opts).context("rendering on the CPU")?;
-        times.push(out.stats.ms_per_frame);
-        last = Some(out);
-    }
-    let out = last.context("no frame rendered")?;
-    times.sort_by(f64::total_cmp);
+    let (out, median_ms) = motu_render::render_cpu_instance_lod(view, &meshes, il, &opts, &cams)?;
     let mut stats = serde_json::to_value(&out.stats)?;
-    stats["ms_per_frame"] = json!(times[times.len() / 2]);
+    stats["ms_per_frame"] = json!(median_ms);
     stats["frames"] = json!(cams.len());
     Ok((out.aov, out.rgba8, stats))
-}
-
-/// Reads a `--camera-path` file with a clear error.
-pub fn load_camera_path(path: &std::path::Path) -> anyhow::Result<motu_abi::camera::RecordedPath> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("reading camera path {}", path.display()))?;
-    motu_abi::camera::RecordedPath::from_json(&text)
-        .with_context(|| format!("camera path {}", path.display()))
 }
 
 /// `query` where a device has ray queries (usually fastest on RTX), else `pipeline`, else the CPU.
@@ -865,7 +546,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     if a.stream && backend == BackendArg::Cpu {
         bail!("--stream builds acceleration structures on a GPU: use --backend pipeline or query");
     }
-    if !a.stream && stream_bounds_given(&a.stream_bounds) {
+    if !a.stream && stream_bounds(&a.stream_bounds).given() {
         bail!(
             "--stream-fallback, --stream-build-budget and --stream-build-ms bound streaming \
              frames: add --stream (with --vram-budget)"
@@ -877,16 +558,12 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     if !a.exposure.is_finite() {
         bail!("--exposure must be a finite number of stops");
     }
-    let selector_pis = view
-        .pis
-        .iter()
-        .filter(|p| p.kind == motu_abi::PI_LOD_SELECTOR)
-        .count() as u32;
     let LodChoice {
         instance: instance_lod,
         mode: lod_mode,
         reason: lod_mode_reason,
-    } = choose_lod_mode(&view, &lod, a.lod_mode, a.stream)?;
+        selector_pis,
+    } = choose_lod_mode(&view, &lod, lod_mode(a.lod_mode), a.stream)?;
     if lod_mode == "traversal" && a.lod_mode == LodModeArg::Instance && a.lod_stochastic | a.stream
     {
         eprintln!("note: LOD runs in traversal mode: {lod_mode_reason}");

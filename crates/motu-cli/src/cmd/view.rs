@@ -74,7 +74,8 @@ impl<'p> PackageSource<'p> {
         } else {
             LodModeArg::Traversal
         };
-        let lod_choice = choose_lod_mode(&view, lod, mode, streaming)?;
+        let lod_choice =
+            choose_lod_mode(&view, lod, crate::cmd::render::lod_mode(mode), streaming)?;
         self.lod_mode = lod_choice.mode;
         match &mut self.renderer {
             Renderer::Full(r) => {
@@ -112,7 +113,7 @@ impl<'p> PackageSource<'p> {
                     max_allocations: a
                         .max_allocations
                         .unwrap_or(motu_gpu::StreamOptions::default().max_allocations),
-                    ..crate::cmd::render::stream_bounds(&a.stream_bounds)
+                    ..crate::cmd::render::stream_bounds(&a.stream_bounds).options()
                 };
                 let opts = motu_gpu::StreamOptions {
                     // Flying with no build budget given: one frame's worth of building per
@@ -277,7 +278,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         bail!("--stream-passes must be at least 1 (1: trace with what is resident, then build for the next frame)");
     }
     let streaming = a.stream || a.vram_budget.is_some();
-    if !streaming && crate::cmd::render::stream_bounds_given(&a.stream_bounds) {
+    if !streaming && crate::cmd::render::stream_bounds(&a.stream_bounds).given() {
         bail!(
             "--stream-fallback, --stream-build-budget and --stream-build-ms bound streaming \
              frames: add --stream or --vram-budget"
@@ -368,7 +369,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         frames: 1,
         // The scene's lights with `motu render`'s defaults (one AO ray, one sample, exposure
         // 0), so a view frame equals a render of the same camera.
-        shading: crate::cmd::render::scene_shading_with(1, 1, 0.0, &pkg, &base),
+        shading: motu_render::scene_shading(Default::default(), &pkg, &base),
         ..Default::default()
     };
     if !(a.lod_r_max.is_finite() && a.lod_r_max > 0.0) {

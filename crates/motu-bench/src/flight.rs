@@ -2,11 +2,39 @@
 //! benchmark: the structures are built once, then every frame of the path is rendered through
 //! the viewer's renderer; GPU times per frame (timestamps) after untimed warm-up frames.
 
-use crate::cli::{BackendArg, BenchArgs};
-use crate::pipeline;
-use anyhow::Context as _;
-use serde_json::json;
-use std::path::Path;
+use crate::error::{gpu_err, BenchError};
+use crate::plan::{best_backend, Backend};
+use motu_render::{PackageMeshes, StreamBounds};
+use serde_json::{json, Value};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// `motu bench --camera-path FILE --package PKG`'s options.
+#[derive(Clone, Debug)]
+pub struct FlightOptions {
+    pub package: PathBuf,
+    pub camera_path: PathBuf,
+    /// Image size; default: the path's recorded size, else the camera's.
+    pub width: Option<u32>,
+    pub height: Option<u32>,
+    /// Frames along the path; default: one per recorded pose.
+    pub frames: Option<u32>,
+    /// Untimed warm-up frames; default 3.
+    pub warmup: Option<u32>,
+    pub backend: Option<Backend>,
+    /// Fly through the streaming renderer (also with `vram_budget`).
+    pub stream: bool,
+    pub vram_budget: Option<u64>,
+    pub stream_bounds: StreamBounds,
+}
+
+/// A measured flight: the JSON report and the text the CLI prints without `--json`.
+#[derive(Clone, Debug)]
+pub struct Flight {
+    pub report: Value,
+    /// Lines, each ending in a newline.
+    pub text: String,
+}
 
 fn percentile(sorted: &[f64], p: f64) -> f64 {
     if sorted.is_empty() {
@@ -16,11 +44,17 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
     sorted[i.min(sorted.len() - 1)]
 }
 
-pub fn run(a: &BenchArgs, package: &Path, path_file: &Path) -> anyhow::Result<()> {
-    let path = super::render::load_camera_path(path_file)?;
-    let pkg = pipeline::open(package)?;
-    let view = pkg.view()?;
-    let base = super::render::camera_params(&pkg, &view, None, None, None)?;
+/// Builds the structures once (or streams them), renders every frame of the path after untimed
+/// warm-up frames, and reports GPU times per frame.
+pub fn run_flight(a: &FlightOptions) -> Result<Flight, BenchError> {
+    let (package, path_file) = (a.package.as_path(), a.camera_path.as_path());
+    let path = motu_render::load_camera_path(path_file)?;
+    let pkg = motu_pack::ScenePackage::open(package).map_err(|source| BenchError::Package {
+        what: format!("opening package {}", package.display()),
+        source,
+    })?;
+    let view = pkg.view().map_err(BenchError::PackageData)?;
+    let base = motu_render::camera_params(&pkg, &view, None, None, None)?;
     let (w, h) = match (a.width, a.height, path.width, path.height) {
         (Some(w), Some(h), _, _) => (w, h),
         (None, None, Some(w), Some(h)) => (w, h),
@@ -29,16 +63,16 @@ pub fn run(a: &BenchArgs, package: &Path, path_file: &Path) -> anyhow::Result<()
     let n = a.frames.unwrap_or(path.poses.len() as u32).max(1);
     let warmup = a.warmup.unwrap_or(3);
     let backend = match a.backend {
-        Some(BackendArg::Cpu) => {
-            anyhow::bail!("a flight benchmark runs on the GPU (--backend pipeline or query)")
+        Some(Backend::Cpu) => {
+            bail!("a flight benchmark runs on the GPU (--backend pipeline or query)")
         }
         Some(b) => b,
-        None => super::render::best_backend(&motu_gpu::list_devices()?),
+        None => best_backend(&motu_gpu::list_devices().map_err(BenchError::Devices)?),
     };
     let gpu_backend = match backend {
-        BackendArg::Query => motu_gpu::Backend::Query,
-        BackendArg::Pipeline => motu_gpu::Backend::Pipeline,
-        BackendArg::Cpu => anyhow::bail!("no Vulkan device with ray tracing (`motu devices`)"),
+        Backend::Query => motu_gpu::Backend::Query,
+        Backend::Pipeline => motu_gpu::Backend::Pipeline,
+        Backend::Cpu => bail!("no Vulkan device with ray tracing (`motu devices`)"),
     };
     let ctx = motu_gpu::Context::new(&motu_gpu::ContextOptions {
         require: match gpu_backend {
@@ -47,11 +81,13 @@ pub fn run(a: &BenchArgs, package: &Path, path_file: &Path) -> anyhow::Result<()
         },
         ..Default::default()
     })
-    .context("opening a Vulkan device for ray tracing (`motu devices` lists them)")?;
-    let meshes = super::render::PackageMeshes(&pkg);
+    .map_err(gpu_err(
+        "opening a Vulkan device for ray tracing (`motu devices` lists them)",
+    ))?;
+    let meshes = PackageMeshes(&pkg);
     // Lit like `motu render`'s default shaded view (its default AO ray included), so a flight's
     // frames cost what rendered frames cost.
-    let shading = super::render::scene_shading_with(1, 1, 0.0, &pkg, &view);
+    let shading = motu_render::scene_shading(Default::default(), &pkg, &view);
     if a.stream || a.vram_budget.is_some() {
         return run_streaming(
             a,
@@ -65,13 +101,11 @@ pub fn run(a: &BenchArgs, package: &Path, path_file: &Path) -> anyhow::Result<()
             (w, h, n, warmup),
         );
     }
-    if super::render::stream_bounds_given(&a.stream_bounds) {
-        anyhow::bail!(
-            "--stream-fallback, --stream-build-budget and --stream-build-ms need --stream"
-        );
+    if a.stream_bounds.given() {
+        bail!("--stream-fallback, --stream-build-budget and --stream-build-ms need --stream");
     }
     let scene = motu_gpu::GpuScene::build(&ctx, &view, &meshes, &motu_gpu::BuildOptions::default())
-        .context("building acceleration structures")?;
+        .map_err(gpu_err("building acceleration structures"))?;
     let build_ms = scene.report().build_ms;
     let mut live = motu_gpu::LiveRenderer::new(scene);
     let opts = motu_gpu::RenderOptions {
@@ -82,7 +116,7 @@ pub fn run(a: &BenchArgs, package: &Path, path_file: &Path) -> anyhow::Result<()
     let cams: Vec<_> = (0..n).map(|f| path.sample(f, n).params(w, h)).collect();
     for _ in 0..warmup {
         live.render_frame(&cams[0], &opts)
-            .context("warm-up frame")?;
+            .map_err(gpu_err("warm-up frame"))?;
     }
     let mut ms = Vec::with_capacity(cams.len());
     let mut mrays = Vec::with_capacity(cams.len());
@@ -90,14 +124,17 @@ pub fn run(a: &BenchArgs, package: &Path, path_file: &Path) -> anyhow::Result<()
     for (f, cam) in cams.iter().enumerate() {
         let out = live
             .render_frame(cam, &opts)
-            .with_context(|| format!("flight frame {f}"))?;
+            .map_err(|source| BenchError::GpuFrame {
+                what: format!("flight frame {f}"),
+                source,
+            })?;
         ms.push(out.stats.ms_per_frame);
         mrays.push(out.stats.rays_per_second / 1e6);
         traces += out.stats.traces_per_ray;
     }
     drop(live);
     ctx.check_validation()
-        .context("Vulkan validation reported errors")?;
+        .map_err(gpu_err("Vulkan validation reported errors"))?;
     let mut sorted = ms.clone();
     sorted.sort_by(f64::total_cmp);
     let mut sorted_mrays = mrays.clone();
@@ -120,10 +157,11 @@ pub fn run(a: &BenchArgs, package: &Path, path_file: &Path) -> anyhow::Result<()
         "traces_per_ray_mean": traces / n as f64,
         "frame_ms": ms,
     });
-    if a.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
-    } else {
-        println!(
+    // Writing to a String cannot fail.
+    let mut text = String::new();
+    {
+        let _ = writeln!(
+            text,
             "flight {} on {} ({}, {}×{}): {} frames, median {:.2} ms, p95 {:.2} ms, max {:.2} ms, {:.1} Mrays/s, {:.2} traces/ray",
             path_file.display(),
             ctx.device_name(),
@@ -138,7 +176,7 @@ pub fn run(a: &BenchArgs, package: &Path, path_file: &Path) -> anyhow::Result<()
             traces / n as f64
         );
     }
-    Ok(())
+    Ok(Flight { report, text })
 }
 
 /// A flight through the streaming renderer: per-frame rows (passes, bytes built, build and
@@ -146,19 +184,19 @@ pub fn run(a: &BenchArgs, package: &Path, path_file: &Path) -> anyhow::Result<()
 /// then dropped, so the timed flight starts with nothing resident, as a user's would.
 #[allow(clippy::too_many_arguments)]
 fn run_streaming(
-    a: &BenchArgs,
+    a: &FlightOptions,
     package: &Path,
     path_file: &Path,
     path: &motu_abi::camera::RecordedPath,
     view: &motu_abi::HierarchyView<'_>,
-    meshes: &super::render::PackageMeshes<'_>,
+    meshes: &PackageMeshes<'_>,
     ctx: &motu_gpu::Context,
     (backend, shading): (motu_gpu::Backend, motu_abi::shade::Shading),
     (w, h, n, warmup): (u32, u32, u32, u32),
-) -> anyhow::Result<()> {
+) -> Result<Flight, BenchError> {
     let opts = motu_gpu::StreamOptions {
         budget_bytes: a.vram_budget.unwrap_or(u64::MAX),
-        ..super::render::stream_bounds(&a.stream_bounds)
+        ..a.stream_bounds.options()
     };
     let ropts = motu_gpu::RenderOptions {
         backend,
@@ -167,20 +205,26 @@ fn run_streaming(
     };
     let cams: Vec<_> = (0..n).map(|f| path.sample(f, n).params(w, h)).collect();
     if warmup > 0 {
-        let mut sr = motu_gpu::StreamingRenderer::new(ctx, *view, meshes, &opts)
-            .context("setting up streaming (the resident skeleton must fit the budget)")?;
+        let mut sr = motu_gpu::StreamingRenderer::new(ctx, *view, meshes, &opts).map_err(
+            gpu_err("setting up streaming (the resident skeleton must fit the budget)"),
+        )?;
         for _ in 0..warmup {
-            sr.render_frame(&cams[0], &ropts).context("warm-up frame")?;
+            sr.render_frame(&cams[0], &ropts)
+                .map_err(gpu_err("warm-up frame"))?;
         }
     }
-    let mut sr = motu_gpu::StreamingRenderer::new(ctx, *view, meshes, &opts)
-        .context("setting up streaming (the resident skeleton must fit the budget)")?;
+    let mut sr = motu_gpu::StreamingRenderer::new(ctx, *view, meshes, &opts).map_err(gpu_err(
+        "setting up streaming (the resident skeleton must fit the budget)",
+    ))?;
     let mut rows = Vec::with_capacity(cams.len());
     for (f, cam) in cams.iter().enumerate() {
         let t0 = std::time::Instant::now();
         let (out, st) = sr
             .render_frame(cam, &ropts)
-            .with_context(|| format!("flight frame {f}"))?;
+            .map_err(|source| BenchError::GpuFrame {
+                what: format!("flight frame {f}"),
+                source,
+            })?;
         let wall_ms = t0.elapsed().as_secs_f64() * 1e3;
         rows.push(json!({
             "frame": f,
@@ -202,7 +246,7 @@ fn run_streaming(
     let totals = sr.totals();
     drop(sr);
     ctx.check_validation()
-        .context("Vulkan validation reported errors")?;
+        .map_err(gpu_err("Vulkan validation reported errors"))?;
     let mean = |key: &str, skip: usize| -> f64 {
         let v: Vec<f64> = rows
             .iter()
@@ -241,44 +285,50 @@ fn run_streaming(
         "totals": totals,
         "per_frame": rows,
     });
-    if a.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
-    } else {
-        println!(
+    // Writing to a String cannot fail.
+    let mut text = String::new();
+    {
+        let _ = writeln!(
+            text,
             "streaming flight {} on {} ({}, {}×{}, budget {}): {} frames",
             path_file.display(),
             ctx.device_name(),
             backend_name(backend),
             w,
             h,
-            crate::size::format_size(totals.vram_budget_bytes),
+            motu_report::format_size(totals.vram_budget_bytes),
             n
         );
-        println!("frame  passes  built        build ms  trace ms  wall ms  fallback px");
+        let _ = writeln!(
+            text,
+            "frame  passes  built        build ms  trace ms  wall ms  fallback px"
+        );
         for r in &rows {
-            println!(
+            let _ = writeln!(
+                text,
                 "{:>5}  {:>6}  {:>11}  {:>8.2}  {:>8.2}  {:>7.2}  {:>11}",
                 r["frame"],
                 r["passes"],
-                crate::size::format_size(r["built_bytes"].as_u64().unwrap_or(0)),
+                motu_report::format_size(r["built_bytes"].as_u64().unwrap_or(0)),
                 r["build_ms"].as_f64().unwrap_or(0.0),
                 r["trace_ms"].as_f64().unwrap_or(0.0),
                 r["wall_ms"].as_f64().unwrap_or(0.0),
                 r["fallback_pixels"],
             );
         }
-        println!(
+        let _ = writeln!(
+            text,
             "mean: {:.3} passes ({:.3} after the first frame), {} built, {:.2} ms building, {:.2} ms tracing, {:.2} ms wall per frame; {} frames incomplete",
             mean("passes", 0),
             mean("passes", 1),
-            crate::size::format_size(mean("built_bytes", 0) as u64),
+            motu_report::format_size(mean("built_bytes", 0) as u64),
             mean("build_ms", 0),
             mean("trace_ms", 0),
             mean("wall_ms", 0),
             incomplete
         );
     }
-    Ok(())
+    Ok(Flight { report, text })
 }
 
 fn backend_name(b: motu_gpu::Backend) -> &'static str {

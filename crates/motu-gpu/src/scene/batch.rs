@@ -1,0 +1,342 @@
+//! Build batching: batches planned under the scratch budget, staged one ahead of the GPU and
+//! compacted before the next.
+
+use std::time::Instant;
+
+use ash::vk;
+use motu_alloc::{plan_build_batches, AllocKind, BatchLimits, BuildSize, MemoryClass};
+
+use super::{AccelStruct, BuildOptions, Pending, ResourceReport, SizeQueries};
+use crate::context::Context;
+use crate::error::{GpuError, Result};
+use crate::heap::GpuHeap;
+use crate::memory::BufferUsage;
+
+/// Build inputs staged one batch ahead: `stage` loads batch k+1's inputs into host-visible
+/// staging while batch k builds on the GPU; `record` puts the staged copies into the batch's
+/// own command buffer, ahead of its build.
+pub(crate) trait BatchStager {
+    /// Loads and stages the inputs of builds `builds`; returns the bytes staged and the time
+    /// spent blocked on the GPU (a full ring region flushes behind the batch in flight). Runs
+    /// while the previous batch may still be on the GPU, so it must not touch its resources.
+    fn stage(&mut self, builds: std::ops::Range<usize>) -> Result<(u64, std::time::Duration)>;
+    /// Records the staged copies into `cmd`; returns whether anything was recorded.
+    ///
+    /// # Safety
+    /// `cmd` is recording on `device`; the caller waits on its submission before the staged
+    /// region is reused and before any destination is freed.
+    unsafe fn record(&mut self, device: &ash::Device, cmd: vk::CommandBuffer) -> bool;
+    /// Drops whatever was staged but not recorded (after a failure).
+    fn abandon(&mut self);
+}
+
+/// Builds `sizes.len()` structures in batches under the scratch budget, compacting each
+/// batch before the next. `geometry(k)` describes build k (addresses valid once
+/// `prepare(heap, batch_range)` ran for its batch). Returns (k, structure) pairs. On failure
+/// every structure this call created is released before the error returns (a streaming caller
+/// evicts and retries).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn build_batched<'g>(
+    ctx: &Context,
+    heap: &mut GpuHeap,
+    report: &mut ResourceReport,
+    sizes: &[BuildSize],
+    ty: vk::AccelerationStructureTypeKHR,
+    opts: &BuildOptions,
+    geometry: impl Fn(usize) -> (Vec<vk::AccelerationStructureGeometryKHR<'g>>, Vec<u32>),
+    prepare: impl FnMut(&mut GpuHeap, std::ops::Range<usize>) -> Result<()>,
+) -> Result<Vec<(usize, AccelStruct)>> {
+    build_pipelined(ctx, heap, report, sizes, ty, opts, geometry, prepare, None)
+}
+
+/// [`build_batched`] with inputs staged one batch ahead by `stager`: batch k's copies and build
+/// go in one submission that is not waited on until batch k+1 is staged (the wait comes before
+/// the compacted-size read, the compaction copies and the next batch's submission).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn build_pipelined<'g>(
+    ctx: &Context,
+    heap: &mut GpuHeap,
+    report: &mut ResourceReport,
+    sizes: &[BuildSize],
+    ty: vk::AccelerationStructureTypeKHR,
+    opts: &BuildOptions,
+    geometry: impl Fn(usize) -> (Vec<vk::AccelerationStructureGeometryKHR<'g>>, Vec<u32>),
+    mut prepare: impl FnMut(&mut GpuHeap, std::ops::Range<usize>) -> Result<()>,
+    mut stager: Option<&mut dyn BatchStager>,
+) -> Result<Vec<(usize, AccelStruct)>> {
+    if sizes.is_empty() {
+        return Ok(Vec::new());
+    }
+    let accel = ctx.accel_device()?;
+    let scratch_align = u64::from(
+        ctx.limits()
+            .min_acceleration_structure_scratch_offset_alignment
+            .max(1),
+    )
+    .next_power_of_two();
+    let plan = plan_build_batches(
+        sizes,
+        BatchLimits {
+            scratch_budget_bytes: opts.scratch_budget_bytes,
+            scratch_alignment_bytes: scratch_align,
+            scratch_pool_max_bytes: heap.limits().budget_bytes,
+            max_batch_result_bytes: Some(opts.max_batch_result_bytes),
+        },
+    )
+    .map_err(|e| GpuError::Budget(e.to_string()))?;
+    let scratch = heap.alloc_buffer(
+        "scratch-pool",
+        plan.scratch_pool_bytes.max(scratch_align),
+        BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
+        AllocKind::Scratch,
+        MemoryClass::DeviceLocal,
+        scratch_align,
+    )?;
+    report.scratch_peak_bytes = report.scratch_peak_bytes.max(scratch.size_bytes());
+    let mut out: Vec<(usize, AccelStruct)> = Vec::with_capacity(sizes.len());
+    let mut in_flight: Vec<AccelStruct> = Vec::new();
+    let result = (|| -> Result<()> {
+        let scratch_base = scratch.device_address()?.0.div_ceil(scratch_align) * scratch_align;
+        let kind = if ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL {
+            "tlas"
+        } else {
+            "blas"
+        };
+        if let (Some(st), Some(first)) = (stager.as_deref_mut(), plan.batches.first()) {
+            st.stage(first.builds.clone())?;
+        }
+        for (bi, batch) in plan.batches.iter().enumerate() {
+            report.build_batches += 1;
+            prepare(heap, batch.builds.clone())?;
+            let mut pending: Vec<Pending> = Vec::new();
+            for k in batch.builds.clone() {
+                match AccelStruct::new(ctx, heap, &format!("{kind}-{k}"), sizes[k].result_bytes, ty)
+                {
+                    Ok(a) => pending.push(Pending { accel: a, index: k }),
+                    Err(e) => {
+                        in_flight.extend(pending.into_iter().map(|p| p.accel));
+                        return Err(e);
+                    }
+                }
+            }
+            // From here on a failure releases this batch through `in_flight`.
+            let pending_ref = &pending;
+            let run = (|| -> Result<Vec<AccelStruct>> {
+                let descs: Vec<_> = batch.builds.clone().map(&geometry).collect();
+                let ranges: Vec<Vec<vk::AccelerationStructureBuildRangeInfoKHR>> = descs
+                    .iter()
+                    .map(|(_, counts)| {
+                        counts
+                            .iter()
+                            .map(|&n| {
+                                vk::AccelerationStructureBuildRangeInfoKHR::default()
+                                    .primitive_count(n)
+                            })
+                            .collect()
+                    })
+                    .collect();
+                let infos: Vec<_> = descs
+                    .iter()
+                    .zip(pending_ref)
+                    .map(|((g, _), p)| {
+                        vk::AccelerationStructureBuildGeometryInfoKHR::default()
+                            .ty(ty)
+                            .flags(
+                                vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE
+                                    | vk::BuildAccelerationStructureFlagsKHR::ALLOW_COMPACTION,
+                            )
+                            .mode(vk::BuildAccelerationStructureModeKHR::BUILD)
+                            .dst_acceleration_structure(p.accel.handle)
+                            .geometries(g)
+                            .scratch_data(vk::DeviceOrHostAddressKHR {
+                                device_address: scratch_base + plan.scratch_offsets_bytes[p.index],
+                            })
+                    })
+                    .collect();
+                let range_refs: Vec<&[vk::AccelerationStructureBuildRangeInfoKHR]> =
+                    ranges.iter().map(|r| r.as_slice()).collect();
+                let queries = SizeQueries::new(ctx, pending_ref.len() as u32)?;
+                let handles: Vec<_> = pending_ref.iter().map(|p| p.accel.handle).collect();
+                let rec = ctx.record(&format!("{kind} build batch {bi}"))?;
+                let (c, cmd) = rec.raw();
+                let device = &c.shared.device;
+                // SAFETY: recording state; destinations, scratch slices (disjoint, aligned),
+                // inputs, staged copies and the query pool live until the submission below is
+                // waited on (also on every error path: `Submitted` waits when dropped).
+                unsafe {
+                    if let Some(st) = stager.as_deref_mut() {
+                        if st.record(device, cmd) {
+                            transfer_to_build_barrier(device, cmd);
+                        }
+                    }
+                    full_barrier(device, cmd);
+                    accel.cmd_build_acceleration_structures(cmd, &infos, &range_refs);
+                    full_barrier(device, cmd);
+                    device.cmd_reset_query_pool(cmd, queries.pool, 0, queries.count);
+                    accel.cmd_write_acceleration_structures_properties(
+                        cmd,
+                        &handles,
+                        vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR,
+                        queries.pool,
+                        0,
+                    );
+                }
+                let submitted = rec.submit()?;
+                // While the GPU builds this batch, load and stage the next one.
+                if let (Some(st), Some(next)) = (stager.as_deref_mut(), plan.batches.get(bi + 1)) {
+                    let t = Instant::now();
+                    match st.stage(next.builds.clone()) {
+                        Ok((bytes, stalled)) => {
+                            report.upload_build_overlap_batches += 1;
+                            report.upload_overlap_bytes += bytes;
+                            report.upload_overlap_ms +=
+                                t.elapsed().saturating_sub(stalled).as_secs_f64() * 1e3;
+                            report.upload_stall_ms += stalled.as_secs_f64() * 1e3;
+                        }
+                        Err(e) => {
+                            st.abandon();
+                            // This batch's resources are released by the caller: wait first.
+                            let _ = submitted.wait();
+                            return Err(e);
+                        }
+                    }
+                }
+                submitted.wait()?;
+                if !opts.compact {
+                    return Ok(Vec::new());
+                }
+                let compacted = queries.read(pending_ref.len() as u32)?;
+                // Nothing to gain (lavapipe reports the built size): keep the originals and
+                // skip the copies' second allocation, which would double the peak.
+                if pending_ref
+                    .iter()
+                    .zip(&compacted)
+                    .all(|(p, &size)| size.max(1) >= p.accel.size_bytes)
+                {
+                    return Ok(Vec::new());
+                }
+                let mut copies = Vec::with_capacity(pending_ref.len());
+                for (p, &size) in pending_ref.iter().zip(&compacted) {
+                    let size = size.max(1).min(p.accel.size_bytes);
+                    match AccelStruct::new(
+                        ctx,
+                        heap,
+                        &format!("{kind}-{}-compact", p.index),
+                        size,
+                        ty,
+                    ) {
+                        Ok(a) => copies.push(a),
+                        Err(GpuError::Budget(msg)) => {
+                            // No room for both copies: the uncompacted ones are valid as they
+                            // are, and the budget holds.
+                            tracing::debug!(%msg, "compaction skipped under the budget");
+                            copies.into_iter().for_each(|c| c.release(heap));
+                            return Ok(Vec::new());
+                        }
+                        Err(e) => {
+                            copies.into_iter().for_each(|c| c.release(heap));
+                            return Err(e);
+                        }
+                    }
+                }
+                let rec = match ctx.record(&format!("{kind} compaction batch {bi}")) {
+                    Ok(r) => r,
+                    Err(e) => {
+                        copies.into_iter().for_each(|c| c.release(heap));
+                        return Err(e);
+                    }
+                };
+                let (_, cmd) = rec.raw();
+                for (p, dst) in pending_ref.iter().zip(&copies) {
+                    let info = vk::CopyAccelerationStructureInfoKHR::default()
+                        .src(p.accel.handle)
+                        .dst(dst.handle)
+                        .mode(vk::CopyAccelerationStructureModeKHR::COMPACT);
+                    // SAFETY: both structures live until the fenced submission returns; the
+                    // source was built with ALLOW_COMPACTION and dst holds its compacted size.
+                    unsafe { accel.cmd_copy_acceleration_structure(cmd, &info) };
+                }
+                if let Err(e) = rec.submit_and_wait() {
+                    copies.into_iter().for_each(|c| c.release(heap));
+                    return Err(e);
+                }
+                Ok(copies)
+            })();
+            match run {
+                Ok(copies) if copies.is_empty() => {
+                    out.extend(pending.into_iter().map(|p| (p.index, p.accel)));
+                }
+                Ok(copies) => {
+                    for (p, dst) in pending.into_iter().zip(copies) {
+                        p.accel.release(heap);
+                        out.push((p.index, dst));
+                    }
+                }
+                Err(e) => {
+                    in_flight.extend(pending.into_iter().map(|p| p.accel));
+                    return Err(e);
+                }
+            }
+        }
+        Ok(())
+    })();
+    heap.free(scratch);
+    match result {
+        Ok(()) => Ok(out),
+        Err(e) => {
+            for a in in_flight {
+                a.release(heap);
+            }
+            for (_, a) in out {
+                a.release(heap);
+            }
+            Err(e)
+        }
+    }
+}
+
+/// Transfer writes (staged geometry copies) before acceleration-structure builds read them.
+///
+/// # Safety
+/// `cmd` must be in the recording state on `device`.
+pub(crate) unsafe fn transfer_to_build_barrier(device: &ash::Device, cmd: vk::CommandBuffer) {
+    let barrier = vk::MemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+        .dst_access_mask(
+            vk::AccessFlags::ACCELERATION_STRUCTURE_READ_KHR | vk::AccessFlags::SHADER_READ,
+        );
+    // SAFETY: per the function contract.
+    unsafe {
+        device.cmd_pipeline_barrier(
+            cmd,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR,
+            vk::DependencyFlags::empty(),
+            &[barrier],
+            &[],
+            &[],
+        )
+    };
+}
+
+/// A full memory barrier (coarse: builds are few and large).
+///
+/// # Safety
+/// `cmd` must be in the recording state on `device`.
+pub(crate) unsafe fn full_barrier(device: &ash::Device, cmd: vk::CommandBuffer) {
+    let barrier = vk::MemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::MEMORY_WRITE)
+        .dst_access_mask(vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE);
+    // SAFETY: per the function contract.
+    unsafe {
+        device.cmd_pipeline_barrier(
+            cmd,
+            vk::PipelineStageFlags::ALL_COMMANDS,
+            vk::PipelineStageFlags::ALL_COMMANDS,
+            vk::DependencyFlags::empty(),
+            &[barrier],
+            &[],
+            &[],
+        )
+    };
+}

@@ -1,0 +1,199 @@
+//! Table encoding: BLAS geometry descriptions, TLAS instance records, programmable-instance
+//! AABBs and what the root reaches.
+
+use ash::vk;
+use motu_abi::{HierarchyView, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
+
+use super::MeshGpu;
+use crate::accel::BlasGeometry;
+use crate::error::{GpuError, Result};
+
+/// Vulkan geometry of one BLAS.
+pub(crate) type BlasDesc = (
+    Vec<vk::AccelerationStructureGeometryKHR<'static>>,
+    Vec<u32>,
+    Vec<BlasGeometry>,
+);
+
+/// Geometry of BLAS `i` of `view`: one triangle geometry per mesh (`mesh(m)` is mesh record
+/// `m` on the GPU) or the AABBs of its programmable instances, read at `aabb_base + 24 × item`.
+/// `None` for a BLAS without primitives.
+pub(crate) fn blas_geometry<'m>(
+    view: &HierarchyView<'_>,
+    i: usize,
+    mesh: impl Fn(usize) -> Option<&'m MeshGpu>,
+    aabb_base: u64,
+) -> Result<Option<BlasDesc>> {
+    let b = &view.blases[i];
+    let range = b.item_base as usize..(b.item_base + b.item_count) as usize;
+    let (geoms, counts, shape): (Vec<_>, Vec<u32>, Vec<BlasGeometry>) = if b.kind == BLAS_AABBS {
+        if b.item_count == 0 {
+            (Vec::new(), Vec::new(), Vec::new())
+        } else {
+            let aabbs = vk::AccelerationStructureGeometryAabbsDataKHR::default()
+                .data(vk::DeviceOrHostAddressConstKHR {
+                    device_address: aabb_base + u64::from(b.item_base) * 24,
+                })
+                .stride(24);
+            (
+                vec![vk::AccelerationStructureGeometryKHR::default()
+                    .geometry_type(vk::GeometryTypeKHR::AABBS)
+                    .geometry(vk::AccelerationStructureGeometryDataKHR { aabbs })
+                    .flags(vk::GeometryFlagsKHR::NO_DUPLICATE_ANY_HIT_INVOCATION)],
+                vec![b.item_count],
+                vec![BlasGeometry::Aabbs {
+                    aabb_count: b.item_count,
+                    opaque: false,
+                }],
+            )
+        }
+    } else {
+        let mut g = Vec::new();
+        let mut c = Vec::new();
+        let mut s = Vec::new();
+        for geo in &view.geometries[range] {
+            let Some(m) = mesh(geo.mesh as usize) else {
+                continue;
+            };
+            let opaque = view.meshes[geo.mesh as usize].flags & FLAG_NEEDS_ANY_HIT == 0;
+            let tri = vk::AccelerationStructureGeometryTrianglesDataKHR::default()
+                .vertex_format(vk::Format::R32G32B32_SFLOAT)
+                .vertex_data(vk::DeviceOrHostAddressConstKHR {
+                    device_address: m.positions_address,
+                })
+                .vertex_stride(12)
+                .max_vertex(m.vertex_count - 1)
+                .index_type(vk::IndexType::UINT32)
+                .index_data(vk::DeviceOrHostAddressConstKHR {
+                    device_address: m.indices_address,
+                });
+            g.push(
+                vk::AccelerationStructureGeometryKHR::default()
+                    .geometry_type(vk::GeometryTypeKHR::TRIANGLES)
+                    .geometry(vk::AccelerationStructureGeometryDataKHR { triangles: tri })
+                    .flags(if opaque {
+                        vk::GeometryFlagsKHR::OPAQUE
+                    } else {
+                        vk::GeometryFlagsKHR::NO_DUPLICATE_ANY_HIT_INVOCATION
+                    }),
+            );
+            c.push(m.triangle_count);
+            s.push(BlasGeometry::Triangles {
+                vertex_count: m.vertex_count,
+                triangle_count: m.triangle_count,
+                indexed: true,
+                opaque,
+            });
+        }
+        // A geometry index must equal its position in the record (gl_GeometryIndexEXT
+        // resolves the mesh), so an empty mesh inside a BLAS is an error.
+        if g.len() != b.item_count as usize {
+            return Err(GpuError::InvalidRequest(format!(
+                "BLAS {i}: {} of its {} meshes are empty",
+                b.item_count as usize - g.len(),
+                b.item_count
+            )));
+        }
+        (g, c, s)
+    };
+    Ok(if geoms.is_empty() {
+        None
+    } else {
+        Some((geoms, counts, shape))
+    })
+}
+
+/// One `VkAccelerationStructureInstanceKHR` (64 bytes): triangles use hit group 0 (opaque unless
+/// `needs_any_hit`), programmable instances (`aabbs`) hit group 1, never opaque. A
+/// `blas_address` of 0 makes the instance inactive (mask 0 as well: some drivers only check
+/// the mask). The custom index is `local_index`, the instance's index within its TLAS's
+/// record range (< 2^24, which `max_instance_count` bounds): the shaders read it instead of
+/// the position in the built TLAS, so a streamed TLAS may hold only its resident instances.
+pub(crate) fn encode_instance(
+    tlas_from_blas: &[f32; 12],
+    aabbs: bool,
+    needs_any_hit: bool,
+    blas_address: u64,
+    local_index: u32,
+) -> [u8; 64] {
+    let (sbt, flags) = if aabbs {
+        (1u32, vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE)
+    } else if needs_any_hit {
+        (
+            0,
+            vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE,
+        )
+    } else {
+        (
+            0,
+            vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE
+                | vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE,
+        )
+    };
+    let mut out = [0u8; 64];
+    for (i, v) in tlas_from_blas.iter().enumerate() {
+        out[4 * i..4 * i + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    // Node ids never travel in 24 bits: only the local instance index does.
+    debug_assert!(local_index < 1 << 24, "instance index {local_index} ≥ 2^24");
+    let mask = if blas_address == 0 { 0u32 } else { 0xFF };
+    out[48..52].copy_from_slice(&((mask << 24) | (local_index & 0xFF_FFFF)).to_le_bytes());
+    out[52..56].copy_from_slice(&(sbt | (flags.as_raw() << 24)).to_le_bytes());
+    out[56..64].copy_from_slice(&blas_address.to_le_bytes());
+    out
+}
+
+/// TLASes and BLASes reachable from the root: through instances, PIs, LOD levels.
+pub(crate) fn reachable(view: &HierarchyView<'_>) -> (Vec<bool>, Vec<bool>) {
+    let mut tlas = vec![false; view.tlases.len()];
+    let mut blas = vec![false; view.blases.len()];
+    let mut todo = vec![view.root_tlas as usize];
+    if let Some(r) = tlas.get_mut(view.root_tlas as usize) {
+        *r = true;
+    }
+    let visit = |t: usize, tlas: &mut Vec<bool>, todo: &mut Vec<usize>| {
+        if t < tlas.len() && !tlas[t] {
+            tlas[t] = true;
+            todo.push(t);
+        }
+    };
+    while let Some(t) = todo.pop() {
+        let rec = &view.tlases[t];
+        let range = rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize;
+        for inst in view.instances.get(range).unwrap_or(&[]) {
+            let b = inst.blas as usize;
+            if b >= blas.len() || blas[b] {
+                continue;
+            }
+            blas[b] = true;
+            let br = &view.blases[b];
+            if br.kind != BLAS_AABBS {
+                continue;
+            }
+            let items = br.item_base as usize..(br.item_base + br.item_count) as usize;
+            for pi in view.pis.get(items).unwrap_or(&[]) {
+                if pi.kind == motu_abi::PI_TLAS {
+                    visit(pi.target as usize, &mut tlas, &mut todo);
+                } else if let Some(s) = view.lod_selectors.get(pi.target as usize) {
+                    let levels = s.level_base as usize..(s.level_base + s.level_count) as usize;
+                    for &lt in view.lod_levels.get(levels).unwrap_or(&[]) {
+                        visit(lt as usize, &mut tlas, &mut todo);
+                    }
+                }
+            }
+        }
+    }
+    (tlas, blas)
+}
+
+/// The AABB build input of every programmable instance (`VkAabbPositionsKHR`: min then max),
+/// indexed like the PI table.
+pub(crate) fn pi_aabbs(view: &HierarchyView<'_>) -> Vec<[f32; 6]> {
+    view.pis
+        .iter()
+        .map(|p| {
+            let (a, b) = (p.aabb_min, p.aabb_max);
+            [a[0], a[1], a[2], b[0], b[1], b[2]]
+        })
+        .collect()
+}

@@ -1,0 +1,443 @@
+//! Uploads: the bounded staging ring and mesh buffers (positions, indices, shading attributes).
+
+use std::time::Instant;
+
+use ash::vk;
+use motu_abi::{HierarchyView, MeshRecord, BLAS_TRIANGLES};
+use motu_alloc::{AllocKind, MemoryClass};
+
+use super::{BatchStager, MeshBlobSource};
+use crate::context::Context;
+use crate::error::{GpuError, Result};
+use crate::heap::{GpuHeap, HeapBuffer};
+use crate::memory::BufferUsage;
+
+/// Bounded host-visible staging ring: copies are queued and flushed (one fenced submission)
+/// whenever the ring is full, so host memory never holds more than the ring.
+///
+/// Double-buffered mode (pipelined builds) splits the ring in two halves: the copies queued in
+/// one half are recorded into a build batch's command buffer ([`Uploader::record_pending`]),
+/// and the next batch is staged into the other half while that batch runs on the GPU.
+pub(crate) struct Uploader {
+    pub(crate) staging: HeapBuffer,
+    cursor: u64,
+    pending: Vec<(vk::Buffer, u64, u64, u64)>,
+    flushes: u32,
+    /// Time spent in fenced flushes (submission and wait).
+    flush_wait: std::time::Duration,
+    double_buffered: bool,
+    /// The half being filled (double-buffered mode).
+    half: u64,
+}
+
+impl Uploader {
+    pub(crate) fn new(heap: &mut GpuHeap, size_bytes: u64) -> Result<Uploader> {
+        let staging = heap.alloc_buffer(
+            "staging-ring",
+            size_bytes.max(64 * 1024),
+            BufferUsage::TRANSFER_SRC,
+            AllocKind::Staging,
+            MemoryClass::HostVisible,
+            16,
+        )?;
+        Ok(Uploader {
+            staging,
+            cursor: 0,
+            pending: Vec::new(),
+            flushes: 0,
+            flush_wait: std::time::Duration::ZERO,
+            double_buffered: false,
+            half: 0,
+        })
+    }
+
+    /// The byte range of the ring being filled.
+    fn region(&self) -> (u64, u64) {
+        let cap = self.staging.size_bytes();
+        if !self.double_buffered {
+            return (0, cap);
+        }
+        let mid = cap / 2 / 16 * 16;
+        if self.half == 0 {
+            (0, mid)
+        } else {
+            (mid, cap)
+        }
+    }
+
+    /// Switches between one ring and two halves. Call with nothing queued (after a flush or
+    /// `record_pending`) and every earlier copy out of the ring complete.
+    pub(crate) fn set_double_buffered(&mut self, on: bool) {
+        debug_assert!(self.pending.is_empty());
+        self.pending.clear();
+        self.double_buffered = on;
+        self.half = 0;
+        self.cursor = self.region().0;
+    }
+
+    /// Queues `bytes` for `dst` at `dst_offset`. `dst` must stay alive until the next `flush`
+    /// (or until the submission `record_pending` recorded into completes).
+    pub(crate) fn upload(
+        &mut self,
+        ctx: &Context,
+        dst: &HeapBuffer,
+        dst_offset: u64,
+        bytes: &[u8],
+    ) -> Result<()> {
+        let mut done = 0usize;
+        while done < bytes.len() {
+            let (_, end) = self.region();
+            if self.cursor >= end {
+                self.flush(ctx)?;
+            }
+            let n = ((end - self.cursor) as usize).min(bytes.len() - done);
+            self.staging
+                .write_bytes(self.cursor, &bytes[done..done + n])?;
+            self.pending.push((
+                dst.handle(),
+                self.cursor,
+                dst_offset + done as u64,
+                n as u64,
+            ));
+            // Keep copies 16-byte aligned in the ring.
+            self.cursor = (self.cursor + n as u64).div_ceil(16) * 16;
+            done += n;
+        }
+        Ok(())
+    }
+
+    /// Records the queued copies into `cmd` (whose submission the caller fences before the
+    /// ring region is reused) and moves to the other half. Returns whether anything was recorded.
+    ///
+    /// # Safety
+    /// `cmd` must be in the recording state on `device`, and every queued destination must
+    /// stay alive until that submission completes.
+    pub(crate) unsafe fn record_pending(
+        &mut self,
+        device: &ash::Device,
+        cmd: vk::CommandBuffer,
+    ) -> bool {
+        let any = !self.pending.is_empty();
+        for &(dst, src_off, dst_off, size) in &self.pending {
+            let region = vk::BufferCopy {
+                src_offset: src_off,
+                dst_offset: dst_off,
+                size,
+            };
+            // SAFETY: per the function contract; the staging buffer outlives the submission
+            // (freed only after every build batch was waited on).
+            unsafe { device.cmd_copy_buffer(cmd, self.staging.handle(), dst, &[region]) };
+        }
+        self.pending.clear();
+        if self.double_buffered {
+            self.half ^= 1;
+        }
+        self.cursor = self.region().0;
+        any
+    }
+
+    /// Forgets queued copies (their destinations are about to be freed after a failure).
+    pub(crate) fn abandon(&mut self) {
+        self.pending.clear();
+        self.cursor = self.region().0;
+    }
+
+    pub(crate) fn flush(&mut self, ctx: &Context) -> Result<()> {
+        if self.pending.is_empty() {
+            self.cursor = self.region().0;
+            return Ok(());
+        }
+        let rec = ctx.record("upload")?;
+        let (c, cmd) = rec.raw();
+        for &(dst, src_off, dst_off, size) in &self.pending {
+            let region = vk::BufferCopy {
+                src_offset: src_off,
+                dst_offset: dst_off,
+                size,
+            };
+            // SAFETY: recording state; the staging buffer and every queued destination are alive
+            // until this function returns (callers keep them; the submission is waited on).
+            unsafe {
+                c.shared
+                    .device
+                    .cmd_copy_buffer(cmd, self.staging.handle(), dst, &[region])
+            };
+        }
+        let t = Instant::now();
+        let r = rec.submit_and_wait();
+        self.flush_wait += t.elapsed();
+        self.pending.clear();
+        self.cursor = self.region().0;
+        r?;
+        self.flushes += 1;
+        Ok(())
+    }
+}
+
+/// Stages the meshes of each BLAS build batch (each mesh once, at its first batch) through
+/// the double-buffered ring.
+pub(crate) struct MeshStager<'s, 'v> {
+    pub(crate) ctx: &'s Context,
+    pub(crate) up: &'s mut Uploader,
+    pub(crate) source: &'s dyn MeshBlobSource,
+    pub(crate) view: &'s HierarchyView<'v>,
+    /// Build index → BLAS index.
+    pub(crate) order: &'s [usize],
+    pub(crate) meshes: &'s [Option<MeshGpu>],
+    pub(crate) staged: Vec<bool>,
+}
+
+impl BatchStager for MeshStager<'_, '_> {
+    fn stage(&mut self, builds: std::ops::Range<usize>) -> Result<(u64, std::time::Duration)> {
+        let stalled_before = self.up.flush_wait;
+        let mut bytes = 0u64;
+        for k in builds {
+            let Some(&b) = self.order.get(k) else {
+                continue;
+            };
+            let rec = &self.view.blases[b];
+            if rec.kind != BLAS_TRIANGLES {
+                continue;
+            }
+            let items = rec.item_base as usize..(rec.item_base + rec.item_count) as usize;
+            for geo in self.view.geometries.get(items).unwrap_or(&[]) {
+                let m = geo.mesh as usize;
+                let Some(Some(g)) = self.meshes.get(m) else {
+                    continue;
+                };
+                if self.staged[m] {
+                    continue;
+                }
+                bytes += g.upload(self.ctx, self.up, self.source, m)?;
+                self.staged[m] = true;
+            }
+        }
+        Ok((bytes, self.up.flush_wait.saturating_sub(stalled_before)))
+    }
+
+    unsafe fn record(&mut self, device: &ash::Device, cmd: vk::CommandBuffer) -> bool {
+        // SAFETY: per the trait contract; the mesh buffers live in the scene being built.
+        unsafe { self.up.record_pending(device, cmd) }
+    }
+
+    fn abandon(&mut self) {
+        self.up.abandon();
+    }
+}
+
+/// Per compiled mesh on the GPU.
+pub(crate) struct MeshGpu {
+    pub(crate) buffer: HeapBuffer,
+    pub(crate) positions_address: u64,
+    pub(crate) indices_address: u64,
+    pub(crate) vertex_count: u32,
+    pub(crate) triangle_count: u32,
+    /// A cluster: its primitive map follows the indices (`indices_address + 12 × triangles`,
+    /// where the shaders read it).
+    pub(crate) has_primitive_map: bool,
+    /// Streaming only ([`MeshGpu::alloc_streamed`]): the shading normals and texture
+    /// coordinates after the indices (0: none), so they stream and evict with the mesh.
+    pub(crate) normals_address: u64,
+    pub(crate) uvs_address: u64,
+}
+
+/// Bytes of a streamed mesh's shading attributes (`FLAG_HAS_NORMALS`: 12 per vertex,
+/// `FLAG_HAS_UVS`: 8 per vertex, each 16-byte aligned) after its geometry: what
+/// [`MeshGpu::alloc_streamed`] adds, and the streaming floor's attribute term.
+pub(crate) fn streamed_attribute_bytes(rec: &MeshRecord) -> (u64, u64) {
+    let vc = u64::from(rec.vertex_count);
+    let normals = if rec.flags & motu_abi::FLAG_HAS_NORMALS != 0 {
+        (vc * 12).div_ceil(16) * 16
+    } else {
+        0
+    };
+    let uvs = if rec.flags & motu_abi::FLAG_HAS_UVS != 0 {
+        (vc * 8).div_ceil(16) * 16
+    } else {
+        0
+    };
+    (normals, uvs)
+}
+
+impl MeshGpu {
+    /// Allocates the buffer of mesh record `m` (positions, then indices at a 16-byte offset,
+    /// then a cluster's primitive map).
+    pub(crate) fn alloc(heap: &mut GpuHeap, m: usize, rec: &MeshRecord) -> Result<MeshGpu> {
+        Self::alloc_with(heap, m, rec, false)
+    }
+
+    /// [`MeshGpu::alloc`] plus room for the mesh's shading attributes after its geometry (the
+    /// streaming renderer: they must be resident whenever a hit on the mesh is resolved).
+    pub(crate) fn alloc_streamed(
+        heap: &mut GpuHeap,
+        m: usize,
+        rec: &MeshRecord,
+    ) -> Result<MeshGpu> {
+        Self::alloc_with(heap, m, rec, true)
+    }
+
+    fn alloc_with(
+        heap: &mut GpuHeap,
+        m: usize,
+        rec: &MeshRecord,
+        attributes: bool,
+    ) -> Result<MeshGpu> {
+        let pos_bytes = u64::from(rec.vertex_count) * 12;
+        let idx_offset = pos_bytes.div_ceil(16) * 16;
+        let has_primitive_map = rec.flags & motu_abi::FLAG_PRIMITIVE_MAP != 0;
+        let map_bytes = if has_primitive_map {
+            u64::from(rec.triangle_count) * 4
+        } else {
+            0
+        };
+        let mut geometry = idx_offset + u64::from(rec.triangle_count) * 12 + map_bytes;
+        let (normal_bytes, uv_bytes) = if attributes {
+            streamed_attribute_bytes(rec)
+        } else {
+            (0, 0)
+        };
+        if normal_bytes + uv_bytes > 0 {
+            geometry = geometry.div_ceil(16) * 16;
+        }
+        let size = geometry + normal_bytes + uv_bytes;
+        let buf = heap.alloc_buffer(
+            &format!("mesh-{m}"),
+            size,
+            BufferUsage::STORAGE
+                | BufferUsage::DEVICE_ADDRESS
+                | BufferUsage::TRANSFER_DST
+                | BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT,
+            AllocKind::Geometry,
+            MemoryClass::DeviceLocal,
+            16,
+        )?;
+        let base = match buf.device_address() {
+            Ok(a) => a.0,
+            Err(e) => {
+                heap.free(buf);
+                return Err(e);
+            }
+        };
+        Ok(MeshGpu {
+            buffer: buf,
+            positions_address: base,
+            indices_address: base + idx_offset,
+            vertex_count: rec.vertex_count,
+            triangle_count: rec.triangle_count,
+            has_primitive_map,
+            normals_address: if normal_bytes > 0 { base + geometry } else { 0 },
+            uvs_address: if uv_bytes > 0 {
+                base + geometry + normal_bytes
+            } else {
+                0
+            },
+        })
+    }
+
+    /// [`MeshGpu::upload`] plus the shading attributes of a mesh from
+    /// [`MeshGpu::alloc_streamed`]; an attribute the source lacks (or gives at the wrong
+    /// length) is dropped, as the full build's shading tables drop it.
+    pub(crate) fn upload_streamed(
+        &mut self,
+        ctx: &Context,
+        up: &mut Uploader,
+        source: &dyn MeshBlobSource,
+        m: usize,
+    ) -> Result<u64> {
+        use bytemuck::cast_slice;
+        let mut bytes = self.upload(ctx, up, source, m)?;
+        if self.normals_address == 0 && self.uvs_address == 0 {
+            return Ok(bytes);
+        }
+        let (normals, uvs) = source
+            .mesh_shading(m as u32)
+            .map_err(|e| GpuError::InvalidRequest(format!("mesh record {m}: {e}")))?;
+        let vc = self.vertex_count as usize;
+        let base = self.positions_address;
+        match normals.as_deref().filter(|n| n.len() == vc) {
+            Some(n) if self.normals_address != 0 => {
+                up.upload(
+                    ctx,
+                    &self.buffer,
+                    self.normals_address - base,
+                    cast_slice(n),
+                )?;
+                bytes += (n.len() * 12) as u64;
+            }
+            _ => self.normals_address = 0,
+        }
+        match uvs.as_deref().filter(|u| u.len() == vc) {
+            Some(u) if self.uvs_address != 0 => {
+                up.upload(ctx, &self.buffer, self.uvs_address - base, cast_slice(u))?;
+                bytes += (u.len() * 8) as u64;
+            }
+            _ => self.uvs_address = 0,
+        }
+        Ok(bytes)
+    }
+
+    /// Bytes of its buffer.
+    pub(crate) fn size_bytes(&self) -> u64 {
+        self.buffer.size_bytes()
+    }
+
+    /// Loads mesh record `m` from `source`, checks it against the record and queues its upload.
+    pub(crate) fn upload(
+        &self,
+        ctx: &Context,
+        up: &mut Uploader,
+        source: &dyn MeshBlobSource,
+        m: usize,
+    ) -> Result<u64> {
+        use bytemuck::cast_slice;
+        let (positions, indices) = source
+            .mesh_data(m as u32)
+            .map_err(|e| GpuError::InvalidRequest(format!("mesh record {m}: {e}")))?;
+        if positions.len() != self.vertex_count as usize
+            || indices.len() != 3 * self.triangle_count as usize
+        {
+            return Err(GpuError::InvalidRequest(format!(
+                "mesh record {m}: {} positions and {} indices, the record says {} and {}",
+                positions.len(),
+                indices.len(),
+                self.vertex_count,
+                3 * self.triangle_count
+            )));
+        }
+        if let Some(bad) = indices.iter().find(|&&i| i >= self.vertex_count) {
+            return Err(GpuError::InvalidRequest(format!(
+                "mesh record {m}: index {bad} >= vertex count {}",
+                self.vertex_count
+            )));
+        }
+        let map = source
+            .primitive_map(m as u32)
+            .map_err(|e| GpuError::InvalidRequest(format!("mesh record {m}: {e}")))?;
+        let map_len = match (&map, self.has_primitive_map) {
+            (Some(map), true) if map.len() == self.triangle_count as usize => map.len(),
+            (None, false) => 0,
+            (got, _) => {
+                return Err(GpuError::InvalidRequest(format!(
+                    "mesh record {m}: the record {} a primitive map of {} entries, the source \
+                     gave {}",
+                    if self.has_primitive_map {
+                        "needs"
+                    } else {
+                        "has no"
+                    },
+                    self.triangle_count,
+                    got.as_ref()
+                        .map_or("none".to_string(), |g| g.len().to_string())
+                )))
+            }
+        };
+        up.upload(ctx, &self.buffer, 0, cast_slice(&positions[..]))?;
+        let idx_off = self.indices_address - self.positions_address;
+        up.upload(ctx, &self.buffer, idx_off, cast_slice(&indices[..]))?;
+        if let Some(map) = &map {
+            let map_off = idx_off + u64::from(self.triangle_count) * 12;
+            up.upload(ctx, &self.buffer, map_off, cast_slice(&map[..]))?;
+        }
+        Ok((positions.len() * 12 + indices.len() * 4 + map_len * 4) as u64)
+    }
+}
