@@ -32,6 +32,8 @@ dpkg-query -W -f='${Status}' libvulkan1 2>/dev/null | grep -q "ok installed" || 
 command -v chromium >/dev/null 2>&1 || missing+=(chromium)
 # `motu view` is tested in a real window: Xvfb, plus the X libraries winit loads at run time.
 command -v Xvfb >/dev/null 2>&1 || missing+=(xvfb)
+# ... and on Wayland: a headless weston compositor (it brings libwayland-client and xkbcommon).
+command -v weston >/dev/null 2>&1 || missing+=(weston)
 for p in libx11-xcb1 libxkbcommon-x11-0 libxcursor1 libxrandr2 libxi6; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "ok installed" || missing+=("$p")
 done
@@ -76,7 +78,7 @@ export DEBIAN_FRONTEND=noninteractive
 log "apt-get update"
 $SUDO apt-get update -qq
 pkgs=(libvulkan1 glslang-tools spirv-tools vulkan-tools chromium
-  xvfb libx11-xcb1 libxkbcommon-x11-0 libxcursor1 libxrandr2 libxi6)
+  xvfb libx11-xcb1 libxkbcommon-x11-0 libxcursor1 libxrandr2 libxi6 weston)
 log "installing ${pkgs[*]} and mesa-vulkan-drivers from bookworm-backports"
 $SUDO apt-get install -y -qq --no-install-recommends "${pkgs[@]}" >/dev/null
 $SUDO apt-get install -y -qq --no-install-recommends -t bookworm-backports mesa-vulkan-drivers >/dev/null

@@ -279,6 +279,88 @@ pub fn xvfb(test: &str) -> Option<Xvfb> {
     })
 }
 
+/// A private headless Wayland compositor for window tests (`motu view` on Wayland): weston's
+/// headless backend on its own socket in its own runtime directory, killed on drop.
+pub struct Weston {
+    child: std::process::Child,
+    runtime_dir: tempfile::TempDir,
+    /// The `WAYLAND_DISPLAY` value (the socket's name in the runtime directory).
+    pub socket: String,
+}
+
+impl Drop for Weston {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Starts a headless weston; `None` (with a loud line) when it is not installed, a failure when
+/// `MOTU_REQUIRE_GPU` is set (CI: `tools/setup.sh` installs `weston`).
+pub fn weston(test: &str) -> Option<Weston> {
+    use std::os::unix::fs::PermissionsExt;
+    let runtime_dir = tempfile::tempdir().expect("runtime dir");
+    // Wayland refuses runtime directories others can read.
+    std::fs::set_permissions(runtime_dir.path(), std::fs::Permissions::from_mode(0o700))
+        .expect("runtime dir mode");
+    let socket = "motu-test".to_string();
+    let spawned = Command::new("weston")
+        .args([
+            "--backend=headless-backend.so",
+            &format!("--socket={socket}"),
+            "--width=1024",
+            "--height=768",
+            "--idle-time=0",
+        ])
+        .env("XDG_RUNTIME_DIR", runtime_dir.path())
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn();
+    let mut child = match spawned {
+        Ok(c) => c,
+        Err(e) => {
+            assert!(
+                std::env::var_os("MOTU_REQUIRE_GPU").is_none(),
+                "MOTU_REQUIRE_GPU is set but weston cannot start ({e}): tools/setup.sh installs weston"
+            );
+            eprintln!("SKIPPED: weston not available ({e}): {test}");
+            return None;
+        }
+    };
+    // The socket appears once weston accepts clients.
+    let path = runtime_dir.path().join(&socket);
+    let start = std::time::Instant::now();
+    while !path.exists() {
+        if let Ok(Some(status)) = child.try_wait() {
+            panic!("weston exited before opening its socket: {status}");
+        }
+        if start.elapsed() > std::time::Duration::from_secs(30) {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("weston did not open {} within 30 s", path.display());
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    Some(Weston {
+        child,
+        runtime_dir,
+        socket,
+    })
+}
+
+/// Runs `motu` on the Wayland compositor `w` (and no X display).
+pub fn motu_on_wayland(w: &Weston, args: &[&str]) -> Output {
+    Command::new(motu_bin())
+        .args(args)
+        .env("XDG_RUNTIME_DIR", w.runtime_dir.path())
+        .env("WAYLAND_DISPLAY", &w.socket)
+        .env_remove("DISPLAY")
+        .output()
+        .expect("spawning motu")
+}
+
 /// Runs `motu` with `DISPLAY` set to `display` (and no Wayland).
 pub fn motu_on_display(display: &str, args: &[&str]) -> Output {
     Command::new(motu_bin())

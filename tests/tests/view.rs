@@ -2,7 +2,9 @@
 //! read back from the swapchain must equal `motu render` per pixel; recorded camera paths must
 //! replay identically in both; without a display the viewer must point at `motu render`.
 
-use motu_tests::{gpu_available, has_ray_query, motu, motu_ok, motu_on_display, s, xvfb};
+use motu_tests::{
+    gpu_available, has_ray_query, motu, motu_ok, motu_on_display, motu_on_wayland, s, weston, xvfb,
+};
 use std::path::{Path, PathBuf};
 
 fn forest(dir: &Path) -> PathBuf {
@@ -36,6 +38,151 @@ fn view_ok(display: &str, args: &[&str]) -> String {
         all.join(" ")
     );
     err
+}
+
+/// LOD in the viewer runs like `motu render`'s: instance-level by default (one trace, the
+/// same levels as the render), the traversal shader with `--lod-mode traversal`; each equals
+/// the render of the same mode per pixel and `--stats` names the mode that ran.
+#[test]
+fn view_lod_modes_equal_render_per_pixel() {
+    if !gpu_available() {
+        return;
+    }
+    let Some(x) = xvfb("view_lod_modes_equal_render_per_pixel") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let grid = d.join("grid");
+    motu_ok(&[
+        "gen",
+        "lod-grid",
+        "-o",
+        s(&grid),
+        "--grid",
+        "6x12",
+        "--triangles",
+        "20000",
+    ]);
+    let pkg = d.join("lod.motu");
+    motu_ok(&[
+        "import",
+        s(&grid.join("scene.pbrt")),
+        "-o",
+        s(&pkg),
+        "--lod",
+        "4",
+    ]);
+    for (mode, traces_max) in [("instance", 1.05), ("traversal", f64::INFINITY)] {
+        let (vaov, vstats, raov) = (
+            d.join(format!("view-{mode}.aov")),
+            d.join(format!("view-{mode}.json")),
+            d.join(format!("render-{mode}.aov")),
+        );
+        let mut args = vec![
+            s(&pkg),
+            "--width",
+            "96",
+            "--backend",
+            "pipeline",
+            "--view",
+            "lod",
+            "--frames",
+            "2",
+            "--aov",
+            s(&vaov),
+            "--stats",
+            s(&vstats),
+        ];
+        if mode == "traversal" {
+            args.extend(["--lod-mode", "traversal"]);
+        }
+        view_ok(&x.display, &args);
+        let png = d.join(format!("render-{mode}.png"));
+        motu_ok(&[
+            "render",
+            s(&pkg),
+            "-o",
+            s(&png),
+            "--aov",
+            s(&raov),
+            "--width",
+            "96",
+            "--backend",
+            "pipeline",
+            "--view",
+            "lod",
+            "--lod-mode",
+            mode,
+        ]);
+        compare_exact(&vaov, &raov);
+        let st = read_json(&vstats);
+        assert_eq!(st["lod_mode"], mode, "{st}");
+        let traces = st["traces_per_ray"].as_f64().unwrap();
+        assert!(traces <= traces_max, "{mode}: {traces} traces/ray: {st}");
+        if mode == "traversal" {
+            assert!(traces > 1.2, "traversal LOD takes hops: {st}");
+        }
+    }
+}
+
+/// `motu view` on a Wayland compositor (no X display): a native Wayland window and swapchain
+/// whose frames equal `motu render`'s per pixel, like the X11 path.
+#[test]
+fn view_on_wayland_equals_render_per_pixel() {
+    if !gpu_available() {
+        return;
+    }
+    let Some(w) = weston("view_on_wayland_equals_render_per_pixel") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pkg = forest(d);
+    let (vpng, vaov, vstats) = (d.join("view.png"), d.join("view.aov"), d.join("view.json"));
+    let out = motu_on_wayland(
+        &w,
+        &[
+            "view",
+            s(&pkg),
+            "--width",
+            "96",
+            "--backend",
+            "pipeline",
+            "--frames",
+            "3",
+            "--screenshot",
+            s(&vpng),
+            "--aov",
+            s(&vaov),
+            "--stats",
+            s(&vstats),
+        ],
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "motu view on Wayland failed:\n{err}");
+    assert!(!err.contains("ERROR"), "{err}");
+    let (rpng, raov) = (d.join("render.png"), d.join("render.aov"));
+    motu_ok(&[
+        "render",
+        s(&pkg),
+        "-o",
+        s(&rpng),
+        "--aov",
+        s(&raov),
+        "--width",
+        "96",
+        "--backend",
+        "pipeline",
+    ]);
+    compare_exact(&vaov, &raov);
+    assert!(
+        decode_png(&vpng) == decode_png(&rpng),
+        "the Wayland swapchain image differs from motu render's PNG"
+    );
+    let st = read_json(&vstats);
+    assert_eq!(st["frames"], 3, "{st}");
+    assert_eq!(st["window"]["presented_via"], "swapchain", "{st}");
 }
 
 fn compare_exact(a: &Path, b: &Path) {

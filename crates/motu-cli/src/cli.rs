@@ -471,6 +471,11 @@ pub struct ViewArgs {
     pub lod_r_max: f32,
     #[arg(long)]
     pub lod_stochastic: bool,
+    /// How LOD selectors are resolved at the start, as in `motu render --lod-mode` (M toggles
+    /// live): `instance` where the rule allows (not with --lod-stochastic/K or streaming),
+    /// else the traversal shader. The overlay and --stats (`lod_mode`) say which ran.
+    #[arg(long, value_enum, default_value_t = LodModeArg::Instance)]
+    pub lod_mode: LodModeArg,
     #[arg(long, default_value_t = 16)]
     pub stack_size: u32,
     #[arg(long, env = "MOTU_DEVICE")]

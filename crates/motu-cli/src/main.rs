@@ -61,7 +61,10 @@ fn init_tracing(verbose: u8) {
         2 => "debug",
         _ => "trace",
     };
-    let filter = EnvFilter::try_from_env("MOTU_LOG").unwrap_or_else(|_| EnvFilter::new(default));
+    // winit's Wayland title bar (sctk-adwaita) logs an ERROR when no XDG settings portal
+    // answers, which desktops without one never do: noise, not a motu problem.
+    let filter = EnvFilter::try_from_env("MOTU_LOG")
+        .unwrap_or_else(|_| EnvFilter::new(format!("{default},sctk_adwaita=off")));
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)

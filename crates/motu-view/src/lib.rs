@@ -82,6 +82,8 @@ pub struct SourceStats {
     /// Pixels left unfinished by the frame's pass cap (streaming; refined by later frames).
     /// Shown while flying; a scripted run fails if its last frame has any.
     pub incomplete_pixels: u64,
+    /// How LOD ran: `instance`, `traversal` or `none` (no LOD selectors); empty if unknown.
+    pub lod_mode: &'static str,
 }
 
 /// One rendered frame.
@@ -98,12 +100,15 @@ pub trait FrameSource {
     /// The device (opened with [`motu_gpu::ContextOptions::presentation`]).
     fn context(&self) -> &motu_gpu::Context;
     /// Renders `camera` with `opts`, showing only the elements whose entry in `elements_on` is
-    /// true (a change of the set may rebuild structures).
+    /// true (a change of the set may rebuild structures). `lod_instance`: instance-level LOD
+    /// where the rule allows it (the source falls back to the traversal shader otherwise and
+    /// says so in [`SourceStats::lod_mode`]); a change may rebuild structures.
     fn render(
         &mut self,
         camera: &CameraParams,
         opts: &RenderOptions,
         elements_on: &[bool],
+        lod_instance: bool,
     ) -> Result<SourceFrame, String>;
 }
 
@@ -118,6 +123,8 @@ pub struct ViewOptions {
     /// The scene's cameras (number keys 1–9).
     pub cameras: Vec<(String, CameraPose)>,
     pub render: RenderOptions,
+    /// Instance-level LOD at the start (M toggles it with the traversal shader's LOD).
+    pub lod_instance: bool,
     /// Element names and which are on at the start (Shift+1–9 toggle).
     pub elements: Vec<String>,
     pub elements_on: Vec<bool>,
@@ -164,8 +171,8 @@ where
     check_display()?;
     let event_loop = EventLoop::new().map_err(|e| {
         ViewError::Window(format!(
-            "{e} (motu view speaks X11; on a Wayland-only session run it under XWayland, or render \
-             headless with `motu render`)"
+            "{e} (motu view opens X11 and Wayland windows: check DISPLAY / WAYLAND_DISPLAY, or \
+             render headless with `motu render`)"
         ))
     })?;
     let display = event_loop
@@ -218,6 +225,8 @@ pub struct Keys {
 #[derive(Debug)]
 pub struct Controls {
     pub render: RenderOptions,
+    /// Instance-level LOD wanted (M); the source reports what ran.
+    pub lod_instance: bool,
     pub overlay: bool,
     pub elements: Vec<String>,
     pub elements_on: Vec<bool>,
@@ -232,6 +241,7 @@ impl Controls {
     pub fn new(opts: &ViewOptions) -> Controls {
         Controls {
             render: opts.render,
+            lod_instance: opts.lod_instance,
             overlay: opts.overlay,
             elements: opts.elements.clone(),
             elements_on: opts.elements_on.clone(),
@@ -290,6 +300,7 @@ impl Controls {
                 };
             }
             KeyCode::KeyK => r.lod.stochastic ^= 1,
+            KeyCode::KeyM => self.lod_instance = !self.lod_instance,
             KeyCode::KeyH => r.shadows = !r.shadows,
             KeyCode::Tab => self.overlay = !self.overlay,
             _ => {}
@@ -455,7 +466,12 @@ impl<S: FrameSource> App<S> {
         let t0 = Instant::now();
         let frame = self
             .source
-            .render(&camera, &self.ctl.render, &self.ctl.elements_on)
+            .render(
+                &camera,
+                &self.ctl.render,
+                &self.ctl.elements_on,
+                self.ctl.lod_instance,
+            )
             .map_err(ViewError::Source)?;
         let last = automated && self.opts.frames == Some(self.result.frames_shown as u32 + 1);
         if last && frame.stats.incomplete_pixels > 0 {
@@ -567,18 +583,25 @@ impl<S: FrameSource> App<S> {
             ),
             stream,
             format!(
-                "LOD {lod}{}  shadows {}",
+                "LOD {lod}{} ({})  shadows {}",
                 if r.lod.stochastic != 0 {
                     " stochastic"
                 } else {
                     ""
+                },
+                match (s.lod_mode, self.ctl.lod_instance) {
+                    ("", _) => "mode ?",
+                    ("instance", _) => "instance",
+                    ("none", _) => "no selectors",
+                    (_, true) => "traversal: rule needs it",
+                    (_, false) => "traversal",
                 },
                 if r.shadows { "on" } else { "off" }
             ),
             format!("elements: {}", elements.join(" ")),
             format!("speed {:.3}/s  {}", self.ctl.fly.speed, self.ctl.message),
             "WASD/QE move, drag look, wheel speed, 1-9 cameras".into(),
-            "V/F1-F4 view, L lod, K dither, H shadows".into(),
+            "V/F1-F4 view, L lod, M lod mode, K dither, H shadows".into(),
             "Shift+1-9 elements, Tab overlay, Esc quit".into(),
         ]
     }
@@ -669,6 +692,7 @@ mod tests {
             start: pose(0.0),
             cameras: vec![("a".into(), pose(1.0)), ("b".into(), pose(2.0))],
             render: RenderOptions::default(),
+            lod_instance: true,
             elements: vec!["x".into(), "y".into()],
             elements_on: vec![true, true],
             speed: 1.0,
@@ -705,6 +729,12 @@ mod tests {
         assert_eq!(c.render.lod.forced_lod, 7);
         press(&mut c, KeyCode::KeyL, false);
         assert!(c.render.lod.forced_lod < 0);
+        // LOD mode: instance ↔ traversal.
+        assert!(c.lod_instance);
+        press(&mut c, KeyCode::KeyM, false);
+        assert!(!c.lod_instance);
+        press(&mut c, KeyCode::KeyM, false);
+        assert!(c.lod_instance);
         // Cameras on digits; a missing one changes nothing.
         press(&mut c, KeyCode::Digit2, false);
         assert_eq!(c.fly.pose, pose(2.0));

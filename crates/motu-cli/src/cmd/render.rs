@@ -522,6 +522,61 @@ pub fn stream_bounds_given(b: &crate::cli::StreamBoundArgs) -> bool {
         || b.stream_build_ms.is_some()
 }
 
+/// How LOD runs for a frame: instance-level (a per-frame pass picks each instance's level and
+/// the TLASes are rebuilt; one trace) or in the traversal shader, and why.
+pub(crate) struct LodChoice {
+    pub instance: Option<InstanceLod>,
+    /// `instance`, `traversal` or `none` (no LOD selectors).
+    pub mode: &'static str,
+    pub reason: &'static str,
+}
+
+/// Instance-level LOD where the rule allows it; otherwise the traversal path, and why
+/// (`motu render` and `motu view` decide alike).
+pub(crate) fn choose_lod_mode(
+    view: &HierarchyView<'_>,
+    lod: &LodParams,
+    mode: LodModeArg,
+    stream: bool,
+) -> anyhow::Result<LodChoice> {
+    let selector_pis = view
+        .pis
+        .iter()
+        .filter(|p| p.kind == motu_abi::PI_LOD_SELECTOR)
+        .count();
+    let traversal = |reason| LodChoice {
+        instance: None,
+        mode: "traversal",
+        reason,
+    };
+    Ok(if selector_pis == 0 {
+        LodChoice {
+            instance: None,
+            mode: "none",
+            reason: "the package has no LOD selectors",
+        }
+    } else if mode == LodModeArg::Traversal {
+        traversal("--lod-mode traversal")
+    } else if !rule_is_camera_only(lod) {
+        traversal("--lod-stochastic chooses a level per ray")
+    } else if stream {
+        traversal(
+            "--stream resolves LOD in the traversal shader (instance LOD needs its levels' BLASes resident before the frame)",
+        )
+    } else {
+        match InstanceLod::new(view).context("rewriting LOD selectors as instances")? {
+            Some(il) => LodChoice {
+                instance: Some(il),
+                mode: "instance",
+                reason: "the LOD rule depends only on the camera",
+            },
+            None => {
+                traversal("no LOD selector qualifies (each sits in a TLAS placed more than once)")
+            }
+        }
+    })
+}
+
 /// The device and the package's structures built on it under `--vram-budget` and
 /// `--max-allocations` (a full build: `render` and `render --camera-path`).
 fn build_gpu_scene<'v>(
@@ -817,42 +872,16 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     if !a.exposure.is_finite() {
         bail!("--exposure must be a finite number of stops");
     }
-    // Instance-level LOD where the rule allows it; otherwise the traversal path, and why.
     let selector_pis = view
         .pis
         .iter()
         .filter(|p| p.kind == motu_abi::PI_LOD_SELECTOR)
         .count() as u32;
-    let (instance_lod, lod_mode, lod_mode_reason) = if selector_pis == 0 {
-        (None, "none", "the package has no LOD selectors")
-    } else if a.lod_mode == LodModeArg::Traversal {
-        (None, "traversal", "--lod-mode traversal")
-    } else if !rule_is_camera_only(&lod) {
-        (
-            None,
-            "traversal",
-            "--lod-stochastic chooses a level per ray",
-        )
-    } else if a.stream {
-        (
-            None,
-            "traversal",
-            "--stream resolves LOD in the traversal shader (instance LOD needs its levels' BLASes resident before the frame)",
-        )
-    } else {
-        match InstanceLod::new(&view).context("rewriting LOD selectors as instances")? {
-            Some(il) => (
-                Some(il),
-                "instance",
-                "the LOD rule depends only on the camera",
-            ),
-            None => (
-                None,
-                "traversal",
-                "no LOD selector qualifies (each sits in a TLAS placed more than once)",
-            ),
-        }
-    };
+    let LodChoice {
+        instance: instance_lod,
+        mode: lod_mode,
+        reason: lod_mode_reason,
+    } = choose_lod_mode(&view, &lod, a.lod_mode, a.stream)?;
     if lod_mode == "traversal" && a.lod_mode == LodModeArg::Instance && a.lod_stochastic | a.stream
     {
         eprintln!("note: LOD runs in traversal mode: {lod_mode_reason}");

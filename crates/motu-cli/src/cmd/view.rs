@@ -1,8 +1,8 @@
 //! `motu view`: the interactive viewer (crates/motu-view) over a package: a full GPU build, or
 //! the streaming renderer under `--vram-budget`/`--stream`.
 
-use crate::cli::{BackendArg, ViewArg, ViewArgs};
-use crate::cmd::render::{camera_pose, load_camera_path, PackageMeshes};
+use crate::cli::{BackendArg, LodModeArg, ViewArg, ViewArgs};
+use crate::cmd::render::{camera_pose, choose_lod_mode, load_camera_path, PackageMeshes};
 use crate::pipeline;
 use anyhow::{bail, Context as _};
 use glam::Vec3;
@@ -29,6 +29,10 @@ struct PackageSource<'p> {
     element_ids: Vec<u32>,
     /// The element set the renderer was built for.
     built_for: Vec<bool>,
+    /// The LOD mode asked for when the renderer was built (instance where the rule allows it)
+    /// with the LOD parameters it was decided for, and the mode that ran.
+    built_lod: Option<(bool, LodParams)>,
+    lod_mode: &'static str,
     renderer: Renderer<'p>,
     a: &'p ViewArgs,
     total_structures: u64,
@@ -55,7 +59,7 @@ impl<'p> PackageSource<'p> {
         Ok(subset.view(&self.base))
     }
 
-    fn rebuild(&mut self, on: &[bool]) -> anyhow::Result<()> {
+    fn rebuild(&mut self, on: &[bool], lod_instance: bool, lod: &LodParams) -> anyhow::Result<()> {
         // Free the old structures before building the new ones (the budget holds one set).
         match &mut self.renderer {
             Renderer::Full(r) => *r = None,
@@ -64,6 +68,14 @@ impl<'p> PackageSource<'p> {
         let view = self.view_for(on)?;
         let a = self.a;
         let budget = a.vram_budget.unwrap_or(u64::MAX);
+        let streaming = matches!(self.renderer, Renderer::Stream(_));
+        let mode = if lod_instance {
+            LodModeArg::Instance
+        } else {
+            LodModeArg::Traversal
+        };
+        let lod_choice = choose_lod_mode(&view, lod, mode, streaming)?;
+        self.lod_mode = lod_choice.mode;
         match &mut self.renderer {
             Renderer::Full(r) => {
                 let build = motu_gpu::BuildOptions {
@@ -74,8 +86,19 @@ impl<'p> PackageSource<'p> {
                     staging_bytes: (budget / 8).clamp(4 << 20, 64 << 20),
                     ..Default::default()
                 };
-                let scene = motu_gpu::GpuScene::build(&self.ctx, &view, self.meshes, &build)
+                // Instance-level LOD: the rewritten hierarchy is built and a per-frame pass picks
+                // each LOD instance's level (as `motu render` does).
+                let built = match &lod_choice.instance {
+                    Some(il) => il.view(&view),
+                    None => view,
+                };
+                let mut scene = motu_gpu::GpuScene::build(&self.ctx, &built, self.meshes, &build)
                     .context("building acceleration structures")?;
+                if let Some(il) = &lod_choice.instance {
+                    scene
+                        .enable_instance_lod(&view, il)
+                        .context("setting up instance-level LOD")?;
+                }
                 *r = Some(Box::new(motu_gpu::LiveRenderer::new(scene)));
             }
             Renderer::Stream(r) => {
@@ -110,7 +133,19 @@ impl<'p> PackageSource<'p> {
             }
         }
         self.built_for = on.to_vec();
+        self.built_lod = Some((lod_instance, *lod));
         Ok(())
+    }
+
+    /// Whether the structures must be rebuilt for `lod_instance` with `lod`: only when the mode
+    /// that would run changes (instance LOD applies to camera-only rules).
+    fn lod_changed(&self, lod_instance: bool, lod: &LodParams) -> bool {
+        let effective =
+            |inst: bool, l: &LodParams| inst && motu_abi::lod_instance::rule_is_camera_only(l);
+        match &self.built_lod {
+            None => true,
+            Some((inst, l)) => effective(*inst, l) != effective(lod_instance, lod),
+        }
     }
 
     fn render_inner(
@@ -118,10 +153,12 @@ impl<'p> PackageSource<'p> {
         camera: &CameraParams,
         opts: &motu_gpu::RenderOptions,
         on: &[bool],
+        lod_instance: bool,
     ) -> anyhow::Result<SourceFrame> {
-        if on != self.built_for.as_slice() {
-            self.rebuild(on)?;
+        if on != self.built_for.as_slice() || self.lod_changed(lod_instance, &opts.lod) {
+            self.rebuild(on, lod_instance, &opts.lod)?;
         }
+        let lod_mode = self.lod_mode;
         let total = self.total_structures;
         match &mut self.renderer {
             Renderer::Full(Some(r)) => {
@@ -138,6 +175,7 @@ impl<'p> PackageSource<'p> {
                     passes: 1,
                     streaming: None,
                     incomplete_pixels: 0,
+                    lod_mode,
                 };
                 let detail = serde_json::to_string(rep).ok();
                 Ok(SourceFrame {
@@ -168,6 +206,7 @@ impl<'p> PackageSource<'p> {
                     } else {
                         st.incomplete_pixels.max(1)
                     },
+                    lod_mode,
                 };
                 let detail = serde_json::to_string(&st).ok();
                 Ok(SourceFrame {
@@ -191,14 +230,16 @@ impl FrameSource for PackageSource<'_> {
         camera: &CameraParams,
         opts: &motu_gpu::RenderOptions,
         on: &[bool],
+        lod_instance: bool,
     ) -> Result<SourceFrame, String> {
-        self.render_inner(camera, opts, on).map_err(|e| {
-            let mut msg = e.to_string();
-            for c in e.chain().skip(1) {
-                msg.push_str(&format!(": {c}"));
-            }
-            msg
-        })
+        self.render_inner(camera, opts, on, lod_instance)
+            .map_err(|e| {
+                let mut msg = e.to_string();
+                for c in e.chain().skip(1) {
+                    msg.push_str(&format!(": {c}"));
+                }
+                msg
+            })
     }
 }
 
@@ -345,6 +386,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         start,
         cameras,
         render,
+        lod_instance: a.lod_mode == LodModeArg::Instance,
         elements: names,
         elements_on: elements_on.clone(),
         speed: a.speed.unwrap_or(radius * 0.25),
@@ -377,6 +419,8 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
             meshes: &meshes,
             element_ids: element_ids.clone(),
             built_for: Vec::new(),
+            built_lod: None,
+            lod_mode: "",
             renderer: if streaming {
                 Renderer::Stream(None)
             } else {
@@ -385,7 +429,8 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
             a: &a,
             total_structures,
         };
-        src.rebuild(&elements_on).map_err(|e| format!("{e:#}"))?;
+        src.rebuild(&elements_on, o.lod_instance, &o.render.lod)
+            .map_err(|e| format!("{e:#}"))?;
         Ok(src)
     })
     .context("motu view")?;
@@ -430,6 +475,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         stats["streaming"] = json!(last.stats.streaming.is_some());
         stats["incomplete_frames"] = json!(result.incomplete_frames);
         stats["incomplete_pixels_per_frame"] = json!(result.incomplete_pixels_per_frame);
+        stats["lod_mode"] = json!(last.stats.lod_mode);
         if let Some(d) = &last.detail {
             stats["detail"] = serde_json::from_str(d).unwrap_or(json!(null));
         }
