@@ -182,7 +182,10 @@ ShadeInput shade_input(TraceHit h, uint mesh, vec3 org, vec3 dir) {
         ShadingRef sr = ShadingRef(f.shading);
         TextureRecord tex = TextureTable(sr.textures).r[mat.base_color_texture];
         float tpp = sp.uv_per_pixel * sqrt(float(tex.width) * float(tex.height));
-        albedo *= sample_texture(tex, sr.texels, sp.uv, mip_level(tpp, tex.mip_count)).rgb;
+        uint64_t texels = texels_of(sr, mat.base_color_texture);
+        if (texels != 0ul) {
+            albedo *= sample_texture(tex, texels, sp.uv, mip_level(tpp, tex.mip_count)).rgb;
+        }
     }
     ShadeInput si;
     si.ng = sp.ng;

@@ -12,7 +12,9 @@ layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer Sh
     uint64_t mesh_attrs;  // per mesh record: normals address, uvs address (0: none)
     uint64_t textures;    // TextureRecord[]
     uint64_t texels;      // u32 RGBA8
-    uint64_t _pad;
+    // Streaming: per texture, the address of its own mip chain (0: not resident); the records'
+    // texel offsets are then 0. 0 in a full build, where every chain sits in `texels`.
+    uint64_t texel_addresses;
 };
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer TextureTable { TextureRecord r[]; };
 layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer Floats { float v[]; };
@@ -40,6 +42,13 @@ vec4 texel_at(U32Table texels, uint base, uint w, uint h, int xi, int yi) {
     vec4 c = vec4(float(t & 0xffu), float((t >> 8u) & 0xffu), float((t >> 16u) & 0xffu),
                   float(t >> 24u)) / 255.0;
     return vec4(srgb_to_linear(c.r), srgb_to_linear(c.g), srgb_to_linear(c.b), c.a);
+}
+
+// Where texture `index`'s texels are addressed from: the shared texel array, or (streaming)
+// the texture's own chain. 0: a streamed texture that is not resident (never while a mesh
+// that uses it is; callers then keep the material's constants).
+uint64_t texels_of(ShadingRef sr, uint index) {
+    return sr.texel_addresses != 0ul ? U64Table(sr.texel_addresses).r[index] : sr.texels;
 }
 
 // motu_abi::shade::sample_texture.
@@ -97,7 +106,10 @@ bool alpha_passes(uint tlas, uint instance, uint geometry, uint primitive, vec2 
             vec2 t2 = vec2(u.v[2u * i2], u.v[2u * i2 + 1u]);
             vec2 uv = (1.0 - bary.x - bary.y) * t0 + bary.x * t1 + bary.y * t2;
             TextureRecord tex = TextureTable(sr.textures).r[mat.alpha_texture];
-            a *= sample_texture(tex, sr.texels, uv, 0u).a;
+            uint64_t texels = texels_of(sr, mat.alpha_texture);
+            if (texels != 0ul) {
+                a *= sample_texture(tex, texels, uv, 0u).a;
+            }
         }
     }
     return a >= ALPHA_CUTOFF;

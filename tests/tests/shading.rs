@@ -196,5 +196,23 @@ fn textures_alpha_cutouts_and_a_missing_texture() {
             mean < 3.0,
             "{b}: mean channel difference {mean} to the CPU image"
         );
+        // Streaming: the textures (the checker's colours, the leaf's cut-out) arrive with the
+        // meshes that sample them; the streamed frame equals the full build per pixel.
+        let streamed = dir.path().join(format!("{b}-stream.aov"));
+        let st = render(
+            &pkg,
+            b,
+            &streamed,
+            &["--ao-samples", "0", "--stream", "--vram-budget", "64MiB"],
+        );
+        assert_eq!(st["stream"]["totals"]["incomplete_frames"], 0, "{st}");
+        let resident = st["stream"]["frames"][0]["resident_textures"]
+            .as_u64()
+            .unwrap_or_else(|| panic!("resident_textures in {st}"));
+        assert_eq!(resident, 2, "the checker and the leaf's alpha: {st}");
+        let out = motu_ok(&["compare", s(&gpu), s(&streamed), "--max-mismatch", "0"]);
+        assert!(out.contains("(0 of "), "{out}");
+        let (_, _, sp) = read_png(&streamed.with_extension("png"));
+        assert!(sp == g, "{b}: the streamed image equals the full build's");
     }
 }

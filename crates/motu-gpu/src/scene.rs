@@ -944,7 +944,15 @@ impl GpuScene {
             }
         }
         self.upload_table(ctx, heap, up, Slot::MeshGeo, cast_slice(&mesh_geo))?;
-        let shading = crate::shading::upload(ctx, heap, up, view, source, &used)?;
+        let shading = crate::shading::upload(
+            ctx,
+            heap,
+            up,
+            view,
+            source,
+            &used,
+            crate::shading::Texels::Resident,
+        )?;
         self.shading_address = shading.address;
         self.report.texture_bytes = shading.texture_bytes;
         self.report.shading_attribute_bytes = shading.attribute_bytes;

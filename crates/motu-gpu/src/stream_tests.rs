@@ -343,6 +343,99 @@ fn streaming_under_a_quarter_of_the_full_build_matches_it_on_both_backends() {
     assert_no_validation_errors(&ctx);
 }
 
+/// Issue 16: image textures stream with the meshes that sample them. Every material of the
+/// field samples its own texture; at a quarter of the full build's bytes on a camera path,
+/// only the textures of resident meshes are resident (at most one per resident BLAS here), some
+/// were let go with evicted meshes, and every frame's hits and colours equal the full build's.
+#[test]
+fn textures_stream_with_the_meshes_that_sample_them() {
+    let Some(ctx) = context_or_skip("stream_textures", Requirement::RayTracing) else {
+        return;
+    };
+    let mut h = textured_field(10, 16, 30);
+    h.textures.clear();
+    h.texels.clear();
+    for (i, mat) in h.materials.iter_mut().enumerate() {
+        let a = 0xff00_0000u32 | (i as u32 * 0x0003_0507);
+        let b = 0xffff_ffffu32 ^ (i as u32 * 0x0001_0203);
+        h.textures.push(motu_abi::TextureRecord {
+            texel_offset: h.texels.len() as u32,
+            width: 4,
+            height: 4,
+            mip_count: 1,
+        });
+        for y in 0..4u32 {
+            for x in 0..4u32 {
+                h.texels.push(if (x + y) % 2 == 0 { a } else { b });
+            }
+        }
+        mat.base_color_texture = i as u32;
+    }
+    let blobs = Blobs(&h);
+    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
+    let budget = full_build_needs(&full) / 4;
+    let be = backend(&ctx);
+    let shaded = RenderOptions {
+        shading: motu_abi::shade::Shading {
+            ao_samples: 0,
+            spp: 1,
+            ..full_shading()
+        },
+        ..ids_opts(be)
+    };
+    let mut sr = StreamingRenderer::new(
+        &ctx,
+        h.view(),
+        &blobs,
+        &StreamOptions {
+            budget_bytes: budget,
+            staging_bytes: 256 * 1024,
+            scratch_budget_bytes: 1 << 20,
+            ..Default::default()
+        },
+    )
+    .expect("streaming renderer");
+    let path = CameraPath {
+        yaw_sweep_deg: 70.0,
+        dolly_world: 4.0,
+    };
+    let frames = 4;
+    let mut resident_textures = Vec::new();
+    for f in 0..frames {
+        let cam = camera_path(&base_pose(), &path, f, frames).params(32, 32);
+        let (out, st) = sr.render_frame(&cam, &shaded).expect("frame");
+        assert!(st.complete, "{st:?}");
+        assert!(st.vram_peak_bytes <= budget, "{st:?}");
+        // Here every BLAS holds one mesh of one material with one texture.
+        assert!(
+            st.resident_textures >= 1 && st.resident_textures <= st.resident_blases,
+            "textures follow the resident meshes: {st:?}"
+        );
+        resident_textures.push(st.resident_textures);
+        let reference = render(&ctx, &full, &cam, &shaded).expect("full render");
+        let cmp = motu_trace::compare(&reference.aov, &out.aov, 0.0).expect("sizes");
+        assert_eq!(cmp.mismatched, 0, "frame {f}: hits equal the full build's");
+        assert_shaded_equal(&reference.rgba8, &out.rgba8, &format!("frame {f}"));
+    }
+    let totals = sr.totals();
+    eprintln!(
+        "resident textures per frame {resident_textures:?} of {}; {totals:?}",
+        h.textures.len()
+    );
+    assert!(
+        resident_textures
+            .iter()
+            .all(|&n| (n as usize) < h.textures.len()),
+        "only what the resident meshes sample is resident"
+    );
+    assert!(
+        totals.evicted > 0,
+        "meshes (and their textures) were let go"
+    );
+    drop(sr);
+    assert_no_validation_errors(&ctx);
+}
+
 #[test]
 fn camera_path_reuses_last_frames_structures_and_evicts_under_the_budget() {
     let Some(ctx) = context_or_skip("stream_camera_path", Requirement::RayTracing) else {

@@ -384,7 +384,9 @@ fn render_streaming(
                 crate::size::format_size(floor.tlas_rebuild_bytes),
                 crate::size::format_size(floor.frame_bytes),
                 crate::size::format_size(
-                    floor.shading_tables_bytes + floor.shading_attributes_bytes
+                    floor.shading_tables_bytes
+                        + floor.shading_attributes_bytes
+                        + floor.shading_textures_bytes
                 ),
             );
         }

@@ -67,8 +67,19 @@ impl<'a> StreamingRenderer<'a> {
                             return Err(e);
                         }
                     };
-                    self.frame_stats.bytes_streamed += bytes;
-                    self.frame_stats.built_bytes += bytes;
+                    // Its material's textures come with it (a mesh is resident exactly
+                    // while it holds its texture references).
+                    let texture_bytes = match self.acquire_mesh_textures(m, evict) {
+                        Ok(n) => n,
+                        Err(e) => {
+                            let ctx = self.ctx.clone();
+                            let _ = self.up_mut()?.flush(&ctx);
+                            self.heap.free(g.buffer);
+                            return Err(e);
+                        }
+                    };
+                    self.frame_stats.bytes_streamed += bytes + texture_bytes;
+                    self.frame_stats.built_bytes += bytes + texture_bytes;
                     self.meshes[m] = Some(g);
                 }
             }
@@ -94,6 +105,7 @@ impl<'a> StreamingRenderer<'a> {
                     if self.mesh_refs[m] == 0 {
                         if let Some(g) = self.meshes[m].take() {
                             self.heap.free(g.buffer);
+                            self.release_mesh_textures(m);
                         }
                     }
                 }

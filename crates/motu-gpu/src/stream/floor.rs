@@ -57,11 +57,15 @@ pub struct StreamFloor {
     pub tlas_rebuild_bytes: u64,
     /// Frame buffers at the image size (carried hits, lists, AOV, colour, readback).
     pub frame_bytes: u64,
-    /// Shading tables kept resident: texture records, texels, the per-mesh attribute table.
+    /// Shading tables kept resident: texture records, the per-texture address table, the
+    /// per-mesh attribute table.
     pub shading_tables_bytes: u64,
     /// The most shading-attribute bytes (normals, texture coordinates) the meshes of one
     /// triangle BLAS stream with (they are resident with its geometry).
     pub shading_attributes_bytes: u64,
+    /// The most texture bytes (whole mip chains) the materials of one triangle BLAS's meshes
+    /// sample: textures stream with the meshes that use them.
+    pub shading_textures_bytes: u64,
     pub width: u32,
     pub height: u32,
     /// Trace pipeline and shader binding tables (allowance).
@@ -239,9 +243,16 @@ pub fn streaming_floor(
     let pixels = u64::from(width) * u64::from(height);
     let guard = u64::from(width + 16) * u64::from(height + 16) / 4;
     let frame = frame_buffer_bytes(pixels, guard, nb + nt);
-    let shading_tables = crate::shading::table_bytes(view);
+    let shading_tables = crate::shading::table_bytes(view, crate::shading::Texels::Streamed);
     let shading_attributes = largest_blas_attribute_bytes(view);
-    let base = tables + skeleton + frame + PIPELINE_BYTES + shading_tables + shading_attributes;
+    let shading_textures = largest_blas_texture_bytes(view);
+    let base = tables
+        + skeleton
+        + frame
+        + PIPELINE_BYTES
+        + shading_tables
+        + shading_attributes
+        + shading_textures;
     // Budget-dependent parts: staging (an eighth), TLAS rebuild scratch batches (an eighth),
     // allocator slack (four blocks of a 64th): iterate to the fixed point.
     let mut floor = base + blas_build;
@@ -268,6 +279,7 @@ pub fn streaming_floor(
         frame_bytes: frame,
         shading_tables_bytes: shading_tables,
         shading_attributes_bytes: shading_attributes,
+        shading_textures_bytes: shading_textures,
         width,
         height,
         pipeline_bytes: PIPELINE_BYTES,
@@ -292,6 +304,29 @@ fn largest_blas_attribute_bytes(view: &HierarchyView<'_>) -> u64 {
                         crate::scene::streamed_attribute_bytes(&view.meshes[g.mesh as usize]);
                     n + u
                 })
+                .sum::<u64>()
+        })
+        .max()
+        .unwrap_or(0)
+}
+
+/// Texture bytes of the triangle BLAS whose meshes' materials sample the most (each texture
+/// once; see `shading::streamed_texture_bytes`).
+fn largest_blas_texture_bytes(view: &HierarchyView<'_>) -> u64 {
+    view.blases
+        .iter()
+        .filter(|r| r.kind == BLAS_TRIANGLES && r.item_count > 0)
+        .map(|r| {
+            let range = r.item_base as usize..(r.item_base + r.item_count) as usize;
+            let mut textures: Vec<usize> = view.geometries[range]
+                .iter()
+                .flat_map(|g| crate::shading::mesh_textures(view, g.mesh as usize))
+                .collect();
+            textures.sort_unstable();
+            textures.dedup();
+            textures
+                .into_iter()
+                .map(|t| crate::shading::streamed_texture_bytes(view, t))
                 .sum::<u64>()
         })
         .max()

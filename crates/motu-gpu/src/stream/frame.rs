@@ -90,7 +90,9 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         let report = self.heap.report();
+        let resident_textures = self.shading.resident_textures();
         let st = &mut self.frame_stats;
+        st.resident_textures = resident_textures;
         st.resident_blases = self
             .blas
             .iter()

@@ -203,6 +203,8 @@ pub struct FrameStreamStats {
     pub resident_bytes: u64,
     pub resident_blases: u32,
     pub resident_tlases: u32,
+    /// Image textures resident after the frame (they stream with the meshes that sample them).
+    pub resident_textures: u32,
     /// Highest bytes of blocks counted against the budget so far (never above it).
     pub vram_peak_bytes: u64,
     pub vram_budget_bytes: u64,

@@ -56,6 +56,7 @@ impl<'a> StreamingRenderer<'a> {
             if self.mesh_refs[g] == 0 {
                 if let Some(m) = self.meshes[g].take() {
                     self.heap.free(m.buffer);
+                    self.release_mesh_textures(g);
                 }
             }
         }
