@@ -4,7 +4,7 @@
 
 use crate::analyze::{edge_ref, Plan};
 use crate::partition::{group_by_location, partition_mesh, Cluster, Item};
-use crate::split::{median_partition, sah_partition};
+use crate::split::{median_partition, sah_partition, split_keeping_direct};
 use crate::{lod, xform, CompileError, CompiledScene, MeshLoader, MeshSink};
 use motu_abi::{
     BlasRecord, GeometryRecord, InstanceRecord, LodSelectorRecord, MaterialRecord, MeshRecord,
@@ -658,9 +658,11 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
 
     /// Splits `tlas` until its instance count fits the cap (see the crate docs): the few
     /// instances large against the whole (terrain, ocean) stay in `tlas` itself, traced with
-    /// it, and the rest is cut by a binned SAH over instance bounds into pieces that barely
-    /// overlap, so a ray enters few of them and skips those behind its hit. Pieces mix
-    /// elements; their instances keep their element tags, which `--subset` filters on.
+    /// it, and the rest is cut by a binned SAH over instance bounds into compact leaves; the
+    /// densest leaves become pieces (barely overlapping, so a ray enters few of them and
+    /// skips those behind its hit) and the others stay in `tlas` too, up to the cap, so rays
+    /// that only meet them take one trace. Pieces mix elements; their instances keep their
+    /// element tags, which `--subset` filters on.
     fn split_tlas(&mut self, tlas: u32) -> Result<(), CompileError> {
         let cap = self.instance_cap;
         let per_blas = self.plan.opts.max_primitives_per_blas as usize;
@@ -686,21 +688,33 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
                     })
                     .collect()
             };
+            ranges.clear();
             let direct = if first_round {
                 self.out.report.split_tlases += 1;
-                keep_large_at_end(&mut self.out.instances[base..], &mut bounds, cap)
+                let large = keep_large_at_end(&mut self.out.instances[base..], &mut bounds, cap);
+                // Beside the large ones, the TLAS keeps as many instances as the cap leaves
+                // room for next to its pieces' AABB instances: rays into that part take one
+                // trace, and only the densest clusters become pieces.
+                let rest = count - large;
+                let kept = split_keeping_direct(
+                    &mut self.out.instances[base..base + rest],
+                    &mut bounds[..rest],
+                    cap,
+                    |pieces| cap.saturating_sub(large + pieces.div_ceil(per_blas.max(1))),
+                    &mut ranges,
+                );
+                large + kept
             } else {
+                sah_partition(
+                    &mut self.out.instances[base..],
+                    &mut bounds[..],
+                    cap,
+                    &mut ranges,
+                );
                 0
             };
             first_round = false;
             let split_end = base + count - direct;
-            ranges.clear();
-            sah_partition(
-                &mut self.out.instances[base..split_end],
-                &mut bounds[..count - direct],
-                cap,
-                &mut ranges,
-            );
             drop(bounds);
             let first_piece = self.out.tlases.len();
             for &(x, y) in &ranges {

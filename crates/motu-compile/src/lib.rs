@@ -58,8 +58,11 @@
 //! ray enters few pieces (issue 15): the instances large against the whole (terrain, ocean;
 //! at most a quarter of the cap) stay in the TLAS itself, and the rest of its instance range
 //! is partitioned in place by a binned SAH over instance bounds (each side at least 1/8 of the
-//! range; an index split when centroids coincide, so it always terminates) until each piece
-//! fits; the pieces become child TLASes (their instance ranges are sub-ranges of the original:
+//! range; an index split when centroids coincide, so it always terminates) into about 8
+//! leaves of at most the cap; the leaves with the least box area per instance (the densest)
+//! become pieces until the others fit in the TLAS beside the pieces' AABB instances, so only
+//! rays entering a dense piece's box take a second trace (a TLAS still over the cap after
+//! that is split again, all of it into pieces); the pieces become child TLASes (their instance ranges are sub-ranges of the original:
 //! nothing is copied) reached through PIs of new AABB BLASes instanced by the original TLAS,
 //! which traversal enters near-to-far, skipping those behind the best hit. AABB BLASes over
 //! the primitive cap are split at the median PI centre. Split levels add TLAS levels below the

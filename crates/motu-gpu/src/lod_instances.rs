@@ -3,6 +3,12 @@
 //! and writes that level's BLAS addresses into the TLAS instance buffer (and the instance
 //! table the shaders read), then the slots' TLASes are rebuilt. Rays then reach LOD'd
 //! geometry in one trace, without a traversal-shader hop.
+//!
+//! The levels depend only on the frame's camera and LOD parameters, so the pass is skipped
+//! when those are bit-identical to the ones the slot TLASes were last built for (a static
+//! camera: progressive frames, repeated renders); any change, a moved eye included, runs it.
+
+use std::sync::Mutex;
 
 use ash::vk;
 use bytemuck::{cast_slice, Pod, Zeroable};
@@ -57,11 +63,40 @@ pub(crate) struct InstanceLodGpu {
     group_count: u32,
     /// Slots (LOD'd instances), for stats.
     pub(crate) slot_count: u32,
+    /// The camera and LOD parameters (bytes, see [`InstanceLodGpu::needs_pass`]) the slot
+    /// TLASes hold the levels of; None before the first pass and while a submission that
+    /// rebuilds them has not completed (a failed one leaves them unknown).
+    built_for: Mutex<Option<Vec<u8>>>,
+    /// Frames that ran the pass and frames that skipped it (levels already current).
+    counts: Mutex<[u64; 2]>,
 }
 
 impl InstanceLodGpu {
+    /// Whether a frame with the levels' inputs `key` (the frame's camera and LOD parameters)
+    /// needs the pass: false when the slot TLASes already hold that key's levels. When it
+    /// returns true the built state is marked unknown until [`Self::built`] confirms the
+    /// submission that rebuilds them completed.
+    /// `frames` frames of this camera follow; all but the first skip the pass.
+    pub(crate) fn needs_pass(&self, key: &[u8], frames: u32) -> bool {
+        let mut built = self.built_for.lock().unwrap_or_else(|e| e.into_inner());
+        let mut counts = self.counts.lock().unwrap_or_else(|e| e.into_inner());
+        let needed = built.as_deref() != Some(key);
+        if needed {
+            *built = None;
+            counts[0] += 1;
+        }
+        counts[1] += u64::from(frames) - u64::from(needed);
+        needed
+    }
+
+    /// The submission with the pass for `key` completed: the slot TLASes hold its levels.
+    pub(crate) fn built(&self, key: Vec<u8>) {
+        *self.built_for.lock().unwrap_or_else(|e| e.into_inner()) = Some(key);
+    }
+
     /// Records the LOD pass for the frame whose parameters are at `frame_address`: pick
-    /// levels, write instances, rebuild the slots' TLASes. Barriers on both sides.
+    /// levels, write instances, rebuild the slots' TLASes. The caller orders it after the
+    /// previous frame's trace (a full barrier); a barrier follows each step.
     pub(crate) fn record<'a>(
         &'a self,
         ctx: &Context,
@@ -72,7 +107,6 @@ impl InstanceLodGpu {
             frame: frame_address,
             ..self.push
         };
-        rec.barrier();
         rec.dispatch(
             &self.pipeline,
             None,
@@ -322,6 +356,8 @@ impl GpuScene {
                 tlases,
                 group_count: (lod.slots.len() as u32).div_ceil(64),
                 slot_count: lod.slots.len() as u32,
+                built_for: Mutex::new(None),
+                counts: Mutex::new([0; 2]),
             })
         })();
         let gpu = match r {
@@ -361,5 +397,14 @@ impl GpuScene {
     /// LOD instance slots (instance-level LOD), 0 when it is off.
     pub fn lod_instance_slots(&self) -> u32 {
         self.instance_lod.as_ref().map_or(0, |l| l.slot_count)
+    }
+
+    /// Instance-level LOD so far on this scene: `[frames that ran the pass, frames that
+    /// skipped it]` (skipped: the frame's camera and LOD parameters equalled those the levels
+    /// were built for). `[0, 0]` when off.
+    pub fn lod_instance_passes(&self) -> [u64; 2] {
+        self.instance_lod.as_ref().map_or([0; 2], |l| {
+            *l.counts.lock().unwrap_or_else(|e| e.into_inner())
+        })
     }
 }

@@ -249,6 +249,15 @@ pub(crate) struct FrameParams {
     lights: [LightRecord; MAX_LIGHTS],
 }
 
+impl FrameParams {
+    /// What instance-level LOD's levels depend on: the camera and the LOD parameters (bytes).
+    pub(crate) fn levels_key(&self) -> Vec<u8> {
+        let mut key = bytemuck::bytes_of(&self.camera).to_vec();
+        key.extend_from_slice(bytemuck::bytes_of(&self.lod));
+        key
+    }
+}
+
 /// Stats words of every renderer's buffers (full builds, streaming, the viewer): the last,
 /// `STAT_TRUNCATED_RAYS` of `common.glsl`, counts rays cut short by a stack overflow or the
 /// trace cap.
@@ -591,13 +600,28 @@ pub(crate) fn run_frames(
         Tracer::Query(_) => "trace (query)",
     })?;
     rec.reset_queries(&timestamps);
+    // Instance-level LOD: every frame of this call has the same camera, so the levels are
+    // picked (and the slot TLASes rebuilt) in the first frame at most, and not at all when
+    // they already are this camera's (lod_instances.rs).
+    let lod_key = match &scene.instance_lod {
+        Some(_) => {
+            let params: Vec<FrameParams> = frame.params.read_vec(0, 1)?;
+            Some(params[0].levels_key())
+        }
+        None => None,
+    };
+    let mut lod_pass = match (&scene.instance_lod, &lod_key) {
+        (Some(lod), Some(key)) => lod.needs_pass(key, frames),
+        _ => false,
+    };
     for f in 0..frames {
         rec.fill_buffer(&frame.stats, 0, (RENDER_STAT_WORDS * 4) as u64, 0)?;
         rec.barrier();
         rec.write_timestamp(&timestamps, 2 * f)?;
-        // Instance-level LOD: this frame's levels (counted in the frame's time).
-        if let Some(lod) = &scene.instance_lod {
+        // Counted in the frame's time.
+        if let (true, Some(lod)) = (lod_pass, &scene.instance_lod) {
             lod.record(ctx, &mut rec, addresses[Slot::Frame as usize])?;
+            lod_pass = false;
         }
         tracer.record(&mut rec, push_bytes, [w, h], None)?;
         rec.write_timestamp(&timestamps, 2 * f + 1)?;
@@ -615,6 +639,9 @@ pub(crate) fn run_frames(
         (RENDER_STAT_WORDS * 4) as u64,
     )?;
     rec.submit_and_wait()?;
+    if let (Some(lod), Some(key)) = (&scene.instance_lod, lod_key) {
+        lod.built(key);
+    }
     let records: Vec<AovRecord> = frame.readback.read_vec(0, pixels as usize)?;
     let rgba: Vec<u32> = frame.readback.read_vec(rgba_off, pixels as usize)?;
     let counters: Vec<u32> = frame.readback.read_vec(stats_off, RENDER_STAT_WORDS)?;

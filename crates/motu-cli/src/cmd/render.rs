@@ -633,6 +633,7 @@ fn render_gpu(
     let mut stats = serde_json::to_value(&out.stats)?;
     stats["truncated_rays"] = json!(counts.truncated_rays);
     stats["resources"] = serde_json::to_value(scene.report())?;
+    lod_pass_stats(&mut stats, scene.lod_instance_passes());
     drop(scene);
     ctx.check_validation()
         .context("Vulkan validation reported errors")?;
@@ -661,6 +662,14 @@ fn recorded_cameras(
     Ok(Some(
         (0..n).map(|f| path.sample(f, n).params(w, h)).collect(),
     ))
+}
+
+/// Instance-level LOD's per-frame pass: `lod_passes` frames ran it (levels picked, slot TLASes
+/// rebuilt), `lod_passes_skipped` frames did not (their camera was the one the levels were
+/// built for).
+fn lod_pass_stats(stats: &mut Value, [run, skipped]: [u64; 2]) {
+    stats["lod_passes"] = json!(run);
+    stats["lod_passes_skipped"] = json!(skipped);
 }
 
 /// A recorded camera path on a full GPU build: one frame per camera through the viewer's
@@ -701,6 +710,7 @@ fn render_gpu_path(
     stats["frames"] = json!(cams.len());
     stats["path_ms_per_frame"] = json!(times);
     stats["resources"] = serde_json::to_value(live.scene().report())?;
+    lod_pass_stats(&mut stats, live.scene().lod_instance_passes());
     drop(live);
     ctx.check_validation()
         .context("Vulkan validation reported errors")?;
