@@ -38,7 +38,7 @@
 #define STREAM_OPEN 1u
 #define STREAM_NEEDED 2u
 
-// Per-pass streaming parameters (Rust: stream::StreamParams, 64 bytes). Present only when
+// Per-pass streaming parameters (Rust: stream::StreamParams, 80 bytes). Present only when
 // push.stream != 0.
 struct StreamParams {
     uint64_t blas_stamps;   // u32 per BLAS: 4 × stamp + STREAM_* level
@@ -51,6 +51,8 @@ struct StreamParams {
     uint blas_count;
     uint64_t requests;      // u32 per BLAS: pixels whose nearest open structure it is (build order)
     uint64_t carry;         // Carry per pixel (render_pixel.glsl), zeroed at the frame's start
+    uint64_t cluster_members;  // u32 global instance indices of the proxy clusters' members
+    uint64_t _pad;
 };
 
 struct FrameParams {

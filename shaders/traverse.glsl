@@ -75,6 +75,52 @@ void stream_empty_blas(uint blas, float t_near) {
     stream_mark_as(s.blas_stamps, blas, STREAM_OPEN);
 }
 
+// The proxy PI table read as words: a proxy's first two words (its unused child transform)
+// hold its cluster's member range (stream/skeleton.rs `proxy_pi`; a PiRecord is 20 words).
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer PiWords { uint w[]; };
+#define PI_RECORD_WORDS 20u
+
+// A ray (in the proxy's TLAS space, t < t_max) entered the proxy box of cluster PI `pi` of
+// non-resident BLAS `blas`. The box covers up to 16 instances: test each member instance's
+// box (its BLAS bounds under its tlas_from_blas, padded as the CPU pads proxy boxes) and
+// report the BLAS at the nearest member entry only, so rays passing between instances do not
+// demand it (guard probes included).
+void stream_empty_cluster(uint pi, uint blas, vec3 org, vec3 dir, float t_max) {
+    StreamParams s = StreamRef(push.stream).s;
+    if (!g_guard && StampTable(s.walked).r[blas] >= g_start) {
+        return;  // walked by this ray in an earlier pass: resolved
+    }
+    PiWords words = PiWords(uint64_t(push.pis));
+    uint first = words.w[pi * PI_RECORD_WORDS];
+    uint count = words.w[pi * PI_RECORD_WORDS + 1u];
+    BlasRecord br = push.blases.r[blas];
+    vec3 centre = 0.5 * (br.bounds_min + br.bounds_max);
+    vec3 half_size = 0.5 * (br.bounds_max - br.bounds_min);
+    U32Table members = U32Table(s.cluster_members);
+    float t_best = T_INFINITY;
+    for (uint i = 0u; i < count; ++i) {
+        InstanceRecord ir = push.instances.r[members.r[first + i]];
+        Affine m = affine_from_array(ir.tlas_from_blas);
+        vec3 c = xform_point(m, centre);
+        vec3 h = vec3(dot(abs(m.r0.xyz), half_size), dot(abs(m.r1.xyz), half_size),
+                      dot(abs(m.r2.xyz), half_size));
+        vec3 lo = c - h;
+        vec3 hi = c + h;
+        // Transformed-box rounding plus the CPU's proxy padding (`padded`): conservative.
+        float extent = 2.0 * max(max(h.x, h.y), h.z);
+        float magnitude = max(max(max(abs(lo.x), abs(lo.y)), abs(lo.z)),
+                              max(max(abs(hi.x), abs(hi.y)), abs(hi.z)));
+        float pad = 1e-3 * extent + 2e-5 * magnitude;
+        float t = slab_near(org, dir, lo - pad, hi + pad, 0.0, min(t_max, t_best));
+        if (t >= 0.0) {
+            t_best = min(t_best, t);
+        }
+    }
+    if (t_best < t_max) {
+        stream_empty_blas(blas, t_best);
+    }
+}
+
 // After a walk: whether an open structure lies in front of the best hit `best_t`; if so its
 // nearest is requested (needed, counted so the host builds the most requested first).
 bool stream_still_open(float best_t) {
@@ -184,7 +230,8 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
                 // A non-resident triangle BLAS in front of the best hit: open unless already
                 // walked (streaming only; every TLAS is resident).
                 if (g_streaming) {
-                    stream_empty_blas(pi.target, cd.t_near);
+                    stream_empty_cluster(cd.pi, pi.target, xform_point(e.tlas_from_world, org),
+                                         xform_vector(e.tlas_from_world, dir), hit.t);
                 }
                 continue;
             }

@@ -288,15 +288,7 @@ fn stack_overflow_is_counted_and_a_larger_stack_removes_it() {
             &cam,
             &RenderOptions {
                 backend,
-                // 16 (the default) is enough for the row. Not 32 on the pipeline backend:
-                // since the closest-hit reads gl_InstanceCustomIndexEXT, lavapipe's LLVM
-                // compile of the 32-entry pipeline variant runs for over half an hour (a
-                // lavapipe compile-time problem, noted in issue 14's notes; query compiles).
-                stack_size: if backend == crate::render::Backend::Pipeline {
-                    16
-                } else {
-                    32
-                },
+                stack_size: 32,
                 view: View::Ids,
                 ..Default::default()
             },

@@ -123,6 +123,13 @@ fn render_streaming(
         max_passes: a.stream_max_passes.unwrap_or(0),
         ..stream_bounds(&a.stream_bounds).options()
     };
+    // A recorded path renders at its cameras' size, not the package camera's.
+    let (w, h) = match recorded {
+        Some(r) if !r.is_empty() => r
+            .iter()
+            .fold((0, 0), |(w, h), c| (w.max(c.width), h.max(c.height))),
+        _ => (w, h),
+    };
     // Refused up front below the floor: under it some frame could not complete.
     let floor = motu_gpu::streaming_floor(view, &ctx, w, h, opts.staging_bytes)
         .context("computing the streaming floor")?;

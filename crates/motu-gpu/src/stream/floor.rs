@@ -41,7 +41,8 @@ impl FloorSizes for crate::context::Context {
 /// The parts of the floor (bytes), for reports and error messages.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
 pub struct StreamFloor {
-    /// Node tables (with the proxies' records), stamps and walked tables.
+    /// Node tables (with the proxies' records and the clusters' member table), stamps and
+    /// walked tables.
     pub tables_bytes: u64,
     /// PI BLASes, every TLAS and every proxy BLAS (no triangle instance resident: TLASes hold
     /// their PI instances and one proxy of clustered boxes): the resident skeleton besides the
@@ -111,6 +112,7 @@ pub fn streaming_floor(
         r.kind == BLAS_TRIANGLES && r.item_count > 0
     };
     let mut proxies_total = 0u64;
+    let mut members_total = 0u64;
     let mut skeleton = 0u64;
     let mut rebuild_structures = 0u64;
     let mut rebuild_inputs = 0u64;
@@ -130,7 +132,9 @@ pub fn streaming_floor(
             }
         }
         let most = per_blas.values().copied().max().unwrap_or(0);
-        let clusters = proxy_clusters(view, t, buildable).len() as u32;
+        let cl = proxy_clusters(view, t, buildable);
+        members_total += cl.iter().map(|c| c.members.len() as u64).sum::<u64>();
+        let clusters = cl.len() as u32;
         let proxy = u32::from(clusters > 0);
         let (t_bytes, _) = sizes.tlas((other + proxy).max(1))?;
         skeleton += as_align(t_bytes);
@@ -194,6 +198,8 @@ pub fn streaming_floor(
         )
         + rec_bytes(view.meshes.len() as u64, 16)
         + rec_bytes(nt, 8)
+        // The proxy clusters' member table (u32 an instance).
+        + rec_bytes(members_total, 4)
         + 2 * rec_bytes(nb.max(1), 4);
     // The largest triangle BLAS build: meshes, structure, scratch.
     let mut largest: Option<(u32, u64, u64)> = None;

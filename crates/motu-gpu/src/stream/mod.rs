@@ -9,7 +9,12 @@
 //! with triangle instances gets one extra instance: a *proxy* AABB BLAS with one box per
 //! non-resident *cluster* (up to 16 neighbouring instances of one BLAS, grouped by the
 //! compiler's SAH over instance bounds; the union of their BLAS bounds in TLAS space, padded),
-//! whose PI record has kind `PI_EMPTY_BLAS` and names the BLAS. A built TLAS holds only the
+//! whose PI record has kind `PI_EMPTY_BLAS` and names the BLAS. A ray that enters such a box
+//! tests the cluster's member instances (their BLAS bounds under their own transforms, read
+//! from the resident instance table through a member table; the PI record's unused transform
+//! words carry the range): only a ray that enters a member's box, in front of its best hit,
+//! opens the BLAS (at that member's entry), so rays passing between the instances of a
+//! cluster demand nothing (guard probes alike). A built TLAS holds only the
 //! instances of resident BLASes (and PI instances) plus the proxy: each carries its index in
 //! the TLAS's record range as its custom index, which the shaders read, so records never move
 //! and the resident skeleton does not grow with the instance count (only the instance table
@@ -260,6 +265,9 @@ pub struct StreamingRenderer<'a> {
     pis_table: usize,
     mesh_geo_table: usize,
     tlas_addr_table: usize,
+    /// Device address of the proxy clusters' member table (u32 global instance indices), 0
+    /// when no TLAS has a proxy.
+    cluster_members: u64,
     shading: shading::StreamShading,
     view: HierarchyView<'a>,
     source: &'a dyn MeshBlobSource,

@@ -14,7 +14,7 @@ use crate::error::{GpuError, Result};
 use crate::render::{Tracer, STAT_WORDS};
 use crate::scene::Slot;
 
-/// `StreamParams` of `common.glsl` (64 bytes).
+/// `StreamParams` of `common.glsl` (80 bytes).
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 #[repr(C)]
 pub(super) struct StreamParams {
@@ -33,6 +33,10 @@ pub(super) struct StreamParams {
     /// [`CARRY_BYTES`] per pixel: the state carried across passes (`Carry` of
     /// `render_pixel.glsl`).
     pub(super) carry: u64,
+    /// u32 global instance indices of the proxy clusters' members (a proxy PI record names
+    /// its range), 0: no proxies.
+    pub(super) cluster_members: u64,
+    pub(super) _pad: u64,
 }
 
 /// Bytes of one pixel's `Carry` (`render_pixel.glsl`).
@@ -93,6 +97,8 @@ impl<'a> StreamingRenderer<'a> {
                 blas_count: nb as u32,
                 requests: fb.requests.device_address()?.0,
                 carry: fb.carry.device_address()?.0,
+                cluster_members: self.cluster_members,
+                _pad: 0,
             };
             fb.stream.write(0, std::slice::from_ref(&sp))?;
             let mut addresses = self.addresses;

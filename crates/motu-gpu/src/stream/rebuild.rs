@@ -80,7 +80,7 @@ impl<'a> StreamingRenderer<'a> {
             for c in &self.clusters[t as usize] {
                 if self.blas[c.blas as usize].is_none() {
                     proxy_boxes.push(c.bounds);
-                    pis.push(proxy_pi(c.blas, &c.bounds));
+                    pis.push(proxy_pi(c));
                 }
             }
             if !pis.is_empty() {

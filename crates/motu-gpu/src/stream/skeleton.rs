@@ -51,11 +51,17 @@ pub(super) fn transformed_box(m: &[f32; 12], lo: [f32; 3], hi: [f32; 3]) -> [f32
 pub(super) const PROXY_CLUSTER_INSTANCES: usize = 16;
 
 /// One proxy box: a spatially coherent cluster of a TLAS's instances of one triangle BLAS.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub(super) struct ProxyCluster {
     pub blas: u32,
     /// `[min, max]` in the TLAS's space: the union of the instances' transformed BLAS bounds.
     pub bounds: [f32; 6],
+    /// The member instances: indices in the TLAS's instance range (= their custom index).
+    pub members: Vec<u32>,
+    /// Where `members` start in the GPU member table (global instance-table indices): a ray
+    /// that enters the box tests the members' boxes, so a BLAS is demanded only by rays that
+    /// enter one of its instances' boxes (set by [`StreamingRenderer::new`]).
+    pub member_first: u32,
 }
 
 /// The proxy clusters of TLAS `t`: its instances of each buildable BLAS, cut by the compiler's
@@ -68,9 +74,11 @@ pub(super) fn proxy_clusters(
 ) -> Vec<ProxyCluster> {
     let rec = &view.tlases[t];
     type Bounds = ([f32; 3], [f32; 3]);
-    let mut by_blas: std::collections::BTreeMap<u32, Vec<Bounds>> = Default::default();
-    for inst in &view.instances
+    let mut by_blas: std::collections::BTreeMap<u32, (Vec<u32>, Vec<Bounds>)> = Default::default();
+    for (local, inst) in view.instances
         [rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize]
+        .iter()
+        .enumerate()
     {
         let b = inst.blas as usize;
         if !buildable(b) {
@@ -78,15 +86,13 @@ pub(super) fn proxy_clusters(
         }
         let br = &view.blases[b];
         let x = transformed_box(&inst.tlas_from_blas, br.bounds_min, br.bounds_max);
-        by_blas
-            .entry(inst.blas)
-            .or_default()
-            .push(([x[0], x[1], x[2]], [x[3], x[4], x[5]]));
+        let entry = by_blas.entry(inst.blas).or_default();
+        entry.0.push(local as u32);
+        entry.1.push(([x[0], x[1], x[2]], [x[3], x[4], x[5]]));
     }
     let mut out = Vec::new();
     let mut ranges = Vec::new();
-    for (blas, mut bounds) in by_blas {
-        let mut items = vec![(); bounds.len()];
+    for (blas, (mut items, mut bounds)) in by_blas {
         ranges.clear();
         motu_compile::sah_partition(
             &mut items,
@@ -112,6 +118,8 @@ pub(super) fn proxy_clusters(
             out.push(ProxyCluster {
                 blas,
                 bounds: padded(b),
+                members: items[begin..end].to_vec(),
+                member_first: 0,
             });
         }
     }
@@ -200,9 +208,24 @@ impl<'a> StreamingRenderer<'a> {
                 }
             }
         }
-        let clusters: Vec<Vec<ProxyCluster>> = (0..nt)
+        let mut clusters: Vec<Vec<ProxyCluster>> = (0..nt)
             .map(|t| proxy_clusters(&view, t, |b| buildable[b]))
             .collect();
+        // The member table: per cluster, its instances' global indices in the GPU instance
+        // table (each TLAS's range there starts at the running total of the ranges before it,
+        // each grown by its proxy instance).
+        let mut members: Vec<u32> = Vec::new();
+        let mut gpu_base = 0u32;
+        for (t, rec) in view.tlases.iter().enumerate() {
+            for c in &mut clusters[t] {
+                c.member_first = u32::try_from(members.len()).map_err(|_| too_many("instances"))?;
+                members.extend(c.members.iter().map(|&local| gpu_base + local));
+            }
+            let grown = rec.instance_count + u32::from(!clusters[t].is_empty());
+            gpu_base = gpu_base
+                .checked_add(grown)
+                .ok_or_else(|| too_many("instances"))?;
+        }
         // GPU tables: TLAS ranges grow by the proxy instance; proxy BLASes and PI slots (one
         // per cluster) follow the originals.
         let mut gpu_tlases: Vec<TlasRecord> = Vec::with_capacity(nt);
@@ -221,7 +244,7 @@ impl<'a> StreamingRenderer<'a> {
                 let blas_id = u32::try_from(gpu_blases.len()).map_err(|_| too_many("BLASes"))?;
                 proxy_pi_base[t] = pi_base;
                 for c in &clusters[t] {
-                    gpu_pis.push(proxy_pi(c.blas, &c.bounds));
+                    gpu_pis.push(proxy_pi(c));
                 }
                 let n = clusters[t].len() as u32;
                 gpu_blases.push(BlasRecord {
@@ -281,6 +304,7 @@ impl<'a> StreamingRenderer<'a> {
             pis_table: 0,
             mesh_geo_table: 0,
             tlas_addr_table: 0,
+            cluster_members: 0,
             shading: Default::default(),
             view,
             source,
@@ -309,7 +333,7 @@ impl<'a> StreamingRenderer<'a> {
             },
             ctx: ctx.clone(),
         };
-        r.init_skeleton(&gpu_tlases, &gpu_instances, &gpu_blases, &gpu_pis)?;
+        r.init_skeleton(&gpu_tlases, &gpu_instances, &gpu_blases, &gpu_pis, &members)?;
         let report = r.heap.report();
         r.totals.skeleton_bytes = report.budget_in_use_bytes;
         tracing::info!(
@@ -327,6 +351,7 @@ impl<'a> StreamingRenderer<'a> {
         gpu_instances: &[InstanceRecord],
         gpu_blases: &[BlasRecord],
         gpu_pis: &[PiRecord],
+        cluster_members: &[u32],
     ) -> Result<()> {
         use bytemuck::cast_slice;
         let ctx = self.ctx.clone();
@@ -367,6 +392,20 @@ impl<'a> StreamingRenderer<'a> {
                 Slot::TlasAddresses => self.tlas_addr_table = self.tables.len(),
                 _ => {}
             }
+            self.tables.push(buf);
+        }
+        if !cluster_members.is_empty() {
+            let bytes: &[u8] = cast_slice(cluster_members);
+            let buf = self.heap.alloc_buffer(
+                "stream-cluster-members",
+                bytes.len() as u64,
+                table_usage(),
+                AllocKind::NodeTable,
+                MemoryClass::DeviceLocal,
+                16,
+            )?;
+            self.cluster_members = buf.device_address()?.0;
+            self.up_mut()?.upload(&ctx, &buf, 0, bytes)?;
             self.tables.push(buf);
         }
         let stamp_usage = BufferUsage::STORAGE
@@ -482,12 +521,19 @@ impl<'a> StreamingRenderer<'a> {
     }
 }
 
-pub(super) fn proxy_pi(blas: u32, b: &[f32; 6]) -> PiRecord {
+/// The PI record of cluster `c`'s proxy box. A proxy has no child transform: its first two
+/// words (`child_from_parent[0..2]`, read as u32 by `traverse.glsl`'s `stream_empty_cluster`)
+/// carry the cluster's member range in the member table.
+pub(super) fn proxy_pi(c: &ProxyCluster) -> PiRecord {
+    let b = &c.bounds;
+    let mut child_from_parent = [0.0f32; 12];
+    child_from_parent[0] = f32::from_bits(c.member_first);
+    child_from_parent[1] = f32::from_bits(c.members.len() as u32);
     PiRecord {
-        child_from_parent: [0.0; 12],
+        child_from_parent,
         aabb_min: [b[0], b[1], b[2]],
         kind: PI_EMPTY_BLAS,
         aabb_max: [b[3], b[4], b[5]],
-        target: blas,
+        target: c.blas,
     }
 }
