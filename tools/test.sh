@@ -14,5 +14,6 @@ cargo clippy --workspace --all-targets --locked -- -D warnings
 echo "== fuzz smoke (parser, PLY reader, package reader; 30 s each)"
 FUZZ_SECONDS=${FUZZ_SECONDS:-30} bash tools/fuzz-smoke.sh
 echo "== cargo test (unit, integration, doc; benches run once each in test mode)"
-cargo test --workspace --all-targets --locked
+# --no-fail-fast: one run names every failing test, not just the first binary's.
+cargo test --workspace --all-targets --locked --no-fail-fast
 cargo test --workspace --doc --locked

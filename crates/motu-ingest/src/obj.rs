@@ -16,7 +16,7 @@ pub fn ingest_obj(
     if let Some((line, col, detail)) = scan_obj(path, Scan::FaceIndices) {
         return Err(IngestError::Obj {
             path: format!("{shown}:{line}:{col}"),
-            reason: format!("face index out of range: {detail}"),
+            reason: format!("face index out of bounds: {detail}"),
         });
     }
     let (models, materials) = tobj::load_obj(
