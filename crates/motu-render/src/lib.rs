@@ -23,7 +23,7 @@ pub use camera::{
 };
 pub use cpu::render_cpu_instance_lod;
 pub use lod::{choose_lod_mode, LodChoice, LodMode};
-pub use meshes::PackageMeshes;
+pub use meshes::{PackageGeometry, PackageMeshes};
 pub use session::{render, RenderJob, Rendered};
 pub use settings::{RenderEvent, RenderSettings};
 pub use shading::{scene_shading, ShadingOptions, AO_DISTANCE_OF_DIAGONAL};
