@@ -311,14 +311,7 @@ pub fn parse_ply_report(bytes: &[u8]) -> Result<(Mesh, PlyReport), PlyError> {
                                     let line = line.map(|_| body.line);
                                     add_polygon(&mut mesh, &mut report, &poly, index, line);
                                 }
-                                (PropKind::List { count, item }, _) => {
-                                    skip_list(body, *count, *item, el, prop, index)?
-                                }
-                                (PropKind::Scalar(s), _) => {
-                                    body.read(*s).ok_or_else(|| {
-                                        body_err(el, prop, index, "truncated or malformed")
-                                    })?;
-                                }
+                                _ => skip_property(body, el, prop, index)?,
                             }
                         }
                         Ok(())
@@ -375,14 +368,7 @@ pub fn parse_ply_report(bytes: &[u8]) -> Result<(Mesh, PlyReport), PlyError> {
                                         }
                                     }
                                 }
-                                (PropKind::List { count, item }, _) => {
-                                    skip_list(body, *count, *item, el, prop, index)?
-                                }
-                                (PropKind::Scalar(s), _) => {
-                                    body.read(*s).ok_or_else(|| {
-                                        body_err(el, prop, index, "truncated or malformed")
-                                    })?;
-                                }
+                                _ => skip_property(body, el, prop, index)?,
                             }
                         }
                         Ok(())
@@ -394,16 +380,7 @@ pub fn parse_ply_report(bytes: &[u8]) -> Result<(Mesh, PlyReport), PlyError> {
                 for index in 0..el.count {
                     body.item(el, index, |body| {
                         for prop in &el.props {
-                            match &prop.kind {
-                                PropKind::Scalar(s) => {
-                                    body.read(*s).ok_or_else(|| {
-                                        body_err(el, prop, index, "truncated or malformed")
-                                    })?;
-                                }
-                                PropKind::List { count, item } => {
-                                    skip_list(body, *count, *item, el, prop, index)?
-                                }
-                            }
+                            skip_property(body, el, prop, index)?;
                         }
                         Ok(())
                     })?;
@@ -480,6 +457,23 @@ fn read_count(
         return Err(body_err(el, prop, index, &format!("bad list count {n}")));
     }
     Ok(n as usize)
+}
+
+/// Reads past a property this reader does not store (a scalar or a whole list).
+fn skip_property(
+    body: &mut Body<'_>,
+    el: &Element,
+    prop: &Property,
+    index: usize,
+) -> Result<(), PlyError> {
+    match &prop.kind {
+        PropKind::Scalar(s) => {
+            body.read(*s)
+                .ok_or_else(|| body_err(el, prop, index, "truncated or malformed"))?;
+            Ok(())
+        }
+        PropKind::List { count, item } => skip_list(body, *count, *item, el, prop, index),
+    }
 }
 
 fn skip_list(

@@ -56,7 +56,7 @@ pub(crate) fn render_cpu(
     let opts = RenderOptions {
         view: trace_view(s.view),
         lod,
-        max_traces_per_ray: s.max_traces_per_ray,
+        max_traces_per_ray: s.limits.max_traces_per_ray,
         shading: scene_shading(s.shading, pkg, view),
         ..Default::default()
     };

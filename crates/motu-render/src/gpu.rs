@@ -20,9 +20,9 @@ pub(crate) fn gpu_context(
 ) -> Result<motu_gpu::Context, RenderError> {
     use motu_gpu::{ContextOptions, LimitOverrides, Requirement};
     let ctx = motu_gpu::Context::new(&ContextOptions {
-        device_index: s.device,
+        device_index: s.device.index,
         limit_overrides: LimitOverrides {
-            max_memory_allocation_count: s.max_allocations,
+            max_memory_allocation_count: s.device.max_allocations,
             ..Default::default()
         },
         require: match backend {
@@ -32,7 +32,7 @@ pub(crate) fn gpu_context(
         ..Default::default()
     })
     .map_err(RenderError::Device)?;
-    check_vram_budget(s.vram_budget_bytes, &ctx)?;
+    check_vram_budget(s.device.vram_budget_bytes, &ctx)?;
     Ok(ctx)
 }
 
@@ -70,16 +70,16 @@ pub(crate) fn gpu_render_options(
         },
         view: s.view,
         lod,
-        stack_size: s.stack_size,
-        max_traces_per_ray: s.max_traces_per_ray,
+        stack_size: s.limits.stack_size,
+        max_traces_per_ray: s.limits.max_traces_per_ray,
         frames,
         shading,
         ..Default::default()
     }
 }
 
-/// The device and the package's structures built on it under `--vram-budget` and
-/// `--max-allocations` (a full build: `render` and `render --camera-path`).
+/// The device and the package's structures built on it (a full build: `render` and
+/// `render --camera-path`).
 fn build_gpu_scene(
     s: &RenderSettings,
     pkg: &ScenePackage,
@@ -88,30 +88,51 @@ fn build_gpu_scene(
     instance_lod: Option<&InstanceLod>,
 ) -> Result<(motu_gpu::Context, motu_gpu::GpuScene), RenderError> {
     let ctx = gpu_context(s, backend)?;
-    let budget = s.vram_budget_bytes.unwrap_or(u64::MAX);
+    let meshes = PackageMeshes(pkg);
+    let scene = build_scene(
+        &ctx,
+        view,
+        &meshes,
+        s.device.vram_budget_bytes,
+        s.device.max_allocations,
+        instance_lod,
+    )?;
+    Ok((ctx, scene))
+}
+
+/// `view`'s structures built on `ctx` under `--vram-budget` and `--max-allocations` (a full
+/// build: `motu render` and `motu view`); with instance-level LOD the rewritten hierarchy is
+/// built and a per-frame pass picks each LOD instance's level.
+pub fn build_scene(
+    ctx: &motu_gpu::Context,
+    view: &HierarchyView<'_>,
+    meshes: &dyn motu_gpu::MeshBlobSource,
+    vram_budget_bytes: Option<u64>,
+    max_allocations: Option<u32>,
+    instance_lod: Option<&InstanceLod>,
+) -> Result<motu_gpu::GpuScene, RenderError> {
+    let budget = vram_budget_bytes.unwrap_or(u64::MAX);
     let build = motu_gpu::BuildOptions {
         budget_bytes: budget,
-        max_allocations: s
-            .max_allocations
+        max_allocations: max_allocations
             .unwrap_or(motu_gpu::BuildOptions::default().max_allocations),
         // Each half of the staging ring should hold a build batch's geometry so uploads overlap
         // builds; host-visible memory counts against the budget on unified-memory devices.
         staging_bytes: (budget / 8).clamp(4 << 20, 64 << 20),
         ..Default::default()
     };
-    let meshes = PackageMeshes(pkg);
     let built = match instance_lod {
         Some(il) => il.view(view),
         None => *view,
     };
     let mut scene =
-        motu_gpu::GpuScene::build(&ctx, &built, &meshes, &build).map_err(RenderError::Build)?;
+        motu_gpu::GpuScene::build(ctx, &built, meshes, &build).map_err(RenderError::Build)?;
     if let Some(il) = instance_lod {
         scene
             .enable_instance_lod(view, il)
             .map_err(RenderError::InstanceLodSetup)?;
     }
-    Ok((ctx, scene))
+    Ok(scene)
 }
 
 /// Builds the package's structures on the GPU under the budget and renders with a traversal

@@ -22,10 +22,13 @@ pub use camera::{
     camera_params, camera_pose, load_camera_path, recorded_path_cameras, sweep_around_root,
 };
 pub use cpu::render_cpu_instance_lod;
+pub use gpu::build_scene;
 pub use lod::{choose_lod_mode, LodChoice, LodMode};
 pub use meshes::{PackageGeometry, PackageMeshes};
 pub use session::{render, RenderJob, Rendered};
-pub use settings::{RenderEvent, RenderSettings};
+pub use settings::{
+    CameraRequest, DeviceRequest, RenderEvent, RenderSettings, StreamSettings, TraversalLimits,
+};
 pub use shading::{scene_shading, ShadingOptions, AO_DISTANCE_OF_DIAGONAL};
 pub use stream::StreamBounds;
 

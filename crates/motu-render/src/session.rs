@@ -65,23 +65,22 @@ pub fn render(
     let (pkg, view, camera, recorded) = (job.package, job.view, job.camera, job.recorded);
     let lod = s.lod;
     let instance_lod = job.lod.instance.as_ref();
-    let (aov, rgba8, stats): (Aov, Vec<u8>, Value) = match s.backend {
-        Backend::Cpu => {
+    let (aov, rgba8, stats): (Aov, Vec<u8>, Value) = match (s.backend, &s.stream) {
+        (Backend::Cpu, _) => {
             let cams = recorded
                 .map(<[CameraParams]>::to_vec)
                 .unwrap_or_else(|| vec![camera; s.frames as usize]);
             crate::cpu::render_cpu(s, pkg, view, lod, instance_lod, &cams)?
         }
-        backend @ (Backend::Pipeline | Backend::Query) if s.stream => {
-            crate::stream::render_streaming(s, pkg, view, lod, backend, recorded, progress)?
+        (backend, Some(stream)) => {
+            crate::stream::render_streaming(s, stream, pkg, view, backend, recorded, progress)?
         }
-        backend @ (Backend::Pipeline | Backend::Query) if recorded.is_some() => {
-            let cams = recorded.unwrap_or_default();
-            crate::gpu::render_gpu_path(s, pkg, view, cams, lod, backend, instance_lod)?
-        }
-        backend @ (Backend::Pipeline | Backend::Query) => {
-            crate::gpu::render_gpu(s, pkg, view, &camera, lod, backend, instance_lod)?
-        }
+        (backend, None) => match recorded {
+            Some(cams) => {
+                crate::gpu::render_gpu_path(s, pkg, view, cams, lod, backend, instance_lod)?
+            }
+            None => crate::gpu::render_gpu(s, pkg, view, &camera, lod, backend, instance_lod)?,
+        },
     };
     let mut stats = stats;
     lod_stats(&mut stats, job.lod);
@@ -90,7 +89,7 @@ pub fn render(
         json!({
             "backend": s.backend.name(),
             "view": s.view_name(),
-            "vram_budget_bytes": s.vram_budget_bytes.unwrap_or(0),
+            "vram_budget_bytes": s.device.vram_budget_bytes.unwrap_or(0),
             "vram_peak_bytes": 0,
             "allocation_count": 0,
             "as_bytes": 0,
@@ -105,9 +104,9 @@ pub fn render(
     if truncated > 0 || overflows > 0 {
         let what = format!(
             "{truncated} ray(s) were cut short ({overflows} traversal stack overflows with --stack-size {}; --max-traces-per-ray {}): their hits may be wrong (exponentially deep instancing?)",
-            s.stack_size, s.max_traces_per_ray
+            s.limits.stack_size, s.limits.max_traces_per_ray
         );
-        if !s.allow_truncated {
+        if !s.limits.allow_truncated {
             return Err(RenderError::Truncated { what });
         }
         progress(RenderEvent::TruncatedWritten { what: &what });

@@ -11,33 +11,51 @@ pub struct RenderSettings {
     pub backend: Backend,
     pub view: motu_gpu::View,
     pub lod: LodParams,
-    /// Traversal stack entries (`--stack-size`).
-    pub stack_size: u32,
-    /// TLAS walks a ray may make before it is cut short (`--max-traces-per-ray`).
-    pub max_traces_per_ray: u32,
+    pub limits: TraversalLimits,
     /// Frames rendered (`--frames`): timed repeats, or the streaming sweep's length.
     pub frames: u32,
     pub shading: ShadingOptions,
-    /// The camera by name (`--camera`) and the image size as given (`--width`, `--height`):
-    /// streaming sizes its default sweep from them.
-    pub camera_name: Option<String>,
+    pub camera: CameraRequest,
+    pub device: DeviceRequest,
+    /// `--stream`: build only what rays touch, evicting under the budget (`None`: a full build).
+    pub stream: Option<StreamSettings>,
+}
+
+/// How far a ray's traversal may go (`--stack-size`, `--max-traces-per-ray`), and whether an
+/// image with rays cut short is written anyway (`--allow-truncated`).
+#[derive(Clone, Copy, Debug)]
+pub struct TraversalLimits {
+    pub stack_size: u32,
+    pub max_traces_per_ray: u32,
+    pub allow_truncated: bool,
+}
+
+/// The camera by name (`--camera`) and the image size as given (`--width`, `--height`):
+/// streaming sizes its default sweep from them.
+#[derive(Clone, Debug, Default)]
+pub struct CameraRequest {
+    pub name: Option<String>,
     pub width: Option<u32>,
     pub height: Option<u32>,
-    /// Vulkan device index (`--device`; `None`: `MOTU_DEVICE` or the first).
-    pub device: Option<usize>,
-    /// `--vram-budget` (`None`: what is free).
+}
+
+/// The Vulkan device (`--device`; `None`: `MOTU_DEVICE` or the first) and its limits:
+/// `--vram-budget` (`None`: what is free) and `--max-allocations` (`None`: the device's).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct DeviceRequest {
+    pub index: Option<usize>,
     pub vram_budget_bytes: Option<u64>,
-    /// `--max-allocations` (`None`: the device's limit).
     pub max_allocations: Option<u32>,
-    /// `--stream`: build only what rays touch, evicting under the budget.
-    pub stream: bool,
-    /// `--stream-max-passes` (`None`: sized from the scene).
-    pub stream_max_passes: Option<u32>,
-    pub stream_bounds: StreamBounds,
-    /// `--allow-incomplete`: write a streamed frame with unfinished pixels (magenta).
+}
+
+/// `--stream`'s own settings: the pass cap (`--stream-max-passes`; `None`: sized from the
+/// scene), the per-frame bounds, and whether a frame with unfinished pixels is written
+/// (magenta) anyway (`--allow-incomplete`).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct StreamSettings {
+    pub max_passes: Option<u32>,
+    pub bounds: StreamBounds,
     pub allow_incomplete: bool,
-    /// `--allow-truncated`: write an image whose rays were cut short.
-    pub allow_truncated: bool,
 }
 
 impl RenderSettings {

@@ -3,10 +3,9 @@
 //! `--stream-build-budget`, `--stream-build-ms`).
 
 use crate::gpu::{gpu_context, gpu_render_options, Rendered};
-use crate::settings::{RenderEvent, RenderSettings};
+use crate::settings::{RenderEvent, RenderSettings, StreamSettings};
 use crate::{camera_pose, scene_shading, Backend, PackageMeshes, RenderError};
 use motu_abi::camera::{camera_path, CameraParams};
-use motu_abi::lod::LodParams;
 use motu_abi::HierarchyView;
 use motu_pack::ScenePackage;
 use serde_json::{json, Value};
@@ -45,24 +44,31 @@ impl StreamBounds {
 /// `progress` before its completeness is checked.
 pub(crate) fn render_streaming(
     s: &RenderSettings,
+    stream: &StreamSettings,
     pkg: &ScenePackage,
     view: &HierarchyView<'_>,
-    lod: LodParams,
     backend: Backend,
     recorded: Option<&[CameraParams]>,
     progress: &mut dyn FnMut(RenderEvent<'_>),
 ) -> Result<Rendered, RenderError> {
     let ctx = gpu_context(s, backend)?;
-    let (pose, w, h) = camera_pose(pkg, view, s.camera_name.as_deref(), s.width, s.height)?;
+    let (pose, w, h) = camera_pose(
+        pkg,
+        view,
+        s.camera.name.as_deref(),
+        s.camera.width,
+        s.camera.height,
+    )?;
     let path = crate::sweep_around_root(view, &pose);
     let meshes = PackageMeshes(pkg);
     let opts = motu_gpu::StreamOptions {
-        budget_bytes: s.vram_budget_bytes.unwrap_or(u64::MAX),
+        budget_bytes: s.device.vram_budget_bytes.unwrap_or(u64::MAX),
         max_allocations: s
+            .device
             .max_allocations
             .unwrap_or(motu_gpu::StreamOptions::default().max_allocations),
-        max_passes: s.stream_max_passes.unwrap_or(0),
-        ..s.stream_bounds.options()
+        max_passes: stream.max_passes.unwrap_or(0),
+        ..stream.bounds.options()
     };
     // A recorded path renders at its cameras' size, not the package camera's.
     let (w, h) = match recorded {
@@ -74,7 +80,7 @@ pub(crate) fn render_streaming(
     // Refused up front below the floor: under it some frame could not complete.
     let floor = motu_gpu::streaming_floor(view, &ctx, w, h, opts.staging_bytes)
         .map_err(RenderError::Floor)?;
-    if let Some(budget) = s.vram_budget_bytes {
+    if let Some(budget) = s.device.vram_budget_bytes {
         if budget < floor.min_resident_bytes {
             return Err(RenderError::BelowFloor {
                 budget_bytes: budget,
@@ -91,7 +97,7 @@ pub(crate) fn render_streaming(
                 source,
             }
         })?;
-    let ropts = gpu_render_options(s, lod, backend, 1, scene_shading(s.shading, pkg, view));
+    let ropts = gpu_render_options(s, s.lod, backend, 1, scene_shading(s.shading, pkg, view));
     if s.shading.spp > 1 {
         progress(RenderEvent::StreamSppIgnored { spp: s.shading.spp });
     }
@@ -111,7 +117,7 @@ pub(crate) fn render_streaming(
             stats: &st,
         });
         // A wrong image never exits 0 silently (fallback pixels are opt-in and counted).
-        if !st.complete && st.fallback_pixels == 0 && !s.allow_incomplete {
+        if !st.complete && st.fallback_pixels == 0 && !stream.allow_incomplete {
             let cause = if st.build_budget_spent {
                 "its build budget (--stream-build-budget/--stream-build-ms) spent".to_string()
             } else {

@@ -17,45 +17,45 @@ use crate::pipeline::ComputePipeline;
 #[derive(Clone, Copy, Pod, Zeroable)]
 #[repr(C)]
 pub(crate) struct Push {
-    pub(crate) frame: u64,
-    pub(crate) tlases: u64,
-    pub(crate) instances: u64,
-    pub(crate) selectors: u64,
-    pub(crate) lod_levels: u64,
-    pub(crate) slots: u64,
-    pub(crate) blas_addresses: u64,
-    pub(crate) vk_instances: u64,
-    pub(crate) slot_count: u32,
-    pub(crate) lod_instance_base: u32,
-    pub(crate) _pad: [u32; 2],
+    pub frame: u64,
+    pub tlases: u64,
+    pub instances: u64,
+    pub selectors: u64,
+    pub lod_levels: u64,
+    pub slots: u64,
+    pub blas_addresses: u64,
+    pub vk_instances: u64,
+    pub slot_count: u32,
+    pub lod_instance_base: u32,
+    pub _pad: [u32; 2],
 }
 
 /// One TLAS rebuilt every frame: its instances at `offset_bytes` in the instance buffer; the
 /// structure itself is `GpuScene::tlases[tlas]` (built without compaction, so a rebuild fits).
 pub(crate) struct LodTlas {
-    pub(crate) handle: vk::AccelerationStructureKHR,
-    pub(crate) count: u32,
-    pub(crate) offset_bytes: u64,
-    pub(crate) scratch_offset_bytes: u64,
+    pub handle: vk::AccelerationStructureKHR,
+    pub count: u32,
+    pub offset_bytes: u64,
+    pub scratch_offset_bytes: u64,
 }
 
 /// The per-frame LOD pass's resources (owned by [`GpuScene`](super::GpuScene)).
 pub(crate) struct InstanceLodGpu {
-    pub(crate) pipeline: ComputePipeline,
+    pub pipeline: ComputePipeline,
     /// Scratch, BLAS addresses, slots, instance buffer: kept for the scene's life.
-    pub(crate) _buffers: Vec<HeapBuffer>,
-    pub(crate) push: Push,
-    pub(crate) scratch_address: u64,
-    pub(crate) tlases: Vec<LodTlas>,
-    pub(crate) group_count: u32,
+    pub _buffers: Vec<HeapBuffer>,
+    pub push: Push,
+    pub scratch_address: u64,
+    pub tlases: Vec<LodTlas>,
+    pub group_count: u32,
     /// Slots (LOD'd instances), for stats.
-    pub(crate) slot_count: u32,
+    pub slot_count: u32,
     /// The camera and LOD parameters (bytes, see [`InstanceLodGpu::needs_pass`]) the slot
     /// TLASes hold the levels of; None before the first pass and while a submission that
     /// rebuilds them has not completed (a failed one leaves them unknown).
-    pub(crate) built_for: Mutex<Option<Vec<u8>>>,
+    pub built_for: Mutex<Option<Vec<u8>>>,
     /// Frames that ran the pass and frames that skipped it (levels already current).
-    pub(crate) counts: Mutex<[u64; 2]>,
+    pub counts: Mutex<[u64; 2]>,
 }
 
 impl InstanceLodGpu {
