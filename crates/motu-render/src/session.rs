@@ -133,3 +133,33 @@ fn contract_stats(mut stats: Value, extra: Value) -> Value {
     }
     stats
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn contract_keys_fill_gaps_and_never_overwrite_a_backends_value() {
+        let stats = json!({"passes": 3, "ms_per_frame": 1.5});
+        let out = contract_stats(stats, json!({"passes": 1, "as_bytes": 0}));
+        assert_eq!(out["passes"], 3);
+        assert_eq!(out["as_bytes"], 0);
+        assert_eq!(out["ms_per_frame"], 1.5);
+    }
+
+    #[test]
+    fn lod_keys_without_instance_lod_count_the_package_selectors() {
+        let mut stats = json!({});
+        let choice = LodChoice {
+            instance: None,
+            mode: "traversal",
+            reason: "test",
+            selector_pis: 7,
+        };
+        lod_stats(&mut stats, &choice);
+        assert_eq!(stats["lod_mode"], "traversal");
+        assert_eq!(stats["lod_mode_reason"], "test");
+        assert_eq!(stats["lod_instances"], 0);
+        assert_eq!(stats["lod_traversal_selectors"], 7);
+    }
+}
