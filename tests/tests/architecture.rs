@@ -195,6 +195,53 @@ fn motu_render_stays_below_the_cli_the_viewer_and_bench() {
     }
 }
 
+/// `motu view`'s frame source (device opening, the full build or streaming set-up, the
+/// per-frame render) is motu-view's `PackageSource`, above motu-render and below the CLI: the
+/// viewer never reaches up into the CLI, bench or import, and the CLI drives no renderer itself.
+#[test]
+fn the_view_frame_source_lives_in_motu_view_not_the_cli() {
+    let all = manifests();
+    let (_, m) = all.iter().find(|(n, _)| n == "motu-view").unwrap();
+    let deps = dependencies(m);
+    for below in ["motu-render", "motu-gpu"] {
+        assert!(deps.iter().any(|d| d == below), "{below} missing: {deps:?}");
+    }
+    for above in [
+        "motu-cli",
+        "motu-bench",
+        "motu-import",
+        "ash",
+        "anyhow",
+        "clap",
+    ] {
+        assert!(!deps.iter().any(|d| d == above), "motu-view uses {above}");
+    }
+    let view = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../crates/motu-view/src");
+    assert!(
+        rust_files(&view)
+            .iter()
+            .any(|(_, t)| t.contains("impl FrameSource for PackageSource")),
+        "motu-view holds the package frame source"
+    );
+    let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../crates/motu-cli/src");
+    for (path, text) in rust_files(&src) {
+        for glue in [
+            "StreamingRenderer",
+            "LiveRenderer",
+            "FrameSource for",
+            "render_progressive",
+            "StreamOptions {",
+            "ContextOptions {",
+        ] {
+            assert!(
+                !text.contains(glue),
+                "{} holds {glue}: the viewer's frame source lives in motu-view",
+                path.display()
+            );
+        }
+    }
+}
+
 /// The CLI parses arguments and prints; the import pipeline's stages are motu-import's job.
 #[test]
 fn the_cli_calls_the_import_pipeline_not_its_stages() {

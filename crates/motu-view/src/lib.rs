@@ -1,8 +1,9 @@
 //! motu-view: the interactive viewer behind `motu view`.
 //!
-//! A winit window whose frames come from a [`FrameSource`] (the CLI's: a full GPU build or the
-//! streaming renderer, on a [`motu_gpu::Context`] opened for presentation) and reach the screen
-//! through [`motu_gpu::Presenter`] (surface and swapchain live in motu-gpu: no Vulkan here).
+//! A winit window whose frames come from a [`FrameSource`] ([`PackageSource`]: a package's
+//! full GPU build or the streaming renderer, on a [`motu_gpu::Context`] opened for
+//! presentation) and reach the screen through [`motu_gpu::Presenter`] (surface and swapchain
+//! live in motu-gpu: no Vulkan here).
 //! A fly camera, the scene's cameras on number keys, views, LOD modes and element toggles
 //! change the next frame's [`RenderOptions`]; an 8×8 bitmap-font overlay shows the frame's
 //! numbers. For tests and scripts, [`ViewOptions::frames`] renders that many frames through the
@@ -10,6 +11,7 @@
 
 mod fly;
 mod overlay;
+mod package;
 
 use std::time::Instant;
 
@@ -25,6 +27,7 @@ use winit::window::{Window, WindowId};
 
 pub use fly::{FlyCamera, Motion};
 pub use overlay::draw_text;
+pub use package::{chain, PackageSource, PackageSourceSettings, SourceError, ViewStreamSettings};
 
 /// Errors of the viewer; the CLI adds context.
 #[derive(Debug, thiserror::Error)]
@@ -95,7 +98,7 @@ pub struct SourceFrame {
     pub detail: Option<String>,
 }
 
-/// What the viewer draws from; implemented by the CLI over a package.
+/// What the viewer draws from; [`PackageSource`] implements it over a package.
 pub trait FrameSource {
     /// The device (opened with [`motu_gpu::ContextOptions::presentation`]).
     fn context(&self) -> &motu_gpu::Context;

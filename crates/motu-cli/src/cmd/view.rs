@@ -1,244 +1,17 @@
 //! `motu view`: the interactive viewer (crates/motu-view) over a package: a full GPU build, or
-//! the streaming renderer under `--vram-budget`/`--stream`.
+//! the streaming renderer under `--vram-budget`/`--stream` (`motu_view::PackageSource`). Here:
+//! the flags' checks and mapping, the camera set-up, and the outputs of a scripted run.
 
 use crate::cli::{BackendArg, LodModeArg, ViewArg, ViewArgs};
-use crate::cmd::render::{camera_pose, choose_lod_mode, load_camera_path, PackageMeshes};
+use crate::cmd::render::{camera_pose, load_camera_path, PackageMeshes};
 use crate::pipeline;
 use anyhow::{bail, Context as _};
 use glam::Vec3;
-use motu_abi::camera::{CameraParams, CameraPose, RecordedPath};
+use motu_abi::camera::{CameraPose, RecordedPath};
 use motu_abi::lod::LodParams;
-use motu_abi::{HierarchyView, RootSubset};
 use motu_pack::ScenePackage;
-use motu_view::{FrameSource, SourceFrame, SourceStats, ViewOptions};
+use motu_view::{PackageSource, PackageSourceSettings, ViewOptions, ViewStreamSettings};
 use serde_json::json;
-
-/// Milliseconds of building per frame while flying when no build budget is given (at least
-/// one structure is built per frame).
-const INTERACTIVE_BUILD_MS: f64 = 30.0;
-
-enum Renderer<'p> {
-    Full(Option<Box<motu_gpu::LiveRenderer>>),
-    Stream(Option<Box<motu_gpu::StreamingRenderer<'p>>>),
-}
-
-struct PackageSource<'p> {
-    ctx: motu_gpu::Context,
-    base: HierarchyView<'p>,
-    meshes: &'p PackageMeshes<'p>,
-    element_ids: Vec<u32>,
-    /// The element set the renderer was built for.
-    built_for: Vec<bool>,
-    /// The LOD mode asked for when the renderer was built (instance where the rule allows it)
-    /// with the LOD parameters it was decided for, and the mode that ran.
-    built_lod: Option<(bool, LodParams)>,
-    lod_mode: &'static str,
-    renderer: Renderer<'p>,
-    a: &'p ViewArgs,
-    total_structures: u64,
-}
-
-impl<'p> PackageSource<'p> {
-    /// The view with only the elements on. A subset's root copy is leaked: the streaming
-    /// renderer borrows its view for its whole life, and each toggle leaks one root table
-    /// (bounded by the user's key presses).
-    fn view_for(&self, on: &[bool]) -> anyhow::Result<HierarchyView<'p>> {
-        if on.iter().all(|e| *e) {
-            return Ok(self.base);
-        }
-        let keep: Vec<u32> = self
-            .element_ids
-            .iter()
-            .zip(on)
-            .filter(|(_, on)| **on)
-            .map(|(id, _)| *id)
-            .collect();
-        let subset = RootSubset::new(&self.base, |e| keep.contains(&e))
-            .context("filtering the root for the element set")?;
-        let subset: &'p RootSubset = Box::leak(Box::new(subset));
-        Ok(subset.view(&self.base))
-    }
-
-    fn rebuild(&mut self, on: &[bool], lod_instance: bool, lod: &LodParams) -> anyhow::Result<()> {
-        // Free the old structures before building the new ones (the budget holds one set).
-        match &mut self.renderer {
-            Renderer::Full(r) => *r = None,
-            Renderer::Stream(r) => *r = None,
-        }
-        let view = self.view_for(on)?;
-        let a = self.a;
-        let budget = a.vram_budget.unwrap_or(u64::MAX);
-        let streaming = matches!(self.renderer, Renderer::Stream(_));
-        let mode = if lod_instance {
-            LodModeArg::Instance
-        } else {
-            LodModeArg::Traversal
-        };
-        let lod_choice =
-            choose_lod_mode(&view, lod, crate::cmd::render::lod_mode(mode), streaming)?;
-        self.lod_mode = lod_choice.mode;
-        match &mut self.renderer {
-            Renderer::Full(r) => {
-                // Instance-level LOD: the rewritten hierarchy is built and a per-frame pass picks
-                // each LOD instance's level (as `motu render` does).
-                let scene = motu_render::build_scene(
-                    &self.ctx,
-                    &view,
-                    self.meshes,
-                    a.vram_budget,
-                    a.max_allocations,
-                    lod_choice.instance.as_ref(),
-                )?;
-                *r = Some(Box::new(motu_gpu::LiveRenderer::new(scene)));
-            }
-            Renderer::Stream(r) => {
-                let opts = motu_gpu::StreamOptions {
-                    budget_bytes: budget,
-                    // Interactive: bounded build work per frame keeps the window responsive;
-                    // the next frames go on refining (what was built stays resident).
-                    max_passes: a
-                        .stream_passes
-                        .unwrap_or(motu_gpu::StreamOptions::default().max_passes),
-                    max_allocations: a
-                        .max_allocations
-                        .unwrap_or(motu_gpu::StreamOptions::default().max_allocations),
-                    ..crate::cmd::render::stream_bounds(&a.stream_bounds).options()
-                };
-                let opts = motu_gpu::StreamOptions {
-                    // Flying with no build budget given: one frame's worth of building per
-                    // frame, so the window stays responsive while structures arrive.
-                    frame_build_ms: if progressive(a)
-                        && a.stream_bounds.stream_build_budget.is_none()
-                        && a.stream_bounds.stream_build_ms.is_none()
-                    {
-                        INTERACTIVE_BUILD_MS
-                    } else {
-                        opts.frame_build_ms
-                    },
-                    ..opts
-                };
-                let sr = motu_gpu::StreamingRenderer::new(&self.ctx, view, self.meshes, &opts)
-                    .context("setting up streaming (the resident skeleton must fit the budget)")?;
-                *r = Some(Box::new(sr));
-            }
-        }
-        self.built_for = on.to_vec();
-        self.built_lod = Some((lod_instance, *lod));
-        Ok(())
-    }
-
-    /// Whether the structures must be rebuilt for `lod_instance` with `lod`: only when the mode
-    /// that would run changes (instance LOD applies to camera-only rules).
-    fn lod_changed(&self, lod_instance: bool, lod: &LodParams) -> bool {
-        let effective =
-            |inst: bool, l: &LodParams| inst && motu_abi::lod_instance::rule_is_camera_only(l);
-        match &self.built_lod {
-            None => true,
-            Some((inst, l)) => effective(*inst, l) != effective(lod_instance, lod),
-        }
-    }
-
-    fn render_inner(
-        &mut self,
-        camera: &CameraParams,
-        opts: &motu_gpu::RenderOptions,
-        on: &[bool],
-        lod_instance: bool,
-    ) -> anyhow::Result<SourceFrame> {
-        if on != self.built_for.as_slice() || self.lod_changed(lod_instance, &opts.lod) {
-            self.rebuild(on, lod_instance, &opts.lod)?;
-        }
-        let lod_mode = self.lod_mode;
-        let total = self.total_structures;
-        match &mut self.renderer {
-            Renderer::Full(Some(r)) => {
-                let out = r
-                    .render_frame(camera, opts)
-                    .context("rendering on the GPU")?;
-                let rep = r.scene().report();
-                let alloc = r.scene().alloc_report();
-                let stats = SourceStats {
-                    vram_used_bytes: alloc.budget_block_bytes,
-                    vram_budget_bytes: alloc.budget_bytes,
-                    resident_structures: u64::from(rep.blas_count) + u64::from(rep.tlas_count),
-                    total_structures: total,
-                    passes: 1,
-                    streaming: None,
-                    incomplete_pixels: 0,
-                    lod_mode,
-                };
-                let detail = serde_json::to_string(rep).ok();
-                Ok(SourceFrame {
-                    output: out,
-                    stats,
-                    detail,
-                })
-            }
-            Renderer::Stream(Some(sr)) => {
-                let (out, st) = if progressive(self.a) {
-                    // Trace with what is resident, build toward the next frame (bounded).
-                    sr.render_progressive(camera, opts)
-                } else {
-                    sr.render_frame(camera, opts)
-                }
-                .context("streaming a frame")?;
-                let alloc = sr.alloc_report();
-                let stats = SourceStats {
-                    vram_used_bytes: alloc.budget_block_bytes,
-                    vram_budget_bytes: alloc.budget_bytes,
-                    resident_structures: u64::from(st.resident_blases)
-                        + u64::from(st.resident_tlases),
-                    total_structures: total,
-                    passes: st.passes,
-                    streaming: Some((st.blas_built + st.tlas_built, st.evicted)),
-                    incomplete_pixels: if st.complete {
-                        0
-                    } else {
-                        st.incomplete_pixels.max(1)
-                    },
-                    lod_mode,
-                };
-                let detail = serde_json::to_string(&st).ok();
-                Ok(SourceFrame {
-                    output: out,
-                    stats,
-                    detail,
-                })
-            }
-            _ => bail!("no renderer (an earlier rebuild failed)"),
-        }
-    }
-}
-
-impl FrameSource for PackageSource<'_> {
-    fn context(&self) -> &motu_gpu::Context {
-        &self.ctx
-    }
-
-    fn render(
-        &mut self,
-        camera: &CameraParams,
-        opts: &motu_gpu::RenderOptions,
-        on: &[bool],
-        lod_instance: bool,
-    ) -> Result<SourceFrame, String> {
-        self.render_inner(camera, opts, on, lod_instance)
-            .map_err(|e| {
-                let mut msg = e.to_string();
-                for c in e.chain().skip(1) {
-                    msg.push_str(&format!(": {c}"));
-                }
-                msg
-            })
-    }
-}
-
-/// Whether streaming frames are progressive (one trace with what is resident, then a build
-/// bounded by the frame budget for the next frame): `--stream-passes 1`, or flying without
-/// `--stream-passes`.
-fn progressive(a: &ViewArgs) -> bool {
-    a.stream_passes == Some(1) || (a.frames.is_none() && a.stream_passes.is_none())
-}
 
 /// Writes `bytes` to `path` atomically (temp file, fsync, rename).
 fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
@@ -378,7 +151,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         render,
         lod_instance: a.lod_mode == LodModeArg::Instance,
         elements: names,
-        elements_on: elements_on.clone(),
+        elements_on,
         speed: a.speed.unwrap_or(radius * 0.25),
         frames,
         replay: replay_poses,
@@ -387,41 +160,20 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         display: None,
     };
     let meshes = PackageMeshes(&pkg);
-    let total_structures = (base.blases.len() + base.tlases.len()) as u64;
+    let settings = PackageSourceSettings {
+        device_index: a.device,
+        backend,
+        vram_budget_bytes: a.vram_budget,
+        max_allocations: a.max_allocations,
+        stream: streaming.then(|| ViewStreamSettings {
+            bounds: crate::cmd::render::stream_bounds(&a.stream_bounds),
+            max_passes: a.stream_passes,
+            frames: a.frames,
+        }),
+    };
     let result = motu_view::run(opts, |o| {
-        let ctx = motu_gpu::Context::new(&motu_gpu::ContextOptions {
-            device_index: a.device,
-            limit_overrides: motu_gpu::LimitOverrides {
-                max_memory_allocation_count: a.max_allocations,
-                ..Default::default()
-            },
-            require: match backend {
-                motu_gpu::Backend::Query => motu_gpu::Requirement::RayQuery,
-                motu_gpu::Backend::Pipeline => motu_gpu::Requirement::RayPipeline,
-            },
-            presentation: o.display,
-            ..Default::default()
-        })
-        .map_err(|e| format!("opening a Vulkan device that can present: {e}"))?;
-        let mut src = PackageSource {
-            ctx,
-            base,
-            meshes: &meshes,
-            element_ids: element_ids.clone(),
-            built_for: Vec::new(),
-            built_lod: None,
-            lod_mode: "",
-            renderer: if streaming {
-                Renderer::Stream(None)
-            } else {
-                Renderer::Full(None)
-            },
-            a: &a,
-            total_structures,
-        };
-        src.rebuild(&elements_on, o.lod_instance, &o.render.lod)
-            .map_err(|e| format!("{e:#}"))?;
-        Ok(src)
+        PackageSource::open(o, base, &meshes, element_ids, settings)
+            .map_err(|e| motu_view::chain(&e))
     })
     .context("motu view")?;
     if let Some(p) = &a.record {

@@ -1,0 +1,385 @@
+//! The viewer's frame source over a package: a full GPU build (with instance-level LOD where the
+//! rule allows it) or the streaming renderer under a budget, rebuilt when the element set or
+//! the LOD mode changes. `motu view` maps its flags onto [`PackageSourceSettings`].
+
+use crate::{FrameSource, SourceFrame, SourceStats, ViewOptions};
+use motu_abi::camera::CameraParams;
+use motu_abi::lod::LodParams;
+use motu_abi::{HierarchyView, RootSubset};
+use motu_render::{choose_lod_mode, LodMode, PackageMeshes, RenderError, StreamBounds};
+
+/// Milliseconds of building per frame while flying when no build budget is given (at least
+/// one structure is built per frame).
+const INTERACTIVE_BUILD_MS: f64 = 30.0;
+
+/// How the package source renders (`motu view`'s flags, typed).
+#[derive(Clone, Debug)]
+pub struct PackageSourceSettings {
+    /// The Vulkan device (`--device`); `None`: the first that can present and trace.
+    pub device_index: Option<usize>,
+    pub backend: motu_gpu::Backend,
+    /// `--vram-budget`: the full build's budget, or the streaming budget.
+    pub vram_budget_bytes: Option<u64>,
+    /// `--max-allocations`: overrides the device's allocation count limit.
+    pub max_allocations: Option<u32>,
+    /// Streaming (`--stream` or `--vram-budget`); `None`: one full build.
+    pub stream: Option<ViewStreamSettings>,
+}
+
+/// The streaming renderer's settings in the viewer.
+#[derive(Clone, Debug, Default)]
+pub struct ViewStreamSettings {
+    /// `--stream-fallback`, `--stream-build-budget`, `--stream-build-ms`.
+    pub bounds: StreamBounds,
+    /// `--stream-passes`: the build–trace passes one frame may take.
+    pub max_passes: Option<u32>,
+    /// `--frames` as given: a scripted run of that many frames; `None`: flying (a replayed
+    /// camera path without `--frames` too).
+    pub frames: Option<u32>,
+}
+
+impl ViewStreamSettings {
+    /// Whether streaming frames are progressive (one trace with what is resident, then a build
+    /// bounded by the frame budget for the next frame): `--stream-passes 1`, or flying without
+    /// `--stream-passes`.
+    pub fn progressive(&self) -> bool {
+        self.max_passes == Some(1) || (self.frames.is_none() && self.max_passes.is_none())
+    }
+
+    /// The streaming renderer's options under `budget_bytes`.
+    fn options(&self, budget_bytes: u64, max_allocations: Option<u32>) -> motu_gpu::StreamOptions {
+        let opts = motu_gpu::StreamOptions {
+            budget_bytes,
+            // Interactive: bounded build work per frame keeps the window responsive;
+            // the next frames go on refining (what was built stays resident).
+            max_passes: self
+                .max_passes
+                .unwrap_or(motu_gpu::StreamOptions::default().max_passes),
+            max_allocations: max_allocations
+                .unwrap_or(motu_gpu::StreamOptions::default().max_allocations),
+            ..self.bounds.options()
+        };
+        motu_gpu::StreamOptions {
+            // Flying with no build budget given: one frame's worth of building per
+            // frame, so the window stays responsive while structures arrive.
+            frame_build_ms: if self.progressive()
+                && self.bounds.frame_build_bytes.is_none()
+                && self.bounds.frame_build_ms.is_none()
+            {
+                INTERACTIVE_BUILD_MS
+            } else {
+                opts.frame_build_ms
+            },
+            ..opts
+        }
+    }
+}
+
+/// What went wrong opening or rendering the package source. [`chain`] gives the message the
+/// viewer shows (each cause after a colon).
+#[derive(Debug, thiserror::Error)]
+pub enum SourceError {
+    #[error("opening a Vulkan device that can present: {0}")]
+    Device(motu_gpu::GpuError),
+    #[error("filtering the root for the element set")]
+    Subset(#[source] motu_abi::HierarchyError),
+    #[error(transparent)]
+    Render(#[from] RenderError),
+    #[error("setting up streaming (the resident skeleton must fit the budget)")]
+    StreamSetup(#[source] motu_gpu::GpuError),
+    #[error("rendering on the GPU")]
+    Gpu(#[source] motu_gpu::GpuError),
+    #[error("streaming a frame")]
+    StreamFrame(#[source] motu_gpu::GpuError),
+    #[error("no renderer (an earlier rebuild failed)")]
+    NoRenderer,
+}
+
+/// `e` and its causes, joined by `: `.
+pub fn chain(e: &dyn std::error::Error) -> String {
+    let mut msg = e.to_string();
+    let mut cause = e.source();
+    while let Some(c) = cause {
+        msg.push_str(&format!(": {c}"));
+        cause = c.source();
+    }
+    msg
+}
+
+/// The renderer drawing the current structures; `None` after a failed rebuild.
+enum Renderer<'p> {
+    Full(Option<Box<motu_gpu::LiveRenderer>>),
+    Stream(Option<Box<motu_gpu::StreamingRenderer<'p>>>),
+}
+
+/// A [`FrameSource`] over a package's hierarchy: the device, the structures for the element set
+/// and LOD mode shown, and the renderer drawing them.
+pub struct PackageSource<'p> {
+    ctx: motu_gpu::Context,
+    base: HierarchyView<'p>,
+    meshes: &'p PackageMeshes<'p>,
+    element_ids: Vec<u32>,
+    /// The element set the renderer was built for.
+    built_for: Vec<bool>,
+    /// The LOD mode asked for when the renderer was built (instance where the rule allows it)
+    /// with the LOD parameters it was decided for, and the mode that ran.
+    built_lod: Option<(bool, LodParams)>,
+    lod_mode: &'static str,
+    renderer: Renderer<'p>,
+    settings: PackageSourceSettings,
+    total_structures: u64,
+}
+
+impl<'p> PackageSource<'p> {
+    /// Opens a device that can present on `o.display` and builds the structures for
+    /// `o.elements_on` (`element_ids`: the package's element ids in the same order) and
+    /// `o`'s LOD mode.
+    pub fn open(
+        o: &ViewOptions,
+        base: HierarchyView<'p>,
+        meshes: &'p PackageMeshes<'p>,
+        element_ids: Vec<u32>,
+        settings: PackageSourceSettings,
+    ) -> Result<PackageSource<'p>, SourceError> {
+        let ctx = motu_gpu::Context::new(&motu_gpu::ContextOptions {
+            device_index: settings.device_index,
+            limit_overrides: motu_gpu::LimitOverrides {
+                max_memory_allocation_count: settings.max_allocations,
+                ..Default::default()
+            },
+            require: match settings.backend {
+                motu_gpu::Backend::Query => motu_gpu::Requirement::RayQuery,
+                motu_gpu::Backend::Pipeline => motu_gpu::Requirement::RayPipeline,
+            },
+            presentation: o.display,
+            ..Default::default()
+        })
+        .map_err(SourceError::Device)?;
+        let mut src = PackageSource {
+            ctx,
+            base,
+            meshes,
+            element_ids,
+            built_for: Vec::new(),
+            built_lod: None,
+            lod_mode: "",
+            renderer: Renderer::Full(None),
+            total_structures: (base.blases.len() + base.tlases.len()) as u64,
+            settings,
+        };
+        src.rebuild(&o.elements_on, o.lod_instance, &o.render.lod)?;
+        Ok(src)
+    }
+
+    /// The view with only the elements on. A subset's root copy is leaked: the streaming
+    /// renderer borrows its view for its whole life, and each toggle leaks one root table
+    /// (bounded by the user's key presses).
+    fn view_for(&self, on: &[bool]) -> Result<HierarchyView<'p>, SourceError> {
+        if on.iter().all(|e| *e) {
+            return Ok(self.base);
+        }
+        let keep: Vec<u32> = self
+            .element_ids
+            .iter()
+            .zip(on)
+            .filter(|(_, on)| **on)
+            .map(|(id, _)| *id)
+            .collect();
+        let subset =
+            RootSubset::new(&self.base, |e| keep.contains(&e)).map_err(SourceError::Subset)?;
+        let subset: &'p RootSubset = Box::leak(Box::new(subset));
+        Ok(subset.view(&self.base))
+    }
+
+    fn rebuild(
+        &mut self,
+        on: &[bool],
+        lod_instance: bool,
+        lod: &LodParams,
+    ) -> Result<(), SourceError> {
+        // Free the old structures before building the new ones (the budget holds one set).
+        self.renderer = Renderer::Full(None);
+        let view = self.view_for(on)?;
+        let s = &self.settings;
+        let budget = s.vram_budget_bytes.unwrap_or(u64::MAX);
+        let mode = if lod_instance {
+            LodMode::Instance
+        } else {
+            LodMode::Traversal
+        };
+        let lod_choice = choose_lod_mode(&view, lod, mode, s.stream.is_some())?;
+        self.lod_mode = lod_choice.mode;
+        self.renderer = match &s.stream {
+            None => {
+                // Instance-level LOD: the rewritten hierarchy is built and a per-frame pass picks
+                // each LOD instance's level (as `motu render` does).
+                let scene = motu_render::build_scene(
+                    &self.ctx,
+                    &view,
+                    self.meshes,
+                    s.vram_budget_bytes,
+                    s.max_allocations,
+                    lod_choice.instance.as_ref(),
+                )?;
+                Renderer::Full(Some(Box::new(motu_gpu::LiveRenderer::new(scene))))
+            }
+            Some(stream) => {
+                let opts = stream.options(budget, s.max_allocations);
+                let sr = motu_gpu::StreamingRenderer::new(&self.ctx, view, self.meshes, &opts)
+                    .map_err(SourceError::StreamSetup)?;
+                Renderer::Stream(Some(Box::new(sr)))
+            }
+        };
+        self.built_for = on.to_vec();
+        self.built_lod = Some((lod_instance, *lod));
+        Ok(())
+    }
+
+    /// Whether the structures must be rebuilt for `lod_instance` with `lod`: only when the mode
+    /// that would run changes (instance LOD applies to camera-only rules).
+    fn lod_changed(&self, lod_instance: bool, lod: &LodParams) -> bool {
+        let effective =
+            |inst: bool, l: &LodParams| inst && motu_abi::lod_instance::rule_is_camera_only(l);
+        match &self.built_lod {
+            None => true,
+            Some((inst, l)) => effective(*inst, l) != effective(lod_instance, lod),
+        }
+    }
+
+    fn render_inner(
+        &mut self,
+        camera: &CameraParams,
+        opts: &motu_gpu::RenderOptions,
+        on: &[bool],
+        lod_instance: bool,
+    ) -> Result<SourceFrame, SourceError> {
+        if on != self.built_for.as_slice() || self.lod_changed(lod_instance, &opts.lod) {
+            self.rebuild(on, lod_instance, &opts.lod)?;
+        }
+        let lod_mode = self.lod_mode;
+        let total = self.total_structures;
+        let progressive = self
+            .settings
+            .stream
+            .as_ref()
+            .is_some_and(ViewStreamSettings::progressive);
+        match &mut self.renderer {
+            Renderer::Full(Some(r)) => {
+                let out = r.render_frame(camera, opts).map_err(SourceError::Gpu)?;
+                let rep = r.scene().report();
+                let alloc = r.scene().alloc_report();
+                let stats = SourceStats {
+                    vram_used_bytes: alloc.budget_block_bytes,
+                    vram_budget_bytes: alloc.budget_bytes,
+                    resident_structures: u64::from(rep.blas_count) + u64::from(rep.tlas_count),
+                    total_structures: total,
+                    passes: 1,
+                    streaming: None,
+                    incomplete_pixels: 0,
+                    lod_mode,
+                };
+                let detail = serde_json::to_string(rep).ok();
+                Ok(SourceFrame {
+                    output: out,
+                    stats,
+                    detail,
+                })
+            }
+            Renderer::Stream(Some(sr)) => {
+                let (out, st) = if progressive {
+                    // Trace with what is resident, build toward the next frame (bounded).
+                    sr.render_progressive(camera, opts)
+                } else {
+                    sr.render_frame(camera, opts)
+                }
+                .map_err(SourceError::StreamFrame)?;
+                let alloc = sr.alloc_report();
+                let stats = SourceStats {
+                    vram_used_bytes: alloc.budget_block_bytes,
+                    vram_budget_bytes: alloc.budget_bytes,
+                    resident_structures: u64::from(st.resident_blases)
+                        + u64::from(st.resident_tlases),
+                    total_structures: total,
+                    passes: st.passes,
+                    streaming: Some((st.blas_built + st.tlas_built, st.evicted)),
+                    incomplete_pixels: if st.complete {
+                        0
+                    } else {
+                        st.incomplete_pixels.max(1)
+                    },
+                    lod_mode,
+                };
+                let detail = serde_json::to_string(&st).ok();
+                Ok(SourceFrame {
+                    output: out,
+                    stats,
+                    detail,
+                })
+            }
+            _ => Err(SourceError::NoRenderer),
+        }
+    }
+}
+
+impl FrameSource for PackageSource<'_> {
+    fn context(&self) -> &motu_gpu::Context {
+        &self.ctx
+    }
+
+    fn render(
+        &mut self,
+        camera: &CameraParams,
+        opts: &motu_gpu::RenderOptions,
+        on: &[bool],
+        lod_instance: bool,
+    ) -> Result<SourceFrame, String> {
+        self.render_inner(camera, opts, on, lod_instance)
+            .map_err(|e| chain(&e))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stream(max_passes: Option<u32>, frames: Option<u32>) -> ViewStreamSettings {
+        ViewStreamSettings {
+            max_passes,
+            frames,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn progressive_when_flying_or_one_pass() {
+        assert!(stream(None, None).progressive());
+        assert!(stream(Some(1), None).progressive());
+        assert!(stream(Some(1), Some(5)).progressive());
+        assert!(!stream(None, Some(5)).progressive());
+        assert!(!stream(Some(4), None).progressive());
+    }
+
+    #[test]
+    fn flying_without_a_build_bound_builds_an_interactive_frame_time() {
+        let o = stream(None, None).options(1 << 30, Some(64));
+        assert_eq!(o.budget_bytes, 1 << 30);
+        assert_eq!(o.max_allocations, 64);
+        assert_eq!(o.frame_build_ms, INTERACTIVE_BUILD_MS);
+        assert_eq!(o.max_passes, motu_gpu::StreamOptions::default().max_passes);
+        // A given bound wins, and scripted multi-pass frames are not bounded in time.
+        let mut given = stream(None, None);
+        given.bounds.frame_build_bytes = Some(1 << 20);
+        let o = given.options(u64::MAX, None);
+        assert_eq!(o.frame_build_ms, 0.0);
+        assert_eq!(o.frame_build_bytes, 1 << 20);
+        assert_eq!(
+            o.max_allocations,
+            motu_gpu::StreamOptions::default().max_allocations
+        );
+        assert_eq!(
+            stream(Some(3), Some(2)).options(1, None).frame_build_ms,
+            0.0
+        );
+        assert_eq!(stream(Some(3), Some(2)).options(1, None).max_passes, 3);
+    }
+}
