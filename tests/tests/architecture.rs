@@ -196,8 +196,9 @@ fn motu_render_stays_below_the_cli_the_viewer_and_bench() {
 }
 
 /// `motu view`'s frame source (device opening, the full build or streaming set-up, the
-/// per-frame render) is motu-view's `PackageSource`, above motu-render and below the CLI: the
-/// viewer never reaches up into the CLI, bench or import, and the CLI drives no renderer itself.
+/// per-frame render; the scene's cameras and fly speed) is motu-view's, above motu-render and
+/// below the CLI: the viewer never reaches up into the CLI, bench or import, and the CLI drives
+/// no renderer itself.
 #[test]
 fn the_view_frame_source_lives_in_motu_view_not_the_cli() {
     let all = manifests();
@@ -232,6 +233,8 @@ fn the_view_frame_source_lives_in_motu_view_not_the_cli() {
             "render_progressive",
             "StreamOptions {",
             "ContextOptions {",
+            // The viewer's start over a package (default fly speed from the root's bounds).
+            "bounds_max",
         ] {
             assert!(
                 !text.contains(glue),

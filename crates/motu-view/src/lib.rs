@@ -27,7 +27,10 @@ use winit::window::{Window, WindowId};
 
 pub use fly::{FlyCamera, Motion};
 pub use overlay::draw_text;
-pub use package::{chain, PackageSource, PackageSourceSettings, SourceError, ViewStreamSettings};
+pub use package::{
+    chain, default_fly_speed, scene_cameras, PackageSource, PackageSourceSettings, SourceError,
+    ViewStreamSettings,
+};
 
 /// Errors of the viewer; the CLI adds context.
 #[derive(Debug, thiserror::Error)]

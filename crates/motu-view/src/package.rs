@@ -3,9 +3,10 @@
 //! the LOD mode changes. `motu view` maps its flags onto [`PackageSourceSettings`].
 
 use crate::{FrameSource, SourceFrame, SourceStats, ViewOptions};
-use motu_abi::camera::CameraParams;
+use motu_abi::camera::{CameraParams, CameraPose};
 use motu_abi::lod::LodParams;
 use motu_abi::{HierarchyView, RootSubset};
+use motu_pack::ScenePackage;
 use motu_render::{choose_lod_mode, LodMode, PackageMeshes, RenderError, StreamBounds};
 
 /// Milliseconds of building per frame while flying when no build budget is given (at least
@@ -73,6 +74,33 @@ impl ViewStreamSettings {
             ..opts
         }
     }
+}
+
+/// The scene's cameras as poses for the number keys, in the package's order.
+pub fn scene_cameras(
+    pkg: &ScenePackage,
+    base: &HierarchyView<'_>,
+) -> Result<Vec<(String, CameraPose)>, RenderError> {
+    pkg.meta()
+        .cameras
+        .iter()
+        .map(|c| {
+            let (p, _, _) = motu_render::camera_pose(pkg, base, Some(&c.name), Some(1), Some(1))?;
+            Ok((c.name.clone(), p))
+        })
+        .collect()
+}
+
+/// The fly speed when none is given, in world units per second: a quarter of the radius of the
+/// root's bounds.
+pub fn default_fly_speed(base: &HierarchyView<'_>) -> f32 {
+    let root = &base.tlases[base.root_tlas as usize];
+    let radius = ((glam::Vec3::from_array(root.bounds_max)
+        - glam::Vec3::from_array(root.bounds_min))
+    .length()
+        * 0.5)
+        .max(1e-3);
+    radius * 0.25
 }
 
 /// What went wrong opening or rendering the package source. [`chain`] gives the message the

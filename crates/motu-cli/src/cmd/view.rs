@@ -6,8 +6,7 @@ use crate::cli::{BackendArg, LodModeArg, ViewArg, ViewArgs};
 use crate::cmd::render::{camera_pose, load_camera_path, PackageMeshes};
 use crate::pipeline;
 use anyhow::{bail, Context as _};
-use glam::Vec3;
-use motu_abi::camera::{CameraPose, RecordedPath};
+use motu_abi::camera::RecordedPath;
 use motu_abi::lod::LodParams;
 use motu_pack::ScenePackage;
 use motu_view::{PackageSource, PackageSourceSettings, ViewOptions, ViewStreamSettings};
@@ -77,18 +76,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         }) if a.width.is_none() && a.height.is_none() => (*w, *h),
         _ => (cw, ch),
     };
-    let cameras: Vec<(String, CameraPose)> = meta
-        .cameras
-        .iter()
-        .map(|c| -> anyhow::Result<(String, CameraPose)> {
-            let (p, _, _) = camera_pose(&pkg, &base, Some(&c.name), Some(1), Some(1))?;
-            Ok((c.name.clone(), p))
-        })
-        .collect::<anyhow::Result<_>>()?;
-    let root = &base.tlases[base.root_tlas as usize];
-    let radius = ((Vec3::from_array(root.bounds_max) - Vec3::from_array(root.bounds_min)).length()
-        * 0.5)
-        .max(1e-3);
+    let cameras = motu_view::scene_cameras(&pkg, &base)?;
     let backend = match a.backend {
         Some(BackendArg::Cpu) => bail!(
             "`motu view` renders on the GPU (pipeline or query); the CPU backend is `motu render --backend cpu`"
@@ -152,7 +140,9 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         lod_instance: a.lod_mode == LodModeArg::Instance,
         elements: names,
         elements_on,
-        speed: a.speed.unwrap_or(radius * 0.25),
+        speed: a
+            .speed
+            .unwrap_or_else(|| motu_view::default_fly_speed(&base)),
         frames,
         replay: replay_poses,
         overlay: a.overlay || a.frames.is_none(),
