@@ -1,18 +1,22 @@
-//! Instance-level LOD on the GPU (motu_abi::lod_instance): each frame, before tracing, a
-//! compute pass (`shaders/lod_instances.comp`) picks every slot's level for the frame's camera
-//! and writes that level's BLAS addresses into the TLAS instance buffer (and the instance
-//! table the shaders read), then the slots' TLASes are rebuilt. Rays then reach LOD'd
-//! geometry in one trace, without a traversal-shader hop.
+//! Instance-level LOD on the GPU (motu_abi::lod_instance): each frame, before tracing, the
+//! host picks every slot's level for the frame's camera with the CPU oracle's own rule
+//! ([`InstanceLod::levels`], so GPU and CPU levels agree exactly), and when any slot's level
+//! differs from the ones the slot TLASes hold, a compute pass (`shaders/lod_instances.comp`)
+//! writes the chosen levels' BLAS addresses into the TLAS instance buffer and the slots'
+//! TLASes are rebuilt. Rays then reach LOD'd geometry in one trace, without a
+//! traversal-shader hop.
 //!
-//! The levels depend only on the frame's camera and LOD parameters, so the pass is skipped
-//! when those are bit-identical to the ones the slot TLASes were last built for (a static
-//! camera: progressive frames, repeated renders); any change, a moved eye included, runs it.
+//! The pass is skipped when no slot's level changes: a static camera (progressive frames,
+//! repeated renders), and the many frames of a moving camera in which no slot crosses a
+//! level threshold (the rebuild, not the level choice, is what costs GPU time).
 
 use std::sync::Mutex;
 
 use ash::vk;
 use bytemuck::{cast_slice, Pod, Zeroable};
-use motu_abi::lod_instance::InstanceLod;
+use motu_abi::camera::CameraParams;
+use motu_abi::lod::LodParams;
+use motu_abi::lod_instance::{camera_level, InstanceLod, LodSlotRecord};
 use motu_abi::{HierarchyView, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
 use motu_alloc::{AllocKind, MemoryClass};
 
@@ -30,7 +34,8 @@ use crate::shaders;
 #[derive(Clone, Copy, Pod, Zeroable)]
 #[repr(C)]
 struct Push {
-    frame: u64,
+    /// The frame's level per slot (host-visible, written before the pass is recorded).
+    levels: u64,
     tlases: u64,
     instances: u64,
     selectors: u64,
@@ -63,24 +68,37 @@ pub(crate) struct InstanceLodGpu {
     group_count: u32,
     /// Slots (LOD'd instances), for stats.
     pub(crate) slot_count: u32,
-    /// The camera and LOD parameters (bytes, see [`InstanceLodGpu::needs_pass`]) the slot
-    /// TLASes hold the levels of; None before the first pass and while a submission that
-    /// rebuilds them has not completed (a failed one leaves them unknown).
-    built_for: Mutex<Option<Vec<u8>>>,
+    /// The slots and each one's level count: the host picks the levels.
+    slots: Vec<LodSlotRecord>,
+    level_counts: Vec<u32>,
+    /// The levels the next pass applies (one u32 per slot, host-visible; `Push::levels`).
+    levels: HeapBuffer,
+    /// The levels (one per slot) the slot TLASes hold; None before the first pass and while
+    /// a submission that rebuilds them has not completed (a failed one leaves them unknown).
+    built_for: Mutex<Option<Vec<u32>>>,
     /// Frames that ran the pass and frames that skipped it (levels already current).
     counts: Mutex<[u64; 2]>,
 }
 
 impl InstanceLodGpu {
-    /// Whether a frame with the levels' inputs `key` (the frame's camera and LOD parameters)
-    /// needs the pass: false when the slot TLASes already hold that key's levels. When it
-    /// returns true the built state is marked unknown until [`Self::built`] confirms the
-    /// submission that rebuilds them completed.
+    /// Each slot's level for a camera: the rule of [`InstanceLod::levels`] (the CPU oracle's).
+    pub(crate) fn levels(&self, camera: &CameraParams, lod: &LodParams) -> Vec<u32> {
+        self.slots
+            .iter()
+            .zip(&self.level_counts)
+            .map(|(s, &n)| camera_level(lod, camera.pixels_per_unit_at_1, camera.world_eye, s, n))
+            .collect()
+    }
+
+    /// Whether a frame showing `levels` (one per slot, [`Self::levels`]) needs the pass:
+    /// false when the slot TLASes already hold exactly those levels. When it returns true the
+    /// built state is marked unknown until [`Self::built`] confirms the submission that
+    /// rebuilds them completed.
     /// `frames` frames of this camera follow; all but the first skip the pass.
-    pub(crate) fn needs_pass(&self, key: &[u8], frames: u32) -> bool {
+    pub(crate) fn needs_pass(&self, levels: &[u32], frames: u32) -> bool {
         let mut built = self.built_for.lock().unwrap_or_else(|e| e.into_inner());
         let mut counts = self.counts.lock().unwrap_or_else(|e| e.into_inner());
-        let needed = built.as_deref() != Some(key);
+        let needed = built.as_deref() != Some(levels);
         if needed {
             *built = None;
             counts[0] += 1;
@@ -89,24 +107,33 @@ impl InstanceLodGpu {
         needed
     }
 
-    /// The submission with the pass for `key` completed: the slot TLASes hold its levels.
-    pub(crate) fn built(&self, key: Vec<u8>) {
-        *self.built_for.lock().unwrap_or_else(|e| e.into_inner()) = Some(key);
+    /// The submission with the pass for `levels` completed: the slot TLASes hold them.
+    pub(crate) fn built(&self, levels: Vec<u32>) {
+        *self.built_for.lock().unwrap_or_else(|e| e.into_inner()) = Some(levels);
     }
 
-    /// Records the LOD pass for the frame whose parameters are at `frame_address`: pick
-    /// levels, write instances, rebuild the slots' TLASes. The caller orders it after the
-    /// previous frame's trace (a full barrier); a barrier follows each step.
+    /// Records the LOD pass applying `levels` (one per slot): write instances, rebuild the
+    /// slots' TLASes. The levels go to a host-visible buffer now, so the caller must not
+    /// record another pass before this submission completed (one pass per submission, which
+    /// is waited for). The caller orders it after the previous frame's trace (a full
+    /// barrier); a barrier follows each step.
     pub(crate) fn record<'a>(
         &'a self,
         ctx: &Context,
         rec: &mut CommandRecorder<'a>,
-        frame_address: u64,
+        levels: &[u32],
     ) -> Result<()> {
-        let push = Push {
-            frame: frame_address,
-            ..self.push
-        };
+        if levels.len() != self.slots.len() {
+            return Err(GpuError::InvalidRequest(format!(
+                "instance LOD: {} levels for {} slots",
+                levels.len(),
+                self.slots.len()
+            )));
+        }
+        if !levels.is_empty() {
+            self.levels.write(0, levels)?;
+        }
+        let push = self.push;
         rec.dispatch(
             &self.pipeline,
             None,
@@ -335,8 +362,23 @@ impl GpuScene {
             })();
             heap.free(up.staging);
             let [blas_addresses, slots, vk_instances] = uploaded?;
+            let levels = heap.alloc_buffer(
+                "lod-levels",
+                (lod.slots.len() as u64 * 4).max(16),
+                BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
+                AllocKind::NodeTable,
+                MemoryClass::HostVisible,
+                16,
+            )?;
+            let levels_address = match levels.device_address() {
+                Ok(a) => a.0,
+                Err(e) => {
+                    heap.free(levels);
+                    return Err(e);
+                }
+            };
             let push = Push {
-                frame: 0,
+                levels: levels_address,
                 tlases: self.addresses[Slot::Tlases as usize],
                 instances: self.addresses[Slot::Instances as usize],
                 selectors: self.addresses[Slot::Selectors as usize],
@@ -356,6 +398,13 @@ impl GpuScene {
                 tlases,
                 group_count: (lod.slots.len() as u32).div_ceil(64),
                 slot_count: lod.slots.len() as u32,
+                slots: lod.slots.clone(),
+                level_counts: lod
+                    .slots
+                    .iter()
+                    .map(|s| base.lod_selectors[s.selector as usize].level_count)
+                    .collect(),
+                levels,
                 built_for: Mutex::new(None),
                 counts: Mutex::new([0; 2]),
             })
