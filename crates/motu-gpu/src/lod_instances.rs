@@ -1,12 +1,14 @@
-//! Instance-level LOD on the GPU (motu_abi::lod_instance): each frame, before tracing, a
-//! compute pass (`shaders/lod_instances.comp`) picks every slot's level for the frame's camera
-//! and writes that level's BLAS addresses into the TLAS instance buffer (and the instance
-//! table the shaders read), then the slots' TLASes are rebuilt. Rays then reach LOD'd
-//! geometry in one trace, without a traversal-shader hop.
+//! Instance-level LOD on the GPU (motu_abi::lod_instance): each frame, before tracing, the
+//! host picks every slot's level for the frame's camera with the CPU oracle's own rule
+//! (`InstanceLod::levels`, so GPU and CPU levels agree exactly), and when any slot's level
+//! differs from the ones the slot TLASes hold, a compute pass (`shaders/lod_instances.comp`)
+//! writes the chosen levels' BLAS addresses into the TLAS instance buffer and the slots'
+//! TLASes are rebuilt (`scene/lod_pass.rs`). Rays then reach LOD'd geometry in one trace,
+//! without a traversal-shader hop.
 //!
-//! The levels depend only on the frame's camera and LOD parameters, so the pass is skipped
-//! when those are bit-identical to the ones the slot TLASes were last built for (a static
-//! camera: progressive frames, repeated renders); any change, a moved eye included, runs it.
+//! The pass is skipped when no slot's level changes: a static camera (progressive frames,
+//! repeated renders), pans and turns, and the frames of a moving camera in which no slot
+//! crosses a level threshold (the rebuild, not the level choice, is what costs GPU time).
 
 use std::sync::Mutex;
 
@@ -198,8 +200,23 @@ impl GpuScene {
             })();
             heap.free(up.staging);
             let [blas_addresses, slots, vk_instances] = uploaded?;
+            let levels = heap.alloc_buffer(
+                "lod-levels",
+                (lod.slots.len() as u64 * 4).max(16),
+                BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
+                AllocKind::NodeTable,
+                MemoryClass::HostVisible,
+                16,
+            )?;
+            let levels_address = match levels.device_address() {
+                Ok(a) => a.0,
+                Err(e) => {
+                    heap.free(levels);
+                    return Err(e);
+                }
+            };
             let push = LodPush {
-                frame: 0,
+                levels: levels_address,
                 tlases: self.addresses[Slot::Tlases as usize],
                 instances: self.addresses[Slot::Instances as usize],
                 selectors: self.addresses[Slot::Selectors as usize],
@@ -219,6 +236,13 @@ impl GpuScene {
                 tlases,
                 group_count: (lod.slots.len() as u32).div_ceil(64),
                 slot_count: lod.slots.len() as u32,
+                slots: lod.slots.clone(),
+                level_counts: lod
+                    .slots
+                    .iter()
+                    .map(|s| base.lod_selectors[s.selector as usize].level_count)
+                    .collect(),
+                levels,
                 built_for: Mutex::new(None),
                 counts: Mutex::new([0; 2]),
             })

@@ -250,11 +250,9 @@ pub(crate) struct FrameParams {
 }
 
 impl FrameParams {
-    /// What instance-level LOD's levels depend on: the camera and the LOD parameters (bytes).
-    pub(crate) fn levels_key(&self) -> Vec<u8> {
-        let mut key = bytemuck::bytes_of(&self.camera).to_vec();
-        key.extend_from_slice(bytemuck::bytes_of(&self.lod));
-        key
+    /// What instance-level LOD's levels depend on: the camera and the LOD parameters.
+    pub(crate) fn camera_and_lod(&self) -> (&CameraParams, &LodParams) {
+        (&self.camera, &self.lod)
     }
 }
 
@@ -616,17 +614,18 @@ pub(crate) fn run_frames(
     })?;
     rec.reset_queries(&timestamps);
     // Instance-level LOD: every frame of this call has the same camera, so the levels are
-    // picked (and the slot TLASes rebuilt) in the first frame at most, and not at all when
-    // they already are this camera's (lod_instances.rs).
-    let lod_key = match &scene.instance_lod {
-        Some(_) => {
+    // picked on the host and applied (the slot TLASes rebuilt) in the first frame at most,
+    // and not at all when the slot TLASes already hold exactly those levels (lod_instances.rs).
+    let lod_levels = match &scene.instance_lod {
+        Some(lod) => {
             let params: Vec<FrameParams> = frame.params.read_vec(0, 1)?;
-            Some(params[0].levels_key())
+            let (camera, lod_params) = params[0].camera_and_lod();
+            Some(lod.levels(camera, lod_params))
         }
         None => None,
     };
-    let mut lod_pass = match (&scene.instance_lod, &lod_key) {
-        (Some(lod), Some(key)) => lod.needs_pass(key, frames),
+    let mut lod_pass = match (&scene.instance_lod, &lod_levels) {
+        (Some(lod), Some(levels)) => lod.needs_pass(levels, frames),
         _ => false,
     };
     for f in 0..frames {
@@ -634,8 +633,8 @@ pub(crate) fn run_frames(
         rec.barrier();
         rec.write_timestamp(&timestamps, 2 * f)?;
         // Counted in the frame's time.
-        if let (true, Some(lod)) = (lod_pass, &scene.instance_lod) {
-            lod.record(ctx, &mut rec, addresses[Slot::Frame as usize])?;
+        if let (true, Some(lod), Some(levels)) = (lod_pass, &scene.instance_lod, &lod_levels) {
+            lod.record(ctx, &mut rec, levels)?;
             lod_pass = false;
         }
         tracer.record(&mut rec, push_bytes, [w, h], None)?;
@@ -654,8 +653,8 @@ pub(crate) fn run_frames(
         (RENDER_STAT_WORDS * 4) as u64,
     )?;
     rec.submit_and_wait()?;
-    if let (Some(lod), Some(key)) = (&scene.instance_lod, lod_key) {
-        lod.built(key);
+    if let (Some(lod), Some(levels)) = (&scene.instance_lod, lod_levels) {
+        lod.built(levels);
     }
     let records: Vec<AovRecord> = frame.readback.read_vec(0, pixels as usize)?;
     let rgba: Vec<u32> = frame.readback.read_vec(rgba_off, pixels as usize)?;

@@ -7,9 +7,13 @@ use std::sync::Mutex;
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
 
+use motu_abi::camera::CameraParams;
+use motu_abi::lod::LodParams;
+use motu_abi::lod_instance::{camera_level, LodSlotRecord};
+
 use crate::command::CommandRecorder;
 use crate::context::Context;
-use crate::error::Result;
+use crate::error::{GpuError, Result};
 use crate::heap::HeapBuffer;
 use crate::pipeline::ComputePipeline;
 
@@ -17,7 +21,8 @@ use crate::pipeline::ComputePipeline;
 #[derive(Clone, Copy, Pod, Zeroable)]
 #[repr(C)]
 pub(crate) struct Push {
-    pub frame: u64,
+    /// The frame's level per slot (host-visible, written before the pass is recorded).
+    pub levels: u64,
     pub tlases: u64,
     pub instances: u64,
     pub selectors: u64,
@@ -50,24 +55,37 @@ pub(crate) struct InstanceLodGpu {
     pub group_count: u32,
     /// Slots (LOD'd instances), for stats.
     pub slot_count: u32,
-    /// The camera and LOD parameters (bytes, see [`InstanceLodGpu::needs_pass`]) the slot
-    /// TLASes hold the levels of; None before the first pass and while a submission that
-    /// rebuilds them has not completed (a failed one leaves them unknown).
-    pub built_for: Mutex<Option<Vec<u8>>>,
+    /// The slots and each one's level count: the host picks the levels.
+    pub slots: Vec<LodSlotRecord>,
+    pub level_counts: Vec<u32>,
+    /// The levels the next pass applies (one u32 per slot, host-visible; `Push::levels`).
+    pub levels: HeapBuffer,
+    /// The levels (one per slot) the slot TLASes hold; None before the first pass and while
+    /// a submission that rebuilds them has not completed (a failed one leaves them unknown).
+    pub built_for: Mutex<Option<Vec<u32>>>,
     /// Frames that ran the pass and frames that skipped it (levels already current).
     pub counts: Mutex<[u64; 2]>,
 }
 
 impl InstanceLodGpu {
-    /// Whether a frame with the levels' inputs `key` (the frame's camera and LOD parameters)
-    /// needs the pass: false when the slot TLASes already hold that key's levels. When it
-    /// returns true the built state is marked unknown until [`Self::built`] confirms the
-    /// submission that rebuilds them completed.
+    /// Each slot's level for a camera: the rule of `InstanceLod::levels` (the CPU oracle's).
+    pub(crate) fn levels(&self, camera: &CameraParams, lod: &LodParams) -> Vec<u32> {
+        self.slots
+            .iter()
+            .zip(&self.level_counts)
+            .map(|(s, &n)| camera_level(lod, camera.pixels_per_unit_at_1, camera.world_eye, s, n))
+            .collect()
+    }
+
+    /// Whether a frame showing `levels` (one per slot, [`Self::levels`]) needs the pass:
+    /// false when the slot TLASes already hold exactly those levels. When it returns true the
+    /// built state is marked unknown until [`Self::built`] confirms the submission that
+    /// rebuilds them completed.
     /// `frames` frames of this camera follow; all but the first skip the pass.
-    pub(crate) fn needs_pass(&self, key: &[u8], frames: u32) -> bool {
+    pub(crate) fn needs_pass(&self, levels: &[u32], frames: u32) -> bool {
         let mut built = self.built_for.lock().unwrap_or_else(|e| e.into_inner());
         let mut counts = self.counts.lock().unwrap_or_else(|e| e.into_inner());
-        let needed = built.as_deref() != Some(key);
+        let needed = built.as_deref() != Some(levels);
         if needed {
             *built = None;
             counts[0] += 1;
@@ -76,24 +94,33 @@ impl InstanceLodGpu {
         needed
     }
 
-    /// The submission with the pass for `key` completed: the slot TLASes hold its levels.
-    pub(crate) fn built(&self, key: Vec<u8>) {
-        *self.built_for.lock().unwrap_or_else(|e| e.into_inner()) = Some(key);
+    /// The submission with the pass for `levels` completed: the slot TLASes hold them.
+    pub(crate) fn built(&self, levels: Vec<u32>) {
+        *self.built_for.lock().unwrap_or_else(|e| e.into_inner()) = Some(levels);
     }
 
-    /// Records the LOD pass for the frame whose parameters are at `frame_address`: pick
-    /// levels, write instances, rebuild the slots' TLASes. The caller orders it after the
-    /// previous frame's trace (a full barrier); a barrier follows each step.
+    /// Records the LOD pass applying `levels` (one per slot): write instances, rebuild the
+    /// slots' TLASes. The levels go to a host-visible buffer now, so the caller must not
+    /// record another pass before this submission completed (one pass per submission, which
+    /// is waited for). The caller orders it after the previous frame's trace (a full
+    /// barrier); a barrier follows each step.
     pub(crate) fn record<'a>(
         &'a self,
         ctx: &Context,
         rec: &mut CommandRecorder<'a>,
-        frame_address: u64,
+        levels: &[u32],
     ) -> Result<()> {
-        let push = Push {
-            frame: frame_address,
-            ..self.push
-        };
+        if levels.len() != self.slots.len() {
+            return Err(GpuError::InvalidRequest(format!(
+                "instance LOD: {} levels for {} slots",
+                levels.len(),
+                self.slots.len()
+            )));
+        }
+        if !levels.is_empty() {
+            self.levels.write(0, levels)?;
+        }
+        let push = self.push;
         rec.dispatch(
             &self.pipeline,
             None,
