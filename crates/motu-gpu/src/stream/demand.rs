@@ -43,6 +43,8 @@ impl<'a> StreamingRenderer<'a> {
     /// and the meshes only it held are released: nothing of it stays resident.
     pub(super) fn build_group(&mut self, group: &[u32], evict: bool) -> Result<()> {
         let mut taken: Vec<usize> = Vec::new();
+        self.frame_stats.build_groups += 1;
+        let t_mesh = Instant::now();
         let loaded = (|| -> Result<()> {
             for &b in group {
                 for m in self.blas_meshes(b as usize) {
@@ -93,21 +95,21 @@ impl<'a> StreamingRenderer<'a> {
                 up.flush(&ctx)?;
             }
         }
+        self.frame_stats.mesh_ms += t_mesh.elapsed().as_secs_f64() * 1e3;
+        let t_blas = Instant::now();
         let built = loaded.and_then(|()| {
             let ids: Vec<usize> = group.iter().map(|&b| b as usize).collect();
             self.maybe_evicting(evict, |s| s.build_blas_set(&ids, 0))
         });
+        self.frame_stats.blas_ms += t_blas.elapsed().as_secs_f64() * 1e3;
+        if matches!(built, Err(GpuError::Budget(_))) {
+            self.frame_stats.refused_groups += 1;
+        }
         let built = match built {
             Ok(b) => b,
             Err(e) => {
                 for m in taken {
-                    self.mesh_refs[m] = self.mesh_refs[m].saturating_sub(1);
-                    if self.mesh_refs[m] == 0 {
-                        if let Some(g) = self.meshes[m].take() {
-                            self.heap.free(g.buffer);
-                            self.release_mesh_textures(m);
-                        }
-                    }
+                    self.drop_mesh_ref(m);
                 }
                 return Err(e);
             }
@@ -146,12 +148,18 @@ impl<'a> StreamingRenderer<'a> {
     }
 
     /// Builds the BLASes of `queue` (priority order) in groups that halve when the budget
-    /// refuses them; groups use free memory only, single BLASes evict for room (so eviction
-    /// frees about what one build needs). Stops at the first single BLAS that does not fit
-    /// (left for a later pass) and returns how many were left. `must_progress`: when nothing
-    /// was built yet, evict the current pass's pins too before giving up, then fail with the
-    /// numbers.
-    pub(super) fn build_blas_queue(&mut self, queue: &[u32], must_progress: bool) -> Result<usize> {
+    /// refuses them. `evict_groups`: groups evict unpinned structures for room (the room a
+    /// group needs by estimate is made once, up front, so a group is rarely refused after its
+    /// meshes were streamed); otherwise groups are cut to the free budget by estimate and
+    /// only single BLASes evict. Stops at the first single BLAS that does not fit (left for a
+    /// later pass) and returns how many were left. `must_progress`: when nothing was built
+    /// yet, evict the current pass's pins too before giving up, then fail with the numbers.
+    pub(super) fn build_blas_queue(
+        &mut self,
+        queue: &[u32],
+        must_progress: bool,
+        evict_groups: bool,
+    ) -> Result<usize> {
         let mut i = 0;
         // Group size carries over between steps: a full budget keeps failing large groups,
         // and each failure streams their meshes for nothing.
@@ -164,9 +172,32 @@ impl<'a> StreamingRenderer<'a> {
                 self.frame_stats.build_budget_spent = true;
                 return Ok(queue.len() - i);
             }
-            let n = self.group_within_frame_budget(&queue[i..], chunk);
+            let mut n = self.group_within_frame_budget(&queue[i..], chunk);
+            let free = self.free_budget_bytes();
+            if !evict_groups {
+                // Free memory only: a group the budget cannot hold would stream its meshes for
+                // nothing.
+                let mut est = 0u64;
+                let mut k = 0;
+                for &b in &queue[i..i + n] {
+                    est += self.blas_estimate_bytes(b);
+                    if k > 0 && est > free {
+                        break;
+                    }
+                    k += 1;
+                }
+                n = k.max(1);
+            }
             let group = &queue[i..i + n];
-            match self.build_group(group, group.len() == 1) {
+            let evict = evict_groups || group.len() == 1;
+            if evict {
+                let need: u64 = group.iter().map(|&b| self.blas_estimate_bytes(b)).sum();
+                if need > free {
+                    // One eviction round for the whole group instead of one per refusal.
+                    self.evict_some(need - free)?;
+                }
+            }
+            match self.build_group(group, evict) {
                 Ok(()) => {
                     i += group.len();
                     chunk = (chunk * 2).min(64);
@@ -193,6 +224,29 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         Ok(0)
+    }
+
+    /// Budget bytes not sub-allocated now (optimistic: a dedicated allocation needs them in
+    /// one piece; a refusal is retried).
+    pub(super) fn free_budget_bytes(&self) -> u64 {
+        let r = self.heap.report();
+        r.budget_bytes.saturating_sub(r.budget_in_use_bytes)
+    }
+
+    /// What building BLAS `b` takes by estimate: its meshes not resident yet (geometry and
+    /// shading attributes) plus ~64 bytes a triangle each for the structure and its scratch.
+    pub(super) fn blas_estimate_bytes(&self, b: u32) -> u64 {
+        let tris = u64::from(self.view.blases[b as usize].primitive_count);
+        let mesh: u64 = self
+            .blas_meshes(b as usize)
+            .into_iter()
+            .filter(|&m| self.meshes[m].is_none())
+            .map(|m| {
+                let r = &self.view.meshes[m];
+                u64::from(r.vertex_count) * 32 + u64::from(r.triangle_count) * 16
+            })
+            .sum();
+        mesh + 128 * tris
     }
 
     /// The error for BLAS `b` not fitting next to the skeleton alone.
@@ -247,14 +301,17 @@ impl<'a> StreamingRenderer<'a> {
                 .collect()
         };
         let (needed, later) = (queue(&demand.blases), queue(&demand.later));
-        let deferred = self.build_blas_queue(&needed, !prefetch)?;
+        let deferred = self.build_blas_queue(&needed, !prefetch, !prefetch)?;
         if deferred == 0 && !later.is_empty() && self.opts.build_open_early {
             // What fits of the rest, without giving up anything built above.
-            self.build_blas_queue(&later, false)?;
+            self.build_blas_queue(&later, false, false)?;
         }
         // Parents whose instance set changed (builds or evictions).
         self.rebuild_dirty()?;
+        let t_tables = Instant::now();
         self.upload_tlas_addresses()?;
+        self.frame_stats.tables_ms += t_tables.elapsed().as_secs_f64() * 1e3;
+        self.frame_stats.build_steps += 1;
         if prefetch {
             self.frame_stats.prefetched += self.built_now.len() as u32;
         } else {

@@ -34,6 +34,7 @@ impl<'a> StreamingRenderer<'a> {
             height = h
         );
         let _g = span.enter();
+        let frame_t0 = std::time::Instant::now();
         self.frame += 1;
         self.frame_stats = FrameStreamStats {
             frame: self.frame,
@@ -90,6 +91,7 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         let report = self.heap.report();
+        self.frame_stats.frame_ms = frame_t0.elapsed().as_secs_f64() * 1e3;
         let resident_textures = self.shading.resident_textures();
         let st = &mut self.frame_stats;
         st.resident_textures = resident_textures;

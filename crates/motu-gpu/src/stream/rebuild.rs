@@ -198,6 +198,8 @@ impl<'a> StreamingRenderer<'a> {
             });
         }
         let total: u64 = instance_bytes.iter().map(|b| b.len() as u64).sum();
+        self.frame_stats.tlas_builds += ids.len() as u32;
+        self.frame_stats.tlas_instances_written += total / 64;
         let mut offsets = Vec::with_capacity(ids.len());
         let mut off = 0u64;
         for b in &instance_bytes {
@@ -297,6 +299,50 @@ impl<'a> StreamingRenderer<'a> {
     /// evicted, gives back structures this step built, least requested first (their pixels
     /// stay incomplete); fails only when none is left.
     pub(super) fn rebuild_dirty(&mut self) -> Result<()> {
+        let t0 = std::time::Instant::now();
+        let r = self.rebuild_dirty_untimed();
+        self.frame_stats.tlas_ms += t0.elapsed().as_secs_f64() * 1e3;
+        r
+    }
+
+    /// Bytes rebuilding the dirty TLASes takes beyond what their current builds hold, by
+    /// their resident instance counts now (instance buffer, structure, scratch).
+    fn tlas_rebuild_estimate(&self) -> Result<u64> {
+        let mut need = 0u64;
+        for &t in &self.dirty {
+            let rec = &self.view.tlases[t as usize];
+            let count = self.view.instances
+                [rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize]
+                .iter()
+                .filter(|i| self.blas[i.blas as usize].is_some())
+                .count() as u32
+                + 1;
+            let s = self
+                .ctx
+                .tlas_build_sizes(count, crate::accel::AsBuildFlags::default())?;
+            need += u64::from(count) * 64
+                + s.acceleration_structure_size_bytes
+                + s.build_scratch_size_bytes;
+            if let Some(old) = &self.tlas[t as usize] {
+                need = need.saturating_sub(old.accel.size_bytes);
+            }
+        }
+        Ok(need)
+    }
+
+    fn rebuild_dirty_untimed(&mut self) -> Result<()> {
+        if !self.dirty.is_empty() {
+            // Room made once up front: each refused attempt re-encodes and re-uploads every
+            // resident instance record of the dirty TLASes.
+            // TLASes, their scratch and instance buffers are large (dedicated blocks): count
+            // only budget no block holds as free, and evict a quarter more for fragmentation.
+            let need = self.tlas_rebuild_estimate()?;
+            let r = self.heap.report();
+            let free = r.budget_bytes.saturating_sub(r.budget_block_bytes);
+            if need > free {
+                self.evict_some((need - free) + (need - free) / 4)?;
+            }
+        }
         let mut rounds = 0;
         while !self.dirty.is_empty() {
             rounds += 1;
