@@ -122,6 +122,8 @@ impl<'a> StreamingRenderer<'a> {
                 .map(|m| self.meshes[m].as_ref().map_or(0, |g| g.size_bytes()))
                 .sum();
             let bytes = accel.size_bytes + mesh_bytes;
+            self.blas_bytes[b] = bytes;
+            self.used_in_frame[b] = self.frame;
             self.frame_stats.blas_built += 1;
             self.frame_stats.built_bytes += accel.size_bytes;
             self.frame_stats.triangles_built += u64::from(self.view.blases[b].primitive_count);
@@ -165,6 +167,10 @@ impl<'a> StreamingRenderer<'a> {
         // and each failure streams their meshes for nothing.
         let mut chunk = self.group_hint.clamp(1, 64);
         let mut relaxed = false;
+        // Room for the TLAS rebuilds of this step, kept free while building: a step that
+        // fills the budget with BLASes would give them back one by one to fit the rebuild
+        // (each attempt re-encodes every resident instance record).
+        let mut counts = self.resident_instance_counts();
         while i < queue.len() {
             // The frame's build budget: spent stops the step (a frame that has built nothing
             // yet and must progress still builds one).
@@ -173,7 +179,8 @@ impl<'a> StreamingRenderer<'a> {
                 return Ok(queue.len() - i);
             }
             let mut n = self.group_within_frame_budget(&queue[i..], chunk);
-            let free = self.free_budget_bytes();
+            let reserve = self.tlas_reserve(&counts, &queue[i..i + n])?;
+            let free = self.free_budget_bytes().saturating_sub(reserve);
             if !evict_groups {
                 // Free memory only: a group the budget cannot hold would stream its meshes for
                 // nothing.
@@ -190,15 +197,39 @@ impl<'a> StreamingRenderer<'a> {
             }
             let group = &queue[i..i + n];
             let evict = evict_groups || group.len() == 1;
+            let need: u64 = group.iter().map(|&b| self.blas_estimate_bytes(b)).sum();
             if evict {
-                let need: u64 = group.iter().map(|&b| self.blas_estimate_bytes(b)).sum();
-                if need > free {
-                    // One eviction round for the whole group instead of one per refusal.
-                    self.evict_some(need - free)?;
+                // The room the whole group needs, made before its meshes stream (a BLAS's
+                // bytes count meshes other BLASes may still hold, so an eviction may free
+                // less than it counted: repeat while it helps).
+                let mut short = need.saturating_sub(free);
+                while short > 0 && self.evict_some(short)? {
+                    short = need.saturating_sub(self.free_budget_bytes().saturating_sub(reserve));
                 }
+            }
+            if !self.built_now.is_empty() && need > self.free_budget_bytes().saturating_sub(reserve)
+            {
+                // Built next to the step's builds, it would squeeze out the TLAS rebuild:
+                // smaller, or in a later pass.
+                if group.len() > 1 {
+                    chunk = group.len() / 2;
+                    self.group_hint = chunk;
+                    continue;
+                }
+                return Ok(queue.len() - i);
             }
             match self.build_group(group, evict) {
                 Ok(()) => {
+                    for &b in group {
+                        if self.blas[b as usize].is_some() {
+                            for (&t, &c) in self.parents[b as usize]
+                                .iter()
+                                .zip(&self.parent_counts[b as usize])
+                            {
+                                counts[t as usize] += u64::from(c);
+                            }
+                        }
+                    }
                     i += group.len();
                     chunk = (chunk * 2).min(64);
                     self.group_hint = chunk;
@@ -224,6 +255,31 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         Ok(0)
+    }
+
+    /// Bytes the TLAS rebuilds of the running step take by estimate (see
+    /// `tlas_rebuild_bytes`) with `counts` resident instance records per TLAS plus those of
+    /// `group`: every TLAS dirty now or parent of a BLAS of `group` or built this step.
+    pub(super) fn tlas_reserve(&self, counts: &[u64], group: &[u32]) -> Result<u64> {
+        let mut touched: BTreeSet<u32> = self.dirty.clone();
+        for &b in group.iter().chain(&self.built_now) {
+            touched.extend(self.parents[b as usize].iter().copied());
+        }
+        let mut reserve = 0u64;
+        for t in touched {
+            let extra: u64 = group
+                .iter()
+                .flat_map(|&b| {
+                    self.parents[b as usize]
+                        .iter()
+                        .zip(&self.parent_counts[b as usize])
+                })
+                .filter(|(&p, _)| p == t)
+                .map(|(_, &c)| u64::from(c))
+                .sum();
+            reserve += self.tlas_rebuild_bytes(t, counts[t as usize] + extra)?;
+        }
+        Ok(reserve)
     }
 
     /// Budget bytes not sub-allocated now (optimistic: a dedicated allocation needs them in

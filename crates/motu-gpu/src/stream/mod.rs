@@ -228,6 +228,11 @@ pub struct FrameStreamStats {
     /// records written for them.
     pub tlas_builds: u32,
     pub tlas_instances_written: u64,
+    /// The frame's working set: distinct BLASes its rays used (hit or open while resident,
+    /// or built for them) and their bytes (structures plus meshes). Above what the budget
+    /// leaves for structures, some BLAS must be built more than once in the frame.
+    pub working_set_blases: u32,
+    pub working_set_bytes: u64,
     /// Per pass: where its time went.
     pub pass_log: Vec<PassStats>,
     /// Resident acceleration-structure and geometry bytes after the frame.
@@ -329,10 +334,17 @@ pub struct StreamingRenderer<'a> {
     proxy_pi_base: Vec<u32>,
     /// Per BLAS: TLASes instancing it.
     parents: Vec<Vec<u32>>,
+    /// Per BLAS: its instance count in each of `parents` (same order).
+    parent_counts: Vec<Vec<u32>>,
     buildable: Vec<bool>,
     residency: Residency,
     /// Per item (BLAS, then TLAS): the last pass stamp that saw it.
     last_seen: Vec<u32>,
+    /// Per BLAS: bytes it held when last resident (structure plus meshes), and the last frame
+    /// whose rays used it (walked while resident and seen, or built for them): the frame's
+    /// working set.
+    blas_bytes: Vec<u64>,
+    used_in_frame: Vec<u64>,
     /// Resident TLASes whose instance set changed since their build.
     dirty: BTreeSet<u32>,
     /// Pins of the current build step (items that must not be evicted): what the latest

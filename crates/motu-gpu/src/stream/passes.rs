@@ -173,6 +173,7 @@ impl<'a> StreamingRenderer<'a> {
                 }
                 self.last_seen[b] = self.stamp;
                 if self.blas[b].is_some() {
+                    self.used_in_frame[b] = self.frame;
                     if self.buildable[b] {
                         self.residency
                             .mark_visible(ItemId(b as u32), u64::from(self.stamp));
