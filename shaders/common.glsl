@@ -22,6 +22,7 @@
 #define STAT_SHADOW_RAYS 2
 #define STAT_HITS 3
 #define STAT_TRUNCATED_RAYS 4
+#define STAT_MISSING_TEXTURES 5
 
 #define T_INFINITY 3.0e38
 

@@ -1,5 +1,6 @@
-// Instance-level LOD (motu_abi::lod_instance): per slot, the level for this frame's camera;
-// the slot's TLAS instances (VkAccelerationStructureInstanceKHR) of that level get their BLAS
+// Instance-level LOD (motu_abi::lod_instance): per slot, the level the host picked for this
+// frame's camera (InstanceLod::levels, the CPU oracle's rule, so both agree exactly); the
+// slot's TLAS instances (VkAccelerationStructureInstanceKHR) of that level get their BLAS
 // addresses, the other levels' are made inactive (address 0, mask 0). The host rebuilds the
 // slots' TLASes after this pass.
 #version 460
@@ -9,12 +10,6 @@
 #include "lod.glsl"
 
 layout(local_size_x = 64) in;
-
-// The head of common.glsl's FrameParams (same std430 offsets).
-struct FrameHead {
-    CameraParams camera;
-    LodParams lod;
-};
 
 // VkAccelerationStructureInstanceKHR: 64 bytes.
 struct VkInstance {
@@ -26,7 +21,6 @@ struct VkInstance {
     uint64_t reference;
 };
 
-layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer FrameRef { FrameHead f; };
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer TlasTable { TlasRecord r[]; };
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer InstanceTable { InstanceRecord r[]; };
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer SelectorTable { LodSelectorRecord r[]; };
@@ -37,7 +31,7 @@ layout(buffer_reference, std430, buffer_reference_align = 16) buffer VkInstanceT
 
 // Rust: motu-gpu's lod_instances.rs `Push` (80 bytes).
 layout(push_constant) uniform Push {
-    FrameRef frame;
+    U32Table levels;            // the frame's level per slot
     TlasTable tlases;
     InstanceTable instances;
     SelectorTable selectors;
@@ -58,9 +52,7 @@ void main() {
     }
     LodSlotRecord slot = push.slots.r[i];
     LodSelectorRecord sel = push.selectors.r[slot.selector];
-    FrameHead fh = push.frame.f;
-    uint level = camera_lod(fh.lod, fh.camera.pixels_per_unit_at_1, fh.camera.world_eye, slot,
-                            sel.level_count);
+    uint level = push.levels.r[i];
     // The slot holds every level's BLASes in order: only the chosen level's are active.
     uint gi = slot.instance;
     for (uint l = 0u; l < sel.level_count; ++l) {

@@ -45,10 +45,18 @@ vec4 texel_at(U32Table texels, uint base, uint w, uint h, int xi, int yi) {
 }
 
 // Where texture `index`'s texels are addressed from: the shared texel array, or (streaming)
-// the texture's own chain. 0: a streamed texture that is not resident (never while a mesh
-// that uses it is; callers then keep the material's constants).
+// the texture's own chain. 0: a streamed texture that is not resident. A resident mesh holds
+// its textures, so that is a broken invariant: it is counted, and the frame fails rather than
+// showing the material's constants as if they were the image.
 uint64_t texels_of(ShadingRef sr, uint index) {
-    return sr.texel_addresses != 0ul ? U64Table(sr.texel_addresses).r[index] : sr.texels;
+    if (sr.texel_addresses == 0ul) {
+        return sr.texels;
+    }
+    uint64_t a = U64Table(sr.texel_addresses).r[index];
+    if (a == 0ul) {
+        atomicAdd(push.stats.n[STAT_MISSING_TEXTURES], 1u);
+    }
+    return a;
 }
 
 // motu_abi::shade::sample_texture.

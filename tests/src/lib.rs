@@ -213,68 +213,79 @@ pub fn render(pkg: &Path, backend: &str, aov: &Path, extra: &[&str]) -> serde_js
         .expect("stats JSON")
 }
 
+/// A child process killed (and reaped) on drop: display servers outlive no test.
+pub struct KillOnDrop(pub std::process::Child);
+
+impl Drop for KillOnDrop {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Spawns the display server `cmd` (`name`, installed by the `package` that `tools/setup.sh`
+/// installs) for window tests: `None` with a loud SKIPPED line when it cannot start, a failure
+/// when `MOTU_REQUIRE_GPU` is set (CI).
+pub fn spawn_display_server(
+    mut cmd: Command,
+    name: &str,
+    package: &str,
+    test: &str,
+) -> Option<KillOnDrop> {
+    match cmd.spawn() {
+        Ok(c) => Some(KillOnDrop(c)),
+        Err(e) => {
+            assert!(
+                std::env::var_os("MOTU_REQUIRE_GPU").is_none(),
+                "MOTU_REQUIRE_GPU is set but {name} cannot start ({e}): tools/setup.sh installs {package}"
+            );
+            eprintln!("SKIPPED: {name} not available ({e}): {test}");
+            None
+        }
+    }
+}
+
 /// A private X server for window tests (`motu view`): Xvfb on a display number it picks itself
 /// (`-displayfd`), killed on drop.
 pub struct Xvfb {
-    child: std::process::Child,
+    _server: KillOnDrop,
     /// Xvfb's stdout, kept open: a closed pipe would kill it (SIGPIPE) if it wrote again.
     _stdout: std::io::BufReader<std::process::ChildStdout>,
     /// The `DISPLAY` value (`:N`).
     pub display: String,
 }
 
-impl Drop for Xvfb {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
 /// Starts Xvfb; `None` (with a loud line) when it is not installed, a failure when
 /// `MOTU_REQUIRE_GPU` is set (CI: `tools/setup.sh` installs `xvfb`).
 pub fn xvfb(test: &str) -> Option<Xvfb> {
     use std::io::BufRead;
-    let spawned = Command::new("Xvfb")
-        .args([
-            "-displayfd",
-            "1",
-            "-screen",
-            "0",
-            "1024x768x24",
-            "-nolisten",
-            "tcp",
-        ])
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::null())
-        .spawn();
-    let mut child = match spawned {
-        Ok(c) => c,
-        Err(e) => {
-            assert!(
-                std::env::var_os("MOTU_REQUIRE_GPU").is_none(),
-                "MOTU_REQUIRE_GPU is set but Xvfb cannot start ({e}): tools/setup.sh installs xvfb"
-            );
-            eprintln!("SKIPPED: Xvfb not available ({e}): {test}");
-            return None;
-        }
-    };
-    // Xvfb writes the display number once it accepts connections.
+    let mut cmd = Command::new("Xvfb");
+    cmd.args([
+        "-displayfd",
+        "1",
+        "-screen",
+        "0",
+        "1024x768x24",
+        "-nolisten",
+        "tcp",
+    ])
+    .stdout(std::process::Stdio::piped())
+    .stderr(std::process::Stdio::null());
+    let mut server = spawn_display_server(cmd, "Xvfb", "xvfb", test)?;
+    // Xvfb writes the display number once it accepts connections (a panic here drops, so
+    // kills, the server).
     let mut line = String::new();
-    let Some(mut stdout) = child.stdout.take().map(std::io::BufReader::new) else {
-        let _ = child.kill();
-        let _ = child.wait();
+    let Some(mut stdout) = server.0.stdout.take().map(std::io::BufReader::new) else {
         panic!("Xvfb has no stdout pipe");
     };
     let read = stdout.read_line(&mut line);
     let n = line.trim().to_string();
     if read.is_err() || n.is_empty() {
-        let _ = child.kill();
-        let _ = child.wait();
         panic!("Xvfb started but reported no display number ({read:?})");
     }
     Some(Xvfb {
         display: format!(":{n}"),
-        child,
+        _server: server,
         _stdout: stdout,
     })
 }
@@ -282,17 +293,10 @@ pub fn xvfb(test: &str) -> Option<Xvfb> {
 /// A private headless Wayland compositor for window tests (`motu view` on Wayland): weston's
 /// headless backend on its own socket in its own runtime directory, killed on drop.
 pub struct Weston {
-    child: std::process::Child,
+    _server: KillOnDrop,
     runtime_dir: tempfile::TempDir,
     /// The `WAYLAND_DISPLAY` value (the socket's name in the runtime directory).
     pub socket: String,
-}
-
-impl Drop for Weston {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
 }
 
 /// Starts a headless weston; `None` (with a loud line) when it is not installed, a failure when
@@ -304,47 +308,34 @@ pub fn weston(test: &str) -> Option<Weston> {
     std::fs::set_permissions(runtime_dir.path(), std::fs::Permissions::from_mode(0o700))
         .expect("runtime dir mode");
     let socket = "motu-test".to_string();
-    let spawned = Command::new("weston")
-        .args([
-            "--backend=headless-backend.so",
-            &format!("--socket={socket}"),
-            "--width=1024",
-            "--height=768",
-            "--idle-time=0",
-        ])
-        .env("XDG_RUNTIME_DIR", runtime_dir.path())
-        .env_remove("DISPLAY")
-        .env_remove("WAYLAND_DISPLAY")
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .spawn();
-    let mut child = match spawned {
-        Ok(c) => c,
-        Err(e) => {
-            assert!(
-                std::env::var_os("MOTU_REQUIRE_GPU").is_none(),
-                "MOTU_REQUIRE_GPU is set but weston cannot start ({e}): tools/setup.sh installs weston"
-            );
-            eprintln!("SKIPPED: weston not available ({e}): {test}");
-            return None;
-        }
-    };
+    let mut cmd = Command::new("weston");
+    cmd.args([
+        "--backend=headless-backend.so",
+        &format!("--socket={socket}"),
+        "--width=1024",
+        "--height=768",
+        "--idle-time=0",
+    ])
+    .env("XDG_RUNTIME_DIR", runtime_dir.path())
+    .env_remove("DISPLAY")
+    .env_remove("WAYLAND_DISPLAY")
+    .stdout(std::process::Stdio::null())
+    .stderr(std::process::Stdio::null());
+    let mut server = spawn_display_server(cmd, "weston", "weston", test)?;
     // The socket appears once weston accepts clients.
     let path = runtime_dir.path().join(&socket);
     let start = std::time::Instant::now();
     while !path.exists() {
-        if let Ok(Some(status)) = child.try_wait() {
+        if let Ok(Some(status)) = server.0.try_wait() {
             panic!("weston exited before opening its socket: {status}");
         }
         if start.elapsed() > std::time::Duration::from_secs(30) {
-            let _ = child.kill();
-            let _ = child.wait();
             panic!("weston did not open {} within 30 s", path.display());
         }
         std::thread::sleep(std::time::Duration::from_millis(50));
     }
     Some(Weston {
-        child,
+        _server: server,
         runtime_dir,
         socket,
     })

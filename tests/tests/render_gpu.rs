@@ -253,6 +253,15 @@ fn instance_lod_follows_a_moving_camera() {
         serde_json::json!({"eye": at, "forward": forward, "up": up, "fov_deg": 50.0})
     };
     let (far, near) = (pose(0.0), pose(0.55));
+    // The far eye looking elsewhere: the levels depend only on the eye (and the film), so
+    // turning in place changes the image but not one slot's level.
+    let len = forward.iter().map(|v| v * v).sum::<f32>().sqrt();
+    let turn = |a: f32| {
+        let mut f = forward.clone();
+        f[0] += a * len;
+        serde_json::json!({"eye": eye, "forward": f, "up": up, "fov_deg": 50.0})
+    };
+    let (turned, turned_more) = (turn(0.05), turn(0.1));
     let path = |name: &str, poses: &[&serde_json::Value]| {
         let p = dir.path().join(format!("{name}.json"));
         let doc = serde_json::json!({"format": "motu-camera-path", "version": 1, "frames": poses});
@@ -278,6 +287,8 @@ fn instance_lod_follows_a_moving_camera() {
     for (name, poses, passes, skipped) in [
         ("hold-then-move", vec![&far, &far, &near], 2, 1),
         ("move-back", vec![&near, &near, &far], 2, 1),
+        // A new camera every frame, the same levels: the pass (and its rebuild) runs once.
+        ("turn-in-place", vec![&far, &turned, &turned_more], 1, 2),
     ] {
         let p = path(name, &poses);
         let args = ["--width", "64", "--camera-path", s(&p)];

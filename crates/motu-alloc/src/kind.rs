@@ -147,6 +147,15 @@ pub fn binary_scale(bytes: u64) -> (f64, &'static str) {
     (v, BINARY_UNITS[u])
 }
 
+/// `1536` → `1.5 KiB`: one decimal at every unit (the command line's progress, summaries and
+/// error messages).
+pub fn format_size(bytes: u64) -> String {
+    match binary_scale(bytes) {
+        (_, "B") => format!("{bytes} B"),
+        (v, unit) => format!("{v:.1} {unit}"),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

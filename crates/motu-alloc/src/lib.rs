@@ -85,7 +85,8 @@ pub use allocator::{AllocRequest, Allocation, Allocator, BlockEvent};
 pub use batch::{plan_build_batches, BatchError, BatchLimits, BatchPlan, BuildBatch, BuildSize};
 pub use error::{AllocError, LimitsError};
 pub use kind::{
-    binary_scale, AllocKind, AllocationId, BlockId, ByteSize, MemoryClass, BINARY_UNITS,
+    binary_scale, format_size, AllocKind, AllocationId, BlockId, ByteSize, MemoryClass,
+    BINARY_UNITS,
 };
 pub use limits::{
     effective_budget_bytes, standard_block_size_bytes, AllocLimits, AllocPolicy, SafetyMargin, GIB,

@@ -1,7 +1,7 @@
 //! The hidden `--child-render PKG` mode: one timed render in its own process.
 
 use crate::error::{gpu_err, io, BenchError};
-use crate::plan::{backend_name, Backend};
+use crate::plan::Backend;
 use crate::report::RenderMetrics;
 use motu_abi::camera::CameraParams;
 use motu_abi::HierarchyView;
@@ -40,7 +40,7 @@ where
     let camera = *camera;
     let backend = a.backend.unwrap_or(Backend::Query);
     let mut m = RenderMetrics {
-        backend: backend_name(backend).into(),
+        backend: backend.name().into(),
         width: camera.width,
         height: camera.height,
         warmup_frames: warmup,

@@ -12,24 +12,8 @@ const QUICK_ISLAND_MAX_INSTANCES: u32 = 1500;
 /// ≈ 17.4M; the run warns if it is not over).
 const GPU_ISLAND_SCALE: f64 = 0.63;
 
-/// A render backend (the CLI's `--backend`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Backend {
-    Pipeline,
-    Query,
-    Cpu,
-}
-
-/// `query` where a device has ray queries (usually fastest on RTX), else `pipeline`, else the CPU.
-pub fn best_backend(devices: &[motu_gpu::DeviceReport]) -> Backend {
-    if devices.iter().any(|d| d.ray_query) {
-        Backend::Query
-    } else if devices.iter().any(|d| d.ray_pipeline) {
-        Backend::Pipeline
-    } else {
-        Backend::Cpu
-    }
-}
+/// A render backend (the CLI's `--backend`) and the best one of the devices there are.
+pub use motu_render::{best_backend, Backend};
 
 /// A suite run: `motu bench`'s flags (see CLI.md for each).
 #[derive(Clone, Debug, Default)]
@@ -144,10 +128,10 @@ pub(crate) fn settings(a: &SuiteOptions) -> Result<Settings, BenchError> {
         (SuiteKind::Cpu, true) => (160, 90, 3, 1, 300),
     };
     let backend = match (a.backend, kind) {
-        (Some(b), _) => backend_name(b),
+        (Some(b), _) => b.name(),
         (None, SuiteKind::Cpu) => "cpu",
         (None, SuiteKind::Gpu) => match motu_gpu::list_devices() {
-            Ok(d) => backend_name(best_backend(&d)),
+            Ok(d) => best_backend(&d).name(),
             Err(_) => "cpu",
         },
     };
@@ -184,14 +168,6 @@ pub(crate) fn settings(a: &SuiteOptions) -> Result<Settings, BenchError> {
         step_timeout_s: a.step_timeout_s.unwrap_or(timeout).max(1),
         keep_packages: a.keep,
     })
-}
-
-pub(crate) fn backend_name(b: Backend) -> &'static str {
-    match b {
-        Backend::Pipeline => "pipeline",
-        Backend::Query => "query",
-        Backend::Cpu => "cpu",
-    }
 }
 
 /// `shared/scenes` beside or above the working directory or the binary.

@@ -284,6 +284,16 @@ pub enum BackendArg {
     Cpu,
 }
 
+impl From<BackendArg> for motu_render::Backend {
+    fn from(b: BackendArg) -> Self {
+        match b {
+            BackendArg::Pipeline => motu_render::Backend::Pipeline,
+            BackendArg::Query => motu_render::Backend::Query,
+            BackendArg::Cpu => motu_render::Backend::Cpu,
+        }
+    }
+}
+
 /// `--stream-fallback`.
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum FallbackArg {

@@ -33,7 +33,8 @@ mod report;
 mod rt_pipeline;
 mod scene;
 pub mod shaders;
-mod shading;
+// The scene's shading tables are part of the GPU scene; `crate::shading` names them.
+use scene::shading;
 mod stream;
 pub mod testing;
 

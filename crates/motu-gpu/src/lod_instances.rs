@@ -1,168 +1,33 @@
-//! Instance-level LOD on the GPU (motu_abi::lod_instance): each frame, before tracing, a
-//! compute pass (`shaders/lod_instances.comp`) picks every slot's level for the frame's camera
-//! and writes that level's BLAS addresses into the TLAS instance buffer (and the instance
-//! table the shaders read), then the slots' TLASes are rebuilt. Rays then reach LOD'd
-//! geometry in one trace, without a traversal-shader hop.
+//! Instance-level LOD on the GPU (motu_abi::lod_instance): each frame, before tracing, the
+//! host picks every slot's level for the frame's camera with the CPU oracle's own rule
+//! (`InstanceLod::levels`, so GPU and CPU levels agree exactly), and when any slot's level
+//! differs from the ones the slot TLASes hold, a compute pass (`shaders/lod_instances.comp`)
+//! writes the chosen levels' BLAS addresses into the TLAS instance buffer and the slots'
+//! TLASes are rebuilt (`scene/lod_pass.rs`). Rays then reach LOD'd geometry in one trace,
+//! without a traversal-shader hop.
 //!
-//! The levels depend only on the frame's camera and LOD parameters, so the pass is skipped
-//! when those are bit-identical to the ones the slot TLASes were last built for (a static
-//! camera: progressive frames, repeated renders); any change, a moved eye included, runs it.
+//! The pass is skipped when no slot's level changes: a static camera (progressive frames,
+//! repeated renders), pans and turns, and the frames of a moving camera in which no slot
+//! crosses a level threshold (the rebuild, not the level choice, is what costs GPU time).
 
 use std::sync::Mutex;
 
 use ash::vk;
-use bytemuck::{cast_slice, Pod, Zeroable};
+use bytemuck::cast_slice;
 use motu_abi::lod_instance::InstanceLod;
 use motu_abi::{HierarchyView, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
 use motu_alloc::{AllocKind, MemoryClass};
 
 use crate::accel::AsBuildFlags;
-use crate::command::CommandRecorder;
-use crate::context::Context;
 use crate::error::{GpuError, Result};
 use crate::heap::{GpuHeap, HeapBuffer};
 use crate::memory::BufferUsage;
 use crate::pipeline::{ComputePipeline, ComputePipelineDesc};
-use crate::scene::{encode_instance, table_usage, AccelStruct, GpuScene, Slot, Uploader};
+use crate::scene::{
+    encode_instance, table_usage, AccelStruct, GpuScene, InstanceLodGpu, LodPush, LodTlas, Slot,
+    Uploader,
+};
 use crate::shaders;
-
-/// `lod_instances.comp`'s push constants.
-#[derive(Clone, Copy, Pod, Zeroable)]
-#[repr(C)]
-struct Push {
-    frame: u64,
-    tlases: u64,
-    instances: u64,
-    selectors: u64,
-    lod_levels: u64,
-    slots: u64,
-    blas_addresses: u64,
-    vk_instances: u64,
-    slot_count: u32,
-    lod_instance_base: u32,
-    _pad: [u32; 2],
-}
-
-/// One TLAS rebuilt every frame: its instances at `offset_bytes` in the instance buffer; the
-/// structure itself is `GpuScene::tlases[tlas]` (built without compaction, so a rebuild fits).
-struct LodTlas {
-    handle: vk::AccelerationStructureKHR,
-    count: u32,
-    offset_bytes: u64,
-    scratch_offset_bytes: u64,
-}
-
-/// The per-frame LOD pass's resources (owned by [`GpuScene`]).
-pub(crate) struct InstanceLodGpu {
-    pipeline: ComputePipeline,
-    /// Scratch, BLAS addresses, slots, instance buffer: kept for the scene's life.
-    _buffers: Vec<HeapBuffer>,
-    push: Push,
-    scratch_address: u64,
-    tlases: Vec<LodTlas>,
-    group_count: u32,
-    /// Slots (LOD'd instances), for stats.
-    pub(crate) slot_count: u32,
-    /// The camera and LOD parameters (bytes, see [`InstanceLodGpu::needs_pass`]) the slot
-    /// TLASes hold the levels of; None before the first pass and while a submission that
-    /// rebuilds them has not completed (a failed one leaves them unknown).
-    built_for: Mutex<Option<Vec<u8>>>,
-    /// Frames that ran the pass and frames that skipped it (levels already current).
-    counts: Mutex<[u64; 2]>,
-}
-
-impl InstanceLodGpu {
-    /// Whether a frame with the levels' inputs `key` (the frame's camera and LOD parameters)
-    /// needs the pass: false when the slot TLASes already hold that key's levels. When it
-    /// returns true the built state is marked unknown until [`Self::built`] confirms the
-    /// submission that rebuilds them completed.
-    /// `frames` frames of this camera follow; all but the first skip the pass.
-    pub(crate) fn needs_pass(&self, key: &[u8], frames: u32) -> bool {
-        let mut built = self.built_for.lock().unwrap_or_else(|e| e.into_inner());
-        let mut counts = self.counts.lock().unwrap_or_else(|e| e.into_inner());
-        let needed = built.as_deref() != Some(key);
-        if needed {
-            *built = None;
-            counts[0] += 1;
-        }
-        counts[1] += u64::from(frames) - u64::from(needed);
-        needed
-    }
-
-    /// The submission with the pass for `key` completed: the slot TLASes hold its levels.
-    pub(crate) fn built(&self, key: Vec<u8>) {
-        *self.built_for.lock().unwrap_or_else(|e| e.into_inner()) = Some(key);
-    }
-
-    /// Records the LOD pass for the frame whose parameters are at `frame_address`: pick
-    /// levels, write instances, rebuild the slots' TLASes. The caller orders it after the
-    /// previous frame's trace (a full barrier); a barrier follows each step.
-    pub(crate) fn record<'a>(
-        &'a self,
-        ctx: &Context,
-        rec: &mut CommandRecorder<'a>,
-        frame_address: u64,
-    ) -> Result<()> {
-        let push = Push {
-            frame: frame_address,
-            ..self.push
-        };
-        rec.dispatch(
-            &self.pipeline,
-            None,
-            bytemuck::bytes_of(&push),
-            [self.group_count, 1, 1],
-        )?;
-        rec.barrier();
-        let accel = ctx.accel_device()?;
-        let geometries: Vec<[vk::AccelerationStructureGeometryKHR<'_>; 1]> = self
-            .tlases
-            .iter()
-            .map(|t| {
-                let instances = vk::AccelerationStructureGeometryInstancesDataKHR::default()
-                    .array_of_pointers(false)
-                    .data(vk::DeviceOrHostAddressConstKHR {
-                        device_address: self.push.vk_instances + t.offset_bytes,
-                    });
-                [vk::AccelerationStructureGeometryKHR::default()
-                    .geometry_type(vk::GeometryTypeKHR::INSTANCES)
-                    .geometry(vk::AccelerationStructureGeometryDataKHR { instances })]
-            })
-            .collect();
-        let ranges: Vec<[vk::AccelerationStructureBuildRangeInfoKHR; 1]> = self
-            .tlases
-            .iter()
-            .map(|t| {
-                [vk::AccelerationStructureBuildRangeInfoKHR::default().primitive_count(t.count)]
-            })
-            .collect();
-        let infos: Vec<vk::AccelerationStructureBuildGeometryInfoKHR<'_>> = self
-            .tlases
-            .iter()
-            .zip(&geometries)
-            .map(|(t, g)| {
-                vk::AccelerationStructureBuildGeometryInfoKHR::default()
-                    .ty(vk::AccelerationStructureTypeKHR::TOP_LEVEL)
-                    .flags(vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE)
-                    .mode(vk::BuildAccelerationStructureModeKHR::BUILD)
-                    .dst_acceleration_structure(t.handle)
-                    .geometries(g)
-                    .scratch_data(vk::DeviceOrHostAddressKHR {
-                        device_address: self.scratch_address + t.scratch_offset_bytes,
-                    })
-            })
-            .collect();
-        let range_refs: Vec<&[vk::AccelerationStructureBuildRangeInfoKHR]> =
-            ranges.iter().map(|r| r.as_slice()).collect();
-        let (_, cmd) = rec.raw();
-        // SAFETY: recording state; the destinations (the scene's TLASes), the instance buffer
-        // and the disjoint, aligned scratch slices live as long as the scene, which outlives
-        // every submission recording this pass (callers wait on it).
-        unsafe { accel.cmd_build_acceleration_structures(cmd, &infos, &range_refs) };
-        rec.barrier();
-        Ok(())
-    }
-}
 
 fn buffer(
     heap: &mut GpuHeap,
@@ -213,7 +78,7 @@ impl GpuScene {
                     label: "instance LOD",
                     spirv: shaders::LOD_INSTANCES_COMP,
                     storage_buffer_count: 0,
-                    push_constant_size_bytes: std::mem::size_of::<Push>() as u32,
+                    push_constant_size_bytes: std::mem::size_of::<LodPush>() as u32,
                     specialization: &[],
                 },
             )?;
@@ -335,8 +200,23 @@ impl GpuScene {
             })();
             heap.free(up.staging);
             let [blas_addresses, slots, vk_instances] = uploaded?;
-            let push = Push {
-                frame: 0,
+            let levels = heap.alloc_buffer(
+                "lod-levels",
+                (lod.slots.len() as u64 * 4).max(16),
+                BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
+                AllocKind::NodeTable,
+                MemoryClass::HostVisible,
+                16,
+            )?;
+            let levels_address = match levels.device_address() {
+                Ok(a) => a.0,
+                Err(e) => {
+                    heap.free(levels);
+                    return Err(e);
+                }
+            };
+            let push = LodPush {
+                levels: levels_address,
                 tlases: self.addresses[Slot::Tlases as usize],
                 instances: self.addresses[Slot::Instances as usize],
                 selectors: self.addresses[Slot::Selectors as usize],
@@ -356,6 +236,13 @@ impl GpuScene {
                 tlases,
                 group_count: (lod.slots.len() as u32).div_ceil(64),
                 slot_count: lod.slots.len() as u32,
+                slots: lod.slots.clone(),
+                level_counts: lod
+                    .slots
+                    .iter()
+                    .map(|s| base.lod_selectors[s.selector as usize].level_count)
+                    .collect(),
+                levels,
                 built_for: Mutex::new(None),
                 counts: Mutex::new([0; 2]),
             })

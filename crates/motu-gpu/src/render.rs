@@ -250,20 +250,33 @@ pub(crate) struct FrameParams {
 }
 
 impl FrameParams {
-    /// What instance-level LOD's levels depend on: the camera and the LOD parameters (bytes).
-    pub(crate) fn levels_key(&self) -> Vec<u8> {
-        let mut key = bytemuck::bytes_of(&self.camera).to_vec();
-        key.extend_from_slice(bytemuck::bytes_of(&self.lod));
-        key
+    /// What instance-level LOD's levels depend on: the camera and the LOD parameters.
+    pub(crate) fn camera_and_lod(&self) -> (&CameraParams, &LodParams) {
+        (&self.camera, &self.lod)
     }
 }
 
-/// Stats words of every renderer's buffers (full builds, streaming, the viewer): the last,
-/// `STAT_TRUNCATED_RAYS` of `common.glsl`, counts rays cut short by a stack overflow or the
-/// trace cap.
-pub(crate) const STAT_WORDS: usize = 5;
+/// Stats words of every renderer's buffers (full builds, streaming, the viewer), indexed by
+/// the `STAT_*` of `common.glsl`.
+pub(crate) const STAT_WORDS: usize = 6;
 const RENDER_STAT_WORDS: usize = STAT_WORDS;
+/// Rays cut short by a stack overflow or the trace cap.
 pub(crate) const STAT_TRUNCATED_RAYS: usize = 4;
+/// Texture reads that found a streamed texture not resident.
+pub(crate) const STAT_MISSING_TEXTURES: usize = 5;
+
+/// Fails a frame whose shading read a texture that was not resident: the pixel would show the
+/// material's constant colour, a wrong image. A resident mesh holds its textures, so this is a
+/// broken residency invariant, never a budget matter.
+pub(crate) fn check_texture_residency(counters: &[u32]) -> Result<()> {
+    match counters.get(STAT_MISSING_TEXTURES).copied().unwrap_or(0) {
+        0 => Ok(()),
+        n => Err(crate::error::GpuError::InvalidRequest(format!(
+            "{n} texture reads found their texture not resident (a streaming residency bug): \
+             the frame would show constant material colours, so it is refused"
+        ))),
+    }
+}
 
 /// The largest traversal stack: entries are 64 bytes of private memory per ray, and beyond a
 /// few hundred shader compilers spill, stall or fail (2^16 hangs lavapipe's compiler).
@@ -601,17 +614,18 @@ pub(crate) fn run_frames(
     })?;
     rec.reset_queries(&timestamps);
     // Instance-level LOD: every frame of this call has the same camera, so the levels are
-    // picked (and the slot TLASes rebuilt) in the first frame at most, and not at all when
-    // they already are this camera's (lod_instances.rs).
-    let lod_key = match &scene.instance_lod {
-        Some(_) => {
+    // picked on the host and applied (the slot TLASes rebuilt) in the first frame at most,
+    // and not at all when the slot TLASes already hold exactly those levels (lod_instances.rs).
+    let lod_levels = match &scene.instance_lod {
+        Some(lod) => {
             let params: Vec<FrameParams> = frame.params.read_vec(0, 1)?;
-            Some(params[0].levels_key())
+            let (camera, lod_params) = params[0].camera_and_lod();
+            Some(lod.levels(camera, lod_params))
         }
         None => None,
     };
-    let mut lod_pass = match (&scene.instance_lod, &lod_key) {
-        (Some(lod), Some(key)) => lod.needs_pass(key, frames),
+    let mut lod_pass = match (&scene.instance_lod, &lod_levels) {
+        (Some(lod), Some(levels)) => lod.needs_pass(levels, frames),
         _ => false,
     };
     for f in 0..frames {
@@ -619,8 +633,8 @@ pub(crate) fn run_frames(
         rec.barrier();
         rec.write_timestamp(&timestamps, 2 * f)?;
         // Counted in the frame's time.
-        if let (true, Some(lod)) = (lod_pass, &scene.instance_lod) {
-            lod.record(ctx, &mut rec, addresses[Slot::Frame as usize])?;
+        if let (true, Some(lod), Some(levels)) = (lod_pass, &scene.instance_lod, &lod_levels) {
+            lod.record(ctx, &mut rec, levels)?;
             lod_pass = false;
         }
         tracer.record(&mut rec, push_bytes, [w, h], None)?;
@@ -639,12 +653,13 @@ pub(crate) fn run_frames(
         (RENDER_STAT_WORDS * 4) as u64,
     )?;
     rec.submit_and_wait()?;
-    if let (Some(lod), Some(key)) = (&scene.instance_lod, lod_key) {
-        lod.built(key);
+    if let (Some(lod), Some(levels)) = (&scene.instance_lod, lod_levels) {
+        lod.built(levels);
     }
     let records: Vec<AovRecord> = frame.readback.read_vec(0, pixels as usize)?;
     let rgba: Vec<u32> = frame.readback.read_vec(rgba_off, pixels as usize)?;
     let counters: Vec<u32> = frame.readback.read_vec(stats_off, RENDER_STAT_WORDS)?;
+    check_texture_residency(&counters)?;
     let ticks = timestamps.read_ticks()?;
     let frame_ns = (0..frames)
         .map(|f| timestamps.elapsed_ns(&ticks, 2 * f, 2 * f + 1))
@@ -690,5 +705,44 @@ pub fn heat_colour(v: f32) -> [f32; 3] {
         2 => [f, 1.0, 0.0],
         3 => [1.0, 1.0 - f, 0.0],
         _ => [1.0, 0.0, 0.0],
+    }
+}
+
+#[cfg(test)]
+mod stat_word_tests {
+    use super::*;
+
+    /// The stats-word indices are written twice (Rust here, `#define STAT_*` in common.glsl):
+    /// this keeps them equal, and every GLSL index inside the buffer.
+    #[test]
+    fn stat_words_match_common_glsl() {
+        let glsl = include_str!("../../../shaders/common.glsl");
+        let defines: Vec<(&str, usize)> = glsl
+            .lines()
+            .filter_map(|l| {
+                let mut it = l.strip_prefix("#define STAT_")?.split_whitespace();
+                Some((it.next()?, it.next()?.parse().ok()?))
+            })
+            .collect();
+        let index = |name: &str| {
+            defines
+                .iter()
+                .find(|(n, _)| *n == name)
+                .unwrap_or_else(|| panic!("common.glsl has no STAT_{name}"))
+                .1
+        };
+        assert_eq!(index("TRUNCATED_RAYS"), STAT_TRUNCATED_RAYS);
+        assert_eq!(index("MISSING_TEXTURES"), STAT_MISSING_TEXTURES);
+        assert_eq!(defines.len(), STAT_WORDS, "{defines:?}");
+        assert!(defines.iter().all(|&(_, i)| i < STAT_WORDS), "{defines:?}");
+    }
+
+    #[test]
+    fn a_missing_texture_read_fails_the_frame() {
+        let mut counters = vec![0u32; STAT_WORDS];
+        assert!(check_texture_residency(&counters).is_ok());
+        counters[STAT_MISSING_TEXTURES] = 3;
+        let e = check_texture_residency(&counters).unwrap_err().to_string();
+        assert!(e.contains("3 texture reads"), "{e}");
     }
 }

@@ -36,12 +36,15 @@ use crate::memory::BufferUsage;
 
 mod batch;
 mod budget;
+mod lod_pass;
+pub(crate) mod shading;
 mod structures;
 mod tables;
 mod upload;
 
 pub(crate) use batch::{build_batched, build_pipelined, BatchStager};
 pub(crate) use budget::usable_budget_bytes;
+pub(crate) use lod_pass::{InstanceLodGpu, LodTlas, Push as LodPush};
 pub(crate) use structures::{AccelStruct, SizeQueries, Slot, SLOT_COUNT};
 pub(crate) use tables::{blas_geometry, encode_instance, pi_aabbs, reachable};
 pub(crate) use upload::{streamed_attribute_bytes, MeshGpu, MeshStager, Uploader};
@@ -166,7 +169,7 @@ pub struct GpuScene {
     meshes: Vec<Option<MeshGpu>>,
     pub(crate) tables: Vec<HeapBuffer>,
     /// Instance-level LOD's per-frame pass (`lod_instances.rs`), when enabled.
-    pub(crate) instance_lod: Option<crate::lod_instances::InstanceLodGpu>,
+    pub(crate) instance_lod: Option<InstanceLodGpu>,
     pub(crate) addresses: [u64; SLOT_COUNT],
     pub(crate) root_tlas: u32,
     /// `FrameParams::shading`: the shading tables' header (`shading.rs`).

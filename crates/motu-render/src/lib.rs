@@ -1,24 +1,38 @@
-//! Render set-up shared by `motu render`, `motu view` and `motu bench`: a package's meshes for
-//! the tracers, the camera (by name, the scene's, or a view of the bounds) and recorded camera
-//! paths, the LOD mode (instance or traversal, and why) and the CPU reference with instance LOD, the scene's shading (lights, sky, the AO distance), and the streaming bounds. The CLI
-//! maps its flags onto these types and prints; no Vulkan here (that is `motu-gpu`).
+//! Rendering a package, shared by `motu render`, `motu view` and `motu bench`: a package's
+//! meshes for the tracers, the camera (by name, the scene's, or a view of the bounds) and
+//! recorded camera paths, the LOD mode (instance or traversal, and why) and the CPU reference
+//! with instance LOD, the scene's shading (lights, sky, the AO distance), the backend, and
+//! [`render`]: one `motu render` (CPU, full GPU build, recorded path or the streaming frame
+//! loop) with its `--stats` object. The CLI maps its flags onto these types and prints; no
+//! Vulkan here (that is `motu-gpu`).
 
+mod backend;
 mod camera;
 mod cpu;
+mod gpu;
 mod lod;
 mod meshes;
+mod session;
+mod settings;
 mod shading;
 mod stream;
 
+pub use backend::{best_backend, Backend};
 pub use camera::{
     camera_params, camera_pose, load_camera_path, recorded_path_cameras, sweep_around_root,
 };
 pub use cpu::render_cpu_instance_lod;
+pub use gpu::build_scene;
 pub use lod::{choose_lod_mode, LodChoice, LodMode};
-pub use meshes::PackageMeshes;
+pub use meshes::{PackageGeometry, PackageMeshes};
+pub use session::{render, RenderJob, Rendered};
+pub use settings::{
+    CameraRequest, DeviceRequest, RenderEvent, RenderSettings, StreamSettings, TraversalLimits,
+};
 pub use shading::{scene_shading, ShadingOptions, AO_DISTANCE_OF_DIAGONAL};
 pub use stream::StreamBounds;
 
+use motu_alloc::format_size;
 use std::path::PathBuf;
 
 /// What went wrong setting up a render.
@@ -51,4 +65,94 @@ pub enum RenderError {
         #[source]
         source: motu_abi::camera::PathError,
     },
+    #[error("opening a Vulkan device for ray tracing (`motu devices` lists them; `--backend cpu` needs none)")]
+    Device(#[source] motu_gpu::GpuError),
+    #[error(
+        "--vram-budget {} is more than {device} has ({} of device-local memory): give at most {}, or omit it to use what is free",
+        format_size(*budget_bytes),
+        format_size(*device_bytes),
+        format_size(*device_bytes)
+    )]
+    BudgetAboveDevice {
+        budget_bytes: u64,
+        device: String,
+        device_bytes: u64,
+    },
+    #[error("building acceleration structures")]
+    Build(#[source] motu_gpu::GpuError),
+    #[error("setting up instance-level LOD")]
+    InstanceLodSetup(#[source] motu_gpu::GpuError),
+    #[error("rendering on the GPU")]
+    Gpu(#[source] motu_gpu::GpuError),
+    #[error("rendering camera-path frame {frame}")]
+    PathFrame {
+        frame: usize,
+        #[source]
+        source: motu_gpu::GpuError,
+    },
+    #[error("empty camera path")]
+    EmptyCameraPath,
+    #[error("Vulkan validation reported errors")]
+    Validation(#[source] motu_gpu::GpuError),
+    #[error("computing the streaming floor")]
+    Floor(#[source] motu_gpu::GpuError),
+    /// `--vram-budget` below the streaming floor, with the floor's parts.
+    #[error(
+        "--vram-budget {} is below the streaming floor of {} ({} bytes) for {width}×{height}: \
+         the resident skeleton ({} of tables, {} of TLASes, proxies and PI BLASes), the \
+         largest BLAS build ({}), TLAS rebuilds ({}), frame buffers ({}), shading \
+         tables and attributes ({}), staging and allocator slack; raise --vram-budget to at least the floor (`motu report` \
+         prints it as streaming.min_resident_bytes)",
+        format_size(*budget_bytes),
+        format_size(floor.min_resident_bytes),
+        floor.min_resident_bytes,
+        format_size(floor.tables_bytes),
+        format_size(floor.skeleton_structures_bytes),
+        format_size(floor.largest_blas_build_bytes),
+        format_size(floor.tlas_rebuild_bytes),
+        format_size(floor.frame_bytes),
+        format_size(
+            floor.shading_tables_bytes
+                + floor.shading_attributes_bytes
+                + floor.shading_textures_bytes
+        )
+    )]
+    BelowFloor {
+        budget_bytes: u64,
+        width: u32,
+        height: u32,
+        floor: Box<motu_gpu::StreamFloor>,
+    },
+    #[error("setting up streaming (the resident skeleton must fit the budget; the floor is {floor_bytes} bytes)")]
+    StreamSetup {
+        floor_bytes: u64,
+        #[source]
+        source: motu_gpu::GpuError,
+    },
+    #[error("streaming frame {frame}")]
+    StreamFrame {
+        frame: u32,
+        #[source]
+        source: motu_gpu::GpuError,
+    },
+    /// A streamed frame with unfinished pixels and no `allow_incomplete`.
+    #[error(
+        "frame {frame}: {pixels} pixels unfinished after {passes} passes ({cause}): the image would be \
+         wrong; nothing written (--allow-incomplete writes it with those pixels \
+         magenta; --stream-fallback coarse shows what is missing by its bounds, \
+         counted)"
+    )]
+    IncompleteFrame {
+        frame: u32,
+        pixels: u64,
+        passes: u32,
+        cause: String,
+    },
+    /// Rays cut short and no `allow_truncated`.
+    #[error("{what}; nothing was written. Raise --stack-size/--max-traces-per-ray, or pass --allow-truncated to write the image anyway")]
+    Truncated { what: String },
+    #[error(transparent)]
+    Trace(#[from] motu_trace::TraceError),
+    #[error(transparent)]
+    Stats(#[from] serde_json::Error),
 }

@@ -1,6 +1,7 @@
 //! A package's meshes, straight from its chunks, for the CPU tracer and the GPU builds.
 
 use motu_pack::ScenePackage;
+use std::borrow::Cow;
 
 /// Mesh data for the tracers, straight from the package's chunks.
 pub struct PackageMeshes<'a>(pub &'a ScenePackage);
@@ -21,28 +22,44 @@ impl motu_trace::MeshSource for PackageMeshes<'_> {
     }
 }
 
-impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
-    fn mesh_data(
-        &self,
-        mesh_record: u32,
-    ) -> Result<
-        (
-            std::borrow::Cow<'_, [[f32; 3]]>,
-            std::borrow::Cow<'_, [u32]>,
-        ),
-        String,
-    > {
-        self.0.mesh_slices(mesh_record).map_err(|e| e.to_string())
+/// A package's positions, indices and primitive maps only, for GPU builds that need no shading
+/// attributes (`motu report`'s compaction measurement): its shading tables stay empty.
+pub struct PackageGeometry<'a>(pub &'a ScenePackage);
+
+impl motu_gpu::MeshBlobSource for PackageGeometry<'_> {
+    fn mesh_data(&self, mesh_record: u32) -> Result<Geometry<'_>, String> {
+        mesh_data(self.0, mesh_record)
     }
 
-    fn primitive_map(
-        &self,
-        mesh_record: u32,
-    ) -> Result<Option<std::borrow::Cow<'_, [u32]>>, String> {
-        self.0
-            .primitive_map_slice(mesh_record)
-            .map_err(|e| e.to_string())
+    fn primitive_map(&self, mesh_record: u32) -> Result<Option<Cow<'_, [u32]>>, String> {
+        primitive_map(self.0, mesh_record)
     }
+}
+
+/// A mesh's positions and indices.
+type Geometry<'a> = (Cow<'a, [[f32; 3]]>, Cow<'a, [u32]>);
+
+/// Positions and indices of a mesh record, borrowed from the package's chunks.
+fn mesh_data(pkg: &ScenePackage, mesh_record: u32) -> Result<Geometry<'_>, String> {
+    pkg.mesh_slices(mesh_record).map_err(|e| e.to_string())
+}
+
+/// A cluster's primitive map (source triangle ids), where the record has one.
+fn primitive_map(pkg: &ScenePackage, mesh_record: u32) -> Result<Option<Cow<'_, [u32]>>, String> {
+    pkg.primitive_map_slice(mesh_record)
+        .map_err(|e| e.to_string())
+}
+
+/// The package's geometry ([`PackageGeometry`]) and its normals and texture coordinates.
+impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
+    fn mesh_data(&self, mesh_record: u32) -> Result<Geometry<'_>, String> {
+        mesh_data(self.0, mesh_record)
+    }
+
+    fn primitive_map(&self, mesh_record: u32) -> Result<Option<Cow<'_, [u32]>>, String> {
+        primitive_map(self.0, mesh_record)
+    }
+
     fn mesh_shading(
         &self,
         mesh_record: u32,

@@ -1,5 +1,14 @@
-//! The per-frame bounds of the streaming renderer (`--stream-fallback`, `--stream-build-budget`,
-//! `--stream-build-ms`).
+//! `--stream`: the streaming frame loop (build only what rays touch, evict under the budget,
+//! frame by frame along a camera path) and its per-frame bounds (`--stream-fallback`,
+//! `--stream-build-budget`, `--stream-build-ms`).
+
+use crate::gpu::{gpu_context, gpu_render_options, Rendered};
+use crate::settings::{RenderEvent, RenderSettings, StreamSettings};
+use crate::{camera_pose, scene_shading, Backend, PackageMeshes, RenderError};
+use motu_abi::camera::{camera_path, CameraParams};
+use motu_abi::HierarchyView;
+use motu_pack::ScenePackage;
+use serde_json::{json, Value};
 
 /// What one streaming frame may build, and what it shows for what it did not build.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -28,4 +37,128 @@ impl StreamBounds {
             || self.frame_build_bytes.is_some()
             || self.frame_build_ms.is_some()
     }
+}
+
+/// `--stream`: builds only what rays touch, evicting under the budget, frame by frame along a
+/// camera path (`frames`; one frame renders the camera itself). Each frame is reported to
+/// `progress` before its completeness is checked.
+pub(crate) fn render_streaming(
+    s: &RenderSettings,
+    stream: &StreamSettings,
+    pkg: &ScenePackage,
+    view: &HierarchyView<'_>,
+    backend: Backend,
+    recorded: Option<&[CameraParams]>,
+    progress: &mut dyn FnMut(RenderEvent<'_>),
+) -> Result<Rendered, RenderError> {
+    let ctx = gpu_context(s, backend)?;
+    let (pose, w, h) = camera_pose(
+        pkg,
+        view,
+        s.camera.name.as_deref(),
+        s.camera.width,
+        s.camera.height,
+    )?;
+    let path = crate::sweep_around_root(view, &pose);
+    let meshes = PackageMeshes(pkg);
+    let opts = motu_gpu::StreamOptions {
+        budget_bytes: s.device.vram_budget_bytes.unwrap_or(u64::MAX),
+        max_allocations: s
+            .device
+            .max_allocations
+            .unwrap_or(motu_gpu::StreamOptions::default().max_allocations),
+        max_passes: stream.max_passes.unwrap_or(0),
+        ..stream.bounds.options()
+    };
+    // A recorded path renders at its cameras' size, not the package camera's.
+    let (w, h) = match recorded {
+        Some(r) if !r.is_empty() => r
+            .iter()
+            .fold((0, 0), |(w, h), c| (w.max(c.width), h.max(c.height))),
+        _ => (w, h),
+    };
+    // Refused up front below the floor: under it some frame could not complete.
+    let floor = motu_gpu::streaming_floor(view, &ctx, w, h, opts.staging_bytes)
+        .map_err(RenderError::Floor)?;
+    if let Some(budget) = s.device.vram_budget_bytes {
+        if budget < floor.min_resident_bytes {
+            return Err(RenderError::BelowFloor {
+                budget_bytes: budget,
+                width: w,
+                height: h,
+                floor: Box::new(floor),
+            });
+        }
+    }
+    let mut sr =
+        motu_gpu::StreamingRenderer::new(&ctx, *view, &meshes, &opts).map_err(|source| {
+            RenderError::StreamSetup {
+                floor_bytes: floor.min_resident_bytes,
+                source,
+            }
+        })?;
+    let ropts = gpu_render_options(s, s.lod, backend, 1, scene_shading(s.shading, pkg, view));
+    if s.shading.spp > 1 {
+        progress(RenderEvent::StreamSppIgnored { spp: s.shading.spp });
+    }
+    let mut frames = Vec::new();
+    let mut last = None;
+    let frame_count = recorded.map_or(s.frames, |r| r.len() as u32);
+    for f in 0..frame_count {
+        let cam = match recorded {
+            Some(r) => r[f as usize],
+            None => camera_path(&pose, &path, f, s.frames).params(w, h),
+        };
+        let (out, st) = sr
+            .render_frame(&cam, &ropts)
+            .map_err(|source| RenderError::StreamFrame { frame: f, source })?;
+        progress(RenderEvent::StreamFrame {
+            index: f,
+            stats: &st,
+        });
+        // A wrong image never exits 0 silently (fallback pixels are opt-in and counted).
+        if !st.complete && st.fallback_pixels == 0 && !stream.allow_incomplete {
+            let cause = if st.build_budget_spent {
+                "its build budget (--stream-build-budget/--stream-build-ms) spent".to_string()
+            } else {
+                format!("the pass cap, {}", sr.max_passes())
+            };
+            return Err(RenderError::IncompleteFrame {
+                frame: f,
+                pixels: st.incomplete_pixels,
+                passes: st.passes,
+                cause,
+            });
+        }
+        frames.push(serde_json::to_value(&st)?);
+        last = Some(out);
+    }
+    let out = last.ok_or(RenderError::NoFrame)?;
+    let mut stats = serde_json::to_value(&out.stats)?;
+    // The last frame is the image written: its cut rays decide (render's common check).
+    stats["truncated_rays"] = frames
+        .last()
+        .and_then(|f| f["truncated_rays"].as_u64())
+        .map_or(json!(0), |n| json!(n));
+    // The written frame's fallback pixels (not exact; 0 unless --stream-fallback).
+    stats["fallback_pixels"] = frames
+        .last()
+        .and_then(|f| f["fallback_pixels"].as_u64())
+        .map_or(json!(0), |n| json!(n));
+    let totals = sr.totals();
+    let after_first: Vec<f64> = frames
+        .iter()
+        .skip(1)
+        .filter_map(|f| f["passes"].as_f64())
+        .collect();
+    stats["stream"] = json!({
+        "frames": frames,
+        "totals": totals,
+        "floor": floor,
+        "max_passes": sr.max_passes(),
+        "mean_passes_after_first": if after_first.is_empty() { Value::Null } else { json!(after_first.iter().sum::<f64>() / after_first.len() as f64) },
+    });
+    drop(sr);
+    ctx.check_validation().map_err(RenderError::Validation)?;
+    Ok((out.aov, out.rgba8, stats))
 }

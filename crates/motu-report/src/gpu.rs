@@ -5,6 +5,7 @@ use std::cell::RefCell;
 use std::collections::HashMap;
 
 use motu_gpu::{AsBuildFlags, BlasGeometry, Context, ContextOptions, Requirement};
+use motu_render::PackageGeometry;
 use serde::Serialize;
 
 use crate::presets::{LAVAPIPE, NVIDIA_H200};
@@ -66,36 +67,12 @@ impl GpuSizes {
         &mut self,
         pkg: &motu_pack::ScenePackage,
     ) -> Result<f64, ReportError> {
-        struct Blobs<'a>(&'a motu_pack::ScenePackage);
-        impl motu_gpu::MeshBlobSource for Blobs<'_> {
-            fn mesh_data(
-                &self,
-                mesh_record: u32,
-            ) -> Result<
-                (
-                    std::borrow::Cow<'_, [[f32; 3]]>,
-                    std::borrow::Cow<'_, [u32]>,
-                ),
-                String,
-            > {
-                self.0.mesh_slices(mesh_record).map_err(|e| e.to_string())
-            }
-
-            fn primitive_map(
-                &self,
-                mesh_record: u32,
-            ) -> Result<Option<std::borrow::Cow<'_, [u32]>>, String> {
-                self.0
-                    .primitive_map_slice(mesh_record)
-                    .map_err(|e| e.to_string())
-            }
-        }
         let view = pkg.view()?;
         let opts = motu_gpu::BuildOptions {
             compact: true,
             ..Default::default()
         };
-        let scene = motu_gpu::GpuScene::build(&self.ctx, &view, &Blobs(pkg), &opts)?;
+        let scene = motu_gpu::GpuScene::build(&self.ctx, &view, &PackageGeometry(pkg), &opts)?;
         let r = scene.report();
         let ratio = if r.blas_bytes > 0 {
             r.blas_compacted_bytes as f64 / r.blas_bytes as f64

@@ -12,13 +12,8 @@ pub fn human_bytes(bytes: u64) -> String {
     }
 }
 
-/// `1536` → `1.5 KiB`: one decimal at every unit (the command line's progress and summaries).
-pub fn format_size(bytes: u64) -> String {
-    match binary_scale(bytes) {
-        (_, "B") => format!("{bytes} B"),
-        (v, unit) => format!("{v:.1} {unit}"),
-    }
-}
+/// `1536` → `1.5 KiB` (lives beside the unit loop so crates below this one print alike).
+pub use motu_alloc::format_size;
 
 /// `1.2M`, `15.3G`, `999`.
 pub fn human_count(n: u64) -> String {

@@ -2,19 +2,11 @@
 //! [`motu_bench::run_flight`]; the hidden `--child-render` mode opens the package and picks the camera here
 //! (the render command's glue) and times the frames in the library.
 
-use crate::cli::{BackendArg, BenchArgs};
+use crate::cli::BenchArgs;
 use crate::pipeline;
 use anyhow::Context;
 use motu_bench::{Backend, ChildRender, FlightOptions, SuiteOptions};
 use std::time::Instant;
-
-fn backend(b: BackendArg) -> Backend {
-    match b {
-        BackendArg::Pipeline => Backend::Pipeline,
-        BackendArg::Query => Backend::Query,
-        BackendArg::Cpu => Backend::Cpu,
-    }
-}
 
 pub fn run(a: BenchArgs) -> anyhow::Result<()> {
     if let Some(pkg) = &a.child_render {
@@ -28,7 +20,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
             height: a.height,
             frames: a.frames,
             warmup: a.warmup,
-            backend: a.backend.map(backend),
+            backend: a.backend.map(Backend::from),
             stream: a.stream,
             vram_budget: a.vram_budget,
             stream_bounds: super::render::stream_bounds(&a.stream_bounds),
@@ -51,7 +43,7 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
         warmup: a.warmup,
         width: a.width,
         height: a.height,
-        backend: a.backend.map(backend),
+        backend: a.backend.map(Backend::from),
         island_scale: a.island_scale,
         scenes: a.scenes.clone(),
         configs: a.configs.clone(),
@@ -87,7 +79,7 @@ fn child_render(a: &BenchArgs, package: &std::path::Path) -> anyhow::Result<()> 
     let camera = super::render::camera_params(&pkg, &view, None, a.width, a.height)?;
     let meshes = super::render::PackageMeshes(&pkg);
     let opts = ChildRender {
-        backend: a.backend.map(backend),
+        backend: a.backend.map(Backend::from),
         frames: a.frames,
         warmup: a.warmup,
         stats_path,

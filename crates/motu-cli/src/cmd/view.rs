@@ -79,27 +79,16 @@ impl<'p> PackageSource<'p> {
         self.lod_mode = lod_choice.mode;
         match &mut self.renderer {
             Renderer::Full(r) => {
-                let build = motu_gpu::BuildOptions {
-                    budget_bytes: budget,
-                    max_allocations: a
-                        .max_allocations
-                        .unwrap_or(motu_gpu::BuildOptions::default().max_allocations),
-                    staging_bytes: (budget / 8).clamp(4 << 20, 64 << 20),
-                    ..Default::default()
-                };
                 // Instance-level LOD: the rewritten hierarchy is built and a per-frame pass picks
                 // each LOD instance's level (as `motu render` does).
-                let built = match &lod_choice.instance {
-                    Some(il) => il.view(&view),
-                    None => view,
-                };
-                let mut scene = motu_gpu::GpuScene::build(&self.ctx, &built, self.meshes, &build)
-                    .context("building acceleration structures")?;
-                if let Some(il) = &lod_choice.instance {
-                    scene
-                        .enable_instance_lod(&view, il)
-                        .context("setting up instance-level LOD")?;
-                }
+                let scene = motu_render::build_scene(
+                    &self.ctx,
+                    &view,
+                    self.meshes,
+                    a.vram_budget,
+                    a.max_allocations,
+                    lod_choice.instance.as_ref(),
+                )?;
                 *r = Some(Box::new(motu_gpu::LiveRenderer::new(scene)));
             }
             Renderer::Stream(r) => {

@@ -142,6 +142,7 @@ impl<'a> StreamingRenderer<'a> {
 
         let (aov, rgba8, heatmap_max) =
             crate::render::frame_outputs(w, h, records, &rgba_words, opts.view);
+        crate::render::check_texture_residency(&counters)?;
         self.frame_stats.truncated_rays = u64::from(counters[crate::render::STAT_TRUNCATED_RAYS]);
         let stats = RenderStats::measured(
             opts,

@@ -1,0 +1,218 @@
+//! Full GPU builds and renders: the device under `--vram-budget`, the package's structures
+//! built on it, one frame (timed over `frames`) or one per recorded camera.
+
+use crate::settings::RenderSettings;
+use crate::{scene_shading, Backend, PackageMeshes, RenderError};
+use motu_abi::aov::Aov;
+use motu_abi::camera::CameraParams;
+use motu_abi::lod::LodParams;
+use motu_abi::lod_instance::InstanceLod;
+use motu_abi::HierarchyView;
+use motu_pack::ScenePackage;
+use serde_json::{json, Value};
+
+/// An image and its `--stats` object (the backend's stats and the render path's keys).
+pub(crate) type Rendered = (Aov, Vec<u8>, Value);
+
+pub(crate) fn gpu_context(
+    s: &RenderSettings,
+    backend: Backend,
+) -> Result<motu_gpu::Context, RenderError> {
+    use motu_gpu::{ContextOptions, LimitOverrides, Requirement};
+    let ctx = motu_gpu::Context::new(&ContextOptions {
+        device_index: s.device.index,
+        limit_overrides: LimitOverrides {
+            max_memory_allocation_count: s.device.max_allocations,
+            ..Default::default()
+        },
+        require: match backend {
+            Backend::Query => Requirement::RayQuery,
+            _ => Requirement::RayPipeline,
+        },
+        ..Default::default()
+    })
+    .map_err(RenderError::Device)?;
+    check_vram_budget(s.device.vram_budget_bytes, &ctx)?;
+    Ok(ctx)
+}
+
+/// `--vram-budget` above what the device has is a mistake (a unit typo), not a wish to clamp.
+fn check_vram_budget(budget: Option<u64>, ctx: &motu_gpu::Context) -> Result<(), RenderError> {
+    let Some(b) = budget else { return Ok(()) };
+    let device_bytes = ctx
+        .heaps()
+        .iter()
+        .filter(|h| h.device_local)
+        .map(|h| h.size_bytes)
+        .max()
+        .unwrap_or(0);
+    if device_bytes > 0 && b > device_bytes {
+        return Err(RenderError::BudgetAboveDevice {
+            budget_bytes: b,
+            device: ctx.device_name().to_string(),
+            device_bytes,
+        });
+    }
+    Ok(())
+}
+
+pub(crate) fn gpu_render_options(
+    s: &RenderSettings,
+    lod: LodParams,
+    backend: Backend,
+    frames: u32,
+    shading: motu_abi::shade::Shading,
+) -> motu_gpu::RenderOptions {
+    motu_gpu::RenderOptions {
+        backend: match backend {
+            Backend::Query => motu_gpu::Backend::Query,
+            _ => motu_gpu::Backend::Pipeline,
+        },
+        view: s.view,
+        lod,
+        stack_size: s.limits.stack_size,
+        max_traces_per_ray: s.limits.max_traces_per_ray,
+        frames,
+        shading,
+        ..Default::default()
+    }
+}
+
+/// The device and the package's structures built on it (a full build: `render` and
+/// `render --camera-path`).
+fn build_gpu_scene(
+    s: &RenderSettings,
+    pkg: &ScenePackage,
+    view: &HierarchyView<'_>,
+    backend: Backend,
+    instance_lod: Option<&InstanceLod>,
+) -> Result<(motu_gpu::Context, motu_gpu::GpuScene), RenderError> {
+    let ctx = gpu_context(s, backend)?;
+    let meshes = PackageMeshes(pkg);
+    let scene = build_scene(
+        &ctx,
+        view,
+        &meshes,
+        s.device.vram_budget_bytes,
+        s.device.max_allocations,
+        instance_lod,
+    )?;
+    Ok((ctx, scene))
+}
+
+/// `view`'s structures built on `ctx` under `--vram-budget` and `--max-allocations` (a full
+/// build: `motu render` and `motu view`); with instance-level LOD the rewritten hierarchy is
+/// built and a per-frame pass picks each LOD instance's level.
+pub fn build_scene(
+    ctx: &motu_gpu::Context,
+    view: &HierarchyView<'_>,
+    meshes: &dyn motu_gpu::MeshBlobSource,
+    vram_budget_bytes: Option<u64>,
+    max_allocations: Option<u32>,
+    instance_lod: Option<&InstanceLod>,
+) -> Result<motu_gpu::GpuScene, RenderError> {
+    let budget = vram_budget_bytes.unwrap_or(u64::MAX);
+    let build = motu_gpu::BuildOptions {
+        budget_bytes: budget,
+        max_allocations: max_allocations
+            .unwrap_or(motu_gpu::BuildOptions::default().max_allocations),
+        // Each half of the staging ring should hold a build batch's geometry so uploads overlap
+        // builds; host-visible memory counts against the budget on unified-memory devices.
+        staging_bytes: (budget / 8).clamp(4 << 20, 64 << 20),
+        ..Default::default()
+    };
+    let built = match instance_lod {
+        Some(il) => il.view(view),
+        None => *view,
+    };
+    let mut scene =
+        motu_gpu::GpuScene::build(ctx, &built, meshes, &build).map_err(RenderError::Build)?;
+    if let Some(il) = instance_lod {
+        scene
+            .enable_instance_lod(view, il)
+            .map_err(RenderError::InstanceLodSetup)?;
+    }
+    Ok(scene)
+}
+
+/// Builds the package's structures on the GPU under the budget and renders with a traversal
+/// shader backend.
+pub(crate) fn render_gpu(
+    s: &RenderSettings,
+    pkg: &ScenePackage,
+    view: &HierarchyView<'_>,
+    camera: &CameraParams,
+    lod: LodParams,
+    backend: Backend,
+    instance_lod: Option<&InstanceLod>,
+) -> Result<Rendered, RenderError> {
+    let (ctx, scene) = build_gpu_scene(s, pkg, view, backend, instance_lod)?;
+    let opts = gpu_render_options(
+        s,
+        lod,
+        backend,
+        s.frames,
+        scene_shading(s.shading, pkg, view),
+    );
+    let (out, counts) =
+        motu_gpu::render_counted(&ctx, &scene, camera, &opts).map_err(RenderError::Gpu)?;
+    let mut stats = serde_json::to_value(&out.stats)?;
+    stats["truncated_rays"] = json!(counts.truncated_rays);
+    stats["resources"] = serde_json::to_value(scene.report())?;
+    lod_pass_stats(&mut stats, scene.lod_instance_passes());
+    drop(scene);
+    ctx.check_validation().map_err(RenderError::Validation)?;
+    Ok((out.aov, out.rgba8, stats))
+}
+
+/// Instance-level LOD's per-frame pass: `lod_passes` frames ran it (levels picked, slot TLASes
+/// rebuilt), `lod_passes_skipped` frames did not (their camera was the one the levels were
+/// built for).
+fn lod_pass_stats(stats: &mut Value, [run, skipped]: [u64; 2]) {
+    stats["lod_passes"] = json!(run);
+    stats["lod_passes_skipped"] = json!(skipped);
+}
+
+/// A recorded camera path on a full GPU build: one frame per camera through the viewer's
+/// renderer (pipeline compiled once); the last frame is the output, every frame's time is in
+/// `path_ms_per_frame`.
+pub(crate) fn render_gpu_path(
+    s: &RenderSettings,
+    pkg: &ScenePackage,
+    view: &HierarchyView<'_>,
+    cams: &[CameraParams],
+    lod: LodParams,
+    backend: Backend,
+    instance_lod: Option<&InstanceLod>,
+) -> Result<Rendered, RenderError> {
+    let (ctx, scene) = build_gpu_scene(s, pkg, view, backend, instance_lod)?;
+    let opts = gpu_render_options(s, lod, backend, 1, scene_shading(s.shading, pkg, view));
+    let mut live = motu_gpu::LiveRenderer::new(scene);
+    let mut times = Vec::with_capacity(cams.len());
+    let mut last = None;
+    for (f, cam) in cams.iter().enumerate() {
+        let out = live
+            .render_frame(cam, &opts)
+            .map_err(|source| RenderError::PathFrame { frame: f, source })?;
+        times.push(out.stats.ms_per_frame);
+        last = Some(out);
+    }
+    let out = last.ok_or(RenderError::EmptyCameraPath)?;
+    let mut stats = serde_json::to_value(&out.stats)?;
+    // The first frame is a warm-up (pipeline first use): left out of the median.
+    let timed = if times.len() > 1 {
+        &times[1..]
+    } else {
+        &times[..]
+    };
+    let mut timed = timed.to_vec();
+    timed.sort_by(f64::total_cmp);
+    stats["ms_per_frame"] = json!(timed[timed.len() / 2]);
+    stats["frames"] = json!(cams.len());
+    stats["path_ms_per_frame"] = json!(times);
+    stats["resources"] = serde_json::to_value(live.scene().report())?;
+    lod_pass_stats(&mut stats, live.scene().lod_instance_passes());
+    drop(live);
+    ctx.check_validation().map_err(RenderError::Validation)?;
+    Ok((out.aov, out.rgba8, stats))
+}

@@ -1,0 +1,165 @@
+//! One `motu render`: the chosen backend's render path (CPU, full GPU build, recorded camera
+//! path, or streaming), then the `--stats` object every path shares (CLI.md's keys) and the
+//! truncation check.
+
+use crate::settings::{RenderEvent, RenderSettings};
+use crate::{Backend, LodChoice, RenderError};
+use motu_abi::aov::Aov;
+use motu_abi::camera::CameraParams;
+use motu_abi::HierarchyView;
+use motu_pack::ScenePackage;
+use serde_json::{json, Value};
+use std::path::Path;
+
+/// What to render: the package (and its path and `--subset`, for the stats), the view of it,
+/// the camera, an optional recorded path, and the LOD mode chosen for it.
+pub struct RenderJob<'a> {
+    pub package: &'a ScenePackage,
+    pub package_path: &'a Path,
+    pub subset: &'a [String],
+    pub view: &'a HierarchyView<'a>,
+    /// The camera rendered (the recorded path's last one where there is a path).
+    pub camera: CameraParams,
+    /// `--camera-path`: one frame per camera.
+    pub recorded: Option<&'a [CameraParams]>,
+    pub lod: &'a LodChoice,
+}
+
+/// A rendered image: the last frame's AOV and pixels, and the `--stats` object.
+#[derive(Debug)]
+pub struct Rendered {
+    pub aov: Aov,
+    pub rgba8: Vec<u8>,
+    /// The keys of CLI.md's `--stats` (the backend's stats, the render path's, the contract's).
+    pub stats: Value,
+}
+
+impl Rendered {
+    fn stat_f64(&self, key: &str) -> f64 {
+        self.stats[key].as_f64().unwrap_or(0.0)
+    }
+
+    /// Median milliseconds per frame.
+    pub fn ms_per_frame(&self) -> f64 {
+        self.stat_f64("ms_per_frame")
+    }
+
+    pub fn rays_per_second(&self) -> f64 {
+        self.stat_f64("rays_per_second")
+    }
+
+    pub fn traces_per_ray(&self) -> f64 {
+        self.stat_f64("traces_per_ray")
+    }
+}
+
+/// Renders `job` with `settings`, reporting streamed frames and allowed truncation to
+/// `progress`. A truncated traversal (or an unfinished streamed frame) is an error unless the
+/// settings allow it.
+pub fn render(
+    job: &RenderJob<'_>,
+    settings: &RenderSettings,
+    progress: &mut dyn FnMut(RenderEvent<'_>),
+) -> Result<Rendered, RenderError> {
+    let s = settings;
+    let (pkg, view, camera, recorded) = (job.package, job.view, job.camera, job.recorded);
+    let lod = s.lod;
+    let instance_lod = job.lod.instance.as_ref();
+    let (aov, rgba8, stats): (Aov, Vec<u8>, Value) = match (s.backend, &s.stream) {
+        (Backend::Cpu, _) => {
+            let cams = recorded
+                .map(<[CameraParams]>::to_vec)
+                .unwrap_or_else(|| vec![camera; s.frames as usize]);
+            crate::cpu::render_cpu(s, pkg, view, lod, instance_lod, &cams)?
+        }
+        (backend, Some(stream)) => {
+            crate::stream::render_streaming(s, stream, pkg, view, backend, recorded, progress)?
+        }
+        (backend, None) => match recorded {
+            Some(cams) => {
+                crate::gpu::render_gpu_path(s, pkg, view, cams, lod, backend, instance_lod)?
+            }
+            None => crate::gpu::render_gpu(s, pkg, view, &camera, lod, backend, instance_lod)?,
+        },
+    };
+    let mut stats = stats;
+    lod_stats(&mut stats, job.lod);
+    let stats = contract_stats(
+        stats,
+        json!({
+            "backend": s.backend.name(),
+            "view": s.view_name(),
+            "vram_budget_bytes": s.device.vram_budget_bytes.unwrap_or(0),
+            "vram_peak_bytes": 0,
+            "allocation_count": 0,
+            "as_bytes": 0,
+            "passes": 1,
+            "subset": job.subset,
+            "package": job.package_path.display().to_string(),
+        }),
+    );
+    // A truncated traversal is a wrong image: an error unless explicitly allowed.
+    let truncated = stats["truncated_rays"].as_u64().unwrap_or(0);
+    let overflows = stats["stack_overflows"].as_u64().unwrap_or(0);
+    if truncated > 0 || overflows > 0 {
+        let what = format!(
+            "{truncated} ray(s) were cut short ({overflows} traversal stack overflows with --stack-size {}; --max-traces-per-ray {}): their hits may be wrong (exponentially deep instancing?)",
+            s.limits.stack_size, s.limits.max_traces_per_ray
+        );
+        if !s.limits.allow_truncated {
+            return Err(RenderError::Truncated { what });
+        }
+        progress(RenderEvent::TruncatedWritten { what: &what });
+    }
+    Ok(Rendered { aov, rgba8, stats })
+}
+
+/// The LOD mode and its instance/selector counts.
+fn lod_stats(stats: &mut Value, lod: &LodChoice) {
+    let instance_lod = lod.instance.as_ref();
+    stats["lod_mode"] = json!(lod.mode);
+    stats["lod_mode_reason"] = json!(lod.reason);
+    stats["lod_instances"] = json!(instance_lod.map_or(0, |il| il.slots.len()));
+    stats["lod_traversal_selectors"] =
+        json!(instance_lod.map_or(lod.selector_pis, |il| il.traversal_selectors));
+}
+
+/// Adds the contract's keys to a backend's stats object.
+fn contract_stats(mut stats: Value, extra: Value) -> Value {
+    if let (Some(s), Some(e)) = (stats.as_object_mut(), extra.as_object()) {
+        for (k, v) in e {
+            s.entry(k.clone()).or_insert(v.clone());
+        }
+    }
+    stats
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn contract_keys_fill_gaps_and_never_overwrite_a_backends_value() {
+        let stats = json!({"passes": 3, "ms_per_frame": 1.5});
+        let out = contract_stats(stats, json!({"passes": 1, "as_bytes": 0}));
+        assert_eq!(out["passes"], 3);
+        assert_eq!(out["as_bytes"], 0);
+        assert_eq!(out["ms_per_frame"], 1.5);
+    }
+
+    #[test]
+    fn lod_keys_without_instance_lod_count_the_package_selectors() {
+        let mut stats = json!({});
+        let choice = LodChoice {
+            instance: None,
+            mode: "traversal",
+            reason: "test",
+            selector_pis: 7,
+        };
+        lod_stats(&mut stats, &choice);
+        assert_eq!(stats["lod_mode"], "traversal");
+        assert_eq!(stats["lod_mode_reason"], "test");
+        assert_eq!(stats["lod_instances"], 0);
+        assert_eq!(stats["lod_traversal_selectors"], 7);
+    }
+}
