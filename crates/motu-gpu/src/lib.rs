@@ -75,6 +75,6 @@ pub use render::{
 pub use report::{list_devices, DeviceReport};
 pub use scene::{BuildOptions, GpuScene, MeshBlobSource, ResourceReport};
 pub use stream::{
-    streaming_floor, FloorSizes, FrameStreamStats, StreamFallback, StreamFloor, StreamOptions,
-    StreamTotals, StreamingRenderer, PI_EMPTY_BLAS,
+    streaming_floor, FloorSizes, FrameStreamStats, PassStats, StreamFallback, StreamFloor,
+    StreamOptions, StreamTotals, StreamingRenderer, PI_EMPTY_BLAS,
 };

@@ -549,6 +549,27 @@ fn a_frame_under_a_sixteenth_of_the_full_build_evicts_mid_frame_and_completes() 
         "the frame's set does not fit at once: {st:?}"
     );
     assert!(st.vram_peak_bytes <= budget, "{st:?}");
+    // The time breakdown (`--stats`): one entry per pass, builds accounted to their pass (or
+    // the prefetch), the parts of the build time inside it, the working set counted.
+    assert_eq!(st.pass_log.len(), st.passes as usize, "{st:?}");
+    let per_pass: u32 = st.pass_log.iter().map(|p| p.blas_built).sum();
+    assert_eq!(per_pass + st.prefetched, st.blas_built, "{st:?}");
+    assert!(
+        st.mesh_ms + st.blas_ms + st.tlas_ms + st.tables_ms <= st.build_ms * 1.001 + 0.1,
+        "{st:?}"
+    );
+    assert!(
+        st.working_set_blases > 0 && st.working_set_bytes > 0,
+        "{st:?}"
+    );
+    // A TLAS rebuild that does not fit gives back builds a 32nd of the budget at a time, not
+    // one per attempt (each attempt re-encodes every resident instance).
+    assert!(
+        st.tlas_builds <= 4 * st.tlas_rebuilt.max(1),
+        "{} TLAS builds for {} rebuilds",
+        st.tlas_builds,
+        st.tlas_rebuilt
+    );
     let cmp =
         motu_trace::compare(&reference.aov, &out.aov, motu_trace::DEFAULT_REL_EPS).expect("sizes");
     assert!(cmp.fraction <= 0.001, "{} of {}", cmp.mismatched, cmp.total);

@@ -43,6 +43,8 @@ impl<'a> StreamingRenderer<'a> {
     /// and the meshes only it held are released: nothing of it stays resident.
     pub(super) fn build_group(&mut self, group: &[u32], evict: bool) -> Result<()> {
         let mut taken: Vec<usize> = Vec::new();
+        self.frame_stats.build_groups += 1;
+        let t_mesh = Instant::now();
         let loaded = (|| -> Result<()> {
             for &b in group {
                 for m in self.blas_meshes(b as usize) {
@@ -93,21 +95,21 @@ impl<'a> StreamingRenderer<'a> {
                 up.flush(&ctx)?;
             }
         }
+        self.frame_stats.mesh_ms += t_mesh.elapsed().as_secs_f64() * 1e3;
+        let t_blas = Instant::now();
         let built = loaded.and_then(|()| {
             let ids: Vec<usize> = group.iter().map(|&b| b as usize).collect();
             self.maybe_evicting(evict, |s| s.build_blas_set(&ids, 0))
         });
+        self.frame_stats.blas_ms += t_blas.elapsed().as_secs_f64() * 1e3;
+        if matches!(built, Err(GpuError::Budget(_))) {
+            self.frame_stats.refused_groups += 1;
+        }
         let built = match built {
             Ok(b) => b,
             Err(e) => {
                 for m in taken {
-                    self.mesh_refs[m] = self.mesh_refs[m].saturating_sub(1);
-                    if self.mesh_refs[m] == 0 {
-                        if let Some(g) = self.meshes[m].take() {
-                            self.heap.free(g.buffer);
-                            self.release_mesh_textures(m);
-                        }
-                    }
+                    self.drop_mesh_ref(m);
                 }
                 return Err(e);
             }
@@ -120,6 +122,8 @@ impl<'a> StreamingRenderer<'a> {
                 .map(|m| self.meshes[m].as_ref().map_or(0, |g| g.size_bytes()))
                 .sum();
             let bytes = accel.size_bytes + mesh_bytes;
+            self.blas_bytes[b] = bytes;
+            self.used_in_frame[b] = self.frame;
             self.frame_stats.blas_built += 1;
             self.frame_stats.built_bytes += accel.size_bytes;
             self.frame_stats.triangles_built += u64::from(self.view.blases[b].primitive_count);
@@ -146,17 +150,27 @@ impl<'a> StreamingRenderer<'a> {
     }
 
     /// Builds the BLASes of `queue` (priority order) in groups that halve when the budget
-    /// refuses them; groups use free memory only, single BLASes evict for room (so eviction
-    /// frees about what one build needs). Stops at the first single BLAS that does not fit
-    /// (left for a later pass) and returns how many were left. `must_progress`: when nothing
-    /// was built yet, evict the current pass's pins too before giving up, then fail with the
-    /// numbers.
-    pub(super) fn build_blas_queue(&mut self, queue: &[u32], must_progress: bool) -> Result<usize> {
+    /// refuses them. `evict_groups`: groups evict unpinned structures for room (the room a
+    /// group needs by estimate is made once, up front, so a group is rarely refused after its
+    /// meshes were streamed); otherwise groups are cut to the free budget by estimate and
+    /// only single BLASes evict. Stops at the first single BLAS that does not fit (left for a
+    /// later pass) and returns how many were left. `must_progress`: when nothing was built
+    /// yet, evict the current pass's pins too before giving up, then fail with the numbers.
+    pub(super) fn build_blas_queue(
+        &mut self,
+        queue: &[u32],
+        must_progress: bool,
+        evict_groups: bool,
+    ) -> Result<usize> {
         let mut i = 0;
         // Group size carries over between steps: a full budget keeps failing large groups,
         // and each failure streams their meshes for nothing.
         let mut chunk = self.group_hint.clamp(1, 64);
         let mut relaxed = false;
+        // Room for the TLAS rebuilds of this step, kept free while building: a step that
+        // fills the budget with BLASes would give them back one by one to fit the rebuild
+        // (each attempt re-encodes every resident instance record).
+        let mut counts = self.resident_instance_counts();
         while i < queue.len() {
             // The frame's build budget: spent stops the step (a frame that has built nothing
             // yet and must progress still builds one).
@@ -164,10 +178,58 @@ impl<'a> StreamingRenderer<'a> {
                 self.frame_stats.build_budget_spent = true;
                 return Ok(queue.len() - i);
             }
-            let n = self.group_within_frame_budget(&queue[i..], chunk);
+            let mut n = self.group_within_frame_budget(&queue[i..], chunk);
+            let reserve = self.tlas_reserve(&counts, &queue[i..i + n])?;
+            let free = self.free_budget_bytes().saturating_sub(reserve);
+            if !evict_groups {
+                // Free memory only: a group the budget cannot hold would stream its meshes for
+                // nothing.
+                let mut est = 0u64;
+                let mut k = 0;
+                for &b in &queue[i..i + n] {
+                    est += self.blas_estimate_bytes(b);
+                    if k > 0 && est > free {
+                        break;
+                    }
+                    k += 1;
+                }
+                n = k.max(1);
+            }
             let group = &queue[i..i + n];
-            match self.build_group(group, group.len() == 1) {
+            let evict = evict_groups || group.len() == 1;
+            let need: u64 = group.iter().map(|&b| self.blas_estimate_bytes(b)).sum();
+            if evict {
+                // The room the whole group needs, made before its meshes stream (a BLAS's
+                // bytes count meshes other BLASes may still hold, so an eviction may free
+                // less than it counted: repeat while it helps).
+                let mut short = need.saturating_sub(free);
+                while short > 0 && self.evict_some(short)? {
+                    short = need.saturating_sub(self.free_budget_bytes().saturating_sub(reserve));
+                }
+            }
+            if !self.built_now.is_empty() && need > self.free_budget_bytes().saturating_sub(reserve)
+            {
+                // Built next to the step's builds, it would squeeze out the TLAS rebuild:
+                // smaller, or in a later pass.
+                if group.len() > 1 {
+                    chunk = group.len() / 2;
+                    self.group_hint = chunk;
+                    continue;
+                }
+                return Ok(queue.len() - i);
+            }
+            match self.build_group(group, evict) {
                 Ok(()) => {
+                    for &b in group {
+                        if self.blas[b as usize].is_some() {
+                            for (&t, &c) in self.parents[b as usize]
+                                .iter()
+                                .zip(&self.parent_counts[b as usize])
+                            {
+                                counts[t as usize] += u64::from(c);
+                            }
+                        }
+                    }
                     i += group.len();
                     chunk = (chunk * 2).min(64);
                     self.group_hint = chunk;
@@ -193,6 +255,54 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         Ok(0)
+    }
+
+    /// Bytes the TLAS rebuilds of the running step take by estimate (see
+    /// `tlas_rebuild_bytes`) with `counts` resident instance records per TLAS plus those of
+    /// `group`: every TLAS dirty now or parent of a BLAS of `group` or built this step.
+    pub(super) fn tlas_reserve(&self, counts: &[u64], group: &[u32]) -> Result<u64> {
+        let mut touched: BTreeSet<u32> = self.dirty.clone();
+        for &b in group.iter().chain(&self.built_now) {
+            touched.extend(self.parents[b as usize].iter().copied());
+        }
+        let mut reserve = 0u64;
+        for t in touched {
+            let extra: u64 = group
+                .iter()
+                .flat_map(|&b| {
+                    self.parents[b as usize]
+                        .iter()
+                        .zip(&self.parent_counts[b as usize])
+                })
+                .filter(|(&p, _)| p == t)
+                .map(|(_, &c)| u64::from(c))
+                .sum();
+            reserve += self.tlas_rebuild_bytes(t, counts[t as usize] + extra)?;
+        }
+        Ok(reserve)
+    }
+
+    /// Budget bytes not sub-allocated now (optimistic: a dedicated allocation needs them in
+    /// one piece; a refusal is retried).
+    pub(super) fn free_budget_bytes(&self) -> u64 {
+        let r = self.heap.report();
+        r.budget_bytes.saturating_sub(r.budget_in_use_bytes)
+    }
+
+    /// What building BLAS `b` takes by estimate: its meshes not resident yet (geometry and
+    /// shading attributes) plus ~64 bytes a triangle each for the structure and its scratch.
+    pub(super) fn blas_estimate_bytes(&self, b: u32) -> u64 {
+        let tris = u64::from(self.view.blases[b as usize].primitive_count);
+        let mesh: u64 = self
+            .blas_meshes(b as usize)
+            .into_iter()
+            .filter(|&m| self.meshes[m].is_none())
+            .map(|m| {
+                let r = &self.view.meshes[m];
+                u64::from(r.vertex_count) * 32 + u64::from(r.triangle_count) * 16
+            })
+            .sum();
+        mesh + 128 * tris
     }
 
     /// The error for BLAS `b` not fitting next to the skeleton alone.
@@ -247,14 +357,17 @@ impl<'a> StreamingRenderer<'a> {
                 .collect()
         };
         let (needed, later) = (queue(&demand.blases), queue(&demand.later));
-        let deferred = self.build_blas_queue(&needed, !prefetch)?;
+        let deferred = self.build_blas_queue(&needed, !prefetch, !prefetch)?;
         if deferred == 0 && !later.is_empty() && self.opts.build_open_early {
             // What fits of the rest, without giving up anything built above.
-            self.build_blas_queue(&later, false)?;
+            self.build_blas_queue(&later, false, false)?;
         }
         // Parents whose instance set changed (builds or evictions).
         self.rebuild_dirty()?;
+        let t_tables = Instant::now();
         self.upload_tlas_addresses()?;
+        self.frame_stats.tables_ms += t_tables.elapsed().as_secs_f64() * 1e3;
+        self.frame_stats.build_steps += 1;
         if prefetch {
             self.frame_stats.prefetched += self.built_now.len() as u32;
         } else {

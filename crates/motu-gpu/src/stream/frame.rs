@@ -34,6 +34,7 @@ impl<'a> StreamingRenderer<'a> {
             height = h
         );
         let _g = span.enter();
+        let frame_t0 = std::time::Instant::now();
         self.frame += 1;
         self.frame_stats = FrameStreamStats {
             frame: self.frame,
@@ -81,6 +82,13 @@ impl<'a> StreamingRenderer<'a> {
         };
         self.keep_frame_buffers(fb, w, h, guard.len());
         let (records, rgba_words, counters, guard_demand) = out;
+        // The working set of the frame's rays (before the prefetch builds for the next).
+        for (b, &f) in self.used_in_frame.iter().enumerate() {
+            if f == self.frame {
+                self.frame_stats.working_set_blases += 1;
+                self.frame_stats.working_set_bytes += self.blas_bytes[b];
+            }
+        }
         // Prefetch: what the guard band saw, evicting only what this frame did not see (what
         // does not fit is skipped), within what is left of the frame's build budget.
         if !guard_demand.is_empty() && self.frame_stats.complete && !self.frame_build_spent() {
@@ -90,6 +98,7 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         let report = self.heap.report();
+        self.frame_stats.frame_ms = frame_t0.elapsed().as_secs_f64() * 1e3;
         let resident_textures = self.shading.resident_textures();
         let st = &mut self.frame_stats;
         st.resident_textures = resident_textures;

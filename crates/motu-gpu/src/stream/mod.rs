@@ -144,8 +144,12 @@ impl Default for StreamOptions {
             budget_bytes: 512 * MIB,
             max_allocations: 4096,
             max_passes: 0,
-            scratch_budget_bytes: 32 * MIB,
-            staging_bytes: 8 * MIB,
+            // Both are capped by the budget (scratch an eighth, staging a 32nd), so these only
+            // matter for budgets above 256 MiB, where fewer, larger build batches and ring
+            // flushes cut the per-step cost (a ring flush and a batch are a fenced submission
+            // each).
+            scratch_budget_bytes: 256 * MIB,
+            staging_bytes: 64 * MIB,
             guard_band_px: 8,
             compact: true,
             build_open_early: true,
@@ -199,6 +203,38 @@ pub struct FrameStreamStats {
     pub build_ms: f64,
     /// Wall time of the trace submissions.
     pub trace_ms: f64,
+    /// Wall time of the whole frame (passes, build steps, prefetch, readback).
+    pub frame_ms: f64,
+    /// Host work of the pass loop outside traces and build steps: stamp and request
+    /// readback, demand lists, pixel lists, per-pass table writes.
+    pub host_ms: f64,
+    /// Of `build_ms`: streaming meshes (and their textures) from the source to the device.
+    pub mesh_ms: f64,
+    /// Of `build_ms`: triangle BLAS builds (with compaction).
+    pub blas_ms: f64,
+    /// Of `build_ms`: TLAS (and proxy BLAS) rebuilds, including their evict-and-retry rounds.
+    pub tlas_ms: f64,
+    /// Of `build_ms`: choosing and releasing eviction victims.
+    pub evict_ms: f64,
+    /// Of `build_ms`: rewriting the per-step tables (TLAS and mesh addresses, shading).
+    pub tables_ms: f64,
+    /// Build steps (one after each pass that left pixels open, plus the prefetch).
+    pub build_steps: u32,
+    /// BLAS build groups attempted, and how many of them the budget refused (a refused group
+    /// is retried in halves; its meshes were streamed for nothing).
+    pub build_groups: u32,
+    pub refused_groups: u32,
+    /// TLAS builds (each rebuild of a dirty TLAS counts, retries included) and the instance
+    /// records written for them.
+    pub tlas_builds: u32,
+    pub tlas_instances_written: u64,
+    /// The frame's working set: distinct BLASes its rays used (hit or open while resident,
+    /// or built for them) and their bytes (structures plus meshes). Above what the budget
+    /// leaves for structures, some BLAS must be built more than once in the frame.
+    pub working_set_blases: u32,
+    pub working_set_bytes: u64,
+    /// Per pass: where its time went.
+    pub pass_log: Vec<PassStats>,
     /// Resident acceleration-structure and geometry bytes after the frame.
     pub resident_bytes: u64,
     pub resident_blases: u32,
@@ -208,6 +244,25 @@ pub struct FrameStreamStats {
     /// Highest bytes of blocks counted against the budget so far (never above it).
     pub vram_peak_bytes: u64,
     pub vram_budget_bytes: u64,
+}
+
+/// One pass of a frame (`FrameStreamStats::pass_log`).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct PassStats {
+    /// Pixels (and guard rays) traced in this pass.
+    pub traced: u64,
+    /// Pixels still open after it.
+    pub open_pixels: u64,
+    /// Structures the pass demanded (nearest open) and saw open behind those.
+    pub needed: u32,
+    pub later: u32,
+    pub trace_ms: f64,
+    pub host_ms: f64,
+    /// Its build step (0 after the last pass).
+    pub build_ms: f64,
+    pub tlas_ms: f64,
+    pub blas_built: u32,
+    pub evicted: u32,
 }
 
 /// Totals over all frames rendered so far.
@@ -279,10 +334,17 @@ pub struct StreamingRenderer<'a> {
     proxy_pi_base: Vec<u32>,
     /// Per BLAS: TLASes instancing it.
     parents: Vec<Vec<u32>>,
+    /// Per BLAS: its instance count in each of `parents` (same order).
+    parent_counts: Vec<Vec<u32>>,
     buildable: Vec<bool>,
     residency: Residency,
     /// Per item (BLAS, then TLAS): the last pass stamp that saw it.
     last_seen: Vec<u32>,
+    /// Per BLAS: bytes it held when last resident (structure plus meshes), and the last frame
+    /// whose rays used it (walked while resident and seen, or built for them): the frame's
+    /// working set.
+    blas_bytes: Vec<u64>,
+    used_in_frame: Vec<u64>,
     /// Resident TLASes whose instance set changed since their build.
     dirty: BTreeSet<u32>,
     /// Pins of the current build step (items that must not be evicted): what the latest

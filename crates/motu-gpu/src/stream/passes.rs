@@ -9,7 +9,7 @@ use motu_alloc::ItemId;
 
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
-use super::{StreamFallback, StreamingRenderer, GUARD_BIAS};
+use super::{PassStats, StreamFallback, StreamingRenderer, GUARD_BIAS};
 use crate::error::{GpuError, Result};
 use crate::render::{Tracer, STAT_WORDS};
 use crate::scene::Slot;
@@ -68,6 +68,15 @@ impl<'a> StreamingRenderer<'a> {
         let mut guard_demand = Demand::default();
         let max_passes = self.frame_pass_cap();
         loop {
+            let pass_t0 = Instant::now();
+            let before = (
+                self.frame_stats.trace_ms,
+                self.frame_stats.build_ms,
+                self.frame_stats.tlas_ms,
+                self.frame_stats.blas_built,
+                self.frame_stats.evicted,
+            );
+            let traced = u64::from(full_count) + list.len() as u64;
             self.stamp += 1;
             self.frame_stats.passes += 1;
             let first = self.frame_stats.passes == 1;
@@ -164,6 +173,7 @@ impl<'a> StreamingRenderer<'a> {
                 }
                 self.last_seen[b] = self.stamp;
                 if self.blas[b].is_some() {
+                    self.used_in_frame[b] = self.frame;
                     if self.buildable[b] {
                         self.residency
                             .mark_visible(ItemId(b as u32), u64::from(self.stamp));
@@ -188,7 +198,26 @@ impl<'a> StreamingRenderer<'a> {
                 }
             }
             demand.sort();
+            let mut pass = PassStats {
+                traced,
+                open_pixels: u64::from(count),
+                needed: demand.blases.len() as u32,
+                later: demand.later.len() as u32,
+                ..Default::default()
+            };
+            let host_before_build = pass_t0.elapsed().as_secs_f64() * 1e3;
+            let log_pass = |s: &mut Self, mut pass: PassStats, host_extra: f64| {
+                pass.trace_ms = s.frame_stats.trace_ms - before.0;
+                pass.build_ms = s.frame_stats.build_ms - before.1;
+                pass.tlas_ms = s.frame_stats.tlas_ms - before.2;
+                pass.blas_built = s.frame_stats.blas_built - before.3;
+                pass.evicted = s.frame_stats.evicted - before.4;
+                pass.host_ms = (host_before_build - pass.trace_ms).max(0.0) + host_extra;
+                s.frame_stats.host_ms += pass.host_ms;
+                s.frame_stats.pass_log.push(pass);
+            };
             if count == 0 {
+                log_pass(self, pass, 0.0);
                 self.frame_stats.complete = true;
                 break;
             }
@@ -212,12 +241,14 @@ impl<'a> StreamingRenderer<'a> {
                     );
                 }
                 list = incomplete;
+                log_pass(self, pass, 0.0);
                 break;
             }
             if let Err(e) = self.make_resident(&demand, false) {
                 self.quarantine_after_failure(&e);
                 return Err(e);
             }
+            let t_list = Instant::now();
             self.frame_stats.reshot_pixels += u64::from(count);
             full_count = 0;
             list = incomplete
@@ -227,6 +258,8 @@ impl<'a> StreamingRenderer<'a> {
                     pack_biased(x, y)
                 })
                 .collect();
+            pass.open_pixels = u64::from(count);
+            log_pass(self, pass, t_list.elapsed().as_secs_f64() * 1e3);
         }
         // Final readback of the image.
         guard_demand.sort();

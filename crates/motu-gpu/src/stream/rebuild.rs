@@ -198,6 +198,8 @@ impl<'a> StreamingRenderer<'a> {
             });
         }
         let total: u64 = instance_bytes.iter().map(|b| b.len() as u64).sum();
+        self.frame_stats.tlas_builds += ids.len() as u32;
+        self.frame_stats.tlas_instances_written += total / 64;
         let mut offsets = Vec::with_capacity(ids.len());
         let mut off = 0u64;
         for b in &instance_bytes {
@@ -297,6 +299,71 @@ impl<'a> StreamingRenderer<'a> {
     /// evicted, gives back structures this step built, least requested first (their pixels
     /// stay incomplete); fails only when none is left.
     pub(super) fn rebuild_dirty(&mut self) -> Result<()> {
+        let t0 = std::time::Instant::now();
+        let r = self.rebuild_dirty_untimed();
+        self.frame_stats.tlas_ms += t0.elapsed().as_secs_f64() * 1e3;
+        r
+    }
+
+    /// Per TLAS: instance records of resident BLASes now (what its rebuild holds).
+    pub(super) fn resident_instance_counts(&self) -> Vec<u64> {
+        let mut counts = vec![0u64; self.view.tlases.len()];
+        for (b, a) in self.blas.iter().enumerate() {
+            if a.is_some() {
+                for (&t, &n) in self.parents[b].iter().zip(&self.parent_counts[b]) {
+                    counts[t as usize] += u64::from(n);
+                }
+            }
+        }
+        counts
+    }
+
+    /// Bytes rebuilding TLAS `t` with `count` resident instance records takes beyond what its
+    /// current build holds (instance buffer, structure, scratch; the proxy, its boxes and the
+    /// fragmentation of blocks by a quarter more).
+    pub(super) fn tlas_rebuild_bytes(&self, t: u32, count: u64) -> Result<u64> {
+        let count = count + 1;
+        let s = self.ctx.tlas_build_sizes(
+            u32::try_from(count).unwrap_or(u32::MAX),
+            crate::accel::AsBuildFlags::default(),
+        )?;
+        let need = count * 64 + s.acceleration_structure_size_bytes + s.build_scratch_size_bytes;
+        let old = self.tlas[t as usize]
+            .as_ref()
+            .map_or(0, |g| g.accel.size_bytes);
+        Ok((need + need / 4).saturating_sub(old))
+    }
+
+    /// [`tlas_rebuild_bytes`](Self::tlas_rebuild_bytes) summed over the dirty TLASes.
+    fn tlas_rebuild_estimate(&self) -> Result<u64> {
+        let counts = self.resident_instance_counts();
+        let mut need = 0u64;
+        for &t in &self.dirty {
+            need += self.tlas_rebuild_bytes(t, counts[t as usize])?;
+        }
+        Ok(need)
+    }
+
+    fn rebuild_dirty_untimed(&mut self) -> Result<()> {
+        if !self.dirty.is_empty() {
+            // Room made once up front: each refused attempt re-encodes and re-uploads every
+            // resident instance record of the dirty TLASes.
+            // TLASes, their scratch and instance buffers are large (dedicated blocks): count
+            // only budget no block holds as free, and evict a quarter more for fragmentation.
+            let need = self.tlas_rebuild_estimate()?;
+            let free = |s: &Self| {
+                let r = s.heap.report();
+                r.budget_bytes.saturating_sub(r.budget_block_bytes)
+            };
+            // A few rounds at most: evicted items free whole blocks only when they empty
+            // them, so this could otherwise evict everything unpinned.
+            let mut short = need.saturating_sub(free(self));
+            let mut rounds = 0;
+            while short > 0 && rounds < 4 && self.evict_some(short)? {
+                short = need.saturating_sub(free(self));
+                rounds += 1;
+            }
+        }
         let mut rounds = 0;
         while !self.dirty.is_empty() {
             rounds += 1;
@@ -315,6 +382,20 @@ impl<'a> StreamingRenderer<'a> {
                 Ok(()) => self.frame_stats.tlas_rebuilt += rebuilt,
                 Err(GpuError::Budget(_)) if self.unpin_pass_pins() => {}
                 Err(GpuError::Budget(msg)) => {
+                    // Give back about a 32nd of the budget of this step's builds per round
+                    // (least requested first): one at a time would re-encode every instance
+                    // record once per structure.
+                    let step = (self.build_opts.budget_bytes / 32).max(1);
+                    let mut given = 0u64;
+                    while given < step && self.built_now.len() > 1 {
+                        let b = self.built_now.pop().unwrap_or_default();
+                        given += self.blas_bytes[b as usize];
+                        self.frame_stats.deferred += 1;
+                        if self.residency.contains(ItemId(b)) {
+                            self.evict(b as usize);
+                            self.frame_stats.evicted -= 1;
+                        }
+                    }
                     let Some(last) = self.built_now.pop() else {
                         let report = self.heap.report();
                         return Err(GpuError::Budget(format!(

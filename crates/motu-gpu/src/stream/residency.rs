@@ -11,6 +11,13 @@ impl<'a> StreamingRenderer<'a> {
     /// Evicts least-recently-visible unpinned structures (at least `bytes` of them, or all that
     /// are left). Returns false when nothing could be evicted.
     pub(super) fn evict_some(&mut self, bytes: u64) -> Result<bool> {
+        let t0 = std::time::Instant::now();
+        let r = self.evict_some_untimed(bytes);
+        self.frame_stats.evict_ms += t0.elapsed().as_secs_f64() * 1e3;
+        r
+    }
+
+    fn evict_some_untimed(&mut self, bytes: u64) -> Result<bool> {
         let pins = &self.pinned;
         let pinned = |id: ItemId| pins.get(id.0 as usize).copied().unwrap_or(true);
         let victims = match self
@@ -51,13 +58,18 @@ impl<'a> StreamingRenderer<'a> {
 
     /// Drops BLAS `b`'s references to its meshes, freeing those no other BLAS holds.
     pub(super) fn release_blas_meshes(&mut self, b: usize) {
-        for g in self.blas_meshes(b) {
-            self.mesh_refs[g] = self.mesh_refs[g].saturating_sub(1);
-            if self.mesh_refs[g] == 0 {
-                if let Some(m) = self.meshes[g].take() {
-                    self.heap.free(m.buffer);
-                    self.release_mesh_textures(g);
-                }
+        for m in self.blas_meshes(b) {
+            self.drop_mesh_ref(m);
+        }
+    }
+
+    /// Drops one reference to mesh `m`; at zero the mesh and its texture references go.
+    pub(super) fn drop_mesh_ref(&mut self, m: usize) {
+        self.mesh_refs[m] = self.mesh_refs[m].saturating_sub(1);
+        if self.mesh_refs[m] == 0 {
+            if let Some(g) = self.meshes[m].take() {
+                self.heap.free(g.buffer);
+                self.release_mesh_textures(m);
             }
         }
     }

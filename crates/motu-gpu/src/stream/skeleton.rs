@@ -197,14 +197,19 @@ impl<'a> StreamingRenderer<'a> {
             .iter()
             .map(|b| b.kind == BLAS_TRIANGLES && b.item_count > 0)
             .collect();
-        let mut parents = vec![Vec::new(); nb];
+        let mut parents: Vec<Vec<u32>> = vec![Vec::new(); nb];
+        let mut parent_counts: Vec<Vec<u32>> = vec![Vec::new(); nb];
         for (t, rec) in view.tlases.iter().enumerate() {
             for inst in &view.instances
                 [rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize]
             {
                 let b = inst.blas as usize;
-                if !parents[b].contains(&(t as u32)) {
-                    parents[b].push(t as u32);
+                match parents[b].iter().position(|&p| p == t as u32) {
+                    Some(k) => parent_counts[b][k] += 1,
+                    None => {
+                        parents[b].push(t as u32);
+                        parent_counts[b].push(1);
+                    }
                 }
             }
         }
@@ -313,9 +318,12 @@ impl<'a> StreamingRenderer<'a> {
             clusters,
             proxy_pi_base,
             parents,
+            parent_counts,
             buildable,
             residency: Residency::new(),
             last_seen: vec![0; nb + nt],
+            blas_bytes: vec![0; nb],
+            used_in_frame: vec![0; nb],
             dirty: BTreeSet::new(),
             pinned: vec![false; nb + nt],
             built_now: Vec::new(),
