@@ -2,7 +2,7 @@
 
 use motu_alloc::{AllocKind, MemoryClass};
 
-use super::passes::{StreamParams, CARRY_BYTES};
+use super::params::{StreamParams, CARRY_BYTES};
 use crate::error::{GpuError, Result};
 use crate::heap::{GpuHeap, HeapBuffer};
 use crate::memory::BufferUsage;

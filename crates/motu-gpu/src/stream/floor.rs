@@ -10,7 +10,7 @@ use motu_alloc::MIB;
 use serde::Serialize;
 
 use super::buffers::frame_buffer_bytes;
-use super::skeleton::proxy_clusters;
+use super::skeleton::{proxy_clusters, BLOCKS_PER_BUDGET, STAGING_PER_BUDGET};
 use crate::accel::BlasGeometry;
 use crate::error::Result;
 
@@ -83,12 +83,6 @@ pub struct StreamFloor {
 const PIPELINE_BYTES: u64 = MIB;
 /// Least staging ring the renderer uses.
 const MIN_STAGING_BYTES: u64 = 64 * 1024;
-/// Standard allocator blocks of a streaming heap are this fraction of the budget.
-pub(super) const BLOCKS_PER_BUDGET: u64 = 64;
-/// The staging ring is at most this fraction of the budget (it counts against it on
-/// unified-memory devices; mesh uploads stream through it in ring-sized pieces, so a smaller
-/// ring costs submissions, not correctness).
-pub(super) const STAGING_PER_BUDGET: u64 = 32;
 
 fn align(v: u64, a: u64) -> u64 {
     v.div_ceil(a) * a

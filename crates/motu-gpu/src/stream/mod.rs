@@ -64,6 +64,7 @@ mod buffers;
 mod demand;
 mod floor;
 mod frame;
+mod params;
 mod passes;
 mod rebuild;
 mod residency;

@@ -3,44 +3,17 @@
 
 use std::time::Instant;
 
-use bytemuck::{Pod, Zeroable};
 use motu_abi::aov::AovRecord;
 use motu_alloc::ItemId;
 
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
+use super::params::{StreamParams, CARRY_BYTES};
 use super::{PassStats, StreamFallback, StreamingRenderer, GUARD_BIAS};
 use crate::error::{GpuError, Result};
 use crate::render::{Tracer, STAT_WORDS};
 use crate::scene::Slot;
 
-/// `StreamParams` of `common.glsl` (80 bytes).
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-#[repr(C)]
-pub(super) struct StreamParams {
-    /// u32 per BLAS: `4 × stamp + level` (seen 0, open 1, needed 2) of the latest pass.
-    pub(super) blas_stamps: u64,
-    /// u32 per BLAS: the latest stamp of a pass it was resident (walked) in.
-    pub(super) walked: u64,
-    pub(super) pixel_list: u64,
-    pub(super) incomplete: u64,
-    pub(super) stamp: u32,
-    pub(super) full_count: u32,
-    pub(super) list_count: u32,
-    pub(super) blas_count: u32,
-    /// u32 per BLAS: pixels of the pass whose nearest open structure it is (build priority).
-    pub(super) requests: u64,
-    /// [`CARRY_BYTES`] per pixel: the state carried across passes (`Carry` of
-    /// `render_pixel.glsl`).
-    pub(super) carry: u64,
-    /// u32 global instance indices of the proxy clusters' members (a proxy PI record names
-    /// its range), 0: no proxies.
-    pub(super) cluster_members: u64,
-    pub(super) _pad: u64,
-}
-
-/// Bytes of one pixel's `Carry` (`render_pixel.glsl`).
-pub(super) const CARRY_BYTES: u64 = 128;
 /// Stamp levels of `common.glsl` (`STREAM_*`).
 const LEVEL_OPEN: u32 = 1;
 const LEVEL_NEEDED: u32 = 2;

@@ -64,6 +64,13 @@ pub(super) struct ProxyCluster {
     pub member_first: u32,
 }
 
+/// Standard allocator blocks of a streaming heap are this fraction of the budget.
+pub(super) const BLOCKS_PER_BUDGET: u64 = 64;
+/// The staging ring is at most this fraction of the budget (it counts against it on
+/// unified-memory devices; mesh uploads stream through it in ring-sized pieces, so a smaller
+/// ring costs submissions, not correctness).
+pub(super) const STAGING_PER_BUDGET: u64 = 32;
+
 /// The proxy clusters of TLAS `t`: its instances of each buildable BLAS, cut by the compiler's
 /// binned SAH over instance bounds into pieces of at most [`PROXY_CLUSTER_INSTANCES`], in BLAS
 /// order. Deterministic: the renderer and the floor ([`super::streaming_floor`]) both call it.
@@ -171,7 +178,7 @@ impl<'a> StreamingRenderer<'a> {
         let opts = &StreamOptions {
             staging_bytes: opts
                 .staging_bytes
-                .min(budget / super::floor::STAGING_PER_BUDGET)
+                .min(budget / STAGING_PER_BUDGET)
                 .max(64 * 1024),
             scratch_budget_bytes: opts.scratch_budget_bytes.min(budget / 8).max(64 * 1024),
             ..*opts
@@ -186,7 +193,7 @@ impl<'a> StreamingRenderer<'a> {
             budget_bytes: budget,
             host_visible_budget_bytes: opts.staging_bytes.max(64 * MIB) * 4,
         };
-        let block = (budget / super::floor::BLOCKS_PER_BUDGET).clamp(256 * 1024, 256 * MIB);
+        let block = (budget / BLOCKS_PER_BUDGET).clamp(256 * 1024, 256 * MIB);
         let heap = GpuHeap::with_block_size(ctx, limits, Some(block))?;
         let nb = view.blases.len();
         let nt = view.tlases.len();
