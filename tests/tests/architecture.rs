@@ -426,7 +426,7 @@ fn no_use_circles_between_files() {
     }
     let mut all = Vec::new();
     for src in crates.iter().filter(|s| s.exists()) {
-        let mut uses = file_uses(src);
+        let uses = file_uses(src);
         all.extend(
             uses.iter()
                 .map(|(m, u)| (src.clone(), m.clone(), u.clone())),
