@@ -4,10 +4,10 @@
 #define MOTU_CANDIDATES_GLSL
 #include "common.glsl"
 
-// Records a candidate in the payload, keeping the PI_CAPACITY nearest (called from any-hit or
-// from the ray-query loop).
+// Records a candidate in the payload, keeping the PI_CAPACITY first in (t_near, pi) order
+// after the floor (called from any-hit or from the ray-query loop).
 void record_candidate(uint pi, float t_near) {
-    if (t_near <= pl.t_floor) {
+    if (!candidate_before(pl.t_floor, pl.floor_pi, t_near, pi)) {
         return;
     }
     if (pl.count < PI_CAPACITY) {
@@ -18,11 +18,11 @@ void record_candidate(uint pi, float t_near) {
     pl.truncated = 1u;
     uint far_i = 0u;
     for (uint i = 1u; i < PI_CAPACITY; ++i) {
-        if (pl.c[i].t_near > pl.c[far_i].t_near) {
+        if (candidate_before(pl.c[far_i].t_near, pl.c[far_i].pi, pl.c[i].t_near, pl.c[i].pi)) {
             far_i = i;
         }
     }
-    if (t_near < pl.c[far_i].t_near) {
+    if (candidate_before(t_near, pi, pl.c[far_i].t_near, pl.c[far_i].pi)) {
         pl.c[far_i] = PiCandidate(pi, t_near);
     }
 }

@@ -89,12 +89,21 @@ struct PiCandidate {
 };
 
 // The traversal payload (rayPayloadEXT in the pipeline backend, a plain global in the query
-// backend): 36 + 8 × PI_CAPACITY = 100 bytes. Written by raygen before the trace
-// (tlas, t_floor, counters) and by any-hit (candidates) and closest-hit (the hit) during it.
+// backend): 40 + 8 × PI_CAPACITY = 104 bytes. Written by raygen before the trace
+// (tlas, floor, counters) and by any-hit (candidates) and closest-hit (the hit) during it.
+// Candidates are ordered by (t_near, pi): a total order, so a re-walk after truncation resumes
+// exactly after the farthest kept one even where many share a t_near (a ray starting inside
+// boxes meets them all at t_near 0); ordered by t_near alone, the tied ones were lost.
+// Whether candidate (t_a, pi_a) comes before (t_b, pi_b) in the walk's total order.
+bool candidate_before(float t_a, uint pi_a, float t_b, uint pi_b) {
+    return t_a < t_b || (t_a == t_b && pi_a < pi_b);
+}
+
 struct Payload {
     uint tlas;
     uint count;
-    float t_floor;   // record only candidates with t_near > t_floor (re-walk after truncation)
+    float t_floor;   // record only candidates after (t_floor, floor_pi) (re-walk after truncation)
+    uint floor_pi;
     float t_max;     // the trace's t_max (in any-hit, gl_RayTmaxEXT is the candidate's reported t)
     uint truncated;  // the list was full: farther candidates were dropped
     float hit_t;     // < 0: no triangle hit

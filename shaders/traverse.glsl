@@ -6,8 +6,8 @@
 //     void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool first_hit)
 // which walks TLAS `tlas` (its address is push.tlas_addresses.r[tlas]) with the ray already
 // in that TLAS's space, t in [t_min, t_max], and fills `pl`: the closest triangle hit (hit_*) and
-// up to PI_CAPACITY programmable-instance candidates with t_near > pl.t_floor (the nearest
-// ones; `truncated` set when more were found).
+// up to PI_CAPACITY programmable-instance candidates after (pl.t_floor, pl.floor_pi) in
+// (t_near, pi) order (the first ones; `truncated` set when more were found).
 //
 // Semantics mirror motu-trace (the CPU oracle): rays move between spaces by affine 3×4
 // matrices without renormalising the direction, so every t is a world distance; entries whose
@@ -32,6 +32,7 @@ struct Entry {
     uint tlas;
     uint lod;       // level of the innermost selector on the path, NONE_U32 if none
     float t_floor;  // -1, or the re-walk floor after a truncated candidate list
+    uint floor_pi;  // with t_floor: the farthest candidate kept by the truncated walk
 };
 
 // Streaming state of the current ray (carried hits, see motu-gpu's stream module): a pass walks
@@ -151,7 +152,7 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
                   float lod_u, bool first_hit, inout uint traces, inout uint overflows,
                   inout uint truncations) {
     Entry stack[STACK_SIZE];
-    stack[0] = Entry(affine_identity(), 0.0, root_tlas, NONE_U32, -1.0);
+    stack[0] = Entry(affine_identity(), 0.0, root_tlas, NONE_U32, -1.0, 0u);
     uint sp = 1u;
     TraceHit hit;
     hit.t = g_streaming ? min(g_best_t, g_t_max) : g_t_max;
@@ -172,6 +173,7 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
         pl.tlas = e.tlas;
         pl.count = 0u;
         pl.t_floor = e.t_floor;
+        pl.floor_pi = e.floor_pi;
         pl.t_max = hit.t;
         pl.truncated = 0u;
         pl.hit_t = -1.0;
@@ -193,9 +195,13 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
         uint order[PI_CAPACITY];
         uint n = 0u;
         float t_kept_max = -1.0;
+        uint pi_kept_max = 0u;
         for (uint i = 0u; i < pl.count; ++i) {
             float t = pl.c[i].t_near;
-            t_kept_max = max(t_kept_max, t);
+            if (i == 0u || candidate_before(t_kept_max, pi_kept_max, t, pl.c[i].pi)) {
+                t_kept_max = t;
+                pi_kept_max = pl.c[i].pi;
+            }
             if (t >= hit.t) {
                 continue;
             }
@@ -209,11 +215,12 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
         }
         if (pl.truncated != 0u) {
             // Candidates beyond the kept ones were dropped: walk this TLAS again later for
-            // those only (t_near > the farthest kept one).
+            // those only (after the farthest kept one in (t_near, pi) order, ties included).
             truncations += 1u;
             if (t_kept_max < hit.t) {
                 if (sp < STACK_SIZE) {
-                    stack[sp] = Entry(e.tlas_from_world, t_kept_max, e.tlas, e.lod, t_kept_max);
+                    stack[sp] = Entry(e.tlas_from_world, t_kept_max, e.tlas, e.lod, t_kept_max,
+                                      pi_kept_max);
                     sp += 1u;
                 } else {
                     overflows += 1u;
@@ -252,7 +259,7 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
                 tlas = push.lod_levels.r[sel.level_base + level];
                 lod = level;
             }
-            stack[sp] = Entry(child_from_world, cd.t_near, tlas, lod, -1.0);
+            stack[sp] = Entry(child_from_world, cd.t_near, tlas, lod, -1.0, 0u);
             sp += 1u;
         }
     }
