@@ -85,15 +85,8 @@ impl<'a> StreamingRenderer<'a> {
         let mut n = 0;
         for &b in queue.iter().take(max) {
             let tris = u64::from(self.view.blases[b as usize].primitive_count);
-            let mesh: u64 = self
-                .blas_meshes(b as usize)
-                .into_iter()
-                .filter(|&m| self.meshes[m].is_none())
-                .map(|m| {
-                    let r = &self.view.meshes[m];
-                    u64::from(r.vertex_count) * 12 + u64::from(r.triangle_count) * 12
-                })
-                .sum();
+            // Bytes built: positions and indices, ~64 bytes a triangle of structure.
+            let mesh = self.missing_mesh_bytes(b, 12, 12);
             let est = mesh + 64 * tris;
             if n > 0 && est > left {
                 break;

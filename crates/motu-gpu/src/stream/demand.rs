@@ -290,19 +290,24 @@ impl<'a> StreamingRenderer<'a> {
     }
 
     /// What building BLAS `b` takes by estimate: its meshes not resident yet (geometry and
-    /// shading attributes) plus ~64 bytes a triangle each for the structure and its scratch.
+    /// shading attributes: 32 bytes a vertex, 16 a triangle) plus ~128 bytes a triangle for
+    /// the structure and its scratch.
     pub(super) fn blas_estimate_bytes(&self, b: u32) -> u64 {
         let tris = u64::from(self.view.blases[b as usize].primitive_count);
-        let mesh: u64 = self
-            .blas_meshes(b as usize)
+        self.missing_mesh_bytes(b, 32, 16) + 128 * tris
+    }
+
+    /// Bytes of BLAS `b`'s meshes that are not resident yet, at `per_vertex` and
+    /// `per_triangle` bytes (callers count geometry alone or geometry with attributes).
+    pub(super) fn missing_mesh_bytes(&self, b: u32, per_vertex: u64, per_triangle: u64) -> u64 {
+        self.blas_meshes(b as usize)
             .into_iter()
             .filter(|&m| self.meshes[m].is_none())
             .map(|m| {
                 let r = &self.view.meshes[m];
-                u64::from(r.vertex_count) * 32 + u64::from(r.triangle_count) * 16
+                u64::from(r.vertex_count) * per_vertex + u64::from(r.triangle_count) * per_triangle
             })
-            .sum();
-        mesh + 128 * tris
+            .sum()
     }
 
     /// The error for BLAS `b` not fitting next to the skeleton alone.
