@@ -221,6 +221,28 @@ fn assert_shaded_equal(full: &[u8], streamed: &[u8], what: &str) {
     );
 }
 
+/// The traversal backends this device runs (both on lavapipe; the pipeline alone on NVIDIA).
+fn available_backends(ctx: &Context) -> Vec<Backend> {
+    let caps = ctx.caps();
+    [
+        (caps.ray_pipeline, Backend::Pipeline),
+        (caps.ray_query, Backend::Query),
+    ]
+    .into_iter()
+    .filter_map(|(ok, be)| ok.then_some(be))
+    .collect()
+}
+
+/// Streaming options for the small test scenes: a budget of a few MiB, with staging and
+/// scratch kept small so the budget holds structures rather than rings.
+fn small_stream_options(budget: u64) -> StreamOptions {
+    StreamOptions {
+        budget_bytes: budget,
+        staging_bytes: 256 * 1024,
+        scratch_budget_bytes: 1 << 20,
+        ..Default::default()
+    }
+}
 #[test]
 fn streaming_under_a_quarter_of_the_full_build_matches_it_on_both_backends() {
     let Some(ctx) = context_or_skip("streaming_matches_full_build", Requirement::RayTracing) else {
@@ -233,13 +255,7 @@ fn streaming_under_a_quarter_of_the_full_build_matches_it_on_both_backends() {
     let budget = full_needs / 4;
     eprintln!("full build needs {full_needs} bytes; streaming budget {budget} bytes");
     let cam = base_pose().params(SIZE, SIZE);
-    let mut backends = Vec::new();
-    if ctx.caps().ray_pipeline {
-        backends.push(Backend::Pipeline);
-    }
-    if ctx.caps().ray_query {
-        backends.push(Backend::Query);
-    }
+    let backends = available_backends(&ctx);
     for be in backends {
         let opts = ids_opts(be);
         let reference = render(&ctx, &full, &cam, &opts).expect("full render");
@@ -250,18 +266,8 @@ fn streaming_under_a_quarter_of_the_full_build_matches_it_on_both_backends() {
             .filter(|r| r.mesh != MISS)
             .count();
         assert!(hits > 400, "the camera sees the field: {hits}");
-        let mut sr = StreamingRenderer::new(
-            &ctx,
-            h.view(),
-            &blobs,
-            &StreamOptions {
-                budget_bytes: budget,
-                staging_bytes: 256 * 1024,
-                scratch_budget_bytes: 1 << 20,
-                ..Default::default()
-            },
-        )
-        .expect("streaming renderer");
+        let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
+            .expect("streaming renderer");
         let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
         eprintln!("{be:?}: {}", serde_json::to_string(&st).unwrap_or_default());
         assert!(st.complete, "{st:?}");
@@ -295,11 +301,8 @@ fn streaming_under_a_quarter_of_the_full_build_matches_it_on_both_backends() {
             h.view(),
             &blobs,
             &StreamOptions {
-                budget_bytes: budget,
-                staging_bytes: 256 * 1024,
-                scratch_budget_bytes: 1 << 20,
                 guard_band_px: 0,
-                ..Default::default()
+                ..small_stream_options(budget)
             },
         )
         .expect("streaming renderer");
@@ -383,18 +386,8 @@ fn textures_stream_with_the_meshes_that_sample_them() {
         },
         ..ids_opts(be)
     };
-    let mut sr = StreamingRenderer::new(
-        &ctx,
-        h.view(),
-        &blobs,
-        &StreamOptions {
-            budget_bytes: budget,
-            staging_bytes: 256 * 1024,
-            scratch_budget_bytes: 1 << 20,
-            ..Default::default()
-        },
-    )
-    .expect("streaming renderer");
+    let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
+        .expect("streaming renderer");
     let path = CameraPath {
         yaw_sweep_deg: 70.0,
         dolly_world: 4.0,
@@ -447,18 +440,8 @@ fn camera_path_reuses_last_frames_structures_and_evicts_under_the_budget() {
     let budget = full_build_needs(&full) / 4;
     let be = backend(&ctx);
     let opts = ids_opts(be);
-    let mut sr = StreamingRenderer::new(
-        &ctx,
-        h.view(),
-        &blobs,
-        &StreamOptions {
-            budget_bytes: budget,
-            staging_bytes: 256 * 1024,
-            scratch_budget_bytes: 1 << 20,
-            ..Default::default()
-        },
-    )
-    .expect("streaming renderer");
+    let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
+        .expect("streaming renderer");
     let frames = 30;
     let path = CameraPath {
         yaw_sweep_deg: 70.0,
@@ -700,13 +683,7 @@ fn rays_starting_inside_more_boxes_than_a_candidate_list_holds_match_the_full_bu
     // the fix, 156 of 576 pixels differed here on lavapipe with the frame complete).
     let budget = full_build_needs(&full) / 12;
     let cam = base_pose().params(24, 24);
-    let mut backends = Vec::new();
-    if ctx.caps().ray_pipeline {
-        backends.push(Backend::Pipeline);
-    }
-    if ctx.caps().ray_query {
-        backends.push(Backend::Query);
-    }
+    let backends = available_backends(&ctx);
     for be in backends {
         let opts = RenderOptions {
             backend: be,
@@ -720,18 +697,8 @@ fn rays_starting_inside_more_boxes_than_a_candidate_list_holds_match_the_full_bu
             meshes.len() >= 4 && !meshes.contains(&MISS),
             "each shell is the nearest for some pixels: {meshes:?}"
         );
-        let mut sr = StreamingRenderer::new(
-            &ctx,
-            h.view(),
-            &blobs,
-            &StreamOptions {
-                budget_bytes: budget,
-                staging_bytes: 256 * 1024,
-                scratch_budget_bytes: 1 << 20,
-                ..Default::default()
-            },
-        )
-        .expect("streaming renderer");
+        let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
+            .expect("streaming renderer");
         let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
         eprintln!("{be:?}: {}", serde_json::to_string(&st).unwrap_or_default());
         assert!(st.complete, "{st:?}");
