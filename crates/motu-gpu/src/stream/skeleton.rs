@@ -360,6 +360,23 @@ impl<'a> StreamingRenderer<'a> {
         Ok(r)
     }
 
+    /// Allocates a device-local table for `bytes`, queues its upload and keeps it in
+    /// `tables`; returns its device address.
+    fn upload_table(&mut self, ctx: &Context, label: &str, bytes: &[u8]) -> Result<u64> {
+        let buf = self.heap.alloc_buffer(
+            label,
+            bytes.len() as u64,
+            table_usage(),
+            AllocKind::NodeTable,
+            MemoryClass::DeviceLocal,
+            16,
+        )?;
+        let address = buf.device_address()?.0;
+        self.up_mut()?.upload(ctx, &buf, 0, bytes)?;
+        self.tables.push(buf);
+        Ok(address)
+    }
+
     pub(super) fn init_skeleton(
         &mut self,
         gpu_tlases: &[TlasRecord],
@@ -391,37 +408,18 @@ impl<'a> StreamingRenderer<'a> {
             if bytes.is_empty() {
                 continue;
             }
-            let buf = self.heap.alloc_buffer(
-                &format!("stream-table-{slot:?}"),
-                bytes.len() as u64,
-                table_usage(),
-                AllocKind::NodeTable,
-                MemoryClass::DeviceLocal,
-                16,
-            )?;
-            self.addresses[slot as usize] = buf.device_address()?.0;
-            self.up_mut()?.upload(&ctx, &buf, 0, bytes)?;
             match slot {
                 Slot::Pis => self.pis_table = self.tables.len(),
                 Slot::MeshGeo => self.mesh_geo_table = self.tables.len(),
                 Slot::TlasAddresses => self.tlas_addr_table = self.tables.len(),
                 _ => {}
             }
-            self.tables.push(buf);
+            self.addresses[slot as usize] =
+                self.upload_table(&ctx, &format!("stream-table-{slot:?}"), bytes)?;
         }
         if !cluster_members.is_empty() {
-            let bytes: &[u8] = cast_slice(cluster_members);
-            let buf = self.heap.alloc_buffer(
-                "stream-cluster-members",
-                bytes.len() as u64,
-                table_usage(),
-                AllocKind::NodeTable,
-                MemoryClass::DeviceLocal,
-                16,
-            )?;
-            self.cluster_members = buf.device_address()?.0;
-            self.up_mut()?.upload(&ctx, &buf, 0, bytes)?;
-            self.tables.push(buf);
+            self.cluster_members =
+                self.upload_table(&ctx, "stream-cluster-members", cast_slice(cluster_members))?;
         }
         let stamp_usage = BufferUsage::STORAGE
             | BufferUsage::DEVICE_ADDRESS
