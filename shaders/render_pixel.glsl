@@ -112,10 +112,10 @@ vec3 sample_dir(uvec2 px, uint pixel, uint smp) {
 }
 
 // The pixel's rays in order (each sample's primary ray, then its secondary rays), traced through
-// ONE traverse() call site: the traversal loop is inlined once, and what stays live across its
-// traceRayEXT is the Carry and a few words (issue 15: with a call site per ray kind and the
-// shading state live across each, every TLAS hop cost about 3x more on the H200). A guard-band
-// probe (streaming) traces its primary ray along `guard_dir` and stops.
+// ONE traverse() call site: the traversal loop is inlined once per render path, and what stays
+// live across its traceRayEXT is the Carry and a few words (issue 15: with a call site per ray
+// kind and the shading state live across each, TLAS hops cost ~1.3x more on the H200). A
+// guard-band probe (streaming) traces its primary ray along `guard_dir` and stops.
 void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
     uint width = push.frame.f.camera.width;
     if (!guard && (px.x >= width || px.y >= push.frame.f.camera.height)) {
