@@ -24,8 +24,43 @@ use motu_scene::{Aabb, MeshData};
 /// is ~24 MiB, under 10% of its full build; at 2^17 it would be ~29 MiB, at 2^19 (no split on
 /// that island: its largest BLAS has 448k triangles) ~70 MiB. The cost is small: units only
 /// multiply the instances of prototypes over the bound (island: 55,497 → 55,802 instances,
-/// 34 → 71 BLASes, full build 258 → 261 MiB).
+/// 34 → 71 BLASes, full build 258 → 261 MiB). It is the cap of the automatic bound
+/// ([`auto_max_blas_triangles`]), which `motu import` uses when no bound is given.
 pub const DEFAULT_MAX_BLAS_TRIANGLES: u32 = 1 << 16;
+
+/// The smallest bound [`auto_max_blas_triangles`] picks: below it a unit's fixed costs (an
+/// instance, a BLAS header, a build step) outweigh what a smaller floor would save.
+pub const MIN_AUTO_MAX_BLAS_TRIANGLES: u32 = 1 << 12;
+
+/// How many triangles one instance weighs in [`auto_max_blas_triangles`]'s estimate of the
+/// whole build: an instance costs ~300 B (instance record, TLAS node share, tables; the default
+/// island's report: 3.4 MB for 13,970 instances), a triangle ~120 B (BLAS + geometry).
+pub const AUTO_TRIANGLES_PER_INSTANCE: u64 = 2;
+
+/// The share of the whole build one unit may be at most, as a divisor (`whole / 64`).
+pub const AUTO_UNITS_PER_SCENE: u64 = 64;
+
+/// The partitioner's bound when the user gives none (`motu import` without
+/// `--max-blas-triangles`): [`DEFAULT_MAX_BLAS_TRIANGLES`], or less on a scene so small that a
+/// 2^16 unit would be a large share of its whole build — the streaming floor holds the largest
+/// unit, so that share is what a budget below the full build cannot go under.
+///
+/// The bound is `whole / 64` triangles (a unit is then at most ~1.6% of the full build),
+/// clamped to [`MIN_AUTO_MAX_BLAS_TRIANGLES`]..=[`DEFAULT_MAX_BLAS_TRIANGLES`], where `whole`
+/// = unique triangles + [`AUTO_TRIANGLES_PER_INSTANCE`] × instances estimates the full build in
+/// triangles. Scenes of more than 64 × 2^16 ≈ 4.2M such triangles keep the 2^16 default. On the
+/// default `gen island` (521,130 triangles, 13,958 instances: bound 8,579) the floor at 96×64
+/// falls from 18% to 9% of the full build, for +4% instances, +0.2% AS bytes and the same
+/// traces per ray (BENCHMARKS.md "Partition bound").
+pub fn auto_max_blas_triangles(unique_triangles: u64, instances: u64) -> u32 {
+    let whole =
+        unique_triangles.saturating_add(instances.saturating_mul(AUTO_TRIANGLES_PER_INSTANCE));
+    let bound = whole.div_ceil(AUTO_UNITS_PER_SCENE);
+    bound.clamp(
+        u64::from(MIN_AUTO_MAX_BLAS_TRIANGLES),
+        u64::from(DEFAULT_MAX_BLAS_TRIANGLES),
+    ) as u32
+}
 
 /// One cluster of a partitioned mesh.
 #[derive(Clone, Debug, PartialEq)]
@@ -191,6 +226,21 @@ mod tests {
     fn centroid(m: &MeshData, t: usize) -> [f32; 3] {
         let p = |k: usize| m.positions[m.indices[3 * t + k] as usize];
         std::array::from_fn(|a| (p(0)[a] + p(1)[a] + p(2)[a]) / 3.0)
+    }
+
+    /// The automatic bound: 2^16 on big scenes, whole/64 on small ones, never under 2^12.
+    #[test]
+    fn the_automatic_bound_is_a_64th_of_the_whole_build_within_its_clamp() {
+        assert_eq!(auto_max_blas_triangles(1_180_000_000, 27_800_000), 1 << 16);
+        assert_eq!(auto_max_blas_triangles(64 << 16, 0), 1 << 16);
+        assert_eq!(auto_max_blas_triangles((64 << 16) - 64, 0), (1 << 16) - 1);
+        // The default `gen island`: 521,130 triangles, 13,958 instances.
+        assert_eq!(auto_max_blas_triangles(521_130, 13_958), 8_579);
+        assert_eq!(
+            auto_max_blas_triangles(1_000, 10),
+            MIN_AUTO_MAX_BLAS_TRIANGLES
+        );
+        assert_eq!(auto_max_blas_triangles(u64::MAX, u64::MAX), 1 << 16);
     }
 
     /// Bounds respected, every source triangle in exactly one cluster with its own vertices,
