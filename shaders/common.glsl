@@ -88,17 +88,18 @@ struct PiCandidate {
     float t_near;   // world distance (t is invariant under the non-renormalised transforms)
 };
 
-// The traversal payload (rayPayloadEXT in the pipeline backend, a plain global in the query
-// backend): 40 + 8 × PI_CAPACITY = 104 bytes. Written by raygen before the trace
-// (tlas, floor, counters) and by any-hit (candidates) and closest-hit (the hit) during it.
+// Whether candidate (t_a, pi_a) comes before (t_b, pi_b) in the walk's total order.
 // Candidates are ordered by (t_near, pi): a total order, so a re-walk after truncation resumes
 // exactly after the farthest kept one even where many share a t_near (a ray starting inside
 // boxes meets them all at t_near 0); ordered by t_near alone, the tied ones were lost.
-// Whether candidate (t_a, pi_a) comes before (t_b, pi_b) in the walk's total order.
 bool candidate_before(float t_a, uint pi_a, float t_b, uint pi_b) {
     return t_a < t_b || (t_a == t_b && pi_a < pi_b);
 }
 
+// The traversal payload (rayPayloadEXT in the pipeline backend, a plain global in the query
+// backend): 40 + 8 × PI_CAPACITY = 104 bytes. Written by raygen before the trace
+// (tlas, floor, counters) and by any-hit (candidates, kept in candidate_before's order) and
+// closest-hit (the hit) during it.
 struct Payload {
     uint tlas;
     uint count;

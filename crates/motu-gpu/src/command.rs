@@ -180,21 +180,8 @@ impl<'a> CommandRecorder<'a> {
     /// A full memory barrier between everything before and after it. Coarse but always
     /// correct; fine-grained barriers come with the build/render passes that need them.
     pub fn barrier(&mut self) {
-        let barrier = vk::MemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::MEMORY_WRITE)
-            .dst_access_mask(vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE);
-        // SAFETY: recording state; a global memory barrier has no resource references.
-        unsafe {
-            self.device().cmd_pipeline_barrier(
-                self.cmd,
-                vk::PipelineStageFlags::ALL_COMMANDS,
-                vk::PipelineStageFlags::ALL_COMMANDS,
-                vk::DependencyFlags::empty(),
-                &[barrier],
-                &[],
-                &[],
-            )
-        };
+        // SAFETY: recording state (a recorder only exists while its buffer records).
+        unsafe { memory_barrier(self.device(), self.cmd, MemoryScope::ALL, MemoryScope::ALL) };
     }
 
     /// Dispatches `group_count` workgroups of `pipeline` with `bindings` (its storage buffers,
@@ -338,4 +325,51 @@ impl Drop for CommandRecorder<'_> {
             device.destroy_command_pool(self.pool, None);
         }
     }
+}
+
+/// One side of a global memory barrier: the pipeline stages and the accesses it orders.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct MemoryScope {
+    pub stages: vk::PipelineStageFlags,
+    pub access: vk::AccessFlags,
+}
+
+impl MemoryScope {
+    /// Every stage, every write before / every read and write after.
+    pub const ALL: Self = Self {
+        stages: vk::PipelineStageFlags::ALL_COMMANDS,
+        access: vk::AccessFlags::from_raw(
+            vk::AccessFlags::MEMORY_WRITE.as_raw() | vk::AccessFlags::MEMORY_READ.as_raw(),
+        ),
+    };
+}
+
+/// Records one global memory barrier from `src` to `dst` (the one place every barrier of the
+/// crate is written; global barriers name no resource, so they cannot outlive one).
+///
+/// # Safety
+/// `cmd` must be in the recording state on `device`.
+pub(crate) unsafe fn memory_barrier(
+    device: &ash::Device,
+    cmd: vk::CommandBuffer,
+    src: MemoryScope,
+    dst: MemoryScope,
+) {
+    // A write-only source mask: reads need no availability operation.
+    let src_access = src.access & !(vk::AccessFlags::MEMORY_READ);
+    let barrier = vk::MemoryBarrier::default()
+        .src_access_mask(src_access)
+        .dst_access_mask(dst.access);
+    // SAFETY: per the function contract; a global memory barrier has no resource references.
+    unsafe {
+        device.cmd_pipeline_barrier(
+            cmd,
+            src.stages,
+            dst.stages,
+            vk::DependencyFlags::empty(),
+            &[barrier],
+            &[],
+            &[],
+        )
+    };
 }

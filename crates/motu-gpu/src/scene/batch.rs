@@ -7,6 +7,7 @@ use ash::vk;
 use motu_alloc::{plan_build_batches, AllocKind, BatchLimits, BuildSize, MemoryClass};
 
 use super::{AccelStruct, BuildOptions, Pending, ResourceReport, SizeQueries};
+use crate::command::{memory_barrier, MemoryScope};
 use crate::context::Context;
 use crate::error::{GpuError, Result};
 use crate::heap::GpuHeap;
@@ -166,12 +167,14 @@ pub(crate) fn build_pipelined<'g>(
                 unsafe {
                     if let Some(st) = stager.as_deref_mut() {
                         if st.record(device, cmd) {
-                            transfer_to_build_barrier(device, cmd);
+                            // Staged geometry copies before the builds read them.
+                            memory_barrier(device, cmd, TRANSFER_WRITES, BUILD_READS);
                         }
                     }
-                    full_barrier(device, cmd);
+                    // Coarse: builds are few and large.
+                    memory_barrier(device, cmd, MemoryScope::ALL, MemoryScope::ALL);
                     accel.cmd_build_acceleration_structures(cmd, &infos, &range_refs);
-                    full_barrier(device, cmd);
+                    memory_barrier(device, cmd, MemoryScope::ALL, MemoryScope::ALL);
                     device.cmd_reset_query_pool(cmd, queries.pool, 0, queries.count);
                     accel.cmd_write_acceleration_structures_properties(
                         cmd,
@@ -295,48 +298,15 @@ pub(crate) fn build_pipelined<'g>(
     }
 }
 
-/// Transfer writes (staged geometry copies) before acceleration-structure builds read them.
-///
-/// # Safety
-/// `cmd` must be in the recording state on `device`.
-pub(crate) unsafe fn transfer_to_build_barrier(device: &ash::Device, cmd: vk::CommandBuffer) {
-    let barrier = vk::MemoryBarrier::default()
-        .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-        .dst_access_mask(
-            vk::AccessFlags::ACCELERATION_STRUCTURE_READ_KHR | vk::AccessFlags::SHADER_READ,
-        );
-    // SAFETY: per the function contract.
-    unsafe {
-        device.cmd_pipeline_barrier(
-            cmd,
-            vk::PipelineStageFlags::TRANSFER,
-            vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR,
-            vk::DependencyFlags::empty(),
-            &[barrier],
-            &[],
-            &[],
-        )
-    };
-}
+const TRANSFER_WRITES: MemoryScope = MemoryScope {
+    stages: vk::PipelineStageFlags::TRANSFER,
+    access: vk::AccessFlags::TRANSFER_WRITE,
+};
 
-/// A full memory barrier (coarse: builds are few and large).
-///
-/// # Safety
-/// `cmd` must be in the recording state on `device`.
-pub(crate) unsafe fn full_barrier(device: &ash::Device, cmd: vk::CommandBuffer) {
-    let barrier = vk::MemoryBarrier::default()
-        .src_access_mask(vk::AccessFlags::MEMORY_WRITE)
-        .dst_access_mask(vk::AccessFlags::MEMORY_READ | vk::AccessFlags::MEMORY_WRITE);
-    // SAFETY: per the function contract.
-    unsafe {
-        device.cmd_pipeline_barrier(
-            cmd,
-            vk::PipelineStageFlags::ALL_COMMANDS,
-            vk::PipelineStageFlags::ALL_COMMANDS,
-            vk::DependencyFlags::empty(),
-            &[barrier],
-            &[],
-            &[],
-        )
-    };
-}
+const BUILD_READS: MemoryScope = MemoryScope {
+    stages: vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR,
+    access: vk::AccessFlags::from_raw(
+        vk::AccessFlags::ACCELERATION_STRUCTURE_READ_KHR.as_raw()
+            | vk::AccessFlags::SHADER_READ.as_raw(),
+    ),
+};
