@@ -223,14 +223,8 @@ pub fn import(
     let element_names: Vec<String> = scene.elements().iter().map(|e| e.name.clone()).collect();
     let subset_ids = resolve_subset(&o.subset, &element_names)?;
     let max_blas_triangles = o.max_blas_triangles.unwrap_or_else(|| {
-        let st = scene.stats();
-        let bound = motu_compile::auto_max_blas_triangles(st.unique_triangles, st.instances);
-        tracing::info!(
-            bound,
-            unique_triangles = st.unique_triangles,
-            instances = st.instances,
-            "partition bound chosen from the scene's size"
-        );
+        let bound = motu_compile::auto_max_blas_triangles(&scene);
+        tracing::info!(bound, "partition bound chosen from the scene's size");
         bound
     });
     let copts = CompileOptions {
