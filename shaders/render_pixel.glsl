@@ -111,16 +111,20 @@ vec3 sample_dir(uvec2 px, uint pixel, uint smp) {
     return camera_primary_dir(cam, px.x, px.y, rand01(pixel, smp, 0u), rand01(pixel, smp, 1u));
 }
 
-void render_pixel_impl(uvec2 px) {
-    FrameParams f = push.frame.f;
-    uint width = f.camera.width;
-    if (px.x >= width || px.y >= f.camera.height) {
+// The pixel's rays in order (each sample's primary ray, then its secondary rays), traced through
+// ONE traverse() call site: the traversal loop is inlined once per render path, and what stays
+// live across its traceRayEXT is the Carry and a few words (issue 15: with a call site per ray
+// kind and the shading state live across each, TLAS hops cost ~1.3x more on the H200). A
+// guard-band probe (streaming) traces its primary ray along `guard_dir` and stops.
+void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
+    uint width = push.frame.f.camera.width;
+    if (!guard && (px.x >= width || px.y >= push.frame.f.camera.height)) {
         return;
     }
     uint pixel = px.y * width + px.x;
-    vec3 org = f.camera.world_eye;
-    bool shaded = f.view == VIEW_SHADED;
-    uint spp = shaded ? max(f.spp, 1u) : 1u;
+    vec3 org = push.frame.f.camera.world_eye;
+    bool shaded = !guard && push.frame.f.view == VIEW_SHADED;
+    uint spp = shaded ? max(push.frame.f.spp, 1u) : 1u;
     uint traces = 0u;
     uint overflows = 0u;
     uint truncations = 0u;
@@ -135,7 +139,7 @@ void render_pixel_impl(uvec2 px) {
     c.sum = vec4(0.0);
     c.cur = vec4(0.0);
     c.st = uvec4(1u, g_stamp, 0u, 0u);
-    if (g_streaming) {
+    if (g_streaming && !guard) {
         Carry old = CarryTable(StreamRef(push.stream).s.carry).r[pixel];
         if (old.st.x != 0u) {
             c = old;
@@ -145,14 +149,68 @@ void render_pixel_impl(uvec2 px) {
     bool open = false;
     while (true) {
         uint smp = c.st.w & 0xffffu;
-        vec3 dir = sample_dir(px, pixel, smp);
-        if (c.st.x == 1u) {
+        vec3 dir = guard ? guard_dir : sample_dir(px, pixel, smp);
+        bool primary = c.st.x == 1u;
+        ShadeInput si;
+        si.ng = c.hit.yzw;
+        si.ns = c.ns.xyz;
+        si.albedo = c.albedo.xyz;
+        uint ray = c.st.w >> 16u;
+        // The ray to trace: origin, direction, reach (w).
+        vec3 r_org = org;
+        vec4 r_dir = vec4(dir, T_INFINITY);
+        bool sample_done = false;
+        if (primary) {
             g_best_t = c.hit.x;
+        } else {
+            vec3 colour = c.cur.xyz;
+            if (next_secondary_ray(si, c.rec.w, org, dir, c.hit.x, pixel, smp, ray, colour,
+                                   r_dir)) {
+                r_org = secondary_start(org, dir, c.hit.x, si.ng);
+                c.st.w = smp | (ray << 16u);
+            } else {
+                c.sum.xyz += colour + sky_term(si, c.rec.w, uint(c.cur.w));
+                sample_done = true;
+            }
+            c.cur.xyz = colour;
+            g_best_t = T_INFINITY;
+        }
+        if (!sample_done) {
             g_start = c.st.y;
             g_empty_t = T_INFINITY;
-            TraceHit h = traverse(f.root_tlas, org, dir, RAY_PRIMARY, f.lod,
-                                  f.camera.pixels_per_unit_at_1, pixel_dither(px.x, px.y), false,
+            g_t_max = r_dir.w;
+            LodParams lodp = push.frame.f.lod;
+            if (!primary && push.frame.f.shadow_lod_from_primary != 0u) {
+                lodp.forced_lod = int(c.rec.z);
+            }
+            float lod_u = primary ? (guard ? 0.5 : pixel_dither(px.x, px.y)) : 0.0;
+            TraceHit h = traverse(push.frame.f.root_tlas, r_org, r_dir.xyz,
+                                  primary ? RAY_PRIMARY : RAY_SHADOW, lodp,
+                                  push.frame.f.camera.pixels_per_unit_at_1, lod_u, !primary,
                                   traces, overflows, truncations);
+            g_t_max = T_INFINITY;
+            // A cut-short walk (stack overflow, trace cap) cannot finish in a later pass either:
+            // the pixel ends here and is counted as truncated.
+            bool cut = g_truncated || overflows != 0u;
+            if (guard) {
+                return;  // a probe marks what it passed, nothing else
+            }
+            if (!primary) {
+                g_secondary_rays += 1u;
+                uint outcome = RAY_CLEAR;
+                if (h.t < r_dir.w) {
+                    outcome = RAY_OCCLUDED;  // final whatever the open structures hold
+                } else if (!cut && stream_still_open(r_dir.w)) {
+                    open = true;  // traced again next pass, from its start stamp
+                    break;
+                }
+                vec3 colour = c.cur.xyz;
+                uint ao_open = uint(c.cur.w);
+                secondary_ray_done(outcome, ray, si, c.rec.w, org, dir, c.hit.x, colour, ao_open);
+                c.cur = vec4(colour, float(ao_open));
+                c.st.yw = uvec2(g_stamp, smp | ((ray + 1u) << 16u));
+                continue;
+            }
             if (h.tlas != NONE_U32) {
                 // Resolved now, while its BLAS and meshes are resident.
                 uint mesh = hit_mesh(h);
@@ -161,15 +219,12 @@ void render_pixel_impl(uvec2 px) {
                 c.rec = uvec4(m.source_mesh, source_primitive(m, mesh, h.primitive),
                               h.lod == NONE_U32 ? m.lod : h.lod, m.material);
                 if (shaded) {
-                    ShadeInput si = shade_input(h, mesh, org, dir);
-                    c.hit.yzw = si.ng;
-                    c.ns.xyz = si.ns;
-                    c.albedo.xyz = si.albedo;
+                    ShadeInput hs = shade_input(h, mesh, org, dir);
+                    c.hit.yzw = hs.ng;
+                    c.ns.xyz = hs.ns;
+                    c.albedo.xyz = hs.albedo;
                 }
             }
-            // A cut-short walk (stack overflow, trace cap) cannot finish in a later pass either:
-            // the pixel ends here and is counted as truncated.
-            bool cut = g_truncated || overflows != 0u;
             if (!cut && stream_still_open(c.hit.x)) {
                 open = true;  // shading waits until the primary hit is final
                 break;
@@ -181,30 +236,12 @@ void render_pixel_impl(uvec2 px) {
                 break;
             }
             if (c.hit.x < T_INFINITY) {
+                // The sample's secondary rays come next.
                 c.cur = vec4(push.materials.r[c.rec.w].emission, 0.0);
                 c.st.xyw = uvec3(2u, g_stamp, smp);
-            } else {
-                c.sum.xyz += shaded_background(dir);
+                continue;
             }
-        }
-        if (c.st.x == 2u) {
-            ShadeInput si;
-            si.ng = c.hit.yzw;
-            si.ns = c.ns.xyz;
-            si.albedo = c.albedo.xyz;
-            uint ray = c.st.w >> 16u;
-            vec3 colour = c.cur.xyz;
-            uint ao_open = uint(c.cur.w);
-            uint start_stamp = c.st.y;
-            bool done = shade_rays(si, c.rec.w, c.hit.x, c.rec.z, org, dir, pixel, smp, ray,
-                                   colour, ao_open, start_stamp, traces, overflows, truncations);
-            c.cur = vec4(colour, float(ao_open));
-            c.st.yw = uvec2(start_stamp, smp | (ray << 16u));
-            if (!done) {
-                open = true;
-                break;
-            }
-            c.sum.xyz += colour;
+            c.sum.xyz += shaded_background(dir);
         }
         if (smp + 1u >= spp) {
             break;
@@ -227,14 +264,14 @@ void render_pixel_impl(uvec2 px) {
         colour = spp > 1u ? c.sum.xyz / float(spp) : c.sum.xyz;
     } else if (rec.x == AOV_MISS) {
         colour = sky(sample_dir(px, pixel, 0u));
-    } else if (f.view == VIEW_IDS) {
+    } else if (push.frame.f.view == VIEW_IDS) {
         colour = id_colour(rec.x, rec.y);
     } else {
         colour = lod_colour(rec.w);
     }
     rec.w |= min(traces, 65535u) << 16u;
     push.aov.r[pixel] = rec;
-    push.rgba.r[pixel] = shaded ? tone_map(colour, f.exposure_scale) : encode_srgb8(colour);
+    push.rgba.r[pixel] = shaded ? tone_map(colour, push.frame.f.exposure_scale) : encode_srgb8(colour);
     if (overflows != 0u) {
         atomicAdd(push.stats.n[STAT_STACK_OVERFLOWS], overflows);
     }
@@ -245,10 +282,13 @@ void render_pixel_impl(uvec2 px) {
         atomicAdd(push.stats.n[STAT_TRUNCATED_RAYS], 1u);
     }
 }
+// The full-build entry: g_streaming is the constant false here, so the drivers fold the
+// streaming code out of this inlined copy of the traversal loop (one copy shared with the
+// streaming entry, branching on push.stream, was 8% slower on the H200; BENCHMARKS.md).
 void render_pixel(uvec2 px) {
     g_streaming = false;
     g_guard = false;
-    render_pixel_impl(px);
+    render_pixel_impl(px, false, vec3(0.0));
 }
 
 // Streaming work item `i` of a pass: an image pixel (written unless incomplete) or a
@@ -277,17 +317,11 @@ void render_stream_item(uint i) {
     g_best_t = T_INFINITY;
     g_start = s.stamp;
     g_empty_t = T_INFINITY;
-    if (!guard) {
-        render_pixel_impl(uvec2(x, y));
-        return;
+    vec3 guard_dir = vec3(0.0);
+    if (guard) {
+        guard_dir = normalize(c.world_dir00 + c.world_du * (float(x) + 0.5) +
+                              c.world_dv * (float(y) + 0.5));
     }
-    vec3 dir = normalize(c.world_dir00 + c.world_du * (float(x) + 0.5) +
-                         c.world_dv * (float(y) + 0.5));
-    uint traces = 0u;
-    uint overflows = 0u;
-    uint truncations = 0u;
-    FrameParams f = push.frame.f;
-    traverse(f.root_tlas, c.world_eye, dir, RAY_PRIMARY, f.lod, c.pixels_per_unit_at_1, 0.5,
-             false, traces, overflows, truncations);
+    render_pixel_impl(uvec2(x, y), guard, guard_dir);
 }
 #endif

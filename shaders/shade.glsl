@@ -174,12 +174,11 @@ struct ShadeInput {
 };
 
 ShadeInput shade_input(TraceHit h, uint mesh, vec3 org, vec3 dir) {
-    FrameParams f = push.frame.f;
     MaterialRecord mat = push.materials.r[push.meshes.r[mesh].material];
     ShadePoint sp = surface_point(h, mesh, org, dir);
     vec3 albedo = mat.base_color;
     if (mat.base_color_texture != NONE_U32 && sp.has_uv) {
-        ShadingRef sr = ShadingRef(f.shading);
+        ShadingRef sr = ShadingRef(push.frame.f.shading);
         TextureRecord tex = TextureTable(sr.textures).r[mat.base_color_texture];
         float tpp = sp.uv_per_pixel * sqrt(float(tex.width) * float(tex.height));
         uint64_t texels = texels_of(sr, mat.base_color_texture);
@@ -194,108 +193,110 @@ ShadeInput shade_input(TraceHit h, uint mesh, vec3 org, vec3 dir) {
     return si;
 }
 
+// The secondary rays of one sample's hit (motu_trace::shade::shade_hit): the frame's lights with
+// shadow rays, then the sky term with `ao_samples` ambient-occlusion rays, numbered in that
+// order. render_pixel.glsl traces them one at a time through its one traverse() call site
+// (issue 15: every inlined call site of the traversal loop, and every value live across its
+// traceRayEXT, costs each TLAS hop; per-ray state is recomputed here rather than kept live).
+
 // Outcomes of a secondary ray.
 const uint RAY_CLEAR = 0u;
 const uint RAY_OCCLUDED = 1u;
-// Streaming only: nothing resident occludes it, but a structure not walked since `start_stamp`
-// lies within its reach: the ray is traced again next pass.
+// Streaming only: nothing resident occludes it, but a structure not walked since the ray's start
+// stamp lies within its reach: the ray is traced again next pass.
 const uint RAY_OPEN = 2u;
 
-// A secondary (shadow or ambient-occlusion) ray: is anything in (0, t_max)?
-uint occlusion(vec3 start, vec3 d, float t_max, LodParams sl, uint start_stamp,
-               inout uint traces, inout uint overflows, inout uint truncations) {
-    g_t_max = t_max;
-    g_best_t = T_INFINITY;
-    g_start = start_stamp;
-    g_empty_t = T_INFINITY;
-    TraceHit sh = traverse(push.frame.f.root_tlas, start, d, RAY_SHADOW, sl,
-                           push.frame.f.camera.pixels_per_unit_at_1, 0.0, true, traces, overflows,
-                           truncations);
-    g_t_max = T_INFINITY;
-    g_secondary_rays += 1u;
-    if (sh.t < t_max) {
-        return RAY_OCCLUDED;  // final whatever the open structures hold
-    }
-    // A cut-short walk cannot finish in a later pass either (counted as truncated).
-    if (!g_truncated && overflows == 0u && stream_still_open(t_max)) {
-        return RAY_OPEN;
-    }
-    return RAY_CLEAR;
+// Where the secondary rays of a hit at distance `t` along (org, dir) start (geometric normal
+// `ng` facing the ray).
+vec3 secondary_start(vec3 org, vec3 dir, float t, vec3 ng) {
+    vec3 p = org + dir * t;
+    float reach = max(max(abs(org.x), abs(org.y)), abs(org.z)) + t;
+    return shadow_offset(p, ng, reach);
 }
 
-// The secondary rays of one sample's hit (motu_trace::shade::shade_hit): the frame's lights with
-// shadow rays, then the sky term with `ao_samples` ambient-occlusion rays, numbered in that order.
-// Resumable for streaming: starts at ray `ray` with the sample's colour so far in `colour` and
-// the AO rays found open so far in `ao_open`; returns false (state updated) when ray `ray` is
-// open, the full build never does. `start_stamp`: the pass the open ray started in, then the
-// current pass for the rays after it.
-bool shade_rays(ShadeInput si, uint material, float t, uint lod, vec3 org, vec3 dir, uint pixel,
-                uint smp, inout uint ray, inout vec3 colour, inout uint ao_open,
-                inout uint start_stamp, inout uint traces, inout uint overflows,
-                inout uint truncations) {
-    FrameParams f = push.frame.f;
+// Light `i`'s unshadowed term at p = org + dir·t and its shadow ray (xyz direction, w reach);
+// false when the light brings nothing there.
+bool light_term(uint i, ShadeInput si, uint material, vec3 org, vec3 dir, float t,
+                out vec4 shadow_ray, out vec3 term) {
+    vec3 e;
+    if (!light_incidence(push.frame.f.lights[i], org + dir * t, shadow_ray, e)) {
+        return false;
+    }
+    vec3 ldir = shadow_ray.xyz;
+    float ndl = dot(si.ns, ldir);
+    if (ndl <= 0.0 || dot(si.ng, ldir) <= 0.0) {
+        return false;
+    }
     MaterialRecord mat = push.materials.r[material];
-    vec3 ns = si.ns;
-    vec3 ng = si.ng;
     vec3 diffuse = si.albedo * (1.0 - mat.metallic);
     vec3 f0 = vec3(0.04) + (si.albedo - vec3(0.04)) * mat.metallic;
     float s = shininess(mat.roughness);
     float spec_norm = (s + 8.0) / (8.0 * 3.14159265359);
-    vec3 p = org + dir * t;
-    float reach = max(max(abs(org.x), abs(org.y)), abs(org.z)) + t;
-    vec3 start = shadow_offset(p, ng, reach);
-    LodParams sl = f.lod;
-    if (f.shadow_lod_from_primary != 0u) {
-        sl.forced_lod = int(lod);
-    }
-    uint nl = min(f.light_count, uint(MAX_LIGHTS));
-    for (; ray < nl; ++ray) {
-        vec4 dr;
-        vec3 e;
-        if (!light_incidence(f.lights[ray], p, dr, e)) {
-            continue;
-        }
-        vec3 ldir = dr.xyz;
-        float ndl = dot(ns, ldir);
-        if (ndl <= 0.0 || dot(ng, ldir) <= 0.0) {
-            continue;
-        }
-        if (f.shadows != 0u) {
-            uint o = occlusion(start, ldir, dr.w, sl, start_stamp, traces, overflows, truncations);
-            if (o == RAY_OPEN) {
-                return false;
-            }
-            start_stamp = g_stamp;
-            if (o == RAY_OCCLUDED) {
-                continue;
-            }
-        }
-        vec3 hv = normalize(ldir - dir);
-        float spec = spec_norm * pow(max(dot(ns, hv), 0.0), s);
-        colour += (diffuse / 3.14159265359 + f0 * spec) * e * ndl;
-    }
-    for (; ray < nl + f.ao_samples; ++ray) {
-        uint k = ray - nl;
-        vec3 d = cosine_direction(ns, rand01(pixel, smp, 2u + 2u * k),
-                                  rand01(pixel, smp, 3u + 2u * k));
-        if (dot(d, ng) > 0.0) {
-            uint o = occlusion(start, d, f.ao_distance, sl, start_stamp, traces, overflows,
-                               truncations);
-            if (o == RAY_OPEN) {
-                return false;
-            }
-            start_stamp = g_stamp;
-            if (o == RAY_CLEAR) {
-                ao_open += 1u;
-            }
-        }
-    }
-    float ao = 1.0;
-    if (f.ao_samples > 0u) {
-        ao = float(ao_open) / float(f.ao_samples);
-    }
-    colour += (diffuse + f0) * f.sky.rgb * ao;
+    vec3 hv = normalize(ldir - dir);
+    float spec = spec_norm * pow(max(dot(si.ns, hv), 0.0), s);
+    term = (diffuse / 3.14159265359 + f0 * spec) * e * ndl;
     return true;
+}
+
+// From secondary ray `ray` on: the first one that needs a trace (its direction in xyz, its
+// reach in w; true), adding the terms of the lights that need none (shadows off) to `colour`
+// and skipping lights that bring nothing and AO directions below the surface. False when no
+// ray is left (`ray` = the ray count).
+bool next_secondary_ray(ShadeInput si, uint material, vec3 org, vec3 dir, float t, uint pixel,
+                        uint smp, inout uint ray, inout vec3 colour, out vec4 traced) {
+    uint nl = min(push.frame.f.light_count, uint(MAX_LIGHTS));
+    uint n = nl + push.frame.f.ao_samples;
+    bool shadows = push.frame.f.shadows != 0u;
+    for (; ray < n; ++ray) {
+        if (ray < nl) {
+            vec3 term;
+            if (light_term(ray, si, material, org, dir, t, traced, term)) {
+                if (shadows) {
+                    return true;
+                }
+                colour += term;
+            }
+        } else {
+            uint k = ray - nl;
+            vec3 d = cosine_direction(si.ns, rand01(pixel, smp, 2u + 2u * k),
+                                      rand01(pixel, smp, 3u + 2u * k));
+            if (dot(d, si.ng) > 0.0) {
+                traced = vec4(d, push.frame.f.ao_distance);
+                return true;
+            }
+        }
+    }
+    return false;
+}
+
+// A traced secondary ray `ray` ended `outcome`: a clear light ray adds its term to `colour`,
+// a clear AO ray counts in `ao_open`.
+void secondary_ray_done(uint outcome, uint ray, ShadeInput si, uint material, vec3 org,
+                        vec3 dir, float t, inout vec3 colour, inout uint ao_open) {
+    if (outcome != RAY_CLEAR) {
+        return;
+    }
+    if (ray < min(push.frame.f.light_count, uint(MAX_LIGHTS))) {
+        vec4 shadow_ray;
+        vec3 term;
+        if (light_term(ray, si, material, org, dir, t, shadow_ray, term)) {
+            colour += term;
+        }
+    } else {
+        ao_open += 1u;
+    }
+}
+
+// The sky term of a sample whose secondary rays are all done (`ao_open` of them clear).
+vec3 sky_term(ShadeInput si, uint material, uint ao_open) {
+    MaterialRecord mat = push.materials.r[material];
+    vec3 diffuse = si.albedo * (1.0 - mat.metallic);
+    vec3 f0 = vec3(0.04) + (si.albedo - vec3(0.04)) * mat.metallic;
+    float ao = 1.0;
+    if (push.frame.f.ao_samples > 0u) {
+        ao = float(ao_open) / float(push.frame.f.ao_samples);
+    }
+    return (diffuse + f0) * push.frame.f.sky.rgb * ao;
 }
 
 // What a primary ray that hits nothing shows in the shaded view.

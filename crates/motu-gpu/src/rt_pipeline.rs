@@ -189,6 +189,17 @@ impl RtPipeline {
             result: e,
         })?[0];
         shared.set_name(p.pipeline, "traversal pipeline");
+        // The raygen's stack (what stays live across its traceRayEXT calls, the traversal
+        // stack included): each TLAS hop saves and restores it, so it is what hop cost tracks.
+        // SAFETY: the pipeline is live; group 0 is the raygen (general) group.
+        let raygen_stack_bytes = unsafe {
+            p.rt.get_ray_tracing_shader_group_stack_size(
+                p.pipeline,
+                0,
+                vk::ShaderGroupShaderKHR::GENERAL,
+            )
+        };
+        tracing::debug!(raygen_stack_bytes, "traversal pipeline created");
 
         // Shader binding table.
         let limits = ctx.limits();
