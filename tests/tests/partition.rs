@@ -154,27 +154,38 @@ fn partitioned_dense_mesh_renders_like_the_whole_one() {
     assert_same_renders(dir.path(), "lod", &p, &u, &view);
 }
 
-/// Defaults only: the default island has no BLAS above the default bound, renders like its
-/// unpartitioned compile on every backend, and `--subset` partitions the same way.
+/// Defaults only: the default island (no generator flags) has no BLAS above the bound chosen
+/// from its size (under 2^16: a small scene), renders like its unpartitioned compile on every
+/// backend, and `--subset` partitions the same way; `--max-blas-triangles` overrides the choice.
 #[test]
 fn default_island_is_partitioned_under_the_default_bound() {
     let dir = tempfile::tempdir().unwrap();
     let gen = dir.path().join("island");
-    motu_ok(&["gen", "island", "--scale", "0.002", "-o", s(&gen)]);
+    motu_ok(&["gen", "island", "-o", s(&gen)]);
     let scene = gen.join("scene.pbrt");
     let p = dir.path().join("p.motu");
     let u = dir.path().join("u.motu");
     import(&scene, &p, &[]);
     import(&scene, &u, &["--max-blas-triangles", UNPARTITIONED]);
     let (largest, bound, split) = triangles_per_blas(&p);
-    assert_eq!(bound, 65_536, "the documented default");
+    // The automatic bound: a 64th of the island's build in triangles (521k triangles + 2 per
+    // instance), at least 4,096.
+    assert!(
+        (4_096..65_536).contains(&bound),
+        "chosen from the scene's size: {bound}"
+    );
     assert!(largest <= bound, "{largest} > {bound}");
     assert!(split > 0, "the island's terrain meshes are over the bound");
     let (whole, _, _) = triangles_per_blas(&u);
     assert!(
-        whole > bound,
+        whole > 4 * bound,
         "the unpartitioned island has {whole}-triangle BLASes"
     );
+    let o = dir.path().join("o.motu");
+    import(&scene, &o, &["--max-blas-triangles", "65536"]);
+    let (o_largest, o_bound, _) = triangles_per_blas(&o);
+    assert_eq!(o_bound, 65_536, "the flag overrides the choice");
+    assert!(o_largest > bound && o_largest <= o_bound, "{o_largest}");
     // `motu report` reads the partitioned package: its largest BLAS is the bounded one.
     let rp = motu_json(&["report", s(&p), "--json"]);
     let ru = motu_json(&["report", s(&u), "--json"]);
@@ -211,7 +222,7 @@ fn default_island_is_partitioned_under_the_default_bound() {
         ],
     );
     let (largest, _, split) = triangles_per_blas(&sp);
-    assert!(largest <= 65_536 && split > 0, "{largest} {split}");
+    assert!(largest <= bound && split > 0, "{largest} {split}");
     motu_ok(&["verify", s(&sp)]);
     let ids = ["--width", "48", "--view", "ids"];
     let (a, b) = (dir.path().join("sub-p.aov"), dir.path().join("sub-u.aov"));

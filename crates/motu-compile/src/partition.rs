@@ -24,8 +24,86 @@ use motu_scene::{Aabb, MeshData};
 /// is ~24 MiB, under 10% of its full build; at 2^17 it would be ~29 MiB, at 2^19 (no split on
 /// that island: its largest BLAS has 448k triangles) ~70 MiB. The cost is small: units only
 /// multiply the instances of prototypes over the bound (island: 55,497 → 55,802 instances,
-/// 34 → 71 BLASes, full build 258 → 261 MiB).
+/// 34 → 71 BLASes, full build 258 → 261 MiB). It is the cap of the automatic bound
+/// ([`auto_max_blas_triangles`]), which `motu import` uses when no bound is given.
 pub const DEFAULT_MAX_BLAS_TRIANGLES: u32 = 1 << 16;
+
+/// The smallest bound [`auto_max_blas_triangles`] picks: below it a unit's fixed costs (an
+/// instance, a BLAS header, a build step) outweigh what a smaller floor would save.
+pub const MIN_AUTO_MAX_BLAS_TRIANGLES: u32 = 1 << 12;
+
+/// How many triangles one instance record weighs in [`auto_max_blas_triangles`]'s estimate of
+/// the whole build: an instance costs ~300 B (instance record, TLAS node share, tables; the
+/// default island's report: 3.4 MB for 13,970 instances), a triangle ~120 B (BLAS + geometry).
+pub const AUTO_TRIANGLES_PER_INSTANCE: u64 = 2;
+
+/// The share of the whole build one unit aims at, as a divisor (`whole / 64`).
+pub const AUTO_UNITS_PER_SCENE: u64 = 64;
+
+/// A 2^16 unit at most this share of the whole build (`whole / 32`) is small enough: the
+/// default bound is kept.
+pub const AUTO_KEEP_UNITS_PER_SCENE: u64 = 32;
+
+/// The instance records a smaller bound may add, as a share of the whole build (`whole / 16`):
+/// splitting a mesh into `c` clusters places each of its instances `c` times.
+pub const AUTO_MAX_ADDED_SHARE: u64 = 16;
+
+/// The partitioner's bound when the user gives none (`motu import` without
+/// `--max-blas-triangles`): [`DEFAULT_MAX_BLAS_TRIANGLES`], or less on a scene so small that a
+/// 2^16 unit would be a large share of its whole build — the streaming floor holds the largest
+/// unit, so that share is what a budget below the full build cannot go under.
+///
+/// `whole` = unique triangles + [`AUTO_TRIANGLES_PER_INSTANCE`] × instance edges estimates the
+/// full build in triangles. When a 2^16 unit is more than a 32nd of it, the bound is `whole /
+/// 64` (at least [`MIN_AUTO_MAX_BLAS_TRIANGLES`]), doubled while the instance records that
+/// splitting adds (each mesh's extra clusters × the paths that place it: a conservative count
+/// for `ml`) would cost more than a 16th of the build: heavily instanced meshes are not split
+/// (a fractal of one 30k-triangle mesh placed 25k times keeps its one BLAS). On the default
+/// `gen island` (521,130 triangles, 13,958 instances) the bound is 8,579 and the floor at 96×64
+/// falls from 18% to 9% of the full build, for +4% instances, +0.2% AS bytes and the same traces
+/// per ray (BENCHMARKS.md "Partition bound"); scenes over ~2.1M triangle-equivalents keep 2^16.
+pub fn auto_max_blas_triangles(scene: &motu_scene::Scene) -> u32 {
+    let st = scene.stats();
+    let paths = scene.path_counts();
+    let placements: Vec<(u32, u64)> = scene
+        .prototype_ids()
+        .flat_map(|p| {
+            let n = paths[p.index()].max(1);
+            scene.meshes_of(p).iter().map(move |&m| (m, n))
+        })
+        .map(|(m, n)| (scene.mesh(m).triangle_count, n))
+        .collect();
+    auto_bound(st.unique_triangles, st.instances, &placements)
+}
+
+/// [`auto_max_blas_triangles`] from the scene's unique triangles, instance edges and each
+/// mesh's (triangles, placements).
+pub fn auto_bound(unique_triangles: u64, instances: u64, placements: &[(u32, u64)]) -> u32 {
+    let cap = DEFAULT_MAX_BLAS_TRIANGLES;
+    let whole =
+        unique_triangles.saturating_add(instances.saturating_mul(AUTO_TRIANGLES_PER_INSTANCE));
+    if whole >= u64::from(cap).saturating_mul(AUTO_KEEP_UNITS_PER_SCENE) {
+        return cap;
+    }
+    let added = |bound: u32| -> u64 {
+        placements
+            .iter()
+            .map(|&(t, n)| {
+                let extra = cluster_count(u64::from(t), bound) - cluster_count(u64::from(t), cap);
+                extra.saturating_mul(n)
+            })
+            .fold(0u64, u64::saturating_add)
+    };
+    let mut bound = whole
+        .div_ceil(AUTO_UNITS_PER_SCENE)
+        .clamp(u64::from(MIN_AUTO_MAX_BLAS_TRIANGLES), u64::from(cap)) as u32;
+    while bound < cap
+        && added(bound).saturating_mul(AUTO_TRIANGLES_PER_INSTANCE) > whole / AUTO_MAX_ADDED_SHARE
+    {
+        bound = bound.saturating_mul(2).min(cap);
+    }
+    bound
+}
 
 /// One cluster of a partitioned mesh.
 #[derive(Clone, Debug, PartialEq)]
@@ -191,6 +269,31 @@ mod tests {
     fn centroid(m: &MeshData, t: usize) -> [f32; 3] {
         let p = |k: usize| m.positions[m.indices[3 * t + k] as usize];
         std::array::from_fn(|a| (p(0)[a] + p(1)[a] + p(2)[a]) / 3.0)
+    }
+
+    /// The automatic bound: 2^16 on big scenes, whole/64 on small ones (at least 2^12), raised
+    /// where splitting would multiply a heavily instanced mesh's placements.
+    #[test]
+    fn the_automatic_bound_is_a_64th_of_a_small_build_unless_splitting_multiplies_instances() {
+        // Moana-sized, and just at the keep threshold: 2^16.
+        assert_eq!(auto_bound(1_180_000_000, 27_800_000, &[]), 1 << 16);
+        assert_eq!(auto_bound(32 << 16, 0, &[]), 1 << 16);
+        // The default `gen island`: 521,130 triangles, 13,958 instances; its palm trunk (37,950
+        // triangles) placed 40 times adds 4 × 40 records: allowed.
+        assert_eq!(
+            auto_bound(521_130, 13_958, &[(57_600, 1), (37_950, 40)]),
+            8_579
+        );
+        // One 2M-triangle mesh: a 64th of it.
+        assert_eq!(auto_bound(2_000_000, 0, &[(2_000_000, 1)]), 31_250);
+        assert_eq!(
+            auto_bound(1_000, 10, &[(1_000, 10)]),
+            MIN_AUTO_MAX_BLAS_TRIANGLES
+        );
+        // A fractal: one 29,892-triangle mesh placed 25,250 times is never split (the bound
+        // doubles until it holds the mesh whole).
+        assert_eq!(auto_bound(29_892, 25_250, &[(29_892, 25_250)]), 32_768);
+        assert_eq!(auto_bound(u64::MAX, u64::MAX, &[]), 1 << 16);
     }
 
     /// Bounds respected, every source triangle in exactly one cluster with its own vertices,

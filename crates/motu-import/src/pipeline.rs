@@ -23,7 +23,9 @@ pub struct ImportOptions {
     pub levels_text: String,
     pub max_instances: u32,
     pub max_tlas_scratch_bytes: Option<u64>,
-    pub max_blas_triangles: u32,
+    /// The partitioner's bound (`--max-blas-triangles`); `None` picks it from the scene's size
+    /// ([`motu_compile::auto_max_blas_triangles`]: 2^16, less on small scenes).
+    pub max_blas_triangles: Option<u32>,
     pub lod_levels: Option<u32>,
     pub lod_min_triangles: u32,
     pub zstd_level: Option<i32>,
@@ -40,7 +42,7 @@ pub struct ImportOptions {
 }
 
 /// `motu import`'s defaults (`shared/CLI.md`): `--levels ml`, the device's 2^24 − 1 instances
-/// per TLAS, 2^16 triangles per BLAS, no LOD, 64 MiB chunks, raw (no zstd), parallel parsing,
+/// per TLAS, triangles per BLAS chosen from the scene (2^16 on big scenes), no LOD, 64 MiB chunks, raw (no zstd), parallel parsing,
 /// curves skipped, textures up to 1024², no progress reports.
 impl Default for ImportOptions {
     fn default() -> Self {
@@ -49,7 +51,7 @@ impl Default for ImportOptions {
             levels_text: "ml".into(),
             max_instances: (1 << 24) - 1,
             max_tlas_scratch_bytes: None,
-            max_blas_triangles: motu_compile::DEFAULT_MAX_BLAS_TRIANGLES,
+            max_blas_triangles: None,
             lod_levels: None,
             lod_min_triangles: 10_000,
             zstd_level: None,
@@ -131,6 +133,14 @@ pub fn resolve_subset(names: &[String], known: &[String]) -> Result<Vec<u32>, Im
     Ok(ids)
 }
 
+/// Meshes of more triangles than this go to the spill file in a direct import: the bound
+/// given, or the least bound the automatic choice can make.
+fn bound_spilled(o: &ImportOptions) -> u32 {
+    o.max_blas_triangles
+        .unwrap_or(motu_compile::MIN_AUTO_MAX_BLAS_TRIANGLES)
+        .min(motu_compile::DEFAULT_MAX_PER_NODE)
+}
+
 pub fn import(
     scene_path: &Path,
     out: &Path,
@@ -167,6 +177,8 @@ pub fn import(
     })?;
     // Meshes over the partitioner's bound are only ever stored as clusters: in a direct import
     // their whole data goes to a spill file that is dropped after compiling, not the package.
+    // The automatic bound is known only once the scene is parsed, so meshes over its least
+    // value spill; those it then keeps whole are copied into the package by the compile sink.
     let geometry = if direct {
         let spill_path = out.with_extension("partition-spill.motu");
         let spill = PackageWriter::create(&spill_path, writer_options(o)).map_err(|source| {
@@ -175,8 +187,7 @@ pub fn import(
                 source,
             }
         })?;
-        let bound = o.max_blas_triangles.min(motu_compile::DEFAULT_MAX_PER_NODE);
-        PackageGeometry::new(writer).with_spill(spill, u64::from(bound))
+        PackageGeometry::new(writer).with_spill(spill, u64::from(bound_spilled(o)))
     } else {
         PackageGeometry::new(writer)
     };
@@ -211,11 +222,16 @@ pub fn import(
 
     let element_names: Vec<String> = scene.elements().iter().map(|e| e.name.clone()).collect();
     let subset_ids = resolve_subset(&o.subset, &element_names)?;
+    let max_blas_triangles = o.max_blas_triangles.unwrap_or_else(|| {
+        let bound = motu_compile::auto_max_blas_triangles(&scene);
+        tracing::info!(bound, "partition bound chosen from the scene's size");
+        bound
+    });
     let copts = CompileOptions {
         levels: o.levels,
         max_instances_per_tlas: o.max_instances,
         max_tlas_scratch_bytes: o.max_tlas_scratch_bytes.unwrap_or(u64::MAX),
-        max_blas_triangles: o.max_blas_triangles,
+        max_blas_triangles,
         lod_levels: o.lod_levels,
         lod_triangle_threshold: o.lod_min_triangles,
         subset: (!direct).then(|| subset_ids.iter().map(|&i| ElementId(i)).collect()),
@@ -224,15 +240,32 @@ pub fn import(
 
     if direct {
         let load = |m| scene.mesh_data(m).map_err(|e| e.to_string());
+        let mut copied: HashMap<u32, MeshLocation> = HashMap::new();
         let (compiled, compile_ms) = compile_into(&scene, &copts, &geometry, &load, |m| {
-            let at = scene.mesh(motu_scene::MeshId(m.source_mesh)).location;
-            if PackageGeometry::is_spilled(at) {
+            let id = motu_scene::MeshId(m.source_mesh);
+            let at = scene.mesh(id).location;
+            if !PackageGeometry::is_spilled(at) {
+                return Ok(at);
+            }
+            // Spilled under the automatic bound's least value, but within the bound chosen:
+            // kept whole, so its data moves from the spill file into the package (once).
+            if max_blas_triangles <= bound_spilled(o) {
                 return Err(ImportError::Internal(format!(
                     "mesh {} over the BLAS bound was compiled whole",
                     m.source_mesh
                 )));
             }
-            Ok(at)
+            if let Some(&c) = copied.get(&m.source_mesh) {
+                return Ok(c);
+            }
+            let data = scene
+                .mesh_data(id)
+                .map_err(|e| ImportError::Internal(format!("mesh {}: {e}", m.source_mesh)))?;
+            let c = geometry
+                .append_mesh(m.element, &data)
+                .map_err(ImportError::Geometry)?;
+            copied.insert(m.source_mesh, c);
+            Ok(c)
         })?;
         let t2 = Instant::now();
         let writer = geometry.take_writer().map_err(ImportError::Geometry)?;

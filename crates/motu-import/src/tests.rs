@@ -98,7 +98,7 @@ fn defaults_are_the_cli_defaults() {
         (motu_compile::Levels::Ml, "ml")
     );
     assert_eq!(o.max_instances, (1 << 24) - 1);
-    assert_eq!(o.max_blas_triangles, 1 << 16);
+    assert_eq!(o.max_blas_triangles, None, "chosen from the scene's size");
     assert_eq!((o.lod_levels, o.lod_min_triangles), (None, 10_000));
     assert_eq!(
         (o.chunk_bytes, o.zstd_level, o.texture_max),
