@@ -27,6 +27,69 @@ void record_candidate(uint pi, float t_near) {
     }
 }
 
+// Streaming: the ray (in the walked TLAS's space = the proxy BLAS's, which is instanced with
+// identity) entered proxy PI `r`'s box, which stands for up to PROXY_CLUSTER_INSTANCES
+// instances of non-resident BLAS `r.target`, before `t_hi` (the trace's t_max or the closest
+// triangle committed so far). Tests each member instance's box (its BLAS bounds under its
+// tlas_from_blas, padded as the CPU pads proxy boxes), so rays passing between instances do
+// not demand the BLAS, and keeps the nearest member entry in the payload (open_t, open_blas);
+// every BLAS met in front of `t_hi` is marked open (guard probes: seen).
+// Done here, during the hardware walk, rather than as a PI candidate: a ray crossing N proxy
+// boxes took ⌈N / PI_CAPACITY⌉ re-walks of the whole TLAS for them (61 TLAS walks per ray at
+// ⅛ of the 0.3 island, most of the frame's time); now one walk meets every box once.
+void record_proxy(PiRecord r, vec3 org, vec3 dir, float t_min, float t_hi) {
+    if (push.stream == 0ul) {
+        return;  // proxies exist only in streamed skeletons
+    }
+    float t_box = slab_near(org, dir, r.aabb_min, r.aabb_max, t_min, t_hi);
+    if (t_box < 0.0) {
+        return;
+    }
+    StreamParams s = StreamRef(push.stream).s;
+    uint blas = r.target;
+    bool guard = (pl.stream_start & STREAM_GUARD_RAY) != 0u;
+    if (!guard && StampTable(s.walked).r[blas] >= pl.stream_start) {
+        return;  // walked by this ray in an earlier pass: resolved
+    }
+    uint first = floatBitsToUint(r.child_from_parent[0]);
+    uint count = floatBitsToUint(r.child_from_parent[1]);
+    BlasRecord br = push.blases.r[blas];
+    vec3 centre = 0.5 * (br.bounds_min + br.bounds_max);
+    vec3 half_size = 0.5 * (br.bounds_max - br.bounds_min);
+    U32Table members = U32Table(s.cluster_members);
+    float t_best = T_INFINITY;
+    for (uint i = 0u; i < count; ++i) {
+        InstanceRecord ir = push.instances.r[members.r[first + i]];
+        Affine m = affine_from_array(ir.tlas_from_blas);
+        vec3 c = xform_point(m, centre);
+        vec3 h = vec3(dot(abs(m.r0.xyz), half_size), dot(abs(m.r1.xyz), half_size),
+                      dot(abs(m.r2.xyz), half_size));
+        vec3 lo = c - h;
+        vec3 hi = c + h;
+        // Transformed-box rounding plus the CPU's proxy padding (`padded`): conservative.
+        float extent = 2.0 * max(max(h.x, h.y), h.z);
+        float magnitude = max(max(max(abs(lo.x), abs(lo.y)), abs(lo.z)),
+                              max(max(abs(hi.x), abs(hi.y)), abs(hi.z)));
+        float pad = 1e-3 * extent + 2e-5 * magnitude;
+        float t = slab_near(org, dir, lo - pad, hi + pad, t_min, min(t_hi, t_best));
+        if (t >= 0.0) {
+            t_best = min(t_best, t);
+        }
+    }
+    if (t_best >= t_hi) {
+        return;
+    }
+    if (guard) {
+        stream_mark(s.blas_stamps, blas, 4u * s.stamp + STREAM_SEEN);
+        return;
+    }
+    if (t_best < pl.open_t) {
+        pl.open_t = t_best;
+        pl.open_blas = blas;
+    }
+    stream_mark(s.blas_stamps, blas, 4u * s.stamp + STREAM_OPEN);
+}
+
 // The global PI index of primitive `primitive` of instance `instance` of TLAS `tlas`.
 uint pi_index(uint tlas, uint instance, uint primitive) {
     uint blas = push.instances.r[push.tlases.r[tlas].instance_base + instance].blas;

@@ -38,6 +38,8 @@
 #define STREAM_SEEN 0u
 #define STREAM_OPEN 1u
 #define STREAM_NEEDED 2u
+// Payload.stream_start bit of a guard-band ray (stamps stay below 2^30: 4 × stamp + level).
+#define STREAM_GUARD_RAY 0x80000000u
 
 // Per-pass streaming parameters (Rust: stream::StreamParams, 80 bytes). Present only when
 // push.stream != 0.
@@ -97,9 +99,10 @@ bool candidate_before(float t_a, uint pi_a, float t_b, uint pi_b) {
 }
 
 // The traversal payload (rayPayloadEXT in the pipeline backend, a plain global in the query
-// backend): 40 + 8 × PI_CAPACITY = 104 bytes. Written by raygen before the trace
-// (tlas, floor, counters) and by any-hit (candidates, kept in candidate_before's order) and
-// closest-hit (the hit) during it.
+// backend): 52 + 8 × PI_CAPACITY = 116 bytes. Written by raygen before the trace
+// (tlas, floor, counters, streaming state) and by any-hit (candidates, kept in
+// candidate_before's order; the nearest open streaming proxy) and closest-hit (the hit) during
+// it.
 struct Payload {
     uint tlas;
     uint count;
@@ -111,6 +114,13 @@ struct Payload {
     uint hit_instance;
     uint hit_geometry;
     uint hit_primitive;
+    // Streaming (candidates.glsl `record_proxy`): proxy boxes of non-resident BLASes never take
+    // a candidate slot; the walk keeps only the nearest open member entry (open_t, open_blas).
+    // stream_start: the stamp of the pass the ray started in, | STREAM_GUARD_RAY for a guard
+    // probe (marks only).
+    float open_t;
+    uint open_blas;
+    uint stream_start;
     PiCandidate c[PI_CAPACITY];
 };
 
@@ -153,6 +163,15 @@ layout(push_constant) uniform Push {
     Stats stats;
     uint64_t stream;  // StreamParams address, 0 outside streaming
 } push;
+
+// Records `id` at `mark` (4 × stamp + level) in a stamp table (read first: most marks are
+// repeats).
+void stream_mark(uint64_t table, uint id, uint mark) {
+    StampTable t = StampTable(table);
+    if (t.r[id] < mark) {
+        atomicMax(t.r[id], mark);
+    }
+}
 
 // Row-major 3×4 as three rows.
 struct Affine {

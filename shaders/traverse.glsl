@@ -7,7 +7,8 @@
 // which walks TLAS `tlas` (its address is push.tlas_addresses.r[tlas]) with the ray already
 // in that TLAS's space, t in [t_min, t_max], and fills `pl`: the closest triangle hit (hit_*) and
 // up to PI_CAPACITY programmable-instance candidates after (pl.t_floor, pl.floor_pi) in
-// (t_near, pi) order (the first ones; `truncated` set when more were found).
+// (t_near, pi) order (the first ones; `truncated` set when more were found). Streaming proxy
+// boxes are no candidates: the walk itself keeps the nearest open one (pl.open_t, open_blas).
 //
 // Semantics mirror motu-trace (the CPU oracle): rays move between spaces by affine 3×4
 // matrices without renormalising the direction, so every t is a world distance; entries whose
@@ -50,76 +51,9 @@ uint g_empty_id = NONE_U32;
 // Where the ray ends (shadow rays towards a point light); T_INFINITY otherwise.
 float g_t_max = T_INFINITY;
 
-// Records `id` at `level` in this pass (read first: most marks are repeats).
+// Records `id` at `level` in this pass.
 void stream_mark_as(uint64_t table, uint id, uint level) {
-    StampTable t = StampTable(table);
-    uint mark = 4u * g_stamp + level;
-    if (t.r[id] < mark) {
-        atomicMax(t.r[id], mark);
-    }
-}
-
-// A non-resident BLAS at `t_near` in front of the best hit so far.
-void stream_empty_blas(uint blas, float t_near) {
-    StreamParams s = StreamRef(push.stream).s;
-    if (g_guard) {
-        stream_mark_as(s.blas_stamps, blas, STREAM_SEEN);
-        return;
-    }
-    if (StampTable(s.walked).r[blas] >= g_start) {
-        return;  // walked by this ray in an earlier pass: resolved
-    }
-    if (t_near < g_empty_t) {
-        g_empty_t = t_near;
-        g_empty_id = blas;
-    }
-    stream_mark_as(s.blas_stamps, blas, STREAM_OPEN);
-}
-
-// The proxy PI table read as words: a proxy's first two words (its unused child transform)
-// hold its cluster's member range (stream/skeleton.rs `proxy_pi`; a PiRecord is 20 words).
-layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer PiWords { uint w[]; };
-#define PI_RECORD_WORDS 20u
-
-// A ray (in the proxy's TLAS space, t < t_max) entered the proxy box of cluster PI `pi` of
-// non-resident BLAS `blas`. The box covers up to 16 instances: test each member instance's
-// box (its BLAS bounds under its tlas_from_blas, padded as the CPU pads proxy boxes) and
-// report the BLAS at the nearest member entry only, so rays passing between instances do not
-// demand it (guard probes included).
-void stream_empty_cluster(uint pi, uint blas, vec3 org, vec3 dir, float t_max) {
-    StreamParams s = StreamRef(push.stream).s;
-    if (!g_guard && StampTable(s.walked).r[blas] >= g_start) {
-        return;  // walked by this ray in an earlier pass: resolved
-    }
-    PiWords words = PiWords(uint64_t(push.pis));
-    uint first = words.w[pi * PI_RECORD_WORDS];
-    uint count = words.w[pi * PI_RECORD_WORDS + 1u];
-    BlasRecord br = push.blases.r[blas];
-    vec3 centre = 0.5 * (br.bounds_min + br.bounds_max);
-    vec3 half_size = 0.5 * (br.bounds_max - br.bounds_min);
-    U32Table members = U32Table(s.cluster_members);
-    float t_best = T_INFINITY;
-    for (uint i = 0u; i < count; ++i) {
-        InstanceRecord ir = push.instances.r[members.r[first + i]];
-        Affine m = affine_from_array(ir.tlas_from_blas);
-        vec3 c = xform_point(m, centre);
-        vec3 h = vec3(dot(abs(m.r0.xyz), half_size), dot(abs(m.r1.xyz), half_size),
-                      dot(abs(m.r2.xyz), half_size));
-        vec3 lo = c - h;
-        vec3 hi = c + h;
-        // Transformed-box rounding plus the CPU's proxy padding (`padded`): conservative.
-        float extent = 2.0 * max(max(h.x, h.y), h.z);
-        float magnitude = max(max(max(abs(lo.x), abs(lo.y)), abs(lo.z)),
-                              max(max(abs(hi.x), abs(hi.y)), abs(hi.z)));
-        float pad = 1e-3 * extent + 2e-5 * magnitude;
-        float t = slab_near(org, dir, lo - pad, hi + pad, 0.0, min(t_max, t_best));
-        if (t >= 0.0) {
-            t_best = min(t_best, t);
-        }
-    }
-    if (t_best < t_max) {
-        stream_empty_blas(blas, t_best);
-    }
+    stream_mark(table, id, 4u * g_stamp + level);
 }
 
 // After a walk: whether an open structure lies in front of the best hit `best_t`; if so its
@@ -177,8 +111,16 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
         pl.t_max = hit.t;
         pl.truncated = 0u;
         pl.hit_t = -1.0;
+        pl.open_t = T_INFINITY;
+        pl.stream_start = g_start | (g_guard ? STREAM_GUARD_RAY : 0u);
         backend_trace(e.tlas, xform_point(e.tlas_from_world, org), 0.0,
                       xform_vector(e.tlas_from_world, dir), hit.t, first_hit);
+        if (pl.open_t < g_empty_t) {
+            // The walk met a non-resident BLAS in front of its hits (candidates.glsl
+            // `record_proxy`): the nearest is the pixel's request if it stays open.
+            g_empty_t = pl.open_t;
+            g_empty_id = pl.open_blas;
+        }
         if (pl.hit_t >= 0.0 && pl.hit_t < hit.t) {
             hit.t = pl.hit_t;
             hit.tlas = e.tlas;
@@ -232,16 +174,8 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
         }
         for (uint k = 0u; k < n; ++k) {
             PiCandidate cd = pl.c[order[k]];
+            // Never a proxy (PI_EMPTY_BLAS): those are handled during the walk.
             PiRecord pi = push.pis.r[cd.pi];
-            if (pi.kind == PI_EMPTY_BLAS) {
-                // A non-resident triangle BLAS in front of the best hit: open unless already
-                // walked (streaming only; every TLAS is resident).
-                if (g_streaming) {
-                    stream_empty_cluster(cd.pi, pi.target, xform_point(e.tlas_from_world, org),
-                                         xform_vector(e.tlas_from_world, dir), hit.t);
-                }
-                continue;
-            }
             if (sp >= STACK_SIZE) {
                 overflows += 1u;
                 continue;

@@ -26,9 +26,13 @@ void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool
                                  gl_RayQueryCommittedIntersectionTriangleEXT
                              ? rayQueryGetIntersectionTEXT(rq, true)
                              : t_max;
-            float t_near = slab_near(rayQueryGetIntersectionObjectRayOriginEXT(rq, false),
-                                     rayQueryGetIntersectionObjectRayDirectionEXT(rq, false),
-                                     r.aabb_min, r.aabb_max, t_min, t_hi);
+            vec3 o = rayQueryGetIntersectionObjectRayOriginEXT(rq, false);
+            vec3 d = rayQueryGetIntersectionObjectRayDirectionEXT(rq, false);
+            if (r.kind == PI_EMPTY_BLAS) {
+                record_proxy(r, o, d, t_min, t_hi);
+                continue;
+            }
+            float t_near = slab_near(o, d, r.aabb_min, r.aabb_max, t_min, t_hi);
             if (t_near >= 0.0) {
                 record_candidate(pi, t_near);
             }

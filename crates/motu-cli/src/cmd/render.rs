@@ -90,7 +90,7 @@ fn print_event(e: motu_render::RenderEvent<'_>, allow_incomplete: bool) {
                 " (incomplete: pass cap)"
             };
             eprintln!(
-                "frame {f}: {} passes{why}, {} BLAS + {} TLAS built ({}), {} evicted, {} streamed, {:.1} ms building, VRAM {} of {}",
+                "frame {f}: {} passes{why}, {} BLAS + {} TLAS built ({}), {} evicted, {} streamed, {:.1} ms building, VRAM {} of {}, {:.1} ms tracing, {:.1} ms frame",
                 st.passes,
                 st.blas_built,
                 st.tlas_built,
@@ -100,6 +100,8 @@ fn print_event(e: motu_render::RenderEvent<'_>, allow_incomplete: bool) {
                 st.build_ms,
                 crate::size::format_size(st.vram_peak_bytes),
                 crate::size::format_size(st.vram_budget_bytes),
+                st.trace_ms,
+                st.frame_ms,
             );
             if !st.complete && st.fallback_pixels > 0 {
                 // Opt-in (--stream-fallback): loud and counted, refined by later frames.

@@ -69,6 +69,7 @@ impl<'a> StreamingRenderer<'a> {
                 self.dirty.insert(t);
             }
         }
+        self.probe_tlas_room(ids)?;
         // 1. Proxy BLASes: the clusters of non-resident BLASes, compacted; their PI slots are
         // rewritten to match.
         let mut proxy_boxes: Vec<[f32; 6]> = Vec::new();
@@ -150,28 +151,43 @@ impl<'a> StreamingRenderer<'a> {
         // 2. TLASes over the resident BLASes plus the proxy instance. Non-resident instances
         // are left out (their proxy boxes stand for them), so a TLAS's size follows what is
         // resident, not its instance count; the custom index keeps each instance's record.
+        // Resident BLAS addresses (0: not resident), read by the parallel encoder.
+        let addrs: Vec<u64> = self
+            .blas
+            .iter()
+            .map(|a| a.as_ref().map_or(0, |a| a.address))
+            .collect();
         let instance_bytes: Vec<Vec<u8>> = ids
             .iter()
             .map(|&t| {
+                use rayon::prelude::*;
+                const CHUNK: usize = 1 << 16;
                 let rec = &view.tlases[t as usize];
-                let mut out = Vec::new();
-                for (k, inst) in view.instances
-                    [rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize]
-                    .iter()
+                let range = &view.instances
+                    [rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize];
+                let chunks: Vec<Vec<u8>> = range
+                    .par_chunks(CHUNK)
                     .enumerate()
-                {
-                    let b = inst.blas as usize;
-                    let Some(addr) = self.blas[b].as_ref().map(|a| a.address) else {
-                        continue;
-                    };
-                    out.extend_from_slice(&encode_instance(
-                        &inst.tlas_from_blas,
-                        view.blases[b].kind == BLAS_AABBS,
-                        inst.flags & FLAG_NEEDS_ANY_HIT != 0,
-                        addr,
-                        k as u32,
-                    ));
-                }
+                    .map(|(c, chunk)| {
+                        let mut out = Vec::new();
+                        for (j, inst) in chunk.iter().enumerate() {
+                            let b = inst.blas as usize;
+                            let addr = addrs[b];
+                            if addr == 0 {
+                                continue;
+                            }
+                            out.extend_from_slice(&encode_instance(
+                                &inst.tlas_from_blas,
+                                view.blases[b].kind == BLAS_AABBS,
+                                inst.flags & FLAG_NEEDS_ANY_HIT != 0,
+                                addr,
+                                (c * CHUNK + j) as u32,
+                            ));
+                        }
+                        out
+                    })
+                    .collect();
+                let mut out = chunks.concat();
                 if let Some((_, a)) = proxies.iter().find(|(pt, _)| *pt == t) {
                     // The proxy's record follows the TLAS's own (see `StreamingRenderer::new`).
                     out.extend_from_slice(&encode_instance(
@@ -293,6 +309,76 @@ impl<'a> StreamingRenderer<'a> {
             self.dirty.remove(&t);
         }
         Ok(())
+    }
+
+    /// Fails fast with the budget's refusal when rebuilding TLASes `ids` cannot fit now:
+    /// allocates, then frees, what every attempt holds at once (the instance buffer, the
+    /// largest TLAS's build scratch and its structure: a subset of the real peak, so a refusal
+    /// here is one the build would meet). A refused attempt is retried after evicting
+    /// (`with_eviction`, `rebuild_dirty`'s give-back rounds) and used to refuse only after
+    /// encoding, uploading every resident instance record and building the proxies: at ⅛ of
+    /// the 0.3 island (2.8M resident records per rebuild) 46 TLAS builds for 14 rebuilds,
+    /// two thirds of the frame's 13.4 s of TLAS time.
+    fn probe_tlas_room(&mut self, ids: &[u32]) -> Result<()> {
+        let counts = self.resident_instance_counts();
+        let mut records = 0u64;
+        let mut largest = (0u64, 0u64);
+        for &t in ids {
+            let proxy = self.clusters[t as usize]
+                .iter()
+                .any(|c| self.blas[c.blas as usize].is_none());
+            let n = (counts[t as usize] + u64::from(proxy)).max(1);
+            records += n;
+            let s = self.ctx.tlas_build_sizes(
+                u32::try_from(n).unwrap_or(u32::MAX),
+                AsBuildFlags::default(),
+            )?;
+            if s.acceleration_structure_size_bytes > largest.0 {
+                largest = (
+                    s.acceleration_structure_size_bytes,
+                    s.build_scratch_size_bytes,
+                );
+            }
+        }
+        let scratch_align = u64::from(
+            self.ctx
+                .limits()
+                .min_acceleration_structure_scratch_offset_alignment
+                .max(1),
+        )
+        .next_power_of_two();
+        let instances = self.heap.alloc_buffer(
+            "stream-tlas-probe-instances",
+            (records * 64).max(64),
+            BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT | BufferUsage::TRANSFER_DST,
+            AllocKind::InstanceBuffer,
+            MemoryClass::DeviceLocal,
+            16,
+        )?;
+        let scratch = match self.heap.alloc_buffer(
+            "stream-tlas-probe-scratch",
+            largest.1.max(scratch_align),
+            BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
+            AllocKind::Scratch,
+            MemoryClass::DeviceLocal,
+            scratch_align,
+        ) {
+            Ok(b) => b,
+            Err(e) => {
+                self.heap.free(instances);
+                return Err(e);
+            }
+        };
+        let accel = AccelStruct::new(
+            &self.ctx,
+            &mut self.heap,
+            "stream-tlas-probe",
+            largest.0.max(256),
+            vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+        );
+        self.heap.free(scratch);
+        self.heap.free(instances);
+        accel.map(|a| a.release(&mut self.heap))
     }
 
     /// Rebuilds every dirty TLAS. When the budget refuses even with everything unpinned

@@ -535,7 +535,7 @@ impl<'a> StreamingRenderer<'a> {
 }
 
 /// The PI record of cluster `c`'s proxy box. A proxy has no child transform: its first two
-/// words (`child_from_parent[0..2]`, read as u32 by `traverse.glsl`'s `stream_empty_cluster`)
+/// words (`child_from_parent[0..2]`, read as u32 by `candidates.glsl`'s `record_proxy`)
 /// carry the cluster's member range in the member table.
 pub(super) fn proxy_pi(c: &ProxyCluster) -> PiRecord {
     let b = &c.bounds;
