@@ -646,23 +646,36 @@ fn a_frame_build_budget_shows_the_fallback_then_converges_to_the_full_build() {
     assert_no_validation_errors(&ctx);
 }
 
-/// Sixteen distinct sphere meshes (each its own BLAS, root instances, so the full build has
-/// no PI at all) of radius 10 around the camera, their centres spread behind it: the camera
-/// is inside every one's box, and each is the nearest surface for some pixels.
-fn shells_around_the_camera() -> OwnedHierarchy {
+/// `count` distinct sphere meshes, each its own BLAS placed by a root instance (so the full
+/// build has no PI at all); `place(k)` gives sphere k's colour, UV-sphere resolution and
+/// instance transform.
+fn root_spheres(count: u32, place: impl Fn(u32) -> ([f32; 3], u32, [f32; 12])) -> OwnedHierarchy {
     let mut b = HierarchyBuilder::new();
-    let eye = base_pose().world_eye;
     let mut root = Vec::new();
-    for k in 0..16u32 {
-        let mat = b.material([0.2 + 0.05 * k as f32, 0.5, 0.4]);
-        let m = b.mesh(k, 0, mat, uv_sphere(40 + k % 4));
+    for k in 0..count {
+        let (rgb, segments, transform) = place(k);
+        let mat = b.material(rgb);
+        let m = b.mesh(k, 0, mat, uv_sphere(segments));
         let blas = b.triangle_blas(&[m]);
-        let (a, c) = ((k % 4) as f32 - 1.5, (k / 4) as f32 - 1.5);
-        let centre = [eye.x + 1.5 * a, eye.y + 1.5 * c, eye.z + 3.0];
-        root.push((srt(10.0, 0.0, centre), blas));
+        root.push((transform, blas));
     }
     let root_tlas = b.tlas(&root);
     b.finish(root_tlas)
+}
+
+/// Sixteen spheres of radius 10 around the camera, their centres spread behind it: the camera
+/// is inside every one's box, and each is the nearest surface for some pixels.
+fn shells_around_the_camera() -> OwnedHierarchy {
+    let eye = base_pose().world_eye;
+    root_spheres(16, |k| {
+        let (a, c) = ((k % 4) as f32 - 1.5, (k / 4) as f32 - 1.5);
+        let centre = [eye.x + 1.5 * a, eye.y + 1.5 * c, eye.z + 3.0];
+        (
+            [0.2 + 0.05 * k as f32, 0.5, 0.4],
+            40 + k % 4,
+            srt(10.0, 0.0, centre),
+        )
+    })
 }
 
 /// Regression (issue 14, the ⅛ island's one wrong pixel): a ray that starts inside more
@@ -714,26 +727,22 @@ fn rays_starting_inside_more_boxes_than_a_candidate_list_holds_match_the_full_bu
     assert_no_validation_errors(&ctx);
 }
 
-/// `count` distinct sphere meshes (each its own BLAS, root instances: the full build has no
-/// PI) on the view axis, one behind the other, each subtending a wider angle than the one in
-/// front (rings around the nearest), so a ray near the axis crosses every proxy box.
+/// `count` spheres on the view axis, one behind the other, each subtending a wider angle than
+/// the one in front (rings around the nearest), so a ray near the axis crosses every proxy box.
 fn receding_spheres(count: u32) -> OwnedHierarchy {
-    let mut b = HierarchyBuilder::new();
-    let mut root = Vec::new();
     let pose = base_pose();
     let (eye, forward) = (pose.world_eye, pose.world_forward.normalize());
-    for k in 0..count {
-        let mat = b.material([0.2 + 0.02 * k as f32, 0.5, 0.8 - 0.02 * k as f32]);
-        let m = b.mesh(k, 0, mat, uv_sphere(12 + k % 4));
-        let blas = b.triangle_blas(&[m]);
+    root_spheres(count, |k| {
         // Distance and angular radius (radians) of sphere k: the last fills most of the view.
         let distance = 2.0 + k as f32;
         let angle = 0.02 + 0.3 * k as f32 / count as f32;
         let centre = eye + forward * distance;
-        root.push((srt(distance * angle.sin(), 0.0, centre.into()), blas));
-    }
-    let root_tlas = b.tlas(&root);
-    b.finish(root_tlas)
+        (
+            [0.2 + 0.02 * k as f32, 0.5, 0.8 - 0.02 * k as f32],
+            12 + k % 4,
+            srt(distance * angle.sin(), 0.0, centre.into()),
+        )
+    })
 }
 
 /// Issue 14, the non-resident path: proxy boxes (non-resident BLASes) are handled during the
