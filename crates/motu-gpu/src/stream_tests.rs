@@ -5,7 +5,7 @@
 
 use std::borrow::Cow;
 
-use motu_abi::aov::MISS;
+use motu_abi::aov::{Aov, MISS};
 use motu_abi::camera::{camera_path, CameraPath, CameraPose};
 use motu_trace::fixtures::{srt, uv_sphere, HierarchyBuilder, OwnedHierarchy, PiTarget};
 
@@ -197,6 +197,16 @@ fn ids_opts(backend: Backend) -> RenderOptions {
 }
 
 const SIZE: u32 = 48;
+
+/// The streamed AOV equals the full build's, per pixel (mesh, primitive, depth).
+fn assert_same_aov(full: &Aov, streamed: &Aov, what: &str) {
+    let cmp = motu_trace::compare(full, streamed, motu_trace::DEFAULT_REL_EPS).expect("sizes");
+    assert_eq!(
+        cmp.mismatched, 0,
+        "{what}: {} of {} pixels differ from the full build",
+        cmp.mismatched, cmp.total
+    );
+}
 
 /// Streamed shaded colours against the full build's: the same shader code runs the same float
 /// operations in the same order, so they must be equal; the tolerance (one 8-bit step on at most
@@ -716,13 +726,7 @@ fn rays_starting_inside_more_boxes_than_a_candidate_list_holds_match_the_full_bu
         eprintln!("{be:?}: {}", serde_json::to_string(&st).unwrap_or_default());
         assert!(st.complete, "{st:?}");
         assert!(st.evicted > 0, "shells walked earlier are evicted: {st:?}");
-        let cmp = motu_trace::compare(&reference.aov, &out.aov, motu_trace::DEFAULT_REL_EPS)
-            .expect("sizes");
-        assert_eq!(
-            cmp.mismatched, 0,
-            "{be:?}: {} of {} pixels differ from the full build ({st:?})",
-            cmp.mismatched, cmp.total
-        );
+        assert_same_aov(&reference.aov, &out.aov, &format!("{be:?} ({st:?})"));
     }
     assert_no_validation_errors(&ctx);
 }
@@ -793,13 +797,7 @@ fn rays_crossing_many_proxy_boxes_walk_their_tlas_once_per_pass() {
             st.passes
         );
         assert_eq!(out.stats.pi_list_overflows, 0, "{be:?}");
-        let cmp = motu_trace::compare(&reference.aov, &out.aov, motu_trace::DEFAULT_REL_EPS)
-            .expect("sizes");
-        assert_eq!(
-            cmp.mismatched, 0,
-            "{be:?}: {} of {} pixels differ from the full build ({st:?})",
-            cmp.mismatched, cmp.total
-        );
+        assert_same_aov(&reference.aov, &out.aov, &format!("{be:?} ({st:?})"));
     }
     assert_no_validation_errors(&ctx);
 }
