@@ -193,6 +193,28 @@ pub(crate) fn table_usage() -> BufferUsage {
     BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS | BufferUsage::TRANSFER_DST
 }
 
+/// A device-local node table holding `bytes`, its upload queued on `up`: the buffer and its
+/// device address (the full scene's tables and the streaming skeleton's).
+pub(crate) fn upload_node_table(
+    ctx: &Context,
+    heap: &mut GpuHeap,
+    up: &mut Uploader,
+    label: &str,
+    bytes: &[u8],
+) -> Result<(HeapBuffer, u64)> {
+    let buf = heap.alloc_buffer(
+        label,
+        bytes.len() as u64,
+        table_usage(),
+        AllocKind::NodeTable,
+        MemoryClass::DeviceLocal,
+        16,
+    )?;
+    let address = buf.device_address()?.0;
+    up.upload(ctx, &buf, 0, bytes)?;
+    Ok((buf, address))
+}
+
 struct Pending {
     accel: AccelStruct,
     index: usize,
@@ -294,17 +316,9 @@ impl GpuScene {
         if bytes.is_empty() {
             return Ok(());
         }
-        let buf = heap.alloc_buffer(
-            &format!("table-{slot:?}"),
-            bytes.len() as u64,
-            table_usage(),
-            AllocKind::NodeTable,
-            MemoryClass::DeviceLocal,
-            16,
-        )?;
-        self.addresses[slot as usize] = buf.device_address()?.0;
+        let (buf, address) = upload_node_table(ctx, heap, up, &format!("table-{slot:?}"), bytes)?;
+        self.addresses[slot as usize] = address;
         self.report.table_bytes += bytes.len() as u64;
-        up.upload(ctx, &buf, 0, bytes)?;
         self.tables.push(buf);
         Ok(())
     }

@@ -16,7 +16,7 @@ use crate::context::Context;
 use crate::error::{GpuError, Result};
 use crate::heap::GpuHeap;
 use crate::memory::BufferUsage;
-use crate::scene::{table_usage, BuildOptions, MeshBlobSource, Slot, Uploader, SLOT_COUNT};
+use crate::scene::{upload_node_table, BuildOptions, MeshBlobSource, Slot, Uploader, SLOT_COUNT};
 
 pub(super) fn transformed_box(m: &[f32; 12], lo: [f32; 3], hi: [f32; 3]) -> [f32; 6] {
     let mut out = [
@@ -363,16 +363,8 @@ impl<'a> StreamingRenderer<'a> {
     /// Allocates a device-local table for `bytes`, queues its upload and keeps it in
     /// `tables`; returns its device address.
     fn upload_table(&mut self, ctx: &Context, label: &str, bytes: &[u8]) -> Result<u64> {
-        let buf = self.heap.alloc_buffer(
-            label,
-            bytes.len() as u64,
-            table_usage(),
-            AllocKind::NodeTable,
-            MemoryClass::DeviceLocal,
-            16,
-        )?;
-        let address = buf.device_address()?.0;
-        self.up_mut()?.upload(ctx, &buf, 0, bytes)?;
+        let up = self.up.as_mut().ok_or_else(staging_released)?;
+        let (buf, address) = upload_node_table(ctx, &mut self.heap, up, label, bytes)?;
         self.tables.push(buf);
         Ok(address)
     }
@@ -488,9 +480,7 @@ impl<'a> StreamingRenderer<'a> {
     }
 
     pub(super) fn up_mut(&mut self) -> Result<&mut Uploader> {
-        self.up
-            .as_mut()
-            .ok_or_else(|| GpuError::InvalidRequest("streaming: staging ring released".into()))
+        self.up.as_mut().ok_or_else(staging_released)
     }
 
     pub(super) fn upload_tlas_addresses(&mut self) -> Result<()> {
@@ -549,4 +539,8 @@ pub(super) fn proxy_pi(c: &ProxyCluster) -> PiRecord {
         aabb_max: [b[3], b[4], b[5]],
         target: c.blas,
     }
+}
+
+fn staging_released() -> GpuError {
+    GpuError::InvalidRequest("streaming: staging ring released".into())
 }
