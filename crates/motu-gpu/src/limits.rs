@@ -42,6 +42,18 @@ pub struct Limits {
     pub non_coherent_atom_size: u64,
 }
 
+impl Limits {
+    /// The alignment of build scratch offsets in bytes: the device's minimum, as a power of
+    /// two (at least 1), so sub-allocated scratch slices can be aligned with a mask.
+    pub fn scratch_alignment_bytes(&self) -> u64 {
+        u64::from(
+            self.min_acceleration_structure_scratch_offset_alignment
+                .max(1),
+        )
+        .next_power_of_two()
+    }
+}
+
 /// Lowers limits for tests (e.g. a 4096-allocation driver simulated on lavapipe). Values above
 /// the device's limit are ignored (with a warning): overrides never raise a limit.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]

@@ -87,12 +87,7 @@ impl GpuScene {
                 allow_compaction: false,
                 ..AsBuildFlags::default()
             };
-            let scratch_align = u64::from(
-                ctx.limits()
-                    .min_acceleration_structure_scratch_offset_alignment
-                    .max(1),
-            )
-            .next_power_of_two();
+            let scratch_align = ctx.limits().scratch_alignment_bytes();
             let mut tlases = Vec::new();
             let mut scratch_bytes = 0u64;
             for &t in &lod.lod_tlases {

@@ -69,12 +69,7 @@ pub(crate) fn build_pipelined<'g>(
         return Ok(Vec::new());
     }
     let accel = ctx.accel_device()?;
-    let scratch_align = u64::from(
-        ctx.limits()
-            .min_acceleration_structure_scratch_offset_alignment
-            .max(1),
-    )
-    .next_power_of_two();
+    let scratch_align = ctx.limits().scratch_alignment_bytes();
     let plan = plan_build_batches(
         sizes,
         BatchLimits {

@@ -222,12 +222,7 @@ impl<'a> StreamingRenderer<'a> {
                 Ok(()) => {
                     for &b in group {
                         if self.blas[b as usize].is_some() {
-                            for (&t, &c) in self.parents[b as usize]
-                                .iter()
-                                .zip(&self.parent_counts[b as usize])
-                            {
-                                counts[t as usize] += u64::from(c);
-                            }
+                            self.add_instance_counts(b, &mut counts);
                         }
                     }
                     i += group.len();
@@ -265,19 +260,13 @@ impl<'a> StreamingRenderer<'a> {
         for &b in group.iter().chain(&self.built_now) {
             touched.extend(self.parents[b as usize].iter().copied());
         }
+        let mut with_group = counts.to_vec();
+        for &b in group {
+            self.add_instance_counts(b, &mut with_group);
+        }
         let mut reserve = 0u64;
         for t in touched {
-            let extra: u64 = group
-                .iter()
-                .flat_map(|&b| {
-                    self.parents[b as usize]
-                        .iter()
-                        .zip(&self.parent_counts[b as usize])
-                })
-                .filter(|(&p, _)| p == t)
-                .map(|(_, &c)| u64::from(c))
-                .sum();
-            reserve += self.tlas_rebuild_bytes(t, counts[t as usize] + extra)?;
+            reserve += self.tlas_rebuild_bytes(t, with_group[t as usize])?;
         }
         Ok(reserve)
     }

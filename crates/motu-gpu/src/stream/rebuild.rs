@@ -340,13 +340,7 @@ impl<'a> StreamingRenderer<'a> {
                 );
             }
         }
-        let scratch_align = u64::from(
-            self.ctx
-                .limits()
-                .min_acceleration_structure_scratch_offset_alignment
-                .max(1),
-        )
-        .next_power_of_two();
+        let scratch_align = self.ctx.limits().scratch_alignment_bytes();
         let instances = self.heap.alloc_buffer(
             "stream-tlas-probe-instances",
             (records * 64).max(64),
@@ -396,12 +390,18 @@ impl<'a> StreamingRenderer<'a> {
         let mut counts = vec![0u64; self.view.tlases.len()];
         for (b, a) in self.blas.iter().enumerate() {
             if a.is_some() {
-                for (&t, &n) in self.parents[b].iter().zip(&self.parent_counts[b]) {
-                    counts[t as usize] += u64::from(n);
-                }
+                self.add_instance_counts(b as u32, &mut counts);
             }
         }
         counts
+    }
+
+    /// Adds BLAS `b`'s instance records to `counts`, per parent TLAS.
+    pub(super) fn add_instance_counts(&self, b: u32, counts: &mut [u64]) {
+        let b = b as usize;
+        for (&t, &n) in self.parents[b].iter().zip(&self.parent_counts[b]) {
+            counts[t as usize] += u64::from(n);
+        }
     }
 
     /// Bytes rebuilding TLAS `t` with `count` resident instance records takes beyond what its
