@@ -99,7 +99,8 @@ mod proptests;
 
 pub use flatten::{flatten_compiled, flatten_source};
 pub use partition::{
-    auto_bound, auto_max_blas_triangles, DEFAULT_MAX_BLAS_TRIANGLES, MIN_AUTO_MAX_BLAS_TRIANGLES,
+    auto_bound, auto_bound_settles_at_triangles, auto_max_blas_triangles,
+    DEFAULT_MAX_BLAS_TRIANGLES, MIN_AUTO_MAX_BLAS_TRIANGLES,
 };
 pub use split::sah_partition;
 pub use validate::{validate, validate_with, Limits, ValidateError};

@@ -48,6 +48,14 @@ pub const AUTO_KEEP_UNITS_PER_SCENE: u64 = 32;
 /// splitting a mesh into `c` clusters places each of its instances `c` times.
 pub const AUTO_MAX_ADDED_SHARE: u64 = 16;
 
+/// The unique triangles from which [`auto_max_blas_triangles`] is certainly
+/// [`DEFAULT_MAX_BLAS_TRIANGLES`] whatever else the scene holds (its estimate of the whole
+/// build only grows with instances): an import that has stored this many triangles knows the
+/// bound before the scene is parsed.
+pub fn auto_bound_settles_at_triangles() -> u64 {
+    u64::from(DEFAULT_MAX_BLAS_TRIANGLES) * AUTO_KEEP_UNITS_PER_SCENE
+}
+
 /// The partitioner's bound when the user gives none (`motu import` without
 /// `--max-blas-triangles`): [`DEFAULT_MAX_BLAS_TRIANGLES`], or less on a scene so small that a
 /// 2^16 unit would be a large share of its whole build — the streaming floor holds the largest
@@ -82,7 +90,7 @@ pub fn auto_bound(unique_triangles: u64, instances: u64, placements: &[(u32, u64
     let cap = DEFAULT_MAX_BLAS_TRIANGLES;
     let whole =
         unique_triangles.saturating_add(instances.saturating_mul(AUTO_TRIANGLES_PER_INSTANCE));
-    if whole >= u64::from(cap).saturating_mul(AUTO_KEEP_UNITS_PER_SCENE) {
+    if whole >= auto_bound_settles_at_triangles() {
         return cap;
     }
     let added = |bound: u32| -> u64 {

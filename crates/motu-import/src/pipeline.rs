@@ -187,7 +187,19 @@ pub fn import(
                 source,
             }
         })?;
-        PackageGeometry::new(writer).with_spill(spill, u64::from(bound_spilled(o)))
+        let geometry = PackageGeometry::new(writer).with_spill(spill, u64::from(bound_spilled(o)));
+        if o.max_blas_triangles.is_none() {
+            // Past this many triangles the automatic bound is known: larger scenes send only
+            // the meshes over it through the spill file, not every mesh over its least value.
+            let settled =
+                motu_compile::DEFAULT_MAX_BLAS_TRIANGLES.min(motu_compile::DEFAULT_MAX_PER_NODE);
+            geometry.raise_spill_bound_after(
+                motu_compile::auto_bound_settles_at_triangles(),
+                u64::from(settled),
+            )
+        } else {
+            geometry
+        }
     } else {
         PackageGeometry::new(writer)
     };

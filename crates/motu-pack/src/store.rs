@@ -30,6 +30,10 @@ struct Spill {
     writer: PackageWriter,
     stream: Option<StreamId>,
     over_triangles: u64,
+    /// `(after_triangles, bound)`: see [`PackageGeometry::raise_spill_bound_after`].
+    raise: Option<(u64, u64)>,
+    /// Triangles of every mesh stored so far (spilled or not).
+    stored_triangles: u64,
 }
 
 /// Marks a [`MeshLocation`] in the spill writer.
@@ -74,7 +78,23 @@ impl PackageGeometry {
                 writer: spill,
                 stream: None,
                 over_triangles,
+                raise: None,
+                stored_triangles: 0,
             });
+        }
+        self
+    }
+
+    /// Raises the spill bound to `bound` once meshes of `after_triangles` triangles in all
+    /// have been stored. For a partition bound chosen from the scene's size: past that count
+    /// the choice is known to be `bound` (`motu_compile::auto_bound_settles_at_triangles`), so
+    /// meshes under it need not take the detour through the spill file and back (those
+    /// stored before stay spilled; the import copies the ones kept whole into the package).
+    pub fn raise_spill_bound_after(self, after_triangles: u64, bound: u64) -> Self {
+        if let Ok(mut inner) = self.inner.lock() {
+            if let Some(sp) = inner.spill.as_mut() {
+                sp.raise = Some((after_triangles, bound));
+            }
         }
         self
     }
@@ -90,7 +110,14 @@ impl PackageGeometry {
         let Some(sp) = spill.as_mut() else {
             return Ok(None);
         };
-        if data.triangle_count() as u64 <= sp.over_triangles {
+        let triangles = data.triangle_count() as u64;
+        sp.stored_triangles += triangles;
+        if let Some((after, bound)) = sp.raise {
+            if sp.stored_triangles >= after {
+                sp.over_triangles = sp.over_triangles.max(bound);
+            }
+        }
+        if triangles <= sp.over_triangles {
             return Ok(None);
         }
         let layout = MeshBlobLayout::of(data);
@@ -292,5 +319,29 @@ mod tests {
         let pkg = motu_package::Package::open(&s.path).unwrap();
         let raw: u64 = pkg.chunks().iter().map(|c| c.raw_len).sum();
         assert_eq!(raw, MeshBlobLayout::of(&mesh(10)).len);
+    }
+
+    /// A raised bound applies from the mesh that brings the stored count to its threshold on;
+    /// meshes spilled before stay spilled.
+    #[test]
+    fn the_spill_bound_rises_once_enough_triangles_were_stored() {
+        let dir = tempfile::tempdir().unwrap();
+        let opts = WriterOptions::default();
+        let spill = PackageWriter::create(dir.path().join("s.motu"), opts.clone()).unwrap();
+        let mut g =
+            PackageGeometry::new(PackageWriter::create(dir.path().join("p.motu"), opts).unwrap())
+                .with_spill(spill, 10)
+                .raise_spill_bound_after(40, 20);
+        let spilled: Vec<bool> = [15, 15, 15, 15, 25]
+            .iter()
+            .enumerate()
+            .map(|(i, &t)| {
+                let at = g.store(MeshId(i as u32), 0, &mesh(t)).unwrap();
+                assert_eq!(g.load(MeshId(i as u32), at).unwrap(), mesh(t));
+                PackageGeometry::is_spilled(at)
+            })
+            .collect();
+        // 15, 30 stored: over 10 spills; 45 ≥ 40: the bound is 20 from the third mesh on.
+        assert_eq!(spilled, vec![true, true, false, false, true]);
     }
 }
