@@ -40,6 +40,10 @@
 #define STREAM_NEEDED 2u
 // Payload.stream_start bit of a guard-band ray (stamps stay below 2^30: 4 × stamp + level).
 #define STREAM_GUARD_RAY 0x80000000u
+// StreamParams.flags: a prefetch probe of the next frame's camera (render_pixel.glsl): every
+// pixel's rays, primary and secondary, run to the end against what is resident, marking what
+// they meet open (the nearest needed and counted) and writing nothing else.
+#define STREAM_PROBE_PASS 1u
 
 // Per-pass streaming parameters (Rust: stream::StreamParams, 80 bytes). Present only when
 // push.stream != 0.
@@ -55,7 +59,8 @@ struct StreamParams {
     uint64_t requests;      // u32 per BLAS: pixels whose nearest open structure it is (build order)
     uint64_t carry;         // Carry per pixel (render_pixel.glsl), zeroed at the frame's start
     uint64_t cluster_members;  // u32 global instance indices of the proxy clusters' members
-    uint64_t _pad;
+    uint flags;             // STREAM_PROBE_PASS
+    uint _pad;
 };
 
 struct FrameParams {

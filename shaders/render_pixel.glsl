@@ -139,7 +139,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
     c.sum = vec4(0.0);
     c.cur = vec4(0.0);
     c.st = uvec4(1u, g_stamp, 0u, 0u);
-    if (g_streaming && !guard) {
+    if (g_streaming && !guard && !g_probe) {
         Carry old = CarryTable(StreamRef(push.stream).s.carry).r[pixel];
         if (old.st.x != 0u) {
             c = old;
@@ -250,6 +250,9 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         c.hit = vec4(T_INFINITY, 0.0, 0.0, 0.0);
         c.st.xyw = uvec3(1u, g_stamp, smp + 1u);
     }
+    if (g_probe) {
+        return;  // a probe of the next frame marks what its rays met, nothing else
+    }
     if (g_secondary_rays != 0u) {
         atomicAdd(push.stats.n[STAT_SHADOW_RAYS], g_secondary_rays);
     }
@@ -288,12 +291,14 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
 void render_pixel(uvec2 px) {
     g_streaming = false;
     g_guard = false;
+    g_probe = false;
     render_pixel_impl(px, false, vec3(0.0));
 }
 
 // Streaming work item `i` of a pass: an image pixel (written unless incomplete) or a
 // guard-band pixel outside the image (primary ray only: it marks what the camera is about to
-// see, for prefetching, and writes nothing).
+// see, for prefetching, and writes nothing). In a probe pass (STREAM_PROBE_PASS, the next
+// frame's camera) each pixel's rays all run against what is resident and only mark.
 void render_stream_item(uint i) {
     StreamParams s = StreamRef(push.stream).s;
     if (i >= s.full_count + s.list_count) {
@@ -313,6 +318,7 @@ void render_stream_item(uint i) {
     bool guard = x < 0 || y < 0 || x >= int(c.width) || y >= int(c.height);
     g_streaming = true;
     g_guard = guard;
+    g_probe = (s.flags & STREAM_PROBE_PASS) != 0u;
     g_stamp = s.stamp;
     g_best_t = T_INFINITY;
     g_start = s.stamp;

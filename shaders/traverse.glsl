@@ -42,6 +42,7 @@ struct Entry {
 // this ray started (`walked` ≥ g_start): that pass walked it, so its hits are already carried.
 bool g_streaming = false;
 bool g_guard = false;   // a guard-band ray (prefetch probe): marks only
+bool g_probe = false;   // a probe pass of the next frame: marks, never defers nor writes
 uint g_stamp = 0u;      // this pass's stamp
 uint g_start = 0u;      // the stamp of the pass this ray (primary or shadow) started in
 float g_best_t = T_INFINITY;  // the carried best hit's t (culls this walk)
@@ -57,7 +58,8 @@ void stream_mark_as(uint64_t table, uint id, uint level) {
 }
 
 // After a walk: whether an open structure lies in front of the best hit `best_t`; if so its
-// nearest is requested (needed, counted so the host builds the most requested first).
+// nearest is requested (needed, counted so the host builds the most requested first). A probe
+// pass requests the same but goes on as if the ray were final (it prefetches, never defers).
 bool stream_still_open(float best_t) {
     if (!g_streaming || g_guard || g_empty_t >= best_t) {
         return false;
@@ -65,7 +67,7 @@ bool stream_still_open(float best_t) {
     StreamParams s = StreamRef(push.stream).s;
     stream_mark_as(s.blas_stamps, g_empty_id, STREAM_NEEDED);
     atomicAdd(StampTable(s.requests).r[g_empty_id], 1u);
-    return true;
+    return !g_probe;
 }
 
 struct TraceHit {

@@ -67,6 +67,21 @@ impl CameraParams {
         }
     }
 
+    /// The camera one more step along the motion from `prev` to `self` (eye and image plane
+    /// moved by the same difference again; same size): a guess of the next frame's camera
+    /// for prefetching, not an exact pose.
+    pub fn extrapolated_from(&self, prev: &CameraParams) -> CameraParams {
+        let step =
+            |a: [f32; 3], b: [f32; 3]| (Vec3::from_array(a) * 2.0 - Vec3::from_array(b)).to_array();
+        CameraParams {
+            world_eye: step(self.world_eye, prev.world_eye),
+            world_dir00: step(self.world_dir00, prev.world_dir00),
+            world_du: step(self.world_du, prev.world_du),
+            world_dv: step(self.world_dv, prev.world_dv),
+            ..*self
+        }
+    }
+
     /// Normalised world direction through pixel `(x, y)` at sub-pixel offset `(ox, oy)`
     /// (0.5, 0.5 = centre).
     #[inline]
@@ -309,6 +324,17 @@ impl RecordedPath {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn extrapolating_a_dolly_lands_one_step_further() {
+        let at =
+            |z: f32| CameraParams::new(Vec3::new(0.0, 1.0, z), Vec3::Z, Vec3::Y, 40.0, false, 8, 6);
+        let (a, b) = (at(0.0), at(0.5));
+        let next = b.extrapolated_from(&a);
+        assert_eq!(next, at(1.0));
+        // A held camera stays where it is.
+        assert_eq!(b.extrapolated_from(&b), b);
+    }
 
     #[test]
     fn centre_pixel_looks_forward_and_axes_follow_pbrt() {

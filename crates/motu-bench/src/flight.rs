@@ -102,7 +102,10 @@ pub fn run_flight(a: &FlightOptions) -> Result<Flight, BenchError> {
         );
     }
     if a.stream_bounds.given() {
-        bail!("--stream-fallback, --stream-build-budget and --stream-build-ms need --stream");
+        bail!(
+            "--stream-fallback, --stream-build-budget, --stream-build-ms and --stream-probe need \
+             --stream"
+        );
     }
     let scene = motu_gpu::GpuScene::build(&ctx, &view, &meshes, &motu_gpu::BuildOptions::default())
         .map_err(gpu_err("building acceleration structures"))?;
@@ -219,6 +222,8 @@ fn run_streaming(
     let mut rows = Vec::with_capacity(cams.len());
     for (f, cam) in cams.iter().enumerate() {
         let t0 = std::time::Instant::now();
+        // The flight's next camera is known: each frame ends with a probe of it (prefetch).
+        sr.set_next_camera(cams.get(f + 1).copied());
         let (out, st) = sr
             .render_frame(cam, &ropts)
             .map_err(|source| BenchError::GpuFrame {
@@ -238,6 +243,8 @@ fn run_streaming(
             "evicted": st.evicted,
             "build_ms": st.build_ms,
             "trace_ms": st.trace_ms,
+            "probe_rays": st.probe_rays,
+            "probe_ms": st.probe_ms,
             "wall_ms": wall_ms,
             "gpu_ms": out.stats.ms_per_frame,
             "vram_peak_bytes": st.vram_peak_bytes,

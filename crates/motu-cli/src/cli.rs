@@ -323,6 +323,13 @@ pub struct StreamBoundArgs {
     /// Streaming: milliseconds of building one frame may spend (same rules). Default: unbounded.
     #[arg(long, value_parser = parse_build_ms)]
     pub stream_build_ms: Option<f64>,
+    /// Streaming: after each frame whose next camera is known (a camera path, a flight; the
+    /// viewer extrapolates it), trace every ray of every STRIDE-th pixel of the next camera
+    /// against what is resident and prefetch what they meet, so the next frame mostly
+    /// completes in one pass; its rays and ms are reported (probe_rays, probe_ms). 0: no
+    /// probe. Default 1 (every pixel).
+    #[arg(long, value_name = "STRIDE")]
+    pub stream_probe: Option<u32>,
 }
 
 fn parse_build_ms(s: &str) -> Result<f64, String> {

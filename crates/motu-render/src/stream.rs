@@ -18,16 +18,20 @@ pub struct StreamBounds {
     pub frame_build_bytes: Option<u64>,
     /// Milliseconds of building one frame may spend (`None`: unbounded).
     pub frame_build_ms: Option<f64>,
+    /// `--stream-probe`: the next camera's probe stride (`None`: the default; 0: no probe).
+    pub probe_stride: Option<u32>,
 }
 
 impl StreamBounds {
     /// The streaming options with these bounds (the rest default).
     pub fn options(&self) -> motu_gpu::StreamOptions {
+        let d = motu_gpu::StreamOptions::default();
         motu_gpu::StreamOptions {
             fallback: self.fallback,
             frame_build_bytes: self.frame_build_bytes.unwrap_or(0),
             frame_build_ms: self.frame_build_ms.unwrap_or(0.0),
-            ..Default::default()
+            probe_stride: self.probe_stride.unwrap_or(d.probe_stride),
+            ..d
         }
     }
 
@@ -36,6 +40,7 @@ impl StreamBounds {
         self.fallback != motu_gpu::StreamFallback::Off
             || self.frame_build_bytes.is_some()
             || self.frame_build_ms.is_some()
+            || self.probe_stride.is_some()
     }
 }
 
@@ -104,11 +109,14 @@ pub(crate) fn render_streaming(
     let mut frames = Vec::new();
     let mut last = None;
     let frame_count = recorded.map_or(s.frames, |r| r.len() as u32);
+    let camera_at = |f: u32| match recorded {
+        Some(r) => r[f as usize],
+        None => camera_path(&pose, &path, f, s.frames).params(w, h),
+    };
     for f in 0..frame_count {
-        let cam = match recorded {
-            Some(r) => r[f as usize],
-            None => camera_path(&pose, &path, f, s.frames).params(w, h),
-        };
+        let cam = camera_at(f);
+        // The path's next camera is known: the frame ends with a probe of it (prefetch).
+        sr.set_next_camera((f + 1 < frame_count).then(|| camera_at(f + 1)));
         let (out, st) = sr
             .render_frame(&cam, &ropts)
             .map_err(|source| RenderError::StreamFrame { frame: f, source })?;

@@ -155,6 +155,9 @@ pub struct PackageSource<'p> {
     lod_mode: &'static str,
     renderer: Renderer<'p>,
     settings: PackageSourceSettings,
+    /// The camera of the previous streamed frame: a moving camera's next one is extrapolated
+    /// from it for the streaming probe (prefetch).
+    prev_camera: Option<CameraParams>,
     total_structures: u64,
 }
 
@@ -194,6 +197,7 @@ impl<'p> PackageSource<'p> {
             renderer: Renderer::Full(None),
             total_structures: (base.blases.len() + base.tlases.len()) as u64,
             settings,
+            prev_camera: None,
         };
         src.rebuild(&o.elements_on, o.lod_instance, &o.render.lod)?;
         Ok(src)
@@ -314,6 +318,10 @@ impl<'p> PackageSource<'p> {
                 })
             }
             Renderer::Stream(Some(sr)) => {
+                // A moving camera is probed where it is heading (one more step alike).
+                let moving = self.prev_camera.filter(|p| p != camera);
+                sr.set_next_camera(moving.map(|p| camera.extrapolated_from(&p)));
+                self.prev_camera = Some(*camera);
                 let (out, st) = if progressive {
                     // Trace with what is resident, build toward the next frame (bounded).
                     sr.render_progressive(camera, opts)

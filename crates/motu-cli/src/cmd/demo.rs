@@ -111,6 +111,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             stream_fallback: crate::cli::FallbackArg::Off,
             stream_build_budget: None,
             stream_build_ms: None,
+            stream_probe: None,
         },
         frames: 1,
         stats: Some(stats_path.clone()),

@@ -14,7 +14,8 @@ pub use motu_render::{
     camera_params, camera_pose, choose_lod_mode, load_camera_path, PackageMeshes,
 };
 
-/// The streaming bounds of `--stream-fallback`, `--stream-build-budget`, `--stream-build-ms`.
+/// The streaming bounds of `--stream-fallback`, `--stream-build-budget`, `--stream-build-ms`,
+/// and `--stream-probe`.
 pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBounds {
     motu_render::StreamBounds {
         fallback: match b.stream_fallback {
@@ -23,6 +24,7 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         },
         frame_build_bytes: b.stream_build_budget,
         frame_build_ms: b.stream_build_ms,
+        probe_stride: b.stream_probe,
     }
 }
 
@@ -206,7 +208,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     }
     if !a.stream && stream_bounds(&a.stream_bounds).given() {
         bail!(
-            "--stream-fallback, --stream-build-budget and --stream-build-ms bound streaming \
+            "--stream-fallback, --stream-build-budget, --stream-build-ms and --stream-probe bound streaming \
              frames: add --stream (with --vram-budget)"
         );
     }

@@ -41,7 +41,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
     let streaming = a.stream || a.vram_budget.is_some();
     if !streaming && crate::cmd::render::stream_bounds(&a.stream_bounds).given() {
         bail!(
-            "--stream-fallback, --stream-build-budget and --stream-build-ms bound streaming \
+            "--stream-fallback, --stream-build-budget, --stream-build-ms and --stream-probe bound streaming \
              frames: add --stream or --vram-budget"
         );
     }

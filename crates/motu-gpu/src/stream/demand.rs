@@ -29,6 +29,30 @@ impl Demand {
         self.blases.len() + self.later.len()
     }
 
+    /// Puts `first`'s structures ahead of this demand's (a structure in both keeps
+    /// `first`'s place): `first` must be sorted.
+    pub(super) fn merge_first(&mut self, first: Demand) {
+        let mut blases = first.blases;
+        let ahead: std::collections::HashSet<u32> = blases.iter().map(|&(b, _)| b).collect();
+        blases.extend(
+            self.blases
+                .iter()
+                .copied()
+                .filter(|(b, _)| !ahead.contains(b)),
+        );
+        self.blases = blases;
+        let mut later = first.later;
+        let ahead: std::collections::HashSet<u32> =
+            self.blases.iter().chain(&later).map(|&(b, _)| b).collect();
+        later.extend(
+            self.later
+                .iter()
+                .copied()
+                .filter(|(b, _)| !ahead.contains(b)),
+        );
+        self.later = later;
+    }
+
     /// Most requested first (ties: lower id first, so runs are deterministic).
     pub(super) fn sort(&mut self) {
         for v in [&mut self.blases, &mut self.later] {

@@ -9,7 +9,8 @@ use crate::render::{frame_params, FrameMeasure, RenderOptions, RenderOutput, Ren
 
 impl<'a> StreamingRenderer<'a> {
     /// Renders one frame: build–traverse passes until every pixel is complete (or
-    /// `max_passes`), then a prefetch of what the guard band saw. `opts.frames` is ignored
+    /// `max_passes`), then a prefetch of what the guard band saw and, when the caller named
+    /// the next frame's camera ([`Self::set_next_camera`]), what a probe of it met. `opts.frames` is ignored
     /// (one frame per call: a camera path calls this per frame).
     pub fn render_frame(
         &mut self,
@@ -72,8 +73,23 @@ impl<'a> StreamingRenderer<'a> {
                 return Err(e);
             }
         }
-        let result = self.run_passes(&fb, w, h, &guard);
-        let out = match result {
+        let next = self.next_camera.take();
+        let result = self.run_passes(&fb, w, h, &guard).and_then(|out| {
+            // The probe of the next frame's camera (its buffers are this frame's: same size).
+            let probe = match next {
+                Some(n)
+                    if self.opts.probe_stride > 0
+                        && (n.width, n.height) == (w, h)
+                        && self.frame_stats.complete
+                        && !self.frame_build_spent() =>
+                {
+                    Some(self.probe_next_camera(&fb, &n, opts)?)
+                }
+                _ => None,
+            };
+            Ok((out, probe))
+        });
+        let (out, probe) = match result {
             Ok(r) => r,
             Err(e) => {
                 fb.release(&mut self.heap);
@@ -81,7 +97,7 @@ impl<'a> StreamingRenderer<'a> {
             }
         };
         self.keep_frame_buffers(fb, w, h, guard.len());
-        let (records, rgba_words, counters, guard_demand) = out;
+        let (records, rgba_words, counters, mut guard_demand) = out;
         // The working set of the frame's rays (before the prefetch builds for the next).
         for (b, &f) in self.used_in_frame.iter().enumerate() {
             if f == self.frame {
@@ -90,7 +106,13 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         // Prefetch: what the guard band saw, evicting only what this frame did not see (what
-        // does not fit is skipped), within what is left of the frame's build budget.
+        // does not fit is skipped), within what is left of the frame's build budget. With a
+        // probe of the next camera, what its rays need comes first, and only what the probe
+        // saw is kept: this frame is done, the next one is what the room is for.
+        if let Some(p) = probe {
+            guard_demand.merge_first(p);
+            self.frame_first_stamp = self.stamp;
+        }
         if !guard_demand.is_empty() && self.frame_stats.complete && !self.frame_build_spent() {
             if let Err(e) = self.make_resident(&guard_demand, true) {
                 self.quarantine_after_failure(&e);

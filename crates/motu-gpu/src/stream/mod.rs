@@ -66,6 +66,7 @@ mod floor;
 mod frame;
 mod params;
 mod passes;
+mod probe;
 mod rebuild;
 mod residency;
 mod shading;
@@ -120,6 +121,11 @@ pub struct StreamOptions {
     /// the CLI); `Coarse`: the bounds of the nearest missing structure, counted as
     /// [`FrameStreamStats::fallback_pixels`].
     pub fallback: StreamFallback,
+    /// After a frame, probe the next frame's camera when the caller names it
+    /// ([`StreamingRenderer::set_next_camera`]): every ray of every `probe_stride`-th pixel
+    /// (each axis) runs against what is resident and marks what it meets, and that is
+    /// prefetched (see `probe.rs`); 0: no probe.
+    pub probe_stride: u32,
     /// Bytes (meshes plus acceleration structures) one frame may build; 0: unbounded. At least
     /// one structure is built per frame, so a frame may overshoot by one; when it is spent the
     /// frame stops (unfinished pixels, or fallback) and later frames go on refining.
@@ -154,6 +160,7 @@ impl Default for StreamOptions {
             guard_band_px: 8,
             compact: true,
             build_open_early: true,
+            probe_stride: 1,
             fallback: StreamFallback::Off,
             frame_build_bytes: 0,
             frame_build_ms: 0.0,
@@ -188,8 +195,12 @@ pub struct FrameStreamStats {
     pub tlas_built: u32,
     /// Resident TLASes rebuilt because their instance set changed (with their proxies).
     pub tlas_rebuilt: u32,
-    /// Structures built after the frame from the guard band.
+    /// Structures built after the frame from the guard band and the next camera's probe.
     pub prefetched: u32,
+    /// Rays of the probe of the next frame's camera (its pixels' primary rays; 0: no probe),
+    /// and the probe's trace time (not in `trace_ms`).
+    pub probe_rays: u64,
+    pub probe_ms: f64,
     /// Structures evicted (BLASes and TLASes).
     pub evicted: u32,
     /// Demanded structures left unbuilt in a pass because they did not fit next to what the
@@ -357,7 +368,11 @@ pub struct StreamingRenderer<'a> {
     /// BLASes per build group to try first (see `build_blas_queue`).
     group_hint: usize,
     stamp: u32,
+    /// The first stamp whose sightings a prefetch keeps resident: the frame's first pass, or
+    /// the probe of the next camera once it ran.
     frame_first_stamp: u32,
+    /// The next frame's camera, probed after this frame (`set_next_camera`).
+    next_camera: Option<motu_abi::camera::CameraParams>,
     /// Set when a failed build step left the root TLAS referencing freed memory.
     poisoned: Option<String>,
     frame: u64,
@@ -409,6 +424,14 @@ impl<'a> StreamingRenderer<'a> {
 
     fn frame_first_stamp(&self) -> u32 {
         self.frame_first_stamp
+    }
+
+    /// Names the camera of the next frame (a camera path's, a flight's): after the next
+    /// [`Self::render_frame`] a probe of it prefetches what its rays will meet, primary and
+    /// secondary, so that frame mostly completes in one pass. Used by one frame; a camera of
+    /// another size is not probed.
+    pub fn set_next_camera(&mut self, camera: Option<motu_abi::camera::CameraParams>) {
+        self.next_camera = camera;
     }
 
     /// Statistics of the run so far.

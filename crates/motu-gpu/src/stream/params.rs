@@ -26,8 +26,14 @@ pub(super) struct StreamParams {
     /// u32 global instance indices of the proxy clusters' members (a proxy PI record names
     /// its range), 0: no proxies.
     pub(super) cluster_members: u64,
-    pub(super) _pad: u64,
+    /// [`STREAM_PROBE_PASS`] or 0.
+    pub(super) flags: u32,
+    pub(super) _pad: u32,
 }
+
+/// `STREAM_PROBE_PASS` of `common.glsl`: the pass probes the next frame's camera (every
+/// pixel's rays run against what is resident and only mark what they meet).
+pub(super) const STREAM_PROBE_PASS: u32 = 1;
 
 /// Bytes of one pixel's `Carry` (`render_pixel.glsl`).
 pub(super) const CARRY_BYTES: u64 = 128;

@@ -50,92 +50,16 @@ impl<'a> StreamingRenderer<'a> {
                 self.frame_stats.evicted,
             );
             let traced = u64::from(full_count) + list.len() as u64;
-            self.stamp += 1;
             self.frame_stats.passes += 1;
             let first = self.frame_stats.passes == 1;
-            // Every resident BLAS is walked by every ray of this pass that reaches its box in
-            // front of its best hit: a ray that started by now needs it no more.
-            for b in 0..nb {
-                if self.blas[b].is_some() && self.buildable[b] {
-                    self.walked[b] = self.stamp;
-                }
-            }
-            let walked = self.walked_table()?;
-            if nb > 0 {
-                walked.write(0, &self.walked)?;
-            }
-            fb.pixel_list.write(0, &list)?;
-            let sp = StreamParams {
-                blas_stamps: self
-                    .blas_stamps
-                    .as_ref()
-                    .map_or(Ok(0), |b| b.device_address().map(|a| a.0))?,
-                walked: walked.device_address()?.0,
-                pixel_list: fb.pixel_list.device_address()?.0,
-                incomplete: fb.incomplete.device_address()?.0,
-                stamp: self.stamp,
-                full_count,
-                list_count: list.len() as u32,
-                blas_count: nb as u32,
-                requests: fb.requests.device_address()?.0,
-                carry: fb.carry.device_address()?.0,
-                cluster_members: self.cluster_members,
-                _pad: 0,
-            };
-            fb.stream.write(0, std::slice::from_ref(&sp))?;
-            let mut addresses = self.addresses;
-            addresses[Slot::Frame as usize] = fb.params.device_address()?.0;
-            addresses[Slot::Aov as usize] = fb.aov.device_address()?.0;
-            addresses[Slot::Rgba as usize] = fb.rgba.device_address()?.0;
-            addresses[Slot::Stats as usize] = fb.stats.device_address()?.0;
-            addresses[Slot::Stream as usize] = fb.stream.device_address()?.0;
-            let push_bytes: &[u8] = bytemuck::cast_slice(&addresses);
-            let n = full_count + list.len() as u32;
-            let Some((_, _, tracer)) = &self.tracer else {
-                return Err(GpuError::InvalidRequest(
-                    "streaming: no trace pipeline".into(),
-                ));
-            };
-            let (dims, groups) = match tracer {
-                Tracer::Pipeline(_) => {
-                    let width = n.clamp(1, 4096);
-                    ([width, n.div_ceil(width).max(1)], None)
-                }
-                Tracer::Query(_) => {
-                    let g = n.div_ceil(64).max(1);
-                    ([0, 0], Some([g.min(65535), g.div_ceil(65535)]))
-                }
-            };
-            let t0 = Instant::now();
-            let mut rec = self.ctx.record("stream pass")?;
-            if first {
-                rec.fill_buffer(&fb.stats, 0, (STAT_WORDS * 4) as u64, 0)?;
-                rec.fill_buffer(&fb.carry, 0, pixels * CARRY_BYTES, 0)?;
-            }
-            rec.fill_buffer(&fb.incomplete, 0, 4, 0)?;
-            rec.fill_buffer(&fb.requests, 0, stamps_bytes.max(4), 0)?;
-            rec.barrier();
-            tracer.record(&mut rec, push_bytes, dims, groups)?;
-            rec.barrier();
-            if let Some(bs) = &self.blas_stamps {
-                if nb > 0 {
-                    rec.copy_buffer(bs, 0, &fb.readback, 0, stamps_bytes)?;
-                    rec.copy_buffer(&fb.requests, 0, &fb.readback, req_off, stamps_bytes)?;
-                }
-            }
-            rec.copy_buffer(&fb.incomplete, 0, &fb.readback, inc_off, 4 + 4 * pixels)?;
-            rec.submit_and_wait()?;
-            self.frame_stats.trace_ms += t0.elapsed().as_secs_f64() * 1e3;
-            let stamps: Vec<u32> = fb.readback.read_vec(0, nb)?;
-            let requests: Vec<u32> = fb.readback.read_vec(req_off, nb)?;
-            let count = fb
-                .readback
-                .read_vec::<u32>(inc_off, 1)?
-                .first()
-                .copied()
-                .unwrap_or(0);
-            let count = count.min(pixels as u32);
-            let incomplete: Vec<u32> = fb.readback.read_vec(inc_off + 4, count as usize)?;
+            let PassReadback {
+                stamps,
+                requests,
+                incomplete,
+                trace_ms,
+            } = self.trace_pass(fb, pixels, full_count, &list, first, 0)?;
+            self.frame_stats.trace_ms += trace_ms;
+            let count = incomplete.len() as u32;
             // Resident BLASes seen refresh their LRU age; empty ones are needed (some pixel's
             // nearest open one), open (needed later) or, in pass 1, prefetch candidates (the
             // guard band saw them).
@@ -274,6 +198,127 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         Ok((records, rgba, counters, guard_demand))
+    }
+}
+
+/// What one traced pass left for the host: per-BLAS stamps and request counts, and the
+/// incomplete pixels (packed `x | y << 16`).
+pub(super) struct PassReadback {
+    pub(super) stamps: Vec<u32>,
+    pub(super) requests: Vec<u32>,
+    pub(super) incomplete: Vec<u32>,
+    /// Wall time of the trace submission.
+    pub(super) trace_ms: f64,
+}
+
+impl<'a> StreamingRenderer<'a> {
+    /// Traces one pass under a new stamp: the first `full_count` image pixels (row order) then
+    /// `list` (packed, biased), with `flags` (`STREAM_PROBE_PASS`); `first` clears the stats
+    /// and the carried state. Reads back the stamps, requests and incomplete pixels.
+    pub(super) fn trace_pass(
+        &mut self,
+        fb: &FrameBuffers,
+        pixels: u64,
+        full_count: u32,
+        list: &[u32],
+        first: bool,
+        flags: u32,
+    ) -> Result<PassReadback> {
+        let nb = self.view.blases.len();
+        let stamps_bytes = (nb * 4) as u64;
+        let req_off = stamps_bytes.div_ceil(16) * 16;
+        let inc_off = req_off + req_off;
+        self.stamp += 1;
+        // Every resident BLAS is walked by every ray of this pass that reaches its box in
+        // front of its best hit: a ray that started by now needs it no more.
+        for b in 0..nb {
+            if self.blas[b].is_some() && self.buildable[b] {
+                self.walked[b] = self.stamp;
+            }
+        }
+        let walked = self.walked_table()?;
+        if nb > 0 {
+            walked.write(0, &self.walked)?;
+        }
+        fb.pixel_list.write(0, list)?;
+        let sp = StreamParams {
+            blas_stamps: self
+                .blas_stamps
+                .as_ref()
+                .map_or(Ok(0), |b| b.device_address().map(|a| a.0))?,
+            walked: walked.device_address()?.0,
+            pixel_list: fb.pixel_list.device_address()?.0,
+            incomplete: fb.incomplete.device_address()?.0,
+            stamp: self.stamp,
+            full_count,
+            list_count: list.len() as u32,
+            blas_count: nb as u32,
+            requests: fb.requests.device_address()?.0,
+            carry: fb.carry.device_address()?.0,
+            cluster_members: self.cluster_members,
+            flags,
+            _pad: 0,
+        };
+        fb.stream.write(0, std::slice::from_ref(&sp))?;
+        let mut addresses = self.addresses;
+        addresses[Slot::Frame as usize] = fb.params.device_address()?.0;
+        addresses[Slot::Aov as usize] = fb.aov.device_address()?.0;
+        addresses[Slot::Rgba as usize] = fb.rgba.device_address()?.0;
+        addresses[Slot::Stats as usize] = fb.stats.device_address()?.0;
+        addresses[Slot::Stream as usize] = fb.stream.device_address()?.0;
+        let push_bytes: &[u8] = bytemuck::cast_slice(&addresses);
+        let n = full_count + list.len() as u32;
+        let Some((_, _, tracer)) = &self.tracer else {
+            return Err(GpuError::InvalidRequest(
+                "streaming: no trace pipeline".into(),
+            ));
+        };
+        let (dims, groups) = match tracer {
+            Tracer::Pipeline(_) => {
+                let width = n.clamp(1, 4096);
+                ([width, n.div_ceil(width).max(1)], None)
+            }
+            Tracer::Query(_) => {
+                let g = n.div_ceil(64).max(1);
+                ([0, 0], Some([g.min(65535), g.div_ceil(65535)]))
+            }
+        };
+        let t0 = Instant::now();
+        let mut rec = self.ctx.record("stream pass")?;
+        if first {
+            rec.fill_buffer(&fb.stats, 0, (STAT_WORDS * 4) as u64, 0)?;
+            rec.fill_buffer(&fb.carry, 0, pixels * CARRY_BYTES, 0)?;
+        }
+        rec.fill_buffer(&fb.incomplete, 0, 4, 0)?;
+        rec.fill_buffer(&fb.requests, 0, stamps_bytes.max(4), 0)?;
+        rec.barrier();
+        tracer.record(&mut rec, push_bytes, dims, groups)?;
+        rec.barrier();
+        if let Some(bs) = &self.blas_stamps {
+            if nb > 0 {
+                rec.copy_buffer(bs, 0, &fb.readback, 0, stamps_bytes)?;
+                rec.copy_buffer(&fb.requests, 0, &fb.readback, req_off, stamps_bytes)?;
+            }
+        }
+        rec.copy_buffer(&fb.incomplete, 0, &fb.readback, inc_off, 4 + 4 * pixels)?;
+        rec.submit_and_wait()?;
+        let trace_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let stamps: Vec<u32> = fb.readback.read_vec(0, nb)?;
+        let requests: Vec<u32> = fb.readback.read_vec(req_off, nb)?;
+        let count = fb
+            .readback
+            .read_vec::<u32>(inc_off, 1)?
+            .first()
+            .copied()
+            .unwrap_or(0);
+        let count = count.min(pixels as u32);
+        let incomplete: Vec<u32> = fb.readback.read_vec(inc_off + 4, count as usize)?;
+        Ok(PassReadback {
+            stamps,
+            requests,
+            incomplete,
+            trace_ms,
+        })
     }
 }
 

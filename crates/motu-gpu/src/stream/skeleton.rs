@@ -337,6 +337,7 @@ impl<'a> StreamingRenderer<'a> {
             group_hint: 16,
             stamp: 0,
             frame_first_stamp: 1,
+            next_camera: None,
             poisoned: None,
             frame: 0,
             kept: Default::default(),

@@ -1,0 +1,88 @@
+//! The prefetch probe: after a frame, when the caller knows the next frame's camera (a camera
+//! path, a flight), one pass of that camera's pixels runs every ray a pixel traces (primary,
+//! then the lights' shadow rays and the AO rays from the resident hit) against what is
+//! resident, writing nothing but the stamps. What they meet and is not resident is prefetched;
+//! what is resident and met is kept. The guard band sees only primary visibility just outside
+//! the image; shadow and AO rays reach structures the camera never sees, and a moving camera's
+//! new hit points send them elsewhere: without the probe each such frame needed a second pass.
+
+use motu_abi::camera::CameraParams;
+use motu_alloc::ItemId;
+
+use super::buffers::FrameBuffers;
+use super::demand::Demand;
+use super::params::STREAM_PROBE_PASS;
+use super::passes::{pack_biased, PassReadback};
+use super::StreamingRenderer;
+use crate::error::Result;
+use crate::render::{frame_params, RenderOptions};
+
+/// Stamp level `STREAM_NEEDED` of `common.glsl`: some probe ray's nearest open structure.
+const LEVEL_NEEDED: u32 = 2;
+
+impl<'a> StreamingRenderer<'a> {
+    /// Traces the probe of `next` (same image size as the frame just rendered, whose buffers
+    /// `fb` are) and returns what it met that is not resident: the structures some ray would
+    /// open first (most requested first), then the rest of what its rays met. Resident
+    /// structures it met count as seen by this frame, so the prefetch does not evict them.
+    pub(super) fn probe_next_camera(
+        &mut self,
+        fb: &FrameBuffers,
+        next: &CameraParams,
+        opts: &RenderOptions,
+    ) -> Result<Demand> {
+        let mut params = frame_params(next, opts, self.view.root_tlas);
+        params.shading = self.shading.address;
+        fb.params.write(0, std::slice::from_ref(&params))?;
+        let pixels = u64::from(next.width) * u64::from(next.height);
+        let stride = self.opts.probe_stride.max(1);
+        let (full, list) = if stride == 1 {
+            (pixels as u32, Vec::new())
+        } else {
+            // Every stride-th pixel of each axis, from the middle of its stride × stride cell.
+            let o = stride / 2;
+            let list: Vec<u32> = (o..next.height)
+                .step_by(stride as usize)
+                .flat_map(|y| {
+                    (o..next.width)
+                        .step_by(stride as usize)
+                        .map(move |x| pack_biased(x as i32, y as i32))
+                })
+                .collect();
+            (0, list)
+        };
+        let rays = u64::from(full) + list.len() as u64;
+        let PassReadback {
+            stamps,
+            requests,
+            trace_ms,
+            ..
+        } = self.trace_pass(fb, pixels, full, &list, false, STREAM_PROBE_PASS)?;
+        self.frame_stats.probe_rays += rays;
+        self.frame_stats.probe_ms += trace_ms;
+        let mut demand = Demand::default();
+        for (b, &v) in stamps.iter().enumerate() {
+            if v >> 2 != self.stamp {
+                continue;
+            }
+            self.last_seen[b] = self.stamp;
+            if !self.buildable[b] {
+                continue;
+            }
+            if self.blas[b].is_some() {
+                self.residency
+                    .mark_visible(ItemId(b as u32), u64::from(self.stamp));
+                continue;
+            }
+            // Needed (a ray's nearest) first by request count; then everything else it met.
+            let n = if v & 3 == LEVEL_NEEDED {
+                requests.get(b).copied().unwrap_or(0).max(1)
+            } else {
+                0
+            };
+            demand.blases.push((b as u32, n));
+        }
+        demand.sort();
+        Ok(demand)
+    }
+}
