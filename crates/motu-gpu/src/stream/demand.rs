@@ -32,25 +32,12 @@ impl Demand {
     /// Puts `first`'s structures ahead of this demand's (a structure in both keeps
     /// `first`'s place): `first` must be sorted.
     pub(super) fn merge_first(&mut self, first: Demand) {
-        let mut blases = first.blases;
-        let ahead: std::collections::HashSet<u32> = blases.iter().map(|&(b, _)| b).collect();
-        blases.extend(
-            self.blases
-                .iter()
-                .copied()
-                .filter(|(b, _)| !ahead.contains(b)),
-        );
-        self.blases = blases;
-        let mut later = first.later;
-        let ahead: std::collections::HashSet<u32> =
-            self.blases.iter().chain(&later).map(|&(b, _)| b).collect();
-        later.extend(
-            self.later
-                .iter()
-                .copied()
-                .filter(|(b, _)| !ahead.contains(b)),
-        );
-        self.later = later;
+        let mut seen = std::collections::HashSet::new();
+        let mut keep = |list: Vec<(u32, u32)>| -> Vec<(u32, u32)> {
+            list.into_iter().filter(|&(b, _)| seen.insert(b)).collect()
+        };
+        self.blases = keep([first.blases, std::mem::take(&mut self.blases)].concat());
+        self.later = keep([first.later, std::mem::take(&mut self.later)].concat());
     }
 
     /// Most requested first (ties: lower id first, so runs are deterministic).
@@ -401,5 +388,26 @@ impl<'a> StreamingRenderer<'a> {
             "build step"
         );
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Demand;
+
+    #[test]
+    fn merged_demand_puts_the_probe_first_and_keeps_each_structure_once() {
+        let mut guard = Demand {
+            blases: vec![(7, 0), (3, 0)],
+            later: vec![(9, 0), (4, 0)],
+        };
+        let probe = Demand {
+            blases: vec![(3, 5), (1, 2)],
+            later: vec![(7, 0), (2, 0)],
+        };
+        guard.merge_first(probe);
+        assert_eq!(guard.blases, vec![(3, 5), (1, 2), (7, 0)]);
+        // 7 is already needed ahead: it is not built twice.
+        assert_eq!(guard.later, vec![(2, 0), (9, 0), (4, 0)]);
     }
 }
