@@ -126,5 +126,24 @@ mod tests {
         assert_eq!(o.frame_build_bytes, 1 << 20);
         assert_eq!(o.frame_build_ms, 2.5);
         assert_eq!(o.max_passes, motu_gpu::StreamOptions::default().max_passes);
+        // The probe: every pixel unless --stream-probe says otherwise (0: off).
+        let d = motu_gpu::StreamOptions::default();
+        assert_eq!((o.probe_stride, d.probe_stride), (1, 1));
+        let c = cli::Cli::try_parse_from([
+            "motu",
+            "render",
+            "pkg",
+            "-o",
+            "x.png",
+            "--stream-probe",
+            "0",
+        ])
+        .unwrap();
+        let cli::Command::Render(a) = c.command else {
+            panic!("not render")
+        };
+        let b = cmd::render::stream_bounds(&a.stream_bounds);
+        assert!(b.given(), "--stream-probe needs --stream");
+        assert_eq!(b.options().probe_stride, 0);
     }
 }
