@@ -1,0 +1,82 @@
+#!/usr/bin/env bash
+# The out-of-core acceptance run of issue 14 on a GPU machine: a default `gen island --scale S`
+# streamed along the default 30-frame path at a fraction of its full build, with the next
+# camera's probe off and on (alternated, after a warm-up render), beside the full build.
+#
+#   S=0.3 FRACTION=8 bash tools/stream-device.sh
+#
+# Environment: S (island scale, default 0.05), FRACTION (budget = report peak / FRACTION,
+# default 8), FRAMES (default 30), SIZE (WxH, default 640x360), ROUNDS (default 1), OUT (results,
+# default ./stream-out), STREAM_WORK (scenes, default target/motu-stream). Takes a release binary
+# from ./motu, .dev/motu or target/release/motu (see tools/bench-device.sh for the loader and the
+# driver); writes report.json, full.json, and per round probe0-N.json / probe1-N.json (the
+# `--stats` of each run) and a summary.txt into $OUT.
+set -uo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+S=${S:-0.05}
+FRACTION=${FRACTION:-8}
+FRAMES=${FRAMES:-30}
+SIZE=${SIZE:-640x360}
+ROUNDS=${ROUNDS:-1}
+OUT=${OUT:-$ROOT/stream-out}
+WORK=${STREAM_WORK:-$ROOT/target/motu-stream}
+W=${SIZE%x*}
+H=${SIZE#*x}
+mkdir -p "$OUT" "$WORK"
+T0=$(date +%s)
+step() { echo "== [$(($(date +%s) - T0)) s] $*" | tee -a "$OUT/summary.txt"; }
+die() { echo "stream-device: $*" >&2; exit 1; }
+
+if ! ldconfig -p | grep -q 'libvulkan\.so\.1' && compgen -G ".gl/*.deb" >/dev/null; then
+    for f in .gl/*.deb; do dpkg -x "$f" /; done
+    ldconfig
+fi
+ICD=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
+if [ -f "$ICD" ] && [ -z "${VK_DRIVER_FILES:-}" ]; then export VK_DRIVER_FILES=$ICD; fi
+MOTU=
+for c in ./motu .dev/motu target/release/motu; do
+    if [ -x "$c" ]; then MOTU=$ROOT/${c#./}; break; fi
+done
+[ -n "$MOTU" ] || die "no release binary (./motu, .dev/motu, target/release/motu)"
+
+PKG=$WORK/island-$S.motu
+if [ ! -f "$PKG" ]; then
+    step "gen island --scale $S; import (default flags)"
+    "$MOTU" gen island --scale "$S" -o "$WORK/island-$S" >/dev/null || die "gen failed"
+    /usr/bin/time -v "$MOTU" import "$WORK/island-$S/scene.pbrt" -o "$PKG" 2>"$OUT/import.time" >/dev/null ||
+        die "import failed"
+fi
+"$MOTU" report "$PKG" --json --width "$W" --height "$H" >"$OUT/report.json" || die "report failed"
+PEAK=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['variants'][0]['cost']['peak_bytes'])" "$OUT/report.json")
+BUDGET=$((PEAK / FRACTION))
+step "peak $PEAK B, budget $BUDGET B (1/$FRACTION)"
+
+render() {
+    "$MOTU" render "$PKG" -o "$WORK/$1.png" --backend pipeline --width "$W" --height "$H" "${@:2}"
+}
+step "warm-up and full build (5 frames)"
+render warm --frames 2 >/dev/null 2>&1
+render full --frames 5 --stats "$OUT/full.json" >/dev/null 2>&1 || die "full build failed"
+summary() {
+    python3 - "$1" <<'PY' | tee -a "$OUT/summary.txt"
+import json, sys
+st = json.load(open(sys.argv[1]))
+fr = st["stream"]["frames"]
+tot = lambda k: sum(f.get(k, 0) for f in fr)
+print(f"  {sys.argv[1]}: mean passes after the first {st['stream']['mean_passes_after_first']}, "
+      f"frame {tot('frame_ms') / len(fr):.0f} ms, build {tot('build_ms') / len(fr):.0f} ms, "
+      f"trace {tot('trace_ms') / len(fr):.0f} ms, probe {tot('probe_ms') / len(fr):.0f} ms per frame; "
+      f"built {tot('built_bytes') / len(fr) / 1e9:.2f} GB per frame; peak {st['vram_peak_bytes']}")
+PY
+}
+for r in $(seq 1 "$ROUNDS"); do
+    for p in 0 1; do
+        step "round $r: streamed path, --stream-probe $p"
+        render "probe$p-$r" --stream --vram-budget "$BUDGET" --frames "$FRAMES" --stream-probe "$p" \
+            --stats "$OUT/probe$p-$r.json" >"$WORK/probe$p-$r.log" 2>&1 ||
+            { tail -5 "$WORK/probe$p-$r.log"; die "streamed path failed"; }
+        summary "$OUT/probe$p-$r.json"
+    done
+done
+step "done"
