@@ -189,12 +189,21 @@ fn a_frame_build_budget_shows_the_counted_fallback_and_converges_to_the_full_bui
     assert_eq!(rows.len(), 6, "{b}");
     assert_eq!(rows[0]["passes"], frames[0]["passes"], "a cold start: {b}");
     assert_eq!(u(&rows[0]["fallback_pixels"]), fallback[0], "{b}");
-    for k in ["built_bytes", "build_ms", "trace_ms", "wall_ms", "gpu_ms"] {
+    for k in [
+        "built_bytes",
+        "build_ms",
+        "trace_ms",
+        "probe_rays",
+        "probe_ms",
+        "wall_ms",
+        "gpu_ms",
+    ] {
         assert!(rows.iter().all(|r| r[k].is_number()), "{k}: {b}");
     }
     assert!(b["mean_passes"].as_f64().expect("mean") >= 1.0, "{b}");
     assert!(b["mean_built_bytes"].as_f64().expect("mean") > 0.0, "{b}");
     assert!(b["mean_build_ms"].is_number() && b["mean_wall_ms"].is_number());
+    assert!(b["mean_probe_ms"].is_number(), "{b}");
 }
 
 /// The default island (`gen island --scale 0.002`, the scene of `stream_floor.rs`; default

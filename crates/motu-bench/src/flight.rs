@@ -285,6 +285,7 @@ fn run_streaming(
         "mean_built_bytes_after_first": mean("built_bytes", 1),
         "mean_build_ms": mean("build_ms", 0),
         "mean_trace_ms": mean("trace_ms", 0),
+        "mean_probe_ms": mean("probe_ms", 0),
         "mean_wall_ms": mean("wall_ms", 0),
         "mean_wall_ms_after_first": mean("wall_ms", 1),
         "incomplete_frames": incomplete,
