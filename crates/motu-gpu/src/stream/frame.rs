@@ -10,8 +10,8 @@ use crate::render::{frame_params, FrameMeasure, RenderOptions, RenderOutput, Ren
 impl<'a> StreamingRenderer<'a> {
     /// Renders one frame: build–traverse passes until every pixel is complete (or
     /// `max_passes`), then a prefetch of what the guard band saw and, when the caller named
-    /// the next frame's camera ([`Self::set_next_camera`]), what a probe of it met. `opts.frames` is ignored
-    /// (one frame per call: a camera path calls this per frame).
+    /// the next frame's camera ([`Self::set_next_camera`]), what a probe of it met.
+    /// `opts.frames` is ignored (one frame per call: a camera path calls this per frame).
     pub fn render_frame(
         &mut self,
         camera: &CameraParams,
