@@ -7,10 +7,9 @@
 #
 # Environment: S (island scale, default 0.05), FRACTION (budget = report peak / FRACTION,
 # default 8), FRAMES (default 30), SIZE (WxH, default 640x360), ROUNDS (default 1), OUT (results,
-# default ./stream-out), STREAM_WORK (scenes, default target/motu-stream). Takes a release binary
-# from ./motu, .dev/motu or target/release/motu (see tools/bench-device.sh for the loader and the
-# driver); writes report.json, full.json, and per round probe0-N.json / probe1-N.json (the
-# `--stats` of each run) and a summary.txt into $OUT.
+# default ./stream-out), STREAM_WORK (scenes, default target/motu-stream). Takes the release
+# binary and the loader as tools/device-env.sh says; writes report.json, full.json, and per round
+# probe0-N.json / probe1-N.json (the `--stats` of each run) and a summary.txt into $OUT.
 set -uo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
@@ -21,24 +20,8 @@ SIZE=${SIZE:-640x360}
 ROUNDS=${ROUNDS:-1}
 OUT=${OUT:-$ROOT/stream-out}
 WORK=${STREAM_WORK:-$ROOT/target/motu-stream}
-W=${SIZE%x*}
-H=${SIZE#*x}
-mkdir -p "$OUT" "$WORK"
-T0=$(date +%s)
-step() { echo "== [$(($(date +%s) - T0)) s] $*" | tee -a "$OUT/summary.txt"; }
-die() { echo "stream-device: $*" >&2; exit 1; }
-
-if ! ldconfig -p | grep -q 'libvulkan\.so\.1' && compgen -G ".gl/*.deb" >/dev/null; then
-    for f in .gl/*.deb; do dpkg -x "$f" /; done
-    ldconfig
-fi
-ICD=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
-if [ -f "$ICD" ] && [ -z "${VK_DRIVER_FILES:-}" ]; then export VK_DRIVER_FILES=$ICD; fi
-MOTU=
-for c in ./motu .dev/motu target/release/motu; do
-    if [ -x "$c" ]; then MOTU=$ROOT/${c#./}; break; fi
-done
-[ -n "$MOTU" ] || die "no release binary (./motu, .dev/motu, target/release/motu)"
+NAME=stream-device
+. "$ROOT/tools/device-env.sh"
 
 PKG=$WORK/island-$S.motu
 if [ ! -f "$PKG" ]; then
