@@ -50,7 +50,10 @@
 //! pixels ([`FrameStreamStats::complete`], `incomplete_pixels`; the CLI exits non-zero).
 //! Structures the guard band (or pass 1's open marks) saw are built after the frame as a
 //! prefetch, evicting only what this frame did not see, so later frames of a camera path
-//! mostly need one pass.
+//! mostly need one pass. When the caller names the next frame's camera
+//! ([`StreamingRenderer::set_next_camera`]), a probe pass of it (`probe.rs`) runs every ray of
+//! its pixels, secondary rays included, against what is resident first: what it meets is built
+//! ahead of the guard band's, and only what it saw is kept.
 //!
 //! # Eviction and the budget
 //! Allocations go through `motu-alloc` (standard blocks a 64th of the budget), whose blocks
