@@ -16,7 +16,7 @@ use crate::scene::Slot;
 
 /// Stamp levels of `common.glsl` (`STREAM_*`).
 const LEVEL_OPEN: u32 = 1;
-const LEVEL_NEEDED: u32 = 2;
+pub(super) const LEVEL_NEEDED: u32 = 2;
 
 impl<'a> StreamingRenderer<'a> {
     /// The frame's build–traverse passes. Returns the image (AOV records, colour words), the
@@ -64,33 +64,18 @@ impl<'a> StreamingRenderer<'a> {
             // nearest open one), open (needed later) or, in pass 1, prefetch candidates (the
             // guard band saw them).
             let mut demand = Demand::default();
-            for (b, &v) in stamps.iter().enumerate() {
-                if v >> 2 != self.stamp {
-                    continue;
-                }
-                self.last_seen[b] = self.stamp;
-                if self.blas[b].is_some() {
-                    self.used_in_frame[b] = self.frame;
-                    if self.buildable[b] {
-                        self.residency
-                            .mark_visible(ItemId(b as u32), u64::from(self.stamp));
-                    }
-                    continue;
-                }
-                if !self.buildable[b] {
-                    continue;
-                }
-                let n = requests.get(b).copied().unwrap_or(0);
-                match v & 3 {
-                    LEVEL_NEEDED => demand.blases.push((b as u32, n)),
+            for (b, level) in self.sightings(&stamps, true) {
+                let n = requests.get(b as usize).copied().unwrap_or(0);
+                match level {
+                    LEVEL_NEEDED => demand.blases.push((b, n)),
                     LEVEL_OPEN => {
-                        demand.later.push((b as u32, 0));
+                        demand.later.push((b, 0));
                         if first {
                             // Also a prefetch candidate when the frame completes without it.
-                            guard_demand.blases.push((b as u32, 0));
+                            guard_demand.blases.push((b, 0));
                         }
                     }
-                    _ if first => guard_demand.blases.push((b as u32, 0)),
+                    _ if first => guard_demand.blases.push((b, 0)),
                     _ => {}
                 }
             }
@@ -212,6 +197,32 @@ pub(super) struct PassReadback {
 }
 
 impl<'a> StreamingRenderer<'a> {
+    /// What the pass just traced (the current stamp) met, from its readback `stamps`: every
+    /// BLAS it met is seen now (`last_seen`); a resident one refreshes its LRU age and, when
+    /// `this_frame` (the frame's own passes, not the probe of the next frame), counts in the
+    /// frame's working set. Returns the non-resident buildable ones with their stamp level.
+    pub(super) fn sightings(&mut self, stamps: &[u32], this_frame: bool) -> Vec<(u32, u32)> {
+        let mut out = Vec::new();
+        for (b, &v) in stamps.iter().enumerate() {
+            if v >> 2 != self.stamp {
+                continue;
+            }
+            self.last_seen[b] = self.stamp;
+            if self.blas[b].is_some() {
+                if this_frame {
+                    self.used_in_frame[b] = self.frame;
+                }
+                if self.buildable[b] {
+                    self.residency
+                        .mark_visible(ItemId(b as u32), u64::from(self.stamp));
+                }
+            } else if self.buildable[b] {
+                out.push((b as u32, v & 3));
+            }
+        }
+        out
+    }
+
     /// Traces one pass under a new stamp: the first `full_count` image pixels (row order) then
     /// `list` (packed, biased), with `flags` (`STREAM_PROBE_PASS`); `first` clears the stats
     /// and the carried state. Reads back the stamps, requests and incomplete pixels.

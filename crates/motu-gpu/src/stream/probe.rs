@@ -7,18 +7,14 @@
 //! new hit points send them elsewhere: without the probe each such frame needed a second pass.
 
 use motu_abi::camera::CameraParams;
-use motu_alloc::ItemId;
 
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
 use super::params::STREAM_PROBE_PASS;
-use super::passes::{pack_biased, PassReadback};
+use super::passes::{pack_biased, PassReadback, LEVEL_NEEDED};
 use super::StreamingRenderer;
 use crate::error::Result;
 use crate::render::{frame_params, RenderOptions};
-
-/// Stamp level `STREAM_NEEDED` of `common.glsl`: some probe ray's nearest open structure.
-const LEVEL_NEEDED: u32 = 2;
 
 impl<'a> StreamingRenderer<'a> {
     /// Traces the probe of `next` (same image size as the frame just rendered, whose buffers
@@ -61,26 +57,14 @@ impl<'a> StreamingRenderer<'a> {
         self.frame_stats.probe_rays += rays;
         self.frame_stats.probe_ms += trace_ms;
         let mut demand = Demand::default();
-        for (b, &v) in stamps.iter().enumerate() {
-            if v >> 2 != self.stamp {
-                continue;
-            }
-            self.last_seen[b] = self.stamp;
-            if !self.buildable[b] {
-                continue;
-            }
-            if self.blas[b].is_some() {
-                self.residency
-                    .mark_visible(ItemId(b as u32), u64::from(self.stamp));
-                continue;
-            }
+        for (b, level) in self.sightings(&stamps, false) {
             // Needed (a ray's nearest) first by request count; then everything else it met.
-            let n = if v & 3 == LEVEL_NEEDED {
-                requests.get(b).copied().unwrap_or(0).max(1)
+            let n = if level == LEVEL_NEEDED {
+                requests.get(b as usize).copied().unwrap_or(0).max(1)
             } else {
                 0
             };
-            demand.blases.push((b as u32, n));
+            demand.blases.push((b, n));
         }
         demand.sort();
         Ok(demand)
