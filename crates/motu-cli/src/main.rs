@@ -88,14 +88,20 @@ mod tests {
         );
     }
 
+    /// `motu render pkg -o x.png` with `flags`, parsed.
+    fn render_args(flags: &[&str]) -> cli::RenderArgs {
+        let args = ["motu", "render", "pkg", "-o", "x.png"].iter().chain(flags);
+        let cli::Command::Render(a) = cli::Cli::try_parse_from(args).unwrap().command else {
+            panic!("not render")
+        };
+        a
+    }
+
     /// The viewer and flights light scenes with `motu_render::ShadingOptions::default()`: it
     /// must stay `motu render`'s defaults, and the bounds flags map one to one.
     #[test]
     fn render_library_defaults_are_the_render_flags_defaults() {
-        let c = cli::Cli::try_parse_from(["motu", "render", "pkg", "-o", "x.png"]).unwrap();
-        let cli::Command::Render(a) = c.command else {
-            panic!("not render")
-        };
+        let a = render_args(&[]);
         let o = motu_render::ShadingOptions::default();
         assert_eq!(
             (o.ao_samples, o.spp, o.exposure_ev),
@@ -103,23 +109,14 @@ mod tests {
         );
         let b = cmd::render::stream_bounds(&a.stream_bounds);
         assert!(!b.given());
-        let c = cli::Cli::try_parse_from([
-            "motu",
-            "render",
-            "pkg",
-            "-o",
-            "x.png",
+        let a = render_args(&[
             "--stream-fallback",
             "coarse",
             "--stream-build-budget",
             "1MiB",
             "--stream-build-ms",
             "2.5",
-        ])
-        .unwrap();
-        let cli::Command::Render(a) = c.command else {
-            panic!("not render")
-        };
+        ]);
         let o = cmd::render::stream_bounds(&a.stream_bounds).options();
         assert!(cmd::render::stream_bounds(&a.stream_bounds).given());
         assert_eq!(o.fallback, motu_gpu::StreamFallback::Coarse);
@@ -129,20 +126,7 @@ mod tests {
         // The probe: every pixel unless --stream-probe says otherwise (0: off).
         let d = motu_gpu::StreamOptions::default();
         assert_eq!((o.probe_stride, d.probe_stride), (1, 1));
-        let c = cli::Cli::try_parse_from([
-            "motu",
-            "render",
-            "pkg",
-            "-o",
-            "x.png",
-            "--stream-probe",
-            "0",
-        ])
-        .unwrap();
-        let cli::Command::Render(a) = c.command else {
-            panic!("not render")
-        };
-        let b = cmd::render::stream_bounds(&a.stream_bounds);
+        let b = cmd::render::stream_bounds(&render_args(&["--stream-probe", "0"]).stream_bounds);
         assert!(b.given(), "--stream-probe needs --stream");
         assert_eq!(b.options().probe_stride, 0);
     }

@@ -208,8 +208,8 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     }
     if !a.stream && stream_bounds(&a.stream_bounds).given() {
         bail!(
-            "--stream-fallback, --stream-build-budget, --stream-build-ms and --stream-probe bound streaming \
-             frames: add --stream (with --vram-budget)"
+            "--stream-fallback, --stream-build-budget, --stream-build-ms and --stream-probe bound \
+             streaming frames: add --stream (with --vram-budget)"
         );
     }
     if a.frames == 0 {

@@ -41,8 +41,8 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
     let streaming = a.stream || a.vram_budget.is_some();
     if !streaming && crate::cmd::render::stream_bounds(&a.stream_bounds).given() {
         bail!(
-            "--stream-fallback, --stream-build-budget, --stream-build-ms and --stream-probe bound streaming \
-             frames: add --stream or --vram-budget"
+            "--stream-fallback, --stream-build-budget, --stream-build-ms and --stream-probe bound \
+             streaming frames: add --stream or --vram-budget"
         );
     }
     if a.frames == Some(0) {
