@@ -41,8 +41,8 @@ layout(push_constant) uniform Push {
     VkInstanceTable vk_instances;  // instance `lod_instance_base + i` is entry i
     uint slot_count;
     uint lod_instance_base;
-    uint pad0_;
-    uint pad1_;
+    uint refit;  // 1: keep every BLAS address (instances stay active), switch masks only
+    uint pad_;
 } push;
 
 void main() {
@@ -58,16 +58,26 @@ void main() {
     for (uint l = 0u; l < sel.level_count; ++l) {
         uint n = push.tlases.r[push.lod_levels.r[sel.level_base + l]].instance_count;
         for (uint j = 0u; j < n; ++j) {
-            uint64_t addr = 0ul;
-            if (l == level) {
-                addr = push.blas_addresses.r[push.instances.r[gi].blas];
-            }
+            InstanceRecord ir = push.instances.r[gi];
+            uint64_t blas = push.blas_addresses.r[ir.blas];
+            uint64_t addr = (l == level || push.refit != 0u) ? blas : 0ul;
             uint vi = gi - push.lod_instance_base;
             // Keep the custom index (the instance's index in its TLAS, which the hit shaders
             // read); only the mask switches the level on or off.
             uint custom = push.vk_instances.r[vi].custom_mask & 0xFFFFFFu;
-            push.vk_instances.r[vi].custom_mask = custom | (addr != 0ul ? (0xFFu << 24) : 0u);
+            bool on = l == level && blas != 0ul;
+            push.vk_instances.r[vi].custom_mask = custom | (on ? (0xFFu << 24) : 0u);
             push.vk_instances.r[vi].reference = addr;
+            if (push.refit != 0u) {
+                // An update may not make an instance inactive, so an unchosen level stays
+                // active but shrinks to a point at its origin (and is masked out): the refit
+                // tree keeps only the chosen level's box.
+                float k = on ? 1.0 : 0.0;
+                float m[12] = ir.tlas_from_blas;
+                push.vk_instances.r[vi].r0 = vec4(k * m[0], k * m[1], k * m[2], m[3]);
+                push.vk_instances.r[vi].r1 = vec4(k * m[4], k * m[5], k * m[6], m[7]);
+                push.vk_instances.r[vi].r2 = vec4(k * m[8], k * m[9], k * m[10], m[11]);
+            }
             gi += 1u;
         }
     }

@@ -135,8 +135,35 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
                 break;
             }
         }
-        // Candidates that can still beat the best hit, farthest first (insertion sort).
-        uint order[PI_CAPACITY];
+        // A box list (TlasRecord.box_list_instances, a full build's split root): the TLAS's
+        // last instances are AABB instances left out of the hardware walk, whose few PIs are
+        // slab-tested here as the any-hit shader would, on the TLAS's first walk only (a
+        // re-walk finds what the hardware list truncated, which never holds these).
+        PiCandidate boxes[BOX_LIST_CAPACITY];
+        uint nb = 0u;
+        if (e.t_floor < 0.0) {
+            TlasRecord tr = push.tlases.r[e.tlas];
+            if (tr.box_list_instances != 0u) {
+                vec3 o = xform_point(e.tlas_from_world, org);
+                vec3 d = xform_vector(e.tlas_from_world, dir);
+                uint end = tr.instance_base + tr.instance_count;
+                for (uint i = end - tr.box_list_instances; i < end; ++i) {
+                    BlasRecord br = push.blases.r[push.instances.r[i].blas];
+                    for (uint p = br.item_base; p < br.item_base + br.item_count; ++p) {
+                        PiRecord r = push.pis.r[p];
+                        float t = slab_near(o, d, r.aabb_min, r.aabb_max, 0.0, hit.t);
+                        if (t >= 0.0 && nb < BOX_LIST_CAPACITY) {
+                            boxes[nb] = PiCandidate(p, t);
+                            nb += 1u;
+                        }
+                    }
+                }
+            }
+        }
+        // Candidates that can still beat the best hit, farthest first (insertion sort); an
+        // index below PI_CAPACITY is the walk's pl.c[i], above it boxes[i - PI_CAPACITY].
+#define CANDIDATE(i) ((i) < PI_CAPACITY ? pl.c[(i)] : boxes[(i) - PI_CAPACITY])
+        uint order[PI_CAPACITY + BOX_LIST_CAPACITY];
         uint n = 0u;
         float t_kept_max = -1.0;
         uint pi_kept_max = 0u;
@@ -150,11 +177,21 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
                 continue;
             }
             uint j = n;
-            while (j > 0u && pl.c[order[j - 1u]].t_near < t) {
+            while (j > 0u && CANDIDATE(order[j - 1u]).t_near < t) {
                 order[j] = order[j - 1u];
                 j -= 1u;
             }
             order[j] = i;
+            n += 1u;
+        }
+        for (uint b = 0u; b < nb; ++b) {
+            float t = boxes[b].t_near;
+            uint j = n;
+            while (j > 0u && CANDIDATE(order[j - 1u]).t_near < t) {
+                order[j] = order[j - 1u];
+                j -= 1u;
+            }
+            order[j] = PI_CAPACITY + b;
             n += 1u;
         }
         if (pl.truncated != 0u) {
@@ -175,7 +212,7 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
             continue;
         }
         for (uint k = 0u; k < n; ++k) {
-            PiCandidate cd = pl.c[order[k]];
+            PiCandidate cd = CANDIDATE(order[k]);
             // Never a proxy (PI_EMPTY_BLAS): those are handled during the walk.
             PiRecord pi = push.pis.r[cd.pi];
             if (sp >= STACK_SIZE) {
@@ -198,6 +235,7 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
             stack[sp] = Entry(child_from_world, cd.t_near, tlas, lod, -1.0, 0u);
             sp += 1u;
         }
+#undef CANDIDATE
     }
     if (g_streaming && hit.tlas != NONE_U32) {
         // Resident triangle BLASes are walked by the hardware without a shader callback: the

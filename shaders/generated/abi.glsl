@@ -8,6 +8,7 @@
 #define BLAS_AABBS 1u
 #define PI_TLAS 0u
 #define PI_LOD_SELECTOR 1u
+#define BOX_LIST_CAPACITY 16u
 #define FLAG_NEEDS_ANY_HIT 1u
 #define FLAG_HAS_NORMALS 2u
 #define FLAG_HAS_UVS 4u
@@ -32,7 +33,7 @@ struct TlasRecord {
     uint level;
     uint element;
     vec3 bounds_min;
-    uint _pad0;
+    uint box_list_instances;
     vec3 bounds_max;
     uint _pad1;
 };

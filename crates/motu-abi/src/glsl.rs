@@ -74,7 +74,7 @@ pub fn structs() -> Vec<StructDef> {
                 (Uint, level),
                 (Uint, element),
                 (Vec3, bounds_min),
-                (Uint, _pad0),
+                (Uint, box_list_instances),
                 (Vec3, bounds_max),
                 (Uint, _pad1)
             ]
@@ -224,6 +224,7 @@ pub fn constants() -> Vec<(&'static str, String)> {
         ("BLAS_AABBS", format!("{BLAS_AABBS}u")),
         ("PI_TLAS", format!("{PI_TLAS}u")),
         ("PI_LOD_SELECTOR", format!("{PI_LOD_SELECTOR}u")),
+        ("BOX_LIST_CAPACITY", format!("{BOX_LIST_CAPACITY}u")),
         ("FLAG_NEEDS_ANY_HIT", format!("{FLAG_NEEDS_ANY_HIT}u")),
         ("FLAG_HAS_NORMALS", format!("{FLAG_HAS_NORMALS}u")),
         ("FLAG_HAS_UVS", format!("{FLAG_HAS_UVS}u")),

@@ -40,10 +40,19 @@ pub struct TlasRecord {
     pub element: u32,
     /// Bounds in this TLAS's space.
     pub bounds_min: [f32; 3],
-    pub _pad0: u32,
+    /// 0 in a package (reserved). A full GPU build sets it to the number of trailing
+    /// instances (AABB instances of at most [`BOX_LIST_CAPACITY`] PIs in all) that it leaves
+    /// out of the hardware TLAS: the traversal shader tests their boxes itself (a box list).
+    pub box_list_instances: u32,
     pub bounds_max: [f32; 3],
     pub _pad1: u32,
 }
+
+/// The most programmable instances a TLAS's box list may hold ([`TlasRecord::box_list_instances`]):
+/// raygen slab-tests each of them on every first walk of that TLAS, so only a few (the pieces
+/// of a split root, a handful of PIs beside a TLAS's own instances) are worth taking out of the
+/// hardware walk, where each box a ray crosses costs an intersection and an any-hit call.
+pub const BOX_LIST_CAPACITY: u32 = 16;
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]

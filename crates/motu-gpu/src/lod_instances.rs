@@ -24,8 +24,8 @@ use crate::heap::{GpuHeap, HeapBuffer};
 use crate::memory::BufferUsage;
 use crate::pipeline::{ComputePipeline, ComputePipelineDesc};
 use crate::scene::{
-    encode_instance, table_usage, AccelStruct, GpuScene, InstanceLodGpu, LodPush, LodTlas, Slot,
-    Uploader,
+    box_list_instances, encode_instance, table_usage, AccelStruct, GpuScene, InstanceLodGpu,
+    LodPush, LodTlas, Slot, Uploader,
 };
 use crate::shaders;
 
@@ -82,32 +82,44 @@ impl GpuScene {
                     specialization: &[],
                 },
             )?;
-            // Uncompacted TLASes and their scratch slices.
+            // Uncompacted TLASes sized for either kind of pass (scene/lod_pass.rs `PassKind`),
+            // and their scratch slices (for a build or an update).
             let flags = AsBuildFlags {
                 allow_compaction: false,
                 ..AsBuildFlags::default()
+            };
+            let refittable = AsBuildFlags {
+                allow_update: true,
+                ..flags
             };
             let scratch_align = ctx.limits().scratch_alignment_bytes();
             let mut tlases = Vec::new();
             let mut scratch_bytes = 0u64;
             for &t in &lod.lod_tlases {
                 let rec = &view.tlases[t as usize];
-                let sz = ctx.tlas_build_sizes(rec.instance_count, flags)?;
+                let hardware = rec.instance_count - box_list_instances(&view, t as usize);
+                let sz = ctx.tlas_build_sizes(hardware, flags)?;
+                let sz_refit = ctx.tlas_build_sizes(hardware, refittable)?;
                 let a = AccelStruct::new(
                     &ctx,
                     heap,
                     &format!("lod-tlas-{t}"),
-                    sz.acceleration_structure_size_bytes,
+                    sz.acceleration_structure_size_bytes
+                        .max(sz_refit.acceleration_structure_size_bytes),
                     vk::AccelerationStructureTypeKHR::TOP_LEVEL,
                 )?;
                 tlases.push(LodTlas {
                     handle: a.handle,
-                    count: rec.instance_count,
+                    // A box list's instances are tested in raygen, as in the scene's build.
+                    count: hardware,
                     offset_bytes: u64::from(rec.instance_base - lod.lod_instance_base) * 64,
                     scratch_offset_bytes: scratch_bytes,
                 });
-                scratch_bytes +=
-                    sz.build_scratch_size_bytes.div_ceil(scratch_align) * scratch_align;
+                let scratch = sz
+                    .build_scratch_size_bytes
+                    .max(sz_refit.build_scratch_size_bytes)
+                    .max(sz_refit.update_scratch_size_bytes);
+                scratch_bytes += scratch.div_ceil(scratch_align) * scratch_align;
                 accels.push((t, a));
             }
             let scratch = buffer(
@@ -221,7 +233,8 @@ impl GpuScene {
                 vk_instances,
                 slot_count: lod.slots.len() as u32,
                 lod_instance_base: lod.lod_instance_base,
-                _pad: [0; 2],
+                refit: 0,
+                _pad: 0,
             };
             Ok(InstanceLodGpu {
                 pipeline,
@@ -238,8 +251,9 @@ impl GpuScene {
                     .map(|s| base.lod_selectors[s.selector as usize].level_count)
                     .collect(),
                 levels,
-                built_for: Mutex::new(None),
-                counts: Mutex::new([0; 2]),
+                state: InstanceLodGpu::new_state(),
+                counts: Mutex::new([0; 4]),
+                pass_ms: Mutex::new((0.0, 0)),
             })
         })();
         let gpu = match r {
@@ -276,6 +290,18 @@ impl GpuScene {
         r
     }
 
+    /// Mean GPU time (ms) of the instance-LOD passes timed so far; 0 when none ran.
+    pub fn lod_instance_pass_ms(&self) -> f64 {
+        self.instance_lod.as_ref().map_or(0.0, |l| {
+            let (sum, n) = *l.pass_ms.lock().unwrap_or_else(|e| e.into_inner());
+            if n == 0 {
+                0.0
+            } else {
+                sum / n as f64
+            }
+        })
+    }
+
     /// LOD instance slots (instance-level LOD), 0 when it is off.
     pub fn lod_instance_slots(&self) -> u32 {
         self.instance_lod.as_ref().map_or(0, |l| l.slot_count)
@@ -286,7 +312,17 @@ impl GpuScene {
     /// were built for). `[0, 0]` when off.
     pub fn lod_instance_passes(&self) -> [u64; 2] {
         self.instance_lod.as_ref().map_or([0; 2], |l| {
-            *l.counts.lock().unwrap_or_else(|e| e.into_inner())
+            let c = *l.counts.lock().unwrap_or_else(|e| e.into_inner());
+            [c[0], c[1]]
+        })
+    }
+
+    /// Of those: `[level passes that updated the slot TLASes in place, settle rebuilds]`
+    /// (scene/lod_pass.rs `PassKind`). `[0, 0]` when off.
+    pub fn lod_instance_refits(&self) -> [u64; 2] {
+        self.instance_lod.as_ref().map_or([0; 2], |l| {
+            let c = *l.counts.lock().unwrap_or_else(|e| e.into_inner());
+            [c[2], c[3]]
         })
     }
 }

@@ -607,7 +607,8 @@ pub(crate) fn run_frames(
     let push: [u64; SLOT_COUNT] = addresses;
     let push_bytes: &[u8] = bytemuck::cast_slice(&push);
     let pixels = u64::from(w) * u64::from(h);
-    let timestamps = TimestampQueries::new(ctx, 2 * frames)?;
+    // Two per frame, then one at the end of the instance-LOD pass (when a frame runs it).
+    let timestamps = TimestampQueries::new(ctx, 2 * frames + 1)?;
     let mut rec: CommandRecorder<'_> = ctx.record(match tracer {
         Tracer::Pipeline(_) => "trace (pipeline)",
         Tracer::Query(_) => "trace (query)",
@@ -626,20 +627,29 @@ pub(crate) fn run_frames(
     };
     let mut lod_pass = match (&scene.instance_lod, &lod_levels) {
         (Some(lod), Some(levels)) => lod.needs_pass(levels, frames),
-        _ => false,
+        _ => None,
     };
+    let lod_pass_kind = lod_pass;
+    let mut lod_pass_frame = None;
     for f in 0..frames {
         rec.fill_buffer(&frame.stats, 0, (RENDER_STAT_WORDS * 4) as u64, 0)?;
         rec.barrier();
         rec.write_timestamp(&timestamps, 2 * f)?;
         // Counted in the frame's time.
-        if let (true, Some(lod), Some(levels)) = (lod_pass, &scene.instance_lod, &lod_levels) {
-            lod.record(ctx, &mut rec, levels)?;
-            lod_pass = false;
+        if let (Some(kind), Some(lod), Some(levels)) =
+            (lod_pass.take(), &scene.instance_lod, &lod_levels)
+        {
+            lod.record(ctx, &mut rec, levels, kind)?;
+            rec.write_timestamp(&timestamps, 2 * frames)?;
+            lod_pass_frame = Some(f);
         }
         tracer.record(&mut rec, push_bytes, [w, h], None)?;
         rec.write_timestamp(&timestamps, 2 * f + 1)?;
         rec.barrier();
+    }
+    if lod_pass_frame.is_none() {
+        // Every query is read back: the LOD one too, unused without a pass.
+        rec.write_timestamp(&timestamps, 2 * frames)?;
     }
     let rgba_off = pixels * 16;
     let stats_off = pixels * 20;
@@ -653,14 +663,20 @@ pub(crate) fn run_frames(
         (RENDER_STAT_WORDS * 4) as u64,
     )?;
     rec.submit_and_wait()?;
-    if let (Some(lod), Some(levels)) = (&scene.instance_lod, lod_levels) {
-        lod.built(levels);
+    let ticks = timestamps.read_ticks()?;
+    if let (Some(lod), Some(levels), Some(kind), Some(f)) = (
+        &scene.instance_lod,
+        lod_levels,
+        lod_pass_kind,
+        lod_pass_frame,
+    ) {
+        let pass_ms = timestamps.elapsed_ns(&ticks, 2 * f, 2 * frames)? / 1e6;
+        lod.built(levels, kind, pass_ms);
     }
     let records: Vec<AovRecord> = frame.readback.read_vec(0, pixels as usize)?;
     let rgba: Vec<u32> = frame.readback.read_vec(rgba_off, pixels as usize)?;
     let counters: Vec<u32> = frame.readback.read_vec(stats_off, RENDER_STAT_WORDS)?;
     check_texture_residency(&counters)?;
-    let ticks = timestamps.read_ticks()?;
     let frame_ns = (0..frames)
         .map(|f| timestamps.elapsed_ns(&ticks, 2 * f, 2 * f + 1))
         .collect::<Result<Vec<f64>>>()?;

@@ -46,7 +46,7 @@ pub(crate) use batch::{build_batched, build_pipelined, BatchStager};
 pub(crate) use budget::usable_budget_bytes;
 pub(crate) use lod_pass::{InstanceLodGpu, LodTlas, Push as LodPush};
 pub(crate) use structures::{AccelStruct, SizeQueries, Slot, SLOT_COUNT};
-pub(crate) use tables::{blas_geometry, encode_instance, pi_aabbs, reachable};
+pub(crate) use tables::{blas_geometry, box_list_instances, encode_instance, pi_aabbs, reachable};
 pub(crate) use upload::{streamed_attribute_bytes, MeshGpu, MeshStager, Uploader};
 
 /// Geometry of one compiled mesh, by its index in the hierarchy's mesh table (e.g. slices of a
@@ -119,6 +119,10 @@ pub struct ResourceReport {
     /// Structures the root cannot reach (e.g. other elements under `--subset`): not built.
     pub unreachable_tlases: u64,
     pub unreachable_blases: u64,
+    /// TLASes with a box list (PIs tested in raygen, not in the hardware walk) and the
+    /// AABB instances those lists took out of the hardware TLASes.
+    pub box_list_tlases: u32,
+    pub box_list_instances: u64,
     pub budget_bytes: u64,
     pub max_allocations: u32,
     pub blas_count: u32,
@@ -334,8 +338,13 @@ impl GpuScene {
     ) -> Result<()> {
         use bytemuck::cast_slice;
         // 1. Node tables.
+        let tlas_records = tables::tlases_with_box_lists(view);
+        for r in &tlas_records {
+            self.report.box_list_tlases += u32::from(r.box_list_instances > 0);
+            self.report.box_list_instances += u64::from(r.box_list_instances);
+        }
         let tables: [(Slot, &[u8]); 9] = [
-            (Slot::Tlases, cast_slice(view.tlases)),
+            (Slot::Tlases, cast_slice(&tlas_records)),
             (Slot::Instances, cast_slice(view.instances)),
             (Slot::Blases, cast_slice(view.blases)),
             (Slot::Geometries, cast_slice(view.geometries)),
@@ -437,7 +446,20 @@ impl GpuScene {
         r?;
 
         // 5. TLASes, then their address table.
-        self.build_tlases(ctx, heap, up, view, &reach_tlas, opts)?;
+        // An unreachable TLAS is built empty: it keeps its id (and a valid address) for free.
+        // A box list's instances stay out of the hardware TLAS (tables::box_list_instances).
+        let hardware_instances: Vec<u32> = tlas_records
+            .iter()
+            .zip(&reach_tlas)
+            .map(|(r, &reached)| {
+                if reached {
+                    r.instance_count - r.box_list_instances
+                } else {
+                    0
+                }
+            })
+            .collect();
+        self.build_tlases(ctx, heap, up, view, &hardware_instances, opts)?;
         let addrs: Vec<u64> = self.tlases.iter().map(|t| t.address).collect();
         self.upload_table(ctx, heap, up, Slot::TlasAddresses, cast_slice(&addrs))?;
         up.flush(ctx)?;
@@ -551,17 +573,10 @@ impl GpuScene {
         heap: &mut GpuHeap,
         up: &mut Uploader,
         view: &HierarchyView<'_>,
-        reach: &[bool],
+        hardware_instances: &[u32],
         opts: &BuildOptions,
     ) -> Result<()> {
-        // An unreachable TLAS is built empty: it keeps its id (and a valid address) for free.
-        let count = |t: usize| {
-            if reach[t] {
-                view.tlases[t].instance_count
-            } else {
-                0
-            }
-        };
+        let count = |t: usize| hardware_instances[t];
         let mut sizes = Vec::with_capacity(view.tlases.len());
         for t in 0..view.tlases.len() {
             let s = ctx.tlas_build_sizes(count(t), AsBuildFlags::default())?;

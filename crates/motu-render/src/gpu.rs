@@ -159,7 +159,7 @@ pub(crate) fn render_gpu(
     let mut stats = serde_json::to_value(&out.stats)?;
     stats["truncated_rays"] = json!(counts.truncated_rays);
     stats["resources"] = serde_json::to_value(scene.report())?;
-    lod_pass_stats(&mut stats, scene.lod_instance_passes());
+    lod_pass_stats(&mut stats, &scene);
     drop(scene);
     ctx.check_validation().map_err(RenderError::Validation)?;
     Ok((out.aov, out.rgba8, stats))
@@ -167,10 +167,18 @@ pub(crate) fn render_gpu(
 
 /// Instance-level LOD's per-frame pass: `lod_passes` frames ran it (levels picked, slot TLASes
 /// rebuilt), `lod_passes_skipped` frames did not (their camera was the one the levels were
-/// built for).
-fn lod_pass_stats(stats: &mut Value, [run, skipped]: [u64; 2]) {
+/// built for); `lod_pass_ms` is the mean GPU time of the passes that ran (inside the frames'
+/// times).
+/// Of the passes that ran, `lod_refits` updated the slot TLASes in place (a moving camera) and
+/// `lod_settles` rebuilt a held camera's refittable tree at full quality.
+fn lod_pass_stats(stats: &mut Value, scene: &motu_gpu::GpuScene) {
+    let [run, skipped] = scene.lod_instance_passes();
+    let [refits, settles] = scene.lod_instance_refits();
     stats["lod_passes"] = json!(run);
     stats["lod_passes_skipped"] = json!(skipped);
+    stats["lod_refits"] = json!(refits);
+    stats["lod_settles"] = json!(settles);
+    stats["lod_pass_ms"] = json!(scene.lod_instance_pass_ms());
 }
 
 /// A recorded camera path on a full GPU build: one frame per camera through the viewer's
@@ -211,7 +219,7 @@ pub(crate) fn render_gpu_path(
     stats["frames"] = json!(cams.len());
     stats["path_ms_per_frame"] = json!(times);
     stats["resources"] = serde_json::to_value(live.scene().report())?;
-    lod_pass_stats(&mut stats, live.scene().lod_instance_passes());
+    lod_pass_stats(&mut stats, live.scene());
     drop(live);
     ctx.check_validation().map_err(RenderError::Validation)?;
     Ok((out.aov, out.rgba8, stats))

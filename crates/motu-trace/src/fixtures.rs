@@ -185,7 +185,7 @@ impl HierarchyBuilder {
             level: 0,
             element: NONE_U32,
             bounds_min: b.min,
-            _pad0: 0,
+            box_list_instances: 0,
             bounds_max: b.max,
             _pad1: 0,
         });

@@ -2,7 +2,10 @@
 //! AABBs and what the root reaches.
 
 use ash::vk;
-use motu_abi::{HierarchyView, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
+use motu_abi::{
+    HierarchyView, TlasRecord, BLAS_AABBS, BOX_LIST_CAPACITY, FLAG_NEEDS_ANY_HIT, PI_LOD_SELECTOR,
+    PI_TLAS,
+};
 
 use super::MeshGpu;
 use crate::accel::BlasGeometry;
@@ -141,6 +144,53 @@ pub(crate) fn encode_instance(
     out[52..56].copy_from_slice(&(sbt | (flags.as_raw() << 24)).to_le_bytes());
     out[56..64].copy_from_slice(&blas_address.to_le_bytes());
     out
+}
+
+/// How many of TLAS `t`'s last instances a full build leaves out of the hardware TLAS as a box
+/// list ([`TlasRecord::box_list_instances`]): the trailing AABB instances whose PIs (TLASes or
+/// LOD selectors, at most [`BOX_LIST_CAPACITY`] in all) raygen tests itself. A split root's
+/// pieces are such PIs: in the hardware walk every piece box a ray crosses costs an
+/// intersection and an any-hit invocation, in raygen a slab test. At least one instance stays
+/// in the hardware TLAS (its walk is what the box list rides on).
+pub(crate) fn box_list_instances(view: &HierarchyView<'_>, t: usize) -> u32 {
+    let rec = &view.tlases[t];
+    let (base, count) = (rec.instance_base as usize, rec.instance_count as usize);
+    let Some(insts) = view.instances.get(base..base + count) else {
+        return 0;
+    };
+    let (mut n, mut pis) = (0usize, 0u32);
+    for inst in insts.iter().rev() {
+        if n + 1 >= count {
+            break;
+        }
+        let Some(b) = view.blases.get(inst.blas as usize) else {
+            break;
+        };
+        let items = b.item_base as usize..(b.item_base + b.item_count) as usize;
+        let ok = b.kind == BLAS_AABBS
+            && b.item_count > 0
+            && pis + b.item_count <= BOX_LIST_CAPACITY
+            && view.pis.get(items).is_some_and(|ps| {
+                ps.iter()
+                    .all(|p| p.kind == PI_TLAS || p.kind == PI_LOD_SELECTOR)
+            });
+        if !ok {
+            break;
+        }
+        pis += b.item_count;
+        n += 1;
+    }
+    n as u32
+}
+
+/// `view`'s TLAS records as a full build uploads them: each with its box list.
+pub(crate) fn tlases_with_box_lists(view: &HierarchyView<'_>) -> Vec<TlasRecord> {
+    (0..view.tlases.len())
+        .map(|t| TlasRecord {
+            box_list_instances: box_list_instances(view, t),
+            ..view.tlases[t]
+        })
+        .collect()
 }
 
 /// TLASes and BLASes reachable from the root: through instances, PIs, LOD levels.

@@ -281,6 +281,8 @@ impl<'a> StreamingRenderer<'a> {
             gpu_tlases.push(TlasRecord {
                 instance_base: base,
                 instance_count: count,
+                // No box lists: streamed TLASes keep every PI (and proxy) in the hardware walk.
+                box_list_instances: 0,
                 ..*rec
             });
         }
