@@ -57,6 +57,27 @@ fn pipeline_matches_cpu_on_a_forest_package() {
     let a = all_backends_agree(dir.path(), "ml", &ml, &["--width", "96"]);
     let b = all_backends_agree(dir.path(), "sl", &sl, &["--width", "96"]);
     motu_ok(&["compare", s(&a), s(&b)]);
+    // `auto` bakes the small tree (trunk + 100 leaves) into triangle BLASes: the same hits
+    // (source mesh and triangle, through the baked records' maps), fewer traces than `ml`.
+    let auto = dir.path().join("auto.motu");
+    motu_ok(&[
+        "import",
+        s(&gen.join("scene.pbrt")),
+        "-o",
+        s(&auto),
+        "--levels",
+        "auto",
+    ]);
+    let info = motu_json(&["info", s(&auto), "--json"]);
+    assert!(info["baked_prototypes"].as_u64().unwrap() >= 1, "{info}");
+    let c = all_backends_agree(dir.path(), "auto", &auto, &["--width", "96"]);
+    motu_ok(&["compare", s(&b), s(&c)]);
+    let traces = |pkg: &std::path::Path, name: &str| {
+        let st = render(pkg, "pipeline", &dir.path().join(name), &["--width", "96"]);
+        st["traces_per_ray"].as_f64().unwrap()
+    };
+    let (t_ml, t_auto) = (traces(&ml, "t-ml.aov"), traces(&auto, "t-auto.aov"));
+    assert!(t_auto < t_ml && t_auto <= 1.5, "auto {t_auto} vs ml {t_ml} traces/ray");
 }
 
 #[test]

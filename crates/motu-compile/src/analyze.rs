@@ -40,6 +40,10 @@ pub(crate) struct Plan<'s> {
     tlas_height: Vec<u32>,
     /// [`Levels::Auto`]: the prototype is a cheap grouping level, inlined into its parents.
     auto_inline: Vec<bool>,
+    /// [`Levels::Auto`]: the prototype is baked (its meshes' copies become triangle BLASes,
+    /// instanced where it is placed) and its triangles, copies included (saturating).
+    bake: Vec<bool>,
+    bake_triangles: Vec<u64>,
     /// Kept meshes of a prototype that get a LOD chain / that go into `G(P)`.
     pub lod_mesh_count: Vec<u32>,
     pub g_mesh_count: Vec<u32>,
@@ -74,6 +78,8 @@ impl<'s> Plan<'s> {
             plain: vec![false; n],
             tlas_height: vec![0; n],
             auto_inline: vec![false; n],
+            bake: vec![false; n],
+            bake_triangles: vec![0; n],
             lod_mesh_count: vec![0; n],
             g_mesh_count: vec![0; n],
             dropped_degenerate: 0,
@@ -223,7 +229,27 @@ impl<'s> Plan<'s> {
                     .is_identity(self.opts.identity_tolerance))
     }
 
-    /// A kept edge is inlined into its parent's TLAS (otherwise it becomes a PI).
+    /// A kept edge's child is baked: its triangle BLASes are instanced in the parent's TLAS
+    /// (neither inlined nor a PI).
+    #[inline]
+    pub fn bakes(&self, child: PrototypeId) -> bool {
+        self.bake[child.index()]
+    }
+
+    /// BLASes a baked prototype makes (an estimate: location grouping may make a few more).
+    fn bake_blas_estimate(&self, p: PrototypeId) -> u64 {
+        let bound = self
+            .opts
+            .max_blas_triangles
+            .min(self.opts.max_primitives_per_blas)
+            .max(1);
+        self.bake_triangles[p.index()]
+            .div_ceil(u64::from(bound))
+            .max(1)
+    }
+
+    /// A kept edge is inlined into its parent's TLAS (otherwise it becomes a PI or, baked,
+    /// instances of its BLASes).
     #[inline]
     pub fn expands(&self, e: EdgeRef<'_>) -> bool {
         match self.opts.levels {
@@ -237,31 +263,63 @@ impl<'s> Plan<'s> {
     }
 
     /// Bottom-up: the entries TLAS(p) would hold under `Auto` (own meshes' BLAS, expanded
-    /// children's entries, one PI per other child) decide whether a mesh-less `p` is inlined.
+    /// children's entries, a baked child's BLASes, one PI per other child) decide whether a
+    /// mesh-less `p` is inlined; a prototype that is not inlined but would be a TLAS of
+    /// instances, with no LOD below it and at most `auto_bake_max_triangles` triangles in all,
+    /// is baked: no traversal-shader hop reaches it, for a few MB of geometry (instancing
+    /// saves memory where prototypes are big, not in a tree of small leaves).
     fn plan_auto_inlining(&mut self) {
         let scene = self.scene;
         let mut entries = vec![0u64; scene.prototypes().len()];
+        // Triangles of p's content with its copies, or None when a LOD mesh is below p.
+        let mut content: Vec<Option<u64>> = vec![None; scene.prototypes().len()];
         for &p in scene.topo_order() {
             if !self.reachable[p.index()] {
                 continue;
             }
             let mut count = u64::from(self.g_mesh_count[p.index()] > 0)
                 + u64::from(self.lod_mesh_count[p.index()]);
+            let mut tris = (self.lod_mesh_count[p.index()] == 0).then(|| {
+                scene
+                    .meshes_of(p)
+                    .iter()
+                    .enumerate()
+                    .filter(|&(j, &m)| self.mesh_kept(p, j, m))
+                    .map(|(_, &m)| u64::from(scene.mesh(m).triangle_count))
+                    .fold(0u64, u64::saturating_add)
+            });
+            let mut kept_edges = 0u64;
             let base = scene.edge_base(p) as usize;
             for (k, e) in scene.edges(p).iter().enumerate() {
                 if !self.edge_kept(p, base + k, edge_ref!(e)) {
                     continue;
                 }
-                count = count.saturating_add(if self.expands(edge_ref!(e)) {
-                    entries[e.child.index()]
+                let c = e.child;
+                kept_edges += 1;
+                tris = tris
+                    .zip(content[c.index()])
+                    .map(|(a, b)| a.saturating_add(b));
+                count = count.saturating_add(if self.bakes(c) {
+                    self.bake_blas_estimate(c)
+                } else if self.expands(edge_ref!(e)) {
+                    entries[c.index()]
                 } else {
                     1
                 });
             }
             entries[p.index()] = count;
-            self.auto_inline[p.index()] = p != Scene::ROOT
+            content[p.index()] = tris;
+            let inline = p != Scene::ROOT
                 && !self.has_own_meshes(p)
                 && count <= self.opts.auto_inline_max_entries;
+            self.auto_inline[p.index()] = inline;
+            if let Some(t) = tris {
+                self.bake_triangles[p.index()] = t;
+                self.bake[p.index()] = p != Scene::ROOT
+                    && !inline
+                    && kept_edges > 0
+                    && t <= self.opts.auto_bake_max_triangles;
+            }
         }
     }
 
@@ -311,7 +369,9 @@ impl<'s> Plan<'s> {
                     continue;
                 }
                 let c = e.child.index();
-                if self.expands(edge_ref!(e)) {
+                if self.bakes(e.child) {
+                    i = i.saturating_add(self.bake_blas_estimate(e.child));
+                } else if self.expands(edge_ref!(e)) {
                     i = i.saturating_add(inst[c]);
                     q = q.saturating_add(pis[c]);
                     if !self.plain[c] && self.expands_ml(edge_ref!(e)) {

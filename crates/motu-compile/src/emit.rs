@@ -56,6 +56,8 @@ pub(crate) struct Emitter<'p, 's, 'k, 'f> {
     tlas_of_proto: Vec<u32>,
     /// `G(P)` as a range of BLAS ids (several when the triangle cap splits it); count 0 = none.
     g_of_proto: Vec<(u32, u32)>,
+    /// A baked prototype's BLASes (`Plan::bakes`), as a range; count 0 = not made yet.
+    bake_of_proto: Vec<(u32, u32)>,
     record_of_mesh: Vec<u32>,
     selector_of_mesh: Vec<u32>,
     /// Instance flags per BLAS.
@@ -100,6 +102,7 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
             out,
             tlas_of_proto: vec![NONE_U32; n],
             g_of_proto: vec![(NONE_U32, 0); n],
+            bake_of_proto: vec![(NONE_U32, 0); n],
             record_of_mesh: vec![NONE_U32; scene.meshes().len()],
             selector_of_mesh: vec![NONE_U32; scene.meshes().len()],
             blas_flags: Vec::new(),
@@ -256,6 +259,13 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
                     .map_or(NONE_U32, |e| e.0);
             }
             let tlas_from_child = xform::compose(&tlas_from_parent, &e.parent_from_child);
+            if self.plan.bakes(e.child) {
+                let (first, count) = self.bake_for_proto(e.child)?;
+                for b in first..first + count {
+                    self.push_instance(b, &tlas_from_child, element)?;
+                }
+                continue;
+            }
             let child_from_tlas = if self.plan.expands(edge_ref!(e)) {
                 None
             } else {
@@ -420,13 +430,16 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
 
     /// Compiled mesh records for `data` (source mesh `m` at LOD `lod`, whose record template
     /// is `template`): one record handed to the sink when within the bound, else one per
-    /// spatial cluster with its primitive map. Returns the records `(first, count)`.
+    /// spatial cluster with its primitive map. `base_map` maps `data`'s triangles to the source
+    /// mesh's when they are not the same (baked copies); cluster maps compose with it. Returns
+    /// the records `(first, count)`.
     fn made_records(
         &mut self,
         m: MeshId,
         template: &MeshRecord,
         lod: u32,
         data: &MeshData,
+        base_map: Option<&[u32]>,
     ) -> Result<(u32, u32), CompileError> {
         let first = next_id(self.out.meshes.len(), "meshes")?;
         let bound = self.bound();
@@ -455,7 +468,7 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
             })
         };
         if data.triangle_count() <= bound as usize {
-            push(data, None, data.bounds())?;
+            push(data, base_map, data.bounds())?;
         } else {
             let _span = tracing::debug_span!(
                 "partition",
@@ -464,8 +477,12 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
                 triangles = data.triangle_count()
             )
             .entered();
-            partition_mesh(data, bound, &mut |c: Cluster| {
-                push(&c.data, Some(&c.primitive_map), c.bounds)
+            partition_mesh(data, bound, &mut |c: Cluster| match base_map {
+                Some(base) => {
+                    let map: Vec<u32> = c.primitive_map.iter().map(|&t| base[t as usize]).collect();
+                    push(&c.data, Some(&map), c.bounds)
+                }
+                None => push(&c.data, Some(&c.primitive_map), c.bounds),
             })?;
             self.out.report.partitioned_meshes += 1;
             self.out.report.partition_clusters +=
@@ -522,7 +539,7 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         for (element, j, m) in big {
             let data = self.load_source(m)?;
             let template = self.source_record(p, j, m);
-            let (r0, n) = self.made_records(m, &template, 0, &data)?;
+            let (r0, n) = self.made_records(m, &template, 0, &data, None)?;
             drop(data);
             for r in r0..r0 + n {
                 self.triangle_blas(&[r], element)?;
@@ -557,6 +574,74 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         }
         let count = next_id(self.out.blases.len(), "BLASes")? - first;
         self.g_of_proto[p.index()] = (first, count);
+        Ok((first, count))
+    }
+
+    /// A baked prototype `p` (`Plan::bakes`): every kept mesh in its subtree, one copy per
+    /// path from `p` transformed into `p`'s space, as mesh records of the source mesh with a
+    /// primitive map to its triangles (hits name the source mesh and triangle, as instanced
+    /// copies do), grouped by location into triangle BLASes under the bound.
+    fn bake_for_proto(&mut self, p: PrototypeId) -> Result<(u32, u32), CompileError> {
+        let b = self.bake_of_proto[p.index()];
+        if b.1 > 0 {
+            return Ok(b);
+        }
+        let scene = self.plan.scene;
+        // Per source mesh (in id order): its owner and index there, and every placement.
+        let mut uses: std::collections::BTreeMap<u32, (PrototypeId, usize, Vec<Transform34>)> =
+            std::collections::BTreeMap::new();
+        let mut stack = vec![(p, Transform34::IDENTITY)];
+        while let Some((q, proto_from_q)) = stack.pop() {
+            for (j, &m) in scene.meshes_of(q).iter().enumerate() {
+                if self.plan.mesh_kept(q, j, m) {
+                    uses.entry(m.0)
+                        .or_insert_with(|| (q, j, Vec::new()))
+                        .2
+                        .push(proto_from_q);
+                }
+            }
+            let base = scene.edge_base(q) as usize;
+            for (k, e) in scene.edges(q).iter().enumerate() {
+                if self.plan.edge_kept(q, base + k, edge_ref!(e)) {
+                    stack.push((e.child, xform::compose(&proto_from_q, &e.parent_from_child)));
+                }
+            }
+        }
+        let mut records: Vec<(u32, Item)> = Vec::new();
+        for (m, (q, j, placements)) in uses {
+            let m = MeshId(m);
+            let data = self.load_source(m)?;
+            let (baked, map) = bake_copies(&data, &placements);
+            drop(data);
+            let template = self.source_record(q, j, m);
+            let (r0, n) = self.made_records(m, &template, 0, &baked, Some(&map))?;
+            for r in r0..r0 + n {
+                let rec = &self.out.meshes[r as usize];
+                let bounds = xform::aabb_from_record(rec.bounds_min, rec.bounds_max);
+                records.push((
+                    r,
+                    Item {
+                        index: records.len() as u32,
+                        centre: bounds.center().to_array(),
+                        triangles: u64::from(rec.triangle_count),
+                    },
+                ));
+            }
+        }
+        let first = next_id(self.out.blases.len(), "BLASes")?;
+        let mut items: Vec<Item> = records.iter().map(|r| r.1).collect();
+        let mut ranges = Vec::new();
+        group_by_location(&mut items, u64::from(self.bound()), &mut ranges);
+        let mut group: Vec<u32> = Vec::new();
+        for &(a, b) in &ranges {
+            group.clear();
+            group.extend(items[a..b].iter().map(|it| records[it.index as usize].0));
+            group.sort_unstable();
+            self.triangle_blas(&group, NONE_U32)?;
+        }
+        let count = next_id(self.out.blases.len(), "BLASes")? - first;
+        self.out.report.baked_prototypes += 1;
+        self.bake_of_proto[p.index()] = (first, count);
         Ok((first, count))
     }
 
@@ -783,13 +868,13 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         let data = self.load_source(m)?;
         let mut level_records = Vec::new();
         if data.triangle_count() > self.bound() as usize {
-            level_records.push(self.made_records(m, &template, 0, &data)?);
+            level_records.push(self.made_records(m, &template, 0, &data, None)?);
         } else {
             level_records.push((self.record_for(p, j, m)?, 1));
         }
         {
             let mut emit = |lod, level: &MeshData| -> Result<(), CompileError> {
-                let made = self.made_records(m, &template, lod, level)?;
+                let made = self.made_records(m, &template, lod, level, None)?;
                 self.out.report.lod_meshes_made += 1;
                 level_records.push(made);
                 Ok(())
@@ -923,3 +1008,59 @@ fn root_element(plan: &Plan<'_>) -> u32 {
 #[cfg(test)]
 #[path = "emit_tests.rs"]
 mod tests;
+
+/// `data` copied once per placement (`proto_from_mesh`), positions and normals transformed (a
+/// mirroring placement flips the winding back), with each copy's triangle-to-source map.
+fn bake_copies(data: &MeshData, placements: &[Transform34]) -> (MeshData, Vec<u32>) {
+    let (nv, nt) = (data.positions.len(), data.triangle_count());
+    let copies = placements.len();
+    let mut out = MeshData {
+        positions: Vec::with_capacity(nv * copies),
+        normals: data
+            .normals
+            .as_ref()
+            .map(|_| Vec::with_capacity(nv * copies)),
+        uvs: data.uvs.as_ref().map(|_| Vec::with_capacity(nv * copies)),
+        indices: Vec::with_capacity(3 * nt * copies),
+    };
+    let mut map = Vec::with_capacity(nt * copies);
+    for xf in placements {
+        let m = xf.to_mat4();
+        let linear = glam::Mat3::from_mat4(m);
+        // Normals by the cofactor matrix (the inverse transpose up to det, defined even when
+        // the placement is singular), its sign kept so they still point outward.
+        let det = linear.determinant();
+        let cofactor = glam::Mat3::from_cols(
+            linear.y_axis.cross(linear.z_axis),
+            linear.z_axis.cross(linear.x_axis),
+            linear.x_axis.cross(linear.y_axis),
+        );
+        let sign = if det < 0.0 { -1.0 } else { 1.0 };
+        let base = out.positions.len() as u32;
+        out.positions.extend(
+            data.positions
+                .iter()
+                .map(|&p| m.transform_point3(glam::Vec3::from(p)).to_array()),
+        );
+        if let (Some(on), Some(n)) = (out.normals.as_mut(), data.normals.as_ref()) {
+            on.extend(n.iter().map(|&v| {
+                (sign * (cofactor * glam::Vec3::from(v)))
+                    .normalize_or_zero()
+                    .to_array()
+            }));
+        }
+        if let (Some(ou), Some(u)) = (out.uvs.as_mut(), data.uvs.as_ref()) {
+            ou.extend_from_slice(u);
+        }
+        for t in data.indices.chunks_exact(3) {
+            let (a, b, c) = (t[0] + base, t[1] + base, t[2] + base);
+            if det < 0.0 {
+                out.indices.extend_from_slice(&[a, c, b]);
+            } else {
+                out.indices.extend_from_slice(&[a, b, c]);
+            }
+        }
+        map.extend(0..nt as u32);
+    }
+    (out, map)
+}

@@ -607,8 +607,12 @@ fn auto_inlines_grouping_levels_but_keeps_geometry_shared() {
             .unwrap();
     }
     let scene = b.finish().unwrap();
+    let no_bake = |levels| CompileOptions {
+        auto_bake_max_triangles: 0,
+        ..opts(levels)
+    };
     let ml = check_flatten(&scene, &opts(Levels::Ml));
-    let auto = check_flatten(&scene, &opts(Levels::Auto));
+    let auto = check_flatten(&scene, &no_bake(Levels::Auto));
     // Ml: root → group TLAS → tree TLAS. Auto: root holds the 12 tree PIs directly.
     assert_eq!(ml.report.tlas_levels, 3, "{:?}", ml.report);
     assert_eq!(auto.report.tlas_levels, 2, "{:?}", auto.report);
@@ -620,10 +624,79 @@ fn auto_inlines_grouping_levels_but_keeps_geometry_shared() {
         &scene,
         &CompileOptions {
             auto_inline_max_entries: 3,
-            ..opts(Levels::Auto)
+            ..no_bake(Levels::Auto)
         },
     );
     assert_eq!(tight.report.tlas_levels, 3);
+    // Baking (the default): a tree is 6 triangles, so its copies become one triangle BLAS,
+    // instanced 12 times in the root: one level, no PI, the same triangles as the source.
+    let (baked, captured) = crate::testutil::compile_capturing(&scene, &opts(Levels::Auto));
+    assert_eq!(baked.report.baked_prototypes, 1, "{:?}", baked.report);
+    assert_eq!(baked.tlases.len(), 1);
+    assert!(baked.pis.is_empty());
+    assert_eq!(baked.tlases[0].instance_count, 12);
+    crate::testutil::assert_same_triangles(
+        &crate::testutil::source_triangles(&scene),
+        &crate::testutil::compiled_triangles(&scene, &baked, &captured),
+    );
+}
+
+#[test]
+fn baking_keeps_source_triangles_normals_and_winding_under_mirroring() {
+    // A leaf with normals placed twice in a tree, once mirrored; the tree placed twice.
+    let mut b = builder();
+    let main = Scene::MAIN_ELEMENT;
+    let mat = b.default_material();
+    let leaf = b.add_prototype("leaf", main).unwrap();
+    let leaf_mesh = b
+        .add_mesh(leaf, "leaf", mat, main, &grid_mesh(2, true))
+        .unwrap();
+    let tree = b.add_prototype("tree", main).unwrap();
+    // (A trunk of its own: a mesh-less two-entry tree would be inlined, not baked.)
+    b.add_mesh(tree, "trunk", mat, main, &triangle()).unwrap();
+    let mirror = motu_scene::Transform34::from_mat4(glam::Mat4::from_scale_rotation_translation(
+        glam::Vec3::new(-1.0, 2.0, 1.0),
+        glam::Quat::from_rotation_z(0.5),
+        glam::Vec3::new(3.0, 0.0, 0.0),
+    ));
+    b.add_instance(tree, leaf, Transform34::IDENTITY, main)
+        .unwrap();
+    b.add_instance(tree, leaf, mirror, main).unwrap();
+    for i in 0..2 {
+        b.add_instance(b.root(), tree, rot(i as f32, 5.0 * i as f32), main)
+            .unwrap();
+    }
+    let scene = b.finish().unwrap();
+    let (c, captured) = crate::testutil::compile_capturing(&scene, &opts(Levels::Auto));
+    assert_eq!(c.report.baked_prototypes, 1, "{:?}", c.report);
+    crate::testutil::assert_same_triangles(
+        &crate::testutil::source_triangles(&scene),
+        &crate::testutil::compiled_triangles(&scene, &c, &captured),
+    );
+    // The baked record: the leaf's two copies, mapped to the leaf's 8 triangles twice.
+    let (r, rec) = c
+        .meshes
+        .iter()
+        .enumerate()
+        .find(|(_, m)| m.source_mesh == leaf_mesh.0)
+        .unwrap();
+    assert_ne!(rec.flags & motu_abi::FLAG_PRIMITIVE_MAP, 0);
+    let (data, map) = &captured[&(r as u32)];
+    let map = map.as_ref().unwrap();
+    assert_eq!(map, &(0..8).chain(0..8).collect::<Vec<u32>>());
+    // Winding and normals agree in both copies: the geometric normal of every triangle points
+    // the way its vertex normals do (the mirrored copy's winding was flipped back).
+    let normals = data.normals.as_ref().unwrap();
+    for t in data.indices.chunks_exact(3) {
+        let p: Vec<glam::Vec3> = t
+            .iter()
+            .map(|&i| glam::Vec3::from(data.positions[i as usize]))
+            .collect();
+        let ng = (p[1] - p[0]).cross(p[2] - p[0]);
+        let ns = glam::Vec3::from(normals[t[0] as usize]);
+        assert!(ng.dot(ns) > 0.0, "winding {ng} against normal {ns}");
+        assert!((ns.length() - 1.0).abs() < 1e-5);
+    }
 }
 
 /// A big mesh (`grid_mesh(64)`: 8,192 triangles) in a prototype placed 3 times, 40 small meshes

@@ -31,6 +31,15 @@ pub fn flatten_source(scene: &Scene) -> Vec<(Transform34, MeshId)> {
 /// (clamped to each selector's chain) at every selector. A path is not followed deeper than
 /// the TLAS count, so even a cyclic (invalid) hierarchy terminates; validate it first.
 pub fn flatten_compiled(view: &HierarchyView<'_>, lod: u32) -> Vec<(Transform34, u32)> {
+    flatten_compiled_records(view, lod)
+        .into_iter()
+        .map(|(t, r)| (t, view.meshes[r as usize].source_mesh))
+        .collect()
+}
+
+/// [`flatten_compiled`] naming the mesh *record* of each placement (a baked or partitioned
+/// record holds part of, or copies of, its source mesh: compare triangles, not placements).
+pub fn flatten_compiled_records(view: &HierarchyView<'_>, lod: u32) -> Vec<(Transform34, u32)> {
     let mut out = Vec::new();
     if view.check_references().is_err() {
         return out;
@@ -53,7 +62,7 @@ pub fn flatten_compiled(view: &HierarchyView<'_>, lod: u32) -> Vec<(Transform34,
             match b.kind {
                 BLAS_TRIANGLES => {
                     for g in &view.geometries[items] {
-                        out.push((world_from_blas, view.meshes[g.mesh as usize].source_mesh));
+                        out.push((world_from_blas, g.mesh));
                     }
                 }
                 BLAS_AABBS => {

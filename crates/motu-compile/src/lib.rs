@@ -97,7 +97,7 @@ mod testutil;
 #[cfg(test)]
 mod proptests;
 
-pub use flatten::{flatten_compiled, flatten_source};
+pub use flatten::{flatten_compiled, flatten_compiled_records, flatten_source};
 pub use partition::{
     auto_bound, auto_bound_settles_at_triangles, auto_max_blas_triangles,
     DEFAULT_MAX_BLAS_TRIANGLES, MIN_AUTO_MAX_BLAS_TRIANGLES,
@@ -157,6 +157,11 @@ pub struct CompileOptions {
     /// [`Levels::Auto`]: the largest TLAS (instances + PIs) of a mesh-less prototype that is
     /// still inlined into its parents.
     pub auto_inline_max_entries: u64,
+    /// [`Levels::Auto`]: a prototype that would be a TLAS of instances (no LOD below it) and
+    /// whose content, instanced copies included, is at most this many triangles is *baked*:
+    /// its meshes' copies become triangle BLASes (with a primitive map to the source triangle),
+    /// so a ray reaches it with no traversal-shader hop. 0 turns baking off.
+    pub auto_bake_max_triangles: u64,
 }
 
 impl Default for CompileOptions {
@@ -173,6 +178,9 @@ impl Default for CompileOptions {
             subset: None,
             identity_tolerance: 1e-6,
             auto_inline_max_entries: 256,
+            // A forest tree of 8,732 eight-triangle leaves (70k triangles, ~5 MB of BLAS) bakes;
+            // the flake levels of a depth-4 sphereflake (787k) and Moana's plants do not.
+            auto_bake_max_triangles: 1 << 17,
         }
     }
 }
@@ -239,6 +247,9 @@ pub struct CompileReport {
     pub dropped_degenerate_instances: u64,
     /// Prototypes inlined by identity collapse (single parent, identity transform).
     pub collapsed_prototypes: u64,
+    /// Prototypes baked into triangle BLASes (`--levels auto`,
+    /// [`CompileOptions::auto_bake_max_triangles`]).
+    pub baked_prototypes: u64,
     /// Source meshes given a LOD chain, and the simplified meshes made.
     pub lod_source_meshes: u64,
     pub lod_meshes_made: u64,

@@ -1,7 +1,10 @@
 //! Random DAGs: every compile mode yields a hierarchy that passes `validate` and flattens to
 //! exactly the source's leaf placements.
 
-use crate::testutil::{assert_same_placements, compile_ok};
+use crate::testutil::{
+    assert_same_placements, assert_same_triangles, compile_capturing, compile_ok,
+    compiled_triangles, source_triangles,
+};
 use crate::{flatten_compiled, flatten_source, CompileOptions, Levels};
 use glam::{Mat4, Quat, Vec3};
 use motu_scene::{MeshData, PrototypeId, Scene, SceneBuilder, Transform34};
@@ -167,9 +170,16 @@ proptest! {
         let scene = build(&d);
         prop_assume!(scene.stats().flattened_instances < 3000);
         let source = flatten_source(&scene);
+        let mut source_tris = None;
         for opts in modes() {
-            let c = compile_ok(&scene, &opts);
-            assert_same_placements(&source, &flatten_compiled(&c.view(), 0));
+            let (c, captured) = compile_capturing(&scene, &opts);
+            if c.report.baked_prototypes > 0 {
+                // Baked copies live in the vertices: the same triangles, not placements.
+                let want = source_tris.get_or_insert_with(|| source_triangles(&scene));
+                assert_same_triangles(want, &compiled_triangles(&scene, &c, &captured));
+            } else {
+                assert_same_placements(&source, &flatten_compiled(&c.view(), 0));
+            }
             prop_assert_eq!(c.report.flattened_instances, scene.stats().flattened_instances);
             if let Levels::N(n) = opts.levels {
                 if opts.max_instances_per_tlas > 1000 {
