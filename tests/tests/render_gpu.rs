@@ -77,7 +77,10 @@ fn pipeline_matches_cpu_on_a_forest_package() {
         st["traces_per_ray"].as_f64().unwrap()
     };
     let (t_ml, t_auto) = (traces(&ml, "t-ml.aov"), traces(&auto, "t-auto.aov"));
-    assert!(t_auto < t_ml && t_auto <= 1.5, "auto {t_auto} vs ml {t_ml} traces/ray");
+    assert!(
+        t_auto < t_ml && t_auto <= 1.5,
+        "auto {t_auto} vs ml {t_ml} traces/ray"
+    );
 }
 
 #[test]
