@@ -128,6 +128,35 @@ fn sphereflake_and_lod_grid_agree() {
         &lod,
         &["--width", "80", "--lod-stochastic", "--lod-r-max", "64"],
     );
+    // Four selectors (2×2) in traversal mode: the root's LOD-selector PIs are a box list,
+    // slab-tested and resolved in the traversal shader instead of the hardware walk.
+    let few = dir.path().join("few");
+    motu_ok(&[
+        "gen",
+        "lod-grid",
+        "-o",
+        s(&few),
+        "--grid",
+        "2x2",
+        "--triangles",
+        "20000",
+    ]);
+    let few_pkg = dir.path().join("few.motu");
+    motu_ok(&[
+        "import",
+        s(&few.join("scene.pbrt")),
+        "-o",
+        s(&few_pkg),
+        "--lod",
+        "3",
+    ]);
+    let args = ["--width", "64", "--lod-mode", "traversal"];
+    all_backends_agree(dir.path(), "lod-box", &few_pkg, &args);
+    let st = render(&few_pkg, "pipeline", &dir.path().join("box.aov"), &args);
+    assert!(
+        st["resources"]["box_list_tlases"].as_u64().unwrap() >= 1,
+        "{st}"
+    );
 }
 
 /// Instance-level LOD (issue 15): on lod-grid `--lod 4` the default mode is `instance`; every
