@@ -41,7 +41,8 @@ layout(push_constant) uniform Push {
     VkInstanceTable vk_instances;  // instance `lod_instance_base + i` is entry i
     uint slot_count;
     uint lod_instance_base;
-    uint refit;  // 1: keep every BLAS address (instances stay active), switch masks only
+    uint refit;  // 1: every level stays active (an update may not change that): the unchosen
+                 // keep their BLAS address but shrink to a point and are masked out
     uint pad_;
 } push;
 
