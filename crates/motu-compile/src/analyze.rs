@@ -238,11 +238,7 @@ impl<'s> Plan<'s> {
 
     /// BLASes a baked prototype makes (an estimate: location grouping may make a few more).
     fn bake_blas_estimate(&self, p: PrototypeId) -> u64 {
-        let bound = self
-            .opts
-            .max_blas_triangles
-            .min(self.opts.max_primitives_per_blas)
-            .max(1);
+        let bound = self.opts.blas_triangle_bound();
         self.bake_triangles[p.index()]
             .div_ceil(u64::from(bound))
             .max(1)
@@ -329,8 +325,7 @@ impl<'s> Plan<'s> {
         if self.g_mesh_count[p.index()] == 0 {
             return 0;
         }
-        let o = self.opts;
-        let bound = o.max_blas_triangles.min(o.max_primitives_per_blas).max(1);
+        let bound = self.opts.blas_triangle_bound();
         let (mut blases, mut small) = (0u64, 0u64);
         for (j, &m) in self.scene.meshes_of(p).iter().enumerate() {
             if !self.mesh_kept(p, j, m) || self.mesh_gets_lod(m) {

@@ -402,8 +402,7 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
 
     /// The partitioner's bound: triangles per triangle BLAS.
     fn bound(&self) -> u32 {
-        let o = self.plan.opts;
-        o.max_blas_triangles.min(o.max_primitives_per_blas).max(1)
+        self.plan.opts.blas_triangle_bound()
     }
 
     fn load_source(&self, m: MeshId) -> Result<MeshData, CompileError> {
@@ -549,9 +548,8 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         for (k, it) in small.iter_mut().enumerate() {
             it.2.index = k as u32;
         }
+        let records: Vec<u32> = small.iter().map(|it| it.1).collect();
         let mut items: Vec<Item> = Vec::new();
-        let mut ranges: Vec<(usize, usize)> = Vec::new();
-        let mut group: Vec<u32> = Vec::new();
         let mut k = 0;
         while k < small.len() {
             let element = small[k].0;
@@ -561,15 +559,7 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
                 .map_or(small.len(), |n| k + n);
             items.clear();
             items.extend(small[k..run_end].iter().map(|it| it.2));
-            ranges.clear();
-            group_by_location(&mut items, u64::from(bound), &mut ranges);
-            for &(a, b) in &ranges {
-                group.clear();
-                group.extend(items[a..b].iter().map(|it| small[it.index as usize].1));
-                // Mesh order inside a group: as in the scene (stable ids per geometry).
-                group.sort_unstable();
-                self.triangle_blas(&group, element)?;
-            }
+            self.blases_by_location(&mut items, &records, element)?;
             k = run_end;
         }
         let count = next_id(self.out.blases.len(), "BLASes")? - first;
@@ -629,20 +619,33 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
             }
         }
         let first = next_id(self.out.blases.len(), "BLASes")?;
-        let mut items: Vec<Item> = records.iter().map(|r| r.1).collect();
-        let mut ranges = Vec::new();
-        group_by_location(&mut items, u64::from(self.bound()), &mut ranges);
-        let mut group: Vec<u32> = Vec::new();
-        for &(a, b) in &ranges {
-            group.clear();
-            group.extend(items[a..b].iter().map(|it| records[it.index as usize].0));
-            group.sort_unstable();
-            self.triangle_blas(&group, NONE_U32)?;
-        }
+        let (ids, mut items): (Vec<u32>, Vec<Item>) = records.into_iter().unzip();
+        self.blases_by_location(&mut items, &ids, NONE_U32)?;
         let count = next_id(self.out.blases.len(), "BLASes")? - first;
         self.out.report.baked_prototypes += 1;
         self.bake_of_proto[p.index()] = (first, count);
         Ok((first, count))
+    }
+
+    /// Triangle BLASes of `element` over mesh records `records[item.index]` for `items`,
+    /// grouped by location under the bound.
+    fn blases_by_location(
+        &mut self,
+        items: &mut [Item],
+        records: &[u32],
+        element: u32,
+    ) -> Result<(), CompileError> {
+        let mut ranges: Vec<(usize, usize)> = Vec::new();
+        group_by_location(items, u64::from(self.bound()), &mut ranges);
+        let mut group: Vec<u32> = Vec::new();
+        for &(a, b) in &ranges {
+            group.clear();
+            group.extend(items[a..b].iter().map(|it| records[it.index as usize]));
+            // Mesh order inside a group: as in the scene (stable ids per geometry).
+            group.sort_unstable();
+            self.triangle_blas(&group, element)?;
+        }
+        Ok(())
     }
 
     fn triangle_blas(&mut self, records: &[u32], element: u32) -> Result<u32, CompileError> {

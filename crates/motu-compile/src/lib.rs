@@ -186,6 +186,13 @@ impl Default for CompileOptions {
 }
 
 impl CompileOptions {
+    /// Triangles per triangle BLAS: the partitioner's bound within the primitive cap.
+    pub(crate) fn blas_triangle_bound(&self) -> u32 {
+        self.max_blas_triangles
+            .min(self.max_primitives_per_blas)
+            .max(1)
+    }
+
     /// The instance cap after the scratch budget.
     pub fn effective_instance_cap(&self) -> u64 {
         let by_scratch = self

@@ -48,7 +48,11 @@ pub fn builder() -> SceneBuilder {
 
 pub fn compile_ok(scene: &Scene, opts: &CompileOptions) -> CompiledScene {
     let mut sink = |_: u32, _: &MeshData, _: Option<&[u32]>| Ok(());
-    let c = compile(scene, opts, &mut sink).unwrap();
+    validated(compile(scene, opts, &mut sink).unwrap(), opts)
+}
+
+/// `c` after `validate_with` under `opts`' limits (panics with the report when invalid).
+fn validated(c: CompiledScene, opts: &CompileOptions) -> CompiledScene {
     crate::validate_with(
         &c.view(),
         &crate::Limits {
@@ -67,15 +71,7 @@ pub fn compile_capturing(scene: &Scene, opts: &CompileOptions) -> (CompiledScene
         captured.insert(r, (d.clone(), map.map(<[u32]>::to_vec)));
         Ok(())
     };
-    let c = compile(scene, opts, &mut sink).unwrap();
-    crate::validate_with(
-        &c.view(),
-        &crate::Limits {
-            max_instances_per_tlas: opts.effective_instance_cap().min(u32::MAX as u64) as u32,
-            max_primitives_per_blas: opts.max_primitives_per_blas,
-        },
-    )
-    .unwrap_or_else(|e| panic!("invalid hierarchy: {e}\n{:#?}", c.report));
+    let c = validated(compile(scene, opts, &mut sink).unwrap(), opts);
     (c, captured)
 }
 

@@ -625,29 +625,26 @@ pub(crate) fn run_frames(
         }
         None => None,
     };
-    let mut lod_pass = match (&scene.instance_lod, &lod_levels) {
+    let lod_pass = match (&scene.instance_lod, &lod_levels) {
         (Some(lod), Some(levels)) => lod.needs_pass(levels, frames),
         _ => None,
     };
-    let lod_pass_kind = lod_pass;
-    let mut lod_pass_frame = None;
     for f in 0..frames {
         rec.fill_buffer(&frame.stats, 0, (RENDER_STAT_WORDS * 4) as u64, 0)?;
         rec.barrier();
         rec.write_timestamp(&timestamps, 2 * f)?;
-        // Counted in the frame's time.
-        if let (Some(kind), Some(lod), Some(levels)) =
-            (lod_pass.take(), &scene.instance_lod, &lod_levels)
+        // In the first frame (`frames` ≥ 1), counted in its time.
+        if let (0, Some(kind), Some(lod), Some(levels)) =
+            (f, lod_pass, &scene.instance_lod, &lod_levels)
         {
             lod.record(ctx, &mut rec, levels, kind)?;
             rec.write_timestamp(&timestamps, 2 * frames)?;
-            lod_pass_frame = Some(f);
         }
         tracer.record(&mut rec, push_bytes, [w, h], None)?;
         rec.write_timestamp(&timestamps, 2 * f + 1)?;
         rec.barrier();
     }
-    if lod_pass_frame.is_none() {
+    if lod_pass.is_none() {
         // Every query is read back: the LOD one too, unused without a pass.
         rec.write_timestamp(&timestamps, 2 * frames)?;
     }
@@ -664,13 +661,8 @@ pub(crate) fn run_frames(
     )?;
     rec.submit_and_wait()?;
     let ticks = timestamps.read_ticks()?;
-    if let (Some(lod), Some(levels), Some(kind), Some(f)) = (
-        &scene.instance_lod,
-        lod_levels,
-        lod_pass_kind,
-        lod_pass_frame,
-    ) {
-        let pass_ms = timestamps.elapsed_ns(&ticks, 2 * f, 2 * frames)? / 1e6;
+    if let (Some(lod), Some(levels), Some(kind)) = (&scene.instance_lod, lod_levels, lod_pass) {
+        let pass_ms = timestamps.elapsed_ns(&ticks, 0, 2 * frames)? / 1e6;
         lod.built(levels, kind, pass_ms);
     }
     let records: Vec<AovRecord> = frame.readback.read_vec(0, pixels as usize)?;

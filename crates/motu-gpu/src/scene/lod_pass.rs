@@ -63,6 +63,16 @@ pub(crate) enum PassKind {
     Settle,
 }
 
+impl PassKind {
+    /// The pass leaves a refittable tree (every level active, built to allow updates).
+    fn refittable(self) -> bool {
+        matches!(
+            self,
+            PassKind::Update | PassKind::Build { refittable: true }
+        )
+    }
+}
+
 /// The slot TLASes' state between passes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Tree {
@@ -150,9 +160,10 @@ impl InstanceLodGpu {
     /// The submission with pass `kind` for `levels` completed: the slot TLASes hold them;
     /// the pass took `pass_ms` of GPU time.
     pub(crate) fn built(&self, levels: Vec<u32>, kind: PassKind, pass_ms: f64) {
-        let tree = match kind {
-            PassKind::Build { refittable: true } | PassKind::Update => Tree::Refittable,
-            PassKind::Build { refittable: false } | PassKind::Settle => Tree::Quality,
+        let tree = if kind.refittable() {
+            Tree::Refittable
+        } else {
+            Tree::Quality
         };
         *self.state.lock().unwrap_or_else(|e| e.into_inner()) = (Some(levels), tree);
         let mut t = self.pass_ms.lock().unwrap_or_else(|e| e.into_inner());
@@ -182,10 +193,7 @@ impl InstanceLodGpu {
         if !levels.is_empty() {
             self.levels.write(0, levels)?;
         }
-        let refittable = matches!(
-            kind,
-            PassKind::Update | PassKind::Build { refittable: true }
-        );
+        let refittable = kind.refittable();
         let mut push = self.push;
         push.refit = u32::from(refittable);
         rec.dispatch(
