@@ -1,7 +1,9 @@
 //! The GPU backends against the CPU oracle on real packages (issue 7), on whatever Vulkan
 //! device exists (lavapipe in CI, with validation on via MOTU_VALIDATION=1 from tools/test.sh).
 
-use motu_tests::{gpu_available, has_ray_query, motu, motu_json, motu_ok, render, s, shared_scene};
+use motu_tests::{
+    gpu_available, has_ray_query, import, motu, motu_json, motu_ok, render, s, shared_scene,
+};
 use std::path::Path;
 
 /// Every backend renders `pkg` the same way (and equal to `reference`, if given).
@@ -81,6 +83,47 @@ fn pipeline_matches_cpu_on_a_forest_package() {
         t_auto < t_ml && t_auto <= 1.5,
         "auto {t_auto} vs ml {t_ml} traces/ray"
     );
+}
+
+#[test]
+fn auto_inlines_a_sphereflake_whose_flattening_is_cheap() {
+    if !gpu_available() {
+        return;
+    }
+    // Depth 4: flake3 (820 entries, too many triangles to bake) is used 9 times, 7,380
+    // instances in the root, so `auto` inlines it: one TLAS, one trace per ray, the same hits
+    // as `ml` (which walks the nine flake3 TLASes). Depth 5's flake4 (7,381 entries × 9) is
+    // over the 2^16 cap and stays a shared TLAS.
+    let dir = tempfile::tempdir().unwrap();
+    let mut info = Vec::new();
+    for depth in ["4", "5"] {
+        let gen = dir.path().join(format!("flake{depth}"));
+        motu_ok(&["gen", "sphereflake", "-o", s(&gen), "--depth", depth]);
+        let auto = dir.path().join(format!("auto{depth}.motu"));
+        import(&gen.join("scene.pbrt"), &auto, &["--levels", "auto"]);
+        info.push(motu_json(&["info", s(&auto), "--json"]));
+    }
+    assert_eq!(info[0]["levels"], 1, "{}", info[0]);
+    assert_eq!(info[0]["programmable_instances"], 0, "{}", info[0]);
+    assert_eq!(info[0]["tlas_instances"], 7382, "{}", info[0]);
+    assert_eq!(info[1]["levels"], 2, "{}", info[1]);
+    assert_eq!(info[1]["programmable_instances"], 9, "{}", info[1]);
+
+    let gen = dir.path().join("flake4");
+    let ml = dir.path().join("ml4.motu");
+    import(&gen.join("scene.pbrt"), &ml, &[]);
+    let auto = dir.path().join("auto4.motu");
+    let extra = ["--width", "64", "--height", "48"];
+    let a = all_backends_agree(dir.path(), "auto4", &auto, &extra);
+    let m = all_backends_agree(dir.path(), "ml4", &ml, &extra);
+    motu_ok(&["compare", s(&a), s(&m)]);
+    let traces = |pkg: &Path, name: &str| {
+        let st = render(pkg, "pipeline", &dir.path().join(name), &extra);
+        st["traces_per_ray"].as_f64().unwrap()
+    };
+    let (t_ml, t_auto) = (traces(&ml, "t-ml.aov"), traces(&auto, "t-auto.aov"));
+    assert_eq!(t_auto, 1.0, "auto {t_auto} traces/ray");
+    assert!(t_ml > 1.5, "ml {t_ml} traces/ray");
 }
 
 #[test]

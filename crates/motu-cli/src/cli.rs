@@ -183,10 +183,10 @@ pub struct ImportArgs {
     /// Output package path.
     #[arg(short, long)]
     pub output: PathBuf,
-    /// ml: keep the instancing graph; auto: ml with cheap grouping levels inlined and small
+    /// ml: keep the instancing graph; auto: ml with cheap grouping levels inlined, small
     /// instanced prototypes (at most 2^17 triangles with their copies) baked into triangle BLASes
-    /// (fewer traces per ray, big geometry still shared); sl: flatten to one level; N: at most
-    /// N levels.
+    /// and levels whose inlining costs at most 2^16 instances inlined (fewer traces per ray, big
+    /// geometry still shared); sl: flatten to one level; N: at most N levels.
     #[arg(long, default_value = "ml", value_parser = parse_levels)]
     pub levels: LevelsArg,
     /// Instances per TLAS before it is split (default: the spec's 2^24−1).

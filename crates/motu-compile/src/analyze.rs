@@ -260,10 +260,12 @@ impl<'s> Plan<'s> {
 
     /// Bottom-up: the entries TLAS(p) would hold under `Auto` (own meshes' BLAS, expanded
     /// children's entries, a baked child's BLASes, one PI per other child) decide whether a
-    /// mesh-less `p` is inlined; a prototype that is not inlined but would be a TLAS of
-    /// instances, with no LOD below it and at most `auto_bake_max_triangles` triangles in all,
-    /// is baked: no traversal-shader hop reaches it, for a few MB of geometry (instancing
-    /// saves memory where prototypes are big, not in a tree of small leaves).
+    /// mesh-less `p` is inlined as a grouping level; a prototype that is not, but would be a
+    /// TLAS of instances, with no LOD below it and at most `auto_bake_max_triangles` triangles
+    /// in all, is baked: no traversal-shader hop reaches it, for a few MB of geometry
+    /// (instancing saves memory where prototypes are big, not in a tree of small leaves); what
+    /// is left is inlined when its entries times its uses are at most
+    /// `auto_inline_max_instances`, so only levels whose sharing saves memory stay hops.
     fn plan_auto_inlining(&mut self) {
         let scene = self.scene;
         let mut entries = vec![0u64; scene.prototypes().len()];
@@ -305,17 +307,24 @@ impl<'s> Plan<'s> {
             }
             entries[p.index()] = count;
             content[p.index()] = tris;
-            let inline = p != Scene::ROOT
-                && !self.has_own_meshes(p)
-                && count <= self.opts.auto_inline_max_entries;
-            self.auto_inline[p.index()] = inline;
+            let not_root = p != Scene::ROOT;
+            // A mesh-less grouping level of a few entries is inlined whatever its uses (the
+            // thesis forest's groups: a hop saves no memory worth a trace).
+            let grouping =
+                not_root && !self.has_own_meshes(p) && count <= self.opts.auto_inline_max_entries;
             if let Some(t) = tris {
                 self.bake_triangles[p.index()] = t;
-                self.bake[p.index()] = p != Scene::ROOT
-                    && !inline
+                self.bake[p.index()] = not_root
+                    && !grouping
                     && kept_edges > 0
                     && t <= self.opts.auto_bake_max_triangles;
             }
+            // What would still be a hop is inlined when that is cheap: its `count` entries go
+            // into its parents' TLASes once per use (a sphereflake's flake3: 820 × 9).
+            let cheap = count.saturating_mul(u64::from(self.indeg[p.index()]))
+                <= self.opts.auto_inline_max_instances;
+            self.auto_inline[p.index()] =
+                grouping || (not_root && !self.bake[p.index()] && kept_edges > 0 && cheap);
         }
     }
 

@@ -609,6 +609,7 @@ fn auto_inlines_grouping_levels_but_keeps_geometry_shared() {
     let scene = b.finish().unwrap();
     let no_bake = |levels| CompileOptions {
         auto_bake_max_triangles: 0,
+        auto_inline_max_instances: 0,
         ..opts(levels)
     };
     let ml = check_flatten(&scene, &opts(Levels::Ml));
@@ -628,6 +629,18 @@ fn auto_inlines_grouping_levels_but_keeps_geometry_shared() {
         },
     );
     assert_eq!(tight.report.tlas_levels, 3);
+    // Cheap inlining without baking: a tree TLAS (trunk BLAS + 5 leaf instances) is used by 4
+    // edges (the group's, inlined into the root), 6 × 4 = 24 entries: at a cap of 24 it is
+    // inlined (one level, 3 × 4 × 6 instances), at 23 it stays a shared TLAS.
+    let cap = |n| CompileOptions {
+        auto_inline_max_instances: n,
+        ..no_bake(Levels::Auto)
+    };
+    let inlined = check_flatten(&scene, &cap(24));
+    assert_eq!(inlined.report.tlas_levels, 1, "{:?}", inlined.report);
+    assert!(inlined.pis.is_empty());
+    assert_eq!(inlined.tlases[0].instance_count, 72);
+    assert_eq!(check_flatten(&scene, &cap(23)).report.tlas_levels, 2);
     // Baking (the default): a tree is 6 triangles, so its copies become one triangle BLAS,
     // instanced 12 times in the root: one level, no PI, the same triangles as the source.
     let (baked, captured) = crate::testutil::compile_capturing(&scene, &opts(Levels::Auto));

@@ -124,11 +124,14 @@ pub enum Levels {
     Sl,
     /// At most this many TLAS levels on any root-to-leaf path (before splitting); `N(1)` is `Sl`.
     N(u32),
-    /// `Ml`, plus inlining of pure grouping levels: a prototype without meshes of its own whose
-    /// TLAS would hold at most [`CompileOptions::auto_inline_max_entries`] entries is expanded
-    /// into its parents. Such levels save no memory worth a trace (the thesis forest's group
-    /// levels: 12 PIs each) but cost every ray one more `traceRayEXT`; geometry-bearing
-    /// prototypes (where instancing saves memory) stay shared.
+    /// `Ml`, plus inlining of levels that save no memory worth a trace: a prototype without
+    /// meshes of its own whose TLAS would hold at most
+    /// [`CompileOptions::auto_inline_max_entries`] entries (the thesis forest's group levels:
+    /// 12 PIs each), and any prototype whose entries times its uses are at most
+    /// [`CompileOptions::auto_inline_max_instances`] (a depth-4 sphereflake's flakes), is
+    /// expanded into its parents; such levels cost every ray entering them one more
+    /// `traceRayEXT`. Prototypes where instancing saves memory stay shared, and small ones
+    /// are baked ([`CompileOptions::auto_bake_max_triangles`]).
     Auto,
 }
 
@@ -157,6 +160,11 @@ pub struct CompileOptions {
     /// [`Levels::Auto`]: the largest TLAS (instances + PIs) of a mesh-less prototype that is
     /// still inlined into its parents.
     pub auto_inline_max_entries: u64,
+    /// [`Levels::Auto`]: any prototype whose inlining puts at most this many entries into its
+    /// parents' TLASes (its TLAS's entries times its uses) is inlined, meshes or not: a hop
+    /// every ray entering it pays is dearer than a few thousand instance records. 0 turns it
+    /// off.
+    pub auto_inline_max_instances: u64,
     /// [`Levels::Auto`]: a prototype that would be a TLAS of instances (no LOD below it) and
     /// whose content, instanced copies included, is at most this many triangles is *baked*:
     /// its meshes' copies become triangle BLASes (with a primitive map to the source triangle),
@@ -178,6 +186,11 @@ impl Default for CompileOptions {
             subset: None,
             identity_tolerance: 1e-6,
             auto_inline_max_entries: 256,
+            // 2^16 instances are 4 MiB of instance records, little beside any scene that needs
+            // a GPU: a depth-4 sphereflake's flake3 (820 entries × 9 uses) and the thesis
+            // forest's tree groups (2,592 × 12) inline; a depth-5 sphereflake's flake4 (7,381 ×
+            // 9) and Moana's instanced plants (thousands of uses each) stay shared.
+            auto_inline_max_instances: 1 << 16,
             // A forest tree of 8,732 eight-triangle leaves (70k triangles, ~5 MB of BLAS) bakes;
             // the flake levels of a depth-4 sphereflake (787k) and Moana's plants do not.
             auto_bake_max_triangles: 1 << 17,
