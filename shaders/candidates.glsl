@@ -33,10 +33,50 @@ void record_candidate(uint pi, float t_near) {
 // triangle committed so far). Tests each member instance's box (its BLAS bounds under its
 // tlas_from_blas, padded as the CPU pads proxy boxes), so rays passing between instances do
 // not demand the BLAS, and keeps the nearest member entry in the payload (open_t, open_blas);
-// every BLAS met in front of `t_hi` is marked open (guard probes: seen).
+// every BLAS met in front of `t_hi` is marked open (guard probes: seen). Where the BLAS has
+// boxes inside it (proxy_boxes.rs), a member counts only if the ray also enters one of them.
 // Done here, during the hardware walk, rather than as a PI candidate: a ray crossing N proxy
 // boxes took ⌈N / PI_CAPACITY⌉ re-walks of the whole TLAS for them (61 TLAS walks per ray at
 // ⅛ of the 0.3 island, most of the frame's time); now one walk meets every box once.
+// The nearest entry in [t_min, t_max] of the ray into a leaf box of a BLAS placed by
+// `tlas_from_blas` (boxes from `first_box`: `fan` top boxes, then `fan` leaves per top box,
+// BLAS space, transformed as member boxes are and padded by `pad` more), testing only the
+// leaves of the top boxes it enters; -1 when it enters none.
+float proxy_boxes_entry(uint64_t table, uint first_box, uint fan, Affine tlas_from_blas,
+                        vec3 org, vec3 dir, float t_min, float t_max, float pad) {
+    FloatTable bt = FloatTable(table);
+    uint entered = 0u;
+    float t_leaf = -1.0;
+    for (uint k = 0u; k < fan + fan * fan; ++k) {
+        if (k >= fan && (k - fan) % fan == 0u && (entered & (1u << ((k - fan) / fan))) == 0u) {
+            k += fan - 1u;  // the leaves of a top box the ray missed
+            continue;
+        }
+        uint o = 6u * (first_box + k);
+        vec3 bmin = vec3(bt.r[o], bt.r[o + 1u], bt.r[o + 2u]);
+        vec3 bmax = vec3(bt.r[o + 3u], bt.r[o + 4u], bt.r[o + 5u]);
+        if (bmin.x > bmax.x) {
+            continue;  // empty
+        }
+        Affine m = tlas_from_blas;
+        vec3 c = xform_point(m, 0.5 * (bmin + bmax));
+        vec3 h0 = 0.5 * (bmax - bmin);
+        vec3 h = vec3(dot(abs(m.r0.xyz), h0), dot(abs(m.r1.xyz), h0), dot(abs(m.r2.xyz), h0));
+        float p = 2e-3 * max(max(h.x, h.y), h.z) + pad;
+        float t = slab_near(org, dir, c - h - p, c + h + p, t_min,
+                            t_leaf >= 0.0 ? min(t_max, t_leaf) : t_max);
+        if (t < 0.0) {
+            continue;
+        }
+        if (k < fan) {
+            entered |= 1u << k;
+        } else {
+            t_leaf = t;  // only a nearer leaf passes the t_max above
+        }
+    }
+    return t_leaf;
+}
+
 void record_proxy(PiRecord r, vec3 org, vec3 dir, float t_min, float t_hi) {
     if (push.stream == 0ul) {
         return;  // proxies exist only in streamed skeletons
@@ -53,6 +93,15 @@ void record_proxy(PiRecord r, vec3 org, vec3 dir, float t_min, float t_hi) {
     }
     uint first = floatBitsToUint(r.child_from_parent[0]);
     uint count = floatBitsToUint(r.child_from_parent[1]);
+    // The boxes inside the BLAS (proxy_boxes.rs): `fan` top boxes from `first_box`, each
+    // followed by its `fan` leaves.
+    uint first_box = 0u;
+    uint fan = 0u;
+    if (s.proxy_box_index != 0ul) {
+        U32Table ix = U32Table(s.proxy_box_index);
+        first_box = ix.r[2u * blas];
+        fan = ix.r[2u * blas + 1u];
+    }
     BlasRecord br = push.blases.r[blas];
     vec3 centre = 0.5 * (br.bounds_min + br.bounds_max);
     vec3 half_size = 0.5 * (br.bounds_max - br.bounds_min);
@@ -72,6 +121,10 @@ void record_proxy(PiRecord r, vec3 org, vec3 dir, float t_min, float t_hi) {
                               max(max(abs(hi.x), abs(hi.y)), abs(hi.z)));
         float pad = 1e-3 * extent + 2e-5 * magnitude;
         float t = slab_near(org, dir, lo - pad, hi + pad, t_min, min(t_hi, t_best));
+        if (t >= 0.0 && fan != 0u) {
+            t = proxy_boxes_entry(s.proxy_boxes, first_box, fan, m, org, dir, t_min,
+                                  min(t_hi, t_best), pad + 2e-5 * magnitude);
+        }
         if (t >= 0.0) {
             t_best = min(t_best, t);
         }

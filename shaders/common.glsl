@@ -45,7 +45,7 @@
 // they meet open (the nearest needed and counted) and writing nothing else.
 #define STREAM_PROBE_PASS 1u
 
-// Per-pass streaming parameters (Rust: stream::StreamParams, 80 bytes). Present only when
+// Per-pass streaming parameters (Rust: stream::StreamParams, 96 bytes). Present only when
 // push.stream != 0.
 struct StreamParams {
     uint64_t blas_stamps;   // u32 per BLAS: 4 × stamp + STREAM_* level
@@ -59,6 +59,8 @@ struct StreamParams {
     uint64_t requests;      // u32 per BLAS: pixels whose nearest open structure it is (build order)
     uint64_t carry;         // Carry per pixel (render_pixel.glsl), zeroed at the frame's start
     uint64_t cluster_members;  // u32 global instance indices of the proxy clusters' members
+    uint64_t proxy_box_index;  // uvec2 (first, fan) per BLAS into proxy_boxes (fan 0: none)
+    uint64_t proxy_boxes;   // float[6] (min, max; BLAS space): fan top boxes, then fan leaves each
     uint flags;             // STREAM_PROBE_PASS
     uint _pad;
 };
@@ -147,6 +149,7 @@ layout(buffer_reference, std430, buffer_reference_align = 4) writeonly buffer Rg
 layout(buffer_reference, std430, buffer_reference_align = 4) buffer Stats { uint n[]; };
 layout(buffer_reference, std430, buffer_reference_align = 16) readonly buffer StreamRef { StreamParams s; };
 layout(buffer_reference, std430, buffer_reference_align = 4) buffer StampTable { uint r[]; };
+layout(buffer_reference, std430, buffer_reference_align = 4) readonly buffer FloatTable { float r[]; };
 layout(buffer_reference, std430, buffer_reference_align = 4) buffer IncompleteList { uint count; uint r[]; };
 
 // 16 device addresses = 128 bytes, the guaranteed push-constant size. Order = Rust `Slot`.

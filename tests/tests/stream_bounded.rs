@@ -416,6 +416,15 @@ fn default_island_shaded_camera_path_needs_one_pass_per_frame_with_room_and_the_
     assert!(means[0] <= 1.05, "with room and the probe: {}", means[0]);
     assert!(means[1] > means[0], "the probe saves passes: {means:?}");
     assert!(means[2] <= 1.3, "at half the peak: {}", means[2]);
+    // At a quarter a frame's rays reach more than fits at once (2.45 passes before the boxes
+    // inside BLASes, 1.59 with them): they open only the BLASes whose triangles' boxes they
+    // enter, not every one whose bounds they cross.
+    assert!(
+        u(&quarter["stream"]["totals"]["proxy_boxes"]) > 0,
+        "{}",
+        quarter["stream"]["totals"]
+    );
+    assert!(means[3] <= 1.75, "at a quarter: {}", means[3]);
     // A panning recorded path (palmsCam turned from +20° back to itself over 12 frames),
     // streamed at the quarter and at half: its last frame equals the full build of that pose.
     let path = d.join("pan.json");

@@ -50,8 +50,9 @@ pub(crate) use tables::{blas_geometry, box_list_instances, encode_instance, pi_a
 pub(crate) use upload::{streamed_attribute_bytes, MeshGpu, MeshStager, Uploader};
 
 /// Geometry of one compiled mesh, by its index in the hierarchy's mesh table (e.g. slices of a
-/// mapped package chunk, borrowed).
-pub trait MeshBlobSource {
+/// mapped package chunk, borrowed). `Sync`: the streaming renderer reads meshes from several
+/// threads when it starts (the boxes inside BLASes).
+pub trait MeshBlobSource: Sync {
     /// Positions (`vertex_count` of them) and `3 × triangle_count` indices.
     #[allow(clippy::type_complexity)]
     fn mesh_data(

@@ -10,6 +10,7 @@ use motu_alloc::MIB;
 use serde::Serialize;
 
 use super::buffers::frame_buffer_bytes;
+use super::proxy_boxes;
 use super::skeleton::{proxy_clusters, BLOCKS_PER_BUDGET, STAGING_PER_BUDGET};
 use crate::accel::BlasGeometry;
 use crate::error::Result;
@@ -163,6 +164,18 @@ pub fn streaming_floor(
         let _ = b;
     }
     let rec_bytes = |n: u64, size: u64| align(n * size, 16);
+    let proxy_box_bytes = {
+        let (index, boxes) = proxy_boxes::layout(view, buildable);
+        if boxes == 0 {
+            0
+        } else {
+            rec_bytes(index.len() as u64, 8)
+                + rec_bytes(
+                    boxes as u64,
+                    std::mem::size_of::<proxy_boxes::Box6>() as u64,
+                )
+        }
+    };
     let tables = rec_bytes(nt, std::mem::size_of::<motu_abi::TlasRecord>() as u64)
         + rec_bytes(
             view.instances.len() as u64 + nt,
@@ -194,6 +207,8 @@ pub fn streaming_floor(
         + rec_bytes(nt, 8)
         // The proxy clusters' member table (u32 an instance).
         + rec_bytes(members_total, 4)
+        // The boxes inside streamable BLASes and their index.
+        + proxy_box_bytes
         + 2 * rec_bytes(nb.max(1), 4);
     // The largest triangle BLAS build: meshes, structure, scratch.
     let mut largest: Option<(u32, u64, u64)> = None;

@@ -14,7 +14,9 @@
 //! from the resident instance table through a member table; the PI record's unused transform
 //! words carry the range): only a ray that enters a member's box, in front of its best hit,
 //! opens the BLAS (at that member's entry), so rays passing between the instances of a
-//! cluster demand nothing (guard probes alike). A built TLAS holds only the
+//! cluster demand nothing (guard probes alike), and only if it also enters one of the boxes
+//! around the BLAS's triangles (`proxy_boxes.rs`), so rays through a BLAS's empty space do not
+//! either. A built TLAS holds only the
 //! instances of resident BLASes (and PI instances) plus the proxy: each carries its index in
 //! the TLAS's record range as its custom index, which the shaders read, so records never move
 //! and the resident skeleton does not grow with the instance count (only the instance table
@@ -70,6 +72,7 @@ mod frame;
 mod params;
 mod passes;
 mod probe;
+mod proxy_boxes;
 mod rebuild;
 mod residency;
 mod shading;
@@ -302,6 +305,11 @@ pub struct StreamTotals {
     pub scene_triangles: u64,
     /// Bytes the skeleton (tables, PI BLASes, root TLAS, proxies) took at start.
     pub skeleton_bytes: u64,
+    /// Boxes inside the streamable BLASes (top boxes and leaves, `proxy_boxes.rs`) that a ray
+    /// must enter, beside a member instance's box, to open a BLAS; and the milliseconds
+    /// computing them from the meshes took at start.
+    pub proxy_boxes: u64,
+    pub proxy_boxes_ms: f64,
     pub vram_peak_bytes: u64,
     pub vram_budget_bytes: u64,
 }
@@ -338,6 +346,9 @@ pub struct StreamingRenderer<'a> {
     /// Device address of the proxy clusters' member table (u32 global instance indices), 0
     /// when no TLAS has a proxy.
     cluster_members: u64,
+    /// `[first, fan]` per BLAS and the boxes inside BLASes (`proxy_boxes.rs`): 0 when none.
+    proxy_box_index: u64,
+    proxy_boxes: u64,
     shading: shading::StreamShading,
     view: HierarchyView<'a>,
     source: &'a dyn MeshBlobSource,

@@ -4,7 +4,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-/// `StreamParams` of `common.glsl` (80 bytes).
+/// `StreamParams` of `common.glsl` (96 bytes).
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 #[repr(C)]
 pub(super) struct StreamParams {
@@ -26,6 +26,10 @@ pub(super) struct StreamParams {
     /// u32 global instance indices of the proxy clusters' members (a proxy PI record names
     /// its range), 0: no proxies.
     pub(super) cluster_members: u64,
+    /// `[first, fan]` (u32 each) per BLAS and the boxes inside BLASes (`[f32; 6]` each, BLAS
+    /// space) a ray must also enter to open one (`proxy_boxes.rs`); 0: none.
+    pub(super) proxy_box_index: u64,
+    pub(super) proxy_boxes: u64,
     /// [`STREAM_PROBE_PASS`] or 0.
     pub(super) flags: u32,
     pub(super) _pad: u32,

@@ -267,6 +267,8 @@ impl<'a> StreamingRenderer<'a> {
             requests: fb.requests.device_address()?.0,
             carry: fb.carry.device_address()?.0,
             cluster_members: self.cluster_members,
+            proxy_box_index: self.proxy_box_index,
+            proxy_boxes: self.proxy_boxes,
             flags,
             _pad: 0,
         };

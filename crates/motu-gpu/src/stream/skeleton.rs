@@ -137,7 +137,7 @@ pub(super) fn proxy_clusters(
 /// stands for, and a flat one (a ground or ocean plane) is otherwise missed by box tests at
 /// grazing angles where the triangle itself is hit (a far pixel lost its hit at small budgets,
 /// where no neighbour happened to make the BLAS resident).
-fn padded(b: [f32; 6]) -> [f32; 6] {
+pub(super) fn padded(b: [f32; 6]) -> [f32; 6] {
     let extent = (0..3).map(|a| b[3 + a] - b[a]).fold(0.0f32, f32::max);
     let magnitude = b.iter().map(|v| v.abs()).fold(0.0f32, f32::max);
     let pad = 1e-3 * extent + 1e-5 * magnitude;
@@ -319,6 +319,8 @@ impl<'a> StreamingRenderer<'a> {
             mesh_geo_table: 0,
             tlas_addr_table: 0,
             cluster_members: 0,
+            proxy_box_index: 0,
+            proxy_boxes: 0,
             shading: Default::default(),
             view,
             source,
@@ -351,7 +353,19 @@ impl<'a> StreamingRenderer<'a> {
             },
             ctx: ctx.clone(),
         };
-        r.init_skeleton(&gpu_tlases, &gpu_instances, &gpu_blases, &gpu_pis, &members)?;
+        let t_boxes = std::time::Instant::now();
+        let (box_index, box_count) = super::proxy_boxes::layout(&view, |b| r.buildable[b]);
+        let boxes = super::proxy_boxes::compute(&view, source, &box_index, box_count);
+        r.totals.proxy_boxes = boxes.len() as u64;
+        r.totals.proxy_boxes_ms = t_boxes.elapsed().as_secs_f64() * 1e3;
+        r.init_skeleton(
+            &gpu_tlases,
+            &gpu_instances,
+            &gpu_blases,
+            &gpu_pis,
+            &members,
+            (&box_index, &boxes),
+        )?;
         let report = r.heap.report();
         r.totals.skeleton_bytes = report.budget_in_use_bytes;
         tracing::info!(
@@ -379,6 +393,7 @@ impl<'a> StreamingRenderer<'a> {
         gpu_blases: &[BlasRecord],
         gpu_pis: &[PiRecord],
         cluster_members: &[u32],
+        (box_index, boxes): (&[[u32; 2]], &[super::proxy_boxes::Box6]),
     ) -> Result<()> {
         use bytemuck::cast_slice;
         let ctx = self.ctx.clone();
@@ -415,6 +430,11 @@ impl<'a> StreamingRenderer<'a> {
         if !cluster_members.is_empty() {
             self.cluster_members =
                 self.upload_table(&ctx, "stream-cluster-members", cast_slice(cluster_members))?;
+        }
+        if !boxes.is_empty() {
+            self.proxy_box_index =
+                self.upload_table(&ctx, "stream-proxy-box-index", cast_slice(box_index))?;
+            self.proxy_boxes = self.upload_table(&ctx, "stream-proxy-boxes", cast_slice(boxes))?;
         }
         let stamp_usage = BufferUsage::STORAGE
             | BufferUsage::DEVICE_ADDRESS
