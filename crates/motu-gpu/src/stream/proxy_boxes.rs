@@ -107,7 +107,7 @@ fn blas_boxes(
 ) -> Vec<Box6> {
     let r = &view.blases[b];
     let mut out = vec![EMPTY; fan + fan * fan];
-    let bounds = super::skeleton::padded([
+    let bounds = padded([
         r.bounds_min[0],
         r.bounds_min[1],
         r.bounds_min[2],
@@ -147,7 +147,7 @@ fn blas_boxes(
             grow(&mut bx, &t.1[..3], &t.1[3..]);
         }
         if bx[0] <= bx[3] {
-            super::skeleton::padded(bx)
+            padded(bx)
         } else {
             bx
         }
@@ -159,6 +159,27 @@ fn blas_boxes(
         }
     }
     out
+}
+
+/// `b` grown by a little more than float error: a proxy box only has to contain what it
+/// stands for, and a flat one (a ground or ocean plane) is otherwise missed by box tests at
+/// grazing angles where the triangle itself is hit (a far pixel lost its hit at small budgets,
+/// where no neighbour happened to make the BLAS resident).
+pub(super) fn padded(b: [f32; 6]) -> [f32; 6] {
+    let extent = (0..3).map(|a| b[3 + a] - b[a]).fold(0.0f32, f32::max);
+    let magnitude = b.iter().map(|v| v.abs()).fold(0.0f32, f32::max);
+    let pad = 1e-3 * extent + 1e-5 * magnitude;
+    if !pad.is_finite() {
+        return b;
+    }
+    [
+        b[0] - pad,
+        b[1] - pad,
+        b[2] - pad,
+        b[3] + pad,
+        b[4] + pad,
+        b[5] + pad,
+    ]
 }
 
 fn grow(bx: &mut Box6, lo: &[f32], hi: &[f32]) {

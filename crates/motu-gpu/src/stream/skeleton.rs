@@ -10,6 +10,7 @@ use motu_abi::{
 };
 use motu_alloc::{AllocKind, AllocLimits, MemoryClass, Residency, MIB};
 
+use super::proxy_boxes::padded;
 use super::PI_EMPTY_BLAS;
 use super::{FrameStreamStats, StreamOptions, StreamTotals, StreamingRenderer, IDENTITY};
 use crate::context::Context;
@@ -131,27 +132,6 @@ pub(super) fn proxy_clusters(
         }
     }
     out
-}
-
-/// `b` grown by a little more than float error: a proxy box only has to contain what it
-/// stands for, and a flat one (a ground or ocean plane) is otherwise missed by box tests at
-/// grazing angles where the triangle itself is hit (a far pixel lost its hit at small budgets,
-/// where no neighbour happened to make the BLAS resident).
-pub(super) fn padded(b: [f32; 6]) -> [f32; 6] {
-    let extent = (0..3).map(|a| b[3 + a] - b[a]).fold(0.0f32, f32::max);
-    let magnitude = b.iter().map(|v| v.abs()).fold(0.0f32, f32::max);
-    let pad = 1e-3 * extent + 1e-5 * magnitude;
-    if !pad.is_finite() {
-        return b;
-    }
-    [
-        b[0] - pad,
-        b[1] - pad,
-        b[2] - pad,
-        b[3] + pad,
-        b[4] + pad,
-        b[5] + pad,
-    ]
 }
 
 impl<'a> StreamingRenderer<'a> {
