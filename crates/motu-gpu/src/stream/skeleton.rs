@@ -338,6 +338,11 @@ impl<'a> StreamingRenderer<'a> {
         let boxes = super::proxy_boxes::compute(&view, source, &box_index, box_count);
         r.totals.proxy_boxes = boxes.len() as u64;
         r.totals.proxy_boxes_ms = t_boxes.elapsed().as_secs_f64() * 1e3;
+        tracing::info!(
+            boxes = r.totals.proxy_boxes,
+            ms = r.totals.proxy_boxes_ms,
+            "boxes inside streamable BLASes made from their meshes"
+        );
         r.init_skeleton(
             &gpu_tlases,
             &gpu_instances,
