@@ -8,8 +8,10 @@
 #include "generated/abi.glsl"
 
 // Candidates one TLAS walk can record before the list is truncated (the remainder is found by
-// a re-walk of the same TLAS, see traverse.glsl).
-#define PI_CAPACITY 8
+// a re-walk of the same TLAS, see traverse.glsl): a specialisation constant, set for every
+// stage to what the scene's TLASes can meet (motu-gpu `scene::pi_capacity`, 1..=8), since
+// every payload byte costs every trace.
+layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 
 #define VIEW_SHADED 0u
 #define VIEW_IDS 1u
@@ -106,7 +108,7 @@ bool candidate_before(float t_a, uint pi_a, float t_b, uint pi_b) {
 }
 
 // The traversal payload (rayPayloadEXT in the pipeline backend, a plain global in the query
-// backend): 52 + 8 × PI_CAPACITY = 116 bytes. Written by raygen before the trace
+// backend): 52 + 8 × PI_CAPACITY bytes (116 at most). Written by raygen before the trace
 // (tlas, floor, counters, streaming state) and by any-hit (candidates, kept in
 // candidate_before's order; the nearest open streaming proxy) and closest-hit (the hit) during
 // it.

@@ -376,14 +376,24 @@ pub(crate) enum Tracer {
 
 impl Tracer {
     /// The pipeline of `opts.backend` (its SBT, if any, from `heap`).
-    pub(crate) fn new(ctx: &Context, heap: &mut GpuHeap, opts: &RenderOptions) -> Result<Tracer> {
+    /// `pi_capacity`: the payload's candidate slots ([`crate::scene::pi_capacity`]).
+    pub(crate) fn new(
+        ctx: &Context,
+        heap: &mut GpuHeap,
+        opts: &RenderOptions,
+        pi_capacity: u32,
+    ) -> Result<Tracer> {
         if !(1..=MAX_STACK_SIZE).contains(&opts.stack_size) || opts.max_traces_per_ray == 0 {
             return Err(GpuError::InvalidRequest(format!(
                 "stack size {} is outside 1..={MAX_STACK_SIZE}, or the trace cap {} is 0",
                 opts.stack_size, opts.max_traces_per_ray
             )));
         }
-        let spec = [(0, opts.stack_size), (1, opts.max_traces_per_ray)];
+        let spec = [
+            (0, opts.stack_size),
+            (1, opts.max_traces_per_ray),
+            (2, pi_capacity.clamp(1, crate::scene::MAX_PI_CAPACITY)),
+        ];
         Ok(match opts.backend {
             Backend::Pipeline => Tracer::Pipeline(Box::new(RtPipeline::new(ctx, heap, &spec)?)),
             Backend::Query => {
@@ -532,7 +542,7 @@ pub fn render_counted(
     let pixels = u64::from(w) * u64::from(h);
     let frames = opts.frames.max(1);
     let mut heap = scene.heap();
-    let tracer = Tracer::new(ctx, &mut heap, opts)?;
+    let tracer = Tracer::new(ctx, &mut heap, opts, scene.pi_capacity)?;
     let frame = match alloc_frame(&mut heap, pixels, &params) {
         Ok(f) => f,
         Err(e) => {

@@ -254,6 +254,39 @@ fn row_of_pis(count: usize) -> OwnedHierarchy {
 }
 
 #[test]
+fn the_payload_holds_as_many_candidates_as_a_tlas_walk_can_meet() {
+    // One PI BLAS alone in the root stays in the hardware walk: its PIs, up to 8.
+    assert_eq!(crate::scene::pi_capacity(&row_of_pis(3).view(), true), 3);
+    assert_eq!(crate::scene::pi_capacity(&row_of_pis(12).view(), true), 8);
+    // Beside a triangle instance the PI BLAS is a box list: raygen tests it, no slot needed
+    // (streamed skeletons keep it in the hardware walk).
+    let mut b = HierarchyBuilder::new();
+    let m = b.mesh(0, 0, 0, uv_sphere(6));
+    let blas = b.triangle_blas(&[m]);
+    let leaf = b.tlas(&[(srt(0.3, 0.0, [0.0; 3]), blas)]);
+    let pis: Vec<_> = (0..3)
+        .map(|i| {
+            (
+                srt(1.0, 0.0, [i as f32 * 2.0, 0.0, 0.0]),
+                PiTarget::Tlas(leaf),
+            )
+        })
+        .collect();
+    let pb = b.pi_blas(&pis);
+    let root = b.tlas(&[
+        (srt(1.0, 0.0, [0.0, 3.0, 0.0]), blas),
+        (srt(1.0, 0.0, [0.0; 3]), pb),
+    ]);
+    let h = b.finish(root);
+    assert_eq!(
+        crate::scene::box_list_instances(&h.view(), root as usize),
+        1
+    );
+    assert_eq!(crate::scene::pi_capacity(&h.view(), true), 1);
+    assert_eq!(crate::scene::pi_capacity(&h.view(), false), 3);
+}
+
+#[test]
 fn stack_overflow_is_counted_and_a_larger_stack_removes_it() {
     let Some(ctx) = ctx_or_skip("stack_overflow") else {
         return;

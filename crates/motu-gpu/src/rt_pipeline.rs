@@ -36,7 +36,7 @@ pub(crate) struct RtPipeline {
 }
 
 impl RtPipeline {
-    /// `specialization`: (constant id, value) pairs for the raygen stage.
+    /// `specialization`: (constant id, value) pairs for every stage.
     pub(crate) fn new(
         ctx: &Context,
         heap: &mut GpuHeap,
@@ -133,11 +133,8 @@ impl RtPipeline {
                     .stage(*stage)
                     .module(*m)
                     .name(c"main");
-                if *stage == vk::ShaderStageFlags::RAYGEN_KHR {
-                    s.specialization_info(&spec)
-                } else {
-                    s
-                }
+                // Every stage: the payload's size (PI_CAPACITY) must agree between them.
+                s.specialization_info(&spec)
             })
             .collect();
         let unused = vk::SHADER_UNUSED_KHR;

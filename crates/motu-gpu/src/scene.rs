@@ -46,7 +46,10 @@ pub(crate) use batch::{build_batched, build_pipelined, BatchStager};
 pub(crate) use budget::usable_budget_bytes;
 pub(crate) use lod_pass::{InstanceLodGpu, LodTlas, Push as LodPush};
 pub(crate) use structures::{AccelStruct, SizeQueries, Slot, SLOT_COUNT};
-pub(crate) use tables::{blas_geometry, box_list_instances, encode_instance, pi_aabbs, reachable};
+pub(crate) use tables::{
+    blas_geometry, box_list_instances, encode_instance, pi_aabbs, pi_capacity, reachable,
+    MAX_PI_CAPACITY,
+};
 pub(crate) use upload::{streamed_attribute_bytes, MeshGpu, MeshStager, Uploader};
 
 /// Geometry of one compiled mesh, by its index in the hierarchy's mesh table (e.g. slices of a
@@ -177,6 +180,8 @@ pub struct GpuScene {
     pub(crate) instance_lod: Option<InstanceLodGpu>,
     pub(crate) addresses: [u64; SLOT_COUNT],
     pub(crate) root_tlas: u32,
+    /// Candidate slots of the traversal payload this scene needs ([`pi_capacity`]).
+    pub(crate) pi_capacity: u32,
     /// `FrameParams::shading`: the shading tables' header (`shading.rs`).
     pub(crate) shading_address: u64,
     pub(crate) heap: Mutex<GpuHeap>,
@@ -262,6 +267,7 @@ impl GpuScene {
             instance_lod: None,
             addresses: [0; SLOT_COUNT],
             root_tlas: view.root_tlas,
+            pi_capacity: pi_capacity(view, true),
             shading_address: 0,
             heap: Mutex::new(GpuHeap::new(ctx, limits)?),
             report: ResourceReport {

@@ -193,6 +193,47 @@ pub(crate) fn tlases_with_box_lists(view: &HierarchyView<'_>) -> Vec<TlasRecord>
         .collect()
 }
 
+/// The most PI candidates one TLAS walk can record, [`MAX_PI_CAPACITY`] at most: the most PIs
+/// any TLAS's hardware walk can meet (its AABB instances' PIs, less a box list's, which raygen
+/// tests itself when `box_lists`), at least 1. The traversal payload carries that many
+/// candidate slots (`PI_CAPACITY`, a specialisation constant): on the H200's software traversal
+/// every byte of payload costs every trace, and a split root whose pieces are a box list, or a
+/// scene `auto` made single-level, needs no slots at all. A walk meeting more PIs than slots
+/// keeps the nearest and re-walks for the rest, so the image never depends on it.
+pub(crate) fn pi_capacity(view: &HierarchyView<'_>, box_lists: bool) -> u32 {
+    let mut most = 0u32;
+    for (t, rec) in view.tlases.iter().enumerate() {
+        let listed = if box_lists {
+            box_list_instances(view, t) as usize
+        } else {
+            0
+        };
+        let (base, count) = (rec.instance_base as usize, rec.instance_count as usize);
+        let Some(insts) = view
+            .instances
+            .get(base..(base + count).saturating_sub(listed))
+        else {
+            return MAX_PI_CAPACITY;
+        };
+        let mut pis = 0u32;
+        for inst in insts {
+            match view.blases.get(inst.blas as usize) {
+                Some(b) if b.kind == BLAS_AABBS => pis = pis.saturating_add(b.item_count),
+                Some(_) => {}
+                None => return MAX_PI_CAPACITY,
+            }
+            if pis >= MAX_PI_CAPACITY {
+                return MAX_PI_CAPACITY;
+            }
+        }
+        most = most.max(pis);
+    }
+    most.max(1)
+}
+
+/// The default (and largest) candidate list of a TLAS walk (`PI_CAPACITY` of `common.glsl`).
+pub(crate) const MAX_PI_CAPACITY: u32 = 8;
+
 /// TLASes and BLASes reachable from the root: through instances, PIs, LOD levels.
 pub(crate) fn reachable(view: &HierarchyView<'_>) -> (Vec<bool>, Vec<bool>) {
     let mut tlas = vec![false; view.tlases.len()];

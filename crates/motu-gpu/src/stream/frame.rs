@@ -51,7 +51,11 @@ impl<'a> StreamingRenderer<'a> {
             }
             self.pinned = vec![false; self.item_count()];
             let t = self
-                .with_eviction(|s| Tracer::new(&s.ctx.clone(), &mut s.heap, opts))
+                .with_eviction(|s| {
+                    // Streamed TLASes keep every PI in the hardware walk (no box lists).
+                    let slots = crate::scene::pi_capacity(&s.view, false);
+                    Tracer::new(&s.ctx.clone(), &mut s.heap, opts, slots)
+                })
                 .map_err(|e| self.skeleton_error("the trace pipeline", e))?;
             self.tracer = Some((opts.backend, opts.stack_size, t));
         }
