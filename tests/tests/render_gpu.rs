@@ -106,6 +106,10 @@ fn auto_inlines_a_sphereflake_whose_flattening_is_cheap() {
     assert_eq!(info[0]["levels"], 1, "{}", info[0]);
     assert_eq!(info[0]["programmable_instances"], 0, "{}", info[0]);
     assert_eq!(info[0]["tlas_instances"], 7382, "{}", info[0]);
+    // Depth 4: flake1 and flake2 are grouping levels, flake3 (820 × 9) and flake4 (7,381 × 1)
+    // cheap ones. Depth 5: flake4 (7,381 × 9) stays; flake5 (10 entries) is a grouping level.
+    assert_eq!(info[0]["inlined_prototypes"], 4, "{}", info[0]);
+    assert_eq!(info[1]["inlined_prototypes"], 4, "{}", info[1]);
     assert_eq!(info[1]["levels"], 2, "{}", info[1]);
     assert_eq!(info[1]["programmable_instances"], 9, "{}", info[1]);
 

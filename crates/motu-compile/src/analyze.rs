@@ -49,6 +49,8 @@ pub(crate) struct Plan<'s> {
     pub g_mesh_count: Vec<u32>,
     pub dropped_degenerate: u64,
     pub collapsed_prototypes: u64,
+    /// [`Levels::Auto`]: reachable prototypes inlined by its rules.
+    pub auto_inlined_prototypes: u64,
     pub flattened_instances: u64,
     /// Instance-table size estimate (exact unless composed transforms degenerate or location
     /// grouping makes more groups than the triangle total needs).
@@ -84,6 +86,7 @@ impl<'s> Plan<'s> {
             g_mesh_count: vec![0; n],
             dropped_degenerate: 0,
             collapsed_prototypes: 0,
+            auto_inlined_prototypes: 0,
             flattened_instances: 0,
             instance_estimate: 0,
         };
@@ -325,6 +328,7 @@ impl<'s> Plan<'s> {
                 <= self.opts.auto_inline_max_instances;
             self.auto_inline[p.index()] =
                 grouping || (not_root && !self.bake[p.index()] && kept_edges > 0 && cheap);
+            self.auto_inlined_prototypes += u64::from(self.auto_inline[p.index()]);
         }
     }
 

@@ -143,6 +143,7 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         let r = &mut self.out.report;
         r.dropped_degenerate_instances += self.plan.dropped_degenerate;
         r.collapsed_prototypes = self.plan.collapsed_prototypes;
+        r.inlined_prototypes = self.plan.auto_inlined_prototypes;
         r.flattened_instances = self.plan.flattened_instances;
         r.levels = format!("{:?}", self.plan.opts.levels).to_lowercase();
         r.max_blas_triangles = u64::from(bound);

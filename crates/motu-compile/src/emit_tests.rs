@@ -640,6 +640,9 @@ fn auto_inlines_grouping_levels_but_keeps_geometry_shared() {
     assert_eq!(inlined.report.tlas_levels, 1, "{:?}", inlined.report);
     assert!(inlined.pis.is_empty());
     assert_eq!(inlined.tlases[0].instance_count, 72);
+    // The group (a grouping level) and the tree (cheap).
+    assert_eq!(inlined.report.inlined_prototypes, 2);
+    assert_eq!(auto.report.inlined_prototypes, 1);
     assert_eq!(check_flatten(&scene, &cap(23)).report.tlas_levels, 2);
     // Baking (the default): a tree is 6 triangles, so its copies become one triangle BLAS,
     // instanced 12 times in the root: one level, no PI, the same triangles as the source.

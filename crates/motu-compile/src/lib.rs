@@ -270,6 +270,10 @@ pub struct CompileReport {
     /// Prototypes baked into triangle BLASes (`--levels auto`,
     /// [`CompileOptions::auto_bake_max_triangles`]).
     pub baked_prototypes: u64,
+    /// Prototypes `--levels auto` inlined into their parents (grouping levels of a few
+    /// entries, and levels whose entries × uses are at most
+    /// [`CompileOptions::auto_inline_max_instances`]).
+    pub inlined_prototypes: u64,
     /// Source meshes given a LOD chain, and the simplified meshes made.
     pub lod_source_meshes: u64,
     pub lod_meshes_made: u64,

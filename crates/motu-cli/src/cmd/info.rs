@@ -71,6 +71,7 @@ pub fn run(a: InfoArgs) -> anyhow::Result<()> {
         "partitioned_meshes": num("partitioned_meshes"),
         "partition_clusters": num("partition_clusters"),
         "baked_prototypes": num("baked_prototypes"),
+        "inlined_prototypes": num("inlined_prototypes"),
         "chunks": p.chunks().len(),
         "chunk_raw_bytes": p.chunks().iter().map(|c| c.raw_len).sum::<u64>(),
         "chunk_stored_bytes": p.chunks().iter().map(|c| c.stored_len).sum::<u64>(),
