@@ -27,17 +27,6 @@ void record_candidate(uint pi, float t_near) {
     }
 }
 
-// Streaming: the ray (in the walked TLAS's space = the proxy BLAS's, which is instanced with
-// identity) entered proxy PI `r`'s box, which stands for up to PROXY_CLUSTER_INSTANCES
-// instances of non-resident BLAS `r.target`, before `t_hi` (the trace's t_max or the closest
-// triangle committed so far). Tests each member instance's box (its BLAS bounds under its
-// tlas_from_blas, padded as the CPU pads proxy boxes), so rays passing between instances do
-// not demand the BLAS, and keeps the nearest member entry in the payload (open_t, open_blas);
-// every BLAS met in front of `t_hi` is marked open (guard probes: seen). Where the BLAS has
-// boxes inside it (proxy_boxes.rs), a member counts only if the ray also enters one of them.
-// Done here, during the hardware walk, rather than as a PI candidate: a ray crossing N proxy
-// boxes took ⌈N / PI_CAPACITY⌉ re-walks of the whole TLAS for them (61 TLAS walks per ray at
-// ⅛ of the 0.3 island, most of the frame's time); now one walk meets every box once.
 // The nearest entry in [t_min, t_max] of the ray into a leaf box of a BLAS placed by
 // `tlas_from_blas` (boxes from `first_box`: `fan` top boxes, then `fan` leaves per top box,
 // BLAS space, transformed as member boxes are and padded by `pad` more), testing only the
@@ -77,6 +66,17 @@ float proxy_boxes_entry(uint64_t table, uint first_box, uint fan, Affine tlas_fr
     return t_leaf;
 }
 
+// Streaming: the ray (in the walked TLAS's space = the proxy BLAS's, which is instanced with
+// identity) entered proxy PI `r`'s box, which stands for up to PROXY_CLUSTER_INSTANCES
+// instances of non-resident BLAS `r.target`, before `t_hi` (the trace's t_max or the closest
+// triangle committed so far). Tests each member instance's box (its BLAS bounds under its
+// tlas_from_blas, padded as the CPU pads proxy boxes), so rays passing between instances do
+// not demand the BLAS, and keeps the nearest member entry in the payload (open_t, open_blas);
+// every BLAS met in front of `t_hi` is marked open (guard probes: seen). Where the BLAS has
+// boxes inside it (proxy_boxes.rs), a member counts only if the ray also enters one of them.
+// Done here, during the hardware walk, rather than as a PI candidate: a ray crossing N proxy
+// boxes took ⌈N / PI_CAPACITY⌉ re-walks of the whole TLAS for them (61 TLAS walks per ray at
+// ⅛ of the 0.3 island, most of the frame's time); now one walk meets every box once.
 void record_proxy(PiRecord r, vec3 org, vec3 dir, float t_min, float t_hi) {
     if (push.stream == 0ul) {
         return;  // proxies exist only in streamed skeletons

@@ -26,6 +26,13 @@ fn all_backends_agree(dir: &Path, name: &str, pkg: &Path, extra: &[&str]) -> std
     cpu
 }
 
+/// `traces_per_ray` of a pipeline render of `pkg` (AOV and stats beside `aov`).
+fn pipeline_traces_per_ray(pkg: &Path, aov: &Path, extra: &[&str]) -> f64 {
+    render(pkg, "pipeline", aov, extra)["traces_per_ray"]
+        .as_f64()
+        .expect("traces_per_ray")
+}
+
 #[test]
 fn pipeline_matches_cpu_on_a_forest_package() {
     if !gpu_available() {
@@ -74,11 +81,9 @@ fn pipeline_matches_cpu_on_a_forest_package() {
     assert!(info["baked_prototypes"].as_u64().unwrap() >= 1, "{info}");
     let c = all_backends_agree(dir.path(), "auto", &auto, &["--width", "96"]);
     motu_ok(&["compare", s(&b), s(&c)]);
-    let traces = |pkg: &std::path::Path, name: &str| {
-        let st = render(pkg, "pipeline", &dir.path().join(name), &["--width", "96"]);
-        st["traces_per_ray"].as_f64().unwrap()
-    };
-    let (t_ml, t_auto) = (traces(&ml, "t-ml.aov"), traces(&auto, "t-auto.aov"));
+    let extra = ["--width", "96"];
+    let t_ml = pipeline_traces_per_ray(&ml, &dir.path().join("t-ml.aov"), &extra);
+    let t_auto = pipeline_traces_per_ray(&auto, &dir.path().join("t-auto.aov"), &extra);
     assert!(
         t_auto < t_ml && t_auto <= 1.5,
         "auto {t_auto} vs ml {t_ml} traces/ray"
@@ -121,11 +126,8 @@ fn auto_inlines_a_sphereflake_whose_flattening_is_cheap() {
     let a = all_backends_agree(dir.path(), "auto4", &auto, &extra);
     let m = all_backends_agree(dir.path(), "ml4", &ml, &extra);
     motu_ok(&["compare", s(&a), s(&m)]);
-    let traces = |pkg: &Path, name: &str| {
-        let st = render(pkg, "pipeline", &dir.path().join(name), &extra);
-        st["traces_per_ray"].as_f64().unwrap()
-    };
-    let (t_ml, t_auto) = (traces(&ml, "t-ml.aov"), traces(&auto, "t-auto.aov"));
+    let t_ml = pipeline_traces_per_ray(&ml, &dir.path().join("t-ml.aov"), &extra);
+    let t_auto = pipeline_traces_per_ray(&auto, &dir.path().join("t-auto.aov"), &extra);
     assert_eq!(t_auto, 1.0, "auto {t_auto} traces/ray");
     assert!(t_ml > 1.5, "ml {t_ml} traces/ray");
 }

@@ -141,22 +141,25 @@ fn blas_boxes(
     }
     let mut leaves = Vec::with_capacity(fan * fan);
     split(&mut tris, 2 * fan.trailing_zeros(), 0, &mut leaves);
-    let union = |rs: &[Range<usize>]| {
-        let mut bx = EMPTY;
-        for t in rs.iter().flat_map(|r| &tris[r.clone()]) {
-            grow(&mut bx, &t.1[..3], &t.1[3..]);
-        }
-        if bx[0] <= bx[3] {
-            padded(bx)
-        } else {
+    // Each leaf's triangles once; a top box is the union of its leaves.
+    let leaf_boxes: Vec<Box6> = leaves
+        .iter()
+        .map(|r| {
+            let mut bx = EMPTY;
+            for t in &tris[r.clone()] {
+                grow(&mut bx, &t.1[..3], &t.1[3..]);
+            }
             bx
+        })
+        .collect();
+    let pad_nonempty = |bx: Box6| if bx[0] <= bx[3] { padded(bx) } else { bx };
+    for (k, group) in leaf_boxes.chunks_exact(fan).enumerate() {
+        let mut top = EMPTY;
+        for (j, leaf) in group.iter().enumerate() {
+            grow(&mut top, &leaf[..3], &leaf[3..]);
+            out[fan + k * fan + j] = pad_nonempty(*leaf);
         }
-    };
-    for k in 0..fan {
-        out[k] = union(&leaves[k * fan..(k + 1) * fan]);
-        for j in 0..fan {
-            out[fan + k * fan + j] = union(std::slice::from_ref(&leaves[k * fan + j]));
-        }
+        out[k] = pad_nonempty(top);
     }
     out
 }
