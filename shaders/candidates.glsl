@@ -72,7 +72,8 @@ float proxy_boxes_entry(uint64_t table, uint first_box, uint fan, Affine tlas_fr
 // triangle committed so far). Tests each member instance's box (its BLAS bounds under its
 // tlas_from_blas, padded as the CPU pads proxy boxes), so rays passing between instances do
 // not demand the BLAS, and keeps the nearest member entry in the payload (open_t, open_blas);
-// every BLAS met in front of `t_hi` is marked open (guard probes: seen). Where the BLAS has
+// every BLAS met in front of `t_hi` is marked open (guard probes, and probe passes' rays
+// meeting a resident BLAS's box in its marks BLAS: seen). Where the BLAS has
 // boxes inside it (proxy_boxes.rs), a member counts only if the ray also enters one of them.
 // Done here, during the hardware walk, rather than as a PI candidate: a ray crossing N proxy
 // boxes took ⌈N / PI_CAPACITY⌉ re-walks of the whole TLAS for them (61 TLAS walks per ray at
@@ -88,7 +89,11 @@ void record_proxy(PiRecord r, vec3 org, vec3 dir, float t_min, float t_hi) {
     StreamParams s = StreamRef(push.stream).s;
     uint blas = r.target;
     bool guard = (pl.stream_start & STREAM_GUARD_RAY) != 0u;
-    if (!guard && StampTable(s.walked).r[blas] >= pl.stream_start) {
+    uint walked = StampTable(s.walked).r[blas];
+    // A box of the marks BLAS (only probe passes' rays meet those): the BLAS is resident and
+    // this walk tests its triangles; entering it in front of the hit marks it seen.
+    bool resident = walked == s.stamp;
+    if (!guard && !resident && walked >= pl.stream_start) {
         return;  // walked by this ray in an earlier pass: resolved
     }
     uint first = floatBitsToUint(r.child_from_parent[0]);
@@ -132,7 +137,7 @@ void record_proxy(PiRecord r, vec3 org, vec3 dir, float t_min, float t_hi) {
     if (t_best >= t_hi) {
         return;
     }
-    if (guard) {
+    if (guard || resident) {
         stream_mark(s.blas_stamps, blas, 4u * s.stamp + STREAM_SEEN);
         return;
     }

@@ -46,6 +46,13 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 // pixel's rays, primary and secondary, run to the end against what is resident, marking what
 // they meet open (the nearest needed and counted) and writing nothing else.
 #define STREAM_PROBE_PASS 1u
+// Ray cull masks (Rust: stream::MARKS_MASK). Every instance has mask 0xFF except a streamed
+// TLAS's *marks* BLAS (0x02: the boxes of its resident clusters), which only probe passes'
+// rays see: there a ray passing through a resident BLAS without hitting it marks it seen, so
+// the prefetch keeps it (the hardware walk reports no such pass).
+#define CULL_MASK_WALK 0x01u
+#define CULL_MASK_PROBE 0xFFu
+uint g_cull_mask = CULL_MASK_WALK;
 
 // Per-pass streaming parameters (Rust: stream::StreamParams, 96 bytes). Present only when
 // push.stream != 0.

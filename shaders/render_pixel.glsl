@@ -319,6 +319,7 @@ void render_stream_item(uint i) {
     g_streaming = true;
     g_guard = guard;
     g_probe = (s.flags & STREAM_PROBE_PASS) != 0u;
+    g_cull_mask = g_probe ? CULL_MASK_PROBE : CULL_MASK_WALK;
     g_stamp = s.stamp;
     g_best_t = T_INFINITY;
     g_start = s.stamp;

@@ -15,7 +15,7 @@ Payload pl;
 void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool first_hit) {
     rayQueryEXT rq;
     uint flags = first_hit ? gl_RayFlagsTerminateOnFirstHitEXT : gl_RayFlagsNoneEXT;
-    rayQueryInitializeEXT(rq, accelerationStructureEXT(push.tlas_addresses.r[tlas]), flags, 0xFFu,
+    rayQueryInitializeEXT(rq, accelerationStructureEXT(push.tlas_addresses.r[tlas]), flags, g_cull_mask,
                           org, t_min, dir, t_max);
     while (rayQueryProceedEXT(rq)) {
         if (rayQueryGetIntersectionTypeEXT(rq, false) == gl_RayQueryCandidateIntersectionAABBEXT) {

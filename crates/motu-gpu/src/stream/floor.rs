@@ -53,8 +53,8 @@ pub struct StreamFloor {
     /// compaction is skipped when its copy does not fit).
     pub largest_blas: Option<u32>,
     pub largest_blas_build_bytes: u64,
-    /// Rebuilding every TLAS with its proxy (structures, instance buffer, proxy boxes, scratch)
-    /// with the most instanced BLAS resident, next to the largest BLAS.
+    /// Rebuilding every TLAS with its proxy and marks BLASes (structures, instance buffer,
+    /// boxes, scratch) with the most instanced BLAS resident, next to the largest BLAS.
     pub tlas_rebuild_bytes: u64,
     /// Frame buffers at the image size (carried hits, lists, AOV, colour, readback).
     pub frame_bytes: u64,
@@ -126,14 +126,19 @@ pub fn streaming_floor(
                 other += 1;
             }
         }
-        let most = per_blas.values().copied().max().unwrap_or(0);
+        let (most_blas, most) = per_blas
+            .iter()
+            .map(|(&b, &n)| (b, n))
+            .max_by_key(|&(b, n)| (n, std::cmp::Reverse(b)))
+            .unwrap_or((u32::MAX, 0));
         let cl = proxy_clusters(view, t, buildable);
         members_total += cl.iter().map(|c| c.members.len() as u64).sum::<u64>();
         let clusters = cl.len() as u32;
         let proxy = u32::from(clusters > 0);
         let (t_bytes, _) = sizes.tlas((other + proxy).max(1))?;
         skeleton += as_align(t_bytes);
-        let count = (other + proxy + most).max(1);
+        // Rebuilt with the resident BLAS's instances and its clusters in the marks BLAS.
+        let count = (other + 2 * proxy + most).max(1);
         let (r_bytes, r_scratch) = sizes.tlas(count)?;
         rebuild_structures += as_align(r_bytes);
         rebuild_inputs += u64::from(count) * 64;
@@ -149,6 +154,16 @@ pub fn streaming_floor(
             rebuild_structures += as_align(p_bytes);
             rebuild_inputs += align(u64::from(clusters) * 24, 16);
             scratch = scratch.max(p_scratch);
+            // The marks BLAS: the resident BLAS's clusters (also counted in the proxy above).
+            let resident = cl.iter().filter(|c| c.blas == most_blas).count() as u32;
+            if resident > 0 {
+                let (m_bytes, m_scratch) = sizes.blas(&[BlasGeometry::Aabbs {
+                    aabb_count: resident,
+                    opaque: false,
+                }])?;
+                rebuild_structures += as_align(m_bytes);
+                scratch = scratch.max(m_scratch);
+            }
         }
         rebuild_scratch_max = rebuild_scratch_max.max(scratch);
         rebuild_scratch_sum += align(scratch, 256);
@@ -178,10 +193,10 @@ pub fn streaming_floor(
     };
     let tables = rec_bytes(nt, std::mem::size_of::<motu_abi::TlasRecord>() as u64)
         + rec_bytes(
-            view.instances.len() as u64 + nt,
+            view.instances.len() as u64 + 2 * nt,
             std::mem::size_of::<motu_abi::InstanceRecord>() as u64,
         )
-        + rec_bytes(nb + nt, std::mem::size_of::<motu_abi::BlasRecord>() as u64)
+        + rec_bytes(nb + 2 * nt, std::mem::size_of::<motu_abi::BlasRecord>() as u64)
         + rec_bytes(
             view.geometries.len() as u64,
             std::mem::size_of::<motu_abi::GeometryRecord>() as u64,

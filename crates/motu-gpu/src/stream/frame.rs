@@ -144,7 +144,7 @@ impl<'a> StreamingRenderer<'a> {
                 self.tlas
                     .iter()
                     .flatten()
-                    .map(|t| t.accel.size_bytes + t.proxy.as_ref().map_or(0, |p| p.size_bytes)),
+                    .map(|t| t.size_bytes()),
             )
             .chain(self.meshes.iter().flatten().map(|m| m.size_bytes()))
             .sum();

@@ -55,7 +55,9 @@
 //! mostly need one pass. When the caller names the next frame's camera
 //! ([`StreamingRenderer::set_next_camera`]), a probe pass of it (`probe.rs`) runs every ray of
 //! its pixels, secondary rays included, against what is resident first: what it meets is built
-//! ahead of the guard band's, and only what it saw is kept.
+//! ahead of the guard band's, and only what it saw is kept (what its rays pass through
+//! included: each TLAS's *marks* BLAS, seen only by probe rays, holds its resident clusters'
+//! boxes; see `probe.rs`).
 //!
 //! # Eviction and the budget
 //! Allocations go through `motu-alloc` (standard blocks a 64th of the budget), whose blocks
@@ -318,7 +320,32 @@ pub struct StreamTotals {
 struct TlasGpu {
     accel: AccelStruct,
     proxy: Option<AccelStruct>,
+    /// The resident clusters' boxes (instance mask [`MARKS_MASK`]): only probe passes' rays
+    /// meet them, to mark what they pass through (present while some cluster is resident).
+    marks: Option<AccelStruct>,
 }
+
+impl TlasGpu {
+    fn release(self, heap: &mut GpuHeap) {
+        self.accel.release(heap);
+        for a in [self.proxy, self.marks].into_iter().flatten() {
+            a.release(heap);
+        }
+    }
+
+    fn size_bytes(&self) -> u64 {
+        self.accel.size_bytes
+            + [&self.proxy, &self.marks]
+                .into_iter()
+                .flatten()
+                .map(|a| a.size_bytes)
+                .sum::<u64>()
+    }
+}
+
+/// Instance mask of the marks BLASes (`CULL_MASK_*` of `common.glsl`): ordinary traces cull
+/// with bit 0 only, so they never meet the resident clusters' boxes; probe passes trace all.
+pub(super) const MARKS_MASK: u8 = 0x02;
 
 /// Renders a hierarchy whose acceleration structures need not fit the budget: see the module
 /// docs. Holds the view and the mesh source for its lifetime.
@@ -358,6 +385,10 @@ pub struct StreamingRenderer<'a> {
     clusters: Vec<Vec<skeleton::ProxyCluster>>,
     /// Per TLAS: first proxy PI slot and proxy BLAS id in the GPU tables.
     proxy_pi_base: Vec<u32>,
+    /// Per TLAS: the GPU BLAS record of its marks BLAS (`NONE_U32`: no clusters), rewritten
+    /// with each rebuild, and the GPU table holding BLAS records.
+    marks_blas: Vec<u32>,
+    blases_table: usize,
     /// Per BLAS: TLASes instancing it.
     parents: Vec<Vec<u32>>,
     /// Per BLAS: its instance count in each of `parents` (same order).

@@ -5,6 +5,16 @@
 //! what is resident and met is kept. The guard band sees only primary visibility just outside
 //! the image; shadow and AO rays reach structures the camera never sees, and a moving camera's
 //! new hit points send them elsewhere: without the probe each such frame needed a second pass.
+//!
+//! The probe also sees what its rays pass through. The hardware walks a resident triangle
+//! BLAS with no callback unless a triangle is hit, so a BLAS that rays cross without hitting
+//! looked unused, the prefetch evicted it for room, and the next frame's rays, entering its
+//! boxes in front of their hits, had to open it again: most second passes at a quarter of the
+//! full build were that. Each streamed TLAS therefore carries a *marks* BLAS beside its proxy:
+//! the resident clusters' boxes, under an instance mask only probe rays trace
+//! (`CULL_MASK_PROBE`); a probe ray entering a member's box and one of the boxes inside the
+//! BLAS (`proxy_boxes.rs`) in front of its closest hit so far marks the BLAS seen, and the
+//! prefetch keeps it. Ordinary passes cull the marks with their mask and pay nothing for them.
 
 use motu_abi::camera::CameraParams;
 

@@ -5,8 +5,8 @@ use ash::vk;
 use motu_abi::{PiRecord, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
 use motu_alloc::{AllocKind, BuildSize, ItemId, MemoryClass};
 
-use super::skeleton::proxy_pi;
-use super::{StreamingRenderer, TlasGpu, IDENTITY};
+use super::skeleton::{proxy_blas_record, proxy_pi};
+use super::{StreamingRenderer, TlasGpu, IDENTITY, MARKS_MASK};
 use crate::accel::AsBuildFlags;
 use crate::error::{GpuError, Result};
 use crate::memory::BufferUsage;
@@ -62,34 +62,42 @@ impl<'a> StreamingRenderer<'a> {
         let view = self.view;
         for &t in ids {
             if let Some(old) = self.tlas[t as usize].take() {
-                old.accel.release(&mut self.heap);
-                if let Some(p) = old.proxy {
-                    p.release(&mut self.heap);
-                }
+                old.release(&mut self.heap);
                 self.dirty.insert(t);
             }
         }
         self.probe_tlas_room(ids)?;
-        // 1. Proxy BLASes: the clusters of non-resident BLASes, compacted; their PI slots are
-        // rewritten to match.
+        // 1. Proxy BLASes (the clusters of non-resident BLASes) and marks BLASes (the
+        // resident ones), compacted; their shared PI slots (proxy first) and the marks' BLAS
+        // record are rewritten to match.
         let mut proxy_boxes: Vec<[f32; 6]> = Vec::new();
-        let mut proxy_items: Vec<(u32, u32, u32)> = Vec::new(); // (tlas, first box, count)
-        let mut pi_rewrites: Vec<(u32, Vec<PiRecord>)> = Vec::new();
+        // (tlas, marks, first box, count)
+        let mut proxy_items: Vec<(u32, bool, u32, u32)> = Vec::new();
+        let mut pi_rewrites: Vec<(u32, Vec<PiRecord>, u32)> = Vec::new();
         for &t in ids {
-            let first = proxy_boxes.len() as u32;
             let mut pis = Vec::new();
-            for c in &self.clusters[t as usize] {
-                if self.blas[c.blas as usize].is_none() {
-                    proxy_boxes.push(c.bounds);
-                    pis.push(proxy_pi(c));
+            let mut non_resident = 0;
+            for marks in [false, true] {
+                let first = proxy_boxes.len() as u32;
+                for c in &self.clusters[t as usize] {
+                    if self.blas[c.blas as usize].is_some() == marks {
+                        proxy_boxes.push(c.bounds);
+                        pis.push(proxy_pi(c));
+                    }
+                }
+                let n = proxy_boxes.len() as u32 - first;
+                if n > 0 {
+                    proxy_items.push((t, marks, first, n));
+                }
+                if !marks {
+                    non_resident = n;
                 }
             }
             if !pis.is_empty() {
-                proxy_items.push((t, first, pis.len() as u32));
-                pi_rewrites.push((t, pis));
+                pi_rewrites.push((t, pis, non_resident));
             }
         }
-        let mut proxies: Vec<(u32, AccelStruct)> = Vec::new();
+        let mut proxies: Vec<(u32, bool, AccelStruct)> = Vec::new();
         if !proxy_boxes.is_empty() {
             let buf = self.heap.alloc_buffer(
                 "proxy-aabbs",
@@ -106,7 +114,7 @@ impl<'a> StreamingRenderer<'a> {
                 let base = buf.device_address()?.0;
                 let mut descs = Vec::new();
                 let mut sizes = Vec::new();
-                for &(_, first, n) in &proxy_items {
+                for &(_, _, first, n) in &proxy_items {
                     let aabbs = vk::AccelerationStructureGeometryAabbsDataKHR::default()
                         .data(vk::DeviceOrHostAddressConstKHR {
                             device_address: base + u64::from(first) * 24,
@@ -145,7 +153,7 @@ impl<'a> StreamingRenderer<'a> {
             })();
             self.heap.free(buf);
             for (k, a) in r? {
-                proxies.push((proxy_items[k].0, a));
+                proxies.push((proxy_items[k].0, proxy_items[k].1, a));
             }
         }
         // 2. TLASes over the resident BLASes plus the proxy instance. Non-resident instances
@@ -188,15 +196,20 @@ impl<'a> StreamingRenderer<'a> {
                     })
                     .collect();
                 let mut out = chunks.concat();
-                if let Some((_, a)) = proxies.iter().find(|(pt, _)| *pt == t) {
-                    // The proxy's record follows the TLAS's own (see `StreamingRenderer::new`).
-                    out.extend_from_slice(&encode_instance(
+                for (_, marks, a) in proxies.iter().filter(|(pt, _, _)| *pt == t) {
+                    // The proxy's and the marks' records follow the TLAS's own (see
+                    // `StreamingRenderer::new`); only probe passes' rays see the marks.
+                    let mut inst = encode_instance(
                         &IDENTITY,
                         true,
                         false,
                         a.address,
-                        rec.instance_count,
-                    ));
+                        rec.instance_count + u32::from(*marks),
+                    );
+                    if *marks {
+                        inst[51] = MARKS_MASK;
+                    }
+                    out.extend_from_slice(&inst);
                 }
                 if out.is_empty() {
                     // Nothing resident: one inactive instance keeps the TLAS valid.
@@ -234,7 +247,7 @@ impl<'a> StreamingRenderer<'a> {
             Err(e) => {
                 proxies
                     .into_iter()
-                    .for_each(|(_, a)| a.release(&mut self.heap));
+                    .for_each(|(_, _, a)| a.release(&mut self.heap));
                 return Err(e);
             }
         };
@@ -280,31 +293,50 @@ impl<'a> StreamingRenderer<'a> {
             Err(e) => {
                 proxies
                     .into_iter()
-                    .for_each(|(_, a)| a.release(&mut self.heap));
+                    .for_each(|(_, _, a)| a.release(&mut self.heap));
                 return Err(e);
             }
         };
-        // 3. Swap in; rewrite the proxy PI slots.
-        for (t, pis) in &pi_rewrites {
-            let base = u64::from(self.proxy_pi_base[*t as usize]);
+        // 3. Swap in; rewrite the proxy PI slots and the marks' BLAS records.
+        for (t, pis, non_resident) in &pi_rewrites {
+            let base = self.proxy_pi_base[*t as usize];
+            let marks = proxy_blas_record(
+                &view.tlases[*t as usize],
+                base + non_resident,
+                pis.len() as u32 - non_resident,
+            );
+            let marks_offset = u64::from(self.marks_blas[*t as usize])
+                * std::mem::size_of::<motu_abi::BlasRecord>() as u64;
             let pis_buf = &self.tables[self.pis_table];
-            self.up
+            let blases_buf = &self.tables[self.blases_table];
+            let up = self
+                .up
                 .as_mut()
-                .ok_or_else(|| GpuError::InvalidRequest("streaming: staging ring released".into()))?
-                .upload(&ctx, pis_buf, base * 80, cast_slice(pis))?;
+                .ok_or_else(|| GpuError::InvalidRequest("streaming: staging ring released".into()))?;
+            up.upload(
+                &ctx,
+                pis_buf,
+                u64::from(base) * std::mem::size_of::<PiRecord>() as u64,
+                cast_slice(pis),
+            )?;
+            up.upload(&ctx, blases_buf, marks_offset, bytemuck::bytes_of(&marks))?;
         }
         self.up_mut()?.flush(&ctx)?;
         for (k, accel) in built {
             let t = ids[k];
-            let proxy = proxies
-                .iter()
-                .position(|(pt, _)| *pt == t)
-                .map(|p| proxies.swap_remove(p).1);
-            if let Some(old) = self.tlas[t as usize].replace(TlasGpu { accel, proxy }) {
-                old.accel.release(&mut self.heap);
-                if let Some(p) = old.proxy {
-                    p.release(&mut self.heap);
-                }
+            let mut take = |marks: bool| {
+                proxies
+                    .iter()
+                    .position(|(pt, m, _)| *pt == t && *m == marks)
+                    .map(|p| proxies.swap_remove(p).2)
+            };
+            let (proxy, marks) = (take(false), take(true));
+            if let Some(old) = self.tlas[t as usize].replace(TlasGpu {
+                accel,
+                proxy,
+                marks,
+            }) {
+                old.release(&mut self.heap);
             }
             self.dirty.remove(&t);
         }
@@ -324,10 +356,11 @@ impl<'a> StreamingRenderer<'a> {
         let mut records = 0u64;
         let mut largest = (0u64, 0u64);
         for &t in ids {
-            let proxy = self.clusters[t as usize]
-                .iter()
-                .any(|c| self.blas[c.blas as usize].is_none());
-            let n = (counts[t as usize] + u64::from(proxy)).max(1);
+            // The proxy and the marks (each present when it has a box).
+            let cl = &self.clusters[t as usize];
+            let proxy = cl.iter().any(|c| self.blas[c.blas as usize].is_none());
+            let marks = cl.iter().any(|c| self.blas[c.blas as usize].is_some());
+            let n = (counts[t as usize] + u64::from(proxy) + u64::from(marks)).max(1);
             records += n;
             let s = self.ctx.tlas_build_sizes(
                 u32::try_from(n).unwrap_or(u32::MAX),
@@ -408,7 +441,7 @@ impl<'a> StreamingRenderer<'a> {
     /// current build holds (instance buffer, structure, scratch; the proxy, its boxes and the
     /// fragmentation of blocks by a quarter more).
     pub(super) fn tlas_rebuild_bytes(&self, t: u32, count: u64) -> Result<u64> {
-        let count = count + 1;
+        let count = count + 2;
         let s = self.ctx.tlas_build_sizes(
             u32::try_from(count).unwrap_or(u32::MAX),
             crate::accel::AsBuildFlags::default(),

@@ -213,18 +213,20 @@ impl<'a> StreamingRenderer<'a> {
                 c.member_first = u32::try_from(members.len()).map_err(|_| too_many("instances"))?;
                 members.extend(c.members.iter().map(|&local| gpu_base + local));
             }
-            let grown = rec.instance_count + u32::from(!clusters[t].is_empty());
+            let grown = rec.instance_count + 2 * u32::from(!clusters[t].is_empty());
             gpu_base = gpu_base
                 .checked_add(grown)
                 .ok_or_else(|| too_many("instances"))?;
         }
-        // GPU tables: TLAS ranges grow by the proxy instance; proxy BLASes and PI slots (one
-        // per cluster) follow the originals.
+        // GPU tables: TLAS ranges grow by the proxy and marks instances; proxy and marks
+        // BLAS records and PI slots (one per cluster, shared: non-resident clusters first,
+        // then resident ones, rewritten with each rebuild) follow the originals.
         let mut gpu_tlases: Vec<TlasRecord> = Vec::with_capacity(nt);
         let mut gpu_instances: Vec<InstanceRecord> = Vec::with_capacity(view.instances.len() + nt);
         let mut gpu_blases: Vec<BlasRecord> = view.blases.to_vec();
         let mut gpu_pis: Vec<PiRecord> = view.pis.to_vec();
         let mut proxy_pi_base = vec![NONE_U32; nt];
+        let mut marks_blas = vec![NONE_U32; nt];
         for (t, rec) in view.tlases.iter().enumerate() {
             let base = u32::try_from(gpu_instances.len()).map_err(|_| too_many("instances"))?;
             let range =
@@ -239,24 +241,20 @@ impl<'a> StreamingRenderer<'a> {
                     gpu_pis.push(proxy_pi(c));
                 }
                 let n = clusters[t].len() as u32;
-                gpu_blases.push(BlasRecord {
-                    kind: BLAS_AABBS,
-                    item_base: pi_base,
-                    item_count: n,
-                    level: rec.level + 1,
-                    bounds_min: rec.bounds_min,
-                    primitive_count: n,
-                    bounds_max: rec.bounds_max,
-                    _pad: 0,
-                });
-                gpu_instances.push(InstanceRecord {
-                    tlas_from_blas: IDENTITY,
-                    blas: blas_id,
-                    flags: 0,
-                    element: NONE_U32,
-                    _pad: 0,
-                });
-                count += 1;
+                // The proxy (non-resident clusters), then the marks (resident ones: none yet).
+                gpu_blases.push(proxy_blas_record(rec, pi_base, n));
+                gpu_blases.push(proxy_blas_record(rec, pi_base + n, 0));
+                marks_blas[t] = blas_id + 1;
+                for id in [blas_id, blas_id + 1] {
+                    gpu_instances.push(InstanceRecord {
+                        tlas_from_blas: IDENTITY,
+                        blas: id,
+                        flags: 0,
+                        element: NONE_U32,
+                        _pad: 0,
+                    });
+                }
+                count += 2;
             }
             gpu_tlases.push(TlasRecord {
                 instance_base: base,
@@ -308,6 +306,8 @@ impl<'a> StreamingRenderer<'a> {
             build_opts,
             clusters,
             proxy_pi_base,
+            marks_blas,
+            blases_table: 0,
             parents,
             parent_counts,
             buildable,
@@ -405,6 +405,7 @@ impl<'a> StreamingRenderer<'a> {
             }
             match slot {
                 Slot::Pis => self.pis_table = self.tables.len(),
+                Slot::Blases => self.blases_table = self.tables.len(),
                 Slot::MeshGeo => self.mesh_geo_table = self.tables.len(),
                 Slot::TlasAddresses => self.tlas_addr_table = self.tables.len(),
                 _ => {}
@@ -529,6 +530,20 @@ impl<'a> StreamingRenderer<'a> {
             )?;
         }
         up.flush(&ctx)
+    }
+}
+
+/// The GPU BLAS record of TLAS `rec`'s proxy or marks BLAS: `n` PI slots from `item_base`.
+pub(super) fn proxy_blas_record(rec: &TlasRecord, item_base: u32, n: u32) -> BlasRecord {
+    BlasRecord {
+        kind: BLAS_AABBS,
+        item_base,
+        item_count: n,
+        level: rec.level + 1,
+        bounds_min: rec.bounds_min,
+        primitive_count: n,
+        bounds_max: rec.bounds_max,
+        _pad: 0,
     }
 }
 
