@@ -168,7 +168,7 @@ fn default_island_is_partitioned_under_the_default_bound() {
     import(&scene, &p, &[]);
     import(&scene, &u, &["--max-blas-triangles", UNPARTITIONED]);
     let (largest, bound, split) = triangles_per_blas(&p);
-    // The automatic bound: a 64th of the island's build in triangles (521k triangles + 2 per
+    // The automatic bound: a 256th of the island's build in triangles (521k triangles + 2 per
     // instance), at least 4,096.
     assert!(
         (4_096..65_536).contains(&bound),

@@ -643,11 +643,15 @@ fn split_island_case(name: &str, scale: Option<&str>) {
             "split island {name}, {b}: {traces} traces/ray: {stats}"
         );
         assert_eq!(stats["stack_overflows"], 0, "{stats}");
-        // The root's pieces are a box list: tested in raygen, not by the hardware walk.
-        assert!(
-            stats["resources"]["box_list_tlases"].as_u64().unwrap() >= 1,
-            "{stats}"
-        );
+        // The root's pieces are a box list (tested in raygen, not by the hardware walk) when
+        // a list holds them all (`BOX_LIST_CAPACITY`, 16 of motu-abi); more stay in the walk.
+        let pieces = info["tlas_count"].as_u64().unwrap() - 1;
+        let lists = stats["resources"]["box_list_tlases"].as_u64().unwrap();
+        if pieces <= 16 {
+            assert!(lists >= 1, "{pieces} pieces: {stats}");
+        } else {
+            assert_eq!(lists, 0, "{pieces} pieces: {stats}");
+        }
         motu_ok(&["compare", s(&oracle), s(&aov)]);
     }
 }

@@ -3,9 +3,8 @@
 //! refines what is not resident yet until a still camera's path equals the full build; the
 //! budget without the fallback is an error, never a silent wrong image; `motu bench` reports a
 //! streaming flight per frame; and a camera path on the default island at a quarter of the
-//! report's full-build peak needs at most 1.3 passes per frame after the first for primary
-//! visibility, while the shaded default (shadow and AO rays) completes, exact, but needs more
-//! (its working set exceeds the quarter: asserted and printed, see the last test).
+//! report's full-build peak needs at most 1.3 passes per frame after the first, for primary
+//! visibility and for the shaded default (shadow and AO rays) alike, exact.
 
 use motu_tests::{gpu_available, motu, motu_ok, s};
 use std::path::{Path, PathBuf};
@@ -367,12 +366,12 @@ fn write_path(p: &Path, poses: Vec<serde_json::Value>) {
 ///   visibility, but shadow and AO rays reach structures the camera never sees, and each move
 ///   sends them elsewhere. Without the probe (`--stream-probe 0`) such frames take a second
 ///   pass.
-/// - At half the peak the probed path needs at most 1.3 passes per frame after the first.
-/// - At a quarter the path completes every frame under the budget, and a panning path's last
-///   frame equals the full build's AOV (at half too), but it needs more passes: on most frames the
-///   structures the frame's rays hit (`working_set_bytes` with room) are more than what a
-///   quarter leaves beside the always-resident part (BENCHMARKS.md, "the next camera's
-///   probe"), so no prefetch can make those frames one pass.
+/// - At half and at a quarter of the peak the probed path needs at most 1.3 passes per frame
+///   after the first, and a panning path's last frame equals the full build's AOV. At a
+///   quarter that takes the boxes inside BLASes (rays through a BLAS's empty space open
+///   nothing), the probe's marks of what its rays pass through (kept by the prefetch), and
+///   units a 256th of the build (a frame's working set is made of whole units): BENCHMARKS.md,
+///   "What rays pass through, and units a 256th of the build".
 #[test]
 fn default_island_shaded_camera_path_needs_one_pass_per_frame_with_room_and_the_probe_and_is_exact_at_a_quarter(
 ) {
@@ -416,15 +415,14 @@ fn default_island_shaded_camera_path_needs_one_pass_per_frame_with_room_and_the_
     assert!(means[0] <= 1.05, "with room and the probe: {}", means[0]);
     assert!(means[1] > means[0], "the probe saves passes: {means:?}");
     assert!(means[2] <= 1.3, "at half the peak: {}", means[2]);
-    // At a quarter a frame's rays reach more than fits at once (2.45 passes before the boxes
-    // inside BLASes, 1.59 with them): they open only the BLASes whose triangles' boxes they
-    // enter, not every one whose bounds they cross.
+    // At a quarter: 2.45 passes before the boxes inside BLASes, 1.59 with them, 1.48 with the
+    // probe's marks, 1.00 with units a 256th of the build (lavapipe, query backend).
     assert!(
         u(&quarter["stream"]["totals"]["proxy_boxes"]) > 0,
         "{}",
         quarter["stream"]["totals"]
     );
-    assert!(means[3] <= 1.75, "at a quarter: {}", means[3]);
+    assert!(means[3] <= 1.3, "at a quarter: {}", means[3]);
     // A panning recorded path (palmsCam turned from +20° back to itself over 12 frames),
     // streamed at the quarter and at half: its last frame equals the full build of that pose.
     let path = d.join("pan.json");

@@ -198,9 +198,10 @@ pub struct ImportArgs {
     /// Triangles per triangle BLAS (the partitioner's bound): a mesh over it is split into
     /// spatial clusters, small meshes are grouped by location under it. Default: chosen from
     /// the scene's size: 2^16 (every BLAS around 6.5 MiB, ≤ 12 MiB with build scratch and
-    /// geometry), or about a 64th of the whole build on scenes under ~2.1M triangles (at least
-    /// 4,096; heavily instanced meshes are not split), so a streaming budget far below the
-    /// full build still holds the largest one.
+    /// geometry), or about a 256th of the whole build on scenes under ~8.4M triangles (at
+    /// least 4,096; heavily instanced meshes are not split), so a streaming budget far below
+    /// the full build still holds the largest one and a frame's working set is not padded out
+    /// by whole coarse units.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     pub max_blas_triangles: Option<u32>,
     /// Build N LOD levels for heavy meshes.

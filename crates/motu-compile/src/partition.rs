@@ -37,12 +37,16 @@ pub const MIN_AUTO_MAX_BLAS_TRIANGLES: u32 = 1 << 12;
 /// default island's report: 3.4 MB for 13,970 instances), a triangle ~120 B (BLAS + geometry).
 pub const AUTO_TRIANGLES_PER_INSTANCE: u64 = 2;
 
-/// The share of the whole build one unit aims at, as a divisor (`whole / 64`).
-pub const AUTO_UNITS_PER_SCENE: u64 = 64;
+/// The share of the whole build one unit aims at, as a divisor (`whole / 256`): a camera path
+/// streamed at a quarter of the full build holds ~64 units beside the skeleton, and a frame's
+/// working set is made of whole units, so coarser units overshoot what the frame's rays touch
+/// (island 0.002 at a quarter: 2^16 units, 80–100 MB working sets and 1.48 passes a frame;
+/// 8,537, 35 MB and 1.00; BENCHMARKS.md "Units a 256th of the build").
+pub const AUTO_UNITS_PER_SCENE: u64 = 256;
 
-/// A 2^16 unit at most this share of the whole build (`whole / 32`) is small enough: the
+/// A 2^16 unit at most this share of the whole build (`whole / 128`) is small enough: the
 /// default bound is kept.
-pub const AUTO_KEEP_UNITS_PER_SCENE: u64 = 32;
+pub const AUTO_KEEP_UNITS_PER_SCENE: u64 = 128;
 
 /// The instance records a smaller bound may add, as a share of the whole build (`whole / 16`):
 /// splitting a mesh into `c` clusters places each of its instances `c` times.
@@ -62,14 +66,14 @@ pub fn auto_bound_settles_at_triangles() -> u64 {
 /// unit, so that share is what a budget below the full build cannot go under.
 ///
 /// `whole` = unique triangles + [`AUTO_TRIANGLES_PER_INSTANCE`] × instance edges estimates the
-/// full build in triangles. When a 2^16 unit is more than a 32nd of it, the bound is `whole /
-/// 64` (at least [`MIN_AUTO_MAX_BLAS_TRIANGLES`]), doubled while the instance records that
+/// full build in triangles. When a 2^16 unit is more than a 128th of it, the bound is `whole /
+/// 256` (at least [`MIN_AUTO_MAX_BLAS_TRIANGLES`]), doubled while the instance records that
 /// splitting adds (each mesh's extra clusters × the paths that place it: a conservative count
 /// for `ml`) would cost more than a 16th of the build: heavily instanced meshes are not split
 /// (a fractal of one 30k-triangle mesh placed 25k times keeps its one BLAS). On the default
-/// `gen island` (521,130 triangles, 13,958 instances) the bound is 8,579 and the floor at 96×64
-/// falls from 18% to 9% of the full build, for +4% instances, +0.2% AS bytes and the same traces
-/// per ray (BENCHMARKS.md "Partition bound"); scenes over ~2.1M triangle-equivalents keep 2^16.
+/// `gen island` (521,130 triangles, 13,958 instances) the bound is 4,096 and the floor at 96×64
+/// falls from 18% to 8% of the full build, for +8% instances, +0.4% AS bytes and the same traces
+/// per ray (BENCHMARKS.md "Partition bound"); scenes over ~8.4M triangle-equivalents keep 2^16.
 pub fn auto_max_blas_triangles(scene: &motu_scene::Scene) -> u32 {
     let st = scene.stats();
     let paths = scene.path_counts();
@@ -279,21 +283,23 @@ mod tests {
         std::array::from_fn(|a| (p(0)[a] + p(1)[a] + p(2)[a]) / 3.0)
     }
 
-    /// The automatic bound: 2^16 on big scenes, whole/64 on small ones (at least 2^12), raised
+    /// The automatic bound: 2^16 on big scenes, whole/256 on small ones (at least 2^12), raised
     /// where splitting would multiply a heavily instanced mesh's placements.
     #[test]
-    fn the_automatic_bound_is_a_64th_of_a_small_build_unless_splitting_multiplies_instances() {
-        // Moana-sized, and just at the keep threshold: 2^16.
+    fn the_automatic_bound_is_a_256th_of_a_small_build_unless_splitting_multiplies_instances() {
+        // Moana-sized, and just at the keep threshold: 2^16; just under it: a 256th.
         assert_eq!(auto_bound(1_180_000_000, 27_800_000, &[]), 1 << 16);
-        assert_eq!(auto_bound(32 << 16, 0, &[]), 1 << 16);
-        // The default `gen island`: 521,130 triangles, 13,958 instances; its palm trunk (37,950
-        // triangles) placed 40 times adds 4 × 40 records: allowed.
+        assert_eq!(auto_bound(128 << 16, 0, &[]), 1 << 16);
+        assert_eq!(auto_bound((128 << 16) - 256, 0, &[]), (1 << 15) - 1);
+        // The default `gen island`: 521,130 triangles, 13,958 instances (a 256th: 2,145, at
+        // least 4,096); its palm trunk (37,950 triangles) placed 40 times adds 15 × 40
+        // records: allowed.
         assert_eq!(
             auto_bound(521_130, 13_958, &[(57_600, 1), (37_950, 40)]),
-            8_579
+            4_096
         );
-        // One 2M-triangle mesh: a 64th of it.
-        assert_eq!(auto_bound(2_000_000, 0, &[(2_000_000, 1)]), 31_250);
+        // One 2M-triangle mesh: a 256th of it.
+        assert_eq!(auto_bound(2_000_000, 0, &[(2_000_000, 1)]), 7_813);
         assert_eq!(
             auto_bound(1_000, 10, &[(1_000, 10)]),
             MIN_AUTO_MAX_BLAS_TRIANGLES

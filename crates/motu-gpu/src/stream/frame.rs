@@ -140,12 +140,7 @@ impl<'a> StreamingRenderer<'a> {
             .iter()
             .flatten()
             .map(|a| a.size_bytes)
-            .chain(
-                self.tlas
-                    .iter()
-                    .flatten()
-                    .map(|t| t.size_bytes()),
-            )
+            .chain(self.tlas.iter().flatten().map(|t| t.size_bytes()))
             .chain(self.meshes.iter().flatten().map(|m| m.size_bytes()))
             .sum();
         st.vram_peak_bytes = report.peak_block_bytes;

@@ -309,10 +309,9 @@ impl<'a> StreamingRenderer<'a> {
                 * std::mem::size_of::<motu_abi::BlasRecord>() as u64;
             let pis_buf = &self.tables[self.pis_table];
             let blases_buf = &self.tables[self.blases_table];
-            let up = self
-                .up
-                .as_mut()
-                .ok_or_else(|| GpuError::InvalidRequest("streaming: staging ring released".into()))?;
+            let up = self.up.as_mut().ok_or_else(|| {
+                GpuError::InvalidRequest("streaming: staging ring released".into())
+            })?;
             up.upload(
                 &ctx,
                 pis_buf,
