@@ -77,7 +77,14 @@ impl<'a> StreamingRenderer<'a> {
         for &t in ids {
             let mut pis = Vec::new();
             let mut non_resident = 0;
+            // The marks' custom index (the TLAS's instance count + 1) must fit the 24 bits of
+            // an instance's; a TLAS at the device cap goes without (the prefetch then sees only
+            // its hits, as before the marks: slower, never wrong).
+            let with_marks = view.tlases[t as usize].instance_count + 1 < 1 << 24;
             for marks in [false, true] {
+                if marks && !with_marks {
+                    break;
+                }
                 let first = proxy_boxes.len() as u32;
                 for c in &self.clusters[t as usize] {
                     if self.blas[c.blas as usize].is_some() == marks {
