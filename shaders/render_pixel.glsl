@@ -26,18 +26,19 @@ uint source_primitive(MeshRecord m, uint mesh_record, uint primitive) {
 // A pixel's state (128 bytes): carried across streaming passes (zeroed at the frame's start),
 // a local in the full build, which runs the same steps without ever deferring. Per sample: the
 // primary ray's best hit so far, resolved for shading while its BLAS was resident (so the BLAS
-// may go), then its secondary rays in order (lights, then AO), each traced again in later passes
-// while a structure it has not walked may hold an occluder.
+// may go), then its secondary rays (lights, then AO) in windows (shade.glsl
+// SECONDARY_WINDOW): each ray of a window traced again in later passes while a structure it has
+// not walked may hold an occluder, the window's terms added in ray order once all are done.
 struct Carry {
     vec4 hit;     // current sample: x best t (T_INFINITY: none), yzw geometric normal facing the ray
-    vec4 ns;      // xyz shading normal (same side)
+    vec4 ns;      // xyz shading normal (same side); w the secondary window's masks (exact float)
     vec4 albedo;  // xyz textured base colour
     uvec4 rec;    // current sample: source mesh, primitive, LOD level, material
     uvec4 aov;    // sample 0's AOV record (without the trace count)
     vec4 sum;     // xyz: colours of the finished samples
     vec4 cur;     // xyz: the current sample's colour so far; w: AO rays found open
     // x: 0 fresh, 1 primary open, 2 secondary rays open; y: stamp of the pass the open ray
-    // started in; z: traces; w: sample | next secondary ray << 16
+    // (or window) started in; z: traces; w: sample | the window's first secondary ray << 16
     uvec4 st;
 };
 layout(buffer_reference, std430, buffer_reference_align = 16) buffer CarryTable { Carry r[]; };
@@ -147,6 +148,11 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         traces = c.st.z;
     }
     bool open = false;
+#ifdef MOTU_STREAMED
+    // This pass's next secondary ray to look at in the current window (rays before it were
+    // traced or settled in this pass).
+    uint cursor = 0u;
+#endif
     while (true) {
         uint smp = c.st.w & 0xffffu;
         vec3 dir = guard ? guard_dir : sample_dir(px, pixel, smp);
@@ -155,6 +161,61 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         si.ng = c.hit.yzw;
         si.ns = c.ns.xyz;
         si.albedo = c.albedo.xyz;
+#ifdef MOTU_STREAMED
+        uint first = c.st.w >> 16u;  // the current window's first secondary ray
+        // The ray to trace: origin, direction, reach (w).
+        vec3 r_org = org;
+        vec4 r_dir = vec4(dir, T_INFINITY);
+        bool sample_done = false;
+        uint ray_bit = 0u;
+        if (primary) {
+            g_best_t = c.hit.x;
+        } else {
+            // The window's masks: done (bits 0-7), clear (bits 8-15).
+            uint masks = uint(c.ns.w);
+            uint n = secondary_ray_count();
+            uint end = min(first + SECONDARY_WINDOW, n);
+            bool found = false;
+            for (uint k = max(cursor, first); k < end; ++k) {
+                uint bit = 1u << (k - first);
+                if ((masks & bit) != 0u) {
+                    continue;
+                }
+                bool clear;
+                vec3 term;
+                if (secondary_ray(si, c.rec.w, org, dir, c.hit.x, pixel, smp, k, r_dir, clear,
+                                  term)) {
+                    found = true;
+                    cursor = k;
+                    ray_bit = bit;
+                    break;
+                }
+                masks |= bit | (clear ? bit << 8u : 0u);
+            }
+            c.ns.w = float(masks);
+            if (found) {
+                r_org = secondary_start(org, dir, c.hit.x, si.ng);
+            } else if ((masks & 0xffu) != (1u << (end - first)) - 1u) {
+                open = true;  // some ray of the window is still open: traced again next pass
+                break;
+            } else {
+                vec3 colour = c.cur.xyz;
+                uint ao_open = uint(c.cur.w);
+                secondary_window_done(first, masks >> 8u, si, c.rec.w, org, dir, c.hit.x, colour,
+                                      ao_open);
+                c.cur = vec4(colour, float(ao_open));
+                c.ns.w = 0.0;
+                cursor = 0u;
+                if (end < n) {
+                    c.st.yw = uvec2(g_stamp, smp | (end << 16u));  // the next window starts now
+                    continue;
+                }
+                c.sum.xyz += c.cur.xyz + sky_term(si, c.rec.w, uint(c.cur.w));
+                sample_done = true;
+            }
+            g_best_t = T_INFINITY;
+        }
+#else
         uint ray = c.st.w >> 16u;
         // The ray to trace: origin, direction, reach (w).
         vec3 r_org = org;
@@ -175,6 +236,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
             c.cur.xyz = colour;
             g_best_t = T_INFINITY;
         }
+#endif
         if (!sample_done) {
             g_start = c.st.y;
             g_empty_t = T_INFINITY;
@@ -195,6 +257,22 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
             if (guard) {
                 return;  // a probe marks what it passed, nothing else
             }
+#ifdef MOTU_STREAMED
+            if (!primary) {
+                g_secondary_rays += 1u;
+                uint masks = uint(c.ns.w);
+                if (h.t < r_dir.w) {
+                    masks |= ray_bit;  // occluded: final whatever the open structures hold
+                } else if (cut || !stream_still_open(r_dir.w)) {
+                    masks |= ray_bit | (ray_bit << 8u);  // clear
+                }
+                // Else open: traced again next pass from the window's start stamp, while the
+                // window's other rays go on now.
+                c.ns.w = float(masks);
+                cursor += 1u;
+                continue;
+            }
+#else
             if (!primary) {
                 g_secondary_rays += 1u;
                 uint outcome = RAY_CLEAR;
@@ -211,6 +289,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 c.st.yw = uvec2(g_stamp, smp | ((ray + 1u) << 16u));
                 continue;
             }
+#endif
             if (h.tlas != NONE_U32) {
                 // Resolved now, while its BLAS and meshes are resident.
                 uint mesh = hit_mesh(h);
@@ -238,6 +317,9 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
             if (c.hit.x < T_INFINITY) {
                 // The sample's secondary rays come next.
                 c.cur = vec4(push.materials.r[c.rec.w].emission, 0.0);
+#ifdef MOTU_STREAMED
+                c.ns.w = 0.0;  // the first window's masks
+#endif
                 c.st.xyw = uvec3(2u, g_stamp, smp);
                 continue;
             }

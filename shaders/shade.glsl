@@ -238,6 +238,40 @@ bool light_term(uint i, ShadeInput si, uint material, vec3 org, vec3 dir, float 
     return true;
 }
 
+// The sample's secondary rays: the lights' shadow rays, then its AO rays.
+uint secondary_ray_count() {
+    return min(push.frame.f.light_count, uint(MAX_LIGHTS)) + push.frame.f.ao_samples;
+}
+
+// What secondary ray `ray` needs: a trace (true: direction in xyz, reach in w of `traced`), or
+// none (false), `clear` then saying whether it counts as unoccluded (a light with shadows off,
+// its `term`) or brings nothing (a light facing away, an AO direction below the surface).
+bool secondary_ray(ShadeInput si, uint material, vec3 org, vec3 dir, float t, uint pixel,
+                   uint smp, uint ray, out vec4 traced, out bool clear, out vec3 term) {
+    uint nl = min(push.frame.f.light_count, uint(MAX_LIGHTS));
+    clear = false;
+    traced = vec4(0.0);
+    term = vec3(0.0);
+    if (ray < nl) {
+        if (!light_term(ray, si, material, org, dir, t, traced, term)) {
+            return false;
+        }
+        if (push.frame.f.shadows != 0u) {
+            return true;
+        }
+        clear = true;
+        return false;
+    }
+    uint k = ray - nl;
+    vec3 d = cosine_direction(si.ns, rand01(pixel, smp, 2u + 2u * k),
+                              rand01(pixel, smp, 3u + 2u * k));
+    if (dot(d, si.ng) > 0.0) {
+        traced = vec4(d, push.frame.f.ao_distance);
+        return true;
+    }
+    return false;
+}
+
 // From secondary ray `ray` on: the first one that needs a trace (its direction in xyz, its
 // reach in w; true), adding the terms of the lights that need none (shadows off) to `colour`
 // and skipping lights that bring nothing and AO directions below the surface. False when no
@@ -284,6 +318,28 @@ void secondary_ray_done(uint outcome, uint ray, ShadeInput si, uint material, ve
         }
     } else {
         ao_open += 1u;
+    }
+}
+
+// Secondary rays run in windows of SECONDARY_WINDOW rays: a pass traces every ray of the window
+// that is not done (streaming: one a non-resident structure may occlude is traced again next
+// pass while the others finish, so a sample's shadow and AO rays wait on each other's builds in
+// the same pass rather than one after another), and the window's clear rays are added in ray
+// order once all are done, so the colour is the full build's whatever pass each finished in.
+// The window's state is two masks (done, clear << 8) kept in Carry.ns.w as an exact float.
+// Only the streamed variant of the trace shaders (MOTU_STREAMED) uses windows: in one shared
+// with full builds, the window loop's shape cost every full-build ray (H200, island 0.05 at
+// 1280×720: +2.5% a frame shaded, +1.7% in the ids view), so those keep the sequential loop.
+const uint SECONDARY_WINDOW = 8u;
+
+// The window of rays from `first` is done: its clear rays (bits of `clear`), in ray order, add
+// their light terms to `colour` and count AO rays in `ao_open`.
+void secondary_window_done(uint first, uint clear, ShadeInput si, uint material, vec3 org,
+                           vec3 dir, float t, inout vec3 colour, inout uint ao_open) {
+    for (uint i = 0u; i < SECONDARY_WINDOW; ++i) {
+        if ((clear & (1u << i)) != 0u) {
+            secondary_ray_done(RAY_CLEAR, first + i, si, material, org, dir, t, colour, ao_open);
+        }
     }
 }
 

@@ -61,7 +61,7 @@ impl LiveRenderer {
                 if let Some((_, _, t)) = self.tracer.take() {
                     t.release(&mut heap);
                 }
-                let t = Tracer::new(&ctx, &mut heap, opts, self.scene.pi_capacity)?;
+                let t = Tracer::new(&ctx, &mut heap, opts, self.scene.pi_capacity, false)?;
                 self.tracer = Some((opts.backend, opts.stack_size, t));
             }
             match &self.frame {

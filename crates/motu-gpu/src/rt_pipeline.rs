@@ -36,11 +36,13 @@ pub(crate) struct RtPipeline {
 }
 
 impl RtPipeline {
-    /// `specialization`: (constant id, value) pairs for every stage.
+    /// `specialization`: (constant id, value) pairs for every stage; `streamed`: the raygen's
+    /// streamed variant (`pipeline/trace_stream.rgen`).
     pub(crate) fn new(
         ctx: &Context,
         heap: &mut GpuHeap,
         specialization: &[(u32, u32)],
+        streamed: bool,
     ) -> Result<RtPipeline> {
         if !ctx.caps().ray_pipeline {
             return Err(GpuError::MissingFeature {
@@ -70,7 +72,11 @@ impl RtPipeline {
 
         let sources: [(&[u32], vk::ShaderStageFlags); 6] = [
             (
-                shaders::PIPELINE_TRACE_RGEN,
+                if streamed {
+                    shaders::PIPELINE_TRACE_STREAM_RGEN
+                } else {
+                    shaders::PIPELINE_TRACE_RGEN
+                },
                 vk::ShaderStageFlags::RAYGEN_KHR,
             ),
             (shaders::PIPELINE_MISS_RMISS, vk::ShaderStageFlags::MISS_KHR),

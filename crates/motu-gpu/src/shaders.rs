@@ -97,6 +97,11 @@ mod tests {
         for (words, what) in [
             (super::PIPELINE_TRACE_RGEN, "pipeline/trace.rgen"),
             (super::QUERY_TRACE_COMP, "query/trace.comp"),
+            (
+                super::PIPELINE_TRACE_STREAM_RGEN,
+                "pipeline/trace_stream.rgen",
+            ),
+            (super::QUERY_TRACE_STREAM_COMP, "query/trace_stream.comp"),
         ] {
             let g = CallGraph::parse(words);
             for callee in ["traverse", "backend_trace"] {

@@ -54,7 +54,7 @@ impl<'a> StreamingRenderer<'a> {
                 .with_eviction(|s| {
                     // Streamed TLASes keep every PI in the hardware walk (no box lists).
                     let slots = crate::scene::pi_capacity(&s.view, false);
-                    Tracer::new(&s.ctx.clone(), &mut s.heap, opts, slots)
+                    Tracer::new(&s.ctx.clone(), &mut s.heap, opts, slots, true)
                 })
                 .map_err(|e| self.skeleton_error("the trace pipeline", e))?;
             self.tracer = Some((opts.backend, opts.stack_size, t));

@@ -1,0 +1,65 @@
+// The body of `query/trace.comp` and its streamed variant (`query/trace_stream.comp`: MOTU_STREAMED).
+// Backend `query`: the traversal loop in a compute shader with GL_EXT_ray_query (the thesis's
+// form, for devices with ray queries). Candidates of programmable instances (AABBs) are
+// slab-tested and recorded during rayQueryProceedEXT; the instance shader (traverse.glsl) runs
+// after each query.
+#extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_ray_query : require
+layout(local_size_x = 8, local_size_y = 8) in;
+#include "common.glsl"
+
+Payload pl;
+#include "candidates.glsl"
+#include "texture.glsl"
+
+void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool first_hit) {
+    rayQueryEXT rq;
+    uint flags = first_hit ? gl_RayFlagsTerminateOnFirstHitEXT : gl_RayFlagsNoneEXT;
+    rayQueryInitializeEXT(rq, accelerationStructureEXT(push.tlas_addresses.r[tlas]), flags, g_cull_mask,
+                          org, t_min, dir, t_max);
+    while (rayQueryProceedEXT(rq)) {
+        if (rayQueryGetIntersectionTypeEXT(rq, false) == gl_RayQueryCandidateIntersectionAABBEXT) {
+            uint instance = rayQueryGetIntersectionInstanceCustomIndexEXT(rq, false);
+            uint pi = pi_index(tlas, instance, rayQueryGetIntersectionPrimitiveIndexEXT(rq, false));
+            PiRecord r = push.pis.r[pi];
+            float t_hi = rayQueryGetIntersectionTypeEXT(rq, true) ==
+                                 gl_RayQueryCommittedIntersectionTriangleEXT
+                             ? rayQueryGetIntersectionTEXT(rq, true)
+                             : t_max;
+            vec3 o = rayQueryGetIntersectionObjectRayOriginEXT(rq, false);
+            vec3 d = rayQueryGetIntersectionObjectRayDirectionEXT(rq, false);
+            if (r.kind == PI_EMPTY_BLAS) {
+                record_proxy(r, o, d, t_min, t_hi);
+                continue;
+            }
+            float t_near = slab_near(o, d, r.aabb_min, r.aabb_max, t_min, t_hi);
+            if (t_near >= 0.0) {
+                record_candidate(pi, t_near);
+            }
+        } else if (alpha_passes(tlas, rayQueryGetIntersectionInstanceCustomIndexEXT(rq, false),
+                                rayQueryGetIntersectionGeometryIndexEXT(rq, false),
+                                rayQueryGetIntersectionPrimitiveIndexEXT(rq, false),
+                                rayQueryGetIntersectionBarycentricsEXT(rq, false))) {
+            // A non-opaque (alpha-tested) triangle whose texel covers the hit.
+            rayQueryConfirmIntersectionEXT(rq);
+        }
+    }
+    if (rayQueryGetIntersectionTypeEXT(rq, true) == gl_RayQueryCommittedIntersectionTriangleEXT) {
+        pl.hit_t = rayQueryGetIntersectionTEXT(rq, true);
+        pl.hit_instance = rayQueryGetIntersectionInstanceCustomIndexEXT(rq, true);
+        pl.hit_geometry = rayQueryGetIntersectionGeometryIndexEXT(rq, true);
+        pl.hit_primitive = rayQueryGetIntersectionPrimitiveIndexEXT(rq, true);
+    }
+}
+
+#include "render_pixel.glsl"
+
+void main() {
+    if (push.stream != 0ul) {
+        // Streaming passes dispatch a 1-D item list (8 × 8 items per group, groups in 2-D).
+        uint group = gl_WorkGroupID.y * gl_NumWorkGroups.x + gl_WorkGroupID.x;
+        render_stream_item(group * 64u + gl_LocalInvocationIndex);
+        return;
+    }
+    render_pixel(gl_GlobalInvocationID.xy);
+}
