@@ -36,8 +36,9 @@
 //! request (needed, counted), the rest are marked open. The closest hit over BLASes processed
 //! in different passes is the minimum over the passes, so the image equals the full build's,
 //! and a pixel never needs two BLASes resident at once: anything may be evicted between
-//! passes. Secondary rays start when their sample's primary hit is final, one after the
-//! other, and stop at the first occluder; the colour is the full build's (docs/shading.md).
+//! passes. Secondary rays start when their sample's primary hit is final, in windows of 8
+//! traced together each pass (the streamed shaders' `MOTU_STREAMED`), each ray stopping at its
+//! first occluder; the colour is the full build's (docs/shading.md).
 //!
 //! # Build–traverse loop ([`StreamingRenderer::render_frame`])
 //! Pass 1 traces every pixel plus a sparse *guard band* of primary rays around the image.
