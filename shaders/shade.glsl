@@ -275,7 +275,9 @@ bool secondary_ray(ShadeInput si, uint material, vec3 org, vec3 dir, float t, ui
 // From secondary ray `ray` on: the first one that needs a trace (its direction in xyz, its
 // reach in w; true), adding the terms of the lights that need none (shadows off) to `colour`
 // and skipping lights that bring nothing and AO directions below the surface. False when no
-// ray is left (`ray` = the ray count).
+// ray is left (`ray` = the ray count). Full builds only: `secondary_ray` in a loop, written out
+// because the full-build SPIR-V is the one timed on the H200 (rewritten as that loop it is no
+// longer the same code; see SECONDARY_WINDOW).
 bool next_secondary_ray(ShadeInput si, uint material, vec3 org, vec3 dir, float t, uint pixel,
                         uint smp, inout uint ray, inout vec3 colour, out vec4 traced) {
     uint nl = min(push.frame.f.light_count, uint(MAX_LIGHTS));

@@ -25,5 +25,7 @@ void main() {
         render_stream_item(gl_LaunchIDEXT.y * gl_LaunchSizeEXT.x + gl_LaunchIDEXT.x);
         return;
     }
-    render_pixel(gl_LaunchIDEXT.xy);
+#ifndef MOTU_STREAMED
+    render_pixel(gl_LaunchIDEXT.xy);  // the streamed variant only runs streaming passes
+#endif
 }

@@ -61,5 +61,7 @@ void main() {
         render_stream_item(group * 64u + gl_LocalInvocationIndex);
         return;
     }
-    render_pixel(gl_GlobalInvocationID.xy);
+#ifndef MOTU_STREAMED
+    render_pixel(gl_GlobalInvocationID.xy);  // the streamed variant only runs streaming passes
+#endif
 }
