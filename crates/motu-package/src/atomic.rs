@@ -20,18 +20,33 @@ use crate::PackageError;
 /// The suffix every motu temp file carries.
 pub const TEMP_SUFFIX: &str = ".motu-tmp";
 
-/// Temp files being written by this process (removed on signals).
-static LIVE: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+/// Temp files being written by this process (removed on signals), and whether that removal
+/// has run: the process is exiting, and no temp file may be created after it.
+struct Live {
+    paths: Vec<PathBuf>,
+    closing: bool,
+}
 
-fn live() -> std::sync::MutexGuard<'static, Vec<PathBuf>> {
-    // A panic while holding the lock leaves a plain Vec: still usable.
+static LIVE: Mutex<Live> = Mutex::new(Live {
+    paths: Vec::new(),
+    closing: false,
+});
+
+fn live() -> std::sync::MutexGuard<'static, Live> {
+    // A panic while holding the lock leaves plain data: still usable.
     LIVE.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 /// Removes every temp file this process is writing; returns how many were removed. For signal
-/// handling threads: the process is about to exit, so the writers are abandoned.
+/// handling threads: the process is about to exit, so the writers are abandoned, and
+/// [`AtomicFile::create`] refuses from now on (a writer starting during the exit left its temp
+/// file behind: an interrupted import's partition spill file, created just after the signal).
 pub fn remove_registered_temp_files() -> usize {
-    let paths = std::mem::take(&mut *live());
+    let paths = {
+        let mut l = live();
+        l.closing = true;
+        std::mem::take(&mut l.paths)
+    };
     paths
         .iter()
         .filter(|p| std::fs::remove_file(p).is_ok())
@@ -126,10 +141,21 @@ impl AtomicFile {
         // Temp files default to 0600; outputs are ordinary files (0666 minus the umask).
         #[cfg(unix)]
         builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+        // Created and registered under the lock, so a signal's removal either sees it or has
+        // already run (then nothing is created).
+        let mut l = live();
+        if l.closing {
+            let e = std::io::Error::new(
+                std::io::ErrorKind::Interrupted,
+                "the process is exiting on a signal",
+            );
+            return Err(PackageError::io("create temp file beside", &target, e));
+        }
         let temp = builder
             .tempfile_in(parent_dir(&target))
             .map_err(|e| PackageError::io("create temp file beside", &target, e))?;
-        live().push(temp.path().to_path_buf());
+        l.paths.push(temp.path().to_path_buf());
+        drop(l);
         Ok(AtomicFile {
             target,
             temp: Some(temp),
@@ -195,7 +221,7 @@ impl Drop for AtomicFile {
 }
 
 fn unregister(path: &Path) {
-    live().retain(|p| p != path);
+    live().paths.retain(|p| p != path);
 }
 
 /// Writes `bytes` to `target` atomically (temp file, fsync, rename, directory fsync).
@@ -260,18 +286,55 @@ mod tests {
         assert!(temps(dir.path()).is_empty());
     }
 
+    /// The child half of the next test: run in its own process, since the removal marks the
+    /// whole process as exiting.
+    #[test]
+    fn closing_child() {
+        let Some(dir) = std::env::var_os("MOTU_CLOSING_CHILD") else {
+            return;
+        };
+        let dir = PathBuf::from(dir);
+        let open = AtomicFile::create(dir.join("a.motu")).unwrap();
+        let temp = open.temp_path().unwrap().to_path_buf();
+        assert_eq!(remove_registered_temp_files(), 1);
+        assert!(!temp.exists());
+        let err = AtomicFile::create(dir.join("b.motu")).unwrap_err();
+        assert!(err.to_string().contains("exiting on a signal"), "{err}");
+        drop(open);
+        println!("closing child done");
+    }
+
+    /// Regression: an import interrupted just as it opened its partition spill file left that
+    /// temp file behind (the signal's removal had already taken the list).
+    #[test]
+    fn regression_no_temp_file_is_created_after_the_signal_cleanup() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = std::process::Command::new(std::env::current_exe().unwrap())
+            .args(["--exact", "atomic::tests::closing_child", "--nocapture"])
+            .env("MOTU_CLOSING_CHILD", dir.path())
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success() && stdout.contains("closing child done"),
+            "{stdout}{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(temps(dir.path()).is_empty(), "{:?}", temps(dir.path()));
+    }
+
     #[test]
     fn temp_files_are_registered_while_written() {
         let dir = tempfile::tempdir().unwrap();
         let f = AtomicFile::create(dir.path().join("x.motu")).unwrap();
         let temp = f.temp_path().unwrap().to_path_buf();
-        assert!(live().contains(&temp));
+        assert!(live().paths.contains(&temp));
         drop(f);
-        assert!(!live().contains(&temp) && !temp.exists());
+        assert!(!live().paths.contains(&temp) && !temp.exists());
         let f = AtomicFile::create(dir.path().join("y.motu")).unwrap();
         let temp = f.temp_path().unwrap().to_path_buf();
         f.commit().unwrap();
-        assert!(!live().contains(&temp));
+        assert!(!live().paths.contains(&temp));
     }
 
     #[test]
