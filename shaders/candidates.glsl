@@ -66,6 +66,101 @@ float proxy_boxes_entry(uint64_t table, uint first_box, uint fan, Affine tlas_fr
     return t_leaf;
 }
 
+#ifdef MOTU_STREAMED
+// The nearest entry in [t_min, t_hi) of the ray into a member instance of proxy PI `r`'s
+// cluster (each member's BLAS bounds under its tlas_from_blas, padded as the CPU pads proxy
+// boxes, and one of the boxes inside the BLAS where it has them, proxy_boxes.rs); T_INFINITY
+// when it enters none.
+float proxy_entry(StreamParams s, PiRecord r, vec3 org, vec3 dir, float t_min, float t_hi) {
+    uint blas = r.target;
+    uint first = floatBitsToUint(r.child_from_parent[0]);
+    uint count = floatBitsToUint(r.child_from_parent[1]);
+    uint first_box = 0u;
+    uint fan = 0u;
+    if (s.proxy_box_index != 0ul) {
+        U32Table ix = U32Table(s.proxy_box_index);
+        first_box = ix.r[2u * blas];
+        fan = ix.r[2u * blas + 1u];
+    }
+    BlasRecord br = push.blases.r[blas];
+    vec3 centre = 0.5 * (br.bounds_min + br.bounds_max);
+    vec3 half_size = 0.5 * (br.bounds_max - br.bounds_min);
+    U32Table members = U32Table(s.cluster_members);
+    float t_best = T_INFINITY;
+    for (uint i = 0u; i < count; ++i) {
+        InstanceRecord ir = push.instances.r[members.r[first + i]];
+        Affine m = affine_from_array(ir.tlas_from_blas);
+        vec3 c = xform_point(m, centre);
+        vec3 h = vec3(dot(abs(m.r0.xyz), half_size), dot(abs(m.r1.xyz), half_size),
+                      dot(abs(m.r2.xyz), half_size));
+        vec3 lo = c - h;
+        vec3 hi = c + h;
+        // Transformed-box rounding plus the CPU's proxy padding (`padded`): conservative.
+        float extent = 2.0 * max(max(h.x, h.y), h.z);
+        float magnitude = max(max(max(abs(lo.x), abs(lo.y)), abs(lo.z)),
+                              max(max(abs(hi.x), abs(hi.y)), abs(hi.z)));
+        float pad = 1e-3 * extent + 2e-5 * magnitude;
+        float t = slab_near(org, dir, lo - pad, hi + pad, t_min, min(t_hi, t_best));
+        if (t >= 0.0 && fan != 0u) {
+            t = proxy_boxes_entry(s.proxy_boxes, first_box, fan, m, org, dir, t_min,
+                                  min(t_hi, t_best), pad + 2e-5 * magnitude);
+        }
+        if (t >= 0.0) {
+            t_best = min(t_best, t);
+        }
+    }
+    return t_best;
+}
+
+// Streaming: the ray (in the walked TLAS's space = the proxy BLAS's, which is instanced with
+// identity) entered proxy PI `r`'s box, which stands for up to PROXY_CLUSTER_INSTANCES
+// instances of non-resident BLAS `r.target` (or, in a marks BLAS, of a resident one), before
+// `t_hi` (the trace's t_max or the closest triangle committed so far). Done here, during the
+// hardware walk, rather than as a PI candidate: a ray crossing N proxy boxes took
+// ⌈N / PI_CAPACITY⌉ re-walks of the whole TLAS for them. The first walk keeps the nearest
+// member entry of an open BLAS in the payload (open_t, open_blas: the ray's request if it stays
+// in front of the walk's hit) and marks nothing; the mark walk (traverse.glsl), whose t_max is
+// the first walk's hit and which tests no triangle, marks every BLAS it enters open (seen for
+// guard rays, and for a resident BLAS met through its TLAS's marks BLAS in a probe pass).
+void record_proxy(PiRecord r, vec3 org, vec3 dir, float t_min, float t_hi) {
+    if (push.stream == 0ul) {
+        return;  // proxies exist only in streamed skeletons
+    }
+    float t_box = slab_near(org, dir, r.aabb_min, r.aabb_max, t_min, t_hi);
+    if (t_box < 0.0) {
+        return;
+    }
+    StreamParams s = StreamRef(push.stream).s;
+    uint blas = r.target;
+    bool guard = (pl.stream_start & STREAM_GUARD_RAY) != 0u;
+    bool mark_walk = (pl.stream_start & STREAM_MARK_WALK) != 0u;
+    if (guard && !mark_walk) {
+        return;  // a guard ray only marks, in its mark walk
+    }
+    uint walked = StampTable(s.walked).r[blas];
+    // Only mark walks of probe passes meet marks BLASes (resident: walked this pass).
+    bool resident = walked == s.stamp;
+    if (!guard && !resident && walked >= (pl.stream_start & STREAM_START_STAMP)) {
+        return;  // walked by this ray in an earlier pass: resolved
+    }
+    uint mark = 4u * s.stamp + (guard || resident ? STREAM_SEEN : STREAM_OPEN);
+    if (mark_walk && StampTable(s.blas_stamps).r[blas] >= mark) {
+        return;  // another ray marked it already: the member tests would change nothing
+    }
+    float t = proxy_entry(s, r, org, dir, t_min, mark_walk ? t_hi : min(t_hi, pl.open_t));
+    if (t >= t_hi) {
+        return;
+    }
+    if (!mark_walk) {
+        if (t < pl.open_t) {
+            pl.open_t = t;
+            pl.open_blas = blas;
+        }
+        return;
+    }
+    stream_mark(s.blas_stamps, blas, mark);
+}
+#else
 // Streaming: the ray (in the walked TLAS's space = the proxy BLAS's, which is instanced with
 // identity) entered proxy PI `r`'s box, which stands for up to PROXY_CLUSTER_INSTANCES
 // instances of non-resident BLAS `r.target`, before `t_hi` (the trace's t_max or the closest
@@ -147,6 +242,8 @@ void record_proxy(PiRecord r, vec3 org, vec3 dir, float t_min, float t_hi) {
     }
     stream_mark(s.blas_stamps, blas, 4u * s.stamp + STREAM_OPEN);
 }
+
+#endif
 
 // The global PI index of primitive `primitive` of instance `instance` of TLAS `tlas`.
 uint pi_index(uint tlas, uint instance, uint primitive) {

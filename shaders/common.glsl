@@ -42,15 +42,23 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 #define STREAM_NEEDED 2u
 // Payload.stream_start bit of a guard-band ray (stamps stay below 2^30: 4 × stamp + level).
 #define STREAM_GUARD_RAY 0x80000000u
+// Payload.stream_start bit of a streamed ray's *mark walk* (traverse.glsl, MOTU_STREAMED): the
+// second walk that marks what lies in front of the first walk's hit.
+#define STREAM_MARK_WALK 0x40000000u
+#define STREAM_START_STAMP 0x3fffffffu
 // StreamParams.flags: a prefetch probe of the next frame's camera (render_pixel.glsl): every
 // pixel's rays, primary and secondary, run to the end against what is resident, marking what
 // they meet open (the nearest needed and counted) and writing nothing else.
 #define STREAM_PROBE_PASS 1u
-// Ray cull masks (Rust: stream::MARKS_MASK). Every instance has mask 0xFF except a streamed
-// TLAS's *marks* BLAS (0x02: the boxes of its resident clusters), which only probe passes'
-// rays see: there a ray passing through a resident BLAS without hitting it marks it seen, so
-// the prefetch keeps it (the hardware walk reports no such pass).
+// Ray cull masks (Rust: stream::MARKS_MASK, stream::TRIANGLE_MASK). Every instance has mask
+// 0xFF except in a streamed TLAS its triangle instances (0x01) and its *marks* BLAS (0x02: the
+// boxes of its resident clusters), which only probe passes' mark walks see: there a ray passing
+// through a resident BLAS without hitting it marks it seen, so the prefetch keeps it (the
+// hardware walk reports no such pass). A mark walk (CULL_MASK_MARK_WALK) meets PI and proxy
+// boxes only: no triangle is tested twice.
 #define CULL_MASK_WALK 0x01u
+#define CULL_MASK_MARKS 0x02u
+#define CULL_MASK_MARK_WALK 0x04u
 #define CULL_MASK_PROBE 0xFFu
 uint g_cull_mask = CULL_MASK_WALK;
 

@@ -401,7 +401,13 @@ void render_stream_item(uint i) {
     g_streaming = true;
     g_guard = guard;
     g_probe = (s.flags & STREAM_PROBE_PASS) != 0u;
+#ifdef MOTU_STREAMED
+    // Every first walk tests triangles and proxies; what the rays pass (the marks BLASes
+    // included) is marked by the mark walk that follows it (traverse.glsl).
+    g_cull_mask = CULL_MASK_WALK;
+#else
     g_cull_mask = g_probe ? CULL_MASK_PROBE : CULL_MASK_WALK;
+#endif
     g_stamp = s.stamp;
     g_best_t = T_INFINITY;
     g_start = s.stamp;

@@ -51,6 +51,19 @@ float g_empty_t = T_INFINITY;
 uint g_empty_id = NONE_U32;
 // Where the ray ends (shadow rays towards a point light); T_INFINITY otherwise.
 float g_t_max = T_INFINITY;
+#ifdef MOTU_STREAMED
+// The current walk is a ray's *mark walk*: after the first walk found the pass's hit, a second
+// walk over PI and proxy boxes only (CULL_MASK_MARK_WALK, no triangle tested) marks the
+// structures in front of that hit, open or (probe passes, through the marks BLASes) resident
+// and passed. Marked during the first walk, they were judged against the closest hit *so far*
+// in the hardware's order, and most of them lay behind the ray's hit: the host built them
+// ahead for nothing, crowding out what later frames need (issue 14 item 6). Only rays that stay
+// open (their nearest open structure is their request, found by the first walk) and guard rays
+// take it, probe rays included only when open: marking what every probe ray passed kept more
+// resident than the next frames used (BENCHMARKS.md). The marks are hints for building ahead,
+// never needed for correctness, so a mark walk cut short truncates nothing.
+bool g_mark_walk = false;
+#endif
 
 // Records `id` at `level` in this pass.
 void stream_mark_as(uint64_t table, uint id, uint level) {
@@ -95,6 +108,14 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
     hit.tlas = NONE_U32;
     hit.lod = NONE_U32;
     uint traces_at_start = traces;
+#ifdef MOTU_STREAMED
+    // Walk 0 is the ray's walk, walk 1 its mark walk (see g_mark_walk): the same loop, so the
+    // traversal is inlined once.
+    uint walk_cull_mask = g_cull_mask;
+    uvec3 walk_counts = uvec3(0u);  // traces, overflows, truncations of the first walk
+    bool walk_truncated = false;
+    for (uint walk = 0u; walk < 2u; ++walk) {
+#endif
     while (sp > 0u) {
         sp -= 1u;
         Entry e = stack[sp];
@@ -115,6 +136,9 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
         pl.hit_t = -1.0;
         pl.open_t = T_INFINITY;
         pl.stream_start = g_start | (g_guard ? STREAM_GUARD_RAY : 0u);
+#ifdef MOTU_STREAMED
+        pl.stream_start |= g_mark_walk ? STREAM_MARK_WALK : 0u;
+#endif
         backend_trace(e.tlas, xform_point(e.tlas_from_world, org), 0.0,
                       xform_vector(e.tlas_from_world, dir), hit.t, first_hit);
         if (pl.open_t < g_empty_t) {
@@ -237,6 +261,33 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
         }
 #undef CANDIDATE
     }
+#ifdef MOTU_STREAMED
+        if (g_mark_walk) {
+            // What the mark walk counted is not the ray's: the first walk's counts stand.
+            traces = walk_counts.x;
+            overflows = walk_counts.y;
+            truncations = walk_counts.z;
+            g_truncated = walk_truncated;
+            break;
+        }
+        // Open: a structure in front of the hit may hold a nearer one (an occluded shadow ray
+        // is final whatever lies in front of its occluder).
+        bool open = g_empty_t < hit.t && !(first_hit && hit.tlas != NONE_U32);
+        if (!g_streaming || g_truncated || overflows != 0u || !(g_guard || open)) {
+            break;  // final, or cut short: nothing to mark
+        }
+        walk_counts = uvec3(traces, overflows, truncations);
+        walk_truncated = g_truncated;
+        traces_at_start = traces;
+        g_mark_walk = true;
+        g_cull_mask = CULL_MASK_MARK_WALK | (g_probe ? CULL_MASK_MARKS : 0u);
+        first_hit = false;
+        stack[0] = Entry(affine_identity(), 0.0, root_tlas, NONE_U32, -1.0, 0u);
+        sp = 1u;
+    }
+    g_mark_walk = false;
+    g_cull_mask = walk_cull_mask;
+#endif
     if (g_streaming && hit.tlas != NONE_U32) {
         // Resident triangle BLASes are walked by the hardware without a shader callback: the
         // one hit is what refreshes its BLAS's LRU age (see the stream module).

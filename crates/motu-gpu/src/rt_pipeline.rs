@@ -36,8 +36,9 @@ pub(crate) struct RtPipeline {
 }
 
 impl RtPipeline {
-    /// `specialization`: (constant id, value) pairs for every stage; `streamed`: the raygen's
-    /// streamed variant (`pipeline/trace_stream.rgen`).
+    /// `specialization`: (constant id, value) pairs for every stage; `streamed`: the streamed
+    /// variants of the raygen and the PI any-hit (`pipeline/trace_stream.rgen`,
+    /// `pipeline/pi_stream.rahit`).
     pub(crate) fn new(
         ctx: &Context,
         heap: &mut GpuHeap,
@@ -89,7 +90,11 @@ impl RtPipeline {
                 vk::ShaderStageFlags::INTERSECTION_KHR,
             ),
             (
-                shaders::PIPELINE_PI_RAHIT,
+                if streamed {
+                    shaders::PIPELINE_PI_STREAM_RAHIT
+                } else {
+                    shaders::PIPELINE_PI_RAHIT
+                },
                 vk::ShaderStageFlags::ANY_HIT_KHR,
             ),
             (

@@ -33,7 +33,10 @@
 //! walked every BLAS resident in any of those passes, so a non-resident BLAS is *open* for it
 //! only when it was not resident in any pass since the ray started (`walked[b]` < the ray's
 //! start stamp) and its box lies in front of the best hit; the nearest open one is the pixel's
-//! request (needed, counted), the rest are marked open. The closest hit over BLASes processed
+//! request (needed, counted), the rest are marked open by a second walk of the ray over PI and
+//! proxy boxes only, up to the pass's hit (the *mark walk*, `traverse.glsl`: marked during the
+//! first walk, against the closest hit *so far* in the hardware's order, most lay behind the
+//! hit and were built ahead for nothing). The closest hit over BLASes processed
 //! in different passes is the minimum over the passes, so the image equals the full build's,
 //! and a pixel never needs two BLASes resident at once: anything may be evicted between
 //! passes. Secondary rays start when their sample's primary hit is final, in windows of 8
@@ -344,9 +347,13 @@ impl TlasGpu {
     }
 }
 
-/// Instance mask of the marks BLASes (`CULL_MASK_*` of `common.glsl`): ordinary traces cull
-/// with bit 0 only, so they never meet the resident clusters' boxes; probe passes trace all.
+/// Instance mask of the marks BLASes (`CULL_MASK_*` of `common.glsl`): first walks cull with
+/// bit 0 only, so they never meet the resident clusters' boxes; probe passes' mark walks
+/// (`CULL_MASK_MARK_WALK | CULL_MASK_MARKS`) do.
 pub(super) const MARKS_MASK: u8 = 0x02;
+/// Instance mask of a streamed TLAS's triangle instances: bit 0 only, so a ray's mark walk
+/// (`CULL_MASK_MARK_WALK`, bit 2: PI and proxy instances keep 0xFF) tests no triangle twice.
+pub(super) const TRIANGLE_MASK: u8 = 0x01;
 
 /// Renders a hierarchy whose acceleration structures need not fit the budget: see the module
 /// docs. Holds the view and the mesh source for its lifetime.

@@ -11,10 +11,13 @@
 //! looked unused, the prefetch evicted it for room, and the next frame's rays, entering its
 //! boxes in front of their hits, had to open it again: most second passes at a quarter of the
 //! full build were that. Each streamed TLAS therefore carries a *marks* BLAS beside its proxy:
-//! the resident clusters' boxes, under an instance mask only probe rays trace
-//! (`CULL_MASK_PROBE`); a probe ray entering a member's box and one of the boxes inside the
-//! BLAS (`proxy_boxes.rs`) in front of its closest hit so far marks the BLAS seen, and the
-//! prefetch keeps it. Ordinary passes cull the marks with their mask and pay nothing for them.
+//! the resident clusters' boxes, under an instance mask only probe rays' mark walks trace
+//! (`CULL_MASK_MARKS`, `traverse.glsl`); a probe ray that stays open (a non-resident structure
+//! lies in front of its resident hit) walks again over boxes only, up to that hit, and entering
+//! a member's box and one of the boxes inside the BLAS (`proxy_boxes.rs`) marks the BLAS seen,
+//! so the prefetch keeps it. Ordinary passes cull the marks with their mask and pay nothing
+//! for them. Marking what *every* probe ray passed kept more resident than the next frames used
+//! (more built, no fewer passes: BENCHMARKS.md, session 11).
 
 use motu_abi::camera::CameraParams;
 

@@ -6,7 +6,7 @@ use motu_abi::{PiRecord, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
 use motu_alloc::{AllocKind, BuildSize, ItemId, MemoryClass};
 
 use super::skeleton::{proxy_blas_record, proxy_pi};
-use super::{StreamingRenderer, TlasGpu, IDENTITY, MARKS_MASK};
+use super::{StreamingRenderer, TlasGpu, IDENTITY, MARKS_MASK, TRIANGLE_MASK};
 use crate::accel::AsBuildFlags;
 use crate::error::{GpuError, Result};
 use crate::memory::BufferUsage;
@@ -191,13 +191,18 @@ impl<'a> StreamingRenderer<'a> {
                             if addr == 0 {
                                 continue;
                             }
-                            out.extend_from_slice(&encode_instance(
+                            let aabbs = view.blases[b].kind == BLAS_AABBS;
+                            let mut enc = encode_instance(
                                 &inst.tlas_from_blas,
-                                view.blases[b].kind == BLAS_AABBS,
+                                aabbs,
                                 inst.flags & FLAG_NEEDS_ANY_HIT != 0,
                                 addr,
                                 (c * CHUNK + j) as u32,
-                            ));
+                            );
+                            if !aabbs {
+                                enc[51] = TRIANGLE_MASK;
+                            }
+                            out.extend_from_slice(&enc);
                         }
                         out
                     })
