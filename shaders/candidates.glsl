@@ -27,6 +27,7 @@ void record_candidate(uint pi, float t_near) {
     }
 }
 
+#ifdef MOTU_STREAMED
 // The nearest entry in [t_min, t_max] of the ray into a leaf box of a BLAS placed by
 // `tlas_from_blas` (boxes from `first_box`: `fan` top boxes, then `fan` leaves per top box,
 // BLAS space, transformed as member boxes are and padded by `pad` more), testing only the
@@ -66,7 +67,6 @@ float proxy_boxes_entry(uint64_t table, uint first_box, uint fan, Affine tlas_fr
     return t_leaf;
 }
 
-#ifdef MOTU_STREAMED
 // The nearest entry in [t_min, t_hi) of the ray into a member instance of proxy PI `r`'s
 // cluster (each member's BLAS bounds under its tlas_from_blas, padded as the CPU pads proxy
 // boxes, and one of the boxes inside the BLAS where it has them, proxy_boxes.rs); T_INFINITY
@@ -161,88 +161,9 @@ void record_proxy(PiRecord r, vec3 org, vec3 dir, float t_min, float t_hi) {
     stream_mark(s.blas_stamps, blas, mark);
 }
 #else
-// Streaming: the ray (in the walked TLAS's space = the proxy BLAS's, which is instanced with
-// identity) entered proxy PI `r`'s box, which stands for up to PROXY_CLUSTER_INSTANCES
-// instances of non-resident BLAS `r.target`, before `t_hi` (the trace's t_max or the closest
-// triangle committed so far). Tests each member instance's box (its BLAS bounds under its
-// tlas_from_blas, padded as the CPU pads proxy boxes), so rays passing between instances do
-// not demand the BLAS, and keeps the nearest member entry in the payload (open_t, open_blas);
-// every BLAS met in front of `t_hi` is marked open (guard probes, and probe passes' rays
-// meeting a resident BLAS's box in its marks BLAS: seen). Where the BLAS has
-// boxes inside it (proxy_boxes.rs), a member counts only if the ray also enters one of them.
-// Done here, during the hardware walk, rather than as a PI candidate: a ray crossing N proxy
-// boxes took ⌈N / PI_CAPACITY⌉ re-walks of the whole TLAS for them (61 TLAS walks per ray at
-// ⅛ of the 0.3 island, most of the frame's time); now one walk meets every box once.
-void record_proxy(PiRecord r, vec3 org, vec3 dir, float t_min, float t_hi) {
-    if (push.stream == 0ul) {
-        return;  // proxies exist only in streamed skeletons
-    }
-    float t_box = slab_near(org, dir, r.aabb_min, r.aabb_max, t_min, t_hi);
-    if (t_box < 0.0) {
-        return;
-    }
-    StreamParams s = StreamRef(push.stream).s;
-    uint blas = r.target;
-    bool guard = (pl.stream_start & STREAM_GUARD_RAY) != 0u;
-    uint walked = StampTable(s.walked).r[blas];
-    // A box of the marks BLAS (only probe passes' rays meet those): the BLAS is resident and
-    // this walk tests its triangles; entering it in front of the hit marks it seen.
-    bool resident = walked == s.stamp;
-    if (!guard && !resident && walked >= pl.stream_start) {
-        return;  // walked by this ray in an earlier pass: resolved
-    }
-    uint first = floatBitsToUint(r.child_from_parent[0]);
-    uint count = floatBitsToUint(r.child_from_parent[1]);
-    // The boxes inside the BLAS (proxy_boxes.rs): `fan` top boxes from `first_box`, each
-    // followed by its `fan` leaves.
-    uint first_box = 0u;
-    uint fan = 0u;
-    if (s.proxy_box_index != 0ul) {
-        U32Table ix = U32Table(s.proxy_box_index);
-        first_box = ix.r[2u * blas];
-        fan = ix.r[2u * blas + 1u];
-    }
-    BlasRecord br = push.blases.r[blas];
-    vec3 centre = 0.5 * (br.bounds_min + br.bounds_max);
-    vec3 half_size = 0.5 * (br.bounds_max - br.bounds_min);
-    U32Table members = U32Table(s.cluster_members);
-    float t_best = T_INFINITY;
-    for (uint i = 0u; i < count; ++i) {
-        InstanceRecord ir = push.instances.r[members.r[first + i]];
-        Affine m = affine_from_array(ir.tlas_from_blas);
-        vec3 c = xform_point(m, centre);
-        vec3 h = vec3(dot(abs(m.r0.xyz), half_size), dot(abs(m.r1.xyz), half_size),
-                      dot(abs(m.r2.xyz), half_size));
-        vec3 lo = c - h;
-        vec3 hi = c + h;
-        // Transformed-box rounding plus the CPU's proxy padding (`padded`): conservative.
-        float extent = 2.0 * max(max(h.x, h.y), h.z);
-        float magnitude = max(max(max(abs(lo.x), abs(lo.y)), abs(lo.z)),
-                              max(max(abs(hi.x), abs(hi.y)), abs(hi.z)));
-        float pad = 1e-3 * extent + 2e-5 * magnitude;
-        float t = slab_near(org, dir, lo - pad, hi + pad, t_min, min(t_hi, t_best));
-        if (t >= 0.0 && fan != 0u) {
-            t = proxy_boxes_entry(s.proxy_boxes, first_box, fan, m, org, dir, t_min,
-                                  min(t_hi, t_best), pad + 2e-5 * magnitude);
-        }
-        if (t >= 0.0) {
-            t_best = min(t_best, t);
-        }
-    }
-    if (t_best >= t_hi) {
-        return;
-    }
-    if (guard || resident) {
-        stream_mark(s.blas_stamps, blas, 4u * s.stamp + STREAM_SEEN);
-        return;
-    }
-    if (t_best < pl.open_t) {
-        pl.open_t = t_best;
-        pl.open_blas = blas;
-    }
-    stream_mark(s.blas_stamps, blas, 4u * s.stamp + STREAM_OPEN);
-}
-
+// Full builds have no proxies: only streamed skeletons do, and only the streamed shaders
+// (MOTU_STREAMED) trace them.
+void record_proxy(PiRecord r, vec3 org, vec3 dir, float t_min, float t_hi) {}
 #endif
 
 // The global PI index of primitive `primitive` of instance `instance` of TLAS `tlas`.

@@ -501,7 +501,11 @@ fn camera_path_reuses_last_frames_structures_and_evicts_under_the_budget() {
     // nearer ones (no guard-band ray sees them coming) and BLASes that rays enter but never
     // hit (only hits refresh an LRU age), evicted and needed again. Keeping recently needed
     // BLASes (tried) evicts others instead at this budget; see notes/s3-issue-14-17-interactive.md.
-    assert!(avg <= 1.35, "average passes after the first frame: {avg}");
+    // With the mark walk (marks only in front of a ray's hit) it measures 1.379: one more
+    // disocclusion pass in 29 frames, which marks behind the hits had prefetched by chance
+    // (marking everything a guard ray passes, hit or not, measured 1.586: the prefetch then
+    // crowds out what the next frames need).
+    assert!(avg <= 1.4, "average passes after the first frame: {avg}");
     assert!(ratio >= 3.0, "{ratio}");
     assert!(totals.vram_peak_bytes <= budget);
     assert!(sr.alloc_report().peak_block_bytes <= budget);
