@@ -282,8 +282,9 @@ impl Allocator {
     ///
     /// Best fit over the free ranges of the class's blocks; if none fits, a new block
     /// (standard size, or a dedicated block of exactly the request's size when it is larger
-    /// than the standard block) after releasing kept empty blocks if the budget or the count
-    /// cap requires it. Never exceeds the budget or the count cap.
+    /// than the standard block or [`AllocPolicy::dedicated_above_bytes`]) after releasing
+    /// kept empty blocks if the budget or the count cap requires it. Never exceeds the budget
+    /// or the count cap.
     pub fn alloc(&mut self, request: AllocRequest) -> Result<Allocation, AllocError> {
         let AllocRequest {
             size_bytes,
@@ -312,7 +313,11 @@ impl Allocator {
             });
         }
         let standard = self.standard_block_bytes[class.index()];
-        let placed = if size_bytes <= standard {
+        let shared_up_to = self
+            .policy
+            .dedicated_above_bytes
+            .map_or(standard, |b| b.min(standard));
+        let placed = if size_bytes <= shared_up_to {
             match self.find_fit(class, size_bytes, alignment_bytes) {
                 Some(fit) => fit,
                 None => {

@@ -73,6 +73,11 @@ pub struct AllocPolicy {
     /// `vkAllocateMemory`/`vkFreeMemory` churn when one allocation comes and goes. Kept blocks
     /// are released on demand when a new block would exceed the budget or the count cap.
     pub keep_empty_blocks_per_class: u32,
+    /// Requests larger than this get a dedicated block of exactly their size; `None`: only
+    /// those larger than the standard block. A pool whose requests come within a factor of
+    /// the block size and come and go (streamed structures) strands free space inside blocks
+    /// that no later request fits; dedicated blocks return exactly what they held.
+    pub dedicated_above_bytes: Option<u64>,
 }
 
 impl Default for AllocPolicy {
@@ -81,6 +86,7 @@ impl Default for AllocPolicy {
             block_size_bytes: None,
             host_visible_counts_against_budget: false,
             keep_empty_blocks_per_class: 1,
+            dedicated_above_bytes: None,
         }
     }
 }

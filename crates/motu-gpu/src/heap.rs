@@ -59,16 +59,19 @@ impl std::fmt::Debug for GpuHeap {
 impl GpuHeap {
     /// A heap under `limits` (already combined with the device's limits by the caller).
     pub fn new(ctx: &Context, limits: AllocLimits) -> Result<GpuHeap> {
-        Self::with_block_size(ctx, limits, None)
+        Self::with_blocks(ctx, limits, None, None)
     }
 
     /// [`new`](Self::new) with standard blocks of `block_size_bytes` (`None`: the allocator's
-    /// default, a 16th of the budget). Streaming uses smaller blocks: partly used blocks count
-    /// against its floor.
-    pub fn with_block_size(
+    /// default, a 16th of the budget) and dedicated blocks for requests above
+    /// `dedicated_above_bytes` (`None`: above the standard block; see
+    /// [`AllocPolicy::dedicated_above_bytes`]). Streaming uses smaller blocks (partly used
+    /// blocks count against its floor) and dedicated ones from half a block.
+    pub fn with_blocks(
         ctx: &Context,
         limits: AllocLimits,
         block_size_bytes: Option<u64>,
+        dedicated_above_bytes: Option<u64>,
     ) -> Result<GpuHeap> {
         let probe = Buffer::new(
             ctx,
@@ -86,6 +89,7 @@ impl GpuHeap {
         let policy = AllocPolicy {
             host_visible_counts_against_budget: unified,
             block_size_bytes,
+            dedicated_above_bytes,
             ..AllocPolicy::default()
         };
         let allocator = Allocator::new(limits, policy)

@@ -508,7 +508,21 @@ fn camera_path_reuses_last_frames_structures_and_evicts_under_the_budget() {
     assert!(avg <= 1.4, "average passes after the first frame: {avg}");
     assert!(ratio >= 3.0, "{ratio}");
     assert!(totals.vram_peak_bytes <= budget);
-    assert!(sr.alloc_report().peak_block_bytes <= budget);
+    let report = sr.alloc_report();
+    assert!(report.peak_block_bytes <= budget);
+    // Structures of about a block get blocks of their own (`dedicated_above_bytes`): free
+    // space stranded inside device blocks stays within a few blocks.
+    let dl = &report.classes[&motu_alloc::MemoryClass::DeviceLocal];
+    eprintln!(
+        "device-local blocks {} B, in use {} B, standard block {} B",
+        dl.block_bytes, dl.in_use_bytes, dl.standard_block_bytes
+    );
+    assert!(
+        dl.free_bytes <= 4 * dl.standard_block_bytes,
+        "{} B free inside {} B of blocks",
+        dl.free_bytes,
+        dl.block_bytes
+    );
     assert_no_validation_errors(&ctx);
 }
 

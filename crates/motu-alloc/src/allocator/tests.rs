@@ -30,6 +30,42 @@ fn events(allocator: &mut Allocator) -> Vec<BlockEvent> {
     allocator.drain_events().collect()
 }
 
+/// `dedicated_above_bytes`: requests above it get a block of exactly their size, freed whole
+/// when they go; smaller ones share standard blocks as before.
+#[test]
+fn requests_above_the_dedicated_threshold_get_their_own_block() {
+    let policy = AllocPolicy {
+        block_size_bytes: Some(8 * MIB),
+        dedicated_above_bytes: Some(4 * MIB),
+        ..AllocPolicy::default()
+    };
+    let mut a = Allocator::new(limits(20 * MIB, 8), policy).unwrap();
+    let small = a.alloc(blas(4 * MIB)).unwrap();
+    let big = a.alloc(blas(5 * MIB)).unwrap();
+    assert_ne!(big.block, small.block);
+    let ev = events(&mut a);
+    assert!(ev.contains(&BlockEvent::Created {
+        block: big.block,
+        size_bytes: 5 * MIB,
+        class: MemoryClass::DeviceLocal,
+        dedicated: true
+    }));
+    // 8 (standard) + 5 (dedicated) of 20: another 5 MiB one fits only dedicated (7 left).
+    let big2 = a.alloc(blas(5 * MIB)).unwrap();
+    assert_eq!(a.report().budget_block_bytes, 18 * MIB);
+    // Freeing a dedicated request returns exactly its bytes to the budget.
+    a.free(big.id).unwrap();
+    assert_eq!(a.report().budget_block_bytes, 13 * MIB);
+    // Without the threshold the same two 5 MiB requests need a standard block each: the
+    // second would not fit beside a 4 MiB one (8 + 8 of 20, 4 stranded).
+    let mut b = allocator(20 * MIB, 8, 8 * MIB);
+    b.alloc(blas(4 * MIB)).unwrap();
+    b.alloc(blas(5 * MIB)).unwrap();
+    b.alloc(blas(5 * MIB)).unwrap_err();
+    a.free(big2.id).unwrap();
+    a.check_consistency().unwrap();
+}
+
 #[test]
 fn first_allocation_creates_a_block_and_later_ones_share_it() {
     let mut a = allocator(64 * MIB, 8, 8 * MIB);
@@ -500,12 +536,14 @@ proptest! {
         block_mib in prop::option::of(1u64..8),
         host_counts in any::<bool>(),
         keep_empty in 0u32..3,
+        dedicated_kib in prop::option::of(64u64..8192),
         ops in prop::collection::vec(op(), 1..300),
     ) {
         let policy = AllocPolicy {
             block_size_bytes: block_mib.map(|m| m * MIB),
             host_visible_counts_against_budget: host_counts,
             keep_empty_blocks_per_class: keep_empty,
+            dedicated_above_bytes: dedicated_kib.map(|k| k * 1024),
         };
         let mut limits = limits(budget_mib * MIB, max_allocation_count);
         limits.host_visible_budget_bytes = 8 * MIB;

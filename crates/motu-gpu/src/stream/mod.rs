@@ -64,8 +64,11 @@
 //! boxes; see `probe.rs`).
 //!
 //! # Eviction and the budget
-//! Allocations go through `motu-alloc` (standard blocks a 64th of the budget), whose blocks
-//! never exceed the budget (host-visible staging counts against it on unified-memory devices).
+//! Allocations go through `motu-alloc` (standard blocks a 64th of the budget, a block of its
+//! own for any request above half of one), whose blocks never exceed the budget (host-visible
+//! staging counts against it on unified-memory devices). Shared blocks for structures about a
+//! block in size stranded free space no later structure fitted: a fifth to a quarter of the
+//! budget held nothing while structures were evicted for room.
 //! When one fails, the least-recently-visible BLASes not built in the current step are evicted
 //! and it is retried. Only when a single BLAS does not fit next to the skeleton does the frame
 //! fail with [`GpuError::Budget`] naming it; the CLI refuses a budget below the floor up front.

@@ -174,7 +174,10 @@ impl<'a> StreamingRenderer<'a> {
             host_visible_budget_bytes: opts.staging_bytes.max(64 * MIB) * 4,
         };
         let block = (budget / BLOCKS_PER_BUDGET).clamp(256 * 1024, 256 * MIB);
-        let heap = GpuHeap::with_block_size(ctx, limits, Some(block))?;
+        // Structures, meshes and their transients come and go in sizes up to about a block:
+        // from half a block each gets its own (freed whole when evicted), or the free space
+        // they strand inside shared blocks, up to a quarter of the budget, fits nothing.
+        let heap = GpuHeap::with_blocks(ctx, limits, Some(block), Some(block / 2))?;
         let nb = view.blases.len();
         let nt = view.tlases.len();
 
