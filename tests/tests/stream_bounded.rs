@@ -274,6 +274,9 @@ fn stream_path(pkg: &Path, d: &Path, name: &str, budget: u64, extra: &[&str]) ->
         for k in ["built_bytes", "bytes_streamed", "build_ms", "trace_ms"] {
             assert!(f[k].is_number(), "{k}: {f}");
         }
+        // What the heap holds after the frame: live bytes inside blocks inside the budget.
+        let (blocks, in_use) = (u(&f["heap_block_bytes"]), u(&f["heap_in_use_bytes"]));
+        assert!(in_use > 0 && in_use <= blocks && blocks <= budget, "{f}");
     }
     let passes: Vec<u64> = frames.iter().map(|f| u(&f["passes"])).collect();
     eprintln!(

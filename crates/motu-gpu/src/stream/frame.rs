@@ -145,6 +145,8 @@ impl<'a> StreamingRenderer<'a> {
             .sum();
         st.vram_peak_bytes = report.peak_block_bytes;
         st.vram_budget_bytes = report.budget_bytes;
+        st.heap_block_bytes = report.budget_block_bytes;
+        st.heap_in_use_bytes = report.budget_in_use_bytes;
         let tot = &mut self.totals;
         tot.frames += 1;
         tot.passes += u64::from(st.passes);

@@ -271,6 +271,11 @@ pub struct FrameStreamStats {
     /// Highest bytes of blocks counted against the budget so far (never above it).
     pub vram_peak_bytes: u64,
     pub vram_budget_bytes: u64,
+    /// After the frame: bytes of blocks counted against the budget, and of the live
+    /// allocations in them. Their difference is free space inside blocks that only requests
+    /// fitting its ranges can use.
+    pub heap_block_bytes: u64,
+    pub heap_in_use_bytes: u64,
 }
 
 /// One pass of a frame (`FrameStreamStats::pass_log`).
