@@ -238,6 +238,15 @@ bool light_term(uint i, ShadeInput si, uint material, vec3 org, vec3 dir, float 
     return true;
 }
 
+// AO ray `k` of sample `smp`: a cosine-weighted direction about the shading normal (xyz) and
+// the AO reach (w); false when it points below the surface (it brings nothing).
+bool ao_ray(ShadeInput si, uint pixel, uint smp, uint k, out vec4 traced) {
+    vec3 d = cosine_direction(si.ns, rand01(pixel, smp, 2u + 2u * k),
+                              rand01(pixel, smp, 3u + 2u * k));
+    traced = vec4(d, push.frame.f.ao_distance);
+    return dot(d, si.ng) > 0.0;
+}
+
 // The sample's secondary rays: the lights' shadow rays, then its AO rays.
 uint secondary_ray_count() {
     return min(push.frame.f.light_count, uint(MAX_LIGHTS)) + push.frame.f.ao_samples;
@@ -262,22 +271,15 @@ bool secondary_ray(ShadeInput si, uint material, vec3 org, vec3 dir, float t, ui
         clear = true;
         return false;
     }
-    uint k = ray - nl;
-    vec3 d = cosine_direction(si.ns, rand01(pixel, smp, 2u + 2u * k),
-                              rand01(pixel, smp, 3u + 2u * k));
-    if (dot(d, si.ng) > 0.0) {
-        traced = vec4(d, push.frame.f.ao_distance);
-        return true;
-    }
-    return false;
+    return ao_ray(si, pixel, smp, ray - nl, traced);
 }
 
 // From secondary ray `ray` on: the first one that needs a trace (its direction in xyz, its
 // reach in w; true), adding the terms of the lights that need none (shadows off) to `colour`
 // and skipping lights that bring nothing and AO directions below the surface. False when no
-// ray is left (`ray` = the ray count). Full builds only: `secondary_ray` in a loop, written out
-// because the full-build SPIR-V is the one timed on the H200 (rewritten as that loop it is no
-// longer the same code; see SECONDARY_WINDOW).
+// ray is left (`ray` = the ray count). Full builds only: `secondary_ray` in a loop, its light
+// branch written out because the loop's shape is what full builds were timed with on the H200
+// (see SECONDARY_WINDOW); the AO direction is `ao_ray` in both.
 bool next_secondary_ray(ShadeInput si, uint material, vec3 org, vec3 dir, float t, uint pixel,
                         uint smp, inout uint ray, inout vec3 colour, out vec4 traced) {
     uint nl = min(push.frame.f.light_count, uint(MAX_LIGHTS));
@@ -292,14 +294,8 @@ bool next_secondary_ray(ShadeInput si, uint material, vec3 org, vec3 dir, float 
                 }
                 colour += term;
             }
-        } else {
-            uint k = ray - nl;
-            vec3 d = cosine_direction(si.ns, rand01(pixel, smp, 2u + 2u * k),
-                                      rand01(pixel, smp, 3u + 2u * k));
-            if (dot(d, si.ng) > 0.0) {
-                traced = vec4(d, push.frame.f.ao_distance);
-                return true;
-            }
+        } else if (ao_ray(si, pixel, smp, ray - nl, traced)) {
+            return true;
         }
     }
     return false;
