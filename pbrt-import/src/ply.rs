@@ -120,6 +120,11 @@ pub fn parse_ply_report(bytes: &[u8]) -> Result<(Mesh, PlyReport), PlyError> {
                 ));
             }
         }
+        // An element without properties stores nothing per item, whatever its name: its
+        // count (any u64 the header claims) must not drive a loop.
+        if el.props.is_empty() && el.name != "vertex" {
+            continue;
+        }
         match el.name.as_str() {
             "vertex" => {
                 let roles: Vec<Role> = el.props.iter().map(|p| vertex_role(&p.name)).collect();
@@ -375,7 +380,6 @@ pub fn parse_ply_report(bytes: &[u8]) -> Result<(Mesh, PlyReport), PlyError> {
                     })?;
                 }
             }
-            _ if el.props.is_empty() => {} // nothing stored per item
             _ => {
                 for index in 0..el.count {
                     body.item(el, index, |body| {

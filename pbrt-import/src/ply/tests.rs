@@ -211,6 +211,19 @@ fn regression_ply_huge_element_count_timeout() {
           property float z\nelement ve2rtex 433333333333333334\nend_header\n0 0 0\n";
     let started = std::time::Instant::now();
     assert_eq!(parse_ply(no_props).unwrap().positions.len(), 1);
+    // Second finding: the same with an element the reader knows by name (`tristrips`,
+    // `face`): their branches looped over the count before the no-property guard.
+    for name in ["tristrips", "face"] {
+        let named = format!(
+            "ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\n\
+             property float y\nproperty float z\nelement {name} 7777777777777777778\n\
+             end_header\n"
+        );
+        let mut bytes = named.into_bytes();
+        bytes.extend_from_slice(&[0u8; 12]);
+        let mesh = parse_ply(&bytes).unwrap();
+        assert_eq!((mesh.positions.len(), mesh.indices.len()), (1, 0), "{name}");
+    }
     let face = b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\n\
           property float y\nproperty float z\nelement face 4000000000\n\
           property list uchar int vertex_indices\nend_header\n\0\0\0\0\0\0\0\0\0\0\0\0";
