@@ -277,13 +277,20 @@ fn stream_path(pkg: &Path, d: &Path, name: &str, budget: u64, extra: &[&str]) ->
         // What the heap holds after the frame: live bytes inside blocks inside the budget.
         let (blocks, in_use) = (u(&f["heap_block_bytes"]), u(&f["heap_in_use_bytes"]));
         assert!(in_use > 0 && in_use <= blocks && blocks <= budget, "{f}");
+        // The room for structures: the budget less the skeleton, tables and frame buffers.
+        let room = u(&f["room_bytes"]);
+        assert!(room > 0 && room < budget && budget - room <= in_use, "{f}");
     }
     let passes: Vec<u64> = frames.iter().map(|f| u(&f["passes"])).collect();
     eprintln!(
         "{name}: budget {budget}: passes {passes:?}, mean after the first {:.3}, most resident \
-         {} B, totals {}",
+         {} B, working set / room {:.2} at most, totals {}",
         mean_after_first(&st),
         max_resident(&st),
+        frames
+            .iter()
+            .map(|f| u(&f["working_set_bytes"]) as f64 / u(&f["room_bytes"]) as f64)
+            .fold(0.0, f64::max),
         st["stream"]["totals"]
     );
     assert!(

@@ -147,6 +147,16 @@ impl<'a> StreamingRenderer<'a> {
         st.vram_budget_bytes = report.budget_bytes;
         st.heap_block_bytes = report.budget_block_bytes;
         st.heap_in_use_bytes = report.budget_in_use_bytes;
+        let streamed_bytes: u64 = self
+            .blas
+            .iter()
+            .zip(&self.buildable)
+            .filter(|(_, &ok)| ok)
+            .filter_map(|(a, _)| a.as_ref().map(|a| a.size_bytes))
+            .chain(self.meshes.iter().flatten().map(|m| m.size_bytes()))
+            .sum();
+        let fixed_bytes = report.budget_in_use_bytes.saturating_sub(streamed_bytes);
+        st.room_bytes = report.budget_bytes.saturating_sub(fixed_bytes);
         let tot = &mut self.totals;
         tot.frames += 1;
         tot.passes += u64::from(st.passes);

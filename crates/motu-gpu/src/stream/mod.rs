@@ -276,6 +276,11 @@ pub struct FrameStreamStats {
     /// fitting its ranges can use.
     pub heap_block_bytes: u64,
     pub heap_in_use_bytes: u64,
+    /// The budget less what stays in use beside BLASes and their meshes after the frame
+    /// (skeleton, tables, frame buffers, pipeline, staging): the most that structures may hold
+    /// at once. A pass walks only what is resident, so a frame whose `working_set_bytes` is
+    /// above it needs at least `ceil(working_set_bytes / room_bytes)` passes at this budget.
+    pub room_bytes: u64,
 }
 
 /// One pass of a frame (`FrameStreamStats::pass_log`).
