@@ -48,7 +48,7 @@ pub(crate) use lod_pass::{InstanceLodGpu, LodTlas, Push as LodPush};
 pub(crate) use structures::{AccelStruct, SizeQueries, Slot, SLOT_COUNT};
 pub(crate) use tables::{
     blas_geometry, box_list_instances, encode_instance, pi_aabbs, pi_capacity, reachable,
-    MAX_PI_CAPACITY,
+    set_instance_mask, MAX_PI_CAPACITY,
 };
 pub(crate) use upload::{streamed_attribute_bytes, MeshGpu, MeshStager, Uploader};
 

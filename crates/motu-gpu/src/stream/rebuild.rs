@@ -10,7 +10,9 @@ use super::{StreamingRenderer, TlasGpu, IDENTITY, MARKS_MASK, TRIANGLE_MASK};
 use crate::accel::AsBuildFlags;
 use crate::error::{GpuError, Result};
 use crate::memory::BufferUsage;
-use crate::scene::{blas_geometry, build_batched, encode_instance, AccelStruct, ResourceReport};
+use crate::scene::{
+    blas_geometry, build_batched, encode_instance, set_instance_mask, AccelStruct, ResourceReport,
+};
 
 impl<'a> StreamingRenderer<'a> {
     /// Builds the BLASes `ids` of the original hierarchy (meshes must be resident; `aabb_base`
@@ -200,7 +202,7 @@ impl<'a> StreamingRenderer<'a> {
                                 (c * CHUNK + j) as u32,
                             );
                             if !aabbs {
-                                enc[51] = TRIANGLE_MASK;
+                                set_instance_mask(&mut enc, TRIANGLE_MASK);
                             }
                             out.extend_from_slice(&enc);
                         }
@@ -219,7 +221,7 @@ impl<'a> StreamingRenderer<'a> {
                         rec.instance_count + u32::from(*marks),
                     );
                     if *marks {
-                        inst[51] = MARKS_MASK;
+                        set_instance_mask(&mut inst, MARKS_MASK);
                     }
                     out.extend_from_slice(&inst);
                 }
