@@ -32,13 +32,16 @@ uint source_primitive(MeshRecord m, uint mesh_record, uint primitive) {
 struct Carry {
     vec4 hit;     // current sample: x best t (T_INFINITY: none), yzw geometric normal facing the ray
     vec4 ns;      // xyz shading normal (same side); w the secondary window's masks (exact float)
-    vec4 albedo;  // xyz textured base colour
+    vec4 albedo;  // xyz textured base colour; w (streamed, state 3): the speculative window's
+                  // start stamp (uintBitsToFloat)
     uvec4 rec;    // current sample: source mesh, primitive, LOD level, material
     uvec4 aov;    // sample 0's AOV record (without the trace count)
     vec4 sum;     // xyz: colours of the finished samples
     vec4 cur;     // xyz: the current sample's colour so far; w: AO rays found open
-    // x: 0 fresh, 1 primary open, 2 secondary rays open; y: stamp of the pass the open ray
-    // (or window) started in; z: traces; w: sample | the window's first secondary ray << 16
+    // x: 0 fresh, 1 primary open, 2 secondary rays open, 3 primary open with its secondary
+    // rays traced ahead from its best hit so far (streamed: see SPECULATIVE below); y: stamp of
+    // the pass the open ray (or window; state 3: the primary) started in; z: traces; w: sample |
+    // the window's first secondary ray << 16
     uvec4 st;
 };
 layout(buffer_reference, std430, buffer_reference_align = 16) buffer CarryTable { Carry r[]; };
@@ -54,7 +57,7 @@ void stream_write_fallback(uvec2 px, uint pixel, Carry c) {
     bool hatch = ((px.x + px.y) & 4u) != 0u;
     uvec4 rec;
     vec3 colour;
-    if (c.st.x == 1u && (c.st.w & 0xffffu) == 0u) {
+    if ((c.st.x == 1u || c.st.x == 3u) && (c.st.w & 0xffffu) == 0u) {
         uint mesh = push.geometries.r[push.blases.r[g_empty_id].item_base].mesh;
         MeshRecord m = push.meshes.r[mesh];
         rec = uvec4(m.source_mesh, NONE_U32, floatBitsToUint(g_empty_t), AOV_LOD_FALLBACK);
@@ -152,11 +155,26 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
     // This pass's next secondary ray to look at in the current window (rays before it were
     // traced or settled in this pass).
     uint cursor = 0u;
+    // SPECULATIVE secondary rays (state 3): a primary ray left open (a structure it has not
+    // walked lies in front of its best hit) most often keeps that hit, so its secondary rays are
+    // traced from it now, against what is resident now, instead of a pass after the primary ray
+    // is final (when what they need may have been evicted for the primary's structure: one
+    // more pass a frame whenever a frame's rays need more than the room). They are traced in
+    // every pass the pixel is open, after its primary ray, so they walk everything resident
+    // since their window started, as any deferred ray does; a closer primary hit drops them.
+    // `spec`: this invocation's primary ray stayed open and the window's rays come next.
+    bool spec = false;
+    uint primary_empty_id = 0u;  // the primary ray's nearest open structure (fallback)
+    float primary_empty_t = T_INFINITY;
 #endif
     while (true) {
         uint smp = c.st.w & 0xffffu;
         vec3 dir = guard ? guard_dir : sample_dir(px, pixel, smp);
+#ifdef MOTU_STREAMED
+        bool primary = (c.st.x == 1u || c.st.x == 3u) && !spec;
+#else
         bool primary = c.st.x == 1u;
+#endif
         ShadeInput si;
         si.ng = c.hit.yzw;
         si.ns = c.ns.xyz;
@@ -207,8 +225,21 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 c.ns.w = 0.0;
                 cursor = 0u;
                 if (end < n) {
-                    c.st.yw = uvec2(g_stamp, smp | (end << 16u));  // the next window starts now
+                    // The next window starts now.
+                    if (spec) {
+                        c.albedo.w = uintBitsToFloat(g_stamp);
+                        c.st.w = smp | (end << 16u);
+                    } else {
+                        c.st.yw = uvec2(g_stamp, smp | (end << 16u));
+                    }
                     continue;
+                }
+                if (spec) {
+                    // Every window done ahead: the sample ends once its primary hit is final
+                    // (an empty window at `n` then adds its terms, below).
+                    c.st.w = smp | (n << 16u);
+                    open = true;
+                    break;
                 }
                 c.sum.xyz += c.cur.xyz + sky_term(si, c.rec.w, uint(c.cur.w));
                 sample_done = true;
@@ -239,6 +270,11 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
 #endif
         if (!sample_done) {
             g_start = c.st.y;
+#ifdef MOTU_STREAMED
+            if (spec) {
+                g_start = floatBitsToUint(c.albedo.w);
+            }
+#endif
             g_empty_t = T_INFINITY;
             g_t_max = r_dir.w;
             LodParams lodp = push.frame.f.lod;
@@ -297,6 +333,11 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 c.hit.x = h.t;
                 c.rec = uvec4(m.source_mesh, source_primitive(m, mesh, h.primitive),
                               h.lod == NONE_U32 ? m.lod : h.lod, m.material);
+#ifdef MOTU_STREAMED
+                if (c.st.x == 3u) {
+                    c.st.x = 1u;  // a closer hit: the rays traced ahead from the old one go
+                }
+#endif
                 if (shaded) {
                     ShadeInput hs = shade_input(h, mesh, org, dir);
                     c.hit.yzw = hs.ng;
@@ -305,6 +346,24 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 }
             }
             if (!cut && stream_still_open(c.hit.x)) {
+#ifdef MOTU_STREAMED
+                if (shaded && c.hit.x < T_INFINITY) {
+                    primary_empty_id = g_empty_id;
+                    primary_empty_t = g_empty_t;
+                    if (c.st.x == 1u) {
+                        // Trace the secondary rays ahead from this hit, starting now.
+                        c.cur = vec4(push.materials.r[c.rec.w].emission, 0.0);
+                        c.ns.w = 0.0;
+                        c.albedo.w = uintBitsToFloat(g_stamp);
+                        c.st.x = 3u;
+                        c.st.w = smp;
+                    }
+                    if ((c.st.w >> 16u) < secondary_ray_count()) {
+                        spec = true;
+                        continue;
+                    }
+                }
+#endif
                 open = true;  // shading waits until the primary hit is final
                 break;
             }
@@ -314,6 +373,14 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
             if (!shaded) {
                 break;
             }
+#ifdef MOTU_STREAMED
+            if (c.st.x == 3u) {
+                // Final, the hit it was traced ahead from: its secondary rays go on from where
+                // they are, from their window's start.
+                c.st.xy = uvec2(2u, floatBitsToUint(c.albedo.w));
+                continue;
+            }
+#endif
             if (c.hit.x < T_INFINITY) {
                 // The sample's secondary rays come next.
                 c.cur = vec4(push.materials.r[c.rec.w].emission, 0.0);
@@ -340,6 +407,12 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
     }
     if (open) {
         c.st.z = traces;
+#ifdef MOTU_STREAMED
+        if (c.st.x == 3u) {
+            g_empty_id = primary_empty_id;  // the fallback shows the primary ray's
+            g_empty_t = primary_empty_t;
+        }
+#endif
         stream_defer(px, pixel, c);
         return;
     }

@@ -41,7 +41,10 @@
 //! and a pixel never needs two BLASes resident at once: anything may be evicted between
 //! passes. Secondary rays start when their sample's primary hit is final, in windows of 8
 //! traced together each pass (the streamed shaders' `MOTU_STREAMED`), each ray stopping at its
-//! first occluder; the colour is the full build's (docs/shading.md).
+//! first occluder; the colour is the full build's (docs/shading.md). While the primary ray is
+//! open with a hit so far, its windows are traced *ahead* from that hit in each pass after it
+//! (dropped if a closer hit comes): a wide view whose rays need more than the room otherwise
+//! took one more pass for shadow and AO rays whose structures the primary's build evicted.
 //!
 //! # Build–traverse loop ([`StreamingRenderer::render_frame`])
 //! Pass 1 traces every pixel plus a sparse *guard band* of primary rays around the image.
