@@ -57,7 +57,11 @@ void stream_write_fallback(uvec2 px, uint pixel, Carry c) {
     bool hatch = ((px.x + px.y) & 4u) != 0u;
     uvec4 rec;
     vec3 colour;
-    if ((c.st.x == 1u || c.st.x == 3u) && (c.st.w & 0xffffu) == 0u) {
+#ifdef MOTU_STREAMED
+    if ((c.st.x == 1u || c.st.x == 3u) && (c.st.w & 0xffffu) == 0u) {  // 3: rays ahead
+#else
+    if (c.st.x == 1u && (c.st.w & 0xffffu) == 0u) {
+#endif
         uint mesh = push.geometries.r[push.blases.r[g_empty_id].item_base].mesh;
         MeshRecord m = push.meshes.r[mesh];
         rec = uvec4(m.source_mesh, NONE_U32, floatBitsToUint(g_empty_t), AOV_LOD_FALLBACK);
