@@ -196,6 +196,8 @@ fn a_frame_build_budget_shows_the_counted_fallback_and_converges_to_the_full_bui
         "probe_ms",
         "wall_ms",
         "gpu_ms",
+        "working_set_bytes",
+        "room_bytes",
     ] {
         assert!(rows.iter().all(|r| r[k].is_number()), "{k}: {b}");
     }

@@ -248,6 +248,9 @@ fn run_streaming(
             "wall_ms": wall_ms,
             "gpu_ms": out.stats.ms_per_frame,
             "vram_peak_bytes": st.vram_peak_bytes,
+            // Above the room, the frame's rays cannot all be served in one pass.
+            "working_set_bytes": st.working_set_bytes,
+            "room_bytes": st.room_bytes,
         }));
     }
     let totals = sr.totals();
