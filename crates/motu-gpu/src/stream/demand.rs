@@ -139,8 +139,9 @@ impl<'a> StreamingRenderer<'a> {
             self.frame_stats.built_bytes += accel.size_bytes;
             self.frame_stats.triangles_built += u64::from(self.view.blases[b].primitive_count);
             self.blas[b] = Some(accel);
-            let key = self.recency_key(b);
-            let _ = self.residency.insert(ItemId(b as u32), bytes, key);
+            let _ = self
+                .residency
+                .insert(ItemId(b as u32), bytes, u64::from(self.stamp));
             self.pinned[b] = true;
             self.built_now.push(b as u32);
             built_ids.insert(b as u32);

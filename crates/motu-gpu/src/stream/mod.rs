@@ -421,13 +421,6 @@ pub struct StreamingRenderer<'a> {
     residency: Residency,
     /// Per item (BLAS, then TLAS): the last pass stamp that saw it.
     last_seen: Vec<u32>,
-    /// Per BLAS: the last frame whose full-image view met it resident (the frame's first pass,
-    /// or the probe of its camera run after the frame before): the frame's *core*. Eviction
-    /// orders by ([`Self::recency_key`]) this frame, then the stamp, so a frame whose rays need
-    /// more than the room cycles only what its later passes need and keeps the core that the
-    /// next frame's first pass meets again (plain LRU evicted the core for the later passes'
-    /// structures and rebuilt most of the working set every frame).
-    core_frame: Vec<u32>,
     /// Per BLAS: bytes it held when last resident (structure plus meshes), and the last frame
     /// whose rays used it (walked while resident and seen, or built for them): the frame's
     /// working set.
@@ -496,11 +489,6 @@ impl<'a> StreamingRenderer<'a> {
             }
             e => e,
         }
-    }
-
-    /// The residency table's age of BLAS `b` now: its core frame, then the current stamp.
-    fn recency_key(&self, b: usize) -> u64 {
-        u64::from(self.core_frame[b]) << 32 | u64::from(self.stamp)
     }
 
     fn frame_first_stamp(&self) -> u32 {

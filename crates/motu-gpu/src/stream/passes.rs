@@ -64,7 +64,7 @@ impl<'a> StreamingRenderer<'a> {
             // nearest open one), open (needed later) or, in pass 1, prefetch candidates (the
             // guard band saw them).
             let mut demand = Demand::default();
-            for (b, level) in self.sightings(&stamps, true, first.then_some(self.frame)) {
+            for (b, level) in self.sightings(&stamps, true) {
                 let n = requests.get(b as usize).copied().unwrap_or(0);
                 match level {
                     LEVEL_NEEDED => demand.blases.push((b, n)),
@@ -200,15 +200,8 @@ impl<'a> StreamingRenderer<'a> {
     /// What the pass just traced (the current stamp) met, from its readback `stamps`: every
     /// BLAS it met is seen now (`last_seen`); a resident one refreshes its LRU age and, when
     /// `this_frame` (the frame's own passes, not the probe of the next frame), counts in the
-    /// frame's working set; `core` (a full-image view: the frame's first pass, or the probe of
-    /// the next frame's camera) names the frame whose core it joins. Returns the non-resident
-    /// buildable ones with their stamp level.
-    pub(super) fn sightings(
-        &mut self,
-        stamps: &[u32],
-        this_frame: bool,
-        core: Option<u64>,
-    ) -> Vec<(u32, u32)> {
+    /// frame's working set. Returns the non-resident buildable ones with their stamp level.
+    pub(super) fn sightings(&mut self, stamps: &[u32], this_frame: bool) -> Vec<(u32, u32)> {
         let mut out = Vec::new();
         for (b, &v) in stamps.iter().enumerate() {
             if v >> 2 != self.stamp {
@@ -220,11 +213,8 @@ impl<'a> StreamingRenderer<'a> {
                     self.used_in_frame[b] = self.frame;
                 }
                 if self.buildable[b] {
-                    if let Some(f) = core {
-                        self.core_frame[b] = u32::try_from(f).unwrap_or(u32::MAX);
-                    }
-                    let key = self.recency_key(b);
-                    self.residency.mark_visible(ItemId(b as u32), key);
+                    self.residency
+                        .mark_visible(ItemId(b as u32), u64::from(self.stamp));
                 }
             } else if self.buildable[b] {
                 out.push((b as u32, v & 3));

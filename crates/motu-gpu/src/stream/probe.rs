@@ -70,7 +70,7 @@ impl<'a> StreamingRenderer<'a> {
         self.frame_stats.probe_rays += rays;
         self.frame_stats.probe_ms += trace_ms;
         let mut demand = Demand::default();
-        for (b, level) in self.sightings(&stamps, false, Some(self.frame + 1)) {
+        for (b, level) in self.sightings(&stamps, false) {
             // Needed (a ray's nearest) first by request count; then everything else it met.
             let n = if level == LEVEL_NEEDED {
                 requests.get(b as usize).copied().unwrap_or(0).max(1)

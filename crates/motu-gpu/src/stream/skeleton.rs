@@ -316,7 +316,6 @@ impl<'a> StreamingRenderer<'a> {
             buildable,
             residency: Residency::new(),
             last_seen: vec![0; nb + nt],
-            core_frame: vec![0; nb],
             blas_bytes: vec![0; nb],
             used_in_frame: vec![0; nb],
             dirty: BTreeSet::new(),
