@@ -128,33 +128,38 @@ impl<'a> StreamingRenderer<'a> {
         let resident_textures = self.shading.resident_textures();
         let st = &mut self.frame_stats;
         st.resident_textures = resident_textures;
-        st.resident_blases = self
-            .blas
-            .iter()
-            .zip(&self.buildable)
-            .filter(|(b, &ok)| ok && b.is_some())
-            .count() as u32;
-        st.resident_tlases = self.tlas.iter().filter(|t| t.is_some()).count() as u32;
-        st.resident_bytes = self
-            .blas
+        // Resident bytes split once: streamed BLASes and their meshes (what the room is for)
+        // beside the skeleton's BLASes and TLASes.
+        let (mut streamed_blases, mut streamed_bytes, mut skeleton_bytes) = (0u32, 0u64, 0u64);
+        for (a, &buildable) in self.blas.iter().zip(&self.buildable) {
+            if let Some(a) = a {
+                if buildable {
+                    streamed_blases += 1;
+                    streamed_bytes += a.size_bytes;
+                } else {
+                    skeleton_bytes += a.size_bytes;
+                }
+            }
+        }
+        streamed_bytes += self
+            .meshes
             .iter()
             .flatten()
-            .map(|a| a.size_bytes)
-            .chain(self.tlas.iter().flatten().map(|t| t.size_bytes()))
-            .chain(self.meshes.iter().flatten().map(|m| m.size_bytes()))
-            .sum();
+            .map(|m| m.size_bytes())
+            .sum::<u64>();
+        skeleton_bytes += self
+            .tlas
+            .iter()
+            .flatten()
+            .map(|t| t.size_bytes())
+            .sum::<u64>();
+        st.resident_blases = streamed_blases;
+        st.resident_tlases = self.tlas.iter().filter(|t| t.is_some()).count() as u32;
+        st.resident_bytes = streamed_bytes + skeleton_bytes;
         st.vram_peak_bytes = report.peak_block_bytes;
         st.vram_budget_bytes = report.budget_bytes;
         st.heap_block_bytes = report.budget_block_bytes;
         st.heap_in_use_bytes = report.budget_in_use_bytes;
-        let streamed_bytes: u64 = self
-            .blas
-            .iter()
-            .zip(&self.buildable)
-            .filter(|(_, &ok)| ok)
-            .filter_map(|(a, _)| a.as_ref().map(|a| a.size_bytes))
-            .chain(self.meshes.iter().flatten().map(|m| m.size_bytes()))
-            .sum();
         let fixed_bytes = report.budget_in_use_bytes.saturating_sub(streamed_bytes);
         st.room_bytes = report.budget_bytes.saturating_sub(fixed_bytes);
         let tot = &mut self.totals;
