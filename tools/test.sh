@@ -4,6 +4,8 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash tools/setup.sh
 export CARGO_TERM_COLOR=${CARGO_TERM_COLOR:-never}
+# CI builds once from scratch: incremental state only costs disk (GBs) and time.
+export CARGO_INCREMENTAL=${CARGO_INCREMENTAL:-0}
 # GPU tests must run (lavapipe is installed above) with validation on: a missing device or any
 # validation message fails them instead of skipping; so must the headless-browser test.
 export MOTU_REQUIRE_GPU=1 MOTU_VALIDATION=1 MOTU_REQUIRE_BROWSER=1
