@@ -275,6 +275,51 @@ pub struct HierarchyError {
 }
 
 impl HierarchyView<'_> {
+    /// The TLASes and BLASes reachable from the root (through instances, programmable
+    /// instances and LOD levels), as flags by index. Out-of-range references are skipped
+    /// (`check_references` reports them).
+    pub fn reachable(&self) -> (Vec<bool>, Vec<bool>) {
+        let mut tlas = vec![false; self.tlases.len()];
+        let mut blas = vec![false; self.blases.len()];
+        let mut todo = Vec::new();
+        let visit = |t: usize, tlas: &mut Vec<bool>, todo: &mut Vec<usize>| {
+            if t < tlas.len() && !tlas[t] {
+                tlas[t] = true;
+                todo.push(t);
+            }
+        };
+        visit(self.root_tlas as usize, &mut tlas, &mut todo);
+        while let Some(t) = todo.pop() {
+            let rec = &self.tlases[t];
+            let range = rec.instance_base as usize
+                ..(rec.instance_base as usize + rec.instance_count as usize);
+            for inst in self.instances.get(range).unwrap_or(&[]) {
+                let b = inst.blas as usize;
+                if b >= blas.len() || blas[b] {
+                    continue;
+                }
+                blas[b] = true;
+                let br = &self.blases[b];
+                if br.kind != BLAS_AABBS {
+                    continue;
+                }
+                let items = br.item_base as usize..(br.item_base as usize + br.item_count as usize);
+                for pi in self.pis.get(items).unwrap_or(&[]) {
+                    if pi.kind == PI_TLAS {
+                        visit(pi.target as usize, &mut tlas, &mut todo);
+                    } else if let Some(s) = self.lod_selectors.get(pi.target as usize) {
+                        let levels =
+                            s.level_base as usize..(s.level_base as usize + s.level_count as usize);
+                        for &lt in self.lod_levels.get(levels).unwrap_or(&[]) {
+                            visit(lt as usize, &mut tlas, &mut todo);
+                        }
+                    }
+                }
+            }
+        }
+        (tlas, blas)
+    }
+
     /// Checks every cross-table reference is in range, so traversal can index without panics.
     pub fn check_references(&self) -> Result<(), HierarchyError> {
         let err = |table, index, reason: String| {
@@ -387,6 +432,8 @@ impl HierarchyView<'_> {
 pub struct RootSubset {
     pub tlases: Vec<TlasRecord>,
     pub instances: Vec<InstanceRecord>,
+    pub blases: Vec<BlasRecord>,
+    pub pis: Vec<PiRecord>,
     pub root_tlas: u32,
     /// Tagged placements (root and split pieces) kept and dropped.
     pub kept: u32,
@@ -459,9 +506,12 @@ impl RootSubset {
         };
         tlases.push(new_root);
         let root_tlas = u32::try_from(tlases.len() - 1).map_err(|_| too_many("TLASes"))?;
+        let (instances, blases, pis) = compact_reachable(view, root_tlas, &mut tlases, instances);
         Ok(Self {
             tlases,
             instances,
+            blases,
+            pis,
             root_tlas,
             kept,
             dropped,
@@ -474,7 +524,56 @@ impl RootSubset {
             root_tlas: self.root_tlas,
             tlases: &self.tlases,
             instances: &self.instances,
+            blases: &self.blases,
+            pis: &self.pis,
             ..*base
         }
     }
+}
+
+/// Keeps only the instance and programmable-instance records the subset's root reaches: the
+/// renderer uploads these tables whole, and at scale the other elements' records would cost
+/// more than the subset's structures. TLAS and BLAS indices are unchanged (unreached ones keep
+/// their record with an empty range), so nothing else is renumbered.
+fn compact_reachable(
+    base: &HierarchyView<'_>,
+    root_tlas: u32,
+    tlases: &mut [TlasRecord],
+    instances: Vec<InstanceRecord>,
+) -> (Vec<InstanceRecord>, Vec<BlasRecord>, Vec<PiRecord>) {
+    let (reach_tlas, reach_blas) = HierarchyView {
+        root_tlas,
+        tlases,
+        instances: &instances,
+        ..*base
+    }
+    .reachable();
+    let mut kept_instances = Vec::new();
+    for (t, rec) in tlases.iter_mut().enumerate() {
+        let range = rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize;
+        if reach_tlas[t] {
+            // Fits u32: a subsequence of `instances`, whose ranges are u32.
+            rec.instance_base = kept_instances.len() as u32;
+            kept_instances.extend_from_slice(&instances[range]);
+        } else {
+            rec.instance_base = 0;
+            rec.instance_count = 0;
+        }
+    }
+    let mut blases = base.blases.to_vec();
+    let mut pis = Vec::new();
+    for (b, rec) in blases.iter_mut().enumerate() {
+        if rec.kind != BLAS_AABBS {
+            continue;
+        }
+        let range = rec.item_base as usize..(rec.item_base + rec.item_count) as usize;
+        if reach_blas[b] {
+            rec.item_base = pis.len() as u32;
+            pis.extend_from_slice(&base.pis[range]);
+        } else {
+            rec.item_base = 0;
+            rec.item_count = 0;
+        }
+    }
+    (kept_instances, blases, pis)
 }

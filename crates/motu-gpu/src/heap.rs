@@ -138,6 +138,13 @@ impl GpuHeap {
             let _ = self.allocator.free(alloc.id);
             return Err(e);
         }
+        tracing::debug!(
+            label,
+            size_bytes = req.size_bytes,
+            ?class,
+            in_use_bytes = self.allocator.in_use_bytes(class),
+            "heap alloc"
+        );
         let Some(memory) = self.blocks.get(&alloc.block) else {
             let _ = self.allocator.free(alloc.id);
             return Err(GpuError::InvalidRequest(format!(

@@ -73,7 +73,9 @@ pub use render::{
     RenderStats, View, MAX_STACK_SIZE,
 };
 pub use report::{list_devices, DeviceReport};
-pub use scene::{BuildOptions, GpuScene, MeshBlobSource, ResourceReport};
+pub use scene::{
+    full_build_overhead, BuildOptions, FullBuildOverhead, GpuScene, MeshBlobSource, ResourceReport,
+};
 pub use stream::{
     streaming_floor, FloorSizes, FrameStreamStats, PassStats, StreamFallback, StreamFloor,
     StreamOptions, StreamTotals, StreamingRenderer, PI_EMPTY_BLAS,

@@ -306,6 +306,20 @@ impl Frame {
     }
 }
 
+/// Bytes per pixel of the full build's frame buffers: AOV (16), colour (4), readback (20).
+const FRAME_BYTES_PER_PIXEL: [u64; 3] = [16, 4, 20];
+
+/// What [`alloc_frame`] allocates for `pixels` (each buffer rounded to 16 bytes).
+pub(crate) fn frame_bytes(pixels: u64) -> u64 {
+    let stats = (RENDER_STAT_WORDS * 4) as u64;
+    let r16 = |v: u64| v.max(16).div_ceil(16) * 16;
+    r16(std::mem::size_of::<FrameParams>() as u64)
+        + r16(pixels * FRAME_BYTES_PER_PIXEL[0])
+        + r16(pixels * FRAME_BYTES_PER_PIXEL[1])
+        + r16(stats)
+        + r16(pixels * FRAME_BYTES_PER_PIXEL[2] + stats)
+}
+
 pub(crate) fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams) -> Result<Frame> {
     let out = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS | BufferUsage::TRANSFER_SRC;
     let p = heap.alloc_buffer(
@@ -318,7 +332,11 @@ pub(crate) fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams)
     )?;
     p.write(0, std::slice::from_ref(params))?;
     let mut bufs = vec![p];
-    let sizes = [pixels * 16, pixels * 4, (RENDER_STAT_WORDS * 4) as u64];
+    let sizes = [
+        pixels * FRAME_BYTES_PER_PIXEL[0],
+        pixels * FRAME_BYTES_PER_PIXEL[1],
+        (RENDER_STAT_WORDS * 4) as u64,
+    ];
     for (i, size) in sizes.into_iter().enumerate() {
         let usage = if i == 2 {
             out | BufferUsage::TRANSFER_DST
@@ -342,7 +360,7 @@ pub(crate) fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams)
     }
     let readback = match heap.alloc_buffer(
         "readback",
-        pixels * 20 + (RENDER_STAT_WORDS * 4) as u64,
+        pixels * FRAME_BYTES_PER_PIXEL[2] + (RENDER_STAT_WORDS * 4) as u64,
         BufferUsage::TRANSFER_DST,
         AllocKind::Staging,
         MemoryClass::HostVisible,

@@ -43,12 +43,16 @@ mod tables;
 mod upload;
 
 pub(crate) use batch::{build_batched, build_pipelined, BatchStager};
-pub(crate) use budget::usable_budget_bytes;
+pub(crate) use budget::{
+    allocator_slack_bytes, block_bytes_for_budget, staging_bytes_for_budget, usable_budget_bytes,
+    FULL_BUILD_STAGING_CAP_BYTES,
+};
+pub use budget::{full_build_overhead, FullBuildOverhead};
 pub(crate) use lod_pass::{InstanceLodGpu, LodTlas, Push as LodPush};
 pub(crate) use structures::{AccelStruct, SizeQueries, Slot, SLOT_COUNT};
 pub(crate) use tables::{
-    blas_geometry, box_list_instances, encode_instance, pi_aabbs, pi_capacity, reachable,
-    set_instance_mask, MAX_PI_CAPACITY,
+    blas_geometry, box_list_instances, encode_instance, pi_aabbs, pi_capacity, set_instance_mask,
+    MAX_PI_CAPACITY,
 };
 pub(crate) use upload::{streamed_attribute_bytes, MeshGpu, MeshStager, Uploader};
 
@@ -111,7 +115,7 @@ impl Default for BuildOptions {
             max_allocations: 4096,
             scratch_budget_bytes: 128 * MIB,
             max_batch_result_bytes: 256 * MIB,
-            staging_bytes: 16 * MIB,
+            staging_bytes: FULL_BUILD_STAGING_CAP_BYTES,
             compact: true,
         }
     }
@@ -248,6 +252,16 @@ impl GpuScene {
         view.check_references()
             .map_err(|e| GpuError::InvalidRequest(e.to_string()))?;
         let budget = usable_budget_bytes(ctx, opts.budget_bytes)?;
+        // The staging ring counts against the budget on unified memory: under a user budget it
+        // is a 32nd of it at most (`full_build_overhead` counts the same).
+        let opts = &BuildOptions {
+            staging_bytes: if opts.budget_bytes == u64::MAX {
+                opts.staging_bytes
+            } else {
+                staging_bytes_for_budget(budget, opts.staging_bytes)
+            },
+            ..*opts
+        };
         let device_cap = ctx
             .limits()
             .max_memory_allocation_count
@@ -258,7 +272,18 @@ impl GpuScene {
             budget_bytes: budget,
             host_visible_budget_bytes: opts.staging_bytes.max(64 * MIB) * 4,
         };
-        let mut heap = GpuHeap::new(ctx, limits)?;
+        // Under a user budget, blocks are a 64th of it and what is over a 16th of a block gets
+        // its own: a partly used block counts against the budget, and an item bigger than the
+        // space left in a block strands that space, so shared blocks take small items only
+        // (`full_build_overhead` allows four blocks; at most 1,024 items are that big).
+        // Without a budget, the allocator's defaults.
+        let (block, dedicated_above) = if opts.budget_bytes == u64::MAX {
+            (None, None)
+        } else {
+            let block = block_bytes_for_budget(budget);
+            (Some(block), Some(block / 16))
+        };
+        let mut heap = GpuHeap::with_blocks(ctx, limits, block, dedicated_above)?;
         let mut scene = GpuScene {
             blases: Vec::new(),
             tlases: Vec::new(),
@@ -368,7 +393,7 @@ impl GpuScene {
         // 2. Geometry of every mesh a reachable triangle BLAS uses: allocate from the records'
         // counts, then load and upload one mesh at a time through the ring. Only what the root
         // reaches is built (`--subset` roots leave the rest of the package on disk).
-        let (reach_tlas, reach_blas) = reachable(view);
+        let (reach_tlas, reach_blas) = view.reachable();
         self.report.unreachable_tlases = reach_tlas.iter().filter(|r| !**r).count() as u64;
         self.report.unreachable_blases = reach_blas.iter().filter(|r| !**r).count() as u64;
         let mut used = vec![false; view.meshes.len()];

@@ -116,9 +116,8 @@ pub fn build_scene(
         budget_bytes: budget,
         max_allocations: max_allocations
             .unwrap_or(motu_gpu::BuildOptions::default().max_allocations),
-        // Each half of the staging ring should hold a build batch's geometry so uploads overlap
-        // builds; host-visible memory counts against the budget on unified-memory devices.
-        staging_bytes: (budget / 8).clamp(4 << 20, 64 << 20),
+        // The staging ring (64 MiB, less under a budget) is motu-gpu's policy, the one
+        // `motu report` counts.
         ..Default::default()
     };
     let built = match instance_lod {

@@ -30,6 +30,13 @@ pub(crate) struct SubsetCoster {
     /// Labels every subset includes (untagged root instances).
     pub forced: Vec<u32>,
     pub table_bytes_per_root_instance: u64,
+    /// The image a subset renders at (its cost includes the full build's overhead there).
+    pub image: (u32, u32),
+    /// The record tables `--subset` uploads whole (`motu_abi::RootSubset` keeps only the
+    /// instance and PI records its root reaches, and every TLAS, BLAS, geometry, mesh and LOD
+    /// record, plus the filtered root's TLAS record). Added to a subset's own records: the
+    /// members' few small records count twice, a conservative error.
+    pub whole_table_bytes: u64,
 }
 
 impl SubsetCoster {
@@ -54,7 +61,9 @@ impl SubsetCoster {
         root.table_bytes += self.table_bytes_per_root_instance;
         root.seal();
         c.add(&root);
-        Ok(c)
+        c.table_bytes += self.whole_table_bytes;
+        c.seal();
+        Ok(c.rendered_at(self.image))
     }
 }
 

@@ -52,9 +52,16 @@ pub struct Cost {
     /// The most one build adds on top of the resident bytes: a BLAS's uncompacted size plus
     /// its scratch, or a TLAS's scratch (builds one at a time).
     pub build_transient_peak_bytes: u64,
+    /// What rendering needs besides the structures (a full build at the report's image
+    /// size): frame buffers, the staging ring and partly used allocator blocks under a budget
+    /// of `peak_bytes` (`motu_gpu::full_build_overhead`, the renderer's own policy). Set on
+    /// what renders on its own (variants, an element alone, a subset); 0 on per-element rows,
+    /// which are parts of a render.
+    pub render_overhead_bytes: u64,
     /// What stays on the GPU: geometry + compacted BLASes + TLASes + instance buffers + tables.
     pub resident_bytes: u64,
-    /// `resident_bytes + build_transient_peak_bytes`: what must fit to build and render.
+    /// `resident_bytes + build_transient_peak_bytes + render_overhead_bytes`: the least
+    /// `--vram-budget` under which the full build builds and renders.
     pub peak_bytes: u64,
     pub tlas_count: u64,
     pub blas_count: u64,
@@ -79,6 +86,8 @@ impl Cost {
         self.build_transient_peak_bytes = self
             .build_transient_peak_bytes
             .max(o.build_transient_peak_bytes);
+        // One render's overhead, not one per part.
+        self.render_overhead_bytes = self.render_overhead_bytes.max(o.render_overhead_bytes);
         self.tlas_count += o.tlas_count;
         self.blas_count += o.blas_count;
         self.instances = self.instances.saturating_add(o.instances);
@@ -102,7 +111,18 @@ impl Cost {
             + self.instance_buffer_bytes
             + self.table_bytes
             + self.texture_bytes;
-        self.peak_bytes = self.resident_bytes + self.build_transient_peak_bytes;
+        self.peak_bytes =
+            self.resident_bytes + self.build_transient_peak_bytes + self.render_overhead_bytes;
+    }
+
+    /// This cost rendered on its own at `width × height`: with the full build's overhead.
+    pub fn rendered_at(mut self, (width, height): (u32, u32)) -> Cost {
+        self.render_overhead_bytes = 0;
+        self.seal();
+        self.render_overhead_bytes =
+            motu_gpu::full_build_overhead(self.peak_bytes, width, height).total_bytes;
+        self.seal();
+        self
     }
 
     /// TLAS bytes including the instance buffer (the report's "TLAS" column).

@@ -16,7 +16,12 @@
 //! Geometry (positions, normals where stored, `u32` indices, AABB inputs), BLASes as built and
 //! compacted, TLASes (AS + 64 B per instance), motu's record tables, build scratch; `resident`
 //! = geometry + compacted BLAS + TLAS + instance buffers + tables; `peak` = resident + the
-//! largest single build's transient. Per element: nodes reached from one element's root
+//! largest single build's transient + `render_overhead_bytes` (on what renders on its own:
+//! variants, an element alone, a subset): frame buffers at the report's image size, the
+//! staging ring and partly used allocator blocks under that budget, by the renderer's own
+//! policy (`motu_gpu::full_build_overhead`) — so `peak` is a `--vram-budget` the full build
+//! renders under (checked end to end in `tests/tests/report.rs`). A subset also pays for the
+//! record tables `--subset` uploads whole (TLAS, BLAS, geometry, mesh, LOD records). Per element: nodes reached from one element's root
 //! instances belong to it, nodes reached from several go to the `shared` row (and count once
 //! per subset). Variants: as compiled, `--levels 2` and `sl` (see the `cost` module).
 //!
@@ -32,9 +37,12 @@
 //! null: `budget_bytes`, `scene_fits`, `variants`/`elements` ([`Fit`]: `name`, `peak_bytes`,
 //! `fits`), `suggestion` ([`SubsetSuggestion`]: `elements`, `subset_arg`, `cost`,
 //! `instanced_triangles`, `triangle_fraction`, `method`), `streaming_fits`, `notes`),
-//! `streaming` ([`StreamingReport`]), `warnings`. A [`Cost`] has `geometry_bytes`,
+//! `streaming` ([`StreamingReport`]), `render_overhead` (`motu_gpu::FullBuildOverhead`:
+//! `frame_bytes`, `staging_bytes`, `allocator_slack_bytes`, `total_bytes`), `image_width`,
+//! `image_height`, `warnings`. A [`Cost`] has `geometry_bytes`,
 //! `blas_bytes`, `blas_compacted_bytes`, `tlas_bytes`, `instance_buffer_bytes`, `table_bytes`,
-//! `build_scratch_peak_bytes`, `build_transient_peak_bytes`, `resident_bytes`, `peak_bytes`,
+//! `build_scratch_peak_bytes`, `build_transient_peak_bytes`, `render_overhead_bytes`,
+//! `resident_bytes`, `peak_bytes`,
 //! `tlas_count`, `blas_count`, `instances`, `blas_triangles`.
 //!
 //! Module map, each file using only those before it: `human` (sizes and counts for people),

@@ -20,7 +20,8 @@ pub struct ReportInput {
     pub levels: String,
     /// Element names by element id.
     pub element_names: Vec<String>,
-    /// Image size the streaming floor is computed for (frame buffers scale with it).
+    /// Image size the streaming floor and every full-build peak are computed for (frame
+    /// buffers scale with it).
     pub floor_image: (u32, u32),
 }
 
@@ -66,6 +67,13 @@ pub struct Report {
     pub variants: Vec<VariantReport>,
     pub budget: Option<BudgetReport>,
     pub streaming: StreamingReport,
+    /// What the whole scene's full build needs besides its structures at the report's image
+    /// size (`image_width × image_height`): the `render_overhead_bytes` of `as_compiled`.
+    pub render_overhead: motu_gpu::FullBuildOverhead,
+    /// The image every peak and the streaming floor are computed for (`--width`/`--height`,
+    /// else the package camera's).
+    pub image_width: u32,
+    pub image_height: u32,
     pub warnings: Vec<String>,
 }
 
@@ -304,6 +312,8 @@ pub fn build_report_from_view(
             vec![]
         },
         table_bytes_per_root_instance: std::mem::size_of::<motu_abi::TlasRecord>() as u64,
+        image: input.floor_image,
+        whole_table_bytes: whole_table_bytes(view),
     };
 
     let mut elements = Vec::new();
@@ -387,8 +397,7 @@ pub fn build_report_from_view(
 
     // Variants.
     let as_compiled = {
-        let mut c = Cost::sum(elements.iter().map(|e| &e.ml));
-        c.seal();
+        let c = Cost::sum(elements.iter().map(|e| &e.ml)).rendered_at(input.floor_image);
         VariantReport {
             name: "as_compiled".into(),
             levels: input.levels.clone(),
@@ -414,6 +423,7 @@ pub fn build_report_from_view(
             name,
             levels,
             sizes,
+            input.floor_image,
         )?);
     }
     let sl = flat
@@ -453,6 +463,14 @@ pub fn build_report_from_view(
         })
         .transpose()?;
     let info = sizes.info();
+    let render_overhead = {
+        let c = &variants[0].cost;
+        motu_gpu::full_build_overhead(
+            c.resident_bytes + c.build_transient_peak_bytes,
+            input.floor_image.0,
+            input.floor_image.1,
+        )
+    };
     Ok(Report {
         package: input.package.clone(),
         levels: input.levels.clone(),
@@ -469,10 +487,26 @@ pub fn build_report_from_view(
         flattened_instances: sl.tri_instances,
         elements,
         variants,
+        render_overhead,
+        image_width: input.floor_image.0,
+        image_height: input.floor_image.1,
         budget,
         streaming,
         warnings,
     })
+}
+
+/// The record tables a `--subset` render uploads whole (see `SubsetCoster::whole_table_bytes`).
+fn whole_table_bytes(view: &HierarchyView<'_>) -> u64 {
+    fn bytes<T>(n: usize) -> u64 {
+        n as u64 * std::mem::size_of::<T>() as u64
+    }
+    bytes::<motu_abi::TlasRecord>(view.tlases.len() + 1)
+        + bytes::<motu_abi::BlasRecord>(view.blases.len())
+        + bytes::<motu_abi::GeometryRecord>(view.geometries.len())
+        + bytes::<motu_abi::MeshRecord>(view.meshes.len())
+        + bytes::<motu_abi::LodSelectorRecord>(view.lod_selectors.len())
+        + bytes::<u32>(view.lod_levels.len())
 }
 
 /// The whole scene flattened to `levels` TLAS levels (see `cost` module docs).
@@ -482,6 +516,7 @@ fn flattened_variant(
     name: &str,
     levels: u32,
     sizes: &dyn SizeSource,
+    image: (u32, u32),
 ) -> Result<VariantReport, ReportError> {
     let expanded = g.expansions(levels);
     let e = g.expand_instances(root_range.clone(), levels, &expanded);
@@ -528,7 +563,7 @@ fn flattened_variant(
         top_instances,
         top_tlas_pieces: pieces,
         exceeds_max_instance_count: top_instances > sizes.max_instance_count(),
-        cost: c,
+        cost: c.rendered_at(image),
     })
 }
 

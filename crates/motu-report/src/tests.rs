@@ -264,8 +264,13 @@ fn rows_add_up_to_the_whole_and_match_an_independent_sum() {
     let p = &LAVAPIPE;
     let r = forest().report(&lavapipe(), None);
     let total = r.total();
+    // Rows are parts of one render: the full build's overhead comes once, on the whole.
     let sum = Cost::sum(r.elements.iter().map(|e| &e.ml));
-    assert_eq!(sum, total);
+    assert!(r.elements.iter().all(|e| e.ml.render_overhead_bytes == 0));
+    assert_eq!(
+        sum.rendered_at((r.streaming.floor.width, r.streaming.floor.height)),
+        total
+    );
     // Independently: 3 triangle BLASes, 2 AABB BLASes, 3 TLASes, 3 meshes.
     let al = |b: u64| b.div_ceil(256) * 256;
     let blas_built = al(p.blas_triangles.eval(100))
@@ -359,23 +364,58 @@ fn sl_over_max_instance_count_is_split() {
     assert!(text.contains("needs 14 TLASes"), "{text}");
 }
 
+/// The record tables a `--subset` render uploads whole besides the subset's own: the
+/// package's TLAS (and the filtered root's), BLAS, geometry, mesh and LOD records
+/// (`RootSubset` keeps only the instance and PI records its root reaches).
+fn whole_tables(s: &Scene) -> u64 {
+    let v = s.view();
+    ((v.tlases.len() + 1) * std::mem::size_of::<motu_abi::TlasRecord>()
+        + std::mem::size_of_val(v.blases)
+        + std::mem::size_of_val(v.geometries)
+        + std::mem::size_of_val(v.meshes)
+        + std::mem::size_of_val(v.lod_selectors)
+        + std::mem::size_of_val(v.lod_levels)) as u64
+}
+
 #[test]
 fn subset_costs_equal_reports_of_the_subset_scene() {
     let s = forest();
     let r = s.report(&lavapipe(), Some(u64::MAX));
+    let whole = whole_tables(&s);
     for (name, id) in [("trees", 0u32), ("garden", 1)] {
         let alone = element(&r, name).alone.expect("alone");
-        let sub = s.subset(&[id]).report(&lavapipe(), None);
-        assert_eq!(alone.resident_bytes, sub.total().resident_bytes, "{name}");
-        assert_eq!(alone.peak_bytes, sub.total().peak_bytes, "{name}");
-        assert_eq!(alone.tlas_count, sub.total().tlas_count, "{name}");
+        let sub = s.subset(&[id]).report(&lavapipe(), None).total();
+        assert_eq!(alone.table_bytes, sub.table_bytes + whole, "{name}");
+        assert_eq!(
+            alone.resident_bytes - alone.table_bytes,
+            sub.resident_bytes - sub.table_bytes,
+            "{name}"
+        );
+        assert_eq!(
+            alone.build_transient_peak_bytes, sub.build_transient_peak_bytes,
+            "{name}"
+        );
+        assert_eq!(alone.tlas_count, sub.tlas_count, "{name}");
+        // Each renders on its own: the full build's overhead on top, at the report's image.
+        assert_eq!(
+            alone.peak_bytes,
+            alone.resident_bytes
+                + alone.build_transient_peak_bytes
+                + motu_gpu::full_build_overhead(
+                    alone.resident_bytes + alone.build_transient_peak_bytes,
+                    r.streaming.floor.width,
+                    r.streaming.floor.height
+                )
+                .total_bytes,
+            "{name}"
+        );
     }
     let total = r.total();
     let b = r.budget.expect("budget");
     assert!(b.scene_fits);
     let sg = b.suggestion.expect("suggestion");
     assert_eq!(sg.subset_arg, "--subset trees,garden");
-    assert_eq!(sg.cost.resident_bytes, total.resident_bytes);
+    assert_eq!(sg.cost.resident_bytes, total.resident_bytes + whole);
     assert!((sg.triangle_fraction - 1.0).abs() < 1e-9);
 }
 
@@ -440,8 +480,10 @@ fn greedy_and_exact_subsets_fit_the_budget() {
     };
     for n in [5u32, 20] {
         let s = build(n);
-        let full = s.report(&lavapipe(), None).total().peak_bytes;
-        let budget = full / 2;
+        // Half the structures, beside the render's own overhead.
+        let full = s.report(&lavapipe(), None).total();
+        let budget =
+            full.render_overhead_bytes + (full.peak_bytes - full.render_overhead_bytes) / 2;
         let r = s.report(&lavapipe(), Some(budget));
         let b = r.budget.as_ref().expect("budget");
         let sg = b.suggestion.as_ref().expect("some fit");
@@ -469,7 +511,13 @@ fn greedy_and_exact_subsets_fit_the_budget() {
             .map(|n| n[1..].parse().expect("id"))
             .collect();
         let sub = s.subset(&ids).report(&lavapipe(), None);
-        assert_eq!(sub.total().peak_bytes, sg.cost.peak_bytes);
+        // Its structures; its tables plus what `--subset` uploads whole.
+        let c = sub.total();
+        assert_eq!(sg.cost.table_bytes, c.table_bytes + whole_tables(&s));
+        assert_eq!(
+            sg.cost.resident_bytes - sg.cost.table_bytes,
+            c.resident_bytes - c.table_bytes
+        );
         assert_eq!(sub.instanced_triangles, sg.instanced_triangles);
     }
 }
@@ -533,10 +581,28 @@ fn json_is_one_object_with_the_documented_keys() {
         "variants",
         "budget",
         "streaming",
+        "render_overhead",
+        "image_width",
+        "image_height",
         "warnings",
     ] {
         assert!(v.get(k).is_some(), "missing key {k}");
     }
+    for k in [
+        "frame_bytes",
+        "staging_bytes",
+        "allocator_slack_bytes",
+        "total_bytes",
+    ] {
+        assert!(
+            v["render_overhead"].get(k).is_some(),
+            "missing render_overhead.{k}"
+        );
+    }
+    assert_eq!(
+        v["variants"][0]["cost"]["render_overhead_bytes"],
+        v["render_overhead"]["total_bytes"]
+    );
     let e = &v["elements"][1];
     assert_eq!(e["name"], "buddha");
     assert_eq!(e["root_instances"], 25_250);
@@ -548,6 +614,7 @@ fn json_is_one_object_with_the_documented_keys() {
         "instance_buffer_bytes",
         "table_bytes",
         "build_scratch_peak_bytes",
+        "render_overhead_bytes",
         "resident_bytes",
         "peak_bytes",
     ] {
@@ -808,7 +875,12 @@ fn html_report_renders_in_headless_chromium() {
         return;
     }
     let dir = tempfile::tempdir().expect("tmp");
-    let r = buddha_like().report(&lavapipe(), Some(8 << 20));
+    // 8 MiB for the structures, beside the render's own overhead (frame buffers at 640×480).
+    let overhead = buddha_like()
+        .report(&lavapipe(), None)
+        .total()
+        .render_overhead_bytes;
+    let r = buddha_like().report(&lavapipe(), Some(overhead + (8 << 20)));
     let page = dir.path().join("report.html");
     std::fs::write(&page, render_html(&r)).expect("write html");
 
@@ -960,16 +1032,29 @@ mod props {
         ) {
             let s = random_scene(elements, &picks);
             let full = s.report(&lavapipe(), None);
-            prop_assert_eq!(Cost::sum(full.elements.iter().map(|e| &e.ml)), full.total());
-            let budget = (full.total().peak_bytes as f64 * budget_frac) as u64;
+            let image = (full.streaming.floor.width, full.streaming.floor.height);
+            prop_assert_eq!(
+                Cost::sum(full.elements.iter().map(|e| &e.ml)).rendered_at(image),
+                full.total()
+            );
+            // A fraction of the structures, beside the render's own overhead.
+            let t = full.total();
+            let budget = t.render_overhead_bytes
+                + ((t.peak_bytes - t.render_overhead_bytes) as f64 * budget_frac) as u64;
             let r = s.report(&lavapipe(), Some(budget));
             let b = r.budget.expect("budget");
             if let Some(sg) = b.suggestion {
                 prop_assert!(sg.cost.peak_bytes <= budget);
                 let ids: Vec<u32> = sg.elements.iter().map(|n| n[1..].parse().expect("id")).collect();
-                let sub = s.subset(&ids).report(&lavapipe(), None);
-                prop_assert_eq!(sub.total().peak_bytes, sg.cost.peak_bytes);
-                prop_assert_eq!(sub.instanced_triangles, sg.instanced_triangles);
+                let sub = s.subset(&ids).report(&lavapipe(), None).total();
+                // The subset scene's structures; its tables plus what `--subset` uploads whole.
+                prop_assert_eq!(sg.cost.table_bytes, sub.table_bytes + super::whole_tables(&s));
+                prop_assert_eq!(
+                    sg.cost.resident_bytes - sg.cost.table_bytes,
+                    sub.resident_bytes - sub.table_bytes
+                );
+                let sub_tris = s.subset(&ids).report(&lavapipe(), None).instanced_triangles;
+                prop_assert_eq!(sub_tris, sg.instanced_triangles);
             } else {
                 prop_assert!(b.elements.iter().all(|e| !e.fits));
             }

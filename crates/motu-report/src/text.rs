@@ -142,6 +142,18 @@ pub fn render_text(r: &Report) -> String {
         let _ = writeln!(out, "sl: {verdict}");
     }
 
+    let o = &r.render_overhead;
+    let _ = writeln!(
+        out,
+        "peak = resident + the largest build's transient + what rendering {}×{} needs besides: {} (frame buffers {}, staging ring {}, allocator slack {}); the least --vram-budget the full build renders under",
+        r.image_width,
+        r.image_height,
+        human_bytes(o.total_bytes),
+        human_bytes(o.frame_bytes),
+        human_bytes(o.staging_bytes),
+        human_bytes(o.allocator_slack_bytes),
+    );
+
     let s = &r.streaming;
     let _ = writeln!(
         out,

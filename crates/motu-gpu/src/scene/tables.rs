@@ -241,49 +241,6 @@ pub(crate) fn pi_capacity(view: &HierarchyView<'_>, box_lists: bool) -> u32 {
 /// The default (and largest) candidate list of a TLAS walk (`PI_CAPACITY` of `common.glsl`).
 pub(crate) const MAX_PI_CAPACITY: u32 = 8;
 
-/// TLASes and BLASes reachable from the root: through instances, PIs, LOD levels.
-pub(crate) fn reachable(view: &HierarchyView<'_>) -> (Vec<bool>, Vec<bool>) {
-    let mut tlas = vec![false; view.tlases.len()];
-    let mut blas = vec![false; view.blases.len()];
-    let mut todo = vec![view.root_tlas as usize];
-    if let Some(r) = tlas.get_mut(view.root_tlas as usize) {
-        *r = true;
-    }
-    let visit = |t: usize, tlas: &mut Vec<bool>, todo: &mut Vec<usize>| {
-        if t < tlas.len() && !tlas[t] {
-            tlas[t] = true;
-            todo.push(t);
-        }
-    };
-    while let Some(t) = todo.pop() {
-        let rec = &view.tlases[t];
-        let range = rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize;
-        for inst in view.instances.get(range).unwrap_or(&[]) {
-            let b = inst.blas as usize;
-            if b >= blas.len() || blas[b] {
-                continue;
-            }
-            blas[b] = true;
-            let br = &view.blases[b];
-            if br.kind != BLAS_AABBS {
-                continue;
-            }
-            let items = br.item_base as usize..(br.item_base + br.item_count) as usize;
-            for pi in view.pis.get(items).unwrap_or(&[]) {
-                if pi.kind == motu_abi::PI_TLAS {
-                    visit(pi.target as usize, &mut tlas, &mut todo);
-                } else if let Some(s) = view.lod_selectors.get(pi.target as usize) {
-                    let levels = s.level_base as usize..(s.level_base + s.level_count) as usize;
-                    for &lt in view.lod_levels.get(levels).unwrap_or(&[]) {
-                        visit(lt as usize, &mut tlas, &mut todo);
-                    }
-                }
-            }
-        }
-    }
-    (tlas, blas)
-}
-
 /// The AABB build input of every programmable instance (`VkAabbPositionsKHR`: min then max),
 /// indexed like the PI table.
 pub(crate) fn pi_aabbs(view: &HierarchyView<'_>) -> Vec<[f32; 6]> {

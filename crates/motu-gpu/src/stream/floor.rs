@@ -11,9 +11,10 @@ use serde::Serialize;
 
 use super::buffers::frame_buffer_bytes;
 use super::proxy_boxes;
-use super::skeleton::{proxy_clusters, BLOCKS_PER_BUDGET, STAGING_PER_BUDGET};
+use super::skeleton::proxy_clusters;
 use crate::accel::BlasGeometry;
 use crate::error::Result;
+use crate::scene::{allocator_slack_bytes, staging_bytes_for_budget};
 
 /// Acceleration-structure sizes (as built, before compaction; build scratch) the floor needs.
 pub trait FloorSizes {
@@ -82,8 +83,6 @@ pub struct StreamFloor {
 
 /// Allowance for the trace pipeline (shader binding table, small buffers).
 const PIPELINE_BYTES: u64 = MIB;
-/// Least staging ring the renderer uses.
-const MIN_STAGING_BYTES: u64 = 64 * 1024;
 
 fn align(v: u64, a: u64) -> u64 {
     v.div_ceil(a) * a
@@ -282,11 +281,10 @@ pub fn streaming_floor(
     let mut floor = base + blas_build;
     let mut parts = (0, 0, 0);
     for _ in 0..64 {
-        let staging = (floor / STAGING_PER_BUDGET)
-            .clamp(MIN_STAGING_BYTES, staging_cap_bytes.max(MIN_STAGING_BYTES));
+        let staging = staging_bytes_for_budget(floor, staging_cap_bytes);
         let rebuild_scratch = rebuild_scratch_max.max(rebuild_scratch_sum.min(floor / 8));
         let rebuild = rebuild_structures + rebuild_inputs + rebuild_scratch;
-        let slack = 4 * (floor / BLOCKS_PER_BUDGET).max(256 * 1024);
+        let slack = allocator_slack_bytes(floor);
         let next = base + staging + slack + blas_build.max(blas_resident + rebuild);
         parts = (staging, rebuild, slack);
         if next <= floor {

@@ -65,13 +65,6 @@ pub(super) struct ProxyCluster {
     pub member_first: u32,
 }
 
-/// Standard allocator blocks of a streaming heap are this fraction of the budget.
-pub(super) const BLOCKS_PER_BUDGET: u64 = 64;
-/// The staging ring is at most this fraction of the budget (it counts against it on
-/// unified-memory devices; mesh uploads stream through it in ring-sized pieces, so a smaller
-/// ring costs submissions, not correctness).
-pub(super) const STAGING_PER_BUDGET: u64 = 32;
-
 /// The proxy clusters of TLAS `t`: its instances of each buildable BLAS, cut by the compiler's
 /// binned SAH over instance bounds into pieces of at most [`PROXY_CLUSTER_INSTANCES`], in BLAS
 /// order. Deterministic: the renderer and the floor ([`super::streaming_floor`]) both call it.
@@ -156,10 +149,7 @@ impl<'a> StreamingRenderer<'a> {
         // eighth (scratch) and a 32nd (staging) at most, so small budgets leave room for the
         // structures themselves.
         let opts = &StreamOptions {
-            staging_bytes: opts
-                .staging_bytes
-                .min(budget / STAGING_PER_BUDGET)
-                .max(64 * 1024),
+            staging_bytes: crate::scene::staging_bytes_for_budget(budget, opts.staging_bytes),
             scratch_budget_bytes: opts.scratch_budget_bytes.min(budget / 8).max(64 * 1024),
             ..*opts
         };
@@ -173,7 +163,7 @@ impl<'a> StreamingRenderer<'a> {
             budget_bytes: budget,
             host_visible_budget_bytes: opts.staging_bytes.max(64 * MIB) * 4,
         };
-        let block = (budget / BLOCKS_PER_BUDGET).clamp(256 * 1024, 256 * MIB);
+        let block = crate::scene::block_bytes_for_budget(budget);
         // Structures, meshes and their transients come and go in sizes up to about a block:
         // from half a block each gets its own (freed whole when evicted), or the free space
         // they strand inside shared blocks, up to a quarter of the budget, fits nothing.
