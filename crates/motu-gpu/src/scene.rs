@@ -90,6 +90,11 @@ pub trait MeshBlobSource: Sync {
     }
 }
 
+/// The least allocation cap under which a budgeted full build uses small blocks (see
+/// `GpuScene::build`): twice the most it can take (64 blocks, 1,024 dedicated items, a few
+/// host-visible blocks).
+const MIN_ALLOCATIONS_FOR_SMALL_BLOCKS: u32 = 2048;
+
 /// How to build a [`GpuScene`].
 #[derive(Clone, Copy, Debug)]
 pub struct BuildOptions {
@@ -275,9 +280,12 @@ impl GpuScene {
         // Under a user budget, blocks are a 64th of it and what is over a 16th of a block gets
         // its own: a partly used block counts against the budget, and an item bigger than the
         // space left in a block strands that space, so shared blocks take small items only
-        // (`full_build_overhead` allows four blocks; at most 1,024 items are that big).
-        // Without a budget, the allocator's defaults.
-        let (block, dedicated_above) = if opts.budget_bytes == u64::MAX {
+        // (`full_build_overhead` allows four blocks). That takes up to 64 + 1,024 allocations:
+        // without a budget, or under a tight `--max-allocations`, the allocator's defaults
+        // (fewer, larger blocks).
+        let (block, dedicated_above) = if opts.budget_bytes == u64::MAX
+            || limits.max_allocation_count < MIN_ALLOCATIONS_FOR_SMALL_BLOCKS
+        {
             (None, None)
         } else {
             let block = block_bytes_for_budget(budget);

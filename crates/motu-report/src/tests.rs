@@ -754,6 +754,31 @@ fn model_matches_driver_within_15_percent() {
     motu_gpu::testing::assert_no_validation_errors(&ctx);
 }
 
+/// The text says what a peak is made of, and says so when streaming cannot go below the
+/// full build (its floor holds the skeleton, a build, TLAS rebuilds and frame buffers at once).
+#[test]
+fn text_explains_the_peak_and_a_floor_over_it() {
+    // Many big BLASes: the floor holds one of them, the full build all.
+    let mut big = Scene::new(&["big"]);
+    let root: Vec<(u32, u32)> = (0..64)
+        .map(|_| {
+            let m = big.mesh(50_000);
+            (big.tri_blas(&[m]), 0)
+        })
+        .collect();
+    big.tlas(&root);
+    let mut seen = [false; 2];
+    for s in [forest(), buddha_like(), three_levels(), big] {
+        let r = s.report(&lavapipe(), None);
+        let text = render_text(&r);
+        assert!(text.contains("peak = resident"), "{text}");
+        let over = r.streaming.min_resident_bytes >= r.total().peak_bytes;
+        assert_eq!(text.contains("render without --stream"), over, "{text}");
+        seen[usize::from(over)] = true;
+    }
+    assert_eq!(seen, [true, true], "both cases among the scenes");
+}
+
 #[test]
 fn text_table_lists_every_row_and_variant() {
     let r = forest().report(&ModelSizes::new(&NVIDIA_H200), Some(200 << 10));

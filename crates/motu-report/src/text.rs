@@ -165,6 +165,15 @@ pub fn render_text(r: &Report) -> String {
         human_bytes(s.largest_element_peak_bytes),
         s.largest_element.as_deref().unwrap_or("-")
     );
+    if let Some(whole) = r.variants.first() {
+        if s.min_resident_bytes >= whole.cost.peak_bytes {
+            let _ = writeln!(
+                out,
+                "  the streaming floor is not below the full build's peak {}: render without --stream",
+                human_bytes(whole.cost.peak_bytes)
+            );
+        }
+    }
 
     if let Some(b) = &r.budget {
         let _ = writeln!(out, "\nBudget {}:", human_bytes(b.budget_bytes));

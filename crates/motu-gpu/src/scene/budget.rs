@@ -80,7 +80,8 @@ pub struct FullBuildOverhead {
 /// transient) in full and rendering `width × height`, under the budget it leads to: the
 /// staging ring and block size scale with the budget, so this is the fixed point of
 /// `budget = structures + frame + staging(budget) + slack(budget)`, the same policy
-/// [`GpuScene::build`](crate::GpuScene::build) follows under `--vram-budget`.
+/// [`GpuScene::build`](crate::GpuScene::build) follows under `--vram-budget` (with the default
+/// `--max-allocations`; a cap under 2,048 means fewer, larger blocks and more slack).
 pub fn full_build_overhead(structures_bytes: u64, width: u32, height: u32) -> FullBuildOverhead {
     let pixels = u64::from(width) * u64::from(height);
     let frame = crate::render::frame_bytes(pixels);
