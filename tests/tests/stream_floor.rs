@@ -126,7 +126,7 @@ fn default_island_streams_at_fractions_of_its_full_build_and_at_the_floor() {
     assert!(passes[passes.len() - 1].1 >= passes[1].1, "{passes:?}");
 }
 
-fn below_floor_is_refused(pkg: &Path, dir: &Path, budget: u64, floor: u64) {
+fn below_floor_is_refused(pkg: &Path, dir: &Path, budget: u64, floor: u64) -> String {
     let png = dir.join("refused.png");
     let aov = dir.join("refused.aov");
     let b = budget.to_string();
@@ -140,6 +140,36 @@ fn below_floor_is_refused(pkg: &Path, dir: &Path, budget: u64, floor: u64) {
         "the refusal names the floor ({floor}): {err}"
     );
     assert!(!png.exists() && !aov.exists(), "nothing written");
+    err.into_owned()
+}
+
+/// A small scene whose streaming floor is above its full build's peak (buddha-fractal: one
+/// 3 MB BLAS, 25k instances): a budget between the two is refused for `--stream`, with the
+/// hint that the full build fits, and the full build renders under it.
+#[test]
+fn a_floor_over_the_full_build_says_render_without_stream() {
+    let Some(scene) = motu_tests::shared_scene("buddha-fractal/buddha-fractal.pbrt") else {
+        return;
+    };
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = dir.path().join("buddha.motu");
+    motu_ok(&["import", s(&scene), "-o", s(&pkg)]);
+    let (peak, floor) = report(&pkg);
+    assert!(
+        peak < floor,
+        "precondition: peak {peak} below floor {floor}"
+    );
+    let err = below_floor_is_refused(&pkg, dir.path(), peak, floor);
+    assert!(err.contains("render without --stream"), "{err}");
+    let png = dir.path().join("full.png");
+    let aov = dir.path().join("full.aov");
+    let b = peak.to_string();
+    let mut args = render_args(&pkg, &png, &aov, "query");
+    args.extend(["--vram-budget", &b]);
+    motu_ok(&args);
 }
 
 #[test]
@@ -150,7 +180,11 @@ fn below_the_floor_is_refused_and_an_unfinished_frame_is_an_error() {
     let dir = tempfile::tempdir().unwrap();
     let pkg = default_island(dir.path());
     let (peak, floor) = report(&pkg);
-    below_floor_is_refused(&pkg, dir.path(), floor - floor / 50, floor);
+    let err = below_floor_is_refused(&pkg, dir.path(), floor - floor / 50, floor);
+    assert!(
+        !err.contains("without --stream"),
+        "the island's full build does not fit under its floor: {err}"
+    );
 
     // Pass cap 1 (a hidden testing option): pass 1 meets empty instances, so pixels are left.
     let budget = peak.max(floor + floor / 20).to_string();

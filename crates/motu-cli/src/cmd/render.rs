@@ -265,7 +265,8 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         recorded: recorded.as_deref(),
         lod: &lod_choice,
     };
-    let out = motu_render::render(&job, &settings, &mut |e| print_event(e, a.allow_incomplete))?;
+    let out = motu_render::render(&job, &settings, &mut |e| print_event(e, a.allow_incomplete))
+        .map_err(|e| below_floor_hint(e, &a, &pkg))?;
     output::write_png(&a.output, camera.width, camera.height, &out.rgba8)?;
     if let Some(p) = &a.aov {
         output::write(p, &out.aov.to_bytes())?;
@@ -284,6 +285,42 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         out.traces_per_ray(),
     );
     Ok(())
+}
+
+/// A refusal below the streaming floor where the whole scene's full build fits the budget
+/// (small scenes: the floor holds a build, TLAS rebuilds and frame buffers at once) says so.
+fn below_floor_hint(
+    e: motu_render::RenderError,
+    a: &RenderArgs,
+    pkg: &motu_pack::ScenePackage,
+) -> anyhow::Error {
+    let motu_render::RenderError::BelowFloor {
+        budget_bytes,
+        width,
+        height,
+        ..
+    } = &e
+    else {
+        return e.into();
+    };
+    let (budget, image) = (*budget_bytes, (*width, *height));
+    let peak = a
+        .subset
+        .is_empty()
+        .then(|| motu_report::size_source_for_cli(a.device).ok())
+        .flatten()
+        .and_then(|sizes| motu_report::build_report_at(pkg, sizes.as_ref(), None, Some(image)).ok())
+        .and_then(|r| r.variants.first().map(|v| v.cost.peak_bytes));
+    match peak {
+        Some(p) if p <= budget => anyhow::anyhow!(
+            "{e}; the full build fits this budget (motu report: peak {} at {}×{}): render \
+             without --stream",
+            crate::size::format_size(p),
+            image.0,
+            image.1
+        ),
+        _ => e.into(),
+    }
 }
 
 pub fn compare(a: CompareArgs) -> anyhow::Result<()> {
