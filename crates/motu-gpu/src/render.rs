@@ -306,25 +306,34 @@ impl Frame {
     }
 }
 
-/// Bytes per pixel of the full build's frame buffers: AOV (16), colour (4), readback (20).
-const FRAME_BYTES_PER_PIXEL: [u64; 3] = [16, 4, 20];
+/// Sizes of the buffers [`alloc_frame`] allocates for `pixels`: parameters, AOV (16 B a
+/// pixel), colour (4), counters, readback (20 a pixel and the counters). One list for the
+/// allocation and for [`frame_bytes`].
+fn frame_buffer_sizes(pixels: u64) -> [u64; 5] {
+    let stats = (RENDER_STAT_WORDS * 4) as u64;
+    [
+        std::mem::size_of::<FrameParams>() as u64,
+        pixels * 16,
+        pixels * 4,
+        stats,
+        pixels * 20 + stats,
+    ]
+}
 
 /// What [`alloc_frame`] allocates for `pixels` (each buffer rounded to 16 bytes).
 pub(crate) fn frame_bytes(pixels: u64) -> u64 {
-    let stats = (RENDER_STAT_WORDS * 4) as u64;
-    let r16 = |v: u64| v.max(16).div_ceil(16) * 16;
-    r16(std::mem::size_of::<FrameParams>() as u64)
-        + r16(pixels * FRAME_BYTES_PER_PIXEL[0])
-        + r16(pixels * FRAME_BYTES_PER_PIXEL[1])
-        + r16(stats)
-        + r16(pixels * FRAME_BYTES_PER_PIXEL[2] + stats)
+    frame_buffer_sizes(pixels)
+        .iter()
+        .map(|v| v.max(&16).div_ceil(16) * 16)
+        .sum()
 }
 
 pub(crate) fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams) -> Result<Frame> {
     let out = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS | BufferUsage::TRANSFER_SRC;
+    let [params_size, aov_size, rgba_size, stats_size, readback_size] = frame_buffer_sizes(pixels);
     let p = heap.alloc_buffer(
         "frame-params",
-        std::mem::size_of::<FrameParams>() as u64,
+        params_size,
         BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
         AllocKind::Other,
         MemoryClass::HostVisible,
@@ -332,11 +341,7 @@ pub(crate) fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams)
     )?;
     p.write(0, std::slice::from_ref(params))?;
     let mut bufs = vec![p];
-    let sizes = [
-        pixels * FRAME_BYTES_PER_PIXEL[0],
-        pixels * FRAME_BYTES_PER_PIXEL[1],
-        (RENDER_STAT_WORDS * 4) as u64,
-    ];
+    let sizes = [aov_size, rgba_size, stats_size];
     for (i, size) in sizes.into_iter().enumerate() {
         let usage = if i == 2 {
             out | BufferUsage::TRANSFER_DST
@@ -360,7 +365,7 @@ pub(crate) fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams)
     }
     let readback = match heap.alloc_buffer(
         "readback",
-        pixels * FRAME_BYTES_PER_PIXEL[2] + (RENDER_STAT_WORDS * 4) as u64,
+        readback_size,
         BufferUsage::TRANSFER_DST,
         AllocKind::Staging,
         MemoryClass::HostVisible,

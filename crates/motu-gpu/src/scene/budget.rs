@@ -1,6 +1,6 @@
 //! The VRAM budget a build may use.
 
-use motu_alloc::{effective_budget_bytes, SafetyMargin};
+use motu_alloc::{effective_budget_bytes, SafetyMargin, MIB};
 
 use crate::context::Context;
 use crate::error::{GpuError, Result};
@@ -43,7 +43,6 @@ pub(crate) const STAGING_PER_BUDGET: u64 = 32;
 pub(crate) const MIN_STAGING_BYTES: u64 = 64 * 1024;
 /// The full build's staging ring without a budget (or under a large one).
 pub(crate) const FULL_BUILD_STAGING_CAP_BYTES: u64 = 64 * MIB;
-const MIB: u64 = 1 << 20;
 
 /// Standard allocator block size under `budget_bytes` (full builds under a user budget and
 /// every streaming heap).
