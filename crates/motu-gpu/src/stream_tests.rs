@@ -573,6 +573,26 @@ fn a_frame_under_a_sixteenth_of_the_full_build_evicts_mid_frame_and_completes() 
         st.working_set_blases > 0 && st.working_set_bytes > 0,
         "{st:?}"
     );
+    // Evictions: per pass they add up to the frame's (the prefetch evicts nothing here: the
+    // frame has no next camera and its guard band saw what it built), their causes are parts
+    // of them, and what they released is counted.
+    let per_pass: u32 = st.pass_log.iter().map(|p| p.evicted).sum();
+    assert!(per_pass <= st.evicted, "{st:?}");
+    let causes = |p: &crate::stream::PassStats| p.evicted_for_tlas + p.evicted_on_refusal;
+    assert!(st.pass_log.iter().all(|p| causes(p) <= p.evicted), "{st:?}");
+    assert!(
+        st.evicted_for_tlas + st.evicted_on_refusal <= st.evicted,
+        "{st:?}"
+    );
+    assert_eq!(
+        st.pass_log.iter().map(causes).sum::<u32>(),
+        st.evicted_for_tlas + st.evicted_on_refusal,
+        "every cause counted in some pass: {st:?}"
+    );
+    assert!(
+        st.evicted_bytes >= u64::from(st.evicted) * 64,
+        "evicted structures released their bytes: {st:?}"
+    );
     // A TLAS rebuild that does not fit gives back builds a 32nd of the budget at a time, not
     // one per attempt (each attempt re-encodes every resident instance).
     assert!(

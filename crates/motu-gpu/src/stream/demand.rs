@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use motu_alloc::ItemId;
 
+use super::residency::EvictWhy;
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
 use crate::scene::MeshGpu;
@@ -214,7 +215,7 @@ impl<'a> StreamingRenderer<'a> {
                 // bytes count meshes other BLASes may still hold, so an eviction may free
                 // less than it counted: repeat while it helps).
                 let mut short = need.saturating_sub(free);
-                while short > 0 && self.evict_some(short)? {
+                while short > 0 && self.evict_some(short, EvictWhy::BuildRoom)? {
                     short = need.saturating_sub(self.free_budget_bytes().saturating_sub(reserve));
                 }
             }

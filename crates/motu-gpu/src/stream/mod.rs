@@ -219,8 +219,16 @@ pub struct FrameStreamStats {
     /// and the probe's trace time (not in `trace_ms`).
     pub probe_rays: u64,
     pub probe_ms: f64,
-    /// Structures evicted (BLASes and TLASes).
+    /// Structures evicted (BLASes and TLASes), and the bytes released (structures plus their
+    /// meshes; also those of structures a refused TLAS rebuild gave back, counted in
+    /// `deferred`).
     pub evicted: u32,
+    pub evicted_bytes: u64,
+    /// Of `evicted`: made up front for TLAS rebuilds (their buffers are dedicated blocks, so
+    /// only emptied blocks count), and after the budget refused an allocation. The rest made
+    /// room for BLAS build groups by estimate.
+    pub evicted_for_tlas: u32,
+    pub evicted_on_refusal: u32,
     /// Demanded structures left unbuilt in a pass because they did not fit next to what the
     /// pass's incomplete pixels need (built in a later pass, once those pixels completed).
     pub deferred: u32,
@@ -303,6 +311,9 @@ pub struct PassStats {
     pub tlas_ms: f64,
     pub blas_built: u32,
     pub evicted: u32,
+    /// Of `evicted`: up front for TLAS rebuilds, after a refused allocation.
+    pub evicted_for_tlas: u32,
+    pub evicted_on_refusal: u32,
 }
 
 /// Totals over all frames rendered so far.

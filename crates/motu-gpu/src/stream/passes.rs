@@ -48,6 +48,8 @@ impl<'a> StreamingRenderer<'a> {
                 self.frame_stats.tlas_ms,
                 self.frame_stats.blas_built,
                 self.frame_stats.evicted,
+                self.frame_stats.evicted_for_tlas,
+                self.frame_stats.evicted_on_refusal,
             );
             let traced = u64::from(full_count) + list.len() as u64;
             self.frame_stats.passes += 1;
@@ -94,6 +96,8 @@ impl<'a> StreamingRenderer<'a> {
                 pass.tlas_ms = s.frame_stats.tlas_ms - before.2;
                 pass.blas_built = s.frame_stats.blas_built - before.3;
                 pass.evicted = s.frame_stats.evicted - before.4;
+                pass.evicted_for_tlas = s.frame_stats.evicted_for_tlas - before.5;
+                pass.evicted_on_refusal = s.frame_stats.evicted_on_refusal - before.6;
                 pass.host_ms = (host_before_build - pass.trace_ms).max(0.0) + host_extra;
                 s.frame_stats.host_ms += pass.host_ms;
                 s.frame_stats.pass_log.push(pass);

@@ -5,6 +5,7 @@ use ash::vk;
 use motu_abi::{PiRecord, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
 use motu_alloc::{AllocKind, BuildSize, ItemId, MemoryClass};
 
+use super::residency::EvictWhy;
 use super::skeleton::{proxy_blas_record, proxy_pi};
 use super::{StreamingRenderer, TlasGpu, IDENTITY, MARKS_MASK, TRIANGLE_MASK};
 use crate::accel::AsBuildFlags;
@@ -491,7 +492,7 @@ impl<'a> StreamingRenderer<'a> {
             // them, so this could otherwise evict everything unpinned.
             let mut short = need.saturating_sub(free(self));
             let mut rounds = 0;
-            while short > 0 && rounds < 4 && self.evict_some(short)? {
+            while short > 0 && rounds < 4 && self.evict_some(short, EvictWhy::TlasRoom)? {
                 short = need.saturating_sub(free(self));
                 rounds += 1;
             }

@@ -7,12 +7,30 @@ use motu_alloc::ItemId;
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
 
+/// Why structures are evicted (`FrameStreamStats` counts each).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum EvictWhy {
+    /// Room a BLAS build group needs by estimate, made before its meshes stream.
+    BuildRoom,
+    /// Room a TLAS rebuild needs outside blocks, made up front.
+    TlasRoom,
+    /// The budget refused an allocation.
+    Refused,
+}
+
 impl<'a> StreamingRenderer<'a> {
     /// Evicts least-recently-visible unpinned structures (at least `bytes` of them, or all that
     /// are left). Returns false when nothing could be evicted.
-    pub(super) fn evict_some(&mut self, bytes: u64) -> Result<bool> {
+    pub(super) fn evict_some(&mut self, bytes: u64, why: EvictWhy) -> Result<bool> {
         let t0 = std::time::Instant::now();
+        let before = self.frame_stats.evicted;
         let r = self.evict_some_untimed(bytes);
+        let n = self.frame_stats.evicted - before;
+        match why {
+            EvictWhy::BuildRoom => {}
+            EvictWhy::TlasRoom => self.frame_stats.evicted_for_tlas += n,
+            EvictWhy::Refused => self.frame_stats.evicted_on_refusal += n,
+        }
         self.frame_stats.evict_ms += t0.elapsed().as_secs_f64() * 1e3;
         r
     }
@@ -43,8 +61,9 @@ impl<'a> StreamingRenderer<'a> {
 
     /// Releases BLAS `b` with the meshes only it used; its resident parents become dirty.
     pub(super) fn evict(&mut self, b: usize) {
-        self.residency.remove(ItemId(b as u32));
+        let bytes = self.residency.remove(ItemId(b as u32)).unwrap_or(0);
         self.frame_stats.evicted += 1;
+        self.frame_stats.evicted_bytes += bytes;
         if let Some(a) = self.blas.get_mut(b).and_then(Option::take) {
             a.release(&mut self.heap);
         }
@@ -95,7 +114,7 @@ impl<'a> StreamingRenderer<'a> {
             match f(self) {
                 Err(GpuError::Budget(msg)) => {
                     let step = (self.build_opts.budget_bytes / 32).max(1);
-                    if self.evict_some(step)? {
+                    if self.evict_some(step, EvictWhy::Refused)? {
                         continue;
                     }
                     return Err(GpuError::Budget(msg));
