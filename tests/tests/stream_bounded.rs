@@ -198,9 +198,19 @@ fn a_frame_build_budget_shows_the_counted_fallback_and_converges_to_the_full_bui
         "gpu_ms",
         "working_set_bytes",
         "room_bytes",
+        "evicted",
+        "evicted_bytes",
+        "evicted_for_tlas",
+        "evicted_on_refusal",
     ] {
         assert!(rows.iter().all(|r| r[k].is_number()), "{k}: {b}");
     }
+    // The causes of a frame's evictions are parts of them.
+    assert!(
+        rows.iter()
+            .all(|r| u(&r["evicted_for_tlas"]) + u(&r["evicted_on_refusal"]) <= u(&r["evicted"])),
+        "{b}"
+    );
     assert!(b["mean_passes"].as_f64().expect("mean") >= 1.0, "{b}");
     assert!(b["mean_built_bytes"].as_f64().expect("mean") > 0.0, "{b}");
     assert!(b["mean_build_ms"].is_number() && b["mean_wall_ms"].is_number());

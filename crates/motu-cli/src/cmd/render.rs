@@ -92,12 +92,13 @@ fn print_event(e: motu_render::RenderEvent<'_>, allow_incomplete: bool) {
                 " (incomplete: pass cap)"
             };
             eprintln!(
-                "frame {f}: {} passes{why}, {} BLAS + {} TLAS built ({}), {} evicted, {} streamed, {:.1} ms building, VRAM {} of {}, {:.1} ms tracing, {:.1} ms frame",
+                "frame {f}: {} passes{why}, {} BLAS + {} TLAS built ({}), {} evicted{}, {} streamed, {:.1} ms building, VRAM {} of {}, {:.1} ms tracing, {:.1} ms frame",
                 st.passes,
                 st.blas_built,
                 st.tlas_built,
                 crate::size::format_size(st.built_bytes),
                 st.evicted,
+                evicted_causes(st.evicted_for_tlas, st.evicted_on_refusal),
                 crate::size::format_size(st.bytes_streamed),
                 st.build_ms,
                 crate::size::format_size(st.vram_peak_bytes),
@@ -379,4 +380,30 @@ pub fn device_at(
             if list.is_empty() { "none".to_string() } else { list.join(", ") }
         )
     })
+}
+
+/// The causes of a frame's evictions beside their count, when any is not a BLAS build's room.
+fn evicted_causes(for_tlas: u32, on_refusal: u32) -> String {
+    match (for_tlas, on_refusal) {
+        (0, 0) => String::new(),
+        (t, 0) => format!(" ({t} for TLAS rebuilds)"),
+        (0, r) => format!(" ({r} after refused allocations)"),
+        (t, r) => format!(" ({t} for TLAS rebuilds, {r} after refused allocations)"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::evicted_causes;
+
+    #[test]
+    fn eviction_causes_are_named_only_when_present() {
+        assert_eq!(evicted_causes(0, 0), "");
+        assert_eq!(evicted_causes(3, 0), " (3 for TLAS rebuilds)");
+        assert_eq!(evicted_causes(0, 2), " (2 after refused allocations)");
+        assert_eq!(
+            evicted_causes(3, 2),
+            " (3 for TLAS rebuilds, 2 after refused allocations)"
+        );
+    }
 }
