@@ -573,9 +573,9 @@ fn a_frame_under_a_sixteenth_of_the_full_build_evicts_mid_frame_and_completes() 
         st.working_set_blases > 0 && st.working_set_bytes > 0,
         "{st:?}"
     );
-    // Evictions: per pass they add up to the frame's (the prefetch evicts nothing here: the
-    // frame has no next camera and its guard band saw what it built), their causes are parts
-    // of them, and what they released is counted.
+    // Evictions: the passes' are part of the frame's (the prefetch after the last pass may
+    // evict too), their causes are parts of them and each is counted in its pass, and what
+    // they released is counted.
     let per_pass: u32 = st.pass_log.iter().map(|p| p.evicted).sum();
     assert!(per_pass <= st.evicted, "{st:?}");
     let causes = |p: &crate::stream::PassStats| p.evicted_for_tlas + p.evicted_on_refusal;
