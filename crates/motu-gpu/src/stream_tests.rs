@@ -593,6 +593,20 @@ fn a_frame_under_a_sixteenth_of_the_full_build_evicts_mid_frame_and_completes() 
         st.evicted_bytes >= u64::from(st.evicted) * 64,
         "evicted structures released their bytes: {st:?}"
     );
+    // Bytes per pass: parts of the frame's, present wherever the pass built or evicted.
+    let built: u64 = st.pass_log.iter().map(|p| p.built_bytes).sum();
+    let released: u64 = st.pass_log.iter().map(|p| p.evicted_bytes).sum();
+    assert!(
+        built <= st.built_bytes && released <= st.evicted_bytes,
+        "{st:?}"
+    );
+    assert!(
+        st.pass_log
+            .iter()
+            .all(|p| (p.blas_built > 0) == (p.built_bytes > 0)
+                && (p.evicted > 0) <= (p.evicted_bytes > 0)),
+        "{st:?}"
+    );
     // A TLAS rebuild that does not fit gives back builds a 32nd of the budget at a time, not
     // one per attempt (each attempt re-encodes every resident instance).
     assert!(

@@ -310,7 +310,11 @@ pub struct PassStats {
     pub build_ms: f64,
     pub tlas_ms: f64,
     pub blas_built: u32,
+    /// Structure bytes its BLAS builds made (as `FrameStreamStats::built_bytes`).
+    pub built_bytes: u64,
     pub evicted: u32,
+    /// Bytes its evictions released (as `FrameStreamStats::evicted_bytes`).
+    pub evicted_bytes: u64,
     /// Of `evicted`: up front for TLAS rebuilds, after a refused allocation.
     pub evicted_for_tlas: u32,
     pub evicted_on_refusal: u32,

@@ -9,7 +9,7 @@ use motu_alloc::ItemId;
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
 use super::params::{StreamParams, CARRY_BYTES};
-use super::{PassStats, StreamFallback, StreamingRenderer, GUARD_BIAS};
+use super::{FrameStreamStats, PassStats, StreamFallback, StreamingRenderer, GUARD_BIAS};
 use crate::error::{GpuError, Result};
 use crate::render::{Tracer, STAT_WORDS};
 use crate::scene::Slot;
@@ -42,15 +42,7 @@ impl<'a> StreamingRenderer<'a> {
         let max_passes = self.frame_pass_cap();
         loop {
             let pass_t0 = Instant::now();
-            let before = (
-                self.frame_stats.trace_ms,
-                self.frame_stats.build_ms,
-                self.frame_stats.tlas_ms,
-                self.frame_stats.blas_built,
-                self.frame_stats.evicted,
-                self.frame_stats.evicted_for_tlas,
-                self.frame_stats.evicted_on_refusal,
-            );
+            let before = PassCounters::of(&self.frame_stats);
             let traced = u64::from(full_count) + list.len() as u64;
             self.frame_stats.passes += 1;
             let first = self.frame_stats.passes == 1;
@@ -91,13 +83,7 @@ impl<'a> StreamingRenderer<'a> {
             };
             let host_before_build = pass_t0.elapsed().as_secs_f64() * 1e3;
             let log_pass = |s: &mut Self, mut pass: PassStats, host_extra: f64| {
-                pass.trace_ms = s.frame_stats.trace_ms - before.0;
-                pass.build_ms = s.frame_stats.build_ms - before.1;
-                pass.tlas_ms = s.frame_stats.tlas_ms - before.2;
-                pass.blas_built = s.frame_stats.blas_built - before.3;
-                pass.evicted = s.frame_stats.evicted - before.4;
-                pass.evicted_for_tlas = s.frame_stats.evicted_for_tlas - before.5;
-                pass.evicted_on_refusal = s.frame_stats.evicted_on_refusal - before.6;
+                before.since(&s.frame_stats, &mut pass);
                 pass.host_ms = (host_before_build - pass.trace_ms).max(0.0) + host_extra;
                 s.frame_stats.host_ms += pass.host_ms;
                 s.frame_stats.pass_log.push(pass);
@@ -192,6 +178,48 @@ impl<'a> StreamingRenderer<'a> {
 
 /// What one traced pass left for the host: per-BLAS stamps and request counts, and the
 /// incomplete pixels (packed `x | y << 16`).
+/// The frame's counters when a pass starts: its `PassStats` are what they grew by.
+struct PassCounters {
+    trace_ms: f64,
+    build_ms: f64,
+    tlas_ms: f64,
+    blas_built: u32,
+    built_bytes: u64,
+    evicted: u32,
+    evicted_bytes: u64,
+    evicted_for_tlas: u32,
+    evicted_on_refusal: u32,
+}
+
+impl PassCounters {
+    fn of(f: &FrameStreamStats) -> Self {
+        PassCounters {
+            trace_ms: f.trace_ms,
+            build_ms: f.build_ms,
+            tlas_ms: f.tlas_ms,
+            blas_built: f.blas_built,
+            built_bytes: f.built_bytes,
+            evicted: f.evicted,
+            evicted_bytes: f.evicted_bytes,
+            evicted_for_tlas: f.evicted_for_tlas,
+            evicted_on_refusal: f.evicted_on_refusal,
+        }
+    }
+
+    /// Fills `pass` with what the counters grew by since `self`.
+    fn since(&self, f: &FrameStreamStats, pass: &mut PassStats) {
+        pass.trace_ms = f.trace_ms - self.trace_ms;
+        pass.build_ms = f.build_ms - self.build_ms;
+        pass.tlas_ms = f.tlas_ms - self.tlas_ms;
+        pass.blas_built = f.blas_built - self.blas_built;
+        pass.built_bytes = f.built_bytes - self.built_bytes;
+        pass.evicted = f.evicted - self.evicted;
+        pass.evicted_bytes = f.evicted_bytes - self.evicted_bytes;
+        pass.evicted_for_tlas = f.evicted_for_tlas - self.evicted_for_tlas;
+        pass.evicted_on_refusal = f.evicted_on_refusal - self.evicted_on_refusal;
+    }
+}
+
 pub(super) struct PassReadback {
     pub(super) stamps: Vec<u32>,
     pub(super) requests: Vec<u32>,

@@ -491,6 +491,15 @@ impl<'a> StreamingRenderer<'a> {
             // A few rounds at most: evicted items free whole blocks only when they empty
             // them, so this could otherwise evict everything unpinned.
             let mut short = need.saturating_sub(free(self));
+            // What the rebuild needs against what blocks leave free (`MOTU_LOG`), the numbers
+            // behind `evicted_for_tlas`.
+            tracing::debug!(
+                need,
+                free = free(self),
+                dirty = self.dirty.len(),
+                records = self.resident_instance_counts().iter().sum::<u64>(),
+                "TLAS rebuild room"
+            );
             let mut rounds = 0;
             while short > 0 && rounds < 4 && self.evict_some(short, EvictWhy::TlasRoom)? {
                 short = need.saturating_sub(free(self));
