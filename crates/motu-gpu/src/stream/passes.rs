@@ -176,8 +176,6 @@ impl<'a> StreamingRenderer<'a> {
     }
 }
 
-/// What one traced pass left for the host: per-BLAS stamps and request counts, and the
-/// incomplete pixels (packed `x | y << 16`).
 /// The frame's counters when a pass starts: its `PassStats` are what they grew by.
 struct PassCounters {
     trace_ms: f64,
@@ -220,6 +218,8 @@ impl PassCounters {
     }
 }
 
+/// What one traced pass left for the host: per-BLAS stamps and request counts, and the
+/// incomplete pixels (packed `x | y << 16`).
 pub(super) struct PassReadback {
     pub(super) stamps: Vec<u32>,
     pub(super) requests: Vec<u32>,
