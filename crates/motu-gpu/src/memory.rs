@@ -317,6 +317,23 @@ impl DeviceMemory {
         Ok(())
     }
 
+    /// Lends the mapping's bytes `offset..offset + len` to `fill`, which writes them in place
+    /// (same conditions as `write_bytes`; the lock is held while `fill` runs).
+    pub fn with_mapped_mut<R>(
+        &self,
+        offset: u64,
+        len: usize,
+        fill: impl FnOnce(&mut [u8]) -> R,
+    ) -> Result<R> {
+        self.check_range(offset, len)?;
+        let map = self.mapping()?;
+        // SAFETY: the range is inside the persistently mapped allocation (checked above); the
+        // mapping lock, held until `fill` returns, keeps every other host access out, so the
+        // slice is the only reference to these bytes while it lives.
+        let bytes = unsafe { std::slice::from_raw_parts_mut(map.0.add(offset as usize), len) };
+        Ok(fill(bytes))
+    }
+
     /// Copies from the mapping at `offset` into `out` (same conditions as `write_bytes`).
     pub fn read_bytes(&self, offset: u64, out: &mut [u8]) -> Result<()> {
         self.check_range(offset, out.len())?;
@@ -568,6 +585,18 @@ impl Buffer {
         self.check_range(offset, data.len())?;
         let (mem, base) = self.mapped()?;
         mem.write_bytes(base + offset, data)
+    }
+
+    /// Lends bytes `offset..offset + len` to `fill` to write in place (host-mapped memory only).
+    pub fn with_mapped_mut<R>(
+        &self,
+        offset: u64,
+        len: usize,
+        fill: impl FnOnce(&mut [u8]) -> R,
+    ) -> Result<R> {
+        self.check_range(offset, len)?;
+        let (mem, base) = self.mapped()?;
+        mem.with_mapped_mut(base + offset, len, fill)
     }
 
     /// Writes plain-old-data values at `offset` (host-mapped memory only).

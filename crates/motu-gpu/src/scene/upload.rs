@@ -106,6 +106,41 @@ impl Uploader {
         Ok(())
     }
 
+    /// Bytes of the ring region being filled: the most one [`Uploader::upload_in_place`]
+    /// takes.
+    pub(crate) fn region_bytes(&self) -> u64 {
+        let (start, end) = self.region();
+        end - start
+    }
+
+    /// Queues a copy of `len` bytes to `dst` at `dst_offset` that `fill` writes in place in
+    /// the mapped ring (no host copy in between: encoders fill it, in parallel if they like).
+    /// `len` is at most [`Uploader::region_bytes`]; `dst` as for [`Uploader::upload`].
+    pub(crate) fn upload_in_place(
+        &mut self,
+        ctx: &Context,
+        dst: &HeapBuffer,
+        dst_offset: u64,
+        len: usize,
+        fill: impl FnOnce(&mut [u8]),
+    ) -> Result<()> {
+        let (start, end) = self.region();
+        if len as u64 > end - start {
+            return Err(GpuError::InvalidRequest(format!(
+                "an in-place upload of {len} bytes exceeds the staging ring's region of {} bytes",
+                end - start
+            )));
+        }
+        if self.cursor + len as u64 > end {
+            self.flush(ctx)?;
+        }
+        self.staging.with_mapped_mut(self.cursor, len, fill)?;
+        self.pending
+            .push((dst.handle(), self.cursor, dst_offset, len as u64));
+        self.cursor = (self.cursor + len as u64).div_ceil(16) * 16;
+        Ok(())
+    }
+
     /// Records the queued copies into `cmd` (whose submission the caller fences before the
     /// ring region is reused) and moves to the other half. Returns whether anything was recorded.
     ///

@@ -89,6 +89,7 @@ mod rebuild;
 mod residency;
 mod shading;
 mod skeleton;
+mod tlas_records;
 
 pub use floor::{streaming_floor, FloorSizes, StreamFloor};
 

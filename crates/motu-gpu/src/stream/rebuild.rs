@@ -2,12 +2,13 @@
 //! and rebuilding the TLASes whose instance set changed.
 
 use ash::vk;
-use motu_abi::{PiRecord, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
+use motu_abi::PiRecord;
 use motu_alloc::{AllocKind, BuildSize, ItemId, MemoryClass};
 
 use super::residency::EvictWhy;
 use super::skeleton::{proxy_blas_record, proxy_pi};
-use super::{StreamingRenderer, TlasGpu, IDENTITY, MARKS_MASK, TRIANGLE_MASK};
+use super::tlas_records::{TlasRecords, RECORD_BYTES};
+use super::{StreamingRenderer, TlasGpu, IDENTITY, MARKS_MASK};
 use crate::accel::AsBuildFlags;
 use crate::error::{GpuError, Result};
 use crate::memory::BufferUsage;
@@ -63,6 +64,13 @@ impl<'a> StreamingRenderer<'a> {
         use bytemuck::cast_slice;
         let ctx = self.ctx.clone();
         let view = self.view;
+        // Phase times for the debug line below (`MOTU_LOG`).
+        let lap = |t: &mut std::time::Instant| {
+            let d = t.elapsed().as_secs_f64() * 1e3;
+            *t = std::time::Instant::now();
+            d
+        };
+        let mut t_phase = std::time::Instant::now();
         for &t in ids {
             if let Some(old) = self.tlas[t as usize].take() {
                 old.release(&mut self.heap);
@@ -70,6 +78,7 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         self.probe_tlas_room(ids)?;
+        let t_probe = lap(&mut t_phase);
         // 1. Proxy BLASes (the clusters of non-resident BLASes) and marks BLASes (the
         // resident ones), compacted; their shared PI slots (proxy first) and the marks' BLAS
         // record are rewritten to match.
@@ -166,6 +175,7 @@ impl<'a> StreamingRenderer<'a> {
                 proxies.push((proxy_items[k].0, proxy_items[k].1, a));
             }
         }
+        let t_proxy = lap(&mut t_phase);
         // 2. TLASes over the resident BLASes plus the proxy instance. Non-resident instances
         // are left out (their proxy boxes stand for them), so a TLAS's size follows what is
         // resident, not its instance count; the custom index keeps each instance's record.
@@ -175,81 +185,52 @@ impl<'a> StreamingRenderer<'a> {
             .iter()
             .map(|a| a.as_ref().map_or(0, |a| a.address))
             .collect();
-        let instance_bytes: Vec<Vec<u8>> = ids
-            .iter()
-            .map(|&t| {
-                use rayon::prelude::*;
-                const CHUNK: usize = 1 << 16;
-                let rec = &view.tlases[t as usize];
-                let range = &view.instances
-                    [rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize];
-                let chunks: Vec<Vec<u8>> = range
-                    .par_chunks(CHUNK)
-                    .enumerate()
-                    .map(|(c, chunk)| {
-                        let mut out = Vec::new();
-                        for (j, inst) in chunk.iter().enumerate() {
-                            let b = inst.blas as usize;
-                            let addr = addrs[b];
-                            if addr == 0 {
-                                continue;
-                            }
-                            let aabbs = view.blases[b].kind == BLAS_AABBS;
-                            let mut enc = encode_instance(
-                                &inst.tlas_from_blas,
-                                aabbs,
-                                inst.flags & FLAG_NEEDS_ANY_HIT != 0,
-                                addr,
-                                (c * CHUNK + j) as u32,
-                            );
-                            if !aabbs {
-                                set_instance_mask(&mut enc, TRIANGLE_MASK);
-                            }
-                            out.extend_from_slice(&enc);
-                        }
-                        out
-                    })
-                    .collect();
-                let mut out = chunks.concat();
-                for (_, marks, a) in proxies.iter().filter(|(pt, _, _)| *pt == t) {
-                    // The proxy's and the marks' records follow the TLAS's own (see
-                    // `StreamingRenderer::new`); only probe passes' rays see the marks.
+        let ring_region = self.up_mut()?.region_bytes();
+        let records = TlasRecords::count(view, &addrs, ids, ring_region, |t| {
+            // The proxy's and the marks' records follow the TLAS's own (see
+            // `StreamingRenderer::new`); only probe passes' rays see the marks.
+            let count = view.tlases[t as usize].instance_count;
+            proxies
+                .iter()
+                .filter(|(pt, _, _)| *pt == t)
+                .map(|(_, marks, a)| {
                     let mut inst = encode_instance(
                         &IDENTITY,
                         true,
                         false,
                         a.address,
-                        rec.instance_count + u32::from(*marks),
+                        count + u32::from(*marks),
                     );
                     if *marks {
                         set_instance_mask(&mut inst, MARKS_MASK);
                     }
-                    out.extend_from_slice(&inst);
-                }
-                if out.is_empty() {
-                    // Nothing resident: one inactive instance keeps the TLAS valid.
-                    out.extend_from_slice(&encode_instance(&IDENTITY, false, false, 0, 0));
-                }
-                out
-            })
-            .collect();
+                    inst
+                })
+                .collect()
+        });
+        let counts = records.record_counts();
         let mut sizes = Vec::with_capacity(ids.len());
-        for bytes in &instance_bytes {
-            let s = ctx.tlas_build_sizes((bytes.len() / 64) as u32, AsBuildFlags::default())?;
+        for &n in &counts {
+            let s = ctx.tlas_build_sizes(n, AsBuildFlags::default())?;
             sizes.push(BuildSize {
                 result_bytes: s.acceleration_structure_size_bytes,
                 scratch_bytes: s.build_scratch_size_bytes,
             });
         }
-        let total: u64 = instance_bytes.iter().map(|b| b.len() as u64).sum();
+        let total: u64 = counts
+            .iter()
+            .map(|&n| u64::from(n) * RECORD_BYTES as u64)
+            .sum();
         self.frame_stats.tlas_builds += ids.len() as u32;
-        self.frame_stats.tlas_instances_written += total / 64;
+        self.frame_stats.tlas_instances_written += total / RECORD_BYTES as u64;
         let mut offsets = Vec::with_capacity(ids.len());
         let mut off = 0u64;
-        for b in &instance_bytes {
+        for &n in &counts {
             offsets.push(off);
-            off += b.len() as u64;
+            off += u64::from(n) * RECORD_BYTES as u64;
         }
+        let t_encode = lap(&mut t_phase);
+        let mut t_upload = 0.0;
         let inst_buf = match self.heap.alloc_buffer(
             "stream-tlas-instances",
             total.max(64),
@@ -267,17 +248,13 @@ impl<'a> StreamingRenderer<'a> {
             }
         };
         let built = (|| -> Result<Vec<(usize, AccelStruct)>> {
-            for (b, &o) in instance_bytes.iter().zip(&offsets) {
-                if !b.is_empty() {
-                    self.up_mut()?.upload(&ctx, &inst_buf, o, b)?;
-                }
-            }
-            self.up_mut()?.flush(&ctx)?;
+            let up = self.up.as_mut().ok_or_else(|| {
+                GpuError::InvalidRequest("streaming: staging ring released".into())
+            })?;
+            records.upload(&ctx, up, &inst_buf, &offsets)?;
+            up.flush(&ctx)?;
             let inst_addr = inst_buf.device_address()?.0;
-            let counts: Vec<u32> = instance_bytes
-                .iter()
-                .map(|b| (b.len() / 64) as u32)
-                .collect();
+            t_upload = lap(&mut t_phase);
             let mut report = ResourceReport::default();
             build_batched(
                 &ctx,
@@ -312,6 +289,7 @@ impl<'a> StreamingRenderer<'a> {
                 return Err(e);
             }
         };
+        let t_build = lap(&mut t_phase);
         // 3. Swap in; rewrite the proxy PI slots and the marks' BLAS records.
         for (t, pis, non_resident) in &pi_rewrites {
             let base = self.proxy_pi_base[*t as usize];
@@ -354,6 +332,16 @@ impl<'a> StreamingRenderer<'a> {
             }
             self.dirty.remove(&t);
         }
+        tracing::debug!(
+            records = total / 64,
+            probe_ms = t_probe,
+            proxy_ms = t_proxy,
+            encode_ms = t_encode,
+            upload_ms = t_upload,
+            build_ms = t_build,
+            swap_ms = t_phase.elapsed().as_secs_f64() * 1e3,
+            "TLAS rebuild phases"
+        );
         Ok(())
     }
 
