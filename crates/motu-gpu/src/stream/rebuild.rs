@@ -116,6 +116,7 @@ impl<'a> StreamingRenderer<'a> {
                 pi_rewrites.push((t, pis, non_resident));
             }
         }
+        let t_proxy_host = lap(&mut t_phase);
         let mut proxies: Vec<(u32, bool, AccelStruct)> = Vec::new();
         if !proxy_boxes.is_empty() {
             let buf = self.heap.alloc_buffer(
@@ -176,6 +177,7 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         let t_proxy = lap(&mut t_phase);
+        let proxy_boxes_count = proxy_boxes.len();
         // 2. TLASes over the resident BLASes plus the proxy instance. Non-resident instances
         // are left out (their proxy boxes stand for them), so a TLAS's size follows what is
         // resident, not its instance count; the custom index keeps each instance's record.
@@ -335,7 +337,9 @@ impl<'a> StreamingRenderer<'a> {
         tracing::debug!(
             records = total / 64,
             probe_ms = t_probe,
-            proxy_ms = t_proxy,
+            proxy_boxes = proxy_boxes_count,
+            proxy_host_ms = t_proxy_host,
+            proxy_build_ms = t_proxy,
             encode_ms = t_encode,
             upload_ms = t_upload,
             build_ms = t_build,
