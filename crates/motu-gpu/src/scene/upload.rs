@@ -141,6 +141,31 @@ impl Uploader {
         Ok(())
     }
 
+    /// Queues `count` values, `value(k)` for k in `0..count`, for `dst` at `dst_offset`, each
+    /// written in place in the ring a region at a time (no host array of them is built).
+    pub(crate) fn upload_with<T: bytemuck::Pod>(
+        &mut self,
+        ctx: &Context,
+        dst: &HeapBuffer,
+        dst_offset: u64,
+        count: usize,
+        mut value: impl FnMut(usize) -> T,
+    ) -> Result<()> {
+        let size = std::mem::size_of::<T>();
+        let per_region = (self.region_bytes() as usize / size.max(1)).max(1);
+        let mut k = 0;
+        while k < count {
+            let n = per_region.min(count - k);
+            self.upload_in_place(ctx, dst, dst_offset + (k * size) as u64, n * size, |out| {
+                for (j, slot) in out.chunks_exact_mut(size).enumerate() {
+                    slot.copy_from_slice(bytemuck::bytes_of(&value(k + j)));
+                }
+            })?;
+            k += n;
+        }
+        Ok(())
+    }
+
     /// Records the queued copies into `cmd` (whose submission the caller fences before the
     /// ring region is reused) and moves to the other half. Returns whether anything was recorded.
     ///
@@ -474,5 +499,65 @@ impl MeshGpu {
             up.upload(ctx, &self.buffer, map_off, cast_slice(&map[..]))?;
         }
         Ok((positions.len() * 12 + indices.len() * 4 + map_len * 4) as u64)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use motu_alloc::{AllocKind, AllocLimits, MemoryClass};
+
+    use super::Uploader;
+    use crate::context::Requirement;
+    use crate::heap::GpuHeap;
+    use crate::memory::BufferUsage;
+    use crate::testing::{assert_no_validation_errors, context_or_skip};
+
+    /// Values written in place by `upload_with` land in order across several ring regions,
+    /// at an offset, next to a plain upload queued before them.
+    #[test]
+    fn values_written_in_place_span_ring_regions_in_order() {
+        let Some(ctx) = context_or_skip("upload_with_regions", Requirement::Compute) else {
+            return;
+        };
+        let mut heap = GpuHeap::new(
+            &ctx,
+            AllocLimits {
+                max_allocation_count: 64,
+                max_allocation_size_bytes: ctx.limits().max_memory_allocation_size,
+                budget_bytes: 64 << 20,
+                host_visible_budget_bytes: 64 << 20,
+            },
+        )
+        .expect("heap");
+        let mut up = Uploader::new(&mut heap, 64 << 10).expect("ring");
+        assert_eq!(up.region_bytes(), 64 << 10);
+        // 40,000 [u32; 6] values: 960,000 bytes, 15 regions, the last one partial.
+        let count = 40_000usize;
+        let dst = heap
+            .alloc_buffer(
+                "upload-with-dst",
+                16 + (count * 24) as u64,
+                BufferUsage::TRANSFER_DST,
+                AllocKind::Staging,
+                MemoryClass::HostVisible,
+                16,
+            )
+            .expect("destination");
+        let value = |k: usize| -> [u32; 6] { std::array::from_fn(|j| (k * 6 + j) as u32 ^ 0x5a5a) };
+        up.upload(&ctx, &dst, 0, &[7u8; 16]).expect("head");
+        up.upload_with(&ctx, &dst, 16, count, value)
+            .expect("values");
+        up.flush(&ctx).expect("flush");
+        let mut got = vec![0u8; 16 + count * 24];
+        dst.read_bytes(0, &mut got).expect("read back");
+        assert_eq!(&got[..16], &[7u8; 16]);
+        let words: &[u32] = bytemuck::cast_slice(&got[16..]);
+        for (k, v) in words.chunks_exact(6).enumerate() {
+            assert_eq!(v, value(k), "value {k}");
+        }
+        assert!(up.flushes >= 15, "{} flushes", up.flushes);
+        heap.free(dst);
+        heap.free(up.staging);
+        assert_no_validation_errors(&ctx);
     }
 }

@@ -557,6 +557,6 @@ pub(super) fn proxy_pi(c: &ProxyCluster) -> PiRecord {
     }
 }
 
-fn staging_released() -> GpuError {
+pub(super) fn staging_released() -> GpuError {
     GpuError::InvalidRequest("streaming: staging ring released".into())
 }
