@@ -140,9 +140,14 @@ impl<'a> StreamingRenderer<'a> {
                 let mut at = 0u64;
                 for (t, order, _) in &pi_rewrites {
                     let clusters = &self.clusters[*t as usize];
-                    up.upload_with(&ctx, &buf, at, order.len(), |k| {
+                    let r = up.upload_with(&ctx, &buf, at, order.len(), |k| {
                         clusters[order[k] as usize].bounds
-                    })?;
+                    });
+                    if let Err(e) = r {
+                        // Copies queued for the box buffer must not outlive it.
+                        up.abandon();
+                        return Err(e);
+                    }
                     at += order.len() as u64 * 24;
                 }
                 up.flush(&ctx)?;
@@ -258,10 +263,12 @@ impl<'a> StreamingRenderer<'a> {
             }
         };
         let built = (|| -> Result<Vec<(usize, AccelStruct)>> {
-            let up = self.up.as_mut().ok_or_else(|| {
-                GpuError::InvalidRequest("streaming: staging ring released".into())
-            })?;
-            records.upload(&ctx, up, &inst_buf, &offsets)?;
+            let up = self.up.as_mut().ok_or_else(staging_released)?;
+            if let Err(e) = records.upload(&ctx, up, &inst_buf, &offsets) {
+                // Copies queued for the instance buffer must not outlive it.
+                up.abandon();
+                return Err(e);
+            }
             up.flush(&ctx)?;
             let inst_addr = inst_buf.device_address()?.0;
             t_upload = lap(&mut t_phase);
