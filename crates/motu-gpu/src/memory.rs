@@ -307,14 +307,7 @@ impl DeviceMemory {
     /// Copies `data` into the mapping at `offset` (coherent memory: no flush needed). The GPU
     /// must not be using the range (all motu submissions are fenced before returning).
     pub fn write_bytes(&self, offset: u64, data: &[u8]) -> Result<()> {
-        self.check_range(offset, data.len())?;
-        let map = self.mapping()?;
-        // SAFETY: the range is inside the persistently mapped allocation (checked above) and
-        // host access is serialised by the mapping lock.
-        unsafe {
-            std::ptr::copy_nonoverlapping(data.as_ptr(), map.0.add(offset as usize), data.len())
-        };
-        Ok(())
+        self.with_mapped_mut(offset, data.len(), |bytes| bytes.copy_from_slice(data))
     }
 
     /// Lends the mapping's bytes `offset..offset + len` to `fill`, which writes them in place

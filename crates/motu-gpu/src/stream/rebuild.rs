@@ -232,18 +232,15 @@ impl<'a> StreamingRenderer<'a> {
                 scratch_bytes: s.build_scratch_size_bytes,
             });
         }
-        let total: u64 = counts
-            .iter()
-            .map(|&n| u64::from(n) * RECORD_BYTES as u64)
-            .sum();
+        // Each TLAS's byte offset in the instance buffer, and the buffer's size.
+        let mut offsets = Vec::with_capacity(ids.len());
+        let mut total = 0u64;
+        for &n in &counts {
+            offsets.push(total);
+            total += u64::from(n) * RECORD_BYTES as u64;
+        }
         self.frame_stats.tlas_builds += ids.len() as u32;
         self.frame_stats.tlas_instances_written += total / RECORD_BYTES as u64;
-        let mut offsets = Vec::with_capacity(ids.len());
-        let mut off = 0u64;
-        for &n in &counts {
-            offsets.push(off);
-            off += u64::from(n) * RECORD_BYTES as u64;
-        }
         let t_encode = lap(&mut t_phase);
         let mut t_upload = 0.0;
         let inst_buf = match self.heap.alloc_buffer(
@@ -350,7 +347,7 @@ impl<'a> StreamingRenderer<'a> {
             self.dirty.remove(&t);
         }
         tracing::debug!(
-            records = total / 64,
+            records = total / RECORD_BYTES as u64,
             probe_ms = t_probe,
             proxy_boxes = box_count,
             proxy_host_ms = t_proxy_host,
