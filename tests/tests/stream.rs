@@ -113,6 +113,33 @@ fn island_streams_under_a_quarter_of_its_full_build_with_the_same_aov() {
         "--max-mismatch",
         "0.001",
     ]);
+    // BLASes are built for fast trace in a full build and small when streaming, unless
+    // `--blas-build` says otherwise; either way the image is the full build's.
+    assert_eq!(full["blas_build"], "fast-trace", "{full}");
+    assert_eq!(st["blas_build"], "small", "{st}");
+    let ft_aov = dir.path().join("stream-fast-trace.aov");
+    let ft = render(
+        &pkg,
+        &ft_aov,
+        &[
+            "--width",
+            "64",
+            "--stream",
+            "--vram-budget",
+            BUDGET,
+            "--blas-build",
+            "fast-trace",
+        ],
+    );
+    assert_eq!(ft["blas_build"], "fast-trace", "{ft}");
+    assert_eq!(ft["stream"]["frames"][0]["complete"], true, "{ft}");
+    motu_ok(&[
+        "compare",
+        s(&full_aov),
+        s(&ft_aov),
+        "--max-mismatch",
+        "0.001",
+    ]);
 }
 
 #[test]

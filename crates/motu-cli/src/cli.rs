@@ -282,6 +282,21 @@ pub struct ReportArgs {
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BlasBuildArg {
+    FastTrace,
+    Small,
+}
+
+impl From<BlasBuildArg> for motu_gpu::BlasBuild {
+    fn from(b: BlasBuildArg) -> Self {
+        match b {
+            BlasBuildArg::FastTrace => motu_gpu::BlasBuild::FastTrace,
+            BlasBuildArg::Small => motu_gpu::BlasBuild::Small,
+        }
+    }
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BackendArg {
     Pipeline,
     Query,
@@ -376,6 +391,10 @@ pub struct RenderArgs {
     /// Cap on VkDeviceMemory allocations (lower than the device's, for testing).
     #[arg(long)]
     pub max_allocations: Option<u32>,
+    /// How BLASes are built. Default: fast-trace for a full build, small with --stream
+    /// (fast build and low memory: a fifth smaller on NVIDIA, faster to build).
+    #[arg(long, value_enum)]
+    pub blas_build: Option<BlasBuildArg>,
     /// Build only what rays touch and evict under the budget.
     #[arg(long)]
     pub stream: bool,

@@ -59,8 +59,47 @@ impl Default for AsBuildFlags {
     }
 }
 
+/// How triangle BLASes (and the streamer's proxy boxes) are built: what the driver is asked
+/// to favour. TLASes are always built for fast trace.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum BlasBuild {
+    /// Fast trace, compacted: the full build's default, where everything is resident once and
+    /// the frame is all tracing.
+    #[default]
+    FastTrace,
+    /// Fast build and low memory, compacted: streaming's default. On the H200 these BLASes
+    /// are a fifth smaller (island 0.3: 79 against 99 bytes a triangle) and build faster, so
+    /// more of a frame fits its room and a frame builds less; streaming frames are mostly
+    /// building, not tracing (BENCHMARKS.md, session 17).
+    Small,
+}
+
+impl BlasBuild {
+    /// The build flags (the same for the size query and the build).
+    pub fn flags(self) -> AsBuildFlags {
+        match self {
+            BlasBuild::FastTrace => AsBuildFlags::default(),
+            BlasBuild::Small => AsBuildFlags {
+                prefer_fast_trace: false,
+                prefer_fast_build: true,
+                low_memory: true,
+                ..AsBuildFlags::default()
+            },
+        }
+    }
+
+    /// The name `--blas-build` takes and `--stats` reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            BlasBuild::FastTrace => "fast-trace",
+            BlasBuild::Small => "small",
+        }
+    }
+}
+
 impl AsBuildFlags {
-    fn to_vk(self) -> vk::BuildAccelerationStructureFlagsKHR {
+    pub(crate) fn to_vk(self) -> vk::BuildAccelerationStructureFlagsKHR {
         use vk::BuildAccelerationStructureFlagsKHR as F;
         let mut f = F::empty();
         for (on, flag) in [
@@ -250,6 +289,25 @@ mod tests {
     use super::*;
     use crate::testing::{assert_no_validation_errors, context_or_skip};
     use crate::{ContextOptions, LimitOverrides, Requirement, ValidationRequest};
+
+    #[test]
+    fn blas_build_modes_ask_for_what_they_name() {
+        use vk::BuildAccelerationStructureFlagsKHR as F;
+        // Fast trace is what every other build (TLASes, the size model) uses.
+        assert_eq!(BlasBuild::FastTrace.flags(), AsBuildFlags::default());
+        assert_eq!(
+            BlasBuild::FastTrace.flags().to_vk(),
+            F::PREFER_FAST_TRACE | F::ALLOW_COMPACTION
+        );
+        // Small: fast build and low memory, still compacted (streamed BLASes are compacted).
+        assert_eq!(
+            BlasBuild::Small.flags().to_vk(),
+            F::PREFER_FAST_BUILD | F::LOW_MEMORY | F::ALLOW_COMPACTION
+        );
+        assert_eq!(BlasBuild::default(), BlasBuild::FastTrace);
+        assert_eq!(BlasBuild::Small.name(), "small");
+        assert_eq!(BlasBuild::FastTrace.name(), "fast-trace");
+    }
 
     fn tris(n: u32) -> BlasGeometry {
         BlasGeometry::Triangles {

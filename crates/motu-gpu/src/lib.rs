@@ -46,7 +46,7 @@ mod render_tests;
 mod stream_tests;
 
 pub use accel::{
-    AsBuildFlags, AsBuildSizes, BlasGeometry, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
+    AsBuildFlags, AsBuildSizes, BlasBuild, BlasGeometry, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
     INSTANCE_RECORD_SIZE_BYTES,
 };
 pub use command::CommandRecorder;

@@ -111,6 +111,8 @@ pub struct BuildOptions {
     pub staging_bytes: u64,
     /// Compact acceleration structures after building.
     pub compact: bool,
+    /// How BLASes are built (their size queries use the same flags; TLASes: fast trace).
+    pub blas_build: crate::accel::BlasBuild,
 }
 
 impl Default for BuildOptions {
@@ -122,6 +124,7 @@ impl Default for BuildOptions {
             max_batch_result_bytes: 256 * MIB,
             staging_bytes: FULL_BUILD_STAGING_CAP_BYTES,
             compact: true,
+            blas_build: crate::accel::BlasBuild::FastTrace,
         }
     }
 }
@@ -545,7 +548,7 @@ impl GpuScene {
                 descs.push(None);
                 continue;
             };
-            let sz = ctx.blas_build_sizes(&shape, AsBuildFlags::default())?;
+            let sz = ctx.blas_build_sizes(&shape, opts.blas_build.flags())?;
             sizes.push(BuildSize {
                 result_bytes: sz.acceleration_structure_size_bytes,
                 scratch_bytes: sz.build_scratch_size_bytes,

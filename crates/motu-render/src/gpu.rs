@@ -95,6 +95,7 @@ fn build_gpu_scene(
         &meshes,
         s.device.vram_budget_bytes,
         s.device.max_allocations,
+        s.blas_build(),
         instance_lod,
     )?;
     Ok((ctx, scene))
@@ -109,6 +110,7 @@ pub fn build_scene(
     meshes: &dyn motu_gpu::MeshBlobSource,
     vram_budget_bytes: Option<u64>,
     max_allocations: Option<u32>,
+    blas_build: motu_gpu::BlasBuild,
     instance_lod: Option<&InstanceLod>,
 ) -> Result<motu_gpu::GpuScene, RenderError> {
     let budget = vram_budget_bytes.unwrap_or(u64::MAX);
@@ -116,6 +118,7 @@ pub fn build_scene(
         budget_bytes: budget,
         max_allocations: max_allocations
             .unwrap_or(motu_gpu::BuildOptions::default().max_allocations),
+        blas_build,
         // The staging ring (64 MiB, less under a budget) is motu-gpu's policy, the one
         // `motu report` counts.
         ..Default::default()

@@ -84,6 +84,7 @@ pub fn render(
     };
     let mut stats = stats;
     lod_stats(&mut stats, job.lod);
+    stats["blas_build"] = json!(s.blas_build().name());
     let stats = contract_stats(
         stats,
         json!({

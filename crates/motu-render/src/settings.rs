@@ -46,6 +46,8 @@ pub struct DeviceRequest {
     pub index: Option<usize>,
     pub vram_budget_bytes: Option<u64>,
     pub max_allocations: Option<u32>,
+    /// `--blas-build` (`None`: fast trace for a full build, small when streaming).
+    pub blas_build: Option<motu_gpu::BlasBuild>,
 }
 
 /// `--stream`'s own settings: the pass cap (`--stream-max-passes`; `None`: sized from the
@@ -59,6 +61,16 @@ pub struct StreamSettings {
 }
 
 impl RenderSettings {
+    /// How BLASes are built: `--blas-build`, else small when streaming (the budget binds and
+    /// frames are mostly building) and fast trace for a full build (the frame is all tracing).
+    pub fn blas_build(&self) -> motu_gpu::BlasBuild {
+        self.device.blas_build.unwrap_or(if self.stream.is_some() {
+            motu_gpu::BlasBuild::Small
+        } else {
+            motu_gpu::BlasBuild::FastTrace
+        })
+    }
+
     /// The view's name (`--view`, the `--stats` key `view`).
     pub fn view_name(&self) -> &'static str {
         match self.view {

@@ -73,6 +73,7 @@ pub(crate) fn render_streaming(
             .max_allocations
             .unwrap_or(motu_gpu::StreamOptions::default().max_allocations),
         max_passes: stream.max_passes.unwrap_or(0),
+        blas_build: s.blas_build(),
         ..stream.bounds.options()
     };
     // A recorded path renders at its cameras' size, not the package camera's.

@@ -251,6 +251,7 @@ impl<'p> PackageSource<'p> {
                     self.meshes,
                     s.vram_budget_bytes,
                     s.max_allocations,
+                    motu_gpu::BlasBuild::FastTrace,
                     lod_choice.instance.as_ref(),
                 )?;
                 Renderer::Full(Some(Box::new(motu_gpu::LiveRenderer::new(scene))))

@@ -104,6 +104,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         aov: Some(a.work_dir.join("demo.aov")),
         vram_budget: None,
         max_allocations: None,
+        blas_build: None,
         stream: false,
         allow_incomplete: false,
         stream_max_passes: None,

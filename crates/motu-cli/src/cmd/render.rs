@@ -250,6 +250,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             index: a.device,
             vram_budget_bytes: a.vram_budget,
             max_allocations: a.max_allocations,
+            blas_build: a.blas_build.map(Into::into),
         },
         stream: a.stream.then(|| motu_render::StreamSettings {
             max_passes: a.stream_max_passes,

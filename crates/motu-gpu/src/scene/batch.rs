@@ -93,10 +93,10 @@ pub(crate) fn build_pipelined<'g>(
     let mut in_flight: Vec<AccelStruct> = Vec::new();
     let result = (|| -> Result<()> {
         let scratch_base = scratch.device_address()?.0.div_ceil(scratch_align) * scratch_align;
-        let kind = if ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL {
-            "tlas"
+        let (kind, flags) = if ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL {
+            ("tlas", crate::accel::AsBuildFlags::default().to_vk())
         } else {
-            "blas"
+            ("blas", opts.blas_build.flags().to_vk())
         };
         if let (Some(st), Some(first)) = (stager.as_deref_mut(), plan.batches.first()) {
             st.stage(first.builds.clone())?;
@@ -137,10 +137,8 @@ pub(crate) fn build_pipelined<'g>(
                     .map(|((g, _), p)| {
                         vk::AccelerationStructureBuildGeometryInfoKHR::default()
                             .ty(ty)
-                            .flags(
-                                vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE
-                                    | vk::BuildAccelerationStructureFlagsKHR::ALLOW_COMPACTION,
-                            )
+                            // The flags the sizes were queried with.
+                            .flags(flags)
                             .mode(vk::BuildAccelerationStructureModeKHR::BUILD)
                             .dst_acceleration_structure(p.accel.handle)
                             .geometries(g)

@@ -34,7 +34,9 @@ impl<'a> StreamingRenderer<'a> {
             else {
                 continue;
             };
-            let sz = self.ctx.blas_build_sizes(&shape, AsBuildFlags::default())?;
+            let sz = self
+                .ctx
+                .blas_build_sizes(&shape, self.build_opts.blas_build.flags())?;
             sizes.push(BuildSize {
                 result_bytes: sz.acceleration_structure_size_bytes,
                 scratch_bytes: sz.build_scratch_size_bytes,
@@ -172,7 +174,7 @@ impl<'a> StreamingRenderer<'a> {
                             aabb_count: n,
                             opaque: false,
                         }],
-                        AsBuildFlags::default(),
+                        self.build_opts.blas_build.flags(),
                     )?;
                     sizes.push(BuildSize {
                         result_bytes: sz.acceleration_structure_size_bytes,

@@ -265,6 +265,7 @@ impl<'a> StreamingRenderer<'a> {
             max_batch_result_bytes: (opts.scratch_budget_bytes.max(MIB) * 2).min(budget / 4),
             staging_bytes: opts.staging_bytes,
             compact: opts.compact,
+            blas_build: opts.blas_build,
         };
         let scene_triangles = view
             .blases
