@@ -527,6 +527,13 @@ fn allocation_cap_and_budget_are_respected() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("budget") && !err.contains("panicked"), "{err}");
+    // The refusal says what would render instead.
+    assert!(
+        err.contains("full build (fast-trace BLASes) does not fit")
+            && err.contains("--stream renders under any budget above its floor")
+            && err.contains("--blas-build small"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -128,7 +128,13 @@ pub fn build_scene(
         None => *view,
     };
     let mut scene =
-        motu_gpu::GpuScene::build(ctx, &built, meshes, &build).map_err(RenderError::Build)?;
+        motu_gpu::GpuScene::build(ctx, &built, meshes, &build).map_err(|e| match e {
+            motu_gpu::GpuError::Budget(_) => RenderError::BuildOverBudget {
+                blas_build: blas_build.name(),
+                source: e,
+            },
+            e => RenderError::Build(e),
+        })?;
     if let Some(il) = instance_lod {
         scene
             .enable_instance_lod(view, il)

@@ -80,6 +80,17 @@ pub enum RenderError {
     },
     #[error("building acceleration structures")]
     Build(#[source] motu_gpu::GpuError),
+    /// A full build refused by the budget: what else would render.
+    #[error(
+        "the full build ({blas_build} BLASes) does not fit under the budget: `motu report` \
+         prints what it needs; --stream renders under any budget above its floor, and \
+         --blas-build small builds smaller BLASes (a fifth smaller on NVIDIA)"
+    )]
+    BuildOverBudget {
+        blas_build: &'static str,
+        #[source]
+        source: motu_gpu::GpuError,
+    },
     #[error("setting up instance-level LOD")]
     InstanceLodSetup(#[source] motu_gpu::GpuError),
     #[error("rendering on the GPU")]
