@@ -582,6 +582,7 @@ impl GpuScene {
             },
             |_, _| Ok(()),
             Some(&mut stager),
+            &mut |_| {},
         );
         // Meshes no build used (none today: every uploaded mesh belongs to a built BLAS) still
         // get their data, for the shaders.
@@ -711,6 +712,7 @@ impl GpuScene {
                 *inst_buf.borrow_mut() = Some(b);
                 Ok(())
             },
+            &mut |_| {},
         );
         if let Some(b) = inst_buf.borrow_mut().take() {
             heap.free(b);

@@ -33,8 +33,11 @@ pub(crate) trait BatchStager {
 
 /// Builds `sizes.len()` structures in batches under the scratch budget, compacting each
 /// batch before the next. `geometry(k)` describes build k (addresses valid once
-/// `prepare(heap, batch_range)` ran for its batch). Returns (k, structure) pairs. On failure
-/// every structure this call created is released before the error returns (a streaming caller
+/// `prepare(heap, batch_range)` ran for its batch). `inputs_done(heap)` runs once, when the
+/// last batch is built and before it is compacted: the caller may free build inputs nothing
+/// reads after a build (a TLAS's instance buffer), as the scratch pool is freed there, so the
+/// compacted copies do not stack on them. Returns (k, structure) pairs. On failure every
+/// structure this call created is released before the error returns (a streaming caller
 /// evicts and retries).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn build_batched<'g>(
@@ -46,8 +49,20 @@ pub(crate) fn build_batched<'g>(
     opts: &BuildOptions,
     geometry: impl Fn(usize) -> (Vec<vk::AccelerationStructureGeometryKHR<'g>>, Vec<u32>),
     prepare: impl FnMut(&mut GpuHeap, std::ops::Range<usize>) -> Result<()>,
+    inputs_done: &mut dyn FnMut(&mut GpuHeap),
 ) -> Result<Vec<(usize, AccelStruct)>> {
-    build_pipelined(ctx, heap, report, sizes, ty, opts, geometry, prepare, None)
+    build_pipelined(
+        ctx,
+        heap,
+        report,
+        sizes,
+        ty,
+        opts,
+        geometry,
+        prepare,
+        None,
+        inputs_done,
+    )
 }
 
 /// [`build_batched`] with inputs staged one batch ahead by `stager`: batch k's copies and build
@@ -64,6 +79,7 @@ pub(crate) fn build_pipelined<'g>(
     geometry: impl Fn(usize) -> (Vec<vk::AccelerationStructureGeometryKHR<'g>>, Vec<u32>),
     mut prepare: impl FnMut(&mut GpuHeap, std::ops::Range<usize>) -> Result<()>,
     mut stager: Option<&mut dyn BatchStager>,
+    inputs_done: &mut dyn FnMut(&mut GpuHeap),
 ) -> Result<Vec<(usize, AccelStruct)>> {
     if sizes.is_empty() {
         return Ok(Vec::new());
@@ -80,19 +96,30 @@ pub(crate) fn build_pipelined<'g>(
         },
     )
     .map_err(|e| GpuError::Budget(e.to_string()))?;
-    let scratch = heap.alloc_buffer(
+    let mut scratch = Some(heap.alloc_buffer(
         "scratch-pool",
         plan.scratch_pool_bytes.max(scratch_align),
         BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
         AllocKind::Scratch,
         MemoryClass::DeviceLocal,
         scratch_align,
-    )?;
-    report.scratch_peak_bytes = report.scratch_peak_bytes.max(scratch.size_bytes());
+    )?);
+    let scratch_bytes = scratch.as_ref().map_or(0, |s| s.size_bytes());
+    report.scratch_peak_bytes = report.scratch_peak_bytes.max(scratch_bytes);
+    let scratch_address = match scratch.as_ref().map(|s| s.device_address()) {
+        Some(Ok(a)) => a.0,
+        Some(Err(e)) => {
+            if let Some(s) = scratch.take() {
+                heap.free(s);
+            }
+            return Err(e);
+        }
+        None => 0,
+    };
     let mut out: Vec<(usize, AccelStruct)> = Vec::with_capacity(sizes.len());
     let mut in_flight: Vec<AccelStruct> = Vec::new();
     let result = (|| -> Result<()> {
-        let scratch_base = scratch.device_address()?.0.div_ceil(scratch_align) * scratch_align;
+        let scratch_base = scratch_address.div_ceil(scratch_align) * scratch_align;
         let (kind, flags) = if ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL {
             ("tlas", crate::accel::AsBuildFlags::default().to_vk())
         } else {
@@ -198,6 +225,14 @@ pub(crate) fn build_pipelined<'g>(
                     }
                 }
                 submitted.wait()?;
+                if bi + 1 == plan.batches.len() {
+                    // Built: no batch reads the scratch or the inputs any more, and the
+                    // compacted copies below need room of their own.
+                    if let Some(s) = scratch.take() {
+                        heap.free(s);
+                    }
+                    inputs_done(heap);
+                }
                 if !opts.compact {
                     return Ok(Vec::new());
                 }
@@ -276,7 +311,9 @@ pub(crate) fn build_pipelined<'g>(
         }
         Ok(())
     })();
-    heap.free(scratch);
+    if let Some(s) = scratch {
+        heap.free(s);
+    }
     match result {
         Ok(()) => Ok(out),
         Err(e) => {
@@ -303,3 +340,147 @@ const BUILD_READS: MemoryScope = MemoryScope {
             | vk::AccessFlags::SHADER_READ.as_raw(),
     ),
 };
+
+#[cfg(test)]
+mod tests {
+    use motu_alloc::{AllocKind, AllocLimits, BuildSize, MemoryClass};
+
+    use super::build_batched;
+    use crate::accel::BlasGeometry;
+    use crate::context::Requirement;
+    use crate::heap::GpuHeap;
+    use crate::memory::BufferUsage;
+    use crate::scene::{BuildOptions, ResourceReport};
+    use crate::testing::{assert_no_validation_errors, context_or_skip};
+    use ash::vk;
+
+    fn scratch_bytes(heap: &GpuHeap) -> u64 {
+        heap.report()
+            .kinds
+            .get(&AllocKind::Scratch)
+            .map_or(0, |k| k.bytes)
+    }
+
+    /// `inputs_done` runs once, after the last batch is built, with the scratch pool already
+    /// freed: the inputs it frees and the scratch never stack on the compacted copies.
+    #[test]
+    fn inputs_are_released_once_the_last_batch_is_built() {
+        let Some(ctx) = context_or_skip("inputs_done", Requirement::RayTracing) else {
+            return;
+        };
+        let mut heap = GpuHeap::new(
+            &ctx,
+            AllocLimits {
+                max_allocation_count: 64,
+                max_allocation_size_bytes: ctx.limits().max_memory_allocation_size,
+                budget_bytes: 64 << 20,
+                host_visible_budget_bytes: 64 << 20,
+            },
+        )
+        .expect("heap");
+        // Three BLASes of 8 boxes each, one batch each.
+        let boxes: Vec<[f32; 6]> = (0..24)
+            .map(|i| {
+                let x = i as f32;
+                [x, 0.0, 0.0, x + 0.5, 1.0, 1.0]
+            })
+            .collect();
+        let input = heap
+            .alloc_buffer(
+                "aabbs",
+                (boxes.len() * 24) as u64,
+                BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT,
+                AllocKind::Geometry,
+                MemoryClass::HostVisible,
+                16,
+            )
+            .expect("input");
+        input.write(0, &boxes).expect("write boxes");
+        let base = input.device_address().expect("address").0;
+        let shape = [BlasGeometry::Aabbs {
+            aabb_count: 8,
+            opaque: true,
+        }];
+        let opts = BuildOptions {
+            max_batch_result_bytes: 1,
+            ..Default::default()
+        };
+        let sz = ctx
+            .blas_build_sizes(&shape, opts.blas_build.flags())
+            .expect("sizes");
+        let sizes = vec![
+            BuildSize {
+                result_bytes: sz.acceleration_structure_size_bytes,
+                scratch_bytes: sz.build_scratch_size_bytes,
+            };
+            3
+        ];
+        let mut input = Some(input);
+        let prepared = std::cell::Cell::new(0u32);
+        let mut done_calls = 0u32;
+        let mut scratch_while_preparing = 0u64;
+        let mut scratch_when_done = u64::MAX;
+        let mut report = ResourceReport::default();
+        let built = build_batched(
+            &ctx,
+            &mut heap,
+            &mut report,
+            &sizes,
+            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            &opts,
+            |k| {
+                let aabbs = vk::AccelerationStructureGeometryAabbsDataKHR::default()
+                    .data(vk::DeviceOrHostAddressConstKHR {
+                        device_address: base + k as u64 * 8 * 24,
+                    })
+                    .stride(24);
+                (
+                    vec![vk::AccelerationStructureGeometryKHR::default()
+                        .geometry_type(vk::GeometryTypeKHR::AABBS)
+                        .geometry(vk::AccelerationStructureGeometryDataKHR { aabbs })
+                        .flags(vk::GeometryFlagsKHR::OPAQUE)],
+                    vec![8],
+                )
+            },
+            |heap, _| {
+                prepared.set(prepared.get() + 1);
+                scratch_while_preparing = scratch_while_preparing.max(scratch_bytes(heap));
+                Ok(())
+            },
+            &mut |heap| {
+                done_calls += 1;
+                assert_eq!(
+                    prepared.get(),
+                    3,
+                    "every batch prepared before the inputs go"
+                );
+                scratch_when_done = scratch_bytes(heap);
+                if let Some(b) = input.take() {
+                    heap.free(b);
+                }
+            },
+        )
+        .expect("build");
+        assert_eq!(report.build_batches, 3);
+        assert_eq!(done_calls, 1);
+        assert!(input.is_none(), "the inputs were released by the callback");
+        assert!(
+            scratch_while_preparing > 0,
+            "the scratch pool lives while batches build"
+        );
+        assert_eq!(
+            scratch_when_done, 0,
+            "the scratch pool is freed before the inputs"
+        );
+        assert_eq!(built.len(), 3);
+        for (_, a) in built {
+            a.release(&mut heap);
+        }
+        assert_eq!(
+            heap.report().budget_in_use_bytes,
+            0,
+            "nothing left allocated"
+        );
+        assert_no_validation_errors(&ctx);
+    }
+}

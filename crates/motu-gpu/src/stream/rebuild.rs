@@ -54,6 +54,7 @@ impl<'a> StreamingRenderer<'a> {
             &self.build_opts,
             |k| (descs[k].0.clone(), descs[k].1.clone()),
             |_, _| Ok(()),
+            &mut |_| {},
         )?;
         Ok(built.into_iter().map(|(k, a)| (order[k], a)).collect())
     }
@@ -191,6 +192,7 @@ impl<'a> StreamingRenderer<'a> {
                     &self.build_opts,
                     |k| (descs[k].0.clone(), descs[k].1.clone()),
                     |_, _| Ok(()),
+                    &mut |_| {},
                 )
             })();
             self.heap.free(buf);
@@ -261,15 +263,21 @@ impl<'a> StreamingRenderer<'a> {
                 return Err(e);
             }
         };
+        // Freed as soon as the TLASes are built (`inputs_done`), before their compacted copies
+        // are allocated: the records are read by the build only.
+        let mut inst_buf = Some(inst_buf);
         let built = (|| -> Result<Vec<(usize, AccelStruct)>> {
+            let buf = inst_buf.as_ref().ok_or_else(|| {
+                GpuError::InvalidRequest("streaming: TLAS instance buffer missing".into())
+            })?;
             let up = self.up.as_mut().ok_or_else(staging_released)?;
-            if let Err(e) = records.upload(&ctx, up, &inst_buf, &offsets) {
+            if let Err(e) = records.upload(&ctx, up, buf, &offsets) {
                 // Copies queued for the instance buffer must not outlive it.
                 up.abandon();
                 return Err(e);
             }
             up.flush(&ctx)?;
-            let inst_addr = inst_buf.device_address()?.0;
+            let inst_addr = buf.device_address()?.0;
             t_upload = lap(&mut t_phase);
             let mut report = ResourceReport::default();
             build_batched(
@@ -293,9 +301,16 @@ impl<'a> StreamingRenderer<'a> {
                     )
                 },
                 |_, _| Ok(()),
+                &mut |heap| {
+                    if let Some(b) = inst_buf.take() {
+                        heap.free(b);
+                    }
+                },
             )
         })();
-        self.heap.free(inst_buf);
+        if let Some(b) = inst_buf.take() {
+            self.heap.free(b);
+        }
         let built = match built {
             Ok(b) => b,
             Err(e) => {
