@@ -61,3 +61,19 @@ pub fn assert_no_validation_errors(ctx: &Context) {
         errors.join("\n")
     );
 }
+
+/// A heap for a GPU unit test: `budget_bytes` of device-local and of host-visible memory, at
+/// most 64 blocks, each up to the device's largest allocation.
+#[cfg(test)]
+pub(crate) fn test_heap(ctx: &Context, budget_bytes: u64) -> crate::heap::GpuHeap {
+    crate::heap::GpuHeap::new(
+        ctx,
+        motu_alloc::AllocLimits {
+            max_allocation_count: 64,
+            max_allocation_size_bytes: ctx.limits().max_memory_allocation_size,
+            budget_bytes,
+            host_visible_budget_bytes: budget_bytes,
+        },
+    )
+    .expect("test heap")
+}

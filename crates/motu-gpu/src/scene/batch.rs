@@ -343,7 +343,7 @@ const BUILD_READS: MemoryScope = MemoryScope {
 
 #[cfg(test)]
 mod tests {
-    use motu_alloc::{AllocKind, AllocLimits, BuildSize, MemoryClass};
+    use motu_alloc::{AllocKind, BuildSize, MemoryClass};
 
     use super::build_batched;
     use crate::accel::BlasGeometry;
@@ -351,7 +351,7 @@ mod tests {
     use crate::heap::GpuHeap;
     use crate::memory::BufferUsage;
     use crate::scene::{BuildOptions, ResourceReport};
-    use crate::testing::{assert_no_validation_errors, context_or_skip};
+    use crate::testing::{assert_no_validation_errors, context_or_skip, test_heap};
     use ash::vk;
 
     fn scratch_bytes(heap: &GpuHeap) -> u64 {
@@ -368,16 +368,7 @@ mod tests {
         let Some(ctx) = context_or_skip("inputs_done", Requirement::RayTracing) else {
             return;
         };
-        let mut heap = GpuHeap::new(
-            &ctx,
-            AllocLimits {
-                max_allocation_count: 64,
-                max_allocation_size_bytes: ctx.limits().max_memory_allocation_size,
-                budget_bytes: 64 << 20,
-                host_visible_budget_bytes: 64 << 20,
-            },
-        )
-        .expect("heap");
+        let mut heap = test_heap(&ctx, 64 << 20);
         // Three BLASes of 8 boxes each, one batch each.
         let boxes: Vec<[f32; 6]> = (0..24)
             .map(|i| {

@@ -504,13 +504,12 @@ impl MeshGpu {
 
 #[cfg(test)]
 mod tests {
-    use motu_alloc::{AllocKind, AllocLimits, MemoryClass};
+    use motu_alloc::{AllocKind, MemoryClass};
 
     use super::Uploader;
     use crate::context::Requirement;
-    use crate::heap::GpuHeap;
     use crate::memory::BufferUsage;
-    use crate::testing::{assert_no_validation_errors, context_or_skip};
+    use crate::testing::{assert_no_validation_errors, context_or_skip, test_heap};
 
     /// Values written in place by `upload_with` land in order across several ring regions,
     /// at an offset, next to a plain upload queued before them.
@@ -519,16 +518,7 @@ mod tests {
         let Some(ctx) = context_or_skip("upload_with_regions", Requirement::Compute) else {
             return;
         };
-        let mut heap = GpuHeap::new(
-            &ctx,
-            AllocLimits {
-                max_allocation_count: 64,
-                max_allocation_size_bytes: ctx.limits().max_memory_allocation_size,
-                budget_bytes: 64 << 20,
-                host_visible_budget_bytes: 64 << 20,
-            },
-        )
-        .expect("heap");
+        let mut heap = test_heap(&ctx, 64 << 20);
         let mut up = Uploader::new(&mut heap, 64 << 10).expect("ring");
         assert_eq!(up.region_bytes(), 64 << 10);
         // 40,000 [u32; 6] values: 960,000 bytes, 15 regions, the last one partial.
