@@ -189,6 +189,19 @@ fn island_camera_path_needs_about_one_pass_per_frame_under_the_budget() {
     // 1.31 with the default AO ray; see the s3 issue-16 notes).
     assert!(mean <= 1.35, "mean passes after the first frame: {mean}");
     assert!(ratio >= 3.0, "triangles-built ratio {ratio}");
+    // Each frame names its largest TLAS rebuild's transient (what `room_bytes` leaves out):
+    // some bytes where a frame rebuilt a TLAS, none where it did not, under the budget.
+    let mut rebuilt = 0;
+    for f in stream["frames"].as_array().expect("frames") {
+        let transient = u(&f["tlas_rebuild_transient_bytes"]);
+        if u(&f["tlas_builds"]) > 0 {
+            rebuilt += 1;
+            assert!(transient > 0 && transient < PATH_BUDGET_BYTES, "{f}");
+        } else {
+            assert_eq!(transient, 0, "{f}");
+        }
+    }
+    assert!(rebuilt > 0, "the path rebuilt its TLAS");
     assert!(
         u(&totals["vram_peak_bytes"]) <= PATH_BUDGET_BYTES,
         "{totals}"

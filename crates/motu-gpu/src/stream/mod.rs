@@ -271,6 +271,13 @@ pub struct FrameStreamStats {
     /// records written for them.
     pub tlas_builds: u32,
     pub tlas_instances_written: u64,
+    /// The largest of the frame's TLAS rebuilds while it builds: its instance records, the
+    /// structures as built and their build scratch, by the driver's size queries (the proxies
+    /// and the compacted copies aside). Held only during the rebuild, so `room_bytes`
+    /// (measured after the frame) does not count it: a rebuild leaves about `room_bytes`
+    /// less this for BLASes, which is why a frame whose working set is within `room_bytes`
+    /// can still need more than one pass.
+    pub tlas_rebuild_transient_bytes: u64,
     /// The frame's working set: distinct BLASes its rays used (hit or open while resident,
     /// or built for them) and their bytes (structures plus meshes). Above what the budget
     /// leaves for structures, some BLAS must be built more than once in the frame.

@@ -245,6 +245,11 @@ impl<'a> StreamingRenderer<'a> {
         }
         self.frame_stats.tlas_builds += ids.len() as u32;
         self.frame_stats.tlas_instances_written += total / RECORD_BYTES as u64;
+        let transient = sizes
+            .iter()
+            .fold(total, |t, s| t + s.result_bytes + s.scratch_bytes);
+        let st = &mut self.frame_stats;
+        st.tlas_rebuild_transient_bytes = st.tlas_rebuild_transient_bytes.max(transient);
         let t_encode = lap(&mut t_phase);
         let mut t_upload = 0.0;
         let inst_buf = match self.heap.alloc_buffer(
