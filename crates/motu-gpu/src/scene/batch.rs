@@ -96,26 +96,24 @@ pub(crate) fn build_pipelined<'g>(
         },
     )
     .map_err(|e| GpuError::Budget(e.to_string()))?;
-    let mut scratch = Some(heap.alloc_buffer(
+    let pool = heap.alloc_buffer(
         "scratch-pool",
         plan.scratch_pool_bytes.max(scratch_align),
         BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
         AllocKind::Scratch,
         MemoryClass::DeviceLocal,
         scratch_align,
-    )?);
-    let scratch_bytes = scratch.as_ref().map_or(0, |s| s.size_bytes());
-    report.scratch_peak_bytes = report.scratch_peak_bytes.max(scratch_bytes);
-    let scratch_address = match scratch.as_ref().map(|s| s.device_address()) {
-        Some(Ok(a)) => a.0,
-        Some(Err(e)) => {
-            if let Some(s) = scratch.take() {
-                heap.free(s);
-            }
+    )?;
+    report.scratch_peak_bytes = report.scratch_peak_bytes.max(pool.size_bytes());
+    let scratch_address = match pool.device_address() {
+        Ok(a) => a.0,
+        Err(e) => {
+            heap.free(pool);
             return Err(e);
         }
-        None => 0,
     };
+    // Freed once the last batch is built (before its compaction), else at the end.
+    let mut scratch = Some(pool);
     let mut out: Vec<(usize, AccelStruct)> = Vec::with_capacity(sizes.len());
     let mut in_flight: Vec<AccelStruct> = Vec::new();
     let result = (|| -> Result<()> {
