@@ -61,8 +61,7 @@ impl Default for AsBuildFlags {
 
 /// How triangle BLASes (and the streamer's proxy boxes) are built: what the driver is asked
 /// to favour. TLASes are always built for fast trace.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "kebab-case")]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum BlasBuild {
     /// Fast trace, compacted: the full build's default, where everything is resident once and
     /// the frame is all tracing.

@@ -268,21 +268,20 @@ impl<'a> StreamingRenderer<'a> {
                 return Err(e);
             }
         };
-        // Freed as soon as the TLASes are built (`inputs_done`), before their compacted copies
-        // are allocated: the records are read by the build only.
-        let mut inst_buf = Some(inst_buf);
-        let built = (|| -> Result<Vec<(usize, AccelStruct)>> {
-            let buf = inst_buf.as_ref().ok_or_else(|| {
-                GpuError::InvalidRequest("streaming: TLAS instance buffer missing".into())
-            })?;
+        let uploaded = (|| -> Result<u64> {
             let up = self.up.as_mut().ok_or_else(staging_released)?;
-            if let Err(e) = records.upload(&ctx, up, buf, &offsets) {
+            if let Err(e) = records.upload(&ctx, up, &inst_buf, &offsets) {
                 // Copies queued for the instance buffer must not outlive it.
                 up.abandon();
                 return Err(e);
             }
             up.flush(&ctx)?;
-            let inst_addr = buf.device_address()?.0;
+            Ok(inst_buf.device_address()?.0)
+        })();
+        // Freed as soon as the TLASes are built (`inputs_done`), before their compacted copies
+        // are allocated: the records are read by the build only.
+        let mut inst_buf = Some(inst_buf);
+        let built = uploaded.and_then(|inst_addr| {
             t_upload = lap(&mut t_phase);
             let mut report = ResourceReport::default();
             build_batched(
@@ -312,7 +311,7 @@ impl<'a> StreamingRenderer<'a> {
                     }
                 },
             )
-        })();
+        });
         if let Some(b) = inst_buf.take() {
             self.heap.free(b);
         }
