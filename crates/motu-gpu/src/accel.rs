@@ -47,6 +47,17 @@ pub struct AsBuildFlags {
     pub low_memory: bool,
 }
 
+impl AsBuildFlags {
+    /// A TLAS's flags: fast trace, compaction allowed when it will be compacted (the size
+    /// query and the build must agree).
+    pub fn tlas(compact: bool) -> Self {
+        AsBuildFlags {
+            allow_compaction: compact,
+            ..AsBuildFlags::default()
+        }
+    }
+}
+
 impl Default for AsBuildFlags {
     fn default() -> Self {
         Self {

@@ -39,6 +39,37 @@ const ALL_USAGES: BufferUsage = BufferUsage::TRANSFER_SRC
     .union(BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT)
     .union(BufferUsage::SHADER_BINDING_TABLE);
 
+/// One buffer of a [`GpuHeap::try_fit`] question.
+#[derive(Clone, Copy, Debug)]
+pub struct FitRequest<'l> {
+    pub label: &'l str,
+    pub size_bytes: u64,
+    pub usage: BufferUsage,
+    pub kind: AllocKind,
+    pub class: MemoryClass,
+    pub alignment: u64,
+}
+
+/// The policy's request for `buffer` (its memory requirements, aligned to at least
+/// `alignment`).
+fn alloc_request(
+    buffer: &Buffer,
+    kind: AllocKind,
+    class: MemoryClass,
+    alignment: u64,
+) -> AllocRequest {
+    let req = buffer.memory_requirements();
+    let align = req
+        .alignment_bytes
+        .max(alignment)
+        .max(1)
+        .next_power_of_two();
+    match class {
+        MemoryClass::DeviceLocal => AllocRequest::device_local(kind, req.size_bytes, align),
+        MemoryClass::HostVisible => AllocRequest::host_visible(kind, req.size_bytes, align),
+    }
+}
+
 /// The allocator policy plus the memory blocks it decided to create.
 pub struct GpuHeap {
     ctx: Context,
@@ -120,16 +151,8 @@ impl GpuHeap {
                 usage,
             },
         )?;
+        let request = alloc_request(&buffer, kind, class, alignment);
         let req = buffer.memory_requirements();
-        let align = req
-            .alignment_bytes
-            .max(alignment)
-            .max(1)
-            .next_power_of_two();
-        let request = match class {
-            MemoryClass::DeviceLocal => AllocRequest::device_local(kind, req.size_bytes, align),
-            MemoryClass::HostVisible => AllocRequest::host_visible(kind, req.size_bytes, align),
-        };
         let alloc = self
             .allocator
             .alloc(request)
@@ -162,6 +185,28 @@ impl GpuHeap {
             id: alloc.id,
             kind,
         })
+    }
+
+    /// Whether buffers `wanted` (label, size, usage, kind, class, alignment as
+    /// [`alloc_buffer`](Self::alloc_buffer) takes them), all held at once, would be allocated
+    /// now; the budget's refusal of the first that would not. Creates buffer objects for
+    /// their memory requirements but allocates no memory.
+    pub fn try_fit(&self, wanted: &[FitRequest<'_>]) -> Result<()> {
+        let mut requests = Vec::with_capacity(wanted.len());
+        for w in wanted {
+            let buffer = Buffer::new(
+                &self.ctx,
+                w.label,
+                &BufferDesc {
+                    size_bytes: w.size_bytes.max(4),
+                    usage: w.usage,
+                },
+            )?;
+            requests.push(alloc_request(&buffer, w.kind, w.class, w.alignment));
+        }
+        self.allocator
+            .try_fit(&requests)
+            .map_err(|(i, e)| GpuError::Budget(format!("{}: {e}", wanted[i].label)))
     }
 
     /// Destroys the buffer and returns its range (and maybe its block) to the policy.
@@ -223,5 +268,76 @@ impl GpuHeap {
     /// Live `VkDeviceMemory` blocks of this heap.
     pub fn block_count(&self) -> usize {
         self.blocks.len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::context::Requirement;
+    use crate::testing::{assert_no_validation_errors, context_or_skip, test_heap};
+
+    /// `try_fit` answers as allocating would (the streamed TLAS rebuild's room probe asks it
+    /// instead of allocating) and allocates nothing: no block, no memory.
+    #[test]
+    fn try_fit_answers_as_allocating_would_without_allocating() {
+        let Some(ctx) = context_or_skip("heap_try_fit", Requirement::Compute) else {
+            return;
+        };
+        const MIB: u64 = 1 << 20;
+        let mut heap = test_heap(&ctx, 64 * MIB);
+        let held = heap
+            .alloc_buffer(
+                "held",
+                40 * MIB,
+                BufferUsage::STORAGE,
+                AllocKind::Other,
+                MemoryClass::DeviceLocal,
+                16,
+            )
+            .expect("40 MiB of 64");
+        let blocks = heap.block_count();
+        let report = heap.report();
+        let ask = |label, mib: u64| FitRequest {
+            label,
+            size_bytes: mib * MIB,
+            usage: BufferUsage::STORAGE,
+            kind: AllocKind::Scratch,
+            class: MemoryClass::DeviceLocal,
+            alignment: 16,
+        };
+        assert!(heap.try_fit(&[ask("small", 8)]).is_ok());
+        // Each alone fits; held together the second does not, and the error names it.
+        assert!(heap.try_fit(&[ask("second", 16)]).is_ok());
+        match heap.try_fit(&[ask("first", 16), ask("second", 16)]) {
+            Err(GpuError::Budget(msg)) => assert!(msg.starts_with("second:"), "{msg}"),
+            other => panic!("expected the budget's refusal of `second`: {other:?}"),
+        }
+        assert_eq!(heap.block_count(), blocks, "no memory allocated");
+        assert_eq!(heap.report(), report, "the policy's state unchanged");
+        // The real allocations agree.
+        let a = heap
+            .alloc_buffer(
+                "a",
+                16 * MIB,
+                BufferUsage::STORAGE,
+                AllocKind::Scratch,
+                MemoryClass::DeviceLocal,
+                16,
+            )
+            .expect("first fits");
+        assert!(heap
+            .alloc_buffer(
+                "b",
+                16 * MIB,
+                BufferUsage::STORAGE,
+                AllocKind::Scratch,
+                MemoryClass::DeviceLocal,
+                16
+            )
+            .is_err());
+        heap.free(a);
+        heap.free(held);
+        assert_no_validation_errors(&ctx);
     }
 }

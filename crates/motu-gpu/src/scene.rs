@@ -623,7 +623,7 @@ impl GpuScene {
         let count = |t: usize| hardware_instances[t];
         let mut sizes = Vec::with_capacity(view.tlases.len());
         for t in 0..view.tlases.len() {
-            let s = ctx.tlas_build_sizes(count(t), AsBuildFlags::default())?;
+            let s = ctx.tlas_build_sizes(count(t), AsBuildFlags::tlas(opts.compact))?;
             sizes.push(BuildSize {
                 result_bytes: s.acceleration_structure_size_bytes,
                 scratch_bytes: s.build_scratch_size_bytes,

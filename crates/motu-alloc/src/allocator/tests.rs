@@ -671,3 +671,42 @@ fn streaming_eviction_loop_stays_in_budget() {
     );
     assert!(a.report().peak_block_bytes <= budget);
 }
+
+/// `try_fit` answers as allocating would, for the requests held together, and changes
+/// nothing: no block, no event, no statistic.
+#[test]
+fn try_fit_answers_as_allocating_would_and_changes_nothing() {
+    let policy = AllocPolicy {
+        block_size_bytes: Some(8 * MIB),
+        dedicated_above_bytes: Some(4 * MIB),
+        ..AllocPolicy::default()
+    };
+    let mut a = Allocator::new(limits(20 * MIB, 8), policy).unwrap();
+    let small = a.alloc(blas(2 * MIB)).unwrap();
+    let _ = events(&mut a);
+    let before = a.report();
+    // 8 MiB of blocks used: 6 + 6 dedicated fit (20), 6 + 7 do not; 4 (not above the
+    // threshold) fits in the free part of the standard block beside 6 + 6, 5 would not.
+    assert!(a.try_fit(&[blas(6 * MIB), blas(6 * MIB)]).is_ok());
+    assert!(a
+        .try_fit(&[blas(6 * MIB), blas(6 * MIB), blas(4 * MIB)])
+        .is_ok());
+    assert!(a
+        .try_fit(&[blas(6 * MIB), blas(6 * MIB), blas(5 * MIB)])
+        .is_err());
+    let refused = a.try_fit(&[blas(6 * MIB), blas(7 * MIB)]);
+    assert!(
+        matches!(refused, Err((1, AllocError::OverBudget { .. }))),
+        "13 MiB more of dedicated blocks is over 20: {refused:?}"
+    );
+    // Held together, not one after another: each alone fits.
+    assert!(a.try_fit(&[blas(7 * MIB)]).is_ok());
+    assert!(!a.has_pending_events());
+    assert_eq!(a.report(), before);
+    assert_eq!(a.live_allocation_count(), 1);
+    // The real allocations agree with the answers.
+    let x = a.alloc(blas(6 * MIB)).unwrap();
+    assert!(a.alloc(blas(7 * MIB)).is_err());
+    a.free(x.id).unwrap();
+    a.free(small.id).unwrap();
+}

@@ -119,7 +119,10 @@ pub(crate) fn build_pipelined<'g>(
     let result = (|| -> Result<()> {
         let scratch_base = scratch_address.div_ceil(scratch_align) * scratch_align;
         let (kind, flags) = if ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL {
-            ("tlas", crate::accel::AsBuildFlags::default().to_vk())
+            (
+                "tlas",
+                crate::accel::AsBuildFlags::tlas(opts.compact).to_vk(),
+            )
         } else {
             ("blas", opts.blas_build.flags().to_vk())
         };
@@ -174,7 +177,12 @@ pub(crate) fn build_pipelined<'g>(
                     .collect();
                 let range_refs: Vec<&[vk::AccelerationStructureBuildRangeInfoKHR]> =
                     ranges.iter().map(|r| r.as_slice()).collect();
-                let queries = SizeQueries::new(ctx, pending_ref.len() as u32)?;
+                // Compacted sizes are asked only of structures built to be compacted.
+                let queries = if opts.compact {
+                    Some(SizeQueries::new(ctx, pending_ref.len() as u32)?)
+                } else {
+                    None
+                };
                 let handles: Vec<_> = pending_ref.iter().map(|p| p.accel.handle).collect();
                 let rec = ctx.record(&format!("{kind} build batch {bi}"))?;
                 let (c, cmd) = rec.raw();
@@ -193,14 +201,16 @@ pub(crate) fn build_pipelined<'g>(
                     memory_barrier(device, cmd, MemoryScope::ALL, MemoryScope::ALL);
                     accel.cmd_build_acceleration_structures(cmd, &infos, &range_refs);
                     memory_barrier(device, cmd, MemoryScope::ALL, MemoryScope::ALL);
-                    device.cmd_reset_query_pool(cmd, queries.pool, 0, queries.count);
-                    accel.cmd_write_acceleration_structures_properties(
-                        cmd,
-                        &handles,
-                        vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR,
-                        queries.pool,
-                        0,
-                    );
+                    if let Some(q) = &queries {
+                        device.cmd_reset_query_pool(cmd, q.pool, 0, q.count);
+                        accel.cmd_write_acceleration_structures_properties(
+                            cmd,
+                            &handles,
+                            vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR,
+                            q.pool,
+                            0,
+                        );
+                    }
                 }
                 let submitted = rec.submit()?;
                 // While the GPU builds this batch, load and stage the next one.
@@ -231,9 +241,9 @@ pub(crate) fn build_pipelined<'g>(
                     }
                     inputs_done(heap);
                 }
-                if !opts.compact {
+                let Some(queries) = queries else {
                     return Ok(Vec::new());
-                }
+                };
                 let compacted = queries.read(pending_ref.len() as u32)?;
                 // Nothing to gain (lavapipe reports the built size): keep the originals and
                 // skip the copies' second allocation, which would double the peak.

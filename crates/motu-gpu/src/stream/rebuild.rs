@@ -9,8 +9,9 @@ use super::residency::EvictWhy;
 use super::skeleton::{proxy_blas_record, proxy_pi, staging_released};
 use super::tlas_records::{TlasRecords, RECORD_BYTES};
 use super::{StreamingRenderer, TlasGpu, IDENTITY, MARKS_MASK};
-use crate::accel::AsBuildFlags;
+use crate::accel::{AsBuildFlags, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT};
 use crate::error::{GpuError, Result};
+use crate::heap::FitRequest;
 use crate::memory::BufferUsage;
 use crate::scene::{
     blas_geometry, build_batched, encode_instance, set_instance_mask, AccelStruct, ResourceReport,
@@ -230,7 +231,7 @@ impl<'a> StreamingRenderer<'a> {
         let counts = records.record_counts();
         let mut sizes = Vec::with_capacity(ids.len());
         for &n in &counts {
-            let s = ctx.tlas_build_sizes(n, AsBuildFlags::default())?;
+            let s = ctx.tlas_build_sizes(n, AsBuildFlags::tlas(self.build_opts.compact))?;
             sizes.push(BuildSize {
                 result_bytes: s.acceleration_structure_size_bytes,
                 scratch_bytes: s.build_scratch_size_bytes,
@@ -383,13 +384,15 @@ impl<'a> StreamingRenderer<'a> {
     }
 
     /// Fails fast with the budget's refusal when rebuilding TLASes `ids` cannot fit now:
-    /// allocates, then frees, what every attempt holds at once (the instance buffer, the
-    /// largest TLAS's build scratch and its structure: a subset of the real peak, so a refusal
-    /// here is one the build would meet). A refused attempt is retried after evicting
+    /// asks the allocator whether what every attempt holds at once fits (the instance buffer,
+    /// the largest TLAS's build scratch and its structure: a subset of the real peak, so a
+    /// refusal here is one the build would meet). A refused attempt is retried after evicting
     /// (`with_eviction`, `rebuild_dirty`'s give-back rounds) and used to refuse only after
     /// encoding, uploading every resident instance record and building the proxies: at ⅛ of
     /// the 0.3 island (2.8M resident records per rebuild) 46 TLAS builds for 14 rebuilds,
-    /// two thirds of the frame's 13.4 s of TLAS time.
+    /// two thirds of the frame's 13.4 s of TLAS time. Asked, not allocated: allocating and
+    /// freeing those buffers (dedicated blocks of up to a gigabyte) took 36–116 ms a rebuild
+    /// on the H200, 6% of a frame at a quarter of island 0.3 (BENCHMARKS.md, session 18).
     fn probe_tlas_room(&mut self, ids: &[u32]) -> Result<()> {
         let counts = self.resident_instance_counts();
         let mut records = 0u64;
@@ -403,7 +406,7 @@ impl<'a> StreamingRenderer<'a> {
             records += n;
             let s = self.ctx.tlas_build_sizes(
                 u32::try_from(n).unwrap_or(u32::MAX),
-                AsBuildFlags::default(),
+                AsBuildFlags::tlas(self.build_opts.compact),
             )?;
             if s.acceleration_structure_size_bytes > largest.0 {
                 largest = (
@@ -413,38 +416,32 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         let scratch_align = self.ctx.limits().scratch_alignment_bytes();
-        let instances = self.heap.alloc_buffer(
-            "stream-tlas-probe-instances",
-            (records * 64).max(64),
-            BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT | BufferUsage::TRANSFER_DST,
-            AllocKind::InstanceBuffer,
-            MemoryClass::DeviceLocal,
-            16,
-        )?;
-        let scratch = match self.heap.alloc_buffer(
-            "stream-tlas-probe-scratch",
-            largest.1.max(scratch_align),
-            BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
-            AllocKind::Scratch,
-            MemoryClass::DeviceLocal,
-            scratch_align,
-        ) {
-            Ok(b) => b,
-            Err(e) => {
-                self.heap.free(instances);
-                return Err(e);
-            }
-        };
-        let accel = AccelStruct::new(
-            &self.ctx,
-            &mut self.heap,
-            "stream-tlas-probe",
-            largest.0.max(256),
-            vk::AccelerationStructureTypeKHR::TOP_LEVEL,
-        );
-        self.heap.free(scratch);
-        self.heap.free(instances);
-        accel.map(|a| a.release(&mut self.heap))
+        self.heap.try_fit(&[
+            FitRequest {
+                label: "stream-tlas-probe-instances",
+                size_bytes: (records * RECORD_BYTES as u64).max(64),
+                usage: BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT | BufferUsage::TRANSFER_DST,
+                kind: AllocKind::InstanceBuffer,
+                class: MemoryClass::DeviceLocal,
+                alignment: 16,
+            },
+            FitRequest {
+                label: "stream-tlas-probe-scratch",
+                size_bytes: largest.1.max(scratch_align),
+                usage: BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
+                kind: AllocKind::Scratch,
+                class: MemoryClass::DeviceLocal,
+                alignment: scratch_align,
+            },
+            FitRequest {
+                label: "stream-tlas-probe",
+                size_bytes: largest.0.max(256),
+                usage: BufferUsage::ACCELERATION_STRUCTURE_STORAGE,
+                kind: AllocKind::TlasStorage,
+                class: MemoryClass::DeviceLocal,
+                alignment: ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
+            },
+        ])
     }
 
     /// Rebuilds every dirty TLAS. When the budget refuses even with everything unpinned
@@ -483,7 +480,7 @@ impl<'a> StreamingRenderer<'a> {
         let count = count + 2;
         let s = self.ctx.tlas_build_sizes(
             u32::try_from(count).unwrap_or(u32::MAX),
-            crate::accel::AsBuildFlags::default(),
+            AsBuildFlags::tlas(self.build_opts.compact),
         )?;
         let need = count * 64 + s.acceleration_structure_size_bytes + s.build_scratch_size_bytes;
         let old = self.tlas[t as usize]
