@@ -121,7 +121,7 @@ impl InstanceLod {
         let nt = view.tlases.len();
         let range = |t: u32| {
             let r = &view.tlases[t as usize];
-            r.instance_base as usize..(r.instance_base + r.instance_count) as usize
+            r.instance_range()
         };
         // Reachable TLASes, uses of each AABB BLAS (per reachable placement) and references
         // to each TLAS (LOD levels count as many).
@@ -424,9 +424,7 @@ fn count_reachable_selectors(v: &HierarchyView<'_>) -> u32 {
     let mut n = 0u32;
     while let Some(t) = todo.pop() {
         let r = &v.tlases[t as usize];
-        for inst in
-            &v.instances[r.instance_base as usize..(r.instance_base + r.instance_count) as usize]
-        {
+        for inst in &v.instances[r.instance_range()] {
             let b = &v.blases[inst.blas as usize];
             if b.kind != BLAS_AABBS || std::mem::replace(&mut seen_b[inst.blas as usize], true) {
                 continue;

@@ -48,6 +48,16 @@ pub struct TlasRecord {
     pub _pad1: u32,
 }
 
+impl TlasRecord {
+    /// Its instance records' indices in the instance table (computed in `usize`: the sum of
+    /// two `u32`s can pass `u32::MAX` in a corrupt table, which a reader then rejects by
+    /// range, not by overflow).
+    pub fn instance_range(&self) -> std::ops::Range<usize> {
+        let base = self.instance_base as usize;
+        base..base + self.instance_count as usize
+    }
+}
+
 /// The most programmable instances a TLAS's box list may hold ([`TlasRecord::box_list_instances`]):
 /// raygen slab-tests each of them on every first walk of that TLAS, so only a few (the pieces
 /// of a split root, a handful of PIs beside a TLAS's own instances) are worth taking out of the
@@ -291,8 +301,7 @@ impl HierarchyView<'_> {
         visit(self.root_tlas as usize, &mut tlas, &mut todo);
         while let Some(t) = todo.pop() {
             let rec = &self.tlases[t];
-            let range = rec.instance_base as usize
-                ..(rec.instance_base as usize + rec.instance_count as usize);
+            let range = rec.instance_range();
             for inst in self.instances.get(range).unwrap_or(&[]) {
                 let b = inst.blas as usize;
                 if b >= blas.len() || blas[b] {
@@ -463,8 +472,7 @@ impl RootSubset {
         let mut filtered = |rec: &TlasRecord,
                             instances: &mut Vec<InstanceRecord>|
          -> Result<Option<TlasRecord>, HierarchyError> {
-            let range =
-                rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize;
+            let range = rec.instance_range();
             let src = &view.instances[range];
             let tagged = src.iter().filter(|i| i.element != NONE_U32).count() as u32;
             let n_keep = src.iter().filter(|i| keep(i)).count();
@@ -494,10 +502,7 @@ impl RootSubset {
             Some(new) => new,
             None => {
                 let base = u32::try_from(base).map_err(|_| too_many("instances"))?;
-                instances.extend_from_within(
-                    root_rec.instance_base as usize
-                        ..(root_rec.instance_base + root_rec.instance_count) as usize,
-                );
+                instances.extend_from_within(root_rec.instance_range());
                 TlasRecord {
                     instance_base: base,
                     ..root_rec
@@ -550,7 +555,7 @@ fn compact_reachable(
     .reachable();
     let mut kept_instances = Vec::new();
     for (t, rec) in tlases.iter_mut().enumerate() {
-        let range = rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize;
+        let range = rec.instance_range();
         if reach_tlas[t] {
             // Fits u32: a subsequence of `instances`, whose ranges are u32.
             rec.instance_base = kept_instances.len() as u32;

@@ -361,8 +361,7 @@ fn root_placements_carry_their_element() {
     assert!(c.report.split_tlases >= 1);
     assert_eq!(tags(&c), tags(&whole));
     for piece in &c.tlases[1..] {
-        let range =
-            piece.instance_base as usize..(piece.instance_base + piece.instance_count) as usize;
+        let range = piece.instance_range();
         let insts = &c.instances[range];
         if piece.element != NONE_U32 {
             assert!(insts.iter().all(|i| i.element == piece.element));
@@ -396,8 +395,7 @@ fn split_keeps_huge_instances_in_the_parent_and_pieces_apart() {
         let b = crate::emit::instance_bounds(&c.blases, i);
         b.max[0] - b.min[0]
     };
-    let root_range =
-        root.instance_base as usize..(root.instance_base + root.instance_count) as usize;
+    let root_range = root.instance_range();
     assert!(
         c.instances[root_range.clone()]
             .iter()
@@ -405,8 +403,7 @@ fn split_keeps_huge_instances_in_the_parent_and_pieces_apart() {
         "the slab stays in the root"
     );
     for piece in &c.tlases[1..] {
-        let range =
-            piece.instance_base as usize..(piece.instance_base + piece.instance_count) as usize;
+        let range = piece.instance_range();
         assert!(
             c.instances[range].iter().all(|i| x_extent(i) < 10.0),
             "a piece holds the slab"

@@ -12,7 +12,7 @@ pub(crate) fn for_each_child(v: &HierarchyView<'_>, node: usize, mut f: impl FnM
     let nt = v.tlases.len();
     if node < nt {
         let t = &v.tlases[node];
-        let range = t.instance_base as usize..(t.instance_base + t.instance_count) as usize;
+        let range = t.instance_range();
         for inst in &v.instances[range] {
             f(nt + inst.blas as usize);
         }
@@ -112,7 +112,7 @@ pub(crate) fn finalize(out: &mut CompiledScene) -> Result<(), CompileError> {
         let node = node as usize;
         if node < nt {
             let t = out.tlases[node];
-            let range = t.instance_base as usize..(t.instance_base + t.instance_count) as usize;
+            let range = t.instance_range();
             let b = out.instances[range].iter().fold(Aabb::EMPTY, |acc, inst| {
                 acc.union(&crate::emit::instance_bounds(&out.blases, inst))
             });

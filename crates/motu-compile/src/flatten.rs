@@ -52,8 +52,7 @@ pub fn flatten_compiled_records(view: &HierarchyView<'_>, lod: u32) -> Vec<(Tran
             continue;
         }
         let tlas = &view.tlases[t as usize];
-        let range =
-            tlas.instance_base as usize..(tlas.instance_base + tlas.instance_count) as usize;
+        let range = tlas.instance_range();
         for inst in &view.instances[range] {
             let world_from_blas =
                 xform::compose(&world_from_tlas, &xform::from_array(&inst.tlas_from_blas));

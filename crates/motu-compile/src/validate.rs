@@ -140,7 +140,7 @@ pub fn validate_with(view: &HierarchyView<'_>, limits: &Limits) -> Result<(), Va
             });
         }
         let outer = bounds(i);
-        let range = t.instance_base as usize..(t.instance_base + t.instance_count) as usize;
+        let range = t.instance_range();
         for (k, inst) in view.instances[range].iter().enumerate() {
             let inner = bounds(nt + inst.blas as usize)
                 .transformed(&xform::from_array(&inst.tlas_from_blas));

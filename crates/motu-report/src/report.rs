@@ -138,7 +138,7 @@ fn untagged_label(input: &ReportInput, view: &HierarchyView<'_>) -> u32 {
 /// split root's pieces keep their instances' element tags.
 fn holds_root_placements(view: &HierarchyView<'_>, t: u32) -> bool {
     let r = &view.tlases[t as usize];
-    view.instances[r.instance_base as usize..(r.instance_base + r.instance_count) as usize]
+    view.instances[r.instance_range()]
         .iter()
         .any(|i| i.element != NONE_U32)
 }
@@ -184,9 +184,7 @@ fn root_placements(
                 if seen.insert(p.target) {
                     split_nodes.push(Node::Tlas(p.target));
                     let t = &view.tlases[p.target as usize];
-                    todo.push(
-                        t.instance_base as usize..(t.instance_base + t.instance_count) as usize,
-                    );
+                    todo.push(t.instance_range());
                 }
             }
         }
@@ -207,8 +205,7 @@ pub fn build_report_from_view(
     let mut warnings = Vec::new();
     let root = view.root_tlas;
     let root_rec = view.tlases[root as usize];
-    let root_range = root_rec.instance_base as usize
-        ..(root_rec.instance_base + root_rec.instance_count) as usize;
+    let root_range = root_rec.instance_range();
     let untagged = untagged_label(input, view);
     let (labelled, split_nodes) = root_placements(view, root_range.clone(), untagged);
     let mut own = Ownership::compute(&g, &labelled);

@@ -134,8 +134,7 @@ impl Scene {
     pub fn subset(&self, elements: &[u32]) -> Scene {
         let mut s = self.clone();
         let r = s.tlases[s.root as usize];
-        let keep: Vec<InstanceRecord> = self.instances
-            [r.instance_base as usize..(r.instance_base + r.instance_count) as usize]
+        let keep: Vec<InstanceRecord> = self.instances[r.instance_range()]
             .iter()
             .filter(|i| elements.contains(&i.element))
             .copied()

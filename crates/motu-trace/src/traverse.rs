@@ -329,8 +329,7 @@ impl<'a> Tracer<'a> {
 
     fn build_tlas(&self, t: u32, params: BuildParams) -> TlasAccel {
         let tlas = &self.view.tlases[t as usize];
-        let insts = &self.view.instances
-            [tlas.instance_base as usize..(tlas.instance_base + tlas.instance_count) as usize];
+        let insts = &self.view.instances[tlas.instance_range()];
         let mut boxes = Vec::with_capacity(insts.len());
         let mut blas_from_tlas = Vec::with_capacity(insts.len());
         for inst in insts {
@@ -632,9 +631,7 @@ fn tlas_children(
 ) -> Vec<u32> {
     let mut out = Vec::new();
     let tl = &v.tlases[t as usize];
-    for inst in
-        &v.instances[tl.instance_base as usize..(tl.instance_base + tl.instance_count) as usize]
-    {
+    for inst in &v.instances[tl.instance_range()] {
         let b = &v.blases[inst.blas as usize];
         let first_visit = !std::mem::replace(&mut seen_b[inst.blas as usize], true);
         let (base, n) = (b.item_base as usize, b.item_count as usize);

@@ -113,7 +113,7 @@ pub fn streaming_floor(
     let mut rebuild_scratch_max = 0u64;
     let mut rebuild_scratch_sum = 0u64;
     for (t, rec) in view.tlases.iter().enumerate() {
-        let range = rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize;
+        let range = rec.instance_range();
         // A streamed TLAS holds its PI instances, the proxy and the resident BLASes' instances:
         // at the floor one BLAS is resident (the most instanced one bounds its instances).
         let mut per_blas: std::collections::HashMap<u32, u32> = Default::default();

@@ -76,11 +76,7 @@ pub(super) fn proxy_clusters(
     let rec = &view.tlases[t];
     type Bounds = ([f32; 3], [f32; 3]);
     let mut by_blas: std::collections::BTreeMap<u32, (Vec<u32>, Vec<Bounds>)> = Default::default();
-    for (local, inst) in view.instances
-        [rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize]
-        .iter()
-        .enumerate()
-    {
+    for (local, inst) in view.instances[rec.instance_range()].iter().enumerate() {
         let b = inst.blas as usize;
         if !buildable(b) {
             continue;
@@ -180,9 +176,7 @@ impl<'a> StreamingRenderer<'a> {
         let mut parents: Vec<Vec<u32>> = vec![Vec::new(); nb];
         let mut parent_counts: Vec<Vec<u32>> = vec![Vec::new(); nb];
         for (t, rec) in view.tlases.iter().enumerate() {
-            for inst in &view.instances
-                [rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize]
-            {
+            for inst in &view.instances[rec.instance_range()] {
                 let b = inst.blas as usize;
                 match parents[b].iter().position(|&p| p == t as u32) {
                     Some(k) => parent_counts[b][k] += 1,
@@ -222,8 +216,7 @@ impl<'a> StreamingRenderer<'a> {
         let mut marks_blas = vec![NONE_U32; nt];
         for (t, rec) in view.tlases.iter().enumerate() {
             let base = u32::try_from(gpu_instances.len()).map_err(|_| too_many("instances"))?;
-            let range =
-                rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize;
+            let range = rec.instance_range();
             gpu_instances.extend_from_slice(&view.instances[range]);
             let mut count = rec.instance_count;
             if !clusters[t].is_empty() {

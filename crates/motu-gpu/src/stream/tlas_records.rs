@@ -169,7 +169,7 @@ impl<'r> TlasRecords<'r> {
 /// TLAS `t`'s instance range.
 fn instances_of<'v>(view: &HierarchyView<'v>, t: u32) -> &'v [InstanceRecord] {
     let rec = &view.tlases[t as usize];
-    &view.instances[rec.instance_base as usize..(rec.instance_base + rec.instance_count) as usize]
+    &view.instances[rec.instance_range()]
 }
 
 #[cfg(test)]
