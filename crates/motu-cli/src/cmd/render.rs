@@ -92,8 +92,9 @@ fn print_event(e: motu_render::RenderEvent<'_>, allow_incomplete: bool) {
                 " (incomplete: pass cap)"
             };
             eprintln!(
-                "frame {f}: {} passes{why}, {} BLAS + {} TLAS built ({}), {} evicted{}, {} streamed, {:.1} ms building, VRAM {} of {}, {:.1} ms tracing, {:.1} ms frame",
+                "frame {f}: {} passes{why}, {}, {} BLAS + {} TLAS built ({}), {} evicted{}, {} streamed, {:.1} ms building, VRAM {} of {}, {:.1} ms tracing, {:.1} ms frame",
                 st.passes,
+                working_set_note(st.working_set_bytes, st.room_bytes),
                 st.blas_built,
                 st.tlas_built,
                 crate::size::format_size(st.built_bytes),
@@ -383,6 +384,21 @@ pub fn device_at(
     })
 }
 
+/// What the frame's rays met against the room streamed structures have under the budget: a
+/// working set over its room cannot be resident at once, so its frame takes several passes
+/// whatever the prefetch does (a larger budget or a narrower view buys them back).
+fn working_set_note(working_set_bytes: u64, room_bytes: u64) -> String {
+    let (ws, room) = (
+        crate::size::format_size(working_set_bytes),
+        crate::size::format_size(room_bytes),
+    );
+    if working_set_bytes > room_bytes {
+        format!("working set {ws} OVER its room of {room}")
+    } else {
+        format!("working set {ws} in a room of {room}")
+    }
+}
+
 /// The causes of a frame's evictions beside their count, when any is not a BLAS build's room.
 fn evicted_causes(for_tlas: u32, on_refusal: u32) -> String {
     match (for_tlas, on_refusal) {
@@ -395,7 +411,23 @@ fn evicted_causes(for_tlas: u32, on_refusal: u32) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::evicted_causes;
+    use super::{evicted_causes, working_set_note};
+
+    #[test]
+    fn a_working_set_over_its_room_is_called_out() {
+        let mib = 1u64 << 20;
+        let over = working_set_note(24 * mib, 13 * mib);
+        assert!(over.contains("OVER its room"), "{over}");
+        assert!(
+            over.contains("24.0 MiB") && over.contains("13.0 MiB"),
+            "{over}"
+        );
+        let fits = working_set_note(7 * mib, 13 * mib);
+        assert!(
+            fits.starts_with("working set 7.0 MiB in a room of"),
+            "{fits}"
+        );
+    }
 
     #[test]
     fn eviction_causes_are_named_only_when_present() {
