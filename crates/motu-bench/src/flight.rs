@@ -313,23 +313,7 @@ fn run_streaming(
             motu_report::format_size(totals.vram_budget_bytes),
             n
         );
-        let _ = writeln!(
-            text,
-            "frame  passes  built        build ms  trace ms  wall ms  fallback px"
-        );
-        for r in &rows {
-            let _ = writeln!(
-                text,
-                "{:>5}  {:>6}  {:>11}  {:>8.2}  {:>8.2}  {:>7.2}  {:>11}",
-                r["frame"],
-                r["passes"],
-                motu_report::format_size(r["built_bytes"].as_u64().unwrap_or(0)),
-                r["build_ms"].as_f64().unwrap_or(0.0),
-                r["trace_ms"].as_f64().unwrap_or(0.0),
-                r["wall_ms"].as_f64().unwrap_or(0.0),
-                r["fallback_pixels"],
-            );
-        }
+        text.push_str(&frame_table(&rows));
         let _ = writeln!(
             text,
             "mean: {:.3} passes ({:.3} after the first frame), {} built, {:.2} ms building, {:.2} ms tracing, {:.2} ms wall per frame; {} frames incomplete",
@@ -345,6 +329,64 @@ fn run_streaming(
     Ok(Flight { report, text })
 }
 
+/// The per-frame rows of a streaming flight as a text table.
+fn frame_table(rows: &[Value]) -> String {
+    // Writing to a String cannot fail.
+    let mut text = String::new();
+    let _ = writeln!(
+        text,
+        "frame  passes  working set  room         built        build ms  trace ms  wall ms  fallback px"
+    );
+    for r in rows {
+        let bytes = |k: &str| motu_report::format_size(r[k].as_u64().unwrap_or(0));
+        let _ = writeln!(
+            text,
+            "{:>5}  {:>6}  {:>11}  {:>11}  {:>11}  {:>8.2}  {:>8.2}  {:>7.2}  {:>11}",
+            r["frame"],
+            r["passes"],
+            // A working set above its room cannot be resident at once: passes follow.
+            bytes("working_set_bytes"),
+            bytes("room_bytes"),
+            bytes("built_bytes"),
+            r["build_ms"].as_f64().unwrap_or(0.0),
+            r["trace_ms"].as_f64().unwrap_or(0.0),
+            r["wall_ms"].as_f64().unwrap_or(0.0),
+            r["fallback_pixels"],
+        );
+    }
+    text
+}
+
 fn backend_name(b: motu_gpu::Backend) -> &'static str {
     b.name()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_frame_table_shows_each_frames_working_set_beside_its_room() {
+        let mib = 1u64 << 20;
+        let rows = vec![serde_json::json!({
+            "frame": 3, "passes": 3, "working_set_bytes": 24 * mib, "room_bytes": 13 * mib,
+            "built_bytes": 20 * mib, "build_ms": 1.5, "trace_ms": 2.0, "wall_ms": 9.0,
+            "fallback_pixels": 0,
+        })];
+        let t = frame_table(&rows);
+        let mut lines = t.lines();
+        let head = lines.next().expect("header");
+        assert!(head.contains("working set  room"), "{t}");
+        let row = lines.next().expect("a row");
+        let cells: Vec<&str> = row
+            .split("  ")
+            .map(str::trim)
+            .filter(|c| !c.is_empty())
+            .collect();
+        assert_eq!(
+            &cells[..5],
+            &["3", "3", "24.0 MiB", "13.0 MiB", "20.0 MiB"],
+            "{t}"
+        );
+    }
 }
