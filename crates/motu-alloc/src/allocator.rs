@@ -280,9 +280,10 @@ impl Allocator {
 
     /// Whether `requests`, allocated in order and all held at once, would succeed now: the
     /// same policy run on a copy (nothing changes here, no block event is emitted). Returns
-    /// the index of the first refused request and the error it would meet. A caller that only needs to know
-    /// whether a large transient fits asks this instead of allocating and freeing real
-    /// memory (a dedicated `VkDeviceMemory` of a gigabyte costs tens of milliseconds).
+    /// the index of the first refused request and the error it would meet. A caller that
+    /// only needs to know whether a large transient fits asks this instead of allocating and
+    /// freeing real memory (a dedicated `VkDeviceMemory` of a gigabyte costs tens of
+    /// milliseconds).
     pub fn try_fit(&self, requests: &[AllocRequest]) -> Result<(), (usize, AllocError)> {
         let mut copy = self.clone();
         copy.events.clear();

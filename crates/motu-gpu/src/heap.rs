@@ -152,7 +152,6 @@ impl GpuHeap {
             },
         )?;
         let request = alloc_request(&buffer, kind, class, alignment);
-        let req = buffer.memory_requirements();
         let alloc = self
             .allocator
             .alloc(request)
@@ -163,7 +162,7 @@ impl GpuHeap {
         }
         tracing::debug!(
             label,
-            size_bytes = req.size_bytes,
+            size_bytes = request.size_bytes,
             ?class,
             in_use_bytes = self.allocator.in_use_bytes(class),
             "heap alloc"

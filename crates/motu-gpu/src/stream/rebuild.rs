@@ -482,7 +482,9 @@ impl<'a> StreamingRenderer<'a> {
             u32::try_from(count).unwrap_or(u32::MAX),
             AsBuildFlags::tlas(self.build_opts.compact),
         )?;
-        let need = count * 64 + s.acceleration_structure_size_bytes + s.build_scratch_size_bytes;
+        let need = count * RECORD_BYTES as u64
+            + s.acceleration_structure_size_bytes
+            + s.build_scratch_size_bytes;
         let old = self.tlas[t as usize]
             .as_ref()
             .map_or(0, |g| g.accel.size_bytes);
