@@ -348,6 +348,33 @@ pub struct StreamBoundArgs {
     /// probe. Default 1 (every pixel).
     #[arg(long, value_name = "STRIDE")]
     pub stream_probe: Option<u32>,
+    /// Streaming: how TLASes follow what is resident. `update`: each TLAS is built once over
+    /// all its instances (a non-resident one points at a placeholder no ray meets) and
+    /// updated in place as BLASes come and go: no rebuild transient, at the cost of the TLAS
+    /// at full residency kept resident. `rebuild`: rebuilt over its resident instances
+    /// whenever they change (smallest resident TLAS). `auto` (default): update when the
+    /// persistent TLASes take at most a fifth of the budget. `--stats` reports the choice
+    /// (stream.tlas_mode).
+    #[arg(long, value_enum, default_value = "auto")]
+    pub stream_tlas: StreamTlasArg,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum StreamTlasArg {
+    #[default]
+    Auto,
+    Update,
+    Rebuild,
+}
+
+impl From<StreamTlasArg> for motu_gpu::TlasUpdate {
+    fn from(a: StreamTlasArg) -> Self {
+        match a {
+            StreamTlasArg::Auto => motu_gpu::TlasUpdate::Auto,
+            StreamTlasArg::Update => motu_gpu::TlasUpdate::Update,
+            StreamTlasArg::Rebuild => motu_gpu::TlasUpdate::Rebuild,
+        }
+    }
 }
 
 fn parse_build_ms(s: &str) -> Result<f64, String> {

@@ -208,6 +208,12 @@ impl GpuHeap {
             .map_err(|(i, e)| GpuError::Budget(format!("{}: {e}", wanted[i].label)))
     }
 
+    /// Whether host-visible blocks count against the VRAM budget (unified memory: lavapipe,
+    /// integrated GPUs); where they do not, host-visible buffers leave the budget alone.
+    pub fn host_visible_counts_against_budget(&self) -> bool {
+        self.allocator.policy().host_visible_counts_against_budget
+    }
+
     /// Destroys the buffer and returns its range (and maybe its block) to the policy.
     pub fn free(&mut self, buffer: HeapBuffer) {
         let id = buffer.id;

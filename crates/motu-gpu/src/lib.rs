@@ -78,5 +78,5 @@ pub use scene::{
 };
 pub use stream::{
     streaming_floor, FloorSizes, FrameStreamStats, PassStats, StreamFallback, StreamFloor,
-    StreamOptions, StreamTotals, StreamingRenderer, PI_EMPTY_BLAS,
+    StreamOptions, StreamTotals, StreamingRenderer, TlasUpdate, PI_EMPTY_BLAS,
 };

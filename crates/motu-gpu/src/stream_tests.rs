@@ -931,3 +931,128 @@ fn tlas_records_written_through_a_small_ring_in_windows_match_the_full_build() {
     assert_same_aov(&reference.aov, &out.aov, &format!("{st:?}"));
     assert_no_validation_errors(&ctx);
 }
+
+/// Persistent TLASes (`StreamOptions::tlas_update`, `stream/persistent.rs`): the root is built
+/// once over all its 2,500 instances (non-resident ones on placeholders under mask 0) and
+/// updated in place as BLASes come and go. Under an eighth of the full build (evictions within
+/// a frame) and along a short path, every frame equals the full build pixel by pixel on both
+/// backends; updates rewrite only the records of BLASes whose residency changed; `Auto` keeps
+/// small scenes rebuilt.
+#[test]
+fn persistent_tlases_updated_in_place_match_the_full_build_on_both_backends() {
+    let Some(ctx) = context_or_skip("stream_persistent_tlas", Requirement::RayTracing) else {
+        return;
+    };
+    let h = instanced_grid(50, 7);
+    let blobs = Blobs(&h);
+    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
+    let budget = full_build_needs(&full) / 8;
+    let path = CameraPath {
+        yaw_sweep_deg: 40.0,
+        dolly_world: 2.0,
+    };
+    let frames = 4;
+    for be in available_backends(&ctx) {
+        let opts = ids_opts(be);
+        let mut sr = StreamingRenderer::new(
+            &ctx,
+            h.view(),
+            &blobs,
+            &StreamOptions {
+                tlas_update: crate::TlasUpdate::Update,
+                ..small_stream_options(budget)
+            },
+        )
+        .expect("streaming renderer");
+        let totals = sr.totals();
+        assert_eq!(totals.tlas_mode, "update", "{totals:?}");
+        assert_eq!(totals.persistent_tlases, 1, "{totals:?}");
+        let (mut updates, mut written) = (0, 0);
+        for f in 0..frames {
+            let cam = camera_path(&base_pose(), &path, f, frames).params(32, 32);
+            let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
+            eprintln!(
+                "{be:?} frame {f}: {}",
+                serde_json::to_string(&st).unwrap_or_default()
+            );
+            assert!(st.complete, "{st:?}");
+            assert!(st.vram_peak_bytes <= budget, "{st:?}");
+            // Updates, not rebuilds: each patches the records of the BLASes that came or went
+            // plus the proxy and marks (all 2,502 when every BLAS changed).
+            assert_eq!(st.tlas_updates, st.tlas_builds, "{st:?}");
+            assert!(
+                st.tlas_instances_written <= u64::from(st.tlas_updates) * 2_502,
+                "{st:?}"
+            );
+            updates += st.tlas_updates;
+            written += st.tlas_instances_written;
+            let reference = render(&ctx, &full, &cam, &opts).expect("full render");
+            assert_same_aov(
+                &reference.aov,
+                &out.aov,
+                &format!("{be:?} frame {f}: {st:?}"),
+            );
+        }
+        assert!(
+            updates >= 2,
+            "residency changed and the TLAS followed: {updates}"
+        );
+        assert!(!sr.totals().persistent_dropped);
+    }
+    // `Auto` on a scene of 2,500 instances: rebuilt (a rebuild takes milliseconds there).
+    let sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
+        .expect("streaming renderer");
+    assert_eq!(sr.totals().tlas_mode, "rebuild");
+    assert_eq!(sr.totals().persistent_tlases, 0);
+    drop(sr);
+    assert_no_validation_errors(&ctx);
+}
+
+/// Forced persistent TLASes at 1.05× the streaming floor (sized for rebuilt TLASes): when a
+/// BLAS does not fit next to them the renderer drops them and rebuilds from then on, so the
+/// floor's guarantee holds whatever `--stream-tlas` says; the frame equals the full build.
+#[test]
+fn forced_persistent_tlases_at_the_floor_give_way_and_the_frame_completes() {
+    let Some(ctx) = context_or_skip("stream_persistent_floor", Requirement::RayTracing) else {
+        return;
+    };
+    let h = instanced_grid(50, 7);
+    let blobs = Blobs(&h);
+    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
+    let cam = base_pose().params(32, 32);
+    let opts = ids_opts(backend(&ctx));
+    let reference = render(&ctx, &full, &cam, &opts).expect("full render");
+    let base = small_stream_options(0);
+    let floor = crate::streaming_floor(&h.view(), &ctx, 32, 32, base.staging_bytes)
+        .expect("floor")
+        .min_resident_bytes;
+    let budget = floor + floor / 20;
+    let mut sr = StreamingRenderer::new(
+        &ctx,
+        h.view(),
+        &blobs,
+        &StreamOptions {
+            tlas_update: crate::TlasUpdate::Update,
+            ..small_stream_options(budget)
+        },
+    )
+    .expect("streaming renderer at 1.05x the floor");
+    let before = sr.totals();
+    let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
+    let after = sr.totals();
+    eprintln!(
+        "floor {floor} budget {budget}: persistent {} B ({}), dropped {}; {}",
+        before.persistent_tlas_bytes,
+        before.tlas_mode,
+        after.persistent_dropped,
+        serde_json::to_string(&st).unwrap_or_default()
+    );
+    assert!(st.complete, "{st:?}");
+    assert!(st.vram_peak_bytes <= budget, "{st:?}");
+    assert_same_aov(&reference.aov, &out.aov, &format!("{st:?}"));
+    if after.persistent_dropped {
+        assert_eq!(after.tlas_mode, "rebuild");
+        assert_eq!(after.persistent_tlases, 0);
+    }
+    assert_no_validation_errors(&ctx);
+}

@@ -15,7 +15,7 @@ pub use motu_render::{
 };
 
 /// The streaming bounds of `--stream-fallback`, `--stream-build-budget`, `--stream-build-ms`,
-/// and `--stream-probe`.
+/// `--stream-probe` and `--stream-tlas`.
 pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBounds {
     motu_render::StreamBounds {
         fallback: match b.stream_fallback {
@@ -25,6 +25,7 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         frame_build_bytes: b.stream_build_budget,
         frame_build_ms: b.stream_build_ms,
         probe_stride: b.stream_probe,
+        tlas_update: b.stream_tlas.into(),
     }
 }
 

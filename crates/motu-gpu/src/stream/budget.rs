@@ -115,7 +115,7 @@ impl<'a> StreamingRenderer<'a> {
         }
         let pixels = u64::from(w) * u64::from(h);
         let nitems = self.item_count() as u64;
-        self.with_eviction(|s| {
+        self.with_eviction_or_rebuilt_tlases(|s| {
             alloc_frame_buffers(&mut s.heap, pixels, guard_len as u64, nitems, params)
         })
         .map_err(|e| self.skeleton_error("the frame buffers", e))

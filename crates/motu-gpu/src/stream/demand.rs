@@ -256,6 +256,11 @@ impl<'a> StreamingRenderer<'a> {
                         self.unpin_pass_pins();
                         continue;
                     }
+                    if self.drop_persistent() {
+                        // The floor is sized for rebuilt TLASes: without the persistent ones
+                        // it fits (their rebuild comes at the end of this step).
+                        continue;
+                    }
                     return Err(self.does_not_fit(queue[i], &msg));
                 }
                 Err(e) => return Err(e),

@@ -51,7 +51,7 @@ impl<'a> StreamingRenderer<'a> {
             }
             self.pinned = vec![false; self.item_count()];
             let t = self
-                .with_eviction(|s| {
+                .with_eviction_or_rebuilt_tlases(|s| {
                     // Streamed TLASes keep every PI in the hardware walk (no box lists).
                     let slots = crate::scene::pi_capacity(&s.view, false);
                     Tracer::new(&s.ctx.clone(), &mut s.heap, opts, slots, true)
@@ -147,12 +147,14 @@ impl<'a> StreamingRenderer<'a> {
             .flatten()
             .map(|m| m.size_bytes())
             .sum::<u64>();
+        let host_counts = self.heap.host_visible_counts_against_budget();
         skeleton_bytes += self
             .tlas
             .iter()
             .flatten()
-            .map(|t| t.size_bytes())
-            .sum::<u64>();
+            .map(|t| t.size_bytes(host_counts))
+            .sum::<u64>()
+            + self.placeholders.bytes;
         st.resident_blases = streamed_blases;
         st.resident_tlases = self.tlas.iter().filter(|t| t.is_some()).count() as u32;
         st.resident_bytes = streamed_bytes + skeleton_bytes;

@@ -83,6 +83,7 @@ mod floor;
 mod frame;
 mod params;
 mod passes;
+mod persistent;
 mod probe;
 mod proxy_boxes;
 mod rebuild;
@@ -92,6 +93,7 @@ mod skeleton;
 mod tlas_records;
 
 pub use floor::{streaming_floor, FloorSizes, StreamFloor};
+pub use persistent::TlasUpdate;
 
 use std::collections::BTreeSet;
 
@@ -154,6 +156,9 @@ pub struct StreamOptions {
     pub frame_build_bytes: u64,
     /// Milliseconds of building one frame may spend; 0: unbounded (same rules).
     pub frame_build_ms: f64,
+    /// Whether TLASes are persistent and updated as residency changes, or rebuilt over their
+    /// resident instances (`--stream-tlas`; see `persistent.rs`).
+    pub tlas_update: TlasUpdate,
 }
 
 /// See [`StreamOptions::fallback`].
@@ -187,6 +192,7 @@ impl Default for StreamOptions {
             fallback: StreamFallback::Off,
             frame_build_bytes: 0,
             frame_build_ms: 0.0,
+            tlas_update: TlasUpdate::Auto,
         }
     }
 }
@@ -268,9 +274,12 @@ pub struct FrameStreamStats {
     pub build_groups: u32,
     pub refused_groups: u32,
     /// TLAS builds (each rebuild of a dirty TLAS counts, retries included) and the instance
-    /// records written for them.
+    /// records written for them (for persistent TLASes: the records patched).
     pub tlas_builds: u32,
     pub tlas_instances_written: u64,
+    /// Of `tlas_builds`: updates of persistent TLASes (a refit over every instance, no new
+    /// structure; see `StreamOptions::tlas_update`).
+    pub tlas_updates: u32,
     /// The largest of the frame's TLAS rebuilds while it builds: its instance records, the
     /// structures as built and their build scratch, by the driver's size queries (the proxies
     /// and the compacted copies aside). Held only during the rebuild, so `room_bytes`
@@ -359,6 +368,15 @@ pub struct StreamTotals {
     /// computing them from the meshes took at start.
     pub proxy_boxes: u64,
     pub proxy_boxes_ms: f64,
+    /// How TLASes followed residency (`update` or `rebuild`, as `--stream-tlas` resolved),
+    /// the persistent ones, and the VRAM they and their placeholders keep (structures at
+    /// full residency, update scratch, and records where host memory counts).
+    pub tlas_mode: &'static str,
+    pub persistent_tlases: u32,
+    pub persistent_tlas_bytes: u64,
+    /// A BLAS did not fit next to the persistent TLASes, so they were dropped and TLASes
+    /// rebuilt from then on (the floor is sized for rebuilt TLASes).
+    pub persistent_dropped: bool,
     pub vram_peak_bytes: u64,
     pub vram_budget_bytes: u64,
 }
@@ -370,6 +388,8 @@ struct TlasGpu {
     /// The resident clusters' boxes (instance mask [`MARKS_MASK`]): only probe passes' rays
     /// meet them, to mark what they pass through (present while some cluster is resident).
     marks: Option<AccelStruct>,
+    /// Present when the TLAS is persistent (every instance, updated: `persistent.rs`).
+    persistent: Option<persistent::Persistent>,
 }
 
 impl TlasGpu {
@@ -378,10 +398,18 @@ impl TlasGpu {
         for a in [self.proxy, self.marks].into_iter().flatten() {
             a.release(heap);
         }
+        if let Some(p) = self.persistent {
+            p.release(heap);
+        }
     }
 
-    fn size_bytes(&self) -> u64 {
+    /// VRAM it holds (`host_counts`: whether host-visible memory counts against the budget).
+    fn size_bytes(&self, host_counts: bool) -> u64 {
         self.accel.size_bytes
+            + self
+                .persistent
+                .as_ref()
+                .map_or(0, |p| p.size_bytes(host_counts))
             + [&self.proxy, &self.marks]
                 .into_iter()
                 .flatten()
@@ -403,6 +431,10 @@ pub(super) const TRIANGLE_MASK: u8 = 0x01;
 pub struct StreamingRenderer<'a> {
     // Acceleration structures first (destroyed before the heap's blocks).
     blas: Vec<Option<AccelStruct>>,
+    /// The persistent TLASes' placeholder BLASes (empty unless some TLAS is persistent).
+    placeholders: persistent::Placeholders,
+    /// Per TLAS: persistent (built over every instance, then updated) rather than rebuilt.
+    persistent_mode: Vec<bool>,
     tlas: Vec<Option<TlasGpu>>,
     meshes: Vec<Option<MeshGpu>>,
     mesh_refs: Vec<u32>,

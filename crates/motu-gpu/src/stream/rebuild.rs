@@ -75,12 +75,26 @@ impl<'a> StreamingRenderer<'a> {
         };
         let mut t_phase = std::time::Instant::now();
         for &t in ids {
-            if let Some(old) = self.tlas[t as usize].take() {
+            if self.is_persistent(t) {
+                // The structure stays; its old proxy and marks go first, as a rebuilt TLAS's
+                // whole build does (dirty: never traced until updated).
+                if let Some(g) = self.tlas[t as usize].as_mut() {
+                    for a in [g.proxy.take(), g.marks.take()].into_iter().flatten() {
+                        a.release(&mut self.heap);
+                    }
+                }
+                self.dirty.insert(t);
+            } else if let Some(old) = self.tlas[t as usize].take() {
                 old.release(&mut self.heap);
                 self.dirty.insert(t);
             }
         }
-        self.probe_tlas_room(ids)?;
+        // Persistent TLASes are updated (or built once over every instance); the rest rebuilt.
+        let (persistent_ids, rebuild_ids): (Vec<u32>, Vec<u32>) =
+            ids.iter().partition(|&&t| self.persistent_mode[t as usize]);
+        if !rebuild_ids.is_empty() {
+            self.probe_tlas_room(&rebuild_ids)?;
+        }
         let t_probe = lap(&mut t_phase);
         // 1. Proxy BLASes (the clusters of non-resident BLASes) and marks BLASes (the
         // resident ones), compacted; their shared PI slots (proxy first) and the marks' BLAS
@@ -202,6 +216,51 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         let t_proxy = lap(&mut t_phase);
+        // 2a. Persistent TLASes: records patched where residency changed, then an update.
+        let mut updated: Vec<u32> = Vec::new();
+        for &t in &persistent_ids {
+            let tail = [false, true].map(|marks| {
+                proxies
+                    .iter()
+                    .find(|(pt, m, _)| *pt == t && *m == marks)
+                    .map_or(0, |(_, _, a)| a.address)
+            });
+            let r = if self.is_persistent(t) {
+                self.update_persistent(t, &addrs, tail).map(|n| {
+                    let st = &mut self.frame_stats;
+                    st.tlas_builds += 1;
+                    st.tlas_updates += 1;
+                    st.tlas_instances_written += n;
+                })
+            } else {
+                self.build_persistent(t, &addrs, tail).map(|(accel, p)| {
+                    let n = p.record_count();
+                    self.tlas[t as usize] = Some(TlasGpu {
+                        accel,
+                        proxy: None,
+                        marks: None,
+                        persistent: Some(p),
+                    });
+                    self.frame_stats.tlas_builds += 1;
+                    self.frame_stats.tlas_instances_written += u64::from(n);
+                })
+            };
+            if let Err(e) = r {
+                if matches!(e, GpuError::Budget(_)) && !self.is_persistent(t) {
+                    // Built over every instance it does not fit: rebuilt from now on (the
+                    // caller's retry rebuilds it).
+                    tracing::warn!(tlas = t, %e, "persistent TLAS does not fit; rebuilt instead");
+                    self.persistent_mode[t as usize] = false;
+                }
+                proxies
+                    .into_iter()
+                    .for_each(|(_, _, a)| a.release(&mut self.heap));
+                return Err(e);
+            }
+            updated.push(t);
+        }
+        let t_update = lap(&mut t_phase);
+        let ids = &rebuild_ids[..];
         // 2. TLASes over the resident BLASes plus the proxy instance. Non-resident instances
         // are left out (their proxy boxes stand for them), so a TLAS's size follows what is
         // resident, not its instance count; the custom index keeps each instance's record.
@@ -350,27 +409,37 @@ impl<'a> StreamingRenderer<'a> {
             up.upload(&ctx, blases_buf, marks_offset, bytemuck::bytes_of(&marks))?;
         }
         self.up_mut()?.flush(&ctx)?;
+        let mut take = |t: u32, marks: bool| {
+            proxies
+                .iter()
+                .position(|(pt, m, _)| *pt == t && *m == marks)
+                .map(|p| proxies.swap_remove(p).2)
+        };
         for (k, accel) in built {
             let t = ids[k];
-            let mut take = |marks: bool| {
-                proxies
-                    .iter()
-                    .position(|(pt, m, _)| *pt == t && *m == marks)
-                    .map(|p| proxies.swap_remove(p).2)
-            };
-            let (proxy, marks) = (take(false), take(true));
+            let (proxy, marks) = (take(t, false), take(t, true));
             if let Some(old) = self.tlas[t as usize].replace(TlasGpu {
                 accel,
                 proxy,
                 marks,
+                persistent: None,
             }) {
                 old.release(&mut self.heap);
+            }
+            self.dirty.remove(&t);
+        }
+        for t in updated {
+            let (proxy, marks) = (take(t, false), take(t, true));
+            if let Some(g) = self.tlas[t as usize].as_mut() {
+                g.proxy = proxy;
+                g.marks = marks;
             }
             self.dirty.remove(&t);
         }
         tracing::debug!(
             records = total / RECORD_BYTES as u64,
             probe_ms = t_probe,
+            update_ms = t_update,
             proxy_boxes = box_count,
             proxy_host_ms = t_proxy_host,
             proxy_build_ms = t_proxy,
@@ -475,8 +544,12 @@ impl<'a> StreamingRenderer<'a> {
 
     /// Bytes rebuilding TLAS `t` with `count` resident instance records takes beyond what its
     /// current build holds (instance buffer, structure, scratch; the proxy, its boxes and the
-    /// fragmentation of blocks by a quarter more).
+    /// fragmentation of blocks by a quarter more); 0 for a persistent TLAS.
     pub(super) fn tlas_rebuild_bytes(&self, t: u32, count: u64) -> Result<u64> {
+        if self.persistent_mode[t as usize] && self.is_persistent(t) {
+            // Updated in place with its kept scratch: only its proxy and marks are rebuilt.
+            return Ok(0);
+        }
         let count = count + 2;
         let s = self.ctx.tlas_build_sizes(
             u32::try_from(count).unwrap_or(u32::MAX),

@@ -124,6 +124,19 @@ impl<'a> StreamingRenderer<'a> {
         }
     }
 
+    /// [`with_eviction`](Self::with_eviction) for what the floor counts as always resident
+    /// (frame buffers, the trace pipeline): refused with everything evicted, persistent
+    /// TLASes give way (the floor is sized for rebuilt ones) and `f` is tried once more.
+    pub(super) fn with_eviction_or_rebuilt_tlases<T>(
+        &mut self,
+        mut f: impl FnMut(&mut Self) -> Result<T>,
+    ) -> Result<T> {
+        match self.with_eviction(&mut f) {
+            Err(GpuError::Budget(_)) if self.drop_persistent() => self.with_eviction(f),
+            r => r,
+        }
+    }
+
     /// [`with_eviction`](Self::with_eviction) when `evict`, else `f` once.
     pub(super) fn maybe_evicting<T>(
         &mut self,

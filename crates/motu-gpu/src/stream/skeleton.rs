@@ -10,6 +10,7 @@ use motu_abi::{
 };
 use motu_alloc::{AllocKind, AllocLimits, MemoryClass, Residency, MIB};
 
+use super::persistent::{auto_persistent, persistent_candidates, persistent_records, TlasUpdate};
 use super::proxy_boxes::padded;
 use super::PI_EMPTY_BLAS;
 use super::{FrameStreamStats, StreamOptions, StreamTotals, StreamingRenderer, IDENTITY};
@@ -157,7 +158,19 @@ impl<'a> StreamingRenderer<'a> {
             max_allocation_count: opts.max_allocations.min(device_cap).max(1),
             max_allocation_size_bytes: ctx.limits().max_memory_allocation_size,
             budget_bytes: budget,
-            host_visible_budget_bytes: opts.staging_bytes.max(64 * MIB) * 4,
+            // Staging and readback, and the persistent TLASes' instance records (host memory
+            // their builds and updates read; dedicated blocks, beside two standard blocks of
+            // the others' partly used space).
+            host_visible_budget_bytes: opts.staging_bytes.max(64 * MIB) * 4
+                + if opts.tlas_update == TlasUpdate::Rebuild {
+                    0
+                } else {
+                    view.tlases
+                        .iter()
+                        .map(|t| u64::from(persistent_records(t.instance_count)) * 64)
+                        .sum::<u64>()
+                        + 2 * crate::scene::block_bytes_for_budget(budget)
+                },
         };
         let block = crate::scene::block_bytes_for_budget(budget);
         // Structures, meshes and their transients come and go in sizes up to about a block:
@@ -267,8 +280,11 @@ impl<'a> StreamingRenderer<'a> {
             .filter(|(_, &ok)| ok)
             .map(|(b, _)| u64::from(b.primitive_count))
             .sum();
+        let has_clusters: Vec<bool> = clusters.iter().map(|c| !c.is_empty()).collect();
         let mut r = StreamingRenderer {
             blas: (0..nb).map(|_| None).collect(),
+            placeholders: Default::default(),
+            persistent_mode: vec![false; nt],
             tlas: (0..nt).map(|_| None).collect(),
             meshes: (0..view.meshes.len()).map(|_| None).collect(),
             mesh_refs: vec![0; view.meshes.len()],
@@ -320,6 +336,7 @@ impl<'a> StreamingRenderer<'a> {
             },
             ctx: ctx.clone(),
         };
+        r.persistent_mode = r.choose_persistent(&has_clusters)?;
         let t_boxes = std::time::Instant::now();
         let (box_index, box_count) = super::proxy_boxes::layout(&view, |b| r.buildable[b]);
         let boxes = super::proxy_boxes::compute(&view, source, &box_index, box_count);
@@ -347,6 +364,67 @@ impl<'a> StreamingRenderer<'a> {
             "streaming skeleton resident"
         );
         Ok(r)
+    }
+
+    /// Which TLASes are persistent (`StreamOptions::tlas_update`): with `Auto`, all the
+    /// candidates when they are large and their structures at full residency, update
+    /// scratch, placeholders (and records where host memory counts) take a small share of
+    /// the budget (`auto_persistent`), else none (a rebuild then holds only what is
+    /// resident, which small budgets need).
+    fn choose_persistent(&self, has_clusters: &[bool]) -> Result<Vec<bool>> {
+        let mut mode = vec![false; self.view.tlases.len()];
+        if self.opts.tlas_update == TlasUpdate::Rebuild {
+            return Ok(mode);
+        }
+        let max_instances = self.ctx.limits().max_instance_count;
+        let candidates: Vec<u32> = persistent_candidates(&self.view, has_clusters)
+            .into_iter()
+            .filter(|&t| {
+                u64::from(persistent_records(
+                    self.view.tlases[t as usize].instance_count,
+                )) <= max_instances
+            })
+            .collect();
+        if candidates.is_empty() {
+            return Ok(mode);
+        }
+        let host_counts = self.heap.host_visible_counts_against_budget();
+        let mut bytes = 0u64;
+        for &t in &candidates {
+            bytes += self.persistent_bytes(t, host_counts)?;
+        }
+        let placeholder = self.ctx.blas_build_sizes(
+            &[crate::accel::BlasGeometry::Aabbs {
+                aabb_count: 1,
+                opaque: true,
+            }],
+            self.build_opts.blas_build.flags(),
+        )?;
+        let placeholders = self.buildable.iter().filter(|&&b| b).count() as u64 + 1;
+        bytes += placeholders * placeholder.acceleration_structure_size_bytes.div_ceil(256) * 256;
+        let budget = self.build_opts.budget_bytes;
+        let instances: u64 = candidates
+            .iter()
+            .map(|&t| u64::from(self.view.tlases[t as usize].instance_count))
+            .sum();
+        let on = match self.opts.tlas_update {
+            TlasUpdate::Update => true,
+            _ => auto_persistent(instances, bytes, budget),
+        };
+        tracing::info!(
+            candidates = candidates.len(),
+            instances,
+            bytes,
+            budget,
+            on,
+            "persistent TLASes (updated, not rebuilt)"
+        );
+        if on {
+            for t in candidates {
+                mode[t as usize] = true;
+            }
+        }
+        Ok(mode)
     }
 
     /// Allocates a device-local table for `bytes`, queues its upload and keeps it in
@@ -470,7 +548,41 @@ impl<'a> StreamingRenderer<'a> {
         // Every TLAS (no triangle instance resident: only their proxy boxes and PI instances):
         // TLASes are never evicted, so a ray reaches every BLAS box and only BLASes stream.
         let all: Vec<u32> = (0..view.tlases.len() as u32).collect();
-        self.build_tlases(&all)?;
+        if self.persistent_mode.iter().any(|&p| p) {
+            self.build_placeholders()?;
+        }
+        loop {
+            let persistent = self.persistent_mode.iter().filter(|&&p| p).count();
+            match self.build_tlases(&all) {
+                Ok(()) => break,
+                // A persistent TLAS that did not fit is rebuilt instead: try again.
+                Err(GpuError::Budget(_))
+                    if self.persistent_mode.iter().filter(|&&p| p).count() < persistent => {}
+                Err(e) => return Err(e),
+            }
+        }
+        if !self.persistent_mode.iter().any(|&p| p) {
+            self.placeholders.release(&mut self.heap);
+        }
+        let host_counts = self.heap.host_visible_counts_against_budget();
+        self.totals.persistent_tlases = self.persistent_mode.iter().filter(|&&p| p).count() as u32;
+        self.totals.tlas_mode = if self.totals.persistent_tlases > 0 {
+            "update"
+        } else {
+            "rebuild"
+        };
+        self.totals.persistent_tlas_bytes = self
+            .tlas
+            .iter()
+            .flatten()
+            .filter(|g| g.persistent.is_some())
+            .map(|g| {
+                g.size_bytes(host_counts)
+                    - g.proxy.as_ref().map_or(0, |a| a.size_bytes)
+                    - g.marks.as_ref().map_or(0, |a| a.size_bytes)
+            })
+            .sum::<u64>()
+            + self.placeholders.bytes;
         self.upload_tlas_addresses()?;
         Ok(())
     }

@@ -1,0 +1,624 @@
+//! Persistent TLASes: a streamed TLAS that holds every one of its instances, resident or not,
+//! and follows residency by an *update* (a refit with new instance records) instead of a
+//! rebuild.
+//!
+//! A rebuilt TLAS holds only resident instances, so its storage follows residency, but each
+//! rebuild needs its instance records, a new structure and its build scratch at once: at a
+//! quarter of island 0.3 about 2.1 GB for a 7M-record rebuild, a quarter of the room, taken
+//! from the BLASes several times a frame (their eviction and rebuilding is most of the
+//! frame's passes; BENCHMARKS.md, session 18). A persistent TLAS is built once over all its
+//! instances (plus its proxy and marks slots) with `ALLOW_UPDATE`; its records live in host
+//! memory (the build reads them over the bus: no VRAM on a discrete GPU) and are patched in
+//! place where a BLAS's residency changed, and its update needs only a small scratch kept
+//! with it. The cost is the structure's size at full residency, resident for good.
+//!
+//! An instance whose BLAS is not resident references the BLAS's *placeholder*: an AABB BLAS
+//! with one box, the BLAS's own bounds, under instance mask 0 (no ray meets it). Updates may
+//! change an instance's reference and mask but not make an active instance inactive, and a
+//! refit keeps the topology the first build chose: with the BLAS's own bounds every instance
+//! keeps its box, so the topology stays the one a full build would choose. Proxy boxes and
+//! demand work as before (the proxy and marks BLASes are rebuilt and their slots repointed;
+//! an absent one points at the empty placeholder, mask 0).
+
+use ash::vk;
+use motu_abi::{HierarchyView, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
+use motu_alloc::{AllocKind, BuildSize, MemoryClass};
+use rayon::prelude::*;
+
+use super::tlas_records::RECORD_BYTES;
+use super::{StreamingRenderer, IDENTITY, MARKS_MASK, TRIANGLE_MASK};
+use crate::accel::AsBuildFlags;
+use crate::command::{memory_barrier, MemoryScope};
+use crate::error::{GpuError, Result};
+use crate::heap::HeapBuffer;
+use crate::memory::BufferUsage;
+use crate::scene::{
+    build_batched, encode_instance, set_instance_mask, AccelStruct, ResourceReport,
+};
+
+/// How streamed TLASes follow residency (`--stream-tlas`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TlasUpdate {
+    /// Persistent TLASes (updated) for TLASes of a million instances and more that take at
+    /// most an eighth of the budget (`auto_persistent`), else rebuilt.
+    #[default]
+    Auto,
+    /// Persistent TLASes wherever the device allows (instance counts), whatever they take.
+    Update,
+    /// TLASes rebuilt over their resident instances whenever residency changes.
+    Rebuild,
+}
+
+impl TlasUpdate {
+    /// The name `--stream-tlas` takes and `--stats` reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            TlasUpdate::Auto => "auto",
+            TlasUpdate::Update => "update",
+            TlasUpdate::Rebuild => "rebuild",
+        }
+    }
+}
+
+/// A persistent TLAS's state beside its structure.
+pub(super) struct Persistent {
+    /// Host-visible instance records, every instance then the proxy and marks slots.
+    records: HeapBuffer,
+    /// Update scratch, kept.
+    scratch: HeapBuffer,
+    /// Per BLAS: the reference its instances' records hold now.
+    written: Vec<u64>,
+    /// The proxy's and marks' references now.
+    tail_written: [u64; 2],
+    record_count: u32,
+}
+
+impl Persistent {
+    pub(super) fn record_count(&self) -> u32 {
+        self.record_count
+    }
+
+    pub(super) fn release(self, heap: &mut crate::heap::GpuHeap) {
+        heap.free(self.records);
+        heap.free(self.scratch);
+    }
+
+    /// VRAM bytes beside the structure (the update scratch; the records where host memory
+    /// counts).
+    pub(super) fn size_bytes(&self, host_counts: bool) -> u64 {
+        self.scratch.size_bytes()
+            + if host_counts {
+                self.records.size_bytes()
+            } else {
+                0
+            }
+    }
+}
+
+/// Build flags of a persistent TLAS (the size query and the build must agree): fast trace,
+/// updatable, not compacted (a compacted copy would need the full size again beside it, and
+/// TLAS compaction saves 0–2%).
+pub(super) fn persistent_flags() -> AsBuildFlags {
+    AsBuildFlags {
+        allow_update: true,
+        allow_compaction: false,
+        ..AsBuildFlags::default()
+    }
+}
+
+/// Instances the persistent candidates must hold together before `Auto` makes them
+/// persistent: below it a rebuild takes milliseconds (lavapipe, the default island's 22k
+/// instances: 2–6 ms) while tracing past the placeholders costs more (lavapipe: traces
+/// 1.5–2× slower), where at island 0.3 (9M instances, H200) an update takes 60 ms against a
+/// rebuild's 170–260 ms (BENCHMARKS.md, session 19).
+pub(super) const AUTO_MIN_INSTANCES: u64 = 1 << 20;
+
+/// The share of the budget persistent TLASes (and their placeholders) may take under `Auto`:
+/// an eighth. On the H200 at island 0.3 they take 1.8 GB: at half its full build (9% of the
+/// budget) frames took half the time; at a quarter (18%) the room they took from the BLASes
+/// (working set 7.25 GB against a room of 7.30 GB) cost 1.5 passes more a frame and 75% more
+/// time (BENCHMARKS.md, session 19).
+pub(super) const AUTO_MAX_BUDGET_SHARE: u64 = 8;
+
+/// `Auto`'s choice: persistent when the candidates hold at least [`AUTO_MIN_INSTANCES`]
+/// instances and take at most `1 / AUTO_MAX_BUDGET_SHARE` of the budget.
+pub(super) fn auto_persistent(instances: u64, persistent_bytes: u64, budget_bytes: u64) -> bool {
+    instances >= AUTO_MIN_INSTANCES && persistent_bytes <= budget_bytes / AUTO_MAX_BUDGET_SHARE
+}
+
+/// Records of a persistent TLAS over `instance_count` instances: theirs, the proxy, the marks.
+pub(super) fn persistent_records(instance_count: u32) -> u32 {
+    instance_count + 2
+}
+
+/// The TLASes that may be persistent: those with triangle instances (the others never change)
+/// whose records' custom indices fit 24 bits.
+pub(super) fn persistent_candidates(view: &HierarchyView<'_>, has_clusters: &[bool]) -> Vec<u32> {
+    (0..view.tlases.len() as u32)
+        .filter(|&t| {
+            has_clusters[t as usize]
+                && persistent_records(view.tlases[t as usize].instance_count) < 1 << 24
+        })
+        .collect()
+}
+
+impl StreamingRenderer<'_> {
+    /// Encodes instance `j` of TLAS `t` as the persistent TLAS holds it: its BLAS if resident
+    /// (`addrs`), else its placeholder under mask 0. Flags and shader offset are the
+    /// resident instance's either way, so an update changes only the reference and the mask.
+    fn persistent_record(&self, t: u32, j: usize, addrs: &[u64]) -> [u8; RECORD_BYTES] {
+        let rec = &self.view.tlases[t as usize];
+        let inst = &self.view.instances[rec.instance_range()][j];
+        let b = inst.blas as usize;
+        let aabbs = self.view.blases[b].kind == BLAS_AABBS;
+        let any_hit = inst.flags & FLAG_NEEDS_ANY_HIT != 0;
+        let addr = addrs[b];
+        let reference = if addr != 0 { addr } else { self.placeholder(b) };
+        let mut enc = encode_instance(&inst.tlas_from_blas, aabbs, any_hit, reference, j as u32);
+        if addr == 0 {
+            set_instance_mask(&mut enc, 0);
+        } else if !aabbs {
+            set_instance_mask(&mut enc, TRIANGLE_MASK);
+        }
+        enc
+    }
+
+    /// BLAS `b`'s placeholder (the empty one where it has none).
+    fn placeholder(&self, b: usize) -> u64 {
+        let p = self.placeholders.per_blas.get(b).copied().unwrap_or(0);
+        if p != 0 {
+            p
+        } else {
+            self.placeholders.empty
+        }
+    }
+
+    /// The proxy's (`marks` false) or marks' record of persistent TLAS `t`: `addr`, or the
+    /// empty placeholder under mask 0 when absent.
+    fn persistent_tail(&self, t: u32, marks: bool, addr: u64) -> [u8; RECORD_BYTES] {
+        let count = self.view.tlases[t as usize].instance_count;
+        let reference = if addr != 0 {
+            addr
+        } else {
+            self.placeholders.empty
+        };
+        let mut inst = encode_instance(&IDENTITY, true, false, reference, count + u32::from(marks));
+        if addr == 0 {
+            set_instance_mask(&mut inst, 0);
+        } else if marks {
+            set_instance_mask(&mut inst, MARKS_MASK);
+        }
+        inst
+    }
+
+    /// Builds the placeholders (one box each: every buildable BLAS's bounds, and one empty box
+    /// at the origin) once, for the persistent TLASes.
+    pub(super) fn build_placeholders(&mut self) -> Result<()> {
+        let view = self.view;
+        let nb = view.blases.len();
+        let mut boxes: Vec<[f32; 6]> = Vec::new();
+        let mut owner: Vec<Option<usize>> = Vec::new();
+        for b in 0..nb {
+            if !self.buildable[b] {
+                continue;
+            }
+            let r = &view.blases[b];
+            let valid = (0..3).all(|k| r.bounds_min[k] <= r.bounds_max[k]);
+            if valid {
+                boxes.push([
+                    r.bounds_min[0],
+                    r.bounds_min[1],
+                    r.bounds_min[2],
+                    r.bounds_max[0],
+                    r.bounds_max[1],
+                    r.bounds_max[2],
+                ]);
+                owner.push(Some(b));
+            }
+        }
+        boxes.push([0.0; 6]);
+        owner.push(None);
+        let ctx = self.ctx.clone();
+        let buf = self.heap.alloc_buffer(
+            "placeholder-aabbs",
+            (boxes.len() * 24) as u64,
+            BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT | BufferUsage::TRANSFER_DST,
+            AllocKind::Geometry,
+            MemoryClass::DeviceLocal,
+            16,
+        )?;
+        let r = (|| -> Result<Vec<(usize, AccelStruct)>> {
+            self.up_mut()?
+                .upload(&ctx, &buf, 0, bytemuck::cast_slice(&boxes))?;
+            self.up_mut()?.flush(&ctx)?;
+            let base = buf.device_address()?.0;
+            let flags = self.build_opts.blas_build.flags();
+            let s = ctx.blas_build_sizes(
+                &[crate::accel::BlasGeometry::Aabbs {
+                    aabb_count: 1,
+                    opaque: true,
+                }],
+                flags,
+            )?;
+            let sizes = vec![
+                BuildSize {
+                    result_bytes: s.acceleration_structure_size_bytes,
+                    scratch_bytes: s.build_scratch_size_bytes,
+                };
+                boxes.len()
+            ];
+            let mut report = ResourceReport::default();
+            build_batched(
+                &ctx,
+                &mut self.heap,
+                &mut report,
+                &sizes,
+                vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+                &self.build_opts,
+                |k| {
+                    let aabbs = vk::AccelerationStructureGeometryAabbsDataKHR::default()
+                        .data(vk::DeviceOrHostAddressConstKHR {
+                            device_address: base + k as u64 * 24,
+                        })
+                        .stride(24);
+                    (
+                        vec![vk::AccelerationStructureGeometryKHR::default()
+                            .geometry_type(vk::GeometryTypeKHR::AABBS)
+                            .geometry(vk::AccelerationStructureGeometryDataKHR { aabbs })
+                            .flags(vk::GeometryFlagsKHR::OPAQUE)],
+                        vec![1],
+                    )
+                },
+                |_, _| Ok(()),
+                &mut |_| {},
+            )
+        })();
+        self.heap.free(buf);
+        let built = r?;
+        let mut per_blas = vec![0u64; nb];
+        for (k, a) in built {
+            match owner[k] {
+                Some(b) => per_blas[b] = a.address,
+                None => self.placeholders.empty = a.address,
+            }
+            self.placeholders.bytes += a.size_bytes;
+            self.placeholders.structures.push(a);
+        }
+        self.placeholders.per_blas = per_blas;
+        Ok(())
+    }
+
+    /// Bytes a persistent TLAS `t` keeps resident beyond what a rebuilt one holds between
+    /// rebuilds, counted against the budget: its structure at full residency and its update
+    /// scratch (and its records where host memory counts).
+    pub(super) fn persistent_bytes(&self, t: u32, host_counts: bool) -> Result<u64> {
+        let n = persistent_records(self.view.tlases[t as usize].instance_count);
+        let s = self.ctx.tlas_build_sizes(n, persistent_flags())?;
+        let records = if host_counts {
+            u64::from(n) * RECORD_BYTES as u64
+        } else {
+            0
+        };
+        Ok(s.acceleration_structure_size_bytes + s.update_scratch_size_bytes + records)
+    }
+
+    /// Turns every persistent TLAS into a rebuilt one (released now, dirty: the step's
+    /// rebuild builds it over the resident instances) and releases the placeholders: the
+    /// floor is sized for rebuilt TLASes, so a BLAS that does not fit next to persistent ones
+    /// fits without them. Returns whether there was any.
+    pub(super) fn drop_persistent(&mut self) -> bool {
+        let mut any = false;
+        for t in 0..self.persistent_mode.len() {
+            if !std::mem::take(&mut self.persistent_mode[t]) {
+                continue;
+            }
+            any = true;
+            if let Some(g) = self.tlas[t].take() {
+                g.release(&mut self.heap);
+            }
+            self.dirty.insert(t as u32);
+        }
+        if any {
+            tracing::warn!(
+                persistent_tlas_bytes = self.totals.persistent_tlas_bytes,
+                "a BLAS does not fit next to the persistent TLASes: TLASes are rebuilt from now on"
+            );
+            self.placeholders.release(&mut self.heap);
+            self.totals.tlas_mode = "rebuild";
+            self.totals.persistent_tlases = 0;
+            self.totals.persistent_tlas_bytes = 0;
+            self.totals.persistent_dropped = true;
+        }
+        any
+    }
+
+    /// Whether TLAS `t` is persistent and built.
+    pub(super) fn is_persistent(&self, t: u32) -> bool {
+        self.tlas[t as usize]
+            .as_ref()
+            .is_some_and(|g| g.persistent.is_some())
+    }
+
+    /// Builds persistent TLAS `t` over every instance (the first time), records from the
+    /// current residency (`addrs`) and its proxy and marks (`tail`, 0: absent). On failure
+    /// nothing stays allocated.
+    pub(super) fn build_persistent(
+        &mut self,
+        t: u32,
+        addrs: &[u64],
+        tail: [u64; 2],
+    ) -> Result<(AccelStruct, Persistent)> {
+        let ctx = self.ctx.clone();
+        let count = self.view.tlases[t as usize].instance_count;
+        let n = persistent_records(count);
+        let sizes = ctx.tlas_build_sizes(n, persistent_flags())?;
+        let records = self.heap.alloc_buffer(
+            &format!("stream-tlas-{t}-records"),
+            u64::from(n) * RECORD_BYTES as u64,
+            BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT,
+            AllocKind::InstanceBuffer,
+            MemoryClass::HostVisible,
+            16,
+        )?;
+        let filled = records.with_mapped_mut(0, n as usize * RECORD_BYTES, |out| {
+            let (body, rest) = out.split_at_mut(count as usize * RECORD_BYTES);
+            body.par_chunks_mut(RECORD_BYTES)
+                .enumerate()
+                .for_each(|(j, r)| r.copy_from_slice(&self.persistent_record(t, j, addrs)));
+            rest[..RECORD_BYTES].copy_from_slice(&self.persistent_tail(t, false, tail[0]));
+            rest[RECORD_BYTES..].copy_from_slice(&self.persistent_tail(t, true, tail[1]));
+        });
+        if let Err(e) = filled {
+            self.heap.free(records);
+            return Err(e);
+        }
+        let accel = match AccelStruct::new(
+            &ctx,
+            &mut self.heap,
+            &format!("stream-tlas-{t}"),
+            sizes.acceleration_structure_size_bytes,
+            vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+        ) {
+            Ok(a) => a,
+            Err(e) => {
+                self.heap.free(records);
+                return Err(e);
+            }
+        };
+        let r = (|| -> Result<HeapBuffer> {
+            let build_scratch =
+                self.alloc_scratch("stream-tlas-build-scratch", sizes.build_scratch_size_bytes)?;
+            let r = self.record_tlas_build(&accel, &records, &build_scratch, n, false);
+            self.heap.free(build_scratch);
+            r?;
+            self.alloc_scratch(
+                "stream-tlas-update-scratch",
+                sizes.update_scratch_size_bytes,
+            )
+        })();
+        match r {
+            Ok(scratch) => {
+                let mut written = vec![0u64; addrs.len()];
+                for (b, w) in written.iter_mut().enumerate() {
+                    *w = if addrs[b] != 0 {
+                        addrs[b]
+                    } else {
+                        self.placeholder(b)
+                    };
+                }
+                Ok((
+                    accel,
+                    Persistent {
+                        records,
+                        scratch,
+                        written,
+                        tail_written: tail,
+                        record_count: n,
+                    },
+                ))
+            }
+            Err(e) => {
+                accel.release(&mut self.heap);
+                self.heap.free(records);
+                Err(e)
+            }
+        }
+    }
+
+    /// Updates persistent TLAS `t` to the current residency (`addrs`) and proxy and marks
+    /// (`tail`): patches the records of instances whose BLAS's reference changed, in place,
+    /// then refits. Returns the records rewritten (0: nothing changed, no update ran).
+    pub(super) fn update_persistent(
+        &mut self,
+        t: u32,
+        addrs: &[u64],
+        tail: [u64; 2],
+    ) -> Result<u64> {
+        let Some(mut g) = self.tlas[t as usize].take() else {
+            return Err(GpuError::InvalidRequest(format!(
+                "streaming: persistent TLAS {t} is not resident"
+            )));
+        };
+        let r = (|| -> Result<u64> {
+            let p = g.persistent.as_mut().ok_or_else(|| {
+                GpuError::InvalidRequest(format!("streaming: TLAS {t} is not persistent"))
+            })?;
+            let want: Vec<u64> = (0..addrs.len())
+                .map(|b| {
+                    if addrs[b] != 0 {
+                        addrs[b]
+                    } else {
+                        self.placeholder(b)
+                    }
+                })
+                .collect();
+            let changed: Vec<bool> = want.iter().zip(&p.written).map(|(a, b)| a != b).collect();
+            let tail_changed = tail != p.tail_written;
+            if !tail_changed && !changed.iter().any(|&c| c) {
+                return Ok(0);
+            }
+            let count = self.view.tlases[t as usize].instance_count as usize;
+            let range = self.view.tlases[t as usize].instance_range();
+            let instances = &self.view.instances[range];
+            let this = &*self;
+            let rewritten = p.records.with_mapped_mut(
+                0,
+                p.record_count as usize * RECORD_BYTES,
+                |out| -> u64 {
+                    let (body, rest) = out.split_at_mut(count * RECORD_BYTES);
+                    // Chunks of records, each scanned for instances of changed BLASes.
+                    const CHUNK: usize = 1 << 14;
+                    let n: u64 = body
+                        .par_chunks_mut(CHUNK * RECORD_BYTES)
+                        .enumerate()
+                        .map(|(c, chunk)| {
+                            let mut n = 0u64;
+                            for (k, r) in chunk.chunks_exact_mut(RECORD_BYTES).enumerate() {
+                                let j = c * CHUNK + k;
+                                if changed[instances[j].blas as usize] {
+                                    r.copy_from_slice(&this.persistent_record(t, j, addrs));
+                                    n += 1;
+                                }
+                            }
+                            n
+                        })
+                        .sum();
+                    rest[..RECORD_BYTES].copy_from_slice(&this.persistent_tail(t, false, tail[0]));
+                    rest[RECORD_BYTES..].copy_from_slice(&this.persistent_tail(t, true, tail[1]));
+                    n + 2
+                },
+            )?;
+            self.record_tlas_build(&g.accel, &p.records, &p.scratch, p.record_count, true)?;
+            p.written = want;
+            p.tail_written = tail;
+            Ok(rewritten)
+        })();
+        self.tlas[t as usize] = Some(g);
+        r
+    }
+
+    fn alloc_scratch(&mut self, label: &str, size_bytes: u64) -> Result<HeapBuffer> {
+        let align = self.ctx.limits().scratch_alignment_bytes();
+        // One alignment more: the scratch address is rounded up to it inside the buffer.
+        self.heap.alloc_buffer(
+            label,
+            size_bytes + align,
+            BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
+            AllocKind::Scratch,
+            MemoryClass::DeviceLocal,
+            align,
+        )
+    }
+
+    /// Builds (`update` false) or updates in place `accel` from `n` records, and waits.
+    fn record_tlas_build(
+        &self,
+        accel: &AccelStruct,
+        records: &HeapBuffer,
+        scratch: &HeapBuffer,
+        n: u32,
+        update: bool,
+    ) -> Result<()> {
+        let dev = self.ctx.accel_device()?;
+        let instances = vk::AccelerationStructureGeometryInstancesDataKHR::default()
+            .array_of_pointers(false)
+            .data(vk::DeviceOrHostAddressConstKHR {
+                device_address: records.device_address()?.0,
+            });
+        let geometry = [vk::AccelerationStructureGeometryKHR::default()
+            .geometry_type(vk::GeometryTypeKHR::INSTANCES)
+            .geometry(vk::AccelerationStructureGeometryDataKHR { instances })];
+        let align = self.ctx.limits().scratch_alignment_bytes();
+        let scratch_address = scratch.device_address()?.0.div_ceil(align) * align;
+        let mut info = vk::AccelerationStructureBuildGeometryInfoKHR::default()
+            .ty(vk::AccelerationStructureTypeKHR::TOP_LEVEL)
+            .flags(persistent_flags().to_vk())
+            .dst_acceleration_structure(accel.handle)
+            .geometries(&geometry)
+            .scratch_data(vk::DeviceOrHostAddressKHR {
+                device_address: scratch_address,
+            });
+        info = if update {
+            info.mode(vk::BuildAccelerationStructureModeKHR::UPDATE)
+                .src_acceleration_structure(accel.handle)
+        } else {
+            info.mode(vk::BuildAccelerationStructureModeKHR::BUILD)
+        };
+        let range = [vk::AccelerationStructureBuildRangeInfoKHR::default().primitive_count(n)];
+        let rec = self.ctx.record(if update {
+            "tlas update"
+        } else {
+            "tlas build (persistent)"
+        })?;
+        let (c, cmd) = rec.raw();
+        let device = &c.shared.device;
+        // SAFETY: recording; the structure, the records (host-visible, written before this
+        // submission and not touched until it is waited on) and the scratch (aligned inside
+        // its buffer: allocated with the device's scratch alignment) live until
+        // `submit_and_wait` returns. An update reads and writes the same structure, which
+        // the spec allows in place (src == dst), and it was built with ALLOW_UPDATE over the
+        // same record count.
+        unsafe {
+            memory_barrier(device, cmd, MemoryScope::ALL, MemoryScope::ALL);
+            dev.cmd_build_acceleration_structures(cmd, &[info], &[&range[..]]);
+            memory_barrier(device, cmd, MemoryScope::ALL, MemoryScope::ALL);
+        }
+        rec.submit_and_wait()
+    }
+}
+
+/// The placeholders of the persistent TLASes (see the module docs).
+#[derive(Default)]
+pub(super) struct Placeholders {
+    /// Per BLAS: its placeholder's address (0: none; the empty one stands in).
+    pub(super) per_blas: Vec<u64>,
+    /// The empty box's placeholder (absent proxies and marks, BLASes without bounds).
+    pub(super) empty: u64,
+    pub(super) bytes: u64,
+    pub(super) structures: Vec<AccelStruct>,
+}
+
+impl Placeholders {
+    pub(super) fn release(&mut self, heap: &mut crate::heap::GpuHeap) {
+        for a in self.structures.drain(..) {
+            a.release(heap);
+        }
+        self.per_blas.clear();
+        self.empty = 0;
+        self.bytes = 0;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn auto_makes_large_tlases_persistent_only_when_they_take_a_small_share_of_the_budget() {
+        let gb = 1_000_000_000u64;
+        // Island 0.3 on the H200: 9M instances, 1.8 GB persistent.
+        let (n, bytes) = (9_000_000, 1_800_000_000);
+        assert!(
+            auto_persistent(n, bytes, 19_749_285_836),
+            "half the full build: 9%"
+        );
+        assert!(!auto_persistent(n, bytes, 9_874_642_918), "a quarter: 18%");
+        // The edge: exactly an eighth.
+        assert!(auto_persistent(n, gb, 8 * gb));
+        assert!(!auto_persistent(n, gb + 1, 8 * gb));
+        // Small scenes stay rebuilt whatever the budget.
+        assert!(!auto_persistent(22_000, 1_000, 100 * gb));
+        assert!(auto_persistent(AUTO_MIN_INSTANCES, 1_000, 100 * gb));
+    }
+
+    #[test]
+    fn names_are_the_flag_values() {
+        for (m, name) in [
+            (TlasUpdate::Auto, "auto"),
+            (TlasUpdate::Update, "update"),
+            (TlasUpdate::Rebuild, "rebuild"),
+        ] {
+            assert_eq!(m.name(), name);
+        }
+    }
+}
