@@ -52,7 +52,9 @@
 //! builds the needed structures most requested first (meshes stream through the staging ring;
 //! BLASes build in groups that halve when the budget refuses them; single builds evict least
 //! recently visible BLASes for room), then what fits of the open ones; each TLAS whose
-//! instance set changed is rebuilt with its proxy, and only open pixels are traced again.
+//! instance set changed is rebuilt with its proxy (a persistent one, built over every
+//! instance, is updated in place instead: `persistent.rs`), and only open pixels are traced
+//! again.
 //! Each pass builds at least one needed BLAS, so a budget at or above the floor
 //! ([`streaming_floor`]) completes; the pass cap ([`StreamingRenderer::max_passes`]) is a
 //! safety net sized from the BLAS count, and a frame that reaches it reports its unfinished
