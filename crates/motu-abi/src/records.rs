@@ -94,6 +94,15 @@ pub struct BlasRecord {
     pub _pad: u32,
 }
 
+impl BlasRecord {
+    /// Its bounds as one box, `[min x, min y, min z, max x, max y, max z]` (the layout of
+    /// `VkAabbPositionsKHR`).
+    pub fn bounds_box(&self) -> [f32; 6] {
+        let (a, b) = (self.bounds_min, self.bounds_max);
+        [a[0], a[1], a[2], b[0], b[1], b[2]]
+    }
+}
+
 /// Geometry `j` of a triangle BLAS is `geometries[item_base + j]`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]

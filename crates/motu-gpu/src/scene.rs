@@ -51,8 +51,8 @@ pub use budget::{full_build_overhead, FullBuildOverhead};
 pub(crate) use lod_pass::{InstanceLodGpu, LodTlas, Push as LodPush};
 pub(crate) use structures::{AccelStruct, SizeQueries, Slot, SLOT_COUNT};
 pub(crate) use tables::{
-    blas_geometry, box_list_instances, encode_instance, pi_aabbs, pi_capacity, set_instance_mask,
-    MAX_PI_CAPACITY,
+    aabbs_geometry, blas_geometry, box_list_instances, encode_instance, pi_aabbs, pi_capacity,
+    set_instance_mask, MAX_PI_CAPACITY,
 };
 pub(crate) use upload::{streamed_attribute_bytes, MeshGpu, MeshStager, Uploader};
 

@@ -428,16 +428,8 @@ mod tests {
             vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
             &opts,
             |k| {
-                let aabbs = vk::AccelerationStructureGeometryAabbsDataKHR::default()
-                    .data(vk::DeviceOrHostAddressConstKHR {
-                        device_address: base + k as u64 * 8 * 24,
-                    })
-                    .stride(24);
                 (
-                    vec![vk::AccelerationStructureGeometryKHR::default()
-                        .geometry_type(vk::GeometryTypeKHR::AABBS)
-                        .geometry(vk::AccelerationStructureGeometryDataKHR { aabbs })
-                        .flags(vk::GeometryFlagsKHR::OPAQUE)],
+                    vec![crate::scene::aabbs_geometry(base + k as u64 * 8 * 24, true)],
                     vec![8],
                 )
             },

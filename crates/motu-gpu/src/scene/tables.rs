@@ -18,6 +18,26 @@ pub(crate) type BlasDesc = (
     Vec<BlasGeometry>,
 );
 
+/// One geometry of `vk::AabbPositionsKHR` boxes (24 bytes each) at `device_address`:
+/// programmable instances, proxy boxes and placeholders (`opaque`: no any-hit; else each
+/// candidate once, as programmable instances record them).
+pub(crate) fn aabbs_geometry(
+    device_address: u64,
+    opaque: bool,
+) -> vk::AccelerationStructureGeometryKHR<'static> {
+    let aabbs = vk::AccelerationStructureGeometryAabbsDataKHR::default()
+        .data(vk::DeviceOrHostAddressConstKHR { device_address })
+        .stride(24);
+    vk::AccelerationStructureGeometryKHR::default()
+        .geometry_type(vk::GeometryTypeKHR::AABBS)
+        .geometry(vk::AccelerationStructureGeometryDataKHR { aabbs })
+        .flags(if opaque {
+            vk::GeometryFlagsKHR::OPAQUE
+        } else {
+            vk::GeometryFlagsKHR::NO_DUPLICATE_ANY_HIT_INVOCATION
+        })
+}
+
 /// Geometry of BLAS `i` of `view`: one triangle geometry per mesh (`mesh(m)` is mesh record
 /// `m` on the GPU) or the AABBs of its programmable instances, read at `aabb_base + 24 × item`.
 /// `None` for a BLAS without primitives.
@@ -33,16 +53,11 @@ pub(crate) fn blas_geometry<'m>(
         if b.item_count == 0 {
             (Vec::new(), Vec::new(), Vec::new())
         } else {
-            let aabbs = vk::AccelerationStructureGeometryAabbsDataKHR::default()
-                .data(vk::DeviceOrHostAddressConstKHR {
-                    device_address: aabb_base + u64::from(b.item_base) * 24,
-                })
-                .stride(24);
             (
-                vec![vk::AccelerationStructureGeometryKHR::default()
-                    .geometry_type(vk::GeometryTypeKHR::AABBS)
-                    .geometry(vk::AccelerationStructureGeometryDataKHR { aabbs })
-                    .flags(vk::GeometryFlagsKHR::NO_DUPLICATE_ANY_HIT_INVOCATION)],
+                vec![aabbs_geometry(
+                    aabb_base + u64::from(b.item_base) * 24,
+                    false,
+                )],
                 vec![b.item_count],
                 vec![BlasGeometry::Aabbs {
                     aabb_count: b.item_count,

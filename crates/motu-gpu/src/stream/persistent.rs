@@ -33,7 +33,7 @@ use crate::error::{GpuError, Result};
 use crate::heap::HeapBuffer;
 use crate::memory::BufferUsage;
 use crate::scene::{
-    build_batched, encode_instance, set_instance_mask, AccelStruct, ResourceReport,
+    aabbs_geometry, build_batched, encode_instance, set_instance_mask, AccelStruct, ResourceReport,
 };
 
 /// How streamed TLASes follow residency (`--stream-tlas`).
@@ -203,16 +203,8 @@ impl StreamingRenderer<'_> {
                 continue;
             }
             let r = &view.blases[b];
-            let valid = (0..3).all(|k| r.bounds_min[k] <= r.bounds_max[k]);
-            if valid {
-                boxes.push([
-                    r.bounds_min[0],
-                    r.bounds_min[1],
-                    r.bounds_min[2],
-                    r.bounds_max[0],
-                    r.bounds_max[1],
-                    r.bounds_max[2],
-                ]);
+            if (0..3).all(|k| r.bounds_min[k] <= r.bounds_max[k]) {
+                boxes.push(r.bounds_box());
                 owner.push(Some(b));
             }
         }
@@ -255,20 +247,7 @@ impl StreamingRenderer<'_> {
                 &sizes,
                 vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
                 &self.build_opts,
-                |k| {
-                    let aabbs = vk::AccelerationStructureGeometryAabbsDataKHR::default()
-                        .data(vk::DeviceOrHostAddressConstKHR {
-                            device_address: base + k as u64 * 24,
-                        })
-                        .stride(24);
-                    (
-                        vec![vk::AccelerationStructureGeometryKHR::default()
-                            .geometry_type(vk::GeometryTypeKHR::AABBS)
-                            .geometry(vk::AccelerationStructureGeometryDataKHR { aabbs })
-                            .flags(vk::GeometryFlagsKHR::OPAQUE)],
-                        vec![1],
-                    )
-                },
+                |k| (vec![aabbs_geometry(base + k as u64 * 24, true)], vec![1]),
                 |_, _| Ok(()),
                 &mut |_| {},
             )

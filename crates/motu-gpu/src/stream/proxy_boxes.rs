@@ -109,14 +109,7 @@ fn blas_boxes(
 ) -> Vec<Box6> {
     let r = &view.blases[b];
     let mut out = vec![EMPTY; fan + fan * fan];
-    let bounds = padded([
-        r.bounds_min[0],
-        r.bounds_min[1],
-        r.bounds_min[2],
-        r.bounds_max[0],
-        r.bounds_max[1],
-        r.bounds_max[2],
-    ]);
+    let bounds = padded(r.bounds_box());
     // (centroid, box) per triangle.
     let mut tris: Vec<([f32; 3], Box6)> = Vec::with_capacity(r.primitive_count as usize);
     let range = r.item_base as usize..(r.item_base + r.item_count) as usize;

@@ -14,7 +14,8 @@ use crate::error::{GpuError, Result};
 use crate::heap::FitRequest;
 use crate::memory::BufferUsage;
 use crate::scene::{
-    blas_geometry, build_batched, encode_instance, set_instance_mask, AccelStruct, ResourceReport,
+    aabbs_geometry, blas_geometry, build_batched, encode_instance, set_instance_mask, AccelStruct,
+    ResourceReport,
 };
 
 impl<'a> StreamingRenderer<'a> {
@@ -173,16 +174,8 @@ impl<'a> StreamingRenderer<'a> {
                 let mut descs = Vec::new();
                 let mut sizes = Vec::new();
                 for &(_, _, first, n) in &proxy_items {
-                    let aabbs = vk::AccelerationStructureGeometryAabbsDataKHR::default()
-                        .data(vk::DeviceOrHostAddressConstKHR {
-                            device_address: base + u64::from(first) * 24,
-                        })
-                        .stride(24);
                     descs.push((
-                        vec![vk::AccelerationStructureGeometryKHR::default()
-                            .geometry_type(vk::GeometryTypeKHR::AABBS)
-                            .geometry(vk::AccelerationStructureGeometryDataKHR { aabbs })
-                            .flags(vk::GeometryFlagsKHR::NO_DUPLICATE_ANY_HIT_INVOCATION)],
+                        vec![aabbs_geometry(base + u64::from(first) * 24, false)],
                         vec![n],
                     ));
                     let sz = ctx.blas_build_sizes(
