@@ -13,10 +13,14 @@
 //! with it. The cost is the structure's size at full residency, resident for good.
 //!
 //! An instance whose BLAS is not resident references the BLAS's *placeholder*: an AABB BLAS
-//! with one box, the BLAS's own bounds, under instance mask 0 (no ray meets it). Updates may
-//! change an instance's reference and mask but not make an active instance inactive, and a
-//! refit keeps the topology the first build chose: with the BLAS's own bounds every instance
-//! keeps its box, so the topology stays the one a full build would choose. Proxy boxes and
+//! with one box, a point at the centre of the BLAS's bounds, under instance mask 0 (no ray
+//! meets it, and a refit shrinks the nodes over non-resident instances, so rays skip them:
+//! the instance LOD pass, `scene/lod_pass.rs`, does the same). Updates may change an
+//! instance's reference and mask but not make an active instance inactive, and a refit keeps
+//! the topology the first build chose: the first build uses *full* placeholders, the BLASes'
+//! whole bounds, so the topology is the one a full build would choose, and an update right
+//! after it puts the non-resident instances on their points (the full placeholders are then
+//! released). Proxy boxes and
 //! demand work as before (the proxy and marks BLASes are rebuilt and their slots repointed;
 //! an absent one points at the empty placeholder, mask 0).
 
@@ -146,14 +150,18 @@ impl StreamingRenderer<'_> {
     /// Encodes instance `j` of TLAS `t` as the persistent TLAS holds it: its BLAS if resident
     /// (`addrs`), else its placeholder under mask 0. Flags and shader offset are the
     /// resident instance's either way, so an update changes only the reference and the mask.
-    fn persistent_record(&self, t: u32, j: usize, addrs: &[u64]) -> [u8; RECORD_BYTES] {
+    fn persistent_record(&self, t: u32, j: usize, addrs: &[u64], full: bool) -> [u8; RECORD_BYTES] {
         let rec = &self.view.tlases[t as usize];
         let inst = &self.view.instances[rec.instance_range()][j];
         let b = inst.blas as usize;
         let aabbs = self.view.blases[b].kind == BLAS_AABBS;
         let any_hit = inst.flags & FLAG_NEEDS_ANY_HIT != 0;
         let addr = addrs[b];
-        let reference = if addr != 0 { addr } else { self.placeholder(b) };
+        let reference = if addr != 0 {
+            addr
+        } else {
+            self.placeholder(b, full)
+        };
         let mut enc = encode_instance(&inst.tlas_from_blas, aabbs, any_hit, reference, j as u32);
         if addr == 0 {
             set_instance_mask(&mut enc, 0);
@@ -163,9 +171,19 @@ impl StreamingRenderer<'_> {
         enc
     }
 
-    /// BLAS `b`'s placeholder (the empty one where it has none).
-    fn placeholder(&self, b: usize) -> u64 {
-        let p = self.placeholders.per_blas.get(b).copied().unwrap_or(0);
+    /// BLAS `b`'s placeholder: its bounds' centre, or (`full`, while they exist) its whole
+    /// bounds; the empty one where it has none.
+    fn placeholder(&self, b: usize, full: bool) -> u64 {
+        let ph = &self.placeholders;
+        let whole = if full {
+            ph.full_per_blas.get(b).copied()
+        } else {
+            None
+        };
+        let p = whole
+            .filter(|&a| a != 0)
+            .or_else(|| ph.per_blas.get(b).copied())
+            .unwrap_or(0);
         if p != 0 {
             p
         } else {
@@ -191,21 +209,27 @@ impl StreamingRenderer<'_> {
         inst
     }
 
-    /// Builds the placeholders (one box each: every buildable BLAS's bounds, and one empty box
-    /// at the origin) once, for the persistent TLASes.
+    /// Builds the placeholders once, for the persistent TLASes: per buildable BLAS a point at
+    /// its bounds' centre and (for the first builds only) its whole bounds, and one empty box
+    /// at the origin.
     pub(super) fn build_placeholders(&mut self) -> Result<()> {
         let view = self.view;
         let nb = view.blases.len();
         let mut boxes: Vec<[f32; 6]> = Vec::new();
-        let mut owner: Vec<Option<usize>> = Vec::new();
+        // (BLAS, full) per box; None: the empty one.
+        let mut owner: Vec<Option<(usize, bool)>> = Vec::new();
         for b in 0..nb {
             if !self.buildable[b] {
                 continue;
             }
             let r = &view.blases[b];
             if (0..3).all(|k| r.bounds_min[k] <= r.bounds_max[k]) {
-                boxes.push(r.bounds_box());
-                owner.push(Some(b));
+                let whole = r.bounds_box();
+                let c: [f32; 3] = std::array::from_fn(|k| 0.5 * (whole[k] + whole[k + 3]));
+                boxes.push(whole);
+                owner.push(Some((b, true)));
+                boxes.push([c[0], c[1], c[2], c[0], c[1], c[2]]);
+                owner.push(Some((b, false)));
             }
         }
         boxes.push([0.0; 6]);
@@ -254,16 +278,27 @@ impl StreamingRenderer<'_> {
         })();
         self.heap.free(buf);
         let built = r?;
-        let mut per_blas = vec![0u64; nb];
+        let ph = &mut self.placeholders;
+        ph.per_blas = vec![0u64; nb];
+        ph.full_per_blas = vec![0u64; nb];
         for (k, a) in built {
             match owner[k] {
-                Some(b) => per_blas[b] = a.address,
-                None => self.placeholders.empty = a.address,
+                Some((b, true)) => {
+                    ph.full_per_blas[b] = a.address;
+                    ph.full_structures.push(a);
+                }
+                Some((b, false)) => {
+                    ph.per_blas[b] = a.address;
+                    ph.bytes += a.size_bytes;
+                    ph.structures.push(a);
+                }
+                None => {
+                    ph.empty = a.address;
+                    ph.bytes += a.size_bytes;
+                    ph.structures.push(a);
+                }
             }
-            self.placeholders.bytes += a.size_bytes;
-            self.placeholders.structures.push(a);
         }
-        self.placeholders.per_blas = per_blas;
         Ok(())
     }
 
@@ -343,7 +378,7 @@ impl StreamingRenderer<'_> {
             let (body, rest) = out.split_at_mut(count as usize * RECORD_BYTES);
             body.par_chunks_mut(RECORD_BYTES)
                 .enumerate()
-                .for_each(|(j, r)| r.copy_from_slice(&self.persistent_record(t, j, addrs)));
+                .for_each(|(j, r)| r.copy_from_slice(&self.persistent_record(t, j, addrs, true)));
             rest[..RECORD_BYTES].copy_from_slice(&self.persistent_tail(t, false, tail[0]));
             rest[RECORD_BYTES..].copy_from_slice(&self.persistent_tail(t, true, tail[1]));
         });
@@ -377,14 +412,16 @@ impl StreamingRenderer<'_> {
         })();
         match r {
             Ok(scratch) => {
-                let mut written = vec![0u64; addrs.len()];
-                for (b, w) in written.iter_mut().enumerate() {
-                    *w = if addrs[b] != 0 {
-                        addrs[b]
-                    } else {
-                        self.placeholder(b)
-                    };
-                }
+                // The caller's first update puts non-resident instances on their points.
+                let written = (0..addrs.len())
+                    .map(|b| {
+                        if addrs[b] != 0 {
+                            addrs[b]
+                        } else {
+                            self.placeholder(b, true)
+                        }
+                    })
+                    .collect();
                 Ok((
                     accel,
                     Persistent {
@@ -427,7 +464,7 @@ impl StreamingRenderer<'_> {
                     if addrs[b] != 0 {
                         addrs[b]
                     } else {
-                        self.placeholder(b)
+                        self.placeholder(b, false)
                     }
                 })
                 .collect();
@@ -455,7 +492,7 @@ impl StreamingRenderer<'_> {
                             for (k, r) in chunk.chunks_exact_mut(RECORD_BYTES).enumerate() {
                                 let j = c * CHUNK + k;
                                 if changed[instances[j].blas as usize] {
-                                    r.copy_from_slice(&this.persistent_record(t, j, addrs));
+                                    r.copy_from_slice(&this.persistent_record(t, j, addrs, false));
                                     n += 1;
                                 }
                             }
@@ -549,8 +586,12 @@ impl StreamingRenderer<'_> {
 /// The placeholders of the persistent TLASes (see the module docs).
 #[derive(Default)]
 pub(super) struct Placeholders {
-    /// Per BLAS: its placeholder's address (0: none; the empty one stands in).
+    /// Per BLAS: its placeholder's address, a point (0: none; the empty one stands in).
     pub(super) per_blas: Vec<u64>,
+    /// Per BLAS: the placeholder of its whole bounds, for the persistent TLASes' first builds
+    /// (released after them: `release_full`).
+    pub(super) full_per_blas: Vec<u64>,
+    pub(super) full_structures: Vec<AccelStruct>,
     /// The empty box's placeholder (absent proxies and marks, BLASes without bounds).
     pub(super) empty: u64,
     pub(super) bytes: u64,
@@ -558,7 +599,17 @@ pub(super) struct Placeholders {
 }
 
 impl Placeholders {
+    /// Releases the whole-bounds placeholders (no persistent TLAS references them once its
+    /// first update ran).
+    pub(super) fn release_full(&mut self, heap: &mut crate::heap::GpuHeap) {
+        for a in self.full_structures.drain(..) {
+            a.release(heap);
+        }
+        self.full_per_blas.clear();
+    }
+
     pub(super) fn release(&mut self, heap: &mut crate::heap::GpuHeap) {
+        self.release_full(heap);
         for a in self.structures.drain(..) {
             a.release(heap);
         }

@@ -226,17 +226,27 @@ impl<'a> StreamingRenderer<'a> {
                     st.tlas_instances_written += n;
                 })
             } else {
-                self.build_persistent(t, &addrs, tail).map(|(accel, p)| {
-                    let n = p.record_count();
-                    self.tlas[t as usize] = Some(TlasGpu {
-                        accel,
-                        proxy: None,
-                        marks: None,
-                        persistent: Some(p),
-                    });
-                    self.frame_stats.tlas_builds += 1;
-                    self.frame_stats.tlas_instances_written += u64::from(n);
-                })
+                self.build_persistent(t, &addrs, tail)
+                    .map(|(accel, p)| {
+                        let n = p.record_count();
+                        self.tlas[t as usize] = Some(TlasGpu {
+                            accel,
+                            proxy: None,
+                            marks: None,
+                            persistent: Some(p),
+                        });
+                        self.frame_stats.tlas_builds += 1;
+                        self.frame_stats.tlas_instances_written += u64::from(n);
+                    })
+                    .and_then(|()| {
+                        // Built over every instance's whole bounds (the topology of a full
+                        // build); the non-resident ones now shrink to their points.
+                        let n = self.update_persistent(t, &addrs, tail)?;
+                        self.frame_stats.tlas_updates += 1;
+                        self.frame_stats.tlas_builds += 1;
+                        self.frame_stats.tlas_instances_written += n;
+                        Ok(())
+                    })
             };
             if let Err(e) = r {
                 if matches!(e, GpuError::Budget(_)) && !self.is_persistent(t) {

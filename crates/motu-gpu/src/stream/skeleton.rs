@@ -561,6 +561,8 @@ impl<'a> StreamingRenderer<'a> {
                 Err(e) => return Err(e),
             }
         }
+        // The persistent TLASes' first updates ran: the whole-bounds placeholders are unused.
+        self.placeholders.release_full(&mut self.heap);
         if !self.persistent_mode.iter().any(|&p| p) {
             self.placeholders.release(&mut self.heap);
         }
