@@ -228,6 +228,14 @@ impl<'a> StreamingRenderer<'a> {
                     self.group_hint = chunk;
                     continue;
                 }
+                tracing::debug!(
+                    blas = group[0],
+                    need,
+                    free = self.free_budget_bytes(),
+                    reserve,
+                    left = queue.len() - i,
+                    "build queue stops: no room next to the step's builds and the TLAS reserve"
+                );
                 return Ok(queue.len() - i);
             }
             match self.build_group(group, evict) {
@@ -247,6 +255,12 @@ impl<'a> StreamingRenderer<'a> {
                 }
                 Err(GpuError::Budget(msg)) => {
                     if !self.built_now.is_empty() || !must_progress {
+                        tracing::debug!(
+                            blas = queue[i],
+                            left = queue.len() - i,
+                            %msg,
+                            "build queue stops: refused"
+                        );
                         return Ok(queue.len() - i);
                     }
                     if !relaxed {
@@ -368,6 +382,7 @@ impl<'a> StreamingRenderer<'a> {
                 .collect()
         };
         let (needed, later) = (queue(&demand.blases), queue(&demand.later));
+        tracing::trace!(?needed, ?later, prefetch, "build step queues");
         let deferred = self.build_blas_queue(&needed, !prefetch, !prefetch)?;
         if deferred == 0 && !later.is_empty() && self.opts.build_open_early {
             // What fits of the rest, without giving up anything built above.

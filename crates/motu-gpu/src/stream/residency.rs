@@ -52,6 +52,12 @@ impl<'a> StreamingRenderer<'a> {
         if victims.is_empty() {
             return Ok(false);
         }
+        tracing::trace!(
+            victims = ?victims.iter().map(|v| (v.0, self.last_seen.get(v.0 as usize).copied().unwrap_or(0))).collect::<Vec<_>>(),
+            stamp = self.stamp,
+            first = self.frame_first_stamp,
+            "evicting (BLAS, last seen)"
+        );
         for id in victims {
             self.evict(id.0 as usize);
         }
