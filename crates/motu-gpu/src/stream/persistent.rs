@@ -72,8 +72,6 @@ pub(super) struct Persistent {
     scratch: HeapBuffer,
     /// Per BLAS: the reference its instances' records hold now.
     written: Vec<u64>,
-    /// The proxy's and marks' references now.
-    tail_written: [u64; 2],
     record_count: u32,
 }
 
@@ -428,7 +426,6 @@ impl StreamingRenderer<'_> {
                         records,
                         scratch,
                         written,
-                        tail_written: tail,
                         record_count: n,
                     },
                 ))
@@ -443,7 +440,7 @@ impl StreamingRenderer<'_> {
 
     /// Updates persistent TLAS `t` to the current residency (`addrs`) and proxy and marks
     /// (`tail`): patches the records of instances whose BLAS's reference changed, in place,
-    /// then refits. Returns the records rewritten (0: nothing changed, no update ran).
+    /// then refits. Returns the records rewritten (the proxy's and marks' always).
     pub(super) fn update_persistent(
         &mut self,
         t: u32,
@@ -468,11 +465,10 @@ impl StreamingRenderer<'_> {
                     }
                 })
                 .collect();
+            // Updated even when no record changes: the TLAS is dirty because a BLAS came or
+            // went, so its proxy and marks were rebuilt, maybe at the same addresses with other
+            // boxes, and the refit must see their bounds.
             let changed: Vec<bool> = want.iter().zip(&p.written).map(|(a, b)| a != b).collect();
-            let tail_changed = tail != p.tail_written;
-            if !tail_changed && !changed.iter().any(|&c| c) {
-                return Ok(0);
-            }
             let count = self.view.tlases[t as usize].instance_count as usize;
             let range = self.view.tlases[t as usize].instance_range();
             let instances = &self.view.instances[range];
@@ -506,7 +502,6 @@ impl StreamingRenderer<'_> {
             )?;
             self.record_tlas_build(&g.accel, &p.records, &p.scratch, p.record_count, true)?;
             p.written = want;
-            p.tail_written = tail;
             Ok(rewritten)
         })();
         self.tlas[t as usize] = Some(g);
