@@ -20,7 +20,9 @@
 //! instances of resident BLASes (and PI instances) plus the proxy: each carries its index in
 //! the TLAS's record range as its custom index, which the shaders read, so records never move
 //! and the resident skeleton does not grow with the instance count (only the instance table
-//! does, 64 bytes an instance).
+//! does, 64 bytes an instance). A *persistent* TLAS (`persistent.rs`, `--stream-tlas`: large
+//! TLASes when the budget has room) instead holds every instance, the non-resident ones on
+//! placeholders no ray meets, and is updated in place rather than rebuilt.
 //!
 //! # Carried hits (both backends, `traverse.glsl`, `render_pixel.glsl`)
 //! Each pixel keeps its state across the passes of a frame (`Carry`, 128 bytes):
