@@ -202,9 +202,21 @@ fn a_frame_build_budget_shows_the_counted_fallback_and_converges_to_the_full_bui
         "evicted_bytes",
         "evicted_for_tlas",
         "evicted_on_refusal",
+        "tlas_ms",
+        "tlas_builds",
+        "tlas_updates",
     ] {
         assert!(rows.iter().all(|r| r[k].is_number()), "{k}: {b}");
     }
+    // A TLAS's time is part of the build's; updates are TLAS builds of persistent TLASes
+    // (this island's 22k-instance root is rebuilt under `auto`).
+    assert!(
+        rows.iter()
+            .all(|r| r["tlas_ms"].as_f64() <= r["build_ms"].as_f64()
+                && u(&r["tlas_updates"]) <= u(&r["tlas_builds"])),
+        "{b}"
+    );
+    assert_eq!(b["tlas_mode"], "rebuild", "{b}");
     // The causes of a frame's evictions are parts of them.
     assert!(
         rows.iter()

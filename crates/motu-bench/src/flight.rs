@@ -245,6 +245,10 @@ fn run_streaming(
             "evicted_for_tlas": st.evicted_for_tlas,
             "evicted_on_refusal": st.evicted_on_refusal,
             "build_ms": st.build_ms,
+            // Of build_ms: TLAS rebuilds, or updates of persistent TLASes (`--stream-tlas`).
+            "tlas_ms": st.tlas_ms,
+            "tlas_builds": st.tlas_builds,
+            "tlas_updates": st.tlas_updates,
             "trace_ms": st.trace_ms,
             "probe_rays": st.probe_rays,
             "probe_ms": st.probe_ms,
@@ -290,6 +294,8 @@ fn run_streaming(
         "mean_built_bytes": mean("built_bytes", 0),
         "mean_built_bytes_after_first": mean("built_bytes", 1),
         "mean_build_ms": mean("build_ms", 0),
+        "mean_tlas_ms": mean("tlas_ms", 0),
+        "tlas_mode": totals.tlas_mode,
         "mean_trace_ms": mean("trace_ms", 0),
         "mean_probe_ms": mean("probe_ms", 0),
         "mean_wall_ms": mean("wall_ms", 0),
@@ -335,13 +341,13 @@ fn frame_table(rows: &[Value]) -> String {
     let mut text = String::new();
     let _ = writeln!(
         text,
-        "frame  passes  working set  room         built        build ms  trace ms  wall ms  fallback px"
+        "frame  passes  working set  room         built        build ms  TLAS ms  trace ms  wall ms  fallback px"
     );
     for r in rows {
         let bytes = |k: &str| motu_report::format_size(r[k].as_u64().unwrap_or(0));
         let _ = writeln!(
             text,
-            "{:>5}  {:>6}  {:>11}  {:>11}  {:>11}  {:>8.2}  {:>8.2}  {:>7.2}  {:>11}",
+            "{:>5}  {:>6}  {:>11}  {:>11}  {:>11}  {:>8.2}  {:>7.2}  {:>8.2}  {:>7.2}  {:>11}",
             r["frame"],
             r["passes"],
             // A working set above its room cannot be resident at once: passes follow.
@@ -349,6 +355,8 @@ fn frame_table(rows: &[Value]) -> String {
             bytes("room_bytes"),
             bytes("built_bytes"),
             r["build_ms"].as_f64().unwrap_or(0.0),
+            // Of the build: the TLASes' rebuilds or updates.
+            r["tlas_ms"].as_f64().unwrap_or(0.0),
             r["trace_ms"].as_f64().unwrap_or(0.0),
             r["wall_ms"].as_f64().unwrap_or(0.0),
             r["fallback_pixels"],
@@ -370,7 +378,8 @@ mod tests {
         let mib = 1u64 << 20;
         let rows = vec![serde_json::json!({
             "frame": 3, "passes": 3, "working_set_bytes": 24 * mib, "room_bytes": 13 * mib,
-            "built_bytes": 20 * mib, "build_ms": 1.5, "trace_ms": 2.0, "wall_ms": 9.0,
+            "built_bytes": 20 * mib, "build_ms": 1.5, "tlas_ms": 0.75, "trace_ms": 2.0,
+            "wall_ms": 9.0,
             "fallback_pixels": 0,
         })];
         let t = frame_table(&rows);
@@ -384,9 +393,10 @@ mod tests {
             .filter(|c| !c.is_empty())
             .collect();
         assert_eq!(
-            &cells[..5],
-            &["3", "3", "24.0 MiB", "13.0 MiB", "20.0 MiB"],
+            &cells[..8],
+            &["3", "3", "24.0 MiB", "13.0 MiB", "20.0 MiB", "1.50", "0.75", "2.00"],
             "{t}"
         );
+        assert!(head.contains("build ms  TLAS ms  trace ms"), "{t}");
     }
 }
