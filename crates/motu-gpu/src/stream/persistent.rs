@@ -25,20 +25,18 @@
 //! an absent one points at the empty placeholder, mask 0).
 
 use ash::vk;
-use motu_abi::{HierarchyView, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
+use motu_abi::HierarchyView;
 use motu_alloc::{AllocKind, BuildSize, MemoryClass};
 use rayon::prelude::*;
 
-use super::tlas_records::RECORD_BYTES;
-use super::{StreamingRenderer, IDENTITY, MARKS_MASK, TRIANGLE_MASK};
+use super::tlas_records::{instance_record, tail_record, RECORD_BYTES};
+use super::StreamingRenderer;
 use crate::accel::AsBuildFlags;
 use crate::command::{memory_barrier, MemoryScope};
 use crate::error::{GpuError, Result};
 use crate::heap::HeapBuffer;
 use crate::memory::BufferUsage;
-use crate::scene::{
-    aabbs_geometry, build_batched, encode_instance, set_instance_mask, AccelStruct, ResourceReport,
-};
+use crate::scene::{aabbs_geometry, build_batched, set_instance_mask, AccelStruct, ResourceReport};
 
 /// How streamed TLASes follow residency (`--stream-tlas`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -152,21 +150,21 @@ impl StreamingRenderer<'_> {
         let rec = &self.view.tlases[t as usize];
         let inst = &self.view.instances[rec.instance_range()][j];
         let b = inst.blas as usize;
-        let aabbs = self.view.blases[b].kind == BLAS_AABBS;
-        let any_hit = inst.flags & FLAG_NEEDS_ANY_HIT != 0;
-        let addr = addrs[b];
-        let reference = if addr != 0 {
-            addr
-        } else {
-            self.placeholder(b, full)
-        };
-        let mut enc = encode_instance(&inst.tlas_from_blas, aabbs, any_hit, reference, j as u32);
-        if addr == 0 {
+        let mut enc = instance_record(&self.view, inst, j as u32, self.reference(b, addrs, full));
+        if addrs[b] == 0 {
             set_instance_mask(&mut enc, 0);
-        } else if !aabbs {
-            set_instance_mask(&mut enc, TRIANGLE_MASK);
         }
         enc
+    }
+
+    /// What BLAS `b`'s instances reference: the BLAS if resident (`addrs`), else its
+    /// placeholder (`full`: see [`Self::placeholder`]).
+    fn reference(&self, b: usize, addrs: &[u64], full: bool) -> u64 {
+        if addrs[b] != 0 {
+            addrs[b]
+        } else {
+            self.placeholder(b, full)
+        }
     }
 
     /// BLAS `b`'s placeholder: its bounds' centre, or (`full`, while they exist) its whole
@@ -193,17 +191,11 @@ impl StreamingRenderer<'_> {
     /// empty placeholder under mask 0 when absent.
     fn persistent_tail(&self, t: u32, marks: bool, addr: u64) -> [u8; RECORD_BYTES] {
         let count = self.view.tlases[t as usize].instance_count;
-        let reference = if addr != 0 {
-            addr
-        } else {
-            self.placeholders.empty
-        };
-        let mut inst = encode_instance(&IDENTITY, true, false, reference, count + u32::from(marks));
-        if addr == 0 {
-            set_instance_mask(&mut inst, 0);
-        } else if marks {
-            set_instance_mask(&mut inst, MARKS_MASK);
+        if addr != 0 {
+            return tail_record(count, marks, addr);
         }
+        let mut inst = tail_record(count, marks, self.placeholders.empty);
+        set_instance_mask(&mut inst, 0);
         inst
     }
 
@@ -246,21 +238,7 @@ impl StreamingRenderer<'_> {
                 .upload(&ctx, &buf, 0, bytemuck::cast_slice(&boxes))?;
             self.up_mut()?.flush(&ctx)?;
             let base = buf.device_address()?.0;
-            let flags = self.build_opts.blas_build.flags();
-            let s = ctx.blas_build_sizes(
-                &[crate::accel::BlasGeometry::Aabbs {
-                    aabb_count: 1,
-                    opaque: true,
-                }],
-                flags,
-            )?;
-            let sizes = vec![
-                BuildSize {
-                    result_bytes: s.acceleration_structure_size_bytes,
-                    scratch_bytes: s.build_scratch_size_bytes,
-                };
-                boxes.len()
-            ];
+            let sizes = vec![self.placeholder_build_size()?; boxes.len()];
             let mut report = ResourceReport::default();
             build_batched(
                 &ctx,
@@ -298,6 +276,21 @@ impl StreamingRenderer<'_> {
             }
         }
         Ok(())
+    }
+
+    /// The build sizes of one placeholder (an AABB BLAS of one box, built as BLASes are).
+    pub(super) fn placeholder_build_size(&self) -> Result<BuildSize> {
+        let s = self.ctx.blas_build_sizes(
+            &[crate::accel::BlasGeometry::Aabbs {
+                aabb_count: 1,
+                opaque: true,
+            }],
+            self.build_opts.blas_build.flags(),
+        )?;
+        Ok(BuildSize {
+            result_bytes: s.acceleration_structure_size_bytes,
+            scratch_bytes: s.build_scratch_size_bytes,
+        })
     }
 
     /// Bytes a persistent TLAS `t` keeps resident beyond what a rebuilt one holds between
@@ -412,13 +405,7 @@ impl StreamingRenderer<'_> {
             Ok(scratch) => {
                 // The caller's first update puts non-resident instances on their points.
                 let written = (0..addrs.len())
-                    .map(|b| {
-                        if addrs[b] != 0 {
-                            addrs[b]
-                        } else {
-                            self.placeholder(b, true)
-                        }
-                    })
+                    .map(|b| self.reference(b, addrs, true))
                     .collect();
                 Ok((
                     accel,
@@ -457,13 +444,7 @@ impl StreamingRenderer<'_> {
                 GpuError::InvalidRequest(format!("streaming: TLAS {t} is not persistent"))
             })?;
             let want: Vec<u64> = (0..addrs.len())
-                .map(|b| {
-                    if addrs[b] != 0 {
-                        addrs[b]
-                    } else {
-                        self.placeholder(b, false)
-                    }
-                })
+                .map(|b| self.reference(b, addrs, false))
                 .collect();
             // Updated even when no record changes: the TLAS is dirty because a BLAS came or
             // went, so its proxy and marks were rebuilt, maybe at the same addresses with other

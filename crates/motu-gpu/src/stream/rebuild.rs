@@ -7,16 +7,13 @@ use motu_alloc::{AllocKind, BuildSize, ItemId, MemoryClass};
 
 use super::residency::EvictWhy;
 use super::skeleton::{proxy_blas_record, proxy_pi, staging_released};
-use super::tlas_records::{TlasRecords, RECORD_BYTES};
-use super::{StreamingRenderer, TlasGpu, IDENTITY, MARKS_MASK};
+use super::tlas_records::{tail_record, TlasRecords, RECORD_BYTES};
+use super::{StreamingRenderer, TlasGpu};
 use crate::accel::{AsBuildFlags, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT};
 use crate::error::{GpuError, Result};
 use crate::heap::FitRequest;
 use crate::memory::BufferUsage;
-use crate::scene::{
-    aabbs_geometry, blas_geometry, build_batched, encode_instance, set_instance_mask, AccelStruct,
-    ResourceReport,
-};
+use crate::scene::{aabbs_geometry, blas_geometry, build_batched, AccelStruct, ResourceReport};
 
 impl<'a> StreamingRenderer<'a> {
     /// Builds the BLASes `ids` of the original hierarchy (meshes must be resident; `aabb_base`
@@ -275,19 +272,7 @@ impl<'a> StreamingRenderer<'a> {
             proxies
                 .iter()
                 .filter(|(pt, _, _)| *pt == t)
-                .map(|(_, marks, a)| {
-                    let mut inst = encode_instance(
-                        &IDENTITY,
-                        true,
-                        false,
-                        a.address,
-                        count + u32::from(*marks),
-                    );
-                    if *marks {
-                        set_instance_mask(&mut inst, MARKS_MASK);
-                    }
-                    inst
-                })
+                .map(|(_, marks, a)| tail_record(count, *marks, a.address))
                 .collect()
         });
         let counts = records.record_counts();
@@ -549,7 +534,7 @@ impl<'a> StreamingRenderer<'a> {
     /// current build holds (instance buffer, structure, scratch; the proxy, its boxes and the
     /// fragmentation of blocks by a quarter more); 0 for a persistent TLAS.
     pub(super) fn tlas_rebuild_bytes(&self, t: u32, count: u64) -> Result<u64> {
-        if self.persistent_mode[t as usize] && self.is_persistent(t) {
+        if self.is_persistent(t) {
             // Updated in place with its kept scratch: only its proxy and marks are rebuilt.
             return Ok(0);
         }

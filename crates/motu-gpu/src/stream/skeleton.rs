@@ -167,7 +167,10 @@ impl<'a> StreamingRenderer<'a> {
                 } else {
                     view.tlases
                         .iter()
-                        .map(|t| u64::from(persistent_records(t.instance_count)) * 64)
+                        .map(|t| {
+                            u64::from(persistent_records(t.instance_count))
+                                * super::tlas_records::RECORD_BYTES as u64
+                        })
                         .sum::<u64>()
                         + 2 * crate::scene::block_bytes_for_budget(budget)
                 },
@@ -393,15 +396,8 @@ impl<'a> StreamingRenderer<'a> {
         for &t in &candidates {
             bytes += self.persistent_bytes(t, host_counts)?;
         }
-        let placeholder = self.ctx.blas_build_sizes(
-            &[crate::accel::BlasGeometry::Aabbs {
-                aabb_count: 1,
-                opaque: true,
-            }],
-            self.build_opts.blas_build.flags(),
-        )?;
         let placeholders = self.buildable.iter().filter(|&&b| b).count() as u64 + 1;
-        bytes += placeholders * placeholder.acceleration_structure_size_bytes.div_ceil(256) * 256;
+        bytes += placeholders * self.placeholder_build_size()?.result_bytes.div_ceil(256) * 256;
         let budget = self.build_opts.budget_bytes;
         let instances: u64 = candidates
             .iter()
@@ -577,11 +573,8 @@ impl<'a> StreamingRenderer<'a> {
             .tlas
             .iter()
             .flatten()
-            .filter(|g| g.persistent.is_some())
-            .map(|g| {
-                g.size_bytes(host_counts)
-                    - g.proxy.as_ref().map_or(0, |a| a.size_bytes)
-                    - g.marks.as_ref().map_or(0, |a| a.size_bytes)
+            .filter_map(|g| {
+                Some(g.accel.size_bytes + g.persistent.as_ref()?.size_bytes(host_counts))
             })
             .sum::<u64>()
             + self.placeholders.bytes;

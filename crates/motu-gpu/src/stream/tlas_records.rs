@@ -146,17 +146,7 @@ impl<'r> TlasRecords<'r> {
             if addr == 0 {
                 continue;
             }
-            let aabbs = self.view.blases[b].kind == BLAS_AABBS;
-            let mut enc = encode_instance(
-                &inst.tlas_from_blas,
-                aabbs,
-                inst.flags & FLAG_NEEDS_ANY_HIT != 0,
-                addr,
-                (first + j) as u32,
-            );
-            if !aabbs {
-                set_instance_mask(&mut enc, TRIANGLE_MASK);
-            }
+            let enc = instance_record(&self.view, inst, (first + j) as u32, addr);
             // The count pass saw the same residency, so `out` holds exactly these records.
             if let Some(slot) = records.next() {
                 slot.copy_from_slice(&enc);
@@ -164,6 +154,45 @@ impl<'r> TlasRecords<'r> {
         }
         debug_assert!(records.next().is_none(), "fewer records than counted");
     }
+}
+
+/// The record of `inst`, index `index` in its TLAS (the custom index the shaders read),
+/// referencing `addr` (its resident BLAS, or a persistent TLAS's placeholder): flags and shader
+/// offset from its BLAS's kind, triangle instances under [`TRIANGLE_MASK`].
+pub(super) fn instance_record(
+    view: &HierarchyView<'_>,
+    inst: &InstanceRecord,
+    index: u32,
+    addr: u64,
+) -> [u8; RECORD_BYTES] {
+    let aabbs = view.blases[inst.blas as usize].kind == BLAS_AABBS;
+    let mut enc = encode_instance(
+        &inst.tlas_from_blas,
+        aabbs,
+        inst.flags & FLAG_NEEDS_ANY_HIT != 0,
+        addr,
+        index,
+    );
+    if !aabbs {
+        set_instance_mask(&mut enc, TRIANGLE_MASK);
+    }
+    enc
+}
+
+/// The record of a streamed TLAS's proxy (`marks` false) or marks BLAS at `addr`: they follow
+/// the TLAS's `instance_count` own records; only probe passes' rays see the marks.
+pub(super) fn tail_record(instance_count: u32, marks: bool, addr: u64) -> [u8; RECORD_BYTES] {
+    let mut inst = encode_instance(
+        &super::IDENTITY,
+        true,
+        false,
+        addr,
+        instance_count + u32::from(marks),
+    );
+    if marks {
+        set_instance_mask(&mut inst, super::MARKS_MASK);
+    }
+    inst
 }
 
 /// TLAS `t`'s instance range.
