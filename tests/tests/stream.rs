@@ -192,7 +192,30 @@ fn island_camera_path_needs_about_one_pass_per_frame_under_the_budget() {
     // Each frame names its largest TLAS rebuild's transient (what `room_bytes` leaves out):
     // some bytes where a frame rebuilt a TLAS, none where it did not, under the budget.
     let mut rebuilt = 0;
-    for f in stream["frames"].as_array().expect("frames") {
+    for (i, f) in stream["frames"]
+        .as_array()
+        .expect("frames")
+        .iter()
+        .enumerate()
+    {
+        // Every structure the first pass needed has one cause; the first frame had no probe.
+        let missed = [
+            "first_pass_missed_evicted",
+            "first_pass_missed_unprobed",
+            "first_pass_missed_probed",
+        ]
+        .map(|k| u(&f[k]));
+        assert_eq!(
+            missed.iter().sum::<u64>(),
+            u(&f["pass_log"][0]["needed"]),
+            "{f}"
+        );
+        if i == 0 {
+            assert_eq!((missed[0], missed[2]), (0, 0), "{f}");
+        }
+        if u(&f["passes"]) == 1 {
+            assert_eq!(missed, [0, 0, 0], "{f}");
+        }
         let transient = u(&f["tlas_rebuild_transient_bytes"]);
         if u(&f["tlas_builds"]) > 0 {
             rebuilt += 1;

@@ -205,6 +205,9 @@ fn a_frame_build_budget_shows_the_counted_fallback_and_converges_to_the_full_bui
         "tlas_ms",
         "tlas_builds",
         "tlas_updates",
+        "first_pass_missed_evicted",
+        "first_pass_missed_unprobed",
+        "first_pass_missed_probed",
     ] {
         assert!(rows.iter().all(|r| r[k].is_number()), "{k}: {b}");
     }

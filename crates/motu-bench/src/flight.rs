@@ -258,6 +258,10 @@ fn run_streaming(
             // Above the room, the frame's rays cannot all be served in one pass.
             "working_set_bytes": st.working_set_bytes,
             "room_bytes": st.room_bytes,
+            // Why the first pass missed what it needed (another pass follows).
+            "first_pass_missed_evicted": st.first_pass_missed_evicted,
+            "first_pass_missed_unprobed": st.first_pass_missed_unprobed,
+            "first_pass_missed_probed": st.first_pass_missed_probed,
         }));
     }
     let totals = sr.totals();

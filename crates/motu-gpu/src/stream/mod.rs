@@ -296,6 +296,16 @@ pub struct FrameStreamStats {
     /// leaves for structures, some BLAS must be built more than once in the frame.
     pub working_set_blases: u32,
     pub working_set_bytes: u64,
+    /// Why the first pass found structures missing (each one needed by some pixel, so the
+    /// frame takes another pass), judged against the previous frame's probe of this camera:
+    /// resident while the probe ran but met by none of its rays (passed without a hit: the
+    /// hardware reports no such pass) and evicted since, by the prefetch or for the frame;
+    /// not resident then and met by no probe ray (secondary rays from hits the probe could not
+    /// see yet, or no probe ran); met by the probe but not resident now (the prefetch skipped
+    /// it or evicted it again). Zero when the first pass completed the frame.
+    pub first_pass_missed_evicted: u32,
+    pub first_pass_missed_unprobed: u32,
+    pub first_pass_missed_probed: u32,
     /// Per pass: where its time went.
     pub pass_log: Vec<PassStats>,
     /// Resident acceleration-structure and geometry bytes after the frame.
@@ -505,6 +515,9 @@ pub struct StreamingRenderer<'a> {
     frame_first_stamp: u32,
     /// The next frame's camera, probed after this frame (`set_next_camera`).
     next_camera: Option<motu_abi::camera::CameraParams>,
+    /// Per BLAS, what the last probe saw (`PROBE_MET`, `PROBE_RESIDENT` bits), kept for the
+    /// next frame's first pass to say why it missed what it missed; empty when no probe ran.
+    probe_sighting: Vec<u8>,
     /// Set when a failed build step left the root TLAS referencing freed memory.
     poisoned: Option<String>,
     frame: u64,

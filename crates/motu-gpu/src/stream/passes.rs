@@ -9,6 +9,7 @@ use motu_alloc::ItemId;
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
 use super::params::{StreamParams, CARRY_BYTES};
+use super::probe::{PROBE_MET, PROBE_RESIDENT};
 use super::{FrameStreamStats, PassStats, StreamFallback, StreamingRenderer, GUARD_BIAS};
 use crate::error::{GpuError, Result};
 use crate::render::{Tracer, STAT_WORDS};
@@ -74,6 +75,9 @@ impl<'a> StreamingRenderer<'a> {
                 }
             }
             demand.sort();
+            if first {
+                self.classify_first_pass_misses(&demand);
+            }
             let mut pass = PassStats {
                 traced,
                 open_pixels: u64::from(count),
@@ -173,6 +177,26 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         Ok((records, rgba, counters, guard_demand))
+    }
+}
+
+impl<'a> StreamingRenderer<'a> {
+    /// Counts why the first pass's needed structures were missing (see
+    /// `FrameStreamStats::first_pass_missed_evicted`), from the last probe's sightings, which
+    /// it then forgets.
+    fn classify_first_pass_misses(&mut self, demand: &Demand) {
+        let sighting = std::mem::take(&mut self.probe_sighting);
+        for &(b, _) in &demand.blases {
+            let s = sighting.get(b as usize).copied().unwrap_or(0);
+            let st = &mut self.frame_stats;
+            if s & PROBE_MET != 0 {
+                st.first_pass_missed_probed += 1;
+            } else if s & PROBE_RESIDENT != 0 {
+                st.first_pass_missed_evicted += 1;
+            } else {
+                st.first_pass_missed_unprobed += 1;
+            }
+        }
     }
 }
 

@@ -29,6 +29,10 @@ use super::StreamingRenderer;
 use crate::error::Result;
 use crate::render::{frame_params, RenderOptions};
 
+/// `probe_sighting` bits: a probe ray met the BLAS; the BLAS was resident while it ran.
+pub(super) const PROBE_MET: u8 = 1;
+pub(super) const PROBE_RESIDENT: u8 = 2;
+
 impl<'a> StreamingRenderer<'a> {
     /// Traces the probe of `next` (same image size as the frame just rendered, whose buffers
     /// `fb` are) and returns what it met that is not resident: the structures some ray would
@@ -61,12 +65,21 @@ impl<'a> StreamingRenderer<'a> {
             (0, list)
         };
         let rays = u64::from(full) + list.len() as u64;
+        let resident: Vec<bool> = self.blas.iter().map(Option::is_some).collect();
         let PassReadback {
             stamps,
             requests,
             trace_ms,
             ..
         } = self.trace_pass(fb, pixels, full, &list, false, STREAM_PROBE_PASS)?;
+        let stamp = self.stamp;
+        self.probe_sighting = stamps
+            .iter()
+            .zip(&resident)
+            .map(|(&v, &r)| {
+                (if v >> 2 == stamp { PROBE_MET } else { 0 }) | if r { PROBE_RESIDENT } else { 0 }
+            })
+            .collect();
         self.frame_stats.probe_rays += rays;
         self.frame_stats.probe_ms += trace_ms;
         let mut demand = Demand::default();

@@ -328,6 +328,7 @@ impl<'a> StreamingRenderer<'a> {
             stamp: 0,
             frame_first_stamp: 1,
             next_camera: None,
+            probe_sighting: Vec::new(),
             poisoned: None,
             frame: 0,
             kept: Default::default(),
