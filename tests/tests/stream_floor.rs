@@ -36,6 +36,17 @@ fn report(pkg: &Path) -> (u64, u64) {
         "{}",
         r["streaming"]
     );
+    // On a device the report sizes persistent TLASes (`--stream-tlas update`) by its
+    // queries; these scenes' roots (tens of thousands of instances) stay rebuilt under auto.
+    let p = &r["streaming"]["persistent_tlas"];
+    assert!(u(&p["tlases"]) >= 1 && u(&p["bytes"]) > 0, "{p}");
+    assert!(p["auto_min_budget_bytes"].is_null(), "{p}");
+    let text = motu_ok(&["report", s(pkg), "--width", W, "--height", H]);
+    assert!(
+        text.contains("persistent TLASes (--stream-tlas update)")
+            && text.contains("auto rebuilds them"),
+        "{text}"
+    );
     eprintln!("report: full-build peak {peak} bytes, streaming floor {floor} bytes");
     (peak, floor)
 }

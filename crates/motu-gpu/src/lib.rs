@@ -77,6 +77,7 @@ pub use scene::{
     full_build_overhead, BuildOptions, FullBuildOverhead, GpuScene, MeshBlobSource, ResourceReport,
 };
 pub use stream::{
-    streaming_floor, FloorSizes, FrameStreamStats, PassStats, StreamFallback, StreamFloor,
-    StreamOptions, StreamTotals, StreamingRenderer, TlasUpdate, PI_EMPTY_BLAS,
+    persistent_tlas_estimate, streaming_floor, FloorSizes, FrameStreamStats, PassStats,
+    PersistentEstimate, StreamFallback, StreamFloor, StreamOptions, StreamTotals,
+    StreamingRenderer, TlasUpdate, PI_EMPTY_BLAS,
 };

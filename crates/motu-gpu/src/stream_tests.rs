@@ -967,6 +967,28 @@ fn persistent_tlases_updated_in_place_match_the_full_build_on_both_backends() {
         let totals = sr.totals();
         assert_eq!(totals.tlas_mode, "update", "{totals:?}");
         assert_eq!(totals.persistent_tlases, 1, "{totals:?}");
+        // `motu report`'s estimate (by the same size queries; records aside, which count
+        // only where host memory does) is what the renderer keeps, to a placeholder's
+        // alignment and build flags.
+        let est = crate::persistent_tlas_estimate(&h.view(), &ctx, ctx.limits().max_instance_count)
+            .expect("estimate")
+            .expect("the driver sizes updatable TLASes");
+        assert_eq!((est.tlases, est.instances), (1, 2500), "{est:?}");
+        assert_eq!(
+            est.auto_min_budget_bytes, None,
+            "2,500 instances stay rebuilt"
+        );
+        let records = if sr.host_visible_counts_against_budget() {
+            64 * (est.instances + 2)
+        } else {
+            0
+        };
+        let kept = totals.persistent_tlas_bytes - records;
+        assert!(
+            kept.abs_diff(est.bytes) * 50 <= est.bytes,
+            "renderer keeps {kept} bytes besides records, estimate {}",
+            est.bytes
+        );
         let (mut updates, mut written) = (0, 0);
         for f in 0..frames {
             let cam = camera_path(&base_pose(), &path, f, frames).params(32, 32);

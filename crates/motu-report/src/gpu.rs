@@ -197,6 +197,11 @@ impl SizeSource for GpuSizes {
         self.ctx.limits().max_instance_count
     }
 
+    fn tlas_updatable_sizes(&self, instance_count: u32) -> Result<Option<(u64, u64)>, ReportError> {
+        use motu_gpu::FloorSizes;
+        Ok(self.ctx.tlas_updatable(instance_count)?)
+    }
+
     fn max_primitive_count(&self) -> u64 {
         self.ctx.limits().max_primitive_count
     }

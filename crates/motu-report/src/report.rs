@@ -47,6 +47,12 @@ pub struct StreamingReport {
     /// The element with the largest `alone.peak_bytes` (the floor for per-element streaming).
     pub largest_element: Option<String>,
     pub largest_element_peak_bytes: u64,
+    /// What persistent TLASes (`--stream-tlas update`) would keep resident and the least
+    /// budget at which `--stream-tlas auto` (the default) updates them instead of rebuilding;
+    /// `None` where the sizes come from a model (updatable TLAS sizes need a device's
+    /// queries). Their instance records (64 bytes each) also count where host memory does
+    /// (integrated GPUs, CPU drivers).
+    pub persistent_tlas: Option<motu_gpu::PersistentEstimate>,
 }
 
 /// The VRAM-budget report (`motu report --json` prints it as one object).
@@ -446,6 +452,9 @@ pub fn build_report_from_view(
     .map_err(|e| ReportError::Invalid(format!("streaming floor: {e}")))?;
     streaming.min_resident_bytes = floor.min_resident_bytes;
     streaming.floor = floor;
+    streaming.persistent_tlas =
+        motu_gpu::persistent_tlas_estimate(view, &FloorAdapter(sizes), sizes.max_instance_count())
+            .map_err(|e| ReportError::Invalid(format!("persistent TLAS estimate: {e}")))?;
     let budget = budget_bytes
         .map(|b| {
             plan_budget(
@@ -627,6 +636,7 @@ fn streaming_report(
         floor: motu_gpu::StreamFloor::default(),
         largest_element: largest.as_ref().map(|l| l.0.clone()),
         largest_element_peak_bytes: largest.map_or(0, |l| l.1),
+        persistent_tlas: None,
     }
 }
 
@@ -670,5 +680,11 @@ impl motu_gpu::FloorSizes for FloorAdapter<'_> {
             .tlas_sizes(u64::from(instance_count))
             .map_err(|e| motu_gpu::GpuError::InvalidRequest(e.to_string()))?;
         Ok((s.size_bytes, s.build_scratch_bytes))
+    }
+
+    fn tlas_updatable(&self, instance_count: u32) -> motu_gpu::Result<Option<(u64, u64)>> {
+        self.0
+            .tlas_updatable_sizes(instance_count)
+            .map_err(|e| motu_gpu::GpuError::InvalidRequest(e.to_string()))
     }
 }

@@ -83,6 +83,14 @@ pub trait SizeSource {
     fn max_instance_count(&self) -> u64;
     /// `maxPrimitiveCount` of the target device.
     fn max_primitive_count(&self) -> u64;
+    /// (structure, update scratch) of a TLAS built to be updated (`--stream-tlas update`);
+    /// `None` where the source cannot size one (models are fitted on plain builds).
+    fn tlas_updatable_sizes(
+        &self,
+        _instance_count: u32,
+    ) -> Result<Option<(u64, u64)>, ReportError> {
+        Ok(None)
+    }
 }
 
 /// A size curve in bytes over an item count: the sizes measured at small counts (up to

@@ -781,7 +781,10 @@ fn text_explains_the_peak_and_a_floor_over_it() {
 #[test]
 fn text_table_lists_every_row_and_variant() {
     let r = forest().report(&ModelSizes::new(&NVIDIA_H200), Some(200 << 10));
+    // Models are fitted on plain builds: updatable TLAS sizes need a device.
+    assert_eq!(r.streaming.persistent_tlas, None);
     let text = render_text(&r);
+    assert!(!text.contains("persistent TLASes"), "{text}");
     eprintln!("{text}");
     for needle in [
         "trees",

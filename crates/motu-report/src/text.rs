@@ -175,6 +175,23 @@ pub fn render_text(r: &Report) -> String {
         }
     }
 
+    if let Some(p) = s.persistent_tlas.as_ref().filter(|p| p.tlases > 0) {
+        let _ = writeln!(
+            out,
+            "  persistent TLASes (--stream-tlas update): {} over {} instances keep {} resident; {}",
+            p.tlases,
+            p.instances,
+            human_bytes(p.bytes),
+            match p.auto_min_budget_bytes {
+                Some(b) => format!(
+                    "auto updates them at budgets from {}, rebuilds below",
+                    human_bytes(b)
+                ),
+                None => "auto rebuilds them (fewer than 2^20 instances: a rebuild is cheap)".into(),
+            }
+        );
+    }
+
     if let Some(b) = &r.budget {
         let _ = writeln!(out, "\nBudget {}:", human_bytes(b.budget_bytes));
         for v in &b.variants {

@@ -20,6 +20,12 @@ use crate::scene::{allocator_slack_bytes, staging_bytes_for_budget};
 pub trait FloorSizes {
     fn blas(&self, geometry: &[BlasGeometry]) -> Result<(u64, u64)>;
     fn tlas(&self, instance_count: u32) -> Result<(u64, u64)>;
+    /// (structure, update scratch) of a TLAS built to be updated (a persistent TLAS,
+    /// `StreamOptions::tlas_update`); `None` where the source cannot size one (a model fitted
+    /// on plain builds).
+    fn tlas_updatable(&self, _instance_count: u32) -> Result<Option<(u64, u64)>> {
+        Ok(None)
+    }
 }
 
 impl FloorSizes for crate::context::Context {
@@ -37,6 +43,14 @@ impl FloorSizes for crate::context::Context {
             s.acceleration_structure_size_bytes,
             s.build_scratch_size_bytes,
         ))
+    }
+
+    fn tlas_updatable(&self, instance_count: u32) -> Result<Option<(u64, u64)>> {
+        let s = self.tlas_build_sizes(instance_count, super::persistent::persistent_flags())?;
+        Ok(Some((
+            s.acceleration_structure_size_bytes,
+            s.update_scratch_size_bytes,
+        )))
     }
 }
 

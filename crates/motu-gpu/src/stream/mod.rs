@@ -97,7 +97,7 @@ mod skeleton;
 mod tlas_records;
 
 pub use floor::{streaming_floor, FloorSizes, StreamFloor};
-pub use persistent::TlasUpdate;
+pub use persistent::{persistent_tlas_estimate, PersistentEstimate, TlasUpdate};
 
 use std::collections::BTreeSet;
 
@@ -577,6 +577,13 @@ impl<'a> StreamingRenderer<'a> {
     /// another size is not probed.
     pub fn set_next_camera(&mut self, camera: Option<motu_abi::camera::CameraParams>) {
         self.next_camera = camera;
+    }
+
+    /// Whether host-visible memory counts against the budget (unified memory: lavapipe,
+    /// integrated GPUs), where persistent TLASes' records count too.
+    #[cfg(test)]
+    pub(crate) fn host_visible_counts_against_budget(&self) -> bool {
+        self.heap.host_visible_counts_against_budget()
     }
 
     /// Statistics of the run so far.

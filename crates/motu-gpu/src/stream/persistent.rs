@@ -25,10 +25,12 @@
 //! an absent one points at the empty placeholder, mask 0).
 
 use ash::vk;
-use motu_abi::HierarchyView;
+use motu_abi::{HierarchyView, BLAS_TRIANGLES};
 use motu_alloc::{AllocKind, BuildSize, MemoryClass};
 use rayon::prelude::*;
+use serde::Serialize;
 
+use super::floor::FloorSizes;
 use super::tlas_records::{instance_record, tail_record, RECORD_BYTES};
 use super::StreamingRenderer;
 use crate::accel::AsBuildFlags;
@@ -129,6 +131,119 @@ pub(super) fn auto_persistent(instances: u64, persistent_bytes: u64, budget_byte
 /// Records of a persistent TLAS over `instance_count` instances: theirs, the proxy, the marks.
 pub(super) fn persistent_records(instance_count: u32) -> u32 {
     instance_count + 2
+}
+
+/// What persistent TLASes would keep resident (`StreamOptions::tlas_update`), by size queries:
+/// the renderer's `auto` decides on it and `motu report` prints it
+/// (`streaming.persistent_tlas`), so users see at which budget `auto` turns to updates.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct PersistentEstimate {
+    /// The TLASes that would be persistent, and the instances they hold together.
+    pub tlases: u32,
+    pub instances: u64,
+    /// Their structures at full residency, update scratch and placeholders (and their instance
+    /// records where host memory counts against the budget).
+    pub bytes: u64,
+    /// The least budget at which `auto` makes them persistent; `None`: never (fewer than
+    /// 2^20 instances, where a rebuild takes milliseconds).
+    pub auto_min_budget_bytes: Option<u64>,
+}
+
+/// [`PersistentEstimate`] of `view`'s candidates (`has_clusters`: TLASes with triangle
+/// instances; at most `max_instances` records each), with `placeholder_bytes` per placeholder
+/// BLAS and `updatable(records)` = (structure, update scratch) of a TLAS built with
+/// [`persistent_flags`]. `host_records`: instance records (host memory) count too.
+pub(super) fn persistent_estimate(
+    view: &HierarchyView<'_>,
+    has_clusters: &[bool],
+    max_instances: u64,
+    host_records: bool,
+    placeholder_bytes: u64,
+    mut updatable: impl FnMut(u32) -> Result<(u64, u64)>,
+) -> Result<(Vec<u32>, PersistentEstimate)> {
+    let candidates: Vec<u32> = persistent_candidates(view, has_clusters)
+        .into_iter()
+        .filter(|&t| {
+            u64::from(persistent_records(view.tlases[t as usize].instance_count)) <= max_instances
+        })
+        .collect();
+    if candidates.is_empty() {
+        return Ok((candidates, PersistentEstimate::default()));
+    }
+    let mut bytes = 0u64;
+    let mut instances = 0u64;
+    for &t in &candidates {
+        let n = persistent_records(view.tlases[t as usize].instance_count);
+        let (structure, scratch) = updatable(n)?;
+        let records = if host_records {
+            u64::from(n) * RECORD_BYTES as u64
+        } else {
+            0
+        };
+        bytes += structure + scratch + records;
+        instances += u64::from(view.tlases[t as usize].instance_count);
+    }
+    // One placeholder per buildable BLAS, plus the empty one.
+    let placeholders = view
+        .blases
+        .iter()
+        .filter(|b| b.kind == BLAS_TRIANGLES && b.item_count > 0)
+        .count() as u64
+        + 1;
+    bytes += placeholders * placeholder_bytes.div_ceil(256) * 256;
+    let auto_min_budget_bytes =
+        (instances >= AUTO_MIN_INSTANCES).then(|| bytes.saturating_mul(AUTO_MAX_BUDGET_SHARE));
+    let estimate = PersistentEstimate {
+        tlases: candidates.len() as u32,
+        instances,
+        bytes,
+        auto_min_budget_bytes,
+    };
+    Ok((candidates, estimate))
+}
+
+/// What persistent TLASes would keep resident when streaming `view`, by `sizes` (a device's
+/// size queries: [`FloorSizes::tlas_updatable`]), on a device whose TLASes hold at most
+/// `max_instances` instances and whose host memory does not count against the budget; `None`
+/// where `sizes` cannot size updatable TLASes. See [`PersistentEstimate`].
+pub fn persistent_tlas_estimate(
+    view: &HierarchyView<'_>,
+    sizes: &dyn FloorSizes,
+    max_instances: u64,
+) -> Result<Option<PersistentEstimate>> {
+    let buildable = |b: u32| {
+        let r = &view.blases[b as usize];
+        r.kind == BLAS_TRIANGLES && r.item_count > 0
+    };
+    let has_clusters: Vec<bool> = view
+        .tlases
+        .iter()
+        .map(|rec| {
+            view.instances[rec.instance_range()]
+                .iter()
+                .any(|i| buildable(i.blas))
+        })
+        .collect();
+    if sizes.tlas_updatable(2)?.is_none() {
+        return Ok(None);
+    }
+    let (placeholder, _) = sizes.blas(&[crate::accel::BlasGeometry::Aabbs {
+        aabb_count: 1,
+        opaque: true,
+    }])?;
+    let (_, estimate) = persistent_estimate(
+        view,
+        &has_clusters,
+        max_instances,
+        false,
+        placeholder,
+        |n| {
+            sizes
+                .tlas_updatable(n)?
+                .ok_or_else(|| GpuError::InvalidRequest("updatable TLAS sizes unavailable".into()))
+        },
+    )?;
+    Ok(Some(estimate))
 }
 
 /// The TLASes that may be persistent: those with triangle instances (the others never change)
@@ -291,20 +406,6 @@ impl StreamingRenderer<'_> {
             result_bytes: s.acceleration_structure_size_bytes,
             scratch_bytes: s.build_scratch_size_bytes,
         })
-    }
-
-    /// Bytes a persistent TLAS `t` keeps resident beyond what a rebuilt one holds between
-    /// rebuilds, counted against the budget: its structure at full residency and its update
-    /// scratch (and its records where host memory counts).
-    pub(super) fn persistent_bytes(&self, t: u32, host_counts: bool) -> Result<u64> {
-        let n = persistent_records(self.view.tlases[t as usize].instance_count);
-        let s = self.ctx.tlas_build_sizes(n, persistent_flags())?;
-        let records = if host_counts {
-            u64::from(n) * RECORD_BYTES as u64
-        } else {
-            0
-        };
-        Ok(s.acceleration_structure_size_bytes + s.update_scratch_size_bytes + records)
     }
 
     /// Turns every persistent TLAS into a rebuilt one (released now, dirty: the step's

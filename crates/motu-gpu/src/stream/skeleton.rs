@@ -10,7 +10,9 @@ use motu_abi::{
 };
 use motu_alloc::{AllocKind, AllocLimits, MemoryClass, Residency, MIB};
 
-use super::persistent::{auto_persistent, persistent_candidates, persistent_records, TlasUpdate};
+use super::persistent::{
+    auto_persistent, persistent_estimate, persistent_flags, persistent_records, TlasUpdate,
+};
 use super::proxy_boxes::padded;
 use super::PI_EMPTY_BLAS;
 use super::{FrameStreamStats, StreamOptions, StreamTotals, StreamingRenderer, IDENTITY};
@@ -380,38 +382,33 @@ impl<'a> StreamingRenderer<'a> {
         if self.opts.tlas_update == TlasUpdate::Rebuild {
             return Ok(mode);
         }
-        let max_instances = self.ctx.limits().max_instance_count;
-        let candidates: Vec<u32> = persistent_candidates(&self.view, has_clusters)
-            .into_iter()
-            .filter(|&t| {
-                u64::from(persistent_records(
-                    self.view.tlases[t as usize].instance_count,
-                )) <= max_instances
-            })
-            .collect();
+        let ctx = self.ctx.clone();
+        let (candidates, estimate) = persistent_estimate(
+            &self.view,
+            has_clusters,
+            ctx.limits().max_instance_count,
+            self.heap.host_visible_counts_against_budget(),
+            self.placeholder_build_size()?.result_bytes,
+            |n| {
+                let s = ctx.tlas_build_sizes(n, persistent_flags())?;
+                Ok((
+                    s.acceleration_structure_size_bytes,
+                    s.update_scratch_size_bytes,
+                ))
+            },
+        )?;
         if candidates.is_empty() {
             return Ok(mode);
         }
-        let host_counts = self.heap.host_visible_counts_against_budget();
-        let mut bytes = 0u64;
-        for &t in &candidates {
-            bytes += self.persistent_bytes(t, host_counts)?;
-        }
-        let placeholders = self.buildable.iter().filter(|&&b| b).count() as u64 + 1;
-        bytes += placeholders * self.placeholder_build_size()?.result_bytes.div_ceil(256) * 256;
         let budget = self.build_opts.budget_bytes;
-        let instances: u64 = candidates
-            .iter()
-            .map(|&t| u64::from(self.view.tlases[t as usize].instance_count))
-            .sum();
         let on = match self.opts.tlas_update {
             TlasUpdate::Update => true,
-            _ => auto_persistent(instances, bytes, budget),
+            _ => auto_persistent(estimate.instances, estimate.bytes, budget),
         };
         tracing::info!(
             candidates = candidates.len(),
-            instances,
-            bytes,
+            instances = estimate.instances,
+            bytes = estimate.bytes,
             budget,
             on,
             "persistent TLASes (updated, not rebuilt)"
