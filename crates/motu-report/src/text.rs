@@ -178,8 +178,9 @@ pub fn render_text(r: &Report) -> String {
     if let Some(p) = s.persistent_tlas.as_ref().filter(|p| p.tlases > 0) {
         let _ = writeln!(
             out,
-            "  persistent TLASes (--stream-tlas update): {} over {} instances keep {} resident; {}",
+            "  persistent TLASes (--stream-tlas update): {} {} over {} instances would keep {} resident; {}",
             p.tlases,
+            if p.tlases == 1 { "TLAS" } else { "TLASes" },
             p.instances,
             human_bytes(p.bytes),
             match p.auto_min_budget_bytes {
