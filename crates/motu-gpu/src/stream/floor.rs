@@ -10,10 +10,11 @@ use motu_alloc::MIB;
 use serde::Serialize;
 
 use super::buffers::frame_buffer_bytes;
+use super::persistent::{persistent_estimate, persistent_flags, PersistentEstimate};
 use super::proxy_boxes;
 use super::skeleton::proxy_clusters;
 use crate::accel::BlasGeometry;
-use crate::error::Result;
+use crate::error::{GpuError, Result};
 use crate::scene::{allocator_slack_bytes, staging_bytes_for_budget};
 
 /// Acceleration-structure sizes (as built, before compaction; build scratch) the floor needs.
@@ -46,7 +47,7 @@ impl FloorSizes for crate::context::Context {
     }
 
     fn tlas_updatable(&self, instance_count: u32) -> Result<Option<(u64, u64)>> {
-        let s = self.tlas_build_sizes(instance_count, super::persistent::persistent_flags())?;
+        let s = self.tlas_build_sizes(instance_count, persistent_flags())?;
         Ok(Some((
             s.acceleration_structure_size_bytes,
             s.update_scratch_size_bytes,
@@ -367,4 +368,48 @@ fn largest_blas_texture_bytes(view: &HierarchyView<'_>) -> u64 {
         })
         .max()
         .unwrap_or(0)
+}
+
+/// What persistent TLASes would keep resident when streaming `view`, by `sizes` (a device's
+/// size queries: [`FloorSizes::tlas_updatable`]), on a device whose TLASes hold at most
+/// `max_instances` instances and whose host memory does not count against the budget; `None`
+/// where `sizes` cannot size updatable TLASes. See [`PersistentEstimate`].
+pub fn persistent_tlas_estimate(
+    view: &HierarchyView<'_>,
+    sizes: &dyn FloorSizes,
+    max_instances: u64,
+) -> Result<Option<PersistentEstimate>> {
+    let buildable = |b: u32| {
+        let r = &view.blases[b as usize];
+        r.kind == BLAS_TRIANGLES && r.item_count > 0
+    };
+    let has_clusters: Vec<bool> = view
+        .tlases
+        .iter()
+        .map(|rec| {
+            view.instances[rec.instance_range()]
+                .iter()
+                .any(|i| buildable(i.blas))
+        })
+        .collect();
+    if sizes.tlas_updatable(2)?.is_none() {
+        return Ok(None);
+    }
+    let (placeholder, _) = sizes.blas(&[BlasGeometry::Aabbs {
+        aabb_count: 1,
+        opaque: true,
+    }])?;
+    let (_, estimate) = persistent_estimate(
+        view,
+        &has_clusters,
+        max_instances,
+        false,
+        placeholder,
+        |n| {
+            sizes
+                .tlas_updatable(n)?
+                .ok_or_else(|| GpuError::InvalidRequest("updatable TLAS sizes unavailable".into()))
+        },
+    )?;
+    Ok(Some(estimate))
 }

@@ -96,8 +96,8 @@ mod shading;
 mod skeleton;
 mod tlas_records;
 
-pub use floor::{streaming_floor, FloorSizes, StreamFloor};
-pub use persistent::{persistent_tlas_estimate, PersistentEstimate, TlasUpdate};
+pub use floor::{persistent_tlas_estimate, streaming_floor, FloorSizes, StreamFloor};
+pub use persistent::{PersistentEstimate, TlasUpdate};
 
 use std::collections::BTreeSet;
 

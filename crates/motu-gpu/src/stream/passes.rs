@@ -9,7 +9,6 @@ use motu_alloc::ItemId;
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
 use super::params::{StreamParams, CARRY_BYTES};
-use super::probe::{PROBE_MET, PROBE_RESIDENT};
 use super::{FrameStreamStats, PassStats, StreamFallback, StreamingRenderer, GUARD_BIAS};
 use crate::error::{GpuError, Result};
 use crate::render::{Tracer, STAT_WORDS};
@@ -18,6 +17,11 @@ use crate::scene::Slot;
 /// Stamp levels of `common.glsl` (`STREAM_*`).
 const LEVEL_OPEN: u32 = 1;
 pub(super) const LEVEL_NEEDED: u32 = 2;
+
+/// `probe_sighting` bits (`probe.rs`): a probe ray met the BLAS; the BLAS was resident while
+/// the probe ran.
+pub(super) const PROBE_MET: u8 = 1;
+pub(super) const PROBE_RESIDENT: u8 = 2;
 
 impl<'a> StreamingRenderer<'a> {
     /// The frame's build–traverse passes. Returns the image (AOV records, colour words), the

@@ -30,7 +30,6 @@ use motu_alloc::{AllocKind, BuildSize, MemoryClass};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::floor::FloorSizes;
 use super::tlas_records::{instance_record, tail_record, RECORD_BYTES};
 use super::StreamingRenderer;
 use crate::accel::AsBuildFlags;
@@ -200,50 +199,6 @@ pub(super) fn persistent_estimate(
         auto_min_budget_bytes,
     };
     Ok((candidates, estimate))
-}
-
-/// What persistent TLASes would keep resident when streaming `view`, by `sizes` (a device's
-/// size queries: [`FloorSizes::tlas_updatable`]), on a device whose TLASes hold at most
-/// `max_instances` instances and whose host memory does not count against the budget; `None`
-/// where `sizes` cannot size updatable TLASes. See [`PersistentEstimate`].
-pub fn persistent_tlas_estimate(
-    view: &HierarchyView<'_>,
-    sizes: &dyn FloorSizes,
-    max_instances: u64,
-) -> Result<Option<PersistentEstimate>> {
-    let buildable = |b: u32| {
-        let r = &view.blases[b as usize];
-        r.kind == BLAS_TRIANGLES && r.item_count > 0
-    };
-    let has_clusters: Vec<bool> = view
-        .tlases
-        .iter()
-        .map(|rec| {
-            view.instances[rec.instance_range()]
-                .iter()
-                .any(|i| buildable(i.blas))
-        })
-        .collect();
-    if sizes.tlas_updatable(2)?.is_none() {
-        return Ok(None);
-    }
-    let (placeholder, _) = sizes.blas(&[crate::accel::BlasGeometry::Aabbs {
-        aabb_count: 1,
-        opaque: true,
-    }])?;
-    let (_, estimate) = persistent_estimate(
-        view,
-        &has_clusters,
-        max_instances,
-        false,
-        placeholder,
-        |n| {
-            sizes
-                .tlas_updatable(n)?
-                .ok_or_else(|| GpuError::InvalidRequest("updatable TLAS sizes unavailable".into()))
-        },
-    )?;
-    Ok(Some(estimate))
 }
 
 /// The TLASes that may be persistent: those with triangle instances (the others never change)

@@ -24,14 +24,10 @@ use motu_abi::camera::CameraParams;
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
 use super::params::STREAM_PROBE_PASS;
-use super::passes::{pack_biased, PassReadback, LEVEL_NEEDED};
+use super::passes::{pack_biased, PassReadback, LEVEL_NEEDED, PROBE_MET, PROBE_RESIDENT};
 use super::StreamingRenderer;
 use crate::error::Result;
 use crate::render::{frame_params, RenderOptions};
-
-/// `probe_sighting` bits: a probe ray met the BLAS; the BLAS was resident while it ran.
-pub(super) const PROBE_MET: u8 = 1;
-pub(super) const PROBE_RESIDENT: u8 = 2;
 
 impl<'a> StreamingRenderer<'a> {
     /// Traces the probe of `next` (same image size as the frame just rendered, whose buffers
