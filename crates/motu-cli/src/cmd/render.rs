@@ -93,8 +93,13 @@ fn print_event(e: motu_render::RenderEvent<'_>, allow_incomplete: bool) {
                 " (incomplete: pass cap)"
             };
             eprintln!(
-                "frame {f}: {} passes{why}, {}, {} BLAS + {} TLAS built ({}), {} evicted{}, {} streamed, {:.1} ms building, VRAM {} of {}, {:.1} ms tracing, {:.1} ms frame",
+                "frame {f}: {} passes{why}{}, {}, {} BLAS + {} TLAS built ({}), {} evicted{}, {} streamed, {:.1} ms building, VRAM {} of {}, {:.1} ms tracing, {:.1} ms frame",
                 st.passes,
+                first_pass_misses(
+                    st.first_pass_missed_probed,
+                    st.first_pass_missed_unprobed,
+                    st.first_pass_missed_evicted
+                ),
                 working_set_note(st.working_set_bytes, st.room_bytes),
                 st.blas_built,
                 st.tlas_built,
@@ -400,6 +405,29 @@ fn working_set_note(working_set_bytes: u64, room_bytes: u64) -> String {
     }
 }
 
+/// Why the first pass left pixels open (what it needed and was not resident), when it did:
+/// the probe asked for it but the room did not hold it; no probe ray met it; it was resident,
+/// passed by the probe's rays without a hit (so unseen) and evicted.
+fn first_pass_misses(probed: u32, unprobed: u32, evicted: u32) -> String {
+    let total = probed + unprobed + evicted;
+    if total == 0 {
+        return String::new();
+    }
+    let parts: Vec<String> = [
+        (probed, "the probe asked for"),
+        (unprobed, "no probe ray met"),
+        (evicted, "passed unseen and evicted"),
+    ]
+    .iter()
+    .filter(|(n, _)| *n > 0)
+    .map(|(n, what)| format!("{n} {what}"))
+    .collect();
+    format!(
+        " (first pass missed {total} structures: {})",
+        parts.join(", ")
+    )
+}
+
 /// The causes of a frame's evictions beside their count, when any is not a BLAS build's room.
 fn evicted_causes(for_tlas: u32, on_refusal: u32) -> String {
     match (for_tlas, on_refusal) {
@@ -412,7 +440,21 @@ fn evicted_causes(for_tlas: u32, on_refusal: u32) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::{evicted_causes, working_set_note};
+    use super::{evicted_causes, first_pass_misses, working_set_note};
+
+    #[test]
+    fn first_pass_misses_are_named_only_when_present() {
+        assert_eq!(first_pass_misses(0, 0, 0), "");
+        assert_eq!(
+            first_pass_misses(284, 24, 8),
+            " (first pass missed 316 structures: 284 the probe asked for, 24 no probe ray met, 8 \
+             passed unseen and evicted)"
+        );
+        assert_eq!(
+            first_pass_misses(0, 0, 3),
+            " (first pass missed 3 structures: 3 passed unseen and evicted)"
+        );
+    }
 
     #[test]
     fn a_working_set_over_its_room_is_called_out() {
