@@ -5,7 +5,7 @@
 //! below the floor is refused up front) and `motu report` (`streaming.min_resident_bytes`,
 //! sizes from its size source, the same driver query on a device), so the two cannot drift.
 
-use motu_abi::{HierarchyView, BLAS_AABBS, BLAS_TRIANGLES, FLAG_NEEDS_ANY_HIT};
+use motu_abi::{HierarchyView, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
 use motu_alloc::MIB;
 use serde::Serialize;
 
@@ -14,7 +14,7 @@ use super::persistent::{persistent_estimate, persistent_flags, PersistentEstimat
 use super::proxy_boxes;
 use super::skeleton::proxy_clusters;
 use crate::accel::BlasGeometry;
-use crate::error::{GpuError, Result};
+use crate::error::Result;
 use crate::scene::{allocator_slack_bytes, staging_bytes_for_budget};
 
 /// Acceleration-structure sizes (as built, before compaction; build scratch) the floor needs.
@@ -116,10 +116,7 @@ pub fn streaming_floor(
     let nb = view.blases.len() as u64;
     let nt = view.tlases.len() as u64;
     // Triangle instances per TLAS (each gets a proxy box), as the renderer's tables.
-    let buildable = |b: usize| {
-        let r = &view.blases[b];
-        r.kind == BLAS_TRIANGLES && r.item_count > 0
-    };
+    let buildable = |b: usize| super::streamable(&view.blases[b]);
     let mut proxies_total = 0u64;
     let mut members_total = 0u64;
     let mut skeleton = 0u64;
@@ -331,7 +328,7 @@ pub fn streaming_floor(
 fn largest_blas_attribute_bytes(view: &HierarchyView<'_>) -> u64 {
     view.blases
         .iter()
-        .filter(|r| r.kind == BLAS_TRIANGLES && r.item_count > 0)
+        .filter(|r| super::streamable(r))
         .map(|r| {
             let range = r.item_base as usize..(r.item_base + r.item_count) as usize;
             view.geometries[range]
@@ -352,7 +349,7 @@ fn largest_blas_attribute_bytes(view: &HierarchyView<'_>) -> u64 {
 fn largest_blas_texture_bytes(view: &HierarchyView<'_>) -> u64 {
     view.blases
         .iter()
-        .filter(|r| r.kind == BLAS_TRIANGLES && r.item_count > 0)
+        .filter(|r| super::streamable(r))
         .map(|r| {
             let range = r.item_base as usize..(r.item_base + r.item_count) as usize;
             let mut textures: Vec<usize> = view.geometries[range]
@@ -379,10 +376,7 @@ pub fn persistent_tlas_estimate(
     sizes: &dyn FloorSizes,
     max_instances: u64,
 ) -> Result<Option<PersistentEstimate>> {
-    let buildable = |b: u32| {
-        let r = &view.blases[b as usize];
-        r.kind == BLAS_TRIANGLES && r.item_count > 0
-    };
+    let buildable = |b: u32| super::streamable(&view.blases[b as usize]);
     let has_clusters: Vec<bool> = view
         .tlases
         .iter()
@@ -405,11 +399,7 @@ pub fn persistent_tlas_estimate(
         max_instances,
         false,
         placeholder,
-        |n| {
-            sizes
-                .tlas_updatable(n)?
-                .ok_or_else(|| GpuError::InvalidRequest("updatable TLAS sizes unavailable".into()))
-        },
+        |n| sizes.tlas_updatable(n),
     )?;
     Ok(Some(estimate))
 }

@@ -97,6 +97,12 @@ mod skeleton;
 mod tlas_records;
 
 pub use floor::{persistent_tlas_estimate, streaming_floor, FloorSizes, StreamFloor};
+
+/// Whether BLAS `b` is streamed (built on demand, evicted under the budget): a triangle BLAS
+/// with geometry. The rest (AABB BLASes of programmable instances) stay in the skeleton.
+pub(super) fn streamable(b: &motu_abi::BlasRecord) -> bool {
+    b.kind == motu_abi::BLAS_TRIANGLES && b.item_count > 0
+}
 pub use persistent::{PersistentEstimate, TlasUpdate};
 
 use std::collections::BTreeSet;

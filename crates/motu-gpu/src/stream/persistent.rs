@@ -25,7 +25,7 @@
 //! an absent one points at the empty placeholder, mask 0).
 
 use ash::vk;
-use motu_abi::{HierarchyView, BLAS_TRIANGLES};
+use motu_abi::HierarchyView;
 use motu_alloc::{AllocKind, BuildSize, MemoryClass};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -151,14 +151,15 @@ pub struct PersistentEstimate {
 /// [`PersistentEstimate`] of `view`'s candidates (`has_clusters`: TLASes with triangle
 /// instances; at most `max_instances` records each), with `placeholder_bytes` per placeholder
 /// BLAS and `updatable(records)` = (structure, update scratch) of a TLAS built with
-/// [`persistent_flags`]. `host_records`: instance records (host memory) count too.
+/// [`persistent_flags`] ([`FloorSizes::tlas_updatable`](super::FloorSizes::tlas_updatable)).
+/// `host_records`: instance records (host memory) count too.
 pub(super) fn persistent_estimate(
     view: &HierarchyView<'_>,
     has_clusters: &[bool],
     max_instances: u64,
     host_records: bool,
     placeholder_bytes: u64,
-    mut updatable: impl FnMut(u32) -> Result<(u64, u64)>,
+    mut updatable: impl FnMut(u32) -> Result<Option<(u64, u64)>>,
 ) -> Result<(Vec<u32>, PersistentEstimate)> {
     let candidates: Vec<u32> = persistent_candidates(view, has_clusters)
         .into_iter()
@@ -173,7 +174,8 @@ pub(super) fn persistent_estimate(
     let mut instances = 0u64;
     for &t in &candidates {
         let n = persistent_records(view.tlases[t as usize].instance_count);
-        let (structure, scratch) = updatable(n)?;
+        let (structure, scratch) = updatable(n)?
+            .ok_or_else(|| GpuError::InvalidRequest("no size query for updatable TLASes".into()))?;
         let records = if host_records {
             u64::from(n) * RECORD_BYTES as u64
         } else {
@@ -183,12 +185,7 @@ pub(super) fn persistent_estimate(
         instances += u64::from(view.tlases[t as usize].instance_count);
     }
     // One placeholder per buildable BLAS, plus the empty one.
-    let placeholders = view
-        .blases
-        .iter()
-        .filter(|b| b.kind == BLAS_TRIANGLES && b.item_count > 0)
-        .count() as u64
-        + 1;
+    let placeholders = view.blases.iter().filter(|b| super::streamable(b)).count() as u64 + 1;
     bytes += placeholders * placeholder_bytes.div_ceil(256) * 256;
     let auto_min_budget_bytes =
         (instances >= AUTO_MIN_INSTANCES).then(|| bytes.saturating_mul(AUTO_MAX_BUDGET_SHARE));

@@ -5,14 +5,11 @@
 use std::collections::BTreeSet;
 
 use motu_abi::{
-    BlasRecord, HierarchyView, InstanceRecord, PiRecord, TlasRecord, BLAS_AABBS, BLAS_TRIANGLES,
-    NONE_U32,
+    BlasRecord, HierarchyView, InstanceRecord, PiRecord, TlasRecord, BLAS_AABBS, NONE_U32,
 };
 use motu_alloc::{AllocKind, AllocLimits, MemoryClass, Residency, MIB};
 
-use super::persistent::{
-    auto_persistent, persistent_estimate, persistent_flags, persistent_records, TlasUpdate,
-};
+use super::persistent::{auto_persistent, persistent_estimate, persistent_records, TlasUpdate};
 use super::proxy_boxes::padded;
 use super::PI_EMPTY_BLAS;
 use super::{FrameStreamStats, StreamOptions, StreamTotals, StreamingRenderer, IDENTITY};
@@ -186,11 +183,7 @@ impl<'a> StreamingRenderer<'a> {
         let nt = view.tlases.len();
 
         // Derived structure: proxy clusters per TLAS, parents per BLAS, proxy ids.
-        let buildable: Vec<bool> = view
-            .blases
-            .iter()
-            .map(|b| b.kind == BLAS_TRIANGLES && b.item_count > 0)
-            .collect();
+        let buildable: Vec<bool> = view.blases.iter().map(super::streamable).collect();
         let mut parents: Vec<Vec<u32>> = vec![Vec::new(); nb];
         let mut parent_counts: Vec<Vec<u32>> = vec![Vec::new(); nb];
         for (t, rec) in view.tlases.iter().enumerate() {
@@ -389,13 +382,7 @@ impl<'a> StreamingRenderer<'a> {
             ctx.limits().max_instance_count,
             self.heap.host_visible_counts_against_budget(),
             self.placeholder_build_size()?.result_bytes,
-            |n| {
-                let s = ctx.tlas_build_sizes(n, persistent_flags())?;
-                Ok((
-                    s.acceleration_structure_size_bytes,
-                    s.update_scratch_size_bytes,
-                ))
-            },
+            |n| super::FloorSizes::tlas_updatable(&ctx, n),
         )?;
         if candidates.is_empty() {
             return Ok(mode);

@@ -215,18 +215,7 @@ mod tests {
             if addr == 0 {
                 continue;
             }
-            let aabbs = view.blases[inst.blas as usize].kind == BLAS_AABBS;
-            let mut enc = encode_instance(
-                &inst.tlas_from_blas,
-                aabbs,
-                inst.flags & FLAG_NEEDS_ANY_HIT != 0,
-                addr,
-                j as u32,
-            );
-            if !aabbs {
-                set_instance_mask(&mut enc, TRIANGLE_MASK);
-            }
-            out.extend_from_slice(&enc);
+            out.extend_from_slice(&instance_record(view, inst, j as u32, addr));
         }
         out
     }
