@@ -249,6 +249,10 @@ fn run_streaming(
             "tlas_ms": st.tlas_ms,
             "tlas_builds": st.tlas_builds,
             "tlas_updates": st.tlas_updates,
+            // Rebuilds run in groups (a split root piece by piece): their transient is one
+            // group's.
+            "tlas_rebuild_groups": st.tlas_rebuild_groups,
+            "tlas_rebuild_transient_bytes": st.tlas_rebuild_transient_bytes,
             "trace_ms": st.trace_ms,
             "probe_rays": st.probe_rays,
             "probe_ms": st.probe_ms,

@@ -170,6 +170,7 @@ impl<'a> StreamingRenderer<'a> {
         tot.blas_built += u64::from(st.blas_built);
         tot.tlas_built += u64::from(st.tlas_built);
         tot.tlas_rebuilt += u64::from(st.tlas_rebuilt);
+        tot.tlas_rebuild_groups += u64::from(st.tlas_rebuild_groups);
         tot.evicted += u64::from(st.evicted);
         tot.deferred += u64::from(st.deferred);
         tot.incomplete_frames += u64::from(!st.complete);

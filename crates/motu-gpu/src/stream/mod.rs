@@ -234,6 +234,9 @@ pub struct FrameStreamStats {
     pub tlas_built: u32,
     /// Resident TLASes rebuilt because their instance set changed (with their proxies).
     pub tlas_rebuilt: u32,
+    /// Groups those rebuilds ran in: large TLASes (the pieces of a split root) one at a time,
+    /// small ones together, so a rebuild's transient is one group's.
+    pub tlas_rebuild_groups: u32,
     /// Structures built after the frame from the guard band and the next camera's probe.
     pub prefetched: u32,
     /// Rays of the probe of the next frame's camera (its pixels' primary rays; 0: no probe),
@@ -369,6 +372,7 @@ pub struct StreamTotals {
     pub blas_built: u64,
     pub tlas_built: u64,
     pub tlas_rebuilt: u64,
+    pub tlas_rebuild_groups: u64,
     pub evicted: u64,
     pub deferred: u64,
     /// Frames that ran out of passes with pixels still incomplete.

@@ -501,9 +501,9 @@ impl<'a> StreamingRenderer<'a> {
         ])
     }
 
-    /// Rebuilds every dirty TLAS. When the budget refuses even with everything unpinned
-    /// evicted, gives back structures this step built, least requested first (their pixels
-    /// stay incomplete); fails only when none is left.
+    /// Rebuilds every dirty TLAS, in groups ([`Self::next_rebuild_group`]). When the budget
+    /// refuses even with everything unpinned evicted, gives back structures this step built,
+    /// least requested first (their pixels stay incomplete); fails only when none is left.
     pub(super) fn rebuild_dirty(&mut self) -> Result<()> {
         let t0 = std::time::Instant::now();
         let r = self.rebuild_dirty_untimed();
@@ -552,23 +552,61 @@ impl<'a> StreamingRenderer<'a> {
         Ok((need + need / 4).saturating_sub(old))
     }
 
-    /// [`tlas_rebuild_bytes`](Self::tlas_rebuild_bytes) summed over the dirty TLASes.
-    fn tlas_rebuild_estimate(&self) -> Result<u64> {
-        let counts = self.resident_instance_counts();
-        let mut need = 0u64;
-        for &t in &self.dirty {
-            need += self.tlas_rebuild_bytes(t, counts[t as usize])?;
+    fn rebuild_dirty_untimed(&mut self) -> Result<()> {
+        // Each group's rebuild settles (or fails) on its own; evictions for one group may
+        // dirty TLASes another group rebuilt, which the next round picks up.
+        let mut rounds = 0usize;
+        while !self.dirty.is_empty() {
+            rounds += 1;
+            if rounds > 64 + 4 * (self.view.tlases.len() + self.item_count()) {
+                return Err(GpuError::InvalidRequest(
+                    "streaming: TLAS rebuilds do not settle".into(),
+                ));
+            }
+            let group = self.next_rebuild_group()?;
+            self.rebuild_group(&group)?;
+            self.frame_stats.tlas_rebuild_groups += 1;
         }
-        Ok(need)
+        Ok(())
     }
 
-    fn rebuild_dirty_untimed(&mut self) -> Result<()> {
-        if !self.dirty.is_empty() {
+    /// The dirty TLASes to rebuild together next: the one whose rebuild needs the most room,
+    /// then the next largest while the group's rebuilds together need no more than that one
+    /// or a 64th of the budget. A TLAS split into pieces (a root over 2^24 instances,
+    /// or `--max-instances`) is thus rebuilt piece by piece, each piece's instance buffer,
+    /// scratch and new structure released or kept before the next: the room a rebuild takes
+    /// from resident BLASes is one piece's, not the whole root's (at a quarter of island 0.3
+    /// split into 1M-instance pieces: 0.25 GB against 1.9 GB rebuilt at once, 2.6 passes and
+    /// 1.2 s a frame against 3.5 passes and 4.5 s; BENCHMARKS.md, session 21). Small TLASes
+    /// still share one batch (one submission, one instance buffer).
+    fn next_rebuild_group(&self) -> Result<Vec<u32>> {
+        let counts = self.resident_instance_counts();
+        let mut need: Vec<(u64, u32)> = Vec::with_capacity(self.dirty.len());
+        for &t in &self.dirty {
+            need.push((self.tlas_rebuild_bytes(t, counts[t as usize])?, t));
+        }
+        Ok(group_by_need(need, self.build_opts.budget_bytes))
+    }
+
+    /// Rebuilds the TLASes of `group` that are dirty (see [`Self::rebuild_dirty`]).
+    fn rebuild_group(&mut self, group: &[u32]) -> Result<()> {
+        let target = |s: &Self| -> Vec<u32> {
+            group
+                .iter()
+                .copied()
+                .filter(|t| s.dirty.contains(t))
+                .collect()
+        };
+        if !target(self).is_empty() {
             // Room made once up front: each refused attempt re-encodes and re-uploads every
             // resident instance record of the dirty TLASes.
             // TLASes, their scratch and instance buffers are large (dedicated blocks): count
             // only budget no block holds as free, and evict a quarter more for fragmentation.
-            let need = self.tlas_rebuild_estimate()?;
+            let counts = self.resident_instance_counts();
+            let mut need = 0u64;
+            for t in target(self) {
+                need += self.tlas_rebuild_bytes(t, counts[t as usize])?;
+            }
             let free = |s: &Self| {
                 let r = s.heap.report();
                 r.budget_bytes.saturating_sub(r.budget_block_bytes)
@@ -582,6 +620,7 @@ impl<'a> StreamingRenderer<'a> {
                 need,
                 free = free(self),
                 dirty = self.dirty.len(),
+                group = group.len(),
                 records = self.resident_instance_counts().iter().sum::<u64>(),
                 "TLAS rebuild room"
             );
@@ -592,18 +631,18 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         let mut rounds = 0;
-        while !self.dirty.is_empty() {
+        while !target(self).is_empty() {
             rounds += 1;
             if rounds > 64 + self.item_count() {
                 return Err(GpuError::InvalidRequest(
                     "streaming: TLAS rebuilds do not settle".into(),
                 ));
             }
-            let ids: Vec<u32> = self.dirty.iter().copied().collect();
+            let ids: Vec<u32> = target(self);
             let rebuilt = ids.len() as u32;
             match self.with_eviction(|s| {
                 // Eviction may have given some up (a child TLAS): rebuild what is still dirty.
-                let now: Vec<u32> = s.dirty.iter().copied().collect();
+                let now: Vec<u32> = target(s);
                 s.build_tlases(&now)
             }) {
                 Ok(()) => self.frame_stats.tlas_rebuilt += rebuilt,
@@ -646,5 +685,48 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         Ok(())
+    }
+}
+
+/// Of dirty TLASes given as (room its rebuild needs, TLAS), those to rebuild together: the
+/// largest, then the next largest while the sum stays within that one's need or a 64th of
+/// `budget_bytes` (see `next_rebuild_group`).
+fn group_by_need(mut need: Vec<(u64, u32)>, budget_bytes: u64) -> Vec<u32> {
+    // Largest first, ties by index (a stable order across runs).
+    need.sort_by_key(|&(n, t)| (std::cmp::Reverse(n), t));
+    let cap = need.first().map_or(0, |&(n, _)| n.max(budget_bytes / 64));
+    let mut sum = 0u64;
+    let mut group = Vec::new();
+    for (n, t) in need {
+        if group.is_empty() || sum + n <= cap {
+            sum += n;
+            group.push(t);
+        }
+    }
+    group
+}
+
+#[cfg(test)]
+mod tests {
+    use super::group_by_need;
+
+    #[test]
+    fn large_rebuilds_go_alone_and_small_ones_together() {
+        let budget = 64 * 100;
+        // Three pieces over a 64th of the budget, three small TLASes.
+        let mut dirty = vec![(10, 4), (250, 1), (1, 6), (300, 0), (5, 5), (200, 2)];
+        let mut groups = Vec::new();
+        while !dirty.is_empty() {
+            let g = group_by_need(dirty.clone(), budget);
+            dirty.retain(|(_, t)| !g.contains(t));
+            groups.push(g);
+        }
+        assert_eq!(groups, vec![vec![0], vec![1], vec![2], vec![4, 5, 6]]);
+        // One TLAS over the cap still gets a group of its own.
+        assert_eq!(group_by_need(vec![(9000, 3)], budget), vec![3]);
+        // Equal needs: by index; two that fit a 64th together share a group.
+        assert_eq!(group_by_need(vec![(40, 2), (40, 1)], budget), vec![1, 2]);
+        assert_eq!(group_by_need(vec![(60, 2), (60, 1)], budget), vec![1]);
+        assert!(group_by_need(Vec::new(), budget).is_empty());
     }
 }
