@@ -38,6 +38,14 @@ fn report(pkg: &Path) -> (u64, u64) {
     );
     // On a device the report sizes persistent TLASes (`--stream-tlas update`) by its
     // queries; these scenes' roots (tens of thousands of instances) stay rebuilt under auto.
+    // Roots of tens of thousands of instances: none over the streaming split's cap.
+    assert!(
+        r["streaming"]
+            .get("stream_split")
+            .is_some_and(|v| v.is_null()),
+        "{}",
+        r["streaming"]
+    );
     let p = &r["streaming"]["persistent_tlas"];
     assert!(u(&p["tlases"]) >= 1 && u(&p["bytes"]) > 0, "{p}");
     assert!(p["auto_min_budget_bytes"].is_null(), "{p}");
@@ -379,4 +387,48 @@ fn streamed_secondary_windows_give_the_full_builds_colours() {
             "{b}: the streamed image equals the full build's"
         );
     }
+}
+
+/// The floor holds for a hierarchy split at load time (`--stream-split-instances`): a budget
+/// below it is refused naming the split hierarchy's floor, and 1.05× that floor renders the
+/// default island's frame exactly, its root split into pieces of at most 4000 instances.
+#[test]
+fn a_split_hierarchys_floor_is_honest() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = default_island(dir.path());
+    let full_aov = dir.path().join("full.aov");
+    let full_png = dir.path().join("full.png");
+    motu_ok(&render_args(&pkg, &full_png, &full_aov, "query"));
+    let split = ["--stream-split-instances", "4000"];
+    let (png, aov) = (dir.path().join("r.png"), dir.path().join("r.aov"));
+    let mut args = render_args(&pkg, &png, &aov, "query");
+    args.extend(["--stream", "--vram-budget", "1MiB"]);
+    args.extend(split);
+    let out = motu(&args);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("below the streaming floor"),
+        "{err}"
+    );
+    // "... below the streaming floor of 12.3 MiB (12345678 bytes) for ..."
+    let floor: u64 = err
+        .split("below the streaming floor of ")
+        .nth(1)
+        .and_then(|r| r.split(" bytes)").next())
+        .and_then(|r| r.rsplit('(').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("the refusal names the floor in bytes: {err}"));
+    let st = stream_matches_with(
+        &pkg,
+        dir.path(),
+        &full_aov,
+        floor + floor / 20,
+        "query",
+        &split,
+    );
+    let f = &st["stream"]["frames"][0];
+    assert!(u(&f["tlas_rebuild_groups"]) >= 1, "{f}");
 }

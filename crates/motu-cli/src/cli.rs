@@ -357,6 +357,13 @@ pub struct StreamBoundArgs {
     /// (stream.tlas_mode).
     #[arg(long, value_enum, default_value = "auto")]
     pub stream_tlas: StreamTlasArg,
+    /// Streaming: TLASes over N instances (a large root) are split into spatial pieces when
+    /// the package is loaded, as `import --max-instances N` would split them, and the pieces
+    /// are rebuilt one at a time as residency changes, so a rebuild takes one piece's room
+    /// from resident BLASes. The package is unchanged (full builds trace the unsplit TLAS,
+    /// which is faster). 0: no split. Default 1000000.
+    #[arg(long, value_name = "N")]
+    pub stream_split_instances: Option<u32>,
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]

@@ -4,12 +4,13 @@
 
 use crate::analyze::{edge_ref, Plan};
 use crate::partition::{group_by_location, partition_mesh, Cluster, Item};
-use crate::split::{median_partition, sah_partition, split_keeping_direct};
-use crate::{lod, xform, CompileError, CompiledScene, MeshLoader, MeshSink};
+use crate::split::median_partition;
+use crate::tables::{next_id, set_bounds};
+use crate::{lod, tlas_split, xform, CompileError, CompiledScene, MeshLoader, MeshSink};
 use motu_abi::{
     BlasRecord, GeometryRecord, InstanceRecord, LodSelectorRecord, MaterialRecord, MeshRecord,
-    PiRecord, TlasRecord, BLAS_AABBS, BLAS_TRIANGLES, FLAG_HAS_NORMALS, FLAG_HAS_UVS,
-    FLAG_NEEDS_ANY_HIT, FLAG_PRIMITIVE_MAP, NONE_U32, NONE_U64, PI_LOD_SELECTOR, PI_TLAS,
+    PiRecord, TlasRecord, BLAS_TRIANGLES, FLAG_HAS_NORMALS, FLAG_HAS_UVS, FLAG_NEEDS_ANY_HIT,
+    FLAG_PRIMITIVE_MAP, NONE_U32, NONE_U64, PI_LOD_SELECTOR, PI_TLAS,
 };
 use motu_scene::{Aabb, MeshData, MeshId, PrototypeId, Scene, Transform34};
 
@@ -30,22 +31,6 @@ struct Frame {
     tlas_from_proto: Transform34,
     /// In the root TLAS: the element of the root edge this walk came through.
     element: u32,
-}
-
-/// Checked conversion of a table length to the next 32-bit id.
-pub(crate) fn next_id(len: usize, what: &'static str) -> Result<u32, CompileError> {
-    u32::try_from(len)
-        .ok()
-        .filter(|&id| id != u32::MAX)
-        .ok_or(CompileError::TooMany {
-            what,
-            count: len as u64,
-        })
-}
-
-pub(crate) fn set_bounds(min: &mut [f32; 3], max: &mut [f32; 3], b: &Aabb) {
-    *min = b.min;
-    *max = b.max;
 }
 
 pub(crate) struct Emitter<'p, 's, 'k, 'f> {
@@ -726,137 +711,27 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
     }
 
     fn aabb_blas(&mut self, begin: usize, end: usize) -> Result<u32, CompileError> {
-        let id = next_id(self.out.blases.len(), "BLASes")?;
-        let bounds = self.out.pis[begin..end].iter().fold(Aabb::EMPTY, |b, pi| {
-            b.union(&xform::aabb_from_record(pi.aabb_min, pi.aabb_max))
-        });
-        let count = next_id(end - begin, "PIs in one BLAS")?;
-        let mut rec = BlasRecord {
-            kind: BLAS_AABBS,
-            item_base: next_id(begin, "programmable instances")?,
-            item_count: count,
-            primitive_count: count,
-            ..Default::default()
-        };
-        set_bounds(&mut rec.bounds_min, &mut rec.bounds_max, &bounds);
-        self.out.blases.push(rec);
+        let id = tlas_split::push_aabb_blas(&mut self.out, begin, end)?;
         self.blas_flags.push(0);
         self.blas_element.push(NONE_U32);
         Ok(id)
     }
 
-    /// Splits `tlas` until its instance count fits the cap (see the crate docs): the few
-    /// instances large against the whole (terrain, ocean) stay in `tlas` itself, traced with
-    /// it, and the rest is cut by a binned SAH over instance bounds into compact leaves; the
-    /// densest leaves become pieces (barely overlapping, so a ray enters few of them and
-    /// skips those behind its hit) and the others stay in `tlas` too, up to the cap, so rays
-    /// that only meet them take one trace. Pieces mix elements; their instances keep their
-    /// element tags, which `--subset` filters on.
+    /// Splits `tlas` until its instance count fits the cap ([`tlas_split::split_tlas`]).
     fn split_tlas(&mut self, tlas: u32) -> Result<(), CompileError> {
-        let cap = self.instance_cap;
         let per_blas = self.plan.opts.max_primitives_per_blas as usize;
-        let mut ranges: Vec<(usize, usize)> = Vec::new();
-        let mut first_round = true;
-        loop {
-            let t = self.out.tlases[tlas as usize];
-            let (base, count) = (t.instance_base as usize, t.instance_count as usize);
-            if count <= cap {
-                return Ok(());
-            }
-            let _span = tracing::debug_span!("split", tlas, instances = count).entered();
-            // The range is the table's tail (just emitted, or the previous round's output), so
-            // what stays direct can sit at its end and the new AABB instances follow it.
-            debug_assert_eq!(base + count, self.out.instances.len());
-            let mut bounds: Vec<([f32; 3], [f32; 3])> = {
-                let blases = &self.out.blases;
-                self.out.instances[base..]
-                    .iter()
-                    .map(|inst| {
-                        let b = instance_bounds(blases, inst);
-                        (b.min, b.max)
-                    })
-                    .collect()
-            };
-            ranges.clear();
-            let direct = if first_round {
-                self.out.report.split_tlases += 1;
-                let large = keep_large_at_end(&mut self.out.instances[base..], &mut bounds, cap);
-                // Beside the large ones, the TLAS keeps as many instances as the cap leaves
-                // room for next to its pieces' AABB instances: rays into that part take one
-                // trace, and only the densest clusters become pieces.
-                let rest = count - large;
-                let kept = split_keeping_direct(
-                    &mut self.out.instances[base..base + rest],
-                    &mut bounds[..rest],
-                    cap,
-                    |pieces| cap.saturating_sub(large + pieces.div_ceil(per_blas.max(1))),
-                    &mut ranges,
-                );
-                large + kept
-            } else {
-                sah_partition(
-                    &mut self.out.instances[base..],
-                    &mut bounds[..],
-                    cap,
-                    &mut ranges,
-                );
-                0
-            };
-            first_round = false;
-            let split_end = base + count - direct;
-            drop(bounds);
-            let first_piece = self.out.tlases.len();
-            for &(x, y) in &ranges {
-                let (x, y) = (base + x, base + y);
-                next_id(self.out.tlases.len(), "TLASes")?;
-                let insts = &self.out.instances[x..y];
-                let bounds = insts.iter().fold(Aabb::EMPTY, |acc, inst| {
-                    acc.union(&instance_bounds(&self.out.blases, inst))
-                });
-                let mut rec = TlasRecord {
-                    instance_base: x as u32,
-                    instance_count: (y - x) as u32,
-                    element: match common_element(insts.iter().map(|i| i.element)) {
-                        Some(e) if e != NONE_U32 => e,
-                        _ => t.element,
-                    },
-                    ..Default::default()
-                };
-                set_bounds(&mut rec.bounds_min, &mut rec.bounds_max, &bounds);
-                self.out.tlases.push(rec);
-            }
-            let piece_end = self.out.tlases.len();
-            self.out.report.split_pieces += (piece_end - first_piece) as u64;
-            // PIs to the pieces (in spatial order), grouped into AABB BLASes; the TLAS now
-            // instances those, after the instances it keeps.
-            let mut piece = first_piece;
-            while piece < piece_end {
-                let group_end = (piece + per_blas).min(piece_end);
-                let pi_begin = self.out.pis.len();
-                for target in piece..group_end {
-                    let pt = &self.out.tlases[target];
-                    let pi = PiRecord {
-                        child_from_parent: xform::to_array(&Transform34::IDENTITY),
-                        aabb_min: pt.bounds_min,
-                        kind: PI_TLAS,
-                        aabb_max: pt.bounds_max,
-                        target: target as u32,
-                    };
-                    next_id(self.out.pis.len(), "programmable instances")?;
-                    self.out.pis.push(pi);
-                }
-                let blas = self.aabb_blas(pi_begin, self.out.pis.len())?;
-                let element =
-                    common_element(self.out.tlases[piece..group_end].iter().map(|t| t.element))
-                        .unwrap_or(NONE_U32);
-                self.blas_element[blas as usize] = element;
-                self.push_instance(blas, &Transform34::IDENTITY, element)?;
-                piece = group_end;
-            }
-            let t = &mut self.out.tlases[tlas as usize];
-            t.instance_base = next_id(split_end, "instances")?;
-            t.instance_count = next_id(self.out.instances.len() - split_end, "instances")?;
-        }
+        let (flags, elements) = (&mut self.blas_flags, &mut self.blas_element);
+        tlas_split::split_tlas(
+            &mut self.out,
+            tlas,
+            self.instance_cap,
+            per_blas,
+            self.in_root,
+            &mut |element| {
+                flags.push(0);
+                elements.push(element);
+            },
+        )
     }
 
     /// The LOD selector of mesh `m` (its chain is built, and handed to the sink, on first use).
@@ -922,59 +797,6 @@ pub(crate) fn empty_mesh_record(bounds: &Aabb) -> MeshRecord {
 
 fn pi_centre(pi: &PiRecord) -> [f32; 3] {
     std::array::from_fn(|i| 0.5 * (pi.aabb_min[i] + pi.aabb_max[i]))
-}
-
-/// The centre of an instance's transformed bounds: an affine image of a box is symmetric about
-/// the image of the box's centre, so one point transform suffices (hot in median selection).
-/// The one element all of `elements` carry (`NONE_U32` ones included as such), if any.
-fn common_element(mut elements: impl Iterator<Item = u32>) -> Option<u32> {
-    let first = elements.next()?;
-    elements.all(|e| e == first).then_some(first)
-}
-
-/// Moves the instances whose bounds are large against the whole range (terrain, ocean: in
-/// any piece they would make its box span the scene) to the end of `instances` (`bounds`
-/// alongside) and returns how many: those with a surface area of at least the whole's over
-/// the piece count, the largest first, at most a quarter of `cap`, so the parent keeps room
-/// for the pieces' AABB instances.
-fn keep_large_at_end(
-    instances: &mut [InstanceRecord],
-    bounds: &mut [([f32; 3], [f32; 3])],
-    cap: usize,
-) -> usize {
-    let n = instances.len();
-    let area = |b: &([f32; 3], [f32; 3])| Aabb { min: b.0, max: b.1 }.surface_area();
-    let whole = bounds.iter().fold(Aabb::EMPTY, |acc, b| {
-        acc.union(&Aabb { min: b.0, max: b.1 })
-    });
-    let pieces = n.div_ceil(cap.max(1)).max(2);
-    let threshold = whole.surface_area() / pieces as f32;
-    if !(threshold.is_finite() && threshold > 0.0) {
-        return 0;
-    }
-    let mut large: Vec<(f32, usize)> = bounds
-        .iter()
-        .enumerate()
-        .map(|(i, b)| (area(b), i))
-        .filter(|&(a, _)| a >= threshold)
-        .collect();
-    large.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-    large.truncate(cap / 4);
-    let mut picked: Vec<usize> = large.into_iter().map(|(_, i)| i).collect();
-    // Swap the picked to the tail, highest index first so none is moved before it is taken.
-    picked.sort_unstable_by(|a, b| b.cmp(a));
-    for (k, &i) in picked.iter().enumerate() {
-        let dst = n - 1 - k;
-        instances.swap(i, dst);
-        bounds.swap(i, dst);
-    }
-    picked.len()
-}
-
-pub(crate) fn instance_bounds(blases: &[BlasRecord], inst: &InstanceRecord) -> Aabb {
-    let b = &blases[inst.blas as usize];
-    xform::aabb_from_record(b.bounds_min, b.bounds_max)
-        .transformed(&xform::from_array(&inst.tlas_from_blas))
 }
 
 /// The root TLAS's element: the one element all kept root content comes from, else none.

@@ -392,7 +392,7 @@ fn split_keeps_huge_instances_in_the_parent_and_pieces_apart() {
     assert_eq!(flatten_compiled(&c.view(), 0).len(), 2001);
     let root = c.tlases[c.root_tlas as usize];
     let x_extent = |i: &motu_abi::InstanceRecord| {
-        let b = crate::emit::instance_bounds(&c.blases, i);
+        let b = crate::tables::instance_bounds(&c.blases, i);
         b.max[0] - b.min[0]
     };
     let root_range = root.instance_range();
@@ -931,4 +931,75 @@ fn partitioner_bound_of_zero_is_an_error() {
         compile(&scene, &o, &mut sink),
         Err(CompileError::InvalidOptions(_))
     ));
+}
+
+/// The streamer's load-time split makes what `--max-instances` makes at compile time: the
+/// same placements, every TLAS within the cap, a valid hierarchy, the same tables' sizes and
+/// levels; and nothing at all when no TLAS is over the cap.
+#[test]
+fn split_for_streaming_matches_the_compile_time_split() {
+    for same_place in [false, true] {
+        let scene = scattered(10_000, same_place);
+        let whole = check_flatten(&scene, &CompileOptions::default());
+        assert_eq!(whole.report.split_tlases, 0);
+        assert!(crate::split_for_streaming(&whole.view(), 20_000)
+            .unwrap()
+            .is_none());
+        let split = crate::split_for_streaming(&whole.view(), 1000)
+            .unwrap()
+            .expect("a TLAS over the cap");
+        let v = split.view(&whole.view());
+        assert_same_placements(&flatten_source(&scene), &flatten_compiled(&v, 0));
+        crate::validate(&v).unwrap();
+        assert!(v.tlases.iter().all(|t| t.instance_count <= 1000));
+        let capped = compile_ok(
+            &scene,
+            &CompileOptions {
+                max_instances_per_tlas: 1000,
+                ..Default::default()
+            },
+        );
+        assert_eq!(v.tlases.len(), capped.tlases.len());
+        assert_eq!(v.instances.len(), capped.instances.len());
+        assert_eq!(v.blases.len(), capped.blases.len());
+        assert_eq!(v.pis.len(), capped.pis.len());
+        let levels = |v: &motu_abi::HierarchyView<'_>| -> Vec<u32> {
+            v.tlases.iter().map(|t| t.level).collect()
+        };
+        assert_eq!(levels(&v), levels(&capped.view()));
+        assert_eq!(split.counts(), (1, capped.report.split_pieces));
+    }
+}
+
+/// A TLAS over the cap that is not the instance table's tail (a shared prototype's, with the
+/// root's instances after it) is moved there, the other ranges kept consistent.
+#[test]
+fn split_for_streaming_moves_a_range_that_is_not_the_tail() {
+    let (mut b, m, main, leaf) = with_leaf();
+    let tree = b.add_prototype("tree", main).unwrap();
+    b.add_mesh(tree, "trunk", m, main, &triangle()).unwrap();
+    for i in 0..3000 {
+        let (x, y) = ((i % 60) as f32, (i / 60) as f32);
+        b.add_instance(tree, leaf, t(x, y, 0.0), main).unwrap();
+    }
+    for i in 0..3 {
+        b.add_instance(b.root(), tree, t(0.0, 0.0, 100.0 * i as f32), main)
+            .unwrap();
+    }
+    for i in 0..2500 {
+        b.add_instance(b.root(), leaf, t(i as f32, -50.0, 0.0), main)
+            .unwrap();
+    }
+    let scene = b.finish().unwrap();
+    let whole = check_flatten(&scene, &CompileOptions::default());
+    let split = crate::split_for_streaming(&whole.view(), 700)
+        .unwrap()
+        .expect("two TLASes over the cap");
+    let v = split.view(&whole.view());
+    crate::validate(&v).unwrap();
+    assert_same_placements(&flatten_source(&scene), &flatten_compiled(&v, 0));
+    assert!(v.tlases.iter().all(|t| t.instance_count <= 700));
+    assert_eq!(split.counts().0, 2);
+    // Rotated, not copied: the table grows only by the pieces' AABB instances.
+    assert!(v.instances.len() < whole.instances.len() + 100);
 }

@@ -114,7 +114,7 @@ pub(crate) fn finalize(out: &mut CompiledScene) -> Result<(), CompileError> {
             let t = out.tlases[node];
             let range = t.instance_range();
             let b = out.instances[range].iter().fold(Aabb::EMPTY, |acc, inst| {
-                acc.union(&crate::emit::instance_bounds(&out.blases, inst))
+                acc.union(&crate::tables::instance_bounds(&out.blases, inst))
             });
             let t = &mut out.tlases[node];
             (t.bounds_min, t.bounds_max) = (b.min, b.max);

@@ -88,6 +88,8 @@ mod flatten;
 mod lod;
 pub mod partition;
 mod split;
+mod tables;
+mod tlas_split;
 mod validate;
 mod xform;
 
@@ -103,6 +105,7 @@ pub use partition::{
     DEFAULT_MAX_BLAS_TRIANGLES, MIN_AUTO_MAX_BLAS_TRIANGLES,
 };
 pub use split::sah_partition;
+pub use tlas_split::{split_for_streaming, StreamSplit, STREAM_SPLIT_INSTANCES};
 pub use validate::{validate, validate_with, Limits, ValidateError};
 
 use motu_abi::{

@@ -25,12 +25,13 @@ pub use cpu::render_cpu_instance_lod;
 pub use gpu::build_scene;
 pub use lod::{choose_lod_mode, LodChoice, LodMode};
 pub use meshes::{PackageGeometry, PackageMeshes};
+pub use motu_compile::{StreamSplit, STREAM_SPLIT_INSTANCES};
 pub use session::{render, RenderJob, Rendered};
 pub use settings::{
     CameraRequest, DeviceRequest, RenderEvent, RenderSettings, StreamSettings, TraversalLimits,
 };
 pub use shading::{scene_shading, ShadingOptions, AO_DISTANCE_OF_DIAGONAL};
-pub use stream::StreamBounds;
+pub use stream::{stream_split, StreamBounds};
 
 use motu_alloc::format_size;
 use std::path::PathBuf;
@@ -140,6 +141,8 @@ pub enum RenderError {
         #[source]
         source: motu_gpu::GpuError,
     },
+    #[error("streaming: splitting the TLASes over {cap} instances into pieces: {reason}")]
+    StreamSplit { cap: u32, reason: String },
     #[error("streaming frame {frame}")]
     StreamFrame {
         frame: u32,

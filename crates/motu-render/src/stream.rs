@@ -22,6 +22,9 @@ pub struct StreamBounds {
     pub probe_stride: Option<u32>,
     /// `--stream-tlas`: how TLASes follow residency.
     pub tlas_update: motu_gpu::TlasUpdate,
+    /// `--stream-split-instances`: TLASes over this many instances are split into pieces when
+    /// the package is loaded (`None`: [`motu_compile::STREAM_SPLIT_INSTANCES`]; 0: none).
+    pub split_instances: Option<u32>,
 }
 
 impl StreamBounds {
@@ -45,7 +48,33 @@ impl StreamBounds {
             || self.frame_build_ms.is_some()
             || self.probe_stride.is_some()
             || self.tlas_update != motu_gpu::TlasUpdate::Auto
+            || self.split_instances.is_some()
     }
+}
+
+/// The hierarchy a streamer renders for `view`: every TLAS over `split_instances` instances
+/// (`None`: [`motu_compile::STREAM_SPLIT_INSTANCES`]; 0: none) split into spatial pieces, which
+/// the streamer rebuilds one at a time, so a rebuild takes one piece's room from resident
+/// BLASes, not the whole root's ([`motu_compile::split_for_streaming`]). `None`: `view` as is.
+/// The renderer, the floor it enforces and `motu report`'s floor all use this view.
+pub fn stream_split(
+    view: &HierarchyView<'_>,
+    split_instances: Option<u32>,
+) -> Result<Option<motu_compile::StreamSplit>, RenderError> {
+    let cap = split_instances.unwrap_or(motu_compile::STREAM_SPLIT_INSTANCES);
+    if cap == 0 {
+        return Ok(None);
+    }
+    let split =
+        motu_compile::split_for_streaming(view, cap).map_err(|e| RenderError::StreamSplit {
+            cap,
+            reason: e.to_string(),
+        })?;
+    if let Some(s) = &split {
+        let (tlases, pieces) = s.counts();
+        tracing::info!(cap, tlases, pieces, "TLASes split for streaming");
+    }
+    Ok(split)
 }
 
 /// `--stream`: builds only what rays touch, evicting under the budget, frame by frame along a
@@ -61,6 +90,8 @@ pub(crate) fn render_streaming(
     progress: &mut dyn FnMut(RenderEvent<'_>),
 ) -> Result<Rendered, RenderError> {
     let ctx = gpu_context(s, backend)?;
+    let split = stream_split(view, stream.bounds.split_instances)?;
+    let view = &split.as_ref().map_or(*view, |sp| sp.view(view));
     let (pose, w, h) = camera_pose(
         pkg,
         view,

@@ -53,6 +53,19 @@ pub struct StreamingReport {
     /// queries). Their instance records (64 bytes each) also count where host memory does
     /// (integrated GPUs, CPU drivers).
     pub persistent_tlas: Option<motu_gpu::PersistentEstimate>,
+    /// The TLASes `motu render --stream` splits into pieces when it loads the package (those
+    /// over `cap_instances` instances, the default `--stream-split-instances`); the floor and
+    /// the persistent estimate above are those of the split hierarchy. `None`: no TLAS over
+    /// the cap.
+    pub stream_split: Option<StreamSplitReport>,
+}
+
+/// See [`StreamingReport::stream_split`].
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct StreamSplitReport {
+    pub cap_instances: u32,
+    pub tlases_split: u64,
+    pub pieces: u64,
 }
 
 /// The VRAM-budget report (`motu report --json` prints it as one object).
@@ -442,19 +455,34 @@ pub fn build_report_from_view(
     // The floor the renderer enforces, from the same function and (on a device) the same
     // driver size queries.
     let (fw, fh) = input.floor_image;
+    // The hierarchy the streamer renders: large TLASes split into pieces at load time.
+    let split =
+        motu_render::stream_split(view, None).map_err(|e| ReportError::Invalid(e.to_string()))?;
+    let streamed = split.as_ref().map_or(*view, |s| s.view(view));
     let floor = motu_gpu::streaming_floor(
-        view,
+        &streamed,
         &FloorAdapter(sizes),
         fw,
         fh,
         motu_gpu::StreamOptions::default().staging_bytes,
     )
     .map_err(|e| ReportError::Invalid(format!("streaming floor: {e}")))?;
+    streaming.stream_split = split.as_ref().map(|s| {
+        let (tlases_split, pieces) = s.counts();
+        StreamSplitReport {
+            cap_instances: motu_render::STREAM_SPLIT_INSTANCES,
+            tlases_split,
+            pieces,
+        }
+    });
     streaming.min_resident_bytes = floor.min_resident_bytes;
     streaming.floor = floor;
-    streaming.persistent_tlas =
-        motu_gpu::persistent_tlas_estimate(view, &FloorAdapter(sizes), sizes.max_instance_count())
-            .map_err(|e| ReportError::Invalid(format!("persistent TLAS estimate: {e}")))?;
+    streaming.persistent_tlas = motu_gpu::persistent_tlas_estimate(
+        &streamed,
+        &FloorAdapter(sizes),
+        sizes.max_instance_count(),
+    )
+    .map_err(|e| ReportError::Invalid(format!("persistent TLAS estimate: {e}")))?;
     let budget = budget_bytes
         .map(|b| {
             plan_budget(
@@ -637,6 +665,7 @@ fn streaming_report(
         largest_element: largest.as_ref().map(|l| l.0.clone()),
         largest_element_peak_bytes: largest.map_or(0, |l| l.1),
         persistent_tlas: None,
+        stream_split: None,
     }
 }
 

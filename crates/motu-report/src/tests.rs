@@ -785,6 +785,20 @@ fn text_table_lists_every_row_and_variant() {
     assert_eq!(r.streaming.persistent_tlas, None);
     let text = render_text(&r);
     assert!(!text.contains("persistent TLASes"), "{text}");
+    // No TLAS over the streaming split's cap: no split line; one over it: the line.
+    assert_eq!(r.streaming.stream_split, None);
+    assert!(!text.contains("streaming splits"), "{text}");
+    let mut split = r.clone();
+    split.streaming.stream_split = Some(crate::StreamSplitReport {
+        cap_instances: 1_000_000,
+        tlases_split: 1,
+        pieces: 12,
+    });
+    let line = render_text(&split);
+    assert!(
+        line.contains("streaming splits 1 TLAS over 1000000 instances into 12 pieces"),
+        "{line}"
+    );
     eprintln!("{text}");
     for needle in [
         "trees",

@@ -175,6 +175,17 @@ pub fn render_text(r: &Report) -> String {
         }
     }
 
+    if let Some(sp) = &s.stream_split {
+        let _ = writeln!(
+            out,
+            "  streaming splits {} {} over {} instances into {} pieces when it loads the package, rebuilt one at a time (--stream-split-instances; the floor above is the split hierarchy's)",
+            sp.tlases_split,
+            if sp.tlases_split == 1 { "TLAS" } else { "TLASes" },
+            sp.cap_instances,
+            sp.pieces
+        );
+    }
+
     if let Some(p) = s.persistent_tlas.as_ref().filter(|p| p.tlases > 0) {
         let _ = writeln!(
             out,

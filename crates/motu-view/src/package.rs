@@ -186,6 +186,19 @@ impl<'p> PackageSource<'p> {
             ..Default::default()
         })
         .map_err(SourceError::Device)?;
+        // Streaming renders large TLASes split into pieces (as `motu render --stream`); the
+        // split tables are made once and live as long as the viewer (leaked: the renderer and
+        // every element subset borrow them).
+        let base = match &settings.stream {
+            Some(st) => match motu_render::stream_split(&base, st.bounds.split_instances)? {
+                Some(split) => {
+                    let split: &'p motu_render::StreamSplit = Box::leak(Box::new(split));
+                    split.view(&base)
+                }
+                None => base,
+            },
+            None => base,
+        };
         let mut src = PackageSource {
             ctx,
             base,

@@ -114,6 +114,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             stream_build_ms: None,
             stream_probe: None,
             stream_tlas: crate::cli::StreamTlasArg::Auto,
+            stream_split_instances: None,
         },
         frames: 1,
         stats: Some(stats_path.clone()),

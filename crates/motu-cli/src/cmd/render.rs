@@ -15,7 +15,7 @@ pub use motu_render::{
 };
 
 /// The streaming bounds of `--stream-fallback`, `--stream-build-budget`, `--stream-build-ms`,
-/// `--stream-probe` and `--stream-tlas`.
+/// `--stream-probe`, `--stream-tlas` and `--stream-split-instances`.
 pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBounds {
     motu_render::StreamBounds {
         fallback: match b.stream_fallback {
@@ -26,6 +26,7 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         frame_build_ms: b.stream_build_ms,
         probe_stride: b.stream_probe,
         tlas_update: b.stream_tlas.into(),
+        split_instances: b.stream_split_instances,
     }
 }
 

@@ -1,0 +1,317 @@
+//! Splitting a TLAS over an instance cap into spatial pieces (compile time, and at load time
+//! for streaming: [`split_for_streaming`]).
+
+use crate::split::{sah_partition, split_keeping_direct};
+use crate::tables::{instance_bounds, next_id, set_bounds};
+use crate::{xform, CompileError, CompiledScene};
+use motu_abi::{
+    BlasRecord, HierarchyView, InstanceRecord, PiRecord, TlasRecord, BLAS_AABBS, NONE_U32, PI_TLAS,
+};
+use motu_scene::{Aabb, Transform34};
+
+/// Splits `tlas` until its instance count fits `cap` (see the crate docs); its instance range
+/// must be the instance table's tail. `new_aabb_blas(element)` is told of each AABB BLAS made
+/// (with the element its pieces share, or `NONE_U32`); `root`: `tlas` is the root, whose
+/// instances carry elements: the few
+/// instances large against the whole (terrain, ocean) stay in `tlas` itself, traced with
+/// it, and the rest is cut by a binned SAH over instance bounds into compact leaves; the
+/// densest leaves become pieces (barely overlapping, so a ray enters few of them and
+/// skips those behind its hit) and the others stay in `tlas` too, up to the cap, so rays
+/// that only meet them take one trace. Pieces mix elements; their instances keep their
+/// element tags, which `--subset` filters on.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn split_tlas(
+    out: &mut CompiledScene,
+    tlas: u32,
+    cap: usize,
+    per_blas: usize,
+    root: bool,
+    new_aabb_blas: &mut dyn FnMut(u32),
+) -> Result<(), CompileError> {
+    let mut ranges: Vec<(usize, usize)> = Vec::new();
+    let mut first_round = true;
+    loop {
+        let t = out.tlases[tlas as usize];
+        let (base, count) = (t.instance_base as usize, t.instance_count as usize);
+        if count <= cap {
+            return Ok(());
+        }
+        let _span = tracing::debug_span!("split", tlas, instances = count).entered();
+        // The range is the table's tail (just emitted, or the previous round's output), so
+        // what stays direct can sit at its end and the new AABB instances follow it.
+        debug_assert_eq!(base + count, out.instances.len());
+        let mut bounds: Vec<([f32; 3], [f32; 3])> = {
+            let blases = &out.blases;
+            out.instances[base..]
+                .iter()
+                .map(|inst| {
+                    let b = instance_bounds(blases, inst);
+                    (b.min, b.max)
+                })
+                .collect()
+        };
+        ranges.clear();
+        let direct = if first_round {
+            out.report.split_tlases += 1;
+            let large = keep_large_at_end(&mut out.instances[base..], &mut bounds, cap);
+            // Beside the large ones, the TLAS keeps as many instances as the cap leaves
+            // room for next to its pieces' AABB instances: rays into that part take one
+            // trace, and only the densest clusters become pieces.
+            let rest = count - large;
+            let kept = split_keeping_direct(
+                &mut out.instances[base..base + rest],
+                &mut bounds[..rest],
+                cap,
+                |pieces| cap.saturating_sub(large + pieces.div_ceil(per_blas.max(1))),
+                &mut ranges,
+            );
+            large + kept
+        } else {
+            sah_partition(
+                &mut out.instances[base..],
+                &mut bounds[..],
+                cap,
+                &mut ranges,
+            );
+            0
+        };
+        first_round = false;
+        let split_end = base + count - direct;
+        drop(bounds);
+        let first_piece = out.tlases.len();
+        for &(x, y) in &ranges {
+            let (x, y) = (base + x, base + y);
+            next_id(out.tlases.len(), "TLASes")?;
+            let insts = &out.instances[x..y];
+            let bounds = insts.iter().fold(Aabb::EMPTY, |acc, inst| {
+                acc.union(&instance_bounds(&out.blases, inst))
+            });
+            let mut rec = TlasRecord {
+                instance_base: x as u32,
+                instance_count: (y - x) as u32,
+                element: match common_element(insts.iter().map(|i| i.element)) {
+                    Some(e) if e != NONE_U32 => e,
+                    _ => t.element,
+                },
+                ..Default::default()
+            };
+            set_bounds(&mut rec.bounds_min, &mut rec.bounds_max, &bounds);
+            out.tlases.push(rec);
+        }
+        let piece_end = out.tlases.len();
+        out.report.split_pieces += (piece_end - first_piece) as u64;
+        // PIs to the pieces (in spatial order), grouped into AABB BLASes; the TLAS now
+        // instances those, after the instances it keeps.
+        let mut piece = first_piece;
+        while piece < piece_end {
+            let group_end = (piece + per_blas).min(piece_end);
+            let pi_begin = out.pis.len();
+            for target in piece..group_end {
+                let pt = &out.tlases[target];
+                let pi = PiRecord {
+                    child_from_parent: xform::to_array(&Transform34::IDENTITY),
+                    aabb_min: pt.bounds_min,
+                    kind: PI_TLAS,
+                    aabb_max: pt.bounds_max,
+                    target: target as u32,
+                };
+                next_id(out.pis.len(), "programmable instances")?;
+                out.pis.push(pi);
+            }
+            let blas = push_aabb_blas(out, pi_begin, out.pis.len())?;
+            let element = common_element(out.tlases[piece..group_end].iter().map(|t| t.element))
+                .unwrap_or(NONE_U32);
+            new_aabb_blas(element);
+            // Root instances carry their element (`--subset`); below the root the parent
+            // decides.
+            next_id(out.instances.len(), "instances")?;
+            out.instances.push(InstanceRecord {
+                tlas_from_blas: xform::to_array(&Transform34::IDENTITY),
+                blas,
+                flags: 0,
+                element: if root { element } else { NONE_U32 },
+                _pad: 0,
+            });
+            piece = group_end;
+        }
+        let t = &mut out.tlases[tlas as usize];
+        t.instance_base = next_id(split_end, "instances")?;
+        t.instance_count = next_id(out.instances.len() - split_end, "instances")?;
+    }
+}
+
+/// Appends an AABB BLAS over PIs `begin..end` (bounds from their boxes) and returns its id.
+pub(crate) fn push_aabb_blas(
+    out: &mut CompiledScene,
+    begin: usize,
+    end: usize,
+) -> Result<u32, CompileError> {
+    let id = next_id(out.blases.len(), "BLASes")?;
+    let bounds = out.pis[begin..end].iter().fold(Aabb::EMPTY, |b, pi| {
+        b.union(&xform::aabb_from_record(pi.aabb_min, pi.aabb_max))
+    });
+    let count = next_id(end - begin, "PIs in one BLAS")?;
+    let mut rec = BlasRecord {
+        kind: BLAS_AABBS,
+        item_base: next_id(begin, "programmable instances")?,
+        item_count: count,
+        primitive_count: count,
+        ..Default::default()
+    };
+    set_bounds(&mut rec.bounds_min, &mut rec.bounds_max, &bounds);
+    out.blases.push(rec);
+    Ok(id)
+}
+
+/// The one element all of `elements` carry (`NONE_U32` ones included as such), if any.
+fn common_element(mut elements: impl Iterator<Item = u32>) -> Option<u32> {
+    let first = elements.next()?;
+    elements.all(|e| e == first).then_some(first)
+}
+
+/// Moves the instances whose bounds are large against the whole range (terrain, ocean: in
+/// any piece they would make its box span the scene) to the end of `instances` (`bounds`
+/// alongside) and returns how many: those with a surface area of at least the whole's over
+/// the piece count, the largest first, at most a quarter of `cap`, so the parent keeps room
+/// for the pieces' AABB instances.
+fn keep_large_at_end(
+    instances: &mut [InstanceRecord],
+    bounds: &mut [([f32; 3], [f32; 3])],
+    cap: usize,
+) -> usize {
+    let n = instances.len();
+    let area = |b: &([f32; 3], [f32; 3])| Aabb { min: b.0, max: b.1 }.surface_area();
+    let whole = bounds.iter().fold(Aabb::EMPTY, |acc, b| {
+        acc.union(&Aabb { min: b.0, max: b.1 })
+    });
+    let pieces = n.div_ceil(cap.max(1)).max(2);
+    let threshold = whole.surface_area() / pieces as f32;
+    if !(threshold.is_finite() && threshold > 0.0) {
+        return 0;
+    }
+    let mut large: Vec<(f32, usize)> = bounds
+        .iter()
+        .enumerate()
+        .map(|(i, b)| (area(b), i))
+        .filter(|&(a, _)| a >= threshold)
+        .collect();
+    large.sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    large.truncate(cap / 4);
+    let mut picked: Vec<usize> = large.into_iter().map(|(_, i)| i).collect();
+    // Swap the picked to the tail, highest index first so none is moved before it is taken.
+    picked.sort_unstable_by(|a, b| b.cmp(a));
+    for (k, &i) in picked.iter().enumerate() {
+        let dst = n - 1 - k;
+        instances.swap(i, dst);
+        bounds.swap(i, dst);
+    }
+    picked.len()
+}
+
+/// The instance cap above which a streamer splits a TLAS into pieces when it loads a package
+/// ([`split_for_streaming`]). A streamed TLAS is rebuilt whenever the residency of a BLAS it
+/// instances changes, and pieces are rebuilt one at a time, so this bounds the room a rebuild
+/// takes from resident BLASes. Measured on island 0.3 at a quarter of its full build (H200):
+/// 1M-instance pieces 2.64 passes a frame after the first, 256k pieces 2.91, unsplit 3.00
+/// (BENCHMARKS.md, session 21).
+pub const STREAM_SPLIT_INSTANCES: u32 = 1_000_000;
+
+/// A compiled hierarchy with its large TLASes split for streaming (owned tables; the texels
+/// stay with the view it was made from).
+#[derive(Debug)]
+pub struct StreamSplit {
+    scene: CompiledScene,
+}
+
+impl StreamSplit {
+    /// The split hierarchy's view; `base` is the view it was made from (its texels).
+    pub fn view<'a>(&'a self, base: &HierarchyView<'a>) -> HierarchyView<'a> {
+        HierarchyView {
+            texels: base.texels,
+            ..self.scene.view()
+        }
+    }
+
+    /// TLASes split, and pieces made.
+    pub fn counts(&self) -> (u64, u64) {
+        let r = &self.scene.report;
+        (r.split_tlases, r.split_pieces)
+    }
+}
+
+/// Splits every TLAS of `view` over `cap` instances into spatial pieces, as `import
+/// --max-instances cap` would have (the same split: large instances kept in the parent, the
+/// densest clusters made pieces under PIs), at load time: a package keeps one unsplit root for
+/// full builds, which trace it faster (a split root costs a 1080p frame of island 0.3 11–20% on
+/// the H200, 1.69 traces a ray), and a streamer rebuilds the pieces one at a time. Instance
+/// order changes inside a split TLAS; hit records name meshes and primitives, so images and
+/// AOVs do not. `None` when no TLAS is over `cap`.
+pub fn split_for_streaming(
+    view: &HierarchyView<'_>,
+    cap: u32,
+) -> Result<Option<StreamSplit>, CompileError> {
+    let cap = cap.max(2) as usize;
+    let over: Vec<u32> = (0..view.tlases.len() as u32)
+        .filter(|&t| view.tlases[t as usize].instance_count as usize > cap)
+        .collect();
+    if over.is_empty() {
+        return Ok(None);
+    }
+    let _span = tracing::info_span!("split for streaming", tlases = over.len()).entered();
+    let mut out = CompiledScene {
+        root_tlas: view.root_tlas,
+        tlases: view.tlases.to_vec(),
+        instances: view.instances.to_vec(),
+        blases: view.blases.to_vec(),
+        geometries: view.geometries.to_vec(),
+        pis: view.pis.to_vec(),
+        lod_selectors: view.lod_selectors.to_vec(),
+        lod_levels: view.lod_levels.to_vec(),
+        meshes: view.meshes.to_vec(),
+        materials: view.materials.to_vec(),
+        textures: view.textures.to_vec(),
+        texels: Vec::new(),
+        report: Default::default(),
+    };
+    out.view()
+        .check_references()
+        .map_err(|e| CompileError::Internal(e.to_string()))?;
+    let per_blas = crate::CompileOptions::default().max_primitives_per_blas as usize;
+    for t in over {
+        move_range_to_tail(&mut out, t)?;
+        let root = t == out.root_tlas;
+        split_tlas(&mut out, t, cap, per_blas, root, &mut |_| {})?;
+    }
+    // Levels (two more under each split TLAS) and bounds (the pieces', their PIs').
+    crate::finalize::finalize(&mut out)?;
+    Ok(Some(StreamSplit { scene: out }))
+}
+
+/// Makes TLAS `t`'s instance range the table's tail, which [`split_tlas`] needs: rotated there
+/// (later TLASes' ranges shifted down), or copied when another TLAS shares a part of it.
+fn move_range_to_tail(out: &mut CompiledScene, t: u32) -> Result<(), CompileError> {
+    let rec = out.tlases[t as usize];
+    let (base, count) = (rec.instance_base as usize, rec.instance_count as usize);
+    let (end, len) = (base + count, out.instances.len());
+    if end == len {
+        return Ok(());
+    }
+    let shared = out.tlases.iter().enumerate().any(|(u, r)| {
+        let (b, n) = (r.instance_base as usize, r.instance_count as usize);
+        u != t as usize && n > 0 && b < end && base < b + n
+    });
+    if shared {
+        next_id(len + count, "instances")?;
+        out.instances.extend_from_within(base..end);
+        out.tlases[t as usize].instance_base = next_id(len, "instances")?;
+        return Ok(());
+    }
+    out.instances[base..].rotate_left(count);
+    for (u, r) in out.tlases.iter_mut().enumerate() {
+        if u != t as usize && r.instance_base as usize >= end {
+            r.instance_base -= count as u32;
+        }
+    }
+    out.tlases[t as usize].instance_base = next_id(len - count, "instances")?;
+    Ok(())
+}
