@@ -446,12 +446,24 @@ fn default_island_wide_view_at_a_quarter_reports_its_room_and_traces_secondary_r
     }
     let mean = mean_after_first(&st);
     assert!(mean <= 2.33, "mean passes after the first frame: {mean}");
+    streamed_frame_equals_the_full_build(&pkg, d, "wide", budget, &[]);
+}
+
+/// Renders `pkg`'s own camera as a full build, then streamed at `budget` (with `extra`) on
+/// both backends; each streamed frame must equal the full build: AOV (0 mismatches) and colours.
+fn streamed_frame_equals_the_full_build(
+    pkg: &Path,
+    d: &Path,
+    tag: &str,
+    budget: u64,
+    extra: &[&str],
+) {
     let budget_arg = budget.to_string();
-    let full_png = d.join("wide-full.png");
-    let full_aov = d.join("wide-full.aov");
+    let full_png = d.join(format!("{tag}-full.png"));
+    let full_aov = d.join(format!("{tag}-full.aov"));
     motu_ok(&[
         "render",
-        s(&pkg),
+        s(pkg),
         "-o",
         s(&full_png),
         "--width",
@@ -462,11 +474,11 @@ fn default_island_wide_view_at_a_quarter_reports_its_room_and_traces_secondary_r
         s(&full_aov),
     ]);
     for backend in ["pipeline", "query"] {
-        let png = d.join(format!("wide-{backend}.png"));
-        let aov = d.join(format!("wide-{backend}.aov"));
-        motu_ok(&[
+        let png = d.join(format!("{tag}-{backend}.png"));
+        let aov = d.join(format!("{tag}-{backend}.aov"));
+        let mut args = vec![
             "render",
-            s(&pkg),
+            s(pkg),
             "-o",
             s(&png),
             "--backend",
@@ -480,12 +492,14 @@ fn default_island_wide_view_at_a_quarter_reports_its_room_and_traces_secondary_r
             &budget_arg,
             "--aov",
             s(&aov),
-        ]);
-        let cmp = motu_ok(&["compare", s(&full_aov), s(&aov)]);
+        ];
+        args.extend_from_slice(extra);
+        motu_ok(&args);
+        let cmp = motu_ok(&["compare", s(&full_aov), s(&aov), "--max-mismatch", "0"]);
         assert!(cmp.contains("(0 of "), "{backend}: {cmp}");
         assert!(
             std::fs::read(&png).unwrap() == std::fs::read(&full_png).unwrap(),
-            "{backend}: the streamed wide view's colours differ from the full build's"
+            "{backend}: the streamed frame's colours differ from the full build's"
         );
     }
 }
@@ -717,46 +731,11 @@ fn large_tlases_are_split_at_load_and_rebuilt_piece_by_piece_exactly() {
         "a piece-by-piece rebuild took {t_split} B, the whole root's {t_whole} B"
     );
     // The path's first frame is the scene's camera: the full build's image.
-    let full = d.join("full.aov");
-    let full_png = d.join("full.png");
-    motu_ok(&[
-        "render",
-        s(&pkg),
-        "-o",
-        s(&full_png),
-        "--width",
-        W,
-        "--height",
-        H,
-        "--aov",
-        s(&full),
-    ]);
-    for backend in ["pipeline", "query"] {
-        let one = d.join(format!("one-{backend}.aov"));
-        let png = d.join(format!("one-{backend}.png"));
-        motu_ok(&[
-            "render",
-            s(&pkg),
-            "-o",
-            s(&png),
-            "--backend",
-            backend,
-            "--width",
-            W,
-            "--height",
-            H,
-            "--stream",
-            "--vram-budget",
-            &budget_arg,
-            "--stream-split-instances",
-            "8000",
-            "--aov",
-            s(&one),
-        ]);
-        motu_ok(&["compare", s(&full), s(&one), "--max-mismatch", "0"]);
-        assert!(
-            std::fs::read(&png).unwrap() == std::fs::read(&full_png).unwrap(),
-            "{backend}: the split streamed frame's colours differ from the full build's"
-        );
-    }
+    streamed_frame_equals_the_full_build(
+        &pkg,
+        d,
+        "split",
+        budget,
+        &["--stream-split-instances", "8000"],
+    );
 }

@@ -362,7 +362,7 @@ pub struct StreamBoundArgs {
     /// are rebuilt one at a time as residency changes, so a rebuild takes one piece's room
     /// from resident BLASes. The package is unchanged (full builds trace the unsplit TLAS,
     /// which is faster). 0: no split. Default 1000000.
-    #[arg(long, value_name = "N")]
+    #[arg(long, value_name = "N", value_parser = parse_split_instances)]
     pub stream_split_instances: Option<u32>,
 }
 
@@ -381,6 +381,16 @@ impl From<StreamTlasArg> for motu_gpu::TlasUpdate {
             StreamTlasArg::Update => motu_gpu::TlasUpdate::Update,
             StreamTlasArg::Rebuild => motu_gpu::TlasUpdate::Rebuild,
         }
+    }
+}
+
+fn parse_split_instances(s: &str) -> Result<u32, String> {
+    match s.parse::<u32>() {
+        Ok(1) => {
+            Err("1 is too small: a split TLAS holds at least 2 instances (0: no split)".into())
+        }
+        Ok(n) => Ok(n),
+        Err(_) => Err(format!("{s:?} is not a count of instances (0: no split)")),
     }
 }
 

@@ -129,5 +129,27 @@ mod tests {
         let b = cmd::render::stream_bounds(&render_args(&["--stream-probe", "0"]).stream_bounds);
         assert!(b.given(), "--stream-probe needs --stream");
         assert_eq!(b.options().probe_stride, 0);
+        // The load-time split: default (None: a million), any count from 2, 0 for none; 1 is
+        // refused with the reason.
+        assert_eq!(b.split_instances, None);
+        for (flag, want) in [("0", 0), ("2", 2), ("4000", 4000)] {
+            let a = render_args(&["--stream-split-instances", flag]);
+            let b = cmd::render::stream_bounds(&a.stream_bounds);
+            assert!(b.given(), "--stream-split-instances needs --stream");
+            assert_eq!(b.split_instances, Some(want));
+        }
+        for bad in ["1", "many", "5000000000"] {
+            let args = [
+                "motu",
+                "render",
+                "pkg",
+                "-o",
+                "x.png",
+                "--stream-split-instances",
+                bad,
+            ];
+            let e = cli::Cli::try_parse_from(args).unwrap_err().to_string();
+            assert!(e.contains("--stream-split-instances"), "{e}");
+        }
     }
 }

@@ -572,13 +572,14 @@ impl<'a> StreamingRenderer<'a> {
 
     /// The dirty TLASes to rebuild together next: the one whose rebuild needs the most room,
     /// then the next largest while the group's rebuilds together need no more than that one
-    /// or a 64th of the budget. A TLAS split into pieces (a root over 2^24 instances,
-    /// or `--max-instances`) is thus rebuilt piece by piece, each piece's instance buffer,
-    /// scratch and new structure released or kept before the next: the room a rebuild takes
-    /// from resident BLASes is one piece's, not the whole root's (at a quarter of island 0.3
-    /// split into 1M-instance pieces: 0.25 GB against 1.9 GB rebuilt at once, 2.6 passes and
-    /// 1.2 s a frame against 3.5 passes and 4.5 s; BENCHMARKS.md, session 21). Small TLASes
-    /// still share one batch (one submission, one instance buffer).
+    /// or a 64th of the budget. A TLAS split into pieces (when the streamer loads the
+    /// package, `--stream-split-instances`, or at import, `--max-instances`) is thus rebuilt
+    /// piece by piece, each piece's instance buffer, scratch and new structure released or
+    /// kept before the next: the room a rebuild takes from resident BLASes is one piece's, not
+    /// the whole root's (at a quarter of island 0.3 split into 1M-instance pieces: 0.25 GB
+    /// against 1.9 GB rebuilt at once, 2.6 passes and 1.2 s a frame against 3.5 passes and
+    /// 4.5 s; BENCHMARKS.md, session 21). Small TLASes still share one batch (one submission,
+    /// one instance buffer).
     fn next_rebuild_group(&self) -> Result<Vec<u32>> {
         let counts = self.resident_instance_counts();
         let mut need: Vec<(u64, u32)> = Vec::with_capacity(self.dirty.len());
