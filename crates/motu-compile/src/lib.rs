@@ -66,7 +66,9 @@
 //! nothing is copied) reached through PIs of new AABB BLASes instanced by the original TLAS,
 //! which traversal enters near-to-far, skipping those behind the best hit. AABB BLASes over
 //! the primitive cap are split at the median PI centre. Split levels add TLAS levels below the
-//! `Levels::N` budget.
+//! `Levels::N` budget. [`split_for_streaming`] makes the same split of a compiled hierarchy
+//! when a streamer loads it (a package keeps its unsplit TLASes, which full builds trace
+//! faster; a streamer rebuilds the pieces one at a time).
 //!
 //! # Partitioning
 //! Triangle BLASes are bounded by [`CompileOptions::max_blas_triangles`] (see [`partition`]):

@@ -9,17 +9,15 @@ use motu_abi::{
 };
 use motu_scene::{Aabb, Transform34};
 
-/// Splits `tlas` until its instance count fits `cap` (see the crate docs); its instance range
-/// must be the instance table's tail. `new_aabb_blas(element)` is told of each AABB BLAS made
-/// (with the element its pieces share, or `NONE_U32`); `root`: `tlas` is the root, whose
-/// instances carry elements: the few
-/// instances large against the whole (terrain, ocean) stay in `tlas` itself, traced with
-/// it, and the rest is cut by a binned SAH over instance bounds into compact leaves; the
-/// densest leaves become pieces (barely overlapping, so a ray enters few of them and
-/// skips those behind its hit) and the others stay in `tlas` too, up to the cap, so rays
-/// that only meet them take one trace. Pieces mix elements; their instances keep their
-/// element tags, which `--subset` filters on.
-#[allow(clippy::too_many_arguments)]
+/// Splits `tlas` until its instance count fits `cap` (see the crate docs): the few instances
+/// large against the whole (terrain, ocean) stay in `tlas` itself, traced with it, and the
+/// rest is cut by a binned SAH over instance bounds into compact leaves; the densest leaves
+/// become pieces (barely overlapping, so a ray enters few of them and skips those behind its
+/// hit) and the others stay in `tlas` too, up to the cap, so rays that only meet them take one
+/// trace. Pieces mix elements; their instances keep their element tags, which `--subset`
+/// filters on. `tlas`'s instance range must be the instance table's tail.
+/// `new_aabb_blas(element)` is told of each AABB BLAS made (with the element its pieces share,
+/// or `NONE_U32`); `root`: `tlas` is the root, whose instances carry elements.
 pub(crate) fn split_tlas(
     out: &mut CompiledScene,
     tlas: u32,

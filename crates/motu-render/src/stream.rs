@@ -65,6 +65,7 @@ pub fn stream_split(
     if cap == 0 {
         return Ok(None);
     }
+    let t0 = std::time::Instant::now();
     let split =
         motu_compile::split_for_streaming(view, cap).map_err(|e| RenderError::StreamSplit {
             cap,
@@ -72,7 +73,8 @@ pub fn stream_split(
         })?;
     if let Some(s) = &split {
         let (tlases, pieces) = s.counts();
-        tracing::info!(cap, tlases, pieces, "TLASes split for streaming");
+        let split_ms = t0.elapsed().as_secs_f64() * 1e3;
+        tracing::info!(cap, tlases, pieces, split_ms, "TLASes split for streaming");
     }
     Ok(split)
 }
