@@ -240,8 +240,9 @@ fn scan_obj(path: &Path, scan: Scan) -> Option<(usize, usize, String)> {
                     return Some((i + 1, 1, format!("`{line}` needs 3 numbers")));
                 }
             }
-            "f" => {
-                if is(E::InvalidPolygon) && args.len() < 3 {
+            // tobj parses polylines (`l`) as faces: their references are resolved alike.
+            "f" | "l" => {
+                if kw == "f" && is(E::InvalidPolygon) && args.len() < 3 {
                     return Some((
                         i + 1,
                         1,
@@ -328,6 +329,13 @@ mod tests {
         assert!(e.contains("t.obj:4:"), "{e}");
         // tobj 4 overflows on these (found by the obj fuzz target): refused before it runs.
         let e = import(&format!("{tri}vt 0 0\nf 1/-3 2/1 3/1\n"), false).unwrap_err();
+        assert!(
+            e.contains("t.obj:5:3") && e.contains("texture coordinates"),
+            "{e}"
+        );
+        // Polylines too: tobj resolves `l` references as a face's (the fuzz target's crash,
+        // `l 1/-3`, session 21).
+        let e = import(&format!("{tri}vt 0 0\nl 1/-3\n"), false).unwrap_err();
         assert!(
             e.contains("t.obj:5:3") && e.contains("texture coordinates"),
             "{e}"
