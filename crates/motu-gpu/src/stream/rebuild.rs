@@ -563,8 +563,8 @@ impl<'a> StreamingRenderer<'a> {
                     "streaming: TLAS rebuilds do not settle".into(),
                 ));
             }
-            let group = self.next_rebuild_group()?;
-            self.rebuild_group(&group)?;
+            let (group, need) = self.next_rebuild_group()?;
+            self.rebuild_group(&group, need)?;
             self.frame_stats.tlas_rebuild_groups += 1;
         }
         Ok(())
@@ -580,7 +580,8 @@ impl<'a> StreamingRenderer<'a> {
     /// against 1.9 GB rebuilt at once, 2.6 passes and 1.2 s a frame against 3.5 passes and
     /// 4.5 s; BENCHMARKS.md, session 21). Small TLASes still share one batch (one submission,
     /// one instance buffer).
-    fn next_rebuild_group(&self) -> Result<Vec<u32>> {
+    /// Returns the group and the room its rebuilds need together.
+    fn next_rebuild_group(&self) -> Result<(Vec<u32>, u64)> {
         let counts = self.resident_instance_counts();
         let mut need: Vec<(u64, u32)> = Vec::with_capacity(self.dirty.len());
         for &t in &self.dirty {
@@ -589,8 +590,9 @@ impl<'a> StreamingRenderer<'a> {
         Ok(group_by_need(need, self.build_opts.budget_bytes))
     }
 
-    /// Rebuilds the TLASes of `group` that are dirty (see [`Self::rebuild_dirty`]).
-    fn rebuild_group(&mut self, group: &[u32]) -> Result<()> {
+    /// Rebuilds the TLASes of `group` that are dirty (see [`Self::rebuild_dirty`]); `need`: the
+    /// room their rebuilds take ([`Self::next_rebuild_group`], all of them dirty when chosen).
+    fn rebuild_group(&mut self, group: &[u32], need: u64) -> Result<()> {
         let target = |s: &Self| -> Vec<u32> {
             group
                 .iter()
@@ -603,11 +605,6 @@ impl<'a> StreamingRenderer<'a> {
             // resident instance record of the dirty TLASes.
             // TLASes, their scratch and instance buffers are large (dedicated blocks): count
             // only budget no block holds as free, and evict a quarter more for fragmentation.
-            let counts = self.resident_instance_counts();
-            let mut need = 0u64;
-            for t in target(self) {
-                need += self.tlas_rebuild_bytes(t, counts[t as usize])?;
-            }
             let free = |s: &Self| {
                 let r = s.heap.report();
                 r.budget_bytes.saturating_sub(r.budget_block_bytes)
@@ -691,8 +688,8 @@ impl<'a> StreamingRenderer<'a> {
 
 /// Of dirty TLASes given as (room its rebuild needs, TLAS), those to rebuild together: the
 /// largest, then the next largest while the sum stays within that one's need or a 64th of
-/// `budget_bytes` (see `next_rebuild_group`).
-fn group_by_need(mut need: Vec<(u64, u32)>, budget_bytes: u64) -> Vec<u32> {
+/// `budget_bytes` (see `next_rebuild_group`); with the group's need summed.
+fn group_by_need(mut need: Vec<(u64, u32)>, budget_bytes: u64) -> (Vec<u32>, u64) {
     // Largest first, ties by index (a stable order across runs).
     need.sort_by_key(|&(n, t)| (std::cmp::Reverse(n), t));
     let cap = need.first().map_or(0, |&(n, _)| n.max(budget_bytes / 64));
@@ -704,7 +701,7 @@ fn group_by_need(mut need: Vec<(u64, u32)>, budget_bytes: u64) -> Vec<u32> {
             group.push(t);
         }
     }
-    group
+    (group, sum)
 }
 
 #[cfg(test)]
@@ -718,16 +715,25 @@ mod tests {
         let mut dirty = vec![(10, 4), (250, 1), (1, 6), (300, 0), (5, 5), (200, 2)];
         let mut groups = Vec::new();
         while !dirty.is_empty() {
-            let g = group_by_need(dirty.clone(), budget);
+            let (g, need) = group_by_need(dirty.clone(), budget);
+            let listed: u64 = dirty
+                .iter()
+                .filter(|(_, t)| g.contains(t))
+                .map(|p| p.0)
+                .sum();
+            assert_eq!(need, listed);
             dirty.retain(|(_, t)| !g.contains(t));
             groups.push(g);
         }
         assert_eq!(groups, vec![vec![0], vec![1], vec![2], vec![4, 5, 6]]);
         // One TLAS over the cap still gets a group of its own.
-        assert_eq!(group_by_need(vec![(9000, 3)], budget), vec![3]);
+        assert_eq!(group_by_need(vec![(9000, 3)], budget), (vec![3], 9000));
         // Equal needs: by index; two that fit a 64th together share a group.
-        assert_eq!(group_by_need(vec![(40, 2), (40, 1)], budget), vec![1, 2]);
-        assert_eq!(group_by_need(vec![(60, 2), (60, 1)], budget), vec![1]);
-        assert!(group_by_need(Vec::new(), budget).is_empty());
+        assert_eq!(
+            group_by_need(vec![(40, 2), (40, 1)], budget),
+            (vec![1, 2], 80)
+        );
+        assert_eq!(group_by_need(vec![(60, 2), (60, 1)], budget), (vec![1], 60));
+        assert!(group_by_need(Vec::new(), budget).0.is_empty());
     }
 }
