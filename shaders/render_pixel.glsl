@@ -404,7 +404,14 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         c.st.xyw = uvec3(1u, g_stamp, smp + 1u);
     }
     if (g_probe) {
-        return;  // a probe of the next frame marks what its rays met, nothing else
+        // A probe of the next frame marks what its rays met; a pixel that needs a structure
+        // not resident is listed for the next probe round (after the prefetch built it).
+        if (g_probe_open && !guard) {
+            IncompleteList l = IncompleteList(StreamRef(push.stream).s.incomplete);
+            uint k = atomicAdd(l.count, 1u);
+            l.r[k] = px.x | (px.y << 16u);
+        }
+        return;
     }
     if (g_secondary_rays != 0u) {
         atomicAdd(push.stats.n[STAT_SHADOW_RAYS], g_secondary_rays);
@@ -478,6 +485,7 @@ void render_stream_item(uint i) {
     g_streaming = true;
     g_guard = guard;
     g_probe = (s.flags & STREAM_PROBE_PASS) != 0u;
+    g_probe_open = false;
 #ifdef MOTU_STREAMED
     // Every first walk tests triangles and proxies; what the rays pass (the marks BLASes
     // included) is marked by the mark walk that follows it (traverse.glsl).

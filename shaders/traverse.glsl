@@ -43,6 +43,9 @@ struct Entry {
 bool g_streaming = false;
 bool g_guard = false;   // a guard-band ray (prefetch probe): marks only
 bool g_probe = false;   // a probe pass of the next frame: marks, never defers nor writes
+// A probe ray of this pixel met an open structure in front of its hit: the pixel goes on the
+// pass's incomplete list (its only write), so the next probe round traces it alone.
+bool g_probe_open = false;
 uint g_stamp = 0u;      // this pass's stamp
 uint g_start = 0u;      // the stamp of the pass this ray (primary or shadow) started in
 float g_best_t = T_INFINITY;  // the carried best hit's t (culls this walk)
@@ -80,6 +83,7 @@ bool stream_still_open(float best_t) {
     StreamParams s = StreamRef(push.stream).s;
     stream_mark_as(s.blas_stamps, g_empty_id, STREAM_NEEDED);
     atomicAdd(StampTable(s.requests).r[g_empty_id], 1u);
+    g_probe_open = g_probe_open || g_probe;
     return !g_probe;
 }
 

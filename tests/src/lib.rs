@@ -213,6 +213,38 @@ pub fn render(pkg: &Path, backend: &str, aov: &Path, extra: &[&str]) -> serde_js
         .expect("stats JSON")
 }
 
+/// Checks a streamed camera path's probe rounds (`render --stream --stats` JSON `st`, at most
+/// `max_rounds` a frame): every frame but the last probes its successor's pixels once and
+/// then, in later rounds, only pixels left open (fewer than all again each round); the last
+/// frame has no successor and probes nothing. Returns how many frames ran more than one round.
+pub fn check_probe_rounds(st: &serde_json::Value, max_rounds: u64) -> usize {
+    let field = |f: &serde_json::Value, k: &str| {
+        f[k].as_u64()
+            .unwrap_or_else(|| panic!("{k}: expected an unsigned integer in {f}"))
+    };
+    let pixels = field(st, "width") * field(st, "height");
+    let frames = st["stream"]["frames"].as_array().expect("stream frames");
+    let mut more = 0;
+    for (i, f) in frames.iter().enumerate() {
+        let (rounds, rays) = (field(f, "probe_rounds"), field(f, "probe_rays"));
+        if i + 1 == frames.len() {
+            assert_eq!((rounds, rays), (0, 0), "the last frame probes nothing: {f}");
+            continue;
+        }
+        assert!((1..=max_rounds).contains(&rounds), "probe rounds: {f}");
+        if rounds == 1 {
+            assert_eq!(rays, pixels, "one round probes every pixel: {f}");
+        } else {
+            more += 1;
+            assert!(
+                rays > pixels && rays < rounds * pixels,
+                "later rounds probe only the pixels left open: {f}"
+            );
+        }
+    }
+    more
+}
+
 /// A child process killed (and reaped) on drop: display servers outlive no test.
 pub struct KillOnDrop(pub std::process::Child);
 

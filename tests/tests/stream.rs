@@ -4,7 +4,7 @@
 //! 30-frame camera path needs about one pass per frame and builds far fewer triangles than
 //! rebuilding everything per frame.
 
-use motu_tests::{gpu_available, motu_ok, s};
+use motu_tests::{check_probe_rounds, gpu_available, motu_ok, s};
 use std::path::{Path, PathBuf};
 
 /// The streaming budget (above the floor, 16.1 MiB at 64 px wide): the full build below needs
@@ -228,5 +228,11 @@ fn island_camera_path_needs_about_one_pass_per_frame_under_the_budget() {
     assert!(
         u(&totals["vram_peak_bytes"]) <= PATH_BUDGET_BYTES,
         "{totals}"
+    );
+    // Probe rounds (default two): the first probes every pixel of the next camera, a second
+    // only the pixels the first left open.
+    assert!(
+        check_probe_rounds(&st, 2) > 0,
+        "no frame probed a second round"
     );
 }

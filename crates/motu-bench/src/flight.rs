@@ -259,6 +259,7 @@ fn run_streaming(
             "trace_ms": st.trace_ms,
             "probe_rays": st.probe_rays,
             "probe_ms": st.probe_ms,
+            "probe_rounds": st.probe_rounds,
             "wall_ms": wall_ms,
             "gpu_ms": out.stats.ms_per_frame,
             "vram_peak_bytes": st.vram_peak_bytes,
@@ -269,6 +270,9 @@ fn run_streaming(
             "first_pass_missed_evicted": st.first_pass_missed_evicted,
             "first_pass_missed_unprobed": st.first_pass_missed_unprobed,
             "first_pass_missed_probed": st.first_pass_missed_probed,
+            // What the prefetch built, and what it wanted but found no room for.
+            "prefetched": st.prefetched,
+            "prefetch_skipped": st.prefetch_skipped,
         }));
     }
     let totals = sr.totals();

@@ -348,6 +348,13 @@ pub struct StreamBoundArgs {
     /// probe. Default 1 (every pixel).
     #[arg(long, value_name = "STRIDE")]
     pub stream_probe: Option<u32>,
+    /// Streaming: probe rounds after a frame, at most (default 2). A probe ray stops at the
+    /// first structure that is not resident; once the prefetch built it, the ray may hit in
+    /// it and its shadow and AO rays need structures no probe saw. Each later round probes
+    /// only the pixels the round before left open and prefetches what they need, at the cost
+    /// of a TLAS rebuild or update (probe_rounds per frame). 1: one probe.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    pub stream_probe_rounds: Option<u32>,
     /// Streaming: how TLASes follow what is resident. `update`: each TLAS is built once over
     /// all its instances (a non-resident one points at a placeholder no ray meets) and
     /// updated in place as BLASes come and go: no rebuild transient, at the cost of the TLAS

@@ -129,6 +129,23 @@ mod tests {
         let b = cmd::render::stream_bounds(&render_args(&["--stream-probe", "0"]).stream_bounds);
         assert!(b.given(), "--stream-probe needs --stream");
         assert_eq!(b.options().probe_stride, 0);
+        // Probe rounds: two by default, any count from 1.
+        assert_eq!(d.probe_rounds, 2);
+        let b =
+            cmd::render::stream_bounds(&render_args(&["--stream-probe-rounds", "1"]).stream_bounds);
+        assert!(b.given(), "--stream-probe-rounds needs --stream");
+        assert_eq!(b.options().probe_rounds, 1);
+        let args = [
+            "motu",
+            "render",
+            "pkg",
+            "-o",
+            "x.png",
+            "--stream-probe-rounds",
+            "0",
+        ];
+        let e = cli::Cli::try_parse_from(args).unwrap_err().to_string();
+        assert!(e.contains("--stream-probe-rounds"), "{e}");
         // The load-time split: default (None: a million), any count from 2, 0 for none; 1 is
         // refused with the reason.
         assert_eq!(b.split_instances, None);

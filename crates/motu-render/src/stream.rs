@@ -20,6 +20,8 @@ pub struct StreamBounds {
     pub frame_build_ms: Option<f64>,
     /// `--stream-probe`: the next camera's probe stride (`None`: the default; 0: no probe).
     pub probe_stride: Option<u32>,
+    /// `--stream-probe-rounds`: most probe rounds after a frame (`None`: the default).
+    pub probe_rounds: Option<u32>,
     /// `--stream-tlas`: how TLASes follow residency.
     pub tlas_update: motu_gpu::TlasUpdate,
     /// `--stream-split-instances`: TLASes over this many instances are split into pieces when
@@ -36,6 +38,7 @@ impl StreamBounds {
             frame_build_bytes: self.frame_build_bytes.unwrap_or(0),
             frame_build_ms: self.frame_build_ms.unwrap_or(0.0),
             probe_stride: self.probe_stride.unwrap_or(d.probe_stride),
+            probe_rounds: self.probe_rounds.unwrap_or(d.probe_rounds),
             tlas_update: self.tlas_update,
             ..d
         }
@@ -47,6 +50,7 @@ impl StreamBounds {
             || self.frame_build_bytes.is_some()
             || self.frame_build_ms.is_some()
             || self.probe_stride.is_some()
+            || self.probe_rounds.is_some()
             || self.tlas_update != motu_gpu::TlasUpdate::Auto
             || self.split_instances.is_some()
     }

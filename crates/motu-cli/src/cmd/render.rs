@@ -25,6 +25,7 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         frame_build_bytes: b.stream_build_budget,
         frame_build_ms: b.stream_build_ms,
         probe_stride: b.stream_probe,
+        probe_rounds: b.stream_probe_rounds,
         tlas_update: b.stream_tlas.into(),
         split_instances: b.stream_split_instances,
     }

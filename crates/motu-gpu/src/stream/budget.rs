@@ -121,6 +121,12 @@ impl<'a> StreamingRenderer<'a> {
         .map_err(|e| self.skeleton_error("the frame buffers", e))
     }
 
+    /// Takes the kept frame buffers (with their width, height and guard length) for a use
+    /// between frames; [`Self::keep_frame_buffers`] puts them back.
+    pub(super) fn take_kept_frame_buffers(&mut self) -> Option<(FrameBuffers, u32, u32, usize)> {
+        self.kept.frame_buffers.take()
+    }
+
     /// Keeps `fb` for the next frame of the same size.
     pub(super) fn keep_frame_buffers(
         &mut self,

@@ -395,7 +395,10 @@ impl<'a> StreamingRenderer<'a> {
         self.frame_stats.tables_ms += t_tables.elapsed().as_secs_f64() * 1e3;
         self.frame_stats.build_steps += 1;
         if prefetch {
-            self.frame_stats.prefetched += self.built_now.len() as u32;
+            let built = self.built_now.len() as u32;
+            self.frame_stats.prefetched += built;
+            let wanted = (needed.len() + later.len()) as u32;
+            self.frame_stats.prefetch_skipped += wanted.saturating_sub(built);
         } else {
             self.frame_stats.deferred += deferred as u32;
         }

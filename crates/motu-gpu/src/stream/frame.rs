@@ -87,7 +87,7 @@ impl<'a> StreamingRenderer<'a> {
                         && self.frame_stats.complete
                         && !self.frame_build_spent() =>
                 {
-                    Some(self.probe_next_camera(&fb, &n, opts)?)
+                    Some((n, self.probe_next_camera(&fb, &n, opts, None)?))
                 }
                 _ => None,
             };
@@ -113,12 +113,20 @@ impl<'a> StreamingRenderer<'a> {
         // does not fit is skipped), within what is left of the frame's build budget. With a
         // probe of the next camera, what its rays need comes first, and only what the probe
         // saw is kept: this frame is done, the next one is what the room is for.
-        if let Some(p) = probe {
+        let mut again = None;
+        if let Some((next, (p, open))) = probe {
             guard_demand.merge_first(p);
             self.frame_first_stamp = self.stamp;
+            again = Some((next, open));
         }
         if !guard_demand.is_empty() && self.frame_stats.complete && !self.frame_build_spent() {
-            if let Err(e) = self.make_resident(&guard_demand, true) {
+            if let Err(e) = self
+                .make_resident(&guard_demand, true)
+                .and_then(|()| match again {
+                    Some((next, open)) => self.probe_again(&next, opts, open),
+                    None => Ok(()),
+                })
+            {
                 self.quarantine_after_failure(&e);
                 return Err(e);
             }
@@ -215,5 +223,35 @@ impl<'a> StreamingRenderer<'a> {
             "stream frame done"
         );
         Ok((RenderOutput { aov, rgba8, stats }, self.frame_stats.clone()))
+    }
+
+    /// Later probe rounds (`StreamOptions::probe_rounds`): the pixels `open` the round before
+    /// left open are probed again against what the prefetch just built, and what they need is
+    /// prefetched, while a round builds something and leaves pixels open.
+    fn probe_again(
+        &mut self,
+        next: &CameraParams,
+        opts: &RenderOptions,
+        open: Vec<u32>,
+    ) -> Result<()> {
+        let mut open = open;
+        while !open.is_empty()
+            && self.frame_stats.probe_rounds < self.opts.probe_rounds
+            && !self.built_now.is_empty()
+            && !self.frame_build_spent()
+        {
+            let Some((fb, w, h, g)) = self.take_kept_frame_buffers() else {
+                return Ok(());
+            };
+            let probed = self.probe_next_camera(&fb, next, opts, Some(&open));
+            self.keep_frame_buffers(fb, w, h, g);
+            let (demand, still_open) = probed?;
+            if demand.blases.is_empty() {
+                break;
+            }
+            self.make_resident(&demand, true)?;
+            open = still_open;
+        }
+        Ok(())
     }
 }

@@ -68,7 +68,9 @@
 //! its pixels, secondary rays included, against what is resident first: what it meets is built
 //! ahead of the guard band's, and only what it saw is kept (what its rays pass through
 //! included: each TLAS's *marks* BLAS, seen only by probe rays, holds its resident clusters'
-//! boxes; see `probe.rs`).
+//! boxes; see `probe.rs`). A probe ray stops at its first non-resident structure, so later
+//! probe rounds ([`StreamOptions::probe_rounds`]) trace again only the pixels a round left
+//! open, against what its prefetch built, and prefetch what their rays reach from there.
 //!
 //! # Eviction and the budget
 //! Allocations go through `motu-alloc` (standard blocks a 64th of the budget, a block of its
@@ -160,6 +162,16 @@ pub struct StreamOptions {
     /// (each axis) runs against what is resident and marks what it meets, and that is
     /// prefetched (see `probe.rs`); 0: no probe.
     pub probe_stride: u32,
+    /// Most probe rounds after a frame (at least one when probing). A probe ray stops at the
+    /// first structure that is not resident; once the prefetch built it, the ray may hit in
+    /// it and send its shadow and AO rays to structures no round saw yet. So the pixels a
+    /// round left open are probed again (only them) and what they need prefetched too, until
+    /// none is open, a round needs nothing new or built nothing, or this many rounds ran.
+    /// Each round after the first costs a TLAS rebuild or update; two rounds took the passes
+    /// a third did on the H200 (island 0.3 along shotCam: at half the full build 1.455 →
+    /// 1.182 passes after the first at the same frame time; at a quarter 2.636 → 2.364, the
+    /// image 13% sooner and the whole frame 19% longer; BENCHMARKS.md, session 22).
+    pub probe_rounds: u32,
     /// Bytes (meshes plus acceleration structures) one frame may build; 0: unbounded. At least
     /// one structure is built per frame, so a frame may overshoot by one; when it is spent the
     /// frame stops (unfinished pixels, or fallback) and later frames go on refining.
@@ -199,6 +211,7 @@ impl Default for StreamOptions {
             blas_build: crate::accel::BlasBuild::Small,
             build_open_early: true,
             probe_stride: 1,
+            probe_rounds: 2,
             fallback: StreamFallback::Off,
             frame_build_bytes: 0,
             frame_build_ms: 0.0,
@@ -239,10 +252,18 @@ pub struct FrameStreamStats {
     pub tlas_rebuild_groups: u32,
     /// Structures built after the frame from the guard band and the next camera's probe.
     pub prefetched: u32,
+    /// Structures the prefetch wanted but left unbuilt: no room beside what the probe saw
+    /// resident and the TLAS rebuilds' reserve (the next frame's first pass opens those its
+    /// rays need).
+    pub prefetch_skipped: u32,
     /// Rays of the probe of the next frame's camera (its pixels' primary rays; 0: no probe),
     /// and the probe's trace time (not in `trace_ms`).
     pub probe_rays: u64,
     pub probe_ms: f64,
+    /// Probe rounds run after this frame (`StreamOptions::probe_rounds`): the first probes
+    /// the next camera's pixels, each later one only the pixels the round before left open,
+    /// after the prefetch built what they needed.
+    pub probe_rounds: u32,
     /// Structures evicted (BLASes and TLASes), and the bytes released (structures plus their
     /// meshes; also those of structures a refused TLAS rebuild gave back, counted in
     /// `deferred`).

@@ -18,6 +18,14 @@
 //! so the prefetch keeps it. Ordinary passes cull the marks with their mask and pay nothing
 //! for them. Marking what *every* probe ray passed kept more resident than the next frames used
 //! (more built, no fewer passes: BENCHMARKS.md, session 11).
+//!
+//! A probe ray stops at the first structure that is not resident (it requests it, then goes on
+//! as if its resident hit were final). Once the prefetch built that structure, the ray may hit
+//! in it, and its shadow and AO rays leave from there for structures no probe ray met, so the
+//! next frame's first pass opened them. The probe lists the pixels some ray of which requested
+//! a structure (`g_probe_open`, the pass's incomplete list); after the prefetch, a later round
+//! probes only those pixels and prefetches what they need, while rounds build something and
+//! leave pixels open (`StreamOptions::probe_rounds`).
 
 use motu_abi::camera::CameraParams;
 
@@ -31,21 +39,30 @@ use crate::render::{frame_params, RenderOptions};
 
 impl<'a> StreamingRenderer<'a> {
     /// Traces the probe of `next` (same image size as the frame just rendered, whose buffers
-    /// `fb` are) and returns what it met that is not resident: the structures some ray would
-    /// open first (most requested first), then the rest of what its rays met. Resident
+    /// `fb` are): every `probe_stride`-th pixel, or only the pixels `again` (a later round:
+    /// those an earlier round left open, packed `x | y << 16`). Returns what it met that is not
+    /// resident: the structures some ray would open first (most requested first), then the
+    /// rest of what its rays met; and the pixels some ray of which needed one of them. Resident
     /// structures it met count as seen by this frame, so the prefetch does not evict them.
     pub(super) fn probe_next_camera(
         &mut self,
         fb: &FrameBuffers,
         next: &CameraParams,
         opts: &RenderOptions,
-    ) -> Result<Demand> {
+        again: Option<&[u32]>,
+    ) -> Result<(Demand, Vec<u32>)> {
         let mut params = frame_params(next, opts, self.view.root_tlas);
         params.shading = self.shading.address;
         fb.params.write(0, std::slice::from_ref(&params))?;
         let pixels = u64::from(next.width) * u64::from(next.height);
         let stride = self.opts.probe_stride.max(1);
-        let (full, list) = if stride == 1 {
+        let (full, list) = if let Some(again) = again {
+            let list: Vec<u32> = again
+                .iter()
+                .map(|&v| pack_biased((v & 0xffff) as i32, (v >> 16) as i32))
+                .collect();
+            (0, list)
+        } else if stride == 1 {
             (pixels as u32, Vec::new())
         } else {
             // Every stride-th pixel of each axis, from the middle of its stride × stride cell.
@@ -65,19 +82,21 @@ impl<'a> StreamingRenderer<'a> {
         let PassReadback {
             stamps,
             requests,
+            incomplete,
             trace_ms,
-            ..
         } = self.trace_pass(fb, pixels, full, &list, false, STREAM_PROBE_PASS)?;
         let stamp = self.stamp;
-        self.probe_sighting = stamps
-            .iter()
-            .zip(&resident)
-            .map(|(&v, &r)| {
-                (if v >> 2 == stamp { PROBE_MET } else { 0 }) | if r { PROBE_RESIDENT } else { 0 }
-            })
-            .collect();
+        // What the rounds saw together (a later round adds to the first's).
+        if again.is_none() || self.probe_sighting.len() != stamps.len() {
+            self.probe_sighting = vec![0; stamps.len()];
+        }
+        for ((s, &v), &r) in self.probe_sighting.iter_mut().zip(&stamps).zip(&resident) {
+            *s |=
+                (if v >> 2 == stamp { PROBE_MET } else { 0 }) | if r { PROBE_RESIDENT } else { 0 };
+        }
         self.frame_stats.probe_rays += rays;
         self.frame_stats.probe_ms += trace_ms;
+        self.frame_stats.probe_rounds += 1;
         let mut demand = Demand::default();
         for (b, level) in self.sightings(&stamps, false) {
             // Needed (a ray's nearest) first by request count; then everything else it met.
@@ -89,6 +108,6 @@ impl<'a> StreamingRenderer<'a> {
             demand.blases.push((b, n));
         }
         demand.sort();
-        Ok(demand)
+        Ok((demand, incomplete))
     }
 }
