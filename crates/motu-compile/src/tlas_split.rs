@@ -39,9 +39,10 @@ pub(crate) fn split_tlas(
         // what stays direct can sit at its end and the new AABB instances follow it.
         debug_assert_eq!(base + count, out.instances.len());
         let mut bounds: Vec<([f32; 3], [f32; 3])> = {
+            use rayon::prelude::*;
             let blases = &out.blases;
             out.instances[base..]
-                .iter()
+                .par_iter()
                 .map(|inst| {
                     let b = instance_bounds(blases, inst);
                     (b.min, b.max)
@@ -75,15 +76,16 @@ pub(crate) fn split_tlas(
         };
         first_round = false;
         let split_end = base + count - direct;
-        drop(bounds);
         let first_piece = out.tlases.len();
         for &(x, y) in &ranges {
+            // The instances' bounds were permuted with them: a piece's are its range's.
+            let piece_bounds = bounds[x..y].iter().fold(Aabb::EMPTY, |acc, &(min, max)| {
+                acc.union(&Aabb { min, max })
+            });
             let (x, y) = (base + x, base + y);
             next_id(out.tlases.len(), "TLASes")?;
             let insts = &out.instances[x..y];
-            let bounds = insts.iter().fold(Aabb::EMPTY, |acc, inst| {
-                acc.union(&instance_bounds(&out.blases, inst))
-            });
+            let bounds = piece_bounds;
             let mut rec = TlasRecord {
                 instance_base: x as u32,
                 instance_count: (y - x) as u32,
