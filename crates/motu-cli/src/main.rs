@@ -135,17 +135,13 @@ mod tests {
             cmd::render::stream_bounds(&render_args(&["--stream-probe-rounds", "1"]).stream_bounds);
         assert!(b.given(), "--stream-probe-rounds needs --stream");
         assert_eq!(b.options().probe_rounds, 1);
-        let args = [
-            "motu",
-            "render",
-            "pkg",
-            "-o",
-            "x.png",
-            "--stream-probe-rounds",
-            "0",
-        ];
-        let e = cli::Cli::try_parse_from(args).unwrap_err().to_string();
-        assert!(e.contains("--stream-probe-rounds"), "{e}");
+        // A flag's value clap refuses: the error names the flag.
+        let refused = |flag: &str, value: &str| {
+            let args = ["motu", "render", "pkg", "-o", "x.png", flag, value];
+            let e = cli::Cli::try_parse_from(args).unwrap_err().to_string();
+            assert!(e.contains(flag), "{e}");
+        };
+        refused("--stream-probe-rounds", "0");
         // The load-time split: default (None: a million), any count from 2, 0 for none; 1 is
         // refused with the reason.
         assert_eq!(b.split_instances, None);
@@ -156,17 +152,7 @@ mod tests {
             assert_eq!(b.split_instances, Some(want));
         }
         for bad in ["1", "many", "5000000000"] {
-            let args = [
-                "motu",
-                "render",
-                "pkg",
-                "-o",
-                "x.png",
-                "--stream-split-instances",
-                bad,
-            ];
-            let e = cli::Cli::try_parse_from(args).unwrap_err().to_string();
-            assert!(e.contains("--stream-split-instances"), "{e}");
+            refused("--stream-split-instances", bad);
         }
     }
 }
