@@ -41,6 +41,15 @@ impl Demand {
         self.later = keep([first.later, std::mem::take(&mut self.later)].concat());
     }
 
+    /// The structures some ray would open first (requested at least once), in order.
+    pub(super) fn needed_ids(&self) -> Vec<u32> {
+        self.blases
+            .iter()
+            .filter(|&&(_, n)| n > 0)
+            .map(|&(b, _)| b)
+            .collect()
+    }
+
     /// Most requested first (ties: lower id first, so runs are deterministic).
     pub(super) fn sort(&mut self) {
         for v in [&mut self.blases, &mut self.later] {
@@ -418,6 +427,15 @@ impl<'a> StreamingRenderer<'a> {
 #[cfg(test)]
 mod tests {
     use super::Demand;
+
+    #[test]
+    fn needed_structures_are_those_some_ray_requested() {
+        let d = Demand {
+            blases: vec![(5, 3), (2, 1), (9, 0)],
+            later: vec![(4, 0)],
+        };
+        assert_eq!(d.needed_ids(), vec![5, 2]);
+    }
 
     #[test]
     fn merged_demand_puts_the_probe_first_and_keeps_each_structure_once() {

@@ -115,15 +115,16 @@ impl<'a> StreamingRenderer<'a> {
         // saw is kept: this frame is done, the next one is what the room is for.
         let mut again = None;
         if let Some((next, (p, open))) = probe {
+            let needed = p.needed_ids();
             guard_demand.merge_first(p);
             self.frame_first_stamp = self.stamp;
-            again = Some((next, open));
+            again = Some((next, open, needed));
         }
         if !guard_demand.is_empty() && self.frame_stats.complete && !self.frame_build_spent() {
             if let Err(e) = self
                 .make_resident(&guard_demand, true)
                 .and_then(|()| match again {
-                    Some((next, open)) => self.probe_again(&next, opts, open),
+                    Some((next, open, needed)) => self.probe_again(&next, opts, open, needed),
                     None => Ok(()),
                 })
             {
@@ -227,17 +228,19 @@ impl<'a> StreamingRenderer<'a> {
 
     /// Later probe rounds (`StreamOptions::probe_rounds`): the pixels `open` the round before
     /// left open are probed again against what the prefetch just built, and what they need is
-    /// prefetched, while a round builds something and leaves pixels open.
+    /// prefetched, while the prefetch built some structure a round's rays `needed` first (the
+    /// open pixels' rays go on from there) and pixels stay open.
     fn probe_again(
         &mut self,
         next: &CameraParams,
         opts: &RenderOptions,
         open: Vec<u32>,
+        needed: Vec<u32>,
     ) -> Result<()> {
-        let mut open = open;
+        let (mut open, mut needed) = (open, needed);
         while !open.is_empty()
             && self.frame_stats.probe_rounds < self.opts.probe_rounds
-            && !self.built_now.is_empty()
+            && needed.iter().any(|&b| self.blas[b as usize].is_some())
             && !self.frame_build_spent()
         {
             let Some((fb, w, h, g)) = self.take_kept_frame_buffers() else {
@@ -246,7 +249,8 @@ impl<'a> StreamingRenderer<'a> {
             let probed = self.probe_next_camera(&fb, next, opts, Some(&open));
             self.keep_frame_buffers(fb, w, h, g);
             let (demand, still_open) = probed?;
-            if demand.blases.is_empty() {
+            needed = demand.needed_ids();
+            if needed.is_empty() {
                 break;
             }
             self.make_resident(&demand, true)?;
