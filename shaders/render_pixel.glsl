@@ -100,13 +100,17 @@ void stream_write_fallback(uvec2 px, uint pixel, Carry c) {
 
 // Streaming: an open pixel keeps its state and goes on the next pass's list; it writes only its
 // fallback.
-void stream_defer(uvec2 px, uint pixel, Carry c) {
-    stream_write_fallback(px, pixel, c);
-    StreamParams s = StreamRef(push.stream).s;
-    CarryTable(s.carry).r[pixel] = c;
-    IncompleteList l = IncompleteList(s.incomplete);
+// Puts pixel `px` on the pass's incomplete list (packed x | y << 16).
+void stream_list_incomplete(uvec2 px) {
+    IncompleteList l = IncompleteList(StreamRef(push.stream).s.incomplete);
     uint k = atomicAdd(l.count, 1u);
     l.r[k] = px.x | (px.y << 16u);
+}
+
+void stream_defer(uvec2 px, uint pixel, Carry c) {
+    stream_write_fallback(px, pixel, c);
+    CarryTable(StreamRef(push.stream).s.carry).r[pixel] = c;
+    stream_list_incomplete(px);
 }
 
 // Primary ray of sample `smp`: the pixel centre for sample 0 (it gives the AOV record),
@@ -407,9 +411,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         // A probe of the next frame marks what its rays met; a pixel that needs a structure
         // not resident is listed for the next probe round (after the prefetch built it).
         if (g_probe_open && !guard) {
-            IncompleteList l = IncompleteList(StreamRef(push.stream).s.incomplete);
-            uint k = atomicAdd(l.count, 1u);
-            l.r[k] = px.x | (px.y << 16u);
+            stream_list_incomplete(px);
         }
         return;
     }

@@ -298,7 +298,7 @@ const DIRECT_LEAVES: usize = 8;
 /// is 0 when even no kept item leaves enough room.
 pub fn split_keeping_direct<T: Copy + Send>(
     items: &mut [T],
-    bounds: &mut [([f32; 3], [f32; 3])],
+    bounds: &mut [Bounds],
     cap: usize,
     room: impl Fn(usize) -> usize,
     out: &mut Vec<(usize, usize)>,

@@ -85,7 +85,6 @@ pub(crate) fn split_tlas(
             let (x, y) = (base + x, base + y);
             next_id(out.tlases.len(), "TLASes")?;
             let insts = &out.instances[x..y];
-            let bounds = piece_bounds;
             let mut rec = TlasRecord {
                 instance_base: x as u32,
                 instance_count: (y - x) as u32,
@@ -95,7 +94,7 @@ pub(crate) fn split_tlas(
                 },
                 ..Default::default()
             };
-            set_bounds(&mut rec.bounds_min, &mut rec.bounds_max, &bounds);
+            set_bounds(&mut rec.bounds_min, &mut rec.bounds_max, &piece_bounds);
             out.tlases.push(rec);
         }
         let piece_end = out.tlases.len();

@@ -234,10 +234,9 @@ impl<'a> StreamingRenderer<'a> {
         &mut self,
         next: &CameraParams,
         opts: &RenderOptions,
-        open: Vec<u32>,
-        needed: Vec<u32>,
+        mut open: Vec<u32>,
+        mut needed: Vec<u32>,
     ) -> Result<()> {
-        let (mut open, mut needed) = (open, needed);
         while !open.is_empty()
             && self.frame_stats.probe_rounds < self.opts.probe_rounds
             && needed.iter().any(|&b| self.blas[b as usize].is_some())

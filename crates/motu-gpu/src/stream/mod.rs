@@ -166,7 +166,8 @@ pub struct StreamOptions {
     /// first structure that is not resident; once the prefetch built it, the ray may hit in
     /// it and send its shadow and AO rays to structures no round saw yet. So the pixels a
     /// round left open are probed again (only them) and what they need prefetched too, until
-    /// none is open, a round needs nothing new or built nothing, or this many rounds ran.
+    /// none is open, the prefetch built none of what a round needed first, or this many rounds
+    /// ran.
     /// Each round after the first costs a TLAS rebuild or update; two rounds took the passes
     /// a third did on the H200 (island 0.3 along shotCam: at half the full build 1.455 →
     /// 1.182 passes after the first at the same frame time; at a quarter 2.636 → 2.364, the

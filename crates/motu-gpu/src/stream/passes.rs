@@ -131,13 +131,7 @@ impl<'a> StreamingRenderer<'a> {
             let t_list = Instant::now();
             self.frame_stats.reshot_pixels += u64::from(count);
             full_count = 0;
-            list = incomplete
-                .iter()
-                .map(|&v| {
-                    let (x, y) = ((v & 0xffff) as i32, (v >> 16) as i32);
-                    pack_biased(x, y)
-                })
-                .collect();
+            list = relist(&incomplete);
             pass.open_pixels = u64::from(count);
             log_pass(self, pass, t_list.elapsed().as_secs_f64() * 1e3);
         }
@@ -400,6 +394,15 @@ pub(super) fn pack_biased(x: i32, y: i32) -> u32 {
     let bx = (x + GUARD_BIAS).clamp(0, 0xffff) as u32;
     let by = (y + GUARD_BIAS).clamp(0, 0xffff) as u32;
     bx | (by << 16)
+}
+
+/// The pixel list of a pass that traces again the `incomplete` pixels a pass read back
+/// (packed `x | y << 16`, unbiased).
+pub(super) fn relist(incomplete: &[u32]) -> Vec<u32> {
+    incomplete
+        .iter()
+        .map(|&v| pack_biased((v & 0xffff) as i32, (v >> 16) as i32))
+        .collect()
 }
 
 /// Every other pixel of a `band`-pixel ring around a `w × h` image (primary rays only).

@@ -24,15 +24,16 @@
 //! in it, and its shadow and AO rays leave from there for structures no probe ray met, so the
 //! next frame's first pass opened them. The probe lists the pixels some ray of which requested
 //! a structure (`g_probe_open`, the pass's incomplete list); after the prefetch, a later round
-//! probes only those pixels and prefetches what they need, while rounds build something and
-//! leave pixels open (`StreamOptions::probe_rounds`).
+//! probes only those pixels and prefetches what they need, while the prefetch built a
+//! structure the round before needed first and pixels stay open
+//! (`StreamOptions::probe_rounds`).
 
 use motu_abi::camera::CameraParams;
 
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
 use super::params::STREAM_PROBE_PASS;
-use super::passes::{pack_biased, PassReadback, LEVEL_NEEDED, PROBE_MET, PROBE_RESIDENT};
+use super::passes::{pack_biased, relist, PassReadback, LEVEL_NEEDED, PROBE_MET, PROBE_RESIDENT};
 use super::StreamingRenderer;
 use crate::error::Result;
 use crate::render::{frame_params, RenderOptions};
@@ -57,11 +58,7 @@ impl<'a> StreamingRenderer<'a> {
         let pixels = u64::from(next.width) * u64::from(next.height);
         let stride = self.opts.probe_stride.max(1);
         let (full, list) = if let Some(again) = again {
-            let list: Vec<u32> = again
-                .iter()
-                .map(|&v| pack_biased((v & 0xffff) as i32, (v >> 16) as i32))
-                .collect();
-            (0, list)
+            (0, relist(again))
         } else if stride == 1 {
             (pixels as u32, Vec::new())
         } else {
