@@ -119,6 +119,8 @@ impl<'a> StreamingRenderer<'a> {
         loop {
             match f(self) {
                 Err(GpuError::Budget(msg)) => {
+                    // What refused (`MOTU_LOG`): the numbers behind `evicted_on_refusal`.
+                    tracing::debug!(%msg, "refused; evicting");
                     let step = (self.build_opts.budget_bytes / 32).max(1);
                     if self.evict_some(step, EvictWhy::Refused)? {
                         continue;
