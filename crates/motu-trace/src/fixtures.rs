@@ -395,6 +395,19 @@ impl BruteForce {
 
     /// Closest hit with `t > t_min` along the normalised `dir` (Möller–Trumbore in f64).
     pub fn closest(&self, org: [f32; 3], dir: [f32; 3], t_min: f64) -> Option<BruteHit> {
+        self.closest_within(org, dir, t_min, 0.0)
+    }
+
+    /// [`closest`](Self::closest) with each triangle grown (`edge_eps` > 0) or shrunk (< 0) by
+    /// `edge_eps` in barycentric terms: what f32 traversal may decide either way on a ray
+    /// that grazes an edge.
+    pub fn closest_within(
+        &self,
+        org: [f32; 3],
+        dir: [f32; 3],
+        t_min: f64,
+        edge_eps: f64,
+    ) -> Option<BruteHit> {
         let o = org.map(|v| v as f64);
         let len = dir
             .iter()
@@ -424,7 +437,7 @@ impl BruteForce {
             let u = dot(s, p) / det;
             let q = cross(s, e1);
             let v = dot(d, q) / det;
-            if u < 0.0 || v < 0.0 || u + v > 1.0 {
+            if u < -edge_eps || v < -edge_eps || u + v > 1.0 + edge_eps {
                 continue;
             }
             let t = dot(e2, q) / det;

@@ -4,10 +4,12 @@ use motu_abi::camera::CameraParams;
 use motu_abi::lod::{LodParams, LOD_NOT_FORCED, RAY_SHADOW};
 use proptest::prelude::*;
 
-use crate::fixtures::{srt, uv_sphere, BruteForce, HierarchyBuilder, OwnedHierarchy, PiTarget};
+use crate::fixtures::{
+    srt, uv_sphere, BruteForce, BruteHit, HierarchyBuilder, OwnedHierarchy, PiTarget,
+};
 use crate::ray::{LocalRay, IDENTITY_3X4};
 use crate::render::{render_with, RenderOptions, View};
-use crate::{compare, MeshGeometry, RayQuery, Scratch, TraceError, Tracer};
+use crate::{compare, Hit, MeshGeometry, RayQuery, Scratch, TraceError, Tracer};
 
 /// xorshift64*: deterministic scenes from a proptest seed.
 struct Rng(u64);
@@ -108,6 +110,34 @@ fn random_scene(seed: u64, two_level: bool) -> OwnedHierarchy {
     b.finish(root)
 }
 
+/// Barycentric tolerance of an edge graze (see `check_against_brute_force`).
+const EDGE_EPS: f64 = 1e-5;
+
+/// Whether traversal's `got` is the brute force's `want` for a ray from `org`: both miss, or
+/// both hit at the same t (f32 error), the same triangle unless at a tie.
+fn agrees(got: &Hit, want: Option<BruteHit>, org: [f32; 3]) -> Result<(), String> {
+    match want {
+        None if got.is_hit() => Err(format!("brute force misses, traversal hit {got:?}")),
+        None => Ok(()),
+        Some(w) if !got.is_hit() => Err(format!("traversal missed {w:?}")),
+        Some(w) => {
+            // f32 transforms of an origin ~15 units out: absolute error ~1e-6.
+            let err = (got.t as f64 - w.t).abs();
+            let scale = org.iter().fold(1.0f32, |m, v| m.max(v.abs())) as f64;
+            if err >= 1e-4 * w.t + 1e-5 * scale {
+                return Err(format!("t {} vs {}", got.t, w.t));
+            }
+            // A different triangle only at a tie (shared edge or coincident surfaces).
+            if (got.mesh_record, got.primitive) != (w.mesh_record, w.primitive)
+                && err >= 1e-5 * (w.t + scale)
+            {
+                return Err("different triangle at different t".into());
+            }
+            Ok(())
+        }
+    }
+}
+
 fn check_against_brute_force(h: &OwnedHierarchy, seed: u64) -> Result<(), TestCaseError> {
     let tracer = Tracer::new(h.view(), h).unwrap();
     let brute = BruteForce::new(h, 0);
@@ -128,23 +158,18 @@ fn check_against_brute_force(h: &OwnedHierarchy, seed: u64) -> Result<(), TestCa
         let dir = [target[0] - org[0], target[1] - org[1], target[2] - org[2]];
         let got = tracer.trace(org, dir, &RayQuery::default(), &mut scratch);
         let want = brute.closest(org, dir, 0.0);
-        match want {
-            None => prop_assert!(!got.is_hit(), "brute force misses, traversal hit {got:?}"),
-            Some(w) => {
-                prop_assert!(got.is_hit(), "traversal missed {w:?}");
-                hits += 1;
-                // f32 transforms of an origin ~15 units out: absolute error ~1e-6.
-                let err = (got.t as f64 - w.t).abs();
-                let scale = org.iter().fold(1.0f32, |m, v| m.max(v.abs())) as f64;
-                prop_assert!(err < 1e-4 * w.t + 1e-5 * scale, "t {} vs {}", got.t, w.t);
-                // A different triangle only at a tie (shared edge or coincident surfaces).
-                if (got.mesh_record, got.primitive) != (w.mesh_record, w.primitive) {
-                    prop_assert!(
-                        err < 1e-5 * (w.t + scale),
-                        "different triangle at different t"
-                    );
-                }
-            }
+        if want.is_some() {
+            hits += 1;
+        }
+        // f32 traversal (two transforms deep) decides a ray that grazes an edge within
+        // f32 rounding either way: its answer must be the f64 brute force's with every
+        // triangle exact, grown or shrunk by EDGE_EPS (the grazes seen: ~1e-7).
+        let exact = agrees(&got, want, org);
+        if exact.is_err()
+            && agrees(&got, brute.closest_within(org, dir, 0.0, EDGE_EPS), org).is_err()
+            && agrees(&got, brute.closest_within(org, dir, 0.0, -EDGE_EPS), org).is_err()
+        {
+            return Err(TestCaseError::fail(exact.unwrap_err()));
         }
         prop_assert!(got.traces >= 1);
     }
