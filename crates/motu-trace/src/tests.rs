@@ -164,12 +164,11 @@ fn check_against_brute_force(h: &OwnedHierarchy, seed: u64) -> Result<(), TestCa
         // f32 traversal (two transforms deep) decides a ray that grazes an edge within
         // f32 rounding either way: its answer must be the f64 brute force's with every
         // triangle exact, grown or shrunk by EDGE_EPS (the grazes seen: ~1e-7).
-        let exact = agrees(&got, want, org);
-        if exact.is_err()
-            && agrees(&got, brute.closest_within(org, dir, 0.0, EDGE_EPS), org).is_err()
-            && agrees(&got, brute.closest_within(org, dir, 0.0, -EDGE_EPS), org).is_err()
-        {
-            return Err(TestCaseError::fail(exact.unwrap_err()));
+        if let Err(e) = agrees(&got, want, org) {
+            let graze = [EDGE_EPS, -EDGE_EPS]
+                .iter()
+                .any(|&eps| agrees(&got, brute.closest_within(org, dir, 0.0, eps), org).is_ok());
+            prop_assert!(graze, "{}", e);
         }
         prop_assert!(got.traces >= 1);
     }
