@@ -98,8 +98,6 @@ void stream_write_fallback(uvec2 px, uint pixel, Carry c) {
     push.rgba.r[pixel] = encode_srgb8(colour);
 }
 
-// Streaming: an open pixel keeps its state and goes on the next pass's list; it writes only its
-// fallback.
 // Puts pixel `px` on the pass's incomplete list (packed x | y << 16).
 void stream_list_incomplete(uvec2 px) {
     IncompleteList l = IncompleteList(StreamRef(push.stream).s.incomplete);
@@ -107,6 +105,8 @@ void stream_list_incomplete(uvec2 px) {
     l.r[k] = px.x | (px.y << 16u);
 }
 
+// Streaming: an open pixel keeps its state and goes on the next pass's list; it writes only its
+// fallback.
 void stream_defer(uvec2 px, uint pixel, Carry c) {
     stream_write_fallback(px, pixel, c);
     CarryTable(StreamRef(push.stream).s.carry).r[pixel] = c;

@@ -59,6 +59,42 @@ pub fn motu_json(args: &[&str]) -> serde_json::Value {
         .unwrap_or_else(|e| panic!("motu {} printed non-JSON ({e}): {out}", args.join(" ")))
 }
 
+/// `motu gen island -o DIR/island` (at `scale`; `None`: the generator's default, no other
+/// flag) and its default import: `DIR/island.motu`.
+pub fn gen_island(dir: &Path, scale: Option<&str>) -> PathBuf {
+    let gen = dir.join("island");
+    let mut args = vec!["gen", "island", "-o", s(&gen)];
+    if let Some(sc) = scale {
+        args.extend(["--scale", sc]);
+    }
+    motu_ok(&args);
+    let pkg = dir.join("island.motu");
+    import(&gen.join("scene.pbrt"), &pkg, &[]);
+    pkg
+}
+
+/// `motu report`'s full-build peak and streaming floor of `pkg` for a `width` × `height`
+/// image (`variants[0].cost.peak_bytes`, `streaming.min_resident_bytes`).
+pub fn report_peak_and_floor(pkg: &Path, width: &str, height: &str) -> (u64, u64) {
+    let r = motu_json(&[
+        "report",
+        s(pkg),
+        "--json",
+        "--width",
+        width,
+        "--height",
+        height,
+    ]);
+    let field = |v: &serde_json::Value| {
+        v.as_u64()
+            .unwrap_or_else(|| panic!("report: expected an unsigned integer, got {v}"))
+    };
+    (
+        field(&r["variants"][0]["cost"]["peak_bytes"]),
+        field(&r["streaming"]["min_resident_bytes"]),
+    )
+}
+
 /// A scene from `shared/scenes` beside the checkout; `None` (with a loud line) if absent.
 pub fn shared_scene(rel: &str) -> Option<PathBuf> {
     let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))

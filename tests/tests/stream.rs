@@ -5,38 +5,13 @@
 //! full build's AOV, and a 30-frame camera path needs about one pass per frame and builds far
 //! fewer triangles than rebuilding everything per frame.
 
-use motu_tests::{check_probe_rounds, gpu_available, motu_ok, s};
-use std::path::{Path, PathBuf};
+use motu_tests::{
+    check_probe_rounds, gen_island, gpu_available, motu_ok, report_peak_and_floor, s,
+};
+use std::path::Path;
 
 /// A close-up that sees a small part of the island (`motu gen island`'s cameras).
 const CAMERA: &str = "palmsCam";
-
-/// The island, default generator and import.
-fn island(dir: &Path) -> PathBuf {
-    let gen = dir.join("island");
-    motu_ok(&["gen", "island", "-o", s(&gen)]);
-    let pkg = dir.join("island.motu");
-    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
-    pkg
-}
-
-/// The report's full-build peak and streaming floor of `pkg` at `width` × `height`.
-fn peak_and_floor(pkg: &Path, width: &str, height: &str) -> (u64, u64) {
-    let rep: serde_json::Value = serde_json::from_str(&motu_ok(&[
-        "report",
-        s(pkg),
-        "--json",
-        "--width",
-        width,
-        "--height",
-        height,
-    ]))
-    .expect("report JSON");
-    (
-        u(&rep["variants"][0]["cost"]["peak_bytes"]),
-        u(&rep["streaming"]["min_resident_bytes"]),
-    )
-}
 
 fn render(pkg: &Path, aov: &Path, extra: &[&str]) -> serde_json::Value {
     let stats = aov.with_extension("json");
@@ -72,7 +47,7 @@ fn island_streams_under_a_quarter_of_its_full_build_with_the_same_aov() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let pkg = island(dir.path());
+    let pkg = gen_island(dir.path(), None);
     let full_aov = dir.path().join("full.aov");
     let size = ["--width", "64", "--height", "36"];
     let full = render(&pkg, &full_aov, &size);
@@ -85,7 +60,7 @@ fn island_streams_under_a_quarter_of_its_full_build_with_the_same_aov() {
         + u(&r["scratch_peak_bytes"]);
     // A quarter of that, above the report's floor (the floor is what a budget must hold).
     let budget_bytes = needs / 4;
-    let (_, floor) = peak_and_floor(&pkg, "64", "36");
+    let (_, floor) = report_peak_and_floor(&pkg, "64", "36");
     eprintln!("full build needs {needs} bytes = 4x the {budget_bytes}-byte budget; floor {floor}");
     assert!(budget_bytes >= floor, "a quarter is above the floor");
     let budget = budget_bytes.to_string();
@@ -155,11 +130,11 @@ fn island_camera_path_needs_about_one_pass_per_frame_under_the_budget() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let pkg = island(dir.path());
+    let pkg = gen_island(dir.path(), None);
     let frames = 30u64;
     // An eighth of the report's full-build peak (about twice the floor): palmsCam sees a
     // small part of the island, and at a quarter nothing is ever evicted along the path.
-    let (peak, floor) = peak_and_floor(&pkg, "32", "18");
+    let (peak, floor) = report_peak_and_floor(&pkg, "32", "18");
     let path_budget_bytes = peak / 8;
     assert!(path_budget_bytes >= floor, "an eighth is above the floor");
     let st = render(

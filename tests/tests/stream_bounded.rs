@@ -6,23 +6,13 @@
 //! report's full-build peak needs at most 1.3 passes per frame after the first, for primary
 //! visibility and for the shaded default (shadow and AO rays) alike, exact.
 
-use motu_tests::{check_probe_rounds, gpu_available, motu, motu_ok, s};
+use motu_tests::{
+    check_probe_rounds, gen_island, gpu_available, motu, motu_ok, report_peak_and_floor, s,
+};
 use std::path::{Path, PathBuf};
 
 const W: &str = "64";
 const H: &str = "36";
-
-fn island(dir: &Path, scale: Option<&str>) -> PathBuf {
-    let gen = dir.join("island");
-    let mut args = vec!["gen", "island", "-o", s(&gen)];
-    if let Some(sc) = scale {
-        args.extend(["--scale", sc]);
-    }
-    motu_ok(&args);
-    let pkg = dir.join("island.motu");
-    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
-    pkg
-}
 
 /// A camera path holding one pose: the generated island's `shotCam` (its pbrt `LookAt` and
 /// fov), so every frame of the path sees the same image.
@@ -75,7 +65,7 @@ fn a_frame_build_budget_shows_the_counted_fallback_and_converges_to_the_full_bui
     }
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let pkg = island(d, None);
+    let pkg = gen_island(d, None);
     let path = still_path(d);
     let full = d.join("full.aov");
     motu_ok(&[
@@ -243,24 +233,10 @@ fn quarter_budget_island(d: &Path) -> (PathBuf, u64, u64) {
 /// `gen island` at `scale` (None: the generator's default), default import, and a quarter of
 /// its report's full-build peak at the test size.
 fn quarter_budget(d: &Path, scale: Option<&str>) -> (PathBuf, u64, u64) {
-    let pkg = island(d, scale);
-    let rep: serde_json::Value = serde_json::from_str(&motu_ok(&[
-        "report",
-        s(&pkg),
-        "--json",
-        "--width",
-        W,
-        "--height",
-        H,
-    ]))
-    .expect("report JSON");
-    let peak = u(&rep["variants"][0]["cost"]["peak_bytes"]);
+    let pkg = gen_island(d, scale);
+    let (peak, floor) = report_peak_and_floor(&pkg, W, H);
     let budget = peak / 4;
-    assert!(
-        budget >= u(&rep["streaming"]["min_resident_bytes"]),
-        "a quarter is above the floor: {}",
-        rep["streaming"]
-    );
+    assert!(budget >= floor, "a quarter is above the floor ({floor})");
     (pkg, peak, budget)
 }
 

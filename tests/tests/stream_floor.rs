@@ -3,22 +3,12 @@
 //! streaming floor complete with the full build's AOV (0 mismatches, peak ≤ budget, exit 0);
 //! a budget below the floor is refused naming it; a frame that runs out of passes is an error.
 
-use motu_tests::{gpu_available, motu, motu_json, motu_ok, s};
-use std::path::{Path, PathBuf};
+use motu_tests::{gen_island, gpu_available, motu, motu_json, motu_ok, s};
+use std::path::Path;
 use std::time::Instant;
 
 const W: &str = "96";
 const H: &str = "64";
-
-/// The default island (`motu gen island`, no flags; default import: the partition bound is
-/// chosen from the scene's size).
-fn default_island(dir: &Path) -> PathBuf {
-    let gen = dir.join("island");
-    motu_ok(&["gen", "island", "-o", s(&gen)]);
-    let pkg = dir.join("island.motu");
-    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
-    pkg
-}
 
 fn u(v: &serde_json::Value) -> u64 {
     v.as_u64()
@@ -128,7 +118,7 @@ fn default_island_streams_at_fractions_of_its_full_build_and_at_the_floor() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let pkg = default_island(dir.path());
+    let pkg = gen_island(dir.path(), None);
     let (peak, floor) = report(&pkg);
     let full_aov = dir.path().join("full.aov");
     let full_png = dir.path().join("full.png");
@@ -234,7 +224,7 @@ fn below_the_floor_is_refused_and_an_unfinished_frame_is_an_error() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let pkg = default_island(dir.path());
+    let pkg = gen_island(dir.path(), None);
     let (peak, floor) = report(&pkg);
     let err = below_floor_is_refused(&pkg, dir.path(), floor - floor / 50, floor);
     assert!(
@@ -344,7 +334,7 @@ fn streamed_secondary_windows_give_the_full_builds_colours() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let pkg = default_island(dir.path());
+    let pkg = gen_island(dir.path(), None);
     let (peak, _) = report(&pkg);
     let budget = (peak / 4).to_string();
     let mut backends = vec!["pipeline"];
@@ -398,7 +388,7 @@ fn a_split_hierarchys_floor_is_honest() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let pkg = default_island(dir.path());
+    let pkg = gen_island(dir.path(), None);
     let full_aov = dir.path().join("full.aov");
     let full_png = dir.path().join("full.png");
     motu_ok(&render_args(&pkg, &full_png, &full_aov, "query"));

@@ -3,7 +3,8 @@
 //! replay identically in both; without a display the viewer must point at `motu render`.
 
 use motu_tests::{
-    gpu_available, has_ray_query, motu, motu_ok, motu_on_display, motu_on_wayland, s, weston, xvfb,
+    gen_island, gpu_available, has_ray_query, motu, motu_ok, motu_on_display, motu_on_wayland,
+    report_peak_and_floor, s, weston, xvfb,
 };
 use std::path::{Path, PathBuf};
 
@@ -22,15 +23,6 @@ fn forest(dir: &Path) -> PathBuf {
         "60",
     ]);
     let pkg = dir.join("forest.motu");
-    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
-    pkg
-}
-
-/// The default island (`motu gen island`, default import): `DIR/island.motu`.
-fn island(dir: &Path) -> PathBuf {
-    let gen = dir.join("island");
-    motu_ok(&["gen", "island", "-o", s(&gen)]);
-    let pkg = dir.join("island.motu");
     motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
     pkg
 }
@@ -649,18 +641,8 @@ fn view_never_writes_an_unfinished_frame() {
     };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let pkg = island(d);
-    let rep = motu_ok(&[
-        "report",
-        s(&pkg),
-        "--json",
-        "--width",
-        "64",
-        "--height",
-        "36",
-    ]);
-    let rep: serde_json::Value = serde_json::from_str(&rep).unwrap();
-    let floor = rep["streaming"]["min_resident_bytes"].as_u64().unwrap();
+    let pkg = gen_island(d, None);
+    let (_, floor) = report_peak_and_floor(&pkg, "64", "36");
     let budget = (floor as f64 * 1.05) as u64;
     let bad = d.join("bad.aov");
     let budget_arg = budget.to_string();
@@ -704,7 +686,7 @@ fn view_subsets_equal_render_subsets() {
     };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let pkg = island(d);
+    let pkg = gen_island(d, None);
     let raov = d.join("r.aov");
     motu_ok(&[
         "render",
@@ -810,7 +792,7 @@ fn view_streams_progressively_within_a_frame_build_budget() {
     };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let pkg = island(d);
+    let pkg = gen_island(d, None);
     // One pose, the start camera (recorded through the window).
     let start = d.join("start.json");
     view_ok(
