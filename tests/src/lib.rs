@@ -85,14 +85,16 @@ pub fn report_peak_and_floor(pkg: &Path, width: &str, height: &str) -> (u64, u64
         "--height",
         height,
     ]);
-    let field = |v: &serde_json::Value| {
-        v.as_u64()
-            .unwrap_or_else(|| panic!("report: expected an unsigned integer, got {v}"))
-    };
     (
-        field(&r["variants"][0]["cost"]["peak_bytes"]),
-        field(&r["streaming"]["min_resident_bytes"]),
+        json_u64(&r["variants"][0]["cost"]["peak_bytes"]),
+        json_u64(&r["streaming"]["min_resident_bytes"]),
     )
+}
+
+/// `v` as an unsigned integer; a panic naming what it was otherwise (stats and report JSON).
+pub fn json_u64(v: &serde_json::Value) -> u64 {
+    v.as_u64()
+        .unwrap_or_else(|| panic!("expected an unsigned integer, got {v}"))
 }
 
 /// A scene from `shared/scenes` beside the checkout; `None` (with a loud line) if absent.
@@ -254,10 +256,7 @@ pub fn render(pkg: &Path, backend: &str, aov: &Path, extra: &[&str]) -> serde_js
 /// then, in later rounds, only pixels left open (fewer than all again each round); the last
 /// frame has no successor and probes nothing. Returns how many frames ran more than one round.
 pub fn check_probe_rounds(st: &serde_json::Value, max_rounds: u64) -> usize {
-    let field = |f: &serde_json::Value, k: &str| {
-        f[k].as_u64()
-            .unwrap_or_else(|| panic!("{k}: expected an unsigned integer in {f}"))
-    };
+    let field = |f: &serde_json::Value, k: &str| json_u64(&f[k]);
     let pixels = field(st, "width") * field(st, "height");
     let frames = st["stream"]["frames"].as_array().expect("stream frames");
     let mut more = 0;

@@ -6,7 +6,7 @@
 //! fewer triangles than rebuilding everything per frame.
 
 use motu_tests::{
-    check_probe_rounds, gen_island, gpu_available, motu_ok, report_peak_and_floor, s,
+    check_probe_rounds, gen_island, gpu_available, json_u64 as u, motu_ok, report_peak_and_floor, s,
 };
 use std::path::Path;
 
@@ -34,11 +34,6 @@ fn render(pkg: &Path, aov: &Path, extra: &[&str]) -> serde_json::Value {
     motu_ok(&args);
     serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats written"))
         .expect("stats JSON")
-}
-
-fn u(v: &serde_json::Value) -> u64 {
-    v.as_u64()
-        .unwrap_or_else(|| panic!("expected an unsigned integer, got {v}"))
 }
 
 #[test]

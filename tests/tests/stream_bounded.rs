@@ -7,7 +7,8 @@
 //! visibility and for the shaded default (shadow and AO rays) alike, exact.
 
 use motu_tests::{
-    check_probe_rounds, gen_island, gpu_available, motu, motu_ok, report_peak_and_floor, s,
+    check_probe_rounds, gen_island, gpu_available, json_u64 as u, motu, motu_ok,
+    report_peak_and_floor, s,
 };
 use std::path::{Path, PathBuf};
 
@@ -51,11 +52,6 @@ fn still_path(dir: &Path) -> PathBuf {
 
 fn read_json(p: &Path) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(p).expect("stats file")).expect("stats JSON")
-}
-
-fn u(v: &serde_json::Value) -> u64 {
-    v.as_u64()
-        .unwrap_or_else(|| panic!("expected an unsigned integer, got {v}"))
 }
 
 #[test]

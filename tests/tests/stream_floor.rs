@@ -3,17 +3,12 @@
 //! streaming floor complete with the full build's AOV (0 mismatches, peak ≤ budget, exit 0);
 //! a budget below the floor is refused naming it; a frame that runs out of passes is an error.
 
-use motu_tests::{gen_island, gpu_available, motu, motu_json, motu_ok, s};
+use motu_tests::{gen_island, gpu_available, json_u64 as u, motu, motu_json, motu_ok, s};
 use std::path::Path;
 use std::time::Instant;
 
 const W: &str = "96";
 const H: &str = "64";
-
-fn u(v: &serde_json::Value) -> u64 {
-    v.as_u64()
-        .unwrap_or_else(|| panic!("expected an unsigned integer, got {v}"))
-}
 
 /// (full-build peak, streaming floor) as `motu report` prints them for a W×H image.
 fn report(pkg: &Path) -> (u64, u64) {
