@@ -256,7 +256,11 @@ pub fn render(pkg: &Path, backend: &str, aov: &Path, extra: &[&str]) -> serde_js
 /// then, in later rounds, only pixels left open (fewer than all again each round); the last
 /// frame has no successor and probes nothing. Returns how many frames ran more than one round.
 pub fn check_probe_rounds(st: &serde_json::Value, max_rounds: u64) -> usize {
-    let field = |f: &serde_json::Value, k: &str| json_u64(&f[k]);
+    // Names the key and the frame on failure (json_u64 alone would say only "got null").
+    let field = |f: &serde_json::Value, k: &str| {
+        f[k].as_u64()
+            .unwrap_or_else(|| panic!("{k}: expected an unsigned integer in {f}"))
+    };
     let pixels = field(st, "width") * field(st, "height");
     let frames = st["stream"]["frames"].as_array().expect("stream frames");
     let mut more = 0;
