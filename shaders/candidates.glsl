@@ -144,6 +144,13 @@ void record_proxy(PiRecord r, vec3 org, vec3 dir, float t_min, float t_hi) {
         return;  // walked by this ray in an earlier pass: resolved
     }
     uint mark = 4u * s.stamp + (guard || resident ? STREAM_SEEN : STREAM_OPEN);
+    if ((pl.stream_start & STREAM_PASS_WALK) != 0u) {
+        // A final probe ray's pass-mark walk: only resident BLASes it passes, as passed.
+        if (!resident) {
+            return;
+        }
+        mark = 4u * s.stamp - 1u;
+    }
     if (mark_walk && StampTable(s.blas_stamps).r[blas] >= mark) {
         return;  // another ray marked it already: the member tests would change nothing
     }

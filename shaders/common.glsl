@@ -40,16 +40,26 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 #define STREAM_SEEN 0u
 #define STREAM_OPEN 1u
 #define STREAM_NEEDED 2u
-// Payload.stream_start bit of a guard-band ray (stamps stay below 2^30: 4 × stamp + level).
+// Payload.stream_start bit of a guard-band ray (stamps stay below 2^29, STREAM_START_STAMP).
 #define STREAM_GUARD_RAY 0x80000000u
 // Payload.stream_start bit of a streamed ray's *mark walk* (traverse.glsl, MOTU_STREAMED): the
 // second walk that marks what lies in front of the first walk's hit.
 #define STREAM_MARK_WALK 0x40000000u
-#define STREAM_START_STAMP 0x3fffffffu
+// Payload.stream_start bit of a *pass-mark walk*: a probe ray's mark walk taken although its
+// hit is final (StreamParams.flags' pass rows): it marks the resident BLASes it enters at
+// 4 × stamp - 1 (level 3 of the stamp before: below every mark of this pass, and written by
+// nothing else), which the host reads as "passed": an LRU refresh, never a keep
+// (stream/probe.rs).
+#define STREAM_PASS_WALK 0x20000000u
+#define STREAM_START_STAMP 0x1fffffffu
 // StreamParams.flags: a prefetch probe of the next frame's camera (render_pixel.glsl): every
 // pixel's rays, primary and secondary, run to the end against what is resident, marking what
 // they meet open (the nearest needed and counted) and writing nothing else.
 #define STREAM_PROBE_PASS 1u
+// StreamParams.flags >> STREAM_PASS_ROWS_SHIFT: N > 0: in a probe pass, the pixels of every
+// N-th row also take a pass-mark walk (STREAM_PASS_WALK). Whole rows: a launch's subgroups are
+// runs of one row, so sampling within rows would cost every subgroup the whole walk.
+#define STREAM_PASS_ROWS_SHIFT 8u
 // Ray cull masks (Rust: stream::MARKS_MASK, stream::TRIANGLE_MASK). Every instance has mask
 // 0xFF except in a streamed TLAS its triangle instances (0x01) and its *marks* BLAS (0x02: the
 // boxes of its resident clusters), which only probe passes' mark walks see: there a ray passing

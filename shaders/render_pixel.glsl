@@ -460,6 +460,7 @@ void render_pixel(uvec2 px) {
     g_streaming = false;
     g_guard = false;
     g_probe = false;
+    g_probe_pass_marks = false;
     render_pixel_impl(px, false, vec3(0.0));
 }
 
@@ -487,6 +488,8 @@ void render_stream_item(uint i) {
     g_streaming = true;
     g_guard = guard;
     g_probe = (s.flags & STREAM_PROBE_PASS) != 0u;
+    uint pass_rows = s.flags >> STREAM_PASS_ROWS_SHIFT;
+    g_probe_pass_marks = g_probe && !guard && pass_rows != 0u && uint(y) % pass_rows == 0u;
     g_probe_open = false;
 #ifdef MOTU_STREAMED
     // Every first walk tests triangles and proxies; what the rays pass (the marks BLASes

@@ -43,6 +43,9 @@ struct Entry {
 bool g_streaming = false;
 bool g_guard = false;   // a guard-band ray (prefetch probe): marks only
 bool g_probe = false;   // a probe pass of the next frame: marks, never defers nor writes
+// A probe ray of a pass-mark row (StreamParams.flags' pass rows): its mark walk runs even when
+// its hit is final, and marks what it passes as passed only (STREAM_PASS_WALK).
+bool g_probe_pass_marks = false;
 // A probe ray of this pixel met an open structure in front of its hit: the pixel goes on the
 // pass's incomplete list (its only write), so the next probe round traces it alone.
 bool g_probe_open = false;
@@ -62,10 +65,14 @@ float g_t_max = T_INFINITY;
 // in the hardware's order, and most of them lay behind the ray's hit: the host built them
 // ahead for nothing, crowding out what later frames need (issue 14 item 6). Only rays that stay
 // open (their nearest open structure is their request, found by the first walk) and guard rays
-// take it, probe rays included only when open: marking what every probe ray passed kept more
-// resident than the next frames used (BENCHMARKS.md). The marks are hints for building ahead,
-// never needed for correctness, so a mark walk cut short truncates nothing.
+// take it, probe rays included only when open: marking what every probe ray passed as seen kept
+// more resident than the next frames used (BENCHMARKS.md). Probe rays of pass-mark rows
+// (g_probe_pass_marks) take it too when final, marking what they pass as *passed* only: the
+// host refreshes those BLASes' LRU age without keeping them (g_pass_walk). The marks are hints
+// for building ahead and keeping, never needed for correctness, so a mark walk cut short
+// truncates nothing.
 bool g_mark_walk = false;
+bool g_pass_walk = false;  // this mark walk is a final ray's pass-mark walk
 #endif
 
 // Records `id` at `level` in this pass.
@@ -142,6 +149,7 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
         pl.stream_start = g_start | (g_guard ? STREAM_GUARD_RAY : 0u);
 #ifdef MOTU_STREAMED
         pl.stream_start |= g_mark_walk ? STREAM_MARK_WALK : 0u;
+        pl.stream_start |= g_pass_walk ? STREAM_PASS_WALK : 0u;
 #endif
         backend_trace(e.tlas, xform_point(e.tlas_from_world, org), 0.0,
                       xform_vector(e.tlas_from_world, dir), hit.t, first_hit);
@@ -277,19 +285,22 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
         // Open: a structure in front of the hit may hold a nearer one (an occluded shadow ray
         // is final whatever lies in front of its occluder).
         bool open = g_empty_t < hit.t && !(first_hit && hit.tlas != NONE_U32);
-        if (!g_streaming || g_truncated || overflows != 0u || !(g_guard || open)) {
+        if (!g_streaming || g_truncated || overflows != 0u ||
+            !(g_guard || open || g_probe_pass_marks)) {
             break;  // final, or cut short: nothing to mark
         }
         walk_counts = uvec3(traces, overflows, truncations);
         walk_truncated = g_truncated;
         traces_at_start = traces;
         g_mark_walk = true;
+        g_pass_walk = !(g_guard || open);
         g_cull_mask = CULL_MASK_MARK_WALK | (g_probe ? CULL_MASK_MARKS : 0u);
         first_hit = false;
         stack[0] = Entry(affine_identity(), 0.0, root_tlas, NONE_U32, -1.0, 0u);
         sp = 1u;
     }
     g_mark_walk = false;
+    g_pass_walk = false;
     g_cull_mask = walk_cull_mask;
 #endif
     if (g_streaming && hit.tlas != NONE_U32) {

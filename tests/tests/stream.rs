@@ -221,3 +221,94 @@ fn island_camera_path_needs_about_one_pass_per_frame_under_the_budget() {
         "no frame probed a second round"
     );
 }
+
+/// `--stream-probe-pass-rows`: the probe's final rays of every N-th row mark the resident
+/// structures they pass without hitting, so the prefetch evicts those after everything else
+/// unseen. Along the default camera's path at a third of the full build (where the prefetch
+/// evicts for room), the marks refresh structures on every probed frame, the first passes miss
+/// no more structures the prefetch evicted than without them, and every frame is the image of
+/// the same path with nothing evicted.
+#[test]
+fn probe_pass_marks_keep_what_rays_pass_and_change_no_pixel() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = gen_island(dir.path(), None);
+    let (peak, floor) = report_peak_and_floor(&pkg, "64", "36");
+    let budget_bytes = peak / 3;
+    assert!(budget_bytes >= floor, "a third is above the floor");
+    let path = |name: &str, budget: u64, extra: &[&str]| {
+        let stats = dir.path().join(format!("{name}.json"));
+        let aov = dir.path().join(format!("{name}.aov"));
+        let png = dir.path().join(format!("{name}.png"));
+        let budget = budget.to_string();
+        let mut args = vec![
+            "render",
+            s(&pkg),
+            "-o",
+            s(&png),
+            "--aov",
+            s(&aov),
+            "--stats",
+            s(&stats),
+            "--width",
+            "64",
+            "--height",
+            "36",
+            "--frames",
+            "8",
+            "--stream",
+            "--vram-budget",
+            &budget,
+        ];
+        args.extend(extra);
+        motu_ok(&args);
+        let st: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("JSON");
+        (st, aov)
+    };
+    // Everything fits: the reference frames of the path.
+    let (_, reference) = path("everything", peak * 2, &[]);
+    let (off, off_aov) = path("off", budget_bytes, &[]);
+    let (on, on_aov) = path("rows1", budget_bytes, &["--stream-probe-pass-rows", "1"]);
+    // The ray-pipeline path marks too (the only one on devices without ray queries).
+    let (pipe, pipe_aov) = path(
+        "rows1-pipeline",
+        budget_bytes,
+        &["--stream-probe-pass-rows", "1", "--backend", "pipeline"],
+    );
+    let frames =
+        |st: &serde_json::Value| st["stream"]["frames"].as_array().expect("frames").clone();
+    let total = |st: &serde_json::Value, k: &str| frames(st).iter().map(|f| u(&f[k])).sum::<u64>();
+    for (st, aov) in [(&off, &off_aov), (&on, &on_aov), (&pipe, &pipe_aov)] {
+        assert_eq!(st["stream"]["totals"]["incomplete_frames"], 0, "{st}");
+        assert!(u(&st["stream"]["totals"]["evicted"]) > 0, "the path evicts");
+        motu_ok(&["compare", s(&reference), s(aov), "--max-mismatch", "0"]);
+    }
+    assert_eq!(total(&off, "probe_pass_marks"), 0, "off by default");
+    for st in [&on, &pipe] {
+        let on_frames = frames(st);
+        for (i, f) in on_frames.iter().enumerate() {
+            let marks = u(&f["probe_pass_marks"]);
+            if i + 1 == on_frames.len() {
+                assert_eq!(marks, 0, "the last frame probes nothing: {f}");
+            } else {
+                assert!(
+                    marks > 0,
+                    "frame {i}'s probe passed resident structures: {f}"
+                );
+            }
+        }
+    }
+    let missed = |st: &serde_json::Value| total(st, "first_pass_missed_evicted");
+    eprintln!(
+        "pass marks at a third: passes after the first {} → {}, first-pass misses of evicted \
+         structures {} → {}",
+        off["stream"]["mean_passes_after_first"],
+        on["stream"]["mean_passes_after_first"],
+        missed(&off),
+        missed(&on)
+    );
+    assert!(missed(&on) <= missed(&off), "the marks kept what rays pass");
+}

@@ -355,6 +355,14 @@ pub struct StreamBoundArgs {
     /// of a TLAS rebuild or update (probe_rounds per frame). 1: one probe.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
     pub stream_probe_rounds: Option<u32>,
+    /// Streaming: the probe's pixels of every N-th row also mark the resident structures their
+    /// rays pass through without hitting, so the prefetch evicts those last (it never skips a
+    /// build to keep them). Fewer second passes where the prefetch evicts for room (a third
+    /// of the full build on the H200: 1.727 → 1.182 passes after the first), at the cost of
+    /// the probe's time (at half: frames +25% for 1.182 → 1.000); the count is in --stats
+    /// (probe_pass_marks). 0: off (default).
+    #[arg(long, value_name = "N")]
+    pub stream_probe_pass_rows: Option<u32>,
     /// Streaming: how TLASes follow what is resident. `update`: each TLAS is built once over
     /// all its instances (a non-resident one points at a placeholder no ray meets) and
     /// updated in place as BLASes come and go: no rebuild transient, at the cost of the TLAS

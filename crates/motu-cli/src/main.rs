@@ -142,6 +142,25 @@ mod tests {
             assert!(e.contains(flag), "{e}");
         };
         refused("--stream-probe-rounds", "0");
+        // Pass marks: off by default, any row stride; contradicting --stream-probe 0 is
+        // refused by name.
+        assert_eq!(d.probe_pass_rows, 0);
+        assert_eq!(o.probe_pass_rows, 0);
+        let b = cmd::render::stream_bounds(
+            &render_args(&["--stream-probe-pass-rows", "2"]).stream_bounds,
+        );
+        assert!(b.given(), "--stream-probe-pass-rows needs --stream");
+        assert_eq!(b.options().probe_pass_rows, 2);
+        assert_eq!(b.conflict(), None);
+        let b = cmd::render::stream_bounds(
+            &render_args(&["--stream-probe-pass-rows", "2", "--stream-probe", "0"]).stream_bounds,
+        );
+        let e = b.conflict().expect("pass rows without a probe");
+        assert!(
+            e.contains("--stream-probe-pass-rows 2") && e.contains("--stream-probe 0"),
+            "{e}"
+        );
+        refused("--stream-probe-pass-rows", "two");
         // The load-time split: default (None: a million), any count from 2, 0 for none; 1 is
         // refused with the reason.
         assert_eq!(b.split_instances, None);

@@ -1084,3 +1084,37 @@ fn forced_persistent_tlases_at_the_floor_give_way_and_the_frame_completes() {
     }
     assert_no_validation_errors(&ctx);
 }
+
+/// Stamps (`4 × stamp + level` in u32 tables, the start stamp in 29 bits of a payload) would
+/// wrap after 2^29 passes (~20 days of a viewer): the pass before the limit is refused with
+/// the limit, and no frame comes back wrong.
+#[test]
+fn the_pass_stamp_limit_is_refused_by_name() {
+    let Some(ctx) = context_or_skip("stream_stamp_limit", Requirement::RayTracing) else {
+        return;
+    };
+    let h = field(2, 2, 4);
+    let blobs = Blobs(&h);
+    let opts = ids_opts(backend(&ctx));
+    let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(64 << 20))
+        .expect("streaming renderer");
+    let cam = base_pose().params(SIZE, SIZE);
+    let (_, st) = sr
+        .render_frame(&cam, &opts)
+        .expect("a frame below the limit");
+    assert!(st.complete, "{st:?}");
+    // The last stamp the payload holds is 2^29 - 1: a one-pass frame still takes it.
+    sr.skip_stamps_to((1 << 29) - 2);
+    let (_, st) = sr.render_frame(&cam, &opts).expect("the last stamp");
+    assert_eq!(st.passes, 1, "{st:?}");
+    match sr.render_frame(&cam, &opts) {
+        Err(crate::GpuError::LimitExceeded { what, limit, .. }) => {
+            assert!(what.contains("stamps"), "{what}");
+            assert_eq!(limit, (1 << 29) - 1);
+        }
+        other => panic!(
+            "expected the stamp limit, got {:?}",
+            other.map(|(_, st)| st)
+        ),
+    }
+}

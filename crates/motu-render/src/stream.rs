@@ -22,6 +22,8 @@ pub struct StreamBounds {
     pub probe_stride: Option<u32>,
     /// `--stream-probe-rounds`: most probe rounds after a frame (`None`: the default).
     pub probe_rounds: Option<u32>,
+    /// `--stream-probe-pass-rows`: the probe's pass-mark row stride (`None`: the default, off).
+    pub probe_pass_rows: Option<u32>,
     /// `--stream-tlas`: how TLASes follow residency.
     pub tlas_update: motu_gpu::TlasUpdate,
     /// `--stream-split-instances`: TLASes over this many instances are split into pieces when
@@ -39,8 +41,20 @@ impl StreamBounds {
             frame_build_ms: self.frame_build_ms.unwrap_or(0.0),
             probe_stride: self.probe_stride.unwrap_or(d.probe_stride),
             probe_rounds: self.probe_rounds.unwrap_or(d.probe_rounds),
+            probe_pass_rows: self.probe_pass_rows.unwrap_or(d.probe_pass_rows),
             tlas_update: self.tlas_update,
             ..d
+        }
+    }
+
+    /// Bounds that contradict each other, as the message to refuse them with.
+    pub fn conflict(&self) -> Option<String> {
+        match (self.probe_stride, self.probe_pass_rows) {
+            (Some(0), Some(r)) if r > 0 => Some(format!(
+                "--stream-probe-pass-rows {r} marks rows of the next camera's probe, which \
+                 --stream-probe 0 turns off: drop one of them"
+            )),
+            _ => None,
         }
     }
 
@@ -51,6 +65,7 @@ impl StreamBounds {
             || self.frame_build_ms.is_some()
             || self.probe_stride.is_some()
             || self.probe_rounds.is_some()
+            || self.probe_pass_rows.is_some()
             || self.tlas_update != motu_gpu::TlasUpdate::Auto
             || self.split_instances.is_some()
     }

@@ -15,7 +15,8 @@ pub use motu_render::{
 };
 
 /// The streaming bounds of `--stream-fallback`, `--stream-build-budget`, `--stream-build-ms`,
-/// `--stream-probe`, `--stream-tlas` and `--stream-split-instances`.
+/// `--stream-probe`, `--stream-probe-rounds`, `--stream-probe-pass-rows`, `--stream-tlas` and
+/// `--stream-split-instances`.
 pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBounds {
     motu_render::StreamBounds {
         fallback: match b.stream_fallback {
@@ -26,6 +27,7 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         frame_build_ms: b.stream_build_ms,
         probe_stride: b.stream_probe,
         probe_rounds: b.stream_probe_rounds,
+        probe_pass_rows: b.stream_probe_pass_rows,
         tlas_update: b.stream_tlas.into(),
         split_instances: b.stream_split_instances,
     }
@@ -218,9 +220,12 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     }
     if !a.stream && stream_bounds(&a.stream_bounds).given() {
         bail!(
-            "--stream-fallback, --stream-build-budget, --stream-build-ms and --stream-probe bound \
+            "--stream-fallback, --stream-build-budget, --stream-build-ms and --stream-probe* bound \
              streaming frames: add --stream (with --vram-budget)"
         );
+    }
+    if let Some(why) = crate::cmd::render::stream_bounds(&a.stream_bounds).conflict() {
+        bail!(why);
     }
     if a.frames == 0 {
         bail!("--frames must be at least 1");

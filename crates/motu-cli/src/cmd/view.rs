@@ -41,9 +41,12 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
     let streaming = a.stream || a.vram_budget.is_some();
     if !streaming && crate::cmd::render::stream_bounds(&a.stream_bounds).given() {
         bail!(
-            "--stream-fallback, --stream-build-budget, --stream-build-ms and --stream-probe bound \
+            "--stream-fallback, --stream-build-budget, --stream-build-ms and --stream-probe* bound \
              streaming frames: add --stream or --vram-budget"
         );
+    }
+    if let Some(why) = crate::cmd::render::stream_bounds(&a.stream_bounds).conflict() {
+        bail!(why);
     }
     if a.frames == Some(0) {
         bail!("--frames must be at least 1");

@@ -173,6 +173,17 @@ pub struct StreamOptions {
     /// 1.182 passes after the first at the same frame time; at a quarter 2.636 → 2.364, the
     /// image 13% sooner and the whole frame 19% longer; BENCHMARKS.md, session 22).
     pub probe_rounds: u32,
+    /// Pass marks of the probe: the pixels of every `probe_pass_rows`-th row of the next
+    /// camera also walk, when their rays' hits are final, the boxes of the resident BLASes in
+    /// front of those hits (the mark walk, over the marks BLASes), and the BLASes they pass
+    /// without hitting (the hardware reports no such pass) become the most recently used
+    /// after what the probe met: the prefetch evicts them after everything else unseen,
+    /// never skips a build to keep them (see `probe.rs`). 0: off (default). On the H200
+    /// (island 0.3, shotCam, 640×360, BENCHMARKS.md session 25): at a third of the full build
+    /// every 2nd row took passes after the first 1.727 → 1.182 and frames 820–856 → 784 ms;
+    /// at half 1.182 → 1.000 passes but frames 264–282 → 350 ms (the walk's cost; every 4th
+    /// row: 318 ms); at a quarter no change (what the probe met does not fit either).
+    pub probe_pass_rows: u32,
     /// Bytes (meshes plus acceleration structures) one frame may build; 0: unbounded. At least
     /// one structure is built per frame, so a frame may overshoot by one; when it is spent the
     /// frame stops (unfinished pixels, or fallback) and later frames go on refining.
@@ -213,6 +224,7 @@ impl Default for StreamOptions {
             build_open_early: true,
             probe_stride: 1,
             probe_rounds: 2,
+            probe_pass_rows: 0,
             fallback: StreamFallback::Off,
             frame_build_bytes: 0,
             frame_build_ms: 0.0,
@@ -265,6 +277,9 @@ pub struct FrameStreamStats {
     /// the next camera's pixels, each later one only the pixels the round before left open,
     /// after the prefetch built what they needed.
     pub probe_rounds: u32,
+    /// Resident BLASes the probe's pass marks refreshed (`StreamOptions::probe_pass_rows`):
+    /// passed by a final probe ray, met by no probe ray's hit or open walk.
+    pub probe_pass_marks: u32,
     /// Structures evicted (BLASes and TLASes), and the bytes released (structures plus their
     /// meshes; also those of structures a refused TLAS rebuild gave back, counted in
     /// `deferred`).
@@ -609,6 +624,12 @@ impl<'a> StreamingRenderer<'a> {
     /// another size is not probed.
     pub fn set_next_camera(&mut self, camera: Option<motu_abi::camera::CameraParams>) {
         self.next_camera = camera;
+    }
+
+    /// Moves the pass stamp on to `stamp` (tests of the stamp limit: 2^29 passes otherwise).
+    #[cfg(test)]
+    pub(crate) fn skip_stamps_to(&mut self, stamp: u32) {
+        self.stamp = self.stamp.max(stamp);
     }
 
     /// Whether host-visible memory counts against the budget (unified memory: lavapipe,

@@ -8,7 +8,7 @@ use motu_alloc::ItemId;
 
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
-use super::params::{StreamParams, CARRY_BYTES};
+use super::params::{StreamParams, CARRY_BYTES, STAMP_LIMIT};
 use super::{FrameStreamStats, PassStats, StreamFallback, StreamingRenderer, GUARD_BIAS};
 use crate::error::{GpuError, Result};
 use crate::render::{Tracer, STAT_WORDS};
@@ -293,6 +293,15 @@ impl<'a> StreamingRenderer<'a> {
         let stamps_bytes = (nb * 4) as u64;
         let req_off = stamps_bytes.div_ceil(16) * 16;
         let inc_off = req_off + req_off;
+        if self.stamp + 1 >= STAMP_LIMIT {
+            // ~20 days of a viewer at 60 frames a second and 5 passes a frame: refuse rather
+            // than let stamps wrap and marks lie.
+            return Err(GpuError::LimitExceeded {
+                what: "streaming passes of one renderer (stamps)",
+                requested: u64::from(self.stamp) + 1,
+                limit: u64::from(STAMP_LIMIT - 1),
+            });
+        }
         self.stamp += 1;
         // Every resident BLAS is walked by every ray of this pass that reaches its box in
         // front of its best hit: a ray that started by now needs it no more.

@@ -19,6 +19,17 @@
 //! for them. Marking what *every* probe ray passed kept more resident than the next frames used
 //! (more built, no fewer passes: BENCHMARKS.md, session 11).
 //!
+//! *Pass marks* (`StreamOptions::probe_pass_rows`, off by default) take the middle way: the
+//! final rays of every N-th row walk the marks too, but what they pass is marked *passed*
+//! (`4 × stamp - 1`), which refreshes the BLAS's LRU age to just below what the probe met
+//! instead of keeping it. The prefetch then evicts the passed BLASes after everything else it
+//! may evict and never skips a build for them. At a third of the full build (H200) the first
+//! passes' misses were nearly all such BLASes, evicted by the prefetch because no probe ray
+//! met them: whole rows (a launch's subgroups are runs of one row) of every 2nd row took the
+//! passes after the first from 1.727 to 1.182, frames no slower; at half, fewer passes but
+//! slower frames (the walk costs more than the second passes it saves). BENCHMARKS.md,
+//! session 25.
+//!
 //! A probe ray stops at the first structure that is not resident (it requests it, then goes on
 //! as if its resident hit were final). Once the prefetch built that structure, the ray may hit
 //! in it, and its shadow and AO rays leave from there for structures no probe ray met, so the
@@ -29,10 +40,11 @@
 //! (`StreamOptions::probe_rounds`).
 
 use motu_abi::camera::CameraParams;
+use motu_alloc::ItemId;
 
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
-use super::params::STREAM_PROBE_PASS;
+use super::params::{passed_mark, probe_flags};
 use super::passes::{pack_biased, relist, PassReadback, LEVEL_NEEDED, PROBE_MET, PROBE_RESIDENT};
 use super::StreamingRenderer;
 use crate::error::Result;
@@ -81,8 +93,30 @@ impl<'a> StreamingRenderer<'a> {
             requests,
             incomplete,
             trace_ms,
-        } = self.trace_pass(fb, pixels, full, &list, false, STREAM_PROBE_PASS)?;
+        } = self.trace_pass(
+            fb,
+            pixels,
+            full,
+            &list,
+            false,
+            probe_flags(self.opts.probe_pass_rows),
+        )?;
         let stamp = self.stamp;
+        if self.opts.probe_pass_rows > 0 {
+            // Passed by a final ray only: as recent as the frame's last pass (a later round:
+            // as the first round's), below what the probe met, so not kept by the prefetch.
+            let at = match again {
+                None => stamp - 1,
+                Some(_) => self.frame_first_stamp.saturating_sub(1),
+            };
+            for (b, &v) in stamps.iter().enumerate() {
+                if passed_mark(v, stamp) && self.blas[b].is_some() && self.buildable[b] {
+                    self.residency.mark_visible(ItemId(b as u32), u64::from(at));
+                    self.last_seen[b] = self.last_seen[b].max(at);
+                    self.frame_stats.probe_pass_marks += 1;
+                }
+            }
+        }
         // What the rounds saw together (a later round adds to the first's).
         if again.is_none() || self.probe_sighting.len() != stamps.len() {
             self.probe_sighting = vec![0; stamps.len()];
