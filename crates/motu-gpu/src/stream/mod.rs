@@ -180,9 +180,10 @@ pub struct StreamOptions {
     /// after what the probe met: the prefetch evicts them after everything else unseen,
     /// never skips a build to keep them (see `probe.rs`). 0: off (default). On the H200
     /// (island 0.3, shotCam, 640×360, BENCHMARKS.md session 25): at a third of the full build
-    /// every 2nd row took passes after the first 1.727 → 1.182 and frames 820–856 → 784 ms;
-    /// at half 1.182 → 1.000 passes but frames 264–282 → 350 ms (the walk's cost; every 4th
-    /// row: 318 ms); at a quarter no change (what the probe met does not fit either).
+    /// every 2nd row took passes after the first 1.727 → 1.182 at 784 ms a frame (775–856 ms
+    /// without, in other calls); at half 1.182 → 1.000 passes but frames 264 → 350 ms (the
+    /// walk's cost; every 4th row: 318 ms); at a quarter no change (what the probe met does
+    /// not fit either).
     pub probe_pass_rows: u32,
     /// Bytes (meshes plus acceleration structures) one frame may build; 0: unbounded. At least
     /// one structure is built per frame, so a frame may overshoot by one; when it is spent the

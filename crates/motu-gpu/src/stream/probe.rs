@@ -26,9 +26,9 @@
 //! may evict and never skips a build for them. At a third of the full build (H200) the first
 //! passes' misses were nearly all such BLASes, evicted by the prefetch because no probe ray
 //! met them: whole rows (a launch's subgroups are runs of one row) of every 2nd row took the
-//! passes after the first from 1.727 to 1.182, frames no slower; at half, fewer passes but
-//! slower frames (the walk costs more than the second passes it saves). BENCHMARKS.md,
-//! session 25.
+//! passes after the first from 1.727 to 1.182 at about the same frame time; at half, fewer
+//! passes but slower frames (the walk costs more than the second passes it saves).
+//! BENCHMARKS.md, session 25.
 //!
 //! A probe ray stops at the first structure that is not resident (it requests it, then goes on
 //! as if its resident hit were final). Once the prefetch built that structure, the ray may hit
