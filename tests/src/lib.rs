@@ -73,10 +73,9 @@ pub fn gen_island(dir: &Path, scale: Option<&str>) -> PathBuf {
     pkg
 }
 
-/// `motu report`'s full-build peak and streaming floor of `pkg` for a `width` × `height`
-/// image (`variants[0].cost.peak_bytes`, `streaming.min_resident_bytes`).
-pub fn report_peak_and_floor(pkg: &Path, width: &str, height: &str) -> (u64, u64) {
-    let r = motu_json(&[
+/// `motu report --json` of `pkg` for a `width` × `height` image.
+pub fn report_json(pkg: &Path, width: &str, height: &str) -> serde_json::Value {
+    motu_json(&[
         "report",
         s(pkg),
         "--json",
@@ -84,11 +83,22 @@ pub fn report_peak_and_floor(pkg: &Path, width: &str, height: &str) -> (u64, u64
         width,
         "--height",
         height,
-    ]);
+    ])
+}
+
+/// A report's full-build peak and streaming floor (`variants[0].cost.peak_bytes`,
+/// `streaming.min_resident_bytes`).
+pub fn peak_and_floor(report: &serde_json::Value) -> (u64, u64) {
     (
-        json_u64(&r["variants"][0]["cost"]["peak_bytes"]),
-        json_u64(&r["streaming"]["min_resident_bytes"]),
+        json_u64(&report["variants"][0]["cost"]["peak_bytes"]),
+        json_u64(&report["streaming"]["min_resident_bytes"]),
     )
+}
+
+/// `motu report`'s full-build peak and streaming floor of `pkg` for a `width` × `height`
+/// image ([`report_json`], [`peak_and_floor`]).
+pub fn report_peak_and_floor(pkg: &Path, width: &str, height: &str) -> (u64, u64) {
+    peak_and_floor(&report_json(pkg, width, height))
 }
 
 /// `v` as an unsigned integer; a panic naming what it was otherwise (stats and report JSON).

@@ -3,7 +3,10 @@
 //! streaming floor complete with the full build's AOV (0 mismatches, peak ≤ budget, exit 0);
 //! a budget below the floor is refused naming it; a frame that runs out of passes is an error.
 
-use motu_tests::{gen_island, gpu_available, json_u64 as u, motu, motu_json, motu_ok, s};
+use motu_tests::{
+    gen_island, gpu_available, json_u64 as u, motu, motu_json, motu_ok, peak_and_floor,
+    report_json, s,
+};
 use std::path::Path;
 use std::time::Instant;
 
@@ -12,9 +15,8 @@ const H: &str = "64";
 
 /// (full-build peak, streaming floor) as `motu report` prints them for a W×H image.
 fn report(pkg: &Path) -> (u64, u64) {
-    let r = motu_json(&["report", s(pkg), "--json", "--width", W, "--height", H]);
-    let peak = u(&r["variants"][0]["cost"]["peak_bytes"]);
-    let floor = u(&r["streaming"]["min_resident_bytes"]);
+    let r = report_json(pkg, W, H);
+    let (peak, floor) = peak_and_floor(&r);
     assert_eq!(
         floor,
         u(&r["streaming"]["floor"]["min_resident_bytes"]),
