@@ -359,7 +359,7 @@ pub struct StreamBoundArgs {
     /// rays pass through without hitting, so the prefetch evicts those last (it never skips a
     /// build to keep them). Fewer second passes where the prefetch evicts for room (a third
     /// of the full build on the H200: 1.727 → 1.182 passes after the first), at the cost of
-    /// the probe's time (at half: frames +20–35% for 1.182 → 1.000); the count is in --stats
+    /// the probe's time (at half: frames +20–40% for 1.182 → 1.000); the count is in --stats
     /// (probe_pass_marks). 0: off (default).
     #[arg(long, value_name = "N")]
     pub stream_probe_pass_rows: Option<u32>,
