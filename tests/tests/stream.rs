@@ -6,34 +6,19 @@
 //! fewer triangles than rebuilding everything per frame.
 
 use motu_tests::{
-    check_probe_rounds, gen_island, gpu_available, json_u64 as u, motu_ok, report_peak_and_floor, s,
+    check_probe_rounds, gen_island, gpu_available, json_u64 as u, motu_ok, render as render_with,
+    report_peak_and_floor, s,
 };
 use std::path::Path;
 
 /// A close-up that sees a small part of the island (`motu gen island`'s cameras).
 const CAMERA: &str = "palmsCam";
 
+/// `motu_tests::render` on the pipeline backend from [`CAMERA`].
 fn render(pkg: &Path, aov: &Path, extra: &[&str]) -> serde_json::Value {
-    let stats = aov.with_extension("json");
-    let png = aov.with_extension("png");
-    let mut args = vec![
-        "render",
-        s(pkg),
-        "-o",
-        s(&png),
-        "--backend",
-        "pipeline",
-        "--camera",
-        CAMERA,
-        "--aov",
-        s(aov),
-        "--stats",
-        s(&stats),
-    ];
+    let mut args = vec!["--camera", CAMERA];
     args.extend(extra);
-    motu_ok(&args);
-    serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats written"))
-        .expect("stats JSON")
+    render_with(pkg, "pipeline", aov, &args)
 }
 
 #[test]
@@ -238,20 +223,10 @@ fn probe_pass_marks_keep_what_rays_pass_and_change_no_pixel() {
     let (peak, floor) = report_peak_and_floor(&pkg, "64", "36");
     let budget_bytes = peak / 3;
     assert!(budget_bytes >= floor, "a third is above the floor");
-    let path = |name: &str, budget: u64, extra: &[&str]| {
-        let stats = dir.path().join(format!("{name}.json"));
+    let path = |name: &str, budget: u64, backend: &str, extra: &[&str]| {
         let aov = dir.path().join(format!("{name}.aov"));
-        let png = dir.path().join(format!("{name}.png"));
         let budget = budget.to_string();
         let mut args = vec![
-            "render",
-            s(&pkg),
-            "-o",
-            s(&png),
-            "--aov",
-            s(&aov),
-            "--stats",
-            s(&stats),
             "--width",
             "64",
             "--height",
@@ -263,21 +238,15 @@ fn probe_pass_marks_keep_what_rays_pass_and_change_no_pixel() {
             &budget,
         ];
         args.extend(extra);
-        motu_ok(&args);
-        let st: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("JSON");
-        (st, aov)
+        (render_with(&pkg, backend, &aov, &args), aov)
     };
     // Everything fits: the reference frames of the path.
-    let (_, reference) = path("everything", peak * 2, &[]);
-    let (off, off_aov) = path("off", budget_bytes, &[]);
-    let (on, on_aov) = path("rows1", budget_bytes, &["--stream-probe-pass-rows", "1"]);
+    let (_, reference) = path("everything", peak * 2, "query", &[]);
+    let rows = ["--stream-probe-pass-rows", "1"];
+    let (off, off_aov) = path("off", budget_bytes, "query", &[]);
+    let (on, on_aov) = path("rows1", budget_bytes, "query", &rows);
     // The ray-pipeline path marks too (the only one on devices without ray queries).
-    let (pipe, pipe_aov) = path(
-        "rows1-pipeline",
-        budget_bytes,
-        &["--stream-probe-pass-rows", "1", "--backend", "pipeline"],
-    );
+    let (pipe, pipe_aov) = path("rows1-pipeline", budget_bytes, "pipeline", &rows);
     let frames =
         |st: &serde_json::Value| st["stream"]["frames"].as_array().expect("frames").clone();
     let total = |st: &serde_json::Value, k: &str| frames(st).iter().map(|f| u(&f[k])).sum::<u64>();

@@ -1086,8 +1086,9 @@ fn forced_persistent_tlases_at_the_floor_give_way_and_the_frame_completes() {
 }
 
 /// Stamps (`4 × stamp + level` in u32 tables, the start stamp in 29 bits of a payload) would
-/// wrap after 2^29 passes (~20 days of a viewer): the pass before the limit is refused with
-/// the limit, and no frame comes back wrong.
+/// wrap after 2^29 passes (~20 days of a viewer): the last stamp below the limit still
+/// renders, the pass that would reach the limit is refused naming it, and no frame comes back
+/// wrong.
 #[test]
 fn the_pass_stamp_limit_is_refused_by_name() {
     let Some(ctx) = context_or_skip("stream_stamp_limit", Requirement::RayTracing) else {
