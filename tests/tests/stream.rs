@@ -212,7 +212,9 @@ fn island_camera_path_needs_about_one_pass_per_frame_under_the_budget() {
 /// unseen. Along the default camera's path at a third of the full build (where the prefetch
 /// evicts for room), the marks refresh structures on every probed frame, the first passes miss
 /// no more structures the prefetch evicted than without them, and every frame is the image of
-/// the same path with nothing evicted.
+/// the same path with nothing evicted. The default, `auto`, marks every 2nd row exactly in the
+/// probes within 4 frames of one that evicted for build room while its prefetch skipped
+/// nothing (the rule is recomputed here from each frame's statistics), and does mark there.
 #[test]
 fn probe_pass_marks_keep_what_rays_pass_and_change_no_pixel() {
     if !gpu_available() {
@@ -243,19 +245,60 @@ fn probe_pass_marks_keep_what_rays_pass_and_change_no_pixel() {
     // Everything fits: the reference frames of the path.
     let (_, reference) = path("everything", peak * 2, "query", &[]);
     let rows = ["--stream-probe-pass-rows", "1"];
-    let (off, off_aov) = path("off", budget_bytes, "query", &[]);
+    let (off, off_aov) = path(
+        "off",
+        budget_bytes,
+        "query",
+        &["--stream-probe-pass-rows", "0"],
+    );
+    let (auto, auto_aov) = path("auto", budget_bytes, "query", &[]);
     let (on, on_aov) = path("rows1", budget_bytes, "query", &rows);
     // The ray-pipeline path marks too (the only one on devices without ray queries).
     let (pipe, pipe_aov) = path("rows1-pipeline", budget_bytes, "pipeline", &rows);
     let frames =
         |st: &serde_json::Value| st["stream"]["frames"].as_array().expect("frames").clone();
     let total = |st: &serde_json::Value, k: &str| frames(st).iter().map(|f| u(&f[k])).sum::<u64>();
-    for (st, aov) in [(&off, &off_aov), (&on, &on_aov), (&pipe, &pipe_aov)] {
+    for (st, aov) in [
+        (&off, &off_aov),
+        (&auto, &auto_aov),
+        (&on, &on_aov),
+        (&pipe, &pipe_aov),
+    ] {
         assert_eq!(st["stream"]["totals"]["incomplete_frames"], 0, "{st}");
         assert!(u(&st["stream"]["totals"]["evicted"]) > 0, "the path evicts");
         motu_ok(&["compare", s(&reference), s(aov), "--max-mismatch", "0"]);
     }
-    assert_eq!(total(&off, "probe_pass_marks"), 0, "off by default");
+    assert_eq!(total(&off, "probe_pass_marks"), 0, "0: off");
+    // Auto: frame k's probe marks every 2nd row iff some frame of k-4..k-1 evicted for build
+    // room (evictions not for TLAS room nor on refusal) and skipped no prefetch.
+    let auto_frames = frames(&auto);
+    let wanted: Vec<bool> = auto_frames
+        .iter()
+        .map(|f| {
+            let room = u(&f["evicted"])
+                .saturating_sub(u(&f["evicted_for_tlas"]) + u(&f["evicted_on_refusal"]));
+            room > 0 && u(&f["prefetch_skipped"]) == 0
+        })
+        .collect();
+    let mut marked_frames = 0;
+    for (k, f) in auto_frames.iter().enumerate() {
+        let probed = u(&f["probe_rays"]) > 0;
+        let want = probed && (k.saturating_sub(4)..k).any(|j| wanted[j]);
+        assert_eq!(
+            u(&f["probe_pass_rows"]),
+            if want { 2 } else { 0 },
+            "frame {k}: {f}"
+        );
+        if want {
+            marked_frames += 1;
+        } else {
+            assert_eq!(u(&f["probe_pass_marks"]), 0, "frame {k} marks nothing: {f}");
+        }
+    }
+    assert!(
+        marked_frames > 0,
+        "auto marks at a third of the full build (build-room evictions): {wanted:?}"
+    );
     for st in [&on, &pipe] {
         let on_frames = frames(st);
         for (i, f) in on_frames.iter().enumerate() {
@@ -272,12 +315,14 @@ fn probe_pass_marks_keep_what_rays_pass_and_change_no_pixel() {
     }
     let missed = |st: &serde_json::Value| total(st, "first_pass_missed_evicted");
     eprintln!(
-        "pass marks at a third: passes after the first {} → {}, first-pass misses of evicted \
-         structures {} → {}",
+        "pass marks at a third: passes after the first {} → {} (auto {}, {marked_frames} \
+         probes marked), first-pass misses of evicted structures {} → {} (auto {})",
         off["stream"]["mean_passes_after_first"],
         on["stream"]["mean_passes_after_first"],
+        auto["stream"]["mean_passes_after_first"],
         missed(&off),
-        missed(&on)
+        missed(&on),
+        missed(&auto)
     );
     assert!(missed(&on) <= missed(&off), "the marks kept what rays pass");
 }

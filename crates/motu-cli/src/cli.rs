@@ -359,10 +359,13 @@ pub struct StreamBoundArgs {
     /// rays pass through without hitting, so the prefetch evicts those last (it never skips a
     /// build to keep them). Fewer second passes where the prefetch evicts for room (a third
     /// of the full build on the H200: 1.727 → 1.182 passes after the first), at the cost of
-    /// the probe's time (at half: frames +20–40% for 1.182 → 1.000); the count is in --stats
-    /// (probe_pass_marks). 0: off (default).
-    #[arg(long, value_name = "N")]
-    pub stream_probe_pass_rows: Option<u32>,
+    /// the probe's time (at half: frames +20–40% for 1.182 → 1.000). `auto` (default): every
+    /// 2nd row for the probes within 4 frames of one whose builds evicted for room while its
+    /// prefetch skipped nothing, else none (H200: a third 1.727 → 1.182 at the same frame
+    /// time; half and a quarter never mark, unchanged). --stats has the stride and the count
+    /// per frame (probe_pass_rows, probe_pass_marks). 0: off.
+    #[arg(long, value_name = "N|auto", value_parser = parse_pass_marks)]
+    pub stream_probe_pass_rows: Option<motu_gpu::PassMarks>,
     /// Streaming: how TLASes follow what is resident. `update`: each TLAS is built once over
     /// all its instances (a non-resident one points at a placeholder no ray meets) and
     /// updated in place as BLASes come and go: no rebuild transient, at the cost of the TLAS
@@ -406,6 +409,17 @@ fn parse_split_instances(s: &str) -> Result<u32, String> {
         }
         Ok(n) => Ok(n),
         Err(_) => Err(format!("{s:?} is not a count of instances (0: no split)")),
+    }
+}
+
+fn parse_pass_marks(s: &str) -> Result<motu_gpu::PassMarks, String> {
+    match s {
+        "auto" => Ok(motu_gpu::PassMarks::Auto),
+        "0" => Ok(motu_gpu::PassMarks::Off),
+        _ => s
+            .parse::<u32>()
+            .map(motu_gpu::PassMarks::Rows)
+            .map_err(|_| format!("{s:?} is not a row stride (N ≥ 1, 0: off) or auto")),
     }
 }
 

@@ -142,16 +142,24 @@ mod tests {
             assert!(e.contains(flag), "{e}");
         };
         refused("--stream-probe-rounds", "0");
-        // Pass marks: off by default, any row stride; contradicting --stream-probe 0 is
-        // refused by name.
-        assert_eq!(d.probe_pass_rows, 0);
-        assert_eq!(o.probe_pass_rows, 0);
-        let b = cmd::render::stream_bounds(
-            &render_args(&["--stream-probe-pass-rows", "2"]).stream_bounds,
-        );
-        assert!(b.given(), "--stream-probe-pass-rows needs --stream");
-        assert_eq!(b.options().probe_pass_rows, 2);
-        assert_eq!(b.conflict(), None);
+        // Pass marks: auto by default (also without a probe: it then marks nothing), any row
+        // stride; an explicit stride or auto contradicting --stream-probe 0 is refused by name.
+        assert_eq!(d.pass_marks, motu_gpu::PassMarks::Auto);
+        assert_eq!(o.pass_marks, motu_gpu::PassMarks::Auto);
+        let b = cmd::render::stream_bounds(&render_args(&["--stream-probe", "0"]).stream_bounds);
+        assert_eq!(b.conflict(), None, "the default pass marks with no probe");
+        for (flag, want) in [
+            ("2", motu_gpu::PassMarks::Rows(2)),
+            ("0", motu_gpu::PassMarks::Off),
+            ("auto", motu_gpu::PassMarks::Auto),
+        ] {
+            let b = cmd::render::stream_bounds(
+                &render_args(&["--stream-probe-pass-rows", flag]).stream_bounds,
+            );
+            assert!(b.given(), "--stream-probe-pass-rows needs --stream");
+            assert_eq!(b.options().pass_marks, want);
+            assert_eq!(b.conflict(), None);
+        }
         let b = cmd::render::stream_bounds(
             &render_args(&["--stream-probe-pass-rows", "2", "--stream-probe", "0"]).stream_bounds,
         );
@@ -160,6 +168,12 @@ mod tests {
             e.contains("--stream-probe-pass-rows 2") && e.contains("--stream-probe 0"),
             "{e}"
         );
+        let b = cmd::render::stream_bounds(
+            &render_args(&["--stream-probe-pass-rows", "auto", "--stream-probe", "0"])
+                .stream_bounds,
+        );
+        let e = b.conflict().expect("auto pass marks without a probe");
+        assert!(e.contains("--stream-probe-pass-rows auto"), "{e}");
         refused("--stream-probe-pass-rows", "two");
         // The load-time split: default (None: a million), any count from 2, 0 for none; 1 is
         // refused with the reason.

@@ -1119,3 +1119,23 @@ fn the_pass_stamp_limit_is_refused_by_name() {
         ),
     }
 }
+
+/// `PassMarks::Auto` marks after a frame that evicted for build room and skipped no prefetch.
+#[test]
+fn auto_pass_marks_mark_after_build_room_evictions_with_nothing_skipped() {
+    use crate::{PassMarks, AUTO_PASS_FRAMES, AUTO_PASS_ROWS};
+    assert_eq!(PassMarks::Off.rows(true), 0);
+    assert_eq!(PassMarks::Rows(3).rows(false), 3);
+    assert_eq!(PassMarks::Auto.rows(true), AUTO_PASS_ROWS);
+    assert_eq!(PassMarks::Auto.rows(false), 0);
+    // A third of island 0.3 (evicts for room, skips nothing): on; half (no build-room
+    // evictions) and a quarter (skips builds): off.
+    assert!(PassMarks::auto_wanted(137, 0));
+    assert!(!PassMarks::auto_wanted(0, 0));
+    assert!(!PassMarks::auto_wanted(370, 387));
+    // Held after frame 3: the probes after frames 4 to 3 + AUTO_PASS_FRAMES mark.
+    assert!(!PassMarks::auto_window(5, 0), "never held");
+    assert!(PassMarks::auto_window(4, 3));
+    assert!(PassMarks::auto_window(3 + AUTO_PASS_FRAMES, 3));
+    assert!(!PassMarks::auto_window(4 + AUTO_PASS_FRAMES, 3));
+}

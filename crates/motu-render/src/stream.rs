@@ -22,8 +22,8 @@ pub struct StreamBounds {
     pub probe_stride: Option<u32>,
     /// `--stream-probe-rounds`: most probe rounds after a frame (`None`: the default).
     pub probe_rounds: Option<u32>,
-    /// `--stream-probe-pass-rows`: the probe's pass-mark row stride (`None`: the default, off).
-    pub probe_pass_rows: Option<u32>,
+    /// `--stream-probe-pass-rows`: the probe's pass marks (`None`: the default, auto).
+    pub pass_marks: Option<motu_gpu::PassMarks>,
     /// `--stream-tlas`: how TLASes follow residency.
     pub tlas_update: motu_gpu::TlasUpdate,
     /// `--stream-split-instances`: TLASes over this many instances are split into pieces when
@@ -41,7 +41,7 @@ impl StreamBounds {
             frame_build_ms: self.frame_build_ms.unwrap_or(0.0),
             probe_stride: self.probe_stride.unwrap_or(d.probe_stride),
             probe_rounds: self.probe_rounds.unwrap_or(d.probe_rounds),
-            probe_pass_rows: self.probe_pass_rows.unwrap_or(d.probe_pass_rows),
+            pass_marks: self.pass_marks.unwrap_or(d.pass_marks),
             tlas_update: self.tlas_update,
             ..d
         }
@@ -49,10 +49,14 @@ impl StreamBounds {
 
     /// Bounds that contradict each other, as the message to refuse them with.
     pub fn conflict(&self) -> Option<String> {
-        match (self.probe_stride, self.probe_pass_rows) {
-            (Some(0), Some(r)) if r > 0 => Some(format!(
-                "--stream-probe-pass-rows {r} marks rows of the next camera's probe, which \
-                 --stream-probe 0 turns off: drop one of them"
+        match (self.probe_stride, self.pass_marks) {
+            (Some(0), Some(m)) if m != motu_gpu::PassMarks::Off => Some(format!(
+                "--stream-probe-pass-rows {} marks rows of the next camera's probe, which \
+                 --stream-probe 0 turns off: drop one of them",
+                match m {
+                    motu_gpu::PassMarks::Rows(n) => n.to_string(),
+                    _ => "auto".into(),
+                }
             )),
             _ => None,
         }
@@ -65,7 +69,7 @@ impl StreamBounds {
             || self.frame_build_ms.is_some()
             || self.probe_stride.is_some()
             || self.probe_rounds.is_some()
-            || self.probe_pass_rows.is_some()
+            || self.pass_marks.is_some()
             || self.tlas_update != motu_gpu::TlasUpdate::Auto
             || self.split_instances.is_some()
     }

@@ -27,7 +27,7 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         frame_build_ms: b.stream_build_ms,
         probe_stride: b.stream_probe,
         probe_rounds: b.stream_probe_rounds,
-        probe_pass_rows: b.stream_probe_pass_rows,
+        pass_marks: b.stream_probe_pass_rows,
         tlas_update: b.stream_tlas.into(),
         split_instances: b.stream_split_instances,
     }

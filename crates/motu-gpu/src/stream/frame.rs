@@ -132,6 +132,15 @@ impl<'a> StreamingRenderer<'a> {
                 return Err(e);
             }
         }
+        // Pass marks (auto) for the next probes: this frame evicted for build room and its
+        // prefetch built all it wanted.
+        let st = &self.frame_stats;
+        let build_room = st
+            .evicted
+            .saturating_sub(st.evicted_for_tlas + st.evicted_on_refusal);
+        if super::PassMarks::auto_wanted(build_room, st.prefetch_skipped) {
+            self.pass_marks_held = self.frame;
+        }
         let report = self.heap.report();
         self.frame_stats.frame_ms = frame_t0.elapsed().as_secs_f64() * 1e3;
         let resident_textures = self.shading.resident_textures();

@@ -173,18 +173,8 @@ pub struct StreamOptions {
     /// 1.182 passes after the first at the same frame time; at a quarter 2.636 → 2.364, the
     /// image 13% sooner and the whole frame 19% longer; BENCHMARKS.md, session 22).
     pub probe_rounds: u32,
-    /// Pass marks of the probe: the pixels of every `probe_pass_rows`-th row of the next
-    /// camera also walk, when their rays' hits are final, the boxes of the resident BLASes in
-    /// front of those hits (the mark walk, over the marks BLASes), and the BLASes they pass
-    /// without hitting (the hardware reports no such pass) become the most recently used
-    /// after what the probe met: the prefetch evicts them after everything else unseen,
-    /// never skips a build to keep them (see `probe.rs`). 0: off (default). On the H200
-    /// (island 0.3, shotCam, 640×360, BENCHMARKS.md session 25): at a third of the full build
-    /// every 2nd row took passes after the first 1.727 → 1.182 at 784 ms a frame (775–856 ms
-    /// without, in other calls); at half 1.182 → 1.000 passes but frames 264 → 350 ms (the
-    /// walk's cost; every 4th row: 318 ms); at a quarter no change (what the probe met does
-    /// not fit either).
-    pub probe_pass_rows: u32,
+    /// Pass marks of the probe (see [`PassMarks`]); [`PassMarks::Auto`] by default.
+    pub pass_marks: PassMarks,
     /// Bytes (meshes plus acceleration structures) one frame may build; 0: unbounded. At least
     /// one structure is built per frame, so a frame may overshoot by one; when it is spent the
     /// frame stops (unfinished pixels, or fallback) and later frames go on refining.
@@ -194,6 +184,70 @@ pub struct StreamOptions {
     /// Whether TLASes are persistent and updated as residency changes, or rebuilt over their
     /// resident instances (`--stream-tlas`; see `persistent.rs`).
     pub tlas_update: TlasUpdate,
+}
+
+/// Pass marks of the probe ([`StreamOptions::pass_marks`], `--stream-probe-pass-rows`): the
+/// pixels of every N-th row of the next camera also walk, when their rays' hits are final, the
+/// boxes of the resident BLASes in front of those hits (the mark walk, over the marks BLASes),
+/// and the BLASes they pass without hitting (the hardware reports no such pass) become the
+/// most recently used after what the probe met: the prefetch evicts them after everything else
+/// it may evict and never skips a build to keep them (see `probe.rs`). On the H200 (island
+/// 0.3, shotCam, 640×360, BENCHMARKS.md session 25): at a third of the full build every 2nd
+/// row took passes after the first 1.727 → 1.182 at 784 ms a frame (775–856 ms without, in
+/// other calls); at half 1.182 → 1.000 passes but frames 264 → 350 ms (the walk's cost; every
+/// 4th row: 318 ms); at a quarter no change (what the probe met does not fit either).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PassMarks {
+    /// No pass marks.
+    Off,
+    /// Every N-th row (N ≥ 1) of every probe.
+    Rows(u32),
+    /// Every [`AUTO_PASS_ROWS`]-th row of the probes within [`AUTO_PASS_FRAMES`] frames of one
+    /// whose build steps evicted for room while its prefetch skipped nothing (a window, since
+    /// marking removes the evictions it reads: a frame at a time it marked every other
+    /// probe and missed more than without). The marks only reorder what the prefetch
+    /// evicts, so they help when it evicts and stops before running out of what it may evict
+    /// (a third of island 0.3's build), and are not worth their walk when it evicts nothing
+    /// for room (half: the misses there follow refusals) or everything (a quarter: it skips
+    /// builds). The default: on the H200 (island 0.3, shotCam, 640×360, 12 frames,
+    /// BENCHMARKS.md session 26) it marked from the third frame on at a third of the full
+    /// build, 1.727 → 1.182 passes after the first at 811–835 ms a frame against 846–892 ms
+    /// off (alternated), and never at half or a quarter (counts identical to off).
+    #[default]
+    Auto,
+}
+
+/// The row stride of [`PassMarks::Auto`] when it marks (every 2nd row measured best at a
+/// third of island 0.3's build: BENCHMARKS.md session 25).
+pub const AUTO_PASS_ROWS: u32 = 2;
+
+/// How many frames [`PassMarks::Auto`] keeps marking after its condition last held.
+pub const AUTO_PASS_FRAMES: u64 = 4;
+
+impl PassMarks {
+    /// The row stride a probe marks with (0: none), `wanted` being [`PassMarks::Auto`]'s
+    /// reading of the frames before ([`PassMarks::auto_window`]).
+    pub fn rows(self, wanted: bool) -> u32 {
+        match self {
+            Self::Off => 0,
+            Self::Rows(n) => n,
+            Self::Auto if wanted => AUTO_PASS_ROWS,
+            Self::Auto => 0,
+        }
+    }
+
+    /// Whether [`PassMarks::Auto`] marks the next probe after a frame that evicted
+    /// `build_room_evictions` structures to make room for builds and whose prefetch left
+    /// `prefetch_skipped` structures unbuilt.
+    pub fn auto_wanted(build_room_evictions: u32, prefetch_skipped: u32) -> bool {
+        build_room_evictions > 0 && prefetch_skipped == 0
+    }
+
+    /// Whether [`PassMarks::Auto`] marks the probe after frame `frame`, its condition having
+    /// last held after frame `held` (0: never).
+    pub fn auto_window(frame: u64, held: u64) -> bool {
+        held > 0 && frame.saturating_sub(held) <= AUTO_PASS_FRAMES
+    }
 }
 
 /// See [`StreamOptions::fallback`].
@@ -225,7 +279,7 @@ impl Default for StreamOptions {
             build_open_early: true,
             probe_stride: 1,
             probe_rounds: 2,
-            probe_pass_rows: 0,
+            pass_marks: PassMarks::Auto,
             fallback: StreamFallback::Off,
             frame_build_bytes: 0,
             frame_build_ms: 0.0,
@@ -278,8 +332,10 @@ pub struct FrameStreamStats {
     /// the next camera's pixels, each later one only the pixels the round before left open,
     /// after the prefetch built what they needed.
     pub probe_rounds: u32,
-    /// Resident BLASes the probe's pass marks refreshed (`StreamOptions::probe_pass_rows`):
-    /// passed by a final probe ray, met by no probe ray's hit or open walk.
+    /// The row stride of the probe's pass marks after this frame (0: none;
+    /// `StreamOptions::pass_marks`), and the resident BLASes they refreshed: passed by a final
+    /// probe ray, met by no probe ray's hit or open walk.
+    pub probe_pass_rows: u32,
     pub probe_pass_marks: u32,
     /// Structures evicted (BLASes and TLASes), and the bytes released (structures plus their
     /// meshes; also those of structures a refused TLAS rebuild gave back, counted in
@@ -561,6 +617,8 @@ pub struct StreamingRenderer<'a> {
     /// The first stamp whose sightings a prefetch keeps resident: the frame's first pass, or
     /// the probe of the next camera once it ran.
     frame_first_stamp: u32,
+    /// The last frame after which [`PassMarks::auto_wanted`] held (0: none yet).
+    pass_marks_held: u64,
     /// The next frame's camera, probed after this frame (`set_next_camera`).
     next_camera: Option<motu_abi::camera::CameraParams>,
     /// Per BLAS, what the last probe saw (`PROBE_MET`, `PROBE_RESIDENT` bits), kept for the

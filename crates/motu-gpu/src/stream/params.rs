@@ -41,7 +41,7 @@ pub(super) struct StreamParams {
 pub(super) const STREAM_PROBE_PASS: u32 = 1;
 
 /// `STREAM_PASS_ROWS_SHIFT` of `common.glsl`: `flags >> it` is the probe's pass-mark row
-/// stride (0: none; `StreamOptions::probe_pass_rows`).
+/// stride (0: none; `StreamOptions::pass_marks`).
 pub(super) const STREAM_PASS_ROWS_SHIFT: u32 = 8;
 
 /// The largest pass-mark row stride the flags hold (a stride at or above the image height

@@ -19,7 +19,7 @@
 //! for them. Marking what *every* probe ray passed kept more resident than the next frames used
 //! (more built, no fewer passes: BENCHMARKS.md, session 11).
 //!
-//! *Pass marks* (`StreamOptions::probe_pass_rows`, off by default) take the middle way: the
+//! *Pass marks* (`StreamOptions::pass_marks`, `auto` by default) take the middle way: the
 //! final rays of every N-th row walk the marks too, but what they pass is marked *passed*
 //! (`4 × stamp - 1`), which refreshes the BLAS's LRU age to just below what the probe met
 //! instead of keeping it. The prefetch then evicts the passed BLASes after everything else it
@@ -28,7 +28,9 @@
 //! met them: whole rows (a launch's subgroups are runs of one row) of every 2nd row took the
 //! passes after the first from 1.727 to 1.182 at about the same frame time; at half, fewer
 //! passes but slower frames (the walk costs more than the second passes it saves).
-//! BENCHMARKS.md, session 25.
+//! BENCHMARKS.md, session 25. Hence `PassMarks::Auto`, the default: it marks only after
+//! frames whose builds evicted for room while the prefetch skipped nothing (a third: from the
+//! third frame on, 1.182 at the same frame time; half and a quarter: never; session 26).
 //!
 //! A probe ray stops at the first structure that is not resident (it requests it, then goes on
 //! as if its resident hit were final). Once the prefetch built that structure, the ray may hit
@@ -87,22 +89,24 @@ impl<'a> StreamingRenderer<'a> {
             (0, list)
         };
         let rays = u64::from(full) + list.len() as u64;
+        // A later round marks as the first did.
+        let pass_rows = match again {
+            None => self.opts.pass_marks.rows(super::PassMarks::auto_window(
+                self.frame,
+                self.pass_marks_held,
+            )),
+            Some(_) => self.frame_stats.probe_pass_rows,
+        };
+        self.frame_stats.probe_pass_rows = pass_rows;
         let resident: Vec<bool> = self.blas.iter().map(Option::is_some).collect();
         let PassReadback {
             stamps,
             requests,
             incomplete,
             trace_ms,
-        } = self.trace_pass(
-            fb,
-            pixels,
-            full,
-            &list,
-            false,
-            probe_flags(self.opts.probe_pass_rows),
-        )?;
+        } = self.trace_pass(fb, pixels, full, &list, false, probe_flags(pass_rows))?;
         let stamp = self.stamp;
-        if self.opts.probe_pass_rows > 0 {
+        if pass_rows > 0 {
             // Passed by a final ray only: as recent as the frame's last pass (a later round:
             // as the first round's), below what the probe met, so not kept by the prefetch.
             let at = match again {

@@ -322,6 +322,7 @@ impl<'a> StreamingRenderer<'a> {
             group_hint: 16,
             stamp: 0,
             frame_first_stamp: 1,
+            pass_marks_held: 0,
             next_camera: None,
             probe_sighting: Vec::new(),
             poisoned: None,
