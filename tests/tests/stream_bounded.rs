@@ -196,6 +196,8 @@ fn a_frame_build_budget_shows_the_counted_fallback_and_converges_to_the_full_bui
         "first_pass_missed_probed",
         "prefetched",
         "prefetch_skipped",
+        "probe_pass_rows",
+        "probe_pass_marks",
     ] {
         assert!(rows.iter().all(|r| r[k].is_number()), "{k}: {b}");
     }

@@ -260,6 +260,10 @@ fn run_streaming(
             "probe_rays": st.probe_rays,
             "probe_ms": st.probe_ms,
             "probe_rounds": st.probe_rounds,
+            // Pass marks (`--stream-probe-pass-rows`, auto by default): the probe's row
+            // stride (0: none) and the resident structures its rows passed and refreshed.
+            "probe_pass_rows": st.probe_pass_rows,
+            "probe_pass_marks": st.probe_pass_marks,
             "wall_ms": wall_ms,
             "gpu_ms": out.stats.ms_per_frame,
             "vram_peak_bytes": st.vram_peak_bytes,
