@@ -134,6 +134,20 @@ pub struct Allocator {
     peak_block_count: u32,
     peak_budgeted_block_bytes: u64,
     peak_budgeted_in_use_bytes: u64,
+    /// Blocks being emptied ([`Allocator::set_draining`]): no allocation is placed in them,
+    /// and they are destroyed, not kept, once empty.
+    draining: BTreeSet<BlockId>,
+    /// No new block is created ([`Allocator::set_fit_only`]).
+    fit_only: bool,
+}
+
+/// How full one standard block is ([`Allocator::block_fills`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BlockFill {
+    pub block: BlockId,
+    pub size_bytes: u64,
+    pub used_bytes: u64,
+    pub live_count: u32,
 }
 
 impl Allocator {
@@ -173,6 +187,8 @@ impl Allocator {
             peak_block_count: 0,
             peak_budgeted_block_bytes: 0,
             peak_budgeted_in_use_bytes: 0,
+            draining: BTreeSet::new(),
+            fit_only: false,
         };
         for class in MemoryClass::ALL {
             let budget = allocator.budget_bytes(class);
@@ -237,6 +253,50 @@ impl Allocator {
         self.budget_group(class)
             .map(|c| self.pools[c.index()].in_use_bytes)
             .sum()
+    }
+
+    /// The standard (shared) blocks of `class`, emptiest first: what a caller that moves
+    /// allocations to free whole blocks drains first.
+    pub fn block_fills(&self, class: MemoryClass) -> Vec<BlockFill> {
+        let mut v: Vec<BlockFill> = self
+            .blocks
+            .iter()
+            .filter(|(_, b)| b.class == class && !b.dedicated)
+            .map(|(&block, b)| BlockFill {
+                block,
+                size_bytes: b.size_bytes,
+                used_bytes: b.used_bytes,
+                live_count: b.live_count,
+            })
+            .collect();
+        v.sort_by_key(|f| (f.used_bytes, f.block));
+        v
+    }
+
+    /// The live allocations in `block` (O(live allocations)).
+    pub fn allocations_in(&self, block: BlockId) -> Vec<Allocation> {
+        let mut v: Vec<Allocation> = self
+            .live
+            .values()
+            .filter(|a| a.block == block)
+            .copied()
+            .collect();
+        v.sort_by_key(|a| a.offset_bytes);
+        v
+    }
+
+    /// Marks `blocks` as being emptied (replacing any earlier set): no allocation is placed
+    /// in them, and each is destroyed as soon as its last allocation is freed. A caller moves
+    /// their allocations elsewhere (with [`Self::set_fit_only`], into free space other blocks
+    /// already have), frees the originals, then clears the set; a block not emptied by then
+    /// takes allocations again.
+    pub fn set_draining(&mut self, blocks: &[BlockId]) {
+        self.draining = blocks.iter().copied().collect();
+    }
+
+    /// While set, an allocation that fits no free range fails instead of creating a block.
+    pub fn set_fit_only(&mut self, fit_only: bool) {
+        self.fit_only = fit_only;
     }
 
     /// Blocks that exist now, all classes.
@@ -314,6 +374,8 @@ impl Allocator {
             peak_block_count: self.peak_block_count,
             peak_budgeted_block_bytes: self.peak_budgeted_block_bytes,
             peak_budgeted_in_use_bytes: self.peak_budgeted_in_use_bytes,
+            draining: self.draining.clone(),
+            fit_only: self.fit_only,
         }
     }
 
@@ -424,6 +486,7 @@ impl Allocator {
         };
         if block.live_count == 0 {
             let keep = !block.dedicated
+                && !self.draining.contains(&allocation.block)
                 && self.pools[class.index()].empty_blocks.len()
                     < self.policy.keep_empty_blocks_per_class as usize;
             if keep {
@@ -521,14 +584,20 @@ impl Allocator {
                 offset,
             })
         };
+        let open = |e: &&(u64, BlockId, u64)| !self.draining.contains(&e.1);
         let start = (size_bytes, BlockId(0), 0);
-        if let Some(fit) = free.range(start..).take(PADDED_PROBES).find_map(fit_in) {
+        if let Some(fit) = free
+            .range(start..)
+            .filter(open)
+            .take(PADDED_PROBES)
+            .find_map(fit_in)
+        {
             return Some(fit);
         }
         // Any range at least size + alignment - 1 long fits whatever its offset.
         let padded = size_bytes.checked_add(alignment_bytes - 1)?;
         free.range((padded, BlockId(0), 0)..)
-            .next()
+            .find(open)
             .and_then(fit_in)
     }
 
@@ -569,6 +638,16 @@ impl Allocator {
         dedicated: bool,
     ) -> Result<BlockId, AllocError> {
         let class = request.class;
+        if self.fit_only {
+            return Err(AllocError::OverBudget {
+                requested_bytes: request.size_bytes,
+                in_use_bytes: self.in_use_bytes(class),
+                reserved_bytes: self.reserved_bytes(class),
+                budget_bytes: self.budget_bytes(class),
+                kind: request.kind,
+                class,
+            });
+        }
         loop {
             let count_ok = self.block_count() < self.limits.max_allocation_count;
             let budget = self.budget_bytes(class);
@@ -677,6 +756,7 @@ impl Allocator {
         let Some(block) = self.blocks.remove(&block_id) else {
             return;
         };
+        self.draining.remove(&block_id);
         let pool = &mut self.pools[block.class.index()];
         for (&offset, &size) in &block.free_by_offset {
             pool.free_by_size.remove(&(size, block_id, offset));

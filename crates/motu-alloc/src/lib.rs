@@ -81,7 +81,7 @@ mod limits;
 mod residency;
 mod stats;
 
-pub use allocator::{AllocRequest, Allocation, Allocator, BlockEvent};
+pub use allocator::{AllocRequest, Allocation, Allocator, BlockEvent, BlockFill};
 pub use batch::{plan_build_batches, BatchError, BatchLimits, BatchPlan, BuildBatch, BuildSize};
 pub use error::{AllocError, LimitsError};
 pub use kind::{

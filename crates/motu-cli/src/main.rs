@@ -148,6 +148,11 @@ mod tests {
         assert_eq!(o.pass_marks, motu_gpu::PassMarks::Auto);
         let b = cmd::render::stream_bounds(&render_args(&["--stream-probe", "0"]).stream_bounds);
         assert_eq!(b.conflict(), None, "the default pass marks with no probe");
+        // Draining blocks: off by default, a bound that needs --stream.
+        assert!(!d.defrag && !o.defrag);
+        let b = cmd::render::stream_bounds(&render_args(&["--stream-defrag"]).stream_bounds);
+        assert!(b.given(), "--stream-defrag needs --stream");
+        assert!(b.options().defrag);
         for (flag, want) in [
             ("2", motu_gpu::PassMarks::Rows(2)),
             ("0", motu_gpu::PassMarks::Off),

@@ -261,6 +261,27 @@ impl GpuHeap {
         Ok(())
     }
 
+    /// Device-local standard blocks, emptiest first ([`Allocator::block_fills`]).
+    pub(crate) fn block_fills(&self) -> Vec<motu_alloc::BlockFill> {
+        self.allocator.block_fills(MemoryClass::DeviceLocal)
+    }
+
+    /// The live allocations in `block`.
+    pub(crate) fn allocations_in(&self, block: BlockId) -> Vec<AllocationId> {
+        self.allocator
+            .allocations_in(block)
+            .into_iter()
+            .map(|a| a.id)
+            .collect()
+    }
+
+    /// Blocks being emptied ([`Allocator::set_draining`]) and whether new blocks may be made
+    /// ([`Allocator::set_fit_only`]); `(&[], false)` ends a move.
+    pub(crate) fn set_draining(&mut self, blocks: &[BlockId], fit_only: bool) {
+        self.allocator.set_draining(blocks);
+        self.allocator.set_fit_only(fit_only);
+    }
+
     /// The policy's statistics (per kind, peaks, budget).
     pub fn report(&self) -> AllocReport {
         self.allocator.report()

@@ -1139,3 +1139,78 @@ fn auto_pass_marks_mark_after_build_room_evictions_with_nothing_skipped() {
     assert!(PassMarks::auto_window(3 + AUTO_PASS_FRAMES, 3));
     assert!(!PassMarks::auto_window(4 + AUTO_PASS_FRAMES, 3));
 }
+
+/// Draining blocks (`defrag.rs`, experiment): after a camera path under a quarter of the full
+/// build has left its blocks part-used, the streamed BLASes and meshes of the emptiest ones
+/// move into other blocks' free space, whole blocks are freed, and the next frame (moved
+/// BLASes' parents rebuilt, moved meshes' addresses rewritten) is the full build's, hits and
+/// shaded colours.
+#[test]
+fn drained_blocks_free_budget_and_the_next_frame_is_unchanged() {
+    let Some(ctx) = context_or_skip("stream_defrag", Requirement::RayTracing) else {
+        return;
+    };
+    let h = textured_field(10, 16, 30);
+    let blobs = Blobs(&h);
+    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
+    let budget = full_build_needs(&full) / 4;
+    let shaded = RenderOptions {
+        shading: motu_abi::shade::Shading {
+            ao_samples: 0,
+            spp: 1,
+            ..full_shading()
+        },
+        ..ids_opts(backend(&ctx))
+    };
+    let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
+        .expect("streaming renderer");
+    let path = CameraPath {
+        yaw_sweep_deg: 70.0,
+        dolly_world: 4.0,
+    };
+    let frames = 4;
+    let mut cam = base_pose().params(32, 32);
+    for f in 0..frames {
+        cam = camera_path(&base_pose(), &path, f, frames).params(32, 32);
+        let (_, st) = sr.render_frame(&cam, &shaded).expect("frame");
+        assert!(st.complete, "{st:?}");
+    }
+    // The path leaves the blocks packed (no range fits a BLAS elsewhere): nothing moves.
+    // Once every other BLAS is evicted, the blocks have ranges that do.
+    assert_eq!(
+        sr.defragment_now(false).expect("drain"),
+        (0, 0),
+        "nothing fits elsewhere"
+    );
+    let before = sr.alloc_report();
+    let (moved, freed) = sr.defragment_now(true).expect("drain");
+    let before_in_use = before.budget_in_use_bytes;
+    let after = sr.alloc_report();
+    eprintln!(
+        "moved {moved}, freed {freed} B: blocks {} -> {} B, in use {} -> {} B",
+        before.budget_block_bytes,
+        after.budget_block_bytes,
+        before.budget_in_use_bytes,
+        after.budget_in_use_bytes
+    );
+    assert!(moved > 0 && freed > 0, "part-used blocks were drained");
+    assert!(before.budget_block_bytes - after.budget_block_bytes >= freed);
+    assert!(
+        after.budget_in_use_bytes < before_in_use,
+        "the thinning evicted"
+    );
+    let (out, st) = sr
+        .render_frame(&cam, &shaded)
+        .expect("frame after the drain");
+    assert!(st.complete, "{st:?}");
+    assert!(st.vram_peak_bytes <= budget, "{st:?}");
+    let reference = render(&ctx, &full, &cam, &shaded).expect("full render");
+    let cmp = motu_trace::compare(&reference.aov, &out.aov, 0.0).expect("sizes");
+    assert_eq!(
+        cmp.mismatched, 0,
+        "hits equal the full build's after the drain"
+    );
+    assert_shaded_equal(&reference.rgba8, &out.rgba8, "after the drain");
+    drop(sr);
+    assert_no_validation_errors(&ctx);
+}

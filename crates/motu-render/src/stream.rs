@@ -29,6 +29,8 @@ pub struct StreamBounds {
     /// `--stream-split-instances`: TLASes over this many instances are split into pieces when
     /// the package is loaded (`None`: [`motu_compile::STREAM_SPLIT_INSTANCES`]; 0: none).
     pub split_instances: Option<u32>,
+    /// `--stream-defrag`: drain part-used memory blocks before evicting (off by default).
+    pub defrag: bool,
 }
 
 impl StreamBounds {
@@ -43,6 +45,7 @@ impl StreamBounds {
             probe_rounds: self.probe_rounds.unwrap_or(d.probe_rounds),
             pass_marks: self.pass_marks.unwrap_or(d.pass_marks),
             tlas_update: self.tlas_update,
+            defrag: self.defrag,
             ..d
         }
     }
@@ -72,6 +75,7 @@ impl StreamBounds {
             || self.pass_marks.is_some()
             || self.tlas_update != motu_gpu::TlasUpdate::Auto
             || self.split_instances.is_some()
+            || self.defrag
     }
 }
 

@@ -710,3 +710,61 @@ fn try_fit_answers_as_allocating_would_and_changes_nothing() {
     a.free(x.id).unwrap();
     a.free(small.id).unwrap();
 }
+
+#[test]
+fn draining_moves_allocations_into_other_blocks_free_space_and_frees_the_block() {
+    // 4 blocks of 4 MiB, a quarter full each after every other 1 MiB allocation is freed.
+    let limits = AllocLimits {
+        max_allocation_count: 64,
+        ..AllocLimits::with_budget(16 * MIB)
+    };
+    let policy = AllocPolicy {
+        block_size_bytes: Some(4 * MIB),
+        keep_empty_blocks_per_class: 1,
+        ..AllocPolicy::default()
+    };
+    let mut a = Allocator::new(limits, policy).unwrap();
+    let all: Vec<Allocation> = (0..16).map(|_| a.alloc(blas(MIB)).unwrap()).collect();
+    for x in all.iter().skip(1).step_by(2) {
+        a.free(x.id).unwrap();
+    }
+    a.drain_events().count();
+    let fills = a.block_fills(MemoryClass::DeviceLocal);
+    assert_eq!(fills.len(), 4);
+    assert!(fills
+        .iter()
+        .all(|f| f.used_bytes == 2 * MIB && f.live_count == 2));
+    assert_eq!(a.reserved_bytes(MemoryClass::DeviceLocal), 16 * MIB);
+    // A new 1 MiB request fits free space; with every block full no new block is made.
+    let victim = fills[0].block;
+    let movers = a.allocations_in(victim);
+    assert_eq!(movers.len(), 2);
+    a.set_draining(&[victim]);
+    a.set_fit_only(true);
+    let moved: Vec<Allocation> = movers.iter().map(|_| a.alloc(blas(MIB)).unwrap()).collect();
+    assert!(
+        moved.iter().all(|m| m.block != victim),
+        "never placed in a draining block"
+    );
+    for m in &movers {
+        a.free(m.id).unwrap();
+    }
+    assert_eq!(
+        a.block_size_bytes(victim),
+        None,
+        "an emptied draining block is destroyed"
+    );
+    assert!(a
+        .drain_events()
+        .any(|e| matches!(e, BlockEvent::Destroyed { block, .. } if block == victim)));
+    assert_eq!(a.reserved_bytes(MemoryClass::DeviceLocal), 12 * MIB);
+    // Fit only: what fits no free range fails rather than taking the freed budget.
+    assert!(matches!(
+        a.alloc(blas(2 * MIB)),
+        Err(AllocError::OverBudget { .. })
+    ));
+    a.set_fit_only(false);
+    a.set_draining(&[]);
+    assert!(a.alloc(blas(2 * MIB)).is_ok(), "a new block once allowed");
+    a.check_consistency().unwrap();
+}

@@ -117,6 +117,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             stream_probe_pass_rows: None,
             stream_tlas: crate::cli::StreamTlasArg::Auto,
             stream_split_instances: None,
+            stream_defrag: false,
         },
         frames: 1,
         stats: Some(stats_path.clone()),

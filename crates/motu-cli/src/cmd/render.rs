@@ -30,6 +30,7 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         pass_marks: b.stream_probe_pass_rows,
         tlas_update: b.stream_tlas.into(),
         split_instances: b.stream_split_instances,
+        defrag: b.stream_defrag,
     }
 }
 

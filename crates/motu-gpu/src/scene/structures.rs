@@ -96,6 +96,11 @@ impl AccelStruct {
         })
     }
 
+    /// The heap allocation holding the structure.
+    pub(crate) fn allocation_id(&self) -> Option<motu_alloc::AllocationId> {
+        self.buffer.as_ref().map(|b| b.id)
+    }
+
     /// Destroys the structure and returns its memory to the heap.
     pub(crate) fn release(mut self, heap: &mut GpuHeap) {
         self.destroy_handle();

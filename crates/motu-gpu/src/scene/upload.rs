@@ -286,6 +286,14 @@ impl BatchStager for MeshStager<'_, '_> {
 }
 
 /// Per compiled mesh on the GPU.
+/// Usages of a mesh buffer: read by shaders and AS builds, written by uploads, and copied from
+/// when a streamer moves it to empty a memory block.
+const MESH_USAGE: BufferUsage = BufferUsage::STORAGE
+    .union(BufferUsage::DEVICE_ADDRESS)
+    .union(BufferUsage::TRANSFER_DST)
+    .union(BufferUsage::TRANSFER_SRC)
+    .union(BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT);
+
 pub(crate) struct MeshGpu {
     pub(crate) buffer: HeapBuffer,
     pub(crate) positions_address: u64,
@@ -363,10 +371,7 @@ impl MeshGpu {
         let buf = heap.alloc_buffer(
             &format!("mesh-{m}"),
             size,
-            BufferUsage::STORAGE
-                | BufferUsage::DEVICE_ADDRESS
-                | BufferUsage::TRANSFER_DST
-                | BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT,
+            MESH_USAGE,
             AllocKind::Geometry,
             MemoryClass::DeviceLocal,
             16,
@@ -392,6 +397,32 @@ impl MeshGpu {
                 0
             },
         })
+    }
+
+    /// A new buffer for this mesh's bytes (the caller copies them and swaps it in with
+    /// [`MeshGpu::moved_to`]): a streamer emptying a memory block.
+    pub(crate) fn alloc_move_target(&self, heap: &mut GpuHeap, m: usize) -> Result<HeapBuffer> {
+        heap.alloc_buffer(
+            &format!("mesh-{m}-moved"),
+            self.buffer.size_bytes(),
+            MESH_USAGE,
+            AllocKind::Geometry,
+            MemoryClass::DeviceLocal,
+            16,
+        )
+    }
+
+    /// This mesh in `buffer` (a copy of its bytes); returns the old buffer to free once no
+    /// submission reads it.
+    pub(crate) fn moved_to(&mut self, buffer: HeapBuffer) -> Result<HeapBuffer> {
+        let old_base = self.positions_address;
+        let new_base = buffer.device_address()?.0;
+        let rebase = |a: u64| if a == 0 { 0 } else { a - old_base + new_base };
+        self.indices_address = rebase(self.indices_address);
+        self.normals_address = rebase(self.normals_address);
+        self.uvs_address = rebase(self.uvs_address);
+        self.positions_address = new_base;
+        Ok(std::mem::replace(&mut self.buffer, buffer))
     }
 
     /// [`MeshGpu::upload`] plus the shading attributes of a mesh from

@@ -612,6 +612,11 @@ impl<'a> StreamingRenderer<'a> {
             // A few rounds at most: evicted items free whole blocks only when they empty
             // them, so this could otherwise evict everything unpinned.
             let mut short = need.saturating_sub(free(self));
+            if short > 0 && self.opts.defrag {
+                // Whole blocks freed by moving what sparse ones hold, before evicting.
+                self.defragment(short)?;
+                short = need.saturating_sub(free(self));
+            }
             // What the rebuild needs against what blocks leave free (`MOTU_LOG`), the numbers
             // behind `evicted_for_tlas`.
             tracing::debug!(

@@ -1,0 +1,204 @@
+//! Emptying memory blocks by moving what they hold (`StreamOptions::defrag`, opt-in).
+//!
+//! Streamed BLASes and meshes are small and live in shared blocks; evicting them frees space
+//! *inside* blocks, while a TLAS rebuild's instance buffer, scratch and structure are
+//! dedicated blocks that need budget *outside* blocks. Once BLASes have spread over every
+//! block, a rebuild finds no such room and the streamer evicts whole swaths of what frames
+//! need (BENCHMARKS.md, sessions 22, 23, 26). Here the emptiest blocks whose every allocation
+//! is a streamed BLAS or mesh are drained instead: each allocation is copied into free space
+//! other blocks already have (no new block), the originals are freed, and the emptied blocks
+//! return their bytes to the budget. A moved BLAS has a new address, so its resident parents
+//! become dirty (rebuilt before any trace); a moved mesh's addresses are rewritten with the
+//! step's tables.
+
+use std::collections::HashMap;
+
+use ash::vk;
+use motu_alloc::{AllocationId, BlockId};
+
+use super::StreamingRenderer;
+use crate::error::Result;
+use crate::heap::HeapBuffer;
+use crate::scene::AccelStruct;
+
+/// What owns an allocation a drain may move.
+#[derive(Clone, Copy)]
+enum Owner {
+    Blas(usize),
+    Mesh(usize),
+}
+
+/// Of a block's free space, the share a drain counts on placing moved allocations in (the rest
+/// is ranges too small or misaligned for them).
+const USABLE_FREE: f64 = 0.75;
+
+impl<'a> StreamingRenderer<'a> {
+    /// Frees at least `bytes` of blocks (or as much as it can) by draining the emptiest
+    /// standard blocks whose every allocation is a streamed BLAS or mesh. Returns the bytes
+    /// of blocks freed.
+    pub(super) fn defragment(&mut self, bytes: u64) -> Result<u64> {
+        let t0 = std::time::Instant::now();
+        let owners = self.movable_owners();
+        let fills = self.heap.block_fills();
+        let free_total: u64 = fills.iter().map(|f| f.size_bytes - f.used_bytes).sum();
+        let mut chosen: Vec<BlockId> = Vec::new();
+        let mut movers: Vec<Owner> = Vec::new();
+        let (mut freeing, mut moving, mut chosen_free) = (0u64, 0u64, 0u64);
+        for f in &fills {
+            if freeing >= bytes {
+                break;
+            }
+            let ids = self.heap.allocations_in(f.block);
+            let Some(own): Option<Vec<Owner>> =
+                ids.iter().map(|id| owners.get(id).copied()).collect()
+            else {
+                tracing::trace!(
+                    block = f.block.0,
+                    used = f.used_bytes,
+                    size = f.size_bytes,
+                    unmovable = ids.iter().filter(|id| !owners.contains_key(id)).count(),
+                    "block not drainable"
+                );
+                continue;
+            };
+            // What it holds must fit the free space of the blocks that stay.
+            let free_left = free_total - chosen_free - (f.size_bytes - f.used_bytes);
+            if (moving + f.used_bytes) as f64 > free_left as f64 * USABLE_FREE {
+                break;
+            }
+            chosen.push(f.block);
+            movers.extend(own);
+            freeing += f.size_bytes;
+            moving += f.used_bytes;
+            chosen_free += f.size_bytes - f.used_bytes;
+        }
+        if chosen.is_empty() {
+            return Ok(0);
+        }
+        let before = self.heap.report().budget_block_bytes;
+        self.heap.set_draining(&chosen, true);
+        let moved = self.move_out(&movers);
+        self.heap.set_draining(&[], false);
+        let moved = moved?;
+        let freed = before.saturating_sub(self.heap.report().budget_block_bytes);
+        let st = &mut self.frame_stats;
+        st.defrag_moves += moved;
+        st.defrag_freed_bytes += freed;
+        st.defrag_ms += t0.elapsed().as_secs_f64() * 1e3;
+        tracing::debug!(
+            blocks = chosen.len(),
+            moved,
+            moving,
+            freed,
+            wanted = bytes,
+            "defragmented"
+        );
+        Ok(freed)
+    }
+
+    /// Allocations a drain may move: resident streamed BLASes (not those a persistent TLAS
+    /// references: its records are patched on residency changes only) and resident meshes.
+    fn movable_owners(&self) -> HashMap<AllocationId, Owner> {
+        let mut owners = HashMap::new();
+        for (b, a) in self.blas.iter().enumerate() {
+            let Some(a) = a else { continue };
+            if !self.buildable[b] || self.parents[b].iter().any(|&t| self.is_persistent(t)) {
+                continue;
+            }
+            if let Some(id) = a.allocation_id() {
+                owners.insert(id, Owner::Blas(b));
+            }
+        }
+        for (m, g) in self.meshes.iter().enumerate() {
+            if let Some(g) = g {
+                owners.insert(g.buffer.id, Owner::Mesh(m));
+            }
+        }
+        owners
+    }
+
+    /// Copies `movers` into new allocations (placed outside the draining blocks, in existing
+    /// free space only) and frees the originals; stops at the first that does not fit (the
+    /// rest stay). Returns how many moved.
+    fn move_out(&mut self, movers: &[Owner]) -> Result<u32> {
+        let ctx = self.ctx.clone();
+        // Uploads still queued into a mesh must land before it is copied.
+        self.up_mut()?.flush(&ctx)?;
+        let mut blas_new: Vec<(usize, AccelStruct)> = Vec::new();
+        let mut mesh_new: Vec<(usize, HeapBuffer)> = Vec::new();
+        for &o in movers {
+            let placed = match o {
+                Owner::Blas(b) => {
+                    let size = self.blas[b].as_ref().map_or(0, |a| a.size_bytes);
+                    AccelStruct::new(
+                        &ctx,
+                        &mut self.heap,
+                        &format!("blas-{b}-moved"),
+                        size,
+                        vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+                    )
+                    .map(|a| blas_new.push((b, a)))
+                }
+                Owner::Mesh(m) => match self.meshes[m].as_ref() {
+                    Some(g) => g
+                        .alloc_move_target(&mut self.heap, m)
+                        .map(|buf| mesh_new.push((m, buf))),
+                    None => Ok(()),
+                },
+            };
+            if placed.is_err() {
+                break;
+            }
+        }
+        let copied = (|| -> Result<()> {
+            let accel = ctx.accel_device()?;
+            let mut rec = ctx.record("defragment")?;
+            for (m, buf) in &mesh_new {
+                if let Some(g) = self.meshes[*m].as_ref() {
+                    rec.copy_buffer(&g.buffer, 0, buf, 0, g.buffer.size_bytes())?;
+                }
+            }
+            let (_, cmd) = rec.raw();
+            for (b, dst) in &blas_new {
+                if let Some(src) = self.blas[*b].as_ref() {
+                    let info = vk::CopyAccelerationStructureInfoKHR::default()
+                        .src(src.handle)
+                        .dst(dst.handle)
+                        .mode(vk::CopyAccelerationStructureModeKHR::CLONE);
+                    // SAFETY: both structures live until the fenced submission returns; dst
+                    // was created with src's size and type.
+                    unsafe { accel.cmd_copy_acceleration_structure(cmd, &info) };
+                }
+            }
+            rec.submit_and_wait()
+        })();
+        if let Err(e) = copied {
+            blas_new
+                .into_iter()
+                .for_each(|(_, a)| a.release(&mut self.heap));
+            mesh_new.into_iter().for_each(|(_, b)| self.heap.free(b));
+            return Err(e);
+        }
+        let moved = (blas_new.len() + mesh_new.len()) as u32;
+        for (b, a) in blas_new {
+            if let Some(old) = self.blas[b].replace(a) {
+                old.release(&mut self.heap);
+            }
+            // Its instance records hold the old address.
+            for &p in &self.parents[b] {
+                if self.tlas[p as usize].is_some() {
+                    self.dirty.insert(p);
+                }
+            }
+        }
+        for (m, buf) in mesh_new {
+            if let Some(g) = self.meshes[m].as_mut() {
+                let old = g.moved_to(buf)?;
+                self.heap.free(old);
+            } else {
+                self.heap.free(buf);
+            }
+        }
+        Ok(moved)
+    }
+}
