@@ -9,7 +9,7 @@ use motu_tests::{
     check_probe_rounds, gen_island, gpu_available, json_u64 as u, motu_ok, render as render_with,
     report_peak_and_floor, s,
 };
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// A close-up that sees a small part of the island (`motu gen island`'s cameras).
 const CAMERA: &str = "palmsCam";
@@ -226,21 +226,7 @@ fn probe_pass_marks_keep_what_rays_pass_and_change_no_pixel() {
     let budget_bytes = peak / 3;
     assert!(budget_bytes >= floor, "a third is above the floor");
     let path = |name: &str, budget: u64, backend: &str, extra: &[&str]| {
-        let aov = dir.path().join(format!("{name}.aov"));
-        let budget = budget.to_string();
-        let mut args = vec![
-            "--width",
-            "64",
-            "--height",
-            "36",
-            "--frames",
-            "8",
-            "--stream",
-            "--vram-budget",
-            &budget,
-        ];
-        args.extend(extra);
-        (render_with(&pkg, backend, &aov, &args), aov)
+        shot_path(&pkg, dir.path(), name, budget, backend, extra)
     };
     // Everything fits: the reference frames of the path.
     let (_, reference) = path("everything", peak * 2, "query", &[]);
@@ -343,21 +329,7 @@ fn drained_blocks_change_no_pixel_along_a_path() {
     let budget_bytes = peak / 4;
     assert!(budget_bytes >= floor, "a quarter is above the floor");
     let path = |name: &str, budget: u64, backend: &str, extra: &[&str]| {
-        let aov = dir.path().join(format!("{name}.aov"));
-        let budget = budget.to_string();
-        let mut args = vec![
-            "--width",
-            "64",
-            "--height",
-            "36",
-            "--frames",
-            "8",
-            "--stream",
-            "--vram-budget",
-            &budget,
-        ];
-        args.extend(extra);
-        (render_with(&pkg, backend, &aov, &args), aov)
+        shot_path(&pkg, dir.path(), name, budget, backend, extra)
     };
     let (_, reference) = path("everything", peak * 2, "query", &[]);
     for backend in ["query", "pipeline"] {
@@ -385,4 +357,31 @@ fn drained_blocks_change_no_pixel_along_a_path() {
         );
         motu_ok(&["compare", s(&reference), s(&aov), "--max-mismatch", "0"]);
     }
+}
+
+/// The default camera's path (64×36, 8 frames) streamed under `budget` bytes on `backend` with
+/// `extra` flags, its AOV written to `dir/name.aov`: the statistics and the AOV's path.
+fn shot_path(
+    pkg: &Path,
+    dir: &Path,
+    name: &str,
+    budget: u64,
+    backend: &str,
+    extra: &[&str],
+) -> (serde_json::Value, PathBuf) {
+    let aov = dir.join(format!("{name}.aov"));
+    let budget = budget.to_string();
+    let mut args = vec![
+        "--width",
+        "64",
+        "--height",
+        "36",
+        "--frames",
+        "8",
+        "--stream",
+        "--vram-budget",
+        &budget,
+    ];
+    args.extend(extra);
+    (render_with(pkg, backend, &aov, &args), aov)
 }

@@ -97,6 +97,19 @@ fn textured_field(rows: u32, cols: u32, segments: u32) -> OwnedHierarchy {
 
 /// The full shading model's inputs: a distant and a point light, a sky with ambient occlusion
 /// (2 rays per sample, reaching 3 units) and 2 samples per pixel.
+/// Shaded frames without AO, one sample a pixel: textures, normals, lights and shadow rays
+/// (the tests of what streams with meshes).
+fn textured_opts(be: Backend) -> RenderOptions {
+    RenderOptions {
+        shading: motu_abi::shade::Shading {
+            ao_samples: 0,
+            spp: 1,
+            ..full_shading()
+        },
+        ..ids_opts(be)
+    }
+}
+
 fn full_shading() -> motu_abi::shade::Shading {
     use motu_abi::shade::{LightRecord, Shading, LIGHT_DISTANT, LIGHT_POINT};
     let mut s = Shading {
@@ -173,6 +186,12 @@ fn full_build_needs(full: &GpuScene) -> u64 {
         .as_ref()
         .map_or(full.report().peak_bytes, |a| a.peak_in_use_bytes)
 }
+
+/// The camera path of the path tests: a 70° yaw sweep with a 4-unit dolly.
+const SWEEP: CameraPath = CameraPath {
+    yaw_sweep_deg: 70.0,
+    dolly_world: 4.0,
+};
 
 fn base_pose() -> CameraPose {
     CameraPose {
@@ -387,21 +406,10 @@ fn textures_stream_with_the_meshes_that_sample_them() {
     let blobs = Blobs(&h);
     let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let budget = full_build_needs(&full) / 4;
-    let be = backend(&ctx);
-    let shaded = RenderOptions {
-        shading: motu_abi::shade::Shading {
-            ao_samples: 0,
-            spp: 1,
-            ..full_shading()
-        },
-        ..ids_opts(be)
-    };
+    let shaded = textured_opts(backend(&ctx));
     let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
         .expect("streaming renderer");
-    let path = CameraPath {
-        yaw_sweep_deg: 70.0,
-        dolly_world: 4.0,
-    };
+    let path = SWEEP;
     let frames = 4;
     let mut resident_textures = Vec::new();
     for f in 0..frames {
@@ -453,10 +461,7 @@ fn camera_path_reuses_last_frames_structures_and_evicts_under_the_budget() {
     let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
         .expect("streaming renderer");
     let frames = 30;
-    let path = CameraPath {
-        yaw_sweep_deg: 70.0,
-        dolly_world: 4.0,
-    };
+    let path = SWEEP;
     let mut passes_after_first = 0u32;
     let mut mismatched = 0u64;
     let mut total = 0u64;
@@ -1154,20 +1159,10 @@ fn drained_blocks_free_budget_and_the_next_frame_is_unchanged() {
     let blobs = Blobs(&h);
     let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let budget = full_build_needs(&full) / 4;
-    let shaded = RenderOptions {
-        shading: motu_abi::shade::Shading {
-            ao_samples: 0,
-            spp: 1,
-            ..full_shading()
-        },
-        ..ids_opts(backend(&ctx))
-    };
+    let shaded = textured_opts(backend(&ctx));
     let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
         .expect("streaming renderer");
-    let path = CameraPath {
-        yaw_sweep_deg: 70.0,
-        dolly_world: 4.0,
-    };
+    let path = SWEEP;
     let frames = 4;
     let mut cam = base_pose().params(32, 32);
     for f in 0..frames {
