@@ -314,8 +314,8 @@ fn probe_pass_marks_keep_what_rays_pass_and_change_no_pixel() {
 }
 
 /// `--stream-defrag`: before evicting on a refused allocation or for a TLAS rebuild's room, the
-/// streamer drains part-used memory blocks (their BLASes and meshes copied into other blocks'
-/// free space). Along the default camera's path at a quarter of the full build it moves
+/// streamer drains part-used memory blocks (their BLASes, meshes and textures copied into
+/// other blocks' free space). Along the default camera's path at a quarter of the full build it moves
 /// allocations and frees blocks, every frame is the image of the same path with everything
 /// resident, and the peak stays under the budget, on both backends.
 #[test]

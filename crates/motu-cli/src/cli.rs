@@ -383,9 +383,9 @@ pub struct StreamBoundArgs {
     #[arg(long, value_name = "N", value_parser = parse_split_instances)]
     pub stream_split_instances: Option<u32>,
     /// Streaming: before evicting structures for a TLAS rebuild's room or after a refused
-    /// allocation, drain the emptiest memory blocks instead: their BLASes and meshes are
-    /// copied into free space other blocks have, and the emptied blocks go back to the budget
-    /// (defrag_moves, defrag_freed_bytes per frame in --stats). Off by default: measured on
+    /// allocation, drain the emptiest memory blocks instead: their BLASes, meshes and textures
+    /// are copied into free space other blocks have, and the emptied blocks go back to the
+    /// budget (defrag_moves, defrag_freed_bytes per frame in --stats). Off by default: measured on
     /// lavapipe only (default island along shotCam at a third of its full build: 1.86 → 1.57
     /// passes after the first, the same image), not yet on a GPU.
     #[arg(long)]

@@ -125,11 +125,18 @@ pub(crate) fn upload_streamed_texture(
     Ok(buf)
 }
 
+/// A new buffer for a streamed texture's `size` bytes (a streamer emptying a memory block
+/// copies the texels into it).
+pub(crate) fn alloc_texture_move_target(heap: &mut GpuHeap, size: u64) -> Result<HeapBuffer> {
+    alloc(heap, "texture-moved", size)
+}
+
 fn alloc(heap: &mut GpuHeap, label: &str, size: u64) -> Result<HeapBuffer> {
     heap.alloc_buffer(
         label,
         size.max(16),
-        table_usage(),
+        // Copied from when a streamer moves it.
+        table_usage() | crate::memory::BufferUsage::TRANSFER_SRC,
         AllocKind::Texture,
         MemoryClass::DeviceLocal,
         16,

@@ -5,11 +5,11 @@
 //! dedicated blocks that need budget *outside* blocks. Once BLASes have spread over every
 //! block, a rebuild finds no such room and the streamer evicts whole swaths of what frames
 //! need (BENCHMARKS.md, sessions 22, 23, 26). Here the emptiest blocks whose every allocation
-//! is a streamed BLAS or mesh are drained instead: each allocation is copied into free space
-//! other blocks already have (no new block), the originals are freed, and the emptied blocks
-//! return their bytes to the budget. A moved BLAS has a new address, so its resident parents
-//! become dirty (rebuilt before any trace); a moved mesh's addresses are rewritten with the
-//! step's tables.
+//! is a streamed BLAS, mesh or texture are drained instead: each allocation is copied into
+//! free space other blocks already have (no new block), the originals are freed, and the
+//! emptied blocks return their bytes to the budget. A moved BLAS has a new address, so its
+//! resident parents become dirty (rebuilt before any trace); a moved mesh's or texture's
+//! addresses are rewritten with the step's tables.
 
 use std::collections::HashMap;
 
@@ -26,6 +26,18 @@ use crate::scene::AccelStruct;
 enum Owner {
     Blas(usize),
     Mesh(usize),
+    Texture(usize),
+}
+
+/// What one drain did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct Drained {
+    /// Allocations moved, by what they hold.
+    pub(crate) blases: u32,
+    pub(crate) meshes: u32,
+    pub(crate) textures: u32,
+    /// Bytes of blocks the drain freed.
+    pub(crate) freed_bytes: u64,
 }
 
 /// Of a block's free space, the share a drain counts on placing moved allocations in (the rest
@@ -34,9 +46,9 @@ const USABLE_FREE: f64 = 0.75;
 
 impl<'a> StreamingRenderer<'a> {
     /// Frees at least `bytes` of blocks (or as much as it can) by draining the emptiest
-    /// standard blocks whose every allocation is a streamed BLAS or mesh. Returns the bytes
-    /// of blocks freed.
-    pub(super) fn defragment(&mut self, bytes: u64) -> Result<u64> {
+    /// standard blocks whose every allocation is a streamed BLAS, mesh or texture. Returns the
+    /// allocations it moved and the bytes of blocks freed.
+    pub(super) fn defragment(&mut self, bytes: u64) -> Result<Drained> {
         let t0 = std::time::Instant::now();
         let owners = self.movable_owners();
         let fills = self.heap.block_fills();
@@ -73,14 +85,16 @@ impl<'a> StreamingRenderer<'a> {
             chosen_free += f.size_bytes - f.used_bytes;
         }
         if chosen.is_empty() {
-            return Ok(0);
+            return Ok(Drained::default());
         }
         let before = self.heap.report().budget_block_bytes;
         self.heap.set_draining(&chosen, true);
         let moved = self.move_out(&movers);
         self.heap.set_draining(&[], false);
-        let moved = moved?;
+        let mut drained = moved?;
         let freed = before.saturating_sub(self.heap.report().budget_block_bytes);
+        drained.freed_bytes = freed;
+        let moved = drained.blases + drained.meshes + drained.textures;
         let st = &mut self.frame_stats;
         st.defrag_moves += moved;
         st.defrag_freed_bytes += freed;
@@ -93,11 +107,11 @@ impl<'a> StreamingRenderer<'a> {
             wanted = bytes,
             "defragmented"
         );
-        Ok(freed)
+        Ok(drained)
     }
 
     /// Allocations a drain may move: resident streamed BLASes (not those a persistent TLAS
-    /// references: its records are patched on residency changes only) and resident meshes.
+    /// references: its records are patched on residency changes only), meshes and textures.
     fn movable_owners(&self) -> HashMap<AllocationId, Owner> {
         let mut owners = HashMap::new();
         for (b, a) in self.blas.iter().enumerate() {
@@ -114,18 +128,22 @@ impl<'a> StreamingRenderer<'a> {
                 owners.insert(g.buffer.id, Owner::Mesh(m));
             }
         }
+        for (t, b) in self.shading.resident() {
+            owners.insert(b.id, Owner::Texture(t));
+        }
         owners
     }
 
     /// Copies `movers` into new allocations (placed outside the draining blocks, in existing
     /// free space only) and frees the originals; stops at the first that does not fit (the
-    /// rest stay). Returns how many moved.
-    fn move_out(&mut self, movers: &[Owner]) -> Result<u32> {
+    /// rest stay). Returns how many moved, by kind.
+    fn move_out(&mut self, movers: &[Owner]) -> Result<Drained> {
         let ctx = self.ctx.clone();
         // Uploads still queued into a mesh must land before it is copied.
         self.up_mut()?.flush(&ctx)?;
         let mut blas_new: Vec<(usize, AccelStruct)> = Vec::new();
         let mut mesh_new: Vec<(usize, HeapBuffer)> = Vec::new();
+        let mut texture_new: Vec<(usize, HeapBuffer)> = Vec::new();
         for &o in movers {
             let placed = match o {
                 Owner::Blas(b) => {
@@ -145,6 +163,13 @@ impl<'a> StreamingRenderer<'a> {
                         .map(|buf| mesh_new.push((m, buf))),
                     None => Ok(()),
                 },
+                Owner::Texture(t) => match self.shading.texture(t).map(|b| b.size_bytes()) {
+                    Some(size) => {
+                        crate::scene::shading::alloc_texture_move_target(&mut self.heap, size)
+                            .map(|buf| texture_new.push((t, buf)))
+                    }
+                    None => Ok(()),
+                },
             };
             if placed.is_err() {
                 break;
@@ -156,6 +181,11 @@ impl<'a> StreamingRenderer<'a> {
             for (m, buf) in &mesh_new {
                 if let Some(g) = self.meshes[*m].as_ref() {
                     rec.copy_buffer(&g.buffer, 0, buf, 0, g.buffer.size_bytes())?;
+                }
+            }
+            for (t, buf) in &texture_new {
+                if let Some(old) = self.shading.texture(*t) {
+                    rec.copy_buffer(old, 0, buf, 0, old.size_bytes())?;
                 }
             }
             let (_, cmd) = rec.raw();
@@ -176,10 +206,18 @@ impl<'a> StreamingRenderer<'a> {
             blas_new
                 .into_iter()
                 .for_each(|(_, a)| a.release(&mut self.heap));
-            mesh_new.into_iter().for_each(|(_, b)| self.heap.free(b));
+            mesh_new
+                .into_iter()
+                .chain(texture_new)
+                .for_each(|(_, b)| self.heap.free(b));
             return Err(e);
         }
-        let moved = (blas_new.len() + mesh_new.len()) as u32;
+        let moved = Drained {
+            blases: blas_new.len() as u32,
+            meshes: mesh_new.len() as u32,
+            textures: texture_new.len() as u32,
+            freed_bytes: 0,
+        };
         for (b, a) in blas_new {
             if let Some(old) = self.blas[b].replace(a) {
                 old.release(&mut self.heap);
@@ -190,6 +228,10 @@ impl<'a> StreamingRenderer<'a> {
                     self.dirty.insert(p);
                 }
             }
+        }
+        for (t, buf) in texture_new {
+            let old = self.shading.moved_to(t, buf);
+            self.heap.free(old);
         }
         for (m, buf) in mesh_new {
             if let Some(g) = self.meshes[m].as_mut() {

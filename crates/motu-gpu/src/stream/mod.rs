@@ -186,9 +186,9 @@ pub struct StreamOptions {
     /// resident instances (`--stream-tlas`; see `persistent.rs`).
     pub tlas_update: TlasUpdate,
     /// Before evicting for a TLAS rebuild's room or after a refused allocation, drain the
-    /// emptiest memory blocks instead: their streamed BLASes and meshes are copied into free
-    /// space other blocks have and the emptied blocks return their bytes to the budget
-    /// (`defrag.rs`; `defrag_*` per frame in `--stats`). Off by default: measured on lavapipe
+    /// emptiest memory blocks instead: their streamed BLASes, meshes and textures are copied
+    /// into free space other blocks have and the emptied blocks return their bytes to the
+    /// budget (`defrag.rs`; `defrag_*` per frame in `--stats`). Off by default: measured on lavapipe
     /// only (the default island along shotCam at a third of its full build, 64×36: 1.857 →
     /// 1.571 passes after the first, evictions on refusal 3.6 → 0 a frame; a quarter
     /// unchanged; every image equal to the full build's), not yet on a GPU.
@@ -701,10 +701,10 @@ impl<'a> StreamingRenderer<'a> {
     }
 
     /// Drains every block it can now (`defrag.rs`), after evicting every other resident
-    /// streamed BLAS when `thin_out` (free ranges inside the blocks); returns (allocations
-    /// moved, bytes of blocks freed). Tests: the next frame must be unchanged.
+    /// streamed BLAS when `thin_out` (free ranges inside the blocks). Tests: the next frame
+    /// must be unchanged.
     #[cfg(test)]
-    pub(crate) fn defragment_now(&mut self, thin_out: bool) -> Result<(u32, u64)> {
+    pub(crate) fn defragment_now(&mut self, thin_out: bool) -> Result<defrag::Drained> {
         if thin_out {
             let resident: Vec<usize> = (0..self.blas.len())
                 .filter(|&b| self.blas[b].is_some() && self.buildable[b])
@@ -713,9 +713,7 @@ impl<'a> StreamingRenderer<'a> {
                 self.evict(b);
             }
         }
-        let moves = self.frame_stats.defrag_moves;
-        let freed = self.defragment(u64::MAX)?;
-        Ok((self.frame_stats.defrag_moves - moves, freed))
+        self.defragment(u64::MAX)
     }
 
     /// Moves the pass stamp on to `stamp` (tests of the stamp limit: 2^29 passes otherwise).

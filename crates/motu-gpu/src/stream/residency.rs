@@ -123,7 +123,7 @@ impl<'a> StreamingRenderer<'a> {
                     tracing::debug!(%msg, "refused; evicting");
                     let step = (self.build_opts.budget_bytes / 32).max(1);
                     // A refusal is for a new block: whole blocks drained first, if any.
-                    if self.opts.defrag && self.defragment(step)? > 0 {
+                    if self.opts.defrag && self.defragment(step)?.freed_bytes > 0 {
                         continue;
                     }
                     if self.evict_some(step, EvictWhy::Refused)? {

@@ -34,6 +34,31 @@ impl StreamShading {
     pub(super) fn resident_textures(&self) -> u32 {
         self.textures.iter().filter(|t| t.is_some()).count() as u32
     }
+
+    /// Texture `t`'s buffer while resident.
+    pub(super) fn texture(&self, t: usize) -> Option<&HeapBuffer> {
+        self.textures.get(t).and_then(Option::as_ref)
+    }
+
+    /// Resident textures: (texture, its buffer).
+    pub(super) fn resident(&self) -> impl Iterator<Item = (usize, &HeapBuffer)> {
+        self.textures
+            .iter()
+            .enumerate()
+            .filter_map(|(t, b)| Some((t, b.as_ref()?)))
+    }
+
+    /// Puts `buffer` (a copy of texture `t`'s texels) in its place, its address rewritten with
+    /// the next tables; returns the old buffer (or `buffer` itself when `t` is not resident).
+    pub(super) fn moved_to(&mut self, t: usize, buffer: HeapBuffer) -> HeapBuffer {
+        match self.textures.get_mut(t).and_then(Option::as_mut) {
+            Some(slot) => {
+                self.textures_changed = true;
+                std::mem::replace(slot, buffer)
+            }
+            None => buffer,
+        }
+    }
 }
 
 impl<'a> StreamingRenderer<'a> {
