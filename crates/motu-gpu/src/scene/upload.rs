@@ -285,7 +285,6 @@ impl BatchStager for MeshStager<'_, '_> {
     }
 }
 
-/// Per compiled mesh on the GPU.
 /// Usages of a mesh buffer: read by shaders and AS builds, written by uploads, and copied from
 /// when a streamer moves it to empty a memory block.
 const MESH_USAGE: BufferUsage = BufferUsage::STORAGE
@@ -294,6 +293,7 @@ const MESH_USAGE: BufferUsage = BufferUsage::STORAGE
     .union(BufferUsage::TRANSFER_SRC)
     .union(BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT);
 
+/// Per compiled mesh on the GPU.
 pub(crate) struct MeshGpu {
     pub(crate) buffer: HeapBuffer,
     pub(crate) positions_address: u64,

@@ -223,11 +223,7 @@ impl<'a> StreamingRenderer<'a> {
                 old.release(&mut self.heap);
             }
             // Its instance records hold the old address.
-            for &p in &self.parents[b] {
-                if self.tlas[p as usize].is_some() {
-                    self.dirty.insert(p);
-                }
-            }
+            self.dirty_parents(b);
         }
         for (t, buf) in texture_new {
             let old = self.shading.moved_to(t, buf);

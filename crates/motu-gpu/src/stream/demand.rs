@@ -155,11 +155,7 @@ impl<'a> StreamingRenderer<'a> {
             self.pinned[b] = true;
             self.built_now.push(b as u32);
             built_ids.insert(b as u32);
-            for &p in &self.parents[b] {
-                if self.tlas[p as usize].is_some() {
-                    self.dirty.insert(p);
-                }
-            }
+            self.dirty_parents(b);
         }
         // A BLAS with nothing to build keeps no references.
         for &b in group {

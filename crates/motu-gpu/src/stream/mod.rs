@@ -188,9 +188,9 @@ pub struct StreamOptions {
     /// Before evicting for a TLAS rebuild's room or after a refused allocation, drain the
     /// emptiest memory blocks instead: their streamed BLASes, meshes and textures are copied
     /// into free space other blocks have and the emptied blocks return their bytes to the
-    /// budget (`defrag.rs`; `defrag_*` per frame in `--stats`). Off by default: measured on lavapipe
-    /// only (the default island along shotCam at a third of its full build, 64×36: 1.857 →
-    /// 1.571 passes after the first, evictions on refusal 3.6 → 0 a frame; a quarter
+    /// budget (`defrag.rs`; `defrag_*` per frame in `--stats`). Off by default: measured on
+    /// lavapipe only (the default island along shotCam at a third of its full build, 64×36:
+    /// 1.857 → 1.571 passes after the first, evictions on refusal 3.6 → 0 a frame; a quarter
     /// unchanged; every image equal to the full build's), not yet on a GPU.
     pub defrag: bool,
 }

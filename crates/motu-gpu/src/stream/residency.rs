@@ -74,6 +74,12 @@ impl<'a> StreamingRenderer<'a> {
             a.release(&mut self.heap);
         }
         self.release_blas_meshes(b);
+        self.dirty_parents(b);
+    }
+
+    /// Marks BLAS `b`'s resident parent TLASes dirty: their instance records no longer match
+    /// it (built, evicted or moved), so they are rebuilt before the next trace.
+    pub(super) fn dirty_parents(&mut self, b: usize) {
         for &p in &self.parents[b] {
             if self.tlas[p as usize].is_some() {
                 self.dirty.insert(p);
