@@ -313,6 +313,69 @@ fn probe_pass_marks_keep_what_rays_pass_and_change_no_pixel() {
     assert!(missed(&on) <= missed(&off), "the marks kept what rays pass");
 }
 
+/// `probe_need_blases`/`probe_need_bytes`: what of the resident set the probe rounds of the
+/// next camera used. With room for everything (nothing evicted) and pass marks on every row,
+/// that is what the next frame's rays hit and what they pass, its one-pass need once the path
+/// has made it resident: the BLASes they hit (the need without pass marks, the same residency)
+/// and at most as many more as the probe marked passed, the same on both backends. Against
+/// the room a budget leaves, it bounds the passes a frame takes (BENCHMARKS.md, session 27).
+#[test]
+fn probe_need_is_what_the_next_frame_hits_and_passes() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = gen_island(dir.path(), None);
+    let (peak, _) = report_peak_and_floor(&pkg, "64", "36");
+    let path = |name: &str, backend: &str, rows: &str| {
+        let (st, _) = shot_path(
+            &pkg,
+            dir.path(),
+            name,
+            peak * 2,
+            backend,
+            &["--stream-probe-pass-rows", rows],
+        );
+        assert_eq!(u(&st["stream"]["totals"]["evicted"]), 0, "everything fits");
+        st["stream"]["frames"].as_array().expect("frames").clone()
+    };
+    let hits = path("need-hits", "query", "0");
+    let all = path("need-all", "query", "1");
+    let pipe = path("need-all-pipeline", "pipeline", "1");
+    let need = |f: &serde_json::Value| (u(&f["probe_need_blases"]), u(&f["probe_need_bytes"]));
+    let last = all.len() - 1;
+    let mut passed_only = 0;
+    for (k, ((h, a), p)) in hits.iter().zip(&all).zip(&pipe).enumerate() {
+        if k == last {
+            assert_eq!(need(a), (0, 0), "the last frame probes nothing: {a}");
+            continue;
+        }
+        assert!(
+            need(h).0 > 0 && need(h).1 > 0,
+            "frame {k}'s probe hit resident BLASes: {h}"
+        );
+        assert_eq!(
+            need(p),
+            need(a),
+            "frame {k}: the pipeline's need is the query's"
+        );
+        assert!(
+            need(a).0 >= need(h).0 && need(a).1 >= need(h).1,
+            "frame {k}: marks only add: {a} against {h}"
+        );
+        let (more, more_bytes) = (need(a).0 - need(h).0, need(a).1 - need(h).1);
+        assert!(
+            more <= u(&a["probe_pass_marks"]) && (more == 0) == (more_bytes == 0),
+            "frame {k}: {a} against {h}"
+        );
+        passed_only += more;
+    }
+    assert!(
+        passed_only > 0,
+        "rays pass resident BLASes without hitting them"
+    );
+}
+
 /// `--stream-defrag`: before evicting on a refused allocation or for a TLAS rebuild's room, the
 /// streamer drains part-used memory blocks (their BLASes, meshes and textures copied into
 /// other blocks' free space). Along the default camera's path at a quarter of the full build it moves

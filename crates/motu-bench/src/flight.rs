@@ -264,6 +264,10 @@ fn run_streaming(
             // stride (0: none) and the resident structures its rows passed and refreshed.
             "probe_pass_rows": st.probe_pass_rows,
             "probe_pass_marks": st.probe_pass_marks,
+            // What of the resident set the probe's rays used: the next frame's one-pass need
+            // when everything is resident and every row marks.
+            "probe_need_blases": st.probe_need_blases,
+            "probe_need_bytes": st.probe_need_bytes,
             "wall_ms": wall_ms,
             "gpu_ms": out.stats.ms_per_frame,
             "vram_peak_bytes": st.vram_peak_bytes,

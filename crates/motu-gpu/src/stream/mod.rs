@@ -347,6 +347,15 @@ pub struct FrameStreamStats {
     /// probe ray, met by no probe ray's hit or open walk.
     pub probe_pass_rows: u32,
     pub probe_pass_marks: u32,
+    /// The resident streamed BLASes the probe rounds' rays hit or passed through (met, or
+    /// marked passed), and their bytes (structures, and each of their meshes once): what of
+    /// the resident set the next frame's rays use. With everything resident and pass marks
+    /// on every row (`--stream-probe-pass-rows 1`), the next frame's *one-pass need*: above
+    /// its `room_bytes`, no residency order can serve that frame in one pass while whole
+    /// BLASes are the unit (exactly so for primary visibility; a shadow ray may also be
+    /// served by another of its occluders). Pass marks off, passed BLASes are not counted.
+    pub probe_need_blases: u32,
+    pub probe_need_bytes: u64,
     /// Structures evicted (BLASes and TLASes), and the bytes released (structures plus their
     /// meshes; also those of structures a refused TLAS rebuild gave back, counted in
     /// `deferred`).
@@ -639,6 +648,8 @@ pub struct StreamingRenderer<'a> {
     /// Per BLAS, what the last probe saw (`PROBE_MET`, `PROBE_RESIDENT` bits), kept for the
     /// next frame's first pass to say why it missed what it missed; empty when no probe ran.
     probe_sighting: Vec<u8>,
+    /// What the probe rounds after this frame used of the resident set (`probe.rs`).
+    probe_need: probe::ProbeNeed,
     /// Set when a failed build step left the root TLAS referencing freed memory.
     poisoned: Option<String>,
     frame: u64,

@@ -121,6 +121,7 @@ impl<'a> StreamingRenderer<'a> {
                 }
             }
         }
+        self.count_probe_need(&stamps, stamp, again.is_none());
         // What the rounds saw together (a later round adds to the first's).
         if again.is_none() || self.probe_sighting.len() != stamps.len() {
             self.probe_sighting = vec![0; stamps.len()];
@@ -145,4 +146,39 @@ impl<'a> StreamingRenderer<'a> {
         demand.sort();
         Ok((demand, incomplete))
     }
+
+    /// `FrameStreamStats::probe_need_blases` and `probe_need_bytes` after a probe round
+    /// (`first`: the first of the frame) that traced under `stamp`: the resident streamed
+    /// BLASes some round's rays met or marked passed, with their bytes then (structures, and
+    /// each of their meshes once).
+    fn count_probe_need(&mut self, stamps: &[u32], stamp: u32, first: bool) {
+        let mut need = std::mem::take(&mut self.probe_need);
+        if first {
+            need = ProbeNeed::default();
+        }
+        for (b, &v) in stamps.iter().enumerate() {
+            let used = v >> 2 == stamp || passed_mark(v, stamp);
+            let Some(a) = self.blas[b].as_ref().filter(|_| used && self.buildable[b]) else {
+                continue;
+            };
+            need.blases.entry(b).or_insert(a.size_bytes);
+            for m in self.blas_meshes(b) {
+                if let Some(g) = self.meshes[m].as_ref() {
+                    need.meshes.entry(m).or_insert(g.size_bytes());
+                }
+            }
+        }
+        self.frame_stats.probe_need_blases = need.blases.len() as u32;
+        self.frame_stats.probe_need_bytes =
+            need.blases.values().sum::<u64>() + need.meshes.values().sum::<u64>();
+        self.probe_need = need;
+    }
+}
+
+/// What the probe rounds of one frame used of the resident set (`count_probe_need`): bytes per
+/// BLAS and per mesh when first met.
+#[derive(Default)]
+pub(super) struct ProbeNeed {
+    blases: std::collections::BTreeMap<usize, u64>,
+    meshes: std::collections::BTreeMap<usize, u64>,
 }

@@ -325,6 +325,7 @@ impl<'a> StreamingRenderer<'a> {
             pass_marks_held: 0,
             next_camera: None,
             probe_sighting: Vec::new(),
+            probe_need: Default::default(),
             poisoned: None,
             frame: 0,
             kept: Default::default(),
