@@ -152,10 +152,11 @@ impl<'a> StreamingRenderer<'a> {
     /// BLASes some round's rays met or marked passed, with their bytes then (structures, and
     /// each of their meshes once).
     fn count_probe_need(&mut self, stamps: &[u32], stamp: u32, first: bool) {
-        let mut need = std::mem::take(&mut self.probe_need);
-        if first {
-            need = ProbeNeed::default();
-        }
+        let mut need = if first {
+            ProbeNeed::default()
+        } else {
+            std::mem::take(&mut self.probe_need)
+        };
         for (b, &v) in stamps.iter().enumerate() {
             let used = v >> 2 == stamp || passed_mark(v, stamp);
             let Some(a) = self.blas[b].as_ref().filter(|_| used && self.buildable[b]) else {
