@@ -262,9 +262,11 @@ pub fn render(pkg: &Path, backend: &str, aov: &Path, extra: &[&str]) -> serde_js
 }
 
 /// Checks a streamed camera path's probe rounds (`render --stream --stats` JSON `st`, at most
-/// `max_rounds` a frame): every frame but the last probes its successor's pixels once and
-/// then, in later rounds, only pixels left open (fewer than all again each round); the last
-/// frame has no successor and probes nothing. Returns how many frames ran more than one round.
+/// `max_rounds` a frame besides the verifying ones): every frame but the last probes its
+/// successor's pixels once and then, in later rounds, only pixels left open (fewer than all
+/// again each round), then in each verifying round (`probe_verify_rounds`, at most two) every
+/// pixel again; the last frame has no successor and probes nothing. Returns how many frames ran
+/// more than one round over open pixels.
 pub fn check_probe_rounds(st: &serde_json::Value, max_rounds: u64) -> usize {
     // Names the key and the frame on failure (json_u64 alone would say only "got null").
     let field = |f: &serde_json::Value, k: &str| {
@@ -276,10 +278,17 @@ pub fn check_probe_rounds(st: &serde_json::Value, max_rounds: u64) -> usize {
     let mut more = 0;
     for (i, f) in frames.iter().enumerate() {
         let (rounds, rays) = (field(f, "probe_rounds"), field(f, "probe_rays"));
+        let verify = field(f, "probe_verify_rounds");
         if i + 1 == frames.len() {
-            assert_eq!((rounds, rays), (0, 0), "the last frame probes nothing: {f}");
+            assert_eq!(
+                (rounds, rays, verify),
+                (0, 0, 0),
+                "the last frame probes nothing: {f}"
+            );
             continue;
         }
+        assert!(verify <= 2 && verify < rounds, "verifying rounds: {f}");
+        let (rounds, rays) = (rounds - verify, rays - verify * pixels);
         assert!((1..=max_rounds).contains(&rounds), "probe rounds: {f}");
         if rounds == 1 {
             assert_eq!(rays, pixels, "one round probes every pixel: {f}");

@@ -260,6 +260,7 @@ fn run_streaming(
             "probe_rays": st.probe_rays,
             "probe_ms": st.probe_ms,
             "probe_rounds": st.probe_rounds,
+            "probe_verify_rounds": st.probe_verify_rounds,
             // Pass marks (`--stream-probe-pass-rows`, auto by default): the probe's row
             // stride (0: none) and the resident structures its rows passed and refreshed.
             "probe_pass_rows": st.probe_pass_rows,
@@ -268,6 +269,7 @@ fn run_streaming(
             // when everything is resident and every row marks.
             "probe_need_blases": st.probe_need_blases,
             "probe_need_bytes": st.probe_need_bytes,
+            "probe_need_mesh_bytes": st.probe_need_mesh_bytes,
             "wall_ms": wall_ms,
             "gpu_ms": out.stats.ms_per_frame,
             "vram_peak_bytes": st.vram_peak_bytes,

@@ -142,6 +142,12 @@ mod tests {
             assert!(e.contains(flag), "{e}");
         };
         refused("--stream-probe-rounds", "0");
+        // Verifying rounds: two by default, 0 turns them off.
+        assert_eq!(d.probe_verify_rounds, 2);
+        let b =
+            cmd::render::stream_bounds(&render_args(&["--stream-probe-verify", "0"]).stream_bounds);
+        assert!(b.given(), "--stream-probe-verify needs --stream");
+        assert_eq!(b.options().probe_verify_rounds, 0);
         // Pass marks: auto by default (also without a probe: it then marks nothing), any row
         // stride; an explicit stride or auto contradicting --stream-probe 0 is refused by name.
         assert_eq!(d.pass_marks, motu_gpu::PassMarks::Auto);

@@ -22,6 +22,8 @@ pub struct StreamBounds {
     pub probe_stride: Option<u32>,
     /// `--stream-probe-rounds`: most probe rounds after a frame (`None`: the default).
     pub probe_rounds: Option<u32>,
+    /// `--stream-probe-verify`: verifying probe rounds after those (`None`: the default).
+    pub probe_verify: Option<u32>,
     /// `--stream-probe-pass-rows`: the probe's pass marks (`None`: the default, auto).
     pub pass_marks: Option<motu_gpu::PassMarks>,
     /// `--stream-tlas`: how TLASes follow residency.
@@ -43,6 +45,7 @@ impl StreamBounds {
             frame_build_ms: self.frame_build_ms.unwrap_or(0.0),
             probe_stride: self.probe_stride.unwrap_or(d.probe_stride),
             probe_rounds: self.probe_rounds.unwrap_or(d.probe_rounds),
+            probe_verify_rounds: self.probe_verify.unwrap_or(d.probe_verify_rounds),
             pass_marks: self.pass_marks.unwrap_or(d.pass_marks),
             tlas_update: self.tlas_update,
             defrag: self.defrag,
@@ -72,6 +75,7 @@ impl StreamBounds {
             || self.frame_build_ms.is_some()
             || self.probe_stride.is_some()
             || self.probe_rounds.is_some()
+            || self.probe_verify.is_some()
             || self.pass_marks.is_some()
             || self.tlas_update != motu_gpu::TlasUpdate::Auto
             || self.split_instances.is_some()

@@ -114,6 +114,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             stream_build_ms: None,
             stream_probe: None,
             stream_probe_rounds: None,
+            stream_probe_verify: None,
             stream_probe_pass_rows: None,
             stream_tlas: crate::cli::StreamTlasArg::Auto,
             stream_split_instances: None,

@@ -15,7 +15,8 @@ pub use motu_render::{
 };
 
 /// The streaming bounds of `--stream-fallback`, `--stream-build-budget`, `--stream-build-ms`,
-/// `--stream-probe`, `--stream-probe-rounds`, `--stream-probe-pass-rows`, `--stream-tlas` and
+/// `--stream-probe`, `--stream-probe-rounds`, `--stream-probe-verify`,
+/// `--stream-probe-pass-rows`, `--stream-tlas` and
 /// `--stream-split-instances`.
 pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBounds {
     motu_render::StreamBounds {
@@ -27,6 +28,7 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         frame_build_ms: b.stream_build_ms,
         probe_stride: b.stream_probe,
         probe_rounds: b.stream_probe_rounds,
+        probe_verify: b.stream_probe_verify,
         pass_marks: b.stream_probe_pass_rows,
         tlas_update: b.stream_tlas.into(),
         split_instances: b.stream_split_instances,

@@ -87,7 +87,7 @@ impl<'a> StreamingRenderer<'a> {
                         && self.frame_stats.complete
                         && !self.frame_build_spent() =>
                 {
-                    Some((n, self.probe_next_camera(&fb, &n, opts, None)?))
+                    Some((n, self.probe_next_camera(&fb, &n, opts, None, false)?))
                 }
                 _ => None,
             };
@@ -114,6 +114,7 @@ impl<'a> StreamingRenderer<'a> {
         // probe of the next camera, what its rays need comes first, and only what the probe
         // saw is kept: this frame is done, the next one is what the room is for.
         let mut again = None;
+        let evictions_at_probe = self.evictions;
         if let Some((next, (p, open))) = probe {
             let needed = p.needed_ids();
             guard_demand.merge_first(p);
@@ -124,7 +125,9 @@ impl<'a> StreamingRenderer<'a> {
             if let Err(e) = self
                 .make_resident(&guard_demand, true)
                 .and_then(|()| match again {
-                    Some((next, open, needed)) => self.probe_again(&next, opts, open, needed),
+                    Some((next, open, needed)) => {
+                        self.probe_again(&next, opts, open, needed, evictions_at_probe)
+                    }
                     None => Ok(()),
                 })
             {
@@ -238,14 +241,19 @@ impl<'a> StreamingRenderer<'a> {
     /// Later probe rounds (`StreamOptions::probe_rounds`): the pixels `open` the round before
     /// left open are probed again against what the prefetch just built, and what they need is
     /// prefetched, while the prefetch built some structure a round's rays `needed` first (the
-    /// open pixels' rays go on from there) and pixels stay open.
+    /// open pixels' rays go on from there) and pixels stay open. Then verifying rounds
+    /// (`StreamOptions::probe_verify_rounds`) over every pixel, unless the rounds settled
+    /// (no pixel left open) and nothing was evicted since the first probe (`self.evictions`
+    /// was `evictions_at_probe` then): the next frame then finds everything its rays need.
     fn probe_again(
         &mut self,
         next: &CameraParams,
         opts: &RenderOptions,
         mut open: Vec<u32>,
         mut needed: Vec<u32>,
+        evictions_at_probe: u64,
     ) -> Result<()> {
+        let mut settled = open.is_empty();
         while !open.is_empty()
             && self.frame_stats.probe_rounds < self.opts.probe_rounds
             && needed.iter().any(|&b| self.blas[b as usize].is_some())
@@ -254,15 +262,44 @@ impl<'a> StreamingRenderer<'a> {
             let Some((fb, w, h, g)) = self.take_kept_frame_buffers() else {
                 return Ok(());
             };
-            let probed = self.probe_next_camera(&fb, next, opts, Some(&open));
+            let probed = self.probe_next_camera(&fb, next, opts, Some(&open), false);
             self.keep_frame_buffers(fb, w, h, g);
             let (demand, still_open) = probed?;
             needed = demand.needed_ids();
             if needed.is_empty() {
+                settled = true;
                 break;
             }
             self.make_resident(&demand, true)?;
             open = still_open;
+            settled = open.is_empty();
+        }
+        // Verifying rounds: the prefetch evicted, for room, structures no round met, and the
+        // next frame's rays may pass through some of them; every pixel again finds those.
+        let mut evictions_since = evictions_at_probe;
+        while self.frame_stats.probe_verify_rounds < self.opts.probe_verify_rounds
+            && !(settled && self.evictions == evictions_since)
+            && !self.frame_build_spent()
+        {
+            self.frame_stats.probe_verify_rounds += 1;
+            let Some((fb, w, h, g)) = self.take_kept_frame_buffers() else {
+                return Ok(());
+            };
+            let probed = self.probe_next_camera(&fb, next, opts, None, true);
+            self.keep_frame_buffers(fb, w, h, g);
+            let (demand, still_open) = probed?;
+            if demand.needed_ids().is_empty() {
+                break;
+            }
+            let built = self.frame_stats.prefetched;
+            evictions_since = self.evictions;
+            self.make_resident(&demand, true)?;
+            if self.frame_stats.prefetched == built {
+                break;
+            }
+            // Its open pixels' rays go on past what it built: another round is needed even
+            // if nothing was evicted.
+            settled = still_open.is_empty();
         }
         Ok(())
     }

@@ -70,7 +70,9 @@
 //! included: each TLAS's *marks* BLAS, seen only by probe rays, holds its resident clusters'
 //! boxes; see `probe.rs`). A probe ray stops at its first non-resident structure, so later
 //! probe rounds ([`StreamOptions::probe_rounds`]) trace again only the pixels a round left
-//! open, against what its prefetch built, and prefetch what their rays reach from there.
+//! open, against what its prefetch built, and prefetch what their rays reach from there;
+//! verifying rounds ([`StreamOptions::probe_verify_rounds`]) then probe every pixel again and
+//! bring back what the prefetch evicted that the next frame's rays still pass through.
 //!
 //! # Eviction and the budget
 //! Allocations go through `motu-alloc` (standard blocks a 64th of the budget, a block of its
@@ -174,6 +176,20 @@ pub struct StreamOptions {
     /// 1.182 passes after the first at the same frame time; at a quarter 2.636 → 2.364, the
     /// image 13% sooner and the whole frame 19% longer; BENCHMARKS.md, session 22).
     pub probe_rounds: u32,
+    /// Verifying probe rounds after those (`--stream-probe-verify`; 0: none): every pixel of
+    /// the next camera probed again against what the prefetch left resident, and what its
+    /// rays now find missing prefetched, until a round finds nothing missing, its prefetch
+    /// builds nothing, or this many ran. The prefetch evicts for room what no probe ray met,
+    /// and some of that the next frame's rays pass through on their way to their hits; a
+    /// verifying round finds it before the frame does. A round's own prefetch may evict
+    /// another such structure, so the default is two: one round left the H200's third at
+    /// 1.455 passes after the first, two at 1.000. H200, island 0.3 along shotCam, two rounds
+    /// against none (BENCHMARKS.md, session 28): primary visibility at a quarter of the full
+    /// build 1.909 → 1.091 passes after the first at about the same frame time; shaded at half
+    /// 1.182 → 1.000 (frames +12%), at a third 1.182 → 1.000 (+53%), at a quarter 2.364 →
+    /// 2.182 (capacity-bound). Each round costs a probe trace and, when it finds something, a
+    /// build step with its TLAS rebuilds.
+    pub probe_verify_rounds: u32,
     /// Pass marks of the probe (see [`PassMarks`]); [`PassMarks::Auto`] by default.
     pub pass_marks: PassMarks,
     /// Bytes (meshes plus acceleration structures) one frame may build; 0: unbounded. At least
@@ -288,6 +304,7 @@ impl Default for StreamOptions {
             build_open_early: true,
             probe_stride: 1,
             probe_rounds: 2,
+            probe_verify_rounds: 2,
             pass_marks: PassMarks::Auto,
             fallback: StreamFallback::Off,
             frame_build_bytes: 0,
@@ -342,6 +359,9 @@ pub struct FrameStreamStats {
     /// the next camera's pixels, each later one only the pixels the round before left open,
     /// after the prefetch built what they needed.
     pub probe_rounds: u32,
+    /// Of `probe_rounds`: verifying rounds (`StreamOptions::probe_verify_rounds`), each over
+    /// every pixel after the rounds before had prefetched.
+    pub probe_verify_rounds: u32,
     /// The row stride of the probe's pass marks after this frame (0: none;
     /// `StreamOptions::pass_marks`), and the resident BLASes they refreshed: passed by a final
     /// probe ray, met by no probe ray's hit or open walk.
@@ -356,6 +376,10 @@ pub struct FrameStreamStats {
     /// served by another of its occluders). Pass marks off, passed BLASes are not counted.
     pub probe_need_blases: u32,
     pub probe_need_bytes: u64,
+    /// Of `probe_need_bytes`: the meshes (geometry and shading attributes), what a unit of
+    /// residency smaller than a BLAS and its meshes could leave out for structures rays only
+    /// pass or only shadow and AO rays meet.
+    pub probe_need_mesh_bytes: u64,
     /// Structures evicted (BLASes and TLASes), and the bytes released (structures plus their
     /// meshes; also those of structures a refused TLAS rebuild gave back, counted in
     /// `deferred`).
@@ -650,6 +674,9 @@ pub struct StreamingRenderer<'a> {
     probe_sighting: Vec<u8>,
     /// What the probe rounds after this frame used of the resident set (`probe.rs`).
     probe_need: probe::ProbeNeed,
+    /// BLASes evicted since the renderer started (also those given back; never decremented):
+    /// whether a prefetch removed anything since a probe.
+    evictions: u64,
     /// Set when a failed build step left the root TLAS referencing freed memory.
     poisoned: Option<String>,
     frame: u64,

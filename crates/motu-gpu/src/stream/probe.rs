@@ -40,6 +40,17 @@
 //! probes only those pixels and prefetches what they need, while the prefetch built a
 //! structure the round before needed first and pixels stay open
 //! (`StreamOptions::probe_rounds`).
+//!
+//! The prefetch makes room by evicting what no probe ray met, least recently seen first, and
+//! without pass marks on every row the structures the next frame's rays only pass through look
+//! like any other: at a quarter of island 0.3's full build (H200, primary visibility) the next
+//! frames' first passes missed 8–64 such structures each, and every frame took two passes
+//! although what the frames need was 0.64–0.77 of the room. *Verifying rounds*
+//! (`StreamOptions::probe_verify_rounds`) then probe every pixel again against what the
+//! prefetch left resident and prefetch what is now missing (their sightings, need and marks
+//! add to the first round's, so what any round met stays pinned): 1.909 → 1.091 passes after
+//! the first there (BENCHMARKS.md, session 28). They are skipped when the rounds before left
+//! no pixel open and nothing was evicted since the first probe.
 
 use motu_abi::camera::CameraParams;
 use motu_alloc::ItemId;
@@ -65,7 +76,11 @@ impl<'a> StreamingRenderer<'a> {
         next: &CameraParams,
         opts: &RenderOptions,
         again: Option<&[u32]>,
+        verify: bool,
     ) -> Result<(Demand, Vec<u32>)> {
+        // A later round (open pixels, or a verifying round over every pixel) adds to the
+        // first round's sightings, need and marks.
+        let later = again.is_some() || verify;
         let mut params = frame_params(next, opts, self.view.root_tlas);
         params.shading = self.shading.address;
         fb.params.write(0, std::slice::from_ref(&params))?;
@@ -90,12 +105,13 @@ impl<'a> StreamingRenderer<'a> {
         };
         let rays = u64::from(full) + list.len() as u64;
         // A later round marks as the first did.
-        let pass_rows = match again {
-            None => self.opts.pass_marks.rows(super::PassMarks::auto_window(
+        let pass_rows = if later {
+            self.frame_stats.probe_pass_rows
+        } else {
+            self.opts.pass_marks.rows(super::PassMarks::auto_window(
                 self.frame,
                 self.pass_marks_held,
-            )),
-            Some(_) => self.frame_stats.probe_pass_rows,
+            ))
         };
         self.frame_stats.probe_pass_rows = pass_rows;
         let resident: Vec<bool> = self.blas.iter().map(Option::is_some).collect();
@@ -109,9 +125,10 @@ impl<'a> StreamingRenderer<'a> {
         if pass_rows > 0 {
             // Passed by a final ray only: as recent as the frame's last pass (a later round:
             // as the first round's), below what the probe met, so not kept by the prefetch.
-            let at = match again {
-                None => stamp - 1,
-                Some(_) => self.frame_first_stamp.saturating_sub(1),
+            let at = if later {
+                self.frame_first_stamp.saturating_sub(1)
+            } else {
+                stamp - 1
             };
             for (b, &v) in stamps.iter().enumerate() {
                 if passed_mark(v, stamp) && self.blas[b].is_some() && self.buildable[b] {
@@ -121,9 +138,9 @@ impl<'a> StreamingRenderer<'a> {
                 }
             }
         }
-        self.count_probe_need(&stamps, stamp, again.is_none());
+        self.count_probe_need(&stamps, stamp, !later);
         // What the rounds saw together (a later round adds to the first's).
-        if again.is_none() || self.probe_sighting.len() != stamps.len() {
+        if !later || self.probe_sighting.len() != stamps.len() {
             self.probe_sighting = vec![0; stamps.len()];
         }
         for ((s, &v), &r) in self.probe_sighting.iter_mut().zip(&stamps).zip(&resident) {
@@ -170,8 +187,9 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         self.frame_stats.probe_need_blases = need.blases.len() as u32;
-        self.frame_stats.probe_need_bytes =
-            need.blases.values().sum::<u64>() + need.meshes.values().sum::<u64>();
+        let mesh_bytes = need.meshes.values().sum::<u64>();
+        self.frame_stats.probe_need_bytes = need.blases.values().sum::<u64>() + mesh_bytes;
+        self.frame_stats.probe_need_mesh_bytes = mesh_bytes;
         self.probe_need = need;
     }
 }

@@ -69,6 +69,7 @@ impl<'a> StreamingRenderer<'a> {
     pub(super) fn evict(&mut self, b: usize) {
         let bytes = self.residency.remove(ItemId(b as u32)).unwrap_or(0);
         self.frame_stats.evicted += 1;
+        self.evictions += 1;
         self.frame_stats.evicted_bytes += bytes;
         if let Some(a) = self.blas.get_mut(b).and_then(Option::take) {
             a.release(&mut self.heap);

@@ -326,6 +326,7 @@ impl<'a> StreamingRenderer<'a> {
             next_camera: None,
             probe_sighting: Vec::new(),
             probe_need: Default::default(),
+            evictions: 0,
             poisoned: None,
             frame: 0,
             kept: Default::default(),
