@@ -354,6 +354,13 @@ fn probe_need_is_what_the_next_frame_hits_and_passes() {
             need(h).0 > 0 && need(h).1 > 0,
             "frame {k}'s probe hit resident BLASes: {h}"
         );
+        // Meshes are part of the need and of the working set, never all of either.
+        for f in [h, a, p] {
+            let mesh = u(&f["probe_need_mesh_bytes"]);
+            assert!(mesh > 0 && mesh < need(f).1, "frame {k}: {f}");
+            let ws = (u(&f["working_set_mesh_bytes"]), u(&f["working_set_bytes"]));
+            assert!(ws.0 > 0 && ws.0 < ws.1, "frame {k}: {f}");
+        }
         assert_eq!(
             need(p),
             need(a),

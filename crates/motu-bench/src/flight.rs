@@ -275,6 +275,7 @@ fn run_streaming(
             "vram_peak_bytes": st.vram_peak_bytes,
             // Above the room, the frame's rays cannot all be served in one pass.
             "working_set_bytes": st.working_set_bytes,
+            "working_set_mesh_bytes": st.working_set_mesh_bytes,
             "room_bytes": st.room_bytes,
             // Why the first pass missed what it needed (another pass follows).
             "first_pass_missed_evicted": st.first_pass_missed_evicted,

@@ -103,12 +103,18 @@ impl<'a> StreamingRenderer<'a> {
         self.keep_frame_buffers(fb, w, h, guard.len());
         let (records, rgba_words, counters, mut guard_demand) = out;
         // The working set of the frame's rays (before the prefetch builds for the next).
+        let mut working_meshes = std::collections::BTreeSet::new();
         for (b, &f) in self.used_in_frame.iter().enumerate() {
             if f == self.frame {
                 self.frame_stats.working_set_blases += 1;
                 self.frame_stats.working_set_bytes += self.blas_bytes[b];
+                working_meshes.extend(self.blas_meshes(b));
             }
         }
+        self.frame_stats.working_set_mesh_bytes = working_meshes
+            .into_iter()
+            .filter_map(|m| self.meshes[m].as_ref().map(|g| g.size_bytes()))
+            .sum();
         // Prefetch: what the guard band saw, evicting only what this frame did not see (what
         // does not fit is skipped), within what is left of the frame's build budget. With a
         // probe of the next camera, what its rays need comes first, and only what the probe

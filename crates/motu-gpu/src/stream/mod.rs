@@ -447,6 +447,12 @@ pub struct FrameStreamStats {
     /// leaves for structures, some BLAS must be built more than once in the frame.
     pub working_set_blases: u32,
     pub working_set_bytes: u64,
+    /// Of `working_set_bytes`: the working set's meshes, each once (resident at the frame's
+    /// end). With everything resident, a frame's one-pass need under a unit of residency that
+    /// keeps meshes apart from structures is at most the previous frame's `probe_need_bytes`
+    /// less its `probe_need_mesh_bytes` plus this: only BLASes rays hit need their meshes
+    /// (`tools/stream-need.sh` prints that bound).
+    pub working_set_mesh_bytes: u64,
     /// Why the first pass found structures missing (each one needed by some pixel, so the
     /// frame takes another pass), judged against the previous frame's probe of this camera:
     /// resident while the probe ran but met by none of its rays (passed without a hit: the
