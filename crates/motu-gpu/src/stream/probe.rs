@@ -66,7 +66,9 @@ use crate::render::{frame_params, RenderOptions};
 impl<'a> StreamingRenderer<'a> {
     /// Traces the probe of `next` (same image size as the frame just rendered, whose buffers
     /// `fb` are): every `probe_stride`-th pixel, or only the pixels `again` (a later round:
-    /// those an earlier round left open, packed `x | y << 16`). Returns what it met that is not
+    /// those an earlier round left open, packed `x | y << 16`); `verify`: a verifying round,
+    /// every `probe_stride`-th pixel again, adding to the earlier rounds as `again` does.
+    /// Returns what it met that is not
     /// resident: the structures some ray would open first (most requested first), then the
     /// rest of what its rays met; and the pixels some ray of which needed one of them. Resident
     /// structures it met count as seen by this frame, so the prefetch does not evict them.
