@@ -265,12 +265,9 @@ impl<'a> StreamingRenderer<'a> {
             && needed.iter().any(|&b| self.blas[b as usize].is_some())
             && !self.frame_build_spent()
         {
-            let Some((fb, w, h, g)) = self.take_kept_frame_buffers() else {
+            let Some((demand, still_open)) = self.probe_round(next, opts, Some(&open))? else {
                 return Ok(());
             };
-            let probed = self.probe_next_camera(&fb, next, opts, Some(&open), false);
-            self.keep_frame_buffers(fb, w, h, g);
-            let (demand, still_open) = probed?;
             needed = demand.needed_ids();
             if needed.is_empty() {
                 settled = true;
@@ -280,33 +277,45 @@ impl<'a> StreamingRenderer<'a> {
             open = still_open;
             settled = open.is_empty();
         }
+        if settled && self.evictions == evictions_at_probe {
+            return Ok(());
+        }
         // Verifying rounds: the prefetch evicted, for room, structures no round met, and the
-        // next frame's rays may pass through some of them; every pixel again finds those.
-        let mut evictions_since = evictions_at_probe;
+        // next frame's rays may pass through some of them; every pixel again finds those. A
+        // round that built something leaves its open pixels' rays going on past it, so the
+        // next round runs whether or not it evicted.
         while self.frame_stats.probe_verify_rounds < self.opts.probe_verify_rounds
-            && !(settled && self.evictions == evictions_since)
             && !self.frame_build_spent()
         {
             self.frame_stats.probe_verify_rounds += 1;
-            let Some((fb, w, h, g)) = self.take_kept_frame_buffers() else {
+            let Some((demand, _)) = self.probe_round(next, opts, None)? else {
                 return Ok(());
             };
-            let probed = self.probe_next_camera(&fb, next, opts, None, true);
-            self.keep_frame_buffers(fb, w, h, g);
-            let (demand, still_open) = probed?;
             if demand.needed_ids().is_empty() {
                 break;
             }
             let built = self.frame_stats.prefetched;
-            evictions_since = self.evictions;
             self.make_resident(&demand, true)?;
             if self.frame_stats.prefetched == built {
                 break;
             }
-            // Its open pixels' rays go on past what it built: another round is needed even
-            // if nothing was evicted.
-            settled = still_open.is_empty();
         }
         Ok(())
+    }
+
+    /// One later probe round in the kept frame buffers: the pixels `again`, or (None) a
+    /// verifying round over every pixel. None when no buffers are kept.
+    fn probe_round(
+        &mut self,
+        next: &CameraParams,
+        opts: &RenderOptions,
+        again: Option<&[u32]>,
+    ) -> Result<Option<(super::demand::Demand, Vec<u32>)>> {
+        let Some((fb, w, h, g)) = self.take_kept_frame_buffers() else {
+            return Ok(None);
+        };
+        let probed = self.probe_next_camera(&fb, next, opts, again, again.is_none());
+        self.keep_frame_buffers(fb, w, h, g);
+        probed.map(Some)
     }
 }
