@@ -33,15 +33,26 @@ pub fn motu_bin() -> PathBuf {
 
 /// Runs `motu` with `args`; returns the output whatever the exit status.
 pub fn motu(args: &[&str]) -> Output {
+    motu_env(args, &[])
+}
+
+/// [`motu`] with environment variables set.
+pub fn motu_env(args: &[&str], env: &[(&str, &str)]) -> Output {
     Command::new(motu_bin())
         .args(args)
+        .envs(env.iter().copied())
         .output()
         .expect("spawning motu")
 }
 
 /// Runs `motu` and asserts success, returning stdout.
 pub fn motu_ok(args: &[&str]) -> String {
-    let out = motu(args);
+    motu_ok_env(args, &[])
+}
+
+/// [`motu_ok`] with environment variables set.
+pub fn motu_ok_env(args: &[&str], env: &[(&str, &str)]) -> String {
+    let out = motu_env(args, env);
     assert!(
         out.status.success(),
         "motu {} failed:\nstdout: {}\nstderr: {}",
@@ -241,6 +252,17 @@ pub fn import(scene: &Path, pkg: &Path, extra: &[&str]) {
 /// `motu render` with `backend`, writing the AOV to `aov` (PNG and stats JSON beside it);
 /// returns the stats.
 pub fn render(pkg: &Path, backend: &str, aov: &Path, extra: &[&str]) -> serde_json::Value {
+    render_env(pkg, backend, aov, extra, &[])
+}
+
+/// [`render`] with environment variables set.
+pub fn render_env(
+    pkg: &Path,
+    backend: &str,
+    aov: &Path,
+    extra: &[&str],
+    env: &[(&str, &str)],
+) -> serde_json::Value {
     let stats = aov.with_extension("json");
     let png = aov.with_extension("png");
     let mut args = vec![
@@ -256,7 +278,7 @@ pub fn render(pkg: &Path, backend: &str, aov: &Path, extra: &[&str]) -> serde_js
         s(&stats),
     ];
     args.extend(extra);
-    motu_ok(&args);
+    motu_ok_env(&args, env);
     serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats written"))
         .expect("stats JSON")
 }

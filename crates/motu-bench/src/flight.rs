@@ -273,6 +273,8 @@ fn run_streaming(
             "wall_ms": wall_ms,
             "gpu_ms": out.stats.ms_per_frame,
             "vram_peak_bytes": st.vram_peak_bytes,
+            // Meshes in host memory outside the budget (`--stream-mesh-memory`).
+            "resident_host_mesh_bytes": st.resident_host_mesh_bytes,
             // Above the room, the frame's rays cannot all be served in one pass.
             "working_set_bytes": st.working_set_bytes,
             "working_set_mesh_bytes": st.working_set_mesh_bytes,
@@ -322,6 +324,8 @@ fn run_streaming(
         "mean_build_ms": mean("build_ms", 0),
         "mean_tlas_ms": mean("tlas_ms", 0),
         "tlas_mode": totals.tlas_mode,
+        "mesh_memory": totals.mesh_memory,
+        "host_mesh_peak_bytes": totals.host_mesh_peak_bytes,
         "mean_trace_ms": mean("trace_ms", 0),
         "mean_probe_ms": mean("probe_ms", 0),
         "mean_wall_ms": mean("wall_ms", 0),

@@ -401,6 +401,33 @@ pub struct StreamBoundArgs {
     /// passes after the first, the same image), not yet on a GPU.
     #[arg(long)]
     pub stream_defrag: bool,
+    /// Streaming: where streamed meshes (positions, indices, shading attributes) live. `host`:
+    /// host memory the GPU reads over the bus (only hits and BLAS builds read meshes), outside
+    /// the VRAM budget, which then holds acceleration structures and textures alone; `device`:
+    /// VRAM, counted against the budget. `auto` (default): host on a discrete GPU, device
+    /// where host memory is the same memory and counts against the budget (lavapipe,
+    /// integrated GPUs). --stats reports the choice (stream.mesh_memory) and the host bytes
+    /// (host_mesh_peak_bytes, resident_host_mesh_bytes per frame).
+    #[arg(long, value_enum, default_value = "auto")]
+    pub stream_mesh_memory: MeshMemoryArg,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum MeshMemoryArg {
+    #[default]
+    Auto,
+    Device,
+    Host,
+}
+
+impl From<MeshMemoryArg> for motu_gpu::MeshMemory {
+    fn from(a: MeshMemoryArg) -> Self {
+        match a {
+            MeshMemoryArg::Auto => motu_gpu::MeshMemory::Auto,
+            MeshMemoryArg::Device => motu_gpu::MeshMemory::Device,
+            MeshMemoryArg::Host => motu_gpu::MeshMemory::Host,
+        }
+    }
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]

@@ -159,6 +159,19 @@ mod tests {
         let b = cmd::render::stream_bounds(&render_args(&["--stream-defrag"]).stream_bounds);
         assert!(b.given(), "--stream-defrag needs --stream");
         assert!(b.options().defrag);
+        // Mesh memory: auto by default (host on a discrete GPU); device and host name it.
+        assert_eq!(d.mesh_memory, motu_gpu::MeshMemory::Auto);
+        assert_eq!(o.mesh_memory, motu_gpu::MeshMemory::Auto);
+        for (flag, want) in [
+            ("device", motu_gpu::MeshMemory::Device),
+            ("host", motu_gpu::MeshMemory::Host),
+        ] {
+            let b = cmd::render::stream_bounds(
+                &render_args(&["--stream-mesh-memory", flag]).stream_bounds,
+            );
+            assert!(b.given(), "--stream-mesh-memory needs --stream");
+            assert_eq!(b.options().mesh_memory, want);
+        }
         for (flag, want) in [
             ("2", motu_gpu::PassMarks::Rows(2)),
             ("0", motu_gpu::PassMarks::Off),

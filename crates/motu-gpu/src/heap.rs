@@ -30,6 +30,12 @@ impl std::ops::Deref for HeapBuffer {
     }
 }
 
+/// `MOTU_SIMULATE_DISCRETE_MEMORY=1`: host-visible memory is counted apart from the budget
+/// even where it is the same memory as device-local (see [`GpuHeap::with_blocks`]).
+pub fn simulate_discrete_memory() -> bool {
+    std::env::var_os("MOTU_SIMULATE_DISCRETE_MEMORY").is_some_and(|v| v == "1")
+}
+
 /// Every usage a heap buffer may have: blocks get a memory type all of them accept.
 const ALL_USAGES: BufferUsage = BufferUsage::TRANSFER_SRC
     .union(BufferUsage::TRANSFER_DST)
@@ -116,7 +122,10 @@ impl GpuHeap {
         let device_local = ctx.memory_type_index(MemoryLocation::DeviceLocal, bits)?;
         let upload = ctx.memory_type_index(MemoryLocation::Upload, bits)?;
         // Unified memory (lavapipe, integrated GPUs): host-visible blocks use the same heap.
-        let unified = device_local == upload;
+        // MOTU_SIMULATE_DISCRETE_MEMORY=1 counts them apart as a discrete GPU does, so tests on
+        // lavapipe can check what host memory outside the budget does (the counts only: the
+        // memory is the same).
+        let unified = device_local == upload && !simulate_discrete_memory();
         let policy = AllocPolicy {
             host_visible_counts_against_budget: unified,
             block_size_bytes,

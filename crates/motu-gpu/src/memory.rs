@@ -553,6 +553,14 @@ impl Buffer {
         }))
     }
 
+    /// Whether the buffer is bound to host-mapped memory (writable with
+    /// [`Buffer::write_bytes`] without a staging copy).
+    pub fn is_host_mapped(&self) -> bool {
+        self.binding
+            .as_ref()
+            .is_some_and(|(mem, _)| mem.is_mapped())
+    }
+
     fn mapped(&self) -> Result<(&Arc<DeviceMemory>, u64)> {
         let (mem, base) = self.binding.as_ref().ok_or_else(|| {
             GpuError::InvalidRequest(format!("buffer {:?} is not bound", self.label))

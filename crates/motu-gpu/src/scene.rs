@@ -54,7 +54,9 @@ pub(crate) use tables::{
     aabbs_geometry, blas_geometry, box_list_instances, encode_instance, pi_aabbs, pi_capacity,
     set_instance_mask, MAX_PI_CAPACITY,
 };
-pub(crate) use upload::{streamed_attribute_bytes, MeshGpu, MeshStager, Uploader};
+pub(crate) use upload::{
+    streamed_attribute_bytes, streamed_mesh_bytes, MeshGpu, MeshStager, Uploader,
+};
 
 /// Geometry of one compiled mesh, by its index in the hierarchy's mesh table (e.g. slices of a
 /// mapped package chunk, borrowed). `Sync`: the streaming renderer reads meshes from several

@@ -33,6 +33,8 @@ pub struct StreamBounds {
     pub split_instances: Option<u32>,
     /// `--stream-defrag`: drain part-used memory blocks before evicting (off by default).
     pub defrag: bool,
+    /// `--stream-mesh-memory`: where streamed meshes live.
+    pub mesh_memory: motu_gpu::MeshMemory,
 }
 
 impl StreamBounds {
@@ -49,6 +51,7 @@ impl StreamBounds {
             pass_marks: self.pass_marks.unwrap_or(d.pass_marks),
             tlas_update: self.tlas_update,
             defrag: self.defrag,
+            mesh_memory: self.mesh_memory,
             ..d
         }
     }
@@ -80,6 +83,7 @@ impl StreamBounds {
             || self.tlas_update != motu_gpu::TlasUpdate::Auto
             || self.split_instances.is_some()
             || self.defrag
+            || self.mesh_memory != motu_gpu::MeshMemory::Auto
     }
 }
 

@@ -119,6 +119,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             stream_tlas: crate::cli::StreamTlasArg::Auto,
             stream_split_instances: None,
             stream_defrag: false,
+            stream_mesh_memory: crate::cli::MeshMemoryArg::Auto,
         },
         frames: 1,
         stats: Some(stats_path.clone()),

@@ -16,8 +16,8 @@ pub use motu_render::{
 
 /// The streaming bounds of `--stream-fallback`, `--stream-build-budget`, `--stream-build-ms`,
 /// `--stream-probe`, `--stream-probe-rounds`, `--stream-probe-verify`,
-/// `--stream-probe-pass-rows`, `--stream-tlas` and
-/// `--stream-split-instances`.
+/// `--stream-probe-pass-rows`, `--stream-tlas`, `--stream-split-instances`, `--stream-defrag`
+/// and `--stream-mesh-memory`.
 pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBounds {
     motu_render::StreamBounds {
         fallback: match b.stream_fallback {
@@ -33,6 +33,7 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         tlas_update: b.stream_tlas.into(),
         split_instances: b.stream_split_instances,
         defrag: b.stream_defrag,
+        mesh_memory: b.stream_mesh_memory.into(),
     }
 }
 

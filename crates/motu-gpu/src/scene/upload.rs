@@ -327,33 +327,23 @@ pub(crate) fn streamed_attribute_bytes(rec: &MeshRecord) -> (u64, u64) {
     (normals, uvs)
 }
 
-impl MeshGpu {
-    /// Allocates the buffer of mesh record `m` (positions, then indices at a 16-byte offset,
-    /// then a cluster's primitive map).
-    pub(crate) fn alloc(heap: &mut GpuHeap, m: usize, rec: &MeshRecord) -> Result<MeshGpu> {
-        Self::alloc_with(heap, m, rec, false)
-    }
+/// Where a mesh's parts lie in its buffer.
+struct MeshLayout {
+    /// Offset of the indices (after the positions, 16-byte aligned).
+    idx_offset: u64,
+    /// Bytes of positions, indices and a cluster's primitive map (16-byte aligned when
+    /// attributes follow).
+    geometry: u64,
+    normal_bytes: u64,
+    uv_bytes: u64,
+    size_bytes: u64,
+}
 
-    /// [`MeshGpu::alloc`] plus room for the mesh's shading attributes after its geometry (the
-    /// streaming renderer: they must be resident whenever a hit on the mesh is resolved).
-    pub(crate) fn alloc_streamed(
-        heap: &mut GpuHeap,
-        m: usize,
-        rec: &MeshRecord,
-    ) -> Result<MeshGpu> {
-        Self::alloc_with(heap, m, rec, true)
-    }
-
-    fn alloc_with(
-        heap: &mut GpuHeap,
-        m: usize,
-        rec: &MeshRecord,
-        attributes: bool,
-    ) -> Result<MeshGpu> {
+impl MeshLayout {
+    fn of(rec: &MeshRecord, attributes: bool) -> MeshLayout {
         let pos_bytes = u64::from(rec.vertex_count) * 12;
         let idx_offset = pos_bytes.div_ceil(16) * 16;
-        let has_primitive_map = rec.flags & motu_abi::FLAG_PRIMITIVE_MAP != 0;
-        let map_bytes = if has_primitive_map {
+        let map_bytes = if rec.flags & motu_abi::FLAG_PRIMITIVE_MAP != 0 {
             u64::from(rec.triangle_count) * 4
         } else {
             0
@@ -367,13 +357,55 @@ impl MeshGpu {
         if normal_bytes + uv_bytes > 0 {
             geometry = geometry.div_ceil(16) * 16;
         }
-        let size = geometry + normal_bytes + uv_bytes;
+        MeshLayout {
+            idx_offset,
+            geometry,
+            normal_bytes,
+            uv_bytes,
+            size_bytes: geometry + normal_bytes + uv_bytes,
+        }
+    }
+}
+
+/// Bytes of the buffer [`MeshGpu::alloc_streamed`] gives mesh record `rec`.
+pub(crate) fn streamed_mesh_bytes(rec: &MeshRecord) -> u64 {
+    MeshLayout::of(rec, true).size_bytes
+}
+
+impl MeshGpu {
+    /// Allocates the buffer of mesh record `m` (positions, then indices at a 16-byte offset,
+    /// then a cluster's primitive map).
+    pub(crate) fn alloc(heap: &mut GpuHeap, m: usize, rec: &MeshRecord) -> Result<MeshGpu> {
+        Self::alloc_with(heap, m, rec, false, MemoryClass::DeviceLocal)
+    }
+
+    /// [`MeshGpu::alloc`] plus room for the mesh's shading attributes after its geometry (the
+    /// streaming renderer: they must be resident whenever a hit on the mesh is resolved).
+    /// in memory of `class` (host-visible: the streamer's meshes on a discrete GPU, read by
+    /// shaders and builds over the bus and written in place, outside the VRAM budget).
+    pub(crate) fn alloc_streamed(
+        heap: &mut GpuHeap,
+        m: usize,
+        rec: &MeshRecord,
+        class: MemoryClass,
+    ) -> Result<MeshGpu> {
+        Self::alloc_with(heap, m, rec, true, class)
+    }
+
+    fn alloc_with(
+        heap: &mut GpuHeap,
+        m: usize,
+        rec: &MeshRecord,
+        attributes: bool,
+        class: MemoryClass,
+    ) -> Result<MeshGpu> {
+        let layout = MeshLayout::of(rec, attributes);
         let buf = heap.alloc_buffer(
             &format!("mesh-{m}"),
-            size,
+            layout.size_bytes,
             MESH_USAGE,
             AllocKind::Geometry,
-            MemoryClass::DeviceLocal,
+            class,
             16,
         )?;
         let base = match buf.device_address() {
@@ -383,13 +415,20 @@ impl MeshGpu {
                 return Err(e);
             }
         };
+        let MeshLayout {
+            idx_offset,
+            geometry,
+            normal_bytes,
+            uv_bytes,
+            ..
+        } = layout;
         Ok(MeshGpu {
             buffer: buf,
             positions_address: base,
             indices_address: base + idx_offset,
             vertex_count: rec.vertex_count,
             triangle_count: rec.triangle_count,
-            has_primitive_map,
+            has_primitive_map: rec.flags & motu_abi::FLAG_PRIMITIVE_MAP != 0,
             normals_address: if normal_bytes > 0 { base + geometry } else { 0 },
             uvs_address: if uv_bytes > 0 {
                 base + geometry + normal_bytes
@@ -407,9 +446,28 @@ impl MeshGpu {
             self.buffer.size_bytes(),
             MESH_USAGE,
             AllocKind::Geometry,
-            MemoryClass::DeviceLocal,
+            self.memory_class(),
             16,
         )
+    }
+
+    /// The memory its buffer lives in (host-visible ones are host-mapped).
+    pub(crate) fn memory_class(&self) -> MemoryClass {
+        if self.buffer.is_host_mapped() {
+            MemoryClass::HostVisible
+        } else {
+            MemoryClass::DeviceLocal
+        }
+    }
+
+    /// Writes `bytes` at `offset` of its buffer: in place when host-mapped, else through the
+    /// staging ring (a fresh buffer no submission reads yet, so either order is safe).
+    fn put(&self, ctx: &Context, up: &mut Uploader, offset: u64, bytes: &[u8]) -> Result<()> {
+        if self.buffer.is_host_mapped() {
+            self.buffer.write_bytes(offset, bytes)
+        } else {
+            up.upload(ctx, &self.buffer, offset, bytes)
+        }
     }
 
     /// This mesh in `buffer` (a copy of its bytes); returns the old buffer to free once no
@@ -447,19 +505,14 @@ impl MeshGpu {
         let base = self.positions_address;
         match normals.as_deref().filter(|n| n.len() == vc) {
             Some(n) if self.normals_address != 0 => {
-                up.upload(
-                    ctx,
-                    &self.buffer,
-                    self.normals_address - base,
-                    cast_slice(n),
-                )?;
+                self.put(ctx, up, self.normals_address - base, cast_slice(n))?;
                 bytes += (n.len() * 12) as u64;
             }
             _ => self.normals_address = 0,
         }
         match uvs.as_deref().filter(|u| u.len() == vc) {
             Some(u) if self.uvs_address != 0 => {
-                up.upload(ctx, &self.buffer, self.uvs_address - base, cast_slice(u))?;
+                self.put(ctx, up, self.uvs_address - base, cast_slice(u))?;
                 bytes += (u.len() * 8) as u64;
             }
             _ => self.uvs_address = 0,
@@ -522,12 +575,12 @@ impl MeshGpu {
                 )))
             }
         };
-        up.upload(ctx, &self.buffer, 0, cast_slice(&positions[..]))?;
+        self.put(ctx, up, 0, cast_slice(&positions[..]))?;
         let idx_off = self.indices_address - self.positions_address;
-        up.upload(ctx, &self.buffer, idx_off, cast_slice(&indices[..]))?;
+        self.put(ctx, up, idx_off, cast_slice(&indices[..]))?;
         if let Some(map) = &map {
             let map_off = idx_off + u64::from(self.triangle_count) * 12;
-            up.upload(ctx, &self.buffer, map_off, cast_slice(&map[..]))?;
+            self.put(ctx, up, map_off, cast_slice(&map[..]))?;
         }
         Ok((positions.len() * 12 + indices.len() * 4 + map_len * 4) as u64)
     }

@@ -76,8 +76,9 @@ impl<'a> StreamingRenderer<'a> {
                         continue;
                     }
                     let rec = self.view.meshes[m];
-                    let mut g = self
-                        .maybe_evicting(evict, |s| MeshGpu::alloc_streamed(&mut s.heap, m, &rec))?;
+                    let mut g = self.maybe_evicting(evict, |s| {
+                        MeshGpu::alloc_streamed(&mut s.heap, m, &rec, s.mesh_class)
+                    })?;
                     let ctx = self.ctx.clone();
                     let source = self.source;
                     let up = self.up_mut()?;
@@ -140,7 +141,11 @@ impl<'a> StreamingRenderer<'a> {
             let mesh_bytes: u64 = self
                 .blas_meshes(b)
                 .into_iter()
-                .map(|m| self.meshes[m].as_ref().map_or(0, |g| g.size_bytes()))
+                .map(|m| {
+                    self.meshes[m]
+                        .as_ref()
+                        .map_or(0, |g| self.mesh_budget_bytes(g))
+                })
                 .sum();
             let bytes = accel.size_bytes + mesh_bytes;
             self.blas_bytes[b] = bytes;
@@ -314,12 +319,17 @@ impl<'a> StreamingRenderer<'a> {
         r.budget_bytes.saturating_sub(r.budget_in_use_bytes)
     }
 
-    /// What building BLAS `b` takes by estimate: its meshes not resident yet (geometry and
-    /// shading attributes: 32 bytes a vertex, 16 a triangle) plus ~128 bytes a triangle for
-    /// the structure and its scratch.
+    /// What building BLAS `b` takes from the budget by estimate: its meshes not resident yet
+    /// where they count against it (geometry and shading attributes: 32 bytes a vertex, 16 a
+    /// triangle) plus ~128 bytes a triangle for the structure and its scratch.
     pub(super) fn blas_estimate_bytes(&self, b: u32) -> u64 {
         let tris = u64::from(self.view.blases[b as usize].primitive_count);
-        self.missing_mesh_bytes(b, 32, 16) + 128 * tris
+        let meshes = if self.meshes_budgeted {
+            self.missing_mesh_bytes(b, 32, 16)
+        } else {
+            0
+        };
+        meshes + 128 * tris
     }
 
     /// Bytes of BLAS `b`'s meshes that are not resident yet, at `per_vertex` and
@@ -347,8 +357,13 @@ impl<'a> StreamingRenderer<'a> {
             })
             .sum();
         let report = self.heap.report();
+        let meshes = if self.meshes_budgeted {
+            format!("{mesh_bytes} bytes of meshes plus its")
+        } else {
+            format!("its {mesh_bytes} bytes of meshes in host memory aside,")
+        };
         GpuError::Budget(format!(
-            "streaming: BLAS {b} ({} triangles, {mesh_bytes} bytes of meshes plus its \
+            "streaming: BLAS {b} ({} triangles, {meshes} \
              acceleration structure and build scratch) does not fit under the budget of {} \
              bytes even with every other structure evicted: {} bytes stay in use (resident \
              skeleton {} bytes, frame buffers, trace pipeline, staging ring); raise \

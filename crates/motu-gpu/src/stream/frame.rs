@@ -168,12 +168,16 @@ impl<'a> StreamingRenderer<'a> {
                 }
             }
         }
-        streamed_bytes += self
-            .meshes
-            .iter()
-            .flatten()
-            .map(|m| m.size_bytes())
-            .sum::<u64>();
+        for g in self.meshes.iter().flatten() {
+            match if self.meshes_budgeted {
+                g.size_bytes()
+            } else {
+                0
+            } {
+                0 => st.resident_host_mesh_bytes += g.size_bytes(),
+                n => streamed_bytes += n,
+            }
+        }
         let host_counts = self.heap.host_visible_counts_against_budget();
         skeleton_bytes += self
             .tlas
@@ -207,6 +211,7 @@ impl<'a> StreamingRenderer<'a> {
         tot.triangles_built += st.triangles_built;
         tot.build_ms += st.build_ms;
         tot.vram_peak_bytes = report.peak_block_bytes;
+        tot.host_mesh_peak_bytes = tot.host_mesh_peak_bytes.max(st.resident_host_mesh_bytes);
 
         let (aov, rgba8, heatmap_max) =
             crate::render::frame_outputs(w, h, records, &rgba_words, opts.view);

@@ -113,7 +113,7 @@ pub use persistent::{PersistentEstimate, TlasUpdate};
 use std::collections::BTreeSet;
 
 use motu_abi::HierarchyView;
-use motu_alloc::{Residency, MIB};
+use motu_alloc::{MemoryClass, Residency, MIB};
 use serde::Serialize;
 
 use crate::context::Context;
@@ -209,6 +209,28 @@ pub struct StreamOptions {
     /// 1.857 → 1.571 passes after the first, evictions on refusal 3.6 → 0 a frame; a quarter
     /// unchanged; every image equal to the full build's), not yet on a GPU.
     pub defrag: bool,
+    /// Where streamed meshes (positions, indices, primitive maps, shading attributes) live
+    /// (`--stream-mesh-memory`; see [`MeshMemory`]).
+    pub mesh_memory: MeshMemory,
+}
+
+/// Where the streaming renderer keeps its meshes ([`StreamOptions::mesh_memory`]). After a
+/// BLAS is built only the hits on it read its meshes (the closest-hit shading: a few
+/// vertices a pixel) and its rebuilds read them once, so on a discrete GPU they can live in
+/// host memory the GPU reads over the bus, as production GPU renderers keep out-of-core
+/// geometry, and the VRAM budget holds acceleration structures and textures alone.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum MeshMemory {
+    /// [`MeshMemory::Host`] where host-visible memory is not counted against the VRAM budget
+    /// (a discrete GPU), else [`MeshMemory::Device`] (unified memory: lavapipe, integrated
+    /// GPUs, where both are the same memory).
+    #[default]
+    Auto,
+    /// Device-local memory, counted against the budget.
+    Device,
+    /// Host-visible memory, written in place; counted against the budget only where
+    /// host-visible memory is (unified memory).
+    Host,
 }
 
 /// Pass marks of the probe ([`StreamOptions::pass_marks`], `--stream-probe-pass-rows`): the
@@ -311,6 +333,7 @@ impl Default for StreamOptions {
             frame_build_ms: 0.0,
             tlas_update: TlasUpdate::Auto,
             defrag: false,
+            mesh_memory: MeshMemory::Auto,
         }
     }
 }
@@ -465,8 +488,12 @@ pub struct FrameStreamStats {
     pub first_pass_missed_probed: u32,
     /// Per pass: where its time went.
     pub pass_log: Vec<PassStats>,
-    /// Resident acceleration-structure and geometry bytes after the frame.
+    /// Resident acceleration-structure and geometry bytes after the frame (counted against
+    /// the budget).
     pub resident_bytes: u64,
+    /// Resident meshes' bytes in host memory outside the budget after the frame
+    /// ([`MeshMemory`]; 0 where meshes are device-local or host memory counts).
+    pub resident_host_mesh_bytes: u64,
     pub resident_blases: u32,
     pub resident_tlases: u32,
     /// Image textures resident after the frame (they stream with the meshes that sample them).
@@ -549,6 +576,12 @@ pub struct StreamTotals {
     /// A BLAS did not fit next to the persistent TLASes, so they were dropped and TLASes
     /// rebuilt from then on (the floor is sized for rebuilt TLASes).
     pub persistent_dropped: bool,
+    /// Where streamed meshes live ([`MeshMemory`] resolved: `device` or `host`) and whether
+    /// they count against the budget (host memory does on unified memory).
+    pub mesh_memory: &'static str,
+    pub meshes_budgeted: bool,
+    /// Most bytes of resident meshes in host memory outside the budget after any frame.
+    pub host_mesh_peak_bytes: u64,
     pub vram_peak_bytes: u64,
     pub vram_budget_bytes: u64,
 }
@@ -610,6 +643,10 @@ pub struct StreamingRenderer<'a> {
     tlas: Vec<Option<TlasGpu>>,
     meshes: Vec<Option<MeshGpu>>,
     mesh_refs: Vec<u32>,
+    /// The memory streamed meshes are allocated in ([`StreamOptions::mesh_memory`] resolved)
+    /// and whether it counts against the budget.
+    mesh_class: MemoryClass,
+    meshes_budgeted: bool,
     tables: Vec<HeapBuffer>,
     blas_stamps: Option<HeapBuffer>,
     /// Per BLAS: the latest pass stamp it was resident in (host copy of `walked_buf`).

@@ -184,7 +184,7 @@ impl<'a> StreamingRenderer<'a> {
             need.blases.entry(b).or_insert(a.size_bytes);
             for m in self.blas_meshes(b) {
                 if let Some(g) = self.meshes[m].as_ref() {
-                    need.meshes.entry(m).or_insert(g.size_bytes());
+                    need.meshes.entry(m).or_insert(self.mesh_budget_bytes(g));
                 }
             }
         }

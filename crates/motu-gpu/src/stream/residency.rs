@@ -6,6 +6,7 @@ use motu_alloc::ItemId;
 
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
+use crate::scene::MeshGpu;
 
 /// Why structures are evicted (`FrameStreamStats` counts each).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -19,6 +20,16 @@ pub(super) enum EvictWhy {
 }
 
 impl<'a> StreamingRenderer<'a> {
+    /// Bytes mesh `g` takes from the budget: 0 where streamed meshes live outside it (host
+    /// memory of a discrete GPU, [`super::MeshMemory`]).
+    pub(super) fn mesh_budget_bytes(&self, g: &MeshGpu) -> u64 {
+        if self.meshes_budgeted {
+            g.size_bytes()
+        } else {
+            0
+        }
+    }
+
     /// Evicts least-recently-visible unpinned structures (at least `bytes` of them, or all that
     /// are left). Returns false when nothing could be evicted.
     pub(super) fn evict_some(&mut self, bytes: u64, why: EvictWhy) -> Result<bool> {

@@ -12,7 +12,9 @@ use motu_alloc::{AllocKind, AllocLimits, MemoryClass, Residency, MIB};
 use super::persistent::{auto_persistent, persistent_estimate, persistent_records, TlasUpdate};
 use super::proxy_boxes::padded;
 use super::PI_EMPTY_BLAS;
-use super::{FrameStreamStats, StreamOptions, StreamTotals, StreamingRenderer, IDENTITY};
+use super::{
+    FrameStreamStats, MeshMemory, StreamOptions, StreamTotals, StreamingRenderer, IDENTITY,
+};
 use crate::context::Context;
 use crate::error::{GpuError, Result};
 use crate::heap::GpuHeap;
@@ -172,6 +174,19 @@ impl<'a> StreamingRenderer<'a> {
                         })
                         .sum::<u64>()
                         + 2 * crate::scene::block_bytes_for_budget(budget)
+                }
+                // Meshes in host memory: at most every mesh at once, twice over for the free
+                // space their comings and goings strand in shared blocks (a cap, not a
+                // reservation: blocks are made as meshes arrive).
+                + if opts.mesh_memory == MeshMemory::Device {
+                    0
+                } else {
+                    2 * view
+                        .meshes
+                        .iter()
+                        .map(crate::scene::streamed_mesh_bytes)
+                        .sum::<u64>()
+                        + 4 * crate::scene::block_bytes_for_budget(budget)
                 },
         };
         let block = crate::scene::block_bytes_for_budget(budget);
@@ -179,6 +194,14 @@ impl<'a> StreamingRenderer<'a> {
         // from half a block each gets its own (freed whole when evicted), or the free space
         // they strand inside shared blocks, up to a quarter of the budget, fits nothing.
         let heap = GpuHeap::with_blocks(ctx, limits, Some(block), Some(block / 2))?;
+        let host_counts = heap.host_visible_counts_against_budget();
+        let mesh_class = match opts.mesh_memory {
+            MeshMemory::Device => MemoryClass::DeviceLocal,
+            MeshMemory::Host => MemoryClass::HostVisible,
+            MeshMemory::Auto if host_counts => MemoryClass::DeviceLocal,
+            MeshMemory::Auto => MemoryClass::HostVisible,
+        };
+        let meshes_budgeted = mesh_class == MemoryClass::DeviceLocal || host_counts;
         let nb = view.blases.len();
         let nt = view.tlases.len();
 
@@ -286,6 +309,8 @@ impl<'a> StreamingRenderer<'a> {
             tlas: (0..nt).map(|_| None).collect(),
             meshes: (0..view.meshes.len()).map(|_| None).collect(),
             mesh_refs: vec![0; view.meshes.len()],
+            mesh_class,
+            meshes_budgeted,
             tables: Vec::new(),
             blas_stamps: None,
             walked_buf: None,
@@ -334,6 +359,11 @@ impl<'a> StreamingRenderer<'a> {
             totals: StreamTotals {
                 scene_triangles,
                 vram_budget_bytes: budget,
+                mesh_memory: match mesh_class {
+                    MemoryClass::DeviceLocal => "device",
+                    MemoryClass::HostVisible => "host",
+                },
+                meshes_budgeted,
                 ..Default::default()
             },
             ctx: ctx.clone(),
