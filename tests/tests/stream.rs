@@ -217,19 +217,20 @@ fn island_camera_path_needs_about_one_pass_per_frame_under_the_budget() {
 /// nothing (the rule is recomputed here from each frame's statistics), and does mark there.
 #[test]
 fn probe_pass_marks_keep_what_rays_pass_and_change_no_pixel() {
-    if !gpu_available() {
+    let Some(ShotFixture {
+        dir,
+        pkg,
+        peak,
+        reference,
+        ..
+    }) = ShotFixture::new()
+    else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
-    let pkg = gen_island(dir.path(), None);
-    let (peak, floor) = report_peak_and_floor(&pkg, "64", "36");
+    };
     let budget_bytes = peak / 3;
-    assert!(budget_bytes >= floor, "a third is above the floor");
     let path = |name: &str, budget: u64, backend: &str, extra: &[&str]| {
         shot_path(&pkg, dir.path(), name, budget, backend, extra)
     };
-    // Everything fits: the reference frames of the path.
-    let (_, reference) = path("everything", peak * 2, "query", &[]);
     let rows = ["--stream-probe-pass-rows", "1"];
     let (off, off_aov) = path(
         "off",
@@ -397,17 +398,15 @@ fn probe_need_is_what_the_next_frame_hits_and_passes() {
 /// first-pass misses of evicted structures, and each frame is the full build's image.
 #[test]
 fn verifying_probe_rounds_make_frames_one_pass_where_they_fit() {
-    if !gpu_available() {
+    let Some(ShotFixture {
+        dir,
+        pkg,
+        peak,
+        floor,
+        reference,
+    }) = ShotFixture::new()
+    else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
-    let pkg = gen_island(dir.path(), None);
-    let (peak, floor) = report_peak_and_floor(&pkg, "64", "36");
-    let (_, reference) = shot_path(&pkg, dir.path(), "everything", peak * 2, "query", &[]);
-    let passes = |st: &serde_json::Value| {
-        st["stream"]["mean_passes_after_first"]
-            .as_f64()
-            .expect("mean passes")
     };
     let frames =
         |st: &serde_json::Value| st["stream"]["frames"].as_array().expect("frames").clone();
@@ -482,21 +481,18 @@ fn verifying_probe_rounds_make_frames_one_pass_where_they_fit() {
 /// discrete GPU's is.
 #[test]
 fn meshes_in_host_memory_make_quarter_budget_paths_one_pass() {
-    if !gpu_available() {
+    let Some(ShotFixture {
+        dir,
+        pkg,
+        peak,
+        reference,
+        ..
+    }) = ShotFixture::new()
+    else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
-    let pkg = gen_island(dir.path(), None);
-    let (peak, floor) = report_peak_and_floor(&pkg, "64", "36");
-    let budget_bytes = peak / 4;
-    assert!(budget_bytes >= floor, "a quarter is above the floor");
-    let (_, reference) = shot_path(&pkg, dir.path(), "everything", peak * 2, "query", &[]);
-    let totals = |st: &serde_json::Value| st["stream"]["totals"].clone();
-    let passes = |st: &serde_json::Value| {
-        st["stream"]["mean_passes_after_first"]
-            .as_f64()
-            .expect("mean passes")
     };
+    let budget_bytes = peak / 4;
+    let totals = |st: &serde_json::Value| st["stream"]["totals"].clone();
     let discrete = [("MOTU_SIMULATE_DISCRETE_MEMORY", "1")];
     for backend in ["query", "pipeline"] {
         let run = |name: &str, extra: &[&str], env: &[(&str, &str)]| {
@@ -559,18 +555,20 @@ fn meshes_in_host_memory_make_quarter_budget_paths_one_pass() {
 /// resident, and the peak stays under the budget, on both backends.
 #[test]
 fn drained_blocks_change_no_pixel_along_a_path() {
-    if !gpu_available() {
+    let Some(ShotFixture {
+        dir,
+        pkg,
+        peak,
+        reference,
+        ..
+    }) = ShotFixture::new()
+    else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
-    let pkg = gen_island(dir.path(), None);
-    let (peak, floor) = report_peak_and_floor(&pkg, "64", "36");
+    };
     let budget_bytes = peak / 4;
-    assert!(budget_bytes >= floor, "a quarter is above the floor");
     let path = |name: &str, budget: u64, backend: &str, extra: &[&str]| {
         shot_path(&pkg, dir.path(), name, budget, backend, extra)
     };
-    let (_, reference) = path("everything", peak * 2, "query", &[]);
     for backend in ["query", "pipeline"] {
         let (st, aov) = path(backend, budget_bytes, backend, &["--stream-defrag"]);
         assert_eq!(st["stream"]["totals"]["incomplete_frames"], 0, "{st}");
@@ -600,6 +598,49 @@ fn drained_blocks_change_no_pixel_along_a_path() {
 
 /// The default camera's path (64×36, 8 frames) streamed under `budget` bytes on `backend` with
 /// `extra` flags, its AOV written to `dir/name.aov`: the statistics and the AOV's path.
+/// The default island (default `gen island` and `import`) in a fresh directory, its report's
+/// full-build peak and streaming floor at 64×36, and the reference frames of shotCam's path
+/// ([`shot_path`] with room for everything, on the query backend).
+struct ShotFixture {
+    dir: tempfile::TempDir,
+    pkg: PathBuf,
+    peak: u64,
+    floor: u64,
+    reference: PathBuf,
+}
+
+impl ShotFixture {
+    /// `None` without a ray-tracing device (said loudly by `gpu_available`). Every fraction
+    /// of the peak down to a quarter is checked to be above the floor.
+    fn new() -> Option<ShotFixture> {
+        if !gpu_available() {
+            return None;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let pkg = gen_island(dir.path(), None);
+        let (peak, floor) = report_peak_and_floor(&pkg, "64", "36");
+        assert!(
+            peak / 4 >= floor,
+            "a quarter of the peak is above the floor"
+        );
+        let (_, reference) = shot_path(&pkg, dir.path(), "everything", peak * 2, "query", &[]);
+        Some(ShotFixture {
+            dir,
+            pkg,
+            peak,
+            floor,
+            reference,
+        })
+    }
+}
+
+/// `mean_passes_after_first` of a streamed path's `--stats`.
+fn passes(st: &serde_json::Value) -> f64 {
+    st["stream"]["mean_passes_after_first"]
+        .as_f64()
+        .expect("mean passes")
+}
+
 fn shot_path(
     pkg: &Path,
     dir: &Path,
