@@ -169,13 +169,10 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         for g in self.meshes.iter().flatten() {
-            match if self.meshes_budgeted {
-                g.size_bytes()
+            if self.meshes_budgeted {
+                streamed_bytes += g.size_bytes();
             } else {
-                0
-            } {
-                0 => st.resident_host_mesh_bytes += g.size_bytes(),
-                n => streamed_bytes += n,
+                st.resident_host_mesh_bytes += g.size_bytes();
             }
         }
         let host_counts = self.heap.host_visible_counts_against_budget();
