@@ -580,6 +580,9 @@ pub struct StreamTotals {
     /// they count against the budget (host memory does on unified memory).
     pub mesh_memory: &'static str,
     pub meshes_budgeted: bool,
+    /// Whether host-visible memory (staging, persistent TLASes' records, host meshes) counts
+    /// against the budget: unified memory (lavapipe, integrated GPUs), not a discrete GPU.
+    pub host_memory_counted: bool,
     /// Most bytes of resident meshes in host memory outside the budget after any frame.
     pub host_mesh_peak_bytes: u64,
     pub vram_peak_bytes: u64,

@@ -364,6 +364,7 @@ impl<'a> StreamingRenderer<'a> {
                     MemoryClass::HostVisible => "host",
                 },
                 meshes_budgeted,
+                host_memory_counted: host_counts,
                 ..Default::default()
             },
             ctx: ctx.clone(),
