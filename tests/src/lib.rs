@@ -17,10 +17,15 @@ pub fn motu_bin() -> PathBuf {
             .expect("target/<profile>");
         let bin = profile_dir.join("motu");
         // Always (once per test process): a binary left from an older build would test old code.
+        // In the tests' own profile (`cargo test --release` runs target/release/motu).
         {
             let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+            let mut args = vec!["build", "-p", "motu-cli"];
+            if profile_dir.file_name().is_some_and(|n| n == "release") {
+                args.push("--release");
+            }
             let status = Command::new(cargo)
-                .args(["build", "-p", "motu-cli"])
+                .args(&args)
                 .status()
                 .expect("running cargo build -p motu-cli");
             assert!(status.success(), "cargo build -p motu-cli failed");

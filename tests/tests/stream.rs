@@ -7,7 +7,7 @@
 
 use motu_tests::{
     check_probe_rounds, gen_island, gpu_available, json_u64 as u, motu_ok, render as render_with,
-    render_env, report_peak_and_floor, s,
+    render_env, report_json, report_peak_and_floor, s,
 };
 use std::path::{Path, PathBuf};
 
@@ -508,6 +508,9 @@ fn meshes_in_host_memory_make_quarter_budget_paths_one_pass() {
     let budget_bytes = peak / 4;
     let totals = |st: &serde_json::Value| st["stream"]["totals"].clone();
     let discrete = [("MOTU_SIMULATE_DISCRETE_MEMORY", "1")];
+    // The report's bound on the host memory streamed meshes take.
+    let mesh_bytes = u(&report_json(&pkg, "64", "36")["streaming"]["mesh_bytes"]);
+    assert!(mesh_bytes > 0);
     for backend in ["query", "pipeline"] {
         let run = |name: &str, extra: &[&str], env: &[(&str, &str)]| {
             let name = format!("{name}-{backend}");
@@ -546,6 +549,11 @@ fn meshes_in_host_memory_make_quarter_budget_paths_one_pass() {
         );
         assert_eq!(dt["mesh_memory"], "device");
         assert!(u(&ht["host_mesh_peak_bytes"]) > 0 && u(&dt["host_mesh_peak_bytes"]) == 0);
+        assert!(
+            u(&ht["host_mesh_peak_bytes"]) <= mesh_bytes,
+            "the report's bound"
+        );
+        assert_eq!(ht["host_memory_counted"], false);
         eprintln!(
             "1/4 {backend}: passes after the first {} with meshes in host memory, {} on the \
              device ({} without the discrete layout); host meshes peak {} bytes",

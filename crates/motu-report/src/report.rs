@@ -53,6 +53,12 @@ pub struct StreamingReport {
     /// queries). Their instance records (64 bytes each) also count where host memory does
     /// (integrated GPUs, CPU drivers).
     pub persistent_tlas: Option<motu_gpu::PersistentEstimate>,
+    /// Bytes of every mesh `motu render --stream` streams (positions, indices, primitive maps,
+    /// shading attributes, as it lays them out): on a discrete GPU they live in host memory
+    /// (`--stream-mesh-memory auto`), the resident ones at most, so this bounds the host
+    /// memory they take; in VRAM (`device`, unified memory) they come and go with their BLASes
+    /// under the budget.
+    pub mesh_bytes: u64,
     /// The TLASes `motu render --stream` splits into pieces when it loads the package (those
     /// over `cap_instances` instances, the default `--stream-split-instances`); the floor and
     /// the persistent estimate above are those of the split hierarchy. `None`: no TLAS over
@@ -477,6 +483,7 @@ pub fn build_report_from_view(
     });
     streaming.min_resident_bytes = floor.min_resident_bytes;
     streaming.floor = floor;
+    streaming.mesh_bytes = motu_gpu::streamed_mesh_total_bytes(&streamed);
     streaming.persistent_tlas = motu_gpu::persistent_tlas_estimate(
         &streamed,
         &FloorAdapter(sizes),
@@ -665,6 +672,7 @@ fn streaming_report(
         largest_element: largest.as_ref().map(|l| l.0.clone()),
         largest_element_peak_bytes: largest.map_or(0, |l| l.1),
         persistent_tlas: None,
+        mesh_bytes: 0,
         stream_split: None,
     }
 }

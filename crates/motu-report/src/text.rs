@@ -165,6 +165,11 @@ pub fn render_text(r: &Report) -> String {
         human_bytes(s.largest_element_peak_bytes),
         s.largest_element.as_deref().unwrap_or("-")
     );
+    let _ = writeln!(
+        out,
+        "  streamed meshes {} (in host memory on a discrete GPU, outside the VRAM budget: --stream-mesh-memory)",
+        human_bytes(s.mesh_bytes)
+    );
     if let Some(whole) = r.variants.first() {
         if s.min_resident_bytes >= whole.cost.peak_bytes {
             let _ = writeln!(

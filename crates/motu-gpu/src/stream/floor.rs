@@ -323,6 +323,16 @@ pub fn streaming_floor(
     })
 }
 
+/// Bytes of every mesh a streamer of `view` streams, as it lays them out
+/// (`MeshGpu::alloc_streamed`): the most its meshes take at once, in host memory on a discrete
+/// GPU ([`super::MeshMemory`]).
+pub fn streamed_mesh_total_bytes(view: &HierarchyView<'_>) -> u64 {
+    view.meshes
+        .iter()
+        .map(crate::scene::streamed_mesh_bytes)
+        .sum()
+}
+
 /// Shading attributes of the triangle BLAS whose meshes have the most (see
 /// `scene::streamed_attribute_bytes`).
 fn largest_blas_attribute_bytes(view: &HierarchyView<'_>) -> u64 {

@@ -101,7 +101,9 @@ mod shading;
 mod skeleton;
 mod tlas_records;
 
-pub use floor::{persistent_tlas_estimate, streaming_floor, FloorSizes, StreamFloor};
+pub use floor::{
+    persistent_tlas_estimate, streamed_mesh_total_bytes, streaming_floor, FloorSizes, StreamFloor,
+};
 
 /// Whether BLAS `b` is streamed (built on demand, evicted under the budget): a triangle BLAS
 /// with geometry. The rest (AABB BLASes of programmable instances) stay in the skeleton.

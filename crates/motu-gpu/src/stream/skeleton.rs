@@ -181,11 +181,7 @@ impl<'a> StreamingRenderer<'a> {
                 + if opts.mesh_memory == MeshMemory::Device {
                     0
                 } else {
-                    2 * view
-                        .meshes
-                        .iter()
-                        .map(crate::scene::streamed_mesh_bytes)
-                        .sum::<u64>()
+                    2 * super::streamed_mesh_total_bytes(&view)
                         + 4 * crate::scene::block_bytes_for_budget(budget)
                 },
         };
