@@ -10,6 +10,9 @@
 # line estimates the need if meshes were resident apart from structures: the need's structures
 # plus the meshes of the BLASes primary rays hit (`working_set_mesh_bytes` of the same path
 # rendered with `--view ids`, need-primary.json; only primary hits read shading attributes).
+# Where meshes live in host memory (`--stream-mesh-memory`, the default on a discrete GPU) the
+# need counts VRAM alone, structures and textures (`probe_need_mesh_bytes` 0), and the third
+# line is the need itself.
 #
 #   S=0.3 FRACTIONS="4 3 2" bash tools/stream-need.sh      # on the H200 (tools/device-env.sh)
 #   FRAMES=8 SIZE=64x36 bash tools/stream-need.sh          # lavapipe, the default island
