@@ -111,9 +111,10 @@ impl<'a> StreamingRenderer<'a> {
                 working_meshes.extend(self.blas_meshes(b));
             }
         }
+        // Of working_set_bytes: what the meshes take from the budget (0 in host memory).
         self.frame_stats.working_set_mesh_bytes = working_meshes
             .into_iter()
-            .filter_map(|m| self.meshes[m].as_ref().map(|g| g.size_bytes()))
+            .filter_map(|m| self.meshes[m].as_ref().map(|g| self.mesh_budget_bytes(g)))
             .sum();
         // Prefetch: what the guard band saw, evicting only what this frame did not see (what
         // does not fit is skipped), within what is left of the frame's build budget. With a

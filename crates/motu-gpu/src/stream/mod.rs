@@ -473,7 +473,7 @@ pub struct FrameStreamStats {
     pub working_set_blases: u32,
     pub working_set_bytes: u64,
     /// Of `working_set_bytes`: the working set's meshes, each once (resident at the frame's
-    /// end). With everything resident, a frame's one-pass need under a unit of residency that
+    /// end), where they count against the budget (0 with meshes in host memory). With everything resident, a frame's one-pass need under a unit of residency that
     /// keeps meshes apart from structures is at most the previous frame's `probe_need_bytes`
     /// less its `probe_need_mesh_bytes` plus this: only BLASes rays hit need their meshes
     /// (`tools/stream-need.sh` prints that bound).
