@@ -32,7 +32,7 @@ impl std::ops::Deref for HeapBuffer {
 
 /// `MOTU_SIMULATE_DISCRETE_MEMORY=1`: host-visible memory is counted apart from the budget
 /// even where it is the same memory as device-local (see [`GpuHeap::with_blocks`]).
-pub fn simulate_discrete_memory() -> bool {
+fn simulate_discrete_memory() -> bool {
     std::env::var_os("MOTU_SIMULATE_DISCRETE_MEMORY").is_some_and(|v| v == "1")
 }
 
