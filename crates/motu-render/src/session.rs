@@ -23,6 +23,9 @@ pub struct RenderJob<'a> {
     /// `--camera-path`: one frame per camera.
     pub recorded: Option<&'a [CameraParams]>,
     pub lod: &'a LodChoice,
+    /// When the command began (`--stats` times the first streamed pixel from it); `None`:
+    /// from the render's start.
+    pub started: Option<std::time::Instant>,
 }
 
 /// A rendered image: the last frame's AOV and pixels, and the `--stats` object.
@@ -72,9 +75,16 @@ pub fn render(
                 .unwrap_or_else(|| vec![camera; s.frames as usize]);
             crate::cpu::render_cpu(s, pkg, view, lod, instance_lod, &cams)?
         }
-        (backend, Some(stream)) => {
-            crate::stream::render_streaming(s, stream, pkg, view, backend, recorded, progress)?
-        }
+        (backend, Some(stream)) => crate::stream::render_streaming(
+            s,
+            stream,
+            pkg,
+            view,
+            backend,
+            recorded,
+            job.started,
+            progress,
+        )?,
         (backend, None) => match recorded {
             Some(cams) => {
                 crate::gpu::render_gpu_path(s, pkg, view, cams, lod, backend, instance_lod)?

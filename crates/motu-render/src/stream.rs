@@ -8,7 +8,9 @@ use crate::{camera_pose, scene_shading, Backend, PackageMeshes, RenderError};
 use motu_abi::camera::{camera_path, CameraParams};
 use motu_abi::HierarchyView;
 use motu_pack::ScenePackage;
+use serde::Serialize;
 use serde_json::{json, Value};
+use std::time::Instant;
 
 /// What one streaming frame may build, and what it shows for what it did not build.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -114,6 +116,44 @@ pub fn stream_split(
     Ok(split)
 }
 
+/// Where a streamed render's time went up to its first frame (`stream.startup` in `--stats`):
+/// the time to first pixel and its phases, in milliseconds. Each phase is also a `tracing`
+/// span (`MOTU_LOG=motu_render=info` prints them).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct StreamStartup {
+    /// From the command's start to the render: opening and checking the package, the subset,
+    /// the camera and the LOD mode (0 when the caller gave no start).
+    pub before_render_ms: f64,
+    /// Opening the Vulkan device.
+    pub device_ms: f64,
+    /// Splitting large TLASes for streaming ([`stream_split`]).
+    pub split_ms: f64,
+    /// The proxy clusters of every TLAS (`motu_gpu::StreamPlan`), which the floor and the
+    /// renderer share.
+    pub clusters_ms: f64,
+    /// The streaming floor (`motu_gpu::streaming_floor`): refusing budgets below it.
+    pub floor_ms: f64,
+    /// The streaming renderer's start: derived tables, proxy clusters and boxes, the resident
+    /// skeleton's upload and builds.
+    pub init_ms: f64,
+    /// Of `init_ms`: the derived tables (parents, proxy clusters, GPU records), choosing
+    /// persistent TLASes, the boxes inside streamable BLASes (read from every mesh), and the
+    /// resident skeleton (tables uploaded, PI BLASes and TLASes built).
+    pub derived_ms: f64,
+    pub persistent_choice_ms: f64,
+    pub proxy_boxes_ms: f64,
+    pub skeleton_ms: f64,
+    /// The first frame (all its passes, builds and its next-camera probe).
+    pub first_frame_ms: f64,
+    /// From the command's start to the end of the first frame (0 when the caller gave no
+    /// start); the CLI adds the PNG and AOV write after it as `write_ms`.
+    pub to_first_pixel_ms: f64,
+}
+
+fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
 /// `--stream`: builds only what rays touch, evicting under the budget, frame by frame along a
 /// camera path (`frames`; one frame renders the camera itself). Each frame is reported to
 /// `progress` before its completeness is checked.
@@ -124,10 +164,21 @@ pub(crate) fn render_streaming(
     view: &HierarchyView<'_>,
     backend: Backend,
     recorded: Option<&[CameraParams]>,
+    started: Option<Instant>,
     progress: &mut dyn FnMut(RenderEvent<'_>),
 ) -> Result<Rendered, RenderError> {
-    let ctx = gpu_context(s, backend)?;
-    let split = stream_split(view, stream.bounds.split_instances)?;
+    let _span = tracing::info_span!("stream_render").entered();
+    let mut startup = StreamStartup {
+        before_render_ms: started.map_or(0.0, |t| ms_since(t)),
+        ..Default::default()
+    };
+    let t = Instant::now();
+    let ctx = tracing::info_span!("device").in_scope(|| gpu_context(s, backend))?;
+    startup.device_ms = ms_since(t);
+    let t = Instant::now();
+    let split = tracing::info_span!("split")
+        .in_scope(|| stream_split(view, stream.bounds.split_instances))?;
+    startup.split_ms = ms_since(t);
     let view = &split.as_ref().map_or(*view, |sp| sp.view(view));
     let (pose, w, h) = camera_pose(
         pkg,
@@ -156,8 +207,14 @@ pub(crate) fn render_streaming(
         _ => (w, h),
     };
     // Refused up front below the floor: under it some frame could not complete.
-    let floor = motu_gpu::streaming_floor(view, &ctx, w, h, opts.staging_bytes)
+    let t = Instant::now();
+    let plan = motu_gpu::StreamPlan::new(view);
+    startup.clusters_ms = ms_since(t);
+    let t = Instant::now();
+    let floor = tracing::info_span!("floor")
+        .in_scope(|| motu_gpu::streaming_floor_planned(view, &plan, &ctx, w, h, opts.staging_bytes))
         .map_err(RenderError::Floor)?;
+    startup.floor_ms = ms_since(t);
     if let Some(budget) = s.device.vram_budget_bytes {
         if budget < floor.min_resident_bytes {
             return Err(RenderError::BelowFloor {
@@ -168,13 +225,14 @@ pub(crate) fn render_streaming(
             });
         }
     }
-    let mut sr =
-        motu_gpu::StreamingRenderer::new(&ctx, *view, &meshes, &opts).map_err(|source| {
-            RenderError::StreamSetup {
-                floor_bytes: floor.min_resident_bytes,
-                source,
-            }
+    let t = Instant::now();
+    let mut sr = tracing::info_span!("init")
+        .in_scope(|| motu_gpu::StreamingRenderer::with_plan(&ctx, *view, plan, &meshes, &opts))
+        .map_err(|source| RenderError::StreamSetup {
+            floor_bytes: floor.min_resident_bytes,
+            source,
         })?;
+    startup.init_ms = ms_since(t);
     let ropts = gpu_render_options(s, s.lod, backend, 1, scene_shading(s.shading, pkg, view));
     if s.shading.spp > 1 {
         progress(RenderEvent::StreamSppIgnored { spp: s.shading.spp });
@@ -190,9 +248,33 @@ pub(crate) fn render_streaming(
         let cam = camera_at(f);
         // The path's next camera is known: the frame ends with a probe of it (prefetch).
         sr.set_next_camera((f + 1 < frame_count).then(|| camera_at(f + 1)));
-        let (out, st) = sr
-            .render_frame(&cam, &ropts)
+        let t = Instant::now();
+        let (out, st) = tracing::info_span!("frame", index = f)
+            .in_scope(|| sr.render_frame(&cam, &ropts))
             .map_err(|source| RenderError::StreamFrame { frame: f, source })?;
+        if f == 0 {
+            startup.first_frame_ms = ms_since(t);
+            startup.to_first_pixel_ms = started.map_or(0.0, |t| ms_since(t));
+            let totals = sr.totals();
+            startup.proxy_boxes_ms = totals.proxy_boxes_ms;
+            startup.derived_ms = totals.derived_ms;
+            startup.persistent_choice_ms = totals.persistent_choice_ms;
+            startup.skeleton_ms = totals.skeleton_ms;
+            tracing::info!(
+                device_ms = startup.device_ms,
+                split_ms = startup.split_ms,
+                clusters_ms = startup.clusters_ms,
+                floor_ms = startup.floor_ms,
+                init_ms = startup.init_ms,
+                derived_ms = startup.derived_ms,
+                persistent_choice_ms = startup.persistent_choice_ms,
+                proxy_boxes_ms = startup.proxy_boxes_ms,
+                skeleton_ms = startup.skeleton_ms,
+                first_frame_ms = startup.first_frame_ms,
+                to_first_pixel_ms = startup.to_first_pixel_ms,
+                "first streamed frame done"
+            );
+        }
         progress(RenderEvent::StreamFrame {
             index: f,
             stats: &st,
@@ -237,6 +319,7 @@ pub(crate) fn render_streaming(
         "totals": totals,
         "floor": floor,
         "max_passes": sr.max_passes(),
+        "startup": startup,
         "mean_passes_after_first": if after_first.is_empty() { Value::Null } else { json!(after_first.iter().sum::<f64>() / after_first.len() as f64) },
     });
     drop(sr);

@@ -149,6 +149,7 @@ fn print_event(e: motu_render::RenderEvent<'_>, allow_incomplete: bool) {
 }
 
 pub fn run(a: RenderArgs) -> anyhow::Result<()> {
+    let started = std::time::Instant::now();
     let mut outputs = vec![("-o", a.output.as_path())];
     outputs.extend(a.aov.as_deref().map(|p| ("--aov", p)));
     outputs.extend(a.stats.as_deref().map(|p| ("--stats", p)));
@@ -284,12 +285,18 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         camera,
         recorded: recorded.as_deref(),
         lod: &lod_choice,
+        started: Some(started),
     };
-    let out = motu_render::render(&job, &settings, &mut |e| print_event(e, a.allow_incomplete))
+    let mut out = motu_render::render(&job, &settings, &mut |e| print_event(e, a.allow_incomplete))
         .map_err(|e| below_floor_hint(e, &a, &pkg))?;
+    let written = std::time::Instant::now();
     output::write_png(&a.output, camera.width, camera.height, &out.rgba8)?;
     if let Some(p) = &a.aov {
         output::write(p, &out.aov.to_bytes())?;
+    }
+    if let Some(startup) = out.stats["stream"].get_mut("startup") {
+        // The image's write closes the time to first pixel the render measured.
+        startup["write_ms"] = serde_json::json!(written.elapsed().as_secs_f64() * 1e3);
     }
     if let Some(p) = &a.stats {
         output::write(p, serde_json::to_string_pretty(&out.stats)?.as_bytes())?;

@@ -12,7 +12,6 @@ use serde::Serialize;
 use super::buffers::frame_buffer_bytes;
 use super::persistent::{persistent_estimate, persistent_flags, PersistentEstimate};
 use super::proxy_boxes;
-use super::skeleton::proxy_clusters;
 use crate::accel::BlasGeometry;
 use crate::error::Result;
 use crate::scene::{allocator_slack_bytes, staging_bytes_for_budget};
@@ -112,6 +111,21 @@ pub fn streaming_floor(
     height: u32,
     staging_cap_bytes: u64,
 ) -> Result<StreamFloor> {
+    let plan = super::StreamPlan::new(view);
+    streaming_floor_planned(view, &plan, sizes, width, height, staging_cap_bytes)
+}
+
+/// [`streaming_floor`] with the proxy clusters already made (`plan`, of this `view`): a
+/// render derives them once for the floor and the renderer.
+pub fn streaming_floor_planned(
+    view: &HierarchyView<'_>,
+    plan: &super::StreamPlan,
+    sizes: &dyn FloorSizes,
+    width: u32,
+    height: u32,
+    staging_cap_bytes: u64,
+) -> Result<StreamFloor> {
+    plan.check(view)?;
     let as_align = |v: u64| align(v, 256);
     let nb = view.blases.len() as u64;
     let nt = view.tlases.len() as u64;
@@ -142,7 +156,7 @@ pub fn streaming_floor(
             .map(|(&b, &n)| (b, n))
             .max_by_key(|&(b, n)| (n, std::cmp::Reverse(b)))
             .unwrap_or((u32::MAX, 0));
-        let cl = proxy_clusters(view, t, buildable);
+        let cl = &plan.clusters[t];
         members_total += cl.iter().map(|c| c.members.len() as u64).sum::<u64>();
         let clusters = cl.len() as u32;
         let proxy = u32::from(clusters > 0);

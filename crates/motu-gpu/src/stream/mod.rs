@@ -102,8 +102,10 @@ mod skeleton;
 mod tlas_records;
 
 pub use floor::{
-    persistent_tlas_estimate, streamed_mesh_total_bytes, streaming_floor, FloorSizes, StreamFloor,
+    persistent_tlas_estimate, streamed_mesh_total_bytes, streaming_floor, streaming_floor_planned,
+    FloorSizes, StreamFloor,
 };
+pub use skeleton::StreamPlan;
 
 /// Whether BLAS `b` is streamed (built on demand, evicted under the budget): a triangle BLAS
 /// with geometry. The rest (AABB BLASes of programmable instances) stay in the skeleton.
@@ -569,6 +571,13 @@ pub struct StreamTotals {
     /// computing them from the meshes took at start.
     pub proxy_boxes: u64,
     pub proxy_boxes_ms: f64,
+    /// Milliseconds of the start's other phases: the derived tables (parents per BLAS, proxy
+    /// clusters per TLAS, the GPU tables' records), choosing persistent TLASes (driver size
+    /// queries), and the resident skeleton (tables uploaded, PI BLASes, TLASes and proxies
+    /// built).
+    pub derived_ms: f64,
+    pub persistent_choice_ms: f64,
+    pub skeleton_ms: f64,
     /// How TLASes followed residency (`update` or `rebuild`, as `--stream-tlas` resolved),
     /// the persistent ones, and the VRAM they and their placeholders keep (structures at
     /// full residency, update scratch, and records where host memory counts).

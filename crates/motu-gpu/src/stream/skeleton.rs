@@ -125,11 +125,63 @@ pub(super) fn proxy_clusters(
     out
 }
 
+/// What the floor ([`super::streaming_floor_planned`]) and the renderer
+/// ([`StreamingRenderer::with_plan`]) both derive from a view before anything is built: the
+/// proxy clusters of every TLAS (binned SAH over millions of instances: seconds at island
+/// scale, so made once per render, the TLASes in parallel).
+pub struct StreamPlan {
+    pub(super) clusters: Vec<Vec<ProxyCluster>>,
+    instances: usize,
+}
+
+impl StreamPlan {
+    pub fn new(view: &HierarchyView<'_>) -> StreamPlan {
+        use rayon::prelude::*;
+        let _span = tracing::info_span!("proxy_clusters", tlases = view.tlases.len()).entered();
+        let buildable = |b: usize| super::streamable(&view.blases[b]);
+        let clusters = (0..view.tlases.len())
+            .into_par_iter()
+            .map(|t| proxy_clusters(view, t, buildable))
+            .collect();
+        StreamPlan {
+            clusters,
+            instances: view.instances.len(),
+        }
+    }
+
+    /// A plan made for another view is a caller's mistake, refused rather than trusted.
+    pub(super) fn check(&self, view: &HierarchyView<'_>) -> Result<()> {
+        if self.clusters.len() != view.tlases.len() || self.instances != view.instances.len() {
+            return Err(GpuError::InvalidRequest(format!(
+                "streaming: a plan of {} TLASes and {} instances for a view of {} and {}",
+                self.clusters.len(),
+                self.instances,
+                view.tlases.len(),
+                view.instances.len()
+            )));
+        }
+        Ok(())
+    }
+}
+
 impl<'a> StreamingRenderer<'a> {
     /// Uploads the skeleton (tables, PI BLASes, the root TLAS with its proxy) under the budget.
     pub fn new(
         ctx: &Context,
         view: HierarchyView<'a>,
+        source: &'a dyn MeshBlobSource,
+        opts: &StreamOptions,
+    ) -> Result<StreamingRenderer<'a>> {
+        let plan = StreamPlan::new(&view);
+        Self::with_plan(ctx, view, plan, source, opts)
+    }
+
+    /// [`Self::new`] with the proxy clusters already made (`plan`, of this `view`, as the
+    /// floor used them).
+    pub fn with_plan(
+        ctx: &Context,
+        view: HierarchyView<'a>,
+        plan: StreamPlan,
         source: &'a dyn MeshBlobSource,
         opts: &StreamOptions,
     ) -> Result<StreamingRenderer<'a>> {
@@ -141,6 +193,7 @@ impl<'a> StreamingRenderer<'a> {
         let _g = span.enter();
         view.check_references()
             .map_err(|e| GpuError::InvalidRequest(e.to_string()))?;
+        plan.check(&view)?;
         let too_many = |what: &str| GpuError::InvalidRequest(format!("streaming: too many {what}"));
         let budget = crate::scene::usable_budget_bytes(ctx, opts.budget_bytes)?;
         // Staging and scratch come out of the budget (staging does on unified memory): an
@@ -202,6 +255,7 @@ impl<'a> StreamingRenderer<'a> {
         let nt = view.tlases.len();
 
         // Derived structure: proxy clusters per TLAS, parents per BLAS, proxy ids.
+        let t_derived = std::time::Instant::now();
         let buildable: Vec<bool> = view.blases.iter().map(super::streamable).collect();
         let mut parents: Vec<Vec<u32>> = vec![Vec::new(); nb];
         let mut parent_counts: Vec<Vec<u32>> = vec![Vec::new(); nb];
@@ -217,9 +271,7 @@ impl<'a> StreamingRenderer<'a> {
                 }
             }
         }
-        let mut clusters: Vec<Vec<ProxyCluster>> = (0..nt)
-            .map(|t| proxy_clusters(&view, t, |b| buildable[b]))
-            .collect();
+        let mut clusters = plan.clusters;
         // The member table: per cluster, its instances' global indices in the GPU instance
         // table (each TLAS's range there starts at the running total of the ranges before it,
         // each grown by its proxy instance).
@@ -298,6 +350,7 @@ impl<'a> StreamingRenderer<'a> {
             .map(|(b, _)| u64::from(b.primitive_count))
             .sum();
         let has_clusters: Vec<bool> = clusters.iter().map(|c| !c.is_empty()).collect();
+        let derived_ms = ms_since(t_derived);
         let mut r = StreamingRenderer {
             blas: (0..nb).map(|_| None).collect(),
             placeholders: Default::default(),
@@ -361,11 +414,14 @@ impl<'a> StreamingRenderer<'a> {
                 },
                 meshes_budgeted,
                 host_memory_counted: host_counts,
+                derived_ms,
                 ..Default::default()
             },
             ctx: ctx.clone(),
         };
+        let t_persistent = std::time::Instant::now();
         r.persistent_mode = r.choose_persistent(&has_clusters)?;
+        r.totals.persistent_choice_ms = ms_since(t_persistent);
         let t_boxes = std::time::Instant::now();
         let (box_index, box_count) = super::proxy_boxes::layout(&view, |b| r.buildable[b]);
         let boxes = super::proxy_boxes::compute(&view, source, &box_index, box_count);
@@ -376,6 +432,7 @@ impl<'a> StreamingRenderer<'a> {
             ms = r.totals.proxy_boxes_ms,
             "boxes inside streamable BLASes made from their meshes"
         );
+        let t_skeleton = std::time::Instant::now();
         r.init_skeleton(
             &gpu_tlases,
             &gpu_instances,
@@ -384,11 +441,15 @@ impl<'a> StreamingRenderer<'a> {
             &members,
             (&box_index, &boxes),
         )?;
+        r.totals.skeleton_ms = ms_since(t_skeleton);
         let report = r.heap.report();
         r.totals.skeleton_bytes = report.budget_in_use_bytes;
         tracing::info!(
             skeleton_bytes = r.totals.skeleton_bytes,
             budget_bytes = budget,
+            derived_ms = r.totals.derived_ms,
+            persistent_choice_ms = r.totals.persistent_choice_ms,
+            skeleton_ms = r.totals.skeleton_ms,
             scene_triangles,
             "streaming skeleton resident"
         );
@@ -675,4 +736,8 @@ pub(super) fn proxy_pi(c: &ProxyCluster) -> PiRecord {
 
 pub(super) fn staging_released() -> GpuError {
     GpuError::InvalidRequest("streaming: staging ring released".into())
+}
+
+fn ms_since(t: std::time::Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
 }
