@@ -75,16 +75,9 @@ pub fn render(
                 .unwrap_or_else(|| vec![camera; s.frames as usize]);
             crate::cpu::render_cpu(s, pkg, view, lod, instance_lod, &cams)?
         }
-        (backend, Some(stream)) => crate::stream::render_streaming(
-            s,
-            stream,
-            pkg,
-            view,
-            backend,
-            recorded,
-            job.started,
-            progress,
-        )?,
+        (backend, Some(stream)) => {
+            crate::stream::render_streaming(s, stream, job, backend, progress)?
+        }
         (backend, None) => match recorded {
             Some(cams) => {
                 crate::gpu::render_gpu_path(s, pkg, view, cams, lod, backend, instance_lod)?

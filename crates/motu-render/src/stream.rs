@@ -5,9 +5,8 @@
 use crate::gpu::{gpu_context, gpu_render_options, Rendered};
 use crate::settings::{RenderEvent, RenderSettings, StreamSettings};
 use crate::{camera_pose, scene_shading, Backend, PackageMeshes, RenderError};
-use motu_abi::camera::{camera_path, CameraParams};
+use motu_abi::camera::camera_path;
 use motu_abi::HierarchyView;
-use motu_pack::ScenePackage;
 use serde::Serialize;
 use serde_json::{json, Value};
 use std::time::Instant;
@@ -160,16 +159,14 @@ fn ms_since(t: Instant) -> f64 {
 pub(crate) fn render_streaming(
     s: &RenderSettings,
     stream: &StreamSettings,
-    pkg: &ScenePackage,
-    view: &HierarchyView<'_>,
+    job: &crate::RenderJob<'_>,
     backend: Backend,
-    recorded: Option<&[CameraParams]>,
-    started: Option<Instant>,
     progress: &mut dyn FnMut(RenderEvent<'_>),
 ) -> Result<Rendered, RenderError> {
+    let (pkg, view, recorded, started) = (job.package, job.view, job.recorded, job.started);
     let _span = tracing::info_span!("stream_render").entered();
     let mut startup = StreamStartup {
-        before_render_ms: started.map_or(0.0, |t| ms_since(t)),
+        before_render_ms: started.map_or(0.0, ms_since),
         ..Default::default()
     };
     let t = Instant::now();
@@ -254,7 +251,7 @@ pub(crate) fn render_streaming(
             .map_err(|source| RenderError::StreamFrame { frame: f, source })?;
         if f == 0 {
             startup.first_frame_ms = ms_since(t);
-            startup.to_first_pixel_ms = started.map_or(0.0, |t| ms_since(t));
+            startup.to_first_pixel_ms = started.map_or(0.0, ms_since);
             let totals = sr.totals();
             startup.proxy_boxes_ms = totals.proxy_boxes_ms;
             startup.derived_ms = totals.derived_ms;
