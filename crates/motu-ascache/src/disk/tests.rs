@@ -582,3 +582,46 @@ fn an_unreadable_entry_is_a_counted_miss_warned_once() {
     assert!(c.writable(), "a failed read leaves writes on");
     assert!(c.entry_path(&key(1)).is_dir(), "not ours to remove");
 }
+
+mod prop {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(24))]
+        /// On disk, not only in the index: the entries' files never exceed the bound, the
+        /// files are exactly the indexed entries, every entry just written or read is kept,
+        /// and every read returns what was last written under its key.
+        #[test]
+        fn files_stay_within_the_bound_and_match_the_index(
+            capacity_entries in 1u64..5,
+            ops in proptest::collection::vec((any::<bool>(), 0u8..8, 0usize..300), 1..40),
+        ) {
+            let dir = tempfile::tempdir().unwrap();
+            let capacity = capacity_entries * (ENTRY_HEADER_BYTES as u64 + 32 + 300);
+            let mut c = open(dir.path(), capacity);
+            let mut last: std::collections::HashMap<u8, Vec<u8>> = Default::default();
+            for (write, k, len) in ops {
+                if write {
+                    let b = blob(k, len);
+                    prop_assert!(c.put(&key(k), &b));
+                    last.insert(k, b);
+                    prop_assert!(c.contains(&key(k)));
+                } else if let Some(got) = c.get(&key(k), &driver(k)) {
+                    prop_assert_eq!(Some(&got[..]), last.get(&k).map(|v| &v[..]));
+                    prop_assert!(c.contains(&key(k)));
+                }
+                let on_disk: Vec<String> = files(dir.path());
+                let bytes: u64 = on_disk
+                    .iter()
+                    .map(|f| fs::metadata(dir.path().join(f)).unwrap().len())
+                    .sum();
+                let s = c.stats();
+                prop_assert!(bytes <= capacity, "{} > {}", bytes, capacity);
+                prop_assert_eq!(bytes, s.bytes);
+                prop_assert_eq!(on_disk.len() as u64, s.entries);
+                prop_assert_eq!(s.warnings.total(), 0);
+            }
+        }
+    }
+}
