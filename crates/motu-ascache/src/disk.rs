@@ -372,6 +372,7 @@ impl DiskCache {
                 self.index(*key, blob.len() as u64 + ENTRY_HEADER_BYTES as u64);
                 self.stats.hits += 1;
                 self.stats.hit_bytes += blob.len() as u64;
+                tracing::trace!(%key, bytes = blob.len(), "cache entry read");
                 Some(blob)
             }
             Err(miss) => {
@@ -443,6 +444,7 @@ impl DiskCache {
             Ok(()) => {
                 self.stats.written += 1;
                 self.stats.written_bytes += file_bytes;
+                tracing::debug!(%key, bytes = file_bytes, "wrote a cache entry");
                 true
             }
             Err(e) => {
