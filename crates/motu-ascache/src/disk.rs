@@ -93,9 +93,9 @@ pub struct DiskOptions {
     /// leave an entry whose bytes never reached the disk; its checksum then fails and it is
     /// rebuilt with a warning, so turning it off trades a warning after a crash for write speed.
     pub sync: bool,
-    /// For tests: every write fails with this error once its temp file exists (`StorageFull`
-    /// is a full disk, `PermissionDenied` a read-only directory), down the same clean-up and
-    /// warning path a real failure takes.
+    /// For tests: every write fails with this error after its temp file holds the header and
+    /// half the blob (`StorageFull` is a disk filling up mid-entry, `PermissionDenied` a
+    /// read-only directory), down the same clean-up and warning path a real failure takes.
     pub fail_writes_with: Option<io::ErrorKind>,
 }
 
@@ -462,11 +462,13 @@ impl DiskCache {
             .prefix(&temp_prefix(key, std::process::id()))
             .suffix(TEMP_SUFFIX)
             .tempfile_in(&dir)?;
-        if let Some(kind) = self.options.fail_writes_with {
-            return Err(io::Error::new(kind, "simulated write failure"));
-        }
         let file = temp.as_file_mut();
         file.write_all(&encode_header(key, blob))?;
+        if let Some(kind) = self.options.fail_writes_with {
+            // Half the blob written, as a disk filling up mid-entry leaves it.
+            file.write_all(&blob[..blob.len() / 2])?;
+            return Err(io::Error::new(kind, "simulated write failure"));
+        }
         file.write_all(blob)?;
         if self.options.sync {
             file.sync_all()?;

@@ -436,6 +436,20 @@ fn a_read_only_directory_is_a_counted_warning_never_an_error() {
         read_only(p, 0o755);
     }
 
+    // Real for root too: sysfs refuses new directories (EPERM, or EROFS where mounted ro).
+    let sys = Path::new("/sys/motu-ascache-test-cache");
+    if Path::new("/sys/kernel").is_dir() && !sys.exists() {
+        let mut c = open(sys, 1 << 20);
+        let _ = fs::remove_dir_all(sys); // never created; defensive
+        assert!(!c.writable());
+        assert_eq!(c.stats().warnings.read_only, 1, "{:?}", c.stats().warnings);
+        assert!(!c.put(&key(1), &blob(1, 100)));
+        assert!(c.get(&key(1), &driver(1)).is_none());
+        assert_eq!(c.stats().warnings.total(), 1);
+    } else {
+        eprintln!("no sysfs: the /sys case is skipped");
+    }
+
     // A cache directory that cannot be created (a path under a regular file): for everyone.
     let file = dir.path().join("a-file");
     fs::write(&file, b"not a directory").unwrap();
