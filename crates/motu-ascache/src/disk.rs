@@ -1,0 +1,592 @@
+//! Tier 2: serialized structures in a cache directory that outlives the process.
+//!
+//! Nothing here fails a render: every problem is a miss or a skipped write, a
+//! `tracing::warn!` naming the file and the reason, and a count in [`DiskStats::warnings`].
+
+use std::ffi::OsString;
+use std::fs::{self, File};
+use std::io::{self, Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, SystemTime};
+
+use xxhash_rust::xxh3::xxh3_64;
+
+use crate::compat::{serialized_header, Compatibility, SERIALIZED_HEADER_BYTES};
+use crate::entry::{
+    decode_header, encode_header, entry_key, entry_path, shard_dir, temp_owner, temp_prefix,
+    EntryError, ENTRY_HEADER_BYTES, TEMP_SUFFIX, VERSION_DIR,
+};
+use crate::key::CacheKey;
+use crate::lru::ByteLru;
+use crate::stats::{DiskStats, WarningReason};
+
+/// The environment variable naming the cache directory (before the XDG default).
+pub const CACHE_DIR_ENV: &str = "MOTU_AS_CACHE";
+
+/// The most the cache directory holds by default: 32 GiB.
+///
+/// Enough for the compacted structures of a first frame of the largest scenes measured
+/// (island at scale 0.63 builds 19–33 GB over a frame's passes at 8–24 GiB budgets, with
+/// repeats), while a cache the user never asked for stays a small part of a render node's disk.
+pub const DEFAULT_DISK_CAPACITY_BYTES: u64 = 32 << 30;
+
+/// By default the cache also leaves at least half of its filesystem's free space (at open) to
+/// everything else: [`default_disk_capacity_bytes`].
+pub const DEFAULT_FREE_SHARE_DENOMINATOR: u64 = 2;
+
+/// A temp file is left alone until it is this old (and its writer is gone): a live writer
+/// finishes an entry in seconds.
+pub const DEFAULT_STALE_TEMP_AGE: Duration = Duration::from_secs(10 * 60);
+
+/// The default cache directory: `$MOTU_AS_CACHE` if set and not empty, else
+/// `$XDG_CACHE_HOME/motu/as-cache` (when absolute, as the XDG spec requires), else
+/// `$HOME/.cache/motu/as-cache`; `None` when none is set (no disk tier).
+pub fn default_dir() -> Option<PathBuf> {
+    dir_from_env(|name| std::env::var_os(name))
+}
+
+/// [`default_dir`]'s rule over any environment (`var` returns a variable's value).
+pub fn dir_from_env(var: impl Fn(&str) -> Option<OsString>) -> Option<PathBuf> {
+    let set = |name: &str| var(name).filter(|v| !v.is_empty()).map(PathBuf::from);
+    if let Some(dir) = set(CACHE_DIR_ENV) {
+        return Some(dir);
+    }
+    if let Some(xdg) = set("XDG_CACHE_HOME").filter(|p| p.is_absolute()) {
+        return Some(xdg.join("motu").join("as-cache"));
+    }
+    set("HOME").map(|home| home.join(".cache").join("motu").join("as-cache"))
+}
+
+/// The default bound: [`DEFAULT_DISK_CAPACITY_BYTES`], or what the cache holds plus half the
+/// filesystem's free space when that is smaller (`free_bytes` unknown: the constant).
+pub fn default_disk_capacity_bytes(cache_bytes: u64, free_bytes: Option<u64>) -> u64 {
+    match free_bytes {
+        Some(free) => DEFAULT_DISK_CAPACITY_BYTES
+            .min(cache_bytes.saturating_add(free / DEFAULT_FREE_SHARE_DENOMINATOR)),
+        None => DEFAULT_DISK_CAPACITY_BYTES,
+    }
+}
+
+/// Bytes an unprivileged user may still write on `path`'s filesystem.
+pub fn filesystem_free_bytes(path: &Path) -> Option<u64> {
+    #[cfg(unix)]
+    {
+        let s = rustix::fs::statvfs(path).ok()?;
+        s.f_bavail.checked_mul(s.f_frsize)
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = path;
+        None
+    }
+}
+
+/// How a [`DiskCache`] is opened.
+#[derive(Debug, Clone)]
+pub struct DiskOptions {
+    /// The bound on the entries' file bytes; `None`: [`default_disk_capacity_bytes`].
+    pub capacity_bytes: Option<u64>,
+    /// Temp files of dead writers older than this are removed at open.
+    pub stale_temp_age: Duration,
+    /// fsync each entry before renaming it into place (default). Without it a power loss can
+    /// leave an entry whose bytes never reached the disk; its checksum then fails and it is
+    /// rebuilt with a warning, so turning it off trades a warning after a crash for write speed.
+    pub sync: bool,
+    /// For tests: every write fails with this error after its temp file holds the header and
+    /// half the blob (`StorageFull` is a disk filling up mid-entry, `PermissionDenied` a
+    /// read-only directory), down the same clean-up and warning path a real failure takes.
+    pub fail_writes_with: Option<io::ErrorKind>,
+}
+
+impl Default for DiskOptions {
+    fn default() -> Self {
+        Self {
+            capacity_bytes: None,
+            stale_temp_age: DEFAULT_STALE_TEMP_AGE,
+            sync: true,
+            fail_writes_with: None,
+        }
+    }
+}
+
+/// The warning an IO error counts as.
+pub fn io_reason(e: &io::Error) -> WarningReason {
+    match e.kind() {
+        io::ErrorKind::PermissionDenied | io::ErrorKind::ReadOnlyFilesystem => {
+            WarningReason::ReadOnly
+        }
+        io::ErrorKind::StorageFull | io::ErrorKind::QuotaExceeded | io::ErrorKind::FileTooLarge => {
+            WarningReason::Full
+        }
+        _ => WarningReason::Io,
+    }
+}
+
+/// Whether process `pid` runs on this machine; `None` when that cannot be told (no /proc).
+fn process_alive(pid: u32) -> Option<bool> {
+    let proc = Path::new("/proc");
+    if !proc.join("self").exists() {
+        return None;
+    }
+    Some(proc.join(pid.to_string()).exists())
+}
+
+/// Why a read returned nothing.
+enum ReadMiss {
+    Absent,
+    /// A bad entry, and the identity of the file that was read.
+    Bad(EntryError, Option<FileId>),
+    Io(io::Error),
+}
+
+/// A file's identity (device, inode): a bad entry is removed only while its name still
+/// points at the file that was read, never at an entry another process renamed over it since.
+#[derive(Clone, Copy, PartialEq, Eq)]
+struct FileId(u64, u64);
+
+fn file_id(meta: &fs::Metadata) -> Option<FileId> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        Some(FileId(meta.dev(), meta.ino()))
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = meta;
+        None
+    }
+}
+
+/// A file found by the scan at open.
+struct Found {
+    key: CacheKey,
+    bytes: u64,
+    modified: SystemTime,
+}
+
+/// Serialized structures in a cache directory, one file per entry (layout and header:
+/// [`entry`](crate::entry)), bounded by their file bytes with the least recently used removed
+/// first. Recency is the file's modification time, set on every hit, so it is shared by every
+/// process using the directory and survives them; the scan at open orders the entries by it.
+///
+/// - **Writes** are atomic: the entry is written to a temp file in its own directory, fsynced
+///   and renamed over its name, so a reader (in any process) sees a whole entry or none. Two
+///   processes writing one key both write whole entries; the last rename wins.
+/// - **Reads** check the header (magic, format, header checksum, key, length), the blob's
+///   checksum and the caller's [`Compatibility`]; a bad entry is a miss with a warning, and
+///   its file is removed (if it is still the file that was read).
+/// - **Failures** never surface as errors: a directory that cannot be created, a read-only
+///   directory, a full disk or any IO error on a write is counted, warned once, and turns
+///   writes off for this cache's life; reads go on.
+/// - **Other processes** sharing the directory may add or remove entries at any time: a key
+///   missing from this process's index is still looked up on disk, and the byte count is this
+///   process's view (rescanned at the next open), so several writers may together overshoot the
+///   bound until one of them evicts.
+pub struct DiskCache {
+    root: PathBuf,
+    lru: ByteLru<CacheKey, ()>,
+    writable: bool,
+    /// False when the entries' directory does not exist (it could not be created): no reads.
+    readable: bool,
+    /// Whether an unreadable entry was warned about (later ones are only counted).
+    read_warned: bool,
+    options: DiskOptions,
+    stats: DiskStats,
+}
+
+impl std::fmt::Debug for DiskCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DiskCache")
+            .field("root", &self.root)
+            .field("stats", &self.stats())
+            .finish()
+    }
+}
+
+impl DiskCache {
+    /// Opens (creating it if needed, mode 0700) the cache directory `root`: removes stale temp
+    /// files, scans the entries, sets the bound and evicts down to it. Never fails: a directory
+    /// that cannot be created or read gives a cache with warnings counted and writes off.
+    pub fn open(root: impl Into<PathBuf>, options: DiskOptions) -> Self {
+        let root = root.into();
+        let _span = tracing::info_span!("as_cache_open", root = %root.display()).entered();
+        let mut cache = Self {
+            root,
+            lru: ByteLru::new(0),
+            writable: true,
+            readable: true,
+            read_warned: false,
+            options,
+            stats: DiskStats::default(),
+        };
+        let versioned = cache.root.join(VERSION_DIR);
+        if let Err(e) = create_private_dir_all(&versioned) {
+            cache.write_failed(&versioned, &e, "cannot create the cache directory");
+            cache.readable = versioned.is_dir();
+        }
+        let found = cache.scan(&versioned);
+        let found_bytes: u64 = found.iter().map(|f| f.bytes).sum();
+        cache.stats.found_at_open = found.len() as u64;
+        cache.stats.found_bytes_at_open = found_bytes;
+        let capacity = cache.options.capacity_bytes.unwrap_or_else(|| {
+            default_disk_capacity_bytes(found_bytes, filesystem_free_bytes(&cache.root))
+        });
+        cache.lru.set_capacity(capacity);
+        for f in found {
+            cache.index(f.key, f.bytes);
+        }
+        tracing::debug!(
+            entries = cache.lru.len(),
+            bytes = cache.lru.bytes(),
+            capacity_bytes = capacity,
+            "opened the acceleration-structure cache"
+        );
+        cache
+    }
+
+    /// Entries found under `v1/`, oldest first; stale temp files removed on the way.
+    fn scan(&mut self, versioned: &Path) -> Vec<Found> {
+        let mut found = Vec::new();
+        let Ok(shards) = fs::read_dir(versioned) else {
+            return found;
+        };
+        let now = SystemTime::now();
+        for shard in shards.flatten() {
+            let Ok(files) = fs::read_dir(shard.path()) else {
+                continue;
+            };
+            let shard_name = shard.file_name().to_string_lossy().into_owned();
+            for file in files.flatten() {
+                let name = file.file_name().to_string_lossy().into_owned();
+                let Ok(meta) = file.metadata() else { continue };
+                if !meta.is_file() {
+                    continue;
+                }
+                let modified = meta.modified().unwrap_or(SystemTime::UNIX_EPOCH);
+                if let Some(key) = entry_key(&shard_name, &name) {
+                    found.push(Found {
+                        key,
+                        bytes: meta.len(),
+                        modified,
+                    });
+                } else if let Some(pid) = temp_owner(&name) {
+                    let age = now.duration_since(modified).unwrap_or_default();
+                    self.remove_stale_temp(&file.path(), pid, age);
+                }
+            }
+        }
+        found.sort_by_key(|f| (f.modified, f.key));
+        found
+    }
+
+    /// Removes a temp file whose writer is gone (or cannot be told alive: no /proc) once it is
+    /// older than `stale_temp_age`; a live process's temp file is never touched.
+    fn remove_stale_temp(&mut self, path: &Path, pid: u32, age: Duration) {
+        if pid == std::process::id()
+            || process_alive(pid) == Some(true)
+            || age < self.options.stale_temp_age
+        {
+            return;
+        }
+        match fs::remove_file(path) {
+            Ok(()) => {
+                self.stats.stale_temp_files_removed += 1;
+                tracing::info!(path = %path.display(), pid, "removed a stale cache temp file");
+            }
+            Err(e) => tracing::debug!(path = %path.display(), error = %e, "stale temp file kept"),
+        }
+    }
+
+    /// Records `key` as the most recent entry of `bytes`, removing the files of the entries
+    /// evicted to make room. False when the entry alone exceeds the bound.
+    fn index(&mut self, key: CacheKey, bytes: u64) -> bool {
+        if self.lru.contains(&key) {
+            self.lru.remove(&key);
+        }
+        match self.lru.insert(key, (), bytes) {
+            Ok(evicted) => {
+                for e in evicted {
+                    let path = entry_path(&self.root, &e.key);
+                    match fs::remove_file(&path) {
+                        Ok(()) => {}
+                        Err(err) if err.kind() == io::ErrorKind::NotFound => {}
+                        Err(err) => {
+                            tracing::debug!(path = %path.display(), error = %err, "evicted entry kept");
+                        }
+                    }
+                    self.stats.evicted_entries += 1;
+                    self.stats.evicted_bytes += e.weight;
+                }
+                true
+            }
+            Err(()) => {
+                // An entry found at open larger than the bound: too big to keep.
+                let path = entry_path(&self.root, &key);
+                if fs::remove_file(&path).is_ok() {
+                    self.stats.evicted_entries += 1;
+                    self.stats.evicted_bytes += bytes;
+                }
+                false
+            }
+        }
+    }
+
+    /// The directory given to [`open`](Self::open).
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    /// The file `key`'s entry has (or would have).
+    pub fn entry_path(&self, key: &CacheKey) -> PathBuf {
+        entry_path(&self.root, key)
+    }
+
+    /// Whether writes are still on.
+    pub fn writable(&self) -> bool {
+        self.writable
+    }
+
+    /// Whether this process knows an entry for `key` (found at open, written or read since);
+    /// another process may have removed it since.
+    pub fn contains(&self, key: &CacheKey) -> bool {
+        self.lru.contains(key)
+    }
+
+    /// The blob of `key`'s entry when it is whole, matches its checksums and `compat` accepts
+    /// its serialization header; its file becomes the most recently used. Anything else is
+    /// `None`: a bad entry is warned about, counted by reason and removed.
+    pub fn get(&mut self, key: &CacheKey, compat: &dyn Compatibility) -> Option<Arc<[u8]>> {
+        if !self.readable {
+            self.stats.misses += 1;
+            return None;
+        }
+        let path = entry_path(&self.root, key);
+        match read_entry(&path, key, compat) {
+            Ok((blob, file)) => {
+                // Recency for this and every later process; a file we may not touch (another
+                // user's, a read-only directory) keeps its old time.
+                if let Err(e) = file.set_modified(SystemTime::now()) {
+                    tracing::trace!(path = %path.display(), error = %e, "hit not touched");
+                }
+                self.index(*key, blob.len() as u64 + ENTRY_HEADER_BYTES as u64);
+                self.stats.hits += 1;
+                self.stats.hit_bytes += blob.len() as u64;
+                tracing::trace!(%key, bytes = blob.len(), "cache entry read");
+                Some(blob)
+            }
+            Err(miss) => {
+                self.stats.misses += 1;
+                self.lru.remove(key);
+                match miss {
+                    ReadMiss::Absent => {}
+                    ReadMiss::Bad(e, id) => self.bad_entry(&path, e, id),
+                    ReadMiss::Io(e) => {
+                        let reason = io_reason(&e);
+                        self.stats.warnings.count(reason);
+                        // Counted every time, said once: an unreadable directory would
+                        // otherwise warn for every structure of every frame.
+                        if !std::mem::replace(&mut self.read_warned, true) {
+                            tracing::warn!(
+                                path = %path.display(),
+                                %reason,
+                                error = %e,
+                                "acceleration-structure cache entry unreadable; rebuilding it \
+                                 (further unreadable entries are only counted)"
+                            );
+                        } else {
+                            tracing::debug!(path = %path.display(), %reason, error = %e, "entry unreadable");
+                        }
+                    }
+                }
+                None
+            }
+        }
+    }
+
+    fn bad_entry(&mut self, path: &Path, e: EntryError, read: Option<FileId>) {
+        let reason = e.reason();
+        self.stats.warnings.count(reason);
+        tracing::warn!(
+            path = %path.display(),
+            %reason,
+            "acceleration-structure cache entry not used ({e}); rebuilding it and removing the file"
+        );
+        let now = fs::metadata(path).ok().as_ref().and_then(file_id);
+        if read.is_some() && now != read {
+            return; // replaced since (or gone): not the bad file any more
+        }
+        match fs::remove_file(path) {
+            Ok(()) => self.stats.removed_bad += 1,
+            Err(err) if err.kind() == io::ErrorKind::NotFound => {}
+            Err(err) => tracing::debug!(path = %path.display(), error = %err, "bad entry kept"),
+        }
+    }
+
+    /// Writes `blob` as `key`'s entry (replacing any), evicting the least recently used
+    /// entries first to stay under the bound; returns whether the entry is now on disk.
+    /// Skipped (counted in `skipped_writes`) when writes are off, when `blob` is shorter than
+    /// a serialization header, or when the entry alone exceeds the bound. A failed write is a
+    /// warning that turns writes off; the temp file is removed and nothing else changes.
+    pub fn put(&mut self, key: &CacheKey, blob: &[u8]) -> bool {
+        let file_bytes = blob.len() as u64 + ENTRY_HEADER_BYTES as u64;
+        if !self.writable
+            || blob.len() < SERIALIZED_HEADER_BYTES
+            || file_bytes > self.lru.capacity()
+        {
+            self.stats.skipped_writes += 1;
+            return false;
+        }
+        // Evict first, so a cache at its bound on a nearly full disk makes room before writing.
+        self.index(*key, file_bytes);
+        let path = entry_path(&self.root, key);
+        match self.write_entry(&path, key, blob) {
+            Ok(()) => {
+                self.stats.written += 1;
+                self.stats.written_bytes += file_bytes;
+                tracing::debug!(%key, bytes = file_bytes, "wrote a cache entry");
+                true
+            }
+            Err(e) => {
+                self.lru.remove(key);
+                self.write_failed(&path, &e, "cannot write a cache entry");
+                false
+            }
+        }
+    }
+
+    fn write_entry(&self, path: &Path, key: &CacheKey, blob: &[u8]) -> io::Result<()> {
+        let dir = shard_dir(&self.root, key);
+        create_private_dir_all(&dir)?;
+        let mut temp = tempfile::Builder::new()
+            .prefix(&temp_prefix(key, std::process::id()))
+            .suffix(TEMP_SUFFIX)
+            .tempfile_in(&dir)?;
+        let file = temp.as_file_mut();
+        file.write_all(&encode_header(key, blob))?;
+        if let Some(kind) = self.options.fail_writes_with {
+            // Half the blob written, as a disk filling up mid-entry leaves it.
+            file.write_all(&blob[..blob.len() / 2])?;
+            return Err(io::Error::new(kind, "simulated write failure"));
+        }
+        file.write_all(blob)?;
+        if self.options.sync {
+            file.sync_all()?;
+        }
+        // rename(2) over the target: readers see the old entry or the new one, never a part.
+        temp.persist(path).map_err(|e| e.error)?;
+        Ok(())
+    }
+
+    fn write_failed(&mut self, path: &Path, e: &io::Error, what: &str) {
+        let reason = io_reason(e);
+        self.stats.warnings.count(reason);
+        self.writable = false;
+        tracing::warn!(
+            path = %path.display(),
+            %reason,
+            error = %e,
+            "{what}; the acceleration-structure cache stops writing (renders go on, rebuilding)"
+        );
+    }
+
+    /// Forgets and removes `key`'s entry (e.g. bytes the device refused to deserialize).
+    pub fn remove(&mut self, key: &CacheKey) -> bool {
+        self.lru.remove(key);
+        fs::remove_file(entry_path(&self.root, key)).is_ok()
+    }
+
+    /// The counters, with `entries`, `bytes`, `capacity_bytes` and `writable` as of now.
+    pub fn stats(&self) -> DiskStats {
+        DiskStats {
+            capacity_bytes: self.lru.capacity(),
+            writable: self.writable,
+            entries: self.lru.len() as u64,
+            bytes: self.lru.bytes(),
+            ..self.stats
+        }
+    }
+}
+
+/// Creates `dir` and its missing parents, private to the user (the blobs go to the driver).
+fn create_private_dir_all(dir: &Path) -> io::Result<()> {
+    let mut builder = fs::DirBuilder::new();
+    builder.recursive(true);
+    #[cfg(unix)]
+    std::os::unix::fs::DirBuilderExt::mode(&mut builder, 0o700);
+    builder.create(dir)
+}
+
+/// Reads and checks `key`'s entry at `path`; returns its blob and the open file (to touch).
+fn read_entry(
+    path: &Path,
+    key: &CacheKey,
+    compat: &dyn Compatibility,
+) -> Result<(Arc<[u8]>, File), ReadMiss> {
+    let mut file = match File::open(path) {
+        Ok(f) => f,
+        // A shard path that is a file holds no entry either.
+        Err(e)
+            if matches!(
+                e.kind(),
+                io::ErrorKind::NotFound | io::ErrorKind::NotADirectory
+            ) =>
+        {
+            return Err(ReadMiss::Absent)
+        }
+        Err(e) => return Err(ReadMiss::Io(e)),
+    };
+    let meta = file.metadata().map_err(ReadMiss::Io)?;
+    let (file_bytes, id) = (meta.len(), file_id(&meta));
+    let bad = |e: EntryError| ReadMiss::Bad(e, id);
+    if file_bytes < ENTRY_HEADER_BYTES as u64 {
+        return Err(bad(EntryError::Truncated {
+            file_bytes,
+            expected_bytes: ENTRY_HEADER_BYTES as u64,
+        }));
+    }
+    let mut h = [0u8; ENTRY_HEADER_BYTES];
+    file.read_exact(&mut h).map_err(ReadMiss::Io)?;
+    // The length is checked against the file's before any allocation of that size.
+    let header = decode_header(&h, key, file_bytes).map_err(bad)?;
+    if header.blob_bytes < SERIALIZED_HEADER_BYTES as u64 {
+        return Err(bad(EntryError::NoSerializationHeader(header.blob_bytes)));
+    }
+    let len = usize::try_from(header.blob_bytes).map_err(|_| {
+        ReadMiss::Io(io::Error::new(
+            io::ErrorKind::OutOfMemory,
+            "entry larger than the address space",
+        ))
+    })?;
+    // Collected straight into the Arc's allocation (a trusted-length iterator): no second copy.
+    let mut blob: Arc<[u8]> = std::iter::repeat_n(0u8, len).collect();
+    let Some(buf) = Arc::get_mut(&mut blob) else {
+        unreachable!("a fresh Arc is unique")
+    };
+    match file.read_exact(buf) {
+        Ok(()) => {}
+        // The file shrank after its length was read (another process rewriting it in place
+        // would not: entries are only ever renamed into place).
+        Err(e) if e.kind() == io::ErrorKind::UnexpectedEof => {
+            return Err(bad(EntryError::Truncated {
+                file_bytes,
+                expected_bytes: file_bytes,
+            }))
+        }
+        Err(e) => return Err(ReadMiss::Io(e)),
+    }
+    let computed = xxh3_64(&blob);
+    if computed != header.blob_xxh3 {
+        return Err(bad(EntryError::BlobChecksum {
+            stored: header.blob_xxh3,
+            computed,
+        }));
+    }
+    match serialized_header(&blob) {
+        Some(h) if compat.compatible(h) => Ok((blob, file)),
+        _ => Err(bad(EntryError::Incompatible)),
+    }
+}
+
+#[cfg(test)]
+mod tests;

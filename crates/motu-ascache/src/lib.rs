@@ -1,0 +1,122 @@
+//! Cache **policy and storage** for motu's built acceleration structures: plain Rust, no
+//! Vulkan, testable without a GPU (as `motu-alloc` is for allocation policy).
+//!
+//! The GPU layer serializes a built, compacted BLAS
+//! (`vkCmdCopyAccelerationStructureToMemoryKHR`, `SERIALIZE` mode) into bytes, hands them here
+//! under a [`CacheKey`], and later asks for them back instead of rebuilding from the meshes,
+//! deserializing them with `vkCmdCopyMemoryToAccelerationStructureKHR`. This crate never looks
+//! inside a blob except for its first [`SERIALIZED_HEADER_BYTES`] (Vulkan's serialization
+//! header: the `driverUUID` and the compatibility identifier), which it passes to the
+//! caller's [`Compatibility`] check before a blob from disk is returned.
+//!
+//! # Tiers
+//! - [`HostCache`] (tier 1, `--host-cache BYTES`): blobs in host memory, bounded by their
+//!   bytes, least recently used evicted first. Default bound: [`default_host_cache_bytes`],
+//!   a quarter of `MemAvailable`.
+//! - [`DiskCache`] (tier 2, `--as-cache DIR`, off with `--no-as-cache`): one checksummed file
+//!   per entry (`DIR/v1/ab/<hex key>.as`, byte layout in [`entry`]), written atomically,
+//!   bounded by bytes with LRU eviction by file modification time. Default directory:
+//!   [`default_dir`] (`$MOTU_AS_CACHE`, else `$XDG_CACHE_HOME/motu/as-cache`, else
+//!   `$HOME/.cache/motu/as-cache`); default bound: [`default_disk_capacity_bytes`] (32 GiB or
+//!   half the free space plus what the cache holds, whichever is smaller).
+//! - [`AsCache`]: host in front of disk; a disk hit is promoted to host; `put` writes through.
+//!
+//! # What never happens
+//! - A bad entry is never returned: truncated, corrupt (any flipped byte: header and blob are
+//!   checksummed), foreign (its header names another key) or incompatible (the device says
+//!   no) is a miss, a `tracing::warn!` naming the file and the reason, a count in
+//!   [`WarningCounts`], and the file is removed. So a cache can change when an image is ready,
+//!   never what it shows (given a key that covers every input: see [`CacheKeyBuilder`]).
+//! - A cache problem never fails a render: no method returns an error. A directory that
+//!   cannot be created, a read-only directory, a full disk or an IO error while writing is a
+//!   counted warning that turns writes off; reads go on.
+//! - No reader sees a half-written entry, in this process or another sharing the directory
+//!   (temp file, fsync, rename). Two processes may write the same key: both entries are whole,
+//!   the last rename wins. Temp files of killed writers are removed at the next open, never
+//!   those of a live process.
+//!
+//! # Use from the GPU layer
+//! ```
+//! use std::sync::Arc;
+//! use motu_ascache::*;
+//!
+//! # let dir = tempfile::tempdir()?;
+//! # let cache_dir = Some(dir.path().to_path_buf());
+//! // At start-up: --host-cache, --as-cache / --no-as-cache.
+//! let host = HostCache::new(default_host_cache_bytes());
+//! let disk = cache_dir.map(|d| DiskCache::open(d, DiskOptions::default())); // or default_dir()
+//! let mut cache = AsCache::new(host, disk);
+//!
+//! // A BLAS's key: its content, its build flags, the device.
+//! let key = CacheKeyBuilder::new("motu-gpu blas v1")
+//!     .bytes(b"geometry records").u64(0xc0ffee /* mesh chunk xxh3 */)
+//!     .u32(0b110 /* VkBuildAccelerationStructureFlagsKHR */)
+//!     .bytes(&[7; 16] /* driverUUID */)
+//!     .finish();
+//!
+//! // vkGetDeviceAccelerationStructureCompatibilityKHR in the real thing.
+//! let device = |header: &[u8; SERIALIZED_HEADER_BYTES]| header[..16] == [7; 16];
+//! match cache.get(&key, &device) {
+//!     Some((blob, tier)) => { /* deserialize `blob`: restored from `tier` */ }
+//!     None => {
+//!         // build, compact, serialize, then:
+//!         let serialized: Arc<[u8]> = vec![7u8; 4096].into();
+//!         cache.put(key, serialized);
+//!     }
+//! }
+//! assert_eq!(cache.get(&key, &device).map(|(_, t)| t), Some(Tier::Host));
+//! let stats: CacheStats = cache.stats(); // for --stats
+//! assert_eq!((stats.misses, stats.host_hits), (1, 1));
+//! # Ok::<(), std::io::Error>(())
+//! ```
+//!
+//! One thread uses a cache (`&mut self`); it is `Send`, so it can live on a worker thread.
+
+mod cache;
+mod compat;
+mod disk;
+pub mod entry;
+mod host;
+mod key;
+mod lru;
+mod stats;
+
+pub use cache::AsCache;
+pub use compat::{serialized_header, AnyDevice, Compatibility, SERIALIZED_HEADER_BYTES};
+pub use disk::{
+    default_dir, default_disk_capacity_bytes, dir_from_env, filesystem_free_bytes, io_reason,
+    DiskCache, DiskOptions, CACHE_DIR_ENV, DEFAULT_DISK_CAPACITY_BYTES,
+    DEFAULT_FREE_SHARE_DENOMINATOR, DEFAULT_STALE_TEMP_AGE,
+};
+pub use host::{
+    default_host_cache_bytes, mem_available_bytes, HostCache, DEFAULT_HOST_SHARE_DENOMINATOR,
+    FALLBACK_HOST_CACHE_BYTES,
+};
+pub use key::{CacheKey, CacheKeyBuilder, KeyParseError};
+pub use stats::{CacheStats, DiskStats, HostStats, Tier, WarningCounts, WarningReason};
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_cache_can_move_to_a_worker_thread() {
+        fn is_send<T: Send>() {}
+        is_send::<AsCache>();
+        is_send::<DiskCache>();
+        is_send::<HostCache>();
+    }
+
+    /// ARCHITECTURE.md's invariant: cache policy is plain Rust, usable below every crate.
+    #[test]
+    fn depends_on_no_workspace_crate_and_no_vulkan() {
+        let manifest = include_str!("../Cargo.toml");
+        for line in manifest.lines().map(str::trim) {
+            let name = line.split(['=', '.', ' ']).next().unwrap_or("");
+            assert!(
+                !name.starts_with("motu") && !name.starts_with("pbrt") && name != "ash",
+                "motu-ascache must stay GPU-free and below the workspace: {line}"
+            );
+        }
+    }
+}
