@@ -40,18 +40,131 @@ fn dependencies(manifest: &str) -> Vec<String> {
     out
 }
 
-#[test]
-fn only_motu_gpu_uses_ash() {
-    let users: Vec<String> = manifests()
+/// The crates whose `[dependencies]` name `dep`.
+fn users_of(dep: &str) -> Vec<String> {
+    let mut users: Vec<String> = manifests()
         .into_iter()
-        .filter(|(_, m)| dependencies(m).iter().any(|d| d == "ash"))
+        .filter(|(_, m)| dependencies(m).iter().any(|d| d == dep))
         .map(|(n, _)| n)
         .collect();
-    assert_eq!(users, ["motu-gpu"]);
+    users.sort();
+    users
+}
+
+/// The device layer alone speaks Vulkan; the renderer above it is safe code over its types.
+#[test]
+fn only_motu_vk_uses_ash() {
+    assert_eq!(users_of("ash"), ["motu-vk"]);
+    assert_eq!(users_of("ash-window"), ["motu-vk"]);
+}
+
+/// The crates above the GPU crate reach the device layer through motu-gpu's re-exports, so
+/// the device layer can change under one crate.
+#[test]
+fn only_motu_gpu_uses_the_device_layer() {
+    assert_eq!(users_of("motu-vk"), ["motu-gpu"]);
+}
+
+/// Where `unsafe` may appear outside the device layer, and why: each an mmap or an FFI
+/// boundary no safe API can express.
+const UNSAFE_OUTSIDE_THE_DEVICE_LAYER: &[(&str, &str)] = &[
+    (
+        "pbrt-import/src/source.rs",
+        "mmap of a scene file (a truncated input's SIGBUS becomes an error in motu-cli)",
+    ),
+    (
+        "crates/motu-package/src/reader.rs",
+        "mmap of a package (offsets validated against the mapped length, chunks checksummed)",
+    ),
+    (
+        "crates/motu-cli/src/signals.rs",
+        "the SIGBUS handler (sigaction, async-signal-safe libc calls) and its test's mmap",
+    ),
+    (
+        "crates/motu-view/src/lib.rs",
+        "`Presenter::new` takes winit's raw window handles, whose window must outlive the surface",
+    ),
+];
+
+/// The lines of `text` that use the `unsafe` keyword, comments left out.
+fn unsafe_lines(text: &str) -> Vec<usize> {
+    let ident = |c: char| c.is_alphanumeric() || c == '_';
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| {
+            let code = l.split("//").next().unwrap_or("");
+            code.match_indices("unsafe").any(|(at, _)| {
+                let before = code[..at].chars().next_back();
+                let after = code[at + "unsafe".len()..].chars().next();
+                !before.is_some_and(ident) && !after.is_some_and(ident)
+            })
+        })
+        .map(|(i, _)| i + 1)
+        .collect()
+}
+
+/// No `unsafe` outside motu-vk and the named mmap/FFI places: the renderer, the streamer and
+/// every other crate are safe code.
+#[test]
+fn unsafe_only_in_the_device_layer_and_named_places() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let mut dirs = vec![root.join("pbrt-import/src"), root.join("tests/src")];
+    for e in std::fs::read_dir(root.join("crates")).unwrap().flatten() {
+        dirs.push(e.path().join("src"));
+    }
+    let mut device_layer = 0;
+    let mut found = Vec::new();
+    for dir in dirs.iter().filter(|d| d.exists()) {
+        for (path, text) in rust_files(dir) {
+            let lines = unsafe_lines(&text);
+            if lines.is_empty() {
+                continue;
+            }
+            let rel = path
+                .strip_prefix(&root)
+                .unwrap()
+                .to_string_lossy()
+                .replace('\\', "/");
+            if rel.starts_with("crates/motu-vk/") {
+                device_layer += lines.len();
+            } else if UNSAFE_OUTSIDE_THE_DEVICE_LAYER
+                .iter()
+                .all(|(allowed, _)| *allowed != rel)
+            {
+                found.push(format!("{rel}: lines {lines:?}"));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "`unsafe` outside motu-vk and the named mmap/FFI places (move the Vulkan call into \
+         motu-vk behind a safe API, or name the place and why in this test):\n{}",
+        found.join("\n")
+    );
+    assert!(
+        device_layer > 50,
+        "the checker sees motu-vk's unsafe ({device_layer} lines)"
+    );
+    for (allowed, why) in UNSAFE_OUTSIDE_THE_DEVICE_LAYER {
+        let text = std::fs::read_to_string(root.join(allowed)).unwrap();
+        assert!(
+            !unsafe_lines(&text).is_empty(),
+            "{allowed} ({why}) has no unsafe any more: take it off the list"
+        );
+    }
+}
+
+/// The checker sees `unsafe` in code and not in comments or longer names.
+#[test]
+fn the_unsafe_check_reads_code_not_comments() {
+    let text =
+        "fn a() {}\n// unsafe in a comment\nlet x = unsafe { y() };\n#![deny(unsafe_code)]\n\
+                fn b() { c() } // unsafe after code\nunsafe fn d() {}\n";
+    assert_eq!(unsafe_lines(text), [3, 6]);
 }
 
 #[test]
-fn the_window_system_stays_behind_the_viewer_and_gpu_crates() {
+fn the_window_system_stays_behind_the_viewer_and_the_device_layer() {
     let users = |dep: &str| -> Vec<String> {
         manifests()
             .into_iter()
@@ -60,7 +173,7 @@ fn the_window_system_stays_behind_the_viewer_and_gpu_crates() {
             .collect()
     };
     assert_eq!(users("winit"), ["motu-view"]);
-    assert_eq!(users("ash-window"), ["motu-gpu"]);
+    assert_eq!(users("ash-window"), ["motu-vk"]);
 }
 
 #[test]
@@ -104,13 +217,14 @@ fn motu_import_stays_below_the_gpu_and_the_cli() {
         "motu-trace",
         "motu-cli",
         "ash",
+        "motu-vk",
     ] {
         assert!(!deps.iter().any(|d| d == above), "motu-import uses {above}");
     }
 }
 
 /// The bench harness is a library below the CLI: it never reaches up into the CLI or the
-/// viewer, `ash` stays in motu-gpu, and `motu bench` in the CLI only parses, delegates, prints.
+/// viewer, `ash` stays in motu-vk, and `motu bench` in the CLI only parses, delegates, prints.
 #[test]
 fn motu_bench_stays_below_the_cli() {
     let all = manifests();
@@ -140,7 +254,7 @@ fn motu_bench_stays_below_the_cli() {
 
 /// Render set-up (package meshes, cameras, scene shading, streaming bounds) and `motu render`'s
 /// render paths (the streaming frame loop, the stats) are a library below the CLI, the viewer
-/// and the bench harness; it needs no Vulkan of its own (`ash` stays in motu-gpu), and the CLI
+/// and the bench harness; it needs no Vulkan of its own (`ash` stays in motu-vk), and the CLI
 /// neither holds it nor the camera-path flights.
 #[test]
 fn motu_render_stays_below_the_cli_the_viewer_and_bench() {
@@ -453,6 +567,9 @@ fn no_use_circles_between_files() {
         ("motu-gpu/src", "render", "scene"),
         ("motu-gpu/src", "stream::passes", "stream::params"),
         ("motu-gpu/src", "stream::buffers", "stream::params"),
+        ("motu-vk/src", "command", "conv"),
+        ("motu-vk/src", "conv", "accel"),
+        ("motu-vk/src", "structure", "heap"),
     ] {
         assert!(
             all.iter()

@@ -69,6 +69,12 @@ pub(crate) fn io(what: String) -> impl FnOnce(std::io::Error) -> BenchError {
     move |source| BenchError::Io { what, source }
 }
 
-pub(crate) fn gpu_err(what: &'static str) -> impl FnOnce(motu_gpu::GpuError) -> BenchError {
-    move |source| BenchError::Gpu { what, source }
+/// `what` failed on the GPU: a renderer's error or the device layer's (re-exported by motu-gpu).
+pub(crate) fn gpu_err<E: Into<motu_gpu::GpuError>>(
+    what: &'static str,
+) -> impl FnOnce(E) -> BenchError {
+    move |source| BenchError::Gpu {
+        what,
+        source: source.into(),
+    }
 }

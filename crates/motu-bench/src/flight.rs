@@ -67,7 +67,7 @@ pub fn run_flight(a: &FlightOptions) -> Result<Flight, BenchError> {
             bail!("a flight benchmark runs on the GPU (--backend pipeline or query)")
         }
         Some(b) => b,
-        None => best_backend(&motu_gpu::list_devices().map_err(BenchError::Devices)?),
+        None => best_backend(&motu_gpu::list_devices().map_err(|e| BenchError::Devices(e.into()))?),
     };
     let gpu_backend = match backend {
         Backend::Query => motu_gpu::Backend::Query,

@@ -1,76 +1,21 @@
-use ash::vk;
+use motu_vk::VkError;
 
-/// Everything that can go wrong in the device layer. Messages say what is missing and what to do.
+/// Everything that can go wrong in the GPU scene, renderers and streaming: the device layer's
+/// errors ([`VkError`], shown as they are) and the few this crate's own policy raises.
 #[derive(Debug, thiserror::Error)]
 pub enum GpuError {
-    #[error(
-        "cannot load the Vulkan loader (libvulkan.so.1): {reason}. Install the loader \
-         (Debian: `libvulkan1`) and a driver: for a CPU device run `tools/setup.sh`, which installs \
-         `mesa-vulkan-drivers` (lavapipe, Mesa >= 24.1 for ray tracing) from bookworm-backports; \
-         on NVIDIA install `libvulkan1` and set `VK_DRIVER_FILES` to the driver's `nvidia_icd.json`"
-    )]
-    LoaderMissing { reason: String },
+    /// A device-layer failure (its message unchanged).
+    #[error(transparent)]
+    Device(VkError),
 
-    #[error(
-        "no Vulkan device found. The loader works but no driver (ICD) reported a device: install \
-         `mesa-vulkan-drivers` (run `tools/setup.sh`) or your GPU's Vulkan driver; on NVIDIA set \
-         `VK_DRIVER_FILES` to the driver's `nvidia_icd.json`"
-    )]
-    NoDevice,
+    /// The VRAM budget or the allocation-count cap refused a request (what was asked, what is
+    /// in use, the budget). The heap's refusals are lifted here from [`VkError::Budget`], so
+    /// one pattern catches the heap's and the streamer's (callers evict and retry on it).
+    #[error("VRAM budget: {0}")]
+    Budget(String),
 
-    #[error(
-        "device index {index} does not exist: {count} Vulkan device(s) found (see `motu devices`)"
-    )]
-    DeviceIndexOutOfRange { index: usize, count: usize },
-
-    #[error("device {index} ({name}) is not usable: {reason}")]
-    DeviceUnsuitable {
-        index: usize,
-        name: String,
-        reason: String,
-    },
-
-    #[error(
-        "no device supports {what}; devices and what they lack: {details}. Ray tracing needs \
-         VK_KHR_acceleration_structure plus VK_KHR_ray_tracing_pipeline or VK_KHR_ray_query: on a \
-         CPU use lavapipe from Mesa >= 24.1 (`tools/setup.sh`), on a GPU an RT-capable driver"
-    )]
-    MissingFeature { what: String, details: String },
-
-    #[error(
-        "validation was forced on (MOTU_VALIDATION=1) but the layer VK_LAYER_KHRONOS_validation \
-         is not installed (Debian: `vulkan-validationlayers`)"
-    )]
-    ValidationLayerMissing,
-
-    #[error("{count} Vulkan validation error(s); first: {first}")]
-    Validation { count: usize, first: String },
-
-    #[error("invalid value {value:?} for environment variable {name}: {reason}")]
-    InvalidEnv {
-        name: &'static str,
-        value: String,
-        reason: String,
-    },
-
-    #[error(
-        "device memory allocation #{requested} refused: the allocation count limit is {limit} \
-         (maxMemoryAllocationCount, possibly lowered by MOTU_MAX_ALLOCATIONS); \
-         sub-allocate from larger blocks"
-    )]
-    AllocationCountExceeded { requested: u32, limit: u32 },
-
-    #[error(
-        "device memory allocation of {size_bytes} bytes exceeds the per-allocation limit of \
-         {limit_bytes} bytes (maxMemoryAllocationSize, possibly lowered by MOTU_MAX_ALLOCATION_SIZE)"
-    )]
-    AllocationTooLarge { size_bytes: u64, limit_bytes: u64 },
-
-    #[error("no memory type is suitable for {location:?} (allowed type bits {type_bits:#b})")]
-    NoMemoryType {
-        location: crate::MemoryLocation,
-        type_bits: u32,
-    },
+    #[error("invalid request: {0}")]
+    InvalidRequest(String),
 
     #[error("{what}: {requested} requested, the limit in force is {limit}")]
     LimitExceeded {
@@ -79,41 +24,21 @@ pub enum GpuError {
         limit: u64,
     },
 
-    /// The VRAM budget or the allocation-count cap refused a request (what was asked, what is
-    /// in use, the budget).
-    #[error("VRAM budget: {0}")]
-    Budget(String),
-
-    #[error("invalid request: {0}")]
-    InvalidRequest(String),
-
     #[error(
-        "the GPU device was lost (VK_ERROR_DEVICE_LOST) during phase {phase:?}: the driver reset \
-         the device (a shader fault or a timeout); the last submitted work was that phase"
+        "no device supports {what}; devices and what they lack: {details}. Ray tracing needs \
+         VK_KHR_acceleration_structure plus VK_KHR_ray_tracing_pipeline or VK_KHR_ray_query: on a \
+         CPU use lavapipe from Mesa >= 24.1 (`tools/setup.sh`), on a GPU an RT-capable driver"
     )]
-    DeviceLost { phase: String },
-
-    #[error("{call} failed: {result}")]
-    Vulkan {
-        call: &'static str,
-        result: vk::Result,
-    },
+    MissingFeature { what: String, details: String },
 }
 
-impl GpuError {
-    /// A failed submission or wait of the phase `label` (device loss names the phase).
-    pub(crate) fn from_submit(call: &'static str, result: vk::Result, label: &str) -> GpuError {
-        if result == vk::Result::ERROR_DEVICE_LOST {
-            GpuError::DeviceLost {
-                phase: label.to_string(),
-            }
-        } else {
-            GpuError::Vulkan { call, result }
+impl From<VkError> for GpuError {
+    fn from(e: VkError) -> GpuError {
+        match e {
+            // Policy above the device layer matches budget refusals (evict and retry).
+            VkError::Budget(msg) => GpuError::Budget(msg),
+            e => GpuError::Device(e),
         }
-    }
-
-    pub(crate) fn vk(call: &'static str) -> impl FnOnce(vk::Result) -> GpuError {
-        move |result| GpuError::Vulkan { call, result }
     }
 }
 

@@ -1,42 +1,27 @@
-//! motu-gpu: the Vulkan device layer, and the only crate in motu that uses `ash`.
+//! motu-gpu: the GPU scene, the renderers and out-of-core streaming, in safe Rust over the
+//! device layer `motu-vk` (the only crate that uses `ash` or makes `unsafe` Vulkan calls).
 //!
-//! Everything public is safe Rust: a [`Context`] (instance + device + queue, validation
-//! messages collected), RAII resources ([`Buffer`], [`DeviceMemory`], [`ComputePipeline`],
-//! [`BindingSet`], [`TimestampQueries`]), fenced one-shot submission ([`CommandRecorder`]),
-//! device reports for `motu devices` ([`list_devices`]) and the embedded SPIR-V ([`shaders`]).
+//! A [`GpuScene`] is a compiled hierarchy built on the device under a VRAM budget; [`render`]
+//! traces it once, [`LiveRenderer`] frame after frame, [`StreamingRenderer`] out of core (see
+//! `stream/`). Commands are recorded through motu-vk's typed [`CommandRecorder`] (copies,
+//! barriers, dispatches, ray launches, acceleration-structure builds and copies): no raw
+//! Vulkan here. The SPIR-V of `shaders/` is compiled by `build.rs` and embedded ([`shaders`]).
 //!
-//! Invariants: every Vulkan handle is owned by one RAII value that destroys it; every resource
-//! holds an `Arc` to the device, so the device is destroyed last; resources recorded into a
-//! command buffer are borrowed until the submission's fence signalled.
-//!
-//! Environment: `MOTU_DEVICE` (index), `MOTU_VALIDATION` (`1` forces the validation layer; any
-//! validation error then fails [`Context::check_validation`] and the tests), `MOTU_MAX_*`
-//! (lower limits for testing, see [`LimitOverrides`]), `MOTU_REQUIRE_GPU` (tests fail instead of
-//! skipping without a device).
+//! The device layer's public API is re-exported (the crates above use `motu_gpu::Context`,
+//! `motu_gpu::list_devices`, `motu_gpu::Presenter`, …), so nothing above this crate depends on
+//! motu-vk. [`GpuError`] wraps motu-vk's [`VkError`] with its message unchanged.
 
-mod accel;
-mod command;
-mod context;
 mod error;
-mod heap;
-mod instance;
-mod limits;
 mod live;
 mod lod_instances;
-mod memory;
-mod pipeline;
-mod present;
-mod probe;
-mod query;
 mod render;
-mod report;
-mod rt_pipeline;
 mod scene;
 pub mod shaders;
 // The scene's shading tables are part of the GPU scene; `crate::shading` names them.
 use scene::shading;
 mod stream;
-pub mod testing;
+/// Helpers for GPU tests in this and other crates (motu-vk's).
+pub use motu_vk::testing;
 
 #[cfg(test)]
 mod gpu_tests;
@@ -45,34 +30,24 @@ mod render_tests;
 #[cfg(test)]
 mod stream_tests;
 
-pub use accel::{
-    AsBuildFlags, AsBuildSizes, BlasBuild, BlasGeometry, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
-    INSTANCE_RECORD_SIZE_BYTES,
-};
-pub use command::CommandRecorder;
-pub use context::{Context, ContextOptions, Requirement, ENV_DEVICE};
 pub use error::{GpuError, Result};
-pub use heap::{GpuHeap, HeapBuffer};
-pub use instance::{ValidationRequest, ENV_VALIDATION};
-pub use limits::{
-    parse_size, LimitOverrides, Limits, ENV_MAX_ALLOCATIONS, ENV_MAX_ALLOCATION_SIZE,
-    ENV_MAX_INSTANCE_COUNT, ENV_MAX_PRIMITIVE_COUNT, ENV_MAX_STORAGE_BUFFER_RANGE,
-};
 pub use live::LiveRenderer;
-pub use memory::{
-    Buffer, BufferDesc, BufferUsage, DeviceAddress, DeviceMemory, MemoryLocation,
-    MemoryRequirements,
+// The device layer's API as the crates above knew it.
+pub use motu_vk::{
+    list_devices, parse_size, AsBuildFlags, AsBuildSizes, BindingSet, BlasBuild, BlasGeometry,
+    Buffer, BufferDesc, BufferUsage, Caps, CommandRecorder, ComputePipeline, ComputePipelineDesc,
+    Context, ContextOptions, DeviceAddress, DeviceMemory, DeviceReport, GpuHeap, HeapBuffer,
+    HeapReport, LimitOverrides, Limits, MemoryLocation, MemoryRequirements, Presented, Presenter,
+    RawDisplayHandle, RawWindowHandle, Requirement, TimestampQueries, ValidationRequest, VkError,
+    ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT, ENV_DEVICE, ENV_MAX_ALLOCATIONS,
+    ENV_MAX_ALLOCATION_SIZE, ENV_MAX_INSTANCE_COUNT, ENV_MAX_PRIMITIVE_COUNT,
+    ENV_MAX_STORAGE_BUFFER_RANGE, ENV_VALIDATION, INSTANCE_RECORD_SIZE_BYTES,
 };
-pub use pipeline::{BindingSet, ComputePipeline, ComputePipelineDesc};
-pub use present::{Presented, Presenter, RawDisplayHandle, RawWindowHandle};
-pub use probe::{Caps, HeapReport};
-pub use query::TimestampQueries;
 
 pub use render::{
     heat_colour, render, render_counted, Backend, RayCounts, RenderOptions, RenderOutput,
     RenderStats, View, MAX_STACK_SIZE,
 };
-pub use report::{list_devices, DeviceReport};
 pub use scene::{
     full_build_overhead, BuildOptions, FullBuildOverhead, GpuScene, MeshBlobSource, ResourceReport,
 };

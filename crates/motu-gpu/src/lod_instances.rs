@@ -12,17 +12,15 @@
 
 use std::sync::Mutex;
 
-use ash::vk;
 use bytemuck::cast_slice;
 use motu_abi::lod_instance::InstanceLod;
 use motu_abi::{HierarchyView, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
 use motu_alloc::{AllocKind, MemoryClass};
+use motu_vk::{
+    AsBuildFlags, BufferUsage, ComputePipeline, ComputePipelineDesc, GpuHeap, HeapBuffer,
+};
 
-use crate::accel::AsBuildFlags;
 use crate::error::{GpuError, Result};
-use crate::heap::{GpuHeap, HeapBuffer};
-use crate::memory::BufferUsage;
-use crate::pipeline::{ComputePipeline, ComputePipelineDesc};
 use crate::scene::{
     box_list_instances, encode_instance, table_usage, AccelStruct, GpuScene, InstanceLodGpu,
     LodPush, LodTlas, Slot, Uploader,
@@ -45,6 +43,7 @@ fn buffer(
         MemoryClass::DeviceLocal,
         alignment,
     )
+    .map_err(Into::into)
 }
 
 impl GpuScene {
@@ -106,10 +105,10 @@ impl GpuScene {
                     &format!("lod-tlas-{t}"),
                     sz.acceleration_structure_size_bytes
                         .max(sz_refit.acceleration_structure_size_bytes),
-                    vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+                    motu_vk::AsLevel::Top,
                 )?;
                 tlases.push(LodTlas {
-                    handle: a.handle,
+                    handle: a.target(),
                     // A box list's instances are tested in raygen, as in the scene's build.
                     count: hardware,
                     offset_bytes: u64::from(rec.instance_base - lod.lod_instance_base) * 64,
@@ -219,7 +218,7 @@ impl GpuScene {
                 Ok(a) => a.0,
                 Err(e) => {
                     heap.free(levels);
-                    return Err(e);
+                    return Err(e.into());
                 }
             };
             let push = LodPush {

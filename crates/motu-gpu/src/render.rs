@@ -13,16 +13,13 @@ use motu_abi::lod::LodParams;
 use motu_abi::shade::{Shading, MAX_LIGHTS};
 use motu_abi::LightRecord;
 use motu_alloc::{AllocKind, MemoryClass};
+use motu_vk::{
+    BufferUsage, CommandRecorder, ComputePipeline, ComputePipelineDesc, Context, GpuHeap,
+    HeapBuffer, RtPipeline, RtShaders, TimestampQueries, PUSH_CONSTANT_BYTES,
+};
 use serde::Serialize;
 
-use crate::command::CommandRecorder;
-use crate::context::Context;
 use crate::error::{GpuError, Result};
-use crate::heap::{GpuHeap, HeapBuffer};
-use crate::memory::BufferUsage;
-use crate::pipeline::{ComputePipeline, ComputePipelineDesc};
-use crate::query::TimestampQueries;
-use crate::rt_pipeline::{rt_stages, RtPipeline, PUSH_CONSTANT_BYTES};
 use crate::scene::{GpuScene, Slot, SLOT_COUNT};
 use crate::shaders;
 
@@ -359,7 +356,7 @@ pub(crate) fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams)
             Ok(b) => bufs.push(b),
             Err(e) => {
                 bufs.into_iter().for_each(|b| heap.free(b));
-                return Err(e);
+                return Err(e.into());
             }
         }
     }
@@ -374,7 +371,7 @@ pub(crate) fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams)
         Ok(b) => b,
         Err(e) => {
             bufs.into_iter().for_each(|b| heap.free(b));
-            return Err(e);
+            return Err(e.into());
         }
     };
     let mut it = bufs.into_iter();
@@ -425,7 +422,25 @@ impl Tracer {
         ];
         Ok(match opts.backend {
             Backend::Pipeline => {
-                Tracer::Pipeline(Box::new(RtPipeline::new(ctx, heap, &spec, streamed)?))
+                // The streamed variants of the raygen and the PI any-hit
+                // (`pipeline/trace_stream.rgen`, `pipeline/pi_stream.rahit`).
+                let shaders = RtShaders {
+                    raygen: if streamed {
+                        shaders::PIPELINE_TRACE_STREAM_RGEN
+                    } else {
+                        shaders::PIPELINE_TRACE_RGEN
+                    },
+                    miss: shaders::PIPELINE_MISS_RMISS,
+                    triangle_closest_hit: shaders::PIPELINE_TRIANGLE_RCHIT,
+                    triangle_any_hit: shaders::PIPELINE_TRIANGLE_RAHIT,
+                    pi_intersection: shaders::PIPELINE_PI_RINT,
+                    pi_any_hit: if streamed {
+                        shaders::PIPELINE_PI_STREAM_RAHIT
+                    } else {
+                        shaders::PIPELINE_PI_RAHIT
+                    },
+                };
+                Tracer::Pipeline(Box::new(RtPipeline::new(ctx, heap, &spec, &shaders)?))
             }
             Backend::Query => {
                 if !ctx.caps().ray_query {
@@ -469,34 +484,12 @@ impl Tracer {
         groups: Option<[u32; 2]>,
     ) -> Result<()> {
         match self {
-            Tracer::Pipeline(p) => {
-                let (c, cmd) = rec.raw();
-                let device = &c.shared.device;
-                // SAFETY: recording state; the pipeline, its layout and SBT, and every buffer
-                // behind the pushed addresses live until the fenced submission returns.
-                unsafe {
-                    device.cmd_bind_pipeline(
-                        cmd,
-                        ash::vk::PipelineBindPoint::RAY_TRACING_KHR,
-                        p.pipeline,
-                    );
-                    device.cmd_push_constants(cmd, p.layout, rt_stages(), 0, push_bytes);
-                    p.rt.cmd_trace_rays(
-                        cmd,
-                        &p.regions[0],
-                        &p.regions[1],
-                        &p.regions[2],
-                        &p.regions[3],
-                        dims[0],
-                        dims[1],
-                        1,
-                    );
-                }
-                Ok(())
-            }
+            // The pipeline, its SBT, and every buffer behind the pushed addresses live until
+            // the fenced submission returns.
+            Tracer::Pipeline(p) => Ok(rec.trace_rays(p, push_bytes, dims)?),
             Tracer::Query(q) => {
                 let g = groups.unwrap_or([dims[0].div_ceil(8), dims[1].div_ceil(8)]);
-                rec.dispatch(q, None, push_bytes, [g[0], g[1], 1])
+                Ok(rec.dispatch(q, None, push_bytes, [g[0], g[1], 1])?)
             }
         }
     }
@@ -682,7 +675,7 @@ pub(crate) fn run_frames(
         if let (0, Some(kind), Some(lod), Some(levels)) =
             (f, lod_pass, &scene.instance_lod, &lod_levels)
         {
-            lod.record(ctx, &mut rec, levels, kind)?;
+            lod.record(&mut rec, levels, kind)?;
             rec.write_timestamp(&timestamps, 2 * frames)?;
         }
         tracer.record(&mut rec, push_bytes, [w, h], None)?;
@@ -716,7 +709,7 @@ pub(crate) fn run_frames(
     check_texture_residency(&counters)?;
     let frame_ns = (0..frames)
         .map(|f| timestamps.elapsed_ns(&ticks, 2 * f, 2 * f + 1))
-        .collect::<Result<Vec<f64>>>()?;
+        .collect::<motu_vk::Result<Vec<f64>>>()?;
     Ok((records, rgba, counters, frame_ns))
 }
 

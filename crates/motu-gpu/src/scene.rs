@@ -16,23 +16,19 @@
 //!
 //! Files: this one holds `GpuScene` and its build steps; `scene/upload.rs` the staging ring and
 //! mesh buffers, `scene/batch.rs` batched and pipelined builds with compaction,
-//! `scene/structures.rs` AS objects, table slots and size queries, `scene/tables.rs` the
+//! `scene/structures.rs` the table slots (AS objects and size queries are motu-vk's), `scene/tables.rs` the
 //! encoding of BLAS geometry, TLAS instances and PI AABBs, `scene/budget.rs` the usable budget.
 
 use std::borrow::Cow;
 use std::sync::{Mutex, MutexGuard};
 use std::time::Instant;
 
-use ash::vk;
 use motu_abi::{HierarchyView, BLAS_AABBS, BLAS_TRIANGLES, FLAG_NEEDS_ANY_HIT};
 use motu_alloc::{AllocKind, AllocLimits, AllocReport, BuildSize, MemoryClass, MIB};
+use motu_vk::{AsBuildFlags, AsGeometry, AsLevel, BufferUsage, Context, GpuHeap, HeapBuffer};
 use serde::Serialize;
 
-use crate::accel::AsBuildFlags;
-use crate::context::Context;
 use crate::error::{GpuError, Result};
-use crate::heap::{GpuHeap, HeapBuffer};
-use crate::memory::BufferUsage;
 
 mod batch;
 mod budget;
@@ -49,7 +45,8 @@ pub(crate) use budget::{
 };
 pub use budget::{full_build_overhead, FullBuildOverhead};
 pub(crate) use lod_pass::{InstanceLodGpu, LodTlas, Push as LodPush};
-pub(crate) use structures::{AccelStruct, SizeQueries, Slot, SLOT_COUNT};
+pub(crate) use motu_vk::{AccelStruct, SizeQueries};
+pub(crate) use structures::{Slot, SLOT_COUNT};
 pub(crate) use tables::{
     aabbs_geometry, blas_geometry, box_list_instances, encode_instance, pi_aabbs, pi_capacity,
     set_instance_mask, MAX_PI_CAPACITY,
@@ -114,7 +111,7 @@ pub struct BuildOptions {
     /// Compact acceleration structures after building.
     pub compact: bool,
     /// How BLASes are built (their size queries use the same flags; TLASes: fast trace).
-    pub blas_build: crate::accel::BlasBuild,
+    pub blas_build: motu_vk::BlasBuild,
 }
 
 impl Default for BuildOptions {
@@ -126,7 +123,7 @@ impl Default for BuildOptions {
             max_batch_result_bytes: 256 * MIB,
             staging_bytes: FULL_BUILD_STAGING_CAP_BYTES,
             compact: true,
-            blas_build: crate::accel::BlasBuild::FastTrace,
+            blas_build: motu_vk::BlasBuild::FastTrace,
         }
     }
 }
@@ -535,7 +532,7 @@ impl GpuScene {
             None => 0,
         };
         // Geometry descriptions (with addresses) per BLAS; None for empty ones.
-        let mut descs: Vec<Option<(Vec<vk::AccelerationStructureGeometryKHR<'static>>, Vec<u32>)>> =
+        let mut descs: Vec<Option<(Vec<AsGeometry>, Vec<u32>)>> =
             Vec::with_capacity(view.blases.len());
         let mut sizes = Vec::new();
         let mut order = Vec::new();
@@ -573,7 +570,7 @@ impl GpuScene {
             heap,
             &mut self.report,
             &sizes,
-            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            AsLevel::Bottom,
             opts,
             |k| {
                 let (g, c) = descs[order[k]]
@@ -668,18 +665,13 @@ impl GpuScene {
             heap,
             &mut self.report,
             &sizes,
-            vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+            AsLevel::Top,
             opts,
             |k| {
-                let instances = vk::AccelerationStructureGeometryInstancesDataKHR::default()
-                    .array_of_pointers(false)
-                    .data(vk::DeviceOrHostAddressConstKHR {
-                        device_address: inst_addr.get() + inst_offsets.borrow()[k],
-                    });
                 (
-                    vec![vk::AccelerationStructureGeometryKHR::default()
-                        .geometry_type(vk::GeometryTypeKHR::INSTANCES)
-                        .geometry(vk::AccelerationStructureGeometryDataKHR { instances })],
+                    vec![AsGeometry::Instances {
+                        address: inst_addr.get() + inst_offsets.borrow()[k],
+                    }],
                     vec![count(k)],
                 )
             },

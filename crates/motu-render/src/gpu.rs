@@ -31,7 +31,7 @@ pub(crate) fn gpu_context(
         },
         ..Default::default()
     })
-    .map_err(RenderError::Device)?;
+    .map_err(|e| RenderError::Device(e.into()))?;
     check_vram_budget(s.device.vram_budget_bytes, &ctx)?;
     Ok(ctx)
 }
@@ -169,7 +169,8 @@ pub(crate) fn render_gpu(
     stats["resources"] = serde_json::to_value(scene.report())?;
     lod_pass_stats(&mut stats, &scene);
     drop(scene);
-    ctx.check_validation().map_err(RenderError::Validation)?;
+    ctx.check_validation()
+        .map_err(|e| RenderError::Validation(e.into()))?;
     Ok((out.aov, out.rgba8, stats))
 }
 
@@ -229,6 +230,7 @@ pub(crate) fn render_gpu_path(
     stats["resources"] = serde_json::to_value(live.scene().report())?;
     lod_pass_stats(&mut stats, live.scene());
     drop(live);
-    ctx.check_validation().map_err(RenderError::Validation)?;
+    ctx.check_validation()
+        .map_err(|e| RenderError::Validation(e.into()))?;
     Ok((out.aov, out.rgba8, stats))
 }

@@ -320,6 +320,7 @@ pub(crate) fn render_streaming(
         "mean_passes_after_first": if after_first.is_empty() { Value::Null } else { json!(after_first.iter().sum::<f64>() / after_first.len() as f64) },
     });
     drop(sr);
-    ctx.check_validation().map_err(RenderError::Validation)?;
+    ctx.check_validation()
+        .map_err(|e| RenderError::Validation(e.into()))?;
     Ok((out.aov, out.rgba8, stats))
 }

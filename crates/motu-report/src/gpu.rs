@@ -41,7 +41,8 @@ impl GpuSizes {
             device_index,
             require: Requirement::RayTracing,
             ..Default::default()
-        })?;
+        })
+        .map_err(motu_gpu::GpuError::from)?;
         Ok(Self::with_context(ctx))
     }
 
@@ -167,7 +168,11 @@ impl SizeSource for GpuSizes {
         if let Some(s) = self.blas_cache.borrow().get(shape) {
             return Ok(*s);
         }
-        let s = from_gpu(self.ctx.blas_build_sizes(&to_gpu(shape), self.flags)?);
+        let s = from_gpu(
+            self.ctx
+                .blas_build_sizes(&to_gpu(shape), self.flags)
+                .map_err(motu_gpu::GpuError::from)?,
+        );
         self.blas_cache.borrow_mut().insert(shape.clone(), s);
         Ok(s)
     }
@@ -181,7 +186,11 @@ impl SizeSource for GpuSizes {
                 "a TLAS of {instance_count} instances is over any device's limit"
             ))
         })?;
-        let s = from_gpu(self.ctx.tlas_build_sizes(n, self.flags)?);
+        let s = from_gpu(
+            self.ctx
+                .tlas_build_sizes(n, self.flags)
+                .map_err(motu_gpu::GpuError::from)?,
+        );
         self.tlas_cache.borrow_mut().insert(instance_count, s);
         Ok(s)
     }

@@ -414,7 +414,8 @@ impl<S: FrameSource> App<S> {
                 [size.width, size.height],
                 self.opts.vsync,
             )
-        }?;
+        }
+        .map_err(motu_gpu::GpuError::from)?;
         self.presenter = Some(presenter);
         self.window = Some(window);
         Ok(())
@@ -433,7 +434,7 @@ impl<S: FrameSource> App<S> {
         let Some(presenter) = self.presenter.as_mut() else {
             return Ok(());
         };
-        let extent = presenter.prepare()?;
+        let extent = presenter.prepare().map_err(motu_gpu::GpuError::from)?;
         let automated = self.opts.frames.is_some();
         let [w, h] = if automated {
             [self.opts.width, self.opts.height]
@@ -491,7 +492,10 @@ impl<S: FrameSource> App<S> {
         let Some(presenter) = self.presenter.as_mut() else {
             return Ok(());
         };
-        match presenter.present(&shown, w, h, last)? {
+        match presenter
+            .present(&shown, w, h, last)
+            .map_err(motu_gpu::GpuError::from)?
+        {
             Presented::Skipped => {
                 self.skips += 1;
                 return self.check_skips();

@@ -185,7 +185,7 @@ impl<'p> PackageSource<'p> {
             presentation: o.display,
             ..Default::default()
         })
-        .map_err(SourceError::Device)?;
+        .map_err(|e| SourceError::Device(e.into()))?;
         // Streaming renders large TLASes split into pieces (as `motu render --stream`); the
         // split tables are made once and live as long as the viewer (leaked: the renderer and
         // every element subset borrow them).

@@ -3,15 +3,14 @@
 
 use std::time::Instant;
 
-use ash::vk;
 use motu_alloc::{plan_build_batches, AllocKind, BatchLimits, BuildSize, MemoryClass};
+use motu_vk::{
+    AsBuild, AsBuildFlags, AsBuildMode, AsCopyMode, AsGeometry, AsLevel, BufferUsage,
+    CommandRecorder, Context, GpuHeap, MemoryScope,
+};
 
 use super::{AccelStruct, BuildOptions, Pending, ResourceReport, SizeQueries};
-use crate::command::{memory_barrier, MemoryScope};
-use crate::context::Context;
 use crate::error::{GpuError, Result};
-use crate::heap::GpuHeap;
-use crate::memory::BufferUsage;
 
 /// Build inputs staged one batch ahead: `stage` loads batch k+1's inputs into host-visible
 /// staging while batch k builds on the GPU; `record` puts the staged copies into the batch's
@@ -21,12 +20,10 @@ pub(crate) trait BatchStager {
     /// spent blocked on the GPU (a full ring region flushes behind the batch in flight). Runs
     /// while the previous batch may still be on the GPU, so it must not touch its resources.
     fn stage(&mut self, builds: std::ops::Range<usize>) -> Result<(u64, std::time::Duration)>;
-    /// Records the staged copies into `cmd`; returns whether anything was recorded.
-    ///
-    /// # Safety
-    /// `cmd` is recording on `device`; the caller waits on its submission before the staged
-    /// region is reused and before any destination is freed.
-    unsafe fn record(&mut self, device: &ash::Device, cmd: vk::CommandBuffer) -> bool;
+    /// Records the staged copies into `rec`; returns whether anything was recorded. The
+    /// caller waits on its submission before the staged region is reused and before any
+    /// destination is freed.
+    fn record(&mut self, rec: &mut CommandRecorder<'_>) -> Result<bool>;
     /// Drops whatever was staged but not recorded (after a failure).
     fn abandon(&mut self);
 }
@@ -40,14 +37,14 @@ pub(crate) trait BatchStager {
 /// structure this call created is released before the error returns (a streaming caller
 /// evicts and retries).
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn build_batched<'g>(
+pub(crate) fn build_batched(
     ctx: &Context,
     heap: &mut GpuHeap,
     report: &mut ResourceReport,
     sizes: &[BuildSize],
-    ty: vk::AccelerationStructureTypeKHR,
+    ty: AsLevel,
     opts: &BuildOptions,
-    geometry: impl Fn(usize) -> (Vec<vk::AccelerationStructureGeometryKHR<'g>>, Vec<u32>),
+    geometry: impl Fn(usize) -> (Vec<AsGeometry>, Vec<u32>),
     prepare: impl FnMut(&mut GpuHeap, std::ops::Range<usize>) -> Result<()>,
     inputs_done: &mut dyn FnMut(&mut GpuHeap),
 ) -> Result<Vec<(usize, AccelStruct)>> {
@@ -69,14 +66,14 @@ pub(crate) fn build_batched<'g>(
 /// go in one submission that is not waited on until batch k+1 is staged (the wait comes before
 /// the compacted-size read, the compaction copies and the next batch's submission).
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn build_pipelined<'g>(
+pub(crate) fn build_pipelined(
     ctx: &Context,
     heap: &mut GpuHeap,
     report: &mut ResourceReport,
     sizes: &[BuildSize],
-    ty: vk::AccelerationStructureTypeKHR,
+    ty: AsLevel,
     opts: &BuildOptions,
-    geometry: impl Fn(usize) -> (Vec<vk::AccelerationStructureGeometryKHR<'g>>, Vec<u32>),
+    geometry: impl Fn(usize) -> (Vec<AsGeometry>, Vec<u32>),
     mut prepare: impl FnMut(&mut GpuHeap, std::ops::Range<usize>) -> Result<()>,
     mut stager: Option<&mut dyn BatchStager>,
     inputs_done: &mut dyn FnMut(&mut GpuHeap),
@@ -84,7 +81,6 @@ pub(crate) fn build_pipelined<'g>(
     if sizes.is_empty() {
         return Ok(Vec::new());
     }
-    let accel = ctx.accel_device()?;
     let scratch_align = ctx.limits().scratch_alignment_bytes();
     let plan = plan_build_batches(
         sizes,
@@ -109,7 +105,7 @@ pub(crate) fn build_pipelined<'g>(
         Ok(a) => a.0,
         Err(e) => {
             heap.free(pool);
-            return Err(e);
+            return Err(e.into());
         }
     };
     // Freed once the last batch is built (before its compaction), else at the end.
@@ -118,13 +114,9 @@ pub(crate) fn build_pipelined<'g>(
     let mut in_flight: Vec<AccelStruct> = Vec::new();
     let result = (|| -> Result<()> {
         let scratch_base = scratch_address.div_ceil(scratch_align) * scratch_align;
-        let (kind, flags) = if ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL {
-            (
-                "tlas",
-                crate::accel::AsBuildFlags::tlas(opts.compact).to_vk(),
-            )
-        } else {
-            ("blas", opts.blas_build.flags().to_vk())
+        let (kind, flags) = match ty {
+            AsLevel::Top => ("tlas", AsBuildFlags::tlas(opts.compact)),
+            AsLevel::Bottom => ("blas", opts.blas_build.flags()),
         };
         if let (Some(st), Some(first)) = (stager.as_deref_mut(), plan.batches.first()) {
             st.stage(first.builds.clone())?;
@@ -139,7 +131,7 @@ pub(crate) fn build_pipelined<'g>(
                     Ok(a) => pending.push(Pending { accel: a, index: k }),
                     Err(e) => {
                         in_flight.extend(pending.into_iter().map(|p| p.accel));
-                        return Err(e);
+                        return Err(e.into());
                     }
                 }
             }
@@ -147,70 +139,43 @@ pub(crate) fn build_pipelined<'g>(
             let pending_ref = &pending;
             let run = (|| -> Result<Vec<AccelStruct>> {
                 let descs: Vec<_> = batch.builds.clone().map(&geometry).collect();
-                let ranges: Vec<Vec<vk::AccelerationStructureBuildRangeInfoKHR>> = descs
-                    .iter()
-                    .map(|(_, counts)| {
-                        counts
-                            .iter()
-                            .map(|&n| {
-                                vk::AccelerationStructureBuildRangeInfoKHR::default()
-                                    .primitive_count(n)
-                            })
-                            .collect()
-                    })
-                    .collect();
-                let infos: Vec<_> = descs
+                let builds: Vec<AsBuild<'_>> = descs
                     .iter()
                     .zip(pending_ref)
-                    .map(|((g, _), p)| {
-                        vk::AccelerationStructureBuildGeometryInfoKHR::default()
-                            .ty(ty)
-                            // The flags the sizes were queried with.
-                            .flags(flags)
-                            .mode(vk::BuildAccelerationStructureModeKHR::BUILD)
-                            .dst_acceleration_structure(p.accel.handle)
-                            .geometries(g)
-                            .scratch_data(vk::DeviceOrHostAddressKHR {
-                                device_address: scratch_base + plan.scratch_offsets_bytes[p.index],
-                            })
+                    .map(|((g, counts), p)| AsBuild {
+                        level: ty,
+                        // The flags the sizes were queried with.
+                        flags,
+                        mode: AsBuildMode::Build,
+                        dst: p.accel.target(),
+                        geometries: g,
+                        primitive_counts: counts,
+                        scratch_address: scratch_base + plan.scratch_offsets_bytes[p.index],
                     })
                     .collect();
-                let range_refs: Vec<&[vk::AccelerationStructureBuildRangeInfoKHR]> =
-                    ranges.iter().map(|r| r.as_slice()).collect();
                 // Compacted sizes are asked only of structures built to be compacted.
                 let queries = if opts.compact {
                     Some(SizeQueries::new(ctx, pending_ref.len() as u32)?)
                 } else {
                     None
                 };
-                let handles: Vec<_> = pending_ref.iter().map(|p| p.accel.handle).collect();
-                let rec = ctx.record(&format!("{kind} build batch {bi}"))?;
-                let (c, cmd) = rec.raw();
-                let device = &c.shared.device;
-                // SAFETY: recording state; destinations, scratch slices (disjoint, aligned),
-                // inputs, staged copies and the query pool live until the submission below is
-                // waited on (also on every error path: `Submitted` waits when dropped).
-                unsafe {
-                    if let Some(st) = stager.as_deref_mut() {
-                        if st.record(device, cmd) {
-                            // Staged geometry copies before the builds read them.
-                            memory_barrier(device, cmd, TRANSFER_WRITES, BUILD_READS);
-                        }
+                let targets: Vec<_> = pending_ref.iter().map(|p| p.accel.target()).collect();
+                // Destinations, scratch slices (disjoint, aligned), inputs, staged copies and
+                // the query pool live until the submission below is waited on (also on every
+                // error path: `Submitted` waits when dropped).
+                let mut rec = ctx.record(&format!("{kind} build batch {bi}"))?;
+                if let Some(st) = stager.as_deref_mut() {
+                    if st.record(&mut rec)? {
+                        // Staged geometry copies before the builds read them.
+                        rec.memory_barrier(MemoryScope::TransferWrites, MemoryScope::BuildReads);
                     }
-                    // Coarse: builds are few and large.
-                    memory_barrier(device, cmd, MemoryScope::ALL, MemoryScope::ALL);
-                    accel.cmd_build_acceleration_structures(cmd, &infos, &range_refs);
-                    memory_barrier(device, cmd, MemoryScope::ALL, MemoryScope::ALL);
-                    if let Some(q) = &queries {
-                        device.cmd_reset_query_pool(cmd, q.pool, 0, q.count);
-                        accel.cmd_write_acceleration_structures_properties(
-                            cmd,
-                            &handles,
-                            vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR,
-                            q.pool,
-                            0,
-                        );
-                    }
+                }
+                // Coarse: builds are few and large.
+                rec.barrier();
+                rec.build_acceleration_structures(&builds)?;
+                rec.barrier();
+                if let Some(q) = &queries {
+                    rec.write_compacted_sizes(&targets, q)?;
                 }
                 let submitted = rec.submit()?;
                 // While the GPU builds this batch, load and stage the next one.
@@ -265,7 +230,7 @@ pub(crate) fn build_pipelined<'g>(
                         ty,
                     ) {
                         Ok(a) => copies.push(a),
-                        Err(GpuError::Budget(msg)) => {
+                        Err(motu_vk::VkError::Budget(msg)) => {
                             // No room for both copies: the uncompacted ones are valid as they
                             // are, and the budget holds.
                             tracing::debug!(%msg, "compaction skipped under the budget");
@@ -274,30 +239,29 @@ pub(crate) fn build_pipelined<'g>(
                         }
                         Err(e) => {
                             copies.into_iter().for_each(|c| c.release(heap));
-                            return Err(e);
+                            return Err(e.into());
                         }
                     }
                 }
-                let rec = match ctx.record(&format!("{kind} compaction batch {bi}")) {
+                let mut rec = match ctx.record(&format!("{kind} compaction batch {bi}")) {
                     Ok(r) => r,
                     Err(e) => {
                         copies.into_iter().for_each(|c| c.release(heap));
-                        return Err(e);
+                        return Err(e.into());
                     }
                 };
-                let (_, cmd) = rec.raw();
-                for (p, dst) in pending_ref.iter().zip(&copies) {
-                    let info = vk::CopyAccelerationStructureInfoKHR::default()
-                        .src(p.accel.handle)
-                        .dst(dst.handle)
-                        .mode(vk::CopyAccelerationStructureModeKHR::COMPACT);
-                    // SAFETY: both structures live until the fenced submission returns; the
-                    // source was built with ALLOW_COMPACTION and dst holds its compacted size.
-                    unsafe { accel.cmd_copy_acceleration_structure(cmd, &info) };
-                }
-                if let Err(e) = rec.submit_and_wait() {
+                // Both structures live until the fenced submission returns; the source was
+                // built with compaction allowed and dst holds its compacted size.
+                let copied = pending_ref.iter().zip(&copies).try_for_each(|(p, dst)| {
+                    rec.copy_acceleration_structure(
+                        p.accel.target(),
+                        dst.target(),
+                        AsCopyMode::Compact,
+                    )
+                });
+                if let Err(e) = copied.and_then(|()| rec.submit_and_wait()) {
                     copies.into_iter().for_each(|c| c.release(heap));
-                    return Err(e);
+                    return Err(e.into());
                 }
                 Ok(copies)
             })();
@@ -336,31 +300,18 @@ pub(crate) fn build_pipelined<'g>(
     }
 }
 
-const TRANSFER_WRITES: MemoryScope = MemoryScope {
-    stages: vk::PipelineStageFlags::TRANSFER,
-    access: vk::AccessFlags::TRANSFER_WRITE,
-};
-
-const BUILD_READS: MemoryScope = MemoryScope {
-    stages: vk::PipelineStageFlags::ACCELERATION_STRUCTURE_BUILD_KHR,
-    access: vk::AccessFlags::from_raw(
-        vk::AccessFlags::ACCELERATION_STRUCTURE_READ_KHR.as_raw()
-            | vk::AccessFlags::SHADER_READ.as_raw(),
-    ),
-};
-
 #[cfg(test)]
 mod tests {
     use motu_alloc::{AllocKind, BuildSize, MemoryClass};
 
     use super::build_batched;
-    use crate::accel::BlasGeometry;
-    use crate::context::Requirement;
-    use crate::heap::GpuHeap;
-    use crate::memory::BufferUsage;
     use crate::scene::{BuildOptions, ResourceReport};
     use crate::testing::{assert_no_validation_errors, context_or_skip, test_heap};
-    use ash::vk;
+    use motu_vk::AsLevel;
+    use motu_vk::BlasGeometry;
+    use motu_vk::BufferUsage;
+    use motu_vk::GpuHeap;
+    use motu_vk::Requirement;
 
     fn scratch_bytes(heap: &GpuHeap) -> u64 {
         heap.report()
@@ -425,7 +376,7 @@ mod tests {
             &mut heap,
             &mut report,
             &sizes,
-            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            AsLevel::Bottom,
             &opts,
             |k| {
                 (

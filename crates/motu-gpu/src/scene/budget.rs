@@ -1,8 +1,8 @@
 //! The VRAM budget a build may use.
 
 use motu_alloc::{effective_budget_bytes, SafetyMargin, MIB};
+use motu_vk::Context;
 
-use crate::context::Context;
 use crate::error::{GpuError, Result};
 
 /// The budget a build may use: the user's, lowered to what `VK_EXT_memory_budget` says is

@@ -4,18 +4,17 @@
 
 use std::sync::Mutex;
 
-use ash::vk;
 use bytemuck::{Pod, Zeroable};
 
 use motu_abi::camera::CameraParams;
 use motu_abi::lod::LodParams;
 use motu_abi::lod_instance::{camera_level, LodSlotRecord};
+use motu_vk::{
+    AsBuild, AsBuildFlags, AsBuildMode, AsGeometry, AsLevel, AsTarget, CommandRecorder,
+    ComputePipeline, HeapBuffer,
+};
 
-use crate::command::CommandRecorder;
-use crate::context::Context;
 use crate::error::{GpuError, Result};
-use crate::heap::HeapBuffer;
-use crate::pipeline::ComputePipeline;
 
 /// `lod_instances.comp`'s push constants.
 #[derive(Clone, Copy, Pod, Zeroable)]
@@ -41,7 +40,7 @@ pub(crate) struct Push {
 /// One TLAS rebuilt every frame: its instances at `offset_bytes` in the instance buffer; the
 /// structure itself is `GpuScene::tlases[tlas]` (built without compaction, so a rebuild fits).
 pub(crate) struct LodTlas {
-    pub handle: vk::AccelerationStructureKHR,
+    pub handle: AsTarget,
     pub count: u32,
     pub offset_bytes: u64,
     pub scratch_offset_bytes: u64,
@@ -178,7 +177,6 @@ impl InstanceLodGpu {
     /// barrier); a barrier follows each step.
     pub(crate) fn record<'a>(
         &'a self,
-        ctx: &Context,
         rec: &mut CommandRecorder<'a>,
         levels: &[u32],
         kind: PassKind,
@@ -203,66 +201,46 @@ impl InstanceLodGpu {
             [self.group_count, 1, 1],
         )?;
         rec.barrier();
-        let accel = ctx.accel_device()?;
-        let update = kind == PassKind::Update;
-        let mode = if update {
-            vk::BuildAccelerationStructureModeKHR::UPDATE
+        let mode = if kind == PassKind::Update {
+            AsBuildMode::UpdateInPlace
         } else {
-            vk::BuildAccelerationStructureModeKHR::BUILD
+            AsBuildMode::Build
         };
-        let mut flags = vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE;
-        if refittable {
-            flags |= vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE;
-        }
-        let geometries: Vec<[vk::AccelerationStructureGeometryKHR<'_>; 1]> = self
+        let flags = AsBuildFlags {
+            prefer_fast_trace: true,
+            prefer_fast_build: false,
+            allow_compaction: false,
+            allow_update: refittable,
+            low_memory: false,
+        };
+        let geometries: Vec<[AsGeometry; 1]> = self
             .tlases
             .iter()
             .map(|t| {
-                let instances = vk::AccelerationStructureGeometryInstancesDataKHR::default()
-                    .array_of_pointers(false)
-                    .data(vk::DeviceOrHostAddressConstKHR {
-                        device_address: self.push.vk_instances + t.offset_bytes,
-                    });
-                [vk::AccelerationStructureGeometryKHR::default()
-                    .geometry_type(vk::GeometryTypeKHR::INSTANCES)
-                    .geometry(vk::AccelerationStructureGeometryDataKHR { instances })]
+                [AsGeometry::Instances {
+                    address: self.push.vk_instances + t.offset_bytes,
+                }]
             })
             .collect();
-        let ranges: Vec<[vk::AccelerationStructureBuildRangeInfoKHR; 1]> = self
+        let counts: Vec<[u32; 1]> = self.tlases.iter().map(|t| [t.count]).collect();
+        let builds: Vec<AsBuild<'_>> = self
             .tlases
             .iter()
-            .map(|t| {
-                [vk::AccelerationStructureBuildRangeInfoKHR::default().primitive_count(t.count)]
+            .zip(geometries.iter().zip(&counts))
+            .map(|(t, (g, n))| AsBuild {
+                level: AsLevel::Top,
+                flags,
+                mode,
+                dst: t.handle,
+                geometries: g,
+                primitive_counts: n,
+                scratch_address: self.scratch_address + t.scratch_offset_bytes,
             })
             .collect();
-        let infos: Vec<vk::AccelerationStructureBuildGeometryInfoKHR<'_>> = self
-            .tlases
-            .iter()
-            .zip(&geometries)
-            .map(|(t, g)| {
-                vk::AccelerationStructureBuildGeometryInfoKHR::default()
-                    .ty(vk::AccelerationStructureTypeKHR::TOP_LEVEL)
-                    .flags(flags)
-                    .mode(mode)
-                    .src_acceleration_structure(if update {
-                        t.handle
-                    } else {
-                        vk::AccelerationStructureKHR::null()
-                    })
-                    .dst_acceleration_structure(t.handle)
-                    .geometries(g)
-                    .scratch_data(vk::DeviceOrHostAddressKHR {
-                        device_address: self.scratch_address + t.scratch_offset_bytes,
-                    })
-            })
-            .collect();
-        let range_refs: Vec<&[vk::AccelerationStructureBuildRangeInfoKHR]> =
-            ranges.iter().map(|r| r.as_slice()).collect();
-        let (_, cmd) = rec.raw();
-        // SAFETY: recording state; the destinations (the scene's TLASes), the instance buffer
-        // and the disjoint, aligned scratch slices live as long as the scene, which outlives
-        // every submission recording this pass (callers wait on it).
-        unsafe { accel.cmd_build_acceleration_structures(cmd, &infos, &range_refs) };
+        // The destinations (the scene's TLASes), the instance buffer and the disjoint, aligned
+        // scratch slices live as long as the scene, which outlives every submission recording
+        // this pass (callers wait on it).
+        rec.build_acceleration_structures(&builds)?;
         rec.barrier();
         Ok(())
     }

@@ -6,10 +6,9 @@
 use bytemuck::{cast_slice, Pod, Zeroable};
 use motu_abi::{HierarchyView, FLAG_HAS_NORMALS, FLAG_HAS_UVS};
 use motu_alloc::{AllocKind, MemoryClass};
+use motu_vk::{Context, GpuHeap, HeapBuffer};
 
-use crate::context::Context;
 use crate::error::Result;
-use crate::heap::{GpuHeap, HeapBuffer};
 use crate::scene::{table_usage, MeshBlobSource, Uploader};
 
 /// `ShadingRef` of `shade.glsl`.
@@ -136,11 +135,12 @@ fn alloc(heap: &mut GpuHeap, label: &str, size: u64) -> Result<HeapBuffer> {
         label,
         size.max(16),
         // Copied from when a streamer moves it.
-        table_usage() | crate::memory::BufferUsage::TRANSFER_SRC,
+        table_usage() | motu_vk::BufferUsage::TRANSFER_SRC,
         AllocKind::Texture,
         MemoryClass::DeviceLocal,
         16,
     )
+    .map_err(Into::into)
 }
 
 /// Uploads the shading tables for the meshes marked in `used`. On error the buffers made so

@@ -1,41 +1,27 @@
 //! Table encoding: BLAS geometry descriptions, TLAS instance records, programmable-instance
 //! AABBs and what the root reaches.
 
-use ash::vk;
 use motu_abi::{
     HierarchyView, TlasRecord, BLAS_AABBS, BOX_LIST_CAPACITY, FLAG_NEEDS_ANY_HIT, PI_LOD_SELECTOR,
     PI_TLAS,
 };
+use motu_vk::{AsGeometry, BlasGeometry, InstanceHit};
 
 use super::MeshGpu;
-use crate::accel::BlasGeometry;
 use crate::error::{GpuError, Result};
 
-/// Vulkan geometry of one BLAS.
-pub(crate) type BlasDesc = (
-    Vec<vk::AccelerationStructureGeometryKHR<'static>>,
-    Vec<u32>,
-    Vec<BlasGeometry>,
-);
+/// The build geometry of one BLAS: geometries, their primitive counts, their shapes (for the
+/// size query).
+pub(crate) type BlasDesc = (Vec<AsGeometry>, Vec<u32>, Vec<BlasGeometry>);
 
-/// One geometry of `vk::AabbPositionsKHR` boxes (24 bytes each) at `device_address`:
-/// programmable instances, proxy boxes and placeholders (`opaque`: no any-hit; else each
-/// candidate once, as programmable instances record them).
-pub(crate) fn aabbs_geometry(
-    device_address: u64,
-    opaque: bool,
-) -> vk::AccelerationStructureGeometryKHR<'static> {
-    let aabbs = vk::AccelerationStructureGeometryAabbsDataKHR::default()
-        .data(vk::DeviceOrHostAddressConstKHR { device_address })
-        .stride(24);
-    vk::AccelerationStructureGeometryKHR::default()
-        .geometry_type(vk::GeometryTypeKHR::AABBS)
-        .geometry(vk::AccelerationStructureGeometryDataKHR { aabbs })
-        .flags(if opaque {
-            vk::GeometryFlagsKHR::OPAQUE
-        } else {
-            vk::GeometryFlagsKHR::NO_DUPLICATE_ANY_HIT_INVOCATION
-        })
+/// One geometry of boxes (24 bytes each) at `device_address`: programmable instances, proxy
+/// boxes and placeholders (`opaque`: no any-hit; else each candidate once, as programmable
+/// instances record them).
+pub(crate) fn aabbs_geometry(device_address: u64, opaque: bool) -> AsGeometry {
+    AsGeometry::Aabbs {
+        address: device_address,
+        opaque,
+    }
 }
 
 /// Geometry of BLAS `i` of `view`: one triangle geometry per mesh (`mesh(m)` is mesh record
@@ -74,27 +60,12 @@ pub(crate) fn blas_geometry<'m>(
                 continue;
             };
             let opaque = view.meshes[geo.mesh as usize].flags & FLAG_NEEDS_ANY_HIT == 0;
-            let tri = vk::AccelerationStructureGeometryTrianglesDataKHR::default()
-                .vertex_format(vk::Format::R32G32B32_SFLOAT)
-                .vertex_data(vk::DeviceOrHostAddressConstKHR {
-                    device_address: m.positions_address,
-                })
-                .vertex_stride(12)
-                .max_vertex(m.vertex_count - 1)
-                .index_type(vk::IndexType::UINT32)
-                .index_data(vk::DeviceOrHostAddressConstKHR {
-                    device_address: m.indices_address,
-                });
-            g.push(
-                vk::AccelerationStructureGeometryKHR::default()
-                    .geometry_type(vk::GeometryTypeKHR::TRIANGLES)
-                    .geometry(vk::AccelerationStructureGeometryDataKHR { triangles: tri })
-                    .flags(if opaque {
-                        vk::GeometryFlagsKHR::OPAQUE
-                    } else {
-                        vk::GeometryFlagsKHR::NO_DUPLICATE_ANY_HIT_INVOCATION
-                    }),
-            );
+            g.push(AsGeometry::Triangles {
+                positions_address: m.positions_address,
+                vertex_count: m.vertex_count,
+                indices_address: m.indices_address,
+                opaque,
+            });
             c.push(m.triangle_count);
             s.push(BlasGeometry::Triangles {
                 vertex_count: m.vertex_count,
@@ -121,12 +92,13 @@ pub(crate) fn blas_geometry<'m>(
     })
 }
 
-/// One `VkAccelerationStructureInstanceKHR` (64 bytes): triangles use hit group 0 (opaque unless
-/// `needs_any_hit`), programmable instances (`aabbs`) hit group 1, never opaque. A
-/// `blas_address` of 0 makes the instance inactive (mask 0 as well: some drivers only check
-/// the mask). The custom index is `local_index`, the instance's index within its TLAS's
-/// record range (< 2^24, which `max_instance_count` bounds): the shaders read it instead of
-/// the position in the built TLAS, so a streamed TLAS may hold only its resident instances.
+/// One TLAS instance record (64 bytes, motu-vk's [`motu_vk::encode_instance`]): triangles use
+/// hit group 0 (opaque unless `needs_any_hit`), programmable instances (`aabbs`) hit group 1,
+/// never opaque. A `blas_address` of 0 makes the instance inactive. The custom index is
+/// `local_index`, the instance's index within its TLAS's record range (< 2^24, which
+/// `max_instance_count` bounds): the shaders read it instead of the position in the built
+/// TLAS, so a streamed TLAS may hold only its resident instances. Node ids never travel in 24
+/// bits: only the local instance index does.
 pub(crate) fn encode_instance(
     tlas_from_blas: &[f32; 12],
     aabbs: bool,
@@ -134,31 +106,14 @@ pub(crate) fn encode_instance(
     blas_address: u64,
     local_index: u32,
 ) -> [u8; 64] {
-    let (sbt, flags) = if aabbs {
-        (1u32, vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE)
-    } else if needs_any_hit {
-        (
-            0,
-            vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE,
-        )
+    let hit = if aabbs {
+        InstanceHit::Procedural
     } else {
-        (
-            0,
-            vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE
-                | vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE,
-        )
+        InstanceHit::Triangles {
+            any_hit: needs_any_hit,
+        }
     };
-    let mut out = [0u8; 64];
-    for (i, v) in tlas_from_blas.iter().enumerate() {
-        out[4 * i..4 * i + 4].copy_from_slice(&v.to_le_bytes());
-    }
-    // Node ids never travel in 24 bits: only the local instance index does.
-    debug_assert!(local_index < 1 << 24, "instance index {local_index} ≥ 2^24");
-    let mask = if blas_address == 0 { 0u32 } else { 0xFF };
-    out[48..52].copy_from_slice(&((mask << 24) | (local_index & 0xFF_FFFF)).to_le_bytes());
-    out[52..56].copy_from_slice(&(sbt | (flags.as_raw() << 24)).to_le_bytes());
-    out[56..64].copy_from_slice(&blas_address.to_le_bytes());
-    out
+    motu_vk::encode_instance(tlas_from_blas, hit, blas_address, local_index)
 }
 
 /// Sets an encoded instance's 8-bit visibility mask (the top byte of its custom-index word,

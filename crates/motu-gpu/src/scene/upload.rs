@@ -2,15 +2,12 @@
 
 use std::time::Instant;
 
-use ash::vk;
 use motu_abi::{HierarchyView, MeshRecord, BLAS_TRIANGLES};
 use motu_alloc::{AllocKind, MemoryClass};
+use motu_vk::{BufferCopy, BufferUsage, CommandRecorder, Context, GpuHeap, HeapBuffer};
 
 use super::{BatchStager, MeshBlobSource};
-use crate::context::Context;
 use crate::error::{GpuError, Result};
-use crate::heap::{GpuHeap, HeapBuffer};
-use crate::memory::BufferUsage;
 
 /// Bounded host-visible staging ring: copies are queued and flushed (one fenced submission)
 /// whenever the ring is full, so host memory never holds more than the ring.
@@ -21,7 +18,7 @@ use crate::memory::BufferUsage;
 pub(crate) struct Uploader {
     pub(crate) staging: HeapBuffer,
     cursor: u64,
-    pending: Vec<(vk::Buffer, u64, u64, u64)>,
+    pending: Vec<BufferCopy>,
     flushes: u32,
     /// Time spent in fenced flushes (submission and wait).
     flush_wait: std::time::Duration,
@@ -93,12 +90,12 @@ impl Uploader {
             let n = ((end - self.cursor) as usize).min(bytes.len() - done);
             self.staging
                 .write_bytes(self.cursor, &bytes[done..done + n])?;
-            self.pending.push((
-                dst.handle(),
-                self.cursor,
-                dst_offset + done as u64,
-                n as u64,
-            ));
+            self.pending.push(BufferCopy {
+                dst: dst.target(),
+                src_offset: self.cursor,
+                dst_offset: dst_offset + done as u64,
+                size_bytes: n as u64,
+            });
             // Keep copies 16-byte aligned in the ring.
             self.cursor = (self.cursor + n as u64).div_ceil(16) * 16;
             done += n;
@@ -135,8 +132,12 @@ impl Uploader {
             self.flush(ctx)?;
         }
         self.staging.with_mapped_mut(self.cursor, len, fill)?;
-        self.pending
-            .push((dst.handle(), self.cursor, dst_offset, len as u64));
+        self.pending.push(BufferCopy {
+            dst: dst.target(),
+            src_offset: self.cursor,
+            dst_offset,
+            size_bytes: len as u64,
+        });
         self.cursor = (self.cursor + len as u64).div_ceil(16) * 16;
         Ok(())
     }
@@ -166,34 +167,21 @@ impl Uploader {
         Ok(())
     }
 
-    /// Records the queued copies into `cmd` (whose submission the caller fences before the
-    /// ring region is reused) and moves to the other half. Returns whether anything was recorded.
-    ///
-    /// # Safety
-    /// `cmd` must be in the recording state on `device`, and every queued destination must
-    /// stay alive until that submission completes.
-    pub(crate) unsafe fn record_pending(
-        &mut self,
-        device: &ash::Device,
-        cmd: vk::CommandBuffer,
-    ) -> bool {
+    /// Records the queued copies into `rec` (whose submission the caller fences before the
+    /// ring region is reused, and before any queued destination is freed) and moves to the
+    /// other half. Returns whether anything was recorded.
+    pub(crate) fn record_pending(&mut self, rec: &mut CommandRecorder<'_>) -> Result<bool> {
         let any = !self.pending.is_empty();
-        for &(dst, src_off, dst_off, size) in &self.pending {
-            let region = vk::BufferCopy {
-                src_offset: src_off,
-                dst_offset: dst_off,
-                size,
-            };
-            // SAFETY: per the function contract; the staging buffer outlives the submission
-            // (freed only after every build batch was waited on).
-            unsafe { device.cmd_copy_buffer(cmd, self.staging.handle(), dst, &[region]) };
-        }
+        // The staging buffer outlives the submission (freed only after every build batch was
+        // waited on), like the destinations.
+        let recorded = rec.copy_regions(self.staging.target(), &self.pending);
         self.pending.clear();
         if self.double_buffered {
             self.half ^= 1;
         }
         self.cursor = self.region().0;
-        any
+        recorded?;
+        Ok(any)
     }
 
     /// Forgets queued copies (their destinations are about to be freed after a failure).
@@ -207,24 +195,12 @@ impl Uploader {
             self.cursor = self.region().0;
             return Ok(());
         }
-        let rec = ctx.record("upload")?;
-        let (c, cmd) = rec.raw();
-        for &(dst, src_off, dst_off, size) in &self.pending {
-            let region = vk::BufferCopy {
-                src_offset: src_off,
-                dst_offset: dst_off,
-                size,
-            };
-            // SAFETY: recording state; the staging buffer and every queued destination are alive
-            // until this function returns (callers keep them; the submission is waited on).
-            unsafe {
-                c.shared
-                    .device
-                    .cmd_copy_buffer(cmd, self.staging.handle(), dst, &[region])
-            };
-        }
+        // The staging buffer and every queued destination are alive until this function
+        // returns (callers keep them; the submission is waited on).
+        let mut rec = ctx.record("upload")?;
+        let r = rec.copy_regions(self.staging.target(), &self.pending);
         let t = Instant::now();
-        let r = rec.submit_and_wait();
+        let r = r.and_then(|()| rec.submit_and_wait());
         self.flush_wait += t.elapsed();
         self.pending.clear();
         self.cursor = self.region().0;
@@ -275,9 +251,9 @@ impl BatchStager for MeshStager<'_, '_> {
         Ok((bytes, self.up.flush_wait.saturating_sub(stalled_before)))
     }
 
-    unsafe fn record(&mut self, device: &ash::Device, cmd: vk::CommandBuffer) -> bool {
-        // SAFETY: per the trait contract; the mesh buffers live in the scene being built.
-        unsafe { self.up.record_pending(device, cmd) }
+    fn record(&mut self, rec: &mut CommandRecorder<'_>) -> Result<bool> {
+        // Per the trait contract; the mesh buffers live in the scene being built.
+        self.up.record_pending(rec)
     }
 
     fn abandon(&mut self) {
@@ -412,7 +388,7 @@ impl MeshGpu {
             Ok(a) => a.0,
             Err(e) => {
                 heap.free(buf);
-                return Err(e);
+                return Err(e.into());
             }
         };
         let MeshLayout {
@@ -449,6 +425,7 @@ impl MeshGpu {
             self.memory_class(),
             16,
         )
+        .map_err(Into::into)
     }
 
     /// The memory its buffer lives in (host-visible ones are host-mapped).
@@ -464,7 +441,7 @@ impl MeshGpu {
     /// staging ring (a fresh buffer no submission reads yet, so either order is safe).
     fn put(&self, ctx: &Context, up: &mut Uploader, offset: u64, bytes: &[u8]) -> Result<()> {
         if self.buffer.is_host_mapped() {
-            self.buffer.write_bytes(offset, bytes)
+            self.buffer.write_bytes(offset, bytes).map_err(Into::into)
         } else {
             up.upload(ctx, &self.buffer, offset, bytes)
         }
@@ -591,9 +568,9 @@ mod tests {
     use motu_alloc::{AllocKind, MemoryClass};
 
     use super::Uploader;
-    use crate::context::Requirement;
-    use crate::memory::BufferUsage;
     use crate::testing::{assert_no_validation_errors, context_or_skip, test_heap};
+    use motu_vk::BufferUsage;
+    use motu_vk::Requirement;
 
     /// Values written in place by `upload_with` land in order across several ring regions,
     /// at an offset, next to a plain upload queued before them.

@@ -1,11 +1,10 @@
 //! Per-frame buffers (parameters, AOV, colour, stats, streaming lists, readback).
 
 use motu_alloc::{AllocKind, MemoryClass};
+use motu_vk::{BufferUsage, GpuHeap, HeapBuffer};
 
 use super::params::{StreamParams, CARRY_BYTES};
 use crate::error::{GpuError, Result};
-use crate::heap::{GpuHeap, HeapBuffer};
-use crate::memory::BufferUsage;
 use crate::render::STAT_WORDS;
 
 /// Buffers of one frame, freed at its end.
@@ -147,7 +146,7 @@ pub(super) fn alloc_frame_buffers(
             Ok(b) => bufs.push(b),
             Err(e) => {
                 bufs.into_iter().for_each(|b| heap.free(b));
-                return Err(e);
+                return Err(e.into());
             }
         }
     }

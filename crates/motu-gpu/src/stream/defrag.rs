@@ -13,12 +13,11 @@
 
 use std::collections::HashMap;
 
-use ash::vk;
 use motu_alloc::{AllocationId, BlockId};
+use motu_vk::HeapBuffer;
 
 use super::StreamingRenderer;
 use crate::error::Result;
-use crate::heap::HeapBuffer;
 use crate::scene::AccelStruct;
 
 /// What owns an allocation a drain may move.
@@ -125,11 +124,11 @@ impl<'a> StreamingRenderer<'a> {
         }
         for (m, g) in self.meshes.iter().enumerate() {
             if let Some(g) = g {
-                owners.insert(g.buffer.id, Owner::Mesh(m));
+                owners.insert(g.buffer.id(), Owner::Mesh(m));
             }
         }
         for (t, b) in self.shading.resident() {
-            owners.insert(b.id, Owner::Texture(t));
+            owners.insert(b.id(), Owner::Texture(t));
         }
         owners
     }
@@ -153,9 +152,10 @@ impl<'a> StreamingRenderer<'a> {
                         &mut self.heap,
                         &format!("blas-{b}-moved"),
                         size,
-                        vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+                        motu_vk::AsLevel::Bottom,
                     )
                     .map(|a| blas_new.push((b, a)))
+                    .map_err(Into::into)
                 }
                 Owner::Mesh(m) => match self.meshes[m].as_ref() {
                     Some(g) => g
@@ -176,7 +176,6 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         let copied = (|| -> Result<()> {
-            let accel = ctx.accel_device()?;
             let mut rec = ctx.record("defragment")?;
             for (m, buf) in &mesh_new {
                 if let Some(g) = self.meshes[*m].as_ref() {
@@ -188,19 +187,18 @@ impl<'a> StreamingRenderer<'a> {
                     rec.copy_buffer(old, 0, buf, 0, old.size_bytes())?;
                 }
             }
-            let (_, cmd) = rec.raw();
             for (b, dst) in &blas_new {
                 if let Some(src) = self.blas[*b].as_ref() {
-                    let info = vk::CopyAccelerationStructureInfoKHR::default()
-                        .src(src.handle)
-                        .dst(dst.handle)
-                        .mode(vk::CopyAccelerationStructureModeKHR::CLONE);
-                    // SAFETY: both structures live until the fenced submission returns; dst
-                    // was created with src's size and type.
-                    unsafe { accel.cmd_copy_acceleration_structure(cmd, &info) };
+                    // Both structures live until the fenced submission returns; dst was
+                    // created with src's size and level.
+                    rec.copy_acceleration_structure(
+                        src.target(),
+                        dst.target(),
+                        motu_vk::AsCopyMode::Clone,
+                    )?;
                 }
             }
-            rec.submit_and_wait()
+            rec.submit_and_wait().map_err(Into::into)
         })();
         if let Err(e) = copied {
             blas_new

@@ -7,12 +7,12 @@
 
 use motu_abi::{HierarchyView, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
 use motu_alloc::MIB;
+use motu_vk::BlasGeometry;
 use serde::Serialize;
 
 use super::buffers::frame_buffer_bytes;
 use super::persistent::{persistent_estimate, persistent_flags, PersistentEstimate};
 use super::proxy_boxes;
-use crate::accel::BlasGeometry;
 use crate::error::Result;
 use crate::scene::{allocator_slack_bytes, staging_bytes_for_budget};
 
@@ -28,9 +28,9 @@ pub trait FloorSizes {
     }
 }
 
-impl FloorSizes for crate::context::Context {
+impl FloorSizes for motu_vk::Context {
     fn blas(&self, geometry: &[BlasGeometry]) -> Result<(u64, u64)> {
-        let s = self.blas_build_sizes(geometry, crate::accel::AsBuildFlags::default())?;
+        let s = self.blas_build_sizes(geometry, motu_vk::AsBuildFlags::default())?;
         Ok((
             s.acceleration_structure_size_bytes,
             s.build_scratch_size_bytes,
@@ -38,7 +38,7 @@ impl FloorSizes for crate::context::Context {
     }
 
     fn tlas(&self, instance_count: u32) -> Result<(u64, u64)> {
-        let s = self.tlas_build_sizes(instance_count, crate::accel::AsBuildFlags::default())?;
+        let s = self.tlas_build_sizes(instance_count, motu_vk::AsBuildFlags::default())?;
         Ok((
             s.acceleration_structure_size_bytes,
             s.build_scratch_size_bytes,

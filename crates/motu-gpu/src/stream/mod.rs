@@ -118,11 +118,10 @@ use std::collections::BTreeSet;
 
 use motu_abi::HierarchyView;
 use motu_alloc::{MemoryClass, Residency, MIB};
+use motu_vk::{Context, GpuHeap, HeapBuffer};
 use serde::Serialize;
 
-use crate::context::Context;
 use crate::error::{GpuError, Result};
-use crate::heap::{GpuHeap, HeapBuffer};
 use crate::render::{Backend, Tracer};
 use crate::scene::{AccelStruct, BuildOptions, MeshBlobSource, MeshGpu, Uploader, SLOT_COUNT};
 
@@ -152,9 +151,9 @@ pub struct StreamOptions {
     pub guard_band_px: u32,
     /// Compact acceleration structures after building.
     pub compact: bool,
-    /// How triangle BLASes and proxy boxes are built: [`BlasBuild::Small`](crate::accel::BlasBuild::Small) by default (a
+    /// How triangle BLASes and proxy boxes are built: [`BlasBuild::Small`](motu_vk::BlasBuild::Small) by default (a
     /// fifth smaller on NVIDIA, faster to build; streamed frames are mostly building).
-    pub blas_build: crate::accel::BlasBuild,
+    pub blas_build: motu_vk::BlasBuild,
     /// Also build, in a pass's build step, what fits of the structures pixels will need
     /// after their nearest (fewer passes on a cold frame; off: they are only prefetched after
     /// the frame).
@@ -326,7 +325,7 @@ impl Default for StreamOptions {
             staging_bytes: 64 * MIB,
             guard_band_px: 8,
             compact: true,
-            blas_build: crate::accel::BlasBuild::Small,
+            blas_build: motu_vk::BlasBuild::Small,
             build_open_early: true,
             probe_stride: 1,
             probe_rounds: 2,

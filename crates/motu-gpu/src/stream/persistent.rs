@@ -24,19 +24,15 @@
 //! demand work as before (the proxy and marks BLASes are rebuilt and their slots repointed;
 //! an absent one points at the empty placeholder, mask 0).
 
-use ash::vk;
 use motu_abi::HierarchyView;
 use motu_alloc::{AllocKind, BuildSize, MemoryClass};
+use motu_vk::{AsBuild, AsBuildFlags, AsBuildMode, AsGeometry, AsLevel, BufferUsage, HeapBuffer};
 use rayon::prelude::*;
 use serde::Serialize;
 
 use super::tlas_records::{instance_record, tail_record, RECORD_BYTES};
 use super::StreamingRenderer;
-use crate::accel::AsBuildFlags;
-use crate::command::{memory_barrier, MemoryScope};
 use crate::error::{GpuError, Result};
-use crate::heap::HeapBuffer;
-use crate::memory::BufferUsage;
 use crate::scene::{aabbs_geometry, build_batched, set_instance_mask, AccelStruct, ResourceReport};
 
 /// How streamed TLASes follow residency (`--stream-tlas`).
@@ -79,7 +75,7 @@ impl Persistent {
         self.record_count
     }
 
-    pub(super) fn release(self, heap: &mut crate::heap::GpuHeap) {
+    pub(super) fn release(self, heap: &mut motu_vk::GpuHeap) {
         heap.free(self.records);
         heap.free(self.scratch);
     }
@@ -312,7 +308,7 @@ impl StreamingRenderer<'_> {
                 &mut self.heap,
                 &mut report,
                 &sizes,
-                vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+                AsLevel::Bottom,
                 &self.build_opts,
                 |k| (vec![aabbs_geometry(base + k as u64 * 24, true)], vec![1]),
                 |_, _| Ok(()),
@@ -348,7 +344,7 @@ impl StreamingRenderer<'_> {
     /// The build sizes of one placeholder (an AABB BLAS of one box, built as BLASes are).
     pub(super) fn placeholder_build_size(&self) -> Result<BuildSize> {
         let s = self.ctx.blas_build_sizes(
-            &[crate::accel::BlasGeometry::Aabbs {
+            &[motu_vk::BlasGeometry::Aabbs {
                 aabb_count: 1,
                 opaque: true,
             }],
@@ -428,19 +424,19 @@ impl StreamingRenderer<'_> {
         });
         if let Err(e) = filled {
             self.heap.free(records);
-            return Err(e);
+            return Err(e.into());
         }
         let accel = match AccelStruct::new(
             &ctx,
             &mut self.heap,
             &format!("stream-tlas-{t}"),
             sizes.acceleration_structure_size_bytes,
-            vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+            AsLevel::Top,
         ) {
             Ok(a) => a,
             Err(e) => {
                 self.heap.free(records);
-                return Err(e);
+                return Err(e.into());
             }
         };
         let r = (|| -> Result<HeapBuffer> {
@@ -545,14 +541,14 @@ impl StreamingRenderer<'_> {
     fn alloc_scratch(&mut self, label: &str, size_bytes: u64) -> Result<HeapBuffer> {
         let align = self.ctx.limits().scratch_alignment_bytes();
         // One alignment more: the scratch address is rounded up to it inside the buffer.
-        self.heap.alloc_buffer(
+        Ok(self.heap.alloc_buffer(
             label,
             size_bytes + align,
             BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
             AllocKind::Scratch,
             MemoryClass::DeviceLocal,
             align,
-        )
+        )?)
     }
 
     /// Builds (`update` false) or updates in place `accel` from `n` records, and waits.
@@ -564,51 +560,38 @@ impl StreamingRenderer<'_> {
         n: u32,
         update: bool,
     ) -> Result<()> {
-        let dev = self.ctx.accel_device()?;
-        let instances = vk::AccelerationStructureGeometryInstancesDataKHR::default()
-            .array_of_pointers(false)
-            .data(vk::DeviceOrHostAddressConstKHR {
-                device_address: records.device_address()?.0,
-            });
-        let geometry = [vk::AccelerationStructureGeometryKHR::default()
-            .geometry_type(vk::GeometryTypeKHR::INSTANCES)
-            .geometry(vk::AccelerationStructureGeometryDataKHR { instances })];
+        let geometry = [AsGeometry::Instances {
+            address: records.device_address()?.0,
+        }];
         let align = self.ctx.limits().scratch_alignment_bytes();
         let scratch_address = scratch.device_address()?.0.div_ceil(align) * align;
-        let mut info = vk::AccelerationStructureBuildGeometryInfoKHR::default()
-            .ty(vk::AccelerationStructureTypeKHR::TOP_LEVEL)
-            .flags(persistent_flags().to_vk())
-            .dst_acceleration_structure(accel.handle)
-            .geometries(&geometry)
-            .scratch_data(vk::DeviceOrHostAddressKHR {
-                device_address: scratch_address,
-            });
-        info = if update {
-            info.mode(vk::BuildAccelerationStructureModeKHR::UPDATE)
-                .src_acceleration_structure(accel.handle)
-        } else {
-            info.mode(vk::BuildAccelerationStructureModeKHR::BUILD)
+        let build = AsBuild {
+            level: AsLevel::Top,
+            flags: persistent_flags(),
+            // An update reads and writes the same structure, which the spec allows in place;
+            // it was built with ALLOW_UPDATE over the same record count.
+            mode: if update {
+                AsBuildMode::UpdateInPlace
+            } else {
+                AsBuildMode::Build
+            },
+            dst: accel.target(),
+            geometries: &geometry,
+            primitive_counts: &[n],
+            scratch_address,
         };
-        let range = [vk::AccelerationStructureBuildRangeInfoKHR::default().primitive_count(n)];
-        let rec = self.ctx.record(if update {
+        let mut rec = self.ctx.record(if update {
             "tlas update"
         } else {
             "tlas build (persistent)"
         })?;
-        let (c, cmd) = rec.raw();
-        let device = &c.shared.device;
-        // SAFETY: recording; the structure, the records (host-visible, written before this
-        // submission and not touched until it is waited on) and the scratch (aligned inside
-        // its buffer: allocated with the device's scratch alignment) live until
-        // `submit_and_wait` returns. An update reads and writes the same structure, which
-        // the spec allows in place (src == dst), and it was built with ALLOW_UPDATE over the
-        // same record count.
-        unsafe {
-            memory_barrier(device, cmd, MemoryScope::ALL, MemoryScope::ALL);
-            dev.cmd_build_acceleration_structures(cmd, &[info], &[&range[..]]);
-            memory_barrier(device, cmd, MemoryScope::ALL, MemoryScope::ALL);
-        }
-        rec.submit_and_wait()
+        // The structure, the records (host-visible, written before this submission and not
+        // touched until it is waited on) and the scratch (aligned inside its buffer: allocated
+        // with the device's scratch alignment) live until `submit_and_wait` returns.
+        rec.barrier();
+        rec.build_acceleration_structures(&[build])?;
+        rec.barrier();
+        rec.submit_and_wait().map_err(Into::into)
     }
 }
 
@@ -630,14 +613,14 @@ pub(super) struct Placeholders {
 impl Placeholders {
     /// Releases the whole-bounds placeholders (no persistent TLAS references them once its
     /// first update ran).
-    pub(super) fn release_full(&mut self, heap: &mut crate::heap::GpuHeap) {
+    pub(super) fn release_full(&mut self, heap: &mut motu_vk::GpuHeap) {
         for a in self.full_structures.drain(..) {
             a.release(heap);
         }
         self.full_per_blas.clear();
     }
 
-    pub(super) fn release(&mut self, heap: &mut crate::heap::GpuHeap) {
+    pub(super) fn release(&mut self, heap: &mut motu_vk::GpuHeap) {
         self.release_full(heap);
         for a in self.structures.drain(..) {
             a.release(heap);

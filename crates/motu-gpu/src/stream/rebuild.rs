@@ -1,18 +1,18 @@
 //! Acceleration-structure builds: triangle and PI BLAS sets, TLASes with their proxy BLASes,
 //! and rebuilding the TLASes whose instance set changed.
 
-use ash::vk;
 use motu_abi::PiRecord;
 use motu_alloc::{AllocKind, BuildSize, ItemId, MemoryClass};
+use motu_vk::{
+    AsBuildFlags, AsGeometry, AsLevel, BufferUsage, FitRequest,
+    ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
+};
 
 use super::residency::EvictWhy;
 use super::skeleton::{proxy_blas_record, proxy_pi, staging_released};
 use super::tlas_records::{tail_record, TlasRecords, RECORD_BYTES};
 use super::{StreamingRenderer, TlasGpu};
-use crate::accel::{AsBuildFlags, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT};
 use crate::error::{GpuError, Result};
-use crate::heap::FitRequest;
-use crate::memory::BufferUsage;
 use crate::scene::{aabbs_geometry, blas_geometry, build_batched, AccelStruct, ResourceReport};
 
 impl<'a> StreamingRenderer<'a> {
@@ -49,7 +49,7 @@ impl<'a> StreamingRenderer<'a> {
             &mut self.heap,
             &mut report,
             &sizes,
-            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            AsLevel::Bottom,
             &self.build_opts,
             |k| (descs[k].0.clone(), descs[k].1.clone()),
             |_, _| Ok(()),
@@ -176,7 +176,7 @@ impl<'a> StreamingRenderer<'a> {
                         vec![n],
                     ));
                     let sz = ctx.blas_build_sizes(
-                        &[crate::accel::BlasGeometry::Aabbs {
+                        &[motu_vk::BlasGeometry::Aabbs {
                             aabb_count: n,
                             opaque: false,
                         }],
@@ -193,7 +193,7 @@ impl<'a> StreamingRenderer<'a> {
                     &mut self.heap,
                     &mut report,
                     &sizes,
-                    vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+                    AsLevel::Bottom,
                     &self.build_opts,
                     |k| (descs[k].0.clone(), descs[k].1.clone()),
                     |_, _| Ok(()),
@@ -313,7 +313,7 @@ impl<'a> StreamingRenderer<'a> {
                 proxies
                     .into_iter()
                     .for_each(|(_, _, a)| a.release(&mut self.heap));
-                return Err(e);
+                return Err(e.into());
             }
         };
         let uploaded = (|| -> Result<u64> {
@@ -337,18 +337,13 @@ impl<'a> StreamingRenderer<'a> {
                 &mut self.heap,
                 &mut report,
                 &sizes,
-                vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+                AsLevel::Top,
                 &self.build_opts,
                 |k| {
-                    let instances = vk::AccelerationStructureGeometryInstancesDataKHR::default()
-                        .array_of_pointers(false)
-                        .data(vk::DeviceOrHostAddressConstKHR {
-                            device_address: inst_addr + offsets[k],
-                        });
                     (
-                        vec![vk::AccelerationStructureGeometryKHR::default()
-                            .geometry_type(vk::GeometryTypeKHR::INSTANCES)
-                            .geometry(vk::AccelerationStructureGeometryDataKHR { instances })],
+                        vec![AsGeometry::Instances {
+                            address: inst_addr + offsets[k],
+                        }],
                         vec![counts[k]],
                     )
                 },
@@ -473,7 +468,7 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         let scratch_align = self.ctx.limits().scratch_alignment_bytes();
-        self.heap.try_fit(&[
+        Ok(self.heap.try_fit(&[
             FitRequest {
                 label: "stream-tlas-probe-instances",
                 size_bytes: (records * RECORD_BYTES as u64).max(64),
@@ -498,7 +493,7 @@ impl<'a> StreamingRenderer<'a> {
                 class: MemoryClass::DeviceLocal,
                 alignment: ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
             },
-        ])
+        ])?)
     }
 
     /// Rebuilds every dirty TLAS, in groups ([`Self::next_rebuild_group`]). When the budget

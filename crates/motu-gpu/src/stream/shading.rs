@@ -4,10 +4,10 @@
 //! each texture's mip chain streams with the meshes whose materials sample it (a reference per
 //! resident mesh: loaded with the first, freed with the last). The per-mesh attribute table
 //! and the per-texture address table the shaders read are rewritten as meshes come and go.
+use motu_vk::HeapBuffer;
 
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
-use crate::heap::HeapBuffer;
 use crate::shading::{mesh_textures, upload_streamed_texture, Texels};
 
 /// The renderer's shading tables and resident textures.

@@ -8,6 +8,7 @@ use motu_abi::{
     BlasRecord, HierarchyView, InstanceRecord, PiRecord, TlasRecord, BLAS_AABBS, NONE_U32,
 };
 use motu_alloc::{AllocKind, AllocLimits, MemoryClass, Residency, MIB};
+use motu_vk::{BufferUsage, Context, GpuHeap};
 
 use super::persistent::{auto_persistent, persistent_estimate, persistent_records, TlasUpdate};
 use super::proxy_boxes::padded;
@@ -15,10 +16,7 @@ use super::PI_EMPTY_BLAS;
 use super::{
     FrameStreamStats, MeshMemory, StreamOptions, StreamTotals, StreamingRenderer, IDENTITY,
 };
-use crate::context::Context;
 use crate::error::{GpuError, Result};
-use crate::heap::GpuHeap;
-use crate::memory::BufferUsage;
 use crate::scene::{upload_node_table, BuildOptions, MeshBlobSource, Slot, Uploader, SLOT_COUNT};
 
 pub(super) fn transformed_box(m: &[f32; 12], lo: [f32; 3], hi: [f32; 3]) -> [f32; 6] {

@@ -8,12 +8,11 @@
 //! the mapped ring writes every byte once.
 
 use motu_abi::{HierarchyView, InstanceRecord, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
+use motu_vk::{Context, HeapBuffer};
 use rayon::prelude::*;
 
 use super::TRIANGLE_MASK;
-use crate::context::Context;
 use crate::error::{GpuError, Result};
-use crate::heap::HeapBuffer;
 use crate::scene::{encode_instance, set_instance_mask, Uploader};
 
 /// Bytes of one encoded instance record (`VkAccelerationStructureInstanceKHR`).

@@ -1,11 +1,9 @@
-//! Acceleration-structure basics: build-size queries within the device limits (for the VRAM
-//! report and the budgeted builder). Builds themselves come with the AS-build issue.
+//! Acceleration-structure types: build flags and modes, the geometry a build reads, and the
+//! motu types builds and copies are recorded with ([`AsBuild`], [`AsGeometry`]; `conv.rs`
+//! turns them into Vulkan structs, `build_sizes.rs` asks the device for their sizes).
 
 use ash::vk;
 use serde::Serialize;
-
-use crate::context::Context;
-use crate::error::{GpuError, Result};
 
 /// Acceleration structures must start at multiples of 256 bytes in their buffer (spec:
 /// `VkAccelerationStructureCreateInfoKHR::offset`).
@@ -29,7 +27,7 @@ pub enum BlasGeometry {
 }
 
 impl BlasGeometry {
-    fn primitive_count(&self) -> u32 {
+    pub(crate) fn primitive_count(&self) -> u32 {
         match *self {
             BlasGeometry::Triangles { triangle_count, .. } => triangle_count,
             BlasGeometry::Aabbs { aabb_count, .. } => aabb_count,
@@ -108,24 +106,77 @@ impl BlasBuild {
     }
 }
 
-impl AsBuildFlags {
-    pub(crate) fn to_vk(self) -> vk::BuildAccelerationStructureFlagsKHR {
-        use vk::BuildAccelerationStructureFlagsKHR as F;
-        let mut f = F::empty();
-        for (on, flag) in [
-            (self.prefer_fast_trace, F::PREFER_FAST_TRACE),
-            (self.prefer_fast_build, F::PREFER_FAST_BUILD),
-            (self.allow_compaction, F::ALLOW_COMPACTION),
-            (self.allow_update, F::ALLOW_UPDATE),
-            (self.low_memory, F::LOW_MEMORY),
-        ] {
-            if on {
-                f |= flag;
-            }
-        }
-        f
-    }
+/// Which level an acceleration structure is: a BLAS over geometry or a TLAS over instances.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AsLevel {
+    Bottom,
+    Top,
 }
+
+/// One geometry of a build, by the device addresses of its inputs (which the caller keeps
+/// alive and written until the build's submission was waited on).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AsGeometry {
+    /// Triangles: `vertex_count` `f32 x3` positions (12-byte stride) and `u32` indices.
+    /// `opaque`: no any-hit; else each candidate reaches any-hit once.
+    Triangles {
+        positions_address: u64,
+        vertex_count: u32,
+        indices_address: u64,
+        opaque: bool,
+    },
+    /// Axis-aligned boxes of 24 bytes (min xyz, max xyz) at `address`.
+    Aabbs { address: u64, opaque: bool },
+    /// A TLAS's instance records ([`INSTANCE_RECORD_SIZE_BYTES`] each) at `address`.
+    Instances { address: u64 },
+}
+
+/// Whether a build makes a new structure or updates one in place.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AsBuildMode {
+    Build,
+    /// Refit the destination in place (it was built with `allow_update` over as many
+    /// primitives; the spec allows source = destination).
+    UpdateInPlace,
+}
+
+/// How an acceleration-structure copy treats its source.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AsCopyMode {
+    /// Into a structure of the compacted size a query reported (source built with
+    /// `allow_compaction`).
+    Compact,
+    /// A whole copy into a structure of the source's size (moving it to other memory).
+    Clone,
+}
+
+/// Which hit group an instance's rays run and whether triangles are forced opaque.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InstanceHit {
+    /// Triangles (hit group 0); `any_hit`: alpha-tested, so not forced opaque.
+    Triangles { any_hit: bool },
+    /// Programmable instances' boxes (hit group 1), never opaque.
+    Procedural,
+}
+
+/// One structure to build into `dst`: `geometries[i]` holds `primitive_counts[i]` primitives;
+/// its scratch starts at `scratch_address` (aligned to the device's scratch alignment).
+#[derive(Clone, Copy, Debug)]
+pub struct AsBuild<'g> {
+    pub level: AsLevel,
+    /// The flags the sizes were queried with.
+    pub flags: AsBuildFlags,
+    pub mode: AsBuildMode,
+    pub dst: AsTarget,
+    pub geometries: &'g [AsGeometry],
+    pub primitive_counts: &'g [u32],
+    pub scratch_address: u64,
+}
+
+/// An acceleration structure named in a recorded command without borrowing it (see
+/// [`crate::CommandRecorder`]: its owner keeps it alive until the submission was waited on).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AsTarget(pub(crate) vk::AccelerationStructureKHR);
 
 /// Worst-case sizes from `vkGetAccelerationStructureBuildSizesKHR` (before compaction).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
@@ -135,169 +186,13 @@ pub struct AsBuildSizes {
     pub update_scratch_size_bytes: u64,
 }
 
-impl Context {
-    pub(crate) fn accel_device(&self) -> Result<&ash::khr::acceleration_structure::Device> {
-        self.shared
-            .accel
-            .as_ref()
-            .ok_or_else(|| GpuError::MissingFeature {
-                what: "VK_KHR_acceleration_structure".into(),
-                details: format!("#{} {}", self.device_index(), self.device_name()),
-            })
-    }
-
-    /// Sizes for a BLAS over `geometries`, checked against the geometry and primitive limits
-    /// in force (so lowered test limits apply).
-    pub fn blas_build_sizes(
-        &self,
-        geometries: &[BlasGeometry],
-        flags: AsBuildFlags,
-    ) -> Result<AsBuildSizes> {
-        let accel = self.accel_device()?;
-        let limits = self.limits();
-        if geometries.is_empty() {
-            return Err(GpuError::InvalidRequest(
-                "a BLAS needs at least one geometry".into(),
-            ));
-        }
-        let is_triangles = |g: &BlasGeometry| matches!(g, BlasGeometry::Triangles { .. });
-        if geometries
-            .iter()
-            .any(|g| is_triangles(g) != is_triangles(&geometries[0]))
-        {
-            // VUID-VkAccelerationStructureBuildGeometryInfoKHR-type-03792.
-            return Err(GpuError::InvalidRequest(
-                "a BLAS holds either triangles or AABBs, not both".into(),
-            ));
-        }
-        if geometries.len() as u64 > limits.max_geometry_count {
-            return Err(GpuError::LimitExceeded {
-                what: "geometries per BLAS (max_geometry_count)",
-                requested: geometries.len() as u64,
-                limit: limits.max_geometry_count,
-            });
-        }
-        let primitives: u64 = geometries
-            .iter()
-            .map(|g| u64::from(g.primitive_count()))
-            .sum();
-        if primitives > limits.max_primitive_count {
-            return Err(GpuError::LimitExceeded {
-                what: "primitives per BLAS (max_primitive_count)",
-                requested: primitives,
-                limit: limits.max_primitive_count,
-            });
-        }
-        let vk_geometries: Vec<vk::AccelerationStructureGeometryKHR<'_>> = geometries
-            .iter()
-            .map(|g| match *g {
-                BlasGeometry::Triangles {
-                    vertex_count,
-                    indexed,
-                    opaque,
-                    ..
-                } => {
-                    let triangles = vk::AccelerationStructureGeometryTrianglesDataKHR::default()
-                        .vertex_format(vk::Format::R32G32B32_SFLOAT)
-                        .vertex_stride(12)
-                        .max_vertex(vertex_count.saturating_sub(1))
-                        .index_type(if indexed {
-                            vk::IndexType::UINT32
-                        } else {
-                            vk::IndexType::NONE_KHR
-                        });
-                    vk::AccelerationStructureGeometryKHR::default()
-                        .geometry_type(vk::GeometryTypeKHR::TRIANGLES)
-                        .geometry(vk::AccelerationStructureGeometryDataKHR { triangles })
-                        .flags(geometry_flags(opaque))
-                }
-                BlasGeometry::Aabbs { opaque, .. } => {
-                    let aabbs = vk::AccelerationStructureGeometryAabbsDataKHR::default()
-                        .stride(std::mem::size_of::<vk::AabbPositionsKHR>() as u64);
-                    vk::AccelerationStructureGeometryKHR::default()
-                        .geometry_type(vk::GeometryTypeKHR::AABBS)
-                        .geometry(vk::AccelerationStructureGeometryDataKHR { aabbs })
-                        .flags(geometry_flags(opaque))
-                }
-            })
-            .collect();
-        let counts: Vec<u32> = geometries
-            .iter()
-            .map(BlasGeometry::primitive_count)
-            .collect();
-        let info = vk::AccelerationStructureBuildGeometryInfoKHR::default()
-            .ty(vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL)
-            .flags(flags.to_vk())
-            .mode(vk::BuildAccelerationStructureModeKHR::BUILD)
-            .geometries(&vk_geometries);
-        Ok(query_sizes(accel, &info, &counts))
-    }
-
-    /// Sizes for a TLAS over `instance_count` instances, checked against `max_instance_count`.
-    pub fn tlas_build_sizes(
-        &self,
-        instance_count: u32,
-        flags: AsBuildFlags,
-    ) -> Result<AsBuildSizes> {
-        let accel = self.accel_device()?;
-        let limit = self.limits().max_instance_count;
-        if u64::from(instance_count) > limit {
-            return Err(GpuError::LimitExceeded {
-                what: "instances per TLAS (max_instance_count)",
-                requested: u64::from(instance_count),
-                limit,
-            });
-        }
-        let instances =
-            vk::AccelerationStructureGeometryInstancesDataKHR::default().array_of_pointers(false);
-        let geometry = [vk::AccelerationStructureGeometryKHR::default()
-            .geometry_type(vk::GeometryTypeKHR::INSTANCES)
-            .geometry(vk::AccelerationStructureGeometryDataKHR { instances })];
-        let info = vk::AccelerationStructureBuildGeometryInfoKHR::default()
-            .ty(vk::AccelerationStructureTypeKHR::TOP_LEVEL)
-            .flags(flags.to_vk())
-            .mode(vk::BuildAccelerationStructureModeKHR::BUILD)
-            .geometries(&geometry);
-        Ok(query_sizes(accel, &info, &[instance_count]))
-    }
-}
-
-fn geometry_flags(opaque: bool) -> vk::GeometryFlagsKHR {
-    if opaque {
-        vk::GeometryFlagsKHR::OPAQUE
-    } else {
-        // Programmable instances record every candidate once in any-hit.
-        vk::GeometryFlagsKHR::NO_DUPLICATE_ANY_HIT_INVOCATION
-    }
-}
-
-fn query_sizes(
-    accel: &ash::khr::acceleration_structure::Device,
-    info: &vk::AccelerationStructureBuildGeometryInfoKHR<'_>,
-    counts: &[u32],
-) -> AsBuildSizes {
-    let mut sizes = vk::AccelerationStructureBuildSizesInfoKHR::default();
-    // SAFETY: the extension and feature are enabled (accel exists only then); `counts` has one
-    // entry per geometry; device addresses in `info` are ignored by this query.
-    unsafe {
-        accel.get_acceleration_structure_build_sizes(
-            vk::AccelerationStructureBuildTypeKHR::DEVICE,
-            info,
-            counts,
-            &mut sizes,
-        )
-    };
-    AsBuildSizes {
-        acceleration_structure_size_bytes: sizes.acceleration_structure_size,
-        build_scratch_size_bytes: sizes.build_scratch_size,
-        update_scratch_size_bytes: sizes.update_scratch_size,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::conv::build_flags;
+    use crate::error::VkError;
     use crate::testing::{assert_no_validation_errors, context_or_skip};
+    use crate::Context;
     use crate::{ContextOptions, LimitOverrides, Requirement, ValidationRequest};
 
     #[test]
@@ -306,12 +201,12 @@ mod tests {
         // Fast trace is what every other build (TLASes, the size model) uses.
         assert_eq!(BlasBuild::FastTrace.flags(), AsBuildFlags::default());
         assert_eq!(
-            BlasBuild::FastTrace.flags().to_vk(),
+            build_flags(BlasBuild::FastTrace.flags()),
             F::PREFER_FAST_TRACE | F::ALLOW_COMPACTION
         );
         // Small: fast build and low memory, still compacted (streamed BLASes are compacted).
         assert_eq!(
-            BlasBuild::Small.flags().to_vk(),
+            build_flags(BlasBuild::Small.flags()),
             F::PREFER_FAST_BUILD | F::LOW_MEMORY | F::ALLOW_COMPACTION
         );
         assert_eq!(BlasBuild::default(), BlasBuild::FastTrace);
@@ -423,7 +318,7 @@ mod tests {
         assert!(
             matches!(
                 err,
-                GpuError::LimitExceeded {
+                VkError::LimitExceeded {
                     requested: 101,
                     limit: 100,
                     ..

@@ -7,7 +7,7 @@ use std::ffi::{CStr, CString};
 use ash::vk;
 use serde::Serialize;
 
-use crate::error::{GpuError, Result};
+use crate::error::{Result, VkError};
 use crate::instance::version_string;
 use crate::limits::Limits;
 
@@ -136,7 +136,7 @@ impl PhysicalInfo {
 pub(crate) fn enumerate(instance: &ash::Instance, instance_api: u32) -> Result<Vec<PhysicalInfo>> {
     // SAFETY: `instance` is a live instance.
     let handles = unsafe { instance.enumerate_physical_devices() }
-        .map_err(GpuError::vk("vkEnumeratePhysicalDevices"))?;
+        .map_err(VkError::vk("vkEnumeratePhysicalDevices"))?;
     handles
         .into_iter()
         .enumerate()
@@ -155,7 +155,7 @@ fn probe(
     let api_version = props.api_version.min(instance_api);
     // SAFETY: as above.
     let ext_props = unsafe { instance.enumerate_device_extension_properties(handle) }
-        .map_err(GpuError::vk("vkEnumerateDeviceExtensionProperties"))?;
+        .map_err(VkError::vk("vkEnumerateDeviceExtensionProperties"))?;
     let extensions: BTreeSet<CString> = ext_props
         .iter()
         .filter_map(|e| e.extension_name_as_c_str().ok().map(CStr::to_owned))

@@ -1,7 +1,7 @@
 //! Helpers for GPU tests in this and other crates: open a validated context or say loudly why not.
 
 use crate::context::{Context, ContextOptions, Requirement};
-use crate::error::GpuError;
+use crate::error::VkError;
 use crate::instance::ValidationRequest;
 
 /// Set by CI: a missing device fails GPU tests instead of skipping them.
@@ -37,9 +37,8 @@ pub fn context_or_skip(test: &str, require: Requirement) -> Option<Context> {
             Some(ctx)
         }
         Err(
-            e @ (GpuError::LoaderMissing { .. }
-            | GpuError::NoDevice
-            | GpuError::MissingFeature { .. }),
+            e
+            @ (VkError::LoaderMissing { .. } | VkError::NoDevice | VkError::MissingFeature { .. }),
         ) => {
             if require_gpu() {
                 panic!("{test}: {ENV_REQUIRE_GPU}=1 but no usable Vulkan device: {e}");
@@ -64,8 +63,7 @@ pub fn assert_no_validation_errors(ctx: &Context) {
 
 /// A heap for a GPU unit test: `budget_bytes` of device-local and of host-visible memory, at
 /// most 64 blocks, each up to the device's largest allocation.
-#[cfg(test)]
-pub(crate) fn test_heap(ctx: &Context, budget_bytes: u64) -> crate::heap::GpuHeap {
+pub fn test_heap(ctx: &Context, budget_bytes: u64) -> crate::heap::GpuHeap {
     crate::heap::GpuHeap::new(
         ctx,
         motu_alloc::AllocLimits {

@@ -7,7 +7,7 @@ use std::sync::{Arc, Mutex};
 use ash::vk;
 
 use crate::context::{Context, DeviceShared};
-use crate::error::{GpuError, Result};
+use crate::error::{Result, VkError};
 
 /// Where memory lives, from the host's point of view.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -164,7 +164,7 @@ impl Context {
                     std::cmp::Reverse(i),
                 )
             })
-            .ok_or(GpuError::NoMemoryType {
+            .ok_or(VkError::NoMemoryType {
                 location,
                 type_bits,
             })
@@ -183,13 +183,13 @@ impl DeviceMemory {
     ) -> Result<Arc<DeviceMemory>> {
         let shared = &ctx.shared;
         if size_bytes == 0 {
-            return Err(GpuError::InvalidRequest(
+            return Err(VkError::InvalidRequest(
                 "zero-sized memory allocation".into(),
             ));
         }
         let limit_bytes = shared.limits.max_memory_allocation_size;
         if size_bytes > limit_bytes {
-            return Err(GpuError::AllocationTooLarge {
+            return Err(VkError::AllocationTooLarge {
                 size_bytes,
                 limit_bytes,
             });
@@ -205,7 +205,7 @@ impl DeviceMemory {
         let live = match reserved {
             Ok(prev) => prev + 1,
             Err(prev) => {
-                return Err(GpuError::AllocationCountExceeded {
+                return Err(VkError::AllocationCountExceeded {
                     requested: prev.saturating_add(1),
                     limit,
                 })
@@ -228,7 +228,7 @@ impl DeviceMemory {
             Ok(h) => h,
             Err(e) => {
                 release_slot();
-                return Err(GpuError::Vulkan {
+                return Err(VkError::Vulkan {
                     call: "vkAllocateMemory",
                     result: e,
                 });
@@ -249,7 +249,7 @@ impl DeviceMemory {
                     // SAFETY: allocated above and not used by anything.
                     unsafe { shared.device.free_memory(handle, None) };
                     release_slot();
-                    return Err(GpuError::Vulkan {
+                    return Err(VkError::Vulkan {
                         call: "vkMapMemory",
                         result: e,
                     });
@@ -289,7 +289,7 @@ impl DeviceMemory {
     fn check_range(&self, offset: u64, len: usize) -> Result<()> {
         let end = offset.checked_add(len as u64);
         if end.is_none_or(|e| e > self.size_bytes) {
-            return Err(GpuError::InvalidRequest(format!(
+            return Err(VkError::InvalidRequest(format!(
                 "host access of {len} bytes at offset {offset} exceeds the {}-byte allocation",
                 self.size_bytes
             )));
@@ -299,7 +299,7 @@ impl DeviceMemory {
 
     fn mapping(&self) -> Result<std::sync::MutexGuard<'_, Mapping>> {
         let m = self.mapping.as_ref().ok_or_else(|| {
-            GpuError::InvalidRequest(format!("memory at {:?} is not host-mapped", self.location))
+            VkError::InvalidRequest(format!("memory at {:?} is not host-mapped", self.location))
         })?;
         Ok(m.lock().unwrap_or_else(|e| e.into_inner()))
     }
@@ -386,13 +386,13 @@ impl Buffer {
     pub fn new(ctx: &Context, label: &str, desc: &BufferDesc) -> Result<Buffer> {
         let shared = &ctx.shared;
         if desc.size_bytes == 0 {
-            return Err(GpuError::InvalidRequest(format!(
+            return Err(VkError::InvalidRequest(format!(
                 "buffer {label:?} has size 0"
             )));
         }
         if let Some(max) = shared.info.limits.max_buffer_size {
             if desc.size_bytes > max {
-                return Err(GpuError::InvalidRequest(format!(
+                return Err(VkError::InvalidRequest(format!(
                     "buffer {label:?} of {} bytes exceeds maxBufferSize {max}",
                     desc.size_bytes
                 )));
@@ -406,7 +406,7 @@ impl Buffer {
             usage = usage | BufferUsage::DEVICE_ADDRESS;
         }
         if usage.contains(BufferUsage::DEVICE_ADDRESS) && !shared.info.caps.buffer_device_address {
-            return Err(GpuError::MissingFeature {
+            return Err(VkError::MissingFeature {
                 what: "bufferDeviceAddress".into(),
                 details: format!(
                     "buffer {label:?} needs it; device {} lacks it",
@@ -420,7 +420,7 @@ impl Buffer {
             .sharing_mode(vk::SharingMode::EXCLUSIVE);
         // SAFETY: valid create info; usage bits map to enabled features (checked above).
         let handle = unsafe { shared.device.create_buffer(&info, None) }
-            .map_err(GpuError::vk("vkCreateBuffer"))?;
+            .map_err(VkError::vk("vkCreateBuffer"))?;
         shared.set_name(handle, label);
         // SAFETY: the buffer was just created from this device.
         let req = unsafe { shared.device.get_buffer_memory_requirements(handle) };
@@ -443,24 +443,24 @@ impl Buffer {
     pub fn bind(&mut self, memory: &Arc<DeviceMemory>, offset: u64) -> Result<()> {
         let req = self.requirements;
         if self.binding.is_some() {
-            return Err(GpuError::InvalidRequest(format!(
+            return Err(VkError::InvalidRequest(format!(
                 "buffer {:?} is already bound",
                 self.label
             )));
         }
         if !Arc::ptr_eq(&memory.shared, &self.shared) {
-            return Err(GpuError::InvalidRequest(
+            return Err(VkError::InvalidRequest(
                 "memory belongs to another device".into(),
             ));
         }
         if offset % req.alignment_bytes != 0 {
-            return Err(GpuError::InvalidRequest(format!(
+            return Err(VkError::InvalidRequest(format!(
                 "buffer {:?}: offset {offset} is not a multiple of its alignment {}",
                 self.label, req.alignment_bytes
             )));
         }
         if req.memory_type_bits & (1 << memory.memory_type_index) == 0 {
-            return Err(GpuError::InvalidRequest(format!(
+            return Err(VkError::InvalidRequest(format!(
                 "buffer {:?} cannot live in memory type {} (allowed bits {:#b})",
                 self.label, memory.memory_type_index, req.memory_type_bits
             )));
@@ -469,7 +469,7 @@ impl Buffer {
             .checked_add(req.size_bytes)
             .is_none_or(|end| end > memory.size_bytes)
         {
-            return Err(GpuError::InvalidRequest(format!(
+            return Err(VkError::InvalidRequest(format!(
                 "buffer {:?} needs {} bytes at offset {offset}; the memory holds {}",
                 self.label, req.size_bytes, memory.size_bytes
             )));
@@ -481,7 +481,7 @@ impl Buffer {
                 .device
                 .bind_buffer_memory(self.handle, memory.handle, offset)
         }
-        .map_err(GpuError::vk("vkBindBufferMemory"))?;
+        .map_err(VkError::vk("vkBindBufferMemory"))?;
         self.binding = Some((Arc::clone(memory), offset));
         Ok(())
     }
@@ -525,7 +525,7 @@ impl Buffer {
 
     pub(crate) fn check_bound(&self) -> Result<()> {
         if self.binding.is_none() {
-            return Err(GpuError::InvalidRequest(format!(
+            return Err(VkError::InvalidRequest(format!(
                 "buffer {:?} is used before being bound to memory",
                 self.label
             )));
@@ -540,7 +540,7 @@ impl Buffer {
     /// The buffer's GPU address (needs `BufferUsage::DEVICE_ADDRESS` and a binding).
     pub fn device_address(&self) -> Result<DeviceAddress> {
         if !self.usage.contains(BufferUsage::DEVICE_ADDRESS) {
-            return Err(GpuError::InvalidRequest(format!(
+            return Err(VkError::InvalidRequest(format!(
                 "buffer {:?} was created without DEVICE_ADDRESS usage",
                 self.label
             )));
@@ -563,7 +563,7 @@ impl Buffer {
 
     fn mapped(&self) -> Result<(&Arc<DeviceMemory>, u64)> {
         let (mem, base) = self.binding.as_ref().ok_or_else(|| {
-            GpuError::InvalidRequest(format!("buffer {:?} is not bound", self.label))
+            VkError::InvalidRequest(format!("buffer {:?} is not bound", self.label))
         })?;
         Ok((mem, *base))
     }
@@ -573,7 +573,7 @@ impl Buffer {
             .checked_add(len as u64)
             .is_none_or(|e| e > self.size_bytes)
         {
-            return Err(GpuError::InvalidRequest(format!(
+            return Err(VkError::InvalidRequest(format!(
                 "access of {len} bytes at offset {offset} exceeds buffer {:?} ({} bytes)",
                 self.label, self.size_bytes
             )));

@@ -1,6 +1,6 @@
 //! The ray-tracing pipeline of the `pipeline` backend and its shader binding table.
 //!
-//! Groups: raygen (`pipeline/trace.rgen`), miss, hit group 0 = triangles (closest-hit, and
+//! Groups: raygen (motu-gpu's `pipeline/trace.rgen`), miss, hit group 0 = triangles (closest-hit, and
 //! an any-hit alpha test that only non-opaque geometry runs; opaque instances `FORCE_OPAQUE`,
 //! SBT offset 0), hit group 1 = programmable instances
 //! (intersection + any-hit; instances `FORCE_NO_OPAQUE`, SBT offset 1). No descriptor sets:
@@ -10,12 +10,24 @@ use ash::vk;
 use motu_alloc::{AllocKind, MemoryClass};
 
 use crate::context::Context;
-use crate::error::{GpuError, Result};
+use crate::error::{Result, VkError};
 use crate::heap::{GpuHeap, HeapBuffer};
 use crate::memory::BufferUsage;
-use crate::shaders;
 
-pub(crate) const PUSH_CONSTANT_BYTES: u32 = 128;
+/// The push-constant bytes every stage sees (the shaders' table addresses).
+pub const PUSH_CONSTANT_BYTES: u32 = 128;
+
+/// The SPIR-V of the pipeline's six stages (entry point `main` each), which the crate above
+/// embeds: it picks full-build or streamed variants.
+#[derive(Clone, Copy, Debug)]
+pub struct RtShaders<'s> {
+    pub raygen: &'s [u32],
+    pub miss: &'s [u32],
+    pub triangle_closest_hit: &'s [u32],
+    pub triangle_any_hit: &'s [u32],
+    pub pi_intersection: &'s [u32],
+    pub pi_any_hit: &'s [u32],
+}
 
 pub(crate) fn rt_stages() -> vk::ShaderStageFlags {
     vk::ShaderStageFlags::RAYGEN_KHR
@@ -25,7 +37,8 @@ pub(crate) fn rt_stages() -> vk::ShaderStageFlags {
         | vk::ShaderStageFlags::INTERSECTION_KHR
 }
 
-pub(crate) struct RtPipeline {
+/// A ray-tracing pipeline and its shader binding table (see the module docs for the groups).
+pub struct RtPipeline {
     ctx: Context,
     pub(crate) rt: ash::khr::ray_tracing_pipeline::Device,
     pub(crate) pipeline: vk::Pipeline,
@@ -36,17 +49,16 @@ pub(crate) struct RtPipeline {
 }
 
 impl RtPipeline {
-    /// `specialization`: (constant id, value) pairs for every stage; `streamed`: the streamed
-    /// variants of the raygen and the PI any-hit (`pipeline/trace_stream.rgen`,
-    /// `pipeline/pi_stream.rahit`).
-    pub(crate) fn new(
+    /// `specialization`: (constant id, value) pairs for every stage; `shaders`: the stages'
+    /// SPIR-V (validated by the embedding crate's build).
+    pub fn new(
         ctx: &Context,
         heap: &mut GpuHeap,
         specialization: &[(u32, u32)],
-        streamed: bool,
+        shaders: &RtShaders<'_>,
     ) -> Result<RtPipeline> {
         if !ctx.caps().ray_pipeline {
-            return Err(GpuError::MissingFeature {
+            return Err(VkError::MissingFeature {
                 what: "the ray-tracing pipeline (VK_KHR_ray_tracing_pipeline)".into(),
                 details: ctx.device_name().to_string(),
             });
@@ -69,43 +81,26 @@ impl RtPipeline {
         let layout_info = vk::PipelineLayoutCreateInfo::default().push_constant_ranges(&ranges);
         // SAFETY: valid create info; the layout is owned by `p`.
         p.layout = unsafe { device.create_pipeline_layout(&layout_info, None) }
-            .map_err(GpuError::vk("vkCreatePipelineLayout"))?;
+            .map_err(VkError::vk("vkCreatePipelineLayout"))?;
 
         let sources: [(&[u32], vk::ShaderStageFlags); 6] = [
+            (shaders.raygen, vk::ShaderStageFlags::RAYGEN_KHR),
+            (shaders.miss, vk::ShaderStageFlags::MISS_KHR),
             (
-                if streamed {
-                    shaders::PIPELINE_TRACE_STREAM_RGEN
-                } else {
-                    shaders::PIPELINE_TRACE_RGEN
-                },
-                vk::ShaderStageFlags::RAYGEN_KHR,
-            ),
-            (shaders::PIPELINE_MISS_RMISS, vk::ShaderStageFlags::MISS_KHR),
-            (
-                shaders::PIPELINE_TRIANGLE_RCHIT,
+                shaders.triangle_closest_hit,
                 vk::ShaderStageFlags::CLOSEST_HIT_KHR,
             ),
             (
-                shaders::PIPELINE_PI_RINT,
+                shaders.pi_intersection,
                 vk::ShaderStageFlags::INTERSECTION_KHR,
             ),
-            (
-                if streamed {
-                    shaders::PIPELINE_PI_STREAM_RAHIT
-                } else {
-                    shaders::PIPELINE_PI_RAHIT
-                },
-                vk::ShaderStageFlags::ANY_HIT_KHR,
-            ),
-            (
-                shaders::PIPELINE_TRIANGLE_RAHIT,
-                vk::ShaderStageFlags::ANY_HIT_KHR,
-            ),
+            (shaders.pi_any_hit, vk::ShaderStageFlags::ANY_HIT_KHR),
+            (shaders.triangle_any_hit, vk::ShaderStageFlags::ANY_HIT_KHR),
         ];
         let mut modules = Vec::with_capacity(sources.len());
         for (words, _) in &sources {
             let info = vk::ShaderModuleCreateInfo::default().code(words);
-            // SAFETY: embedded SPIR-V validated by spirv-val at build time.
+            // SAFETY: SPIR-V validated by spirv-val when the embedding crate was built.
             match unsafe { device.create_shader_module(&info, None) } {
                 Ok(m) => modules.push(m),
                 Err(e) => {
@@ -113,7 +108,7 @@ impl RtPipeline {
                         // SAFETY: created above, unused.
                         unsafe { device.destroy_shader_module(m, None) };
                     }
-                    return Err(GpuError::Vulkan {
+                    return Err(VkError::Vulkan {
                         call: "vkCreateShaderModule",
                         result: e,
                     });
@@ -192,7 +187,7 @@ impl RtPipeline {
             // SAFETY: only needed during creation.
             unsafe { device.destroy_shader_module(m, None) };
         }
-        p.pipeline = result.map_err(|(_, e)| GpuError::Vulkan {
+        p.pipeline = result.map_err(|(_, e)| VkError::Vulkan {
             call: "vkCreateRayTracingPipelinesKHR",
             result: e,
         })?[0];
@@ -225,7 +220,7 @@ impl RtPipeline {
                 (handle_size * u64::from(group_count)) as usize,
             )
         }
-        .map_err(GpuError::vk("vkGetRayTracingShaderGroupHandlesKHR"))?;
+        .map_err(VkError::vk("vkGetRayTracingShaderGroupHandlesKHR"))?;
         let align = |v: u64| v.div_ceil(base_align) * base_align;
         let raygen_off = 0u64;
         let miss_off = align(stride);
@@ -273,7 +268,7 @@ impl RtPipeline {
     }
 
     /// Returns the SBT's memory to the heap (call before dropping when the heap lives on).
-    pub(crate) fn release(mut self, heap: &mut GpuHeap) {
+    pub fn release(mut self, heap: &mut GpuHeap) {
         if let Some(b) = self.sbt.take() {
             heap.free(b);
         }

@@ -6,14 +6,14 @@ use std::sync::Arc;
 use ash::vk;
 
 use crate::context::{Context, DeviceShared};
-use crate::error::{GpuError, Result};
+use crate::error::{Result, VkError};
 use crate::memory::{Buffer, BufferUsage};
 
 /// What a compute pipeline looks like to the host.
 #[derive(Clone, Debug)]
 pub struct ComputePipelineDesc<'s> {
     pub label: &'s str,
-    /// SPIR-V words (e.g. a constant from [`crate::shaders`]); entry point `main`.
+    /// SPIR-V words (e.g. a constant of `motu_gpu::shaders`); entry point `main`.
     pub spirv: &'s [u32],
     /// Storage buffers at set 0, bindings `0..storage_buffer_count`.
     pub storage_buffer_count: u32,
@@ -49,14 +49,14 @@ impl ComputePipeline {
         let shared = &ctx.shared;
         let device = &shared.device;
         if desc.spirv.first() != Some(&0x0723_0203) {
-            return Err(GpuError::InvalidRequest(format!(
+            return Err(VkError::InvalidRequest(format!(
                 "pipeline {:?}: not SPIR-V (bad magic)",
                 desc.label
             )));
         }
         let max_push = shared.limits.max_push_constants_size;
         if desc.push_constant_size_bytes % 4 != 0 || desc.push_constant_size_bytes > max_push {
-            return Err(GpuError::InvalidRequest(format!(
+            return Err(VkError::InvalidRequest(format!(
                 "pipeline {:?}: push constants of {} bytes (must be a multiple of 4 and <= {max_push})",
                 desc.label, desc.push_constant_size_bytes
             )));
@@ -83,7 +83,7 @@ impl ComputePipeline {
         let set_info = vk::DescriptorSetLayoutCreateInfo::default().bindings(&bindings);
         // SAFETY: valid create info; the layout is owned by `pipe`.
         pipe.set_layout = unsafe { device.create_descriptor_set_layout(&set_info, None) }
-            .map_err(GpuError::vk("vkCreateDescriptorSetLayout"))?;
+            .map_err(VkError::vk("vkCreateDescriptorSetLayout"))?;
         let ranges = [vk::PushConstantRange::default()
             .stage_flags(vk::ShaderStageFlags::COMPUTE)
             .offset(0)
@@ -95,13 +95,13 @@ impl ComputePipeline {
         }
         // SAFETY: valid create info referencing the live set layout.
         pipe.layout = unsafe { device.create_pipeline_layout(&layout_info, None) }
-            .map_err(GpuError::vk("vkCreatePipelineLayout"))?;
+            .map_err(VkError::vk("vkCreatePipelineLayout"))?;
 
         let module_info = vk::ShaderModuleCreateInfo::default().code(desc.spirv);
         // SAFETY: the words start with the SPIR-V magic; embedded shaders were validated by
         // spirv-val at build time (the driver validates the rest).
         let module = unsafe { device.create_shader_module(&module_info, None) }
-            .map_err(GpuError::vk("vkCreateShaderModule"))?;
+            .map_err(VkError::vk("vkCreateShaderModule"))?;
         let entries: Vec<_> = desc
             .specialization
             .iter()
@@ -135,7 +135,7 @@ impl ComputePipeline {
             unsafe { device.create_compute_pipelines(vk::PipelineCache::null(), &[info], None) };
         // SAFETY: the module is only needed during pipeline creation.
         unsafe { device.destroy_shader_module(module, None) };
-        pipe.pipeline = result.map_err(|(_, e)| GpuError::Vulkan {
+        pipe.pipeline = result.map_err(|(_, e)| VkError::Vulkan {
             call: "vkCreateComputePipelines",
             result: e,
         })?[0];
@@ -158,7 +158,7 @@ impl ComputePipeline {
     /// Makes a descriptor set binding `buffers[i]` at binding `i` (one per storage binding).
     pub fn bind_storage_buffers<'b>(&self, buffers: &[&'b Buffer]) -> Result<BindingSet<'b>> {
         if buffers.len() != self.storage_buffer_count as usize {
-            return Err(GpuError::InvalidRequest(format!(
+            return Err(VkError::InvalidRequest(format!(
                 "pipeline {:?} has {} storage bindings, got {} buffers",
                 self.label,
                 self.storage_buffer_count,
@@ -168,20 +168,20 @@ impl ComputePipeline {
         let max_range = u64::from(self.shared.limits.max_storage_buffer_range);
         for b in buffers {
             if !b.same_device(&self.shared) {
-                return Err(GpuError::InvalidRequest(format!(
+                return Err(VkError::InvalidRequest(format!(
                     "buffer {:?} belongs to another device",
                     b.label()
                 )));
             }
             b.check_bound()?;
             if !b.usage().contains(BufferUsage::STORAGE) {
-                return Err(GpuError::InvalidRequest(format!(
+                return Err(VkError::InvalidRequest(format!(
                     "buffer {:?} lacks STORAGE usage",
                     b.label()
                 )));
             }
             if b.size_bytes() > max_range {
-                return Err(GpuError::InvalidRequest(format!(
+                return Err(VkError::InvalidRequest(format!(
                     "buffer {:?} ({} bytes) exceeds max_storage_buffer_range {max_range}",
                     b.label(),
                     b.size_bytes()
@@ -205,14 +205,14 @@ impl ComputePipeline {
             .pool_sizes(&sizes);
         // SAFETY: valid create info; the pool is owned by `set`.
         set.pool = unsafe { device.create_descriptor_pool(&pool_info, None) }
-            .map_err(GpuError::vk("vkCreateDescriptorPool"))?;
+            .map_err(VkError::vk("vkCreateDescriptorPool"))?;
         let layouts = [self.set_layout];
         let alloc = vk::DescriptorSetAllocateInfo::default()
             .descriptor_pool(set.pool)
             .set_layouts(&layouts);
         // SAFETY: the pool has room for one set of this layout.
         set.set = unsafe { device.allocate_descriptor_sets(&alloc) }
-            .map_err(GpuError::vk("vkAllocateDescriptorSets"))?[0];
+            .map_err(VkError::vk("vkAllocateDescriptorSets"))?[0];
         let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers
             .iter()
             .map(|b| {
@@ -248,7 +248,7 @@ impl ComputePipeline {
         group_count: [u32; 3],
     ) -> Result<()> {
         let bad = |why: String| {
-            Err(GpuError::InvalidRequest(format!(
+            Err(VkError::InvalidRequest(format!(
                 "dispatch of {:?}: {why}",
                 self.label
             )))

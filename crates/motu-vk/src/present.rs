@@ -17,7 +17,7 @@ use ash::vk;
 pub use raw_window_handle::{RawDisplayHandle, RawWindowHandle};
 
 use crate::context::Context;
-use crate::error::{GpuError, Result};
+use crate::error::{Result, VkError};
 use crate::memory::{Buffer, BufferDesc, BufferUsage, MemoryLocation};
 
 /// What [`Presenter::present`] did.
@@ -97,7 +97,7 @@ impl Presenter {
         let surface = unsafe {
             ash_window::create_surface(&inst.entry, &inst.instance, display, window, None)
         }
-        .map_err(GpuError::vk("vkCreate*SurfaceKHR"))?;
+        .map_err(VkError::vk("vkCreate*SurfaceKHR"))?;
         let surface_fn = ash::khr::surface::Instance::new(&inst.entry, &inst.instance);
         let swapchain_fn = ash::khr::swapchain::Device::new(&inst.instance, &shared.device);
         let mut p = Presenter {
@@ -129,9 +129,9 @@ impl Presenter {
                 surface,
             )
         }
-        .map_err(GpuError::vk("vkGetPhysicalDeviceSurfaceSupportKHR"))?;
+        .map_err(VkError::vk("vkGetPhysicalDeviceSurfaceSupportKHR"))?;
         if !supported {
-            return Err(GpuError::DeviceUnsuitable {
+            return Err(VkError::DeviceUnsuitable {
                 index: shared.info.index,
                 name: shared.info.name.clone(),
                 reason: "its compute queue cannot present to this window".into(),
@@ -145,7 +145,7 @@ impl Presenter {
         unsafe {
             p.pool = device
                 .create_command_pool(&pool_info, None)
-                .map_err(GpuError::vk("vkCreateCommandPool"))?;
+                .map_err(VkError::vk("vkCreateCommandPool"))?;
             p.cmd = device
                 .allocate_command_buffers(
                     &vk::CommandBufferAllocateInfo::default()
@@ -153,13 +153,13 @@ impl Presenter {
                         .level(vk::CommandBufferLevel::PRIMARY)
                         .command_buffer_count(1),
                 )
-                .map_err(GpuError::vk("vkAllocateCommandBuffers"))?[0];
+                .map_err(VkError::vk("vkAllocateCommandBuffers"))?[0];
             p.fence = device
                 .create_fence(&vk::FenceCreateInfo::default(), None)
-                .map_err(GpuError::vk("vkCreateFence"))?;
+                .map_err(VkError::vk("vkCreateFence"))?;
             p.acquired = device
                 .create_semaphore(&vk::SemaphoreCreateInfo::default(), None)
-                .map_err(GpuError::vk("vkCreateSemaphore"))?;
+                .map_err(VkError::vk("vkCreateSemaphore"))?;
         }
         p.recreate()?;
         Ok(p)
@@ -192,19 +192,19 @@ impl Presenter {
             self.surface_fn
                 .get_physical_device_surface_capabilities(phys, self.surface)
         }
-        .map_err(GpuError::vk("vkGetPhysicalDeviceSurfaceCapabilitiesKHR"))?;
+        .map_err(VkError::vk("vkGetPhysicalDeviceSurfaceCapabilitiesKHR"))?;
         // SAFETY: as above.
         let formats = unsafe {
             self.surface_fn
                 .get_physical_device_surface_formats(phys, self.surface)
         }
-        .map_err(GpuError::vk("vkGetPhysicalDeviceSurfaceFormatsKHR"))?;
+        .map_err(VkError::vk("vkGetPhysicalDeviceSurfaceFormatsKHR"))?;
         // SAFETY: as above.
         let modes = unsafe {
             self.surface_fn
                 .get_physical_device_surface_present_modes(phys, self.surface)
         }
-        .map_err(GpuError::vk("vkGetPhysicalDeviceSurfacePresentModesKHR"))?;
+        .map_err(VkError::vk("vkGetPhysicalDeviceSurfacePresentModesKHR"))?;
         let preference = [
             vk::Format::B8G8R8A8_UNORM,
             vk::Format::R8G8B8A8_UNORM,
@@ -216,7 +216,7 @@ impl Presenter {
             .find_map(|f| formats.iter().find(|s| s.format == *f))
             .copied()
         else {
-            return Err(GpuError::InvalidRequest(format!(
+            return Err(VkError::InvalidRequest(format!(
                 "the window surface offers no 8-bit RGBA/BGRA format (it offers {:?})",
                 formats.iter().map(|f| f.format).collect::<Vec<_>>()
             )));
@@ -225,7 +225,7 @@ impl Presenter {
             .supported_usage_flags
             .contains(vk::ImageUsageFlags::TRANSFER_DST)
         {
-            return Err(GpuError::InvalidRequest(
+            return Err(VkError::InvalidRequest(
                 "the window surface does not allow copying into swapchain images".into(),
             ));
         }
@@ -248,7 +248,7 @@ impl Presenter {
         };
         // SAFETY: nothing of ours is pending (every present waited for its fence), but the
         // presentation engine may still hold old images: wait before destroying them.
-        unsafe { shared.device.device_wait_idle() }.map_err(GpuError::vk("vkDeviceWaitIdle"))?;
+        unsafe { shared.device.device_wait_idle() }.map_err(VkError::vk("vkDeviceWaitIdle"))?;
         self.destroy_swapchain();
         self.extent = [0, 0];
         self.stale = false;
@@ -298,10 +298,10 @@ impl Presenter {
         // SAFETY: the surface is live and supported by this queue family; the info uses only
         // supported values (queried above); the old swapchain was destroyed.
         self.swapchain = unsafe { self.swapchain_fn.create_swapchain(&info, None) }
-            .map_err(GpuError::vk("vkCreateSwapchainKHR"))?;
+            .map_err(VkError::vk("vkCreateSwapchainKHR"))?;
         // SAFETY: the swapchain was just created.
         self.images = unsafe { self.swapchain_fn.get_swapchain_images(self.swapchain) }
-            .map_err(GpuError::vk("vkGetSwapchainImagesKHR"))?;
+            .map_err(VkError::vk("vkGetSwapchainImagesKHR"))?;
         for _ in 0..self.images.len() {
             // SAFETY: valid create info; destroyed with the swapchain.
             let s = unsafe {
@@ -309,7 +309,7 @@ impl Presenter {
                     .device
                     .create_semaphore(&vk::SemaphoreCreateInfo::default(), None)
             }
-            .map_err(GpuError::vk("vkCreateSemaphore"))?;
+            .map_err(VkError::vk("vkCreateSemaphore"))?;
             self.rendered.push(s);
         }
         self.format = format.format;
@@ -375,7 +375,7 @@ impl Presenter {
     ) -> Result<Presented> {
         let pixels = u64::from(width) * u64::from(height);
         if width == 0 || height == 0 || rgba8.len() as u64 != pixels * 4 {
-            return Err(GpuError::InvalidRequest(format!(
+            return Err(VkError::InvalidRequest(format!(
                 "present: {} bytes for a {width}×{height} frame",
                 rgba8.len()
             )));
@@ -398,7 +398,7 @@ impl Presenter {
         let upload = self
             .upload
             .as_ref()
-            .ok_or_else(|| GpuError::InvalidRequest("present: no upload buffer".into()))?;
+            .ok_or_else(|| VkError::InvalidRequest("present: no upload buffer".into()))?;
         if is_bgra(self.format) {
             let mut bgra = rgba8.to_vec();
             bgra.chunks_exact_mut(4).for_each(|p| p.swap(0, 2));
@@ -442,7 +442,7 @@ impl Presenter {
                 return Ok(Presented::Skipped);
             }
             Err(e) => {
-                return Err(GpuError::Vulkan {
+                return Err(VkError::Vulkan {
                     call: "vkAcquireNextImageKHR",
                     result: e,
                 })
@@ -484,14 +484,14 @@ impl Presenter {
         unsafe {
             device
                 .reset_command_buffer(cmd, vk::CommandBufferResetFlags::empty())
-                .map_err(GpuError::vk("vkResetCommandBuffer"))?;
+                .map_err(VkError::vk("vkResetCommandBuffer"))?;
             device
                 .begin_command_buffer(
                     cmd,
                     &vk::CommandBufferBeginInfo::default()
                         .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
                 )
-                .map_err(GpuError::vk("vkBeginCommandBuffer"))?;
+                .map_err(VkError::vk("vkBeginCommandBuffer"))?;
             device.cmd_pipeline_barrier(
                 cmd,
                 vk::PipelineStageFlags::TRANSFER,
@@ -595,7 +595,7 @@ impl Presenter {
             );
             device
                 .end_command_buffer(cmd)
-                .map_err(GpuError::vk("vkEndCommandBuffer"))?;
+                .map_err(VkError::vk("vkEndCommandBuffer"))?;
         }
         let waits = [self.acquired];
         let stages = [vk::PipelineStageFlags::TRANSFER];
@@ -617,7 +617,7 @@ impl Presenter {
             // SAFETY: the queue is externally synchronised by its lock; the fence is unsignalled
             // (reset after each wait); every handle recorded lives in `self`.
             unsafe { device.queue_submit(*queue, &[submit], self.fence) }
-                .map_err(GpuError::vk("vkQueueSubmit"))?;
+                .map_err(VkError::vk("vkQueueSubmit"))?;
             // SAFETY: as above; the image was acquired from this swapchain.
             unsafe { self.swapchain_fn.queue_present(*queue, &present) }
         };
@@ -625,16 +625,16 @@ impl Presenter {
         unsafe {
             device
                 .wait_for_fences(&[self.fence], true, u64::MAX)
-                .map_err(|r| GpuError::from_submit("vkWaitForFences", r, "present"))?;
+                .map_err(|r| VkError::from_submit("vkWaitForFences", r, "present"))?;
             device
                 .reset_fences(&[self.fence])
-                .map_err(GpuError::vk("vkResetFences"))?;
+                .map_err(VkError::vk("vkResetFences"))?;
         }
         match presented {
             Ok(false) => {}
             Ok(true) | Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => self.stale = true,
             Err(e) => {
-                return Err(GpuError::Vulkan {
+                return Err(VkError::Vulkan {
                     call: "vkQueuePresentKHR",
                     result: e,
                 })

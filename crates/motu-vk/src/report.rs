@@ -4,10 +4,10 @@ use std::fmt::Write as _;
 
 use serde::Serialize;
 
+use crate::capabilities::{self, Caps, HeapReport, PhysicalInfo};
 use crate::error::Result;
 use crate::instance::{version_string, InstanceShared, ValidationRequest};
 use crate::limits::{LimitOverrides, Limits};
-use crate::probe::{self, Caps, HeapReport, PhysicalInfo};
 
 /// One device as `motu devices` shows it. Limits include env overrides (listed in
 /// `limit_overrides`), so the report shows what motu will actually use.
@@ -43,18 +43,18 @@ pub struct DeviceReport {
 }
 
 /// Lists every Vulkan device (no validation, nothing opened). Errors say what to install:
-/// [`GpuError::LoaderMissing`] without `libvulkan1`, [`GpuError::NoDevice`] without a driver.
+/// [`VkError::LoaderMissing`] without `libvulkan1`, [`VkError::NoDevice`] without a driver.
 ///
-/// [`GpuError::LoaderMissing`]: crate::GpuError::LoaderMissing
-/// [`GpuError::NoDevice`]: crate::GpuError::NoDevice
+/// [`VkError::LoaderMissing`]: crate::VkError::LoaderMissing
+/// [`VkError::NoDevice`]: crate::VkError::NoDevice
 pub fn list_devices() -> Result<Vec<DeviceReport>> {
     let overrides = LimitOverrides::from_env()?;
     let inst = InstanceShared::new(ValidationRequest::Off)?;
-    let infos = probe::enumerate(&inst.instance, inst.api_version)?;
+    let infos = capabilities::enumerate(&inst.instance, inst.api_version)?;
     Ok(infos
         .iter()
         .map(|info| {
-            let heaps = probe::heaps(&inst.instance, info.handle, info.caps.memory_budget);
+            let heaps = capabilities::heaps(&inst.instance, info.handle, info.caps.memory_budget);
             DeviceReport::from_info(info, heaps, &overrides)
         })
         .collect())

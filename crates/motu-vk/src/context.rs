@@ -6,10 +6,10 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use ash::vk;
 
-use crate::error::{GpuError, Result};
+use crate::capabilities::{self, Caps, HeapReport, PhysicalInfo};
+use crate::error::{Result, VkError};
 use crate::instance::{version_string, InstanceShared, ValidationRequest};
 use crate::limits::{LimitOverrides, Limits};
-use crate::probe::{self, Caps, HeapReport, PhysicalInfo};
 use crate::report::DeviceReport;
 
 /// Environment variable selecting the device by index (as listed by `motu devices`).
@@ -145,7 +145,7 @@ impl Context {
             Some(i) => Some(i),
             None => match std::env::var(ENV_DEVICE).ok() {
                 Some(v) if !v.trim().is_empty() => {
-                    Some(v.trim().parse().map_err(|_| GpuError::InvalidEnv {
+                    Some(v.trim().parse().map_err(|_| VkError::InvalidEnv {
                         name: ENV_DEVICE,
                         value: v.clone(),
                         reason: "expected a device index (see `motu devices`)".into(),
@@ -159,7 +159,7 @@ impl Context {
             Some(display) => {
                 let surface_exts =
                     ash_window::enumerate_required_extensions(display).map_err(|e| {
-                        GpuError::MissingFeature {
+                        VkError::MissingFeature {
                             what: "a Vulkan surface for this window system".into(),
                             details: format!("{e:?}"),
                         }
@@ -167,9 +167,9 @@ impl Context {
                 InstanceShared::with_extensions(options.validation, surface_exts)?
             }
         };
-        let infos = probe::enumerate(&instance.instance, instance.api_version)?;
+        let infos = capabilities::enumerate(&instance.instance, instance.api_version)?;
         if infos.is_empty() {
-            return Err(GpuError::NoDevice);
+            return Err(VkError::NoDevice);
         }
         let info = select(&infos, index, options.require)?;
         Self::open(instance, info, &overrides, options.presentation.is_some())
@@ -190,7 +190,7 @@ impl Context {
         let _guard = span.enter();
         let queue_family_index =
             info.queue_family_index
-                .ok_or_else(|| GpuError::DeviceUnsuitable {
+                .ok_or_else(|| VkError::DeviceUnsuitable {
                     index: info.index,
                     name: info.name.clone(),
                     reason: "no compute queue".into(),
@@ -221,7 +221,7 @@ impl Context {
         if present {
             let name = ash::khr::swapchain::NAME;
             if !info.extensions.contains(name) {
-                return Err(GpuError::DeviceUnsuitable {
+                return Err(VkError::DeviceUnsuitable {
                     index: info.index,
                     name: info.name.clone(),
                     reason: "no VK_KHR_swapchain: it cannot present to a window".into(),
@@ -314,7 +314,7 @@ impl Context {
                 .instance
                 .create_device(info.handle, &create_info, None)
         }
-        .map_err(GpuError::vk("vkCreateDevice"))?;
+        .map_err(VkError::vk("vkCreateDevice"))?;
         // SAFETY: queue 0 of the family we requested exists.
         let queue = unsafe { device.get_device_queue(queue_family_index, 0) };
         let accel = caps
@@ -400,7 +400,7 @@ impl Context {
 
     /// Heaps with current budget and usage (queried now).
     pub fn heaps(&self) -> Vec<HeapReport> {
-        probe::heaps(
+        capabilities::heaps(
             &self.shared.instance.instance,
             self.shared.info.handle,
             self.shared.info.caps.memory_budget,
@@ -427,7 +427,7 @@ impl Context {
         let errors = self.validation_errors();
         match errors.first() {
             None => Ok(()),
-            Some(first) => Err(GpuError::Validation {
+            Some(first) => Err(VkError::Validation {
                 count: errors.len(),
                 first: first.clone(),
             }),
@@ -453,7 +453,7 @@ impl Context {
     pub fn wait_idle(&self) -> Result<()> {
         let _queue = self.shared.queue();
         // SAFETY: the queue lock is held, so no submission races with the wait.
-        unsafe { self.shared.device.device_wait_idle() }.map_err(GpuError::vk("vkDeviceWaitIdle"))
+        unsafe { self.shared.device.device_wait_idle() }.map_err(VkError::vk("vkDeviceWaitIdle"))
     }
 }
 
@@ -463,19 +463,19 @@ fn select(
     require: Requirement,
 ) -> Result<PhysicalInfo> {
     if let Some(index) = index {
-        let info = infos.get(index).ok_or(GpuError::DeviceIndexOutOfRange {
+        let info = infos.get(index).ok_or(VkError::DeviceIndexOutOfRange {
             index,
             count: infos.len(),
         })?;
         if let Some(reason) = info.unusable_reason() {
-            return Err(GpuError::DeviceUnsuitable {
+            return Err(VkError::DeviceUnsuitable {
                 index,
                 name: info.name.clone(),
                 reason,
             });
         }
         if !require.met_by(&info.caps) {
-            return Err(GpuError::DeviceUnsuitable {
+            return Err(VkError::DeviceUnsuitable {
                 index,
                 name: info.name.clone(),
                 reason: format!(
@@ -505,7 +505,7 @@ fn select(
         .max_by_key(|i| rank(i));
     match best {
         Some(info) => Ok(info.clone()),
-        None => Err(GpuError::MissingFeature {
+        None => Err(VkError::MissingFeature {
             what: require.describe().to_string(),
             details: infos
                 .iter()

@@ -5,7 +5,7 @@ use std::sync::{Arc, Mutex};
 
 use ash::vk;
 
-use crate::error::{GpuError, Result};
+use crate::error::{Result, VkError};
 
 pub(crate) const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
 /// The highest API version motu asks for; ash 0.38 knows Vulkan 1.3.
@@ -35,7 +35,7 @@ impl ValidationRequest {
         match std::env::var(ENV_VALIDATION).ok().as_deref().map(str::trim) {
             None | Some("") | Some("0") => Ok(Self::Off),
             Some("1") => Ok(Self::Required),
-            Some(other) => Err(GpuError::InvalidEnv {
+            Some(other) => Err(VkError::InvalidEnv {
                 name: ENV_VALIDATION,
                 value: other.to_string(),
                 reason: "expected 0 or 1".into(),
@@ -141,16 +141,16 @@ impl InstanceShared {
     ) -> Result<Self> {
         let validation = validation.resolve()?;
         // SAFETY: loading libvulkan runs its initialisers; we trust the system loader.
-        let entry = unsafe { ash::Entry::load() }.map_err(|e| GpuError::LoaderMissing {
+        let entry = unsafe { ash::Entry::load() }.map_err(|e| VkError::LoaderMissing {
             reason: e.to_string(),
         })?;
         // SAFETY: entry is a loaded loader; this global command has no preconditions.
         let loader_version = unsafe { entry.try_enumerate_instance_version() }
-            .map_err(GpuError::vk("vkEnumerateInstanceVersion"))?
+            .map_err(VkError::vk("vkEnumerateInstanceVersion"))?
             .unwrap_or(vk::API_VERSION_1_0);
         let api_version = loader_version.min(TARGET_API_VERSION);
         if api_version < vk::API_VERSION_1_2 {
-            return Err(GpuError::LoaderMissing {
+            return Err(VkError::LoaderMissing {
                 reason: format!(
                     "the loader supports only Vulkan {}; motu needs 1.2 or newer",
                     version_string(loader_version)
@@ -160,13 +160,13 @@ impl InstanceShared {
 
         // SAFETY: global command on a loaded entry.
         let layers = unsafe { entry.enumerate_instance_layer_properties() }
-            .map_err(GpuError::vk("vkEnumerateInstanceLayerProperties"))?;
+            .map_err(VkError::vk("vkEnumerateInstanceLayerProperties"))?;
         let has_layer = layers
             .iter()
             .any(|l| l.layer_name_as_c_str().is_ok_and(|n| n == VALIDATION_LAYER));
         // SAFETY: global command on a loaded entry; `None` asks for the implementation's list.
         let extensions = unsafe { entry.enumerate_instance_extension_properties(None) }
-            .map_err(GpuError::vk("vkEnumerateInstanceExtensionProperties"))?;
+            .map_err(VkError::vk("vkEnumerateInstanceExtensionProperties"))?;
         let has_ext = |name: &CStr| {
             extensions
                 .iter()
@@ -176,7 +176,7 @@ impl InstanceShared {
 
         let validation_enabled = match validation {
             ValidationRequest::Required if !has_layer => {
-                return Err(GpuError::ValidationLayerMissing)
+                return Err(VkError::ValidationLayerMissing)
             }
             ValidationRequest::Required => true,
             ValidationRequest::Preferred if !has_layer => {
@@ -188,7 +188,7 @@ impl InstanceShared {
         };
         let use_messenger = validation_enabled && has_debug_utils;
         if validation_enabled && !has_debug_utils {
-            return Err(GpuError::MissingFeature {
+            return Err(VkError::MissingFeature {
                 what: "VK_EXT_debug_utils (needed to collect validation messages)".into(),
                 details: "the instance does not expose it".into(),
             });
@@ -235,9 +235,9 @@ impl InstanceShared {
         let instance = unsafe { entry.create_instance(&create_info, None) }.map_err(|e| {
             if e == vk::Result::ERROR_INCOMPATIBLE_DRIVER {
                 // The loader's way of saying it found no driver (ICD) at all.
-                GpuError::NoDevice
+                VkError::NoDevice
             } else {
-                GpuError::Vulkan {
+                VkError::Vulkan {
                     call: "vkCreateInstance",
                     result: e,
                 }
@@ -252,7 +252,7 @@ impl InstanceShared {
                 Err(e) => {
                     // SAFETY: nothing else was created from this instance yet.
                     unsafe { instance.destroy_instance(None) };
-                    return Err(GpuError::Vulkan {
+                    return Err(VkError::Vulkan {
                         call: "vkCreateDebugUtilsMessengerEXT",
                         result: e,
                     });

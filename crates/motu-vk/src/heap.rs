@@ -11,7 +11,7 @@ use motu_alloc::{
 };
 
 use crate::context::Context;
-use crate::error::{GpuError, Result};
+use crate::error::{Result, VkError};
 use crate::memory::{Buffer, BufferDesc, BufferUsage, DeviceMemory, MemoryLocation};
 
 /// A buffer placed in a heap block; give it back with [`GpuHeap::free`] (dropping it without
@@ -19,8 +19,15 @@ use crate::memory::{Buffer, BufferDesc, BufferUsage, DeviceMemory, MemoryLocatio
 #[derive(Debug)]
 pub struct HeapBuffer {
     pub buffer: Buffer,
-    pub(crate) id: AllocationId,
+    id: AllocationId,
     pub kind: AllocKind,
+}
+
+impl HeapBuffer {
+    /// The policy's id of the allocation (what [`GpuHeap::allocations_in`] lists).
+    pub fn id(&self) -> AllocationId {
+        self.id
+    }
 }
 
 impl std::ops::Deref for HeapBuffer {
@@ -133,7 +140,7 @@ impl GpuHeap {
             ..AllocPolicy::default()
         };
         let allocator = Allocator::new(limits, policy)
-            .map_err(|e| GpuError::InvalidRequest(format!("allocation limits: {e}")))?;
+            .map_err(|e| VkError::InvalidRequest(format!("allocation limits: {e}")))?;
         Ok(GpuHeap {
             ctx: ctx.clone(),
             allocator,
@@ -164,7 +171,7 @@ impl GpuHeap {
         let alloc = self
             .allocator
             .alloc(request)
-            .map_err(|e| GpuError::Budget(format!("{label}: {e}")))?;
+            .map_err(|e| VkError::Budget(format!("{label}: {e}")))?;
         if let Err(e) = self.apply_events() {
             let _ = self.allocator.free(alloc.id);
             return Err(e);
@@ -178,7 +185,7 @@ impl GpuHeap {
         );
         let Some(memory) = self.blocks.get(&alloc.block) else {
             let _ = self.allocator.free(alloc.id);
-            return Err(GpuError::InvalidRequest(format!(
+            return Err(VkError::InvalidRequest(format!(
                 "{label}: block {} has no memory",
                 alloc.block.0
             )));
@@ -214,7 +221,7 @@ impl GpuHeap {
         }
         self.allocator
             .try_fit(&requests)
-            .map_err(|(i, e)| GpuError::Budget(format!("{}: {e}", wanted[i].label)))
+            .map_err(|(i, e)| VkError::Budget(format!("{}: {e}", wanted[i].label)))
     }
 
     /// Whether host-visible blocks count against the VRAM budget (unified memory: lavapipe,
@@ -271,12 +278,12 @@ impl GpuHeap {
     }
 
     /// Device-local standard blocks, emptiest first ([`Allocator::block_fills`]).
-    pub(crate) fn block_fills(&self) -> Vec<motu_alloc::BlockFill> {
+    pub fn block_fills(&self) -> Vec<motu_alloc::BlockFill> {
         self.allocator.block_fills(MemoryClass::DeviceLocal)
     }
 
     /// The live allocations in `block`.
-    pub(crate) fn allocations_in(&self, block: BlockId) -> Vec<AllocationId> {
+    pub fn allocations_in(&self, block: BlockId) -> Vec<AllocationId> {
         self.allocator
             .allocations_in(block)
             .into_iter()
@@ -286,7 +293,7 @@ impl GpuHeap {
 
     /// Blocks being emptied ([`Allocator::set_draining`]) and whether new blocks may be made
     /// ([`Allocator::set_fit_only`]); `(&[], false)` ends a move.
-    pub(crate) fn set_draining(&mut self, blocks: &[BlockId], fit_only: bool) {
+    pub fn set_draining(&mut self, blocks: &[BlockId], fit_only: bool) {
         self.allocator.set_draining(blocks);
         self.allocator.set_fit_only(fit_only);
     }
@@ -345,7 +352,7 @@ mod tests {
         // Each alone fits; held together the second does not, and the error names it.
         assert!(heap.try_fit(&[ask("second", 16)]).is_ok());
         match heap.try_fit(&[ask("first", 16), ask("second", 16)]) {
-            Err(GpuError::Budget(msg)) => assert!(msg.starts_with("second:"), "{msg}"),
+            Err(VkError::Budget(msg)) => assert!(msg.starts_with("second:"), "{msg}"),
             other => panic!("expected the budget's refusal of `second`: {other:?}"),
         }
         assert_eq!(heap.block_count(), blocks, "no memory allocated");

@@ -2,7 +2,7 @@
 
 use serde::Serialize;
 
-use crate::error::{GpuError, Result};
+use crate::error::{Result, VkError};
 
 /// Limits of one device, as motu uses them. Ray-tracing limits are 0 when the device lacks the
 /// extension (check [`crate::Caps`] first). Values may be lowered by [`LimitOverrides`].
@@ -88,7 +88,7 @@ impl LimitOverrides {
                 Some(v) if v.trim().is_empty() => Ok(None),
                 Some(v) => parse_size(&v)
                     .map(Some)
-                    .map_err(|reason| GpuError::InvalidEnv {
+                    .map_err(|reason| VkError::InvalidEnv {
                         name,
                         value: v.clone(),
                         reason,
@@ -97,7 +97,7 @@ impl LimitOverrides {
         };
         let to_u32 = |name: &'static str, v: Option<u64>| -> Result<Option<u32>> {
             v.map(|v| {
-                u32::try_from(v).map_err(|_| GpuError::InvalidEnv {
+                u32::try_from(v).map_err(|_| VkError::InvalidEnv {
                     name,
                     value: v.to_string(),
                     reason: "must fit in 32 bits".into(),

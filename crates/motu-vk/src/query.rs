@@ -5,7 +5,7 @@ use std::sync::Arc;
 use ash::vk;
 
 use crate::context::{Context, DeviceShared};
-use crate::error::{GpuError, Result};
+use crate::error::{Result, VkError};
 
 /// A timestamp query pool. Record `reset_queries` then `write_timestamp`s, submit, then read.
 pub struct TimestampQueries {
@@ -25,7 +25,7 @@ impl std::fmt::Debug for TimestampQueries {
 impl TimestampQueries {
     pub fn new(ctx: &Context, count: u32) -> Result<TimestampQueries> {
         if !ctx.caps().timestamps {
-            return Err(GpuError::MissingFeature {
+            return Err(VkError::MissingFeature {
                 what: "timestamps".into(),
                 details: format!(
                     "{}: the queue has timestampValidBits = 0",
@@ -34,14 +34,14 @@ impl TimestampQueries {
             });
         }
         if count == 0 {
-            return Err(GpuError::InvalidRequest("zero timestamp queries".into()));
+            return Err(VkError::InvalidRequest("zero timestamp queries".into()));
         }
         let info = vk::QueryPoolCreateInfo::default()
             .query_type(vk::QueryType::TIMESTAMP)
             .query_count(count);
         // SAFETY: valid create info for this device.
         let pool = unsafe { ctx.shared.device.create_query_pool(&info, None) }
-            .map_err(GpuError::vk("vkCreateQueryPool"))?;
+            .map_err(VkError::vk("vkCreateQueryPool"))?;
         Ok(TimestampQueries {
             shared: Arc::clone(&ctx.shared),
             pool,
@@ -70,7 +70,7 @@ impl TimestampQueries {
                 vk::QueryResultFlags::TYPE_64 | vk::QueryResultFlags::WAIT,
             )
         }
-        .map_err(GpuError::vk("vkGetQueryPoolResults"))?;
+        .map_err(VkError::vk("vkGetQueryPoolResults"))?;
         let bits = self.shared.limits.timestamp_valid_bits;
         if bits < 64 {
             let mask = (1u64 << bits) - 1;
@@ -82,7 +82,7 @@ impl TimestampQueries {
     /// Nanoseconds between queries `from` and `to` (handles counter wrap-around).
     pub fn elapsed_ns(&self, ticks: &[u64], from: u32, to: u32) -> Result<f64> {
         let (Some(&a), Some(&b)) = (ticks.get(from as usize), ticks.get(to as usize)) else {
-            return Err(GpuError::InvalidRequest(format!(
+            return Err(VkError::InvalidRequest(format!(
                 "timestamp indices {from}, {to} out of range ({})",
                 ticks.len()
             )));

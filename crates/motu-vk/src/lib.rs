@@ -1,0 +1,79 @@
+//! motu-vk: the Vulkan device layer, and the only crate in motu that uses `ash` (and
+//! `ash-window`) and holds `unsafe` Vulkan calls.
+//!
+//! Everything public is safe Rust: a [`Context`] (instance + device + queue, validation
+//! messages collected), RAII resources ([`Buffer`], [`DeviceMemory`], [`ComputePipeline`],
+//! [`BindingSet`], [`TimestampQueries`], [`AccelStruct`], [`RtPipeline`]), budgeted memory
+//! ([`GpuHeap`], applying `motu-alloc`'s policy), fenced submission of typed commands
+//! ([`CommandRecorder`]: copies, barriers, dispatches, ray launches, acceleration-structure
+//! builds, copies and compacted-size queries; no raw command buffer leaves the crate), device
+//! reports for `motu devices` ([`list_devices`]) and presentation to a window ([`Presenter`]).
+//! Vulkan structs are built from motu types in one place, `conv.rs`. `motu-gpu` is the safe
+//! renderer layer above it and re-exports what the crates above use.
+//!
+//! Invariants: every Vulkan handle is owned by one RAII value that destroys it; every resource
+//! holds an `Arc` to the device, so the device is destroyed last; resources recorded by
+//! reference into a command buffer are borrowed until the submission's fence signalled, and
+//! those named by token ([`AsTarget`], [`BufferTarget`]) are kept alive by their owner until
+//! then (see [`CommandRecorder`]).
+//!
+//! Environment: `MOTU_DEVICE` (index), `MOTU_VALIDATION` (`1` forces the validation layer; any
+//! validation error then fails [`Context::check_validation`] and the tests), `MOTU_MAX_*`
+//! (lower limits for testing, see [`LimitOverrides`]), `MOTU_REQUIRE_GPU` (tests fail instead of
+//! skipping without a device).
+//!
+//! Files, lowest first: `error`, `instance`, `limits`, `capabilities` (what a physical device
+//! offers), `report`, `context`, `memory`, `heap`, `query`, `pipeline`, `rt_pipeline`, `accel`
+//! (AS types), `barrier`, `conv` (every motu → Vulkan conversion), `build_sizes` (AS size
+//! queries), `structure` (AS objects), `command` (typed recording), `present`.
+
+mod accel;
+mod barrier;
+mod build_sizes;
+mod capabilities;
+mod command;
+mod context;
+mod conv;
+mod error;
+mod heap;
+mod instance;
+mod limits;
+mod memory;
+mod pipeline;
+mod present;
+mod query;
+mod report;
+mod rt_pipeline;
+mod structure;
+pub mod testing;
+
+#[cfg(test)]
+mod tests;
+
+pub use accel::{
+    AsBuild, AsBuildFlags, AsBuildMode, AsBuildSizes, AsCopyMode, AsGeometry, AsLevel, AsTarget,
+    BlasBuild, BlasGeometry, InstanceHit, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
+    INSTANCE_RECORD_SIZE_BYTES,
+};
+pub use barrier::MemoryScope;
+pub use capabilities::{Caps, HeapReport};
+pub use command::{BufferCopy, BufferTarget, CommandRecorder, Submitted};
+pub use context::{Context, ContextOptions, Requirement, ENV_DEVICE};
+pub use conv::encode_instance;
+pub use error::{Result, VkError};
+pub use heap::{FitRequest, GpuHeap, HeapBuffer};
+pub use instance::{ValidationRequest, ENV_VALIDATION};
+pub use limits::{
+    parse_size, LimitOverrides, Limits, ENV_MAX_ALLOCATIONS, ENV_MAX_ALLOCATION_SIZE,
+    ENV_MAX_INSTANCE_COUNT, ENV_MAX_PRIMITIVE_COUNT, ENV_MAX_STORAGE_BUFFER_RANGE,
+};
+pub use memory::{
+    Buffer, BufferDesc, BufferUsage, DeviceAddress, DeviceMemory, MemoryLocation,
+    MemoryRequirements,
+};
+pub use pipeline::{BindingSet, ComputePipeline, ComputePipelineDesc};
+pub use present::{Presented, Presenter, RawDisplayHandle, RawWindowHandle};
+pub use query::TimestampQueries;
+pub use report::{list_devices, DeviceReport};
+pub use rt_pipeline::{RtPipeline, RtShaders, PUSH_CONSTANT_BYTES};
+pub use structure::{AccelStruct, SizeQueries};
