@@ -1,6 +1,7 @@
-//! Every conversion from motu's device types to Vulkan structs and flags (as wgpu-hal keeps
-//! its in `vulkan/conv.rs`): the crates above name geometry, build flags, barriers and instance
-//! records in motu terms; only this module spells them in `vk::`.
+//! The conversions from motu's types to the Vulkan structs and flags of recorded commands (as
+//! wgpu-hal keeps its in `vulkan/conv.rs`): the crates above name geometry, build flags, copy
+//! modes, barriers and instance records in motu terms; this module spells them in `vk::`.
+//! (A resource's creation flags stay beside its type, e.g. `BufferUsage::to_vk`.)
 
 use ash::vk;
 

@@ -8,8 +8,8 @@
 //! ([`CommandRecorder`]: copies, barriers, dispatches, ray launches, acceleration-structure
 //! builds, copies and compacted-size queries; no raw command buffer leaves the crate), device
 //! reports for `motu devices` ([`list_devices`]) and presentation to a window ([`Presenter`]).
-//! Vulkan structs are built from motu types in one place, `conv.rs`. `motu-gpu` is the safe
-//! renderer layer above it and re-exports what the crates above use.
+//! The Vulkan structs of recorded commands are built from motu types in one place, `conv.rs`.
+//! `motu-gpu` is the safe renderer layer above it and re-exports what the crates above use.
 //!
 //! Invariants: every Vulkan handle is owned by one RAII value that destroys it; every resource
 //! holds an `Arc` to the device, so the device is destroyed last; resources recorded by
@@ -24,8 +24,9 @@
 //!
 //! Files, lowest first: `error`, `instance`, `limits`, `capabilities` (what a physical device
 //! offers), `report`, `context`, `memory`, `heap`, `query`, `pipeline`, `rt_pipeline`, `accel`
-//! (AS types), `barrier`, `conv` (every motu → Vulkan conversion), `build_sizes` (AS size
-//! queries), `structure` (AS objects), `command` (typed recording), `present`.
+//! (AS types), `barrier`, `conv` (motu → Vulkan conversions of what is recorded),
+//! `build_sizes` (AS size queries), `structure` (AS objects), `command` (typed recording),
+//! `present`.
 
 mod accel;
 mod barrier;
