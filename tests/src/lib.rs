@@ -41,13 +41,18 @@ pub fn motu(args: &[&str]) -> Output {
     motu_env(args, &[])
 }
 
-/// [`motu`] with environment variables set.
+/// [`motu`] with environment variables set. Unless `env` names `MOTU_AS_CACHE`, each run
+/// gets a fresh structure-cache directory of its own (removed after it), so no test's counts
+/// depend on what an earlier one left in the user's cache.
 pub fn motu_env(args: &[&str], env: &[(&str, &str)]) -> Output {
-    Command::new(motu_bin())
-        .args(args)
-        .envs(env.iter().copied())
-        .output()
-        .expect("spawning motu")
+    let fresh = (!env.iter().any(|(k, _)| *k == "MOTU_AS_CACHE"))
+        .then(|| tempfile::tempdir().expect("a temp dir for the structure cache"));
+    let mut cmd = Command::new(motu_bin());
+    cmd.args(args).envs(env.iter().copied());
+    if let Some(d) = &fresh {
+        cmd.env("MOTU_AS_CACHE", d.path());
+    }
+    cmd.output().expect("spawning motu")
 }
 
 /// Runs `motu` and asserts success, returning stdout.

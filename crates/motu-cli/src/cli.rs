@@ -324,6 +324,26 @@ pub enum FallbackArg {
     Coarse,
 }
 
+/// Built structures kept for reuse while streaming (`render --stream`): a BLAS evicted or left
+/// by an earlier process is restored by copy instead of rebuilt; images are the same.
+#[derive(Args, Debug, Clone)]
+pub struct AsCacheArgs {
+    /// Streaming: bytes of built acceleration structures (serialised) kept in host memory,
+    /// least recently used dropped first. Default: a quarter of the memory available at start;
+    /// 0: none.
+    #[arg(long, value_parser = parse_size)]
+    pub host_cache: Option<u64>,
+    /// Streaming: the directory where built structures are kept between runs (per device and
+    /// driver; bad or foreign entries are rebuilt with a warning; a read-only or full
+    /// directory is a warning). Default: $MOTU_AS_CACHE, else $XDG_CACHE_HOME/motu/as-cache,
+    /// else ~/.cache/motu/as-cache.
+    #[arg(long, conflicts_with = "no_as_cache")]
+    pub as_cache: Option<PathBuf>,
+    /// Streaming: keep no built structures on disk.
+    #[arg(long)]
+    pub no_as_cache: bool,
+}
+
 /// Bounded streaming work per frame (`render --stream`, `view`): how long a frame may build
 /// and what the pixels still waiting show.
 #[derive(Args, Debug, Clone, Copy)]
@@ -531,6 +551,8 @@ pub struct RenderArgs {
     pub stream_max_passes: Option<u32>,
     #[command(flatten)]
     pub stream_bounds: StreamBoundArgs,
+    #[command(flatten)]
+    pub as_cache: AsCacheArgs,
     /// Frames to render (timing; with --stream, along the camera path).
     #[arg(long, default_value_t = 1)]
     pub frames: u32,

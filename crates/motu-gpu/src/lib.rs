@@ -55,5 +55,5 @@ pub use stream::{
     persistent_tlas_estimate, streamed_mesh_total_bytes, streaming_floor, streaming_floor_planned,
     FloorSizes, FrameStreamStats, MeshMemory, PassMarks, PassStats, PersistentEstimate,
     StreamFallback, StreamFloor, StreamOptions, StreamPlan, StreamTotals, StreamingRenderer,
-    TlasUpdate, AUTO_PASS_FRAMES, AUTO_PASS_ROWS, PI_EMPTY_BLAS,
+    StructureCache, TlasUpdate, AUTO_PASS_FRAMES, AUTO_PASS_ROWS, PI_EMPTY_BLAS,
 };

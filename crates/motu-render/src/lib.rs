@@ -7,6 +7,7 @@
 //! Vulkan here (that is `motu-gpu`).
 
 mod backend;
+mod cache;
 mod camera;
 mod cpu;
 mod gpu;
@@ -18,6 +19,7 @@ mod shading;
 mod stream;
 
 pub use backend::{best_backend, Backend};
+pub use cache::{package_identity, CacheDir, CacheSettings};
 pub use camera::{
     camera_params, camera_pose, load_camera_path, recorded_path_cameras, sweep_around_root,
 };

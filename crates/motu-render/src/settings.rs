@@ -53,11 +53,13 @@ pub struct DeviceRequest {
 /// `--stream`'s own settings: the pass cap (`--stream-max-passes`; `None`: sized from the
 /// scene), the per-frame bounds, and whether a frame with unfinished pixels is written
 /// (magenta) anyway (`--allow-incomplete`).
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct StreamSettings {
     pub max_passes: Option<u32>,
     pub bounds: StreamBounds,
     pub allow_incomplete: bool,
+    /// Where built structures are kept for reuse (`--host-cache`, `--as-cache`).
+    pub cache: crate::CacheSettings,
 }
 
 impl RenderSettings {

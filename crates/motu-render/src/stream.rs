@@ -229,6 +229,9 @@ pub(crate) fn render_streaming(
             floor_bytes: floor.min_resident_bytes,
             source,
         })?;
+    if let Some(cache) = stream.cache.open(pkg) {
+        sr.attach_cache(cache);
+    }
     startup.init_ms = ms_since(t);
     let ropts = gpu_render_options(s, s.lod, backend, 1, scene_shading(s.shading, pkg, view));
     if s.shading.spp > 1 {
@@ -317,6 +320,7 @@ pub(crate) fn render_streaming(
         "floor": floor,
         "max_passes": sr.max_passes(),
         "startup": startup,
+        "cache": sr.cache_stats(),
         "mean_passes_after_first": if after_first.is_empty() { Value::Null } else { json!(after_first.iter().sum::<f64>() / after_first.len() as f64) },
     });
     drop(sr);

@@ -327,31 +327,55 @@ impl<'a> CommandRecorder<'a> {
         structures: &[AsTarget],
         queries: &SizeQueries,
     ) -> Result<()> {
-        if structures.len() as u64 > u64::from(queries.count) {
+        self.write_structure_properties(
+            structures,
+            queries,
+            vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR,
+        )
+    }
+
+    /// Resets `queries` (of `kind`) and writes that property of `structures` into its first
+    /// queries.
+    pub(crate) fn write_structure_properties(
+        &mut self,
+        structures: &[AsTarget],
+        queries: &SizeQueries,
+        kind: vk::QueryType,
+    ) -> Result<()> {
+        if structures.len() as u64 > u64::from(queries.count) || queries.kind != kind {
             return Err(VkError::InvalidRequest(format!(
-                "{}: {} compacted sizes asked of {} queries",
+                "{}: {} sizes ({kind:?}) asked of {} queries of {:?}",
                 self.label,
                 structures.len(),
-                queries.count
+                queries.count,
+                queries.kind
             )));
         }
         let accel = self.ctx.accel_device()?;
         let handles: Vec<vk::AccelerationStructureKHR> = structures.iter().map(|t| t.0).collect();
-        // SAFETY: recording state; the pool belongs to this device and holds enough queries
-        // (checked above); it and the structures live until the submission was waited on (the
-        // caller's contract, module docs).
+        // SAFETY: recording state; the pool belongs to this device, is of `kind` and holds
+        // enough queries (checked above); it and the structures live until the submission was
+        // waited on (the caller's contract, module docs).
         unsafe {
             self.device()
                 .cmd_reset_query_pool(self.cmd, queries.pool, 0, queries.count);
             accel.cmd_write_acceleration_structures_properties(
                 self.cmd,
                 &handles,
-                vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR,
+                kind,
                 queries.pool,
                 0,
             );
         }
         Ok(())
+    }
+
+    pub(crate) fn ctx(&self) -> &Context {
+        self.ctx
+    }
+
+    pub(crate) fn raw_cmd(&self) -> vk::CommandBuffer {
+        self.cmd
     }
 
     /// Copies structure `src` into `dst` (`dst` sized for `mode`: the compacted size a query

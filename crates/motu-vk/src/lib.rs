@@ -45,6 +45,7 @@ mod present;
 mod query;
 mod report;
 mod rt_pipeline;
+mod serialize;
 mod structure;
 pub mod testing;
 
@@ -77,4 +78,5 @@ pub use present::{Presented, Presenter, RawDisplayHandle, RawWindowHandle};
 pub use query::TimestampQueries;
 pub use report::{list_devices, DeviceReport};
 pub use rt_pipeline::{RtPipeline, RtShaders, PUSH_CONSTANT_BYTES};
+pub use serialize::{SerializedHeader, SERIALIZED_ALIGNMENT, SERIALIZED_HEADER_BYTES};
 pub use structure::{AccelStruct, SizeQueries};

@@ -110,18 +110,36 @@ impl Drop for AccelStruct {
     }
 }
 
-/// A compacted-size query pool.
+/// A pool of acceleration-structure size queries: compacted sizes, or serialised sizes.
 pub struct SizeQueries {
     ctx: Context,
     pub(crate) pool: vk::QueryPool,
     pub(crate) count: u32,
+    pub(crate) kind: vk::QueryType,
 }
 
 impl SizeQueries {
     /// A pool of `count` (at least one) compacted-size queries.
     pub fn new(ctx: &Context, count: u32) -> Result<SizeQueries> {
+        Self::of_kind(
+            ctx,
+            count,
+            vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR,
+        )
+    }
+
+    /// A pool of `count` (at least one) serialised-size queries (`crate::serialize`).
+    pub fn serialization(ctx: &Context, count: u32) -> Result<SizeQueries> {
+        Self::of_kind(
+            ctx,
+            count,
+            vk::QueryType::ACCELERATION_STRUCTURE_SERIALIZATION_SIZE_KHR,
+        )
+    }
+
+    fn of_kind(ctx: &Context, count: u32, kind: vk::QueryType) -> Result<SizeQueries> {
         let info = vk::QueryPoolCreateInfo::default()
-            .query_type(vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR)
+            .query_type(kind)
             .query_count(count.max(1));
         // SAFETY: valid create info; the AS extension is enabled (caller checked).
         let pool = unsafe { ctx.shared.device.create_query_pool(&info, None) }
@@ -130,6 +148,7 @@ impl SizeQueries {
             ctx: ctx.clone(),
             pool,
             count: count.max(1),
+            kind,
         })
     }
 

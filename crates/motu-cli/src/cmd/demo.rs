@@ -121,6 +121,11 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             stream_defrag: false,
             stream_mesh_memory: crate::cli::MeshMemoryArg::Auto,
         },
+        as_cache: crate::cli::AsCacheArgs {
+            host_cache: None,
+            as_cache: None,
+            no_as_cache: false,
+        },
         frames: 1,
         stats: Some(stats_path.clone()),
         subset: Vec::new(),

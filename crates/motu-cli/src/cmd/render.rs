@@ -275,6 +275,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             max_passes: a.stream_max_passes,
             bounds: stream_bounds(&a.stream_bounds),
             allow_incomplete: a.allow_incomplete,
+            cache: cache_settings(&a.as_cache),
         }),
     };
     let job = motu_render::RenderJob {
@@ -312,6 +313,18 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         out.traces_per_ray(),
     );
     Ok(())
+}
+
+/// `--host-cache`, `--as-cache`, `--no-as-cache` as the streamer's cache settings.
+pub fn cache_settings(a: &crate::cli::AsCacheArgs) -> motu_render::CacheSettings {
+    motu_render::CacheSettings {
+        host_bytes: a.host_cache,
+        dir: match (&a.as_cache, a.no_as_cache) {
+            (_, true) => motu_render::CacheDir::Off,
+            (Some(d), false) => motu_render::CacheDir::At(d.clone()),
+            (None, false) => motu_render::CacheDir::Default,
+        },
+    }
 }
 
 /// A refusal below the streaming floor where the whole scene's full build fits the budget

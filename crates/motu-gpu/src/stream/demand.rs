@@ -121,7 +121,29 @@ impl<'a> StreamingRenderer<'a> {
         let t_blas = Instant::now();
         let built = loaded.and_then(|()| {
             let ids: Vec<usize> = group.iter().map(|&b| b as usize).collect();
-            self.maybe_evicting(evict, |s| s.build_blas_set(&ids, 0))
+            let (restored, rest) = self.restore_cached(&ids, evict)?;
+            let built = match self.maybe_evicting(evict, |s| s.build_blas_set(&rest, 0)) {
+                Ok(b) => b,
+                Err(e) => {
+                    for (_, a) in restored {
+                        a.release(&mut self.heap);
+                    }
+                    return Err(e);
+                }
+            };
+            if let Err(e) = self.store_built(&built) {
+                for (_, a) in restored.into_iter().chain(built) {
+                    a.release(&mut self.heap);
+                }
+                return Err(e);
+            }
+            let n = built.len();
+            Ok(built
+                .into_iter()
+                .chain(restored)
+                .enumerate()
+                .map(|(k, (b, a))| (b, a, k >= n))
+                .collect::<Vec<_>>())
         });
         self.frame_stats.blas_ms += t_blas.elapsed().as_secs_f64() * 1e3;
         if matches!(built, Err(GpuError::Budget(_))) {
@@ -137,7 +159,7 @@ impl<'a> StreamingRenderer<'a> {
             }
         };
         let mut built_ids = BTreeSet::new();
-        for (b, accel) in built {
+        for (b, accel, restored) in built {
             let mesh_bytes: u64 = self
                 .blas_meshes(b)
                 .into_iter()
@@ -150,9 +172,19 @@ impl<'a> StreamingRenderer<'a> {
             let bytes = accel.size_bytes + mesh_bytes;
             self.blas_bytes[b] = bytes;
             self.used_in_frame[b] = self.frame;
-            self.frame_stats.blas_built += 1;
-            self.frame_stats.built_bytes += accel.size_bytes;
-            self.frame_stats.triangles_built += u64::from(self.view.blases[b].primitive_count);
+            if restored {
+                self.frame_stats.restored_blases += 1;
+                self.frame_stats.restored_bytes += accel.size_bytes;
+            } else {
+                if self.reuse.built_once[b] {
+                    self.frame_stats.rebuilt_blases += 1;
+                    self.frame_stats.rebuilt_bytes += accel.size_bytes;
+                }
+                self.frame_stats.blas_built += 1;
+                self.frame_stats.built_bytes += accel.size_bytes;
+                self.frame_stats.triangles_built += u64::from(self.view.blases[b].primitive_count);
+            }
+            self.reuse.built_once[b] = true;
             self.blas[b] = Some(accel);
             let _ = self
                 .residency

@@ -206,6 +206,19 @@ impl<'a> StreamingRenderer<'a> {
         tot.fallback_pixels += st.fallback_pixels;
         tot.bytes_streamed += st.bytes_streamed;
         tot.built_bytes += st.built_bytes;
+        tot.restored_blases += u64::from(st.restored_blases);
+        tot.restored_bytes += st.restored_bytes;
+        tot.restore_ms += st.restore_ms;
+        tot.rebuilt_blases += u64::from(st.rebuilt_blases);
+        tot.rebuilt_bytes += st.rebuilt_bytes;
+        tot.cache_stored += u64::from(st.cache_stored);
+        tot.cache_stored_bytes += st.cache_stored_bytes;
+        tot.cache_store_ms += st.cache_store_ms;
+        tot.restore_gb_per_s = if tot.restore_ms > 0.0 {
+            tot.restored_bytes as f64 / (tot.restore_ms * 1e6)
+        } else {
+            0.0
+        };
         tot.triangles_built += st.triangles_built;
         tot.build_ms += st.build_ms;
         tot.vram_peak_bytes = report.peak_block_bytes;

@@ -86,6 +86,7 @@
 
 mod budget;
 mod buffers;
+mod cache;
 mod defrag;
 mod demand;
 mod floor;
@@ -101,6 +102,7 @@ mod shading;
 mod skeleton;
 mod tlas_records;
 
+pub use cache::StructureCache;
 pub use floor::{
     persistent_tlas_estimate, streamed_mesh_total_bytes, streaming_floor, streaming_floor_planned,
     FloorSizes, StreamFloor,
@@ -425,6 +427,23 @@ pub struct FrameStreamStats {
     pub built_bytes: u64,
     /// Triangles in the BLASes built.
     pub triangles_built: u64,
+    /// BLASes restored from the structure cache by copy instead of built (`cache.rs`), their
+    /// bytes, from which tier, and the time the restores took (part of `build_ms`).
+    pub restored_blases: u32,
+    pub restored_bytes: u64,
+    pub restored_from_host: u32,
+    pub restored_from_disk: u32,
+    pub restore_ms: f64,
+    /// Of `blas_built`: BLASes this renderer had built (or restored) before, built again, and
+    /// their structure bytes: what a cache saves.
+    pub rebuilt_blases: u32,
+    pub rebuilt_bytes: u64,
+    /// BLASes serialised into the structure cache after their builds, the bytes, the time
+    /// (part of `build_ms`), and those skipped for want of room to read them back.
+    pub cache_stored: u32,
+    pub cache_stored_bytes: u64,
+    pub cache_store_ms: f64,
+    pub cache_skipped: u32,
     pub build_ms: f64,
     /// Wall time of the trace submissions.
     pub trace_ms: f64,
@@ -561,6 +580,17 @@ pub struct StreamTotals {
     pub built_bytes: u64,
     pub triangles_built: u64,
     pub build_ms: f64,
+    /// The structure cache (`cache.rs`): restores, rebuilds and stores over all frames (as
+    /// [`FrameStreamStats`]), and the restores' rate in GB/s.
+    pub restored_blases: u64,
+    pub restored_bytes: u64,
+    pub restore_ms: f64,
+    pub restore_gb_per_s: f64,
+    pub rebuilt_blases: u64,
+    pub rebuilt_bytes: u64,
+    pub cache_stored: u64,
+    pub cache_stored_bytes: u64,
+    pub cache_store_ms: f64,
     /// Triangles of every buildable triangle BLAS: what one full build costs.
     pub scene_triangles: u64,
     /// Bytes the skeleton (tables, PI BLASes, root TLAS, proxies) took at start.
@@ -733,6 +763,8 @@ pub struct StreamingRenderer<'a> {
     /// BLASes evicted since the renderer started (also those given back; never decremented):
     /// whether a prefetch removed anything since a probe.
     evictions: u64,
+    /// Built structures kept for reuse (`cache.rs`).
+    reuse: cache::Reuse,
     /// Set when a failed build step left the root TLAS referencing freed memory.
     poisoned: Option<String>,
     frame: u64,

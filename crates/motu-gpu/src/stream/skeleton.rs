@@ -400,6 +400,7 @@ impl<'a> StreamingRenderer<'a> {
             probe_need: Default::default(),
             evictions: 0,
             poisoned: None,
+            reuse: super::cache::Reuse::new(nb),
             frame: 0,
             kept: Default::default(),
             frame_stats: FrameStreamStats::default(),

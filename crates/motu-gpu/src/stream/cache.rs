@@ -1,0 +1,324 @@
+//! Built BLASes that survive eviction and the process (`--host-cache`, `--as-cache`).
+//!
+//! Every triangle BLAS the streamer builds is serialised (Vulkan's `SERIALIZE` copy of the
+//! compacted structure) into a [`motu_ascache::AsCache`]: a byte-bounded LRU in host memory,
+//! written through to a cache directory. When the BLAS is needed again, after an eviction or in
+//! a later process, it is deserialised by copy instead of rebuilt from its meshes (which are
+//! streamed as before: hits still shade from them). Keys name the scene's content (the
+//! package's checksums), the BLAS and its records, the build flags and the driver; the driver
+//! judges each entry's compatibility data before it is used, so a cache of another device or
+//! driver is a miss with a warning (`motu-ascache`), never a wrong structure. A deserialised
+//! structure is the one that was built, so images cannot change.
+//!
+//! The state lives in one owned part, [`Reuse`]: which BLASes were ever built (so rebuilds are
+//! counted whether or not a cache is attached) and the cache with its keys.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use motu_alloc::{AllocKind, MemoryClass};
+use motu_ascache::{AsCache, CacheKey, CacheKeyBuilder, CacheStats, Tier};
+use motu_vk::{AsLevel, BufferUsage, SerializedHeader, SizeQueries, SERIALIZED_ALIGNMENT};
+
+use super::StreamingRenderer;
+use crate::error::{GpuError, Result};
+use crate::scene::AccelStruct;
+
+/// A structure cache for a [`StreamingRenderer`] ([`StreamingRenderer::attach_cache`]): the
+/// cache tiers and the identity of the scene content its keys are made from.
+pub struct StructureCache {
+    cache: AsCache,
+    scene_identity: Vec<u8>,
+}
+
+impl StructureCache {
+    /// `scene_identity`: bytes that change whenever any mesh or record of the scene does (a
+    /// package's chunk and section checksums).
+    pub fn new(cache: AsCache, scene_identity: &[u8]) -> StructureCache {
+        StructureCache {
+            cache,
+            scene_identity: scene_identity.to_vec(),
+        }
+    }
+
+    pub fn stats(&self) -> CacheStats {
+        self.cache.stats()
+    }
+}
+
+/// What the streamer keeps to reuse built structures: see the module docs.
+#[derive(Default)]
+pub(super) struct Reuse {
+    /// Per BLAS: built (or restored) at least once by this renderer.
+    pub(super) built_once: Vec<bool>,
+    cache: Option<Attached>,
+}
+
+struct Attached {
+    cache: StructureCache,
+    /// Per BLAS, its key once made.
+    keys: Vec<Option<CacheKey>>,
+    driver: String,
+}
+
+/// Restored structures (BLAS id, structure) and the ids left to build.
+pub(super) type Restored = (Vec<(usize, AccelStruct)>, Vec<usize>);
+
+/// Keys' format: bump when what a key covers changes.
+const KEY_DOMAIN: &str = "motu-blas-v1";
+
+impl Reuse {
+    pub(super) fn new(blases: usize) -> Reuse {
+        Reuse {
+            built_once: vec![false; blases],
+            cache: None,
+        }
+    }
+
+    pub(super) fn stats(&self) -> Option<CacheStats> {
+        self.cache.as_ref().map(|a| a.cache.stats())
+    }
+}
+
+impl StreamingRenderer<'_> {
+    /// Keeps every BLAS built from now on in `cache` and restores from it instead of
+    /// rebuilding (see the module docs).
+    pub fn attach_cache(&mut self, cache: StructureCache) {
+        let n = self.view.blases.len();
+        self.reuse.cache = Some(Attached {
+            cache,
+            keys: vec![None; n],
+            driver: self.ctx.driver_identity(),
+        });
+    }
+
+    /// The structure cache's counts (`None`: no cache attached).
+    pub fn cache_stats(&self) -> Option<CacheStats> {
+        self.reuse.stats()
+    }
+
+    fn blas_key(&mut self, b: usize) -> Option<CacheKey> {
+        let view = self.view;
+        let flags = self.build_opts.blas_build.name();
+        let compact = self.build_opts.compact;
+        let a = self.reuse.cache.as_mut()?;
+        if let Some(k) = a.keys[b] {
+            return Some(k);
+        }
+        let rec = &view.blases[b];
+        let geometries = &view.geometries[rec.item_base as usize..][..rec.item_count as usize];
+        let mut k = CacheKeyBuilder::new(KEY_DOMAIN);
+        k.bytes(&a.cache.scene_identity)
+            .u32(b as u32)
+            .bytes(bytemuck::bytes_of(rec))
+            .bytes(bytemuck::cast_slice(geometries))
+            .str(flags)
+            .u32(u32::from(compact))
+            .str(&a.driver);
+        let key = k.finish();
+        a.keys[b] = Some(key);
+        Some(key)
+    }
+
+    /// Restores what the cache holds of BLASes `ids` (their meshes resident): returns the
+    /// restored structures and the ids left to build. Anything that goes wrong (a bad entry,
+    /// no room for the copy) leaves those BLASes to be built, as without a cache; only a
+    /// device error fails.
+    pub(super) fn restore_cached(&mut self, ids: &[usize], evict: bool) -> Result<Restored> {
+        if self.reuse.cache.is_none() || ids.is_empty() {
+            return Ok((Vec::new(), ids.to_vec()));
+        }
+        let t = Instant::now();
+        let ctx = self.ctx.clone();
+        let compatible = |h: &[u8; 32]| ctx.acceleration_structure_compatible(h).unwrap_or(false);
+        let mut hits: Vec<(usize, Arc<[u8]>, SerializedHeader)> = Vec::new();
+        let mut rest = Vec::new();
+        for &b in ids {
+            let Some(key) = self.blas_key(b) else {
+                rest.push(b);
+                continue;
+            };
+            let a = self.reuse.cache.as_mut().expect("attached");
+            match a.cache.cache.get(&key, &compatible) {
+                Some((blob, tier)) => match SerializedHeader::read(&blob) {
+                    Some(h)
+                        if h.serialized_bytes == blob.len() as u64 && h.deserialized_bytes > 0 =>
+                    {
+                        match tier {
+                            Tier::Host => self.frame_stats.restored_from_host += 1,
+                            Tier::Disk => self.frame_stats.restored_from_disk += 1,
+                        }
+                        hits.push((b, blob, h));
+                    }
+                    _ => {
+                        tracing::warn!(blas = b, "structure cache: an entry whose serialised header does not match its length; rebuilt");
+                        a.cache.cache.remove(&key);
+                        rest.push(b);
+                    }
+                },
+                None => rest.push(b),
+            }
+        }
+        if hits.is_empty() {
+            return Ok((Vec::new(), rest));
+        }
+        let restored = match self.maybe_evicting(evict, |s| s.deserialize(&hits)) {
+            Ok(r) => r,
+            Err(GpuError::Budget(why)) => {
+                tracing::debug!(%why, "structure cache: no room to restore; building instead");
+                rest.extend(hits.iter().map(|h| h.0));
+                rest.sort_unstable();
+                return Ok((Vec::new(), rest));
+            }
+            Err(e) => return Err(e),
+        };
+        self.frame_stats.restore_ms += t.elapsed().as_secs_f64() * 1e3;
+        Ok((restored, rest))
+    }
+
+    /// One submission deserialising `hits` from a host-visible copy of their blobs.
+    fn deserialize(
+        &mut self,
+        hits: &[(usize, Arc<[u8]>, SerializedHeader)],
+    ) -> Result<Vec<(usize, AccelStruct)>> {
+        let ctx = self.ctx.clone();
+        let align = |v: u64| v.div_ceil(SERIALIZED_ALIGNMENT) * SERIALIZED_ALIGNMENT;
+        let total: u64 = hits.iter().map(|h| align(h.1.len() as u64)).sum();
+        let staging = self.heap.alloc_buffer(
+            "restore blobs",
+            total,
+            BufferUsage::DEVICE_ADDRESS.union(BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT),
+            AllocKind::Staging,
+            MemoryClass::HostVisible,
+            SERIALIZED_ALIGNMENT,
+        )?;
+        let mut out: Vec<(usize, AccelStruct)> = Vec::with_capacity(hits.len());
+        let result = (|| -> Result<()> {
+            let base = staging.device_address()?;
+            let mut at = 0u64;
+            let mut offsets = Vec::with_capacity(hits.len());
+            for (b, blob, h) in hits {
+                staging.write_bytes(at, blob)?;
+                offsets.push(at);
+                let accel = AccelStruct::new(
+                    &ctx,
+                    &mut self.heap,
+                    &format!("blas {b} (restored)"),
+                    h.deserialized_bytes,
+                    AsLevel::Bottom,
+                )?;
+                out.push((*b, accel));
+                at += align(blob.len() as u64);
+            }
+            let mut rec = ctx.record("restore blases")?;
+            for ((_, accel), &off) in out.iter().zip(&offsets) {
+                rec.deserialize_acceleration_structure(base.offset(off), accel.target())?;
+            }
+            rec.barrier();
+            rec.submit_and_wait()?;
+            Ok(())
+        })();
+        self.heap.free(staging);
+        match result {
+            Ok(()) => Ok(out),
+            Err(e) => {
+                for (_, a) in out {
+                    a.release(&mut self.heap);
+                }
+                Err(e)
+            }
+        }
+    }
+
+    /// Serialises the newly built BLASes of `built` into the cache (those it does not hold
+    /// yet). A cache that cannot take them (no room for the readback) is skipped, counted.
+    pub(super) fn store_built(&mut self, built: &[(usize, AccelStruct)]) -> Result<()> {
+        if self.reuse.cache.is_none() || built.is_empty() {
+            return Ok(());
+        }
+        let t = Instant::now();
+        let mut todo: Vec<(usize, &AccelStruct, CacheKey)> = Vec::new();
+        for (b, a) in built {
+            let Some(key) = self.blas_key(*b) else {
+                continue;
+            };
+            let held = self.reuse.cache.as_ref().expect("attached");
+            if held.cache.cache.contains(&key).is_none() {
+                todo.push((*b, a, key));
+            }
+        }
+        if todo.is_empty() {
+            return Ok(());
+        }
+        self.store_some(&todo)?;
+        self.frame_stats.cache_store_ms += t.elapsed().as_secs_f64() * 1e3;
+        Ok(())
+    }
+
+    /// Serialises `todo` in one readback; where the budget has no room for it, in halves (a
+    /// single structure that does not fit is skipped, counted).
+    fn store_some(&mut self, todo: &[(usize, &AccelStruct, CacheKey)]) -> Result<()> {
+        let ctx = self.ctx.clone();
+        let queries = SizeQueries::serialization(&ctx, todo.len() as u32)?;
+        let targets: Vec<_> = todo.iter().map(|t| t.1.target()).collect();
+        let mut rec = ctx.record("serialised sizes")?;
+        rec.barrier();
+        rec.write_serialization_sizes(&targets, &queries)?;
+        rec.submit_and_wait()?;
+        let sizes = queries.read(todo.len() as u32)?;
+        let align = |v: u64| v.div_ceil(SERIALIZED_ALIGNMENT) * SERIALIZED_ALIGNMENT;
+        let total: u64 = sizes.iter().map(|&s| align(s)).sum();
+        let readback = match self.heap.alloc_buffer(
+            "serialised blases",
+            total,
+            BufferUsage::DEVICE_ADDRESS.union(BufferUsage::TRANSFER_DST),
+            AllocKind::Staging,
+            MemoryClass::HostVisible,
+            SERIALIZED_ALIGNMENT,
+        ) {
+            Ok(buf) => buf,
+            Err(motu_vk::VkError::Budget(why)) if todo.len() > 1 => {
+                tracing::debug!(%why, n = todo.len(), "structure cache: serialising in halves");
+                let (l, r) = todo.split_at(todo.len() / 2);
+                self.store_some(l)?;
+                return self.store_some(r);
+            }
+            Err(motu_vk::VkError::Budget(why)) => {
+                // The cache is an optimisation: no room to read back is a skip, not a failure.
+                tracing::debug!(%why, "structure cache: no room to serialise; not cached");
+                self.frame_stats.cache_skipped += 1;
+                return Ok(());
+            }
+            Err(e) => return Err(e.into()),
+        };
+        let result = (|| -> Result<Vec<Vec<u8>>> {
+            let base = readback.device_address()?;
+            let mut rec = ctx.record("serialise blases")?;
+            let mut at = 0u64;
+            let mut offsets = Vec::with_capacity(todo.len());
+            for (t, &size) in targets.iter().zip(&sizes) {
+                rec.serialize_acceleration_structure(*t, base.offset(at))?;
+                offsets.push(at);
+                at += align(size);
+            }
+            rec.barrier();
+            rec.submit_and_wait()?;
+            let mut blobs = Vec::with_capacity(todo.len());
+            for (&off, &size) in offsets.iter().zip(&sizes) {
+                let mut v = vec![0u8; size as usize];
+                readback.read_bytes(off, &mut v)?;
+                blobs.push(v);
+            }
+            Ok(blobs)
+        })();
+        self.heap.free(readback);
+        let blobs = result?;
+        let a = self.reuse.cache.as_mut().expect("attached");
+        for ((_, _, key), blob) in todo.iter().zip(blobs) {
+            self.frame_stats.cache_stored_bytes += blob.len() as u64;
+            self.frame_stats.cache_stored += 1;
+            a.cache.cache.put(*key, Arc::from(blob));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,304 @@
+//! Built structures that survive eviction and the process (issue 45 items 2 and 3): the host
+//! cache restores what a camera path evicted and needs again, a warm cache directory spares a
+//! second process every build it cached, bad entries and unwritable directories are warnings,
+//! and every image equals the path with everything resident.
+
+use motu_tests::{
+    gen_island, gpu_available, json_u64, motu_ok, render_env, report_peak_and_floor, s,
+};
+use std::path::{Path, PathBuf};
+
+/// The default island, its 64×36 peak, and the reference path (room for everything, no cache).
+struct Fixture {
+    dir: tempfile::TempDir,
+    pkg: PathBuf,
+    peak: u64,
+    reference: PathBuf,
+}
+
+impl Fixture {
+    fn new() -> Option<Fixture> {
+        if !gpu_available() {
+            return None;
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let pkg = gen_island(dir.path(), None);
+        let (peak, _floor) = report_peak_and_floor(&pkg, "64", "36");
+        let f = Fixture {
+            reference: dir.path().join("reference.aov"),
+            dir,
+            pkg,
+            peak,
+        };
+        let budget = (f.peak * 2).to_string();
+        path(
+            &f,
+            "reference",
+            "query",
+            &budget,
+            &["--host-cache", "0", "--no-as-cache"],
+            &[],
+        );
+        Some(f)
+    }
+
+    fn same_as_reference(&self, aov: &Path) {
+        motu_ok(&["compare", s(&self.reference), s(aov), "--max-mismatch", "0"]);
+    }
+}
+
+/// The default 8-frame streamed path at 64×36 (`--stats` beside the AOV).
+fn path(
+    f: &Fixture,
+    name: &str,
+    backend: &str,
+    budget: &str,
+    extra: &[&str],
+    env: &[(&str, &str)],
+) -> (serde_json::Value, PathBuf) {
+    let aov = f.dir.path().join(format!("{name}.aov"));
+    let mut args = vec![
+        "--width",
+        "64",
+        "--height",
+        "36",
+        "--frames",
+        "8",
+        "--stream",
+        "--vram-budget",
+        budget,
+    ];
+    args.extend(extra);
+    (render_env(&f.pkg, backend, &aov, &args, env), aov)
+}
+
+fn totals(st: &serde_json::Value) -> &serde_json::Value {
+    &st["stream"]["totals"]
+}
+
+fn warnings(st: &serde_json::Value, reason: &str) -> u64 {
+    json_u64(&st["stream"]["cache"]["disk"]["warnings"][reason])
+}
+
+#[test]
+fn a_path_that_returns_restores_from_the_host_cache() {
+    let Some(f) = Fixture::new() else { return };
+    // A quarter of the peak: the path evicts structures its later frames need again.
+    let budget = (f.peak / 4).to_string();
+    let (off, off_aov) = path(
+        &f,
+        "host-off",
+        "query",
+        &budget,
+        &["--host-cache", "0", "--no-as-cache"],
+        &[],
+    );
+    let (on, on_aov) = path(&f, "host-on", "query", &budget, &["--no-as-cache"], &[]);
+    let (t0, t1) = (totals(&off), totals(&on));
+    eprintln!("without: {t0}\nwith: {t1}");
+    assert!(
+        json_u64(&t0["rebuilt_blases"]) > 0,
+        "the path rebuilds without a cache: {t0}"
+    );
+    assert_eq!(json_u64(&t0["restored_blases"]), 0, "{t0}");
+    assert!(
+        json_u64(&t1["restored_blases"]) > 0,
+        "restores from the host cache: {t1}"
+    );
+    let host_hits = json_u64(&on["stream"]["cache"]["host_hits"]);
+    assert!(host_hits > 0, "{}", on["stream"]["cache"]);
+    assert!(
+        json_u64(&t1["rebuilt_bytes"]) < json_u64(&t0["rebuilt_bytes"]),
+        "fewer rebuilt bytes with the cache: {} against {}",
+        t1["rebuilt_bytes"],
+        t0["rebuilt_bytes"]
+    );
+    assert!(json_u64(&t1["restored_bytes"]) > 0 && t1["restore_gb_per_s"].as_f64().unwrap() > 0.0);
+    f.same_as_reference(&off_aov);
+    f.same_as_reference(&on_aov);
+}
+
+#[test]
+fn a_second_process_with_a_warm_cache_rebuilds_nothing_it_cached() {
+    let Some(f) = Fixture::new() else { return };
+    let budget = (f.peak * 2).to_string();
+    for backend in ["query", "pipeline"] {
+        if backend == "query" && !motu_tests::has_ray_query() {
+            eprintln!("SKIPPED the query backend: the device has no ray queries");
+            continue;
+        }
+        let cache = f.dir.path().join(format!("cache-{backend}"));
+        let dir = ["--as-cache", s(&cache)];
+        let (cold, cold_aov) = path(&f, &format!("cold-{backend}"), backend, &budget, &dir, &[]);
+        let stored = json_u64(&totals(&cold)["cache_stored"]);
+        let built = json_u64(&totals(&cold)["blas_built"]);
+        assert!(
+            stored > 0 && stored == built,
+            "every build is cached: {}",
+            totals(&cold)
+        );
+        let (warm, warm_aov) = path(&f, &format!("warm-{backend}"), backend, &budget, &dir, &[]);
+        let t = totals(&warm);
+        assert_eq!(json_u64(&t["blas_built"]), 0, "nothing rebuilt: {t}");
+        assert_eq!(json_u64(&t["restored_blases"]), stored, "{t}");
+        assert_eq!(json_u64(&warm["stream"]["cache"]["disk_hits"]), stored);
+        f.same_as_reference(&cold_aov);
+        f.same_as_reference(&warm_aov);
+    }
+}
+
+/// The cache's entry files (`v1/ab/<hex key>.as`), sorted.
+fn entries(cache: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut stack = vec![cache.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if p.extension().is_some_and(|x| x == "as") {
+                out.push(p);
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn corrupt_truncated_and_foreign_entries_are_rebuilt_with_a_warning() {
+    let Some(f) = Fixture::new() else { return };
+    let budget = (f.peak * 2).to_string();
+    let cache = f.dir.path().join("cache");
+    let dir = ["--host-cache", "0", "--as-cache", s(&cache)];
+    let (cold, _) = path(&f, "cold", "pipeline", &budget, &dir, &[]);
+    let stored = json_u64(&totals(&cold)["cache_stored"]);
+    let files = entries(&cache);
+    assert_eq!(files.len() as u64, stored, "{files:?}");
+    assert!(files.len() >= 3);
+    // One byte flipped in the middle of an entry.
+    let mut bytes = std::fs::read(&files[0]).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x5a;
+    std::fs::write(&files[0], &bytes).unwrap();
+    // An entry cut short.
+    let bytes = std::fs::read(&files[1]).unwrap();
+    std::fs::write(&files[1], &bytes[..bytes.len() / 3]).unwrap();
+    // A whole, well-formed entry written for another driver: its serialised header's driver
+    // UUID differs, so the device refuses it as incompatible.
+    let key_hex = files[2].file_stem().unwrap().to_str().unwrap();
+    let key = motu_ascache::CacheKey::from_hex(key_hex).unwrap();
+    let mut disk = motu_ascache::DiskCache::open(&cache, Default::default());
+    let mut blob = disk
+        .get(&key, &motu_ascache::AnyDevice)
+        .expect("entry readable")
+        .to_vec();
+    for b in &mut blob[..16] {
+        *b ^= 0xff;
+    }
+    assert!(disk.put(&key, &blob));
+    drop(disk);
+
+    let out = motu_tests::motu(&[
+        "render",
+        s(&f.pkg),
+        "-o",
+        s(&f.dir.path().join("bad.png")),
+        "--backend",
+        "pipeline",
+        "--aov",
+        s(&f.dir.path().join("bad.aov")),
+        "--stats",
+        s(&f.dir.path().join("bad.json")),
+        "--width",
+        "64",
+        "--height",
+        "36",
+        "--frames",
+        "8",
+        "--stream",
+        "--vram-budget",
+        &budget,
+        "--host-cache",
+        "0",
+        "--as-cache",
+        s(&cache),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    let st: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(f.dir.path().join("bad.json")).unwrap())
+            .unwrap();
+    for reason in ["corrupt", "truncated", "incompatible"] {
+        assert_eq!(
+            warnings(&st, reason),
+            1,
+            "{reason}: {}",
+            st["stream"]["cache"]
+        );
+        assert!(
+            err.contains(reason),
+            "the {reason} entry is warned about: {err}"
+        );
+    }
+    let t = totals(&st);
+    assert_eq!(
+        json_u64(&t["blas_built"]),
+        3,
+        "exactly the bad entries rebuilt: {t}"
+    );
+    assert_eq!(json_u64(&t["restored_blases"]), stored - 3, "{t}");
+    f.same_as_reference(&f.dir.path().join("bad.aov"));
+}
+
+#[test]
+fn a_read_only_or_full_cache_directory_renders_with_a_warning() {
+    let Some(f) = Fixture::new() else { return };
+    let budget = (f.peak * 2).to_string();
+    // Read-only: as root chmod does not stop writes, so a directory under sysfs (which refuses
+    // every new file) stands for one; as another user a 0555 directory does.
+    let ro = if is_root() {
+        PathBuf::from("/sys/motu-as-cache-test")
+    } else {
+        let d = f.dir.path().join("read-only");
+        std::fs::create_dir(&d).unwrap();
+        std::fs::set_permissions(&d, std::os::unix::fs::PermissionsExt::from_mode(0o555)).unwrap();
+        d
+    };
+    let (st, aov) = path(
+        &f,
+        "read-only",
+        "pipeline",
+        &budget,
+        &["--as-cache", s(&ro)],
+        &[],
+    );
+    let c = &st["stream"]["cache"];
+    assert!(warnings(&st, "read_only") + warnings(&st, "io") >= 1, "{c}");
+    assert_eq!(c["disk"]["writable"], false, "{c}");
+    f.same_as_reference(&aov);
+    // Full: every write fails as on a full disk.
+    let full = f.dir.path().join("full");
+    let (st, aov) = path(
+        &f,
+        "full",
+        "pipeline",
+        &budget,
+        &["--as-cache", s(&full)],
+        &[("MOTU_AS_CACHE_SIMULATE", "full")],
+    );
+    assert!(warnings(&st, "full") >= 1, "{}", st["stream"]["cache"]);
+    assert!(entries(&full).is_empty());
+    f.same_as_reference(&aov);
+}
+
+fn is_root() -> bool {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("Uid:"))
+                .map(|l| l.split_whitespace().nth(1) == Some("0"))
+        })
+        .unwrap_or(false)
+}
