@@ -576,6 +576,7 @@ impl<'s> Parser<'s> {
                     self.hint_v4("v4 material");
                 }
                 let p = self.params(lx)?;
+                self.check_material("Material", &kind, &p, t.loc)?;
                 let m = self.make_material(None, &kind, &p, t.loc);
                 self.sink.material(&m)?;
                 self.gs.material = m;
@@ -603,6 +604,7 @@ impl<'s> Parser<'s> {
                     }
                     self.warn(Some(t.loc), format!("named material \"{name}\" redefined"));
                 }
+                self.check_material("MakeNamedMaterial", &kind, &p, t.loc)?;
                 let m = self.make_material(Some(name.to_string()), &kind, &p, t.loc);
                 self.sink.material(&m)?;
                 self.named_materials.insert(name.into_owned(), m);
@@ -624,6 +626,8 @@ impl<'s> Parser<'s> {
             b"AreaLightSource" => {
                 let (kind, _) = self.string(lx, tok)?;
                 let p = self.params(lx)?;
+                // Caught here with its location, not by the package's self-check.
+                self.require_finite("AreaLightSource", &p)?;
                 let radiance = self.emission(&p, "L");
                 let two_sided = p.bool("twosided").unwrap_or(false);
                 self.gs.area_light = Some(Arc::new(AreaLight {
