@@ -63,14 +63,26 @@ fn init_tracing(verbose: u8) {
     };
     // winit's Wayland title bar (sctk-adwaita) logs an ERROR when no XDG settings portal
     // answers, which desktops without one never do: noise, not a motu problem.
-    let filter = EnvFilter::try_from_env("MOTU_LOG")
-        .unwrap_or_else(|_| EnvFilter::new(format!("{default},sctk_adwaita=off")));
+    let fallback = || EnvFilter::new(format!("{default},sctk_adwaita=off"));
+    let (filter, bad) = match std::env::var("MOTU_LOG") {
+        Ok(v) => match EnvFilter::try_new(&v) {
+            Ok(f) => (f, None),
+            Err(e) => (fallback(), Some(format!("{v:?} ({e})"))),
+        },
+        Err(_) => (fallback(), None),
+    };
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
         // Colour codes only for a person at a terminal, never in logs or captured output.
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
+    if let Some(bad) = bad {
+        // Said, not silently replaced: the user asked for logs they would not get.
+        eprintln!(
+            "warning: MOTU_LOG={bad} is not a log filter (e.g. `info`, `motu_gpu=debug`); logging at `{default}`"
+        );
+    }
 }
 
 #[cfg(test)]

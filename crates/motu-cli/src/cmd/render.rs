@@ -37,6 +37,10 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
     }
 }
 
+/// A recorded camera path is JSON of poses (~100 B each): a bigger file is not one, and a
+/// device such as `/dev/zero` is refused before it is read.
+pub const CAMERA_PATH_MAX_BYTES: u64 = 256 << 20;
+
 /// `--lod-mode` as the library's request.
 pub(crate) fn lod_mode(m: LodModeArg) -> motu_render::LodMode {
     match m {
@@ -54,6 +58,7 @@ fn recorded_cameras(
     let Some(p) = &a.camera_path else {
         return Ok(None);
     };
+    output::check_input("--camera-path", p, Some(CAMERA_PATH_MAX_BYTES))?;
     let path = load_camera_path(p)?;
     let path_size = a.width.is_none() && a.height.is_none();
     Ok(Some(motu_render::recorded_path_cameras(
@@ -152,7 +157,12 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     let mut outputs = vec![("-o", a.output.as_path())];
     outputs.extend(a.aov.as_deref().map(|p| ("--aov", p)));
     outputs.extend(a.stats.as_deref().map(|p| ("--stats", p)));
-    output::check_outputs(&[("package", &a.package)], &outputs)?;
+    // Every output is checked and its temp file created before any work; none is renamed into
+    // place until all are written (a failed AOV never leaves a new PNG beside an old AOV).
+    let mut outs = output::Outputs::begin(&[("package", &a.package)], &outputs)?;
+    if let Some(p) = &a.camera_path {
+        output::check_input("--camera-path", p, Some(CAMERA_PATH_MAX_BYTES))?;
+    }
     let pkg = pipeline::open(&a.package)?;
     let base = pkg.view()?;
     let names: Vec<String> = pkg.meta().elements.iter().map(|e| e.name.clone()).collect();
@@ -287,13 +297,14 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     };
     let out = motu_render::render(&job, &settings, &mut |e| print_event(e, a.allow_incomplete))
         .map_err(|e| below_floor_hint(e, &a, &pkg))?;
-    output::write_png(&a.output, camera.width, camera.height, &out.rgba8)?;
+    outs.write_png(&a.output, camera.width, camera.height, &out.rgba8)?;
     if let Some(p) = &a.aov {
-        output::write(p, &out.aov.to_bytes())?;
+        outs.write(p, &out.aov.to_bytes())?;
     }
     if let Some(p) = &a.stats {
-        output::write(p, serde_json::to_string_pretty(&out.stats)?.as_bytes())?;
+        outs.write(p, serde_json::to_string_pretty(&out.stats)?.as_bytes())?;
     }
+    outs.commit()?;
     eprintln!(
         "rendered {} ({}×{}, {}): {:.1} ms/frame, {:.2} Mrays/s, {:.2} traces/ray",
         a.output.display(),
@@ -344,15 +355,23 @@ fn below_floor_hint(
 }
 
 pub fn compare(a: CompareArgs) -> anyhow::Result<()> {
-    if let Some(p) = &a.diff {
-        output::check_outputs(&[("A", &a.a), ("B", &a.b)], &[("--diff", p)])?;
-    }
+    let outputs: Vec<(&str, &std::path::Path)> = a
+        .diff
+        .as_deref()
+        .map(|p| ("--diff", p))
+        .into_iter()
+        .collect();
+    let mut outs = output::Outputs::begin(&[("A", &a.a), ("B", &a.b)], &outputs)?;
+    // A FIFO or device named as an AOV is refused before it is opened (opening one blocks).
+    output::check_input("A", &a.a, None)?;
+    output::check_input("B", &a.b, None)?;
     let x = Aov::load(&a.a).with_context(|| format!("reading {}", a.a.display()))?;
     let y = Aov::load(&a.b).with_context(|| format!("reading {}", a.b.display()))?;
     let r = motu_trace::compare(&x, &y, a.depth_epsilon).context("comparing")?;
     if let Some(p) = &a.diff {
-        output::write_png(p, x.width, x.height, &r.diff_rgba8)?;
+        outs.write_png(p, x.width, x.height, &r.diff_rgba8)?;
     }
+    outs.commit()?;
     let ok = r.fraction <= a.max_mismatch;
     if a.json {
         println!(
