@@ -569,7 +569,15 @@ mod tests {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pbrt-import/fuzz/corpus/obj");
         let mut n = 0;
         for e in std::fs::read_dir(&dir).unwrap().flatten() {
-            let text = String::from_utf8_lossy(&std::fs::read(e.path()).unwrap()).into_owned();
+            let data = std::fs::read(e.path()).unwrap();
+            // As the fuzz target: after `#--mtl--`, the bytes are `input.mtl` beside the OBJ.
+            const MARK: &[u8] = b"#--mtl--\n";
+            let (obj, mtl) = match data.windows(MARK.len()).position(|w| w == MARK) {
+                Some(i) => (&data[..i], &data[i + MARK.len()..]),
+                None => (&data[..], &[][..]),
+            };
+            let text = String::from_utf8_lossy(obj).into_owned();
+            let _ = import_with(&text, &[("input.mtl", mtl)]);
             let _ = import(&text, true);
             let _ = import(&text, false);
             n += 1;
