@@ -656,7 +656,28 @@ impl<'s> Parser<'s> {
                 })?;
             }
             b"ObjectInstance" => self.object_instance(lx, tok)?,
-            _ => return Err(self.err(tok, ParseErrorKind::UnknownDirective)),
+            _ => {
+                // A scene in another encoding fails on its first token: name the encoding.
+                let b = tok.bytes;
+                let encoding = if b.starts_with(&[0xFF, 0xFE]) || b.starts_with(&[0xFE, 0xFF]) {
+                    Some("UTF-16 text (it starts with a UTF-16 byte-order mark)")
+                } else if b.contains(&0) {
+                    Some("UTF-16 or binary data (the directive holds NUL bytes)")
+                } else if b.starts_with(&[0xEF, 0xBB, 0xBF]) {
+                    Some("UTF-8 with a byte-order mark")
+                } else {
+                    None
+                };
+                if let Some(what) = encoding {
+                    return Err(self.err(
+                        tok,
+                        ParseErrorKind::Invalid(format!(
+                            "the file is {what}; pbrt scenes are ASCII/UTF-8 text without a byte-order mark (convert it, e.g. `iconv -f UTF-16 -t UTF-8`)"
+                        )),
+                    ));
+                }
+                return Err(self.err(tok, ParseErrorKind::UnknownDirective));
+            }
         }
         Ok(())
     }

@@ -975,3 +975,37 @@ fn regression_zero_fov_is_an_error_at_the_parameter() {
         "Camera \"perspective\" \"float fov\" [ 179 ]\nWorldBegin\n{TRI}\n"
     ));
 }
+
+#[test]
+fn regression_utf16_scene_names_its_encoding() {
+    let text = "WorldBegin\n";
+    let mut utf16 = vec![0xFF, 0xFE];
+    for u in text.encode_utf16() {
+        utf16.extend_from_slice(&u.to_le_bytes());
+    }
+    let mut sink = CollectSink::default();
+    let e = parse_bytes(
+        &utf16,
+        Path::new("/nonexistent"),
+        &opts(VersionOption::Auto),
+        &mut sink,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains(":1:1") && e.contains("UTF-16"), "{e}");
+    assert!(!e.contains("unknown directive"), "{e}");
+}
+
+#[test]
+fn regression_negative_loopsubdiv_levels_are_warned() {
+    let (sink, stats) = run(
+        "WorldBegin\nShape \"loopsubdiv\" \"integer levels\" [-3] \"integer indices\" [0 1 2] \"point P\" [0 0 0 1 0 0 0 1 0]\n",
+    );
+    assert_eq!(stats.warnings, 1, "{:?}", sink.warnings);
+    assert!(
+        sink.warnings[0].message.contains("is -3"),
+        "{:?}",
+        sink.warnings
+    );
+    assert_eq!(sink.shapes.len(), 1);
+}

@@ -382,6 +382,32 @@ fn regression_misleading_errors_say_what_is_wrong() {
         &["import", s(&obj), "-o", s(&d.join("nan.motu"))],
         &["nan.obj:2:3", "not a finite number"],
     );
+    // A UTF-16 scene names its encoding (was "unknown directive" at 1:1).
+    let u16 = d.join("u16.pbrt");
+    let mut bytes = vec![0xFF, 0xFE];
+    for u in "WorldBegin\n".encode_utf16() {
+        bytes.extend_from_slice(&u.to_le_bytes());
+    }
+    std::fs::write(&u16, bytes).unwrap();
+    let e = fails_with(
+        &["import", s(&u16), "-o", s(&d.join("u16.motu"))],
+        &["u16.pbrt:1:1", "UTF-16"],
+    );
+    assert!(!e.contains("unknown directive"), "{e}");
+    // Control bytes from a scene are escaped, never sent to the terminal.
+    let ctl = d.join("ctl.pbrt");
+    std::fs::write(&ctl, "WorldBegin\n\x1b[31mBad\x07\n").unwrap();
+    let e = fails_with(
+        &["import", s(&ctl), "-o", s(&d.join("ctl.motu"))],
+        &["ctl.pbrt:2:1"],
+    );
+    assert!(!e.contains('\x1b') && !e.contains('\x07'), "{e:?}");
+    // An empty scene is said, not a silent empty package.
+    let empty = d.join("empty.pbrt");
+    std::fs::write(&empty, "WorldBegin\n").unwrap();
+    let o = motu(&["import", s(&empty), "-o", s(&d.join("empty.motu"))]);
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success() && e.contains("holds no geometry"), "{e}");
     // A scene whose flattened single-level variant has 2^40 instances: `report` asked the
     // device for a 2^32 − 1 box BLAS and failed on a package import accepted.
     let dag = d.join("dag.pbrt");

@@ -63,6 +63,13 @@ pub fn run(a: ImportArgs) -> anyhow::Result<()> {
         progress: crate::progress::import_bar(),
     };
     let s = pipeline::import(&a.scene, &a.output, &o)?;
+    if s.meshes == 0 {
+        // Not an error (a camera-only scene is valid pbrt), but never silent: it renders empty.
+        eprintln!(
+            "warning: {} holds no geometry: the package renders as an empty image",
+            a.scene.display()
+        );
+    }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&s)?);
     } else {

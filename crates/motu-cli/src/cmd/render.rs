@@ -163,6 +163,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     if let Some(p) = &a.camera_path {
         output::check_input("--camera-path", p, Some(CAMERA_PATH_MAX_BYTES))?;
     }
+    let opened = file_stamp(&a.package);
     let pkg = pipeline::open(&a.package)?;
     let base = pkg.view()?;
     let names: Vec<String> = pkg.meta().elements.iter().map(|e| e.name.clone()).collect();
@@ -296,7 +297,8 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         lod: &lod_choice,
     };
     let out = motu_render::render(&job, &settings, &mut |e| print_event(e, a.allow_incomplete))
-        .map_err(|e| below_floor_hint(e, &a, &pkg))?;
+        .map_err(|e| below_floor_hint(e, &a, &pkg))
+        .map_err(|e| package_changed_hint(e, &a.package, &opened))?;
     outs.write_png(&a.output, camera.width, camera.height, &out.rgba8)?;
     if let Some(p) = &a.aov {
         outs.write(p, &out.aov.to_bytes())?;
@@ -316,6 +318,31 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         out.traces_per_ray(),
     );
     Ok(())
+}
+
+/// What identifies a file's contents cheaply: device, inode, length, modification time.
+fn file_stamp(path: &std::path::Path) -> Option<(u64, u64, u64, std::time::SystemTime)> {
+    use std::os::unix::fs::MetadataExt;
+    let m = std::fs::metadata(path).ok()?;
+    Some((m.dev(), m.ino(), m.len(), m.modified().ok()?))
+}
+
+/// A render that failed on the package's data names the package, and says so when the file
+/// was replaced or rewritten while it was read (a mesh record pointing past its vertices is
+/// then a mix of two packages, not a damaged import).
+fn package_changed_hint(
+    e: anyhow::Error,
+    package: &std::path::Path,
+    opened: &Option<(u64, u64, u64, std::time::SystemTime)>,
+) -> anyhow::Error {
+    if opened.is_some() && file_stamp(package) != *opened {
+        e.context(format!(
+            "rendering {}: the package file changed while it was read (replaced or rewritten              during the render); render again once it is complete",
+            package.display()
+        ))
+    } else {
+        e.context(format!("rendering {}", package.display()))
+    }
 }
 
 /// A refusal below the streaming floor where the whole scene's full build fits the budget
@@ -470,7 +497,33 @@ fn evicted_causes(for_tlas: u32, on_refusal: u32) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::{evicted_causes, first_pass_misses, working_set_note};
+    use super::{
+        evicted_causes, file_stamp, first_pass_misses, package_changed_hint, working_set_note,
+    };
+
+    /// Issue 49: a package replaced under a CPU render said "mesh record 181: triangle 0 uses
+    /// vertex 1523 of 12" without the file or the likely cause.
+    #[test]
+    fn regression_package_changed_under_a_render_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("p.motu");
+        std::fs::write(&p, b"first package").unwrap();
+        let opened = file_stamp(&p);
+        let cause = || anyhow::anyhow!("mesh record 181: triangle 0 uses vertex 1523 of 12");
+        let e = format!("{:#}", package_changed_hint(cause(), &p, &opened));
+        assert!(e.contains("p.motu") && !e.contains("changed"), "{e}");
+        // Replaced by a rename, as an import does.
+        let q = dir.path().join("q.motu");
+        std::fs::write(&q, b"a second, longer package").unwrap();
+        std::fs::rename(&q, &p).unwrap();
+        let e = format!("{:#}", package_changed_hint(cause(), &p, &opened));
+        assert!(
+            e.contains("p.motu")
+                && e.contains("changed while it was read")
+                && e.contains("vertex 1523"),
+            "{e}"
+        );
+    }
 
     #[test]
     fn first_pass_misses_are_named_only_when_present() {
