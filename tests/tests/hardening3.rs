@@ -124,8 +124,12 @@ fn regression_special_files_are_named_and_never_opened() {
             &["render", s(path), "-o", s(&png), "--backend", "cpu"],
             &[what],
         );
-        // An AOV for compare; a camera path for render.
+        // An AOV for compare; a camera path for render; a scene for import.
         fails_with(&["compare", s(path), s(path)], &[what]);
+        fails_with(
+            &["import", s(path), "-o", s(&d.join("special.motu"))],
+            &["scene", what, "not a regular file"],
+        );
         fails_with(
             &[
                 "render",

@@ -6,6 +6,13 @@ use crate::size::format_size;
 use motu_compile::Levels;
 
 pub fn run(a: ImportArgs) -> anyhow::Result<()> {
+    // A directory, FIFO, device or symlink loop as the scene is named before anything opens
+    // it (a missing scene is the pipeline's own error).
+    if let motu_package::identity::InputKind::Other(what) =
+        motu_package::identity::classify_input(&a.scene)
+    {
+        anyhow::bail!("scene {}: is {what}, not a regular file", a.scene.display());
+    }
     crate::output::check_outputs(&[("scene", &a.scene)], &[("-o", &a.output)])?;
     if let Some(t) = a.threads {
         rayon::ThreadPoolBuilder::new()
