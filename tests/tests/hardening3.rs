@@ -292,6 +292,27 @@ fn regression_gen_is_atomic_and_refuses_a_non_empty_target() {
     assert!(!out.join("mine.txt").exists());
     assert_ne!(std::fs::read(out.join("scene.pbrt")).unwrap(), first);
     assert!(temp_files(d).is_empty(), "{:?}", temp_files(d));
+    // `-o .` in the working directory: its entries are replaced (the shell's directory is
+    // never renamed away), the scene file last.
+    let here = d.join("here");
+    std::fs::create_dir(&here).unwrap();
+    std::fs::write(here.join("old.txt"), b"old").unwrap();
+    let gen_here = |force: bool| {
+        let mut args = vec!["gen", "sphereflake", "--depth", "1", "-o", "."];
+        if force {
+            args.push("--force");
+        }
+        Command::new(motu_bin())
+            .args(&args)
+            .current_dir(&here)
+            .output()
+            .unwrap()
+    };
+    assert!(!gen_here(false).status.success());
+    let o = gen_here(true);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(here.join("scene.pbrt").is_file() && !here.join("old.txt").exists());
+    assert!(temp_files(d).is_empty(), "{:?}", temp_files(d));
     // The written scene imports.
     motu_ok(&[
         "import",

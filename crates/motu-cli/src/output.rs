@@ -188,11 +188,12 @@ impl OutputDir {
         self.dir.path()
     }
 
-    /// Renames the written directory into place.
-    pub fn commit(self) -> anyhow::Result<()> {
+    /// Renames the written directory into place (`last`, the entry file, appears last where
+    /// the directory's entries are replaced one by one: `-o .`).
+    pub fn commit(self, last: &str) -> anyhow::Result<()> {
         let target = self.dir.target_display();
         self.dir
-            .commit()
+            .commit_last(last)
             .with_context(|| format!("writing {target}"))
     }
 }
@@ -290,7 +291,7 @@ mod tests {
         );
         let out = OutputDir::begin("-o", &scene, true).unwrap();
         std::fs::write(out.path().join("scene.pbrt"), b"new").unwrap();
-        out.commit().unwrap();
+        out.commit("scene.pbrt").unwrap();
         assert!(!scene.join("keep.pbrt").exists());
         assert_eq!(std::fs::read(scene.join("scene.pbrt")).unwrap(), b"new");
         let file = dir.path().join("file");

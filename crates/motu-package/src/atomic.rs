@@ -295,7 +295,13 @@ pub struct AtomicDir {
 impl AtomicDir {
     /// Creates the temp directory beside `target` (removing stale temp files of `target`).
     pub fn create(target: impl AsRef<Path>) -> Result<Self, PackageError> {
-        let target = target.as_ref().to_path_buf();
+        let mut target = target.as_ref().to_path_buf();
+        if target.file_name().is_none() {
+            // `.` or `..`: the directory it names, by its own name.
+            target = target
+                .canonicalize()
+                .map_err(|e| PackageError::io("resolve", &target, e))?;
+        }
         let prefix = format!("{}{}.", temp_prefix(&target)?, std::process::id());
         let _ = remove_stale_temp_files(&target);
         let mut l = live();
@@ -334,8 +340,15 @@ impl AtomicDir {
 
     /// fsyncs every file written, then renames the directory into place. An existing target
     /// directory is replaced as a whole (moved aside, the new one renamed in, the old one
-    /// removed); an existing target that is not a directory is refused.
-    pub fn commit(mut self) -> Result<(), PackageError> {
+    /// removed); an existing target that is not a directory is refused. The working directory
+    /// (or one above it) keeps its inode: its entries are replaced, the entry named `last`
+    /// (such as `scene.pbrt`) renamed after every other.
+    pub fn commit(self) -> Result<(), PackageError> {
+        self.commit_last("")
+    }
+
+    /// [`commit`](Self::commit) naming the entry renamed last when entries are replaced.
+    pub fn commit_last(mut self, last: &str) -> Result<(), PackageError> {
         let temp = self
             .temp
             .clone()
@@ -352,6 +365,21 @@ impl AtomicDir {
                 &self.target,
                 e,
             ));
+        }
+        if holds_current_dir(&self.target) {
+            // Renaming over the working directory would leave this shell in a deleted one:
+            // its entries are replaced instead, `last` renamed last (an entry file appears
+            // only once everything it names is in place).
+            drop(l);
+            let r = replace_entries(&temp, &self.target, last);
+            if r.is_ok() {
+                let _ = std::fs::remove_dir_all(&temp);
+                let mut l = live();
+                l.dirs.retain(|d| d != &temp);
+                l.committed.push(self.target.clone());
+                self.temp = None;
+            }
+            return r.and_then(|()| sync_dir(&self.target));
         }
         let old = match std::fs::symlink_metadata(&self.target) {
             Ok(m) if m.is_dir() => {
@@ -412,6 +440,43 @@ impl Drop for AtomicDir {
             live().dirs.retain(|d| d != &t);
         }
     }
+}
+
+/// Whether `dir` is the working directory or one above it.
+fn holds_current_dir(dir: &Path) -> bool {
+    match (std::env::current_dir(), dir.canonicalize()) {
+        (Ok(cwd), Ok(dir)) => cwd.starts_with(dir),
+        _ => false,
+    }
+}
+
+/// Replaces `target`'s entries by `from`'s: the old ones removed (the caller checked the
+/// target was empty or may be replaced), the new ones renamed in, `last` after the others.
+fn replace_entries(from: &Path, target: &Path, last: &str) -> Result<(), PackageError> {
+    let list = |dir: &Path| -> Result<Vec<std::fs::DirEntry>, PackageError> {
+        std::fs::read_dir(dir)
+            .and_then(|it| it.collect::<std::io::Result<Vec<_>>>())
+            .map_err(|e| PackageError::io("read", dir, e))
+    };
+    // The old entry file first, so no reader meets it beside half-replaced files.
+    let mut old = list(target)?;
+    old.sort_by_key(|e| e.file_name() != last);
+    for e in old {
+        let p = e.path();
+        let r = if e.file_type().is_ok_and(|t| t.is_dir()) {
+            std::fs::remove_dir_all(&p)
+        } else {
+            std::fs::remove_file(&p)
+        };
+        r.map_err(|err| PackageError::io("remove", &p, err))?;
+    }
+    let mut new = list(from)?;
+    new.sort_by_key(|e| e.file_name() == last);
+    for e in new {
+        let to = target.join(e.file_name());
+        std::fs::rename(e.path(), &to).map_err(|err| PackageError::io("rename into", &to, err))?;
+    }
+    Ok(())
 }
 
 /// fsyncs every regular file and directory under `dir` (before a rename makes them visible).

@@ -60,7 +60,12 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
     if let Ok(rel) = summary.scene_path.strip_prefix(out.path()) {
         summary.scene_path = scene_dir.join(rel);
     }
-    out.commit()?;
+    let entry = summary
+        .scene_path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    out.commit(&entry)?;
     step(
         &format!("gen forest ({})", format_size(summary.bytes_written)),
         t,

@@ -123,7 +123,12 @@ pub fn run(a: GenArgs) -> anyhow::Result<()> {
     if let Ok(rel) = summary.scene_path.strip_prefix(out.path()) {
         summary.scene_path = a.output.join(rel);
     }
-    out.commit()?;
+    let entry = summary
+        .scene_path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    out.commit(&entry)?;
     progress.finish();
     if a.json {
         let out = serde_json::json!({
