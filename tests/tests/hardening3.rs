@@ -433,19 +433,19 @@ fn regression_misleading_errors_say_what_is_wrong() {
     let o = motu(&["import", s(&empty), "-o", s(&d.join("empty.motu"))]);
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success() && e.contains("holds no geometry"), "{e}");
-    // A scene whose flattened single-level variant has 2^40 instances: `report` asked the
+    // A scene whose flattened single-level variant has 2^64 instances: `report` asked the
     // device for a 2^32 − 1 box BLAS and failed on a package import accepted.
     let dag = d.join("dag.pbrt");
     let mut t = String::from(
         "LookAt 0 0 5  0 0 0  0 1 0\nCamera \"perspective\" \"float fov\" [ 40 ]\nFilm \"image\" \"integer xresolution\" [8] \"integer yresolution\" [8]\nWorldBegin\nObjectBegin \"l0\"\nShape \"trianglemesh\" \"point P\" [-1 -1 0 1 -1 0 0 1 0] \"integer indices\" [0 1 2]\nObjectEnd\n",
     );
-    for i in 1..=40 {
+    for i in 1..=64 {
         t.push_str(&format!(
             "ObjectBegin \"l{i}\"\nObjectInstance \"l{p}\"\nAttributeBegin\nTranslate 0.0001 0 0\nObjectInstance \"l{p}\"\nAttributeEnd\nObjectEnd\n",
             p = i - 1
         ));
     }
-    t.push_str("ObjectInstance \"l40\"\nWorldEnd\n");
+    t.push_str("ObjectInstance \"l64\"\nWorldEnd\n");
     std::fs::write(&dag, t).unwrap();
     let dag_pkg = d.join("dag.motu");
     motu_ok(&["import", s(&dag), "-o", s(&dag_pkg)]);

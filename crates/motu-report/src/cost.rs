@@ -130,15 +130,17 @@ impl Cost {
     pub fn rendered_at(mut self, (width, height): (u32, u32)) -> Cost {
         self.render_overhead_bytes = 0;
         self.seal();
+        // Past an exbibyte the overhead is moot (flattened exponential instancing saturates
+        // at 2^64): clamped so the budget fixed point stays in range.
         self.render_overhead_bytes =
-            motu_gpu::full_build_overhead(self.peak_bytes, width, height).total_bytes;
+            motu_gpu::full_build_overhead(self.peak_bytes.min(1 << 60), width, height).total_bytes;
         self.seal();
         self
     }
 
     /// TLAS bytes including the instance buffer (the report's "TLAS" column).
     pub fn tlas_total_bytes(&self) -> u64 {
-        self.tlas_bytes + self.instance_buffer_bytes
+        self.tlas_bytes.saturating_add(self.instance_buffer_bytes)
     }
 }
 
@@ -175,8 +177,8 @@ pub(crate) fn tlas_cost(
     };
     let add_tlas = |c: &mut Cost, n: u64| -> Result<(), ReportError> {
         let s = sizes.tlas_sizes(n)?;
-        c.tlas_bytes += align_as(s.size_bytes);
-        c.tlas_count += 1;
+        c.tlas_bytes = c.tlas_bytes.saturating_add(align_as(s.size_bytes));
+        c.tlas_count = c.tlas_count.saturating_add(1);
         c.build_scratch_peak_bytes = c.build_scratch_peak_bytes.max(s.build_scratch_bytes);
         c.build_transient_peak_bytes = c.build_transient_peak_bytes.max(s.build_scratch_bytes);
         Ok(())
