@@ -26,7 +26,7 @@ NAME=stream-device
 PKG=$WORK/island-$S.motu
 if [ ! -f "$PKG" ]; then
     step "gen island --scale $S; import (default flags)"
-    "$MOTU" gen island --scale "$S" -o "$WORK/island-$S" >/dev/null || die "gen failed"
+    "$MOTU" gen island --scale "$S" -o "$WORK/island-$S" --force >/dev/null || die "gen failed"
     /usr/bin/time -v "$MOTU" import "$WORK/island-$S/scene.pbrt" -o "$PKG" 2>"$OUT/import.time" >/dev/null ||
         die "import failed"
 fi

@@ -43,7 +43,7 @@ pub use events::{
 };
 pub use lexer::Loc;
 pub use math::Mat4;
-pub use source::SourceBytes;
+pub use source::{check_input, classify, FileKind, SourceBytes};
 
 /// Index of an input file in [`ParseStats::files`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, PartialOrd, Ord)]

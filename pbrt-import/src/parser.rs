@@ -576,6 +576,7 @@ impl<'s> Parser<'s> {
                     self.hint_v4("v4 material");
                 }
                 let p = self.params(lx)?;
+                self.check_material("Material", &kind, &p, t.loc)?;
                 let m = self.make_material(None, &kind, &p, t.loc);
                 self.sink.material(&m)?;
                 self.gs.material = m;
@@ -603,6 +604,7 @@ impl<'s> Parser<'s> {
                     }
                     self.warn(Some(t.loc), format!("named material \"{name}\" redefined"));
                 }
+                self.check_material("MakeNamedMaterial", &kind, &p, t.loc)?;
                 let m = self.make_material(Some(name.to_string()), &kind, &p, t.loc);
                 self.sink.material(&m)?;
                 self.named_materials.insert(name.into_owned(), m);
@@ -624,6 +626,8 @@ impl<'s> Parser<'s> {
             b"AreaLightSource" => {
                 let (kind, _) = self.string(lx, tok)?;
                 let p = self.params(lx)?;
+                // Caught here with its location, not by the package's self-check.
+                self.require_finite("AreaLightSource", &p)?;
                 let radiance = self.emission(&p, "L");
                 let two_sided = p.bool("twosided").unwrap_or(false);
                 self.gs.area_light = Some(Arc::new(AreaLight {
@@ -652,7 +656,28 @@ impl<'s> Parser<'s> {
                 })?;
             }
             b"ObjectInstance" => self.object_instance(lx, tok)?,
-            _ => return Err(self.err(tok, ParseErrorKind::UnknownDirective)),
+            _ => {
+                // A scene in another encoding fails on its first token: name the encoding.
+                let b = tok.bytes;
+                let encoding = if b.starts_with(&[0xFF, 0xFE]) || b.starts_with(&[0xFE, 0xFF]) {
+                    Some("UTF-16 text (it starts with a UTF-16 byte-order mark)")
+                } else if b.contains(&0) {
+                    Some("UTF-16 or binary data (the directive holds NUL bytes)")
+                } else if b.starts_with(&[0xEF, 0xBB, 0xBF]) {
+                    Some("UTF-8 with a byte-order mark")
+                } else {
+                    None
+                };
+                if let Some(what) = encoding {
+                    return Err(self.err(
+                        tok,
+                        ParseErrorKind::Invalid(format!(
+                            "the file is {what}; pbrt scenes are ASCII/UTF-8 text without a byte-order mark (convert it, e.g. `iconv -f UTF-16 -t UTF-8`)"
+                        )),
+                    ));
+                }
+                return Err(self.err(tok, ParseErrorKind::UnknownDirective));
+            }
         }
         Ok(())
     }

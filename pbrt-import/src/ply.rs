@@ -395,9 +395,42 @@ pub fn parse_ply_report(bytes: &[u8]) -> Result<(Mesh, PlyReport), PlyError> {
     if vertex_count.is_none() {
         return Err(PlyError::Content("no vertex element".into()));
     }
+    check_body_end(&body, &elements)?;
     mesh.normals = have_normals.then_some(normals);
     mesh.uvs = have_uvs.then_some(uvs);
     Ok((mesh, report))
+}
+
+/// Data after the last declared item is an error, not silently dropped: a body holding more
+/// faces (or anything) than the header declares names where the surplus starts (its line in
+/// an ASCII file, its byte offset in a binary one). A binary file may end in a newline.
+fn check_body_end(body: &Body<'_>, elements: &[Element]) -> Result<(), PlyError> {
+    let rest = body.bytes.get(body.pos..).unwrap_or(&[]);
+    let Some(first) = rest.iter().position(|b| !body::is_space(b)) else {
+        return Ok(());
+    };
+    let Some(last) = elements.last() else {
+        return Ok(());
+    };
+    let property = last.props.first().map_or(String::new(), |p| p.name.clone());
+    let at = if body.format == Format::Ascii {
+        let line = body.line + rest[..first].iter().filter(|&&b| b == b'\n').count();
+        format!("line {line}")
+    } else {
+        format!("byte {}", body.pos + first)
+    };
+    Err(PlyError::Body {
+        element: last.name.clone(),
+        property,
+        index: last.count,
+        message: format!(
+            "{at}: {} byte(s) of data after the {} declared `{}` item(s), the last element: \
+             the body holds more than the header declares (fix the header's count)",
+            rest.len() - first,
+            last.count,
+            last.name
+        ),
+    })
 }
 
 /// One vertex index of a face list, checked against the vertex count.

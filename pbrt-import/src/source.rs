@@ -61,7 +61,36 @@ pub fn classify(path: &Path) -> FileKind {
         }
         // ELOOP (40 on Linux): the name resolves through a cycle of symbolic links.
         Err(e) if e.raw_os_error() == Some(40) => FileKind::Other("a symbolic-link loop"),
+        Err(e) if e.kind() == std::io::ErrorKind::PermissionDenied => {
+            FileKind::Other("unreadable (permission denied)")
+        }
         Err(_) => FileKind::Other("unreadable"),
+    }
+}
+
+/// The check every scene-side input path (pbrt, PLY, OBJ, MTL, spectrum and texture files)
+/// passes before it is opened: a regular file of at most `max_bytes` when given. Returns its
+/// size; the error names what it is instead. `motu_package::identity::check_input` is the
+/// same check for the other inputs (this crate depends on no workspace crate), with the same
+/// words for every kind.
+pub fn check_input(path: &Path, max_bytes: Option<u64>) -> std::io::Result<u64> {
+    use std::io::{Error, ErrorKind};
+    match classify(path) {
+        FileKind::Regular => {
+            let bytes = std::fs::metadata(path)?.len();
+            match max_bytes {
+                Some(max) if bytes > max => Err(Error::new(
+                    ErrorKind::InvalidData,
+                    format!("{bytes} bytes, more than the {max} bytes this input may have"),
+                )),
+                _ => Ok(bytes),
+            }
+        }
+        FileKind::Missing => Err(Error::new(ErrorKind::NotFound, "no such file")),
+        FileKind::Other(what) => Err(Error::new(
+            ErrorKind::InvalidInput,
+            format!("{what}, not a regular file"),
+        )),
     }
 }
 

@@ -925,3 +925,87 @@ Shape "trianglemesh" "integer indices" [0 1 2] "point P" [0 0 0 1 0 0 0 1 0] "te
     assert_eq!(sink.shapes[0].alpha, Some(0.25));
     assert!(sink.shapes[0].alpha_image.is_none());
 }
+
+/// Issue 49: material and area-light values that were taken without a word.
+#[test]
+fn regression_nonfinite_material_and_area_light_values_have_locations() {
+    let (line, col, token, msg) = err(
+        "WorldBegin\nMaterial \"matte\" \"color Kd\" [nan 0 0]\n",
+        VersionOption::Auto,
+    );
+    assert_eq!((line, col, token.as_str()), (2, 18, "Kd"), "{msg}");
+    assert!(msg.contains("finite"), "{msg}");
+    // 1e400 is past f32: infinite.
+    let (line, _, token, msg) = err(
+        "WorldBegin\nMakeNamedMaterial \"m\" \"string type\" \"diffuse\" \"rgb reflectance\" [-5 1e400 0]\n",
+        VersionOption::Auto,
+    );
+    assert_eq!((line, token.as_str()), (2, "reflectance"), "{msg}");
+    let (line, col, token, msg) = err(
+        "WorldBegin\nAreaLightSource \"diffuse\" \"rgb L\" [nan 1 1]\n",
+        VersionOption::Auto,
+    );
+    assert_eq!((line, col, token.as_str()), (2, 27, "L"), "{msg}");
+    // Negative reflectance (pbrt-v3 takes it) and an unknown type are counted warnings.
+    let (sink, stats) = run(&format!(
+        "WorldBegin\nMaterial \"matte\" \"rgb Kd\" [-5 1 0]\nMaterial \"velvet\"\n{TRI}\n"
+    ));
+    assert_eq!(stats.warnings, 2, "{:?}", sink.warnings);
+    assert!(sink
+        .warnings
+        .iter()
+        .any(|w| w.message.contains("negative value -5") && w.loc.is_some()));
+    assert!(sink
+        .warnings
+        .iter()
+        .any(|w| w.message.contains("unknown material type \"velvet\"")));
+}
+
+#[test]
+fn regression_zero_fov_is_an_error_at_the_parameter() {
+    for fov in ["0", "180", "-3"] {
+        let (line, col, token, msg) = err(
+            &format!("Camera \"perspective\" \"float fov\" [ {fov} ]\nWorldBegin\n"),
+            VersionOption::Auto,
+        );
+        assert_eq!((line, col, token.as_str()), (1, 22, "fov"), "{msg}");
+        assert!(msg.contains("more than 0 and less than 180"), "{msg}");
+    }
+    run(&format!(
+        "Camera \"perspective\" \"float fov\" [ 179 ]\nWorldBegin\n{TRI}\n"
+    ));
+}
+
+#[test]
+fn regression_utf16_scene_names_its_encoding() {
+    let text = "WorldBegin\n";
+    let mut utf16 = vec![0xFF, 0xFE];
+    for u in text.encode_utf16() {
+        utf16.extend_from_slice(&u.to_le_bytes());
+    }
+    let mut sink = CollectSink::default();
+    let e = parse_bytes(
+        &utf16,
+        Path::new("/nonexistent"),
+        &opts(VersionOption::Auto),
+        &mut sink,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains(":1:1") && e.contains("UTF-16"), "{e}");
+    assert!(!e.contains("unknown directive"), "{e}");
+}
+
+#[test]
+fn regression_negative_loopsubdiv_levels_are_warned() {
+    let (sink, stats) = run(
+        "WorldBegin\nShape \"loopsubdiv\" \"integer levels\" [-3] \"integer indices\" [0 1 2] \"point P\" [0 0 0 1 0 0 0 1 0]\n",
+    );
+    assert_eq!(stats.warnings, 1, "{:?}", sink.warnings);
+    assert!(
+        sink.warnings[0].message.contains("is -3"),
+        "{:?}",
+        sink.warnings
+    );
+    assert_eq!(sink.shapes.len(), 1);
+}

@@ -74,3 +74,24 @@ fn ply_corpus_replays_without_panics() {
     }
     assert!(meshes > 0, "the seed PLY files must still parse");
 }
+
+/// Issue 49's PLY seeds: a body holding more faces than declared is an error (it was dropped),
+/// ASCII or binary; a binary body ending in a newline is still read.
+#[test]
+fn ply_corpus_more_faces_than_declared_are_errors() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/corpus/ply");
+    for (name, ok) in [
+        ("regression-ascii-more-faces-than-declared", false),
+        ("regression-binary-more-faces-than-declared", false),
+        ("regression-binary-trailing-newline", true),
+    ] {
+        let data = std::fs::read(dir.join(name)).unwrap();
+        let r = pbrt_import::ply::parse_ply(&data);
+        assert_eq!(
+            r.is_ok(),
+            ok,
+            "{name}: {:?}",
+            r.err().map(|e| e.to_string())
+        );
+    }
+}

@@ -1,6 +1,6 @@
 //! The argument grammar (clap derive), one struct per subcommand.
 
-use crate::size::parse_size;
+use crate::size::{parse_budget, parse_size};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 
@@ -65,9 +65,14 @@ pub enum GenKindArg {
 #[derive(Args, Debug)]
 pub struct GenArgs {
     pub kind: GenKindArg,
-    /// Output directory (created).
+    /// Output directory: written into a temp directory beside it and renamed into place when
+    /// complete. An existing non-empty directory is refused unless --force.
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Replace an existing non-empty output directory (as a whole, once the new scene is
+    /// complete).
+    #[arg(long)]
+    pub force: bool,
     /// forest: grid levels above the tree; trees = (W·H)^N (the thesis layout is 3).
     #[arg(long)]
     pub levels: Option<u32>,
@@ -260,7 +265,7 @@ pub struct VerifyArgs {
 pub struct ReportArgs {
     pub package: PathBuf,
     /// VRAM budget to fit the scene into.
-    #[arg(long, value_parser = parse_size)]
+    #[arg(long, value_parser = parse_budget)]
     pub budget: Option<u64>,
     /// Vulkan device index.
     #[arg(long, env = "MOTU_DEVICE")]
@@ -529,7 +534,7 @@ pub struct RenderArgs {
     /// Write the per-pixel hit record (FORMAT.md, "AOV file").
     #[arg(long)]
     pub aov: Option<PathBuf>,
-    #[arg(long, value_parser = parse_size)]
+    #[arg(long, value_parser = parse_budget)]
     pub vram_budget: Option<u64>,
     /// Cap on VkDeviceMemory allocations (lower than the device's, for testing).
     #[arg(long)]
@@ -630,7 +635,7 @@ pub struct ViewArgs {
     #[arg(long, value_enum, default_value = "shaded")]
     pub view: ViewArg,
     /// Stream structures under this VRAM budget (implies --stream).
-    #[arg(long, value_parser = parse_size)]
+    #[arg(long, value_parser = parse_budget)]
     pub vram_budget: Option<u64>,
     /// Build only what rays touch and evict under the budget.
     #[arg(long)]
@@ -786,7 +791,7 @@ pub struct BenchArgs {
     #[arg(long, requires = "camera_path")]
     pub stream: bool,
     /// With --camera-path --stream: the VRAM budget (default: unlimited).
-    #[arg(long, value_parser = parse_size, requires = "camera_path")]
+    #[arg(long, value_parser = parse_budget, requires = "camera_path")]
     pub vram_budget: Option<u64>,
     #[command(flatten)]
     pub stream_bounds: StreamBoundArgs,

@@ -39,6 +39,24 @@ fn main() -> ExitCode {
 /// One paragraph: what, where, what to do (the contexts carry the where). Library errors often
 /// print their source in their own message too; a cause already shown is not repeated.
 fn error_paragraph(e: &anyhow::Error) -> String {
+    terminal_safe(&error_text(e))
+}
+
+/// `text` with control characters from input files (escape sequences, bells, NULs) shown as
+/// `\x1b`, never sent to the terminal as they are; line breaks and tabs are kept.
+pub(crate) fn terminal_safe(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        if c.is_control() && c != '\n' && c != '\t' {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+fn error_text(e: &anyhow::Error) -> String {
     let mut msg = String::new();
     for cause in e.chain() {
         let text = cause.to_string();
@@ -63,19 +81,40 @@ fn init_tracing(verbose: u8) {
     };
     // winit's Wayland title bar (sctk-adwaita) logs an ERROR when no XDG settings portal
     // answers, which desktops without one never do: noise, not a motu problem.
-    let filter = EnvFilter::try_from_env("MOTU_LOG")
-        .unwrap_or_else(|_| EnvFilter::new(format!("{default},sctk_adwaita=off")));
+    let fallback = || EnvFilter::new(format!("{default},sctk_adwaita=off"));
+    let (filter, bad) = match std::env::var("MOTU_LOG") {
+        Ok(v) => match EnvFilter::try_new(&v) {
+            Ok(f) => (f, None),
+            Err(e) => (fallback(), Some(format!("{v:?} ({e})"))),
+        },
+        Err(_) => (fallback(), None),
+    };
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
         // Colour codes only for a person at a terminal, never in logs or captured output.
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
+    if let Some(bad) = bad {
+        // Said, not silently replaced: the user asked for logs they would not get.
+        eprintln!(
+            "warning: MOTU_LOG={bad} is not a log filter (e.g. `info`, `motu_gpu=debug`); logging at `{default}`"
+        );
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn regression_control_bytes_from_inputs_are_escaped() {
+        let e = anyhow::anyhow!("ctl.pbrt:2:1: unknown directive (at `\x1b[31mBad\x07\0`)");
+        let shown = error_paragraph(&e);
+        assert!(!shown.chars().any(|c| c.is_control()), "{shown:?}");
+        assert!(shown.contains("\\u{1b}[31mBad\\u{7}\\u{0}"), "{shown}");
+        assert_eq!(terminal_safe("a\tb\nc"), "a\tb\nc");
+    }
 
     #[test]
     fn regression_error_text_is_not_repeated() {

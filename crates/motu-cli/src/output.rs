@@ -1,6 +1,8 @@
 //! Output files: checked before any work (never an input of the same command, never another
-//! output of it, never a non-regular file, in a directory that exists), then written through
-//! one atomic path (temp file, fsync, rename: `motu_package::atomic`).
+//! output of it, never a non-regular file, in a directory that exists and can be written),
+//! then written through one atomic path (temp file, fsync, rename: `motu_package::atomic`);
+//! a command's several outputs are all or nothing ([`Outputs`]). And the one check for input
+//! paths given on the command line ([`check_input`]).
 
 use anyhow::{bail, Context};
 use motu_package::identity::{describe_file_type, FileIdentity};
@@ -72,17 +74,135 @@ pub fn check_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> any
     Ok(())
 }
 
-/// Writes `bytes` to `path` atomically.
-pub fn write(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    motu_package::atomic::write_atomic(path, bytes)
-        .with_context(|| format!("writing {}", path.display()))
+/// A command's outputs, all or nothing: checked (as [`check_outputs`]) and their temp files
+/// created before any work, so an unwritable directory fails before the work and before any
+/// target is touched; written into the temp files; renamed into place only when every one is
+/// written and fsynced ([`commit`](Self::commit)). Dropped uncommitted (an error, a full disk),
+/// every temp file is removed and every target keeps its old contents.
+pub struct Outputs {
+    files: Vec<(String, std::path::PathBuf, motu_package::atomic::AtomicFile)>,
 }
 
-/// Encodes an RGBA8 image as PNG and writes it atomically.
-pub fn write_png(path: &Path, width: u32, height: u32, rgba8: &[u8]) -> anyhow::Result<()> {
-    let png = motu_trace::encode_png(width, height, rgba8)
-        .with_context(|| format!("encoding {}", path.display()))?;
-    write(path, &png)
+impl Outputs {
+    /// Checks `outputs` against `inputs` and each other, then creates each one's temp file.
+    pub fn begin(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> anyhow::Result<Self> {
+        check_outputs(inputs, outputs)?;
+        let mut files = Vec::with_capacity(outputs.len());
+        for &(option, path) in outputs {
+            let f = motu_package::atomic::AtomicFile::create(path).with_context(|| {
+                format!(
+                    "{option} {}: cannot be written (checked before any work)",
+                    path.display()
+                )
+            })?;
+            files.push((option.to_string(), path.to_path_buf(), f));
+        }
+        Ok(Outputs { files })
+    }
+
+    /// Writes the whole contents of the output `path` (one of those given to `begin`).
+    pub fn write(&mut self, path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+        use std::io::Write;
+        let (option, _, f) = self
+            .files
+            .iter_mut()
+            .find(|(_, p, _)| p == path)
+            .with_context(|| format!("{} is not an output of this command", path.display()))?;
+        f.write_all(bytes)
+            .and_then(|()| f.file().sync_all())
+            .with_context(|| format!("writing {option} {}", path.display()))
+    }
+
+    /// Encodes an RGBA8 image as PNG into the output `path`.
+    pub fn write_png(
+        &mut self,
+        path: &Path,
+        width: u32,
+        height: u32,
+        rgba8: &[u8],
+    ) -> anyhow::Result<()> {
+        let png = motu_trace::encode_png(width, height, rgba8)
+            .with_context(|| format!("encoding {}", path.display()))?;
+        self.write(path, &png)
+    }
+
+    /// Renames every output into place (each was written and fsynced by `write`).
+    pub fn commit(self) -> anyhow::Result<()> {
+        for (option, path, f) in self.files {
+            f.commit()
+                .with_context(|| format!("writing {option} {}", path.display()))?;
+        }
+        Ok(())
+    }
+}
+
+/// An output directory written whole (`motu gen`): checked before any work (not a file, a
+/// symlink or a device; empty, missing, or replaced only with `replace`), written into a temp
+/// directory beside it, and renamed into place by [`commit`](Self::commit). Dropped
+/// uncommitted (a bad option found while writing, a full disk), it leaves nothing behind.
+pub struct OutputDir {
+    dir: motu_package::atomic::AtomicDir,
+}
+
+impl OutputDir {
+    pub fn begin(option: &str, path: &Path, replace: bool) -> anyhow::Result<Self> {
+        match std::fs::symlink_metadata(path) {
+            Ok(m) if m.is_dir() => {
+                let mut entries = std::fs::read_dir(path)
+                    .with_context(|| format!("{option} {}: reading it", path.display()))?;
+                if entries.next().is_some() && !replace {
+                    bail!(
+                        "{option} {}: the directory is not empty; give --force to replace it as a whole, or choose another path",
+                        path.display()
+                    );
+                }
+            }
+            Ok(m) => bail!(
+                "{option} {}: exists and is {}, not a directory (remove it or choose another path)",
+                path.display(),
+                describe_file_type(&m.file_type())
+            ),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                let parent = motu_package::atomic::parent_dir(path);
+                if !parent.is_dir() {
+                    bail!(
+                        "{option} {}: the directory {} does not exist (create it first)",
+                        path.display(),
+                        parent.display()
+                    );
+                }
+            }
+            Err(e) => return Err(e).with_context(|| format!("{option} {}", path.display())),
+        }
+        let dir = motu_package::atomic::AtomicDir::create(path).with_context(|| {
+            format!(
+                "{option} {}: cannot be written (checked before any work)",
+                path.display()
+            )
+        })?;
+        Ok(OutputDir { dir })
+    }
+
+    /// The temp directory to write into.
+    pub fn path(&self) -> &Path {
+        self.dir.path()
+    }
+
+    /// Renames the written directory into place (`last`, the entry file, appears last where
+    /// the directory's entries are replaced one by one: `-o .`).
+    pub fn commit(self, last: &str) -> anyhow::Result<()> {
+        let target = self.dir.target_display();
+        self.dir
+            .commit_last(last)
+            .with_context(|| format!("writing {target}"))
+    }
+}
+
+/// The input check every path given on the command line passes before it is opened
+/// (`motu_package::identity::check_input`): a regular file, of at most `max_bytes` when given.
+pub fn check_input(option: &str, path: &Path, max_bytes: Option<u64>) -> anyhow::Result<u64> {
+    motu_package::identity::check_input(path, max_bytes)
+        .with_context(|| format!("{option} {}", path.display()))
 }
 
 #[cfg(test)]
@@ -113,6 +233,72 @@ mod tests {
             &[("-o", &dir.path().join("a.png")), ("--aov", &x)],
         )
         .unwrap();
+    }
+
+    fn temps(dir: &Path) -> Vec<String> {
+        std::fs::read_dir(dir)
+            .unwrap()
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.ends_with(".motu-tmp"))
+            .collect()
+    }
+
+    /// Issue 49: `render -o out.png --aov <unwritable>` replaced out.png, then failed.
+    #[test]
+    fn regression_outputs_are_all_or_nothing() {
+        let dir = tempfile::tempdir().unwrap();
+        let png = dir.path().join("out.png");
+        let aov = dir.path().join("out.aov");
+        std::fs::write(&png, b"old png").unwrap();
+        std::fs::write(&aov, b"old aov").unwrap();
+        // An output that cannot be written (procfs refuses new files, even to root) fails
+        // before any work, leaving every target and no temp file.
+        let e = Outputs::begin(&[], &[("-o", &png), ("--aov", Path::new("/proc/motu.aov"))])
+            .err()
+            .unwrap();
+        assert!(e.to_string().contains("--aov /proc/motu.aov"), "{e:#}");
+        assert_eq!(std::fs::read(&png).unwrap(), b"old png");
+        assert!(temps(dir.path()).is_empty(), "{:?}", temps(dir.path()));
+        // Written but not committed (the second write failed, a full disk): both old.
+        {
+            let mut outs = Outputs::begin(&[], &[("-o", &png), ("--aov", &aov)]).unwrap();
+            outs.write(&png, b"new png").unwrap();
+        }
+        assert_eq!(std::fs::read(&png).unwrap(), b"old png");
+        assert_eq!(std::fs::read(&aov).unwrap(), b"old aov");
+        assert!(temps(dir.path()).is_empty(), "{:?}", temps(dir.path()));
+        // Committed: both new.
+        let mut outs = Outputs::begin(&[], &[("-o", &png), ("--aov", &aov)]).unwrap();
+        outs.write(&png, b"new png").unwrap();
+        outs.write(&aov, b"new aov").unwrap();
+        outs.commit().unwrap();
+        assert_eq!(std::fs::read(&png).unwrap(), b"new png");
+        assert_eq!(std::fs::read(&aov).unwrap(), b"new aov");
+        assert!(temps(dir.path()).is_empty(), "{:?}", temps(dir.path()));
+    }
+
+    #[test]
+    fn regression_output_dir_refuses_non_empty_without_replace() {
+        let dir = tempfile::tempdir().unwrap();
+        let scene = dir.path().join("scene");
+        std::fs::create_dir(&scene).unwrap();
+        std::fs::write(scene.join("keep.pbrt"), b"mine").unwrap();
+        let e = OutputDir::begin("-o", &scene, false).err().unwrap();
+        assert!(
+            e.to_string().contains("not empty") && e.to_string().contains("--force"),
+            "{e}"
+        );
+        let out = OutputDir::begin("-o", &scene, true).unwrap();
+        std::fs::write(out.path().join("scene.pbrt"), b"new").unwrap();
+        out.commit("scene.pbrt").unwrap();
+        assert!(!scene.join("keep.pbrt").exists());
+        assert_eq!(std::fs::read(scene.join("scene.pbrt")).unwrap(), b"new");
+        let file = dir.path().join("file");
+        std::fs::write(&file, b"x").unwrap();
+        let e = OutputDir::begin("-o", &file, true).err().unwrap();
+        assert!(e.to_string().contains("not a directory"), "{e}");
+        assert!(temps(dir.path()).is_empty(), "{:?}", temps(dir.path()));
     }
 
     #[test]

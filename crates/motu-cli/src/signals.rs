@@ -27,7 +27,7 @@ fn install_termination_cleanup() {
         .name("motu-signals".into())
         .spawn(move || {
             if let Some(sig) = signals.forever().next() {
-                let removed = motu_package::atomic::remove_registered_temp_files();
+                let cleanup = motu_package::atomic::remove_registered_temp_outputs();
                 if BUS_ERROR.load(Ordering::SeqCst) {
                     std::process::exit(1);
                 }
@@ -36,15 +36,35 @@ fn install_termination_cleanup() {
                     SIGTERM => "SIGTERM",
                     _ => "SIGHUP",
                 };
-                eprintln!(
-                    "motu: interrupted by {name}; removed {removed} unfinished output file(s)"
-                );
+                eprintln!("motu: {}", interrupted_message(name, &cleanup));
                 // Die of the signal, as the shell and parent processes expect.
                 let _ = signal_hook::low_level::emulate_default_handler(sig);
                 std::process::exit(128 + sig);
             }
         })
         .ok();
+}
+
+/// What an interrupted command says: the unfinished outputs it removed, and any output it had
+/// already completed before the signal (kept: it is whole and valid), so a late interrupt never
+/// reads as if the old file were still there.
+fn interrupted_message(signal: &str, c: &motu_package::atomic::SignalCleanup) -> String {
+    let mut msg = format!(
+        "interrupted by {signal}; removed {} unfinished output file(s)",
+        c.removed
+    );
+    if !c.completed.is_empty() {
+        let names: Vec<String> = c
+            .completed
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect();
+        msg.push_str(&format!(
+            "; already completed before the signal, and kept: {}",
+            names.join(", ")
+        ));
+    }
+    msg
 }
 
 fn install_sigbus_handler() {
@@ -214,6 +234,23 @@ extern "C" fn on_sigbus(_sig: libc::c_int, info: *mut libc::siginfo_t, _ctx: *mu
 mod tests {
     use super::*;
     use std::io::Write;
+
+    #[test]
+    fn regression_late_interrupt_names_the_completed_output() {
+        let c = motu_package::atomic::SignalCleanup {
+            removed: 0,
+            completed: vec!["/tmp/out.motu".into()],
+        };
+        let m = interrupted_message("SIGINT", &c);
+        assert!(
+            m.contains("removed 0")
+                && m.contains("already completed")
+                && m.contains("/tmp/out.motu"),
+            "{m}"
+        );
+        let m = interrupted_message("SIGTERM", &Default::default());
+        assert!(!m.contains("completed"), "{m}");
+    }
 
     #[test]
     fn maps_lines_resolve_path_and_offset() {

@@ -1,5 +1,16 @@
 //! Human sizes on the command line: `64MiB`, `8GiB`, `1.5GB`, plain bytes.
 
+/// A VRAM budget: a size of at least one byte (0 holds nothing; said here with the option's
+/// words, not the allocator's field name).
+pub fn parse_budget(s: &str) -> Result<u64, String> {
+    match parse_size(s)? {
+        0 => Err(format!(
+            "'{s}': a budget of 0 bytes holds nothing; give a size such as 512MiB (or leave the option out for the device's own budget)"
+        )),
+        b => Ok(b),
+    }
+}
+
 /// Parses a size in bytes. Binary (`KiB`, `MiB`, `GiB`, `TiB`) and decimal (`KB`, `MB`, `GB`,
 /// `TB`) suffixes, case-insensitive; `K`/`M`/`G`/`T` alone are binary.
 pub fn parse_size(s: &str) -> Result<u64, String> {

@@ -5,6 +5,10 @@ use motu_scene::{GeometryStore, Material, MeshData, Scene, SceneBuilder};
 use std::io::BufRead;
 use std::path::{Path, PathBuf};
 
+/// A material library bigger than this is not one (the bound keeps a device or a huge file
+/// from being read as one endless line).
+const MTL_MAX_BYTES: u64 = 256 << 20;
+
 /// Imports an OBJ file. A referenced `.mtl` that is missing is an error unless
 /// `allow_missing` (then a warning and default materials).
 pub fn ingest_obj(
@@ -16,8 +20,54 @@ pub fn ingest_obj(
     if let Some((line, col, detail)) = scan_obj(path, Scan::FaceIndices) {
         return Err(IngestError::Obj {
             path: format!("{shown}:{line}:{col}"),
-            reason: format!("face index out of bounds: {detail}"),
+            reason: if detail.starts_with("index ") {
+                format!("face index out of bounds: {detail}")
+            } else {
+                detail
+            },
         });
+    }
+    let mut report = IngestReport {
+        files: 1,
+        ..Default::default()
+    };
+    report.input_files.push(path.to_path_buf());
+    // Material libraries are checked before tobj opens them: a FIFO would block it and
+    // `/dev/zero` would be read as one endless line.
+    for (line, lib) in mtllibs(path) {
+        match pbrt_import::check_input(&lib, Some(MTL_MAX_BYTES)) {
+            Ok(_) => {
+                // tobj names neither the library nor the line of what it cannot read.
+                if let Some((mline, detail)) = scan_mtl(&lib) {
+                    return Err(IngestError::Obj {
+                        path: format!("{}:{mline}", lib.display()),
+                        reason: format!("{detail} (material library of {shown}:{line})"),
+                    });
+                }
+                report.input_files.push(lib)
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound && allow_missing => {
+                report.warnings.push(format!(
+                    "{shown}:{line}: missing file {} (materials skipped)",
+                    lib.display()
+                ));
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                return Err(IngestError::Obj {
+                    path: format!("{shown}:{line}"),
+                    reason: format!(
+                        "mtllib {}: missing file (import with --allow-missing to use default materials)",
+                        lib.display()
+                    ),
+                });
+            }
+            Err(e) => {
+                return Err(IngestError::Obj {
+                    path: format!("{shown}:{line}"),
+                    reason: format!("mtllib {}: {e}", lib.display()),
+                });
+            }
+        }
     }
     let (models, materials) = tobj::load_obj(
         path,
@@ -37,42 +87,26 @@ pub fn ingest_obj(
             reason: e.to_string(),
         },
     })?;
-    let mut report = IngestReport {
-        files: 1,
-        ..Default::default()
-    };
-    report.input_files.push(path.to_path_buf());
-    for (line, lib) in mtllibs(path) {
-        if lib.is_file() {
-            report.input_files.push(lib);
-        } else if allow_missing {
-            report.warnings.push(format!(
-                "{shown}:{line}: missing file {} (materials skipped)",
-                lib.display()
-            ));
-        } else {
-            return Err(IngestError::Obj {
-                path: format!("{shown}:{line}"),
-                reason: format!(
-                    "mtllib {}: missing file (import with --allow-missing to use default materials)",
-                    lib.display()
-                ),
-            });
-        }
-    }
     let mut b = SceneBuilder::new(geometry);
     let mut mat_ids = Vec::new();
     let dir = path.parent().unwrap_or(Path::new("."));
+    let mut mat_names: Vec<String> = Vec::new();
     match materials {
         Ok(ms) => {
+            mat_names = ms.iter().map(|m| m.name.clone()).collect();
             for m in ms {
                 // MTL map names are relative to the OBJ; a missing file falls back to Kd.
                 let mut texture = |name: &Option<String>, is_alpha: bool| {
                     let name = name.as_ref()?;
                     let file = dir.join(name);
-                    if !file.is_file() {
+                    if let Err(e) = pbrt_import::check_input(&file, None) {
+                        let why = if e.kind() == std::io::ErrorKind::NotFound {
+                            "texture file missing".to_string()
+                        } else {
+                            e.to_string()
+                        };
                         report.warnings.push(format!(
-                            "{shown}: texture file missing: {}; the material's constant colour is used",
+                            "{shown}: {why}: {}; the material's constant colour is used",
                             file.display()
                         ));
                         return None;
@@ -108,11 +142,34 @@ pub fn ingest_obj(
         // Missing libraries were handled above (error, or a warning with --allow-missing).
         Err(tobj::LoadError::OpenFileFailed) if allow_missing => {}
         Err(e) => {
+            let libs: Vec<String> = mtllibs(path)
+                .iter()
+                .map(|(line, lib)| format!("{} (line {line})", lib.display()))
+                .collect();
             return Err(IngestError::Obj {
                 path: shown.clone(),
-                reason: format!("materials not loaded: {e}"),
-            })
+                reason: format!("materials not loaded from {}: {e}", libs.join(", ")),
+            });
         }
+    }
+    // `usemtl` of a material no library defines: tobj drops it silently (default material).
+    let defined: std::collections::HashSet<&str> = mat_names.iter().map(String::as_str).collect();
+    let mut undefined = 0u64;
+    let mut first_undefined = None;
+    for (i, l) in obj_lines(path).into_iter().flatten().enumerate() {
+        let mut words = l.split_whitespace();
+        if words.next() == Some("usemtl") {
+            let name = words.collect::<Vec<_>>().join(" ");
+            if !defined.contains(name.as_str()) {
+                undefined += 1;
+                first_undefined.get_or_insert((i + 1, name));
+            }
+        }
+    }
+    if let Some((line, name)) = first_undefined {
+        report.warnings.push(format!(
+            "{shown}:{line}: usemtl \"{name}\" names no material of the file's libraries; {undefined} such usemtl line(s) use the default material"
+        ));
     }
     let scene_err = |e| IngestError::Scene {
         at: shown.clone(),
@@ -172,6 +229,48 @@ fn mtllibs(path: &Path) -> Vec<(usize, PathBuf)> {
         .collect()
 }
 
+/// The first line of a material library tobj would misread or turn into non-finite values:
+/// binary data (not UTF-8, NUL bytes), or a colour or number that does not parse or is not
+/// finite. (1-based line, what is wrong).
+fn scan_mtl(path: &Path) -> Option<(usize, String)> {
+    let f = std::fs::File::open(path).ok()?;
+    for (i, raw) in std::io::BufReader::new(f)
+        .split(b'\n')
+        .map_while(Result::ok)
+        .enumerate()
+    {
+        let Ok(line) = std::str::from_utf8(&raw) else {
+            return Some((i + 1, "binary data, not a text material library".into()));
+        };
+        if line.contains('\0') {
+            return Some((i + 1, "binary data, not a text material library".into()));
+        }
+        let mut words = line.split_whitespace();
+        let Some(kw) = words.next() else { continue };
+        if !matches!(
+            kw,
+            "Ka" | "Kd" | "Ks" | "Ke" | "Kt" | "Tf" | "Ns" | "Ni" | "d" | "Tr" | "illum"
+        ) {
+            continue;
+        }
+        for w in words {
+            match w.parse::<f32>() {
+                Ok(v) if v.is_finite() => {}
+                Ok(v) => {
+                    return Some((
+                        i + 1,
+                        format!("`{kw}` value {w} is {v}, not a finite number"),
+                    ))
+                }
+                // `Kd spectral file.rfl`, `Kd xyz 1 1 1`: words tobj skips.
+                Err(_) if w.chars().next().is_some_and(|c| c.is_ascii_alphabetic()) => {}
+                Err(_) => return Some((i + 1, format!("`{kw}`: `{w}` is not a number"))),
+            }
+        }
+    }
+    None
+}
+
 /// What [`scan_obj`] looks for.
 #[derive(Clone, Copy, PartialEq)]
 enum Scan {
@@ -221,6 +320,19 @@ fn scan_obj(path: &Path, scan: Scan) -> Option<(usize, usize, String)> {
         let args: Vec<&str> = words.collect();
         let floats_ok =
             |n: usize| args.len() >= n && args.iter().take(n).all(|a| a.parse::<f32>().is_ok());
+        // NaN and values past f32 (`1e400`) would reach the scene as non-finite positions.
+        if scan == Scan::FaceIndices && matches!(kw, "v" | "vt" | "vn") {
+            if let Some(a) = args
+                .iter()
+                .find(|a| a.parse::<f32>().is_ok_and(|v| !v.is_finite()))
+            {
+                return Some((
+                    i + 1,
+                    col_of(line.as_str(), a),
+                    format!("`{a}` is not a finite number (in `{line}`)"),
+                ));
+            }
+        }
         match kw {
             "v" => {
                 seen[0] += 1;
@@ -242,7 +354,9 @@ fn scan_obj(path: &Path, scan: Scan) -> Option<(usize, usize, String)> {
             }
             // tobj parses polylines (`l`) as faces: their references are resolved alike.
             "f" | "l" => {
-                if kw == "f" && is(E::InvalidPolygon) && args.len() < 3 {
+                // tobj would turn a face of 1 or 2 vertices into a degenerate triangle.
+                let few = scan == Scan::FaceIndices || is(E::InvalidPolygon);
+                if kw == "f" && few && args.len() < 3 {
                     return Some((
                         i + 1,
                         1,
@@ -363,13 +477,107 @@ mod tests {
         );
     }
 
+    /// Writes `files` (name, bytes) beside `t.obj` and imports it.
+    fn import_with(text: &str, files: &[(&str, &[u8])]) -> Result<IngestReport, String> {
+        let dir = tempfile::tempdir().unwrap();
+        for (name, bytes) in files {
+            std::fs::write(dir.path().join(name), bytes).unwrap();
+        }
+        let p = dir.path().join("t.obj");
+        std::fs::write(&p, text).unwrap();
+        ingest_obj(&p, false, Box::new(motu_scene::InMemoryGeometry::new()))
+            .map(|(_, r)| r)
+            .map_err(|e| e.to_string())
+    }
+
+    const TRI: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+
+    #[test]
+    fn regression_special_file_as_mtllib_is_named_and_never_read() {
+        // `/dev/zero` was read as one endless line until the allocator aborted.
+        for (dev, what) in [
+            ("/dev/zero", "a character device"),
+            ("/dev/urandom", "a character device"),
+            ("/tmp", "a directory"),
+        ] {
+            let e = import(&format!("mtllib {dev}\n{TRI}f 1 2 3\n"), true).unwrap_err();
+            assert!(e.contains("t.obj:1") && e.contains(what), "{dev}: {e}");
+            assert!(!e.contains("missing"), "{dev}: {e}");
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let fifo = dir.path().join("lib.mtl");
+        if std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .is_ok_and(|s| s.success())
+        {
+            let p = dir.path().join("t.obj");
+            std::fs::write(&p, format!("mtllib lib.mtl\n{TRI}f 1 2 3\n")).unwrap();
+            let e = ingest_obj(&p, false, Box::new(motu_scene::InMemoryGeometry::new()))
+                .map(|_| ())
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("a FIFO"), "{e}");
+        }
+    }
+
+    #[test]
+    fn regression_obj_non_finite_vertices_and_short_faces_have_lines() {
+        let e = import(&format!("{TRI}v nan 0 0\nf 1 2 3\n"), false).unwrap_err();
+        assert!(
+            e.contains("t.obj:4:3") && e.contains("not a finite number"),
+            "{e}"
+        );
+        let e = import(&format!("{TRI}v 1e400 0 0\nf 1 2 3\n"), false).unwrap_err();
+        assert!(e.contains("t.obj:4:3") && e.contains("1e400"), "{e}");
+        for face in ["f 1", "f 1 2"] {
+            let e = import(&format!("{TRI}{face}\n"), false).unwrap_err();
+            assert!(
+                e.contains("t.obj:4:1") && e.contains("at least 3 vertices"),
+                "{e}"
+            );
+        }
+    }
+
+    #[test]
+    fn regression_bad_mtl_and_undefined_usemtl_are_named() {
+        let obj = format!("mtllib m.mtl\n{TRI}usemtl red\nf 1 2 3\nusemtl blue\nf 1 2 3\n");
+        let e = import_with(
+            &obj,
+            &[("m.mtl", b"newmtl red\nKd 1 0 0\n\xff\xfe\x00\x01\n")],
+        )
+        .unwrap_err();
+        assert!(e.contains("m.mtl:3") && e.contains("binary data"), "{e}");
+        let e = import_with(&obj, &[("m.mtl", b"newmtl red\nKd nan 0 0\n")]).unwrap_err();
+        assert!(
+            e.contains("m.mtl:2") && e.contains("not a finite number"),
+            "{e}"
+        );
+        let r = import_with(&obj, &[("m.mtl", b"newmtl red\nKd 1 0 0\n")]).unwrap();
+        assert!(
+            r.warnings
+                .iter()
+                .any(|w| w.contains("t.obj:7") && w.contains("\"blue\"") && w.contains("1 such")),
+            "{:?}",
+            r.warnings
+        );
+    }
+
     /// The fuzz corpus (`pbrt-import/fuzz/corpus/obj`) replayed on stable: errors, never panics.
     #[test]
     fn obj_fuzz_corpus_replays() {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../pbrt-import/fuzz/corpus/obj");
         let mut n = 0;
         for e in std::fs::read_dir(&dir).unwrap().flatten() {
-            let text = String::from_utf8_lossy(&std::fs::read(e.path()).unwrap()).into_owned();
+            let data = std::fs::read(e.path()).unwrap();
+            // As the fuzz target: after `#--mtl--`, the bytes are `input.mtl` beside the OBJ.
+            const MARK: &[u8] = b"#--mtl--\n";
+            let (obj, mtl) = match data.windows(MARK.len()).position(|w| w == MARK) {
+                Some(i) => (&data[..i], &data[i + MARK.len()..]),
+                None => (&data[..], &[][..]),
+            };
+            let text = String::from_utf8_lossy(obj).into_owned();
+            let _ = import_with(&text, &[("input.mtl", mtl)]);
             let _ = import(&text, true);
             let _ = import(&text, false);
             n += 1;

@@ -1,5 +1,11 @@
 //! Which file a path names, for the rule that an output never replaces an input: an existing
-//! file by device and inode (hard links and symlinks to one file are one file).
+//! file by device and inode (hard links and symlinks to one file are one file); and the one
+//! check every input path passes before it is opened ([`check_input`], [`open_input`]): a
+//! regular file, within a size bound where one is known. Opening a FIFO blocks forever, a
+//! device such as `/dev/zero` never ends, and a directory or symlink loop fails with a raw OS
+//! error; each is named as what it is instead. (`pbrt-import`, which depends on no workspace
+//! crate, keeps the same check for scene files: `pbrt_import::check_input`; the two name every
+//! kind alike, `tests/tests/hardening3.rs` holds them to it.)
 
 use std::path::{Path, PathBuf};
 
@@ -25,6 +31,84 @@ impl FileIdentity {
     pub fn of_input(path: &Path) -> Option<Self> {
         std::fs::metadata(path).ok().map(|m| Self::of(&m))
     }
+}
+
+/// What an input path is, found without opening it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InputKind {
+    /// A regular file (symlinks followed) of this many bytes.
+    Regular {
+        bytes: u64,
+    },
+    Missing,
+    /// Exists but cannot be read as a file: `a directory`, `a FIFO`, `a symbolic-link loop`…
+    Other(&'static str),
+}
+
+/// Classifies `path` without opening it (opening a FIFO would block).
+pub fn classify_input(path: &Path) -> InputKind {
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_file() => InputKind::Regular { bytes: m.len() },
+        Ok(m) => InputKind::Other(describe_file_type(&m.file_type())),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            if std::fs::symlink_metadata(path).is_ok() {
+                InputKind::Other("a dangling symbolic link")
+            } else {
+                InputKind::Missing
+            }
+        }
+        // ELOOP (40 on Linux): the name resolves through a cycle of symbolic links.
+        Err(e) if e.raw_os_error() == Some(40) => InputKind::Other("a symbolic-link loop"),
+        Err(e) if e.kind() == std::io::ErrorKind::PermissionDenied => {
+            InputKind::Other("unreadable (permission denied)")
+        }
+        Err(_) => InputKind::Other("unreadable"),
+    }
+}
+
+/// The check every input path passes before it is opened: a regular file of at most
+/// `max_bytes` (when given). Returns its size; the error's message names what it is instead
+/// (`a FIFO, not a regular file`, `no such file`, `… bytes, more than …`).
+pub fn check_input(path: &Path, max_bytes: Option<u64>) -> std::io::Result<u64> {
+    use std::io::{Error, ErrorKind};
+    match classify_input(path) {
+        InputKind::Regular { bytes } => match max_bytes {
+            Some(max) if bytes > max => Err(Error::new(
+                ErrorKind::InvalidData,
+                format!("{bytes} bytes, more than the {max} bytes this input may have"),
+            )),
+            _ => Ok(bytes),
+        },
+        InputKind::Missing => Err(Error::new(ErrorKind::NotFound, "no such file")),
+        InputKind::Other(what) => Err(Error::new(
+            ErrorKind::InvalidInput,
+            format!("{what}, not a regular file"),
+        )),
+    }
+}
+
+/// [`check_input`], then opens the file and checks the opened file again (a path swapped for a
+/// FIFO between the check and the open is refused, not read).
+pub fn open_input(path: &Path, max_bytes: Option<u64>) -> std::io::Result<(std::fs::File, u64)> {
+    check_input(path, max_bytes)?;
+    let file = std::fs::File::open(path)?;
+    let m = file.metadata()?;
+    if !m.is_file() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!("{}, not a regular file", describe_file_type(&m.file_type())),
+        ));
+    }
+    if let Some(max) = max_bytes.filter(|&max| m.len() > max) {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "{} bytes, more than the {max} bytes this input may have",
+                m.len()
+            ),
+        ));
+    }
+    Ok((file, m.len()))
 }
 
 /// `a directory`, `a symbolic link`, `a FIFO`, … for messages.
@@ -53,5 +137,50 @@ pub fn describe_file_type(t: &std::fs::FileType) -> &'static str {
         "a regular file"
     } else {
         "not a regular file"
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn regression_special_input_files_are_named_before_opening() {
+        let dir = tempfile::tempdir().unwrap();
+        let named = |p: &Path| check_input(p, None).unwrap_err().to_string();
+        assert_eq!(named(dir.path()), "a directory, not a regular file");
+        assert_eq!(
+            named(Path::new("/dev/zero")),
+            "a character device, not a regular file"
+        );
+        assert_eq!(
+            named(Path::new("/dev/null")),
+            "a character device, not a regular file"
+        );
+        let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+        std::os::unix::fs::symlink(&a, &b).unwrap();
+        std::os::unix::fs::symlink(&b, &a).unwrap();
+        assert_eq!(named(&a), "a symbolic-link loop, not a regular file");
+        let dangling = dir.path().join("dangling");
+        std::os::unix::fs::symlink(dir.path().join("gone"), &dangling).unwrap();
+        assert_eq!(
+            named(&dangling),
+            "a dangling symbolic link, not a regular file"
+        );
+        assert_eq!(named(&dir.path().join("none")), "no such file");
+        // A FIFO is refused without opening it (opening would block this test forever).
+        let fifo = dir.path().join("fifo");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        if made.is_ok_and(|s| s.success()) {
+            assert_eq!(named(&fifo), "a FIFO, not a regular file");
+            assert!(open_input(&fifo, None).is_err());
+        } else {
+            eprintln!("SKIPPED the FIFO case: mkfifo is not available");
+        }
+        let f = dir.path().join("f");
+        std::fs::write(&f, [0u8; 100]).unwrap();
+        assert_eq!(open_input(&f, Some(100)).unwrap().1, 100);
+        let e = check_input(&f, Some(99)).unwrap_err().to_string();
+        assert!(e.contains("100 bytes, more than the 99"), "{e}");
     }
 }

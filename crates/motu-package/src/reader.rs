@@ -179,11 +179,9 @@ impl Package {
         let path = path.as_ref();
         let span = tracing::info_span!("package_open", path = %path.display());
         let _entered = span.enter();
-        let file = std::fs::File::open(path).map_err(|e| PackageError::io("open", path, e))?;
-        let len = file
-            .metadata()
-            .map_err(|e| PackageError::io("stat", path, e))?
-            .len();
+        // A FIFO, device, directory or symlink loop is named as such, never opened or mapped.
+        let (file, len) = crate::identity::open_input(path, None)
+            .map_err(|e| PackageError::io("open", path, e))?;
         check_min_len(len)?;
         // SAFETY: the map is read-only and private to this `Package`; see the doc comment above
         // for why a concurrent writer cannot cause out-of-bounds reads here (all offsets are

@@ -73,13 +73,19 @@ pub struct Cost {
 
 impl Cost {
     pub fn add(&mut self, o: &Cost) {
-        self.geometry_bytes += o.geometry_bytes;
-        self.blas_bytes += o.blas_bytes;
-        self.blas_compacted_bytes += o.blas_compacted_bytes;
-        self.tlas_bytes += o.tlas_bytes;
-        self.instance_buffer_bytes += o.instance_buffer_bytes;
-        self.table_bytes += o.table_bytes;
-        self.texture_bytes += o.texture_bytes;
+        self.add_times(o, 1);
+    }
+
+    /// Adds `times` copies of `o` (saturating: flattened exponential instancing reaches 2^64).
+    pub(crate) fn add_times(&mut self, o: &Cost, times: u64) {
+        let add = |a: &mut u64, b: u64| *a = a.saturating_add(b.saturating_mul(times));
+        add(&mut self.geometry_bytes, o.geometry_bytes);
+        add(&mut self.blas_bytes, o.blas_bytes);
+        add(&mut self.blas_compacted_bytes, o.blas_compacted_bytes);
+        add(&mut self.tlas_bytes, o.tlas_bytes);
+        add(&mut self.instance_buffer_bytes, o.instance_buffer_bytes);
+        add(&mut self.table_bytes, o.table_bytes);
+        add(&mut self.texture_bytes, o.texture_bytes);
         self.build_scratch_peak_bytes = self
             .build_scratch_peak_bytes
             .max(o.build_scratch_peak_bytes);
@@ -88,10 +94,10 @@ impl Cost {
             .max(o.build_transient_peak_bytes);
         // One render's overhead, not one per part.
         self.render_overhead_bytes = self.render_overhead_bytes.max(o.render_overhead_bytes);
-        self.tlas_count += o.tlas_count;
-        self.blas_count += o.blas_count;
-        self.instances = self.instances.saturating_add(o.instances);
-        self.blas_triangles = self.blas_triangles.saturating_add(o.blas_triangles);
+        add(&mut self.tlas_count, o.tlas_count);
+        add(&mut self.blas_count, o.blas_count);
+        add(&mut self.instances, o.instances);
+        add(&mut self.blas_triangles, o.blas_triangles);
         self.seal();
     }
 
@@ -105,29 +111,36 @@ impl Cost {
 
     /// Recomputes the derived totals.
     pub(crate) fn seal(&mut self) {
-        self.resident_bytes = self.geometry_bytes
-            + self.blas_compacted_bytes
-            + self.tlas_bytes
-            + self.instance_buffer_bytes
-            + self.table_bytes
-            + self.texture_bytes;
-        self.peak_bytes =
-            self.resident_bytes + self.build_transient_peak_bytes + self.render_overhead_bytes;
+        self.resident_bytes = [
+            self.blas_compacted_bytes,
+            self.tlas_bytes,
+            self.instance_buffer_bytes,
+            self.table_bytes,
+            self.texture_bytes,
+        ]
+        .iter()
+        .fold(self.geometry_bytes, |a, &b| a.saturating_add(b));
+        self.peak_bytes = self
+            .resident_bytes
+            .saturating_add(self.build_transient_peak_bytes)
+            .saturating_add(self.render_overhead_bytes);
     }
 
     /// This cost rendered on its own at `width × height`: with the full build's overhead.
     pub fn rendered_at(mut self, (width, height): (u32, u32)) -> Cost {
         self.render_overhead_bytes = 0;
         self.seal();
+        // Past an exbibyte the overhead is moot (flattened exponential instancing saturates
+        // at 2^64): clamped so the budget fixed point stays in range.
         self.render_overhead_bytes =
-            motu_gpu::full_build_overhead(self.peak_bytes, width, height).total_bytes;
+            motu_gpu::full_build_overhead(self.peak_bytes.min(1 << 60), width, height).total_bytes;
         self.seal();
         self
     }
 
     /// TLAS bytes including the instance buffer (the report's "TLAS" column).
     pub fn tlas_total_bytes(&self) -> u64 {
-        self.tlas_bytes + self.instance_buffer_bytes
+        self.tlas_bytes.saturating_add(self.instance_buffer_bytes)
     }
 }
 
@@ -157,14 +170,15 @@ pub(crate) fn tlas_cost(
     let max = sizes.max_instance_count().max(1);
     let pieces = instance_count.div_ceil(max).max(1);
     let mut c = Cost {
-        instance_buffer_bytes: instance_count * INSTANCE_RECORD_SIZE_BYTES,
+        // Saturating: exponential instancing flattens to counts near 2^64.
+        instance_buffer_bytes: instance_count.saturating_mul(INSTANCE_RECORD_SIZE_BYTES),
         instances: instance_count,
         ..Default::default()
     };
     let add_tlas = |c: &mut Cost, n: u64| -> Result<(), ReportError> {
         let s = sizes.tlas_sizes(n)?;
-        c.tlas_bytes += align_as(s.size_bytes);
-        c.tlas_count += 1;
+        c.tlas_bytes = c.tlas_bytes.saturating_add(align_as(s.size_bytes));
+        c.tlas_count = c.tlas_count.saturating_add(1);
         c.build_scratch_peak_bytes = c.build_scratch_peak_bytes.max(s.build_scratch_bytes);
         c.build_transient_peak_bytes = c.build_transient_peak_bytes.max(s.build_scratch_bytes);
         Ok(())
@@ -177,19 +191,34 @@ pub(crate) fn tlas_cost(
         // Every full piece has the same size: query once.
         let mut one = Cost::default();
         add_tlas(&mut one, max)?;
-        c.tlas_bytes += one.tlas_bytes * full;
-        c.tlas_count += full;
+        c.tlas_bytes = c
+            .tlas_bytes
+            .saturating_add(one.tlas_bytes.saturating_mul(full));
+        c.tlas_count = c.tlas_count.saturating_add(full);
         c.build_scratch_peak_bytes = one.build_scratch_peak_bytes;
         c.build_transient_peak_bytes = one.build_transient_peak_bytes;
         add_tlas(&mut c, last)?;
-        // The pieces are joined by an AABB BLAS of one box each under a 1-instance TLAS.
-        let shape = BlasShape::Aabbs {
-            box_count: u32::try_from(pieces).unwrap_or(u32::MAX),
-        };
-        c.add(&blas_cost_of(sizes, &shape, 0)?);
-        add_tlas(&mut c, 1)?;
-        c.instance_buffer_bytes += INSTANCE_RECORD_SIZE_BYTES;
-        c.instances += 1;
+        // The pieces are joined by AABB BLASes of one box each (as many as maxPrimitiveCount
+        // allows per BLAS: a flattened exponential scene has more pieces than one BLAS may
+        // hold, which asked the device for a 2^32 − 1 box BLAS) under one TLAS.
+        let max_boxes = sizes.max_primitive_count().clamp(1, u64::from(u32::MAX));
+        let joins = pieces.div_ceil(max_boxes);
+        let last_boxes = pieces - (joins - 1) * max_boxes;
+        for (boxes, times) in [(max_boxes, joins - 1), (last_boxes, 1)] {
+            if times == 0 {
+                continue;
+            }
+            let shape = BlasShape::Aabbs {
+                box_count: u32::try_from(boxes).unwrap_or(u32::MAX),
+            };
+            let one = blas_cost_of(sizes, &shape, 0)?;
+            c.add_times(&one, times);
+        }
+        add_tlas(&mut c, joins)?;
+        c.instance_buffer_bytes = c
+            .instance_buffer_bytes
+            .saturating_add(joins.saturating_mul(INSTANCE_RECORD_SIZE_BYTES));
+        c.instances = c.instances.saturating_add(joins);
     }
     c.seal();
     Ok((c, pieces))

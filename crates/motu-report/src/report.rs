@@ -582,15 +582,17 @@ fn flattened_variant(
             let mut one = blas_cost_of(sizes, &shape, 0)?;
             one.table_bytes += count * std::mem::size_of::<PiRecord>() as u64;
             one.seal();
-            for _ in 0..times {
-                c.add(&one);
-            }
+            // One addition of `times` copies: a loop of 2^40 additions would not end.
+            c.add_times(&one, times);
         }
-        top_instances += blases;
+        top_instances = top_instances.saturating_add(blases);
     }
     let (mut top, pieces) = tlas_cost(sizes, top_instances)?;
-    top.table_bytes += std::mem::size_of::<motu_abi::TlasRecord>() as u64
-        + top_instances * std::mem::size_of::<InstanceRecord>() as u64;
+    top.table_bytes = top.table_bytes.saturating_add(
+        (std::mem::size_of::<motu_abi::TlasRecord>() as u64).saturating_add(
+            top_instances.saturating_mul(std::mem::size_of::<InstanceRecord>() as u64),
+        ),
+    );
     top.seal();
     c.add(&top);
     c.add(&g.global_tables());

@@ -85,6 +85,21 @@ impl<'s> Parser<'s> {
         let (kind, _) = self.string(lx, tok)?;
         let p = self.params(lx)?;
         self.require_finite("Camera", &p)?;
+        if kind == "perspective" {
+            // A field of view of 0 (or ≥ 180) degrees makes every ray the same: a flat image.
+            if let Some(param) = p.get("fov") {
+                let fov = p.float("fov").unwrap_or(90.0);
+                if !(fov > 0.0 && fov < 180.0) {
+                    return Err(self.err_at(
+                        param.loc,
+                        param.name,
+                        ParseErrorKind::BadParameter(format!(
+                            "Camera \"perspective\" \"float fov\" is {fov} degrees: it must be more than 0 and less than 180"
+                        )),
+                    ));
+                }
+            }
+        }
         if self.in_world {
             self.warn(Some(tok.loc), "Camera inside the world block".into());
         }

@@ -3,6 +3,38 @@
 
 use super::*;
 
+/// Material types of pbrt-v3 and pbrt-v4 (others are warned about, then shaded as defaults).
+const KNOWN_MATERIALS: &[&str] = &[
+    "",
+    "none",
+    "interface",
+    "matte",
+    "diffuse",
+    "coateddiffuse",
+    "substrate",
+    "disney",
+    "translucent",
+    "diffusetransmission",
+    "subsurface",
+    "kdsubsurface",
+    "hair",
+    "plastic",
+    "uber",
+    "mirror",
+    "glass",
+    "dielectric",
+    "thindielectric",
+    "coatedconductor",
+    "metal",
+    "conductor",
+    "mix",
+    "measured",
+    "fourier",
+];
+
+/// Spectrum files are a few hundred (wavelength, value) pairs; a bigger one is not one.
+const SPECTRUM_FILE_MAX_BYTES: u64 = 64 << 20;
+
 impl<'s> Parser<'s> {
     /// `L`/`I` times `scale` (v3: spectrum scale; v4: float scale).
     pub(super) fn emission(&mut self, p: &ParamList<'_>, name: &str) -> Option<[f32; 3]> {
@@ -91,7 +123,10 @@ impl<'s> Parser<'s> {
                 if let Some(c) = self.spectrum_cache.get(&path) {
                     return c.map(|c| (c, None));
                 }
-                let rgb = match std::fs::read(&path) {
+                // Checked first: a FIFO or device named as a spectrum file must not be read.
+                let read = crate::source::check_input(&path, Some(SPECTRUM_FILE_MAX_BYTES))
+                    .and_then(|_| std::fs::read(&path));
+                let rgb = match read {
                     Ok(bytes) => {
                         color::parse_spd(&bytes).and_then(|pairs| color::spectrum_rgb(&pairs))
                     }
@@ -153,6 +188,43 @@ impl<'s> Parser<'s> {
         let param = p.get(key)?;
         self.color_of(param)
             .map(|c| (c.0[0] + c.0[1] + c.0[2]) / 3.0)
+    }
+
+    /// A material's parameters before it is made: non-finite numbers are errors at the
+    /// parameter (they would reach shading and the package's JSON); negative colour values,
+    /// which pbrt-v3 accepts, and unknown material types, are warnings with the location.
+    pub(super) fn check_material(
+        &mut self,
+        directive: &str,
+        kind: &str,
+        p: &ParamList<'_>,
+        loc: Loc,
+    ) -> Result<()> {
+        self.require_finite(directive, p)?;
+        for param in &p.params {
+            let colour = matches!(param.ty, ParamType::Rgb);
+            if let (true, Values::Nums(v)) = (colour, &param.values) {
+                if let Some(bad) = v.iter().find(|x| **x < 0.0) {
+                    self.warn(
+                        Some(param.loc),
+                        format!(
+                            "{directive} \"{kind}\" parameter \"{} {}\" has the negative value {bad}; a reflectance is 0–1 (shaded as given)",
+                            param.ty.name(),
+                            param.name
+                        ),
+                    );
+                }
+            }
+        }
+        if !KNOWN_MATERIALS.contains(&kind) {
+            self.warn(
+                Some(loc),
+                format!(
+                    "{directive}: unknown material type \"{kind}\"; shaded with default values"
+                ),
+            );
+        }
+        Ok(())
     }
 
     pub(super) fn make_material(
@@ -361,14 +433,21 @@ impl<'s> Parser<'s> {
                 let file = p.string("filename").unwrap_or("").to_owned();
                 let path = self.resolve(&file);
                 let scale = p.float("scale").unwrap_or(1.0);
-                if !file.is_empty() && path.is_file() {
+                let kind = crate::source::classify(&path);
+                if !file.is_empty() && kind == crate::source::FileKind::Regular {
                     image = Some((path, [scale; 3]));
                 } else {
+                    let why = match kind {
+                        crate::source::FileKind::Other(what) => {
+                            format!("{what}, not a regular file")
+                        }
+                        _ => "texture file missing".to_string(),
+                    };
                     self.warn_once(
                         &format!("img:{file}"),
                         Some(tok.loc),
                         format!(
-                            "texture \"{name}\" ({file}): texture file missing; the material's constant colour is used"
+                            "texture \"{name}\" ({file}): {why}; the material's constant colour is used"
                         ),
                     );
                 }

@@ -96,7 +96,15 @@ impl<'s> Parser<'s> {
         let mut notes = Vec::new();
         let built: std::result::Result<Geometry, String> = match kind.as_ref() {
             "trianglemesh" => shapes::triangle_mesh(&mut p, &mut notes).map(Geometry::Mesh),
-            "loopsubdiv" => shapes::triangle_mesh(&mut p, &mut notes).map(Geometry::Mesh),
+            "loopsubdiv" => {
+                // The cage is used as it is; a negative level count is still said.
+                if let Some(levels) = p.int("levels").filter(|&l| l < 0) {
+                    notes.push(format!(
+                        "\"integer levels\" is {levels}: a subdivision level count is 0 or more (the cage is used as it is)"
+                    ));
+                }
+                shapes::triangle_mesh(&mut p, &mut notes).map(Geometry::Mesh)
+            }
             "bilinearmesh" => {
                 self.hint_v4("bilinearmesh");
                 shapes::bilinear_mesh(&mut p, &mut notes).map(Geometry::Mesh)

@@ -245,3 +245,40 @@ fn gz_file() {
     enc.finish().unwrap();
     assert_eq!(read_ply(&path).unwrap().triangle_count(), 2);
 }
+
+#[test]
+fn regression_ply_body_with_more_faces_than_declared_is_an_error() {
+    // ASCII: a second face line where the header declares one.
+    let ply = format!("{TRI_HEAD}element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n");
+    let e = parse_ply(ply.as_bytes()).unwrap_err().to_string();
+    assert!(
+        e.contains("line 15")
+            && e.contains("more than the header declares")
+            && e.contains("`face`"),
+        "{e}"
+    );
+    // Trailing blank lines are not data.
+    let ok = format!("{TRI_HEAD}element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n\n\n");
+    assert_eq!(parse_ply(ok.as_bytes()).unwrap().indices, vec![0, 1, 2]);
+    // Binary: a second face record after the one declared, by its byte offset.
+    let head = b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n";
+    let mut bin = head.to_vec();
+    for v in [0f32, 0., 0., 1., 0., 0., 0., 1., 0.] {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+    let face = |bin: &mut Vec<u8>| {
+        bin.push(3);
+        for i in [0i32, 1, 2] {
+            bin.extend_from_slice(&i.to_le_bytes());
+        }
+    };
+    face(&mut bin);
+    assert_eq!(parse_ply(&bin).unwrap().indices, vec![0, 1, 2]);
+    let end = bin.len();
+    face(&mut bin);
+    let e = parse_ply(&bin).unwrap_err().to_string();
+    assert!(
+        e.contains(&format!("byte {end}")) && e.contains("13 byte(s)"),
+        "{e}"
+    );
+}

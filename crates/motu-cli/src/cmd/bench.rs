@@ -13,6 +13,12 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
         return child_render(&a, pkg);
     }
     if let (Some(path), Some(pkg)) = (&a.camera_path, &a.package) {
+        crate::output::check_input(
+            "--camera-path",
+            path,
+            Some(super::render::CAMERA_PATH_MAX_BYTES),
+        )?;
+        crate::output::check_input("--package", pkg, None)?;
         let opts = FlightOptions {
             package: pkg.clone(),
             camera_path: path.clone(),

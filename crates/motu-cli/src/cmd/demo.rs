@@ -32,6 +32,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
     let gen = GenArgs {
         kind: GenKindArg::Forest,
         output: scene_dir.clone(),
+        force: true,
         levels: None,
         grid: None,
         leaves: None,
@@ -52,8 +53,19 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         json: false,
     };
     let kind = super::gen::options(&gen)?;
-    let summary =
-        motu_gen::generate(&kind, &scene_dir, &mut |_| {}).context("generating the demo scene")?;
+    // The demo's own scene directory is replaced whole on each run (`motu gen --force`).
+    let out = crate::output::OutputDir::begin("--work-dir", &scene_dir, true)?;
+    let mut summary =
+        motu_gen::generate(&kind, out.path(), &mut |_| {}).context("generating the demo scene")?;
+    if let Ok(rel) = summary.scene_path.strip_prefix(out.path()) {
+        summary.scene_path = scene_dir.join(rel);
+    }
+    let entry = summary
+        .scene_path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    out.commit(&entry)?;
     step(
         &format!("gen forest ({})", format_size(summary.bytes_written)),
         t,

@@ -15,6 +15,10 @@ fn reject(flag: &str, given: bool, kind: &str) -> anyhow::Result<()> {
 }
 
 pub fn options(a: &GenArgs) -> anyhow::Result<GenKind> {
+    if a.threads == Some(0) {
+        // As `motu import` refuses it, for every kind.
+        super::import::cap_threads("--threads", 0)?;
+    }
     let grid = a
         .grid
         .as_deref()
@@ -108,11 +112,23 @@ pub fn options(a: &GenArgs) -> anyhow::Result<GenKind> {
 
 pub fn run(a: GenArgs) -> anyhow::Result<()> {
     let kind = options(&a)?;
+    // Written whole into a temp directory beside the target and renamed into place: a failure
+    // (full disk, a bad option found while writing) leaves nothing, never a cut scene.
+    let out = crate::output::OutputDir::begin("-o", &a.output, a.force)?;
     let progress = Progress::bytes("writing pbrt");
-    let summary = motu_gen::generate(&kind, &a.output, &mut |p| {
+    let mut summary = motu_gen::generate(&kind, out.path(), &mut |p| {
         progress.set(p.bytes_written, None);
     })
     .with_context(|| format!("generating {} into {}", kind.name(), a.output.display()))?;
+    if let Ok(rel) = summary.scene_path.strip_prefix(out.path()) {
+        summary.scene_path = a.output.join(rel);
+    }
+    let entry = summary
+        .scene_path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    out.commit(&entry)?;
     progress.finish();
     if a.json {
         let out = serde_json::json!({

@@ -6,6 +6,13 @@ use crate::size::format_size;
 use motu_compile::Levels;
 
 pub fn run(a: ImportArgs) -> anyhow::Result<()> {
+    // A directory, FIFO, device or symlink loop as the scene is named before anything opens
+    // it (a missing scene is the pipeline's own error).
+    if let motu_package::identity::InputKind::Other(what) =
+        motu_package::identity::classify_input(&a.scene)
+    {
+        anyhow::bail!("scene {}: is {what}, not a regular file", a.scene.display());
+    }
     crate::output::check_outputs(&[("scene", &a.scene)], &[("-o", &a.output)])?;
     if let Some(t) = a.threads {
         rayon::ThreadPoolBuilder::new()
@@ -63,6 +70,13 @@ pub fn run(a: ImportArgs) -> anyhow::Result<()> {
         progress: crate::progress::import_bar(),
     };
     let s = pipeline::import(&a.scene, &a.output, &o)?;
+    if s.meshes == 0 {
+        // Not an error (a camera-only scene is valid pbrt), but never silent: it renders empty.
+        eprintln!(
+            "warning: {} holds no geometry: the package renders as an empty image",
+            a.scene.display()
+        );
+    }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&s)?);
     } else {

@@ -100,7 +100,7 @@ pub fn run(a: InfoArgs) -> anyhow::Result<()> {
         println!("{k:<24} {shown}");
     }
     for w in meta.warnings.iter().take(20) {
-        println!("warning: {w}");
+        println!("warning: {}", crate::terminal_safe(w));
     }
     Ok(())
 }

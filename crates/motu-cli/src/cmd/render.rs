@@ -37,6 +37,10 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
     }
 }
 
+/// A recorded camera path is JSON of poses (~100 B each): a bigger file is not one, and a
+/// device such as `/dev/zero` is refused before it is read.
+pub const CAMERA_PATH_MAX_BYTES: u64 = 256 << 20;
+
 /// `--lod-mode` as the library's request.
 pub(crate) fn lod_mode(m: LodModeArg) -> motu_render::LodMode {
     match m {
@@ -54,6 +58,7 @@ fn recorded_cameras(
     let Some(p) = &a.camera_path else {
         return Ok(None);
     };
+    output::check_input("--camera-path", p, Some(CAMERA_PATH_MAX_BYTES))?;
     let path = load_camera_path(p)?;
     let path_size = a.width.is_none() && a.height.is_none();
     Ok(Some(motu_render::recorded_path_cameras(
@@ -153,7 +158,13 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     let mut outputs = vec![("-o", a.output.as_path())];
     outputs.extend(a.aov.as_deref().map(|p| ("--aov", p)));
     outputs.extend(a.stats.as_deref().map(|p| ("--stats", p)));
-    output::check_outputs(&[("package", &a.package)], &outputs)?;
+    // Every output is checked and its temp file created before any work; none is renamed into
+    // place until all are written (a failed AOV never leaves a new PNG beside an old AOV).
+    let mut outs = output::Outputs::begin(&[("package", &a.package)], &outputs)?;
+    if let Some(p) = &a.camera_path {
+        output::check_input("--camera-path", p, Some(CAMERA_PATH_MAX_BYTES))?;
+    }
+    let opened = file_stamp(&a.package);
     let pkg = pipeline::open(&a.package)?;
     let base = pkg.view()?;
     let names: Vec<String> = pkg.meta().elements.iter().map(|e| e.name.clone()).collect();
@@ -289,19 +300,21 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         started: Some(started),
     };
     let mut out = motu_render::render(&job, &settings, &mut |e| print_event(e, a.allow_incomplete))
-        .map_err(|e| below_floor_hint(e, &a, &pkg))?;
+        .map_err(|e| below_floor_hint(e, &a, &pkg))
+        .map_err(|e| package_changed_hint(e, &a.package, &opened))?;
     let written = std::time::Instant::now();
-    output::write_png(&a.output, camera.width, camera.height, &out.rgba8)?;
+    outs.write_png(&a.output, camera.width, camera.height, &out.rgba8)?;
     if let Some(p) = &a.aov {
-        output::write(p, &out.aov.to_bytes())?;
+        outs.write(p, &out.aov.to_bytes())?;
     }
     if let Some(startup) = out.stats["stream"].get_mut("startup") {
         // The image's write closes the time to first pixel the render measured.
         startup["write_ms"] = serde_json::json!(written.elapsed().as_secs_f64() * 1e3);
     }
     if let Some(p) = &a.stats {
-        output::write(p, serde_json::to_string_pretty(&out.stats)?.as_bytes())?;
+        outs.write(p, serde_json::to_string_pretty(&out.stats)?.as_bytes())?;
     }
+    outs.commit()?;
     eprintln!(
         "rendered {} ({}×{}, {}): {:.1} ms/frame, {:.2} Mrays/s, {:.2} traces/ray",
         a.output.display(),
@@ -324,6 +337,31 @@ pub fn cache_settings(a: &crate::cli::AsCacheArgs) -> motu_render::CacheSettings
             (Some(d), false) => motu_render::CacheDir::At(d.clone()),
             (None, false) => motu_render::CacheDir::Default,
         },
+    }
+}
+
+/// What identifies a file's contents cheaply: device, inode, length, modification time.
+fn file_stamp(path: &std::path::Path) -> Option<(u64, u64, u64, std::time::SystemTime)> {
+    use std::os::unix::fs::MetadataExt;
+    let m = std::fs::metadata(path).ok()?;
+    Some((m.dev(), m.ino(), m.len(), m.modified().ok()?))
+}
+
+/// A render that failed on the package's data names the package, and says so when the file
+/// was replaced or rewritten while it was read (a mesh record pointing past its vertices is
+/// then a mix of two packages, not a damaged import).
+fn package_changed_hint(
+    e: anyhow::Error,
+    package: &std::path::Path,
+    opened: &Option<(u64, u64, u64, std::time::SystemTime)>,
+) -> anyhow::Error {
+    if opened.is_some() && file_stamp(package) != *opened {
+        e.context(format!(
+            "rendering {}: the package file changed while it was read (replaced or rewritten during the render); render again once it is complete",
+            package.display()
+        ))
+    } else {
+        e.context(format!("rendering {}", package.display()))
     }
 }
 
@@ -364,15 +402,23 @@ fn below_floor_hint(
 }
 
 pub fn compare(a: CompareArgs) -> anyhow::Result<()> {
-    if let Some(p) = &a.diff {
-        output::check_outputs(&[("A", &a.a), ("B", &a.b)], &[("--diff", p)])?;
-    }
+    let outputs: Vec<(&str, &std::path::Path)> = a
+        .diff
+        .as_deref()
+        .map(|p| ("--diff", p))
+        .into_iter()
+        .collect();
+    let mut outs = output::Outputs::begin(&[("A", &a.a), ("B", &a.b)], &outputs)?;
+    // A FIFO or device named as an AOV is refused before it is opened (opening one blocks).
+    output::check_input("A", &a.a, None)?;
+    output::check_input("B", &a.b, None)?;
     let x = Aov::load(&a.a).with_context(|| format!("reading {}", a.a.display()))?;
     let y = Aov::load(&a.b).with_context(|| format!("reading {}", a.b.display()))?;
     let r = motu_trace::compare(&x, &y, a.depth_epsilon).context("comparing")?;
     if let Some(p) = &a.diff {
-        output::write_png(p, x.width, x.height, &r.diff_rgba8)?;
+        outs.write_png(p, x.width, x.height, &r.diff_rgba8)?;
     }
+    outs.commit()?;
     let ok = r.fraction <= a.max_mismatch;
     if a.json {
         println!(
@@ -471,7 +517,33 @@ fn evicted_causes(for_tlas: u32, on_refusal: u32) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::{evicted_causes, first_pass_misses, working_set_note};
+    use super::{
+        evicted_causes, file_stamp, first_pass_misses, package_changed_hint, working_set_note,
+    };
+
+    /// Issue 49: a package replaced under a CPU render said "mesh record 181: triangle 0 uses
+    /// vertex 1523 of 12" without the file or the likely cause.
+    #[test]
+    fn regression_package_changed_under_a_render_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("p.motu");
+        std::fs::write(&p, b"first package").unwrap();
+        let opened = file_stamp(&p);
+        let cause = || anyhow::anyhow!("mesh record 181: triangle 0 uses vertex 1523 of 12");
+        let e = format!("{:#}", package_changed_hint(cause(), &p, &opened));
+        assert!(e.contains("p.motu") && !e.contains("changed"), "{e}");
+        // Replaced by a rename, as an import does.
+        let q = dir.path().join("q.motu");
+        std::fs::write(&q, b"a second, longer package").unwrap();
+        std::fs::rename(&q, &p).unwrap();
+        let e = format!("{:#}", package_changed_hint(cause(), &p, &opened));
+        assert!(
+            e.contains("p.motu")
+                && e.contains("changed while it was read")
+                && e.contains("vertex 1523"),
+            "{e}"
+        );
+    }
 
     #[test]
     fn first_pass_misses_are_named_only_when_present() {

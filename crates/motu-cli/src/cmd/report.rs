@@ -5,9 +5,13 @@ use crate::cli::ReportArgs;
 use anyhow::Context;
 
 pub fn run(a: ReportArgs) -> anyhow::Result<()> {
-    if let Some(p) = &a.html {
-        crate::output::check_outputs(&[("package", &a.package)], &[("--html", p)])?;
-    }
+    let outputs: Vec<(&str, &std::path::Path)> = a
+        .html
+        .as_deref()
+        .map(|p| ("--html", p))
+        .into_iter()
+        .collect();
+    let mut outs = crate::output::Outputs::begin(&[("package", &a.package)], &outputs)?;
     let pkg = crate::pipeline::open(&a.package)?;
     let sizes: Box<dyn motu_report::SizeSource> = if a.measure {
         // Build and compact everything on the device: compacted sizes are measured, not modelled.
@@ -33,8 +37,9 @@ pub fn run(a: ReportArgs) -> anyhow::Result<()> {
     let r = motu_report::build_report_at(&pkg, sizes.as_ref(), a.budget, floor_image)
         .with_context(|| format!("VRAM report of {}", a.package.display()))?;
     if let Some(p) = &a.html {
-        crate::output::write(p, motu_report::render_html(&r).as_bytes())?;
+        outs.write(p, motu_report::render_html(&r).as_bytes())?;
     }
+    outs.commit()?;
     if a.json {
         println!("{}", serde_json::to_string_pretty(&r)?);
     } else {

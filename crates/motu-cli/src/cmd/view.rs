@@ -12,26 +12,6 @@ use motu_pack::ScenePackage;
 use motu_view::{PackageSource, PackageSourceSettings, ViewOptions, ViewStreamSettings};
 use serde_json::json;
 
-/// Writes `bytes` to `path` atomically (temp file, fsync, rename).
-fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> anyhow::Result<()> {
-    use std::io::Write;
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(std::path::Path::new("."));
-    let tmp = dir.join(format!(
-        ".{}.tmp{}",
-        path.file_name().and_then(|n| n.to_str()).unwrap_or("out"),
-        std::process::id()
-    ));
-    let mut f = std::fs::File::create(&tmp)?;
-    f.write_all(bytes)?;
-    f.sync_all()?;
-    drop(f);
-    std::fs::rename(&tmp, path)?;
-    Ok(())
-}
-
 pub fn run(a: ViewArgs) -> anyhow::Result<()> {
     // Before any work: without a display the answer is `motu render`.
     motu_view::check_display()?;
@@ -53,6 +33,22 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
     }
     if a.frames.is_none() && (a.screenshot.is_some() || a.aov.is_some() || a.stats.is_some()) {
         bail!("--screenshot, --aov and --stats need --frames N (render N frames, write the last, exit)");
+    }
+    // Outputs all or nothing, checked and their temp files created before any work.
+    let mut outputs: Vec<(&str, &std::path::Path)> = Vec::new();
+    outputs.extend(a.record.as_deref().map(|p| ("--record", p)));
+    outputs.extend(a.screenshot.as_deref().map(|p| ("--screenshot", p)));
+    outputs.extend(a.aov.as_deref().map(|p| ("--aov", p)));
+    outputs.extend(a.stats.as_deref().map(|p| ("--stats", p)));
+    let mut inputs: Vec<(&str, &std::path::Path)> = vec![("package", &a.package)];
+    inputs.extend(a.camera_path.as_deref().map(|p| ("--camera-path", p)));
+    let mut outs = crate::output::Outputs::begin(&inputs, &outputs)?;
+    if let Some(p) = &a.camera_path {
+        crate::output::check_input(
+            "--camera-path",
+            p,
+            Some(crate::cmd::render::CAMERA_PATH_MAX_BYTES),
+        )?;
     }
     let pkg: ScenePackage = pipeline::open(&a.package)?;
     let base = pkg.view()?;
@@ -175,11 +171,13 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
             width: Some(result.last_size[0]),
             height: Some(result.last_size[1]),
         };
-        write_atomic(p, path.to_json().as_bytes())
-            .with_context(|| format!("writing {}", p.display()))?;
-        eprintln!("recorded {} frames to {}", result.poses.len(), p.display());
+        outs.write(p, path.to_json().as_bytes())?;
     }
     if a.frames.is_none() {
+        outs.commit()?;
+        if let Some(p) = &a.record {
+            eprintln!("recorded {} frames to {}", result.poses.len(), p.display());
+        }
         return Ok(());
     }
     let [w, h] = result.last_size;
@@ -188,13 +186,10 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         let px = result.screenshot_rgba8.as_ref().context(
             "the swapchain image could not be read back (the surface does not allow TRANSFER_SRC)",
         )?;
-        motu_trace::write_png(p, w, h, px).with_context(|| format!("writing {}", p.display()))?;
+        outs.write_png(p, w, h, px)?;
     }
     if let Some(p) = &a.aov {
-        last.output
-            .aov
-            .save(p)
-            .with_context(|| format!("writing {}", p.display()))?;
+        outs.write(p, &last.output.aov.to_bytes())?;
     }
     if let Some(p) = &a.stats {
         let mut stats = serde_json::to_value(&last.output.stats)?;
@@ -215,8 +210,11 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
             stats["detail"] = serde_json::from_str(d).unwrap_or(json!(null));
         }
         stats["package"] = json!(a.package.display().to_string());
-        write_atomic(p, serde_json::to_string_pretty(&stats)?.as_bytes())
-            .with_context(|| format!("writing {}", p.display()))?;
+        outs.write(p, serde_json::to_string_pretty(&stats)?.as_bytes())?;
+    }
+    outs.commit()?;
+    if let Some(p) = &a.record {
+        eprintln!("recorded {} frames to {}", result.poses.len(), p.display());
     }
     eprintln!(
         "view: {} frames shown ({}×{}, {}), last {:.2} Mrays/s, {:.2} traces/ray",
