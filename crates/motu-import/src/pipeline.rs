@@ -149,6 +149,8 @@ pub fn import(
     let path = scene_path.to_path_buf();
     match std::fs::metadata(scene_path) {
         Ok(m) if m.is_file() => {}
+        // Moana's JSON+OBJ base package may be named by its folder.
+        Ok(m) if m.is_dir() && motu_ingest::is_moana_json(scene_path) => {}
         Ok(m) => {
             return Err(ImportError::NotASceneFile {
                 path,
