@@ -498,19 +498,6 @@ fn printable(b: u8) -> String {
     }
 }
 
-/// 1-based line and column of a byte offset (for messages; scans the prefix).
-pub(crate) fn line_column(bytes: &[u8], offset: usize) -> (u32, u32) {
-    let prefix = &bytes[..offset.min(bytes.len())];
-    let line = prefix.iter().filter(|&&b| b == b'\n').count() + 1;
-    let col = prefix.len()
-        - prefix
-            .iter()
-            .rposition(|&b| b == b'\n')
-            .map_or(0, |p| p + 1)
-        + 1;
-    (line as u32, col as u32)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -581,11 +568,5 @@ mod tests {
             .object::<JsonError>("x", |r, _, _| r.numbers::<16>("a matrix").map(|_| ()))
             .unwrap_err();
         assert!(e.message.contains("2 numbers, not 16"), "{e:?}");
-    }
-
-    #[test]
-    fn line_and_column() {
-        assert_eq!(line_column(b"ab\ncd", 4), (2, 2));
-        assert_eq!(line_column(b"ab", 0), (1, 1));
     }
 }

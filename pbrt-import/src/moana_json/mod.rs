@@ -242,11 +242,14 @@ struct Input {
     path: PathBuf,
     file: FileId,
     bytes: SourceBytes,
+    /// The last offset turned into a line and column, its line and its line's start: offsets
+    /// asked in increasing order (curves, placements) cost only the bytes between them.
+    cursor: std::cell::Cell<(usize, u32, usize)>,
 }
 
 impl Input {
     fn json_error(&self, e: JsonError) -> Error {
-        let (line, column) = json::line_column(self.bytes.bytes(), e.offset);
+        let (line, column) = self.line_column(e.offset);
         Error::Json {
             path: self.path.clone(),
             offset: e.offset as u64,
@@ -266,8 +269,25 @@ impl Input {
         }
     }
 
+    fn line_column(&self, offset: usize) -> (u32, u32) {
+        let bytes = self.bytes.bytes();
+        let offset = offset.min(bytes.len());
+        let (mut at, mut line, mut start) = self.cursor.get();
+        if offset < at {
+            (at, line, start) = (0, 1, 0);
+        }
+        for (i, &b) in bytes[at..offset].iter().enumerate() {
+            if b == b'\n' {
+                line += 1;
+                start = at + i + 1;
+            }
+        }
+        self.cursor.set((offset, line, start));
+        (line, (offset - start + 1) as u32)
+    }
+
     fn loc(&self, offset: usize) -> Loc {
-        let (line, column) = json::line_column(self.bytes.bytes(), offset);
+        let (line, column) = self.line_column(offset);
         Loc {
             file: self.file,
             line,
@@ -276,7 +296,7 @@ impl Input {
     }
 
     fn location(&self, offset: usize) -> Location {
-        let (line, column) = json::line_column(self.bytes.bytes(), offset);
+        let (line, column) = self.line_column(offset);
         Location {
             path: self.path.clone(),
             line,
@@ -416,6 +436,7 @@ impl Importer<'_> {
             path: path.to_path_buf(),
             file,
             bytes,
+            cursor: std::cell::Cell::new((0, 1, 0)),
         }))
     }
 
@@ -429,6 +450,7 @@ impl Importer<'_> {
             path: path.to_path_buf(),
             file: FileId(0),
             bytes,
+            cursor: std::cell::Cell::new((0, 1, 0)),
         };
         let doc = input.tree()?;
         let Some(list) = doc.get("elements") else {
@@ -871,11 +893,7 @@ impl Importer<'_> {
                                 &parent_from_instance,
                                 inside,
                                 ctx.element,
-                                Loc {
-                                    file: input.file,
-                                    line: 0,
-                                    column: 0,
-                                },
+                                input.loc(at),
                             )?;
                         }
                         Ok(())

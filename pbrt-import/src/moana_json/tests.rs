@@ -172,7 +172,8 @@ fn truncated_malformed_and_nan_json_name_file_and_offset() {
     let text = r#"{"geomObjFile": "obj/isB/isB.obj", "transformMatrix": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,NaN,0,1]}"#;
     std::fs::write(&el, text).unwrap();
     let msg = parse(dir.path(), false).unwrap_err().to_string();
-    let at = format!("isB.json: byte {} ", text.find("[1,0").unwrap());
+    let offset = text.find("[1,0").unwrap();
+    let at = format!("isB.json: byte {offset} (line 1, column {})", offset + 1);
     assert!(msg.contains(&at) && msg.contains("non-finite"), "{msg}");
 }
 
