@@ -63,7 +63,7 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 pub use forest::ForestOptions;
-pub use island::{IslandOptions, ISLAND_CAMERAS, ISLAND_ELEMENTS};
+pub use island::{IslandFormat, IslandOptions, ISLAND_CAMERAS, ISLAND_ELEMENTS};
 pub use lod_grid::LodGridOptions;
 pub use pbrt::Syntax;
 pub use sphereflake::SphereflakeOptions;
