@@ -122,9 +122,19 @@ pub struct GenArgs {
     /// patch gets its own BLAS (the unit `--stream` builds and evicts).
     #[arg(long)]
     pub terrain_objects: bool,
+    /// island: the file layout: `pbrt` (Moana's pbrt-v3 release) or `json` (Moana's JSON+OBJ
+    /// base package: `DIR/json/island.json`, element JSON, OBJ).
+    #[arg(long, value_enum, default_value = "pbrt")]
+    pub format: GenFormatArg,
     /// One JSON object on stdout describing what was written.
     #[arg(long)]
     pub json: bool,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GenFormatArg {
+    Pbrt,
+    Json,
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
