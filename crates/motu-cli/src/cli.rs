@@ -223,9 +223,9 @@ pub struct ImportArgs {
     /// Compress chunks with zstd at this level (1–22).
     #[arg(long)]
     pub zstd: Option<i32>,
-    /// `curve` shapes: `skip` counts them (motu traces triangles), `ribbons` tessellates flat
-    /// ribbons.
-    #[arg(long, value_enum, default_value = "skip")]
+    /// `curve` shapes: `ribbons` tessellates them into flat ribbons (motu traces triangles),
+    /// `skip` counts and drops them.
+    #[arg(long, value_enum, default_value = "ribbons")]
     pub curves: CurvesArg,
     /// Warn about missing referenced files and skip their shapes instead of failing.
     #[arg(long)]

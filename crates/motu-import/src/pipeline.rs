@@ -43,7 +43,7 @@ pub struct ImportOptions {
 
 /// `motu import`'s defaults (`shared/CLI.md`): `--levels ml`, the device's 2^24 − 1 instances
 /// per TLAS, triangles per BLAS chosen from the scene (2^16 on big scenes), no LOD, 64 MiB chunks, raw (no zstd), parallel parsing,
-/// curves skipped, textures up to 1024², no progress reports.
+/// curves as ribbons, textures up to 1024², no progress reports.
 impl Default for ImportOptions {
     fn default() -> Self {
         Self {
@@ -60,7 +60,7 @@ impl Default for ImportOptions {
             subset: Vec::new(),
             chunk_bytes: 64 << 20,
             parallel: true,
-            curve_ribbons: false,
+            curve_ribbons: true,
             texture_max: 1024,
             progress: None,
         }
@@ -96,6 +96,8 @@ pub struct ImportSummary {
     pub warnings: usize,
     pub curves_not_converted: u64,
     pub curve_ribbons: u64,
+    /// Triangles of the curves tessellated as ribbons.
+    pub curve_ribbon_triangles: u64,
     pub unsupported_shapes: u64,
     pub skipped_shapes: u64,
     /// Peak resident memory of the importing process (Linux `VmHWM`), 0 if unknown.
@@ -440,6 +442,7 @@ fn summary(
         warnings: report.warnings.len(),
         curves_not_converted: report.curves - report.curve_ribbons,
         curve_ribbons: report.curve_ribbons,
+        curve_ribbon_triangles: report.curve_ribbon_triangles,
         unsupported_shapes: report.unsupported_shapes,
         skipped_shapes: report.skipped_shapes,
         peak_rss_bytes: crate::peak_rss_bytes().unwrap_or(0),
@@ -480,6 +483,11 @@ fn finish(
         scene: scene_stats,
         compile: serde_json::to_value(&compiled.report)?,
         warnings: report.warnings.clone(),
+        curves: motu_pack::CurveMeta {
+            curves: report.curves,
+            ribbons: report.curve_ribbons,
+            ribbon_triangles: report.curve_ribbon_triangles,
+        },
     };
     let mut meta = meta;
     let textures = write_textures(&mut writer, scene, o.texture_max, &mut meta.warnings)?;

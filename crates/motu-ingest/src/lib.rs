@@ -80,6 +80,8 @@ pub struct IngestReport {
     pub curves: u64,
     /// Curves turned into ribbon meshes (`curve_ribbons`).
     pub curve_ribbons: u64,
+    /// Triangles of those ribbons.
+    pub curve_ribbon_triangles: u64,
     pub unsupported_shapes: u64,
     pub skipped_shapes: u64,
     pub degenerate_meshes: u64,

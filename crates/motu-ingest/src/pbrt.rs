@@ -261,6 +261,7 @@ impl SceneSink for Adapter {
                 match crate::curves::ribbon(&c) {
                     Some(m) => {
                         self.report.curve_ribbons += 1;
+                        self.report.curve_ribbon_triangles += (m.indices.len() / 3) as u64;
                         pbrt_import::Mesh {
                             positions: m.positions,
                             normals: None,

@@ -81,6 +81,9 @@ pub fn run(a: InfoArgs) -> anyhow::Result<()> {
         "lights": meta.lights.len(),
         "materials": meta.material_names.len(),
         "warnings": meta.warnings.len(),
+        "curves": meta.curves.curves,
+        "curve_ribbons": meta.curves.ribbons,
+        "curve_ribbon_triangles": meta.curves.ribbon_triangles,
     });
     if a.json {
         println!("{}", serde_json::to_string_pretty(&out)?);
