@@ -101,7 +101,8 @@ fn small_island(dir: &Path) -> std::path::PathBuf {
     );
     w(
         "island/json/isA/materials.json",
-        r#"{"ground": {"baseColor": [0.5, 0.4, 0.3], "assignment": ["xgHair"]}}"#,
+        r#"{"ground": {"baseColor": [0.5, 0.4, 0.3], "assignment": ["xgHair"],
+                       "colorMap": "textures/isA/Color"}}"#,
     );
     w(
         "island/json/isA/isA_xgRock.json",
@@ -154,6 +155,10 @@ fn small_base_package_imports_archives_curves_and_camera() {
         "{info}"
     );
     assert_eq!(info["cameras"], serde_json::json!(["shotCam"]), "{info}");
+    // The ground's Ptex file (`<colorMap>/<group>.ptx`) is kept; the rock has none.
+    assert_eq!(info["ptex_materials"], 1, "{info}");
+    assert_eq!(info["curves"], 2, "{info}");
+    assert_eq!(info["curve_ribbons"], 2, "{info}");
     let aov = dir.path().join("a.aov");
     let stats = render(&pkg, "cpu", &aov, &["--width", "32", "--height", "32"]);
     assert_eq!(stats["width"], 32, "{stats}");

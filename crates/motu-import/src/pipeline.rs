@@ -478,6 +478,11 @@ fn finish(
         cameras: scene.cameras().to_vec(),
         lights: scene.lights().to_vec(),
         material_names: scene.materials().iter().map(|m| m.name.clone()).collect(),
+        material_ptex: scene
+            .materials()
+            .iter()
+            .map(|m| m.ptex.as_ref().map(|p| p.display().to_string()))
+            .collect(),
         mesh_names: scene.meshes().iter().map(|m| m.name.clone()).collect(),
         elements: elements.clone(),
         scene: scene_stats,

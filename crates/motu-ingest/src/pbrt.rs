@@ -151,6 +151,7 @@ impl Adapter {
                 roughness: m.roughness.unwrap_or(0.5),
                 metallic: m.metallic.unwrap_or(0.0),
                 emission: [0.0; 3],
+                ptex: m.ptex.clone(),
             })
             .map_err(sink_err)?;
         self.materials.insert(m.id, id);

@@ -53,6 +53,10 @@ pub struct PackageMeta {
     /// it was added: zeros).
     #[serde(default)]
     pub curves: CurveMeta,
+    /// Per material (by id): the Ptex file its base colour comes from, if any (absent in
+    /// packages written before it was added).
+    #[serde(default)]
+    pub material_ptex: Vec<Option<String>>,
 }
 
 /// Curve shapes at import: all of them, those tessellated into ribbons, and the ribbons'

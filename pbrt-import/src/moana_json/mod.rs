@@ -89,12 +89,14 @@ pub fn parse_moana_json(
             base_color_texture: None,
             opacity: None,
             base_color_image: None,
+            ptex: None,
             roughness: Some(1.0),
             metallic: Some(0.0),
             loc: Loc::default(),
         }),
         seq: 0,
         entry_taken: false,
+        per_group: HashMap::new(),
     };
     let plan = if path.is_dir() {
         plan_dir(path)?
@@ -325,6 +327,8 @@ impl Input {
 struct Materials {
     by_name: HashMap<String, Arc<Material>>,
     by_primitive: HashMap<String, Arc<Material>>,
+    /// Materials with a `colorMap`: the folder of their meshes' `<group>.ptx` files.
+    ptex_dirs: HashMap<MaterialId, PathBuf>,
 }
 
 struct Importer<'s> {
@@ -339,6 +343,8 @@ struct Importer<'s> {
     default_material: Arc<Material>,
     seq: u64,
     entry_taken: bool,
+    /// A textured material per OBJ group (its own Ptex file), as Moana's pbrt release has.
+    per_group: HashMap<(MaterialId, String), Arc<Material>>,
 }
 
 impl Importer<'_> {
@@ -558,12 +564,21 @@ impl Importer<'_> {
                 base_color_texture: None,
                 opacity: None,
                 base_color_image: None,
+                ptex: None,
                 roughness: scalar("roughness").map(|r| r.clamp(0.0, 1.0) as f32),
                 metallic: scalar("metallic").map(|r| r.clamp(0.0, 1.0) as f32),
                 loc: input.loc(m.at),
             });
             self.next_material += 1;
             self.sink.material(&material)?;
+            if let Some(dir) = m
+                .get("colorMap")
+                .and_then(Node::as_str)
+                .filter(|s| !s.is_empty())
+            {
+                out.ptex_dirs
+                    .insert(material.id, self.resolve(dir, &input.path));
+            }
             for a in m.get("assignment").map(Node::items).unwrap_or_default() {
                 if let Some(p) = a.as_str() {
                     out.by_primitive.insert(p.to_string(), material.clone());
@@ -820,12 +835,30 @@ impl Importer<'_> {
         };
         let m = math::to_f32(parent_from_shape);
         let result = obj::read::<Stop>(input.bytes.bytes(), |om: ObjMesh| {
-            let material = ctx
+            let mut material = ctx
                 .mats
                 .by_name
                 .get(&om.material)
                 .cloned()
                 .unwrap_or_else(|| self.default_material.clone());
+            let dir = ctx.mats.ptex_dirs.get(&material.id);
+            if let (Some(dir), false) = (dir, om.group.is_empty()) {
+                let key = (material.id, om.group.clone());
+                material = match self.per_group.get(&key) {
+                    Some(m) => m.clone(),
+                    None => {
+                        let m = Arc::new(Material {
+                            id: MaterialId(self.next_material),
+                            ptex: Some(dir.join(format!("{}.ptx", om.group))),
+                            ..(*material).clone()
+                        });
+                        self.next_material += 1;
+                        self.sink.material(&m).map_err(|e| Stop::Done(e.into()))?;
+                        self.per_group.insert(key, m.clone());
+                        m
+                    }
+                };
+            }
             self.stats.shapes += 1;
             self.stats.triangles += om.mesh.triangle_count() as u64;
             let seq = self.seq;

@@ -14,6 +14,8 @@ use crate::events::Mesh;
 /// One mesh of an OBJ file.
 #[derive(Debug)]
 pub(crate) struct ObjMesh {
+    /// The group (`g`/`o`) name: in Moana, the stem of the mesh's Ptex file.
+    pub group: String,
     /// The material (`usemtl`), empty when none was named.
     pub material: String,
     /// 1-based line of the group's first face.
@@ -29,6 +31,7 @@ pub(crate) struct ObjError {
 
 #[derive(Default)]
 struct Group {
+    name: String,
     material: String,
     line: u32,
     /// Corners: (v, vt, vn) 0-based, `u32::MAX` when absent.
@@ -67,11 +70,14 @@ pub(crate) fn read<E: From<ObjError>>(
             }
             b"g" | b"o" => {
                 flush(&mut group, &v, &vt, &vn, &mut emit)?;
+                group.name = String::from_utf8_lossy(trim(rest)).into_owned();
             }
             b"usemtl" => {
                 let name = String::from_utf8_lossy(trim(rest)).into_owned();
                 if name != group.material {
+                    let keep = std::mem::take(&mut group.name);
                     flush(&mut group, &v, &vt, &vn, &mut emit)?;
+                    group.name = keep;
                     group.material = name;
                 }
             }
@@ -134,6 +140,7 @@ fn flush<E>(
     emit: &mut impl FnMut(ObjMesh) -> Result<(), E>,
 ) -> Result<(), E> {
     let material = g.material.clone();
+    let name = std::mem::take(&mut g.name);
     if g.triangles.is_empty() {
         *g = Group {
             material,
@@ -206,6 +213,7 @@ fn flush<E>(
         }
     };
     let out = ObjMesh {
+        group: name,
         material: material.clone(),
         line: g.line,
         mesh,
@@ -308,6 +316,7 @@ mod tests {
         .unwrap();
         assert_eq!(m.len(), 2);
         assert_eq!(m[0].material, "sand");
+        assert_eq!((m[0].group.as_str(), m[1].group.as_str()), ("quad", "tri"));
         assert_eq!(m[0].mesh.indices, [0, 1, 2, 0, 2, 3, 0, 2, 3]);
         assert_eq!(m[0].mesh.normals.as_ref().unwrap().len(), 4);
         assert_eq!(m[0].line, 11);

@@ -201,3 +201,47 @@ fn a_malformed_obj_names_file_and_line() {
     let e = parse(dir.path(), false).unwrap_err();
     assert!(e.to_string().contains("isB.obj:2: "), "{e}");
 }
+
+#[test]
+fn ptex_paths_are_kept_per_material_on_both_routes() {
+    let dir = tempfile::tempdir().unwrap();
+    island(dir.path());
+    std::fs::write(
+        dir.path().join("json/isA/materials.json"),
+        r#"{"green": {"baseColor": [0.1, 0.6, 0.2], "colorMap": "textures/isA/Color"}}"#,
+    )
+    .unwrap();
+    let (sink, _) = parse(dir.path(), false).unwrap();
+    let ptex: Vec<_> = sink
+        .shapes
+        .iter()
+        .filter_map(|s| s.material.ptex.clone())
+        .collect();
+    let root = dir.path();
+    assert_eq!(
+        ptex,
+        [
+            root.join("textures/isA/Color/leaf.ptx"),
+            root.join("textures/isA/Color/ground.ptx")
+        ]
+    );
+    // Each textured group has a material of its own, with the base material's colour.
+    assert_ne!(sink.shapes[0].material.id, sink.shapes[1].material.id);
+    assert_eq!(sink.shapes[1].material.base_color, Some([0.1, 0.6, 0.2]));
+    // pbrt: a `ptex` texture behind the base colour, also through a shape-level override.
+    let text = r#"WorldBegin
+Texture "c" "spectrum" "ptex" "string filename" "tex/a.ptx"
+Material "diffuse" "texture reflectance" "c"
+Shape "trianglemesh" "integer indices" [0 1 2] "point3 P" [0 0 0 1 0 0 0 1 0]
+Texture "f" "float" "ptex" "string filename" "tex/alpha.ptx"
+Material "diffuse" "texture reflectance" "f"
+Shape "trianglemesh" "integer indices" [0 1 2] "point3 P" [0 0 0 1 0 0 0 1 0]
+"#;
+    let mut sink = CollectSink::default();
+    crate::parse_str(text, root, &ParseOptions::default(), &mut sink).unwrap();
+    assert_eq!(sink.shapes[0].material.ptex, Some(root.join("tex/a.ptx")));
+    assert_eq!(
+        sink.shapes[1].material.ptex, None,
+        "float textures are no colour"
+    );
+}
