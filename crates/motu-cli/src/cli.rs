@@ -188,7 +188,10 @@ fn parse_threshold(s: &str) -> Result<f64, String> {
 
 #[derive(Args, Debug)]
 pub struct ImportArgs {
-    /// The entry .pbrt (or .pbrt.gz) file, or an .obj file.
+    /// The entry .pbrt (or .pbrt.gz) file, an .obj file, or Moana's JSON+OBJ base package: its
+    /// `json/` folder (or the island folder above it), one element's folder or JSON file, or a
+    /// list `{"elements": [...], "cameras": [...], "lights": [...]}` (`motu gen island --format
+    /// json` writes `json/island.json`).
     pub scene: PathBuf,
     /// Output package path.
     #[arg(short, long)]
