@@ -605,8 +605,16 @@ impl Importer<'_> {
             return Ok(());
         };
         let doc = input.tree()?;
-        if !doc.is_obj() {
-            return Err(input.invalid(doc.at, "an element file must be a JSON object"));
+        let keys = [
+            "geomObjFile",
+            "instancedPrimitiveJsonFiles",
+            "instancedCopies",
+        ];
+        if !doc.is_obj() || keys.iter().all(|k| doc.get(k).is_none()) {
+            return Err(input.invalid(
+                doc.at,
+                "not a Moana element file (an object with geomObjFile, instancedPrimitiveJsonFiles or instancedCopies) nor a scene list (an object with elements)",
+            ));
         }
         let name = stem.as_str();
         let mats = self.materials(&input, &doc, (id, name))?;

@@ -245,3 +245,15 @@ Shape "trianglemesh" "integer indices" [0 1 2] "point3 P" [0 0 0 1 0 0 0 1 0]
         "float textures are no colour"
     );
 }
+
+#[test]
+fn a_json_file_that_is_no_element_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("path.json");
+    std::fs::write(&p, r#"{"frames": []}"#).unwrap();
+    let e = parse(&p, false).unwrap_err().to_string();
+    assert!(
+        e.contains("path.json: byte 0") && e.contains("not a Moana element"),
+        "{e}"
+    );
+}
