@@ -280,10 +280,23 @@ fn parse_f32(w: &[u8]) -> Result<f32, String> {
 
 /// 1-based (or negative, relative to the end) OBJ index → 0-based, checked against `count`.
 fn index(w: &[u8], count: usize) -> Result<u32, String> {
-    let s = std::str::from_utf8(w).unwrap_or("");
-    let i: i64 = s
-        .parse()
-        .map_err(|_| format!("`{}` is not an index", String::from_utf8_lossy(w)))?;
+    // By hand: faces are most of an OBJ's bytes, and str::parse needs a UTF-8 check first.
+    let (negative, digits) = match w.split_first() {
+        Some((b'-', rest)) => (true, rest),
+        _ => (false, w),
+    };
+    let bad = || format!("`{}` is not an index", String::from_utf8_lossy(w));
+    if digits.is_empty() || digits.len() > 18 {
+        return Err(bad());
+    }
+    let mut i: i64 = 0;
+    for &d in digits {
+        if !d.is_ascii_digit() {
+            return Err(bad());
+        }
+        i = i * 10 + i64::from(d - b'0');
+    }
+    let i = if negative { -i } else { i };
     let zero_based = if i < 0 { count as i64 + i } else { i - 1 };
     if i == 0 || zero_based < 0 || zero_based >= count as i64 {
         return Err(format!(
@@ -342,6 +355,8 @@ mod tests {
             ("v 0 0 0\nf 1 2 3\n", 2, "out of range"),
             ("v 0 0 0\nv 0 0 0\nf 1 2\n", 3, "at least 3"),
             ("v nan 0 0\n", 1, "finite"),
+            ("v 0 0 0\nv 0 0 0\nv 0 0 0\nf 1 2 x\n", 4, "not an index"),
+            ("v 0 0 0\nv 0 0 0\nv 0 0 0\nf 1 2 -\n", 4, "not an index"),
         ] {
             let e = meshes(text).unwrap_err();
             assert_eq!(e.line, line, "{text}");
