@@ -155,6 +155,26 @@ pub enum Error {
         #[source]
         source: Box<PlyError>,
     },
+    /// A JSON file of Moana's base package is malformed or holds a value it cannot.
+    #[error("{}: byte {offset} {message}", path.display())]
+    Json {
+        /// The JSON file.
+        path: PathBuf,
+        /// Byte offset of the fault.
+        offset: u64,
+        /// Line and column, and what is wrong.
+        message: String,
+    },
+    /// An OBJ file is malformed.
+    #[error("{}:{line}: {message}", path.display())]
+    Obj {
+        /// The OBJ file.
+        path: PathBuf,
+        /// 1-based line.
+        line: u32,
+        /// What is wrong.
+        message: String,
+    },
     /// The sink asked to stop.
     #[error(transparent)]
     Sink(#[from] SinkError),

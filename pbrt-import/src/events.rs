@@ -60,6 +60,10 @@ pub struct Material {
     /// image is multiplied by `base_color`), resolved against the scene file; `None` when the
     /// colour is constant or the file is missing.
     pub base_color_image: Option<std::path::PathBuf>,
+    /// Ptex file the base colour comes from (a `ptex` texture, resolved against the scene file;
+    /// Moana's base package: the mesh group's `<colorMap>/<group>.ptx`). Kept for renderers
+    /// with a Ptex reader; motu shows the constant colour.
+    pub ptex: Option<std::path::PathBuf>,
     /// Perceptual roughness in [0, 1] where the model has one (defaults per model applied).
     pub roughness: Option<f32>,
     /// Metalness in [0, 1] (1 for `metal`/`conductor`/`mirror`, `metallic` for `disney`).

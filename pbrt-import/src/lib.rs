@@ -25,6 +25,7 @@ mod error;
 mod events;
 pub mod lexer;
 mod math;
+pub mod moana_json;
 mod parallel;
 pub mod params;
 mod parser;

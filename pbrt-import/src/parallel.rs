@@ -441,6 +441,7 @@ mod tests {
                 base_color_texture: None,
                 opacity: None,
                 base_color_image: None,
+                ptex: None,
                 roughness: None,
                 metallic: None,
                 loc: Loc::default(),

@@ -157,6 +157,8 @@ struct Parser<'s> {
     /// Textures whose value is an image file times a constant, by (is float, name). Their
     /// entry in `float_textures`/`color_textures` is the constant colour used without it.
     image_textures: HashMap<(bool, String), (PathBuf, [f32; 3])>,
+    /// `ptex` colour textures: name → file, resolved.
+    ptex_textures: HashMap<String, PathBuf>,
     objects: HashMap<String, ObjectId>,
     object_names: Vec<String>,
     object_defined: Vec<bool>,
@@ -195,6 +197,7 @@ fn default_material(version: PbrtVersion) -> Material {
         base_color_texture: None,
         opacity: None,
         base_color_image: None,
+        ptex: None,
         roughness: Some(1.0),
         metallic: Some(0.0),
         loc: Loc::default(),
@@ -238,6 +241,7 @@ impl<'s> Parser<'s> {
             float_textures: HashMap::new(),
             color_textures: HashMap::new(),
             image_textures: HashMap::new(),
+            ptex_textures: HashMap::new(),
             objects: HashMap::new(),
             object_names: Vec::new(),
             object_defined: Vec::new(),

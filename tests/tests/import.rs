@@ -316,22 +316,34 @@ fn curves_are_counted_or_tessellated_into_ribbons() {
     std::fs::write(&scene, text).unwrap();
     let skip = dir.path().join("skip.motu");
     let ribbons = dir.path().join("ribbons.motu");
-    let out = motu_ok(&["import", s(&scene), "-o", s(&skip)]);
+    let out = motu_ok(&["import", s(&scene), "-o", s(&skip), "--curves", "skip"]);
     assert!(out.contains("50 curve shapes were counted"), "{out}");
     let a = motu_json(&["info", s(&skip), "--json"]);
     assert_eq!(a["unique_triangles"], 2);
-    motu_ok(&[
-        "import",
-        s(&scene),
-        "-o",
-        s(&ribbons),
-        "--curves",
-        "ribbons",
-    ]);
+    assert_eq!(
+        (&a["curves"], &a["curve_ribbons"]),
+        (&50.into(), &0.into()),
+        "{a}"
+    );
+    // Ribbons are the default.
+    let out = motu_ok(&["import", s(&scene), "-o", s(&ribbons)]);
+    assert!(
+        out.contains("50 curve shapes tessellated as ribbons (400 triangles)"),
+        "{out}"
+    );
     let b = motu_json(&["info", s(&ribbons), "--json"]);
     // 50 ribbons of 4 quads, gathered into one mesh, plus the ground.
     assert_eq!(b["unique_triangles"], 2 + 50 * 8, "{b}");
     assert_eq!(b["meshes"], 2, "{b}");
+    assert_eq!(
+        (
+            &b["curves"],
+            &b["curve_ribbons"],
+            &b["curve_ribbon_triangles"]
+        ),
+        (&50.into(), &50.into(), &400.into()),
+        "{b}"
+    );
     let aov = dir.path().join("g.aov");
     motu_ok(&[
         "render",

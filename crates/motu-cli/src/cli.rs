@@ -127,9 +127,19 @@ pub struct GenArgs {
     /// patch gets its own BLAS (the unit `--stream` builds and evicts).
     #[arg(long)]
     pub terrain_objects: bool,
+    /// island: the file layout: `pbrt` (Moana's pbrt-v3 release) or `json` (Moana's JSON+OBJ
+    /// base package: `DIR/json/island.json`, element JSON, OBJ).
+    #[arg(long, value_enum, default_value = "pbrt")]
+    pub format: GenFormatArg,
     /// One JSON object on stdout describing what was written.
     #[arg(long)]
     pub json: bool,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GenFormatArg {
+    Pbrt,
+    Json,
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -183,7 +193,10 @@ fn parse_threshold(s: &str) -> Result<f64, String> {
 
 #[derive(Args, Debug)]
 pub struct ImportArgs {
-    /// The entry .pbrt (or .pbrt.gz) file, or an .obj file.
+    /// The entry .pbrt (or .pbrt.gz) file, an .obj file, or Moana's JSON+OBJ base package: its
+    /// `json/` folder (or the island folder above it), one element's folder or JSON file, or a
+    /// list `{"elements": [...], "cameras": [...], "lights": [...]}` (`motu gen island --format
+    /// json` writes `json/island.json`).
     pub scene: PathBuf,
     /// Output package path.
     #[arg(short, long)]
@@ -218,9 +231,9 @@ pub struct ImportArgs {
     /// Compress chunks with zstd at this level (1–22).
     #[arg(long)]
     pub zstd: Option<i32>,
-    /// `curve` shapes: `skip` counts them (motu traces triangles), `ribbons` tessellates flat
-    /// ribbons.
-    #[arg(long, value_enum, default_value = "skip")]
+    /// `curve` shapes: `ribbons` tessellates them into flat ribbons (motu traces triangles),
+    /// `skip` counts and drops them.
+    #[arg(long, value_enum, default_value = "ribbons")]
     pub curves: CurvesArg,
     /// Warn about missing referenced files and skip their shapes instead of failing.
     #[arg(long)]

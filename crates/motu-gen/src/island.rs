@@ -45,6 +45,7 @@ use crate::text::OutFile;
 use crate::{GenError, GenProgress, GenSummary};
 
 mod archives;
+mod moana_json;
 mod terrain;
 mod writers;
 
@@ -74,6 +75,18 @@ pub struct IslandOptions {
     pub threads: Option<usize>,
     pub width: u32,
     pub height: u32,
+    /// pbrt-v3 (Moana's pbrt release) or the layout of Moana's JSON+OBJ base package.
+    pub format: IslandFormat,
+}
+
+/// The file layout `motu gen island` writes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum IslandFormat {
+    /// `scene.pbrt` and its includes (pbrt-v3, PLY).
+    #[default]
+    Pbrt,
+    /// `json/island.json`, element JSON, archive JSON and OBJ files.
+    MoanaJson,
 }
 
 impl Default for IslandOptions {
@@ -88,6 +101,7 @@ impl Default for IslandOptions {
             threads: None,
             width: 1024,
             height: 429,
+            format: IslandFormat::Pbrt,
         }
     }
 }
@@ -130,6 +144,9 @@ pub const ISLAND_ELEMENTS: [&str; 20] = [
 const INSTANCES_AT_SCALE_1: f64 = 28.0e6;
 const INLINE_TRIANGLES_AT_SCALE_1: f64 = 700.0e6;
 const PLY_TRIANGLES_AT_SCALE_1: f64 = 480.0e6;
+/// The sun: where it shines from, and its radiance.
+const SUN_FROM: Vec3 = [0.35, 1.0, 0.55];
+const SUN_RADIANCE: Vec3 = [3.0, 2.9, 2.7];
 /// Island radius in scene units; the ocean reaches 3 radii.
 const RADIUS: f64 = 2000.0;
 const POSITION_DECIMALS: u32 = 3;
@@ -793,6 +810,9 @@ pub(crate) fn generate(
     progress: &mut dyn FnMut(GenProgress),
 ) -> Result<GenSummary, GenError> {
     validate(o)?;
+    if o.format == IslandFormat::MoanaJson {
+        return moana_json::generate(o, root, progress);
+    }
     let terrain = Terrain::new(o.seed);
     let elements = plan(o);
     let cams = cameras(&terrain);

@@ -1,7 +1,8 @@
 //! Procedural pbrt scenes for stress tests, demos and benchmarks.
 //!
 //! `generate` writes `DIR/scene.pbrt` plus binary little-endian PLY files and
-//! included pbrt files beside it. Every generator is deterministic (same
+//! included pbrt files beside it (the island can also be written in the layout of Moana's
+//! JSON+OBJ base package, [`IslandFormat::MoanaJson`]). Every generator is deterministic (same
 //! options → byte-identical files, on the same platform), streams its output
 //! (memory does not grow with the scene: meshes are computed vertex by vertex,
 //! placements line by line) and depends on no other motu crate.
@@ -63,7 +64,7 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 pub use forest::ForestOptions;
-pub use island::{IslandOptions, ISLAND_CAMERAS, ISLAND_ELEMENTS};
+pub use island::{IslandFormat, IslandOptions, ISLAND_CAMERAS, ISLAND_ELEMENTS};
 pub use lod_grid::LodGridOptions;
 pub use pbrt::Syntax;
 pub use sphereflake::SphereflakeOptions;
@@ -142,7 +143,8 @@ pub struct GenProgress {
 /// What was written.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct GenSummary {
-    /// `DIR/scene.pbrt`, the file to import.
+    /// `DIR/scene.pbrt` (`DIR/json/island.json` for the island's base-package layout), the
+    /// file to import.
     pub scene_path: PathBuf,
     pub files_written: u64,
     pub bytes_written: u64,

@@ -30,7 +30,7 @@ pub(crate) struct CameraSpec {
     pub(crate) fov_deg: f64,
 }
 
-fn push_vec(line: &mut Vec<u8>, v: Vec3, decimals: u32) {
+pub(crate) fn push_vec(line: &mut Vec<u8>, v: Vec3, decimals: u32) {
     for (i, c) in v.iter().enumerate() {
         if i > 0 {
             line.push(b' ');

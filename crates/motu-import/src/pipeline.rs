@@ -43,7 +43,7 @@ pub struct ImportOptions {
 
 /// `motu import`'s defaults (`shared/CLI.md`): `--levels ml`, the device's 2^24 − 1 instances
 /// per TLAS, triangles per BLAS chosen from the scene (2^16 on big scenes), no LOD, 64 MiB chunks, raw (no zstd), parallel parsing,
-/// curves skipped, textures up to 1024², no progress reports.
+/// curves as ribbons, textures up to 1024², no progress reports.
 impl Default for ImportOptions {
     fn default() -> Self {
         Self {
@@ -60,7 +60,7 @@ impl Default for ImportOptions {
             subset: Vec::new(),
             chunk_bytes: 64 << 20,
             parallel: true,
-            curve_ribbons: false,
+            curve_ribbons: true,
             texture_max: 1024,
             progress: None,
         }
@@ -96,6 +96,8 @@ pub struct ImportSummary {
     pub warnings: usize,
     pub curves_not_converted: u64,
     pub curve_ribbons: u64,
+    /// Triangles of the curves tessellated as ribbons.
+    pub curve_ribbon_triangles: u64,
     pub unsupported_shapes: u64,
     pub skipped_shapes: u64,
     /// Peak resident memory of the importing process (Linux `VmHWM`), 0 if unknown.
@@ -149,6 +151,8 @@ pub fn import(
     let path = scene_path.to_path_buf();
     match std::fs::metadata(scene_path) {
         Ok(m) if m.is_file() => {}
+        // Moana's JSON+OBJ base package may be named by its folder.
+        Ok(m) if m.is_dir() && motu_ingest::is_moana_json(scene_path) => {}
         Ok(m) => {
             return Err(ImportError::NotASceneFile {
                 path,
@@ -438,6 +442,7 @@ fn summary(
         warnings: report.warnings.len(),
         curves_not_converted: report.curves - report.curve_ribbons,
         curve_ribbons: report.curve_ribbons,
+        curve_ribbon_triangles: report.curve_ribbon_triangles,
         unsupported_shapes: report.unsupported_shapes,
         skipped_shapes: report.skipped_shapes,
         peak_rss_bytes: crate::peak_rss_bytes().unwrap_or(0),
@@ -473,11 +478,21 @@ fn finish(
         cameras: scene.cameras().to_vec(),
         lights: scene.lights().to_vec(),
         material_names: scene.materials().iter().map(|m| m.name.clone()).collect(),
+        material_ptex: scene
+            .materials()
+            .iter()
+            .map(|m| m.ptex.as_ref().map(|p| p.display().to_string()))
+            .collect(),
         mesh_names: scene.meshes().iter().map(|m| m.name.clone()).collect(),
         elements: elements.clone(),
         scene: scene_stats,
         compile: serde_json::to_value(&compiled.report)?,
         warnings: report.warnings.clone(),
+        curves: motu_pack::CurveMeta {
+            curves: report.curves,
+            ribbons: report.curve_ribbons,
+            ribbon_triangles: report.curve_ribbon_triangles,
+        },
     };
     let mut meta = meta;
     let textures = write_textures(&mut writer, scene, o.texture_max, &mut meta.warnings)?;

@@ -104,7 +104,7 @@ fn defaults_are_the_cli_defaults() {
         (o.chunk_bytes, o.zstd_level, o.texture_max),
         (64 << 20, None, 1024)
     );
-    assert!(o.parallel && !o.allow_missing && !o.curve_ribbons && o.subset.is_empty());
+    assert!(o.parallel && !o.allow_missing && o.curve_ribbons && o.subset.is_empty());
 }
 
 #[test]

@@ -21,7 +21,13 @@ mod obj;
 mod pbrt;
 
 pub use obj::ingest_obj;
-pub use pbrt::ingest_pbrt;
+pub use pbrt::{ingest_moana_json, ingest_pbrt};
+
+/// Whether `path` is Moana's JSON+OBJ base package (a `.json` file or a folder of element JSON
+/// files) rather than pbrt or OBJ.
+pub fn is_moana_json(path: &Path) -> bool {
+    pbrt_import::moana_json::is_moana_json(path)
+}
 
 use motu_scene::{GeometryStore, Scene};
 use std::path::Path;
@@ -74,6 +80,8 @@ pub struct IngestReport {
     pub curves: u64,
     /// Curves turned into ribbon meshes (`curve_ribbons`).
     pub curve_ribbons: u64,
+    /// Triangles of those ribbons.
+    pub curve_ribbon_triangles: u64,
     pub unsupported_shapes: u64,
     pub skipped_shapes: u64,
     pub degenerate_meshes: u64,
@@ -82,7 +90,8 @@ pub struct IngestReport {
     pub input_files: Vec<std::path::PathBuf>,
 }
 
-/// Imports a pbrt scene (`.pbrt`, `.pbrt.gz`) or an OBJ file (`.obj`) by extension.
+/// Imports a pbrt scene (`.pbrt`, `.pbrt.gz`), an OBJ file (`.obj`) or Moana's JSON+OBJ base
+/// package (a `.json` file or a folder, [`is_moana_json`]).
 pub fn ingest_file(
     path: &Path,
     options: &IngestOptions,
@@ -93,6 +102,8 @@ pub fn ingest_file(
         .is_some_and(|e| e.eq_ignore_ascii_case("obj"));
     if is_obj {
         ingest_obj(path, options.allow_missing, geometry)
+    } else if is_moana_json(path) {
+        ingest_moana_json(path, options, geometry)
     } else {
         ingest_pbrt(path, options, geometry)
     }

@@ -151,6 +151,7 @@ impl Adapter {
                 roughness: m.roughness.unwrap_or(0.5),
                 metallic: m.metallic.unwrap_or(0.0),
                 emission: [0.0; 3],
+                ptex: m.ptex.clone(),
             })
             .map_err(sink_err)?;
         self.materials.insert(m.id, id);
@@ -261,6 +262,7 @@ impl SceneSink for Adapter {
                 match crate::curves::ribbon(&c) {
                     Some(m) => {
                         self.report.curve_ribbons += 1;
+                        self.report.curve_ribbon_triangles += (m.indices.len() / 3) as u64;
                         pbrt_import::Mesh {
                             positions: m.positions,
                             normals: None,
@@ -544,53 +546,86 @@ fn ingest_pbrt_with(
         parallel_includes: options.parallel,
         ..Default::default()
     };
-    let mut a = Adapter {
-        b: SceneBuilder::new(geometry),
-        objects: HashMap::new(),
-        materials: HashMap::new(),
-        derived: HashMap::new(),
-        elements: HashMap::new(),
-        files: HashMap::new(),
-        camera_names: HashMap::new(),
-        cameras: Vec::new(),
-        report: IngestReport::default(),
-        curve_ribbons: options.curve_ribbons,
-        curve_meshes: HashMap::new(),
-        progress: options.progress.clone(),
-        bytes_entered: 0,
-    };
+    let mut a = Adapter::new(options, geometry);
     let stats = pbrt_import::parse_file(path, &parse_options, &mut a)?;
-    a.flush_curves(None).map_err(|e| IngestError::Scene {
-        at: path.display().to_string(),
-        source: motu_scene::SceneError::Store(e.0.to_string()),
-    })?;
-    let skipped_curves = a.report.curves - a.report.curve_ribbons;
-    if skipped_curves > 0 {
-        a.warn(format!(
+    a.finish(path, &stats)
+}
+
+/// Imports Moana's JSON+OBJ base package (an element JSON, a scene list or a folder): the
+/// same events as a pbrt parse, so the same scene for the same content.
+pub fn ingest_moana_json(
+    path: &Path,
+    options: &IngestOptions,
+    geometry: Box<dyn GeometryStore>,
+) -> Result<(Scene, IngestReport), IngestError> {
+    let _span = tracing::info_span!("parse", path = %path.display()).entered();
+    let parse_options = ParseOptions {
+        allow_missing: options.allow_missing,
+        ..Default::default()
+    };
+    let mut a = Adapter::new(options, geometry);
+    let stats = pbrt_import::moana_json::parse_moana_json(path, &parse_options, &mut a)?;
+    a.finish(path, &stats)
+}
+
+impl Adapter {
+    fn new(options: &IngestOptions, geometry: Box<dyn GeometryStore>) -> Self {
+        Adapter {
+            b: SceneBuilder::new(geometry),
+            objects: HashMap::new(),
+            materials: HashMap::new(),
+            derived: HashMap::new(),
+            elements: HashMap::new(),
+            files: HashMap::new(),
+            camera_names: HashMap::new(),
+            cameras: Vec::new(),
+            report: IngestReport::default(),
+            curve_ribbons: options.curve_ribbons,
+            curve_meshes: HashMap::new(),
+            progress: options.progress.clone(),
+            bytes_entered: 0,
+        }
+    }
+
+    /// After the parse: curve meshes, the report's counts and inputs, cameras, the scene.
+    fn finish(
+        self,
+        path: &Path,
+        stats: &pbrt_import::ParseStats,
+    ) -> Result<(Scene, IngestReport), IngestError> {
+        let mut a = self;
+        a.flush_curves(None).map_err(|e| IngestError::Scene {
+            at: path.display().to_string(),
+            source: motu_scene::SceneError::Store(e.0.to_string()),
+        })?;
+        let skipped_curves = a.report.curves - a.report.curve_ribbons;
+        if skipped_curves > 0 {
+            a.warn(format!(
             "{skipped_curves} curve shapes counted but not converted (import with --curves ribbons to tessellate them)"
         ));
+        }
+        a.report.input_files.extend(stats.files.iter().cloned());
+        a.report.input_files.sort_unstable();
+        a.report.input_files.dedup();
+        a.report.text_bytes = stats.text_bytes;
+        a.report.ply_bytes = stats.ply_bytes;
+        for m in &stats.missing {
+            a.warn(format!(
+                "{}: missing file skipped: {}",
+                m.referenced_at,
+                m.path.display()
+            ));
+        }
+        // pbrt renders with the last camera: list it first so it is the default.
+        for cam in a.cameras.drain(..).rev() {
+            a.b.add_camera(cam);
+        }
+        let at = path.display().to_string();
+        let scene =
+            a.b.finish()
+                .map_err(|source| IngestError::Scene { at, source })?;
+        Ok((scene, a.report))
     }
-    a.report.input_files.extend(stats.files.iter().cloned());
-    a.report.input_files.sort_unstable();
-    a.report.input_files.dedup();
-    a.report.text_bytes = stats.text_bytes;
-    a.report.ply_bytes = stats.ply_bytes;
-    for m in &stats.missing {
-        a.warn(format!(
-            "{}: missing file skipped: {}",
-            m.referenced_at,
-            m.path.display()
-        ));
-    }
-    // pbrt renders with the last camera: list it first so it is the default.
-    for cam in a.cameras.drain(..).rev() {
-        a.b.add_camera(cam);
-    }
-    let at = path.display().to_string();
-    let scene =
-        a.b.finish()
-            .map_err(|source| IngestError::Scene { at, source })?;
-    Ok((scene, a.report))
 }
 
 #[cfg(test)]

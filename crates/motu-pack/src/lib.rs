@@ -20,7 +20,7 @@ mod store;
 mod write;
 
 pub use blob::{MeshBlobLayout, MESH_BLOB_ALIGN};
-pub use meta::{ElementMeta, PackageMeta, SCHEMA, SCHEMA_READABLE};
+pub use meta::{CurveMeta, ElementMeta, PackageMeta, SCHEMA, SCHEMA_READABLE};
 pub use read::{read_mesh_blob, MeshGeometry, ScenePackage};
 pub use sections::*;
 pub use store::{place_mesh_record, PackageGeometry};

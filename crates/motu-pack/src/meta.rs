@@ -49,6 +49,23 @@ pub struct PackageMeta {
     pub compile: serde_json::Value,
     /// Import warnings (capped) for `motu info`.
     pub warnings: Vec<String>,
+    /// The source's curve shapes and what became of them (absent in packages written before
+    /// it was added: zeros).
+    #[serde(default)]
+    pub curves: CurveMeta,
+    /// Per material (by id): the Ptex file its base colour comes from, if any (absent in
+    /// packages written before it was added).
+    #[serde(default)]
+    pub material_ptex: Vec<Option<String>>,
+}
+
+/// Curve shapes at import: all of them, those tessellated into ribbons, and the ribbons'
+/// triangles (the rest were counted and skipped, `--curves skip`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct CurveMeta {
+    pub curves: u64,
+    pub ribbons: u64,
+    pub ribbon_triangles: u64,
 }
 
 /// Parses the `meta` section as every reader does: valid JSON of this schema.

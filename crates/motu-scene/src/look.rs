@@ -21,6 +21,9 @@ pub struct Material {
     pub metallic: f32,
     /// Emitted radiance, linear RGB (area lights).
     pub emission: [f32; 3],
+    /// The Ptex file the base colour comes from (kept for a Ptex reader; not sampled).
+    #[serde(default)]
+    pub ptex: Option<std::path::PathBuf>,
 }
 
 impl Default for Material {
@@ -34,6 +37,7 @@ impl Default for Material {
             roughness: 0.5,
             metallic: 0.0,
             emission: [0.0; 3],
+            ptex: None,
         }
     }
 }

@@ -239,6 +239,7 @@ impl<'s> Parser<'s> {
         let mut base_color = None;
         let mut base_color_texture = None;
         let mut base_color_image = None;
+        let mut ptex = None;
         let colour_keys: &[&str] = match kind {
             "glass" | "dielectric" | "thindielectric" => &["Kt", "Kr"],
             _ => &["Kd", "reflectance", "color", "Kr"],
@@ -251,6 +252,12 @@ impl<'s> Parser<'s> {
                     if let Some((path, factor)) = self.image_of(param) {
                         base_color = Some(factor);
                         base_color_image = Some(path);
+                    }
+                    if let (ParamType::Texture, Values::Strs(v)) = (&param.ty, &param.values) {
+                        ptex = v
+                            .first()
+                            .and_then(|n| self.ptex_textures.get(n.as_ref()))
+                            .cloned();
                     }
                     break;
                 }
@@ -284,6 +291,7 @@ impl<'s> Parser<'s> {
                     base_color = m.base_color;
                     base_color_texture = m.base_color_texture.clone();
                     base_color_image = m.base_color_image.clone();
+                    ptex = m.ptex.clone();
                 }
                 roughness = roughness.or(m.roughness);
                 metallic = metallic.or(m.metallic);
@@ -342,6 +350,7 @@ impl<'s> Parser<'s> {
             base_color_texture,
             opacity,
             base_color_image,
+            ptex,
             roughness,
             metallic,
             loc,
@@ -427,6 +436,7 @@ impl<'s> Parser<'s> {
             |a: [f32; 3], b: [f32; 3]| -> [f32; 3] { std::array::from_fn(|i| 0.5 * (a[i] + b[i])) };
         let mul = |a: [f32; 3], b: [f32; 3]| -> [f32; 3] { std::array::from_fn(|i| a[i] * b[i]) };
         let mut image: Option<(PathBuf, [f32; 3])> = None;
+        let mut ptex: Option<PathBuf> = None;
         let value = match class.as_ref() {
             "constant" => operand(self, "value", 1.0),
             "imagemap" => {
@@ -459,9 +469,12 @@ impl<'s> Parser<'s> {
                     "ptex",
                     Some(tok.loc),
                     format!(
-                        "texture \"{name}\" ({file}): ptex textures are not read (no Rust ptex reader); the material's constant colour is used"
+                        "texture \"{name}\" ({file}): ptex textures are not read (no Rust ptex reader); the material's constant colour is used and the file is kept in the package"
                     ),
                 );
+                if !file.is_empty() && !is_float {
+                    ptex = Some(self.resolve(&file));
+                }
                 [0.5; 3]
             }
             "scale" => {
@@ -503,6 +516,15 @@ impl<'s> Parser<'s> {
             }
             _ => [0.5; 3],
         };
+        match ptex {
+            Some(path) => {
+                self.ptex_textures.insert(name.to_string(), path);
+            }
+            None if !is_float => {
+                self.ptex_textures.remove(name.as_ref());
+            }
+            None => {}
+        }
         match image {
             Some(img) => {
                 self.image_textures

@@ -52,6 +52,11 @@ impl<'s> Parser<'s> {
                 } else {
                     derived.base_color_image.clone()
                 },
+                ptex: if keep_base {
+                    material.ptex.clone()
+                } else {
+                    derived.ptex.clone()
+                },
                 roughness: if p.get("roughness").is_some() {
                     derived.roughness
                 } else {

@@ -50,6 +50,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         threads: None,
         max_mesh_triangles: None,
         terrain_objects: false,
+        format: crate::cli::GenFormatArg::Pbrt,
         json: false,
     };
     let kind = super::gen::options(&gen)?;

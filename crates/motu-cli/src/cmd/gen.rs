@@ -36,6 +36,11 @@ pub fn options(a: &GenArgs) -> anyhow::Result<GenKind> {
             &kind,
         )?;
         reject("--terrain-objects", a.terrain_objects, &kind)?;
+        reject(
+            "--format json",
+            a.format == crate::cli::GenFormatArg::Json,
+            &kind,
+        )?;
     }
     let kind = match a.kind {
         GenKindArg::Forest => {
@@ -96,6 +101,9 @@ pub fn options(a: &GenArgs) -> anyhow::Result<GenKind> {
                 .or(o.threads);
             o.max_mesh_triangles = a.max_mesh_triangles.unwrap_or(o.max_mesh_triangles);
             o.terrain_objects = a.terrain_objects;
+            if a.format == crate::cli::GenFormatArg::Json {
+                o.format = motu_gen::IslandFormat::MoanaJson;
+            }
             o.seed = a.seed.unwrap_or(o.seed);
             o.width = a.width.unwrap_or(o.width);
             o.height = a.height.unwrap_or(o.height);

@@ -95,6 +95,12 @@ pub fn run(a: ImportArgs) -> anyhow::Result<()> {
             s.pack_ms,
             if s.warnings > 0 { format!("; {} warnings (see `motu info`)", s.warnings) } else { String::new() }
         );
+        if s.curve_ribbons > 0 {
+            println!(
+                "{} curve shapes tessellated as ribbons ({} triangles)",
+                s.curve_ribbons, s.curve_ribbon_triangles
+            );
+        }
         if s.curves_not_converted > 0 {
             println!(
                 "note: {} curve shapes were counted but not converted to triangles (--curves ribbons tessellates them)",

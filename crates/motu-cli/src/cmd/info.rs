@@ -81,6 +81,10 @@ pub fn run(a: InfoArgs) -> anyhow::Result<()> {
         "lights": meta.lights.len(),
         "materials": meta.material_names.len(),
         "warnings": meta.warnings.len(),
+        "curves": meta.curves.curves,
+        "curve_ribbons": meta.curves.ribbons,
+        "curve_ribbon_triangles": meta.curves.ribbon_triangles,
+        "ptex_materials": meta.material_ptex.iter().filter(|p| p.is_some()).count(),
     });
     if a.json {
         println!("{}", serde_json::to_string_pretty(&out)?);

@@ -76,7 +76,7 @@ pub(super) fn write_scene_file(
         line.extend_from_slice(format!("Include \"cameras/{cam}.pbrt\"\n").as_bytes());
     }
     line.extend_from_slice(b"\nWorldBegin\n\n");
-    push_sun(&mut line, syntax, [0.35, 1.0, 0.55], [3.0, 2.9, 2.7]);
+    push_sun(&mut line, syntax, SUN_FROM, SUN_RADIANCE);
     for (name, rgb) in MATERIALS {
         push_material(&mut line, syntax, name, rgb);
     }
@@ -216,45 +216,12 @@ pub(super) fn write_placements(
     file: &str,
     range: Range<u64>,
 ) -> Result<Tally, GenError> {
-    let list = &e.lists[list_index];
     let mut out = OutFile::create(ctx.root, file, ctx.live)?;
     let mut line = Vec::with_capacity(1 << 16);
     let mut instanced = 0u64;
-    let (height, palm, _) = e.plant.unwrap_or((1.0, false, 0));
     let mut cached_copy: Option<(u64, Affine)> = None;
     for k in range.clone() {
-        let (m, archive) = match &list.kind {
-            ListKind::Scatter {
-                region,
-                archives,
-                kind,
-            } => {
-                let (m, pick) =
-                    scatter_transform(o, terrain, e.index, list_index as u64, k, region, *kind);
-                (
-                    m,
-                    archives.start + (pick % archives.len().max(1) as u64) as usize,
-                )
-            }
-            ListKind::PlantCopies { trunk } => (plant_transform(o, terrain, e.index, k), *trunk),
-            ListKind::PlantLeaves {
-                leaves_per_plant,
-                archives,
-            } => {
-                let (copy, leaf) = (k / leaves_per_plant, k % leaves_per_plant);
-                let world_from_plant = match cached_copy {
-                    Some((c, m)) if c == copy => m,
-                    _ => {
-                        let m = plant_transform(o, terrain, e.index, copy);
-                        cached_copy = Some((copy, m));
-                        m
-                    }
-                };
-                let plant_from_leaf = leaf_transform(o, e.index, leaf, height, palm);
-                let pick = archives.start + (leaf % archives.len().max(1) as u64) as usize;
-                (world_from_plant.mul(&plant_from_leaf), pick)
-            }
-        };
+        let (m, archive) = placement(o, terrain, e, list_index, k, &mut cached_copy);
         let a = &e.archives[archive];
         push_instance(&mut line, &m, &a.object, POSITION_DECIMALS);
         instanced += a.triangles;
@@ -270,4 +237,49 @@ pub(super) fn write_placements(
         instanced_triangles: instanced,
         ..Tally::file(out.finish()?)
     })
+}
+
+/// Instance `k` of list `list_index`: its transform and archive (`cached_copy` keeps the last
+/// plant copy's transform, which consecutive leaves share).
+pub(super) fn placement(
+    o: &IslandOptions,
+    terrain: &Terrain,
+    e: &ElementPlan,
+    list_index: usize,
+    k: u64,
+    cached_copy: &mut Option<(u64, Affine)>,
+) -> (Affine, usize) {
+    let (height, palm, _) = e.plant.unwrap_or((1.0, false, 0));
+    match &e.lists[list_index].kind {
+        ListKind::Scatter {
+            region,
+            archives,
+            kind,
+        } => {
+            let (m, pick) =
+                scatter_transform(o, terrain, e.index, list_index as u64, k, region, *kind);
+            (
+                m,
+                archives.start + (pick % archives.len().max(1) as u64) as usize,
+            )
+        }
+        ListKind::PlantCopies { trunk } => (plant_transform(o, terrain, e.index, k), *trunk),
+        ListKind::PlantLeaves {
+            leaves_per_plant,
+            archives,
+        } => {
+            let (copy, leaf) = (k / leaves_per_plant, k % leaves_per_plant);
+            let world_from_plant = match *cached_copy {
+                Some((c, m)) if c == copy => m,
+                _ => {
+                    let m = plant_transform(o, terrain, e.index, copy);
+                    *cached_copy = Some((copy, m));
+                    m
+                }
+            };
+            let plant_from_leaf = leaf_transform(o, e.index, leaf, height, palm);
+            let pick = archives.start + (leaf % archives.len().max(1) as u64) as usize;
+            (world_from_plant.mul(&plant_from_leaf), pick)
+        }
+    }
 }
