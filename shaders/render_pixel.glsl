@@ -95,7 +95,8 @@ void stream_write_fallback(uvec2 px, uint pixel, Carry c) {
     }
     rec.w |= min(c.st.z, 65535u) << 16u;
     push.aov.r[pixel] = rec;
-    push.rgba.r[pixel] = encode_srgb8(colour);
+    push.rgba.r[pixel] = f.view == VIEW_SHADED ? tone_map(colour, f.exposure_scale)
+                                              : encode_srgb8(colour);
 }
 
 // Puts pixel `px` on the pass's incomplete list (packed x | y << 16).
@@ -227,8 +228,8 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
             } else {
                 vec3 colour = c.cur.xyz;
                 uint ao_open = uint(c.cur.w);
-                secondary_window_done(first, masks >> 8u, si, c.rec.w, org, dir, c.hit.x, colour,
-                                      ao_open);
+                secondary_window_done(first, masks >> 8u, si, c.rec.w, org, dir, c.hit.x, pixel,
+                                      smp, colour, ao_open);
                 c.cur = vec4(colour, float(ao_open));
                 c.ns.w = 0.0;
                 cursor = 0u;
@@ -328,7 +329,8 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 }
                 vec3 colour = c.cur.xyz;
                 uint ao_open = uint(c.cur.w);
-                secondary_ray_done(outcome, ray, si, c.rec.w, org, dir, c.hit.x, colour, ao_open);
+                secondary_ray_done(outcome, ray, si, c.rec.w, org, dir, c.hit.x, pixel, smp, colour,
+                                   ao_open);
                 c.cur = vec4(colour, float(ao_open));
                 c.st.yw = uvec2(g_stamp, smp | ((ray + 1u) << 16u));
                 continue;

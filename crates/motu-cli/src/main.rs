@@ -104,8 +104,8 @@ mod tests {
         let a = render_args(&[]);
         let o = motu_render::ShadingOptions::default();
         assert_eq!(
-            (o.ao_samples, o.spp, o.exposure_ev),
-            (a.ao_samples, a.spp, a.exposure)
+            (o.ao_samples, o.spp, o.auto_exposure),
+            (a.ao_samples, a.spp, a.exposure == cli::ExposureArg::Auto)
         );
         let b = cmd::render::stream_bounds(&a.stream_bounds);
         assert!(!b.given());

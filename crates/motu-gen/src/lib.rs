@@ -45,6 +45,7 @@
 //!   world-level shapes); `instanced_triangles`: triangles after full
 //!   flattening (world-level shapes count once).
 
+mod courtyard;
 mod forest;
 mod island;
 mod lod_grid;
@@ -62,6 +63,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
+pub use courtyard::CourtyardOptions;
 pub use forest::ForestOptions;
 pub use island::{IslandOptions, ISLAND_CAMERAS, ISLAND_ELEMENTS};
 pub use lod_grid::LodGridOptions;
@@ -75,6 +77,7 @@ pub enum GenKind {
     Sphereflake(SphereflakeOptions),
     LodGrid(LodGridOptions),
     Island(IslandOptions),
+    Courtyard(CourtyardOptions),
 }
 
 impl GenKind {
@@ -85,6 +88,7 @@ impl GenKind {
             GenKind::Sphereflake(_) => "sphereflake",
             GenKind::LodGrid(_) => "lod-grid",
             GenKind::Island(_) => "island",
+            GenKind::Courtyard(_) => "courtyard",
         }
     }
 }
@@ -199,6 +203,7 @@ pub fn generate(
         GenKind::Sphereflake(o) => sphereflake::generate(o, out_dir, progress),
         GenKind::LodGrid(o) => lod_grid::generate(o, out_dir, progress),
         GenKind::Island(o) => island::generate(o, out_dir, progress),
+        GenKind::Courtyard(o) => courtyard::generate(o, out_dir, progress),
     }?;
     tracing::info!(
         files = summary.files_written,
@@ -223,6 +228,7 @@ mod tests {
             GenKind::Sphereflake(SphereflakeOptions::default()),
             GenKind::LodGrid(LodGridOptions::default()),
             GenKind::Island(IslandOptions::default()),
+            GenKind::Courtyard(CourtyardOptions::default()),
         ] {
             let dir = tempfile::tempdir().expect("tempdir");
             let s = generate(&kind, dir.path(), &mut |_| {}).expect("generate");

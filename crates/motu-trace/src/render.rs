@@ -7,7 +7,7 @@ use std::time::Instant;
 use motu_abi::aov::{Aov, AovRecord};
 use motu_abi::camera::CameraParams;
 use motu_abi::lod::RAY_PRIMARY;
-use motu_abi::shade::{rand01, tone_map};
+use motu_abi::shade::{encode_rgb9e5, rand01, resolve_auto_exposure, tone_map};
 use motu_abi::HierarchyView;
 use rayon::prelude::*;
 
@@ -46,6 +46,8 @@ pub struct RenderStats {
     pub max_stack_depth: u32,
     /// The heatmap's red end: the most traces spent on one pixel.
     pub heatmap_max_traces: u32,
+    /// The exposure the shaded image was tone-mapped with, in stops (auto exposure's choice).
+    pub exposure_ev: f32,
     pub meshes_built: usize,
     pub threads: usize,
 }
@@ -112,6 +114,7 @@ pub fn render_with(
     let mut aov = Aov::new(w, h);
     let mut rgba8 = vec![0u8; w as usize * h as usize * 4];
     let exposure = opts.shading.exposure_scale();
+    let auto_exposure = opts.shading.auto_exposure && opts.view == View::Shaded;
     let spp = opts.shading.spp.max(1);
     let totals = aov
         .records
@@ -215,12 +218,17 @@ pub fn render_with(
                 };
                 st.truncated += u64::from(truncated);
                 let px = &mut px_row[x as usize * 4..x as usize * 4 + 4];
-                px[..3].copy_from_slice(&if opts.view == View::Shaded {
-                    tone_map(colour, exposure)
+                if auto_exposure {
+                    // Linear until the whole image's exposure is known (as the GPU writes it).
+                    px.copy_from_slice(&encode_rgb9e5(colour).to_le_bytes());
                 } else {
-                    encode_srgb(colour)
-                });
-                px[3] = 255;
+                    px[..3].copy_from_slice(&if opts.view == View::Shaded {
+                        tone_map(colour, exposure)
+                    } else {
+                        encode_srgb(colour)
+                    });
+                    px[3] = 255;
+                }
             }
             st
         })
@@ -237,6 +245,11 @@ pub fn render_with(
             px[..3].copy_from_slice(&c.map(|v| (v * 255.0 + 0.5) as u8));
         }
     }
+    let exposure_ev = if auto_exposure {
+        resolve_auto_exposure(&mut rgba8)
+    } else {
+        opts.shading.exposure_ev
+    };
     let secs = t1.elapsed().as_secs_f64();
     tracer.first_error()?;
     let rays = totals.primary + totals.shadow;
@@ -258,6 +271,7 @@ pub fn render_with(
         truncated_rays: totals.truncated,
         max_stack_depth: totals.max_stack,
         heatmap_max_traces: heatmap_max,
+        exposure_ev,
         meshes_built: tracer.meshes_built(),
         threads: rayon::current_num_threads(),
     };
@@ -273,6 +287,9 @@ pub fn render_with(
 /// What a primary ray that hits nothing shows in the shaded view: the scene's sky colour, else
 /// the gradient sky.
 fn background(opts: &RenderOptions, dir: [f32; 3]) -> [f32; 3] {
+    if let Some(env) = opts.shading.environment {
+        return env.radiance_towards(dir);
+    }
     opts.shading.sky.unwrap_or_else(|| sky(dir))
 }
 

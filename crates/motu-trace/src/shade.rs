@@ -247,6 +247,31 @@ pub fn shade_hit(
     let sky = opts.shading.sky_radiance(opts.ambient);
     let mut ao = 1.0;
     let n_ao = opts.shading.ao_samples;
+    if let (Some(env), true) = (opts.shading.environment, n_ao > 0) {
+        // The environment map as a light: its rays are drawn from the map and reach to
+        // infinity; each clear one adds the map's radiance through the material over its
+        // density (`shade.glsl` `environment_term`).
+        for k in 0..n_ao {
+            let Some(smp) = env.sample(
+                rand01(pixel, sample, 2 + 2 * k),
+                rand01(pixel, sample, 3 + 2 * k),
+            ) else {
+                continue;
+            };
+            let d = smp.world_dir;
+            let ndl = dot(ns, d);
+            if dot(d, ng) <= 0.0 || ndl <= 0.0 || occluded(d, f32::INFINITY, scratch) {
+                continue;
+            }
+            let h = normalize(sub(d, dir));
+            let spec = spec_norm * dot(ns, h).max(0.0).powf(s);
+            let w = ndl / (smp.pdf * n_ao as f32);
+            colour = std::array::from_fn(|i| {
+                colour[i] + (diffuse[i] / std::f32::consts::PI + f0[i] * spec) * smp.radiance[i] * w
+            });
+        }
+        return colour;
+    }
     if n_ao > 0 {
         let mut open = 0u32;
         for k in 0..n_ao {
