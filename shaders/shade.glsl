@@ -396,6 +396,19 @@ vec3 environment_term(ShadeInput si, uint material, vec3 dir, uint pixel, uint s
            (ndl / (pdf * float(push.frame.f.ao_samples)));
 }
 
+// The diffuse bounce from a vertex (motu_trace::shade::bounce_direction): a cosine-weighted
+// direction about the shading normal drawn with the next vertex's sample `next_smp` in
+// dimensions 0 and 1 (which secondary rays never use); `weight` multiplies the path's
+// throughput (the diffuse albedo: Lambert's f·cos/pdf). False below the surface or where the
+// surface has no diffuse part.
+bool bounce_ray(ShadeInput si, uint material, uint pixel, uint next_smp, out vec3 d,
+                out vec3 weight) {
+    MaterialRecord mat = push.materials.r[material];
+    weight = si.albedo * (1.0 - mat.metallic);
+    d = cosine_direction(si.ns, rand01(pixel, next_smp, 0u), rand01(pixel, next_smp, 1u));
+    return dot(d, si.ng) > 0.0 && max(max(weight.x, weight.y), weight.z) > 0.0;
+}
+
 // The sample's secondary rays: the lights' shadow rays, then its AO rays.
 uint secondary_ray_count() {
     return min(push.frame.f.light_count, uint(MAX_LIGHTS)) + push.frame.f.ao_samples;

@@ -86,6 +86,9 @@ pub struct Shading {
     /// The scene's environment map (an `infinite` light's image): importance-sampled by the
     /// sky term's rays and shown where camera rays escape; `None`: the constant `sky`.
     pub environment: Option<&'static crate::env::Environment>,
+    /// Diffuse bounces after each camera hit, each vertex lit like the first (its lights'
+    /// shadow rays, the environment's rays); 0: direct light only.
+    pub bounces: u32,
 }
 
 impl Default for Shading {
@@ -100,6 +103,7 @@ impl Default for Shading {
             exposure_ev: 0.0,
             auto_exposure: false,
             environment: None,
+            bounces: 0,
         }
     }
 }
@@ -179,21 +183,23 @@ pub fn luminance(c: [f32; 3]) -> f32 {
 }
 
 /// The exposure (stops) that maps the image's log-average luminance to
-/// [`AUTO_EXPOSURE_KEY`] (Reinhard et al. 2002): exp(mean ln(δ + L)), δ = 1e-4 so black
-/// pixels count without dominating; an all-black image keeps 0.
+/// [`AUTO_EXPOSURE_KEY`] (Reinhard et al. 2002), over the pixels that hold light: a black
+/// pixel carries no exposure information, and with one noisy sample a pixel (a path that
+/// found no light) those would drag the average down until every lit pixel clips. An image
+/// without light keeps 0.
 pub fn auto_exposure_ev(pixels: impl Iterator<Item = [f32; 3]>) -> f32 {
     let (mut sum, mut n) = (0.0f64, 0u64);
     for c in pixels {
-        sum += (1e-4 + luminance(c).max(0.0) as f64).ln();
-        n += 1;
+        let l = luminance(c);
+        if l > 1e-6 {
+            sum += (l as f64).ln();
+            n += 1;
+        }
     }
     if n == 0 {
         return 0.0;
     }
     let avg = (sum / n as f64).exp();
-    if avg <= 2e-4 {
-        return 0.0;
-    }
     let ev = (AUTO_EXPOSURE_KEY as f64 / avg).log2() as f32;
     ev.clamp(-AUTO_EXPOSURE_MAX_EV, AUTO_EXPOSURE_MAX_EV)
 }
@@ -421,7 +427,10 @@ mod tests {
     fn auto_exposure_brings_the_log_average_to_middle_grey() {
         let dark = [[0.01f32; 3]; 16];
         let ev = auto_exposure_ev(dark.iter().copied());
-        assert!((ev - (0.18f32 / 0.0101).log2()).abs() < 0.05, "{ev}");
+        assert!((ev - (0.18f32 / 0.01).log2()).abs() < 0.05, "{ev}");
+        // Black pixels do not drag the exposure up.
+        let half_black = dark.iter().copied().chain([[0.0f32; 3]; 16]);
+        assert!((auto_exposure_ev(half_black) - ev).abs() < 1e-4);
         let bright = [[40.0f32; 3]; 16];
         assert!(auto_exposure_ev(bright.iter().copied()) < -7.0);
         assert_eq!(auto_exposure_ev([[0.0f32; 3]; 4].into_iter()), 0.0);

@@ -581,6 +581,10 @@ pub struct RenderArgs {
     /// Ambient-occlusion rays per sample for the sky term (0: unoccluded sky light).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=256))]
     pub ao_samples: u32,
+    /// Diffuse bounces of the shaded view after each camera hit, each lit by the scene's lights
+    /// and environment (0: direct light only; not yet with --stream).
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=8))]
+    pub bounces: u32,
     /// Exposure of the shaded view: `auto` (the image's log-average luminance becomes middle
     /// grey; the chosen value is `exposure_ev` in --stats) or a number of stops EV (the image is
     /// scaled by 2^EV before the sRGB transfer).

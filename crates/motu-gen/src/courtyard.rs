@@ -30,8 +30,8 @@ impl Default for CourtyardOptions {
 
 /// Half the courtyard's side, its wall height and the opening's half side (world units).
 const HALF: f64 = 5.0;
-const WALL: f64 = 6.0;
-const OPENING: f64 = 2.5;
+const WALL: f64 = 4.0;
+const OPENING: f64 = 3.5;
 
 /// Sky radiance towards light-space direction (θ from the zenith).
 fn sky_radiance(theta: f64, phi: f64) -> [f32; 3] {
@@ -80,7 +80,7 @@ fn scene_text(o: &CourtyardOptions) -> String {
     let (h, w, a) = (HALF, WALL, OPENING);
     let mut s = String::new();
     s.push_str("# motu gen courtyard: sky map + sun through a roof opening\n");
-    s.push_str("LookAt 3.8 1.6 3.8  -2 2.2 -3  0 1 0\n");
+    s.push_str("LookAt 3.8 1.6 3.8  -2 1.5 -3  0 1 0\n");
     s.push_str("Camera \"perspective\" \"float fov\" [70]\n");
     s.push_str(&format!(
         "Film \"image\" \"integer xresolution\" [{}] \"integer yresolution\" [{}]\n",
@@ -89,7 +89,7 @@ fn scene_text(o: &CourtyardOptions) -> String {
     s.push_str("WorldBegin\n");
     // pbrt-v3's lat-long map has +z at its top row: rotate it to +y.
     s.push_str("AttributeBegin\n  Rotate -90 1 0 0\n  LightSource \"infinite\" \"string mapname\" \"sky.pfm\" \"rgb L\" [1 1 1]\nAttributeEnd\n");
-    s.push_str("LightSource \"distant\" \"point from\" [-1.2 6 0.9] \"point to\" [0 0 0] \"rgb L\" [5 4.7 4.2]\n");
+    s.push_str("LightSource \"distant\" \"point from\" [-1 6 0.5] \"point to\" [0 0 0] \"rgb L\" [5 4.7 4.2]\n");
     s.push_str(
         "MakeNamedMaterial \"floor\" \"string type\" \"matte\" \"rgb Kd\" [0.55 0.5 0.45]\n",
     );

@@ -596,7 +596,7 @@ pub(crate) fn frame_params(
         lights,
         environment: u32::from(sh.environment.is_some()),
         auto_exposure: u32::from(sh.auto_exposure && opts.view == View::Shaded),
-        bounces: 0,
+        bounces: sh.bounces,
         _pad: 0,
     }
 }

@@ -17,6 +17,9 @@ pub struct ShadingOptions {
     pub exposure_ev: f32,
     /// `--exposure auto` (the default): from the image's log-average luminance.
     pub auto_exposure: bool,
+    /// `--bounces N`: diffuse bounces after each camera hit (full builds and the CPU; streaming
+    /// refuses more than 0 for now).
+    pub bounces: u32,
 }
 
 impl Default for ShadingOptions {
@@ -26,6 +29,7 @@ impl Default for ShadingOptions {
             spp: 1,
             exposure_ev: 0.0,
             auto_exposure: true,
+            bounces: 0,
         }
     }
 }
@@ -44,6 +48,7 @@ pub fn scene_shading(
         spp,
         exposure_ev: exposure,
         auto_exposure,
+        bounces,
     } = o;
     use motu_abi::shade::{
         Shading, LIGHT_AREA, LIGHT_DISTANT, LIGHT_POINT, LIGHT_SPOT, MAX_LIGHTS,
@@ -54,6 +59,7 @@ pub fn scene_shading(
         spp: spp.max(1),
         exposure_ev: exposure,
         auto_exposure,
+        bounces,
         ..Default::default()
     };
     if let Some(root) = view.tlases.get(view.root_tlas as usize) {

@@ -126,6 +126,11 @@ pub(crate) fn render_streaming(
     recorded: Option<&[CameraParams]>,
     progress: &mut dyn FnMut(RenderEvent<'_>),
 ) -> Result<Rendered, RenderError> {
+    if s.shading.bounces > 0 && s.view == motu_gpu::View::Shaded {
+        return Err(RenderError::StreamBounces {
+            bounces: s.shading.bounces,
+        });
+    }
     let ctx = gpu_context(s, backend)?;
     let split = stream_split(view, stream.bounds.split_instances)?;
     let view = &split.as_ref().map_or(*view, |sp| sp.view(view));

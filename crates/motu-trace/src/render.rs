@@ -13,7 +13,7 @@ use rayon::prelude::*;
 
 use crate::mesh::MeshSource;
 use crate::ray::normalize;
-use crate::shade::{shade_hit, ShadeRays};
+use crate::shade::{shade_vertex, ShadeRays};
 use crate::traverse::{RayQuery, Scratch, Tracer};
 use crate::TraceError;
 
@@ -168,12 +168,11 @@ pub fn render_with(
                             };
                             let c = if h.is_hit() {
                                 let mut rays = ShadeRays::default();
-                                let c = shade_hit(
+                                let c = shade_path(
                                     tracer,
                                     camera,
                                     opts,
                                     &h,
-                                    camera.world_eye,
                                     normalize(d),
                                     pixel,
                                     sample,
@@ -282,6 +281,74 @@ pub fn render_with(
         "cpu render done"
     );
     Ok(RenderOutput { aov, rgba8, stats })
+}
+
+/// A sample's path from the camera's hit `hit` (direction `dir`): each vertex shaded with its
+/// lights and environment rays, then `opts.shading.bounces` diffuse bounces
+/// (`render_pixel.glsl`'s states 4 and 5). A bounce that escapes ends the path: the
+/// environment's light reached every vertex through its sampled rays already. Vertex `b`
+/// draws its numbers from sample `sample | b << 20`.
+#[allow(clippy::too_many_arguments)]
+fn shade_path(
+    tracer: &Tracer<'_>,
+    camera: &CameraParams,
+    opts: &RenderOptions,
+    hit: &crate::traverse::Hit,
+    dir: [f32; 3],
+    pixel: u32,
+    sample: u32,
+    scratch: &mut Scratch,
+    rays: &mut ShadeRays,
+) -> [f32; 3] {
+    let (mut colour, mut from) = shade_vertex(
+        tracer,
+        camera,
+        opts,
+        hit,
+        camera.world_eye,
+        dir,
+        pixel,
+        sample,
+        true,
+        scratch,
+        rays,
+    );
+    let mut thru = [1.0f32; 3];
+    for b in 1..=opts.shading.bounces {
+        let next = sample | (b << 20);
+        let Some(d) = from.direction(pixel, next) else {
+            break;
+        };
+        thru = std::array::from_fn(|i| thru[i] * from.diffuse[i]);
+        let q = RayQuery {
+            kind: motu_abi::lod::RAY_SHADOW,
+            lod: motu_abi::lod::LodParams {
+                forced_lod: if opts.shadow_lod_from_primary {
+                    from.lod as i32
+                } else {
+                    opts.lod.forced_lod
+                },
+                ..opts.lod
+            },
+            pixels_per_unit_at_1: camera.pixels_per_unit_at_1,
+            max_traces: opts.max_traces_per_ray,
+            ..RayQuery::default()
+        };
+        let h = tracer.trace(from.start, d, &q, scratch);
+        rays.truncated |= h.truncated;
+        rays.rays += 1;
+        rays.traces += h.traces;
+        rays.max_stack = rays.max_stack.max(h.max_stack);
+        if !h.is_hit() {
+            break;
+        }
+        let (c, f) = shade_vertex(
+            tracer, camera, opts, &h, from.start, d, pixel, next, false, scratch, rays,
+        );
+        colour = std::array::from_fn(|i| colour[i] + thru[i] * c[i]);
+        from = f;
+    }
+    colour
 }
 
 /// What a primary ray that hits nothing shows in the shaded view: the scene's sky colour, else

@@ -135,6 +135,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         spp: 1,
         ao_samples: 1,
         exposure: crate::cli::ExposureArg::Auto,
+        bounces: 0,
         device: None,
         camera_path: None,
     };

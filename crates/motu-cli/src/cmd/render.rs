@@ -259,6 +259,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
                 crate::cli::ExposureArg::Auto => 0.0,
             },
             auto_exposure: a.exposure == crate::cli::ExposureArg::Auto,
+            bounces: a.bounces,
         },
         camera: motu_render::CameraRequest {
             name: a.camera.clone(),
