@@ -153,6 +153,15 @@ fn courtyard_sky_map_sun_and_a_bounce() {
             &read_png(&aov.with_extension("png")),
         );
     }
+    // The samples are a fixed per-pixel sequence: a rerun is bit-identical.
+    let mut args = size.to_vec();
+    args.extend(["--bounces", "1"]);
+    render(&pkg, "pipeline", &at("again.aov"), &args);
+    assert_eq!(
+        read_png(&at("again.png")),
+        read_png(&at("pipeline_b.png")),
+        "a rerun differs"
+    );
     // Bounces are not streamed yet: refused, never a silently different image.
     let out = motu(&[
         "render",

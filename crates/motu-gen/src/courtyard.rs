@@ -1,9 +1,9 @@
 //! `courtyard`: a lighting test, lit the way production scenes are. A walled courtyard under a
-//! roof with an opening, lit only by an `infinite` light with a sky map (`sky.pfm`: bright at
-//! the zenith, dark below the horizon) and a sun (`distant`) whose light falls through the
-//! opening onto one patch of floor and wall: most surfaces see no light source directly, so
-//! what they show is the sky through the opening and light bounced off the sunlit patch.
-//! Standard pbrt-v3, a few hundred bytes of geometry.
+//! roof rim around a wide opening, lit only by an `infinite` light with a sky map (`sky.pfm`:
+//! bright at the zenith, dark below the horizon) and a sun (`distant`) whose light falls
+//! through the opening onto the floor: the walls under the rim see the sun not at all and
+//! the sky only through the opening, so much of what they show is sky and light bounced off
+//! the sunlit floor (`--bounces`). Standard pbrt-v3, 18 triangles and a 64×32 PFM.
 
 use std::path::Path;
 
@@ -87,8 +87,9 @@ fn scene_text(o: &CourtyardOptions) -> String {
         o.width, o.height
     ));
     s.push_str("WorldBegin\n");
-    // pbrt-v3's lat-long map has +z at its top row: rotate it to +y.
-    s.push_str("AttributeBegin\n  Rotate -90 1 0 0\n  LightSource \"infinite\" \"string mapname\" \"sky.pfm\" \"rgb L\" [1 1 1]\nAttributeEnd\n");
+    // pbrt-v3's lat-long map has +z at its top row: rotate it to +y (`Rotate -90 1 0 0`,
+    // written as its matrix, column-major as pbrt reads it).
+    s.push_str("AttributeBegin\n  Transform [1 0 0 0  0 0 -1 0  0 1 0 0  0 0 0 1]\n  LightSource \"infinite\" \"string mapname\" \"sky.pfm\" \"rgb L\" [1 1 1]\nAttributeEnd\n");
     s.push_str("LightSource \"distant\" \"point from\" [-1 6 0.5] \"point to\" [0 0 0] \"rgb L\" [5 4.7 4.2]\n");
     s.push_str(
         "MakeNamedMaterial \"floor\" \"string type\" \"matte\" \"rgb Kd\" [0.55 0.5 0.45]\n",
@@ -172,4 +173,39 @@ pub(crate) fn generate(
         nested_instancing: false,
         syntax: None,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn writes_the_scene_and_its_sky_map() {
+        let dir = tempfile::tempdir().unwrap();
+        let o = CourtyardOptions::default();
+        let s = generate(&o, dir.path(), &mut |_| {}).unwrap();
+        let text = std::fs::read_to_string(&s.scene_path).unwrap();
+        assert!(text.contains("LightSource \"infinite\" \"string mapname\" \"sky.pfm\""));
+        assert_eq!(text.matches("Shape \"trianglemesh\"").count(), 9);
+        assert_eq!(s.unique_triangles, 18);
+        let sky = std::fs::read(dir.path().join("sky.pfm")).unwrap();
+        let header = format!("PF\n{} {}\n-1.0\n", o.sky_width, o.sky_width / 2);
+        assert!(sky.starts_with(header.as_bytes()));
+        assert_eq!(
+            sky.len(),
+            header.len() + 12 * (o.sky_width * (o.sky_width / 2)) as usize
+        );
+        // The zenith is brighter than the horizon, and below it the ground is dark.
+        let [z, h, g] = [0.05, 1.5, 2.5].map(|t| sky_radiance(t, 0.0)[1]);
+        assert!(z > h && h > g, "{z} {h} {g}");
+        assert!(generate(
+            &CourtyardOptions {
+                width: 0,
+                ..o.clone()
+            },
+            dir.path(),
+            &mut |_| {}
+        )
+        .is_err());
+    }
 }

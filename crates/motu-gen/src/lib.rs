@@ -228,7 +228,6 @@ mod tests {
             GenKind::Sphereflake(SphereflakeOptions::default()),
             GenKind::LodGrid(LodGridOptions::default()),
             GenKind::Island(IslandOptions::default()),
-            GenKind::Courtyard(CourtyardOptions::default()),
         ] {
             let dir = tempfile::tempdir().expect("tempdir");
             let s = generate(&kind, dir.path(), &mut |_| {}).expect("generate");
