@@ -109,6 +109,10 @@ struct FrameParams {
     float ao_distance;
     float exposure_scale;
     LightRecord lights[MAX_LIGHTS];
+    uint environment;    // 1: an environment map's tables follow, ENV_OFFSET_BYTES in (shade.glsl)
+    uint auto_exposure;  // 1: shaded pixels are written as linear RGB9E5 (the host tone-maps)
+    uint bounces;        // diffuse bounces after each primary hit
+    uint _pad_frame;
 };
 
 struct MeshGeo {

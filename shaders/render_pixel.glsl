@@ -95,7 +95,8 @@ void stream_write_fallback(uvec2 px, uint pixel, Carry c) {
     }
     rec.w |= min(c.st.z, 65535u) << 16u;
     push.aov.r[pixel] = rec;
-    push.rgba.r[pixel] = encode_srgb8(colour);
+    push.rgba.r[pixel] = f.view == VIEW_SHADED ? tone_map(colour, f.exposure_scale)
+                                              : encode_srgb8(colour);
 }
 
 // Puts pixel `px` on the pass's incomplete list (packed x | y << 16).
@@ -159,6 +160,16 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         traces = c.st.z;
     }
     bool open = false;
+#ifndef MOTU_STREAMED
+    // Diffuse bounces (full builds; state 4 of Carry.st.x: the bounce ray is next, 5: the path
+    // ended): the current vertex's incoming ray (p_org, p_dir; the camera ray at vertex 0), the
+    // vertex's index and the path's throughput. A vertex's secondary rays draw their numbers
+    // from sample smp | bounce << 20, so vertex 0 is the sample as without bounces.
+    uint bounce = 0u;
+    vec3 p_org = org;
+    vec3 p_dir = vec3(0.0);
+    vec3 thru = vec3(1.0);
+#endif
 #ifdef MOTU_STREAMED
     // This pass's next secondary ray to look at in the current window (rays before it were
     // traced or settled in this pass).
@@ -183,6 +194,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
 #else
         bool primary = c.st.x == 1u;
 #endif
+        bool bouncing = false;
         ShadeInput si;
         si.ng = c.hit.yzw;
         si.ns = c.ns.xyz;
@@ -227,8 +239,8 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
             } else {
                 vec3 colour = c.cur.xyz;
                 uint ao_open = uint(c.cur.w);
-                secondary_window_done(first, masks >> 8u, si, c.rec.w, org, dir, c.hit.x, colour,
-                                      ao_open);
+                secondary_window_done(first, masks >> 8u, si, c.rec.w, org, dir, c.hit.x, pixel,
+                                      smp, colour, ao_open);
                 c.cur = vec4(colour, float(ao_open));
                 c.ns.w = 0.0;
                 cursor = 0u;
@@ -256,20 +268,42 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         }
 #else
         uint ray = c.st.w >> 16u;
+        // The current vertex's incoming ray and random-number sample.
+        vec3 v_org = bounce > 0u ? p_org : org;
+        vec3 v_dir = bounce > 0u ? p_dir : dir;
+        uint v_smp = smp | (bounce << 20u);
+        bouncing = c.st.x == 4u;
         // The ray to trace: origin, direction, reach (w).
         vec3 r_org = org;
         vec4 r_dir = vec4(dir, T_INFINITY);
-        bool sample_done = false;
+        bool sample_done = c.st.x == 5u;
         if (primary) {
             g_best_t = c.hit.x;
-        } else {
+        } else if (bouncing) {
+            r_org = p_org;
+            r_dir = vec4(p_dir, T_INFINITY);
+            g_best_t = T_INFINITY;
+        } else if (!sample_done) {
             vec3 colour = c.cur.xyz;
-            if (next_secondary_ray(si, c.rec.w, org, dir, c.hit.x, pixel, smp, ray, colour,
+            if (next_secondary_ray(si, c.rec.w, v_org, v_dir, c.hit.x, pixel, v_smp, ray, colour,
                                    r_dir)) {
-                r_org = secondary_start(org, dir, c.hit.x, si.ng);
+                r_org = secondary_start(v_org, v_dir, c.hit.x, si.ng);
                 c.st.w = smp | (ray << 16u);
             } else {
-                c.sum.xyz += colour + sky_term(si, c.rec.w, uint(c.cur.w));
+                c.sum.xyz += thru * (colour + sky_term(si, c.rec.w, uint(c.cur.w)));
+                vec3 bounce_dir;
+                vec3 weight;
+                if (bounce < push.frame.f.bounces &&
+                    bounce_ray(si, c.rec.w, pixel, smp | ((bounce + 1u) << 20u), bounce_dir,
+                               weight)) {
+                    // The path goes on: its bounce ray is traced next.
+                    p_org = secondary_start(v_org, v_dir, c.hit.x, si.ng);
+                    p_dir = bounce_dir;
+                    thru *= weight;
+                    bounce += 1u;
+                    c.st.x = 4u;
+                    continue;
+                }
                 sample_done = true;
             }
             c.cur.xyz = colour;
@@ -292,8 +326,8 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
             float lod_u = primary ? (guard ? 0.5 : pixel_dither(px.x, px.y)) : 0.0;
             TraceHit h = traverse(push.frame.f.root_tlas, r_org, r_dir.xyz,
                                   primary ? RAY_PRIMARY : RAY_SHADOW, lodp,
-                                  push.frame.f.camera.pixels_per_unit_at_1, lod_u, !primary,
-                                  traces, overflows, truncations);
+                                  push.frame.f.camera.pixels_per_unit_at_1, lod_u,
+                                  !primary && !bouncing, traces, overflows, truncations);
             g_t_max = T_INFINITY;
             // A cut-short walk (stack overflow, trace cap) cannot finish in a later pass either:
             // the pixel ends here and is counted as truncated.
@@ -317,6 +351,28 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 continue;
             }
 #else
+            if (bouncing) {
+                g_secondary_rays += 1u;
+                if (h.tlas == NONE_U32) {
+                    // Escaped: the environment's light reached every vertex through its
+                    // sampled rays, so the path ends without adding it again.
+                    c.st.x = 5u;
+                    continue;
+                }
+                // The bounce's hit is the next vertex: resolved, then its secondary rays.
+                uint mesh = hit_mesh(h);
+                MeshRecord m = push.meshes.r[mesh];
+                c.hit.x = h.t;
+                c.rec = uvec4(m.source_mesh, source_primitive(m, mesh, h.primitive),
+                              h.lod == NONE_U32 ? m.lod : h.lod, m.material);
+                ShadeInput hs = shade_input(h, mesh, p_org, p_dir);
+                c.hit.yzw = hs.ng;
+                c.ns.xyz = hs.ns;
+                c.albedo.xyz = hs.albedo;
+                c.cur = vec4(0.0);
+                c.st.xw = uvec2(2u, smp);
+                continue;
+            }
             if (!primary) {
                 g_secondary_rays += 1u;
                 uint outcome = RAY_CLEAR;
@@ -328,7 +384,8 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 }
                 vec3 colour = c.cur.xyz;
                 uint ao_open = uint(c.cur.w);
-                secondary_ray_done(outcome, ray, si, c.rec.w, org, dir, c.hit.x, colour, ao_open);
+                secondary_ray_done(outcome, ray, si, c.rec.w, v_org, v_dir, c.hit.x, pixel, v_smp,
+                                   colour, ao_open);
                 c.cur = vec4(colour, float(ao_open));
                 c.st.yw = uvec2(g_stamp, smp | ((ray + 1u) << 16u));
                 continue;
@@ -406,6 +463,10 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         // The next sample's primary ray starts now.
         c.hit = vec4(T_INFINITY, 0.0, 0.0, 0.0);
         c.st.xyw = uvec3(1u, g_stamp, smp + 1u);
+#ifndef MOTU_STREAMED
+        bounce = 0u;
+        thru = vec3(1.0);
+#endif
     }
     if (g_probe) {
         // A probe of the next frame marks what its rays met; a pixel that needs a structure

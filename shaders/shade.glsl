@@ -11,6 +11,119 @@
 // Secondary rays of the current pixel (added to the stats once per pixel).
 uint g_secondary_rays = 0u;
 
+// Environment map (motu_abi::env, mirrored line by line): its tables follow FrameParams in the
+// frame-parameter buffer (motu-gpu render.rs ENV_OFFSET_BYTES): a header of ENV_HEADER_WORDS
+// (width, height, sampleable, pad, light_from_world and world_from_light rows as vec4), the
+// marginal CDF (height + 1), the conditional CDFs (height × (width + 1)), RGB radiance.
+const uint64_t ENV_OFFSET_BYTES = 1024ul;
+const uint ENV_HEADER_WORDS = 28u;
+const float ENV_PI = 3.14159265359;
+
+uint64_t env_base() {
+    return uint64_t(push.frame) + ENV_OFFSET_BYTES;
+}
+
+// The largest i < n with cdf[first + i] <= u (motu_abi::env::find_interval).
+uint env_find(FloatTable t, uint first, uint n, float u) {
+    uint lo = 0u;
+    uint hi = n + 1u;
+    while (lo < hi) {
+        uint mid = (lo + hi) / 2u;
+        if (t.r[first + mid] <= u) {
+            lo = mid + 1u;
+        } else {
+            hi = mid;
+        }
+    }
+    return min(max(lo, 1u) - 1u, n - 1u);
+}
+
+// Rows at word `at` (three vec4) times v.
+vec3 env_mat_vec(FloatTable t, uint at, vec3 v) {
+    vec3 r0 = vec3(t.r[at], t.r[at + 1u], t.r[at + 2u]);
+    vec3 r1 = vec3(t.r[at + 4u], t.r[at + 5u], t.r[at + 6u]);
+    vec3 r2 = vec3(t.r[at + 8u], t.r[at + 9u], t.r[at + 10u]);
+    return vec3(r0.x * v.x + r0.y * v.y + r0.z * v.z, r1.x * v.x + r1.y * v.y + r1.z * v.z,
+                r2.x * v.x + r2.y * v.y + r2.z * v.z);
+}
+
+vec3 env_texel(FloatTable t, uint w, uint h, uint col, uint row) {
+    uint at = ENV_HEADER_WORDS + h + 1u + h * (w + 1u) + 3u * (row * w + col);
+    return vec3(t.r[at], t.r[at + 1u], t.r[at + 2u]);
+}
+
+// A direction drawn from the map's distribution (Environment::sample): world direction,
+// radiance and density per solid angle; false where the map has no light or at a pole.
+bool env_sample(float u0, float u1, out vec3 dir, out vec3 radiance, out float pdf) {
+    U32Table hdr = U32Table(env_base());
+    FloatTable t = FloatTable(env_base());
+    dir = vec3(0.0, 1.0, 0.0);
+    radiance = vec3(0.0);
+    pdf = 0.0;
+    if (hdr.r[2] == 0u) {
+        return false;
+    }
+    uint w = hdr.r[0];
+    uint h = hdr.r[1];
+    uint marg = ENV_HEADER_WORDS;
+    uint row = env_find(t, marg, h, u1);
+    float m0 = t.r[marg + row];
+    float m1 = t.r[marg + row + 1u];
+    float dv = (u1 - m0) / (m1 - m0);
+    uint cb = marg + h + 1u + row * (w + 1u);
+    uint col = env_find(t, cb, w, u0);
+    float c0 = t.r[cb + col];
+    float c1 = t.r[cb + col + 1u];
+    float du = (u0 - c0) / (c1 - c0);
+    float pdf_uv = float(h) * (m1 - m0) * (float(w) * (c1 - c0));
+    float v = (float(row) + dv) / float(h);
+    float u = (float(col) + du) / float(w);
+    float theta = v * ENV_PI;
+    float phi = u * 2.0 * ENV_PI;
+    float sin_theta = sin(theta);
+    if (!(pdf_uv > 0.0 && sin_theta > 0.0)) {
+        return false;
+    }
+    vec3 l = vec3(sin_theta * cos(phi), sin_theta * sin(phi), cos(theta));
+    dir = normalize(env_mat_vec(t, 16u, l));
+    radiance = env_texel(t, w, h, col, row);
+    pdf = pdf_uv / (2.0 * ENV_PI * ENV_PI * sin_theta);
+    return true;
+}
+
+// Radiance arriving from world direction d, bilinear between texel centres
+// (Environment::radiance_towards): what an escaping camera ray shows.
+vec3 env_radiance(vec3 d) {
+    U32Table hdr = U32Table(env_base());
+    FloatTable t = FloatTable(env_base());
+    uint w = hdr.r[0];
+    uint h = hdr.r[1];
+    vec3 l = env_mat_vec(t, 4u, normalize(d));
+    float theta = acos(clamp(l.z, -1.0, 1.0));
+    float phi = atan(l.y, l.x);
+    if (phi < 0.0) {
+        phi += 2.0 * ENV_PI;
+    }
+    float x = phi / (2.0 * ENV_PI) * float(w) - 0.5;
+    float y = clamp(theta / ENV_PI * float(h) - 0.5, 0.0, float(h - 1u));
+    float x0 = floor(x);
+    float y0 = floor(y);
+    float fx = x - x0;
+    float fy = y - y0;
+    int xi = int(x0);
+    uint c0 = uint(((xi % int(w)) + int(w)) % int(w));
+    uint c1 = uint((((xi + 1) % int(w)) + int(w)) % int(w));
+    uint r0 = uint(y0);
+    uint r1 = min(r0 + 1u, h - 1u);
+    vec3 a = env_texel(t, w, h, c0, r0);
+    vec3 b = env_texel(t, w, h, c1, r0);
+    vec3 c = env_texel(t, w, h, c0, r1);
+    vec3 e = env_texel(t, w, h, c1, r1);
+    vec3 top = a + (b - a) * fx;
+    vec3 bottom = c + (e - c) * fx;
+    return top + (bottom - top) * fy;
+}
+
 float rand01(uint pixel, uint smp, uint dim) {
     uint h = hash_u32(hash_u32(hash_u32(pixel) ^ (smp * 0x9e3779b9u)) ^ dim);
     return float(h >> 8u) / 16777216.0;
@@ -239,12 +352,61 @@ bool light_term(uint i, ShadeInput si, uint material, vec3 org, vec3 dir, float 
 }
 
 // AO ray `k` of sample `smp`: a cosine-weighted direction about the shading normal (xyz) and
-// the AO reach (w); false when it points below the surface (it brings nothing).
+// the AO reach (w); false when it points below the surface (it brings nothing). With an
+// environment map it is a direction drawn from the map (env_sample) reaching to infinity.
 bool ao_ray(ShadeInput si, uint pixel, uint smp, uint k, out vec4 traced) {
-    vec3 d = cosine_direction(si.ns, rand01(pixel, smp, 2u + 2u * k),
-                              rand01(pixel, smp, 3u + 2u * k));
+    float u0 = rand01(pixel, smp, 2u + 2u * k);
+    float u1 = rand01(pixel, smp, 3u + 2u * k);
+    if (push.frame.f.environment != 0u) {
+        vec3 d;
+        vec3 radiance;
+        float pdf;
+        bool some = env_sample(u0, u1, d, radiance, pdf);
+        traced = vec4(d, T_INFINITY);
+        return some && dot(d, si.ng) > 0.0 && dot(d, si.ns) > 0.0;
+    }
+    vec3 d = cosine_direction(si.ns, u0, u1);
     traced = vec4(d, push.frame.f.ao_distance);
     return dot(d, si.ng) > 0.0;
+}
+
+// What environment ray `k` of sample `smp` brings when clear: the map's radiance through the
+// material (diffuse and the specular lobe, as a light), cosine over density, averaged over
+// the sample's `ao_samples` rays (motu_trace::shade::environment_term).
+vec3 environment_term(ShadeInput si, uint material, vec3 dir, uint pixel, uint smp, uint k) {
+    vec3 d;
+    vec3 radiance;
+    float pdf;
+    if (!env_sample(rand01(pixel, smp, 2u + 2u * k), rand01(pixel, smp, 3u + 2u * k), d,
+                    radiance, pdf)) {
+        return vec3(0.0);
+    }
+    float ndl = dot(si.ns, d);
+    if (ndl <= 0.0 || dot(si.ng, d) <= 0.0) {
+        return vec3(0.0);
+    }
+    MaterialRecord mat = push.materials.r[material];
+    vec3 diffuse = si.albedo * (1.0 - mat.metallic);
+    vec3 f0 = vec3(0.04) + (si.albedo - vec3(0.04)) * mat.metallic;
+    float s = shininess(mat.roughness);
+    float spec_norm = (s + 8.0) / (8.0 * 3.14159265359);
+    vec3 hv = normalize(d - dir);
+    float spec = spec_norm * pow(max(dot(si.ns, hv), 0.0), s);
+    return (diffuse / 3.14159265359 + f0 * spec) * radiance *
+           (ndl / (pdf * float(push.frame.f.ao_samples)));
+}
+
+// The diffuse bounce from a vertex (motu_trace::shade::bounce_direction): a cosine-weighted
+// direction about the shading normal drawn with the next vertex's sample `next_smp` in
+// dimensions 0 and 1 (which secondary rays never use); `weight` multiplies the path's
+// throughput (the diffuse albedo: Lambert's f·cos/pdf). False below the surface or where the
+// surface has no diffuse part.
+bool bounce_ray(ShadeInput si, uint material, uint pixel, uint next_smp, out vec3 d,
+                out vec3 weight) {
+    MaterialRecord mat = push.materials.r[material];
+    weight = si.albedo * (1.0 - mat.metallic);
+    d = cosine_direction(si.ns, rand01(pixel, next_smp, 0u), rand01(pixel, next_smp, 1u));
+    return dot(d, si.ng) > 0.0 && max(max(weight.x, weight.y), weight.z) > 0.0;
 }
 
 // The sample's secondary rays: the lights' shadow rays, then its AO rays.
@@ -302,18 +464,22 @@ bool next_secondary_ray(ShadeInput si, uint material, vec3 org, vec3 dir, float 
 }
 
 // A traced secondary ray `ray` ended `outcome`: a clear light ray adds its term to `colour`,
-// a clear AO ray counts in `ao_open`.
+// a clear AO ray counts in `ao_open` (an environment ray adds its term).
 void secondary_ray_done(uint outcome, uint ray, ShadeInput si, uint material, vec3 org,
-                        vec3 dir, float t, inout vec3 colour, inout uint ao_open) {
+                        vec3 dir, float t, uint pixel, uint smp, inout vec3 colour,
+                        inout uint ao_open) {
     if (outcome != RAY_CLEAR) {
         return;
     }
-    if (ray < min(push.frame.f.light_count, uint(MAX_LIGHTS))) {
+    uint nl = min(push.frame.f.light_count, uint(MAX_LIGHTS));
+    if (ray < nl) {
         vec4 shadow_ray;
         vec3 term;
         if (light_term(ray, si, material, org, dir, t, shadow_ray, term)) {
             colour += term;
         }
+    } else if (push.frame.f.environment != 0u) {
+        colour += environment_term(si, material, dir, pixel, smp, ray - nl);
     } else {
         ao_open += 1u;
     }
@@ -333,16 +499,22 @@ const uint SECONDARY_WINDOW = 8u;
 // The window of rays from `first` is done: its clear rays (bits of `clear`), in ray order, add
 // their light terms to `colour` and count AO rays in `ao_open`.
 void secondary_window_done(uint first, uint clear, ShadeInput si, uint material, vec3 org,
-                           vec3 dir, float t, inout vec3 colour, inout uint ao_open) {
+                           vec3 dir, float t, uint pixel, uint smp, inout vec3 colour,
+                           inout uint ao_open) {
     for (uint i = 0u; i < SECONDARY_WINDOW; ++i) {
         if ((clear & (1u << i)) != 0u) {
-            secondary_ray_done(RAY_CLEAR, first + i, si, material, org, dir, t, colour, ao_open);
+            secondary_ray_done(RAY_CLEAR, first + i, si, material, org, dir, t, pixel, smp,
+                               colour, ao_open);
         }
     }
 }
 
-// The sky term of a sample whose secondary rays are all done (`ao_open` of them clear).
+// The sky term of a sample whose secondary rays are all done (`ao_open` of them clear); with
+// an environment map its rays added their terms already (without rays: the map's mean).
 vec3 sky_term(ShadeInput si, uint material, uint ao_open) {
+    if (push.frame.f.environment != 0u && push.frame.f.ao_samples > 0u) {
+        return vec3(0.0);
+    }
     MaterialRecord mat = push.materials.r[material];
     vec3 diffuse = si.albedo * (1.0 - mat.metallic);
     vec3 f0 = vec3(0.04) + (si.albedo - vec3(0.04)) * mat.metallic;
@@ -355,11 +527,38 @@ vec3 sky_term(ShadeInput si, uint material, uint ao_open) {
 
 // What a primary ray that hits nothing shows in the shaded view.
 vec3 shaded_background(vec3 dir) {
+    if (push.frame.f.environment != 0u) {
+        return env_radiance(dir);
+    }
     return push.frame.f.sky.w != 0.0 ? push.frame.f.sky.rgb : sky(dir);
 }
 
-// Exposure and the sRGB transfer (motu_abi::shade::tone_map).
+// Linear RGB as shared-exponent RGB9E5 (motu_abi::shade::encode_rgb9e5, line by line).
+uint encode_rgb9e5(vec3 c) {
+    const float MAX_RGB9E5 = 65408.0;
+    c = vec3(c.x > 0.0 ? min(c.x, MAX_RGB9E5) : 0.0, c.y > 0.0 ? min(c.y, MAX_RGB9E5) : 0.0,
+             c.z > 0.0 ? min(c.z, MAX_RGB9E5) : 0.0);
+    float m = max(max(c.x, c.y), c.z);
+    if (m <= 0.0) {
+        return 0u;
+    }
+    int floor_log2 = int((floatBitsToUint(m) >> 23u) & 0xffu) - 127;
+    int e = max(floor_log2, -16) + 16;
+    float denom = exp2(float(e - 15 - 9));
+    if (floor(m / denom + 0.5) >= 512.0) {
+        e += 1;
+        denom *= 2.0;
+    }
+    uvec3 q = min(uvec3(floor(c / denom + 0.5)), uvec3(511u));
+    return q.x | (q.y << 9u) | (q.z << 18u) | (uint(e) << 27u);
+}
+
+// Exposure and the sRGB transfer (motu_abi::shade::tone_map); under auto exposure the linear
+// colour as RGB9E5, tone-mapped on the host once the image's exposure is known.
 uint tone_map(vec3 c, float exposure_scale) {
+    if (push.frame.f.auto_exposure != 0u) {
+        return encode_rgb9e5(c);
+    }
     return encode_srgb8(c * exposure_scale);
 }
 #endif

@@ -25,6 +25,7 @@
 
 pub mod aov;
 pub mod camera;
+pub mod env;
 pub mod glsl;
 pub mod lod;
 pub mod lod_instance;

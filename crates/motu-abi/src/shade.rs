@@ -79,6 +79,16 @@ pub struct Shading {
     pub spp: u32,
     /// Exposure in stops (the image is scaled by 2^ev before the sRGB transfer).
     pub exposure_ev: f32,
+    /// Exposure from the image's log-average luminance ([`auto_exposure_ev`]) instead of
+    /// `exposure_ev`: the renderers write linear RGB9E5 pixels ([`encode_rgb9e5`]) and
+    /// [`resolve_auto_exposure`] tone-maps them once the whole image is known.
+    pub auto_exposure: bool,
+    /// The scene's environment map (an `infinite` light's image): importance-sampled by the
+    /// sky term's rays and shown where camera rays escape; `None`: the constant `sky`.
+    pub environment: Option<&'static crate::env::Environment>,
+    /// Diffuse bounces after each camera hit, each vertex lit like the first (its lights'
+    /// shadow rays, the environment's rays); 0: direct light only.
+    pub bounces: u32,
 }
 
 impl Default for Shading {
@@ -91,6 +101,9 @@ impl Default for Shading {
             ao_distance: f32::INFINITY,
             spp: 1,
             exposure_ev: 0.0,
+            auto_exposure: false,
+            environment: None,
+            bounces: 0,
         }
     }
 }
@@ -128,6 +141,82 @@ impl Shading {
     pub fn exposure_scale(&self) -> f32 {
         self.exposure_ev.exp2()
     }
+}
+
+/// Middle grey: the log-average luminance auto exposure maps the image to (Reinhard's key).
+pub const AUTO_EXPOSURE_KEY: f32 = 0.18;
+/// Auto exposure stays within ±this many stops.
+pub const AUTO_EXPOSURE_MAX_EV: f32 = 16.0;
+
+/// Linear RGB as the shared-exponent RGB9E5 word (9-bit mantissas, 5-bit exponent, bias 15;
+/// negative and NaN channels are 0, large ones clamp): what a shaded pixel holds until
+/// [`resolve_auto_exposure`] tone-maps it. The GLSL's `encode_rgb9e5` is this function.
+pub fn encode_rgb9e5(c: [f32; 3]) -> u32 {
+    const MAX: f32 = 65408.0; // (511 / 512) × 2^16
+    let c = c.map(|v| if v > 0.0 { v.min(MAX) } else { 0.0 });
+    let m = c[0].max(c[1]).max(c[2]);
+    if m <= 0.0 {
+        return 0;
+    }
+    // floor(log2(m)) from the bits: exact, and identical on the GPU.
+    let floor_log2 = ((m.to_bits() >> 23) & 0xff) as i32 - 127;
+    let mut e = floor_log2.max(-16) + 16; // shared exponent, biased: 0..=31
+    let mut denom = ((e - 15 - 9) as f32).exp2();
+    if (m / denom + 0.5).floor() >= 512.0 {
+        e += 1;
+        denom *= 2.0;
+    }
+    let q = c.map(|v| ((v / denom + 0.5).floor() as u32).min(511));
+    q[0] | q[1] << 9 | q[2] << 18 | (e as u32) << 27
+}
+
+/// The linear RGB an RGB9E5 word holds.
+pub fn decode_rgb9e5(w: u32) -> [f32; 3] {
+    let scale = (((w >> 27) as i32) - 15 - 9) as f32;
+    let scale = scale.exp2();
+    [w & 511, (w >> 9) & 511, (w >> 18) & 511].map(|m| m as f32 * scale)
+}
+
+/// Rec. 709 luminance of linear RGB.
+pub fn luminance(c: [f32; 3]) -> f32 {
+    0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
+}
+
+/// The exposure (stops) that maps the image's log-average luminance to
+/// [`AUTO_EXPOSURE_KEY`] (Reinhard et al. 2002), over the pixels that hold light: a black
+/// pixel carries no exposure information, and with one noisy sample a pixel (a path that
+/// found no light) those would drag the average down until every lit pixel clips. An image
+/// without light keeps 0.
+pub fn auto_exposure_ev(pixels: impl Iterator<Item = [f32; 3]>) -> f32 {
+    let (mut sum, mut n) = (0.0f64, 0u64);
+    for c in pixels {
+        let l = luminance(c);
+        if l > 1e-6 {
+            sum += (l as f64).ln();
+            n += 1;
+        }
+    }
+    if n == 0 {
+        return 0.0;
+    }
+    let avg = (sum / n as f64).exp();
+    let ev = (AUTO_EXPOSURE_KEY as f64 / avg).log2() as f32;
+    ev.clamp(-AUTO_EXPOSURE_MAX_EV, AUTO_EXPOSURE_MAX_EV)
+}
+
+/// Tone-maps an image of RGB9E5 pixels (`rgba8`, 4 bytes a pixel, as the renderers wrote them
+/// under auto exposure) in place with the exposure [`auto_exposure_ev`] picks for it, and
+/// returns that exposure in stops.
+pub fn resolve_auto_exposure(rgba8: &mut [u8]) -> f32 {
+    let word = |p: &[u8]| u32::from_le_bytes([p[0], p[1], p[2], p[3]]);
+    let ev = auto_exposure_ev(rgba8.chunks_exact(4).map(|p| decode_rgb9e5(word(p))));
+    let scale = ev.exp2();
+    for p in rgba8.chunks_exact_mut(4) {
+        let c = tone_map(decode_rgb9e5(word(p)), scale);
+        p[..3].copy_from_slice(&c);
+        p[3] = 255;
+    }
+    ev
 }
 
 /// Phong exponent of a perceptual roughness (the specular lobe of both renderers).
@@ -304,6 +393,56 @@ mod tests {
         assert_eq!(l[0].kind, LIGHT_DISTANT);
         assert_eq!(l[0].world_direction, [0.0, -1.0, 0.0]);
         assert!((l[0].radiance[0] / std::f32::consts::PI - 0.8).abs() < 1e-6);
+    }
+
+    #[test]
+    fn rgb9e5_round_trips_within_its_precision() {
+        for c in [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.5, 0.25],
+            [1e-6, 3e-5, 2e-7],
+            [1234.5, 0.1, 77.0],
+            [0.999, 0.999, 0.999],
+            [1e9, -1.0, f32::NAN],
+        ] {
+            let d = decode_rgb9e5(encode_rgb9e5(c));
+            let m = c
+                .iter()
+                .cloned()
+                .filter(|v| v.is_finite())
+                .fold(0.0f32, f32::max)
+                .min(65408.0);
+            for i in 0..3 {
+                let want = if c[i] > 0.0 { c[i].min(65408.0) } else { 0.0 };
+                assert!((d[i] - want).abs() <= m / 512.0 + 1e-30, "{c:?} -> {d:?}");
+            }
+        }
+        assert_eq!(
+            decode_rgb9e5(encode_rgb9e5([0.5, 0.25, 1.0])),
+            [0.5, 0.25, 1.0]
+        );
+    }
+
+    #[test]
+    fn auto_exposure_brings_the_log_average_to_middle_grey() {
+        let dark = [[0.01f32; 3]; 16];
+        let ev = auto_exposure_ev(dark.iter().copied());
+        assert!((ev - (0.18f32 / 0.01).log2()).abs() < 0.05, "{ev}");
+        // Black pixels do not drag the exposure up.
+        let half_black = dark.iter().copied().chain([[0.0f32; 3]; 16]);
+        assert!((auto_exposure_ev(half_black) - ev).abs() < 1e-4);
+        let bright = [[40.0f32; 3]; 16];
+        assert!(auto_exposure_ev(bright.iter().copied()) < -7.0);
+        assert_eq!(auto_exposure_ev([[0.0f32; 3]; 4].into_iter()), 0.0);
+        let mut px: Vec<u8> = dark
+            .iter()
+            .flat_map(|c| encode_rgb9e5(*c).to_le_bytes())
+            .collect();
+        let ev = resolve_auto_exposure(&mut px);
+        assert!(ev > 4.0);
+        // Middle grey after exposure: sRGB ≈ 118.
+        assert!((110..=125).contains(&px[0]), "{}", px[0]);
+        assert_eq!(px[3], 255);
     }
 
     #[test]

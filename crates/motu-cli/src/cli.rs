@@ -60,6 +60,8 @@ pub enum GenKindArg {
     Sphereflake,
     LodGrid,
     Island,
+    /// A lighting test: a courtyard lit by a sky map and a sun through a roof opening.
+    Courtyard,
 }
 
 #[derive(Args, Debug)]
@@ -619,9 +621,15 @@ pub struct RenderArgs {
     /// Ambient-occlusion rays per sample for the sky term (0: unoccluded sky light).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=256))]
     pub ao_samples: u32,
-    /// Exposure in stops: the shaded image is scaled by 2^EV before the sRGB transfer.
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
-    pub exposure: f32,
+    /// Diffuse bounces of the shaded view after each camera hit, each lit by the scene's lights
+    /// and environment (0: direct light only; not yet with --stream).
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=8))]
+    pub bounces: u32,
+    /// Exposure of the shaded view: `auto` (the image's log-average luminance becomes middle
+    /// grey; the chosen value is `exposure_ev` in --stats) or a number of stops EV (the image is
+    /// scaled by 2^EV before the sRGB transfer).
+    #[arg(long, default_value = "auto", allow_hyphen_values = true, value_parser = parse_exposure)]
+    pub exposure: ExposureArg,
     /// Vulkan device index.
     #[arg(long, env = "MOTU_DEVICE")]
     pub device: Option<usize>,
@@ -827,4 +835,23 @@ pub struct DemoArgs {
     /// The image to write.
     #[arg(short, long, default_value = "demo.png")]
     pub output: PathBuf,
+}
+
+/// `--exposure`: `auto` or a finite number of stops.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ExposureArg {
+    Auto,
+    Ev(f32),
+}
+
+fn parse_exposure(s: &str) -> Result<ExposureArg, String> {
+    if s.eq_ignore_ascii_case("auto") {
+        return Ok(ExposureArg::Auto);
+    }
+    match s.parse::<f32>() {
+        Ok(v) if v.is_finite() => Ok(ExposureArg::Ev(v)),
+        _ => Err(format!(
+            "--exposure {s:?} is neither `auto` nor a finite number of stops"
+        )),
+    }
 }

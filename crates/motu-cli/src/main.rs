@@ -143,8 +143,13 @@ mod tests {
         let a = render_args(&[]);
         let o = motu_render::ShadingOptions::default();
         assert_eq!(
-            (o.ao_samples, o.spp, o.exposure_ev),
-            (a.ao_samples, a.spp, a.exposure)
+            (o.ao_samples, o.spp, o.auto_exposure, o.bounces),
+            (
+                a.ao_samples,
+                a.spp,
+                a.exposure == cli::ExposureArg::Auto,
+                a.bounces
+            )
         );
         let b = cmd::render::stream_bounds(&a.stream_bounds);
         assert!(!b.given());

@@ -46,6 +46,7 @@
 //!   world-level shapes); `instanced_triangles`: triangles after full
 //!   flattening (world-level shapes count once).
 
+mod courtyard;
 mod forest;
 mod island;
 mod lod_grid;
@@ -63,6 +64,7 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
+pub use courtyard::CourtyardOptions;
 pub use forest::ForestOptions;
 pub use island::{IslandFormat, IslandOptions, ISLAND_CAMERAS, ISLAND_ELEMENTS};
 pub use lod_grid::LodGridOptions;
@@ -76,6 +78,7 @@ pub enum GenKind {
     Sphereflake(SphereflakeOptions),
     LodGrid(LodGridOptions),
     Island(IslandOptions),
+    Courtyard(CourtyardOptions),
 }
 
 impl GenKind {
@@ -86,6 +89,7 @@ impl GenKind {
             GenKind::Sphereflake(_) => "sphereflake",
             GenKind::LodGrid(_) => "lod-grid",
             GenKind::Island(_) => "island",
+            GenKind::Courtyard(_) => "courtyard",
         }
     }
 }
@@ -201,6 +205,7 @@ pub fn generate(
         GenKind::Sphereflake(o) => sphereflake::generate(o, out_dir, progress),
         GenKind::LodGrid(o) => lod_grid::generate(o, out_dir, progress),
         GenKind::Island(o) => island::generate(o, out_dir, progress),
+        GenKind::Courtyard(o) => courtyard::generate(o, out_dir, progress),
     }?;
     tracing::info!(
         files = summary.files_written,

@@ -6,8 +6,8 @@ use motu_abi::camera::CameraParams;
 
 use crate::error::Result;
 use crate::render::{
-    alloc_frame, frame_outputs, frame_params, run_frames, Frame, FrameMeasure, RenderOptions,
-    RenderOutput, RenderStats, Tracer,
+    alloc_frame, frame_outputs, frame_params, params_bytes, run_frames, write_params, Frame,
+    FrameMeasure, RenderOptions, RenderOutput, RenderStats, Tracer,
 };
 use crate::scene::GpuScene;
 
@@ -65,15 +65,22 @@ impl LiveRenderer {
                 self.tracer = Some((opts.backend, opts.stack_size, t));
             }
             match &self.frame {
-                Some((f, fw, fh)) if (*fw, *fh) == (w, h) => {
-                    f.params.write(0, std::slice::from_ref(&params))?;
+                Some((f, fw, fh))
+                    if (*fw, *fh) == (w, h)
+                        && f.params.size_bytes() >= params_bytes(&opts.shading) =>
+                {
+                    write_params(&f.params, &params, &opts.shading)?;
                 }
                 _ => {
                     if let Some((f, _, _)) = self.frame.take() {
                         f.release(&mut heap);
                     }
                     let pixels = u64::from(w) * u64::from(h);
-                    self.frame = Some((alloc_frame(&mut heap, pixels, &params)?, w, h));
+                    self.frame = Some((
+                        alloc_frame(&mut heap, pixels, &params, &opts.shading)?,
+                        w,
+                        h,
+                    ));
                 }
             }
         }
@@ -84,7 +91,8 @@ impl LiveRenderer {
         };
         let (records, rgba_words, counters, frame_ns) =
             run_frames(&ctx, &self.scene, tracer, frame, w, h, 1)?;
-        let (aov, rgba8, heatmap_max) = frame_outputs(w, h, records, &rgba_words, opts.view);
+        let (aov, rgba8, heatmap_max, exposure_ev) =
+            frame_outputs(w, h, records, &rgba_words, opts);
         let ms = frame_ns.first().copied().unwrap_or(0.0) / 1e6;
         let pixels = u64::from(w) * u64::from(h);
         let stats = RenderStats::measured(
@@ -98,6 +106,7 @@ impl LiveRenderer {
                 aov: &aov,
                 counters: &counters,
                 heatmap_max,
+                exposure_ev,
                 as_bytes: self.scene.report().as_bytes,
                 alloc: self.scene.alloc_report(),
                 passes: 1,

@@ -154,6 +154,8 @@ pub struct RenderStats {
     pub pi_list_overflows: u64,
     /// The heatmap's red end: the most traces spent on one pixel.
     pub heatmap_max: u32,
+    /// The exposure the shaded image was tone-mapped with, in stops (auto exposure's choice).
+    pub exposure_ev: f32,
     pub as_bytes: u64,
     pub vram_budget_bytes: u64,
     pub vram_peak_bytes: u64,
@@ -174,6 +176,7 @@ pub(crate) struct FrameMeasure<'a> {
     /// The frame's stats words (`STAT_WORDS`).
     pub counters: &'a [u32],
     pub heatmap_max: u32,
+    pub exposure_ev: f32,
     pub as_bytes: u64,
     pub alloc: motu_alloc::AllocReport,
     pub passes: u32,
@@ -206,6 +209,7 @@ impl RenderStats {
             stack_overflows: u64::from(m.counters[0]),
             pi_list_overflows: u64::from(m.counters[1]),
             heatmap_max: m.heatmap_max,
+            exposure_ev: m.exposure_ev,
             as_bytes: m.as_bytes,
             vram_budget_bytes: m.alloc.budget_bytes,
             vram_peak_bytes: m.alloc.peak_block_bytes,
@@ -223,7 +227,7 @@ pub struct RenderOutput {
     pub stats: RenderStats,
 }
 
-/// `FrameParams` of `common.glsl` (std430, 544 bytes).
+/// `FrameParams` of `common.glsl` (std430, 560 bytes).
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 #[repr(C)]
 pub(crate) struct FrameParams {
@@ -244,6 +248,48 @@ pub(crate) struct FrameParams {
     ao_distance: f32,
     exposure_scale: f32,
     lights: [LightRecord; MAX_LIGHTS],
+    /// 1: an environment map's tables ([`motu_abi::env::Environment::gpu_words`]) follow the
+    /// parameters, [`ENV_OFFSET_BYTES`] into their buffer (`shade.glsl` `env_base`).
+    environment: u32,
+    /// 1: shaded pixels are written as linear RGB9E5 and tone-mapped on the host
+    /// ([`frame_outputs`], `motu_abi::shade::resolve_auto_exposure`).
+    auto_exposure: u32,
+    /// Diffuse bounces after each primary hit (`shade.glsl`).
+    bounces: u32,
+    _pad: u32,
+}
+
+/// Where an environment map's tables start in the frame-parameter buffer (`shade.glsl`
+/// `ENV_OFFSET_BYTES`): they are written with the parameters, so every renderer's frame
+/// carries them without a table of its own.
+pub(crate) const ENV_OFFSET_BYTES: u64 = 1024;
+
+/// Bytes of the frame-parameter buffer for a frame shaded with `shading`.
+pub(crate) fn params_bytes(shading: &Shading) -> u64 {
+    let base = std::mem::size_of::<FrameParams>() as u64;
+    match shading.environment {
+        Some(e) => ENV_OFFSET_BYTES + 4 * e.gpu_words().len() as u64,
+        None => base,
+    }
+}
+
+/// Writes the frame's parameters (and its environment map's tables) into `buf`.
+pub(crate) fn write_params(
+    buf: &HeapBuffer,
+    params: &FrameParams,
+    shading: &Shading,
+) -> Result<()> {
+    buf.write(0, std::slice::from_ref(params))?;
+    if let Some(e) = shading.environment {
+        let words = e.gpu_words();
+        if ENV_OFFSET_BYTES + 4 * words.len() as u64 > buf.size_bytes() {
+            return Err(GpuError::InvalidRequest(
+                "the frame's parameter buffer has no room for the environment map".into(),
+            ));
+        }
+        buf.write(ENV_OFFSET_BYTES, &words)?;
+    }
+    Ok(())
 }
 
 impl FrameParams {
@@ -306,10 +352,10 @@ impl Frame {
 /// Sizes of the buffers [`alloc_frame`] allocates for `pixels`: parameters, AOV (16 B a
 /// pixel), colour (4), counters, readback (20 a pixel and the counters). One list for the
 /// allocation and for [`frame_bytes`].
-fn frame_buffer_sizes(pixels: u64) -> [u64; 5] {
+fn frame_buffer_sizes(pixels: u64, params_size: u64) -> [u64; 5] {
     let stats = (RENDER_STAT_WORDS * 4) as u64;
     [
-        std::mem::size_of::<FrameParams>() as u64,
+        params_size,
         pixels * 16,
         pixels * 4,
         stats,
@@ -319,15 +365,21 @@ fn frame_buffer_sizes(pixels: u64) -> [u64; 5] {
 
 /// What [`alloc_frame`] allocates for `pixels` (each buffer rounded to 16 bytes).
 pub(crate) fn frame_bytes(pixels: u64) -> u64 {
-    frame_buffer_sizes(pixels)
+    frame_buffer_sizes(pixels, std::mem::size_of::<FrameParams>() as u64)
         .iter()
         .map(|v| v.max(&16).div_ceil(16) * 16)
         .sum()
 }
 
-pub(crate) fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams) -> Result<Frame> {
+pub(crate) fn alloc_frame(
+    heap: &mut GpuHeap,
+    pixels: u64,
+    params: &FrameParams,
+    shading: &Shading,
+) -> Result<Frame> {
     let out = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS | BufferUsage::TRANSFER_SRC;
-    let [params_size, aov_size, rgba_size, stats_size, readback_size] = frame_buffer_sizes(pixels);
+    let [params_size, aov_size, rgba_size, stats_size, readback_size] =
+        frame_buffer_sizes(pixels, params_bytes(shading));
     let p = heap.alloc_buffer(
         "frame-params",
         params_size,
@@ -336,7 +388,10 @@ pub(crate) fn alloc_frame(heap: &mut GpuHeap, pixels: u64, params: &FrameParams)
         MemoryClass::HostVisible,
         16,
     )?;
-    p.write(0, std::slice::from_ref(params))?;
+    if let Err(e) = write_params(&p, params, shading) {
+        heap.free(p);
+        return Err(e);
+    }
     let mut bufs = vec![p];
     let sizes = [aov_size, rgba_size, stats_size];
     for (i, size) in sizes.into_iter().enumerate() {
@@ -532,6 +587,10 @@ pub(crate) fn frame_params(
         ao_distance: sh.ao_distance.min(3.0e38),
         exposure_scale: sh.exposure_scale(),
         lights,
+        environment: u32::from(sh.environment.is_some()),
+        auto_exposure: u32::from(sh.auto_exposure && opts.view == View::Shaded),
+        bounces: sh.bounces,
+        _pad: 0,
     }
 }
 
@@ -571,7 +630,7 @@ pub fn render_counted(
     let frames = opts.frames.max(1);
     let mut heap = scene.heap();
     let tracer = Tracer::new(ctx, &mut heap, opts, scene.pi_capacity, false)?;
-    let frame = match alloc_frame(&mut heap, pixels, &params) {
+    let frame = match alloc_frame(&mut heap, pixels, &params, &opts.shading) {
         Ok(f) => f,
         Err(e) => {
             if let Tracer::Pipeline(p) = tracer {
@@ -589,7 +648,7 @@ pub fn render_counted(
     drop(heap);
     let (records, rgba_words, counters, frame_ns) = result?;
 
-    let (aov, rgba8, heatmap_max) = frame_outputs(w, h, records, &rgba_words, opts.view);
+    let (aov, rgba8, heatmap_max, exposure_ev) = frame_outputs(w, h, records, &rgba_words, opts);
     // The first of several frames is a warm-up (caches, pipeline first use): not in the median.
     let mut sorted = if frame_ns.len() > 1 {
         frame_ns[1..].to_vec()
@@ -609,6 +668,7 @@ pub fn render_counted(
             aov: &aov,
             counters: &counters,
             heatmap_max,
+            exposure_ev,
             as_bytes: scene.report().as_bytes,
             alloc,
             passes: 1,
@@ -720,8 +780,9 @@ pub(crate) fn frame_outputs(
     h: u32,
     records: Vec<AovRecord>,
     rgba_words: &[u32],
-    view: View,
-) -> (Aov, Vec<u8>, u32) {
+    opts: &RenderOptions,
+) -> (Aov, Vec<u8>, u32, f32) {
+    let view = opts.view;
     let mut aov = Aov::new(w, h);
     aov.records = records;
     let heatmap_max = aov
@@ -738,7 +799,13 @@ pub(crate) fn frame_outputs(
             px[3] = 255;
         }
     }
-    (aov, rgba8, heatmap_max)
+    // Auto exposure: the shader wrote linear RGB9E5; tone-map with the whole image's exposure.
+    let exposure_ev = if view == View::Shaded && opts.shading.auto_exposure {
+        motu_abi::shade::resolve_auto_exposure(&mut rgba8)
+    } else {
+        opts.shading.exposure_ev
+    };
+    (aov, rgba8, heatmap_max, exposure_ev)
 }
 
 /// Blue → cyan → green → yellow → red for `v` in [0, 1] (motu-trace's heat colours).

@@ -350,6 +350,7 @@ impl SceneSink for Adapter {
                     world_position: centre.to_array(),
                     cone_deg: None,
                     radius,
+                    map: None,
                 });
             }
         }
@@ -468,10 +469,41 @@ impl SceneSink for Adapter {
         let to = Vec3::from_array(e.to.unwrap_or([0.0, 0.0, 1.0]));
         let dir = w.transform_vector3(to - from).normalize_or_zero();
         let mut color = e.color.unwrap_or([1.0; 3]);
+        let mut map = None;
         if let (LightKind::Infinite, Some(path)) = (kind, &e.map_path) {
-            // An environment map lights as its average colour.
-            match motu_texture::average(path) {
-                Ok(avg) => color = std::array::from_fn(|i| color[i] * avg[i]),
+            // An environment map lights as itself (importance-sampled by the renderers); its
+            // mean times `L` × `scale` is the constant stand-in.
+            match motu_texture::load_environment(path) {
+                Ok((width, height, texels)) => {
+                    let radiance: Vec<[f32; 3]> = texels
+                        .iter()
+                        .map(|t| {
+                            std::array::from_fn(|i| {
+                                let v = t[i] * color[i];
+                                if v.is_finite() {
+                                    v.max(0.0)
+                                } else {
+                                    0.0
+                                }
+                            })
+                        })
+                        .collect();
+                    let n = radiance.len().max(1) as f64;
+                    let mut sum = [0.0f64; 3];
+                    for t in &radiance {
+                        for i in 0..3 {
+                            sum[i] += t[i] as f64;
+                        }
+                    }
+                    color = sum.map(|s| (s / n) as f32);
+                    let r = |i: usize| [w.x_axis[i], w.y_axis[i], w.z_axis[i]];
+                    map = Some(motu_scene::EnvironmentMap {
+                        width,
+                        height,
+                        radiance,
+                        world_from_light: [r(0), r(1), r(2)],
+                    });
+                }
                 Err(err) => {
                     let at = self.where_(&e.loc);
                     self.warn(format!(
@@ -494,6 +526,7 @@ impl SceneSink for Adapter {
             world_position: w.transform_point3(from).to_array(),
             cone_deg: e.cone_deg,
             radius: 0.0,
+            map,
         });
         Ok(())
     }

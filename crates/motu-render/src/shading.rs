@@ -13,7 +13,13 @@ pub const AO_DISTANCE_OF_DIAGONAL: f32 = 0.2;
 pub struct ShadingOptions {
     pub ao_samples: u32,
     pub spp: u32,
+    /// `--exposure EV` (used when `auto_exposure` is off).
     pub exposure_ev: f32,
+    /// `--exposure auto` (the default): from the image's log-average luminance.
+    pub auto_exposure: bool,
+    /// `--bounces N`: diffuse bounces after each camera hit (full builds and the CPU; streaming
+    /// refuses more than 0 for now).
+    pub bounces: u32,
 }
 
 impl Default for ShadingOptions {
@@ -22,6 +28,8 @@ impl Default for ShadingOptions {
             ao_samples: 1,
             spp: 1,
             exposure_ev: 0.0,
+            auto_exposure: true,
+            bounces: 0,
         }
     }
 }
@@ -39,6 +47,8 @@ pub fn scene_shading(
         ao_samples,
         spp,
         exposure_ev: exposure,
+        auto_exposure,
+        bounces,
     } = o;
     use motu_abi::shade::{
         Shading, LIGHT_AREA, LIGHT_DISTANT, LIGHT_POINT, LIGHT_SPOT, MAX_LIGHTS,
@@ -48,6 +58,8 @@ pub fn scene_shading(
         ao_samples,
         spp: spp.max(1),
         exposure_ev: exposure,
+        auto_exposure,
+        bounces,
         ..Default::default()
     };
     if let Some(root) = view.tlases.get(view.root_tlas as usize) {
@@ -93,6 +105,22 @@ pub fn scene_shading(
                 ..rec
             },
             LightKind::Infinite => {
+                if let (Some(map), None) = (&l.map, sh.environment) {
+                    // The first environment map lights as itself; its mean stays the sky
+                    // colour (fallbacks, `--ao-samples 0`).
+                    sh.environment = motu_abi::env::Environment::new(
+                        map.width,
+                        map.height,
+                        map.radiance.clone(),
+                        map.world_from_light,
+                    )
+                    .map(motu_abi::env::Environment::intern);
+                    if sh.environment.is_none() {
+                        eprintln!("warning: an environment map's size or orientation is invalid; its mean colour lights the scene");
+                    }
+                } else if l.map.is_some() {
+                    eprintln!("warning: the scene has several environment maps; only the first is sampled (the others count in the unoccluded sky term of --ao-samples 0 only)");
+                }
                 let s = sky.get_or_insert([0.0; 3]);
                 for (s, r) in s.iter_mut().zip(radiance) {
                     *s += r;

@@ -80,4 +80,20 @@ pub struct Light {
     /// Area: the emitter's bounding radius about `world_position`.
     #[serde(default)]
     pub radius: f32,
+    /// Infinite: its image, when it has one (then `color` × `intensity` is the image's mean).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub map: Option<EnvironmentMap>,
+}
+
+/// An `infinite` light's image as the package keeps it: latitude-longitude (row 0 at the light
+/// space's +z pole, `u = φ / 2π`), linear radiance with the light's `L` × `scale` applied,
+/// halved at import until it is at most `motu_abi`'s `ENV_MAX_WIDTH` wide.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EnvironmentMap {
+    pub width: u32,
+    pub height: u32,
+    /// Row-major texels.
+    pub radiance: Vec<[f32; 3]>,
+    /// Rows of the light's rotation (the CTM at its `LightSource`).
+    pub world_from_light: [[f32; 3]; 3],
 }

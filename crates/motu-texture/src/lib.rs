@@ -245,6 +245,51 @@ pub fn load(path: &Path, max_size: u32, as_coverage: bool) -> Result<MipChain, T
     Ok(mip_chain(img, max_size))
 }
 
+/// Widest environment map the package keeps (halved until it fits; the height follows): the
+/// map and its sampling tables travel in the package's meta and with each GPU frame.
+pub const ENVIRONMENT_MAX_WIDTH: u32 = 256;
+
+/// Reads an environment map (an `infinite` light's image) as linear RGB, halved until it is at
+/// most [`ENVIRONMENT_MAX_WIDTH`] wide: `(width, height, texels)`, row 0 at the top.
+pub fn load_environment(path: &Path) -> Result<(u32, u32, Vec<[f32; 3]>), TextureError> {
+    let img = read_linear(path)?;
+    let texels = img.texels.iter().map(|t| [t[0], t[1], t[2]]).collect();
+    Ok(cap_width(
+        ENVIRONMENT_MAX_WIDTH,
+        img.width,
+        img.height,
+        texels,
+    ))
+}
+
+/// Halves a `width × height` map (2×2 box filter; an odd last column or row is dropped) until
+/// its width is at most `max_width`.
+fn cap_width(
+    max_width: u32,
+    mut width: u32,
+    mut height: u32,
+    mut texels: Vec<[f32; 3]>,
+) -> (u32, u32, Vec<[f32; 3]>) {
+    while width > max_width.max(1) && height > 1 {
+        let (nw, nh) = (width / 2, height / 2);
+        let mut out = vec![[0.0f32; 3]; nw as usize * nh as usize];
+        for y in 0..nh as usize {
+            for x in 0..nw as usize {
+                let mut s = [0.0f32; 3];
+                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    let t = texels[(2 * y + dy) * width as usize + 2 * x + dx];
+                    for i in 0..3 {
+                        s[i] += if t[i].is_finite() { t[i] } else { 0.0 } / 4.0;
+                    }
+                }
+                out[y * nw as usize + x] = s;
+            }
+        }
+        (width, height, texels) = (nw, nh, out);
+    }
+    (width, height, texels)
+}
+
 /// Mean linear RGB of an image (an environment map's constant approximation).
 pub fn average(path: &Path) -> Result<[f32; 3], TextureError> {
     let img = read_linear(path)?;
@@ -263,6 +308,15 @@ pub fn average(path: &Path) -> Result<[f32; 3], TextureError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn environment_maps_halve_to_the_cap() {
+        let (w, h, t) = cap_width(256, 1024, 512, vec![[1.0, 2.0, 3.0]; 1024 * 512]);
+        assert_eq!((w, h, t.len()), (256, 128, 256 * 128));
+        assert_eq!(t[77], [1.0, 2.0, 3.0]);
+        let (w, h, _) = cap_width(256, 200, 100, vec![[0.0; 3]; 200 * 100]);
+        assert_eq!((w, h), (200, 100));
+    }
 
     #[test]
     fn png_round_trip_and_mips() {

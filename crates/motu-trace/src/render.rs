@@ -7,13 +7,13 @@ use std::time::Instant;
 use motu_abi::aov::{Aov, AovRecord};
 use motu_abi::camera::CameraParams;
 use motu_abi::lod::RAY_PRIMARY;
-use motu_abi::shade::{rand01, tone_map};
+use motu_abi::shade::{encode_rgb9e5, rand01, resolve_auto_exposure, tone_map};
 use motu_abi::HierarchyView;
 use rayon::prelude::*;
 
 use crate::mesh::MeshSource;
 use crate::ray::normalize;
-use crate::shade::{shade_hit, ShadeRays};
+use crate::shade::{shade_vertex, ShadeRays};
 use crate::traverse::{RayQuery, Scratch, Tracer};
 use crate::TraceError;
 
@@ -46,6 +46,8 @@ pub struct RenderStats {
     pub max_stack_depth: u32,
     /// The heatmap's red end: the most traces spent on one pixel.
     pub heatmap_max_traces: u32,
+    /// The exposure the shaded image was tone-mapped with, in stops (auto exposure's choice).
+    pub exposure_ev: f32,
     pub meshes_built: usize,
     pub threads: usize,
 }
@@ -112,6 +114,7 @@ pub fn render_with(
     let mut aov = Aov::new(w, h);
     let mut rgba8 = vec![0u8; w as usize * h as usize * 4];
     let exposure = opts.shading.exposure_scale();
+    let auto_exposure = opts.shading.auto_exposure && opts.view == View::Shaded;
     let spp = opts.shading.spp.max(1);
     let totals = aov
         .records
@@ -165,12 +168,11 @@ pub fn render_with(
                             };
                             let c = if h.is_hit() {
                                 let mut rays = ShadeRays::default();
-                                let c = shade_hit(
+                                let c = shade_path(
                                     tracer,
                                     camera,
                                     opts,
                                     &h,
-                                    camera.world_eye,
                                     normalize(d),
                                     pixel,
                                     sample,
@@ -215,12 +217,17 @@ pub fn render_with(
                 };
                 st.truncated += u64::from(truncated);
                 let px = &mut px_row[x as usize * 4..x as usize * 4 + 4];
-                px[..3].copy_from_slice(&if opts.view == View::Shaded {
-                    tone_map(colour, exposure)
+                if auto_exposure {
+                    // Linear until the whole image's exposure is known (as the GPU writes it).
+                    px.copy_from_slice(&encode_rgb9e5(colour).to_le_bytes());
                 } else {
-                    encode_srgb(colour)
-                });
-                px[3] = 255;
+                    px[..3].copy_from_slice(&if opts.view == View::Shaded {
+                        tone_map(colour, exposure)
+                    } else {
+                        encode_srgb(colour)
+                    });
+                    px[3] = 255;
+                }
             }
             st
         })
@@ -237,6 +244,11 @@ pub fn render_with(
             px[..3].copy_from_slice(&c.map(|v| (v * 255.0 + 0.5) as u8));
         }
     }
+    let exposure_ev = if auto_exposure {
+        resolve_auto_exposure(&mut rgba8)
+    } else {
+        opts.shading.exposure_ev
+    };
     let secs = t1.elapsed().as_secs_f64();
     tracer.first_error()?;
     let rays = totals.primary + totals.shadow;
@@ -258,6 +270,7 @@ pub fn render_with(
         truncated_rays: totals.truncated,
         max_stack_depth: totals.max_stack,
         heatmap_max_traces: heatmap_max,
+        exposure_ev,
         meshes_built: tracer.meshes_built(),
         threads: rayon::current_num_threads(),
     };
@@ -270,9 +283,80 @@ pub fn render_with(
     Ok(RenderOutput { aov, rgba8, stats })
 }
 
+/// A sample's path from the camera's hit `hit` (direction `dir`): each vertex shaded with its
+/// lights and environment rays, then `opts.shading.bounces` diffuse bounces
+/// (`render_pixel.glsl`'s states 4 and 5). A bounce that escapes ends the path: the
+/// environment's light reached every vertex through its sampled rays already. Vertex `b`
+/// draws its numbers from sample `sample | b << 20`.
+#[allow(clippy::too_many_arguments)]
+fn shade_path(
+    tracer: &Tracer<'_>,
+    camera: &CameraParams,
+    opts: &RenderOptions,
+    hit: &crate::traverse::Hit,
+    dir: [f32; 3],
+    pixel: u32,
+    sample: u32,
+    scratch: &mut Scratch,
+    rays: &mut ShadeRays,
+) -> [f32; 3] {
+    let (mut colour, mut from) = shade_vertex(
+        tracer,
+        camera,
+        opts,
+        hit,
+        camera.world_eye,
+        dir,
+        pixel,
+        sample,
+        true,
+        scratch,
+        rays,
+    );
+    let mut thru = [1.0f32; 3];
+    for b in 1..=opts.shading.bounces {
+        let next = sample | (b << 20);
+        let Some(d) = from.direction(pixel, next) else {
+            break;
+        };
+        thru = std::array::from_fn(|i| thru[i] * from.diffuse[i]);
+        let q = RayQuery {
+            kind: motu_abi::lod::RAY_SHADOW,
+            lod: motu_abi::lod::LodParams {
+                forced_lod: if opts.shadow_lod_from_primary {
+                    from.lod as i32
+                } else {
+                    opts.lod.forced_lod
+                },
+                ..opts.lod
+            },
+            pixels_per_unit_at_1: camera.pixels_per_unit_at_1,
+            max_traces: opts.max_traces_per_ray,
+            ..RayQuery::default()
+        };
+        let h = tracer.trace(from.start, d, &q, scratch);
+        rays.truncated |= h.truncated;
+        rays.rays += 1;
+        rays.traces += h.traces;
+        rays.max_stack = rays.max_stack.max(h.max_stack);
+        if !h.is_hit() {
+            break;
+        }
+        let (c, f) = shade_vertex(
+            tracer, camera, opts, &h, from.start, d, pixel, next, false, scratch, rays,
+        );
+        colour = std::array::from_fn(|i| colour[i] + thru[i] * c[i]);
+        from = f;
+    }
+    colour
+}
+
 /// What a primary ray that hits nothing shows in the shaded view: the scene's sky colour, else
 /// the gradient sky.
 fn background(opts: &RenderOptions, dir: [f32; 3]) -> [f32; 3] {
+    if let Some(env) = opts.shading.environment {
+        return env.radiance_towards(dir);
+    }
     opts.shading.sky.unwrap_or_else(|| sky(dir))
 }
 

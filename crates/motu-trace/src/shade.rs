@@ -157,6 +157,33 @@ pub struct ShadeRays {
     pub truncated: bool,
 }
 
+/// Where a path may bounce from a shaded vertex (`shade.glsl` `bounce_ray`).
+#[derive(Clone, Copy, Debug)]
+pub struct BounceFrom {
+    /// The offset start of rays leaving the vertex.
+    pub start: [f32; 3],
+    pub shading_normal: [f32; 3],
+    pub geometric_normal: [f32; 3],
+    /// Diffuse albedo: the throughput factor of a cosine-sampled Lambert bounce.
+    pub diffuse: [f32; 3],
+    pub lod: u32,
+}
+
+impl BounceFrom {
+    /// The bounce's direction drawn with the next vertex's sample `next_sample` (dimensions 0
+    /// and 1, which secondary rays never use); `None` below the surface or without a diffuse
+    /// part.
+    pub fn direction(&self, pixel: u32, next_sample: u32) -> Option<[f32; 3]> {
+        let d = cosine_direction(
+            self.shading_normal,
+            rand01(pixel, next_sample, 0),
+            rand01(pixel, next_sample, 1),
+        );
+        let peak = self.diffuse[0].max(self.diffuse[1]).max(self.diffuse[2]);
+        (dot(d, self.geometric_normal) > 0.0 && peak > 0.0).then_some(d)
+    }
+}
+
 /// Colour (linear, before exposure) of `hit` for sample `sample` of pixel `pixel`.
 #[allow(clippy::too_many_arguments)]
 pub fn shade_hit(
@@ -171,6 +198,29 @@ pub fn shade_hit(
     scratch: &mut Scratch,
     rays: &mut ShadeRays,
 ) -> [f32; 3] {
+    shade_vertex(
+        tracer, camera, opts, hit, org, dir, pixel, sample, true, scratch, rays,
+    )
+    .0
+}
+
+/// [`shade_hit`] for a vertex of a path: `emission` says whether the surface's own light
+/// counts (the camera's hit; not after a bounce, whose light sources are sampled as lights).
+/// Also returns where the path may bounce from.
+#[allow(clippy::too_many_arguments)]
+pub fn shade_vertex(
+    tracer: &Tracer<'_>,
+    camera: &CameraParams,
+    opts: &RenderOptions,
+    hit: &Hit,
+    org: [f32; 3],
+    dir: [f32; 3],
+    pixel: u32,
+    sample: u32,
+    emission: bool,
+    scratch: &mut Scratch,
+    rays: &mut ShadeRays,
+) -> ([f32; 3], BounceFrom) {
     let view = tracer.view();
     let rec = &view.meshes[hit.mesh_record as usize];
     let mat = view
@@ -223,7 +273,14 @@ pub fn shade_hit(
         rays.max_stack = rays.max_stack.max(h.max_stack);
         h.is_hit()
     };
-    let mut colour = mat.emission;
+    let mut colour = if emission { mat.emission } else { [0.0; 3] };
+    let bounce = BounceFrom {
+        start,
+        shading_normal: ns,
+        geometric_normal: ng,
+        diffuse,
+        lod: hit.lod,
+    };
     let (lights, count) = opts
         .shading
         .frame_lights(opts.sun_dir_world, opts.sun_intensity);
@@ -247,6 +304,31 @@ pub fn shade_hit(
     let sky = opts.shading.sky_radiance(opts.ambient);
     let mut ao = 1.0;
     let n_ao = opts.shading.ao_samples;
+    if let (Some(env), true) = (opts.shading.environment, n_ao > 0) {
+        // The environment map as a light: its rays are drawn from the map and reach to
+        // infinity; each clear one adds the map's radiance through the material over its
+        // density (`shade.glsl` `environment_term`).
+        for k in 0..n_ao {
+            let Some(smp) = env.sample(
+                rand01(pixel, sample, 2 + 2 * k),
+                rand01(pixel, sample, 3 + 2 * k),
+            ) else {
+                continue;
+            };
+            let d = smp.world_dir;
+            let ndl = dot(ns, d);
+            if dot(d, ng) <= 0.0 || ndl <= 0.0 || occluded(d, f32::INFINITY, scratch) {
+                continue;
+            }
+            let h = normalize(sub(d, dir));
+            let spec = spec_norm * dot(ns, h).max(0.0).powf(s);
+            let w = ndl / (smp.pdf * n_ao as f32);
+            colour = std::array::from_fn(|i| {
+                colour[i] + (diffuse[i] / std::f32::consts::PI + f0[i] * spec) * smp.radiance[i] * w
+            });
+        }
+        return (colour, bounce);
+    }
     if n_ao > 0 {
         let mut open = 0u32;
         for k in 0..n_ao {
@@ -261,5 +343,8 @@ pub fn shade_hit(
         }
         ao = open as f32 / n_ao as f32;
     }
-    std::array::from_fn(|i| colour[i] + (diffuse[i] + f0[i]) * sky[i] * ao)
+    (
+        std::array::from_fn(|i| colour[i] + (diffuse[i] + f0[i]) * sky[i] * ao),
+        bounce,
+    )
 }

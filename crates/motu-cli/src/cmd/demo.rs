@@ -152,7 +152,8 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         allow_truncated: false,
         spp: 1,
         ao_samples: 1,
-        exposure: 0.0,
+        exposure: crate::cli::ExposureArg::Auto,
+        bounces: 0,
         device: None,
         camera_path: None,
     };

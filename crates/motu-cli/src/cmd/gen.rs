@@ -4,7 +4,8 @@ use crate::cli::{GenArgs, GenKindArg};
 use crate::progress::Progress;
 use anyhow::{bail, Context};
 use motu_gen::{
-    ForestOptions, GenKind, GridSize, IslandOptions, LodGridOptions, SphereflakeOptions,
+    CourtyardOptions, ForestOptions, GenKind, GridSize, IslandOptions, LodGridOptions,
+    SphereflakeOptions,
 };
 
 fn reject(flag: &str, given: bool, kind: &str) -> anyhow::Result<()> {
@@ -113,6 +114,23 @@ pub fn options(a: &GenArgs) -> anyhow::Result<GenKind> {
                 "island",
             )?;
             GenKind::Island(o)
+        }
+        GenKindArg::Courtyard => {
+            let mut o = CourtyardOptions::default();
+            o.width = a.width.unwrap_or(o.width);
+            o.height = a.height.unwrap_or(o.height);
+            for (f, g) in [
+                ("--levels", a.levels.is_some()),
+                ("--grid", a.grid.is_some()),
+                ("--depth", a.depth.is_some()),
+                ("--scale", a.scale.is_some()),
+                ("--triangles", a.triangles.is_some()),
+                ("--seed", a.seed.is_some()),
+                ("--flat", a.flat),
+            ] {
+                reject(f, g, "courtyard")?;
+            }
+            GenKind::Courtyard(o)
         }
     };
     Ok(kind)

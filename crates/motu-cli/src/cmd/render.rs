@@ -246,9 +246,6 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     if a.frames == 0 {
         bail!("--frames must be at least 1");
     }
-    if !a.exposure.is_finite() {
-        bail!("--exposure must be a finite number of stops");
-    }
     let lod_choice = choose_lod_mode(&view, &lod, lod_mode(a.lod_mode), a.stream)?;
     if lod_choice.mode == "traversal"
         && a.lod_mode == LodModeArg::Instance
@@ -269,7 +266,12 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         shading: motu_render::ShadingOptions {
             ao_samples: a.ao_samples,
             spp: a.spp,
-            exposure_ev: a.exposure,
+            exposure_ev: match a.exposure {
+                crate::cli::ExposureArg::Ev(ev) => ev,
+                crate::cli::ExposureArg::Auto => 0.0,
+            },
+            auto_exposure: a.exposure == crate::cli::ExposureArg::Auto,
+            bounces: a.bounces,
         },
         camera: motu_render::CameraRequest {
             name: a.camera.clone(),

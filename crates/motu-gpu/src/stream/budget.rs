@@ -105,10 +105,13 @@ impl<'a> StreamingRenderer<'a> {
         h: u32,
         guard_len: usize,
         params: &FrameParams,
+        shading: &motu_abi::shade::Shading,
     ) -> Result<FrameBuffers> {
         if let Some((fb, fw, fh, fg)) = self.kept.frame_buffers.take() {
-            if (fw, fh, fg) == (w, h, guard_len) {
-                fb.params.write(0, std::slice::from_ref(params))?;
+            if (fw, fh, fg) == (w, h, guard_len)
+                && fb.params.size_bytes() >= crate::render::params_bytes(shading)
+            {
+                crate::render::write_params(&fb.params, params, shading)?;
                 return Ok(fb);
             }
             fb.release(&mut self.heap);
@@ -116,7 +119,14 @@ impl<'a> StreamingRenderer<'a> {
         let pixels = u64::from(w) * u64::from(h);
         let nitems = self.item_count() as u64;
         self.with_eviction_or_rebuilt_tlases(|s| {
-            alloc_frame_buffers(&mut s.heap, pixels, guard_len as u64, nitems, params)
+            alloc_frame_buffers(
+                &mut s.heap,
+                pixels,
+                guard_len as u64,
+                nitems,
+                params,
+                shading,
+            )
         })
         .map_err(|e| self.skeleton_error("the frame buffers", e))
     }

@@ -43,7 +43,7 @@ impl FrameBuffers {
 type Spec = (&'static str, u64, BufferUsage, AllocKind, MemoryClass);
 
 /// The frame's buffers: label, bytes, usage, kind, memory class.
-fn frame_buffer_specs(pixels: u64, guard_count: u64, items: u64) -> [Spec; 10] {
+fn frame_buffer_specs(pixels: u64, guard_count: u64, items: u64, params_size: u64) -> [Spec; 10] {
     let dev = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS | BufferUsage::TRANSFER_SRC;
     let host = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS;
     let stamps_bytes = (items * 4).div_ceil(16) * 16;
@@ -53,7 +53,7 @@ fn frame_buffer_specs(pixels: u64, guard_count: u64, items: u64) -> [Spec; 10] {
     [
         (
             "frame-params",
-            std::mem::size_of::<crate::render::FrameParams>() as u64,
+            params_size,
             host,
             AllocKind::Other,
             MemoryClass::HostVisible,
@@ -126,7 +126,8 @@ fn frame_buffer_specs(pixels: u64, guard_count: u64, items: u64) -> [Spec; 10] {
 
 /// Bytes of the frame's buffers (16-byte aligned each), for the floor.
 pub(super) fn frame_buffer_bytes(pixels: u64, guard_count: u64, items: u64) -> u64 {
-    frame_buffer_specs(pixels, guard_count, items)
+    let params = std::mem::size_of::<crate::render::FrameParams>() as u64;
+    frame_buffer_specs(pixels, guard_count, items, params)
         .iter()
         .map(|s| s.1.max(16).div_ceil(16) * 16)
         .sum()
@@ -138,8 +139,14 @@ pub(super) fn alloc_frame_buffers(
     guard_count: u64,
     items: u64,
     params: &crate::render::FrameParams,
+    shading: &motu_abi::shade::Shading,
 ) -> Result<FrameBuffers> {
-    let specs = frame_buffer_specs(pixels, guard_count, items);
+    let specs = frame_buffer_specs(
+        pixels,
+        guard_count,
+        items,
+        crate::render::params_bytes(shading),
+    );
     let mut bufs: Vec<HeapBuffer> = Vec::with_capacity(specs.len());
     for (label, size, usage, kind, class) in specs {
         match heap.alloc_buffer(label, size, usage, kind, class, 16) {
@@ -150,7 +157,10 @@ pub(super) fn alloc_frame_buffers(
             }
         }
     }
-    bufs[0].write(0, std::slice::from_ref(params))?;
+    if let Err(e) = crate::render::write_params(&bufs[0], params, shading) {
+        bufs.into_iter().for_each(|b| heap.free(b));
+        return Err(e);
+    }
     let mut it = bufs.into_iter();
     let mut next = || {
         it.next()

@@ -64,7 +64,7 @@ impl<'a> StreamingRenderer<'a> {
         let mut params = frame_params(camera, opts, self.view.root_tlas);
         params.shading = self.shading.address;
         self.pinned = vec![false; self.item_count()];
-        let fb = self.frame_buffers(w, h, guard.len(), &params)?;
+        let fb = self.frame_buffers(w, h, guard.len(), &params, &opts.shading)?;
         // Making room for the frame may have evicted BLASes that TLASes still reference.
         if !self.dirty.is_empty() {
             self.built_now.clear();
@@ -224,8 +224,8 @@ impl<'a> StreamingRenderer<'a> {
         tot.vram_peak_bytes = report.peak_block_bytes;
         tot.host_mesh_peak_bytes = tot.host_mesh_peak_bytes.max(st.resident_host_mesh_bytes);
 
-        let (aov, rgba8, heatmap_max) =
-            crate::render::frame_outputs(w, h, records, &rgba_words, opts.view);
+        let (aov, rgba8, heatmap_max, exposure_ev) =
+            crate::render::frame_outputs(w, h, records, &rgba_words, opts);
         crate::render::check_texture_residency(&counters)?;
         self.frame_stats.truncated_rays = u64::from(counters[crate::render::STAT_TRUNCATED_RAYS]);
         let stats = RenderStats::measured(
@@ -239,6 +239,7 @@ impl<'a> StreamingRenderer<'a> {
                 aov: &aov,
                 counters: &counters,
                 heatmap_max,
+                exposure_ev,
                 as_bytes: self
                     .blas
                     .iter()

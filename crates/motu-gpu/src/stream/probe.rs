@@ -85,7 +85,7 @@ impl<'a> StreamingRenderer<'a> {
         let later = again.is_some() || verify;
         let mut params = frame_params(next, opts, self.view.root_tlas);
         params.shading = self.shading.address;
-        fb.params.write(0, std::slice::from_ref(&params))?;
+        crate::render::write_params(&fb.params, &params, &opts.shading)?;
         let pixels = u64::from(next.width) * u64::from(next.height);
         let stride = self.opts.probe_stride.max(1);
         let (full, list) = if let Some(again) = again {
