@@ -253,6 +253,18 @@ fn scan_mtl(path: &Path) -> Option<(usize, String)> {
         ) {
             continue;
         }
+        let words: Vec<&str> = words.collect();
+        // tobj reads a colour as its first three words and panics (an unwrap) when fewer than
+        // three are there and all parse: `Kd`, `Kd 1`, `Kd 1 1`.
+        if matches!(kw, "Ka" | "Kd" | "Ks" | "Ke")
+            && words.len() < 3
+            && words.iter().all(|w| w.parse::<f32>().is_ok())
+        {
+            return Some((
+                i + 1,
+                format!("`{kw}` needs three numbers, has {}", words.len()),
+            ));
+        }
         for w in words {
             match w.parse::<f32>() {
                 Ok(v) if v.is_finite() => {}
@@ -536,6 +548,24 @@ mod tests {
                 e.contains("t.obj:4:1") && e.contains("at least 3 vertices"),
                 "{e}"
             );
+        }
+    }
+
+    #[test]
+    fn regression_short_mtl_colour_is_an_error_not_a_tobj_panic() {
+        // Found by the obj fuzz target: tobj 4 unwraps a colour of fewer than three numbers.
+        for kd in ["Kd", "Kd 1", "Kd 0.5 0.5"] {
+            let d = tempfile::tempdir().unwrap();
+            std::fs::write(d.path().join("m.mtl"), format!("newmtl red\n{kd}\n")).unwrap();
+            let obj = d.path().join("a.obj");
+            std::fs::write(
+                &obj,
+                "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl red\nf 1 2 3\n",
+            )
+            .unwrap();
+            let (line, why) = scan_mtl(&d.path().join("m.mtl")).expect("refused");
+            assert_eq!(line, 2, "{why}");
+            assert!(why.contains("three numbers"), "{why}");
         }
     }
 
