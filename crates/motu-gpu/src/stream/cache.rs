@@ -162,18 +162,38 @@ impl StreamingRenderer<'_> {
         if hits.is_empty() {
             return Ok((Vec::new(), rest));
         }
-        let restored = match self.maybe_evicting(evict, |s| s.deserialize(&hits)) {
-            Ok(r) => r,
-            Err(GpuError::Budget(why)) => {
-                tracing::debug!(%why, "structure cache: no room to restore; building instead");
-                rest.extend(hits.iter().map(|h| h.0));
-                rest.sort_unstable();
-                return Ok((Vec::new(), rest));
-            }
-            Err(e) => return Err(e),
-        };
+        let mut restored = Vec::with_capacity(hits.len());
+        self.restore_some(&hits, evict, &mut restored, &mut rest)?;
+        rest.sort_unstable();
         self.frame_stats.restore_ms += t.elapsed().as_secs_f64() * 1e3;
         Ok((restored, rest))
+    }
+
+    /// Deserialises `hits` in one submission; where the budget has no room for their copies,
+    /// in halves (a single one that does not fit is left to be built, counted).
+    fn restore_some(
+        &mut self,
+        hits: &[(usize, Arc<[u8]>, SerializedHeader)],
+        evict: bool,
+        restored: &mut Vec<(usize, AccelStruct)>,
+        rest: &mut Vec<usize>,
+    ) -> Result<()> {
+        match self.maybe_evicting(evict, |s| s.deserialize(hits)) {
+            Ok(r) => restored.extend(r),
+            Err(GpuError::Budget(why)) if hits.len() > 1 => {
+                tracing::debug!(%why, n = hits.len(), "structure cache: restoring in halves");
+                let (l, r) = hits.split_at(hits.len() / 2);
+                self.restore_some(l, evict, restored, rest)?;
+                self.restore_some(r, evict, restored, rest)?;
+            }
+            Err(GpuError::Budget(why)) => {
+                tracing::debug!(%why, "structure cache: no room to restore; building instead");
+                self.frame_stats.restore_skipped += 1;
+                rest.push(hits[0].0);
+            }
+            Err(e) => return Err(e),
+        }
+        Ok(())
     }
 
     /// One submission deserialising `hits` from a host-visible copy of their blobs.

@@ -434,6 +434,9 @@ pub struct FrameStreamStats {
     pub restored_from_host: u32,
     pub restored_from_disk: u32,
     pub restore_ms: f64,
+    /// Cached BLASes built instead of restored: no room for their copy next to what the
+    /// step must keep.
+    pub restore_skipped: u32,
     /// Of `blas_built`: BLASes this renderer had built (or restored) before, built again, and
     /// their structure bytes: what a cache saves.
     pub rebuilt_blases: u32,
