@@ -77,3 +77,30 @@ fn devices_json_reports_ray_tracing_and_limits() {
         assert_eq!(lvp["max_instance_count"], 16_777_215);
     }
 }
+
+#[test]
+fn regression_a_closed_stdout_ends_quietly_not_with_a_panic() {
+    // `motu info pkg | head -1`: the reader goes away before motu writes.
+    let d = tempfile::tempdir().unwrap();
+    let obj = d.path().join("tri.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let pkg = d.path().join("tri.motu");
+    motu_tests::import(&obj, &pkg, &[]);
+    for _ in 0..3 {
+        let mut child = std::process::Command::new(motu_tests::motu_bin())
+            .args(["info", motu_tests::s(&pkg)])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("spawning motu");
+        drop(child.stdout.take());
+        let out = child.wait_with_output().expect("waiting for motu");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(
+            out.status.success() || out.status.code() == Some(141),
+            "{:?}: {err}",
+            out.status
+        );
+    }
+}

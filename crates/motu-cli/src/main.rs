@@ -27,6 +27,7 @@ fn main() -> ExitCode {
     let args = cli::Cli::parse();
     init_tracing(args.verbose);
     signals::install();
+    quiet_broken_pipe();
     match cmd::run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
@@ -34,6 +35,26 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// `motu info … | head`: the reader went away. Rust ignores SIGPIPE, so the next `println!`
+/// fails and panics; a Unix tool ends quietly instead (status 141, as if killed by SIGPIPE),
+/// removing its unfinished outputs as on SIGINT.
+fn quiet_broken_pipe() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let msg = info
+            .payload()
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| info.payload().downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if msg.starts_with("failed printing to stdout") && msg.contains("Broken pipe") {
+            let _ = motu_package::atomic::remove_registered_temp_outputs();
+            std::process::exit(141);
+        }
+        default(info)
+    }));
 }
 
 /// One paragraph: what, where, what to do (the contexts carry the where). Library errors often
