@@ -311,7 +311,7 @@ impl StreamingRenderer<'_> {
             }
             Err(e) => return Err(e.into()),
         };
-        let result = (|| -> Result<Vec<Vec<u8>>> {
+        let result = (|| -> Result<Vec<Arc<[u8]>>> {
             let base = readback.device_address()?;
             let mut rec = ctx.record("serialise blases")?;
             let mut at = 0u64;
@@ -325,9 +325,11 @@ impl StreamingRenderer<'_> {
             rec.submit_and_wait()?;
             let mut blobs = Vec::with_capacity(todo.len());
             for (&off, &size) in offsets.iter().zip(&sizes) {
-                let mut v = vec![0u8; size as usize];
-                readback.read_bytes(off, &mut v)?;
-                blobs.push(v);
+                // Read straight into the shared blob the cache keeps (no second copy).
+                let mut blob: Arc<[u8]> = std::iter::repeat_n(0u8, size as usize).collect();
+                let bytes = Arc::get_mut(&mut blob).expect("a new blob is unshared");
+                readback.read_bytes(off, bytes)?;
+                blobs.push(blob);
             }
             Ok(blobs)
         })();
@@ -337,7 +339,7 @@ impl StreamingRenderer<'_> {
         for ((_, _, key), blob) in todo.iter().zip(blobs) {
             self.frame_stats.cache_stored_bytes += blob.len() as u64;
             self.frame_stats.cache_stored += 1;
-            a.cache.cache.put(*key, Arc::from(blob));
+            a.cache.cache.put(*key, blob);
         }
         Ok(())
     }
