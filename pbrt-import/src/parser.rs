@@ -163,6 +163,9 @@ struct Parser<'s> {
     object_names: Vec<String>,
     object_defined: Vec<bool>,
     forward_refs: Vec<(ObjectId, Loc, String)>,
+    /// (object, object it instances) → the first such `ObjectInstance`: an instancing cycle is
+    /// reported at the instance that closes it (pbrt-v4 forward references make them possible).
+    instance_edges: std::collections::BTreeMap<(u32, u32), Loc>,
     current_object: Option<ObjectId>,
     cameras: Vec<PendingCamera>,
     film_resolution: [u32; 2],
@@ -246,6 +249,7 @@ impl<'s> Parser<'s> {
             object_names: Vec::new(),
             object_defined: Vec::new(),
             forward_refs: Vec::new(),
+            instance_edges: std::collections::BTreeMap::new(),
             current_object: None,
             cameras: Vec::new(),
             film_resolution: [1280, 720],
@@ -364,6 +368,19 @@ impl<'s> Parser<'s> {
                     ParseErrorKind::UnknownObject,
                 ));
             }
+        }
+        if let Some((loc, cycle)) = self.instance_cycle() {
+            let shown = format!("\"{}\"", cycle[cycle.len() - 1]);
+            let path = cycle
+                .iter()
+                .map(|n| format!("\"{n}\""))
+                .collect::<Vec<_>>()
+                .join(" → ");
+            return Err(self.err_at(
+                loc,
+                &shown,
+                ParseErrorKind::Invalid(format!("instancing cycle: {path}")),
+            ));
         }
         if !self.missing.is_empty() && !self.opts.allow_missing {
             return Err(Error::MissingFiles {

@@ -454,3 +454,29 @@ fn regression_misleading_errors_say_what_is_wrong() {
     assert!(o.status.success(), "{e}");
     assert!(!e.contains("4294967295"), "{e}");
 }
+
+#[test]
+fn regression_an_instancing_cycle_is_located_at_the_instance_that_closes_it() {
+    // pbrt-v4 forward references let objects instance each other; the scene builder used to
+    // report it as "prototype 'world' instances itself", without a file or line.
+    let d = tempfile::tempdir().unwrap();
+    let scene = d.path().join("cycle.pbrt");
+    std::fs::write(
+        &scene,
+        "LookAt 0 0 5  0 0 0  0 1 0\nCamera \"perspective\" \"float fov\" [45]\nWorldBegin\n\
+         ObjectBegin \"a\"\nObjectInstance \"b\"\nShape \"sphere\"\nObjectEnd\n\
+         ObjectBegin \"b\"\nObjectInstance \"a\"\nObjectEnd\nObjectInstance \"a\"\n",
+    )
+    .unwrap();
+    let pkg = d.path().join("cycle.motu");
+    let err = fails_with(
+        &["import", s(&scene), "-o", s(&pkg), "--pbrt-version", "4"],
+        &[
+            "cycle.pbrt:9:1:",
+            "instancing cycle",
+            "\"a\" → \"b\" → \"a\"",
+        ],
+    );
+    assert!(!err.contains("'world'"), "{err}");
+    assert!(!pkg.exists());
+}

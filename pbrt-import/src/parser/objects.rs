@@ -108,6 +108,9 @@ impl<'s> Parser<'s> {
         loc: Loc,
     ) -> Result<()> {
         self.stats.instances += 1;
+        if let Some(parent) = inside {
+            self.instance_edges.entry((parent.0, id.0)).or_insert(loc);
+        }
         let ev = InstanceEvent {
             object: id,
             name: self
@@ -121,5 +124,54 @@ impl<'s> Parser<'s> {
         };
         self.sink.object_instance(&ev)?;
         Ok(())
+    }
+
+    /// The first instancing cycle among objects, if any: the `ObjectInstance` that closes it
+    /// and the object names along it (first and last the same).
+    pub(super) fn instance_cycle(&self) -> Option<(Loc, Vec<String>)> {
+        let mut children: std::collections::BTreeMap<u32, Vec<u32>> = Default::default();
+        for &(p, c) in self.instance_edges.keys() {
+            children.entry(p).or_default().push(c);
+        }
+        // 0: unseen, 1: on the current path, 2: done. Iterative DFS (scenes nest deeply).
+        let mut state: std::collections::HashMap<u32, u8> = Default::default();
+        for &root in children.keys() {
+            if state.get(&root).copied().unwrap_or(0) != 0 {
+                continue;
+            }
+            let mut stack: Vec<(u32, usize)> = vec![(root, 0)];
+            state.insert(root, 1);
+            while let Some(&mut (node, ref mut next)) = stack.last_mut() {
+                let kids = children.get(&node).map_or(&[][..], Vec::as_slice);
+                if let Some(&child) = kids.get(*next) {
+                    *next += 1;
+                    match state.get(&child).copied().unwrap_or(0) {
+                        0 => {
+                            state.insert(child, 1);
+                            stack.push((child, 0));
+                        }
+                        1 => {
+                            let at = stack.iter().position(|&(n, _)| n == child)?;
+                            let name = |id: u32| {
+                                self.object_names
+                                    .get(id as usize)
+                                    .cloned()
+                                    .unwrap_or_default()
+                            };
+                            let mut names: Vec<String> =
+                                stack[at..].iter().map(|&(n, _)| name(n)).collect();
+                            names.push(name(child));
+                            let loc = *self.instance_edges.get(&(node, child))?;
+                            return Some((loc, names));
+                        }
+                        _ => {}
+                    }
+                } else {
+                    state.insert(node, 2);
+                    stack.pop();
+                }
+            }
+        }
+        None
     }
 }
