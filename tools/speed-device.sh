@@ -33,7 +33,7 @@ scene() {
     [ -f "$WORK/$name/scene.pbrt" ] && return 0
     step "gen $1 → $name"
     # shellcheck disable=SC2086
-    "$MOTU" gen $1 -o "$WORK/$name" >/dev/null || die "gen $1 failed"
+    "$MOTU" gen $1 -o "$WORK/$name" --force >/dev/null || die "gen $1 failed"
 }
 # Imports scene `$1` with flags `$3` into $WORK/$2.motu once.
 package() {

@@ -41,7 +41,7 @@ TAG=${S:-default}
 PKG=$WORK/island-$TAG.motu
 if [ ! -f "$PKG" ]; then
     step "gen island${S:+ --scale $S}; import (default flags)"
-    "$MOTU" gen island ${S:+--scale "$S"} -o "$WORK/island-$TAG" >/dev/null || die "gen failed"
+    "$MOTU" gen island ${S:+--scale "$S"} -o "$WORK/island-$TAG" --force >/dev/null || die "gen failed"
     "$MOTU" import "$WORK/island-$TAG/scene.pbrt" -o "$PKG" >/dev/null || die "import failed"
 fi
 "$MOTU" report "$PKG" --json --width "$W" --height "$H" >"$OUT/report.json" || die "report failed"

@@ -71,6 +71,13 @@ impl Runner {
                 return None;
             }
         }
+        // `motu gen` writes into an existing directory only (outputs are checked up front).
+        if let Some(parent) = dir.parent() {
+            if let Err(e) = std::fs::create_dir_all(parent) {
+                r.error = Some(format!("cannot create {}: {e}", parent.display()));
+                return None;
+            }
+        }
         self.say(&format!("{}: motu gen {}", spec.name, args.join(" ")));
         let mut full = vec!["gen".to_string()];
         full.extend(args.iter().cloned());

@@ -6,13 +6,21 @@ use crate::size::format_size;
 use motu_compile::Levels;
 
 pub fn run(a: ImportArgs) -> anyhow::Result<()> {
-    // A directory, FIFO, device or symlink loop as the scene is named before anything opens
-    // it (a missing scene is the pipeline's own error).
+    // A FIFO, device or symlink loop as the scene is named before anything opens it (a missing
+    // scene is the pipeline's own error, and so is a directory: Moana's base package may be
+    // named by its folder, anything else is refused there by name).
     if let motu_package::identity::InputKind::Other(what) =
         motu_package::identity::classify_input(&a.scene)
     {
+        if a.scene.is_dir() {
+            return import_checked(a);
+        }
         anyhow::bail!("scene {}: is {what}, not a regular file", a.scene.display());
     }
+    import_checked(a)
+}
+
+fn import_checked(a: ImportArgs) -> anyhow::Result<()> {
     crate::output::check_outputs(&[("scene", &a.scene)], &[("-o", &a.output)])?;
     if let Some(t) = a.threads {
         rayon::ThreadPoolBuilder::new()
