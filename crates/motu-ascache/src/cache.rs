@@ -15,8 +15,9 @@ use crate::stats::{CacheStats, Tier};
 /// - [`put`](Self::put) stores in host memory and **writes through** to the directory when
 ///   it does not hold the key yet: an entry is on disk as soon as it is built, so it survives
 ///   the process (even a killed one) and an evicted host blob needs no write-back. The write
-///   (write, fsync, rename) is synchronous; a caller that cannot afford it on its frame's
-///   thread can own the `AsCache` on a worker.
+///   (write, fsync, rename) happens on the caller's thread, or on the disk tier's own writer
+///   thread with [`DiskOptions::background`](crate::DiskOptions::background), which shares
+///   the host tier's blob instead of copying it.
 ///
 /// Blobs in the host tier are trusted as this process's device wrote them (one `AsCache` per
 /// device); only the disk tier asks [`Compatibility`].
@@ -80,7 +81,7 @@ impl AsCache {
         self.stats.put_bytes += blob.len() as u64;
         if let Some(disk) = self.disk.as_mut() {
             if !disk.contains(&key) {
-                disk.put(&key, &blob);
+                disk.put_shared(&key, &blob);
             }
         }
         self.host.insert(key, blob);
@@ -104,6 +105,13 @@ impl AsCache {
         self.host.remove(key);
         if let Some(disk) = self.disk.as_mut() {
             disk.remove(key);
+        }
+    }
+
+    /// Waits until every entry written through is on disk (see [`DiskCache::flush`]).
+    pub fn flush(&mut self) {
+        if let Some(disk) = self.disk.as_mut() {
+            disk.flush();
         }
     }
 

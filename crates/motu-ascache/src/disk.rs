@@ -20,6 +20,7 @@ use crate::entry::{
 use crate::key::CacheKey;
 use crate::lru::ByteLru;
 use crate::stats::{DiskStats, WarningReason};
+use crate::writer::{Job, Writer};
 
 /// The environment variable naming the cache directory (before the XDG default).
 pub const CACHE_DIR_ENV: &str = "MOTU_AS_CACHE";
@@ -97,7 +98,18 @@ pub struct DiskOptions {
     /// half the blob (`StorageFull` is a disk filling up mid-entry, `PermissionDenied` a
     /// read-only directory), down the same clean-up and warning path a real failure takes.
     pub fail_writes_with: Option<io::ErrorKind>,
+    /// Write entries on a thread of their own (`put` queues and returns; a queued entry is
+    /// answered from memory until it is on disk; dropping the cache writes the queue first).
+    /// Off by default: a caller on a frame's thread turns it on.
+    pub background: bool,
+    /// With `background`: the most blob bytes queued before `put` waits for the writer.
+    pub max_pending_bytes: u64,
 }
+
+/// The default bound of [`DiskOptions::max_pending_bytes`]: 1 GiB. The queued blobs are
+/// mostly the host tier's too (shared, not copied), so this bounds how far the disk may lag
+/// behind the builds rather than memory alone.
+pub const DEFAULT_MAX_PENDING_BYTES: u64 = 1 << 30;
 
 impl Default for DiskOptions {
     fn default() -> Self {
@@ -106,6 +118,8 @@ impl Default for DiskOptions {
             stale_temp_age: DEFAULT_STALE_TEMP_AGE,
             sync: true,
             fail_writes_with: None,
+            background: false,
+            max_pending_bytes: DEFAULT_MAX_PENDING_BYTES,
         }
     }
 }
@@ -193,6 +207,8 @@ pub struct DiskCache {
     read_warned: bool,
     options: DiskOptions,
     stats: DiskStats,
+    /// With [`DiskOptions::background`]: the thread that writes entries.
+    writer: Option<Writer>,
 }
 
 impl std::fmt::Debug for DiskCache {
@@ -217,9 +233,17 @@ impl DiskCache {
             writable: true,
             readable: true,
             read_warned: false,
+            writer: None,
             options,
             stats: DiskStats::default(),
         };
+        if cache.options.background {
+            match Writer::start(cache.options.max_pending_bytes) {
+                Ok(w) => cache.writer = Some(w),
+                // Still a cache: entries are written on the caller's thread.
+                Err(e) => tracing::warn!(error = %e, "no writer thread for the structure cache"),
+            }
+        }
         let versioned = cache.root.join(VERSION_DIR);
         if let Err(e) = create_private_dir_all(&versioned) {
             cache.write_failed(&versioned, &e, "cannot create the cache directory");
@@ -307,6 +331,9 @@ impl DiskCache {
         match self.lru.insert(key, (), bytes) {
             Ok(evicted) => {
                 for e in evicted {
+                    if let Some(w) = &self.writer {
+                        w.cancel(&e.key);
+                    }
                     let path = entry_path(&self.root, &e.key);
                     match fs::remove_file(&path) {
                         Ok(()) => {}
@@ -357,6 +384,14 @@ impl DiskCache {
     /// its serialization header; its file becomes the most recently used. Anything else is
     /// `None`: a bad entry is warned about, counted by reason and removed.
     pub fn get(&mut self, key: &CacheKey, compat: &dyn Compatibility) -> Option<Arc<[u8]>> {
+        self.drain();
+        if let Some(blob) = self.writer.as_ref().and_then(|w| w.pending_blob(key)) {
+            // Written by this process a moment ago and not on disk yet: the same bytes.
+            self.index(*key, blob.len() as u64 + ENTRY_HEADER_BYTES as u64);
+            self.stats.hits += 1;
+            self.stats.hit_bytes += blob.len() as u64;
+            return Some(blob);
+        }
         if !self.readable {
             self.stats.misses += 1;
             return None;
@@ -429,6 +464,17 @@ impl DiskCache {
     /// a serialization header, or when the entry alone exceeds the bound. A failed write is a
     /// warning that turns writes off; the temp file is removed and nothing else changes.
     pub fn put(&mut self, key: &CacheKey, blob: &[u8]) -> bool {
+        self.put_inner(key, blob, None)
+    }
+
+    /// [`put`](Self::put) of a shared blob: the background writer keeps a reference instead
+    /// of a copy.
+    pub fn put_shared(&mut self, key: &CacheKey, blob: &Arc<[u8]>) -> bool {
+        self.put_inner(key, blob, Some(blob))
+    }
+
+    fn put_inner(&mut self, key: &CacheKey, blob: &[u8], shared: Option<&Arc<[u8]>>) -> bool {
+        self.drain();
         let file_bytes = blob.len() as u64 + ENTRY_HEADER_BYTES as u64;
         if !self.writable
             || blob.len() < SERIALIZED_HEADER_BYTES
@@ -439,15 +485,31 @@ impl DiskCache {
         }
         // Evict first, so a cache at its bound on a nearly full disk makes room before writing.
         self.index(*key, file_bytes);
+        if let Some(w) = &self.writer {
+            w.submit(Job {
+                key: *key,
+                root: self.root.clone(),
+                blob: shared.map_or_else(|| Arc::from(blob), Arc::clone),
+                sync: self.options.sync,
+                fail_with: self.options.fail_writes_with,
+            });
+            return true;
+        }
         let path = entry_path(&self.root, key);
-        match self.write_entry(&path, key, blob) {
-            Ok(()) => {
+        match write_entry_file(
+            &self.root,
+            key,
+            blob,
+            self.options.sync,
+            self.options.fail_writes_with,
+        ) {
+            Ok(_) => {
                 self.stats.written += 1;
                 self.stats.written_bytes += file_bytes;
                 tracing::debug!(%key, bytes = file_bytes, "wrote a cache entry");
                 true
             }
-            Err(e) => {
+            Err((_, e)) => {
                 self.lru.remove(key);
                 self.write_failed(&path, &e, "cannot write a cache entry");
                 false
@@ -455,27 +517,26 @@ impl DiskCache {
         }
     }
 
-    fn write_entry(&self, path: &Path, key: &CacheKey, blob: &[u8]) -> io::Result<()> {
-        let dir = shard_dir(&self.root, key);
-        create_private_dir_all(&dir)?;
-        let mut temp = tempfile::Builder::new()
-            .prefix(&temp_prefix(key, std::process::id()))
-            .suffix(TEMP_SUFFIX)
-            .tempfile_in(&dir)?;
-        let file = temp.as_file_mut();
-        file.write_all(&encode_header(key, blob))?;
-        if let Some(kind) = self.options.fail_writes_with {
-            // Half the blob written, as a disk filling up mid-entry leaves it.
-            file.write_all(&blob[..blob.len() / 2])?;
-            return Err(io::Error::new(kind, "simulated write failure"));
+    /// Applies what the writer thread reports: keys it could not write are forgotten, and a
+    /// failed write turns writes off (the writer warned).
+    fn drain(&mut self) {
+        let Some(w) = &self.writer else { return };
+        let (unwritten, failed) = w.take_unwritten();
+        for key in unwritten {
+            self.lru.remove(&key);
         }
-        file.write_all(blob)?;
-        if self.options.sync {
-            file.sync_all()?;
+        if failed {
+            self.writable = false;
         }
-        // rename(2) over the target: readers see the old entry or the new one, never a part.
-        temp.persist(path).map_err(|e| e.error)?;
-        Ok(())
+    }
+
+    /// Waits until every entry `put` queued is on disk (or failed); a no-op without
+    /// [`DiskOptions::background`].
+    pub fn flush(&mut self) {
+        if let Some(w) = &self.writer {
+            w.flush();
+        }
+        self.drain();
     }
 
     fn write_failed(&mut self, path: &Path, e: &io::Error, what: &str) {
@@ -492,19 +553,73 @@ impl DiskCache {
 
     /// Forgets and removes `key`'s entry (e.g. bytes the device refused to deserialize).
     pub fn remove(&mut self, key: &CacheKey) -> bool {
+        if let Some(w) = &self.writer {
+            w.cancel(key);
+        }
         self.lru.remove(key);
         fs::remove_file(entry_path(&self.root, key)).is_ok()
     }
 
-    /// The counters, with `entries`, `bytes`, `capacity_bytes` and `writable` as of now.
+    /// The counters, with `entries`, `bytes`, `capacity_bytes` and `writable` as of now; with
+    /// the background writer, after every queued write is done (this waits for them).
     pub fn stats(&self) -> DiskStats {
-        DiskStats {
+        let mut s = DiskStats {
             capacity_bytes: self.lru.capacity(),
             writable: self.writable,
             entries: self.lru.len() as u64,
             bytes: self.lru.bytes(),
             ..self.stats
+        };
+        if let Some(w) = &self.writer {
+            // Counts of writes still queued would be guesses: wait for them (a report is
+            // taken once, at the end; the process writes them before it exits anyway).
+            w.flush();
+            w.with_done(|d| {
+                s.written += d.written;
+                s.written_bytes += d.written_bytes;
+                s.warnings.add(&d.warnings);
+                s.writable &= d.warnings.total() == 0;
+            });
         }
+        s
+    }
+}
+
+/// Writes `blob` as `key`'s entry under `root` (temp file, optional fsync, rename over the
+/// name): the entry's path and file bytes, or the path and the error (the temp file removed).
+pub(crate) fn write_entry_file(
+    root: &Path,
+    key: &CacheKey,
+    blob: &[u8],
+    sync: bool,
+    fail_with: Option<io::ErrorKind>,
+) -> Result<(PathBuf, u64), (PathBuf, io::Error)> {
+    let path = entry_path(root, key);
+    let write = || -> io::Result<()> {
+        let dir = shard_dir(root, key);
+        create_private_dir_all(&dir)?;
+        let mut temp = tempfile::Builder::new()
+            .prefix(&temp_prefix(key, std::process::id()))
+            .suffix(TEMP_SUFFIX)
+            .tempfile_in(&dir)?;
+        let file = temp.as_file_mut();
+        file.write_all(&encode_header(key, blob))?;
+        if let Some(kind) = fail_with {
+            // Half the blob written, as a disk filling up mid-entry leaves it.
+            file.write_all(&blob[..blob.len() / 2])?;
+            return Err(io::Error::new(kind, "simulated write failure"));
+        }
+        file.write_all(blob)?;
+        if sync {
+            file.sync_all()?;
+        }
+        // rename(2) over the target: readers see the old entry or the new one, never a part.
+        temp.persist(&path).map_err(|e| e.error)?;
+        Ok(())
+    };
+    match write() {
+        Ok(()) => Ok((path, blob.len() as u64 + ENTRY_HEADER_BYTES as u64)),
+        Err(e) => Err((path, e)),
     }
 }
 

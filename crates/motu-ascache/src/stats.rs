@@ -105,6 +105,17 @@ impl WarningCounts {
         *c += 1;
     }
 
+    /// Adds `other`'s counts.
+    pub fn add(&mut self, other: &WarningCounts) {
+        self.corrupt += other.corrupt;
+        self.truncated += other.truncated;
+        self.foreign += other.foreign;
+        self.incompatible += other.incompatible;
+        self.read_only += other.read_only;
+        self.full += other.full;
+        self.io += other.io;
+    }
+
     /// All warnings.
     pub fn total(&self) -> u64 {
         WarningReason::ALL.iter().map(|&r| self.get(r)).sum()

@@ -52,6 +52,9 @@ impl CacheSettings {
                     // cold frame (lavapipe, island 0.05: 4.4 s of its 6.4 s of building). An
                     // entry a power loss cut fails its checksum and is rebuilt with a warning.
                     sync: false,
+                    // Files written beside the next builds instead of between them; the
+                    // process writes what is queued before it exits.
+                    background: true,
                     ..DiskOptions::default()
                 },
             )

@@ -1,0 +1,84 @@
+#!/usr/bin/env bash
+# Issue 45's still-frame runs on a GPU machine: a default `gen island --scale S` (default 0.63)
+# rendered once by the full build and streamed at 8 and 24 GiB, each with a cold and then a warm
+# on-disk structure cache, timing every process from its start to its written PNG (wall clock,
+# and `stream.startup` from --stats). Runs alternate after a warm-up render, so no process pays
+# the GPU's cold start.
+#
+#   S=0.63 bash tools/ttfp-device.sh
+#
+# Environment: S, BUDGETS (GiB, default "8 24"), SIZE (default 640x360), ROUNDS (default 1),
+# OUT (default ./ttfp-out), TTFP_WORK (scenes, default target/motu-ttfp), KEEP_PBRT=1 keeps the
+# generated pbrt files (they are deleted after the import to leave disk for the package).
+# Writes into $OUT: import.time, report.json, per run NAME.json (--stats) and summary.txt.
+set -uo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$PWD
+S=${S:-0.63}
+BUDGETS=${BUDGETS:-8 24}
+SIZE=${SIZE:-640x360}
+ROUNDS=${ROUNDS:-1}
+OUT=${OUT:-$ROOT/ttfp-out}
+WORK=${TTFP_WORK:-$ROOT/target/motu-ttfp}
+NAME=ttfp-device
+. "$ROOT/tools/device-env.sh"
+
+PKG=$WORK/island-$S.motu
+if [ ! -f "$PKG" ]; then
+    step "gen island --scale $S"
+    "$MOTU" gen island --scale "$S" -o "$WORK/island-$S" --force >/dev/null || die "gen failed"
+    step "import (default flags)"
+    /usr/bin/time -v "$MOTU" import "$WORK/island-$S/scene.pbrt" -o "$PKG" --json \
+        >"$OUT/import.json" 2>"$OUT/import.time" || die "import failed"
+    [ "${KEEP_PBRT:-0}" = 1 ] || rm -rf "$WORK/island-$S"
+fi
+step "report"
+/usr/bin/time -v "$MOTU" report "$PKG" --json --width "$W" --height "$H" >"$OUT/report.json" \
+    2>"$OUT/report.time" || die "report failed"
+
+# One process: wall seconds from start to exit (the PNG is its last output), its --stats kept.
+timed() {
+    local name=$1
+    shift
+    local t0 t1
+    t0=$(date +%s.%N)
+    "$MOTU" render "$PKG" -o "$WORK/$name.png" --backend pipeline --width "$W" --height "$H" \
+        --stats "$OUT/$name.json" "$@" >"$WORK/$name.log" 2>&1 ||
+        { tail -5 "$WORK/$name.log"; die "$name failed"; }
+    t1=$(date +%s.%N)
+    python3 - "$OUT/$name.json" "$name" "$t0" "$t1" <<'PY' | tee -a "$OUT/summary.txt"
+import json, sys
+st = json.load(open(sys.argv[1]))
+wall = float(sys.argv[4]) - float(sys.argv[3])
+s = st.get("stream") or {}
+up = s.get("startup") or {}
+fr = s.get("frames") or [{}]
+f0 = fr[0]
+keys = ["before_render_ms", "device_ms", "split_ms", "clusters_ms", "floor_ms", "init_ms",
+        "derived_ms", "persistent_choice_ms", "proxy_boxes_ms", "skeleton_ms", "first_frame_ms", "to_first_pixel_ms", "write_ms"]
+parts = " ".join(f"{k[:-3]}={up[k]:.0f}" for k in keys if isinstance(up.get(k), (int, float)))
+print(f"  {sys.argv[2]}: {wall:.1f} s to exit; {parts}; passes {f0.get('passes', '-')}, "
+      f"build {f0.get('build_ms', 0):.0f} ms trace {f0.get('trace_ms', 0):.0f} ms, "
+      f"built {f0.get('built_bytes', 0) / 1e9:.2f} GB, rebuilt {f0.get('rebuilt_blases', '-')} "
+      f"restored {f0.get('restored_blases', '-')} ({f0.get('restored_bytes', 0) / 1e9:.2f} GB)")
+PY
+}
+
+step "warm-up (full build, 2 frames)"
+"$MOTU" render "$PKG" -o "$WORK/warm.png" --backend pipeline --width "$W" --height "$H" \
+    --frames 2 >/dev/null 2>&1 || die "warm-up failed"
+for r in $(seq 1 "$ROUNDS"); do
+    step "round $r: full build"
+    timed "full-$r"
+    for b in $BUDGETS; do
+        CACHE=$WORK/as-cache-$b-$r
+        rm -rf "$CACHE"
+        step "round $r: streamed at $b GiB, cold cache"
+        timed "s$b-cold-$r" --stream --vram-budget "${b}GiB" --as-cache "$CACHE"
+        step "round $r: streamed at $b GiB, warm cache"
+        timed "s$b-warm-$r" --stream --vram-budget "${b}GiB" --as-cache "$CACHE"
+        du -sh "$CACHE" | tee -a "$OUT/summary.txt"
+        rm -rf "$CACHE"
+    done
+done
+step "done"
