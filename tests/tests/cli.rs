@@ -104,3 +104,78 @@ fn regression_a_closed_stdout_ends_quietly_not_with_a_panic() {
         );
     }
 }
+
+/// The lines of `help` under `heading` (up to the next blank-line-separated heading).
+fn help_section<'a>(help: &'a str, heading: &str) -> Vec<&'a str> {
+    let mut lines = help.lines().skip_while(|l| *l != heading).skip(1);
+    let mut out = Vec::new();
+    for l in lines.by_ref() {
+        if !l.starts_with(' ') && !l.is_empty() {
+            break;
+        }
+        out.push(l);
+    }
+    out
+}
+
+/// Issue 46 item 7: `render` and `view` list their flags under headings, the expert streaming
+/// knobs only in `--help`, and no flag of CLI.md's contract is lost.
+#[test]
+fn render_and_view_help_group_their_flags() {
+    let text = |args: &[&str]| {
+        let out = motu(args);
+        assert!(out.status.success(), "motu {args:?}");
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let expert = [
+        "--stream-probe ",
+        "--stream-probe-rounds",
+        "--stream-probe-verify",
+        "--stream-probe-pass-rows",
+        "--stream-tlas",
+        "--stream-split-instances",
+        "--stream-defrag",
+        "--stream-mesh-memory",
+    ];
+    for cmd in ["render", "view"] {
+        let short = text(&[cmd, "-h"]);
+        let long = text(&[cmd, "--help"]);
+        for heading in [
+            "Output:",
+            "Camera:",
+            "Shading:",
+            "Scene subset and level of detail:",
+            "Device and budget:",
+            "Streaming:",
+            "Debugging:",
+        ] {
+            assert!(short.contains(heading), "{cmd} -h lacks {heading}:\n{short}");
+            assert!(long.contains(heading), "{cmd} --help lacks {heading}");
+        }
+        assert!(long.contains("Streaming, expert (--help only):"), "{long}");
+        assert!(!short.contains("Streaming, expert"), "{short}");
+        for flag in expert {
+            assert!(long.contains(flag), "{cmd} --help lacks {flag}");
+            assert!(!short.contains(flag), "{cmd} -h shows the expert {flag}");
+        }
+        // Every flag sits under a heading: the generic list holds only the global ones.
+        let generic: Vec<&str> = help_section(&short, "Options:")
+            .into_iter()
+            .filter(|l| l.trim_start().starts_with('-'))
+            .collect();
+        assert!(
+            generic
+                .iter()
+                .all(|l| ["--help", "--version", "--verbose"].iter().any(|f| l.contains(f))),
+            "{cmd}: flags without a heading: {generic:?}"
+        );
+    }
+    // CLI.md's `render` flags, all still there in the short help.
+    let short = text(&["render", "-h"]);
+    for flag in [
+        "--output", "--camera", "--width", "--height", "--backend", "--view", "--aov",
+        "--vram-budget", "--max-allocations", "--stream", "--frames", "--stats", "--subset",
+    ] {
+        assert!(short.contains(flag), "render -h lacks {flag}");
+    }
+}

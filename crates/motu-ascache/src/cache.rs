@@ -72,6 +72,43 @@ impl AsCache {
         found
     }
 
+    /// [`get`](Self::get) of every key of `keys`, in order, counted as `get` counts: what
+    /// host memory lacks is read from the directory on several threads
+    /// ([`DiskCache::get_many`]) and promoted to host memory.
+    pub fn get_many(
+        &mut self,
+        keys: &[CacheKey],
+        compat: &(dyn Compatibility + Sync),
+    ) -> Vec<Option<(Arc<[u8]>, Tier)>> {
+        let mut found: Vec<Option<(Arc<[u8]>, Tier)>> = keys
+            .iter()
+            .map(|k| self.host.get(k).map(|b| (b, Tier::Host)))
+            .collect();
+        if let Some(disk) = self.disk.as_mut() {
+            let todo: Vec<usize> = (0..keys.len()).filter(|&i| found[i].is_none()).collect();
+            let wanted: Vec<CacheKey> = todo.iter().map(|&i| keys[i]).collect();
+            for (i, blob) in todo.into_iter().zip(disk.get_many(&wanted, compat)) {
+                if let Some(blob) = blob {
+                    self.host.insert(keys[i], Arc::clone(&blob));
+                    found[i] = Some((blob, Tier::Disk));
+                }
+            }
+        }
+        for f in &found {
+            match f {
+                Some((blob, tier)) => {
+                    match tier {
+                        Tier::Host => self.stats.host_hits += 1,
+                        Tier::Disk => self.stats.disk_hits += 1,
+                    }
+                    self.stats.hit_bytes += blob.len() as u64;
+                }
+                None => self.stats.misses += 1,
+            }
+        }
+        found
+    }
+
     /// Stores `blob` (a serialized structure) under `key`: in host memory, and in the
     /// directory unless this process knows an entry for `key` there already. Never fails: a
     /// blob over the host bound is refused there and still written to disk, and a failed
@@ -215,6 +252,42 @@ mod tests {
         assert_eq!(s.warnings().get(WarningReason::Incompatible), 1);
         assert_eq!(s.misses, 1);
         assert_eq!(c.contains(&key(2)), None);
+    }
+
+    #[test]
+    fn get_many_answers_as_get_does_from_both_tiers_in_order() {
+        let dir = tempfile::tempdir().unwrap();
+        {
+            let mut c = AsCache::new(HostCache::new(1 << 20), Some(disk(dir.path())));
+            for i in 0..40 {
+                c.put(key(i), blob(1, 1000 + usize::from(i)));
+            }
+        }
+        let mut c = AsCache::new(HostCache::new(1 << 20), Some(disk(dir.path())));
+        c.put(key(200), blob(1, 10)); // in host memory only
+                                      // An entry another driver wrote: a miss with a warning, as `get` would say.
+        let mut other = AsCache::new(HostCache::new(0), Some(disk(dir.path())));
+        other.put(key(201), blob(2, 10));
+        drop(other);
+        let keys: Vec<CacheKey> = (0..40).chain([200, 201, 202]).map(key).collect();
+        let got = c.get_many(&keys, &driver(1));
+        for i in 0..40u8 {
+            let (b, tier) = got[usize::from(i)].as_ref().expect("on disk");
+            assert_eq!(
+                (tier, &**b),
+                (&Tier::Disk, &*blob(1, 1000 + usize::from(i)))
+            );
+        }
+        assert_eq!(got[40].as_ref().map(|g| g.1), Some(Tier::Host));
+        assert!(got[41].is_none() && got[42].is_none());
+        let s = c.stats();
+        assert_eq!((s.host_hits, s.disk_hits, s.misses), (1, 40, 2));
+        assert_eq!(s.warnings().get(WarningReason::Incompatible), 1);
+        // Promoted: the same keys again come from host memory.
+        let again = c.get_many(&keys[..40], &driver(1));
+        assert!(again
+            .iter()
+            .all(|g| g.as_ref().map(|g| g.1) == Some(Tier::Host)));
     }
 
     #[test]

@@ -385,11 +385,7 @@ impl DiskCache {
     /// `None`: a bad entry is warned about, counted by reason and removed.
     pub fn get(&mut self, key: &CacheKey, compat: &dyn Compatibility) -> Option<Arc<[u8]>> {
         self.drain();
-        if let Some(blob) = self.writer.as_ref().and_then(|w| w.pending_blob(key)) {
-            // Written by this process a moment ago and not on disk yet: the same bytes.
-            self.index(*key, blob.len() as u64 + ENTRY_HEADER_BYTES as u64);
-            self.stats.hits += 1;
-            self.stats.hit_bytes += blob.len() as u64;
+        if let Some(blob) = self.pending_hit(key) {
             return Some(blob);
         }
         if !self.readable {
@@ -397,13 +393,79 @@ impl DiskCache {
             return None;
         }
         let path = entry_path(&self.root, key);
-        match read_entry(&path, key, compat) {
-            Ok((blob, file)) => {
-                // Recency for this and every later process; a file we may not touch (another
-                // user's, a read-only directory) keeps its old time.
-                if let Err(e) = file.set_modified(SystemTime::now()) {
-                    tracing::trace!(path = %path.display(), error = %e, "hit not touched");
+        let read = read_and_touch(&path, key, compat);
+        self.apply_read(key, &path, read)
+    }
+
+    /// [`get`](Self::get) of every key of `keys`, in order: entries are read and checked on up
+    /// to [`READ_THREADS`] threads (one thread read the H200 host's ~3 MB entries at
+    /// 0.6 GB/s, checksums included), then indexed in order as `get` would.
+    pub fn get_many(
+        &mut self,
+        keys: &[CacheKey],
+        compat: &(dyn Compatibility + Sync),
+    ) -> Vec<Option<Arc<[u8]>>> {
+        self.drain();
+        let mut out: Vec<Option<Arc<[u8]>>> = keys.iter().map(|k| self.pending_hit(k)).collect();
+        if !self.readable {
+            let missing = out.iter().filter(|o| o.is_none()).count();
+            self.stats.misses += missing as u64;
+            return out;
+        }
+        let todo: Vec<usize> = (0..keys.len()).filter(|&i| out[i].is_none()).collect();
+        let paths: Vec<PathBuf> = todo
+            .iter()
+            .map(|&i| entry_path(&self.root, &keys[i]))
+            .collect();
+        let threads = READ_THREADS
+            .min(std::thread::available_parallelism().map_or(1, usize::from))
+            .min(todo.len())
+            .max(1);
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let mut reads: Vec<Option<ReadResult>> = (0..todo.len()).map(|_| None).collect();
+        std::thread::scope(|scope| {
+            let workers: Vec<_> = (0..threads)
+                .map(|_| {
+                    scope.spawn(|| {
+                        let mut done = Vec::new();
+                        loop {
+                            let j = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                            if j >= todo.len() {
+                                break done;
+                            }
+                            done.push((j, read_and_touch(&paths[j], &keys[todo[j]], compat)));
+                        }
+                    })
+                })
+                .collect();
+            for w in workers {
+                // A panicking reader is a bug; its keys stay misses (rebuilt).
+                for (j, r) in w.join().unwrap_or_default() {
+                    reads[j] = Some(r);
                 }
+            }
+        });
+        for ((&i, path), read) in todo.iter().zip(&paths).zip(reads) {
+            let read = read.unwrap_or(Err(ReadMiss::Absent));
+            out[i] = self.apply_read(&keys[i], path, read);
+        }
+        out
+    }
+
+    /// A hit on a blob the background writer still holds.
+    fn pending_hit(&mut self, key: &CacheKey) -> Option<Arc<[u8]>> {
+        let blob = self.writer.as_ref()?.pending_blob(key)?;
+        // Written by this process a moment ago and not on disk yet: the same bytes.
+        self.index(*key, blob.len() as u64 + ENTRY_HEADER_BYTES as u64);
+        self.stats.hits += 1;
+        self.stats.hit_bytes += blob.len() as u64;
+        Some(blob)
+    }
+
+    /// Counts and indexes one read of `key`'s entry at `path`.
+    fn apply_read(&mut self, key: &CacheKey, path: &Path, read: ReadResult) -> Option<Arc<[u8]>> {
+        match read {
+            Ok(blob) => {
                 self.index(*key, blob.len() as u64 + ENTRY_HEADER_BYTES as u64);
                 self.stats.hits += 1;
                 self.stats.hit_bytes += blob.len() as u64;
@@ -415,7 +477,7 @@ impl DiskCache {
                 self.lru.remove(key);
                 match miss {
                     ReadMiss::Absent => {}
-                    ReadMiss::Bad(e, id) => self.bad_entry(&path, e, id),
+                    ReadMiss::Bad(e, id) => self.bad_entry(path, e, id),
                     ReadMiss::Io(e) => {
                         let reason = io_reason(&e);
                         self.stats.warnings.count(reason);
@@ -633,6 +695,22 @@ fn create_private_dir_all(dir: &Path) -> io::Result<()> {
 }
 
 /// Reads and checks `key`'s entry at `path`; returns its blob and the open file (to touch).
+/// Threads [`DiskCache::get_many`] reads entries on, at most.
+pub const READ_THREADS: usize = 8;
+
+type ReadResult = Result<Arc<[u8]>, ReadMiss>;
+
+/// [`read_entry`], and a hit's file becomes the most recently used: recency for this and
+/// every later process (a file we may not touch, another user's or in a read-only directory,
+/// keeps its old time).
+fn read_and_touch(path: &Path, key: &CacheKey, compat: &dyn Compatibility) -> ReadResult {
+    let (blob, file) = read_entry(path, key, compat)?;
+    if let Err(e) = file.set_modified(SystemTime::now()) {
+        tracing::trace!(path = %path.display(), error = %e, "hit not touched");
+    }
+    Ok(blob)
+}
+
 fn read_entry(
     path: &Path,
     key: &CacheKey,

@@ -88,6 +88,7 @@ pub use disk::{
     default_dir, default_disk_capacity_bytes, dir_from_env, filesystem_free_bytes, io_reason,
     DiskCache, DiskOptions, CACHE_DIR_ENV, DEFAULT_DISK_CAPACITY_BYTES,
     DEFAULT_FREE_SHARE_DENOMINATOR, DEFAULT_MAX_PENDING_BYTES, DEFAULT_STALE_TEMP_AGE,
+    READ_THREADS,
 };
 pub use host::{
     default_host_cache_bytes, mem_available_bytes, HostCache, DEFAULT_HOST_SHARE_DENOMINATOR,

@@ -4,6 +4,17 @@ use crate::size::{parse_budget, parse_size};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 
+// `render`/`view` flags under help headings (issue 46: 38 flags in one list were not a CLI a
+// person can hold in their head). The expert streaming knobs show in `--help`, not in `-h`.
+const HEADING_OUTPUT: &str = "Output";
+const HEADING_CAMERA: &str = "Camera";
+const HEADING_SHADING: &str = "Shading";
+const HEADING_SCENE: &str = "Scene subset and level of detail";
+const HEADING_DEVICE: &str = "Device and budget";
+const HEADING_STREAMING: &str = "Streaming";
+const HEADING_STREAMING_EXPERT: &str = "Streaming, expert (--help only)";
+const HEADING_DEBUG: &str = "Debugging";
+
 #[derive(Parser, Debug)]
 #[command(name = "motu", version, about = "Make Moana-scale instanced scenes usable on one GPU", long_about = None)]
 pub struct Cli {
@@ -351,16 +362,16 @@ pub struct AsCacheArgs {
     /// Streaming: bytes of built acceleration structures (serialised) kept in host memory,
     /// least recently used dropped first. Default: a quarter of the memory available at start;
     /// 0: none.
-    #[arg(long, value_parser = parse_size)]
+    #[arg(help_heading = HEADING_STREAMING, long, value_parser = parse_size)]
     pub host_cache: Option<u64>,
     /// Streaming: the directory where built structures are kept between runs (per device and
     /// driver; bad or foreign entries are rebuilt with a warning; a read-only or full
     /// directory is a warning). Default: $MOTU_AS_CACHE, else $XDG_CACHE_HOME/motu/as-cache,
     /// else ~/.cache/motu/as-cache.
-    #[arg(long, conflicts_with = "no_as_cache")]
+    #[arg(help_heading = HEADING_STREAMING, long, conflicts_with = "no_as_cache")]
     pub as_cache: Option<PathBuf>,
     /// Streaming: keep no built structures on disk.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_STREAMING, long)]
     pub no_as_cache: bool,
 }
 
@@ -371,29 +382,29 @@ pub struct StreamBoundArgs {
     /// Streaming: what a structure that is not resident yet shows when a frame stops before
     /// building it (opt-in: such a frame is not exact; its fallback pixels are counted in
     /// --stats and on stderr). Later frames of a camera path refine it.
-    #[arg(long, value_enum, default_value = "off")]
+    #[arg(help_heading = HEADING_STREAMING, long, value_enum, default_value = "off")]
     pub stream_fallback: FallbackArg,
     /// Streaming: bytes (meshes plus acceleration structures) one frame may build; a frame
     /// stops when it is spent (at least one structure is built per frame) and later frames go
     /// on. Default: unbounded.
-    #[arg(long, value_parser = parse_size)]
+    #[arg(help_heading = HEADING_STREAMING, long, value_parser = parse_size)]
     pub stream_build_budget: Option<u64>,
     /// Streaming: milliseconds of building one frame may spend (same rules). Default: unbounded.
-    #[arg(long, value_parser = parse_build_ms)]
+    #[arg(help_heading = HEADING_STREAMING, long, value_parser = parse_build_ms)]
     pub stream_build_ms: Option<f64>,
     /// Streaming: after each frame whose next camera is known (a camera path, a flight; the
     /// viewer extrapolates it), trace every ray of every STRIDE-th pixel of the next camera
     /// against what is resident and prefetch what they meet, so the next frame mostly
     /// completes in one pass; its rays and ms are reported (probe_rays, probe_ms). 0: no
     /// probe. Default 1 (every pixel).
-    #[arg(long, value_name = "STRIDE")]
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_name = "STRIDE")]
     pub stream_probe: Option<u32>,
     /// Streaming: probe rounds after a frame, at most (default 2). A probe ray stops at the
     /// first structure that is not resident; once the prefetch built it, the ray may hit in
     /// it and its shadow and AO rays need structures no probe saw. Each later round probes
     /// only the pixels the round before left open and prefetches what they need, at the cost
     /// of a TLAS rebuild or update (probe_rounds per frame). 1: one probe.
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
     pub stream_probe_rounds: Option<u32>,
     /// Streaming: verifying probe rounds after those, at most (default 2; 0: none). The
     /// prefetch evicts for room what no probe ray met, and the next frame's rays may pass
@@ -404,7 +415,7 @@ pub struct StreamBoundArgs {
     /// about the same frame time; shaded at half 1.182 → 1.000, frames +12%; at a third
     /// 1.182 → 1.000, frames +53%). Each round costs a probe trace and, when it finds
     /// something, a build step (probe_verify_rounds per frame); 0 for throughput.
-    #[arg(long, value_name = "N")]
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_name = "N")]
     pub stream_probe_verify: Option<u32>,
     /// Streaming: the probe's pixels of every N-th row also mark the resident structures their
     /// rays pass through without hitting, so the prefetch evicts those last (it never skips a
@@ -415,7 +426,7 @@ pub struct StreamBoundArgs {
     /// prefetch skipped nothing, else none (H200: a third 1.727 → 1.182 at the same frame
     /// time; half and a quarter never mark, unchanged). --stats has the stride and the count
     /// per frame (probe_pass_rows, probe_pass_marks). 0: off.
-    #[arg(long, value_name = "N|auto", value_parser = parse_pass_marks)]
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_name = "N|auto", value_parser = parse_pass_marks)]
     pub stream_probe_pass_rows: Option<motu_gpu::PassMarks>,
     /// Streaming: how TLASes follow what is resident. `update`: each TLAS is built once over
     /// all its instances (a non-resident one points at a placeholder no ray meets) and
@@ -424,14 +435,14 @@ pub struct StreamBoundArgs {
     /// whenever they change (smallest resident TLAS). `auto` (default): update when the
     /// persistent TLASes take at most a fifth of the budget. `--stats` reports the choice
     /// (stream.tlas_mode).
-    #[arg(long, value_enum, default_value = "auto")]
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, default_value = "auto")]
     pub stream_tlas: StreamTlasArg,
     /// Streaming: TLASes over N instances (a large root) are split into spatial pieces when
     /// the package is loaded, as `import --max-instances N` would split them, and the pieces
     /// are rebuilt one at a time as residency changes, so a rebuild takes one piece's room
     /// from resident BLASes. The package is unchanged (full builds trace the unsplit TLAS,
     /// which is faster). 0: no split. Default 1000000.
-    #[arg(long, value_name = "N", value_parser = parse_split_instances)]
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_name = "N", value_parser = parse_split_instances)]
     pub stream_split_instances: Option<u32>,
     /// Streaming: before evicting structures for a TLAS rebuild's room or after a refused
     /// allocation, drain the emptiest memory blocks instead: their BLASes, meshes and textures
@@ -439,7 +450,7 @@ pub struct StreamBoundArgs {
     /// budget (defrag_moves, defrag_freed_bytes per frame in --stats). Off by default: measured on
     /// lavapipe only (default island along shotCam at a third of its full build: 1.86 → 1.57
     /// passes after the first, the same image), not yet on a GPU.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long)]
     pub stream_defrag: bool,
     /// Streaming: where streamed meshes (positions, indices, shading attributes) live. `host`:
     /// host memory the GPU reads over the bus (only hits and BLAS builds read meshes), outside
@@ -452,7 +463,7 @@ pub struct StreamBoundArgs {
     /// (stream.totals.mesh_memory) and the host bytes (host_mesh_peak_bytes,
     /// resident_host_mesh_bytes per frame); `motu report` the most they take
     /// (streaming.mesh_bytes).
-    #[arg(long, value_enum, default_value = "auto")]
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, default_value = "auto")]
     pub stream_mesh_memory: MeshMemoryArg,
 }
 
@@ -532,110 +543,115 @@ pub enum ViewArg {
 pub struct RenderArgs {
     pub package: PathBuf,
     /// Output PNG.
-    #[arg(short, long)]
+    #[arg(help_heading = HEADING_OUTPUT, short, long)]
     pub output: PathBuf,
     /// Camera name (default: the scene's active camera).
-    #[arg(long)]
+    #[arg(help_heading = HEADING_CAMERA, long)]
     pub camera: Option<String>,
-    #[arg(long)]
+    /// Image width in pixels (default: the camera's film; with only one of --width and --height,
+    /// the other keeps the film's aspect).
+    #[arg(help_heading = HEADING_OUTPUT, long)]
     pub width: Option<u32>,
-    #[arg(long)]
+    /// Image height in pixels (see --width).
+    #[arg(help_heading = HEADING_OUTPUT, long)]
     pub height: Option<u32>,
     /// Default: query where available, else pipeline.
-    #[arg(long, value_enum)]
+    #[arg(help_heading = HEADING_DEVICE, long, value_enum)]
     pub backend: Option<BackendArg>,
-    #[arg(long, value_enum, default_value = "shaded")]
+    /// What the image shows: shaded, a traversal heatmap, LOD levels or ids.
+    #[arg(help_heading = HEADING_SHADING, long, value_enum, default_value = "shaded")]
     pub view: ViewArg,
     /// Write the per-pixel hit record (FORMAT.md, "AOV file").
-    #[arg(long)]
+    #[arg(help_heading = HEADING_OUTPUT, long)]
     pub aov: Option<PathBuf>,
-    #[arg(long, value_parser = parse_budget)]
+    /// VRAM the render may use (a size: 512MiB, 8GiB); default: the device's budget.
+    #[arg(help_heading = HEADING_DEVICE, long, value_parser = parse_budget)]
     pub vram_budget: Option<u64>,
     /// Cap on VkDeviceMemory allocations (lower than the device's, for testing).
-    #[arg(long)]
+    #[arg(help_heading = HEADING_DEBUG, long)]
     pub max_allocations: Option<u32>,
     /// How BLASes are built. Default: fast-trace for a full build, small with --stream
     /// (fast build and low memory: a fifth smaller on NVIDIA, faster to build).
-    #[arg(long, value_enum)]
+    #[arg(help_heading = HEADING_DEVICE, long, value_enum)]
     pub blas_build: Option<BlasBuildArg>,
     /// Build only what rays touch and evict under the budget.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_STREAMING, long)]
     pub stream: bool,
     /// With --stream: write the image even when a frame ends with unfinished pixels (they are
     /// magenta misses; a loud, counted warning). Without it such a frame is an error.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_STREAMING, long)]
     pub allow_incomplete: bool,
     /// With --stream: build–traverse passes per frame before a frame gives up (testing; by
     /// default sized from the scene's structure count).
-    #[arg(long, hide = true)]
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, hide = true)]
     pub stream_max_passes: Option<u32>,
     #[command(flatten)]
     pub stream_bounds: StreamBoundArgs,
     #[command(flatten)]
     pub as_cache: AsCacheArgs,
     /// Frames to render (timing; with --stream, along the camera path).
-    #[arg(long, default_value_t = 1)]
+    #[arg(help_heading = HEADING_CAMERA, long, default_value_t = 1)]
     pub frames: u32,
     /// Write statistics JSON.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_OUTPUT, long)]
     pub stats: Option<PathBuf>,
     /// Render only these elements (comma-separated).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(help_heading = HEADING_SCENE, long, value_delimiter = ',')]
     pub subset: Vec<String>,
     /// Force every LOD selector to this level.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_SCENE, long)]
     pub lod: Option<u32>,
     /// LOD rule: projected radius (pixels) at and above which the finest level is used; one
     /// level coarser per halving.
-    #[arg(long, default_value_t = 256.0)]
+    #[arg(help_heading = HEADING_SCENE, long, default_value_t = 256.0)]
     pub lod_r_max: f32,
     /// Levels added for shadow rays (when they do not take the primary hit's level).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(help_heading = HEADING_SCENE, long, default_value_t = 1.0)]
     pub shadow_lod_bias: f32,
     /// Dither between the two nearest LOD levels (hashed per pixel) instead of rounding down.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_SCENE, long)]
     pub lod_stochastic: bool,
     /// How LOD selectors are resolved: `instance` picks each LOD instance's level per frame
     /// from the camera (a compute pass rewrites the TLAS: one trace, no traversal-shader hop;
     /// every ray sees an instance at one level, so --shadow-lod-bias does not apply), where the
     /// rule allows (not with --lod-stochastic or --stream, which use `traversal`: a level per
     /// ray, chosen in the traversal shader). The mode that ran is `lod_mode` in --stats.
-    #[arg(long, value_enum, default_value_t = LodModeArg::Instance)]
+    #[arg(help_heading = HEADING_SCENE, long, value_enum, default_value_t = LodModeArg::Instance)]
     pub lod_mode: LodModeArg,
     /// Traversal stack entries per ray (1–256: 64 bytes of private shader memory each).
-    #[arg(long, default_value_t = 16,
+    #[arg(help_heading = HEADING_DEBUG, long, default_value_t = 16,
           value_parser = clap::value_parser!(u32).range(1..=i64::from(motu_gpu::MAX_STACK_SIZE)))]
     pub stack_size: u32,
     /// TLAS walks one ray may make before it is cut short (bounds a frame's work on
     /// exponentially deep instancing); cut rays are counted as `truncated_rays`.
-    #[arg(long, default_value_t = motu_abi::DEFAULT_MAX_TRACES_PER_RAY,
+    #[arg(help_heading = HEADING_DEBUG, long, default_value_t = motu_abi::DEFAULT_MAX_TRACES_PER_RAY,
           value_parser = clap::value_parser!(u32).range(1..))]
     pub max_traces_per_ray: u32,
     /// Write the image even when rays were truncated (stack overflow or --max-traces-per-ray):
     /// a counted warning instead of an error.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_DEBUG, long)]
     pub allow_truncated: bool,
     /// Samples per pixel of the shaded view (the first, at the pixel centre, gives the AOV).
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    #[arg(help_heading = HEADING_SHADING, long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub spp: u32,
     /// Ambient-occlusion rays per sample for the sky term (0: unoccluded sky light).
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=256))]
+    #[arg(help_heading = HEADING_SHADING, long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=256))]
     pub ao_samples: u32,
     /// Diffuse bounces of the shaded view after each camera hit, each lit by the scene's lights
     /// and environment (0: direct light only; not yet with --stream).
-    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=8))]
+    #[arg(help_heading = HEADING_SHADING, long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=8))]
     pub bounces: u32,
     /// Exposure of the shaded view: `auto` (the image's log-average luminance becomes middle
     /// grey; the chosen value is `exposure_ev` in --stats) or a number of stops EV (the image is
     /// scaled by 2^EV before the sRGB transfer).
-    #[arg(long, default_value = "auto", allow_hyphen_values = true, value_parser = parse_exposure)]
+    #[arg(help_heading = HEADING_SHADING, long, default_value = "auto", allow_hyphen_values = true, value_parser = parse_exposure)]
     pub exposure: ExposureArg,
     /// Vulkan device index.
-    #[arg(long, env = "MOTU_DEVICE")]
+    #[arg(help_heading = HEADING_DEVICE, long, env = "MOTU_DEVICE")]
     pub device: Option<usize>,
     /// Replay a recorded camera path (`motu view --record`) over `--frames` frames (default:
     /// one per recorded pose); writes the last frame.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_CAMERA, long)]
     pub camera_path: Option<PathBuf>,
 }
 
@@ -643,82 +659,83 @@ pub struct RenderArgs {
 pub struct ViewArgs {
     pub package: PathBuf,
     /// Start at this scene camera (default: the scene's active camera); 1–9 switch cameras.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_CAMERA, long)]
     pub camera: Option<String>,
     /// Window size (default: the camera's image size).
-    #[arg(long)]
+    #[arg(help_heading = HEADING_OUTPUT, long)]
     pub width: Option<u32>,
-    #[arg(long)]
+    /// Image height in pixels (see --width).
+    #[arg(help_heading = HEADING_OUTPUT, long)]
     pub height: Option<u32>,
     /// Default: query where available, else pipeline.
-    #[arg(long, value_enum)]
+    #[arg(help_heading = HEADING_DEVICE, long, value_enum)]
     pub backend: Option<BackendArg>,
-    #[arg(long, value_enum, default_value = "shaded")]
+    #[arg(help_heading = HEADING_SHADING, long, value_enum, default_value = "shaded")]
     pub view: ViewArg,
     /// Stream structures under this VRAM budget (implies --stream).
-    #[arg(long, value_parser = parse_budget)]
+    #[arg(help_heading = HEADING_DEVICE, long, value_parser = parse_budget)]
     pub vram_budget: Option<u64>,
     /// Build only what rays touch and evict under the budget.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_STREAMING, long)]
     pub stream: bool,
     /// Streaming: build–trace passes per frame. 1 (the default while flying): trace with what
     /// is resident (the rest unfinished, or the --stream-fallback), then build toward the next
     /// frame within the frame's build budget (--stream-build-budget/--stream-build-ms; 30 ms
     /// while flying if neither is given), so the window stays responsive and later frames
     /// refine. With --frames the default is the full pass cap (each frame exact).
-    #[arg(long)]
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long)]
     pub stream_passes: Option<u32>,
     #[command(flatten)]
     pub stream_bounds: StreamBoundArgs,
-    #[arg(long)]
+    #[arg(help_heading = HEADING_DEBUG, long)]
     pub max_allocations: Option<u32>,
     /// Elements shown at the start (comma-separated; Shift+1–9 toggle them live).
-    #[arg(long, value_delimiter = ',')]
+    #[arg(help_heading = HEADING_SCENE, long, value_delimiter = ',')]
     pub subset: Vec<String>,
     /// Force every LOD selector to this level (L cycles live).
-    #[arg(long)]
+    #[arg(help_heading = HEADING_SCENE, long)]
     pub lod: Option<u32>,
-    #[arg(long, default_value_t = 256.0)]
+    #[arg(help_heading = HEADING_SCENE, long, default_value_t = 256.0)]
     pub lod_r_max: f32,
-    #[arg(long)]
+    #[arg(help_heading = HEADING_SCENE, long)]
     pub lod_stochastic: bool,
     /// How LOD selectors are resolved at the start, as in `motu render --lod-mode` (M toggles
     /// live): `instance` where the rule allows (not with --lod-stochastic/K or streaming),
     /// else the traversal shader. The overlay and --stats (`lod_mode`) say which ran.
-    #[arg(long, value_enum, default_value_t = LodModeArg::Instance)]
+    #[arg(help_heading = HEADING_SCENE, long, value_enum, default_value_t = LodModeArg::Instance)]
     pub lod_mode: LodModeArg,
-    #[arg(long, default_value_t = 16)]
+    #[arg(help_heading = HEADING_DEBUG, long, default_value_t = 16)]
     pub stack_size: u32,
-    #[arg(long, env = "MOTU_DEVICE")]
+    #[arg(help_heading = HEADING_DEVICE, long, env = "MOTU_DEVICE")]
     pub device: Option<usize>,
     /// Render N frames through the window and swapchain, write the last (--screenshot, --aov,
     /// --stats) and exit.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_CAMERA, long)]
     pub frames: Option<u32>,
     /// With --frames: the last frame as read back from the swapchain image (PNG).
-    #[arg(long)]
+    #[arg(help_heading = HEADING_OUTPUT, long)]
     pub screenshot: Option<PathBuf>,
     /// With --frames: the last frame's hit records (FORMAT.md, "AOV file").
-    #[arg(long)]
+    #[arg(help_heading = HEADING_OUTPUT, long)]
     pub aov: Option<PathBuf>,
     /// With --frames: statistics JSON of the last frame.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_OUTPUT, long)]
     pub stats: Option<PathBuf>,
     /// Write the camera of every frame shown as a camera path (JSON) on exit.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_OUTPUT, long)]
     pub record: Option<PathBuf>,
     /// Fly along a recorded camera path instead of the fly camera (frames: one per pose, or
     /// --frames spread over it).
-    #[arg(long)]
+    #[arg(help_heading = HEADING_CAMERA, long)]
     pub camera_path: Option<PathBuf>,
     /// Show the overlay in --frames runs too (it is then in the screenshot).
-    #[arg(long)]
+    #[arg(help_heading = HEADING_OUTPUT, long)]
     pub overlay: bool,
     /// Present as fast as possible (MAILBOX/IMMEDIATE) instead of at the display's rate.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_DEVICE, long)]
     pub no_vsync: bool,
     /// Fly speed in world units per second (default: a quarter of the scene's radius).
-    #[arg(long)]
+    #[arg(help_heading = HEADING_CAMERA, long)]
     pub speed: Option<f32>,
 }
 

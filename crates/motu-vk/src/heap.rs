@@ -43,6 +43,18 @@ fn simulate_discrete_memory() -> bool {
     std::env::var_os("MOTU_SIMULATE_DISCRETE_MEMORY").is_some_and(|v| v == "1")
 }
 
+/// Where host-visible blocks live: a cached memory type where the device has one. The CPU
+/// reads serialised structures back from them, and reads of uncached (write-combined) memory
+/// crawl (H200, island 0.63: a cold structure cache stored 12 GB in 13 s, the frame's largest
+/// cost), while writes to cached memory are as fast. `MOTU_HOST_MEMORY=write-combined` picks
+/// the uncached type instead (for A/B measurements).
+fn host_location() -> MemoryLocation {
+    match std::env::var("MOTU_HOST_MEMORY").as_deref() {
+        Ok("write-combined") => MemoryLocation::Upload,
+        _ => MemoryLocation::Readback,
+    }
+}
+
 /// Every usage a heap buffer may have: blocks get a memory type all of them accept.
 const ALL_USAGES: BufferUsage = BufferUsage::TRANSFER_SRC
     .union(BufferUsage::TRANSFER_DST)
@@ -89,6 +101,8 @@ pub struct GpuHeap {
     allocator: Allocator,
     blocks: HashMap<BlockId, Arc<DeviceMemory>>,
     type_index: [u32; 2],
+    /// The memory location of host-visible blocks ([`host_location`]).
+    host_location: MemoryLocation,
 }
 
 impl std::fmt::Debug for GpuHeap {
@@ -127,7 +141,8 @@ impl GpuHeap {
         )?;
         let bits = probe.memory_requirements().memory_type_bits;
         let device_local = ctx.memory_type_index(MemoryLocation::DeviceLocal, bits)?;
-        let upload = ctx.memory_type_index(MemoryLocation::Upload, bits)?;
+        let host_location = host_location();
+        let upload = ctx.memory_type_index(host_location, bits)?;
         // Unified memory (lavapipe, integrated GPUs): host-visible blocks use the same heap.
         // MOTU_SIMULATE_DISCRETE_MEMORY=1 counts them apart as a discrete GPU does, so tests on
         // lavapipe can check what host memory outside the budget does (the counts only: the
@@ -146,6 +161,7 @@ impl GpuHeap {
             allocator,
             blocks: HashMap::new(),
             type_index: [device_local, upload],
+            host_location,
         })
     }
 
@@ -254,7 +270,7 @@ impl GpuHeap {
                 } => {
                     let location = match class {
                         MemoryClass::DeviceLocal => MemoryLocation::DeviceLocal,
-                        MemoryClass::HostVisible => MemoryLocation::Upload,
+                        MemoryClass::HostVisible => self.host_location,
                     };
                     let type_index = self.type_index[class as usize];
                     match DeviceMemory::allocate(&self.ctx, size_bytes, type_index, location) {

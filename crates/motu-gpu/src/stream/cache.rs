@@ -133,13 +133,19 @@ impl StreamingRenderer<'_> {
         let compatible = |h: &[u8; 32]| ctx.acceleration_structure_compatible(h).unwrap_or(false);
         let mut hits: Vec<(usize, Arc<[u8]>, SerializedHeader)> = Vec::new();
         let mut rest = Vec::new();
+        let mut keyed: Vec<(usize, CacheKey)> = Vec::with_capacity(ids.len());
         for &b in ids {
-            let Some(key) = self.blas_key(b) else {
-                rest.push(b);
-                continue;
-            };
-            let a = self.reuse.cache.as_mut().expect("attached");
-            match a.cache.cache.get(&key, &compatible) {
+            match self.blas_key(b) {
+                Some(key) => keyed.push((b, key)),
+                None => rest.push(b),
+            }
+        }
+        let keys: Vec<CacheKey> = keyed.iter().map(|k| k.1).collect();
+        let a = self.reuse.cache.as_mut().expect("attached");
+        // One call for the whole set: entries on disk are read on several threads.
+        let found = a.cache.cache.get_many(&keys, &compatible);
+        for ((b, key), found) in keyed.into_iter().zip(found) {
+            match found {
                 Some((blob, tier)) => match SerializedHeader::read(&blob) {
                     Some(h)
                         if h.serialized_bytes == blob.len() as u64 && h.deserialized_bytes > 0 =>
