@@ -290,6 +290,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             allow_incomplete: a.allow_incomplete,
             cache: cache_settings(&a.as_cache),
         }),
+        denoise: a.denoise,
     };
     let job = motu_render::RenderJob {
         package: &pkg,
