@@ -886,14 +886,30 @@ fn view_accumulates_samples_at_rest_toward_a_many_sample_render() {
     let (vpng, vaov, vstats) = (d.join("v.png"), d.join("v.aov"), d.join("v.json"));
     let mut args = vec![s(&pkg), "--frames", "16", "--accumulate"];
     args.extend(size);
-    args.extend(["--screenshot", s(&vpng), "--aov", s(&vaov), "--stats", s(&vstats)]);
+    args.extend([
+        "--screenshot",
+        s(&vpng),
+        "--aov",
+        s(&vaov),
+        "--stats",
+        s(&vstats),
+    ]);
     view_ok(&x.display, &args);
     let st = read_json(&vstats);
     assert_eq!(st["accumulated_samples"], 16, "{st}");
     assert_eq!(st["denoised"], false, "{st}");
     let render_spp = |spp: &str| {
         let (png, aov) = (d.join(format!("r{spp}.png")), d.join(format!("r{spp}.aov")));
-        let mut args = vec!["render", s(&pkg), "-o", s(&png), "--aov", s(&aov), "--spp", spp];
+        let mut args = vec![
+            "render",
+            s(&pkg),
+            "-o",
+            s(&png),
+            "--aov",
+            s(&aov),
+            "--spp",
+            spp,
+        ];
         args.extend(size);
         motu_ok(&args);
         (decode_png(&png).2, aov)
@@ -903,10 +919,16 @@ fn view_accumulates_samples_at_rest_toward_a_many_sample_render() {
     compare_exact(&vaov, &one_aov);
     let (_, _, shown) = decode_png(&vpng);
     let mad = |a: &[u8], b: &[u8]| {
-        a.iter().zip(b).map(|(p, q)| f64::from(p.abs_diff(*q))).sum::<f64>() / a.len() as f64
+        a.iter()
+            .zip(b)
+            .map(|(p, q)| f64::from(p.abs_diff(*q)))
+            .sum::<f64>()
+            / a.len() as f64
     };
     let (e_one, e_view) = (mad(&one, &many), mad(&shown, &many));
-    eprintln!("mean absolute difference to 256 spp: 1 spp {e_one:.2}, 16 frames at rest {e_view:.2}");
+    eprintln!(
+        "mean absolute difference to 256 spp: 1 spp {e_one:.2}, 16 frames at rest {e_view:.2}"
+    );
     assert!(
         e_view < 0.6 * e_one,
         "16 frames at rest are not nearer 256 spp than one frame: {e_view:.2} vs {e_one:.2}"

@@ -29,8 +29,8 @@ pub mod env;
 pub mod glsl;
 pub mod lod;
 pub mod lod_instance;
-pub mod sampling;
 mod records;
+pub mod sampling;
 pub mod shade;
 
 pub use records::*;

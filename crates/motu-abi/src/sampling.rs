@@ -125,7 +125,10 @@ mod tests {
     fn pixels_pairs_and_vertices_are_decorrelated() {
         assert_ne!(sample01(1, 5, 0), sample01(2, 5, 0));
         assert_ne!(sample01(1, 5, 0), sample01(1, 5, 2));
-        assert_ne!(sample01(1, 5, 0), sample01(1, 5 | 1 << SAMPLE_INDEX_BITS, 0));
+        assert_ne!(
+            sample01(1, 5, 0),
+            sample01(1, 5 | 1 << SAMPLE_INDEX_BITS, 0)
+        );
         // Over many pixels, sample 3's numbers are uniform and pairs uncorrelated.
         let n = 8192u32;
         let (mut mean, mut cross) = (0.0f64, 0.0f64);

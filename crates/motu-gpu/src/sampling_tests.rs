@@ -67,8 +67,13 @@ fn glsl_sample_sequence_equals_the_rust_one_bit_for_bit() {
         push.extend_from_slice(&v.to_le_bytes());
     }
     let mut rec = ctx.record("sampling mirror").expect("record");
-    rec.dispatch(&pipe, None, &push, [(cases.len() as u32).div_ceil(64), 1, 1])
-        .expect("dispatch");
+    rec.dispatch(
+        &pipe,
+        None,
+        &push,
+        [(cases.len() as u32).div_ceil(64), 1, 1],
+    )
+    .expect("dispatch");
     rec.submit_and_wait().expect("submit");
     let gpu: Vec<u32> = bits_buf.read_vec(0, cases.len()).expect("read");
     let differ: Vec<String> = cases

@@ -174,7 +174,9 @@ pub fn denoise_rgba8(
         };
     }
     let mut next = colour.clone();
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get()).min(h.max(1));
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(h.max(1));
     let rows_per = h.div_ceil(threads).max(1);
     for it in 0..opts.iterations {
         let pass = Pass {
@@ -262,8 +264,8 @@ impl Pass<'_> {
                 let scale = o.sigma_plane * self.footprint * p.depth * offset_px.max(1.0);
                 let wp = (-plane / scale.max(1e-20)).exp();
                 let wa = (-dist2(p.albedo, q.albedo) / (o.sigma_albedo * o.sigma_albedo)).exp();
-                let wc = (-dist2(cp, self.colour[j]) / (self.sigma_c * self.sigma_c).max(1e-12))
-                    .exp();
+                let wc =
+                    (-dist2(cp, self.colour[j]) / (self.sigma_c * self.sigma_c).max(1e-12)).exp();
                 let wt = hx * hy * wn * wp * wa * wc;
                 for (s, c) in sum.iter_mut().zip(self.colour[j]) {
                     *s += wt * c;

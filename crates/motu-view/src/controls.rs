@@ -150,7 +150,6 @@ impl Controls {
     }
 }
 
-
 fn on_off(b: bool) -> &'static str {
     if b {
         "on"

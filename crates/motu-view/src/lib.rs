@@ -362,12 +362,8 @@ impl<S: FrameSource> App<S> {
         let t0 = Instant::now();
         let mut opts = self.ctl.render;
         let first = if self.ctl.accumulate {
-            self.accum.first_sample(
-                &camera,
-                &opts,
-                &self.ctl.elements_on,
-                self.ctl.lod_instance,
-            )
+            self.accum
+                .first_sample(&camera, &opts, &self.ctl.elements_on, self.ctl.lod_instance)
         } else {
             self.accum.reset();
             None
@@ -383,7 +379,9 @@ impl<S: FrameSource> App<S> {
         }
         // A streamed frame still refining changes from frame to frame: it starts again.
         let samples = match first {
-            Some(_) if frame.stats.incomplete_pixels == 0 => self.accum.add(&mut frame.output, &opts),
+            Some(_) if frame.stats.incomplete_pixels == 0 => {
+                self.accum.add(&mut frame.output, &opts)
+            }
             _ => {
                 self.accum.reset();
                 opts.shading.spp

@@ -122,7 +122,11 @@ impl Accumulator {
 }
 
 /// Filters the shown image with the denoiser of `motu render --denoise` (never the AOV).
-pub fn denoise(frame: &mut RenderOutput, camera: &CameraParams, base_colour: impl Fn(u32) -> [f32; 3]) {
+pub fn denoise(
+    frame: &mut RenderOutput,
+    camera: &CameraParams,
+    base_colour: impl Fn(u32) -> [f32; 3],
+) {
     use motu_render::denoise::{denoise_rgba8, guide_from_aov, pixel_footprint, DenoiseOptions};
     let guide = guide_from_aov(&frame.aov, camera, base_colour);
     denoise_rgba8(

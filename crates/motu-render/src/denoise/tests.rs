@@ -101,11 +101,22 @@ fn the_filter_removes_noise_and_keeps_the_silhouette_and_the_sky() {
     let mut px = encode(&noisy);
     let before = mse(&px, &truth, &aov);
     let sky_before: Vec<u8> = px[..(4 * W * 4) as usize].to_vec();
-    let st = denoise_rgba8(&mut px, W, H, &guide, pixel_footprint(&cam), &DenoiseOptions::default());
+    let st = denoise_rgba8(
+        &mut px,
+        W,
+        H,
+        &guide,
+        pixel_footprint(&cam),
+        &DenoiseOptions::default(),
+    );
     let after = mse(&px, &truth, &aov);
     assert!(after * 4.0 < before, "error {before:.5} → {after:.5}");
     assert_eq!(st.filtered_pixels, u64::from(W * (H - 4)));
-    assert_eq!(&px[..(4 * W * 4) as usize], &sky_before[..], "the sky changed");
+    assert_eq!(
+        &px[..(4 * W * 4) as usize],
+        &sky_before[..],
+        "the sky changed"
+    );
     // Across the silhouette the two walls keep their contrast (nothing bled over): on average
     // nearly all of it, each row (some noise stays where half the taps are on the other wall)
     // at least half.
@@ -131,7 +142,8 @@ fn a_normal_edge_on_one_mesh_keeps_its_step() {
             let i = (y * W + x) as usize;
             let d = cam.primary_dir(x, y, 0.5, 0.5);
             // The plane through the near wall's edge, turned 60° about y: z = -4 - (x' ) tan60.
-            let x0 = 4.0 * (cam.primary_dir(W / 2, y, 0.0, 0.5).x / -cam.primary_dir(W / 2, y, 0.0, 0.5).z);
+            let x0 = 4.0
+                * (cam.primary_dir(W / 2, y, 0.0, 0.5).x / -cam.primary_dir(W / 2, y, 0.0, 0.5).z);
             let k = 3f32.sqrt();
             // Ray: p = t d; on the plane z = -4 - k (p.x - x0).
             let t = (-4.0 + k * x0) / (d.z + k * d.x);
@@ -140,13 +152,28 @@ fn a_normal_edge_on_one_mesh_keeps_its_step() {
         }
     }
     let guide = guide_from_aov(&aov, &cam, |_| [0.5; 3]);
-    let (l, r) = (&guide[(10 * W + 5) as usize], &guide[(10 * W + W - 5) as usize]);
-    assert!(dot(l.normal, r.normal) < 0.7, "{:?} {:?}", l.normal, r.normal);
+    let (l, r) = (
+        &guide[(10 * W + 5) as usize],
+        &guide[(10 * W + W - 5) as usize],
+    );
+    assert!(
+        dot(l.normal, r.normal) < 0.7,
+        "{:?} {:?}",
+        l.normal,
+        r.normal
+    );
     let colours: Vec<[f32; 3]> = (0..W * H)
         .map(|i| if i % W < W / 2 { [0.5; 3] } else { [0.1; 3] })
         .collect();
     let mut px = encode(&colours);
-    denoise_rgba8(&mut px, W, H, &guide, pixel_footprint(&cam), &DenoiseOptions::default());
+    denoise_rgba8(
+        &mut px,
+        W,
+        H,
+        &guide,
+        pixel_footprint(&cam),
+        &DenoiseOptions::default(),
+    );
     for y in 6..H - 2 {
         let l = linear(&px, (y * W + W / 2 - 2) as usize)[0];
         let r = linear(&px, (y * W + W / 2 + 1) as usize)[0];
