@@ -143,6 +143,20 @@ fn denoise_lowers_the_error_and_keeps_silhouettes() {
         st["denoise"]["filtered_pixels"].as_u64().unwrap() > 0,
         "{st}"
     );
+    // Only the shaded view has sampling noise: elsewhere the flag is refused, not ignored.
+    let out = motu_tests::motu(&[
+        "render",
+        s(&pkg),
+        "-o",
+        s(&at("ids.png")),
+        "--view",
+        "ids",
+        "--denoise",
+        "--backend",
+        "cpu",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("--denoise"), "{err}");
     // Never on the AOV.
     assert_eq!(
         std::fs::read(at("noisy.aov")).unwrap(),

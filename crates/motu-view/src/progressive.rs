@@ -92,8 +92,8 @@ impl Accumulator {
             let inv = (-frame.stats.exposure_ev).exp2();
             let weight = spp as f32;
             for (s, p) in self.sum.iter_mut().zip(frame.rgba8.chunks_exact(4)) {
-                for k in 0..3 {
-                    s[k] += weight * srgb_to_linear(f32::from(p[k]) / 255.0) * inv;
+                for (c, v) in s.iter_mut().zip(&p[..3]) {
+                    *c += weight * srgb_to_linear(f32::from(*v) / 255.0) * inv;
                 }
             }
             if self.samples == 0 {
