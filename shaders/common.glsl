@@ -112,7 +112,7 @@ struct FrameParams {
     uint environment;    // 1: an environment map's tables follow, ENV_OFFSET_BYTES in (shade.glsl)
     uint auto_exposure;  // 1: shaded pixels are written as linear RGB9E5 (the host tone-maps)
     uint bounces;        // diffuse bounces after each primary hit
-    uint _pad_frame;
+    uint first_sample;   // the frame's first sample in the pixel's sequence (progressive)
 };
 
 struct MeshGeo {

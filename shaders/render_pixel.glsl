@@ -114,14 +114,22 @@ void stream_defer(uvec2 px, uint pixel, Carry c) {
     stream_list_incomplete(px);
 }
 
-// Primary ray of sample `smp`: the pixel centre for sample 0 (it gives the AOV record),
-// jittered after.
+// The frame's sample `smp` in the pixel's sequence (a progressive frame starts at
+// `first_sample`): what the random numbers are drawn with; `smp` itself counts the frame's
+// samples.
+uint seq_sample(uint smp) {
+    return smp + push.frame.f.first_sample;
+}
+
+// Primary ray of sample `smp`: the pixel centre for the sequence's sample 0 (it gives the AOV
+// record), jittered after.
 vec3 sample_dir(uvec2 px, uint pixel, uint smp) {
     CameraParams cam = push.frame.f.camera;
-    if (smp == 0u) {
+    uint g = seq_sample(smp);
+    if (g == 0u) {
         return camera_primary_dir(cam, px.x, px.y, 0.5, 0.5);
     }
-    return camera_primary_dir(cam, px.x, px.y, rand01(pixel, smp, 0u), rand01(pixel, smp, 1u));
+    return camera_primary_dir(cam, px.x, px.y, rand01(pixel, g, 0u), rand01(pixel, g, 1u));
 }
 
 // The pixel's rays in order (each sample's primary ray, then its secondary rays), traced through
@@ -221,7 +229,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 }
                 bool clear;
                 vec3 term;
-                if (secondary_ray(si, c.rec.w, org, dir, c.hit.x, pixel, smp, k, r_dir, clear,
+                if (secondary_ray(si, c.rec.w, org, dir, c.hit.x, pixel, seq_sample(smp), k, r_dir, clear,
                                   term)) {
                     found = true;
                     cursor = k;
@@ -240,7 +248,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 vec3 colour = c.cur.xyz;
                 uint ao_open = uint(c.cur.w);
                 secondary_window_done(first, masks >> 8u, si, c.rec.w, org, dir, c.hit.x, pixel,
-                                      smp, colour, ao_open);
+                                      seq_sample(smp), colour, ao_open);
                 c.cur = vec4(colour, float(ao_open));
                 c.ns.w = 0.0;
                 cursor = 0u;
@@ -271,7 +279,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         // The current vertex's incoming ray and random-number sample.
         vec3 v_org = bounce > 0u ? p_org : org;
         vec3 v_dir = bounce > 0u ? p_dir : dir;
-        uint v_smp = smp | (bounce << 20u);
+        uint v_smp = seq_sample(smp) | (bounce << 20u);
         bouncing = c.st.x == 4u;
         // The ray to trace: origin, direction, reach (w).
         vec3 r_org = org;
@@ -294,7 +302,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 vec3 bounce_dir;
                 vec3 weight;
                 if (bounce < push.frame.f.bounces &&
-                    bounce_ray(si, c.rec.w, pixel, smp | ((bounce + 1u) << 20u), bounce_dir,
+                    bounce_ray(si, c.rec.w, pixel, seq_sample(smp) | ((bounce + 1u) << 20u), bounce_dir,
                                weight)) {
                     // The path goes on: its bounce ray is traced next.
                     p_org = secondary_start(v_org, v_dir, c.hit.x, si.ng);
@@ -495,7 +503,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
     if (shaded) {
         colour = spp > 1u ? c.sum.xyz / float(spp) : c.sum.xyz;
     } else if (rec.x == AOV_MISS) {
-        colour = sky(sample_dir(px, pixel, 0u));
+        colour = sky(camera_primary_dir(push.frame.f.camera, px.x, px.y, 0.5, 0.5));
     } else if (push.frame.f.view == VIEW_IDS) {
         colour = id_colour(rec.x, rec.y);
     } else {

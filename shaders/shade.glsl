@@ -7,6 +7,7 @@
 #define MOTU_SHADE_GLSL
 #include "traverse.glsl"
 #include "texture.glsl"
+#include "sampling.glsl"
 
 // Secondary rays of the current pixel (added to the stats once per pixel).
 uint g_secondary_rays = 0u;
@@ -124,9 +125,9 @@ vec3 env_radiance(vec3 d) {
     return top + (bottom - top) * fy;
 }
 
+// The pixel's Owen-scrambled Sobol sequence (sampling.glsl; motu_abi::shade::rand01).
 float rand01(uint pixel, uint smp, uint dim) {
-    uint h = hash_u32(hash_u32(hash_u32(pixel) ^ (smp * 0x9e3779b9u)) ^ dim);
-    return float(h >> 8u) / 16777216.0;
+    return sample01(pixel, smp, dim);
 }
 
 float shininess(float roughness) {

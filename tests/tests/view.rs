@@ -867,3 +867,81 @@ fn view_streams_progressively_within_a_frame_build_budget() {
     assert_eq!(st["detail"]["complete"], true, "{st}");
     compare_exact(&vaov, &raov);
 }
+
+/// Issue 47 item 3: a window at rest accumulates samples (each frame the next ones of every
+/// pixel's sequence), so its image converges toward a many-sample render while the AOV stays
+/// the pixel centres' (equal to `motu render`'s); `--denoise` (the N key) filters what is shown.
+#[test]
+fn view_accumulates_samples_at_rest_toward_a_many_sample_render() {
+    if !gpu_available() {
+        return;
+    }
+    let Some(x) = xvfb("view_accumulates_samples_at_rest_toward_a_many_sample_render") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pkg = forest(d);
+    let size = ["--width", "48", "--height", "32", "--backend", "pipeline"];
+    let (vpng, vaov, vstats) = (d.join("v.png"), d.join("v.aov"), d.join("v.json"));
+    let mut args = vec![s(&pkg), "--frames", "16", "--accumulate"];
+    args.extend(size);
+    args.extend([
+        "--screenshot",
+        s(&vpng),
+        "--aov",
+        s(&vaov),
+        "--stats",
+        s(&vstats),
+    ]);
+    view_ok(&x.display, &args);
+    let st = read_json(&vstats);
+    assert_eq!(st["accumulated_samples"], 16, "{st}");
+    assert_eq!(st["denoised"], false, "{st}");
+    let render_spp = |spp: &str| {
+        let (png, aov) = (d.join(format!("r{spp}.png")), d.join(format!("r{spp}.aov")));
+        let mut args = vec![
+            "render",
+            s(&pkg),
+            "-o",
+            s(&png),
+            "--aov",
+            s(&aov),
+            "--spp",
+            spp,
+        ];
+        args.extend(size);
+        motu_ok(&args);
+        (decode_png(&png).2, aov)
+    };
+    let (one, one_aov) = render_spp("1");
+    let (many, _) = render_spp("256");
+    compare_exact(&vaov, &one_aov);
+    let (_, _, shown) = decode_png(&vpng);
+    let mad = |a: &[u8], b: &[u8]| {
+        a.iter()
+            .zip(b)
+            .map(|(p, q)| f64::from(p.abs_diff(*q)))
+            .sum::<f64>()
+            / a.len() as f64
+    };
+    let (e_one, e_view) = (mad(&one, &many), mad(&shown, &many));
+    eprintln!(
+        "mean absolute difference to 256 spp: 1 spp {e_one:.2}, 16 frames at rest {e_view:.2}"
+    );
+    assert!(
+        e_view < 0.6 * e_one,
+        "16 frames at rest are not nearer 256 spp than one frame: {e_view:.2} vs {e_one:.2}"
+    );
+    // Without --accumulate a scripted frame is the render's (the other tests rely on it); with
+    // --denoise the shown image is filtered.
+    let dpng = d.join("dn.png");
+    let mut args = vec![s(&pkg), "--frames", "2", "--denoise"];
+    args.extend(size);
+    args.extend(["--screenshot", s(&dpng), "--stats", s(&vstats)]);
+    view_ok(&x.display, &args);
+    let st = read_json(&vstats);
+    assert_eq!(st["denoised"], true, "{st}");
+    assert_eq!(st["accumulated_samples"], 1, "{st}");
+    assert_ne!(decode_png(&dpng).2, one, "the denoiser changed nothing");
+}

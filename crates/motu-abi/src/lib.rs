@@ -30,6 +30,7 @@ pub mod glsl;
 pub mod lod;
 pub mod lod_instance;
 mod records;
+pub mod sampling;
 pub mod shade;
 
 pub use records::*;

@@ -77,6 +77,11 @@ pub struct Shading {
     pub ao_distance: f32,
     /// Samples per pixel (the first at the pixel centre gives the hit record).
     pub spp: u32,
+    /// Index of the frame's first sample in the pixel's sequence ([`crate::sampling`]): a
+    /// progressive renderer (the viewer at rest) draws samples `first_sample..first_sample +
+    /// spp` each frame and averages the frames. Only sample 0 is the pixel centre; a frame
+    /// starting later writes its first sample's hit as the AOV record.
+    pub first_sample: u32,
     /// Exposure in stops (the image is scaled by 2^ev before the sRGB transfer).
     pub exposure_ev: f32,
     /// Exposure from the image's log-average luminance ([`auto_exposure_ev`]) instead of
@@ -100,6 +105,7 @@ impl Default for Shading {
             ao_samples: 0,
             ao_distance: f32::INFINITY,
             spp: 1,
+            first_sample: 0,
             exposure_ev: 0.0,
             auto_exposure: false,
             environment: None,
@@ -240,17 +246,11 @@ pub fn cosine_direction(n: [f32; 3], u1: f32, u2: f32) -> [f32; 3] {
     std::array::from_fn(|i| x * t[i] + y * bt[i] + z * n[i])
 }
 
-/// A uniform number in [0, 1) for pixel `pixel`, sample `sample`, dimension `dim` (a PCG hash
-/// chain; identical on the GPU).
+/// A uniform number in [0, 1) for pixel `pixel`, sample `sample` (`sample | vertex << 20`),
+/// dimension `dim`: the pixel's Owen-scrambled Sobol sequence ([`crate::sampling`]; identical
+/// on the GPU).
 pub fn rand01(pixel: u32, sample: u32, dim: u32) -> f32 {
-    let h = hash_u32(hash_u32(hash_u32(pixel) ^ sample.wrapping_mul(0x9e37_79b9)) ^ dim);
-    (h >> 8) as f32 / (1u32 << 24) as f32
-}
-
-fn hash_u32(v: u32) -> u32 {
-    let state = v.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
-    let word = ((state >> ((state >> 28) + 4)) ^ state).wrapping_mul(277_803_737);
-    (word >> 22) ^ word
+    crate::sampling::sample01(pixel, sample, dim)
 }
 
 /// sRGB-encoded 8-bit value to linear.

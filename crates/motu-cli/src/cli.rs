@@ -646,6 +646,11 @@ pub struct RenderArgs {
     /// scaled by 2^EV before the sRGB transfer).
     #[arg(help_heading = HEADING_SHADING, long, default_value = "auto", allow_hyphen_values = true, value_parser = parse_exposure)]
     pub exposure: ExposureArg,
+    /// Filter the shaded image's sampling noise with an edge-aware à-trous filter guided by the
+    /// AOV's depth, the normals it implies and the materials' base colours (never the AOV;
+    /// `denoise` in --stats). Only the shaded view.
+    #[arg(long)]
+    pub denoise: bool,
     /// Vulkan device index.
     #[arg(help_heading = HEADING_DEVICE, long, env = "MOTU_DEVICE")]
     pub device: Option<usize>,
@@ -734,6 +739,16 @@ pub struct ViewArgs {
     /// Present as fast as possible (MAILBOX/IMMEDIATE) instead of at the display's rate.
     #[arg(help_heading = HEADING_DEVICE, long)]
     pub no_vsync: bool,
+    /// Accumulate samples while the camera rests in --frames runs too (a window always does
+    /// until P turns it off): each frame adds the next samples of every pixel's sequence and
+    /// the image converges; anything that changes starts again. Without it a scripted frame
+    /// equals `motu render`'s per pixel.
+    #[arg(long)]
+    pub accumulate: bool,
+    /// Start with the denoiser on (N toggles it): the shown image is filtered as `motu render
+    /// --denoise` filters, never the AOV.
+    #[arg(long)]
+    pub denoise: bool,
     /// Fly speed in world units per second (default: a quarter of the scene's radius).
     #[arg(help_heading = HEADING_CAMERA, long)]
     pub speed: Option<f32>,

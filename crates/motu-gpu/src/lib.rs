@@ -28,6 +28,8 @@ mod gpu_tests;
 #[cfg(test)]
 mod render_tests;
 #[cfg(test)]
+mod sampling_tests;
+#[cfg(test)]
 mod stream_tests;
 
 pub use error::{GpuError, Result};

@@ -89,7 +89,7 @@ impl View {
     }
 }
 
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderOptions {
     pub backend: Backend,
     pub view: View,
@@ -256,7 +256,8 @@ pub(crate) struct FrameParams {
     auto_exposure: u32,
     /// Diffuse bounces after each primary hit (`shade.glsl`).
     bounces: u32,
-    _pad: u32,
+    /// The frame's first sample in the pixel's sequence (`Shading::first_sample`).
+    first_sample: u32,
 }
 
 /// Where an environment map's tables start in the frame-parameter buffer (`shade.glsl`
@@ -590,7 +591,7 @@ pub(crate) fn frame_params(
         environment: u32::from(sh.environment.is_some()),
         auto_exposure: u32::from(sh.auto_exposure && opts.view == View::Shaded),
         bounces: sh.bounces,
-        _pad: 0,
+        first_sample: sh.first_sample,
     }
 }
 

@@ -10,6 +10,7 @@ mod backend;
 mod cache;
 mod camera;
 mod cpu;
+pub mod denoise;
 mod gpu;
 mod lod;
 mod meshes;

@@ -68,6 +68,8 @@ pub fn render(
     let (pkg, view, camera, recorded) = (job.package, job.view, job.camera, job.recorded);
     let lod = s.lod;
     let instance_lod = job.lod.instance.as_ref();
+    // The image's camera: the streamed sweep's last one, else the job's.
+    let mut image_camera = camera;
     let (aov, rgba8, stats): (Aov, Vec<u8>, Value) = match (s.backend, &s.stream) {
         (Backend::Cpu, _) => {
             let cams = recorded
@@ -76,7 +78,10 @@ pub fn render(
             crate::cpu::render_cpu(s, pkg, view, lod, instance_lod, &cams)?
         }
         (backend, Some(stream)) => {
-            crate::stream::render_streaming(s, stream, job, backend, progress)?
+            let (rendered, last) =
+                crate::stream::render_streaming(s, stream, job, backend, progress)?;
+            image_camera = last;
+            rendered
         }
         (backend, None) => match recorded {
             Some(cams) => {
@@ -86,6 +91,11 @@ pub fn render(
         },
     };
     let mut stats = stats;
+    let mut rgba8 = rgba8;
+    stats["denoise"] = match (s.denoise, s.view) {
+        (true, motu_gpu::View::Shaded) => json!(denoise(job, &image_camera, &aov, &mut rgba8)),
+        _ => Value::Null,
+    };
     lod_stats(&mut stats, job.lod);
     stats["blas_build"] = json!(s.blas_build().name());
     let stats = contract_stats(
@@ -116,6 +126,28 @@ pub fn render(
         progress(RenderEvent::TruncatedWritten { what: &what });
     }
     Ok(Rendered { aov, rgba8, stats })
+}
+
+/// `--denoise`: filters the shaded image with the guide its AOV gives (the materials' base
+/// colours by source mesh).
+fn denoise(
+    job: &RenderJob<'_>,
+    camera: &CameraParams,
+    aov: &Aov,
+    rgba8: &mut [u8],
+) -> crate::denoise::DenoiseStats {
+    let albedo = crate::denoise::mesh_base_colours(job.view);
+    let guide = crate::denoise::guide_from_aov(aov, camera, |mesh| {
+        albedo.get(&mesh).copied().unwrap_or([0.5; 3])
+    });
+    crate::denoise::denoise_rgba8(
+        rgba8,
+        aov.width,
+        aov.height,
+        &guide,
+        crate::denoise::pixel_footprint(camera),
+        &crate::denoise::DenoiseOptions::default(),
+    )
 }
 
 /// The LOD mode and its instance/selector counts.

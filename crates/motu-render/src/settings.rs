@@ -19,6 +19,8 @@ pub struct RenderSettings {
     pub device: DeviceRequest,
     /// `--stream`: build only what rays touch, evicting under the budget (`None`: a full build).
     pub stream: Option<StreamSettings>,
+    /// `--denoise`: the shaded image is filtered ([`crate::denoise`]); the AOV never is.
+    pub denoise: bool,
 }
 
 /// How far a ray's traversal may go (`--stack-size`, `--max-traces-per-ray`), and whether an

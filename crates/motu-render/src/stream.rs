@@ -5,7 +5,7 @@
 use crate::gpu::{gpu_context, gpu_render_options, Rendered};
 use crate::settings::{RenderEvent, RenderSettings, StreamSettings};
 use crate::{camera_pose, scene_shading, Backend, PackageMeshes, RenderError};
-use motu_abi::camera::camera_path;
+use motu_abi::camera::{camera_path, CameraParams};
 use motu_abi::HierarchyView;
 use serde::Serialize;
 use serde_json::{json, Value};
@@ -162,7 +162,7 @@ pub(crate) fn render_streaming(
     job: &crate::RenderJob<'_>,
     backend: Backend,
     progress: &mut dyn FnMut(RenderEvent<'_>),
-) -> Result<Rendered, RenderError> {
+) -> Result<(Rendered, CameraParams), RenderError> {
     let (pkg, view, recorded, started) = (job.package, job.view, job.recorded, job.started);
     if s.shading.bounces > 0 && s.view == motu_gpu::View::Shaded {
         return Err(RenderError::StreamBounces {
@@ -299,9 +299,9 @@ pub(crate) fn render_streaming(
             });
         }
         frames.push(serde_json::to_value(&st)?);
-        last = Some(out);
+        last = Some((out, cam));
     }
-    let out = last.ok_or(RenderError::NoFrame)?;
+    let (out, last_camera) = last.ok_or(RenderError::NoFrame)?;
     let mut stats = serde_json::to_value(&out.stats)?;
     // The last frame is the image written: its cut rays decide (render's common check).
     stats["truncated_rays"] = frames
@@ -331,5 +331,5 @@ pub(crate) fn render_streaming(
     drop(sr);
     ctx.check_validation()
         .map_err(|e| RenderError::Validation(e.into()))?;
-    Ok((out.aov, out.rgba8, stats))
+    Ok(((out.aov, out.rgba8, stats), last_camera))
 }

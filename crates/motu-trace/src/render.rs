@@ -146,8 +146,10 @@ pub fn render_with(
                 let colour = match opts.view {
                     View::Shaded => {
                         let mut sum = [0.0f32; 3];
-                        for sample in 0..spp {
-                            // Sample 0 is the pixel centre (the hit record's ray).
+                        for local in 0..spp {
+                            // The sequence's sample 0 is the pixel centre (the hit record's
+                            // ray); a progressive frame starts at `first_sample`.
+                            let sample = opts.shading.first_sample + local;
                             let (h, d) = if sample == 0 {
                                 (hit, dir)
                             } else {

@@ -9,9 +9,11 @@
 //! numbers. For tests and scripts, [`ViewOptions::frames`] renders that many frames through the
 //! real window and swapchain, reads the last one back from the swapchain image and exits.
 
+mod controls;
 mod fly;
 mod overlay;
 mod package;
+pub mod progressive;
 
 use std::time::Instant;
 
@@ -25,6 +27,7 @@ use winit::keyboard::{KeyCode, ModifiersState, PhysicalKey};
 use winit::raw_window_handle::{HasDisplayHandle, HasWindowHandle};
 use winit::window::{Window, WindowId};
 
+pub use controls::{Controls, Keys};
 pub use fly::{FlyCamera, Motion};
 pub use overlay::draw_text;
 pub use package::{
@@ -116,6 +119,10 @@ pub trait FrameSource {
         elements_on: &[bool],
         lod_instance: bool,
     ) -> Result<SourceFrame, String>;
+    /// A source mesh's base colour (the denoiser's material guide).
+    fn base_colour(&self, _mesh: u32) -> [f32; 3] {
+        [0.5; 3]
+    }
 }
 
 /// How the viewer starts.
@@ -142,6 +149,10 @@ pub struct ViewOptions {
     pub replay: Option<Vec<CameraPose>>,
     pub overlay: bool,
     pub vsync: bool,
+    /// Accumulate samples while the camera rests (P toggles; [`progressive`]).
+    pub accumulate: bool,
+    /// Filter the shown image (N toggles; `motu render --denoise`'s filter, never the AOV).
+    pub denoise: bool,
     /// Open the window (and create the device) for this display; set by [`run`].
     pub display: Option<motu_gpu::RawDisplayHandle>,
 }
@@ -151,7 +162,8 @@ pub struct ViewOptions {
 pub struct ViewResult {
     /// Frames rendered and shown.
     pub frames_shown: u64,
-    /// The last frame as the renderer produced it.
+    /// The last frame as shown (accumulated and denoised as the window showed it, the AOV the
+    /// run's first frame's), before the overlay.
     pub last: Option<SourceFrame>,
     /// The last frame as read back from the swapchain image (automation mode).
     pub screenshot_rgba8: Option<Vec<u8>>,
@@ -164,6 +176,10 @@ pub struct ViewResult {
     pub incomplete_frames: u64,
     /// Per shown frame: its pixels still refining (unfinished, or the streaming fallback).
     pub incomplete_pixels_per_frame: Vec<u64>,
+    /// Samples per pixel in the last frame shown (accumulated while the camera rested).
+    pub accumulated_samples: u32,
+    /// Whether the last frame shown was denoised.
+    pub denoised: bool,
 }
 
 /// Opens the window and runs until it is closed (or `opts.frames` frames were shown).
@@ -201,6 +217,7 @@ where
         last_tick: Instant::now(),
         last_frame_ms: 0.0,
         skips: 0,
+        accum: progressive::Accumulator::default(),
         opts,
     };
     event_loop.set_control_flow(ControlFlow::Poll);
@@ -216,135 +233,6 @@ where
     Ok(app.result)
 }
 
-/// Movement keys held down.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Keys {
-    forward: bool,
-    back: bool,
-    left: bool,
-    right: bool,
-    up: bool,
-    down: bool,
-}
-
-/// What the keys change: the next frame's options, the camera, the element set, the overlay.
-#[derive(Debug)]
-pub struct Controls {
-    pub render: RenderOptions,
-    /// Instance-level LOD wanted (M); the source reports what ran.
-    pub lod_instance: bool,
-    pub overlay: bool,
-    pub elements: Vec<String>,
-    pub elements_on: Vec<bool>,
-    pub cameras: Vec<(String, CameraPose)>,
-    pub fly: FlyCamera,
-    pub keys: Keys,
-    /// The last action, for the overlay.
-    pub message: String,
-}
-
-impl Controls {
-    pub fn new(opts: &ViewOptions) -> Controls {
-        Controls {
-            render: opts.render,
-            lod_instance: opts.lod_instance,
-            overlay: opts.overlay,
-            elements: opts.elements.clone(),
-            elements_on: opts.elements_on.clone(),
-            cameras: opts.cameras.clone(),
-            fly: FlyCamera::new(opts.start, opts.speed),
-            keys: Keys::default(),
-            message: String::new(),
-        }
-    }
-
-    /// Applies a key press or release; true when the key asks to quit.
-    pub fn key(&mut self, code: KeyCode, pressed: bool, shift: bool) -> bool {
-        let k = &mut self.keys;
-        match code {
-            KeyCode::KeyW => k.forward = pressed,
-            KeyCode::KeyS => k.back = pressed,
-            KeyCode::KeyA => k.left = pressed,
-            KeyCode::KeyD => k.right = pressed,
-            KeyCode::KeyE => k.up = pressed,
-            KeyCode::KeyQ => k.down = pressed,
-            _ => {}
-        }
-        if !pressed {
-            return false;
-        }
-        let r = &mut self.render;
-        let digit = match code {
-            KeyCode::Digit1 => Some(0),
-            KeyCode::Digit2 => Some(1),
-            KeyCode::Digit3 => Some(2),
-            KeyCode::Digit4 => Some(3),
-            KeyCode::Digit5 => Some(4),
-            KeyCode::Digit6 => Some(5),
-            KeyCode::Digit7 => Some(6),
-            KeyCode::Digit8 => Some(7),
-            KeyCode::Digit9 => Some(8),
-            KeyCode::Digit0 => Some(usize::MAX),
-            _ => None,
-        };
-        match code {
-            KeyCode::Escape => return true,
-            KeyCode::KeyV => {
-                let i = VIEWS.iter().position(|v| *v == r.view).unwrap_or(0);
-                r.view = VIEWS[(i + 1) % VIEWS.len()];
-            }
-            KeyCode::F1 => r.view = View::Shaded,
-            KeyCode::F2 => r.view = View::Ids,
-            KeyCode::F3 => r.view = View::Lod,
-            KeyCode::F4 => r.view = View::Heatmap,
-            KeyCode::KeyL => {
-                // auto → 0 → 1 → … → 7 → auto
-                r.lod.forced_lod = match r.lod.forced_lod {
-                    f if f < 0 => 0,
-                    f if f >= 7 => motu_abi::lod::LOD_NOT_FORCED,
-                    f => f + 1,
-                };
-            }
-            KeyCode::KeyK => r.lod.stochastic ^= 1,
-            KeyCode::KeyM => self.lod_instance = !self.lod_instance,
-            KeyCode::KeyH => r.shadows = !r.shadows,
-            KeyCode::Tab => self.overlay = !self.overlay,
-            _ => {}
-        }
-        if let Some(d) = digit {
-            if shift {
-                self.toggle_element(d);
-            } else if let Some((name, pose)) = self.cameras.get(d) {
-                self.fly.pose = *pose;
-                self.message = format!("camera {name}");
-            }
-        }
-        false
-    }
-
-    pub fn toggle_element(&mut self, d: usize) {
-        let on = &mut self.elements_on;
-        if d == usize::MAX {
-            on.iter_mut().for_each(|e| *e = true);
-            self.message = "all elements on".into();
-            return;
-        }
-        if d >= on.len() {
-            return;
-        }
-        if on[d] && on.iter().filter(|e| **e).count() == 1 {
-            self.message = "the last element stays on".into();
-            return;
-        }
-        on[d] = !on[d];
-        self.message = format!(
-            "element {} {}",
-            self.elements[d],
-            if on[d] { "on" } else { "off" }
-        );
-    }
-}
-
 struct App<S: FrameSource> {
     source: S,
     ctl: Controls,
@@ -358,6 +246,7 @@ struct App<S: FrameSource> {
     last_tick: Instant,
     last_frame_ms: f64,
     skips: u32,
+    accum: progressive::Accumulator,
     opts: ViewOptions,
 }
 
@@ -471,22 +360,41 @@ impl<S: FrameSource> App<S> {
         };
         let camera = pose.params(w, h);
         let t0 = Instant::now();
-        let frame = self
+        let mut opts = self.ctl.render;
+        let first = if self.ctl.accumulate {
+            self.accum
+                .first_sample(&camera, &opts, &self.ctl.elements_on, self.ctl.lod_instance)
+        } else {
+            self.accum.reset();
+            None
+        };
+        opts.shading.first_sample = first.unwrap_or(0);
+        let mut frame = self
             .source
-            .render(
-                &camera,
-                &self.ctl.render,
-                &self.ctl.elements_on,
-                self.ctl.lod_instance,
-            )
+            .render(&camera, &opts, &self.ctl.elements_on, self.ctl.lod_instance)
             .map_err(ViewError::Source)?;
         let last = automated && self.opts.frames == Some(self.result.frames_shown as u32 + 1);
         if last && frame.stats.incomplete_pixels > 0 {
             return Err(ViewError::Incomplete(frame.stats.incomplete_pixels));
         }
+        // A streamed frame still refining changes from frame to frame: it starts again.
+        let samples = match first {
+            Some(_) if frame.stats.incomplete_pixels == 0 => {
+                self.accum.add(&mut frame.output, &opts)
+            }
+            _ => {
+                self.accum.reset();
+                opts.shading.spp
+            }
+        };
+        let denoised = self.ctl.denoise && opts.view == View::Shaded;
+        if denoised {
+            let src = &self.source;
+            progressive::denoise(&mut frame.output, &camera, |m| src.base_colour(m));
+        }
         let mut shown = frame.output.rgba8.clone();
         if self.ctl.overlay {
-            let lines = self.overlay_lines(&frame, w, h);
+            let lines = self.overlay_lines(&frame, w, h, samples, denoised);
             draw_text(&mut shown, w, h, &lines, if w >= 1600 { 2 } else { 1 });
         }
         let Some(presenter) = self.presenter.as_mut() else {
@@ -514,6 +422,8 @@ impl<S: FrameSource> App<S> {
                 if last {
                     self.result.screenshot_rgba8 = readback;
                 }
+                self.result.accumulated_samples = samples;
+                self.result.denoised = denoised;
                 self.result.last = Some(frame);
             }
         }
@@ -535,7 +445,14 @@ impl<S: FrameSource> App<S> {
         Ok(())
     }
 
-    fn overlay_lines(&self, f: &SourceFrame, w: u32, h: u32) -> Vec<String> {
+    fn overlay_lines(
+        &self,
+        f: &SourceFrame,
+        w: u32,
+        h: u32,
+        samples: u32,
+        denoised: bool,
+    ) -> Vec<String> {
         let st = &f.output.stats;
         let s = &f.stats;
         let r = &self.ctl.render;
@@ -608,11 +525,21 @@ impl<S: FrameSource> App<S> {
                 },
                 if r.shadows { "on" } else { "off" }
             ),
+            format!(
+                "samples {samples}{}  denoiser {}",
+                match (self.ctl.accumulate, r.view) {
+                    (true, View::Shaded) => " (accumulating at rest)",
+                    (true, _) => "",
+                    (false, _) => " (accumulation off)",
+                },
+                if denoised { "on" } else { "off" }
+            ),
             format!("elements: {}", elements.join(" ")),
             format!("speed {:.3}/s  {}", self.ctl.fly.speed, self.ctl.message),
             "WASD/QE move, drag look, wheel speed, 1-9 cameras".into(),
             "V/F1-F4 view, L lod, M lod mode, K dither, H shadows".into(),
-            "Shift+1-9 elements, Tab overlay, Esc quit".into(),
+            "P accumulate, N denoise, Shift+1-9 elements".into(),
+            "Tab overlay, Esc quit".into(),
         ]
     }
 }
@@ -710,6 +637,8 @@ mod tests {
             replay: None,
             overlay: true,
             vsync: true,
+            accumulate: true,
+            denoise: false,
             display: None,
         })
     }

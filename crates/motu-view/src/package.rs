@@ -159,6 +159,8 @@ pub struct PackageSource<'p> {
     /// from it for the streaming probe (prefetch).
     prev_camera: Option<CameraParams>,
     total_structures: u64,
+    /// Each source mesh's base colour (the denoiser's guide).
+    base_colours: std::collections::HashMap<u32, [f32; 3]>,
 }
 
 impl<'p> PackageSource<'p> {
@@ -211,6 +213,7 @@ impl<'p> PackageSource<'p> {
             total_structures: (base.blases.len() + base.tlases.len()) as u64,
             settings,
             prev_camera: None,
+            base_colours: motu_render::denoise::mesh_base_colours(&base),
         };
         src.rebuild(&o.elements_on, o.lod_instance, &o.render.lod)?;
         Ok(src)
@@ -385,6 +388,10 @@ impl FrameSource for PackageSource<'_> {
     ) -> Result<SourceFrame, String> {
         self.render_inner(camera, opts, on, lod_instance)
             .map_err(|e| chain(&e))
+    }
+
+    fn base_colour(&self, mesh: u32) -> [f32; 3] {
+        self.base_colours.get(&mesh).copied().unwrap_or([0.5; 3])
     }
 }
 

@@ -154,6 +154,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         ao_samples: 1,
         exposure: crate::cli::ExposureArg::Auto,
         bounces: 0,
+        denoise: false,
         device: None,
         camera_path: None,
     };

@@ -246,6 +246,9 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     if a.frames == 0 {
         bail!("--frames must be at least 1");
     }
+    if a.denoise && a.view != ViewArg::Shaded {
+        bail!("--denoise filters the shaded view's sampling noise: drop it or use --view shaded");
+    }
     let lod_choice = choose_lod_mode(&view, &lod, lod_mode(a.lod_mode), a.stream)?;
     if lod_choice.mode == "traversal"
         && a.lod_mode == LodModeArg::Instance
@@ -290,6 +293,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             allow_incomplete: a.allow_incomplete,
             cache: cache_settings(&a.as_cache),
         }),
+        denoise: a.denoise,
     };
     let job = motu_render::RenderJob {
         package: &pkg,

@@ -146,6 +146,8 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         replay: replay_poses,
         overlay: a.overlay || a.frames.is_none(),
         vsync: !a.no_vsync,
+        accumulate: a.accumulate || a.frames.is_none(),
+        denoise: a.denoise,
         display: None,
     };
     let meshes = PackageMeshes(&pkg);
@@ -206,6 +208,8 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         stats["incomplete_frames"] = json!(result.incomplete_frames);
         stats["incomplete_pixels_per_frame"] = json!(result.incomplete_pixels_per_frame);
         stats["lod_mode"] = json!(last.stats.lod_mode);
+        stats["accumulated_samples"] = json!(result.accumulated_samples);
+        stats["denoised"] = json!(result.denoised);
         if let Some(d) = &last.detail {
             stats["detail"] = serde_json::from_str(d).unwrap_or(json!(null));
         }

@@ -1,0 +1,212 @@
+//! Progressive refinement while the camera rests: each frame of the shaded view draws the next
+//! `spp` samples of every pixel's sequence (`Shading::first_sample`), and the viewer averages
+//! the frames in linear light until anything changes (the camera, an option, the element set,
+//! the window, or a streamed frame still refining), when it starts again from sample 0. The
+//! first frame of a run is the image `motu render` writes; its AOV (the pixel centres) stays
+//! the frame's AOV while later frames add samples.
+//!
+//! The frames come tone-mapped (8-bit sRGB at their own exposure): each is taken back to
+//! linear with its exposure, summed in `f32`, and the mean tone-mapped again (auto exposure
+//! over the mean, or the fixed EV). What a frame clipped (above 1 after its exposure) is lost
+//! to the sum; 8-bit steps average out under the noise.
+
+use motu_abi::aov::Aov;
+use motu_abi::camera::CameraParams;
+use motu_abi::shade::{auto_exposure_ev, srgb_to_linear, tone_map};
+use motu_gpu::{RenderOptions, RenderOutput, View};
+
+/// Samples a pixel accumulates at most (well inside the sequence's 2^20 sample indices); then
+/// the image stays as it is until something changes.
+pub const MAX_ACCUMULATED_SAMPLES: u32 = 1 << 16;
+
+/// What an accumulation run was started for: a change of any of it starts again.
+#[derive(Clone, Debug, PartialEq)]
+struct RunKey {
+    camera: CameraParams,
+    opts: RenderOptions,
+    elements_on: Vec<bool>,
+    lod_instance: bool,
+}
+
+/// The running sum of a camera at rest.
+#[derive(Debug, Default)]
+pub struct Accumulator {
+    key: Option<RunKey>,
+    sum: Vec<[f32; 3]>,
+    samples: u32,
+    /// The run's first frame's AOV (sample 0: the pixel centres).
+    aov: Option<Aov>,
+}
+
+impl Accumulator {
+    /// Samples in the current run (0: none yet).
+    pub fn samples(&self) -> u32 {
+        self.samples
+    }
+
+    /// Forgets the run: the next frame starts at sample 0.
+    pub fn reset(&mut self) {
+        self.key = None;
+        self.sum.clear();
+        self.samples = 0;
+        self.aov = None;
+    }
+
+    /// The first sample the next frame of `camera` with `opts` should draw: 0 after any
+    /// change, else where the run stands. `None`: nothing accumulates (the view is not shaded).
+    pub fn first_sample(
+        &mut self,
+        camera: &CameraParams,
+        opts: &RenderOptions,
+        elements_on: &[bool],
+        lod_instance: bool,
+    ) -> Option<u32> {
+        if opts.view != View::Shaded {
+            self.reset();
+            return None;
+        }
+        let key = RunKey {
+            camera: *camera,
+            opts: *opts,
+            elements_on: elements_on.to_vec(),
+            lod_instance,
+        };
+        if self.key.as_ref() != Some(&key) {
+            self.reset();
+            self.key = Some(key);
+        }
+        Some(self.samples.min(MAX_ACCUMULATED_SAMPLES))
+    }
+
+    /// Adds `frame` (rendered from [`Accumulator::first_sample`] with `opts`) to the run and
+    /// replaces its image with the run's mean and its AOV with the run's first; returns the
+    /// run's samples.
+    pub fn add(&mut self, frame: &mut RenderOutput, opts: &RenderOptions) -> u32 {
+        let n = (frame.rgba8.len() / 4) as u32;
+        if self.sum.len() != n as usize {
+            self.sum = vec![[0.0; 3]; n as usize];
+            self.samples = 0;
+        }
+        let spp = opts.shading.spp.max(1);
+        if self.samples < MAX_ACCUMULATED_SAMPLES {
+            let inv = (-frame.stats.exposure_ev).exp2();
+            let weight = spp as f32;
+            for (s, p) in self.sum.iter_mut().zip(frame.rgba8.chunks_exact(4)) {
+                for (c, v) in s.iter_mut().zip(&p[..3]) {
+                    *c += weight * srgb_to_linear(f32::from(*v) / 255.0) * inv;
+                }
+            }
+            if self.samples == 0 {
+                self.aov = Some(frame.aov.clone());
+            }
+            self.samples += spp;
+        }
+        let inv_n = 1.0 / self.samples as f32;
+        let mean = self.sum.iter().map(|s| s.map(|c| c * inv_n));
+        let ev = if opts.shading.auto_exposure {
+            auto_exposure_ev(mean.clone())
+        } else {
+            opts.shading.exposure_ev
+        };
+        let scale = ev.exp2();
+        for (p, c) in frame.rgba8.chunks_exact_mut(4).zip(mean) {
+            p[..3].copy_from_slice(&tone_map(c, scale));
+            p[3] = 255;
+        }
+        frame.stats.exposure_ev = ev;
+        if let Some(aov) = &self.aov {
+            frame.aov.clone_from(aov);
+        }
+        self.samples
+    }
+}
+
+/// Filters the shown image with the denoiser of `motu render --denoise` (never the AOV).
+pub fn denoise(
+    frame: &mut RenderOutput,
+    camera: &CameraParams,
+    base_colour: impl Fn(u32) -> [f32; 3],
+) {
+    use motu_render::denoise::{denoise_rgba8, guide_from_aov, pixel_footprint, DenoiseOptions};
+    let guide = guide_from_aov(&frame.aov, camera, base_colour);
+    denoise_rgba8(
+        &mut frame.rgba8,
+        frame.aov.width,
+        frame.aov.height,
+        &guide,
+        pixel_footprint(camera),
+        &DenoiseOptions::default(),
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(level: u8, ev: f32) -> RenderOutput {
+        let mut out = RenderOutput {
+            aov: Aov::new(2, 1),
+            rgba8: vec![level, level, level, 255, 0, 0, 0, 255],
+            stats: Default::default(),
+        };
+        out.stats.exposure_ev = ev;
+        out
+    }
+
+    fn camera() -> CameraParams {
+        CameraParams::new(
+            [0.0, 0.0, 0.0].into(),
+            [0.0, 0.0, -1.0].into(),
+            [0.0, 1.0, 0.0].into(),
+            45.0,
+            false,
+            2,
+            1,
+        )
+    }
+
+    fn fixed() -> RenderOptions {
+        let mut o = RenderOptions::default();
+        o.shading.auto_exposure = false;
+        o
+    }
+
+    #[test]
+    fn frames_at_rest_average_and_any_change_starts_again() {
+        let mut acc = Accumulator::default();
+        let (cam, opts) = (camera(), fixed());
+        assert_eq!(acc.first_sample(&cam, &opts, &[true], false), Some(0));
+        let mut a = frame(255, 0.0);
+        a.aov.records[0].mesh = 7;
+        assert_eq!(acc.add(&mut a, &opts), 1);
+        assert_eq!(a.rgba8[0], 255);
+        assert_eq!(acc.first_sample(&cam, &opts, &[true], false), Some(1));
+        // Linear 1 and 0: the mean is linear 0.5 (sRGB 188), not the sRGB mean.
+        let mut b = frame(0, 0.0);
+        assert_eq!(acc.add(&mut b, &opts), 2);
+        assert_eq!(b.rgba8[0], tone_map([0.5; 3], 1.0)[0]);
+        assert_eq!(b.aov.records[0].mesh, 7, "the run's first AOV is kept");
+        // A frame at another exposure is taken back to linear with its own.
+        let mut c = frame(255, 1.0); // linear 0.5 before its exposure
+        acc.add(&mut c, &opts);
+        assert_eq!(c.rgba8[0], tone_map([0.5; 3], 1.0)[0]);
+        // Anything changed: the camera, an option, the elements, the LOD mode, the view.
+        let mut moved = cam;
+        moved.world_eye[0] += 0.1;
+        assert_eq!(acc.first_sample(&moved, &opts, &[true], false), Some(0));
+        acc.add(&mut frame(10, 0.0), &opts);
+        let mut spp = opts;
+        spp.shading.spp = 4;
+        assert_eq!(acc.first_sample(&moved, &spp, &[true], false), Some(0));
+        acc.add(&mut frame(10, 0.0), &spp);
+        assert_eq!(acc.samples(), 4, "a frame of 4 spp adds 4 samples");
+        assert_eq!(acc.first_sample(&moved, &spp, &[true], false), Some(4));
+        assert_eq!(acc.first_sample(&moved, &spp, &[false], false), Some(0));
+        acc.add(&mut frame(10, 0.0), &spp);
+        assert_eq!(acc.first_sample(&moved, &spp, &[false], true), Some(0));
+        let mut ids = spp;
+        ids.view = View::Ids;
+        assert_eq!(acc.first_sample(&moved, &ids, &[false], true), None);
+        assert_eq!(acc.samples(), 0);
+    }
+}
