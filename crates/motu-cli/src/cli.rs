@@ -649,7 +649,7 @@ pub struct RenderArgs {
     /// Filter the shaded image's sampling noise with an edge-aware à-trous filter guided by the
     /// AOV's depth, the normals it implies and the materials' base colours (never the AOV;
     /// `denoise` in --stats). Only the shaded view.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_SHADING, long)]
     pub denoise: bool,
     /// Vulkan device index.
     #[arg(help_heading = HEADING_DEVICE, long, env = "MOTU_DEVICE")]
@@ -743,11 +743,11 @@ pub struct ViewArgs {
     /// until P turns it off): each frame adds the next samples of every pixel's sequence and
     /// the image converges; anything that changes starts again. Without it a scripted frame
     /// equals `motu render`'s per pixel.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_SHADING, long)]
     pub accumulate: bool,
     /// Start with the denoiser on (N toggles it): the shown image is filtered as `motu render
     /// --denoise` filters, never the AOV.
-    #[arg(long)]
+    #[arg(help_heading = HEADING_SHADING, long)]
     pub denoise: bool,
     /// Fly speed in world units per second (default: a quarter of the scene's radius).
     #[arg(help_heading = HEADING_CAMERA, long)]
