@@ -294,3 +294,81 @@ fn ptex_from_pbrt_v4() {
     let faces = check_faces(&cpu.with_extension("png"), &cpu);
     assert!(faces >= N * N * 3 / 4, "{faces} faces seen");
 }
+
+/// Moana's JSON+OBJ base package: the ground group's `<colorMap>/ground.ptx`, its quads the
+/// Ptex faces in file order (a quad's two triangles its halves).
+#[test]
+fn ptex_from_moana_json_obj() {
+    let dir = tempfile::tempdir().unwrap();
+    let w = |rel: &str, text: &str| {
+        let p = dir.path().join(rel);
+        std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+        std::fs::write(p, text).unwrap();
+    };
+    w(
+        "island/json/isA/isA.json",
+        r#"{"name": "isA", "matFile": "json/isA/materials.json", "geomObjFile": "obj/isA/isA.obj",
+            "transformMatrix": [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]}"#,
+    );
+    w(
+        "island/json/isA/materials.json",
+        r#"{"ground": {"baseColor": [0.5, 0.5, 0.5], "colorMap": "textures/isA/Color"}}"#,
+    );
+    // 2 × 2 quads over [-8, 8]², face x + 2 z.
+    let mut obj = String::from("g ground\nusemtl ground\n");
+    for z in 0..3 {
+        for x in 0..3 {
+            obj += &format!("v {} 0 {}\n", -8 + 8 * x, -8 + 8 * z);
+        }
+    }
+    for z in 0..2 {
+        for x in 0..2 {
+            let v = 1 + x + 3 * z;
+            obj += &format!("f {} {} {} {}\n", v, v + 1, v + 4, v + 3);
+        }
+    }
+    w("island/obj/isA/isA.obj", &obj);
+    w(
+        "island/json/cameras/shotCam.json",
+        r#"{"eye": [0, 20, 0], "look": [0, 0, 0], "up": [0, 0, 1], "fov": 60, "ratio": 1.0}"#,
+    );
+    let ptx = dir.path().join("island/textures/isA/Color/ground.ptx");
+    std::fs::create_dir_all(ptx.parent().unwrap()).unwrap();
+    let faces: Vec<WriteFace> = (0..4)
+        .map(|f| WriteFace {
+            ulog2: 1,
+            vlog2: 1,
+            data: face_rgb(f).repeat(4),
+            encoding: Encoding::Zipped,
+        })
+        .collect();
+    write(&ptx, DataType::U8, 3, None, 1, &faces).unwrap();
+    let pkg = dir.path().join("m.motu");
+    let out = motu(&["import", s(&dir.path().join("island/json")), "-o", s(&pkg)]);
+    assert!(out.status.success(), "{out:?}");
+    assert!(
+        !String::from_utf8_lossy(&out.stderr).contains("Ptex texture not read"),
+        "{out:?}"
+    );
+    let info = motu_json(&["info", s(&pkg), "--json"]);
+    assert_eq!(info["ptex_faces"], 4, "{info}");
+    let aov = dir.path().join("cpu.aov");
+    render(
+        &pkg,
+        "cpu",
+        &aov,
+        &["--ao-samples", "0", "--width", "32", "--height", "32"],
+    );
+    let (w, h, rgba) = read_png(&aov.with_extension("png"));
+    let hits = read_aov(&aov);
+    let mut seen = std::collections::BTreeSet::new();
+    for (i, hit) in hits.iter().enumerate() {
+        let Some((_, prim)) = *hit else { continue };
+        let c: [f32; 3] = std::array::from_fn(|k| f32::from(rgba[4 * i + k]));
+        let face = prim as usize / 2;
+        let want = face_rgb(face).map(f32::from);
+        assert_eq!(pattern(c), pattern(want), "pixel {i} (face {face}): {c:?}");
+        seen.insert(face);
+    }
+    assert_eq!(seen.len(), 4, "every face seen in a {w}×{h} image");
+}
