@@ -11,10 +11,9 @@ use motu_scene::{PtexFaces, Scene};
 
 use crate::ImportError;
 
-/// `--ptex-max`'s default: 16 texels a face edge. Moana's Ptex faces are mostly 2^2–2^6 a side
-/// at the finest level; 16 keeps a face's detail at the size a face covers on screen in a
-/// whole-island view while bounding a face to 1 KiB (FORMAT.md "Ptex textures" has the
-/// measurement).
+/// `--ptex-max`'s default: 16 texels a face edge, at most 1 KiB a face; on a generated
+/// Moana-like file the store was ~5% of level 0's texels (docs/shading.md "Ptex textures" has
+/// the measurement).
 pub const DEFAULT_PTEX_MAX: u32 = 16;
 
 /// The import's caps: image textures' largest side, Ptex faces' largest edge.
