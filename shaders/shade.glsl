@@ -172,6 +172,7 @@ struct ShadePoint {
     bool has_uv;
     vec2 uv;
     float uv_per_pixel;
+    vec3 bary;  // barycentrics of the hit (vertex weights 0, 1, 2): Ptex face uvs
 };
 
 vec3 load_vec3(Floats f, uint i) {
@@ -199,6 +200,7 @@ ShadePoint surface_point(TraceHit h, uint mesh, vec3 org, vec3 dir) {
     }
     sp.ng = ng;
     sp.ns = ng;
+    sp.bary = barycentrics(v0, v1, v2, xform_point(object_from_world, sp.p));
     sp.has_uv = false;
     sp.uv = vec2(0.0);
     sp.uv_per_pixel = 0.0;
@@ -212,7 +214,7 @@ ShadePoint surface_point(TraceHit h, uint mesh, vec3 org, vec3 dir) {
     if (normals == 0ul && uvs == 0ul) {
         return sp;
     }
-    vec3 b = barycentrics(v0, v1, v2, xform_point(object_from_world, sp.p));
+    vec3 b = sp.bary;
     if (normals != 0ul && (m.flags & FLAG_HAS_NORMALS) != 0u) {
         Floats n = Floats(normals);
         vec3 n_obj = b.x * load_vec3(n, tri.x) + b.y * load_vec3(n, tri.y) + b.z * load_vec3(n, tri.z);
@@ -291,13 +293,21 @@ ShadeInput shade_input(TraceHit h, uint mesh, vec3 org, vec3 dir) {
     MaterialRecord mat = push.materials.r[push.meshes.r[mesh].material];
     ShadePoint sp = surface_point(h, mesh, org, dir);
     vec3 albedo = mat.base_color;
-    if (mat.base_color_texture != NONE_U32 && sp.has_uv) {
+    if (mat.base_color_texture != NONE_U32 && push.frame.f.shading != 0ul) {
         ShadingRef sr = ShadingRef(push.frame.f.shading);
         TextureRecord tex = TextureTable(sr.textures).r[mat.base_color_texture];
-        float tpp = sp.uv_per_pixel * sqrt(float(tex.width) * float(tex.height));
-        uint64_t texels = texels_of(sr, mat.base_color_texture);
-        if (texels != 0ul) {
-            albedo *= sample_texture(tex, texels, sp.uv, mip_level(tpp, tex.mip_count)).rgb;
+        if (tex.mip_count == 0u) {
+            uint64_t words = texels_of(sr, mat.base_color_texture);
+            if (words != 0ul) {
+                albedo = ptex_albedo(tex, words, mesh, h.primitive, sp.bary, sp.has_uv, sp.uv,
+                                     albedo);
+            }
+        } else if (sp.has_uv) {
+            float tpp = sp.uv_per_pixel * sqrt(float(tex.width) * float(tex.height));
+            uint64_t texels = texels_of(sr, mat.base_color_texture);
+            if (texels != 0ul) {
+                albedo *= sample_texture(tex, texels, sp.uv, mip_level(tpp, tex.mip_count)).rgb;
+            }
         }
     }
     ShadeInput si;

@@ -1,4 +1,4 @@
-// Image textures and per-vertex attributes reached through FrameParams.shading, shared by the
+// Image and Ptex textures and per-vertex attributes reached through FrameParams.shading, shared by the
 // shading code (shade.glsl) and the alpha tests of non-opaque triangles (any-hit shader and
 // ray-query loop). Mirrors motu_abi::shade (texel addressing and bilinear sampling).
 #ifndef MOTU_TEXTURE_GLSL
@@ -87,6 +87,105 @@ vec4 sample_texture(TextureRecord tex, uint64_t texels_addr, vec2 uv, uint level
     vec4 top = a + (b - a) * fx;
     vec4 bottom = c + (d - c) * fx;
     return top + (bottom - top) * fy;
+}
+
+// Ptex textures (TextureRecord.mip_count == 0): motu_abi::ptex, mirrored line by line. The
+// words sit at the record's texel offset: mesh tables, face entries, triangle tables, texels.
+
+// The face of source triangle `prim` of `source_mesh`; y: 1 on a split quad's second half.
+uvec2 ptex_face(TextureRecord tex, U32Table w, uint source_mesh, uint prim) {
+    uint base = tex.texel_offset;
+    uint lo = 0u;
+    uint hi = w.r[base];
+    while (lo < hi) {
+        uint mid = (lo + hi) / 2u;
+        uint id = w.r[base + 1u + 2u * mid];
+        if (id == source_mesh) {
+            uint table = w.r[base + 2u + 2u * mid];
+            if (table == PTEX_QUADS) {
+                return uvec2(prim / 2u, prim % 2u);
+            }
+            uint e = w.r[base + table + prim];
+            return uvec2(e & ~PTEX_SECOND_HALF, (e & PTEX_SECOND_HALF) != 0u ? 1u : 0u);
+        }
+        if (id < source_mesh) {
+            lo = mid + 1u;
+        } else {
+            hi = mid;
+        }
+    }
+    return uvec2(prim, 0u);
+}
+
+vec2 ptex_default_uv(vec3 b, bool second_half) {
+    return second_half ? vec2(b.y, b.y + b.z) : vec2(b.y + b.z, b.z);
+}
+
+vec4 ptex_texel(U32Table w, uint at) {
+    uint t = w.r[at];
+    vec4 c = vec4(float(t & 0xffu), float((t >> 8u) & 0xffu), float((t >> 16u) & 0xffu),
+                  float(t >> 24u)) / 255.0;
+    return vec4(srgb_to_linear(c.r), srgb_to_linear(c.g), srgb_to_linear(c.b), c.a);
+}
+
+// Bilinear sample of face `face` at face uv `uv`, clamped to the face; false for a face the
+// texture does not have (the material's colour then shows).
+bool sample_ptex(TextureRecord tex, uint64_t words, uint face, vec2 uv, out vec4 colour) {
+    colour = vec4(0.0);
+    if (face >= tex.height) {
+        return false;
+    }
+    U32Table w = U32Table(words);
+    uint base = tex.texel_offset;
+    uint entry = base + 1u + 2u * w.r[base] + 2u * face;
+    uint at = base + w.r[entry];
+    uint res = w.r[entry + 1u];
+    int fw = 1 << min(res & 0xffu, 15u);
+    int fh = 1 << min((res >> 8u) & 0xffu, 15u);
+    if (any(isnan(uv)) || any(isinf(uv))) {
+        uv = vec2(0.0);
+    }
+    float x = clamp(uv.x, 0.0, 1.0) * float(fw) - 0.5;
+    float y = clamp(uv.y, 0.0, 1.0) * float(fh) - 0.5;
+    float x0 = floor(x);
+    float y0 = floor(y);
+    float fx = x - x0;
+    float fy = y - y0;
+    int xa = clamp(int(x0), 0, fw - 1);
+    int xb = clamp(int(x0) + 1, 0, fw - 1);
+    int ya = clamp(int(y0), 0, fh - 1);
+    int yb = clamp(int(y0) + 1, 0, fh - 1);
+    vec4 a = ptex_texel(w, at + uint(ya * fw + xa));
+    vec4 b = ptex_texel(w, at + uint(ya * fw + xb));
+    vec4 c = ptex_texel(w, at + uint(yb * fw + xa));
+    vec4 d = ptex_texel(w, at + uint(yb * fw + xb));
+    vec4 top = a + (b - a) * fx;
+    vec4 bottom = c + (d - c) * fx;
+    colour = top + (bottom - top) * fy;
+    return true;
+}
+
+// The base colour of a hit on compiled mesh `mesh` (triangle `primitive`, barycentrics `b`,
+// interpolated texture coordinates `uv` where `has_uv`) under Ptex texture `tex`: the face's
+// sample replaces `albedo`. LOD levels (their triangles are not the source's) keep `albedo`.
+vec3 ptex_albedo(TextureRecord tex, uint64_t words, uint mesh, uint primitive, vec3 b,
+                 bool has_uv, vec2 uv, vec3 albedo) {
+    MeshRecord m = push.meshes.r[mesh];
+    if (m.lod != 0u) {
+        return albedo;
+    }
+    uint prim = primitive;
+    if ((m.flags & FLAG_PRIMITIVE_MAP) != 0u) {
+        uint64_t map = push.mesh_geo.r[mesh].indices + 12ul * uint64_t(m.triangle_count);
+        prim = U32Table(map).r[primitive];
+    }
+    uvec2 f = ptex_face(tex, U32Table(words), m.source_mesh, prim);
+    vec2 fuv = has_uv ? uv : ptex_default_uv(b, f.y != 0u);
+    vec4 c;
+    if (sample_ptex(tex, words, f.x, fuv, c)) {
+        return c.rgb;
+    }
+    return albedo;
 }
 
 // Coverage of a non-opaque triangle at barycentrics `bary` (Vulkan's: weights of vertices 1

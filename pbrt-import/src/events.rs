@@ -61,8 +61,8 @@ pub struct Material {
     /// colour is constant or the file is missing.
     pub base_color_image: Option<std::path::PathBuf>,
     /// Ptex file the base colour comes from (a `ptex` texture, resolved against the scene file;
-    /// Moana's base package: the mesh group's `<colorMap>/<group>.ptx`). Kept for renderers
-    /// with a Ptex reader; motu shows the constant colour.
+    /// Moana's base package: the mesh group's `<colorMap>/<group>.ptx`); its sample replaces
+    /// the base colour, by face ([`Mesh::face_ids`]).
     pub ptex: Option<std::path::PathBuf>,
     /// Perceptual roughness in [0, 1] where the model has one (defaults per model applied).
     pub roughness: Option<f32>,
@@ -94,7 +94,14 @@ pub struct Mesh {
     pub uvs: Option<Vec<[f32; 2]>>,
     /// Triangle vertex indices, three per triangle.
     pub indices: Vec<u32>,
+    /// Per triangle, the Ptex face it belongs to (pbrt `faceIndices`, per patch of a
+    /// `bilinearmesh`), bit 31 set on the second triangle (v0 v2 v3) of a split quad; `None`:
+    /// triangle t is face t.
+    pub face_ids: Option<Vec<u32>>,
 }
+
+/// Bit 31 of a [`Mesh::face_ids`] entry: the second half of a quad.
+pub const FACE_SECOND_HALF: u32 = 1 << 31;
 
 impl Mesh {
     /// Number of triangles.

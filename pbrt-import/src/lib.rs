@@ -40,7 +40,7 @@ use std::path::{Path, PathBuf};
 pub use error::{Error, Location, MissingFile, ParseError, ParseErrorKind, PlyError, SinkError};
 pub use events::{
     AreaLight, CameraEvent, CollectSink, Curve, FileEvent, Geometry, InstanceEvent, LightEvent,
-    Material, Mesh, ObjectEvent, SceneSink, ShapeEvent, Via, Warning,
+    Material, Mesh, ObjectEvent, SceneSink, ShapeEvent, Via, Warning, FACE_SECOND_HALF,
 };
 pub use lexer::Loc;
 pub use math::Mat4;

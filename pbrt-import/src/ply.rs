@@ -4,7 +4,8 @@
 //! separated by -1) are unrolled. Faces of fewer than 3 vertices are dropped and counted
 //! ([`PlyReport`]). Vertex normals come from `nx ny nz`; texture coordinates from any of
 //! pbrt's names (`u v`, `s t`, `texture_u texture_v`, `texture_s texture_t`). `face_indices`
-//! and other properties/elements are read and skipped. ASCII bodies hold one element item
+//! (pbrt's Ptex face per face) becomes [`Mesh::face_ids`]; other properties/elements are read
+//! and skipped. ASCII bodies hold one element item
 //! per line (the PLY rule): a missing or extra value is an error naming the line.
 
 use std::path::Path;
@@ -297,8 +298,18 @@ pub fn parse_ply_report(bytes: &[u8]) -> Result<(Mesh, PlyReport), PlyError> {
                         continue;
                     }
                 }
+                // pbrt's `face_indices`: each face's Ptex face id, kept per triangle (a quad's
+                // second triangle marked as its second half).
+                let with_faces = el
+                    .props
+                    .iter()
+                    .any(|p| p.name == "face_indices" && matches!(p.kind, PropKind::Scalar(_)));
+                let mut face_ids: Vec<u32> = Vec::new();
                 for index in 0..el.count {
                     let line = (format == Format::Ascii).then_some(body.line);
+                    let before = mesh.indices.len() / 3;
+                    let mut face = index as u32;
+                    let mut corners = 0;
                     body.item(el, index, |body| {
                         for prop in &el.props {
                             match (&prop.kind, prop.name.as_str()) {
@@ -312,15 +323,44 @@ pub fn parse_ply_report(bytes: &[u8]) -> Result<(Mesh, PlyReport), PlyError> {
                                         let v = read_index(body, *item, el, prop, index, nv)?;
                                         poly.push(v);
                                     }
+                                    corners = n;
                                     // The item's line is known only after `item` found it.
                                     let line = line.map(|_| body.line);
                                     add_polygon(&mut mesh, &mut report, &poly, index, line);
+                                }
+                                (PropKind::Scalar(sc), "face_indices") => {
+                                    let v = body.read(*sc).ok_or_else(|| {
+                                        body_err(el, prop, index, "truncated or malformed")
+                                    })?;
+                                    if !(v >= 0.0 && v.fract() == 0.0 && v < 2_147_483_648.0) {
+                                        return Err(body_err(
+                                            el,
+                                            prop,
+                                            index,
+                                            &format!("bad face index {v}"),
+                                        ));
+                                    }
+                                    face = v as u32;
                                 }
                                 _ => skip_property(body, el, prop, index)?,
                             }
                         }
                         Ok(())
                     })?;
+                    if with_faces {
+                        let added = mesh.indices.len() / 3 - before;
+                        for k in 0..added {
+                            let half = k == 1 && corners == 4;
+                            face_ids.push(if half {
+                                face | crate::events::FACE_SECOND_HALF
+                            } else {
+                                face
+                            });
+                        }
+                    }
+                }
+                if with_faces {
+                    mesh.face_ids = Some(face_ids);
                 }
             }
             "tristrips" => {

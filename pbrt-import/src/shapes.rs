@@ -72,7 +72,26 @@ fn vertices(params: &mut ParamList<'_>, notes: &mut Vec<String>) -> Result<Mesh,
         normals,
         uvs,
         indices: Vec::new(),
+        face_ids: None,
     })
+}
+
+/// pbrt's `faceIndices` (one per triangle or patch, `count` of them); another length is
+/// dropped with a message in `notes`.
+fn face_indices(
+    params: &mut ParamList<'_>,
+    count: usize,
+    notes: &mut Vec<String>,
+) -> Option<Vec<u32>> {
+    let raw = take_ints(params, "faceIndices")?;
+    if raw.len() != count || raw.iter().any(|&f| f < 0) {
+        notes.push(format!(
+            "\"faceIndices\" has {} values for {count} faces (or a negative one); ignored",
+            raw.len()
+        ));
+        return None;
+    }
+    Some(raw.into_iter().map(|f| f as u32).collect())
 }
 
 fn checked_indices(raw: Vec<i32>, n_verts: usize) -> Result<Vec<u32>, String> {
@@ -106,6 +125,7 @@ pub(crate) fn triangle_mesh(
             mesh.indices.len()
         ));
     }
+    mesh.face_ids = face_indices(params, mesh.indices.len() / 3, notes);
     Ok(mesh)
 }
 
@@ -128,6 +148,15 @@ pub(crate) fn bilinear_mesh(
         .chunks_exact(4)
         .flat_map(|q| [q[0], q[1], q[3], q[0], q[3], q[2]])
         .collect();
+    // A patch's triangles are its Ptex face's halves: (v00 v10 v11) and (v00 v11 v01).
+    let faces = face_indices(params, quads.len() / 4, notes)
+        .unwrap_or_else(|| (0..(quads.len() / 4) as u32).collect());
+    mesh.face_ids = Some(
+        faces
+            .iter()
+            .flat_map(|&f| [f, f | crate::events::FACE_SECOND_HALF])
+            .collect(),
+    );
     Ok(mesh)
 }
 
@@ -309,6 +338,28 @@ mod tests {
         let mut p = params(r#""point3 P" [0 0 0 1 0 0 0 1 0 1 1 0]"#);
         let m = bilinear_mesh(&mut p, &mut Vec::new()).unwrap();
         assert_eq!(m.indices, [0, 1, 3, 0, 3, 2]);
+        // The patch is one Ptex face, its second triangle the second half.
+        let half = crate::events::FACE_SECOND_HALF;
+        assert_eq!(m.face_ids.as_deref(), Some(&[0, half][..]));
+        let mut p = params(r#""point3 P" [0 0 0 1 0 0 0 1 0 1 1 0] "integer faceIndices" [7]"#);
+        let m = bilinear_mesh(&mut p, &mut Vec::new()).unwrap();
+        assert_eq!(m.face_ids.as_deref(), Some(&[7, 7 | half][..]));
+    }
+
+    #[test]
+    fn face_indices_are_kept_per_triangle() {
+        let mut notes = Vec::new();
+        let mut p = params(
+            r#""point P" [0 0 0 1 0 0 0 1 0 1 1 0] "integer indices" [0 1 2 2 1 3] "integer faceIndices" [4 4]"#,
+        );
+        let m = triangle_mesh(&mut p, &mut notes).unwrap();
+        assert_eq!(m.face_ids.as_deref(), Some(&[4, 4][..]));
+        let mut p = params(
+            r#""point P" [0 0 0 1 0 0 0 1 0 1 1 0] "integer indices" [0 1 2 2 1 3] "integer faceIndices" [4]"#,
+        );
+        let m = triangle_mesh(&mut p, &mut notes).unwrap();
+        assert_eq!(m.face_ids, None);
+        assert!(notes.iter().any(|n| n.contains("faceIndices")), "{notes:?}");
     }
 
     #[test]

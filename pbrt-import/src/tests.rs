@@ -465,6 +465,7 @@ fn ply_shapes_parallel_and_sequential_agree() {
         normals: None,
         uvs: None,
         indices: vec![0, 1, 2, 2, 1, 3],
+        face_ids: None,
     };
     std::fs::write(dir.path().join("m.ply"), ply::write_ply_binary_le(&mesh)).unwrap();
     std::fs::write(
@@ -559,6 +560,7 @@ mod props {
                     normals: with_n.then_some(normals),
                     uvs: with_uv.then_some(uvs),
                     indices,
+                    face_ids: None,
                 })
         })
     }

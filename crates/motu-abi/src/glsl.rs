@@ -229,6 +229,11 @@ pub fn constants() -> Vec<(&'static str, String)> {
         ("FLAG_HAS_NORMALS", format!("{FLAG_HAS_NORMALS}u")),
         ("FLAG_HAS_UVS", format!("{FLAG_HAS_UVS}u")),
         ("FLAG_PRIMITIVE_MAP", format!("{FLAG_PRIMITIVE_MAP}u")),
+        (
+            "PTEX_SECOND_HALF",
+            format!("{}u", crate::ptex::PTEX_SECOND_HALF),
+        ),
+        ("PTEX_QUADS", format!("{}u", crate::ptex::PTEX_QUADS)),
         ("LIGHT_DISTANT", format!("{}u", shade::LIGHT_DISTANT)),
         ("LIGHT_POINT", format!("{}u", shade::LIGHT_POINT)),
         ("LIGHT_SPOT", format!("{}u", shade::LIGHT_SPOT)),

@@ -29,6 +29,7 @@ pub mod env;
 pub mod glsl;
 pub mod lod;
 pub mod lod_instance;
+pub mod ptex;
 mod records;
 pub mod sampling;
 pub mod shade;

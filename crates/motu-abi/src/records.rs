@@ -425,9 +425,7 @@ impl HierarchyView<'_> {
             }
         }
         for (i, t) in self.textures.iter().enumerate() {
-            if t.mip_count == 0
-                || t.texel_offset as u64 + t.texel_count() > self.texels.len() as u64
-            {
+            if t.texel_offset as u64 + t.texel_count() > self.texels.len() as u64 {
                 return err("textures", i, "texel range out of bounds".into());
             }
         }

@@ -37,7 +37,8 @@ pub struct LightRecord {
 }
 
 /// One image texture: a mip chain of RGBA8 texels, level 0 first, each level right after the
-/// previous one in [`crate::HierarchyView::texels`].
+/// previous one in [`crate::HierarchyView::texels`]; `mip_count == 0` marks a Ptex texture
+/// (faces, not a chain: [`crate::ptex`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 #[repr(C)]
 pub struct TextureRecord {
@@ -49,8 +50,11 @@ pub struct TextureRecord {
 }
 
 impl TextureRecord {
-    /// Texels of the whole chain.
+    /// Texels of the whole chain (a Ptex texture's: its words, [`crate::ptex`]).
     pub fn texel_count(&self) -> u64 {
+        if self.mip_count == 0 {
+            return u64::from(self.width);
+        }
         (0..self.mip_count)
             .map(|l| mip_extent(self.width, l) as u64 * mip_extent(self.height, l) as u64)
             .sum()

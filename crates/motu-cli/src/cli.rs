@@ -267,6 +267,10 @@ pub struct ImportArgs {
     /// texels per side (larger images are halved until they fit).
     #[arg(long, default_value_t = 1024, value_parser = clap::value_parser!(u32).range(1..=16384))]
     pub texture_max: u32,
+    /// Ptex faces keep at most this many texels per face edge (larger faces are halved with a
+    /// box filter until they fit).
+    #[arg(long, default_value_t = motu_import::DEFAULT_PTEX_MAX, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub ptex_max: u32,
     /// One JSON object on stdout describing the import.
     #[arg(long)]
     pub json: bool,

@@ -5,12 +5,14 @@
 mod error;
 mod memory;
 mod pipeline;
+mod textures;
 
 pub use error::ImportError;
 pub use memory::peak_rss_bytes;
 pub use pipeline::{
     element_stats, import, resolve_subset, ImportOptions, ImportProgress, ImportSummary, ProgressFn,
 };
+pub use textures::DEFAULT_PTEX_MAX;
 
 #[cfg(test)]
 mod tests;

@@ -37,6 +37,8 @@ pub struct ImportOptions {
     pub curve_ribbons: bool,
     /// Largest side of an image texture's finest mip level (`--texture-max`).
     pub texture_max: u32,
+    /// Most texels a Ptex face keeps per edge (`--ptex-max`; larger faces are halved).
+    pub ptex_max: u32,
     /// Called as parsing advances and once when it is done (the CLI's progress bar).
     pub progress: Option<ProgressFn>,
 }
@@ -62,6 +64,7 @@ impl Default for ImportOptions {
             parallel: true,
             curve_ribbons: true,
             texture_max: 1024,
+            ptex_max: crate::textures::DEFAULT_PTEX_MAX,
             progress: None,
         }
     }
@@ -495,74 +498,16 @@ fn finish(
         },
     };
     let mut meta = meta;
-    let textures = write_textures(&mut writer, scene, o.texture_max, &mut meta.warnings)?;
+    let caps = crate::textures::Caps {
+        image_max: o.texture_max,
+        ptex_max: o.ptex_max,
+    };
+    let textures = crate::textures::write_textures(&mut writer, scene, caps, &mut meta.warnings)?;
     let mut view = compiled.view();
     view.textures = &textures;
     view.texels = &[];
     motu_pack::write_hierarchy_after_texels(&mut writer, &view, &meta)?;
     writer.finish().map_err(ImportError::FinishPackage)
-}
-
-/// Reads every scene texture into a capped mip chain (several at a time), in scene order so
-/// materials' texture indices hold, and writes its texels to the package's texels section as
-/// soon as it is decoded: at most one batch of chains is in memory, whatever the scene's total
-/// texture size. A file that cannot be read becomes a neutral 1×1 texture (white, opaque: the
-/// material's constant colour shows) with a warning. Returns the texture records.
-fn write_textures(
-    writer: &mut PackageWriter,
-    scene: &Scene,
-    max_size: u32,
-    warnings: &mut Vec<String>,
-) -> Result<Vec<motu_abi::TextureRecord>, ImportError> {
-    use rayon::prelude::*;
-    let list = scene.textures();
-    let mut records = Vec::with_capacity(list.len());
-    let mut texels = motu_pack::begin_texels(writer)?;
-    // Texels written so far (the next texture's offset).
-    let mut texel_count = 0u64;
-    // A bounded batch keeps at most this many decoded images in memory at once.
-    const BATCH: usize = 8;
-    for batch in list.chunks(BATCH) {
-        let chains: Vec<_> = batch
-            .par_iter()
-            .map(|t| motu_texture::load(&t.path, max_size, t.is_alpha))
-            .collect();
-        for (t, chain) in batch.iter().zip(chains) {
-            let chain = match chain {
-                Ok(c) => c,
-                Err(e) => {
-                    let msg =
-                        format!("texture not read ({e}); the material's constant colour is used");
-                    tracing::warn!("{msg}");
-                    warnings.push(msg);
-                    motu_texture::MipChain {
-                        width: 1,
-                        height: 1,
-                        levels: vec![vec![u32::MAX]],
-                    }
-                }
-            };
-            let texel_offset = u32::try_from(texel_count)
-                .ok()
-                .filter(|&o| (o as u64) + (chain.texel_count() as u64) <= u32::MAX as u64)
-                .ok_or_else(|| ImportError::TooManyTexels {
-                    path: t.path.clone(),
-                })?;
-            records.push(motu_abi::TextureRecord {
-                texel_offset,
-                width: chain.width,
-                height: chain.height,
-                mip_count: chain.levels.len() as u32,
-            });
-            for level in chain.levels {
-                let bytes: Vec<u8> = level.iter().flat_map(|t| t.to_le_bytes()).collect();
-                texels.write(&bytes)?;
-                texel_count += level.len() as u64;
-            }
-        }
-    }
-    texels.finish()?;
-    Ok(records)
 }
 
 /// Per-element counts: each element's root edges and root meshes, and everything they reach.

@@ -114,6 +114,7 @@ pub fn ingest_obj(
                     Some(b.add_texture(motu_scene::Texture {
                         path: file,
                         is_alpha,
+                        ptex: false,
                     }))
                 };
                 let base_color_texture = texture(&m.diffuse_texture, false);

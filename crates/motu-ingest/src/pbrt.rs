@@ -131,12 +131,20 @@ impl Adapter {
             return Ok(id);
         }
         let opacity = m.opacity.map(|o| (o[0] + o[1] + o[2]) / 3.0).unwrap_or(1.0);
-        let base_color_texture = m.base_color_image.as_ref().map(|path| {
-            self.b.add_texture(Texture {
+        // A Ptex file replaces the colour (and an image, which pbrt would not combine with it).
+        let base_color_texture = match (&m.ptex, &m.base_color_image) {
+            (Some(path), _) => Some(self.b.add_texture(Texture {
                 path: path.clone(),
                 is_alpha: false,
-            })
-        });
+                ptex: true,
+            })),
+            (None, Some(path)) => Some(self.b.add_texture(Texture {
+                path: path.clone(),
+                is_alpha: false,
+                ptex: false,
+            })),
+            (None, None) => None,
+        };
         let id = self
             .b
             .add_material(Material {
@@ -186,6 +194,7 @@ impl Adapter {
             m.alpha_texture = Some(self.b.add_texture(Texture {
                 path: path.clone(),
                 is_alpha: true,
+                ptex: false,
             }));
         }
         if let Some(a) = alpha {
@@ -268,6 +277,7 @@ impl SceneSink for Adapter {
                             normals: None,
                             uvs: None,
                             indices: m.indices,
+                            face_ids: None,
                         }
                     }
                     None => return Ok(()),
@@ -311,6 +321,7 @@ impl SceneSink for Adapter {
                 })
                 .collect()
         });
+        let face_ids = mesh.face_ids.take();
         let data = MeshData {
             positions,
             normals,
@@ -385,7 +396,18 @@ impl SceneSink for Adapter {
             None => format!("{}@{}", s.kind, at),
         };
         match self.b.add_mesh(proto, &name, material, element, &data) {
-            Ok(_) => self.report.meshes += 1,
+            Ok(id) => {
+                self.report.meshes += 1;
+                // Face ids matter only where a Ptex texture is sampled.
+                let ptex = self.b.material(material).ptex.is_some();
+                if let (true, Some(ids)) = (ptex, face_ids) {
+                    if ids.len() == data.triangle_count() {
+                        if let Some(f) = motu_scene::PtexFaces::from_ids(&ids) {
+                            self.b.set_ptex_faces(id, f);
+                        }
+                    }
+                }
+            }
             Err(SceneError::BadMesh { reason, .. }) => {
                 self.report.skipped_shapes += 1;
                 self.warn(format!("{at}: shape '{}' skipped: {reason}", s.kind));

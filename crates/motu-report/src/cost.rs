@@ -45,8 +45,12 @@ pub struct Cost {
     /// motu's record tables the traversal shader reads (TLAS, instance, BLAS, geometry, PI,
     /// LOD, mesh and material records).
     pub table_bytes: u64,
-    /// Image textures for shading: texture records and every mip chain's texels.
+    /// Textures for shading: texture records, every mip chain's texels and every Ptex
+    /// texture's faces and tables.
     pub texture_bytes: u64,
+    /// The Ptex part of `texture_bytes`: Ptex textures' texels and face tables (counted there
+    /// too, not again in the totals).
+    pub ptex_bytes: u64,
     /// The largest build scratch of any one structure.
     pub build_scratch_peak_bytes: u64,
     /// The most one build adds on top of the resident bytes: a BLAS's uncompacted size plus
@@ -86,6 +90,7 @@ impl Cost {
         add(&mut self.instance_buffer_bytes, o.instance_buffer_bytes);
         add(&mut self.table_bytes, o.table_bytes);
         add(&mut self.texture_bytes, o.texture_bytes);
+        add(&mut self.ptex_bytes, o.ptex_bytes);
         self.build_scratch_peak_bytes = self
             .build_scratch_peak_bytes
             .max(o.build_scratch_peak_bytes);
@@ -662,6 +667,13 @@ impl<'a> Graph<'a> {
             table_bytes: self.view.materials.len() as u64 * rec::<MaterialRecord>(),
             texture_bytes: self.view.textures.len() as u64 * rec::<motu_abi::TextureRecord>()
                 + self.view.texels.len() as u64 * 4,
+            ptex_bytes: self
+                .view
+                .textures
+                .iter()
+                .filter(|t| motu_abi::ptex::is_ptex(t))
+                .map(|t| t.texel_count() * 4)
+                .sum(),
             ..Default::default()
         };
         c.seal();

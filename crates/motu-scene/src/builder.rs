@@ -20,6 +20,7 @@ pub struct SceneBuilder {
     cameras: Vec<Camera>,
     lights: Vec<Light>,
     textures: Vec<crate::Texture>,
+    ptex_faces: Vec<(MeshId, crate::PtexFaces)>,
     elements: Vec<Element>,
     geometry: Box<dyn GeometryStore>,
 }
@@ -65,6 +66,7 @@ impl SceneBuilder {
             cameras: Vec::new(),
             lights: Vec::new(),
             textures: Vec::new(),
+            ptex_faces: Vec::new(),
             elements: vec![Element {
                 name: "main".into(),
             }],
@@ -242,6 +244,12 @@ impl SceneBuilder {
         self.textures.len() as u32 - 1
     }
 
+    /// Records how `mesh`'s triangles map to its Ptex faces (meshes whose material samples a
+    /// Ptex texture; without an entry triangle `t` is face `t`).
+    pub fn set_ptex_faces(&mut self, mesh: MeshId, faces: crate::PtexFaces) {
+        self.ptex_faces.push((mesh, faces));
+    }
+
     pub fn add_light(&mut self, l: Light) -> LightId {
         self.lights.push(l);
         LightId(self.lights.len() as u32 - 1)
@@ -318,6 +326,7 @@ impl SceneBuilder {
             cameras: self.cameras,
             lights: self.lights,
             textures: self.textures,
+            ptex_faces: self.ptex_faces,
             elements: self.elements,
             bounds: Vec::new(),
             topo_order: Vec::new(),

@@ -25,6 +25,6 @@ pub use builder::SceneBuilder;
 pub use camera::Camera;
 pub use geometry::{GeometryStore, InMemoryGeometry, MeshData, MeshLocation};
 pub use ids::{CameraId, EdgeIndex, ElementId, LightId, MaterialId, MeshId, PrototypeId};
-pub use look::{EnvironmentMap, Light, LightKind, Material, Texture};
+pub use look::{EnvironmentMap, Light, LightKind, Material, PtexFaces, Texture};
 pub use math::{Aabb, Transform34};
 pub use scene::{Element, MeshInfo, Prototype, Scene, SceneError, SceneStats};

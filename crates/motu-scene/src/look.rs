@@ -21,7 +21,8 @@ pub struct Material {
     pub metallic: f32,
     /// Emitted radiance, linear RGB (area lights).
     pub emission: [f32; 3],
-    /// The Ptex file the base colour comes from (kept for a Ptex reader; not sampled).
+    /// The Ptex file the base colour comes from (also `base_color_texture`, a Ptex texture,
+    /// whose sample replaces `base_color`; kept here for `meta.material_ptex`).
     #[serde(default)]
     pub ptex: Option<std::path::PathBuf>,
 }
@@ -50,6 +51,42 @@ pub struct Texture {
     pub path: PathBuf,
     /// Used as coverage (alpha) rather than colour.
     pub is_alpha: bool,
+    /// A Ptex file (`.ptx`): sampled by face id and face uv, not by texture coordinates.
+    #[serde(default)]
+    pub ptex: bool,
+}
+
+/// How a mesh's triangles map to the faces of its material's Ptex texture, where they are not
+/// one face each (triangle `t` is face `t` without an entry).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum PtexFaces {
+    /// Every face a quad split in two: triangle `t` is face `t / 2`, odd `t` its second half
+    /// (vertices 0, 2, 3 of the quad).
+    Quads,
+    /// Per triangle: the face id, with bit 31 set on a quad's second half.
+    Table(Vec<u32>),
+}
+
+impl PtexFaces {
+    /// The compact form of per-triangle face ids (bit 31: a quad's second half): `None` when
+    /// triangle `t` is face `t`, [`PtexFaces::Quads`] for the quad pattern.
+    pub fn from_ids(ids: &[u32]) -> Option<PtexFaces> {
+        const HALF: u32 = 1 << 31;
+        let t = |i: usize| i as u32;
+        if ids.iter().enumerate().all(|(i, &f)| f == t(i)) {
+            return None;
+        }
+        let quads = ids.len() % 2 == 0
+            && ids
+                .iter()
+                .enumerate()
+                .all(|(i, &f)| f == t(i / 2) | if i % 2 == 1 { HALF } else { 0 });
+        Some(if quads {
+            PtexFaces::Quads
+        } else {
+            PtexFaces::Table(ids.to_vec())
+        })
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]

@@ -97,6 +97,7 @@ pub struct Scene {
     pub(crate) cameras: Vec<Camera>,
     pub(crate) lights: Vec<Light>,
     pub(crate) textures: Vec<crate::Texture>,
+    pub(crate) ptex_faces: Vec<(MeshId, crate::PtexFaces)>,
     pub(crate) elements: Vec<Element>,
     pub(crate) bounds: Vec<Aabb>,
     /// Children before parents.
@@ -208,6 +209,11 @@ impl Scene {
     }
 
     /// Image texture files materials refer to by index.
+    /// Meshes whose triangles are not one Ptex face each, and how they map ([`crate::PtexFaces`]).
+    pub fn ptex_faces(&self) -> &[(MeshId, crate::PtexFaces)] {
+        &self.ptex_faces
+    }
+
     pub fn textures(&self) -> &[crate::Texture] {
         &self.textures
     }

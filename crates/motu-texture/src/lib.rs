@@ -6,6 +6,8 @@
 
 use std::path::{Path, PathBuf};
 
+pub mod ptex;
+
 /// Why a texture could not be read.
 #[derive(Debug, thiserror::Error)]
 pub enum TextureError {

@@ -115,6 +115,30 @@ pub fn surface_point(
     sp
 }
 
+/// The base colour of a hit under Ptex texture `tex` (`texture.glsl` `ptex_albedo`): the
+/// face's sample at the face uv; `None` keeps the material's colour (a LOD level, whose
+/// triangles are not the source mesh's, or a face the texture does not have).
+fn ptex_albedo(
+    tracer: &Tracer<'_>,
+    hit: &Hit,
+    sp: &SurfacePoint,
+    tex: &motu_abi::TextureRecord,
+) -> Option<[f32; 3]> {
+    use motu_abi::ptex::{default_face_uv, ptex_face, sample_ptex};
+    let view = tracer.view();
+    if view.meshes.get(hit.mesh_record as usize)?.lod != 0 {
+        return None;
+    }
+    let v = *tracer
+        .mesh_bvh(hit.mesh_record)?
+        .tri_verts
+        .get(hit.slot as usize)?;
+    let b = barycentrics(v, xform_point(&hit.object_from_world, sp.world_position));
+    let (face, second_half) = ptex_face(tex, view.texels, hit.source_mesh, hit.primitive);
+    let uv = sp.uv.unwrap_or_else(|| default_face_uv(b, second_half));
+    sample_ptex(tex, view.texels, face, uv).map(|c| [c[0], c[1], c[2]])
+}
+
 /// The direction towards a light, its distance (shadow-ray length) and the irradiance it
 /// brings at normal incidence; `None` where it brings nothing.
 pub fn light_incidence(l: &LightRecord, p: [f32; 3]) -> Option<([f32; 3], f32, [f32; 3])> {
@@ -230,7 +254,10 @@ pub fn shade_vertex(
         .unwrap_or_default();
     let sp = surface_point(tracer, camera, hit, org, dir);
     let mut albedo = mat.base_color;
-    if let (Some(tex), Some(uv)) = (view.textures.get(mat.base_color_texture as usize), sp.uv) {
+    let texture = view.textures.get(mat.base_color_texture as usize);
+    if let Some(tex) = texture.filter(|t| motu_abi::ptex::is_ptex(t)) {
+        albedo = ptex_albedo(tracer, hit, &sp, tex).unwrap_or(albedo);
+    } else if let (Some(tex), Some(uv)) = (texture, sp.uv) {
         if mat.base_color_texture != NONE_U32 {
             let texels_per_pixel =
                 sp.uv_per_pixel * ((tex.width as f32) * (tex.height as f32)).sqrt();

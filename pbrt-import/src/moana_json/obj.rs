@@ -38,6 +38,10 @@ struct Group {
     corners: Vec<[u32; 3]>,
     /// Triangles as corner indices.
     triangles: Vec<u32>,
+    /// Per triangle its Ptex face (`Mesh::face_ids`).
+    face_ids: Vec<u32>,
+    /// The group's next Ptex face id (continues across a `usemtl` inside the group).
+    next_face: u32,
 }
 
 /// Reads `bytes` and calls `emit` with each mesh in file order.
@@ -76,8 +80,10 @@ pub(crate) fn read<E: From<ObjError>>(
                 let name = String::from_utf8_lossy(trim(rest)).into_owned();
                 if name != group.material {
                     let keep = std::mem::take(&mut group.name);
+                    let next_face = group.next_face;
                     flush(&mut group, &v, &vt, &vn, &mut emit)?;
                     group.name = keep;
+                    group.next_face = next_face;
                     group.material = name;
                 }
             }
@@ -124,6 +130,20 @@ pub(crate) fn read<E: From<ObjError>>(
                         .triangles
                         .extend_from_slice(&[base, base + k, base + k + 1]);
                 }
+                // Ptex faces: a triangle or a quad is one (a quad's second triangle its second
+                // half); an n-gon has n sub-faces, its triangles sampled in the first.
+                let face = group.next_face;
+                let n = corner_buf.len() as u32;
+                group.face_ids.push(face);
+                let rest = if n == 4 {
+                    face | crate::events::FACE_SECOND_HALF
+                } else {
+                    face
+                };
+                group
+                    .face_ids
+                    .extend(std::iter::repeat_n(rest, n as usize - 3));
+                group.next_face = face.saturating_add(if n <= 4 { 1 } else { n });
             }
             // Smoothing groups, material libraries, lines and points carry nothing motu keeps.
             _ => {}
@@ -180,6 +200,7 @@ fn flush<E>(
                     .iter()
                     .map(|&c| g.corners[c as usize][0] - lo)
                     .collect(),
+                face_ids: None,
             }
         }
         _ => {
@@ -212,6 +233,8 @@ fn flush<E>(
             m
         }
     };
+    let mut mesh = mesh;
+    mesh.face_ids = Some(std::mem::take(&mut g.face_ids));
     let out = ObjMesh {
         group: name,
         material: material.clone(),
@@ -331,6 +354,9 @@ mod tests {
         assert_eq!(m[0].material, "sand");
         assert_eq!((m[0].group.as_str(), m[1].group.as_str()), ("quad", "tri"));
         assert_eq!(m[0].mesh.indices, [0, 1, 2, 0, 2, 3, 0, 2, 3]);
+        // Ptex faces: the quad's two halves, then the triangle as face 1.
+        let half = crate::events::FACE_SECOND_HALF;
+        assert_eq!(m[0].mesh.face_ids.as_deref(), Some(&[0, half, 1][..]));
         assert_eq!(m[0].mesh.normals.as_ref().unwrap().len(), 4);
         assert_eq!(m[0].line, 11);
         // Negative indices: the last three vertices, in the file's order.

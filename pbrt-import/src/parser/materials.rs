@@ -464,14 +464,18 @@ impl<'s> Parser<'s> {
                 [0.5; 3]
             }
             "ptex" => {
+                // Read at import (motu-texture's Ptex reader), which warns about a missing
+                // or corrupt file; a float (coverage) Ptex texture is not sampled.
                 let file = p.string("filename").unwrap_or("").to_owned();
-                self.warn_once(
-                    "ptex",
-                    Some(tok.loc),
-                    format!(
-                        "texture \"{name}\" ({file}): ptex textures are not read (no Rust ptex reader); the material's constant colour is used and the file is kept in the package"
-                    ),
-                );
+                if is_float {
+                    self.warn_once(
+                        "ptex-float",
+                        Some(tok.loc),
+                        format!(
+                            "texture \"{name}\" ({file}): float ptex textures are not sampled; the constant is used"
+                        ),
+                    );
+                }
                 if !file.is_empty() && !is_float {
                     ptex = Some(self.resolve(&file));
                 }

@@ -20,6 +20,7 @@ fn binary_le_roundtrip() {
         normals: Some(vec![[0.0, 0.0, 1.0]; 3]),
         uvs: Some(vec![[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]),
         indices: vec![0, 1, 2],
+        face_ids: None,
     };
     assert_eq!(parse_ply(&write_ply_binary_le(&mesh)).unwrap(), mesh);
 }
@@ -281,4 +282,21 @@ fn regression_ply_body_with_more_faces_than_declared_is_an_error() {
         e.contains(&format!("byte {end}")) && e.contains("13 byte(s)"),
         "{e}"
     );
+}
+
+#[test]
+fn face_indices_become_per_triangle_face_ids() {
+    let ply = format!(
+        "{TRI_HEAD}element face 2\nproperty list uchar int vertex_indices\nproperty int face_indices\nend_header\n\
+         0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3 5\n3 0 2 3 9\n"
+    );
+    let m = parse_ply(ply.as_bytes()).unwrap();
+    assert_eq!(m.indices, [0, 1, 2, 0, 2, 3, 0, 2, 3]);
+    let half = crate::events::FACE_SECOND_HALF;
+    assert_eq!(m.face_ids.as_deref(), Some(&[5, 5 | half, 9][..]));
+    let bad = ply.replace("3 0 2 3 9", "3 0 2 3 -1");
+    assert!(parse_ply(bad.as_bytes())
+        .unwrap_err()
+        .to_string()
+        .contains("face index"));
 }

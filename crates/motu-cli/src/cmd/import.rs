@@ -75,6 +75,7 @@ fn import_checked(a: ImportArgs) -> anyhow::Result<()> {
         parallel: a.threads != Some(1),
         curve_ribbons: a.curves == crate::cli::CurvesArg::Ribbons,
         texture_max: a.texture_max,
+        ptex_max: a.ptex_max,
         progress: crate::progress::import_bar(),
     };
     let s = pipeline::import(&a.scene, &a.output, &o)?;

@@ -38,6 +38,11 @@ pub fn run(a: InfoArgs) -> anyhow::Result<()> {
         }
         return Ok(());
     }
+    // Ptex textures read with at least one face (a file that could not be read has none).
+    let ptex = view
+        .textures
+        .iter()
+        .filter(|t| motu_abi::ptex::is_ptex(t) && t.height > 0);
     let out = serde_json::json!({
         "format_version": format!("{}.{}", v.major, v.minor),
         "schema": meta.schema,
@@ -86,6 +91,14 @@ pub fn run(a: InfoArgs) -> anyhow::Result<()> {
         "curve_ribbon_triangles": meta.curves.ribbon_triangles,
         "ptex_materials": meta.material_ptex.iter().filter(|p| p.is_some()).count(),
     });
+    let mut out = out;
+    out["ptex_textures"] = ptex.clone().count().into();
+    out["ptex_faces"] = ptex
+        .clone()
+        .map(|t| u64::from(t.height))
+        .sum::<u64>()
+        .into();
+    out["ptex_bytes"] = ptex.map(|t| t.texel_count() * 4).sum::<u64>().into();
     if a.json {
         println!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
@@ -93,7 +106,7 @@ pub fn run(a: InfoArgs) -> anyhow::Result<()> {
     let obj = out.as_object().context("info is an object")?;
     for (k, v) in obj {
         let shown = match (k.as_str(), v.as_u64()) {
-            ("file_bytes" | "chunk_raw_bytes" | "chunk_stored_bytes", Some(b)) => {
+            ("file_bytes" | "chunk_raw_bytes" | "chunk_stored_bytes" | "ptex_bytes", Some(b)) => {
                 format!("{} ({b})", format_size(b))
             }
             _ => match v {
