@@ -339,21 +339,15 @@ impl<'a> StreamingRenderer<'a> {
         self.frame.stamp += 1;
         // Every resident BLAS is walked by every ray of this pass that reaches its box in
         // front of its best hit: a ray that started by now needs it no more.
-        for b in 0..nb {
-            if self.res.blas[b].is_some() && self.topo.buildable(b) {
-                self.gpu.walked[b] = self.frame.stamp;
-            }
-        }
+        let resident = (0..nb).filter(|&b| self.res.blas[b].is_some() && self.topo.buildable(b));
+        self.gpu.write_walked(resident, self.frame.stamp)?;
         let walked = self.gpu.walked_table()?;
-        if nb > 0 {
-            walked.write(0, &self.gpu.walked)?;
-        }
         fb.pixel_list.write(0, list)?;
+        let (cluster_members, proxy_box_index, proxy_boxes) = self.gpu.proxy_addresses();
         let sp = StreamParams {
             blas_stamps: self
                 .gpu
-                .blas_stamps
-                .as_ref()
+                .blas_stamps()
                 .map_or(Ok(0), |b| b.device_address().map(|a| a.0))?,
             walked: walked.device_address()?.0,
             pixel_list: fb.pixel_list.device_address()?.0,
@@ -364,14 +358,14 @@ impl<'a> StreamingRenderer<'a> {
             blas_count: nb as u32,
             requests: fb.requests.device_address()?.0,
             carry: fb.carry.device_address()?.0,
-            cluster_members: self.gpu.cluster_members,
-            proxy_box_index: self.gpu.proxy_box_index,
-            proxy_boxes: self.gpu.proxy_boxes,
+            cluster_members,
+            proxy_box_index,
+            proxy_boxes,
             flags,
             _pad: 0,
         };
         fb.stream.write(0, std::slice::from_ref(&sp))?;
-        let mut addresses = self.gpu.addresses;
+        let mut addresses = self.gpu.addresses();
         addresses[Slot::Frame as usize] = fb.params.device_address()?.0;
         addresses[Slot::Aov as usize] = fb.aov.device_address()?.0;
         addresses[Slot::Rgba as usize] = fb.rgba.device_address()?.0;
@@ -405,7 +399,7 @@ impl<'a> StreamingRenderer<'a> {
         rec.barrier();
         tracer.record(&mut rec, push_bytes, dims, groups)?;
         rec.barrier();
-        if let Some(bs) = &self.gpu.blas_stamps {
+        if let Some(bs) = self.gpu.blas_stamps() {
             if nb > 0 {
                 rec.copy_buffer(bs, 0, &fb.readback, 0, stamps_bytes)?;
                 rec.copy_buffer(&fb.requests, 0, &fb.readback, req_off, stamps_bytes)?;

@@ -81,15 +81,15 @@ impl<'a> StreamingRenderer<'a> {
             Texels::Streamed,
         )?;
         let n = self.view.textures.len();
+        let first = self.gpu.keep_tables(t.buffers);
         self.shading = StreamShading {
             address: t.address,
-            mesh_attrs_table: t.mesh_attrs.map(|i| self.gpu.buffers.len() + i),
-            texel_addresses_table: t.texel_addresses.map(|i| self.gpu.buffers.len() + i),
+            mesh_attrs_table: t.mesh_attrs.map(|i| first + i),
+            texel_addresses_table: t.texel_addresses.map(|i| first + i),
             textures: (0..n).map(|_| None).collect(),
             texture_refs: vec![0; n],
             textures_changed: false,
         };
-        self.gpu.buffers.extend(t.buffers);
         Ok(())
     }
 
@@ -167,12 +167,7 @@ impl<'a> StreamingRenderer<'a> {
             let up = self.up.as_mut().ok_or_else(|| {
                 GpuError::InvalidRequest("streaming: staging ring released".into())
             })?;
-            up.upload(
-                &ctx,
-                &self.gpu.buffers[table],
-                0,
-                bytemuck::cast_slice(&attrs),
-            )?;
+            up.upload(&ctx, self.gpu.table(table), 0, bytemuck::cast_slice(&attrs))?;
         }
         if let (Some(table), true) = (
             self.shading.texel_addresses_table,
@@ -188,12 +183,7 @@ impl<'a> StreamingRenderer<'a> {
             let up = self.up.as_mut().ok_or_else(|| {
                 GpuError::InvalidRequest("streaming: staging ring released".into())
             })?;
-            up.upload(
-                &ctx,
-                &self.gpu.buffers[table],
-                0,
-                bytemuck::cast_slice(&addrs),
-            )?;
+            up.upload(&ctx, self.gpu.table(table), 0, bytemuck::cast_slice(&addrs))?;
             self.shading.textures_changed = false;
         }
         Ok(())

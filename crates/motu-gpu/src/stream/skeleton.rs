@@ -5,7 +5,7 @@
 
 use motu_abi::{HierarchyView, BLAS_AABBS};
 use motu_alloc::{AllocKind, AllocLimits, MemoryClass, MIB};
-use motu_vk::{BufferUsage, Context, GpuHeap};
+use motu_vk::{BufferUsage, Context, GpuHeap, HeapBuffer};
 
 use super::persistent::{auto_persistent, persistent_estimate, persistent_records, TlasUpdate};
 use super::proxy_boxes::Box6;
@@ -71,7 +71,7 @@ impl HeapSetup {
                 + if opts.mesh_memory == MeshMemory::Device {
                     0
                 } else {
-                    2 * super::streamed_mesh_total_bytes(&view)
+                    2 * super::streamed_mesh_total_bytes(view)
                         + 4 * crate::scene::block_bytes_for_budget(budget)
                 },
         };
@@ -188,13 +188,16 @@ impl<'a> StreamingRenderer<'a> {
         Ok(mode)
     }
 
-    /// Allocates a device-local table for `bytes`, queues its upload and keeps it in
-    /// `tables`; returns its device address.
-    fn upload_table(&mut self, ctx: &Context, label: &str, bytes: &[u8]) -> Result<u64> {
+    /// Allocates a device-local table for `bytes` and queues its upload; returns it with its
+    /// device address.
+    fn upload_table(
+        &mut self,
+        ctx: &Context,
+        label: &str,
+        bytes: &[u8],
+    ) -> Result<(HeapBuffer, u64)> {
         let up = self.up.as_mut().ok_or_else(staging_released)?;
-        let (buf, address) = upload_node_table(ctx, &mut self.heap, up, label, bytes)?;
-        self.gpu.buffers.push(buf);
-        Ok(address)
+        upload_node_table(ctx, &mut self.heap, up, label, bytes)
     }
 
     /// The resident skeleton: the tables, the stamp buffers and the shading tables
@@ -244,25 +247,19 @@ impl<'a> StreamingRenderer<'a> {
             if bytes.is_empty() {
                 continue;
             }
-            match slot {
-                Slot::Pis => self.gpu.pis_table = self.gpu.buffers.len(),
-                Slot::Blases => self.gpu.blases_table = self.gpu.buffers.len(),
-                Slot::MeshGeo => self.gpu.mesh_geo_table = self.gpu.buffers.len(),
-                Slot::TlasAddresses => self.gpu.tlas_addr_table = self.gpu.buffers.len(),
-                _ => {}
-            }
-            self.gpu.addresses[slot as usize] =
+            let (buf, address) =
                 self.upload_table(&ctx, &format!("stream-table-{slot:?}"), bytes)?;
+            self.gpu.keep_slot(slot, buf, address);
         }
         if !cluster_members.is_empty() {
-            self.gpu.cluster_members =
+            let (buf, address) =
                 self.upload_table(&ctx, "stream-cluster-members", cast_slice(cluster_members))?;
+            self.gpu.keep_cluster_members(buf, address);
         }
         if !boxes.is_empty() {
-            self.gpu.proxy_box_index =
-                self.upload_table(&ctx, "stream-proxy-box-index", cast_slice(box_index))?;
-            self.gpu.proxy_boxes =
-                self.upload_table(&ctx, "stream-proxy-boxes", cast_slice(boxes))?;
+            let index = self.upload_table(&ctx, "stream-proxy-box-index", cast_slice(box_index))?;
+            let boxes = self.upload_table(&ctx, "stream-proxy-boxes", cast_slice(boxes))?;
+            self.gpu.keep_proxy_boxes(index, boxes);
         }
         Ok(())
     }
@@ -288,7 +285,6 @@ impl<'a> StreamingRenderer<'a> {
         let mut rec = ctx.record("clear stamps")?;
         rec.fill_buffer(&buf, 0, stamp_bytes, 0)?;
         rec.submit_and_wait()?;
-        self.gpu.blas_stamps = Some(buf);
         // Written by the host before each pass (which BLASes that pass walks).
         let walked = self.heap.alloc_buffer(
             "blas-walked",
@@ -299,7 +295,7 @@ impl<'a> StreamingRenderer<'a> {
             16,
         )?;
         walked.write(0, &vec![0u32; view.blases.len().max(1)])?;
-        self.gpu.walked_buf = Some(walked);
+        self.gpu.keep_stamps(buf, walked);
         Ok(())
     }
 
@@ -407,20 +403,10 @@ impl<'a> StreamingRenderer<'a> {
             ));
         };
         if !addrs.is_empty() {
-            up.upload(
-                &ctx,
-                &self.gpu.buffers[self.gpu.tlas_addr_table],
-                0,
-                cast_slice(&addrs),
-            )?;
+            up.upload(&ctx, self.gpu.tlas_addresses(), 0, cast_slice(&addrs))?;
         }
         if !mesh_geo.is_empty() {
-            up.upload(
-                &ctx,
-                &self.gpu.buffers[self.gpu.mesh_geo_table],
-                0,
-                cast_slice(&mesh_geo),
-            )?;
+            up.upload(&ctx, self.gpu.mesh_geo(), 0, cast_slice(&mesh_geo))?;
         }
         up.flush(&ctx)
     }

@@ -541,8 +541,8 @@ impl TlasBuild<'_, '_> {
             );
             let marks_offset =
                 u64::from(marks_blas) * std::mem::size_of::<motu_abi::BlasRecord>() as u64;
-            let pis_buf = &r.gpu.buffers[r.gpu.pis_table];
-            let blases_buf = &r.gpu.buffers[r.gpu.blases_table];
+            let pis_buf = r.gpu.pis();
+            let blases_buf = r.gpu.blases();
             let clusters = r.topo.clusters(t);
             let order = &o.order;
             let up = r.up.as_mut().ok_or_else(staging_released)?;
