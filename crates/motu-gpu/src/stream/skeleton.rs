@@ -353,7 +353,7 @@ impl<'a> StreamingRenderer<'a> {
         }
         // The persistent TLASes' first updates ran: the whole-bounds placeholders are unused.
         self.tlases.placeholders.release_full(&mut self.heap);
-        if !self.tlases.persistent_count() > 0 {
+        if self.tlases.persistent_count() == 0 {
             self.tlases.placeholders.release(&mut self.heap);
         }
         let host_counts = self.heap.host_visible_counts_against_budget();
