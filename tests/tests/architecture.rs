@@ -596,3 +596,176 @@ fn the_circle_check_finds_a_circle() {
         "doc comments are not uses"
     );
 }
+
+/// `text` with comments, string and character literals blanked (newlines kept), so that
+/// braces and `fn` are seen only in code. Lifetimes (`'a`) stay.
+fn code_only(text: &str) -> String {
+    let c: Vec<char> = text.chars().collect();
+    let mut out = String::with_capacity(text.len());
+    let blank = |out: &mut String, s: &[char]| {
+        out.extend(s.iter().map(|&ch| if ch == '\n' { '\n' } else { ' ' }))
+    };
+    let mut i = 0;
+    while i < c.len() {
+        let rest = &c[i..];
+        let end = if rest.starts_with(&['/', '/']) {
+            rest.iter().position(|&ch| ch == '\n').unwrap_or(rest.len())
+        } else if rest.starts_with(&['/', '*']) {
+            // Block comments nest in Rust.
+            let (mut depth, mut k) = (0, 0);
+            while k < rest.len() {
+                if rest[k..].starts_with(&['/', '*']) {
+                    depth += 1;
+                    k += 2;
+                } else if rest[k..].starts_with(&['*', '/']) {
+                    depth -= 1;
+                    k += 2;
+                    if depth == 0 {
+                        break;
+                    }
+                } else {
+                    k += 1;
+                }
+            }
+            k
+        } else if rest[0] == 'r'
+            && (i == 0 || !(c[i - 1].is_alphanumeric() || c[i - 1] == '_'))
+            && rest.len() > 1
+            && (rest[1] == '"' || rest[1] == '#')
+        {
+            // A raw string: r"…", r#"…"#.
+            let hashes = rest[1..].iter().take_while(|&&ch| ch == '#').count();
+            if rest.get(1 + hashes) != Some(&'"') {
+                1
+            } else {
+                let mut k = 2 + hashes;
+                while k < rest.len()
+                    && !(rest[k] == '"' && rest[k + 1..].iter().take(hashes).all(|&h| h == '#'))
+                {
+                    k += 1;
+                }
+                (k + 1 + hashes).min(rest.len())
+            }
+        } else if rest[0] == '"' {
+            let mut k = 1;
+            while k < rest.len() && rest[k] != '"' {
+                k += if rest[k] == '\\' { 2 } else { 1 };
+            }
+            (k + 1).min(rest.len())
+        } else if rest[0] == '\'' && rest.get(1) == Some(&'\\') {
+            // An escaped character: '\n', '\'', '\u{…}'.
+            2 + rest[2..]
+                .iter()
+                .skip(1)
+                .position(|&ch| ch == '\'')
+                .map_or(0, |p| p + 2)
+        } else if rest[0] == '\'' && rest.get(2) == Some(&'\'') {
+            3
+        } else {
+            out.push(rest[0]);
+            i += 1;
+            continue;
+        };
+        blank(&mut out, &rest[..end]);
+        i += end;
+    }
+    out
+}
+
+/// Every function with a body in `text`: its name, first line and length in lines (from the
+/// `fn` line to the closing brace's).
+fn fn_lengths(text: &str) -> Vec<(String, usize, usize)> {
+    let code = code_only(text);
+    let b = code.as_bytes();
+    let ident = |ch: u8| ch.is_ascii_alphanumeric() || ch == b'_';
+    let line_of = |at: usize| code[..at].matches('\n').count() + 1;
+    let mut out = Vec::new();
+    for (at, _) in code.match_indices("fn") {
+        let before_ok = at == 0 || !ident(b[at - 1]);
+        let after = b.get(at + 2).copied().unwrap_or(b' ');
+        if !before_ok || !after.is_ascii_whitespace() {
+            continue;
+        }
+        let name: String = code[at + 2..]
+            .trim_start()
+            .chars()
+            .take_while(|&ch| ch.is_alphanumeric() || ch == '_')
+            .collect();
+        if name.is_empty() {
+            continue;
+        }
+        // The body: the first `{` before any `;` (a declaration without a body).
+        let Some(open) = code[at..].find(['{', ';']).map(|k| at + k) else {
+            continue;
+        };
+        if b[open] == b';' {
+            continue;
+        }
+        let mut depth = 0usize;
+        let mut close = open;
+        for (k, &ch) in b.iter().enumerate().skip(open) {
+            match ch {
+                b'{' => depth += 1,
+                b'}' => {
+                    depth -= 1;
+                    if depth == 0 {
+                        close = k;
+                        break;
+                    }
+                }
+                _ => {}
+            }
+        }
+        let first = line_of(at);
+        out.push((name, first, line_of(close) - first + 1));
+    }
+    out
+}
+
+/// The streaming renderer's procedures stay readable: no function in the streamer's module
+/// (`crates/motu-gpu/src/stream`) over 150 lines; a long procedure becomes a context struct
+/// with a method per phase (issue 46).
+#[test]
+fn no_long_functions_in_the_streamer() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let dir = root.join("crates/motu-gpu/src/stream");
+    let mut long = Vec::new();
+    let mut seen = 0;
+    for (path, text) in rust_files(&dir) {
+        for (name, line, lines) in fn_lengths(&text) {
+            seen += 1;
+            if lines > 150 {
+                let rel = path.strip_prefix(&root).unwrap().display().to_string();
+                long.push(format!("{rel}:{line}: fn {name}: {lines} lines"));
+            }
+        }
+    }
+    assert!(
+        seen > 100,
+        "the scan sees the streamer's functions ({seen})"
+    );
+    assert!(
+        long.is_empty(),
+        "functions over 150 lines in the streamer (split them into phases):\n{}",
+        long.join("\n")
+    );
+}
+
+/// The length scan matches braces in code only and skips declarations.
+#[test]
+fn the_function_scan_reads_code_not_strings_or_comments() {
+    let text = "trait T { fn decl(&self); }\n\
+                fn a<'x>(s: &'x str) -> char {\n\
+                    let _ = \"}}} fn fake() {\";\n\
+                    // } fn in a comment {\n\
+                    let _ = r#\"}\"#; /* { /* } */ { */\n\
+                    if s.is_empty() { '}' } else { '\\'' }\n\
+                }\n\
+                fn b() {}\n";
+    let got = fn_lengths(text);
+    assert_eq!(
+        got,
+        [("a".to_string(), 2, 6), ("b".to_string(), 8, 1)],
+        "{got:?}"
+    );
+}

@@ -37,15 +37,18 @@ impl<'a> StreamingRenderer<'a> {
         camera: &CameraParams,
         opts: &RenderOptions,
     ) -> Result<(RenderOutput, FrameStreamStats)> {
-        self.kept.pass_cap = Some(1);
+        self.frame.kept.pass_cap = Some(1);
         let r = self.render_frame(camera, opts);
-        self.kept.pass_cap = None;
+        self.frame.kept.pass_cap = None;
         r
     }
 
     /// The running frame's pass cap.
     pub(super) fn frame_pass_cap(&self) -> u32 {
-        self.kept.pass_cap.unwrap_or_else(|| self.max_passes())
+        self.frame
+            .kept
+            .pass_cap
+            .unwrap_or_else(|| self.max_passes())
     }
 
     /// Whether a frame that stops with unfinished pixels still builds what they need (for the
@@ -54,13 +57,14 @@ impl<'a> StreamingRenderer<'a> {
         self.opts.fallback != StreamFallback::Off
             || self.opts.frame_build_bytes > 0
             || self.opts.frame_build_ms > 0.0
-            || self.kept.pass_cap.is_some()
+            || self.frame.kept.pass_cap.is_some()
     }
 
     /// Milliseconds built this frame, including the running step.
     fn frame_build_ms_now(&self) -> f64 {
-        self.frame_stats.build_ms
+        self.frame.stats.build_ms
             + self
+                .frame
                 .kept
                 .step_start
                 .map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3)
@@ -69,7 +73,7 @@ impl<'a> StreamingRenderer<'a> {
     /// Whether this frame's build budget is spent.
     pub(super) fn frame_build_spent(&self) -> bool {
         let o = &self.opts;
-        (o.frame_build_bytes > 0 && self.frame_stats.built_bytes >= o.frame_build_bytes)
+        (o.frame_build_bytes > 0 && self.frame.stats.built_bytes >= o.frame_build_bytes)
             || (o.frame_build_ms > 0.0 && self.frame_build_ms_now() >= o.frame_build_ms)
     }
 
@@ -81,7 +85,7 @@ impl<'a> StreamingRenderer<'a> {
         if budget == 0 {
             return max.min(queue.len());
         }
-        let mut left = budget.saturating_sub(self.frame_stats.built_bytes);
+        let mut left = budget.saturating_sub(self.frame.stats.built_bytes);
         let mut n = 0;
         for &b in queue.iter().take(max) {
             let tris = u64::from(self.view.blases[b as usize].primitive_count);
@@ -107,7 +111,7 @@ impl<'a> StreamingRenderer<'a> {
         params: &FrameParams,
         shading: &motu_abi::shade::Shading,
     ) -> Result<FrameBuffers> {
-        if let Some((fb, fw, fh, fg)) = self.kept.frame_buffers.take() {
+        if let Some((fb, fw, fh, fg)) = self.frame.kept.frame_buffers.take() {
             if (fw, fh, fg) == (w, h, guard_len)
                 && fb.params.size_bytes() >= crate::render::params_bytes(shading)
             {
@@ -134,7 +138,7 @@ impl<'a> StreamingRenderer<'a> {
     /// Takes the kept frame buffers (with their width, height and guard length) for a use
     /// between frames; [`Self::keep_frame_buffers`] puts them back.
     pub(super) fn take_kept_frame_buffers(&mut self) -> Option<(FrameBuffers, u32, u32, usize)> {
-        self.kept.frame_buffers.take()
+        self.frame.kept.frame_buffers.take()
     }
 
     /// Keeps `fb` for the next frame of the same size.
@@ -145,9 +149,9 @@ impl<'a> StreamingRenderer<'a> {
         h: u32,
         guard_len: usize,
     ) {
-        if let Some((old, ..)) = self.kept.frame_buffers.take() {
+        if let Some((old, ..)) = self.frame.kept.frame_buffers.take() {
             old.release(&mut self.heap);
         }
-        self.kept.frame_buffers = Some((fb, w, h, guard_len));
+        self.frame.kept.frame_buffers = Some((fb, w, h, guard_len));
     }
 }

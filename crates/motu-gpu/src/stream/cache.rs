@@ -151,8 +151,8 @@ impl StreamingRenderer<'_> {
                         if h.serialized_bytes == blob.len() as u64 && h.deserialized_bytes > 0 =>
                     {
                         match tier {
-                            Tier::Host => self.frame_stats.restored_from_host += 1,
-                            Tier::Disk => self.frame_stats.restored_from_disk += 1,
+                            Tier::Host => self.frame.stats.restored_from_host += 1,
+                            Tier::Disk => self.frame.stats.restored_from_disk += 1,
                         }
                         hits.push((b, blob, h));
                     }
@@ -171,7 +171,7 @@ impl StreamingRenderer<'_> {
         let mut restored = Vec::with_capacity(hits.len());
         self.restore_some(&hits, evict, &mut restored, &mut rest)?;
         rest.sort_unstable();
-        self.frame_stats.restore_ms += t.elapsed().as_secs_f64() * 1e3;
+        self.frame.stats.restore_ms += t.elapsed().as_secs_f64() * 1e3;
         Ok((restored, rest))
     }
 
@@ -194,7 +194,7 @@ impl StreamingRenderer<'_> {
             }
             Err(GpuError::Budget(why)) => {
                 tracing::debug!(%why, "structure cache: no room to restore; building instead");
-                self.frame_stats.restore_skipped += 1;
+                self.frame.stats.restore_skipped += 1;
                 rest.push(hits[0].0);
             }
             Err(e) => return Err(e),
@@ -277,7 +277,7 @@ impl StreamingRenderer<'_> {
             return Ok(());
         }
         self.store_some(&todo)?;
-        self.frame_stats.cache_store_ms += t.elapsed().as_secs_f64() * 1e3;
+        self.frame.stats.cache_store_ms += t.elapsed().as_secs_f64() * 1e3;
         Ok(())
     }
 
@@ -312,7 +312,7 @@ impl StreamingRenderer<'_> {
             Err(motu_vk::VkError::Budget(why)) => {
                 // The cache is an optimisation: no room to read back is a skip, not a failure.
                 tracing::debug!(%why, "structure cache: no room to serialise; not cached");
-                self.frame_stats.cache_skipped += 1;
+                self.frame.stats.cache_skipped += 1;
                 return Ok(());
             }
             Err(e) => return Err(e.into()),
@@ -343,8 +343,8 @@ impl StreamingRenderer<'_> {
         let blobs = result?;
         let a = self.reuse.cache.as_mut().expect("attached");
         for ((_, _, key), blob) in todo.iter().zip(blobs) {
-            self.frame_stats.cache_stored_bytes += blob.len() as u64;
-            self.frame_stats.cache_stored += 1;
+            self.frame.stats.cache_stored_bytes += blob.len() as u64;
+            self.frame.stats.cache_stored += 1;
             a.cache.cache.put(*key, blob);
         }
         Ok(())

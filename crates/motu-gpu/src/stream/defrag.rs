@@ -94,7 +94,7 @@ impl<'a> StreamingRenderer<'a> {
         let freed = before.saturating_sub(self.heap.report().budget_block_bytes);
         drained.freed_bytes = freed;
         let moved = drained.blases + drained.meshes + drained.textures;
-        let st = &mut self.frame_stats;
+        let st = &mut self.frame.stats;
         st.defrag_moves += moved;
         st.defrag_freed_bytes += freed;
         st.defrag_ms += t0.elapsed().as_secs_f64() * 1e3;
@@ -113,16 +113,22 @@ impl<'a> StreamingRenderer<'a> {
     /// references: its records are patched on residency changes only), meshes and textures.
     fn movable_owners(&self) -> HashMap<AllocationId, Owner> {
         let mut owners = HashMap::new();
-        for (b, a) in self.blas.iter().enumerate() {
+        for (b, a) in self.res.blas.iter().enumerate() {
             let Some(a) = a else { continue };
-            if !self.buildable[b] || self.parents[b].iter().any(|&t| self.is_persistent(t)) {
+            if !self.topo.buildable(b)
+                || self
+                    .topo
+                    .parents(b)
+                    .iter()
+                    .any(|&t| self.tlases.is_persistent(t))
+            {
                 continue;
             }
             if let Some(id) = a.allocation_id() {
                 owners.insert(id, Owner::Blas(b));
             }
         }
-        for (m, g) in self.meshes.iter().enumerate() {
+        for (m, g) in self.res.meshes.iter().enumerate() {
             if let Some(g) = g {
                 owners.insert(g.buffer.id(), Owner::Mesh(m));
             }
@@ -146,7 +152,7 @@ impl<'a> StreamingRenderer<'a> {
         for &o in movers {
             let placed = match o {
                 Owner::Blas(b) => {
-                    let size = self.blas[b].as_ref().map_or(0, |a| a.size_bytes);
+                    let size = self.res.blas[b].as_ref().map_or(0, |a| a.size_bytes);
                     AccelStruct::new(
                         &ctx,
                         &mut self.heap,
@@ -157,7 +163,7 @@ impl<'a> StreamingRenderer<'a> {
                     .map(|a| blas_new.push((b, a)))
                     .map_err(Into::into)
                 }
-                Owner::Mesh(m) => match self.meshes[m].as_ref() {
+                Owner::Mesh(m) => match self.res.meshes[m].as_ref() {
                     Some(g) => g
                         .alloc_move_target(&mut self.heap, m)
                         .map(|buf| mesh_new.push((m, buf))),
@@ -178,7 +184,7 @@ impl<'a> StreamingRenderer<'a> {
         let copied = (|| -> Result<()> {
             let mut rec = ctx.record("defragment")?;
             for (m, buf) in &mesh_new {
-                if let Some(g) = self.meshes[*m].as_ref() {
+                if let Some(g) = self.res.meshes[*m].as_ref() {
                     rec.copy_buffer(&g.buffer, 0, buf, 0, g.buffer.size_bytes())?;
                 }
             }
@@ -188,7 +194,7 @@ impl<'a> StreamingRenderer<'a> {
                 }
             }
             for (b, dst) in &blas_new {
-                if let Some(src) = self.blas[*b].as_ref() {
+                if let Some(src) = self.res.blas[*b].as_ref() {
                     // Both structures live until the fenced submission returns; dst was
                     // created with src's size and level.
                     rec.copy_acceleration_structure(
@@ -217,7 +223,7 @@ impl<'a> StreamingRenderer<'a> {
             freed_bytes: 0,
         };
         for (b, a) in blas_new {
-            if let Some(old) = self.blas[b].replace(a) {
+            if let Some(old) = self.res.blas[b].replace(a) {
                 old.release(&mut self.heap);
             }
             // Its instance records hold the old address.
@@ -228,7 +234,7 @@ impl<'a> StreamingRenderer<'a> {
             self.heap.free(old);
         }
         for (m, buf) in mesh_new {
-            if let Some(g) = self.meshes[m].as_mut() {
+            if let Some(g) = self.res.meshes[m].as_mut() {
                 let old = g.moved_to(buf)?;
                 self.heap.free(old);
             } else {

@@ -64,20 +64,20 @@ impl<'a> StreamingRenderer<'a> {
     /// and the meshes only it held are released: nothing of it stays resident.
     pub(super) fn build_group(&mut self, group: &[u32], evict: bool) -> Result<()> {
         let mut taken: Vec<usize> = Vec::new();
-        self.frame_stats.build_groups += 1;
+        self.frame.stats.build_groups += 1;
         let t_mesh = Instant::now();
         let loaded = (|| -> Result<()> {
             for &b in group {
                 for m in self.blas_meshes(b as usize) {
                     // Referenced before loading: evicting a BLAS that shares it keeps it.
-                    self.mesh_refs[m] += 1;
+                    self.res.mesh_refs[m] += 1;
                     taken.push(m);
-                    if self.meshes[m].is_some() {
+                    if self.res.meshes[m].is_some() {
                         continue;
                     }
                     let rec = self.view.meshes[m];
                     let mut g = self.maybe_evicting(evict, |s| {
-                        MeshGpu::alloc_streamed(&mut s.heap, m, &rec, s.mesh_class)
+                        MeshGpu::alloc_streamed(&mut s.heap, m, &rec, s.res.mesh_class)
                     })?;
                     let ctx = self.ctx.clone();
                     let source = self.source;
@@ -102,9 +102,9 @@ impl<'a> StreamingRenderer<'a> {
                             return Err(e);
                         }
                     };
-                    self.frame_stats.bytes_streamed += bytes + texture_bytes;
-                    self.frame_stats.built_bytes += bytes + texture_bytes;
-                    self.meshes[m] = Some(g);
+                    self.frame.stats.bytes_streamed += bytes + texture_bytes;
+                    self.frame.stats.built_bytes += bytes + texture_bytes;
+                    self.res.meshes[m] = Some(g);
                 }
             }
             let ctx = self.ctx.clone();
@@ -117,7 +117,7 @@ impl<'a> StreamingRenderer<'a> {
                 up.flush(&ctx)?;
             }
         }
-        self.frame_stats.mesh_ms += t_mesh.elapsed().as_secs_f64() * 1e3;
+        self.frame.stats.mesh_ms += t_mesh.elapsed().as_secs_f64() * 1e3;
         let t_blas = Instant::now();
         let built = loaded.and_then(|()| {
             let ids: Vec<usize> = group.iter().map(|&b| b as usize).collect();
@@ -145,9 +145,9 @@ impl<'a> StreamingRenderer<'a> {
                 .map(|(k, (b, a))| (b, a, k >= n))
                 .collect::<Vec<_>>())
         });
-        self.frame_stats.blas_ms += t_blas.elapsed().as_secs_f64() * 1e3;
+        self.frame.stats.blas_ms += t_blas.elapsed().as_secs_f64() * 1e3;
         if matches!(built, Err(GpuError::Budget(_))) {
-            self.frame_stats.refused_groups += 1;
+            self.frame.stats.refused_groups += 1;
         }
         let built = match built {
             Ok(b) => b,
@@ -164,33 +164,34 @@ impl<'a> StreamingRenderer<'a> {
                 .blas_meshes(b)
                 .into_iter()
                 .map(|m| {
-                    self.meshes[m]
+                    self.res.meshes[m]
                         .as_ref()
                         .map_or(0, |g| self.mesh_budget_bytes(g))
                 })
                 .sum();
             let bytes = accel.size_bytes + mesh_bytes;
-            self.blas_bytes[b] = bytes;
-            self.used_in_frame[b] = self.frame;
+            self.res.blas_bytes[b] = bytes;
+            self.res.used_in_frame[b] = self.frame.number;
             if restored {
-                self.frame_stats.restored_blases += 1;
-                self.frame_stats.restored_bytes += accel.size_bytes;
+                self.frame.stats.restored_blases += 1;
+                self.frame.stats.restored_bytes += accel.size_bytes;
             } else {
                 if self.reuse.built_once[b] {
-                    self.frame_stats.rebuilt_blases += 1;
-                    self.frame_stats.rebuilt_bytes += accel.size_bytes;
+                    self.frame.stats.rebuilt_blases += 1;
+                    self.frame.stats.rebuilt_bytes += accel.size_bytes;
                 }
-                self.frame_stats.blas_built += 1;
-                self.frame_stats.built_bytes += accel.size_bytes;
-                self.frame_stats.triangles_built += u64::from(self.view.blases[b].primitive_count);
+                self.frame.stats.blas_built += 1;
+                self.frame.stats.built_bytes += accel.size_bytes;
+                self.frame.stats.triangles_built += u64::from(self.view.blases[b].primitive_count);
             }
             self.reuse.built_once[b] = true;
-            self.blas[b] = Some(accel);
+            self.res.blas[b] = Some(accel);
             let _ = self
+                .res
                 .residency
-                .insert(ItemId(b as u32), bytes, u64::from(self.stamp));
-            self.pinned[b] = true;
-            self.built_now.push(b as u32);
+                .insert(ItemId(b as u32), bytes, u64::from(self.frame.stamp));
+            self.res.pinned[b] = true;
+            self.res.built_now.push(b as u32);
             built_ids.insert(b as u32);
             self.dirty_parents(b);
         }
@@ -219,7 +220,7 @@ impl<'a> StreamingRenderer<'a> {
         let mut i = 0;
         // Group size carries over between steps: a full budget keeps failing large groups,
         // and each failure streams their meshes for nothing.
-        let mut chunk = self.group_hint.clamp(1, 64);
+        let mut chunk = self.res.group_hint.clamp(1, 64);
         let mut relaxed = false;
         // Room for the TLAS rebuilds of this step, kept free while building: a step that
         // fills the budget with BLASes would give them back one by one to fit the rebuild
@@ -228,8 +229,8 @@ impl<'a> StreamingRenderer<'a> {
         while i < queue.len() {
             // The frame's build budget: spent stops the step (a frame that has built nothing
             // yet and must progress still builds one).
-            if self.frame_build_spent() && (self.frame_stats.blas_built > 0 || !must_progress) {
-                self.frame_stats.build_budget_spent = true;
+            if self.frame_build_spent() && (self.frame.stats.blas_built > 0 || !must_progress) {
+                self.frame.stats.build_budget_spent = true;
                 return Ok(queue.len() - i);
             }
             let mut n = self.group_within_frame_budget(&queue[i..], chunk);
@@ -261,13 +262,14 @@ impl<'a> StreamingRenderer<'a> {
                     short = need.saturating_sub(self.free_budget_bytes().saturating_sub(reserve));
                 }
             }
-            if !self.built_now.is_empty() && need > self.free_budget_bytes().saturating_sub(reserve)
+            if !self.res.built_now.is_empty()
+                && need > self.free_budget_bytes().saturating_sub(reserve)
             {
                 // Built next to the step's builds, it would squeeze out the TLAS rebuild:
                 // smaller, or in a later pass.
                 if group.len() > 1 {
                     chunk = group.len() / 2;
-                    self.group_hint = chunk;
+                    self.res.group_hint = chunk;
                     continue;
                 }
                 tracing::debug!(
@@ -283,20 +285,20 @@ impl<'a> StreamingRenderer<'a> {
             match self.build_group(group, evict) {
                 Ok(()) => {
                     for &b in group {
-                        if self.blas[b as usize].is_some() {
-                            self.add_instance_counts(b, &mut counts);
+                        if self.res.blas[b as usize].is_some() {
+                            self.topo.add_instance_counts(b, &mut counts);
                         }
                     }
                     i += group.len();
                     chunk = (chunk * 2).min(64);
-                    self.group_hint = chunk;
+                    self.res.group_hint = chunk;
                 }
                 Err(GpuError::Budget(_)) if group.len() > 1 => {
                     chunk = group.len() / 2;
-                    self.group_hint = chunk;
+                    self.res.group_hint = chunk;
                 }
                 Err(GpuError::Budget(msg)) => {
-                    if !self.built_now.is_empty() || !must_progress {
+                    if !self.res.built_now.is_empty() || !must_progress {
                         tracing::debug!(
                             blas = queue[i],
                             left = queue.len() - i,
@@ -329,13 +331,13 @@ impl<'a> StreamingRenderer<'a> {
     /// `tlas_rebuild_bytes`) with `counts` resident instance records per TLAS plus those of
     /// `group`: every TLAS dirty now or parent of a BLAS of `group` or built this step.
     pub(super) fn tlas_reserve(&self, counts: &[u64], group: &[u32]) -> Result<u64> {
-        let mut touched: BTreeSet<u32> = self.dirty.clone();
-        for &b in group.iter().chain(&self.built_now) {
-            touched.extend(self.parents[b as usize].iter().copied());
+        let mut touched: BTreeSet<u32> = self.tlases.dirty.clone();
+        for &b in group.iter().chain(&self.res.built_now) {
+            touched.extend(self.topo.parents(b as usize).iter().copied());
         }
         let mut with_group = counts.to_vec();
         for &b in group {
-            self.add_instance_counts(b, &mut with_group);
+            self.topo.add_instance_counts(b, &mut with_group);
         }
         let mut reserve = 0u64;
         for t in touched {
@@ -356,7 +358,7 @@ impl<'a> StreamingRenderer<'a> {
     /// triangle) plus ~128 bytes a triangle for the structure and its scratch.
     pub(super) fn blas_estimate_bytes(&self, b: u32) -> u64 {
         let tris = u64::from(self.view.blases[b as usize].primitive_count);
-        let meshes = if self.meshes_budgeted {
+        let meshes = if self.res.meshes_budgeted {
             self.missing_mesh_bytes(b, 32, 16)
         } else {
             0
@@ -369,7 +371,7 @@ impl<'a> StreamingRenderer<'a> {
     pub(super) fn missing_mesh_bytes(&self, b: u32, per_vertex: u64, per_triangle: u64) -> u64 {
         self.blas_meshes(b as usize)
             .into_iter()
-            .filter(|&m| self.meshes[m].is_none())
+            .filter(|&m| self.res.meshes[m].is_none())
             .map(|m| {
                 let r = &self.view.meshes[m];
                 u64::from(r.vertex_count) * per_vertex + u64::from(r.triangle_count) * per_triangle
@@ -389,7 +391,7 @@ impl<'a> StreamingRenderer<'a> {
             })
             .sum();
         let report = self.heap.report();
-        let meshes = if self.meshes_budgeted {
+        let meshes = if self.res.meshes_budgeted {
             format!("{mesh_bytes} bytes of meshes plus its")
         } else {
             format!("its {mesh_bytes} bytes of meshes in host memory aside,")
@@ -414,23 +416,23 @@ impl<'a> StreamingRenderer<'a> {
     /// may be evicted, and what does not fit is skipped.
     pub(super) fn make_resident(&mut self, demand: &Demand, prefetch: bool) -> Result<()> {
         let t0 = Instant::now();
-        self.kept.step_start = Some(t0);
-        self.pinned = if prefetch {
+        self.frame.kept.step_start = Some(t0);
+        self.res.pinned = if prefetch {
             let first = self.frame_first_stamp();
             (0..self.item_count())
-                .map(|i| self.last_seen[i] >= first)
+                .map(|i| self.res.last_seen[i] >= first)
                 .collect()
         } else {
             vec![false; self.item_count()]
         };
-        self.built_now.clear();
+        self.res.built_now.clear();
         for &(b, _) in demand.blases.iter().chain(&demand.later) {
-            self.last_seen[b as usize] = self.stamp;
+            self.res.last_seen[b as usize] = self.frame.stamp;
         }
         let queue = |v: &[(u32, u32)]| -> Vec<u32> {
             v.iter()
                 .map(|&(b, _)| b)
-                .filter(|&b| self.blas[b as usize].is_none() && self.buildable[b as usize])
+                .filter(|&b| self.res.blas[b as usize].is_none() && self.topo.buildable(b as usize))
                 .collect()
         };
         let (needed, later) = (queue(&demand.blases), queue(&demand.later));
@@ -444,21 +446,21 @@ impl<'a> StreamingRenderer<'a> {
         self.rebuild_dirty()?;
         let t_tables = Instant::now();
         self.upload_tlas_addresses()?;
-        self.frame_stats.tables_ms += t_tables.elapsed().as_secs_f64() * 1e3;
-        self.frame_stats.build_steps += 1;
+        self.frame.stats.tables_ms += t_tables.elapsed().as_secs_f64() * 1e3;
+        self.frame.stats.build_steps += 1;
         if prefetch {
-            let built = self.built_now.len() as u32;
-            self.frame_stats.prefetched += built;
+            let built = self.res.built_now.len() as u32;
+            self.frame.stats.prefetched += built;
             let wanted = (needed.len() + later.len()) as u32;
-            self.frame_stats.prefetch_skipped += wanted.saturating_sub(built);
+            self.frame.stats.prefetch_skipped += wanted.saturating_sub(built);
         } else {
-            self.frame_stats.deferred += deferred as u32;
+            self.frame.stats.deferred += deferred as u32;
         }
-        self.kept.step_start = None;
-        self.frame_stats.build_ms += t0.elapsed().as_secs_f64() * 1e3;
+        self.frame.kept.step_start = None;
+        self.frame.stats.build_ms += t0.elapsed().as_secs_f64() * 1e3;
         tracing::debug!(
             demanded = demand.len(),
-            built = self.built_now.len(),
+            built = self.res.built_now.len(),
             deferred,
             prefetch,
             "build step"

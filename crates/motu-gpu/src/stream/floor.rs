@@ -126,83 +126,175 @@ pub fn streaming_floor_planned(
     staging_cap_bytes: u64,
 ) -> Result<StreamFloor> {
     plan.check(view)?;
-    let as_align = |v: u64| align(v, 256);
     let nb = view.blases.len() as u64;
     let nt = view.tlases.len() as u64;
-    // Triangle instances per TLAS (each gets a proxy box), as the renderer's tables.
-    let buildable = |b: usize| super::streamable(&view.blases[b]);
-    let mut proxies_total = 0u64;
-    let mut members_total = 0u64;
-    let mut skeleton = 0u64;
-    let mut rebuild_structures = 0u64;
-    let mut rebuild_inputs = 0u64;
-    let mut rebuild_scratch_max = 0u64;
-    let mut rebuild_scratch_sum = 0u64;
-    for (t, rec) in view.tlases.iter().enumerate() {
-        let range = rec.instance_range();
-        // A streamed TLAS holds its PI instances, the proxy and the resident BLASes' instances:
-        // at the floor one BLAS is resident (the most instanced one bounds its instances).
-        let mut per_blas: std::collections::HashMap<u32, u32> = Default::default();
-        let mut other = 0u32;
-        for i in &view.instances[range] {
-            if buildable(i.blas as usize) {
-                *per_blas.entry(i.blas).or_default() += 1;
-            } else {
-                other += 1;
-            }
+    let tl = TlasFloor::of(view, plan, sizes)?;
+    let skeleton = tl.skeleton_bytes + pi_blas_bytes(view, sizes)?;
+    let tables = table_bytes(view, tl.proxies, tl.members);
+    let largest = LargestBuild::of(view, sizes)?;
+    let pixels = u64::from(width) * u64::from(height);
+    let guard = u64::from(width + 16) * u64::from(height + 16) / 4;
+    let frame = frame_buffer_bytes(pixels, guard, nb + nt);
+    let shading_tables = crate::shading::table_bytes(view, crate::shading::Texels::Streamed);
+    let shading_attributes = largest_blas_attribute_bytes(view);
+    let shading_textures = largest_blas_texture_bytes(view);
+    let base = tables
+        + skeleton
+        + frame
+        + PIPELINE_BYTES
+        + shading_tables
+        + shading_attributes
+        + shading_textures;
+    // Budget-dependent parts: staging (an eighth), TLAS rebuild scratch batches (an eighth),
+    // allocator slack (four blocks of a 64th): iterate to the fixed point.
+    let mut floor = base + largest.build_bytes;
+    let mut parts = (0, 0, 0);
+    for _ in 0..64 {
+        let staging = staging_bytes_for_budget(floor, staging_cap_bytes);
+        let rebuild_scratch = tl
+            .rebuild_scratch_max
+            .max(tl.rebuild_scratch_sum.min(floor / 8));
+        let rebuild = tl.rebuild_structures + tl.rebuild_inputs + rebuild_scratch;
+        let slack = allocator_slack_bytes(floor);
+        let next =
+            base + staging + slack + largest.build_bytes.max(largest.resident_bytes + rebuild);
+        parts = (staging, rebuild, slack);
+        if next <= floor {
+            break;
         }
-        let (most_blas, most) = per_blas
-            .iter()
-            .map(|(&b, &n)| (b, n))
-            .max_by_key(|&(b, n)| (n, std::cmp::Reverse(b)))
-            .unwrap_or((u32::MAX, 0));
-        let cl = &plan.clusters[t];
-        members_total += cl.iter().map(|c| c.members.len() as u64).sum::<u64>();
-        let clusters = cl.len() as u32;
-        let proxy = u32::from(clusters > 0);
-        let (t_bytes, _) = sizes.tlas((other + proxy).max(1))?;
-        skeleton += as_align(t_bytes);
-        // Rebuilt with the resident BLAS's instances and its clusters in the marks BLAS.
-        let count = (other + 2 * proxy + most).max(1);
-        let (r_bytes, r_scratch) = sizes.tlas(count)?;
-        rebuild_structures += as_align(r_bytes);
-        rebuild_inputs += u64::from(count) * 64;
-        let mut scratch = r_scratch;
-        if clusters > 0 {
-            proxies_total += u64::from(clusters);
-            let (p_bytes, p_scratch) = sizes.blas(&[BlasGeometry::Aabbs {
-                aabb_count: clusters,
-                opaque: false,
-            }])?;
-            skeleton += as_align(p_bytes);
-            // Rebuilt next to the old one's release: counted again (conservative).
-            rebuild_structures += as_align(p_bytes);
-            rebuild_inputs += align(u64::from(clusters) * 24, 16);
-            scratch = scratch.max(p_scratch);
-            // The marks BLAS: the resident BLAS's clusters (also counted in the proxy above).
-            let resident = cl.iter().filter(|c| c.blas == most_blas).count() as u32;
-            if resident > 0 {
-                let (m_bytes, m_scratch) = sizes.blas(&[BlasGeometry::Aabbs {
-                    aabb_count: resident,
+        floor = next;
+    }
+    Ok(StreamFloor {
+        tables_bytes: tables,
+        skeleton_structures_bytes: skeleton,
+        largest_blas: largest.blas,
+        largest_blas_build_bytes: largest.build_bytes,
+        tlas_rebuild_bytes: parts.1,
+        frame_bytes: frame,
+        shading_tables_bytes: shading_tables,
+        shading_attributes_bytes: shading_attributes,
+        shading_textures_bytes: shading_textures,
+        width,
+        height,
+        pipeline_bytes: PIPELINE_BYTES,
+        staging_bytes: parts.0,
+        allocator_slack_bytes: parts.2,
+        min_resident_bytes: floor,
+    })
+}
+
+fn as_align(v: u64) -> u64 {
+    align(v, 256)
+}
+
+/// What the TLASes bring to the floor: their skeleton (each TLAS over its PI instances and
+/// proxy, and the proxy), and rebuilding them with the most instanced BLAS resident.
+#[derive(Default)]
+struct TlasFloor {
+    /// Proxy boxes (clusters) and their members over all TLASes.
+    proxies: u64,
+    members: u64,
+    /// The TLASes and proxies of the skeleton.
+    skeleton_bytes: u64,
+    /// A rebuild of every TLAS: structures, inputs (records and boxes), and the largest and
+    /// summed scratch of one TLAS's builds.
+    rebuild_structures: u64,
+    rebuild_inputs: u64,
+    rebuild_scratch_max: u64,
+    rebuild_scratch_sum: u64,
+}
+
+impl TlasFloor {
+    fn of(
+        view: &HierarchyView<'_>,
+        plan: &super::StreamPlan,
+        sizes: &dyn FloorSizes,
+    ) -> Result<TlasFloor> {
+        // Triangle instances per TLAS (each gets a proxy box), as the renderer's tables.
+        let buildable = |b: usize| super::streamable(&view.blases[b]);
+        let mut out = TlasFloor::default();
+        for (t, rec) in view.tlases.iter().enumerate() {
+            let range = rec.instance_range();
+            // A streamed TLAS holds its PI instances, the proxy and the resident BLASes'
+            // instances: at the floor one BLAS is resident (the most instanced one bounds its
+            // instances).
+            let mut per_blas: std::collections::HashMap<u32, u32> = Default::default();
+            let mut other = 0u32;
+            for i in &view.instances[range] {
+                if buildable(i.blas as usize) {
+                    *per_blas.entry(i.blas).or_default() += 1;
+                } else {
+                    other += 1;
+                }
+            }
+            let (most_blas, most) = per_blas
+                .iter()
+                .map(|(&b, &n)| (b, n))
+                .max_by_key(|&(b, n)| (n, std::cmp::Reverse(b)))
+                .unwrap_or((u32::MAX, 0));
+            let cl = &plan.clusters[t];
+            out.members += cl.iter().map(|c| c.members.len() as u64).sum::<u64>();
+            let clusters = cl.len() as u32;
+            let proxy = u32::from(clusters > 0);
+            let (t_bytes, _) = sizes.tlas((other + proxy).max(1))?;
+            out.skeleton_bytes += as_align(t_bytes);
+            // Rebuilt with the resident BLAS's instances and its clusters in the marks BLAS.
+            let count = (other + 2 * proxy + most).max(1);
+            let (r_bytes, r_scratch) = sizes.tlas(count)?;
+            out.rebuild_structures += as_align(r_bytes);
+            out.rebuild_inputs += u64::from(count) * 64;
+            let mut scratch = r_scratch;
+            if clusters > 0 {
+                out.proxies += u64::from(clusters);
+                let (p_bytes, p_scratch) = sizes.blas(&[BlasGeometry::Aabbs {
+                    aabb_count: clusters,
                     opaque: false,
                 }])?;
-                rebuild_structures += as_align(m_bytes);
-                scratch = scratch.max(m_scratch);
+                out.skeleton_bytes += as_align(p_bytes);
+                // Rebuilt next to the old one's release: counted again (conservative).
+                out.rebuild_structures += as_align(p_bytes);
+                out.rebuild_inputs += align(u64::from(clusters) * 24, 16);
+                scratch = scratch.max(p_scratch);
+                // The marks BLAS: the resident BLAS's clusters (also counted in the proxy).
+                let resident = cl.iter().filter(|c| c.blas == most_blas).count() as u32;
+                if resident > 0 {
+                    let (m_bytes, m_scratch) = sizes.blas(&[BlasGeometry::Aabbs {
+                        aabb_count: resident,
+                        opaque: false,
+                    }])?;
+                    out.rebuild_structures += as_align(m_bytes);
+                    scratch = scratch.max(m_scratch);
+                }
             }
+            out.rebuild_scratch_max = out.rebuild_scratch_max.max(scratch);
+            out.rebuild_scratch_sum += align(scratch, 256);
         }
-        rebuild_scratch_max = rebuild_scratch_max.max(scratch);
-        rebuild_scratch_sum += align(scratch, 256);
+        Ok(out)
     }
-    for (b, r) in view.blases.iter().enumerate() {
+}
+
+/// The PI BLASes of the skeleton.
+fn pi_blas_bytes(view: &HierarchyView<'_>, sizes: &dyn FloorSizes) -> Result<u64> {
+    let mut bytes = 0;
+    for r in view.blases {
         if r.kind == BLAS_AABBS && r.item_count > 0 {
-            let (bytes, _) = sizes.blas(&[BlasGeometry::Aabbs {
+            let (b, _) = sizes.blas(&[BlasGeometry::Aabbs {
                 aabb_count: r.item_count,
                 opaque: false,
             }])?;
-            skeleton += as_align(bytes);
+            bytes += as_align(b);
         }
-        let _ = b;
     }
+    Ok(bytes)
+}
+
+/// The GPU tables as the renderer uploads them: the node tables with `proxies` proxy PI
+/// records, the member table of `members` instances, the boxes inside streamable BLASes, the
+/// address and stamp tables.
+fn table_bytes(view: &HierarchyView<'_>, proxies: u64, members: u64) -> u64 {
+    let nb = view.blases.len() as u64;
+    let nt = view.tlases.len() as u64;
+    let buildable = |b: usize| super::streamable(&view.blases[b]);
     let rec_bytes = |n: u64, size: u64| align(n * size, 16);
     let proxy_box_bytes = {
         let (index, boxes) = proxy_boxes::layout(view, buildable);
@@ -216,7 +308,7 @@ pub fn streaming_floor_planned(
                 )
         }
     };
-    let tables = rec_bytes(nt, std::mem::size_of::<motu_abi::TlasRecord>() as u64)
+    rec_bytes(nt, std::mem::size_of::<motu_abi::TlasRecord>() as u64)
         + rec_bytes(
             view.instances.len() as u64 + 2 * nt,
             std::mem::size_of::<motu_abi::InstanceRecord>() as u64,
@@ -227,7 +319,7 @@ pub fn streaming_floor_planned(
             std::mem::size_of::<motu_abi::GeometryRecord>() as u64,
         )
         + rec_bytes(
-            view.pis.len() as u64 + proxies_total,
+            view.pis.len() as u64 + proxies,
             std::mem::size_of::<motu_abi::PiRecord>() as u64,
         )
         + rec_bytes(
@@ -246,95 +338,67 @@ pub fn streaming_floor_planned(
         + rec_bytes(view.meshes.len() as u64, 16)
         + rec_bytes(nt, 8)
         // The proxy clusters' member table (u32 an instance).
-        + rec_bytes(members_total, 4)
+        + rec_bytes(members, 4)
         // The boxes inside streamable BLASes and their index.
         + proxy_box_bytes
-        + 2 * rec_bytes(nb.max(1), 4);
-    // The largest triangle BLAS build: meshes, structure, scratch.
-    let mut largest: Option<(u32, u64, u64)> = None;
-    for (b, r) in view.blases.iter().enumerate() {
-        if !buildable(b) {
-            continue;
+        + 2 * rec_bytes(nb.max(1), 4)
+}
+
+/// The triangle BLAS with the largest build: meshes, structure, scratch.
+struct LargestBuild {
+    blas: Option<u32>,
+    /// Its build's bytes, and what stays resident after (meshes and structure).
+    build_bytes: u64,
+    resident_bytes: u64,
+}
+
+impl LargestBuild {
+    fn of(view: &HierarchyView<'_>, sizes: &dyn FloorSizes) -> Result<LargestBuild> {
+        let mut largest = LargestBuild {
+            blas: None,
+            build_bytes: 0,
+            resident_bytes: 0,
+        };
+        for (b, r) in view.blases.iter().enumerate() {
+            if !super::streamable(r) {
+                continue;
+            }
+            let range = r.item_base as usize..(r.item_base + r.item_count) as usize;
+            let mut shape = Vec::new();
+            let mut mesh_bytes = 0u64;
+            for g in &view.geometries[range] {
+                let m = &view.meshes[g.mesh as usize];
+                shape.push(BlasGeometry::Triangles {
+                    vertex_count: m.vertex_count,
+                    triangle_count: m.triangle_count,
+                    indexed: true,
+                    opaque: m.flags & FLAG_NEEDS_ANY_HIT == 0,
+                });
+                // As MeshGpu lays it out: positions, indices, the primitive map of a cluster.
+                let map = if m.flags & motu_abi::FLAG_PRIMITIVE_MAP != 0 {
+                    u64::from(m.triangle_count) * 4
+                } else {
+                    0
+                };
+                mesh_bytes += align(
+                    align(u64::from(m.vertex_count) * 12, 16)
+                        + u64::from(m.triangle_count) * 12
+                        + map,
+                    16,
+                );
+            }
+            let (bytes, scratch) = sizes.blas(&shape)?;
+            let build = mesh_bytes + as_align(bytes) + align(scratch, 256);
+            if largest.blas.is_none() || build > largest.build_bytes {
+                largest = LargestBuild {
+                    blas: Some(b as u32),
+                    build_bytes: build,
+                    resident_bytes: mesh_bytes + as_align(bytes),
+                };
+            }
         }
-        let range = r.item_base as usize..(r.item_base + r.item_count) as usize;
-        let mut shape = Vec::new();
-        let mut mesh_bytes = 0u64;
-        for g in &view.geometries[range] {
-            let m = &view.meshes[g.mesh as usize];
-            shape.push(BlasGeometry::Triangles {
-                vertex_count: m.vertex_count,
-                triangle_count: m.triangle_count,
-                indexed: true,
-                opaque: m.flags & FLAG_NEEDS_ANY_HIT == 0,
-            });
-            // As MeshGpu lays it out: positions, indices, the primitive map of a cluster.
-            let map = if m.flags & motu_abi::FLAG_PRIMITIVE_MAP != 0 {
-                u64::from(m.triangle_count) * 4
-            } else {
-                0
-            };
-            mesh_bytes += align(
-                align(u64::from(m.vertex_count) * 12, 16) + u64::from(m.triangle_count) * 12 + map,
-                16,
-            );
-        }
-        let (bytes, scratch) = sizes.blas(&shape)?;
-        let build = mesh_bytes + as_align(bytes) + align(scratch, 256);
-        let resident = mesh_bytes + as_align(bytes);
-        if largest.is_none_or(|l| build > l.1) {
-            largest = Some((b as u32, build, resident));
-        }
+        Ok(largest)
     }
-    let (largest_blas, blas_build, blas_resident) = match largest {
-        Some((b, build, res)) => (Some(b), build, res),
-        None => (None, 0, 0),
-    };
-    let pixels = u64::from(width) * u64::from(height);
-    let guard = u64::from(width + 16) * u64::from(height + 16) / 4;
-    let frame = frame_buffer_bytes(pixels, guard, nb + nt);
-    let shading_tables = crate::shading::table_bytes(view, crate::shading::Texels::Streamed);
-    let shading_attributes = largest_blas_attribute_bytes(view);
-    let shading_textures = largest_blas_texture_bytes(view);
-    let base = tables
-        + skeleton
-        + frame
-        + PIPELINE_BYTES
-        + shading_tables
-        + shading_attributes
-        + shading_textures;
-    // Budget-dependent parts: staging (an eighth), TLAS rebuild scratch batches (an eighth),
-    // allocator slack (four blocks of a 64th): iterate to the fixed point.
-    let mut floor = base + blas_build;
-    let mut parts = (0, 0, 0);
-    for _ in 0..64 {
-        let staging = staging_bytes_for_budget(floor, staging_cap_bytes);
-        let rebuild_scratch = rebuild_scratch_max.max(rebuild_scratch_sum.min(floor / 8));
-        let rebuild = rebuild_structures + rebuild_inputs + rebuild_scratch;
-        let slack = allocator_slack_bytes(floor);
-        let next = base + staging + slack + blas_build.max(blas_resident + rebuild);
-        parts = (staging, rebuild, slack);
-        if next <= floor {
-            break;
-        }
-        floor = next;
-    }
-    Ok(StreamFloor {
-        tables_bytes: tables,
-        skeleton_structures_bytes: skeleton,
-        largest_blas,
-        largest_blas_build_bytes: blas_build,
-        tlas_rebuild_bytes: parts.1,
-        frame_bytes: frame,
-        shading_tables_bytes: shading_tables,
-        shading_attributes_bytes: shading_attributes,
-        shading_textures_bytes: shading_textures,
-        width,
-        height,
-        pipeline_bytes: PIPELINE_BYTES,
-        staging_bytes: parts.0,
-        allocator_slack_bytes: parts.2,
-        min_resident_bytes: floor,
-    })
 }
 
 /// Bytes of every mesh a streamer of `view` streams, as it lays them out

@@ -2,10 +2,67 @@
 
 use motu_abi::camera::CameraParams;
 
-use super::passes::guard_pixels;
+use super::buffers::FrameBuffers;
+use super::demand::Demand;
+use super::passes::{guard_pixels, FrameImage};
 use super::{FrameStreamStats, StreamingRenderer};
 use crate::error::{GpuError, Result};
-use crate::render::{frame_params, FrameMeasure, RenderOptions, RenderOutput, RenderStats, Tracer};
+use crate::render::{
+    frame_params, Backend, FrameMeasure, RenderOptions, RenderOutput, RenderStats, Tracer,
+};
+
+/// The frame part: the frame in progress (its number, statistics and pass stamps), what the
+/// probe of the next camera saw, and what is kept between frames (the trace pipeline, the
+/// frame buffers, the build clock).
+///
+/// Invariants: `stamp` only grows (one a pass or probe; the shaders compare stamps); the
+/// frame's sightings from `first_stamp` on are what a prefetch keeps resident; `stats` is
+/// reset by each frame's start and handed out at its end.
+pub(super) struct FrameState {
+    /// Frames started so far (the current one's number).
+    pub number: u64,
+    pub stats: FrameStreamStats,
+    /// The latest pass stamp.
+    pub stamp: u32,
+    /// The first stamp whose sightings a prefetch keeps resident: the frame's first pass, or
+    /// the probe of the next camera once it ran.
+    pub first_stamp: u32,
+    /// The last frame after which [`PassMarks::auto_wanted`](super::PassMarks::auto_wanted)
+    /// held (0: none yet).
+    pub pass_marks_held: u64,
+    /// The next frame's camera, probed after this frame (`set_next_camera`).
+    pub next_camera: Option<CameraParams>,
+    /// Per BLAS, what the last probe saw (`PROBE_MET`, `PROBE_RESIDENT` bits), kept for the
+    /// next frame's first pass to say why it missed what it missed; empty when no probe ran.
+    pub probe_sighting: Vec<u8>,
+    /// What the probe rounds after this frame used of the resident set (`probe.rs`).
+    pub probe_need: super::probe::ProbeNeed,
+    /// The trace pipeline with the backend and stack size it was made for.
+    pub tracer: Option<(Backend, u32, Tracer)>,
+    /// State kept between frames: the frame buffers, the frame's build clock.
+    pub kept: super::budget::Kept,
+}
+
+impl FrameState {
+    pub fn new() -> FrameState {
+        FrameState {
+            number: 0,
+            stats: FrameStreamStats::default(),
+            stamp: 0,
+            first_stamp: 1,
+            pass_marks_held: 0,
+            next_camera: None,
+            probe_sighting: Vec::new(),
+            probe_need: Default::default(),
+            tracer: None,
+            kept: Default::default(),
+        }
+    }
+}
+
+/// The probe of the next frame's camera after the passes: that camera, and what its first
+/// round met (structures, then the pixels it left open).
+type FirstProbe = (CameraParams, (Demand, Vec<u32>));
 
 impl<'a> StreamingRenderer<'a> {
     /// Renders one frame: build–traverse passes until every pixel is complete (or
@@ -30,26 +87,71 @@ impl<'a> StreamingRenderer<'a> {
         }
         let span = tracing::info_span!(
             "stream_frame",
-            frame = self.frame + 1,
+            frame = self.frame.number + 1,
             width = w,
             height = h
         );
         let _g = span.enter();
         let frame_t0 = std::time::Instant::now();
-        self.frame += 1;
-        self.frame_stats = FrameStreamStats {
-            frame: self.frame,
+        self.begin_frame();
+        self.ensure_tracer(opts)?;
+        let guard = guard_pixels(w, h, self.opts.guard_band_px);
+        let fb = self.prepare_frame_buffers(camera, opts, guard.len())?;
+        let next = self.frame.next_camera.take();
+        let result = self.run_passes(&fb, w, h, &guard).and_then(|image| {
+            // The probe of the next frame's camera (its buffers are this frame's: same size).
+            let probe = match next {
+                Some(n)
+                    if self.opts.probe_stride > 0
+                        && (n.width, n.height) == (w, h)
+                        && self.frame.stats.complete
+                        && !self.frame_build_spent() =>
+                {
+                    Some((n, self.probe_next_camera(&fb, &n, opts, None, false)?))
+                }
+                _ => None,
+            };
+            Ok((image, probe))
+        });
+        let (mut image, probe) = match result {
+            Ok(r) => r,
+            Err(e) => {
+                fb.release(&mut self.heap);
+                return Err(e);
+            }
+        };
+        self.keep_frame_buffers(fb, w, h, guard.len());
+        self.measure_working_set();
+        let guard_demand = std::mem::take(&mut image.guard_demand);
+        self.prefetch_after_frame(guard_demand, probe, opts)?;
+        self.note_pass_marks();
+        let report = self.heap.report();
+        self.frame.stats.frame_ms = frame_t0.elapsed().as_secs_f64() * 1e3;
+        self.measure_residency(&report);
+        self.totals.add_frame(&self.frame.stats, &report);
+        self.frame_output(camera, image, opts, report)
+    }
+
+    /// A new frame's counters: its number, its statistics, its first stamp, its build clock.
+    fn begin_frame(&mut self) {
+        self.frame.number += 1;
+        self.frame.stats = FrameStreamStats {
+            frame: self.frame.number,
             ..Default::default()
         };
-        self.frame_first_stamp = self.stamp + 1;
-        self.kept.step_start = None;
-        let need_tracer =
-            !matches!(&self.tracer, Some((b, s, _)) if *b == opts.backend && *s == opts.stack_size);
+        self.frame.first_stamp = self.frame.stamp + 1;
+        self.frame.kept.step_start = None;
+    }
+
+    /// The trace pipeline of `opts`'s backend and stack size, made (evicting for room) when
+    /// the last frame's was another.
+    fn ensure_tracer(&mut self, opts: &RenderOptions) -> Result<()> {
+        let need_tracer = !matches!(&self.frame.tracer, Some((b, s, _)) if *b == opts.backend && *s == opts.stack_size);
         if need_tracer {
-            if let Some((_, _, t)) = self.tracer.take() {
+            if let Some((_, _, t)) = self.frame.tracer.take() {
                 t.release(&mut self.heap);
             }
-            self.pinned = vec![false; self.item_count()];
+            self.res.pinned = vec![false; self.item_count()];
             let t = self
                 .with_eviction_or_rebuilt_tlases(|s| {
                     // Streamed TLASes keep every PI in the hardware walk (no box lists).
@@ -57,17 +159,31 @@ impl<'a> StreamingRenderer<'a> {
                     Tracer::new(&s.ctx.clone(), &mut s.heap, opts, slots, true)
                 })
                 .map_err(|e| self.skeleton_error("the trace pipeline", e))?;
-            self.tracer = Some((opts.backend, opts.stack_size, t));
+            self.frame.tracer = Some((opts.backend, opts.stack_size, t));
         }
-        let pixels = u64::from(w) * u64::from(h);
-        let guard = guard_pixels(w, h, self.opts.guard_band_px);
+        Ok(())
+    }
+
+    /// The frame's buffers with `camera`'s parameters, and every TLAS clean: making room for
+    /// them may have evicted BLASes that TLASes still reference.
+    fn prepare_frame_buffers(
+        &mut self,
+        camera: &CameraParams,
+        opts: &RenderOptions,
+        guard_len: usize,
+    ) -> Result<FrameBuffers> {
         let mut params = frame_params(camera, opts, self.view.root_tlas);
         params.shading = self.shading.address;
-        self.pinned = vec![false; self.item_count()];
-        let fb = self.frame_buffers(w, h, guard.len(), &params, &opts.shading)?;
-        // Making room for the frame may have evicted BLASes that TLASes still reference.
-        if !self.dirty.is_empty() {
-            self.built_now.clear();
+        self.res.pinned = vec![false; self.item_count()];
+        let fb = self.frame_buffers(
+            camera.width,
+            camera.height,
+            guard_len,
+            &params,
+            &opts.shading,
+        )?;
+        if !self.tlases.dirty.is_empty() {
+            self.res.built_now.clear();
             if let Err(e) = self
                 .rebuild_dirty()
                 .and_then(|()| self.upload_tlas_addresses())
@@ -77,58 +193,49 @@ impl<'a> StreamingRenderer<'a> {
                 return Err(e);
             }
         }
-        let next = self.next_camera.take();
-        let result = self.run_passes(&fb, w, h, &guard).and_then(|out| {
-            // The probe of the next frame's camera (its buffers are this frame's: same size).
-            let probe = match next {
-                Some(n)
-                    if self.opts.probe_stride > 0
-                        && (n.width, n.height) == (w, h)
-                        && self.frame_stats.complete
-                        && !self.frame_build_spent() =>
-                {
-                    Some((n, self.probe_next_camera(&fb, &n, opts, None, false)?))
-                }
-                _ => None,
-            };
-            Ok((out, probe))
-        });
-        let (out, probe) = match result {
-            Ok(r) => r,
-            Err(e) => {
-                fb.release(&mut self.heap);
-                return Err(e);
-            }
-        };
-        self.keep_frame_buffers(fb, w, h, guard.len());
-        let (records, rgba_words, counters, mut guard_demand) = out;
-        // The working set of the frame's rays (before the prefetch builds for the next).
+        Ok(fb)
+    }
+
+    /// The working set of the frame's rays (before the prefetch builds for the next).
+    fn measure_working_set(&mut self) {
         let mut working_meshes = std::collections::BTreeSet::new();
-        for (b, &f) in self.used_in_frame.iter().enumerate() {
-            if f == self.frame {
-                self.frame_stats.working_set_blases += 1;
-                self.frame_stats.working_set_bytes += self.blas_bytes[b];
+        for (b, &f) in self.res.used_in_frame.iter().enumerate() {
+            if f == self.frame.number {
+                self.frame.stats.working_set_blases += 1;
+                self.frame.stats.working_set_bytes += self.res.blas_bytes[b];
                 working_meshes.extend(self.blas_meshes(b));
             }
         }
         // Of working_set_bytes: what the meshes take from the budget (0 in host memory).
-        self.frame_stats.working_set_mesh_bytes = working_meshes
+        self.frame.stats.working_set_mesh_bytes = working_meshes
             .into_iter()
-            .filter_map(|m| self.meshes[m].as_ref().map(|g| self.mesh_budget_bytes(g)))
+            .filter_map(|m| {
+                self.res.meshes[m]
+                    .as_ref()
+                    .map(|g| self.mesh_budget_bytes(g))
+            })
             .sum();
-        // Prefetch: what the guard band saw, evicting only what this frame did not see (what
-        // does not fit is skipped), within what is left of the frame's build budget. With a
-        // probe of the next camera, what its rays need comes first, and only what the probe
-        // saw is kept: this frame is done, the next one is what the room is for.
+    }
+
+    /// Prefetch: what the guard band saw, evicting only what this frame did not see (what
+    /// does not fit is skipped), within what is left of the frame's build budget. With a
+    /// probe of the next camera, what its rays need comes first, and only what the probe
+    /// saw is kept: this frame is done, the next one is what the room is for.
+    fn prefetch_after_frame(
+        &mut self,
+        mut guard_demand: Demand,
+        probe: Option<FirstProbe>,
+        opts: &RenderOptions,
+    ) -> Result<()> {
         let mut again = None;
-        let evictions_at_probe = self.evictions;
+        let evictions_at_probe = self.res.evictions;
         if let Some((next, (p, open))) = probe {
             let needed = p.needed_ids();
             guard_demand.merge_first(p);
-            self.frame_first_stamp = self.stamp;
+            self.frame.first_stamp = self.frame.stamp;
             again = Some((next, open, needed));
         }
-        if !guard_demand.is_empty() && self.frame_stats.complete && !self.frame_build_spent() {
+        if !guard_demand.is_empty() && self.frame.stats.complete && !self.frame_build_spent() {
             if let Err(e) = self
                 .make_resident(&guard_demand, true)
                 .and_then(|()| match again {
@@ -142,24 +249,30 @@ impl<'a> StreamingRenderer<'a> {
                 return Err(e);
             }
         }
-        // Pass marks (auto) for the next probes: this frame evicted for build room and its
-        // prefetch built all it wanted.
-        let st = &self.frame_stats;
+        Ok(())
+    }
+
+    /// Pass marks (auto) for the next probes: this frame evicted for build room and its
+    /// prefetch built all it wanted.
+    fn note_pass_marks(&mut self) {
+        let st = &self.frame.stats;
         let build_room = st
             .evicted
             .saturating_sub(st.evicted_for_tlas + st.evicted_on_refusal);
         if super::PassMarks::auto_wanted(build_room, st.prefetch_skipped) {
-            self.pass_marks_held = self.frame;
+            self.frame.pass_marks_held = self.frame.number;
         }
-        let report = self.heap.report();
-        self.frame_stats.frame_ms = frame_t0.elapsed().as_secs_f64() * 1e3;
+    }
+
+    /// The frame's residency statistics, from the allocator's `report` now. Resident bytes
+    /// are split once: streamed BLASes and their meshes (what the room is for) beside the
+    /// skeleton's BLASes and TLASes.
+    fn measure_residency(&mut self, report: &motu_alloc::AllocReport) {
         let resident_textures = self.shading.resident_textures();
-        let st = &mut self.frame_stats;
+        let st = &mut self.frame.stats;
         st.resident_textures = resident_textures;
-        // Resident bytes split once: streamed BLASes and their meshes (what the room is for)
-        // beside the skeleton's BLASes and TLASes.
         let (mut streamed_blases, mut streamed_bytes, mut skeleton_bytes) = (0u32, 0u64, 0u64);
-        for (a, &buildable) in self.blas.iter().zip(&self.buildable) {
+        for (a, &buildable) in self.res.blas.iter().zip(self.topo.buildable_all()) {
             if let Some(a) = a {
                 if buildable {
                     streamed_blases += 1;
@@ -169,23 +282,17 @@ impl<'a> StreamingRenderer<'a> {
                 }
             }
         }
-        for g in self.meshes.iter().flatten() {
-            if self.meshes_budgeted {
+        for g in self.res.meshes.iter().flatten() {
+            if self.res.meshes_budgeted {
                 streamed_bytes += g.size_bytes();
             } else {
                 st.resident_host_mesh_bytes += g.size_bytes();
             }
         }
         let host_counts = self.heap.host_visible_counts_against_budget();
-        skeleton_bytes += self
-            .tlas
-            .iter()
-            .flatten()
-            .map(|t| t.size_bytes(host_counts))
-            .sum::<u64>()
-            + self.placeholders.bytes;
+        skeleton_bytes += self.tlases.size_bytes(host_counts);
         st.resident_blases = streamed_blases;
-        st.resident_tlases = self.tlas.iter().filter(|t| t.is_some()).count() as u32;
+        st.resident_tlases = self.tlases.tlas.iter().filter(|t| t.is_some()).count() as u32;
         st.resident_bytes = streamed_bytes + skeleton_bytes;
         st.vram_peak_bytes = report.peak_block_bytes;
         st.vram_budget_bytes = report.budget_bytes;
@@ -193,72 +300,66 @@ impl<'a> StreamingRenderer<'a> {
         st.heap_in_use_bytes = report.budget_in_use_bytes;
         let fixed_bytes = report.budget_in_use_bytes.saturating_sub(streamed_bytes);
         st.room_bytes = report.budget_bytes.saturating_sub(fixed_bytes);
-        let tot = &mut self.totals;
-        tot.frames += 1;
-        tot.passes += u64::from(st.passes);
-        tot.blas_built += u64::from(st.blas_built);
-        tot.tlas_built += u64::from(st.tlas_built);
-        tot.tlas_rebuilt += u64::from(st.tlas_rebuilt);
-        tot.tlas_rebuild_groups += u64::from(st.tlas_rebuild_groups);
-        tot.evicted += u64::from(st.evicted);
-        tot.deferred += u64::from(st.deferred);
-        tot.incomplete_frames += u64::from(!st.complete);
-        tot.fallback_pixels += st.fallback_pixels;
-        tot.bytes_streamed += st.bytes_streamed;
-        tot.built_bytes += st.built_bytes;
-        tot.restored_blases += u64::from(st.restored_blases);
-        tot.restored_bytes += st.restored_bytes;
-        tot.restore_ms += st.restore_ms;
-        tot.rebuilt_blases += u64::from(st.rebuilt_blases);
-        tot.rebuilt_bytes += st.rebuilt_bytes;
-        tot.cache_stored += u64::from(st.cache_stored);
-        tot.cache_stored_bytes += st.cache_stored_bytes;
-        tot.cache_store_ms += st.cache_store_ms;
-        tot.restore_gb_per_s = if tot.restore_ms > 0.0 {
-            tot.restored_bytes as f64 / (tot.restore_ms * 1e6)
-        } else {
-            0.0
-        };
-        tot.triangles_built += st.triangles_built;
-        tot.build_ms += st.build_ms;
-        tot.vram_peak_bytes = report.peak_block_bytes;
-        tot.host_mesh_peak_bytes = tot.host_mesh_peak_bytes.max(st.resident_host_mesh_bytes);
+    }
 
+    /// The frame's image, AOVs and render statistics.
+    fn frame_output(
+        &mut self,
+        camera: &CameraParams,
+        image: FrameImage,
+        opts: &RenderOptions,
+        report: motu_alloc::AllocReport,
+    ) -> Result<(RenderOutput, FrameStreamStats)> {
+        let (w, h) = (camera.width, camera.height);
+        let pixels = u64::from(w) * u64::from(h);
+        let FrameImage {
+            records,
+            rgba_words,
+            counters,
+            ..
+        } = image;
         let (aov, rgba8, heatmap_max, exposure_ev) =
             crate::render::frame_outputs(w, h, records, &rgba_words, opts);
         crate::render::check_texture_residency(&counters)?;
-        self.frame_stats.truncated_rays = u64::from(counters[crate::render::STAT_TRUNCATED_RAYS]);
+        self.frame.stats.truncated_rays = u64::from(counters[crate::render::STAT_TRUNCATED_RAYS]);
         let stats = RenderStats::measured(
             opts,
             FrameMeasure {
                 width: w,
                 height: h,
                 frames: 1,
-                ms_per_frame: self.frame_stats.trace_ms,
-                primary_rays: pixels + self.frame_stats.reshot_pixels,
+                ms_per_frame: self.frame.stats.trace_ms,
+                primary_rays: pixels + self.frame.stats.reshot_pixels,
                 aov: &aov,
                 counters: &counters,
                 heatmap_max,
                 exposure_ev,
                 as_bytes: self
+                    .res
                     .blas
                     .iter()
                     .flatten()
                     .map(|a| a.size_bytes)
-                    .chain(self.tlas.iter().flatten().map(|t| t.accel.size_bytes))
+                    .chain(
+                        self.tlases
+                            .tlas
+                            .iter()
+                            .flatten()
+                            .map(|t| t.accel.size_bytes),
+                    )
                     .sum(),
                 alloc: report,
-                passes: self.frame_stats.passes,
+                passes: self.frame.stats.passes,
             },
         );
         tracing::info!(
-            frame = self.frame,
-            passes = self.frame_stats.passes,
-            blas_built = self.frame_stats.blas_built,
-            evicted = self.frame_stats.evicted,
+            frame = self.frame.number,
+            passes = self.frame.stats.passes,
+            blas_built = self.frame.stats.blas_built,
+            evicted = self.frame.stats.evicted,
             "stream frame done"
         );
-        Ok((RenderOutput { aov, rgba8, stats }, self.frame_stats.clone()))
+        Ok((RenderOutput { aov, rgba8, stats }, self.frame.stats.clone()))
     }
 
     /// Later probe rounds (`StreamOptions::probe_rounds`): the pixels `open` the round before
@@ -266,7 +367,7 @@ impl<'a> StreamingRenderer<'a> {
     /// prefetched, while the prefetch built some structure a round's rays `needed` first (the
     /// open pixels' rays go on from there) and pixels stay open. Then verifying rounds
     /// (`StreamOptions::probe_verify_rounds`) over every pixel, unless the rounds settled
-    /// (no pixel left open) and nothing was evicted since the first probe (`self.evictions`
+    /// (no pixel left open) and nothing was evicted since the first probe (`self.res.evictions`
     /// was `evictions_at_probe` then): the next frame then finds everything its rays need.
     fn probe_again(
         &mut self,
@@ -278,8 +379,8 @@ impl<'a> StreamingRenderer<'a> {
     ) -> Result<()> {
         let mut settled = open.is_empty();
         while !open.is_empty()
-            && self.frame_stats.probe_rounds < self.opts.probe_rounds
-            && needed.iter().any(|&b| self.blas[b as usize].is_some())
+            && self.frame.stats.probe_rounds < self.opts.probe_rounds
+            && needed.iter().any(|&b| self.res.blas[b as usize].is_some())
             && !self.frame_build_spent()
         {
             let Some((demand, still_open)) = self.probe_round(next, opts, Some(&open))? else {
@@ -294,26 +395,26 @@ impl<'a> StreamingRenderer<'a> {
             open = still_open;
             settled = open.is_empty();
         }
-        if settled && self.evictions == evictions_at_probe {
+        if settled && self.res.evictions == evictions_at_probe {
             return Ok(());
         }
         // Verifying rounds: the prefetch evicted, for room, structures no round met, and the
         // next frame's rays may pass through some of them; every pixel again finds those. A
         // round that built something leaves its open pixels' rays going on past it, so the
         // next round runs whether or not it evicted.
-        while self.frame_stats.probe_verify_rounds < self.opts.probe_verify_rounds
+        while self.frame.stats.probe_verify_rounds < self.opts.probe_verify_rounds
             && !self.frame_build_spent()
         {
-            self.frame_stats.probe_verify_rounds += 1;
+            self.frame.stats.probe_verify_rounds += 1;
             let Some((demand, _)) = self.probe_round(next, opts, None)? else {
                 return Ok(());
             };
             if demand.needed_ids().is_empty() {
                 break;
             }
-            let built = self.frame_stats.prefetched;
+            let built = self.frame.stats.prefetched;
             self.make_resident(&demand, true)?;
-            if self.frame_stats.prefetched == built {
+            if self.frame.stats.prefetched == built {
                 break;
             }
         }

@@ -23,17 +23,28 @@ pub(super) const LEVEL_NEEDED: u32 = 2;
 pub(super) const PROBE_MET: u8 = 1;
 pub(super) const PROBE_RESIDENT: u8 = 2;
 
+/// What a frame's passes leave: the image, the shaders' stats counters and what the guard
+/// band saw.
+pub(super) struct FrameImage {
+    pub records: Vec<AovRecord>,
+    /// Colour, one packed RGBA8 word a pixel.
+    pub rgba_words: Vec<u32>,
+    /// The shaders' stats counters (`STAT_WORDS`).
+    pub counters: Vec<u32>,
+    /// What the guard band (and pass 1's open marks) saw: the prefetch after the frame.
+    pub guard_demand: Demand,
+}
+
 impl<'a> StreamingRenderer<'a> {
-    /// The frame's build–traverse passes. Returns the image (AOV records, colour words), the
-    /// stats counters and what the guard band saw (the prefetch).
-    #[allow(clippy::type_complexity)]
+    /// The frame's build–traverse passes. Returns the image, the stats counters and what the
+    /// guard band saw (the prefetch).
     pub(super) fn run_passes(
         &mut self,
         fb: &FrameBuffers,
         w: u32,
         h: u32,
         guard: &[u32],
-    ) -> Result<(Vec<AovRecord>, Vec<u32>, Vec<u32>, Demand)> {
+    ) -> Result<FrameImage> {
         let nb = self.view.blases.len();
         let pixels = u64::from(w) * u64::from(h);
         let stamps_bytes = (nb * 4) as u64;
@@ -42,22 +53,22 @@ impl<'a> StreamingRenderer<'a> {
         let final_off = (inc_off + 4 + 4 * pixels).div_ceil(16) * 16;
         let mut full_count = pixels as u32;
         let mut list: Vec<u32> = guard.to_vec();
-        self.frame_stats.guard_rays = guard.len() as u64;
+        self.frame.stats.guard_rays = guard.len() as u64;
         let mut guard_demand = Demand::default();
         let max_passes = self.frame_pass_cap();
         loop {
             let pass_t0 = Instant::now();
-            let before = PassCounters::of(&self.frame_stats);
+            let before = PassCounters::of(&self.frame.stats);
             let traced = u64::from(full_count) + list.len() as u64;
-            self.frame_stats.passes += 1;
-            let first = self.frame_stats.passes == 1;
+            self.frame.stats.passes += 1;
+            let first = self.frame.stats.passes == 1;
             let PassReadback {
                 stamps,
                 requests,
                 incomplete,
                 trace_ms,
             } = self.trace_pass(fb, pixels, full_count, &list, first, 0)?;
-            self.frame_stats.trace_ms += trace_ms;
+            self.frame.stats.trace_ms += trace_ms;
             let count = incomplete.len() as u32;
             // Resident BLASes seen refresh their LRU age; empty ones are needed (some pixel's
             // nearest open one), open (needed later) or, in pass 1, prefetch candidates (the
@@ -91,20 +102,20 @@ impl<'a> StreamingRenderer<'a> {
             };
             let host_before_build = pass_t0.elapsed().as_secs_f64() * 1e3;
             let log_pass = |s: &mut Self, mut pass: PassStats, host_extra: f64| {
-                before.since(&s.frame_stats, &mut pass);
+                before.since(&s.frame.stats, &mut pass);
                 pass.host_ms = (host_before_build - pass.trace_ms).max(0.0) + host_extra;
-                s.frame_stats.host_ms += pass.host_ms;
-                s.frame_stats.pass_log.push(pass);
+                s.frame.stats.host_ms += pass.host_ms;
+                s.frame.stats.pass_log.push(pass);
             };
             if count == 0 {
                 log_pass(self, pass, 0.0);
-                self.frame_stats.complete = true;
+                self.frame.stats.complete = true;
                 break;
             }
             let spent = self.frame_build_spent();
-            if self.frame_stats.passes >= max_passes || spent {
-                self.frame_stats.incomplete_pixels = u64::from(count);
-                self.frame_stats.build_budget_spent = spent;
+            if self.frame.stats.passes >= max_passes || spent {
+                self.frame.stats.incomplete_pixels = u64::from(count);
+                self.frame.stats.build_budget_spent = spent;
                 if self.builds_after_last_pass() {
                     // Bounded frames: build toward the next frame (what is left of the budget).
                     if !spent {
@@ -116,7 +127,7 @@ impl<'a> StreamingRenderer<'a> {
                 } else {
                     tracing::warn!(
                         incomplete = count,
-                        passes = self.frame_stats.passes,
+                        passes = self.frame.stats.passes,
                         "stream pass cap reached with pixels unfinished"
                     );
                 }
@@ -129,14 +140,31 @@ impl<'a> StreamingRenderer<'a> {
                 return Err(e);
             }
             let t_list = Instant::now();
-            self.frame_stats.reshot_pixels += u64::from(count);
+            self.frame.stats.reshot_pixels += u64::from(count);
             full_count = 0;
             list = relist(&incomplete);
             pass.open_pixels = u64::from(count);
             log_pass(self, pass, t_list.elapsed().as_secs_f64() * 1e3);
         }
-        // Final readback of the image.
         guard_demand.sort();
+        let mut image = self.read_image(fb, w, h, final_off, &list)?;
+        image.guard_demand = guard_demand;
+        Ok(image)
+    }
+
+    /// The final readback of the image (AOV records, colour words, stats counters) from
+    /// `fb` through its readback buffer at `final_off`; `list`: the last pass's incomplete
+    /// pixels, unbiased (shown as misses unless the fallback wrote them). The guard band's
+    /// demand is left empty.
+    fn read_image(
+        &mut self,
+        fb: &FrameBuffers,
+        w: u32,
+        h: u32,
+        final_off: u64,
+        list: &[u32],
+    ) -> Result<FrameImage> {
+        let pixels = u64::from(w) * u64::from(h);
         let mut rec = self.ctx.record("stream readback")?;
         rec.copy_buffer(&fb.aov, 0, &fb.readback, final_off, pixels * 16)?;
         rec.copy_buffer(
@@ -159,13 +187,13 @@ impl<'a> StreamingRenderer<'a> {
             .readback
             .read_vec(final_off + pixels * 16, pixels as usize)?;
         let counters: Vec<u32> = fb.readback.read_vec(final_off + pixels * 20, STAT_WORDS)?;
-        if !self.frame_stats.complete && self.opts.fallback != StreamFallback::Off {
+        if !self.frame.stats.complete && self.opts.fallback != StreamFallback::Off {
             // Each wrote its fallback when it was deferred (render_pixel.glsl).
-            self.frame_stats.fallback_pixels = list.len() as u64;
-        } else if !self.frame_stats.complete {
+            self.frame.stats.fallback_pixels = list.len() as u64;
+        } else if !self.frame.stats.complete {
             // Never written: misses, magenta so they are not mistaken for sky.
             // `list` holds the last pass's incomplete pixels, unbiased.
-            for &v in &list {
+            for &v in list {
                 let (x, y) = (v & 0xffff, v >> 16);
                 if x < w && y < h {
                     let i = y as usize * w as usize + x as usize;
@@ -174,7 +202,12 @@ impl<'a> StreamingRenderer<'a> {
                 }
             }
         }
-        Ok((records, rgba, counters, guard_demand))
+        Ok(FrameImage {
+            records,
+            rgba_words: rgba,
+            counters,
+            guard_demand: Demand::default(),
+        })
     }
 }
 
@@ -183,10 +216,10 @@ impl<'a> StreamingRenderer<'a> {
     /// `FrameStreamStats::first_pass_missed_evicted`), from the last probe's sightings, which
     /// it then forgets.
     fn classify_first_pass_misses(&mut self, demand: &Demand) {
-        let sighting = std::mem::take(&mut self.probe_sighting);
+        let sighting = std::mem::take(&mut self.frame.probe_sighting);
         for &(b, _) in &demand.blases {
             let s = sighting.get(b as usize).copied().unwrap_or(0);
-            let st = &mut self.frame_stats;
+            let st = &mut self.frame.stats;
             if s & PROBE_MET != 0 {
                 st.first_pass_missed_probed += 1;
             } else if s & PROBE_RESIDENT != 0 {
@@ -258,19 +291,20 @@ impl<'a> StreamingRenderer<'a> {
     pub(super) fn sightings(&mut self, stamps: &[u32], this_frame: bool) -> Vec<(u32, u32)> {
         let mut out = Vec::new();
         for (b, &v) in stamps.iter().enumerate() {
-            if v >> 2 != self.stamp {
+            if v >> 2 != self.frame.stamp {
                 continue;
             }
-            self.last_seen[b] = self.stamp;
-            if self.blas[b].is_some() {
+            self.res.last_seen[b] = self.frame.stamp;
+            if self.res.blas[b].is_some() {
                 if this_frame {
-                    self.used_in_frame[b] = self.frame;
+                    self.res.used_in_frame[b] = self.frame.number;
                 }
-                if self.buildable[b] {
-                    self.residency
-                        .mark_visible(ItemId(b as u32), u64::from(self.stamp));
+                if self.topo.buildable(b) {
+                    self.res
+                        .residency
+                        .mark_visible(ItemId(b as u32), u64::from(self.frame.stamp));
                 }
-            } else if self.buildable[b] {
+            } else if self.topo.buildable(b) {
                 out.push((b as u32, v & 3));
             }
         }
@@ -293,50 +327,45 @@ impl<'a> StreamingRenderer<'a> {
         let stamps_bytes = (nb * 4) as u64;
         let req_off = stamps_bytes.div_ceil(16) * 16;
         let inc_off = req_off + req_off;
-        if self.stamp + 1 >= STAMP_LIMIT {
+        if self.frame.stamp + 1 >= STAMP_LIMIT {
             // ~20 days of a viewer at 60 frames a second and 5 passes a frame: refuse rather
             // than let stamps wrap and marks lie.
             return Err(GpuError::LimitExceeded {
                 what: "streaming passes of one renderer (stamps)",
-                requested: u64::from(self.stamp) + 1,
+                requested: u64::from(self.frame.stamp) + 1,
                 limit: u64::from(STAMP_LIMIT - 1),
             });
         }
-        self.stamp += 1;
+        self.frame.stamp += 1;
         // Every resident BLAS is walked by every ray of this pass that reaches its box in
         // front of its best hit: a ray that started by now needs it no more.
-        for b in 0..nb {
-            if self.blas[b].is_some() && self.buildable[b] {
-                self.walked[b] = self.stamp;
-            }
-        }
-        let walked = self.walked_table()?;
-        if nb > 0 {
-            walked.write(0, &self.walked)?;
-        }
+        let resident = (0..nb).filter(|&b| self.res.blas[b].is_some() && self.topo.buildable(b));
+        self.gpu.write_walked(resident, self.frame.stamp)?;
+        let walked = self.gpu.walked_table()?;
         fb.pixel_list.write(0, list)?;
+        let (cluster_members, proxy_box_index, proxy_boxes) = self.gpu.proxy_addresses();
         let sp = StreamParams {
             blas_stamps: self
-                .blas_stamps
-                .as_ref()
+                .gpu
+                .blas_stamps()
                 .map_or(Ok(0), |b| b.device_address().map(|a| a.0))?,
             walked: walked.device_address()?.0,
             pixel_list: fb.pixel_list.device_address()?.0,
             incomplete: fb.incomplete.device_address()?.0,
-            stamp: self.stamp,
+            stamp: self.frame.stamp,
             full_count,
             list_count: list.len() as u32,
             blas_count: nb as u32,
             requests: fb.requests.device_address()?.0,
             carry: fb.carry.device_address()?.0,
-            cluster_members: self.cluster_members,
-            proxy_box_index: self.proxy_box_index,
-            proxy_boxes: self.proxy_boxes,
+            cluster_members,
+            proxy_box_index,
+            proxy_boxes,
             flags,
             _pad: 0,
         };
         fb.stream.write(0, std::slice::from_ref(&sp))?;
-        let mut addresses = self.addresses;
+        let mut addresses = self.gpu.addresses();
         addresses[Slot::Frame as usize] = fb.params.device_address()?.0;
         addresses[Slot::Aov as usize] = fb.aov.device_address()?.0;
         addresses[Slot::Rgba as usize] = fb.rgba.device_address()?.0;
@@ -344,7 +373,7 @@ impl<'a> StreamingRenderer<'a> {
         addresses[Slot::Stream as usize] = fb.stream.device_address()?.0;
         let push_bytes: &[u8] = bytemuck::cast_slice(&addresses);
         let n = full_count + list.len() as u32;
-        let Some((_, _, tracer)) = &self.tracer else {
+        let Some((_, _, tracer)) = &self.frame.tracer else {
             return Err(GpuError::InvalidRequest(
                 "streaming: no trace pipeline".into(),
             ));
@@ -370,7 +399,7 @@ impl<'a> StreamingRenderer<'a> {
         rec.barrier();
         tracer.record(&mut rec, push_bytes, dims, groups)?;
         rec.barrier();
-        if let Some(bs) = &self.blas_stamps {
+        if let Some(bs) = self.gpu.blas_stamps() {
             if nb > 0 {
                 rec.copy_buffer(bs, 0, &fb.readback, 0, stamps_bytes)?;
                 rec.copy_buffer(&fb.requests, 0, &fb.readback, req_off, stamps_bytes)?;

@@ -233,7 +233,7 @@ impl StreamingRenderer<'_> {
     /// BLAS `b`'s placeholder: its bounds' centre, or (`full`, while they exist) its whole
     /// bounds; the empty one where it has none.
     fn placeholder(&self, b: usize, full: bool) -> u64 {
-        let ph = &self.placeholders;
+        let ph = &self.tlases.placeholders;
         let whole = if full {
             ph.full_per_blas.get(b).copied()
         } else {
@@ -246,7 +246,7 @@ impl StreamingRenderer<'_> {
         if p != 0 {
             p
         } else {
-            self.placeholders.empty
+            self.tlases.placeholders.empty
         }
     }
 
@@ -257,7 +257,7 @@ impl StreamingRenderer<'_> {
         if addr != 0 {
             return tail_record(count, marks, addr);
         }
-        let mut inst = tail_record(count, marks, self.placeholders.empty);
+        let mut inst = tail_record(count, marks, self.tlases.placeholders.empty);
         set_instance_mask(&mut inst, 0);
         inst
     }
@@ -272,7 +272,7 @@ impl StreamingRenderer<'_> {
         // (BLAS, full) per box; None: the empty one.
         let mut owner: Vec<Option<(usize, bool)>> = Vec::new();
         for b in 0..nb {
-            if !self.buildable[b] {
+            if !self.topo.buildable(b) {
                 continue;
             }
             let r = &view.blases[b];
@@ -317,7 +317,7 @@ impl StreamingRenderer<'_> {
         })();
         self.heap.free(buf);
         let built = r?;
-        let ph = &mut self.placeholders;
+        let ph = &mut self.tlases.placeholders;
         ph.per_blas = vec![0u64; nb];
         ph.full_per_blas = vec![0u64; nb];
         for (k, a) in built {
@@ -362,35 +362,28 @@ impl StreamingRenderer<'_> {
     /// fits without them. Returns whether there was any.
     pub(super) fn drop_persistent(&mut self) -> bool {
         let mut any = false;
-        for t in 0..self.persistent_mode.len() {
-            if !std::mem::take(&mut self.persistent_mode[t]) {
+        for t in 0..self.tlases.persistent_mode.len() {
+            if !std::mem::take(&mut self.tlases.persistent_mode[t]) {
                 continue;
             }
             any = true;
-            if let Some(g) = self.tlas[t].take() {
+            if let Some(g) = self.tlases.tlas[t].take() {
                 g.release(&mut self.heap);
             }
-            self.dirty.insert(t as u32);
+            self.tlases.dirty.insert(t as u32);
         }
         if any {
             tracing::warn!(
                 persistent_tlas_bytes = self.totals.persistent_tlas_bytes,
                 "a BLAS does not fit next to the persistent TLASes: TLASes are rebuilt from now on"
             );
-            self.placeholders.release(&mut self.heap);
+            self.tlases.placeholders.release(&mut self.heap);
             self.totals.tlas_mode = "rebuild";
             self.totals.persistent_tlases = 0;
             self.totals.persistent_tlas_bytes = 0;
             self.totals.persistent_dropped = true;
         }
         any
-    }
-
-    /// Whether TLAS `t` is persistent and built.
-    pub(super) fn is_persistent(&self, t: u32) -> bool {
-        self.tlas[t as usize]
-            .as_ref()
-            .is_some_and(|g| g.persistent.is_some())
     }
 
     /// Builds persistent TLAS `t` over every instance (the first time), records from the
@@ -483,7 +476,7 @@ impl StreamingRenderer<'_> {
         addrs: &[u64],
         tail: [u64; 2],
     ) -> Result<u64> {
-        let Some(mut g) = self.tlas[t as usize].take() else {
+        let Some(mut g) = self.tlases.tlas[t as usize].take() else {
             return Err(GpuError::InvalidRequest(format!(
                 "streaming: persistent TLAS {t} is not resident"
             )));
@@ -534,7 +527,7 @@ impl StreamingRenderer<'_> {
             p.written = want;
             Ok(rewritten)
         })();
-        self.tlas[t as usize] = Some(g);
+        self.tlases.tlas[t as usize] = Some(g);
         r
     }
 

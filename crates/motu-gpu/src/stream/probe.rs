@@ -108,50 +108,58 @@ impl<'a> StreamingRenderer<'a> {
         let rays = u64::from(full) + list.len() as u64;
         // A later round marks as the first did.
         let pass_rows = if later {
-            self.frame_stats.probe_pass_rows
+            self.frame.stats.probe_pass_rows
         } else {
             self.opts.pass_marks.rows(super::PassMarks::auto_window(
-                self.frame,
-                self.pass_marks_held,
+                self.frame.number,
+                self.frame.pass_marks_held,
             ))
         };
-        self.frame_stats.probe_pass_rows = pass_rows;
-        let resident: Vec<bool> = self.blas.iter().map(Option::is_some).collect();
+        self.frame.stats.probe_pass_rows = pass_rows;
+        let resident: Vec<bool> = self.res.blas.iter().map(Option::is_some).collect();
         let PassReadback {
             stamps,
             requests,
             incomplete,
             trace_ms,
         } = self.trace_pass(fb, pixels, full, &list, false, probe_flags(pass_rows))?;
-        let stamp = self.stamp;
+        let stamp = self.frame.stamp;
         if pass_rows > 0 {
             // Passed by a final ray only: as recent as the frame's last pass (a later round:
             // as the first round's), below what the probe met, so not kept by the prefetch.
             let at = if later {
-                self.frame_first_stamp.saturating_sub(1)
+                self.frame.first_stamp.saturating_sub(1)
             } else {
                 stamp - 1
             };
             for (b, &v) in stamps.iter().enumerate() {
-                if passed_mark(v, stamp) && self.blas[b].is_some() && self.buildable[b] {
-                    self.residency.mark_visible(ItemId(b as u32), u64::from(at));
-                    self.last_seen[b] = self.last_seen[b].max(at);
-                    self.frame_stats.probe_pass_marks += 1;
+                if passed_mark(v, stamp) && self.res.blas[b].is_some() && self.topo.buildable(b) {
+                    self.res
+                        .residency
+                        .mark_visible(ItemId(b as u32), u64::from(at));
+                    self.res.last_seen[b] = self.res.last_seen[b].max(at);
+                    self.frame.stats.probe_pass_marks += 1;
                 }
             }
         }
         self.count_probe_need(&stamps, stamp, !later);
         // What the rounds saw together (a later round adds to the first's).
-        if !later || self.probe_sighting.len() != stamps.len() {
-            self.probe_sighting = vec![0; stamps.len()];
+        if !later || self.frame.probe_sighting.len() != stamps.len() {
+            self.frame.probe_sighting = vec![0; stamps.len()];
         }
-        for ((s, &v), &r) in self.probe_sighting.iter_mut().zip(&stamps).zip(&resident) {
+        for ((s, &v), &r) in self
+            .frame
+            .probe_sighting
+            .iter_mut()
+            .zip(&stamps)
+            .zip(&resident)
+        {
             *s |=
                 (if v >> 2 == stamp { PROBE_MET } else { 0 }) | if r { PROBE_RESIDENT } else { 0 };
         }
-        self.frame_stats.probe_rays += rays;
-        self.frame_stats.probe_ms += trace_ms;
-        self.frame_stats.probe_rounds += 1;
+        self.frame.stats.probe_rays += rays;
+        self.frame.stats.probe_ms += trace_ms;
+        self.frame.stats.probe_rounds += 1;
         let mut demand = Demand::default();
         for (b, level) in self.sightings(&stamps, false) {
             // Needed (a ray's nearest) first by request count; then everything else it met.
@@ -174,25 +182,28 @@ impl<'a> StreamingRenderer<'a> {
         let mut need = if first {
             ProbeNeed::default()
         } else {
-            std::mem::take(&mut self.probe_need)
+            std::mem::take(&mut self.frame.probe_need)
         };
         for (b, &v) in stamps.iter().enumerate() {
             let used = v >> 2 == stamp || passed_mark(v, stamp);
-            let Some(a) = self.blas[b].as_ref().filter(|_| used && self.buildable[b]) else {
+            let Some(a) = self.res.blas[b]
+                .as_ref()
+                .filter(|_| used && self.topo.buildable(b))
+            else {
                 continue;
             };
             need.blases.entry(b).or_insert(a.size_bytes);
             for m in self.blas_meshes(b) {
-                if let Some(g) = self.meshes[m].as_ref() {
+                if let Some(g) = self.res.meshes[m].as_ref() {
                     need.meshes.entry(m).or_insert(self.mesh_budget_bytes(g));
                 }
             }
         }
-        self.frame_stats.probe_need_blases = need.blases.len() as u32;
+        self.frame.stats.probe_need_blases = need.blases.len() as u32;
         let mesh_bytes = need.meshes.values().sum::<u64>();
-        self.frame_stats.probe_need_bytes = need.blases.values().sum::<u64>() + mesh_bytes;
-        self.frame_stats.probe_need_mesh_bytes = mesh_bytes;
-        self.probe_need = need;
+        self.frame.stats.probe_need_bytes = need.blases.values().sum::<u64>() + mesh_bytes;
+        self.frame.stats.probe_need_mesh_bytes = mesh_bytes;
+        self.frame.probe_need = need;
     }
 }
 

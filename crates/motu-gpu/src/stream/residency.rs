@@ -1,12 +1,13 @@
-//! Residency: LRU eviction under the budget, pins, mesh reference counts, and quarantine of
-//! TLASes left inconsistent by a failed build step.
+//! Residency: the part that says what of the streamed state is resident ([`Resident`]); LRU
+//! eviction under the budget, pins, mesh reference counts, and quarantine of TLASes left
+//! inconsistent by a failed build step.
 
 use motu_abi::BLAS_TRIANGLES;
-use motu_alloc::ItemId;
+use motu_alloc::{ItemId, MemoryClass, Residency};
 
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
-use crate::scene::MeshGpu;
+use crate::scene::{AccelStruct, MeshGpu};
 
 /// Why structures are evicted (`FrameStreamStats` counts each).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -19,11 +20,80 @@ pub(super) enum EvictWhy {
     Refused,
 }
 
+/// The residency part: the streamed BLASes and meshes resident now, and what chooses what
+/// goes (the LRU order by last sighting, the pins of a build step, the sizes and working set).
+///
+/// Invariants: a streamed BLAS is resident (`blas[b]` set) exactly when `residency` holds it,
+/// with its structure's and meshes' bytes; `mesh_refs[m]` counts the resident BLASes using mesh
+/// `m`, which is resident exactly while that is above 0; pinned items are never evicted in the
+/// current build step; `evictions` never decreases.
+pub(super) struct Resident {
+    /// Per BLAS (streamed and skeleton alike): its structure when resident.
+    pub blas: Vec<Option<AccelStruct>>,
+    /// Per mesh: its geometry when resident, and how many resident BLASes use it.
+    pub meshes: Vec<Option<MeshGpu>>,
+    pub mesh_refs: Vec<u32>,
+    /// The memory streamed meshes are allocated in ([`StreamOptions::mesh_memory`] resolved)
+    /// and whether it counts against the budget.
+    ///
+    /// [`StreamOptions::mesh_memory`]: super::StreamOptions::mesh_memory
+    pub mesh_class: MemoryClass,
+    pub meshes_budgeted: bool,
+    /// The streamed BLASes resident, with their bytes, in LRU order.
+    pub residency: Residency,
+    /// Per item (BLAS, then TLAS): the last pass stamp that saw it.
+    pub last_seen: Vec<u32>,
+    /// Per BLAS: bytes it held when last resident (structure plus meshes), and the last frame
+    /// whose rays used it (walked while resident and seen, or built for them): the frame's
+    /// working set.
+    pub blas_bytes: Vec<u64>,
+    pub used_in_frame: Vec<u64>,
+    /// Pins of the current build step (items that must not be evicted): what the latest
+    /// pass's incomplete pixels need (or, when prefetching, everything this frame saw), plus
+    /// what the step built.
+    pub pinned: Vec<bool>,
+    /// Items the current build step made resident, in build (priority) order.
+    pub built_now: Vec<u32>,
+    /// BLASes per build group to try first (see `build_blas_queue`).
+    pub group_hint: usize,
+    /// BLASes evicted since the renderer started (also those given back; never decremented):
+    /// whether a prefetch removed anything since a probe.
+    pub evictions: u64,
+}
+
+impl Resident {
+    /// Nothing resident of `blases` BLASes, `tlases` TLASes and `meshes` meshes; streamed
+    /// meshes go to `mesh_class`.
+    pub fn new(
+        blases: usize,
+        tlases: usize,
+        meshes: usize,
+        mesh_class: MemoryClass,
+        meshes_budgeted: bool,
+    ) -> Resident {
+        Resident {
+            blas: (0..blases).map(|_| None).collect(),
+            meshes: (0..meshes).map(|_| None).collect(),
+            mesh_refs: vec![0; meshes],
+            mesh_class,
+            meshes_budgeted,
+            residency: Residency::new(),
+            last_seen: vec![0; blases + tlases],
+            blas_bytes: vec![0; blases],
+            used_in_frame: vec![0; blases],
+            pinned: vec![false; blases + tlases],
+            built_now: Vec::new(),
+            group_hint: 16,
+            evictions: 0,
+        }
+    }
+}
+
 impl<'a> StreamingRenderer<'a> {
     /// Bytes mesh `g` takes from the budget: 0 where streamed meshes live outside it (host
     /// memory of a discrete GPU, [`super::MeshMemory`]).
     pub(super) fn mesh_budget_bytes(&self, g: &MeshGpu) -> u64 {
-        if self.meshes_budgeted {
+        if self.res.meshes_budgeted {
             g.size_bytes()
         } else {
             0
@@ -34,27 +104,29 @@ impl<'a> StreamingRenderer<'a> {
     /// are left). Returns false when nothing could be evicted.
     pub(super) fn evict_some(&mut self, bytes: u64, why: EvictWhy) -> Result<bool> {
         let t0 = std::time::Instant::now();
-        let before = self.frame_stats.evicted;
+        let before = self.frame.stats.evicted;
         let r = self.evict_some_untimed(bytes);
-        let n = self.frame_stats.evicted - before;
+        let n = self.frame.stats.evicted - before;
         match why {
             EvictWhy::BuildRoom => {}
-            EvictWhy::TlasRoom => self.frame_stats.evicted_for_tlas += n,
-            EvictWhy::Refused => self.frame_stats.evicted_on_refusal += n,
+            EvictWhy::TlasRoom => self.frame.stats.evicted_for_tlas += n,
+            EvictWhy::Refused => self.frame.stats.evicted_on_refusal += n,
         }
-        self.frame_stats.evict_ms += t0.elapsed().as_secs_f64() * 1e3;
+        self.frame.stats.evict_ms += t0.elapsed().as_secs_f64() * 1e3;
         r
     }
 
     fn evict_some_untimed(&mut self, bytes: u64) -> Result<bool> {
-        let pins = &self.pinned;
+        let pins = &self.res.pinned;
         let pinned = |id: ItemId| pins.get(id.0 as usize).copied().unwrap_or(true);
         let victims = match self
+            .res
             .residency
             .choose_victims_excluding(bytes.max(1), pinned)
         {
             Ok(v) => v,
             Err(e) if e.evictable_bytes > 0 => self
+                .res
                 .residency
                 .choose_victims_excluding(e.evictable_bytes, pinned)
                 .unwrap_or_default(),
@@ -64,25 +136,25 @@ impl<'a> StreamingRenderer<'a> {
             return Ok(false);
         }
         tracing::trace!(
-            victims = ?victims.iter().map(|v| (v.0, self.last_seen.get(v.0 as usize).copied().unwrap_or(0))).collect::<Vec<_>>(),
-            stamp = self.stamp,
-            first = self.frame_first_stamp,
+            victims = ?victims.iter().map(|v| (v.0, self.res.last_seen.get(v.0 as usize).copied().unwrap_or(0))).collect::<Vec<_>>(),
+            stamp = self.frame.stamp,
+            first = self.frame.first_stamp,
             "evicting (BLAS, last seen)"
         );
         for id in victims {
             self.evict(id.0 as usize);
         }
-        tracing::debug!(resident = self.residency.len(), "evicted");
+        tracing::debug!(resident = self.res.residency.len(), "evicted");
         Ok(true)
     }
 
     /// Releases BLAS `b` with the meshes only it used; its resident parents become dirty.
     pub(super) fn evict(&mut self, b: usize) {
-        let bytes = self.residency.remove(ItemId(b as u32)).unwrap_or(0);
-        self.frame_stats.evicted += 1;
-        self.evictions += 1;
-        self.frame_stats.evicted_bytes += bytes;
-        if let Some(a) = self.blas.get_mut(b).and_then(Option::take) {
+        let bytes = self.res.residency.remove(ItemId(b as u32)).unwrap_or(0);
+        self.frame.stats.evicted += 1;
+        self.res.evictions += 1;
+        self.frame.stats.evicted_bytes += bytes;
+        if let Some(a) = self.res.blas.get_mut(b).and_then(Option::take) {
             a.release(&mut self.heap);
         }
         self.release_blas_meshes(b);
@@ -92,9 +164,9 @@ impl<'a> StreamingRenderer<'a> {
     /// Marks BLAS `b`'s resident parent TLASes dirty: their instance records no longer match
     /// it (built, evicted or moved), so they are rebuilt before the next trace.
     pub(super) fn dirty_parents(&mut self, b: usize) {
-        for &p in &self.parents[b] {
-            if self.tlas[p as usize].is_some() {
-                self.dirty.insert(p);
+        for &p in self.topo.parents(b) {
+            if self.tlases.tlas[p as usize].is_some() {
+                self.tlases.dirty.insert(p);
             }
         }
     }
@@ -108,9 +180,9 @@ impl<'a> StreamingRenderer<'a> {
 
     /// Drops one reference to mesh `m`; at zero the mesh and its texture references go.
     pub(super) fn drop_mesh_ref(&mut self, m: usize) {
-        self.mesh_refs[m] = self.mesh_refs[m].saturating_sub(1);
-        if self.mesh_refs[m] == 0 {
-            if let Some(g) = self.meshes[m].take() {
+        self.res.mesh_refs[m] = self.res.mesh_refs[m].saturating_sub(1);
+        if self.res.mesh_refs[m] == 0 {
+            if let Some(g) = self.res.meshes[m].take() {
                 self.heap.free(g.buffer);
                 self.release_mesh_textures(m);
             }
@@ -183,21 +255,21 @@ impl<'a> StreamingRenderer<'a> {
     /// Drops the pins that are not this step's builds (the incomplete pixels' best hits: they
     /// are found again later). Returns false if there were none.
     pub(super) fn unpin_pass_pins(&mut self) -> bool {
-        let mut keep = vec![false; self.pinned.len()];
-        for &i in &self.built_now {
+        let mut keep = vec![false; self.res.pinned.len()];
+        for &i in &self.res.built_now {
             if let Some(k) = keep.get_mut(i as usize) {
                 *k = true;
             }
         }
-        let changed = self.pinned.iter().zip(&keep).any(|(&p, &k)| p && !k);
-        self.pinned = keep;
+        let changed = self.res.pinned.iter().zip(&keep).any(|(&p, &k)| p && !k);
+        self.res.pinned = keep;
         changed
     }
 
     /// After a failed build step, a TLAS left dirty (absent, or referencing evicted BLASes)
     /// must never be traced: every TLAS is part of the skeleton, so the renderer is poisoned.
     pub(super) fn quarantine_after_failure(&mut self, e: &GpuError) {
-        if !self.dirty.is_empty() {
+        if !self.tlases.dirty.is_empty() {
             self.poisoned = Some(e.to_string());
         }
     }

@@ -81,15 +81,15 @@ impl<'a> StreamingRenderer<'a> {
             Texels::Streamed,
         )?;
         let n = self.view.textures.len();
+        let first = self.gpu.keep_tables(t.buffers);
         self.shading = StreamShading {
             address: t.address,
-            mesh_attrs_table: t.mesh_attrs.map(|i| self.tables.len() + i),
-            texel_addresses_table: t.texel_addresses.map(|i| self.tables.len() + i),
+            mesh_attrs_table: t.mesh_attrs.map(|i| first + i),
+            texel_addresses_table: t.texel_addresses.map(|i| first + i),
             textures: (0..n).map(|_| None).collect(),
             texture_refs: vec![0; n],
             textures_changed: false,
         };
-        self.tables.extend(t.buffers);
         Ok(())
     }
 
@@ -157,8 +157,8 @@ impl<'a> StreamingRenderer<'a> {
     pub(super) fn queue_mesh_attrs(&mut self) -> Result<()> {
         let ctx = self.ctx.clone();
         if let Some(table) = self.shading.mesh_attrs_table {
-            let mut attrs = vec![0u64; 2 * self.meshes.len()];
-            for (m, g) in self.meshes.iter().enumerate() {
+            let mut attrs = vec![0u64; 2 * self.res.meshes.len()];
+            for (m, g) in self.res.meshes.iter().enumerate() {
                 if let Some(g) = g {
                     attrs[2 * m] = g.normals_address;
                     attrs[2 * m + 1] = g.uvs_address;
@@ -167,7 +167,7 @@ impl<'a> StreamingRenderer<'a> {
             let up = self.up.as_mut().ok_or_else(|| {
                 GpuError::InvalidRequest("streaming: staging ring released".into())
             })?;
-            up.upload(&ctx, &self.tables[table], 0, bytemuck::cast_slice(&attrs))?;
+            up.upload(&ctx, self.gpu.table(table), 0, bytemuck::cast_slice(&attrs))?;
         }
         if let (Some(table), true) = (
             self.shading.texel_addresses_table,
@@ -183,7 +183,7 @@ impl<'a> StreamingRenderer<'a> {
             let up = self.up.as_mut().ok_or_else(|| {
                 GpuError::InvalidRequest("streaming: staging ring released".into())
             })?;
-            up.upload(&ctx, &self.tables[table], 0, bytemuck::cast_slice(&addrs))?;
+            up.upload(&ctx, self.gpu.table(table), 0, bytemuck::cast_slice(&addrs))?;
             self.shading.textures_changed = false;
         }
         Ok(())

@@ -1,0 +1,215 @@
+//! How a [`StreamingRenderer`](super::StreamingRenderer) works ([`StreamOptions`]) and its enumerated choices.
+
+use motu_alloc::MIB;
+
+use super::persistent::TlasUpdate;
+
+/// How a [`StreamingRenderer`](super::StreamingRenderer) works.
+#[derive(Clone, Copy, Debug)]
+pub struct StreamOptions {
+    /// The VRAM budget (`--vram-budget`): blocks counted against it never exceed it.
+    pub budget_bytes: u64,
+    /// Cap on `VkDeviceMemory` allocations.
+    pub max_allocations: u32,
+    /// Build–traverse passes per frame before giving up on the remaining pixels; 0: sized
+    /// from the structure count (see [`StreamingRenderer::max_passes`](super::StreamingRenderer::max_passes)).
+    pub max_passes: u32,
+    /// Scratch bytes one build batch may use (capped at an eighth of the budget).
+    pub scratch_budget_bytes: u64,
+    /// Host-visible staging ring (mesh data streams through it). Capped at an eighth of the
+    /// budget: on unified-memory devices (lavapipe, integrated GPUs) it counts against it.
+    pub staging_bytes: u64,
+    /// Width in pixels of the guard band traced around the image in pass 1 (every other pixel
+    /// of it) to prefetch what the camera is about to see; 0 disables prefetching.
+    pub guard_band_px: u32,
+    /// Compact acceleration structures after building.
+    pub compact: bool,
+    /// How triangle BLASes and proxy boxes are built: [`BlasBuild::Small`](motu_vk::BlasBuild::Small) by default (a
+    /// fifth smaller on NVIDIA, faster to build; streamed frames are mostly building).
+    pub blas_build: motu_vk::BlasBuild,
+    /// Also build, in a pass's build step, what fits of the structures pixels will need
+    /// after their nearest (fewer passes on a cold frame; off: they are only prefetched after
+    /// the frame).
+    pub build_open_early: bool,
+    /// What a pixel whose structures are not resident yet shows when the frame stops before
+    /// it is finished (`--stream-fallback`). Off: such pixels are unfinished (an error for
+    /// the CLI); `Coarse`: the bounds of the nearest missing structure, counted as
+    /// [`FrameStreamStats::fallback_pixels`].
+    pub fallback: StreamFallback,
+    /// After a frame, probe the next frame's camera when the caller names it
+    /// ([`StreamingRenderer::set_next_camera`](super::StreamingRenderer::set_next_camera)): every ray of every `probe_stride`-th pixel
+    /// (each axis) runs against what is resident and marks what it meets, and that is
+    /// prefetched (see `probe.rs`); 0: no probe.
+    pub probe_stride: u32,
+    /// Most probe rounds after a frame (at least one when probing). A probe ray stops at the
+    /// first structure that is not resident; once the prefetch built it, the ray may hit in
+    /// it and send its shadow and AO rays to structures no round saw yet. So the pixels a
+    /// round left open are probed again (only them) and what they need prefetched too, until
+    /// none is open, the prefetch built none of what a round needed first, or this many rounds
+    /// ran.
+    /// Each round after the first costs a TLAS rebuild or update; two rounds took the passes
+    /// a third did on the H200 (island 0.3 along shotCam: at half the full build 1.455 →
+    /// 1.182 passes after the first at the same frame time; at a quarter 2.636 → 2.364, the
+    /// image 13% sooner and the whole frame 19% longer; BENCHMARKS.md, session 22).
+    pub probe_rounds: u32,
+    /// Verifying probe rounds after those (`--stream-probe-verify`; 0: none): every pixel of
+    /// the next camera probed again against what the prefetch left resident, and what its
+    /// rays now find missing prefetched, until a round finds nothing missing, its prefetch
+    /// builds nothing, or this many ran. The prefetch evicts for room what no probe ray met,
+    /// and some of that the next frame's rays pass through on their way to their hits; a
+    /// verifying round finds it before the frame does. A round's own prefetch may evict
+    /// another such structure, so the default is two: one round left the H200's third at
+    /// 1.455 passes after the first, two at 1.000. H200, island 0.3 along shotCam, two rounds
+    /// against none (BENCHMARKS.md, session 28): primary visibility at a quarter of the full
+    /// build 1.909 → 1.091 passes after the first at about the same frame time; shaded at half
+    /// 1.182 → 1.000 (frames +12%), at a third 1.182 → 1.000 (+53%), at a quarter 2.364 →
+    /// 2.182 (capacity-bound). Each round costs a probe trace and, when it finds something, a
+    /// build step with its TLAS rebuilds.
+    pub probe_verify_rounds: u32,
+    /// Pass marks of the probe (see [`PassMarks`]); [`PassMarks::Auto`] by default.
+    pub pass_marks: PassMarks,
+    /// Bytes (meshes plus acceleration structures) one frame may build; 0: unbounded. At least
+    /// one structure is built per frame, so a frame may overshoot by one; when it is spent the
+    /// frame stops (unfinished pixels, or fallback) and later frames go on refining.
+    pub frame_build_bytes: u64,
+    /// Milliseconds of building one frame may spend; 0: unbounded (same rules).
+    pub frame_build_ms: f64,
+    /// Whether TLASes are persistent and updated as residency changes, or rebuilt over their
+    /// resident instances (`--stream-tlas`; see `persistent.rs`).
+    pub tlas_update: TlasUpdate,
+    /// Before evicting for a TLAS rebuild's room or after a refused allocation, drain the
+    /// emptiest memory blocks instead: their streamed BLASes, meshes and textures are copied
+    /// into free space other blocks have and the emptied blocks return their bytes to the
+    /// budget (`defrag.rs`; `defrag_*` per frame in `--stats`). Off by default: measured on
+    /// lavapipe only (the default island along shotCam at a third of its full build, 64×36:
+    /// 1.857 → 1.571 passes after the first, evictions on refusal 3.6 → 0 a frame; a quarter
+    /// unchanged; every image equal to the full build's), not yet on a GPU.
+    pub defrag: bool,
+    /// Where streamed meshes (positions, indices, primitive maps, shading attributes) live
+    /// (`--stream-mesh-memory`; see [`MeshMemory`]).
+    pub mesh_memory: MeshMemory,
+}
+
+/// Where the streaming renderer keeps its meshes ([`StreamOptions::mesh_memory`]). After a
+/// BLAS is built only the hits on it read its meshes (the closest-hit shading: a few
+/// vertices a pixel) and its rebuilds read them once, so on a discrete GPU they can live in
+/// host memory the GPU reads over the bus, as production GPU renderers keep out-of-core
+/// geometry, and the VRAM budget holds acceleration structures and textures alone.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum MeshMemory {
+    /// [`MeshMemory::Host`] where host-visible memory is not counted against the VRAM budget
+    /// (a discrete GPU), else [`MeshMemory::Device`] (unified memory: lavapipe, integrated
+    /// GPUs, where both are the same memory).
+    #[default]
+    Auto,
+    /// Device-local memory, counted against the budget.
+    Device,
+    /// Host-visible memory, written in place; counted against the budget only where
+    /// host-visible memory is (unified memory).
+    Host,
+}
+
+/// Pass marks of the probe ([`StreamOptions::pass_marks`], `--stream-probe-pass-rows`): the
+/// pixels of every N-th row of the next camera also walk, when their rays' hits are final, the
+/// boxes of the resident BLASes in front of those hits (the mark walk, over the marks BLASes),
+/// and the BLASes they pass without hitting (the hardware reports no such pass) become the
+/// most recently used after what the probe met: the prefetch evicts them after everything else
+/// it may evict and never skips a build to keep them (see `probe.rs`). On the H200 (island
+/// 0.3, shotCam, 640×360, BENCHMARKS.md session 25): at a third of the full build every 2nd
+/// row took passes after the first 1.727 → 1.182 at 784 ms a frame (775–856 ms without, in
+/// other calls); at half 1.182 → 1.000 passes but frames 264 → 350 ms (the walk's cost; every
+/// 4th row: 318 ms); at a quarter no change (what the probe met does not fit either).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PassMarks {
+    /// No pass marks.
+    Off,
+    /// Every N-th row (N ≥ 1) of every probe.
+    Rows(u32),
+    /// Every [`AUTO_PASS_ROWS`]-th row of the probes within [`AUTO_PASS_FRAMES`] frames of one
+    /// whose build steps evicted for room while its prefetch skipped nothing (a window, since
+    /// marking removes the evictions it reads: a frame at a time it marked every other
+    /// probe and missed more than without). The marks only reorder what the prefetch
+    /// evicts, so they help when it evicts and stops before running out of what it may evict
+    /// (a third of island 0.3's build), and are not worth their walk when it evicts nothing
+    /// for room (half: the misses there follow refusals) or everything (a quarter: it skips
+    /// builds). The default: on the H200 (island 0.3, shotCam, 640×360, 12 frames,
+    /// BENCHMARKS.md session 26) it marked from the third frame on at a third of the full
+    /// build, 1.727 → 1.182 passes after the first at 811–835 ms a frame against 846–892 ms
+    /// off (alternated), and never at half or a quarter (counts identical to off).
+    #[default]
+    Auto,
+}
+
+/// The row stride of [`PassMarks::Auto`] when it marks (every 2nd row measured best at a
+/// third of island 0.3's build: BENCHMARKS.md session 25).
+pub const AUTO_PASS_ROWS: u32 = 2;
+
+/// How many frames [`PassMarks::Auto`] keeps marking after its condition last held.
+pub const AUTO_PASS_FRAMES: u64 = 4;
+
+impl PassMarks {
+    /// The row stride a probe marks with (0: none), `wanted` being [`PassMarks::Auto`]'s
+    /// reading of the frames before ([`PassMarks::auto_window`]).
+    pub fn rows(self, wanted: bool) -> u32 {
+        match self {
+            Self::Off => 0,
+            Self::Rows(n) => n,
+            Self::Auto if wanted => AUTO_PASS_ROWS,
+            Self::Auto => 0,
+        }
+    }
+
+    /// Whether [`PassMarks::Auto`] marks the next probe after a frame that evicted
+    /// `build_room_evictions` structures to make room for builds and whose prefetch left
+    /// `prefetch_skipped` structures unbuilt.
+    pub fn auto_wanted(build_room_evictions: u32, prefetch_skipped: u32) -> bool {
+        build_room_evictions > 0 && prefetch_skipped == 0
+    }
+
+    /// Whether [`PassMarks::Auto`] marks the probe after frame `frame`, its condition having
+    /// last held after frame `held` (0: never).
+    pub fn auto_window(frame: u64, held: u64) -> bool {
+        held > 0 && frame.saturating_sub(held) <= AUTO_PASS_FRAMES
+    }
+}
+
+/// See [`StreamOptions::fallback`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum StreamFallback {
+    /// Unfinished pixels stay unfinished (misses, magenta).
+    #[default]
+    Off,
+    /// A not-yet-resident structure is shown by its bounds (a box hit at the box's entry
+    /// distance, LOD `AOV_LOD_FALLBACK`, a hatched colour).
+    Coarse,
+}
+
+impl Default for StreamOptions {
+    fn default() -> Self {
+        Self {
+            budget_bytes: 512 * MIB,
+            max_allocations: 4096,
+            max_passes: 0,
+            // Both are capped by the budget (scratch an eighth, staging a 32nd), so these only
+            // matter for budgets above 256 MiB, where fewer, larger build batches and ring
+            // flushes cut the per-step cost (a ring flush and a batch are a fenced submission
+            // each).
+            scratch_budget_bytes: 256 * MIB,
+            staging_bytes: 64 * MIB,
+            guard_band_px: 8,
+            compact: true,
+            blas_build: motu_vk::BlasBuild::Small,
+            build_open_early: true,
+            probe_stride: 1,
+            probe_rounds: 2,
+            probe_verify_rounds: 2,
+            pass_marks: PassMarks::Auto,
+            fallback: StreamFallback::Off,
+            frame_build_bytes: 0,
+            frame_build_ms: 0.0,
+            tlas_update: TlasUpdate::Auto,
+            defrag: false,
+            mesh_memory: MeshMemory::Auto,
+        }
+    }
+}

@@ -1,0 +1,330 @@
+//! What a [`StreamingRenderer`](super::StreamingRenderer) reports: per frame
+//! ([`FrameStreamStats`], with a [`PassStats`] a pass) and over the run ([`StreamTotals`]).
+//! The keys are the `--stats` contract (shared/CLI.md): renamed or removed, never.
+
+use serde::Serialize;
+
+/// Per-frame streaming statistics (`--stats`, one entry per frame).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct FrameStreamStats {
+    pub frame: u64,
+    /// Build–traverse passes this frame.
+    pub passes: u32,
+    /// False when `max_passes` ran out with pixels still incomplete.
+    pub complete: bool,
+    /// Pixels still incomplete after the last pass (rendered as misses, or as the fallback).
+    pub incomplete_pixels: u64,
+    /// Of those, pixels shown by the fallback (`StreamOptions::fallback`): not exact.
+    pub fallback_pixels: u64,
+    /// The frame stopped because its build budget (`frame_build_bytes`/`frame_build_ms`) was
+    /// spent.
+    pub build_budget_spent: bool,
+    /// Pixels whose traversal was cut short this frame (a stack overflow or the trace cap).
+    pub truncated_rays: u64,
+    /// Pixels traced again in passes after the first.
+    pub reshot_pixels: u64,
+    /// Guard-band rays traced (prefetch probes).
+    pub guard_rays: u64,
+    /// Triangle BLASes built (demand plus prefetch).
+    pub blas_built: u32,
+    /// Child TLASes made resident.
+    pub tlas_built: u32,
+    /// Resident TLASes rebuilt because their instance set changed (with their proxies).
+    pub tlas_rebuilt: u32,
+    /// Groups those rebuilds ran in: large TLASes (the pieces of a split root) one at a time,
+    /// small ones together, so a rebuild's transient is one group's.
+    pub tlas_rebuild_groups: u32,
+    /// Structures built after the frame from the guard band and the next camera's probe.
+    pub prefetched: u32,
+    /// Structures the prefetch wanted but left unbuilt: no room beside what the probe saw
+    /// resident and the TLAS rebuilds' reserve (the next frame's first pass opens those its
+    /// rays need).
+    pub prefetch_skipped: u32,
+    /// Rays of the probe of the next frame's camera (its pixels' primary rays; 0: no probe),
+    /// and the probe's trace time (not in `trace_ms`).
+    pub probe_rays: u64,
+    pub probe_ms: f64,
+    /// Probe rounds run after this frame (`StreamOptions::probe_rounds`): the first probes
+    /// the next camera's pixels, each later one only the pixels the round before left open,
+    /// after the prefetch built what they needed.
+    pub probe_rounds: u32,
+    /// Of `probe_rounds`: verifying rounds (`StreamOptions::probe_verify_rounds`), each over
+    /// every pixel after the rounds before had prefetched.
+    pub probe_verify_rounds: u32,
+    /// The row stride of the probe's pass marks after this frame (0: none;
+    /// `StreamOptions::pass_marks`), and the resident BLASes they refreshed: passed by a final
+    /// probe ray, met by no probe ray's hit or open walk.
+    pub probe_pass_rows: u32,
+    pub probe_pass_marks: u32,
+    /// The resident streamed BLASes the probe rounds' rays hit or passed through (met, or
+    /// marked passed), and their bytes (structures, and each of their meshes once): what of
+    /// the resident set the next frame's rays use. With everything resident and pass marks
+    /// on every row (`--stream-probe-pass-rows 1`), the next frame's *one-pass need*: above
+    /// its `room_bytes`, no residency order can serve that frame in one pass while whole
+    /// BLASes are the unit (exactly so for primary visibility; a shadow ray may also be
+    /// served by another of its occluders). Pass marks off, passed BLASes are not counted.
+    pub probe_need_blases: u32,
+    pub probe_need_bytes: u64,
+    /// Of `probe_need_bytes`: the meshes (geometry and shading attributes), what a unit of
+    /// residency smaller than a BLAS and its meshes could leave out for structures rays only
+    /// pass or only shadow and AO rays meet.
+    pub probe_need_mesh_bytes: u64,
+    /// Structures evicted (BLASes and TLASes), and the bytes released (structures plus their
+    /// meshes; also those of structures a refused TLAS rebuild gave back, counted in
+    /// `deferred`).
+    pub evicted: u32,
+    pub evicted_bytes: u64,
+    /// Of `evicted`: made up front for TLAS rebuilds (their buffers are dedicated blocks, so
+    /// only emptied blocks count), and after the budget refused an allocation. The rest made
+    /// room for BLAS build groups by estimate.
+    pub evicted_for_tlas: u32,
+    pub evicted_on_refusal: u32,
+    /// Demanded structures left unbuilt in a pass because they did not fit next to what the
+    /// pass's incomplete pixels need (built in a later pass, once those pixels completed).
+    pub deferred: u32,
+    /// Mesh bytes streamed from the source to the device.
+    pub bytes_streamed: u64,
+    /// Bytes built this frame: acceleration structures plus the meshes streamed for them.
+    pub built_bytes: u64,
+    /// Triangles in the BLASes built.
+    pub triangles_built: u64,
+    /// BLASes restored from the structure cache by copy instead of built (`cache.rs`), their
+    /// bytes, from which tier, and the time the restores took (part of `build_ms`).
+    pub restored_blases: u32,
+    pub restored_bytes: u64,
+    pub restored_from_host: u32,
+    pub restored_from_disk: u32,
+    pub restore_ms: f64,
+    /// Cached BLASes built instead of restored: no room for their copy next to what the
+    /// step must keep.
+    pub restore_skipped: u32,
+    /// Of `blas_built`: BLASes this renderer had built (or restored) before, built again, and
+    /// their structure bytes: what a cache saves.
+    pub rebuilt_blases: u32,
+    pub rebuilt_bytes: u64,
+    /// BLASes serialised into the structure cache after their builds, the bytes, the time
+    /// (part of `build_ms`), and those skipped for want of room to read them back.
+    pub cache_stored: u32,
+    pub cache_stored_bytes: u64,
+    pub cache_store_ms: f64,
+    pub cache_skipped: u32,
+    pub build_ms: f64,
+    /// Wall time of the trace submissions.
+    pub trace_ms: f64,
+    /// Wall time of the whole frame (passes, build steps, prefetch, readback).
+    pub frame_ms: f64,
+    /// Host work of the pass loop outside traces and build steps: stamp and request
+    /// readback, demand lists, pixel lists, per-pass table writes.
+    pub host_ms: f64,
+    /// Of `build_ms`: streaming meshes (and their textures) from the source to the device.
+    pub mesh_ms: f64,
+    /// Of `build_ms`: triangle BLAS builds (with compaction).
+    pub blas_ms: f64,
+    /// Of `build_ms`: TLAS (and proxy BLAS) rebuilds, including their evict-and-retry rounds.
+    pub tlas_ms: f64,
+    /// Of `build_ms`: choosing and releasing eviction victims.
+    pub evict_ms: f64,
+    /// Of `build_ms`: rewriting the per-step tables (TLAS and mesh addresses, shading).
+    pub tables_ms: f64,
+    /// Build steps (one after each pass that left pixels open, plus the prefetch).
+    pub build_steps: u32,
+    /// BLAS build groups attempted, and how many of them the budget refused (a refused group
+    /// is retried in halves; its meshes were streamed for nothing).
+    pub build_groups: u32,
+    pub refused_groups: u32,
+    /// TLAS builds (each rebuild of a dirty TLAS counts, retries included) and the instance
+    /// records written for them (for persistent TLASes: the records patched).
+    pub tlas_builds: u32,
+    pub tlas_instances_written: u64,
+    /// Of `tlas_builds`: updates of persistent TLASes (a refit over every instance, no new
+    /// structure; see `StreamOptions::tlas_update`).
+    pub tlas_updates: u32,
+    /// The largest of the frame's TLAS rebuilds while it builds: its instance records, the
+    /// structures as built and their build scratch, by the driver's size queries (the proxies
+    /// and the compacted copies aside). Held only during the rebuild, so `room_bytes`
+    /// (measured after the frame) does not count it: a rebuild leaves about `room_bytes`
+    /// less this for BLASes, which is why a frame whose working set is within `room_bytes`
+    /// can still need more than one pass.
+    pub tlas_rebuild_transient_bytes: u64,
+    /// Allocations moved to empty memory blocks (`StreamOptions::defrag`), the bytes of blocks
+    /// that freed, and the time it took (part of `build_ms`).
+    pub defrag_moves: u32,
+    pub defrag_freed_bytes: u64,
+    pub defrag_ms: f64,
+    /// The frame's working set: distinct BLASes its rays used (hit or open while resident,
+    /// or built for them) and their bytes (structures plus meshes). Above what the budget
+    /// leaves for structures, some BLAS must be built more than once in the frame.
+    pub working_set_blases: u32,
+    pub working_set_bytes: u64,
+    /// Of `working_set_bytes`: the working set's meshes, each once (resident at the frame's
+    /// end), where they count against the budget (0 with meshes in host memory). With everything resident, a frame's one-pass need under a unit of residency that
+    /// keeps meshes apart from structures is at most the previous frame's `probe_need_bytes`
+    /// less its `probe_need_mesh_bytes` plus this: only BLASes rays hit need their meshes
+    /// (`tools/stream-need.sh` prints that bound).
+    pub working_set_mesh_bytes: u64,
+    /// Why the first pass found structures missing (each one needed by some pixel, so the
+    /// frame takes another pass), judged against the previous frame's probe of this camera:
+    /// resident while the probe ran but met by none of its rays (passed without a hit: the
+    /// hardware reports no such pass) and evicted since, by the prefetch or for the frame;
+    /// not resident then and met by no probe ray (secondary rays from hits the probe could not
+    /// see yet, or no probe ran); met by the probe but not resident now (the prefetch skipped
+    /// it or evicted it again). Zero when the first pass completed the frame.
+    pub first_pass_missed_evicted: u32,
+    pub first_pass_missed_unprobed: u32,
+    pub first_pass_missed_probed: u32,
+    /// Per pass: where its time went.
+    pub pass_log: Vec<PassStats>,
+    /// Resident acceleration-structure and geometry bytes after the frame (counted against
+    /// the budget).
+    pub resident_bytes: u64,
+    /// Resident meshes' bytes in host memory outside the budget after the frame
+    /// ([`MeshMemory`]; 0 where meshes are device-local or host memory counts).
+    pub resident_host_mesh_bytes: u64,
+    pub resident_blases: u32,
+    pub resident_tlases: u32,
+    /// Image textures resident after the frame (they stream with the meshes that sample them).
+    pub resident_textures: u32,
+    /// Highest bytes of blocks counted against the budget so far (never above it).
+    pub vram_peak_bytes: u64,
+    pub vram_budget_bytes: u64,
+    /// After the frame: bytes of blocks counted against the budget, and of the live
+    /// allocations in them. Their difference is free space inside blocks that only requests
+    /// fitting its ranges can use.
+    pub heap_block_bytes: u64,
+    pub heap_in_use_bytes: u64,
+    /// The budget less what stays in use beside BLASes and their meshes after the frame
+    /// (skeleton, tables, frame buffers, pipeline, staging): the most that structures may hold
+    /// at once. A pass walks only what is resident, so a frame whose `working_set_bytes` is
+    /// above it needs at least `ceil(working_set_bytes / room_bytes)` passes at this budget.
+    pub room_bytes: u64,
+}
+
+/// One pass of a frame (`FrameStreamStats::pass_log`).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct PassStats {
+    /// Pixels (and guard rays) traced in this pass.
+    pub traced: u64,
+    /// Pixels still open after it.
+    pub open_pixels: u64,
+    /// Structures the pass demanded (nearest open) and saw open behind those.
+    pub needed: u32,
+    pub later: u32,
+    pub trace_ms: f64,
+    pub host_ms: f64,
+    /// Its build step (0 after the last pass).
+    pub build_ms: f64,
+    pub tlas_ms: f64,
+    pub blas_built: u32,
+    /// Structure bytes its BLAS builds made (as `FrameStreamStats::built_bytes`).
+    pub built_bytes: u64,
+    pub evicted: u32,
+    /// Bytes its evictions released (as `FrameStreamStats::evicted_bytes`).
+    pub evicted_bytes: u64,
+    /// Of `evicted`: up front for TLAS rebuilds, after a refused allocation.
+    pub evicted_for_tlas: u32,
+    pub evicted_on_refusal: u32,
+}
+
+/// Totals over all frames rendered so far.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct StreamTotals {
+    pub frames: u64,
+    pub passes: u64,
+    pub blas_built: u64,
+    pub tlas_built: u64,
+    pub tlas_rebuilt: u64,
+    pub tlas_rebuild_groups: u64,
+    pub evicted: u64,
+    pub deferred: u64,
+    /// Frames that ran out of passes with pixels still incomplete.
+    pub incomplete_frames: u64,
+    /// Pixels shown by the fallback, over all frames.
+    pub fallback_pixels: u64,
+    pub bytes_streamed: u64,
+    pub built_bytes: u64,
+    pub triangles_built: u64,
+    pub build_ms: f64,
+    /// The structure cache (`cache.rs`): restores, rebuilds and stores over all frames (as
+    /// [`FrameStreamStats`]), and the restores' rate in GB/s.
+    pub restored_blases: u64,
+    pub restored_bytes: u64,
+    pub restore_ms: f64,
+    pub restore_gb_per_s: f64,
+    pub rebuilt_blases: u64,
+    pub rebuilt_bytes: u64,
+    pub cache_stored: u64,
+    pub cache_stored_bytes: u64,
+    pub cache_store_ms: f64,
+    /// Triangles of every buildable triangle BLAS: what one full build costs.
+    pub scene_triangles: u64,
+    /// Bytes the skeleton (tables, PI BLASes, root TLAS, proxies) took at start.
+    pub skeleton_bytes: u64,
+    /// Boxes inside the streamable BLASes (top boxes and leaves, `proxy_boxes.rs`) that a ray
+    /// must enter, beside a member instance's box, to open a BLAS; and the milliseconds
+    /// computing them from the meshes took at start.
+    pub proxy_boxes: u64,
+    pub proxy_boxes_ms: f64,
+    /// Milliseconds of the start's other phases: the derived tables (parents per BLAS, proxy
+    /// clusters per TLAS, the GPU tables' records), choosing persistent TLASes (driver size
+    /// queries), and the resident skeleton (tables uploaded, PI BLASes, TLASes and proxies
+    /// built).
+    pub derived_ms: f64,
+    pub persistent_choice_ms: f64,
+    pub skeleton_ms: f64,
+    /// How TLASes followed residency (`update` or `rebuild`, as `--stream-tlas` resolved),
+    /// the persistent ones, and the VRAM they and their placeholders keep (structures at
+    /// full residency, update scratch, and records where host memory counts).
+    pub tlas_mode: &'static str,
+    pub persistent_tlases: u32,
+    pub persistent_tlas_bytes: u64,
+    /// A BLAS did not fit next to the persistent TLASes, so they were dropped and TLASes
+    /// rebuilt from then on (the floor is sized for rebuilt TLASes).
+    pub persistent_dropped: bool,
+    /// Where streamed meshes live ([`MeshMemory`] resolved: `device` or `host`) and whether
+    /// they count against the budget (host memory does on unified memory).
+    pub mesh_memory: &'static str,
+    pub meshes_budgeted: bool,
+    /// Whether host-visible memory (staging, persistent TLASes' records, host meshes) counts
+    /// against the budget: unified memory (lavapipe, integrated GPUs), not a discrete GPU.
+    pub host_memory_counted: bool,
+    /// Most bytes of resident meshes in host memory outside the budget after any frame.
+    pub host_mesh_peak_bytes: u64,
+    pub vram_peak_bytes: u64,
+    pub vram_budget_bytes: u64,
+}
+
+impl StreamTotals {
+    /// Adds frame `st`'s counts (the allocator's `report` after it).
+    pub(super) fn add_frame(&mut self, st: &FrameStreamStats, report: &motu_alloc::AllocReport) {
+        let tot = self;
+        tot.frames += 1;
+        tot.passes += u64::from(st.passes);
+        tot.blas_built += u64::from(st.blas_built);
+        tot.tlas_built += u64::from(st.tlas_built);
+        tot.tlas_rebuilt += u64::from(st.tlas_rebuilt);
+        tot.tlas_rebuild_groups += u64::from(st.tlas_rebuild_groups);
+        tot.evicted += u64::from(st.evicted);
+        tot.deferred += u64::from(st.deferred);
+        tot.incomplete_frames += u64::from(!st.complete);
+        tot.fallback_pixels += st.fallback_pixels;
+        tot.bytes_streamed += st.bytes_streamed;
+        tot.built_bytes += st.built_bytes;
+        tot.restored_blases += u64::from(st.restored_blases);
+        tot.restored_bytes += st.restored_bytes;
+        tot.restore_ms += st.restore_ms;
+        tot.rebuilt_blases += u64::from(st.rebuilt_blases);
+        tot.rebuilt_bytes += st.rebuilt_bytes;
+        tot.cache_stored += u64::from(st.cache_stored);
+        tot.cache_stored_bytes += st.cache_stored_bytes;
+        tot.cache_store_ms += st.cache_store_ms;
+        tot.restore_gb_per_s = if tot.restore_ms > 0.0 {
+            tot.restored_bytes as f64 / (tot.restore_ms * 1e6)
+        } else {
+            0.0
+        };
+        tot.triangles_built += st.triangles_built;
+        tot.build_ms += st.build_ms;
+        tot.vram_peak_bytes = report.peak_block_bytes;
+        tot.host_mesh_peak_bytes = tot.host_mesh_peak_bytes.max(st.resident_host_mesh_bytes);
+    }
+}

@@ -1,0 +1,593 @@
+//! (Re)building TLASes with their proxy and marks BLASes ([`StreamingRenderer::build_tlases`]):
+//! a [`TlasBuild`] runs one method per phase (old structures out, room probed, proxies
+//! planned and built, persistent TLASes updated, the others' records encoded, uploaded and
+//! built, everything swapped in), each phase's products named structs.
+
+use motu_abi::PiRecord;
+use motu_alloc::{AllocKind, BuildSize, MemoryClass};
+use motu_vk::{AsBuildFlags, AsGeometry, AsLevel, BufferUsage, Context};
+
+use super::skeleton::staging_released;
+use super::tlas_records::{tail_record, TlasRecords, RECORD_BYTES};
+use super::tlases::TlasGpu;
+use super::topology::{proxy_blas_record, proxy_pi};
+use super::StreamingRenderer;
+use crate::error::{GpuError, Result};
+use crate::scene::{aabbs_geometry, build_batched, AccelStruct, ResourceReport};
+
+/// One proxy BLAS (`marks` false: a TLAS's non-resident clusters) or marks BLAS (its
+/// resident ones) to build over boxes `first_box..first_box + box_count` of the box buffer.
+struct ProxyItem {
+    tlas: u32,
+    marks: bool,
+    first_box: u32,
+    box_count: u32,
+}
+
+/// TLAS `tlas`'s clusters in box order: the `non_resident` first (the proxy's boxes and PI
+/// slots), then the resident ones (the marks'), each in cluster order.
+struct ClusterOrder {
+    tlas: u32,
+    order: Vec<u32>,
+    non_resident: u32,
+}
+
+/// What the proxies of a build are: the BLASes to build and, per TLAS, its boxes' order.
+/// Boxes and PI records are written from the clusters straight into the staging ring:
+/// building them as host vectors took ~55 ms of each rebuild at island 0.3 (0.8M clusters,
+/// 85 MB of fresh pages).
+#[derive(Default)]
+struct ProxyPlan {
+    items: Vec<ProxyItem>,
+    orders: Vec<ClusterOrder>,
+    box_count: u32,
+}
+
+/// A built proxy or marks BLAS of TLAS `tlas`.
+struct BuiltProxy {
+    tlas: u32,
+    marks: bool,
+    accel: AccelStruct,
+}
+
+/// The proxies a build made, until each is installed in its TLAS (or all released when the
+/// build fails).
+#[derive(Default)]
+struct Proxies(Vec<BuiltProxy>);
+
+impl Proxies {
+    /// Device address of TLAS `t`'s proxy (`marks` false) or marks BLAS; 0: none.
+    fn address(&self, t: u32, marks: bool) -> u64 {
+        self.0
+            .iter()
+            .find(|p| p.tlas == t && p.marks == marks)
+            .map_or(0, |p| p.accel.address)
+    }
+
+    /// The records following TLAS `t`'s own (`count` instances): its proxy's and marks'.
+    fn tail_records(&self, t: u32, count: u32) -> Vec<[u8; RECORD_BYTES]> {
+        self.0
+            .iter()
+            .filter(|p| p.tlas == t)
+            .map(|p| tail_record(count, p.marks, p.accel.address))
+            .collect()
+    }
+
+    fn take(&mut self, t: u32, marks: bool) -> Option<AccelStruct> {
+        let p = self
+            .0
+            .iter()
+            .position(|p| p.tlas == t && p.marks == marks)?;
+        Some(self.0.swap_remove(p).accel)
+    }
+
+    fn release(self, heap: &mut motu_vk::GpuHeap) {
+        self.0.into_iter().for_each(|p| p.accel.release(heap));
+    }
+}
+
+/// Milliseconds of each phase, for the debug line at the end (`MOTU_LOG`).
+struct PhaseTimes {
+    clock: std::time::Instant,
+    probe_ms: f64,
+    proxy_host_ms: f64,
+    proxy_build_ms: f64,
+    update_ms: f64,
+    encode_ms: f64,
+    upload_ms: f64,
+    build_ms: f64,
+}
+
+impl PhaseTimes {
+    fn new() -> Self {
+        PhaseTimes {
+            clock: std::time::Instant::now(),
+            probe_ms: 0.0,
+            proxy_host_ms: 0.0,
+            proxy_build_ms: 0.0,
+            update_ms: 0.0,
+            encode_ms: 0.0,
+            upload_ms: 0.0,
+            build_ms: 0.0,
+        }
+    }
+
+    /// Milliseconds since the last lap.
+    fn lap(&mut self) -> f64 {
+        let d = self.clock.elapsed().as_secs_f64() * 1e3;
+        self.clock = std::time::Instant::now();
+        d
+    }
+}
+
+/// The rebuilt TLASes' instance records, counted, with their build sizes and places in the
+/// instance buffer.
+struct RebuildRecords<'r> {
+    records: TlasRecords<'r>,
+    /// Per rebuilt TLAS (in the order of its ids): records, build sizes, byte offset.
+    counts: Vec<u32>,
+    sizes: Vec<BuildSize>,
+    offsets: Vec<u64>,
+    /// The instance buffer's bytes.
+    total_bytes: u64,
+}
+
+/// One [`StreamingRenderer::build_tlases`] call.
+struct TlasBuild<'r, 'a> {
+    r: &'r mut StreamingRenderer<'a>,
+    ctx: Context,
+    /// Resident BLAS addresses (0: not resident): the clusters' residency, read by the
+    /// parallel record encoder.
+    addrs: Vec<u64>,
+    times: PhaseTimes,
+}
+
+impl<'a> StreamingRenderer<'a> {
+    /// (Re)builds TLASes `ids` with their proxies from the current residency. The old ones are
+    /// released first (old and new together would double the largest transient of a small
+    /// budget, the root's); on failure they stay absent and dirty for the caller to retry with
+    /// less resident (never traced: the caller rebuilds or poisons before the next trace).
+    pub(super) fn build_tlases(&mut self, ids: &[u32]) -> Result<()> {
+        let ctx = self.ctx.clone();
+        let mut b = TlasBuild {
+            r: self,
+            ctx,
+            addrs: Vec::new(),
+            times: PhaseTimes::new(),
+        };
+        b.release_old(ids);
+        // Persistent TLASes are updated (or built once over every instance); the rest rebuilt.
+        let (persistent_ids, rebuild_ids): (Vec<u32>, Vec<u32>) = ids
+            .iter()
+            .partition(|&&t| b.r.tlases.persistent_mode[t as usize]);
+        if !rebuild_ids.is_empty() {
+            b.r.probe_tlas_room(&rebuild_ids)?;
+        }
+        b.times.probe_ms = b.times.lap();
+        b.addrs =
+            b.r.res
+                .blas
+                .iter()
+                .map(|a| a.as_ref().map_or(0, |a| a.address))
+                .collect();
+        let plan = b.plan_proxies(ids);
+        b.times.proxy_host_ms = b.times.lap();
+        let mut proxies = b.build_proxies(&plan)?;
+        b.times.proxy_build_ms = b.times.lap();
+        let updated = match b.update_persistent_tlases(&persistent_ids, &proxies) {
+            Ok(u) => u,
+            Err(e) => {
+                proxies.release(&mut b.r.heap);
+                return Err(e);
+            }
+        };
+        b.times.update_ms = b.times.lap();
+        let (built, records) = match b.rebuild(&rebuild_ids, &proxies) {
+            Ok(r) => r,
+            Err(e) => {
+                proxies.release(&mut b.r.heap);
+                return Err(e);
+            }
+        };
+        b.times.build_ms = b.times.lap();
+        b.rewrite_proxy_records(&plan)?;
+        b.swap_in(&rebuild_ids, built, updated, &mut proxies);
+        let t = &mut b.times;
+        tracing::debug!(
+            records,
+            probe_ms = t.probe_ms,
+            update_ms = t.update_ms,
+            proxy_boxes = plan.box_count,
+            proxy_host_ms = t.proxy_host_ms,
+            proxy_build_ms = t.proxy_build_ms,
+            encode_ms = t.encode_ms,
+            upload_ms = t.upload_ms,
+            build_ms = t.build_ms,
+            swap_ms = t.clock.elapsed().as_secs_f64() * 1e3,
+            "TLAS rebuild phases"
+        );
+        Ok(())
+    }
+}
+
+impl TlasBuild<'_, '_> {
+    /// Phase 0: the old structures go. A persistent TLAS's structure stays; its old proxy and
+    /// marks go, as a rebuilt TLAS's whole build does (dirty: never traced until updated).
+    fn release_old(&mut self, ids: &[u32]) {
+        let r = &mut *self.r;
+        for &t in ids {
+            if r.tlases.is_persistent(t) {
+                if let Some(g) = r.tlases.tlas[t as usize].as_mut() {
+                    for a in [g.proxy.take(), g.marks.take()].into_iter().flatten() {
+                        a.release(&mut r.heap);
+                    }
+                }
+                r.tlases.dirty.insert(t);
+            } else if let Some(old) = r.tlases.tlas[t as usize].take() {
+                old.release(&mut r.heap);
+                r.tlases.dirty.insert(t);
+            }
+        }
+    }
+
+    /// Phase 1 on the host: which proxy BLASes (the clusters of non-resident BLASes) and marks
+    /// BLASes (the resident ones) TLASes `ids` get, and the order of their boxes.
+    fn plan_proxies(&self, ids: &[u32]) -> ProxyPlan {
+        let view = self.r.view;
+        let mut plan = ProxyPlan::default();
+        for &t in ids {
+            // The marks' custom index (the TLAS's instance count + 1) must fit the 24 bits of
+            // an instance's; a TLAS at the device cap goes without (the prefetch then sees only
+            // its hits, as before the marks: slower, never wrong).
+            let with_marks = view.tlases[t as usize].instance_count + 1 < 1 << 24;
+            let clusters = self.r.topo.clusters(t as usize);
+            let resident = |i: &u32| self.addrs[clusters[*i as usize].blas as usize] != 0;
+            let all = 0..clusters.len() as u32;
+            let mut order: Vec<u32> = Vec::with_capacity(clusters.len());
+            order.extend(all.clone().filter(|i| !resident(i)));
+            let non_resident = order.len() as u32;
+            if with_marks {
+                order.extend(all.filter(resident));
+            }
+            let marks = order.len() as u32 - non_resident;
+            let first = plan.box_count;
+            for (is_marks, first_box, box_count) in [
+                (false, first, non_resident),
+                (true, first + non_resident, marks),
+            ] {
+                if box_count > 0 {
+                    plan.items.push(ProxyItem {
+                        tlas: t,
+                        marks: is_marks,
+                        first_box,
+                        box_count,
+                    });
+                }
+            }
+            plan.box_count += order.len() as u32;
+            if !order.is_empty() {
+                plan.orders.push(ClusterOrder {
+                    tlas: t,
+                    order,
+                    non_resident,
+                });
+            }
+        }
+        plan
+    }
+
+    /// Phase 1 on the device: the planned proxy and marks BLASes, built compacted from a box
+    /// buffer freed after.
+    fn build_proxies(&mut self, plan: &ProxyPlan) -> Result<Proxies> {
+        let mut proxies = Proxies::default();
+        if plan.box_count == 0 {
+            return Ok(proxies);
+        }
+        let ctx = &self.ctx;
+        let r = &mut *self.r;
+        let buf = r.heap.alloc_buffer(
+            "proxy-aabbs",
+            u64::from(plan.box_count) * 24,
+            BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT | BufferUsage::TRANSFER_DST,
+            AllocKind::Geometry,
+            MemoryClass::DeviceLocal,
+            16,
+        )?;
+        let built = (|| -> Result<Vec<(usize, AccelStruct)>> {
+            let up = r.up.as_mut().ok_or_else(staging_released)?;
+            let mut at = 0u64;
+            for o in &plan.orders {
+                let clusters = r.topo.clusters(o.tlas as usize);
+                let order = &o.order;
+                let uploaded = up.upload_with(ctx, &buf, at, order.len(), |k| {
+                    clusters[order[k] as usize].bounds
+                });
+                if let Err(e) = uploaded {
+                    // Copies queued for the box buffer must not outlive it.
+                    up.abandon();
+                    return Err(e);
+                }
+                at += order.len() as u64 * 24;
+            }
+            up.flush(ctx)?;
+            let base = buf.device_address()?.0;
+            let mut descs = Vec::new();
+            let mut sizes = Vec::new();
+            for item in &plan.items {
+                descs.push((
+                    vec![aabbs_geometry(base + u64::from(item.first_box) * 24, false)],
+                    vec![item.box_count],
+                ));
+                let sz = ctx.blas_build_sizes(
+                    &[motu_vk::BlasGeometry::Aabbs {
+                        aabb_count: item.box_count,
+                        opaque: false,
+                    }],
+                    r.build_opts.blas_build.flags(),
+                )?;
+                sizes.push(BuildSize {
+                    result_bytes: sz.acceleration_structure_size_bytes,
+                    scratch_bytes: sz.build_scratch_size_bytes,
+                });
+            }
+            let mut report = ResourceReport::default();
+            build_batched(
+                ctx,
+                &mut r.heap,
+                &mut report,
+                &sizes,
+                AsLevel::Bottom,
+                &r.build_opts,
+                |k| (descs[k].0.clone(), descs[k].1.clone()),
+                |_, _| Ok(()),
+                &mut |_| {},
+            )
+        })();
+        r.heap.free(buf);
+        for (k, accel) in built? {
+            let item = &plan.items[k];
+            proxies.0.push(BuiltProxy {
+                tlas: item.tlas,
+                marks: item.marks,
+                accel,
+            });
+        }
+        Ok(proxies)
+    }
+
+    /// Phase 2a: persistent TLASes `ids`, their records patched where residency changed, then
+    /// updated (built over every instance first when they are not yet). Returns them.
+    fn update_persistent_tlases(&mut self, ids: &[u32], proxies: &Proxies) -> Result<Vec<u32>> {
+        let r = &mut *self.r;
+        let addrs = &self.addrs;
+        let mut updated = Vec::with_capacity(ids.len());
+        for &t in ids {
+            let tail = [false, true].map(|marks| proxies.address(t, marks));
+            let done = if r.tlases.is_persistent(t) {
+                r.update_persistent(t, addrs, tail).map(|n| {
+                    let st = &mut r.frame.stats;
+                    st.tlas_builds += 1;
+                    st.tlas_updates += 1;
+                    st.tlas_instances_written += n;
+                })
+            } else {
+                r.build_persistent(t, addrs, tail)
+                    .map(|(accel, p)| {
+                        let n = p.record_count();
+                        r.tlases.tlas[t as usize] = Some(TlasGpu {
+                            accel,
+                            proxy: None,
+                            marks: None,
+                            persistent: Some(p),
+                        });
+                        r.frame.stats.tlas_builds += 1;
+                        r.frame.stats.tlas_instances_written += u64::from(n);
+                    })
+                    .and_then(|()| {
+                        // Built over every instance's whole bounds (the topology of a full
+                        // build); the non-resident ones now shrink to their points.
+                        let n = r.update_persistent(t, addrs, tail)?;
+                        r.frame.stats.tlas_updates += 1;
+                        r.frame.stats.tlas_builds += 1;
+                        r.frame.stats.tlas_instances_written += n;
+                        Ok(())
+                    })
+            };
+            if let Err(e) = done {
+                if matches!(e, GpuError::Budget(_)) && !r.tlases.is_persistent(t) {
+                    // Built over every instance it does not fit: rebuilt from now on (the
+                    // caller's retry rebuilds it).
+                    tracing::warn!(tlas = t, %e, "persistent TLAS does not fit; rebuilt instead");
+                    r.tlases.persistent_mode[t as usize] = false;
+                }
+                return Err(e);
+            }
+            updated.push(t);
+        }
+        Ok(updated)
+    }
+
+    /// Phase 2b on the host: the rebuilt TLASes' records counted (resident BLASes' instances
+    /// plus the proxy and marks: non-resident instances are left out, their proxy boxes stand
+    /// for them, so a TLAS's size follows what is resident, not its instance count; the custom
+    /// index keeps each instance's record), their build sizes and buffer offsets.
+    fn count_records<'s, 'v: 's>(
+        r: &mut StreamingRenderer<'v>,
+        ctx: &Context,
+        addrs: &'s [u64],
+        ids: &[u32],
+        proxies: &Proxies,
+    ) -> Result<RebuildRecords<'s>> {
+        let view: motu_abi::HierarchyView<'s> = r.view;
+        let ring_region = r.up_mut()?.region_bytes();
+        let records = TlasRecords::count(view, addrs, ids, ring_region, |t| {
+            // The proxy's and the marks' records follow the TLAS's own (see
+            // `StreamingRenderer::new`); only probe passes' rays see the marks.
+            proxies.tail_records(t, view.tlases[t as usize].instance_count)
+        });
+        let counts = records.record_counts();
+        let mut sizes = Vec::with_capacity(ids.len());
+        for &n in &counts {
+            let s = ctx.tlas_build_sizes(n, AsBuildFlags::tlas(r.build_opts.compact))?;
+            sizes.push(BuildSize {
+                result_bytes: s.acceleration_structure_size_bytes,
+                scratch_bytes: s.build_scratch_size_bytes,
+            });
+        }
+        let mut offsets = Vec::with_capacity(ids.len());
+        let mut total_bytes = 0u64;
+        for &n in &counts {
+            offsets.push(total_bytes);
+            total_bytes += u64::from(n) * RECORD_BYTES as u64;
+        }
+        let st = &mut r.frame.stats;
+        st.tlas_builds += ids.len() as u32;
+        st.tlas_instances_written += total_bytes / RECORD_BYTES as u64;
+        let transient = sizes
+            .iter()
+            .fold(total_bytes, |t, s| t + s.result_bytes + s.scratch_bytes);
+        st.tlas_rebuild_transient_bytes = st.tlas_rebuild_transient_bytes.max(transient);
+        Ok(RebuildRecords {
+            records,
+            counts,
+            sizes,
+            offsets,
+            total_bytes,
+        })
+    }
+
+    /// Phase 2b: TLASes `ids` rebuilt over the resident BLASes plus their proxy and marks
+    /// instances. Returns the new structures (indices into `ids`) and the records written.
+    fn rebuild(
+        &mut self,
+        ids: &[u32],
+        proxies: &Proxies,
+    ) -> Result<(Vec<(usize, AccelStruct)>, u64)> {
+        let ctx = self.ctx.clone();
+        let (r, times) = (&mut *self.r, &mut self.times);
+        let RebuildRecords {
+            records,
+            counts,
+            sizes,
+            offsets,
+            total_bytes,
+        } = Self::count_records(r, &ctx, &self.addrs, ids, proxies)?;
+        times.encode_ms = times.lap();
+        let inst_buf = r.heap.alloc_buffer(
+            "stream-tlas-instances",
+            total_bytes.max(64),
+            BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT | BufferUsage::TRANSFER_DST,
+            AllocKind::InstanceBuffer,
+            MemoryClass::DeviceLocal,
+            16,
+        )?;
+        let uploaded = (|| -> Result<u64> {
+            let up = r.up.as_mut().ok_or_else(staging_released)?;
+            if let Err(e) = records.upload(&ctx, up, &inst_buf, &offsets) {
+                // Copies queued for the instance buffer must not outlive it.
+                up.abandon();
+                return Err(e);
+            }
+            up.flush(&ctx)?;
+            Ok(inst_buf.device_address()?.0)
+        })();
+        // Freed as soon as the TLASes are built (`inputs_done`), before their compacted copies
+        // are allocated: the records are read by the build only.
+        let mut inst_buf = Some(inst_buf);
+        let built = uploaded.and_then(|inst_addr| {
+            times.upload_ms = times.lap();
+            let mut report = ResourceReport::default();
+            build_batched(
+                &ctx,
+                &mut r.heap,
+                &mut report,
+                &sizes,
+                AsLevel::Top,
+                &r.build_opts,
+                |k| {
+                    (
+                        vec![AsGeometry::Instances {
+                            address: inst_addr + offsets[k],
+                        }],
+                        vec![counts[k]],
+                    )
+                },
+                |_, _| Ok(()),
+                &mut |heap| {
+                    if let Some(b) = inst_buf.take() {
+                        heap.free(b);
+                    }
+                },
+            )
+        });
+        if let Some(b) = inst_buf.take() {
+            r.heap.free(b);
+        }
+        Ok((built?, total_bytes / RECORD_BYTES as u64))
+    }
+
+    /// Phase 3a: the proxy PI slots and the marks' BLAS records rewritten to the new order.
+    fn rewrite_proxy_records(&mut self, plan: &ProxyPlan) -> Result<()> {
+        let ctx = &self.ctx;
+        let r = &mut *self.r;
+        let view = r.view;
+        for o in &plan.orders {
+            let t = o.tlas as usize;
+            let (base, marks_blas) = r.topo.proxy_slots(t);
+            let marks = proxy_blas_record(
+                &view.tlases[t],
+                base + o.non_resident,
+                o.order.len() as u32 - o.non_resident,
+            );
+            let marks_offset =
+                u64::from(marks_blas) * std::mem::size_of::<motu_abi::BlasRecord>() as u64;
+            let pis_buf = r.gpu.pis();
+            let blases_buf = r.gpu.blases();
+            let clusters = r.topo.clusters(t);
+            let order = &o.order;
+            let up = r.up.as_mut().ok_or_else(staging_released)?;
+            up.upload_with(
+                ctx,
+                pis_buf,
+                u64::from(base) * std::mem::size_of::<PiRecord>() as u64,
+                order.len(),
+                |k| proxy_pi(&clusters[order[k] as usize]),
+            )?;
+            up.upload(ctx, blases_buf, marks_offset, bytemuck::bytes_of(&marks))?;
+        }
+        r.up_mut()?.flush(ctx)
+    }
+
+    /// Phase 3b: the rebuilt TLASes (`built`, indices into `rebuilt`) and the `updated`
+    /// persistent ones take their proxies and are clean.
+    fn swap_in(
+        &mut self,
+        rebuilt: &[u32],
+        built: Vec<(usize, AccelStruct)>,
+        updated: Vec<u32>,
+        proxies: &mut Proxies,
+    ) {
+        let r = &mut *self.r;
+        for (k, accel) in built {
+            let t = rebuilt[k];
+            let (proxy, marks) = (proxies.take(t, false), proxies.take(t, true));
+            if let Some(old) = r.tlases.tlas[t as usize].replace(TlasGpu {
+                accel,
+                proxy,
+                marks,
+                persistent: None,
+            }) {
+                old.release(&mut r.heap);
+            }
+            r.tlases.dirty.remove(&t);
+        }
+        for t in updated {
+            let (proxy, marks) = (proxies.take(t, false), proxies.take(t, true));
+            if let Some(g) = r.tlases.tlas[t as usize].as_mut() {
+                g.proxy = proxy;
+                g.marks = marks;
+            }
+            r.tlases.dirty.remove(&t);
+        }
+    }
+}

@@ -1,0 +1,381 @@
+//! The topology part ([`Topology`]): what the view implies for streaming and never changes
+//! after the start: which BLASes stream, each BLAS's parent TLASes with its instance counts in
+//! them, each TLAS's proxy clusters ([`StreamPlan`]) and the GPU slots of its proxy and marks
+//! BLASes; and the GPU tables' records derived from them ([`SkeletonRecords`], uploaded by
+//! `skeleton.rs`).
+//!
+//! Invariants: every vector is indexed by the view's BLAS or TLAS ids and sized to them;
+//! nothing here is written after [`Topology::derive`] (the cluster member ranges are set
+//! there), so the GPU slots it names stay valid for the renderer's life.
+
+use motu_abi::{
+    BlasRecord, HierarchyView, InstanceRecord, PiRecord, TlasRecord, BLAS_AABBS, NONE_U32,
+};
+
+use super::proxy_boxes::padded;
+use super::{IDENTITY, PI_EMPTY_BLAS};
+use crate::error::{GpuError, Result};
+
+/// `[min, max]` of nothing: the start of a union of boxes.
+const EMPTY_BOX: [f32; 6] = [
+    f32::INFINITY,
+    f32::INFINITY,
+    f32::INFINITY,
+    -f32::INFINITY,
+    -f32::INFINITY,
+    -f32::INFINITY,
+];
+
+/// `[min, max]` of the box `lo..hi` under the affine map `m`.
+pub(super) fn transformed_box(m: &[f32; 12], lo: [f32; 3], hi: [f32; 3]) -> [f32; 6] {
+    let mut out = EMPTY_BOX;
+    for c in 0..8 {
+        let p = [
+            if c & 1 == 0 { lo[0] } else { hi[0] },
+            if c & 2 == 0 { lo[1] } else { hi[1] },
+            if c & 4 == 0 { lo[2] } else { hi[2] },
+        ];
+        let q = motu_abi::xform_point(m, p);
+        for a in 0..3 {
+            out[a] = out[a].min(q[a]);
+            out[3 + a] = out[3 + a].max(q[a]);
+        }
+    }
+    out
+}
+
+/// Triangle instances of one BLAS per proxy box at most. One box per instance made the
+/// resident skeleton (proxy BLAS, PI records, and the TLAS sized for every instance) grow with
+/// the instance count: 26 MB of the default island's 46 MB floor. A box over a cluster of
+/// neighbouring instances of the same BLAS stays exact where it matters (the BLAS is open for a
+/// ray that enters the box, a superset of the rays that could hit an instance) and only costs
+/// a build when a ray passes between the instances before the BLAS was walked.
+pub(super) const PROXY_CLUSTER_INSTANCES: usize = 16;
+
+/// One proxy box: a spatially coherent cluster of a TLAS's instances of one triangle BLAS.
+#[derive(Clone, Debug)]
+pub(super) struct ProxyCluster {
+    pub blas: u32,
+    /// `[min, max]` in the TLAS's space: the union of the instances' transformed BLAS bounds.
+    pub bounds: [f32; 6],
+    /// The member instances: indices in the TLAS's instance range (= their custom index).
+    pub members: Vec<u32>,
+    /// Where `members` start in the GPU member table (global instance-table indices): a ray
+    /// that enters the box tests the members' boxes, so a BLAS is demanded only by rays that
+    /// enter one of its instances' boxes (set by [`Topology::derive`]).
+    pub member_first: u32,
+}
+
+/// The proxy clusters of TLAS `t`: its instances of each buildable BLAS, cut by the compiler's
+/// binned SAH over instance bounds into pieces of at most [`PROXY_CLUSTER_INSTANCES`], in BLAS
+/// order. Deterministic: the renderer and the floor ([`super::streaming_floor`]) both call it.
+pub(super) fn proxy_clusters(
+    view: &HierarchyView<'_>,
+    t: usize,
+    buildable: impl Fn(usize) -> bool,
+) -> Vec<ProxyCluster> {
+    let rec = &view.tlases[t];
+    type Bounds = ([f32; 3], [f32; 3]);
+    let mut by_blas: std::collections::BTreeMap<u32, (Vec<u32>, Vec<Bounds>)> = Default::default();
+    for (local, inst) in view.instances[rec.instance_range()].iter().enumerate() {
+        let b = inst.blas as usize;
+        if !buildable(b) {
+            continue;
+        }
+        let br = &view.blases[b];
+        let x = transformed_box(&inst.tlas_from_blas, br.bounds_min, br.bounds_max);
+        let entry = by_blas.entry(inst.blas).or_default();
+        entry.0.push(local as u32);
+        entry.1.push(([x[0], x[1], x[2]], [x[3], x[4], x[5]]));
+    }
+    let mut out = Vec::new();
+    let mut ranges = Vec::new();
+    for (blas, (mut items, mut bounds)) in by_blas {
+        ranges.clear();
+        motu_compile::sah_partition(
+            &mut items,
+            &mut bounds,
+            PROXY_CLUSTER_INSTANCES,
+            &mut ranges,
+        );
+        for &(begin, end) in &ranges {
+            let mut b = EMPTY_BOX;
+            for (lo, hi) in &bounds[begin..end] {
+                for a in 0..3 {
+                    b[a] = b[a].min(lo[a]);
+                    b[3 + a] = b[3 + a].max(hi[a]);
+                }
+            }
+            out.push(ProxyCluster {
+                blas,
+                bounds: padded(b),
+                members: items[begin..end].to_vec(),
+                member_first: 0,
+            });
+        }
+    }
+    out
+}
+
+/// What the floor ([`super::streaming_floor_planned`]) and the renderer
+/// ([`StreamingRenderer::with_plan`](super::StreamingRenderer::with_plan)) both derive from a view before anything is built: the
+/// proxy clusters of every TLAS (binned SAH over millions of instances: seconds at island
+/// scale, so made once per render, the TLASes in parallel).
+pub struct StreamPlan {
+    pub(super) clusters: Vec<Vec<ProxyCluster>>,
+    instances: usize,
+}
+
+impl StreamPlan {
+    pub fn new(view: &HierarchyView<'_>) -> StreamPlan {
+        use rayon::prelude::*;
+        let _span = tracing::info_span!("proxy_clusters", tlases = view.tlases.len()).entered();
+        let buildable = |b: usize| super::streamable(&view.blases[b]);
+        let clusters = (0..view.tlases.len())
+            .into_par_iter()
+            .map(|t| proxy_clusters(view, t, buildable))
+            .collect();
+        StreamPlan {
+            clusters,
+            instances: view.instances.len(),
+        }
+    }
+
+    /// A plan made for another view is a caller's mistake, refused rather than trusted.
+    pub(super) fn check(&self, view: &HierarchyView<'_>) -> Result<()> {
+        if self.clusters.len() != view.tlases.len() || self.instances != view.instances.len() {
+            return Err(GpuError::InvalidRequest(format!(
+                "streaming: a plan of {} TLASes and {} instances for a view of {} and {}",
+                self.clusters.len(),
+                self.instances,
+                view.tlases.len(),
+                view.instances.len()
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// The topology of a [`StreamingRenderer`](super::StreamingRenderer) (see the module docs).
+pub(super) struct Topology {
+    /// Per BLAS: streamed (built on demand, evicted; [`super::streamable`]).
+    buildable: Vec<bool>,
+    /// Per BLAS: TLASes instancing it.
+    parents: Vec<Vec<u32>>,
+    /// Per BLAS: its instance count in each of `parents` (same order).
+    parent_counts: Vec<Vec<u32>>,
+    /// Per TLAS: its proxy boxes (clusters of triangle instances of one BLAS).
+    clusters: Vec<Vec<ProxyCluster>>,
+    /// Per TLAS: first proxy PI slot in the GPU tables (`NONE_U32`: no clusters).
+    proxy_pi_base: Vec<u32>,
+    /// Per TLAS: the GPU BLAS record of its marks BLAS (`NONE_U32`: no clusters), rewritten
+    /// with each rebuild.
+    marks_blas: Vec<u32>,
+}
+
+/// The GPU copies of the node tables (TLAS ranges grown by the proxy and marks instances,
+/// proxy and marks BLAS records and PI slots after the originals) and the proxy clusters'
+/// member table: what the skeleton uploads.
+pub(super) struct SkeletonRecords {
+    pub tlases: Vec<TlasRecord>,
+    pub instances: Vec<InstanceRecord>,
+    pub blases: Vec<BlasRecord>,
+    pub pis: Vec<PiRecord>,
+    /// Per cluster, its instances' global indices in the GPU instance table.
+    pub members: Vec<u32>,
+}
+
+fn too_many(what: &str) -> GpuError {
+    GpuError::InvalidRequest(format!("streaming: too many {what}"))
+}
+
+impl Topology {
+    /// The topology of `view` with `plan`'s clusters (checked against it by the caller), and
+    /// the GPU tables' records.
+    pub fn derive(
+        view: &HierarchyView<'_>,
+        plan: StreamPlan,
+    ) -> Result<(Topology, SkeletonRecords)> {
+        let nb = view.blases.len();
+        let buildable: Vec<bool> = view.blases.iter().map(super::streamable).collect();
+        let mut parents: Vec<Vec<u32>> = vec![Vec::new(); nb];
+        let mut parent_counts: Vec<Vec<u32>> = vec![Vec::new(); nb];
+        for (t, rec) in view.tlases.iter().enumerate() {
+            for inst in &view.instances[rec.instance_range()] {
+                let b = inst.blas as usize;
+                match parents[b].iter().position(|&p| p == t as u32) {
+                    Some(k) => parent_counts[b][k] += 1,
+                    None => {
+                        parents[b].push(t as u32);
+                        parent_counts[b].push(1);
+                    }
+                }
+            }
+        }
+        let mut clusters = plan.clusters;
+        let members = member_table(view, &mut clusters)?;
+        let mut topo = Topology {
+            buildable,
+            parents,
+            parent_counts,
+            clusters,
+            proxy_pi_base: Vec::new(),
+            marks_blas: Vec::new(),
+        };
+        let records = topo.gpu_records(view, members)?;
+        Ok((topo, records))
+    }
+
+    /// The GPU tables: TLAS ranges grow by the proxy and marks instances; proxy and marks
+    /// BLAS records and PI slots (one per cluster, shared: non-resident clusters first, then
+    /// resident ones, rewritten with each rebuild) follow the originals. Sets the proxies'
+    /// PI bases and the marks' BLAS records.
+    fn gpu_records(
+        &mut self,
+        view: &HierarchyView<'_>,
+        members: Vec<u32>,
+    ) -> Result<SkeletonRecords> {
+        let nt = view.tlases.len();
+        let mut out = SkeletonRecords {
+            tlases: Vec::with_capacity(nt),
+            instances: Vec::with_capacity(view.instances.len() + nt),
+            blases: view.blases.to_vec(),
+            pis: view.pis.to_vec(),
+            members,
+        };
+        self.proxy_pi_base = vec![NONE_U32; nt];
+        self.marks_blas = vec![NONE_U32; nt];
+        for (t, rec) in view.tlases.iter().enumerate() {
+            let base = u32::try_from(out.instances.len()).map_err(|_| too_many("instances"))?;
+            let range = rec.instance_range();
+            out.instances.extend_from_slice(&view.instances[range]);
+            let mut count = rec.instance_count;
+            let clusters = &self.clusters[t];
+            if !clusters.is_empty() {
+                let pi_base = u32::try_from(out.pis.len()).map_err(|_| too_many("PIs"))?;
+                let blas_id = u32::try_from(out.blases.len()).map_err(|_| too_many("BLASes"))?;
+                self.proxy_pi_base[t] = pi_base;
+                for c in clusters {
+                    out.pis.push(proxy_pi(c));
+                }
+                let n = clusters.len() as u32;
+                // The proxy (non-resident clusters), then the marks (resident ones: none yet).
+                out.blases.push(proxy_blas_record(rec, pi_base, n));
+                out.blases.push(proxy_blas_record(rec, pi_base + n, 0));
+                self.marks_blas[t] = blas_id + 1;
+                for id in [blas_id, blas_id + 1] {
+                    out.instances.push(InstanceRecord {
+                        tlas_from_blas: IDENTITY,
+                        blas: id,
+                        flags: 0,
+                        element: NONE_U32,
+                        _pad: 0,
+                    });
+                }
+                count += 2;
+            }
+            out.tlases.push(TlasRecord {
+                instance_base: base,
+                instance_count: count,
+                // No box lists: streamed TLASes keep every PI (and proxy) in the hardware walk.
+                box_list_instances: 0,
+                ..*rec
+            });
+        }
+        Ok(out)
+    }
+
+    /// Whether BLAS `b` streams.
+    pub fn buildable(&self, b: usize) -> bool {
+        self.buildable[b]
+    }
+
+    /// Per BLAS: whether it streams.
+    pub fn buildable_all(&self) -> &[bool] {
+        &self.buildable
+    }
+
+    /// The TLASes instancing BLAS `b`.
+    pub fn parents(&self, b: usize) -> &[u32] {
+        &self.parents[b]
+    }
+
+    /// TLAS `t`'s proxy clusters, in box order of the GPU tables.
+    pub fn clusters(&self, t: usize) -> &[ProxyCluster] {
+        &self.clusters[t]
+    }
+
+    /// Per TLAS: whether it has proxy clusters.
+    pub fn has_clusters(&self) -> Vec<bool> {
+        self.clusters.iter().map(|c| !c.is_empty()).collect()
+    }
+
+    /// TLAS `t`'s first proxy PI slot and the GPU BLAS record of its marks BLAS (both
+    /// `NONE_U32` without clusters).
+    pub fn proxy_slots(&self, t: usize) -> (u32, u32) {
+        (self.proxy_pi_base[t], self.marks_blas[t])
+    }
+
+    /// Streamed BLASes: how many there are.
+    pub fn buildable_count(&self) -> usize {
+        self.buildable.iter().filter(|&&b| b).count()
+    }
+
+    /// Adds BLAS `b`'s instance records to `counts`, per parent TLAS.
+    pub fn add_instance_counts(&self, b: u32, counts: &mut [u64]) {
+        let b = b as usize;
+        for (&t, &n) in self.parents[b].iter().zip(&self.parent_counts[b]) {
+            counts[t as usize] += u64::from(n);
+        }
+    }
+}
+
+/// The member table: per cluster, its instances' global indices in the GPU instance table
+/// (each TLAS's range there starts at the running total of the ranges before it, each grown
+/// by its proxy and marks instances). Sets each cluster's `member_first`.
+fn member_table(view: &HierarchyView<'_>, clusters: &mut [Vec<ProxyCluster>]) -> Result<Vec<u32>> {
+    let mut members: Vec<u32> = Vec::new();
+    let mut gpu_base = 0u32;
+    for (t, rec) in view.tlases.iter().enumerate() {
+        for c in &mut clusters[t] {
+            c.member_first = u32::try_from(members.len()).map_err(|_| too_many("instances"))?;
+            members.extend(c.members.iter().map(|&local| gpu_base + local));
+        }
+        let grown = rec.instance_count + 2 * u32::from(!clusters[t].is_empty());
+        gpu_base = gpu_base
+            .checked_add(grown)
+            .ok_or_else(|| too_many("instances"))?;
+    }
+    Ok(members)
+}
+
+/// The GPU BLAS record of TLAS `rec`'s proxy or marks BLAS: `n` PI slots from `item_base`.
+pub(super) fn proxy_blas_record(rec: &TlasRecord, item_base: u32, n: u32) -> BlasRecord {
+    BlasRecord {
+        kind: BLAS_AABBS,
+        item_base,
+        item_count: n,
+        level: rec.level + 1,
+        bounds_min: rec.bounds_min,
+        primitive_count: n,
+        bounds_max: rec.bounds_max,
+        _pad: 0,
+    }
+}
+
+/// The PI record of cluster `c`'s proxy box. A proxy has no child transform: its first two
+/// words (`child_from_parent[0..2]`, read as u32 by `candidates.glsl`'s `record_proxy`)
+/// carry the cluster's member range in the member table.
+pub(super) fn proxy_pi(c: &ProxyCluster) -> PiRecord {
+    let b = &c.bounds;
+    let mut child_from_parent = [0.0f32; 12];
+    child_from_parent[0] = f32::from_bits(c.member_first);
+    child_from_parent[1] = f32::from_bits(c.members.len() as u32);
+    PiRecord {
+        child_from_parent,
+        aabb_min: [b[0], b[1], b[2]],
+        kind: PI_EMPTY_BLAS,
+        aabb_max: [b[3], b[4], b[5]],
+        target: c.blas,
+    }
+}
