@@ -5,6 +5,7 @@
 mod error;
 mod memory;
 mod pipeline;
+mod split;
 
 pub use error::ImportError;
 pub use memory::peak_rss_bytes;
