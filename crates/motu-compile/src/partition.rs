@@ -181,7 +181,9 @@ pub fn partition_mesh<E>(
     }
     drop(cluster_of_tri);
     // A vertex map of the source's size per worker (at most `MAX_CUTTERS`), reused.
-    let workers = rayon::current_num_threads().clamp(1, MAX_CUTTERS).min(ranges.len());
+    let workers = rayon::current_num_threads()
+        .clamp(1, MAX_CUTTERS)
+        .min(ranges.len());
     let mut remaps: Vec<Vec<u32>> = (0..workers)
         .map(|_| vec![u32::MAX; mesh.positions.len()])
         .collect();

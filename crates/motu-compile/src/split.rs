@@ -83,7 +83,6 @@ fn median_split<T>(slice: &mut [T], centre: &impl Fn(&T) -> [f32; 3]) -> usize {
     mid
 }
 
-
 /// Bins per axis of [`sah_partition`].
 pub(crate) const SAH_BINS: usize = 32;
 /// Neither side of a SAH split may hold fewer than this fraction of the range's items: keeps
@@ -687,7 +686,12 @@ mod tests {
             seed ^= seed << 17;
             (seed >> 40) as f32 / (1u64 << 24) as f32
         };
-        for (n, cap) in [(200_000usize, 16usize), (150_000, 1_000), (3_000, 16), (40, 3)] {
+        for (n, cap) in [
+            (200_000usize, 16usize),
+            (150_000, 1_000),
+            (3_000, 16),
+            (40, 3),
+        ] {
             let boxes: Vec<Bounds> = (0..n)
                 .map(|i| {
                     let c = if i % 97 == 0 {
@@ -699,10 +703,7 @@ mod tests {
                         [k + rnd() * 10.0, rnd() * 1000.0, 0.0] // z flat
                     };
                     let h = rnd() * 3.0;
-                    (
-                        [c[0] - h, c[1] - h, c[2]],
-                        [c[0] + h, c[1] + 0.5 * h, c[2]],
-                    )
+                    ([c[0] - h, c[1] - h, c[2]], [c[0] + h, c[1] + 0.5 * h, c[2]])
                 })
                 .collect();
             let (mut a_items, mut a_bounds) = ((0..n as u32).collect::<Vec<_>>(), boxes.clone());

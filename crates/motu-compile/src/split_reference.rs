@@ -126,7 +126,6 @@ pub(crate) fn old_sah_split<T>(items: &mut [T], bounds: &mut [Bounds]) -> usize 
     i
 }
 
-
 /// The old `sah_partition`, serial.
 pub(crate) fn sah_partition_serial<T>(
     items: &mut [T],

@@ -537,7 +537,10 @@ fn finish(
     meta.stream_split = Some(crate::split::write_stream_split(&mut writer, &view)?);
     let split_ms = t.elapsed().as_secs_f64() * 1e3;
     motu_pack::write_hierarchy_after_texels(&mut writer, &view, &meta)?;
-    Ok((writer.finish().map_err(ImportError::FinishPackage)?, split_ms))
+    Ok((
+        writer.finish().map_err(ImportError::FinishPackage)?,
+        split_ms,
+    ))
 }
 
 /// Reads every scene texture into a capped mip chain (several at a time), in scene order so
