@@ -476,7 +476,6 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
                 }
                 None => push(&c.data, Some(&c.primitive_map), c.bounds),
             })?;
-            drop(push);
             self.out.report.partitioned_meshes += 1;
             self.out.report.partition_clusters +=
                 u64::from(next_id(meshes.len(), "meshes")? - first);
