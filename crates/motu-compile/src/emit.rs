@@ -391,8 +391,10 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         self.plan.opts.blas_triangle_bound()
     }
 
-    fn load_source(&self, m: MeshId) -> Result<MeshData, CompileError> {
+    fn load_source(&mut self, m: MeshId) -> Result<MeshData, CompileError> {
+        let t = std::time::Instant::now();
         let data = (self.load)(m).map_err(|reason| CompileError::Mesh { mesh: m.0, reason })?;
+        self.out.report.phases.load_ms += t.elapsed().as_secs_f64() * 1e3;
         let info = self.plan.scene.mesh(m);
         if data.triangle_count() != info.triangle_count as usize
             || data.positions.len() != info.vertex_count as usize
@@ -434,6 +436,8 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         }
         let meshes = &mut self.out.meshes;
         let sink = &mut *self.sink;
+        let started = std::time::Instant::now();
+        let mut sink_ms = 0.0;
         let mut push = |data: &MeshData, map: Option<&[u32]>, bounds: Aabb| {
             let id = next_id(meshes.len(), "meshes")?;
             let map_flag = if map.is_some() { FLAG_PRIMITIVE_MAP } else { 0 };
@@ -447,10 +451,13 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
                 bounds_max: bounds.max,
                 ..*template
             });
-            sink(id, data, map).map_err(|reason| CompileError::Sink {
+            let t = std::time::Instant::now();
+            let r = sink(id, data, map).map_err(|reason| CompileError::Sink {
                 mesh_record: id,
                 reason,
-            })
+            });
+            sink_ms += t.elapsed().as_secs_f64() * 1e3;
+            r
         };
         if data.triangle_count() <= bound as usize {
             push(data, base_map, data.bounds())?;
@@ -472,6 +479,11 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
             self.out.report.partitioned_meshes += 1;
             self.out.report.partition_clusters +=
                 u64::from(next_id(meshes.len(), "meshes")? - first);
+        }
+        let phases = &mut self.out.report.phases;
+        phases.sink_ms += sink_ms;
+        if data.triangle_count() > bound as usize {
+            phases.partition_ms += started.elapsed().as_secs_f64() * 1e3 - sink_ms;
         }
         let count = next_id(self.out.meshes.len(), "meshes")? - first;
         Ok((first, count))

@@ -1003,3 +1003,40 @@ fn split_for_streaming_moves_a_range_that_is_not_the_tail() {
     // Rotated, not copied: the table grows only by the pieces' AABB instances.
     assert!(v.instances.len() < whole.instances.len() + 100);
 }
+
+/// The split a package stores (`stored_stream_split`) rebuilds exactly the split a reader
+/// would make (every table equal, `_pad` cleared), for a root split in place and for a
+/// shared range moved to the tail; a damaged map is an error, not a panic.
+#[test]
+fn a_stored_stream_split_rebuilds_the_same_split() {
+    let scene = scattered(10_000, false);
+    let whole = check_flatten(&scene, &CompileOptions::default());
+    assert!(crate::stored_stream_split(&whole.view(), 20_000)
+        .unwrap()
+        .is_none());
+    for cap in [1000, 3000] {
+        let made = crate::split_for_streaming(&whole.view(), cap)
+            .unwrap()
+            .expect("a TLAS over the cap");
+        let stored = crate::stored_stream_split(&whole.view(), cap)
+            .unwrap()
+            .expect("stored");
+        assert!(stored.extra_instances.iter().all(|i| i._pad == 0));
+        assert!(stored.instance_source.iter().any(|&s| s != NONE_U32));
+        let back = crate::StreamSplit::from_stored(&whole.view(), &stored).unwrap();
+        let (a, b) = (made.view(&whole.view()), back.view(&whole.view()));
+        assert_eq!(a.tlases, b.tlases);
+        assert_eq!(a.instances, b.instances);
+        assert!(a.instances.iter().all(|i| i._pad == 0));
+        assert_eq!(a.blases, b.blases);
+        assert_eq!(a.pis, b.pis);
+        assert_eq!(a.meshes, b.meshes);
+        assert_eq!(made.counts(), back.counts());
+        let mut bad = stored.clone();
+        bad.instance_source[0] = whole.instances.len() as u32;
+        assert!(crate::StreamSplit::from_stored(&whole.view(), &bad).is_err());
+        let mut bad = stored.clone();
+        bad.extra_instances.pop();
+        assert!(crate::StreamSplit::from_stored(&whole.view(), &bad).is_err());
+    }
+}

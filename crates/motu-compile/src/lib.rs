@@ -90,6 +90,8 @@ mod flatten;
 mod lod;
 pub mod partition;
 mod split;
+#[cfg(test)]
+mod split_reference;
 mod tables;
 mod tlas_split;
 mod validate;
@@ -107,7 +109,11 @@ pub use partition::{
     DEFAULT_MAX_BLAS_TRIANGLES, MIN_AUTO_MAX_BLAS_TRIANGLES,
 };
 pub use split::sah_partition;
-pub use tlas_split::{split_for_streaming, StreamSplit, STREAM_SPLIT_INSTANCES};
+
+pub use tlas_split::{
+    split_for_streaming, stored_stream_split, StoredStreamSplit, StreamSplit,
+    STREAM_SPLIT_INSTANCES,
+};
 pub use validate::{validate, validate_with, Limits, ValidateError};
 
 use motu_abi::{
@@ -286,6 +292,27 @@ pub struct CompileReport {
     /// meshes, root excluded), within the subset. Saturating.
     pub flattened_instances: u64,
     pub time_ms: f64,
+    /// Where `time_ms` went.
+    pub phases: CompilePhases,
+}
+
+/// The phases of a compile, in milliseconds (`motu import --json`'s `compile_phases`).
+/// `emit_ms` holds `load_ms`, `partition_ms` and `sink_ms`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct CompilePhases {
+    /// The per-prototype plan (`analyze`).
+    pub analyze_ms: f64,
+    /// The walk that writes the tables, with everything below.
+    pub emit_ms: f64,
+    /// Reading source meshes back (LOD chains, the partitioner).
+    pub load_ms: f64,
+    /// Cutting meshes over the bound into clusters (without storing them).
+    pub partition_ms: f64,
+    /// Handing the meshes the compiler made (LOD levels, clusters) to the caller's sink
+    /// (`motu import` stores them on a writer thread: this is the wait for its queue).
+    pub sink_ms: f64,
+    /// Levels and exact bounds (`finalize`).
+    pub finalize_ms: f64,
 }
 
 /// The compiled hierarchy: the tables of [`motu_abi`], owned.
@@ -365,7 +392,11 @@ pub fn compile_with_loader(
     let start = std::time::Instant::now();
     check_options(opts)?;
     let plan = analyze::Plan::new(scene, opts)?;
+    let analyze_ms = start.elapsed().as_secs_f64() * 1e3;
     let mut out = emit::Emitter::new(&plan, load, sink).run()?;
+    let emitted = std::time::Instant::now();
+    out.report.phases.analyze_ms = analyze_ms;
+    out.report.phases.emit_ms = (emitted - start).as_secs_f64() * 1e3 - analyze_ms;
     // A neutral 1×1 texture per scene texture until the packer reads the images
     // (`CompiledScene::textures`): the hierarchy is complete without them.
     out.textures = (0..scene.textures().len() as u32)
@@ -378,6 +409,7 @@ pub fn compile_with_loader(
         .collect();
     out.texels = vec![u32::MAX; scene.textures().len()];
     finalize::finalize(&mut out)?;
+    out.report.phases.finalize_ms = emitted.elapsed().as_secs_f64() * 1e3;
     out.report.time_ms = start.elapsed().as_secs_f64() * 1e3;
     tracing::info!(
         tlases = out.tlases.len(),

@@ -140,11 +140,17 @@ pub fn cluster_count(triangles: u64, bound: u32) -> u64 {
 
 /// Splits `mesh` into spatial clusters of at most `bound` triangles, calling `emit` for each in
 /// spatial order (left half before right half). A mesh within the bound is one cluster.
+///
+/// O(triangles · log(triangles / bound)) for the median splits (large ranges on two threads),
+/// then O(triangles) to list each cluster's triangles in ascending order (one counting pass,
+/// no sort); clusters are cut out of the mesh a few at a time in parallel and emitted in order,
+/// so at most a batch of clusters is in memory beside the mesh.
 pub fn partition_mesh<E>(
     mesh: &MeshData,
     bound: u32,
     emit: &mut dyn FnMut(Cluster) -> Result<(), E>,
 ) -> Result<(), E> {
+    use rayon::prelude::*;
     let tris = mesh.triangle_count();
     let centroid = |t: u32| -> [f32; 3] {
         let i = 3 * t as usize;
@@ -152,20 +158,59 @@ pub fn partition_mesh<E>(
         let (a, b, c) = (p(0), p(1), p(2));
         std::array::from_fn(|k| (a[k] + b[k] + c[k]) * (1.0 / 3.0))
     };
-    let mut order: Vec<(u32, [f32; 3])> = (0..tris as u32).map(|t| (t, centroid(t))).collect();
+    let mut order: Vec<(u32, [f32; 3])> = (0..tris as u32)
+        .into_par_iter()
+        .map(|t| (t, centroid(t)))
+        .collect();
     let mut ranges = Vec::new();
     median_partition(&mut order, |o| o.1, bound.max(1) as usize, &mut ranges);
-    let mut remap = vec![u32::MAX; mesh.positions.len()];
-    for (a, b) in ranges {
-        let mut prims: Vec<u32> = order[a..b].iter().map(|o| o.0).collect();
-        prims.sort_unstable();
-        emit(cluster_of(mesh, prims, &mut remap))?;
+    // Each triangle's cluster, then every cluster's triangles in ascending order (what
+    // sorting each range gave) by one counting pass over the triangles.
+    let mut cluster_of_tri = vec![0u32; tris];
+    for (k, &(a, b)) in ranges.iter().enumerate() {
+        for o in &order[a..b] {
+            cluster_of_tri[o.0 as usize] = k as u32;
+        }
+    }
+    drop(order);
+    let mut next: Vec<usize> = ranges.iter().map(|&(a, _)| a).collect();
+    let mut prims = vec![0u32; tris];
+    for (t, &k) in cluster_of_tri.iter().enumerate() {
+        prims[next[k as usize]] = t as u32;
+        next[k as usize] += 1;
+    }
+    drop(cluster_of_tri);
+    // A vertex map of the source's size per worker (at most `MAX_CUTTERS`), reused.
+    let workers = rayon::current_num_threads()
+        .clamp(1, MAX_CUTTERS)
+        .min(ranges.len());
+    let mut remaps: Vec<Vec<u32>> = (0..workers)
+        .map(|_| vec![u32::MAX; mesh.positions.len()])
+        .collect();
+    for group in ranges.chunks(2 * workers) {
+        let per = group.len().div_ceil(workers);
+        let clusters: Vec<Vec<Cluster>> = remaps
+            .par_iter_mut()
+            .zip(group.par_chunks(per))
+            .map(|(remap, rs)| {
+                rs.iter()
+                    .map(|&(a, b)| cluster_of(mesh, prims[a..b].to_vec(), remap))
+                    .collect()
+            })
+            .collect();
+        for c in clusters.into_iter().flatten() {
+            emit(c)?;
+        }
     }
     Ok(())
 }
 
-/// The sub-mesh of `prims` (source triangle ids); `remap` is scratch of the source's vertex
-/// count, all `u32::MAX` on entry and on return.
+/// Clusters cut out of one mesh at once, at most (each worker holds a vertex map of the
+/// source mesh's size).
+const MAX_CUTTERS: usize = 4;
+
+/// The sub-mesh of `prims` (source triangle ids), its vertices renumbered in first-use order;
+/// `remap` is scratch of the source's vertex count, all `u32::MAX` on entry and on return.
 fn cluster_of(mesh: &MeshData, prims: Vec<u32>, remap: &mut [u32]) -> Cluster {
     let mut order: Vec<u32> = Vec::new();
     let mut indices = Vec::with_capacity(prims.len() * 3);

@@ -12,55 +12,85 @@
 
 /// Partitions `items` in place into consecutive ranges of at most `cap` items (`cap ≥ 1`),
 /// appended to `out` as `(begin, end)` in spatial order (left half before right half).
-pub(crate) fn median_partition<T>(
+pub(crate) fn median_partition<T: Send>(
     items: &mut [T],
-    centre: impl Fn(&T) -> [f32; 3],
+    centre: impl Fn(&T) -> [f32; 3] + Sync,
     cap: usize,
     out: &mut Vec<(usize, usize)>,
 ) {
-    let cap = cap.max(1);
-    let mut stack = vec![(0usize, items.len())];
+    out.extend(median_ranges(items, &centre, cap.max(1), 0));
+}
+
+/// [`median_partition`] of a range that starts at `offset` in the whole: its ranges, in order.
+/// Ranges of at least `PARALLEL_ITEMS` items are split, then their halves partitioned on two
+/// threads (the same ranges as serially: each step depends on its range alone).
+fn median_ranges<T: Send>(
+    items: &mut [T],
+    centre: &(impl Fn(&T) -> [f32; 3] + Sync),
+    cap: usize,
+    offset: usize,
+) -> Vec<(usize, usize)> {
+    let len = items.len();
+    if len >= PARALLEL_ITEMS && len > cap {
+        let mid = median_split(items, centre);
+        let (left_items, right_items) = items.split_at_mut(mid);
+        let (mut left, right) = rayon::join(
+            || median_ranges(left_items, centre, cap, offset),
+            || median_ranges(right_items, centre, cap, offset + mid),
+        );
+        left.extend(right);
+        return left;
+    }
+    let mut out = Vec::new();
+    let mut stack = vec![(0usize, len)];
     while let Some((begin, end)) = stack.pop() {
-        let len = end - begin;
-        if len <= cap {
-            if len > 0 {
-                out.push((begin, end));
+        if end - begin <= cap {
+            if end > begin {
+                out.push((offset + begin, offset + end));
             }
             continue;
         }
-        let slice = &mut items[begin..end];
-        let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-        for item in slice.iter() {
-            let c = centre(item);
-            for k in 0..3 {
-                lo[k] = lo[k].min(c[k]);
-                hi[k] = hi[k].max(c[k]);
-            }
-        }
-        let extent: [f32; 3] = std::array::from_fn(|k| hi[k] - lo[k]);
-        let axis = (0..3)
-            .filter(|&k| extent[k].is_finite())
-            .max_by(|&a, &b| extent[a].total_cmp(&extent[b]))
-            .unwrap_or(0);
-        let mid = len / 2;
-        // All centres equal (or none finite): an object-median split by index.
-        if extent[axis] > 0.0 {
-            slice.select_nth_unstable_by(mid, |a, b| centre(a)[axis].total_cmp(&centre(b)[axis]));
-        }
+        let mid = begin + median_split(&mut items[begin..end], centre);
         // Right first so the left half is popped (and emitted) first.
-        stack.push((begin + mid, end));
-        stack.push((begin, begin + mid));
+        stack.push((mid, end));
+        stack.push((begin, mid));
     }
+    out
+}
+
+/// One step of [`median_partition`]: the median along the largest axis of the centres moved
+/// to `len / 2`, smaller before it; returns `len / 2`.
+fn median_split<T>(slice: &mut [T], centre: &impl Fn(&T) -> [f32; 3]) -> usize {
+    let len = slice.len();
+    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    for item in slice.iter() {
+        let c = centre(item);
+        for k in 0..3 {
+            lo[k] = lo[k].min(c[k]);
+            hi[k] = hi[k].max(c[k]);
+        }
+    }
+    let extent: [f32; 3] = std::array::from_fn(|k| hi[k] - lo[k]);
+    let axis = (0..3)
+        .filter(|&k| extent[k].is_finite())
+        .max_by(|&a, &b| extent[a].total_cmp(&extent[b]))
+        .unwrap_or(0);
+    let mid = len / 2;
+    // All centres equal (or none finite): an object-median split by index.
+    if extent[axis] > 0.0 {
+        slice.select_nth_unstable_by(mid, |a, b| centre(a)[axis].total_cmp(&centre(b)[axis]));
+    }
+    mid
 }
 
 /// Bins per axis of [`sah_partition`].
-const SAH_BINS: usize = 32;
+pub(crate) const SAH_BINS: usize = 32;
 /// Neither side of a SAH split may hold fewer than this fraction of the range's items: keeps
 /// the piece count within a small factor of the minimum (`n / cap`) when SAH would rather
 /// peel off a few items at a time.
-const SAH_MIN_SIDE_FRACTION: usize = 8;
+pub(crate) const SAH_MIN_SIDE_FRACTION: usize = 8;
 
-fn surface_area(min: [f32; 3], max: [f32; 3]) -> f32 {
+pub(crate) fn surface_area(min: [f32; 3], max: [f32; 3]) -> f32 {
     let d: [f32; 3] = std::array::from_fn(|k| (max[k] - min[k]).max(0.0));
     let a = 2.0 * (d[0] * d[1] + d[1] * d[2] + d[2] * d[0]);
     if a.is_finite() {
@@ -71,20 +101,20 @@ fn surface_area(min: [f32; 3], max: [f32; 3]) -> f32 {
 }
 
 #[derive(Clone, Copy)]
-struct Bin {
-    min: [f32; 3],
-    max: [f32; 3],
-    count: usize,
+pub(crate) struct Bin {
+    pub min: [f32; 3],
+    pub max: [f32; 3],
+    pub count: usize,
 }
 
 impl Bin {
-    const EMPTY: Self = Self {
+    pub const EMPTY: Self = Self {
         min: [f32::INFINITY; 3],
         max: [f32::NEG_INFINITY; 3],
         count: 0,
     };
 
-    fn grow(&mut self, min: [f32; 3], max: [f32; 3], count: usize) {
+    pub fn grow(&mut self, min: [f32; 3], max: [f32; 3], count: usize) {
         for k in 0..3 {
             self.min[k] = self.min[k].min(min[k]);
             self.max[k] = self.max[k].max(max[k]);
@@ -94,13 +124,13 @@ impl Bin {
 }
 
 /// An item's bounds, `(min, max)`.
-type Bounds = ([f32; 3], [f32; 3]);
+pub(crate) type Bounds = ([f32; 3], [f32; 3]);
 
 /// Ranges of at least this many items are split with their halves partitioned on two threads
 /// and their bins filled in parallel chunks (rayon); smaller ones serially. Either way the
 /// ranges are the same: a step's split depends on its range alone, and bins merge exactly
 /// (minima, maxima, counts).
-const PARALLEL_ITEMS: usize = 1 << 16;
+pub(crate) const PARALLEL_ITEMS: usize = 1 << 16;
 
 /// Partitions `items` (with `bounds[i]` = `(min, max)` of `items[i]`, permuted alongside) in
 /// place into consecutive ranges of at most `cap` items (`cap ≥ 1`), appended to `out` as
@@ -163,12 +193,12 @@ fn sah_ranges<T: Send>(
     left
 }
 
-fn centroid(b: &Bounds, k: usize) -> f32 {
+pub(crate) fn centroid(b: &Bounds, k: usize) -> f32 {
     0.5 * (b.0[k] + b.1[k])
 }
 
 /// The finite centroids' bounds of `bs`, per axis (`lo`, `hi`).
-fn centroid_bounds(bs: &[Bounds]) -> ([f32; 3], [f32; 3]) {
+pub(crate) fn centroid_bounds(bs: &[Bounds]) -> ([f32; 3], [f32; 3]) {
     let fold = |(mut lo, mut hi): ([f32; 3], [f32; 3]), b: &Bounds| {
         for k in 0..3 {
             let c = centroid(b, k);
@@ -197,13 +227,22 @@ fn centroid_bounds(bs: &[Bounds]) -> ([f32; 3], [f32; 3]) {
         )
 }
 
-/// The SAH bins of `bs` along `axis` (`bin_of` gives an item's bin).
-fn fill_bins(bs: &[Bounds], bin_of: impl Fn(&Bounds) -> usize + Sync) -> [Bin; SAH_BINS] {
-    // A loop over one array in place (a fold moving the 32 bins per item took twice the time).
+/// The SAH bins of `bs` along every axis in `axes` (`bin_of(b, axis)` gives an item's bin),
+/// filled in one pass over the items (the other axes' bins stay empty).
+fn fill_bins(
+    bs: &[Bounds],
+    axes: [bool; 3],
+    bin_of: impl Fn(&Bounds, usize) -> usize + Sync,
+) -> [[Bin; SAH_BINS]; 3] {
+    // A loop over arrays in place (a fold moving the 32 bins per item took twice the time).
     let fill = |chunk: &[Bounds]| {
-        let mut bins = [Bin::EMPTY; SAH_BINS];
+        let mut bins = [[Bin::EMPTY; SAH_BINS]; 3];
         for b in chunk {
-            bins[bin_of(b)].grow(b.0, b.1, 1);
+            for (axis, bins) in bins.iter_mut().enumerate() {
+                if axes[axis] {
+                    bins[bin_of(b, axis)].grow(b.0, b.1, 1);
+                }
+            }
         }
         bins
     };
@@ -212,10 +251,12 @@ fn fill_bins(bs: &[Bounds], bin_of: impl Fn(&Bounds) -> usize + Sync) -> [Bin; S
     }
     use rayon::prelude::*;
     bs.par_chunks(PARALLEL_ITEMS / 4).map(fill).reduce(
-        || [Bin::EMPTY; SAH_BINS],
+        || [[Bin::EMPTY; SAH_BINS]; 3],
         |mut a, b| {
-            for (x, y) in a.iter_mut().zip(&b) {
-                x.grow(y.min, y.max, y.count);
+            for (xa, ya) in a.iter_mut().zip(&b) {
+                for (x, y) in xa.iter_mut().zip(ya) {
+                    x.grow(y.min, y.max, y.count);
+                }
             }
             a
         },
@@ -228,33 +269,40 @@ fn sah_split<T>(items: &mut [T], bounds: &mut [Bounds]) -> usize {
     let len = items.len();
     let (lo, hi) = centroid_bounds(bounds);
     let min_side = (len / SAH_MIN_SIDE_FRACTION).max(1);
+    let axes: [bool; 3] = std::array::from_fn(|k| {
+        let extent = hi[k] - lo[k];
+        extent > 0.0 && extent.is_finite()
+    });
+    let scale: [f32; 3] = std::array::from_fn(|k| SAH_BINS as f32 / (hi[k] - lo[k]));
+    // NaN and out-of-range centroids clamp (a saturating cast), so every item has a bin.
+    let bin_of = |b: &Bounds, axis: usize| {
+        (((centroid(b, axis) - lo[axis]) * scale[axis]) as usize).min(SAH_BINS - 1)
+    };
+    let all_bins = fill_bins(bounds, axes, bin_of);
     // (cost, axis, first bin of the right side)
     let mut best: Option<(f32, usize, usize)> = None;
-    for axis in 0..3 {
-        let extent = hi[axis] - lo[axis];
-        if !(extent > 0.0 && extent.is_finite()) {
-            continue;
-        }
-        let scale = SAH_BINS as f32 / extent;
-        // NaN and out-of-range centroids clamp (a saturating cast), so every item has a bin.
-        let bins = fill_bins(bounds, |b| {
-            (((centroid(b, axis) - lo[axis]) * scale) as usize).min(SAH_BINS - 1)
-        });
-        let mut right = [(0.0f32, 0usize); SAH_BINS];
+    for axis in (0..3).filter(|&k| axes[k]) {
+        let bins = &all_bins[axis];
+        let mut right = [Bin::EMPTY; SAH_BINS];
         let mut acc = Bin::EMPTY;
         for i in (1..SAH_BINS).rev() {
             acc.grow(bins[i].min, bins[i].max, bins[i].count);
-            right[i] = (surface_area(acc.min, acc.max), acc.count);
+            right[i] = acc;
         }
         let mut left = Bin::EMPTY;
         for i in 1..SAH_BINS {
             left.grow(bins[i - 1].min, bins[i - 1].max, bins[i - 1].count);
-            let (r_area, r_count) = right[i];
-            if left.count < min_side || r_count < min_side {
+            // Past an empty bin the sides are those of the candidate before, whose cost (the
+            // same floats) this one could not beat: only the areas are skipped.
+            if bins[i - 1].count == 0 {
                 continue;
             }
-            let cost =
-                surface_area(left.min, left.max) * left.count as f32 + r_area * r_count as f32;
+            let r = &right[i];
+            if left.count < min_side || r.count < min_side {
+                continue;
+            }
+            let cost = surface_area(left.min, left.max) * left.count as f32
+                + surface_area(r.min, r.max) * r.count as f32;
             if best.is_none_or(|(c, _, _)| cost < c) {
                 best = Some((cost, axis, i));
             }
@@ -263,12 +311,10 @@ fn sah_split<T>(items: &mut [T], bounds: &mut [Bounds]) -> usize {
     let Some((_, axis, split)) = best else {
         return len / 2;
     };
-    let scale = SAH_BINS as f32 / (hi[axis] - lo[axis]);
-    let bin_of = |b: &Bounds| (((centroid(b, axis) - lo[axis]) * scale) as usize).min(SAH_BINS - 1);
     // Hoare-style partition of both arrays: bins < split to the left.
     let (mut i, mut j) = (0, len);
     while i < j {
-        if bin_of(&bounds[i]) < split {
+        if bin_of(&bounds[i], axis) < split {
             i += 1;
         } else {
             j -= 1;
@@ -625,5 +671,61 @@ mod tests {
             .collect();
         check(&mut mixed, 4);
         check(&mut [], 3);
+    }
+
+    /// Random boxes with clusters, duplicates, flat axes and NaN: the fast splits equal the
+    /// reference (the code before the speed-ups, serial) range for range and item for item,
+    /// on inputs large enough for the parallel paths.
+    #[test]
+    fn fast_partitions_equal_the_reference() {
+        use crate::split_reference::{median_partition_serial, sah_partition_serial};
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for (n, cap) in [
+            (200_000usize, 16usize),
+            (150_000, 1_000),
+            (3_000, 16),
+            (40, 3),
+        ] {
+            let boxes: Vec<Bounds> = (0..n)
+                .map(|i| {
+                    let c = if i % 97 == 0 {
+                        [5.0, 5.0, 0.0] // duplicates
+                    } else if i % 1013 == 0 {
+                        [f32::NAN, 1.0, 0.0]
+                    } else {
+                        let k = (i % 7) as f32 * 100.0;
+                        [k + rnd() * 10.0, rnd() * 1000.0, 0.0] // z flat
+                    };
+                    let h = rnd() * 3.0;
+                    ([c[0] - h, c[1] - h, c[2]], [c[0] + h, c[1] + 0.5 * h, c[2]])
+                })
+                .collect();
+            let (mut a_items, mut a_bounds) = ((0..n as u32).collect::<Vec<_>>(), boxes.clone());
+            let (mut b_items, mut b_bounds) = (a_items.clone(), boxes.clone());
+            let (mut a, mut b) = (Vec::new(), Vec::new());
+            sah_partition(&mut a_items, &mut a_bounds, cap, &mut a);
+            sah_partition_serial(&mut b_items, &mut b_bounds, cap, &mut b);
+            assert_eq!(a, b, "sah ranges, n {n} cap {cap}");
+            assert_eq!(a_items, b_items, "sah order, n {n} cap {cap}");
+
+            let centres: Vec<(u32, [f32; 3])> = boxes
+                .iter()
+                .enumerate()
+                .map(|(i, b)| (i as u32, std::array::from_fn(|k| centroid(b, k))))
+                .collect();
+            let (mut x, mut y) = (centres.clone(), centres);
+            let (mut a, mut b) = (Vec::new(), Vec::new());
+            median_partition(&mut x, |c| c.1, cap, &mut a);
+            median_partition_serial(&mut y, |c| c.1, cap, &mut b);
+            assert_eq!(a, b, "median ranges, n {n} cap {cap}");
+            let ids = |v: &[(u32, [f32; 3])]| v.iter().map(|c| c.0).collect::<Vec<_>>();
+            assert_eq!(ids(&x), ids(&y), "median order, n {n} cap {cap}");
+        }
     }
 }

@@ -236,6 +236,104 @@ impl StreamSplit {
         let r = &self.scene.report;
         (r.split_tlases, r.split_pieces)
     }
+
+    /// The split in the form a package stores it ([`StoredStreamSplit`]), `view` being the
+    /// hierarchy it was made from; `self` must come from [`split_tagged`] (origins in `_pad`).
+    fn stored(&self, view: &HierarchyView<'_>) -> StoredStreamSplit {
+        let (tlases_split, pieces) = self.counts();
+        let mut source = Vec::with_capacity(self.scene.instances.len());
+        let mut extra_instances = Vec::new();
+        for inst in &self.scene.instances {
+            // `split_for_streaming` tags each copied instance with its index + 1 (in `_pad`);
+            // the split's own AABB-BLAS instances carry 0.
+            if inst._pad != 0 && (inst._pad as usize) <= view.instances.len() {
+                source.push(inst._pad - 1);
+            } else {
+                source.push(NONE_U32);
+                extra_instances.push(InstanceRecord { _pad: 0, ..*inst });
+            }
+        }
+        StoredStreamSplit {
+            tlases_split,
+            pieces,
+            tlases: self.scene.tlases.clone(),
+            blases: self.scene.blases.clone(),
+            pis: self.scene.pis.clone(),
+            instance_source: source,
+            extra_instances,
+        }
+    }
+
+    /// The split a package stored ([`StreamSplit::stored`]), rebuilt over `view` (the
+    /// package's hierarchy) without splitting anything: O(instances). Checks that the stored
+    /// tables fit `view` (every source index in range, as many extra instances as named,
+    /// every cross-table reference valid), so a damaged package is an error, not a panic.
+    pub fn from_stored(
+        view: &HierarchyView<'_>,
+        stored: &StoredStreamSplit,
+    ) -> Result<StreamSplit, CompileError> {
+        let bad = |what: String| CompileError::Internal(format!("stored stream split: {what}"));
+        let mut extra = stored.extra_instances.iter();
+        let mut instances = Vec::with_capacity(stored.instance_source.len());
+        for &s in &stored.instance_source {
+            if s == NONE_U32 {
+                let e = extra
+                    .next()
+                    .ok_or_else(|| bad("fewer extra instances than the map names".into()))?;
+                instances.push(*e);
+            } else {
+                let i = view
+                    .instances
+                    .get(s as usize)
+                    .ok_or_else(|| bad(format!("instance {s} is out of range")))?;
+                instances.push(*i);
+            }
+        }
+        if extra.next().is_some() {
+            return Err(bad("more extra instances than the map names".into()));
+        }
+        let scene = CompiledScene {
+            root_tlas: view.root_tlas,
+            tlases: stored.tlases.clone(),
+            instances,
+            blases: stored.blases.clone(),
+            geometries: view.geometries.to_vec(),
+            pis: stored.pis.clone(),
+            lod_selectors: view.lod_selectors.to_vec(),
+            lod_levels: view.lod_levels.to_vec(),
+            meshes: view.meshes.to_vec(),
+            materials: view.materials.to_vec(),
+            textures: view.textures.to_vec(),
+            texels: Vec::new(),
+            report: crate::CompileReport {
+                split_tlases: stored.tlases_split,
+                split_pieces: stored.pieces,
+                ..Default::default()
+            },
+        };
+        scene
+            .view()
+            .check_references()
+            .map_err(|e| bad(e.to_string()))?;
+        Ok(StreamSplit { scene })
+    }
+}
+
+/// A [`StreamSplit`] as a package stores it, so that readers (`motu report`) need not split
+/// again: the split hierarchy's TLAS, BLAS and PI tables whole (they are small: the split adds
+/// a few pieces, PIs and AABB BLASes), and its instance table as a map into the package's
+/// (`instance_source[i]`: the package instance the split's instance `i` is, or `NONE_U32` for
+/// the next of `extra_instances`, the split's own AABB-BLAS instances). Every other table is
+/// the package's own.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StoredStreamSplit {
+    pub tlases_split: u64,
+    pub pieces: u64,
+    pub tlases: Vec<TlasRecord>,
+    pub blases: Vec<BlasRecord>,
+    pub pis: Vec<PiRecord>,
+    pub instance_source: Vec<u32>,
+    pub extra_instances: Vec<InstanceRecord>,
 }
 
 /// Splits every TLAS of `view` over `cap` instances into spatial pieces, as `import
@@ -249,6 +347,25 @@ pub fn split_for_streaming(
     view: &HierarchyView<'_>,
     cap: u32,
 ) -> Result<Option<StreamSplit>, CompileError> {
+    let mut split = split_tagged(view, cap)?;
+    if let Some(s) = split.as_mut() {
+        clear_origins(s);
+    }
+    Ok(split)
+}
+
+/// [`split_for_streaming`] in the form a package stores it (`motu import` writes it, `motu
+/// report` reads it back with [`StreamSplit::from_stored`]). `None` when no TLAS is over `cap`.
+pub fn stored_stream_split(
+    view: &HierarchyView<'_>,
+    cap: u32,
+) -> Result<Option<StoredStreamSplit>, CompileError> {
+    Ok(split_tagged(view, cap)?.map(|s| s.stored(view)))
+}
+
+/// [`split_for_streaming`] with each instance's origin left in `_pad` (index + 1; 0 for the
+/// split's own AABB-BLAS instances).
+fn split_tagged(view: &HierarchyView<'_>, cap: u32) -> Result<Option<StreamSplit>, CompileError> {
     let cap = cap.max(2) as usize;
     let over: Vec<u32> = (0..view.tlases.len() as u32)
         .filter(|&t| view.tlases[t as usize].instance_count as usize > cap)
@@ -257,10 +374,26 @@ pub fn split_for_streaming(
         return Ok(None);
     }
     let _span = tracing::info_span!("split for streaming", tlases = over.len()).entered();
+    // Each instance remembers where it came from (its index + 1 in `_pad`, always 0 in a
+    // package) so that [`StreamSplit::stored`] can store the split as a map; cleared below.
+    if view.instances.len() >= NONE_U32 as usize {
+        return Err(CompileError::TooMany {
+            what: "instances",
+            count: view.instances.len() as u64,
+        });
+    }
     let mut out = CompiledScene {
         root_tlas: view.root_tlas,
         tlases: view.tlases.to_vec(),
-        instances: view.instances.to_vec(),
+        instances: view
+            .instances
+            .iter()
+            .enumerate()
+            .map(|(i, inst)| InstanceRecord {
+                _pad: i as u32 + 1,
+                ..*inst
+            })
+            .collect(),
         blases: view.blases.to_vec(),
         geometries: view.geometries.to_vec(),
         pis: view.pis.to_vec(),
@@ -284,6 +417,13 @@ pub fn split_for_streaming(
     // Levels (two more under each split TLAS) and bounds (the pieces', their PIs').
     crate::finalize::finalize(&mut out)?;
     Ok(Some(StreamSplit { scene: out }))
+}
+
+/// Clears the origins [`split_tagged`] left in the instances' `_pad` (0 in every package).
+fn clear_origins(split: &mut StreamSplit) {
+    for inst in &mut split.scene.instances {
+        inst._pad = 0;
+    }
 }
 
 /// Makes TLAS `t`'s instance range the table's tail, which [`split_tlas`] needs: rotated there

@@ -5,6 +5,7 @@
 mod error;
 mod memory;
 mod pipeline;
+mod split;
 mod textures;
 
 pub use error::ImportError;

@@ -91,6 +91,11 @@ pub struct ImportSummary {
     pub parse_ms: f64,
     pub compile_ms: f64,
     pub pack_ms: f64,
+    /// Where `compile_ms` went (the compiler's phases: analyze, emit with its source-mesh
+    /// loads, partitioning and stores, finalize).
+    pub compile_phases: motu_compile::CompilePhases,
+    /// Of `pack_ms`: the stream split made and stored for readers (FORMAT.md).
+    pub stream_split_ms: f64,
     pub meshes: u64,
     pub instances: u64,
     pub flattened_instances: u64,
@@ -377,6 +382,10 @@ fn warn_on_count_overflow(scene: &Scene, report: &mut IngestReport) {
 /// they come, and points every mesh record at its blob: whole source meshes where
 /// `source_location` says, made meshes where they were appended. Returns the compiled scene
 /// and the compile time.
+///
+/// The made meshes are stored by a writer thread (a few in flight, in the order made, so the
+/// package is the same) while the compiler goes on partitioning: storing is copying and
+/// writing chunks, partitioning is arithmetic, and the two overlap.
 fn compile_into(
     scene: &Scene,
     copts: &CompileOptions,
@@ -385,19 +394,37 @@ fn compile_into(
     mut source_location: impl FnMut(&MeshRecord) -> Result<MeshLocation, ImportError>,
 ) -> Result<(CompiledScene, f64), ImportError> {
     let t = Instant::now();
-    let mut made_locations: HashMap<u32, MeshLocation> = HashMap::new();
-    let mut sink =
-        |rec: u32, data: &motu_scene::MeshData, map: Option<&[u32]>| -> Result<(), String> {
-            let group = if map.is_some() {
-                CLUSTER_GROUP
-            } else {
-                LOD_GROUP
+    type Made = (u32, motu_scene::MeshData, Option<Vec<u32>>);
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Made>(MADE_IN_FLIGHT);
+    let (compiled, made_locations) = std::thread::scope(|scope| {
+        let writer = scope.spawn(move || -> Result<HashMap<u32, MeshLocation>, String> {
+            let mut made: HashMap<u32, MeshLocation> = HashMap::new();
+            for (rec, data, map) in rx {
+                let group = if map.is_some() {
+                    CLUSTER_GROUP
+                } else {
+                    LOD_GROUP
+                };
+                made.insert(rec, geo.append_mesh_mapped(group, &data, map.as_deref())?);
+            }
+            Ok(made)
+        });
+        let mut sink =
+            |rec: u32, data: &motu_scene::MeshData, map: Option<&[u32]>| -> Result<(), String> {
+                tx.send((rec, data.clone(), map.map(<[u32]>::to_vec)))
+                    .map_err(|_| "the mesh writer stopped".to_string())
             };
-            made_locations.insert(rec, geo.append_mesh_mapped(group, data, map)?);
-            Ok(())
-        };
-    let mut compiled = motu_compile::compile_with_loader(scene, copts, load, &mut sink)
-        .map_err(ImportError::Compile)?;
+        let compiled = motu_compile::compile_with_loader(scene, copts, load, &mut sink);
+        drop(tx);
+        let made = writer
+            .join()
+            .map_err(|_| ImportError::Internal("the mesh writer panicked".into()))?;
+        // The writer's error first: the compiler then only saw a closed queue.
+        let made = made.map_err(ImportError::Geometry)?;
+        let compiled = compiled.map_err(ImportError::Compile)?;
+        Ok::<_, ImportError>((compiled, made))
+    })?;
+    let mut compiled = compiled;
     let compile_ms = t.elapsed().as_secs_f64() * 1e3;
     tracing::info!(
         compile_ms,
@@ -420,8 +447,12 @@ fn compile_into(
     Ok((compiled, compile_ms))
 }
 
+/// Made meshes queued for the writer thread at most (each up to a cluster: ~2 MiB at 2^16
+/// triangles).
+const MADE_IN_FLIGHT: usize = 4;
+
 fn summary(
-    s: WriteSummary,
+    (s, split_ms): (WriteSummary, f64),
     scene: &Scene,
     compiled: &CompiledScene,
     report: &IngestReport,
@@ -437,6 +468,8 @@ fn summary(
         parse_ms,
         compile_ms,
         pack_ms: pack_start.elapsed().as_secs_f64() * 1e3,
+        compile_phases: compiled.report.phases.clone(),
+        stream_split_ms: split_ms,
         meshes: st.meshes,
         instances: st.instances,
         flattened_instances: st.flattened_instances,
@@ -459,7 +492,7 @@ fn finish(
     report: &IngestReport,
     source: &Path,
     o: &ImportOptions,
-) -> Result<WriteSummary, ImportError> {
+) -> Result<(WriteSummary, f64), ImportError> {
     // A subset package describes only what it holds.
     let mut elements = element_stats(scene);
     let mut scene_stats = scene.stats();
@@ -496,6 +529,7 @@ fn finish(
             ribbons: report.curve_ribbons,
             ribbon_triangles: report.curve_ribbon_triangles,
         },
+        stream_split: None,
     };
     let mut meta = meta;
     let caps = crate::textures::Caps {
@@ -506,8 +540,14 @@ fn finish(
     let mut view = compiled.view();
     view.textures = &textures;
     view.texels = &[];
+    let t = Instant::now();
+    meta.stream_split = Some(crate::split::write_stream_split(&mut writer, &view)?);
+    let split_ms = t.elapsed().as_secs_f64() * 1e3;
     motu_pack::write_hierarchy_after_texels(&mut writer, &view, &meta)?;
-    writer.finish().map_err(ImportError::FinishPackage)
+    Ok((
+        writer.finish().map_err(ImportError::FinishPackage)?,
+        split_ms,
+    ))
 }
 
 /// Per-element counts: each element's root edges and root meshes, and everything they reach.

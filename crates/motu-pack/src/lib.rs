@@ -20,11 +20,14 @@ mod store;
 mod write;
 
 pub use blob::{MeshBlobLayout, MESH_BLOB_ALIGN};
-pub use meta::{CurveMeta, ElementMeta, PackageMeta, SCHEMA, SCHEMA_READABLE};
+pub use meta::{CurveMeta, ElementMeta, PackageMeta, StreamSplitMeta, SCHEMA, SCHEMA_READABLE};
 pub use read::{read_mesh_blob, MeshGeometry, ScenePackage};
 pub use sections::*;
 pub use store::{place_mesh_record, PackageGeometry};
-pub use write::{begin_texels, write_hierarchy, write_hierarchy_after_texels};
+pub use write::{
+    begin_texels, write_hierarchy, write_hierarchy_after_texels, write_stream_split,
+    StreamSplitTables,
+};
 
 /// Errors reading or writing the package schema.
 #[derive(Debug, thiserror::Error)]

@@ -57,6 +57,20 @@ pub struct PackageMeta {
     /// packages written before it was added).
     #[serde(default)]
     pub material_ptex: Vec<Option<String>>,
+    /// The split `motu render --stream` makes of TLASes over `cap_instances` instances, made
+    /// once at import and stored (`SECTION_SPLIT_*`) so readers need not redo it (`motu
+    /// report`). Absent in packages written before it was added (readers split themselves);
+    /// present with `tlases_split == 0` (and no sections) when no TLAS is over the cap.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stream_split: Option<StreamSplitMeta>,
+}
+
+/// See [`PackageMeta::stream_split`].
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct StreamSplitMeta {
+    pub cap_instances: u32,
+    pub tlases_split: u64,
+    pub pieces: u64,
 }
 
 /// Curve shapes at import: all of them, those tessellated into ribbons, and the ribbons'

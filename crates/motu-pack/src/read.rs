@@ -92,6 +92,34 @@ impl ScenePackage {
         })
     }
 
+    /// The stream split stored at import for `cap_instances`: `Ok(None)` when the package
+    /// stores none for that cap (written before it was stored, or split for another cap;
+    /// the caller splits itself), `Ok(Some(None))` when no TLAS is over the cap, else the
+    /// tables, borrowed from the map.
+    #[allow(clippy::type_complexity)]
+    pub fn stored_stream_split(
+        &self,
+        cap_instances: u32,
+    ) -> Result<Option<Option<crate::StreamSplitTables<'_>>>, PackError> {
+        let Some(m) = &self.meta.stream_split else {
+            return Ok(None);
+        };
+        if m.cap_instances != cap_instances {
+            return Ok(None);
+        }
+        if m.tlases_split == 0 {
+            return Ok(Some(None));
+        }
+        let p = &self.package;
+        Ok(Some(Some(crate::StreamSplitTables {
+            tlases: p.section_as(SECTION_SPLIT_TLASES)?,
+            blases: p.section_as(SECTION_SPLIT_BLASES)?,
+            pis: p.section_as(SECTION_SPLIT_PIS)?,
+            instance_source: p.section_as(SECTION_SPLIT_INSTANCE_SOURCE)?,
+            extra_instances: p.section_as(SECTION_SPLIT_EXTRA_INSTANCES)?,
+        })))
+    }
+
     fn layout(m: &MeshRecord) -> MeshBlobLayout {
         MeshBlobLayout::with_map(
             m.vertex_count as u64,

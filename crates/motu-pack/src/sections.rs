@@ -16,3 +16,12 @@ pub const SECTION_MATERIALS: SectionKind = SectionKind(10);
 pub const SECTION_TEXTURES: SectionKind = SectionKind(11);
 /// RGBA8 texels (`u32`) of every texture's mip chain.
 pub const SECTION_TEXELS: SectionKind = SectionKind(12);
+/// The stream split (`motu_compile::StoredStreamSplit`, written by `motu import` since
+/// `stream_split` appeared in the meta): the split hierarchy's TLAS, BLAS and PI tables, its
+/// instance map (`u32` per instance: a package instance, or `NONE_U32` for the next extra
+/// instance) and its extra instances.
+pub const SECTION_SPLIT_TLASES: SectionKind = SectionKind(13);
+pub const SECTION_SPLIT_BLASES: SectionKind = SectionKind(14);
+pub const SECTION_SPLIT_PIS: SectionKind = SectionKind(15);
+pub const SECTION_SPLIT_INSTANCE_SOURCE: SectionKind = SectionKind(16);
+pub const SECTION_SPLIT_EXTRA_INSTANCES: SectionKind = SectionKind(17);

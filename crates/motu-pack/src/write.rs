@@ -67,3 +67,34 @@ fn write_tables(
     writer.add_section(SECTION_META, "meta", 1, &json)?;
     Ok(())
 }
+
+/// The stored stream split's tables, borrowed (see [`crate::SECTION_SPLIT_TLASES`]).
+#[derive(Clone, Copy, Debug)]
+pub struct StreamSplitTables<'a> {
+    pub tlases: &'a [motu_abi::TlasRecord],
+    pub blases: &'a [motu_abi::BlasRecord],
+    pub pis: &'a [motu_abi::PiRecord],
+    pub instance_source: &'a [u32],
+    pub extra_instances: &'a [motu_abi::InstanceRecord],
+}
+
+/// Adds the stored stream split's sections (the meta's `stream_split` says what they are).
+pub fn write_stream_split(
+    writer: &mut PackageWriter,
+    t: &StreamSplitTables<'_>,
+) -> Result<(), PackError> {
+    writer.add_section_slice(SECTION_SPLIT_TLASES, "split_tlases", t.tlases)?;
+    writer.add_section_slice(SECTION_SPLIT_BLASES, "split_blases", t.blases)?;
+    writer.add_section_slice(SECTION_SPLIT_PIS, "split_pis", t.pis)?;
+    writer.add_section_slice(
+        SECTION_SPLIT_INSTANCE_SOURCE,
+        "split_instance_source",
+        t.instance_source,
+    )?;
+    writer.add_section_slice(
+        SECTION_SPLIT_EXTRA_INSTANCES,
+        "split_extra_instances",
+        t.extra_instances,
+    )?;
+    Ok(())
+}

@@ -144,7 +144,38 @@ pub fn build_report_at(
                 .map_or(DEFAULT_FLOOR_IMAGE, |c| (c.width.max(1), c.height.max(1)))
         }),
     };
-    build_report_from_view(&pkg.view()?, &input, sizes, budget_bytes)
+    let view = pkg.view()?;
+    let split = stored_split(pkg, &view)?;
+    build(&view, &input, sizes, budget_bytes, split)
+}
+
+/// The stream split the package stored at import (`Some(None)`: no TLAS over the cap), rebuilt
+/// without splitting; `None` when the package has none for the streamer's cap (written before
+/// it was stored): the report splits itself.
+#[allow(clippy::type_complexity)]
+fn stored_split(
+    pkg: &motu_pack::ScenePackage,
+    view: &HierarchyView<'_>,
+) -> Result<Option<Option<motu_compile::StreamSplit>>, ReportError> {
+    let Some(stored) = pkg.stored_stream_split(motu_render::STREAM_SPLIT_INSTANCES)? else {
+        return Ok(None);
+    };
+    let Some(t) = stored else {
+        return Ok(Some(None));
+    };
+    let meta = pkg.meta().stream_split.clone().unwrap_or_default();
+    let stored = motu_compile::StoredStreamSplit {
+        tlases_split: meta.tlases_split,
+        pieces: meta.pieces,
+        tlases: t.tlases.to_vec(),
+        blases: t.blases.to_vec(),
+        pis: t.pis.to_vec(),
+        instance_source: t.instance_source.to_vec(),
+        extra_instances: t.extra_instances.to_vec(),
+    };
+    let split = motu_compile::StreamSplit::from_stored(view, &stored)
+        .map_err(|e| ReportError::Invalid(format!("{}: {e}", pkg.path())))?;
+    Ok(Some(Some(split)))
 }
 
 /// The element label of untagged root instances (after every real element id).
@@ -224,6 +255,17 @@ pub fn build_report_from_view(
     input: &ReportInput,
     sizes: &dyn SizeSource,
     budget_bytes: Option<u64>,
+) -> Result<Report, ReportError> {
+    build(view, input, sizes, budget_bytes, None)
+}
+
+/// [`build_report_from_view`] with the stream split already made (`None`: split here).
+fn build(
+    view: &HierarchyView<'_>,
+    input: &ReportInput,
+    sizes: &dyn SizeSource,
+    budget_bytes: Option<u64>,
+    stored_split: Option<Option<motu_compile::StreamSplit>>,
 ) -> Result<Report, ReportError> {
     let _span = tracing::info_span!("report", package = %input.package).entered();
     let g = Graph::new(*view, sizes)?;
@@ -462,8 +504,11 @@ pub fn build_report_from_view(
     // driver size queries.
     let (fw, fh) = input.floor_image;
     // The hierarchy the streamer renders: large TLASes split into pieces at load time.
-    let split =
-        motu_render::stream_split(view, None).map_err(|e| ReportError::Invalid(e.to_string()))?;
+    let split = match stored_split {
+        Some(split) => split,
+        None => motu_render::stream_split(view, None)
+            .map_err(|e| ReportError::Invalid(e.to_string()))?,
+    };
     let streamed = split.as_ref().map_or(*view, |s| s.view(view));
     let floor = motu_gpu::streaming_floor(
         &streamed,

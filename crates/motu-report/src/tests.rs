@@ -981,13 +981,13 @@ fn html_report_renders_in_headless_chromium() {
     );
 }
 
-/// `build_report` on a real package (written with motu-pack) equals the report of its tables.
-#[test]
-fn build_report_reads_a_package() {
-    let mut s = forest();
-    let dir = tempfile::tempdir().expect("tmp");
-    let path = dir.path().join("forest.motu");
-    let writer = motu_package::PackageWriter::create(&path, Default::default()).expect("writer");
+/// Writes `s` as a real package (motu-pack), with `split`'s sections and meta entry if given.
+fn write_package(
+    s: &mut Scene,
+    path: &std::path::Path,
+    split: Option<motu_pack::StreamSplitMeta>,
+) -> Option<motu_compile::StoredStreamSplit> {
+    let writer = motu_package::PackageWriter::create(path, Default::default()).expect("writer");
     let geometry = motu_pack::PackageGeometry::new(writer);
     for m in &mut s.meshes {
         let t = m.triangle_count;
@@ -1003,6 +1003,23 @@ fn build_report_reads_a_package() {
         motu_pack::place_mesh_record(m, at);
     }
     let mut writer = geometry.take_writer().expect("writer back");
+    let mut stored = None;
+    if let Some(m) = &split {
+        stored = motu_compile::stored_stream_split(&s.view(), m.cap_instances).expect("split");
+        if let Some(st) = &stored {
+            motu_pack::write_stream_split(
+                &mut writer,
+                &motu_pack::StreamSplitTables {
+                    tlases: &st.tlases,
+                    blases: &st.blases,
+                    pis: &st.pis,
+                    instance_source: &st.instance_source,
+                    extra_instances: &st.extra_instances,
+                },
+            )
+            .expect("split sections");
+        }
+    }
     let meta = motu_pack::PackageMeta {
         schema: motu_pack::SCHEMA.into(),
         levels: "ml".into(),
@@ -1015,16 +1032,84 @@ fn build_report_reads_a_package() {
                 ..Default::default()
             })
             .collect(),
+        stream_split: split.map(|m| motu_pack::StreamSplitMeta {
+            tlases_split: stored.as_ref().map_or(0, |s| s.tlases_split),
+            pieces: stored.as_ref().map_or(0, |s| s.pieces),
+            ..m
+        }),
         ..Default::default()
     };
     motu_pack::write_hierarchy(&mut writer, &s.view(), &meta).expect("sections");
     writer.finish().expect("finish");
+    stored
+}
+
+/// `build_report` on a real package (written with motu-pack, without a stored stream split,
+/// as packages were before it was stored) equals the report of its tables.
+#[test]
+fn build_report_reads_a_package() {
+    let mut s = forest();
+    let dir = tempfile::tempdir().expect("tmp");
+    let path = dir.path().join("forest.motu");
+    write_package(&mut s, &path, None);
     let pkg = motu_pack::ScenePackage::open(&path).expect("open");
     let from_pkg = build_report(&pkg, &lavapipe(), Some(1 << 20)).expect("report");
     let mut from_view = s.report(&lavapipe(), Some(1 << 20));
     from_view.package = pkg.path().to_string();
     assert_eq!(from_pkg, from_view);
     assert_eq!(from_pkg.elements[0].name, "trees");
+}
+
+/// A package's stored stream split reads back as the split a reader would make (sections
+/// round trip, every table equal), one for another cap is not used, and the report from a
+/// package that stored its split equals the report that splits itself.
+#[test]
+fn a_stored_stream_split_reads_back_and_changes_no_number() {
+    let mut s = forest();
+    let dir = tempfile::tempdir().expect("tmp");
+    let cap = 3;
+    let path = dir.path().join("split.motu");
+    let meta = motu_pack::StreamSplitMeta {
+        cap_instances: cap,
+        ..Default::default()
+    };
+    let written = write_package(&mut s, &path, Some(meta)).expect("a TLAS over the cap");
+    let pkg = motu_pack::ScenePackage::open(&path).expect("open");
+    let view = pkg.view().expect("view");
+    assert!(pkg.stored_stream_split(cap + 1).expect("read").is_none());
+    let t = pkg
+        .stored_stream_split(cap)
+        .expect("read")
+        .expect("for this cap")
+        .expect("a split");
+    assert_eq!(t.instance_source, &written.instance_source[..]);
+    let back = motu_compile::StreamSplit::from_stored(&view, &written).expect("rebuilt");
+    let made = motu_compile::split_for_streaming(&view, cap)
+        .expect("split")
+        .expect("over the cap");
+    let (a, b) = (made.view(&view), back.view(&view));
+    assert_eq!(
+        (a.tlases, a.instances, a.blases, a.pis),
+        (b.tlases, b.instances, b.blases, b.pis)
+    );
+    assert_eq!(made.counts(), back.counts());
+
+    // The streamer's own cap: stored as "nothing over it", read without splitting.
+    let path = dir.path().join("default.motu");
+    let meta = motu_pack::StreamSplitMeta {
+        cap_instances: motu_render::STREAM_SPLIT_INSTANCES,
+        ..Default::default()
+    };
+    assert!(write_package(&mut s, &path, Some(meta)).is_none());
+    let pkg = motu_pack::ScenePackage::open(&path).expect("open");
+    assert!(matches!(
+        pkg.stored_stream_split(motu_render::STREAM_SPLIT_INSTANCES),
+        Ok(Some(None))
+    ));
+    let from_pkg = build_report(&pkg, &lavapipe(), Some(1 << 20)).expect("report");
+    let mut from_view = s.report(&lavapipe(), Some(1 << 20));
+    from_view.package = pkg.path().to_string();
+    assert_eq!(from_pkg, from_view);
 }
 
 mod props {
