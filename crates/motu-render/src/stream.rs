@@ -88,6 +88,78 @@ impl StreamBounds {
     }
 }
 
+/// [`stream_split`] of `pkg`'s own hierarchy, read back from the split the import stored for
+/// this cap (FORMAT.md sections 13–17) instead of made again: a binned SAH over every instance
+/// of a large root (10 s of island 0.63's start on the H200 host) becomes a table read. Any
+/// other view (a subset), another cap, or a package written before splits were stored is
+/// split here, as before.
+pub fn package_stream_split(
+    pkg: &motu_pack::ScenePackage,
+    view: &HierarchyView<'_>,
+    split_instances: Option<u32>,
+) -> Result<Option<motu_compile::StreamSplit>, RenderError> {
+    let cap = split_instances.unwrap_or(motu_compile::STREAM_SPLIT_INSTANCES);
+    if cap == 0 {
+        return Ok(None);
+    }
+    let invalid = |reason: String| RenderError::StreamSplit { cap, reason };
+    // The stored split indexes the package's own tables: only a view that is those tables
+    // (the same memory, not a copy or a subset) may use it.
+    let own = pkg.view().map_err(|e| invalid(e.to_string()))?;
+    let same = |a: *const u8, b: *const u8, la: usize, lb: usize| a == b && la == lb;
+    let is_own = same(
+        own.instances.as_ptr().cast(),
+        view.instances.as_ptr().cast(),
+        own.instances.len(),
+        view.instances.len(),
+    ) && same(
+        own.tlases.as_ptr().cast(),
+        view.tlases.as_ptr().cast(),
+        own.tlases.len(),
+        view.tlases.len(),
+    ) && same(
+        own.blases.as_ptr().cast(),
+        view.blases.as_ptr().cast(),
+        own.blases.len(),
+        view.blases.len(),
+    ) && own.root_tlas == view.root_tlas;
+    if !is_own {
+        return stream_split(view, split_instances);
+    }
+    let t0 = std::time::Instant::now();
+    let Some(stored) = pkg
+        .stored_stream_split(cap)
+        .map_err(|e| invalid(e.to_string()))?
+    else {
+        return stream_split(view, split_instances);
+    };
+    let Some(t) = stored else {
+        return Ok(None); // stored: no TLAS over the cap
+    };
+    let meta = pkg.meta().stream_split.clone().unwrap_or_default();
+    let stored = motu_compile::StoredStreamSplit {
+        tlases_split: meta.tlases_split,
+        pieces: meta.pieces,
+        tlases: t.tlases.to_vec(),
+        blases: t.blases.to_vec(),
+        pis: t.pis.to_vec(),
+        instance_source: t.instance_source.to_vec(),
+        extra_instances: t.extra_instances.to_vec(),
+    };
+    let split = motu_compile::StreamSplit::from_stored(view, &stored)
+        .map_err(|e| invalid(format!("{}: the stored split: {e}", pkg.path())))?;
+    let (tlases, pieces) = split.counts();
+    let split_ms = t0.elapsed().as_secs_f64() * 1e3;
+    tracing::info!(
+        cap,
+        tlases,
+        pieces,
+        split_ms,
+        "TLASes split for streaming (stored at import)"
+    );
+    Ok(Some(split))
+}
+
 /// The hierarchy a streamer renders for `view`: every TLAS over `split_instances` instances
 /// (`None`: [`motu_compile::STREAM_SPLIT_INSTANCES`]; 0: none) split into spatial pieces, which
 /// the streamer rebuilds one at a time, so a rebuild takes one piece's room from resident
@@ -179,7 +251,7 @@ pub(crate) fn render_streaming(
     startup.device_ms = ms_since(t);
     let t = Instant::now();
     let split = tracing::info_span!("split")
-        .in_scope(|| stream_split(view, stream.bounds.split_instances))?;
+        .in_scope(|| package_stream_split(pkg, view, stream.bounds.split_instances))?;
     startup.split_ms = ms_since(t);
     let view = &split.as_ref().map_or(*view, |sp| sp.view(view));
     let (pose, w, h) = camera_pose(

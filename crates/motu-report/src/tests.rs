@@ -1093,6 +1093,18 @@ fn a_stored_stream_split_reads_back_and_changes_no_number() {
         (b.tlases, b.instances, b.blases, b.pis)
     );
     assert_eq!(made.counts(), back.counts());
+    // The renderer's entry point reads the stored split for the package's own view, and
+    // splits afresh for any other (here the compiled scene's tables in memory): both equal.
+    for v in [view, s.view()] {
+        let r = motu_render::package_stream_split(&pkg, &v, Some(cap))
+            .expect("split")
+            .expect("over the cap");
+        let c = r.view(&v);
+        assert_eq!(
+            (a.tlases, a.instances, a.blases, a.pis),
+            (c.tlases, c.instances, c.blases, c.pis)
+        );
+    }
 
     // The streamer's own cap: stored as "nothing over it", read without splitting.
     let path = dir.path().join("default.motu");
