@@ -5,7 +5,7 @@
 
 use std::ffi::OsString;
 use std::fs::{self, File};
-use std::io::{self, Read, Write};
+use std::io::{self, Read};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, SystemTime};
@@ -14,12 +14,13 @@ use xxhash_rust::xxh3::xxh3_64;
 
 use crate::compat::{serialized_header, Compatibility, SERIALIZED_HEADER_BYTES};
 use crate::entry::{
-    decode_header, encode_header, entry_key, entry_path, shard_dir, temp_owner, temp_prefix,
-    EntryError, ENTRY_HEADER_BYTES, TEMP_SUFFIX, VERSION_DIR,
+    decode_header, entry_key, entry_path, temp_owner, EntryError, ENTRY_HEADER_BYTES, VERSION_DIR,
 };
+pub use crate::file::io_reason;
+use crate::file::{create_private_dir_all, write_entry_file};
 use crate::key::CacheKey;
 use crate::lru::ByteLru;
-use crate::stats::{DiskStats, WarningReason};
+use crate::stats::DiskStats;
 use crate::writer::{Job, Writer};
 
 /// The environment variable naming the cache directory (before the XDG default).
@@ -121,19 +122,6 @@ impl Default for DiskOptions {
             background: false,
             max_pending_bytes: DEFAULT_MAX_PENDING_BYTES,
         }
-    }
-}
-
-/// The warning an IO error counts as.
-pub fn io_reason(e: &io::Error) -> WarningReason {
-    match e.kind() {
-        io::ErrorKind::PermissionDenied | io::ErrorKind::ReadOnlyFilesystem => {
-            WarningReason::ReadOnly
-        }
-        io::ErrorKind::StorageFull | io::ErrorKind::QuotaExceeded | io::ErrorKind::FileTooLarge => {
-            WarningReason::Full
-        }
-        _ => WarningReason::Io,
     }
 }
 
@@ -647,54 +635,6 @@ impl DiskCache {
     }
 }
 
-/// Writes `blob` as `key`'s entry under `root` (temp file, optional fsync, rename over the
-/// name): the entry's path and file bytes, or the path and the error (the temp file removed).
-pub(crate) fn write_entry_file(
-    root: &Path,
-    key: &CacheKey,
-    blob: &[u8],
-    sync: bool,
-    fail_with: Option<io::ErrorKind>,
-) -> Result<(PathBuf, u64), (PathBuf, io::Error)> {
-    let path = entry_path(root, key);
-    let write = || -> io::Result<()> {
-        let dir = shard_dir(root, key);
-        create_private_dir_all(&dir)?;
-        let mut temp = tempfile::Builder::new()
-            .prefix(&temp_prefix(key, std::process::id()))
-            .suffix(TEMP_SUFFIX)
-            .tempfile_in(&dir)?;
-        let file = temp.as_file_mut();
-        file.write_all(&encode_header(key, blob))?;
-        if let Some(kind) = fail_with {
-            // Half the blob written, as a disk filling up mid-entry leaves it.
-            file.write_all(&blob[..blob.len() / 2])?;
-            return Err(io::Error::new(kind, "simulated write failure"));
-        }
-        file.write_all(blob)?;
-        if sync {
-            file.sync_all()?;
-        }
-        // rename(2) over the target: readers see the old entry or the new one, never a part.
-        temp.persist(&path).map_err(|e| e.error)?;
-        Ok(())
-    };
-    match write() {
-        Ok(()) => Ok((path, blob.len() as u64 + ENTRY_HEADER_BYTES as u64)),
-        Err(e) => Err((path, e)),
-    }
-}
-
-/// Creates `dir` and its missing parents, private to the user (the blobs go to the driver).
-fn create_private_dir_all(dir: &Path) -> io::Result<()> {
-    let mut builder = fs::DirBuilder::new();
-    builder.recursive(true);
-    #[cfg(unix)]
-    std::os::unix::fs::DirBuilderExt::mode(&mut builder, 0o700);
-    builder.create(dir)
-}
-
-/// Reads and checks `key`'s entry at `path`; returns its blob and the open file (to touch).
 /// Threads [`DiskCache::get_many`] reads entries on, at most.
 pub const READ_THREADS: usize = 8;
 
@@ -711,6 +651,7 @@ fn read_and_touch(path: &Path, key: &CacheKey, compat: &dyn Compatibility) -> Re
     Ok(blob)
 }
 
+/// Reads and checks `key`'s entry at `path`; returns its blob and the open file (to touch).
 fn read_entry(
     path: &Path,
     key: &CacheKey,

@@ -76,6 +76,7 @@ mod cache;
 mod compat;
 mod disk;
 pub mod entry;
+mod file;
 mod host;
 mod key;
 mod lru;

@@ -15,7 +15,7 @@ use std::path::PathBuf;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 
-use crate::disk::{io_reason, write_entry_file};
+use crate::file::{io_reason, write_entry_file};
 use crate::key::CacheKey;
 use crate::stats::WarningCounts;
 

@@ -7,6 +7,8 @@ use std::time::{Duration, SystemTime};
 use super::*;
 use crate::compat::AnyDevice;
 use crate::entry::ENTRY_HEADER_BYTES;
+use crate::entry::{temp_prefix, TEMP_SUFFIX};
+use crate::stats::WarningReason;
 
 fn key(i: u8) -> CacheKey {
     crate::key::CacheKeyBuilder::new("disk tests")
