@@ -2,8 +2,6 @@
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
-use serde::Serialize;
-
 use crate::error::{AllocError, LimitsError};
 use crate::kind::{AllocKind, AllocationId, BlockId, MemoryClass};
 use crate::limits::{standard_block_size_bytes, AllocLimits, AllocPolicy, MIB};
@@ -50,7 +48,7 @@ impl AllocRequest {
 }
 
 /// A live sub-allocation: bind the buffer to `block`'s memory at `offset_bytes`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Allocation {
     /// Handle for [`Allocator::free`].
     pub id: AllocationId,
@@ -67,7 +65,7 @@ pub struct Allocation {
 }
 
 /// What the GPU layer must do to the real memory, in order.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum BlockEvent {
     /// Call `vkAllocateMemory` of `size_bytes` in a memory type of `class` for `block`.
     Created {

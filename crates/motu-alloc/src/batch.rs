@@ -2,13 +2,11 @@
 
 use std::ops::Range;
 
-use serde::Serialize;
-
 use crate::allocator::align_up;
 use crate::kind::ByteSize;
 
 /// Sizes of one build, from `vkGetAccelerationStructureBuildSizesKHR`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BuildSize {
     /// `accelerationStructureSize`.
     pub result_bytes: u64,
@@ -17,7 +15,7 @@ pub struct BuildSize {
 }
 
 /// Limits of one batch.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BatchLimits {
     /// Summed aligned scratch of a batch stays at or below this (the shared scratch pool size).
     pub scratch_budget_bytes: u64,
@@ -33,7 +31,7 @@ pub struct BatchLimits {
 }
 
 /// Consecutive builds that run together, each with its own slice of the scratch pool.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct BuildBatch {
     /// Indices into the input list.
     pub builds: Range<usize>,
@@ -46,7 +44,7 @@ pub struct BuildBatch {
 }
 
 /// The batches, in input order.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct BatchPlan {
     /// Batches covering every build once, in order.
     pub batches: Vec<BuildBatch>,

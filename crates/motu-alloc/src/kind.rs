@@ -1,11 +1,9 @@
 //! What an allocation is for, which memory it lives in, and the ids handed out.
 
-use serde::Serialize;
 use std::fmt;
 
 /// What an allocation holds; used for per-kind accounting only (alignment comes from the caller).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
-#[serde(rename_all = "snake_case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum AllocKind {
     /// Bottom-level acceleration structure storage (offset alignment 256).
     BlasStorage,
@@ -69,8 +67,7 @@ impl fmt::Display for AllocKind {
 
 /// Which memory a block lives in. Each class is a separate pool of blocks; all pools share the
 /// allocation-count cap.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
-#[serde(rename_all = "snake_case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum MemoryClass {
     /// `DEVICE_LOCAL` memory: acceleration structures, scratch, geometry, tables.
     DeviceLocal,
@@ -102,7 +99,7 @@ impl fmt::Display for MemoryClass {
 }
 
 /// A memory block: one future `VkDeviceMemory`. Never reused within one allocator.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct BlockId(pub u32);
 
 impl fmt::Display for BlockId {
@@ -112,7 +109,7 @@ impl fmt::Display for BlockId {
 }
 
 /// One live sub-allocation. Never reused within one allocator.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct AllocationId(pub u64);
 
 impl fmt::Display for AllocationId {
@@ -167,19 +164,6 @@ mod tests {
         }
         for (index, class) in MemoryClass::ALL.iter().enumerate() {
             assert_eq!(class.index(), index);
-        }
-    }
-
-    #[test]
-    fn names_match_serde() {
-        for kind in AllocKind::ALL {
-            assert_eq!(serde_json::to_string(&kind).unwrap(), format!("\"{kind}\""));
-        }
-        for class in MemoryClass::ALL {
-            assert_eq!(
-                serde_json::to_string(&class).unwrap(),
-                format!("\"{class}\"")
-            );
         }
     }
 

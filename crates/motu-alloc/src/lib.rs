@@ -11,7 +11,7 @@
 //!   `<= max_allocation_count`, *by construction* (both are checked before a block is created).
 //! - [`Residency`]: least-recently-visible eviction order for streaming, with per-pass pins.
 //! - [`plan_build_batches`]: acceleration-structure builds grouped under a scratch budget.
-//! - [`AllocReport`]: statistics (`serde::Serialize`) for `--stats`.
+//! - [`AllocReport`]: statistics for `--stats` (its JSON is `motu_render::stats::AllocReport`).
 //!
 //! # Allocator design
 //! - **Blocks.** Each block is one future `VkDeviceMemory`. Standard blocks have the size

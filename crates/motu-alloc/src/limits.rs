@@ -1,7 +1,5 @@
 //! Device limits, the effective VRAM budget and the block-size rule.
 
-use serde::Serialize;
-
 /// One mebibyte in bytes.
 pub const MIB: u64 = 1 << 20;
 /// One gibibyte in bytes.
@@ -17,7 +15,7 @@ pub const MAX_STANDARD_BLOCK_BYTES: u64 = 256 * MIB;
 ///
 /// Fill them from the device (`maxMemoryAllocationCount`, `maxMemoryAllocationSize`) and from
 /// [`effective_budget_bytes`]; lower them freely for testing (`--max-allocations N`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct AllocLimits {
     /// Most memory blocks (`VkDeviceMemory` objects) this allocator holds at once, all memory
     /// classes together. Subtract allocations made outside the allocator from the device limit.
@@ -61,7 +59,7 @@ impl AllocLimits {
 }
 
 /// Policy knobs that are choices, not device facts.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct AllocPolicy {
     /// Standard block size per memory class; `None` applies [`standard_block_size_bytes`].
     pub block_size_bytes: Option<u64>,
@@ -118,7 +116,7 @@ pub fn standard_block_size_bytes(
 }
 
 /// Headroom left for other processes, the driver and allocations outside the allocator.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SafetyMargin {
     /// Share of the device-reported available bytes kept free, in percent.
     pub percent: u8,

@@ -2,12 +2,10 @@
 
 use std::collections::BTreeMap;
 
-use serde::Serialize;
-
 use crate::kind::{AllocKind, MemoryClass};
 
 /// Accounting of one [`AllocKind`].
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct KindStats {
     /// Bytes of live allocations.
     pub bytes: u64,
@@ -40,7 +38,7 @@ impl KindStats {
 }
 
 /// Blocks and free space of one [`MemoryClass`] pool.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ClassStats {
     /// Whether these blocks count against the VRAM budget.
     pub counts_against_budget: bool,
@@ -76,7 +74,7 @@ pub struct ClassStats {
 ///
 /// "Allocation" in the top-level counts means a `VkDeviceMemory` (a block), as in
 /// `maxMemoryAllocationCount`; sub-allocations are counted per kind.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct AllocReport {
     /// VRAM budget.
     pub budget_bytes: u64,

@@ -332,7 +332,7 @@ fn run_streaming(
         "mean_wall_ms_after_first": mean("wall_ms", 1),
         "incomplete_frames": incomplete,
         "fallback_pixels": totals.fallback_pixels,
-        "totals": totals,
+        "totals": motu_render::stats::StreamTotals::from(&totals),
         "per_frame": rows,
     });
     // Writing to a String cannot fail.

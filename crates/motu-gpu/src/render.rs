@@ -17,15 +17,13 @@ use motu_vk::{
     BufferUsage, CommandRecorder, ComputePipeline, ComputePipelineDesc, Context, GpuHeap,
     HeapBuffer, RtPipeline, RtShaders, TimestampQueries, PUSH_CONSTANT_BYTES,
 };
-use serde::Serialize;
 
 use crate::error::{GpuError, Result};
 use crate::scene::{GpuScene, Slot, SLOT_COUNT};
 use crate::shaders;
 
 /// Which traversal backend traces.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "lowercase")]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Backend {
     /// Ray-tracing pipeline: raygen owns the stack (every RT device; the only one on the H200).
     Pipeline,
@@ -67,8 +65,7 @@ impl std::str::FromStr for Backend {
 }
 
 /// What the image shows (values match `VIEW_*` in `common.glsl`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "lowercase")]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum View {
     #[default]
     Shaded,
@@ -79,6 +76,16 @@ pub enum View {
 }
 
 impl View {
+    /// The view's name (`--view`, `view` in `--stats`).
+    pub fn name(self) -> &'static str {
+        match self {
+            View::Shaded => "shaded",
+            View::Ids => "ids",
+            View::Lod => "lod",
+            View::Heatmap => "heatmap",
+        }
+    }
+
     fn code(self) -> u32 {
         match self {
             View::Shaded => 0,
@@ -130,8 +137,9 @@ impl Default for RenderOptions {
     }
 }
 
-/// `--stats` keys of the CLI contract, plus detail.
-#[derive(Clone, Debug, Default, Serialize)]
+/// What one frame measured: the CLI contract's `--stats` keys and detail (the JSON is
+/// `motu_render::stats::FrameStats`).
+#[derive(Clone, Copy, Debug, Default)]
 pub struct RenderStats {
     pub width: u32,
     pub height: u32,
@@ -327,7 +335,7 @@ pub(crate) fn check_texture_residency(counters: &[u32]) -> Result<()> {
 pub const MAX_STACK_SIZE: u32 = 256;
 
 /// Counts of one render beyond [`RenderStats`].
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RayCounts {
     /// Rays whose traversal was cut short: a stack overflow dropped an entry, or the ray
     /// reached `max_traces_per_ray`. Their hit may be wrong.

@@ -404,8 +404,7 @@ fn budget_cap_and_compaction() {
     );
     assert_eq!(r.blas_count, 4);
     assert_eq!(r.tlas_count, 4);
-    let json = serde_json::to_value(r).expect("serialize");
-    assert!(json["scratch_peak_bytes"].as_u64() > Some(0));
+    assert!(r.scratch_peak_bytes > 0);
     // It renders within the cap too.
     let cam = camera([0.5, 1.0, 7.0], [0.0, 0.0, 0.0], 16);
     let out = render(

@@ -26,7 +26,6 @@ use std::time::Instant;
 use motu_abi::{HierarchyView, BLAS_AABBS, BLAS_TRIANGLES, FLAG_NEEDS_ANY_HIT};
 use motu_alloc::{AllocKind, AllocLimits, AllocReport, BuildSize, MemoryClass, MIB};
 use motu_vk::{AsBuildFlags, AsGeometry, AsLevel, BufferUsage, Context, GpuHeap, HeapBuffer};
-use serde::Serialize;
 
 use crate::error::{GpuError, Result};
 
@@ -128,8 +127,9 @@ impl Default for BuildOptions {
     }
 }
 
-/// Bytes and counts per kind of resource (`--stats`).
-#[derive(Clone, Debug, Default, Serialize)]
+/// Bytes and counts per kind of resource (`resources` in `--stats`: the JSON is
+/// `motu_render::stats::ResourceReport`).
+#[derive(Clone, Debug, Default)]
 pub struct ResourceReport {
     /// Structures the root cannot reach (e.g. other elements under `--subset`): not built.
     pub unreachable_tlases: u64,

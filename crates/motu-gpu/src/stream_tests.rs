@@ -340,7 +340,7 @@ fn streaming_under_a_quarter_of_the_full_build_matches_it_on_both_backends() {
         let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
             .expect("streaming renderer");
         let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
-        eprintln!("{be:?}: {}", serde_json::to_string(&st).unwrap_or_default());
+        eprintln!("{be:?}: {st:?}");
         assert!(st.complete, "{st:?}");
         assert!(
             st.passes >= 2,
@@ -380,10 +380,7 @@ fn streaming_under_a_quarter_of_the_full_build_matches_it_on_both_backends() {
         let (out_shaded, st_shaded) = cold.render_frame(&small, &shaded).expect("stream shaded");
         drop(cold);
         assert!(st_shaded.passes >= 2, "{st_shaded:?}");
-        eprintln!(
-            "{be:?} shaded: {}",
-            serde_json::to_string(&st_shaded).unwrap_or_default()
-        );
+        eprintln!("{be:?} shaded: {st_shaded:?}");
         assert!(st_shaded.complete, "{st_shaded:?}");
         let cmp = motu_trace::compare(&full_shaded.aov, &out_shaded.aov, 0.0).expect("sizes");
         assert_eq!(
@@ -492,10 +489,7 @@ fn camera_path_reuses_last_frames_structures_and_evicts_under_the_budget() {
     for f in 0..frames {
         let cam = camera_path(&base_pose(), &path, f, frames).params(SIZE, SIZE);
         let (out, st) = sr.render_frame(&cam, &opts).expect("frame");
-        eprintln!(
-            "frame {f}: {}",
-            serde_json::to_string(&st).unwrap_or_default()
-        );
+        eprintln!("frame {f}: {st:?}");
         assert!(st.complete, "{st:?}");
         assert!(st.vram_peak_bytes <= budget);
         if f > 0 {
@@ -582,7 +576,7 @@ fn a_frame_under_a_sixteenth_of_the_full_build_evicts_mid_frame_and_completes() 
     )
     .expect("streaming renderer (staging and scratch sized from the budget)");
     let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
-    eprintln!("{}", serde_json::to_string(&st).unwrap_or_default());
+    eprintln!("{st:?}");
     assert!(st.complete, "{st:?}");
     assert!(
         st.evicted > 0,
@@ -804,7 +798,7 @@ fn rays_starting_inside_more_boxes_than_a_candidate_list_holds_match_the_full_bu
         let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &device_meshes(budget))
             .expect("streaming renderer");
         let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
-        eprintln!("{be:?}: {}", serde_json::to_string(&st).unwrap_or_default());
+        eprintln!("{be:?}: {st:?}");
         assert!(st.complete, "{st:?}");
         assert!(st.evicted > 0, "shells walked earlier are evicted: {st:?}");
         assert_same_aov(&reference.aov, &out.aov, &format!("{be:?} ({st:?})"));
@@ -860,7 +854,7 @@ fn rays_crossing_many_proxy_boxes_walk_their_tlas_once_per_pass() {
         let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
             .expect("streaming renderer");
         let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
-        eprintln!("{be:?}: {}", serde_json::to_string(&st).unwrap_or_default());
+        eprintln!("{be:?}: {st:?}");
         assert!(st.complete, "{st:?}");
         let traced: u64 = st.pass_log.iter().map(|p| p.traced).sum::<u64>() - st.guard_rays;
         let traces: u64 = out.aov.records.iter().map(|r| u64::from(r.traces)).sum();
@@ -949,7 +943,7 @@ fn tlas_records_written_through_a_small_ring_in_windows_match_the_full_build() {
     )
     .expect("streaming renderer");
     let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
-    eprintln!("{}", serde_json::to_string(&st).unwrap_or_default());
+    eprintln!("{st:?}");
     assert!(st.complete, "{st:?}");
     // Partly resident rebuilds happened: a TLAS build wrote fewer records than the root has
     // (plus its proxy and marks) at least once.
@@ -1022,10 +1016,7 @@ fn persistent_tlases_updated_in_place_match_the_full_build_on_both_backends() {
         for f in 0..frames {
             let cam = camera_path(&base_pose(), &path, f, frames).params(32, 32);
             let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
-            eprintln!(
-                "{be:?} frame {f}: {}",
-                serde_json::to_string(&st).unwrap_or_default()
-            );
+            eprintln!("{be:?} frame {f}: {st:?}");
             assert!(st.complete, "{st:?}");
             assert!(st.vram_peak_bytes <= budget, "{st:?}");
             // Updates, not rebuilds: each patches the records of the BLASes that came or went
@@ -1098,11 +1089,8 @@ fn forced_persistent_tlases_at_the_floor_give_way_and_the_frame_completes() {
     let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
     let after = sr.totals();
     eprintln!(
-        "floor {floor} budget {budget}: persistent {} B ({}), dropped {}; {}",
-        before.persistent_tlas_bytes,
-        before.tlas_mode,
-        after.persistent_dropped,
-        serde_json::to_string(&st).unwrap_or_default()
+        "floor {floor} budget {budget}: persistent {} B ({}), dropped {}; {:?}",
+        before.persistent_tlas_bytes, before.tlas_mode, after.persistent_dropped, st
     );
     assert!(st.complete, "{st:?}");
     assert!(st.vram_peak_bytes <= budget, "{st:?}");

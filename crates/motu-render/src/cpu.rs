@@ -1,8 +1,9 @@
 //! The CPU reference render (`motu render --backend cpu`), with instance-level LOD when the LOD
 //! mode is `instance`.
 
-use crate::gpu::Rendered;
+use crate::gpu::{PathStats, Rendered};
 use crate::settings::RenderSettings;
+use crate::stats::FrameStats;
 use crate::{scene_shading, PackageMeshes, RenderError};
 use motu_abi::camera::CameraParams;
 use motu_abi::lod::LodParams;
@@ -10,7 +11,6 @@ use motu_abi::lod_instance::InstanceLod;
 use motu_abi::HierarchyView;
 use motu_pack::ScenePackage;
 use motu_trace::{MeshSource, RenderOptions, RenderOutput};
-use serde_json::json;
 
 /// Per camera, each slot's level from the same rule as the GPU's compute pass (`opts.lod`),
 /// then a trace of the rewritten hierarchy. Returns the last frame and the median of the
@@ -85,9 +85,16 @@ pub(crate) fn render_cpu(
             (out, times[times.len() / 2])
         }
     };
-    let mut stats = serde_json::to_value(&out.stats)?;
-    stats["ms_per_frame"] = json!(median);
-    stats["frames"] = json!(cameras.len());
+    let (mut frame, truncated_rays) = FrameStats::cpu(
+        &out.stats,
+        cameras.len() as u64,
+        s.device.vram_budget_bytes.unwrap_or(0),
+    );
+    frame.ms_per_frame = median;
+    let stats = PathStats {
+        truncated_rays: Some(truncated_rays),
+        ..PathStats::new(frame)
+    };
     Ok((out.aov, out.rgba8, stats))
 }
 

@@ -136,8 +136,8 @@ pub fn guide_from_aov(
     g
 }
 
-/// What a denoise did (`denoise` in `--stats`).
-#[derive(Clone, Copy, Debug, serde::Serialize)]
+/// What a denoise did (`denoise` in `--stats`: the JSON is [`crate::stats::DenoiseStats`]).
+#[derive(Clone, Copy, Debug)]
 pub struct DenoiseStats {
     pub filter: &'static str,
     pub iterations: u32,

@@ -2,6 +2,7 @@
 //! built on it, one frame (timed over `frames`) or one per recorded camera.
 
 use crate::settings::RenderSettings;
+use crate::stats::{FrameStats, FullBuildStats, StreamRunStats};
 use crate::{scene_shading, Backend, PackageMeshes, RenderError};
 use motu_abi::aov::Aov;
 use motu_abi::camera::CameraParams;
@@ -9,10 +10,35 @@ use motu_abi::lod::LodParams;
 use motu_abi::lod_instance::InstanceLod;
 use motu_abi::HierarchyView;
 use motu_pack::ScenePackage;
-use serde_json::{json, Value};
 
-/// An image and its `--stats` object (the backend's stats and the render path's keys).
-pub(crate) type Rendered = (Aov, Vec<u8>, Value);
+/// An image and its render path's `--stats` keys.
+pub(crate) type Rendered = (Aov, Vec<u8>, PathStats);
+
+/// What a render path reports: the frame written and the path's own keys (the session adds
+/// its keys to make [`crate::stats::RenderStats`]).
+#[derive(Debug)]
+pub(crate) struct PathStats {
+    pub frame: FrameStats,
+    pub truncated_rays: Option<u64>,
+    pub full_build: Option<FullBuildStats>,
+    pub path_ms_per_frame: Option<Vec<f64>>,
+    pub fallback_pixels: Option<u64>,
+    pub stream: Option<StreamRunStats>,
+}
+
+impl PathStats {
+    /// `frame` and none of the paths' keys.
+    pub fn new(frame: FrameStats) -> Self {
+        Self {
+            frame,
+            truncated_rays: None,
+            full_build: None,
+            path_ms_per_frame: None,
+            fallback_pixels: None,
+            stream: None,
+        }
+    }
+}
 
 pub(crate) fn gpu_context(
     s: &RenderSettings,
@@ -164,30 +190,15 @@ pub(crate) fn render_gpu(
     );
     let (out, counts) =
         motu_gpu::render_counted(&ctx, &scene, camera, &opts).map_err(RenderError::Gpu)?;
-    let mut stats = serde_json::to_value(&out.stats)?;
-    stats["truncated_rays"] = json!(counts.truncated_rays);
-    stats["resources"] = serde_json::to_value(scene.report())?;
-    lod_pass_stats(&mut stats, &scene);
+    let stats = PathStats {
+        truncated_rays: Some(counts.truncated_rays),
+        full_build: Some(FullBuildStats::of(&scene)),
+        ..PathStats::new(FrameStats::gpu(&out.stats))
+    };
     drop(scene);
     ctx.check_validation()
         .map_err(|e| RenderError::Validation(e.into()))?;
     Ok((out.aov, out.rgba8, stats))
-}
-
-/// Instance-level LOD's per-frame pass: `lod_passes` frames ran it (levels picked, slot TLASes
-/// rebuilt), `lod_passes_skipped` frames did not (their camera was the one the levels were
-/// built for); `lod_pass_ms` is the mean GPU time of the passes that ran (inside the frames'
-/// times).
-/// Of the passes that ran, `lod_refits` updated the slot TLASes in place (a moving camera) and
-/// `lod_settles` rebuilt a held camera's refittable tree at full quality.
-fn lod_pass_stats(stats: &mut Value, scene: &motu_gpu::GpuScene) {
-    let [run, skipped] = scene.lod_instance_passes();
-    let [refits, settles] = scene.lod_instance_refits();
-    stats["lod_passes"] = json!(run);
-    stats["lod_passes_skipped"] = json!(skipped);
-    stats["lod_refits"] = json!(refits);
-    stats["lod_settles"] = json!(settles);
-    stats["lod_pass_ms"] = json!(scene.lod_instance_pass_ms());
 }
 
 /// A recorded camera path on a full GPU build: one frame per camera through the viewer's
@@ -215,7 +226,7 @@ pub(crate) fn render_gpu_path(
         last = Some(out);
     }
     let out = last.ok_or(RenderError::EmptyCameraPath)?;
-    let mut stats = serde_json::to_value(&out.stats)?;
+    let mut frame = FrameStats::gpu(&out.stats);
     // The first frame is a warm-up (pipeline first use): left out of the median.
     let timed = if times.len() > 1 {
         &times[1..]
@@ -224,11 +235,13 @@ pub(crate) fn render_gpu_path(
     };
     let mut timed = timed.to_vec();
     timed.sort_by(f64::total_cmp);
-    stats["ms_per_frame"] = json!(timed[timed.len() / 2]);
-    stats["frames"] = json!(cams.len());
-    stats["path_ms_per_frame"] = json!(times);
-    stats["resources"] = serde_json::to_value(live.scene().report())?;
-    lod_pass_stats(&mut stats, live.scene());
+    frame.ms_per_frame = timed[timed.len() / 2];
+    frame.frames = cams.len() as u64;
+    let stats = PathStats {
+        full_build: Some(FullBuildStats::of(live.scene())),
+        path_ms_per_frame: Some(times),
+        ..PathStats::new(frame)
+    };
     drop(live);
     ctx.check_validation()
         .map_err(|e| RenderError::Validation(e.into()))?;

@@ -3,7 +3,8 @@
 //! recorded camera paths, the LOD mode (instance or traversal, and why) and the CPU reference
 //! with instance LOD, the scene's shading (lights, sky, the AO distance), the backend, and
 //! [`render`]: one `motu render` (CPU, full GPU build, recorded path or the streaming frame
-//! loop) with its `--stats` object. The CLI maps its flags onto these types and prints; no
+//! loop) with its `--stats` object, whose schema ([`stats`]: `motu render --stats` and `motu
+//! view --stats`) owns the JSON keys. The CLI maps its flags onto these types and prints; no
 //! Vulkan here (that is `motu-gpu`).
 
 mod backend;
@@ -17,6 +18,7 @@ mod meshes;
 mod session;
 mod settings;
 mod shading;
+pub mod stats;
 mod stream;
 
 pub use backend::{best_backend, Backend};

@@ -1,14 +1,15 @@
 //! One `motu render`: the chosen backend's render path (CPU, full GPU build, recorded camera
-//! path, or streaming), then the `--stats` object every path shares (CLI.md's keys) and the
-//! truncation check.
+//! path, or streaming), then the `--stats` object every path shares
+//! ([`crate::stats::RenderStats`], CLI.md's keys) and the truncation check.
 
+use crate::gpu::PathStats;
 use crate::settings::{RenderEvent, RenderSettings};
+use crate::stats::{LodStats, RenderStats};
 use crate::{Backend, LodChoice, RenderError};
 use motu_abi::aov::Aov;
 use motu_abi::camera::CameraParams;
 use motu_abi::HierarchyView;
 use motu_pack::ScenePackage;
-use serde_json::{json, Value};
 use std::path::Path;
 
 /// What to render: the package (and its path and `--subset`, for the stats), the view of it,
@@ -33,26 +34,22 @@ pub struct RenderJob<'a> {
 pub struct Rendered {
     pub aov: Aov,
     pub rgba8: Vec<u8>,
-    /// The keys of CLI.md's `--stats` (the backend's stats, the render path's, the contract's).
-    pub stats: Value,
+    /// CLI.md's `--stats` keys (the backend's stats, the render path's, the session's).
+    pub stats: RenderStats,
 }
 
 impl Rendered {
-    fn stat_f64(&self, key: &str) -> f64 {
-        self.stats[key].as_f64().unwrap_or(0.0)
-    }
-
     /// Median milliseconds per frame.
     pub fn ms_per_frame(&self) -> f64 {
-        self.stat_f64("ms_per_frame")
+        self.stats.ms_per_frame()
     }
 
     pub fn rays_per_second(&self) -> f64 {
-        self.stat_f64("rays_per_second")
+        self.stats.rays_per_second()
     }
 
     pub fn traces_per_ray(&self) -> f64 {
-        self.stat_f64("traces_per_ray")
+        self.stats.traces_per_ray()
     }
 }
 
@@ -70,7 +67,7 @@ pub fn render(
     let instance_lod = job.lod.instance.as_ref();
     // The image's camera: the streamed sweep's last one, else the job's.
     let mut image_camera = camera;
-    let (aov, rgba8, stats): (Aov, Vec<u8>, Value) = match (s.backend, &s.stream) {
+    let (aov, rgba8, path): (Aov, Vec<u8>, PathStats) = match (s.backend, &s.stream) {
         (Backend::Cpu, _) => {
             let cams = recorded
                 .map(<[CameraParams]>::to_vec)
@@ -90,31 +87,35 @@ pub fn render(
             None => crate::gpu::render_gpu(s, pkg, view, &camera, lod, backend, instance_lod)?,
         },
     };
-    let mut stats = stats;
     let mut rgba8 = rgba8;
-    stats["denoise"] = match (s.denoise, s.view) {
-        (true, motu_gpu::View::Shaded) => json!(denoise(job, &image_camera, &aov, &mut rgba8)),
-        _ => Value::Null,
+    let denoised = match (s.denoise, s.view) {
+        (true, motu_gpu::View::Shaded) => Some(denoise(job, &image_camera, &aov, &mut rgba8)),
+        _ => None,
     };
-    lod_stats(&mut stats, job.lod);
-    stats["blas_build"] = json!(s.blas_build().name());
-    let stats = contract_stats(
-        stats,
-        json!({
-            "backend": s.backend.name(),
-            "view": s.view_name(),
-            "vram_budget_bytes": s.device.vram_budget_bytes.unwrap_or(0),
-            "vram_peak_bytes": 0,
-            "allocation_count": 0,
-            "as_bytes": 0,
-            "passes": 1,
-            "subset": job.subset,
-            "package": job.package_path.display().to_string(),
-        }),
-    );
+    let PathStats {
+        frame,
+        truncated_rays,
+        full_build,
+        path_ms_per_frame,
+        fallback_pixels,
+        stream,
+    } = path;
+    let stats = RenderStats {
+        frame,
+        truncated_rays,
+        full_build,
+        path_ms_per_frame,
+        fallback_pixels,
+        stream,
+        denoise: denoised.as_ref().map(Into::into),
+        lod: lod_stats(job.lod),
+        blas_build: s.blas_build().name(),
+        subset: job.subset.to_vec(),
+        package: job.package_path.display().to_string(),
+    };
     // A truncated traversal is a wrong image: an error unless explicitly allowed.
-    let truncated = stats["truncated_rays"].as_u64().unwrap_or(0);
-    let overflows = stats["stack_overflows"].as_u64().unwrap_or(0);
+    let truncated = stats.truncated_rays.unwrap_or(0);
+    let overflows = stats.frame.stack_overflows;
     if truncated > 0 || overflows > 0 {
         let what = format!(
             "{truncated} ray(s) were cut short ({overflows} traversal stack overflows with --stack-size {}; --max-traces-per-ray {}): their hits may be wrong (exponentially deep instancing?)",
@@ -151,23 +152,14 @@ fn denoise(
 }
 
 /// The LOD mode and its instance/selector counts.
-fn lod_stats(stats: &mut Value, lod: &LodChoice) {
+fn lod_stats(lod: &LodChoice) -> LodStats {
     let instance_lod = lod.instance.as_ref();
-    stats["lod_mode"] = json!(lod.mode);
-    stats["lod_mode_reason"] = json!(lod.reason);
-    stats["lod_instances"] = json!(instance_lod.map_or(0, |il| il.slots.len()));
-    stats["lod_traversal_selectors"] =
-        json!(instance_lod.map_or(lod.selector_pis, |il| il.traversal_selectors));
-}
-
-/// Adds the contract's keys to a backend's stats object.
-fn contract_stats(mut stats: Value, extra: Value) -> Value {
-    if let (Some(s), Some(e)) = (stats.as_object_mut(), extra.as_object()) {
-        for (k, v) in e {
-            s.entry(k.clone()).or_insert(v.clone());
-        }
+    LodStats {
+        lod_mode: lod.mode,
+        lod_mode_reason: lod.reason,
+        lod_instances: instance_lod.map_or(0, |il| il.slots.len()),
+        lod_traversal_selectors: instance_lod.map_or(lod.selector_pis, |il| il.traversal_selectors),
     }
-    stats
 }
 
 #[cfg(test)]
@@ -175,27 +167,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn contract_keys_fill_gaps_and_never_overwrite_a_backends_value() {
-        let stats = json!({"passes": 3, "ms_per_frame": 1.5});
-        let out = contract_stats(stats, json!({"passes": 1, "as_bytes": 0}));
-        assert_eq!(out["passes"], 3);
-        assert_eq!(out["as_bytes"], 0);
-        assert_eq!(out["ms_per_frame"], 1.5);
-    }
-
-    #[test]
     fn lod_keys_without_instance_lod_count_the_package_selectors() {
-        let mut stats = json!({});
         let choice = LodChoice {
             instance: None,
             mode: "traversal",
             reason: "test",
             selector_pis: 7,
         };
-        lod_stats(&mut stats, &choice);
-        assert_eq!(stats["lod_mode"], "traversal");
-        assert_eq!(stats["lod_mode_reason"], "test");
-        assert_eq!(stats["lod_instances"], 0);
-        assert_eq!(stats["lod_traversal_selectors"], 7);
+        let stats = lod_stats(&choice);
+        assert_eq!(stats.lod_mode, "traversal");
+        assert_eq!(stats.lod_mode_reason, "test");
+        assert_eq!(stats.lod_instances, 0);
+        assert_eq!(stats.lod_traversal_selectors, 7);
     }
 }

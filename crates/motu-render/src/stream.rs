@@ -2,13 +2,12 @@
 //! frame by frame along a camera path) and its per-frame bounds (`--stream-fallback`,
 //! `--stream-build-budget`, `--stream-build-ms`).
 
-use crate::gpu::{gpu_context, gpu_render_options, Rendered};
+use crate::gpu::{gpu_context, gpu_render_options, PathStats, Rendered};
 use crate::settings::{RenderEvent, RenderSettings, StreamSettings};
+use crate::stats::{FrameStats, StartupStats, StreamRunStats};
 use crate::{camera_pose, scene_shading, Backend, PackageMeshes, RenderError};
 use motu_abi::camera::{camera_path, CameraParams};
 use motu_abi::HierarchyView;
-use serde::Serialize;
-use serde_json::{json, Value};
 use std::time::Instant;
 
 /// What one streaming frame may build, and what it shows for what it did not build.
@@ -189,8 +188,9 @@ pub fn stream_split(
 
 /// Where a streamed render's time went up to its first frame (`stream.startup` in `--stats`):
 /// the time to first pixel and its phases, in milliseconds. Each phase is also a `tracing`
-/// span (`MOTU_LOG=motu_render=info` prints them).
-#[derive(Clone, Debug, Default, Serialize)]
+/// span (`MOTU_LOG=motu_render=info` prints them). The JSON is
+/// [`crate::stats::StreamStartup`].
+#[derive(Clone, Debug, Default)]
 pub struct StreamStartup {
     /// From the command's start to the render: opening and checking the package, the subset,
     /// the camera and the LOD mode (0 when the caller gave no start).
@@ -370,36 +370,32 @@ pub(crate) fn render_streaming(
                 cause,
             });
         }
-        frames.push(serde_json::to_value(&st)?);
+        frames.push(st);
         last = Some((out, cam));
     }
     let (out, last_camera) = last.ok_or(RenderError::NoFrame)?;
-    let mut stats = serde_json::to_value(&out.stats)?;
-    // The last frame is the image written: its cut rays decide (render's common check).
-    stats["truncated_rays"] = frames
-        .last()
-        .and_then(|f| f["truncated_rays"].as_u64())
-        .map_or(json!(0), |n| json!(n));
-    // The written frame's fallback pixels (not exact; 0 unless --stream-fallback).
-    stats["fallback_pixels"] = frames
-        .last()
-        .and_then(|f| f["fallback_pixels"].as_u64())
-        .map_or(json!(0), |n| json!(n));
-    let totals = sr.totals();
-    let after_first: Vec<f64> = frames
-        .iter()
-        .skip(1)
-        .filter_map(|f| f["passes"].as_f64())
-        .collect();
-    stats["stream"] = json!({
-        "frames": frames,
-        "totals": totals,
-        "floor": floor,
-        "max_passes": sr.max_passes(),
-        "startup": startup,
-        "cache": sr.cache_stats(),
-        "mean_passes_after_first": if after_first.is_empty() { Value::Null } else { json!(after_first.iter().sum::<f64>() / after_first.len() as f64) },
-    });
+    let written = frames.last();
+    let after_first: Vec<f64> = frames.iter().skip(1).map(|f| f64::from(f.passes)).collect();
+    let stats = PathStats {
+        // The last frame is the image written: its cut rays decide (render's common check).
+        truncated_rays: Some(written.map_or(0, |f| f.truncated_rays)),
+        // The written frame's fallback pixels (not exact; 0 unless --stream-fallback).
+        fallback_pixels: Some(written.map_or(0, |f| f.fallback_pixels)),
+        stream: Some(StreamRunStats {
+            frames: frames.iter().map(Into::into).collect(),
+            totals: (&sr.totals()).into(),
+            floor: (&floor).into(),
+            max_passes: sr.max_passes(),
+            startup: StartupStats {
+                phases: (&startup).into(),
+                write_ms: None,
+            },
+            cache: sr.cache_stats().as_ref().map(Into::into),
+            mean_passes_after_first: (!after_first.is_empty())
+                .then(|| after_first.iter().sum::<f64>() / after_first.len() as f64),
+        }),
+        ..PathStats::new(FrameStats::gpu(&out.stats))
+    };
     drop(sr);
     ctx.check_validation()
         .map_err(|e| RenderError::Validation(e.into()))?;

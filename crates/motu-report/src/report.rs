@@ -43,6 +43,7 @@ pub struct StreamingReport {
     /// above it completes every frame at `floor`'s image size.
     pub min_resident_bytes: u64,
     /// Its parts, as `motu_gpu::streaming_floor` computes them for the renderer.
+    #[serde(serialize_with = "floor_json")]
     pub floor: motu_gpu::StreamFloor,
     /// The element with the largest `alone.peak_bytes` (the floor for per-element streaming).
     pub largest_element: Option<String>,
@@ -52,6 +53,7 @@ pub struct StreamingReport {
     /// `None` where the sizes come from a model (updatable TLAS sizes need a device's
     /// queries). Their instance records (64 bytes each) also count where host memory does
     /// (integrated GPUs, CPU drivers).
+    #[serde(serialize_with = "persistent_json")]
     pub persistent_tlas: Option<motu_gpu::PersistentEstimate>,
     /// Bytes of every mesh `motu render --stream` streams (positions, indices, primitive maps,
     /// shading attributes, as it lays them out): on a discrete GPU they live in host memory
@@ -64,6 +66,27 @@ pub struct StreamingReport {
     /// the persistent estimate above are those of the split hierarchy. `None`: no TLAS over
     /// the cap.
     pub stream_split: Option<StreamSplitReport>,
+}
+
+// The GPU crate's reports as `motu_render::stats` writes them (their JSON keys live there).
+fn floor_json<S: serde::Serializer>(v: &motu_gpu::StreamFloor, s: S) -> Result<S::Ok, S::Error> {
+    motu_render::stats::StreamFloor::from(v).serialize(s)
+}
+
+fn persistent_json<S: serde::Serializer>(
+    v: &Option<motu_gpu::PersistentEstimate>,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    v.as_ref()
+        .map(motu_render::stats::PersistentEstimate::from)
+        .serialize(s)
+}
+
+fn overhead_json<S: serde::Serializer>(
+    v: &motu_gpu::FullBuildOverhead,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    motu_render::stats::FullBuildOverhead::from(v).serialize(s)
 }
 
 /// See [`StreamingReport::stream_split`].
@@ -94,6 +117,7 @@ pub struct Report {
     pub streaming: StreamingReport,
     /// What the whole scene's full build needs besides its structures at the report's image
     /// size (`image_width × image_height`): the `render_overhead_bytes` of `as_compiled`.
+    #[serde(serialize_with = "overhead_json")]
     pub render_overhead: motu_gpu::FullBuildOverhead,
     /// The image every peak and the streaming floor are computed for (`--width`/`--height`,
     /// else the package camera's).

@@ -5,8 +5,7 @@ use motu_abi::lod::LodParams;
 use motu_abi::shade::Shading;
 
 /// What the PNG shows.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum View {
     /// Materials and image textures lit by the scene's lights (or a key light) with shadow
     /// rays, plus a sky term with ambient occlusion (`shade.rs`).
@@ -18,6 +17,18 @@ pub enum View {
     Lod,
     /// Traces per pixel, blue (0) to red (the frame's maximum, reported in stats).
     Heatmap,
+}
+
+impl View {
+    /// The view's name (`--view`, `view` in `--stats`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Shaded => "shaded",
+            Self::Ids => "ids",
+            Self::Lod => "lod",
+            Self::Heatmap => "heatmap",
+        }
+    }
 }
 
 impl std::str::FromStr for View {

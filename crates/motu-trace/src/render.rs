@@ -20,8 +20,9 @@ use crate::TraceError;
 pub use crate::options::{RenderOptions, View};
 pub use crate::ray::shadow_offset;
 
-/// Key names follow the CLI's `--stats` contract where they overlap.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+/// What a CPU render measured; key names follow the CLI's `--stats` contract where they
+/// overlap (the JSON is `motu_render::stats::FrameStats`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct RenderStats {
     pub width: u32,
     pub height: u32,

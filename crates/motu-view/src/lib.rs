@@ -100,8 +100,9 @@ pub struct SourceStats {
 pub struct SourceFrame {
     pub output: RenderOutput,
     pub stats: SourceStats,
-    /// Extra JSON-able detail for `--stats` (e.g. the streaming frame's statistics).
-    pub detail: Option<String>,
+    /// The renderer's detail for `--stats` (a full build's resources, a streamed frame's
+    /// statistics).
+    pub detail: Option<motu_render::stats::ViewDetail>,
 }
 
 /// What the viewer draws from; [`PackageSource`] implements it over a package.

@@ -7,6 +7,7 @@ use motu_abi::camera::{CameraParams, CameraPose};
 use motu_abi::lod::LodParams;
 use motu_abi::{HierarchyView, RootSubset};
 use motu_pack::ScenePackage;
+use motu_render::stats::ViewDetail;
 use motu_render::{choose_lod_mode, LodMode, PackageMeshes, RenderError, StreamBounds};
 
 /// Milliseconds of building per frame while flying when no build budget is given (at least
@@ -327,7 +328,7 @@ impl<'p> PackageSource<'p> {
                     incomplete_pixels: 0,
                     lod_mode,
                 };
-                let detail = serde_json::to_string(rep).ok();
+                let detail = Some(ViewDetail::Resources(rep.into()));
                 Ok(SourceFrame {
                     output: out,
                     stats,
@@ -362,7 +363,7 @@ impl<'p> PackageSource<'p> {
                     },
                     lod_mode,
                 };
-                let detail = serde_json::to_string(&st).ok();
+                let detail = Some(ViewDetail::Stream((&st).into()));
                 Ok(SourceFrame {
                     output: out,
                     stats,

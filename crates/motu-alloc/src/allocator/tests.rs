@@ -397,19 +397,19 @@ fn budget_64_mib_with_8_allocations_fills_up() {
 }
 
 #[test]
-fn report_serialises_for_stats() {
+fn report_counts_per_kind_and_class() {
     let mut a = allocator(64 * MIB, 8, MIB);
     let x = a.alloc(blas(1000)).unwrap();
     a.alloc(AllocRequest::device_local(AllocKind::Geometry, 3000, 4))
         .unwrap();
     a.free(x.id).unwrap();
-    let json = serde_json::to_value(a.report()).unwrap();
-    assert_eq!(json["kinds"]["blas_storage"]["peak_bytes"], 1000);
-    assert_eq!(json["kinds"]["blas_storage"]["bytes"], 0);
-    assert_eq!(json["kinds"]["geometry"]["count"], 1);
-    assert_eq!(json["classes"]["device_local"]["block_count"], 1);
-    assert_eq!(json["allocation_count"], 1);
-    assert_eq!(json["budget_bytes"], 64 * MIB);
+    let r = a.report();
+    assert_eq!(r.kinds[&AllocKind::BlasStorage].peak_bytes, 1000);
+    assert_eq!(r.kinds[&AllocKind::BlasStorage].bytes, 0);
+    assert_eq!(r.kinds[&AllocKind::Geometry].count, 1);
+    assert_eq!(r.classes[&MemoryClass::DeviceLocal].block_count, 1);
+    assert_eq!(r.allocation_count, 1);
+    assert_eq!(r.budget_bytes, 64 * MIB);
 }
 
 #[derive(Debug, Clone)]

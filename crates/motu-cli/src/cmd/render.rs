@@ -313,9 +313,9 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     if let Some(p) = &a.aov {
         outs.write(p, &out.aov.to_bytes())?;
     }
-    if let Some(startup) = out.stats["stream"].get_mut("startup") {
+    if let Some(stream) = &mut out.stats.stream {
         // The image's write closes the time to first pixel the render measured.
-        startup["write_ms"] = serde_json::json!(written.elapsed().as_secs_f64() * 1e3);
+        stream.startup.write_ms = Some(written.elapsed().as_secs_f64() * 1e3);
     }
     if let Some(p) = &a.stats {
         outs.write(p, serde_json::to_string_pretty(&out.stats)?.as_bytes())?;
@@ -326,7 +326,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         a.output.display(),
         camera.width,
         camera.height,
-        out.stats["backend"].as_str().unwrap_or("?"),
+        out.stats.frame.backend,
         out.ms_per_frame(),
         out.rays_per_second() / 1e6,
         out.traces_per_ray(),

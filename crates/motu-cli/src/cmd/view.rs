@@ -10,7 +10,6 @@ use motu_abi::camera::RecordedPath;
 use motu_abi::lod::LodParams;
 use motu_pack::ScenePackage;
 use motu_view::{PackageSource, PackageSourceSettings, ViewOptions, ViewStreamSettings};
-use serde_json::json;
 
 pub fn run(a: ViewArgs) -> anyhow::Result<()> {
     // Before any work: without a display the answer is `motu render`.
@@ -194,26 +193,32 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         outs.write(p, &last.output.aov.to_bytes())?;
     }
     if let Some(p) = &a.stats {
-        let mut stats = serde_json::to_value(&last.output.stats)?;
         let mut ms = result.frame_ms.clone();
         ms.sort_by(f64::total_cmp);
-        stats["frames"] = json!(result.frames_shown);
-        stats["wall_ms_per_frame_median"] = json!(ms.get(ms.len() / 2).copied().unwrap_or(0.0));
-        stats["wall_ms_per_frame"] = json!(result.frame_ms);
-        stats["window"] = json!({"width": w, "height": h, "presented_via": "swapchain"});
-        stats["vram_used_bytes"] = json!(last.stats.vram_used_bytes);
-        stats["resident_structures"] = json!(last.stats.resident_structures);
-        stats["total_structures"] = json!(last.stats.total_structures);
-        stats["streaming"] = json!(last.stats.streaming.is_some());
-        stats["incomplete_frames"] = json!(result.incomplete_frames);
-        stats["incomplete_pixels_per_frame"] = json!(result.incomplete_pixels_per_frame);
-        stats["lod_mode"] = json!(last.stats.lod_mode);
-        stats["accumulated_samples"] = json!(result.accumulated_samples);
-        stats["denoised"] = json!(result.denoised);
-        if let Some(d) = &last.detail {
-            stats["detail"] = serde_json::from_str(d).unwrap_or(json!(null));
-        }
-        stats["package"] = json!(a.package.display().to_string());
+        let stats = motu_render::stats::ViewStats {
+            frame: motu_render::stats::FrameStats {
+                frames: result.frames_shown,
+                ..motu_render::stats::FrameStats::gpu(&last.output.stats)
+            },
+            wall_ms_per_frame_median: ms.get(ms.len() / 2).copied().unwrap_or(0.0),
+            wall_ms_per_frame: result.frame_ms.clone(),
+            window: motu_render::stats::WindowStats {
+                width: w,
+                height: h,
+                presented_via: "swapchain",
+            },
+            vram_used_bytes: last.stats.vram_used_bytes,
+            resident_structures: last.stats.resident_structures,
+            total_structures: last.stats.total_structures,
+            streaming: last.stats.streaming.is_some(),
+            incomplete_frames: result.incomplete_frames,
+            incomplete_pixels_per_frame: result.incomplete_pixels_per_frame.clone(),
+            lod_mode: last.stats.lod_mode,
+            accumulated_samples: result.accumulated_samples,
+            denoised: result.denoised,
+            detail: last.detail.clone(),
+            package: a.package.display().to_string(),
+        };
         outs.write(p, serde_json::to_string_pretty(&stats)?.as_bytes())?;
     }
     outs.commit()?;

@@ -62,7 +62,7 @@ pub(crate) fn staging_bytes_for_budget(budget_bytes: u64, cap_bytes: u64) -> u64
 
 /// What a full build and render needs besides its structures, geometry, tables and build
 /// transients (what `motu report` counts per node): see [`full_build_overhead`].
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct FullBuildOverhead {
     /// Frame buffers at the image size (parameters, AOV, colour, counters, readback).
     pub frame_bytes: u64,

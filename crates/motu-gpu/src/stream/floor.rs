@@ -8,7 +8,6 @@
 use motu_abi::{HierarchyView, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
 use motu_alloc::MIB;
 use motu_vk::BlasGeometry;
-use serde::Serialize;
 
 use super::buffers::frame_buffer_bytes;
 use super::persistent::{persistent_estimate, persistent_flags, PersistentEstimate};
@@ -55,7 +54,7 @@ impl FloorSizes for motu_vk::Context {
 }
 
 /// The parts of the floor (bytes), for reports and error messages.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct StreamFloor {
     /// Node tables (with the proxies' records and the clusters' member table), stamps and
     /// walked tables.

@@ -28,7 +28,6 @@ use motu_abi::HierarchyView;
 use motu_alloc::{AllocKind, BuildSize, MemoryClass};
 use motu_vk::{AsBuild, AsBuildFlags, AsBuildMode, AsGeometry, AsLevel, BufferUsage, HeapBuffer};
 use rayon::prelude::*;
-use serde::Serialize;
 
 use super::tlas_records::{instance_record, tail_record, RECORD_BYTES};
 use super::StreamingRenderer;
@@ -131,7 +130,7 @@ pub(super) fn persistent_records(instance_count: u32) -> u32 {
 /// What persistent TLASes would keep resident (`StreamOptions::tlas_update`), by size queries:
 /// the renderer's `auto` decides on it and `motu report` prints it
 /// (`streaming.persistent_tlas`), so users see at which budget `auto` turns to updates.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct PersistentEstimate {
     /// The TLASes that would be persistent, and the instances they hold together.
     pub tlases: u32,

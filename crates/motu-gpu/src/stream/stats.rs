@@ -1,11 +1,10 @@
 //! What a [`StreamingRenderer`](super::StreamingRenderer) reports: per frame
 //! ([`FrameStreamStats`], with a [`PassStats`] a pass) and over the run ([`StreamTotals`]).
-//! The keys are the `--stats` contract (shared/CLI.md): renamed or removed, never.
-
-use serde::Serialize;
+//! Their JSON is `motu_render::stats` (`stream` in `--stats`), whose conversion names every
+//! field: a field added here gets its key there.
 
 /// Per-frame streaming statistics (`--stats`, one entry per frame).
-#[derive(Clone, Debug, Default, Serialize)]
+#[derive(Clone, Debug, Default)]
 pub struct FrameStreamStats {
     pub frame: u64,
     /// Build–traverse passes this frame.
@@ -200,7 +199,7 @@ pub struct FrameStreamStats {
 }
 
 /// One pass of a frame (`FrameStreamStats::pass_log`).
-#[derive(Clone, Debug, Default, Serialize)]
+#[derive(Clone, Debug, Default)]
 pub struct PassStats {
     /// Pixels (and guard rays) traced in this pass.
     pub traced: u64,
@@ -226,7 +225,7 @@ pub struct PassStats {
 }
 
 /// Totals over all frames rendered so far.
-#[derive(Clone, Debug, Default, Serialize)]
+#[derive(Clone, Debug, Default)]
 pub struct StreamTotals {
     pub frames: u64,
     pub passes: u64,

@@ -1,0 +1,392 @@
+//! The `--stats` schema: the JSON that `motu render --stats` and `motu view --stats` write, as
+//! typed structs. These types own the keys (shared/CLI.md's contract: keys are added, never
+//! renamed or removed); the libraries' statistics (`motu_gpu::RenderStats`,
+//! `motu_gpu::FrameStreamStats`, `motu_alloc::AllocReport`, `motu_ascache::CacheStats`, …)
+//! are not `Serialize` and are converted here, so renaming a library field cannot change a key.
+//!
+//! A struct that copies a library struct key for key is declared with `mirror!`
+//! (`stats/mirror.rs`): its conversion names every field of the source, so a field added to
+//! the library struct fails to compile until it has its key here. `stats/keys.txt` lists every
+//! key path the schema writes; a unit test compares the two (`MOTU_UPDATE_STATS_KEYS=1`
+//! rewrites the list after a deliberate addition).
+
+mod mirror;
+mod resources;
+mod stream;
+#[cfg(test)]
+mod tests;
+
+pub use resources::{AllocReport, ClassStats, KindStats, ResourceReport};
+pub use stream::{
+    CacheStats, DiskStats, FrameStreamStats, FullBuildOverhead, HostStats, PassStats,
+    PersistentEstimate, StreamFloor, StreamStartup, StreamTotals, WarningCounts,
+};
+
+use mirror::mirror;
+use serde::Serialize;
+
+/// The keys CLI.md names for `motu render --stats` (checked against CLI.md by the
+/// integration tests): each is a field of [`FrameStats`].
+pub const CONTRACT_KEYS: [&str; 13] = [
+    "width",
+    "height",
+    "backend",
+    "ms_per_frame",
+    "rays",
+    "rays_per_second",
+    "traces_per_ray",
+    "stack_overflows",
+    "vram_budget_bytes",
+    "vram_peak_bytes",
+    "allocation_count",
+    "as_bytes",
+    "passes",
+];
+
+/// `motu render --stats`: the frame written (CLI.md's keys), what the render path adds (a
+/// full build's resources, a recorded path's frame times, the streaming run), and the
+/// session's keys (denoise, LOD mode, BLAS build, subset, package).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RenderStats {
+    #[serde(flatten)]
+    pub frame: FrameStats,
+    /// Rays of the frame written that were cut short (absent for a recorded camera path on
+    /// the GPU, whose frames do not count them).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub truncated_rays: Option<u64>,
+    /// A full GPU build's resources and instance-LOD passes.
+    #[serde(flatten)]
+    pub full_build: Option<FullBuildStats>,
+    /// A recorded camera path on the GPU: every frame's time, the first (a warm-up) included.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub path_ms_per_frame: Option<Vec<f64>>,
+    /// Streaming: the written frame's fallback pixels (not exact; 0 unless
+    /// `--stream-fallback`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fallback_pixels: Option<u64>,
+    /// The streaming run (`null` for other renders).
+    pub stream: Option<StreamRunStats>,
+    /// `--denoise` on the shaded view (`null` otherwise).
+    pub denoise: Option<DenoiseStats>,
+    #[serde(flatten)]
+    pub lod: LodStats,
+    /// `--blas-build` as run (`fast-trace` or `small`).
+    pub blas_build: &'static str,
+    /// `--subset`'s element names.
+    pub subset: Vec<String>,
+    /// The package's path.
+    pub package: String,
+}
+
+impl RenderStats {
+    /// Median milliseconds per frame.
+    pub fn ms_per_frame(&self) -> f64 {
+        self.frame.ms_per_frame
+    }
+
+    pub fn rays_per_second(&self) -> f64 {
+        self.frame.rays_per_second
+    }
+
+    pub fn traces_per_ray(&self) -> f64 {
+        self.frame.traces_per_ray
+    }
+}
+
+/// One frame's counts: CLI.md's keys first, then what every tracer reports, then the GPU's
+/// or the CPU's own detail ([`TracerStats`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FrameStats {
+    pub width: u32,
+    pub height: u32,
+    /// `pipeline`, `query` or `cpu`.
+    pub backend: &'static str,
+    /// Median time of one frame's trace (GPU timestamps; wall clock on the CPU).
+    pub ms_per_frame: f64,
+    /// Primary plus shadow rays of one frame.
+    pub rays: u64,
+    pub rays_per_second: f64,
+    pub traces_per_ray: f64,
+    pub stack_overflows: u64,
+    /// The VRAM budget (0: none; the CPU reports `--vram-budget` as given).
+    pub vram_budget_bytes: u64,
+    /// Highest bytes of memory blocks counted against the budget (0 on the CPU).
+    pub vram_peak_bytes: u64,
+    /// Most `VkDeviceMemory` allocations at once (0 on the CPU).
+    pub allocation_count: u32,
+    /// Acceleration-structure bytes resident (0 on the CPU).
+    pub as_bytes: u64,
+    /// Build–trace passes of the frame (1 but for streaming).
+    pub passes: u32,
+    /// `shaded`, `ids`, `lod` or `heatmap`.
+    pub view: &'static str,
+    /// Frames rendered (timed, or shown by the viewer).
+    pub frames: u64,
+    pub primary_rays: u64,
+    pub shadow_rays: u64,
+    /// TLAS walks of one frame.
+    pub traces: u64,
+    /// The exposure the shaded image was tone-mapped with, in stops.
+    pub exposure_ev: f32,
+    #[serde(flatten)]
+    pub tracer: TracerStats,
+}
+
+/// What only one kind of tracer reports.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum TracerStats {
+    /// The GPU backends (`motu_gpu::RenderStats`).
+    Gpu {
+        stack_size: u32,
+        pi_list_overflows: u64,
+        /// The heatmap's red end: the most traces spent on one pixel.
+        heatmap_max: u32,
+    },
+    /// The CPU reference (`motu_trace::RenderStats`).
+    Cpu {
+        prepare_ms: f64,
+        hits: u64,
+        max_stack_depth: u32,
+        /// The heatmap's red end (as the GPU's `heatmap_max`).
+        heatmap_max_traces: u32,
+        meshes_built: usize,
+        threads: usize,
+    },
+}
+
+impl FrameStats {
+    /// A GPU frame's stats.
+    pub fn gpu(s: &motu_gpu::RenderStats) -> Self {
+        let motu_gpu::RenderStats {
+            width,
+            height,
+            backend,
+            view,
+            frames,
+            ms_per_frame,
+            rays,
+            primary_rays,
+            shadow_rays,
+            rays_per_second,
+            traces,
+            traces_per_ray,
+            stack_size,
+            stack_overflows,
+            pi_list_overflows,
+            heatmap_max,
+            exposure_ev,
+            as_bytes,
+            vram_budget_bytes,
+            vram_peak_bytes,
+            allocation_count,
+            passes,
+        } = *s;
+        Self {
+            width,
+            height,
+            backend,
+            ms_per_frame,
+            rays,
+            rays_per_second,
+            traces_per_ray,
+            stack_overflows,
+            vram_budget_bytes,
+            vram_peak_bytes,
+            allocation_count,
+            as_bytes,
+            passes,
+            view: view.name(),
+            frames: u64::from(frames),
+            primary_rays,
+            shadow_rays,
+            traces,
+            exposure_ev,
+            tracer: TracerStats::Gpu {
+                stack_size,
+                pi_list_overflows,
+                heatmap_max,
+            },
+        }
+    }
+
+    /// A CPU frame's stats, with the frame count and the budget the CPU does not know, and its
+    /// truncated rays (a key of [`RenderStats`]).
+    pub fn cpu(s: &motu_trace::RenderStats, frames: u64, vram_budget_bytes: u64) -> (Self, u64) {
+        let motu_trace::RenderStats {
+            width,
+            height,
+            backend,
+            view,
+            ms_per_frame,
+            prepare_ms,
+            rays,
+            primary_rays,
+            shadow_rays,
+            hits,
+            traces,
+            traces_per_ray,
+            rays_per_second,
+            stack_overflows,
+            truncated_rays,
+            max_stack_depth,
+            heatmap_max_traces,
+            exposure_ev,
+            meshes_built,
+            threads,
+        } = *s;
+        let frame = Self {
+            width,
+            height,
+            backend,
+            ms_per_frame,
+            rays,
+            rays_per_second,
+            traces_per_ray,
+            stack_overflows,
+            vram_budget_bytes,
+            vram_peak_bytes: 0,
+            allocation_count: 0,
+            as_bytes: 0,
+            passes: 1,
+            view: view.name(),
+            frames,
+            primary_rays,
+            shadow_rays,
+            traces,
+            exposure_ev,
+            tracer: TracerStats::Cpu {
+                prepare_ms,
+                hits,
+                max_stack_depth,
+                heatmap_max_traces,
+                meshes_built,
+                threads,
+            },
+        };
+        (frame, truncated_rays)
+    }
+}
+
+/// A full GPU build's keys: its resources and instance-level LOD's per-frame pass.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct FullBuildStats {
+    pub resources: ResourceReport,
+    /// Frames that ran the pass (levels picked, slot TLASes rebuilt), frames that did not
+    /// (their camera was the one the levels were built for).
+    pub lod_passes: u64,
+    pub lod_passes_skipped: u64,
+    /// Of the passes that ran: slot TLASes updated in place (a moving camera), and a held
+    /// camera's refittable tree rebuilt at full quality.
+    pub lod_refits: u64,
+    pub lod_settles: u64,
+    /// Mean GPU time of the passes that ran (inside the frames' times).
+    pub lod_pass_ms: f64,
+}
+
+impl FullBuildStats {
+    /// `scene`'s resources and LOD passes.
+    pub fn of(scene: &motu_gpu::GpuScene) -> Self {
+        let [lod_passes, lod_passes_skipped] = scene.lod_instance_passes();
+        let [lod_refits, lod_settles] = scene.lod_instance_refits();
+        Self {
+            resources: scene.report().into(),
+            lod_passes,
+            lod_passes_skipped,
+            lod_refits,
+            lod_settles,
+            lod_pass_ms: scene.lod_instance_pass_ms(),
+        }
+    }
+}
+
+/// The LOD mode that ran and its instance/selector counts.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct LodStats {
+    /// `instance`, `traversal` or `none`.
+    pub lod_mode: &'static str,
+    pub lod_mode_reason: &'static str,
+    /// LOD instances rewritten (instance mode), else 0.
+    pub lod_instances: usize,
+    /// LOD selectors the traversal shader evaluates.
+    pub lod_traversal_selectors: u32,
+}
+
+/// `stream` in `--stats`: every frame, the run's totals, the floor the budget was checked
+/// against, the pass cap, the start's phases and the structure cache.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StreamRunStats {
+    pub frames: Vec<FrameStreamStats>,
+    pub totals: StreamTotals,
+    pub floor: StreamFloor,
+    pub max_passes: u32,
+    pub startup: StartupStats,
+    /// The structure cache's counters (`null` without one).
+    pub cache: Option<CacheStats>,
+    /// Mean passes of the frames after the first (`null` with one frame).
+    pub mean_passes_after_first: Option<f64>,
+}
+
+/// `stream.startup`: the phases up to the first streamed frame.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StartupStats {
+    #[serde(flatten)]
+    pub phases: StreamStartup,
+    /// Writing the PNG and AOV after the render (`motu render` adds it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub write_ms: Option<f64>,
+}
+
+mirror! {
+    /// `motu_render::denoise::DenoiseStats` as JSON.
+    DenoiseStats from crate::denoise::DenoiseStats {
+        filter: &'static str,
+        iterations: u32,
+        filtered_pixels: u64,
+        denoise_ms: f64,
+    }
+}
+
+/// `motu view --stats`: the last frame (as `motu render`'s, `frames` counting the frames
+/// shown), the window's timing, residency and accumulation, and the renderer's detail.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ViewStats {
+    #[serde(flatten)]
+    pub frame: FrameStats,
+    /// Wall time per frame shown (median, and every frame).
+    pub wall_ms_per_frame_median: f64,
+    pub wall_ms_per_frame: Vec<f64>,
+    pub window: WindowStats,
+    pub vram_used_bytes: u64,
+    pub resident_structures: u64,
+    pub total_structures: u64,
+    /// Whether the viewer streamed.
+    pub streaming: bool,
+    /// Frames shown with unfinished pixels, and the unfinished pixels of each frame.
+    pub incomplete_frames: u64,
+    pub incomplete_pixels_per_frame: Vec<u64>,
+    pub lod_mode: &'static str,
+    pub accumulated_samples: u32,
+    pub denoised: bool,
+    /// The last frame's renderer detail (absent when the renderer gave none).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub detail: Option<ViewDetail>,
+    pub package: String,
+}
+
+/// `window` in `motu view --stats`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct WindowStats {
+    pub width: u32,
+    pub height: u32,
+    /// How frames reached the screen (`swapchain`).
+    pub presented_via: &'static str,
+}
+
+/// `detail` in `motu view --stats`: a full build's resources or the streamed frame's stats.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(untagged)]
+pub enum ViewDetail {
+    Resources(ResourceReport),
+    Stream(FrameStreamStats),
+}

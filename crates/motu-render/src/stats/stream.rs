@@ -1,0 +1,284 @@
+//! A streamed render's `stream` object in `--stats`: per frame and pass, the run's totals, the
+//! floor, the start's phases and the structure cache's counters; and the floor's and the
+//! persistent TLASes' parts that `motu report --json` prints. Each key is the library field of
+//! the same name.
+
+use super::mirror::mirror;
+
+mirror! {
+    /// `motu_gpu::FrameStreamStats` as JSON.
+    FrameStreamStats from motu_gpu::FrameStreamStats {
+        frame: u64,
+        passes: u32,
+        complete: bool,
+        incomplete_pixels: u64,
+        fallback_pixels: u64,
+        build_budget_spent: bool,
+        truncated_rays: u64,
+        reshot_pixels: u64,
+        guard_rays: u64,
+        blas_built: u32,
+        tlas_built: u32,
+        tlas_rebuilt: u32,
+        tlas_rebuild_groups: u32,
+        prefetched: u32,
+        prefetch_skipped: u32,
+        probe_rays: u64,
+        probe_ms: f64,
+        probe_rounds: u32,
+        probe_verify_rounds: u32,
+        probe_pass_rows: u32,
+        probe_pass_marks: u32,
+        probe_need_blases: u32,
+        probe_need_bytes: u64,
+        probe_need_mesh_bytes: u64,
+        evicted: u32,
+        evicted_bytes: u64,
+        evicted_for_tlas: u32,
+        evicted_on_refusal: u32,
+        deferred: u32,
+        bytes_streamed: u64,
+        built_bytes: u64,
+        triangles_built: u64,
+        restored_blases: u32,
+        restored_bytes: u64,
+        restored_from_host: u32,
+        restored_from_disk: u32,
+        restore_ms: f64,
+        restore_skipped: u32,
+        rebuilt_blases: u32,
+        rebuilt_bytes: u64,
+        cache_stored: u32,
+        cache_stored_bytes: u64,
+        cache_store_ms: f64,
+        cache_skipped: u32,
+        build_ms: f64,
+        trace_ms: f64,
+        frame_ms: f64,
+        host_ms: f64,
+        mesh_ms: f64,
+        blas_ms: f64,
+        tlas_ms: f64,
+        evict_ms: f64,
+        tables_ms: f64,
+        build_steps: u32,
+        build_groups: u32,
+        refused_groups: u32,
+        tlas_builds: u32,
+        tlas_instances_written: u64,
+        tlas_updates: u32,
+        tlas_rebuild_transient_bytes: u64,
+        defrag_moves: u32,
+        defrag_freed_bytes: u64,
+        defrag_ms: f64,
+        working_set_blases: u32,
+        working_set_bytes: u64,
+        working_set_mesh_bytes: u64,
+        first_pass_missed_evicted: u32,
+        first_pass_missed_unprobed: u32,
+        first_pass_missed_probed: u32,
+        pass_log: Vec<PassStats>,
+        resident_bytes: u64,
+        resident_host_mesh_bytes: u64,
+        resident_blases: u32,
+        resident_tlases: u32,
+        resident_textures: u32,
+        vram_peak_bytes: u64,
+        vram_budget_bytes: u64,
+        heap_block_bytes: u64,
+        heap_in_use_bytes: u64,
+        room_bytes: u64,
+    }
+}
+
+mirror! {
+    /// `motu_gpu::PassStats` as JSON.
+    PassStats from motu_gpu::PassStats {
+        traced: u64,
+        open_pixels: u64,
+        needed: u32,
+        later: u32,
+        trace_ms: f64,
+        host_ms: f64,
+        build_ms: f64,
+        tlas_ms: f64,
+        blas_built: u32,
+        built_bytes: u64,
+        evicted: u32,
+        evicted_bytes: u64,
+        evicted_for_tlas: u32,
+        evicted_on_refusal: u32,
+    }
+}
+
+mirror! {
+    /// `motu_gpu::StreamTotals` as JSON.
+    StreamTotals from motu_gpu::StreamTotals {
+        frames: u64,
+        passes: u64,
+        blas_built: u64,
+        tlas_built: u64,
+        tlas_rebuilt: u64,
+        tlas_rebuild_groups: u64,
+        evicted: u64,
+        deferred: u64,
+        incomplete_frames: u64,
+        fallback_pixels: u64,
+        bytes_streamed: u64,
+        built_bytes: u64,
+        triangles_built: u64,
+        build_ms: f64,
+        restored_blases: u64,
+        restored_bytes: u64,
+        restore_ms: f64,
+        restore_gb_per_s: f64,
+        rebuilt_blases: u64,
+        rebuilt_bytes: u64,
+        cache_stored: u64,
+        cache_stored_bytes: u64,
+        cache_store_ms: f64,
+        scene_triangles: u64,
+        skeleton_bytes: u64,
+        proxy_boxes: u64,
+        proxy_boxes_ms: f64,
+        derived_ms: f64,
+        persistent_choice_ms: f64,
+        skeleton_ms: f64,
+        tlas_mode: &'static str,
+        persistent_tlases: u32,
+        persistent_tlas_bytes: u64,
+        persistent_dropped: bool,
+        mesh_memory: &'static str,
+        meshes_budgeted: bool,
+        host_memory_counted: bool,
+        host_mesh_peak_bytes: u64,
+        vram_peak_bytes: u64,
+        vram_budget_bytes: u64,
+    }
+}
+
+mirror! {
+    /// `motu_gpu::StreamFloor` as JSON.
+    StreamFloor from motu_gpu::StreamFloor {
+        tables_bytes: u64,
+        skeleton_structures_bytes: u64,
+        largest_blas: Option<u32>,
+        largest_blas_build_bytes: u64,
+        tlas_rebuild_bytes: u64,
+        frame_bytes: u64,
+        shading_tables_bytes: u64,
+        shading_attributes_bytes: u64,
+        shading_textures_bytes: u64,
+        width: u32,
+        height: u32,
+        pipeline_bytes: u64,
+        staging_bytes: u64,
+        allocator_slack_bytes: u64,
+        min_resident_bytes: u64,
+    }
+}
+
+mirror! {
+    /// `motu_gpu::PersistentEstimate` as JSON.
+    PersistentEstimate from motu_gpu::PersistentEstimate {
+        tlases: u32,
+        instances: u64,
+        bytes: u64,
+        auto_min_budget_bytes: Option<u64>,
+    }
+}
+
+mirror! {
+    /// `motu_gpu::FullBuildOverhead` as JSON.
+    FullBuildOverhead from motu_gpu::FullBuildOverhead {
+        frame_bytes: u64,
+        staging_bytes: u64,
+        allocator_slack_bytes: u64,
+        total_bytes: u64,
+    }
+}
+
+mirror! {
+    /// `crate::StreamStartup` as JSON.
+    StreamStartup from crate::StreamStartup {
+        before_render_ms: f64,
+        device_ms: f64,
+        split_ms: f64,
+        clusters_ms: f64,
+        floor_ms: f64,
+        init_ms: f64,
+        derived_ms: f64,
+        persistent_choice_ms: f64,
+        proxy_boxes_ms: f64,
+        skeleton_ms: f64,
+        first_frame_ms: f64,
+        to_first_pixel_ms: f64,
+    }
+}
+
+mirror! {
+    /// `motu_ascache::CacheStats` as JSON.
+    CacheStats from motu_ascache::CacheStats {
+        host_hits: u64,
+        disk_hits: u64,
+        misses: u64,
+        hit_bytes: u64,
+        puts: u64,
+        put_bytes: u64,
+        host: HostStats,
+        disk: Option<DiskStats>,
+    }
+}
+
+mirror! {
+    /// `motu_ascache::HostStats` as JSON.
+    HostStats from motu_ascache::HostStats {
+        capacity_bytes: u64,
+        entries: u64,
+        bytes: u64,
+        hits: u64,
+        misses: u64,
+        inserted: u64,
+        inserted_bytes: u64,
+        refused: u64,
+        refused_bytes: u64,
+        evicted_entries: u64,
+        evicted_bytes: u64,
+    }
+}
+
+mirror! {
+    /// `motu_ascache::DiskStats` as JSON.
+    DiskStats from motu_ascache::DiskStats {
+        capacity_bytes: u64,
+        writable: bool,
+        entries: u64,
+        bytes: u64,
+        found_at_open: u64,
+        found_bytes_at_open: u64,
+        hits: u64,
+        hit_bytes: u64,
+        misses: u64,
+        written: u64,
+        written_bytes: u64,
+        skipped_writes: u64,
+        evicted_entries: u64,
+        evicted_bytes: u64,
+        removed_bad: u64,
+        stale_temp_files_removed: u64,
+        warnings: WarningCounts,
+    }
+}
+
+mirror! {
+    /// `motu_ascache::WarningCounts` as JSON.
+    WarningCounts from motu_ascache::WarningCounts {
+        corrupt: u64,
+        truncated: u64,
+        foreign: u64,
+        incompatible: u64,
+        read_only: u64,
+        full: u64,
+        io: u64,
+    }
+}
