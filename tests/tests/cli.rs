@@ -1,6 +1,7 @@
 //! The command-line contract (shared/CLI.md): commands exist, errors are clean, JSON is one object.
 
-use motu_tests::{motu, motu_json};
+use motu_tests::{gpu_available, motu, motu_json, motu_ok, s};
+use std::path::Path;
 
 #[test]
 fn every_command_has_help() {
@@ -191,5 +192,85 @@ fn render_and_view_help_group_their_flags() {
         "--subset",
     ] {
         assert!(short.contains(flag), "render -h lacks {flag}");
+    }
+}
+
+/// The keys CLI.md (the contract, `../shared/CLI.md` beside the workspace) names in the table
+/// row starting with `row`, after `marker`, up to the cell's end: its backticked names.
+fn cli_md_keys(row: &str, marker: &str) -> Vec<String> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/CLI.md");
+    let text = std::fs::read_to_string(&path)
+        .unwrap_or_else(|e| panic!("reading the CLI contract {}: {e}", path.display()));
+    let line = text
+        .lines()
+        .find(|l| l.starts_with(row))
+        .unwrap_or_else(|| panic!("CLI.md has no row {row:?}"));
+    let (_, after) = line
+        .split_once(marker)
+        .unwrap_or_else(|| panic!("CLI.md's row {row:?} lost {marker:?}"));
+    let cell = after.split(" |").next().unwrap_or(after);
+    let keys: Vec<String> = cell
+        .split('`')
+        .skip(1)
+        .step_by(2)
+        .filter(|k| k.chars().all(|c| c.is_ascii_lowercase() || c == '_'))
+        .map(String::from)
+        .collect();
+    assert!(
+        keys.len() >= 5,
+        "too few keys parsed from {row:?}: {keys:?}"
+    );
+    keys
+}
+
+/// Issue 46 item 3: every key CLI.md names for `render --stats` (CPU, a full GPU build and a
+/// streamed render), `info --json` and `devices --json` is written, not null.
+#[test]
+fn json_outputs_write_every_key_cli_md_names() {
+    let render_keys = cli_md_keys(
+        "| `motu render ",
+        "`--stats` writes JSON with at least the top-level keys",
+    );
+    let info_keys = cli_md_keys("| `motu info PKG [--json]`", "JSON keys at least:");
+    let device_keys = cli_md_keys("| `motu devices", "lists Vulkan devices:");
+    let has = |v: &serde_json::Value, keys: &[String], what: &str| {
+        for k in keys {
+            assert!(
+                v.get(k).is_some_and(|x| !x.is_null()),
+                "{what}: CLI.md's key {k} is missing: {v}"
+            );
+        }
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let gen = d.join("flake");
+    motu_ok(&["gen", "sphereflake", "--depth", "1", "-o", s(&gen)]);
+    let pkg = d.join("flake.motu");
+    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    has(
+        &motu_json(&["info", s(&pkg), "--json"]),
+        &info_keys,
+        "info --json",
+    );
+    let mut renders = vec![("cpu", vec!["--backend", "cpu"])];
+    if gpu_available() {
+        let v = motu_json(&["devices", "--json"]);
+        for dev in v["devices"].as_array().expect("devices") {
+            has(dev, &device_keys, "devices --json");
+        }
+        renders.push(("pipeline", vec!["--backend", "pipeline"]));
+        renders.push(("stream", vec!["--backend", "pipeline", "--stream"]));
+    }
+    for (name, args) in renders {
+        let stats = d.join(format!("{name}.json"));
+        let png = d.join(format!("{name}.png"));
+        let mut all = vec!["render", s(&pkg), "-o", s(&png), "--width", "16"];
+        all.extend(["--height", "16", "--stats", s(&stats)]);
+        all.extend(args);
+        motu_ok(&all);
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+        has(&v, &render_keys, &format!("render --stats ({name})"));
+        assert_eq!(v["width"], 16, "{name}: {v}");
     }
 }
