@@ -13,6 +13,7 @@
 //! cluster of a partitioned mesh adds its primitive map (`u32` per triangle) likewise.
 
 mod blob;
+mod info;
 mod meta;
 mod read;
 mod sections;
@@ -20,6 +21,7 @@ mod store;
 mod write;
 
 pub use blob::{MeshBlobLayout, MESH_BLOB_ALIGN};
+pub use info::{ElementsInfo, PackageInfo};
 pub use meta::{CurveMeta, ElementMeta, PackageMeta, StreamSplitMeta, SCHEMA, SCHEMA_READABLE};
 pub use read::{read_mesh_blob, MeshGeometry, ScenePackage};
 pub use sections::*;
