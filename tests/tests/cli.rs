@@ -68,6 +68,9 @@ fn devices_json_reports_ray_tracing_and_limits() {
         ] {
             assert!(!d[key].is_null(), "device lacks {key}: {d}");
         }
+        for key in ["size_bytes", "budget_bytes", "usage_bytes", "device_local"] {
+            assert!(d["heaps"][0].get(key).is_some(), "heap lacks {key}: {d}");
+        }
     }
     if let Some(lvp) = devices
         .iter()

@@ -1,14 +1,9 @@
-//! Prints what `motu devices` shows: `cargo run -p motu-gpu --example devices [-- --json]`.
+//! Prints the table `motu devices` shows: `cargo run -p motu-gpu --example devices` (the JSON
+//! form, `motu devices --json`, is `motu_render::stats::DeviceList`).
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let json = std::env::args().any(|a| a == "--json");
-    let devices = motu_gpu::list_devices()?;
-    if json {
-        println!("{}", serde_json::to_string_pretty(&devices)?);
-    } else {
-        for d in &devices {
-            print!("{}", d.to_table_string());
-        }
+    for d in &motu_gpu::list_devices()? {
+        print!("{}", d.to_table_string());
     }
     Ok(())
 }

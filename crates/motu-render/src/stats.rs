@@ -1,5 +1,6 @@
-//! The `--stats` schema: the JSON that `motu render --stats` and `motu view --stats` write, as
-//! typed structs. These types own the keys (shared/CLI.md's contract: keys are added, never
+//! The `--stats` schema: the JSON that `motu render --stats` and `motu view --stats` write
+//! (and `motu devices --json`, and the GPU crate's parts of `motu report --json`), as typed
+//! structs. These types own the keys (shared/CLI.md's contract: keys are added, never
 //! renamed or removed); the libraries' statistics (`motu_gpu::RenderStats`,
 //! `motu_gpu::FrameStreamStats`, `motu_alloc::AllocReport`, `motu_ascache::CacheStats`, …)
 //! are not `Serialize` and are converted here, so renaming a library field cannot change a key.
@@ -10,12 +11,14 @@
 //! key path the schema writes; a unit test compares the two (`MOTU_UPDATE_STATS_KEYS=1`
 //! rewrites the list after a deliberate addition).
 
+mod devices;
 mod mirror;
 mod resources;
 mod stream;
 #[cfg(test)]
 mod tests;
 
+pub use devices::{Caps, DeviceList, DeviceReport, HeapReport, Limits};
 pub use resources::{AllocReport, ClassStats, KindStats, ResourceReport};
 pub use stream::{
     CacheStats, DiskStats, FrameStreamStats, FullBuildOverhead, HostStats, PassStats,

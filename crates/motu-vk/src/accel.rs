@@ -3,8 +3,6 @@
 //! turns them into Vulkan structs, `build_sizes.rs` asks the device for their sizes).
 
 use ash::vk;
-use serde::Serialize;
-
 /// Acceleration structures must start at multiples of 256 bytes in their buffer (spec:
 /// `VkAccelerationStructureCreateInfoKHR::offset`).
 pub const ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT: u64 = 256;
@@ -179,7 +177,7 @@ pub struct AsBuild<'g> {
 pub struct AsTarget(pub(crate) vk::AccelerationStructureKHR);
 
 /// Worst-case sizes from `vkGetAccelerationStructureBuildSizesKHR` (before compaction).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct AsBuildSizes {
     pub acceleration_structure_size_bytes: u64,
     pub build_scratch_size_bytes: u64,

@@ -4,16 +4,14 @@
 use std::collections::BTreeSet;
 use std::ffi::{CStr, CString};
 
-use ash::vk;
-use serde::Serialize;
-
 use crate::error::{Result, VkError};
 use crate::instance::version_string;
 use crate::limits::Limits;
+use ash::vk;
 
 /// What the device (as opened) can do. Ray-tracing flags require both the extension and its
 /// feature bit, plus acceleration structures and buffer device address.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Caps {
     pub acceleration_structure: bool,
     /// `VK_KHR_ray_tracing_pipeline` usable (the H200 path).
@@ -40,7 +38,7 @@ pub struct Caps {
 }
 
 /// One memory heap with its `VK_EXT_memory_budget` numbers (`None` without the extension).
-#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct HeapReport {
     pub index: u32,
     pub size_bytes: u64,

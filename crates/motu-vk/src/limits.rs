@@ -1,12 +1,10 @@
 //! Device limits later stages must respect, and test overrides that can only lower them.
 
-use serde::Serialize;
-
 use crate::error::{Result, VkError};
 
 /// Limits of one device, as motu uses them. Ray-tracing limits are 0 when the device lacks the
 /// extension (check [`crate::Caps`] first). Values may be lowered by [`LimitOverrides`].
-#[derive(Clone, Debug, PartialEq, Serialize)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Limits {
     /// Instances per TLAS (`VkPhysicalDeviceAccelerationStructurePropertiesKHR`).
     pub max_instance_count: u64,

@@ -2,16 +2,15 @@
 
 use std::fmt::Write as _;
 
-use serde::Serialize;
-
 use crate::capabilities::{self, Caps, HeapReport, PhysicalInfo};
 use crate::error::Result;
 use crate::instance::{version_string, InstanceShared, ValidationRequest};
 use crate::limits::{LimitOverrides, Limits};
 
-/// One device as `motu devices` shows it. Limits include env overrides (listed in
-/// `limit_overrides`), so the report shows what motu will actually use.
-#[derive(Clone, Debug, Serialize)]
+/// One device as `motu devices` shows it (the JSON is `motu_render::stats::DeviceReport`).
+/// Limits include env overrides (listed in `limit_overrides`), so the report shows what motu
+/// will actually use.
+#[derive(Clone, Debug)]
 pub struct DeviceReport {
     /// Index for `--device N` / `MOTU_DEVICE`.
     pub index: usize,
@@ -35,7 +34,6 @@ pub struct DeviceReport {
     pub buffer_device_address: bool,
     pub memory_budget_ext: bool,
     pub caps: Caps,
-    #[serde(flatten)]
     pub limits: Limits,
     pub heaps: Vec<HeapReport>,
     /// Names of limits lowered by `MOTU_MAX_*` environment overrides.

@@ -307,34 +307,8 @@ fn list_devices_reports_lavapipe_ray_tracing() {
             table.contains(&d.name) && table.contains("max_instance_count"),
             "{table}"
         );
-        // The CLI contract's keys (CLI.md, `motu devices --json`).
-        let json = serde_json::to_value(d).expect("serialize");
-        for key in [
-            "name",
-            "driver",
-            "ray_pipeline",
-            "ray_query",
-            "max_instance_count",
-            "max_primitive_count",
-            "max_memory_allocation_count",
-            "max_memory_allocation_size",
-            "heaps",
-            "index",
-            "device_type",
-            "api_version",
-            "acceleration_structure",
-            "memory_budget_ext",
-            "max_storage_buffer_range",
-            "min_acceleration_structure_scratch_offset_alignment",
-            "shader_group_handle_size",
-            "timestamp_period_ns",
-        ] {
-            assert!(json.get(key).is_some(), "missing key {key} in {json}");
-        }
-        let heap = &json["heaps"][0];
-        for key in ["size_bytes", "budget_bytes", "usage_bytes", "device_local"] {
-            assert!(heap.get(key).is_some(), "missing heap key {key}");
-        }
+        // The CLI contract's keys (CLI.md, `motu devices --json`) are checked on the JSON
+        // (`motu_render::stats::DeviceReport`, `tests/tests/cli.rs`).
     }
     match devices.iter().find(|d| d.name.starts_with("llvmpipe")) {
         Some(lp) if lp.driver.contains("Mesa") => {

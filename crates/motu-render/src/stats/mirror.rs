@@ -21,7 +21,17 @@ macro_rules! mirror_as_is {
     };
 }
 
-mirror_as_is!(bool, u32, u64, usize, f32, f64, &'static str, String);
+mirror_as_is!(
+    bool,
+    u32,
+    u64,
+    usize,
+    f32,
+    f64,
+    &'static str,
+    String,
+    [u32; 3]
+);
 
 impl<T, U: Mirror<T>> Mirror<Option<T>> for Option<U> {
     fn mirror(value: &Option<T>) -> Self {
