@@ -121,13 +121,12 @@ use motu_abi::{
     MeshRecord, PiRecord, TlasRecord,
 };
 use motu_scene::{ElementId, MeshData, Scene};
-use serde::Serialize;
 
 /// The Vulkan-safe default for instances per TLAS and primitives per BLAS (2^24 − 1).
 pub const DEFAULT_MAX_PER_NODE: u32 = (1 << 24) - 1;
 
 /// How many instancing levels to keep.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Levels {
     /// Keep the graph (multi-level instancing).
     Ml,
@@ -243,8 +242,9 @@ pub enum CompileError {
     Internal(String),
 }
 
-/// What a compile did, for `motu import`/`motu info` and benchmarks.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+/// What a compile did, for `motu import`/`motu info` and benchmarks (its JSON, stored in the
+/// package meta, is `motu-import`'s `compile_report::CompileReport`).
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct CompileReport {
     pub levels: String,
     pub tlas_count: u64,
@@ -298,7 +298,7 @@ pub struct CompileReport {
 
 /// The phases of a compile, in milliseconds (`motu import --json`'s `compile_phases`).
 /// `emit_ms` holds `load_ms`, `partition_ms` and `sink_ms`.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct CompilePhases {
     /// The per-prototype plan (`analyze`).
     pub analyze_ms: f64,

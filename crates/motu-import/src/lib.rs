@@ -2,6 +2,7 @@
 //! to package chunks as it is parsed) → the compiled traversal hierarchy → a finished package.
 //! `motu import`, `motu demo`, `motu bench` and any embedding program call [`import`].
 
+mod compile_report;
 mod error;
 mod memory;
 mod pipeline;

@@ -93,7 +93,7 @@ pub struct ImportSummary {
     pub pack_ms: f64,
     /// Where `compile_ms` went (the compiler's phases: analyze, emit with its source-mesh
     /// loads, partitioning and stores, finalize).
-    pub compile_phases: motu_compile::CompilePhases,
+    pub compile_phases: crate::compile_report::CompilePhases,
     /// Of `pack_ms`: the stream split made and stored for readers (FORMAT.md).
     pub stream_split_ms: f64,
     pub meshes: u64,
@@ -468,7 +468,7 @@ fn summary(
         parse_ms,
         compile_ms,
         pack_ms: pack_start.elapsed().as_secs_f64() * 1e3,
-        compile_phases: compiled.report.phases.clone(),
+        compile_phases: (&compiled.report.phases).into(),
         stream_split_ms: split_ms,
         meshes: st.meshes,
         instances: st.instances,
@@ -522,7 +522,9 @@ fn finish(
         mesh_names: scene.meshes().iter().map(|m| m.name.clone()).collect(),
         elements: elements.clone(),
         scene: scene_stats,
-        compile: serde_json::to_value(&compiled.report)?,
+        compile: serde_json::to_value(crate::compile_report::CompileReport::from(
+            &compiled.report,
+        ))?,
         warnings: report.warnings.clone(),
         curves: motu_pack::CurveMeta {
             curves: report.curves,
