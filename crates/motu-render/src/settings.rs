@@ -74,16 +74,6 @@ impl RenderSettings {
             motu_gpu::BlasBuild::FastTrace
         })
     }
-
-    /// The view's name (`--view`, the `--stats` key `view`).
-    pub fn view_name(&self) -> &'static str {
-        match self.view {
-            motu_gpu::View::Shaded => "shaded",
-            motu_gpu::View::Heatmap => "heatmap",
-            motu_gpu::View::Lod => "lod",
-            motu_gpu::View::Ids => "ids",
-        }
-    }
 }
 
 /// What a render reports while it runs, for the caller to print (the library prints nothing).

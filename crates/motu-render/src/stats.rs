@@ -22,7 +22,7 @@ pub use devices::{Caps, DeviceList, DeviceReport, HeapReport, Limits};
 pub use resources::{AllocReport, ClassStats, KindStats, ResourceReport};
 pub use stream::{
     CacheStats, DiskStats, FrameStreamStats, FullBuildOverhead, HostStats, PassStats,
-    PersistentEstimate, StreamFloor, StreamStartup, StreamTotals, WarningCounts,
+    PersistentEstimate, StreamFloor, StreamTotals, WarningCounts,
 };
 
 use mirror::mirror;
@@ -323,18 +323,45 @@ pub struct StreamRunStats {
     pub totals: StreamTotals,
     pub floor: StreamFloor,
     pub max_passes: u32,
-    pub startup: StartupStats,
+    pub startup: StreamStartup,
     /// The structure cache's counters (`null` without one).
     pub cache: Option<CacheStats>,
     /// Mean passes of the frames after the first (`null` with one frame).
     pub mean_passes_after_first: Option<f64>,
 }
 
-/// `stream.startup`: the phases up to the first streamed frame.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct StartupStats {
-    #[serde(flatten)]
-    pub phases: StreamStartup,
+/// Where a streamed render's time went up to its first frame (`stream.startup` in `--stats`):
+/// the time to first pixel and its phases, in milliseconds. Each phase is also a `tracing`
+/// span (`MOTU_LOG=motu_render=info` prints them).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct StreamStartup {
+    /// From the command's start to the render: opening and checking the package, the subset,
+    /// the camera and the LOD mode (0 when the caller gave no start).
+    pub before_render_ms: f64,
+    /// Opening the Vulkan device.
+    pub device_ms: f64,
+    /// Splitting large TLASes for streaming ([`crate::stream_split`]).
+    pub split_ms: f64,
+    /// The proxy clusters of every TLAS (`motu_gpu::StreamPlan`), which the floor and the
+    /// renderer share.
+    pub clusters_ms: f64,
+    /// The streaming floor (`motu_gpu::streaming_floor`): refusing budgets below it.
+    pub floor_ms: f64,
+    /// The streaming renderer's start: derived tables, proxy clusters and boxes, the resident
+    /// skeleton's upload and builds.
+    pub init_ms: f64,
+    /// Of `init_ms`: the derived tables (parents, proxy clusters, GPU records), choosing
+    /// persistent TLASes, the boxes inside streamable BLASes (read from every mesh), and the
+    /// resident skeleton (tables uploaded, PI BLASes and TLASes built).
+    pub derived_ms: f64,
+    pub persistent_choice_ms: f64,
+    pub proxy_boxes_ms: f64,
+    pub skeleton_ms: f64,
+    /// The first frame (all its passes, builds and its next-camera probe).
+    pub first_frame_ms: f64,
+    /// From the command's start to the end of the first frame (0 when the caller gave no
+    /// start).
+    pub to_first_pixel_ms: f64,
     /// Writing the PNG and AOV after the render (`motu render` adds it).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub write_ms: Option<f64>,

@@ -4,7 +4,7 @@
 
 use crate::gpu::{gpu_context, gpu_render_options, PathStats, Rendered};
 use crate::settings::{RenderEvent, RenderSettings, StreamSettings};
-use crate::stats::{FrameStats, StartupStats, StreamRunStats};
+use crate::stats::{FrameStats, StreamRunStats, StreamStartup};
 use crate::{camera_pose, scene_shading, Backend, PackageMeshes, RenderError};
 use motu_abi::camera::{camera_path, CameraParams};
 use motu_abi::HierarchyView;
@@ -186,41 +186,6 @@ pub fn stream_split(
     Ok(split)
 }
 
-/// Where a streamed render's time went up to its first frame (`stream.startup` in `--stats`):
-/// the time to first pixel and its phases, in milliseconds. Each phase is also a `tracing`
-/// span (`MOTU_LOG=motu_render=info` prints them). The JSON is
-/// [`crate::stats::StreamStartup`].
-#[derive(Clone, Debug, Default)]
-pub struct StreamStartup {
-    /// From the command's start to the render: opening and checking the package, the subset,
-    /// the camera and the LOD mode (0 when the caller gave no start).
-    pub before_render_ms: f64,
-    /// Opening the Vulkan device.
-    pub device_ms: f64,
-    /// Splitting large TLASes for streaming ([`stream_split`]).
-    pub split_ms: f64,
-    /// The proxy clusters of every TLAS (`motu_gpu::StreamPlan`), which the floor and the
-    /// renderer share.
-    pub clusters_ms: f64,
-    /// The streaming floor (`motu_gpu::streaming_floor`): refusing budgets below it.
-    pub floor_ms: f64,
-    /// The streaming renderer's start: derived tables, proxy clusters and boxes, the resident
-    /// skeleton's upload and builds.
-    pub init_ms: f64,
-    /// Of `init_ms`: the derived tables (parents, proxy clusters, GPU records), choosing
-    /// persistent TLASes, the boxes inside streamable BLASes (read from every mesh), and the
-    /// resident skeleton (tables uploaded, PI BLASes and TLASes built).
-    pub derived_ms: f64,
-    pub persistent_choice_ms: f64,
-    pub proxy_boxes_ms: f64,
-    pub skeleton_ms: f64,
-    /// The first frame (all its passes, builds and its next-camera probe).
-    pub first_frame_ms: f64,
-    /// From the command's start to the end of the first frame (0 when the caller gave no
-    /// start); the CLI adds the PNG and AOV write after it as `write_ms`.
-    pub to_first_pixel_ms: f64,
-}
-
 fn ms_since(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
 }
@@ -386,10 +351,7 @@ pub(crate) fn render_streaming(
             totals: (&sr.totals()).into(),
             floor: (&floor).into(),
             max_passes: sr.max_passes(),
-            startup: StartupStats {
-                phases: (&startup).into(),
-                write_ms: None,
-            },
+            startup,
             cache: sr.cache_stats().as_ref().map(Into::into),
             mean_passes_after_first: (!after_first.is_empty())
                 .then(|| after_first.iter().sum::<f64>() / after_first.len() as f64),

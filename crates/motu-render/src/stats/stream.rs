@@ -199,24 +199,6 @@ mirror! {
 }
 
 mirror! {
-    /// `crate::StreamStartup` as JSON.
-    StreamStartup from crate::StreamStartup {
-        before_render_ms: f64,
-        device_ms: f64,
-        split_ms: f64,
-        clusters_ms: f64,
-        floor_ms: f64,
-        init_ms: f64,
-        derived_ms: f64,
-        persistent_choice_ms: f64,
-        proxy_boxes_ms: f64,
-        skeleton_ms: f64,
-        first_frame_ms: f64,
-        to_first_pixel_ms: f64,
-    }
-}
-
-mirror! {
     /// `motu_ascache::CacheStats` as JSON.
     CacheStats from motu_ascache::CacheStats {
         host_hits: u64,

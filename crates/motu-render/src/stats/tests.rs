@@ -123,9 +123,9 @@ fn full_render_stats() -> RenderStats {
             totals: (&motu_gpu::StreamTotals::default()).into(),
             floor: (&floor).into(),
             max_passes: 1,
-            startup: StartupStats {
-                phases: (&crate::StreamStartup::default()).into(),
+            startup: StreamStartup {
                 write_ms: Some(1.0),
+                ..Default::default()
             },
             cache: Some((&cache).into()),
             mean_passes_after_first: Some(1.0),
