@@ -34,7 +34,9 @@ pub use settings::{
     CameraRequest, DeviceRequest, RenderEvent, RenderSettings, StreamSettings, TraversalLimits,
 };
 pub use shading::{scene_shading, ShadingOptions, AO_DISTANCE_OF_DIAGONAL};
-pub use stream::{package_stream_split, stream_split, StreamBounds, StreamStartup};
+pub use stream::{
+    package_stream_split, stored_stream_split, stream_split, StreamBounds, StreamStartup,
+};
 
 use motu_alloc::format_size;
 use std::path::PathBuf;

@@ -91,6 +91,8 @@ pub enum ReportError {
     Hierarchy(#[from] motu_abi::HierarchyError),
     #[error("GPU size query failed: {0}")]
     Gpu(#[from] motu_gpu::GpuError),
+    #[error(transparent)]
+    Render(#[from] motu_render::RenderError),
     #[error("{0}")]
     Invalid(String),
 }

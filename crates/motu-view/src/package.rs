@@ -188,17 +188,21 @@ impl<'p> PackageSource<'p> {
             ..Default::default()
         })
         .map_err(|e| SourceError::Device(e.into()))?;
-        // Streaming renders large TLASes split into pieces (as `motu render --stream`); the
-        // split tables are made once and live as long as the viewer (leaked: the renderer and
+        // Streaming renders large TLASes split into pieces (as `motu render --stream`, from
+        // the split the import stored when `base` is the package's own); the split tables are
+        // made once and live as long as the viewer (leaked: the renderer and
         // every element subset borrow them).
         let base = match &settings.stream {
-            Some(st) => match motu_render::stream_split(&base, st.bounds.split_instances)? {
-                Some(split) => {
-                    let split: &'p motu_render::StreamSplit = Box::leak(Box::new(split));
-                    split.view(&base)
+            Some(st) => {
+                match motu_render::package_stream_split(meshes.0, &base, st.bounds.split_instances)?
+                {
+                    Some(split) => {
+                        let split: &'p motu_render::StreamSplit = Box::leak(Box::new(split));
+                        split.view(&base)
+                    }
+                    None => base,
                 }
-                None => base,
-            },
+            }
             None => base,
         };
         let mut src = PackageSource {
