@@ -945,3 +945,59 @@ fn view_accumulates_samples_at_rest_toward_a_many_sample_render() {
     assert_eq!(st["accumulated_samples"], 1, "{st}");
     assert_ne!(decode_png(&dpng).2, one, "the denoiser changed nothing");
 }
+
+/// Issue 45 item 6: the viewer streams with the structure cache as `motu render --stream`
+/// does: a second viewer process over the same `--as-cache` directory restores every BLAS the
+/// first built, from disk, and shows the same image.
+#[test]
+fn a_second_viewer_restores_structures_from_the_cache_directory() {
+    if !gpu_available() {
+        return;
+    }
+    let Some(x) = xvfb("a_second_viewer_restores_structures_from_the_cache_directory") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pkg = forest(d);
+    let cache = d.join("as-cache");
+    let run = |name: &str| {
+        let (aov, stats) = (
+            d.join(format!("{name}.aov")),
+            d.join(format!("{name}.json")),
+        );
+        view_ok(
+            &x.display,
+            &[
+                s(&pkg),
+                "--width",
+                "48",
+                "--backend",
+                "pipeline",
+                "--stream",
+                "--frames",
+                "1",
+                "--as-cache",
+                s(&cache),
+                "--aov",
+                s(&aov),
+                "--stats",
+                s(&stats),
+            ],
+        );
+        let st = read_json(&stats);
+        let detail: serde_json::Value = match &st["detail"] {
+            serde_json::Value::String(t) => serde_json::from_str(t).unwrap(),
+            v => v.clone(),
+        };
+        (aov, detail)
+    };
+    let (cold_aov, cold) = run("cold");
+    let built = cold["blas_built"].as_u64().unwrap();
+    assert!(built > 0, "{cold}");
+    assert_eq!(cold["cache_stored"].as_u64(), Some(built), "{cold}");
+    let (warm_aov, warm) = run("warm");
+    assert_eq!(warm["blas_built"].as_u64(), Some(0), "{warm}");
+    assert_eq!(warm["restored_from_disk"].as_u64(), Some(built), "{warm}");
+    compare_exact(&cold_aov, &warm_aov);
+}

@@ -696,6 +696,8 @@ pub struct ViewArgs {
     pub stream_passes: Option<u32>,
     #[command(flatten)]
     pub stream_bounds: StreamBoundArgs,
+    #[command(flatten)]
+    pub as_cache: AsCacheArgs,
     #[arg(help_heading = HEADING_DEBUG, long)]
     pub max_allocations: Option<u32>,
     /// Elements shown at the start (comma-separated; Shift+1–9 toggle them live).

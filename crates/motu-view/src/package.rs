@@ -37,6 +37,9 @@ pub struct ViewStreamSettings {
     /// `--frames` as given: a scripted run of that many frames; `None`: flying (a replayed
     /// camera path without `--frames` too).
     pub frames: Option<u32>,
+    /// `--host-cache`, `--as-cache`, `--no-as-cache`: where built structures are kept between
+    /// evictions and processes (as `motu render --stream`).
+    pub cache: motu_render::CacheSettings,
 }
 
 impl ViewStreamSettings {
@@ -278,8 +281,22 @@ impl<'p> PackageSource<'p> {
             }
             Some(stream) => {
                 let opts = stream.options(budget, s.max_allocations);
-                let sr = motu_gpu::StreamingRenderer::new(&self.ctx, view, self.meshes, &opts)
-                    .map_err(SourceError::StreamSetup)?;
+                // The previous renderer's cache (after an element toggle) stays warm.
+                let cache = match &mut self.renderer {
+                    Renderer::Stream(Some(old)) => old.take_cache(),
+                    _ => None,
+                }
+                .or_else(|| stream.cache.open(self.meshes.0));
+                let plan = motu_gpu::StreamPlan::new(&view);
+                let sr = motu_gpu::StreamingRenderer::with_plan_and_cache(
+                    &self.ctx,
+                    view,
+                    plan,
+                    self.meshes,
+                    &opts,
+                    cache,
+                )
+                .map_err(SourceError::StreamSetup)?;
                 Renderer::Stream(Some(Box::new(sr)))
             }
         };

@@ -160,6 +160,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
             bounds: crate::cmd::render::stream_bounds(&a.stream_bounds),
             max_passes: a.stream_passes,
             frames: a.frames,
+            cache: crate::cmd::render::cache_settings(&a.as_cache),
         }),
     };
     let result = motu_view::run(opts, |o| {

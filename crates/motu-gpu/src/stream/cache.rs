@@ -95,6 +95,13 @@ impl StreamingRenderer<'_> {
         });
     }
 
+    /// Detaches the structure cache (with what it holds) for another renderer of the same
+    /// scene, e.g. the viewer's after an element toggle: its entries stay warm and its pending
+    /// disk writes go on instead of being waited for.
+    pub fn take_cache(&mut self) -> Option<StructureCache> {
+        self.reuse.cache.take().map(|a| a.cache)
+    }
+
     /// The structure cache's counts (`None`: no cache attached).
     pub fn cache_stats(&self) -> Option<CacheStats> {
         self.reuse.stats()
