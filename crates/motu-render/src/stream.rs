@@ -205,6 +205,8 @@ pub struct StreamStartup {
     /// The proxy clusters of every TLAS (`motu_gpu::StreamPlan`), which the floor and the
     /// renderer share.
     pub clusters_ms: f64,
+    /// Whether the clusters were read from the structure cache (kept by an earlier process).
+    pub clusters_cached: bool,
     /// The streaming floor (`motu_gpu::streaming_floor`): refusing budgets below it.
     pub floor_ms: f64,
     /// The streaming renderer's start: derived tables, proxy clusters and boxes, the resident
@@ -284,9 +286,15 @@ pub(crate) fn render_streaming(
         _ => (w, h),
     };
     // Refused up front below the floor: under it some frame could not complete.
+    // Opened before the start: the proxy clusters and boxes are kept in it too.
+    let mut cache = stream.cache.open(pkg);
     let t = Instant::now();
-    let plan = motu_gpu::StreamPlan::new(view);
+    let plan = match cache.as_mut() {
+        Some(c) => motu_gpu::StreamPlan::new_cached(view, c),
+        None => motu_gpu::StreamPlan::new(view),
+    };
     startup.clusters_ms = ms_since(t);
+    startup.clusters_cached = plan.from_cache();
     let t = Instant::now();
     let floor = tracing::info_span!("floor")
         .in_scope(|| motu_gpu::streaming_floor_planned(view, &plan, &ctx, w, h, opts.staging_bytes))
@@ -303,8 +311,6 @@ pub(crate) fn render_streaming(
         }
     }
     let t = Instant::now();
-    // Attached before the start: the start's proxy boxes are kept in it too.
-    let cache = stream.cache.open(pkg);
     let mut sr = tracing::info_span!("init")
         .in_scope(|| {
             motu_gpu::StreamingRenderer::with_plan_and_cache(

@@ -282,12 +282,15 @@ impl<'p> PackageSource<'p> {
             Some(stream) => {
                 let opts = stream.options(budget, s.max_allocations);
                 // The previous renderer's cache (after an element toggle) stays warm.
-                let cache = match &mut self.renderer {
+                let mut cache = match &mut self.renderer {
                     Renderer::Stream(Some(old)) => old.take_cache(),
                     _ => None,
                 }
                 .or_else(|| stream.cache.open(self.meshes.0));
-                let plan = motu_gpu::StreamPlan::new(&view);
+                let plan = match cache {
+                    Some(ref mut c) => motu_gpu::StreamPlan::new_cached(&view, c),
+                    None => motu_gpu::StreamPlan::new(&view),
+                };
                 let sr = motu_gpu::StreamingRenderer::with_plan_and_cache(
                     &self.ctx,
                     view,

@@ -47,6 +47,14 @@ impl StructureCache {
     pub fn stats(&self) -> CacheStats {
         self.cache.stats()
     }
+
+    pub(super) fn scene_identity(&self) -> &[u8] {
+        &self.scene_identity
+    }
+
+    pub(super) fn cache_mut(&mut self) -> &mut AsCache {
+        &mut self.cache
+    }
 }
 
 /// What the streamer keeps to reuse built structures: see the module docs.

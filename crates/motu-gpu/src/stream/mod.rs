@@ -119,6 +119,7 @@ mod options;
 mod params;
 mod passes;
 mod persistent;
+mod plan_cache;
 mod probe;
 mod proxy_boxes;
 mod rebuild;
