@@ -40,6 +40,7 @@ mod heap;
 mod instance;
 mod limits;
 mod memory;
+mod panel;
 mod pipeline;
 mod present;
 mod query;
@@ -74,6 +75,7 @@ pub use memory::{
     MemoryRequirements,
 };
 pub use pipeline::{BindingSet, ComputePipeline, ComputePipelineDesc};
+pub use panel::PanelPaint;
 pub use present::{Presented, Presenter, RawDisplayHandle, RawWindowHandle};
 pub use query::TimestampQueries;
 pub use report::{list_devices, DeviceReport};
