@@ -513,7 +513,11 @@ impl<S: FrameSource> ApplicationHandler for App<S> {
     fn window_event(&mut self, el: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
         // The panel sees every event; what it takes (a click on it, a focused slider's keys)
         // does not reach the camera. Tab and Esc always do.
-        let taken = match (self.ctl.panel, self.egui_input.as_mut(), self.window.as_ref()) {
+        let taken = match (
+            self.ctl.panel,
+            self.egui_input.as_mut(),
+            self.window.as_ref(),
+        ) {
             (true, Some(state), Some(window)) => state.on_window_event(window, &event).consumed,
             _ => false,
         };

@@ -69,33 +69,37 @@ pub fn build(ctx: &egui::Context, info: &PanelInfo, history: &History, ctl: &mut
         .default_width(300.0)
         .resizable(false)
         .show(ctx, |ui| {
-            ui.label(format!(
-                "{}×{}  {}  {}",
-                info.width,
-                info.height,
-                info.backend,
-                view_name(ctl.render.view)
-            ));
-            timings(ui, info, history);
-            memory(ui, info);
-            ui.separator();
-            render_controls(ui, info, ctl);
-            ui.separator();
-            elements(ui, ctl);
-            cameras(ui, ctl);
-            if !ctl.message.is_empty() {
-                ui.label(RichText::new(&ctl.message).italics());
-            }
-            ui.label(
-                RichText::new(
-                    "WASD/QE move, drag look, wheel speed, 1-9 cameras, Shift+1-9 elements, \
-                     V/F1-F4 view, L lod, M lod mode, K dither, H shadows, P accumulate, \
-                     N denoise, Tab panel, Esc quit",
-                )
-                .small()
-                .weak(),
-            );
+            // A window shorter than the panel scrolls it.
+            egui::ScrollArea::vertical()
+                .id_salt("panel")
+                .show(ui, |ui| contents(ui, info, history, ctl));
         });
+}
+
+/// The keys, as the panel's last line reminds them.
+const KEYS: &str = "WASD/QE move, drag look, wheel speed, 1-9 cameras, Shift+1-9 elements, \
+                    V/F1-F4 view, L lod, M lod mode, K dither, H shadows, P accumulate, \
+                    N denoise, Tab panel, Esc quit";
+
+fn contents(ui: &mut Ui, info: &PanelInfo, history: &History, ctl: &mut Controls) {
+    ui.label(format!(
+        "{}×{}  {}  {}",
+        info.width,
+        info.height,
+        info.backend,
+        view_name(ctl.render.view)
+    ));
+    timings(ui, info, history);
+    memory(ui, info);
+    ui.separator();
+    render_controls(ui, info, ctl);
+    ui.separator();
+    elements(ui, ctl);
+    cameras(ui, ctl);
+    if !ctl.message.is_empty() {
+        ui.label(RichText::new(&ctl.message).italics());
+    }
+    ui.label(RichText::new(KEYS).small().weak());
 }
 
 fn timings(ui: &mut Ui, info: &PanelInfo, history: &History) {
@@ -156,10 +160,10 @@ fn memory(ui: &mut Ui, info: &PanelInfo) {
     } else {
         (s.vram_used_bytes as f64 / s.vram_budget_bytes as f64) as f32
     };
-    ui.add(egui::ProgressBar::new(fraction.clamp(0.0, 1.0)).text(format!(
-        "VRAM {} / {budget}",
-        mib(s.vram_used_bytes)
-    )));
+    ui.add(
+        egui::ProgressBar::new(fraction.clamp(0.0, 1.0))
+            .text(format!("VRAM {} / {budget}", mib(s.vram_used_bytes))),
+    );
     ui.label(format!(
         "structures {}/{} resident",
         s.resident_structures, s.total_structures
@@ -281,13 +285,12 @@ fn cameras(ui: &mut Ui, ctl: &mut Controls) {
     }
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::SourceStats;
-    use motu_gpu::View;
     use egui::epaint::{ClippedShape, Shape};
+    use motu_gpu::View;
 
     fn info() -> PanelInfo {
         PanelInfo {
@@ -435,6 +438,8 @@ mod tests {
         let out = frame(&ctx, &mut ctl, &h, vec![]);
         click_text(&ctx, &mut ctl, &out.shapes, "x");
         assert_eq!(ctl.elements_on, [false, true], "{}", ctl.message);
+        // A click leaves the keyboard to the camera keys (no text field took it).
+        assert!(!ctx.wants_keyboard_input());
         // The last element on stays on, as with the keys.
         let out = frame(&ctx, &mut ctl, &h, vec![]);
         click_text(&ctx, &mut ctl, &out.shapes, "y");

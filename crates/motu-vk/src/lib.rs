@@ -74,8 +74,8 @@ pub use memory::{
     Buffer, BufferDesc, BufferUsage, DeviceAddress, DeviceMemory, MemoryLocation,
     MemoryRequirements,
 };
-pub use pipeline::{BindingSet, ComputePipeline, ComputePipelineDesc};
 pub use panel::PanelPaint;
+pub use pipeline::{BindingSet, ComputePipeline, ComputePipelineDesc};
 pub use present::{Presented, Presenter, RawDisplayHandle, RawWindowHandle};
 pub use query::TimestampQueries;
 pub use report::{list_devices, DeviceReport};

@@ -260,9 +260,9 @@ impl PanelPainter {
     /// Frees the textures egui released (after the frame's fence was waited on).
     pub(crate) fn free(&mut self, paint: &PanelPaint<'_>) -> Result<()> {
         match self.renderer.as_mut() {
-            Some(r) if !paint.textures.free.is_empty() => {
-                r.free_textures(&paint.textures.free).map_err(renderer_error)
-            }
+            Some(r) if !paint.textures.free.is_empty() => r
+                .free_textures(&paint.textures.free)
+                .map_err(renderer_error),
             _ => Ok(()),
         }
     }

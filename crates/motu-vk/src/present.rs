@@ -619,8 +619,7 @@ impl Presenter {
             }
             if let Some(paint) = panel {
                 // After the read-back: the screenshot is the frame alone.
-                self.panel
-                    .record(cmd, image, index as usize, last, paint)?;
+                self.panel.record(cmd, image, index as usize, last, paint)?;
             } else {
                 device.cmd_pipeline_barrier(
                     cmd,
