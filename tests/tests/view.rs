@@ -334,6 +334,10 @@ fn view_frames_through_the_swapchain_equal_render_per_pixel() {
     );
     let st = read_json(&pstats);
     assert_eq!(st["window"]["panel_frames"], 2, "{st}");
+    // It did reach the window: the image read again after drawing it differs.
+    let (pw, ph) = (96u64, u64::from(decode_png(&ppng).1));
+    let changed = st["window"]["panel_pixels"].as_u64().unwrap();
+    assert!(changed > 0 && changed <= pw * ph, "{st}");
     compare_exact(&paov, &d.join("render-pipeline-shaded.aov"));
     assert!(
         decode_png(&ppng) == decode_png(&d.join("render-pipeline-shaded.png")),

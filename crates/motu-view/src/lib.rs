@@ -184,6 +184,9 @@ pub struct ViewResult {
     pub denoised: bool,
     /// Frames presented with the panel drawn over them (after the read-back).
     pub panel_frames: u64,
+    /// Pixels of the last frame that the panel changed on the window (read back again after
+    /// drawing it; 0 without a panel or a screenshot).
+    pub panel_pixels: u64,
 }
 
 /// Opens the window and runs until it is closed (or `opts.frames` frames were shown).
@@ -441,11 +444,22 @@ impl<S: FrameSource> App<S> {
                 self.skips += 1;
                 return self.check_skips();
             }
-            Presented::Shown { readback, panel } => {
+            Presented::Shown {
+                readback,
+                panel,
+                shown,
+            } => {
                 if panel {
                     // Uploaded: the next panel starts from these textures.
                     self.textures = egui::TexturesDelta::default();
                     self.result.panel_frames += 1;
+                }
+                if let (Some(shot), Some(shown)) = (&readback, &shown) {
+                    self.result.panel_pixels = shot
+                        .chunks_exact(4)
+                        .zip(shown.chunks_exact(4))
+                        .filter(|(a, b)| a[..3] != b[..3])
+                        .count() as u64;
                 }
                 self.skips = 0;
                 self.last_frame_ms = t0.elapsed().as_secs_f64() * 1e3;

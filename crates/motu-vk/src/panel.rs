@@ -257,6 +257,81 @@ impl PanelPainter {
         drawn
     }
 
+    /// Copies the presented image (panel included; in PRESENT_SRC layout after [`Self::record`])
+    /// into `buffer` by `copy`, for tests that the panel reached the window; back to
+    /// PRESENT_SRC afterwards.
+    pub(crate) fn copy_shown(
+        &self,
+        cmd: vk::CommandBuffer,
+        image: vk::Image,
+        buffer: vk::Buffer,
+        copy: vk::BufferImageCopy,
+    ) {
+        let barrier = |old, new, src, dst| {
+            vk::ImageMemoryBarrier::default()
+                .old_layout(old)
+                .new_layout(new)
+                .src_access_mask(src)
+                .dst_access_mask(dst)
+                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .image(image)
+                .subresource_range(
+                    vk::ImageSubresourceRange::default()
+                        .aspect_mask(vk::ImageAspectFlags::COLOR)
+                        .level_count(1)
+                        .layer_count(1),
+                )
+        };
+        let host = vk::BufferMemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(vk::AccessFlags::HOST_READ)
+            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .buffer(buffer)
+            .size(vk::WHOLE_SIZE);
+        // SAFETY: `cmd` is recording outside a render pass; the image (TRANSFER_SRC usage)
+        // and the buffer (TRANSFER_DST, large enough: the caller sized it) are live until the
+        // submission's fence.
+        unsafe {
+            self.device.cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
+                &[barrier(
+                    vk::ImageLayout::PRESENT_SRC_KHR,
+                    vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                    vk::AccessFlags::COLOR_ATTACHMENT_WRITE,
+                    vk::AccessFlags::TRANSFER_READ,
+                )],
+            );
+            self.device.cmd_copy_image_to_buffer(
+                cmd,
+                image,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                buffer,
+                &[copy],
+            );
+            self.device.cmd_pipeline_barrier(
+                cmd,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::HOST | vk::PipelineStageFlags::BOTTOM_OF_PIPE,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[host],
+                &[barrier(
+                    vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                    vk::ImageLayout::PRESENT_SRC_KHR,
+                    vk::AccessFlags::TRANSFER_READ,
+                    vk::AccessFlags::empty(),
+                )],
+            );
+        }
+    }
+
     /// Frees the textures egui released (after the frame's fence was waited on).
     pub(crate) fn free(&mut self, paint: &PanelPaint<'_>) -> Result<()> {
         match self.renderer.as_mut() {

@@ -28,10 +28,13 @@ pub enum Presented {
     /// The frame is on screen; with `read_back`, the swapchain image's pixels as RGBA8 (`None`
     /// when the image could not be read: its size differs from the frame's, or the surface does
     /// not allow reading swapchain images).
-    /// `panel`: whether a panel was drawn over the frame (after the read-back).
+    /// `panel`: whether a panel was drawn over the frame (after the read-back); `shown`: with
+    /// `read_back` and a panel, the image as presented, panel included (for tests that the
+    /// panel reached the window; never a screenshot).
     Shown {
         readback: Option<Vec<u8>>,
         panel: bool,
+        shown: Option<Vec<u8>>,
     },
     /// The surface is out of date or has zero size (minimised): nothing was shown; the
     /// swapchain is recreated on the next call.
@@ -435,19 +438,21 @@ impl Presenter {
         }
         let [ew, eh] = self.extent;
         let readable = read_back && self.readable && [width, height] == [ew, eh];
+        let panel = panel.filter(|_| self.panel_ok);
+        // The frame, then (with a panel) the image as shown.
+        let copies = if panel.is_some() { 2 } else { 1 };
         if readable {
             Self::host_buffer(
                 &ctx,
                 &mut self.readback,
                 "present-readback",
-                pixels * 4,
+                copies * pixels * 4,
                 BufferUsage::TRANSFER_DST,
                 MemoryLocation::Readback,
             )?;
         }
         let shared = &ctx.shared;
         let device = &shared.device;
-        let panel = panel.filter(|_| self.panel_ok);
         if let Some(paint) = panel {
             let queue = shared.queue();
             self.panel.upload(
@@ -620,6 +625,13 @@ impl Presenter {
             if let Some(paint) = panel {
                 // After the read-back: the screenshot is the frame alone.
                 self.panel.record(cmd, image, index as usize, last, paint)?;
+                if let (true, Some(rb)) = (readable, self.readback.as_ref()) {
+                    let after = vk::BufferImageCopy {
+                        buffer_offset: pixels * 4,
+                        ..copy
+                    };
+                    self.panel.copy_shown(cmd, image, rb.handle(), after);
+                }
             } else {
                 device.cmd_pipeline_barrier(
                     cmd,
@@ -686,20 +698,21 @@ impl Presenter {
                 })
             }
         }
-        let readback = match (readable, self.readback.as_ref()) {
-            (true, Some(rb)) => {
-                let mut px = vec![0u8; (pixels * 4) as usize];
-                rb.read_bytes(0, &mut px)?;
-                if is_bgra(self.format) {
-                    px.chunks_exact_mut(4).for_each(|p| p.swap(0, 2));
-                }
-                Some(px)
+        let read = |copy: u64| -> Result<Option<Vec<u8>>> {
+            let (true, Some(rb)) = (readable && copy < copies, self.readback.as_ref()) else {
+                return Ok(None);
+            };
+            let mut px = vec![0u8; (pixels * 4) as usize];
+            rb.read_bytes(copy * pixels * 4, &mut px)?;
+            if is_bgra(self.format) {
+                px.chunks_exact_mut(4).for_each(|p| p.swap(0, 2));
             }
-            _ => None,
+            Ok(Some(px))
         };
         Ok(Presented::Shown {
-            readback,
+            readback: read(0)?,
             panel: panel.is_some(),
+            shown: read(1)?,
         })
     }
 }

@@ -205,6 +205,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
             "height": h,
             "presented_via": "swapchain",
             "panel_frames": result.panel_frames,
+            "panel_pixels": result.panel_pixels,
         });
         stats["vram_used_bytes"] = json!(last.stats.vram_used_bytes);
         stats["resident_structures"] = json!(last.stats.resident_structures);
