@@ -57,6 +57,7 @@ mod heap;
 mod instance;
 mod limits;
 mod memory;
+mod panel;
 mod pipeline;
 mod present;
 mod query;
@@ -90,6 +91,7 @@ pub use memory::{
     Buffer, BufferDesc, BufferUsage, DeviceAddress, DeviceMemory, MemoryLocation,
     MemoryRequirements,
 };
+pub use panel::PanelPaint;
 pub use pipeline::{BindingSet, ComputePipeline, ComputePipelineDesc};
 pub use present::{Presented, Presenter, RawDisplayHandle, RawWindowHandle};
 pub use query::TimestampQueries;
