@@ -345,6 +345,8 @@ pub struct StreamStartup {
     /// The proxy clusters of every TLAS (`motu_gpu::StreamPlan`), which the floor and the
     /// renderer share.
     pub clusters_ms: f64,
+    /// Whether the clusters were read from the structure cache (kept by an earlier process).
+    pub clusters_cached: bool,
     /// The streaming floor (`motu_gpu::streaming_floor`): refusing budgets below it.
     pub floor_ms: f64,
     /// The streaming renderer's start: derived tables, proxy clusters and boxes, the resident
@@ -411,6 +413,10 @@ pub struct WindowStats {
     pub height: u32,
     /// How frames reached the screen (`swapchain`).
     pub presented_via: &'static str,
+    /// Frames presented with the panel drawn over them, and the last frame's pixels the panel
+    /// changed on the window (0 without a panel or a screenshot).
+    pub panel_frames: u64,
+    pub panel_pixels: u64,
 }
 
 /// `detail` in `motu view --stats`: a full build's resources or the streamed frame's stats.

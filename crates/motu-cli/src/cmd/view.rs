@@ -143,7 +143,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
             .unwrap_or_else(|| motu_view::default_fly_speed(&base)),
         frames,
         replay: replay_poses,
-        overlay: a.overlay || a.frames.is_none(),
+        panel: a.overlay || (a.frames.is_none() && !a.no_panel),
         vsync: !a.no_vsync,
         accumulate: a.accumulate || a.frames.is_none(),
         denoise: a.denoise,
@@ -159,6 +159,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
             bounds: crate::cmd::render::stream_bounds(&a.stream_bounds),
             max_passes: a.stream_passes,
             frames: a.frames,
+            cache: crate::cmd::render::cache_settings(&a.as_cache),
         }),
     };
     let result = motu_view::run(opts, |o| {
@@ -206,6 +207,8 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
                 width: w,
                 height: h,
                 presented_via: "swapchain",
+                panel_frames: result.panel_frames,
+                panel_pixels: result.panel_pixels,
             },
             vram_used_bytes: last.stats.vram_used_bytes,
             resident_structures: last.stats.resident_structures,

@@ -152,6 +152,8 @@ fn view_stats(detail: ViewDetail) -> ViewStats {
             width: 1,
             height: 1,
             presented_via: "swapchain",
+            panel_frames: 1,
+            panel_pixels: 1,
         },
         vram_used_bytes: 0,
         resident_structures: 0,
