@@ -423,6 +423,6 @@ pub struct WindowStats {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum ViewDetail {
-    Resources(ResourceReport),
-    Stream(FrameStreamStats),
+    Resources(Box<ResourceReport>),
+    Stream(Box<FrameStreamStats>),
 }

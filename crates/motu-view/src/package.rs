@@ -352,7 +352,7 @@ impl<'p> PackageSource<'p> {
                     incomplete_pixels: 0,
                     lod_mode,
                 };
-                let detail = Some(ViewDetail::Resources(rep.into()));
+                let detail = Some(ViewDetail::Resources(Box::new(rep.into())));
                 Ok(SourceFrame {
                     output: out,
                     stats,
@@ -387,7 +387,7 @@ impl<'p> PackageSource<'p> {
                     },
                     lod_mode,
                 };
-                let detail = Some(ViewDetail::Stream((&st).into()));
+                let detail = Some(ViewDetail::Stream(Box::new((&st).into())));
                 Ok(SourceFrame {
                     output: out,
                     stats,

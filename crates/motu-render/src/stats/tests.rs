@@ -248,11 +248,13 @@ fn documents() -> Vec<(&'static str, Value)> {
         ("render_cpu", json(&cpu)),
         (
             "view",
-            json(&view_stats(ViewDetail::Resources(resources()))),
+            json(&view_stats(ViewDetail::Resources(Box::new(resources())))),
         ),
         (
             "view_stream",
-            json(&view_stats(ViewDetail::Stream((&stream_frame()).into()))),
+            json(&view_stats(ViewDetail::Stream(Box::new(
+                (&stream_frame()).into(),
+            )))),
         ),
         (
             "report_persistent_tlas",
