@@ -23,12 +23,15 @@ uint source_primitive(MeshRecord m, uint mesh_record, uint primitive) {
     return U32Table(map).r[primitive];
 }
 
-// A pixel's state (128 bytes): carried across streaming passes (zeroed at the frame's start),
+// A pixel's state (176 bytes): carried across streaming passes (zeroed at the frame's start),
 // a local in the full build, which runs the same steps without ever deferring. Per sample: the
 // primary ray's best hit so far, resolved for shading while its BLAS was resident (so the BLAS
 // may go), then its secondary rays (lights, then AO) in windows (shade.glsl
 // SECONDARY_WINDOW): each ray of a window traced again in later passes while a structure it has
 // not walked may hold an occluder, the window's terms added in ray order once all are done.
+// With `--bounces N` each vertex's secondary rays are followed by its bounce ray (state 4), a
+// closest-hit ray deferred like the primary ray while an open structure lies in front of its
+// best hit, whose final hit is the next vertex (hit, rec, ns, albedo then describe it).
 struct Carry {
     vec4 hit;     // current sample: x best t (T_INFINITY: none), yzw geometric normal facing the ray
     vec4 ns;      // xyz shading normal (same side); w the secondary window's masks (exact float)
@@ -41,8 +44,15 @@ struct Carry {
     // x: 0 fresh, 1 primary open, 2 secondary rays open, 3 primary open with its secondary
     // rays traced ahead from its best hit so far (streamed: see SPECULATIVE below); y: stamp of
     // the pass the open ray (or window; state 3: the primary) started in; z: traces; w: sample |
-    // the window's first secondary ray << 16
+    // the window's first secondary ray << 16; 4 (bounces): the bounce ray open, its best hit so
+    // far in hit/rec/ns/albedo; 5: the sample's path ended
     uvec4 st;
+#ifdef MOTU_STREAMED
+    // Streamed only (full builds keep the path in locals, their SPIR-V unchanged):
+    vec4 path_org;  // xyz: the current vertex's incoming ray's origin; w: the vertex (exact float)
+    vec4 path_dir;  // xyz: its direction; w: the LOD of the vertex the bounce ray left (bits)
+    vec4 thru;      // xyz: the path's throughput
+#endif
 };
 layout(buffer_reference, std430, buffer_reference_align = 16) buffer CarryTable { Carry r[]; };
 
@@ -85,6 +95,10 @@ void stream_write_fallback(uvec2 px, uint pixel, Carry c) {
             colour = rec.x == AOV_MISS ? sky(dir) : id_colour(rec.x, rec.y);
         } else if (f.view == VIEW_LOD) {
             colour = rec.x == AOV_MISS ? sky(dir) : lod_colour(rec.w);
+#ifdef MOTU_STREAMED
+        } else if (c.st.x >= 4u || c.path_org.w > 0.0) {
+            colour = c.sum.xyz / float(smp + 1u);  // a path's light so far (bounces)
+#endif
         } else if (smp > 0u) {
             colour = c.sum.xyz / float(smp);
         } else if (rec.x == AOV_MISS) {
@@ -160,6 +174,11 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
     c.sum = vec4(0.0);
     c.cur = vec4(0.0);
     c.st = uvec4(1u, g_stamp, 0u, 0u);
+#ifdef MOTU_STREAMED
+    c.path_org = vec4(org, 0.0);
+    c.path_dir = vec4(0.0);
+    c.thru = vec4(1.0);
+#endif
     if (g_streaming && !guard && !g_probe) {
         Carry old = CarryTable(StreamRef(push.stream).s.carry).r[pixel];
         if (old.st.x != 0u) {
@@ -168,11 +187,18 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         traces = c.st.z;
     }
     bool open = false;
-#ifndef MOTU_STREAMED
-    // Diffuse bounces (full builds; state 4 of Carry.st.x: the bounce ray is next, 5: the path
-    // ended): the current vertex's incoming ray (p_org, p_dir; the camera ray at vertex 0), the
-    // vertex's index and the path's throughput. A vertex's secondary rays draw their numbers
-    // from sample smp | bounce << 20, so vertex 0 is the sample as without bounces.
+    // Diffuse bounces (state 4 of Carry.st.x: the bounce ray is next, 5: the path ended): the
+    // current vertex's incoming ray (p_org, p_dir; the camera ray at vertex 0), the vertex's
+    // index and the path's throughput (streaming: kept in the Carry across passes, with the
+    // LOD the bounce ray left from). A vertex's secondary rays draw their numbers from sample
+    // smp | bounce << 20, so vertex 0 is the sample as without bounces.
+#ifdef MOTU_STREAMED
+    uint bounce = uint(c.path_org.w);
+    vec3 p_org = c.path_org.xyz;
+    vec3 p_dir = c.path_dir.xyz;
+    vec3 thru = c.thru.xyz;
+    uint bounce_lod = floatBitsToUint(c.path_dir.w);
+#else
     uint bounce = 0u;
     vec3 p_org = org;
     vec3 p_dir = vec3(0.0);
@@ -209,14 +235,24 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         si.albedo = c.albedo.xyz;
 #ifdef MOTU_STREAMED
         uint first = c.st.w >> 16u;  // the current window's first secondary ray
+        // The current vertex's incoming ray and random-number sample (as in full builds).
+        vec3 v_org = bounce > 0u ? p_org : org;
+        vec3 v_dir = bounce > 0u ? p_dir : dir;
+        uint v_smp = seq_sample(smp) | (bounce << 20u);
+        bouncing = c.st.x == 4u;
         // The ray to trace: origin, direction, reach (w).
         vec3 r_org = org;
         vec4 r_dir = vec4(dir, T_INFINITY);
-        bool sample_done = false;
+        bool sample_done = c.st.x == 5u;
         uint ray_bit = 0u;
         if (primary) {
             g_best_t = c.hit.x;
-        } else {
+        } else if (bouncing) {
+            // The bounce ray, against its best hit so far (none when it started).
+            r_org = p_org;
+            r_dir = vec4(p_dir, T_INFINITY);
+            g_best_t = c.hit.x;
+        } else if (!sample_done) {
             // The window's masks: done (bits 0-7), clear (bits 8-15).
             uint masks = uint(c.ns.w);
             uint n = secondary_ray_count();
@@ -229,7 +265,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 }
                 bool clear;
                 vec3 term;
-                if (secondary_ray(si, c.rec.w, org, dir, c.hit.x, pixel, seq_sample(smp), k, r_dir, clear,
+                if (secondary_ray(si, c.rec.w, v_org, v_dir, c.hit.x, pixel, v_smp, k, r_dir, clear,
                                   term)) {
                     found = true;
                     cursor = k;
@@ -240,15 +276,15 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
             }
             c.ns.w = float(masks);
             if (found) {
-                r_org = secondary_start(org, dir, c.hit.x, si.ng);
+                r_org = secondary_start(v_org, v_dir, c.hit.x, si.ng);
             } else if ((masks & 0xffu) != (1u << (end - first)) - 1u) {
                 open = true;  // some ray of the window is still open: traced again next pass
                 break;
             } else {
                 vec3 colour = c.cur.xyz;
                 uint ao_open = uint(c.cur.w);
-                secondary_window_done(first, masks >> 8u, si, c.rec.w, org, dir, c.hit.x, pixel,
-                                      seq_sample(smp), colour, ao_open);
+                secondary_window_done(first, masks >> 8u, si, c.rec.w, v_org, v_dir, c.hit.x, pixel,
+                                      v_smp, colour, ao_open);
                 c.cur = vec4(colour, float(ao_open));
                 c.ns.w = 0.0;
                 cursor = 0u;
@@ -269,7 +305,22 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                     open = true;
                     break;
                 }
-                c.sum.xyz += c.cur.xyz + sky_term(si, c.rec.w, uint(c.cur.w));
+                c.sum.xyz += thru * (c.cur.xyz + sky_term(si, c.rec.w, uint(c.cur.w)));
+                vec3 bounce_dir;
+                vec3 weight;
+                if (bounce < push.frame.f.bounces &&
+                    bounce_ray(si, c.rec.w, pixel, seq_sample(smp) | ((bounce + 1u) << 20u), bounce_dir,
+                               weight)) {
+                    // The path goes on: its bounce ray starts now, with no hit yet.
+                    p_org = secondary_start(v_org, v_dir, c.hit.x, si.ng);
+                    p_dir = bounce_dir;
+                    thru *= weight;
+                    bounce += 1u;
+                    bounce_lod = c.rec.z;
+                    c.hit.x = T_INFINITY;
+                    c.st.xy = uvec2(4u, g_stamp);
+                    continue;
+                }
                 sample_done = true;
             }
             g_best_t = T_INFINITY;
@@ -329,7 +380,12 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
             g_t_max = r_dir.w;
             LodParams lodp = push.frame.f.lod;
             if (!primary && push.frame.f.shadow_lod_from_primary != 0u) {
+#ifdef MOTU_STREAMED
+                // A bounce ray's best hit so far is in c.rec: it leaves from bounce_lod's vertex.
+                lodp.forced_lod = int(bouncing ? bounce_lod : c.rec.z);
+#else
                 lodp.forced_lod = int(c.rec.z);
+#endif
             }
             float lod_u = primary ? (guard ? 0.5 : pixel_dither(px.x, px.y)) : 0.0;
             TraceHit h = traverse(push.frame.f.root_tlas, r_org, r_dir.xyz,
@@ -344,6 +400,34 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 return;  // a probe marks what it passed, nothing else
             }
 #ifdef MOTU_STREAMED
+            if (bouncing) {
+                g_secondary_rays += 1u;
+                if (h.tlas != NONE_U32) {
+                    // A closer hit: resolved now, while its BLAS and meshes are resident.
+                    uint mesh = hit_mesh(h);
+                    MeshRecord m = push.meshes.r[mesh];
+                    c.hit.x = h.t;
+                    c.rec = uvec4(m.source_mesh, source_primitive(m, mesh, h.primitive),
+                                  h.lod == NONE_U32 ? m.lod : h.lod, m.material);
+                    ShadeInput hs = shade_input(h, mesh, p_org, p_dir);
+                    c.hit.yzw = hs.ng;
+                    c.ns.xyz = hs.ns;
+                    c.albedo.xyz = hs.albedo;
+                }
+                if (!cut && stream_still_open(c.hit.x)) {
+                    open = true;  // the next vertex waits until the bounce's hit is final
+                    break;
+                }
+                if (c.hit.x >= T_INFINITY) {
+                    c.st.x = 5u;  // escaped: the path ends (see the full build's branch)
+                    continue;
+                }
+                // Final: the next vertex's secondary rays start now, from their first window.
+                c.cur = vec4(0.0);
+                c.ns.w = 0.0;
+                c.st.xyw = uvec3(2u, g_stamp, smp);
+                continue;
+            }
             if (!primary) {
                 g_secondary_rays += 1u;
                 uint masks = uint(c.ns.w);
@@ -471,10 +555,8 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         // The next sample's primary ray starts now.
         c.hit = vec4(T_INFINITY, 0.0, 0.0, 0.0);
         c.st.xyw = uvec3(1u, g_stamp, smp + 1u);
-#ifndef MOTU_STREAMED
         bounce = 0u;
         thru = vec3(1.0);
-#endif
     }
     if (g_probe) {
         // A probe of the next frame marks what its rays met; a pixel that needs a structure
@@ -490,6 +572,9 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
     if (open) {
         c.st.z = traces;
 #ifdef MOTU_STREAMED
+        c.path_org = vec4(p_org, float(bounce));
+        c.path_dir = vec4(p_dir, uintBitsToFloat(bounce_lod));
+        c.thru = vec4(thru, 0.0);
         if (c.st.x == 3u) {
             g_empty_id = primary_empty_id;  // the fallback shows the primary ray's
             g_empty_t = primary_empty_t;

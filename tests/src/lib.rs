@@ -260,13 +260,40 @@ pub fn import(scene: &Path, pkg: &Path, extra: &[&str]) {
 }
 
 /// `motu render` with `backend`, writing the AOV to `aov` (PNG and stats JSON beside it);
-/// returns the stats.
+/// returns the stats. Pins `--bounces 0` unless `extra` names `--bounces`: the shaded view's
+/// default diffuse bounce about doubles a shaded render's time on lavapipe, and these tests'
+/// subjects are other things (streaming, hits, textures); tests of the default lighting use
+/// [`render_default_lighting`].
 pub fn render(pkg: &Path, backend: &str, aov: &Path, extra: &[&str]) -> serde_json::Value {
     render_env(pkg, backend, aov, extra, &[])
 }
 
-/// [`render`] with environment variables set.
+/// [`render`] with environment variables set (`--bounces 0` pinned the same way).
 pub fn render_env(
+    pkg: &Path,
+    backend: &str,
+    aov: &Path,
+    extra: &[&str],
+    env: &[(&str, &str)],
+) -> serde_json::Value {
+    let mut extra = extra.to_vec();
+    if !extra.contains(&"--bounces") {
+        extra.extend(["--bounces", "0"]);
+    }
+    render_unpinned(pkg, backend, aov, &extra, env)
+}
+
+/// [`render`] with `motu render`'s own lighting defaults (`--bounces` as the CLI sets it).
+pub fn render_default_lighting(
+    pkg: &Path,
+    backend: &str,
+    aov: &Path,
+    extra: &[&str],
+) -> serde_json::Value {
+    render_unpinned(pkg, backend, aov, extra, &[])
+}
+
+fn render_unpinned(
     pkg: &Path,
     backend: &str,
     aov: &Path,

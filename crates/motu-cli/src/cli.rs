@@ -642,8 +642,8 @@ pub struct RenderArgs {
     #[arg(help_heading = HEADING_SHADING, long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=256))]
     pub ao_samples: u32,
     /// Diffuse bounces of the shaded view after each camera hit, each lit by the scene's lights
-    /// and environment (0: direct light only; not yet with --stream).
-    #[arg(help_heading = HEADING_SHADING, long, default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=8))]
+    /// and environment (0: direct light only).
+    #[arg(help_heading = HEADING_SHADING, long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=8))]
     pub bounces: u32,
     /// Exposure of the shaded view: `auto` (the image's log-average luminance becomes middle
     /// grey; the chosen value is `exposure_ev` in --stats) or a number of stops EV (the image is

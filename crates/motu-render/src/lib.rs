@@ -85,8 +85,6 @@ pub enum RenderError {
         #[source]
         source: std::io::Error,
     },
-    #[error("--bounces {bounces} is not supported with --stream yet: the streamed shader carries no path state across passes (render with a full build or --bounces 0)")]
-    StreamBounces { bounces: u32 },
     #[error("{what}")]
     Cpu {
         what: &'static str,

@@ -17,8 +17,8 @@ pub struct ShadingOptions {
     pub exposure_ev: f32,
     /// `--exposure auto` (the default): from the image's log-average luminance.
     pub auto_exposure: bool,
-    /// `--bounces N`: diffuse bounces after each camera hit (full builds and the CPU; streaming
-    /// refuses more than 0 for now).
+    /// `--bounces N`: diffuse bounces after each camera hit (every renderer, streaming
+    /// included).
     pub bounces: u32,
 }
 
@@ -29,7 +29,7 @@ impl Default for ShadingOptions {
             spp: 1,
             exposure_ev: 0.0,
             auto_exposure: true,
-            bounces: 0,
+            bounces: 1,
         }
     }
 }

@@ -204,11 +204,6 @@ pub(crate) fn render_streaming(
     progress: &mut dyn FnMut(RenderEvent<'_>),
 ) -> Result<(Rendered, CameraParams), RenderError> {
     let (pkg, view, recorded, started) = (job.package, job.view, job.recorded, job.started);
-    if s.shading.bounces > 0 && s.view == motu_gpu::View::Shaded {
-        return Err(RenderError::StreamBounces {
-            bounces: s.shading.bounces,
-        });
-    }
     let _span = tracing::info_span!("stream_render").entered();
     let mut startup = StreamStartup {
         before_render_ms: started.map_or(0.0, ms_since),

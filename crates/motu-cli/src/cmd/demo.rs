@@ -153,7 +153,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         spp: 1,
         ao_samples: 1,
         exposure: crate::cli::ExposureArg::Auto,
-        bounces: 0,
+        bounces: motu_render::ShadingOptions::default().bounces,
         denoise: false,
         device: None,
         camera_path: None,

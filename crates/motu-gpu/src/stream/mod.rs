@@ -25,11 +25,13 @@
 //! placeholders no ray meets, and is updated in place rather than rebuilt.
 //!
 //! # Carried hits (both backends, `traverse.glsl`, `render_pixel.glsl`)
-//! Each pixel keeps its state across the passes of a frame (`Carry`, 128 bytes):
+//! Each pixel keeps its state across the passes of a frame (`Carry`, 176 bytes):
 //! the current sample's primary best hit so far, *resolved* (source mesh, primitive, LOD,
 //! material, geometric and shading normals, textured base colour) while its BLAS was resident,
-//! sample 0's AOV record, the colour summed so far, and which ray is open (the primary, or the
-//! n-th secondary ray: lights' shadow rays, then AO rays) since which pass. A pass
+//! sample 0's AOV record, the colour summed so far, and which ray is open (the primary, the
+//! n-th secondary ray: lights' shadow rays, then AO rays, or a `--bounces` path's bounce ray,
+//! a closest-hit ray carried like the primary) since which pass, with the path's vertex,
+//! throughput and the next vertex's incoming ray. A pass
 //! walks what is resident now against that best hit (it only culls with the carried t, never
 //! with an empty instance's box). A ray that was traced in every pass since it started has
 //! walked every BLAS resident in any of those passes, so a non-resident BLAS is *open* for it

@@ -64,7 +64,7 @@ pub(super) fn passed_mark(value: u32, stamp: u32) -> bool {
 }
 
 /// Bytes of one pixel's `Carry` (`render_pixel.glsl`).
-pub(super) const CARRY_BYTES: u64 = 128;
+pub(super) const CARRY_BYTES: u64 = 176;
 
 #[cfg(test)]
 mod tests {
