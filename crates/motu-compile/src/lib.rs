@@ -90,8 +90,6 @@ mod flatten;
 mod lod;
 pub mod partition;
 mod split;
-#[cfg(test)]
-mod split_reference;
 mod tables;
 mod tlas_split;
 mod validate;
@@ -101,7 +99,7 @@ mod xform;
 mod testutil;
 
 #[cfg(test)]
-mod proptests;
+mod tests;
 
 pub use flatten::{flatten_compiled, flatten_compiled_records, flatten_source};
 pub use partition::{
@@ -237,10 +235,34 @@ pub enum CompileError {
     OutOfMemory { what: &'static str, bytes: u64 },
     #[error("mesh {mesh}: {reason}")]
     Mesh { mesh: u32, reason: String },
-    #[error("mesh sink rejected compiled mesh record {mesh_record}: {reason}")]
-    Sink { mesh_record: u32, reason: String },
+    /// The mesh loader could not read a source mesh.
+    #[error("mesh {mesh}: {source}")]
+    MeshLoad {
+        mesh: u32,
+        #[source]
+        source: motu_scene::StoreError,
+    },
+    /// meshopt refused the simplifier's input.
+    #[error("mesh {mesh}: simplifier input: {source}")]
+    Simplifier {
+        mesh: u32,
+        #[source]
+        source: meshopt::Error,
+    },
+    #[error("mesh sink rejected compiled mesh record {mesh_record}: {source}")]
+    Sink {
+        mesh_record: u32,
+        #[source]
+        source: motu_scene::StoreError,
+    },
     #[error("internal compiler error: {0}")]
     Internal(String),
+    /// The compiled hierarchy references out of range (a compiler bug, not bad input).
+    #[error("internal compiler error: {0}")]
+    References(#[source] motu_abi::HierarchyError),
+    /// A stored stream split that does not fit the hierarchy it was stored with.
+    #[error("internal compiler error: stored stream split: {0}")]
+    StoredSplit(#[source] motu_abi::HierarchyError),
 }
 
 /// What a compile did, for `motu import`/`motu info` and benchmarks.
@@ -359,10 +381,12 @@ impl CompiledScene {
 /// (`lod > 0`) and the clusters of partitioned meshes (with their primitive map, the
 /// record's `FLAG_PRIMITIVE_MAP`). Whole source meshes (`lod == 0`, no map) are not passed:
 /// their data is in the scene's geometry store.
-pub type MeshSink<'a> = dyn FnMut(u32, &MeshData, Option<&[u32]>) -> Result<(), String> + 'a;
+pub type MeshSink<'a> =
+    dyn FnMut(u32, &MeshData, Option<&[u32]>) -> Result<(), motu_scene::StoreError> + 'a;
 
 /// Loads a source mesh's data (for LOD chains and partitioning), one mesh at a time.
-pub type MeshLoader<'a> = dyn Fn(motu_scene::MeshId) -> Result<MeshData, String> + 'a;
+pub type MeshLoader<'a> =
+    dyn Fn(motu_scene::MeshId) -> Result<MeshData, motu_scene::StoreError> + 'a;
 
 /// Compiles `scene`, loading source meshes from its geometry store. Mesh records' `chunk` and
 /// `*_offset` fields are left `NONE` for the packer to fill.
@@ -371,7 +395,7 @@ pub fn compile(
     opts: &CompileOptions,
     sink: &mut MeshSink<'_>,
 ) -> Result<CompiledScene, CompileError> {
-    let load = |m| scene.mesh_data(m).map_err(|e| e.to_string());
+    let load = |m| scene.mesh_data(m).map_err(motu_scene::StoreError::from);
     compile_with_loader(scene, opts, &load, sink)
 }
 

@@ -7,7 +7,7 @@ use std::borrow::Cow;
 
 use motu_abi::aov::{Aov, MISS};
 use motu_abi::camera::{camera_path, CameraPath, CameraPose};
-use motu_trace::fixtures::{srt, uv_sphere, HierarchyBuilder, OwnedHierarchy, PiTarget};
+use motu_trace::testutil::{srt, uv_sphere, HierarchyBuilder, OwnedHierarchy, PiTarget};
 
 use crate::testing::{assert_no_validation_errors, context_or_skip};
 use crate::{

@@ -102,10 +102,10 @@ pub fn package_stream_split(
     if cap == 0 {
         return Ok(None);
     }
-    let invalid = |reason: String| RenderError::StreamSplit { cap, reason };
+    let unreadable = |source| RenderError::StoredSplitRead { cap, source };
     // The stored split indexes the package's own tables: only a view that is those tables
     // (the same memory, not a copy or a subset) may use it.
-    let own = pkg.view().map_err(|e| invalid(e.to_string()))?;
+    let own = pkg.view().map_err(unreadable)?;
     let same = |a: *const u8, b: *const u8, la: usize, lb: usize| a == b && la == lb;
     let is_own = same(
         own.instances.as_ptr().cast(),
@@ -127,10 +127,7 @@ pub fn package_stream_split(
         return stream_split(view, split_instances);
     }
     let t0 = std::time::Instant::now();
-    let Some(stored) = pkg
-        .stored_stream_split(cap)
-        .map_err(|e| invalid(e.to_string()))?
-    else {
+    let Some(stored) = pkg.stored_stream_split(cap).map_err(unreadable)? else {
         return stream_split(view, split_instances);
     };
     let Some(t) = stored else {
@@ -146,8 +143,13 @@ pub fn package_stream_split(
         instance_source: t.instance_source.to_vec(),
         extra_instances: t.extra_instances.to_vec(),
     };
-    let split = motu_compile::StreamSplit::from_stored(view, &stored)
-        .map_err(|e| invalid(format!("{}: the stored split: {e}", pkg.path())))?;
+    let split = motu_compile::StreamSplit::from_stored(view, &stored).map_err(|source| {
+        RenderError::StoredSplit {
+            cap,
+            path: pkg.path().to_string(),
+            source,
+        }
+    })?;
     let (tlases, pieces) = split.counts();
     let split_ms = t0.elapsed().as_secs_f64() * 1e3;
     tracing::info!(
@@ -174,11 +176,8 @@ pub fn stream_split(
         return Ok(None);
     }
     let t0 = std::time::Instant::now();
-    let split =
-        motu_compile::split_for_streaming(view, cap).map_err(|e| RenderError::StreamSplit {
-            cap,
-            reason: e.to_string(),
-        })?;
+    let split = motu_compile::split_for_streaming(view, cap)
+        .map_err(|source| RenderError::StreamSplit { cap, source })?;
     if let Some(s) = &split {
         let (tlases, pieces) = s.counts();
         let split_ms = t0.elapsed().as_secs_f64() * 1e3;

@@ -91,6 +91,22 @@ pub enum ReportError {
     Hierarchy(#[from] motu_abi::HierarchyError),
     #[error("GPU size query failed: {0}")]
     Gpu(#[from] motu_gpu::GpuError),
+    /// A report input out of range (the text says which and why).
     #[error("{0}")]
     Invalid(String),
+    /// The package's stored TLAS split does not fit its hierarchy.
+    #[error("{path}: {source}")]
+    StoredSplit {
+        path: String,
+        #[source]
+        source: motu_compile::CompileError,
+    },
+    #[error(transparent)]
+    Render(#[from] motu_render::RenderError),
+    #[error("streaming floor: {0}")]
+    Floor(#[source] motu_gpu::GpuError),
+    #[error("persistent TLAS estimate: {0}")]
+    PersistentEstimate(#[source] motu_gpu::GpuError),
+    #[error("size preset: {0}")]
+    Preset(#[source] serde_json::Error),
 }

@@ -173,8 +173,12 @@ fn stored_split(
         instance_source: t.instance_source.to_vec(),
         extra_instances: t.extra_instances.to_vec(),
     };
-    let split = motu_compile::StreamSplit::from_stored(view, &stored)
-        .map_err(|e| ReportError::Invalid(format!("{}: {e}", pkg.path())))?;
+    let split = motu_compile::StreamSplit::from_stored(view, &stored).map_err(|source| {
+        ReportError::StoredSplit {
+            path: pkg.path().to_string(),
+            source,
+        }
+    })?;
     Ok(Some(Some(split)))
 }
 
@@ -506,8 +510,7 @@ fn build(
     // The hierarchy the streamer renders: large TLASes split into pieces at load time.
     let split = match stored_split {
         Some(split) => split,
-        None => motu_render::stream_split(view, None)
-            .map_err(|e| ReportError::Invalid(e.to_string()))?,
+        None => motu_render::stream_split(view, None)?,
     };
     let streamed = split.as_ref().map_or(*view, |s| s.view(view));
     let floor = motu_gpu::streaming_floor(
@@ -517,7 +520,7 @@ fn build(
         fh,
         motu_gpu::StreamOptions::default().staging_bytes,
     )
-    .map_err(|e| ReportError::Invalid(format!("streaming floor: {e}")))?;
+    .map_err(ReportError::Floor)?;
     streaming.stream_split = split.as_ref().map(|s| {
         let (tlases_split, pieces) = s.counts();
         StreamSplitReport {
@@ -534,7 +537,7 @@ fn build(
         &FloorAdapter(sizes),
         sizes.max_instance_count(),
     )
-    .map_err(|e| ReportError::Invalid(format!("persistent TLAS estimate: {e}")))?;
+    .map_err(ReportError::PersistentEstimate)?;
     let budget = budget_bytes
         .map(|b| {
             plan_budget(
@@ -754,7 +757,7 @@ impl motu_gpu::FloorSizes for FloorAdapter<'_> {
         let s = self
             .0
             .blas_sizes(&shape)
-            .map_err(|e| motu_gpu::GpuError::InvalidRequest(e.to_string()))?;
+            .map_err(motu_gpu::GpuError::size_source)?;
         Ok((s.size_bytes, s.build_scratch_bytes))
     }
 
@@ -762,13 +765,13 @@ impl motu_gpu::FloorSizes for FloorAdapter<'_> {
         let s = self
             .0
             .tlas_sizes(u64::from(instance_count))
-            .map_err(|e| motu_gpu::GpuError::InvalidRequest(e.to_string()))?;
+            .map_err(motu_gpu::GpuError::size_source)?;
         Ok((s.size_bytes, s.build_scratch_bytes))
     }
 
     fn tlas_updatable(&self, instance_count: u32) -> motu_gpu::Result<Option<(u64, u64)>> {
         self.0
             .tlas_updatable_sizes(instance_count)
-            .map_err(|e| motu_gpu::GpuError::InvalidRequest(e.to_string()))
+            .map_err(motu_gpu::GpuError::size_source)
     }
 }
