@@ -58,3 +58,16 @@ fn pfm_reads_bottom_up_little_endian() {
     assert!(read_pfm(b"PF\n2 2\n-1.0\n").is_err());
     assert!(read_pfm(b"P6\n2 2\n255\n").is_err());
 }
+
+/// Errors keep their cause (issue 46): an unreadable file's I/O error is the source.
+#[test]
+fn an_unreadable_texture_keeps_its_io_error() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["gone.png", "gone.pfm"] {
+        let e = read_linear(&dir.path().join(name)).unwrap_err();
+        assert!(matches!(e, TextureError::Io { .. }), "{e}");
+        let cause = std::error::Error::source(&e).expect("the I/O error is the source");
+        assert!(cause.downcast_ref::<std::io::Error>().is_some(), "{cause}");
+        assert!(e.to_string().contains(name), "{e}");
+    }
+}

@@ -39,3 +39,13 @@ fn png_round_trip_size_check() {
     assert_eq!((reader.info().width, reader.info().height), (2, 1));
     assert!(write_png(&path, 3, 3, &[0; 4]).is_err());
 }
+
+/// Errors keep their cause (issue 46): a PNG that cannot be written keeps the I/O error.
+#[test]
+fn a_png_write_failure_keeps_its_io_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let e = write_png(dir.path(), 1, 1, &[0; 4]).unwrap_err();
+    assert!(matches!(e, TraceError::PngWrite { .. }), "{e}");
+    let cause = std::error::Error::source(&e).expect("the I/O error is the source");
+    assert!(cause.downcast_ref::<std::io::Error>().is_some(), "{cause}");
+}

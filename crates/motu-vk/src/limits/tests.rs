@@ -121,3 +121,18 @@ fn combine_takes_the_smaller() {
     assert!(!c.is_empty());
     assert!(LimitOverrides::default().is_empty());
 }
+
+/// Errors keep their cause (issue 46): a size that does not parse is the source, typed.
+#[test]
+fn a_bad_size_in_the_environment_is_the_source() {
+    let err = LimitOverrides::from_lookup(|name| {
+        (name == ENV_MAX_ALLOCATION_SIZE).then(|| "99999999999999999999999".to_string())
+    })
+    .unwrap_err();
+    let cause = std::error::Error::source(&err).expect("the parse error is the source");
+    assert!(matches!(
+        cause.downcast_ref::<SizeParseError>(),
+        Some(SizeParseError::Digits(_))
+    ));
+    assert!(err.to_string().contains(ENV_MAX_ALLOCATION_SIZE), "{err}");
+}
