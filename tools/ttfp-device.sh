@@ -32,6 +32,10 @@ if [ ! -f "$PKG" ]; then
         >"$OUT/import.json" 2>"$OUT/import.time" || die "import failed"
     [ "${KEEP_PBRT:-0}" = 1 ] || rm -rf "$WORK/island-$S"
 fi
+step "disk: 4 GiB written with fdatasync, then read back"
+dd if=/dev/zero of="$WORK/dd.test" bs=16M count=256 conv=fdatasync 2>&1 | tail -1 | tee -a "$OUT/summary.txt"
+dd if="$WORK/dd.test" of=/dev/null bs=16M 2>&1 | tail -1 | tee -a "$OUT/summary.txt"
+rm -f "$WORK/dd.test"
 step "report"
 /usr/bin/time -v "$MOTU" report "$PKG" --json --width "$W" --height "$H" >"$OUT/report.json" \
     2>"$OUT/report.time" || die "report failed"
@@ -61,6 +65,17 @@ print(f"  {sys.argv[2]}: {wall:.1f} s to exit; {parts}; passes {f0.get('passes',
       f"build {f0.get('build_ms', 0):.0f} ms trace {f0.get('trace_ms', 0):.0f} ms, "
       f"built {f0.get('built_bytes', 0) / 1e9:.2f} GB, rebuilt {f0.get('rebuilt_blases', '-')} "
       f"restored {f0.get('restored_blases', '-')} ({f0.get('restored_bytes', 0) / 1e9:.2f} GB)")
+t = s.get("totals") or {}
+ph = ["mesh_ms", "blas_ms", "tlas_ms", "evict_ms", "tables_ms", "cache_store_ms", "store_serialize_ms",
+      "store_copy_ms", "store_put_ms", "restore_ms", "restore_read_ms", "restore_upload_ms", "restore_gpu_ms"]
+print("    frame 0: " + " ".join(f"{k[:-3]}={f0[k]:.0f}" for k in ph if isinstance(f0.get(k), (int, float))))
+d = (s.get("cache") or {}).get("disk") or {}
+if d:
+    busy = d.get("write_busy_ms", 0)
+    rate = d.get("written_bytes", 0) / (busy * 1e6) if busy else 0
+    print(f"    disk: written {d.get('written', 0)} ({d.get('written_bytes', 0) / 1e9:.2f} GB) "
+          f"busy {busy:.0f} ms ({rate:.2f} GB/s), put waited {d.get('submit_wait_ms', 0):.0f} ms, "
+          f"flush waited {d.get('flush_wait_ms', 0):.0f} ms, hits {d.get('hits', 0)}")
 PY
 }
 

@@ -19,6 +19,22 @@
 //! Paths in `Include`, `Import`, `plymesh` and spectrum files resolve relative to
 //! the including file's directory first, then to the entry file's directory (what
 //! pbrt itself does), so both layouts found in published scenes work.
+//!
+//! # Map
+//!
+//! (The crate's code map; ARCHITECTURE.md keeps a summary.)
+//! pbrt-v3/v4 tokenizer (zero-copy over mmap, `.gz`), parser with each version's semantics, PLY
+//! reader (`ply.rs`: the API and mesh assembly; `ply/` the `header`, the `body` item reader, the
+//! `write`r), a small pbrt writer. Streams [`SceneSink`] events; never accumulates mesh data.
+//! `parser.rs` is the state and the directive dispatch; `parser/` holds one file per job (`args`,
+//! `graphics`, `materials`, `shape`, `objects`, `includes`); `prescan.rs` the byte scanners the
+//! parser and the parallel include workers (`parallel.rs`) share; `moana_json/` reads Moana's
+//! JSON+OBJ base package into the same events (`json.rs` a pull reader over the mapped bytes, so
+//! gigabyte archive and curve files stream in constant memory; `obj.rs` the OBJ subset; `mod.rs`
+//! elements, copies, archives, curves, materials, cameras, lights in pbrt's document order).
+//! **Depends on no workspace crate.**.
+//!
+//! Key types: `parse_file`, `SceneSink`, `ShapeEvent`, `Error` (file:line:column).
 
 mod color;
 mod error;

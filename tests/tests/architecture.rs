@@ -803,10 +803,12 @@ const LAYOUT_NOT_YET_MOVED: &[&str] = &[
     "crates/motu-gpu/src/scene/tables.rs",
     "crates/motu-gpu/src/scene/upload.rs",
     "crates/motu-gpu/src/shaders.rs",
+    "crates/motu-gpu/src/stream/cache.rs",
     "crates/motu-gpu/src/stream/demand.rs",
     "crates/motu-gpu/src/stream/mod.rs",
     "crates/motu-gpu/src/stream/params.rs",
     "crates/motu-gpu/src/stream/persistent.rs",
+    "crates/motu-gpu/src/stream/plan_cache.rs",
     "crates/motu-gpu/src/stream/proxy_boxes.rs",
     "crates/motu-gpu/src/stream/rebuild.rs",
     "crates/motu-gpu/src/stream/tlas_records.rs",
@@ -816,8 +818,8 @@ const LAYOUT_NOT_YET_MOVED: &[&str] = &[
     "crates/motu-render/src/session.rs",
     "crates/motu-view/src/fly.rs",
     "crates/motu-view/src/lib.rs",
-    "crates/motu-view/src/overlay.rs",
     "crates/motu-view/src/package.rs",
+    "crates/motu-view/src/panel.rs",
     "crates/motu-view/src/progressive.rs",
     // A public GPU-test harness whose users are motu-gpu's tests: rename it to testutil with
     // them.
@@ -1163,5 +1165,50 @@ fn the_cause_check_finds_stringified_causes() {
         "x.map_err(|reason| PackError::Mesh { mesh, reason })?;",
     ] {
         assert!(stringified_causes(good).is_empty(), "{good}");
+    }
+}
+
+/// ARCHITECTURE.md maps every crate in a short section of its own (job, key types, invariants:
+/// at most ~10 lines, the detail in the crate's `//!` docs) and no line runs past 200 characters.
+#[test]
+fn architecture_md_has_a_short_section_per_crate_and_short_lines() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let text = std::fs::read_to_string(root.join("ARCHITECTURE.md")).unwrap();
+    let long: Vec<(usize, usize)> = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| l.chars().count() > 200)
+        .map(|(i, l)| (i + 1, l.chars().count()))
+        .collect();
+    assert!(
+        long.is_empty(),
+        "lines over 200 characters (line, length): {long:?}"
+    );
+    // Each `### ` section's non-empty lines, by heading.
+    let mut sections: Vec<(String, usize)> = Vec::new();
+    for line in text.lines() {
+        if let Some(h) = line.strip_prefix("### ") {
+            sections.push((h.to_string(), 0));
+        } else if line.starts_with("## ") {
+            sections.push((String::new(), 0));
+        } else if !line.trim().is_empty() {
+            if let Some(s) = sections.last_mut() {
+                s.1 += 1;
+            }
+        }
+    }
+    for (name, _) in manifests() {
+        let path = if name == "pbrt-import" {
+            "`pbrt-import/`".to_string()
+        } else {
+            format!("`crates/{name}`")
+        };
+        let Some((_, lines)) = sections.iter().find(|(h, _)| *h == path) else {
+            panic!("ARCHITECTURE.md has no `### {path}` section");
+        };
+        assert!(
+            (2..=10).contains(lines),
+            "ARCHITECTURE.md's section {path} has {lines} lines (a job, key types and invariants in at most 10)"
+        );
     }
 }

@@ -141,14 +141,55 @@ fn a_second_process_with_a_warm_cache_rebuilds_nothing_it_cached() {
         let t = totals(&warm);
         assert_eq!(json_u64(&t["blas_built"]), 0, "nothing rebuilt: {t}");
         assert_eq!(json_u64(&t["restored_blases"]), stored, "{t}");
-        assert_eq!(json_u64(&warm["stream"]["cache"]["disk_hits"]), stored);
+        // The start's proxy boxes: made from the meshes and kept, then read back.
+        assert_eq!(totals(&cold)["proxy_boxes_cached"], false);
+        assert_eq!(t["proxy_boxes_cached"], true, "{t}");
+        assert_eq!(proxy_table_entries(&cache).len(), 1);
+        // The proxy clusters too.
+        assert_eq!(cold["stream"]["startup"]["clusters_cached"], false);
+        assert_eq!(warm["stream"]["startup"]["clusters_cached"], true);
+        assert_eq!(
+            json_u64(&warm["stream"]["cache"]["disk_hits"]),
+            stored + 2,
+            "every structure, the proxy-box table and the stream plan"
+        );
         f.same_as_reference(&cold_aov);
         f.same_as_reference(&warm_aov);
     }
 }
 
-/// The cache's entry files (`v1/ab/<hex key>.as`), sorted.
+/// The cache's entry files of serialised structures, sorted (not the proxy-box table and the
+/// stream plan the streamer keeps beside them).
 fn entries(cache: &Path) -> Vec<PathBuf> {
+    let mut tables = proxy_table_entries(cache);
+    tables.extend(entries_starting(cache, b"motu stream plan"));
+    all_entries(cache)
+        .into_iter()
+        .filter(|p| !tables.contains(p))
+        .collect()
+}
+
+/// The entry files holding a proxy-box table (their blob starts with its magic).
+fn proxy_table_entries(cache: &Path) -> Vec<PathBuf> {
+    entries_starting(cache, b"motu proxy-box table")
+}
+
+/// The entry files whose blob starts with `magic`.
+fn entries_starting(cache: &Path, magic: &[u8]) -> Vec<PathBuf> {
+    let mut disk = motu_ascache::DiskCache::open(cache, Default::default());
+    all_entries(cache)
+        .into_iter()
+        .filter(|p| {
+            let key = p.file_stem().and_then(|s| s.to_str()).unwrap();
+            let key = motu_ascache::CacheKey::from_hex(key).unwrap();
+            disk.get(&key, &motu_ascache::AnyDevice)
+                .is_some_and(|b| b.starts_with(magic))
+        })
+        .collect()
+}
+
+/// The cache's entry files (`v1/ab/<hex key>.as`), sorted.
+fn all_entries(cache: &Path) -> Vec<PathBuf> {
     let mut out = Vec::new();
     let mut stack = vec![cache.to_path_buf()];
     while let Some(d) = stack.pop() {

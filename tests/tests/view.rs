@@ -305,45 +305,49 @@ fn view_frames_through_the_swapchain_equal_render_per_pixel() {
             "{st}"
         );
     }
-    // The overlay, when asked for in a scripted run, is drawn into the top-left only.
-    let opng = d.join("overlay.png");
+    // The panel, when shown in a scripted run, is drawn on the window after the read-back:
+    // the screenshot and the AOV are the frame without it (equal to the render's), and every
+    // frame presented had the panel drawn over it.
+    let (ppng, paov, pstats) = (
+        d.join("panel.png"),
+        d.join("panel.aov"),
+        d.join("panel.json"),
+    );
     view_ok(
         &x.display,
         &[
             s(&pkg),
             "--width",
-            "320",
+            "96",
             "--backend",
             "pipeline",
             "--frames",
             "2",
             "--overlay",
             "--screenshot",
-            s(&opng),
+            s(&ppng),
+            "--aov",
+            s(&paov),
+            "--stats",
+            s(&pstats),
         ],
     );
-    let rpng = d.join("overlay-ref.png");
-    motu_ok(&[
-        "render",
-        s(&pkg),
-        "-o",
-        s(&rpng),
-        "--width",
-        "320",
-        "--backend",
-        "pipeline",
-    ]);
-    let (w, h, o) = decode_png(&opng);
-    let (_, _, r) = decode_png(&rpng);
-    let px = |buf: &[u8], x: u32, y: u32| {
-        let i = ((y * w + x) * 4) as usize;
-        buf[i..i + 4].to_vec()
-    };
-    let top_left_differs = (0..20).any(|y| (0..200).any(|x| px(&o, x, y) != px(&r, x, y)));
-    assert!(top_left_differs, "the overlay drew nothing");
-    assert!(h > 120, "{h}");
-    let bottom = (h - 10..h).all(|y| (0..w).all(|x| px(&o, x, y) == px(&r, x, y)));
-    assert!(bottom, "the overlay changed pixels outside its box");
+    let st = read_json(&pstats);
+    assert_eq!(st["window"]["panel_frames"], 2, "{st}");
+    // It did reach the window: the image read again after drawing it differs.
+    let (pw, ph) = (96u64, u64::from(decode_png(&ppng).1));
+    let changed = st["window"]["panel_pixels"].as_u64().unwrap();
+    assert!(changed > 0 && changed <= pw * ph, "{st}");
+    compare_exact(&paov, &d.join("render-pipeline-shaded.aov"));
+    assert!(
+        decode_png(&ppng) == decode_png(&d.join("render-pipeline-shaded.png")),
+        "the panel reached the screenshot"
+    );
+    let st = read_json(&d.join("view-pipeline-shaded.json"));
+    assert_eq!(
+        st["window"]["panel_frames"], 0,
+        "a scripted run without --overlay shows no panel: {st}"
+    );
 }
 
 /// A camera path with four distinct poses around the start camera (read from a recording).
@@ -944,4 +948,60 @@ fn view_accumulates_samples_at_rest_toward_a_many_sample_render() {
     assert_eq!(st["denoised"], true, "{st}");
     assert_eq!(st["accumulated_samples"], 1, "{st}");
     assert_ne!(decode_png(&dpng).2, one, "the denoiser changed nothing");
+}
+
+/// Issue 45 item 6: the viewer streams with the structure cache as `motu render --stream`
+/// does: a second viewer process over the same `--as-cache` directory restores every BLAS the
+/// first built, from disk, and shows the same image.
+#[test]
+fn a_second_viewer_restores_structures_from_the_cache_directory() {
+    if !gpu_available() {
+        return;
+    }
+    let Some(x) = xvfb("a_second_viewer_restores_structures_from_the_cache_directory") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pkg = forest(d);
+    let cache = d.join("as-cache");
+    let run = |name: &str| {
+        let (aov, stats) = (
+            d.join(format!("{name}.aov")),
+            d.join(format!("{name}.json")),
+        );
+        view_ok(
+            &x.display,
+            &[
+                s(&pkg),
+                "--width",
+                "48",
+                "--backend",
+                "pipeline",
+                "--stream",
+                "--frames",
+                "1",
+                "--as-cache",
+                s(&cache),
+                "--aov",
+                s(&aov),
+                "--stats",
+                s(&stats),
+            ],
+        );
+        let st = read_json(&stats);
+        let detail: serde_json::Value = match &st["detail"] {
+            serde_json::Value::String(t) => serde_json::from_str(t).unwrap(),
+            v => v.clone(),
+        };
+        (aov, detail)
+    };
+    let (cold_aov, cold) = run("cold");
+    let built = cold["blas_built"].as_u64().unwrap();
+    assert!(built > 0, "{cold}");
+    assert_eq!(cold["cache_stored"].as_u64(), Some(built), "{cold}");
+    let (warm_aov, warm) = run("warm");
+    assert_eq!(warm["blas_built"].as_u64(), Some(0), "{warm}");
+    assert_eq!(warm["restored_from_disk"].as_u64(), Some(built), "{warm}");
+    compare_exact(&cold_aov, &warm_aov);
 }

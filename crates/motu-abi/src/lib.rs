@@ -22,6 +22,23 @@
 //!   first) by projected size ([`lod::select_lod`]).
 //! - **Meshes** ([`MeshRecord`]) are compiled meshes: every source mesh (LOD 0) and its
 //!   simplified levels; the hit identity is `(source_mesh, primitive)` plus the LOD.
+//!
+//! # Map
+//!
+//! (The crate's code map; ARCHITECTURE.md keeps a summary.)
+//! **One source of truth** for everything shared with GLSL: the hierarchy records, camera model,
+//! LOD rule (per ray, and per instance from the camera: `lod_instance` rewrites camera-only LOD
+//! selectors as TLAS instance slots), AOV file, the shading rules (`shade`: lights, textures,
+//! RGB9E5 and auto exposure; `env`: an environment map's importance-sampling tables, which the GPU
+//! reads after the frame parameters; `sampling`: every pixel's sample sequence, Owen-scrambled
+//! Sobol pairs mirrored bit for bit by `shaders/sampling.glsl`, a GPU test compares the two;
+//! `ptex`: a Ptex texture's words in the texel store — per-mesh triangle → face tables, face table,
+//! texels — and its sampling by face id and face uv, which `texture.glsl` mirrors). Generates
+//! `shaders/generated/abi.glsl`; a test proves std430 offsets equal Rust offsets and that the
+//! committed file is current.
+//!
+//! Key types: `HierarchyView`, `TlasRecord`, `PiRecord`, `CameraParams`, `select_lod`,
+//! `InstanceLod`, `Aov`, `shade::Shading`, `env::Environment`.
 
 pub mod aov;
 pub mod camera;

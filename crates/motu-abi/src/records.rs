@@ -294,6 +294,18 @@ pub struct HierarchyError {
 }
 
 impl HierarchyView<'_> {
+    /// Whether `other` has this very instancing graph: the same root and the same TLAS,
+    /// instance, BLAS and programmable-instance tables, by address and length (not equal
+    /// copies). Data indexed by those tables (a package's stored stream split) applies only to
+    /// a view that shares them.
+    pub fn same_instancing(&self, other: &HierarchyView<'_>) -> bool {
+        self.root_tlas == other.root_tlas
+            && std::ptr::eq(self.tlases, other.tlases)
+            && std::ptr::eq(self.instances, other.instances)
+            && std::ptr::eq(self.blases, other.blases)
+            && std::ptr::eq(self.pis, other.pis)
+    }
+
     /// The TLASes and BLASes reachable from the root (through instances, programmable
     /// instances and LOD levels), as flags by index. Out-of-range references are skipped
     /// (`check_references` reports them).

@@ -72,6 +72,18 @@
 //! Alignments come from the caller: 256 for acceleration-structure storage,
 //! `minAccelerationStructureScratchOffsetAlignment` for scratch, and the buffer's
 //! `VkMemoryRequirements::alignment` otherwise (use the largest that applies).
+//!
+//! # Map
+//!
+//! (The crate's code map; ARCHITECTURE.md keeps a summary.)
+//! GPU memory **policy** in plain Rust: budget, block sub-allocator with alignment and
+//! allocation-count cap (dedicated blocks above a threshold: streaming's half block), `try_fit`
+//! (whether requests held together would be allocated: the policy run on a copy, no memory; the
+//! streamed TLAS rebuild's room probe asks it), draining (`block_fills`, `allocations_in`,
+//! `set_draining`, `set_fit_only`: what a streamer moving allocations to free whole blocks asks and
+//! sets), per-kind stats, LRU residency for streaming, build batching.
+//!
+//! Key types: `Allocator`, `Residency`, `plan_build_batches`.
 
 mod allocator;
 mod batch;

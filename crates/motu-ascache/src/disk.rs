@@ -628,6 +628,9 @@ impl DiskCache {
                 s.written += d.written;
                 s.written_bytes += d.written_bytes;
                 s.warnings.add(&d.warnings);
+                s.write_busy_ms = d.write_busy_ms;
+                s.submit_wait_ms = d.submit_wait_ms;
+                s.flush_wait_ms = d.flush_wait_ms;
                 s.writable &= d.warnings.total() == 0;
             });
         }

@@ -71,6 +71,32 @@
 //! ```
 //!
 //! One thread uses a cache (`&mut self`); it is `Send`, so it can live on a worker thread.
+//!
+//! # Map
+//!
+//! (The crate's code map; ARCHITECTURE.md keeps a summary.)
+//! Cache **policy and storage** for built acceleration structures, plain Rust (no Vulkan, no
+//! workspace crate): blobs are serialized BLASes, opaque but for their first 32 bytes (Vulkan's
+//! serialization header: driver UUID + compatibility data) that a caller's `Compatibility` check
+//! (`vkGetDeviceAccelerationStructureCompatibilityKHR`) must accept; keys (`CacheKeyBuilder`: two
+//! seeded XXH3-128 streams over framed fields: content, build flags, device, format version); the
+//! host tier (`--host-cache`, byte-bounded LRU, default a quarter of `MemAvailable`); the disk tier
+//! (`--as-cache DIR`, default `$MOTU_AS_CACHE`, `$XDG_CACHE_HOME/motu/as-cache` or
+//! `~/.cache/motu/as-cache`; one file per entry `v1/ab/<hex>.as`, header with magic, version, key,
+//! length and checksums (`entry.rs`); atomic writes, LRU by file mtime, bound min(32 GiB, half the
+//! free space + what it holds), stale temp files of dead writers removed at open; with
+//! `DiskOptions::background`, which render sets, entries are written by a writer thread of its own
+//! (`writer.rs`: a queued entry is answered from memory, eviction cancels its write, the queue
+//! bounded at 1 GiB of blobs only it keeps alive, written before the cache is dropped or its
+//! stats are read)); a bad entry
+//! (truncated, corrupt, foreign, incompatible) is a miss, a warning and a removed file; a read-only
+//! or full directory a counted warning that turns writes off — nothing here returns an error.
+//! Files, lowest first: `key`, `compat`, `stats`, `lru`, `host`, `entry`, `file`, `disk`, `writer`,
+//! `cache`.
+//!
+//! Key types: `AsCache`, `HostCache`, `DiskCache`, `DiskOptions`, `CacheKey`, `CacheKeyBuilder`,
+//! `Compatibility`, `CacheStats`, `Tier`, `WarningReason`, `default_dir`,
+//! `default_host_cache_bytes`.
 
 mod cache;
 mod compat;

@@ -150,7 +150,7 @@ pub struct HostStats {
 }
 
 /// The disk tier's counters ([`DiskCache::stats`](crate::DiskCache::stats)).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct DiskStats {
     /// The byte bound of the entries' files.
     pub capacity_bytes: u64,
@@ -187,11 +187,18 @@ pub struct DiskStats {
     pub stale_temp_files_removed: u64,
     /// Warnings by reason.
     pub warnings: WarningCounts,
+    /// With the background writer: milliseconds its thread spent writing entries (the files'
+    /// rate is `written_bytes / write_busy_ms`), those `put` waited for room in its queue (a
+    /// disk slower than the builds), and those taken to wait for queued writes when the
+    /// counters were read (at the end of a render: writes still pending after the image).
+    pub write_busy_ms: f64,
+    pub submit_wait_ms: f64,
+    pub flush_wait_ms: f64,
 }
 
 /// Both tiers' counters as [`AsCache::stats`](crate::AsCache::stats) reports them: what the
 /// streaming stats print.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
 pub struct CacheStats {
     /// `get`s answered from host memory.
     pub host_hits: u64,

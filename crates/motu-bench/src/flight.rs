@@ -207,8 +207,9 @@ fn run_streaming(
         ..Default::default()
     };
     let cams: Vec<_> = (0..n).map(|f| path.sample(f, n).params(w, h)).collect();
-    // The hierarchy the streamer renders (large TLASes split into pieces), as `render --stream`.
-    let split = motu_render::stream_split(view, a.stream_bounds.split_instances)?;
+    // The hierarchy the streamer renders (large TLASes split into pieces; the split the import
+    // stored when `view` is the package's own), as `render --stream`.
+    let split = motu_render::package_stream_split(meshes.0, view, a.stream_bounds.split_instances)?;
     let view = &split.as_ref().map_or(*view, |s| s.view(view));
     if warmup > 0 {
         let mut sr = motu_gpu::StreamingRenderer::new(ctx, *view, meshes, &opts).map_err(

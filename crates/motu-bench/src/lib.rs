@@ -11,6 +11,23 @@
 //! The `motu` CLI parses the flags into [`SuiteOptions`] (or a [`ChildRender`] for the hidden
 //! child mode) and prints what [`run_suite`] returns ([`text_table`] or the JSON of
 //! [`BenchReport`]); the children are spawned from `std::env::current_exe()`, i.e. `motu` itself.
+//!
+//! # Map
+//!
+//! (The crate's code map; ARCHITECTURE.md keeps a summary.)
+//! `motu bench` as a library: suite plans (scenes × configurations `sl`, `ml`, `levels2`, `+lod`),
+//! one child process of the running executable per step (gen, import, render; timeouts, deadline,
+//! logs), the timed child render (warm-up submitted apart, median of GPU timestamps or CPU frames),
+//! ratios against `sl` of the same run, `bench.json`, the terminal and Markdown tables. Files:
+//! `plan.rs` (options, settings, scenes × configurations), `steps.rs` (child processes),
+//! `runner.rs` (a scene's steps → results, ratios), `child.rs` (the timed child render),
+//! `report.rs` (`bench.json` structs, machine, commit), `tables.rs` (text and Markdown),
+//! `error.rs`; `flight.rs` (`--camera-path` flights, full build or streaming); `lib.rs` runs the
+//! suite.
+//!
+//! Key types: `SuiteOptions`, `run_suite`, `FlightOptions`, `run_flight`, `dry_run_plan`,
+//! `BenchReport` (`check`), `text_table`, `markdown`, `ChildRender`, `child_render`, `Backend` and
+//! `best_backend` (motu-render's, re-exported), `BenchError`.
 
 #[macro_use]
 mod error;

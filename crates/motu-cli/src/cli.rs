@@ -696,6 +696,8 @@ pub struct ViewArgs {
     pub stream_passes: Option<u32>,
     #[command(flatten)]
     pub stream_bounds: StreamBoundArgs,
+    #[command(flatten)]
+    pub as_cache: AsCacheArgs,
     #[arg(help_heading = HEADING_DEBUG, long)]
     pub max_allocations: Option<u32>,
     /// Elements shown at the start (comma-separated; Shift+1–9 toggle them live).
@@ -710,7 +712,7 @@ pub struct ViewArgs {
     pub lod_stochastic: bool,
     /// How LOD selectors are resolved at the start, as in `motu render --lod-mode` (M toggles
     /// live): `instance` where the rule allows (not with --lod-stochastic/K or streaming),
-    /// else the traversal shader. The overlay and --stats (`lod_mode`) say which ran.
+    /// else the traversal shader. The panel and --stats (`lod_mode`) say which ran.
     #[arg(help_heading = HEADING_SCENE, long, value_enum, default_value_t = LodModeArg::Instance)]
     pub lod_mode: LodModeArg,
     #[arg(help_heading = HEADING_DEBUG, long, default_value_t = 16)]
@@ -737,9 +739,13 @@ pub struct ViewArgs {
     /// --frames spread over it).
     #[arg(help_heading = HEADING_CAMERA, long)]
     pub camera_path: Option<PathBuf>,
-    /// Show the overlay in --frames runs too (it is then in the screenshot).
-    #[arg(help_heading = HEADING_OUTPUT, long)]
+    /// Show the panel in --frames runs too (drawn on the window after the screenshot is read:
+    /// never in --screenshot or --aov).
+    #[arg(help_heading = HEADING_OUTPUT, long, conflicts_with = "no_panel")]
     pub overlay: bool,
+    /// Start with the panel hidden (Tab shows it).
+    #[arg(help_heading = HEADING_OUTPUT, long)]
+    pub no_panel: bool,
     /// Present as fast as possible (MAILBOX/IMMEDIATE) instead of at the display's rate.
     #[arg(help_heading = HEADING_DEVICE, long)]
     pub no_vsync: bool,

@@ -1,5 +1,18 @@
 //! `motu`: import, compile, inspect and render Moana-scale instanced scenes on one GPU.
 //! The command line is a contract (`shared/CLI.md`): names and JSON keys are only ever added.
+//!
+//! # Map
+//!
+//! (The crate's code map; ARCHITECTURE.md keeps a summary.)
+//! The `motu` binary: the contract in `shared/CLI.md`. `cli.rs` (clap arguments), `cmd/` (one file
+//! per command: options in, library calls, output), `output.rs` (output checks, all-or-nothing
+//! outputs `Outputs`, `OutputDir` for gen, and the input check of command-line paths),
+//! `progress.rs`, `signals.rs`; `cmd/bench.rs` maps `motu bench`'s flags onto `motu-bench` (and
+//! opens the package and camera for the child render); `cmd/render.rs` checks render's flags, picks
+//! the backend and camera, maps the flags onto `motu_render::RenderSettings`, prints each
+//! `RenderEvent` and writes the outputs; `cmd/view.rs` checks view's flags, picks the backend and
+//! cameras, maps the flags onto `motu_view::PackageSourceSettings` and `ViewOptions`, and writes a
+//! scripted run's screenshot, AOV, `--stats` and `--record`.
 
 mod cli;
 mod cmd;

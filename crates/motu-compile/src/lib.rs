@@ -82,6 +82,34 @@
 //! pieces, LOD levels) getting consecutive ids when the TLAS is emitted (thesis 2.6.3); BLASes
 //! and mesh records are numbered in the same walk, so a subtree's records are close together.
 //! All indices are 32-bit and every table is checked against `u32`.
+//!
+//! # Map
+//!
+//! (The crate's code map; ARCHITECTURE.md keeps a summary.)
+//! Scene → traversal hierarchy: TLAS on even levels, BLAS on odd, instance lists, programmable
+//! instances, identity collapse, TLAS splits by binned SAH over instance bounds (`split.rs`'s
+//! `sah_partition`: ranges of 64k+ instances split on rayon, the same ranges as serially;
+//! `tlas_split.rs`: huge instances kept in the parent, and as many of the rest as the cap allows:
+//! only the densest SAH leaves become pieces; the same split at load time for streaming,
+//! `split_for_streaming`, on a package's view: TLASes over `STREAM_SPLIT_INSTANCES` moved to the
+//! instance table's tail, split, finalized; `stored_stream_split`/`StreamSplit::from_stored`: the
+//! split as a package stores it — tables whole, instances as a map into the package's — and rebuilt
+//! in O(instances); `split_reference.rs` (tests only): the partitioners before their speed-ups,
+//! which the fast ones must equal; `tables.rs` holds the table helpers emit, split and finalize
+//! share), `ml`/`sl`/`N`/`auto` levels (`auto`, in `analyze.rs` `plan_auto_inlining`: grouping
+//! levels of ≤ 256 entries inlined, and small instanced prototypes — ≤ 2^17 triangles with their
+//! copies, no LOD below — *baked*: `emit.rs` `bake_for_proto` turns each source mesh's copies into
+//! one mesh with a primitive map, so no hop reaches them; what would still be a hop is inlined when
+//! its entries × uses ≤ 2^16, `auto_inline_max_instances`), LOD chains (meshopt), the
+//! **partitioner** (`partition.rs`: triangle BLASes bounded by `max_blas_triangles`, which `motu
+//! import` picks from the scene's size when not given — `auto_max_blas_triangles`: 2^16, or about a
+//! 256th of a small build (under ~8.4M triangle-equivalents), never splitting heavily instanced
+//! meshes; big meshes and LOD levels split into spatial clusters with a primitive map, small meshes
+//! grouped by location), `validate()`, flatten for tests (placements; `testutil.rs` also compares
+//! world-space triangles per source triangle, which baked compiles need).
+//!
+//! Key types: `compile`, `compile_with_loader`, `CompiledScene`, `validate`, `split_for_streaming`,
+//! `StreamSplit`.
 
 mod analyze;
 mod emit;

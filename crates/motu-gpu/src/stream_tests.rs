@@ -1241,3 +1241,40 @@ fn drained_blocks_free_budget_and_the_next_frame_is_unchanged() {
     drop(sr);
     assert_no_validation_errors(&ctx);
 }
+
+/// A camera at rest (the next frame's camera is this frame's) after a one-pass frame skips the
+/// probe of the next camera: it could only meet what the frame had resident. A moved camera
+/// is probed, and the frames at rest still equal the full build.
+#[test]
+fn a_camera_at_rest_skips_the_next_camera_probe() {
+    let Some(ctx) = context_or_skip("stream_probe_at_rest", Requirement::RayTracing) else {
+        return;
+    };
+    let h = field(4, 6, 12);
+    let blobs = Blobs(&h);
+    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
+    let opts = ids_opts(backend(&ctx));
+    let budget = full_build_needs(&full) * 2;
+    let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
+        .expect("streaming renderer");
+    let cam = camera_path(&base_pose(), &SWEEP, 0, 4).params(SIZE, SIZE);
+    let moved = camera_path(&base_pose(), &SWEEP, 2, 4).params(SIZE, SIZE);
+    let mut stats = Vec::new();
+    for next in [cam, cam, moved] {
+        sr.set_next_camera(Some(next));
+        let (out, st) = sr.render_frame(&cam, &opts).expect("frame");
+        let reference = render(&ctx, &full, &cam, &opts).expect("full render");
+        assert_same_aov(&reference.aov, &out.aov, "a frame at rest");
+        stats.push(st);
+    }
+    // The first frame builds (several passes are possible); once everything is resident the
+    // camera at rest takes one pass and skips its probe; the moved camera is probed.
+    let at_rest = &stats[1];
+    assert_eq!(at_rest.passes, 1, "{at_rest:?}");
+    assert!(at_rest.probe_skipped_still, "{at_rest:?}");
+    assert_eq!(at_rest.probe_rays, 0, "{at_rest:?}");
+    let probed = &stats[2];
+    assert!(!probed.probe_skipped_still, "{probed:?}");
+    assert!(probed.probe_rays > 0, "{probed:?}");
+    assert_no_validation_errors(&ctx);
+}

@@ -1,6 +1,22 @@
 //! The import pipeline as a library: a pbrt or OBJ scene file → a streamed scene (mesh data goes
 //! to package chunks as it is parsed) → the compiled traversal hierarchy → a finished package.
 //! `motu import`, `motu demo`, `motu bench` and any embedding program call [`import`].
+//!
+//! # Map
+//!
+//! (The crate's code map; ARCHITECTURE.md keeps a summary.)
+//! The import pipeline as a library (what `motu import`, `demo` and `bench` call): checks the scene
+//! path, streams the scene into package chunks (a scratch package for `--subset`, a spill file for
+//! meshes over the BLAS bound; with the automatic bound, over its least value until 2^16 × 32
+//! triangles were stored, when the bound is known to be 2^16, and meshes spilled but kept whole are
+//! then copied into the package), refuses an output the scene read, compiles (per-phase times:
+//! `CompilePhases`), stores LOD meshes and clusters on a writer thread as they are made, loads
+//! textures (`textures.rs`: image mip chains and Ptex faces with their meshes' face tables, written
+//! to the texel store a batch at a time), makes and stores the stream split (`split.rs`, for `motu
+//! report`), writes meta and finishes the package atomically; per-element statistics; peak RSS.
+//!
+//! Key types: `import`, `ImportOptions`, `ImportSummary`, `ImportError`, `ImportProgress`,
+//! `resolve_subset`, `element_stats`, `peak_rss_bytes`.
 
 mod error;
 mod memory;

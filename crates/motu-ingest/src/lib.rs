@@ -15,6 +15,14 @@
 //! - Curves are counted and skipped, or (`curve_ribbons`) tessellated into flat ribbon meshes;
 //!   unsupported shapes are counted and warned about. `ReverseOrientation` does not matter:
 //!   shading is two-sided.
+//!
+//! # Map
+//!
+//! (The crate's code map; ARCHITECTURE.md keeps a summary.)
+//! Adapter: pbrt events (from pbrt or Moana's base package) and OBJ (tobj) → `SceneBuilder`; names
+//! elements and cameras by file stem.
+//!
+//! Key types: `ingest_file`, `is_moana_json`.
 
 mod curves;
 mod obj;

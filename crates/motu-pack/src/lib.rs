@@ -11,6 +11,14 @@
 //! (`[f32; 3]` × vertices), then `u32` indices (3 per triangle) at the next 16-byte boundary,
 //! then optional normals likewise — GPU-upload-ready, readable in place from a raw chunk. A
 //! cluster of a partitioned mesh adds its primitive map (`u32` per triangle) likewise.
+//!
+//! # Map
+//!
+//! (The crate's code map; ARCHITECTURE.md keeps a summary.)
+//! The scene schema on the container: section kinds, mesh blob layout, `meta` JSON,
+//! `PackageGeometry` (a `GeometryStore` writing straight into chunks).
+//!
+//! Key types: `ScenePackage`, `write_hierarchy`.
 
 mod blob;
 mod meta;

@@ -22,6 +22,16 @@
 //! let chunk = package.chunk(vertices.chunk)?; // borrowed from the map when raw
 //! # Ok(()) }
 //! ```
+//!
+//! # Map
+//!
+//! (The crate's code map; ARCHITECTURE.md keeps a summary.)
+//! The package container: header, page-aligned chunks (raw or zstd, xxh3 each), sections, footer
+//! manifest, trailer; mmap reader validating in O(manifest); atomic writer (temp + fsync + rename;
+//! `AtomicDir` for a directory written whole), the input check before opening
+//! (`identity::check_input`). Knows nothing of scenes.
+//!
+//! Key types: `PackageWriter`, `Package`, `verify`.
 
 pub mod atomic;
 mod error;

@@ -5,6 +5,35 @@
 //! [`render`]: one `motu render` (CPU, full GPU build, recorded path or the streaming frame
 //! loop) with its `--stats` object. The CLI maps its flags onto these types and prints; no
 //! Vulkan here (that is `motu-gpu`).
+//!
+//! # Map
+//!
+//! (The crate's code map; ARCHITECTURE.md keeps a summary.)
+//! Render set-up shared by `motu render`, `view` and `bench`: a package's meshes for both tracers
+//! (`meshes.rs`), the camera by name / the scene's / a view of the bounds and the image size,
+//! recorded camera paths and their frame cameras, the streaming render's default sweep
+//! (`camera.rs`), the LOD mode: instance-level where the rule allows it, else the traversal shader,
+//! and why (`lod.rs`), the CPU reference with instance-level LOD (`cpu.rs`), the scene's shading:
+//! lights, sky, the AO distance (`shading.rs`), the streaming renderer's per-frame bounds, the
+//! split of large TLASes it renders (`stream_split`, which the report, bench flights and the viewer
+//! also use; `package_stream_split` reads the split the import stored for the package's own view
+//! instead of making it) and the streaming frame loop (`stream.rs`, with `stream.startup`, the time
+//! to first pixel by phase, and `StreamPlan`: the proxy clusters made once for the floor and the
+//! renderer); the structure cache's tiers from `--host-cache`/`--as-cache` and the package identity
+//! its keys start from (`cache.rs`); the backend and the best one of the devices (`backend.rs`);
+//! `--denoise` (`denoise.rs`: an edge-aware à-trous filter guided by the AOV's depth, the normals
+//! it implies and the materials' base colours; the viewer's N key uses it too); **`render`**
+//! (`session.rs`): one `motu render` from typed `RenderSettings` (`settings.rs`) — the CPU
+//! reference (`cpu.rs`), a full GPU build, one frame or a recorded camera path (`gpu.rs`), or
+//! streaming — reporting each streamed frame to a progress callback (`RenderEvent`) and returning
+//! the image with its `--stats` object (the keys of CLI.md, assembled here). `PackageGeometry` is
+//! the geometry-only mesh source (`motu report --measure`). No `ash`, no clap.
+//!
+//! Key types: `render`, `RenderJob`, `RenderSettings`, `RenderEvent`, `Rendered`, `Backend`,
+//! `best_backend`, `PackageMeshes`, `PackageGeometry`, `camera_params`, `camera_pose`,
+//! `load_camera_path`, `recorded_path_cameras`, `sweep_around_root`, `choose_lod_mode`,
+//! `LodChoice`, `LodMode`, `render_cpu_instance_lod`, `scene_shading`, `ShadingOptions`,
+//! `StreamBounds`, `stream_split`, `RenderError`.
 
 mod backend;
 mod cache;
@@ -34,7 +63,9 @@ pub use settings::{
     CameraRequest, DeviceRequest, RenderEvent, RenderSettings, StreamSettings, TraversalLimits,
 };
 pub use shading::{scene_shading, ShadingOptions, AO_DISTANCE_OF_DIAGONAL};
-pub use stream::{package_stream_split, stream_split, StreamBounds, StreamStartup};
+pub use stream::{
+    package_stream_split, stored_stream_split, stream_split, StreamBounds, StreamStartup,
+};
 
 use motu_alloc::format_size;
 use std::path::PathBuf;

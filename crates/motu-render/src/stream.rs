@@ -102,36 +102,49 @@ pub fn package_stream_split(
     if cap == 0 {
         return Ok(None);
     }
-    let unreadable = |source| RenderError::StoredSplitRead { cap, source };
     // The stored split indexes the package's own tables: only a view that is those tables
     // (the same memory, not a copy or a subset) may use it.
-    let own = pkg.view().map_err(unreadable)?;
-    let same = |a: *const u8, b: *const u8, la: usize, lb: usize| a == b && la == lb;
-    let is_own = same(
-        own.instances.as_ptr().cast(),
-        view.instances.as_ptr().cast(),
-        own.instances.len(),
-        view.instances.len(),
-    ) && same(
-        own.tlases.as_ptr().cast(),
-        view.tlases.as_ptr().cast(),
-        own.tlases.len(),
-        view.tlases.len(),
-    ) && same(
-        own.blases.as_ptr().cast(),
-        view.blases.as_ptr().cast(),
-        own.blases.len(),
-        view.blases.len(),
-    ) && own.root_tlas == view.root_tlas;
-    if !is_own {
+    let own = pkg
+        .view()
+        .map_err(|source| RenderError::StoredSplitRead { cap, source })?;
+    if !own.same_instancing(view) {
         return stream_split(view, split_instances);
     }
     let t0 = std::time::Instant::now();
-    let Some(stored) = pkg.stored_stream_split(cap).map_err(unreadable)? else {
-        return stream_split(view, split_instances);
+    let split = match stored_stream_split(pkg, view, cap)? {
+        None => return stream_split(view, split_instances),
+        Some(None) => return Ok(None), // stored: no TLAS over the cap
+        Some(Some(split)) => split,
+    };
+    let (tlases, pieces) = split.counts();
+    let split_ms = t0.elapsed().as_secs_f64() * 1e3;
+    tracing::info!(
+        cap,
+        tlases,
+        pieces,
+        split_ms,
+        "TLASes split for streaming (stored at import)"
+    );
+    Ok(Some(split))
+}
+
+/// The split the import stored in `pkg` for `cap` instances, made into a [`motu_compile::StreamSplit`] of
+/// `view` (the package's own tables) without splitting: `None` when the package stored none
+/// for this cap (written before splits were stored), `Some(None)` when it stored that no TLAS
+/// is over the cap. `motu report` reads it too.
+pub fn stored_stream_split(
+    pkg: &motu_pack::ScenePackage,
+    view: &HierarchyView<'_>,
+    cap: u32,
+) -> Result<Option<Option<motu_compile::StreamSplit>>, RenderError> {
+    let Some(stored) = pkg
+        .stored_stream_split(cap)
+        .map_err(|source| RenderError::StoredSplitRead { cap, source })?
+    else {
+        return Ok(None);
     };
     let Some(t) = stored else {
-        return Ok(None); // stored: no TLAS over the cap
+        return Ok(Some(None));
     };
     let meta = pkg.meta().stream_split.clone().unwrap_or_default();
     let stored = motu_compile::StoredStreamSplit {
@@ -150,16 +163,7 @@ pub fn package_stream_split(
             source,
         }
     })?;
-    let (tlases, pieces) = split.counts();
-    let split_ms = t0.elapsed().as_secs_f64() * 1e3;
-    tracing::info!(
-        cap,
-        tlases,
-        pieces,
-        split_ms,
-        "TLASes split for streaming (stored at import)"
-    );
-    Ok(Some(split))
+    Ok(Some(Some(split)))
 }
 
 /// The hierarchy a streamer renders for `view`: every TLAS over `split_instances` instances
@@ -201,6 +205,8 @@ pub struct StreamStartup {
     /// The proxy clusters of every TLAS (`motu_gpu::StreamPlan`), which the floor and the
     /// renderer share.
     pub clusters_ms: f64,
+    /// Whether the clusters were read from the structure cache (kept by an earlier process).
+    pub clusters_cached: bool,
     /// The streaming floor (`motu_gpu::streaming_floor`): refusing budgets below it.
     pub floor_ms: f64,
     /// The streaming renderer's start: derived tables, proxy clusters and boxes, the resident
@@ -280,9 +286,15 @@ pub(crate) fn render_streaming(
         _ => (w, h),
     };
     // Refused up front below the floor: under it some frame could not complete.
+    // Opened before the start: the proxy clusters and boxes are kept in it too.
+    let mut cache = stream.cache.open(pkg);
     let t = Instant::now();
-    let plan = motu_gpu::StreamPlan::new(view);
+    let plan = match cache.as_mut() {
+        Some(c) => motu_gpu::StreamPlan::new_cached(view, c),
+        None => motu_gpu::StreamPlan::new(view),
+    };
     startup.clusters_ms = ms_since(t);
+    startup.clusters_cached = plan.from_cache();
     let t = Instant::now();
     let floor = tracing::info_span!("floor")
         .in_scope(|| motu_gpu::streaming_floor_planned(view, &plan, &ctx, w, h, opts.staging_bytes))
@@ -300,14 +312,15 @@ pub(crate) fn render_streaming(
     }
     let t = Instant::now();
     let mut sr = tracing::info_span!("init")
-        .in_scope(|| motu_gpu::StreamingRenderer::with_plan(&ctx, *view, plan, &meshes, &opts))
+        .in_scope(|| {
+            motu_gpu::StreamingRenderer::with_plan_and_cache(
+                &ctx, *view, plan, &meshes, &opts, cache,
+            )
+        })
         .map_err(|source| RenderError::StreamSetup {
             floor_bytes: floor.min_resident_bytes,
             source,
         })?;
-    if let Some(cache) = stream.cache.open(pkg) {
-        sr.attach_cache(cache);
-    }
     startup.init_ms = ms_since(t);
     let ropts = gpu_render_options(s, s.lod, backend, 1, scene_shading(s.shading, pkg, view));
     if s.shading.spp > 1 {

@@ -50,6 +50,21 @@
 //! `presets/*.json`), `gpu` (driver sizes, the fitting harness), `cost` (per-node costs,
 //! ownership, flattening), `rows` (per-element and per-variant rows), `budget` (what fits),
 //! `report` (assembly), `text`, `html`.
+//!
+//! # Map
+//!
+//! (The crate's code map; ARCHITECTURE.md keeps a summary.)
+//! VRAM-budget report (text, JSON, self-contained HTML). Every peak it prints is a `--vram-budget`
+//! the full build renders under: structures + largest build transient +
+//! `motu_gpu::full_build_overhead` (frame buffers at the report's image size, the staging ring and
+//! allocator slack, by the renderer's own budget policy in `motu-gpu/src/scene/budget.rs`); a
+//! subset also pays for the record tables `--subset` uploads whole (`motu_abi::RootSubset` keeps
+//! only the instance and PI records its root reaches). Fitted size models are data:
+//! `presets/*.json` (loaded with `include_str!`), made by the `fit_sizes` example
+//! (`presets/README.md`); `--measure` builds the package on the device through motu-render's
+//! `PackageGeometry`.
+//!
+//! Key types: `build_report`, `ModelPreset`, `LAVAPIPE`, `NVIDIA_H200`.
 
 mod budget;
 mod cost;
@@ -94,13 +109,6 @@ pub enum ReportError {
     /// A report input out of range (the text says which and why).
     #[error("{0}")]
     Invalid(String),
-    /// The package's stored TLAS split does not fit its hierarchy.
-    #[error("{path}: {source}")]
-    StoredSplit {
-        path: String,
-        #[source]
-        source: motu_compile::CompileError,
-    },
     #[error(transparent)]
     Render(#[from] motu_render::RenderError),
     #[error("streaming floor: {0}")]

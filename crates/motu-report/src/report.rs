@@ -145,41 +145,8 @@ pub fn build_report_at(
         }),
     };
     let view = pkg.view()?;
-    let split = stored_split(pkg, &view)?;
+    let split = motu_render::stored_stream_split(pkg, &view, motu_render::STREAM_SPLIT_INSTANCES)?;
     build(&view, &input, sizes, budget_bytes, split)
-}
-
-/// The stream split the package stored at import (`Some(None)`: no TLAS over the cap), rebuilt
-/// without splitting; `None` when the package has none for the streamer's cap (written before
-/// it was stored): the report splits itself.
-#[allow(clippy::type_complexity)]
-fn stored_split(
-    pkg: &motu_pack::ScenePackage,
-    view: &HierarchyView<'_>,
-) -> Result<Option<Option<motu_compile::StreamSplit>>, ReportError> {
-    let Some(stored) = pkg.stored_stream_split(motu_render::STREAM_SPLIT_INSTANCES)? else {
-        return Ok(None);
-    };
-    let Some(t) = stored else {
-        return Ok(Some(None));
-    };
-    let meta = pkg.meta().stream_split.clone().unwrap_or_default();
-    let stored = motu_compile::StoredStreamSplit {
-        tlases_split: meta.tlases_split,
-        pieces: meta.pieces,
-        tlases: t.tlases.to_vec(),
-        blases: t.blases.to_vec(),
-        pis: t.pis.to_vec(),
-        instance_source: t.instance_source.to_vec(),
-        extra_instances: t.extra_instances.to_vec(),
-    };
-    let split = motu_compile::StreamSplit::from_stored(view, &stored).map_err(|source| {
-        ReportError::StoredSplit {
-            path: pkg.path().to_string(),
-            source,
-        }
-    })?;
-    Ok(Some(Some(split)))
 }
 
 /// The element label of untagged root instances (after every real element id).

@@ -12,6 +12,15 @@
 //!
 //! Build a scene with [`SceneBuilder`]; [`SceneBuilder::finish`] validates the graph (no cycles,
 //! ids in range) and computes per-prototype bounds once.
+//!
+//! # Map
+//!
+//! (The crate's code map; ARCHITECTURE.md keeps a summary.)
+//! The scene graph every stage speaks: prototypes (a DAG), CSR instance edges (`parent_from_child`,
+//! 52 B/edge, no per-edge heap), meshes as `MeshInfo` + a `GeometryStore` holding the data,
+//! materials, cameras, lights, elements, memoised bounds.
+//!
+//! Key types: `Scene`, `SceneBuilder`, `Transform34`, `Aabb`, `MeshId`….
 
 mod builder;
 mod camera;

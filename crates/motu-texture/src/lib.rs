@@ -3,6 +3,17 @@
 //! largest side is at most a cap, ready for the package's texel section (FORMAT.md,
 //! "Textures"). Colour channels are stored sRGB-encoded (8 bits keep dark tones), alpha as is;
 //! levels are box-filtered in linear space. HDR images (EXR, PFM) are clipped to [0, 1].
+//!
+//! # Map
+//!
+//! (The crate's code map; ARCHITECTURE.md keeps a summary.)
+//! Image textures at import: PNG, TGA, JPEG, EXR (the `image` crate) and PFM read into capped mip
+//! chains (`--texture-max`), the texels the package's `textures`/`texels` sections hold; the GPU
+//! and the CPU oracle sample them identically (`shaders/texture.glsl`, `motu-trace` `shade.rs`).
+//! `ptex.rs`: a reader of Ptex files' level 0 (constant, zipped, diff-zipped and tiled faces;
+//! `flate2`), each face resampled to at most `--ptex-max` texels an edge, and a writer for tests.
+//!
+//! Key types: `load`, `read_linear`, `mip_chain`, `MipChain`, `ptex::load`, `ptex::write`.
 
 use std::path::{Path, PathBuf};
 

@@ -36,6 +36,16 @@
 //! once: all reachable ones in parallel in [`Tracer::prepare`], or serially on first touch
 //! during traversal. [`render::render`] runs `prepare` then traces rows in parallel with rayon,
 //! one [`Scratch`] per worker so rays do not allocate.
+//!
+//! # Map
+//!
+//! (The crate's code map; ARCHITECTURE.md keeps a summary.)
+//! CPU reference traversal (binned-SAH BVHs, watertight triangles, multi-level walk with the GPU's
+//! semantics), CPU renderer, AOV comparison. Files, lowest first: `ray.rs` (ray maths,
+//! `shadow_offset`), `bvh.rs`, `mesh.rs`, `coverage.rs` (alpha coverage traversal asks),
+//! `traverse.rs`, `options.rs` (`View`, `RenderOptions`), `shade.rs`, `render.rs`.
+//!
+//! Key types: `render`, `compare`.
 
 pub mod bvh;
 pub mod compare;

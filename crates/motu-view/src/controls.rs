@@ -1,5 +1,5 @@
-//! What the keys change: the next frame's options, the camera, the element set, the overlay,
-//! progressive accumulation and the denoiser.
+//! What the keys (and the panel's widgets) change: the next frame's options, the camera, the
+//! element set, the panel, progressive accumulation and the denoiser.
 
 use crate::{FlyCamera, ViewOptions, VIEWS};
 use motu_abi::camera::CameraPose;
@@ -17,8 +17,8 @@ pub struct Keys {
     pub(crate) down: bool,
 }
 
-/// What the keys change: the next frame's options, the camera, the element set, the overlay,
-/// accumulation and the denoiser.
+/// What the keys and the panel change: the next frame's options, the camera, the element set,
+/// the panel, accumulation and the denoiser.
 #[derive(Debug)]
 pub struct Controls {
     pub render: RenderOptions,
@@ -28,13 +28,14 @@ pub struct Controls {
     pub denoise: bool,
     /// Instance-level LOD wanted (M); the source reports what ran.
     pub lod_instance: bool,
-    pub overlay: bool,
+    /// The panel is shown (Tab).
+    pub panel: bool,
     pub elements: Vec<String>,
     pub elements_on: Vec<bool>,
     pub cameras: Vec<(String, CameraPose)>,
     pub fly: FlyCamera,
     pub keys: Keys,
-    /// The last action, for the overlay.
+    /// The last action, for the panel.
     pub message: String,
 }
 
@@ -45,7 +46,7 @@ impl Controls {
             accumulate: opts.accumulate,
             denoise: opts.denoise,
             lod_instance: opts.lod_instance,
-            overlay: opts.overlay,
+            panel: opts.panel,
             elements: opts.elements.clone(),
             elements_on: opts.elements_on.clone(),
             cameras: opts.cameras.clone(),
@@ -105,7 +106,7 @@ impl Controls {
             KeyCode::KeyK => r.lod.stochastic ^= 1,
             KeyCode::KeyM => self.lod_instance = !self.lod_instance,
             KeyCode::KeyH => r.shadows = !r.shadows,
-            KeyCode::Tab => self.overlay = !self.overlay,
+            KeyCode::Tab => self.panel = !self.panel,
             KeyCode::KeyP => {
                 self.accumulate = !self.accumulate;
                 self.message = format!("accumulation {}", on_off(self.accumulate));
@@ -119,14 +120,22 @@ impl Controls {
         if let Some(d) = digit {
             if shift {
                 self.toggle_element(d);
-            } else if let Some((name, pose)) = self.cameras.get(d) {
-                self.fly.pose = *pose;
-                self.message = format!("camera {name}");
+            } else {
+                self.select_camera(d);
             }
         }
         false
     }
 
+    /// Moves to the scene's camera `i` (nothing if there is none).
+    pub fn select_camera(&mut self, i: usize) {
+        if let Some((name, pose)) = self.cameras.get(i) {
+            self.fly.pose = *pose;
+            self.message = format!("camera {name}");
+        }
+    }
+
+    /// Toggles element `d` (`usize::MAX`: all on); the last element on stays on.
     pub fn toggle_element(&mut self, d: usize) {
         let on = &mut self.elements_on;
         if d == usize::MAX {

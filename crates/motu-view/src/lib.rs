@@ -5,20 +5,22 @@
 //! presentation) and reach the screen through [`motu_gpu::Presenter`] (surface and swapchain
 //! live in motu-gpu: no Vulkan here).
 //! A fly camera, the scene's cameras on number keys, views, LOD modes and element toggles
-//! change the next frame's [`RenderOptions`]; an 8×8 bitmap-font overlay shows the frame's
-//! numbers. For tests and scripts, [`ViewOptions::frames`] renders that many frames through the
-//! real window and swapchain, reads the last one back from the swapchain image and exits.
+//! change the next frame's [`RenderOptions`]; an egui panel ([`panel`]) shows the frame's
+//! numbers and offers the same controls as widgets. The presenter draws the panel over the
+//! frame after the screenshot's read-back, so neither `--screenshot` nor `--aov` contains it.
+//! For tests and scripts, [`ViewOptions::frames`] renders that many frames through the real
+//! window and swapchain, reads the last one back from the swapchain image and exits.
 
 mod controls;
 mod fly;
-mod overlay;
 mod package;
+pub mod panel;
 pub mod progressive;
 
 use std::time::Instant;
 
 use motu_abi::camera::{CameraParams, CameraPose};
-use motu_gpu::{Presented, Presenter, RenderOptions, RenderOutput, View};
+use motu_gpu::{PanelPaint, Presented, Presenter, RenderOptions, RenderOutput, View};
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
@@ -29,7 +31,6 @@ use winit::window::{Window, WindowId};
 
 pub use controls::{Controls, Keys};
 pub use fly::{FlyCamera, Motion};
-pub use overlay::draw_text;
 pub use package::{
     chain, default_fly_speed, scene_cameras, PackageSource, PackageSourceSettings, SourceError,
     ViewStreamSettings,
@@ -77,7 +78,7 @@ pub fn check_display() -> Result<(), ViewError> {
     }
 }
 
-/// Numbers for the overlay that only the source knows.
+/// Numbers for the panel that only the source knows.
 #[derive(Clone, Debug, Default)]
 pub struct SourceStats {
     pub vram_used_bytes: u64,
@@ -147,7 +148,8 @@ pub struct ViewOptions {
     pub frames: Option<u32>,
     /// Poses to play, one per frame (a replayed camera path); the fly camera otherwise.
     pub replay: Option<Vec<CameraPose>>,
-    pub overlay: bool,
+    /// Show the panel at the start (Tab toggles it).
+    pub panel: bool,
     pub vsync: bool,
     /// Accumulate samples while the camera rests (P toggles; [`progressive`]).
     pub accumulate: bool,
@@ -163,7 +165,7 @@ pub struct ViewResult {
     /// Frames rendered and shown.
     pub frames_shown: u64,
     /// The last frame as shown (accumulated and denoised as the window showed it, the AOV the
-    /// run's first frame's), before the overlay.
+    /// run's first frame's), without the panel.
     pub last: Option<SourceFrame>,
     /// The last frame as read back from the swapchain image (automation mode).
     pub screenshot_rgba8: Option<Vec<u8>>,
@@ -180,6 +182,11 @@ pub struct ViewResult {
     pub accumulated_samples: u32,
     /// Whether the last frame shown was denoised.
     pub denoised: bool,
+    /// Frames presented with the panel drawn over them (after the read-back).
+    pub panel_frames: u64,
+    /// Pixels of the last frame that the panel changed on the window (read back again after
+    /// drawing it; 0 without a panel or a screenshot).
+    pub panel_pixels: u64,
 }
 
 /// Opens the window and runs until it is closed (or `opts.frames` frames were shown).
@@ -218,6 +225,10 @@ where
         last_frame_ms: 0.0,
         skips: 0,
         accum: progressive::Accumulator::default(),
+        egui: egui::Context::default(),
+        egui_input: None,
+        history: panel::History::default(),
+        textures: egui::TexturesDelta::default(),
         opts,
     };
     event_loop.set_control_flow(ControlFlow::Poll);
@@ -226,6 +237,7 @@ where
         .map_err(|e| ViewError::Window(e.to_string()))?;
     // Destroy the swapchain and surface before the window.
     app.presenter = None;
+    app.egui_input = None;
     app.window = None;
     if let Some(e) = app.error {
         return Err(e);
@@ -247,25 +259,23 @@ struct App<S: FrameSource> {
     last_frame_ms: f64,
     skips: u32,
     accum: progressive::Accumulator,
+    /// The panel's UI state and its window input (created with the window).
+    egui: egui::Context,
+    egui_input: Option<egui_winit::State>,
+    history: panel::History,
+    /// Texture changes egui made that no presented panel has uploaded yet.
+    textures: egui::TexturesDelta,
     opts: ViewOptions,
 }
 
 const VIEWS: [View; 4] = [View::Shaded, View::Ids, View::Lod, View::Heatmap];
 
-fn view_name(v: View) -> &'static str {
+pub(crate) fn view_name(v: View) -> &'static str {
     match v {
         View::Shaded => "shaded",
         View::Ids => "ids",
         View::Lod => "lod",
         View::Heatmap => "heatmap",
-    }
-}
-
-fn mib(b: u64) -> String {
-    if b >= 1 << 30 {
-        format!("{:.2} GiB", b as f64 / (1u64 << 30) as f64)
-    } else {
-        format!("{:.1} MiB", b as f64 / (1u64 << 20) as f64)
     }
 }
 
@@ -306,6 +316,14 @@ impl<S: FrameSource> App<S> {
         }
         .map_err(motu_gpu::GpuError::from)?;
         self.presenter = Some(presenter);
+        self.egui_input = Some(egui_winit::State::new(
+            self.egui.clone(),
+            egui::ViewportId::ROOT,
+            &window,
+            Some(window.scale_factor() as f32),
+            None,
+            None,
+        ));
         self.window = Some(window);
         Ok(())
     }
@@ -392,26 +410,62 @@ impl<S: FrameSource> App<S> {
             let src = &self.source;
             progressive::denoise(&mut frame.output, &camera, |m| src.base_colour(m));
         }
-        let mut shown = frame.output.rgba8.clone();
-        if self.ctl.overlay {
-            let lines = self.overlay_lines(&frame, w, h, samples, denoised);
-            draw_text(&mut shown, w, h, &lines, if w >= 1600 { 2 } else { 1 });
-        }
+        let primitives = if self.ctl.panel {
+            let info = panel::PanelInfo {
+                width: w,
+                height: h,
+                backend: frame.output.stats.backend,
+                frame_ms: self.last_frame_ms,
+                gpu_ms: frame.output.stats.ms_per_frame,
+                rays_per_second: frame.output.stats.rays_per_second,
+                traces_per_ray: frame.output.stats.traces_per_ray,
+                exposure_ev: frame.output.stats.exposure_ev,
+                stats: frame.stats.clone(),
+                samples,
+                denoised,
+            };
+            self.run_panel(&info)
+        } else {
+            None
+        };
         let Some(presenter) = self.presenter.as_mut() else {
             return Ok(());
         };
+        let paint = primitives.as_ref().map(|(p, ppp)| PanelPaint {
+            primitives: p,
+            textures: &self.textures,
+            pixels_per_point: *ppp,
+        });
         match presenter
-            .present(&shown, w, h, last)
+            .present(&frame.output.rgba8, w, h, last, paint.as_ref())
             .map_err(motu_gpu::GpuError::from)?
         {
             Presented::Skipped => {
                 self.skips += 1;
                 return self.check_skips();
             }
-            Presented::Shown { readback } => {
+            Presented::Shown {
+                readback,
+                panel,
+                shown,
+            } => {
+                if panel {
+                    // Uploaded: the next panel starts from these textures.
+                    self.textures = egui::TexturesDelta::default();
+                    self.result.panel_frames += 1;
+                }
+                if let (Some(shot), Some(shown)) = (&readback, &shown) {
+                    self.result.panel_pixels = shot
+                        .chunks_exact(4)
+                        .zip(shown.chunks_exact(4))
+                        .filter(|(a, b)| a[..3] != b[..3])
+                        .count() as u64;
+                }
                 self.skips = 0;
                 self.last_frame_ms = t0.elapsed().as_secs_f64() * 1e3;
                 self.result.frame_ms.push(self.last_frame_ms);
+                self.history
+                    .push(self.last_frame_ms, frame.output.stats.ms_per_frame);
                 self.result.frames_shown += 1;
                 self.result.incomplete_frames += u64::from(frame.stats.incomplete_pixels > 0);
                 self.result
@@ -445,102 +499,19 @@ impl<S: FrameSource> App<S> {
         Ok(())
     }
 
-    fn overlay_lines(
-        &self,
-        f: &SourceFrame,
-        w: u32,
-        h: u32,
-        samples: u32,
-        denoised: bool,
-    ) -> Vec<String> {
-        let st = &f.output.stats;
-        let s = &f.stats;
-        let r = &self.ctl.render;
-        let lod = if r.lod.forced_lod < 0 {
-            format!("auto (r_max {} px)", r.lod.r_max_px)
-        } else {
-            format!("forced {}", r.lod.forced_lod)
-        };
-        let elements: Vec<String> = self
-            .opts
-            .elements
-            .iter()
-            .zip(&self.ctl.elements_on)
-            .take(9)
-            .enumerate()
-            .map(|(i, (n, on))| format!("{}{}{}", i + 1, if *on { "+" } else { "-" }, n))
-            .collect();
-        let stream = match s.streaming {
-            Some((built, evicted)) => format!(
-                "streaming: {} passes, {built} built, {evicted} evicted{}",
-                s.passes,
-                if s.incomplete_pixels > 0 {
-                    format!(", {} px refining", s.incomplete_pixels)
-                } else {
-                    String::new()
-                }
-            ),
-            None => "full build (no streaming)".into(),
-        };
-        vec![
-            format!(
-                "motu view  {}x{}  {}  {}",
-                w,
-                h,
-                st.backend,
-                view_name(r.view)
-            ),
-            format!(
-                "frame {:.1} ms  gpu {:.2} ms  {:.2} Mrays/s  {:.2} traces/ray",
-                self.last_frame_ms,
-                st.ms_per_frame,
-                st.rays_per_second / 1e6,
-                st.traces_per_ray
-            ),
-            format!(
-                "VRAM {} / {}  structures {}/{} resident",
-                mib(s.vram_used_bytes),
-                if s.vram_budget_bytes == 0 || s.vram_budget_bytes == u64::MAX {
-                    "device".to_string()
-                } else {
-                    mib(s.vram_budget_bytes)
-                },
-                s.resident_structures,
-                s.total_structures
-            ),
-            stream,
-            format!(
-                "LOD {lod}{} ({})  shadows {}",
-                if r.lod.stochastic != 0 {
-                    " stochastic"
-                } else {
-                    ""
-                },
-                match (s.lod_mode, self.ctl.lod_instance) {
-                    ("", _) => "mode ?",
-                    ("instance", _) => "instance",
-                    ("none", _) => "no selectors",
-                    (_, true) => "traversal: rule needs it",
-                    (_, false) => "traversal",
-                },
-                if r.shadows { "on" } else { "off" }
-            ),
-            format!(
-                "samples {samples}{}  denoiser {}",
-                match (self.ctl.accumulate, r.view) {
-                    (true, View::Shaded) => " (accumulating at rest)",
-                    (true, _) => "",
-                    (false, _) => " (accumulation off)",
-                },
-                if denoised { "on" } else { "off" }
-            ),
-            format!("elements: {}", elements.join(" ")),
-            format!("speed {:.3}/s  {}", self.ctl.fly.speed, self.ctl.message),
-            "WASD/QE move, drag look, wheel speed, 1-9 cameras".into(),
-            "V/F1-F4 view, L lod, M lod mode, K dither, H shadows".into(),
-            "P accumulate, N denoise, Shift+1-9 elements".into(),
-            "Tab overlay, Esc quit".into(),
-        ]
+    /// Lays the panel out (applying its changes to the controls) and tessellates it; the
+    /// new textures join `self.textures` until a presented panel uploads them.
+    fn run_panel(&mut self, info: &panel::PanelInfo) -> Option<(Vec<egui::ClippedPrimitive>, f32)> {
+        let (state, window) = (self.egui_input.as_mut()?, self.window.as_ref()?);
+        let input = state.take_egui_input(window);
+        let (ctl, history) = (&mut self.ctl, &self.history);
+        let out = self
+            .egui
+            .run(input, |ctx| panel::build(ctx, info, history, ctl));
+        state.handle_platform_output(window, out.platform_output);
+        self.textures.append(out.textures_delta);
+        let primitives = self.egui.tessellate(out.shapes, out.pixels_per_point);
+        Some((primitives, out.pixels_per_point))
     }
 }
 
@@ -554,6 +525,16 @@ impl<S: FrameSource> ApplicationHandler for App<S> {
     }
 
     fn window_event(&mut self, el: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        // The panel sees every event; what it takes (a click on it, a focused slider's keys)
+        // does not reach the camera. Tab and Esc always do.
+        let taken = match (
+            self.ctl.panel,
+            self.egui_input.as_mut(),
+            self.window.as_ref(),
+        ) {
+            (true, Some(state), Some(window)) => state.on_window_event(window, &event).consumed,
+            _ => false,
+        };
         match event {
             WindowEvent::CloseRequested => el.exit(),
             WindowEvent::Resized(size) => {
@@ -564,14 +545,15 @@ impl<S: FrameSource> ApplicationHandler for App<S> {
             WindowEvent::ModifiersChanged(m) => self.modifiers = m.state(),
             WindowEvent::KeyboardInput { event, .. } => {
                 if let PhysicalKey::Code(code) = event.physical_key {
-                    if self.opts.frames.is_none() {
+                    let always = matches!(code, KeyCode::Tab | KeyCode::Escape);
+                    if self.opts.frames.is_none() && (always || !taken) {
                         self.on_key(el, code, event.state == ElementState::Pressed);
                     }
                 }
             }
             WindowEvent::MouseInput { state, button, .. } => {
                 if matches!(button, MouseButton::Left | MouseButton::Right) {
-                    self.dragging = state == ElementState::Pressed;
+                    self.dragging = state == ElementState::Pressed && !taken;
                 }
             }
             WindowEvent::CursorMoved { position, .. } => {
@@ -583,6 +565,7 @@ impl<S: FrameSource> ApplicationHandler for App<S> {
                 }
                 self.cursor = Some((position.x, position.y));
             }
+            WindowEvent::MouseWheel { .. } if taken => {}
             WindowEvent::MouseWheel { delta, .. } => {
                 let notches = match delta {
                     MouseScrollDelta::LineDelta(_, y) => y,
@@ -611,7 +594,7 @@ mod tests {
     use super::*;
     use glam::Vec3;
 
-    fn pose(z: f32) -> CameraPose {
+    pub(crate) fn pose(z: f32) -> CameraPose {
         CameraPose {
             world_eye: Vec3::new(0.0, 0.0, z),
             world_forward: Vec3::NEG_Z,
@@ -621,7 +604,7 @@ mod tests {
         }
     }
 
-    fn controls() -> Controls {
+    pub(crate) fn controls() -> Controls {
         Controls::new(&ViewOptions {
             title: String::new(),
             width: 8,
@@ -635,7 +618,7 @@ mod tests {
             speed: 1.0,
             frames: None,
             replay: None,
-            overlay: true,
+            panel: true,
             vsync: true,
             accumulate: true,
             denoise: false,
@@ -650,7 +633,7 @@ mod tests {
     }
 
     #[test]
-    fn keys_switch_views_lod_cameras_elements_and_overlay() {
+    fn keys_switch_views_lod_cameras_elements_and_panel() {
         let mut c = controls();
         press(&mut c, KeyCode::KeyV, false);
         assert_eq!(c.render.view, View::Ids);
@@ -688,7 +671,7 @@ mod tests {
         assert_eq!(c.elements_on, [true, true]);
         assert_eq!(c.fly.pose, pose(2.0), "Shift+digit is not a camera");
         press(&mut c, KeyCode::Tab, false);
-        assert!(!c.overlay);
+        assert!(!c.panel);
         press(&mut c, KeyCode::KeyH, false);
         assert!(!c.render.shadows);
         assert!(press(&mut c, KeyCode::Escape, false));

@@ -37,6 +37,9 @@ pub struct ViewStreamSettings {
     /// `--frames` as given: a scripted run of that many frames; `None`: flying (a replayed
     /// camera path without `--frames` too).
     pub frames: Option<u32>,
+    /// `--host-cache`, `--as-cache`, `--no-as-cache`: where built structures are kept between
+    /// evictions and processes (as `motu render --stream`).
+    pub cache: motu_render::CacheSettings,
 }
 
 impl ViewStreamSettings {
@@ -188,17 +191,21 @@ impl<'p> PackageSource<'p> {
             ..Default::default()
         })
         .map_err(|e| SourceError::Device(e.into()))?;
-        // Streaming renders large TLASes split into pieces (as `motu render --stream`); the
-        // split tables are made once and live as long as the viewer (leaked: the renderer and
+        // Streaming renders large TLASes split into pieces (as `motu render --stream`, from
+        // the split the import stored when `base` is the package's own); the split tables are
+        // made once and live as long as the viewer (leaked: the renderer and
         // every element subset borrow them).
         let base = match &settings.stream {
-            Some(st) => match motu_render::stream_split(&base, st.bounds.split_instances)? {
-                Some(split) => {
-                    let split: &'p motu_render::StreamSplit = Box::leak(Box::new(split));
-                    split.view(&base)
+            Some(st) => {
+                match motu_render::package_stream_split(meshes.0, &base, st.bounds.split_instances)?
+                {
+                    Some(split) => {
+                        let split: &'p motu_render::StreamSplit = Box::leak(Box::new(split));
+                        split.view(&base)
+                    }
+                    None => base,
                 }
-                None => base,
-            },
+            }
             None => base,
         };
         let mut src = PackageSource {
@@ -274,8 +281,25 @@ impl<'p> PackageSource<'p> {
             }
             Some(stream) => {
                 let opts = stream.options(budget, s.max_allocations);
-                let sr = motu_gpu::StreamingRenderer::new(&self.ctx, view, self.meshes, &opts)
-                    .map_err(SourceError::StreamSetup)?;
+                // The previous renderer's cache (after an element toggle) stays warm.
+                let mut cache = match &mut self.renderer {
+                    Renderer::Stream(Some(old)) => old.take_cache(),
+                    _ => None,
+                }
+                .or_else(|| stream.cache.open(self.meshes.0));
+                let plan = match cache {
+                    Some(ref mut c) => motu_gpu::StreamPlan::new_cached(&view, c),
+                    None => motu_gpu::StreamPlan::new(&view),
+                };
+                let sr = motu_gpu::StreamingRenderer::with_plan_and_cache(
+                    &self.ctx,
+                    view,
+                    plan,
+                    self.meshes,
+                    &opts,
+                    cache,
+                )
+                .map_err(SourceError::StreamSetup)?;
                 Renderer::Stream(Some(Box::new(sr)))
             }
         };

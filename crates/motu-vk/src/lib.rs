@@ -27,6 +27,23 @@
 //! (AS types), `barrier`, `conv` (motu → Vulkan conversions of what is recorded),
 //! `build_sizes` (AS size queries), `structure` (AS objects), `command` (typed recording),
 //! `present`.
+//!
+//! # Map
+//!
+//! (The crate's code map; ARCHITECTURE.md keeps a summary.)
+//! **The device layer: the only crate that uses `ash` (and `ash-window`) and makes `unsafe` Vulkan
+//! calls.** Instance, device and limits (`capabilities.rs`: what a physical device offers),
+//! validation capture, RAII buffers and memory, the budgeted heap (`heap.rs`: motu-alloc's policy
+//! applied to device memory), compute and ray-tracing pipelines (the SPIR-V is given by motu-gpu),
+//! timestamp and compacted-size queries, acceleration-structure objects and size queries,
+//! presentation (surface + swapchain via ash-window), and fenced submission of typed commands
+//! (`CommandRecorder`: copies, barriers, dispatches, ray launches, AS builds, copies and compacted
+//! sizes; no raw command buffer leaves it). The conversions of what is recorded are in `conv.rs`
+//! (geometry, build flags, copy modes, barriers, instance records); a resource's creation flags
+//! stay beside its type (`BufferUsage`).
+//!
+//! Key types: `Context`, `GpuHeap`, `Buffer`, `CommandRecorder`, `AsBuild`, `AsGeometry`,
+//! `AccelStruct`, `RtPipeline`, `Presenter`, `VkError`.
 
 mod accel;
 mod barrier;
@@ -40,6 +57,7 @@ mod heap;
 mod instance;
 mod limits;
 mod memory;
+mod panel;
 mod pipeline;
 mod present;
 mod query;
@@ -73,6 +91,7 @@ pub use memory::{
     Buffer, BufferDesc, BufferUsage, DeviceAddress, DeviceMemory, MemoryLocation,
     MemoryRequirements,
 };
+pub use panel::PanelPaint;
 pub use pipeline::{BindingSet, ComputePipeline, ComputePipelineDesc};
 pub use present::{Presented, Presenter, RawDisplayHandle, RawWindowHandle};
 pub use query::TimestampQueries;

@@ -6,7 +6,8 @@
 //! image: a raw texel copy, since the bytes are already sRGB-encoded (UNORM and SRGB formats
 //! both show them exactly as the headless PNG has them). With `read_back`, the presented image
 //! is copied out again before presentation: that is how `--screenshot` proves the window shows
-//! the same pixels as `motu render`.
+//! the same pixels as `motu render`. The viewer's panel ([`PanelPaint`]) is drawn over the
+//! image after that read-back, so a screenshot never contains it.
 //!
 //! One frame in flight: `present` waits for its own submission, which keeps buffer reuse
 //! trivially safe; the renderer's own fence already serialises the frame.
@@ -19,6 +20,7 @@ pub use raw_window_handle::{RawDisplayHandle, RawWindowHandle};
 use crate::context::Context;
 use crate::error::{Result, VkError};
 use crate::memory::{Buffer, BufferDesc, BufferUsage, MemoryLocation};
+use crate::panel::{PanelPaint, PanelPainter};
 
 /// What [`Presenter::present`] did.
 #[derive(Debug)]
@@ -26,7 +28,14 @@ pub enum Presented {
     /// The frame is on screen; with `read_back`, the swapchain image's pixels as RGBA8 (`None`
     /// when the image could not be read: its size differs from the frame's, or the surface does
     /// not allow reading swapchain images).
-    Shown { readback: Option<Vec<u8>> },
+    /// `panel`: whether a panel was drawn over the frame (after the read-back); `shown`: with
+    /// `read_back` and a panel, the image as presented, panel included (for tests that the
+    /// panel reached the window; never a screenshot).
+    Shown {
+        readback: Option<Vec<u8>>,
+        panel: bool,
+        shown: Option<Vec<u8>>,
+    },
     /// The surface is out of date or has zero size (minimised): nothing was shown; the
     /// swapchain is recreated on the next call.
     Skipped,
@@ -34,6 +43,10 @@ pub enum Presented {
 
 /// A window surface and its swapchain. Drop it before the window.
 pub struct Presenter {
+    /// First: dropped (its Vulkan objects destroyed) while `ctx` still holds the device.
+    panel: PanelPainter,
+    /// Whether swapchain images can be colour attachments (the panel is drawn only then).
+    panel_ok: bool,
     ctx: Context,
     surface_fn: ash::khr::surface::Instance,
     swapchain_fn: ash::khr::swapchain::Device,
@@ -101,6 +114,8 @@ impl Presenter {
         let surface_fn = ash::khr::surface::Instance::new(&inst.entry, &inst.instance);
         let swapchain_fn = ash::khr::swapchain::Device::new(&inst.instance, &shared.device);
         let mut p = Presenter {
+            panel: PanelPainter::new(&shared.device),
+            panel_ok: false,
             ctx: ctx.clone(),
             surface_fn,
             swapchain_fn,
@@ -282,6 +297,12 @@ impl Presenter {
         if readable {
             usage |= vk::ImageUsageFlags::TRANSFER_SRC;
         }
+        let panel_ok = caps
+            .supported_usage_flags
+            .contains(vk::ImageUsageFlags::COLOR_ATTACHMENT);
+        if panel_ok {
+            usage |= vk::ImageUsageFlags::COLOR_ATTACHMENT;
+        }
         let info = vk::SwapchainCreateInfoKHR::default()
             .surface(self.surface)
             .min_image_count(count)
@@ -312,6 +333,11 @@ impl Presenter {
             .map_err(VkError::vk("vkCreateSemaphore"))?;
             self.rendered.push(s);
         }
+        if panel_ok {
+            self.panel
+                .set_targets(&self.images, format.format, [extent.width, extent.height])?;
+        }
+        self.panel_ok = panel_ok;
         self.format = format.format;
         self.readable = readable;
         self.extent = [extent.width, extent.height];
@@ -328,6 +354,8 @@ impl Presenter {
 
     fn destroy_swapchain(&mut self) {
         let device = &self.ctx.shared.device;
+        // The device is idle (callers wait).
+        self.panel.drop_targets();
         for s in self.rendered.drain(..) {
             // SAFETY: the device is idle (callers wait), so no pending wait uses it.
             unsafe { device.destroy_semaphore(s, None) };
@@ -365,13 +393,15 @@ impl Presenter {
 
     /// Shows `rgba8` (`width × height`, row 0 at the top): copied into the next swapchain image
     /// at the top-left (a frame smaller than the swapchain leaves the rest dark, a larger one
-    /// is cut), then presented. See [`Presented`].
+    /// is cut), read back if asked, `panel` drawn over it (where the surface allows drawing),
+    /// then presented. See [`Presented`].
     pub fn present(
         &mut self,
         rgba8: &[u8],
         width: u32,
         height: u32,
         read_back: bool,
+        panel: Option<&PanelPaint<'_>>,
     ) -> Result<Presented> {
         let pixels = u64::from(width) * u64::from(height);
         if width == 0 || height == 0 || rgba8.len() as u64 != pixels * 4 {
@@ -408,18 +438,31 @@ impl Presenter {
         }
         let [ew, eh] = self.extent;
         let readable = read_back && self.readable && [width, height] == [ew, eh];
+        let panel = panel.filter(|_| self.panel_ok);
+        // The frame, then (with a panel) the image as shown.
+        let copies = if panel.is_some() { 2 } else { 1 };
         if readable {
             Self::host_buffer(
                 &ctx,
                 &mut self.readback,
                 "present-readback",
-                pixels * 4,
+                copies * pixels * 4,
                 BufferUsage::TRANSFER_DST,
                 MemoryLocation::Readback,
             )?;
         }
         let shared = &ctx.shared;
         let device = &shared.device;
+        if let Some(paint) = panel {
+            let queue = shared.queue();
+            self.panel.upload(
+                &shared.instance.instance,
+                shared.info.handle,
+                *queue,
+                self.pool,
+                paint,
+            )?;
+        }
         // SAFETY: the swapchain is live; `acquired` is unsignalled (its last wait completed:
         // the submission that waited on it was fenced).
         let acquired = unsafe {
@@ -579,20 +622,32 @@ impl Presenter {
                 );
                 last = vk::ImageLayout::TRANSFER_SRC_OPTIMAL;
             }
-            device.cmd_pipeline_barrier(
-                cmd,
-                vk::PipelineStageFlags::TRANSFER,
-                vk::PipelineStageFlags::BOTTOM_OF_PIPE,
-                vk::DependencyFlags::empty(),
-                &[],
-                &[],
-                &[barrier(
-                    last,
-                    vk::ImageLayout::PRESENT_SRC_KHR,
-                    vk::AccessFlags::TRANSFER_WRITE,
-                    vk::AccessFlags::empty(),
-                )],
-            );
+            if let Some(paint) = panel {
+                // After the read-back: the screenshot is the frame alone.
+                self.panel.record(cmd, image, index as usize, last, paint)?;
+                if let (true, Some(rb)) = (readable, self.readback.as_ref()) {
+                    let after = vk::BufferImageCopy {
+                        buffer_offset: pixels * 4,
+                        ..copy
+                    };
+                    self.panel.copy_shown(cmd, image, rb.handle(), after);
+                }
+            } else {
+                device.cmd_pipeline_barrier(
+                    cmd,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::PipelineStageFlags::BOTTOM_OF_PIPE,
+                    vk::DependencyFlags::empty(),
+                    &[],
+                    &[],
+                    &[barrier(
+                        last,
+                        vk::ImageLayout::PRESENT_SRC_KHR,
+                        vk::AccessFlags::TRANSFER_WRITE,
+                        vk::AccessFlags::empty(),
+                    )],
+                );
+            }
             device
                 .end_command_buffer(cmd)
                 .map_err(VkError::vk("vkEndCommandBuffer"))?;
@@ -630,6 +685,9 @@ impl Presenter {
                 .reset_fences(&[self.fence])
                 .map_err(VkError::vk("vkResetFences"))?;
         }
+        if let Some(paint) = panel {
+            self.panel.free(paint)?;
+        }
         match presented {
             Ok(false) => {}
             Ok(true) | Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => self.stale = true,
@@ -640,18 +698,22 @@ impl Presenter {
                 })
             }
         }
-        let readback = match (readable, self.readback.as_ref()) {
-            (true, Some(rb)) => {
-                let mut px = vec![0u8; (pixels * 4) as usize];
-                rb.read_bytes(0, &mut px)?;
-                if is_bgra(self.format) {
-                    px.chunks_exact_mut(4).for_each(|p| p.swap(0, 2));
-                }
-                Some(px)
+        let read = |copy: u64| -> Result<Option<Vec<u8>>> {
+            let (true, Some(rb)) = (readable && copy < copies, self.readback.as_ref()) else {
+                return Ok(None);
+            };
+            let mut px = vec![0u8; (pixels * 4) as usize];
+            rb.read_bytes(copy * pixels * 4, &mut px)?;
+            if is_bgra(self.format) {
+                px.chunks_exact_mut(4).for_each(|p| p.swap(0, 2));
             }
-            _ => None,
+            Ok(Some(px))
         };
-        Ok(Presented::Shown { readback })
+        Ok(Presented::Shown {
+            readback: read(0)?,
+            panel: panel.is_some(),
+            shown: read(1)?,
+        })
     }
 }
 

@@ -144,7 +144,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
             .unwrap_or_else(|| motu_view::default_fly_speed(&base)),
         frames,
         replay: replay_poses,
-        overlay: a.overlay || a.frames.is_none(),
+        panel: a.overlay || (a.frames.is_none() && !a.no_panel),
         vsync: !a.no_vsync,
         accumulate: a.accumulate || a.frames.is_none(),
         denoise: a.denoise,
@@ -160,6 +160,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
             bounds: crate::cmd::render::stream_bounds(&a.stream_bounds),
             max_passes: a.stream_passes,
             frames: a.frames,
+            cache: crate::cmd::render::cache_settings(&a.as_cache),
         }),
     };
     let result = motu_view::run(opts, |o| {
@@ -200,7 +201,13 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         stats["frames"] = json!(result.frames_shown);
         stats["wall_ms_per_frame_median"] = json!(ms.get(ms.len() / 2).copied().unwrap_or(0.0));
         stats["wall_ms_per_frame"] = json!(result.frame_ms);
-        stats["window"] = json!({"width": w, "height": h, "presented_via": "swapchain"});
+        stats["window"] = json!({
+            "width": w,
+            "height": h,
+            "presented_via": "swapchain",
+            "panel_frames": result.panel_frames,
+            "panel_pixels": result.panel_pixels,
+        });
         stats["vram_used_bytes"] = json!(last.stats.vram_used_bytes);
         stats["resident_structures"] = json!(last.stats.resident_structures);
         stats["total_structures"] = json!(last.stats.total_structures);

@@ -17,9 +17,12 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use motu_alloc::{AllocKind, MemoryClass};
-use motu_ascache::{AsCache, CacheKey, CacheKeyBuilder, CacheStats, Tier};
+use motu_ascache::{AsCache, CacheKey, CacheKeyBuilder, CacheStats, Tier, SERIALIZED_HEADER_BYTES};
 use motu_vk::{AsLevel, BufferUsage, SerializedHeader, SizeQueries, SERIALIZED_ALIGNMENT};
+use rayon::prelude::*;
 
+use super::proxy_boxes::{self, Box6};
+use super::skeleton::ms_since;
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
 use crate::scene::AccelStruct;
@@ -43,6 +46,14 @@ impl StructureCache {
 
     pub fn stats(&self) -> CacheStats {
         self.cache.stats()
+    }
+
+    pub(super) fn scene_identity(&self) -> &[u8] {
+        &self.scene_identity
+    }
+
+    pub(super) fn cache_mut(&mut self) -> &mut AsCache {
+        &mut self.cache
     }
 }
 
@@ -90,6 +101,13 @@ impl StreamingRenderer<'_> {
             keys: vec![None; n],
             driver: self.ctx.driver_identity(),
         });
+    }
+
+    /// Detaches the structure cache (with what it holds) for another renderer of the same
+    /// scene, e.g. the viewer's after an element toggle: its entries stay warm and its pending
+    /// disk writes go on instead of being waited for.
+    pub fn take_cache(&mut self) -> Option<StructureCache> {
+        self.reuse.cache.take().map(|a| a.cache)
     }
 
     /// The structure cache's counts (`None`: no cache attached).
@@ -143,7 +161,9 @@ impl StreamingRenderer<'_> {
         let keys: Vec<CacheKey> = keyed.iter().map(|k| k.1).collect();
         let a = self.reuse.cache.as_mut().expect("attached");
         // One call for the whole set: entries on disk are read on several threads.
+        let read = Instant::now();
         let found = a.cache.cache.get_many(&keys, &compatible);
+        self.frame.stats.restore_read_ms += ms_since(read);
         for ((b, key), found) in keyed.into_iter().zip(found) {
             match found {
                 Some((blob, tier)) => match SerializedHeader::read(&blob) {
@@ -171,7 +191,7 @@ impl StreamingRenderer<'_> {
         let mut restored = Vec::with_capacity(hits.len());
         self.restore_some(&hits, evict, &mut restored, &mut rest)?;
         rest.sort_unstable();
-        self.frame.stats.restore_ms += t.elapsed().as_secs_f64() * 1e3;
+        self.frame.stats.restore_ms += ms_since(t);
         Ok((restored, rest))
     }
 
@@ -208,6 +228,7 @@ impl StreamingRenderer<'_> {
         hits: &[(usize, Arc<[u8]>, SerializedHeader)],
     ) -> Result<Vec<(usize, AccelStruct)>> {
         let ctx = self.ctx.clone();
+        let t = Instant::now();
         let align = |v: u64| v.div_ceil(SERIALIZED_ALIGNMENT) * SERIALIZED_ALIGNMENT;
         let total: u64 = hits.iter().map(|h| align(h.1.len() as u64)).sum();
         let staging = self.heap.alloc_buffer(
@@ -221,10 +242,9 @@ impl StreamingRenderer<'_> {
         let mut out: Vec<(usize, AccelStruct)> = Vec::with_capacity(hits.len());
         let result = (|| -> Result<()> {
             let base = staging.device_address()?;
-            let mut at = 0u64;
             let mut offsets = Vec::with_capacity(hits.len());
+            let mut at = 0u64;
             for (b, blob, h) in hits {
-                staging.write_bytes(at, blob)?;
                 offsets.push(at);
                 let accel = AccelStruct::new(
                     &ctx,
@@ -236,12 +256,32 @@ impl StreamingRenderer<'_> {
                 out.push((*b, accel));
                 at += align(blob.len() as u64);
             }
+            // The host's copies in parallel: one thread's memcpy into pinned memory held
+            // restores to a few GB/s.
+            staging.with_mapped_mut(0, at as usize, |bytes| {
+                let mut parts = Vec::with_capacity(hits.len());
+                let mut rest = bytes;
+                for (i, (_, blob, _)) in hits.iter().enumerate() {
+                    let next = offsets
+                        .get(i + 1)
+                        .map_or(rest.len(), |&o| (o - offsets[i]) as usize);
+                    let (part, tail) = rest.split_at_mut(next);
+                    parts.push((&mut part[..blob.len()], &blob[..]));
+                    rest = tail;
+                }
+                parts
+                    .into_par_iter()
+                    .for_each(|(dst, src)| dst.copy_from_slice(src));
+            })?;
+            self.frame.stats.restore_upload_ms += ms_since(t);
+            let gpu = Instant::now();
             let mut rec = ctx.record("restore blases")?;
             for ((_, accel), &off) in out.iter().zip(&offsets) {
                 rec.deserialize_acceleration_structure(base.offset(off), accel.target())?;
             }
             rec.barrier();
             rec.submit_and_wait()?;
+            self.frame.stats.restore_gpu_ms += ms_since(gpu);
             Ok(())
         })();
         self.heap.free(staging);
@@ -277,7 +317,7 @@ impl StreamingRenderer<'_> {
             return Ok(());
         }
         self.store_some(&todo)?;
-        self.frame.stats.cache_store_ms += t.elapsed().as_secs_f64() * 1e3;
+        self.frame.stats.cache_store_ms += ms_since(t);
         Ok(())
     }
 
@@ -285,6 +325,7 @@ impl StreamingRenderer<'_> {
     /// single structure that does not fit is skipped, counted).
     fn store_some(&mut self, todo: &[(usize, &AccelStruct, CacheKey)]) -> Result<()> {
         let ctx = self.ctx.clone();
+        let t = Instant::now();
         let queries = SizeQueries::serialization(&ctx, todo.len() as u32)?;
         let targets: Vec<_> = todo.iter().map(|t| t.1.target()).collect();
         let mut rec = ctx.record("serialised sizes")?;
@@ -329,24 +370,147 @@ impl StreamingRenderer<'_> {
             }
             rec.barrier();
             rec.submit_and_wait()?;
-            let mut blobs = Vec::with_capacity(todo.len());
-            for (&off, &size) in offsets.iter().zip(&sizes) {
-                // Read straight into the shared blob the cache keeps (no second copy).
-                let mut blob: Arc<[u8]> = std::iter::repeat_n(0u8, size as usize).collect();
-                let bytes = Arc::get_mut(&mut blob).expect("a new blob is unshared");
-                readback.read_bytes(off, bytes)?;
-                blobs.push(blob);
-            }
+            self.frame.stats.store_serialize_ms += ms_since(t);
+            let copy = Instant::now();
+            // Each blob copied once, straight into the shared allocation the cache keeps (no
+            // zero fill), on all cores: one thread's reads of pinned memory held storing to
+            // about 1 GB/s.
+            let blobs = readback.with_mapped_mut(0, at as usize, |bytes| {
+                let bytes: &[u8] = bytes;
+                offsets
+                    .par_iter()
+                    .zip(&sizes)
+                    .map(|(&off, &size)| Arc::<[u8]>::from(&bytes[off as usize..][..size as usize]))
+                    .collect::<Vec<_>>()
+            })?;
+            self.frame.stats.store_copy_ms += ms_since(copy);
             Ok(blobs)
         })();
         self.heap.free(readback);
         let blobs = result?;
+        let put = Instant::now();
         let a = self.reuse.cache.as_mut().expect("attached");
         for ((_, _, key), blob) in todo.iter().zip(blobs) {
             self.frame.stats.cache_stored_bytes += blob.len() as u64;
             self.frame.stats.cache_stored += 1;
             a.cache.cache.put(*key, blob);
         }
+        self.frame.stats.store_put_ms += ms_since(put);
         Ok(())
+    }
+}
+
+/// The first bytes of a proxy-box table's cache entry: where a serialised structure has its
+/// driver's compatibility header (the cache reads entries through it), so no driver accepts
+/// the table as a structure and the table is accepted only as itself.
+const PROXY_BOXES_MAGIC: [u8; SERIALIZED_HEADER_BYTES] =
+    *b"motu proxy-box table v1\0\0\0\0\0\0\0\0\0";
+const PROXY_BOXES_DOMAIN: &str = "motu-proxy-boxes-v1";
+
+/// A proxy-box table as a cache blob: the magic, the index's and the table's lengths (u64
+/// each), the index (`[first, fan]` per BLAS), the boxes.
+fn encode_proxy_boxes(index: &[[u32; 2]], boxes: &[Box6]) -> Arc<[u8]> {
+    let mut out = Vec::with_capacity(
+        SERIALIZED_HEADER_BYTES + 16 + std::mem::size_of_val(index) + std::mem::size_of_val(boxes),
+    );
+    out.extend_from_slice(&PROXY_BOXES_MAGIC);
+    out.extend_from_slice(&(index.len() as u64).to_le_bytes());
+    out.extend_from_slice(&(boxes.len() as u64).to_le_bytes());
+    out.extend_from_slice(bytemuck::cast_slice(index));
+    out.extend_from_slice(bytemuck::cast_slice(boxes));
+    out.into()
+}
+
+/// The boxes of a blob [`encode_proxy_boxes`] made for `index` (`None`: not such a blob).
+fn decode_proxy_boxes(blob: &[u8], index: &[[u32; 2]], box_count: usize) -> Option<Vec<Box6>> {
+    let rest = blob.strip_prefix(&PROXY_BOXES_MAGIC[..])?;
+    let (n_index, rest) = rest.split_first_chunk::<8>()?;
+    let (n_boxes, rest) = rest.split_first_chunk::<8>()?;
+    if u64::from_le_bytes(*n_index) != index.len() as u64
+        || u64::from_le_bytes(*n_boxes) != box_count as u64
+    {
+        return None;
+    }
+    let index_bytes: &[u8] = bytemuck::cast_slice(index);
+    let rest = rest.strip_prefix(index_bytes)?;
+    if rest.len() != box_count * std::mem::size_of::<Box6>() {
+        return None;
+    }
+    // The blob's bytes are not aligned for f32: copy them out.
+    let mut boxes = vec![[0f32; 6]; box_count];
+    bytemuck::cast_slice_mut::<Box6, u8>(&mut boxes).copy_from_slice(rest);
+    Some(boxes)
+}
+
+impl StreamingRenderer<'_> {
+    /// The boxes inside streamable BLASes (`proxy_boxes.rs`, laid out as `index`): from the
+    /// structure cache when it holds this scene's table, else made from every mesh (seconds
+    /// on a large scene) and kept there for the next process.
+    pub(super) fn proxy_boxes_cached(&mut self, index: &[[u32; 2]], box_count: usize) -> Vec<Box6> {
+        let view = self.view;
+        let key = self.reuse.cache.as_ref().map(|a| {
+            let mut k = CacheKeyBuilder::new(PROXY_BOXES_DOMAIN);
+            k.bytes(&a.cache.scene_identity)
+                .bytes(bytemuck::cast_slice(view.blases))
+                .bytes(bytemuck::cast_slice(view.geometries))
+                .bytes(bytemuck::cast_slice(index));
+            k.finish()
+        });
+        if let (Some(key), Some(a)) = (key, self.reuse.cache.as_mut()) {
+            let table = |h: &[u8; SERIALIZED_HEADER_BYTES]| *h == PROXY_BOXES_MAGIC;
+            if let Some((blob, tier)) = a.cache.cache.get(&key, &table) {
+                match decode_proxy_boxes(&blob, index, box_count) {
+                    Some(boxes) => {
+                        tracing::info!(
+                            ?tier,
+                            boxes = box_count,
+                            "proxy boxes from the structure cache"
+                        );
+                        self.totals.proxy_boxes_cached = true;
+                        return boxes;
+                    }
+                    None => {
+                        tracing::warn!("structure cache: a proxy-box table that does not match this scene's layout; made again");
+                        a.cache.cache.remove(&key);
+                    }
+                }
+            }
+        }
+        let boxes = proxy_boxes::compute(&view, self.source, index, box_count);
+        if let (Some(key), Some(a)) = (key, self.reuse.cache.as_mut()) {
+            a.cache.cache.put(key, encode_proxy_boxes(index, &boxes));
+        }
+        boxes
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_proxy_box_table_round_trips_and_refuses_another_layout() {
+        let index = [[0u32, 1], [0, 0], [2, 2]];
+        let boxes: Vec<Box6> = (0..8)
+            .map(|i| [i as f32, 1.0, 2.0, 3.0, 4.0, 5.0 + i as f32])
+            .collect();
+        let blob = encode_proxy_boxes(&index, &boxes);
+        assert_eq!(
+            decode_proxy_boxes(&blob, &index, boxes.len()),
+            Some(boxes.clone())
+        );
+        // Another layout, another count, a cut blob, another header: not this table.
+        assert_eq!(
+            decode_proxy_boxes(&blob, &[[0, 1], [0, 0], [2, 4]], boxes.len()),
+            None
+        );
+        assert_eq!(decode_proxy_boxes(&blob, &index, boxes.len() - 1), None);
+        assert_eq!(
+            decode_proxy_boxes(&blob[..blob.len() - 1], &index, boxes.len()),
+            None
+        );
+        let mut other = blob.to_vec();
+        other[0] ^= 1;
+        assert_eq!(decode_proxy_boxes(&other, &index, boxes.len()), None);
     }
 }

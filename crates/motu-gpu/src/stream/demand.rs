@@ -182,6 +182,7 @@ impl<'a> StreamingRenderer<'a> {
                 }
                 self.frame.stats.blas_built += 1;
                 self.frame.stats.built_bytes += accel.size_bytes;
+                self.frame.stats.blas_structure_bytes += accel.size_bytes;
                 self.frame.stats.triangles_built += u64::from(self.view.blases[b].primitive_count);
             }
             self.reuse.built_once[b] = true;

@@ -99,8 +99,12 @@ impl<'a> StreamingRenderer<'a> {
         let fb = self.prepare_frame_buffers(camera, opts, guard.len())?;
         let next = self.frame.next_camera.take();
         let result = self.run_passes(&fb, w, h, &guard).and_then(|image| {
+            // A camera at rest after a one-pass frame: its next frame needs what this one had
+            // resident at once, so a probe would only find it again.
+            let still = next == Some(*camera) && self.frame.stats.passes == 1;
+            self.frame.stats.probe_skipped_still = still;
             // The probe of the next frame's camera (its buffers are this frame's: same size).
-            let probe = match next {
+            let probe = match next.filter(|_| !still) {
                 Some(n)
                     if self.opts.probe_stride > 0
                         && (n.width, n.height) == (w, h)

@@ -119,6 +119,7 @@ mod options;
 mod params;
 mod passes;
 mod persistent;
+mod plan_cache;
 mod probe;
 mod proxy_boxes;
 mod rebuild;
@@ -224,6 +225,20 @@ impl<'a> StreamingRenderer<'a> {
         source: &'a dyn MeshBlobSource,
         opts: &StreamOptions,
     ) -> Result<StreamingRenderer<'a>> {
+        Self::with_plan_and_cache(ctx, view, plan, source, opts, None)
+    }
+
+    /// [`Self::with_plan`] with a structure cache attached from the start
+    /// ([`Self::attach_cache`]), so that what the start derives from every mesh (the boxes
+    /// inside streamable BLASes) is also kept there and read back by the next process.
+    pub fn with_plan_and_cache(
+        ctx: &Context,
+        view: HierarchyView<'a>,
+        plan: StreamPlan,
+        source: &'a dyn MeshBlobSource,
+        opts: &StreamOptions,
+        cache: Option<StructureCache>,
+    ) -> Result<StreamingRenderer<'a>> {
         let span = tracing::info_span!(
             "stream_init",
             blases = view.blases.len(),
@@ -293,6 +308,9 @@ impl<'a> StreamingRenderer<'a> {
             totals,
             ctx: ctx.clone(),
         };
+        if let Some(cache) = cache {
+            r.attach_cache(cache);
+        }
         r.raise_skeleton(&records)?;
         Ok(r)
     }

@@ -44,6 +44,9 @@ pub struct FrameStreamStats {
     /// and the probe's trace time (not in `trace_ms`).
     pub probe_rays: u64,
     pub probe_ms: f64,
+    /// The next frame's camera was this frame's and the frame took one pass (all it needed
+    /// resident at once), so the probe, which could only meet what this frame met, was skipped.
+    pub probe_skipped_still: bool,
     /// Probe rounds run after this frame (`StreamOptions::probe_rounds`): the first probes
     /// the next camera's pixels, each later one only the pixels the round before left open,
     /// after the prefetch built what they needed.
@@ -88,6 +91,8 @@ pub struct FrameStreamStats {
     pub built_bytes: u64,
     /// Triangles in the BLASes built.
     pub triangles_built: u64,
+    /// Bytes of the BLASes built (their final, compacted structures; not restored ones).
+    pub blas_structure_bytes: u64,
     /// BLASes restored from the structure cache by copy instead of built (`cache.rs`), their
     /// bytes, from which tier, and the time the restores took (part of `build_ms`).
     pub restored_blases: u32,
@@ -108,6 +113,17 @@ pub struct FrameStreamStats {
     pub cache_stored_bytes: u64,
     pub cache_store_ms: f64,
     pub cache_skipped: u32,
+    /// Of `cache_store_ms`: size queries, the readback buffer and the GPU's serialise copies;
+    /// the host's copies out of the readback buffer; handing the blobs to the cache (with the
+    /// disk writer's queue waits).
+    pub store_serialize_ms: f64,
+    pub store_copy_ms: f64,
+    pub store_put_ms: f64,
+    /// Of `restore_ms`: finding and reading the entries (disk reads); the staging buffer and
+    /// the host's copies into it; the GPU's deserialise copies.
+    pub restore_read_ms: f64,
+    pub restore_upload_ms: f64,
+    pub restore_gpu_ms: f64,
     pub build_ms: f64,
     /// Wall time of the trace submissions.
     pub trace_ms: f64,
@@ -255,6 +271,19 @@ pub struct StreamTotals {
     pub cache_stored: u64,
     pub cache_stored_bytes: u64,
     pub cache_store_ms: f64,
+    /// Bytes of the BLASes built, over all frames, and the rate they were built at: those
+    /// bytes over the BLAS steps' time less their restores and cache stores (GB/s).
+    pub blas_structure_bytes: u64,
+    pub blas_build_gb_per_s: f64,
+    /// Of `build_ms` over all frames: the BLAS steps (builds, restores, cache stores).
+    pub blas_ms: f64,
+    /// The phases of storing and restoring over all frames (as [`FrameStreamStats`]).
+    pub store_serialize_ms: f64,
+    pub store_copy_ms: f64,
+    pub store_put_ms: f64,
+    pub restore_read_ms: f64,
+    pub restore_upload_ms: f64,
+    pub restore_gpu_ms: f64,
     /// Triangles of every buildable triangle BLAS: what one full build costs.
     pub scene_triangles: u64,
     /// Bytes the skeleton (tables, PI BLASes, root TLAS, proxies) took at start.
@@ -264,6 +293,8 @@ pub struct StreamTotals {
     /// computing them from the meshes took at start.
     pub proxy_boxes: u64,
     pub proxy_boxes_ms: f64,
+    /// Whether the boxes came from the structure cache (made by an earlier process).
+    pub proxy_boxes_cached: bool,
     /// Milliseconds of the start's other phases: the derived tables (parents per BLAS, proxy
     /// clusters per TLAS, the GPU tables' records), choosing persistent TLASes (driver size
     /// queries), and the resident skeleton (tables uploaded, PI BLASes, TLASes and proxies
@@ -317,6 +348,20 @@ impl StreamTotals {
         tot.cache_stored += u64::from(st.cache_stored);
         tot.cache_stored_bytes += st.cache_stored_bytes;
         tot.cache_store_ms += st.cache_store_ms;
+        tot.blas_structure_bytes += st.blas_structure_bytes;
+        tot.blas_ms += st.blas_ms;
+        let building_ms = tot.blas_ms - tot.restore_ms - tot.cache_store_ms;
+        tot.blas_build_gb_per_s = if building_ms > 0.0 {
+            tot.blas_structure_bytes as f64 / (building_ms * 1e6)
+        } else {
+            0.0
+        };
+        tot.store_serialize_ms += st.store_serialize_ms;
+        tot.store_copy_ms += st.store_copy_ms;
+        tot.store_put_ms += st.store_put_ms;
+        tot.restore_read_ms += st.restore_read_ms;
+        tot.restore_upload_ms += st.restore_upload_ms;
+        tot.restore_gpu_ms += st.restore_gpu_ms;
         tot.restore_gb_per_s = if tot.restore_ms > 0.0 {
             tot.restored_bytes as f64 / (tot.restore_ms * 1e6)
         } else {

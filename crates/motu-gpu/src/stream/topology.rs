@@ -123,7 +123,9 @@ pub(super) fn proxy_clusters(
 /// scale, so made once per render, the TLASes in parallel).
 pub struct StreamPlan {
     pub(super) clusters: Vec<Vec<ProxyCluster>>,
-    instances: usize,
+    pub(super) instances: usize,
+    /// Read back from the structure cache ([`StreamPlan::new_cached`]).
+    pub(super) from_cache: bool,
 }
 
 impl StreamPlan {
@@ -138,7 +140,13 @@ impl StreamPlan {
         StreamPlan {
             clusters,
             instances: view.instances.len(),
+            from_cache: false,
         }
+    }
+
+    /// Whether the clusters were read from the structure cache instead of made.
+    pub fn from_cache(&self) -> bool {
+        self.from_cache
     }
 
     /// A plan made for another view is a caller's mistake, refused rather than trusted.
