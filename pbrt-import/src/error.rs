@@ -97,12 +97,15 @@ pub enum PlyError {
     /// Required data is absent or inconsistent.
     #[error("PLY: {0}")]
     Content(String),
+    /// The file cannot be read.
+    #[error("PLY: cannot read: {0}")]
+    Read(#[source] std::io::Error),
 }
 
 /// Error returned by a [`crate::SceneSink`] to abort the parse.
 #[derive(Debug, thiserror::Error)]
 #[error("scene sink: {0}")]
-pub struct SinkError(pub Box<dyn std::error::Error + Send + Sync>);
+pub struct SinkError(#[source] pub Box<dyn std::error::Error + Send + Sync>);
 
 impl SinkError {
     /// Wrap any error.

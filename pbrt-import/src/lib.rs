@@ -30,7 +30,7 @@
 //! `graphics`, `materials`, `shape`, `objects`, `includes`); `prescan.rs` the byte scanners the
 //! parser and the parallel include workers (`parallel.rs`) share; `moana_json/` reads Moana's
 //! JSON+OBJ base package into the same events (`json.rs` a pull reader over the mapped bytes, so
-//! gigabyte archive and curve files stream in constant memory; `obj.rs` the OBJ subset; `mod.rs`
+//! gigabyte archive and curve files stream in constant memory; `obj.rs` the OBJ subset; `moana_json.rs`
 //! elements, copies, archives, curves, materials, cameras, lights in pbrt's document order).
 //! **Depends on no workspace crate.**.
 //!

@@ -49,8 +49,7 @@ pub fn read_ply(path: &Path) -> Result<Mesh, PlyError> {
 
 /// [`read_ply`], also saying what was dropped.
 pub fn read_ply_report(path: &Path) -> Result<(Mesh, PlyReport), PlyError> {
-    let src =
-        SourceBytes::open(path).map_err(|e| PlyError::Content(format!("cannot read: {e}")))?;
+    let src = SourceBytes::open(path).map_err(PlyError::Read)?;
     parse_ply_report(src.bytes())
 }
 

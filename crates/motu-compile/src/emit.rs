@@ -393,7 +393,7 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
 
     fn load_source(&mut self, m: MeshId) -> Result<MeshData, CompileError> {
         let t = std::time::Instant::now();
-        let data = (self.load)(m).map_err(|reason| CompileError::Mesh { mesh: m.0, reason })?;
+        let data = (self.load)(m).map_err(|source| CompileError::MeshLoad { mesh: m.0, source })?;
         self.out.report.phases.load_ms += t.elapsed().as_secs_f64() * 1e3;
         let info = self.plan.scene.mesh(m);
         if data.triangle_count() != info.triangle_count as usize
@@ -452,9 +452,9 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
                 ..*template
             });
             let t = std::time::Instant::now();
-            let r = sink(id, data, map).map_err(|reason| CompileError::Sink {
+            let r = sink(id, data, map).map_err(|source| CompileError::Sink {
                 mesh_record: id,
-                reason,
+                source,
             });
             sink_ms += t.elapsed().as_secs_f64() * 1e3;
             r
@@ -843,10 +843,6 @@ fn root_element(plan: &Plan<'_>) -> u32 {
     }
 }
 
-#[cfg(test)]
-#[path = "emit_tests.rs"]
-mod tests;
-
 /// `data` copied once per placement (`proto_from_mesh`), positions and normals transformed (a
 /// mirroring placement flips the winding back), with each copy's triangle-to-source map.
 fn bake_copies(data: &MeshData, placements: &[Transform34]) -> (MeshData, Vec<u32>) {
@@ -902,3 +898,6 @@ fn bake_copies(data: &MeshData, placements: &[Transform34]) -> (MeshData, Vec<u3
     }
     (out, map)
 }
+
+#[cfg(test)]
+mod tests;

@@ -62,7 +62,7 @@ pub(crate) fn finalize(out: &mut CompiledScene) -> Result<(), CompileError> {
     let _span = tracing::info_span!("finalize").entered();
     out.view()
         .check_references()
-        .map_err(|e| CompileError::Internal(e.to_string()))?;
+        .map_err(CompileError::References)?;
     let nt = out.tlases.len();
     let n = nt + out.blases.len();
     // Kahn's algorithm: a topological order and longest-path levels.

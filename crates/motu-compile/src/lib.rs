@@ -94,7 +94,7 @@
 //! `split_for_streaming`, on a package's view: TLASes over `STREAM_SPLIT_INSTANCES` moved to the
 //! instance table's tail, split, finalized; `stored_stream_split`/`StreamSplit::from_stored`: the
 //! split as a package stores it — tables whole, instances as a map into the package's — and rebuilt
-//! in O(instances); `split_reference.rs` (tests only): the partitioners before their speed-ups,
+//! in O(instances); `split/tests/reference.rs` (tests only): the partitioners before their speed-ups,
 //! which the fast ones must equal; `tables.rs` holds the table helpers emit, split and finalize
 //! share), `ml`/`sl`/`N`/`auto` levels (`auto`, in `analyze.rs` `plan_auto_inlining`: grouping
 //! levels of ≤ 256 entries inlined, and small instanced prototypes — ≤ 2^17 triangles with their
@@ -118,8 +118,6 @@ mod flatten;
 mod lod;
 pub mod partition;
 mod split;
-#[cfg(test)]
-mod split_reference;
 mod tables;
 mod tlas_split;
 mod validate;
@@ -129,7 +127,7 @@ mod xform;
 mod testutil;
 
 #[cfg(test)]
-mod proptests;
+mod tests;
 
 pub use flatten::{flatten_compiled, flatten_compiled_records, flatten_source};
 pub use partition::{
@@ -264,10 +262,34 @@ pub enum CompileError {
     OutOfMemory { what: &'static str, bytes: u64 },
     #[error("mesh {mesh}: {reason}")]
     Mesh { mesh: u32, reason: String },
-    #[error("mesh sink rejected compiled mesh record {mesh_record}: {reason}")]
-    Sink { mesh_record: u32, reason: String },
+    /// The mesh loader could not read a source mesh.
+    #[error("mesh {mesh}: {source}")]
+    MeshLoad {
+        mesh: u32,
+        #[source]
+        source: motu_scene::StoreError,
+    },
+    /// meshopt refused the simplifier's input.
+    #[error("mesh {mesh}: simplifier input: {source}")]
+    Simplifier {
+        mesh: u32,
+        #[source]
+        source: meshopt::Error,
+    },
+    #[error("mesh sink rejected compiled mesh record {mesh_record}: {source}")]
+    Sink {
+        mesh_record: u32,
+        #[source]
+        source: motu_scene::StoreError,
+    },
     #[error("internal compiler error: {0}")]
     Internal(String),
+    /// The compiled hierarchy references out of range (a compiler bug, not bad input).
+    #[error("internal compiler error: {0}")]
+    References(#[source] motu_abi::HierarchyError),
+    /// A stored stream split that does not fit the hierarchy it was stored with.
+    #[error("internal compiler error: stored stream split: {0}")]
+    StoredSplit(#[source] motu_abi::HierarchyError),
 }
 
 /// What a compile did, for `motu import`/`motu info` and benchmarks (its JSON, stored in the
@@ -387,10 +409,12 @@ impl CompiledScene {
 /// (`lod > 0`) and the clusters of partitioned meshes (with their primitive map, the
 /// record's `FLAG_PRIMITIVE_MAP`). Whole source meshes (`lod == 0`, no map) are not passed:
 /// their data is in the scene's geometry store.
-pub type MeshSink<'a> = dyn FnMut(u32, &MeshData, Option<&[u32]>) -> Result<(), String> + 'a;
+pub type MeshSink<'a> =
+    dyn FnMut(u32, &MeshData, Option<&[u32]>) -> Result<(), motu_scene::StoreError> + 'a;
 
 /// Loads a source mesh's data (for LOD chains and partitioning), one mesh at a time.
-pub type MeshLoader<'a> = dyn Fn(motu_scene::MeshId) -> Result<MeshData, String> + 'a;
+pub type MeshLoader<'a> =
+    dyn Fn(motu_scene::MeshId) -> Result<MeshData, motu_scene::StoreError> + 'a;
 
 /// Compiles `scene`, loading source meshes from its geometry store. Mesh records' `chunk` and
 /// `*_offset` fields are left `NONE` for the packer to fill.
@@ -399,7 +423,7 @@ pub fn compile(
     opts: &CompileOptions,
     sink: &mut MeshSink<'_>,
 ) -> Result<CompiledScene, CompileError> {
-    let load = |m| scene.mesh_data(m).map_err(|e| e.to_string());
+    let load = |m| scene.mesh_data(m).map_err(motu_scene::StoreError::from);
     compile_with_loader(scene, opts, &load, sink)
 }
 

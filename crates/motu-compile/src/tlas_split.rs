@@ -314,7 +314,7 @@ impl StreamSplit {
         scene
             .view()
             .check_references()
-            .map_err(|e| bad(e.to_string()))?;
+            .map_err(CompileError::StoredSplit)?;
         Ok(StreamSplit { scene })
     }
 }
@@ -407,7 +407,7 @@ fn split_tagged(view: &HierarchyView<'_>, cap: u32) -> Result<Option<StreamSplit
     };
     out.view()
         .check_references()
-        .map_err(|e| CompileError::Internal(e.to_string()))?;
+        .map_err(CompileError::References)?;
     let per_blas = crate::CompileOptions::default().max_primitives_per_blas as usize;
     for t in over {
         move_range_to_tail(&mut out, t)?;

@@ -91,7 +91,7 @@ pub(crate) fn run_jobs(
                 Some(n) => rayon::ThreadPoolBuilder::new()
                     .num_threads(n.max(1))
                     .build()
-                    .map_err(|e| GenError::Worker(e.to_string()))
+                    .map_err(GenError::ThreadPool)
                     .and_then(|pool| pool.install(work)),
                 None => work(),
             };

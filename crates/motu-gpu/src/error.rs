@@ -30,6 +30,10 @@ pub enum GpuError {
          CPU use lavapipe from Mesa >= 24.1 (`tools/setup.sh`), on a GPU an RT-capable driver"
     )]
     MissingFeature { what: String, details: String },
+
+    /// A size source outside this crate failed (see [`GpuError::size_source`]).
+    #[error(transparent)]
+    SizeSource(Box<dyn std::error::Error + Send + Sync>),
 }
 
 impl From<VkError> for GpuError {
@@ -39,6 +43,14 @@ impl From<VkError> for GpuError {
             VkError::Budget(msg) => GpuError::Budget(msg),
             e => GpuError::Device(e),
         }
+    }
+}
+
+impl GpuError {
+    /// A size source outside this crate (an implementor of [`crate::FloorSizes`], e.g.
+    /// `motu report`'s size model) failed: its error, kept as the cause.
+    pub fn size_source(e: impl std::error::Error + Send + Sync + 'static) -> GpuError {
+        GpuError::SizeSource(Box::new(e))
     }
 }
 

@@ -7,7 +7,7 @@ use glam_free::*;
 use motu_abi::aov::MISS;
 use motu_abi::camera::CameraParams;
 use motu_abi::lod::LodParams;
-use motu_trace::fixtures::{srt, uv_sphere, HierarchyBuilder, OwnedHierarchy, PiTarget};
+use motu_trace::testutil::{srt, uv_sphere, HierarchyBuilder, OwnedHierarchy, PiTarget};
 
 use crate::testing::{assert_no_validation_errors, context_or_skip};
 use crate::{

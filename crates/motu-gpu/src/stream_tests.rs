@@ -7,7 +7,7 @@ use std::borrow::Cow;
 
 use motu_abi::aov::{Aov, MISS};
 use motu_abi::camera::{camera_path, CameraPath, CameraPose};
-use motu_trace::fixtures::{srt, uv_sphere, HierarchyBuilder, OwnedHierarchy, PiTarget};
+use motu_trace::testutil::{srt, uv_sphere, HierarchyBuilder, OwnedHierarchy, PiTarget};
 
 use crate::testing::{assert_no_validation_errors, context_or_skip};
 use crate::{
@@ -1280,6 +1280,8 @@ fn a_camera_at_rest_skips_the_next_camera_probe() {
     let probed = &stats[2];
     assert!(!probed.probe_skipped_still, "{probed:?}");
     assert!(probed.probe_rays > 0, "{probed:?}");
+    assert_no_validation_errors(&ctx);
+}
 
 /// Issue 47: `--bounces` paths under streaming. Each bounce ray is a closest-hit ray carried
 /// across passes like the primary (its best hit resolved while its BLAS is resident, traced

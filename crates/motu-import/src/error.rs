@@ -20,6 +20,7 @@ pub enum ImportError {
     #[error("{}: {error}", path.display())]
     SceneUnreadable {
         path: PathBuf,
+        #[source]
         error: std::io::Error,
     },
     #[error("creating {}", path.display())]
@@ -48,9 +49,6 @@ pub enum ImportError {
     },
     #[error("compiling the instancing graph")]
     Compile(#[source] motu_compile::CompileError),
-    /// The package's geometry store refused a mesh (its message says why).
-    #[error("{0}")]
-    Geometry(String),
     #[error("finishing the scratch package")]
     FinishScratch(#[source] PackageError),
     #[error("writing the package")]
@@ -66,4 +64,11 @@ pub enum ImportError {
     /// A broken promise between the compiler and the packer (a bug, not bad input).
     #[error("internal: {0}")]
     Internal(String),
+    /// A source mesh the scene holds could not be read back (a bug, not bad input).
+    #[error("internal: mesh {mesh}: {source}")]
+    MeshData {
+        mesh: u32,
+        #[source]
+        source: motu_scene::SceneError,
+    },
 }

@@ -6,9 +6,9 @@ use crate::ImportError;
 use motu_abi::MeshRecord;
 use motu_compile::{CompileOptions, CompiledScene, Levels};
 use motu_ingest::{IngestOptions, IngestReport};
-use motu_pack::{place_mesh_record, ElementMeta, PackageGeometry, PackageMeta};
+use motu_pack::{place_mesh_record, ElementMeta, PackError, PackageGeometry, PackageMeta};
 use motu_package::{PackageWriter, WriteSummary, WriterOptions};
-use motu_scene::{ElementId, MeshLocation, PrototypeId, Scene};
+use motu_scene::{ElementId, MeshLocation, PrototypeId, Scene, StoreError};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -263,7 +263,7 @@ pub fn import(
     };
 
     if direct {
-        let load = |m| scene.mesh_data(m).map_err(|e| e.to_string());
+        let load = |m| scene.mesh_data(m).map_err(StoreError::from);
         let mut copied: HashMap<u32, MeshLocation> = HashMap::new();
         let (compiled, compile_ms) = compile_into(&scene, &copts, &geometry, &load, |m| {
             let id = motu_scene::MeshId(m.source_mesh);
@@ -284,15 +284,16 @@ pub fn import(
             }
             let data = scene
                 .mesh_data(id)
-                .map_err(|e| ImportError::Internal(format!("mesh {}: {e}", m.source_mesh)))?;
-            let c = geometry
-                .append_mesh(m.element, &data)
-                .map_err(ImportError::Geometry)?;
+                .map_err(|source| ImportError::MeshData {
+                    mesh: m.source_mesh,
+                    source,
+                })?;
+            let c = geometry.append_mesh(m.element, &data)?;
             copied.insert(m.source_mesh, c);
             Ok(c)
         })?;
         let t2 = Instant::now();
-        let writer = geometry.take_writer().map_err(ImportError::Geometry)?;
+        let writer = geometry.take_writer()?;
         let s = finish(writer, &scene, &compiled, &report, scene_path, o)?;
         return Ok(summary(
             s, &scene, &compiled, &report, parse_ms, compile_ms, t2,
@@ -300,7 +301,7 @@ pub fn import(
     }
     // Finish the scratch package so its chunks can be read back, then copy only the blobs the
     // subset references into the real package.
-    let scratch_writer = geometry.take_writer().map_err(ImportError::Geometry)?;
+    let scratch_writer = geometry.take_writer()?;
     scratch_writer
         .finish()
         .map_err(ImportError::FinishScratch)?;
@@ -327,20 +328,18 @@ pub fn import(
                 info.has_uvs,
             )
         };
-        let load = |m: motu_scene::MeshId| read_source(m).map_err(|e| e.to_string());
+        let load = |m: motu_scene::MeshId| read_source(m).map_err(StoreError::from);
         let (compiled, compile_ms) = compile_into(&scene, &copts, &final_geo, &load, |m| {
             if let Some(&at) = copied.get(&m.source_mesh) {
                 return Ok(at);
             }
             let data = read_source(motu_scene::MeshId(m.source_mesh))?;
-            let at = final_geo
-                .append_mesh(m.element, &data)
-                .map_err(ImportError::Geometry)?;
+            let at = final_geo.append_mesh(m.element, &data)?;
             copied.insert(m.source_mesh, at);
             Ok(at)
         })?;
         let t2 = Instant::now();
-        let writer = final_geo.take_writer().map_err(ImportError::Geometry)?;
+        let writer = final_geo.take_writer()?;
         let s = finish(writer, &scene, &compiled, &report, scene_path, o)?;
         Ok(summary(
             s, &scene, &compiled, &report, parse_ms, compile_ms, t2,
@@ -397,7 +396,7 @@ fn compile_into(
     type Made = (u32, motu_scene::MeshData, Option<Vec<u32>>);
     let (tx, rx) = std::sync::mpsc::sync_channel::<Made>(MADE_IN_FLIGHT);
     let (compiled, made_locations) = std::thread::scope(|scope| {
-        let writer = scope.spawn(move || -> Result<HashMap<u32, MeshLocation>, String> {
+        let writer = scope.spawn(move || -> Result<HashMap<u32, MeshLocation>, PackError> {
             let mut made: HashMap<u32, MeshLocation> = HashMap::new();
             for (rec, data, map) in rx {
                 let group = if map.is_some() {
@@ -409,18 +408,20 @@ fn compile_into(
             }
             Ok(made)
         });
-        let mut sink =
-            |rec: u32, data: &motu_scene::MeshData, map: Option<&[u32]>| -> Result<(), String> {
-                tx.send((rec, data.clone(), map.map(<[u32]>::to_vec)))
-                    .map_err(|_| "the mesh writer stopped".to_string())
-            };
+        let mut sink = |rec: u32,
+                        data: &motu_scene::MeshData,
+                        map: Option<&[u32]>|
+         -> Result<(), StoreError> {
+            tx.send((rec, data.clone(), map.map(<[u32]>::to_vec)))
+                .map_err(|_| "the mesh writer stopped".into())
+        };
         let compiled = motu_compile::compile_with_loader(scene, copts, load, &mut sink);
         drop(tx);
         let made = writer
             .join()
             .map_err(|_| ImportError::Internal("the mesh writer panicked".into()))?;
         // The writer's error first: the compiler then only saw a closed queue.
-        let made = made.map_err(ImportError::Geometry)?;
+        let made = made?;
         let compiled = compiled.map_err(ImportError::Compile)?;
         Ok::<_, ImportError>((compiled, made))
     })?;

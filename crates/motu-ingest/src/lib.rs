@@ -46,10 +46,42 @@ pub enum IngestError {
     Pbrt(#[from] pbrt_import::Error),
     #[error("{path}: {reason}")]
     Obj { path: String, reason: String },
+    /// tobj could not load the OBJ file (`detail`: what motu's line scan found there).
+    #[error("{path}: {source}{}", detail.as_ref().map(|d| format!(": {d}")).unwrap_or_default())]
+    ObjLoad {
+        path: String,
+        detail: Option<String>,
+        #[source]
+        source: tobj::LoadError,
+    },
+    /// A material library named by `mtllib` cannot be read.
+    #[error("{path}: mtllib {}: {source}", lib.display())]
+    MtlUnreadable {
+        path: String,
+        lib: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// tobj could not load the material libraries.
+    #[error("{path}: materials not loaded from {libs}: {source}")]
+    Materials {
+        path: String,
+        libs: String,
+        #[source]
+        source: tobj::LoadError,
+    },
     #[error("{at}: {source}")]
     Scene {
         at: String,
+        #[source]
         source: motu_scene::SceneError,
+    },
+    /// Converting the curves left at the end of the parse failed.
+    #[error("{at}: {source}")]
+    Curves {
+        at: String,
+        #[source]
+        source: pbrt_import::SinkError,
     },
 }
 

@@ -30,7 +30,9 @@ mod write;
 
 pub use blob::{MeshBlobLayout, MESH_BLOB_ALIGN};
 pub use info::{ElementsInfo, PackageInfo};
-pub use meta::{CurveMeta, ElementMeta, PackageMeta, StreamSplitMeta, SCHEMA, SCHEMA_READABLE};
+pub use meta::{
+    CurveMeta, ElementMeta, MetaError, PackageMeta, StreamSplitMeta, SCHEMA, SCHEMA_READABLE,
+};
 pub use read::{read_mesh_blob, MeshGeometry, ScenePackage};
 pub use sections::*;
 pub use store::{place_mesh_record, PackageGeometry};
@@ -46,6 +48,38 @@ pub enum PackError {
     Package(#[from] motu_package::PackageError),
     #[error("package {path}: {reason}")]
     Schema { path: String, reason: String },
+    /// The `meta` section does not parse, or would not.
+    #[error("package {path}: {source}")]
+    Meta {
+        path: String,
+        #[source]
+        source: meta::MetaError,
+    },
+    /// The tables reference out of range.
+    #[error("package {path}: {source}")]
+    References {
+        path: String,
+        #[source]
+        source: motu_abi::HierarchyError,
+    },
     #[error("mesh {mesh}: {reason}")]
     Mesh { mesh: u32, reason: String },
+    /// A mesh's chunk is not in the package.
+    #[error("mesh {mesh}: {source}")]
+    MeshChunk {
+        mesh: u32,
+        #[source]
+        source: motu_package::PackageError,
+    },
+    /// A mesh's bytes cannot be viewed as its element type (`what`: positions, indices, ...;
+    /// `cast`: bytemuck's reason, typed, see `PackageError::SectionCast`).
+    #[error("mesh {mesh}: {what}: {cast}")]
+    MeshCast {
+        mesh: u32,
+        what: &'static str,
+        cast: bytemuck::PodCastError,
+    },
+    /// The geometry store refused (it was finished, or a mesh was never stored).
+    #[error("{0}")]
+    Store(String),
 }

@@ -82,58 +82,43 @@ pub struct CurveMeta {
     pub ribbon_triangles: u64,
 }
 
+/// Why the `meta` section does not parse (or, when writing, would not).
+#[derive(Debug, thiserror::Error)]
+pub enum MetaError {
+    #[error("meta section is not valid: {0}")]
+    Json(#[source] serde_json::Error),
+    #[error(
+        "schema '{found}' is not supported (this build reads '{SCHEMA}'): re-import the scene with this build"
+    )]
+    Schema { found: String },
+    #[error("meta does not serialise: {0}")]
+    Serialise(#[source] serde_json::Error),
+    #[error("meta would not be readable ({0}); a camera or light value is probably not finite")]
+    Unreadable(#[source] Box<MetaError>),
+}
+
 /// Parses the `meta` section as every reader does: valid JSON of this schema.
-pub(crate) fn parse_meta(bytes: &[u8]) -> Result<PackageMeta, String> {
+pub(crate) fn parse_meta(bytes: &[u8]) -> Result<PackageMeta, MetaError> {
     // The schema first: an older package's meta lacks newer fields, and "missing field" would
     // hide the real reason.
-    let value: serde_json::Value =
-        serde_json::from_slice(bytes).map_err(|e| format!("meta section is not valid: {e}"))?;
+    let value: serde_json::Value = serde_json::from_slice(bytes).map_err(MetaError::Json)?;
     let schema = value.get("schema").and_then(|s| s.as_str()).unwrap_or("");
     if !SCHEMA_READABLE.contains(&schema) {
-        return Err(format!(
-            "schema '{schema}' is not supported (this build reads '{SCHEMA}'): re-import the scene with this build"
-        ));
+        return Err(MetaError::Schema {
+            found: schema.to_string(),
+        });
     }
-    serde_json::from_value(value).map_err(|e| format!("meta section is not valid: {e}"))
+    serde_json::from_value(value).map_err(MetaError::Json)
 }
 
 /// Serialises `meta` and proves the reader accepts it: JSON has no NaN or infinity (serde
 /// writes them as `null`, which the reader then refuses), so a writer that skipped this check
 /// could produce a package nothing can open.
-pub(crate) fn serialise_meta(meta: &PackageMeta) -> Result<Vec<u8>, String> {
-    let json = serde_json::to_vec(meta).map_err(|e| format!("meta does not serialise: {e}"))?;
-    parse_meta(&json).map_err(|e| {
-        format!("meta would not be readable ({e}); a camera or light value is probably not finite")
-    })?;
+pub(crate) fn serialise_meta(meta: &PackageMeta) -> Result<Vec<u8>, MetaError> {
+    let json = serde_json::to_vec(meta).map_err(MetaError::Serialise)?;
+    parse_meta(&json).map_err(|e| MetaError::Unreadable(Box::new(e)))?;
     Ok(json)
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn regression_meta_writer_cannot_write_what_reader_refuses() {
-        let mut meta = PackageMeta {
-            schema: SCHEMA.into(),
-            ..Default::default()
-        };
-        meta.cameras.push(motu_scene::Camera {
-            name: "cam".into(),
-            world_eye: [0.0; 3],
-            world_forward: [0.0, 0.0, 1.0],
-            world_up: [0.0, 1.0, 0.0],
-            fov_deg: 45.0,
-            width: 8,
-            height: 8,
-            mirror_x: false,
-        });
-        let good = serialise_meta(&meta).unwrap();
-        assert_eq!(parse_meta(&good).unwrap(), meta);
-        meta.cameras[0].fov_deg = f32::NAN;
-        let e = serialise_meta(&meta).unwrap_err();
-        assert!(e.contains("not finite"), "{e}");
-        meta.cameras[0].fov_deg = f32::INFINITY;
-        assert!(serialise_meta(&meta).is_err());
-    }
-}
+mod tests;

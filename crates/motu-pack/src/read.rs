@@ -34,12 +34,11 @@ impl ScenePackage {
         let _span = tracing::info_span!("open_package", path = %path.display()).entered();
         let package = Package::open(path)?;
         let shown = path.display().to_string();
-        let schema_err = |reason: String| PackError::Schema {
-            path: shown.clone(),
-            reason,
-        };
         let meta_bytes = package.section_bytes(SECTION_META)?;
-        let meta = crate::meta::parse_meta(meta_bytes).map_err(schema_err)?;
+        let meta = crate::meta::parse_meta(meta_bytes).map_err(|source| PackError::Meta {
+            path: shown.clone(),
+            source,
+        })?;
         let me = Self {
             package,
             meta,
@@ -47,7 +46,10 @@ impl ScenePackage {
         };
         let view = me.view()?;
         view.check_references()
-            .map_err(|e| schema_err(e.to_string()))?;
+            .map_err(|source| PackError::References {
+                path: shown.clone(),
+                source,
+            })?;
         let clusters_allowed = me.meta.schema == SCHEMA;
         for (i, m) in view.meshes.iter().enumerate() {
             if !clusters_allowed && m.flags & FLAG_PRIMITIVE_MAP != 0 {
@@ -139,7 +141,10 @@ impl ScenePackage {
         let info = self
             .package
             .chunk_info(ChunkId(m.chunk))
-            .map_err(|e| err(e.to_string()))?;
+            .map_err(|source| PackError::MeshChunk {
+                mesh: index,
+                source,
+            })?;
         let l = Self::layout(m);
         let base = m.positions_offset;
         let ok = m.indices_offset == base + l.indices
@@ -254,9 +259,19 @@ impl ScenePackage {
                         .ok_or_else(|| err("blob outside its chunk".into()))
                 };
                 let p: &[[f32; 3]] = bytemuck::try_cast_slice(slice(m.positions_offset, vb)?)
-                    .map_err(|e| err(format!("positions: {e}")))?;
-                let i: &[u32] = bytemuck::try_cast_slice(slice(m.indices_offset, ib)?)
-                    .map_err(|e| err(format!("indices: {e}")))?;
+                    .map_err(|cast| PackError::MeshCast {
+                        mesh: mesh_record,
+                        what: "positions",
+                        cast,
+                    })?;
+                let i: &[u32] =
+                    bytemuck::try_cast_slice(slice(m.indices_offset, ib)?).map_err(|cast| {
+                        PackError::MeshCast {
+                            mesh: mesh_record,
+                            what: "indices",
+                            cast,
+                        }
+                    })?;
                 Ok((Cow::Borrowed(p), Cow::Borrowed(i)))
             }
             owned => {
@@ -346,8 +361,12 @@ impl ScenePackage {
                 let bytes = b
                     .get(range)
                     .ok_or_else(|| err("primitive map outside its chunk".into()))?;
-                let map: &[u32] = bytemuck::try_cast_slice(bytes)
-                    .map_err(|e| err(format!("primitive map: {e}")))?;
+                let map: &[u32] =
+                    bytemuck::try_cast_slice(bytes).map_err(|cast| PackError::MeshCast {
+                        mesh: mesh_record,
+                        what: "primitive map",
+                        cast,
+                    })?;
                 Ok(Some(Cow::Borrowed(map)))
             }
             owned => {

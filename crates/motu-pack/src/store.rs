@@ -2,8 +2,9 @@
 //! import never holds the scene's geometry in memory.
 
 use crate::blob::{MeshBlobLayout, MESH_BLOB_ALIGN};
+use crate::PackError;
 use motu_package::{ChunkId, PackageWriter, StreamId};
-use motu_scene::{GeometryStore, MeshData, MeshId, MeshLocation};
+use motu_scene::{GeometryStore, MeshData, MeshId, MeshLocation, StoreError};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
@@ -104,7 +105,7 @@ impl PackageGeometry {
         at.a & SPILL_BIT != 0
     }
 
-    fn spill_mesh(&self, data: &MeshData) -> Result<Option<MeshLocation>, String> {
+    fn spill_mesh(&self, data: &MeshData) -> Result<Option<MeshLocation>, PackError> {
         let mut inner = self.lock()?;
         let Inner { spill, layouts, .. } = &mut *inner;
         let Some(sp) = spill.as_mut() else {
@@ -125,11 +126,8 @@ impl PackageGeometry {
         let stream = *sp
             .stream
             .get_or_insert_with(|| sp.writer.open_stream(0, u32::MAX));
-        let loc = sp
-            .writer
-            .append(stream, &blob, MESH_BLOB_ALIGN)
-            .map_err(|e| e.to_string())?;
-        sp.writer.seal_chunk(stream).map_err(|e| e.to_string())?;
+        let loc = sp.writer.append(stream, &blob, MESH_BLOB_ALIGN)?;
+        sp.writer.seal_chunk(stream)?;
         let at = location(loc.chunk, loc.offset_in_chunk);
         let at = MeshLocation {
             a: at.a | SPILL_BIT,
@@ -139,14 +137,14 @@ impl PackageGeometry {
         Ok(Some(at))
     }
 
-    fn lock(&self) -> Result<std::sync::MutexGuard<'_, Inner>, String> {
+    fn lock(&self) -> Result<std::sync::MutexGuard<'_, Inner>, PackError> {
         self.inner
             .lock()
-            .map_err(|_| "package writer lock poisoned".to_string())
+            .map_err(|_| store_err("package writer lock poisoned"))
     }
 
     /// Appends an arbitrary mesh (e.g. a LOD level the compiler made) to `group`'s stream.
-    pub fn append_mesh(&self, group: u32, data: &MeshData) -> Result<MeshLocation, String> {
+    pub fn append_mesh(&self, group: u32, data: &MeshData) -> Result<MeshLocation, PackError> {
         self.append_mesh_mapped(group, data, None)
     }
 
@@ -157,14 +155,14 @@ impl PackageGeometry {
         group: u32,
         data: &MeshData,
         primitive_map: Option<&[u32]>,
-    ) -> Result<MeshLocation, String> {
+    ) -> Result<MeshLocation, PackError> {
         if let Some(map) = primitive_map {
             if map.len() != data.triangle_count() {
-                return Err(format!(
+                return Err(store_err(format!(
                     "primitive map has {} entries for {} triangles",
                     map.len(),
                     data.triangle_count()
-                ));
+                )));
             }
         }
         let layout = MeshBlobLayout::of_mapped(data, primitive_map);
@@ -176,13 +174,13 @@ impl PackageGeometry {
             layouts,
             ..
         } = &mut *inner;
-        let writer = writer.as_mut().ok_or("package writer already finished")?;
+        let writer = writer
+            .as_mut()
+            .ok_or_else(|| store_err("package writer already finished"))?;
         let stream = *streams
             .entry(group)
             .or_insert_with(|| writer.open_stream(0, group));
-        let loc = writer
-            .append(stream, &blob, MESH_BLOB_ALIGN)
-            .map_err(|e| e.to_string())?;
+        let loc = writer.append(stream, &blob, MESH_BLOB_ALIGN)?;
         let at = location(loc.chunk, loc.offset_in_chunk);
         layouts.insert((at.a, at.b), layout);
         // One open chunk per element could hold elements × 64 MiB in memory: past the budget,
@@ -197,7 +195,7 @@ impl PackageGeometry {
             if total <= OPEN_CHUNK_BUDGET_BYTES {
                 break;
             }
-            writer.seal_chunk(s).map_err(|e| e.to_string())?;
+            writer.seal_chunk(s)?;
             total -= bytes;
         }
         Ok(at)
@@ -205,48 +203,58 @@ impl PackageGeometry {
 
     /// Seals every open stream and hands the writer back (for sections and `finish`); drops
     /// the spill writer (its temp file).
-    pub fn take_writer(&self) -> Result<PackageWriter, String> {
+    pub fn take_writer(&self) -> Result<PackageWriter, PackError> {
         let mut inner = self.lock()?;
         inner.spill = None;
-        let mut writer = inner.writer.take().ok_or("package writer already taken")?;
+        let mut writer = inner
+            .writer
+            .take()
+            .ok_or_else(|| store_err("package writer already taken"))?;
         for (_, s) in inner.streams.drain() {
-            writer.close_stream(s).map_err(|e| e.to_string())?;
+            writer.close_stream(s)?;
         }
         Ok(writer)
     }
 }
 
 impl GeometryStore for PackageGeometry {
-    fn store(&mut self, _id: MeshId, group: u32, data: &MeshData) -> Result<MeshLocation, String> {
+    fn store(
+        &mut self,
+        _id: MeshId,
+        group: u32,
+        data: &MeshData,
+    ) -> Result<MeshLocation, StoreError> {
         if let Some(at) = self.spill_mesh(data)? {
             return Ok(at);
         }
-        self.append_mesh(group, data)
+        Ok(self.append_mesh(group, data)?)
     }
 
-    fn load(&self, id: MeshId, at: MeshLocation) -> Result<MeshData, String> {
+    fn load(&self, id: MeshId, at: MeshLocation) -> Result<MeshData, StoreError> {
         let mut inner = self.lock()?;
         let layout = *inner
             .layouts
             .get(&(at.a, at.b))
-            .ok_or_else(|| format!("{id} was not stored in this package"))?;
+            .ok_or_else(|| store_err(format!("{id} was not stored in this package")))?;
         let writer = if Self::is_spilled(at) {
             &mut inner
                 .spill
                 .as_mut()
-                .ok_or("the spill store was already dropped")?
+                .ok_or_else(|| store_err("the spill store was already dropped"))?
                 .writer
         } else {
             inner
                 .writer
                 .as_mut()
-                .ok_or("package writer already finished")?
+                .ok_or_else(|| store_err("package writer already finished"))?
         };
-        let bytes = writer
-            .read_back(ChunkId((at.a & !SPILL_BIT) as u32), at.b, layout.len)
-            .map_err(|e| e.to_string())?;
-        layout.decode(&bytes)
+        let bytes = writer.read_back(ChunkId((at.a & !SPILL_BIT) as u32), at.b, layout.len)?;
+        Ok(layout.decode(&bytes)?)
     }
+}
+
+fn store_err(what: impl Into<String>) -> PackError {
+    PackError::Store(what.into())
 }
 
 /// Points a mesh record at the blob stored at `at` (offsets follow [`MeshBlobLayout`]; the
@@ -280,68 +288,4 @@ pub fn place_mesh_record(rec: &mut motu_abi::MeshRecord, at: MeshLocation) {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use motu_package::WriterOptions;
-
-    fn mesh(triangles: u32) -> MeshData {
-        MeshData {
-            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
-            indices: (0..triangles).flat_map(|_| [0, 1, 2]).collect(),
-            ..Default::default()
-        }
-    }
-
-    /// Meshes over the spill bound are read back from the spill file, never written to the
-    /// package, and the spill file is gone once the writer is taken.
-    #[test]
-    fn meshes_over_the_bound_spill_and_vanish() {
-        let dir = tempfile::tempdir().unwrap();
-        let out = dir.path().join("p.motu");
-        let opts = WriterOptions::default();
-        let spill = PackageWriter::create(dir.path().join("s.motu"), opts.clone()).unwrap();
-        let mut g =
-            PackageGeometry::new(PackageWriter::create(&out, opts).unwrap()).with_spill(spill, 10);
-        let small = g.store(MeshId(0), 0, &mesh(10)).unwrap();
-        let big = g.store(MeshId(1), 0, &mesh(11)).unwrap();
-        assert!(!PackageGeometry::is_spilled(small));
-        assert!(PackageGeometry::is_spilled(big));
-        assert_eq!(g.load(MeshId(0), small).unwrap(), mesh(10));
-        assert_eq!(g.load(MeshId(1), big).unwrap(), mesh(11));
-        let writer = g.take_writer().unwrap();
-        let s = writer.finish().unwrap();
-        let names: Vec<String> = std::fs::read_dir(dir.path())
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
-        assert_eq!(names, vec!["p.motu".to_string()], "no spill file left");
-        // Only the small mesh's blob is in the package.
-        let pkg = motu_package::Package::open(&s.path).unwrap();
-        let raw: u64 = pkg.chunks().iter().map(|c| c.raw_len).sum();
-        assert_eq!(raw, MeshBlobLayout::of(&mesh(10)).len);
-    }
-
-    /// A raised bound applies from the mesh that brings the stored count to its threshold on;
-    /// meshes spilled before stay spilled.
-    #[test]
-    fn the_spill_bound_rises_once_enough_triangles_were_stored() {
-        let dir = tempfile::tempdir().unwrap();
-        let opts = WriterOptions::default();
-        let spill = PackageWriter::create(dir.path().join("s.motu"), opts.clone()).unwrap();
-        let mut g =
-            PackageGeometry::new(PackageWriter::create(dir.path().join("p.motu"), opts).unwrap())
-                .with_spill(spill, 10)
-                .raise_spill_bound_after(40, 20);
-        let spilled: Vec<bool> = [15, 15, 15, 15, 25]
-            .iter()
-            .enumerate()
-            .map(|(i, &t)| {
-                let at = g.store(MeshId(i as u32), 0, &mesh(t)).unwrap();
-                assert_eq!(g.load(MeshId(i as u32), at).unwrap(), mesh(t));
-                PackageGeometry::is_spilled(at)
-            })
-            .collect();
-        // 15, 30 stored: over 10 spills; 45 ≥ 40: the bound is 20 from the third mesh on.
-        assert_eq!(spilled, vec![true, true, false, false, true]);
-    }
-}
+mod tests;

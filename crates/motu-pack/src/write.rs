@@ -60,9 +60,9 @@ fn write_tables(
     if with_texels {
         writer.add_section_slice(SECTION_TEXELS, "texels", view.texels)?;
     }
-    let json = crate::meta::serialise_meta(meta).map_err(|reason| PackError::Schema {
+    let json = crate::meta::serialise_meta(meta).map_err(|source| PackError::Meta {
         path: String::new(),
-        reason,
+        source,
     })?;
     writer.add_section(SECTION_META, "meta", 1, &json)?;
     Ok(())

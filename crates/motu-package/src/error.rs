@@ -94,6 +94,16 @@ pub enum PackageError {
         type_name: &'static str,
         reason: String,
     },
+    /// The section's bytes cannot be viewed as the requested type (length or alignment).
+    /// `cast` is bytemuck's reason, kept typed (bytemuck implements `Error` only with a
+    /// feature this workspace does not enable, so it cannot be the `source`).
+    #[error("section {name} (kind {}) cannot be read as {type_name}: {cast}", kind.0)]
+    SectionCast {
+        kind: SectionKind,
+        name: String,
+        type_name: &'static str,
+        cast: bytemuck::PodCastError,
+    },
     /// The writer was used wrongly (caller bug or option out of range).
     #[error("invalid package writer use: {0}")]
     InvalidArgument(String),
@@ -121,21 +131,4 @@ impl PackageError {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn parts_display_as_in_messages() {
-        assert_eq!(Part::Chunk(ChunkId(17)).to_string(), "chunk 17");
-        let nodes = Part::Section {
-            kind: SectionKind(1),
-            name: "nodes".into(),
-        };
-        assert_eq!(nodes.to_string(), "section nodes");
-        let err = PackageError::corrupt(Part::Chunk(ChunkId(3)), "checksum mismatch");
-        assert_eq!(
-            err.to_string(),
-            "corrupt package (chunk 3): checksum mismatch"
-        );
-    }
-}
+mod tests;

@@ -176,8 +176,28 @@ pub enum RenderError {
         #[source]
         source: motu_gpu::GpuError,
     },
-    #[error("streaming: splitting the TLASes over {cap} instances into pieces: {reason}")]
-    StreamSplit { cap: u32, reason: String },
+    #[error("streaming: splitting the TLASes over {cap} instances into pieces: {source}")]
+    StreamSplit {
+        cap: u32,
+        #[source]
+        source: motu_compile::CompileError,
+    },
+    /// The package's stored split (made at import) cannot be read or does not fit.
+    #[error("streaming: splitting the TLASes over {cap} instances into pieces: {source}")]
+    StoredSplitRead {
+        cap: u32,
+        #[source]
+        source: motu_pack::PackError,
+    },
+    #[error(
+        "streaming: splitting the TLASes over {cap} instances into pieces: {path}: the stored split: {source}"
+    )]
+    StoredSplit {
+        cap: u32,
+        path: String,
+        #[source]
+        source: motu_compile::CompileError,
+    },
     #[error("streaming frame {frame}")]
     StreamFrame {
         frame: u32,

@@ -80,7 +80,7 @@ pub fn choose_lod_mode(
 mod tests {
     use super::*;
     use motu_abi::IDENTITY_3X4;
-    use motu_trace::fixtures::{uv_sphere, HierarchyBuilder, OwnedHierarchy, PiTarget};
+    use motu_trace::testutil::{uv_sphere, HierarchyBuilder, OwnedHierarchy, PiTarget};
 
     /// One sphere with two LOD levels behind one selector, placed once (or no LOD at all).
     fn scene(with_lod: bool) -> OwnedHierarchy {

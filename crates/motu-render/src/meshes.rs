@@ -7,11 +7,8 @@ use std::borrow::Cow;
 pub struct PackageMeshes<'a>(pub &'a ScenePackage);
 
 impl motu_trace::MeshSource for PackageMeshes<'_> {
-    fn load(&self, mesh_record: u32) -> Result<motu_trace::MeshGeometry, String> {
-        let g = self
-            .0
-            .mesh_geometry(mesh_record)
-            .map_err(|e| e.to_string())?;
+    fn load(&self, mesh_record: u32) -> Result<motu_trace::MeshGeometry, motu_trace::LoadError> {
+        let g = self.0.mesh_geometry(mesh_record)?;
         Ok(motu_trace::MeshGeometry {
             positions: g.positions,
             indices: g.indices,

@@ -103,10 +103,9 @@ pub fn package_stream_split(
     }
     // The stored split indexes the package's own tables: only a view that is those tables
     // (the same memory, not a copy or a subset) may use it.
-    let own = pkg.view().map_err(|e| RenderError::StreamSplit {
-        cap,
-        reason: e.to_string(),
-    })?;
+    let own = pkg
+        .view()
+        .map_err(|source| RenderError::StoredSplitRead { cap, source })?;
     if !own.same_instancing(view) {
         return stream_split(view, split_instances);
     }
@@ -137,10 +136,9 @@ pub fn stored_stream_split(
     view: &HierarchyView<'_>,
     cap: u32,
 ) -> Result<Option<Option<motu_compile::StreamSplit>>, RenderError> {
-    let invalid = |reason: String| RenderError::StreamSplit { cap, reason };
     let Some(stored) = pkg
         .stored_stream_split(cap)
-        .map_err(|e| invalid(e.to_string()))?
+        .map_err(|source| RenderError::StoredSplitRead { cap, source })?
     else {
         return Ok(None);
     };
@@ -157,8 +155,13 @@ pub fn stored_stream_split(
         instance_source: t.instance_source.to_vec(),
         extra_instances: t.extra_instances.to_vec(),
     };
-    let split = motu_compile::StreamSplit::from_stored(view, &stored)
-        .map_err(|e| invalid(format!("{}: the stored split: {e}", pkg.path())))?;
+    let split = motu_compile::StreamSplit::from_stored(view, &stored).map_err(|source| {
+        RenderError::StoredSplit {
+            cap,
+            path: pkg.path().to_string(),
+            source,
+        }
+    })?;
     Ok(Some(Some(split)))
 }
 
@@ -176,11 +179,8 @@ pub fn stream_split(
         return Ok(None);
     }
     let t0 = std::time::Instant::now();
-    let split =
-        motu_compile::split_for_streaming(view, cap).map_err(|e| RenderError::StreamSplit {
-            cap,
-            reason: e.to_string(),
-        })?;
+    let split = motu_compile::split_for_streaming(view, cap)
+        .map_err(|source| RenderError::StreamSplit { cap, source })?;
     if let Some(s) = &split {
         let (tlases, pieces) = s.counts();
         let split_ms = t0.elapsed().as_secs_f64() * 1e3;

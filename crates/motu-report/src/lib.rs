@@ -106,8 +106,15 @@ pub enum ReportError {
     Hierarchy(#[from] motu_abi::HierarchyError),
     #[error("GPU size query failed: {0}")]
     Gpu(#[from] motu_gpu::GpuError),
-    #[error(transparent)]
-    Render(#[from] motu_render::RenderError),
+    /// A report input out of range (the text says which and why).
     #[error("{0}")]
     Invalid(String),
+    #[error(transparent)]
+    Render(#[from] motu_render::RenderError),
+    #[error("streaming floor: {0}")]
+    Floor(#[source] motu_gpu::GpuError),
+    #[error("persistent TLAS estimate: {0}")]
+    PersistentEstimate(#[source] motu_gpu::GpuError),
+    #[error("size preset: {0}")]
+    Preset(#[source] serde_json::Error),
 }

@@ -501,8 +501,7 @@ fn build(
     // The hierarchy the streamer renders: large TLASes split into pieces at load time.
     let split = match stored_split {
         Some(split) => split,
-        None => motu_render::stream_split(view, None)
-            .map_err(|e| ReportError::Invalid(e.to_string()))?,
+        None => motu_render::stream_split(view, None)?,
     };
     let streamed = split.as_ref().map_or(*view, |s| s.view(view));
     let floor = motu_gpu::streaming_floor(
@@ -512,7 +511,7 @@ fn build(
         fh,
         motu_gpu::StreamOptions::default().staging_bytes,
     )
-    .map_err(|e| ReportError::Invalid(format!("streaming floor: {e}")))?;
+    .map_err(ReportError::Floor)?;
     streaming.stream_split = split.as_ref().map(|s| {
         let (tlases_split, pieces) = s.counts();
         StreamSplitReport {
@@ -529,7 +528,7 @@ fn build(
         &FloorAdapter(sizes),
         sizes.max_instance_count(),
     )
-    .map_err(|e| ReportError::Invalid(format!("persistent TLAS estimate: {e}")))?;
+    .map_err(ReportError::PersistentEstimate)?;
     let budget = budget_bytes
         .map(|b| {
             plan_budget(
@@ -749,7 +748,7 @@ impl motu_gpu::FloorSizes for FloorAdapter<'_> {
         let s = self
             .0
             .blas_sizes(&shape)
-            .map_err(|e| motu_gpu::GpuError::InvalidRequest(e.to_string()))?;
+            .map_err(motu_gpu::GpuError::size_source)?;
         Ok((s.size_bytes, s.build_scratch_bytes))
     }
 
@@ -757,13 +756,13 @@ impl motu_gpu::FloorSizes for FloorAdapter<'_> {
         let s = self
             .0
             .tlas_sizes(u64::from(instance_count))
-            .map_err(|e| motu_gpu::GpuError::InvalidRequest(e.to_string()))?;
+            .map_err(motu_gpu::GpuError::size_source)?;
         Ok((s.size_bytes, s.build_scratch_bytes))
     }
 
     fn tlas_updatable(&self, instance_count: u32) -> motu_gpu::Result<Option<(u64, u64)>> {
         self.0
             .tlas_updatable_sizes(instance_count)
-            .map_err(|e| motu_gpu::GpuError::InvalidRequest(e.to_string()))
+            .map_err(motu_gpu::GpuError::size_source)
     }
 }

@@ -72,13 +72,22 @@ pub struct MeshLocation {
     pub b: u64,
 }
 
+/// Why a [`GeometryStore`] could not store or load a mesh: the store's own error, kept as the
+/// cause (a package store's I/O error, say), not flattened to text.
+pub type StoreError = Box<dyn std::error::Error + Send + Sync>;
+
 /// Holds mesh data outside the skeleton.
 pub trait GeometryStore: Send + Sync {
     /// Stores a mesh's data and returns where it went. `group` is a locality hint (the mesh's
     /// element): stores keep a group's data together so subsets read only their own chunks.
-    fn store(&mut self, id: MeshId, group: u32, data: &MeshData) -> Result<MeshLocation, String>;
+    fn store(
+        &mut self,
+        id: MeshId,
+        group: u32,
+        data: &MeshData,
+    ) -> Result<MeshLocation, StoreError>;
     /// Reads a mesh back.
-    fn load(&self, id: MeshId, at: MeshLocation) -> Result<MeshData, String>;
+    fn load(&self, id: MeshId, at: MeshLocation) -> Result<MeshData, StoreError>;
 }
 
 /// Keeps everything in memory: tests, generated scenes, OBJ files.
@@ -94,7 +103,12 @@ impl InMemoryGeometry {
 }
 
 impl GeometryStore for InMemoryGeometry {
-    fn store(&mut self, _id: MeshId, _group: u32, data: &MeshData) -> Result<MeshLocation, String> {
+    fn store(
+        &mut self,
+        _id: MeshId,
+        _group: u32,
+        data: &MeshData,
+    ) -> Result<MeshLocation, StoreError> {
         self.meshes.push(data.clone());
         Ok(MeshLocation {
             a: (self.meshes.len() - 1) as u64,
@@ -102,10 +116,10 @@ impl GeometryStore for InMemoryGeometry {
         })
     }
 
-    fn load(&self, id: MeshId, at: MeshLocation) -> Result<MeshData, String> {
+    fn load(&self, id: MeshId, at: MeshLocation) -> Result<MeshData, StoreError> {
         self.meshes
             .get(at.a as usize)
             .cloned()
-            .ok_or_else(|| format!("{id} not in the in-memory store"))
+            .ok_or_else(|| format!("{id} not in the in-memory store").into())
     }
 }

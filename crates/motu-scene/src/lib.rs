@@ -32,7 +32,7 @@ mod scene;
 
 pub use builder::SceneBuilder;
 pub use camera::Camera;
-pub use geometry::{GeometryStore, InMemoryGeometry, MeshData, MeshLocation};
+pub use geometry::{GeometryStore, InMemoryGeometry, MeshData, MeshLocation, StoreError};
 pub use ids::{CameraId, EdgeIndex, ElementId, LightId, MaterialId, MeshId, PrototypeId};
 pub use look::{EnvironmentMap, Light, LightKind, Material, PtexFaces, Texture};
 pub use math::{Aabb, Transform34};

@@ -22,7 +22,7 @@ pub enum SceneError {
     #[error("mesh '{name}': {reason}")]
     BadMesh { name: String, reason: String },
     #[error("geometry store: {0}")]
-    Store(String),
+    Store(#[source] crate::StoreError),
     #[error("too many {what} for 32-bit ids: {count}")]
     TooMany { what: &'static str, count: u64 },
 }

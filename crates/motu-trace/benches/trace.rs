@@ -8,8 +8,8 @@
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::Vec3;
 use motu_abi::camera::CameraParams;
-use motu_trace::fixtures::{srt, uv_sphere, HierarchyBuilder, OwnedHierarchy, PiTarget};
 use motu_trace::ray::IDENTITY_3X4;
+use motu_trace::testutil::{srt, uv_sphere, HierarchyBuilder, OwnedHierarchy, PiTarget};
 use motu_trace::{render_with, RenderOptions, Tracer, View};
 
 /// `count` spheres on a jittered square grid in the XZ plane; with `two_level`, rows become

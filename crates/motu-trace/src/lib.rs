@@ -50,19 +50,19 @@
 pub mod bvh;
 pub mod compare;
 mod coverage;
-pub mod fixtures;
 pub mod mesh;
 mod options;
 pub mod ray;
 pub mod render;
 pub mod shade;
+pub mod testutil;
 mod traverse;
 
 #[cfg(test)]
 mod tests;
 
 pub use compare::{compare, CompareError, CompareReport, DEFAULT_REL_EPS};
-pub use mesh::{MeshBvh, MeshError, MeshGeometry, MeshSource};
+pub use mesh::{LoadError, MeshBvh, MeshError, MeshGeometry, MeshSource};
 pub use render::{
     encode_png, render, render_with, write_png, RenderOptions, RenderOutput, RenderStats, View,
 };
@@ -85,4 +85,16 @@ pub enum TraceError {
     Camera(String),
     #[error("PNG {path}: {reason}")]
     Png { path: String, reason: String },
+    #[error("PNG {path}: {source}")]
+    PngEncode {
+        path: String,
+        #[source]
+        source: png::EncodingError,
+    },
+    #[error("PNG {path}: {source}")]
+    PngWrite {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
 }

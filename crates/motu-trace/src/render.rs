@@ -433,16 +433,21 @@ fn encode_srgb(c: [f32; 3]) -> [u8; 3] {
 
 /// Writes an 8-bit RGBA PNG.
 pub fn write_png(path: &Path, width: u32, height: u32, rgba8: &[u8]) -> Result<(), TraceError> {
+    let shown = || path.display().to_string();
     let bytes = encode_png(width, height, rgba8).map_err(|e| match e {
         TraceError::Png { reason, .. } => TraceError::Png {
-            path: path.display().to_string(),
+            path: shown(),
             reason,
+        },
+        TraceError::PngEncode { source, .. } => TraceError::PngEncode {
+            path: shown(),
+            source,
         },
         other => other,
     })?;
-    std::fs::write(path, bytes).map_err(|e| TraceError::Png {
-        path: path.display().to_string(),
-        reason: e.to_string(),
+    std::fs::write(path, bytes).map_err(|source| TraceError::PngWrite {
+        path: shown(),
+        source,
     })
 }
 
@@ -466,53 +471,15 @@ pub fn encode_png(width: u32, height: u32, rgba8: &[u8]) -> Result<Vec<u8>, Trac
     let mut enc = png::Encoder::new(&mut out, width, height);
     enc.set_color(png::ColorType::Rgba);
     enc.set_depth(png::BitDepth::Eight);
-    let mut w = enc.write_header().map_err(|e| err(e.to_string()))?;
-    w.write_image_data(rgba8).map_err(|e| err(e.to_string()))?;
-    w.finish().map_err(|e| err(e.to_string()))?;
+    let encode_err = |source| TraceError::PngEncode {
+        path: "<memory>".into(),
+        source,
+    };
+    let mut w = enc.write_header().map_err(encode_err)?;
+    w.write_image_data(rgba8).map_err(encode_err)?;
+    w.finish().map_err(encode_err)?;
     Ok(out)
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn shadow_offset_moves_along_the_normal() {
-        for p in [[0.0, 0.0, 0.0], [100.0, -2000.0, 3.5], [1e-3, 5.0, -0.01]] {
-            let n = [0.0, 1.0, 0.0];
-            let o = shadow_offset(p, n, 0.0);
-            assert!(o[1] > p[1], "{p:?} -> {o:?}");
-            assert_eq!(o[0], p[0]);
-        }
-        let n = normalize([1.0, -1.0, 0.5]);
-        let o = shadow_offset([10.0, 10.0, 10.0], n, 0.0);
-        // Far hits move further: the reach term covers the error of o + t·d.
-        let far = shadow_offset([0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 1000.0);
-        assert!(far[1] >= 1000.0 / 262_144.0, "{far:?}");
-        assert!(o[0] > 10.0 && o[1] < 10.0 && o[2] > 10.0);
-    }
-
-    #[test]
-    fn colours_and_views() {
-        assert_ne!(id_colour(1, 2), id_colour(1, 3));
-        assert_eq!(id_colour(4, 5), id_colour(4, 5));
-        assert_eq!(heat_colour(0.0), [0.0, 0.0, 1.0]);
-        assert_eq!(heat_colour(1.0), [1.0, 0.0, 0.0]);
-        assert_ne!(lod_colour(0), lod_colour(1));
-        assert_eq!("heatmap".parse::<View>(), Ok(View::Heatmap));
-        assert!("x".parse::<View>().is_err());
-        let d: Vec<f32> = (0..100).map(|i| pixel_dither(i, 7)).collect();
-        assert!(d.iter().all(|&u| (0.0..1.0).contains(&u)));
-    }
-
-    #[test]
-    fn png_round_trip_size_check() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("a.png");
-        write_png(&path, 2, 1, &[255, 0, 0, 255, 0, 255, 0, 255]).unwrap();
-        let dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&path).unwrap()));
-        let reader = dec.read_info().unwrap();
-        assert_eq!((reader.info().width, reader.info().height), (2, 1));
-        assert!(write_png(&path, 3, 3, &[0; 4]).is_err());
-    }
-}
+mod tests;

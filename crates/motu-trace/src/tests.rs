@@ -4,11 +4,11 @@ use motu_abi::camera::CameraParams;
 use motu_abi::lod::{LodParams, LOD_NOT_FORCED, RAY_SHADOW};
 use proptest::prelude::*;
 
-use crate::fixtures::{
-    srt, uv_sphere, BruteForce, BruteHit, HierarchyBuilder, OwnedHierarchy, PiTarget,
-};
 use crate::ray::{LocalRay, IDENTITY_3X4};
 use crate::render::{render_with, RenderOptions, View};
+use crate::testutil::{
+    srt, uv_sphere, BruteForce, BruteHit, HierarchyBuilder, OwnedHierarchy, PiTarget,
+};
 use crate::{compare, Hit, MeshGeometry, RayQuery, Scratch, TraceError, Tracer};
 
 /// xorshift64*: deterministic scenes from a proptest seed.
@@ -328,7 +328,7 @@ fn nested_scene() -> (OwnedHierarchy, OwnedHierarchy) {
         let m = f.mesh(r.source_mesh, r.lod, r.material, g.clone());
         blas_of.push(f.triangle_blas(&[m]));
     }
-    let inst: Vec<_> = crate::fixtures::flatten(&ml.view(), 0)
+    let inst: Vec<_> = crate::testutil::flatten(&ml.view(), 0)
         .iter()
         .map(|fi| {
             let m: [f32; 12] = std::array::from_fn(|k| fi.world_from_mesh[k / 4][k % 4] as f32);

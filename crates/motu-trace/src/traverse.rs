@@ -255,7 +255,10 @@ impl<'a> Tracer<'a> {
 
     fn load_mesh(&self, m: u32, params: BuildParams) -> Result<MeshBvh, MeshError> {
         let rec = &self.view.meshes[m as usize];
-        let g = self.source.load(m).map_err(MeshError::Load)?;
+        let g = self
+            .source
+            .load(m)
+            .map_err(|e| MeshError::Source(e.into()))?;
         if g.indices.len() / 3 != rec.triangle_count as usize {
             tracing::warn!(
                 mesh = m,

@@ -11,7 +11,10 @@ pub enum VkError {
          `mesa-vulkan-drivers` (lavapipe, Mesa >= 24.1 for ray tracing) from bookworm-backports; \
          on NVIDIA install `libvulkan1` and set `VK_DRIVER_FILES` to the driver's `nvidia_icd.json`"
     )]
-    LoaderMissing { reason: String },
+    LoaderMissing {
+        #[source]
+        reason: LoaderFault,
+    },
 
     #[error(
         "no Vulkan device found. The loader works but no driver (ICD) reported a device: install \
@@ -54,6 +57,18 @@ pub enum VkError {
         value: String,
         reason: String,
     },
+
+    /// An environment variable holding a size that does not parse.
+    #[error("invalid value {value:?} for environment variable {name}: {source}")]
+    InvalidEnvSize {
+        name: &'static str,
+        value: String,
+        #[source]
+        source: SizeParseError,
+    },
+
+    #[error("invalid request: allocation limits: {0}")]
+    AllocatorLimits(#[source] motu_alloc::LimitsError),
 
     #[error(
         "device memory allocation #{requested} refused: the allocation count limit is {limit} \
@@ -102,6 +117,17 @@ pub enum VkError {
     },
 }
 
+/// Why the Vulkan loader is not usable.
+#[derive(Debug, thiserror::Error)]
+pub enum LoaderFault {
+    /// `libvulkan.so.1` could not be loaded.
+    #[error(transparent)]
+    Load(#[from] ash::LoadingError),
+    /// The loader is older than Vulkan 1.2.
+    #[error("the loader supports only Vulkan {0}; motu needs 1.2 or newer")]
+    TooOld(String),
+}
+
 impl VkError {
     /// A failed submission or wait of the phase `label` (device loss names the phase).
     pub(crate) fn from_submit(call: &'static str, result: vk::Result, label: &str) -> VkError {
@@ -121,3 +147,16 @@ impl VkError {
 
 /// The device layer's result.
 pub type Result<T, E = VkError> = std::result::Result<T, E>;
+
+/// Why a size (`64MiB`) does not parse.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SizeParseError {
+    #[error("expected a number, optionally with a KiB/MiB/GiB/KB/MB/GB suffix")]
+    NoNumber,
+    #[error(transparent)]
+    Digits(#[from] std::num::ParseIntError),
+    #[error("unknown unit suffix {0:?}")]
+    Unit(String),
+    #[error("value overflows 64 bits")]
+    Overflow,
+}

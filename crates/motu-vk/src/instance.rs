@@ -5,7 +5,7 @@ use std::sync::{Arc, Mutex};
 
 use ash::vk;
 
-use crate::error::{Result, VkError};
+use crate::error::{LoaderFault, Result, VkError};
 
 pub(crate) const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
 /// The highest API version motu asks for; ash 0.38 knows Vulkan 1.3.
@@ -141,9 +141,8 @@ impl InstanceShared {
     ) -> Result<Self> {
         let validation = validation.resolve()?;
         // SAFETY: loading libvulkan runs its initialisers; we trust the system loader.
-        let entry = unsafe { ash::Entry::load() }.map_err(|e| VkError::LoaderMissing {
-            reason: e.to_string(),
-        })?;
+        let entry = unsafe { ash::Entry::load() }
+            .map_err(|e| VkError::LoaderMissing { reason: e.into() })?;
         // SAFETY: entry is a loaded loader; this global command has no preconditions.
         let loader_version = unsafe { entry.try_enumerate_instance_version() }
             .map_err(VkError::vk("vkEnumerateInstanceVersion"))?
@@ -151,10 +150,7 @@ impl InstanceShared {
         let api_version = loader_version.min(TARGET_API_VERSION);
         if api_version < vk::API_VERSION_1_2 {
             return Err(VkError::LoaderMissing {
-                reason: format!(
-                    "the loader supports only Vulkan {}; motu needs 1.2 or newer",
-                    version_string(loader_version)
-                ),
+                reason: LoaderFault::TooOld(version_string(loader_version)),
             });
         }
 

@@ -3,10 +3,8 @@
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 
-#[path = "alloc_guard.rs"]
-mod alloc_guard;
 #[global_allocator]
-static GUARD: alloc_guard::Guard = alloc_guard::Guard(512 << 20);
+static GUARD: pbrt_import_fuzz::Guard = pbrt_import_fuzz::Guard(512 << 20);
 
 fuzz_target!(|data: &[u8]| {
     let dir = std::env::temp_dir().join(format!("motu-fuzz-obj-{}", std::process::id()));

@@ -6,10 +6,8 @@
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 
-#[path = "alloc_guard.rs"]
-mod alloc_guard;
 #[global_allocator]
-static GUARD: alloc_guard::Guard = alloc_guard::Guard((1 << 30) + (64 << 20));
+static GUARD: pbrt_import_fuzz::Guard = pbrt_import_fuzz::Guard((1 << 30) + (64 << 20));
 use motu_package::format::{
     checksum, ChunkEntry, ManifestHeader, SectionEntry, Trailer, CHUNK_ENTRY_LEN,
     HEADER_CHECKSUMMED_LEN, HEADER_LEN, MANIFEST_HEADER_LEN, SECTION_ENTRY_LEN,

@@ -2,10 +2,8 @@
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 
-#[path = "alloc_guard.rs"]
-mod alloc_guard;
 #[global_allocator]
-static GUARD: alloc_guard::Guard = alloc_guard::Guard(256 << 20);
+static GUARD: pbrt_import_fuzz::Guard = pbrt_import_fuzz::Guard(256 << 20);
 use pbrt_import::{lexer::Lexer, parse_bytes, CollectSink, FileId, ParseOptions, VersionOption};
 
 fuzz_target!(|data: &[u8]| {

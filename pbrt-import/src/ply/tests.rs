@@ -300,3 +300,14 @@ fn face_indices_become_per_triangle_face_ids() {
         .to_string()
         .contains("face index"));
 }
+
+/// Errors keep their cause (issue 46): an unreadable PLY file's I/O error is the source.
+#[test]
+fn an_unreadable_ply_keeps_its_io_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let e = read_ply(&dir.path().join("gone.ply")).unwrap_err();
+    assert!(matches!(e, PlyError::Read(_)), "{e}");
+    let cause = std::error::Error::source(&e).expect("the I/O error is the source");
+    assert!(cause.downcast_ref::<std::io::Error>().is_some(), "{cause}");
+    assert!(e.to_string().starts_with("PLY: cannot read: "), "{e}");
+}

@@ -162,7 +162,11 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         if backend == BackendArg::Cpu {
             return Err(e);
         }
-        println!("    the GPU backend failed ({e:#}); rendering on the CPU instead");
+        // The deduplicating printer: a cause a message already shows is not repeated.
+        println!(
+            "    the GPU backend failed ({}); rendering on the CPU instead",
+            crate::error_paragraph(&e)
+        );
         super::render::run(args(BackendArg::Cpu))?;
     }
     step(&format!("render {}", a.output.display()), t);

@@ -141,10 +141,10 @@ impl<'a> Reader<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use motu_trace::fixtures::{srt, uv_sphere, HierarchyBuilder};
+    use motu_trace::testutil::{srt, uv_sphere, HierarchyBuilder};
 
     /// A root of many instances of two BLASes: clusters with members.
-    fn scene() -> motu_trace::fixtures::OwnedHierarchy {
+    fn scene() -> motu_trace::testutil::OwnedHierarchy {
         let mut b = HierarchyBuilder::new();
         let mat = b.material([0.5, 0.5, 0.5]);
         let big = b.mesh(0, 0, mat, uv_sphere(8));

@@ -50,11 +50,11 @@ impl OwnedHierarchy {
 }
 
 impl MeshSource for OwnedHierarchy {
-    fn load(&self, mesh_record: u32) -> Result<MeshGeometry, String> {
+    fn load(&self, mesh_record: u32) -> Result<MeshGeometry, crate::LoadError> {
         self.geometry
             .get(mesh_record as usize)
             .cloned()
-            .ok_or_else(|| format!("no geometry for mesh record {mesh_record}"))
+            .ok_or_else(|| format!("no geometry for mesh record {mesh_record}").into())
     }
 }
 

@@ -1,7 +1,7 @@
 //! The partitioners as they were before their speed-ups, serial: what `split.rs` must still
 //! compute exactly (tests only).
 
-use super::split::*;
+use crate::split::*;
 
 pub(crate) fn median_partition_serial<T>(
     items: &mut [T],

@@ -528,12 +528,14 @@ fn lod_chains_replace_heavy_meshes_with_selectors() {
     .length()
         * 0.5;
     assert!((s.radius - half_diag).abs() < 1e-5);
-    // Sink errors surface.
-    let mut failing = |_: u32, _: &MeshData, _: Option<&[u32]>| Err("disk full".to_string());
-    assert!(matches!(
-        compile(&scene, &o, &mut failing),
-        Err(CompileError::Sink { .. })
-    ));
+    // Sink errors surface, the sink's own error kept as the cause.
+    let mut failing =
+        |_: u32, _: &MeshData, _: Option<&[u32]>| Err(std::io::Error::other("disk full").into());
+    let err = compile(&scene, &o, &mut failing).unwrap_err();
+    assert!(matches!(err, CompileError::Sink { .. }), "{err}");
+    let cause = std::error::Error::source(&err).expect("the sink's error is the source");
+    assert_eq!(cause.to_string(), "disk full");
+    assert!(err.to_string().ends_with(": disk full"), "{err}");
 }
 
 #[test]

@@ -1,0 +1,144 @@
+use super::*;
+use crate::compat::AnyDevice;
+use crate::disk::DiskOptions;
+use crate::stats::WarningReason;
+
+fn key(i: u8) -> CacheKey {
+    CacheKey([i; 32])
+}
+
+/// A fake serialized structure: a 32-byte header of `driver`, then `len` bytes.
+fn blob(driver: u8, len: usize) -> Arc<[u8]> {
+    let mut v = vec![driver; 32];
+    v.extend((0..len).map(|i| (i * 7 + usize::from(driver)) as u8));
+    v.into()
+}
+
+fn driver(d: u8) -> impl Fn(&[u8; 32]) -> bool {
+    move |h: &[u8; 32]| h.iter().all(|&b| b == d)
+}
+
+fn disk(dir: &std::path::Path) -> DiskCache {
+    DiskCache::open(
+        dir,
+        DiskOptions {
+            capacity_bytes: Some(1 << 20),
+            ..DiskOptions::default()
+        },
+    )
+}
+
+#[test]
+fn put_then_get_from_host_then_from_disk_in_a_new_process() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut c = AsCache::new(HostCache::new(1 << 20), Some(disk(dir.path())));
+    assert!(c.get(&key(1), &driver(1)).is_none());
+    c.put(key(1), blob(1, 500));
+    assert_eq!(c.contains(&key(1)), Some(Tier::Host));
+    let (b, tier) = c.get(&key(1), &driver(1)).unwrap();
+    assert_eq!((tier, &*b), (Tier::Host, &*blob(1, 500)));
+    let s = c.stats();
+    assert_eq!((s.host_hits, s.disk_hits, s.misses, s.puts), (1, 0, 1, 1));
+    assert_eq!(s.disk.unwrap().written, 1);
+
+    // The next process: an empty host tier, the same directory.
+    let mut next = AsCache::new(HostCache::new(1 << 20), Some(disk(dir.path())));
+    assert_eq!(next.contains(&key(1)), Some(Tier::Disk));
+    let (b, tier) = next.get(&key(1), &driver(1)).unwrap();
+    assert_eq!((tier, &*b), (Tier::Disk, &*blob(1, 500)));
+    let (_, tier) = next.get(&key(1), &driver(1)).unwrap();
+    assert_eq!(tier, Tier::Host, "a disk hit is promoted to host memory");
+    // Put of a key the directory holds writes nothing again.
+    next.put(key(1), blob(1, 500));
+    let s = next.stats();
+    assert_eq!((s.host_hits, s.disk_hits, s.hit_bytes), (1, 1, 2 * 532));
+    assert_eq!(s.disk.unwrap().written, 0);
+}
+
+#[test]
+fn host_eviction_leaves_the_disk_copy_and_an_incompatible_one_is_rebuilt() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut c = AsCache::new(HostCache::new(600), Some(disk(dir.path())));
+    c.put(key(1), blob(1, 500));
+    c.put(key(2), blob(1, 500)); // evicts key 1 from host memory
+    assert_eq!(c.contains(&key(1)), Some(Tier::Disk));
+    assert_eq!(c.get(&key(1), &driver(1)).unwrap().1, Tier::Disk);
+    assert_eq!(c.stats().host.evicted_entries, 2);
+    // Another driver: a miss with a warning, and the entry is gone.
+    c.host_mut().set_capacity_bytes(0);
+    assert!(c.get(&key(2), &driver(9)).is_none());
+    let s = c.stats();
+    assert_eq!(s.warnings().get(WarningReason::Incompatible), 1);
+    assert_eq!(s.misses, 1);
+    assert_eq!(c.contains(&key(2)), None);
+}
+
+#[test]
+fn get_many_answers_as_get_does_from_both_tiers_in_order() {
+    let dir = tempfile::tempdir().unwrap();
+    {
+        let mut c = AsCache::new(HostCache::new(1 << 20), Some(disk(dir.path())));
+        for i in 0..40 {
+            c.put(key(i), blob(1, 1000 + usize::from(i)));
+        }
+    }
+    let mut c = AsCache::new(HostCache::new(1 << 20), Some(disk(dir.path())));
+    c.put(key(200), blob(1, 10)); // in host memory only
+                                  // An entry another driver wrote: a miss with a warning, as `get` would say.
+    let mut other = AsCache::new(HostCache::new(0), Some(disk(dir.path())));
+    other.put(key(201), blob(2, 10));
+    drop(other);
+    let keys: Vec<CacheKey> = (0..40).chain([200, 201, 202]).map(key).collect();
+    let got = c.get_many(&keys, &driver(1));
+    for i in 0..40u8 {
+        let (b, tier) = got[usize::from(i)].as_ref().expect("on disk");
+        assert_eq!(
+            (tier, &**b),
+            (&Tier::Disk, &*blob(1, 1000 + usize::from(i)))
+        );
+    }
+    assert_eq!(got[40].as_ref().map(|g| g.1), Some(Tier::Host));
+    assert!(got[41].is_none() && got[42].is_none());
+    let s = c.stats();
+    assert_eq!((s.host_hits, s.disk_hits, s.misses), (1, 40, 2));
+    assert_eq!(s.warnings().get(WarningReason::Incompatible), 1);
+    // Promoted: the same keys again come from host memory.
+    let again = c.get_many(&keys[..40], &driver(1));
+    assert!(again
+        .iter()
+        .all(|g| g.as_ref().map(|g| g.1) == Some(Tier::Host)));
+}
+
+#[test]
+fn host_only_and_remove() {
+    let mut c = AsCache::new(HostCache::new(1000), None);
+    c.put(key(3), blob(3, 10));
+    assert_eq!(c.get(&key(3), &AnyDevice).unwrap().1, Tier::Host);
+    c.remove(&key(3));
+    assert!(c.get(&key(3), &AnyDevice).is_none());
+    let s = c.stats();
+    assert!(s.disk.is_none());
+    assert_eq!(s.warnings().total(), 0);
+    assert_eq!((s.host_hits, s.misses), (1, 1));
+}
+
+#[test]
+fn a_blob_over_the_host_bound_still_reaches_the_disk() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut c = AsCache::new(HostCache::new(100), Some(disk(dir.path())));
+    c.put(key(4), blob(4, 1000));
+    assert_eq!(c.stats().host.refused, 1);
+    assert_eq!(c.get(&key(4), &driver(4)).unwrap().1, Tier::Disk);
+}
+
+#[test]
+fn disk_removal_makes_both_tiers_forget() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut c = AsCache::new(HostCache::new(1 << 20), Some(disk(dir.path())));
+    c.put(key(5), blob(5, 64));
+    let path = c.disk().unwrap().entry_path(&key(5));
+    assert!(path.exists());
+    c.remove(&key(5));
+    assert!(!path.exists());
+    assert_eq!(c.contains(&key(5)), None);
+}

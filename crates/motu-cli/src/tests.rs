@@ -1,0 +1,147 @@
+use super::*;
+
+#[test]
+fn regression_control_bytes_from_inputs_are_escaped() {
+    let e = anyhow::anyhow!("ctl.pbrt:2:1: unknown directive (at `\x1b[31mBad\x07\0`)");
+    let shown = error_paragraph(&e);
+    assert!(!shown.chars().any(|c| c.is_control()), "{shown:?}");
+    assert!(shown.contains("\\u{1b}[31mBad\\u{7}\\u{0}"), "{shown}");
+    assert_eq!(terminal_safe("a\tb\nc"), "a\tb\nc");
+}
+
+#[test]
+fn regression_error_text_is_not_repeated() {
+    let io = std::io::Error::other("No such device (os error 19)");
+    let inner = anyhow::Error::new(io).context("scene.pbrt: No such device (os error 19)");
+    let e = inner.context("importing scene.pbrt");
+    assert_eq!(
+        error_paragraph(&e),
+        "importing scene.pbrt: scene.pbrt: No such device (os error 19)"
+    );
+}
+
+/// `motu render pkg -o x.png` with `flags`, parsed.
+fn render_args(flags: &[&str]) -> cli::RenderArgs {
+    let args = ["motu", "render", "pkg", "-o", "x.png"].iter().chain(flags);
+    let cli::Command::Render(a) = cli::Cli::try_parse_from(args).unwrap().command else {
+        panic!("not render")
+    };
+    a
+}
+
+/// The viewer and flights light scenes with `motu_render::ShadingOptions::default()`: it
+/// must stay `motu render`'s defaults, and the bounds flags map one to one.
+#[test]
+fn render_library_defaults_are_the_render_flags_defaults() {
+    let a = render_args(&[]);
+    let o = motu_render::ShadingOptions::default();
+    assert_eq!(
+        (o.ao_samples, o.spp, o.auto_exposure, o.bounces),
+        (
+            a.ao_samples,
+            a.spp,
+            a.exposure == cli::ExposureArg::Auto,
+            a.bounces
+        )
+    );
+    let b = cmd::render::stream_bounds(&a.stream_bounds);
+    assert!(!b.given());
+    let a = render_args(&[
+        "--stream-fallback",
+        "coarse",
+        "--stream-build-budget",
+        "1MiB",
+        "--stream-build-ms",
+        "2.5",
+    ]);
+    let o = cmd::render::stream_bounds(&a.stream_bounds).options();
+    assert!(cmd::render::stream_bounds(&a.stream_bounds).given());
+    assert_eq!(o.fallback, motu_gpu::StreamFallback::Coarse);
+    assert_eq!(o.frame_build_bytes, 1 << 20);
+    assert_eq!(o.frame_build_ms, 2.5);
+    assert_eq!(o.max_passes, motu_gpu::StreamOptions::default().max_passes);
+    // The probe: every pixel unless --stream-probe says otherwise (0: off).
+    let d = motu_gpu::StreamOptions::default();
+    assert_eq!((o.probe_stride, d.probe_stride), (1, 1));
+    let b = cmd::render::stream_bounds(&render_args(&["--stream-probe", "0"]).stream_bounds);
+    assert!(b.given(), "--stream-probe needs --stream");
+    assert_eq!(b.options().probe_stride, 0);
+    // Probe rounds: two by default, any count from 1.
+    assert_eq!(d.probe_rounds, 2);
+    let b = cmd::render::stream_bounds(&render_args(&["--stream-probe-rounds", "1"]).stream_bounds);
+    assert!(b.given(), "--stream-probe-rounds needs --stream");
+    assert_eq!(b.options().probe_rounds, 1);
+    // A flag's value clap refuses: the error names the flag.
+    let refused = |flag: &str, value: &str| {
+        let args = ["motu", "render", "pkg", "-o", "x.png", flag, value];
+        let e = cli::Cli::try_parse_from(args).unwrap_err().to_string();
+        assert!(e.contains(flag), "{e}");
+    };
+    refused("--stream-probe-rounds", "0");
+    // Verifying rounds: two by default, 0 turns them off.
+    assert_eq!(d.probe_verify_rounds, 2);
+    let b = cmd::render::stream_bounds(&render_args(&["--stream-probe-verify", "0"]).stream_bounds);
+    assert!(b.given(), "--stream-probe-verify needs --stream");
+    assert_eq!(b.options().probe_verify_rounds, 0);
+    // Pass marks: auto by default (also without a probe: it then marks nothing), any row
+    // stride; an explicit stride or auto contradicting --stream-probe 0 is refused by name.
+    assert_eq!(d.pass_marks, motu_gpu::PassMarks::Auto);
+    assert_eq!(o.pass_marks, motu_gpu::PassMarks::Auto);
+    let b = cmd::render::stream_bounds(&render_args(&["--stream-probe", "0"]).stream_bounds);
+    assert_eq!(b.conflict(), None, "the default pass marks with no probe");
+    // Draining blocks: off by default, a bound that needs --stream.
+    assert!(!d.defrag && !o.defrag);
+    let b = cmd::render::stream_bounds(&render_args(&["--stream-defrag"]).stream_bounds);
+    assert!(b.given(), "--stream-defrag needs --stream");
+    assert!(b.options().defrag);
+    // Mesh memory: auto by default (host on a discrete GPU); device and host name it.
+    assert_eq!(d.mesh_memory, motu_gpu::MeshMemory::Auto);
+    assert_eq!(o.mesh_memory, motu_gpu::MeshMemory::Auto);
+    for (flag, want) in [
+        ("device", motu_gpu::MeshMemory::Device),
+        ("host", motu_gpu::MeshMemory::Host),
+    ] {
+        let b =
+            cmd::render::stream_bounds(&render_args(&["--stream-mesh-memory", flag]).stream_bounds);
+        assert!(b.given(), "--stream-mesh-memory needs --stream");
+        assert_eq!(b.options().mesh_memory, want);
+    }
+    for (flag, want) in [
+        ("2", motu_gpu::PassMarks::Rows(2)),
+        ("0", motu_gpu::PassMarks::Off),
+        ("auto", motu_gpu::PassMarks::Auto),
+    ] {
+        let b = cmd::render::stream_bounds(
+            &render_args(&["--stream-probe-pass-rows", flag]).stream_bounds,
+        );
+        assert!(b.given(), "--stream-probe-pass-rows needs --stream");
+        assert_eq!(b.options().pass_marks, want);
+        assert_eq!(b.conflict(), None);
+    }
+    let b = cmd::render::stream_bounds(
+        &render_args(&["--stream-probe-pass-rows", "2", "--stream-probe", "0"]).stream_bounds,
+    );
+    let e = b.conflict().expect("pass rows without a probe");
+    assert!(
+        e.contains("--stream-probe-pass-rows 2") && e.contains("--stream-probe 0"),
+        "{e}"
+    );
+    let b = cmd::render::stream_bounds(
+        &render_args(&["--stream-probe-pass-rows", "auto", "--stream-probe", "0"]).stream_bounds,
+    );
+    let e = b.conflict().expect("auto pass marks without a probe");
+    assert!(e.contains("--stream-probe-pass-rows auto"), "{e}");
+    refused("--stream-probe-pass-rows", "two");
+    // The load-time split: default (None: a million), any count from 2, 0 for none; 1 is
+    // refused with the reason.
+    assert_eq!(b.split_instances, None);
+    for (flag, want) in [("0", 0), ("2", 2), ("4000", 4000)] {
+        let a = render_args(&["--stream-split-instances", flag]);
+        let b = cmd::render::stream_bounds(&a.stream_bounds);
+        assert!(b.given(), "--stream-split-instances needs --stream");
+        assert_eq!(b.split_instances, Some(want));
+    }
+    for bad in ["1", "many", "5000000000"] {
+        refused("--stream-split-instances", bad);
+    }
+}

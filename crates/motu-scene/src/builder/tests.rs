@@ -1,0 +1,141 @@
+use super::*;
+use glam::{Mat4, Quat, Vec3};
+
+fn quad() -> MeshData {
+    MeshData {
+        positions: vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+        ],
+        normals: None,
+        uvs: None,
+        indices: vec![0, 1, 2, 0, 2, 3],
+    }
+}
+
+#[test]
+fn dag_sharing_counts_paths_not_copies() {
+    let mut b = SceneBuilder::default();
+    let mat = b.default_material();
+    let main = Scene::MAIN_ELEMENT;
+    let leaf = b.add_prototype("leaf", main).unwrap();
+    b.add_mesh(leaf, "quad", mat, main, &quad()).unwrap();
+    let tree = b.add_prototype("tree", main).unwrap();
+    for i in 0..3 {
+        b.add_instance(
+            tree,
+            leaf,
+            Transform34::from_translation(Vec3::X * i as f32),
+            main,
+        )
+        .unwrap();
+    }
+    for i in 0..4 {
+        b.add_instance(
+            b.root(),
+            tree,
+            Transform34::from_translation(Vec3::Y * i as f32),
+            main,
+        )
+        .unwrap();
+    }
+    // The root also places a leaf directly: the leaf prototype is shared by two parents.
+    b.add_instance(b.root(), leaf, Transform34::IDENTITY, main)
+        .unwrap();
+    let s = b.finish().unwrap();
+    let st = s.stats();
+    assert_eq!(st.instances, 3 + 4 + 1);
+    assert_eq!(st.flattened_instances, 4 * 3 + 1);
+    assert_eq!(st.unique_triangles, 2);
+    assert_eq!(st.instanced_triangles, (4 * 3 + 1) * 2);
+    assert_eq!(st.max_depth, 2);
+    let wb = s.world_bounds();
+    assert_eq!(wb.min, [0.0, 0.0, 0.0]);
+    assert_eq!(wb.max, [3.0, 4.0, 0.0]);
+    assert_eq!(s.mesh_data(MeshId(0)).unwrap(), quad());
+}
+
+#[test]
+fn interleaved_edges_are_sorted_into_csr_in_import_order() {
+    let mut b = SceneBuilder::default();
+    let main = Scene::MAIN_ELEMENT;
+    let a = b.add_prototype("a", main).unwrap();
+    let c = b.add_prototype("c", main).unwrap();
+    let t = |x: f32| Transform34::from_translation(Vec3::X * x);
+    b.add_instance(b.root(), a, t(1.0), main).unwrap();
+    b.add_instance(a, c, t(2.0), main).unwrap();
+    b.add_instance(b.root(), c, t(3.0), main).unwrap();
+    b.add_instance(a, c, t(4.0), main).unwrap();
+    let s = b.finish().unwrap();
+    let xs = |p| {
+        s.edges(p)
+            .iter()
+            .map(|e| e.parent_from_child.rows[0][3])
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(xs(s.root()), vec![1.0, 3.0]);
+    assert_eq!(xs(a), vec![2.0, 4.0]);
+    assert!(xs(c).is_empty());
+    assert_eq!(s.root_edge_elements().len(), 2);
+}
+
+#[test]
+fn cycles_are_rejected() {
+    let mut b = SceneBuilder::default();
+    let main = Scene::MAIN_ELEMENT;
+    let a = b.add_prototype("a", main).unwrap();
+    let c = b.add_prototype("c", main).unwrap();
+    b.add_instance(a, c, Transform34::IDENTITY, main).unwrap();
+    b.add_instance(c, a, Transform34::IDENTITY, main).unwrap();
+    b.add_instance(b.root(), a, Transform34::IDENTITY, main)
+        .unwrap();
+    let err = b.finish().unwrap_err();
+    assert!(matches!(err, SceneError::Cycle { .. }), "{err}");
+}
+
+#[test]
+fn bounds_through_rotated_instances_use_all_corners() {
+    let mut b = SceneBuilder::default();
+    let main = Scene::MAIN_ELEMENT;
+    let m = b.default_material();
+    let p = b.add_prototype("unit", main).unwrap();
+    let cube = MeshData {
+        positions: vec![[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0], [1.0, -1.0, 1.0]],
+        normals: None,
+        uvs: None,
+        indices: vec![0, 1, 2],
+    };
+    b.add_mesh(p, "tri", m, main, &cube).unwrap();
+    let rot = Transform34::from_mat4(Mat4::from_quat(Quat::from_rotation_y(0.7)));
+    b.add_instance(b.root(), p, rot, main).unwrap();
+    let s = b.finish().unwrap();
+    let expect = s.mesh(MeshId(0)).bounds.transformed(&rot);
+    assert_eq!(s.world_bounds(), expect);
+    // Conservative: every transformed vertex is inside.
+    for v in &cube.positions {
+        let q = rot.transform_point(Vec3::from_array(*v));
+        assert!(s.world_bounds().contains(&Aabb::from_min_max(q, q), 1e-5));
+    }
+}
+
+#[test]
+fn bad_input_is_an_error_not_a_panic() {
+    let mut b = SceneBuilder::default();
+    let main = Scene::MAIN_ELEMENT;
+    let m = b.default_material();
+    let bad = MeshData {
+        positions: vec![[0.0; 3]],
+        indices: vec![0, 1, 2],
+        ..Default::default()
+    };
+    assert!(b.add_mesh(b.root(), "bad", m, main, &bad).is_err());
+    assert!(b
+        .add_instance(b.root(), PrototypeId(99), Transform34::IDENTITY, main)
+        .is_err());
+    let mut nan = Transform34::IDENTITY;
+    nan.rows[0][0] = f32::NAN;
+    let p = b.add_prototype("p", main).unwrap();
+    assert!(b.add_instance(b.root(), p, nan, main).is_err());
+}

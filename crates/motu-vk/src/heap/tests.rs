@@ -1,0 +1,67 @@
+use super::*;
+use crate::context::Requirement;
+use crate::testing::{assert_no_validation_errors, context_or_skip, test_heap};
+
+/// `try_fit` answers as allocating would (the streamed TLAS rebuild's room probe asks it
+/// instead of allocating) and allocates nothing: no block, no memory.
+#[test]
+fn try_fit_answers_as_allocating_would_without_allocating() {
+    let Some(ctx) = context_or_skip("heap_try_fit", Requirement::Compute) else {
+        return;
+    };
+    const MIB: u64 = 1 << 20;
+    let mut heap = test_heap(&ctx, 64 * MIB);
+    let held = heap
+        .alloc_buffer(
+            "held",
+            40 * MIB,
+            BufferUsage::STORAGE,
+            AllocKind::Other,
+            MemoryClass::DeviceLocal,
+            16,
+        )
+        .expect("40 MiB of 64");
+    let blocks = heap.block_count();
+    let report = heap.report();
+    let ask = |label, mib: u64| FitRequest {
+        label,
+        size_bytes: mib * MIB,
+        usage: BufferUsage::STORAGE,
+        kind: AllocKind::Scratch,
+        class: MemoryClass::DeviceLocal,
+        alignment: 16,
+    };
+    assert!(heap.try_fit(&[ask("small", 8)]).is_ok());
+    // Each alone fits; held together the second does not, and the error names it.
+    assert!(heap.try_fit(&[ask("second", 16)]).is_ok());
+    match heap.try_fit(&[ask("first", 16), ask("second", 16)]) {
+        Err(VkError::Budget(msg)) => assert!(msg.starts_with("second:"), "{msg}"),
+        other => panic!("expected the budget's refusal of `second`: {other:?}"),
+    }
+    assert_eq!(heap.block_count(), blocks, "no memory allocated");
+    assert_eq!(heap.report(), report, "the policy's state unchanged");
+    // The real allocations agree.
+    let a = heap
+        .alloc_buffer(
+            "a",
+            16 * MIB,
+            BufferUsage::STORAGE,
+            AllocKind::Scratch,
+            MemoryClass::DeviceLocal,
+            16,
+        )
+        .expect("first fits");
+    assert!(heap
+        .alloc_buffer(
+            "b",
+            16 * MIB,
+            BufferUsage::STORAGE,
+            AllocKind::Scratch,
+            MemoryClass::DeviceLocal,
+            16
+        )
+        .is_err());
+    heap.free(a);
+    heap.free(held);
+    assert_no_validation_errors(&ctx);
+}

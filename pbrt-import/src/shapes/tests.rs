@@ -1,0 +1,83 @@
+use super::*;
+use crate::lexer::Lexer;
+use crate::FileId;
+
+fn params(src: &str) -> ParamList<'_> {
+    let mut lx = Lexer::new(src.as_bytes(), FileId(0));
+    ParamList::parse(&mut lx).unwrap_or_else(|_| panic!("bad test params"))
+}
+
+#[test]
+fn trianglemesh_basic_and_errors() {
+    let mut notes = Vec::new();
+    let mut p =
+        params(r#""point3 P" [0 0 0 1 0 0 0 1 0] "normal N" [0 0 1] "float uv" [0 0 1 0 0 1]"#);
+    let m = triangle_mesh(&mut p, &mut notes).unwrap();
+    assert_eq!(m.indices, [0, 1, 2]);
+    assert!(m.normals.is_none() && notes.len() == 1);
+    assert_eq!(m.uvs.unwrap()[1], [1.0, 0.0]);
+    let mut p = params(r#""integer indices" [0 1 5] "point P" [0 0 0 1 0 0 0 1 0]"#);
+    assert!(triangle_mesh(&mut p, &mut notes)
+        .unwrap_err()
+        .contains("out of range"));
+    let mut p = params(r#""integer indices" [0 1 2 3] "point P" [0 0 0 1 0 0 0 1 0 1 1 1]"#);
+    assert!(triangle_mesh(&mut p, &mut notes)
+        .unwrap_err()
+        .contains("multiple of 3"));
+}
+
+#[test]
+fn bilinear_to_triangles() {
+    let mut p = params(r#""point3 P" [0 0 0 1 0 0 0 1 0 1 1 0]"#);
+    let m = bilinear_mesh(&mut p, &mut Vec::new()).unwrap();
+    assert_eq!(m.indices, [0, 1, 3, 0, 3, 2]);
+    // The patch is one Ptex face, its second triangle the second half.
+    let half = crate::events::FACE_SECOND_HALF;
+    assert_eq!(m.face_ids.as_deref(), Some(&[0, half][..]));
+    let mut p = params(r#""point3 P" [0 0 0 1 0 0 0 1 0 1 1 0] "integer faceIndices" [7]"#);
+    let m = bilinear_mesh(&mut p, &mut Vec::new()).unwrap();
+    assert_eq!(m.face_ids.as_deref(), Some(&[7, 7 | half][..]));
+}
+
+#[test]
+fn face_indices_are_kept_per_triangle() {
+    let mut notes = Vec::new();
+    let mut p = params(
+        r#""point P" [0 0 0 1 0 0 0 1 0 1 1 0] "integer indices" [0 1 2 2 1 3] "integer faceIndices" [4 4]"#,
+    );
+    let m = triangle_mesh(&mut p, &mut notes).unwrap();
+    assert_eq!(m.face_ids.as_deref(), Some(&[4, 4][..]));
+    let mut p = params(
+        r#""point P" [0 0 0 1 0 0 0 1 0 1 1 0] "integer indices" [0 1 2 2 1 3] "integer faceIndices" [4]"#,
+    );
+    let m = triangle_mesh(&mut p, &mut notes).unwrap();
+    assert_eq!(m.face_ids, None);
+    assert!(notes.iter().any(|n| n.contains("faceIndices")), "{notes:?}");
+}
+
+#[test]
+fn quadrics_are_valid_and_sized() {
+    let s = sphere(&params(r#""float radius" 2"#), 16).unwrap();
+    assert!(valid(&s));
+    for p in &s.positions {
+        let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        assert!((r - 2.0).abs() < 1e-4);
+    }
+    let d = disk(&params(r#""float radius" 3 "float height" 1"#), 8).unwrap();
+    assert!(valid(&d) && d.positions.iter().all(|p| p[2] == 1.0));
+    let c = cylinder(&params(r#""float zmax" 5"#), 8).unwrap();
+    assert_eq!(c.triangle_count(), 16);
+}
+
+#[test]
+fn curves() {
+    let mut p =
+        params(r#""point3 P" [0 0 0 1 0 0 2 0 0 3 0 0] "float width" 0.1 "string type" "ribbon""#);
+    let c = curve(&mut p).unwrap();
+    assert_eq!(
+        (c.control_points.len(), c.width0, c.curve_type.as_str()),
+        (4, 0.1, "ribbon")
+    );
+    let mut p = params(r#""point3 P" [0 0 0 1 0 0]"#);
+    assert!(curve(&mut p).is_err());
+}
