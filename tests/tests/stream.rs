@@ -701,6 +701,8 @@ fn shot_path_env(
         "--frames",
         "8",
         "--stream",
+        // The streamer itself, also at budgets that hold the whole scene ("everything").
+        "--stream-always",
         "--vram-budget",
         &budget,
     ];
