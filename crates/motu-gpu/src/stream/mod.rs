@@ -135,6 +135,7 @@ mod tlas_build;
 mod tlas_records;
 mod tlases;
 mod topology;
+mod transfer;
 
 pub use cache::StructureCache;
 pub use fits::{full_build_fits, FullBuildFit};
