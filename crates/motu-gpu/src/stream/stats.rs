@@ -123,6 +123,10 @@ pub struct FrameStreamStats {
     pub restore_read_ms: f64,
     pub restore_upload_ms: f64,
     pub restore_gpu_ms: f64,
+    /// Store and restore batches, and the host-visible buffers allocated for them (kept and
+    /// reused on a discrete GPU: far fewer than batches; `transfer.rs`).
+    pub transfer_batches: u32,
+    pub transfer_allocations: u32,
     pub build_ms: f64,
     /// Wall time of the trace submissions.
     pub trace_ms: f64,
@@ -283,6 +287,8 @@ pub struct StreamTotals {
     pub restore_read_ms: f64,
     pub restore_upload_ms: f64,
     pub restore_gpu_ms: f64,
+    pub transfer_batches: u32,
+    pub transfer_allocations: u32,
     /// Triangles of every buildable triangle BLAS: what one full build costs.
     pub scene_triangles: u64,
     /// Bytes the skeleton (tables, PI BLASes, root TLAS, proxies) took at start.
@@ -361,6 +367,8 @@ impl StreamTotals {
         tot.restore_read_ms += st.restore_read_ms;
         tot.restore_upload_ms += st.restore_upload_ms;
         tot.restore_gpu_ms += st.restore_gpu_ms;
+        tot.transfer_batches += st.transfer_batches;
+        tot.transfer_allocations += st.transfer_allocations;
         tot.restore_gb_per_s = if tot.restore_ms > 0.0 {
             tot.restored_bytes as f64 / (tot.restore_ms * 1e6)
         } else {
