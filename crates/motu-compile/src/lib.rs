@@ -117,6 +117,7 @@ mod finalize;
 mod flatten;
 mod lod;
 pub mod partition;
+pub mod proxy_boxes;
 mod split;
 mod tables;
 mod tlas_split;

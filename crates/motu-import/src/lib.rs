@@ -22,6 +22,7 @@ mod compile_report;
 mod error;
 mod memory;
 mod pipeline;
+mod proxy_boxes;
 mod split;
 mod textures;
 

@@ -546,6 +546,7 @@ fn finish(
     let t = Instant::now();
     meta.stream_split = Some(crate::split::write_stream_split(&mut writer, &view)?);
     let split_ms = t.elapsed().as_secs_f64() * 1e3;
+    crate::proxy_boxes::write_proxy_boxes(&mut writer, &view)?;
     motu_pack::write_hierarchy_after_texels(&mut writer, &view, &meta)?;
     Ok((
         writer.finish().map_err(ImportError::FinishPackage)?,
