@@ -160,3 +160,6 @@ impl super::StreamingRenderer<'_> {
         self.proxy_boxes_cached(index, box_count, partial)
     }
 }
+
+#[cfg(test)]
+mod tests;
