@@ -26,7 +26,9 @@ pub(crate) fn write_proxy_boxes(
     view: &HierarchyView<'_>,
 ) -> Result<(), ImportError> {
     let t = std::time::Instant::now();
-    let batch = rayon::current_num_threads().max(2);
+    // Chunks read at once: one per core, at most 16 (64 MiB each by default, and about as much
+    // again of triangle boxes while their BLASes wait).
+    let batch = rayon::current_num_threads().clamp(2, 16);
     let table = make_table(view, batch, |c| writer.read_back_chunk(c))?;
     let made_ms = t.elapsed().as_secs_f64() * 1e3;
     let bytes = encode_section(&table);
