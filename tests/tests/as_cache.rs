@@ -68,6 +68,8 @@ fn path(
         "--frames",
         "8",
         "--stream",
+        // The streamer and its cache, also at budgets that hold the whole scene.
+        "--stream-always",
         "--vram-budget",
         budget,
     ];
@@ -263,6 +265,7 @@ fn corrupt_truncated_and_foreign_entries_are_rebuilt_with_a_warning() {
         "--frames",
         "8",
         "--stream",
+        "--stream-always",
         "--vram-budget",
         &budget,
         "--host-cache",

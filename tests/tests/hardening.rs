@@ -543,6 +543,7 @@ fn regression_exponential_instancing_warns_and_frames_end() {
             "--backend",
             "pipeline",
             "--stream",
+            "--stream-always",
             "--stats",
             s(&stats),
         ];

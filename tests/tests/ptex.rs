@@ -270,7 +270,15 @@ fn ptex_faces_render_on_every_backend_and_stream() {
             &pkg,
             b,
             &streamed,
-            &["--ao-samples", "0", "--stream", "--vram-budget", "64MiB"],
+            // The streamer (64 MiB holds this scene: it would render the full build).
+            &[
+                "--ao-samples",
+                "0",
+                "--stream",
+                "--stream-always",
+                "--vram-budget",
+                "64MiB",
+            ],
         );
         assert_eq!(st["stream"]["totals"]["incomplete_frames"], 0, "{st}");
         assert!(

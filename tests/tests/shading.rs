@@ -203,7 +203,15 @@ fn textures_alpha_cutouts_and_a_missing_texture() {
             &pkg,
             b,
             &streamed,
-            &["--ao-samples", "0", "--stream", "--vram-budget", "64MiB"],
+            // The streamer (64 MiB holds this scene: it would render the full build).
+            &[
+                "--ao-samples",
+                "0",
+                "--stream",
+                "--stream-always",
+                "--vram-budget",
+                "64MiB",
+            ],
         );
         assert_eq!(st["stream"]["totals"]["incomplete_frames"], 0, "{st}");
         let resident = st["stream"]["frames"][0]["resident_textures"]

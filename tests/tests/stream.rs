@@ -701,6 +701,8 @@ fn shot_path_env(
         "--frames",
         "8",
         "--stream",
+        // The streamer itself, also at budgets that hold the whole scene ("everything").
+        "--stream-always",
         "--vram-budget",
         &budget,
     ];
@@ -744,6 +746,8 @@ fn proxy_boxes_stored_at_import_start_streamed_renders_and_bad_ones_are_made_aga
             "--stats",
             s(&json),
             "--stream",
+            // The streamer's start is under test, whatever the budget holds.
+            "--stream-always",
             "--vram-budget",
             &budget,
             size[0],

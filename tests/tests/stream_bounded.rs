@@ -86,6 +86,8 @@ fn a_frame_build_budget_shows_the_counted_fallback_and_converges_to_the_full_bui
             "--backend",
             "pipeline",
             "--stream",
+            // No --vram-budget: the device's holds the scene; the streamer is under test.
+            "--stream-always",
             "--camera-path",
             s(&path),
             "--frames",
@@ -283,6 +285,8 @@ fn stream_frames(
         "--height",
         H,
         "--stream",
+        // The streamer itself, also "with room" (a budget that holds the whole scene).
+        "--stream-always",
         "--vram-budget",
         &budget_arg,
         "--frames",

@@ -95,6 +95,12 @@ fn stream_matches_with(
         serde_json::from_str(&std::fs::read_to_string(&stats).expect("stats")).expect("json");
     let frame = &st["stream"]["frames"][0];
     assert_eq!(frame["complete"], true, "{frame}");
+    // Below the full build's bound: streamed, not handed to the full build.
+    assert_eq!(
+        st["stream_fit"]["full_build"], false,
+        "{}",
+        st["stream_fit"]
+    );
     assert!(u(&st["vram_peak_bytes"]) <= budget, "{st}");
     let out = motu_ok(&["compare", s(full_aov), s(&aov), "--max-mismatch", "0"]);
     assert!(out.contains("(0 of "), "{out}");
@@ -246,6 +252,8 @@ fn below_the_floor_is_refused_and_an_unfinished_frame_is_an_error() {
     let mut args = render_args(&pkg, &png, &aov, "query");
     args.extend([
         "--stream",
+        // The budget may hold the whole scene: the streamer's pass cap is under test.
+        "--stream-always",
         "--vram-budget",
         &budget,
         "--stream-max-passes",

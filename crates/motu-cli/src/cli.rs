@@ -593,6 +593,10 @@ pub struct RenderArgs {
     /// default sized from the scene's structure count).
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, hide = true)]
     pub stream_max_passes: Option<u32>,
+    /// With --stream: stream even when the budget holds the whole scene (by default the full
+    /// build renders it then, being never slower; for testing the streamer).
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long)]
+    pub stream_always: bool,
     #[command(flatten)]
     pub stream_bounds: StreamBoundArgs,
     #[command(flatten)]

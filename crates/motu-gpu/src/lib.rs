@@ -154,8 +154,9 @@ pub use scene::{
     full_build_overhead, BuildOptions, FullBuildOverhead, GpuScene, MeshBlobSource, ResourceReport,
 };
 pub use stream::{
-    persistent_tlas_estimate, streamed_mesh_total_bytes, streaming_floor, streaming_floor_planned,
-    FloorSizes, FrameStreamStats, MeshMemory, PassMarks, PassStats, PersistentEstimate,
-    StreamFallback, StreamFloor, StreamOptions, StreamPlan, StreamTotals, StreamingRenderer,
-    StructureCache, TlasUpdate, AUTO_PASS_FRAMES, AUTO_PASS_ROWS, PI_EMPTY_BLAS,
+    full_build_fits, persistent_tlas_estimate, streamed_mesh_total_bytes, streaming_floor,
+    streaming_floor_planned, FloorSizes, FrameStreamStats, FullBuildFit, MeshMemory, PassMarks,
+    PassStats, PersistentEstimate, StreamFallback, StreamFloor, StreamOptions, StreamPlan,
+    StreamTotals, StreamingRenderer, StructureCache, TlasUpdate, AUTO_PASS_FRAMES, AUTO_PASS_ROWS,
+    PI_EMPTY_BLAS,
 };

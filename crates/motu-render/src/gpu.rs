@@ -24,6 +24,7 @@ pub(crate) struct PathStats {
     pub path_ms_per_frame: Option<Vec<f64>>,
     pub fallback_pixels: Option<u64>,
     pub stream: Option<StreamRunStats>,
+    pub stream_fit: Option<crate::stats::StreamFitStats>,
 }
 
 impl PathStats {
@@ -36,6 +37,7 @@ impl PathStats {
             path_ms_per_frame: None,
             fallback_pixels: None,
             stream: None,
+            stream_fit: None,
         }
     }
 }
@@ -112,8 +114,12 @@ fn build_gpu_scene(
     view: &HierarchyView<'_>,
     backend: Backend,
     instance_lod: Option<&InstanceLod>,
+    ctx: Option<motu_gpu::Context>,
 ) -> Result<(motu_gpu::Context, motu_gpu::GpuScene), RenderError> {
-    let ctx = gpu_context(s, backend)?;
+    let ctx = match ctx {
+        Some(c) => c,
+        None => gpu_context(s, backend)?,
+    };
     let meshes = PackageMeshes(pkg);
     let scene = build_scene(
         &ctx,
@@ -176,14 +182,14 @@ pub(crate) fn render_gpu(
     pkg: &ScenePackage,
     view: &HierarchyView<'_>,
     camera: &CameraParams,
-    lod: LodParams,
     backend: Backend,
     instance_lod: Option<&InstanceLod>,
+    ctx: Option<motu_gpu::Context>,
 ) -> Result<Rendered, RenderError> {
-    let (ctx, scene) = build_gpu_scene(s, pkg, view, backend, instance_lod)?;
+    let (ctx, scene) = build_gpu_scene(s, pkg, view, backend, instance_lod, ctx)?;
     let opts = gpu_render_options(
         s,
-        lod,
+        s.lod,
         backend,
         s.frames,
         scene_shading(s.shading, pkg, view),
@@ -209,12 +215,12 @@ pub(crate) fn render_gpu_path(
     pkg: &ScenePackage,
     view: &HierarchyView<'_>,
     cams: &[CameraParams],
-    lod: LodParams,
     backend: Backend,
     instance_lod: Option<&InstanceLod>,
+    ctx: Option<motu_gpu::Context>,
 ) -> Result<Rendered, RenderError> {
-    let (ctx, scene) = build_gpu_scene(s, pkg, view, backend, instance_lod)?;
-    let opts = gpu_render_options(s, lod, backend, 1, scene_shading(s.shading, pkg, view));
+    let (ctx, scene) = build_gpu_scene(s, pkg, view, backend, instance_lod, ctx)?;
+    let opts = gpu_render_options(s, s.lod, backend, 1, scene_shading(s.shading, pkg, view));
     let mut live = motu_gpu::LiveRenderer::new(scene);
     let mut times = Vec::with_capacity(cams.len());
     let mut last = None;

@@ -82,9 +82,9 @@ pub fn render(
         }
         (backend, None) => match recorded {
             Some(cams) => {
-                crate::gpu::render_gpu_path(s, pkg, view, cams, lod, backend, instance_lod)?
+                crate::gpu::render_gpu_path(s, pkg, view, cams, backend, instance_lod, None)?
             }
-            None => crate::gpu::render_gpu(s, pkg, view, &camera, lod, backend, instance_lod)?,
+            None => crate::gpu::render_gpu(s, pkg, view, &camera, backend, instance_lod, None)?,
         },
     };
     let mut rgba8 = rgba8;
@@ -99,7 +99,13 @@ pub fn render(
         path_ms_per_frame,
         fallback_pixels,
         stream,
+        stream_fit,
     } = path;
+    // A `--stream` render whose budget held the scene built it as the full build does.
+    let blas_build = match &stream_fit {
+        Some(f) if f.full_build => crate::stream::full_build_settings(s).blas_build(),
+        _ => s.blas_build(),
+    };
     let stats = RenderStats {
         frame,
         truncated_rays,
@@ -107,9 +113,10 @@ pub fn render(
         path_ms_per_frame,
         fallback_pixels,
         stream,
+        stream_fit,
         denoise: denoised.as_ref().map(Into::into),
         lod: lod_stats(job.lod),
-        blas_build: s.blas_build().name(),
+        blas_build: blas_build.name(),
         subset: job.subset.to_vec(),
         package: job.package_path.display().to_string(),
     };

@@ -62,6 +62,9 @@ pub struct StreamSettings {
     pub allow_incomplete: bool,
     /// Where built structures are kept for reuse (`--host-cache`, `--as-cache`).
     pub cache: crate::CacheSettings,
+    /// `--stream-always`: stream even when the budget holds the whole scene (by default the
+    /// full build renders it then: never slower).
+    pub always: bool,
 }
 
 impl RenderSettings {
@@ -89,4 +92,8 @@ pub enum RenderEvent<'a> {
     },
     /// Rays were cut short and `allow_truncated` writes the image anyway: `what` says how many.
     TruncatedWritten { what: &'a str },
+    /// `--stream` under a budget that holds the whole scene: the full build renders it.
+    StreamFullBuild { budget_bytes: u64, upper_bytes: u64 },
+    /// The full build chosen for `--stream` did not fit after all (`what`): streamed instead.
+    StreamFullBuildRefused { what: &'a str },
 }

@@ -69,6 +69,9 @@ pub struct RenderStats {
     pub fallback_pixels: Option<u64>,
     /// The streaming run (`null` for other renders).
     pub stream: Option<StreamRunStats>,
+    /// `--stream`'s test of whether the budget holds the whole scene (`null` for other renders
+    /// and with `--stream-always`).
+    pub stream_fit: Option<StreamFitStats>,
     /// `--denoise` on the shaded view (`null` otherwise).
     pub denoise: Option<DenoiseStats>,
     #[serde(flatten)]
@@ -313,6 +316,20 @@ pub struct LodStats {
     pub lod_instances: usize,
     /// LOD selectors the traversal shader evaluates.
     pub lod_traversal_selectors: u32,
+}
+
+/// `stream_fit` in `--stats`: whether a `--stream` render's budget holds the whole scene,
+/// by an upper bound of the full build's peak (`motu_gpu::full_build_fits`).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StreamFitStats {
+    /// The budget the full build would get.
+    pub budget_bytes: u64,
+    /// The bound (uncompacted structures, every mesh and texel, transients, overhead).
+    pub full_build_upper_bytes: u64,
+    /// The budget held it and the full build rendered (`stream` is then `null`).
+    pub full_build: bool,
+    /// The test's time (the device's size queries for every structure).
+    pub check_ms: f64,
 }
 
 /// `stream` in `--stats`: every frame, the run's totals, the floor the budget was checked

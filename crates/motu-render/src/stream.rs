@@ -4,7 +4,7 @@
 
 use crate::gpu::{gpu_context, gpu_render_options, PathStats, Rendered};
 use crate::settings::{RenderEvent, RenderSettings, StreamSettings};
-use crate::stats::{FrameStats, StreamRunStats, StreamStartup};
+use crate::stats::{FrameStats, StreamFitStats, StreamRunStats, StreamStartup};
 use crate::{camera_pose, scene_shading, Backend, PackageMeshes, RenderError};
 use motu_abi::camera::{camera_path, CameraParams};
 use motu_abi::HierarchyView;
@@ -212,6 +212,13 @@ pub(crate) fn render_streaming(
     let t = Instant::now();
     let ctx = tracing::info_span!("device").in_scope(|| gpu_context(s, backend))?;
     startup.device_ms = ms_since(t);
+    let mut stream_fit = None;
+    if !stream.always {
+        match render_full_if_it_fits(s, job, backend, &ctx, progress)? {
+            Fit::Rendered(done) => return Ok(*done),
+            Fit::Streams(fit) => stream_fit = Some(fit),
+        }
+    }
     let t = Instant::now();
     let split = tracing::info_span!("split")
         .in_scope(|| package_stream_split(pkg, view, stream.bounds.split_instances))?;
@@ -363,10 +370,132 @@ pub(crate) fn render_streaming(
             mean_passes_after_first: (!after_first.is_empty())
                 .then(|| after_first.iter().sum::<f64>() / after_first.len() as f64),
         }),
+        stream_fit,
         ..PathStats::new(FrameStats::gpu(&out.stats))
     };
     drop(sr);
     ctx.check_validation()
         .map_err(|e| RenderError::Validation(e.into()))?;
     Ok(((out.aov, out.rgba8, stats), last_camera))
+}
+
+/// The settings of the full build that renders a `--stream` job whose budget holds the whole
+/// scene: the same, without streaming (so BLASes build as a full build's unless
+/// `--blas-build` says otherwise).
+pub(crate) fn full_build_settings(s: &RenderSettings) -> RenderSettings {
+    RenderSettings {
+        stream: None,
+        ..s.clone()
+    }
+}
+
+/// What [`render_full_if_it_fits`] did.
+enum Fit {
+    /// The full build rendered the job (the image and the last camera).
+    Rendered(Box<(Rendered, CameraParams)>),
+    /// The budget does not hold the scene (or the full build was refused): stream it.
+    Streams(StreamFitStats),
+}
+
+/// A streamed render is never slower than the full build: when the budget holds the whole
+/// scene (an upper bound of the full build's peak, `motu_gpu::full_build_fits`), the full build
+/// renders the same cameras the stream would (the sweep or the recorded path), on the device
+/// already open. A full build the allocator refuses after all falls back to streaming, said.
+fn render_full_if_it_fits(
+    s: &RenderSettings,
+    job: &crate::RenderJob<'_>,
+    backend: Backend,
+    ctx: &motu_gpu::Context,
+    progress: &mut dyn FnMut(RenderEvent<'_>),
+) -> Result<Fit, RenderError> {
+    let (pkg, view) = (job.package, job.view);
+    let full = full_build_settings(s);
+    let (pose, w, h) = camera_pose(
+        pkg,
+        view,
+        s.camera.name.as_deref(),
+        s.camera.width,
+        s.camera.height,
+    )?;
+    let cams: Vec<CameraParams> = match job.recorded {
+        Some(r) => r.to_vec(),
+        None => {
+            let path = crate::sweep_around_root(view, &pose);
+            (0..s.frames)
+                .map(|f| camera_path(&pose, &path, f, s.frames).params(w, h))
+                .collect()
+        }
+    };
+    let (w, h) = cams
+        .iter()
+        .fold((w, h), |(w, h), c| (w.max(c.width), h.max(c.height)));
+    let t = Instant::now();
+    let fit = tracing::info_span!("full_build_fits")
+        .in_scope(|| {
+            motu_gpu::full_build_fits(
+                ctx,
+                view,
+                w,
+                h,
+                s.device.vram_budget_bytes.unwrap_or(u64::MAX),
+                full.blas_build(),
+            )
+        })
+        .map_err(RenderError::Build)?;
+    let mut stats = StreamFitStats {
+        budget_bytes: fit.budget_bytes,
+        full_build_upper_bytes: fit.upper_bytes,
+        full_build: fit.fits(),
+        check_ms: ms_since(t),
+    };
+    tracing::info!(
+        budget_bytes = fit.budget_bytes,
+        upper_bytes = fit.upper_bytes,
+        fits = fit.fits(),
+        ms = stats.check_ms,
+        "does the budget hold the full build?"
+    );
+    if !fit.fits() {
+        return Ok(Fit::Streams(stats));
+    }
+    progress(RenderEvent::StreamFullBuild {
+        budget_bytes: fit.budget_bytes,
+        upper_bytes: fit.upper_bytes,
+    });
+    let instance_lod = job.lod.instance.as_ref();
+    let last = *cams.last().ok_or(RenderError::NoFrame)?;
+    let rendered = if cams.len() == 1 && job.recorded.is_none() {
+        crate::gpu::render_gpu(
+            &full,
+            pkg,
+            view,
+            &last,
+            backend,
+            instance_lod,
+            Some(ctx.clone()),
+        )
+    } else {
+        crate::gpu::render_gpu_path(
+            &full,
+            pkg,
+            view,
+            &cams,
+            backend,
+            instance_lod,
+            Some(ctx.clone()),
+        )
+    };
+    match rendered {
+        Ok((aov, rgba8, mut path)) => {
+            path.stream_fit = Some(stats);
+            Ok(Fit::Rendered(Box::new(((aov, rgba8, path), last))))
+        }
+        Err(e @ RenderError::BuildOverBudget { .. }) => {
+            let what = e.to_string();
+            progress(RenderEvent::StreamFullBuildRefused { what: &what });
+            stats.full_build = false;
+            Ok(Fit::Streams(stats))
+        }
+        Err(e) => Err(e),
+    }
 }

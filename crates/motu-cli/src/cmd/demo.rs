@@ -121,6 +121,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         stream: false,
         allow_incomplete: false,
         stream_max_passes: None,
+        stream_always: false,
         stream_bounds: crate::cli::StreamBoundArgs {
             stream_fallback: crate::cli::FallbackArg::Off,
             stream_build_budget: None,

@@ -91,6 +91,22 @@ fn gpu_view(v: ViewArg) -> motu_gpu::View {
 fn print_event(e: motu_render::RenderEvent<'_>, allow_incomplete: bool) {
     use motu_render::RenderEvent;
     match e {
+        RenderEvent::StreamFullBuild {
+            budget_bytes,
+            upper_bytes,
+        } => {
+            eprintln!(
+                "--stream: the budget ({}) holds the whole scene (at most {} built in full): \
+                 rendering the full build (--stream-always streams anyway)",
+                crate::size::format_size(budget_bytes),
+                crate::size::format_size(upper_bytes)
+            );
+        }
+        RenderEvent::StreamFullBuildRefused { what } => {
+            eprintln!(
+                "warning: --stream: the full build did not fit after all ({what}); streaming"
+            );
+        }
         RenderEvent::StreamSppIgnored { spp } => {
             eprintln!("warning: --stream renders one sample per pixel (--spp {spp} ignored)");
         }
@@ -292,6 +308,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             bounds: stream_bounds(&a.stream_bounds),
             allow_incomplete: a.allow_incomplete,
             cache: cache_settings(&a.as_cache),
+            always: a.stream_always,
         }),
         denoise: a.denoise,
     };

@@ -17,13 +17,13 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use motu_abi::blob::{BlobReader, BlobWriter};
-use motu_alloc::{AllocKind, MemoryClass};
 use motu_ascache::{AsCache, CacheKey, CacheKeyBuilder, CacheStats, Tier, SERIALIZED_HEADER_BYTES};
-use motu_vk::{AsLevel, BufferUsage, SerializedHeader, SizeQueries, SERIALIZED_ALIGNMENT};
+use motu_vk::{AsLevel, SerializedHeader, SizeQueries, SERIALIZED_ALIGNMENT};
 use rayon::prelude::*;
 
 use super::proxy_boxes::{self, Box6};
 use super::skeleton::ms_since;
+use super::transfer::{Transfer, TransferBuffers, TRANSFER_CAP_BYTES};
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
 use crate::scene::AccelStruct;
@@ -64,6 +64,8 @@ pub(super) struct Reuse {
     /// Per BLAS: built (or restored) at least once by this renderer.
     pub(super) built_once: Vec<bool>,
     cache: Option<Attached>,
+    /// Host-visible buffers kept between store and restore batches (`transfer.rs`).
+    pub(super) transfer: TransferBuffers,
 }
 
 struct Attached {
@@ -84,6 +86,7 @@ impl Reuse {
         Reuse {
             built_once: vec![false; blases],
             cache: None,
+            transfer: TransferBuffers::default(),
         }
     }
 
@@ -205,6 +208,13 @@ impl StreamingRenderer<'_> {
         restored: &mut Vec<(usize, AccelStruct)>,
         rest: &mut Vec<usize>,
     ) -> Result<()> {
+        let align = |v: u64| v.div_ceil(SERIALIZED_ALIGNMENT) * SERIALIZED_ALIGNMENT;
+        let total: u64 = hits.iter().map(|h| align(h.1.len() as u64)).sum();
+        if total > TRANSFER_CAP_BYTES && hits.len() > 1 {
+            let (l, r) = hits.split_at(hits.len() / 2);
+            self.restore_some(l, evict, restored, rest)?;
+            return self.restore_some(r, evict, restored, rest);
+        }
         match self.maybe_evicting(evict, |s| s.deserialize(hits)) {
             Ok(r) => restored.extend(r),
             Err(GpuError::Budget(why)) if hits.len() > 1 => {
@@ -232,14 +242,7 @@ impl StreamingRenderer<'_> {
         let t = Instant::now();
         let align = |v: u64| v.div_ceil(SERIALIZED_ALIGNMENT) * SERIALIZED_ALIGNMENT;
         let total: u64 = hits.iter().map(|h| align(h.1.len() as u64)).sum();
-        let staging = self.heap.alloc_buffer(
-            "restore blobs",
-            total,
-            BufferUsage::DEVICE_ADDRESS.union(BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT),
-            AllocKind::Staging,
-            MemoryClass::HostVisible,
-            SERIALIZED_ALIGNMENT,
-        )?;
+        let staging = self.transfer_buffer(Transfer::Upload, total)?;
         let mut out: Vec<(usize, AccelStruct)> = Vec::with_capacity(hits.len());
         let result = (|| -> Result<()> {
             let base = staging.device_address()?;
@@ -285,7 +288,7 @@ impl StreamingRenderer<'_> {
             self.frame.stats.restore_gpu_ms += ms_since(gpu);
             Ok(())
         })();
-        self.heap.free(staging);
+        self.put_back_transfer(Transfer::Upload, staging);
         match result {
             Ok(()) => Ok(out),
             Err(e) => {
@@ -322,8 +325,8 @@ impl StreamingRenderer<'_> {
         Ok(())
     }
 
-    /// Serialises `todo` in one readback; where the budget has no room for it, in halves (a
-    /// single structure that does not fit is skipped, counted).
+    /// Serialises `todo`: their sizes in one query, then in batches of at most
+    /// [`TRANSFER_CAP_BYTES`] (see `transfer.rs`).
     fn store_some(&mut self, todo: &[(usize, &AccelStruct, CacheKey)]) -> Result<()> {
         let ctx = self.ctx.clone();
         let t = Instant::now();
@@ -334,22 +337,35 @@ impl StreamingRenderer<'_> {
         rec.write_serialization_sizes(&targets, &queries)?;
         rec.submit_and_wait()?;
         let sizes = queries.read(todo.len() as u32)?;
+        self.frame.stats.store_serialize_ms += ms_since(t);
+        self.store_sized(todo, &sizes)
+    }
+
+    /// Serialises `todo` (serialised sizes `sizes`) in one readback; above the transfer cap,
+    /// or where the budget has no room for it, in halves (a single structure that does not fit
+    /// is skipped, counted).
+    fn store_sized(
+        &mut self,
+        todo: &[(usize, &AccelStruct, CacheKey)],
+        sizes: &[u64],
+    ) -> Result<()> {
+        let ctx = self.ctx.clone();
+        let t = Instant::now();
         let align = |v: u64| v.div_ceil(SERIALIZED_ALIGNMENT) * SERIALIZED_ALIGNMENT;
         let total: u64 = sizes.iter().map(|&s| align(s)).sum();
-        let readback = match self.heap.alloc_buffer(
-            "serialised blases",
-            total,
-            BufferUsage::DEVICE_ADDRESS.union(BufferUsage::TRANSFER_DST),
-            AllocKind::Staging,
-            MemoryClass::HostVisible,
-            SERIALIZED_ALIGNMENT,
-        ) {
+        let halves = |s: &mut Self| -> Result<()> {
+            let k = todo.len() / 2;
+            s.store_sized(&todo[..k], &sizes[..k])?;
+            s.store_sized(&todo[k..], &sizes[k..])
+        };
+        if total > TRANSFER_CAP_BYTES && todo.len() > 1 {
+            return halves(self);
+        }
+        let readback = match self.transfer_buffer(Transfer::Readback, total) {
             Ok(buf) => buf,
             Err(motu_vk::VkError::Budget(why)) if todo.len() > 1 => {
                 tracing::debug!(%why, n = todo.len(), "structure cache: serialising in halves");
-                let (l, r) = todo.split_at(todo.len() / 2);
-                self.store_some(l)?;
-                return self.store_some(r);
+                return halves(self);
             }
             Err(motu_vk::VkError::Budget(why)) => {
                 // The cache is an optimisation: no room to read back is a skip, not a failure.
@@ -364,8 +380,8 @@ impl StreamingRenderer<'_> {
             let mut rec = ctx.record("serialise blases")?;
             let mut at = 0u64;
             let mut offsets = Vec::with_capacity(todo.len());
-            for (t, &size) in targets.iter().zip(&sizes) {
-                rec.serialize_acceleration_structure(*t, base.offset(at))?;
+            for ((_, a, _), &size) in todo.iter().zip(sizes) {
+                rec.serialize_acceleration_structure(a.target(), base.offset(at))?;
                 offsets.push(at);
                 at += align(size);
             }
@@ -380,14 +396,14 @@ impl StreamingRenderer<'_> {
                 let bytes: &[u8] = bytes;
                 offsets
                     .par_iter()
-                    .zip(&sizes)
+                    .zip(sizes)
                     .map(|(&off, &size)| Arc::<[u8]>::from(&bytes[off as usize..][..size as usize]))
                     .collect::<Vec<_>>()
             })?;
             self.frame.stats.store_copy_ms += ms_since(copy);
             Ok(blobs)
         })();
-        self.heap.free(readback);
+        self.put_back_transfer(Transfer::Readback, readback);
         let blobs = result?;
         let put = Instant::now();
         let a = self.reuse.cache.as_mut().expect("attached");

@@ -115,6 +115,7 @@ mod buffers;
 mod cache;
 mod defrag;
 mod demand;
+mod fits;
 mod floor;
 mod frame;
 mod options;
@@ -134,8 +135,10 @@ mod tlas_build;
 mod tlas_records;
 mod tlases;
 mod topology;
+mod transfer;
 
 pub use cache::StructureCache;
+pub use fits::{full_build_fits, FullBuildFit};
 pub use floor::{
     persistent_tlas_estimate, streamed_mesh_total_bytes, streaming_floor, streaming_floor_planned,
     FloorSizes, StreamFloor,

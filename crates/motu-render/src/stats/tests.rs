@@ -130,6 +130,12 @@ fn full_render_stats() -> RenderStats {
             cache: Some((&cache).into()),
             mean_passes_after_first: Some(1.0),
         }),
+        stream_fit: Some(StreamFitStats {
+            budget_bytes: 1,
+            full_build_upper_bytes: 1,
+            full_build: false,
+            check_ms: 1.0,
+        }),
         denoise: Some((&denoise).into()),
         lod: LodStats {
             lod_mode: "none",
@@ -235,6 +241,7 @@ fn documents() -> Vec<(&'static str, Value)> {
         path_ms_per_frame: None,
         fallback_pixels: None,
         stream: None,
+        stream_fit: None,
         denoise: None,
         ..full_render_stats()
     };
