@@ -809,7 +809,6 @@ const LAYOUT_NOT_YET_MOVED: &[&str] = &[
     "crates/motu-gpu/src/stream/params.rs",
     "crates/motu-gpu/src/stream/persistent.rs",
     "crates/motu-gpu/src/stream/plan_cache.rs",
-    "crates/motu-gpu/src/stream/proxy_boxes.rs",
     "crates/motu-gpu/src/stream/rebuild.rs",
     "crates/motu-gpu/src/stream/tlas_records.rs",
     "crates/motu-gpu/src/stream_tests.rs",

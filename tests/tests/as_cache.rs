@@ -3,12 +3,12 @@
 //! second process every build it cached, bad entries and unwritable directories are warnings,
 //! and every image equals the path with everything resident.
 
-use motu_tests::{
-    gen_island, gpu_available, json_u64, motu_ok, render_env, report_peak_and_floor, s,
-};
+use motu_tests::{gpu_available, import, json_u64, motu_ok, render_env, report_peak_and_floor, s};
 use std::path::{Path, PathBuf};
 
-/// The default island, its 64×36 peak, and the reference path (room for everything, no cache).
+/// The default island imported without its stored proxy boxes (`--no-proxy-boxes`, as an older
+/// package: the structure cache then keeps the boxes the start makes), its 64×36 peak, and the
+/// reference path (room for everything, no cache).
 struct Fixture {
     dir: tempfile::TempDir,
     pkg: PathBuf,
@@ -22,7 +22,10 @@ impl Fixture {
             return None;
         }
         let dir = tempfile::tempdir().unwrap();
-        let pkg = gen_island(dir.path(), None);
+        let gen = dir.path().join("island");
+        motu_ok(&["gen", "island", "-o", s(&gen)]);
+        let pkg = dir.path().join("island.motu");
+        import(&gen.join("scene.pbrt"), &pkg, &["--no-proxy-boxes"]);
         let (peak, _floor) = report_peak_and_floor(&pkg, "64", "36");
         let f = Fixture {
             reference: dir.path().join("reference.aov"),
@@ -188,6 +191,8 @@ fn a_second_process_with_a_warm_cache_rebuilds_nothing_it_cached() {
         // The start's proxy boxes: made from the meshes and kept, then read back.
         assert_eq!(totals(&cold)["proxy_boxes_cached"], false);
         assert_eq!(t["proxy_boxes_cached"], true, "{t}");
+        assert_eq!(totals(&cold)["proxy_boxes_source"], "computed");
+        assert_eq!(t["proxy_boxes_source"], "cache", "{t}");
         assert_eq!(proxy_table_entries(&cache).len(), 1);
         // The proxy clusters too.
         assert_eq!(cold["stream"]["startup"]["clusters_cached"], false);

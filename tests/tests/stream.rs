@@ -709,3 +709,101 @@ fn shot_path_env(
     args.extend(extra);
     (render_env(pkg, backend, &aov, &args, env), aov)
 }
+
+/// Issue 45 item 1: `motu import` stores the boxes inside every triangle BLAS (the package's
+/// `proxy_boxes` section), so a streamed start reads no mesh for them; a section that cannot be
+/// read is a warning and the boxes are made from the meshes, as for a package imported
+/// without it (`--no-proxy-boxes`, what older motu wrote). Every image is the full build's.
+#[test]
+fn proxy_boxes_stored_at_import_start_streamed_renders_and_bad_ones_are_made_again() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pkg = gen_island(d, None);
+    let size = ["--width", "48", "--height", "27"];
+    let full_aov = d.join("full.aov");
+    render(&pkg, &full_aov, &size);
+    let (peak, floor) = report_peak_and_floor(&pkg, "48", "27");
+    let budget = (floor + (peak.saturating_sub(floor)) / 4).to_string();
+    let streamed = |pkg: &Path, name: &str| {
+        let aov = d.join(format!("{name}.aov"));
+        let (png, json) = (aov.with_extension("png"), aov.with_extension("json"));
+        let args = [
+            "render",
+            s(pkg),
+            "-o",
+            s(&png),
+            "--backend",
+            "pipeline",
+            "--camera",
+            CAMERA,
+            "--bounces",
+            "0",
+            "--aov",
+            s(&aov),
+            "--stats",
+            s(&json),
+            "--stream",
+            // The streamer's start is under test, whatever the budget holds.
+            "--stream-always",
+            "--vram-budget",
+            &budget,
+            size[0],
+            size[1],
+            size[2],
+            size[3],
+        ];
+        let out = motu_tests::motu(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "{name}: {stderr}");
+        let st: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        assert_eq!(st["stream"]["frames"][0]["complete"], true, "{name}");
+        motu_ok(&["compare", s(&full_aov), s(&aov), "--max-mismatch", "0.001"]);
+        (st, stderr, aov)
+    };
+    let (st, stderr, stored_aov) = streamed(&pkg, "stored");
+    let startup = &st["stream"]["startup"];
+    assert_eq!(startup["proxy_boxes_source"], "package", "{startup}");
+    assert_eq!(st["stream"]["totals"]["proxy_boxes_source"], "package");
+    assert_eq!(u(&st["stream"]["totals"]["proxy_boxes_stale_blases"]), 0);
+    assert!(u(&st["stream"]["totals"]["proxy_boxes"]) > 0);
+    assert!(!stderr.contains("proxy-box table"), "{stderr}");
+
+    // One bit flipped inside the section: its checksum fails; made from the meshes.
+    let bytes = std::fs::read(&pkg).unwrap();
+    let magic = b"motu pboxes v1\0\0";
+    let at = bytes
+        .windows(magic.len())
+        .position(|w| w == magic)
+        .expect("the package stores a proxy_boxes section");
+    let mut damaged = bytes.clone();
+    damaged[at + 40] ^= 0x10;
+    let bad = d.join("damaged.motu");
+    std::fs::write(&bad, &damaged).unwrap();
+    let (st, stderr, bad_aov) = streamed(&bad, "damaged");
+    assert_eq!(st["stream"]["startup"]["proxy_boxes_source"], "computed");
+    assert!(
+        stderr.contains("proxy-box table cannot be read"),
+        "{stderr}"
+    );
+
+    // Imported without the section (an older package): made from the meshes, no warning.
+    let old = d.join("old.motu");
+    motu_tests::import(
+        &d.join("island").join("scene.pbrt"),
+        &old,
+        &["--no-proxy-boxes"],
+    );
+    let old_bytes = std::fs::read(&old).unwrap();
+    assert!(!old_bytes.windows(magic.len()).any(|w| w == magic));
+    let (st, stderr, old_aov) = streamed(&old, "old");
+    assert_eq!(st["stream"]["startup"]["proxy_boxes_source"], "computed");
+    assert!(!stderr.contains("proxy-box table"), "{stderr}");
+    // The same boxes, whatever their source: the same pixels.
+    for other in [&bad_aov, &old_aov] {
+        motu_ok(&["compare", s(&stored_aov), s(other), "--max-mismatch", "0"]);
+    }
+}

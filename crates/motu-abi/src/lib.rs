@@ -41,6 +41,7 @@
 //! `InstanceLod`, `Aov`, `shade::Shading`, `env::Environment`.
 
 pub mod aov;
+pub mod blob;
 pub mod camera;
 pub mod env;
 pub mod glsl;

@@ -251,6 +251,10 @@ pub struct ImportArgs {
     /// Warn about missing referenced files and skip their shapes instead of failing.
     #[arg(long)]
     pub allow_missing: bool,
+    /// Do not store the boxes inside triangle BLASes (the `proxy_boxes` section): a faster
+    /// import whose streamed renders make them from every mesh at start instead.
+    #[arg(long)]
+    pub no_proxy_boxes: bool,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,

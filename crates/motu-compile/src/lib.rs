@@ -106,7 +106,10 @@
 //! 256th of a small build (under ~8.4M triangle-equivalents), never splitting heavily instanced
 //! meshes; big meshes and LOD levels split into spatial clusters with a primitive map, small meshes
 //! grouped by location), `validate()`, flatten for tests (placements; `testutil.rs` also compares
-//! world-space triangles per source triangle, which baked compiles need).
+//! world-space triangles per source triangle, which baked compiles need), and `proxy_boxes.rs`:
+//! the boxes inside a triangle BLAS a streamed render tests before building it, with the
+//! `proxy_boxes` package section (`motu import` stores them; the streamer checks each BLAS's
+//! entry by a hash of its records).
 //!
 //! Key types: `compile`, `compile_with_loader`, `CompiledScene`, `validate`, `split_for_streaming`,
 //! `StreamSplit`.
@@ -117,6 +120,7 @@ mod finalize;
 mod flatten;
 mod lod;
 pub mod partition;
+pub mod proxy_boxes;
 mod split;
 mod tables;
 mod tlas_split;

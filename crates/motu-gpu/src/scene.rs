@@ -86,6 +86,13 @@ pub trait MeshBlobSource: Sync {
     {
         Ok((None, None))
     }
+
+    /// The boxes inside triangle BLASes stored with the meshes (a package's `proxy_boxes`
+    /// section, `motu_compile::proxy_boxes::encode_section`), where the source has them. The
+    /// streamer checks each BLAS's entry against its records before using it.
+    fn stored_proxy_boxes(&self) -> Option<&[u8]> {
+        None
+    }
 }
 
 /// The least allocation cap under which a budgeted full build uses small blocks (see

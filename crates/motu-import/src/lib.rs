@@ -13,7 +13,8 @@
 //! `CompilePhases`), stores LOD meshes and clusters on a writer thread as they are made, loads
 //! textures (`textures.rs`: image mip chains and Ptex faces with their meshes' face tables, written
 //! to the texel store a batch at a time), makes and stores the stream split (`split.rs`, for `motu
-//! report`), writes meta and finishes the package atomically; per-element statistics; peak RSS.
+//! report`) and the boxes inside triangle BLASes (`proxy_boxes.rs`, for streamed starts; a chunk
+//! read once each), writes meta and finishes the package atomically; per-element statistics; peak RSS.
 //!
 //! Key types: `import`, `ImportOptions`, `ImportSummary`, `ImportError`, `ImportProgress`,
 //! `resolve_subset`, `element_stats`, `peak_rss_bytes`.
@@ -22,6 +23,7 @@ mod compile_report;
 mod error;
 mod memory;
 mod pipeline;
+mod proxy_boxes;
 mod split;
 mod textures;
 

@@ -39,6 +39,9 @@ pub struct ImportOptions {
     pub texture_max: u32,
     /// Most texels a Ptex face keeps per edge (`--ptex-max`; larger faces are halved).
     pub ptex_max: u32,
+    /// Store the boxes inside every triangle BLAS (the `proxy_boxes` section, FORMAT.md) so
+    /// streamed renders need not read every mesh at start (`--no-proxy-boxes`: off).
+    pub proxy_boxes: bool,
     /// Called as parsing advances and once when it is done (the CLI's progress bar).
     pub progress: Option<ProgressFn>,
 }
@@ -65,6 +68,7 @@ impl Default for ImportOptions {
             curve_ribbons: true,
             texture_max: 1024,
             ptex_max: crate::textures::DEFAULT_PTEX_MAX,
+            proxy_boxes: true,
             progress: None,
         }
     }
@@ -96,6 +100,9 @@ pub struct ImportSummary {
     pub compile_phases: crate::compile_report::CompilePhases,
     /// Of `pack_ms`: the stream split made and stored for readers (FORMAT.md).
     pub stream_split_ms: f64,
+    /// Of `pack_ms`: the boxes inside triangle BLASes made and stored for streamed renders
+    /// (0 with `--no-proxy-boxes`).
+    pub proxy_boxes_ms: f64,
     pub meshes: u64,
     pub instances: u64,
     pub flattened_instances: u64,
@@ -453,7 +460,7 @@ fn compile_into(
 const MADE_IN_FLIGHT: usize = 4;
 
 fn summary(
-    (s, split_ms): (WriteSummary, f64),
+    (s, split_ms, proxy_boxes_ms): (WriteSummary, f64, f64),
     scene: &Scene,
     compiled: &CompiledScene,
     report: &IngestReport,
@@ -471,6 +478,7 @@ fn summary(
         pack_ms: pack_start.elapsed().as_secs_f64() * 1e3,
         compile_phases: (&compiled.report.phases).into(),
         stream_split_ms: split_ms,
+        proxy_boxes_ms,
         meshes: st.meshes,
         instances: st.instances,
         flattened_instances: st.flattened_instances,
@@ -493,7 +501,7 @@ fn finish(
     report: &IngestReport,
     source: &Path,
     o: &ImportOptions,
-) -> Result<(WriteSummary, f64), ImportError> {
+) -> Result<(WriteSummary, f64, f64), ImportError> {
     // A subset package describes only what it holds.
     let mut elements = element_stats(scene);
     let mut scene_stats = scene.stats();
@@ -546,10 +554,16 @@ fn finish(
     let t = Instant::now();
     meta.stream_split = Some(crate::split::write_stream_split(&mut writer, &view)?);
     let split_ms = t.elapsed().as_secs_f64() * 1e3;
+    let t = Instant::now();
+    if o.proxy_boxes {
+        crate::proxy_boxes::write_proxy_boxes(&mut writer, &view)?;
+    }
+    let proxy_boxes_ms = t.elapsed().as_secs_f64() * 1e3;
     motu_pack::write_hierarchy_after_texels(&mut writer, &view, &meta)?;
     Ok((
         writer.finish().map_err(ImportError::FinishPackage)?,
         split_ms,
+        proxy_boxes_ms,
     ))
 }
 

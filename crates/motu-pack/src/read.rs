@@ -122,6 +122,15 @@ impl ScenePackage {
         })))
     }
 
+    /// The `proxy_boxes` section's bytes (`motu_compile::proxy_boxes::decode_section` reads
+    /// them): `Ok(None)` in a package written without it, an error when its checksum fails.
+    pub fn stored_proxy_boxes(&self) -> Result<Option<&[u8]>, PackError> {
+        if self.package.section_info(SECTION_PROXY_BOXES).is_none() {
+            return Ok(None);
+        }
+        Ok(Some(self.package.section_bytes(SECTION_PROXY_BOXES)?))
+    }
+
     fn layout(m: &MeshRecord) -> MeshBlobLayout {
         MeshBlobLayout::with_map(
             m.vertex_count as u64,

@@ -25,3 +25,7 @@ pub const SECTION_SPLIT_BLASES: SectionKind = SectionKind(14);
 pub const SECTION_SPLIT_PIS: SectionKind = SectionKind(15);
 pub const SECTION_SPLIT_INSTANCE_SOURCE: SectionKind = SectionKind(16);
 pub const SECTION_SPLIT_EXTRA_INSTANCES: SectionKind = SectionKind(17);
+/// Boxes inside every triangle BLAS for streamed renders (`motu_compile::proxy_boxes`, written
+/// by `motu import` since this kind appeared; optional): a versioned byte blob whose entries
+/// each carry a hash of their BLAS's records, so a reader uses only those that match.
+pub const SECTION_PROXY_BOXES: SectionKind = SectionKind(18);

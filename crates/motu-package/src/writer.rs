@@ -300,6 +300,25 @@ impl PackageWriter {
                 return Ok(open.data[range(open.data.len())?].to_vec());
             }
         }
+        let raw = self.read_back_chunk(chunk)?;
+        Ok(raw[range(raw.len())?].to_vec())
+    }
+
+    /// The whole raw bytes of a chunk written (or still being filled) by this writer: one read
+    /// (and decompression) per chunk for a pass over every mesh (an importer's proxy boxes).
+    /// Takes `&self`, so several chunks may be read at once.
+    pub fn read_back_chunk(&self, chunk: ChunkId) -> Result<Vec<u8>, PackageError> {
+        self.check_usable()?;
+        for open in self
+            .streams
+            .iter()
+            .flatten()
+            .filter_map(|s| s.open.as_ref())
+        {
+            if open.id == chunk {
+                return Ok(open.data.clone());
+            }
+        }
         let entry = self.chunks.get(chunk.0 as usize).copied().flatten().ok_or(
             PackageError::NoSuchChunk {
                 id: chunk,
@@ -316,13 +335,12 @@ impl PackageWriter {
                 .read_exact_at(&mut stored, entry.offset)
                 .map_err(|e| PackageError::io("read back a chunk of", &self.target, e))?;
         }
-        let raw = if entry.codec == Codec::Zstd.id() {
+        if entry.codec == Codec::Zstd.id() {
             zstd::bulk::decompress(&stored, entry.raw_len as usize)
-                .map_err(|e| PackageError::io("decompress a chunk of", &self.target, e))?
+                .map_err(|e| PackageError::io("decompress a chunk of", &self.target, e))
         } else {
-            stored
-        };
-        Ok(raw[range(raw.len())?].to_vec())
+            Ok(stored)
+        }
     }
 
     /// Bytes in the stream's open (not yet written) chunk: what the stream holds in memory.

@@ -71,4 +71,19 @@ impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
             .mesh_shading_slices(mesh_record)
             .map_err(|e| e.to_string())
     }
+
+    /// The package's `proxy_boxes` section; one that cannot be read (its checksum fails) is a
+    /// warning, and the streamer makes the boxes from the meshes.
+    fn stored_proxy_boxes(&self) -> Option<&[u8]> {
+        match self.0.stored_proxy_boxes() {
+            Ok(bytes) => bytes,
+            Err(e) => {
+                tracing::warn!(
+                    error = %e,
+                    "the package's proxy-box table cannot be read; the boxes are made from the meshes"
+                );
+                None
+            }
+        }
+    }
 }

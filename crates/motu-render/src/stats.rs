@@ -375,6 +375,10 @@ pub struct StreamStartup {
     pub derived_ms: f64,
     pub persistent_choice_ms: f64,
     pub proxy_boxes_ms: f64,
+    /// Where the boxes inside streamable BLASes came from: "package" (the package's
+    /// `proxy_boxes` section, stored at import), "cache" (the structure cache) or "computed"
+    /// (read from every mesh).
+    pub proxy_boxes_source: &'static str,
     pub skeleton_ms: f64,
     /// The first frame (all its passes, builds and its next-camera probe).
     pub first_frame_ms: f64,

@@ -311,6 +311,7 @@ pub(crate) fn render_streaming(
             startup.to_first_pixel_ms = started.map_or(0.0, ms_since);
             let totals = sr.totals();
             startup.proxy_boxes_ms = totals.proxy_boxes_ms;
+            startup.proxy_boxes_source = totals.proxy_boxes_source;
             startup.derived_ms = totals.derived_ms;
             startup.persistent_choice_ms = totals.persistent_choice_ms;
             startup.skeleton_ms = totals.skeleton_ms;
@@ -323,6 +324,7 @@ pub(crate) fn render_streaming(
                 derived_ms = startup.derived_ms,
                 persistent_choice_ms = startup.persistent_choice_ms,
                 proxy_boxes_ms = startup.proxy_boxes_ms,
+                proxy_boxes_source = startup.proxy_boxes_source,
                 skeleton_ms = startup.skeleton_ms,
                 first_frame_ms = startup.first_frame_ms,
                 to_first_pixel_ms = startup.to_first_pixel_ms,

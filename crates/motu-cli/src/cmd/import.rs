@@ -76,6 +76,7 @@ fn import_checked(a: ImportArgs) -> anyhow::Result<()> {
         curve_ribbons: a.curves == crate::cli::CurvesArg::Ribbons,
         texture_max: a.texture_max,
         ptex_max: a.ptex_max,
+        proxy_boxes: !a.no_proxy_boxes,
         progress: crate::progress::import_bar(),
     };
     let s = pipeline::import(&a.scene, &a.output, &o)?;

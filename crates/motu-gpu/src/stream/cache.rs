@@ -16,6 +16,7 @@
 use std::sync::Arc;
 use std::time::Instant;
 
+use motu_abi::blob::{BlobReader, BlobWriter};
 use motu_ascache::{AsCache, CacheKey, CacheKeyBuilder, CacheStats, Tier, SERIALIZED_HEADER_BYTES};
 use motu_vk::{AsLevel, SerializedHeader, SizeQueries, SERIALIZED_ALIGNMENT};
 use rayon::prelude::*;
@@ -426,43 +427,44 @@ const PROXY_BOXES_DOMAIN: &str = "motu-proxy-boxes-v1";
 /// A proxy-box table as a cache blob: the magic, the index's and the table's lengths (u64
 /// each), the index (`[first, fan]` per BLAS), the boxes.
 fn encode_proxy_boxes(index: &[[u32; 2]], boxes: &[Box6]) -> Arc<[u8]> {
-    let mut out = Vec::with_capacity(
-        SERIALIZED_HEADER_BYTES + 16 + std::mem::size_of_val(index) + std::mem::size_of_val(boxes),
+    let mut w = BlobWriter::new(
+        &PROXY_BOXES_MAGIC,
+        16 + std::mem::size_of_val(index) + std::mem::size_of_val(boxes),
     );
-    out.extend_from_slice(&PROXY_BOXES_MAGIC);
-    out.extend_from_slice(&(index.len() as u64).to_le_bytes());
-    out.extend_from_slice(&(boxes.len() as u64).to_le_bytes());
-    out.extend_from_slice(bytemuck::cast_slice(index));
-    out.extend_from_slice(bytemuck::cast_slice(boxes));
-    out.into()
+    w.u64(index.len() as u64)
+        .u64(boxes.len() as u64)
+        .pods(index)
+        .pods(boxes);
+    w.finish().into()
 }
 
 /// The boxes of a blob [`encode_proxy_boxes`] made for `index` (`None`: not such a blob).
 fn decode_proxy_boxes(blob: &[u8], index: &[[u32; 2]], box_count: usize) -> Option<Vec<Box6>> {
-    let rest = blob.strip_prefix(&PROXY_BOXES_MAGIC[..])?;
-    let (n_index, rest) = rest.split_first_chunk::<8>()?;
-    let (n_boxes, rest) = rest.split_first_chunk::<8>()?;
-    if u64::from_le_bytes(*n_index) != index.len() as u64
-        || u64::from_le_bytes(*n_boxes) != box_count as u64
-    {
+    let mut r = BlobReader::new(blob, &PROXY_BOXES_MAGIC)?;
+    if r.u64()? != index.len() as u64 || r.u64()? != box_count as u64 {
         return None;
     }
-    let index_bytes: &[u8] = bytemuck::cast_slice(index);
-    let rest = rest.strip_prefix(index_bytes)?;
-    if rest.len() != box_count * std::mem::size_of::<Box6>() {
-        return None;
-    }
-    // The blob's bytes are not aligned for f32: copy them out.
-    let mut boxes = vec![[0f32; 6]; box_count];
-    bytemuck::cast_slice_mut::<Box6, u8>(&mut boxes).copy_from_slice(rest);
+    r.expect(bytemuck::cast_slice(index))?;
+    let boxes = r.pods::<Box6>(box_count)?;
+    r.finish()?;
     Some(boxes)
 }
+
+/// What the start has of the box table before the structure cache is asked: the package's
+/// matching entries filled in, and the BLASes left to make.
+pub(super) type Partial = (Vec<Box6>, Vec<usize>);
 
 impl StreamingRenderer<'_> {
     /// The boxes inside streamable BLASes (`proxy_boxes.rs`, laid out as `index`): from the
     /// structure cache when it holds this scene's table, else made from every mesh (seconds
-    /// on a large scene) and kept there for the next process.
-    pub(super) fn proxy_boxes_cached(&mut self, index: &[[u32; 2]], box_count: usize) -> Vec<Box6> {
+    /// on a large scene; only the BLASes `partial` leaves, where the package stored the
+    /// rest) and kept there for the next process.
+    pub(super) fn proxy_boxes_cached(
+        &mut self,
+        index: &[[u32; 2]],
+        box_count: usize,
+        partial: Option<Partial>,
+    ) -> Vec<Box6> {
         let view = self.view;
         let key = self.reuse.cache.as_ref().map(|a| {
             let mut k = CacheKeyBuilder::new(PROXY_BOXES_DOMAIN);
@@ -483,6 +485,7 @@ impl StreamingRenderer<'_> {
                             "proxy boxes from the structure cache"
                         );
                         self.totals.proxy_boxes_cached = true;
+                        self.totals.proxy_boxes_source = "cache";
                         return boxes;
                     }
                     None => {
@@ -492,7 +495,14 @@ impl StreamingRenderer<'_> {
                 }
             }
         }
-        let boxes = proxy_boxes::compute(&view, self.source, index, box_count);
+        let boxes = match partial {
+            Some((mut table, left)) => {
+                proxy_boxes::fill(&view, self.source, index, &mut table, &left);
+                table
+            }
+            None => proxy_boxes::compute(&view, self.source, index, box_count),
+        };
+        self.totals.proxy_boxes_source = "computed";
         if let (Some(key), Some(a)) = (key, self.reuse.cache.as_mut()) {
             a.cache.cache.put(key, encode_proxy_boxes(index, &boxes));
         }

@@ -6,6 +6,7 @@
 
 use std::sync::Arc;
 
+use motu_abi::blob::{BlobReader, BlobWriter};
 use motu_abi::HierarchyView;
 use motu_ascache::{CacheKey, CacheKeyBuilder, SERIALIZED_HEADER_BYTES};
 
@@ -56,27 +57,25 @@ fn plan_key(view: &HierarchyView<'_>, scene_identity: &[u8]) -> CacheKey {
 /// per cluster its BLAS, member start (u32 each), bounds (6 f32), member count (u64) and
 /// members (u32).
 fn encode(plan: &StreamPlan) -> Arc<[u8]> {
-    let mut out = Vec::new();
-    out.extend_from_slice(&MAGIC);
-    out.extend_from_slice(&(plan.clusters.len() as u64).to_le_bytes());
-    out.extend_from_slice(&(plan.instances as u64).to_le_bytes());
+    let mut w = BlobWriter::new(&MAGIC, 0);
+    w.u64(plan.clusters.len() as u64).u64(plan.instances as u64);
     for tlas in &plan.clusters {
-        out.extend_from_slice(&(tlas.len() as u64).to_le_bytes());
+        w.u64(tlas.len() as u64);
         for c in tlas {
-            out.extend_from_slice(&c.blas.to_le_bytes());
-            out.extend_from_slice(&c.member_first.to_le_bytes());
-            out.extend_from_slice(bytemuck::cast_slice(&c.bounds));
-            out.extend_from_slice(&(c.members.len() as u64).to_le_bytes());
-            out.extend_from_slice(bytemuck::cast_slice(&c.members));
+            w.u32(c.blas)
+                .u32(c.member_first)
+                .pods(&c.bounds)
+                .u64(c.members.len() as u64)
+                .pods(&c.members);
         }
     }
-    out.into()
+    w.finish().into()
 }
 
 /// Reads what [`encode`] wrote; `None` unless it is whole and shaped for `view` (its TLAS and
 /// instance counts, member indices inside each TLAS's range, BLAS ids in range).
 fn decode(blob: &[u8], view: &HierarchyView<'_>) -> Option<StreamPlan> {
-    let mut r = Reader(blob.strip_prefix(&MAGIC[..])?);
+    let mut r = BlobReader::new(blob, &MAGIC)?;
     let tlases = r.u64()? as usize;
     let instances = r.u64()? as usize;
     if tlases != view.tlases.len() || instances != view.instances.len() {
@@ -89,16 +88,9 @@ fn decode(blob: &[u8], view: &HierarchyView<'_>) -> Option<StreamPlan> {
         for _ in 0..n {
             let blas = r.u32()?;
             let member_first = r.u32()?;
-            let mut bounds = [0f32; 6];
-            for b in &mut bounds {
-                *b = f32::from_le_bytes(r.take(4)?.try_into().ok()?);
-            }
-            let count = r.u64()? as usize;
-            let bytes = r.take(count.checked_mul(4)?)?;
-            let members: Vec<u32> = bytes
-                .chunks_exact(4)
-                .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                .collect();
+            let bounds: [f32; 6] = r.pods::<f32>(6)?.try_into().ok()?;
+            let count = usize::try_from(r.u64()?).ok()?;
+            let members: Vec<u32> = r.pods(count)?;
             if blas as usize >= view.blases.len() || members.iter().any(|&m| m >= t.instance_count)
             {
                 return None;
@@ -112,30 +104,12 @@ fn decode(blob: &[u8], view: &HierarchyView<'_>) -> Option<StreamPlan> {
         }
         clusters.push(list);
     }
-    r.0.is_empty().then_some(StreamPlan {
+    r.finish()?;
+    Some(StreamPlan {
         clusters,
         instances,
         from_cache: true,
     })
-}
-
-struct Reader<'a>(&'a [u8]);
-
-impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize) -> Option<&'a [u8]> {
-        if self.0.len() < n {
-            return None;
-        }
-        let (head, tail) = self.0.split_at(n);
-        self.0 = tail;
-        Some(head)
-    }
-    fn u32(&mut self) -> Option<u32> {
-        Some(u32::from_le_bytes(self.take(4)?.try_into().ok()?))
-    }
-    fn u64(&mut self) -> Option<u64> {
-        Some(u64::from_le_bytes(self.take(8)?.try_into().ok()?))
-    }
 }
 
 #[cfg(test)]

@@ -8,51 +8,24 @@
 //! structures larger than the room, and each frame took two passes. Each buildable triangle
 //! BLAS gets a two-level tree of boxes from centroid-median splits of its triangles: `fan` top
 //! boxes, each followed in the table by its `fan` leaves (`fan` × `fan` leaves in all, about
-//! [`LEAF_TRIANGLES`] triangles each, `fan` ≤ [`MAX_FAN`]). The shader tests the top boxes and
+//! `LEAF_TRIANGLES` triangles each, `fan` ≤ `MAX_FAN`). The shader tests the top boxes and
 //! only the leaves of those the ray enters (`candidates.glsl` `record_proxy`); the boxes are
 //! padded as proxy boxes are, so a ray that can hit a triangle always enters its leaf and the
 //! image stays the full build's.
 //!
-//! Made once when the renderer starts, from the meshes (read in parallel, none kept), so old
-//! packages get them too; their size depends only on the triangle counts, so the floor
+//! The maths lives in `motu_compile::proxy_boxes`, which `motu import` also runs to store the
+//! table in the package (its `proxy_boxes` section): the start takes each streamable BLAS's
+//! boxes from there when the entry matches the BLAS's records, else from the structure cache
+//! (`cache.rs`), else makes them from the meshes (read in parallel, none kept), so old
+//! packages get them too. Their size depends only on the triangle counts, so the floor
 //! ([`super::streaming_floor`]) counts them from [`layout`] without reading any mesh.
 
-use std::ops::Range;
-
 use motu_abi::{HierarchyView, BLAS_TRIANGLES};
+use motu_compile::proxy_boxes::{blas_boxes, fan, Stored, StoredProxyBoxes, EMPTY};
+pub(super) use motu_compile::proxy_boxes::{padded, Box6};
 use rayon::prelude::*;
 
 use crate::scene::MeshBlobSource;
-
-/// Triangles per leaf box the fan aims at.
-pub(super) const LEAF_TRIANGLES: u32 = 32;
-/// At most this many top boxes (and leaves per top box): the shader keeps the entered top
-/// boxes in a 16-bit mask.
-pub(super) const MAX_FAN: u32 = 16;
-
-/// `[min x, y, z, max x, y, z]`; an unused box is empty (min > max).
-pub(super) type Box6 = [f32; 6];
-
-const EMPTY: Box6 = [
-    f32::INFINITY,
-    f32::INFINITY,
-    f32::INFINITY,
-    f32::NEG_INFINITY,
-    f32::NEG_INFINITY,
-    f32::NEG_INFINITY,
-];
-
-/// Top boxes (= leaves per top box) of a BLAS of `triangles`: the greatest power of two whose
-/// square of leaves holds at least [`LEAF_TRIANGLES`] each (1 for fewer), capped at
-/// [`MAX_FAN`]. Rounding down keeps the table at most a 32nd of the triangles (24 bytes a box,
-/// resident in the floor); rounding up made 4,096-triangle units 272 boxes of 16 triangles.
-pub(super) fn fan(triangles: u32) -> u32 {
-    let mut f = 1u32;
-    while f < MAX_FAN && u64::from(4 * f * f) * u64::from(LEAF_TRIANGLES) <= u64::from(triangles) {
-        f *= 2;
-    }
-    f
-}
 
 /// Where each BLAS's boxes start in the box table and its fan (`[first, fan]`, fan 0: none,
 /// as for AABB BLASes and BLASes that never stream), and the table's length.
@@ -78,6 +51,39 @@ pub(super) fn layout(
     (index, next)
 }
 
+/// The box table for `index` (from [`layout`]) with every BLAS whose entry in `stored`
+/// matches its records filled, the BLASes left to make, and how many of those had a stale
+/// entry (one made for other records).
+pub(super) fn from_stored(
+    view: &HierarchyView<'_>,
+    stored: &StoredProxyBoxes,
+    index: &[[u32; 2]],
+    total: usize,
+) -> (Vec<Box6>, Vec<usize>, usize) {
+    let found: Vec<(usize, Stored<'_>)> = index
+        .par_iter()
+        .enumerate()
+        .filter(|(_, ix)| ix[1] != 0)
+        .map(|(b, _)| (b, stored.boxes_of(view, b)))
+        .collect();
+    let mut out = vec![EMPTY; total];
+    let (mut left, mut stale) = (Vec::new(), 0);
+    for (b, s) in found {
+        match s {
+            Stored::Valid(boxes) => {
+                let first = index[b][0] as usize;
+                out[first..first + boxes.len()].copy_from_slice(boxes);
+            }
+            Stored::Stale => {
+                stale += 1;
+                left.push(b);
+            }
+            Stored::Absent => left.push(b),
+        }
+    }
+    (out, left, stale)
+}
+
 /// The box table for `index` (from [`layout`]): every BLAS with a fan gets its boxes from its
 /// meshes; one whose meshes cannot be read gets its bounds as its only top box and leaf (the
 /// build reports the error when a ray needs it).
@@ -87,205 +93,73 @@ pub(super) fn compute(
     index: &[[u32; 2]],
     total: usize,
 ) -> Vec<Box6> {
-    let per_blas: Vec<(usize, Vec<Box6>)> = index
-        .par_iter()
-        .enumerate()
-        .filter(|(_, ix)| ix[1] != 0)
-        .map(|(b, ix)| (ix[0] as usize, blas_boxes(view, source, b, ix[1] as usize)))
-        .collect();
     let mut out = vec![EMPTY; total];
-    for (first, boxes) in per_blas {
-        out[first..first + boxes.len()].copy_from_slice(&boxes);
-    }
+    let all: Vec<usize> = (0..index.len()).filter(|&b| index[b][1] != 0).collect();
+    fill(view, source, index, &mut out, &all);
     out
 }
 
-/// `fan` top boxes then `fan` leaves per top box, in BLAS space, padded.
-fn blas_boxes(
+/// Makes BLASes `blases`' boxes from their meshes into `table` (laid out by `index`).
+pub(super) fn fill(
     view: &HierarchyView<'_>,
     source: &dyn MeshBlobSource,
-    b: usize,
-    fan: usize,
-) -> Vec<Box6> {
-    let r = &view.blases[b];
-    let mut out = vec![EMPTY; fan + fan * fan];
-    let bounds = padded(r.bounds_box());
-    // (centroid, box) per triangle.
-    let mut tris: Vec<([f32; 3], Box6)> = Vec::with_capacity(r.primitive_count as usize);
-    let range = r.item_base as usize..(r.item_base + r.item_count) as usize;
-    for g in &view.geometries[range] {
-        let Ok((positions, indices)) = source.mesh_data(g.mesh) else {
-            out[0] = bounds;
-            out[fan] = bounds;
-            return out;
-        };
-        for t in indices.chunks_exact(3) {
-            let mut bx = EMPTY;
-            for &i in t {
-                // An index out of range fails the build itself (`MeshGpu::upload`).
-                let Some(p) = positions.get(i as usize) else {
-                    continue;
-                };
-                grow(&mut bx, p, p);
-            }
-            if bx[0] <= bx[3] {
-                let c = std::array::from_fn(|a| 0.5 * (bx[a] + bx[3 + a]));
-                tris.push((c, bx));
-            }
-        }
-    }
-    let mut leaves = Vec::with_capacity(fan * fan);
-    split(&mut tris, 2 * fan.trailing_zeros(), 0, &mut leaves);
-    // Each leaf's triangles once; a top box is the union of its leaves.
-    let leaf_boxes: Vec<Box6> = leaves
-        .iter()
-        .map(|r| {
-            let mut bx = EMPTY;
-            for t in &tris[r.clone()] {
-                grow(&mut bx, &t.1[..3], &t.1[3..]);
-            }
-            bx
+    index: &[[u32; 2]],
+    table: &mut [Box6],
+    blases: &[usize],
+) {
+    let made: Vec<(usize, Vec<Box6>)> = blases
+        .par_iter()
+        .map(|&b| {
+            let [first, fan] = index[b];
+            let boxes = blas_boxes(view, b, fan as usize, |m| source.mesh_data(m));
+            (first as usize, boxes)
         })
         .collect();
-    let pad_nonempty = |bx: Box6| if bx[0] <= bx[3] { padded(bx) } else { bx };
-    for (k, group) in leaf_boxes.chunks_exact(fan).enumerate() {
-        let mut top = EMPTY;
-        for (j, leaf) in group.iter().enumerate() {
-            grow(&mut top, &leaf[..3], &leaf[3..]);
-            out[fan + k * fan + j] = pad_nonempty(*leaf);
+    for (first, boxes) in made {
+        table[first..first + boxes.len()].copy_from_slice(&boxes);
+    }
+}
+
+impl super::StreamingRenderer<'_> {
+    /// The boxes inside streamable BLASes, laid out as `index`: each BLAS's from the table the
+    /// mesh source stores (a package's `proxy_boxes` section) where its entry matches the
+    /// BLAS's records; when any is left, the whole table from the structure cache, else the
+    /// rest made from the meshes (`cache.rs`). Where they came from is in the totals
+    /// (`proxy_boxes_source`); a stored table that does not match is a warning, never used.
+    pub(super) fn proxy_boxes_start(&mut self, index: &[[u32; 2]], box_count: usize) -> Vec<Box6> {
+        let view = self.view;
+        let source = self.source;
+        let mut partial = None;
+        if let Some(bytes) = source.stored_proxy_boxes() {
+            match motu_compile::proxy_boxes::decode_section(bytes) {
+                None => tracing::warn!(
+                    bytes = bytes.len(),
+                    "the package's proxy-box table is not one this reader knows (another \
+                     version, or damaged); the boxes are made from the meshes"
+                ),
+                Some(stored) => {
+                    let (table, left, stale) = from_stored(&view, &stored, index, box_count);
+                    self.totals.proxy_boxes_stale_blases = stale as u64;
+                    if left.is_empty() {
+                        self.totals.proxy_boxes_source = "package";
+                        tracing::info!(boxes = box_count, "proxy boxes from the package");
+                        return table;
+                    }
+                    if stale > 0 {
+                        tracing::warn!(
+                            stale,
+                            left = left.len(),
+                            "the package's proxy-box table does not match the records of \
+                             {stale} BLASes; their boxes are made from the meshes"
+                        );
+                    }
+                    partial = Some((table, left));
+                }
+            }
         }
-        out[k] = pad_nonempty(top);
+        self.proxy_boxes_cached(index, box_count, partial)
     }
-    out
-}
-
-/// `b` grown by a little more than float error: a proxy box only has to contain what it
-/// stands for, and a flat one (a ground or ocean plane) is otherwise missed by box tests at
-/// grazing angles where the triangle itself is hit (a far pixel lost its hit at small budgets,
-/// where no neighbour happened to make the BLAS resident).
-pub(super) fn padded(b: [f32; 6]) -> [f32; 6] {
-    let extent = (0..3).map(|a| b[3 + a] - b[a]).fold(0.0f32, f32::max);
-    let magnitude = b.iter().map(|v| v.abs()).fold(0.0f32, f32::max);
-    let pad = 1e-3 * extent + 1e-5 * magnitude;
-    if !pad.is_finite() {
-        return b;
-    }
-    [
-        b[0] - pad,
-        b[1] - pad,
-        b[2] - pad,
-        b[3] + pad,
-        b[4] + pad,
-        b[5] + pad,
-    ]
-}
-
-fn grow(bx: &mut Box6, lo: &[f32], hi: &[f32]) {
-    for a in 0..3 {
-        bx[a] = bx[a].min(lo[a]);
-        bx[3 + a] = bx[3 + a].max(hi[a]);
-    }
-}
-
-/// Appends `2^depth` leaf ranges (absolute, from `base`) of centroid-median splits along the
-/// widest centroid axis, depth first, so leaf `j`'s ancestor `d` levels up is `j >> d`; a range
-/// too small to split ends in empty leaves.
-fn split(tris: &mut [([f32; 3], Box6)], depth: u32, base: usize, leaves: &mut Vec<Range<usize>>) {
-    if depth == 0 || tris.len() < 2 {
-        leaves.push(base..base + tris.len());
-        let end = base + tris.len();
-        leaves.extend((1..1usize << depth).map(|_| end..end));
-        return;
-    }
-    let mut c = EMPTY;
-    for t in tris.iter() {
-        grow(&mut c, &t.0, &t.0);
-    }
-    let axis = (0..3)
-        .max_by(|&x, &y| (c[3 + x] - c[x]).total_cmp(&(c[3 + y] - c[y])))
-        .unwrap_or(0);
-    let mid = tris.len() / 2;
-    tris.select_nth_unstable_by(mid, |x, y| x.0[axis].total_cmp(&y.0[axis]));
-    let (l, r) = tris.split_at_mut(mid);
-    split(l, depth - 1, base, leaves);
-    split(r, depth - 1, base + mid, leaves);
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn fan_grows_with_triangles_up_to_the_cap() {
-        assert_eq!(fan(1), 1);
-        assert_eq!(fan(127), 1);
-        assert_eq!(fan(128), 2);
-        assert_eq!(fan(511), 2);
-        assert_eq!(fan(512), 4);
-        assert_eq!(fan(4096), 8);
-        assert_eq!(fan(8191), 8);
-        assert_eq!(fan(8192), 16);
-        assert_eq!(fan(u32::MAX), MAX_FAN);
-    }
-
-    #[test]
-    fn every_triangle_lies_in_a_leaf_of_a_top_box_that_holds_it() {
-        // A 40 × 40 grid of small triangles on a tilted, curved sheet, plus far outliers.
-        let mut tris = Vec::new();
-        for i in 0..40 {
-            for j in 0..40 {
-                let (x, z) = (i as f32, j as f32);
-                let y = 0.1 * x * z.sin();
-                let bx = [x, y, z, x + 0.7, y + 0.3, z + 0.9];
-                tris.push((std::array::from_fn(|a| 0.5 * (bx[a] + bx[3 + a])), bx));
-            }
-        }
-        let sheet = tris.clone();
-        tris.push(([1e4, 0.0, 0.0], [1e4, 0.0, 0.0, 1e4, 0.0, 0.0]));
-        tris.push(([-3.0; 3], [-3.0, -3.0, -3.0, -3.0, -3.0, -3.0]));
-        let mut volumes = Vec::new();
-        for (fan, all) in [1usize, 2, 4, 16]
-            .into_iter()
-            .flat_map(|f| [(f, &tris), (f, &sheet)])
-        {
-            let mut work = all.clone();
-            let mut leaves = Vec::new();
-            split(&mut work, 2 * fan.trailing_zeros(), 0, &mut leaves);
-            assert_eq!(leaves.len(), fan * fan);
-            assert_eq!(leaves.iter().map(|r| r.len()).sum::<usize>(), all.len());
-            let union = |rs: &[Range<usize>]| {
-                let mut bx = EMPTY;
-                for t in rs.iter().flat_map(|r| &work[r.clone()]) {
-                    grow(&mut bx, &t.1[..3], &t.1[3..]);
-                }
-                bx
-            };
-            let inside = |o: &Box6, t: &Box6| (0..3).all(|a| o[a] <= t[a] && t[3 + a] <= o[3 + a]);
-            let mut leaf_volume = 0.0f64;
-            for t in all {
-                let held = (0..fan).any(|k| {
-                    inside(&union(&leaves[k * fan..(k + 1) * fan]), &t.1)
-                        && (0..fan).any(|j| {
-                            inside(&union(std::slice::from_ref(&leaves[k * fan + j])), &t.1)
-                        })
-                });
-                assert!(
-                    held,
-                    "fan {fan}: {t:?} is in no leaf of a top box holding it"
-                );
-            }
-            for l in &leaves {
-                let b = union(std::slice::from_ref(l));
-                if b[0] <= b[3] {
-                    leaf_volume += (0..3).map(|a| f64::from(b[3 + a] - b[a])).product::<f64>();
-                }
-            }
-            if std::ptr::eq(all, &sheet) {
-                volumes.push(leaf_volume);
-            }
-        }
-        // Finer fans hug the sheet: the leaves' volume shrinks.
-        assert!(volumes.windows(2).all(|w| w[1] < w[0]), "{volumes:?}");
-        assert!(volumes[3] < 0.5 * volumes[0], "{volumes:?}");
-    }
-}
+mod tests;

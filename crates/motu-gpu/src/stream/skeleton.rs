@@ -120,13 +120,14 @@ impl<'a> StreamingRenderer<'a> {
         self.totals.persistent_choice_ms = ms_since(t_persistent);
         let t_boxes = std::time::Instant::now();
         let (index, box_count) = super::proxy_boxes::layout(&view, |b| self.topo.buildable(b));
-        let boxes = self.proxy_boxes_cached(&index, box_count);
+        let boxes = self.proxy_boxes_start(&index, box_count);
         self.totals.proxy_boxes = boxes.len() as u64;
         self.totals.proxy_boxes_ms = t_boxes.elapsed().as_secs_f64() * 1e3;
         tracing::info!(
             boxes = self.totals.proxy_boxes,
             ms = self.totals.proxy_boxes_ms,
-            "boxes inside streamable BLASes made from their meshes"
+            source = self.totals.proxy_boxes_source,
+            "boxes inside streamable BLASes"
         );
         let t_skeleton = std::time::Instant::now();
         self.init_skeleton(records, &ProxyBoxes { index, boxes })?;

@@ -300,6 +300,14 @@ pub struct StreamTotals {
     pub proxy_boxes_ms: f64,
     /// Whether the boxes came from the structure cache (made by an earlier process).
     pub proxy_boxes_cached: bool,
+    /// Where the boxes came from: "package" (every streamable BLAS's entry of the package's
+    /// `proxy_boxes` section matched its records), "cache" (the structure cache), "computed"
+    /// (made from the meshes at start; where the package stored some, only the rest), or ""
+    /// before the start.
+    pub proxy_boxes_source: &'static str,
+    /// BLASes whose entry in the package's table was made for other records (a warning: their
+    /// boxes were taken from the cache or made).
+    pub proxy_boxes_stale_blases: u64,
     /// Milliseconds of the start's other phases: the derived tables (parents per BLAS, proxy
     /// clusters per TLAS, the GPU tables' records), choosing persistent TLASes (driver size
     /// queries), and the resident skeleton (tables uploaded, PI BLASes, TLASes and proxies

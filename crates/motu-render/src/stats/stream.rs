@@ -163,6 +163,8 @@ mirror! {
         proxy_boxes: u64,
         proxy_boxes_ms: f64,
         proxy_boxes_cached: bool,
+        proxy_boxes_source: &'static str,
+        proxy_boxes_stale_blases: u64,
         derived_ms: f64,
         persistent_choice_ms: f64,
         skeleton_ms: f64,

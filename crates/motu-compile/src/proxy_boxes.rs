@@ -1,0 +1,321 @@
+//! Proxy boxes inside a triangle BLAS: the maths, and the table a package stores.
+//!
+//! A streamed render (`motu-gpu` `stream/proxy_boxes.rs`) lets a ray that enters a
+//! non-resident BLAS's box open it only if the ray also enters one of the boxes around the
+//! BLAS's triangles: `fan` top boxes, each followed in the table by its `fan` leaves, from
+//! centroid-median splits of the triangles (`fan` × `fan` leaves in all, about
+//! [`LEAF_TRIANGLES`] triangles each, `fan` ≤ [`MAX_FAN`]), padded as proxy boxes are, so a ray
+//! that can hit a triangle always enters its leaf.
+//!
+//! Making them reads every mesh (seconds on a large scene), so `motu import` makes them once
+//! and stores them in the package's `proxy_boxes` section ([`encode_section`], FORMAT.md);
+//! the streamer uses a stored BLAS's boxes only when the entry's hash of the BLAS's records
+//! ([`blas_hash`]) matches, and makes the rest itself. Both sides call [`blas_boxes`] (the
+//! streamer) or [`boxes_from_triangles`] over [`push_triangle_boxes`] (the importer, a chunk at
+//! a time): the same operations in the same order, so the boxes are equal bit for bit.
+
+use std::borrow::Cow;
+use std::ops::Range;
+
+use motu_abi::blob::{BlobReader, BlobWriter};
+use motu_abi::{BlasRecord, HierarchyView, BLAS_TRIANGLES};
+
+/// Triangles per leaf box the fan aims at.
+pub const LEAF_TRIANGLES: u32 = 32;
+/// At most this many top boxes (and leaves per top box): the shader keeps the entered top
+/// boxes in a 16-bit mask.
+pub const MAX_FAN: u32 = 16;
+
+/// `[min x, y, z, max x, y, z]`; an unused box is empty (min > max).
+pub type Box6 = [f32; 6];
+
+/// A triangle's centroid and box, as the splits read them.
+pub type TriangleBox = ([f32; 3], Box6);
+
+/// The empty box (min > max).
+pub const EMPTY: Box6 = [
+    f32::INFINITY,
+    f32::INFINITY,
+    f32::INFINITY,
+    f32::NEG_INFINITY,
+    f32::NEG_INFINITY,
+    f32::NEG_INFINITY,
+];
+
+/// Top boxes (= leaves per top box) of a BLAS of `triangles`: the greatest power of two whose
+/// square of leaves holds at least [`LEAF_TRIANGLES`] each (1 for fewer), capped at
+/// [`MAX_FAN`]. Rounding down keeps the table at most a 32nd of the triangles (24 bytes a box,
+/// resident in the floor); rounding up made 4,096-triangle units 272 boxes of 16 triangles.
+pub fn fan(triangles: u32) -> u32 {
+    let mut f = 1u32;
+    while f < MAX_FAN && u64::from(4 * f * f) * u64::from(LEAF_TRIANGLES) <= u64::from(triangles) {
+        f *= 2;
+    }
+    f
+}
+
+/// Whether BLAS `r` gets boxes: a triangle BLAS with geometry (what a streamer streams).
+pub fn has_boxes(r: &BlasRecord) -> bool {
+    r.kind == BLAS_TRIANGLES && r.item_count > 0
+}
+
+/// Boxes of a BLAS whose fan is `fan`: `fan` top boxes and `fan` leaves each.
+pub fn box_count(fan: u32) -> usize {
+    (fan + fan * fan) as usize
+}
+
+/// Appends the centroid and box of every triangle of one mesh (`indices` in threes) whose
+/// indices reach a position (an index out of range is skipped: the build reports it).
+pub fn push_triangle_boxes(positions: &[[f32; 3]], indices: &[u32], out: &mut Vec<TriangleBox>) {
+    for t in indices.chunks_exact(3) {
+        let mut bx = EMPTY;
+        for &i in t {
+            let Some(p) = positions.get(i as usize) else {
+                continue;
+            };
+            grow(&mut bx, p, p);
+        }
+        if bx[0] <= bx[3] {
+            let c = std::array::from_fn(|a| 0.5 * (bx[a] + bx[3 + a]));
+            out.push((c, bx));
+        }
+    }
+}
+
+/// A BLAS's boxes ([`box_count`] of `fan`) from its triangles ([`push_triangle_boxes`] over
+/// its geometries in order; reordered here): `fan` top boxes then `fan` leaves per top box,
+/// in BLAS space, padded.
+pub fn boxes_from_triangles(tris: &mut [TriangleBox], fan: usize) -> Vec<Box6> {
+    let mut out = vec![EMPTY; fan + fan * fan];
+    let mut leaves = Vec::with_capacity(fan * fan);
+    split(tris, 2 * fan.trailing_zeros(), 0, &mut leaves);
+    // Each leaf's triangles once; a top box is the union of its leaves.
+    let leaf_boxes: Vec<Box6> = leaves
+        .iter()
+        .map(|r| {
+            let mut bx = EMPTY;
+            for t in &tris[r.clone()] {
+                grow(&mut bx, &t.1[..3], &t.1[3..]);
+            }
+            bx
+        })
+        .collect();
+    let pad_nonempty = |bx: Box6| if bx[0] <= bx[3] { padded(bx) } else { bx };
+    for (k, group) in leaf_boxes.chunks_exact(fan).enumerate() {
+        let mut top = EMPTY;
+        for (j, leaf) in group.iter().enumerate() {
+            grow(&mut top, &leaf[..3], &leaf[3..]);
+            out[fan + k * fan + j] = pad_nonempty(*leaf);
+        }
+        out[k] = pad_nonempty(top);
+    }
+    out
+}
+
+/// Positions and indices of a mesh record.
+pub type MeshSlices<'a> = (Cow<'a, [[f32; 3]]>, Cow<'a, [u32]>);
+
+/// BLAS `b`'s boxes (fan `fan`) from its meshes, read through `mesh`. A BLAS one of whose
+/// meshes cannot be read gets its padded bounds as its only top box and leaf (the build
+/// reports the error when a ray needs it).
+pub fn blas_boxes<'m, E>(
+    view: &HierarchyView<'_>,
+    b: usize,
+    fan: usize,
+    mut mesh: impl FnMut(u32) -> Result<MeshSlices<'m>, E>,
+) -> Vec<Box6> {
+    let r = &view.blases[b];
+    let mut tris: Vec<TriangleBox> = Vec::with_capacity(r.primitive_count as usize);
+    let range = r.item_base as usize..(r.item_base + r.item_count) as usize;
+    for g in &view.geometries[range] {
+        let Ok((positions, indices)) = mesh(g.mesh) else {
+            let mut out = vec![EMPTY; fan + fan * fan];
+            let bounds = padded(r.bounds_box());
+            out[0] = bounds;
+            out[fan] = bounds;
+            return out;
+        };
+        push_triangle_boxes(&positions, &indices, &mut tris);
+    }
+    boxes_from_triangles(&mut tris, fan)
+}
+
+/// `b` grown by a little more than float error: a proxy box only has to contain what it
+/// stands for, and a flat one (a ground or ocean plane) is otherwise missed by box tests at
+/// grazing angles where the triangle itself is hit (a far pixel lost its hit at small budgets,
+/// where no neighbour happened to make the BLAS resident).
+pub fn padded(b: [f32; 6]) -> [f32; 6] {
+    let extent = (0..3).map(|a| b[3 + a] - b[a]).fold(0.0f32, f32::max);
+    let magnitude = b.iter().map(|v| v.abs()).fold(0.0f32, f32::max);
+    let pad = 1e-3 * extent + 1e-5 * magnitude;
+    if !pad.is_finite() {
+        return b;
+    }
+    [
+        b[0] - pad,
+        b[1] - pad,
+        b[2] - pad,
+        b[3] + pad,
+        b[4] + pad,
+        b[5] + pad,
+    ]
+}
+
+fn grow(bx: &mut Box6, lo: &[f32], hi: &[f32]) {
+    for a in 0..3 {
+        bx[a] = bx[a].min(lo[a]);
+        bx[3 + a] = bx[3 + a].max(hi[a]);
+    }
+}
+
+/// Appends `2^depth` leaf ranges (absolute, from `base`) of centroid-median splits along the
+/// widest centroid axis, depth first, so leaf `j`'s ancestor `d` levels up is `j >> d`; a range
+/// too small to split ends in empty leaves.
+fn split(tris: &mut [TriangleBox], depth: u32, base: usize, leaves: &mut Vec<Range<usize>>) {
+    if depth == 0 || tris.len() < 2 {
+        leaves.push(base..base + tris.len());
+        let end = base + tris.len();
+        leaves.extend((1..1usize << depth).map(|_| end..end));
+        return;
+    }
+    let mut c = EMPTY;
+    for t in tris.iter() {
+        grow(&mut c, &t.0, &t.0);
+    }
+    let axis = (0..3)
+        .max_by(|&x, &y| (c[3 + x] - c[x]).total_cmp(&(c[3 + y] - c[y])))
+        .unwrap_or(0);
+    let mid = tris.len() / 2;
+    tris.select_nth_unstable_by(mid, |x, y| x.0[axis].total_cmp(&y.0[axis]));
+    let (l, r) = tris.split_at_mut(mid);
+    split(l, depth - 1, base, leaves);
+    split(r, depth - 1, base + mid, leaves);
+}
+
+/// What BLAS `b`'s boxes are made from, hashed: the box maths' constants, its record, its
+/// geometry records and their mesh records (where its data lies, its counts and bounds; the
+/// data itself is covered by the package's chunk checksums). A stored entry whose hash differs
+/// was made for other records and is not used.
+pub fn blas_hash(view: &HierarchyView<'_>, b: usize) -> u64 {
+    let mut h = xxhash_rust::xxh3::Xxh3::new();
+    h.update(HASH_DOMAIN);
+    h.update(&LEAF_TRIANGLES.to_le_bytes());
+    h.update(&MAX_FAN.to_le_bytes());
+    let r = &view.blases[b];
+    h.update(bytemuck::bytes_of(r));
+    let range = r.item_base as usize..(r.item_base as usize + r.item_count as usize);
+    for g in view.geometries.get(range).unwrap_or(&[]) {
+        h.update(bytemuck::bytes_of(g));
+        if let Some(m) = view.meshes.get(g.mesh as usize) {
+            h.update(bytemuck::bytes_of(m));
+        }
+    }
+    h.digest()
+}
+
+const HASH_DOMAIN: &[u8] = b"motu-proxy-boxes-blas-v1";
+
+/// The `proxy_boxes` section's first bytes (FORMAT.md): the name and the version.
+pub const SECTION_MAGIC: &[u8; 16] = b"motu pboxes v1\0\0";
+
+/// One BLAS's entry of a stored table: its id, fan, first box, and [`blas_hash`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
+pub struct StoredEntry {
+    pub blas: u32,
+    pub fan: u32,
+    pub first_box: u64,
+    pub hash: u64,
+}
+
+/// A package's stored boxes: entries sorted by BLAS id, and the boxes they index.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StoredProxyBoxes {
+    pub entries: Vec<StoredEntry>,
+    pub boxes: Vec<Box6>,
+}
+
+/// What [`StoredProxyBoxes::boxes_of`] found for a BLAS.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Stored<'a> {
+    /// The entry matches the BLAS's records: its boxes.
+    Valid(&'a [Box6]),
+    /// The table has no entry for the BLAS.
+    Absent,
+    /// The entry was made for other records (or another fan): not used.
+    Stale,
+}
+
+impl StoredProxyBoxes {
+    /// Adds BLAS `b`'s boxes (ids ascending).
+    pub fn push(&mut self, b: u32, fan: u32, hash: u64, boxes: &[Box6]) {
+        self.entries.push(StoredEntry {
+            blas: b,
+            fan,
+            first_box: self.boxes.len() as u64,
+            hash,
+        });
+        self.boxes.extend_from_slice(boxes);
+    }
+
+    /// BLAS `b`'s stored boxes, checked against `view`'s records ([`blas_hash`]) and the fan
+    /// its triangle count gives.
+    pub fn boxes_of(&self, view: &HierarchyView<'_>, b: usize) -> Stored<'_> {
+        let Ok(i) = self.entries.binary_search_by_key(&(b as u32), |e| e.blas) else {
+            return Stored::Absent;
+        };
+        let e = self.entries[i];
+        let f = fan(view.blases[b].primitive_count);
+        let start = e.first_box as usize;
+        let boxes = start
+            .checked_add(box_count(f))
+            .and_then(|end| self.boxes.get(start..end));
+        match boxes {
+            Some(boxes) if e.fan == f && e.hash == blas_hash(view, b) => Stored::Valid(boxes),
+            _ => Stored::Stale,
+        }
+    }
+}
+
+/// The section's bytes: [`SECTION_MAGIC`], the entry and box counts (u64 each), the entries
+/// (24 bytes each), the boxes (24 bytes each).
+pub fn encode_section(t: &StoredProxyBoxes) -> Vec<u8> {
+    let mut w = BlobWriter::new(
+        SECTION_MAGIC,
+        16 + std::mem::size_of_val(&t.entries[..]) + std::mem::size_of_val(&t.boxes[..]),
+    );
+    w.u64(t.entries.len() as u64)
+        .u64(t.boxes.len() as u64)
+        .pods(&t.entries)
+        .pods(&t.boxes);
+    w.finish()
+}
+
+/// Reads what [`encode_section`] wrote; `None` for another magic (another version), a cut or
+/// long section, entries out of BLAS order or boxes out of range.
+pub fn decode_section(bytes: &[u8]) -> Option<StoredProxyBoxes> {
+    let mut r = BlobReader::new(bytes, SECTION_MAGIC)?;
+    let n_entries = usize::try_from(r.u64()?).ok()?;
+    let n_boxes = usize::try_from(r.u64()?).ok()?;
+    // Counts checked against the bytes before anything is allocated.
+    let need = n_entries
+        .checked_mul(std::mem::size_of::<StoredEntry>())?
+        .checked_add(n_boxes.checked_mul(std::mem::size_of::<Box6>())?)?;
+    if need != r.remaining() {
+        return None;
+    }
+    let entries: Vec<StoredEntry> = r.pods(n_entries)?;
+    let boxes: Vec<Box6> = r.pods(n_boxes)?;
+    r.finish()?;
+    let ordered = entries.windows(2).all(|w| w[0].blas < w[1].blas);
+    let in_range = entries.iter().all(|e| {
+        e.fan <= MAX_FAN
+            && (e.first_box as usize)
+                .checked_add(box_count(e.fan))
+                .is_some_and(|end| end <= boxes.len())
+    });
+    (ordered && in_range).then_some(StoredProxyBoxes { entries, boxes })
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,213 @@
+use super::*;
+use bytemuck::Zeroable;
+use motu_abi::{GeometryRecord, MeshRecord, BLAS_AABBS};
+
+#[test]
+fn fan_grows_with_triangles_up_to_the_cap() {
+    assert_eq!(fan(1), 1);
+    assert_eq!(fan(127), 1);
+    assert_eq!(fan(128), 2);
+    assert_eq!(fan(511), 2);
+    assert_eq!(fan(512), 4);
+    assert_eq!(fan(4096), 8);
+    assert_eq!(fan(8191), 8);
+    assert_eq!(fan(8192), 16);
+    assert_eq!(fan(u32::MAX), MAX_FAN);
+}
+
+#[test]
+fn every_triangle_lies_in_a_leaf_of_a_top_box_that_holds_it() {
+    // A 40 × 40 grid of small triangles on a tilted, curved sheet, plus far outliers.
+    let mut tris = Vec::new();
+    for i in 0..40 {
+        for j in 0..40 {
+            let (x, z) = (i as f32, j as f32);
+            let y = 0.1 * x * z.sin();
+            let bx = [x, y, z, x + 0.7, y + 0.3, z + 0.9];
+            tris.push((std::array::from_fn(|a| 0.5 * (bx[a] + bx[3 + a])), bx));
+        }
+    }
+    let sheet = tris.clone();
+    tris.push(([1e4, 0.0, 0.0], [1e4, 0.0, 0.0, 1e4, 0.0, 0.0]));
+    tris.push(([-3.0; 3], [-3.0, -3.0, -3.0, -3.0, -3.0, -3.0]));
+    let mut volumes = Vec::new();
+    for (fan, all) in [1usize, 2, 4, 16]
+        .into_iter()
+        .flat_map(|f| [(f, &tris), (f, &sheet)])
+    {
+        let mut work = all.clone();
+        let mut leaves = Vec::new();
+        split(&mut work, 2 * fan.trailing_zeros(), 0, &mut leaves);
+        assert_eq!(leaves.len(), fan * fan);
+        assert_eq!(leaves.iter().map(|r| r.len()).sum::<usize>(), all.len());
+        let union = |rs: &[Range<usize>]| {
+            let mut bx = EMPTY;
+            for t in rs.iter().flat_map(|r| &work[r.clone()]) {
+                grow(&mut bx, &t.1[..3], &t.1[3..]);
+            }
+            bx
+        };
+        let inside = |o: &Box6, t: &Box6| (0..3).all(|a| o[a] <= t[a] && t[3 + a] <= o[3 + a]);
+        let mut leaf_volume = 0.0f64;
+        for t in all {
+            let held = (0..fan).any(|k| {
+                inside(&union(&leaves[k * fan..(k + 1) * fan]), &t.1)
+                    && (0..fan)
+                        .any(|j| inside(&union(std::slice::from_ref(&leaves[k * fan + j])), &t.1))
+            });
+            assert!(
+                held,
+                "fan {fan}: {t:?} is in no leaf of a top box holding it"
+            );
+        }
+        for l in &leaves {
+            let b = union(std::slice::from_ref(l));
+            if b[0] <= b[3] {
+                leaf_volume += (0..3).map(|a| f64::from(b[3 + a] - b[a])).product::<f64>();
+            }
+        }
+        if std::ptr::eq(all, &sheet) {
+            volumes.push(leaf_volume);
+        }
+    }
+    // Finer fans hug the sheet: the leaves' volume shrinks.
+    assert!(volumes.windows(2).all(|w| w[1] < w[0]), "{volumes:?}");
+    assert!(volumes[3] < 0.5 * volumes[0], "{volumes:?}");
+}
+
+/// Two meshes, a triangle BLAS over both, an AABB BLAS and a triangle BLAS over the second.
+struct Tables {
+    blases: Vec<BlasRecord>,
+    geometries: Vec<GeometryRecord>,
+    meshes: Vec<MeshRecord>,
+}
+
+impl Tables {
+    fn new() -> Tables {
+        let mesh = |triangles: u32, chunk: u32| MeshRecord {
+            triangle_count: triangles,
+            vertex_count: 3 * triangles,
+            chunk,
+            ..MeshRecord::zeroed()
+        };
+        let blas = |kind: u32, base: u32, count: u32, prims: u32| BlasRecord {
+            kind,
+            item_base: base,
+            item_count: count,
+            primitive_count: prims,
+            bounds_min: [0.0; 3],
+            bounds_max: [1.0; 3],
+            ..BlasRecord::zeroed()
+        };
+        let geometry = |m: u32| GeometryRecord {
+            mesh: m,
+            ..GeometryRecord::zeroed()
+        };
+        Tables {
+            meshes: vec![mesh(300, 0), mesh(200, 1)],
+            geometries: vec![geometry(0), geometry(1), geometry(1)],
+            blases: vec![
+                blas(BLAS_TRIANGLES, 0, 2, 500),
+                blas(BLAS_AABBS, 0, 0, 0),
+                blas(BLAS_TRIANGLES, 2, 1, 200),
+            ],
+        }
+    }
+
+    fn view(&self) -> HierarchyView<'_> {
+        HierarchyView {
+            blases: &self.blases,
+            geometries: &self.geometries,
+            meshes: &self.meshes,
+            ..HierarchyView::default()
+        }
+    }
+}
+
+#[test]
+fn a_stored_table_round_trips_and_is_used_only_for_the_records_it_was_made_for() {
+    let t = Tables::new();
+    let view = t.view();
+    let mut stored = StoredProxyBoxes::default();
+    for b in [0usize, 2] {
+        let f = fan(view.blases[b].primitive_count);
+        let boxes: Vec<Box6> = (0..box_count(f))
+            .map(|i| [b as f32, i as f32, 0.0, 1.0, 2.0, 3.0])
+            .collect();
+        stored.push(b as u32, f, blas_hash(&view, b), &boxes);
+    }
+    let bytes = encode_section(&stored);
+    let back = decode_section(&bytes).expect("decodes");
+    assert_eq!(back, stored);
+    assert!(matches!(back.boxes_of(&view, 0), Stored::Valid(b) if b.len() == box_count(2)));
+    assert!(matches!(back.boxes_of(&view, 2), Stored::Valid(b) if b[0][0] == 2.0));
+    assert_eq!(back.boxes_of(&view, 1), Stored::Absent);
+    // Another mesh record under BLAS 2 (moved data), another geometry list, another triangle
+    // count: stale.
+    let mut moved = Tables::new();
+    moved.meshes[1].positions_offset = 4096;
+    assert_eq!(back.boxes_of(&moved.view(), 2), Stored::Stale);
+    assert_eq!(back.boxes_of(&moved.view(), 0), Stored::Stale);
+    let mut regrouped = Tables::new();
+    regrouped.geometries[2].mesh = 0;
+    assert_eq!(back.boxes_of(&regrouped.view(), 2), Stored::Stale);
+    assert!(matches!(
+        back.boxes_of(&regrouped.view(), 0),
+        Stored::Valid(_)
+    ));
+    // Cut, long, another version, entries out of order or boxes out of range: refused.
+    assert_eq!(decode_section(&bytes[..bytes.len() - 1]), None);
+    let mut long = bytes.clone();
+    long.push(0);
+    assert_eq!(decode_section(&long), None);
+    let mut v2 = bytes.clone();
+    v2[13] = b'2';
+    assert_eq!(decode_section(&v2), None);
+    let mut swapped = stored.clone();
+    swapped.entries.swap(0, 1);
+    assert_eq!(decode_section(&encode_section(&swapped)), None);
+    let mut far = stored.clone();
+    far.entries[1].first_box = 1 << 40;
+    assert_eq!(decode_section(&encode_section(&far)), None);
+}
+
+#[test]
+fn blas_boxes_of_meshes_equal_boxes_from_their_triangles() {
+    let t = Tables::new();
+    let view = t.view();
+    // Meshes of scattered triangles (deterministic), some indices out of range.
+    let mesh = |m: u32| -> (Vec<[f32; 3]>, Vec<u32>) {
+        let n = view.meshes[m as usize].triangle_count;
+        let positions: Vec<[f32; 3]> = (0..3 * n)
+            .map(|i| {
+                let x = (i as f32 * 0.37 + m as f32).sin() * 10.0;
+                [x, (i as f32 * 1.3).cos(), i as f32 * 0.01]
+            })
+            .collect();
+        let mut indices: Vec<u32> = (0..3 * n).rev().collect();
+        indices[5] = 1 << 30;
+        (positions, indices)
+    };
+    for b in [0usize, 2] {
+        let f = fan(view.blases[b].primitive_count) as usize;
+        let runtime = blas_boxes(&view, b, f, |m| {
+            let (p, i) = mesh(m);
+            Ok::<_, ()>((Cow::Owned(p), Cow::Owned(i)))
+        });
+        let r = &view.blases[b];
+        let mut tris = Vec::new();
+        for g in &view.geometries[r.item_base as usize..][..r.item_count as usize] {
+            let (p, i) = mesh(g.mesh);
+            push_triangle_boxes(&p, &i, &mut tris);
+        }
+        let stored = boxes_from_triangles(&mut tris, f);
+        assert_eq!(
+            bytemuck::cast_slice::<Box6, u32>(&runtime),
+            bytemuck::cast_slice::<Box6, u32>(&stored)
+        );
+        assert!(runtime.iter().all(|b| b[0] <= b[3]), "{runtime:?}");
+    }
+    // A mesh that cannot be read: the padded bounds as the only top box and leaf.
+    let failed = blas_boxes(&view, 2, 1, |_| Err::<MeshSlices<'_>, _>("gone"));
+    assert_eq!(failed, vec![padded([0.0, 0.0, 0.0, 1.0, 1.0, 1.0]); 2]);
+}
