@@ -7,12 +7,14 @@
 use motu_tests::{gpu_available, has_ray_query, motu_ok, s};
 use std::path::Path;
 
-/// 16×16 RGB checker of 2×2-texel cells, two greys of moderate contrast (PFM: little endian).
+/// 128×128 RGB checker of 16×16-texel cells, two greys of moderate contrast (PFM: little
+/// endian). Cells this large stay sharp at the mip level a 64×36 view picks.
 fn write_checker_pfm(path: &Path) {
-    let mut bytes = b"PF\n16 16\n-1.0\n".to_vec();
-    for y in 0..16 {
-        for x in 0..16 {
-            let v = if (x / 2 + y / 2) % 2 == 0 {
+    const N: usize = 128;
+    let mut bytes = format!("PF\n{N} {N}\n-1.0\n").into_bytes();
+    for y in 0..N {
+        for x in 0..N {
+            let v = if (x / 16 + y / 16) % 2 == 0 {
                 0.6f32
             } else {
                 0.3
@@ -28,6 +30,7 @@ fn write_checker_pfm(path: &Path) {
 fn write_scene(dir: &Path) -> std::path::PathBuf {
     write_checker_pfm(&dir.join("checker.pfm"));
     let scene = dir.join("scene.pbrt");
+    // The ground fills the 64×36 view: 8 cells across, about 11 pixels each.
     std::fs::write(
         &scene,
         r#"LookAt 0 8 0  0 0 0  0 0 1
@@ -37,7 +40,7 @@ LightSource "distant" "point from" [0.3 10 0.2] "point to" [0 0 0] "rgb L" [2.5 
 Texture "checks" "spectrum" "imagemap" "string filename" "checker.pfm"
 AttributeBegin
   Material "matte" "texture Kd" "checks"
-  Shape "trianglemesh" "point P" [-3 0 -3  3 0 -3  3 0 3  -3 0 3]
+  Shape "trianglemesh" "point P" [-6 0 -6  6 0 -6  6 0 6  -6 0 6]
     "float uv" [0 0  1 0  1 1  0 1] "integer indices" [0 1 2  0 2 3]
 AttributeEnd
 "#,
@@ -55,24 +58,28 @@ fn read_png(path: &Path) -> Vec<u8> {
     buf
 }
 
+/// Whether each pixel's primary ray hit something (the AOV: a 32-byte header, then 16-byte
+/// records whose first word is the mesh, `u32::MAX` for a miss).
+fn read_hits(path: &Path) -> Vec<bool> {
+    let bytes = std::fs::read(path).unwrap();
+    bytes[32..]
+        .chunks_exact(16)
+        .map(|r| u32::from_le_bytes([r[0], r[1], r[2], r[3]]) != u32::MAX)
+        .collect()
+}
+
 const W: usize = 64;
 const H: usize = 36;
 
-/// Mean luminance step (8-bit) between 4-neighbours that lie in different checker cells (by
-/// the albedo view `albedo`), both on the ground.
-fn edge_contrast(img: &[u8], albedo: &[u8]) -> (f64, usize) {
-    let lum = |p: &[u8], i: usize| {
-        0.2126 * f64::from(p[i * 4])
-            + 0.7152 * f64::from(p[i * 4 + 1])
-            + 0.0722 * f64::from(p[i * 4 + 2])
-    };
-    // Ground texels are greys (sRGB 203 and 149): light cells above the midpoint, dark below; the sky
-    // (blue-ish, not grey) is left out.
-    let class = |i: usize| {
-        let (r, g, b) = (albedo[i * 4], albedo[i * 4 + 1], albedo[i * 4 + 2]);
-        let grey = r.abs_diff(g) <= 2 && g.abs_diff(b) <= 2;
-        grey.then_some(lum(albedo, i) > 176.0)
-    };
+fn lum(p: &[u8], i: usize) -> f64 {
+    0.2126 * f64::from(p[i * 4])
+        + 0.7152 * f64::from(p[i * 4 + 1])
+        + 0.0722 * f64::from(p[i * 4 + 2])
+}
+
+/// Mean luminance step (8-bit) of `img` between 4-neighbours on the ground that lie in
+/// different checker cells (`light`: by the albedo view).
+fn edge_contrast(img: &[u8], light: &[Option<bool>]) -> (f64, usize) {
     let (mut sum, mut n) = (0.0, 0);
     for y in 0..H {
         for x in 0..W {
@@ -81,7 +88,7 @@ fn edge_contrast(img: &[u8], albedo: &[u8]) -> (f64, usize) {
                 .into_iter()
                 .flatten()
             {
-                if let (Some(a), Some(b)) = (class(i), class(j)) {
+                if let (Some(a), Some(b)) = (light[i], light[j]) {
                     if a != b {
                         sum += (lum(img, i) - lum(img, j)).abs();
                         n += 1;
@@ -93,6 +100,9 @@ fn edge_contrast(img: &[u8], albedo: &[u8]) -> (f64, usize) {
     (sum / n.max(1) as f64, n)
 }
 
+/// CPU, the pipeline backend streamed and the query backend's full build (each renders the
+/// albedo view for its guide on its own path); the cells and the undenoised contrast come from
+/// the CPU (the backends agree with it per pixel on the AOV, in colour within tolerance).
 #[test]
 fn denoising_keeps_texel_edges_on_every_backend() {
     let t0 = std::time::Instant::now();
@@ -101,39 +111,48 @@ fn denoising_keeps_texel_edges_on_every_backend() {
     let scene = write_scene(d);
     let pkg = d.join("checker.motu");
     motu_ok(&["import", s(&scene), "-o", s(&pkg)]);
-    let mut backends = vec!["cpu"];
+    let render = |tag: &str, extra: &[&str]| {
+        let (png, aov) = (d.join(format!("{tag}.png")), d.join(format!("{tag}.aov")));
+        let mut args = vec!["render", s(&pkg), "-o", s(&png), "--aov", s(&aov)];
+        args.extend(["--width", "64", "--height", "36"]);
+        args.extend_from_slice(extra);
+        motu_ok(&args);
+        (read_png(&png), read_hits(&aov))
+    };
+    let (albedo, hits) = render("albedo", &["--backend", "cpu", "--view", "albedo"]);
+    // Texels 0.6 and 0.3 (sRGB 203 and 149): light cells above the midpoint.
+    let light: Vec<Option<bool>> = (0..W * H)
+        .map(|i| hits[i].then(|| lum(&albedo, i) > 176.0))
+        .collect();
+    let (plain, _) = render("plain", &["--backend", "cpu"]);
+    let (before, edges) = edge_contrast(&plain, &light);
+    assert!(
+        edges >= 300,
+        "the checker's edges are in view ({edges} pairs)"
+    );
+    assert!(
+        before >= 20.0,
+        "the cells differ in the shaded image ({before:.1} steps)"
+    );
+    let mut runs: Vec<(&str, Vec<&str>)> = vec![("cpu", vec!["--backend", "cpu"])];
     if gpu_available() {
-        backends.push("pipeline");
+        runs.push(("pipeline-stream", vec!["--backend", "pipeline", "--stream"]));
         if has_ray_query() {
-            backends.push("query");
+            runs.push(("query", vec!["--backend", "query"]));
         }
     }
-    for b in backends {
-        let png = |tag: &str, extra: &[&str]| {
-            let out = d.join(format!("{b}-{tag}.png"));
-            let mut args = vec!["render", s(&pkg), "-o", s(&out), "--backend", b];
-            args.extend(["--width", "64", "--height", "36"]);
-            args.extend_from_slice(extra);
-            motu_ok(&args);
-            read_png(&out)
-        };
-        let albedo = png("albedo", &["--view", "albedo"]);
-        let plain = png("plain", &[]);
-        let denoised = png("denoised", &["--denoise"]);
-        let (before, edges) = edge_contrast(&plain, &albedo);
-        let (after, _) = edge_contrast(&denoised, &albedo);
-        assert!(
-            edges >= 100,
-            "{b}: the checker's edges are in view ({edges} pairs)"
+    for (tag, mut args) in runs {
+        args.push("--denoise");
+        let (denoised, _) = render(tag, &args);
+        let (after, _) = edge_contrast(&denoised, &light);
+        eprintln!(
+            "{tag}: edge contrast {before:.1} before, {after:.1} after denoising ({edges} pairs)"
         );
+        // Kept: the guide separates the cells (with the material constant alone the filter
+        // mixed them: 0.0 of 25.3 steps).
         assert!(
-            before >= 20.0,
-            "{b}: the cells differ in the shaded image ({before:.1} steps)"
-        );
-        // Kept: the guide separates the cells (the material constant alone gave ~0.5).
-        assert!(
-            after >= 0.9 * before,
-            "{b}: denoising blurred the texel edges: contrast {after:.1} of {before:.1} 8-bit steps"
+            after >= 0.8 * before,
+            "{tag}: denoising blurred the texel edges: contrast {after:.1} of {before:.1} 8-bit steps"
         );
     }
     eprintln!(
