@@ -44,7 +44,7 @@ fn a_panel_click_on_an_element_changes_the_next_frame() {
     let clicked = "isBeach";
     assert!(names.iter().any(|n| n == clicked), "{names:?}");
     // The panel needs room for its element list; the ids view keeps the frames cheap.
-    let size = ["--width", "320", "--height", "480"];
+    let size = ["--width", "200", "--height", "440"];
     let view = |tag: &str, click: Option<&str>| {
         let (png, aov) = (d.join(format!("{tag}.png")), d.join(format!("{tag}.aov")));
         let mut args = vec!["view", s(&pkg)];

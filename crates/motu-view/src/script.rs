@@ -49,6 +49,8 @@ pub(crate) struct PanelScript {
     texts: Vec<(String, egui::Rect)>,
     /// The click under way: its position, the frame it started and its label.
     active: Option<(egui::Pos2, u32, String)>,
+    /// The input time of the click's press (seconds).
+    press_time: Option<f64>,
 }
 
 impl PanelScript {
@@ -91,11 +93,20 @@ impl PanelScript {
                         c.frame, c.label, c.label
                     )
                 })?;
+            tracing::info!(frame, label = %c.label, x = at.x, y = at.y, "scripted panel click");
             self.active = Some((at, frame, c.label));
         }
         if let Some((at, start, _)) = &self.active {
             let (at, step) = (*at, frame - start);
             input.events.push(egui::Event::PointerMoved(at));
+            // egui counts a press and release as a click only within its click duration (0.8
+            // s): slow frames (lavapipe) would make it a long press, so the release frame's
+            // input is stamped just after the press (time stays monotonic: real time is later).
+            match (step, input.time) {
+                (1, t) => self.press_time = t,
+                (2, Some(_)) => input.time = self.press_time.map(|t| t + 0.05),
+                _ => {}
+            }
             if step >= 1 {
                 input.events.push(egui::Event::PointerButton {
                     pos: at,
