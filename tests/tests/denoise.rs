@@ -136,6 +136,22 @@ fn denoising_keeps_texel_edges_on_every_backend() {
     );
     let mut runs: Vec<(&str, Vec<&str>)> = vec![("cpu", vec!["--backend", "cpu"])];
     if gpu_available() {
+        // The GPU's albedo view is the CPU's (docs/shading.md's tolerance between backends:
+        // at most 2% of the channels more than two 8-bit steps apart).
+        let (gpu_albedo, gpu_hits) = render(
+            "albedo-pipeline",
+            &["--backend", "pipeline", "--view", "albedo"],
+        );
+        assert_eq!(gpu_hits, hits);
+        let off = albedo
+            .iter()
+            .zip(&gpu_albedo)
+            .filter(|(a, b)| a.abs_diff(**b) > 2)
+            .count();
+        assert!(
+            off * 50 <= albedo.len(),
+            "the pipeline's albedo view differs from the CPU's on {off} channels"
+        );
         runs.push(("pipeline-stream", vec!["--backend", "pipeline", "--stream"]));
         if has_ray_query() {
             runs.push(("query", vec!["--backend", "query"]));
