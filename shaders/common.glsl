@@ -17,6 +17,7 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 #define VIEW_IDS 1u
 #define VIEW_LOD 2u
 #define VIEW_HEATMAP 3u
+#define VIEW_ALBEDO 4u  // the primary hit's textured base colour (the denoiser's guide)
 
 // Indices of the stats buffer (u32 counters, reset every frame).
 #define STAT_STACK_OVERFLOWS 0

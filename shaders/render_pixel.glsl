@@ -159,6 +159,8 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
     uint pixel = px.y * width + px.x;
     vec3 org = push.frame.f.camera.world_eye;
     bool shaded = !guard && push.frame.f.view == VIEW_SHADED;
+    // The albedo view resolves the primary hit's textured base colour as shading does.
+    bool resolve = shaded || (!guard && push.frame.f.view == VIEW_ALBEDO);
     uint spp = shaded ? max(push.frame.f.spp, 1u) : 1u;
     uint traces = 0u;
     uint overflows = 0u;
@@ -495,7 +497,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                     c.st.x = 1u;  // a closer hit: the rays traced ahead from the old one go
                 }
 #endif
-                if (shaded) {
+                if (resolve) {
                     ShadeInput hs = shade_input(h, mesh, org, dir);
                     c.hit.yzw = hs.ng;
                     c.ns.xyz = hs.ns;
@@ -591,6 +593,8 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         colour = sky(camera_primary_dir(push.frame.f.camera, px.x, px.y, 0.5, 0.5));
     } else if (push.frame.f.view == VIEW_IDS) {
         colour = id_colour(rec.x, rec.y);
+    } else if (push.frame.f.view == VIEW_ALBEDO) {
+        colour = c.albedo.xyz;
     } else {
         colour = lod_colour(rec.w);
     }

@@ -37,21 +37,8 @@ fn forest_ml_sl_levels_and_splits_agree() {
         import(&scene, &pkg, extra);
         let aov = dir.path().join(format!("{name}.aov"));
         let stats = render_aov(&pkg, &aov, &["--width", "96", "--view", "ids"]);
-        for key in [
-            "width",
-            "height",
-            "backend",
-            "ms_per_frame",
-            "rays",
-            "rays_per_second",
-            "traces_per_ray",
-            "stack_overflows",
-            "vram_budget_bytes",
-            "vram_peak_bytes",
-            "allocation_count",
-            "as_bytes",
-            "passes",
-        ] {
+        // The contract's keys from their one source (CLI.md's list, checked there).
+        for key in motu_render::stats::CONTRACT_KEYS {
             assert!(!stats[key].is_null(), "--stats lacks {key}");
         }
         if name == "ml" {

@@ -545,6 +545,8 @@ pub enum ViewArg {
     Heatmap,
     Lod,
     Ids,
+    /// The primary hit's textured base colour (the denoiser's material guide).
+    Albedo,
 }
 
 #[derive(Args, Debug)]
@@ -770,6 +772,13 @@ pub struct ViewArgs {
     /// Fly speed in world units per second (default: a quarter of the scene's radius).
     #[arg(help_heading = HEADING_CAMERA, long)]
     pub speed: Option<f32>,
+    /// For scripts and tests: click the panel's widget labelled LABEL (an element, a view, a
+    /// checkbox, a camera button) through egui's input, as a user would, starting at frame
+    /// FRAME (≥ 2: egui lays the panel out in frames 0 and 1; hover, press, release: the change
+    /// renders from frame FRAME+3). Repeatable; needs the panel shown (--overlay with
+    /// --frames); a label not visible is an error.
+    #[arg(help_heading = HEADING_DEBUG, long, value_name = "FRAME:LABEL")]
+    pub panel_click: Vec<motu_view::PanelClick>,
 }
 
 #[derive(Args, Debug)]

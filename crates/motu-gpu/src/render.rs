@@ -73,6 +73,9 @@ pub enum View {
     Lod,
     /// Traces per pixel, blue (0) to red (the frame's maximum, `heatmap_max` in stats).
     Heatmap,
+    /// The primary hit's textured base colour (sRGB-encoded; misses show the sky): the
+    /// denoiser's material guide.
+    Albedo,
 }
 
 impl View {
@@ -83,6 +86,7 @@ impl View {
             View::Ids => "ids",
             View::Lod => "lod",
             View::Heatmap => "heatmap",
+            View::Albedo => "albedo",
         }
     }
 
@@ -92,6 +96,7 @@ impl View {
             View::Ids => 1,
             View::Lod => 2,
             View::Heatmap => 3,
+            View::Albedo => 4,
         }
     }
 }

@@ -91,6 +91,7 @@ fn cpu_render(
             View::Ids => motu_trace::View::Ids,
             View::Lod => motu_trace::View::Lod,
             View::Heatmap => motu_trace::View::Heatmap,
+            View::Albedo => motu_trace::View::Albedo,
         },
         lod,
         ..Default::default()

@@ -105,5 +105,6 @@ fn trace_view(v: motu_gpu::View) -> motu_trace::View {
         motu_gpu::View::Ids => motu_trace::View::Ids,
         motu_gpu::View::Lod => motu_trace::View::Lod,
         motu_gpu::View::Heatmap => motu_trace::View::Heatmap,
+        motu_gpu::View::Albedo => motu_trace::View::Albedo,
     }
 }

@@ -6,7 +6,9 @@
 //! gives the material's base colour. Each pass blurs with the B3-spline kernel at a doubling
 //! stride and weights every tap by how well it agrees in normal, plane distance, base colour
 //! and colour, so the noise of a few samples goes while silhouettes, creases and material
-//! edges stay. Pixels without a hit (the sky, the environment map) are left as they are and
+//! edges stay. Where a material has a texture the base-colour guide is the textured colour at
+//! the primary hit ([`add_texture_albedo`], from the same frame's `albedo` view on every
+//! backend), so texel edges stay too. Pixels without a hit (the sky, the environment map) are left as they are and
 //! never mixed into hits. The AOV itself is never touched.
 
 use motu_abi::aov::{Aov, MISS};
@@ -134,6 +136,42 @@ pub fn guide_from_aov(
         p.normal = n;
     }
     g
+}
+
+/// Puts the textured base colour of each hit into `guide`: `albedo` is the same frame's
+/// albedo view (`--view albedo`: sRGB, the primary hit's texture at its texel) and `albedo_aov`
+/// its AOV. A pixel whose albedo-view hit is not the guide's (`aov`) keeps its material
+/// constant. Without it a textured surface is one material to the filter, which then blurs
+/// across its texel edges. Returns the pixels taken from the image.
+pub fn add_texture_albedo(
+    guide: &mut [GuidePixel],
+    aov: &Aov,
+    albedo: &[u8],
+    albedo_aov: &Aov,
+) -> u64 {
+    assert_eq!(guide.len(), aov.records.len(), "guide and AOV disagree");
+    if albedo_aov.records.len() != aov.records.len() || albedo.len() != guide.len() * 4 {
+        return 0;
+    }
+    let mut taken = 0;
+    for (i, g) in guide.iter_mut().enumerate() {
+        let (a, b) = (&aov.records[i], &albedo_aov.records[i]);
+        if g.is_hit() && a.mesh == b.mesh && a.primitive == b.primitive {
+            let px = &albedo[i * 4..i * 4 + 3];
+            g.albedo =
+                std::array::from_fn(|c| motu_abi::shade::srgb_to_linear(f32::from(px[c]) / 255.0));
+            taken += 1;
+        }
+    }
+    taken
+}
+
+/// Whether any material of `view` has a base-colour texture (only then does the guide need the
+/// albedo view).
+pub fn has_textured_materials(view: &motu_abi::HierarchyView<'_>) -> bool {
+    view.materials
+        .iter()
+        .any(|m| m.base_color_texture != motu_abi::NONE_U32)
 }
 
 /// What a denoise did (`denoise` in `--stats`: the JSON is [`crate::stats::DenoiseStats`]).

@@ -89,7 +89,16 @@ pub fn render(
     };
     let mut rgba8 = rgba8;
     let denoised = match (s.denoise, s.view) {
-        (true, motu_gpu::View::Shaded) => Some(denoise(job, &image_camera, &aov, &mut rgba8)),
+        (true, motu_gpu::View::Shaded) => {
+            let albedo = texture_albedo(job, settings, &image_camera)?;
+            Some(denoise(
+                job,
+                &image_camera,
+                &aov,
+                &mut rgba8,
+                albedo.as_ref(),
+            ))
+        }
         _ => None,
     };
     let PathStats {
@@ -136,18 +145,70 @@ pub fn render(
     Ok(Rendered { aov, rgba8, stats })
 }
 
+/// `--denoise` on a scene with textured materials: the same camera's `albedo` view (the
+/// textured base colour at each primary hit) on the same backend and path (full build or
+/// streamed), for the guide. A second render of primary rays only; `None` without textures.
+fn texture_albedo(
+    job: &RenderJob<'_>,
+    settings: &RenderSettings,
+    camera: &CameraParams,
+) -> Result<Option<(Aov, Vec<u8>)>, RenderError> {
+    if !crate::denoise::has_textured_materials(job.view) {
+        return Ok(None);
+    }
+    let s = RenderSettings {
+        view: motu_gpu::View::Albedo,
+        frames: 1,
+        denoise: false,
+        ..settings.clone()
+    };
+    let cameras = [*camera];
+    let albedo_job = RenderJob {
+        camera: *camera,
+        recorded: s.stream.is_some().then_some(&cameras[..]),
+        ..*job
+    };
+    let (aov, rgba8, _) = match (s.backend, &s.stream) {
+        (Backend::Cpu, _) => crate::cpu::render_cpu(
+            &s,
+            job.package,
+            job.view,
+            s.lod,
+            job.lod.instance.as_ref(),
+            &cameras,
+        )?,
+        (backend, Some(stream)) => {
+            crate::stream::render_streaming(&s, stream, &albedo_job, backend, &mut |_| {})?.0
+        }
+        (backend, None) => crate::gpu::render_gpu(
+            &s,
+            job.package,
+            job.view,
+            camera,
+            s.lod,
+            backend,
+            job.lod.instance.as_ref(),
+        )?,
+    };
+    Ok(Some((aov, rgba8)))
+}
+
 /// `--denoise`: filters the shaded image with the guide its AOV gives (the materials' base
-/// colours by source mesh).
+/// colours by source mesh; where `albedo` has the frame's albedo view, the textured colour).
 fn denoise(
     job: &RenderJob<'_>,
     camera: &CameraParams,
     aov: &Aov,
     rgba8: &mut [u8],
+    albedo: Option<&(Aov, Vec<u8>)>,
 ) -> crate::denoise::DenoiseStats {
-    let albedo = crate::denoise::mesh_base_colours(job.view);
-    let guide = crate::denoise::guide_from_aov(aov, camera, |mesh| {
-        albedo.get(&mesh).copied().unwrap_or([0.5; 3])
+    let base = crate::denoise::mesh_base_colours(job.view);
+    let mut guide = crate::denoise::guide_from_aov(aov, camera, |mesh| {
+        base.get(&mesh).copied().unwrap_or([0.5; 3])
     });
+    if let Some((albedo_aov, albedo_rgba8)) = albedo {
+        crate::denoise::add_texture_albedo(&mut guide, aov, albedo_rgba8, albedo_aov);
+    }
     crate::denoise::denoise_rgba8(
         rgba8,
         aov.width,

@@ -17,6 +17,9 @@ pub enum View {
     Lod,
     /// Traces per pixel, blue (0) to red (the frame's maximum, reported in stats).
     Heatmap,
+    /// The primary hit's textured base colour, sRGB-encoded (misses show the sky): the
+    /// denoiser's material guide.
+    Albedo,
 }
 
 impl View {
@@ -27,6 +30,7 @@ impl View {
             Self::Ids => "ids",
             Self::Lod => "lod",
             Self::Heatmap => "heatmap",
+            Self::Albedo => "albedo",
         }
     }
 }
@@ -39,8 +43,9 @@ impl std::str::FromStr for View {
             "ids" => Ok(Self::Ids),
             "lod" => Ok(Self::Lod),
             "heatmap" => Ok(Self::Heatmap),
+            "albedo" => Ok(Self::Albedo),
             _ => Err(format!(
-                "unknown view {s:?} (expected shaded, ids, lod or heatmap)"
+                "unknown view {s:?} (expected shaded, ids, lod, heatmap or albedo)"
             )),
         }
     }

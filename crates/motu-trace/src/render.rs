@@ -200,6 +200,13 @@ pub fn render_with(
                     _ if !hit.is_hit() => sky(dir),
                     View::Ids => id_colour(hit.source_mesh, hit.primitive),
                     View::Lod => lod_colour(hit.lod),
+                    View::Albedo => crate::shade::hit_albedo(
+                        tracer,
+                        camera,
+                        &hit,
+                        camera.world_eye,
+                        normalize(dir),
+                    ),
                     // Filled in once the frame's maximum is known.
                     View::Heatmap => [0.0; 3],
                 };

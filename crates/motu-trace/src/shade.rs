@@ -228,6 +228,53 @@ pub fn shade_hit(
     .0
 }
 
+/// The hit's base colour under its material's texture (image or Ptex), as shading sees it
+/// (`shade.glsl` `shade_input`): the albedo view and the denoiser's guide.
+pub fn hit_albedo(
+    tracer: &Tracer<'_>,
+    camera: &CameraParams,
+    hit: &Hit,
+    org: [f32; 3],
+    dir: [f32; 3],
+) -> [f32; 3] {
+    let view = tracer.view();
+    let rec = &view.meshes[hit.mesh_record as usize];
+    let mat = view
+        .materials
+        .get(rec.material as usize)
+        .copied()
+        .unwrap_or_default();
+    let sp = surface_point(tracer, camera, hit, org, dir);
+    textured_albedo(tracer, hit, &sp, &mat)
+}
+
+fn textured_albedo(
+    tracer: &Tracer<'_>,
+    hit: &Hit,
+    sp: &SurfacePoint,
+    mat: &motu_abi::MaterialRecord,
+) -> [f32; 3] {
+    let view = tracer.view();
+    let mut albedo = mat.base_color;
+    let texture = view.textures.get(mat.base_color_texture as usize);
+    if let Some(tex) = texture.filter(|t| motu_abi::ptex::is_ptex(t)) {
+        albedo = ptex_albedo(tracer, hit, sp, tex).unwrap_or(albedo);
+    } else if let (Some(tex), Some(uv)) = (texture, sp.uv) {
+        if mat.base_color_texture != NONE_U32 {
+            let texels_per_pixel =
+                sp.uv_per_pixel * ((tex.width as f32) * (tex.height as f32)).sqrt();
+            let c = sample_texture(
+                tex,
+                view.texels,
+                uv,
+                mip_level(texels_per_pixel, tex.mip_count),
+            );
+            albedo = std::array::from_fn(|i| albedo[i] * c[i]);
+        }
+    }
+    albedo
+}
+
 /// [`shade_hit`] for a vertex of a path: `emission` says whether the surface's own light
 /// counts (the camera's hit; not after a bounce, whose light sources are sampled as lights).
 /// Also returns where the path may bounce from.
@@ -253,23 +300,7 @@ pub fn shade_vertex(
         .copied()
         .unwrap_or_default();
     let sp = surface_point(tracer, camera, hit, org, dir);
-    let mut albedo = mat.base_color;
-    let texture = view.textures.get(mat.base_color_texture as usize);
-    if let Some(tex) = texture.filter(|t| motu_abi::ptex::is_ptex(t)) {
-        albedo = ptex_albedo(tracer, hit, &sp, tex).unwrap_or(albedo);
-    } else if let (Some(tex), Some(uv)) = (texture, sp.uv) {
-        if mat.base_color_texture != NONE_U32 {
-            let texels_per_pixel =
-                sp.uv_per_pixel * ((tex.width as f32) * (tex.height as f32)).sqrt();
-            let c = sample_texture(
-                tex,
-                view.texels,
-                uv,
-                mip_level(texels_per_pixel, tex.mip_count),
-            );
-            albedo = std::array::from_fn(|i| albedo[i] * c[i]);
-        }
-    }
+    let albedo = textured_albedo(tracer, hit, &sp, &mat);
     let (ns, ng) = (sp.shading_normal, sp.geometric_normal);
     let diffuse = albedo.map(|c| c * (1.0 - mat.metallic));
     let f0: [f32; 3] = std::array::from_fn(|i| 0.04 + (albedo[i] - 0.04) * mat.metallic);

@@ -13,9 +13,11 @@
 
 mod controls;
 mod fly;
+mod guide;
 mod package;
 pub mod panel;
 pub mod progressive;
+mod script;
 
 use std::time::Instant;
 
@@ -35,6 +37,7 @@ pub use package::{
     chain, default_fly_speed, scene_cameras, PackageSource, PackageSourceSettings, SourceError,
     ViewStreamSettings,
 };
+pub use script::PanelClick;
 
 /// Errors of the viewer; the CLI adds context.
 #[derive(Debug, thiserror::Error)]
@@ -56,6 +59,9 @@ pub enum ViewError {
          render more frames (--frames) or raise --vram-budget; a wrong image is not written"
     )]
     Incomplete(u64),
+    /// A scripted panel click that could not be played (`--panel-click`).
+    #[error("{0}")]
+    PanelScript(String),
     #[error(
         "the window is {got_w}×{got_h}, not the requested {want_w}×{want_h} (a window manager \
          resized it?): the screenshot would not show the requested frame"
@@ -125,6 +131,11 @@ pub trait FrameSource {
     fn base_colour(&self, _mesh: u32) -> [f32; 3] {
         [0.5; 3]
     }
+    /// Whether a material has a base-colour texture (the denoiser's guide then renders the
+    /// albedo view).
+    fn textured(&self) -> bool {
+        false
+    }
 }
 
 /// How the viewer starts.
@@ -156,6 +167,8 @@ pub struct ViewOptions {
     pub accumulate: bool,
     /// Filter the shown image (N toggles; `motu render --denoise`'s filter, never the AOV).
     pub denoise: bool,
+    /// Scripted clicks on the panel (`--panel-click`; [`PanelClick`]).
+    pub panel_clicks: Vec<PanelClick>,
     /// Open the window (and create the device) for this display; set by [`run`].
     pub display: Option<motu_gpu::RawDisplayHandle>,
 }
@@ -212,6 +225,7 @@ where
     opts.display = Some(display);
     let source = make_source(&opts).map_err(ViewError::Source)?;
     let ctl = Controls::new(&opts);
+    let script = script::PanelScript::new(&opts.panel_clicks);
     let mut app = App {
         source,
         ctl,
@@ -230,6 +244,7 @@ where
         egui_input: None,
         history: panel::History::default(),
         textures: egui::TexturesDelta::default(),
+        script,
         opts,
     };
     event_loop.set_control_flow(ControlFlow::Poll);
@@ -242,6 +257,9 @@ where
     app.window = None;
     if let Some(e) = app.error {
         return Err(e);
+    }
+    if let Some(e) = app.script.unplayed() {
+        return Err(ViewError::PanelScript(e));
     }
     Ok(app.result)
 }
@@ -266,6 +284,7 @@ struct App<S: FrameSource> {
     history: panel::History,
     /// Texture changes egui made that no presented panel has uploaded yet.
     textures: egui::TexturesDelta,
+    script: script::PanelScript,
     opts: ViewOptions,
 }
 
@@ -277,6 +296,7 @@ pub(crate) fn view_name(v: View) -> &'static str {
         View::Ids => "ids",
         View::Lod => "lod",
         View::Heatmap => "heatmap",
+        View::Albedo => "albedo",
     }
 }
 
@@ -408,8 +428,16 @@ impl<S: FrameSource> App<S> {
         };
         let denoised = self.ctl.denoise && opts.view == View::Shaded;
         if denoised {
-            let src = &self.source;
-            progressive::denoise(&mut frame.output, &camera, |m| src.base_colour(m));
+            let (on, lod_instance) = (&self.ctl.elements_on, self.ctl.lod_instance);
+            guide::denoise(
+                &mut self.source,
+                &mut frame.output,
+                &camera,
+                &opts,
+                on,
+                lod_instance,
+            )
+            .map_err(ViewError::Source)?;
         }
         let primitives = if self.ctl.panel {
             let info = panel::PanelInfo {
@@ -425,7 +453,7 @@ impl<S: FrameSource> App<S> {
                 samples,
                 denoised,
             };
-            self.run_panel(&info)
+            self.run_panel(&info)?
         } else {
             None
         };
@@ -502,17 +530,31 @@ impl<S: FrameSource> App<S> {
 
     /// Lays the panel out (applying its changes to the controls) and tessellates it; the
     /// new textures join `self.textures` until a presented panel uploads them.
-    fn run_panel(&mut self, info: &panel::PanelInfo) -> Option<(Vec<egui::ClippedPrimitive>, f32)> {
-        let (state, window) = (self.egui_input.as_mut()?, self.window.as_ref()?);
-        let input = state.take_egui_input(window);
+    /// Scripted clicks ([`script`]) join the window's input.
+    #[allow(clippy::type_complexity)]
+    fn run_panel(
+        &mut self,
+        info: &panel::PanelInfo,
+    ) -> Result<Option<(Vec<egui::ClippedPrimitive>, f32)>, ViewError> {
+        let (Some(state), Some(window)) = (self.egui_input.as_mut(), self.window.as_ref()) else {
+            return Ok(None);
+        };
+        let mut input = state.take_egui_input(window);
+        let frame = self.result.frames_shown as u32;
+        self.script
+            .inject(frame, &mut input)
+            .map_err(ViewError::PanelScript)?;
         let (ctl, history) = (&mut self.ctl, &self.history);
         let out = self
             .egui
             .run(input, |ctx| panel::build(ctx, info, history, ctl));
+        if !self.script.is_empty() {
+            self.script.observe(&out.shapes);
+        }
         state.handle_platform_output(window, out.platform_output);
         self.textures.append(out.textures_delta);
         let primitives = self.egui.tessellate(out.shapes, out.pixels_per_point);
-        Some((primitives, out.pixels_per_point))
+        Ok(Some((primitives, out.pixels_per_point)))
     }
 }
 
@@ -623,6 +665,7 @@ mod tests {
             vsync: true,
             accumulate: true,
             denoise: false,
+            panel_clicks: Vec::new(),
             display: None,
         })
     }

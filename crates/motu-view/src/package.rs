@@ -165,6 +165,8 @@ pub struct PackageSource<'p> {
     total_structures: u64,
     /// Each source mesh's base colour (the denoiser's guide).
     base_colours: std::collections::HashMap<u32, [f32; 3]>,
+    /// A material has a base-colour texture (the guide renders the albedo view).
+    textured: bool,
 }
 
 impl<'p> PackageSource<'p> {
@@ -222,6 +224,7 @@ impl<'p> PackageSource<'p> {
             settings,
             prev_camera: None,
             base_colours: motu_render::denoise::mesh_base_colours(&base),
+            textured: motu_render::denoise::has_textured_materials(&base),
         };
         src.rebuild(&o.elements_on, o.lod_instance, &o.render.lod)?;
         Ok(src)
@@ -417,6 +420,10 @@ impl FrameSource for PackageSource<'_> {
 
     fn base_colour(&self, mesh: u32) -> [f32; 3] {
         self.base_colours.get(&mesh).copied().unwrap_or([0.5; 3])
+    }
+
+    fn textured(&self) -> bool {
+        self.textured
     }
 }
 

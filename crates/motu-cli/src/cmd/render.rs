@@ -83,6 +83,7 @@ fn gpu_view(v: ViewArg) -> motu_gpu::View {
         ViewArg::Ids => motu_gpu::View::Ids,
         ViewArg::Lod => motu_gpu::View::Lod,
         ViewArg::Heatmap => motu_gpu::View::Heatmap,
+        ViewArg::Albedo => motu_gpu::View::Albedo,
     }
 }
 

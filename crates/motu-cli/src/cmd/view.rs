@@ -103,6 +103,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
             ViewArg::Ids => motu_gpu::View::Ids,
             ViewArg::Lod => motu_gpu::View::Lod,
             ViewArg::Heatmap => motu_gpu::View::Heatmap,
+            ViewArg::Albedo => motu_gpu::View::Albedo,
         },
         lod: LodParams {
             forced_lod: a
@@ -147,6 +148,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         vsync: !a.no_vsync,
         accumulate: a.accumulate || a.frames.is_none(),
         denoise: a.denoise,
+        panel_clicks: a.panel_click.clone(),
         display: None,
     };
     let meshes = PackageMeshes(&pkg);

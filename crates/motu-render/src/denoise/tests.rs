@@ -180,3 +180,27 @@ fn a_normal_edge_on_one_mesh_keeps_its_step() {
         assert!(l - r > 0.3, "row {y}: {l} | {r}");
     }
 }
+
+/// The albedo view's colours replace the material constant where its hit is the frame's, and
+/// only there (a different hit, a miss or a size mismatch keep the constant).
+#[test]
+fn texture_albedo_fills_the_guide_where_the_hits_agree() {
+    let (cam, aov, _) = two_walls();
+    let mut guide = guide_from_aov(&aov, &cam, |_| [0.5; 3]);
+    let mut albedo_aov = aov.clone();
+    let hit = (4 * W) as usize; // the first hit row's first pixel
+    let other = hit + 1;
+    albedo_aov.records[other].primitive = 7; // not the frame's hit
+    let albedo: Vec<u8> = (0..W * H).flat_map(|_| [255u8, 0, 0, 255]).collect();
+    let taken = add_texture_albedo(&mut guide, &aov, &albedo, &albedo_aov);
+    let hits = aov.records.iter().filter(|r| r.mesh != MISS).count() as u64;
+    assert_eq!(taken, hits - 1);
+    assert_eq!(guide[hit].albedo, [1.0, 0.0, 0.0]);
+    assert_eq!(guide[other].albedo, [0.5; 3]);
+    assert_eq!(guide[0].albedo, [0.0; 3], "a miss keeps no albedo");
+    let mut g2 = guide_from_aov(&aov, &cam, |_| [0.5; 3]);
+    assert_eq!(
+        add_texture_albedo(&mut g2, &aov, &albedo[4..], &albedo_aov),
+        0
+    );
+}

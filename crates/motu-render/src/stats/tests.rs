@@ -371,6 +371,7 @@ fn frame_views_are_named_as_the_flag() {
             motu_trace::View::Heatmap,
             "heatmap",
         ),
+        (motu_gpu::View::Albedo, motu_trace::View::Albedo, "albedo"),
     ] {
         let g = motu_gpu::RenderStats {
             view: gpu,
