@@ -185,9 +185,9 @@ fn texture_albedo(
             job.package,
             job.view,
             camera,
-            s.lod,
             backend,
             job.lod.instance.as_ref(),
+            None,
         )?,
     };
     Ok(Some((aov, rgba8)))
