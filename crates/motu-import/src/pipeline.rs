@@ -190,41 +190,7 @@ pub fn import(
         out.with_extension("subset-scratch.motu")
     };
     let t0 = Instant::now();
-    let writer = PackageWriter::create(&first_target, writer_options(o)).map_err(|source| {
-        ImportError::CreatePackage {
-            path: first_target.clone(),
-            source,
-        }
-    })?;
-    // Meshes over the partitioner's bound are only ever stored as clusters: in a direct import
-    // their whole data goes to a spill file that is dropped after compiling, not the package.
-    // The automatic bound is known only once the scene is parsed, so meshes over its least
-    // value spill; those it then keeps whole are copied into the package by the compile sink.
-    let geometry = if direct {
-        let spill_path = out.with_extension("partition-spill.motu");
-        let spill = PackageWriter::create(&spill_path, writer_options(o)).map_err(|source| {
-            ImportError::CreateScratch {
-                path: out.to_path_buf(),
-                source,
-            }
-        })?;
-        let geometry = PackageGeometry::new(writer).with_spill(spill, u64::from(bound_spilled(o)));
-        if o.max_blas_triangles.is_none() {
-            // Past this many triangles the automatic bound is known: larger scenes send only
-            // the meshes over it through the spill file, not every mesh over its least value.
-            let settled =
-                motu_compile::DEFAULT_MAX_BLAS_TRIANGLES.min(motu_compile::DEFAULT_MAX_PER_NODE);
-            geometry.raise_spill_bound_after(
-                motu_compile::auto_bound_settles_at_triangles(),
-                u64::from(settled),
-            )
-        } else {
-            geometry
-        }
-    } else {
-        PackageGeometry::new(writer)
-    };
-    let precut = precut_store(&geometry, direct, o);
+    let (geometry, precut) = create_geometry(out, &first_target, direct, o)?;
     let store: Box<dyn motu_scene::GeometryStore> = match &precut {
         Some(p) => Box::new(p.clone()),
         None => Box::new(geometry.clone()),
@@ -361,6 +327,53 @@ pub fn import(
     })();
     let _ = std::fs::remove_file(&first_target);
     result
+}
+
+/// The store the parser writes meshes through: the package writer (at `first_target`), a
+/// spill file in a direct import, and the cutting store over them where it applies.
+fn create_geometry(
+    out: &Path,
+    first_target: &Path,
+    direct: bool,
+    o: &ImportOptions,
+) -> Result<(PackageGeometry, Option<PrecutGeometry>), ImportError> {
+    let writer = PackageWriter::create(first_target, writer_options(o)).map_err(|source| {
+        ImportError::CreatePackage {
+            path: first_target.to_path_buf(),
+            source,
+        }
+    })?;
+    // Meshes over the partitioner's bound are only ever stored as clusters: in a direct import
+    // their whole data goes to a spill file that is dropped after compiling, not the package.
+    // The automatic bound is known only once the scene is parsed, so meshes over its least
+    // value spill; those it then keeps whole are copied into the package by the compile sink.
+    // Once the bound is known, meshes over it are cut as they are stored instead (`precut`).
+    let geometry = if direct {
+        let spill_path = out.with_extension("partition-spill.motu");
+        let spill = PackageWriter::create(&spill_path, writer_options(o)).map_err(|source| {
+            ImportError::CreateScratch {
+                path: out.to_path_buf(),
+                source,
+            }
+        })?;
+        let geometry = PackageGeometry::new(writer).with_spill(spill, u64::from(bound_spilled(o)));
+        if o.max_blas_triangles.is_none() {
+            // Past this many triangles the automatic bound is known: larger scenes send only
+            // the meshes over it through the spill file, not every mesh over its least value.
+            let settled =
+                motu_compile::DEFAULT_MAX_BLAS_TRIANGLES.min(motu_compile::DEFAULT_MAX_PER_NODE);
+            geometry.raise_spill_bound_after(
+                motu_compile::auto_bound_settles_at_triangles(),
+                u64::from(settled),
+            )
+        } else {
+            geometry
+        }
+    } else {
+        PackageGeometry::new(writer)
+    };
+    let precut = precut_store(&geometry, direct, o);
+    Ok((geometry, precut))
 }
 
 /// The store that cuts meshes over the partition bound while parsing (`precut.rs`), where it
