@@ -75,7 +75,9 @@
 //! `G(P)`'s small meshes are grouped by location under the bound, and a mesh over it (or a LOD
 //! level over it) is split into spatial clusters, each a compiled mesh of its own with
 //! `source_mesh` = the original and a primitive map back to the source triangles (made from the
-//! source data, loaded one mesh at a time and handed to the sink cluster by cluster).
+//! source data, loaded one mesh at a time and handed to the sink cluster by cluster). A caller
+//! that cut a mesh already (`motu import` cuts while parsing) hands the clusters' shapes in
+//! instead ([`compile_with_sources`], [`StoredClusters`]): the same records, no load.
 //!
 //! # Numbering
 //! TLASes are numbered depth-first from the root, the children of a TLAS (PI targets, split
