@@ -6,7 +6,9 @@ use crate::analyze::{edge_ref, Plan};
 use crate::partition::{group_by_location, partition_mesh, Cluster, Item};
 use crate::split::median_partition;
 use crate::tables::{next_id, set_bounds};
-use crate::{lod, tlas_split, xform, CompileError, CompiledScene, MeshLoader, MeshSink};
+use crate::{
+    lod, tlas_split, xform, CompileError, CompiledScene, MeshLoader, MeshSink, StoredClusters,
+};
 use motu_abi::{
     BlasRecord, GeometryRecord, InstanceRecord, LodSelectorRecord, MaterialRecord, MeshRecord,
     PiRecord, TlasRecord, BLAS_TRIANGLES, FLAG_HAS_NORMALS, FLAG_HAS_UVS, FLAG_NEEDS_ANY_HIT,
@@ -36,6 +38,7 @@ struct Frame {
 pub(crate) struct Emitter<'p, 's, 'k, 'f> {
     plan: &'p Plan<'s>,
     load: &'k MeshLoader<'f>,
+    stored: &'k mut StoredClusters<'f>,
     sink: &'k mut MeshSink<'f>,
     pub out: CompiledScene,
     tlas_of_proto: Vec<u32>,
@@ -60,7 +63,12 @@ pub(crate) struct Emitter<'p, 's, 'k, 'f> {
 }
 
 impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
-    pub fn new(plan: &'p Plan<'s>, load: &'k MeshLoader<'f>, sink: &'k mut MeshSink<'f>) -> Self {
+    pub fn new(
+        plan: &'p Plan<'s>,
+        load: &'k MeshLoader<'f>,
+        stored: &'k mut StoredClusters<'f>,
+        sink: &'k mut MeshSink<'f>,
+    ) -> Self {
         let scene = plan.scene;
         let n = scene.prototypes().len();
         let out = CompiledScene {
@@ -83,6 +91,7 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         Self {
             plan,
             load,
+            stored,
             sink,
             out,
             tlas_of_proto: vec![NONE_U32; n],
@@ -489,6 +498,40 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         Ok((first, count))
     }
 
+    /// The records of source mesh `m` (over the bound, LOD 0, not baked) from clusters its
+    /// caller cut and stored already ([`crate::StoredClusters`]): the records
+    /// [`Self::made_records`] would make, field for field, or `None` if there are none.
+    fn stored_records(
+        &mut self,
+        m: MeshId,
+        template: &MeshRecord,
+    ) -> Result<Option<(u32, u32)>, CompileError> {
+        let first = next_id(self.out.meshes.len(), "meshes")?;
+        let bound = self.bound();
+        let Some(shapes) = (self.stored)(m, bound, first) else {
+            return Ok(None);
+        };
+        let base = template.flags & !(FLAG_HAS_NORMALS | FLAG_PRIMITIVE_MAP);
+        for c in &shapes {
+            next_id(self.out.meshes.len(), "meshes")?;
+            let normals = if c.has_normals { FLAG_HAS_NORMALS } else { 0 };
+            self.out.meshes.push(MeshRecord {
+                source_mesh: m.0,
+                lod: 0,
+                flags: base | normals | FLAG_PRIMITIVE_MAP,
+                vertex_count: c.vertex_count,
+                triangle_count: c.triangle_count,
+                bounds_min: c.bounds.min,
+                bounds_max: c.bounds.max,
+                ..*template
+            });
+        }
+        let count = next_id(self.out.meshes.len(), "meshes")? - first;
+        self.out.report.partitioned_meshes += 1;
+        self.out.report.partition_clusters += u64::from(count);
+        Ok(Some((first, count)))
+    }
+
     fn material_flags(&self, material: u32) -> u32 {
         match self.plan.scene.materials().get(material as usize) {
             Some(mat) if mat.opacity < 1.0 || mat.alpha_texture.is_some() => FLAG_NEEDS_ANY_HIT,
@@ -534,10 +577,14 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         }
         let first = next_id(self.out.blases.len(), "BLASes")?;
         for (element, j, m) in big {
-            let data = self.load_source(m)?;
             let template = self.source_record(p, j, m);
-            let (r0, n) = self.made_records(m, &template, 0, &data, None)?;
-            drop(data);
+            let (r0, n) = match self.stored_records(m, &template)? {
+                Some(made) => made,
+                None => {
+                    let data = self.load_source(m)?;
+                    self.made_records(m, &template, 0, &data, None)?
+                }
+            };
             for r in r0..r0 + n {
                 self.triangle_blas(&[r], element)?;
             }

@@ -75,7 +75,9 @@
 //! `G(P)`'s small meshes are grouped by location under the bound, and a mesh over it (or a LOD
 //! level over it) is split into spatial clusters, each a compiled mesh of its own with
 //! `source_mesh` = the original and a primitive map back to the source triangles (made from the
-//! source data, loaded one mesh at a time and handed to the sink cluster by cluster).
+//! source data, loaded one mesh at a time and handed to the sink cluster by cluster). A caller
+//! that cut a mesh already (`motu import` cuts while parsing) hands the clusters' shapes in
+//! instead ([`compile_with_sources`], [`StoredClusters`]): the same records, no load.
 //!
 //! # Numbering
 //! TLASes are numbered depth-first from the root, the children of a TLAS (PI targets, split
@@ -420,6 +422,24 @@ pub type MeshSink<'a> =
 pub type MeshLoader<'a> =
     dyn Fn(motu_scene::MeshId) -> Result<MeshData, motu_scene::StoreError> + 'a;
 
+/// The shape of one cluster of a mesh partitioned before compiling (an import cuts meshes over
+/// the bound while parsing, [`partition::partition_mesh`] as the compiler would, and stores
+/// the clusters itself): what the compiler's mesh record needs, the data stays with the caller.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ClusterShape {
+    pub vertex_count: u32,
+    pub triangle_count: u32,
+    pub has_normals: bool,
+    pub bounds: motu_scene::Aabb,
+}
+
+/// Asked for the clusters of source mesh `m` before the compiler loads and partitions it:
+/// `(m, bound, first_record)` → the clusters of `partition_mesh(m's data, bound)` in order,
+/// whose mesh records will be `first_record..first_record + n` (the caller stores their
+/// data), or `None` to have the compiler partition the mesh itself.
+pub type StoredClusters<'a> =
+    dyn FnMut(motu_scene::MeshId, u32, u32) -> Option<Vec<ClusterShape>> + 'a;
+
 /// Compiles `scene`, loading source meshes from its geometry store. Mesh records' `chunk` and
 /// `*_offset` fields are left `NONE` for the packer to fill.
 pub fn compile(
@@ -438,6 +458,19 @@ pub fn compile_with_loader(
     load: &MeshLoader<'_>,
     sink: &mut MeshSink<'_>,
 ) -> Result<CompiledScene, CompileError> {
+    compile_with_sources(scene, opts, load, &mut |_, _, _| None, sink)
+}
+
+/// [`compile_with_loader`] where meshes over the bound may have been partitioned already
+/// (`stored`, see [`StoredClusters`]): their records are made from the cluster shapes, with
+/// no load and no sink call. The records are those the compiler would make itself.
+pub fn compile_with_sources(
+    scene: &Scene,
+    opts: &CompileOptions,
+    load: &MeshLoader<'_>,
+    stored: &mut StoredClusters<'_>,
+    sink: &mut MeshSink<'_>,
+) -> Result<CompiledScene, CompileError> {
     let _span = tracing::info_span!(
         "compile",
         edges = scene.all_edges().len(),
@@ -449,7 +482,7 @@ pub fn compile_with_loader(
     check_options(opts)?;
     let plan = analyze::Plan::new(scene, opts)?;
     let analyze_ms = start.elapsed().as_secs_f64() * 1e3;
-    let mut out = emit::Emitter::new(&plan, load, sink).run()?;
+    let mut out = emit::Emitter::new(&plan, load, stored, sink).run()?;
     let emitted = std::time::Instant::now();
     out.report.phases.analyze_ms = analyze_ms;
     out.report.phases.emit_ms = (emitted - start).as_secs_f64() * 1e3 - analyze_ms;

@@ -6,10 +6,12 @@
 //!
 //! (The crate's code map; ARCHITECTURE.md keeps a summary.)
 //! The import pipeline as a library (what `motu import`, `demo` and `bench` call): checks the scene
-//! path, streams the scene into package chunks (a scratch package for `--subset`, a spill file for
-//! meshes over the BLAS bound; with the automatic bound, over its least value until 2^16 × 32
-//! triangles were stored, when the bound is known to be 2^16, and meshes spilled but kept whole are
-//! then copied into the package), refuses an output the scene read, compiles (per-phase times:
+//! path, streams the scene into package chunks (a scratch package for `--subset`; meshes over the
+//! BLAS bound are cut into clusters as they are stored once the bound is known, `precut.rs`;
+//! before that, with the automatic bound, meshes over its least value go to a spill file until
+//! 2^16 × 128 triangles were stored, when the bound is known to be 2^16: the spilled ones over
+//! it are cut then, and those kept whole are copied into the package after compiling), refuses
+//! an output the scene read, compiles (per-phase times:
 //! `CompilePhases`), stores LOD meshes and clusters on a writer thread as they are made, loads
 //! textures (`textures.rs`: image mip chains and Ptex faces with their meshes' face tables, written
 //! to the texel store a batch at a time), makes and stores the stream split (`split.rs`, for `motu
@@ -23,6 +25,7 @@ mod compile_report;
 mod error;
 mod memory;
 mod pipeline;
+mod precut;
 mod proxy_boxes;
 mod split;
 mod textures;

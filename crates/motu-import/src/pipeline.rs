@@ -2,6 +2,7 @@
 //! Nothing here holds more than the instance skeleton in memory: mesh data goes to chunks as it
 //! is parsed and LOD meshes go to chunks as they are made.
 
+use crate::precut::PrecutGeometry;
 use crate::ImportError;
 use motu_abi::MeshRecord;
 use motu_compile::{CompileOptions, CompiledScene, Levels};
@@ -16,7 +17,7 @@ use std::time::Instant;
 /// Chunk group for LOD meshes the compiler makes (kept apart from element groups).
 const LOD_GROUP: u32 = u32::MAX - 1;
 /// Chunk group for the clusters of partitioned meshes (and LOD levels).
-const CLUSTER_GROUP: u32 = u32::MAX - 2;
+pub(crate) const CLUSTER_GROUP: u32 = u32::MAX - 2;
 
 pub struct ImportOptions {
     pub levels: Levels,
@@ -44,6 +45,9 @@ pub struct ImportOptions {
     pub proxy_boxes: bool,
     /// Called as parsing advances and once when it is done (the CLI's progress bar).
     pub progress: Option<ProgressFn>,
+    /// Cut meshes over the partition bound into clusters while parsing (`precut.rs`) rather
+    /// than when compiling; the same records either way. On by default; off for A/B tests.
+    pub cut_while_parsing: bool,
 }
 
 /// `motu import`'s defaults (`shared/CLI.md`): `--levels ml`, the device's 2^24 − 1 instances
@@ -70,6 +74,7 @@ impl Default for ImportOptions {
             ptex_max: crate::textures::DEFAULT_PTEX_MAX,
             proxy_boxes: true,
             progress: None,
+            cut_while_parsing: true,
         }
     }
 }
@@ -93,6 +98,10 @@ pub struct ImportSummary {
     pub file_bytes: u64,
     pub chunks: u32,
     pub parse_ms: f64,
+    /// Of `parse_ms`: meshes over the partition bound cut into clusters while parsing.
+    pub cut_ms: f64,
+    /// Triangles of the meshes cut while parsing.
+    pub cut_triangles: u64,
     pub compile_ms: f64,
     pub pack_ms: f64,
     /// Where `compile_ms` went (the compiler's phases: analyze, emit with its source-mesh
@@ -188,39 +197,10 @@ pub fn import(
         out.with_extension("subset-scratch.motu")
     };
     let t0 = Instant::now();
-    let writer = PackageWriter::create(&first_target, writer_options(o)).map_err(|source| {
-        ImportError::CreatePackage {
-            path: first_target.clone(),
-            source,
-        }
-    })?;
-    // Meshes over the partitioner's bound are only ever stored as clusters: in a direct import
-    // their whole data goes to a spill file that is dropped after compiling, not the package.
-    // The automatic bound is known only once the scene is parsed, so meshes over its least
-    // value spill; those it then keeps whole are copied into the package by the compile sink.
-    let geometry = if direct {
-        let spill_path = out.with_extension("partition-spill.motu");
-        let spill = PackageWriter::create(&spill_path, writer_options(o)).map_err(|source| {
-            ImportError::CreateScratch {
-                path: out.to_path_buf(),
-                source,
-            }
-        })?;
-        let geometry = PackageGeometry::new(writer).with_spill(spill, u64::from(bound_spilled(o)));
-        if o.max_blas_triangles.is_none() {
-            // Past this many triangles the automatic bound is known: larger scenes send only
-            // the meshes over it through the spill file, not every mesh over its least value.
-            let settled =
-                motu_compile::DEFAULT_MAX_BLAS_TRIANGLES.min(motu_compile::DEFAULT_MAX_PER_NODE);
-            geometry.raise_spill_bound_after(
-                motu_compile::auto_bound_settles_at_triangles(),
-                u64::from(settled),
-            )
-        } else {
-            geometry
-        }
-    } else {
-        PackageGeometry::new(writer)
+    let (geometry, precut) = create_geometry(out, &first_target, direct, o)?;
+    let store: Box<dyn motu_scene::GeometryStore> = match &precut {
+        Some(p) => Box::new(p.clone()),
+        None => Box::new(geometry.clone()),
     };
     // The bar's total: the scene text beside the entry file (an estimate: files there that the
     // scene never includes count too, and PLY data is not in it).
@@ -239,9 +219,8 @@ pub fn import(
         parallel: o.parallel,
         curve_ribbons: o.curve_ribbons,
     };
-    let (scene, mut report) =
-        motu_ingest::ingest_file(scene_path, &ingest_opts, Box::new(geometry.clone()))
-            .map_err(|source| ImportError::Ingest { path, source })?;
+    let (scene, mut report) = motu_ingest::ingest_file(scene_path, &ingest_opts, store)
+        .map_err(|source| ImportError::Ingest { path, source })?;
     if let Some(report) = &o.progress {
         report(ImportProgress::Parsed);
     }
@@ -272,39 +251,40 @@ pub fn import(
     if direct {
         let load = |m| scene.mesh_data(m).map_err(StoreError::from);
         let mut copied: HashMap<u32, MeshLocation> = HashMap::new();
-        let (compiled, compile_ms) = compile_into(&scene, &copts, &geometry, &load, |m| {
-            let id = motu_scene::MeshId(m.source_mesh);
-            let at = scene.mesh(id).location;
-            if !PackageGeometry::is_spilled(at) {
-                return Ok(at);
-            }
-            // Spilled under the automatic bound's least value, but within the bound chosen:
-            // kept whole, so its data moves from the spill file into the package (once).
-            if max_blas_triangles <= bound_spilled(o) {
-                return Err(ImportError::Internal(format!(
-                    "mesh {} over the BLAS bound was compiled whole",
-                    m.source_mesh
-                )));
-            }
-            if let Some(&c) = copied.get(&m.source_mesh) {
-                return Ok(c);
-            }
-            let data = scene
-                .mesh_data(id)
-                .map_err(|source| ImportError::MeshData {
-                    mesh: m.source_mesh,
-                    source,
-                })?;
-            let c = geometry.append_mesh(m.element, &data)?;
-            copied.insert(m.source_mesh, c);
-            Ok(c)
-        })?;
+        let (compiled, compile_ms) =
+            compile_into(&scene, &copts, &geometry, &load, precut.as_ref(), |m| {
+                let id = motu_scene::MeshId(m.source_mesh);
+                let at = scene.mesh(id).location;
+                if !PackageGeometry::is_spilled(at) {
+                    return Ok(at);
+                }
+                // Spilled under the automatic bound's least value, but within the bound chosen:
+                // kept whole, so its data moves from the spill file into the package (once).
+                if max_blas_triangles <= bound_spilled(o) {
+                    return Err(ImportError::Internal(format!(
+                        "mesh {} over the BLAS bound was compiled whole",
+                        m.source_mesh
+                    )));
+                }
+                if let Some(&c) = copied.get(&m.source_mesh) {
+                    return Ok(c);
+                }
+                let data = scene
+                    .mesh_data(id)
+                    .map_err(|source| ImportError::MeshData {
+                        mesh: m.source_mesh,
+                        source,
+                    })?;
+                let c = geometry.append_mesh(m.element, &data)?;
+                copied.insert(m.source_mesh, c);
+                Ok(c)
+            })?;
         let t2 = Instant::now();
         let writer = geometry.take_writer()?;
         let s = finish(writer, &scene, &compiled, &report, scene_path, o)?;
-        return Ok(summary(
-            s, &scene, &compiled, &report, parse_ms, compile_ms, t2,
-        ));
+        let mut sum = summary(s, &scene, &compiled, &report, parse_ms, compile_ms, t2);
+        (sum.cut_ms, sum.cut_triangles) = precut.as_ref().map_or((0.0, 0), |p| p.cut_report());
+        return Ok(sum);
     }
     // Finish the scratch package so its chunks can be read back, then copy only the blobs the
     // subset references into the real package.
@@ -336,7 +316,7 @@ pub fn import(
             )
         };
         let load = |m: motu_scene::MeshId| read_source(m).map_err(StoreError::from);
-        let (compiled, compile_ms) = compile_into(&scene, &copts, &final_geo, &load, |m| {
+        let (compiled, compile_ms) = compile_into(&scene, &copts, &final_geo, &load, None, |m| {
             if let Some(&at) = copied.get(&m.source_mesh) {
                 return Ok(at);
             }
@@ -354,6 +334,83 @@ pub fn import(
     })();
     let _ = std::fs::remove_file(&first_target);
     result
+}
+
+/// The store the parser writes meshes through: the package writer (at `first_target`), a
+/// spill file in a direct import, and the cutting store over them where it applies.
+fn create_geometry(
+    out: &Path,
+    first_target: &Path,
+    direct: bool,
+    o: &ImportOptions,
+) -> Result<(PackageGeometry, Option<PrecutGeometry>), ImportError> {
+    let writer = PackageWriter::create(first_target, writer_options(o)).map_err(|source| {
+        ImportError::CreatePackage {
+            path: first_target.to_path_buf(),
+            source,
+        }
+    })?;
+    // Meshes over the partitioner's bound are only ever stored as clusters: in a direct import
+    // their whole data goes to a spill file that is dropped after compiling, not the package.
+    // The automatic bound is known only once the scene is parsed, so meshes over its least
+    // value spill; those it then keeps whole are copied into the package by the compile sink.
+    // Once the bound is known, meshes over it are cut as they are stored instead (`precut`).
+    let geometry = if direct {
+        let spill_path = out.with_extension("partition-spill.motu");
+        let spill = PackageWriter::create(&spill_path, writer_options(o)).map_err(|source| {
+            ImportError::CreateScratch {
+                path: out.to_path_buf(),
+                source,
+            }
+        })?;
+        let geometry = PackageGeometry::new(writer).with_spill(spill, u64::from(bound_spilled(o)));
+        if o.max_blas_triangles.is_none() {
+            // Past this many triangles the automatic bound is known: larger scenes send only
+            // the meshes over it through the spill file, not every mesh over its least value.
+            let settled =
+                motu_compile::DEFAULT_MAX_BLAS_TRIANGLES.min(motu_compile::DEFAULT_MAX_PER_NODE);
+            geometry.raise_spill_bound_after(
+                motu_compile::auto_bound_settles_at_triangles(),
+                u64::from(settled),
+            )
+        } else {
+            geometry
+        }
+    } else {
+        PackageGeometry::new(writer)
+    };
+    let precut = precut_store(&geometry, direct, o);
+    Ok((geometry, precut))
+}
+
+/// The store that cuts meshes over the partition bound while parsing (`precut.rs`), where it
+/// applies: a direct import (no scratch package) without LOD or `--levels auto`.
+fn precut_store(
+    geometry: &PackageGeometry,
+    direct: bool,
+    o: &ImportOptions,
+) -> Option<PrecutGeometry> {
+    let lod = o.lod_levels.is_some_and(|l| l >= 2);
+    if !o.cut_while_parsing || !direct || lod || o.levels == motu_compile::Levels::Auto {
+        return None;
+    }
+    let cap = motu_compile::DEFAULT_MAX_PER_NODE;
+    Some(match o.max_blas_triangles {
+        Some(0) => return None,
+        Some(b) => PrecutGeometry::new(geometry.clone(), Some(b.min(cap).max(1)), None),
+        None => {
+            let settles = (
+                motu_compile::auto_bound_settles_at_triangles(),
+                motu_compile::DEFAULT_MAX_BLAS_TRIANGLES.min(cap),
+            );
+            // Tests settle small scenes early, at the bound they are known to get.
+            #[cfg(test)]
+            let settles = crate::precut::tests::SETTLES
+                .with(std::cell::Cell::get)
+                .unwrap_or(settles);
+            PrecutGeometry::new(geometry.clone(), None, Some(settles))
+        }
+    })
 }
 
 /// Flattened counts that saturate 2^64 mean exponentially deep instancing (each level
@@ -397,6 +454,7 @@ fn compile_into(
     copts: &CompileOptions,
     geo: &PackageGeometry,
     load: &motu_compile::MeshLoader<'_>,
+    precut: Option<&PrecutGeometry>,
     mut source_location: impl FnMut(&MeshRecord) -> Result<MeshLocation, ImportError>,
 ) -> Result<(CompiledScene, f64), ImportError> {
     let t = Instant::now();
@@ -422,13 +480,19 @@ fn compile_into(
             tx.send((rec, data.clone(), map.map(<[u32]>::to_vec)))
                 .map_err(|_| "the mesh writer stopped".into())
         };
-        let compiled = motu_compile::compile_with_loader(scene, copts, load, &mut sink);
+        let mut cut_locations: HashMap<u32, MeshLocation> = HashMap::new();
+        let mut stored = |m: motu_scene::MeshId, bound: u32, first: u32| {
+            precut.and_then(|p| p.clusters(m, bound, first, &mut cut_locations))
+        };
+        let compiled =
+            motu_compile::compile_with_sources(scene, copts, load, &mut stored, &mut sink);
         drop(tx);
         let made = writer
             .join()
             .map_err(|_| ImportError::Internal("the mesh writer panicked".into()))?;
         // The writer's error first: the compiler then only saw a closed queue.
-        let made = made?;
+        let mut made = made?;
+        made.extend(cut_locations);
         let compiled = compiled.map_err(ImportError::Compile)?;
         Ok::<_, ImportError>((compiled, made))
     })?;
@@ -474,6 +538,8 @@ fn summary(
         file_bytes: s.file_bytes,
         chunks: s.chunk_count,
         parse_ms,
+        cut_ms: 0.0,
+        cut_triangles: 0,
         compile_ms,
         pack_ms: pack_start.elapsed().as_secs_f64() * 1e3,
         compile_phases: (&compiled.report.phases).into(),

@@ -100,6 +100,16 @@ impl PackageGeometry {
         self
     }
 
+    /// Raises the spill bound to `bound` now (a caller that counts stored triangles itself
+    /// and knows the partition bound; see [`Self::raise_spill_bound_after`]).
+    pub fn raise_spill_bound(&self, bound: u64) {
+        if let Ok(mut inner) = self.inner.lock() {
+            if let Some(sp) = inner.spill.as_mut() {
+                sp.over_triangles = sp.over_triangles.max(bound);
+            }
+        }
+    }
+
     /// Whether `at` is in the spill writer (not in the package).
     pub fn is_spilled(at: MeshLocation) -> bool {
         at.a & SPILL_BIT != 0

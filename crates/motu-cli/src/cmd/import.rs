@@ -78,6 +78,8 @@ fn import_checked(a: ImportArgs) -> anyhow::Result<()> {
         ptex_max: a.ptex_max,
         proxy_boxes: !a.no_proxy_boxes,
         progress: crate::progress::import_bar(),
+        // A/B switch for measurements (issue 48): the compile-time cut of the same package.
+        cut_while_parsing: std::env::var_os("MOTU_IMPORT_CUT_AT_COMPILE").is_none(),
     };
     let s = pipeline::import(&a.scene, &a.output, &o)?;
     if s.meshes == 0 {
