@@ -726,31 +726,35 @@ fn fn_lengths(text: &str) -> Vec<(String, usize, usize)> {
     out
 }
 
-/// The streaming renderer's procedures stay readable: no function in the streamer's module
-/// (`crates/motu-gpu/src/stream`) over 150 lines; a long procedure becomes a context struct
-/// with a method per phase (issue 46).
+/// The GPU crate's procedures stay readable: no function in `crates/motu-gpu/src` (the
+/// streamer, the renderer, the scene build, their tests) over 150 lines; a long procedure
+/// becomes a context struct with a method per phase (issue 46).
 #[test]
-fn no_long_functions_in_the_streamer() {
+fn no_long_functions_in_motu_gpu() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
-    let dir = root.join("crates/motu-gpu/src/stream");
+    let dir = root.join("crates/motu-gpu/src");
     let mut long = Vec::new();
     let mut seen = 0;
+    let mut streamer = 0;
     for (path, text) in rust_files(&dir) {
+        let rel = path.strip_prefix(&root).unwrap().display().to_string();
         for (name, line, lines) in fn_lengths(&text) {
             seen += 1;
+            if rel.contains("/stream") {
+                streamer += 1;
+            }
             if lines > 150 {
-                let rel = path.strip_prefix(&root).unwrap().display().to_string();
                 long.push(format!("{rel}:{line}: fn {name}: {lines} lines"));
             }
         }
     }
     assert!(
-        seen > 100,
-        "the scan sees the streamer's functions ({seen})"
+        seen > 300 && streamer > 100,
+        "the scan sees motu-gpu's functions ({seen}, {streamer} in the streamer)"
     );
     assert!(
         long.is_empty(),
-        "functions over 150 lines in the streamer (split them into phases):\n{}",
+        "functions over 150 lines in motu-gpu (split them into phases):\n{}",
         long.join("\n")
     );
 }

@@ -32,8 +32,8 @@
 //! kept buffers), `shading.rs`, `cache.rs` `Reuse`, `stats.rs` (`FrameStreamStats`,
 //! `StreamTotals`), `options.rs` (`StreamOptions`) — and the constructor is in `mod.rs` over
 //! `skeleton.rs` `HeapSetup`/`raise_skeleton`; a TLAS (re)build is `tlas_build.rs`'s `TlasBuild`,
-//! one method per phase; no function in `stream/` over 150 lines,
-//! `no_long_functions_in_the_streamer`: every TLAS resident but holding only resident BLASes'
+//! one method per phase; no function in motu-gpu over 150 lines,
+//! `no_long_functions_in_motu_gpu`: every TLAS resident but holding only resident BLASes'
 //! instances plus one proxy of SAH-clustered boxes for the rest (a ray entering a box tests the
 //! cluster's member instances during the hardware walk — `candidates.glsl`'s `record_proxy`, never
 //! a candidate slot, so one walk meets every box — and keeps only the nearest open one, so demand
