@@ -126,8 +126,6 @@ pub use motu_vk::testing;
 #[cfg(test)]
 mod gpu_tests;
 #[cfg(test)]
-mod render_tests;
-#[cfg(test)]
 mod sampling_tests;
 #[cfg(test)]
 mod stream_tests;

@@ -11,7 +11,8 @@ use std::collections::VecDeque;
 
 use egui::{Color32, RichText, Ui};
 
-use crate::{view_name, Controls, VIEWS};
+use crate::controls::{view_name, VIEWS};
+use crate::Controls;
 
 /// Frames the time graph keeps.
 pub const HISTORY_FRAMES: usize = 240;
@@ -380,7 +381,7 @@ mod tests {
     #[test]
     fn the_panel_shows_the_frames_numbers_controls_elements_and_cameras() {
         let ctx = egui::Context::default();
-        let mut ctl = crate::tests::controls();
+        let mut ctl = crate::testutil::controls();
         ctl.render.shading.auto_exposure = true;
         let mut history = History::default();
         for i in 0..300 {
@@ -432,7 +433,7 @@ mod tests {
     #[test]
     fn clicks_on_the_panel_toggle_elements_views_and_move_the_camera() {
         let ctx = egui::Context::default();
-        let mut ctl = crate::tests::controls();
+        let mut ctl = crate::testutil::controls();
         let h = History::default();
         frame(&ctx, &mut ctl, &h, vec![]);
         let out = frame(&ctx, &mut ctl, &h, vec![]);
@@ -449,7 +450,7 @@ mod tests {
         assert_eq!(ctl.elements_on, [true, true]);
         let out = frame(&ctx, &mut ctl, &h, vec![]);
         click_text(&ctx, &mut ctl, &out.shapes, "2 b");
-        assert_eq!(ctl.fly.pose, crate::tests::pose(2.0));
+        assert_eq!(ctl.fly.pose, crate::testutil::pose(2.0));
         let out = frame(&ctx, &mut ctl, &h, vec![]);
         click_text(&ctx, &mut ctl, &out.shapes, "heatmap");
         assert_eq!(ctl.render.view, View::Heatmap);
