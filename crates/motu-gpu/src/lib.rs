@@ -121,14 +121,12 @@ pub mod shaders;
 use scene::shading;
 mod stream;
 /// Helpers for GPU tests in this and other crates (motu-vk's).
-pub use motu_vk::testing;
+pub use motu_vk::testutil;
 
 #[cfg(test)]
-mod gpu_tests;
-#[cfg(test)]
-mod sampling_tests;
-#[cfg(test)]
 mod stream_tests;
+#[cfg(test)]
+mod tests;
 
 pub use error::{GpuError, Result};
 pub use live::LiveRenderer;

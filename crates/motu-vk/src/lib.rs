@@ -65,7 +65,7 @@ mod report;
 mod rt_pipeline;
 mod serialize;
 mod structure;
-pub mod testing;
+pub mod testutil;
 
 #[cfg(test)]
 mod tests;
