@@ -795,22 +795,6 @@ fn source_dirs(root: &std::path::Path) -> Vec<PathBuf> {
     dirs
 }
 
-/// Files of motu-gpu, motu-render and motu-view that still break the layout habit (issue 46
-/// item 6 was done while other work edited those crates). Shrink this list; never grow it.
-const LAYOUT_NOT_YET_MOVED: &[&str] = &[
-    "crates/motu-gpu/src/lib.rs",
-    "crates/motu-gpu/src/stream/cache.rs",
-    "crates/motu-gpu/src/stream/demand.rs",
-    "crates/motu-gpu/src/stream/mod.rs",
-    "crates/motu-gpu/src/stream/params.rs",
-    "crates/motu-gpu/src/stream/persistent.rs",
-    "crates/motu-gpu/src/stream/plan_cache.rs",
-    "crates/motu-gpu/src/stream/proxy_boxes.rs",
-    "crates/motu-gpu/src/stream/rebuild.rs",
-    "crates/motu-gpu/src/stream/tlas_records.rs",
-    "crates/motu-gpu/src/stream_tests.rs",
-];
-
 /// How a source file breaks the one layout habit, if it does: a module's tests in
 /// `<module>/tests.rs` (not inline, not a crate-root `*_tests.rs`, not `#[path]`), test helpers
 /// in `testutil`, and `foo.rs` + `foo/` rather than `foo/mod.rs`.
@@ -868,7 +852,6 @@ fn layout_faults(rel: &str, text: &str) -> Vec<String> {
 fn one_module_layout_everywhere() {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
     let mut found = Vec::new();
-    let mut listed_and_clean = Vec::new();
     let mut files = 0;
     for dir in source_dirs(&root) {
         for (path, text) in rust_files(&dir) {
@@ -879,12 +862,7 @@ fn one_module_layout_everywhere() {
                 .to_string_lossy()
                 .replace('\\', "/");
             let faults = layout_faults(&rel, &text);
-            let listed = LAYOUT_NOT_YET_MOVED.contains(&rel.as_str());
-            if listed && faults.is_empty() {
-                listed_and_clean.push(rel);
-            } else if !listed {
-                found.extend(faults.into_iter().map(|f| format!("{rel}: {f}")));
-            }
+            found.extend(faults.into_iter().map(|f| format!("{rel}: {f}")));
         }
     }
     assert!(
@@ -897,17 +875,6 @@ fn one_module_layout_everywhere() {
          <module>/tests.rs, helpers in testutil, foo.rs + foo/):\n{}",
         found.join("\n")
     );
-    assert!(
-        listed_and_clean.is_empty(),
-        "these files follow the layout now: take them off LAYOUT_NOT_YET_MOVED:\n{}",
-        listed_and_clean.join("\n")
-    );
-    for listed in LAYOUT_NOT_YET_MOVED {
-        assert!(
-            root.join(listed).exists(),
-            "{listed} is gone: take it off the list"
-        );
-    }
 }
 
 /// The layout check sees each fault it names (a test that it can fail).
@@ -964,7 +931,7 @@ const STRINGIFIED_CAUSES_LEFT: &[(&str, &str, &str)] = &[
         "motu-gpu is edited elsewhere",
     ),
     (
-        "crates/motu-gpu/src/stream/mod.rs",
+        "crates/motu-gpu/src/stream.rs",
         "GpuError::InvalidRequest(e.to_string())",
         "motu-gpu stream/ is edited elsewhere",
     ),

@@ -30,7 +30,7 @@
 //! meshes, LRU, pins, sizes), `tlases.rs` `Tlases` (TLASes with proxies and marks, persistent mode,
 //! dirty set), `frame.rs` `FrameState` (frame number, stats, stamps, probe sightings, pipeline,
 //! kept buffers), `shading.rs`, `cache.rs` `Reuse`, `stats.rs` (`FrameStreamStats`,
-//! `StreamTotals`), `options.rs` (`StreamOptions`) — and the constructor is in `mod.rs` over
+//! `StreamTotals`), `options.rs` (`StreamOptions`) — and the constructor is in `stream.rs` over
 //! `skeleton.rs` `HeapSetup`/`raise_skeleton`; a TLAS (re)build is `tlas_build.rs`'s `TlasBuild`,
 //! one method per phase; no function in motu-gpu over 150 lines,
 //! `no_long_functions_in_motu_gpu`: every TLAS resident but holding only resident BLASes'
@@ -88,7 +88,7 @@
 //! the prefetch builds what it met, keeping only what it saw — what its open rays pass through
 //! included: each streamed TLAS also holds a *marks* BLAS of its resident clusters' boxes under
 //! instance mask 0x02, which only probe rays' mark walks meet, `CULL_MASK_*` in `common.glsl`,
-//! `MARKS_MASK` and `TRIANGLE_MASK` in `stream/mod.rs`; with pass marks, `PassMarks` and
+//! `MARKS_MASK` and `TRIANGLE_MASK` in `stream.rs`; with pass marks, `PassMarks` and
 //! `--stream-probe-pass-rows` — by default `auto`, every 2nd row for the probes within 4 frames of
 //! one that evicted for build room while its prefetch skipped nothing — the final rays of every
 //! N-th row walk the marks too and mark what they pass as *passed*, `STREAM_PASS_WALK`, an LRU
@@ -123,8 +123,6 @@ mod stream;
 /// Helpers for GPU tests in this and other crates (motu-vk's).
 pub use motu_vk::testutil;
 
-#[cfg(test)]
-mod stream_tests;
 #[cfg(test)]
 mod tests;
 

@@ -416,3 +416,6 @@ impl<'a> StreamingRenderer<'a> {
             .is_some_and(|a| a.is_some())
     }
 }
+
+#[cfg(test)]
+mod tests;
