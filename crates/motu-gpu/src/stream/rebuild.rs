@@ -1,7 +1,7 @@
 //! Acceleration-structure builds: triangle and PI BLAS sets, and rebuilding the TLASes whose
 //! instance set changed, in groups that fit (the build itself: `tlas_build.rs`).
 
-use motu_alloc::{AllocKind, BuildSize, ItemId, MemoryClass};
+use motu_alloc::{AllocKind, BuildSize, MemoryClass};
 use motu_vk::{
     AsBuildFlags, AsLevel, BufferUsage, FitRequest, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
 };
@@ -267,7 +267,7 @@ impl<'a> StreamingRenderer<'a> {
                         let b = self.res.built_now.pop().unwrap_or_default();
                         given += self.res.blas_bytes[b as usize];
                         self.frame.stats.deferred += 1;
-                        if self.res.residency.contains(ItemId(b)) {
+                        if self.res.holds(b) {
                             self.evict(b as usize);
                             self.frame.stats.evicted -= 1;
                         }
@@ -285,7 +285,7 @@ impl<'a> StreamingRenderer<'a> {
                         )));
                     };
                     self.frame.stats.deferred += 1;
-                    if self.res.residency.contains(ItemId(last)) {
+                    if self.res.holds(last) {
                         self.evict(last as usize);
                         // Given back, not evicted for room: count it as deferred only.
                         self.frame.stats.evicted -= 1;
