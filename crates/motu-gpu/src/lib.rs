@@ -21,7 +21,8 @@
 //! query with the same flags, `BuildOptions::blas_build`; TLASes fast trace; `scene/batch.rs` frees
 //! the scratch pool and, through `inputs_done`, a TLAS rebuild's instance buffer once the last
 //! batch is built, before the compacted copies), ray-pipeline and ray-query traversal renderers
-//! sharing one GLSL core, the GPU scene (`scene.rs`; `scene/` holds its uploads, batched builds,
+//! sharing one GLSL core (`render.rs`: `render`; `render/` holds the options, the outputs and
+//! stats words, the frame parameters, a frame's buffers and the trace pipeline), the GPU scene (`scene.rs`; `scene/` holds its uploads, batched builds,
 //! structures, tables, budget, LOD pass and shading tables), and out-of-core streaming (`stream/`;
 //! `StreamingRenderer`'s state lives in parts, each a struct in its own file stating its invariants
 //! — `topology.rs` `Topology` (streamed BLASes, parents, proxy clusters and their GPU slots,

@@ -10,6 +10,9 @@
 //! frame after the screenshot's read-back, so neither `--screenshot` nor `--aov` contains it.
 //! For tests and scripts, [`ViewOptions::frames`] renders that many frames through the real
 //! window and swapchain, reads the last one back from the swapchain image and exits.
+//! Files: this root holds the public types; `app.rs` the window's event loop ([`run`]),
+//! `controls.rs` the keys, `fly.rs` the camera, `package.rs` the package source, `panel.rs` the
+//! panel, `progressive.rs` accumulation and denoising.
 
 mod app;
 mod controls;
