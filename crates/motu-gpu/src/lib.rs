@@ -21,7 +21,8 @@
 //! query with the same flags, `BuildOptions::blas_build`; TLASes fast trace; `scene/batch.rs` frees
 //! the scratch pool and, through `inputs_done`, a TLAS rebuild's instance buffer once the last
 //! batch is built, before the compacted copies), ray-pipeline and ray-query traversal renderers
-//! sharing one GLSL core, the GPU scene (`scene.rs`; `scene/` holds its uploads, batched builds,
+//! sharing one GLSL core (`render.rs`: `render`; `render/` holds the options, the outputs and
+//! stats words, the frame parameters, a frame's buffers and the trace pipeline), the GPU scene (`scene.rs`; `scene/` holds its uploads, batched builds,
 //! structures, tables, budget, LOD pass and shading tables), and out-of-core streaming (`stream/`;
 //! `StreamingRenderer`'s state lives in parts, each a struct in its own file stating its invariants
 //! — `topology.rs` `Topology` (streamed BLASes, parents, proxy clusters and their GPU slots,
@@ -30,10 +31,10 @@
 //! meshes, LRU, pins, sizes), `tlases.rs` `Tlases` (TLASes with proxies and marks, persistent mode,
 //! dirty set), `frame.rs` `FrameState` (frame number, stats, stamps, probe sightings, pipeline,
 //! kept buffers), `shading.rs`, `cache.rs` `Reuse`, `stats.rs` (`FrameStreamStats`,
-//! `StreamTotals`), `options.rs` (`StreamOptions`) — and the constructor is in `mod.rs` over
+//! `StreamTotals`), `options.rs` (`StreamOptions`) — and the constructor is in `stream.rs` over
 //! `skeleton.rs` `HeapSetup`/`raise_skeleton`; a TLAS (re)build is `tlas_build.rs`'s `TlasBuild`,
-//! one method per phase; no function in `stream/` over 150 lines,
-//! `no_long_functions_in_the_streamer`: every TLAS resident but holding only resident BLASes'
+//! one method per phase; no function in motu-gpu over 150 lines,
+//! `no_long_functions_in_motu_gpu`: every TLAS resident but holding only resident BLASes'
 //! instances plus one proxy of SAH-clustered boxes for the rest (a ray entering a box tests the
 //! cluster's member instances during the hardware walk — `candidates.glsl`'s `record_proxy`, never
 //! a candidate slot, so one walk meets every box — and keeps only the nearest open one, so demand
@@ -88,7 +89,7 @@
 //! the prefetch builds what it met, keeping only what it saw — what its open rays pass through
 //! included: each streamed TLAS also holds a *marks* BLAS of its resident clusters' boxes under
 //! instance mask 0x02, which only probe rays' mark walks meet, `CULL_MASK_*` in `common.glsl`,
-//! `MARKS_MASK` and `TRIANGLE_MASK` in `stream/mod.rs`; with pass marks, `PassMarks` and
+//! `MARKS_MASK` and `TRIANGLE_MASK` in `stream.rs`; with pass marks, `PassMarks` and
 //! `--stream-probe-pass-rows` — by default `auto`, every 2nd row for the probes within 4 frames of
 //! one that evicted for build room while its prefetch skipped nothing — the final rays of every
 //! N-th row walk the marks too and mark what they pass as *passed*, `STREAM_PASS_WALK`, an LRU
@@ -121,16 +122,10 @@ pub mod shaders;
 use scene::shading;
 mod stream;
 /// Helpers for GPU tests in this and other crates (motu-vk's).
-pub use motu_vk::testing;
+pub use motu_vk::testutil;
 
 #[cfg(test)]
-mod gpu_tests;
-#[cfg(test)]
-mod render_tests;
-#[cfg(test)]
-mod sampling_tests;
-#[cfg(test)]
-mod stream_tests;
+mod tests;
 
 pub use error::{GpuError, Result};
 pub use live::LiveRenderer;

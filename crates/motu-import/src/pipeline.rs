@@ -2,7 +2,7 @@
 //! Nothing here holds more than the instance skeleton in memory: mesh data goes to chunks as it
 //! is parsed and LOD meshes go to chunks as they are made.
 
-use crate::precut::PrecutGeometry;
+use crate::precut::{PrecutGeometry, CLUSTER_GROUP};
 use crate::ImportError;
 use motu_abi::MeshRecord;
 use motu_compile::{CompileOptions, CompiledScene, Levels};
@@ -16,8 +16,6 @@ use std::time::Instant;
 
 /// Chunk group for LOD meshes the compiler makes (kept apart from element groups).
 const LOD_GROUP: u32 = u32::MAX - 1;
-/// Chunk group for the clusters of partitioned meshes (and LOD levels).
-pub(crate) const CLUSTER_GROUP: u32 = u32::MAX - 2;
 
 pub struct ImportOptions {
     pub levels: Levels,

@@ -26,6 +26,9 @@ use motu_scene::{GeometryStore, MeshData, MeshId, MeshLocation, StoreError};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, MutexGuard};
 
+/// Chunk group for the clusters of partitioned meshes (and LOD levels).
+pub(crate) const CLUSTER_GROUP: u32 = u32::MAX - 2;
+
 /// Marks a scene location of a mesh that was cut while parsing (its whole data is not kept).
 const CUT_BIT: u64 = 1 << 62;
 
@@ -91,7 +94,7 @@ impl PrecutGeometry {
             bound,
             &mut |c: motu_compile::partition::Cluster| {
                 let at = self.geometry.append_mesh_mapped(
-                    crate::pipeline::CLUSTER_GROUP,
+                    CLUSTER_GROUP,
                     &c.data,
                     Some(&c.primitive_map),
                 )?;

@@ -648,7 +648,7 @@ fn html_is_self_contained_and_escapes_names() {
 /// scenes, within 15% (lavapipe: exact). Skips loudly without a ray-tracing device.
 #[test]
 fn model_matches_driver_within_15_percent() {
-    let Some(ctx) = motu_gpu::testing::context_or_skip(
+    let Some(ctx) = motu_gpu::testutil::context_or_skip(
         "report_model_vs_driver",
         motu_gpu::Requirement::RayTracing,
     ) else {
@@ -750,7 +750,7 @@ fn model_matches_driver_within_15_percent() {
         worst.0 * 100.0,
         worst.1
     );
-    motu_gpu::testing::assert_no_validation_errors(&ctx);
+    motu_gpu::testutil::assert_no_validation_errors(&ctx);
 }
 
 /// The text says what a peak is made of, and says so when streaming cannot go below the

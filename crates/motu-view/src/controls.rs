@@ -1,10 +1,24 @@
 //! What the keys (and the panel's widgets) change: the next frame's options, the camera, the
 //! element set, the panel, progressive accumulation and the denoiser.
 
-use crate::{FlyCamera, ViewOptions, VIEWS};
+use crate::{FlyCamera, ViewOptions};
 use motu_abi::camera::CameraPose;
 use motu_gpu::{RenderOptions, View};
 use winit::keyboard::KeyCode;
+
+/// The views `V` cycles through, in order.
+pub(crate) const VIEWS: [View; 4] = [View::Shaded, View::Ids, View::Lod, View::Heatmap];
+
+/// A view's name on the panel.
+pub(crate) fn view_name(v: View) -> &'static str {
+    match v {
+        View::Shaded => "shaded",
+        View::Ids => "ids",
+        View::Lod => "lod",
+        View::Heatmap => "heatmap",
+        View::Albedo => "albedo",
+    }
+}
 
 /// Movement keys held down.
 #[derive(Clone, Copy, Debug, Default)]
@@ -166,3 +180,6 @@ fn on_off(b: bool) -> &'static str {
         "off"
     }
 }
+
+#[cfg(test)]
+mod tests;

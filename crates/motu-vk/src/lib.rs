@@ -36,7 +36,8 @@
 //! validation capture, RAII buffers and memory, the budgeted heap (`heap.rs`: motu-alloc's policy
 //! applied to device memory), compute and ray-tracing pipelines (the SPIR-V is given by motu-gpu),
 //! timestamp and compacted-size queries, acceleration-structure objects and size queries,
-//! presentation (surface + swapchain via ash-window), and fenced submission of typed commands
+//! presentation (surface + swapchain via ash-window; `present/record.rs` records a frame's copy),
+//! GPU-test helpers (`testutil`), and fenced submission of typed commands
 //! (`CommandRecorder`: copies, barriers, dispatches, ray launches, AS builds, copies and compacted
 //! sizes; no raw command buffer leaves it). The conversions of what is recorded are in `conv.rs`
 //! (geometry, build flags, copy modes, barriers, instance records); a resource's creation flags
@@ -65,7 +66,7 @@ mod report;
 mod rt_pipeline;
 mod serialize;
 mod structure;
-pub mod testing;
+pub mod testutil;
 
 #[cfg(test)]
 mod tests;

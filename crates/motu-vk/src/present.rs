@@ -22,6 +22,8 @@ use crate::error::{Result, VkError};
 use crate::memory::{Buffer, BufferDesc, BufferUsage, MemoryLocation};
 use crate::panel::{PanelPaint, PanelPainter};
 
+mod record;
+
 /// What [`Presenter::present`] did.
 #[derive(Debug)]
 pub enum Presented {
@@ -84,6 +86,45 @@ fn is_bgra(format: vk::Format) -> bool {
         format,
         vk::Format::B8G8R8A8_UNORM | vk::Format::B8G8R8A8_SRGB
     )
+}
+
+/// The first 8-bit RGBA/BGRA format the surface offers, UNORM before SRGB.
+fn surface_format(formats: &[vk::SurfaceFormatKHR]) -> Result<vk::SurfaceFormatKHR> {
+    let preference = [
+        vk::Format::B8G8R8A8_UNORM,
+        vk::Format::R8G8B8A8_UNORM,
+        vk::Format::B8G8R8A8_SRGB,
+        vk::Format::R8G8B8A8_SRGB,
+    ];
+    preference
+        .iter()
+        .find_map(|f| formats.iter().find(|s| s.format == *f))
+        .copied()
+        .ok_or_else(|| {
+            VkError::InvalidRequest(format!(
+                "the window surface offers no 8-bit RGBA/BGRA format (it offers {:?})",
+                formats.iter().map(|f| f.format).collect::<Vec<_>>()
+            ))
+        })
+}
+
+/// The surface's extent, or the window's `wanted` size within the surface's limits where the
+/// surface leaves it to the swapchain.
+fn swapchain_extent(caps: &vk::SurfaceCapabilitiesKHR, wanted: [u32; 2]) -> vk::Extent2D {
+    if caps.current_extent.width != u32::MAX {
+        caps.current_extent
+    } else {
+        vk::Extent2D {
+            width: wanted[0].clamp(
+                caps.min_image_extent.width,
+                caps.max_image_extent.width.max(1),
+            ),
+            height: wanted[1].clamp(
+                caps.min_image_extent.height,
+                caps.max_image_extent.height.max(1),
+            ),
+        }
+    }
 }
 
 impl Presenter {
@@ -220,22 +261,7 @@ impl Presenter {
                 .get_physical_device_surface_present_modes(phys, self.surface)
         }
         .map_err(VkError::vk("vkGetPhysicalDeviceSurfacePresentModesKHR"))?;
-        let preference = [
-            vk::Format::B8G8R8A8_UNORM,
-            vk::Format::R8G8B8A8_UNORM,
-            vk::Format::B8G8R8A8_SRGB,
-            vk::Format::R8G8B8A8_SRGB,
-        ];
-        let Some(format) = preference
-            .iter()
-            .find_map(|f| formats.iter().find(|s| s.format == *f))
-            .copied()
-        else {
-            return Err(VkError::InvalidRequest(format!(
-                "the window surface offers no 8-bit RGBA/BGRA format (it offers {:?})",
-                formats.iter().map(|f| f.format).collect::<Vec<_>>()
-            )));
-        };
+        let format = surface_format(&formats)?;
         if !caps
             .supported_usage_flags
             .contains(vk::ImageUsageFlags::TRANSFER_DST)
@@ -247,20 +273,7 @@ impl Presenter {
         let readable = caps
             .supported_usage_flags
             .contains(vk::ImageUsageFlags::TRANSFER_SRC);
-        let extent = if caps.current_extent.width != u32::MAX {
-            caps.current_extent
-        } else {
-            vk::Extent2D {
-                width: self.wanted[0].clamp(
-                    caps.min_image_extent.width,
-                    caps.max_image_extent.width.max(1),
-                ),
-                height: self.wanted[1].clamp(
-                    caps.min_image_extent.height,
-                    caps.max_image_extent.height.max(1),
-                ),
-            }
-        };
+        let extent = swapchain_extent(&caps, self.wanted);
         // SAFETY: nothing of ours is pending (every present waited for its fence), but the
         // presentation engine may still hold old images: wait before destroying them.
         unsafe { shared.device.device_wait_idle() }.map_err(VkError::vk("vkDeviceWaitIdle"))?;
@@ -416,12 +429,56 @@ impl Presenter {
         if self.swapchain == vk::SwapchainKHR::null() {
             return Ok(Presented::Skipped);
         }
+        let panel = panel.filter(|_| self.panel_ok);
+        let readable = read_back && self.readable && [width, height] == self.extent;
+        let frame = FrameCopy {
+            width,
+            height,
+            pixels,
+            readable,
+            // The frame, then (with a panel) the image as shown.
+            copies: if panel.is_some() { 2 } else { 1 },
+        };
+        self.stage(rgba8, &frame, panel)?;
+        let Some(index) = self.acquire()? else {
+            return Ok(Presented::Skipped);
+        };
+        self.record(&frame, index, panel)?;
+        let presented = self.submit_and_present(index)?;
+        if let Some(paint) = panel {
+            self.panel.free(paint)?;
+        }
+        match presented {
+            Ok(false) => {}
+            Ok(true) | Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => self.stale = true,
+            Err(e) => {
+                return Err(VkError::Vulkan {
+                    call: "vkQueuePresentKHR",
+                    result: e,
+                })
+            }
+        }
+        Ok(Presented::Shown {
+            readback: self.read(&frame, 0)?,
+            panel: panel.is_some(),
+            shown: self.read(&frame, 1)?,
+        })
+    }
+
+    /// Writes the frame into the upload buffer (swizzled for a BGRA swapchain), sizes the
+    /// read-back buffer and uploads the panel's paint.
+    fn stage(
+        &mut self,
+        rgba8: &[u8],
+        frame: &FrameCopy,
+        panel: Option<&PanelPaint<'_>>,
+    ) -> Result<()> {
         let ctx = self.ctx.clone();
         Self::host_buffer(
             &ctx,
             &mut self.upload,
             "present-upload",
-            pixels * 4,
+            frame.pixels * 4,
             BufferUsage::TRANSFER_SRC,
             MemoryLocation::Upload,
         )?;
@@ -436,24 +493,18 @@ impl Presenter {
         } else {
             upload.write_bytes(0, rgba8)?;
         }
-        let [ew, eh] = self.extent;
-        let readable = read_back && self.readable && [width, height] == [ew, eh];
-        let panel = panel.filter(|_| self.panel_ok);
-        // The frame, then (with a panel) the image as shown.
-        let copies = if panel.is_some() { 2 } else { 1 };
-        if readable {
+        if frame.readable {
             Self::host_buffer(
                 &ctx,
                 &mut self.readback,
                 "present-readback",
-                copies * pixels * 4,
+                frame.copies * frame.pixels * 4,
                 BufferUsage::TRANSFER_DST,
                 MemoryLocation::Readback,
             )?;
         }
-        let shared = &ctx.shared;
-        let device = &shared.device;
         if let Some(paint) = panel {
+            let shared = &ctx.shared;
             let queue = shared.queue();
             self.panel.upload(
                 &shared.instance.instance,
@@ -463,6 +514,11 @@ impl Presenter {
                 paint,
             )?;
         }
+        Ok(())
+    }
+
+    /// The next swapchain image's index; `None` when the swapchain is out of date.
+    fn acquire(&mut self) -> Result<Option<u32>> {
         // SAFETY: the swapchain is live; `acquired` is unsignalled (its last wait completed:
         // the submission that waited on it was fenced).
         let acquired = unsafe {
@@ -473,189 +529,33 @@ impl Presenter {
                 vk::Fence::null(),
             )
         };
-        let index = match acquired {
+        match acquired {
             Ok((i, suboptimal)) => {
                 if suboptimal {
                     self.stale = true;
                 }
-                i
+                Ok(Some(i))
             }
             Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => {
                 self.stale = true;
-                return Ok(Presented::Skipped);
+                Ok(None)
             }
-            Err(e) => {
-                return Err(VkError::Vulkan {
-                    call: "vkAcquireNextImageKHR",
-                    result: e,
-                })
-            }
-        };
-        let image = self.images[index as usize];
-        let rendered = self.rendered[index as usize];
-        let cmd = self.cmd;
-        let range = vk::ImageSubresourceRange::default()
-            .aspect_mask(vk::ImageAspectFlags::COLOR)
-            .level_count(1)
-            .layer_count(1);
-        let barrier = |old, new, src_access, dst_access| {
-            vk::ImageMemoryBarrier::default()
-                .old_layout(old)
-                .new_layout(new)
-                .src_access_mask(src_access)
-                .dst_access_mask(dst_access)
-                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                .image(image)
-                .subresource_range(range)
-        };
-        let layers = vk::ImageSubresourceLayers::default()
-            .aspect_mask(vk::ImageAspectFlags::COLOR)
-            .layer_count(1);
-        let copy = vk::BufferImageCopy::default()
-            .buffer_row_length(width)
-            .buffer_image_height(height)
-            .image_subresource(layers)
-            .image_extent(vk::Extent3D {
-                width: width.min(ew),
-                height: height.min(eh),
-                depth: 1,
-            });
-        // SAFETY: the command buffer is not pending (the last submission was fenced); the image
-        // was acquired (its semaphore is waited on below); the buffers live in `self` until the
-        // fence wait at the end of this function.
-        unsafe {
-            device
-                .reset_command_buffer(cmd, vk::CommandBufferResetFlags::empty())
-                .map_err(VkError::vk("vkResetCommandBuffer"))?;
-            device
-                .begin_command_buffer(
-                    cmd,
-                    &vk::CommandBufferBeginInfo::default()
-                        .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
-                )
-                .map_err(VkError::vk("vkBeginCommandBuffer"))?;
-            device.cmd_pipeline_barrier(
-                cmd,
-                vk::PipelineStageFlags::TRANSFER,
-                vk::PipelineStageFlags::TRANSFER,
-                vk::DependencyFlags::empty(),
-                &[],
-                &[],
-                &[barrier(
-                    vk::ImageLayout::UNDEFINED,
-                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                    vk::AccessFlags::empty(),
-                    vk::AccessFlags::TRANSFER_WRITE,
-                )],
-            );
-            if width < ew || height < eh {
-                device.cmd_clear_color_image(
-                    cmd,
-                    image,
-                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                    &vk::ClearColorValue {
-                        float32: [0.05, 0.05, 0.05, 1.0],
-                    },
-                    &[range],
-                );
-                device.cmd_pipeline_barrier(
-                    cmd,
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::DependencyFlags::empty(),
-                    &[],
-                    &[],
-                    &[barrier(
-                        vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                        vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                        vk::AccessFlags::TRANSFER_WRITE,
-                        vk::AccessFlags::TRANSFER_WRITE,
-                    )],
-                );
-            }
-            device.cmd_copy_buffer_to_image(
-                cmd,
-                upload.handle(),
-                image,
-                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                &[copy],
-            );
-            let mut last = vk::ImageLayout::TRANSFER_DST_OPTIMAL;
-            if let (true, Some(rb)) = (readable, self.readback.as_ref()) {
-                device.cmd_pipeline_barrier(
-                    cmd,
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::DependencyFlags::empty(),
-                    &[],
-                    &[],
-                    &[barrier(
-                        last,
-                        vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
-                        vk::AccessFlags::TRANSFER_WRITE,
-                        vk::AccessFlags::TRANSFER_READ,
-                    )],
-                );
-                device.cmd_copy_image_to_buffer(
-                    cmd,
-                    image,
-                    vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
-                    rb.handle(),
-                    &[copy],
-                );
-                let host = vk::BufferMemoryBarrier::default()
-                    .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-                    .dst_access_mask(vk::AccessFlags::HOST_READ)
-                    .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-                    .buffer(rb.handle())
-                    .size(vk::WHOLE_SIZE);
-                device.cmd_pipeline_barrier(
-                    cmd,
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::PipelineStageFlags::HOST,
-                    vk::DependencyFlags::empty(),
-                    &[],
-                    &[host],
-                    &[],
-                );
-                last = vk::ImageLayout::TRANSFER_SRC_OPTIMAL;
-            }
-            if let Some(paint) = panel {
-                // After the read-back: the screenshot is the frame alone.
-                self.panel.record(cmd, image, index as usize, last, paint)?;
-                if let (true, Some(rb)) = (readable, self.readback.as_ref()) {
-                    let after = vk::BufferImageCopy {
-                        buffer_offset: pixels * 4,
-                        ..copy
-                    };
-                    self.panel.copy_shown(cmd, image, rb.handle(), after);
-                }
-            } else {
-                device.cmd_pipeline_barrier(
-                    cmd,
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::PipelineStageFlags::BOTTOM_OF_PIPE,
-                    vk::DependencyFlags::empty(),
-                    &[],
-                    &[],
-                    &[barrier(
-                        last,
-                        vk::ImageLayout::PRESENT_SRC_KHR,
-                        vk::AccessFlags::TRANSFER_WRITE,
-                        vk::AccessFlags::empty(),
-                    )],
-                );
-            }
-            device
-                .end_command_buffer(cmd)
-                .map_err(VkError::vk("vkEndCommandBuffer"))?;
+            Err(e) => Err(VkError::Vulkan {
+                call: "vkAcquireNextImageKHR",
+                result: e,
+            }),
         }
+    }
+
+    /// Submits the recorded copy, presents image `index` and waits for the submission; the
+    /// presentation's own result is returned for the caller to judge (out of date: recreate).
+    fn submit_and_present(&mut self, index: u32) -> Result<ash::prelude::VkResult<bool>> {
+        let shared = Arc::clone(&self.ctx.shared);
+        let device = &shared.device;
         let waits = [self.acquired];
         let stages = [vk::PipelineStageFlags::TRANSFER];
-        let cmds = [cmd];
-        let signals = [rendered];
+        let cmds = [self.cmd];
+        let signals = [self.rendered[index as usize]];
         let submit = vk::SubmitInfo::default()
             .wait_semaphores(&waits)
             .wait_dst_stage_mask(&stages)
@@ -685,36 +585,36 @@ impl Presenter {
                 .reset_fences(&[self.fence])
                 .map_err(VkError::vk("vkResetFences"))?;
         }
-        if let Some(paint) = panel {
-            self.panel.free(paint)?;
-        }
-        match presented {
-            Ok(false) => {}
-            Ok(true) | Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => self.stale = true,
-            Err(e) => {
-                return Err(VkError::Vulkan {
-                    call: "vkQueuePresentKHR",
-                    result: e,
-                })
-            }
-        }
-        let read = |copy: u64| -> Result<Option<Vec<u8>>> {
-            let (true, Some(rb)) = (readable && copy < copies, self.readback.as_ref()) else {
-                return Ok(None);
-            };
-            let mut px = vec![0u8; (pixels * 4) as usize];
-            rb.read_bytes(copy * pixels * 4, &mut px)?;
-            if is_bgra(self.format) {
-                px.chunks_exact_mut(4).for_each(|p| p.swap(0, 2));
-            }
-            Ok(Some(px))
-        };
-        Ok(Presented::Shown {
-            readback: read(0)?,
-            panel: panel.is_some(),
-            shown: read(1)?,
-        })
+        Ok(presented)
     }
+
+    /// Read-back copy `copy` (0: the frame, 1: the image as shown) as RGBA8, if it was read.
+    fn read(&self, frame: &FrameCopy, copy: u64) -> Result<Option<Vec<u8>>> {
+        let (true, Some(rb)) = (
+            frame.readable && copy < frame.copies,
+            self.readback.as_ref(),
+        ) else {
+            return Ok(None);
+        };
+        let mut px = vec![0u8; (frame.pixels * 4) as usize];
+        rb.read_bytes(copy * frame.pixels * 4, &mut px)?;
+        if is_bgra(self.format) {
+            px.chunks_exact_mut(4).for_each(|p| p.swap(0, 2));
+        }
+        Ok(Some(px))
+    }
+}
+
+/// One [`Presenter::present`] call's frame: its size and what is read back.
+struct FrameCopy {
+    width: u32,
+    height: u32,
+    pixels: u64,
+    /// Whether the presented image is copied back (asked, allowed, and the frame's size is the
+    /// swapchain's).
+    readable: bool,
+    /// Images read back: the frame, then (with a panel) the image as shown.
+    copies: u64,
 }
 
 impl Drop for Presenter {

@@ -4,7 +4,7 @@ use std::sync::Arc;
 
 use ash::vk;
 
-use crate::testing::{assert_no_validation_errors, context_or_skip};
+use crate::testutil::{assert_no_validation_errors, context_or_skip};
 use crate::*;
 
 #[test]
@@ -283,7 +283,7 @@ fn list_devices_reports_lavapipe_ray_tracing() {
     let devices = match list_devices() {
         Ok(d) => d,
         Err(e) => {
-            if std::env::var(testing::ENV_REQUIRE_GPU).is_ok_and(|v| v == "1") {
+            if std::env::var(testutil::ENV_REQUIRE_GPU).is_ok_and(|v| v == "1") {
                 panic!("MOTU_REQUIRE_GPU=1 but list_devices failed: {e}");
             }
             eprintln!("SKIPPED: no Vulkan device: list_devices: {e}");
@@ -292,7 +292,7 @@ fn list_devices_reports_lavapipe_ray_tracing() {
     };
     if devices.is_empty() {
         assert!(
-            !std::env::var(testing::ENV_REQUIRE_GPU).is_ok_and(|v| v == "1"),
+            !std::env::var(testutil::ENV_REQUIRE_GPU).is_ok_and(|v| v == "1"),
             "MOTU_REQUIRE_GPU=1 but no device listed"
         );
         eprintln!("SKIPPED: no Vulkan device: list_devices returned none");

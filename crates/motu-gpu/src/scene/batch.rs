@@ -3,10 +3,10 @@
 
 use std::time::Instant;
 
-use motu_alloc::{plan_build_batches, AllocKind, BatchLimits, BuildSize, MemoryClass};
+use motu_alloc::{plan_build_batches, AllocKind, BatchLimits, BatchPlan, BuildSize, MemoryClass};
 use motu_vk::{
     AsBuild, AsBuildFlags, AsBuildMode, AsCopyMode, AsGeometry, AsLevel, BufferUsage,
-    CommandRecorder, Context, GpuHeap, MemoryScope,
+    CommandRecorder, Context, GpuHeap, HeapBuffer, MemoryScope, Submitted,
 };
 
 use super::{AccelStruct, BuildOptions, Pending, ResourceReport, SizeQueries};
@@ -74,8 +74,8 @@ pub(crate) fn build_pipelined(
     ty: AsLevel,
     opts: &BuildOptions,
     geometry: impl Fn(usize) -> (Vec<AsGeometry>, Vec<u32>),
-    mut prepare: impl FnMut(&mut GpuHeap, std::ops::Range<usize>) -> Result<()>,
-    mut stager: Option<&mut dyn BatchStager>,
+    prepare: impl FnMut(&mut GpuHeap, std::ops::Range<usize>) -> Result<()>,
+    stager: Option<&mut dyn BatchStager>,
     inputs_done: &mut dyn FnMut(&mut GpuHeap),
 ) -> Result<Vec<(usize, AccelStruct)>> {
     if sizes.is_empty() {
@@ -108,321 +108,295 @@ pub(crate) fn build_pipelined(
             return Err(e.into());
         }
     };
-    // Freed once the last batch is built (before its compaction), else at the end.
-    let mut scratch = Some(pool);
-    let mut out: Vec<(usize, AccelStruct)> = Vec::with_capacity(sizes.len());
-    let mut in_flight: Vec<AccelStruct> = Vec::new();
-    let result = (|| -> Result<()> {
-        let scratch_base = scratch_address.div_ceil(scratch_align) * scratch_align;
-        let (kind, flags) = match ty {
-            AsLevel::Top => ("tlas", AsBuildFlags::tlas(opts.compact)),
-            AsLevel::Bottom => ("blas", opts.blas_build.flags()),
-        };
-        if let (Some(st), Some(first)) = (stager.as_deref_mut(), plan.batches.first()) {
+    let (kind, flags) = match ty {
+        AsLevel::Top => ("tlas", AsBuildFlags::tlas(opts.compact)),
+        AsLevel::Bottom => ("blas", opts.blas_build.flags()),
+    };
+    let mut run = PipelinedBuild {
+        ctx,
+        heap,
+        report,
+        sizes,
+        ty,
+        kind,
+        flags,
+        compact: opts.compact,
+        plan: &plan,
+        scratch_base: scratch_address.div_ceil(scratch_align) * scratch_align,
+        scratch: Some(pool),
+        geometry,
+        prepare,
+        stager,
+        inputs_done,
+        out: Vec::with_capacity(sizes.len()),
+        in_flight: Vec::new(),
+    };
+    let result = run.batches();
+    run.finish(result)
+}
+
+/// [`build_pipelined`]'s state over its batches, one method per phase. Every structure it
+/// creates is in `out` (built) or `in_flight` (its batch not finished) until `finish`.
+struct PipelinedBuild<'a, 's, 'i, G, P> {
+    ctx: &'a Context,
+    heap: &'a mut GpuHeap,
+    report: &'a mut ResourceReport,
+    sizes: &'a [BuildSize],
+    ty: AsLevel,
+    /// `"tlas"` or `"blas"`, for labels.
+    kind: &'static str,
+    /// The flags the sizes were queried with.
+    flags: AsBuildFlags,
+    compact: bool,
+    plan: &'a BatchPlan,
+    scratch_base: u64,
+    /// Freed once the last batch is built (before its compaction), else at the end.
+    scratch: Option<HeapBuffer>,
+    geometry: G,
+    prepare: P,
+    stager: Option<&'a mut (dyn BatchStager + 's)>,
+    inputs_done: &'a mut (dyn FnMut(&mut GpuHeap) + 'i),
+    out: Vec<(usize, AccelStruct)>,
+    in_flight: Vec<AccelStruct>,
+}
+
+/// A batch's build submission, not yet waited on, and the compacted-size queries it writes.
+struct BatchSubmission<'c> {
+    submitted: Submitted<'c>,
+    queries: Option<SizeQueries>,
+}
+
+impl<G, P> PipelinedBuild<'_, '_, '_, G, P>
+where
+    G: Fn(usize) -> (Vec<AsGeometry>, Vec<u32>),
+    P: FnMut(&mut GpuHeap, std::ops::Range<usize>) -> Result<()>,
+{
+    /// Every batch in order, the first one's inputs staged ahead.
+    fn batches(&mut self) -> Result<()> {
+        if let (Some(st), Some(first)) = (self.stager.as_deref_mut(), self.plan.batches.first()) {
             st.stage(first.builds.clone())?;
         }
-        for (bi, batch) in plan.batches.iter().enumerate() {
-            report.build_batches += 1;
-            prepare(heap, batch.builds.clone())?;
-            let mut pending: Vec<Pending> = Vec::new();
-            for k in batch.builds.clone() {
-                match AccelStruct::new(ctx, heap, &format!("{kind}-{k}"), sizes[k].result_bytes, ty)
-                {
-                    Ok(a) => pending.push(Pending { accel: a, index: k }),
-                    Err(e) => {
-                        in_flight.extend(pending.into_iter().map(|p| p.accel));
-                        return Err(e.into());
-                    }
-                }
-            }
-            // From here on a failure releases this batch through `in_flight`.
-            let pending_ref = &pending;
-            let run = (|| -> Result<Vec<AccelStruct>> {
-                let descs: Vec<_> = batch.builds.clone().map(&geometry).collect();
-                let builds: Vec<AsBuild<'_>> = descs
-                    .iter()
-                    .zip(pending_ref)
-                    .map(|((g, counts), p)| AsBuild {
-                        level: ty,
-                        // The flags the sizes were queried with.
-                        flags,
-                        mode: AsBuildMode::Build,
-                        dst: p.accel.target(),
-                        geometries: g,
-                        primitive_counts: counts,
-                        scratch_address: scratch_base + plan.scratch_offsets_bytes[p.index],
-                    })
-                    .collect();
-                // Compacted sizes are asked only of structures built to be compacted.
-                let queries = if opts.compact {
-                    Some(SizeQueries::new(ctx, pending_ref.len() as u32)?)
-                } else {
-                    None
-                };
-                let targets: Vec<_> = pending_ref.iter().map(|p| p.accel.target()).collect();
-                // Destinations, scratch slices (disjoint, aligned), inputs, staged copies and
-                // the query pool live until the submission below is waited on (also on every
-                // error path: `Submitted` waits when dropped).
-                let mut rec = ctx.record(&format!("{kind} build batch {bi}"))?;
-                if let Some(st) = stager.as_deref_mut() {
-                    if st.record(&mut rec)? {
-                        // Staged geometry copies before the builds read them.
-                        rec.memory_barrier(MemoryScope::TransferWrites, MemoryScope::BuildReads);
-                    }
-                }
-                // Coarse: builds are few and large.
-                rec.barrier();
-                rec.build_acceleration_structures(&builds)?;
-                rec.barrier();
-                if let Some(q) = &queries {
-                    rec.write_compacted_sizes(&targets, q)?;
-                }
-                let submitted = rec.submit()?;
-                // While the GPU builds this batch, load and stage the next one.
-                if let (Some(st), Some(next)) = (stager.as_deref_mut(), plan.batches.get(bi + 1)) {
-                    let t = Instant::now();
-                    match st.stage(next.builds.clone()) {
-                        Ok((bytes, stalled)) => {
-                            report.upload_build_overlap_batches += 1;
-                            report.upload_overlap_bytes += bytes;
-                            report.upload_overlap_ms +=
-                                t.elapsed().saturating_sub(stalled).as_secs_f64() * 1e3;
-                            report.upload_stall_ms += stalled.as_secs_f64() * 1e3;
-                        }
-                        Err(e) => {
-                            st.abandon();
-                            // This batch's resources are released by the caller: wait first.
-                            let _ = submitted.wait();
-                            return Err(e);
-                        }
-                    }
-                }
-                submitted.wait()?;
-                if bi + 1 == plan.batches.len() {
-                    // Built: no batch reads the scratch or the inputs any more, and the
-                    // compacted copies below need room of their own.
-                    if let Some(s) = scratch.take() {
-                        heap.free(s);
-                    }
-                    inputs_done(heap);
-                }
-                let Some(queries) = queries else {
-                    return Ok(Vec::new());
-                };
-                let compacted = queries.read(pending_ref.len() as u32)?;
-                // Nothing to gain (lavapipe reports the built size): keep the originals and
-                // skip the copies' second allocation, which would double the peak.
-                if pending_ref
-                    .iter()
-                    .zip(&compacted)
-                    .all(|(p, &size)| size.max(1) >= p.accel.size_bytes)
-                {
-                    return Ok(Vec::new());
-                }
-                let mut copies = Vec::with_capacity(pending_ref.len());
-                for (p, &size) in pending_ref.iter().zip(&compacted) {
-                    let size = size.max(1).min(p.accel.size_bytes);
-                    match AccelStruct::new(
-                        ctx,
-                        heap,
-                        &format!("{kind}-{}-compact", p.index),
-                        size,
-                        ty,
-                    ) {
-                        Ok(a) => copies.push(a),
-                        Err(motu_vk::VkError::Budget(msg)) => {
-                            // No room for both copies: the uncompacted ones are valid as they
-                            // are, and the budget holds.
-                            tracing::debug!(%msg, "compaction skipped under the budget");
-                            copies.into_iter().for_each(|c| c.release(heap));
-                            return Ok(Vec::new());
-                        }
-                        Err(e) => {
-                            copies.into_iter().for_each(|c| c.release(heap));
-                            return Err(e.into());
-                        }
-                    }
-                }
-                let mut rec = match ctx.record(&format!("{kind} compaction batch {bi}")) {
-                    Ok(r) => r,
-                    Err(e) => {
-                        copies.into_iter().for_each(|c| c.release(heap));
-                        return Err(e.into());
-                    }
-                };
-                // Both structures live until the fenced submission returns; the source was
-                // built with compaction allowed and dst holds its compacted size.
-                let copied = pending_ref.iter().zip(&copies).try_for_each(|(p, dst)| {
-                    rec.copy_acceleration_structure(
-                        p.accel.target(),
-                        dst.target(),
-                        AsCopyMode::Compact,
-                    )
-                });
-                if let Err(e) = copied.and_then(|()| rec.submit_and_wait()) {
-                    copies.into_iter().for_each(|c| c.release(heap));
+        for bi in 0..self.plan.batches.len() {
+            self.batch(bi)?;
+        }
+        Ok(())
+    }
+
+    /// Batch `bi`: its destinations, then build and compaction; the results go to `out`.
+    fn batch(&mut self, bi: usize) -> Result<()> {
+        let builds = self.plan.batches[bi].builds.clone();
+        self.report.build_batches += 1;
+        (self.prepare)(self.heap, builds.clone())?;
+        let mut pending: Vec<Pending> = Vec::new();
+        for k in builds {
+            match AccelStruct::new(
+                self.ctx,
+                self.heap,
+                &format!("{}-{k}", self.kind),
+                self.sizes[k].result_bytes,
+                self.ty,
+            ) {
+                Ok(a) => pending.push(Pending { accel: a, index: k }),
+                Err(e) => {
+                    self.in_flight.extend(pending.into_iter().map(|p| p.accel));
                     return Err(e.into());
                 }
-                Ok(copies)
-            })();
-            match run {
-                Ok(copies) if copies.is_empty() => {
-                    out.extend(pending.into_iter().map(|p| (p.index, p.accel)));
+            }
+        }
+        // From here on a failure releases this batch through `in_flight`.
+        match self.build_and_compact(bi, &pending) {
+            Ok(copies) if copies.is_empty() => {
+                self.out
+                    .extend(pending.into_iter().map(|p| (p.index, p.accel)));
+            }
+            Ok(copies) => {
+                for (p, dst) in pending.into_iter().zip(copies) {
+                    p.accel.release(self.heap);
+                    self.out.push((p.index, dst));
                 }
-                Ok(copies) => {
-                    for (p, dst) in pending.into_iter().zip(copies) {
-                        p.accel.release(heap);
-                        out.push((p.index, dst));
-                    }
+            }
+            Err(e) => {
+                self.in_flight.extend(pending.into_iter().map(|p| p.accel));
+                return Err(e);
+            }
+        }
+        Ok(())
+    }
+
+    /// Builds batch `bi` into `pending`, staging the next batch meanwhile; returns the
+    /// compacted copies (empty: keep the originals).
+    fn build_and_compact(&mut self, bi: usize, pending: &[Pending]) -> Result<Vec<AccelStruct>> {
+        let ctx = self.ctx;
+        let BatchSubmission { submitted, queries } = self.record_build(ctx, bi, pending)?;
+        self.stage_next(bi, submitted)?;
+        if bi + 1 == self.plan.batches.len() {
+            // Built: no batch reads the scratch or the inputs any more, and the compacted
+            // copies below need room of their own.
+            if let Some(s) = self.scratch.take() {
+                self.heap.free(s);
+            }
+            (self.inputs_done)(self.heap);
+        }
+        let Some(queries) = queries else {
+            return Ok(Vec::new());
+        };
+        self.compact(bi, pending, &queries)
+    }
+
+    /// Records and submits batch `bi`'s staged copies and builds (not waited on).
+    fn record_build<'c>(
+        &mut self,
+        ctx: &'c Context,
+        bi: usize,
+        pending: &[Pending],
+    ) -> Result<BatchSubmission<'c>> {
+        let batch = &self.plan.batches[bi];
+        let descs: Vec<_> = batch.builds.clone().map(&self.geometry).collect();
+        let builds: Vec<AsBuild<'_>> = descs
+            .iter()
+            .zip(pending)
+            .map(|((g, counts), p)| AsBuild {
+                level: self.ty,
+                flags: self.flags,
+                mode: AsBuildMode::Build,
+                dst: p.accel.target(),
+                geometries: g,
+                primitive_counts: counts,
+                scratch_address: self.scratch_base + self.plan.scratch_offsets_bytes[p.index],
+            })
+            .collect();
+        // Compacted sizes are asked only of structures built to be compacted.
+        let queries = if self.compact {
+            Some(SizeQueries::new(ctx, pending.len() as u32)?)
+        } else {
+            None
+        };
+        let targets: Vec<_> = pending.iter().map(|p| p.accel.target()).collect();
+        // Destinations, scratch slices (disjoint, aligned), inputs, staged copies and the
+        // query pool live until the submission is waited on (also on every error path:
+        // `Submitted` waits when dropped).
+        let mut rec = ctx.record(&format!("{} build batch {bi}", self.kind))?;
+        if let Some(st) = self.stager.as_deref_mut() {
+            if st.record(&mut rec)? {
+                // Staged geometry copies before the builds read them.
+                rec.memory_barrier(MemoryScope::TransferWrites, MemoryScope::BuildReads);
+            }
+        }
+        // Coarse: builds are few and large.
+        rec.barrier();
+        rec.build_acceleration_structures(&builds)?;
+        rec.barrier();
+        if let Some(q) = &queries {
+            rec.write_compacted_sizes(&targets, q)?;
+        }
+        Ok(BatchSubmission {
+            submitted: rec.submit()?,
+            queries,
+        })
+    }
+
+    /// While the GPU builds batch `bi`, loads and stages the next one; then waits on `bi`.
+    fn stage_next(&mut self, bi: usize, submitted: Submitted<'_>) -> Result<()> {
+        if let (Some(st), Some(next)) = (self.stager.as_deref_mut(), self.plan.batches.get(bi + 1))
+        {
+            let t = Instant::now();
+            match st.stage(next.builds.clone()) {
+                Ok((bytes, stalled)) => {
+                    let report = &mut *self.report;
+                    report.upload_build_overlap_batches += 1;
+                    report.upload_overlap_bytes += bytes;
+                    report.upload_overlap_ms +=
+                        t.elapsed().saturating_sub(stalled).as_secs_f64() * 1e3;
+                    report.upload_stall_ms += stalled.as_secs_f64() * 1e3;
                 }
                 Err(e) => {
-                    in_flight.extend(pending.into_iter().map(|p| p.accel));
+                    st.abandon();
+                    // This batch's resources are released by the caller: wait first.
+                    let _ = submitted.wait();
                     return Err(e);
                 }
             }
         }
+        submitted.wait()?;
         Ok(())
-    })();
-    if let Some(s) = scratch {
-        heap.free(s);
     }
-    match result {
-        Ok(()) => Ok(out),
-        Err(e) => {
-            for a in in_flight {
-                a.release(heap);
+
+    /// Copies batch `bi`'s structures to their compacted sizes; empty when nothing is gained
+    /// or the budget has no room for both copies.
+    fn compact(
+        &mut self,
+        bi: usize,
+        pending: &[Pending],
+        queries: &SizeQueries,
+    ) -> Result<Vec<AccelStruct>> {
+        let (ctx, kind) = (self.ctx, self.kind);
+        let compacted = queries.read(pending.len() as u32)?;
+        // Nothing to gain (lavapipe reports the built size): keep the originals and skip the
+        // copies' second allocation, which would double the peak.
+        if pending
+            .iter()
+            .zip(&compacted)
+            .all(|(p, &size)| size.max(1) >= p.accel.size_bytes)
+        {
+            return Ok(Vec::new());
+        }
+        let mut copies = Vec::with_capacity(pending.len());
+        for (p, &size) in pending.iter().zip(&compacted) {
+            let size = size.max(1).min(p.accel.size_bytes);
+            let label = format!("{kind}-{}-compact", p.index);
+            match AccelStruct::new(ctx, self.heap, &label, size, self.ty) {
+                Ok(a) => copies.push(a),
+                Err(motu_vk::VkError::Budget(msg)) => {
+                    // No room for both copies: the uncompacted ones are valid as they are,
+                    // and the budget holds.
+                    tracing::debug!(%msg, "compaction skipped under the budget");
+                    copies.into_iter().for_each(|c| c.release(self.heap));
+                    return Ok(Vec::new());
+                }
+                Err(e) => {
+                    copies.into_iter().for_each(|c| c.release(self.heap));
+                    return Err(e.into());
+                }
             }
-            for (_, a) in out {
-                a.release(heap);
+        }
+        let mut rec = match ctx.record(&format!("{kind} compaction batch {bi}")) {
+            Ok(r) => r,
+            Err(e) => {
+                copies.into_iter().for_each(|c| c.release(self.heap));
+                return Err(e.into());
             }
-            Err(e)
+        };
+        // Both structures live until the fenced submission returns; the source was built
+        // with compaction allowed and dst holds its compacted size.
+        let copied = pending.iter().zip(&copies).try_for_each(|(p, dst)| {
+            rec.copy_acceleration_structure(p.accel.target(), dst.target(), AsCopyMode::Compact)
+        });
+        if let Err(e) = copied.and_then(|()| rec.submit_and_wait()) {
+            copies.into_iter().for_each(|c| c.release(self.heap));
+            return Err(e.into());
+        }
+        Ok(copies)
+    }
+
+    /// Frees the scratch pool if still held; on failure releases every structure created.
+    fn finish(self, result: Result<()>) -> Result<Vec<(usize, AccelStruct)>> {
+        if let Some(s) = self.scratch {
+            self.heap.free(s);
+        }
+        match result {
+            Ok(()) => Ok(self.out),
+            Err(e) => {
+                for a in self.in_flight {
+                    a.release(self.heap);
+                }
+                for (_, a) in self.out {
+                    a.release(self.heap);
+                }
+                Err(e)
+            }
         }
     }
 }
 
 #[cfg(test)]
-mod tests {
-    use motu_alloc::{AllocKind, BuildSize, MemoryClass};
-
-    use super::build_batched;
-    use crate::scene::{BuildOptions, ResourceReport};
-    use crate::testing::{assert_no_validation_errors, context_or_skip, test_heap};
-    use motu_vk::AsLevel;
-    use motu_vk::BlasGeometry;
-    use motu_vk::BufferUsage;
-    use motu_vk::GpuHeap;
-    use motu_vk::Requirement;
-
-    fn scratch_bytes(heap: &GpuHeap) -> u64 {
-        heap.report()
-            .kinds
-            .get(&AllocKind::Scratch)
-            .map_or(0, |k| k.bytes)
-    }
-
-    /// `inputs_done` runs once, after the last batch is built, with the scratch pool already
-    /// freed: the inputs it frees and the scratch never stack on the compacted copies.
-    #[test]
-    fn inputs_are_released_once_the_last_batch_is_built() {
-        let Some(ctx) = context_or_skip("inputs_done", Requirement::RayTracing) else {
-            return;
-        };
-        let mut heap = test_heap(&ctx, 64 << 20);
-        // Three BLASes of 8 boxes each, one batch each.
-        let boxes: Vec<[f32; 6]> = (0..24)
-            .map(|i| {
-                let x = i as f32;
-                [x, 0.0, 0.0, x + 0.5, 1.0, 1.0]
-            })
-            .collect();
-        let input = heap
-            .alloc_buffer(
-                "aabbs",
-                (boxes.len() * 24) as u64,
-                BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT,
-                AllocKind::Geometry,
-                MemoryClass::HostVisible,
-                16,
-            )
-            .expect("input");
-        input.write(0, &boxes).expect("write boxes");
-        let base = input.device_address().expect("address").0;
-        let shape = [BlasGeometry::Aabbs {
-            aabb_count: 8,
-            opaque: true,
-        }];
-        let opts = BuildOptions {
-            max_batch_result_bytes: 1,
-            ..Default::default()
-        };
-        let sz = ctx
-            .blas_build_sizes(&shape, opts.blas_build.flags())
-            .expect("sizes");
-        let sizes = vec![
-            BuildSize {
-                result_bytes: sz.acceleration_structure_size_bytes,
-                scratch_bytes: sz.build_scratch_size_bytes,
-            };
-            3
-        ];
-        let mut input = Some(input);
-        let prepared = std::cell::Cell::new(0u32);
-        let mut done_calls = 0u32;
-        let mut scratch_while_preparing = 0u64;
-        let mut scratch_when_done = u64::MAX;
-        let mut report = ResourceReport::default();
-        let built = build_batched(
-            &ctx,
-            &mut heap,
-            &mut report,
-            &sizes,
-            AsLevel::Bottom,
-            &opts,
-            |k| {
-                (
-                    vec![crate::scene::aabbs_geometry(base + k as u64 * 8 * 24, true)],
-                    vec![8],
-                )
-            },
-            |heap, _| {
-                prepared.set(prepared.get() + 1);
-                scratch_while_preparing = scratch_while_preparing.max(scratch_bytes(heap));
-                Ok(())
-            },
-            &mut |heap| {
-                done_calls += 1;
-                assert_eq!(
-                    prepared.get(),
-                    3,
-                    "every batch prepared before the inputs go"
-                );
-                scratch_when_done = scratch_bytes(heap);
-                if let Some(b) = input.take() {
-                    heap.free(b);
-                }
-            },
-        )
-        .expect("build");
-        assert_eq!(report.build_batches, 3);
-        assert_eq!(done_calls, 1);
-        assert!(input.is_none(), "the inputs were released by the callback");
-        assert!(
-            scratch_while_preparing > 0,
-            "the scratch pool lives while batches build"
-        );
-        assert_eq!(
-            scratch_when_done, 0,
-            "the scratch pool is freed before the inputs"
-        );
-        assert_eq!(built.len(), 3);
-        for (_, a) in built {
-            a.release(&mut heap);
-        }
-        assert_eq!(
-            heap.report().budget_in_use_bytes,
-            0,
-            "nothing left allocated"
-        );
-        assert_no_validation_errors(&ctx);
-    }
-}
+mod tests;

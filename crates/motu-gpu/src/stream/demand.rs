@@ -4,8 +4,6 @@
 use std::collections::BTreeSet;
 use std::time::Instant;
 
-use motu_alloc::ItemId;
-
 use super::residency::EvictWhy;
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
@@ -70,14 +68,14 @@ impl<'a> StreamingRenderer<'a> {
             for &b in group {
                 for m in self.blas_meshes(b as usize) {
                     // Referenced before loading: evicting a BLAS that shares it keeps it.
-                    self.res.mesh_refs[m] += 1;
+                    self.take_mesh_ref(m);
                     taken.push(m);
                     if self.res.meshes[m].is_some() {
                         continue;
                     }
                     let rec = self.view.meshes[m];
                     let mut g = self.maybe_evicting(evict, |s| {
-                        MeshGpu::alloc_streamed(&mut s.heap, m, &rec, s.res.mesh_class)
+                        MeshGpu::alloc_streamed(&mut s.heap, m, &rec, s.res.mesh_class())
                     })?;
                     let ctx = self.ctx.clone();
                     let source = self.source;
@@ -186,11 +184,7 @@ impl<'a> StreamingRenderer<'a> {
                 self.frame.stats.triangles_built += u64::from(self.view.blases[b].primitive_count);
             }
             self.reuse.built_once[b] = true;
-            self.res.blas[b] = Some(accel);
-            let _ = self
-                .res
-                .residency
-                .insert(ItemId(b as u32), bytes, u64::from(self.frame.stamp));
+            self.res.admit(b, accel, bytes, self.frame.stamp);
             self.res.pinned[b] = true;
             self.res.built_now.push(b as u32);
             built_ids.insert(b as u32);
@@ -471,31 +465,4 @@ impl<'a> StreamingRenderer<'a> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::Demand;
-
-    #[test]
-    fn needed_structures_are_those_some_ray_requested() {
-        let d = Demand {
-            blases: vec![(5, 3), (2, 1), (9, 0)],
-            later: vec![(4, 0)],
-        };
-        assert_eq!(d.needed_ids(), vec![5, 2]);
-    }
-
-    #[test]
-    fn merged_demand_puts_the_probe_first_and_keeps_each_structure_once() {
-        let mut guard = Demand {
-            blases: vec![(7, 0), (3, 0)],
-            later: vec![(9, 0), (4, 0)],
-        };
-        let probe = Demand {
-            blases: vec![(3, 5), (1, 2)],
-            later: vec![(7, 0), (2, 0)],
-        };
-        guard.merge_first(probe);
-        assert_eq!(guard.blases, vec![(3, 5), (1, 2), (7, 0)]);
-        // 7 is already needed ahead: it is not built twice.
-        assert_eq!(guard.later, vec![(2, 0), (9, 0), (4, 0)]);
-    }
-}
+mod tests;

@@ -31,19 +31,37 @@ pub(super) struct FrameState {
     /// held (0: none yet).
     pub pass_marks_held: u64,
     /// The next frame's camera, probed after this frame (`set_next_camera`).
-    pub next_camera: Option<CameraParams>,
+    next_camera: Option<CameraParams>,
     /// Per BLAS, what the last probe saw (`PROBE_MET`, `PROBE_RESIDENT` bits), kept for the
     /// next frame's first pass to say why it missed what it missed; empty when no probe ran.
     pub probe_sighting: Vec<u8>,
     /// What the probe rounds after this frame used of the resident set (`probe.rs`).
     pub probe_need: super::probe::ProbeNeed,
     /// The trace pipeline with the backend and stack size it was made for.
-    pub tracer: Option<(Backend, u32, Tracer)>,
+    tracer: Option<FrameTracer>,
     /// State kept between frames: the frame buffers, the frame's build clock.
     pub kept: super::budget::Kept,
 }
 
+/// The streamed frames' trace pipeline and what it was made for: a frame asking for another
+/// backend or stack size gets a new one.
+pub(super) struct FrameTracer {
+    backend: Backend,
+    stack_size: u32,
+    tracer: Tracer,
+}
+
 impl FrameState {
+    /// The trace pipeline of the current frame, once `ensure_tracer` made it.
+    pub fn tracer(&self) -> Option<&Tracer> {
+        self.tracer.as_ref().map(|t| &t.tracer)
+    }
+
+    /// Names the next frame's camera (see `StreamingRenderer::set_next_camera`).
+    pub fn set_next_camera(&mut self, camera: Option<CameraParams>) {
+        self.next_camera = camera;
+    }
+
     pub fn new() -> FrameState {
         FrameState {
             number: 0,
@@ -150,10 +168,10 @@ impl<'a> StreamingRenderer<'a> {
     /// The trace pipeline of `opts`'s backend and stack size, made (evicting for room) when
     /// the last frame's was another.
     fn ensure_tracer(&mut self, opts: &RenderOptions) -> Result<()> {
-        let need_tracer = !matches!(&self.frame.tracer, Some((b, s, _)) if *b == opts.backend && *s == opts.stack_size);
+        let need_tracer = !matches!(&self.frame.tracer, Some(t) if t.backend == opts.backend && t.stack_size == opts.stack_size);
         if need_tracer {
-            if let Some((_, _, t)) = self.frame.tracer.take() {
-                t.release(&mut self.heap);
+            if let Some(t) = self.frame.tracer.take() {
+                t.tracer.release(&mut self.heap);
             }
             self.res.pinned = vec![false; self.item_count()];
             let t = self
@@ -163,7 +181,11 @@ impl<'a> StreamingRenderer<'a> {
                     Tracer::new(&s.ctx.clone(), &mut s.heap, opts, slots, true)
                 })
                 .map_err(|e| self.skeleton_error("the trace pipeline", e))?;
-            self.frame.tracer = Some((opts.backend, opts.stack_size, t));
+            self.frame.tracer = Some(FrameTracer {
+                backend: opts.backend,
+                stack_size: opts.stack_size,
+                tracer: t,
+            });
         }
         Ok(())
     }
@@ -232,7 +254,7 @@ impl<'a> StreamingRenderer<'a> {
         opts: &RenderOptions,
     ) -> Result<()> {
         let mut again = None;
-        let evictions_at_probe = self.res.evictions;
+        let evictions_at_probe = self.res.evictions();
         if let Some((next, (p, open))) = probe {
             let needed = p.needed_ids();
             guard_demand.merge_first(p);
@@ -371,7 +393,7 @@ impl<'a> StreamingRenderer<'a> {
     /// prefetched, while the prefetch built some structure a round's rays `needed` first (the
     /// open pixels' rays go on from there) and pixels stay open. Then verifying rounds
     /// (`StreamOptions::probe_verify_rounds`) over every pixel, unless the rounds settled
-    /// (no pixel left open) and nothing was evicted since the first probe (`self.res.evictions`
+    /// (no pixel left open) and nothing was evicted since the first probe (`self.res.evictions()`
     /// was `evictions_at_probe` then): the next frame then finds everything its rays need.
     fn probe_again(
         &mut self,
@@ -399,7 +421,7 @@ impl<'a> StreamingRenderer<'a> {
             open = still_open;
             settled = open.is_empty();
         }
-        if settled && self.res.evictions == evictions_at_probe {
+        if settled && self.res.evictions() == evictions_at_probe {
             return Ok(());
         }
         // Verifying rounds: the prefetch evicted, for room, structures no round met, and the

@@ -4,7 +4,6 @@
 use std::time::Instant;
 
 use motu_abi::aov::AovRecord;
-use motu_alloc::ItemId;
 
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
@@ -300,9 +299,7 @@ impl<'a> StreamingRenderer<'a> {
                     self.res.used_in_frame[b] = self.frame.number;
                 }
                 if self.topo.buildable(b) {
-                    self.res
-                        .residency
-                        .mark_visible(ItemId(b as u32), u64::from(self.frame.stamp));
+                    self.res.saw(b, self.frame.stamp);
                 }
             } else if self.topo.buildable(b) {
                 out.push((b as u32, v & 3));
@@ -373,7 +370,7 @@ impl<'a> StreamingRenderer<'a> {
         addresses[Slot::Stream as usize] = fb.stream.device_address()?.0;
         let push_bytes: &[u8] = bytemuck::cast_slice(&addresses);
         let n = full_count + list.len() as u32;
-        let Some((_, _, tracer)) = &self.frame.tracer else {
+        let Some(tracer) = self.frame.tracer() else {
             return Err(GpuError::InvalidRequest(
                 "streaming: no trace pipeline".into(),
             ));

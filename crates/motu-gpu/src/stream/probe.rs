@@ -53,7 +53,6 @@
 //! no pixel open and nothing was evicted since the first probe.
 
 use motu_abi::camera::CameraParams;
-use motu_alloc::ItemId;
 
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
@@ -134,9 +133,7 @@ impl<'a> StreamingRenderer<'a> {
             };
             for (b, &v) in stamps.iter().enumerate() {
                 if passed_mark(v, stamp) && self.res.blas[b].is_some() && self.topo.buildable(b) {
-                    self.res
-                        .residency
-                        .mark_visible(ItemId(b as u32), u64::from(at));
+                    self.res.saw(b, at);
                     self.res.last_seen[b] = self.res.last_seen[b].max(at);
                     self.frame.stats.probe_pass_marks += 1;
                 }

@@ -1,7 +1,7 @@
 //! Acceleration-structure builds: triangle and PI BLAS sets, and rebuilding the TLASes whose
 //! instance set changed, in groups that fit (the build itself: `tlas_build.rs`).
 
-use motu_alloc::{AllocKind, BuildSize, ItemId, MemoryClass};
+use motu_alloc::{AllocKind, BuildSize, MemoryClass};
 use motu_vk::{
     AsBuildFlags, AsLevel, BufferUsage, FitRequest, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
 };
@@ -267,7 +267,7 @@ impl<'a> StreamingRenderer<'a> {
                         let b = self.res.built_now.pop().unwrap_or_default();
                         given += self.res.blas_bytes[b as usize];
                         self.frame.stats.deferred += 1;
-                        if self.res.residency.contains(ItemId(b)) {
+                        if self.res.holds(b) {
                             self.evict(b as usize);
                             self.frame.stats.evicted -= 1;
                         }
@@ -285,7 +285,7 @@ impl<'a> StreamingRenderer<'a> {
                         )));
                     };
                     self.frame.stats.deferred += 1;
-                    if self.res.residency.contains(ItemId(last)) {
+                    if self.res.holds(last) {
                         self.evict(last as usize);
                         // Given back, not evicted for room: count it as deferred only.
                         self.frame.stats.evicted -= 1;
@@ -317,35 +317,4 @@ fn group_by_need(mut need: Vec<(u64, u32)>, budget_bytes: u64) -> (Vec<u32>, u64
 }
 
 #[cfg(test)]
-mod tests {
-    use super::group_by_need;
-
-    #[test]
-    fn large_rebuilds_go_alone_and_small_ones_together() {
-        let budget = 64 * 100;
-        // Three pieces over a 64th of the budget, three small TLASes.
-        let mut dirty = vec![(10, 4), (250, 1), (1, 6), (300, 0), (5, 5), (200, 2)];
-        let mut groups = Vec::new();
-        while !dirty.is_empty() {
-            let (g, need) = group_by_need(dirty.clone(), budget);
-            let listed: u64 = dirty
-                .iter()
-                .filter(|(_, t)| g.contains(t))
-                .map(|p| p.0)
-                .sum();
-            assert_eq!(need, listed);
-            dirty.retain(|(_, t)| !g.contains(t));
-            groups.push(g);
-        }
-        assert_eq!(groups, vec![vec![0], vec![1], vec![2], vec![4, 5, 6]]);
-        // One TLAS over the cap still gets a group of its own.
-        assert_eq!(group_by_need(vec![(9000, 3)], budget), (vec![3], 9000));
-        // Equal needs: by index; two that fit a 64th together share a group.
-        assert_eq!(
-            group_by_need(vec![(40, 2), (40, 1)], budget),
-            (vec![1, 2], 80)
-        );
-        assert_eq!(group_by_need(vec![(60, 2), (60, 1)], budget), (vec![1], 60));
-        assert!(group_by_need(Vec::new(), budget).0.is_empty());
-    }
-}
+mod tests;

@@ -32,15 +32,15 @@ pub(super) struct Resident {
     pub blas: Vec<Option<AccelStruct>>,
     /// Per mesh: its geometry when resident, and how many resident BLASes use it.
     pub meshes: Vec<Option<MeshGpu>>,
-    pub mesh_refs: Vec<u32>,
+    mesh_refs: Vec<u32>,
     /// The memory streamed meshes are allocated in ([`StreamOptions::mesh_memory`] resolved)
     /// and whether it counts against the budget.
     ///
     /// [`StreamOptions::mesh_memory`]: super::StreamOptions::mesh_memory
-    pub mesh_class: MemoryClass,
+    mesh_class: MemoryClass,
     pub meshes_budgeted: bool,
     /// The streamed BLASes resident, with their bytes, in LRU order.
-    pub residency: Residency,
+    residency: Residency,
     /// Per item (BLAS, then TLAS): the last pass stamp that saw it.
     pub last_seen: Vec<u32>,
     /// Per BLAS: bytes it held when last resident (structure plus meshes), and the last frame
@@ -58,10 +58,40 @@ pub(super) struct Resident {
     pub group_hint: usize,
     /// BLASes evicted since the renderer started (also those given back; never decremented):
     /// whether a prefetch removed anything since a probe.
-    pub evictions: u64,
+    evictions: u64,
 }
 
 impl Resident {
+    /// Makes streamed BLAS `b` resident: its structure, and its bytes (structure and meshes)
+    /// in the LRU order, seen at pass stamp `stamp`.
+    pub fn admit(&mut self, b: usize, accel: AccelStruct, bytes: u64, stamp: u32) {
+        self.blas[b] = Some(accel);
+        let _ = self
+            .residency
+            .insert(ItemId(b as u32), bytes, u64::from(stamp));
+    }
+
+    /// Resident streamed BLAS `b` was seen at `stamp` (it moves up the LRU order).
+    pub fn saw(&mut self, b: usize, stamp: u32) {
+        self.residency
+            .mark_visible(ItemId(b as u32), u64::from(stamp));
+    }
+
+    /// Whether streamed BLAS `b` is resident (and so evictable).
+    pub fn holds(&self, b: u32) -> bool {
+        self.residency.contains(ItemId(b))
+    }
+
+    /// BLASes evicted since the renderer started (never decreases).
+    pub fn evictions(&self) -> u64 {
+        self.evictions
+    }
+
+    /// The memory streamed meshes are allocated in.
+    pub fn mesh_class(&self) -> MemoryClass {
+        self.mesh_class
+    }
+
     /// Nothing resident of `blases` BLASes, `tlases` TLASes and `meshes` meshes; streamed
     /// meshes go to `mesh_class`.
     pub fn new(
@@ -176,6 +206,12 @@ impl<'a> StreamingRenderer<'a> {
         for m in self.blas_meshes(b) {
             self.drop_mesh_ref(m);
         }
+    }
+
+    /// Takes a reference to mesh `m` for a BLAS about to use it (before loading it: evicting a
+    /// BLAS that shares it then keeps it).
+    pub(super) fn take_mesh_ref(&mut self, m: usize) {
+        self.res.mesh_refs[m] += 1;
     }
 
     /// Drops one reference to mesh `m`; at zero the mesh and its texture references go.

@@ -39,7 +39,7 @@ fn clicks_parse_and_reject_what_cannot_be_played() {
 #[test]
 fn a_scripted_click_changes_the_controls_like_a_users() {
     let ctx = egui::Context::default();
-    let mut ctl = crate::tests::controls();
+    let mut ctl = crate::testutil::controls();
     let mut script = PanelScript::new(&[
         "2:x".parse().unwrap(),
         "5:ids".parse().unwrap(),

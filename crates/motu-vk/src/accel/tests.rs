@@ -1,7 +1,7 @@
 use super::*;
 use crate::conv::build_flags;
 use crate::error::VkError;
-use crate::testing::{assert_no_validation_errors, context_or_skip};
+use crate::testutil::{assert_no_validation_errors, context_or_skip};
 use crate::Context;
 use crate::{ContextOptions, LimitOverrides, Requirement, ValidationRequest};
 

@@ -1,6 +1,6 @@
 use super::*;
 use crate::context::Requirement;
-use crate::testing::{assert_no_validation_errors, context_or_skip, test_heap};
+use crate::testutil::{assert_no_validation_errors, context_or_skip, test_heap};
 
 /// `try_fit` answers as allocating would (the streamed TLAS rebuild's room probe asks it
 /// instead of allocating) and allocates nothing: no block, no memory.

@@ -5,7 +5,7 @@ use motu_compile::proxy_boxes::{blas_hash, encode_section, StoredProxyBoxes};
 use motu_trace::testutil::{srt, uv_sphere, HierarchyBuilder, OwnedHierarchy};
 
 use super::*;
-use crate::testing::{assert_no_validation_errors, context_or_skip};
+use crate::testutil::{assert_no_validation_errors, context_or_skip};
 use crate::{
     render, Backend, BuildOptions, GpuScene, RenderOptions, Requirement, StreamOptions,
     StreamingRenderer, View,

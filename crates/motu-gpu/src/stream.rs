@@ -363,7 +363,7 @@ impl<'a> StreamingRenderer<'a> {
     /// secondary, so that frame mostly completes in one pass. Used by one frame; a camera of
     /// another size is not probed.
     pub fn set_next_camera(&mut self, camera: Option<motu_abi::camera::CameraParams>) {
-        self.frame.next_camera = camera;
+        self.frame.set_next_camera(camera);
     }
 
     /// Drains every block it can now (`defrag.rs`), after evicting every other resident
@@ -419,3 +419,6 @@ impl<'a> StreamingRenderer<'a> {
             .is_some_and(|a| a.is_some())
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -9,7 +9,7 @@ use motu_abi::aov::{Aov, MISS};
 use motu_abi::camera::{camera_path, CameraPath, CameraPose};
 use motu_trace::testutil::{srt, uv_sphere, HierarchyBuilder, OwnedHierarchy, PiTarget};
 
-use crate::testing::{assert_no_validation_errors, context_or_skip};
+use crate::testutil::{assert_no_validation_errors, context_or_skip};
 use crate::{
     render, Backend, BuildOptions, Context, GpuScene, MeshBlobSource, RenderOptions, Requirement,
     StreamOptions, StreamingRenderer, View,

@@ -2,7 +2,7 @@
 //! `SKIPPED: no Vulkan device: …` without a device, and fails under `MOTU_REQUIRE_GPU=1`.
 //! These need the embedded shaders; the device layer's own tests are motu-vk's.
 
-use crate::testing::{assert_no_validation_errors, context_or_skip};
+use crate::testutil::{assert_no_validation_errors, context_or_skip};
 use crate::*;
 
 fn smoke_expected(input: &[u32]) -> Vec<u32> {

@@ -9,7 +9,7 @@ use motu_abi::camera::CameraParams;
 use motu_abi::lod::LodParams;
 use motu_trace::testutil::{srt, uv_sphere, HierarchyBuilder, OwnedHierarchy, PiTarget};
 
-use crate::testing::{assert_no_validation_errors, context_or_skip};
+use crate::testutil::{assert_no_validation_errors, context_or_skip};
 use crate::{
     render, Backend, BuildOptions, Context, ContextOptions, GpuError, GpuScene, LimitOverrides,
     MeshBlobSource, RenderOptions, Requirement, ValidationRequest, View,

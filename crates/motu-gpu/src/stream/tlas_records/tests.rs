@@ -1,0 +1,105 @@
+use super::*;
+use motu_abi::{BlasRecord, TlasRecord, BLAS_TRIANGLES};
+
+/// The straightforward encoding the in-place one replaces: every resident instance in
+/// order, its index in the TLAS as custom index, triangle instances masked.
+fn naive(view: &HierarchyView<'_>, addrs: &[u64], t: u32) -> Vec<u8> {
+    let mut out = Vec::new();
+    for (j, inst) in instances_of(view, t).iter().enumerate() {
+        let addr = addrs[inst.blas as usize];
+        if addr == 0 {
+            continue;
+        }
+        out.extend_from_slice(&instance_record(view, inst, j as u32, addr));
+    }
+    out
+}
+
+#[test]
+fn chunks_encoded_in_place_equal_the_records_in_order_and_empty_tlases_get_one_inactive() {
+    // Two TLASes: the second's 50 instances (over three BLASes, one of boxes, one not
+    // resident) span several chunks of 3; the first has only non-resident instances.
+    let blases = [
+        BlasRecord {
+            kind: BLAS_TRIANGLES,
+            ..Default::default()
+        },
+        BlasRecord {
+            kind: BLAS_AABBS,
+            ..Default::default()
+        },
+        BlasRecord {
+            kind: BLAS_TRIANGLES,
+            ..Default::default()
+        },
+    ];
+    let addrs = [0x1000u64, 0x2000, 0];
+    let mut instances = vec![
+        InstanceRecord {
+            blas: 2,
+            ..Default::default()
+        };
+        4
+    ];
+    for j in 0..50u32 {
+        let mut m = [0f32; 12];
+        m[3] = j as f32;
+        instances.push(InstanceRecord {
+            tlas_from_blas: m,
+            blas: [0, 1, 2, 0, 2][j as usize % 5],
+            flags: if j % 7 == 0 { FLAG_NEEDS_ANY_HIT } else { 0 },
+            ..Default::default()
+        });
+    }
+    let tlases = [
+        TlasRecord {
+            instance_base: 0,
+            instance_count: 4,
+            ..Default::default()
+        },
+        TlasRecord {
+            instance_base: 4,
+            instance_count: 50,
+            ..Default::default()
+        },
+    ];
+    let view = HierarchyView {
+        tlases: &tlases,
+        instances: &instances,
+        blases: &blases,
+        ..Default::default()
+    };
+    let tail = [7u8; RECORD_BYTES];
+    let records = TlasRecords::count(view, &addrs, &[0, 1], 3 * RECORD_BYTES as u64, |t| {
+        if t == 1 {
+            vec![tail]
+        } else {
+            Vec::new()
+        }
+    });
+    assert_eq!(records.chunk_instances, 3);
+    let expected = naive(&view, &addrs, 1);
+    assert_eq!(
+        expected.len(),
+        30 * RECORD_BYTES,
+        "3 of every 5 instances resident"
+    );
+    assert_eq!(records.record_counts(), vec![1, 31]);
+    // The inactive record of the empty TLAS.
+    assert_eq!(
+        records.tlases[0].2,
+        vec![encode_instance(&super::super::IDENTITY, false, false, 0, 0)]
+    );
+    // Each chunk encoded into its counted slice, concatenated: the naive encoding.
+    let (_, counts, t1_tail) = &records.tlases[1];
+    let range = instances_of(&view, 1);
+    let mut got = Vec::new();
+    for (k, &n) in counts.iter().enumerate() {
+        let mut out = vec![0u8; n as usize * RECORD_BYTES];
+        let start = k * 3;
+        records.encode_chunk(&range[start..(start + 3).min(range.len())], start, &mut out);
+        got.extend_from_slice(&out);
+    }
+    assert_eq!(got, expected);
+    assert_eq!(t1_tail, &vec![tail]);
+}
