@@ -464,7 +464,9 @@ fn render_full_if_it_fits(
     });
     let instance_lod = job.lod.instance.as_ref();
     let last = *cams.last().ok_or(RenderError::NoFrame)?;
-    let rendered = if cams.len() == 1 && job.recorded.is_none() {
+    // One camera renders as `render` does (a recorded path of one camera too: the denoiser's
+    // albedo view then meets the shaded frame's hits exactly).
+    let rendered = if cams.len() == 1 {
         crate::gpu::render_gpu(
             &full,
             pkg,
