@@ -6,7 +6,7 @@
 //! full build with room to spare, and a budget below it streams as before. The bound is
 //! conservative on purpose: a wrong "fits" would cost a failed full build and then the stream.
 
-use motu_abi::{HierarchyView, BLAS_AABBS, BLAS_TRIANGLES, FLAG_NEEDS_ANY_HIT};
+use motu_abi::{HierarchyView, BLAS_AABBS, BLAS_TRIANGLES};
 use motu_vk::{AsBuildFlags, BlasBuild, BlasGeometry, Context};
 
 use crate::error::Result;
@@ -69,21 +69,7 @@ pub fn full_build_fits(
     let mut scratch_max = 0u64;
     for r in view.blases {
         let shape: Vec<BlasGeometry> = match r.kind {
-            BLAS_TRIANGLES => {
-                let range = r.item_base as usize..(r.item_base + r.item_count) as usize;
-                view.geometries[range]
-                    .iter()
-                    .map(|g| {
-                        let m = &view.meshes[g.mesh as usize];
-                        BlasGeometry::Triangles {
-                            vertex_count: m.vertex_count,
-                            triangle_count: m.triangle_count,
-                            indexed: true,
-                            opaque: m.flags & FLAG_NEEDS_ANY_HIT == 0,
-                        }
-                    })
-                    .collect()
-            }
+            BLAS_TRIANGLES => super::floor::triangle_shape(view, r),
             BLAS_AABBS => vec![BlasGeometry::Aabbs {
                 aabb_count: r.item_count,
                 opaque: false,

@@ -344,6 +344,27 @@ fn table_bytes(view: &HierarchyView<'_>, proxies: u64, members: u64) -> u64 {
 }
 
 /// The triangle BLAS with the largest build: meshes, structure, scratch.
+/// The build shape of triangle BLAS record `r` (one indexed triangle geometry per mesh), for
+/// the device's size query.
+pub(super) fn triangle_shape(
+    view: &HierarchyView<'_>,
+    r: &motu_abi::BlasRecord,
+) -> Vec<BlasGeometry> {
+    let range = r.item_base as usize..(r.item_base + r.item_count) as usize;
+    view.geometries[range]
+        .iter()
+        .map(|g| {
+            let m = &view.meshes[g.mesh as usize];
+            BlasGeometry::Triangles {
+                vertex_count: m.vertex_count,
+                triangle_count: m.triangle_count,
+                indexed: true,
+                opaque: m.flags & FLAG_NEEDS_ANY_HIT == 0,
+            }
+        })
+        .collect()
+}
+
 struct LargestBuild {
     blas: Option<u32>,
     /// Its build's bytes, and what stays resident after (meshes and structure).
@@ -363,16 +384,10 @@ impl LargestBuild {
                 continue;
             }
             let range = r.item_base as usize..(r.item_base + r.item_count) as usize;
-            let mut shape = Vec::new();
+            let shape = triangle_shape(view, r);
             let mut mesh_bytes = 0u64;
             for g in &view.geometries[range] {
                 let m = &view.meshes[g.mesh as usize];
-                shape.push(BlasGeometry::Triangles {
-                    vertex_count: m.vertex_count,
-                    triangle_count: m.triangle_count,
-                    indexed: true,
-                    opaque: m.flags & FLAG_NEEDS_ANY_HIT == 0,
-                });
                 // As MeshGpu lays it out: positions, indices, the primitive map of a cluster.
                 let map = if m.flags & motu_abi::FLAG_PRIMITIVE_MAP != 0 {
                     u64::from(m.triangle_count) * 4
