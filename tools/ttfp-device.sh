@@ -8,7 +8,8 @@
 #   S=0.63 bash tools/ttfp-device.sh
 #
 # Environment: S, BUDGETS (GiB, default "8 24"), SIZE (default 640x360), ROUNDS (default 1),
-# OUT (default ./ttfp-out), TTFP_WORK (scenes, default target/motu-ttfp), KEEP_PBRT=1 keeps the
+# EXTRA (flags added to every streamed render, e.g. "--stream-host-cache serialize" for an A/B;
+# TAG names those runs apart), OUT (default ./ttfp-out), TTFP_WORK (scenes, default target/motu-ttfp), KEEP_PBRT=1 keeps the
 # generated pbrt files (they are deleted after the import to leave disk for the package).
 # Writes into $OUT: import.time, report.json, per run NAME.json (--stats) and summary.txt.
 set -uo pipefail
@@ -66,9 +67,14 @@ print(f"  {sys.argv[2]}: {wall:.1f} s to exit; {parts}; passes {f0.get('passes',
       f"built {f0.get('built_bytes', 0) / 1e9:.2f} GB, rebuilt {f0.get('rebuilt_blases', '-')} "
       f"restored {f0.get('restored_blases', '-')} ({f0.get('restored_bytes', 0) / 1e9:.2f} GB)")
 t = s.get("totals") or {}
-ph = ["mesh_ms", "blas_ms", "tlas_ms", "evict_ms", "tables_ms", "cache_store_ms", "store_serialize_ms",
+ph = ["mesh_ms", "blas_ms", "tlas_ms", "evict_ms", "tables_ms", "clone_ms", "cache_store_ms", "store_serialize_ms",
       "store_copy_ms", "store_put_ms", "restore_ms", "restore_read_ms", "restore_upload_ms", "restore_gpu_ms"]
 print("    frame 0: " + " ".join(f"{k[:-3]}={f0[k]:.0f}" for k in ph if isinstance(f0.get(k), (int, float))))
+if t:
+    print(f"    totals: host cache {t.get('host_cache_mode')}, cloned {t.get('cloned_blases')} "
+          f"({t.get('cloned_bytes', 0) / 1e9:.2f} GB, {t.get('clone_ms', 0):.0f} ms), from clones "
+          f"{t.get('restored_from_clone')}, persisted {t.get('persisted_blases')} "
+          f"({t.get('persisted_bytes', 0) / 1e9:.2f} GB, {t.get('persist_ms', 0):.0f} ms)")
 d = (s.get("cache") or {}).get("disk") or {}
 if d:
     busy = d.get("write_busy_ms", 0)
@@ -89,9 +95,9 @@ for r in $(seq 1 "$ROUNDS"); do
         CACHE=$WORK/as-cache-$b-$r
         rm -rf "$CACHE"
         step "round $r: streamed at $b GiB, cold cache"
-        timed "s$b-cold-$r" --stream --vram-budget "${b}GiB" --as-cache "$CACHE"
+        timed "s$b${TAG:-}-cold-$r" --stream --vram-budget "${b}GiB" --as-cache "$CACHE" ${EXTRA:-}
         step "round $r: streamed at $b GiB, warm cache"
-        timed "s$b-warm-$r" --stream --vram-budget "${b}GiB" --as-cache "$CACHE"
+        timed "s$b${TAG:-}-warm-$r" --stream --vram-budget "${b}GiB" --as-cache "$CACHE" ${EXTRA:-}
         du -sh "$CACHE" | tee -a "$OUT/summary.txt"
         rm -rf "$CACHE"
     done

@@ -119,8 +119,47 @@ fn a_path_that_returns_restores_from_the_host_cache() {
         t0["rebuilt_bytes"]
     );
     assert!(json_u64(&t1["restored_bytes"]) > 0 && t1["restore_gb_per_s"].as_f64().unwrap() > 0.0);
+    // Unified memory: serialised as built, no clones.
+    assert_eq!(t1["host_cache_mode"], "serialize", "{t1}");
+    assert_eq!(json_u64(&t1["cloned_blases"]), 0, "{t1}");
     f.same_as_reference(&off_aov);
     f.same_as_reference(&on_aov);
+
+    // Host memory apart from the budget (a discrete GPU): an evicted BLAS is cloned into host
+    // memory by the device and cloned back when it returns; nothing is serialised.
+    let discrete = [("MOTU_SIMULATE_DISCRETE_MEMORY", "1")];
+    let (cl, cl_aov) = path(
+        &f,
+        "host-clone",
+        "pipeline",
+        &budget,
+        &["--no-as-cache"],
+        &discrete,
+    );
+    let tc = totals(&cl);
+    eprintln!("clones: {tc}");
+    assert_eq!(tc["host_cache_mode"], "clone", "{tc}");
+    assert!(
+        json_u64(&tc["cloned_blases"]) > 0,
+        "evicted BLASes cloned: {tc}"
+    );
+    assert!(
+        json_u64(&tc["restored_from_clone"]) > 0,
+        "returns cloned back: {tc}"
+    );
+    assert_eq!(json_u64(&tc["cache_stored"]), 0, "nothing serialised: {tc}");
+    assert_eq!(json_u64(&tc["persisted_blases"]), 0, "no directory: {tc}");
+    assert!(
+        json_u64(&tc["host_clone_bytes"]) > 0 && json_u64(&tc["cloned_bytes"]) > 0,
+        "{tc}"
+    );
+    assert!(
+        json_u64(&tc["rebuilt_bytes"]) < json_u64(&t0["rebuilt_bytes"]),
+        "fewer rebuilt bytes with clones: {} against {}",
+        tc["rebuilt_bytes"],
+        t0["rebuilt_bytes"]
+    );
+    f.same_as_reference(&cl_aov);
 }
 
 #[test]
@@ -156,6 +195,20 @@ fn a_second_process_with_a_warm_cache_rebuilds_nothing_it_cached() {
             "every build is cached: {}",
             totals(&cold)
         );
+        // With host memory apart the structures are kept as clones while the path renders and
+        // serialised into the directory after its frames; else as they are built.
+        let persisted = json_u64(&totals(&cold)["persisted_blases"]);
+        if discrete.is_empty() {
+            assert_eq!(persisted, 0, "{}", totals(&cold));
+        } else {
+            assert_eq!(totals(&cold)["host_cache_mode"], "clone");
+            assert_eq!(
+                persisted,
+                stored,
+                "written after the frames: {}",
+                totals(&cold)
+            );
+        }
         let (warm, warm_aov) = path(
             &f,
             &format!("warm-{backend}"),

@@ -55,7 +55,7 @@ impl AsCache {
                 .as_mut()
                 .and_then(|d| d.get(key, compat))
                 .map(|blob| {
-                    self.host.insert(*key, Arc::clone(&blob));
+                    self.promote(*key, &blob);
                     (blob, Tier::Disk)
                 }),
         };
@@ -89,7 +89,7 @@ impl AsCache {
             let wanted: Vec<CacheKey> = todo.iter().map(|&i| keys[i]).collect();
             for (i, blob) in todo.into_iter().zip(disk.get_many(&wanted, compat)) {
                 if let Some(blob) = blob {
-                    self.host.insert(keys[i], Arc::clone(&blob));
+                    self.promote(keys[i], &blob);
                     found[i] = Some((blob, Tier::Disk));
                 }
             }
@@ -121,7 +121,15 @@ impl AsCache {
                 disk.put_shared(&key, &blob);
             }
         }
-        self.host.insert(key, blob);
+        self.promote(key, &blob);
+    }
+
+    /// Keeps `blob` in host memory, unless the host tier holds nothing (a bound of 0: the
+    /// caller keeps structures in host memory another way, so no refusal is counted).
+    fn promote(&mut self, key: CacheKey, blob: &Arc<[u8]>) {
+        if self.host.capacity_bytes() > 0 {
+            self.host.insert(key, Arc::clone(blob));
+        }
     }
 
     /// Where `key` is (host first), without reading, counting or refreshing it. The disk

@@ -473,6 +473,33 @@ pub struct StreamBoundArgs {
     /// (streaming.mesh_bytes).
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, default_value = "auto")]
     pub stream_mesh_memory: MeshMemoryArg,
+    /// Streaming: how evicted BLASes are kept in host memory (`--host-cache` bytes) when they
+    /// return. `clone`: the device copies an evicted BLAS into host memory and back (no host
+    /// work; the cache directory is written after the frames); `serialize`: every BLAS built
+    /// is serialised into host memory and the directory as it is built; `auto` (default):
+    /// clone on a discrete GPU, serialize where host memory counts against the budget
+    /// (lavapipe, integrated GPUs). --stats: stream.totals.host_cache_mode, cloned_blases,
+    /// restored_from_clone, persisted_blases, persist_ms.
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, default_value = "auto")]
+    pub stream_host_cache: HostCacheArg,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum HostCacheArg {
+    #[default]
+    Auto,
+    Clone,
+    Serialize,
+}
+
+impl From<HostCacheArg> for motu_gpu::HostCacheMode {
+    fn from(a: HostCacheArg) -> Self {
+        match a {
+            HostCacheArg::Auto => motu_gpu::HostCacheMode::Auto,
+            HostCacheArg::Clone => motu_gpu::HostCacheMode::Clone,
+            HostCacheArg::Serialize => motu_gpu::HostCacheMode::Serialize,
+        }
+    }
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]

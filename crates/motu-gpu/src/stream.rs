@@ -113,6 +113,7 @@
 mod budget;
 mod buffers;
 mod cache;
+mod clones;
 mod defrag;
 mod demand;
 mod fits;
@@ -138,6 +139,7 @@ mod topology;
 mod transfer;
 
 pub use cache::StructureCache;
+pub use clones::HostCacheMode;
 pub use fits::{full_build_fits, FullBuildFit};
 pub use floor::{
     persistent_tlas_estimate, streamed_mesh_total_bytes, streaming_floor, streaming_floor_planned,
@@ -184,6 +186,8 @@ pub struct StreamingRenderer<'a> {
     // Acceleration structures and buffers first (destroyed before the heap's blocks).
     /// What is resident of the streamed BLASes and meshes, and the choice of what goes.
     res: residency::Resident,
+    /// Evicted BLASes cloned into host memory (`clones.rs`).
+    clones: clones::HostClones,
     /// The TLASes with their proxies and marks, persistent or rebuilt, and which are dirty.
     tlases: tlases::Tlases,
     /// The GPU copies of the node tables and the stamp buffers the shaders read.
@@ -309,6 +313,7 @@ impl<'a> StreamingRenderer<'a> {
             opts,
             build_opts,
             reuse: cache::Reuse::new(nb),
+            clones: clones::HostClones::default(),
             poisoned: None,
             totals,
             ctx: ctx.clone(),

@@ -35,6 +35,8 @@ pub struct StreamBounds {
     pub defrag: bool,
     /// `--stream-mesh-memory`: where streamed meshes live.
     pub mesh_memory: motu_gpu::MeshMemory,
+    /// `--stream-host-cache`: how evicted BLASes are kept in host memory.
+    pub host_cache_mode: motu_gpu::HostCacheMode,
 }
 
 impl StreamBounds {
@@ -52,6 +54,7 @@ impl StreamBounds {
             tlas_update: self.tlas_update,
             defrag: self.defrag,
             mesh_memory: self.mesh_memory,
+            host_cache_mode: self.host_cache_mode,
             ..d
         }
     }
@@ -84,6 +87,7 @@ impl StreamBounds {
             || self.split_instances.is_some()
             || self.defrag
             || self.mesh_memory != motu_gpu::MeshMemory::Auto
+            || self.host_cache_mode != motu_gpu::HostCacheMode::Auto
     }
 }
 
@@ -351,6 +355,11 @@ pub(crate) fn render_streaming(
         }
         frames.push(st);
         last = Some((out, cam));
+    }
+    // With host clones nothing was serialised while rendering: the directory gets this run's
+    // structures now, after the frames (a failure is a warning: a cache never fails a render).
+    if let Err(e) = tracing::info_span!("persist_cache").in_scope(|| sr.persist_cache()) {
+        tracing::warn!(error = %e, "structure cache: writing this run's structures failed");
     }
     let (out, last_camera) = last.ok_or(RenderError::NoFrame)?;
     let written = frames.last();

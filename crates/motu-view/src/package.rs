@@ -402,6 +402,18 @@ impl<'p> PackageSource<'p> {
     }
 }
 
+impl Drop for PackageSource<'_> {
+    /// A streamed viewer keeping host clones wrote nothing to the cache directory while it
+    /// ran (`motu_gpu` `clones.rs`): its structures go there at exit, for the next process.
+    fn drop(&mut self) {
+        if let Renderer::Stream(Some(sr)) = &mut self.renderer {
+            if let Err(e) = sr.persist_cache() {
+                tracing::warn!(error = %e, "structure cache: writing the viewer's structures failed");
+            }
+        }
+    }
+}
+
 impl FrameSource for PackageSource<'_> {
     fn context(&self) -> &motu_gpu::Context {
         &self.ctx

@@ -31,6 +31,27 @@ impl AccelStruct {
         size_bytes: u64,
         level: AsLevel,
     ) -> Result<AccelStruct> {
+        Self::new_in(
+            ctx,
+            heap,
+            label,
+            size_bytes,
+            level,
+            MemoryClass::DeviceLocal,
+        )
+    }
+
+    /// [`new`](Self::new) in `class` memory: `HostVisible` keeps a structure in host memory,
+    /// outside a discrete GPU's VRAM budget (a copy to restore from by a device-side clone,
+    /// never traced there).
+    pub fn new_in(
+        ctx: &Context,
+        heap: &mut GpuHeap,
+        label: &str,
+        size_bytes: u64,
+        level: AsLevel,
+        class: MemoryClass,
+    ) -> Result<AccelStruct> {
         let kind = match level {
             AsLevel::Top => AllocKind::TlasStorage,
             AsLevel::Bottom => AllocKind::BlasStorage,
@@ -40,7 +61,7 @@ impl AccelStruct {
             size_bytes,
             BufferUsage::ACCELERATION_STRUCTURE_STORAGE,
             kind,
-            MemoryClass::DeviceLocal,
+            class,
             ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
         )?;
         let accel = ctx.accel_device()?;

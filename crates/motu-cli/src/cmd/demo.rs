@@ -134,6 +134,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             stream_split_instances: None,
             stream_defrag: false,
             stream_mesh_memory: crate::cli::MeshMemoryArg::Auto,
+            stream_host_cache: crate::cli::HostCacheArg::Auto,
         },
         as_cache: crate::cli::AsCacheArgs {
             host_cache: None,

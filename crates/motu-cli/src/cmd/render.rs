@@ -34,6 +34,7 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         split_instances: b.stream_split_instances,
         defrag: b.stream_defrag,
         mesh_memory: b.stream_mesh_memory.into(),
+        host_cache_mode: b.stream_host_cache.into(),
     }
 }
 

@@ -21,6 +21,7 @@ use motu_ascache::{AsCache, CacheKey, CacheKeyBuilder, CacheStats, Tier, SERIALI
 use motu_vk::{AsLevel, SerializedHeader, SizeQueries, SERIALIZED_ALIGNMENT};
 use rayon::prelude::*;
 
+use super::clones::HostCacheMode;
 use super::proxy_boxes::{self, Box6};
 use super::skeleton::ms_since;
 use super::transfer::{Transfer, TransferBuffers, TRANSFER_CAP_BYTES};
@@ -33,6 +34,9 @@ use crate::scene::AccelStruct;
 pub struct StructureCache {
     cache: AsCache,
     scene_identity: Vec<u8>,
+    /// The host tier's bound as given: a renderer keeping clones takes it for them and sets
+    /// the serialised tier's to 0 (`clones.rs`); the next renderer starts from it again.
+    host_bytes: u64,
 }
 
 impl StructureCache {
@@ -40,6 +44,7 @@ impl StructureCache {
     /// package's chunk and section checksums).
     pub fn new(cache: AsCache, scene_identity: &[u8]) -> StructureCache {
         StructureCache {
+            host_bytes: cache.host().capacity_bytes(),
             cache,
             scene_identity: scene_identity.to_vec(),
         }
@@ -98,8 +103,27 @@ impl Reuse {
 impl StreamingRenderer<'_> {
     /// Keeps every BLAS built from now on in `cache` and restores from it instead of
     /// rebuilding (see the module docs).
-    pub fn attach_cache(&mut self, cache: StructureCache) {
+    pub fn attach_cache(&mut self, mut cache: StructureCache) {
         let n = self.view.blases.len();
+        let host_bytes = cache.host_bytes;
+        let clone = match self.opts.host_cache_mode {
+            HostCacheMode::Clone => true,
+            HostCacheMode::Serialize => false,
+            HostCacheMode::Auto => !self.heap.host_visible_counts_against_budget(),
+        };
+        self.totals.host_cache_mode = match (host_bytes, clone) {
+            (0, _) => "off",
+            (_, true) => "clone",
+            (_, false) => "serialize",
+        };
+        if clone && host_bytes > 0 {
+            // The host's bytes go to clones; serialised blobs then only pass through to the
+            // directory (`clones.rs`).
+            self.clones.enable(n, host_bytes);
+            cache.cache.host_mut().set_capacity_bytes(0);
+        } else {
+            cache.cache.host_mut().set_capacity_bytes(host_bytes);
+        }
         self.reuse.cache = Some(Attached {
             cache,
             keys: vec![None; n],
@@ -111,6 +135,11 @@ impl StreamingRenderer<'_> {
     /// scene, e.g. the viewer's after an element toggle: its entries stay warm and its pending
     /// disk writes go on instead of being waited for.
     pub fn take_cache(&mut self) -> Option<StructureCache> {
+        // What only this renderer holds (host clones, resident structures) goes to the
+        // directory first; a failure is a warning (a cache never fails a render).
+        if let Err(e) = self.persist_cache() {
+            tracing::warn!(error = %e, "structure cache: writing this renderer's structures failed");
+        }
         self.reuse.cache.take().map(|a| a.cache)
     }
 
@@ -150,6 +179,18 @@ impl StreamingRenderer<'_> {
         if self.reuse.cache.is_none() || ids.is_empty() {
             return Ok((Vec::new(), ids.to_vec()));
         }
+        // Host clones first (`clones.rs`): a device-side copy, no host work.
+        let (from_clones, ids) = self.restore_clones(ids, evict)?;
+        if ids.is_empty() {
+            return Ok((from_clones, ids));
+        }
+        let (mut restored, rest) = self.restore_serialized(&ids, evict)?;
+        restored.extend(from_clones);
+        Ok((restored, rest))
+    }
+
+    /// [`Self::restore_cached`] from the serialised tiers (host memory, then the directory).
+    fn restore_serialized(&mut self, ids: &[usize], evict: bool) -> Result<Restored> {
         let t = Instant::now();
         let ctx = self.ctx.clone();
         let compatible = |h: &[u8; 32]| ctx.acceleration_structure_compatible(h).unwrap_or(false);
@@ -303,7 +344,8 @@ impl StreamingRenderer<'_> {
     /// Serialises the newly built BLASes of `built` into the cache (those it does not hold
     /// yet). A cache that cannot take them (no room for the readback) is skipped, counted.
     pub(super) fn store_built(&mut self, built: &[(usize, AccelStruct)]) -> Result<()> {
-        if self.reuse.cache.is_none() || built.is_empty() {
+        // With host clones the directory is written after the frames (`persist_cache`).
+        if self.reuse.cache.is_none() || built.is_empty() || self.clones.on() {
             return Ok(());
         }
         let t = Instant::now();
@@ -323,6 +365,88 @@ impl StreamingRenderer<'_> {
         self.store_some(&todo)?;
         self.frame.stats.cache_store_ms += ms_since(t);
         Ok(())
+    }
+
+    /// Writes to the cache directory, serialised, every BLAS this renderer holds (resident or
+    /// as a host clone) that the cache lacks: with host clones (`clones.rs`) nothing is
+    /// serialised while frames render, so a caller that wants the next process warm calls
+    /// this after its last frame (`motu render` after the frames, the viewer at exit). Counted
+    /// in [`StreamTotals`](super::StreamTotals) (`persisted_*`). Without clones the blobs were
+    /// stored as they were built and this does nothing.
+    pub fn persist_cache(&mut self) -> Result<()> {
+        let writable = self
+            .reuse
+            .cache
+            .as_ref()
+            .is_some_and(|a| a.cache.cache.disk().is_some_and(|d| d.writable()));
+        if !self.clones.on() || !writable {
+            return Ok(());
+        }
+        let t = Instant::now();
+        let n = self.view.blases.len();
+        // Taken out for the serialise copies and put back after, whatever happens.
+        let mut taken: Vec<(usize, AccelStruct, bool)> = Vec::new();
+        for b in 0..n {
+            if !self.topo.buildable(b) {
+                continue;
+            }
+            let Some(key) = self.blas_key(b) else {
+                continue;
+            };
+            let held = self.reuse.cache.as_ref().expect("attached");
+            if held.cache.cache.contains(&key).is_some() {
+                continue;
+            }
+            if let Some(a) = self.res.blas[b].take() {
+                taken.push((b, a, false));
+            } else if let Some(a) = self.clones.take(b) {
+                taken.push((b, a, true));
+            }
+        }
+        // Counted into the totals below, not into a frame: none is rendering.
+        let before = self.frame.stats.clone();
+        let todo: Vec<(usize, &AccelStruct, CacheKey)> = taken
+            .iter()
+            .map(|(b, a, _)| {
+                (
+                    *b,
+                    a,
+                    self.reuse
+                        .cache
+                        .as_ref()
+                        .and_then(|c| c.keys[*b])
+                        .expect("keyed"),
+                )
+            })
+            .collect();
+        let stored = if todo.is_empty() {
+            Ok(())
+        } else {
+            self.store_some(&todo)
+        };
+        drop(todo);
+        for (b, a, clone) in taken {
+            if clone {
+                self.clones.put_back(b, a);
+            } else {
+                self.res.blas[b] = Some(a);
+            }
+        }
+        let after = std::mem::replace(&mut self.frame.stats, before);
+        let (b, tot) = (&self.frame.stats, &mut self.totals);
+        let count = u64::from(after.cache_stored - b.cache_stored);
+        let bytes = after.cache_stored_bytes - b.cache_stored_bytes;
+        tot.persisted_blases += count;
+        tot.persisted_bytes += bytes;
+        tot.cache_stored += count;
+        tot.cache_stored_bytes += bytes;
+        tot.store_serialize_ms += after.store_serialize_ms - b.store_serialize_ms;
+        tot.store_copy_ms += after.store_copy_ms - b.store_copy_ms;
+        tot.store_put_ms += after.store_put_ms - b.store_put_ms;
+        tot.transfer_batches += after.transfer_batches - b.transfer_batches;
+        tot.transfer_allocations += after.transfer_allocations - b.transfer_allocations;
+        tot.persist_ms += ms_since(t);
+        stored
     }
 
     /// Serialises `todo`: their sizes in one query, then in batches of at most

@@ -151,6 +151,7 @@ impl<'a> StreamingRenderer<'a> {
         self.frame.stats.frame_ms = frame_t0.elapsed().as_secs_f64() * 1e3;
         self.measure_residency(&report);
         self.totals.add_frame(&self.frame.stats, &report);
+        self.totals.host_clone_bytes = self.clones.bytes();
         self.frame_output(camera, image, opts, report)
     }
 

@@ -88,6 +88,9 @@ pub struct StreamOptions {
     /// Where streamed meshes (positions, indices, primitive maps, shading attributes) live
     /// (`--stream-mesh-memory`; see [`MeshMemory`]).
     pub mesh_memory: MeshMemory,
+    /// How evicted BLASes are kept in host memory when a structure cache is attached
+    /// (`--stream-host-cache`; see [`HostCacheMode`](super::HostCacheMode)).
+    pub host_cache_mode: super::HostCacheMode,
 }
 
 /// Where the streaming renderer keeps its meshes ([`StreamOptions::mesh_memory`]). After a
@@ -210,6 +213,7 @@ impl Default for StreamOptions {
             tlas_update: TlasUpdate::Auto,
             defrag: false,
             mesh_memory: MeshMemory::Auto,
+            host_cache_mode: super::HostCacheMode::Auto,
         }
     }
 }

@@ -268,6 +268,7 @@ impl<'a> StreamingRenderer<'a> {
                         given += self.res.blas_bytes[b as usize];
                         self.frame.stats.deferred += 1;
                         if self.res.holds(b) {
+                            self.clone_out(&[b as usize])?;
                             self.evict(b as usize);
                             self.frame.stats.evicted -= 1;
                         }
@@ -286,6 +287,7 @@ impl<'a> StreamingRenderer<'a> {
                     };
                     self.frame.stats.deferred += 1;
                     if self.res.holds(last) {
+                        self.clone_out(&[last as usize])?;
                         self.evict(last as usize);
                         // Given back, not evicted for room: count it as deferred only.
                         self.frame.stats.evicted -= 1;

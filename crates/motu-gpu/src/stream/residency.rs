@@ -171,8 +171,11 @@ impl<'a> StreamingRenderer<'a> {
             first = self.frame.first_stamp,
             "evicting (BLAS, last seen)"
         );
-        for id in victims {
-            self.evict(id.0 as usize);
+        let ids: Vec<usize> = victims.iter().map(|v| v.0 as usize).collect();
+        // Kept in host memory first (`clones.rs`), so a return is a copy, not a build.
+        self.clone_out(&ids)?;
+        for b in ids {
+            self.evict(b);
         }
         tracing::debug!(resident = self.res.residency.len(), "evicted");
         Ok(true)

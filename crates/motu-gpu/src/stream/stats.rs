@@ -123,6 +123,14 @@ pub struct FrameStreamStats {
     pub restore_read_ms: f64,
     pub restore_upload_ms: f64,
     pub restore_gpu_ms: f64,
+    /// Evicted BLASes cloned into host memory (`clones.rs`), their bytes and the time (part of
+    /// `build_ms`); clones refused (host memory, or larger than the bound); and of
+    /// `restored_blases` (and of `restored_from_host`), those cloned back.
+    pub cloned_blases: u32,
+    pub cloned_bytes: u64,
+    pub clone_ms: f64,
+    pub clone_skipped: u32,
+    pub restored_from_clone: u32,
     /// Store and restore batches, and the host-visible buffers allocated for them (kept and
     /// reused on a discrete GPU: far fewer than batches; `transfer.rs`).
     pub transfer_batches: u32,
@@ -289,6 +297,21 @@ pub struct StreamTotals {
     pub restore_gpu_ms: f64,
     pub transfer_batches: u32,
     pub transfer_allocations: u32,
+    /// How evicted BLASes were kept in host memory: "clone" (device-side clones, `clones.rs`),
+    /// "serialize" (serialised as built), "off" (no host bytes), "" (no cache attached).
+    pub host_cache_mode: &'static str,
+    /// Over all frames (as [`FrameStreamStats`]): clones made, their bytes and time, and the
+    /// BLASes cloned back; the clones' bytes held after the last frame.
+    pub cloned_blases: u64,
+    pub cloned_bytes: u64,
+    pub clone_ms: f64,
+    pub restored_from_clone: u64,
+    pub host_clone_bytes: u64,
+    /// Written to the cache directory after the frames (`persist_cache`, with host clones):
+    /// BLASes, serialised bytes, milliseconds.
+    pub persisted_blases: u64,
+    pub persisted_bytes: u64,
+    pub persist_ms: f64,
     /// Triangles of every buildable triangle BLAS: what one full build costs.
     pub scene_triangles: u64,
     /// Bytes the skeleton (tables, PI BLASes, root TLAS, proxies) took at start.
@@ -377,6 +400,10 @@ impl StreamTotals {
         tot.restore_gpu_ms += st.restore_gpu_ms;
         tot.transfer_batches += st.transfer_batches;
         tot.transfer_allocations += st.transfer_allocations;
+        tot.cloned_blases += u64::from(st.cloned_blases);
+        tot.cloned_bytes += st.cloned_bytes;
+        tot.clone_ms += st.clone_ms;
+        tot.restored_from_clone += u64::from(st.restored_from_clone);
         tot.restore_gb_per_s = if tot.restore_ms > 0.0 {
             tot.restored_bytes as f64 / (tot.restore_ms * 1e6)
         } else {
