@@ -51,10 +51,12 @@ timed() {
         --stats "$OUT/$name.json" "$@" >"$WORK/$name.log" 2>&1 ||
         { tail -5 "$WORK/$name.log"; die "$name failed"; }
     t1=$(date +%s.%N)
-    python3 - "$OUT/$name.json" "$name" "$t0" "$t1" <<'PY' | tee -a "$OUT/summary.txt"
-import json, sys
+    python3 - "$OUT/$name.json" "$name" "$t0" "$t1" "$WORK/$name.png" <<'PY' | tee -a "$OUT/summary.txt"
+import json, os, sys
 st = json.load(open(sys.argv[1]))
 wall = float(sys.argv[4]) - float(sys.argv[3])
+# The PNG's last write (the render commits its outputs, then the cache's queued writes finish).
+to_png = os.path.getmtime(sys.argv[5]) - float(sys.argv[3])
 s = st.get("stream") or {}
 up = s.get("startup") or {}
 fr = s.get("frames") or [{}]
@@ -62,7 +64,7 @@ f0 = fr[0]
 keys = ["before_render_ms", "device_ms", "split_ms", "clusters_ms", "floor_ms", "init_ms",
         "derived_ms", "persistent_choice_ms", "proxy_boxes_ms", "skeleton_ms", "first_frame_ms", "to_first_pixel_ms", "write_ms"]
 parts = " ".join(f"{k[:-3]}={up[k]:.0f}" for k in keys if isinstance(up.get(k), (int, float)))
-print(f"  {sys.argv[2]}: {wall:.1f} s to exit; {parts}; passes {f0.get('passes', '-')}, "
+print(f"  {sys.argv[2]}: {to_png:.1f} s to the PNG, {wall:.1f} s to exit; {parts}; passes {f0.get('passes', '-')}, "
       f"build {f0.get('build_ms', 0):.0f} ms trace {f0.get('trace_ms', 0):.0f} ms, "
       f"built {f0.get('built_bytes', 0) / 1e9:.2f} GB, rebuilt {f0.get('rebuilt_blases', '-')} "
       f"restored {f0.get('restored_blases', '-')} ({f0.get('restored_bytes', 0) / 1e9:.2f} GB)")

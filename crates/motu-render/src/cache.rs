@@ -55,6 +55,11 @@ impl CacheSettings {
                     // Files written beside the next builds instead of between them; the
                     // process writes what is queued before it exits.
                     background: true,
+                    // The queue may run well ahead of the disk: `render` drops the cache (and
+                    // waits for it) after writing its image, so a cold frame does not wait for
+                    // the directory. Half the host cache's bytes, at least the default.
+                    max_pending_bytes: (host_bytes / 2)
+                        .max(motu_ascache::DEFAULT_MAX_PENDING_BYTES),
                     ..DiskOptions::default()
                 },
             )

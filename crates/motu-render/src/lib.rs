@@ -60,7 +60,7 @@ pub use gpu::build_scene;
 pub use lod::{choose_lod_mode, LodChoice, LodMode};
 pub use meshes::{PackageGeometry, PackageMeshes};
 pub use motu_compile::{StreamSplit, STREAM_SPLIT_INSTANCES};
-pub use session::{render, RenderJob, Rendered};
+pub use session::{render, PendingCacheWrites, RenderJob, Rendered};
 pub use settings::{
     CameraRequest, DeviceRequest, RenderEvent, RenderSettings, StreamSettings, TraversalLimits,
 };

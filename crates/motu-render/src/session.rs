@@ -36,6 +36,22 @@ pub struct Rendered {
     pub rgba8: Vec<u8>,
     /// CLI.md's `--stats` keys (the backend's stats, the render path's, the session's).
     pub stats: RenderStats,
+    /// A streamed render's structure cache, its directory writes possibly still queued: the
+    /// caller drops it after writing its outputs, so the image does not wait for the disk
+    /// (dropping waits for the writes).
+    pub pending_cache_writes: Option<PendingCacheWrites>,
+}
+
+/// See [`Rendered::pending_cache_writes`].
+pub struct PendingCacheWrites {
+    /// Held for its drop, which waits for the queued writes.
+    _cache: motu_gpu::StructureCache,
+}
+
+impl std::fmt::Debug for PendingCacheWrites {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_tuple("PendingCacheWrites").finish()
+    }
 }
 
 impl Rendered {
@@ -67,6 +83,7 @@ pub fn render(
     let instance_lod = job.lod.instance.as_ref();
     // The image's camera: the streamed sweep's last one, else the job's.
     let mut image_camera = camera;
+    let mut pending_cache_writes = None;
     let (aov, rgba8, path): (Aov, Vec<u8>, PathStats) = match (s.backend, &s.stream) {
         (Backend::Cpu, _) => {
             let cams = recorded
@@ -75,10 +92,10 @@ pub fn render(
             crate::cpu::render_cpu(s, pkg, view, lod, instance_lod, &cams)?
         }
         (backend, Some(stream)) => {
-            let (rendered, last) =
-                crate::stream::render_streaming(s, stream, job, backend, progress)?;
-            image_camera = last;
-            rendered
+            let done = crate::stream::render_streaming(s, stream, job, backend, progress)?;
+            image_camera = done.camera;
+            pending_cache_writes = done.cache.map(|c| PendingCacheWrites { _cache: c });
+            done.rendered
         }
         (backend, None) => match recorded {
             Some(cams) => {
@@ -142,7 +159,12 @@ pub fn render(
         }
         progress(RenderEvent::TruncatedWritten { what: &what });
     }
-    Ok(Rendered { aov, rgba8, stats })
+    Ok(Rendered {
+        aov,
+        rgba8,
+        stats,
+        pending_cache_writes,
+    })
 }
 
 /// `--denoise` on a scene with textured materials: the same camera's `albedo` view (the
@@ -178,7 +200,7 @@ fn texture_albedo(
             &cameras,
         )?,
         (backend, Some(stream)) => {
-            crate::stream::render_streaming(&s, stream, &albedo_job, backend, &mut |_| {})?.0
+            crate::stream::render_streaming(&s, stream, &albedo_job, backend, &mut |_| {})?.rendered
         }
         (backend, None) => crate::gpu::render_gpu(
             &s,

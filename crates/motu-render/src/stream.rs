@@ -200,13 +200,21 @@ fn ms_since(t: Instant) -> f64 {
 /// `--stream`: builds only what rays touch, evicting under the budget, frame by frame along a
 /// camera path (`frames`; one frame renders the camera itself). Each frame is reported to
 /// `progress` before its completeness is checked.
+/// A streamed render: the image, its camera, and the structure cache (directory writes maybe
+/// still queued; `None` without one) for the caller to drop after its outputs.
+pub(crate) struct Streamed {
+    pub rendered: Rendered,
+    pub camera: CameraParams,
+    pub cache: Option<motu_gpu::StructureCache>,
+}
+
 pub(crate) fn render_streaming(
     s: &RenderSettings,
     stream: &StreamSettings,
     job: &crate::RenderJob<'_>,
     backend: Backend,
     progress: &mut dyn FnMut(RenderEvent<'_>),
-) -> Result<(Rendered, CameraParams), RenderError> {
+) -> Result<Streamed, RenderError> {
     let (pkg, view, recorded, started) = (job.package, job.view, job.recorded, job.started);
     let _span = tracing::info_span!("stream_render").entered();
     let mut startup = StreamStartup {
@@ -219,7 +227,14 @@ pub(crate) fn render_streaming(
     let mut stream_fit = None;
     if !stream.always {
         match render_full_if_it_fits(s, job, backend, &ctx, progress)? {
-            Fit::Rendered(done) => return Ok(*done),
+            Fit::Rendered(done) => {
+                let (rendered, camera) = *done;
+                return Ok(Streamed {
+                    rendered,
+                    camera,
+                    cache: None,
+                });
+            }
             Fit::Streams(fit) => stream_fit = Some(fit),
         }
     }
@@ -382,10 +397,16 @@ pub(crate) fn render_streaming(
         stream_fit,
         ..PathStats::new(FrameStats::gpu(&out.stats))
     };
+    // The cache leaves with the image: its queued directory writes finish after the outputs.
+    let cache = sr.take_cache();
     drop(sr);
     ctx.check_validation()
         .map_err(|e| RenderError::Validation(e.into()))?;
-    Ok(((out.aov, out.rgba8, stats), last_camera))
+    Ok(Streamed {
+        rendered: (out.aov, out.rgba8, stats),
+        camera: last_camera,
+        cache,
+    })
 }
 
 /// The settings of the full build that renders a `--stream` job whose budget holds the whole

@@ -340,6 +340,15 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         outs.write(p, serde_json::to_string_pretty(&out.stats)?.as_bytes())?;
     }
     outs.commit()?;
+    // The structure cache's queued directory writes, after the outputs (dropping waits).
+    if let Some(pending) = out.pending_cache_writes.take() {
+        let t = std::time::Instant::now();
+        drop(pending);
+        tracing::info!(
+            ms = t.elapsed().as_secs_f64() * 1e3,
+            "structure cache written"
+        );
+    }
     eprintln!(
         "rendered {} ({}×{}, {}): {:.1} ms/frame, {:.2} Mrays/s, {:.2} traces/ray",
         a.output.display(),
