@@ -97,7 +97,7 @@ impl Cutter {
                     let sent = motu_compile::partition::partition_mesh(
                         &job.data,
                         job.bound,
-                        &mut |c: Cluster| done_tx.send(Cut::Cluster(c)),
+                        &mut |c: Cluster| done_tx.send(Cut::Cluster(c)).map_err(|_| ()),
                     );
                     drop(job.data);
                     let ms = t.elapsed().as_secs_f64() * 1e3;
