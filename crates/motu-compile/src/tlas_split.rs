@@ -237,16 +237,16 @@ impl StreamSplit {
         (r.split_tlases, r.split_pieces)
     }
 
-    /// The split in the form a package stores it ([`StoredStreamSplit`]), `view` being the
-    /// hierarchy it was made from; `self` must come from [`split_tagged`] (origins in `_pad`).
-    fn stored(&self, view: &HierarchyView<'_>) -> StoredStreamSplit {
+    /// The split in the form a package stores it ([`StoredStreamSplit`]), made from a
+    /// hierarchy of `n` instances; `self` must come from [`split_tagged`] (origins in `_pad`).
+    fn stored(&self, n: usize) -> StoredStreamSplit {
         let (tlases_split, pieces) = self.counts();
         let mut source = Vec::with_capacity(self.scene.instances.len());
         let mut extra_instances = Vec::new();
         for inst in &self.scene.instances {
             // `split_for_streaming` tags each copied instance with its index + 1 (in `_pad`);
             // the split's own AABB-BLAS instances carry 0.
-            if inst._pad != 0 && (inst._pad as usize) <= view.instances.len() {
+            if inst._pad != 0 && (inst._pad as usize) <= n {
                 source.push(inst._pad - 1);
             } else {
                 source.push(NONE_U32);
@@ -360,40 +360,65 @@ pub fn stored_stream_split(
     view: &HierarchyView<'_>,
     cap: u32,
 ) -> Result<Option<StoredStreamSplit>, CompileError> {
-    Ok(split_tagged(view, cap)?.map(|s| s.stored(view)))
+    Ok(split_tagged(view, cap)?.map(|s| s.stored(view.instances.len())))
 }
 
-/// [`split_for_streaming`] with each instance's origin left in `_pad` (index + 1; 0 for the
-/// split's own AABB-BLAS instances).
-fn split_tagged(view: &HierarchyView<'_>, cap: u32) -> Result<Option<StreamSplit>, CompileError> {
-    let cap = cap.max(2) as usize;
-    let over: Vec<u32> = (0..view.tlases.len() as u32)
-        .filter(|&t| view.tlases[t as usize].instance_count as usize > cap)
-        .collect();
-    if over.is_empty() {
+/// [`stored_stream_split`] of `compiled` itself, without a copy of its instance table (the
+/// import's largest table: 64 bytes an instance): the table is moved into the split, tagged,
+/// and put back in its order afterwards. `compiled` is unchanged on success; on an error its
+/// instance table may be lost (the caller fails the import).
+pub fn stored_stream_split_in_place(
+    compiled: &mut CompiledScene,
+    cap: u32,
+) -> Result<Option<StoredStreamSplit>, CompileError> {
+    let Some(over) = over_cap(&compiled.tlases, cap) else {
         return Ok(None);
-    }
-    let _span = tracing::info_span!("split for streaming", tlases = over.len()).entered();
-    // Each instance remembers where it came from (its index + 1 in `_pad`, always 0 in a
-    // package) so that [`StreamSplit::stored`] can store the split as a map; cleared below.
-    if view.instances.len() >= NONE_U32 as usize {
+    };
+    let n = compiled.instances.len();
+    let mut instances = std::mem::take(&mut compiled.instances);
+    tag_origins(&mut instances)?;
+    let view = compiled.view();
+    let mut out = CompiledScene {
+        instances,
+        ..tables_of(&view)
+    };
+    split_tagged_scene(&mut out, over, cap)?;
+    let split = StreamSplit { scene: out };
+    let stored = split.stored(n);
+    compiled.instances = untag_in_order(split.scene.instances, n)?;
+    Ok(Some(stored))
+}
+
+/// The TLASes of over `cap` instances (`None`: none is).
+fn over_cap(tlases: &[TlasRecord], cap: u32) -> Option<Vec<u32>> {
+    let cap = cap.max(2) as usize;
+    let over: Vec<u32> = (0..tlases.len() as u32)
+        .filter(|&t| tlases[t as usize].instance_count as usize > cap)
+        .collect();
+    (!over.is_empty()).then_some(over)
+}
+
+/// Each instance remembers where it came from (its index + 1 in `_pad`, always 0 in a package)
+/// so that [`StreamSplit::stored`] can store the split as a map.
+fn tag_origins(instances: &mut [InstanceRecord]) -> Result<(), CompileError> {
+    if instances.len() >= NONE_U32 as usize {
         return Err(CompileError::TooMany {
             what: "instances",
-            count: view.instances.len() as u64,
+            count: instances.len() as u64,
         });
     }
-    let mut out = CompiledScene {
+    for (i, inst) in instances.iter_mut().enumerate() {
+        inst._pad = i as u32 + 1;
+    }
+    Ok(())
+}
+
+/// Every table of `view` but the instances (left empty), copied.
+fn tables_of(view: &HierarchyView<'_>) -> CompiledScene {
+    CompiledScene {
         root_tlas: view.root_tlas,
         tlases: view.tlases.to_vec(),
-        instances: view
-            .instances
-            .iter()
-            .enumerate()
-            .map(|(i, inst)| InstanceRecord {
-                _pad: i as u32 + 1,
-                ..*inst
-            })
-            .collect(),
+        instances: Vec::new(),
         blases: view.blases.to_vec(),
         geometries: view.geometries.to_vec(),
         pis: view.pis.to_vec(),
@@ -404,19 +429,82 @@ fn split_tagged(view: &HierarchyView<'_>, cap: u32) -> Result<Option<StreamSplit
         textures: view.textures.to_vec(),
         texels: Vec::new(),
         report: Default::default(),
+    }
+}
+
+/// The `n` tagged instances of a split back in their original order, untagged: the split's
+/// own AABB-BLAS instances and copies of shared ranges dropped, then each record swapped to
+/// its index (every origin is there once, so each swap places one record for good).
+fn untag_in_order(
+    mut instances: Vec<InstanceRecord>,
+    n: usize,
+) -> Result<Vec<InstanceRecord>, CompileError> {
+    let mut seen = vec![false; n];
+    instances.retain(|r| {
+        let t = r._pad as usize;
+        let keep = (1..=n).contains(&t) && !seen[t - 1];
+        if keep {
+            seen[t - 1] = true;
+        }
+        keep
+    });
+    if instances.len() != n {
+        return Err(CompileError::Internal(format!(
+            "the stream split kept {} of {n} instances",
+            instances.len()
+        )));
+    }
+    for i in 0..n {
+        loop {
+            let t = instances[i]._pad as usize - 1;
+            if t == i {
+                break;
+            }
+            instances.swap(i, t);
+        }
+    }
+    for r in &mut instances {
+        r._pad = 0;
+    }
+    instances.shrink_to_fit();
+    Ok(instances)
+}
+
+/// [`split_for_streaming`] with each instance's origin left in `_pad` (index + 1; 0 for the
+/// split's own AABB-BLAS instances).
+fn split_tagged(view: &HierarchyView<'_>, cap: u32) -> Result<Option<StreamSplit>, CompileError> {
+    let Some(over) = over_cap(view.tlases, cap) else {
+        return Ok(None);
     };
+    let mut instances = view.instances.to_vec();
+    tag_origins(&mut instances)?;
+    let mut out = CompiledScene {
+        instances,
+        ..tables_of(view)
+    };
+    split_tagged_scene(&mut out, over, cap)?;
+    Ok(Some(StreamSplit { scene: out }))
+}
+
+/// Splits the TLASes `over` of `out` (instances tagged with their origins) over `cap`.
+fn split_tagged_scene(
+    out: &mut CompiledScene,
+    over: Vec<u32>,
+    cap: u32,
+) -> Result<(), CompileError> {
+    let cap = cap.max(2) as usize;
+    let _span = tracing::info_span!("split for streaming", tlases = over.len()).entered();
     out.view()
         .check_references()
         .map_err(CompileError::References)?;
     let per_blas = crate::CompileOptions::default().max_primitives_per_blas as usize;
     for t in over {
-        move_range_to_tail(&mut out, t)?;
+        move_range_to_tail(out, t)?;
         let root = t == out.root_tlas;
-        split_tlas(&mut out, t, cap, per_blas, root, &mut |_| {})?;
+        split_tlas(out, t, cap, per_blas, root, &mut |_| {})?;
     }
     // Levels (two more under each split TLAS) and bounds (the pieces', their PIs').
-    crate::finalize::finalize(&mut out)?;
-    Ok(Some(StreamSplit { scene: out }))
+    crate::finalize::finalize(out)
 }
 
 /// Clears the origins [`split_tagged`] left in the instances' `_pad` (0 in every package).

@@ -35,6 +35,7 @@ pub use memory::peak_rss_bytes;
 pub use pipeline::{
     element_stats, import, resolve_subset, ImportOptions, ImportProgress, ImportSummary, ProgressFn,
 };
+pub use precut::DEFAULT_CUT_QUEUE_BYTES;
 pub use textures::DEFAULT_PTEX_MAX;
 
 #[cfg(test)]

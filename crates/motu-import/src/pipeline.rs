@@ -46,6 +46,9 @@ pub struct ImportOptions {
     /// Cut meshes over the partition bound into clusters while parsing (`precut.rs`) rather
     /// than when compiling; the same records either way. On by default; off for A/B tests.
     pub cut_while_parsing: bool,
+    /// Source-mesh bytes the cutting thread may lag behind the parser by (the memory that
+    /// overlapping cutting with parsing costs); 0 cuts each mesh before the parser goes on.
+    pub cut_queue_bytes: u64,
 }
 
 /// `motu import`'s defaults (`shared/CLI.md`): `--levels ml`, the device's 2^24 − 1 instances
@@ -73,6 +76,7 @@ impl Default for ImportOptions {
             proxy_boxes: true,
             progress: None,
             cut_while_parsing: true,
+            cut_queue_bytes: crate::precut::DEFAULT_CUT_QUEUE_BYTES,
         }
     }
 }
@@ -98,6 +102,9 @@ pub struct ImportSummary {
     pub parse_ms: f64,
     /// Of `parse_ms`: meshes over the partition bound cut into clusters while parsing.
     pub cut_ms: f64,
+    /// Of `parse_ms`: the time the parser waited for the cutting thread (the rest of
+    /// `cut_ms` overlapped parsing).
+    pub cut_wait_ms: f64,
     /// Triangles of the meshes cut while parsing.
     pub cut_triangles: u64,
     pub compile_ms: f64,
@@ -219,6 +226,10 @@ pub fn import(
     };
     let (scene, mut report) = motu_ingest::ingest_file(scene_path, &ingest_opts, store)
         .map_err(|source| ImportError::Ingest { path, source })?;
+    if let Some(p) = &precut {
+        p.finish()
+            .map_err(|e| ImportError::Internal(format!("cutting meshes while parsing: {e}")))?;
+    }
     if let Some(report) = &o.progress {
         report(ImportProgress::Parsed);
     }
@@ -249,7 +260,7 @@ pub fn import(
     if direct {
         let load = |m| scene.mesh_data(m).map_err(StoreError::from);
         let mut copied: HashMap<u32, MeshLocation> = HashMap::new();
-        let (compiled, compile_ms) =
+        let (mut compiled, compile_ms) =
             compile_into(&scene, &copts, &geometry, &load, precut.as_ref(), |m| {
                 let id = motu_scene::MeshId(m.source_mesh);
                 let at = scene.mesh(id).location;
@@ -279,9 +290,11 @@ pub fn import(
             })?;
         let t2 = Instant::now();
         let writer = geometry.take_writer()?;
-        let s = finish(writer, &scene, &compiled, &report, scene_path, o)?;
-        let mut sum = summary(s, &scene, &compiled, &report, parse_ms, compile_ms, t2);
-        (sum.cut_ms, sum.cut_triangles) = precut.as_ref().map_or((0.0, 0), |p| p.cut_report());
+        let st = scene.stats();
+        let s = finish(writer, scene, &st, &mut compiled, &report, scene_path, o)?;
+        let mut sum = summary(s, &st, &compiled, &report, parse_ms, compile_ms, t2);
+        (sum.cut_ms, sum.cut_wait_ms, sum.cut_triangles) =
+            precut.as_ref().map_or((0.0, 0.0, 0), |p| p.cut_report());
         return Ok(sum);
     }
     // Finish the scratch package so its chunks can be read back, then copy only the blobs the
@@ -314,20 +327,22 @@ pub fn import(
             )
         };
         let load = |m: motu_scene::MeshId| read_source(m).map_err(StoreError::from);
-        let (compiled, compile_ms) = compile_into(&scene, &copts, &final_geo, &load, None, |m| {
-            if let Some(&at) = copied.get(&m.source_mesh) {
-                return Ok(at);
-            }
-            let data = read_source(motu_scene::MeshId(m.source_mesh))?;
-            let at = final_geo.append_mesh(m.element, &data)?;
-            copied.insert(m.source_mesh, at);
-            Ok(at)
-        })?;
+        let (mut compiled, compile_ms) =
+            compile_into(&scene, &copts, &final_geo, &load, None, |m| {
+                if let Some(&at) = copied.get(&m.source_mesh) {
+                    return Ok(at);
+                }
+                let data = read_source(motu_scene::MeshId(m.source_mesh))?;
+                let at = final_geo.append_mesh(m.element, &data)?;
+                copied.insert(m.source_mesh, at);
+                Ok(at)
+            })?;
         let t2 = Instant::now();
         let writer = final_geo.take_writer()?;
-        let s = finish(writer, &scene, &compiled, &report, scene_path, o)?;
+        let st = scene.stats();
+        let s = finish(writer, scene, &st, &mut compiled, &report, scene_path, o)?;
         Ok(summary(
-            s, &scene, &compiled, &report, parse_ms, compile_ms, t2,
+            s, &st, &compiled, &report, parse_ms, compile_ms, t2,
         ))
     })();
     let _ = std::fs::remove_file(&first_target);
@@ -395,7 +410,12 @@ fn precut_store(
     let cap = motu_compile::DEFAULT_MAX_PER_NODE;
     Some(match o.max_blas_triangles {
         Some(0) => return None,
-        Some(b) => PrecutGeometry::new(geometry.clone(), Some(b.min(cap).max(1)), None),
+        Some(b) => PrecutGeometry::new(
+            geometry.clone(),
+            Some(b.min(cap).max(1)),
+            None,
+            o.cut_queue_bytes,
+        ),
         None => {
             let settles = (
                 motu_compile::auto_bound_settles_at_triangles(),
@@ -406,7 +426,7 @@ fn precut_store(
             let settles = crate::precut::tests::SETTLES
                 .with(std::cell::Cell::get)
                 .unwrap_or(settles);
-            PrecutGeometry::new(geometry.clone(), None, Some(settles))
+            PrecutGeometry::new(geometry.clone(), None, Some(settles), o.cut_queue_bytes)
         }
     })
 }
@@ -523,20 +543,20 @@ const MADE_IN_FLIGHT: usize = 4;
 
 fn summary(
     (s, split_ms, proxy_boxes_ms): (WriteSummary, f64, f64),
-    scene: &Scene,
+    st: &motu_scene::SceneStats,
     compiled: &CompiledScene,
     report: &IngestReport,
     parse_ms: f64,
     compile_ms: f64,
     pack_start: Instant,
 ) -> ImportSummary {
-    let st = scene.stats();
     ImportSummary {
         package: s.path.display().to_string(),
         file_bytes: s.file_bytes,
         chunks: s.chunk_count,
         parse_ms,
         cut_ms: 0.0,
+        cut_wait_ms: 0.0,
         cut_triangles: 0,
         compile_ms,
         pack_ms: pack_start.elapsed().as_secs_f64() * 1e3,
@@ -558,17 +578,23 @@ fn summary(
     }
 }
 
+/// Writes the package's sections and finishes it. Takes the scene: it is dropped once the
+/// meta and textures are made, before the stream split (the import's peak: the scene's edges
+/// need not be held beside it).
 fn finish(
     mut writer: PackageWriter,
-    scene: &Scene,
-    compiled: &CompiledScene,
+    scene: Scene,
+    stats: &motu_scene::SceneStats,
+    compiled: &mut CompiledScene,
     report: &IngestReport,
     source: &Path,
     o: &ImportOptions,
 ) -> Result<(WriteSummary, f64, f64), ImportError> {
+    let owned = scene;
+    let scene = &owned;
     // A subset package describes only what it holds.
     let mut elements = element_stats(scene);
-    let mut scene_stats = scene.stats();
+    let mut scene_stats = stats.clone();
     if !o.subset.is_empty() {
         elements.retain(|e| o.subset.contains(&e.name));
         scene_stats.instances = elements.iter().map(|e| e.instances).sum();
@@ -612,12 +638,13 @@ fn finish(
         ptex_max: o.ptex_max,
     };
     let textures = crate::textures::write_textures(&mut writer, scene, caps, &mut meta.warnings)?;
+    drop(owned);
+    let t = Instant::now();
+    meta.stream_split = Some(crate::split::write_stream_split(&mut writer, compiled)?);
+    let split_ms = t.elapsed().as_secs_f64() * 1e3;
     let mut view = compiled.view();
     view.textures = &textures;
     view.texels = &[];
-    let t = Instant::now();
-    meta.stream_split = Some(crate::split::write_stream_split(&mut writer, &view)?);
-    let split_ms = t.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
     if o.proxy_boxes {
         crate::proxy_boxes::write_proxy_boxes(&mut writer, &view)?;

@@ -1,29 +1,37 @@
 //! Cutting meshes into clusters while parsing (issue 48 item 1).
 //!
 //! A mesh over the partition bound is only ever stored as clusters. Once the bound is known,
-//! [`PrecutGeometry`] cuts such a mesh the moment the parser stores it
-//! (`motu_compile::partition::partition_mesh`, the compiler's own cut, on all cores) and appends
-//! the clusters to the package, so the compiler makes their records from their shapes
-//! ([`motu_compile::StoredClusters`]) instead of writing the whole mesh to the spill file,
-//! reading it back and cutting it then: partitioning costs what the geometry it cuts costs and
-//! runs beside the parser's worker threads.
+//! [`PrecutGeometry`] queues such a mesh for a cutting thread the moment the parser stores it
+//! (`motu_compile::partition::partition_mesh`, the compiler's own cut, on all cores) and the
+//! parser goes on; the clusters are appended to the package later, so the compiler makes their
+//! records from their shapes ([`motu_compile::StoredClusters`]) instead of writing the whole
+//! mesh to the spill file, reading it back and cutting it then: partitioning costs what the
+//! geometry it cuts costs and overlaps parsing.
+//!
+//! The queue is bounded by source-mesh bytes (`cut_queue_bytes`, [`DEFAULT_CUT_QUEUE_BYTES`]):
+//! past it the parser appends the oldest mesh's clusters, waiting for them if the cutting
+//! thread is behind; the thread sends clusters as it cuts them through a queue of a few, so a
+//! mesh is never held whole as clusters. Appends run on the thread that replays the parser's events, in queue
+//! order and at points that depend only on the meshes' sizes, so the package is the same on
+//! every run (0 bytes: each mesh is cut and appended before its store returns).
 //!
 //! The bound is known from the start when given (`--max-blas-triangles`); the automatic bound
 //! once `auto_bound_settles_at_triangles` triangles were stored. Before that, meshes take the
 //! spill file as before; when the bound becomes known, those over it are read back from the
-//! spill file (still in the page cache) and cut at once, still during parsing. Every step
-//! runs on the thread that replays the parser's events in document order, so the package is
-//! the same on every run. Mesh records are those the compiler would make itself (same ids,
-//! counts, bounds and cluster data; only where clusters lie in the chunks differs): tested
-//! against the compile-time path in `tests.rs`.
+//! spill file (still in the page cache) and queued at once, still during parsing. Mesh
+//! records are those the compiler would make itself (same ids, counts, bounds and cluster
+//! data; only where clusters lie in the chunks differs): tested against the compile-time path
+//! in `tests.rs`.
 //!
 //! Not used with LOD (a LOD chain needs the whole mesh), `--levels auto` (a baked prototype
 //! needs it too) or `--subset` (its scratch package has no spill file).
 
+use motu_compile::partition::Cluster;
 use motu_compile::ClusterShape;
 use motu_pack::PackageGeometry;
 use motu_scene::{GeometryStore, MeshData, MeshId, MeshLocation, StoreError};
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
+use std::sync::mpsc::{channel, sync_channel, Receiver, Sender};
 use std::sync::{Arc, Mutex, MutexGuard};
 
 /// Chunk group for the clusters of partitioned meshes (and LOD levels).
@@ -32,12 +40,90 @@ pub(crate) const CLUSTER_GROUP: u32 = u32::MAX - 2;
 /// Marks a scene location of a mesh that was cut while parsing (its whole data is not kept).
 const CUT_BIT: u64 = 1 << 62;
 
+/// Source-mesh bytes queued for the cutting thread at most (besides the newest mesh, which is
+/// queued whatever its size): with [`CLUSTERS_IN_FLIGHT`] clusters, the memory overlapping
+/// costs.
+pub const DEFAULT_CUT_QUEUE_BYTES: u64 = 32 << 20;
+
 /// A [`GeometryStore`] over the import's [`PackageGeometry`] that cuts meshes over the
 /// partition bound as they are stored. Clones share their state.
 #[derive(Clone)]
 pub(crate) struct PrecutGeometry {
     geometry: PackageGeometry,
     state: Arc<Mutex<State>>,
+}
+
+/// A mesh for the cutting thread.
+struct Job {
+    data: MeshData,
+    bound: u32,
+}
+
+/// What the cutting thread sends back, in queue order: each mesh's clusters as they are cut,
+/// then the milliseconds its cut took.
+enum Cut {
+    Cluster(Cluster),
+    Done(f64),
+}
+
+/// Clusters cut but not yet appended, at most (each up to a cluster: ~2.5 MiB at 2^16
+/// triangles), so a mesh far larger than the queue is never held as clusters whole.
+const CLUSTERS_IN_FLIGHT: usize = 8;
+
+/// A queued mesh: its id, bound and size.
+struct Pending {
+    id: MeshId,
+    bound: u32,
+    triangles: u64,
+    bytes: u64,
+}
+
+/// The cutting thread and its two queues (jobs in, clusters out, both in queue order).
+struct Cutter {
+    jobs: Option<Sender<Job>>,
+    done: Option<Receiver<Cut>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Cutter {
+    fn spawn() -> Result<Self, StoreError> {
+        let (jobs, job_rx) = channel::<Job>();
+        let (done_tx, done) = sync_channel::<Cut>(CLUSTERS_IN_FLIGHT);
+        let thread = std::thread::Builder::new()
+            .name("motu-cut".into())
+            .spawn(move || {
+                for job in job_rx {
+                    let t = std::time::Instant::now();
+                    let sent = motu_compile::partition::partition_mesh(
+                        &job.data,
+                        job.bound,
+                        &mut |c: Cluster| done_tx.send(Cut::Cluster(c)).map_err(|_| ()),
+                    );
+                    drop(job.data);
+                    let ms = t.elapsed().as_secs_f64() * 1e3;
+                    // The receiver is gone: the import stopped.
+                    if sent.is_err() || done_tx.send(Cut::Done(ms)).is_err() {
+                        return;
+                    }
+                }
+            })?;
+        Ok(Self {
+            jobs: Some(jobs),
+            done: Some(done),
+            thread: Some(thread),
+        })
+    }
+}
+
+impl Drop for Cutter {
+    fn drop(&mut self) {
+        // No more jobs, and no one to take clusters: the thread ends after its current cut.
+        self.jobs = None;
+        self.done = None;
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
 }
 
 struct State {
@@ -50,15 +136,28 @@ struct State {
     waiting: Vec<(MeshId, MeshLocation, usize)>,
     /// Per source mesh cut: the bound and its clusters' shapes and locations, in cut order.
     cut: HashMap<u32, (u32, Vec<(ClusterShape, MeshLocation)>)>,
-    /// Time spent cutting (for the import's report).
+    /// Source-mesh bytes queued at most (0: each mesh is cut before its store returns).
+    queue_bytes: u64,
+    /// Meshes queued for the cutting thread, oldest first, and their bytes.
+    pending: VecDeque<Pending>,
+    pending_bytes: u64,
+    cutter: Option<Cutter>,
+    /// Time the cutting thread spent cutting, and the time the parser waited for it.
     cut_ms: f64,
+    wait_ms: f64,
     cut_triangles: u64,
 }
 
 impl PrecutGeometry {
     /// `bound`: the partition bound when known now; `settles`: `(after_triangles, bound)` for
-    /// the automatic bound.
-    pub fn new(geometry: PackageGeometry, bound: Option<u32>, settles: Option<(u64, u32)>) -> Self {
+    /// the automatic bound; `queue_bytes`: source-mesh bytes the cutting thread may lag behind
+    /// the parser by (0: cut each mesh before its store returns).
+    pub fn new(
+        geometry: PackageGeometry,
+        bound: Option<u32>,
+        settles: Option<(u64, u32)>,
+        queue_bytes: u64,
+    ) -> Self {
         Self {
             geometry,
             state: Arc::new(Mutex::new(State {
@@ -67,7 +166,12 @@ impl PrecutGeometry {
                 stored_triangles: 0,
                 waiting: Vec::new(),
                 cut: HashMap::new(),
+                queue_bytes,
+                pending: VecDeque::new(),
+                pending_bytes: 0,
+                cutter: None,
                 cut_ms: 0.0,
+                wait_ms: 0.0,
                 cut_triangles: 0,
             })),
         }
@@ -79,38 +183,91 @@ impl PrecutGeometry {
             .map_err(|_| "the cutting store's lock was poisoned".into())
     }
 
-    /// Cuts `data` (source mesh `id`) at `bound` and appends its clusters to the package.
+    /// Queues `data` (source mesh `id`) for the cutting thread at `bound`, then appends the
+    /// clusters of the oldest queued meshes while more than the queue's bytes wait. Clusters
+    /// are appended on this (the parser's) thread, in queue order and at points that depend
+    /// only on the meshes' sizes, so the package is the same on every run.
     fn cut(
         &self,
         st: &mut State,
         id: MeshId,
-        data: &MeshData,
+        data: MeshData,
         bound: u32,
     ) -> Result<(), StoreError> {
-        let t = std::time::Instant::now();
-        let mut clusters = Vec::new();
-        motu_compile::partition::partition_mesh(
-            data,
+        if st.cutter.is_none() {
+            st.cutter = Some(Cutter::spawn()?);
+        }
+        let bytes = data.size_bytes();
+        let triangles = data.triangle_count() as u64;
+        let sent = st
+            .cutter
+            .as_ref()
+            .and_then(|c| c.jobs.as_ref())
+            .is_some_and(|jobs| jobs.send(Job { data, bound }).is_ok());
+        if !sent {
+            return Err("the cutting thread stopped".into());
+        }
+        st.pending.push_back(Pending {
+            id,
             bound,
-            &mut |c: motu_compile::partition::Cluster| {
-                let at = self.geometry.append_mesh_mapped(
-                    CLUSTER_GROUP,
-                    &c.data,
-                    Some(&c.primitive_map),
-                )?;
-                let shape = ClusterShape {
-                    vertex_count: c.data.positions.len() as u32,
-                    triangle_count: c.data.triangle_count() as u32,
-                    has_normals: c.data.normals.is_some(),
-                    bounds: c.bounds,
-                };
-                clusters.push((shape, at));
-                Ok::<(), motu_pack::PackError>(())
-            },
-        )?;
-        st.cut.insert(id.0, (bound, clusters));
-        st.cut_ms += t.elapsed().as_secs_f64() * 1e3;
-        st.cut_triangles += data.triangle_count() as u64;
+            triangles,
+            bytes,
+        });
+        st.pending_bytes += bytes;
+        while st.pending_bytes > st.queue_bytes && (st.pending.len() > 1 || st.queue_bytes == 0) {
+            self.retire(st)?;
+        }
+        Ok(())
+    }
+
+    /// Appends the oldest queued mesh's clusters to the package as they come.
+    fn retire(&self, st: &mut State) -> Result<(), StoreError> {
+        let Some(p) = st.pending.pop_front() else {
+            return Ok(());
+        };
+        st.pending_bytes -= p.bytes;
+        let mut placed = Vec::new();
+        loop {
+            let t = std::time::Instant::now();
+            let next = st
+                .cutter
+                .as_ref()
+                .and_then(|c| c.done.as_ref())
+                .ok_or("no cutting thread")?
+                .recv()
+                .map_err(|_| "the cutting thread stopped")?;
+            st.wait_ms += t.elapsed().as_secs_f64() * 1e3;
+            let c = match next {
+                Cut::Cluster(c) => c,
+                Cut::Done(ms) => {
+                    st.cut_ms += ms;
+                    break;
+                }
+            };
+            let at =
+                self.geometry
+                    .append_mesh_mapped(CLUSTER_GROUP, &c.data, Some(&c.primitive_map))?;
+            let shape = ClusterShape {
+                vertex_count: c.data.positions.len() as u32,
+                triangle_count: c.data.triangle_count() as u32,
+                has_normals: c.data.normals.is_some(),
+                bounds: c.bounds,
+            };
+            placed.push((shape, at));
+        }
+        st.cut.insert(p.id.0, (p.bound, placed));
+        st.cut_triangles += p.triangles;
+        Ok(())
+    }
+
+    /// Appends the clusters of every queued mesh and stops the cutting thread: call once the
+    /// parser is done, before [`Self::clusters`].
+    pub fn finish(&self) -> Result<(), StoreError> {
+        let mut st = self.lock()?;
+        while !st.pending.is_empty() {
+            self.retire(&mut st)?;
+        }
+        st.cutter = None;
         Ok(())
     }
 
@@ -120,7 +277,7 @@ impl PrecutGeometry {
         for (id, at, triangles) in std::mem::take(&mut st.waiting) {
             if triangles > bound as usize {
                 let data = self.geometry.load(id, at)?;
-                self.cut(st, id, &data, bound)?;
+                self.cut(st, id, data, bound)?;
             }
         }
         Ok(())
@@ -146,11 +303,12 @@ impl PrecutGeometry {
         Some(clusters.iter().map(|c| c.0).collect())
     }
 
-    /// Milliseconds spent cutting and the triangles cut (during parsing).
-    pub fn cut_report(&self) -> (f64, u64) {
-        self.state
-            .lock()
-            .map_or((0.0, 0), |st| (st.cut_ms, st.cut_triangles))
+    /// Milliseconds the cutting thread spent cutting, milliseconds the parser waited for it,
+    /// and the triangles cut (during parsing).
+    pub fn cut_report(&self) -> (f64, f64, u64) {
+        self.state.lock().map_or((0.0, 0.0, 0), |st| {
+            (st.cut_ms, st.wait_ms, st.cut_triangles)
+        })
     }
 }
 
@@ -174,7 +332,7 @@ impl GeometryStore for PrecutGeometry {
             }
         }
         if let Some(bound) = st.bound.filter(|&b| triangles > b as usize) {
-            this.cut(&mut st, id, data, bound)?;
+            this.cut(&mut st, id, data.clone(), bound)?;
             return Ok(MeshLocation {
                 a: CUT_BIT | u64::from(id.0),
                 b: 0,

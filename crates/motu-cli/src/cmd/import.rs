@@ -80,6 +80,12 @@ fn import_checked(a: ImportArgs) -> anyhow::Result<()> {
         progress: crate::progress::import_bar(),
         // A/B switch for measurements (issue 48): the compile-time cut of the same package.
         cut_while_parsing: std::env::var_os("MOTU_IMPORT_CUT_AT_COMPILE").is_none(),
+        // A/B switch (issue 48): cut each mesh before the parser goes on (no overlap).
+        cut_queue_bytes: if std::env::var_os("MOTU_IMPORT_CUT_SEQUENTIAL").is_some() {
+            0
+        } else {
+            motu_import::DEFAULT_CUT_QUEUE_BYTES
+        },
     };
     let s = pipeline::import(&a.scene, &a.output, &o)?;
     if s.meshes == 0 {

@@ -1004,6 +1004,12 @@ fn split_for_streaming_moves_a_range_that_is_not_the_tail() {
     assert_eq!(split.counts().0, 2);
     // Rotated, not copied: the table grows only by the pieces' AABB instances.
     assert!(v.instances.len() < whole.instances.len() + 100);
+    // In place: the stored split of the copy, and the instance table back in its order.
+    let mut in_place = whole.clone();
+    let s = crate::stored_stream_split_in_place(&mut in_place, 700).unwrap();
+    assert_eq!(s, crate::stored_stream_split(&whole.view(), 700).unwrap());
+    assert_eq!(in_place.instances, whole.instances);
+    assert_eq!(in_place.tlases, whole.tlases);
 }
 
 /// The split a package stores (`stored_stream_split`) rebuilds exactly the split a reader
@@ -1025,6 +1031,11 @@ fn a_stored_stream_split_rebuilds_the_same_split() {
             .expect("stored");
         assert!(stored.extra_instances.iter().all(|i| i._pad == 0));
         assert!(stored.instance_source.iter().any(|&s| s != NONE_U32));
+        // Made in place (no copy of the instance table): the same, the table put back.
+        let mut in_place = whole.clone();
+        let s = crate::stored_stream_split_in_place(&mut in_place, cap).unwrap();
+        assert_eq!(s.as_ref(), Some(&stored));
+        assert_eq!(in_place.instances, whole.instances);
         let back = crate::StreamSplit::from_stored(&whole.view(), &stored).unwrap();
         let (a, b) = (made.view(&whole.view()), back.view(&whole.view()));
         assert_eq!(a.tlases, b.tlases);

@@ -201,3 +201,32 @@ fn lod_and_auto_levels_keep_the_compile_time_cut() {
     };
     assert_eq!(run(dir.path(), "auto.motu", &o).cut_triangles, 0);
 }
+
+#[test]
+fn cutting_beside_the_parser_makes_the_package_cutting_in_turn_makes() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = |queue_bytes| ImportOptions {
+        cut_queue_bytes: queue_bytes,
+        ..options(true, Some(700))
+    };
+    // 0: each mesh cut before the parser goes on; 1 byte: the cutting thread one mesh behind;
+    // the default: every mesh queued until parsing ends.
+    let seq = run(dir.path(), "seq.motu", &o(0));
+    let one = run(dir.path(), "one.motu", &o(1));
+    let all = run(dir.path(), "all.motu", &o(crate::DEFAULT_CUT_QUEUE_BYTES));
+    run(dir.path(), "again.motu", &o(crate::DEFAULT_CUT_QUEUE_BYTES));
+    for s in [&seq, &one, &all] {
+        assert_eq!(s.cut_triangles, 2 * (52 * 52 + 50 * 50 + 60 * 60 + 47 * 47));
+    }
+    assert_same_package(&dir.path().join("seq.motu"), &dir.path().join("one.motu"));
+    assert_same_package(&dir.path().join("seq.motu"), &dir.path().join("all.motu"));
+    // Clusters are appended at points that depend only on the meshes: every record in the
+    // same place each run (the meta differs only by its timings).
+    assert_same_package(&dir.path().join("all.motu"), &dir.path().join("again.motu"));
+    let meshes = |n: &str| {
+        let p = motu_pack::ScenePackage::open(&dir.path().join(n)).unwrap();
+        let m = p.view().unwrap().meshes.to_vec();
+        m
+    };
+    assert_eq!(meshes("all.motu"), meshes("again.motu"));
+}
