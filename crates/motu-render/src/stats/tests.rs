@@ -170,6 +170,7 @@ fn view_stats(detail: ViewDetail) -> ViewStats {
         lod_mode: "none",
         accumulated_samples: 1,
         denoised: false,
+        stream_fit: None,
         detail: Some(detail),
         package: "scene.motu".into(),
     }
