@@ -510,3 +510,54 @@ pub fn motu_on_display(display: &str, args: &[&str]) -> Output {
         .output()
         .expect("spawning motu")
 }
+
+/// 128×128 RGB checker of 16×16-texel cells, two greys of moderate contrast (PFM: little
+/// endian). Cells this large stay sharp at the mip level a 64×36 view picks.
+fn write_checker_pfm(path: &Path) {
+    const N: usize = 128;
+    let mut bytes = format!("PF\n{N} {N}\n-1.0\n").into_bytes();
+    for y in 0..N {
+        for x in 0..N {
+            let v = if (x / 16 + y / 16) % 2 == 0 {
+                0.6f32
+            } else {
+                0.3
+            };
+            for _ in 0..3 {
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+/// A textured scene in `dir` (returns its `scene.pbrt`): a ground with a checker image texture
+/// ([`write_checker_pfm`]; one mesh, one material, so its constant colour cannot tell the cells
+/// apart) filling a 64×36 view of the scene's camera, [`CHECKER_CAMERA_POSE`], lit by a
+/// distant light.
+pub fn checker_scene(dir: &Path) -> PathBuf {
+    write_checker_pfm(&dir.join("checker.pfm"));
+    let scene = dir.join("scene.pbrt");
+    // The ground fills the 64×36 view: 8 cells across, about 11 pixels each.
+    std::fs::write(
+        &scene,
+        r#"LookAt 0 8 0  0 0 0  0 0 1
+Camera "perspective" "float fov" [45]
+WorldBegin
+LightSource "distant" "point from" [0.3 10 0.2] "point to" [0 0 0] "rgb L" [2.5 2.5 2.5]
+Texture "checks" "spectrum" "imagemap" "string filename" "checker.pfm"
+AttributeBegin
+  Material "matte" "texture Kd" "checks"
+  Shape "trianglemesh" "point P" [-6 0 -6  6 0 -6  6 0 6  -6 0 6]
+    "float uv" [0 0  1 0  1 1  0 1] "integer indices" [0 1 2  0 2 3]
+AttributeEnd
+"#,
+    )
+    .unwrap();
+    scene
+}
+
+/// [`checker_scene`]'s camera as a camera-path pose (`motu render --camera-path`): the
+/// importer's look-at frame of `LookAt 0 8 0  0 0 0  0 0 1` is exactly this (no rounding).
+pub const CHECKER_CAMERA_POSE: &str =
+    r#"{"eye": [0, 8, 0], "forward": [0, -1, 0], "up": [0, 0, 1], "fov_deg": 45}"#;

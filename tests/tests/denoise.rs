@@ -4,50 +4,8 @@
 //! CPU and every GPU backend; with the material constant alone as the guide the filter blurred
 //! them (the colours of two cells are close enough for its colour weight to mix them).
 
-use motu_tests::{gpu_available, has_ray_query, motu_ok, s};
+use motu_tests::{checker_scene, gpu_available, has_ray_query, motu_ok, s};
 use std::path::Path;
-
-/// 128×128 RGB checker of 16×16-texel cells, two greys of moderate contrast (PFM: little
-/// endian). Cells this large stay sharp at the mip level a 64×36 view picks.
-fn write_checker_pfm(path: &Path) {
-    const N: usize = 128;
-    let mut bytes = format!("PF\n{N} {N}\n-1.0\n").into_bytes();
-    for y in 0..N {
-        for x in 0..N {
-            let v = if (x / 16 + y / 16) % 2 == 0 {
-                0.6f32
-            } else {
-                0.3
-            };
-            for _ in 0..3 {
-                bytes.extend_from_slice(&v.to_le_bytes());
-            }
-        }
-    }
-    std::fs::write(path, bytes).unwrap();
-}
-
-fn write_scene(dir: &Path) -> std::path::PathBuf {
-    write_checker_pfm(&dir.join("checker.pfm"));
-    let scene = dir.join("scene.pbrt");
-    // The ground fills the 64×36 view: 8 cells across, about 11 pixels each.
-    std::fs::write(
-        &scene,
-        r#"LookAt 0 8 0  0 0 0  0 0 1
-Camera "perspective" "float fov" [45]
-WorldBegin
-LightSource "distant" "point from" [0.3 10 0.2] "point to" [0 0 0] "rgb L" [2.5 2.5 2.5]
-Texture "checks" "spectrum" "imagemap" "string filename" "checker.pfm"
-AttributeBegin
-  Material "matte" "texture Kd" "checks"
-  Shape "trianglemesh" "point P" [-6 0 -6  6 0 -6  6 0 6  -6 0 6]
-    "float uv" [0 0  1 0  1 1  0 1] "integer indices" [0 1 2  0 2 3]
-AttributeEnd
-"#,
-    )
-    .unwrap();
-    scene
-}
 
 fn read_png(path: &Path) -> Vec<u8> {
     let dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
@@ -108,7 +66,7 @@ fn denoising_keeps_texel_edges_on_every_backend() {
     let t0 = std::time::Instant::now();
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let scene = write_scene(d);
+    let scene = checker_scene(d);
     let pkg = d.join("checker.motu");
     motu_ok(&["import", s(&scene), "-o", s(&pkg)]);
     let render = |tag: &str, extra: &[&str]| {

@@ -549,6 +549,8 @@ fn view_streams_under_a_vram_budget_with_the_full_builds_image() {
             "pipeline",
             "--vram-budget",
             "256MiB",
+            // The budget holds the forest: the full build would draw it (view_fit.rs).
+            "--stream-always",
             "--frames",
             "3",
             "--aov",
@@ -598,6 +600,7 @@ fn streaming_refines_over_frames_and_never_writes_an_unfinished_frame() {
         "pipeline",
         "--vram-budget",
         "3MiB",
+        "--stream-always",
     ];
     let (vaov, vstats, raov) = (d.join("v.aov"), d.join("v.json"), d.join("r.aov"));
     // With carried hits this small forest completes within two passes at this budget, so the
@@ -663,6 +666,7 @@ fn view_never_writes_an_unfinished_frame() {
             "pipeline",
             "--vram-budget",
             &budget_arg,
+            "--stream-always",
             "--stream-passes",
             "2",
             "--frames",
@@ -706,7 +710,12 @@ fn view_subsets_equal_render_subsets() {
         "--subset",
         "isBeach,isMountainA",
     ]);
-    for extra in [&[][..], &["--stream"][..]] {
+    // The full build, the hand-over of a budget that holds the subset, and the streamer.
+    for extra in [
+        &[][..],
+        &["--stream"][..],
+        &["--stream", "--stream-always"][..],
+    ] {
         let vaov = d.join(format!("v{}.aov", extra.len()));
         let mut args = vec![
             s(&pkg),
@@ -841,6 +850,7 @@ fn view_streams_progressively_within_a_frame_build_budget() {
             "--frames",
             "24",
             "--stream",
+            "--stream-always",
             "--stream-passes",
             "1",
             "--stream-build-budget",
@@ -979,6 +989,7 @@ fn a_second_viewer_restores_structures_from_the_cache_directory() {
                 "--backend",
                 "pipeline",
                 "--stream",
+                "--stream-always",
                 "--frames",
                 "1",
                 "--as-cache",

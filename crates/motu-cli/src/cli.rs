@@ -731,6 +731,10 @@ pub struct ViewArgs {
     /// refine. With --frames the default is the full pass cap (each frame exact).
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long)]
     pub stream_passes: Option<u32>,
+    /// With --stream or --vram-budget: stream even when the budget holds the whole scene (by
+    /// default the full build draws it then, being never slower; for testing the streamer).
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long)]
+    pub stream_always: bool,
     #[command(flatten)]
     pub stream_bounds: StreamBoundArgs,
     #[command(flatten)]

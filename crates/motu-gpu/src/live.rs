@@ -53,7 +53,12 @@ impl LiveRenderer {
             )));
         }
         let ctx = self.scene.context().clone();
-        let params = frame_params(camera, opts, self.scene.root_tlas);
+        let params = frame_params(
+            camera,
+            opts,
+            self.scene.root_tlas,
+            self.scene.shading_address,
+        );
         {
             let mut heap = self.scene.heap();
             if !matches!(&self.tracer, Some((b, s, _)) if *b == opts.backend && *s == opts.stack_size)

@@ -59,8 +59,7 @@ pub fn render_counted(
         height = h
     );
     let _g = span.enter();
-    let mut params = frame_params(camera, opts, scene.root_tlas);
-    params.shading = scene.shading_address;
+    let params = frame_params(camera, opts, scene.root_tlas, scene.shading_address);
     let pixels = u64::from(w) * u64::from(h);
     let frames = opts.frames.max(1);
     let mut heap = scene.heap();

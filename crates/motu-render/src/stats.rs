@@ -421,6 +421,10 @@ pub struct ViewStats {
     pub lod_mode: &'static str,
     pub accumulated_samples: u32,
     pub denoised: bool,
+    /// `--stream`/`--vram-budget`: whether the budget held the whole scene, so the full build
+    /// drew it (`streaming` is then false), as `motu render --stream`'s `stream_fit`; `null`
+    /// without streaming and with `--stream-always`.
+    pub stream_fit: Option<StreamFitStats>,
     /// The last frame's renderer detail (absent when the renderer gave none).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub detail: Option<ViewDetail>,

@@ -494,8 +494,8 @@ fn render_full_if_it_fits(
     });
     let instance_lod = job.lod.instance.as_ref();
     let last = *cams.last().ok_or(RenderError::NoFrame)?;
-    // One camera renders as `render` does (a recorded path of one camera too: the denoiser's
-    // albedo view then meets the shaded frame's hits exactly).
+    // One camera renders as `render` does (a recorded path of one camera too). Both renderers
+    // give the same image (tests/path_textured.rs); the path renderer once lost textures.
     let rendered = if cams.len() == 1 {
         crate::gpu::render_gpu(
             &full,

@@ -6,8 +6,14 @@ use motu_abi::camera::CameraPose;
 use motu_gpu::{RenderOptions, View};
 use winit::keyboard::KeyCode;
 
-/// The views `V` cycles through, in order.
-pub(crate) const VIEWS: [View; 4] = [View::Shaded, View::Ids, View::Lod, View::Heatmap];
+/// The views `V` cycles through, in order (F1–F5 pick one; the panel offers them all).
+pub(crate) const VIEWS: [View; 5] = [
+    View::Shaded,
+    View::Ids,
+    View::Lod,
+    View::Heatmap,
+    View::Albedo,
+];
 
 /// A view's name on the panel.
 pub(crate) fn view_name(v: View) -> &'static str {
@@ -109,6 +115,7 @@ impl Controls {
             KeyCode::F2 => r.view = View::Ids,
             KeyCode::F3 => r.view = View::Lod,
             KeyCode::F4 => r.view = View::Heatmap,
+            KeyCode::F5 => r.view = View::Albedo,
             KeyCode::KeyL => {
                 // auto → 0 → 1 → … → 7 → auto
                 r.lod.forced_lod = match r.lod.forced_lod {

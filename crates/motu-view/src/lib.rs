@@ -96,6 +96,10 @@ pub struct SourceStats {
     pub incomplete_pixels: u64,
     /// How LOD ran: `instance`, `traversal` or `none` (no LOD selectors); empty if unknown.
     pub lod_mode: &'static str,
+    /// Streaming: whether the budget held the whole scene, so the full build draws it
+    /// (`stream_fit` in `--stats`, as `motu render --stream`'s); `None` without streaming or
+    /// with `--stream-always`.
+    pub stream_fit: Option<motu_render::stats::StreamFitStats>,
 }
 
 /// One rendered frame.

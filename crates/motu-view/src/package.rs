@@ -1,6 +1,10 @@
 //! The viewer's frame source over a package: a full GPU build (with instance-level LOD where the
 //! rule allows it) or the streaming renderer under a budget, rebuilt when the element set or
-//! the LOD mode changes. `motu view` maps its flags onto [`PackageSourceSettings`].
+//! the LOD mode changes. A streaming budget that holds the whole scene gets the full build
+//! instead (`fit.rs`, as `motu render --stream`). `motu view` maps its flags onto
+//! [`PackageSourceSettings`].
+
+mod fit;
 
 use crate::{FrameSource, SourceFrame, SourceStats, ViewOptions};
 use motu_abi::camera::{CameraParams, CameraPose};
@@ -41,6 +45,9 @@ pub struct ViewStreamSettings {
     /// `--host-cache`, `--as-cache`, `--no-as-cache`: where built structures are kept between
     /// evictions and processes (as `motu render --stream`).
     pub cache: motu_render::CacheSettings,
+    /// `--stream-always`: stream even when the budget holds the whole scene (by default the
+    /// full build draws it then, as `motu render --stream` does).
+    pub always: bool,
 }
 
 impl ViewStreamSettings {
@@ -119,6 +126,8 @@ pub enum SourceError {
     Render(#[from] RenderError),
     #[error("setting up streaming (the resident skeleton must fit the budget)")]
     StreamSetup(#[source] motu_gpu::GpuError),
+    #[error("testing whether the budget holds the full build")]
+    Fit(#[source] motu_gpu::GpuError),
     #[error("rendering on the GPU")]
     Gpu(#[source] motu_gpu::GpuError),
     #[error("streaming a frame")]
@@ -148,7 +157,11 @@ enum Renderer<'p> {
 /// and LOD mode shown, and the renderer drawing them.
 pub struct PackageSource<'p> {
     ctx: motu_gpu::Context,
+    /// The package's hierarchy (what a full build draws).
     base: HierarchyView<'p>,
+    /// Streaming: `base` with large TLASes split into pieces, made at the first streamed build
+    /// (a budget that holds the scene never needs it).
+    split_base: Option<HierarchyView<'p>>,
     meshes: &'p PackageMeshes<'p>,
     element_ids: Vec<u32>,
     /// The element set the renderer was built for.
@@ -167,6 +180,9 @@ pub struct PackageSource<'p> {
     base_colours: std::collections::HashMap<u32, [f32; 3]>,
     /// A material has a base-colour texture (the guide renders the albedo view).
     textured: bool,
+    /// Streaming: whether the budget held the full build at the last rebuild (`None` without
+    /// streaming or with `--stream-always`).
+    stream_fit: Option<fit::Fit>,
 }
 
 impl<'p> PackageSource<'p> {
@@ -194,26 +210,10 @@ impl<'p> PackageSource<'p> {
             ..Default::default()
         })
         .map_err(|e| SourceError::Device(e.into()))?;
-        // Streaming renders large TLASes split into pieces (as `motu render --stream`, from
-        // the split the import stored when `base` is the package's own); the split tables are
-        // made once and live as long as the viewer (leaked: the renderer and
-        // every element subset borrow them).
-        let base = match &settings.stream {
-            Some(st) => {
-                match motu_render::package_stream_split(meshes.0, &base, st.bounds.split_instances)?
-                {
-                    Some(split) => {
-                        let split: &'p motu_render::StreamSplit = Box::leak(Box::new(split));
-                        split.view(&base)
-                    }
-                    None => base,
-                }
-            }
-            None => base,
-        };
         let mut src = PackageSource {
             ctx,
             base,
+            split_base: None,
             meshes,
             element_ids,
             built_for: Vec::new(),
@@ -225,17 +225,50 @@ impl<'p> PackageSource<'p> {
             prev_camera: None,
             base_colours: motu_render::denoise::mesh_base_colours(&base),
             textured: motu_render::denoise::has_textured_materials(&base),
+            stream_fit: None,
         };
-        src.rebuild(&o.elements_on, o.lod_instance, &o.render.lod)?;
+        let size = (o.width.max(1), o.height.max(1));
+        src.rebuild(&o.elements_on, o.lod_instance, &o.render.lod, size)?;
         Ok(src)
     }
 
-    /// The view with only the elements on. A subset's root copy is leaked: the streaming
+    /// Streaming renders large TLASes split into pieces (as `motu render --stream`, from the
+    /// split the import stored when `base` is the package's own); the split tables are made
+    /// once and live as long as the viewer (leaked: the renderer and every element subset
+    /// borrow them).
+    fn split_base(
+        &mut self,
+        stream: &ViewStreamSettings,
+    ) -> Result<HierarchyView<'p>, SourceError> {
+        if let Some(b) = self.split_base {
+            return Ok(b);
+        }
+        let split = motu_render::package_stream_split(
+            self.meshes.0,
+            &self.base,
+            stream.bounds.split_instances,
+        )?;
+        let b = match split {
+            Some(split) => {
+                let split: &'p motu_render::StreamSplit = Box::leak(Box::new(split));
+                split.view(&self.base)
+            }
+            None => self.base,
+        };
+        self.split_base = Some(b);
+        Ok(b)
+    }
+
+    /// `base` with only the elements on. A subset's root copy is leaked: the streaming
     /// renderer borrows its view for its whole life, and each toggle leaks one root table
     /// (bounded by the user's key presses).
-    fn view_for(&self, on: &[bool]) -> Result<HierarchyView<'p>, SourceError> {
+    fn view_for(
+        &self,
+        base: HierarchyView<'p>,
+        on: &[bool],
+    ) -> Result<HierarchyView<'p>, SourceError> {
         if on.iter().all(|e| *e) {
-            return Ok(self.base);
+            return Ok(base);
         }
         let keep: Vec<u32> = self
             .element_ids
@@ -244,27 +277,57 @@ impl<'p> PackageSource<'p> {
             .filter(|(_, on)| **on)
             .map(|(id, _)| *id)
             .collect();
-        let subset =
-            RootSubset::new(&self.base, |e| keep.contains(&e)).map_err(SourceError::Subset)?;
+        let subset = RootSubset::new(&base, |e| keep.contains(&e)).map_err(SourceError::Subset)?;
         let subset: &'p RootSubset = Box::leak(Box::new(subset));
-        Ok(subset.view(&self.base))
+        Ok(subset.view(&base))
     }
 
+    /// Builds the structures for the elements `on` and the LOD mode asked for, for frames of
+    /// `size` pixels (a streaming budget's test of the full build counts the frame's buffers).
     fn rebuild(
         &mut self,
         on: &[bool],
         lod_instance: bool,
         lod: &LodParams,
+        size: (u32, u32),
     ) -> Result<(), SourceError> {
+        // The previous streamer's structure cache stays warm for the next one.
+        let old_cache = match &mut self.renderer {
+            Renderer::Stream(Some(old)) => old.take_cache(),
+            _ => None,
+        };
         // Free the old structures before building the new ones (the budget holds one set).
         self.renderer = Renderer::Full(None);
-        let view = self.view_for(on)?;
-        let s = &self.settings;
-        let budget = s.vram_budget_bytes.unwrap_or(u64::MAX);
+        self.stream_fit = None;
         let mode = if lod_instance {
             LodMode::Instance
         } else {
             LodMode::Traversal
+        };
+        let settings = self.settings.clone();
+        let s = &settings;
+        let budget = s.vram_budget_bytes.unwrap_or(u64::MAX);
+        if s.stream.as_ref().is_some_and(|st| !st.always) {
+            // A budget that holds the whole scene draws the full build (never slower), with
+            // LOD resolved as the streamer would (the same image).
+            let view = self.view_for(self.base, on)?;
+            let (fit, renderer) =
+                fit::full_build_if_it_fits(&self.ctx, &view, self.meshes, s, size)?;
+            self.stream_fit = Some(fit);
+            if let Some(r) = renderer {
+                self.lod_mode = choose_lod_mode(&view, lod, mode, true)?.mode;
+                self.renderer = Renderer::Full(Some(r));
+                self.built_for = on.to_vec();
+                self.built_lod = Some((lod_instance, *lod));
+                return Ok(());
+            }
+        }
+        let view = match &s.stream {
+            Some(stream) => {
+                let base = self.split_base(stream)?;
+                self.view_for(base, on)?
+            }
+            None => self.view_for(self.base, on)?,
         };
         let lod_choice = choose_lod_mode(&view, lod, mode, s.stream.is_some())?;
         self.lod_mode = lod_choice.mode;
@@ -285,12 +348,7 @@ impl<'p> PackageSource<'p> {
             }
             Some(stream) => {
                 let opts = stream.options(budget, s.max_allocations);
-                // The previous renderer's cache (after an element toggle) stays warm.
-                let mut cache = match &mut self.renderer {
-                    Renderer::Stream(Some(old)) => old.take_cache(),
-                    _ => None,
-                }
-                .or_else(|| stream.cache.open(self.meshes.0));
+                let mut cache = old_cache.or_else(|| stream.cache.open(self.meshes.0));
                 let plan = match cache {
                     Some(ref mut c) => motu_gpu::StreamPlan::new_cached(&view, c),
                     None => motu_gpu::StreamPlan::new(&view),
@@ -330,9 +388,13 @@ impl<'p> PackageSource<'p> {
         on: &[bool],
         lod_instance: bool,
     ) -> Result<SourceFrame, SourceError> {
-        if on != self.built_for.as_slice() || self.lod_changed(lod_instance, &opts.lod) {
-            self.rebuild(on, lod_instance, &opts.lod)?;
+        if on != self.built_for.as_slice()
+            || self.lod_changed(lod_instance, &opts.lod)
+            || self.stream_fit.as_ref().is_some_and(|f| f.outgrown(camera))
+        {
+            self.rebuild(on, lod_instance, &opts.lod, (camera.width, camera.height))?;
         }
+        let stream_fit = self.stream_fit.as_ref().map(|f| f.stats.clone());
         let lod_mode = self.lod_mode;
         let total = self.total_structures;
         let progressive = self
@@ -354,6 +416,7 @@ impl<'p> PackageSource<'p> {
                     streaming: None,
                     incomplete_pixels: 0,
                     lod_mode,
+                    stream_fit,
                 };
                 let detail = Some(ViewDetail::Resources(Box::new(rep.into())));
                 Ok(SourceFrame {
@@ -389,6 +452,7 @@ impl<'p> PackageSource<'p> {
                         st.incomplete_pixels.max(1)
                     },
                     lod_mode,
+                    stream_fit,
                 };
                 let detail = Some(ViewDetail::Stream(Box::new((&st).into())));
                 Ok(SourceFrame {

@@ -79,7 +79,7 @@ pub fn build(ctx: &egui::Context, info: &PanelInfo, history: &History, ctl: &mut
 
 /// The keys, as the panel's last line reminds them.
 const KEYS: &str = "WASD/QE move, drag look, wheel speed, 1-9 cameras, Shift+1-9 elements, \
-                    V/F1-F4 view, L lod, M lod mode, K dither, H shadows, P accumulate, \
+                    V/F1-F5 view, L lod, M lod mode, K dither, H shadows, P accumulate, \
                     N denoise, Tab panel, Esc quit";
 
 fn contents(ui: &mut Ui, info: &PanelInfo, history: &History, ctl: &mut Controls) {
@@ -179,7 +179,13 @@ fn memory(ui: &mut Ui, info: &PanelInfo) {
                 String::new()
             }
         ),
-        None => "full build (no streaming)".into(),
+        None => match &s.stream_fit {
+            Some(f) if f.full_build => format!(
+                "full build: the budget holds the scene (at most {})",
+                mib(f.full_build_upper_bytes)
+            ),
+            _ => "full build (no streaming)".into(),
+        },
     });
     ui.label(format!(
         "samples {}{}  denoiser {}",
@@ -191,7 +197,7 @@ fn memory(ui: &mut Ui, info: &PanelInfo) {
 
 fn render_controls(ui: &mut Ui, info: &PanelInfo, ctl: &mut Controls) {
     let r = &mut ctl.render;
-    ui.horizontal(|ui| {
+    ui.horizontal_wrapped(|ui| {
         ui.label("view");
         for v in VIEWS {
             ui.selectable_value(&mut r.view, v, view_name(v));

@@ -24,6 +24,11 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
              streaming frames: add --stream or --vram-budget"
         );
     }
+    if !streaming && a.stream_always {
+        bail!(
+            "--stream-always streams even a scene the budget holds: add --stream or --vram-budget"
+        );
+    }
     if let Some(why) = crate::cmd::render::stream_bounds(&a.stream_bounds).conflict() {
         bail!(why);
     }
@@ -162,6 +167,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
             max_passes: a.stream_passes,
             frames: a.frames,
             cache: crate::cmd::render::cache_settings(&a.as_cache),
+            always: a.stream_always,
         }),
     };
     let result = motu_view::run(opts, |o| {
@@ -221,6 +227,7 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
             lod_mode: last.stats.lod_mode,
             accumulated_samples: result.accumulated_samples,
             denoised: result.denoised,
+            stream_fit: last.stats.stream_fit.clone(),
             detail: last.detail.clone(),
             package: a.package.display().to_string(),
         };
@@ -230,8 +237,13 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
     if let Some(p) = &a.record {
         eprintln!("recorded {} frames to {}", result.poses.len(), p.display());
     }
+    let drawn = match &last.stats.stream_fit {
+        Some(f) if f.full_build => ", the full build: the budget holds the scene",
+        _ if last.stats.streaming.is_some() => ", streamed",
+        _ => "",
+    };
     eprintln!(
-        "view: {} frames shown ({}×{}, {}), last {:.2} Mrays/s, {:.2} traces/ray",
+        "view: {} frames shown ({}×{}, {}{drawn}), last {:.2} Mrays/s, {:.2} traces/ray",
         result.frames_shown,
         w,
         h,

@@ -25,7 +25,7 @@ pub(crate) struct FrameParams {
     root_tlas: u32,
     light_count: u32,
     /// Address of the scene's shading tables (`shade.glsl`'s `ShadingRef`), 0 for none.
-    pub(crate) shading: u64,
+    shading: u64,
     sky: [f32; 4],
     ao_samples: u32,
     spp: u32,
@@ -84,11 +84,15 @@ impl FrameParams {
     }
 }
 
-/// The frame parameters of `common.glsl` for `camera` and `opts`.
+/// The frame parameters of `common.glsl` for `camera` and `opts` over the scene whose root is
+/// `root_tlas` and whose shading tables (textures, normals, uvs) start at `shading_address`
+/// (0: none; every renderer over a scene with tables must pass them, or its frames lose
+/// textures, shading normals and alpha cut-outs).
 pub(crate) fn frame_params(
     camera: &CameraParams,
     opts: &RenderOptions,
     root_tlas: u32,
+    shading_address: u64,
 ) -> FrameParams {
     let sun = {
         let s = opts.sun_dir_world;
@@ -108,7 +112,7 @@ pub(crate) fn frame_params(
         ambient: opts.ambient,
         root_tlas,
         light_count,
-        shading: 0,
+        shading: shading_address,
         sky: [
             sky[0],
             sky[1],

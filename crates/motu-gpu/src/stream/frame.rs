@@ -199,8 +199,7 @@ impl<'a> StreamingRenderer<'a> {
         opts: &RenderOptions,
         guard_len: usize,
     ) -> Result<FrameBuffers> {
-        let mut params = frame_params(camera, opts, self.view.root_tlas);
-        params.shading = self.shading.address;
+        let params = frame_params(camera, opts, self.view.root_tlas, self.shading.address);
         self.res.pinned = vec![false; self.item_count()];
         let fb = self.frame_buffers(
             camera.width,

@@ -82,8 +82,7 @@ impl<'a> StreamingRenderer<'a> {
         // A later round (open pixels, or a verifying round over every pixel) adds to the
         // first round's sightings, need and marks.
         let later = again.is_some() || verify;
-        let mut params = frame_params(next, opts, self.view.root_tlas);
-        params.shading = self.shading.address;
+        let params = frame_params(next, opts, self.view.root_tlas, self.shading.address);
         crate::render::write_params(&fb.params, &params, &opts.shading)?;
         let pixels = u64::from(next.width) * u64::from(next.height);
         let stride = self.opts.probe_stride.max(1);

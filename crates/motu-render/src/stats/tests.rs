@@ -170,6 +170,7 @@ fn view_stats(detail: ViewDetail) -> ViewStats {
         lod_mode: "none",
         accumulated_samples: 1,
         denoised: false,
+        stream_fit: None,
         detail: Some(detail),
         package: "scene.motu".into(),
     }
@@ -255,7 +256,16 @@ fn documents() -> Vec<(&'static str, Value)> {
         ("render_cpu", json(&cpu)),
         (
             "view",
-            json(&view_stats(ViewDetail::Resources(Box::new(resources())))),
+            // A streaming budget that held the scene: the full build drew it.
+            json(&ViewStats {
+                stream_fit: Some(StreamFitStats {
+                    budget_bytes: 2,
+                    full_build_upper_bytes: 1,
+                    full_build: true,
+                    check_ms: 1.0,
+                }),
+                ..view_stats(ViewDetail::Resources(Box::new(resources())))
+            }),
         ),
         (
             "view_stream",

@@ -17,7 +17,14 @@ fn keys_switch_views_lod_cameras_elements_and_panel() {
     assert_eq!(c.render.view, View::Ids);
     press(&mut c, KeyCode::F4, false);
     assert_eq!(c.render.view, View::Heatmap);
+    // The albedo view (the denoiser's guide) follows the heatmap in the cycle, and is F5.
     press(&mut c, KeyCode::KeyV, false);
+    assert_eq!(c.render.view, View::Albedo);
+    press(&mut c, KeyCode::KeyV, false);
+    assert_eq!(c.render.view, View::Shaded);
+    press(&mut c, KeyCode::F5, false);
+    assert_eq!(c.render.view, View::Albedo);
+    press(&mut c, KeyCode::F1, false);
     assert_eq!(c.render.view, View::Shaded);
     // LOD: auto → 0 → 1 … → 7 → auto.
     assert!(c.render.lod.forced_lod < 0);

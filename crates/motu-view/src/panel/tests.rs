@@ -22,6 +22,7 @@ fn info() -> PanelInfo {
             streaming: Some((5, 2)),
             incomplete_pixels: 0,
             lod_mode: "instance",
+            stream_fit: None,
         },
         samples: 16,
         denoised: false,
@@ -165,6 +166,42 @@ fn clicks_on_the_panel_toggle_elements_views_and_move_the_camera() {
     click_text(&ctx, &mut ctl, &out.shapes, "heatmap");
     assert_eq!(ctl.render.view, View::Heatmap);
     let out = frame(&ctx, &mut ctl, &h, vec![]);
+    click_text(&ctx, &mut ctl, &out.shapes, "albedo");
+    assert_eq!(ctl.render.view, View::Albedo);
+    let out = frame(&ctx, &mut ctl, &h, vec![]);
     click_text(&ctx, &mut ctl, &out.shapes, "shadows");
     assert!(!ctl.render.shadows);
+}
+
+#[test]
+fn a_streaming_budget_that_holds_the_scene_says_the_full_build_draws_it() {
+    let ctx = egui::Context::default();
+    let mut ctl = crate::testutil::controls();
+    let h = History::default();
+    let mut i = info();
+    i.stats.streaming = None;
+    i.stats.stream_fit = Some(motu_render::stats::StreamFitStats {
+        budget_bytes: 8 << 20,
+        full_build_upper_bytes: 3 << 20,
+        full_build: true,
+        check_ms: 1.0,
+    });
+    let mut shown = |i: &PanelInfo| {
+        let _ = ctx.run(input(vec![]), |c| build(c, i, &h, &mut ctl));
+        let out = ctx.run(input(vec![]), |c| build(c, i, &h, &mut ctl));
+        texts(&out.shapes)
+            .into_iter()
+            .map(|t| t.0)
+            .collect::<Vec<_>>()
+    };
+    let all = shown(&i);
+    let want = "full build: the budget holds the scene (at most 3.0 MiB)";
+    assert!(all.iter().any(|t| t == want), "no {want:?} in {all:?}");
+    // Refused (or not holding it): a plain full build is not claimed to be a hand-over.
+    i.stats.stream_fit.as_mut().unwrap().full_build = false;
+    let all = shown(&i);
+    assert!(
+        all.iter().any(|t| t == "full build (no streaming)"),
+        "{all:?}"
+    );
 }
