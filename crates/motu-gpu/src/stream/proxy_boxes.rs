@@ -22,7 +22,7 @@
 
 use motu_abi::{HierarchyView, BLAS_TRIANGLES};
 use motu_compile::proxy_boxes::{blas_boxes, fan, Stored, StoredProxyBoxes, EMPTY};
-pub(super) use motu_compile::proxy_boxes::{padded, Box6};
+pub(super) use motu_compile::proxy_boxes::Box6;
 use rayon::prelude::*;
 
 use crate::scene::MeshBlobSource;
