@@ -45,7 +45,7 @@ fn tables() -> Tables {
         bounds_min: [-10.0; 3],
         box_list_instances: 0,
         bounds_max: [100.0; 3],
-        _pad: 0,
+        ..Default::default()
     };
     Tables {
         tlases: vec![tlas(0, 300), tlas(300, 40)],

@@ -101,8 +101,19 @@ fn a_stored_table_is_used_where_it_matches_and_made_again_where_not() {
     // Damaged, or made for another shape: not used, made.
     let mut damaged = bytes.clone();
     damaged.truncate(bytes.len() - 3);
-    let mut fewer = view;
-    fewer.instances = &view.instances[..view.instances.len() - 1];
+    // One instance fewer (a valid view of another shape).
+    let mut tlases = view.tlases.to_vec();
+    let last = view.instances.len() - 1;
+    assert_eq!(
+        tlases[view.root_tlas as usize].instance_range().end,
+        last + 1
+    );
+    tlases[view.root_tlas as usize].instance_count -= 1;
+    let fewer = HierarchyView {
+        tlases: &tlases,
+        instances: &view.instances[..last],
+        ..view
+    };
     for (v, b) in [(view, &damaged[..]), (fewer, &bytes[..])] {
         let p = StreamPlan::load(&v, Some(b), None);
         assert_eq!(p.source(), ClustersSource::Computed);
