@@ -55,8 +55,11 @@ fn a_plan_round_trips_and_refuses_another_view() {
     assert_ne!(plan_key(&view, b"pkg"), plan_key(&view, b"other"));
 }
 
+/// A cluster's BLAS, bounds and members.
+type Comparable = (u32, [f32; 6], Vec<u32>);
+
 /// The clusters of two plans, comparable.
-fn clusters_of(plan: &StreamPlan) -> Vec<Vec<(u32, [f32; 6], Vec<u32>)>> {
+fn clusters_of(plan: &StreamPlan) -> Vec<Vec<Comparable>> {
     plan.clusters
         .iter()
         .map(|t| {
