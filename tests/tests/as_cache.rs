@@ -6,8 +6,9 @@
 use motu_tests::{gpu_available, import, json_u64, motu_ok, render_env, report_peak_and_floor, s};
 use std::path::{Path, PathBuf};
 
-/// The default island imported without its stored proxy boxes (`--no-proxy-boxes`, as an older
-/// package: the structure cache then keeps the boxes the start makes), its 64×36 peak, and the
+/// The default island imported without its stored proxy boxes and clusters (`--no-proxy-boxes
+/// --no-proxy-clusters`, as an older package: the structure cache then keeps the boxes and
+/// clusters the start makes), its 64×36 peak, and the
 /// reference path (room for everything, no cache).
 struct Fixture {
     dir: tempfile::TempDir,
@@ -25,7 +26,11 @@ impl Fixture {
         let gen = dir.path().join("island");
         motu_ok(&["gen", "island", "-o", s(&gen)]);
         let pkg = dir.path().join("island.motu");
-        import(&gen.join("scene.pbrt"), &pkg, &["--no-proxy-boxes"]);
+        import(
+            &gen.join("scene.pbrt"),
+            &pkg,
+            &["--no-proxy-boxes", "--no-proxy-clusters"],
+        );
         let (peak, _floor) = report_peak_and_floor(&pkg, "64", "36");
         let f = Fixture {
             reference: dir.path().join("reference.aov"),
@@ -250,6 +255,8 @@ fn a_second_process_with_a_warm_cache_rebuilds_nothing_it_cached() {
         // The proxy clusters too.
         assert_eq!(cold["stream"]["startup"]["clusters_cached"], false);
         assert_eq!(warm["stream"]["startup"]["clusters_cached"], true);
+        assert_eq!(cold["stream"]["startup"]["clusters_source"], "computed");
+        assert_eq!(warm["stream"]["startup"]["clusters_source"], "cache");
         assert_eq!(
             json_u64(&warm["stream"]["cache"]["disk_hits"]),
             stored + 2,

@@ -807,3 +807,123 @@ fn proxy_boxes_stored_at_import_start_streamed_renders_and_bad_ones_are_made_aga
         motu_ok(&["compare", s(&stored_aov), s(other), "--max-mismatch", "0"]);
     }
 }
+
+/// `motu report --json` of `pkg` at 48×27 without its `package` path (which names the file).
+fn report_without_path(pkg: &Path) -> serde_json::Value {
+    let mut r = report_json(pkg, "48", "27");
+    r.as_object_mut().unwrap().remove("package");
+    r
+}
+
+/// Issue 45 item 1 / issue 48 item 2: `motu import` stores the proxy clusters of every TLAS
+/// (the package's `proxy_clusters` section), so neither a streamed start nor `motu report`'s
+/// floor runs the binned SAH over every instance; a section that cannot be read is a warning and
+/// the clusters are made, as for a package imported without it (`--no-proxy-clusters`, what
+/// older motu wrote), and a hierarchy of another shape (another stream split) makes its own.
+/// Every image and every report is the same.
+#[test]
+fn proxy_clusters_stored_at_import_start_streamed_renders_and_bad_ones_are_made_again() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pkg = gen_island(d, None);
+    let old = d.join("old.motu");
+    motu_tests::import(
+        &d.join("island").join("scene.pbrt"),
+        &old,
+        &["--no-proxy-clusters"],
+    );
+    let magic = b"motu pclust v1\0\0";
+    let bytes = std::fs::read(&pkg).unwrap();
+    let at = bytes
+        .windows(magic.len())
+        .position(|w| w == magic)
+        .expect("the package stores a proxy_clusters section");
+    let old_bytes = std::fs::read(&old).unwrap();
+    assert!(!old_bytes.windows(magic.len()).any(|w| w == magic));
+    // One bit flipped inside the section: its checksum fails.
+    let mut damaged = bytes.clone();
+    damaged[at + 60] ^= 0x10;
+    let bad = d.join("damaged.motu");
+    std::fs::write(&bad, &damaged).unwrap();
+
+    // The report's floor reads the clusters: the same report from every package.
+    let report = report_without_path(&pkg);
+    assert_eq!(report, report_without_path(&old));
+    assert_eq!(report, report_without_path(&bad));
+
+    let (peak, floor) = report_peak_and_floor(&pkg, "48", "27");
+    let budget = (floor + (peak.saturating_sub(floor)) / 4).to_string();
+    let full_aov = d.join("full.aov");
+    render(&pkg, &full_aov, &["--width", "48", "--height", "27"]);
+    let streamed = |pkg: &Path, name: &str, extra: &[&str]| {
+        let aov = d.join(format!("{name}.aov"));
+        let (png, json) = (aov.with_extension("png"), aov.with_extension("json"));
+        let mut args = vec![
+            "render",
+            s(pkg),
+            "-o",
+            s(&png),
+            "--backend",
+            "pipeline",
+            "--camera",
+            CAMERA,
+            "--bounces",
+            "0",
+            "--aov",
+            s(&aov),
+            "--stats",
+            s(&json),
+            "--stream",
+            "--stream-always",
+            "--vram-budget",
+            &budget,
+            "--width",
+            "48",
+            "--height",
+            "27",
+        ];
+        args.extend(extra);
+        let out = motu_tests::motu(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "{name}: {stderr}");
+        let st: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        assert_eq!(st["stream"]["frames"][0]["complete"], true, "{name}");
+        motu_ok(&["compare", s(&full_aov), s(&aov), "--max-mismatch", "0.001"]);
+        let startup = st["stream"]["startup"].clone();
+        (startup, stderr, aov)
+    };
+    let (startup, stderr, stored_aov) = streamed(&pkg, "stored", &[]);
+    assert_eq!(startup["clusters_source"], "package", "{startup}");
+    assert_eq!(startup["clusters_cached"], false);
+    assert_eq!(u(&startup["clusters_stale_tlases"]), 0);
+    assert!(!stderr.contains("proxy-cluster table"), "{stderr}");
+
+    let (startup, stderr, bad_aov) = streamed(&bad, "damaged", &[]);
+    assert_eq!(startup["clusters_source"], "computed", "{startup}");
+    assert!(
+        stderr.contains("proxy-cluster table cannot be read"),
+        "{stderr}"
+    );
+    let (startup, stderr, old_aov) = streamed(&old, "old", &[]);
+    assert_eq!(startup["clusters_source"], "computed", "{startup}");
+    assert!(!stderr.contains("proxy-cluster table"), "{stderr}");
+    // Another split than the stored clusters were made for: made, quietly.
+    let (startup, stderr, split_aov) = streamed(&pkg, "split", &["--stream-split-instances", "64"]);
+    assert_eq!(startup["clusters_source"], "computed", "{startup}");
+    assert!(!stderr.contains("proxy-cluster table"), "{stderr}");
+    // The same clusters, whatever their source: the same pixels.
+    for other in [&bad_aov, &old_aov] {
+        motu_ok(&["compare", s(&stored_aov), s(other), "--max-mismatch", "0"]);
+    }
+    motu_ok(&[
+        "compare",
+        s(&full_aov),
+        s(&split_aov),
+        "--max-mismatch",
+        "0.001",
+    ]);
+}

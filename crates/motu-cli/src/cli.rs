@@ -255,6 +255,11 @@ pub struct ImportArgs {
     /// import whose streamed renders make them from every mesh at start instead.
     #[arg(long)]
     pub no_proxy_boxes: bool,
+    /// Do not store the proxy clusters of the TLASes (the `proxy_clusters` section): a faster
+    /// import whose streamed renders and `motu report` run the binned SAH over every instance
+    /// instead.
+    #[arg(long)]
+    pub no_proxy_clusters: bool,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,

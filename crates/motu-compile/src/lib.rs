@@ -111,7 +111,9 @@
 //! world-space triangles per source triangle, which baked compiles need), and `proxy_boxes.rs`:
 //! the boxes inside a triangle BLAS a streamed render tests before building it, with the
 //! `proxy_boxes` package section (`motu import` stores them; the streamer checks each BLAS's
-//! entry by a hash of its records).
+//! entry by a hash of its records), and `proxy_clusters.rs`: the proxy clusters of a TLAS (binned
+//! SAH over its triangle instances) with the `proxy_clusters` package section (stored at import
+//! over the stream split; each TLAS's entry checked by a hash of its record and instances).
 //!
 //! Key types: `compile`, `compile_with_loader`, `CompiledScene`, `validate`, `split_for_streaming`,
 //! `StreamSplit`.
@@ -123,6 +125,7 @@ mod flatten;
 mod lod;
 pub mod partition;
 pub mod proxy_boxes;
+pub mod proxy_clusters;
 mod split;
 mod tables;
 mod tlas_split;

@@ -93,6 +93,13 @@ pub trait MeshBlobSource: Sync {
     fn stored_proxy_boxes(&self) -> Option<&[u8]> {
         None
     }
+
+    /// The proxy clusters of every TLAS stored with the meshes (a package's `proxy_clusters`
+    /// section, `motu_compile::proxy_clusters::encode_section`), where the source has them.
+    /// [`crate::StreamPlan::load`] checks each TLAS's entry against the view before using it.
+    fn stored_proxy_clusters(&self) -> Option<&[u8]> {
+        None
+    }
 }
 
 /// The least allocation cap under which a budgeted full build uses small blocks (see

@@ -149,7 +149,7 @@ pub use options::{
     MeshMemory, PassMarks, StreamFallback, StreamOptions, AUTO_PASS_FRAMES, AUTO_PASS_ROWS,
 };
 pub use stats::{FrameStreamStats, PassStats, StreamTotals};
-pub use topology::StreamPlan;
+pub use topology::{ClustersSource, StreamPlan};
 
 /// Whether BLAS `b` is streamed (built on demand, evicted under the budget): a triangle BLAS
 /// with geometry. The rest (AABB BLASes of programmable instances) stay in the skeleton.
@@ -220,7 +220,7 @@ impl<'a> StreamingRenderer<'a> {
         source: &'a dyn MeshBlobSource,
         opts: &StreamOptions,
     ) -> Result<StreamingRenderer<'a>> {
-        let plan = StreamPlan::new(&view);
+        let plan = StreamPlan::load(&view, source.stored_proxy_clusters(), None);
         Self::with_plan(ctx, view, plan, source, opts)
     }
 

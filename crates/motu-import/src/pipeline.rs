@@ -41,6 +41,10 @@ pub struct ImportOptions {
     /// Store the boxes inside every triangle BLAS (the `proxy_boxes` section, FORMAT.md) so
     /// streamed renders need not read every mesh at start (`--no-proxy-boxes`: off).
     pub proxy_boxes: bool,
+    /// Store the proxy clusters of every TLAS of the stream split (the `proxy_clusters`
+    /// section, FORMAT.md) so streamed starts and `motu report` need not run a binned SAH over
+    /// every instance (`--no-proxy-clusters`: off).
+    pub proxy_clusters: bool,
     /// Called as parsing advances and once when it is done (the CLI's progress bar).
     pub progress: Option<ProgressFn>,
     /// Cut meshes over the partition bound into clusters while parsing (`precut.rs`) rather
@@ -74,6 +78,7 @@ impl Default for ImportOptions {
             texture_max: 1024,
             ptex_max: crate::textures::DEFAULT_PTEX_MAX,
             proxy_boxes: true,
+            proxy_clusters: true,
             progress: None,
             cut_while_parsing: true,
             cut_queue_bytes: crate::precut::DEFAULT_CUT_QUEUE_BYTES,
@@ -117,6 +122,9 @@ pub struct ImportSummary {
     /// Of `pack_ms`: the boxes inside triangle BLASes made and stored for streamed renders
     /// (0 with `--no-proxy-boxes`).
     pub proxy_boxes_ms: f64,
+    /// Of `pack_ms`: the proxy clusters of the split hierarchy's TLASes made and stored for
+    /// streamed renders and the report's floor (0 with `--no-proxy-clusters`).
+    pub proxy_clusters_ms: f64,
     pub meshes: u64,
     pub instances: u64,
     pub flattened_instances: u64,
@@ -542,7 +550,7 @@ fn compile_into(
 const MADE_IN_FLIGHT: usize = 4;
 
 fn summary(
-    (s, split_ms, proxy_boxes_ms): (WriteSummary, f64, f64),
+    (s, split_ms, proxy_boxes_ms, proxy_clusters_ms): (WriteSummary, f64, f64, f64),
     st: &motu_scene::SceneStats,
     compiled: &CompiledScene,
     report: &IngestReport,
@@ -563,6 +571,7 @@ fn summary(
         compile_phases: (&compiled.report.phases).into(),
         stream_split_ms: split_ms,
         proxy_boxes_ms,
+        proxy_clusters_ms,
         meshes: st.meshes,
         instances: st.instances,
         flattened_instances: st.flattened_instances,
@@ -589,7 +598,7 @@ fn finish(
     report: &IngestReport,
     source: &Path,
     o: &ImportOptions,
-) -> Result<(WriteSummary, f64, f64), ImportError> {
+) -> Result<(WriteSummary, f64, f64, f64), ImportError> {
     let owned = scene;
     let scene = &owned;
     // A subset package describes only what it holds.
@@ -640,7 +649,8 @@ fn finish(
     let textures = crate::textures::write_textures(&mut writer, scene, caps, &mut meta.warnings)?;
     drop(owned);
     let t = Instant::now();
-    meta.stream_split = Some(crate::split::write_stream_split(&mut writer, compiled)?);
+    let (split_meta, split) = crate::split::write_stream_split(&mut writer, compiled)?;
+    meta.stream_split = Some(split_meta);
     let split_ms = t.elapsed().as_secs_f64() * 1e3;
     let mut view = compiled.view();
     view.textures = &textures;
@@ -650,11 +660,18 @@ fn finish(
         crate::proxy_boxes::write_proxy_boxes(&mut writer, &view)?;
     }
     let proxy_boxes_ms = t.elapsed().as_secs_f64() * 1e3;
+    let t = Instant::now();
+    if o.proxy_clusters {
+        crate::split::write_proxy_clusters(&mut writer, &view, split.as_ref())?;
+    }
+    drop(split);
+    let proxy_clusters_ms = t.elapsed().as_secs_f64() * 1e3;
     motu_pack::write_hierarchy_after_texels(&mut writer, &view, &meta)?;
     Ok((
         writer.finish().map_err(ImportError::FinishPackage)?,
         split_ms,
         proxy_boxes_ms,
+        proxy_clusters_ms,
     ))
 }
 

@@ -1,17 +1,21 @@
 //! The stream split, made once at import and stored in the package (`motu report` reads it
-//! instead of splitting a Moana-sized root again; FORMAT.md "stream split").
+//! instead of splitting a Moana-sized root again; FORMAT.md "stream split"), and the proxy
+//! clusters of the split hierarchy's TLASes (the `proxy_clusters` section), which streamed
+//! starts and the floor read instead of making them.
 
 use crate::ImportError;
-use motu_compile::CompiledScene;
+use motu_abi::HierarchyView;
+use motu_compile::{proxy_clusters, CompiledScene, StoredStreamSplit, StreamSplit};
 use motu_package::PackageWriter;
 
 /// Splits `compiled`'s TLASes over [`motu_compile::STREAM_SPLIT_INSTANCES`] as `motu render
 /// --stream` does, writes the split's sections and returns the meta entry that describes
-/// them. Split in place: the instance table is not copied (`compiled` ends as it was).
+/// them, and the split (`None`: no TLAS over the cap). Split in place: the instance table is
+/// not copied (`compiled` ends as it was).
 pub(crate) fn write_stream_split(
     writer: &mut PackageWriter,
     compiled: &mut CompiledScene,
-) -> Result<motu_pack::StreamSplitMeta, ImportError> {
+) -> Result<(motu_pack::StreamSplitMeta, Option<StoredStreamSplit>), ImportError> {
     let t = std::time::Instant::now();
     let cap = motu_compile::STREAM_SPLIT_INSTANCES;
     let stored =
@@ -42,5 +46,39 @@ pub(crate) fn write_stream_split(
         peak_rss_bytes = crate::peak_rss_bytes(),
         "stream split stored"
     );
-    Ok(meta)
+    Ok((meta, stored))
+}
+
+/// Makes the proxy clusters of every TLAS of the hierarchy a streamed render draws (`view` with
+/// `split`, the stream split just stored, rebuilt as readers rebuild it) and adds them as the
+/// package's `proxy_clusters` section (FORMAT.md), so neither a streamed start nor `motu
+/// report`'s floor runs the binned SAH over every instance.
+pub(crate) fn write_proxy_clusters(
+    writer: &mut PackageWriter,
+    view: &HierarchyView<'_>,
+    split: Option<&StoredStreamSplit>,
+) -> Result<(), ImportError> {
+    let t = std::time::Instant::now();
+    let split = split
+        .map(|s| StreamSplit::from_stored(view, s))
+        .transpose()
+        .map_err(ImportError::Compile)?;
+    let streamed = split.as_ref().map_or(*view, |s| s.view(view));
+    let clusters = proxy_clusters::all_clusters(&streamed);
+    let table = proxy_clusters::StoredProxyClusters::new(&streamed, &clusters);
+    let bytes = proxy_clusters::encode_section(&table);
+    writer.add_section(
+        motu_pack::SECTION_PROXY_CLUSTERS,
+        "proxy_clusters",
+        1,
+        &bytes,
+    )?;
+    tracing::info!(
+        tlases = table.tlases.len(),
+        clusters = table.clusters.len(),
+        section_bytes = bytes.len(),
+        made_ms = t.elapsed().as_secs_f64() * 1e3,
+        "proxy clusters stored"
+    );
+    Ok(())
 }

@@ -131,6 +131,16 @@ impl ScenePackage {
         Ok(Some(self.package.section_bytes(SECTION_PROXY_BOXES)?))
     }
 
+    /// The `proxy_clusters` section's bytes (`motu_compile::proxy_clusters::decode_section`
+    /// reads them): `Ok(None)` in a package written without it, an error when its checksum
+    /// fails.
+    pub fn stored_proxy_clusters(&self) -> Result<Option<&[u8]>, PackError> {
+        if self.package.section_info(SECTION_PROXY_CLUSTERS).is_none() {
+            return Ok(None);
+        }
+        Ok(Some(self.package.section_bytes(SECTION_PROXY_CLUSTERS)?))
+    }
+
     fn layout(m: &MeshRecord) -> MeshBlobLayout {
         MeshBlobLayout::with_map(
             m.vertex_count as u64,

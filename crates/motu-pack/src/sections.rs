@@ -29,3 +29,8 @@ pub const SECTION_SPLIT_EXTRA_INSTANCES: SectionKind = SectionKind(17);
 /// by `motu import` since this kind appeared; optional): a versioned byte blob whose entries
 /// each carry a hash of their BLAS's records, so a reader uses only those that match.
 pub const SECTION_PROXY_BOXES: SectionKind = SectionKind(18);
+/// The proxy clusters of every TLAS of the stream split for streamed renders and the floor
+/// (`motu_compile::proxy_clusters`, written by `motu import` since this kind appeared;
+/// optional): a versioned byte blob whose per-TLAS entries each carry a hash of the TLAS's
+/// record, its instances and the BLAS table, so a reader uses only those that match.
+pub const SECTION_PROXY_CLUSTERS: SectionKind = SectionKind(19);

@@ -58,7 +58,7 @@ pub use camera::{
 pub use cpu::render_cpu_instance_lod;
 pub use gpu::build_scene;
 pub use lod::{choose_lod_mode, LodChoice, LodMode};
-pub use meshes::{PackageGeometry, PackageMeshes};
+pub use meshes::{stored_proxy_clusters, PackageGeometry, PackageMeshes};
 pub use motu_compile::{StreamSplit, STREAM_SPLIT_INSTANCES};
 pub use session::{render, PendingCacheWrites, RenderJob, Rendered};
 pub use settings::{

@@ -86,4 +86,23 @@ impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
             }
         }
     }
+
+    fn stored_proxy_clusters(&self) -> Option<&[u8]> {
+        stored_proxy_clusters(self.0)
+    }
+}
+
+/// The package's `proxy_clusters` section (`motu_gpu::StreamPlan::load` reads it); one that
+/// cannot be read (its checksum fails) is a warning, and the clusters are made again.
+pub fn stored_proxy_clusters(pkg: &ScenePackage) -> Option<&[u8]> {
+    match pkg.stored_proxy_clusters() {
+        Ok(bytes) => bytes,
+        Err(e) => {
+            tracing::warn!(
+                error = %e,
+                "the package's proxy-cluster table cannot be read; the clusters are made again"
+            );
+            None
+        }
+    }
 }

@@ -364,6 +364,13 @@ pub struct StreamStartup {
     pub clusters_ms: f64,
     /// Whether the clusters were read from the structure cache (kept by an earlier process).
     pub clusters_cached: bool,
+    /// Where the clusters came from: "package" (the package's `proxy_clusters` section,
+    /// stored at import), "cache" (the structure cache) or "computed" (binned SAH here, for
+    /// every TLAS or the ones whose stored entry was stale).
+    pub clusters_source: &'static str,
+    /// TLASes whose entry in the package's table did not match (changed since import; made
+    /// again, with a warning).
+    pub clusters_stale_tlases: u64,
     /// The streaming floor (`motu_gpu::streaming_floor`): refusing budgets below it.
     pub floor_ms: f64,
     /// The streaming renderer's start: derived tables, proxy clusters and boxes, the resident

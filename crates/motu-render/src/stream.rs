@@ -8,6 +8,7 @@ use crate::stats::{FrameStats, StreamFitStats, StreamRunStats, StreamStartup};
 use crate::{camera_pose, scene_shading, Backend, PackageMeshes, RenderError};
 use motu_abi::camera::{camera_path, CameraParams};
 use motu_abi::HierarchyView;
+use motu_gpu::MeshBlobSource as _;
 use std::time::Instant;
 
 /// What one streaming frame may build, and what it shows for what it did not build.
@@ -273,12 +274,12 @@ pub(crate) fn render_streaming(
     // Opened before the start: the proxy clusters and boxes are kept in it too.
     let mut cache = stream.cache.open(pkg);
     let t = Instant::now();
-    let plan = match cache.as_mut() {
-        Some(c) => motu_gpu::StreamPlan::new_cached(view, c),
-        None => motu_gpu::StreamPlan::new(view),
-    };
+    // The package's stored clusters, else the structure cache's, else made.
+    let plan = motu_gpu::StreamPlan::load(view, meshes.stored_proxy_clusters(), cache.as_mut());
     startup.clusters_ms = ms_since(t);
     startup.clusters_cached = plan.from_cache();
+    startup.clusters_source = plan.source().as_str();
+    startup.clusters_stale_tlases = plan.stale_tlases();
     let t = Instant::now();
     let floor = tracing::info_span!("floor")
         .in_scope(|| motu_gpu::streaming_floor_planned(view, &plan, &ctx, w, h, opts.staging_bytes))
@@ -338,6 +339,7 @@ pub(crate) fn render_streaming(
                 device_ms = startup.device_ms,
                 split_ms = startup.split_ms,
                 clusters_ms = startup.clusters_ms,
+                clusters_source = startup.clusters_source,
                 floor_ms = startup.floor_ms,
                 init_ms = startup.init_ms,
                 derived_ms = startup.derived_ms,

@@ -170,7 +170,18 @@ pub fn build_report_at(
     };
     let view = pkg.view()?;
     let split = motu_render::stored_stream_split(pkg, &view, motu_render::STREAM_SPLIT_INSTANCES)?;
-    build(&view, &input, sizes, budget_bytes, split)
+    // The proxy clusters the import stored (checked TLAS by TLAS against the split hierarchy).
+    let clusters = motu_render::stored_proxy_clusters(pkg);
+    let stored = Stored { split, clusters };
+    build(&view, &input, sizes, budget_bytes, stored)
+}
+
+/// What a package stored for its readers: the stream split (`None`: split here) and the proxy
+/// clusters' section (`None`: made here).
+#[derive(Default)]
+struct Stored<'p> {
+    split: Option<Option<motu_compile::StreamSplit>>,
+    clusters: Option<&'p [u8]>,
 }
 
 /// The element label of untagged root instances (after every real element id).
@@ -251,16 +262,17 @@ pub fn build_report_from_view(
     sizes: &dyn SizeSource,
     budget_bytes: Option<u64>,
 ) -> Result<Report, ReportError> {
-    build(view, input, sizes, budget_bytes, None)
+    build(view, input, sizes, budget_bytes, Stored::default())
 }
 
-/// [`build_report_from_view`] with the stream split already made (`None`: split here).
+/// [`build_report_from_view`] with what the package stored (the stream split, the proxy
+/// clusters).
 fn build(
     view: &HierarchyView<'_>,
     input: &ReportInput,
     sizes: &dyn SizeSource,
     budget_bytes: Option<u64>,
-    stored_split: Option<Option<motu_compile::StreamSplit>>,
+    stored: Stored<'_>,
 ) -> Result<Report, ReportError> {
     let _span = tracing::info_span!("report", package = %input.package).entered();
     let g = Graph::new(*view, sizes)?;
@@ -499,13 +511,15 @@ fn build(
     // driver size queries.
     let (fw, fh) = input.floor_image;
     // The hierarchy the streamer renders: large TLASes split into pieces at load time.
-    let split = match stored_split {
+    let split = match stored.split {
         Some(split) => split,
         None => motu_render::stream_split(view, None)?,
     };
     let streamed = split.as_ref().map_or(*view, |s| s.view(view));
-    let floor = motu_gpu::streaming_floor(
+    let plan = motu_gpu::StreamPlan::load(&streamed, stored.clusters, None);
+    let floor = motu_gpu::streaming_floor_planned(
         &streamed,
+        &plan,
         &FloorAdapter(sizes),
         fw,
         fh,

@@ -10,6 +10,7 @@ use crate::{FrameSource, SourceFrame, SourceStats, ViewOptions};
 use motu_abi::camera::{CameraParams, CameraPose};
 use motu_abi::lod::LodParams;
 use motu_abi::{HierarchyView, RootSubset};
+use motu_gpu::MeshBlobSource as _;
 use motu_pack::ScenePackage;
 use motu_render::stats::ViewDetail;
 use motu_render::{choose_lod_mode, LodMode, PackageMeshes, RenderError, StreamBounds};
@@ -349,10 +350,13 @@ impl<'p> PackageSource<'p> {
             Some(stream) => {
                 let opts = stream.options(budget, s.max_allocations);
                 let mut cache = old_cache.or_else(|| stream.cache.open(self.meshes.0));
-                let plan = match cache {
-                    Some(ref mut c) => motu_gpu::StreamPlan::new_cached(&view, c),
-                    None => motu_gpu::StreamPlan::new(&view),
-                };
+                // The package's stored clusters (for the whole scene's view; an element
+                // subset's are made), else the structure cache's, else made.
+                let plan = motu_gpu::StreamPlan::load(
+                    &view,
+                    self.meshes.stored_proxy_clusters(),
+                    cache.as_mut(),
+                );
                 let sr = motu_gpu::StreamingRenderer::with_plan_and_cache(
                     &self.ctx,
                     view,

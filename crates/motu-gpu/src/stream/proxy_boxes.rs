@@ -21,8 +21,8 @@
 //! ([`super::streaming_floor`]) counts them from [`layout`] without reading any mesh.
 
 use motu_abi::{HierarchyView, BLAS_TRIANGLES};
+pub(super) use motu_compile::proxy_boxes::Box6;
 use motu_compile::proxy_boxes::{blas_boxes, fan, Stored, StoredProxyBoxes, EMPTY};
-pub(super) use motu_compile::proxy_boxes::{padded, Box6};
 use rayon::prelude::*;
 
 use crate::scene::MeshBlobSource;

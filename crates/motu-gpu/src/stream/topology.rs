@@ -12,47 +12,13 @@ use motu_abi::{
     BlasRecord, HierarchyView, InstanceRecord, PiRecord, TlasRecord, BLAS_AABBS, NONE_U32,
 };
 
-use super::proxy_boxes::padded;
+use motu_compile::proxy_clusters::{tlas_clusters, Cluster};
+
 use super::{IDENTITY, PI_EMPTY_BLAS};
 use crate::error::{GpuError, Result};
 
-/// `[min, max]` of nothing: the start of a union of boxes.
-const EMPTY_BOX: [f32; 6] = [
-    f32::INFINITY,
-    f32::INFINITY,
-    f32::INFINITY,
-    -f32::INFINITY,
-    -f32::INFINITY,
-    -f32::INFINITY,
-];
-
-/// `[min, max]` of the box `lo..hi` under the affine map `m`.
-pub(super) fn transformed_box(m: &[f32; 12], lo: [f32; 3], hi: [f32; 3]) -> [f32; 6] {
-    let mut out = EMPTY_BOX;
-    for c in 0..8 {
-        let p = [
-            if c & 1 == 0 { lo[0] } else { hi[0] },
-            if c & 2 == 0 { lo[1] } else { hi[1] },
-            if c & 4 == 0 { lo[2] } else { hi[2] },
-        ];
-        let q = motu_abi::xform_point(m, p);
-        for a in 0..3 {
-            out[a] = out[a].min(q[a]);
-            out[3 + a] = out[3 + a].max(q[a]);
-        }
-    }
-    out
-}
-
-/// Triangle instances of one BLAS per proxy box at most. One box per instance made the
-/// resident skeleton (proxy BLAS, PI records, and the TLAS sized for every instance) grow with
-/// the instance count: 26 MB of the default island's 46 MB floor. A box over a cluster of
-/// neighbouring instances of the same BLAS stays exact where it matters (the BLAS is open for a
-/// ray that enters the box, a superset of the rays that could hit an instance) and only costs
-/// a build when a ray passes between the instances before the BLAS was walked.
-pub(super) const PROXY_CLUSTER_INSTANCES: usize = 16;
-
-/// One proxy box: a spatially coherent cluster of a TLAS's instances of one triangle BLAS.
+/// One proxy box: a spatially coherent cluster of a TLAS's instances of one triangle BLAS
+/// (`motu_compile::proxy_clusters`), with where its members start in the GPU member table.
 #[derive(Clone, Debug)]
 pub(super) struct ProxyCluster {
     pub blas: u32,
@@ -66,87 +32,91 @@ pub(super) struct ProxyCluster {
     pub member_first: u32,
 }
 
-/// The proxy clusters of TLAS `t`: its instances of each buildable BLAS, cut by the compiler's
-/// binned SAH over instance bounds into pieces of at most [`PROXY_CLUSTER_INSTANCES`], in BLAS
-/// order. Deterministic: the renderer and the floor ([`super::streaming_floor`]) both call it.
-pub(super) fn proxy_clusters(
-    view: &HierarchyView<'_>,
-    t: usize,
-    buildable: impl Fn(usize) -> bool,
-) -> Vec<ProxyCluster> {
-    let rec = &view.tlases[t];
-    type Bounds = ([f32; 3], [f32; 3]);
-    let mut by_blas: std::collections::BTreeMap<u32, (Vec<u32>, Vec<Bounds>)> = Default::default();
-    for (local, inst) in view.instances[rec.instance_range()].iter().enumerate() {
-        let b = inst.blas as usize;
-        if !buildable(b) {
-            continue;
-        }
-        let br = &view.blases[b];
-        let x = transformed_box(&inst.tlas_from_blas, br.bounds_min, br.bounds_max);
-        let entry = by_blas.entry(inst.blas).or_default();
-        entry.0.push(local as u32);
-        entry.1.push(([x[0], x[1], x[2]], [x[3], x[4], x[5]]));
-    }
-    let mut out = Vec::new();
-    let mut ranges = Vec::new();
-    for (blas, (mut items, mut bounds)) in by_blas {
-        ranges.clear();
-        motu_compile::sah_partition(
-            &mut items,
-            &mut bounds,
-            PROXY_CLUSTER_INSTANCES,
-            &mut ranges,
-        );
-        for &(begin, end) in &ranges {
-            let mut b = EMPTY_BOX;
-            for (lo, hi) in &bounds[begin..end] {
-                for a in 0..3 {
-                    b[a] = b[a].min(lo[a]);
-                    b[3 + a] = b[3 + a].max(hi[a]);
-                }
-            }
-            out.push(ProxyCluster {
-                blas,
-                bounds: padded(b),
-                members: items[begin..end].to_vec(),
-                member_first: 0,
-            });
+impl From<Cluster> for ProxyCluster {
+    fn from(c: Cluster) -> ProxyCluster {
+        ProxyCluster {
+            blas: c.blas,
+            bounds: c.bounds,
+            members: c.members,
+            member_first: 0,
         }
     }
-    out
+}
+
+/// The proxy clusters of TLAS `t` (`motu_compile::proxy_clusters::tlas_clusters`: its
+/// instances of each streamable BLAS, cut by the compiler's binned SAH into pieces of at most
+/// `CLUSTER_INSTANCES`, in BLAS order). Deterministic: the importer (which stores them), the
+/// renderer and the floor ([`super::streaming_floor`]) get the same clusters.
+pub(super) fn proxy_clusters(view: &HierarchyView<'_>, t: usize) -> Vec<ProxyCluster> {
+    tlas_clusters(view, t)
+        .into_iter()
+        .map(ProxyCluster::from)
+        .collect()
+}
+
+/// Where a [`StreamPlan`]'s clusters came from (`stream.startup.clusters_source` in `--stats`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ClustersSource {
+    /// The package's `proxy_clusters` section, stored at import.
+    Package,
+    /// The structure cache, kept by an earlier process.
+    Cache,
+    /// Made here (binned SAH over every instance), in part or whole.
+    Computed,
+}
+
+impl ClustersSource {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ClustersSource::Package => "package",
+            ClustersSource::Cache => "cache",
+            ClustersSource::Computed => "computed",
+        }
+    }
 }
 
 /// What the floor ([`super::streaming_floor_planned`]) and the renderer
 /// ([`StreamingRenderer::with_plan`](super::StreamingRenderer::with_plan)) both derive from a view before anything is built: the
 /// proxy clusters of every TLAS (binned SAH over millions of instances: seconds at island
-/// scale, so made once per render, the TLASes in parallel).
+/// scale, so made once per render, the TLASes in parallel, or read from the package or the
+/// structure cache: `plan_cache.rs`).
 pub struct StreamPlan {
     pub(super) clusters: Vec<Vec<ProxyCluster>>,
     pub(super) instances: usize,
-    /// Read back from the structure cache ([`StreamPlan::new_cached`]).
-    pub(super) from_cache: bool,
+    pub(super) source: ClustersSource,
+    /// TLASes whose entry in the package's table was made for another view (made here).
+    pub(super) stale_tlases: u64,
 }
 
 impl StreamPlan {
     pub fn new(view: &HierarchyView<'_>) -> StreamPlan {
         use rayon::prelude::*;
         let _span = tracing::info_span!("proxy_clusters", tlases = view.tlases.len()).entered();
-        let buildable = |b: usize| super::streamable(&view.blases[b]);
         let clusters = (0..view.tlases.len())
             .into_par_iter()
-            .map(|t| proxy_clusters(view, t, buildable))
+            .map(|t| proxy_clusters(view, t))
             .collect();
         StreamPlan {
             clusters,
             instances: view.instances.len(),
-            from_cache: false,
+            source: ClustersSource::Computed,
+            stale_tlases: 0,
         }
     }
 
     /// Whether the clusters were read from the structure cache instead of made.
     pub fn from_cache(&self) -> bool {
-        self.from_cache
+        self.source == ClustersSource::Cache
+    }
+
+    /// Where the clusters came from.
+    pub fn source(&self) -> ClustersSource {
+        self.source
+    }
+
+    /// TLASes whose stored clusters did not match the view (made again).
+    pub fn stale_tlases(&self) -> u64 {
+        self.stale_tlases
     }
 
     /// A plan made for another view is a caller's mistake, refused rather than trusted.

@@ -1,4 +1,5 @@
 use super::*;
+use crate::stream::topology::ClustersSource;
 use motu_trace::testutil::{srt, uv_sphere, HierarchyBuilder};
 
 /// A root of many instances of two BLASes: clusters with members.
@@ -52,4 +53,74 @@ fn a_plan_round_trips_and_refuses_another_view() {
     // The key covers the tables: another instance table, another key.
     assert_ne!(plan_key(&view, b"pkg"), plan_key(&fewer, b"pkg"));
     assert_ne!(plan_key(&view, b"pkg"), plan_key(&view, b"other"));
+}
+
+/// A cluster's BLAS, bounds and members.
+type Comparable = (u32, [f32; 6], Vec<u32>);
+
+/// The clusters of two plans, comparable.
+fn clusters_of(plan: &StreamPlan) -> Vec<Vec<Comparable>> {
+    plan.clusters
+        .iter()
+        .map(|t| {
+            t.iter()
+                .map(|c| (c.blas, c.bounds, c.members.clone()))
+                .collect()
+        })
+        .collect()
+}
+
+/// The package's section for `view` (as `motu import` writes it).
+fn section(view: &HierarchyView<'_>) -> Vec<u8> {
+    use motu_compile::proxy_clusters::{all_clusters, encode_section, StoredProxyClusters};
+    encode_section(&StoredProxyClusters::new(view, &all_clusters(view)))
+}
+
+#[test]
+fn a_stored_table_is_used_where_it_matches_and_made_again_where_not() {
+    let h = scene();
+    let view = h.view();
+    let made = StreamPlan::new(&view);
+    let bytes = section(&view);
+    let stored = StreamPlan::load(&view, Some(&bytes), None);
+    assert_eq!(stored.source(), ClustersSource::Package);
+    assert_eq!(stored.stale_tlases(), 0);
+    assert_eq!(clusters_of(&stored), clusters_of(&made));
+
+    // The view changed since the table was made (an instance moved): that TLAS is stale and
+    // made again, so the plan is the new view's.
+    let mut instances = view.instances.to_vec();
+    instances[7].tlas_from_blas[3] += 40.0;
+    let moved = HierarchyView {
+        instances: &instances,
+        ..view
+    };
+    let again = StreamPlan::load(&moved, Some(&bytes), None);
+    assert_eq!(again.source(), ClustersSource::Computed);
+    assert_eq!(again.stale_tlases(), 1);
+    assert_eq!(clusters_of(&again), clusters_of(&StreamPlan::new(&moved)));
+    assert_ne!(clusters_of(&again), clusters_of(&made));
+
+    // Damaged, or made for another shape: not used, made.
+    let mut damaged = bytes.clone();
+    damaged.truncate(bytes.len() - 3);
+    // One instance fewer (a valid view of another shape).
+    let mut tlases = view.tlases.to_vec();
+    let last = view.instances.len() - 1;
+    assert_eq!(
+        tlases[view.root_tlas as usize].instance_range().end,
+        last + 1
+    );
+    tlases[view.root_tlas as usize].instance_count -= 1;
+    let fewer = HierarchyView {
+        tlases: &tlases,
+        instances: &view.instances[..last],
+        ..view
+    };
+    for (v, b) in [(view, &damaged[..]), (fewer, &bytes[..])] {
+        let p = StreamPlan::load(&v, Some(b), None);
+        assert_eq!(p.source(), ClustersSource::Computed);
+        assert_eq!(p.stale_tlases(), 0);
+        assert_eq!(clusters_of(&p), clusters_of(&StreamPlan::new(&v)));
+    }
 }

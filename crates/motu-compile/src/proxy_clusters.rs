@@ -1,0 +1,310 @@
+//! Proxy clusters of a TLAS: the maths, and the table a package stores.
+//!
+//! A streamed render (`motu-gpu` `stream/topology.rs`) stands each spatially coherent cluster
+//! of a TLAS's instances of one triangle BLAS by one proxy box, cut by the binned SAH
+//! ([`crate::sah_partition`]) over the instances' transformed BLAS bounds into pieces of at most
+//! [`CLUSTER_INSTANCES`]. Over millions of instances that is seconds (about 2 s of island
+//! 0.63's start on the H200 host, and most of `motu report`'s time), so `motu import` makes
+//! the clusters once, over the hierarchy the streamer renders (the package's stream split), and
+//! stores them in the package's `proxy_clusters` section ([`encode_section`], FORMAT.md).
+//!
+//! A reader uses a TLAS's stored clusters only when the entry's hash ([`tlas_hash`]: the TLAS's
+//! record, its instances and the whole BLAS table) matches the view it renders, and makes the
+//! others itself ([`tlas_clusters`]), so a stale or foreign table never changes an image.
+//! Deterministic: the same view gives the same clusters, stored or made.
+
+use motu_abi::blob::{BlobReader, BlobWriter};
+use motu_abi::HierarchyView;
+
+use crate::proxy_boxes::{has_boxes, padded, Box6, EMPTY};
+
+/// Triangle instances of one BLAS per proxy box at most. One box per instance made the
+/// resident skeleton (proxy BLAS, PI records, and the TLAS sized for every instance) grow with
+/// the instance count: 26 MB of the default island's 46 MB floor. A box over a cluster of
+/// neighbouring instances of the same BLAS stays exact where it matters (the BLAS is open for a
+/// ray that enters the box, a superset of the rays that could hit an instance) and only costs
+/// a build when a ray passes between the instances before the BLAS was walked.
+pub const CLUSTER_INSTANCES: usize = 16;
+
+/// One proxy box: a spatially coherent cluster of a TLAS's instances of one triangle BLAS.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Cluster {
+    pub blas: u32,
+    /// `[min, max]` in the TLAS's space: the union of the instances' transformed BLAS bounds,
+    /// padded ([`padded`]).
+    pub bounds: Box6,
+    /// The member instances: indices in the TLAS's instance range.
+    pub members: Vec<u32>,
+}
+
+/// `[min, max]` of the box `lo..hi` under the affine map `m`.
+pub fn transformed_box(m: &[f32; 12], lo: [f32; 3], hi: [f32; 3]) -> Box6 {
+    let mut out = EMPTY;
+    for c in 0..8 {
+        let p = [
+            if c & 1 == 0 { lo[0] } else { hi[0] },
+            if c & 2 == 0 { lo[1] } else { hi[1] },
+            if c & 4 == 0 { lo[2] } else { hi[2] },
+        ];
+        let q = motu_abi::xform_point(m, p);
+        for a in 0..3 {
+            out[a] = out[a].min(q[a]);
+            out[3 + a] = out[3 + a].max(q[a]);
+        }
+    }
+    out
+}
+
+/// The proxy clusters of TLAS `t`: its instances of each BLAS with boxes ([`has_boxes`]: what
+/// a streamer streams), cut by the binned SAH over instance bounds into pieces of at most
+/// [`CLUSTER_INSTANCES`], in BLAS order.
+pub fn tlas_clusters(view: &HierarchyView<'_>, t: usize) -> Vec<Cluster> {
+    let rec = &view.tlases[t];
+    type Bounds = ([f32; 3], [f32; 3]);
+    let mut by_blas: std::collections::BTreeMap<u32, (Vec<u32>, Vec<Bounds>)> = Default::default();
+    for (local, inst) in view.instances[rec.instance_range()].iter().enumerate() {
+        let br = &view.blases[inst.blas as usize];
+        if !has_boxes(br) {
+            continue;
+        }
+        let x = transformed_box(&inst.tlas_from_blas, br.bounds_min, br.bounds_max);
+        let entry = by_blas.entry(inst.blas).or_default();
+        entry.0.push(local as u32);
+        entry.1.push(([x[0], x[1], x[2]], [x[3], x[4], x[5]]));
+    }
+    let mut out = Vec::new();
+    let mut ranges = Vec::new();
+    for (blas, (mut items, mut bounds)) in by_blas {
+        ranges.clear();
+        crate::sah_partition(&mut items, &mut bounds, CLUSTER_INSTANCES, &mut ranges);
+        for &(begin, end) in &ranges {
+            let mut b = EMPTY;
+            for (lo, hi) in &bounds[begin..end] {
+                for a in 0..3 {
+                    b[a] = b[a].min(lo[a]);
+                    b[3 + a] = b[3 + a].max(hi[a]);
+                }
+            }
+            out.push(Cluster {
+                blas,
+                bounds: padded(b),
+                members: items[begin..end].to_vec(),
+            });
+        }
+    }
+    out
+}
+
+/// [`tlas_clusters`] of every TLAS, the TLASes in parallel.
+pub fn all_clusters(view: &HierarchyView<'_>) -> Vec<Vec<Cluster>> {
+    use rayon::prelude::*;
+    (0..view.tlases.len())
+        .into_par_iter()
+        .map(|t| tlas_clusters(view, t))
+        .collect()
+}
+
+const HASH_DOMAIN: &[u8] = b"motu-proxy-clusters-tlas-v1";
+
+/// The whole BLAS table hashed (each TLAS's hash covers it: a cluster reads its BLAS's kind,
+/// item count and bounds).
+pub fn blases_hash(view: &HierarchyView<'_>) -> u64 {
+    xxhash_rust::xxh3::xxh3_64(bytemuck::cast_slice(view.blases))
+}
+
+/// What TLAS `t`'s clusters are made from, hashed: the maths' constant, the BLAS table
+/// ([`blases_hash`]), the TLAS's record and its instance records. A stored entry whose hash
+/// differs was made for another view and is not used.
+pub fn tlas_hash(view: &HierarchyView<'_>, t: usize, blases_hash: u64) -> u64 {
+    let mut h = xxhash_rust::xxh3::Xxh3::new();
+    h.update(HASH_DOMAIN);
+    h.update(&(CLUSTER_INSTANCES as u32).to_le_bytes());
+    h.update(&blases_hash.to_le_bytes());
+    let rec = &view.tlases[t];
+    h.update(bytemuck::bytes_of(rec));
+    let range = rec.instance_range();
+    h.update(bytemuck::cast_slice(
+        view.instances.get(range).unwrap_or(&[]),
+    ));
+    h.digest()
+}
+
+/// The `proxy_clusters` section's first bytes (FORMAT.md): the name and the version.
+pub const SECTION_MAGIC: &[u8; 16] = b"motu pclust v1\0\0";
+
+/// One TLAS's entry of a stored table: [`tlas_hash`], its first cluster and cluster count.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
+pub struct StoredTlas {
+    pub hash: u64,
+    pub first_cluster: u64,
+    pub cluster_count: u64,
+}
+
+/// One stored cluster: its BLAS, its member count (members follow the previous cluster's in
+/// the member table) and its padded bounds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
+pub struct StoredCluster {
+    pub blas: u32,
+    pub member_count: u32,
+    pub bounds: Box6,
+}
+
+/// A package's stored clusters: per TLAS of the view they were made for, its entry; the
+/// clusters; the members (indices in their TLAS's instance range), cluster after cluster.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct StoredProxyClusters {
+    pub instance_count: u64,
+    pub tlases: Vec<StoredTlas>,
+    pub clusters: Vec<StoredCluster>,
+    pub members: Vec<u32>,
+    /// Per cluster, where its members start (made by [`decode_section`]).
+    member_first: Vec<u64>,
+}
+
+/// What [`StoredProxyClusters::tlas_clusters`] found for a TLAS.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Stored {
+    /// The entry matches the TLAS: its clusters.
+    Valid(Vec<Cluster>),
+    /// The entry was made for another TLAS (its record, instances or the BLAS table differ).
+    Stale,
+}
+
+impl StoredProxyClusters {
+    /// The table of `clusters` (per TLAS of `view`, as [`all_clusters`] makes them).
+    pub fn new(view: &HierarchyView<'_>, clusters: &[Vec<Cluster>]) -> StoredProxyClusters {
+        use rayon::prelude::*;
+        let bh = blases_hash(view);
+        let hashes: Vec<u64> = (0..view.tlases.len())
+            .into_par_iter()
+            .map(|t| tlas_hash(view, t, bh))
+            .collect();
+        let mut out = StoredProxyClusters {
+            instance_count: view.instances.len() as u64,
+            ..Default::default()
+        };
+        for (list, hash) in clusters.iter().zip(hashes) {
+            out.tlases.push(StoredTlas {
+                hash,
+                first_cluster: out.clusters.len() as u64,
+                cluster_count: list.len() as u64,
+            });
+            for c in list {
+                out.member_first.push(out.members.len() as u64);
+                out.clusters.push(StoredCluster {
+                    blas: c.blas,
+                    member_count: c.members.len() as u32,
+                    bounds: c.bounds,
+                });
+                out.members.extend_from_slice(&c.members);
+            }
+        }
+        out
+    }
+
+    /// Whether the table was made for a view of `view`'s shape (TLAS and instance counts): a
+    /// table of another shape (another stream split, an element subset) is not one to check
+    /// TLAS by TLAS.
+    pub fn fits(&self, view: &HierarchyView<'_>) -> bool {
+        self.tlases.len() == view.tlases.len() && self.instance_count == view.instances.len() as u64
+    }
+
+    /// TLAS `t`'s stored clusters, checked against `view` ([`tlas_hash`] with `blases_hash`,
+    /// [`blases_hash`] of `view`) and its ranges (members inside the TLAS, BLASes in range).
+    /// The table must [`fit`](Self::fits) `view`.
+    pub fn tlas_clusters(&self, view: &HierarchyView<'_>, t: usize, blases_hash: u64) -> Stored {
+        let e = self.tlases[t];
+        if e.hash != tlas_hash(view, t, blases_hash) {
+            return Stored::Stale;
+        }
+        let count = view.tlases[t].instance_count;
+        let first = e.first_cluster as usize;
+        let mut out = Vec::with_capacity(e.cluster_count as usize);
+        for (k, c) in self.clusters[first..][..e.cluster_count as usize]
+            .iter()
+            .enumerate()
+        {
+            let start = self.member_first[first + k] as usize;
+            let members = &self.members[start..start + c.member_count as usize];
+            if c.blas as usize >= view.blases.len() || members.iter().any(|&m| m >= count) {
+                return Stored::Stale;
+            }
+            out.push(Cluster {
+                blas: c.blas,
+                bounds: c.bounds,
+                members: members.to_vec(),
+            });
+        }
+        Stored::Valid(out)
+    }
+}
+
+/// The section's bytes: [`SECTION_MAGIC`], the instance, TLAS, cluster and member counts (u64
+/// each), the TLAS entries (24 bytes each), the clusters (32 bytes each), the members (u32).
+pub fn encode_section(t: &StoredProxyClusters) -> Vec<u8> {
+    let mut w = BlobWriter::new(
+        SECTION_MAGIC,
+        32 + std::mem::size_of_val(&t.tlases[..])
+            + std::mem::size_of_val(&t.clusters[..])
+            + std::mem::size_of_val(&t.members[..]),
+    );
+    w.u64(t.instance_count)
+        .u64(t.tlases.len() as u64)
+        .u64(t.clusters.len() as u64)
+        .u64(t.members.len() as u64)
+        .pods(&t.tlases)
+        .pods(&t.clusters)
+        .pods(&t.members);
+    w.finish()
+}
+
+/// Reads what [`encode_section`] wrote; `None` for another magic (another version), a cut or
+/// long section, TLAS entries that do not tile the clusters in order, or member counts that do
+/// not add up to the member table.
+pub fn decode_section(bytes: &[u8]) -> Option<StoredProxyClusters> {
+    let mut r = BlobReader::new(bytes, SECTION_MAGIC)?;
+    let instance_count = r.u64()?;
+    let n_tlases = usize::try_from(r.u64()?).ok()?;
+    let n_clusters = usize::try_from(r.u64()?).ok()?;
+    let n_members = usize::try_from(r.u64()?).ok()?;
+    // Counts checked against the bytes before anything is allocated.
+    let need = n_tlases
+        .checked_mul(std::mem::size_of::<StoredTlas>())?
+        .checked_add(n_clusters.checked_mul(std::mem::size_of::<StoredCluster>())?)?
+        .checked_add(n_members.checked_mul(4)?)?;
+    if need != r.remaining() {
+        return None;
+    }
+    let tlases: Vec<StoredTlas> = r.pods(n_tlases)?;
+    let clusters: Vec<StoredCluster> = r.pods(n_clusters)?;
+    let members: Vec<u32> = r.pods(n_members)?;
+    r.finish()?;
+    let mut next = 0u64;
+    for e in &tlases {
+        if e.first_cluster != next {
+            return None;
+        }
+        next = next.checked_add(e.cluster_count)?;
+    }
+    if next != n_clusters as u64 {
+        return None;
+    }
+    let mut member_first = Vec::with_capacity(n_clusters);
+    let mut m = 0u64;
+    for c in &clusters {
+        member_first.push(m);
+        m += u64::from(c.member_count);
+    }
+    (m == n_members as u64).then_some(StoredProxyClusters {
+        instance_count,
+        tlases,
+        clusters,
+        members,
+        member_first,
+    })
+}
+
+#[cfg(test)]
+mod tests;
