@@ -75,8 +75,13 @@ struct Attached {
     driver: String,
 }
 
-/// Restored structures (BLAS id, structure) and the ids left to build.
-pub(super) type Restored = (Vec<(usize, AccelStruct)>, Vec<usize>);
+/// What [`StreamingRenderer::restore_cached`] restored, and what is left to build.
+pub(super) struct Restored {
+    /// (BLAS id, its restored structure).
+    pub built: Vec<(usize, AccelStruct)>,
+    /// The BLASes no cached copy restored.
+    pub rest: Vec<usize>,
+}
 
 /// Keys' format: bump when what a key covers changes.
 const KEY_DOMAIN: &str = "motu-blas-v1";
@@ -148,7 +153,10 @@ impl StreamingRenderer<'_> {
     /// device error fails.
     pub(super) fn restore_cached(&mut self, ids: &[usize], evict: bool) -> Result<Restored> {
         if self.reuse.cache.is_none() || ids.is_empty() {
-            return Ok((Vec::new(), ids.to_vec()));
+            return Ok(Restored {
+                built: Vec::new(),
+                rest: ids.to_vec(),
+            });
         }
         let t = Instant::now();
         let ctx = self.ctx.clone();
@@ -190,13 +198,19 @@ impl StreamingRenderer<'_> {
             }
         }
         if hits.is_empty() {
-            return Ok((Vec::new(), rest));
+            return Ok(Restored {
+                built: Vec::new(),
+                rest,
+            });
         }
         let mut restored = Vec::with_capacity(hits.len());
         self.restore_some(&hits, evict, &mut restored, &mut rest)?;
         rest.sort_unstable();
         self.frame.stats.restore_ms += ms_since(t);
-        Ok((restored, rest))
+        Ok(Restored {
+            built: restored,
+            rest,
+        })
     }
 
     /// Deserialises `hits` in one submission; where the budget has no room for their copies,
