@@ -146,7 +146,8 @@ pub use render::{
     RenderStats, View, MAX_STACK_SIZE,
 };
 pub use scene::{
-    full_build_overhead, BuildOptions, FullBuildOverhead, GpuScene, MeshBlobSource, ResourceReport,
+    full_build_overhead, BuildOptions, FullBuildOverhead, GpuScene, MeshBlobSource,
+    MeshSourceError, ResourceReport,
 };
 pub use stream::{
     full_build_fits, persistent_tlas_estimate, streamed_mesh_total_bytes, streaming_floor,

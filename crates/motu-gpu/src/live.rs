@@ -7,7 +7,7 @@ use motu_abi::camera::CameraParams;
 use crate::error::Result;
 use crate::render::{
     alloc_frame, frame_outputs, frame_params, params_bytes, run_frames, write_params, Frame,
-    FrameMeasure, RenderOptions, RenderOutput, RenderStats, Tracer,
+    FrameMeasure, FrameResult, RenderOptions, RenderOutput, RenderStats, Tracer,
 };
 use crate::scene::GpuScene;
 
@@ -94,8 +94,12 @@ impl LiveRenderer {
                 "live renderer state".into(),
             ));
         };
-        let (records, rgba_words, counters, frame_ns) =
-            run_frames(&ctx, &self.scene, tracer, frame, w, h, 1)?;
+        let FrameResult {
+            records,
+            rgba_words,
+            counters,
+            frame_ns,
+        } = run_frames(&ctx, &self.scene, tracer, frame, w, h, 1)?;
         let (aov, rgba8, heatmap_max, exposure_ev) =
             frame_outputs(w, h, records, &rgba_words, opts);
         let ms = frame_ns.first().copied().unwrap_or(0.0) / 1e6;

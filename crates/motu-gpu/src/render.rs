@@ -18,7 +18,7 @@ use motu_vk::Context;
 use crate::error::{GpuError, Result};
 use crate::scene::GpuScene;
 
-pub(crate) use frame::{alloc_frame, frame_bytes, run_frames, Frame};
+pub(crate) use frame::{alloc_frame, frame_bytes, run_frames, Frame, FrameResult};
 pub use options::{Backend, RenderOptions, View};
 use output::RENDER_STAT_WORDS;
 pub(crate) use output::{
@@ -80,7 +80,12 @@ pub fn render_counted(
         p.release(&mut heap);
     }
     drop(heap);
-    let (records, rgba_words, counters, frame_ns) = result?;
+    let FrameResult {
+        records,
+        rgba_words,
+        counters,
+        frame_ns,
+    } = result?;
 
     let (aov, rgba8, heatmap_max, exposure_ev) = frame_outputs(w, h, records, &rgba_words, opts);
     // The first of several frames is a warm-up (caches, pipeline first use): not in the median.

@@ -54,6 +54,8 @@ pub(crate) use upload::{
     streamed_attribute_bytes, streamed_mesh_bytes, MeshGpu, MeshStager, Uploader,
 };
 
+pub use crate::error::MeshSourceError;
+
 /// Geometry of one compiled mesh, by its index in the hierarchy's mesh table (e.g. slices of a
 /// mapped package chunk, borrowed). `Sync`: the streaming renderer reads meshes from several
 /// threads when it starts (the boxes inside BLASes).
@@ -63,7 +65,7 @@ pub trait MeshBlobSource: Sync {
     fn mesh_data(
         &self,
         mesh_record: u32,
-    ) -> std::result::Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), String>;
+    ) -> std::result::Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), MeshSourceError>;
 
     /// The primitive map (`triangle_count` source triangle ids) of a mesh record with
     /// `FLAG_PRIMITIVE_MAP` (a cluster of a partitioned mesh). Sources without clusters keep
@@ -72,7 +74,7 @@ pub trait MeshBlobSource: Sync {
     fn primitive_map(
         &self,
         _mesh_record: u32,
-    ) -> std::result::Result<Option<Cow<'_, [u32]>>, String> {
+    ) -> std::result::Result<Option<Cow<'_, [u32]>>, MeshSourceError> {
         Ok(None)
     }
 
@@ -82,8 +84,10 @@ pub trait MeshBlobSource: Sync {
     fn mesh_shading(
         &self,
         _mesh_record: u32,
-    ) -> std::result::Result<(Option<Cow<'_, [[f32; 3]]>>, Option<Cow<'_, [[f32; 2]]>>), String>
-    {
+    ) -> std::result::Result<
+        (Option<Cow<'_, [[f32; 3]]>>, Option<Cow<'_, [[f32; 2]]>>),
+        MeshSourceError,
+    > {
         Ok((None, None))
     }
 
@@ -270,8 +274,7 @@ impl GpuScene {
         );
         let _g = span.enter();
         let t0 = Instant::now();
-        view.check_references()
-            .map_err(|e| GpuError::InvalidRequest(e.to_string()))?;
+        view.check_references()?;
         let budget = usable_budget_bytes(ctx, opts.budget_bytes)?;
         // The staging ring counts against the budget on unified memory: under a user budget it
         // is a 32nd of it at most (`full_build_overhead` counts the same).

@@ -254,8 +254,7 @@ impl<'a> StreamingRenderer<'a> {
             tlases = view.tlases.len()
         );
         let _g = span.enter();
-        view.check_references()
-            .map_err(|e| GpuError::InvalidRequest(e.to_string()))?;
+        view.check_references()?;
         plan.check(&view)?;
         let setup = skeleton::HeapSetup::new(ctx, &view, opts)?;
         let opts = setup.opts;
@@ -348,19 +347,19 @@ impl<'a> StreamingRenderer<'a> {
         match e {
             GpuError::Budget(msg) => {
                 let report = self.heap.report();
-                GpuError::Budget(format!(
+                GpuError::Budget(msg.explained(format!(
                     "streaming: {what} do not fit under the budget of {} bytes next to the \
                      resident skeleton ({} bytes) with every structure evicted ({} bytes in \
-                     use); raise --vram-budget or render smaller images ({msg})",
+                     use); raise --vram-budget or render smaller images",
                     report.budget_bytes, self.totals.skeleton_bytes, report.budget_in_use_bytes
-                ))
+                )))
             }
             e => e,
         }
     }
 
     fn frame_first_stamp(&self) -> u32 {
-        self.frame.first_stamp
+        self.frame.first_stamp()
     }
 
     /// Names the camera of the next frame (a camera path's, a flight's): after the next
@@ -390,7 +389,7 @@ impl<'a> StreamingRenderer<'a> {
     /// Moves the pass stamp on to `stamp` (tests of the stamp limit: 2^29 passes otherwise).
     #[cfg(test)]
     pub(crate) fn skip_stamps_to(&mut self, stamp: u32) {
-        self.frame.stamp = self.frame.stamp.max(stamp);
+        self.frame.skip_stamps_to(stamp);
     }
 
     /// Whether host-visible memory counts against the budget (unified memory: lavapipe,
@@ -418,10 +417,7 @@ impl<'a> StreamingRenderer<'a> {
     }
 
     pub fn tlas_resident(&self, t: u32) -> bool {
-        self.tlases
-            .tlas
-            .get(t as usize)
-            .is_some_and(|a| a.is_some())
+        self.tlases.get(t).is_some()
     }
 }
 

@@ -64,6 +64,12 @@ pub enum ImportError {
     /// A broken promise between the compiler and the packer (a bug, not bad input).
     #[error("internal: {0}")]
     Internal(String),
+    /// The meshes cut beside the parser could not all be stored (`precut.rs`).
+    #[error("cutting meshes while parsing")]
+    Cut {
+        #[source]
+        source: motu_scene::StoreError,
+    },
     /// A source mesh the scene holds could not be read back (a bug, not bad input).
     #[error("internal: mesh {mesh}: {source}")]
     MeshData {

@@ -7,15 +7,19 @@ use crate::ImportError;
 use motu_abi::MeshRecord;
 use motu_compile::{CompileOptions, CompiledScene, Levels};
 use motu_ingest::{IngestOptions, IngestReport};
-use motu_pack::{place_mesh_record, ElementMeta, PackError, PackageGeometry, PackageMeta};
-use motu_package::{PackageWriter, WriteSummary, WriterOptions};
-use motu_scene::{ElementId, MeshLocation, PrototypeId, Scene, StoreError};
+use motu_pack::{place_mesh_record, PackError, PackageGeometry};
+use motu_package::{PackageWriter, WriterOptions};
+use motu_scene::{ElementId, MeshLocation, Scene, StoreError};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Chunk group for LOD meshes the compiler makes (kept apart from element groups).
 const LOD_GROUP: u32 = u32::MAX - 1;
+
+mod finish;
+pub use finish::element_stats;
+use finish::{finish, summary};
 
 pub struct ImportOptions {
     pub levels: Levels,
@@ -235,8 +239,7 @@ pub fn import(
     let (scene, mut report) = motu_ingest::ingest_file(scene_path, &ingest_opts, store)
         .map_err(|source| ImportError::Ingest { path, source })?;
     if let Some(p) = &precut {
-        p.finish()
-            .map_err(|e| ImportError::Internal(format!("cutting meshes while parsing: {e}")))?;
+        p.finish().map_err(|source| ImportError::Cut { source })?;
     }
     if let Some(report) = &o.progress {
         report(ImportProgress::Parsed);
@@ -548,219 +551,6 @@ fn compile_into(
 /// Made meshes queued for the writer thread at most (each up to a cluster: ~2 MiB at 2^16
 /// triangles).
 const MADE_IN_FLIGHT: usize = 4;
-
-fn summary(
-    (s, split_ms, proxy_boxes_ms, proxy_clusters_ms): (WriteSummary, f64, f64, f64),
-    st: &motu_scene::SceneStats,
-    compiled: &CompiledScene,
-    report: &IngestReport,
-    parse_ms: f64,
-    compile_ms: f64,
-    pack_start: Instant,
-) -> ImportSummary {
-    ImportSummary {
-        package: s.path.display().to_string(),
-        file_bytes: s.file_bytes,
-        chunks: s.chunk_count,
-        parse_ms,
-        cut_ms: 0.0,
-        cut_wait_ms: 0.0,
-        cut_triangles: 0,
-        compile_ms,
-        pack_ms: pack_start.elapsed().as_secs_f64() * 1e3,
-        compile_phases: (&compiled.report.phases).into(),
-        stream_split_ms: split_ms,
-        proxy_boxes_ms,
-        proxy_clusters_ms,
-        meshes: st.meshes,
-        instances: st.instances,
-        flattened_instances: st.flattened_instances,
-        tlas_count: compiled.report.tlas_count,
-        blas_count: compiled.report.blas_count,
-        warnings: report.warnings.len(),
-        curves_not_converted: report.curves - report.curve_ribbons,
-        curve_ribbons: report.curve_ribbons,
-        curve_ribbon_triangles: report.curve_ribbon_triangles,
-        unsupported_shapes: report.unsupported_shapes,
-        skipped_shapes: report.skipped_shapes,
-        peak_rss_bytes: crate::peak_rss_bytes().unwrap_or(0),
-    }
-}
-
-/// Writes the package's sections and finishes it. Takes the scene: it is dropped once the
-/// meta and textures are made, before the stream split (the import's peak: the scene's edges
-/// need not be held beside it).
-fn finish(
-    mut writer: PackageWriter,
-    scene: Scene,
-    stats: &motu_scene::SceneStats,
-    compiled: &mut CompiledScene,
-    report: &IngestReport,
-    source: &Path,
-    o: &ImportOptions,
-) -> Result<(WriteSummary, f64, f64, f64), ImportError> {
-    let owned = scene;
-    let scene = &owned;
-    // A subset package describes only what it holds.
-    let mut elements = element_stats(scene);
-    let mut scene_stats = stats.clone();
-    if !o.subset.is_empty() {
-        elements.retain(|e| o.subset.contains(&e.name));
-        scene_stats.instances = elements.iter().map(|e| e.instances).sum();
-        scene_stats.flattened_instances = compiled.report.flattened_instances;
-        scene_stats.unique_triangles = elements.iter().map(|e| e.unique_triangles).sum();
-        scene_stats.instanced_triangles = elements.iter().map(|e| e.instanced_triangles).sum();
-        scene_stats.meshes = elements.iter().map(|e| e.meshes).sum();
-    }
-    let meta = PackageMeta {
-        schema: motu_pack::SCHEMA.into(),
-        source: source.display().to_string(),
-        levels: o.levels_text.clone(),
-        max_instances_per_tlas: o.max_instances,
-        lod_levels: o.lod_levels.unwrap_or(1),
-        root_tlas: compiled.root_tlas,
-        cameras: scene.cameras().to_vec(),
-        lights: scene.lights().to_vec(),
-        material_names: scene.materials().iter().map(|m| m.name.clone()).collect(),
-        material_ptex: scene
-            .materials()
-            .iter()
-            .map(|m| m.ptex.as_ref().map(|p| p.display().to_string()))
-            .collect(),
-        mesh_names: scene.meshes().iter().map(|m| m.name.clone()).collect(),
-        elements: elements.clone(),
-        scene: scene_stats,
-        compile: serde_json::to_value(crate::compile_report::CompileReport::from(
-            &compiled.report,
-        ))?,
-        warnings: report.warnings.clone(),
-        curves: motu_pack::CurveMeta {
-            curves: report.curves,
-            ribbons: report.curve_ribbons,
-            ribbon_triangles: report.curve_ribbon_triangles,
-        },
-        stream_split: None,
-    };
-    let mut meta = meta;
-    let caps = crate::textures::Caps {
-        image_max: o.texture_max,
-        ptex_max: o.ptex_max,
-    };
-    let textures = crate::textures::write_textures(&mut writer, scene, caps, &mut meta.warnings)?;
-    drop(owned);
-    let t = Instant::now();
-    let (split_meta, split) = crate::split::write_stream_split(&mut writer, compiled)?;
-    meta.stream_split = Some(split_meta);
-    let split_ms = t.elapsed().as_secs_f64() * 1e3;
-    let mut view = compiled.view();
-    view.textures = &textures;
-    view.texels = &[];
-    let t = Instant::now();
-    if o.proxy_boxes {
-        crate::proxy_boxes::write_proxy_boxes(&mut writer, &view)?;
-    }
-    let proxy_boxes_ms = t.elapsed().as_secs_f64() * 1e3;
-    let t = Instant::now();
-    if o.proxy_clusters {
-        crate::split::write_proxy_clusters(&mut writer, &view, split.as_ref())?;
-    }
-    drop(split);
-    let proxy_clusters_ms = t.elapsed().as_secs_f64() * 1e3;
-    motu_pack::write_hierarchy_after_texels(&mut writer, &view, &meta)?;
-    Ok((
-        writer.finish().map_err(ImportError::FinishPackage)?,
-        split_ms,
-        proxy_boxes_ms,
-        proxy_clusters_ms,
-    ))
-}
-
-/// Per-element counts: each element's root edges and root meshes, and everything they reach.
-pub fn element_stats(scene: &Scene) -> Vec<ElementMeta> {
-    let n_proto = scene.prototypes().len();
-    let root = scene.root();
-    let root_edges = scene.edges(root);
-    let root_meshes = scene.meshes_of(root);
-    let tris = |p: PrototypeId| -> u64 {
-        scene
-            .meshes_of(p)
-            .iter()
-            .map(|&m| scene.mesh(m).triangle_count as u64)
-            .sum()
-    };
-    let blob = |m: motu_scene::MeshId| -> u64 {
-        let i = scene.mesh(m);
-        motu_pack::MeshBlobLayout::new(
-            i.vertex_count as u64,
-            i.triangle_count as u64,
-            i.has_normals,
-        )
-        .with_uvs(i.has_uvs)
-        .len
-    };
-    scene
-        .elements()
-        .iter()
-        .enumerate()
-        .map(|(ei, e)| {
-            let ei = ElementId(ei as u32);
-            let mut paths = vec![0u64; n_proto];
-            for (edge, &el) in root_edges.iter().zip(scene.root_edge_elements()) {
-                if el == ei {
-                    paths[edge.child.index()] = paths[edge.child.index()].saturating_add(1);
-                }
-            }
-            // Parents before children: the reverse of the topological order.
-            for &p in scene.topo_order().iter().rev() {
-                if p == root || paths[p.index()] == 0 {
-                    continue;
-                }
-                let n = paths[p.index()];
-                for edge in scene.edges(p) {
-                    paths[edge.child.index()] = paths[edge.child.index()].saturating_add(n);
-                }
-            }
-            let mut m = ElementMeta {
-                id: ei.0,
-                name: e.name.clone(),
-                ..Default::default()
-            };
-            m.instances = scene
-                .root_edge_elements()
-                .iter()
-                .filter(|&&x| x == ei)
-                .count() as u64;
-            for (mid, &el) in root_meshes.iter().zip(scene.root_mesh_elements()) {
-                if el == ei {
-                    let t = scene.mesh(*mid).triangle_count as u64;
-                    m.unique_triangles += t;
-                    m.instanced_triangles += t;
-                    m.meshes += 1;
-                    m.mesh_bytes += blob(*mid);
-                }
-            }
-            for p in scene.prototype_ids() {
-                if p == root || paths[p.index()] == 0 {
-                    continue;
-                }
-                let t = tris(p);
-                m.instances += scene.edges(p).len() as u64;
-                m.unique_triangles += t;
-                m.instanced_triangles = m
-                    .instanced_triangles
-                    .saturating_add(paths[p.index()].saturating_mul(t));
-                if t > 0 {
-                    m.flattened_instances = m.flattened_instances.saturating_add(paths[p.index()]);
-                }
-                for &mid in scene.meshes_of(p) {
-                    m.meshes += 1;
-                    m.mesh_bytes += blob(mid);
-                }
-            }
-            m
-        })
-        .collect()
-}
 
 /// Bytes of `.pbrt`/`.pbrt.gz` text under `dir` (bounded walk: 100k entries).
 fn scene_text_bytes(dir: &Path) -> u64 {

@@ -1,5 +1,6 @@
 //! A package's meshes, straight from its chunks, for the CPU tracer and the GPU builds.
 
+use motu_gpu::MeshSourceError;
 use motu_pack::ScenePackage;
 use std::borrow::Cow;
 
@@ -24,11 +25,11 @@ impl motu_trace::MeshSource for PackageMeshes<'_> {
 pub struct PackageGeometry<'a>(pub &'a ScenePackage);
 
 impl motu_gpu::MeshBlobSource for PackageGeometry<'_> {
-    fn mesh_data(&self, mesh_record: u32) -> Result<Geometry<'_>, String> {
+    fn mesh_data(&self, mesh_record: u32) -> Result<Geometry<'_>, MeshSourceError> {
         mesh_data(self.0, mesh_record)
     }
 
-    fn primitive_map(&self, mesh_record: u32) -> Result<Option<Cow<'_, [u32]>>, String> {
+    fn primitive_map(&self, mesh_record: u32) -> Result<Option<Cow<'_, [u32]>>, MeshSourceError> {
         primitive_map(self.0, mesh_record)
     }
 }
@@ -37,23 +38,26 @@ impl motu_gpu::MeshBlobSource for PackageGeometry<'_> {
 type Geometry<'a> = (Cow<'a, [[f32; 3]]>, Cow<'a, [u32]>);
 
 /// Positions and indices of a mesh record, borrowed from the package's chunks.
-fn mesh_data(pkg: &ScenePackage, mesh_record: u32) -> Result<Geometry<'_>, String> {
-    pkg.mesh_slices(mesh_record).map_err(|e| e.to_string())
+fn mesh_data(pkg: &ScenePackage, mesh_record: u32) -> Result<Geometry<'_>, MeshSourceError> {
+    pkg.mesh_slices(mesh_record).map_err(MeshSourceError::from)
 }
 
 /// A cluster's primitive map (source triangle ids), where the record has one.
-fn primitive_map(pkg: &ScenePackage, mesh_record: u32) -> Result<Option<Cow<'_, [u32]>>, String> {
+fn primitive_map(
+    pkg: &ScenePackage,
+    mesh_record: u32,
+) -> Result<Option<Cow<'_, [u32]>>, MeshSourceError> {
     pkg.primitive_map_slice(mesh_record)
-        .map_err(|e| e.to_string())
+        .map_err(MeshSourceError::from)
 }
 
 /// The package's geometry ([`PackageGeometry`]) and its normals and texture coordinates.
 impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
-    fn mesh_data(&self, mesh_record: u32) -> Result<Geometry<'_>, String> {
+    fn mesh_data(&self, mesh_record: u32) -> Result<Geometry<'_>, MeshSourceError> {
         mesh_data(self.0, mesh_record)
     }
 
-    fn primitive_map(&self, mesh_record: u32) -> Result<Option<Cow<'_, [u32]>>, String> {
+    fn primitive_map(&self, mesh_record: u32) -> Result<Option<Cow<'_, [u32]>>, MeshSourceError> {
         primitive_map(self.0, mesh_record)
     }
 
@@ -65,11 +69,11 @@ impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
             Option<std::borrow::Cow<'_, [[f32; 3]]>>,
             Option<std::borrow::Cow<'_, [[f32; 2]]>>,
         ),
-        String,
+        MeshSourceError,
     > {
         self.0
             .mesh_shading_slices(mesh_record)
-            .map_err(|e| e.to_string())
+            .map_err(MeshSourceError::from)
     }
 
     /// The package's `proxy_boxes` section; one that cannot be read (its checksum fails) is a

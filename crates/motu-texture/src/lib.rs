@@ -31,6 +31,13 @@ pub enum TextureError {
         #[source]
         source: std::io::Error,
     },
+    /// The file is not a Ptex file this reader takes (the reader says why).
+    #[error("{path}: corrupt Ptex file: {source}")]
+    Ptex {
+        path: PathBuf,
+        #[source]
+        source: ptex::PtexFormatError,
+    },
     /// The `image` crate could not decode the file.
     #[error("{path}: {source}")]
     Image {

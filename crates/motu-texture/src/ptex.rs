@@ -23,7 +23,7 @@ use std::path::Path;
 
 use motu_abi::ptex::PtexFace;
 
-use crate::{err, half, io_err, pack, LinearImage, TextureError};
+use crate::{half, io_err, pack, LinearImage, TextureError};
 
 const MAGIC: &[u8; 4] = b"Ptex";
 const HEADER_BYTES: usize = 64;
@@ -258,8 +258,26 @@ impl Layout {
     }
 }
 
+/// Why bytes are not a Ptex file this reader takes (the reason in words): the cause of
+/// [`TextureError::Ptex`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct PtexFormatError(pub String);
+
+impl From<String> for PtexFormatError {
+    fn from(reason: String) -> PtexFormatError {
+        PtexFormatError(reason)
+    }
+}
+
+impl From<&str> for PtexFormatError {
+    fn from(reason: &str) -> PtexFormatError {
+        PtexFormatError(reason.to_string())
+    }
+}
+
 /// Parses a Ptex file's level 0 (every face in memory: tests and small files).
-pub fn parse(bytes: &[u8]) -> Result<PtexImage, String> {
+pub fn parse(bytes: &[u8]) -> Result<PtexImage, PtexFormatError> {
     let mut faces = Vec::new();
     let h = read_faces(bytes, |_, u, v, px| faces.push((u, v, px)))?;
     Ok(PtexImage {
@@ -281,6 +299,14 @@ pub struct PixelFormat {
 /// Reads level 0 face by face, handing each face's `(ulog2, vlog2, pixels)` to `each` (a
 /// constant face as one pixel, 1×1), so a file is never held as floats whole.
 pub fn read_faces(
+    bytes: &[u8],
+    each: impl FnMut(&PixelFormat, u8, u8, Vec<f32>),
+) -> Result<PixelFormat, PtexFormatError> {
+    read_level0(bytes, each).map_err(PtexFormatError)
+}
+
+/// [`read_faces`], its reason in words.
+fn read_level0(
     bytes: &[u8],
     mut each: impl FnMut(&PixelFormat, u8, u8, Vec<f32>),
 ) -> Result<PixelFormat, String> {
@@ -366,7 +392,10 @@ pub fn load(path: &Path, max_edge: u32) -> Result<Vec<PtexFace>, TextureError> {
     read_faces(&bytes, |format, u, v, px| {
         faces.push(resample_face(format, u, v, &px, max_edge));
     })
-    .map_err(|r| err(path, format!("corrupt Ptex file: {r}")))?;
+    .map_err(|source| TextureError::Ptex {
+        path: path.to_path_buf(),
+        source,
+    })?;
     Ok(faces)
 }
 

@@ -29,15 +29,14 @@ where
     F: FnOnce(&ViewOptions) -> Result<S, String>,
 {
     check_display()?;
-    let event_loop = EventLoop::new().map_err(|e| {
-        ViewError::Window(format!(
-            "{e} (motu view opens X11 and Wayland windows: check DISPLAY / WAYLAND_DISPLAY, or \
-             render headless with `motu render`)"
-        ))
+    let event_loop = EventLoop::new().map_err(|e| ViewError::WindowSystem {
+        source: Box::new(e),
+        hint: " (motu view opens X11 and Wayland windows: check DISPLAY / WAYLAND_DISPLAY, or \
+               render headless with `motu render`)",
     })?;
     let display = event_loop
         .display_handle()
-        .map_err(|e| ViewError::Window(e.to_string()))?
+        .map_err(ViewError::window_system)?
         .as_raw();
     opts.display = Some(display);
     let source = make_source(&opts).map_err(ViewError::Source)?;
@@ -67,7 +66,7 @@ where
     event_loop.set_control_flow(ControlFlow::Poll);
     event_loop
         .run_app(&mut app)
-        .map_err(|e| ViewError::Window(e.to_string()))?;
+        .map_err(ViewError::window_system)?;
     // Destroy the swapchain and surface before the window.
     app.presenter = None;
     app.egui_input = None;
@@ -118,17 +117,15 @@ impl<S: FrameSource> App<S> {
             .with_title(self.opts.title.clone())
             .with_inner_size(PhysicalSize::new(self.opts.width, self.opts.height))
             .with_resizable(self.opts.frames.is_none());
-        let window = el
-            .create_window(attrs)
-            .map_err(|e| ViewError::Window(e.to_string()))?;
+        let window = el.create_window(attrs).map_err(ViewError::window_system)?;
         let size = window.inner_size();
         let display = window
             .display_handle()
-            .map_err(|e| ViewError::Window(e.to_string()))?
+            .map_err(ViewError::window_system)?
             .as_raw();
         let handle = window
             .window_handle()
-            .map_err(|e| ViewError::Window(e.to_string()))?
+            .map_err(ViewError::window_system)?
             .as_raw();
         // SAFETY: the handles belong to `window`, which `run` drops only after the presenter.
         let presenter = unsafe {

@@ -46,6 +46,14 @@ pub enum ViewError {
     NoDisplay,
     #[error("the window system failed: {0}")]
     Window(String),
+    /// A window-system call (winit, its window handles) failed: its error kept as the cause,
+    /// `hint` saying what to check.
+    #[error("the window system failed: {source}{hint}")]
+    WindowSystem {
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+        hint: &'static str,
+    },
     #[error(transparent)]
     Gpu(#[from] motu_gpu::GpuError),
     #[error("{0}")]
@@ -68,6 +76,16 @@ pub enum ViewError {
         want_w: u32,
         want_h: u32,
     },
+}
+
+impl ViewError {
+    /// A window-system error kept as the cause, with no hint.
+    pub(crate) fn window_system(e: impl std::error::Error + Send + Sync + 'static) -> ViewError {
+        ViewError::WindowSystem {
+            source: Box::new(e),
+            hint: "",
+        }
+    }
 }
 
 /// Whether a window system is reachable (`DISPLAY` or `WAYLAND_DISPLAY` set and not empty).

@@ -157,13 +157,8 @@ impl Context {
         let instance = match options.presentation {
             None => InstanceShared::new(options.validation)?,
             Some(display) => {
-                let surface_exts =
-                    ash_window::enumerate_required_extensions(display).map_err(|e| {
-                        VkError::MissingFeature {
-                            what: "a Vulkan surface for this window system".into(),
-                            details: format!("{e:?}"),
-                        }
-                    })?;
+                let surface_exts = ash_window::enumerate_required_extensions(display)
+                    .map_err(|source| VkError::NoSurface { source })?;
                 InstanceShared::with_extensions(options.validation, surface_exts)?
             }
         };
@@ -195,126 +190,9 @@ impl Context {
                     name: info.name.clone(),
                     reason: "no compute queue".into(),
                 })?;
+        let ext_names = device_extensions(&info, present)?;
+        let device = create_device(&instance, &info, queue_family_index, &ext_names)?;
         let caps = &info.caps;
-        let v13 = info.api_version >= vk::API_VERSION_1_3;
-
-        let mut ext_names: Vec<&CStr> = Vec::new();
-        if caps.acceleration_structure {
-            ext_names.push(ash::khr::acceleration_structure::NAME);
-            ext_names.push(ash::khr::deferred_host_operations::NAME);
-        }
-        if caps.ray_pipeline {
-            ext_names.push(ash::khr::ray_tracing_pipeline::NAME);
-        }
-        if caps.ray_query {
-            ext_names.push(ash::khr::ray_query::NAME);
-        }
-        if caps.ray_tracing_maintenance1 && (caps.ray_pipeline || caps.ray_query) {
-            ext_names.push(ash::khr::ray_tracing_maintenance1::NAME);
-        }
-        if caps.memory_budget {
-            ext_names.push(ash::ext::memory_budget::NAME);
-        }
-        if !v13 && caps.maintenance4 {
-            ext_names.push(ash::khr::maintenance4::NAME);
-        }
-        if present {
-            let name = ash::khr::swapchain::NAME;
-            if !info.extensions.contains(name) {
-                return Err(VkError::DeviceUnsuitable {
-                    index: info.index,
-                    name: info.name.clone(),
-                    reason: "no VK_KHR_swapchain: it cannot present to a window".into(),
-                });
-            }
-            ext_names.push(name);
-        }
-        let ext_ptrs: Vec<*const std::ffi::c_char> = ext_names.iter().map(|n| n.as_ptr()).collect();
-
-        // Enable a chosen subset of what is supported: features with a cost (robustness,
-        // capture/replay, host AS commands) stay off.
-        let s = &info.features;
-        let on = |supported: vk::Bool32| supported;
-        let f10 = vk::PhysicalDeviceFeatures::default()
-            .shader_int64(s.f10.shader_int64 == vk::TRUE)
-            .shader_int16(s.f10.shader_int16 == vk::TRUE)
-            .shader_float64(s.f10.shader_float64 == vk::TRUE);
-        let mut f11 = vk::PhysicalDeviceVulkan11Features::default();
-        f11.storage_buffer16_bit_access = on(s.f11.storage_buffer16_bit_access);
-        f11.uniform_and_storage_buffer16_bit_access =
-            on(s.f11.uniform_and_storage_buffer16_bit_access);
-        let mut f12 = vk::PhysicalDeviceVulkan12Features::default();
-        f12.buffer_device_address = on(s.f12.buffer_device_address);
-        f12.descriptor_indexing = on(s.f12.descriptor_indexing);
-        f12.runtime_descriptor_array = on(s.f12.runtime_descriptor_array);
-        f12.shader_storage_buffer_array_non_uniform_indexing =
-            on(s.f12.shader_storage_buffer_array_non_uniform_indexing);
-        f12.descriptor_binding_partially_bound = on(s.f12.descriptor_binding_partially_bound);
-        f12.descriptor_binding_variable_descriptor_count =
-            on(s.f12.descriptor_binding_variable_descriptor_count);
-        f12.scalar_block_layout = on(s.f12.scalar_block_layout);
-        f12.timeline_semaphore = on(s.f12.timeline_semaphore);
-        f12.host_query_reset = on(s.f12.host_query_reset);
-        f12.shader_int8 = on(s.f12.shader_int8);
-        f12.shader_float16 = on(s.f12.shader_float16);
-        f12.storage_buffer8_bit_access = on(s.f12.storage_buffer8_bit_access);
-        f12.uniform_and_storage_buffer8_bit_access =
-            on(s.f12.uniform_and_storage_buffer8_bit_access);
-        f12.uniform_buffer_standard_layout = on(s.f12.uniform_buffer_standard_layout);
-        f12.vulkan_memory_model = on(s.f12.vulkan_memory_model);
-        f12.vulkan_memory_model_device_scope = on(s.f12.vulkan_memory_model_device_scope);
-        f12.shader_subgroup_extended_types = on(s.f12.shader_subgroup_extended_types);
-        let mut f13 = vk::PhysicalDeviceVulkan13Features::default();
-        f13.synchronization2 = on(s.f13.synchronization2);
-        f13.maintenance4 = on(s.f13.maintenance4);
-        let mut m4 = vk::PhysicalDeviceMaintenance4Features::default();
-        m4.maintenance4 = on(s.m4.maintenance4);
-        let yes = |b: vk::Bool32| b == vk::TRUE;
-        let mut f_as = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default()
-            .acceleration_structure(yes(s.accel.acceleration_structure));
-        let mut f_rt = vk::PhysicalDeviceRayTracingPipelineFeaturesKHR::default()
-            .ray_tracing_pipeline(yes(s.rt.ray_tracing_pipeline))
-            .ray_tracing_pipeline_trace_rays_indirect(yes(s
-                .rt
-                .ray_tracing_pipeline_trace_rays_indirect))
-            .ray_traversal_primitive_culling(yes(s.rt.ray_traversal_primitive_culling));
-        let mut f_rq =
-            vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(yes(s.rq.ray_query));
-        let mut f2 = vk::PhysicalDeviceFeatures2::default()
-            .features(f10)
-            .push_next(&mut f11)
-            .push_next(&mut f12);
-        if v13 {
-            f2 = f2.push_next(&mut f13);
-        } else if caps.maintenance4 {
-            f2 = f2.push_next(&mut m4);
-        }
-        if caps.acceleration_structure {
-            f2 = f2.push_next(&mut f_as);
-        }
-        if caps.ray_pipeline {
-            f2 = f2.push_next(&mut f_rt);
-        }
-        if caps.ray_query {
-            f2 = f2.push_next(&mut f_rq);
-        }
-
-        let priorities = [1.0f32];
-        let queue_infos = [vk::DeviceQueueCreateInfo::default()
-            .queue_family_index(queue_family_index)
-            .queue_priorities(&priorities)];
-        let create_info = vk::DeviceCreateInfo::default()
-            .queue_create_infos(&queue_infos)
-            .enabled_extension_names(&ext_ptrs)
-            .push_next(&mut f2);
-        // SAFETY: the physical device belongs to this instance; extensions and features were
-        // checked as supported; all pointers in create_info live until the call returns.
-        let device = unsafe {
-            instance
-                .instance
-                .create_device(info.handle, &create_info, None)
-        }
-        .map_err(VkError::vk("vkCreateDevice"))?;
         // SAFETY: queue 0 of the family we requested exists.
         let queue = unsafe { device.get_device_queue(queue_family_index, 0) };
         let accel = caps
@@ -455,6 +333,140 @@ impl Context {
         // SAFETY: the queue lock is held, so no submission races with the wait.
         unsafe { self.shared.device.device_wait_idle() }.map_err(VkError::vk("vkDeviceWaitIdle"))
     }
+}
+
+/// The device extensions to enable: the ray-tracing ones the device has, the memory budget,
+/// maintenance4 before Vulkan 1.3, and the swapchain when it presents (or why it cannot).
+fn device_extensions(info: &PhysicalInfo, present: bool) -> Result<Vec<&'static CStr>> {
+    let caps = &info.caps;
+    let v13 = info.api_version >= vk::API_VERSION_1_3;
+    let mut ext_names: Vec<&CStr> = Vec::new();
+    if caps.acceleration_structure {
+        ext_names.push(ash::khr::acceleration_structure::NAME);
+        ext_names.push(ash::khr::deferred_host_operations::NAME);
+    }
+    if caps.ray_pipeline {
+        ext_names.push(ash::khr::ray_tracing_pipeline::NAME);
+    }
+    if caps.ray_query {
+        ext_names.push(ash::khr::ray_query::NAME);
+    }
+    if caps.ray_tracing_maintenance1 && (caps.ray_pipeline || caps.ray_query) {
+        ext_names.push(ash::khr::ray_tracing_maintenance1::NAME);
+    }
+    if caps.memory_budget {
+        ext_names.push(ash::ext::memory_budget::NAME);
+    }
+    if !v13 && caps.maintenance4 {
+        ext_names.push(ash::khr::maintenance4::NAME);
+    }
+    if present {
+        let name = ash::khr::swapchain::NAME;
+        if !info.extensions.contains(name) {
+            return Err(VkError::DeviceUnsuitable {
+                index: info.index,
+                name: info.name.clone(),
+                reason: "no VK_KHR_swapchain: it cannot present to a window".into(),
+            });
+        }
+        ext_names.push(name);
+    }
+    Ok(ext_names)
+}
+
+/// The logical device with one queue of `queue_family_index`, `ext_names` and a chosen subset
+/// of the supported features.
+fn create_device(
+    instance: &InstanceShared,
+    info: &PhysicalInfo,
+    queue_family_index: u32,
+    ext_names: &[&CStr],
+) -> Result<ash::Device> {
+    let caps = &info.caps;
+    let v13 = info.api_version >= vk::API_VERSION_1_3;
+    let ext_ptrs: Vec<*const std::ffi::c_char> = ext_names.iter().map(|n| n.as_ptr()).collect();
+
+    // Enable a chosen subset of what is supported: features with a cost (robustness,
+    // capture/replay, host AS commands) stay off.
+    let s = &info.features;
+    let on = |supported: vk::Bool32| supported;
+    let f10 = vk::PhysicalDeviceFeatures::default()
+        .shader_int64(s.f10.shader_int64 == vk::TRUE)
+        .shader_int16(s.f10.shader_int16 == vk::TRUE)
+        .shader_float64(s.f10.shader_float64 == vk::TRUE);
+    let mut f11 = vk::PhysicalDeviceVulkan11Features::default();
+    f11.storage_buffer16_bit_access = on(s.f11.storage_buffer16_bit_access);
+    f11.uniform_and_storage_buffer16_bit_access = on(s.f11.uniform_and_storage_buffer16_bit_access);
+    let mut f12 = vk::PhysicalDeviceVulkan12Features::default();
+    f12.buffer_device_address = on(s.f12.buffer_device_address);
+    f12.descriptor_indexing = on(s.f12.descriptor_indexing);
+    f12.runtime_descriptor_array = on(s.f12.runtime_descriptor_array);
+    f12.shader_storage_buffer_array_non_uniform_indexing =
+        on(s.f12.shader_storage_buffer_array_non_uniform_indexing);
+    f12.descriptor_binding_partially_bound = on(s.f12.descriptor_binding_partially_bound);
+    f12.descriptor_binding_variable_descriptor_count =
+        on(s.f12.descriptor_binding_variable_descriptor_count);
+    f12.scalar_block_layout = on(s.f12.scalar_block_layout);
+    f12.timeline_semaphore = on(s.f12.timeline_semaphore);
+    f12.host_query_reset = on(s.f12.host_query_reset);
+    f12.shader_int8 = on(s.f12.shader_int8);
+    f12.shader_float16 = on(s.f12.shader_float16);
+    f12.storage_buffer8_bit_access = on(s.f12.storage_buffer8_bit_access);
+    f12.uniform_and_storage_buffer8_bit_access = on(s.f12.uniform_and_storage_buffer8_bit_access);
+    f12.uniform_buffer_standard_layout = on(s.f12.uniform_buffer_standard_layout);
+    f12.vulkan_memory_model = on(s.f12.vulkan_memory_model);
+    f12.vulkan_memory_model_device_scope = on(s.f12.vulkan_memory_model_device_scope);
+    f12.shader_subgroup_extended_types = on(s.f12.shader_subgroup_extended_types);
+    let mut f13 = vk::PhysicalDeviceVulkan13Features::default();
+    f13.synchronization2 = on(s.f13.synchronization2);
+    f13.maintenance4 = on(s.f13.maintenance4);
+    let mut m4 = vk::PhysicalDeviceMaintenance4Features::default();
+    m4.maintenance4 = on(s.m4.maintenance4);
+    let yes = |b: vk::Bool32| b == vk::TRUE;
+    let mut f_as = vk::PhysicalDeviceAccelerationStructureFeaturesKHR::default()
+        .acceleration_structure(yes(s.accel.acceleration_structure));
+    let mut f_rt = vk::PhysicalDeviceRayTracingPipelineFeaturesKHR::default()
+        .ray_tracing_pipeline(yes(s.rt.ray_tracing_pipeline))
+        .ray_tracing_pipeline_trace_rays_indirect(yes(s
+            .rt
+            .ray_tracing_pipeline_trace_rays_indirect))
+        .ray_traversal_primitive_culling(yes(s.rt.ray_traversal_primitive_culling));
+    let mut f_rq = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(yes(s.rq.ray_query));
+    let mut f2 = vk::PhysicalDeviceFeatures2::default()
+        .features(f10)
+        .push_next(&mut f11)
+        .push_next(&mut f12);
+    if v13 {
+        f2 = f2.push_next(&mut f13);
+    } else if caps.maintenance4 {
+        f2 = f2.push_next(&mut m4);
+    }
+    if caps.acceleration_structure {
+        f2 = f2.push_next(&mut f_as);
+    }
+    if caps.ray_pipeline {
+        f2 = f2.push_next(&mut f_rt);
+    }
+    if caps.ray_query {
+        f2 = f2.push_next(&mut f_rq);
+    }
+
+    let priorities = [1.0f32];
+    let queue_infos = [vk::DeviceQueueCreateInfo::default()
+        .queue_family_index(queue_family_index)
+        .queue_priorities(&priorities)];
+    let create_info = vk::DeviceCreateInfo::default()
+        .queue_create_infos(&queue_infos)
+        .enabled_extension_names(&ext_ptrs)
+        .push_next(&mut f2);
+    // SAFETY: the physical device belongs to this instance; extensions and features were
+    // checked as supported; all pointers in create_info live until the call returns.
+    unsafe {
+        instance
+            .instance
+            .create_device(info.handle, &create_info, None)
+    }
+    .map_err(VkError::vk("vkCreateDevice"))
 }
 
 fn select(

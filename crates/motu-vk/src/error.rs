@@ -42,6 +42,18 @@ pub enum VkError {
     )]
     MissingFeature { what: String, details: String },
 
+    /// The window system's surface extensions are unknown to the loader (`motu view`).
+    #[error(
+        "no device supports a Vulkan surface for this window system; devices and what they lack: \
+         {source:?}. Ray tracing needs VK_KHR_acceleration_structure plus \
+         VK_KHR_ray_tracing_pipeline or VK_KHR_ray_query: on a CPU use lavapipe from Mesa >= 24.1 \
+         (`tools/setup.sh`), on a GPU an RT-capable driver"
+    )]
+    NoSurface {
+        #[source]
+        source: vk::Result,
+    },
+
     #[error(
         "validation was forced on (MOTU_VALIDATION=1) but the layer VK_LAYER_KHRONOS_validation \
          is not installed (Debian: `vulkan-validationlayers`)"
@@ -99,7 +111,7 @@ pub enum VkError {
     /// The VRAM budget or the allocation-count cap refused a request (what was asked, what is
     /// in use, the budget).
     #[error("VRAM budget: {0}")]
-    Budget(String),
+    Budget(BudgetRefusal),
 
     #[error("invalid request: {0}")]
     InvalidRequest(String),
@@ -115,6 +127,81 @@ pub enum VkError {
         call: &'static str,
         result: vk::Result,
     },
+}
+
+/// A refusal by the VRAM budget or the allocation-count cap: what was asked (a buffer's label,
+/// or the streamer's words for its own policy) and, where the allocator refused, its typed
+/// cause (shown after the words, and kept as the error's source).
+#[derive(Debug)]
+pub struct BudgetRefusal {
+    what: String,
+    cause: Option<Box<dyn std::error::Error + Send + Sync>>,
+    /// Shown `what (cause)` rather than `what: cause` (see [`BudgetRefusal::explained`]).
+    cause_in_parentheses: bool,
+}
+
+impl BudgetRefusal {
+    /// A refusal in the caller's words alone (a policy above the allocator).
+    pub fn new(what: impl Into<String>) -> BudgetRefusal {
+        BudgetRefusal {
+            what: what.into(),
+            cause: None,
+            cause_in_parentheses: false,
+        }
+    }
+
+    /// `what` (a label) refused by `cause`; shown `what: cause`, or `cause` where `what` is
+    /// empty.
+    pub fn caused(
+        what: impl Into<String>,
+        cause: impl std::error::Error + Send + Sync + 'static,
+    ) -> BudgetRefusal {
+        BudgetRefusal {
+            what: what.into(),
+            cause: Some(Box::new(cause)),
+            cause_in_parentheses: false,
+        }
+    }
+
+    /// A refusal shown as its cause alone.
+    pub fn from_cause(cause: impl std::error::Error + Send + Sync + 'static) -> BudgetRefusal {
+        BudgetRefusal::caused(String::new(), cause)
+    }
+
+    /// This refusal explained in a policy's words (what does not fit, what to raise): shown
+    /// `words (this refusal)`, this refusal kept as the cause.
+    pub fn explained(self, words: impl Into<String>) -> BudgetRefusal {
+        BudgetRefusal {
+            what: words.into(),
+            cause: Some(Box::new(self)),
+            cause_in_parentheses: true,
+        }
+    }
+}
+
+impl From<String> for BudgetRefusal {
+    fn from(what: String) -> BudgetRefusal {
+        BudgetRefusal::new(what)
+    }
+}
+
+impl std::fmt::Display for BudgetRefusal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.cause {
+            Some(cause) if self.what.is_empty() => write!(f, "{cause}"),
+            Some(cause) if self.cause_in_parentheses => write!(f, "{} ({cause})", self.what),
+            Some(cause) => write!(f, "{}: {cause}", self.what),
+            None => f.write_str(&self.what),
+        }
+    }
+}
+
+impl std::error::Error for BudgetRefusal {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        self.cause
+            .as_deref()
+            .map(|c| c as &(dyn std::error::Error + 'static))
+    }
 }
 
 /// Why the Vulkan loader is not usable.

@@ -11,7 +11,7 @@ use motu_alloc::{
 };
 
 use crate::context::Context;
-use crate::error::{Result, VkError};
+use crate::error::{BudgetRefusal, Result, VkError};
 use crate::memory::{Buffer, BufferDesc, BufferUsage, DeviceMemory, MemoryLocation};
 
 /// A buffer placed in a heap block; give it back with [`GpuHeap::free`] (dropping it without
@@ -186,7 +186,7 @@ impl GpuHeap {
         let alloc = self
             .allocator
             .alloc(request)
-            .map_err(|e| VkError::Budget(format!("{label}: {e}")))?;
+            .map_err(|e| VkError::Budget(BudgetRefusal::caused(label, e)))?;
         if let Err(e) = self.apply_events() {
             let _ = self.allocator.free(alloc.id);
             return Err(e);
@@ -236,7 +236,7 @@ impl GpuHeap {
         }
         self.allocator
             .try_fit(&requests)
-            .map_err(|(i, e)| VkError::Budget(format!("{}: {e}", wanted[i].label)))
+            .map_err(|(i, e)| VkError::Budget(BudgetRefusal::caused(wanted[i].label, e)))
     }
 
     /// Whether host-visible blocks count against the VRAM budget (unified memory: lavapipe,

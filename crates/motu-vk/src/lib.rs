@@ -81,7 +81,7 @@ pub use capabilities::{Caps, HeapReport};
 pub use command::{BufferCopy, BufferTarget, CommandRecorder, Submitted};
 pub use context::{Context, ContextOptions, Requirement, ENV_DEVICE};
 pub use conv::encode_instance;
-pub use error::{LoaderFault, Result, SizeParseError, VkError};
+pub use error::{BudgetRefusal, LoaderFault, Result, SizeParseError, VkError};
 pub use heap::{FitRequest, GpuHeap, HeapBuffer};
 pub use instance::{ValidationRequest, ENV_VALIDATION};
 pub use limits::{

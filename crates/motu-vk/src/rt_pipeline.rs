@@ -48,6 +48,115 @@ pub struct RtPipeline {
     sbt: Option<HeapBuffer>,
 }
 
+/// The hit groups' count: raygen, miss, triangle hit group, procedural hit group.
+const GROUP_COUNT: u32 = 4;
+
+/// Shader modules live for the pipeline's creation only: destroyed when this drops.
+struct ShaderModules<'d> {
+    device: &'d ash::Device,
+    modules: Vec<vk::ShaderModule>,
+}
+
+impl<'d> ShaderModules<'d> {
+    /// One module per SPIR-V blob, in order; on an error the ones made so far are destroyed.
+    fn new(device: &'d ash::Device, sources: &[&[u32]]) -> Result<ShaderModules<'d>> {
+        let mut made = ShaderModules {
+            device,
+            modules: Vec::with_capacity(sources.len()),
+        };
+        for words in sources {
+            let info = vk::ShaderModuleCreateInfo::default().code(words);
+            // SAFETY: SPIR-V validated by spirv-val when the embedding crate was built.
+            let m = unsafe { device.create_shader_module(&info, None) }.map_err(|e| {
+                VkError::Vulkan {
+                    call: "vkCreateShaderModule",
+                    result: e,
+                }
+            })?;
+            made.modules.push(m);
+        }
+        Ok(made)
+    }
+}
+
+impl Drop for ShaderModules<'_> {
+    fn drop(&mut self) {
+        for &m in &self.modules {
+            // SAFETY: created from this device; only needed during the pipeline's creation.
+            unsafe { self.device.destroy_shader_module(m, None) };
+        }
+    }
+}
+
+/// The shader binding table's layout: a handle stride and the offsets of its three regions.
+struct SbtLayout {
+    handle_size: u64,
+    stride: u64,
+    /// The raygen region's stride and size (the miss and hit regions start aligned to it).
+    raygen_stride: u64,
+    miss_off: u64,
+    hit_off: u64,
+    total: u64,
+}
+
+impl SbtLayout {
+    fn new(ctx: &Context) -> SbtLayout {
+        let limits = ctx.limits();
+        let handle_size = limits.shader_group_handle_size as u64;
+        let handle_align = u64::from(limits.shader_group_handle_alignment.max(1));
+        let base_align = u64::from(limits.shader_group_base_alignment.max(1));
+        let stride = handle_size.div_ceil(handle_align) * handle_align;
+        let align = |v: u64| v.div_ceil(base_align) * base_align;
+        let miss_off = align(stride);
+        let hit_off = miss_off + align(stride);
+        SbtLayout {
+            handle_size,
+            stride,
+            raygen_stride: align(stride),
+            miss_off,
+            hit_off,
+            total: hit_off + 2 * stride,
+        }
+    }
+
+    /// The table's bytes: each group's handle (`handles`, `GROUP_COUNT` of them) at its offset.
+    fn bytes(&self, handles: &[u8]) -> Vec<u8> {
+        let mut bytes = vec![0u8; self.total as usize];
+        let size = self.handle_size as usize;
+        let mut put = |off: u64, i: usize| {
+            bytes[off as usize..off as usize + size]
+                .copy_from_slice(&handles[i * size..(i + 1) * size]);
+        };
+        put(0, 0);
+        put(self.miss_off, 1);
+        put(self.hit_off, 2);
+        put(self.hit_off + self.stride, 3);
+        bytes
+    }
+
+    /// The raygen, miss, hit and (empty) callable regions of a table at device address `base`.
+    fn regions(&self, base: u64) -> [vk::StridedDeviceAddressRegionKHR; 4] {
+        [
+            vk::StridedDeviceAddressRegionKHR {
+                device_address: base,
+                stride: self.raygen_stride,
+                size: self.raygen_stride,
+            },
+            vk::StridedDeviceAddressRegionKHR {
+                device_address: base + self.miss_off,
+                stride: self.stride,
+                size: self.stride,
+            },
+            vk::StridedDeviceAddressRegionKHR {
+                device_address: base + self.hit_off,
+                stride: self.stride,
+                size: 2 * self.stride,
+            },
+            vk::StridedDeviceAddressRegionKHR::default(),
+        ]
+    }
+}
+
 impl RtPipeline {
     /// `specialization`: (constant id, value) pairs for every stage; `shaders`: the stages'
     /// SPIR-V (validated by the embedding crate's build).
@@ -64,8 +173,8 @@ impl RtPipeline {
             });
         }
         let shared = &ctx.shared;
-        let device = &shared.device;
-        let rt = ash::khr::ray_tracing_pipeline::Device::new(&shared.instance.instance, device);
+        let rt =
+            ash::khr::ray_tracing_pipeline::Device::new(&shared.instance.instance, &shared.device);
         let mut p = RtPipeline {
             ctx: ctx.clone(),
             rt,
@@ -74,47 +183,56 @@ impl RtPipeline {
             regions: [vk::StridedDeviceAddressRegionKHR::default(); 4],
             sbt: None,
         };
+        p.create_layout()?;
+        p.create_pipeline(specialization, shaders)?;
+        p.write_sbt(heap)?;
+        Ok(p)
+    }
+
+    /// The layout: 128 bytes of push constants for every stage, no descriptor sets.
+    fn create_layout(&mut self) -> Result<()> {
         let ranges = [vk::PushConstantRange::default()
             .stage_flags(rt_stages())
             .offset(0)
             .size(PUSH_CONSTANT_BYTES)];
         let layout_info = vk::PipelineLayoutCreateInfo::default().push_constant_ranges(&ranges);
-        // SAFETY: valid create info; the layout is owned by `p`.
-        p.layout = unsafe { device.create_pipeline_layout(&layout_info, None) }
-            .map_err(VkError::vk("vkCreatePipelineLayout"))?;
-
-        let sources: [(&[u32], vk::ShaderStageFlags); 6] = [
-            (shaders.raygen, vk::ShaderStageFlags::RAYGEN_KHR),
-            (shaders.miss, vk::ShaderStageFlags::MISS_KHR),
-            (
-                shaders.triangle_closest_hit,
-                vk::ShaderStageFlags::CLOSEST_HIT_KHR,
-            ),
-            (
-                shaders.pi_intersection,
-                vk::ShaderStageFlags::INTERSECTION_KHR,
-            ),
-            (shaders.pi_any_hit, vk::ShaderStageFlags::ANY_HIT_KHR),
-            (shaders.triangle_any_hit, vk::ShaderStageFlags::ANY_HIT_KHR),
-        ];
-        let mut modules = Vec::with_capacity(sources.len());
-        for (words, _) in &sources {
-            let info = vk::ShaderModuleCreateInfo::default().code(words);
-            // SAFETY: SPIR-V validated by spirv-val when the embedding crate was built.
-            match unsafe { device.create_shader_module(&info, None) } {
-                Ok(m) => modules.push(m),
-                Err(e) => {
-                    for m in modules {
-                        // SAFETY: created above, unused.
-                        unsafe { device.destroy_shader_module(m, None) };
-                    }
-                    return Err(VkError::Vulkan {
-                        call: "vkCreateShaderModule",
-                        result: e,
-                    });
-                }
-            }
+        // SAFETY: valid create info; the layout is owned by `self`.
+        self.layout = unsafe {
+            self.ctx
+                .shared
+                .device
+                .create_pipeline_layout(&layout_info, None)
         }
+        .map_err(VkError::vk("vkCreatePipelineLayout"))?;
+        Ok(())
+    }
+
+    /// The pipeline: six stages (specialised alike) in the four groups of the module docs.
+    fn create_pipeline(
+        &mut self,
+        specialization: &[(u32, u32)],
+        shaders: &RtShaders<'_>,
+    ) -> Result<()> {
+        let shared = &self.ctx.shared;
+        let stage_flags = [
+            vk::ShaderStageFlags::RAYGEN_KHR,
+            vk::ShaderStageFlags::MISS_KHR,
+            vk::ShaderStageFlags::CLOSEST_HIT_KHR,
+            vk::ShaderStageFlags::INTERSECTION_KHR,
+            vk::ShaderStageFlags::ANY_HIT_KHR,
+            vk::ShaderStageFlags::ANY_HIT_KHR,
+        ];
+        let modules = ShaderModules::new(
+            &shared.device,
+            &[
+                shaders.raygen,
+                shaders.miss,
+                shaders.triangle_closest_hit,
+                shaders.pi_intersection,
+                shaders.pi_any_hit,
+                shaders.triangle_any_hit,
+            ],
+        )?;
         let spec_entries: Vec<vk::SpecializationMapEntry> = specialization
             .iter()
             .enumerate()
@@ -131,10 +249,10 @@ impl RtPipeline {
         let spec = vk::SpecializationInfo::default()
             .map_entries(&spec_entries)
             .data(&spec_data);
-        let stages: Vec<_> = sources
+        let stages: Vec<_> = stage_flags
             .iter()
-            .zip(&modules)
-            .map(|((_, stage), m)| {
+            .zip(&modules.modules)
+            .map(|(stage, m)| {
                 let s = vk::PipelineShaderStageCreateInfo::default()
                     .stage(*stage)
                     .module(*m)
@@ -143,128 +261,68 @@ impl RtPipeline {
                 s.specialization_info(&spec)
             })
             .collect();
-        let unused = vk::SHADER_UNUSED_KHR;
-        let general = |i: u32| {
-            vk::RayTracingShaderGroupCreateInfoKHR::default()
-                .ty(vk::RayTracingShaderGroupTypeKHR::GENERAL)
-                .general_shader(i)
-                .closest_hit_shader(unused)
-                .any_hit_shader(unused)
-                .intersection_shader(unused)
-        };
-        let groups = [
-            general(0),
-            general(1),
-            vk::RayTracingShaderGroupCreateInfoKHR::default()
-                .ty(vk::RayTracingShaderGroupTypeKHR::TRIANGLES_HIT_GROUP)
-                .general_shader(unused)
-                .closest_hit_shader(2)
-                .any_hit_shader(5)
-                .intersection_shader(unused),
-            vk::RayTracingShaderGroupCreateInfoKHR::default()
-                .ty(vk::RayTracingShaderGroupTypeKHR::PROCEDURAL_HIT_GROUP)
-                .general_shader(unused)
-                .closest_hit_shader(unused)
-                .any_hit_shader(4)
-                .intersection_shader(3),
-        ];
+        let groups = shader_groups();
         let info = vk::RayTracingPipelineCreateInfoKHR::default()
             .stages(&stages)
             .groups(&groups)
             .max_pipeline_ray_recursion_depth(1)
-            .layout(p.layout);
+            .layout(self.layout);
         // SAFETY: modules, layout and infos are live for the call; recursion depth 1 (raygen
         // traces, no hit shader does).
         let result = unsafe {
-            p.rt.create_ray_tracing_pipelines(
+            self.rt.create_ray_tracing_pipelines(
                 vk::DeferredOperationKHR::null(),
                 vk::PipelineCache::null(),
                 &[info],
                 None,
             )
         };
-        for m in modules {
-            // SAFETY: only needed during creation.
-            unsafe { device.destroy_shader_module(m, None) };
-        }
-        p.pipeline = result.map_err(|(_, e)| VkError::Vulkan {
+        drop(modules);
+        self.pipeline = result.map_err(|(_, e)| VkError::Vulkan {
             call: "vkCreateRayTracingPipelinesKHR",
             result: e,
         })?[0];
-        shared.set_name(p.pipeline, "traversal pipeline");
+        shared.set_name(self.pipeline, "traversal pipeline");
         // The raygen's stack (what stays live across its traceRayEXT calls, the traversal
         // stack included): each TLAS hop saves and restores it, so it is what hop cost tracks.
         // SAFETY: the pipeline is live; group 0 is the raygen (general) group.
         let raygen_stack_bytes = unsafe {
-            p.rt.get_ray_tracing_shader_group_stack_size(
-                p.pipeline,
+            self.rt.get_ray_tracing_shader_group_stack_size(
+                self.pipeline,
                 0,
                 vk::ShaderGroupShaderKHR::GENERAL,
             )
         };
         tracing::debug!(raygen_stack_bytes, "traversal pipeline created");
+        Ok(())
+    }
 
-        // Shader binding table.
-        let limits = ctx.limits();
-        let handle_size = limits.shader_group_handle_size as u64;
-        let handle_align = u64::from(limits.shader_group_handle_alignment.max(1));
-        let base_align = u64::from(limits.shader_group_base_alignment.max(1));
-        let stride = handle_size.div_ceil(handle_align) * handle_align;
-        let group_count = groups.len() as u32;
-        // SAFETY: the pipeline has `group_count` groups; the output holds their handles.
+    /// The shader binding table: the groups' handles in host-visible memory, and its regions.
+    fn write_sbt(&mut self, heap: &mut GpuHeap) -> Result<()> {
+        let layout = SbtLayout::new(&self.ctx);
+        let base_align = u64::from(self.ctx.limits().shader_group_base_alignment.max(1));
+        // SAFETY: the pipeline has `GROUP_COUNT` groups; the output holds their handles.
         let handles = unsafe {
-            p.rt.get_ray_tracing_shader_group_handles(
-                p.pipeline,
+            self.rt.get_ray_tracing_shader_group_handles(
+                self.pipeline,
                 0,
-                group_count,
-                (handle_size * u64::from(group_count)) as usize,
+                GROUP_COUNT,
+                (layout.handle_size * u64::from(GROUP_COUNT)) as usize,
             )
         }
         .map_err(VkError::vk("vkGetRayTracingShaderGroupHandlesKHR"))?;
-        let align = |v: u64| v.div_ceil(base_align) * base_align;
-        let raygen_off = 0u64;
-        let miss_off = align(stride);
-        let hit_off = miss_off + align(stride);
-        let total = hit_off + 2 * stride;
         let sbt = heap.alloc_buffer(
             "sbt",
-            total,
+            layout.total,
             BufferUsage::SHADER_BINDING_TABLE | BufferUsage::DEVICE_ADDRESS,
             AllocKind::Other,
             MemoryClass::HostVisible,
             base_align,
         )?;
-        let mut bytes = vec![0u8; total as usize];
-        let h = |i: usize| &handles[i * handle_size as usize..(i + 1) * handle_size as usize];
-        let put = |bytes: &mut Vec<u8>, off: u64, i: usize| {
-            bytes[off as usize..(off + handle_size) as usize].copy_from_slice(h(i));
-        };
-        put(&mut bytes, raygen_off, 0);
-        put(&mut bytes, miss_off, 1);
-        put(&mut bytes, hit_off, 2);
-        put(&mut bytes, hit_off + stride, 3);
-        sbt.write_bytes(0, &bytes)?;
-        let base = sbt.device_address()?.0;
-        p.regions = [
-            vk::StridedDeviceAddressRegionKHR {
-                device_address: base + raygen_off,
-                stride: align(stride),
-                size: align(stride),
-            },
-            vk::StridedDeviceAddressRegionKHR {
-                device_address: base + miss_off,
-                stride,
-                size: stride,
-            },
-            vk::StridedDeviceAddressRegionKHR {
-                device_address: base + hit_off,
-                stride,
-                size: 2 * stride,
-            },
-            vk::StridedDeviceAddressRegionKHR::default(),
-        ];
-        p.sbt = Some(sbt);
-        Ok(p)
+        sbt.write_bytes(0, &layout.bytes(&handles))?;
+        self.regions = layout.regions(sbt.device_address()?.0);
+        self.sbt = Some(sbt);
+        Ok(())
     }
 
     /// Returns the SBT's memory to the heap (call before dropping when the heap lives on).
@@ -273,6 +331,36 @@ impl RtPipeline {
             heap.free(b);
         }
     }
+}
+
+/// Raygen (stage 0), miss (1), the triangle hit group (closest-hit 2, any-hit 5) and the
+/// procedural hit group (intersection 3, any-hit 4).
+fn shader_groups() -> [vk::RayTracingShaderGroupCreateInfoKHR<'static>; GROUP_COUNT as usize] {
+    let unused = vk::SHADER_UNUSED_KHR;
+    let general = |i: u32| {
+        vk::RayTracingShaderGroupCreateInfoKHR::default()
+            .ty(vk::RayTracingShaderGroupTypeKHR::GENERAL)
+            .general_shader(i)
+            .closest_hit_shader(unused)
+            .any_hit_shader(unused)
+            .intersection_shader(unused)
+    };
+    [
+        general(0),
+        general(1),
+        vk::RayTracingShaderGroupCreateInfoKHR::default()
+            .ty(vk::RayTracingShaderGroupTypeKHR::TRIANGLES_HIT_GROUP)
+            .general_shader(unused)
+            .closest_hit_shader(2)
+            .any_hit_shader(5)
+            .intersection_shader(unused),
+        vk::RayTracingShaderGroupCreateInfoKHR::default()
+            .ty(vk::RayTracingShaderGroupTypeKHR::PROCEDURAL_HIT_GROUP)
+            .general_shader(unused)
+            .closest_hit_shader(unused)
+            .any_hit_shader(4)
+            .intersection_shader(3),
+    ]
 }
 
 impl Drop for RtPipeline {

@@ -37,8 +37,10 @@ pub fn context_or_skip(test: &str, require: Requirement) -> Option<Context> {
             Some(ctx)
         }
         Err(
-            e
-            @ (VkError::LoaderMissing { .. } | VkError::NoDevice | VkError::MissingFeature { .. }),
+            e @ (VkError::LoaderMissing { .. }
+            | VkError::NoDevice
+            | VkError::MissingFeature { .. }
+            | VkError::NoSurface { .. }),
         ) => {
             if require_gpu() {
                 panic!("{test}: {ENV_REQUIRE_GPU}=1 but no usable Vulkan device: {e}");

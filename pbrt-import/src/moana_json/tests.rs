@@ -1,4 +1,5 @@
 use super::*;
+use crate::events::Geometry;
 use crate::CollectSink;
 
 const QUAD_OBJ: &str = "g leaf\nusemtl green\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n";

@@ -4,6 +4,7 @@ use proptest::prelude::*;
 
 use super::*;
 use crate::limits::GIB;
+use crate::limits::MIB;
 
 fn limits(budget_bytes: u64, max_allocation_count: u32) -> AllocLimits {
     AllocLimits {

@@ -123,7 +123,17 @@ pub(crate) fn alloc_frame(
     })
 }
 
-pub(crate) type FrameResult = (Vec<AovRecord>, Vec<u32>, Vec<u32>, Vec<f64>);
+/// What [`run_frames`] read back: the last frame's pixels and counters, every frame's time.
+pub(crate) struct FrameResult {
+    /// The hit AOV, one record a pixel.
+    pub records: Vec<AovRecord>,
+    /// The shaded image, one RGBA8 word a pixel.
+    pub rgba_words: Vec<u32>,
+    /// The shaders' counters (`RENDER_STAT_WORDS` of them).
+    pub counters: Vec<u32>,
+    /// Per frame: its GPU time in nanoseconds.
+    pub frame_ns: Vec<f64>,
+}
 
 pub(crate) fn run_frames(
     ctx: &Context,
@@ -201,11 +211,16 @@ pub(crate) fn run_frames(
         lod.built(levels, kind, pass_ms);
     }
     let records: Vec<AovRecord> = frame.readback.read_vec(0, pixels as usize)?;
-    let rgba: Vec<u32> = frame.readback.read_vec(rgba_off, pixels as usize)?;
+    let rgba_words: Vec<u32> = frame.readback.read_vec(rgba_off, pixels as usize)?;
     let counters: Vec<u32> = frame.readback.read_vec(stats_off, RENDER_STAT_WORDS)?;
     check_texture_residency(&counters)?;
     let frame_ns = (0..frames)
         .map(|f| timestamps.elapsed_ns(&ticks, 2 * f, 2 * f + 1))
         .collect::<motu_vk::Result<Vec<f64>>>()?;
-    Ok((records, rgba, counters, frame_ns))
+    Ok(FrameResult {
+        records,
+        rgba_words,
+        counters,
+        frame_ns,
+    })
 }

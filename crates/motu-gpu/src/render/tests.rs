@@ -12,7 +12,7 @@ use motu_trace::testutil::{srt, uv_sphere, HierarchyBuilder, OwnedHierarchy, PiT
 use crate::testutil::{assert_no_validation_errors, context_or_skip};
 use crate::{
     render, Backend, BuildOptions, Context, ContextOptions, GpuError, GpuScene, LimitOverrides,
-    MeshBlobSource, RenderOptions, Requirement, ValidationRequest, View,
+    MeshBlobSource, MeshSourceError, RenderOptions, Requirement, ValidationRequest, View,
 };
 
 /// glam is not a dependency of motu-gpu; the camera comes from motu-abi's constructor.
@@ -34,7 +34,10 @@ mod glam_free {
 struct Blobs<'a>(&'a OwnedHierarchy);
 
 impl MeshBlobSource for Blobs<'_> {
-    fn mesh_data(&self, mesh_record: u32) -> Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), String> {
+    fn mesh_data(
+        &self,
+        mesh_record: u32,
+    ) -> Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), MeshSourceError> {
         let g = self
             .0
             .geometry
@@ -502,7 +505,10 @@ fn uploads_overlap_blas_builds_across_batches() {
 struct FailingBlobs<'a>(Blobs<'a>, u32);
 
 impl MeshBlobSource for FailingBlobs<'_> {
-    fn mesh_data(&self, mesh_record: u32) -> Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), String> {
+    fn mesh_data(
+        &self,
+        mesh_record: u32,
+    ) -> Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), MeshSourceError> {
         if mesh_record == self.1 {
             return Err("chunk checksum mismatch".into());
         }

@@ -5,8 +5,8 @@ use std::time::Instant;
 
 use motu_alloc::{plan_build_batches, AllocKind, BatchLimits, BatchPlan, BuildSize, MemoryClass};
 use motu_vk::{
-    AsBuild, AsBuildFlags, AsBuildMode, AsCopyMode, AsGeometry, AsLevel, BufferUsage,
-    CommandRecorder, Context, GpuHeap, HeapBuffer, MemoryScope, Submitted,
+    AsBuild, AsBuildFlags, AsBuildMode, AsCopyMode, AsGeometry, AsLevel, BudgetRefusal,
+    BufferUsage, CommandRecorder, Context, GpuHeap, HeapBuffer, MemoryScope, Submitted,
 };
 
 use super::{AccelStruct, BuildOptions, Pending, ResourceReport, SizeQueries};
@@ -91,7 +91,7 @@ pub(crate) fn build_pipelined(
             max_batch_result_bytes: Some(opts.max_batch_result_bytes),
         },
     )
-    .map_err(|e| GpuError::Budget(e.to_string()))?;
+    .map_err(|e| GpuError::Budget(BudgetRefusal::from_cause(e)))?;
     let pool = heap.alloc_buffer(
         "scratch-pool",
         plan.scratch_pool_bytes.max(scratch_align),

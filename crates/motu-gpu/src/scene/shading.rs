@@ -210,7 +210,7 @@ fn fill(
         }
         let (normals, uvs) = source
             .mesh_shading(m as u32)
-            .map_err(|e| crate::error::GpuError::InvalidRequest(format!("mesh {m}: {e}")))?;
+            .map_err(crate::error::GpuError::mesh_source(m))?;
         let vc = rec.vertex_count as usize;
         let arrays: [(Option<&[u8]>, usize); 2] = [
             (

@@ -477,7 +477,7 @@ impl MeshGpu {
         }
         let (normals, uvs) = source
             .mesh_shading(m as u32)
-            .map_err(|e| GpuError::InvalidRequest(format!("mesh record {m}: {e}")))?;
+            .map_err(GpuError::mesh_source(m))?;
         let vc = self.vertex_count as usize;
         let base = self.positions_address;
         match normals.as_deref().filter(|n| n.len() == vc) {
@@ -513,7 +513,7 @@ impl MeshGpu {
         use bytemuck::cast_slice;
         let (positions, indices) = source
             .mesh_data(m as u32)
-            .map_err(|e| GpuError::InvalidRequest(format!("mesh record {m}: {e}")))?;
+            .map_err(GpuError::mesh_source(m))?;
         if positions.len() != self.vertex_count as usize
             || indices.len() != 3 * self.triangle_count as usize
         {
@@ -533,7 +533,7 @@ impl MeshGpu {
         }
         let map = source
             .primitive_map(m as u32)
-            .map_err(|e| GpuError::InvalidRequest(format!("mesh record {m}: {e}")))?;
+            .map_err(GpuError::mesh_source(m))?;
         let map_len = match (&map, self.has_primitive_map) {
             (Some(map), true) if map.len() == self.triangle_count as usize => map.len(),
             (None, false) => 0,

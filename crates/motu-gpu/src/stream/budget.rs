@@ -11,13 +11,21 @@ use super::{FrameStreamStats, StreamFallback, StreamingRenderer};
 use crate::error::Result;
 use crate::render::{FrameParams, RenderOptions, RenderOutput};
 
+/// Frame buffers with the image size and guard-band length they were made for.
+pub(super) struct KeptFrameBuffers {
+    pub buffers: FrameBuffers,
+    pub width: u32,
+    pub height: u32,
+    pub guard_len: usize,
+}
+
 /// State kept between frames.
 #[derive(Default)]
 pub(super) struct Kept {
-    /// The last frame's buffers with the width, height and guard-band length they were made
-    /// for: reused while those stay the same (no allocation per frame, and a prefetch never
-    /// takes the room the next frame's buffers need).
-    frame_buffers: Option<(FrameBuffers, u32, u32, usize)>,
+    /// The last frame's buffers: reused while their size and guard length stay the same (no
+    /// allocation per frame, and a prefetch never takes the room the next frame's buffers
+    /// need).
+    frame_buffers: Option<KeptFrameBuffers>,
     /// When the running build step started (its time counts against `frame_build_ms`).
     pub(super) step_start: Option<Instant>,
     /// Pass cap of the running frame when set ([`StreamingRenderer::render_progressive`]).
@@ -111,8 +119,9 @@ impl<'a> StreamingRenderer<'a> {
         params: &FrameParams,
         shading: &motu_abi::shade::Shading,
     ) -> Result<FrameBuffers> {
-        if let Some((fb, fw, fh, fg)) = self.frame.kept.frame_buffers.take() {
-            if (fw, fh, fg) == (w, h, guard_len)
+        if let Some(kept) = self.frame.kept.frame_buffers.take() {
+            let fb = kept.buffers;
+            if (kept.width, kept.height, kept.guard_len) == (w, h, guard_len)
                 && fb.params.size_bytes() >= crate::render::params_bytes(shading)
             {
                 crate::render::write_params(&fb.params, params, shading)?;
@@ -135,23 +144,17 @@ impl<'a> StreamingRenderer<'a> {
         .map_err(|e| self.skeleton_error("the frame buffers", e))
     }
 
-    /// Takes the kept frame buffers (with their width, height and guard length) for a use
-    /// between frames; [`Self::keep_frame_buffers`] puts them back.
-    pub(super) fn take_kept_frame_buffers(&mut self) -> Option<(FrameBuffers, u32, u32, usize)> {
+    /// Takes the kept frame buffers for a use between frames; [`Self::keep_frame_buffers`]
+    /// puts them back.
+    pub(super) fn take_kept_frame_buffers(&mut self) -> Option<KeptFrameBuffers> {
         self.frame.kept.frame_buffers.take()
     }
 
-    /// Keeps `fb` for the next frame of the same size.
-    pub(super) fn keep_frame_buffers(
-        &mut self,
-        fb: FrameBuffers,
-        w: u32,
-        h: u32,
-        guard_len: usize,
-    ) {
-        if let Some((old, ..)) = self.frame.kept.frame_buffers.take() {
-            old.release(&mut self.heap);
+    /// Keeps frame buffers for the next frame of the same size.
+    pub(super) fn keep_frame_buffers(&mut self, kept: KeptFrameBuffers) {
+        if let Some(old) = self.frame.kept.frame_buffers.take() {
+            old.buffers.release(&mut self.heap);
         }
-        self.frame.kept.frame_buffers = Some((fb, w, h, guard_len));
+        self.frame.kept.frame_buffers = Some(kept);
     }
 }

@@ -21,7 +21,7 @@ use motu_ascache::{AsCache, CacheKey, CacheKeyBuilder, CacheStats, Tier, SERIALI
 use motu_vk::{AsLevel, SerializedHeader, SizeQueries, SERIALIZED_ALIGNMENT};
 use rayon::prelude::*;
 
-use super::clones::HostCacheMode;
+use super::clones::{HostCacheMode, Restored};
 use super::proxy_boxes::{self, Box6};
 use super::skeleton::ms_since;
 use super::transfer::{Transfer, TransferBuffers, TRANSFER_CAP_BYTES};
@@ -79,9 +79,6 @@ struct Attached {
     keys: Vec<Option<CacheKey>>,
     driver: String,
 }
-
-/// Restored structures (BLAS id, structure) and the ids left to build.
-pub(super) type Restored = (Vec<(usize, AccelStruct)>, Vec<usize>);
 
 /// Keys' format: bump when what a key covers changes.
 const KEY_DOMAIN: &str = "motu-blas-v1";
@@ -177,16 +174,19 @@ impl StreamingRenderer<'_> {
     /// device error fails.
     pub(super) fn restore_cached(&mut self, ids: &[usize], evict: bool) -> Result<Restored> {
         if self.reuse.cache.is_none() || ids.is_empty() {
-            return Ok((Vec::new(), ids.to_vec()));
+            return Ok(Restored {
+                built: Vec::new(),
+                rest: ids.to_vec(),
+            });
         }
         // Host clones first (`clones.rs`): a device-side copy, no host work.
-        let (from_clones, ids) = self.restore_clones(ids, evict)?;
-        if ids.is_empty() {
-            return Ok((from_clones, ids));
+        let from_clones = self.restore_clones(ids, evict)?;
+        if from_clones.rest.is_empty() {
+            return Ok(from_clones);
         }
-        let (mut restored, rest) = self.restore_serialized(&ids, evict)?;
-        restored.extend(from_clones);
-        Ok((restored, rest))
+        let mut restored = self.restore_serialized(&from_clones.rest, evict)?;
+        restored.built.extend(from_clones.built);
+        Ok(restored)
     }
 
     /// [`Self::restore_cached`] from the serialised tiers (host memory, then the directory).
@@ -231,13 +231,19 @@ impl StreamingRenderer<'_> {
             }
         }
         if hits.is_empty() {
-            return Ok((Vec::new(), rest));
+            return Ok(Restored {
+                built: Vec::new(),
+                rest,
+            });
         }
         let mut restored = Vec::with_capacity(hits.len());
         self.restore_some(&hits, evict, &mut restored, &mut rest)?;
         rest.sort_unstable();
         self.frame.stats.restore_ms += ms_since(t);
-        Ok((restored, rest))
+        Ok(Restored {
+            built: restored,
+            rest,
+        })
     }
 
     /// Deserialises `hits` in one submission; where the budget has no room for their copies,

@@ -51,6 +51,15 @@ impl HostCacheMode {
     }
 }
 
+/// What [`StreamingRenderer::restore_cached`] (host clones, then the serialised tiers)
+/// restored, and what is left to build.
+pub(super) struct Restored {
+    /// (BLAS id, its restored structure).
+    pub built: Vec<(usize, AccelStruct)>,
+    /// The BLASes no cached copy restored.
+    pub rest: Vec<usize>,
+}
+
 /// The clones held (see the module docs).
 #[derive(Default)]
 pub(super) struct HostClones {
@@ -224,13 +233,12 @@ impl StreamingRenderer<'_> {
     /// Clones back into device memory what the host holds of BLASes `ids`: returns the
     /// restored structures and the ids left (to the serialised tiers, then to building). No
     /// room for a copy leaves that BLAS to be built, counted; only a device error fails.
-    pub(super) fn restore_clones(
-        &mut self,
-        ids: &[usize],
-        evict: bool,
-    ) -> Result<super::cache::Restored> {
+    pub(super) fn restore_clones(&mut self, ids: &[usize], evict: bool) -> Result<Restored> {
         if !self.clones.on() || ids.iter().all(|&b| !self.clones.holds(b)) {
-            return Ok((Vec::new(), ids.to_vec()));
+            return Ok(Restored {
+                built: Vec::new(),
+                rest: ids.to_vec(),
+            });
         }
         let t = Instant::now();
         let ctx = self.ctx.clone();
@@ -262,7 +270,7 @@ impl StreamingRenderer<'_> {
             }
         }
         if made.is_empty() {
-            return Ok((made, rest));
+            return Ok(Restored { built: made, rest });
         }
         let copied = (|| -> Result<()> {
             let mut rec = ctx.record("clone blases back from host")?;
@@ -285,6 +293,6 @@ impl StreamingRenderer<'_> {
         self.frame.stats.restored_from_host += made.len() as u32;
         self.frame.stats.restore_ms += ms_since(t);
         rest.sort_unstable();
-        Ok((made, rest))
+        Ok(Restored { built: made, rest })
     }
 }

@@ -4,10 +4,12 @@
 use std::collections::BTreeSet;
 use std::time::Instant;
 
+use super::clones::Restored;
 use super::residency::EvictWhy;
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
 use crate::scene::MeshGpu;
+use motu_vk::BudgetRefusal;
 
 /// Work of one build step: (BLAS, requests) pairs, most requested first.
 #[derive(Default)]
@@ -119,7 +121,10 @@ impl<'a> StreamingRenderer<'a> {
         let t_blas = Instant::now();
         let built = loaded.and_then(|()| {
             let ids: Vec<usize> = group.iter().map(|&b| b as usize).collect();
-            let (restored, rest) = self.restore_cached(&ids, evict)?;
+            let Restored {
+                built: restored,
+                rest,
+            } = self.restore_cached(&ids, evict)?;
             let built = match self.maybe_evicting(evict, |s| s.build_blas_set(&rest, 0)) {
                 Ok(b) => b,
                 Err(e) => {
@@ -169,7 +174,7 @@ impl<'a> StreamingRenderer<'a> {
                 .sum();
             let bytes = accel.size_bytes + mesh_bytes;
             self.res.blas_bytes[b] = bytes;
-            self.res.used_in_frame[b] = self.frame.number;
+            self.res.used_in_frame[b] = self.frame.number();
             if restored {
                 self.frame.stats.restored_blases += 1;
                 self.frame.stats.restored_bytes += accel.size_bytes;
@@ -184,7 +189,7 @@ impl<'a> StreamingRenderer<'a> {
                 self.frame.stats.triangles_built += u64::from(self.view.blases[b].primitive_count);
             }
             self.reuse.built_once[b] = true;
-            self.res.admit(b, accel, bytes, self.frame.stamp);
+            self.res.admit(b, accel, bytes, self.frame.stamp());
             self.res.pinned[b] = true;
             self.res.built_now.push(b as u32);
             built_ids.insert(b as u32);
@@ -314,7 +319,7 @@ impl<'a> StreamingRenderer<'a> {
                         // it fits (their rebuild comes at the end of this step).
                         continue;
                     }
-                    return Err(self.does_not_fit(queue[i], &msg));
+                    return Err(self.does_not_fit(queue[i], msg));
                 }
                 Err(e) => return Err(e),
             }
@@ -326,7 +331,7 @@ impl<'a> StreamingRenderer<'a> {
     /// `tlas_rebuild_bytes`) with `counts` resident instance records per TLAS plus those of
     /// `group`: every TLAS dirty now or parent of a BLAS of `group` or built this step.
     pub(super) fn tlas_reserve(&self, counts: &[u64], group: &[u32]) -> Result<u64> {
-        let mut touched: BTreeSet<u32> = self.tlases.dirty.clone();
+        let mut touched: BTreeSet<u32> = self.tlases.dirty().clone();
         for &b in group.iter().chain(&self.res.built_now) {
             touched.extend(self.topo.parents(b as usize).iter().copied());
         }
@@ -375,7 +380,7 @@ impl<'a> StreamingRenderer<'a> {
     }
 
     /// The error for BLAS `b` not fitting next to the skeleton alone.
-    pub(super) fn does_not_fit(&self, b: u32, msg: &str) -> GpuError {
+    pub(super) fn does_not_fit(&self, b: u32, refusal: BudgetRefusal) -> GpuError {
         let rec = &self.view.blases[b as usize];
         let mesh_bytes: u64 = self
             .blas_meshes(b as usize)
@@ -391,17 +396,17 @@ impl<'a> StreamingRenderer<'a> {
         } else {
             format!("its {mesh_bytes} bytes of meshes in host memory aside,")
         };
-        GpuError::Budget(format!(
+        GpuError::Budget(refusal.explained(format!(
             "streaming: BLAS {b} ({} triangles, {meshes} \
              acceleration structure and build scratch) does not fit under the budget of {} \
              bytes even with every other structure evicted: {} bytes stay in use (resident \
              skeleton {} bytes, frame buffers, trace pipeline, staging ring); raise \
-             --vram-budget or split the scene's meshes finer ({msg})",
+             --vram-budget or split the scene's meshes finer",
             rec.primitive_count,
             report.budget_bytes,
             report.budget_in_use_bytes,
             self.totals.skeleton_bytes,
-        ))
+        )))
     }
 
     /// Makes `demand` resident (streams meshes, builds BLASes), needed first and most requested
@@ -422,7 +427,7 @@ impl<'a> StreamingRenderer<'a> {
         };
         self.res.built_now.clear();
         for &(b, _) in demand.blases.iter().chain(&demand.later) {
-            self.res.last_seen[b as usize] = self.frame.stamp;
+            self.res.last_seen[b as usize] = self.frame.stamp();
         }
         let queue = |v: &[(u32, u32)]| -> Vec<u32> {
             v.iter()

@@ -2,9 +2,11 @@
 
 use motu_abi::camera::CameraParams;
 
+use super::budget::KeptFrameBuffers;
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
 use super::passes::{guard_pixels, FrameImage};
+use super::probe::ProbeFound;
 use super::{FrameStreamStats, StreamingRenderer};
 use crate::error::{GpuError, Result};
 use crate::render::{
@@ -20,16 +22,16 @@ use crate::render::{
 /// reset by each frame's start and handed out at its end.
 pub(super) struct FrameState {
     /// Frames started so far (the current one's number).
-    pub number: u64,
+    number: u64,
     pub stats: FrameStreamStats,
     /// The latest pass stamp.
-    pub stamp: u32,
+    stamp: u32,
     /// The first stamp whose sightings a prefetch keeps resident: the frame's first pass, or
     /// the probe of the next camera once it ran.
-    pub first_stamp: u32,
+    first_stamp: u32,
     /// The last frame after which [`PassMarks::auto_wanted`](super::PassMarks::auto_wanted)
     /// held (0: none yet).
-    pub pass_marks_held: u64,
+    pass_marks_held: u64,
     /// The next frame's camera, probed after this frame (`set_next_camera`).
     next_camera: Option<CameraParams>,
     /// Per BLAS, what the last probe saw (`PROBE_MET`, `PROBE_RESIDENT` bits), kept for the
@@ -62,6 +64,71 @@ impl FrameState {
         self.next_camera = camera;
     }
 
+    /// The current frame's number (frames started so far).
+    pub fn number(&self) -> u64 {
+        self.number
+    }
+
+    /// The latest pass stamp.
+    pub fn stamp(&self) -> u32 {
+        self.stamp
+    }
+
+    /// The first stamp whose sightings a prefetch keeps resident.
+    pub fn first_stamp(&self) -> u32 {
+        self.first_stamp
+    }
+
+    /// The last frame after which the pass marks were wanted (0: none yet).
+    pub fn pass_marks_held(&self) -> u64 {
+        self.pass_marks_held
+    }
+
+    /// A new frame: its number, fresh statistics, its first stamp (the next pass's), no
+    /// build clock yet.
+    pub fn begin(&mut self) {
+        self.number += 1;
+        self.stats = FrameStreamStats {
+            frame: self.number,
+            ..Default::default()
+        };
+        self.first_stamp = self.stamp + 1;
+        self.kept.step_start = None;
+    }
+
+    /// The next pass's stamp (stamps only grow), or the limit when stamps would reach
+    /// `limit` (they must not wrap: the shaders compare them).
+    pub fn next_stamp(&mut self, limit: u32) -> Result<u32> {
+        if self.stamp + 1 >= limit {
+            // ~20 days of a viewer at 60 frames a second and 5 passes a frame: refuse rather
+            // than let stamps wrap and marks lie.
+            return Err(GpuError::LimitExceeded {
+                what: "streaming passes of one renderer (stamps)",
+                requested: u64::from(self.stamp) + 1,
+                limit: u64::from(limit - 1),
+            });
+        }
+        self.stamp += 1;
+        Ok(self.stamp)
+    }
+
+    /// The probe of the next camera ran: its sightings (from the latest stamp on) are what
+    /// the prefetch keeps.
+    pub fn probe_ran(&mut self) {
+        self.first_stamp = self.stamp;
+    }
+
+    /// The pass marks were wanted after this frame.
+    pub fn hold_pass_marks(&mut self) {
+        self.pass_marks_held = self.number;
+    }
+
+    /// Moves the stamp on to `stamp`, never back (tests of the stamp limit).
+    #[cfg(test)]
+    pub fn skip_stamps_to(&mut self, stamp: u32) {
+        self.stamp = self.stamp.max(stamp);
+    }
+
     pub fn new() -> FrameState {
         FrameState {
             number: 0,
@@ -79,8 +146,11 @@ impl FrameState {
 }
 
 /// The probe of the next frame's camera after the passes: that camera, and what its first
-/// round met (structures, then the pixels it left open).
-type FirstProbe = (CameraParams, (Demand, Vec<u32>));
+/// round met.
+struct FirstProbe {
+    camera: CameraParams,
+    found: ProbeFound,
+}
 
 impl<'a> StreamingRenderer<'a> {
     /// Renders one frame: build–traverse passes until every pixel is complete (or
@@ -105,7 +175,7 @@ impl<'a> StreamingRenderer<'a> {
         }
         let span = tracing::info_span!(
             "stream_frame",
-            frame = self.frame.number + 1,
+            frame = self.frame.number() + 1,
             width = w,
             height = h
         );
@@ -129,7 +199,10 @@ impl<'a> StreamingRenderer<'a> {
                         && self.frame.stats.complete
                         && !self.frame_build_spent() =>
                 {
-                    Some((n, self.probe_next_camera(&fb, &n, opts, None, false)?))
+                    Some(FirstProbe {
+                        camera: n,
+                        found: self.probe_next_camera(&fb, &n, opts, None, false)?,
+                    })
                 }
                 _ => None,
             };
@@ -142,7 +215,12 @@ impl<'a> StreamingRenderer<'a> {
                 return Err(e);
             }
         };
-        self.keep_frame_buffers(fb, w, h, guard.len());
+        self.keep_frame_buffers(KeptFrameBuffers {
+            buffers: fb,
+            width: w,
+            height: h,
+            guard_len: guard.len(),
+        });
         self.measure_working_set();
         let guard_demand = std::mem::take(&mut image.guard_demand);
         self.prefetch_after_frame(guard_demand, probe, opts)?;
@@ -157,13 +235,7 @@ impl<'a> StreamingRenderer<'a> {
 
     /// A new frame's counters: its number, its statistics, its first stamp, its build clock.
     fn begin_frame(&mut self) {
-        self.frame.number += 1;
-        self.frame.stats = FrameStreamStats {
-            frame: self.frame.number,
-            ..Default::default()
-        };
-        self.frame.first_stamp = self.frame.stamp + 1;
-        self.frame.kept.step_start = None;
+        self.frame.begin();
     }
 
     /// The trace pipeline of `opts`'s backend and stack size, made (evicting for room) when
@@ -208,7 +280,7 @@ impl<'a> StreamingRenderer<'a> {
             &params,
             &opts.shading,
         )?;
-        if !self.tlases.dirty.is_empty() {
+        if self.tlases.any_dirty() {
             self.res.built_now.clear();
             if let Err(e) = self
                 .rebuild_dirty()
@@ -226,7 +298,7 @@ impl<'a> StreamingRenderer<'a> {
     fn measure_working_set(&mut self) {
         let mut working_meshes = std::collections::BTreeSet::new();
         for (b, &f) in self.res.used_in_frame.iter().enumerate() {
-            if f == self.frame.number {
+            if f == self.frame.number() {
                 self.frame.stats.working_set_blases += 1;
                 self.frame.stats.working_set_bytes += self.res.blas_bytes[b];
                 working_meshes.extend(self.blas_meshes(b));
@@ -255,11 +327,11 @@ impl<'a> StreamingRenderer<'a> {
     ) -> Result<()> {
         let mut again = None;
         let evictions_at_probe = self.res.evictions();
-        if let Some((next, (p, open))) = probe {
-            let needed = p.needed_ids();
-            guard_demand.merge_first(p);
-            self.frame.first_stamp = self.frame.stamp;
-            again = Some((next, open, needed));
+        if let Some(FirstProbe { camera, found }) = probe {
+            let needed = found.demand.needed_ids();
+            guard_demand.merge_first(found.demand);
+            self.frame.probe_ran();
+            again = Some((camera, found.open_pixels, needed));
         }
         if !guard_demand.is_empty() && self.frame.stats.complete && !self.frame_build_spent() {
             if let Err(e) = self
@@ -286,7 +358,7 @@ impl<'a> StreamingRenderer<'a> {
             .evicted
             .saturating_sub(st.evicted_for_tlas + st.evicted_on_refusal);
         if super::PassMarks::auto_wanted(build_room, st.prefetch_skipped) {
-            self.frame.pass_marks_held = self.frame.number;
+            self.frame.hold_pass_marks();
         }
     }
 
@@ -318,7 +390,7 @@ impl<'a> StreamingRenderer<'a> {
         let host_counts = self.heap.host_visible_counts_against_budget();
         skeleton_bytes += self.tlases.size_bytes(host_counts);
         st.resident_blases = streamed_blases;
-        st.resident_tlases = self.tlases.tlas.iter().filter(|t| t.is_some()).count() as u32;
+        st.resident_tlases = self.tlases.resident().count() as u32;
         st.resident_bytes = streamed_bytes + skeleton_bytes;
         st.vram_peak_bytes = report.peak_block_bytes;
         st.vram_budget_bytes = report.budget_bytes;
@@ -366,20 +438,14 @@ impl<'a> StreamingRenderer<'a> {
                     .iter()
                     .flatten()
                     .map(|a| a.size_bytes)
-                    .chain(
-                        self.tlases
-                            .tlas
-                            .iter()
-                            .flatten()
-                            .map(|t| t.accel.size_bytes),
-                    )
+                    .chain(self.tlases.resident().map(|t| t.accel.size_bytes))
                     .sum(),
                 alloc: report,
                 passes: self.frame.stats.passes,
             },
         );
         tracing::info!(
-            frame = self.frame.number,
+            frame = self.frame.number(),
             passes = self.frame.stats.passes,
             blas_built = self.frame.stats.blas_built,
             evicted = self.frame.stats.evicted,
@@ -409,7 +475,11 @@ impl<'a> StreamingRenderer<'a> {
             && needed.iter().any(|&b| self.res.blas[b as usize].is_some())
             && !self.frame_build_spent()
         {
-            let Some((demand, still_open)) = self.probe_round(next, opts, Some(&open))? else {
+            let Some(ProbeFound {
+                demand,
+                open_pixels: still_open,
+            }) = self.probe_round(next, opts, Some(&open))?
+            else {
                 return Ok(());
             };
             needed = demand.needed_ids();
@@ -432,7 +502,7 @@ impl<'a> StreamingRenderer<'a> {
             && !self.frame_build_spent()
         {
             self.frame.stats.probe_verify_rounds += 1;
-            let Some((demand, _)) = self.probe_round(next, opts, None)? else {
+            let Some(ProbeFound { demand, .. }) = self.probe_round(next, opts, None)? else {
                 return Ok(());
             };
             if demand.needed_ids().is_empty() {
@@ -454,12 +524,12 @@ impl<'a> StreamingRenderer<'a> {
         next: &CameraParams,
         opts: &RenderOptions,
         again: Option<&[u32]>,
-    ) -> Result<Option<(super::demand::Demand, Vec<u32>)>> {
-        let Some((fb, w, h, g)) = self.take_kept_frame_buffers() else {
+    ) -> Result<Option<ProbeFound>> {
+        let Some(kept) = self.take_kept_frame_buffers() else {
             return Ok(None);
         };
-        let probed = self.probe_next_camera(&fb, next, opts, again, again.is_none());
-        self.keep_frame_buffers(fb, w, h, g);
+        let probed = self.probe_next_camera(&kept.buffers, next, opts, again, again.is_none());
+        self.keep_frame_buffers(kept);
         probed.map(Some)
     }
 }

@@ -290,16 +290,16 @@ impl<'a> StreamingRenderer<'a> {
     pub(super) fn sightings(&mut self, stamps: &[u32], this_frame: bool) -> Vec<(u32, u32)> {
         let mut out = Vec::new();
         for (b, &v) in stamps.iter().enumerate() {
-            if v >> 2 != self.frame.stamp {
+            if v >> 2 != self.frame.stamp() {
                 continue;
             }
-            self.res.last_seen[b] = self.frame.stamp;
+            self.res.last_seen[b] = self.frame.stamp();
             if self.res.blas[b].is_some() {
                 if this_frame {
-                    self.res.used_in_frame[b] = self.frame.number;
+                    self.res.used_in_frame[b] = self.frame.number();
                 }
                 if self.topo.buildable(b) {
-                    self.res.saw(b, self.frame.stamp);
+                    self.res.saw(b, self.frame.stamp());
                 }
             } else if self.topo.buildable(b) {
                 out.push((b as u32, v & 3));
@@ -324,20 +324,11 @@ impl<'a> StreamingRenderer<'a> {
         let stamps_bytes = (nb * 4) as u64;
         let req_off = stamps_bytes.div_ceil(16) * 16;
         let inc_off = req_off + req_off;
-        if self.frame.stamp + 1 >= STAMP_LIMIT {
-            // ~20 days of a viewer at 60 frames a second and 5 passes a frame: refuse rather
-            // than let stamps wrap and marks lie.
-            return Err(GpuError::LimitExceeded {
-                what: "streaming passes of one renderer (stamps)",
-                requested: u64::from(self.frame.stamp) + 1,
-                limit: u64::from(STAMP_LIMIT - 1),
-            });
-        }
-        self.frame.stamp += 1;
+        self.frame.next_stamp(STAMP_LIMIT)?;
         // Every resident BLAS is walked by every ray of this pass that reaches its box in
         // front of its best hit: a ray that started by now needs it no more.
         let resident = (0..nb).filter(|&b| self.res.blas[b].is_some() && self.topo.buildable(b));
-        self.gpu.write_walked(resident, self.frame.stamp)?;
+        self.gpu.write_walked(resident, self.frame.stamp())?;
         let walked = self.gpu.walked_table()?;
         fb.pixel_list.write(0, list)?;
         let (cluster_members, proxy_box_index, proxy_boxes) = self.gpu.proxy_addresses();
@@ -349,7 +340,7 @@ impl<'a> StreamingRenderer<'a> {
             walked: walked.device_address()?.0,
             pixel_list: fb.pixel_list.device_address()?.0,
             incomplete: fb.incomplete.device_address()?.0,
-            stamp: self.frame.stamp,
+            stamp: self.frame.stamp(),
             full_count,
             list_count: list.len() as u32,
             blas_count: nb as u32,

@@ -232,7 +232,7 @@ impl StreamingRenderer<'_> {
     /// BLAS `b`'s placeholder: its bounds' centre, or (`full`, while they exist) its whole
     /// bounds; the empty one where it has none.
     fn placeholder(&self, b: usize, full: bool) -> u64 {
-        let ph = &self.tlases.placeholders;
+        let ph = self.tlases.placeholders();
         let whole = if full {
             ph.full_per_blas.get(b).copied()
         } else {
@@ -245,7 +245,7 @@ impl StreamingRenderer<'_> {
         if p != 0 {
             p
         } else {
-            self.tlases.placeholders.empty
+            ph.empty
         }
     }
 
@@ -256,7 +256,7 @@ impl StreamingRenderer<'_> {
         if addr != 0 {
             return tail_record(count, marks, addr);
         }
-        let mut inst = tail_record(count, marks, self.tlases.placeholders.empty);
+        let mut inst = tail_record(count, marks, self.tlases.placeholders().empty);
         set_instance_mask(&mut inst, 0);
         inst
     }
@@ -316,7 +316,7 @@ impl StreamingRenderer<'_> {
         })();
         self.heap.free(buf);
         let built = r?;
-        let ph = &mut self.tlases.placeholders;
+        let ph = self.tlases.placeholders_mut();
         ph.per_blas = vec![0u64; nb];
         ph.full_per_blas = vec![0u64; nb];
         for (k, a) in built {
@@ -360,23 +360,13 @@ impl StreamingRenderer<'_> {
     /// floor is sized for rebuilt TLASes, so a BLAS that does not fit next to persistent ones
     /// fits without them. Returns whether there was any.
     pub(super) fn drop_persistent(&mut self) -> bool {
-        let mut any = false;
-        for t in 0..self.tlases.persistent_mode.len() {
-            if !std::mem::take(&mut self.tlases.persistent_mode[t]) {
-                continue;
-            }
-            any = true;
-            if let Some(g) = self.tlases.tlas[t].take() {
-                g.release(&mut self.heap);
-            }
-            self.tlases.dirty.insert(t as u32);
-        }
+        let any = self.tlases.end_persistent_mode(&mut self.heap);
         if any {
             tracing::warn!(
                 persistent_tlas_bytes = self.totals.persistent_tlas_bytes,
                 "a BLAS does not fit next to the persistent TLASes: TLASes are rebuilt from now on"
             );
-            self.tlases.placeholders.release(&mut self.heap);
+            self.tlases.placeholders_mut().release(&mut self.heap);
             self.totals.tlas_mode = "rebuild";
             self.totals.persistent_tlases = 0;
             self.totals.persistent_tlas_bytes = 0;
@@ -475,7 +465,7 @@ impl StreamingRenderer<'_> {
         addrs: &[u64],
         tail: [u64; 2],
     ) -> Result<u64> {
-        let Some(mut g) = self.tlases.tlas[t as usize].take() else {
+        let Some(mut g) = self.tlases.take_for_update(t) else {
             return Err(GpuError::InvalidRequest(format!(
                 "streaming: persistent TLAS {t} is not resident"
             )));
@@ -526,7 +516,7 @@ impl StreamingRenderer<'_> {
             p.written = want;
             Ok(rewritten)
         })();
-        self.tlases.tlas[t as usize] = Some(g);
+        self.tlases.put_back(t, g);
         r
     }
 

@@ -62,6 +62,14 @@ use super::StreamingRenderer;
 use crate::error::Result;
 use crate::render::{frame_params, RenderOptions};
 
+/// What a probe round met that is not resident: the structures (most requested first, see
+/// [`StreamingRenderer::probe_next_camera`]) and the pixels it left open.
+pub(super) struct ProbeFound {
+    pub demand: Demand,
+    /// Pixels (packed `x | y << 16`) some ray of which needed one of `demand`'s structures.
+    pub open_pixels: Vec<u32>,
+}
+
 impl<'a> StreamingRenderer<'a> {
     /// Traces the probe of `next` (same image size as the frame just rendered, whose buffers
     /// `fb` are): every `probe_stride`-th pixel, or only the pixels `again` (a later round:
@@ -78,7 +86,7 @@ impl<'a> StreamingRenderer<'a> {
         opts: &RenderOptions,
         again: Option<&[u32]>,
         verify: bool,
-    ) -> Result<(Demand, Vec<u32>)> {
+    ) -> Result<ProbeFound> {
         // A later round (open pixels, or a verifying round over every pixel) adds to the
         // first round's sightings, need and marks.
         let later = again.is_some() || verify;
@@ -109,8 +117,8 @@ impl<'a> StreamingRenderer<'a> {
             self.frame.stats.probe_pass_rows
         } else {
             self.opts.pass_marks.rows(super::PassMarks::auto_window(
-                self.frame.number,
-                self.frame.pass_marks_held,
+                self.frame.number(),
+                self.frame.pass_marks_held(),
             ))
         };
         self.frame.stats.probe_pass_rows = pass_rows;
@@ -121,12 +129,12 @@ impl<'a> StreamingRenderer<'a> {
             incomplete,
             trace_ms,
         } = self.trace_pass(fb, pixels, full, &list, false, probe_flags(pass_rows))?;
-        let stamp = self.frame.stamp;
+        let stamp = self.frame.stamp();
         if pass_rows > 0 {
             // Passed by a final ray only: as recent as the frame's last pass (a later round:
             // as the first round's), below what the probe met, so not kept by the prefetch.
             let at = if later {
-                self.frame.first_stamp.saturating_sub(1)
+                self.frame.first_stamp().saturating_sub(1)
             } else {
                 stamp - 1
             };
@@ -167,7 +175,10 @@ impl<'a> StreamingRenderer<'a> {
             demand.blases.push((b, n));
         }
         demand.sort();
-        Ok((demand, incomplete))
+        Ok(ProbeFound {
+            demand,
+            open_pixels: incomplete,
+        })
     }
 
     /// `FrameStreamStats::probe_need_blases` and `probe_need_bytes` after a probe round

@@ -153,9 +153,7 @@ impl<'a> StreamingRenderer<'a> {
         let need = count * RECORD_BYTES as u64
             + s.acceleration_structure_size_bytes
             + s.build_scratch_size_bytes;
-        let old = self.tlases.tlas[t as usize]
-            .as_ref()
-            .map_or(0, |g| g.accel.size_bytes);
+        let old = self.tlases.get(t).map_or(0, |g| g.accel.size_bytes);
         Ok((need + need / 4).saturating_sub(old))
     }
 
@@ -163,7 +161,7 @@ impl<'a> StreamingRenderer<'a> {
         // Each group's rebuild settles (or fails) on its own; evictions for one group may
         // dirty TLASes another group rebuilt, which the next round picks up.
         let mut rounds = 0usize;
-        while !self.tlases.dirty.is_empty() {
+        while self.tlases.any_dirty() {
             rounds += 1;
             if rounds > 64 + 4 * (self.view.tlases.len() + self.item_count()) {
                 return Err(GpuError::InvalidRequest(
@@ -190,8 +188,8 @@ impl<'a> StreamingRenderer<'a> {
     /// Returns the group and the room its rebuilds need together.
     fn next_rebuild_group(&self) -> Result<(Vec<u32>, u64)> {
         let counts = self.resident_instance_counts();
-        let mut need: Vec<(u64, u32)> = Vec::with_capacity(self.tlases.dirty.len());
-        for &t in &self.tlases.dirty {
+        let mut need: Vec<(u64, u32)> = Vec::with_capacity(self.tlases.dirty().len());
+        for &t in self.tlases.dirty() {
             need.push((self.tlas_rebuild_bytes(t, counts[t as usize])?, t));
         }
         Ok(group_by_need(need, self.build_opts.budget_bytes))
@@ -204,7 +202,7 @@ impl<'a> StreamingRenderer<'a> {
             group
                 .iter()
                 .copied()
-                .filter(|t| s.tlases.dirty.contains(t))
+                .filter(|t| s.tlases.dirty().contains(t))
                 .collect()
         };
         if !target(self).is_empty() {
@@ -229,7 +227,7 @@ impl<'a> StreamingRenderer<'a> {
             tracing::debug!(
                 need,
                 free = free(self),
-                dirty = self.tlases.dirty.len(),
+                dirty = self.tlases.dirty().len(),
                 group = group.len(),
                 records = self.resident_instance_counts().iter().sum::<u64>(),
                 "TLAS rebuild room"
@@ -275,15 +273,15 @@ impl<'a> StreamingRenderer<'a> {
                     }
                     let Some(last) = self.res.built_now.pop() else {
                         let report = self.heap.report();
-                        return Err(GpuError::Budget(format!(
+                        return Err(GpuError::Budget(msg.explained(format!(
                             "streaming: rebuilding {} TLAS(es) does not fit under the budget of \
                              {} bytes with every evictable structure evicted ({} bytes in use, \
-                             skeleton {} bytes); raise --vram-budget ({msg})",
+                             skeleton {} bytes); raise --vram-budget",
                             ids.len(),
                             report.budget_bytes,
                             report.budget_in_use_bytes,
                             self.totals.skeleton_bytes
-                        )));
+                        ))));
                     };
                     self.frame.stats.deferred += 1;
                     if self.res.holds(last) {

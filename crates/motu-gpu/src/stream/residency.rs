@@ -167,8 +167,8 @@ impl<'a> StreamingRenderer<'a> {
         }
         tracing::trace!(
             victims = ?victims.iter().map(|v| (v.0, self.res.last_seen.get(v.0 as usize).copied().unwrap_or(0))).collect::<Vec<_>>(),
-            stamp = self.frame.stamp,
-            first = self.frame.first_stamp,
+            stamp = self.frame.stamp(),
+            first = self.frame.first_stamp(),
             "evicting (BLAS, last seen)"
         );
         let ids: Vec<usize> = victims.iter().map(|v| v.0 as usize).collect();
@@ -198,9 +198,7 @@ impl<'a> StreamingRenderer<'a> {
     /// it (built, evicted or moved), so they are rebuilt before the next trace.
     pub(super) fn dirty_parents(&mut self, b: usize) {
         for &p in self.topo.parents(b) {
-            if self.tlases.tlas[p as usize].is_some() {
-                self.tlases.dirty.insert(p);
-            }
+            self.tlases.instances_changed(p);
         }
     }
 
@@ -308,7 +306,7 @@ impl<'a> StreamingRenderer<'a> {
     /// After a failed build step, a TLAS left dirty (absent, or referencing evicted BLASes)
     /// must never be traced: every TLAS is part of the skeleton, so the renderer is poisoned.
     pub(super) fn quarantine_after_failure(&mut self, e: &GpuError) {
-        if !self.tlases.dirty.is_empty() {
+        if self.tlases.any_dirty() {
             self.poisoned = Some(e.to_string());
         }
     }

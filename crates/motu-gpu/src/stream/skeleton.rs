@@ -116,7 +116,8 @@ impl<'a> StreamingRenderer<'a> {
         let view = self.view;
         let t_persistent = std::time::Instant::now();
         let has_clusters: Vec<bool> = self.topo.has_clusters();
-        self.tlases.persistent_mode = self.choose_persistent(&has_clusters)?;
+        let persistent_mode = self.choose_persistent(&has_clusters)?;
+        self.tlases.set_persistent_mode(persistent_mode);
         self.totals.persistent_choice_ms = ms_since(t_persistent);
         let t_boxes = std::time::Instant::now();
         let (index, box_count) = super::proxy_boxes::layout(&view, |b| self.topo.buildable(b));
@@ -353,9 +354,9 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         // The persistent TLASes' first updates ran: the whole-bounds placeholders are unused.
-        self.tlases.placeholders.release_full(&mut self.heap);
+        self.tlases.placeholders_mut().release_full(&mut self.heap);
         if self.tlases.persistent_count() == 0 {
-            self.tlases.placeholders.release(&mut self.heap);
+            self.tlases.placeholders_mut().release(&mut self.heap);
         }
         let host_counts = self.heap.host_visible_counts_against_budget();
         self.totals.persistent_tlases = self.tlases.persistent_count() as u32;
@@ -366,14 +367,12 @@ impl<'a> StreamingRenderer<'a> {
         };
         self.totals.persistent_tlas_bytes = self
             .tlases
-            .tlas
-            .iter()
-            .flatten()
+            .resident()
             .filter_map(|g| {
                 Some(g.accel.size_bytes + g.persistent.as_ref()?.size_bytes(host_counts))
             })
             .sum::<u64>()
-            + self.tlases.placeholders.bytes;
+            + self.tlases.placeholders().bytes;
         Ok(())
     }
 
@@ -384,11 +383,8 @@ impl<'a> StreamingRenderer<'a> {
     pub(super) fn upload_tlas_addresses(&mut self) -> Result<()> {
         use bytemuck::cast_slice;
         let ctx = self.ctx.clone();
-        let addrs: Vec<u64> = self
-            .tlases
-            .tlas
-            .iter()
-            .map(|t| t.as_ref().map_or(0, |t| t.accel.address))
+        let addrs: Vec<u64> = (0..self.view.tlases.len() as u32)
+            .map(|t| self.tlases.get(t).map_or(0, |t| t.accel.address))
             .collect();
         let mut mesh_geo = vec![0u64; 2 * self.res.meshes.len()];
         for (m, g) in self.res.meshes.iter().enumerate() {

@@ -11,14 +11,17 @@ use motu_trace::testutil::{srt, uv_sphere, HierarchyBuilder, OwnedHierarchy, PiT
 
 use crate::testutil::{assert_no_validation_errors, context_or_skip};
 use crate::{
-    render, Backend, BuildOptions, Context, GpuScene, MeshBlobSource, RenderOptions, Requirement,
-    StreamOptions, StreamingRenderer, View,
+    render, Backend, BuildOptions, Context, GpuScene, MeshBlobSource, MeshSourceError,
+    RenderOptions, Requirement, StreamOptions, StreamingRenderer, View,
 };
 
 struct Blobs<'a>(&'a OwnedHierarchy);
 
 impl MeshBlobSource for Blobs<'_> {
-    fn mesh_data(&self, mesh_record: u32) -> Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), String> {
+    fn mesh_data(
+        &self,
+        mesh_record: u32,
+    ) -> Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), MeshSourceError> {
         let g = self
             .0
             .geometry
@@ -31,7 +34,7 @@ impl MeshBlobSource for Blobs<'_> {
     fn mesh_shading(
         &self,
         mesh_record: u32,
-    ) -> Result<(Option<Cow<'_, [[f32; 3]]>>, Option<Cow<'_, [[f32; 2]]>>), String> {
+    ) -> Result<(Option<Cow<'_, [[f32; 3]]>>, Option<Cow<'_, [[f32; 2]]>>), MeshSourceError> {
         let g = self
             .0
             .geometry

@@ -157,9 +157,8 @@ impl<'a> StreamingRenderer<'a> {
         };
         b.release_old(ids);
         // Persistent TLASes are updated (or built once over every instance); the rest rebuilt.
-        let (persistent_ids, rebuild_ids): (Vec<u32>, Vec<u32>) = ids
-            .iter()
-            .partition(|&&t| b.r.tlases.persistent_mode[t as usize]);
+        let (persistent_ids, rebuild_ids): (Vec<u32>, Vec<u32>) =
+            ids.iter().partition(|&&t| b.r.tlases.in_persistent_mode(t));
         if !rebuild_ids.is_empty() {
             b.r.probe_tlas_room(&rebuild_ids)?;
         }
@@ -216,17 +215,7 @@ impl TlasBuild<'_, '_> {
     fn release_old(&mut self, ids: &[u32]) {
         let r = &mut *self.r;
         for &t in ids {
-            if r.tlases.is_persistent(t) {
-                if let Some(g) = r.tlases.tlas[t as usize].as_mut() {
-                    for a in [g.proxy.take(), g.marks.take()].into_iter().flatten() {
-                        a.release(&mut r.heap);
-                    }
-                }
-                r.tlases.dirty.insert(t);
-            } else if let Some(old) = r.tlases.tlas[t as usize].take() {
-                old.release(&mut r.heap);
-                r.tlases.dirty.insert(t);
-            }
+            r.tlases.start_rebuild(t, &mut r.heap);
         }
     }
 
@@ -374,12 +363,15 @@ impl TlasBuild<'_, '_> {
                 r.build_persistent(t, addrs, tail)
                     .map(|(accel, p)| {
                         let n = p.record_count();
-                        r.tlases.tlas[t as usize] = Some(TlasGpu {
-                            accel,
-                            proxy: None,
-                            marks: None,
-                            persistent: Some(p),
-                        });
+                        r.tlases.put_persistent(
+                            t,
+                            TlasGpu {
+                                accel,
+                                proxy: None,
+                                marks: None,
+                                persistent: Some(p),
+                            },
+                        );
                         r.frame.stats.tlas_builds += 1;
                         r.frame.stats.tlas_instances_written += u64::from(n);
                     })
@@ -398,7 +390,7 @@ impl TlasBuild<'_, '_> {
                     // Built over every instance it does not fit: rebuilt from now on (the
                     // caller's retry rebuilds it).
                     tracing::warn!(tlas = t, %e, "persistent TLAS does not fit; rebuilt instead");
-                    r.tlases.persistent_mode[t as usize] = false;
+                    r.tlases.leave_persistent_mode(t);
                 }
                 return Err(e);
             }
@@ -571,23 +563,17 @@ impl TlasBuild<'_, '_> {
         for (k, accel) in built {
             let t = rebuilt[k];
             let (proxy, marks) = (proxies.take(t, false), proxies.take(t, true));
-            if let Some(old) = r.tlases.tlas[t as usize].replace(TlasGpu {
+            let g = TlasGpu {
                 accel,
                 proxy,
                 marks,
                 persistent: None,
-            }) {
-                old.release(&mut r.heap);
-            }
-            r.tlases.dirty.remove(&t);
+            };
+            r.tlases.rebuilt(t, g, &mut r.heap);
         }
         for t in updated {
             let (proxy, marks) = (proxies.take(t, false), proxies.take(t, true));
-            if let Some(g) = r.tlases.tlas[t as usize].as_mut() {
-                g.proxy = proxy;
-                g.marks = marks;
-            }
-            r.tlases.dirty.remove(&t);
+            r.tlases.updated(t, proxy, marks);
         }
     }
 }

@@ -29,8 +29,17 @@ pub(super) struct TlasRecords<'r> {
     /// BLAS device addresses, 0 where not resident.
     addrs: &'r [u64],
     chunk_instances: usize,
-    /// Per TLAS of the rebuild: its id, records per chunk, and its tail.
-    tlases: Vec<(u32, Vec<u32>, Vec<[u8; RECORD_BYTES]>)>,
+    /// Per TLAS of the rebuild, in the order of the ids.
+    tlases: Vec<TlasRecordCounts>,
+}
+
+/// One TLAS's records in a rebuild.
+struct TlasRecordCounts {
+    tlas: u32,
+    /// Resident records per chunk of its instance range.
+    per_chunk: Vec<u32>,
+    /// The records after its own (proxy and marks, or one inactive record).
+    tail: Vec<[u8; RECORD_BYTES]>,
 }
 
 impl<'r> TlasRecords<'r> {
@@ -57,7 +66,11 @@ impl<'r> TlasRecords<'r> {
                     // Nothing resident: one inactive instance keeps the TLAS valid.
                     tail.push(encode_instance(&super::IDENTITY, false, false, 0, 0));
                 }
-                (t, counts, tail)
+                TlasRecordCounts {
+                    tlas: t,
+                    per_chunk: counts,
+                    tail,
+                }
             })
             .collect();
         TlasRecords {
@@ -72,7 +85,7 @@ impl<'r> TlasRecords<'r> {
     pub(super) fn record_counts(&self) -> Vec<u32> {
         self.tlases
             .iter()
-            .map(|(_, counts, tail)| counts.iter().sum::<u32>() + tail.len() as u32)
+            .map(|r| r.per_chunk.iter().sum::<u32>() + r.tail.len() as u32)
             .collect()
     }
 
@@ -87,8 +100,9 @@ impl<'r> TlasRecords<'r> {
         offsets: &[u64],
     ) -> Result<()> {
         let window_bytes = up.region_bytes();
-        for ((t, counts, tail), &base) in self.tlases.iter().zip(offsets) {
-            let range = instances_of(&self.view, *t);
+        for (r, &base) in self.tlases.iter().zip(offsets) {
+            let (counts, tail) = (&r.per_chunk, &r.tail);
+            let range = instances_of(&self.view, r.tlas);
             let mut at = base;
             let mut c = 0;
             while c < counts.len() {

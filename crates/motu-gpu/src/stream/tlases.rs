@@ -16,15 +16,17 @@ use super::persistent::{Persistent, Placeholders};
 use crate::scene::AccelStruct;
 
 /// The TLASes of a [`StreamingRenderer`](super::StreamingRenderer) (see the module docs).
+/// The fields are private: residency, the dirty set and the persistent mode change together
+/// through the methods below, which keep the invariants.
 pub(super) struct Tlases {
     /// Per TLAS: resident with its proxy and marks.
-    pub tlas: Vec<Option<TlasGpu>>,
+    tlas: Vec<Option<TlasGpu>>,
     /// The persistent TLASes' placeholder BLASes (empty unless some TLAS is persistent).
-    pub placeholders: Placeholders,
+    placeholders: Placeholders,
     /// Per TLAS: persistent (built over every instance, then updated) rather than rebuilt.
-    pub persistent_mode: Vec<bool>,
+    persistent_mode: Vec<bool>,
     /// Resident TLASes whose instance set changed since their build.
-    pub dirty: BTreeSet<u32>,
+    dirty: BTreeSet<u32>,
 }
 
 impl Tlases {
@@ -38,11 +40,19 @@ impl Tlases {
         }
     }
 
+    /// TLAS `t`, where resident (`None` too for an id out of range).
+    pub fn get(&self, t: u32) -> Option<&TlasGpu> {
+        self.tlas.get(t as usize).and_then(Option::as_ref)
+    }
+
+    /// The resident TLASes.
+    pub fn resident(&self) -> impl Iterator<Item = &TlasGpu> {
+        self.tlas.iter().flatten()
+    }
+
     /// Whether TLAS `t` is persistent and built.
     pub fn is_persistent(&self, t: u32) -> bool {
-        self.tlas[t as usize]
-            .as_ref()
-            .is_some_and(|g| g.persistent.is_some())
+        self.get(t).is_some_and(|g| g.persistent.is_some())
     }
 
     /// How many TLASes are in persistent mode.
@@ -50,12 +60,122 @@ impl Tlases {
         self.persistent_mode.iter().filter(|&&p| p).count()
     }
 
+    /// Whether TLAS `t` is in persistent mode (updated in place rather than rebuilt).
+    pub fn in_persistent_mode(&self, t: u32) -> bool {
+        self.persistent_mode[t as usize]
+    }
+
+    /// Chooses the persistent TLASes at the start (one flag per TLAS).
+    pub fn set_persistent_mode(&mut self, mode: Vec<bool>) {
+        assert_eq!(mode.len(), self.tlas.len(), "one flag per TLAS");
+        self.persistent_mode = mode;
+    }
+
+    /// TLAS `t` leaves the persistent mode for good (built over every instance it does not
+    /// fit): rebuilt from now on.
+    pub fn leave_persistent_mode(&mut self, t: u32) {
+        self.persistent_mode[t as usize] = false;
+    }
+
+    /// Every persistent TLAS becomes a rebuilt one: out of the mode, released and dirty (the
+    /// next rebuild builds it over the resident instances). Returns whether any was persistent.
+    pub fn end_persistent_mode(&mut self, heap: &mut GpuHeap) -> bool {
+        let mut any = false;
+        for t in 0..self.persistent_mode.len() {
+            if !std::mem::take(&mut self.persistent_mode[t]) {
+                continue;
+            }
+            any = true;
+            if let Some(g) = self.tlas[t].take() {
+                g.release(heap);
+            }
+            self.dirty.insert(t as u32);
+        }
+        any
+    }
+
+    /// The persistent TLASes' placeholders.
+    pub fn placeholders(&self) -> &Placeholders {
+        &self.placeholders
+    }
+
+    /// The placeholders, to build or release them (`persistent.rs`).
+    pub fn placeholders_mut(&mut self) -> &mut Placeholders {
+        &mut self.placeholders
+    }
+
+    /// Whether some TLAS is dirty (to rebuild or update before the next trace).
+    pub fn any_dirty(&self) -> bool {
+        !self.dirty.is_empty()
+    }
+
+    /// The dirty TLASes, in order.
+    pub fn dirty(&self) -> &BTreeSet<u32> {
+        &self.dirty
+    }
+
+    /// A BLAS under resident TLAS `t` came, went or moved: its records are stale. A TLAS not
+    /// resident is built over the resident BLASes anyway.
+    pub fn instances_changed(&mut self, t: u32) {
+        if self.tlas[t as usize].is_some() {
+            self.dirty.insert(t);
+        }
+    }
+
+    /// TLAS `t` is about to be rebuilt or updated: dirty until it is. A persistent TLAS keeps
+    /// its structure and loses its proxy and marks; another loses its whole build.
+    pub fn start_rebuild(&mut self, t: u32, heap: &mut GpuHeap) {
+        if self.is_persistent(t) {
+            if let Some(g) = self.tlas[t as usize].as_mut() {
+                for a in [g.proxy.take(), g.marks.take()].into_iter().flatten() {
+                    a.release(heap);
+                }
+            }
+            self.dirty.insert(t);
+        } else if let Some(old) = self.tlas[t as usize].take() {
+            old.release(heap);
+            self.dirty.insert(t);
+        }
+    }
+
+    /// Persistent TLAS `t` built over every instance (its first build; the update that follows
+    /// makes it clean).
+    pub fn put_persistent(&mut self, t: u32, g: TlasGpu) {
+        self.tlas[t as usize] = Some(g);
+    }
+
+    /// Takes persistent TLAS `t` out to update it in place; [`Self::put_back`] returns it.
+    pub fn take_for_update(&mut self, t: u32) -> Option<TlasGpu> {
+        self.tlas[t as usize].take()
+    }
+
+    /// Returns a TLAS taken by [`Self::take_for_update`], as dirty as it was.
+    pub fn put_back(&mut self, t: u32, g: TlasGpu) {
+        self.tlas[t as usize] = Some(g);
+    }
+
+    /// TLAS `t` rebuilt over the resident BLASes: resident and clean (the structure it
+    /// replaces, if any, released).
+    pub fn rebuilt(&mut self, t: u32, g: TlasGpu, heap: &mut GpuHeap) {
+        if let Some(old) = self.tlas[t as usize].replace(g) {
+            old.release(heap);
+        }
+        self.dirty.remove(&t);
+    }
+
+    /// Persistent TLAS `t` updated in place, with its new proxy and marks: clean.
+    pub fn updated(&mut self, t: u32, proxy: Option<AccelStruct>, marks: Option<AccelStruct>) {
+        if let Some(g) = self.tlas[t as usize].as_mut() {
+            g.proxy = proxy;
+            g.marks = marks;
+        }
+        self.dirty.remove(&t);
+    }
+
     /// Bytes the TLASes, their proxies, marks and persistent parts, and the placeholders
     /// hold (`host_counts`: whether host-visible memory counts against the budget).
     pub fn size_bytes(&self, host_counts: bool) -> u64 {
-        self.tlas
-            .iter()
-            .flatten()
+        self.resident()
             .map(|t| t.size_bytes(host_counts))
             .sum::<u64>()
             + self.placeholders.bytes

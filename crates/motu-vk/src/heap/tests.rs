@@ -35,7 +35,15 @@ fn try_fit_answers_as_allocating_would_without_allocating() {
     // Each alone fits; held together the second does not, and the error names it.
     assert!(heap.try_fit(&[ask("second", 16)]).is_ok());
     match heap.try_fit(&[ask("first", 16), ask("second", 16)]) {
-        Err(VkError::Budget(msg)) => assert!(msg.starts_with("second:"), "{msg}"),
+        Err(VkError::Budget(refusal)) => {
+            assert!(refusal.to_string().starts_with("second:"), "{refusal}");
+            // The allocator's refusal is kept as the cause, not only as text.
+            let cause = std::error::Error::source(&refusal).expect("a cause");
+            assert!(
+                refusal.to_string().ends_with(&cause.to_string()),
+                "{refusal}"
+            );
+        }
         other => panic!("expected the budget's refusal of `second`: {other:?}"),
     }
     assert_eq!(heap.block_count(), blocks, "no memory allocated");

@@ -7,8 +7,8 @@ use motu_trace::testutil::{srt, uv_sphere, HierarchyBuilder, OwnedHierarchy};
 use super::*;
 use crate::testutil::{assert_no_validation_errors, context_or_skip};
 use crate::{
-    render, Backend, BuildOptions, GpuScene, RenderOptions, Requirement, StreamOptions,
-    StreamingRenderer, View,
+    render, Backend, BuildOptions, GpuScene, MeshSourceError, RenderOptions, Requirement,
+    StreamOptions, StreamingRenderer, View,
 };
 
 /// A mesh source with (or without) a stored proxy-box table.
@@ -18,7 +18,10 @@ struct WithTable<'a> {
 }
 
 impl MeshBlobSource for WithTable<'_> {
-    fn mesh_data(&self, mesh_record: u32) -> Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), String> {
+    fn mesh_data(
+        &self,
+        mesh_record: u32,
+    ) -> Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), MeshSourceError> {
         let g = self
             .h
             .geometry

@@ -87,11 +87,15 @@ fn chunks_encoded_in_place_equal_the_records_in_order_and_empty_tlases_get_one_i
     assert_eq!(records.record_counts(), vec![1, 31]);
     // The inactive record of the empty TLAS.
     assert_eq!(
-        records.tlases[0].2,
+        records.tlases[0].tail,
         vec![encode_instance(&super::super::IDENTITY, false, false, 0, 0)]
     );
     // Each chunk encoded into its counted slice, concatenated: the naive encoding.
-    let (_, counts, t1_tail) = &records.tlases[1];
+    let TlasRecordCounts {
+        per_chunk: counts,
+        tail: t1_tail,
+        ..
+    } = &records.tlases[1];
     let range = instances_of(&view, 1);
     let mut got = Vec::new();
     for (k, &n) in counts.iter().enumerate() {

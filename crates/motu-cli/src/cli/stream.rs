@@ -1,0 +1,222 @@
+//! `render --stream` and `view`: the streaming options (the fallback, the acceleration-structure
+//! cache, bounded work per frame, the expert knobs).
+
+use crate::size::parse_size;
+use clap::{Args, ValueEnum};
+use std::path::PathBuf;
+
+use super::{HEADING_STREAMING, HEADING_STREAMING_EXPERT};
+
+/// `--stream-fallback`.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum FallbackArg {
+    /// Unfinished pixels stay unfinished (an error unless --allow-incomplete).
+    #[default]
+    Off,
+    /// A structure not resident yet shows as its bounds (a box; LOD 254 in the AOV, a hatched
+    /// colour); counted per frame, never silent.
+    Coarse,
+}
+
+/// Built structures kept for reuse while streaming (`render --stream`): a BLAS evicted or left
+/// by an earlier process is restored by copy instead of rebuilt; images are the same.
+#[derive(Args, Debug, Clone)]
+pub struct AsCacheArgs {
+    /// Streaming: bytes of built acceleration structures (serialised) kept in host memory,
+    /// least recently used dropped first. Default: a quarter of the memory available at start;
+    /// 0: none.
+    #[arg(help_heading = HEADING_STREAMING, long, value_parser = parse_size)]
+    pub host_cache: Option<u64>,
+    /// Streaming: the directory where built structures are kept between runs (per device and
+    /// driver; bad or foreign entries are rebuilt with a warning; a read-only or full
+    /// directory is a warning). Default: $MOTU_AS_CACHE, else $XDG_CACHE_HOME/motu/as-cache,
+    /// else ~/.cache/motu/as-cache.
+    #[arg(help_heading = HEADING_STREAMING, long, conflicts_with = "no_as_cache")]
+    pub as_cache: Option<PathBuf>,
+    /// Streaming: keep no built structures on disk.
+    #[arg(help_heading = HEADING_STREAMING, long)]
+    pub no_as_cache: bool,
+}
+
+/// Bounded streaming work per frame (`render --stream`, `view`): how long a frame may build
+/// and what the pixels still waiting show.
+#[derive(Args, Debug, Clone, Copy)]
+pub struct StreamBoundArgs {
+    /// Streaming: what a structure that is not resident yet shows when a frame stops before
+    /// building it (opt-in: such a frame is not exact; its fallback pixels are counted in
+    /// --stats and on stderr). Later frames of a camera path refine it.
+    #[arg(help_heading = HEADING_STREAMING, long, value_enum, default_value = "off")]
+    pub stream_fallback: FallbackArg,
+    /// Streaming: bytes (meshes plus acceleration structures) one frame may build; a frame
+    /// stops when it is spent (at least one structure is built per frame) and later frames go
+    /// on. Default: unbounded.
+    #[arg(help_heading = HEADING_STREAMING, long, value_parser = parse_size)]
+    pub stream_build_budget: Option<u64>,
+    /// Streaming: milliseconds of building one frame may spend (same rules). Default: unbounded.
+    #[arg(help_heading = HEADING_STREAMING, long, value_parser = parse_build_ms)]
+    pub stream_build_ms: Option<f64>,
+    /// Streaming: after each frame whose next camera is known (a camera path, a flight; the
+    /// viewer extrapolates it), trace every ray of every STRIDE-th pixel of the next camera
+    /// against what is resident and prefetch what they meet, so the next frame mostly
+    /// completes in one pass; its rays and ms are reported (probe_rays, probe_ms). 0: no
+    /// probe. Default 1 (every pixel).
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_name = "STRIDE")]
+    pub stream_probe: Option<u32>,
+    /// Streaming: probe rounds after a frame, at most (default 2). A probe ray stops at the
+    /// first structure that is not resident; once the prefetch built it, the ray may hit in
+    /// it and its shadow and AO rays need structures no probe saw. Each later round probes
+    /// only the pixels the round before left open and prefetches what they need, at the cost
+    /// of a TLAS rebuild or update (probe_rounds per frame). 1: one probe.
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
+    pub stream_probe_rounds: Option<u32>,
+    /// Streaming: verifying probe rounds after those, at most (default 2; 0: none). The
+    /// prefetch evicts for room what no probe ray met, and the next frame's rays may pass
+    /// through some of it on their way to their hits; a verifying round probes every pixel
+    /// again against what the prefetch left resident and prefetches what is now missing, so
+    /// the next frame completes in one pass where its structures fit (H200, island 0.3 at a
+    /// quarter of its full build, primary visibility: 1.909 → 1.091 passes after the first at
+    /// about the same frame time; shaded at half 1.182 → 1.000, frames +12%; at a third
+    /// 1.182 → 1.000, frames +53%). Each round costs a probe trace and, when it finds
+    /// something, a build step (probe_verify_rounds per frame); 0 for throughput.
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_name = "N")]
+    pub stream_probe_verify: Option<u32>,
+    /// Streaming: the probe's pixels of every N-th row also mark the resident structures their
+    /// rays pass through without hitting, so the prefetch evicts those last (it never skips a
+    /// build to keep them). Fewer second passes where the prefetch evicts for room (a third
+    /// of the full build on the H200: 1.727 → 1.182 passes after the first), at the cost of
+    /// the probe's time (at half: frames +20–40% for 1.182 → 1.000). `auto` (default): every
+    /// 2nd row for the probes within 4 frames of one whose builds evicted for room while its
+    /// prefetch skipped nothing, else none (H200: a third 1.727 → 1.182 at the same frame
+    /// time; half and a quarter never mark, unchanged). --stats has the stride and the count
+    /// per frame (probe_pass_rows, probe_pass_marks). 0: off.
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_name = "N|auto", value_parser = parse_pass_marks)]
+    pub stream_probe_pass_rows: Option<motu_gpu::PassMarks>,
+    /// Streaming: how TLASes follow what is resident. `update`: each TLAS is built once over
+    /// all its instances (a non-resident one points at a placeholder no ray meets) and
+    /// updated in place as BLASes come and go: no rebuild transient, at the cost of the TLAS
+    /// at full residency kept resident. `rebuild`: rebuilt over its resident instances
+    /// whenever they change (smallest resident TLAS). `auto` (default): update when the
+    /// persistent TLASes take at most a fifth of the budget. `--stats` reports the choice
+    /// (stream.tlas_mode).
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, default_value = "auto")]
+    pub stream_tlas: StreamTlasArg,
+    /// Streaming: TLASes over N instances (a large root) are split into spatial pieces when
+    /// the package is loaded, as `import --max-instances N` would split them, and the pieces
+    /// are rebuilt one at a time as residency changes, so a rebuild takes one piece's room
+    /// from resident BLASes. The package is unchanged (full builds trace the unsplit TLAS,
+    /// which is faster). 0: no split. Default 1000000.
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_name = "N", value_parser = parse_split_instances)]
+    pub stream_split_instances: Option<u32>,
+    /// Streaming: before evicting structures for a TLAS rebuild's room or after a refused
+    /// allocation, drain the emptiest memory blocks instead: their BLASes, meshes and textures
+    /// are copied into free space other blocks have, and the emptied blocks go back to the
+    /// budget (defrag_moves, defrag_freed_bytes per frame in --stats). Off by default: measured on
+    /// lavapipe only (default island along shotCam at a third of its full build: 1.86 → 1.57
+    /// passes after the first, the same image), not yet on a GPU.
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long)]
+    pub stream_defrag: bool,
+    /// Streaming: where streamed meshes (positions, indices, shading attributes) live. `host`:
+    /// host memory the GPU reads over the bus (only hits and BLAS builds read meshes), outside
+    /// the VRAM budget, which then holds acceleration structures and textures alone; `device`:
+    /// VRAM, counted against the budget. `auto` (default): host on a discrete GPU, device
+    /// where host memory is the same memory and counts against the budget (lavapipe,
+    /// integrated GPUs). H200, island 0.3 along shotCam, shaded, device → host: a quarter of
+    /// the full build 2.18 → 1.00 passes a frame after the first (frames 1.76 → 1.00 s, 2.4 GB
+    /// of host memory); a third 1.33 → 0.71 s a frame; half +2–11%. --stats reports the choice
+    /// (stream.totals.mesh_memory) and the host bytes (host_mesh_peak_bytes,
+    /// resident_host_mesh_bytes per frame); `motu report` the most they take
+    /// (streaming.mesh_bytes).
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, default_value = "auto")]
+    pub stream_mesh_memory: MeshMemoryArg,
+    /// Streaming: how evicted BLASes are kept in host memory (`--host-cache` bytes) when they
+    /// return. `clone`: the device copies an evicted BLAS into host memory and back (no host
+    /// work; the cache directory is written after the frames); `serialize`: every BLAS built
+    /// is serialised into host memory and the directory as it is built; `auto` (default):
+    /// clone on a discrete GPU, serialize where host memory counts against the budget
+    /// (lavapipe, integrated GPUs). --stats: stream.totals.host_cache_mode, cloned_blases,
+    /// restored_from_clone, persisted_blases, persist_ms.
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, default_value = "auto")]
+    pub stream_host_cache: HostCacheArg,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum HostCacheArg {
+    #[default]
+    Auto,
+    Clone,
+    Serialize,
+}
+
+impl From<HostCacheArg> for motu_gpu::HostCacheMode {
+    fn from(a: HostCacheArg) -> Self {
+        match a {
+            HostCacheArg::Auto => motu_gpu::HostCacheMode::Auto,
+            HostCacheArg::Clone => motu_gpu::HostCacheMode::Clone,
+            HostCacheArg::Serialize => motu_gpu::HostCacheMode::Serialize,
+        }
+    }
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum MeshMemoryArg {
+    #[default]
+    Auto,
+    Device,
+    Host,
+}
+
+impl From<MeshMemoryArg> for motu_gpu::MeshMemory {
+    fn from(a: MeshMemoryArg) -> Self {
+        match a {
+            MeshMemoryArg::Auto => motu_gpu::MeshMemory::Auto,
+            MeshMemoryArg::Device => motu_gpu::MeshMemory::Device,
+            MeshMemoryArg::Host => motu_gpu::MeshMemory::Host,
+        }
+    }
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum StreamTlasArg {
+    #[default]
+    Auto,
+    Update,
+    Rebuild,
+}
+
+impl From<StreamTlasArg> for motu_gpu::TlasUpdate {
+    fn from(a: StreamTlasArg) -> Self {
+        match a {
+            StreamTlasArg::Auto => motu_gpu::TlasUpdate::Auto,
+            StreamTlasArg::Update => motu_gpu::TlasUpdate::Update,
+            StreamTlasArg::Rebuild => motu_gpu::TlasUpdate::Rebuild,
+        }
+    }
+}
+
+fn parse_split_instances(s: &str) -> Result<u32, String> {
+    match s.parse::<u32>() {
+        Ok(1) => {
+            Err("1 is too small: a split TLAS holds at least 2 instances (0: no split)".into())
+        }
+        Ok(n) => Ok(n),
+        Err(_) => Err(format!("{s:?} is not a count of instances (0: no split)")),
+    }
+}
+
+fn parse_pass_marks(s: &str) -> Result<motu_gpu::PassMarks, String> {
+    match s {
+        "auto" => Ok(motu_gpu::PassMarks::Auto),
+        "0" => Ok(motu_gpu::PassMarks::Off),
+        _ => s
+            .parse::<u32>()
+            .map(motu_gpu::PassMarks::Rows)
+            .map_err(|_| format!("{s:?} is not a row stride (N ≥ 1, 0: off) or auto")),
+    }
+}
+
+fn parse_build_ms(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("{s:?} is not a positive number of milliseconds")),
+    }
+}
