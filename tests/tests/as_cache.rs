@@ -138,7 +138,7 @@ fn a_path_that_returns_restores_from_the_host_cache() {
         "host-clone",
         "pipeline",
         &budget,
-        &["--no-as-cache"],
+        &["--no-as-cache", "--stream-host-cache", "clone"],
         &discrete,
     );
     let tc = totals(&cl);
@@ -185,12 +185,19 @@ fn a_second_process_with_a_warm_cache_rebuilds_nothing_it_cached() {
         } else {
             &[]
         };
+        // The pipeline backend's runs keep clones (written to the directory after the frames).
+        let mode = if discrete.is_empty() {
+            "serialize"
+        } else {
+            "clone"
+        };
+        let flags = [dir[0], dir[1], "--stream-host-cache", mode];
         let (cold, cold_aov) = path(
             &f,
             &format!("cold-{backend}"),
             backend,
             &budget,
-            &dir,
+            &flags,
             discrete,
         );
         let stored = json_u64(&totals(&cold)["cache_stored"]);
@@ -219,7 +226,7 @@ fn a_second_process_with_a_warm_cache_rebuilds_nothing_it_cached() {
             &format!("warm-{backend}"),
             backend,
             &budget,
-            &dir,
+            &flags,
             discrete,
         );
         let t = totals(&warm);

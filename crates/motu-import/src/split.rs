@@ -5,7 +5,7 @@
 
 use crate::ImportError;
 use motu_abi::HierarchyView;
-use motu_compile::{proxy_clusters, CompiledScene, StoredStreamSplit, StreamSplit};
+use motu_compile::{proxy_clusters, CompiledScene, StoredStreamSplit};
 use motu_package::PackageWriter;
 
 /// Splits `compiled`'s TLASes over [`motu_compile::STREAM_SPLIT_INSTANCES`] as `motu render
@@ -49,21 +49,16 @@ pub(crate) fn write_stream_split(
     Ok((meta, stored))
 }
 
-/// Makes the proxy clusters of every TLAS of the hierarchy a streamed render draws (`view` with
-/// `split`, the stream split just stored, rebuilt as readers rebuild it) and adds them as the
-/// package's `proxy_clusters` section (FORMAT.md), so neither a streamed start nor `motu
-/// report`'s floor runs the binned SAH over every instance.
+/// Makes the proxy clusters of every TLAS of `streamed` (the hierarchy a streamed render draws:
+/// the package's with the stream split just stored) and adds them as the package's
+/// `proxy_clusters` section (FORMAT.md), so neither a streamed start nor `motu report`'s floor
+/// runs the binned SAH over every instance.
 pub(crate) fn write_proxy_clusters(
     writer: &mut PackageWriter,
-    view: &HierarchyView<'_>,
-    split: Option<&StoredStreamSplit>,
+    streamed: &HierarchyView<'_>,
 ) -> Result<(), ImportError> {
     let t = std::time::Instant::now();
-    let split = split
-        .map(|s| StreamSplit::from_stored(view, s))
-        .transpose()
-        .map_err(ImportError::Compile)?;
-    let streamed = split.as_ref().map_or(*view, |s| s.view(view));
+    let streamed = *streamed;
     let clusters = proxy_clusters::all_clusters(&streamed);
     let table = proxy_clusters::StoredProxyClusters::new(&streamed, &clusters);
     let bytes = proxy_clusters::encode_section(&table);

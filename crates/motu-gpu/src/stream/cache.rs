@@ -106,7 +106,10 @@ impl StreamingRenderer<'_> {
         let clone = match self.opts.host_cache_mode {
             HostCacheMode::Clone => true,
             HostCacheMode::Serialize => false,
-            HostCacheMode::Auto => !self.heap.host_visible_counts_against_budget(),
+            // Serialised: on an H100 (island 0.63 at 8 GiB, one warm machine) a cold start took
+            // 25.4 s to the PNG serialising and 37.2 s cloning (clones into host memory ran at
+            // ~4 GB/s at eviction), a warm one 19.7 against 25.0 s (BENCHMARKS.md, session 34).
+            HostCacheMode::Auto => false,
         };
         self.totals.host_cache_mode = match (host_bytes, clone) {
             (0, _) => "off",

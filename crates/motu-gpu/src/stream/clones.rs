@@ -1,5 +1,5 @@
-//! Evicted BLASes kept as clones in host memory (`--stream-host-cache clone`, the default on a
-//! discrete GPU).
+//! Evicted BLASes kept as clones in host memory (`--stream-host-cache clone`, opt-in: measured
+//! slower than serialising on an H100, see `HostCacheMode::Auto`).
 //!
 //! Serialising every built BLAS for the structure cache held the H200's cold frames (island
 //! 0.63 at 8 GiB: 13.3 s of a 24 s first frame storing 12.9 GB at ~1 GB/s through the host's
@@ -31,10 +31,12 @@ use crate::scene::AccelStruct;
 /// How evicted structures are kept in host memory (`--stream-host-cache`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum HostCacheMode {
-    /// Clones where host memory is outside the budget (a discrete GPU), else serialised.
+    /// Serialised (measured faster than clones on an H100, island 0.63: BENCHMARKS.md, session
+    /// 34); kept apart from `Serialize` so the policy can follow later measurements.
     #[default]
     Auto,
-    /// Device-side clones in host memory (outside the budget only on a discrete GPU).
+    /// Device-side clones in host memory (outside the budget only on a discrete GPU; on unified
+    /// memory a clone takes the room its eviction made).
     Clone,
     /// Serialised copies (`vkCmdCopyAccelerationStructureToMemoryKHR`) of every BLAS built,
     /// in host memory and written through to the cache directory as they are built.

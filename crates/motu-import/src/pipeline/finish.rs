@@ -118,14 +118,23 @@ pub(super) fn finish(
     view.textures = &textures;
     view.texels = &[];
     let t = Instant::now();
+    // The hierarchy a streamed render draws (the split's pieces in place of a large root):
+    // the boxes and clusters are made over it, so their records and hashes are the reader's.
+    let streamed_split = split
+        .as_ref()
+        .map(|s| motu_compile::StreamSplit::from_stored(&view, s))
+        .transpose()
+        .map_err(ImportError::Compile)?;
+    let streamed = streamed_split.as_ref().map_or(view, |s| s.view(&view));
     if o.proxy_boxes {
-        crate::proxy_boxes::write_proxy_boxes(&mut writer, &view)?;
+        crate::proxy_boxes::write_proxy_boxes(&mut writer, &streamed)?;
     }
     let proxy_boxes_ms = t.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
     if o.proxy_clusters {
-        crate::split::write_proxy_clusters(&mut writer, &view, split.as_ref())?;
+        crate::split::write_proxy_clusters(&mut writer, &streamed)?;
     }
+    drop(streamed_split);
     drop(split);
     let proxy_clusters_ms = t.elapsed().as_secs_f64() * 1e3;
     motu_pack::write_hierarchy_after_texels(&mut writer, &view, &meta)?;
