@@ -6,7 +6,7 @@
 #   S=0.3 FRACTION=8 bash tools/stream-device.sh
 #
 # Environment: S (island scale, default 0.05), FRACTION (budget = report peak / FRACTION,
-# default 8), FRAMES (default 30), SIZE (WxH, default 640x360), ROUNDS (default 1), OUT (results,
+# default 8), PROBES (the --stream-probe values run, default "0 1"), FRAMES (default 30), SIZE (WxH, default 640x360), ROUNDS (default 1), OUT (results,
 # default ./stream-out), STREAM_WORK (scenes, default target/motu-stream). Takes the release
 # binary and the loader as tools/device-env.sh says; writes report.json, full.json, and per round
 # probe0-N.json / probe1-N.json (the `--stats` of each run) and a summary.txt into $OUT.
@@ -54,7 +54,7 @@ print(f"  {sys.argv[1]}: mean passes after the first {st['stream']['mean_passes_
 PY
 }
 for r in $(seq 1 "$ROUNDS"); do
-    for p in 0 1; do
+    for p in ${PROBES:-0 1}; do
         step "round $r: streamed path, --stream-probe $p"
         render "probe$p-$r" --stream --vram-budget "$BUDGET" --frames "$FRAMES" --stream-probe "$p" \
             --stats "$OUT/probe$p-$r.json" >"$WORK/probe$p-$r.log" 2>&1 ||
