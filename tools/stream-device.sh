@@ -51,6 +51,10 @@ print(f"  {sys.argv[1]}: mean passes after the first {st['stream']['mean_passes_
       f"frame {tot('frame_ms') / len(fr):.0f} ms, build {tot('build_ms') / len(fr):.0f} ms, "
       f"trace {tot('trace_ms') / len(fr):.0f} ms, probe {tot('probe_ms') / len(fr):.0f} ms per frame; "
       f"built {tot('built_bytes') / len(fr) / 1e9:.2f} GB per frame; peak {st['vram_peak_bytes']}")
+later = sorted(f.get("frame_ms", 0) for f in fr[1:])
+if later:
+    print(f"    median frame after the first {later[len(later) // 2]:.0f} ms; first frame "
+          f"{fr[0].get('frame_ms', 0):.0f} ms, {fr[0].get('passes', 0)} passes")
 PY
 }
 for r in $(seq 1 "$ROUNDS"); do
