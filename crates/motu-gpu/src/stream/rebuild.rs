@@ -184,10 +184,7 @@ impl<'a> StreamingRenderer<'a> {
     /// the whole root's (at a quarter of island 0.3 split into 1M-instance pieces: 0.25 GB
     /// against 1.9 GB rebuilt at once, 2.6 passes and 1.2 s a frame against 3.5 passes and
     /// 4.5 s; BENCHMARKS.md, session 21). Small TLASes still share one batch (one submission,
-    /// one instance buffer), and so do pieces whose rebuilds fit together in the budget no
-    /// block holds now (nothing is evicted for them): every group pays a room check, its
-    /// proxy lists, a submission and the proxies' records once (an H100 at a quarter of
-    /// island 0.3 rebuilt 43 pieces a frame one group each, 1.1 s of a 2.3 s frame).
+    /// one instance buffer).
     /// Returns the group and the room its rebuilds need together.
     fn next_rebuild_group(&self) -> Result<(Vec<u32>, u64)> {
         let counts = self.resident_instance_counts();
@@ -195,13 +192,7 @@ impl<'a> StreamingRenderer<'a> {
         for &t in self.tlases.dirty() {
             need.push((self.tlas_rebuild_bytes(t, counts[t as usize])?, t));
         }
-        let r = self.heap.report();
-        let free_bytes = r.budget_bytes.saturating_sub(r.budget_block_bytes);
-        Ok(group_by_need(
-            need,
-            self.build_opts.budget_bytes,
-            free_bytes,
-        ))
+        Ok(group_by_need(need, self.build_opts.budget_bytes))
     }
 
     /// Rebuilds the TLASes of `group` that are dirty (see [`Self::rebuild_dirty`]); `need`: the
@@ -308,15 +299,12 @@ impl<'a> StreamingRenderer<'a> {
 }
 
 /// Of dirty TLASes given as (room its rebuild needs, TLAS), those to rebuild together: the
-/// largest, then the next largest while the sum stays within that one's need, a 64th of
-/// `budget_bytes` or `free_bytes` (budget no block holds now), whichever is most (see
-/// `next_rebuild_group`); with the group's need summed.
-fn group_by_need(mut need: Vec<(u64, u32)>, budget_bytes: u64, free_bytes: u64) -> (Vec<u32>, u64) {
+/// largest, then the next largest while the sum stays within that one's need or a 64th of
+/// `budget_bytes` (see `next_rebuild_group`); with the group's need summed.
+fn group_by_need(mut need: Vec<(u64, u32)>, budget_bytes: u64) -> (Vec<u32>, u64) {
     // Largest first, ties by index (a stable order across runs).
     need.sort_by_key(|&(n, t)| (std::cmp::Reverse(n), t));
-    let cap = need
-        .first()
-        .map_or(0, |&(n, _)| n.max(budget_bytes / 64).max(free_bytes));
+    let cap = need.first().map_or(0, |&(n, _)| n.max(budget_bytes / 64));
     let mut sum = 0u64;
     let mut group = Vec::new();
     for (n, t) in need {

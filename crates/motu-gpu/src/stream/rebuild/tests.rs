@@ -7,7 +7,7 @@ fn large_rebuilds_go_alone_and_small_ones_together() {
     let mut dirty = vec![(10, 4), (250, 1), (1, 6), (300, 0), (5, 5), (200, 2)];
     let mut groups = Vec::new();
     while !dirty.is_empty() {
-        let (g, need) = group_by_need(dirty.clone(), budget, 0);
+        let (g, need) = group_by_need(dirty.clone(), budget);
         let listed: u64 = dirty
             .iter()
             .filter(|(_, t)| g.contains(t))
@@ -19,33 +19,12 @@ fn large_rebuilds_go_alone_and_small_ones_together() {
     }
     assert_eq!(groups, vec![vec![0], vec![1], vec![2], vec![4, 5, 6]]);
     // One TLAS over the cap still gets a group of its own.
-    assert_eq!(group_by_need(vec![(9000, 3)], budget, 0), (vec![3], 9000));
+    assert_eq!(group_by_need(vec![(9000, 3)], budget), (vec![3], 9000));
     // Equal needs: by index; two that fit a 64th together share a group.
     assert_eq!(
-        group_by_need(vec![(40, 2), (40, 1)], budget, 0),
+        group_by_need(vec![(40, 2), (40, 1)], budget),
         (vec![1, 2], 80)
     );
-    assert_eq!(
-        group_by_need(vec![(60, 2), (60, 1)], budget, 0),
-        (vec![1], 60)
-    );
-    assert!(group_by_need(Vec::new(), budget, 0).0.is_empty());
-}
-
-#[test]
-fn pieces_that_fit_the_free_budget_share_a_group() {
-    let budget = 64 * 100;
-    let dirty = vec![(250, 1), (300, 0), (200, 2), (10, 4)];
-    // Nothing free: the largest alone, as without free room.
-    assert_eq!(group_by_need(dirty.clone(), budget, 0), (vec![0], 300));
-    // Room for the two largest together (550), not for the third piece too (750).
-    assert_eq!(
-        group_by_need(dirty.clone(), budget, 600),
-        (vec![0, 1, 4], 560)
-    );
-    // Room for all of them: one group.
-    assert_eq!(
-        group_by_need(dirty, budget, 10_000),
-        (vec![0, 1, 2, 4], 760)
-    );
+    assert_eq!(group_by_need(vec![(60, 2), (60, 1)], budget), (vec![1], 60));
+    assert!(group_by_need(Vec::new(), budget).0.is_empty());
 }
