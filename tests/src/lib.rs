@@ -83,6 +83,11 @@ pub fn motu_json(args: &[&str]) -> serde_json::Value {
 /// `motu gen island -o DIR/island` (at `scale`; `None`: the generator's default, no other
 /// flag) and its default import: `DIR/island.motu`.
 pub fn gen_island(dir: &Path, scale: Option<&str>) -> PathBuf {
+    gen_island_with(dir, scale, &[])
+}
+
+/// [`gen_island`] imported with `import_extra` flags (`--no-proxy-boxes`, say).
+pub fn gen_island_with(dir: &Path, scale: Option<&str>, import_extra: &[&str]) -> PathBuf {
     let gen = dir.join("island");
     let mut args = vec!["gen", "island", "-o", s(&gen)];
     if let Some(sc) = scale {
@@ -90,8 +95,18 @@ pub fn gen_island(dir: &Path, scale: Option<&str>) -> PathBuf {
     }
     motu_ok(&args);
     let pkg = dir.join("island.motu");
-    import(&gen.join("scene.pbrt"), &pkg, &[]);
+    import(&gen.join("scene.pbrt"), &pkg, import_extra);
     pkg
+}
+
+/// `motu gen forest -o DIR/forest FLAGS...` (`--levels`, `--grid`, `--leaves`): the generated
+/// scene file.
+pub fn gen_forest(dir: &Path, flags: &[&str]) -> PathBuf {
+    let gen = dir.join("forest");
+    let mut args = vec!["gen", "forest", "-o", s(&gen)];
+    args.extend(flags);
+    motu_ok(&args);
+    gen.join("scene.pbrt")
 }
 
 /// `motu report --json` of `pkg` for a `width` × `height` image.

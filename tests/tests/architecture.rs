@@ -1134,3 +1134,349 @@ fn architecture_md_has_a_short_section_per_crate_and_short_lines() {
         );
     }
 }
+
+/// The error types defined in `text`: enums and structs that derive an `Error`
+/// (`#[derive(…, thiserror::Error)]`) or implement `std::error::Error` by hand.
+fn error_types_defined(text: &str) -> Vec<String> {
+    let code = code_only(text);
+    let lines: Vec<&str> = code.lines().collect();
+    let mut names = Vec::new();
+    let decl_name = |l: &str| -> Option<String> {
+        let t = l.trim_start();
+        let t = t
+            .strip_prefix("pub(crate) ")
+            .or_else(|| t.strip_prefix("pub(super) "));
+        let t = t.unwrap_or(l.trim_start());
+        let t = t.strip_prefix("pub ").unwrap_or(t);
+        let rest = t
+            .strip_prefix("enum ")
+            .or_else(|| t.strip_prefix("struct "))?;
+        let name: String = rest
+            .chars()
+            .take_while(|c| c.is_alphanumeric() || *c == '_')
+            .collect();
+        (!name.is_empty()).then_some(name)
+    };
+    for (i, line) in lines.iter().enumerate() {
+        let Some(name) = decl_name(line) else {
+            continue;
+        };
+        // The attributes right above the declaration.
+        let derives_error = lines[..i]
+            .iter()
+            .rev()
+            .map(|l| l.trim())
+            .take_while(|l| l.starts_with("#[") || l.ends_with(')') || l.ends_with(','))
+            .any(|l| {
+                l.contains("Error")
+                    && l.split(|c: char| !(c.is_alphanumeric() || c == '_' || c == ':'))
+                        .any(|w| w == "Error" || w == "thiserror::Error")
+            });
+        let implements_error = code.contains(&format!("Error for {name} "))
+            && (code.contains(&format!("impl std::error::Error for {name} "))
+                || code.contains(&format!("impl Error for {name} ")));
+        if derives_error || implements_error {
+            names.push(name);
+        }
+    }
+    names
+}
+
+/// Where `code_only` text `code` builds an error type another crate owns (issue 46 item 4,
+/// "each crate builds only its own error type"): (line, `Type::Variant`, `Type { … }` or
+/// `Type(…)`). `user`: the crate ident whose code this is (`motu_render`); `owners`: (error
+/// type, owning crate ident) for every crate; `crates`: every workspace crate's ident.
+///
+/// A path counts as a construction unless it stands in a pattern: the left of a `let`/`if
+/// let`/`while let` `=`, a `match` arm before its `=>`, or inside `matches!(…)`. Naming the
+/// type is not building it (`-> GpuError`, `#[from] VkError`, `impl From<VkError>`), nor is
+/// calling a constructor the owner publishes (`SinkError::new`, `BudgetRefusal::from_cause`:
+/// the owner chose to let others build it). A path through another, non-workspace crate
+/// (`std::io::Error`, `tobj::LoadError`) is not a workspace type; the bare name `Error` counts
+/// only with its crate's path (`pbrt_import::Error::…`).
+fn foreign_error_constructions(
+    code: &str,
+    user: &str,
+    owners: &[(String, String)],
+    crates: &[String],
+) -> Vec<(usize, String)> {
+    let b = code.as_bytes();
+    let ident = |c: u8| c.is_ascii_alphanumeric() || c == b'_';
+    let mut found = Vec::new();
+    let mut names: Vec<&str> = owners.iter().map(|(n, _)| n.as_str()).collect();
+    names.sort();
+    names.dedup();
+    let defined_by = |name: &str, krate: &str| owners.iter().any(|(n, c)| n == name && c == krate);
+    for name in names {
+        for (at, _) in code.match_indices(name) {
+            let end = at + name.len();
+            if (at > 0 && ident(b[at - 1])) || b.get(end).copied().is_some_and(ident) {
+                continue;
+            }
+            // The path before the name: `motu_vk::VkError` → first segment `motu_vk`.
+            let mut start = at;
+            while start >= 2 && &code[start - 2..start] == "::" {
+                let mut s = start - 2;
+                while s > 0 && ident(b[s - 1]) {
+                    s -= 1;
+                }
+                start = s;
+            }
+            let first = code[start..at].split("::").next().unwrap_or("");
+            let foreign = if first.is_empty() {
+                name != "Error" && !defined_by(name, user) && owners.iter().any(|(n, _)| n == name)
+            } else if crates.iter().any(|c| c == first) {
+                first != user && owners.iter().any(|(n, c)| n == name && c != user)
+            } else {
+                // `crate::`, `self::`, `super::`: the user's own; another crate's path
+                // (`std::`, `tobj::`): not a workspace type.
+                false
+            };
+            if !foreign {
+                continue;
+            }
+            // What follows the name: a variant, a struct literal or a tuple-struct call.
+            let rest = &code[end..];
+            let after = rest.trim_start();
+            let (what, path_end) = if let Some(v) = after.strip_prefix("::") {
+                let v = v.trim_start();
+                let variant: String = v
+                    .chars()
+                    .take_while(|c| c.is_alphanumeric() || *c == '_')
+                    .collect();
+                if !variant.starts_with(|c: char| c.is_ascii_uppercase()) {
+                    continue;
+                }
+                let off = code.len() - v.len() + variant.len();
+                (format!("{name}::{variant}"), off)
+            } else if after.starts_with('{') || after.starts_with('(') {
+                // Not a type named before a body: `-> GpuError {`, `impl … for X {`.
+                let before = code[..start].trim_end();
+                if ["->", "impl", "for", "struct", "enum", "dyn", "as"]
+                    .iter()
+                    .any(|w| before.ends_with(w))
+                {
+                    continue;
+                }
+                (format!("{name} {}", &after[..1]), end)
+            } else {
+                continue;
+            };
+            if !in_pattern(code, start, path_end) {
+                let line = code[..at].matches('\n').count() + 1;
+                found.push((line, what));
+            }
+        }
+    }
+    found.sort();
+    found
+}
+
+/// Whether the path `code[start..end]` stands in a pattern (see
+/// [`foreign_error_constructions`]): read forward to the end of its expression or pattern.
+fn in_pattern(code: &str, start: usize, end: usize) -> bool {
+    // The brackets around the path, innermost first: `(` with whether `matches!` opens it.
+    let mut enclosing: Vec<(u8, bool)> = Vec::new();
+    let mut depth = 0i32;
+    let b = code.as_bytes();
+    for k in (0..start).rev() {
+        match b[k] {
+            b')' | b']' | b'}' => depth += 1,
+            b'(' | b'[' | b'{' if depth > 0 => depth -= 1,
+            c @ (b'(' | b'[' | b'{') => {
+                let macro_call = code[..k].trim_end().ends_with("matches!");
+                enclosing.push((c, macro_call));
+                if c == b'{' {
+                    break;
+                }
+            }
+            b';' if depth == 0 => break,
+            _ => {}
+        }
+    }
+    if enclosing.iter().any(|&(c, m)| c == b'(' && m) {
+        return true;
+    }
+    let mut depth = 0i32;
+    let mut k = end;
+    let mut climbed = 0;
+    while k < b.len() {
+        let c = b[k];
+        let next = b.get(k + 1).copied().unwrap_or(b' ');
+        let prev = if k > 0 { b[k - 1] } else { b' ' };
+        match c {
+            b'(' | b'[' | b'{' => depth += 1,
+            b'}' if depth == 0 => return false,
+            b')' | b']' if depth == 0 => climbed += 1,
+            b')' | b']' | b'}' => depth -= 1,
+            b';' if depth == 0 => return false,
+            b',' if depth == 0 => {
+                // A comma of the block around it (a match arm's end, a struct literal's
+                // field) ends the expression; one inside a tuple or call does not.
+                match enclosing.get(climbed) {
+                    Some((b'(' | b'[', _)) => {}
+                    _ => return false,
+                }
+            }
+            b'=' if depth == 0 && next == b'>' => return true,
+            b'=' if depth == 0
+                && next != b'='
+                && !matches!(
+                    prev,
+                    b'=' | b'!'
+                        | b'<'
+                        | b'>'
+                        | b'+'
+                        | b'-'
+                        | b'*'
+                        | b'/'
+                        | b'%'
+                        | b'&'
+                        | b'|'
+                        | b'^'
+                ) =>
+            {
+                return true
+            }
+            _ => {}
+        }
+        k += 1;
+    }
+    false
+}
+
+/// Each crate builds only its own error type (issue 46 item 4): no library code constructs a
+/// variant (or a struct) of an error type another crate owns; a crate wraps the other's error
+/// as the `#[source]`/`#[from]` of its own (matching on it is fine). Tests may build any.
+#[test]
+fn each_crate_builds_only_its_own_error_type() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    // (crate ident, its non-test files).
+    let mut crates: Vec<(String, Vec<(PathBuf, String)>)> = Vec::new();
+    let mut dirs = vec![("pbrt_import".to_string(), root.join("pbrt-import/src"))];
+    for e in std::fs::read_dir(root.join("crates")).unwrap().flatten() {
+        let name = e.file_name().to_string_lossy().replace('-', "_");
+        dirs.push((name, e.path().join("src")));
+    }
+    for (name, dir) in dirs.into_iter().filter(|(_, d)| d.exists()) {
+        let files = rust_files(&dir)
+            .into_iter()
+            .filter(|(p, _)| {
+                let rel = p.strip_prefix(&dir).unwrap();
+                let n = p.file_name().unwrap().to_string_lossy();
+                n != "tests.rs"
+                    && n != "testutil.rs"
+                    && !rel.components().any(|c| c.as_os_str() == "tests")
+            })
+            .collect();
+        crates.push((name, files));
+    }
+    let idents: Vec<String> = crates.iter().map(|(n, _)| n.clone()).collect();
+    let owners: Vec<(String, String)> = crates
+        .iter()
+        .flat_map(|(krate, files)| {
+            files.iter().flat_map(move |(_, text)| {
+                error_types_defined(text)
+                    .into_iter()
+                    .map(move |t| (t, krate.clone()))
+            })
+        })
+        .collect();
+    for (ty, krate) in [
+        ("GpuError", "motu_gpu"),
+        ("VkError", "motu_vk"),
+        ("Error", "pbrt_import"),
+    ] {
+        assert!(
+            owners.iter().any(|(t, c)| t == ty && c == krate),
+            "the scan sees {krate}'s {ty} ({} error types)",
+            owners.len()
+        );
+    }
+    let mut found = Vec::new();
+    for (krate, files) in &crates {
+        for (path, text) in files {
+            let rel = path.strip_prefix(&root).unwrap().display().to_string();
+            for (line, what) in
+                foreign_error_constructions(&code_only(text), krate, &owners, &idents)
+            {
+                found.push(format!("{rel}:{line}: {what}"));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "another crate's error type built here (give this crate a variant of its own that \
+         keeps the other's error as its #[source], or ask the owner for a constructor):\n{}",
+        found.join("\n")
+    );
+}
+
+/// The error-type check finds each way of building another crate's error and none of the
+/// ways of only naming or matching it.
+#[test]
+fn the_error_type_check_finds_foreign_constructions() {
+    let owners: Vec<(String, String)> = [
+        ("GpuError", "motu_gpu"),
+        ("SinkError", "pbrt_import"),
+        ("HierarchyError", "motu_abi"),
+        ("Error", "pbrt_import"),
+        ("RenderError", "motu_render"),
+    ]
+    .iter()
+    .map(|(t, c)| (t.to_string(), c.to_string()))
+    .collect();
+    let crates: Vec<String> = [
+        "motu_gpu",
+        "pbrt_import",
+        "motu_abi",
+        "motu_render",
+        "motu_cli",
+    ]
+    .iter()
+    .map(|c| c.to_string())
+    .collect();
+    let scan =
+        |text: &str| foreign_error_constructions(&code_only(text), "motu_render", &owners, &crates);
+    for bad in [
+        "fn f() -> Result<(), GpuError> { Err(motu_gpu::GpuError::InvalidRequest(\"x\".into())) }",
+        "fn f() -> R { x.map_err(GpuError::Budget)?; Ok(()) }",
+        "fn f() { return Err(SinkError(Box::new(e))); }",
+        "fn f() { let e = HierarchyError { at: 1 }; }",
+        "fn f() -> E { match k { A => GpuError::Budget(r), B => x } }",
+        "fn f() -> E { let e = if a { GpuError::Budget(r) } else { y }; e }",
+        "fn f() { g(1, GpuError::InvalidRequest(s), 2); }",
+        "fn f() -> E { Err(pbrt_import::Error::Io(e)) }",
+    ] {
+        assert_eq!(scan(bad).len(), 1, "{bad}: {:?}", scan(bad));
+    }
+    for good in [
+        "fn f() { match e { GpuError::Budget(_) => 1, _ => 2 }; }",
+        "fn f() { if let Err(GpuError::Budget(why)) = r { } }",
+        "fn f() { assert!(matches!(e, Err(GpuError::Budget(_)) | Ok(_))); }",
+        "fn f() { let motu_gpu::GpuError::Budget { floor, .. } = e else { return }; }",
+        "fn f(e: GpuError) -> GpuError { e }",
+        "impl From<HierarchyError> for X { fn from(e: HierarchyError) -> X { X::A(e) } }",
+        "fn f() -> E { Err(GpuError::size_source(e)) }",
+        "fn f() { let s = \"GpuError::Budget(x)\"; } // GpuError::Budget(y)",
+        "fn f() -> E { match e { Err(e @ GpuError::Budget { .. }) => {} } }",
+        "fn f() -> E { Err(std::io::Error::new(k, m)) }",
+        "fn f() -> E { Err(Error::Parse(e)) }",
+        "fn f() -> E { Err(crate::RenderError::NoFrame) }",
+        "enum E { #[error(transparent)] Gpu(#[from] GpuError), Sink(SinkError) }",
+        "fn f() { match (a, b) { (GpuError::Budget(_), _) => {} _ => {} } }",
+    ] {
+        assert!(scan(good).is_empty(), "{good}: {:?}", scan(good));
+    }
+    // The user's own type is its own to build.
+    let own = "fn f() -> E { Err(GpuError::Budget(r)) }";
+    assert!(foreign_error_constructions(&code_only(own), "motu_gpu", &owners, &crates).is_empty());
+    assert_eq!(
+        error_types_defined(
+            "#[derive(Debug, thiserror::Error)]\npub enum AError { A }\n\
+             #[derive(Debug)]\npub struct Refusal { w: u8 }\nimpl std::error::Error for Refusal {}\n\
+             #[derive(Debug, Clone)]\npub struct NotAnError;\n"
+        ),
+        ["AError", "Refusal"]
+    );
+}

@@ -3,7 +3,9 @@
 //! second process every build it cached, bad entries and unwritable directories are warnings,
 //! and every image equals the path with everything resident.
 
-use motu_tests::{gpu_available, import, json_u64, motu_ok, render_env, report_peak_and_floor, s};
+use motu_tests::{
+    gen_island_with, gpu_available, json_u64, motu_ok, render_env, report_peak_and_floor, s,
+};
 use std::path::{Path, PathBuf};
 
 /// The default island imported without its stored proxy boxes and clusters (`--no-proxy-boxes
@@ -23,12 +25,9 @@ impl Fixture {
             return None;
         }
         let dir = tempfile::tempdir().unwrap();
-        let gen = dir.path().join("island");
-        motu_ok(&["gen", "island", "-o", s(&gen)]);
-        let pkg = dir.path().join("island.motu");
-        import(
-            &gen.join("scene.pbrt"),
-            &pkg,
+        let pkg = gen_island_with(
+            dir.path(),
+            None,
             &["--no-proxy-boxes", "--no-proxy-clusters"],
         );
         let (peak, _floor) = report_peak_and_floor(&pkg, "64", "36");

@@ -1,6 +1,6 @@
 //! Import, info, verify on real and generated scenes (issues 3, 4, 11).
 
-use motu_tests::{motu, motu_json, motu_ok, s, shared_scene};
+use motu_tests::{gen_forest, motu, motu_json, motu_ok, s, shared_scene};
 
 #[test]
 fn buddha_fractal_counts() {
@@ -186,20 +186,10 @@ fn subset_import_and_unknown_names() {
 #[test]
 fn levels_and_caps_keep_the_flattened_count() {
     let dir = tempfile::tempdir().unwrap();
-    let gen = dir.path().join("forest");
-    motu_ok(&[
-        "gen",
-        "forest",
-        "-o",
-        s(&gen),
-        "--levels",
-        "2",
-        "--grid",
-        "2x2",
-        "--leaves",
-        "50",
-    ]);
-    let scene = gen.join("scene.pbrt");
+    let scene = gen_forest(
+        dir.path(),
+        &["--levels", "2", "--grid", "2x2", "--leaves", "50"],
+    );
     let mut flattened = Vec::new();
     for (name, extra) in [
         ("ml", vec![]),

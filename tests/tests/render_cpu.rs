@@ -1,7 +1,7 @@
 //! The CPU oracle end to end (issue 5): differently compiled packages of one scene render the
 //! same hits, pixel by pixel.
 
-use motu_tests::{import, motu, motu_json, motu_ok, render, s, shared_scene};
+use motu_tests::{gen_forest, import, motu, motu_json, motu_ok, render, s, shared_scene};
 use std::path::Path;
 
 fn render_aov(pkg: &Path, aov: &Path, extra: &[&str]) -> serde_json::Value {
@@ -11,20 +11,10 @@ fn render_aov(pkg: &Path, aov: &Path, extra: &[&str]) -> serde_json::Value {
 #[test]
 fn forest_ml_sl_levels_and_splits_agree() {
     let dir = tempfile::tempdir().unwrap();
-    let gen = dir.path().join("forest");
-    motu_ok(&[
-        "gen",
-        "forest",
-        "-o",
-        s(&gen),
-        "--levels",
-        "2",
-        "--grid",
-        "3x2",
-        "--leaves",
-        "120",
-    ]);
-    let scene = gen.join("scene.pbrt");
+    let scene = gen_forest(
+        dir.path(),
+        &["--levels", "2", "--grid", "3x2", "--leaves", "120"],
+    );
     let configs: [(&str, &[&str]); 4] = [
         ("ml", &[]),
         ("sl", &["--levels", "sl"]),

@@ -2,7 +2,8 @@
 //! device exists (lavapipe in CI, with validation on via MOTU_VALIDATION=1 from tools/test.sh).
 
 use motu_tests::{
-    gpu_available, has_ray_query, import, motu, motu_json, motu_ok, render, s, shared_scene,
+    gen_forest, gpu_available, has_ray_query, import, motu, motu_json, motu_ok, render, s,
+    shared_scene,
 };
 use std::path::Path;
 
@@ -39,44 +40,21 @@ fn pipeline_matches_cpu_on_a_forest_package() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let gen = dir.path().join("forest");
-    motu_ok(&[
-        "gen",
-        "forest",
-        "-o",
-        s(&gen),
-        "--levels",
-        "2",
-        "--grid",
-        "3x2",
-        "--leaves",
-        "100",
-    ]);
+    let scene = gen_forest(
+        dir.path(),
+        &["--levels", "2", "--grid", "3x2", "--leaves", "100"],
+    );
     let ml = dir.path().join("ml.motu");
     let sl = dir.path().join("sl.motu");
-    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&ml)]);
-    motu_ok(&[
-        "import",
-        s(&gen.join("scene.pbrt")),
-        "-o",
-        s(&sl),
-        "--levels",
-        "sl",
-    ]);
+    motu_ok(&["import", s(&scene), "-o", s(&ml)]);
+    motu_ok(&["import", s(&scene), "-o", s(&sl), "--levels", "sl"]);
     let a = all_backends_agree(dir.path(), "ml", &ml, &["--width", "96"]);
     let b = all_backends_agree(dir.path(), "sl", &sl, &["--width", "96"]);
     motu_ok(&["compare", s(&a), s(&b)]);
     // `auto` bakes the small tree (trunk + 100 leaves) into triangle BLASes: the same hits
     // (source mesh and triangle, through the baked records' maps), fewer traces than `ml`.
     let auto = dir.path().join("auto.motu");
-    motu_ok(&[
-        "import",
-        s(&gen.join("scene.pbrt")),
-        "-o",
-        s(&auto),
-        "--levels",
-        "auto",
-    ]);
+    motu_ok(&["import", s(&scene), "-o", s(&auto), "--levels", "auto"]);
     let info = motu_json(&["info", s(&auto), "--json"]);
     assert!(info["baked_prototypes"].as_u64().unwrap() >= 1, "{info}");
     let c = all_backends_agree(dir.path(), "auto", &auto, &["--width", "96"]);
@@ -499,19 +477,9 @@ fn allocation_cap_and_budget_are_respected() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let gen = dir.path().join("forest");
-    motu_ok(&[
-        "gen",
-        "forest",
-        "-o",
-        s(&gen),
-        "--levels",
-        "1",
-        "--leaves",
-        "200",
-    ]);
+    let scene = gen_forest(dir.path(), &["--levels", "1", "--leaves", "200"]);
     let pkg = dir.path().join("f.motu");
-    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    motu_ok(&["import", s(&scene), "-o", s(&pkg)]);
     let aov = dir.path().join("capped.aov");
     render_capped(&pkg, &aov);
     let out = motu(&[

@@ -1,7 +1,7 @@
 //! The VRAM-budget report end to end (issue 9).
 
 use motu_tests::{
-    artifacts_dir, chromium, chromium_available, motu_json, motu_ok, s, shared_scene,
+    artifacts_dir, chromium, chromium_available, gen_forest, motu_json, motu_ok, s, shared_scene,
 };
 
 #[test]
@@ -49,21 +49,12 @@ fn buddha_fractal_html_report_renders_in_chromium() {
 #[test]
 fn report_json_compares_single_and_multi_level_and_suggests_a_subset() {
     let dir = tempfile::tempdir().unwrap();
-    let gen = dir.path().join("forest");
-    motu_ok(&[
-        "gen",
-        "forest",
-        "-o",
-        s(&gen),
-        "--levels",
-        "2",
-        "--grid",
-        "3x2",
-        "--leaves",
-        "200",
-    ]);
+    let scene = gen_forest(
+        dir.path(),
+        &["--levels", "2", "--grid", "3x2", "--leaves", "200"],
+    );
     let pkg = dir.path().join("f.motu");
-    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    motu_ok(&["import", s(&scene), "-o", s(&pkg)]);
     let r = motu_json(&["report", s(&pkg), "--json", "--budget", "1GiB"]);
     let text = r.to_string();
     assert!(

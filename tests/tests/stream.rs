@@ -625,8 +625,6 @@ fn drained_blocks_change_no_pixel_along_a_path() {
     }
 }
 
-/// The default camera's path (64×36, 8 frames) streamed under `budget` bytes on `backend` with
-/// `extra` flags, its AOV written to `dir/name.aov`: the statistics and the AOV's path.
 /// The default island (default `gen island` and `import`) in a fresh directory, its report's
 /// full-build peak and streaming floor at 64×36, and the reference frames of shotCam's path
 /// ([`shot_path`] with room for everything, on the query backend).
@@ -670,6 +668,8 @@ fn passes(st: &serde_json::Value) -> f64 {
         .expect("mean passes")
 }
 
+/// The default camera's path (64×36, 8 frames) streamed under `budget` bytes on `backend` with
+/// `extra` flags, its AOV written to `dir/name.aov`: the statistics and the AOV's path.
 fn shot_path(
     pkg: &Path,
     dir: &Path,
@@ -710,27 +710,39 @@ fn shot_path_env(
     (render_env(pkg, backend, &aov, &args, env), aov)
 }
 
-/// Issue 45 item 1: `motu import` stores the boxes inside every triangle BLAS (the package's
-/// `proxy_boxes` section), so a streamed start reads no mesh for them; a section that cannot be
-/// read is a warning and the boxes are made from the meshes, as for a package imported
-/// without it (`--no-proxy-boxes`, what older motu wrote). Every image is the full build's.
-#[test]
-fn proxy_boxes_stored_at_import_start_streamed_renders_and_bad_ones_are_made_again() {
-    if !gpu_available() {
-        return;
+/// Streamed 48×27 renders of one scene (`--stream-always` on the pipeline backend from
+/// [`CAMERA`], no bounces) under a budget a quarter of the way from its floor to its
+/// full-build peak, each checked complete and equal to the full build's AOV (`full_aov`).
+struct SmallStreamed<'d> {
+    dir: &'d Path,
+    budget: String,
+    full_aov: PathBuf,
+}
+
+impl<'d> SmallStreamed<'d> {
+    /// The budget from `pkg`'s report and the full build's AOV, in `dir`.
+    fn new(dir: &'d Path, pkg: &Path) -> SmallStreamed<'d> {
+        let full_aov = dir.join("full.aov");
+        render(pkg, &full_aov, &["--width", "48", "--height", "27"]);
+        let (peak, floor) = report_peak_and_floor(pkg, "48", "27");
+        let budget = (floor + (peak.saturating_sub(floor)) / 4).to_string();
+        SmallStreamed {
+            dir,
+            budget,
+            full_aov,
+        }
     }
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
-    let pkg = gen_island(d, None);
-    let size = ["--width", "48", "--height", "27"];
-    let full_aov = d.join("full.aov");
-    render(&pkg, &full_aov, &size);
-    let (peak, floor) = report_peak_and_floor(&pkg, "48", "27");
-    let budget = (floor + (peak.saturating_sub(floor)) / 4).to_string();
-    let streamed = |pkg: &Path, name: &str| {
-        let aov = d.join(format!("{name}.aov"));
+
+    /// Streams `pkg` with `extra` flags into `dir/name.aov`: the stats, stderr and the AOV.
+    fn render(
+        &self,
+        pkg: &Path,
+        name: &str,
+        extra: &[&str],
+    ) -> (serde_json::Value, String, PathBuf) {
+        let aov = self.dir.join(format!("{name}.aov"));
         let (png, json) = (aov.with_extension("png"), aov.with_extension("json"));
-        let args = [
+        let mut args = vec![
             "render",
             s(pkg),
             "-o",
@@ -749,21 +761,39 @@ fn proxy_boxes_stored_at_import_start_streamed_renders_and_bad_ones_are_made_aga
             // The streamer's start is under test, whatever the budget holds.
             "--stream-always",
             "--vram-budget",
-            &budget,
-            size[0],
-            size[1],
-            size[2],
-            size[3],
+            &self.budget,
+            "--width",
+            "48",
+            "--height",
+            "27",
         ];
+        args.extend(extra);
         let out = motu_tests::motu(&args);
         let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
         assert!(out.status.success(), "{name}: {stderr}");
         let st: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
         assert_eq!(st["stream"]["frames"][0]["complete"], true, "{name}");
-        motu_ok(&["compare", s(&full_aov), s(&aov), "--max-mismatch", "0.001"]);
+        let full = s(&self.full_aov);
+        motu_ok(&["compare", full, s(&aov), "--max-mismatch", "0.001"]);
         (st, stderr, aov)
-    };
+    }
+}
+
+/// Issue 45 item 1: `motu import` stores the boxes inside every triangle BLAS (the package's
+/// `proxy_boxes` section), so a streamed start reads no mesh for them; a section that cannot be
+/// read is a warning and the boxes are made from the meshes, as for a package imported
+/// without it (`--no-proxy-boxes`, what older motu wrote). Every image is the full build's.
+#[test]
+fn proxy_boxes_stored_at_import_start_streamed_renders_and_bad_ones_are_made_again() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pkg = gen_island(d, None);
+    let small = SmallStreamed::new(d, &pkg);
+    let streamed = |pkg: &Path, name: &str| small.render(pkg, name, &[]);
     let (st, stderr, stored_aov) = streamed(&pkg, "stored");
     let startup = &st["stream"]["startup"];
     assert_eq!(startup["proxy_boxes_source"], "package", "{startup}");
@@ -854,47 +884,10 @@ fn proxy_clusters_stored_at_import_start_streamed_renders_and_bad_ones_are_made_
     assert_eq!(report, report_without_path(&old));
     assert_eq!(report, report_without_path(&bad));
 
-    let (peak, floor) = report_peak_and_floor(&pkg, "48", "27");
-    let budget = (floor + (peak.saturating_sub(floor)) / 4).to_string();
-    let full_aov = d.join("full.aov");
-    render(&pkg, &full_aov, &["--width", "48", "--height", "27"]);
+    let small = SmallStreamed::new(d, &pkg);
     let streamed = |pkg: &Path, name: &str, extra: &[&str]| {
-        let aov = d.join(format!("{name}.aov"));
-        let (png, json) = (aov.with_extension("png"), aov.with_extension("json"));
-        let mut args = vec![
-            "render",
-            s(pkg),
-            "-o",
-            s(&png),
-            "--backend",
-            "pipeline",
-            "--camera",
-            CAMERA,
-            "--bounces",
-            "0",
-            "--aov",
-            s(&aov),
-            "--stats",
-            s(&json),
-            "--stream",
-            "--stream-always",
-            "--vram-budget",
-            &budget,
-            "--width",
-            "48",
-            "--height",
-            "27",
-        ];
-        args.extend(extra);
-        let out = motu_tests::motu(&args);
-        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-        assert!(out.status.success(), "{name}: {stderr}");
-        let st: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
-        assert_eq!(st["stream"]["frames"][0]["complete"], true, "{name}");
-        motu_ok(&["compare", s(&full_aov), s(&aov), "--max-mismatch", "0.001"]);
-        let startup = st["stream"]["startup"].clone();
-        (startup, stderr, aov)
+        let (st, stderr, aov) = small.render(pkg, name, extra);
+        (st["stream"]["startup"].clone(), stderr, aov)
     };
     let (startup, stderr, stored_aov) = streamed(&pkg, "stored", &[]);
     assert_eq!(startup["clusters_source"], "package", "{startup}");
@@ -921,7 +914,7 @@ fn proxy_clusters_stored_at_import_start_streamed_renders_and_bad_ones_are_made_
     }
     motu_ok(&[
         "compare",
-        s(&full_aov),
+        s(&small.full_aov),
         s(&split_aov),
         "--max-mismatch",
         "0.001",

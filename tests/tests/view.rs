@@ -3,27 +3,15 @@
 //! replay identically in both; without a display the viewer must point at `motu render`.
 
 use motu_tests::{
-    gen_island, gpu_available, has_ray_query, motu, motu_ok, motu_on_display, motu_on_wayland,
-    report_peak_and_floor, s, weston, xvfb,
+    gen_forest, gen_island, gpu_available, has_ray_query, motu, motu_ok, motu_on_display,
+    motu_on_wayland, report_peak_and_floor, s, weston, xvfb,
 };
 use std::path::{Path, PathBuf};
 
 fn forest(dir: &Path) -> PathBuf {
-    let gen = dir.join("forest");
-    motu_ok(&[
-        "gen",
-        "forest",
-        "-o",
-        s(&gen),
-        "--levels",
-        "2",
-        "--grid",
-        "3x2",
-        "--leaves",
-        "60",
-    ]);
+    let scene = gen_forest(dir, &["--levels", "2", "--grid", "3x2", "--leaves", "60"]);
     let pkg = dir.join("forest.motu");
-    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    motu_ok(&["import", s(&scene), "-o", s(&pkg)]);
     pkg
 }
 

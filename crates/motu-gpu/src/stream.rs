@@ -105,10 +105,11 @@
 //!
 //! The renderer itself holds what every part uses: the device context, the heap, the staging
 //! ring, the view, the mesh source and the options.
-//! `Topology` and `GpuTables` keep their fields private (read and changed through their
-//! methods only); the other parts' fields are still open to the module's files, their
-//! invariants kept by the renderer's methods in the part's file (`residency.rs`'s eviction and
-//! mesh references, `rebuild.rs`/`tlas_build.rs` for the dirty set).
+//! `Topology`, `GpuTables` and `FrameState` keep their fields private (read and changed
+//! through their methods only; the frame's counters through `stats_mut`); the other parts'
+//! fields are still open to the module's files, their invariants kept by the renderer's
+//! methods in the part's file (`residency.rs`'s eviction and mesh references,
+//! `rebuild.rs`/`tlas_build.rs` for the dirty set).
 
 mod budget;
 mod buffers;

@@ -373,11 +373,11 @@ pub(crate) fn render_streaming(
         frames.push(st);
         last = Some((out, cam));
     }
-    // With host clones nothing was serialised while rendering: the directory gets this run's
-    // structures now, after the frames (a failure is a warning: a cache never fails a render).
-    if let Err(e) = tracing::info_span!("persist_cache").in_scope(|| sr.persist_cache()) {
-        tracing::warn!(error = %e, "structure cache: writing this run's structures failed");
-    }
+    // The cache leaves with the image (its queued directory writes finish after the outputs).
+    // With host clones nothing was serialised while rendering: taking the cache writes this
+    // run's structures to the directory first, once, after the frames and before the totals
+    // below count them (a failure is a warning: a cache never fails a render).
+    let cache = tracing::info_span!("persist_cache").in_scope(|| sr.take_cache());
     let (out, last_camera) = last.ok_or(RenderError::NoFrame)?;
     let written = frames.last();
     let after_first: Vec<f64> = frames.iter().skip(1).map(|f| f64::from(f.passes)).collect();
@@ -392,15 +392,13 @@ pub(crate) fn render_streaming(
             floor: (&floor).into(),
             max_passes: sr.max_passes(),
             startup,
-            cache: sr.cache_stats().as_ref().map(Into::into),
+            cache: cache.as_ref().map(|c| (&c.stats()).into()),
             mean_passes_after_first: (!after_first.is_empty())
                 .then(|| after_first.iter().sum::<f64>() / after_first.len() as f64),
         }),
         stream_fit,
         ..PathStats::new(FrameStats::gpu(&out.stats))
     };
-    // The cache leaves with the image: its queued directory writes finish after the outputs.
-    let cache = sr.take_cache();
     drop(sr);
     ctx.check_validation()
         .map_err(|e| RenderError::Validation(e.into()))?;

@@ -27,9 +27,28 @@ pub(super) struct Kept {
     /// need).
     frame_buffers: Option<KeptFrameBuffers>,
     /// When the running build step started (its time counts against `frame_build_ms`).
-    pub(super) step_start: Option<Instant>,
+    step_start: Option<Instant>,
     /// Pass cap of the running frame when set ([`StreamingRenderer::render_progressive`]).
     pass_cap: Option<u32>,
+}
+
+impl Kept {
+    /// A build step starts at `t0`: its time counts against the frame's build budget while it
+    /// runs.
+    pub(super) fn start_step(&mut self, t0: Instant) {
+        self.step_start = Some(t0);
+    }
+
+    /// The running build step is over (its time is in the frame's `build_ms`).
+    pub(super) fn end_step(&mut self) {
+        self.step_start = None;
+    }
+
+    /// Milliseconds the running build step has taken so far (0 when none runs).
+    fn step_ms_now(&self) -> f64 {
+        self.step_start
+            .map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3)
+    }
 }
 
 impl<'a> StreamingRenderer<'a> {
@@ -45,16 +64,16 @@ impl<'a> StreamingRenderer<'a> {
         camera: &CameraParams,
         opts: &RenderOptions,
     ) -> Result<(RenderOutput, FrameStreamStats)> {
-        self.frame.kept.pass_cap = Some(1);
+        self.frame.kept_mut().pass_cap = Some(1);
         let r = self.render_frame(camera, opts);
-        self.frame.kept.pass_cap = None;
+        self.frame.kept_mut().pass_cap = None;
         r
     }
 
     /// The running frame's pass cap.
     pub(super) fn frame_pass_cap(&self) -> u32 {
         self.frame
-            .kept
+            .kept()
             .pass_cap
             .unwrap_or_else(|| self.max_passes())
     }
@@ -65,23 +84,18 @@ impl<'a> StreamingRenderer<'a> {
         self.opts.fallback != StreamFallback::Off
             || self.opts.frame_build_bytes > 0
             || self.opts.frame_build_ms > 0.0
-            || self.frame.kept.pass_cap.is_some()
+            || self.frame.kept().pass_cap.is_some()
     }
 
     /// Milliseconds built this frame, including the running step.
     fn frame_build_ms_now(&self) -> f64 {
-        self.frame.stats.build_ms
-            + self
-                .frame
-                .kept
-                .step_start
-                .map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3)
+        self.frame.stats().build_ms + self.frame.kept().step_ms_now()
     }
 
     /// Whether this frame's build budget is spent.
     pub(super) fn frame_build_spent(&self) -> bool {
         let o = &self.opts;
-        (o.frame_build_bytes > 0 && self.frame.stats.built_bytes >= o.frame_build_bytes)
+        (o.frame_build_bytes > 0 && self.frame.stats().built_bytes >= o.frame_build_bytes)
             || (o.frame_build_ms > 0.0 && self.frame_build_ms_now() >= o.frame_build_ms)
     }
 
@@ -93,7 +107,7 @@ impl<'a> StreamingRenderer<'a> {
         if budget == 0 {
             return max.min(queue.len());
         }
-        let mut left = budget.saturating_sub(self.frame.stats.built_bytes);
+        let mut left = budget.saturating_sub(self.frame.stats().built_bytes);
         let mut n = 0;
         for &b in queue.iter().take(max) {
             let tris = u64::from(self.view.blases[b as usize].primitive_count);
@@ -119,7 +133,7 @@ impl<'a> StreamingRenderer<'a> {
         params: &FrameParams,
         shading: &motu_abi::shade::Shading,
     ) -> Result<FrameBuffers> {
-        if let Some(kept) = self.frame.kept.frame_buffers.take() {
+        if let Some(kept) = self.frame.kept_mut().frame_buffers.take() {
             let fb = kept.buffers;
             if (kept.width, kept.height, kept.guard_len) == (w, h, guard_len)
                 && fb.params.size_bytes() >= crate::render::params_bytes(shading)
@@ -147,14 +161,13 @@ impl<'a> StreamingRenderer<'a> {
     /// Takes the kept frame buffers for a use between frames; [`Self::keep_frame_buffers`]
     /// puts them back.
     pub(super) fn take_kept_frame_buffers(&mut self) -> Option<KeptFrameBuffers> {
-        self.frame.kept.frame_buffers.take()
+        self.frame.kept_mut().frame_buffers.take()
     }
 
     /// Keeps frame buffers for the next frame of the same size.
     pub(super) fn keep_frame_buffers(&mut self, kept: KeptFrameBuffers) {
-        if let Some(old) = self.frame.kept.frame_buffers.take() {
+        if let Some(old) = self.frame.kept_mut().frame_buffers.replace(kept) {
             old.buffers.release(&mut self.heap);
         }
-        self.frame.kept.frame_buffers = Some(kept);
     }
 }

@@ -21,7 +21,7 @@ use motu_ascache::{AsCache, CacheKey, CacheKeyBuilder, CacheStats, Tier, SERIALI
 use motu_vk::{AsLevel, SerializedHeader, SizeQueries, SERIALIZED_ALIGNMENT};
 use rayon::prelude::*;
 
-use super::clones::{HostCacheMode, Restored};
+use super::clones::{HostCacheMode, Restored, TakenClone};
 use super::proxy_boxes::{self, Box6};
 use super::skeleton::ms_since;
 use super::transfer::{Transfer, TransferBuffers, TRANSFER_CAP_BYTES};
@@ -78,6 +78,37 @@ struct Attached {
     /// Per BLAS, its key once made.
     keys: Vec<Option<CacheKey>>,
     driver: String,
+}
+
+/// A built BLAS to serialise into the cache under `key`.
+struct ToStore<'s> {
+    /// Its id (`debug` logs name it).
+    blas: usize,
+    accel: &'s AccelStruct,
+    key: CacheKey,
+}
+
+/// A BLAS [`StreamingRenderer::persist_cache`] took out of the renderer to serialise, and
+/// where it goes back.
+struct TakenOut {
+    blas: usize,
+    key: CacheKey,
+    from: Home,
+}
+
+/// Where a taken-out BLAS lives: resident, or a host clone with its recency.
+enum Home {
+    Resident(AccelStruct),
+    Clone(TakenClone),
+}
+
+impl Home {
+    fn accel(&self) -> &AccelStruct {
+        match self {
+            Home::Resident(a) => a,
+            Home::Clone(c) => c.accel(),
+        }
+    }
 }
 
 /// Keys' format: bump when what a key covers changes.
@@ -211,7 +242,7 @@ impl StreamingRenderer<'_> {
         // One call for the whole set: entries on disk are read on several threads.
         let read = Instant::now();
         let found = a.cache.cache.get_many(&keys, &compatible);
-        self.frame.stats.restore_read_ms += ms_since(read);
+        self.frame.stats_mut().restore_read_ms += ms_since(read);
         for ((b, key), found) in keyed.into_iter().zip(found) {
             match found {
                 Some((blob, tier)) => match SerializedHeader::read(&blob) {
@@ -219,8 +250,8 @@ impl StreamingRenderer<'_> {
                         if h.serialized_bytes == blob.len() as u64 && h.deserialized_bytes > 0 =>
                     {
                         match tier {
-                            Tier::Host => self.frame.stats.restored_from_host += 1,
-                            Tier::Disk => self.frame.stats.restored_from_disk += 1,
+                            Tier::Host => self.frame.stats_mut().restored_from_host += 1,
+                            Tier::Disk => self.frame.stats_mut().restored_from_disk += 1,
                         }
                         hits.push((b, blob, h));
                     }
@@ -242,7 +273,7 @@ impl StreamingRenderer<'_> {
         let mut restored = Vec::with_capacity(hits.len());
         self.restore_some(&hits, evict, &mut restored, &mut rest)?;
         rest.sort_unstable();
-        self.frame.stats.restore_ms += ms_since(t);
+        self.frame.stats_mut().restore_ms += ms_since(t);
         Ok(Restored {
             built: restored,
             rest,
@@ -275,7 +306,7 @@ impl StreamingRenderer<'_> {
             }
             Err(GpuError::Budget(why)) => {
                 tracing::debug!(%why, "structure cache: no room to restore; building instead");
-                self.frame.stats.restore_skipped += 1;
+                self.frame.stats_mut().restore_skipped += 1;
                 rest.push(hits[0].0);
             }
             Err(e) => return Err(e),
@@ -327,7 +358,7 @@ impl StreamingRenderer<'_> {
                     .into_par_iter()
                     .for_each(|(dst, src)| dst.copy_from_slice(src));
             })?;
-            self.frame.stats.restore_upload_ms += ms_since(t);
+            self.frame.stats_mut().restore_upload_ms += ms_since(t);
             let gpu = Instant::now();
             let mut rec = ctx.record("restore blases")?;
             for ((_, accel), &off) in out.iter().zip(&offsets) {
@@ -335,7 +366,7 @@ impl StreamingRenderer<'_> {
             }
             rec.barrier();
             rec.submit_and_wait()?;
-            self.frame.stats.restore_gpu_ms += ms_since(gpu);
+            self.frame.stats_mut().restore_gpu_ms += ms_since(gpu);
             Ok(())
         })();
         self.put_back_transfer(Transfer::Upload, staging);
@@ -358,28 +389,33 @@ impl StreamingRenderer<'_> {
             return Ok(());
         }
         let t = Instant::now();
-        let mut todo: Vec<(usize, &AccelStruct, CacheKey)> = Vec::new();
-        for (b, a) in built {
+        let mut todo: Vec<ToStore<'_>> = Vec::new();
+        for (b, accel) in built {
             let Some(key) = self.blas_key(*b) else {
                 continue;
             };
             let held = self.reuse.cache.as_ref().expect("attached");
             if held.cache.cache.contains(&key).is_none() {
-                todo.push((*b, a, key));
+                todo.push(ToStore {
+                    blas: *b,
+                    accel,
+                    key,
+                });
             }
         }
         if todo.is_empty() {
             return Ok(());
         }
         self.store_some(&todo)?;
-        self.frame.stats.cache_store_ms += ms_since(t);
+        self.frame.stats_mut().cache_store_ms += ms_since(t);
         Ok(())
     }
 
     /// Writes to the cache directory, serialised, every BLAS this renderer holds (resident or
     /// as a host clone) that the cache lacks: with host clones (`clones.rs`) nothing is
     /// serialised while frames render, so a caller that wants the next process warm calls
-    /// this after its last frame (`motu render` after the frames, the viewer at exit). Counted
+    /// this after its last frame (the viewer at exit), or takes the cache
+    /// ([`Self::take_cache`] calls this once: `motu render` after the frames). Counted
     /// in [`StreamTotals`](super::StreamTotals) (`persisted_*`). Without clones the blobs were
     /// stored as they were built and this does nothing.
     pub fn persist_cache(&mut self) -> Result<()> {
@@ -394,7 +430,7 @@ impl StreamingRenderer<'_> {
         let t = Instant::now();
         let n = self.view.blases.len();
         // Taken out for the serialise copies and put back after, whatever happens.
-        let mut taken: Vec<(usize, AccelStruct, bool)> = Vec::new();
+        let mut taken: Vec<TakenOut> = Vec::new();
         for b in 0..n {
             if !self.topo.buildable(b) {
                 continue;
@@ -406,26 +442,23 @@ impl StreamingRenderer<'_> {
             if held.cache.cache.contains(&key).is_some() {
                 continue;
             }
-            if let Some(a) = self.res.blas[b].take() {
-                taken.push((b, a, false));
-            } else if let Some(a) = self.clones.take(b) {
-                taken.push((b, a, true));
-            }
+            let from = if let Some(a) = self.res.blas[b].take() {
+                Home::Resident(a)
+            } else if let Some(c) = self.clones.take(b) {
+                Home::Clone(c)
+            } else {
+                continue;
+            };
+            taken.push(TakenOut { blas: b, key, from });
         }
         // Counted into the totals below, not into a frame: none is rendering.
-        let before = self.frame.stats.clone();
-        let todo: Vec<(usize, &AccelStruct, CacheKey)> = taken
+        let aside = self.frame.set_stats_aside();
+        let todo: Vec<ToStore<'_>> = taken
             .iter()
-            .map(|(b, a, _)| {
-                (
-                    *b,
-                    a,
-                    self.reuse
-                        .cache
-                        .as_ref()
-                        .and_then(|c| c.keys[*b])
-                        .expect("keyed"),
-                )
+            .map(|t| ToStore {
+                blas: t.blas,
+                accel: t.from.accel(),
+                key: t.key,
             })
             .collect();
         let stored = if todo.is_empty() {
@@ -434,54 +467,49 @@ impl StreamingRenderer<'_> {
             self.store_some(&todo)
         };
         drop(todo);
-        for (b, a, clone) in taken {
-            if clone {
-                self.clones.put_back(b, a);
-            } else {
-                self.res.blas[b] = Some(a);
+        for TakenOut { blas, from, .. } in taken {
+            match from {
+                Home::Resident(a) => self.res.blas[blas] = Some(a),
+                Home::Clone(c) => self.clones.put_back(blas, c),
             }
         }
-        let after = std::mem::replace(&mut self.frame.stats, before);
-        let (b, tot) = (&self.frame.stats, &mut self.totals);
-        let count = u64::from(after.cache_stored - b.cache_stored);
-        let bytes = after.cache_stored_bytes - b.cache_stored_bytes;
+        let counted = self.frame.put_stats_back(aside);
+        let tot = &mut self.totals;
+        let count = u64::from(counted.cache_stored);
+        let bytes = counted.cache_stored_bytes;
         tot.persisted_blases += count;
         tot.persisted_bytes += bytes;
         tot.cache_stored += count;
         tot.cache_stored_bytes += bytes;
-        tot.store_serialize_ms += after.store_serialize_ms - b.store_serialize_ms;
-        tot.store_copy_ms += after.store_copy_ms - b.store_copy_ms;
-        tot.store_put_ms += after.store_put_ms - b.store_put_ms;
-        tot.transfer_batches += after.transfer_batches - b.transfer_batches;
-        tot.transfer_allocations += after.transfer_allocations - b.transfer_allocations;
+        tot.store_serialize_ms += counted.store_serialize_ms;
+        tot.store_copy_ms += counted.store_copy_ms;
+        tot.store_put_ms += counted.store_put_ms;
+        tot.transfer_batches += counted.transfer_batches;
+        tot.transfer_allocations += counted.transfer_allocations;
         tot.persist_ms += ms_since(t);
         stored
     }
 
     /// Serialises `todo`: their sizes in one query, then in batches of at most
     /// [`TRANSFER_CAP_BYTES`] (see `transfer.rs`).
-    fn store_some(&mut self, todo: &[(usize, &AccelStruct, CacheKey)]) -> Result<()> {
+    fn store_some(&mut self, todo: &[ToStore<'_>]) -> Result<()> {
         let ctx = self.ctx.clone();
         let t = Instant::now();
         let queries = SizeQueries::serialization(&ctx, todo.len() as u32)?;
-        let targets: Vec<_> = todo.iter().map(|t| t.1.target()).collect();
+        let targets: Vec<_> = todo.iter().map(|t| t.accel.target()).collect();
         let mut rec = ctx.record("serialised sizes")?;
         rec.barrier();
         rec.write_serialization_sizes(&targets, &queries)?;
         rec.submit_and_wait()?;
         let sizes = queries.read(todo.len() as u32)?;
-        self.frame.stats.store_serialize_ms += ms_since(t);
+        self.frame.stats_mut().store_serialize_ms += ms_since(t);
         self.store_sized(todo, &sizes)
     }
 
     /// Serialises `todo` (serialised sizes `sizes`) in one readback; above the transfer cap,
     /// or where the budget has no room for it, in halves (a single structure that does not fit
     /// is skipped, counted).
-    fn store_sized(
-        &mut self,
-        todo: &[(usize, &AccelStruct, CacheKey)],
-        sizes: &[u64],
-    ) -> Result<()> {
+    fn store_sized(&mut self, todo: &[ToStore<'_>], sizes: &[u64]) -> Result<()> {
         let ctx = self.ctx.clone();
         let t = Instant::now();
         let align = |v: u64| v.div_ceil(SERIALIZED_ALIGNMENT) * SERIALIZED_ALIGNMENT;
@@ -502,8 +530,9 @@ impl StreamingRenderer<'_> {
             }
             Err(motu_vk::VkError::Budget(why)) => {
                 // The cache is an optimisation: no room to read back is a skip, not a failure.
-                tracing::debug!(%why, "structure cache: no room to serialise; not cached");
-                self.frame.stats.cache_skipped += 1;
+                let blas = todo.first().map(|t| t.blas);
+                tracing::debug!(%why, ?blas, "structure cache: no room to serialise; not cached");
+                self.frame.stats_mut().cache_skipped += 1;
                 return Ok(());
             }
             Err(e) => return Err(e.into()),
@@ -513,14 +542,14 @@ impl StreamingRenderer<'_> {
             let mut rec = ctx.record("serialise blases")?;
             let mut at = 0u64;
             let mut offsets = Vec::with_capacity(todo.len());
-            for ((_, a, _), &size) in todo.iter().zip(sizes) {
-                rec.serialize_acceleration_structure(a.target(), base.offset(at))?;
+            for (t, &size) in todo.iter().zip(sizes) {
+                rec.serialize_acceleration_structure(t.accel.target(), base.offset(at))?;
                 offsets.push(at);
                 at += align(size);
             }
             rec.barrier();
             rec.submit_and_wait()?;
-            self.frame.stats.store_serialize_ms += ms_since(t);
+            self.frame.stats_mut().store_serialize_ms += ms_since(t);
             let copy = Instant::now();
             // Each blob copied once, straight into the shared allocation the cache keeps (no
             // zero fill), on all cores: one thread's reads of pinned memory held storing to
@@ -533,19 +562,20 @@ impl StreamingRenderer<'_> {
                     .map(|(&off, &size)| Arc::<[u8]>::from(&bytes[off as usize..][..size as usize]))
                     .collect::<Vec<_>>()
             })?;
-            self.frame.stats.store_copy_ms += ms_since(copy);
+            self.frame.stats_mut().store_copy_ms += ms_since(copy);
             Ok(blobs)
         })();
         self.put_back_transfer(Transfer::Readback, readback);
         let blobs = result?;
         let put = Instant::now();
         let a = self.reuse.cache.as_mut().expect("attached");
-        for ((_, _, key), blob) in todo.iter().zip(blobs) {
-            self.frame.stats.cache_stored_bytes += blob.len() as u64;
-            self.frame.stats.cache_stored += 1;
-            a.cache.cache.put(*key, blob);
+        let st = self.frame.stats_mut();
+        for (t, blob) in todo.iter().zip(blobs) {
+            st.cache_stored_bytes += blob.len() as u64;
+            st.cache_stored += 1;
+            a.cache.cache.put(t.key, blob);
         }
-        self.frame.stats.store_put_ms += ms_since(put);
+        self.frame.stats_mut().store_put_ms += ms_since(put);
         Ok(())
     }
 }

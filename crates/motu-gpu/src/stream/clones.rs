@@ -21,7 +21,7 @@ use std::collections::BTreeSet;
 use std::time::Instant;
 
 use motu_alloc::MemoryClass;
-use motu_vk::{AsCopyMode, AsLevel};
+use motu_vk::{AsCopyMode, AsLevel, AsTarget};
 
 use super::skeleton::ms_since;
 use super::StreamingRenderer;
@@ -74,8 +74,19 @@ pub(super) struct HostClones {
     order: BTreeSet<(u64, usize)>,
     tick: u64,
     bytes: u64,
-    /// Recency of clones [`HostClones::take`]n out, until put back.
-    taken_ticks: Vec<(usize, u64)>,
+}
+
+/// A clone [`HostClones::take`]n out for a moment, with its recency: the holder gives it back
+/// through [`HostClones::put_back`], so the clones keep no state for what is out.
+pub(super) struct TakenClone {
+    accel: AccelStruct,
+    last_use: u64,
+}
+
+impl TakenClone {
+    pub(super) fn accel(&self) -> &AccelStruct {
+        &self.accel
+    }
 }
 
 impl HostClones {
@@ -133,25 +144,19 @@ impl HostClones {
 
     /// Takes BLAS `b`'s clone out for a moment ([`Self::put_back`] returns it unchanged in
     /// recency and bytes).
-    pub(super) fn take(&mut self, b: usize) -> Option<AccelStruct> {
-        let (a, last) = self.held.get_mut(b)?.take()?;
-        self.order.remove(&(last, b));
-        self.bytes -= a.size_bytes;
-        self.taken_ticks.push((b, last));
-        Some(a)
+    pub(super) fn take(&mut self, b: usize) -> Option<TakenClone> {
+        let (accel, last_use) = self.held.get_mut(b)?.take()?;
+        self.order.remove(&(last_use, b));
+        self.bytes -= accel.size_bytes;
+        Some(TakenClone { accel, last_use })
     }
 
-    pub(super) fn put_back(&mut self, b: usize, a: AccelStruct) {
-        let last = match self.taken_ticks.iter().position(|&(t, _)| t == b) {
-            Some(i) => self.taken_ticks.swap_remove(i).1,
-            None => {
-                self.tick += 1;
-                self.tick
-            }
-        };
-        self.bytes += a.size_bytes;
-        self.order.insert((last, b));
-        self.held[b] = Some((a, last));
+    /// Puts BLAS `b`'s clone back where [`Self::take`] took it from.
+    pub(super) fn put_back(&mut self, b: usize, taken: TakenClone) {
+        let TakenClone { accel, last_use } = taken;
+        self.bytes += accel.size_bytes;
+        self.order.insert((last_use, b));
+        self.held[b] = Some((accel, last_use));
     }
 
     pub(super) fn get(&self, b: usize) -> Option<&AccelStruct> {
@@ -182,7 +187,7 @@ impl StreamingRenderer<'_> {
         for b in todo {
             let size = self.res.blas[b].as_ref().map_or(0, |a| a.size_bytes);
             if size > self.clones.bound_bytes {
-                self.frame.stats.clone_skipped += 1;
+                self.frame.stats_mut().clone_skipped += 1;
                 continue;
             }
             for old in self.clones.make_room(size) {
@@ -199,36 +204,22 @@ impl StreamingRenderer<'_> {
                 Ok(a) => made.push((b, a)),
                 Err(e) => {
                     tracing::debug!(blas = b, %e, "host clone refused; rebuilt when needed");
-                    self.frame.stats.clone_skipped += 1;
+                    self.frame.stats_mut().clone_skipped += 1;
                 }
             }
         }
         if made.is_empty() {
             return Ok(());
         }
-        let copied = (|| -> Result<()> {
-            let mut rec = ctx.record("clone evicted blases to host")?;
-            rec.barrier();
-            for (b, dst) in &made {
-                let src = self.res.blas[*b].as_ref().expect("resident").target();
-                rec.copy_acceleration_structure(src, dst.target(), AsCopyMode::Clone)?;
-            }
-            rec.barrier();
-            rec.submit_and_wait()?;
-            Ok(())
-        })();
-        if let Err(e) = copied {
-            for (_, a) in made {
-                a.release(&mut self.heap);
-            }
-            return Err(e);
-        }
+        let made = self.clone_copies("clone evicted blases to host", made, |s, b| {
+            s.res.blas[b].as_ref().expect("resident").target()
+        })?;
         for (b, a) in made {
-            self.frame.stats.cloned_blases += 1;
-            self.frame.stats.cloned_bytes += a.size_bytes;
+            self.frame.stats_mut().cloned_blases += 1;
+            self.frame.stats_mut().cloned_bytes += a.size_bytes;
             self.clones.insert(b, a);
         }
-        self.frame.stats.clone_ms += ms_since(t);
+        self.frame.stats_mut().clone_ms += ms_since(t);
         Ok(())
     }
 
@@ -260,7 +251,7 @@ impl StreamingRenderer<'_> {
                 Ok(a) => made.push((b, a)),
                 Err(crate::error::GpuError::Budget(why)) => {
                     tracing::debug!(blas = b, %why, "no room to restore a host clone; building");
-                    self.frame.stats.restore_skipped += 1;
+                    self.frame.stats_mut().restore_skipped += 1;
                     rest.push(b);
                 }
                 Err(e) => {
@@ -274,11 +265,31 @@ impl StreamingRenderer<'_> {
         if made.is_empty() {
             return Ok(Restored { built: made, rest });
         }
+        let made = self.clone_copies("clone blases back from host", made, |s, b| {
+            s.clones.touch(b).expect("held").target()
+        })?;
+        self.frame.stats_mut().restored_from_clone += made.len() as u32;
+        self.frame.stats_mut().restored_from_host += made.len() as u32;
+        self.frame.stats_mut().restore_ms += ms_since(t);
+        rest.sort_unstable();
+        Ok(Restored { built: made, rest })
+    }
+
+    /// Copies into each new structure of `made` (BLAS id, destination) its source
+    /// `source(self, id)`, in one submission (`label`); on failure the new structures are
+    /// released and nothing is kept.
+    fn clone_copies(
+        &mut self,
+        label: &str,
+        made: Vec<(usize, AccelStruct)>,
+        mut source: impl FnMut(&mut Self, usize) -> AsTarget,
+    ) -> Result<Vec<(usize, AccelStruct)>> {
+        let ctx = self.ctx.clone();
         let copied = (|| -> Result<()> {
-            let mut rec = ctx.record("clone blases back from host")?;
+            let mut rec = ctx.record(label)?;
             rec.barrier();
             for (b, dst) in &made {
-                let src = self.clones.touch(*b).expect("held").target();
+                let src = source(self, *b);
                 rec.copy_acceleration_structure(src, dst.target(), AsCopyMode::Clone)?;
             }
             rec.barrier();
@@ -291,10 +302,6 @@ impl StreamingRenderer<'_> {
             }
             return Err(e);
         }
-        self.frame.stats.restored_from_clone += made.len() as u32;
-        self.frame.stats.restored_from_host += made.len() as u32;
-        self.frame.stats.restore_ms += ms_since(t);
-        rest.sort_unstable();
-        Ok(Restored { built: made, rest })
+        Ok(made)
     }
 }

@@ -94,7 +94,7 @@ impl<'a> StreamingRenderer<'a> {
         let freed = before.saturating_sub(self.heap.report().budget_block_bytes);
         drained.freed_bytes = freed;
         let moved = drained.blases + drained.meshes + drained.textures;
-        let st = &mut self.frame.stats;
+        let st = self.frame.stats_mut();
         st.defrag_moves += moved;
         st.defrag_freed_bytes += freed;
         st.defrag_ms += t0.elapsed().as_secs_f64() * 1e3;

@@ -8,54 +8,97 @@ use super::clones::Restored;
 use super::residency::EvictWhy;
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
-use crate::scene::MeshGpu;
+use crate::scene::{AccelStruct, MeshGpu};
 use motu_vk::BudgetRefusal;
 
-/// Work of one build step: (BLAS, requests) pairs, most requested first.
+/// One structure a build step may build: BLAS `blas`, and how many pixels' rays requested it
+/// as their nearest open structure (0: open or seen, no ray's nearest).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct Request {
+    pub(super) blas: u32,
+    pub(super) requests: u32,
+}
+
+/// Work of one build step, most requested first. Its lists are private: a structure enters
+/// through [`Demand::need`] or [`Demand::open`], and [`Demand::merge_first`] keeps each
+/// structure once.
 #[derive(Default)]
 pub(super) struct Demand {
     /// Some pixel's nearest open structure: built first, at least one per step.
-    pub(super) blases: Vec<(u32, u32)>,
+    needed: Vec<Request>,
     /// Open for some pixel but not its nearest: built when they fit, so later passes have
     /// less to do.
-    pub(super) later: Vec<(u32, u32)>,
+    later: Vec<Request>,
 }
 
 impl Demand {
+    /// BLAS `blas` is needed, `requests` rays asking for it first (0: a candidate the frame
+    /// saw, kept in the needed list's order).
+    pub(super) fn need(&mut self, blas: u32, requests: u32) {
+        self.needed.push(Request { blas, requests });
+    }
+
+    /// BLAS `blas` is open for some pixel but no ray's nearest: built when it fits.
+    pub(super) fn open(&mut self, blas: u32) {
+        self.later.push(Request { blas, requests: 0 });
+    }
+
+    /// The needed structures, in order.
+    pub(super) fn needed(&self) -> &[Request] {
+        &self.needed
+    }
+
+    /// The structures built when they fit, in order.
+    pub(super) fn later(&self) -> &[Request] {
+        &self.later
+    }
+
+    /// Every structure of the demand: the needed ones, then the later ones.
+    pub(super) fn all(&self) -> impl Iterator<Item = &Request> {
+        self.needed.iter().chain(&self.later)
+    }
+
     pub(super) fn is_empty(&self) -> bool {
-        self.blases.is_empty() && self.later.is_empty()
+        self.needed.is_empty() && self.later.is_empty()
     }
 
     pub(super) fn len(&self) -> usize {
-        self.blases.len() + self.later.len()
+        self.needed.len() + self.later.len()
     }
 
     /// Puts `first`'s structures ahead of this demand's (a structure in both keeps
     /// `first`'s place): `first` must be sorted.
     pub(super) fn merge_first(&mut self, first: Demand) {
         let mut seen = std::collections::HashSet::new();
-        let mut keep = |list: Vec<(u32, u32)>| -> Vec<(u32, u32)> {
-            list.into_iter().filter(|&(b, _)| seen.insert(b)).collect()
+        let mut keep = |list: Vec<Request>| -> Vec<Request> {
+            list.into_iter().filter(|r| seen.insert(r.blas)).collect()
         };
-        self.blases = keep([first.blases, std::mem::take(&mut self.blases)].concat());
+        self.needed = keep([first.needed, std::mem::take(&mut self.needed)].concat());
         self.later = keep([first.later, std::mem::take(&mut self.later)].concat());
     }
 
     /// The structures some ray would open first (requested at least once), in order.
     pub(super) fn needed_ids(&self) -> Vec<u32> {
-        self.blases
+        self.needed
             .iter()
-            .filter(|&&(_, n)| n > 0)
-            .map(|&(b, _)| b)
+            .filter(|r| r.requests > 0)
+            .map(|r| r.blas)
             .collect()
     }
 
     /// Most requested first (ties: lower id first, so runs are deterministic).
     pub(super) fn sort(&mut self) {
-        for v in [&mut self.blases, &mut self.later] {
-            v.sort_unstable_by_key(|&(id, n)| (std::cmp::Reverse(n), id));
+        for v in [&mut self.needed, &mut self.later] {
+            v.sort_unstable_by_key(|r| (std::cmp::Reverse(r.requests), r.blas));
         }
     }
+}
+
+/// A BLAS a build group made resident: built now, or `restored` from a cached copy.
+struct Admitted {
+    blas: usize,
+    accel: AccelStruct,
+    restored: bool,
 }
 
 impl<'a> StreamingRenderer<'a> {
@@ -64,7 +107,7 @@ impl<'a> StreamingRenderer<'a> {
     /// and the meshes only it held are released: nothing of it stays resident.
     pub(super) fn build_group(&mut self, group: &[u32], evict: bool) -> Result<()> {
         let mut taken: Vec<usize> = Vec::new();
-        self.frame.stats.build_groups += 1;
+        self.frame.stats_mut().build_groups += 1;
         let t_mesh = Instant::now();
         let loaded = (|| -> Result<()> {
             for &b in group {
@@ -102,8 +145,9 @@ impl<'a> StreamingRenderer<'a> {
                             return Err(e);
                         }
                     };
-                    self.frame.stats.bytes_streamed += bytes + texture_bytes;
-                    self.frame.stats.built_bytes += bytes + texture_bytes;
+                    let st = self.frame.stats_mut();
+                    st.bytes_streamed += bytes + texture_bytes;
+                    st.built_bytes += bytes + texture_bytes;
                     self.res.meshes[m] = Some(g);
                 }
             }
@@ -117,7 +161,7 @@ impl<'a> StreamingRenderer<'a> {
                 up.flush(&ctx)?;
             }
         }
-        self.frame.stats.mesh_ms += t_mesh.elapsed().as_secs_f64() * 1e3;
+        self.frame.stats_mut().mesh_ms += t_mesh.elapsed().as_secs_f64() * 1e3;
         let t_blas = Instant::now();
         let built = loaded.and_then(|()| {
             let ids: Vec<usize> = group.iter().map(|&b| b as usize).collect();
@@ -140,17 +184,22 @@ impl<'a> StreamingRenderer<'a> {
                 }
                 return Err(e);
             }
-            let n = built.len();
+            let admitted = |restored: bool| {
+                move |(blas, accel): (usize, AccelStruct)| Admitted {
+                    blas,
+                    accel,
+                    restored,
+                }
+            };
             Ok(built
                 .into_iter()
-                .chain(restored)
-                .enumerate()
-                .map(|(k, (b, a))| (b, a, k >= n))
+                .map(admitted(false))
+                .chain(restored.into_iter().map(admitted(true)))
                 .collect::<Vec<_>>())
         });
-        self.frame.stats.blas_ms += t_blas.elapsed().as_secs_f64() * 1e3;
+        self.frame.stats_mut().blas_ms += t_blas.elapsed().as_secs_f64() * 1e3;
         if matches!(built, Err(GpuError::Budget(_))) {
-            self.frame.stats.refused_groups += 1;
+            self.frame.stats_mut().refused_groups += 1;
         }
         let built = match built {
             Ok(b) => b,
@@ -161,8 +210,20 @@ impl<'a> StreamingRenderer<'a> {
                 return Err(e);
             }
         };
+        self.admit_group(group, built);
+        Ok(())
+    }
+
+    /// Makes `built` (of BLASes `group`, their meshes referenced) resident and pinned, counted
+    /// in the frame's statistics; the BLASes of `group` with nothing built let their meshes go.
+    fn admit_group(&mut self, group: &[u32], built: Vec<Admitted>) {
         let mut built_ids = BTreeSet::new();
-        for (b, accel, restored) in built {
+        for Admitted {
+            blas: b,
+            accel,
+            restored,
+        } in built
+        {
             let mesh_bytes: u64 = self
                 .blas_meshes(b)
                 .into_iter()
@@ -175,18 +236,21 @@ impl<'a> StreamingRenderer<'a> {
             let bytes = accel.size_bytes + mesh_bytes;
             self.res.blas_bytes[b] = bytes;
             self.res.used_in_frame[b] = self.frame.number();
+            let rebuilt = self.reuse.built_once[b];
+            let triangles = u64::from(self.view.blases[b].primitive_count);
+            let st = self.frame.stats_mut();
             if restored {
-                self.frame.stats.restored_blases += 1;
-                self.frame.stats.restored_bytes += accel.size_bytes;
+                st.restored_blases += 1;
+                st.restored_bytes += accel.size_bytes;
             } else {
-                if self.reuse.built_once[b] {
-                    self.frame.stats.rebuilt_blases += 1;
-                    self.frame.stats.rebuilt_bytes += accel.size_bytes;
+                if rebuilt {
+                    st.rebuilt_blases += 1;
+                    st.rebuilt_bytes += accel.size_bytes;
                 }
-                self.frame.stats.blas_built += 1;
-                self.frame.stats.built_bytes += accel.size_bytes;
-                self.frame.stats.blas_structure_bytes += accel.size_bytes;
-                self.frame.stats.triangles_built += u64::from(self.view.blases[b].primitive_count);
+                st.blas_built += 1;
+                st.built_bytes += accel.size_bytes;
+                st.blas_structure_bytes += accel.size_bytes;
+                st.triangles_built += triangles;
             }
             self.reuse.built_once[b] = true;
             self.res.admit(b, accel, bytes, self.frame.stamp());
@@ -201,7 +265,6 @@ impl<'a> StreamingRenderer<'a> {
                 self.release_blas_meshes(b as usize);
             }
         }
-        Ok(())
     }
 
     /// Builds the BLASes of `queue` (priority order) in groups that halve when the budget
@@ -229,8 +292,8 @@ impl<'a> StreamingRenderer<'a> {
         while i < queue.len() {
             // The frame's build budget: spent stops the step (a frame that has built nothing
             // yet and must progress still builds one).
-            if self.frame_build_spent() && (self.frame.stats.blas_built > 0 || !must_progress) {
-                self.frame.stats.build_budget_spent = true;
+            if self.frame_build_spent() && (self.frame.stats().blas_built > 0 || !must_progress) {
+                self.frame.stats_mut().build_budget_spent = true;
                 return Ok(queue.len() - i);
             }
             let mut n = self.group_within_frame_budget(&queue[i..], chunk);
@@ -416,7 +479,7 @@ impl<'a> StreamingRenderer<'a> {
     /// may be evicted, and what does not fit is skipped.
     pub(super) fn make_resident(&mut self, demand: &Demand, prefetch: bool) -> Result<()> {
         let t0 = Instant::now();
-        self.frame.kept.step_start = Some(t0);
+        self.frame.kept_mut().start_step(t0);
         self.res.pinned = if prefetch {
             let first = self.frame_first_stamp();
             (0..self.item_count())
@@ -426,16 +489,16 @@ impl<'a> StreamingRenderer<'a> {
             vec![false; self.item_count()]
         };
         self.res.built_now.clear();
-        for &(b, _) in demand.blases.iter().chain(&demand.later) {
-            self.res.last_seen[b as usize] = self.frame.stamp();
+        for r in demand.all() {
+            self.res.last_seen[r.blas as usize] = self.frame.stamp();
         }
-        let queue = |v: &[(u32, u32)]| -> Vec<u32> {
+        let queue = |v: &[Request]| -> Vec<u32> {
             v.iter()
-                .map(|&(b, _)| b)
+                .map(|r| r.blas)
                 .filter(|&b| self.res.blas[b as usize].is_none() && self.topo.buildable(b as usize))
                 .collect()
         };
-        let (needed, later) = (queue(&demand.blases), queue(&demand.later));
+        let (needed, later) = (queue(demand.needed()), queue(demand.later()));
         tracing::trace!(?needed, ?later, prefetch, "build step queues");
         let deferred = self.build_blas_queue(&needed, !prefetch, !prefetch)?;
         if deferred == 0 && !later.is_empty() && self.opts.build_open_early {
@@ -446,18 +509,18 @@ impl<'a> StreamingRenderer<'a> {
         self.rebuild_dirty()?;
         let t_tables = Instant::now();
         self.upload_tlas_addresses()?;
-        self.frame.stats.tables_ms += t_tables.elapsed().as_secs_f64() * 1e3;
-        self.frame.stats.build_steps += 1;
+        self.frame.stats_mut().tables_ms += t_tables.elapsed().as_secs_f64() * 1e3;
+        self.frame.stats_mut().build_steps += 1;
         if prefetch {
             let built = self.res.built_now.len() as u32;
-            self.frame.stats.prefetched += built;
+            self.frame.stats_mut().prefetched += built;
             let wanted = (needed.len() + later.len()) as u32;
-            self.frame.stats.prefetch_skipped += wanted.saturating_sub(built);
+            self.frame.stats_mut().prefetch_skipped += wanted.saturating_sub(built);
         } else {
-            self.frame.stats.deferred += deferred as u32;
+            self.frame.stats_mut().deferred += deferred as u32;
         }
-        self.frame.kept.step_start = None;
-        self.frame.stats.build_ms += t0.elapsed().as_secs_f64() * 1e3;
+        self.frame.kept_mut().end_step();
+        self.frame.stats_mut().build_ms += t0.elapsed().as_secs_f64() * 1e3;
         tracing::debug!(
             demanded = demand.len(),
             built = self.res.built_now.len(),

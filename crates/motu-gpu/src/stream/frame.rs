@@ -2,11 +2,11 @@
 
 use motu_abi::camera::CameraParams;
 
-use super::budget::KeptFrameBuffers;
+use super::budget::{Kept, KeptFrameBuffers};
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
-use super::passes::{guard_pixels, FrameImage};
-use super::probe::ProbeFound;
+use super::passes::{guard_pixels, FrameImage, PROBE_MET, PROBE_RESIDENT};
+use super::probe::{ProbeFound, ProbeNeed};
 use super::{FrameStreamStats, StreamingRenderer};
 use crate::error::{GpuError, Result};
 use crate::render::{
@@ -19,11 +19,16 @@ use crate::render::{
 ///
 /// Invariants: `stamp` only grows (one a pass or probe; the shaders compare stamps); the
 /// frame's sightings from `first_stamp` on are what a prefetch keeps resident; `stats` is
-/// reset by each frame's start and handed out at its end.
+/// reset by each frame's start only (or set aside and put back whole around work outside a
+/// frame) and handed out at its end; the probe's sightings and need start afresh with each
+/// frame's first probe round and add up over its later rounds. Every field is private: the
+/// other files count into `stats` through [`FrameState::stats_mut`] (adding to a counter
+/// breaks no invariant; replacing the whole is this file's) and reach the rest through the
+/// methods below.
 pub(super) struct FrameState {
     /// Frames started so far (the current one's number).
     number: u64,
-    pub stats: FrameStreamStats,
+    stats: FrameStreamStats,
     /// The latest pass stamp.
     stamp: u32,
     /// The first stamp whose sightings a prefetch keeps resident: the frame's first pass, or
@@ -36,14 +41,20 @@ pub(super) struct FrameState {
     next_camera: Option<CameraParams>,
     /// Per BLAS, what the last probe saw (`PROBE_MET`, `PROBE_RESIDENT` bits), kept for the
     /// next frame's first pass to say why it missed what it missed; empty when no probe ran.
-    pub probe_sighting: Vec<u8>,
+    probe_sighting: Vec<u8>,
     /// What the probe rounds after this frame used of the resident set (`probe.rs`).
-    pub probe_need: super::probe::ProbeNeed,
+    probe_need: ProbeNeed,
     /// The trace pipeline with the backend and stack size it was made for.
     tracer: Option<FrameTracer>,
-    /// State kept between frames: the frame buffers, the frame's build clock.
-    pub kept: super::budget::Kept,
+    /// State kept between frames: the frame buffers, the frame's build clock (its fields are
+    /// `budget.rs`'s, kept by `Kept`'s methods).
+    kept: Kept,
 }
+
+/// A frame's statistics set aside by [`FrameState::set_stats_aside`]: give them back with
+/// [`FrameState::put_stats_back`].
+#[must_use = "the frame's statistics come back only through put_stats_back"]
+pub(super) struct StatsAside(FrameStreamStats);
 
 /// The streamed frames' trace pipeline and what it was made for: a frame asking for another
 /// backend or stack size gets a new one.
@@ -54,6 +65,83 @@ pub(super) struct FrameTracer {
 }
 
 impl FrameState {
+    /// The current frame's statistics.
+    pub fn stats(&self) -> &FrameStreamStats {
+        &self.stats
+    }
+
+    /// The current frame's statistics, to count into.
+    pub fn stats_mut(&mut self) -> &mut FrameStreamStats {
+        &mut self.stats
+    }
+
+    /// Sets the frame's statistics aside for work outside any frame (storing structures after
+    /// the frames): what is counted until [`Self::put_stats_back`] goes into fresh ones.
+    pub fn set_stats_aside(&mut self) -> StatsAside {
+        let fresh = FrameStreamStats {
+            frame: self.number,
+            ..Default::default()
+        };
+        StatsAside(std::mem::replace(&mut self.stats, fresh))
+    }
+
+    /// Puts the statistics set aside back and returns what was counted meanwhile.
+    pub fn put_stats_back(&mut self, aside: StatsAside) -> FrameStreamStats {
+        std::mem::replace(&mut self.stats, aside.0)
+    }
+
+    /// What the frame's probe rounds used of the resident set so far, taken out to add a
+    /// round to ([`Self::keep_probe_need`] puts it back); `first`: the frame's first round,
+    /// which starts afresh.
+    pub fn take_probe_need(&mut self, first: bool) -> ProbeNeed {
+        let need = std::mem::take(&mut self.probe_need);
+        if first {
+            ProbeNeed::default()
+        } else {
+            need
+        }
+    }
+
+    /// Keeps what the probe rounds used (see [`Self::take_probe_need`]).
+    pub fn keep_probe_need(&mut self, need: ProbeNeed) {
+        self.probe_need = need;
+    }
+
+    /// Adds a probe round's sightings: per BLAS, `PROBE_MET` where its stamp in `stamps` is
+    /// the round's `stamp`, `PROBE_RESIDENT` where `resident`. `first`: the frame's first
+    /// round, which starts afresh.
+    pub fn note_probe_sighting(
+        &mut self,
+        stamps: &[u32],
+        resident: &[bool],
+        stamp: u32,
+        first: bool,
+    ) {
+        if first || self.probe_sighting.len() != stamps.len() {
+            self.probe_sighting = vec![0; stamps.len()];
+        }
+        for ((s, &v), &r) in self.probe_sighting.iter_mut().zip(stamps).zip(resident) {
+            *s |=
+                (if v >> 2 == stamp { PROBE_MET } else { 0 }) | if r { PROBE_RESIDENT } else { 0 };
+        }
+    }
+
+    /// What the last probe saw (empty when none ran since), forgotten here: the next frame's
+    /// first pass reads it once.
+    pub fn take_probe_sighting(&mut self) -> Vec<u8> {
+        std::mem::take(&mut self.probe_sighting)
+    }
+
+    /// State kept between frames.
+    pub fn kept(&self) -> &Kept {
+        &self.kept
+    }
+
+    /// State kept between frames, to change through `Kept`'s methods.
+    pub fn kept_mut(&mut self) -> &mut Kept {
+        &mut self.kept
+    }
+
     /// The trace pipeline of the current frame, once `ensure_tracer` made it.
     pub fn tracer(&self) -> Option<&Tracer> {
         self.tracer.as_ref().map(|t| &t.tracer)
@@ -93,7 +181,7 @@ impl FrameState {
             ..Default::default()
         };
         self.first_stamp = self.stamp + 1;
-        self.kept.step_start = None;
+        self.kept.end_step();
     }
 
     /// The next pass's stamp (stamps only grow), or the limit when stamps would reach
@@ -150,6 +238,14 @@ impl FrameState {
 struct FirstProbe {
     camera: CameraParams,
     found: ProbeFound,
+}
+
+/// What the first probe round leaves the later rounds: the next frame's camera, the pixels it
+/// left open (packed `x | y << 16`) and the structures its rays needed first.
+struct LaterRounds {
+    camera: CameraParams,
+    open: Vec<u32>,
+    needed: Vec<u32>,
 }
 
 impl<'a> StreamingRenderer<'a> {
@@ -331,15 +427,17 @@ impl<'a> StreamingRenderer<'a> {
             let needed = found.demand.needed_ids();
             guard_demand.merge_first(found.demand);
             self.frame.probe_ran();
-            again = Some((camera, found.open_pixels, needed));
+            again = Some(LaterRounds {
+                camera,
+                open: found.open_pixels,
+                needed,
+            });
         }
         if !guard_demand.is_empty() && self.frame.stats.complete && !self.frame_build_spent() {
             if let Err(e) = self
                 .make_resident(&guard_demand, true)
                 .and_then(|()| match again {
-                    Some((next, open, needed)) => {
-                        self.probe_again(&next, opts, open, needed, evictions_at_probe)
-                    }
+                    Some(rounds) => self.probe_again(rounds, opts, evictions_at_probe),
                     None => Ok(()),
                 })
             {
@@ -454,21 +552,26 @@ impl<'a> StreamingRenderer<'a> {
         Ok((RenderOutput { aov, rgba8, stats }, self.frame.stats.clone()))
     }
 
-    /// Later probe rounds (`StreamOptions::probe_rounds`): the pixels `open` the round before
-    /// left open are probed again against what the prefetch just built, and what they need is
-    /// prefetched, while the prefetch built some structure a round's rays `needed` first (the
+    /// Later probe rounds (`StreamOptions::probe_rounds`) of `rounds.camera`: the pixels
+    /// `rounds.open` the round before left open are probed again against what the prefetch
+    /// just built, and what they need is prefetched, while the prefetch built some structure a
+    /// round's rays `rounds.needed` first (the
     /// open pixels' rays go on from there) and pixels stay open. Then verifying rounds
     /// (`StreamOptions::probe_verify_rounds`) over every pixel, unless the rounds settled
     /// (no pixel left open) and nothing was evicted since the first probe (`self.res.evictions()`
     /// was `evictions_at_probe` then): the next frame then finds everything its rays need.
     fn probe_again(
         &mut self,
-        next: &CameraParams,
+        rounds: LaterRounds,
         opts: &RenderOptions,
-        mut open: Vec<u32>,
-        mut needed: Vec<u32>,
         evictions_at_probe: u64,
     ) -> Result<()> {
+        let LaterRounds {
+            camera,
+            mut open,
+            mut needed,
+        } = rounds;
+        let next = &camera;
         let mut settled = open.is_empty();
         while !open.is_empty()
             && self.frame.stats.probe_rounds < self.opts.probe_rounds

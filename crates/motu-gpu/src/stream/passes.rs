@@ -52,39 +52,39 @@ impl<'a> StreamingRenderer<'a> {
         let final_off = (inc_off + 4 + 4 * pixels).div_ceil(16) * 16;
         let mut full_count = pixels as u32;
         let mut list: Vec<u32> = guard.to_vec();
-        self.frame.stats.guard_rays = guard.len() as u64;
+        self.frame.stats_mut().guard_rays = guard.len() as u64;
         let mut guard_demand = Demand::default();
         let max_passes = self.frame_pass_cap();
         loop {
             let pass_t0 = Instant::now();
-            let before = PassCounters::of(&self.frame.stats);
+            let before = PassCounters::of(self.frame.stats());
             let traced = u64::from(full_count) + list.len() as u64;
-            self.frame.stats.passes += 1;
-            let first = self.frame.stats.passes == 1;
+            self.frame.stats_mut().passes += 1;
+            let first = self.frame.stats().passes == 1;
             let PassReadback {
                 stamps,
                 requests,
                 incomplete,
                 trace_ms,
             } = self.trace_pass(fb, pixels, full_count, &list, first, 0)?;
-            self.frame.stats.trace_ms += trace_ms;
+            self.frame.stats_mut().trace_ms += trace_ms;
             let count = incomplete.len() as u32;
             // Resident BLASes seen refresh their LRU age; empty ones are needed (some pixel's
             // nearest open one), open (needed later) or, in pass 1, prefetch candidates (the
             // guard band saw them).
             let mut demand = Demand::default();
-            for (b, level) in self.sightings(&stamps, true) {
+            for Sighting { blas: b, level } in self.sightings(&stamps, true) {
                 let n = requests.get(b as usize).copied().unwrap_or(0);
                 match level {
-                    LEVEL_NEEDED => demand.blases.push((b, n)),
+                    LEVEL_NEEDED => demand.need(b, n),
                     LEVEL_OPEN => {
-                        demand.later.push((b, 0));
+                        demand.open(b);
                         if first {
                             // Also a prefetch candidate when the frame completes without it.
-                            guard_demand.blases.push((b, 0));
+                            guard_demand.need(b, 0);
                         }
                     }
-                    _ if first => guard_demand.blases.push((b, 0)),
+                    _ if first => guard_demand.need(b, 0),
                     _ => {}
                 }
             }
@@ -95,26 +95,26 @@ impl<'a> StreamingRenderer<'a> {
             let mut pass = PassStats {
                 traced,
                 open_pixels: u64::from(count),
-                needed: demand.blases.len() as u32,
-                later: demand.later.len() as u32,
+                needed: demand.needed().len() as u32,
+                later: demand.later().len() as u32,
                 ..Default::default()
             };
             let host_before_build = pass_t0.elapsed().as_secs_f64() * 1e3;
             let log_pass = |s: &mut Self, mut pass: PassStats, host_extra: f64| {
-                before.since(&s.frame.stats, &mut pass);
+                before.since(s.frame.stats(), &mut pass);
                 pass.host_ms = (host_before_build - pass.trace_ms).max(0.0) + host_extra;
-                s.frame.stats.host_ms += pass.host_ms;
-                s.frame.stats.pass_log.push(pass);
+                s.frame.stats_mut().host_ms += pass.host_ms;
+                s.frame.stats_mut().pass_log.push(pass);
             };
             if count == 0 {
                 log_pass(self, pass, 0.0);
-                self.frame.stats.complete = true;
+                self.frame.stats_mut().complete = true;
                 break;
             }
             let spent = self.frame_build_spent();
-            if self.frame.stats.passes >= max_passes || spent {
-                self.frame.stats.incomplete_pixels = u64::from(count);
-                self.frame.stats.build_budget_spent = spent;
+            if self.frame.stats().passes >= max_passes || spent {
+                self.frame.stats_mut().incomplete_pixels = u64::from(count);
+                self.frame.stats_mut().build_budget_spent = spent;
                 if self.builds_after_last_pass() {
                     // Bounded frames: build toward the next frame (what is left of the budget).
                     if !spent {
@@ -126,7 +126,7 @@ impl<'a> StreamingRenderer<'a> {
                 } else {
                     tracing::warn!(
                         incomplete = count,
-                        passes = self.frame.stats.passes,
+                        passes = self.frame.stats().passes,
                         "stream pass cap reached with pixels unfinished"
                     );
                 }
@@ -139,7 +139,7 @@ impl<'a> StreamingRenderer<'a> {
                 return Err(e);
             }
             let t_list = Instant::now();
-            self.frame.stats.reshot_pixels += u64::from(count);
+            self.frame.stats_mut().reshot_pixels += u64::from(count);
             full_count = 0;
             list = relist(&incomplete);
             pass.open_pixels = u64::from(count);
@@ -186,10 +186,10 @@ impl<'a> StreamingRenderer<'a> {
             .readback
             .read_vec(final_off + pixels * 16, pixels as usize)?;
         let counters: Vec<u32> = fb.readback.read_vec(final_off + pixels * 20, STAT_WORDS)?;
-        if !self.frame.stats.complete && self.opts.fallback != StreamFallback::Off {
+        if !self.frame.stats().complete && self.opts.fallback != StreamFallback::Off {
             // Each wrote its fallback when it was deferred (render_pixel.glsl).
-            self.frame.stats.fallback_pixels = list.len() as u64;
-        } else if !self.frame.stats.complete {
+            self.frame.stats_mut().fallback_pixels = list.len() as u64;
+        } else if !self.frame.stats().complete {
             // Never written: misses, magenta so they are not mistaken for sky.
             // `list` holds the last pass's incomplete pixels, unbiased.
             for &v in list {
@@ -215,10 +215,10 @@ impl<'a> StreamingRenderer<'a> {
     /// `FrameStreamStats::first_pass_missed_evicted`), from the last probe's sightings, which
     /// it then forgets.
     fn classify_first_pass_misses(&mut self, demand: &Demand) {
-        let sighting = std::mem::take(&mut self.frame.probe_sighting);
-        for &(b, _) in &demand.blases {
-            let s = sighting.get(b as usize).copied().unwrap_or(0);
-            let st = &mut self.frame.stats;
+        let sighting = self.frame.take_probe_sighting();
+        for r in demand.needed() {
+            let s = sighting.get(r.blas as usize).copied().unwrap_or(0);
+            let st = self.frame.stats_mut();
             if s & PROBE_MET != 0 {
                 st.first_pass_missed_probed += 1;
             } else if s & PROBE_RESIDENT != 0 {
@@ -272,6 +272,14 @@ impl PassCounters {
     }
 }
 
+/// A non-resident buildable BLAS a pass met, with the stamp level it met it at
+/// (`LEVEL_NEEDED`: some ray's nearest open structure, `LEVEL_OPEN`: open for some ray, lower:
+/// passed through).
+pub(super) struct Sighting {
+    pub(super) blas: u32,
+    pub(super) level: u32,
+}
+
 /// What one traced pass left for the host: per-BLAS stamps and request counts, and the
 /// incomplete pixels (packed `x | y << 16`).
 pub(super) struct PassReadback {
@@ -287,7 +295,7 @@ impl<'a> StreamingRenderer<'a> {
     /// BLAS it met is seen now (`last_seen`); a resident one refreshes its LRU age and, when
     /// `this_frame` (the frame's own passes, not the probe of the next frame), counts in the
     /// frame's working set. Returns the non-resident buildable ones with their stamp level.
-    pub(super) fn sightings(&mut self, stamps: &[u32], this_frame: bool) -> Vec<(u32, u32)> {
+    pub(super) fn sightings(&mut self, stamps: &[u32], this_frame: bool) -> Vec<Sighting> {
         let mut out = Vec::new();
         for (b, &v) in stamps.iter().enumerate() {
             if v >> 2 != self.frame.stamp() {
@@ -302,7 +310,10 @@ impl<'a> StreamingRenderer<'a> {
                     self.res.saw(b, self.frame.stamp());
                 }
             } else if self.topo.buildable(b) {
-                out.push((b as u32, v & 3));
+                out.push(Sighting {
+                    blas: b as u32,
+                    level: v & 3,
+                });
             }
         }
         out

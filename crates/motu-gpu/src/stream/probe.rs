@@ -57,7 +57,7 @@ use motu_abi::camera::CameraParams;
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
 use super::params::{passed_mark, probe_flags};
-use super::passes::{pack_biased, relist, PassReadback, LEVEL_NEEDED, PROBE_MET, PROBE_RESIDENT};
+use super::passes::{pack_biased, relist, PassReadback, Sighting, LEVEL_NEEDED};
 use super::StreamingRenderer;
 use crate::error::Result;
 use crate::render::{frame_params, RenderOptions};
@@ -114,14 +114,14 @@ impl<'a> StreamingRenderer<'a> {
         let rays = u64::from(full) + list.len() as u64;
         // A later round marks as the first did.
         let pass_rows = if later {
-            self.frame.stats.probe_pass_rows
+            self.frame.stats().probe_pass_rows
         } else {
             self.opts.pass_marks.rows(super::PassMarks::auto_window(
                 self.frame.number(),
                 self.frame.pass_marks_held(),
             ))
         };
-        self.frame.stats.probe_pass_rows = pass_rows;
+        self.frame.stats_mut().probe_pass_rows = pass_rows;
         let resident: Vec<bool> = self.res.blas.iter().map(Option::is_some).collect();
         let PassReadback {
             stamps,
@@ -142,37 +142,26 @@ impl<'a> StreamingRenderer<'a> {
                 if passed_mark(v, stamp) && self.res.blas[b].is_some() && self.topo.buildable(b) {
                     self.res.saw(b, at);
                     self.res.last_seen[b] = self.res.last_seen[b].max(at);
-                    self.frame.stats.probe_pass_marks += 1;
+                    self.frame.stats_mut().probe_pass_marks += 1;
                 }
             }
         }
         self.count_probe_need(&stamps, stamp, !later);
         // What the rounds saw together (a later round adds to the first's).
-        if !later || self.frame.probe_sighting.len() != stamps.len() {
-            self.frame.probe_sighting = vec![0; stamps.len()];
-        }
-        for ((s, &v), &r) in self
-            .frame
-            .probe_sighting
-            .iter_mut()
-            .zip(&stamps)
-            .zip(&resident)
-        {
-            *s |=
-                (if v >> 2 == stamp { PROBE_MET } else { 0 }) | if r { PROBE_RESIDENT } else { 0 };
-        }
-        self.frame.stats.probe_rays += rays;
-        self.frame.stats.probe_ms += trace_ms;
-        self.frame.stats.probe_rounds += 1;
+        self.frame
+            .note_probe_sighting(&stamps, &resident, stamp, !later);
+        self.frame.stats_mut().probe_rays += rays;
+        self.frame.stats_mut().probe_ms += trace_ms;
+        self.frame.stats_mut().probe_rounds += 1;
         let mut demand = Demand::default();
-        for (b, level) in self.sightings(&stamps, false) {
+        for Sighting { blas: b, level } in self.sightings(&stamps, false) {
             // Needed (a ray's nearest) first by request count; then everything else it met.
             let n = if level == LEVEL_NEEDED {
                 requests.get(b as usize).copied().unwrap_or(0).max(1)
             } else {
                 0
             };
-            demand.blases.push((b, n));
+            demand.need(b, n);
         }
         demand.sort();
         Ok(ProbeFound {
@@ -186,11 +175,7 @@ impl<'a> StreamingRenderer<'a> {
     /// BLASes some round's rays met or marked passed, with their bytes then (structures, and
     /// each of their meshes once).
     fn count_probe_need(&mut self, stamps: &[u32], stamp: u32, first: bool) {
-        let mut need = if first {
-            ProbeNeed::default()
-        } else {
-            std::mem::take(&mut self.frame.probe_need)
-        };
+        let mut need = self.frame.take_probe_need(first);
         for (b, &v) in stamps.iter().enumerate() {
             let used = v >> 2 == stamp || passed_mark(v, stamp);
             let Some(a) = self.res.blas[b]
@@ -206,11 +191,11 @@ impl<'a> StreamingRenderer<'a> {
                 }
             }
         }
-        self.frame.stats.probe_need_blases = need.blases.len() as u32;
+        self.frame.stats_mut().probe_need_blases = need.blases.len() as u32;
         let mesh_bytes = need.meshes.values().sum::<u64>();
-        self.frame.stats.probe_need_bytes = need.blases.values().sum::<u64>() + mesh_bytes;
-        self.frame.stats.probe_need_mesh_bytes = mesh_bytes;
-        self.frame.probe_need = need;
+        self.frame.stats_mut().probe_need_bytes = need.blases.values().sum::<u64>() + mesh_bytes;
+        self.frame.stats_mut().probe_need_mesh_bytes = mesh_bytes;
+        self.frame.keep_probe_need(need);
     }
 }
 

@@ -122,7 +122,7 @@ impl<'a> StreamingRenderer<'a> {
     pub(super) fn rebuild_dirty(&mut self) -> Result<()> {
         let t0 = std::time::Instant::now();
         let r = self.rebuild_dirty_untimed();
-        self.frame.stats.tlas_ms += t0.elapsed().as_secs_f64() * 1e3;
+        self.frame.stats_mut().tlas_ms += t0.elapsed().as_secs_f64() * 1e3;
         r
     }
 
@@ -170,7 +170,7 @@ impl<'a> StreamingRenderer<'a> {
             }
             let (group, need) = self.next_rebuild_group()?;
             self.rebuild_group(&group, need)?;
-            self.frame.stats.tlas_rebuild_groups += 1;
+            self.frame.stats_mut().tlas_rebuild_groups += 1;
         }
         Ok(())
     }
@@ -253,7 +253,7 @@ impl<'a> StreamingRenderer<'a> {
                 let now: Vec<u32> = target(s);
                 s.build_tlases(&now)
             }) {
-                Ok(()) => self.frame.stats.tlas_rebuilt += rebuilt,
+                Ok(()) => self.frame.stats_mut().tlas_rebuilt += rebuilt,
                 Err(GpuError::Budget(_)) if self.unpin_pass_pins() => {}
                 Err(GpuError::Budget(msg)) => {
                     // Give back about a 32nd of the budget of this step's builds per round
@@ -264,11 +264,11 @@ impl<'a> StreamingRenderer<'a> {
                     while given < step && self.res.built_now.len() > 1 {
                         let b = self.res.built_now.pop().unwrap_or_default();
                         given += self.res.blas_bytes[b as usize];
-                        self.frame.stats.deferred += 1;
+                        self.frame.stats_mut().deferred += 1;
                         if self.res.holds(b) {
                             self.clone_out(&[b as usize])?;
                             self.evict(b as usize);
-                            self.frame.stats.evicted -= 1;
+                            self.frame.stats_mut().evicted -= 1;
                         }
                     }
                     let Some(last) = self.res.built_now.pop() else {
@@ -283,12 +283,12 @@ impl<'a> StreamingRenderer<'a> {
                             self.totals.skeleton_bytes
                         ))));
                     };
-                    self.frame.stats.deferred += 1;
+                    self.frame.stats_mut().deferred += 1;
                     if self.res.holds(last) {
                         self.clone_out(&[last as usize])?;
                         self.evict(last as usize);
                         // Given back, not evicted for room: count it as deferred only.
-                        self.frame.stats.evicted -= 1;
+                        self.frame.stats_mut().evicted -= 1;
                     }
                 }
                 Err(e) => return Err(e),

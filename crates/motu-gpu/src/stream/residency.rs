@@ -134,15 +134,15 @@ impl<'a> StreamingRenderer<'a> {
     /// are left). Returns false when nothing could be evicted.
     pub(super) fn evict_some(&mut self, bytes: u64, why: EvictWhy) -> Result<bool> {
         let t0 = std::time::Instant::now();
-        let before = self.frame.stats.evicted;
+        let before = self.frame.stats().evicted;
         let r = self.evict_some_untimed(bytes);
-        let n = self.frame.stats.evicted - before;
+        let n = self.frame.stats().evicted - before;
         match why {
             EvictWhy::BuildRoom => {}
-            EvictWhy::TlasRoom => self.frame.stats.evicted_for_tlas += n,
-            EvictWhy::Refused => self.frame.stats.evicted_on_refusal += n,
+            EvictWhy::TlasRoom => self.frame.stats_mut().evicted_for_tlas += n,
+            EvictWhy::Refused => self.frame.stats_mut().evicted_on_refusal += n,
         }
-        self.frame.stats.evict_ms += t0.elapsed().as_secs_f64() * 1e3;
+        self.frame.stats_mut().evict_ms += t0.elapsed().as_secs_f64() * 1e3;
         r
     }
 
@@ -184,9 +184,9 @@ impl<'a> StreamingRenderer<'a> {
     /// Releases BLAS `b` with the meshes only it used; its resident parents become dirty.
     pub(super) fn evict(&mut self, b: usize) {
         let bytes = self.res.residency.remove(ItemId(b as u32)).unwrap_or(0);
-        self.frame.stats.evicted += 1;
+        self.frame.stats_mut().evicted += 1;
         self.res.evictions += 1;
-        self.frame.stats.evicted_bytes += bytes;
+        self.frame.stats_mut().evicted_bytes += bytes;
         if let Some(a) = self.res.blas.get_mut(b).and_then(Option::take) {
             a.release(&mut self.heap);
         }

@@ -354,7 +354,7 @@ impl TlasBuild<'_, '_> {
             let tail = [false, true].map(|marks| proxies.address(t, marks));
             let done = if r.tlases.is_persistent(t) {
                 r.update_persistent(t, addrs, tail).map(|n| {
-                    let st = &mut r.frame.stats;
+                    let st = r.frame.stats_mut();
                     st.tlas_builds += 1;
                     st.tlas_updates += 1;
                     st.tlas_instances_written += n;
@@ -372,16 +372,16 @@ impl TlasBuild<'_, '_> {
                                 persistent: Some(p),
                             },
                         );
-                        r.frame.stats.tlas_builds += 1;
-                        r.frame.stats.tlas_instances_written += u64::from(n);
+                        r.frame.stats_mut().tlas_builds += 1;
+                        r.frame.stats_mut().tlas_instances_written += u64::from(n);
                     })
                     .and_then(|()| {
                         // Built over every instance's whole bounds (the topology of a full
                         // build); the non-resident ones now shrink to their points.
                         let n = r.update_persistent(t, addrs, tail)?;
-                        r.frame.stats.tlas_updates += 1;
-                        r.frame.stats.tlas_builds += 1;
-                        r.frame.stats.tlas_instances_written += n;
+                        r.frame.stats_mut().tlas_updates += 1;
+                        r.frame.stats_mut().tlas_builds += 1;
+                        r.frame.stats_mut().tlas_instances_written += n;
                         Ok(())
                     })
             };
@@ -432,7 +432,7 @@ impl TlasBuild<'_, '_> {
             offsets.push(total_bytes);
             total_bytes += u64::from(n) * RECORD_BYTES as u64;
         }
-        let st = &mut r.frame.stats;
+        let st = r.frame.stats_mut();
         st.tlas_builds += ids.len() as u32;
         st.tlas_instances_written += total_bytes / RECORD_BYTES as u64;
         let transient = sizes

@@ -85,7 +85,7 @@ impl StreamingRenderer<'_> {
         t: Transfer,
         size_bytes: u64,
     ) -> motu_vk::Result<HeapBuffer> {
-        self.frame.stats.transfer_batches += 1;
+        self.frame.stats_mut().transfer_batches += 1;
         if let Some(b) = self.reuse.transfer.slot(t).take() {
             if b.size_bytes() >= size_bytes {
                 return Ok(b);
@@ -97,7 +97,7 @@ impl StreamingRenderer<'_> {
         } else {
             size_bytes
         };
-        self.frame.stats.transfer_allocations += 1;
+        self.frame.stats_mut().transfer_allocations += 1;
         self.heap.alloc_buffer(
             t.label(),
             alloc_bytes,
