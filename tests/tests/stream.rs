@@ -6,8 +6,8 @@
 //! fewer triangles than rebuilding everything per frame.
 
 use motu_tests::{
-    check_probe_rounds, gen_island, gpu_available, json_u64 as u, motu_ok, render as render_with,
-    render_env, report_json, report_peak_and_floor, s,
+    check_probe_rounds, gen_island, gpu_available, json_u64 as u, motu_json, motu_ok,
+    render as render_with, render_env, report_json, report_peak_and_floor, s,
 };
 use std::path::{Path, PathBuf};
 
@@ -919,4 +919,106 @@ fn proxy_clusters_stored_at_import_start_streamed_renders_and_bad_ones_are_made_
         "--max-mismatch",
         "0.001",
     ]);
+}
+
+/// The import's split cap in [`an_import_split_cap_is_the_streamers_default_and_its_stored_data_are_used`].
+const SPLIT_CAP: &str = "2000";
+
+/// Issue 45 item 1: `motu import --stream-split-instances N` makes the stream split at N and
+/// the proxy boxes and clusters over the split hierarchy, and records N; a streamed render
+/// without the flag splits at the package's N, so everything stored is used (none stale) on a
+/// root that really splits, and the image is the full build's. A render with another cap makes
+/// its own (the stored entries are for another hierarchy: not used) and still draws the full
+/// build's image. The only test of stored data on a split root: the default cap splits only
+/// Moana-sized roots.
+#[test]
+fn an_import_split_cap_is_the_streamers_default_and_its_stored_data_are_used() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    motu_ok(&["gen", "island", "-o", s(&d.join("island"))]);
+    let pkg = d.join("split.motu");
+    motu_tests::import(
+        &d.join("island").join("scene.pbrt"),
+        &pkg,
+        &["--stream-split-instances", SPLIT_CAP],
+    );
+    let info = motu_json(&["info", s(&pkg), "--json"]);
+    assert_eq!(
+        info["stream_split_instances"],
+        SPLIT_CAP.parse::<u64>().unwrap()
+    );
+    assert!(u(&info["stream_split_tlases"]) >= 1, "{info}");
+    assert!(
+        u(&info["stream_split_pieces"]) >= 2,
+        "the root splits at {SPLIT_CAP}: {info}"
+    );
+    let size = ["--width", "48", "--height", "27"];
+    let full_aov = d.join("full.aov");
+    render(&pkg, &full_aov, &size);
+    // `motu report` sizes the floor of the hierarchy split at the package's cap, as the
+    // renderer draws it.
+    let report = report_json(&pkg, "48", "27");
+    let sp = &report["streaming"]["stream_split"];
+    assert_eq!(sp["cap_instances"], info["stream_split_instances"], "{sp}");
+    assert_eq!(sp["pieces"], info["stream_split_pieces"], "{sp}");
+    let (peak, floor) = motu_tests::peak_and_floor(&report);
+    let budget_bytes = floor + (peak.saturating_sub(floor)) / 4;
+    assert!(budget_bytes < peak, "below the full build's need");
+    let budget = budget_bytes.to_string();
+    let streamed = |name: &str, extra: &[&str]| {
+        let aov = d.join(format!("{name}.aov"));
+        let mut args = vec![
+            "--stream",
+            // The streamer's start is under test, whatever the budget holds.
+            "--stream-always",
+            "--vram-budget",
+            &budget,
+        ];
+        args.extend(size);
+        args.extend(extra);
+        let st = render(&pkg, &aov, &args);
+        assert_eq!(st["stream"]["frames"][0]["complete"], true, "{name}: {st}");
+        motu_ok(&["compare", s(&full_aov), s(&aov), "--max-mismatch", "0.001"]);
+        st
+    };
+
+    // The package's cap: its split, proxy clusters and boxes, none stale.
+    let st = streamed("package", &[]);
+    let startup = &st["stream"]["startup"];
+    assert_eq!(
+        startup["split_instances"], info["stream_split_instances"],
+        "{startup}"
+    );
+    assert_eq!(startup["split_instances_source"], "package", "{startup}");
+    assert_eq!(
+        startup["split_tlases"], info["stream_split_tlases"],
+        "{startup}"
+    );
+    assert_eq!(
+        startup["split_pieces"], info["stream_split_pieces"],
+        "{startup}"
+    );
+    assert_eq!(startup["clusters_source"], "package", "{startup}");
+    assert_eq!(u(&startup["clusters_stale_tlases"]), 0, "{startup}");
+    assert_eq!(startup["proxy_boxes_source"], "package", "{startup}");
+    let totals = &st["stream"]["totals"];
+    assert_eq!(u(&totals["proxy_boxes_stale_blases"]), 0, "{totals}");
+    assert!(u(&totals["proxy_boxes"]) > 0, "{totals}");
+
+    // Another cap on the command line: another hierarchy, whose clusters and boxes are made.
+    let st = streamed("unsplit", &["--stream-split-instances", "0"]);
+    let startup = &st["stream"]["startup"];
+    assert_eq!(startup["split_instances"], 0, "{startup}");
+    assert_eq!(startup["split_instances_source"], "flag", "{startup}");
+    assert_eq!(u(&startup["split_pieces"]), 0, "{startup}");
+    assert_eq!(startup["clusters_source"], "computed", "{startup}");
+    assert_eq!(startup["proxy_boxes_source"], "computed", "{startup}");
+    assert!(
+        u(&st["stream"]["totals"]["proxy_boxes_stale_blases"]) > 0,
+        "{}",
+        st["stream"]["totals"]
+    );
 }

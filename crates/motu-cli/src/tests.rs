@@ -145,3 +145,39 @@ fn render_library_defaults_are_the_render_flags_defaults() {
         refused("--stream-split-instances", bad);
     }
 }
+
+/// `motu import pkg -o x.motu` with `flags`, parsed.
+fn import_args(flags: &[&str]) -> Result<cli::ImportArgs, clap::Error> {
+    let args = ["motu", "import", "scene.pbrt", "-o", "x.motu"]
+        .iter()
+        .chain(flags);
+    match cli::Cli::try_parse_from(args)?.command {
+        cli::Command::Import(a) => Ok(a),
+        _ => panic!("not import"),
+    }
+}
+
+/// The import's split cap takes render's counts: default a million, any count from 2, 0 for
+/// none; 1 and non-counts refused with the reason.
+#[test]
+fn import_split_cap_parses_as_renders() {
+    let a = import_args(&[]).expect("defaults");
+    assert_eq!(
+        a.stream_split_instances,
+        motu_compile::STREAM_SPLIT_INSTANCES
+    );
+    for (flag, want) in [("0", 0), ("2", 2), ("64", 64)] {
+        let a = import_args(&["--stream-split-instances", flag]).expect(flag);
+        assert_eq!(a.stream_split_instances, want);
+    }
+    for bad in ["1", "many", "5000000000"] {
+        let e = import_args(&["--stream-split-instances", bad])
+            .expect_err(bad)
+            .to_string();
+        assert!(e.contains("--stream-split-instances"), "{e}");
+    }
+    let e = import_args(&["--stream-split-instances", "1"])
+        .expect_err("1")
+        .to_string();
+    assert!(e.contains("at least 2 instances"), "{e}");
+}

@@ -49,6 +49,11 @@ pub struct ImportOptions {
     /// section, FORMAT.md) so streamed starts and `motu report` need not run a binned SAH over
     /// every instance (`--no-proxy-clusters`: off).
     pub proxy_clusters: bool,
+    /// `--stream-split-instances`: the cap the stored stream split (and the proxy boxes and
+    /// clusters made over the hierarchy it gives) is made for, recorded in the meta
+    /// (`stream_split.cap_instances`), so streamed renders split at it by default
+    /// ([`motu_compile::STREAM_SPLIT_INSTANCES`] by default; 0: no split).
+    pub stream_split_instances: u32,
     /// Called as parsing advances and once when it is done (the CLI's progress bar).
     pub progress: Option<ProgressFn>,
     /// Cut meshes over the partition bound into clusters while parsing (`precut.rs`) rather
@@ -82,6 +87,7 @@ impl Default for ImportOptions {
             texture_max: 1024,
             ptex_max: crate::textures::DEFAULT_PTEX_MAX,
             proxy_boxes: true,
+            stream_split_instances: motu_compile::STREAM_SPLIT_INSTANCES,
             proxy_clusters: true,
             progress: None,
             cut_while_parsing: true,

@@ -8,18 +8,22 @@ use motu_abi::HierarchyView;
 use motu_compile::{proxy_clusters, CompiledScene, StoredStreamSplit};
 use motu_package::PackageWriter;
 
-/// Splits `compiled`'s TLASes over [`motu_compile::STREAM_SPLIT_INSTANCES`] as `motu render
-/// --stream` does, writes the split's sections and returns the meta entry that describes
-/// them, and the split (`None`: no TLAS over the cap). Split in place: the instance table is
-/// not copied (`compiled` ends as it was).
+/// Splits `compiled`'s TLASes over `cap` instances (`--stream-split-instances`, by default
+/// [`motu_compile::STREAM_SPLIT_INSTANCES`]; 0: none) as `motu render --stream` does, writes
+/// the split's sections and returns the meta entry that describes them (with the cap: the
+/// renderer's default for this package), and the split (`None`: no TLAS over the cap). Split
+/// in place: the instance table is not copied (`compiled` ends as it was).
 pub(crate) fn write_stream_split(
     writer: &mut PackageWriter,
     compiled: &mut CompiledScene,
+    cap: u32,
 ) -> Result<(motu_pack::StreamSplitMeta, Option<StoredStreamSplit>), ImportError> {
     let t = std::time::Instant::now();
-    let cap = motu_compile::STREAM_SPLIT_INSTANCES;
-    let stored =
-        motu_compile::stored_stream_split_in_place(compiled, cap).map_err(ImportError::Compile)?;
+    let stored = if cap == 0 {
+        None
+    } else {
+        motu_compile::stored_stream_split_in_place(compiled, cap).map_err(ImportError::Compile)?
+    };
     let mut meta = motu_pack::StreamSplitMeta {
         cap_instances: cap,
         tlases_split: 0,
@@ -41,6 +45,7 @@ pub(crate) fn write_stream_split(
     }
     tracing::info!(
         split_ms = t.elapsed().as_secs_f64() * 1e3,
+        cap,
         tlases = meta.tlases_split,
         pieces = meta.pieces,
         peak_rss_bytes = crate::peak_rss_bytes(),

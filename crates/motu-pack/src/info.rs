@@ -60,6 +60,13 @@ pub struct PackageInfo {
     pub ptex_textures: usize,
     pub ptex_faces: u64,
     pub ptex_bytes: u64,
+    /// The cap `motu import --stream-split-instances` stored its stream split, proxy boxes and
+    /// clusters for (`motu render --stream` splits at it unless told otherwise; 0: no split),
+    /// the TLASes over it and the pieces they were split into. `null` and 0: a package written
+    /// before the cap was recorded (streamed renders split at 1,000,000).
+    pub stream_split_instances: Option<u32>,
+    pub stream_split_tlases: u64,
+    pub stream_split_pieces: u64,
 }
 
 impl PackageInfo {
@@ -131,6 +138,9 @@ impl PackageInfo {
             ptex_textures: ptex().count(),
             ptex_faces: ptex().map(|t| u64::from(t.height)).sum(),
             ptex_bytes: ptex().map(|t| t.texel_count() * 4).sum(),
+            stream_split_instances: meta.stream_split.as_ref().map(|m| m.cap_instances),
+            stream_split_tlases: meta.stream_split.as_ref().map_or(0, |m| m.tlases_split),
+            stream_split_pieces: meta.stream_split.as_ref().map_or(0, |m| m.pieces),
         }
     }
 }

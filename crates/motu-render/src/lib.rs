@@ -18,7 +18,8 @@
 //! lights, sky, the AO distance (`shading.rs`), the streaming renderer's per-frame bounds, the
 //! split of large TLASes it renders (`stream_split`, which the report, bench flights and the viewer
 //! also use; `package_stream_split` reads the split the import stored for the package's own view
-//! instead of making it) and the streaming frame loop (`stream.rs`, with `stream.startup`, the time
+//! instead of making it, at the cap the import recorded unless `--stream-split-instances` names
+//! another: `package_split_cap`) and the streaming frame loop (`stream.rs`, with `stream.startup`, the time
 //! to first pixel by phase, and `StreamPlan`: the proxy clusters made once for the floor and the
 //! renderer); the structure cache's tiers from `--host-cache`/`--as-cache` and the package identity
 //! its keys start from (`cache.rs`); the backend and the best one of the devices (`backend.rs`);
@@ -66,7 +67,10 @@ pub use settings::{
 };
 pub use shading::{scene_shading, ShadingOptions, AO_DISTANCE_OF_DIAGONAL};
 pub use stats::StreamStartup;
-pub use stream::{package_stream_split, stored_stream_split, stream_split, StreamBounds};
+pub use stream::{
+    package_split_cap, package_stream_split, stored_stream_split, stream_split, SplitCapSource,
+    StreamBounds,
+};
 
 use motu_alloc::format_size;
 use std::path::PathBuf;

@@ -359,6 +359,15 @@ pub struct StreamStartup {
     pub device_ms: f64,
     /// Splitting large TLASes for streaming ([`crate::stream_split`]).
     pub split_ms: f64,
+    /// The cap the TLASes were split at (`--stream-split-instances`; 0: no split).
+    pub split_instances: u32,
+    /// Where that cap came from: "flag" (`--stream-split-instances`), "package" (recorded by
+    /// `motu import --stream-split-instances`, the cap its stored split, proxy boxes and
+    /// clusters were made for) or "default" (a package that recorded none: 1,000,000).
+    pub split_instances_source: &'static str,
+    /// TLASes split at that cap, and the pieces they were split into (0 and 0: none over it).
+    pub split_tlases: u64,
+    pub split_pieces: u64,
     /// The proxy clusters of every TLAS (`motu_gpu::StreamPlan`), which the floor and the
     /// renderer share.
     pub clusters_ms: f64,

@@ -92,17 +92,61 @@ impl StreamBounds {
     }
 }
 
+/// Where a streamed render's split cap (`--stream-split-instances`) came from
+/// (`stream.startup.split_instances_source` in `--stats`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SplitCapSource {
+    /// Given on the command line.
+    Flag,
+    /// The cap `motu import --stream-split-instances` recorded in the package
+    /// (`meta.stream_split.cap_instances`), which its stored split, proxy boxes and clusters
+    /// were made for.
+    Package,
+    /// A package written before the cap was recorded: [`motu_compile::STREAM_SPLIT_INSTANCES`].
+    Default,
+}
+
+impl SplitCapSource {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Flag => "flag",
+            Self::Package => "package",
+            Self::Default => "default",
+        }
+    }
+}
+
+/// The cap a streamed render of `pkg` splits TLASes at: `flag` (`--stream-split-instances`)
+/// when given, else the one the import recorded (so the split, proxy boxes and clusters it
+/// stored are the hierarchy drawn), else [`motu_compile::STREAM_SPLIT_INSTANCES`].
+pub fn package_split_cap(
+    pkg: &motu_pack::ScenePackage,
+    flag: Option<u32>,
+) -> (u32, SplitCapSource) {
+    if let Some(cap) = flag {
+        return (cap, SplitCapSource::Flag);
+    }
+    match &pkg.meta().stream_split {
+        Some(m) => (m.cap_instances, SplitCapSource::Package),
+        None => (
+            motu_compile::STREAM_SPLIT_INSTANCES,
+            SplitCapSource::Default,
+        ),
+    }
+}
+
 /// [`stream_split`] of `pkg`'s own hierarchy, read back from the split the import stored for
 /// this cap (FORMAT.md sections 13–17) instead of made again: a binned SAH over every instance
 /// of a large root (10 s of island 0.63's start on the H200 host) becomes a table read. Any
 /// other view (a subset), another cap, or a package written before splits were stored is
-/// split here, as before.
+/// split here, as before. `split_instances` `None`: the package's cap ([`package_split_cap`]).
 pub fn package_stream_split(
     pkg: &motu_pack::ScenePackage,
     view: &HierarchyView<'_>,
     split_instances: Option<u32>,
 ) -> Result<Option<motu_compile::StreamSplit>, RenderError> {
-    let cap = split_instances.unwrap_or(motu_compile::STREAM_SPLIT_INSTANCES);
+    let (cap, _) = package_split_cap(pkg, split_instances);
+    let split_instances = Some(cap);
     if cap == 0 {
         return Ok(None);
     }
@@ -240,9 +284,13 @@ pub(crate) fn render_streaming(
         }
     }
     let t = Instant::now();
-    let split = tracing::info_span!("split")
-        .in_scope(|| package_stream_split(pkg, view, stream.bounds.split_instances))?;
+    let (cap, cap_source) = package_split_cap(pkg, stream.bounds.split_instances);
+    startup.split_instances = cap;
+    startup.split_instances_source = cap_source.as_str();
+    let split =
+        tracing::info_span!("split").in_scope(|| package_stream_split(pkg, view, Some(cap)))?;
     startup.split_ms = ms_since(t);
+    (startup.split_tlases, startup.split_pieces) = split.as_ref().map_or((0, 0), |s| s.counts());
     let view = &split.as_ref().map_or(*view, |sp| sp.view(view));
     let (pose, w, h) = camera_pose(
         pkg,
@@ -338,6 +386,8 @@ pub(crate) fn render_streaming(
             tracing::info!(
                 device_ms = startup.device_ms,
                 split_ms = startup.split_ms,
+                split_instances = startup.split_instances,
+                split_instances_source = startup.split_instances_source,
                 clusters_ms = startup.clusters_ms,
                 clusters_source = startup.clusters_source,
                 floor_ms = startup.floor_ms,

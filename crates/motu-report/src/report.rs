@@ -62,7 +62,8 @@ pub struct StreamingReport {
     /// under the budget.
     pub mesh_bytes: u64,
     /// The TLASes `motu render --stream` splits into pieces when it loads the package (those
-    /// over `cap_instances` instances, the default `--stream-split-instances`); the floor and
+    /// over `cap_instances` instances, the default `--stream-split-instances`: the cap the
+    /// import recorded, else 1,000,000); the floor and
     /// the persistent estimate above are those of the split hierarchy. `None`: no TLAS over
     /// the cap.
     pub stream_split: Option<StreamSplitReport>,
@@ -169,19 +170,32 @@ pub fn build_report_at(
         }),
     };
     let view = pkg.view()?;
-    let split = motu_render::stored_stream_split(pkg, &view, motu_render::STREAM_SPLIT_INSTANCES)?;
+    // The cap a streamed render of the package splits at by default: the one its import
+    // recorded (`motu import --stream-split-instances`).
+    let (cap, _) = motu_render::package_split_cap(pkg, None);
+    let split = if cap == 0 {
+        Some(None)
+    } else {
+        motu_render::stored_stream_split(pkg, &view, cap)?
+    };
     // The proxy clusters the import stored (checked TLAS by TLAS against the split hierarchy).
     let clusters = motu_render::stored_proxy_clusters(pkg);
-    let stored = Stored { split, clusters };
+    let stored = Stored {
+        split,
+        clusters,
+        cap: Some(cap),
+    };
     build(&view, &input, sizes, budget_bytes, stored)
 }
 
 /// What a package stored for its readers: the stream split (`None`: split here) and the proxy
-/// clusters' section (`None`: made here).
+/// clusters' section (`None`: made here), and the split cap it recorded (`None`:
+/// [`motu_render::STREAM_SPLIT_INSTANCES`]).
 #[derive(Default)]
 struct Stored<'p> {
     split: Option<Option<motu_compile::StreamSplit>>,
     clusters: Option<&'p [u8]>,
+    cap: Option<u32>,
 }
 
 /// The element label of untagged root instances (after every real element id).
@@ -513,7 +527,7 @@ fn build(
     // The hierarchy the streamer renders: large TLASes split into pieces at load time.
     let split = match stored.split {
         Some(split) => split,
-        None => motu_render::stream_split(view, None)?,
+        None => motu_render::stream_split(view, stored.cap)?,
     };
     let streamed = split.as_ref().map_or(*view, |s| s.view(view));
     let plan = motu_gpu::StreamPlan::load(&streamed, stored.clusters, None);
@@ -529,7 +543,7 @@ fn build(
     streaming.stream_split = split.as_ref().map(|s| {
         let (tlases_split, pieces) = s.counts();
         StreamSplitReport {
-            cap_instances: motu_render::STREAM_SPLIT_INSTANCES,
+            cap_instances: stored.cap.unwrap_or(motu_render::STREAM_SPLIT_INSTANCES),
             tlases_split,
             pieces,
         }

@@ -88,6 +88,13 @@ pub struct ImportArgs {
     /// instead.
     #[arg(long)]
     pub no_proxy_clusters: bool,
+    /// The split `motu render --stream` makes of every TLAS over N instances (spatial pieces
+    /// rebuilt one at a time) is made here and stored, with the proxy boxes and clusters of
+    /// the hierarchy it gives; the package records N, and streamed renders split at it unless
+    /// their own --stream-split-instances names another (then they make their own). 0: no
+    /// split.
+    #[arg(long, value_name = "N", default_value_t = motu_compile::STREAM_SPLIT_INSTANCES, value_parser = super::stream::parse_split_instances)]
+    pub stream_split_instances: u32,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,

@@ -104,7 +104,9 @@ pub struct StreamBoundArgs {
     /// the package is loaded, as `import --max-instances N` would split them, and the pieces
     /// are rebuilt one at a time as residency changes, so a rebuild takes one piece's room
     /// from resident BLASes. The package is unchanged (full builds trace the unsplit TLAS,
-    /// which is faster). 0: no split. Default 1000000.
+    /// which is faster). 0: no split. Default: the cap the package was imported with
+    /// (`import --stream-split-instances`, 1000000 unless given), whose stored split, proxy
+    /// boxes and clusters then need not be made again.
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_name = "N", value_parser = parse_split_instances)]
     pub stream_split_instances: Option<u32>,
     /// Streaming: before evicting structures for a TLAS rebuild's room or after a refused
@@ -193,7 +195,8 @@ impl From<StreamTlasArg> for motu_gpu::TlasUpdate {
     }
 }
 
-fn parse_split_instances(s: &str) -> Result<u32, String> {
+/// `--stream-split-instances` of `motu render`, `view`, `bench` and `import`.
+pub(crate) fn parse_split_instances(s: &str) -> Result<u32, String> {
     match s.parse::<u32>() {
         Ok(1) => {
             Err("1 is too small: a split TLAS holds at least 2 instances (0: no split)".into())

@@ -78,6 +78,7 @@ fn import_checked(a: ImportArgs) -> anyhow::Result<()> {
         ptex_max: a.ptex_max,
         proxy_boxes: !a.no_proxy_boxes,
         proxy_clusters: !a.no_proxy_clusters,
+        stream_split_instances: a.stream_split_instances,
         progress: crate::progress::import_bar(),
         // A/B switch for measurements (issue 48): the compile-time cut of the same package.
         cut_while_parsing: std::env::var_os("MOTU_IMPORT_CUT_AT_COMPILE").is_none(),

@@ -111,7 +111,8 @@ pub(super) fn finish(
     let textures = crate::textures::write_textures(&mut writer, scene, caps, &mut meta.warnings)?;
     drop(owned);
     let t = Instant::now();
-    let (split_meta, split) = crate::split::write_stream_split(&mut writer, compiled)?;
+    let (split_meta, split) =
+        crate::split::write_stream_split(&mut writer, compiled, o.stream_split_instances)?;
     meta.stream_split = Some(split_meta);
     let split_ms = t.elapsed().as_secs_f64() * 1e3;
     let mut view = compiled.view();
