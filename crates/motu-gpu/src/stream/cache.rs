@@ -88,6 +88,13 @@ struct ToStore<'s> {
     key: CacheKey,
 }
 
+/// A cache entry found for BLAS `blas`: its serialised structure and that blob's header.
+struct Hit {
+    blas: usize,
+    blob: Arc<[u8]>,
+    header: SerializedHeader,
+}
+
 /// A BLAS [`StreamingRenderer::persist_cache`] took out of the renderer to serialise, and
 /// where it goes back.
 struct TakenOut {
@@ -228,7 +235,7 @@ impl StreamingRenderer<'_> {
         let t = Instant::now();
         let ctx = self.ctx.clone();
         let compatible = |h: &[u8; 32]| ctx.acceleration_structure_compatible(h).unwrap_or(false);
-        let mut hits: Vec<(usize, Arc<[u8]>, SerializedHeader)> = Vec::new();
+        let mut hits: Vec<Hit> = Vec::new();
         let mut rest = Vec::new();
         let mut keyed: Vec<(usize, CacheKey)> = Vec::with_capacity(ids.len());
         for &b in ids {
@@ -253,7 +260,11 @@ impl StreamingRenderer<'_> {
                             Tier::Host => self.frame.stats_mut().restored_from_host += 1,
                             Tier::Disk => self.frame.stats_mut().restored_from_disk += 1,
                         }
-                        hits.push((b, blob, h));
+                        hits.push(Hit {
+                            blas: b,
+                            blob,
+                            header: h,
+                        });
                     }
                     _ => {
                         tracing::warn!(blas = b, "structure cache: an entry whose serialised header does not match its length; rebuilt");
@@ -284,13 +295,13 @@ impl StreamingRenderer<'_> {
     /// in halves (a single one that does not fit is left to be built, counted).
     fn restore_some(
         &mut self,
-        hits: &[(usize, Arc<[u8]>, SerializedHeader)],
+        hits: &[Hit],
         evict: bool,
         restored: &mut Vec<(usize, AccelStruct)>,
         rest: &mut Vec<usize>,
     ) -> Result<()> {
         let align = |v: u64| v.div_ceil(SERIALIZED_ALIGNMENT) * SERIALIZED_ALIGNMENT;
-        let total: u64 = hits.iter().map(|h| align(h.1.len() as u64)).sum();
+        let total: u64 = hits.iter().map(|h| align(h.blob.len() as u64)).sum();
         if total > TRANSFER_CAP_BYTES && hits.len() > 1 {
             let (l, r) = hits.split_at(hits.len() / 2);
             self.restore_some(l, evict, restored, rest)?;
@@ -307,7 +318,7 @@ impl StreamingRenderer<'_> {
             Err(GpuError::Budget(why)) => {
                 tracing::debug!(%why, "structure cache: no room to restore; building instead");
                 self.frame.stats_mut().restore_skipped += 1;
-                rest.push(hits[0].0);
+                rest.push(hits[0].blas);
             }
             Err(e) => return Err(e),
         }
@@ -315,21 +326,23 @@ impl StreamingRenderer<'_> {
     }
 
     /// One submission deserialising `hits` from a host-visible copy of their blobs.
-    fn deserialize(
-        &mut self,
-        hits: &[(usize, Arc<[u8]>, SerializedHeader)],
-    ) -> Result<Vec<(usize, AccelStruct)>> {
+    fn deserialize(&mut self, hits: &[Hit]) -> Result<Vec<(usize, AccelStruct)>> {
         let ctx = self.ctx.clone();
         let t = Instant::now();
         let align = |v: u64| v.div_ceil(SERIALIZED_ALIGNMENT) * SERIALIZED_ALIGNMENT;
-        let total: u64 = hits.iter().map(|h| align(h.1.len() as u64)).sum();
+        let total: u64 = hits.iter().map(|h| align(h.blob.len() as u64)).sum();
         let staging = self.transfer_buffer(Transfer::Upload, total)?;
         let mut out: Vec<(usize, AccelStruct)> = Vec::with_capacity(hits.len());
         let result = (|| -> Result<()> {
             let base = staging.device_address()?;
             let mut offsets = Vec::with_capacity(hits.len());
             let mut at = 0u64;
-            for (b, blob, h) in hits {
+            for Hit {
+                blas: b,
+                blob,
+                header: h,
+            } in hits
+            {
                 offsets.push(at);
                 let accel = AccelStruct::new(
                     &ctx,
@@ -346,7 +359,7 @@ impl StreamingRenderer<'_> {
             staging.with_mapped_mut(0, at as usize, |bytes| {
                 let mut parts = Vec::with_capacity(hits.len());
                 let mut rest = bytes;
-                for (i, (_, blob, _)) in hits.iter().enumerate() {
+                for (i, Hit { blob, .. }) in hits.iter().enumerate() {
                     let next = offsets
                         .get(i + 1)
                         .map_or(rest.len(), |&o| (o - offsets[i]) as usize);

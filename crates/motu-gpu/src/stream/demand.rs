@@ -13,6 +13,7 @@ use motu_vk::BudgetRefusal;
 
 /// One structure a build step may build: BLAS `blas`, and how many pixels' rays requested it
 /// as their nearest open structure (0: open or seen, no ray's nearest).
+/// Plain data (`pub(super)` fields): no invariant ties the two, [`Demand`] keeps the order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) struct Request {
     pub(super) blas: u32,

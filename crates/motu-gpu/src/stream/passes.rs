@@ -274,7 +274,7 @@ impl PassCounters {
 
 /// A non-resident buildable BLAS a pass met, with the stamp level it met it at
 /// (`LEVEL_NEEDED`: some ray's nearest open structure, `LEVEL_OPEN`: open for some ray, lower:
-/// passed through).
+/// passed through). Plain data (`pub(super)` fields): no invariant ties the two.
 pub(super) struct Sighting {
     pub(super) blas: u32,
     pub(super) level: u32,
