@@ -308,7 +308,7 @@ mod word_numbers {
                 text.push_str(f);
                 text.push_str("  ");
             }
-            text.push_str("]");
+            text.push(']');
             let mut lx = Lexer::new(text.as_bytes(), FileId(0));
             lx.next_token().unwrap();
             let mut got = Vec::new();
