@@ -1,7 +1,10 @@
 //! Whole-scene parse time (includes followed, PLY files loaded) on a pool of N threads, with
 //! `parallel_includes` on and off; the sink drops everything.
 //!
-//! `cargo run --release -p pbrt-import --example parse_scene -- SCENE.pbrt THREADS [REPEATS]`
+//! `cargo run --release -p pbrt-import --example parse_scene -- SCENE.pbrt THREADS [REPEATS] [MODE]`
+//!
+//! MODE is `both` (the default), `seq` (`parallel_includes` off) or `par` (on): one mode per
+//! process lets `/usr/bin/time` attribute CPU time to it.
 
 use std::path::Path;
 use std::time::Instant;
@@ -27,14 +30,20 @@ impl SceneSink for Null {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
-    let usage = "usage: parse_scene SCENE THREADS [REPEATS]";
+    let usage = "usage: parse_scene SCENE THREADS [REPEATS] [both|seq|par]";
     let path = args.next().ok_or(usage)?;
     let threads: usize = args.next().ok_or(usage)?.parse()?;
     let repeats: u32 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(3);
+    let modes: &[bool] = match args.next().as_deref() {
+        None | Some("both") => &[false, true],
+        Some("seq") => &[false],
+        Some("par") => &[true],
+        Some(_) => return Err(usage.into()),
+    };
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads.max(1))
         .build()?;
-    for parallel in [false, true] {
+    for &parallel in modes {
         let opts = ParseOptions {
             parallel_includes: parallel,
             allow_missing: true,

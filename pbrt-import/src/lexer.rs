@@ -154,6 +154,90 @@ const POW10: [f64; 23] = [
     1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
 ];
 
+/// Exact `f32` powers of ten (every one up to 1e10 is representable in f32).
+const POW10_F32: [f32; 8] = [1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7];
+
+/// Powers of ten as integers, for joining integer and fraction digits.
+const POW10_U64: [u64; 8] = [1, 10, 100, 1_000, 10_000, 100_000, 1_000_000, 10_000_000];
+
+/// The value of eight decimal digits held one per byte (`0..=9`, first digit in the lowest
+/// byte), by three multiplications instead of eight (the SWAR reduction `fast_float` uses).
+#[inline]
+fn eight_digits(v: u64) -> u32 {
+    const MASK: u64 = 0x0000_00FF_0000_00FF;
+    const MUL1: u64 = 0x000F_4240_0000_0064; // 100 + (1_000_000 << 32)
+    const MUL2: u64 = 0x0000_2710_0000_0001; // 1 + (10_000 << 32)
+    let v = v.wrapping_mul(10).wrapping_add(v >> 8);
+    let v = (v & MASK)
+        .wrapping_mul(MUL1)
+        .wrapping_add(((v >> 16) & MASK).wrapping_mul(MUL2))
+        >> 32;
+    v as u32
+}
+
+/// The run of 1 to 7 decimal digits that starts `bytes[start..]`, read as one 8-byte word:
+/// its value and length. `None` when fewer than 8 bytes remain, when the run is empty or
+/// when it is 8 digits or longer (the scalar parsers take those).
+#[inline]
+fn digit_run(bytes: &[u8], start: usize) -> Option<(u32, usize)> {
+    let word = u64::from_le_bytes(bytes.get(start..start + 8)?.try_into().ok()?);
+    let val = word.wrapping_sub(0x3030_3030_3030_3030);
+    // A byte's high bit is set here iff it is not an ASCII digit; bytes after the first
+    // non-digit may be garbled by borrows and carries, but only the first one is used.
+    let non_digit = (word.wrapping_add(0x4646_4646_4646_4646) | val) & 0x8080_8080_8080_8080;
+    let n = (non_digit.trailing_zeros() / 8) as usize;
+    if n == 0 || n == 8 {
+        return None;
+    }
+    // Shifting the digits to the top leaves leading zero digits below them.
+    Some((eight_digits(val << (8 * (8 - n))), n))
+}
+
+/// A non-negative integer of 1 to 7 digits ending at a word end (mesh indices), 8 bytes at a
+/// time: its value and end offset. `None` sends the caller to the scalar parser.
+#[inline]
+fn word_uint(bytes: &[u8], start: usize) -> Option<(u32, usize)> {
+    let (v, n) = digit_run(bytes, start)?;
+    // `n < 8`, so the byte after the digits is inside the word read.
+    is_word_end(bytes[start + n]).then_some((v, start + n))
+}
+
+/// `-?digits[.digits]` with 1 to 7 digits on each side of the point, ending at a word end,
+/// read 8 bytes at a time: (negative, all digits as one integer, fraction digits, end).
+/// `None` (signs `+`, exponents, long runs, a point without digits after it, ...) sends the
+/// caller to the general parsers.
+#[inline]
+fn word_decimal(bytes: &[u8], start: usize) -> Option<(bool, u64, usize, usize)> {
+    let neg = bytes.get(start) == Some(&b'-');
+    let mut p = start + usize::from(neg);
+    let (int, n) = digit_run(bytes, p)?;
+    p += n;
+    let (m, k) = if bytes[p] == b'.' {
+        p += 1;
+        let (frac, k) = digit_run(bytes, p)?;
+        p += k;
+        (u64::from(int) * POW10_U64[k] + u64::from(frac), k)
+    } else {
+        (u64::from(int), 0)
+    };
+    // The byte after the digits is inside the last word read.
+    is_word_end(bytes[p]).then_some((neg, m, k, p))
+}
+
+/// [`word_decimal`] as `f32`: when the digits form an integer `m < 2^24` and there are
+/// `k <= 7` fraction digits, `m` and `10^k` are exact in `f32` and `m / 10^k` is one
+/// correctly rounded division (Clinger's fast path in single precision), so the result
+/// equals `fast_float`'s.
+#[inline]
+fn word_f32(bytes: &[u8], start: usize) -> Option<(f32, usize)> {
+    let (neg, m, k, end) = word_decimal(bytes, start)?;
+    if m >= 1 << 24 {
+        return None;
+    }
+    let v = m as f32 / POW10_F32[k];
+    Some((if neg { -v } else { v }, end))
+}
+
 /// Fast path for the plain decimals that dominate scene text (`-12.5`, `0.7339349`, `1`):
 /// `[+-]?digits[.digits]` ending at a word end, at most 19 digits in all. When the digits
 /// form an integer `m < 2^53` and there are `k <= 22` fraction digits, `m` and `10^k` are
@@ -162,6 +246,11 @@ const POW10: [f64; 23] = [
 /// the caller to the general parser.
 #[inline]
 fn simple_decimal(bytes: &[u8], start: usize) -> Option<(f64, usize)> {
+    if let Some((neg, m, k, end)) = word_decimal(bytes, start) {
+        // At most 14 digits: `m < 2^53`.
+        let v = m as f64 / POW10[k];
+        return Some((if neg { -v } else { v }, end));
+    }
     let s = bytes.get(start..)?;
     let (neg, mut i) = match s.first() {
         Some(b'-') => (true, 1),
@@ -374,6 +463,10 @@ impl<'a> Lexer<'a> {
 
     #[inline]
     fn read_f32_at(&mut self, start: usize) -> Result<f32, LexError> {
+        if let Some((v, end)) = word_f32(self.bytes, start) {
+            self.pos = end;
+            return Ok(v);
+        }
         let rest = &self.bytes[start..];
         let (skip, rest) = match rest.first() {
             Some(b'+') => (1, &rest[1..]),
@@ -439,7 +532,13 @@ impl<'a> Lexer<'a> {
                 self.pos += 1;
                 return Ok(());
             }
-            let v = self.read_i64_at(start)?;
+            let v = match word_uint(self.bytes, start) {
+                Some((v, end)) => {
+                    self.pos = end;
+                    i64::from(v)
+                }
+                None => self.read_i64_at(start)?,
+            };
             match T::try_from(v) {
                 Ok(v) => out.push(v),
                 Err(_) => {

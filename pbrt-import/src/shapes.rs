@@ -95,16 +95,22 @@ fn face_indices(
 }
 
 fn checked_indices(raw: Vec<i32>, n_verts: usize) -> Result<Vec<u32>, String> {
-    let mut out = Vec::with_capacity(raw.len());
-    for i in raw {
-        if i < 0 || i as usize >= n_verts {
-            return Err(format!(
-                "vertex index {i} out of range ({n_verts} vertices)"
-            ));
-        }
-        out.push(i as u32);
+    // One pass for the range (branch-free, so it vectorizes), then the conversion reuses
+    // the allocation; the first offending index is looked for only when there is one.
+    let (lo, hi) = raw
+        .iter()
+        .fold((i32::MAX, i32::MIN), |(lo, hi), &i| (lo.min(i), hi.max(i)));
+    if !raw.is_empty() && (lo < 0 || hi as usize >= n_verts) {
+        let i = raw
+            .iter()
+            .find(|&&i| i < 0 || i as usize >= n_verts)
+            .copied()
+            .unwrap_or(lo);
+        return Err(format!(
+            "vertex index {i} out of range ({n_verts} vertices)"
+        ));
     }
-    Ok(out)
+    Ok(raw.into_iter().map(|i| i as u32).collect())
 }
 
 /// `trianglemesh` (and `loopsubdiv`'s base cage).

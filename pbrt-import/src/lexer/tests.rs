@@ -169,3 +169,158 @@ mod simple_decimal {
         }
     }
 }
+
+/// The 8-bytes-at-a-time number paths agree with the general parsers, byte for byte.
+mod word_numbers {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// Room after the number, so the paths that need 8 readable bytes engage.
+    const PAD: &str = "        ";
+
+    #[test]
+    fn digit_runs() {
+        for (text, want) in [
+            ("0 ", Some((0, 1))),
+            ("7]", Some((7, 1))),
+            ("1234567 ", Some((1_234_567, 7))),
+            ("0000042\n", Some((42, 7))),
+            ("12345678", None), // 8 digits: the scalar path
+            ("x1", None),
+            (" 1", None),
+            ("1234", None), // fewer than 8 bytes readable
+        ] {
+            let padded = if text.len() < 8 && text != "1234" {
+                format!("{text}{PAD}")
+            } else {
+                text.to_string()
+            };
+            assert_eq!(digit_run(padded.as_bytes(), 0), want, "{text:?}");
+        }
+        // Any byte that is not a digit ends the run, including bytes whose arithmetic
+        // carries or borrows (`/` just below `0`, `:` just above `9`, high bytes).
+        for stop in [b'/', b':', b'.', 0u8, 0x7f, 0xb9, 0xba, 0xc0, 0xff] {
+            let mut bytes = b"123".to_vec();
+            bytes.push(stop);
+            bytes.extend_from_slice(b"45678901");
+            assert_eq!(digit_run(&bytes, 0), Some((123, 3)), "stop byte {stop:#x}");
+        }
+    }
+
+    #[test]
+    fn words_that_leave_the_fast_paths() {
+        for text in [
+            "+1",
+            "-.5",
+            ".5",
+            "1.",
+            "1e5",
+            "1.5e-3",
+            "1.2.3",
+            "12a",
+            "-",
+            "inf",
+            "0x10",
+            "12345678.5",
+            "1.12345678",
+            "16777216.0",
+            "1677.7216",
+        ] {
+            let padded = format!("{text}{PAD}");
+            assert_eq!(word_f32(padded.as_bytes(), 0), None, "{text}");
+        }
+        for text in ["-1", "+1", "1.0", "1e2", "12345678", "9x"] {
+            let padded = format!("{text}{PAD}");
+            assert_eq!(word_uint(padded.as_bytes(), 0), None, "{text}");
+        }
+    }
+
+    fn fast_float_f32(text: &str) -> Option<f32> {
+        let b = text.as_bytes();
+        let b = b.strip_prefix(b"+").unwrap_or(b);
+        match fast_float2::parse_partial::<f32, _>(b) {
+            Ok((v, n)) if n == b.len() => Some(v),
+            _ => None,
+        }
+    }
+
+    proptest! {
+        #[test]
+        fn uint_matches_str_parse(v in 0u32..100_000_000, end in prop::sample::select(vec![" ", "]", "\n", "\t", "#", "\"", "["])) {
+            let text = format!("{v}{end}{PAD}");
+            match word_uint(text.as_bytes(), 0) {
+                Some((got, stop)) => {
+                    prop_assert_eq!(got, v);
+                    prop_assert_eq!(stop, v.to_string().len());
+                }
+                None => prop_assert!(v >= 10_000_000),
+            }
+        }
+
+        #[test]
+        fn f32_matches_fast_float(int in 0u64..100_000_000, frac in 0u64..100_000_000, zeros in 0usize..4, point: bool, neg: bool) {
+            let sign = if neg { "-" } else { "" };
+            let num = if point {
+                format!("{sign}{int}.{}{frac}", "0".repeat(zeros))
+            } else {
+                format!("{sign}{int}")
+            };
+            let text = format!("{num} {PAD}");
+            match word_f32(text.as_bytes(), 0) {
+                Some((v, end)) => {
+                    prop_assert_eq!(end, num.len());
+                    prop_assert_eq!(Some(v.to_bits()), fast_float_f32(&num).map(f32::to_bits), "{}", num);
+                }
+                // Only long runs and mantissas of 2^24 or more leave the fast path.
+                None => {
+                    let digits = num.bytes().filter(u8::is_ascii_digit).count();
+                    prop_assert!(digits > 7, "{}", num);
+                }
+            }
+        }
+
+        #[test]
+        fn f64_matches_the_general_parser(int in 0u64..10_000_000, frac in 0u64..10_000_000, zeros in 0usize..3, neg: bool) {
+            let num = format!("{}{int}.{}{frac}", if neg { "-" } else { "" }, "0".repeat(zeros));
+            let text = format!("{num}]{PAD}");
+            match simple_decimal(text.as_bytes(), 0) {
+                Some((v, end)) => {
+                    prop_assert_eq!(end, num.len());
+                    prop_assert_eq!(Some(v.to_bits()), parse_f64(num.as_bytes()).map(f64::to_bits), "{}", num);
+                }
+                // Only mantissas past 15 digits may leave the fast paths.
+                None => prop_assert!(num.bytes().filter(u8::is_ascii_digit).count() > 15, "{}", num),
+            }
+        }
+
+        /// Whole arrays, the way meshes are written, read the same as number by number.
+        #[test]
+        fn arrays_read_like_their_numbers(vals in prop::collection::vec((0u32..20_000_000, -5000i32..5000, 0u32..10_000_000), 1..200)) {
+            let ints: Vec<u32> = vals.iter().map(|v| v.0).collect();
+            let floats: Vec<String> = vals.iter().map(|v| format!("{}.{}", v.1, v.2)).collect();
+            let mut text = String::from("[ ");
+            for (i, v) in ints.iter().enumerate() {
+                text.push_str(&v.to_string());
+                text.push_str(if i % 4 == 3 { "\n    " } else { " " });
+            }
+            text.push_str("] [\n");
+            for f in &floats {
+                text.push_str(f);
+                text.push_str("  ");
+            }
+            text.push(']');
+            let mut lx = Lexer::new(text.as_bytes(), FileId(0));
+            lx.next_token().unwrap();
+            let mut got = Vec::new();
+            lx.read_u32_array(&mut got).unwrap();
+            prop_assert_eq!(&got, &ints);
+            lx.next_token().unwrap();
+            let mut fl = Vec::new();
+            lx.read_f32_array(&mut fl).unwrap();
+            let want: Vec<u32> = floats.iter().map(|f| fast_float_f32(f).unwrap().to_bits()).collect();
+            let fl: Vec<u32> = fl.iter().map(|f| f.to_bits()).collect();
+            prop_assert_eq!(fl, want);
+            prop_assert_eq!(lx.loc().line, 1 + text.matches('\n').count() as u32);
+        }
+    }
+}

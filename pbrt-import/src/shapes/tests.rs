@@ -81,3 +81,15 @@ fn curves() {
     let mut p = params(r#""point3 P" [0 0 0 1 0 0]"#);
     assert!(curve(&mut p).is_err());
 }
+
+#[test]
+fn index_errors_name_the_first_offending_index() {
+    assert_eq!(checked_indices(vec![0, 2, 1], 3), Ok(vec![0, 2, 1]));
+    assert_eq!(checked_indices(Vec::new(), 0), Ok(Vec::new()));
+    // The first bad index in document order, not the smallest or largest one.
+    let e = checked_indices(vec![0, 7, -1, 9], 3).unwrap_err();
+    assert_eq!(e, "vertex index 7 out of range (3 vertices)");
+    let e = checked_indices(vec![0, -4, 7], 3).unwrap_err();
+    assert_eq!(e, "vertex index -4 out of range (3 vertices)");
+    assert!(checked_indices(vec![3], 3).is_err());
+}
