@@ -71,11 +71,13 @@ mod cost;
 mod gpu;
 mod html;
 mod human;
+mod owner;
 mod presets;
 mod report;
 mod rows;
 mod sizes;
 mod text;
+mod timing;
 
 #[cfg(test)]
 mod tests;
@@ -96,6 +98,7 @@ pub use report::{
 pub use rows::{ElementReport, VariantReport};
 pub use sizes::*;
 pub use text::render_text;
+pub use timing::{PhaseTimings, Provenance, ReportSources};
 
 /// Errors building a report.
 #[derive(Debug, thiserror::Error)]
