@@ -184,6 +184,13 @@ fn split_root_keeps_per_element_rows() {
     assert!(info["split_tlases"].as_u64().unwrap() > 0, "{info}");
     let rows = |pkg: &std::path::Path| {
         let r = motu_json(&["report", s(pkg), "--json"]);
+        // `motu import` stored the BLAS counts the report walks (a split root too).
+        assert_eq!(r["sources"]["blas_counts"], "package", "{}", r["sources"]);
+        assert!(
+            r["timings_ms"]["ownership"].as_f64().is_some(),
+            "{}",
+            r["timings_ms"]
+        );
         r["elements"].as_array().unwrap().clone()
     };
     let (w, sp) = (rows(&whole), rows(&split));

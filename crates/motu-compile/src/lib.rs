@@ -119,6 +119,7 @@
 //! `StreamSplit`.
 
 mod analyze;
+pub mod blas_counts;
 mod emit;
 mod finalize;
 mod flatten;

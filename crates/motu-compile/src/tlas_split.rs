@@ -273,25 +273,7 @@ impl StreamSplit {
         stored: &StoredStreamSplit,
     ) -> Result<StreamSplit, CompileError> {
         let bad = |what: String| CompileError::Internal(format!("stored stream split: {what}"));
-        let mut extra = stored.extra_instances.iter();
-        let mut instances = Vec::with_capacity(stored.instance_source.len());
-        for &s in &stored.instance_source {
-            if s == NONE_U32 {
-                let e = extra
-                    .next()
-                    .ok_or_else(|| bad("fewer extra instances than the map names".into()))?;
-                instances.push(*e);
-            } else {
-                let i = view
-                    .instances
-                    .get(s as usize)
-                    .ok_or_else(|| bad(format!("instance {s} is out of range")))?;
-                instances.push(*i);
-            }
-        }
-        if extra.next().is_some() {
-            return Err(bad("more extra instances than the map names".into()));
-        }
+        let instances = gather_stored_instances(view, stored).map_err(bad)?;
         let scene = CompiledScene {
             root_tlas: view.root_tlas,
             tlases: stored.tlases.clone(),
@@ -317,6 +299,59 @@ impl StreamSplit {
             .map_err(CompileError::StoredSplit)?;
         Ok(StreamSplit { scene })
     }
+}
+
+/// The split's instance table from a stored map (see [`StoredStreamSplit`]): a gather of
+/// millions of records, in parallel pieces, each knowing from a first pass how many extra
+/// instances the pieces before it take. The first problem in map order is the error.
+fn gather_stored_instances(
+    view: &HierarchyView<'_>,
+    stored: &StoredStreamSplit,
+) -> Result<Vec<InstanceRecord>, String> {
+    use rayon::prelude::*;
+    const PIECE: usize = 1 << 16;
+    let source = &stored.instance_source;
+    let extra = &stored.extra_instances;
+    let nones: Vec<usize> = source
+        .par_chunks(PIECE)
+        .map(|c| c.iter().filter(|&&s| s == NONE_U32).count())
+        .collect();
+    let mut first_extra = Vec::with_capacity(nones.len());
+    let mut total = 0usize;
+    for n in &nones {
+        first_extra.push(total);
+        total += n;
+    }
+    if let Some(&s) = source
+        .par_iter()
+        .find_first(|&&s| s != NONE_U32 && s as usize >= view.instances.len())
+    {
+        return Err(format!("instance {s} is out of range"));
+    }
+    match total.cmp(&extra.len()) {
+        std::cmp::Ordering::Greater => {
+            return Err("fewer extra instances than the map names".into())
+        }
+        std::cmp::Ordering::Less => return Err("more extra instances than the map names".into()),
+        std::cmp::Ordering::Equal => {}
+    }
+    let mut instances = vec![InstanceRecord::default(); source.len()];
+    instances
+        .par_chunks_mut(PIECE)
+        .zip(source.par_chunks(PIECE))
+        .zip(first_extra.par_iter())
+        .for_each(|((out, map), &first)| {
+            let mut e = first;
+            for (o, &s) in out.iter_mut().zip(map) {
+                *o = if s == NONE_U32 {
+                    e += 1;
+                    extra[e - 1]
+                } else {
+                    view.instances[s as usize]
+                };
+            }
+        });
+    Ok(instances)
 }
 
 /// A [`StreamSplit`] as a package stores it, so that readers (`motu report`) need not split

@@ -141,6 +141,15 @@ impl ScenePackage {
         Ok(Some(self.package.section_bytes(SECTION_PROXY_CLUSTERS)?))
     }
 
+    /// The `blas_counts` section's bytes (`motu_compile::blas_counts::decode_section` reads
+    /// them): `Ok(None)` in a package written without it, an error when its checksum fails.
+    pub fn stored_blas_counts(&self) -> Result<Option<&[u8]>, PackError> {
+        if self.package.section_info(SECTION_BLAS_COUNTS).is_none() {
+            return Ok(None);
+        }
+        Ok(Some(self.package.section_bytes(SECTION_BLAS_COUNTS)?))
+    }
+
     fn layout(m: &MeshRecord) -> MeshBlobLayout {
         MeshBlobLayout::with_map(
             m.vertex_count as u64,

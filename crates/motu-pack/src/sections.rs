@@ -34,3 +34,7 @@ pub const SECTION_PROXY_BOXES: SectionKind = SectionKind(18);
 /// optional): a versioned byte blob whose per-TLAS entries each carry a hash of the TLAS's
 /// record, its instances and the BLAS table, so a reader uses only those that match.
 pub const SECTION_PROXY_CLUSTERS: SectionKind = SectionKind(19);
+/// Per TLAS of the package's own hierarchy, the BLASes its instances place with their counts
+/// (`motu_compile::blas_counts`, written by `motu import` since this kind appeared; optional):
+/// what `motu report` walks instead of every instance.
+pub const SECTION_BLAS_COUNTS: SectionKind = SectionKind(20);

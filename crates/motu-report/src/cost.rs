@@ -1,11 +1,9 @@
 //! The cost model over a compiled hierarchy: what every TLAS, BLAS, mesh and table costs, who
 //! owns it (one element, or several: shared), and what flattened variants would cost.
 //!
-//! Ownership: a depth-first walk from the root TLAS's instances, one element at a time (root
-//! instances carry their element), stamps every node it reaches; a node reached by one element
-//! belongs to it, a node reached by several is **shared** and remembers the set (so a subset's
-//! cost counts each shared node once, when any of its users is selected). O(Σ nodes reachable
-//! per element).
+//! The graph's edges are the package's BLAS counts (`motu_compile::blas_counts`: per TLAS,
+//! the BLASes its instances place, each once with its count), so every walk below is
+//! proportional to the distinct placements, not to the instances. Ownership: see `owner`.
 //!
 //! Variants: `--levels N` keeps a child TLAS (and its whole subtree, unchanged) when its
 //! subtree needs at most `N − 1` TLAS levels and expands it into the root otherwise — the
@@ -13,13 +11,12 @@
 //! placement lands in one top TLAS (split into pieces of `maxInstanceCount`). LOD selectors
 //! expand into their finest level.
 
-use std::collections::HashMap;
-
 use motu_abi::{
     BlasRecord, GeometryRecord, HierarchyView, InstanceRecord, LodSelectorRecord, MaterialRecord,
     MeshRecord, PiRecord, TlasRecord, BLAS_AABBS, BLAS_TRIANGLES, FLAG_NEEDS_ANY_HIT,
-    FLAG_PRIMITIVE_MAP, NONE_U32, NONE_U64, PI_LOD_SELECTOR, PI_TLAS,
+    FLAG_PRIMITIVE_MAP, NONE_U64, PI_LOD_SELECTOR, PI_TLAS,
 };
+use motu_compile::blas_counts::BlasCounts;
 use serde::Serialize;
 
 use crate::sizes::{
@@ -282,12 +279,12 @@ pub(crate) struct Expansion {
 }
 
 impl Expansion {
-    fn add(&mut self, o: &Expansion) {
-        self.tri_instances = self.tri_instances.saturating_add(o.tri_instances);
-        self.kept_pis = self.kept_pis.saturating_add(o.kept_pis);
-        self.instanced_triangles = self
-            .instanced_triangles
-            .saturating_add(o.instanced_triangles);
+    /// Adds `times` copies of `o` (saturating, as `times` additions would).
+    fn add_times(&mut self, o: &Expansion, times: u64) {
+        let add = |a: &mut u64, b: u64| *a = a.saturating_add(b.saturating_mul(times));
+        add(&mut self.tri_instances, o.tri_instances);
+        add(&mut self.kept_pis, o.kept_pis);
+        add(&mut self.instanced_triangles, o.instanced_triangles);
     }
 }
 
@@ -300,6 +297,9 @@ pub(crate) struct Graph<'a> {
     pub lod: Vec<Cost>,
     /// TLAS levels of each TLAS's subtree (1 = only triangle instances).
     pub depth: Vec<u32>,
+    /// Per TLAS, the BLASes its instances place with their counts: the graph's edges, walked
+    /// instead of the instances (stored by the import, or counted by the caller).
+    pub counts: BlasCounts,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -310,8 +310,23 @@ enum Mark {
 }
 
 impl<'a> Graph<'a> {
-    pub fn new(view: HierarchyView<'a>, sizes: &dyn SizeSource) -> Result<Self, ReportError> {
-        view.check_references()?;
+    /// The graph of `view` with its BLAS counts (`counts` must be `view`'s: see
+    /// [`BlasCounts::fits`]). `references_checked`: `view` passed
+    /// `HierarchyView::check_references` already (a package's view, checked when opened).
+    pub fn new(
+        view: HierarchyView<'a>,
+        sizes: &dyn SizeSource,
+        counts: BlasCounts,
+        references_checked: bool,
+    ) -> Result<Self, ReportError> {
+        if !references_checked {
+            view.check_references()?;
+        }
+        if !counts.fits(&view) {
+            return Err(ReportError::Invalid(
+                "the BLAS counts are not this hierarchy's".into(),
+            ));
+        }
         let _span = tracing::info_span!(
             "report_costs",
             tlases = view.tlases.len(),
@@ -351,6 +366,7 @@ impl<'a> Graph<'a> {
             mesh,
             lod,
             depth: Vec::new(),
+            counts,
         };
         g.depth = g.compute_depths()?;
         Ok(g)
@@ -409,11 +425,12 @@ impl<'a> Graph<'a> {
         Ok(c)
     }
 
-    /// The BLAS of each instance of TLAS `t`.
-    pub fn tlas_blases(&self, t: u32) -> impl Iterator<Item = (usize, u32)> + '_ {
-        let r = &self.view.tlases[t as usize];
-        let start = r.instance_base as usize;
-        (start..start + r.instance_count as usize).map(|i| (i, self.view.instances[i].blas))
+    /// The BLASes TLAS `t`'s instances place, with how many place each.
+    pub fn tlas_blases(&self, t: u32) -> impl Iterator<Item = (u32, u64)> + '_ {
+        self.counts
+            .tlas(t as usize)
+            .iter()
+            .map(|c| (c.blas, c.count))
     }
 
     /// PIs of AABB BLAS `b` (empty for triangle BLASes).
@@ -433,7 +450,7 @@ impl<'a> Graph<'a> {
     /// The nodes directly below `n`.
     pub fn children(&self, n: Node, out: &mut Vec<Node>) {
         match n {
-            Node::Tlas(t) => out.extend(self.tlas_blases(t).map(|(_, b)| Node::Blas(b))),
+            Node::Tlas(t) => out.extend(self.tlas_blases(t).map(|(b, _)| Node::Blas(b))),
             Node::Blas(b) => {
                 let r = &self.view.blases[b as usize];
                 let range = r.item_base as usize..(r.item_base + r.item_count) as usize;
@@ -512,7 +529,7 @@ impl<'a> Graph<'a> {
     /// TLASes reached from `t` through one PI (all levels of LOD selectors).
     fn child_tlases(&self, t: u32) -> Vec<u32> {
         let mut out = Vec::new();
-        for (_, b) in self.tlas_blases(t) {
+        for (b, _) in self.tlas_blases(t) {
             for p in self.blas_pis(b) {
                 match p.kind {
                     PI_TLAS => out.push(p.target),
@@ -549,45 +566,43 @@ impl<'a> Graph<'a> {
 
     /// What flattening each TLAS's content to at most `levels` TLAS levels yields, for every
     /// TLAS: computed in ascending depth order (a PI's target is strictly shallower), so no
-    /// recursion however deep the graph. O(instances + PIs).
+    /// recursion however deep the graph. O(BLAS counts + PIs), not O(instances).
     pub fn expansions(&self, levels: u32) -> Vec<Expansion> {
         let mut order: Vec<u32> = (0..self.view.tlases.len() as u32).collect();
         order.sort_by_key(|&t| self.depth[t as usize]);
         let mut out = vec![Expansion::default(); order.len()];
         for t in order {
-            let r = &self.view.tlases[t as usize];
-            let start = r.instance_base as usize;
-            out[t as usize] =
-                self.expand_instances(start..start + r.instance_count as usize, levels, &out);
+            out[t as usize] = self.expand(self.tlas_blases(t), levels, &out);
         }
         out
     }
 
-    /// Flattens instances into a top TLAS with at most `levels` TLAS levels, given
-    /// [`Graph::expansions`] for the same `levels`.
-    pub fn expand_instances(
+    /// Flattens placements (a BLAS and how many instances place it) into a top TLAS with at
+    /// most `levels` TLAS levels, given [`Graph::expansions`] for the same `levels`.
+    pub fn expand(
         &self,
-        instances: impl Iterator<Item = usize>,
+        placements: impl Iterator<Item = (u32, u64)>,
         levels: u32,
         expanded: &[Expansion],
     ) -> Expansion {
         let mut e = Expansion::default();
-        for i in instances {
-            let b = self.view.instances[i].blas;
+        for (b, n) in placements {
             let r = &self.view.blases[b as usize];
             if r.kind == BLAS_TRIANGLES {
-                e.tri_instances = e.tri_instances.saturating_add(1);
-                e.instanced_triangles = e
-                    .instanced_triangles
-                    .saturating_add(u64::from(r.primitive_count));
+                let one = Expansion {
+                    tri_instances: 1,
+                    kept_pis: 0,
+                    instanced_triangles: u64::from(r.primitive_count),
+                };
+                e.add_times(&one, n);
                 continue;
             }
             for p in self.blas_pis(b) {
                 if self.pi_depth(p) < levels {
-                    e.kept_pis = e.kept_pis.saturating_add(1);
+                    e.kept_pis = e.kept_pis.saturating_add(n);
                 } else if let Some(t) = self.pi_expand_target(p) {
                     if let Some(sub) = expanded.get(t as usize) {
-                        e.add(sub);
+                        e.add_times(sub, n);
                     }
                 }
             }
@@ -595,19 +610,14 @@ impl<'a> Graph<'a> {
         e
     }
 
-    /// The TLASes a flattening to `levels` expands (from `instances`), the triangle BLASes it
-    /// places in the top TLAS, and the roots of the subtrees it keeps.
-    pub fn expansion_nodes(
-        &self,
-        instances: impl Iterator<Item = usize>,
-        levels: u32,
-    ) -> (Vec<u32>, Vec<u32>) {
+    /// The TLASes a flattening to `levels` expands (from TLAS `top`'s instances), the triangle
+    /// BLASes it places in the top TLAS, and the roots of the subtrees it keeps.
+    pub fn expansion_nodes(&self, top: u32, levels: u32) -> (Vec<u32>, Vec<u32>) {
         let mut seen_tlas = vec![false; self.view.tlases.len()];
         let mut tri_blas = vec![false; self.view.blases.len()];
         let mut kept = vec![false; self.view.tlases.len()];
-        let mut stack: Vec<usize> = instances.collect();
-        while let Some(i) = stack.pop() {
-            let b = self.view.instances[i].blas;
+        let mut stack: Vec<u32> = self.tlas_blases(top).map(|(b, _)| b).collect();
+        while let Some(b) = stack.pop() {
             if self.view.blases[b as usize].kind == BLAS_TRIANGLES {
                 tri_blas[b as usize] = true;
                 continue;
@@ -626,9 +636,7 @@ impl<'a> Graph<'a> {
                 } else if let Some(t) = self.pi_expand_target(p) {
                     if !seen_tlas[t as usize] {
                         seen_tlas[t as usize] = true;
-                        let r = &self.view.tlases[t as usize];
-                        let start = r.instance_base as usize;
-                        stack.extend(start..start + r.instance_count as usize);
+                        stack.extend(self.tlas_blases(t).map(|(b, _)| b));
                     }
                 }
             }
@@ -714,60 +722,4 @@ fn mesh_cost(m: &MeshRecord) -> Cost {
     };
     c.seal();
     c
-}
-
-/// Owner labels in [`Ownership`].
-pub(crate) const UNSEEN: u32 = NONE_U32;
-pub(crate) const SHARED: u32 = NONE_U32 - 1;
-
-/// Which element owns each node (see the module docs).
-pub(crate) struct Ownership {
-    pub owner: HashMap<Node, u32>,
-    /// Sorted element sets of shared nodes.
-    pub shared_sets: HashMap<Node, Vec<u32>>,
-}
-
-impl Ownership {
-    /// `labelled_roots`: (element label, root instance index), any order.
-    pub fn compute(g: &Graph<'_>, labelled_roots: &[(u32, usize)]) -> Self {
-        let mut roots = labelled_roots.to_vec();
-        roots.sort_unstable();
-        let mut owner: HashMap<Node, u32> = HashMap::new();
-        let mut stamp: HashMap<Node, u32> = HashMap::new();
-        let mut shared_sets: HashMap<Node, Vec<u32>> = HashMap::new();
-        let mut stack = Vec::new();
-        let mut kids = Vec::new();
-        for &(label, inst) in &roots {
-            stack.push(Node::Blas(g.view.instances[inst].blas));
-            while let Some(n) = stack.pop() {
-                if stamp.get(&n) == Some(&label) {
-                    continue;
-                }
-                stamp.insert(n, label);
-                let o = owner.entry(n).or_insert(UNSEEN);
-                if *o == UNSEEN {
-                    *o = label;
-                } else if *o != label {
-                    let set = shared_sets.entry(n).or_default();
-                    if *o != SHARED {
-                        set.push(*o);
-                        *o = SHARED;
-                    }
-                    set.push(label);
-                }
-                kids.clear();
-                g.children(n, &mut kids);
-                stack.extend(
-                    kids.iter()
-                        .copied()
-                        .filter(|k| stamp.get(k) != Some(&label)),
-                );
-            }
-        }
-        for set in shared_sets.values_mut() {
-            set.sort_unstable();
-            set.dedup();
-        }
-        Ownership { owner, shared_sets }
-    }
 }

@@ -47,9 +47,10 @@
 //!
 //! Module map, each file using only those before it: `human` (sizes and counts for people),
 //! `sizes` (sources, curves, fitting), `presets` (the fitted models, loaded from
-//! `presets/*.json`), `gpu` (driver sizes, the fitting harness), `cost` (per-node costs,
-//! ownership, flattening), `rows` (per-element and per-variant rows), `budget` (what fits),
-//! `report` (assembly), `text`, `html`.
+//! `presets/*.json`), `gpu` (driver sizes, the fitting harness), `cost` (per-node costs over
+//! the BLAS counts, flattening), `owner` (ownership), `rows` (per-element and per-variant rows),
+//! `budget` (what fits), `timing` (sources and phase timings), `streaming` (streaming rows, the
+//! floor's size queries), `report` (assembly), `text`, `html`.
 //!
 //! # Map
 //!
@@ -71,11 +72,14 @@ mod cost;
 mod gpu;
 mod html;
 mod human;
+mod owner;
 mod presets;
 mod report;
 mod rows;
 mod sizes;
+mod streaming;
 mod text;
+mod timing;
 
 #[cfg(test)]
 mod tests;
@@ -96,6 +100,7 @@ pub use report::{
 pub use rows::{ElementReport, VariantReport};
 pub use sizes::*;
 pub use text::render_text;
+pub use timing::{PhaseTimings, Provenance, ReportSources};
 
 /// Errors building a report.
 #[derive(Debug, thiserror::Error)]

@@ -6,10 +6,14 @@ use motu_abi::{HierarchyView, InstanceRecord, PiRecord, NONE_U32};
 use serde::Serialize;
 
 use crate::budget::{plan_budget, BudgetReport, SubsetCoster};
-use crate::cost::{blas_cost_of, tlas_cost, Cost, Graph, Node, Ownership, SHARED};
+use crate::cost::{blas_cost_of, tlas_cost, Cost, Graph, Node};
+use crate::owner::{Ownership, SHARED};
 use crate::rows::{ElementReport, VariantReport};
-use crate::sizes::{BlasShape, SizeSource, SizeSourceInfo, TriangleGeometry};
+use crate::sizes::{BlasShape, SizeSource, SizeSourceInfo};
+use crate::streaming::{streaming_report, FloorAdapter};
+use crate::timing::{PhaseTimings, Provenance, ReportSources};
 use crate::ReportError;
+use motu_compile::blas_counts::BlasCounts;
 
 /// What the report needs besides the tables (a package's meta, or hand-made in tests).
 #[derive(Clone, Debug, Default)]
@@ -125,6 +129,10 @@ pub struct Report {
     pub image_width: u32,
     pub image_height: u32,
     pub warnings: Vec<String>,
+    /// Where the stored inputs came from and each phase's wall time (`sources`,
+    /// `timings_ms`); not compared.
+    #[serde(flatten)]
+    pub provenance: Provenance,
 }
 
 impl Report {
@@ -169,33 +177,68 @@ pub fn build_report_at(
                 .map_or(DEFAULT_FLOOR_IMAGE, |c| (c.width.max(1), c.height.max(1)))
         }),
     };
+    let mut timings = PhaseTimings::default();
     let view = pkg.view()?;
     // The cap a streamed render of the package splits at by default: the one its import
     // recorded (`motu import --stream-split-instances`).
     let (cap, _) = motu_render::package_split_cap(pkg, None);
-    let split = if cap == 0 {
-        Some(None)
-    } else {
-        motu_render::stored_stream_split(pkg, &view, cap)?
-    };
+    let split = timings.time("stream_split_read", || {
+        if cap == 0 {
+            Ok(Some(None))
+        } else {
+            motu_render::stored_stream_split(pkg, &view, cap)
+        }
+    })?;
     // The proxy clusters the import stored (checked TLAS by TLAS against the split hierarchy).
     let clusters = motu_render::stored_proxy_clusters(pkg);
+    let counts = timings.time("blas_counts_read", || stored_blas_counts(pkg, &view));
     let stored = Stored {
         split,
         clusters,
+        counts,
         cap: Some(cap),
+        timings,
+        references_checked: true,
     };
     build(&view, &input, sizes, budget_bytes, stored)
 }
 
-/// What a package stored for its readers: the stream split (`None`: split here) and the proxy
-/// clusters' section (`None`: made here), and the split cap it recorded (`None`:
-/// [`motu_render::STREAM_SPLIT_INSTANCES`]).
+/// The package's BLAS counts (`blas_counts` section) where they are this view's; `None` (a
+/// warning where a section was there) otherwise.
+fn stored_blas_counts(
+    pkg: &motu_pack::ScenePackage,
+    view: &HierarchyView<'_>,
+) -> Option<BlasCounts> {
+    let bytes = match pkg.stored_blas_counts() {
+        Ok(b) => b?,
+        Err(e) => {
+            tracing::warn!(error = %e, "the package's BLAS counts cannot be read; counted again");
+            return None;
+        }
+    };
+    let counts = motu_compile::blas_counts::decode_section(bytes, view);
+    if counts.is_none() {
+        tracing::warn!(
+            "the package's BLAS counts are not a table this reader knows or not its \
+             hierarchy's; counted again"
+        );
+    }
+    counts
+}
+
+/// What a package stored for its readers: the stream split (`None`: split here), the proxy
+/// clusters' section (`None`: made here), the BLAS counts (`None`: counted here) and the split
+/// cap it recorded (`None`: [`motu_render::STREAM_SPLIT_INSTANCES`]); and the time spent
+/// reading them.
 #[derive(Default)]
 struct Stored<'p> {
     split: Option<Option<motu_compile::StreamSplit>>,
     clusters: Option<&'p [u8]>,
     cap: Option<u32>,
+    counts: Option<BlasCounts>,
+    timings: PhaseTimings,
+    /// The view passed `check_references` (a package's, when it was opened).
+    references_checked: bool,
 }
 
 /// The element label of untagged root instances (after every real element id).
@@ -212,29 +255,32 @@ fn untagged_label(input: &ReportInput, view: &HierarchyView<'_>) -> u32 {
 
 /// Whether TLAS `t` holds root-level placements: below the root instances are untagged, but a
 /// split root's pieces keep their instances' element tags.
-fn holds_root_placements(view: &HierarchyView<'_>, t: u32) -> bool {
-    let r = &view.tlases[t as usize];
-    view.instances[r.instance_range()]
+fn holds_root_placements(counts: &BlasCounts, t: u32) -> bool {
+    counts
+        .tlas(t as usize)
         .iter()
-        .any(|i| i.element != NONE_U32)
+        .any(|c| c.element != NONE_U32)
 }
+
+/// A root placement: (element label, BLAS, how many root instances place it so).
+pub(crate) type Placement = (u32, u32, u64);
 
 /// The root's placements labelled by element: the root TLAS's own instances and, through a
 /// split root's PI BLASes (identity PIs into TLASes of tagged instances), the instances of its
-/// pieces, which keep their elements' tags. Also returns the split's own nodes.
+/// pieces, which keep their elements' tags. Also returns the split's own nodes. Walks the BLAS
+/// counts (one entry per BLAS and element), not the instances.
 fn root_placements(
     view: &HierarchyView<'_>,
-    root_range: std::ops::Range<usize>,
+    counts: &BlasCounts,
     untagged: u32,
-) -> (Vec<(u32, usize)>, Vec<Node>) {
+) -> (Vec<Placement>, Vec<Node>) {
     let mut labelled = Vec::new();
     let mut split_nodes = Vec::new();
-    let mut todo = vec![root_range];
+    let mut todo = vec![view.root_tlas];
     let mut seen = std::collections::HashSet::new();
-    while let Some(range) = todo.pop() {
-        for i in range {
-            let inst = &view.instances[i];
-            let b = &view.blases[inst.blas as usize];
+    while let Some(t) = todo.pop() {
+        for c in counts.tlas(t as usize) {
+            let b = &view.blases[c.blas as usize];
             let pis: &[PiRecord] = if b.kind == motu_abi::BLAS_AABBS {
                 view.pis
                     .get(b.item_base as usize..(b.item_base + b.item_count) as usize)
@@ -248,19 +294,18 @@ fn root_placements(
                     p.kind == motu_abi::PI_TLAS
                         && p.child_from_parent == motu_abi::IDENTITY_3X4
                         && p.target != view.root_tlas
-                        && holds_root_placements(view, p.target)
+                        && holds_root_placements(counts, p.target)
                 });
             if !is_split {
-                let e = inst.element;
-                labelled.push((if e == NONE_U32 { untagged } else { e }, i));
+                let e = c.element;
+                labelled.push((if e == NONE_U32 { untagged } else { e }, c.blas, c.count));
                 continue;
             }
-            split_nodes.push(Node::Blas(inst.blas));
+            split_nodes.push(Node::Blas(c.blas));
             for p in pis {
                 if seen.insert(p.target) {
                     split_nodes.push(Node::Tlas(p.target));
-                    let t = &view.tlases[p.target as usize];
-                    todo.push(t.instance_range());
+                    todo.push(p.target);
                 }
             }
         }
@@ -289,24 +334,48 @@ fn build(
     stored: Stored<'_>,
 ) -> Result<Report, ReportError> {
     let _span = tracing::info_span!("report", package = %input.package).entered();
-    let g = Graph::new(*view, sizes)?;
+    let Stored {
+        split: stored_split,
+        clusters: stored_clusters,
+        counts: stored_counts,
+        cap: stored_cap,
+        mut timings,
+        references_checked,
+    } = stored;
+    let mut sources = ReportSources {
+        blas_counts: if stored_counts.is_some() {
+            "package"
+        } else {
+            "computed"
+        }
+        .into(),
+        ..Default::default()
+    };
+    let counts = match stored_counts {
+        Some(c) => c,
+        None => timings.time("blas_counts", || BlasCounts::of(view)),
+    };
+    let g = timings.time("graph", || {
+        Graph::new(*view, sizes, counts, references_checked)
+    })?;
     let mut warnings = Vec::new();
     let root = view.root_tlas;
     let root_rec = view.tlases[root as usize];
-    let root_range = root_rec.instance_range();
     let untagged = untagged_label(input, view);
-    let (labelled, split_nodes) = root_placements(view, root_range.clone(), untagged);
-    let mut own = Ownership::compute(&g, &labelled);
+    let t_own = std::time::Instant::now();
+    let (labelled, split_nodes) = root_placements(view, &g.counts, untagged);
+    let root_blases: Vec<(u32, u32)> = labelled.iter().map(|&(l, b, _)| (l, b)).collect();
+    let mut own = Ownership::compute(&g, &root_blases);
     // A split root's skeleton (the PI BLASes into its pieces, the piece TLASes) is needed by
     // every subset, like untagged root instances.
     let split_root = !split_nodes.is_empty();
     for n in split_nodes {
-        own.owner.entry(n).or_insert(untagged);
+        own.claim(n, untagged);
     }
 
     // Labels present, in id order (named elements with no instances still get a row).
     let mut labels: Vec<u32> = (0..input.element_names.len() as u32).collect();
-    for &(l, _) in &labelled {
+    for &(l, _, _) in &labelled {
         if !labels.contains(&l) {
             labels.push(l);
         }
@@ -338,7 +407,7 @@ fn build(
     let mut unique_tris: HashMap<u32, u64> = HashMap::new();
     let mut mesh_counts: HashMap<u32, u64> = HashMap::new();
     let mut groups: HashMap<Vec<u32>, Cost> = HashMap::new();
-    for (&n, &o) in &own.owner {
+    for (n, o) in own.iter() {
         let c = g.cost(n);
         if o == SHARED {
             if let Some(set) = own.shared_sets.get(&n) {
@@ -356,21 +425,23 @@ fn build(
     }
     // Root instance records belong to their element.
     let mut root_count: BTreeMap<u32, u64> = BTreeMap::new();
-    for &(l, _) in &labelled {
-        *root_count.entry(l).or_default() += 1;
+    for &(l, _, n) in &labelled {
+        *root_count.entry(l).or_default() += n;
         let c = owned.entry(l).or_default();
-        c.table_bytes += std::mem::size_of::<InstanceRecord>() as u64;
+        c.table_bytes += std::mem::size_of::<InstanceRecord>() as u64 * n;
         c.seal();
     }
     let mut group_list: Vec<(Vec<u32>, Cost)> = groups.into_iter().collect();
     group_list.sort_by(|a, b| a.0.cmp(&b.0));
     let global = g.global_tables();
+    timings.add("ownership", t_own.elapsed().as_secs_f64() * 1e3);
 
     // Flattening per element (SL) and for the whole scene.
+    let t_flat = std::time::Instant::now();
     let expanded_sl = g.expansions(1);
     let mut flat: BTreeMap<u32, crate::cost::Expansion> = BTreeMap::new();
-    for &(l, i) in &labelled {
-        let e = g.expand_instances(std::iter::once(i), 1, &expanded_sl);
+    for &(l, b, n) in &labelled {
+        let e = g.expand(std::iter::once((b, n)), 1, &expanded_sl);
         let f = flat.entry(l).or_default();
         f.tri_instances = f.tri_instances.saturating_add(e.tri_instances);
         f.instanced_triangles = f.instanced_triangles.saturating_add(e.instanced_triangles);
@@ -384,7 +455,8 @@ fn build(
     root_cost.instances = 0;
     root_cost.seal();
     // Shared by root placements (a split root's pieces' instances included).
-    let root_total = (labelled.len() as u64).max(1);
+    let root_total = labelled.iter().map(|p| p.2).sum::<u64>().max(1);
+    timings.add("flatten_elements", t_flat.elapsed().as_secs_f64() * 1e3);
 
     let coster = SubsetCoster {
         owned: owned.clone(),
@@ -401,6 +473,7 @@ fn build(
         whole_table_bytes: whole_table_bytes(view),
     };
 
+    let t_rows = std::time::Instant::now();
     let mut elements = Vec::new();
     let mut share_sum = Cost::default();
     for &l in &labels {
@@ -456,15 +529,13 @@ fn build(
     root_rest.tlas_bytes -= share_sum.tlas_bytes.min(root_rest.tlas_bytes);
     shared.add(&root_rest);
     let shared_tris: u64 = own
-        .owner
         .iter()
-        .filter(|(n, &o)| o == SHARED && matches!(n, Node::Blas(_)))
-        .map(|(n, _)| g.cost(*n).blas_triangles)
+        .filter(|&(n, o)| o == SHARED && matches!(n, Node::Blas(_)))
+        .map(|(n, _)| g.cost(n).blas_triangles)
         .sum();
     let shared_meshes = own
-        .owner
         .iter()
-        .filter(|(n, &o)| o == SHARED && matches!(n, Node::Mesh(_)))
+        .filter(|&(n, o)| o == SHARED && matches!(n, Node::Mesh(_)))
         .count();
     elements.push(ElementReport {
         name: "shared".into(),
@@ -500,17 +571,20 @@ fn build(
             sizes.max_instance_count()
         ));
     }
+    timings.add("element_rows", t_rows.elapsed().as_secs_f64() * 1e3);
+    let t_variants = std::time::Instant::now();
     let mut variants = vec![as_compiled];
     for (name, levels) in [("levels_2", 2u32), ("sl", 1)] {
         variants.push(flattened_variant(
             &g,
-            root_range.clone(),
+            root,
             name,
             levels,
             sizes,
             input.floor_image,
         )?);
     }
+    timings.add("variants", t_variants.elapsed().as_secs_f64() * 1e3);
     let sl = flat
         .values()
         .fold(crate::cost::Expansion::default(), |mut a, e| {
@@ -519,31 +593,47 @@ fn build(
             a
         });
 
-    let mut streaming =
-        streaming_report(&g, &own, &elements, &variants[0].cost, &root_cost, &name_of);
+    let mut streaming = timings.time("streaming_rows", || {
+        streaming_report(&g, &own, &elements, &variants[0].cost, &root_cost, &name_of)
+    });
     // The floor the renderer enforces, from the same function and (on a device) the same
     // driver size queries.
     let (fw, fh) = input.floor_image;
     // The hierarchy the streamer renders: large TLASes split into pieces at load time.
-    let split = match stored.split {
-        Some(split) => split,
-        None => motu_render::stream_split(view, stored.cap)?,
+    let split = match stored_split {
+        Some(split) => {
+            sources.stream_split = if split.is_some() { "package" } else { "none" }.into();
+            split
+        }
+        None => {
+            let s = timings.time("stream_split", || {
+                motu_render::stream_split(view, stored_cap)
+            })?;
+            sources.stream_split = if s.is_some() { "computed" } else { "none" }.into();
+            s
+        }
     };
     let streamed = split.as_ref().map_or(*view, |s| s.view(view));
-    let plan = motu_gpu::StreamPlan::load(&streamed, stored.clusters, None);
-    let floor = motu_gpu::streaming_floor_planned(
-        &streamed,
-        &plan,
-        &FloorAdapter(sizes),
-        fw,
-        fh,
-        motu_gpu::StreamOptions::default().staging_bytes,
-    )
-    .map_err(ReportError::Floor)?;
+    let plan = timings.time("proxy_clusters", || {
+        motu_gpu::StreamPlan::load(&streamed, stored_clusters, None)
+    });
+    sources.proxy_clusters = plan.source().as_str().into();
+    let floor = timings
+        .time("floor", || {
+            motu_gpu::streaming_floor_planned(
+                &streamed,
+                &plan,
+                &FloorAdapter(sizes),
+                fw,
+                fh,
+                motu_gpu::StreamOptions::default().staging_bytes,
+            )
+        })
+        .map_err(ReportError::Floor)?;
     streaming.stream_split = split.as_ref().map(|s| {
         let (tlases_split, pieces) = s.counts();
         StreamSplitReport {
-            cap_instances: stored.cap.unwrap_or(motu_render::STREAM_SPLIT_INSTANCES),
+            cap_instances: stored_cap.unwrap_or(motu_render::STREAM_SPLIT_INSTANCES),
             tlases_split,
             pieces,
         }
@@ -551,12 +641,16 @@ fn build(
     streaming.min_resident_bytes = floor.min_resident_bytes;
     streaming.floor = floor;
     streaming.mesh_bytes = motu_gpu::streamed_mesh_total_bytes(&streamed);
-    streaming.persistent_tlas = motu_gpu::persistent_tlas_estimate(
-        &streamed,
-        &FloorAdapter(sizes),
-        sizes.max_instance_count(),
-    )
-    .map_err(ReportError::PersistentEstimate)?;
+    streaming.persistent_tlas = timings
+        .time("persistent_tlas", || {
+            motu_gpu::persistent_tlas_estimate(
+                &streamed,
+                &FloorAdapter(sizes),
+                sizes.max_instance_count(),
+            )
+        })
+        .map_err(ReportError::PersistentEstimate)?;
+    let t_budget = std::time::Instant::now();
     let budget = budget_bytes
         .map(|b| {
             plan_budget(
@@ -570,6 +664,7 @@ fn build(
             )
         })
         .transpose()?;
+    timings.add("budget", t_budget.elapsed().as_secs_f64() * 1e3);
     let info = sizes.info();
     let render_overhead = {
         let c = &variants[0].cost;
@@ -601,6 +696,10 @@ fn build(
         budget,
         streaming,
         warnings,
+        provenance: Provenance {
+            sources,
+            timings_ms: timings,
+        },
     })
 }
 
@@ -620,15 +719,15 @@ fn whole_table_bytes(view: &HierarchyView<'_>) -> u64 {
 /// The whole scene flattened to `levels` TLAS levels (see `cost` module docs).
 fn flattened_variant(
     g: &Graph<'_>,
-    root_range: std::ops::Range<usize>,
+    root: u32,
     name: &str,
     levels: u32,
     sizes: &dyn SizeSource,
     image: (u32, u32),
 ) -> Result<VariantReport, ReportError> {
     let expanded = g.expansions(levels);
-    let e = g.expand_instances(root_range.clone(), levels, &expanded);
-    let (tri_blas, kept) = g.expansion_nodes(root_range, levels);
+    let e = g.expand(g.tlas_blases(root), levels, &expanded);
+    let (tri_blas, kept) = g.expansion_nodes(root, levels);
     let mut starts: Vec<Node> = tri_blas.iter().map(|&b| Node::Blas(b)).collect();
     starts.extend(kept.iter().map(|&t| Node::Tlas(t)));
     let mut c = Cost::sum(g.reachable(starts).iter().map(|&n| g.cost(n)));
@@ -675,122 +774,4 @@ fn flattened_variant(
         exceeds_max_instance_count: top_instances > sizes.max_instance_count(),
         cost: c.rendered_at(image),
     })
-}
-
-fn streaming_report(
-    g: &Graph<'_>,
-    own: &Ownership,
-    elements: &[ElementReport],
-    total: &Cost,
-    root: &Cost,
-    name_of: &dyn Fn(u32) -> String,
-) -> StreamingReport {
-    let untagged: u64 = elements
-        .iter()
-        .filter(|e| e.kind == "untagged")
-        .map(|e| e.ml.resident_bytes)
-        .sum();
-    let root_instances: u64 = elements.iter().map(|e| e.root_instances).sum();
-    let always = total.table_bytes
-        + total.texture_bytes
-        + root.tlas_bytes
-        + root_instances * crate::sizes::INSTANCE_RECORD_SIZE_BYTES
-        + untagged;
-    let mut best: Option<(u64, u64, Node)> = None;
-    for (&n, _) in own.owner.iter().filter(|(n, _)| matches!(n, Node::Blas(_))) {
-        let c = g.cost(n);
-        let inputs: u64 = {
-            let mut kids = Vec::new();
-            g.children(n, &mut kids);
-            kids.iter()
-                .filter(|k| matches!(k, Node::Mesh(_)))
-                .map(|&k| g.cost(k).geometry_bytes)
-                .sum()
-        };
-        let build = inputs + c.geometry_bytes + c.build_transient_peak_bytes;
-        if best.is_none_or(|b| build > b.0) {
-            best = Some((build, c.blas_compacted_bytes, n));
-        }
-    }
-    let (build, compacted, owner) = match best {
-        Some((b, c, n)) => {
-            let o = own.owner.get(&n).copied().unwrap_or(SHARED);
-            (
-                b,
-                c,
-                if o == SHARED {
-                    "shared".into()
-                } else {
-                    name_of(o)
-                },
-            )
-        }
-        None => (0, 0, String::new()),
-    };
-    let largest = elements
-        .iter()
-        .filter_map(|e| e.alone.map(|a| (e.name.clone(), a.peak_bytes)))
-        .max_by_key(|x| x.1);
-    StreamingReport {
-        always_resident_bytes: always,
-        largest_blas_build_bytes: build,
-        largest_blas_compacted_bytes: compacted,
-        largest_blas_owner: owner,
-        min_resident_bytes: always + build,
-        floor: motu_gpu::StreamFloor::default(),
-        largest_element: largest.as_ref().map(|l| l.0.clone()),
-        largest_element_peak_bytes: largest.map_or(0, |l| l.1),
-        persistent_tlas: None,
-        mesh_bytes: 0,
-        stream_split: None,
-    }
-}
-
-/// A [`SizeSource`] as the floor's size queries.
-struct FloorAdapter<'a>(&'a dyn SizeSource);
-
-impl motu_gpu::FloorSizes for FloorAdapter<'_> {
-    fn blas(&self, geometry: &[motu_gpu::BlasGeometry]) -> motu_gpu::Result<(u64, u64)> {
-        let mut tris = Vec::new();
-        let mut boxes = 0u32;
-        for g in geometry {
-            match *g {
-                motu_gpu::BlasGeometry::Triangles {
-                    vertex_count,
-                    triangle_count,
-                    opaque,
-                    ..
-                } => tris.push(TriangleGeometry {
-                    vertex_count,
-                    triangle_count,
-                    opaque,
-                }),
-                motu_gpu::BlasGeometry::Aabbs { aabb_count, .. } => boxes += aabb_count,
-            }
-        }
-        let shape = if tris.is_empty() {
-            BlasShape::Aabbs { box_count: boxes }
-        } else {
-            BlasShape::Triangles(tris)
-        };
-        let s = self
-            .0
-            .blas_sizes(&shape)
-            .map_err(motu_gpu::GpuError::size_source)?;
-        Ok((s.size_bytes, s.build_scratch_bytes))
-    }
-
-    fn tlas(&self, instance_count: u32) -> motu_gpu::Result<(u64, u64)> {
-        let s = self
-            .0
-            .tlas_sizes(u64::from(instance_count))
-            .map_err(motu_gpu::GpuError::size_source)?;
-        Ok((s.size_bytes, s.build_scratch_bytes))
-    }
-
-    fn tlas_updatable(&self, instance_count: u32) -> motu_gpu::Result<Option<(u64, u64)>> {
-        self.0
-            .tlas_updatable_sizes(instance_count)
-            .map_err(motu_gpu::GpuError::size_source)
-    }
 }

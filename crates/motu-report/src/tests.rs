@@ -584,8 +584,19 @@ fn json_is_one_object_with_the_documented_keys() {
         "image_width",
         "image_height",
         "warnings",
+        "sources",
+        "timings_ms",
     ] {
         assert!(v.get(k).is_some(), "missing key {k}");
+    }
+    // Tables made from the view: nothing stored.
+    assert_eq!(v["sources"]["blas_counts"], "computed");
+    assert_eq!(v["sources"]["proxy_clusters"], "computed");
+    for phase in ["blas_counts", "graph", "ownership", "variants", "floor"] {
+        assert!(
+            v["timings_ms"][phase].as_f64().is_some_and(|ms| ms >= 0.0),
+            "missing timings_ms.{phase}"
+        );
     }
     for k in [
         "frame_bytes",
@@ -987,6 +998,16 @@ fn write_package(
     path: &std::path::Path,
     split: Option<motu_pack::StreamSplitMeta>,
 ) -> Option<motu_compile::StoredStreamSplit> {
+    write_package_with(s, path, split, None)
+}
+
+/// [`write_package`] with a `blas_counts` section of these bytes.
+fn write_package_with(
+    s: &mut Scene,
+    path: &std::path::Path,
+    split: Option<motu_pack::StreamSplitMeta>,
+    blas_counts: Option<&[u8]>,
+) -> Option<motu_compile::StoredStreamSplit> {
     let writer = motu_package::PackageWriter::create(path, Default::default()).expect("writer");
     let geometry = motu_pack::PackageGeometry::new(writer);
     for m in &mut s.meshes {
@@ -1039,9 +1060,111 @@ fn write_package(
         }),
         ..Default::default()
     };
+    if let Some(bytes) = blas_counts {
+        writer
+            .add_section(motu_pack::SECTION_BLAS_COUNTS, "blas_counts", 1, bytes)
+            .expect("counts section");
+    }
     motu_pack::write_hierarchy(&mut writer, &s.view(), &meta).expect("sections");
     writer.finish().expect("finish");
     stored
+}
+
+/// JSON of a report without how it was made (`sources`, `timings_ms`).
+fn numbers_json(r: &Report) -> serde_json::Value {
+    let mut v = serde_json::to_value(r).expect("json");
+    let o = v.as_object_mut().expect("object");
+    assert!(o.remove("sources").is_some() && o.remove("timings_ms").is_some());
+    v
+}
+
+/// A package that stored its BLAS counts (as `motu import` does) reports exactly what a
+/// report counting every instance itself says, over scenes of shared, nested, split and
+/// heavily instanced placements, and says which source it used; a table of another hierarchy
+/// or a damaged one is not used (counted again, same numbers).
+#[test]
+fn stored_blas_counts_change_no_number() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let scenes = [
+        ("forest", forest(), None),
+        ("three", three_levels(), None),
+        ("buddha", buddha_like(), None),
+        // Split sections stored for a cap of 3: the package's recorded cap, which its streamed
+        // renders and reports split at (the view alone splits at the default cap, so this
+        // scene's reports are compared with one another, not with the view's).
+        (
+            "split",
+            forest(),
+            Some(motu_pack::StreamSplitMeta {
+                cap_instances: 3,
+                ..Default::default()
+            }),
+        ),
+    ];
+    let table_of = |o: &Scene| {
+        motu_compile::blas_counts::encode_section(
+            &o.view(),
+            &motu_compile::blas_counts::BlasCounts::of(&o.view()),
+        )
+    };
+    for (name, mut s, split) in scenes {
+        // Another scene's table (another instance count).
+        let other_bytes = table_of(&if name == "buddha" {
+            forest()
+        } else {
+            buddha_like()
+        });
+        let view = s.view();
+        let counts = motu_compile::blas_counts::BlasCounts::of(&view);
+        let bytes = motu_compile::blas_counts::encode_section(&view, &counts);
+        // Fewer entries than instances wherever a TLAS repeats a BLAS.
+        assert!(counts.entries.len() <= view.instances.len());
+        let mut reports = Vec::new();
+        for (tag, section) in [
+            ("stored", Some(&bytes[..])),
+            ("absent", None),
+            ("foreign", Some(&other_bytes[..])),
+            ("cut", Some(&bytes[..bytes.len() - 8])),
+        ] {
+            let path = dir.path().join(format!("{name}-{tag}.motu"));
+            write_package_with(&mut s, &path, split.clone(), section);
+            let pkg = motu_pack::ScenePackage::open(&path).expect("open");
+            let r = build_report(&pkg, &lavapipe(), Some(1 << 20)).expect("report");
+            let want = if tag == "stored" {
+                "package"
+            } else {
+                "computed"
+            };
+            assert_eq!(r.provenance.sources.blas_counts, want, "{name} {tag}");
+            reports.push(r);
+        }
+        let mut from_view = s.report(&lavapipe(), Some(1 << 20));
+        assert_eq!(from_view.provenance.sources.blas_counts, "computed");
+        if split.is_some() {
+            assert_eq!(
+                reports[0]
+                    .streaming
+                    .stream_split
+                    .as_ref()
+                    .map(|s| s.cap_instances),
+                Some(3)
+            );
+            from_view = reports[1].clone();
+        }
+        for r in &reports {
+            from_view.package = r.package.clone();
+            assert_eq!(numbers_json(r), numbers_json(&from_view), "{name}");
+            assert_eq!(*r, from_view, "{name}");
+        }
+        if name == "buddha" {
+            // 25,251 instances, two entries: the walk is over entries.
+            assert_eq!(counts.entries.len(), 2);
+            assert_eq!(reports[0].flattened_instances, 25_251);
+        }
+        // No TLAS over the default cap; the package's recorded cap of 3 splits its stored ones.
+        let want = if split.is_some() { "package" } else { "none" };
+        assert_eq!(reports[0].provenance.sources.stream_split, want, "{name}");
+    }
 }
 
 /// `build_report` on a real package (written with motu-pack, without a stored stream split,

@@ -209,28 +209,12 @@ impl TlasFloor {
         plan: &super::StreamPlan,
         sizes: &dyn FloorSizes,
     ) -> Result<TlasFloor> {
-        // Triangle instances per TLAS (each gets a proxy box), as the renderer's tables.
-        let buildable = |b: usize| super::streamable(&view.blases[b]);
+        // A streamed TLAS holds its PI instances, the proxy and the resident BLASes'
+        // instances: at the floor one BLAS is resident (the most instanced one bounds its
+        // instances). Counted in parallel over TLASes (millions of instances).
+        let most = most_instanced(view);
         let mut out = TlasFloor::default();
-        for (t, rec) in view.tlases.iter().enumerate() {
-            let range = rec.instance_range();
-            // A streamed TLAS holds its PI instances, the proxy and the resident BLASes'
-            // instances: at the floor one BLAS is resident (the most instanced one bounds its
-            // instances).
-            let mut per_blas: std::collections::HashMap<u32, u32> = Default::default();
-            let mut other = 0u32;
-            for i in &view.instances[range] {
-                if buildable(i.blas as usize) {
-                    *per_blas.entry(i.blas).or_default() += 1;
-                } else {
-                    other += 1;
-                }
-            }
-            let (most_blas, most) = per_blas
-                .iter()
-                .map(|(&b, &n)| (b, n))
-                .max_by_key(|&(b, n)| (n, std::cmp::Reverse(b)))
-                .unwrap_or((u32::MAX, 0));
+        for (t, &(other, most_blas, most)) in most.iter().enumerate() {
             let cl = &plan.clusters[t];
             out.members += cl.iter().map(|c| c.members.len() as u64).sum::<u64>();
             let clusters = cl.len() as u32;
@@ -270,6 +254,44 @@ impl TlasFloor {
         }
         Ok(out)
     }
+}
+
+/// Per TLAS: its instances of BLASes that are not streamed (PI and empty BLASes), and the
+/// streamed BLAS most of its instances place (the lowest id among equals; `u32::MAX` if none)
+/// with that count. Parallel over TLASes, a dense counter per task.
+fn most_instanced(view: &HierarchyView<'_>) -> Vec<(u32, u32, u32)> {
+    use rayon::prelude::*;
+    let buildable: Vec<bool> = view.blases.iter().map(super::streamable).collect();
+    view.tlases
+        .par_iter()
+        .map_init(
+            || vec![0u32; view.blases.len()],
+            |per_blas, rec| {
+                let mut other = 0u32;
+                let mut touched = Vec::new();
+                for i in &view.instances[rec.instance_range()] {
+                    let b = i.blas as usize;
+                    if buildable[b] {
+                        if per_blas[b] == 0 {
+                            touched.push(i.blas);
+                        }
+                        per_blas[b] += 1;
+                    } else {
+                        other += 1;
+                    }
+                }
+                let (most_blas, most) = touched
+                    .iter()
+                    .map(|&b| (b, per_blas[b as usize]))
+                    .max_by_key(|&(b, n)| (n, std::cmp::Reverse(b)))
+                    .unwrap_or((u32::MAX, 0));
+                for &b in &touched {
+                    per_blas[b as usize] = 0;
+                }
+                (other, most_blas, most)
+            },
+        )
+        .collect()
 }
 
 /// The PI BLASes of the skeleton.

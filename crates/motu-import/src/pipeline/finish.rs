@@ -138,6 +138,8 @@ pub(super) fn finish(
     drop(streamed_split);
     drop(split);
     let proxy_clusters_ms = t.elapsed().as_secs_f64() * 1e3;
+    // What `motu report` walks instead of every instance (the package's own tables).
+    crate::split::write_blas_counts(&mut writer, &view)?;
     motu_pack::write_hierarchy_after_texels(&mut writer, &view, &meta)?;
     Ok((
         writer.finish().map_err(ImportError::FinishPackage)?,

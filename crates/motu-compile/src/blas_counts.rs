@@ -1,0 +1,237 @@
+//! Per TLAS, the BLASes its instances place, each once with its instance count: what
+//! `motu report` walks instead of every instance (the cost graph's edges), and the table a
+//! package stores (`blas_counts` section, FORMAT.md) so a report of millions of instances reads
+//! it instead of counting them again.
+//!
+//! An entry is a (BLAS, element) pair of one TLAS with the number of its instances that place
+//! that BLAS with that element tag (root placements carry their element; below the root the tag
+//! is `NONE`), so a TLAS of a million instances of fifty BLASes is fifty entries. Entries of a
+//! TLAS are ascending by (BLAS, element). Deterministic: the same view gives the same table,
+//! stored or made.
+
+use motu_abi::blob::{BlobReader, BlobWriter};
+use motu_abi::HierarchyView;
+use rayon::prelude::*;
+
+/// One (BLAS, element) pair of a TLAS and how many of its instances place it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C)]
+pub struct BlasCount {
+    pub blas: u32,
+    /// The instances' element tag (`NONE` below the root).
+    pub element: u32,
+    pub count: u64,
+}
+
+/// [`BlasCount`]s of every TLAS of a view: TLAS `t`'s are `entries[first[t]..first[t + 1]]`.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct BlasCounts {
+    /// `tlas_count + 1` offsets into `entries`.
+    pub first: Vec<u64>,
+    pub entries: Vec<BlasCount>,
+}
+
+/// TLASes of more instances than this are counted in parallel pieces.
+const PIECE_INSTANCES: usize = 1 << 16;
+
+impl BlasCounts {
+    /// Counts every TLAS's instances (parallel over TLASes and over large TLASes' pieces).
+    /// O(instances / threads + entries · log).
+    pub fn of(view: &HierarchyView<'_>) -> BlasCounts {
+        let per_tlas: Vec<Vec<BlasCount>> = view
+            .tlases
+            .par_iter()
+            .map(|rec| {
+                let instances = view.instances.get(rec.instance_range()).unwrap_or(&[]);
+                if instances.len() <= PIECE_INSTANCES {
+                    count_sorted(instances.iter().map(|i| (i.blas, i.element, 1)).collect())
+                } else {
+                    let pieces: Vec<BlasCount> = instances
+                        .par_chunks(PIECE_INSTANCES)
+                        .flat_map_iter(|piece| {
+                            count_sorted(piece.iter().map(|i| (i.blas, i.element, 1)).collect())
+                        })
+                        .collect();
+                    count_sorted(
+                        pieces
+                            .into_iter()
+                            .map(|e| (e.blas, e.element, e.count))
+                            .collect(),
+                    )
+                }
+            })
+            .collect();
+        let mut first = Vec::with_capacity(per_tlas.len() + 1);
+        let mut entries = Vec::with_capacity(per_tlas.iter().map(Vec::len).sum());
+        for e in per_tlas {
+            first.push(entries.len() as u64);
+            entries.extend(e);
+        }
+        first.push(entries.len() as u64);
+        BlasCounts { first, entries }
+    }
+
+    /// TLAS `t`'s entries (empty past the table).
+    pub fn tlas(&self, t: usize) -> &[BlasCount] {
+        match (self.first.get(t), self.first.get(t + 1)) {
+            (Some(&a), Some(&b)) => self.entries.get(a as usize..b as usize).unwrap_or(&[]),
+            _ => &[],
+        }
+    }
+
+    /// Whether this table can be `view`'s: one entry list per TLAS, each adding up to its
+    /// TLAS's instance count, every BLAS in range, entries ascending. O(entries). (A stored
+    /// table is the import's own count of the package's tables, covered by the section's
+    /// checksum; this guards against a table of another package or a damaged one.)
+    pub fn fits(&self, view: &HierarchyView<'_>) -> bool {
+        if self.first.len() != view.tlases.len() + 1 {
+            return false;
+        }
+        view.tlases.iter().enumerate().all(|(t, rec)| {
+            let (a, b) = (self.first[t], self.first[t + 1]);
+            if a > b || b > self.entries.len() as u64 {
+                return false;
+            }
+            let e = &self.entries[a as usize..b as usize];
+            let total = e
+                .iter()
+                .try_fold(0u64, |s, c| s.checked_add(c.count).filter(|_| c.count > 0));
+            total == Some(u64::from(rec.instance_count))
+                && e.iter().all(|c| (c.blas as usize) < view.blases.len())
+                && e.windows(2)
+                    .all(|w| (w[0].blas, w[0].element) < (w[1].blas, w[1].element))
+        })
+    }
+}
+
+/// Sorts (BLAS, element, count) triples and merges equal pairs.
+fn count_sorted(mut v: Vec<(u32, u32, u64)>) -> Vec<BlasCount> {
+    v.sort_unstable_by_key(|&(b, e, _)| (b, e));
+    let mut out: Vec<BlasCount> = Vec::new();
+    for (blas, element, count) in v {
+        match out.last_mut() {
+            Some(l) if l.blas == blas && l.element == element => l.count += count,
+            _ => out.push(BlasCount {
+                blas,
+                element,
+                count,
+            }),
+        }
+    }
+    out
+}
+
+/// The `blas_counts` section's first bytes (FORMAT.md): the name and the version.
+pub const SECTION_MAGIC: &[u8; 16] = b"motu bcounts v1\0";
+
+/// The `blas_counts` section (FORMAT.md): the instance and TLAS counts of the view it was made
+/// for, then the offsets and the entries.
+pub fn encode_section(view: &HierarchyView<'_>, t: &BlasCounts) -> Vec<u8> {
+    let mut w = BlobWriter::new(
+        SECTION_MAGIC,
+        24 + std::mem::size_of_val(&t.first[..]) + std::mem::size_of_val(&t.entries[..]),
+    );
+    w.u64(view.instances.len() as u64)
+        .u64(view.tlases.len() as u64)
+        .u64(t.entries.len() as u64)
+        .pods(&t.first)
+        .pods(&t.entries);
+    w.finish()
+}
+
+/// Reads what [`encode_section`] wrote for `view`; `None` for another magic (another version),
+/// a cut or long section, or a table that does not fit `view` ([`BlasCounts::fits`]).
+pub fn decode_section(bytes: &[u8], view: &HierarchyView<'_>) -> Option<BlasCounts> {
+    let mut r = BlobReader::new(bytes, SECTION_MAGIC)?;
+    let instances = r.u64()?;
+    let n_tlases = usize::try_from(r.u64()?).ok()?;
+    let n_entries = usize::try_from(r.u64()?).ok()?;
+    if instances != view.instances.len() as u64 || n_tlases != view.tlases.len() {
+        return None;
+    }
+    let need = (n_tlases.checked_add(1)?)
+        .checked_mul(8)?
+        .checked_add(n_entries.checked_mul(std::mem::size_of::<BlasCount>())?)?;
+    if need != r.remaining() {
+        return None;
+    }
+    let first: Vec<u64> = r.pods(n_tlases + 1)?;
+    let entries: Vec<BlasCount> = r.pods(n_entries)?;
+    r.finish()?;
+    let t = BlasCounts { first, entries };
+    t.fits(view).then_some(t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use motu_abi::{InstanceRecord, TlasRecord, NONE_U32};
+
+    fn inst(blas: u32, element: u32) -> InstanceRecord {
+        InstanceRecord {
+            blas,
+            element,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn counts_pairs_per_tlas_and_round_trips() {
+        // TLAS 0: a large one (counted in pieces), TLAS 1: root placements with elements.
+        let mut instances: Vec<InstanceRecord> = (0..PIECE_INSTANCES as u32 * 3 + 7)
+            .map(|i| inst(i % 5, NONE_U32))
+            .collect();
+        let big = instances.len() as u32;
+        instances.extend([inst(2, 0), inst(2, 1), inst(2, 0), inst(0, 1)]);
+        let tlases = [
+            TlasRecord {
+                instance_base: 0,
+                instance_count: big,
+                ..Default::default()
+            },
+            TlasRecord {
+                instance_base: big,
+                instance_count: 4,
+                ..Default::default()
+            },
+        ];
+        let blases = vec![motu_abi::BlasRecord::default(); 5];
+        let view = HierarchyView {
+            tlases: &tlases,
+            instances: &instances,
+            blases: &blases,
+            ..Default::default()
+        };
+        let c = BlasCounts::of(&view);
+        let naive = |t: usize| {
+            let mut m = std::collections::BTreeMap::<(u32, u32), u64>::new();
+            for i in &instances[tlases[t].instance_range()] {
+                *m.entry((i.blas, i.element)).or_default() += 1;
+            }
+            m.into_iter()
+                .map(|((blas, element), count)| BlasCount {
+                    blas,
+                    element,
+                    count,
+                })
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(c.tlas(0), &naive(0)[..]);
+        assert_eq!(c.tlas(1), &naive(1)[..]);
+        assert_eq!(c.tlas(1).len(), 3);
+        assert!(c.fits(&view));
+        let bytes = encode_section(&view, &c);
+        assert_eq!(decode_section(&bytes, &view), Some(c.clone()));
+        // Damaged or foreign tables are not used.
+        assert_eq!(decode_section(&bytes[..bytes.len() - 1], &view), None);
+        let mut wrong = c.clone();
+        wrong.entries[0].count += 1;
+        assert!(!wrong.fits(&view));
+        assert_eq!(decode_section(&encode_section(&view, &wrong), &view), None);
+        let fewer = HierarchyView {
+            tlases: &tlases[..1],
+            ..view
+        };
+        assert_eq!(decode_section(&bytes, &fewer), None);
+    }
+}
