@@ -94,11 +94,11 @@ pub use html::render_html;
 pub use human::{format_size, human_bytes, human_count};
 pub use presets::{preset, LAVAPIPE, NVIDIA_H200, PRESETS};
 pub use report::{
-    build_report, build_report_at, build_report_from_view, Report, ReportInput, StreamSplitReport,
-    StreamingReport, DEFAULT_FLOOR_IMAGE,
+    build_report, build_report_at, build_report_from_view, Report, ReportInput, DEFAULT_FLOOR_IMAGE,
 };
 pub use rows::{ElementReport, VariantReport};
 pub use sizes::*;
+pub use streaming::{StreamSplitReport, StreamingReport};
 pub use text::render_text;
 pub use timing::{PhaseTimings, Provenance, ReportSources};
 

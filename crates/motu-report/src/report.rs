@@ -10,7 +10,7 @@ use crate::cost::{blas_cost_of, tlas_cost, Cost, Graph, Node};
 use crate::owner::{Ownership, SHARED};
 use crate::rows::{ElementReport, VariantReport};
 use crate::sizes::{BlasShape, SizeSource, SizeSourceInfo};
-use crate::streaming::{streaming_report, FloorAdapter};
+use crate::streaming::{streaming_report, FloorAdapter, StreamSplitReport, StreamingReport};
 use crate::timing::{PhaseTimings, Provenance, ReportSources};
 use crate::ReportError;
 use motu_compile::blas_counts::BlasCounts;
@@ -32,74 +32,12 @@ pub struct ReportInput {
 /// Image size of the streaming floor when the package has no camera.
 pub const DEFAULT_FLOOR_IMAGE: (u32, u32) = (640, 480);
 
-/// What streaming would need at least.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct StreamingReport {
-    /// Always resident while rendering anything: every record table, the root TLAS and its
-    /// instance buffer, and untagged items.
-    pub always_resident_bytes: u64,
-    /// The BLAS with the largest build working set (inputs + uncompacted + scratch).
-    pub largest_blas_build_bytes: u64,
-    pub largest_blas_compacted_bytes: u64,
-    /// Its owner (an element name or `shared`).
-    pub largest_blas_owner: String,
-    /// The floor of `motu render --stream` (`floor.min_resident_bytes`): every budget at or
-    /// above it completes every frame at `floor`'s image size.
-    pub min_resident_bytes: u64,
-    /// Its parts, as `motu_gpu::streaming_floor` computes them for the renderer.
-    #[serde(serialize_with = "floor_json")]
-    pub floor: motu_gpu::StreamFloor,
-    /// The element with the largest `alone.peak_bytes` (the floor for per-element streaming).
-    pub largest_element: Option<String>,
-    pub largest_element_peak_bytes: u64,
-    /// What persistent TLASes (`--stream-tlas update`) would keep resident and the least
-    /// budget at which `--stream-tlas auto` (the default) updates them instead of rebuilding;
-    /// `None` where the sizes come from a model (updatable TLAS sizes need a device's
-    /// queries). Their instance records (64 bytes each) also count where host memory does
-    /// (integrated GPUs, CPU drivers).
-    #[serde(serialize_with = "persistent_json")]
-    pub persistent_tlas: Option<motu_gpu::PersistentEstimate>,
-    /// Bytes of every mesh `motu render --stream` streams (positions, indices, primitive maps,
-    /// shading attributes, as it lays them out): on a discrete GPU they live in host memory
-    /// (`--stream-mesh-memory auto`), the resident ones at most, so this bounds the host
-    /// memory they take; in VRAM (`device`, unified memory) they come and go with their BLASes
-    /// under the budget.
-    pub mesh_bytes: u64,
-    /// The TLASes `motu render --stream` splits into pieces when it loads the package (those
-    /// over `cap_instances` instances, the default `--stream-split-instances`: the cap the
-    /// import recorded, else 1,000,000); the floor and
-    /// the persistent estimate above are those of the split hierarchy. `None`: no TLAS over
-    /// the cap.
-    pub stream_split: Option<StreamSplitReport>,
-}
-
 // The GPU crate's reports as `motu_render::stats` writes them (their JSON keys live there).
-fn floor_json<S: serde::Serializer>(v: &motu_gpu::StreamFloor, s: S) -> Result<S::Ok, S::Error> {
-    motu_render::stats::StreamFloor::from(v).serialize(s)
-}
-
-fn persistent_json<S: serde::Serializer>(
-    v: &Option<motu_gpu::PersistentEstimate>,
-    s: S,
-) -> Result<S::Ok, S::Error> {
-    v.as_ref()
-        .map(motu_render::stats::PersistentEstimate::from)
-        .serialize(s)
-}
-
 fn overhead_json<S: serde::Serializer>(
     v: &motu_gpu::FullBuildOverhead,
     s: S,
 ) -> Result<S::Ok, S::Error> {
     motu_render::stats::FullBuildOverhead::from(v).serialize(s)
-}
-
-/// See [`StreamingReport::stream_split`].
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
-pub struct StreamSplitReport {
-    pub cap_instances: u32,
-    pub tlases_split: u64,
-    pub pieces: u64,
 }
 
 /// The VRAM-budget report (`motu report --json` prints it as one object).

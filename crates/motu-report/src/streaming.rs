@@ -2,11 +2,75 @@
 //! ([`streaming_report`]), and the report's size source as the floor's size queries
 //! ([`FloorAdapter`]) for `motu_gpu::streaming_floor_planned`.
 
+use serde::Serialize;
+
 use crate::cost::{Cost, Graph, Node};
 use crate::owner::{Ownership, SHARED};
-use crate::report::StreamingReport;
 use crate::rows::ElementReport;
 use crate::sizes::{BlasShape, SizeSource, TriangleGeometry};
+
+/// What streaming would need at least.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StreamingReport {
+    /// Always resident while rendering anything: every record table, the root TLAS and its
+    /// instance buffer, and untagged items.
+    pub always_resident_bytes: u64,
+    /// The BLAS with the largest build working set (inputs + uncompacted + scratch).
+    pub largest_blas_build_bytes: u64,
+    pub largest_blas_compacted_bytes: u64,
+    /// Its owner (an element name or `shared`).
+    pub largest_blas_owner: String,
+    /// The floor of `motu render --stream` (`floor.min_resident_bytes`): every budget at or
+    /// above it completes every frame at `floor`'s image size.
+    pub min_resident_bytes: u64,
+    /// Its parts, as `motu_gpu::streaming_floor` computes them for the renderer.
+    #[serde(serialize_with = "floor_json")]
+    pub floor: motu_gpu::StreamFloor,
+    /// The element with the largest `alone.peak_bytes` (the floor for per-element streaming).
+    pub largest_element: Option<String>,
+    pub largest_element_peak_bytes: u64,
+    /// What persistent TLASes (`--stream-tlas update`) would keep resident and the least
+    /// budget at which `--stream-tlas auto` (the default) updates them instead of rebuilding;
+    /// `None` where the sizes come from a model (updatable TLAS sizes need a device's
+    /// queries). Their instance records (64 bytes each) also count where host memory does
+    /// (integrated GPUs, CPU drivers).
+    #[serde(serialize_with = "persistent_json")]
+    pub persistent_tlas: Option<motu_gpu::PersistentEstimate>,
+    /// Bytes of every mesh `motu render --stream` streams (positions, indices, primitive maps,
+    /// shading attributes, as it lays them out): on a discrete GPU they live in host memory
+    /// (`--stream-mesh-memory auto`), the resident ones at most, so this bounds the host
+    /// memory they take; in VRAM (`device`, unified memory) they come and go with their BLASes
+    /// under the budget.
+    pub mesh_bytes: u64,
+    /// The TLASes `motu render --stream` splits into pieces when it loads the package (those
+    /// over `cap_instances` instances, the default `--stream-split-instances`: the cap the
+    /// import recorded, else 1,000,000); the floor and
+    /// the persistent estimate above are those of the split hierarchy. `None`: no TLAS over
+    /// the cap.
+    pub stream_split: Option<StreamSplitReport>,
+}
+
+/// See [`StreamingReport::stream_split`].
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct StreamSplitReport {
+    pub cap_instances: u32,
+    pub tlases_split: u64,
+    pub pieces: u64,
+}
+
+// The GPU crate's reports as `motu_render::stats` writes them (their JSON keys live there).
+fn floor_json<S: serde::Serializer>(v: &motu_gpu::StreamFloor, s: S) -> Result<S::Ok, S::Error> {
+    motu_render::stats::StreamFloor::from(v).serialize(s)
+}
+
+fn persistent_json<S: serde::Serializer>(
+    v: &Option<motu_gpu::PersistentEstimate>,
+    s: S,
+) -> Result<S::Ok, S::Error> {
+    v.as_ref()
+        .map(motu_render::stats::PersistentEstimate::from)
+        .serialize(s)
+}
 
 pub(crate) fn streaming_report(
     g: &Graph<'_>,
