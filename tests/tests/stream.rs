@@ -839,10 +839,17 @@ fn proxy_boxes_stored_at_import_start_streamed_renders_and_bad_ones_are_made_aga
 }
 
 /// `motu report --json` of `pkg` at 48×27 without its `package` path (which names the file).
-fn report_without_path(pkg: &Path) -> serde_json::Value {
+/// The report's numbers: without its path, its phase times and where its inputs came from
+/// (`sources`, returned beside it).
+fn report_without_path(pkg: &Path) -> (serde_json::Value, serde_json::Value) {
     let mut r = report_json(pkg, "48", "27");
-    r.as_object_mut().unwrap().remove("package");
-    r
+    let o = r.as_object_mut().unwrap();
+    o.remove("package");
+    o.remove("timings_ms");
+    let sources = o
+        .remove("sources")
+        .expect("the report says where its inputs came from");
+    (r, sources)
 }
 
 /// Issue 45 item 1 / issue 48 item 2: `motu import` stores the proxy clusters of every TLAS
@@ -880,9 +887,13 @@ fn proxy_clusters_stored_at_import_start_streamed_renders_and_bad_ones_are_made_
     std::fs::write(&bad, &damaged).unwrap();
 
     // The report's floor reads the clusters: the same report from every package.
-    let report = report_without_path(&pkg);
-    assert_eq!(report, report_without_path(&old));
-    assert_eq!(report, report_without_path(&bad));
+    let (report, sources) = report_without_path(&pkg);
+    assert_eq!(sources["proxy_clusters"], "package", "{sources}");
+    for other in [&old, &bad] {
+        let (r, sources) = report_without_path(other);
+        assert_eq!(report, r);
+        assert_eq!(sources["proxy_clusters"], "computed", "{sources}");
+    }
 
     let small = SmallStreamed::new(d, &pkg);
     let streamed = |pkg: &Path, name: &str, extra: &[&str]| {
