@@ -438,10 +438,7 @@ impl<'a> StreamingRenderer<'a> {
             let open = again.as_ref().map_or(0, |r| r.open.len());
             if let Err(e) = self
                 .make_resident(&guard_demand, true)
-                .and_then(|()| {
-                    before.log(&self.frame.stats, "first", open);
-                    Ok(())
-                })
+                .map(|()| before.log(&self.frame.stats, "first", open))
                 .and_then(|()| match again {
                     Some(rounds) => self.probe_again(rounds, opts, evictions_at_probe),
                     None => Ok(()),
