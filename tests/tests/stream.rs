@@ -483,6 +483,99 @@ fn verifying_probe_rounds_make_frames_one_pass_where_they_fit() {
     }
 }
 
+/// `--stream-probe-later verify` (issue 45 items 4 and 5): where the first probe round's
+/// prefetch evicted, the verifying rounds probe the pixels it left open with every other
+/// instead of an open-pixel round first, so a build step, with the TLAS rebuilds of every root
+/// piece holding an instance of what it built or evicted, is saved. Along the default camera's
+/// path at a quarter of the full build, the root split into pieces as island 0.3's is (about
+/// nine) and host memory counted apart as on a discrete GPU: fewer TLAS rebuilds and instance
+/// records written than `open`, no more passes after the first, the full build's image.
+#[test]
+fn merged_probe_rounds_rebuild_fewer_tlases_at_no_more_passes() {
+    let Some(ShotFixture {
+        dir,
+        pkg,
+        peak,
+        reference,
+        ..
+    }) = ShotFixture::new()
+    else {
+        return;
+    };
+    let frames =
+        |st: &serde_json::Value| st["stream"]["frames"].as_array().expect("frames").clone();
+    let total = |st: &serde_json::Value, k: &str| frames(st).iter().map(|f| u(&f[k])).sum::<u64>();
+    let merged_frames = |st: &serde_json::Value| {
+        frames(st)
+            .iter()
+            .filter(|f| {
+                f["probe_later_merged"]
+                    .as_bool()
+                    .expect("probe_later_merged")
+            })
+            .count()
+    };
+    let discrete = [("MOTU_SIMULATE_DISCRETE_MEMORY", "1")];
+    let run = |later: &str| {
+        let flags = [
+            "--stream-split-instances",
+            "1700",
+            "--no-as-cache",
+            "--stream-probe-later",
+            later,
+        ];
+        let name = format!("later-{later}");
+        shot_path_env(
+            &pkg,
+            dir.path(),
+            &name,
+            peak / 4,
+            "pipeline",
+            &flags,
+            &discrete,
+        )
+    };
+    let (open, _) = run("open");
+    let (merged, aov) = run("verify");
+    let pieces = u(&merged["stream"]["startup"]["split_pieces"]);
+    eprintln!(
+        "a quarter, {pieces} root pieces: TLAS rebuilds {} → {}, instance records {} → {}, \
+         build steps {} → {}, probe rays {} → {}, passes after the first {} → {} ({} of {} \
+         frames merged)",
+        total(&open, "tlas_rebuilt"),
+        total(&merged, "tlas_rebuilt"),
+        total(&open, "tlas_instances_written"),
+        total(&merged, "tlas_instances_written"),
+        total(&open, "build_steps"),
+        total(&merged, "build_steps"),
+        total(&open, "probe_rays"),
+        total(&merged, "probe_rays"),
+        passes(&open),
+        passes(&merged),
+        merged_frames(&merged),
+        frames(&merged).len()
+    );
+    assert!(pieces >= 4, "the root is split into pieces: {pieces}");
+    assert_eq!(merged_frames(&open), 0, "open never merges");
+    assert!(
+        merged_frames(&merged) > 0,
+        "the prefetch evicted and merged"
+    );
+    for st in [&open, &merged] {
+        assert_eq!(st["stream"]["totals"]["incomplete_frames"], 0, "{st}");
+    }
+    assert!(
+        total(&merged, "tlas_rebuilt") < total(&open, "tlas_rebuilt"),
+        "fewer TLAS rebuilds"
+    );
+    assert!(
+        total(&merged, "tlas_instances_written") < total(&open, "tlas_instances_written"),
+        "fewer instance records written"
+    );
+    assert!(passes(&merged) <= passes(&open), "no more passes");
+    motu_ok(&["compare", s(&reference), s(&aov), "--max-mismatch", "0"]);
+}
+
 /// Streamed meshes in host memory (`--stream-mesh-memory`, issue 14 item 6). Only hits and
 /// builds read a BLAS's meshes, so on a discrete GPU (`auto`) they live in host memory outside
 /// the VRAM budget, which then holds structures and textures alone: along the default

@@ -83,6 +83,21 @@ fn render_library_defaults_are_the_render_flags_defaults() {
     let b = cmd::render::stream_bounds(&render_args(&["--stream-probe-verify", "0"]).stream_bounds);
     assert!(b.given(), "--stream-probe-verify needs --stream");
     assert_eq!(b.options().probe_verify_rounds, 0);
+    // Later rounds: open-pixel rounds first by default; verify merges them into the verifying
+    // rounds; any other value is refused by name.
+    assert_eq!(d.probe_later, motu_gpu::ProbeLater::Open);
+    assert_eq!(o.probe_later, motu_gpu::ProbeLater::Open);
+    for (value, want) in [
+        ("open", motu_gpu::ProbeLater::Open),
+        ("verify", motu_gpu::ProbeLater::Verify),
+    ] {
+        let b = cmd::render::stream_bounds(
+            &render_args(&["--stream-probe-later", value]).stream_bounds,
+        );
+        assert!(b.given(), "--stream-probe-later needs --stream");
+        assert_eq!(b.options().probe_later, want);
+    }
+    refused("--stream-probe-later", "all");
     // Pass marks: auto by default (also without a probe: it then marks nothing), any row
     // stride; an explicit stride or auto contradicting --stream-probe 0 is refused by name.
     assert_eq!(d.pass_marks, motu_gpu::PassMarks::Auto);

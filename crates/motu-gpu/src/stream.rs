@@ -147,7 +147,8 @@ pub use floor::{
     FloorSizes, StreamFloor,
 };
 pub use options::{
-    MeshMemory, PassMarks, StreamFallback, StreamOptions, AUTO_PASS_FRAMES, AUTO_PASS_ROWS,
+    MeshMemory, PassMarks, ProbeLater, StreamFallback, StreamOptions, AUTO_PASS_FRAMES,
+    AUTO_PASS_ROWS,
 };
 pub use stats::{FrameStreamStats, PassStats, StreamTotals};
 pub use topology::{ClustersSource, StreamPlan};

@@ -25,6 +25,9 @@ pub struct StreamBounds {
     pub probe_rounds: Option<u32>,
     /// `--stream-probe-verify`: verifying probe rounds after those (`None`: the default).
     pub probe_verify: Option<u32>,
+    /// `--stream-probe-later`: the rounds after the first when its prefetch evicted (`None`:
+    /// the default).
+    pub probe_later: Option<motu_gpu::ProbeLater>,
     /// `--stream-probe-pass-rows`: the probe's pass marks (`None`: the default, auto).
     pub pass_marks: Option<motu_gpu::PassMarks>,
     /// `--stream-tlas`: how TLASes follow residency.
@@ -51,6 +54,7 @@ impl StreamBounds {
             probe_stride: self.probe_stride.unwrap_or(d.probe_stride),
             probe_rounds: self.probe_rounds.unwrap_or(d.probe_rounds),
             probe_verify_rounds: self.probe_verify.unwrap_or(d.probe_verify_rounds),
+            probe_later: self.probe_later.unwrap_or(d.probe_later),
             pass_marks: self.pass_marks.unwrap_or(d.pass_marks),
             tlas_update: self.tlas_update,
             defrag: self.defrag,
@@ -83,6 +87,7 @@ impl StreamBounds {
             || self.probe_stride.is_some()
             || self.probe_rounds.is_some()
             || self.probe_verify.is_some()
+            || self.probe_later.is_some()
             || self.pass_marks.is_some()
             || self.tlas_update != motu_gpu::TlasUpdate::Auto
             || self.split_instances.is_some()

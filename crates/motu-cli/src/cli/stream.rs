@@ -80,6 +80,14 @@ pub struct StreamBoundArgs {
     /// something, a build step (probe_verify_rounds per frame); 0 for throughput.
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_name = "N")]
     pub stream_probe_verify: Option<u32>,
+    /// Streaming: what the probe rounds after the first do when the first round's prefetch
+    /// evicted (verifying rounds then follow). `open` (default): probe the pixels it left open
+    /// (--stream-probe-rounds), then the verifying rounds. `verify`: straight to the verifying
+    /// rounds, which probe every pixel, the open ones among them, up to --stream-probe-rounds
+    /// minus one more of them: a build step, and its TLAS rebuilds, fewer per frame where
+    /// both kinds would have found something (probe_later_merged per frame).
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, value_name = "WHAT")]
+    pub stream_probe_later: Option<ProbeLaterArg>,
     /// Streaming: the probe's pixels of every N-th row also mark the resident structures their
     /// rays pass through without hitting, so the prefetch evicts those last (it never skips a
     /// build to keep them). Fewer second passes where the prefetch evicts for room (a third
@@ -173,6 +181,22 @@ impl From<MeshMemoryArg> for motu_gpu::MeshMemory {
             MeshMemoryArg::Auto => motu_gpu::MeshMemory::Auto,
             MeshMemoryArg::Device => motu_gpu::MeshMemory::Device,
             MeshMemoryArg::Host => motu_gpu::MeshMemory::Host,
+        }
+    }
+}
+
+/// `--stream-probe-later`.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ProbeLaterArg {
+    Open,
+    Verify,
+}
+
+impl From<ProbeLaterArg> for motu_gpu::ProbeLater {
+    fn from(a: ProbeLaterArg) -> Self {
+        match a {
+            ProbeLaterArg::Open => motu_gpu::ProbeLater::Open,
+            ProbeLaterArg::Verify => motu_gpu::ProbeLater::Verify,
         }
     }
 }

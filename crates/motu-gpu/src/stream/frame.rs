@@ -434,8 +434,11 @@ impl<'a> StreamingRenderer<'a> {
             });
         }
         if !guard_demand.is_empty() && self.frame.stats.complete && !self.frame_build_spent() {
+            let before = ProbeStep::of(&self.frame.stats);
+            let open = again.as_ref().map_or(0, |r| r.open.len());
             if let Err(e) = self
                 .make_resident(&guard_demand, true)
+                .map(|()| before.log(&self.frame.stats, "first", open))
                 .and_then(|()| match again {
                     Some(rounds) => self.probe_again(rounds, opts, evictions_at_probe),
                     None => Ok(()),
@@ -573,7 +576,21 @@ impl<'a> StreamingRenderer<'a> {
         } = rounds;
         let next = &camera;
         let mut settled = open.is_empty();
-        while !open.is_empty()
+        // `ProbeLater::Verify`: the prefetch evicted, so verifying rounds follow; they probe
+        // the open pixels too, one build step for both.
+        let merged = self.opts.probe_later == super::ProbeLater::Verify
+            && self.opts.probe_verify_rounds > 0
+            && self.res.evictions() != evictions_at_probe;
+        // Merged, the verifying rounds may go as deep as the open-pixel rounds would have.
+        let verify_rounds = self.opts.probe_verify_rounds
+            + if merged && !open.is_empty() {
+                self.opts.probe_rounds.saturating_sub(1)
+            } else {
+                0
+            };
+        self.frame.stats.probe_later_merged = merged;
+        while !merged
+            && !open.is_empty()
             && self.frame.stats.probe_rounds < self.opts.probe_rounds
             && needed.iter().any(|&b| self.res.blas[b as usize].is_some())
             && !self.frame_build_spent()
@@ -590,7 +607,9 @@ impl<'a> StreamingRenderer<'a> {
                 settled = true;
                 break;
             }
+            let before = ProbeStep::of(&self.frame.stats);
             self.make_resident(&demand, true)?;
+            before.log(&self.frame.stats, "open", still_open.len());
             open = still_open;
             settled = open.is_empty();
         }
@@ -601,18 +620,22 @@ impl<'a> StreamingRenderer<'a> {
         // next frame's rays may pass through some of them; every pixel again finds those. A
         // round that built something leaves its open pixels' rays going on past it, so the
         // next round runs whether or not it evicted.
-        while self.frame.stats.probe_verify_rounds < self.opts.probe_verify_rounds
-            && !self.frame_build_spent()
-        {
+        while self.frame.stats.probe_verify_rounds < verify_rounds && !self.frame_build_spent() {
             self.frame.stats.probe_verify_rounds += 1;
-            let Some(ProbeFound { demand, .. }) = self.probe_round(next, opts, None)? else {
+            let Some(ProbeFound {
+                demand,
+                open_pixels,
+            }) = self.probe_round(next, opts, None)?
+            else {
                 return Ok(());
             };
             if demand.needed_ids().is_empty() {
                 break;
             }
             let built = self.frame.stats.prefetched;
+            let before = ProbeStep::of(&self.frame.stats);
             self.make_resident(&demand, true)?;
+            before.log(&self.frame.stats, "verify", open_pixels.len());
             if self.frame.stats.prefetched == built {
                 break;
             }
@@ -634,5 +657,45 @@ impl<'a> StreamingRenderer<'a> {
         let probed = self.probe_next_camera(&kept.buffers, next, opts, again, again.is_none());
         self.keep_frame_buffers(kept);
         probed.map(Some)
+    }
+}
+
+/// The frame's counters before a probe round's prefetch step: what the step added is logged
+/// (`MOTU_LOG=motu_gpu=debug`), per round, to see which rounds find what and what their TLAS
+/// rebuilds cost.
+struct ProbeStep {
+    rays: u64,
+    prefetched: u32,
+    evicted: u32,
+    tlas_rebuilt: u32,
+    records: u64,
+}
+
+impl ProbeStep {
+    fn of(f: &FrameStreamStats) -> Self {
+        ProbeStep {
+            rays: f.probe_rays,
+            prefetched: f.prefetched,
+            evicted: f.evicted,
+            tlas_rebuilt: f.tlas_rebuilt,
+            records: f.tlas_instances_written,
+        }
+    }
+
+    /// Logs the step of a `kind` round (`first`, `open`, `verify`) that left `open` pixels.
+    fn log(&self, f: &FrameStreamStats, kind: &str, open: usize) {
+        tracing::debug!(
+            frame = f.frame,
+            kind,
+            round = f.probe_rounds,
+            rays_so_far = f.probe_rays,
+            rays_before = self.rays,
+            open,
+            built = f.prefetched - self.prefetched,
+            evicted = f.evicted - self.evicted,
+            tlas_rebuilt = f.tlas_rebuilt - self.tlas_rebuilt,
+            records = f.tlas_instances_written - self.records,
+            "probe step"
+        );
     }
 }

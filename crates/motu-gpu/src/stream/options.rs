@@ -66,6 +66,9 @@ pub struct StreamOptions {
     /// 2.182 (capacity-bound). Each round costs a probe trace and, when it finds something, a
     /// build step with its TLAS rebuilds.
     pub probe_verify_rounds: u32,
+    /// What the rounds after the first do when the first round's prefetch evicted
+    /// (`--stream-probe-later`, see [`ProbeLater`]).
+    pub probe_later: ProbeLater,
     /// Pass marks of the probe (see [`PassMarks`]); [`PassMarks::Auto`] by default.
     pub pass_marks: PassMarks,
     /// Bytes (meshes plus acceleration structures) one frame may build; 0: unbounded. At least
@@ -176,6 +179,24 @@ impl PassMarks {
     }
 }
 
+/// What the probe rounds after the first do ([`StreamOptions::probe_later`],
+/// `--stream-probe-later`) when the first round's prefetch evicted, so that verifying rounds
+/// (every pixel again) follow whatever the open-pixel rounds do. Each round that finds
+/// something costs a build step, and each step rebuilds every TLAS piece holding an instance
+/// of what it built or evicted: with a split root and popular BLASes, every piece.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ProbeLater {
+    /// The open-pixel rounds ([`StreamOptions::probe_rounds`]), then the verifying rounds.
+    #[default]
+    Open,
+    /// Straight to the verifying rounds: they probe every pixel, the open ones among them, so
+    /// the open-pixel rounds' build steps (and their TLAS rebuilds) are saved; the verifying
+    /// rounds may run up to `probe_rounds - 1` more to reach as deep (each still stops when
+    /// its prefetch builds nothing). Without an eviction the open-pixel rounds run as with
+    /// `Open` (no verifying round follows them once they settle).
+    Verify,
+}
+
 /// See [`StreamOptions::fallback`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum StreamFallback {
@@ -206,6 +227,7 @@ impl Default for StreamOptions {
             probe_stride: 1,
             probe_rounds: 2,
             probe_verify_rounds: 2,
+            probe_later: ProbeLater::Open,
             pass_marks: PassMarks::Auto,
             fallback: StreamFallback::Off,
             frame_build_bytes: 0,

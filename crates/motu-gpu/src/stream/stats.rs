@@ -53,6 +53,10 @@ pub struct FrameStreamStats {
     /// Of `probe_rounds`: verifying rounds (`StreamOptions::probe_verify_rounds`), each over
     /// every pixel after the rounds before had prefetched.
     pub probe_verify_rounds: u32,
+    /// The first round's prefetch evicted and `StreamOptions::probe_later` is
+    /// `ProbeLater::Verify`: no open-pixel round ran, the verifying rounds probed the open
+    /// pixels with every other.
+    pub probe_later_merged: bool,
     /// The row stride of the probe's pass marks after this frame (0: none;
     /// `StreamOptions::pass_marks`), and the resident BLASes they refreshed: passed by a final
     /// probe ray, met by no probe ray's hit or open walk.

@@ -28,6 +28,7 @@ mirror! {
         probe_skipped_still: bool,
         probe_rounds: u32,
         probe_verify_rounds: u32,
+        probe_later_merged: bool,
         probe_pass_rows: u32,
         probe_pass_marks: u32,
         probe_need_blases: u32,
