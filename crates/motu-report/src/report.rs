@@ -121,11 +121,7 @@ pub fn build_report_at(
     // recorded (`motu import --stream-split-instances`).
     let (cap, _) = motu_render::package_split_cap(pkg, None);
     let split = timings.time("stream_split_read", || {
-        if cap == 0 {
-            Ok(Some(None))
-        } else {
-            motu_render::stored_stream_split(pkg, &view, cap)
-        }
+        motu_render::stored_stream_split_or_none(pkg, &view, cap)
     })?;
     // The proxy clusters the import stored (checked TLAS by TLAS against the split hierarchy).
     let clusters = motu_render::stored_proxy_clusters(pkg);

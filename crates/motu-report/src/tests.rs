@@ -1219,7 +1219,7 @@ fn a_stored_stream_split_reads_back_and_changes_no_number() {
     // The renderer's entry point reads the stored split for the package's own view, and
     // splits afresh for any other (here the compiled scene's tables in memory): both equal.
     for v in [view, s.view()] {
-        let r = motu_render::package_stream_split(&pkg, &v, Some(cap))
+        let r = motu_render::package_stream_split(&pkg, &v, cap)
             .expect("split")
             .expect("over the cap");
         let c = r.view(&v);
