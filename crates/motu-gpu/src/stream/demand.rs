@@ -228,7 +228,11 @@ impl<'a> StreamingRenderer<'a> {
             let mesh_bytes: u64 = self
                 .blas_meshes(b)
                 .into_iter()
-                .map(|m| self.res.mesh(m).map_or(0, |g| self.mesh_budget_bytes(g)))
+                .map(|m| {
+                    self.res
+                        .mesh(m)
+                        .map_or(0, |g| self.res.mesh_budget_bytes(g))
+                })
                 .sum();
             let bytes = accel.size_bytes + mesh_bytes;
             let rebuilt = self.reuse.mark_built(b);
@@ -367,7 +371,7 @@ impl<'a> StreamingRenderer<'a> {
                         // Nothing fits next to what the incomplete pixels hold: let those go
                         // (their pixels find them again later) rather than fail.
                         relaxed = true;
-                        self.unpin_pass_pins();
+                        self.res.unpin_pass_pins();
                         continue;
                     }
                     if self.drop_persistent() {

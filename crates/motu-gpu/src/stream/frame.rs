@@ -403,7 +403,7 @@ impl<'a> StreamingRenderer<'a> {
         // Of working_set_bytes: what the meshes take from the budget (0 in host memory).
         self.frame.stats.working_set_mesh_bytes = working_meshes
             .into_iter()
-            .filter_map(|m| self.res.mesh(m).map(|g| self.mesh_budget_bytes(g)))
+            .filter_map(|m| self.res.mesh(m).map(|g| self.res.mesh_budget_bytes(g)))
             .sum();
     }
 

@@ -184,7 +184,9 @@ impl<'a> StreamingRenderer<'a> {
             need.blases.entry(b).or_insert(a.size_bytes);
             for m in self.blas_meshes(b) {
                 if let Some(g) = self.res.mesh(m) {
-                    need.meshes.entry(m).or_insert(self.mesh_budget_bytes(g));
+                    need.meshes
+                        .entry(m)
+                        .or_insert(self.res.mesh_budget_bytes(g));
                 }
             }
         }

@@ -254,7 +254,7 @@ impl<'a> StreamingRenderer<'a> {
                 s.build_tlases(&now)
             }) {
                 Ok(()) => self.frame.stats_mut().tlas_rebuilt += rebuilt,
-                Err(GpuError::Budget(_)) if self.unpin_pass_pins() => {}
+                Err(GpuError::Budget(_)) if self.res.unpin_pass_pins() => {}
                 Err(GpuError::Budget(msg)) => {
                     // Give back about a 32nd of the budget of this step's builds per round
                     // (least requested first): one at a time would re-encode every instance

@@ -173,6 +173,30 @@ impl Resident {
         self.built_now.clear();
     }
 
+    /// Drops the pins that are not this step's builds (the incomplete pixels' best hits: they
+    /// are found again later). Returns false if there were none.
+    pub fn unpin_pass_pins(&mut self) -> bool {
+        let mut keep = vec![false; self.pinned.len()];
+        for &i in &self.built_now {
+            if let Some(k) = keep.get_mut(i as usize) {
+                *k = true;
+            }
+        }
+        let changed = self.pinned.iter().zip(&keep).any(|(&p, &k)| p && !k);
+        self.pinned = keep;
+        changed
+    }
+
+    /// Bytes mesh `g` takes from the budget: 0 where streamed meshes live outside it (host
+    /// memory of a discrete GPU, [`super::MeshMemory`]).
+    pub fn mesh_budget_bytes(&self, g: &MeshGpu) -> u64 {
+        if self.meshes_budgeted {
+            g.size_bytes()
+        } else {
+            0
+        }
+    }
+
     /// Items the current build step made resident, in build (priority) order.
     pub fn built_now(&self) -> &[u32] {
         &self.built_now
@@ -265,16 +289,6 @@ impl Resident {
 }
 
 impl<'a> StreamingRenderer<'a> {
-    /// Bytes mesh `g` takes from the budget: 0 where streamed meshes live outside it (host
-    /// memory of a discrete GPU, [`super::MeshMemory`]).
-    pub(super) fn mesh_budget_bytes(&self, g: &MeshGpu) -> u64 {
-        if self.res.meshes_budgeted {
-            g.size_bytes()
-        } else {
-            0
-        }
-    }
-
     /// Evicts least-recently-visible unpinned structures (at least `bytes` of them, or all that
     /// are left). Returns false when nothing could be evicted.
     pub(super) fn evict_some(&mut self, bytes: u64, why: EvictWhy) -> Result<bool> {
@@ -432,20 +446,6 @@ impl<'a> StreamingRenderer<'a> {
         } else {
             f(self)
         }
-    }
-
-    /// Drops the pins that are not this step's builds (the incomplete pixels' best hits: they
-    /// are found again later). Returns false if there were none.
-    pub(super) fn unpin_pass_pins(&mut self) -> bool {
-        let mut keep = vec![false; self.res.pinned.len()];
-        for &i in &self.res.built_now {
-            if let Some(k) = keep.get_mut(i as usize) {
-                *k = true;
-            }
-        }
-        let changed = self.res.pinned.iter().zip(&keep).any(|(&p, &k)| p && !k);
-        self.res.pinned = keep;
-        changed
     }
 
     /// After a failed build step, a TLAS left dirty (absent, or referencing evicted BLASes)
