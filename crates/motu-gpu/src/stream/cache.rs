@@ -486,6 +486,10 @@ impl StreamingRenderer<'_> {
             };
             taken.push(TakenOut { blas: b, key, from });
         }
+        let from_clones = taken
+            .iter()
+            .filter(|t| matches!(t.from, Home::Clone(_)))
+            .count() as u64;
         // Counted into the totals below, not into a frame: none is rendering.
         let aside = self.frame.set_stats_aside();
         let todo: Vec<ToStore<'_>> = taken
@@ -522,6 +526,9 @@ impl StreamingRenderer<'_> {
         tot.transfer_batches += counted.transfer_batches;
         tot.transfer_allocations += counted.transfer_allocations;
         tot.persist_ms += ms_since(t);
+        if stored.is_ok() {
+            tot.persisted_from_clone += from_clones;
+        }
         stored
     }
 
