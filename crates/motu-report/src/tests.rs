@@ -1323,3 +1323,69 @@ mod props {
         }
     }
 }
+
+/// The report's JSON as `motu report --json` writes it (keys in its order), each phase's time
+/// at 0 (the phases stay: which ran, in what order, is compared too) and the package path
+/// made relative.
+fn snapshot_json(r: &Report) -> String {
+    let mut r = r.clone();
+    r.package = "<package>".into();
+    r.provenance.timings_ms = r.provenance.timings_ms.zeroed();
+    serde_json::to_string_pretty(&r).expect("json")
+}
+
+/// `motu report --json`'s bytes stay what they were (but its phases' milliseconds) over
+/// scenes of shared, nested, split and heavily instanced placements, from tables and from
+/// packages that stored their split (cap 3) or none: the snapshot `report/snapshot.txt` was
+/// written by the report before it was split into phases (`report/build.rs`). A deliberate
+/// change rewrites it with `MOTU_UPDATE_SNAPSHOTS=1`.
+#[test]
+fn report_json_matches_its_snapshot() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let h200 = ModelSizes::new(&NVIDIA_H200);
+    let mut text = String::new();
+    let mut add = |name: &str, r: &Report| {
+        text += &format!("{name}\n{}\n", snapshot_json(r));
+    };
+    add("forest", &forest().report(&lavapipe(), Some(1 << 20)));
+    add("three_levels", &three_levels().report(&lavapipe(), None));
+    add("buddha_like", &buddha_like().report(&h200, Some(64 << 20)));
+    for (name, cap) in [("forest_package", None), ("forest_split_package", Some(3))] {
+        let mut s = forest();
+        let path = dir.path().join(format!("{name}.motu"));
+        let meta = cap.map(|cap_instances| motu_pack::StreamSplitMeta {
+            cap_instances,
+            ..Default::default()
+        });
+        write_package(&mut s, &path, meta);
+        let pkg = motu_pack::ScenePackage::open(&path).expect("open");
+        add(
+            name,
+            &build_report(&pkg, &lavapipe(), Some(1 << 20)).expect("report"),
+        );
+    }
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/report/snapshot.txt");
+    if std::env::var_os("MOTU_UPDATE_SNAPSHOTS").is_some() {
+        std::fs::write(&path, &text).expect("writing the snapshot");
+    }
+    let want = std::fs::read_to_string(&path).expect("reading the snapshot");
+    assert!(
+        text == want,
+        "the report's JSON changed (MOTU_UPDATE_SNAPSHOTS=1 rewrites {}):\n{}",
+        path.display(),
+        first_difference(&want, &text)
+    );
+}
+
+/// The first line where `a` and `b` differ, with its number.
+fn first_difference(a: &str, b: &str) -> String {
+    let (mut la, mut lb) = (a.lines(), b.lines());
+    for n in 1.. {
+        match (la.next(), lb.next()) {
+            (None, None) => break,
+            (x, y) if x != y => return format!("line {n}: {x:?} against {y:?}"),
+            _ => {}
+        }
+    }
+    "no line differs".into()
+}
