@@ -86,6 +86,18 @@ pub fn gen_island(dir: &Path, scale: Option<&str>) -> PathBuf {
     gen_island_with(dir, scale, &[])
 }
 
+/// The opening of the streaming tests: `None` (the test returns, said loudly by
+/// [`gpu_available`]) without a ray-tracing device, else a new temporary directory and
+/// [`gen_island`] at `scale` in it. Keep the directory alive while the package is used.
+pub fn gpu_island(scale: Option<&str>) -> Option<(tempfile::TempDir, PathBuf)> {
+    if !gpu_available() {
+        return None;
+    }
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let pkg = gen_island(dir.path(), scale);
+    Some((dir, pkg))
+}
+
 /// [`gen_island`] imported with `import_extra` flags (`--no-proxy-boxes`, say).
 pub fn gen_island_with(dir: &Path, scale: Option<&str>, import_extra: &[&str]) -> PathBuf {
     let gen = dir.join("island");

@@ -88,22 +88,12 @@ fn view_lod_modes_equal_render_per_pixel() {
         }
         view_ok(&x.display, &args);
         let png = d.join(format!("render-{mode}.png"));
-        motu_ok(&[
-            "render",
-            s(&pkg),
-            "-o",
-            s(&png),
-            "--aov",
-            s(&raov),
-            "--width",
-            "96",
-            "--backend",
-            "pipeline",
-            "--view",
-            "lod",
-            "--lod-mode",
-            mode,
-        ]);
+        render_full(
+            &pkg,
+            &png,
+            &raov,
+            &["--width", "96", "--view", "lod", "--lod-mode", mode],
+        );
         compare_exact(&vaov, &raov);
         let st = read_json(&vstats);
         assert_eq!(st["lod_mode"], mode, "{st}");
@@ -152,18 +142,7 @@ fn view_on_wayland_equals_render_per_pixel() {
     assert!(out.status.success(), "motu view on Wayland failed:\n{err}");
     assert!(!err.contains("ERROR"), "{err}");
     let (rpng, raov) = (d.join("render.png"), d.join("render.aov"));
-    motu_ok(&[
-        "render",
-        s(&pkg),
-        "-o",
-        s(&rpng),
-        "--aov",
-        s(&raov),
-        "--width",
-        "96",
-        "--backend",
-        "pipeline",
-    ]);
+    render_full(&pkg, &rpng, &raov, &["--width", "96"]);
     compare_exact(&vaov, &raov);
     assert!(
         decode_png(&vpng) == decode_png(&rpng),
@@ -172,6 +151,23 @@ fn view_on_wayland_equals_render_per_pixel() {
     let st = read_json(&vstats);
     assert_eq!(st["frames"], 3, "{st}");
     assert_eq!(st["window"]["presented_via"], "swapchain", "{st}");
+}
+
+/// `motu render PKG -o PNG --aov AOV --backend pipeline EXTRA...`: the full build the
+/// viewer's image is compared with.
+fn render_full(pkg: &Path, png: &Path, aov: &Path, extra: &[&str]) {
+    let mut args = vec![
+        "render",
+        s(pkg),
+        "-o",
+        s(png),
+        "--aov",
+        s(aov),
+        "--backend",
+        "pipeline",
+    ];
+    args.extend_from_slice(extra);
+    motu_ok(&args);
 }
 
 fn compare_exact(a: &Path, b: &Path) {
@@ -417,22 +413,19 @@ fn a_recorded_camera_path_replays_identically_in_view_and_render() {
         );
         assert!(err.contains(&format!("{frames} frames shown")), "{err}");
         let rstats = d.join(format!("render-{frames}.json"));
-        motu_ok(&[
-            "render",
-            s(&pkg),
-            "-o",
-            s(&d.join(format!("render-{frames}.png"))),
-            "--aov",
-            s(&raov),
-            "--backend",
-            "pipeline",
-            "--camera-path",
-            s(&path),
-            "--frames",
-            frames,
-            "--stats",
-            s(&rstats),
-        ]);
+        render_full(
+            &pkg,
+            &d.join(format!("render-{frames}.png")),
+            &raov,
+            &[
+                "--camera-path",
+                s(&path),
+                "--frames",
+                frames,
+                "--stats",
+                s(&rstats),
+            ],
+        );
         compare_exact(&vaov, &raov);
         let st = read_json(&rstats);
         assert_eq!(st["frames"].as_u64(), frames.parse().ok(), "{st}");
@@ -490,18 +483,12 @@ fn a_recorded_camera_path_replays_identically_in_view_and_render() {
     let mut p = read_json(&path);
     p["frames"] = serde_json::json!([p["frames"][0].clone()]);
     std::fs::write(&one, p.to_string()).unwrap();
-    motu_ok(&[
-        "render",
-        s(&pkg),
-        "-o",
-        s(&d.join("first.png")),
-        "--aov",
-        s(&first),
-        "--backend",
-        "pipeline",
-        "--camera-path",
-        s(&one),
-    ]);
+    render_full(
+        &pkg,
+        &d.join("first.png"),
+        &first,
+        &["--camera-path", s(&one)],
+    );
     let out = motu(&[
         "compare",
         s(&first),
@@ -547,18 +534,7 @@ fn view_streams_under_a_vram_budget_with_the_full_builds_image() {
             s(&vstats),
         ],
     );
-    motu_ok(&[
-        "render",
-        s(&pkg),
-        "-o",
-        s(&d.join("r.png")),
-        "--aov",
-        s(&raov),
-        "--width",
-        "64",
-        "--backend",
-        "pipeline",
-    ]);
+    render_full(&pkg, &d.join("r.png"), &raov, &["--width", "64"]);
     compare_exact(&vaov, &raov);
     let st = read_json(&vstats);
     assert_eq!(st["streaming"], true, "{st}");
@@ -609,18 +585,7 @@ fn streaming_refines_over_frames_and_never_writes_an_unfinished_frame() {
     let st = read_json(&vstats);
     assert_eq!(st["detail"]["complete"], true, "{st}");
     assert!(st["vram_used_bytes"].as_u64().unwrap() <= 3 << 20, "{st}");
-    motu_ok(&[
-        "render",
-        s(&pkg),
-        "-o",
-        s(&d.join("r.png")),
-        "--aov",
-        s(&raov),
-        "--width",
-        "64",
-        "--backend",
-        "pipeline",
-    ]);
+    render_full(&pkg, &d.join("r.png"), &raov, &["--width", "64"]);
     compare_exact(&vaov, &raov);
 }
 
@@ -684,20 +649,12 @@ fn view_subsets_equal_render_subsets() {
     let d = dir.path();
     let pkg = gen_island(d, None);
     let raov = d.join("r.aov");
-    motu_ok(&[
-        "render",
-        s(&pkg),
-        "-o",
-        s(&d.join("r.png")),
-        "--aov",
-        s(&raov),
-        "--width",
-        "64",
-        "--backend",
-        "pipeline",
-        "--subset",
-        "isBeach,isMountainA",
-    ]);
+    render_full(
+        &pkg,
+        &d.join("r.png"),
+        &raov,
+        &["--width", "64", "--subset", "isBeach,isMountainA"],
+    );
     // The full build, the hand-over of a budget that holds the subset, and the streamer.
     for extra in [
         &[][..],
