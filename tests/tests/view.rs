@@ -694,45 +694,31 @@ fn bad_camera_paths_fail_with_the_reason() {
     let d = dir.path();
     let pkg = forest(d);
     let bad = d.join("bad.json");
-    std::fs::write(
-        &bad,
-        "{\"format\": \"motu-camera-path\",\n \"version\": 1, \"frames\": [}",
-    )
-    .unwrap();
-    let out = motu(&[
-        "render",
-        s(&pkg),
-        "-o",
-        s(&d.join("x.png")),
-        "--backend",
-        "cpu",
-        "--camera-path",
-        s(&bad),
-    ]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    // Renders the camera path `text`: it fails, writes no image, and its message is returned.
+    let refused = |text: &str| -> String {
+        std::fs::write(&bad, text).unwrap();
+        let out = motu(&[
+            "render",
+            s(&pkg),
+            "-o",
+            s(&d.join("x.png")),
+            "--backend",
+            "cpu",
+            "--camera-path",
+            s(&bad),
+        ]);
+        assert!(!out.status.success());
+        assert!(!d.join("x.png").exists(), "no output on bad input");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let err = refused("{\"format\": \"motu-camera-path\",\n \"version\": 1, \"frames\": [}");
     assert!(
         err.contains("camera path") && err.contains("line 2"),
         "{err}"
     );
-    assert!(!d.join("x.png").exists(), "no output on bad input");
-    std::fs::write(
-        &bad,
+    let err = refused(
         r#"{"format":"motu-camera-path","version":1,"frames":[{"eye":[0,0,0],"forward":[0,0,0],"up":[0,1,0],"fov_deg":40}]}"#,
-    )
-    .unwrap();
-    let out = motu(&[
-        "render",
-        s(&pkg),
-        "-o",
-        s(&d.join("x.png")),
-        "--backend",
-        "cpu",
-        "--camera-path",
-        s(&bad),
-    ]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    );
     assert!(err.contains("frame 0") && err.contains("forward"), "{err}");
 }
 
