@@ -111,6 +111,31 @@ pub fn gen_island_with(dir: &Path, scale: Option<&str>, import_extra: &[&str]) -
     pkg
 }
 
+/// `motu gen lod-grid -o DIR/NAME --grid GRID --triangles 20000` imported with `--lod LOD` as
+/// `DIR/PKG`: the generated directory and the package.
+pub fn gen_lod_grid(
+    dir: &Path,
+    name: &str,
+    grid: &str,
+    pkg: &str,
+    lod: &str,
+) -> (PathBuf, PathBuf) {
+    let gen = dir.join(name);
+    motu_ok(&[
+        "gen",
+        "lod-grid",
+        "-o",
+        s(&gen),
+        "--grid",
+        grid,
+        "--triangles",
+        "20000",
+    ]);
+    let out = dir.join(pkg);
+    import(&gen.join("scene.pbrt"), &out, &["--lod", lod]);
+    (gen, out)
+}
+
 /// `motu gen forest -o DIR/forest FLAGS...` (`--levels`, `--grid`, `--leaves`): the generated
 /// scene file.
 pub fn gen_forest(dir: &Path, flags: &[&str]) -> PathBuf {

@@ -2,10 +2,10 @@
 //! device exists (lavapipe in CI, with validation on via MOTU_VALIDATION=1 from tools/test.sh).
 
 use motu_tests::{
-    gen_forest, gpu_available, has_ray_query, import, motu, motu_json, motu_ok, render, s,
-    shared_scene,
+    gen_forest, gen_lod_grid, gpu_available, has_ray_query, import, motu, motu_json, motu_ok,
+    render, s, shared_scene,
 };
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Every backend renders `pkg` the same way (and equal to `reference`, if given).
 fn all_backends_agree(dir: &Path, name: &str, pkg: &Path, extra: &[&str]) -> std::path::PathBuf {
@@ -32,32 +32,6 @@ fn pipeline_traces_per_ray(pkg: &Path, aov: &Path, extra: &[&str]) -> f64 {
     render(pkg, "pipeline", aov, extra)["traces_per_ray"]
         .as_f64()
         .expect("traces_per_ray")
-}
-
-/// `motu gen lod-grid -o DIR/NAME --grid GRID --triangles 20000` imported with `--lod LOD` as
-/// `DIR/PKG`: the generated directory and the package.
-fn lod_grid(dir: &Path, name: &str, grid: &str, pkg: &str, lod: &str) -> (PathBuf, PathBuf) {
-    let gen = dir.join(name);
-    motu_ok(&[
-        "gen",
-        "lod-grid",
-        "-o",
-        s(&gen),
-        "--grid",
-        grid,
-        "--triangles",
-        "20000",
-    ]);
-    let out = dir.join(pkg);
-    motu_ok(&[
-        "import",
-        s(&gen.join("scene.pbrt")),
-        "-o",
-        s(&out),
-        "--lod",
-        lod,
-    ]);
-    (gen, out)
 }
 
 #[test]
@@ -153,7 +127,7 @@ fn sphereflake_and_lod_grid_agree() {
         &["--width", "64", "--view", "ids"],
     );
 
-    let (_, lod) = lod_grid(dir.path(), "grid", "6x12", "lod.motu", "3");
+    let (_, lod) = gen_lod_grid(dir.path(), "grid", "6x12", "lod.motu", "3");
     all_backends_agree(dir.path(), "lod0", &lod, &["--width", "80", "--lod", "0"]);
     // LOD chosen by size (not forced), with stochastic dithering: the same hash on every backend.
     all_backends_agree(
@@ -164,7 +138,7 @@ fn sphereflake_and_lod_grid_agree() {
     );
     // Four selectors (2×2) in traversal mode: the root's LOD-selector PIs are a box list,
     // slab-tested and resolved in the traversal shader instead of the hardware walk.
-    let (_, few_pkg) = lod_grid(dir.path(), "few", "2x2", "few.motu", "3");
+    let (_, few_pkg) = gen_lod_grid(dir.path(), "few", "2x2", "few.motu", "3");
     let args = ["--width", "64", "--lod-mode", "traversal"];
     all_backends_agree(dir.path(), "lod-box", &few_pkg, &args);
     let st = render(&few_pkg, "pipeline", &dir.path().join("box.aov"), &args);
@@ -185,7 +159,7 @@ fn instance_lod_matches_the_cpu_oracle_in_one_trace() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let (_, pkg) = lod_grid(dir.path(), "grid", "6x12", "lod.motu", "4");
+    let (_, pkg) = gen_lod_grid(dir.path(), "grid", "6x12", "lod.motu", "4");
     let mut backends = vec!["pipeline"];
     if has_ray_query() {
         backends.push("query");
@@ -265,7 +239,7 @@ fn instance_lod_follows_a_moving_camera() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let (grid, pkg) = lod_grid(dir.path(), "grid", "6x12", "lod.motu", "4");
+    let (grid, pkg) = gen_lod_grid(dir.path(), "grid", "6x12", "lod.motu", "4");
     let scene = std::fs::read_to_string(grid.join("scene.pbrt")).unwrap();
     // The generated camera: `LookAt eye look up`.
     let look_at: Vec<f32> = scene

@@ -3,8 +3,8 @@
 //! replay identically in both; without a display the viewer must point at `motu render`.
 
 use motu_tests::{
-    gen_forest, gen_island, gpu_available, has_ray_query, motu, motu_ok, motu_on_display,
-    motu_on_wayland, report_peak_and_floor, s, weston, xvfb,
+    gen_forest, gen_island, gen_lod_grid, gpu_available, has_ray_query, motu, motu_ok,
+    motu_on_display, motu_on_wayland, report_peak_and_floor, s, weston, xvfb,
 };
 use std::path::{Path, PathBuf};
 
@@ -42,26 +42,7 @@ fn view_lod_modes_equal_render_per_pixel() {
     };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let grid = d.join("grid");
-    motu_ok(&[
-        "gen",
-        "lod-grid",
-        "-o",
-        s(&grid),
-        "--grid",
-        "6x12",
-        "--triangles",
-        "20000",
-    ]);
-    let pkg = d.join("lod.motu");
-    motu_ok(&[
-        "import",
-        s(&grid.join("scene.pbrt")),
-        "-o",
-        s(&pkg),
-        "--lod",
-        "4",
-    ]);
+    let (_, pkg) = gen_lod_grid(d, "grid", "6x12", "lod.motu", "4");
     for (mode, traces_max) in [("instance", 1.05), ("traversal", f64::INFINITY)] {
         let (vaov, vstats, raov) = (
             d.join(format!("view-{mode}.aov")),
