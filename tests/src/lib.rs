@@ -86,6 +86,18 @@ pub fn gen_island(dir: &Path, scale: Option<&str>) -> PathBuf {
     gen_island_with(dir, scale, &[])
 }
 
+/// The opening of the streaming tests: `None` (the test returns, said loudly by
+/// [`gpu_available`]) without a ray-tracing device, else a new temporary directory and
+/// [`gen_island`] at `scale` in it. Keep the directory alive while the package is used.
+pub fn gpu_island(scale: Option<&str>) -> Option<(tempfile::TempDir, PathBuf)> {
+    if !gpu_available() {
+        return None;
+    }
+    let dir = tempfile::tempdir().expect("temporary directory");
+    let pkg = gen_island(dir.path(), scale);
+    Some((dir, pkg))
+}
+
 /// [`gen_island`] imported with `import_extra` flags (`--no-proxy-boxes`, say).
 pub fn gen_island_with(dir: &Path, scale: Option<&str>, import_extra: &[&str]) -> PathBuf {
     let gen = dir.join("island");
@@ -97,6 +109,31 @@ pub fn gen_island_with(dir: &Path, scale: Option<&str>, import_extra: &[&str]) -
     let pkg = dir.join("island.motu");
     import(&gen.join("scene.pbrt"), &pkg, import_extra);
     pkg
+}
+
+/// `motu gen lod-grid -o DIR/NAME --grid GRID --triangles 20000` imported with `--lod LOD` as
+/// `DIR/PKG`: the generated directory and the package.
+pub fn gen_lod_grid(
+    dir: &Path,
+    name: &str,
+    grid: &str,
+    pkg: &str,
+    lod: &str,
+) -> (PathBuf, PathBuf) {
+    let gen = dir.join(name);
+    motu_ok(&[
+        "gen",
+        "lod-grid",
+        "-o",
+        s(&gen),
+        "--grid",
+        grid,
+        "--triangles",
+        "20000",
+    ]);
+    let out = dir.join(pkg);
+    import(&gen.join("scene.pbrt"), &out, &["--lod", lod]);
+    (gen, out)
 }
 
 /// `motu gen forest -o DIR/forest FLAGS...` (`--levels`, `--grid`, `--leaves`): the generated

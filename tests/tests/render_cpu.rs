@@ -1,7 +1,9 @@
 //! The CPU oracle end to end (issue 5): differently compiled packages of one scene render the
 //! same hits, pixel by pixel.
 
-use motu_tests::{gen_forest, import, motu, motu_json, motu_ok, render, s, shared_scene};
+use motu_tests::{
+    gen_forest, gen_lod_grid, import, motu, motu_json, motu_ok, render, s, shared_scene,
+};
 use std::path::Path;
 
 fn render_aov(pkg: &Path, aov: &Path, extra: &[&str]) -> serde_json::Value {
@@ -141,19 +143,7 @@ fn subset_render_equals_subset_import() {
 #[test]
 fn lod_grid_gets_coarser_with_distance() {
     let dir = tempfile::tempdir().unwrap();
-    let gen = dir.path().join("grid");
-    motu_ok(&[
-        "gen",
-        "lod-grid",
-        "-o",
-        s(&gen),
-        "--grid",
-        "6x24",
-        "--triangles",
-        "20000",
-    ]);
-    let pkg = dir.path().join("lod.motu");
-    import(&gen.join("scene.pbrt"), &pkg, &["--lod", "4"]);
+    let (_, pkg) = gen_lod_grid(dir.path(), "grid", "6x24", "lod.motu", "4");
     let info = motu_json(&["info", s(&pkg), "--json"]);
     assert!(info["lod_selectors"].as_u64().unwrap() >= 1, "{info}");
     let aov = dir.path().join("lod.aov");

@@ -2,8 +2,8 @@
 //! device exists (lavapipe in CI, with validation on via MOTU_VALIDATION=1 from tools/test.sh).
 
 use motu_tests::{
-    gen_forest, gpu_available, has_ray_query, import, motu, motu_json, motu_ok, render, s,
-    shared_scene,
+    gen_forest, gen_lod_grid, gpu_available, has_ray_query, import, motu, motu_json, motu_ok,
+    render, s, shared_scene,
 };
 use std::path::Path;
 
@@ -127,26 +127,7 @@ fn sphereflake_and_lod_grid_agree() {
         &["--width", "64", "--view", "ids"],
     );
 
-    let grid = dir.path().join("grid");
-    motu_ok(&[
-        "gen",
-        "lod-grid",
-        "-o",
-        s(&grid),
-        "--grid",
-        "6x12",
-        "--triangles",
-        "20000",
-    ]);
-    let lod = dir.path().join("lod.motu");
-    motu_ok(&[
-        "import",
-        s(&grid.join("scene.pbrt")),
-        "-o",
-        s(&lod),
-        "--lod",
-        "3",
-    ]);
+    let (_, lod) = gen_lod_grid(dir.path(), "grid", "6x12", "lod.motu", "3");
     all_backends_agree(dir.path(), "lod0", &lod, &["--width", "80", "--lod", "0"]);
     // LOD chosen by size (not forced), with stochastic dithering: the same hash on every backend.
     all_backends_agree(
@@ -157,26 +138,7 @@ fn sphereflake_and_lod_grid_agree() {
     );
     // Four selectors (2×2) in traversal mode: the root's LOD-selector PIs are a box list,
     // slab-tested and resolved in the traversal shader instead of the hardware walk.
-    let few = dir.path().join("few");
-    motu_ok(&[
-        "gen",
-        "lod-grid",
-        "-o",
-        s(&few),
-        "--grid",
-        "2x2",
-        "--triangles",
-        "20000",
-    ]);
-    let few_pkg = dir.path().join("few.motu");
-    motu_ok(&[
-        "import",
-        s(&few.join("scene.pbrt")),
-        "-o",
-        s(&few_pkg),
-        "--lod",
-        "3",
-    ]);
+    let (_, few_pkg) = gen_lod_grid(dir.path(), "few", "2x2", "few.motu", "3");
     let args = ["--width", "64", "--lod-mode", "traversal"];
     all_backends_agree(dir.path(), "lod-box", &few_pkg, &args);
     let st = render(&few_pkg, "pipeline", &dir.path().join("box.aov"), &args);
@@ -197,26 +159,7 @@ fn instance_lod_matches_the_cpu_oracle_in_one_trace() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let grid = dir.path().join("grid");
-    motu_ok(&[
-        "gen",
-        "lod-grid",
-        "-o",
-        s(&grid),
-        "--grid",
-        "6x12",
-        "--triangles",
-        "20000",
-    ]);
-    let pkg = dir.path().join("lod.motu");
-    motu_ok(&[
-        "import",
-        s(&grid.join("scene.pbrt")),
-        "-o",
-        s(&pkg),
-        "--lod",
-        "4",
-    ]);
+    let (_, pkg) = gen_lod_grid(dir.path(), "grid", "6x12", "lod.motu", "4");
     let mut backends = vec!["pipeline"];
     if has_ray_query() {
         backends.push("query");
@@ -296,27 +239,8 @@ fn instance_lod_follows_a_moving_camera() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let grid = dir.path().join("grid");
-    motu_ok(&[
-        "gen",
-        "lod-grid",
-        "-o",
-        s(&grid),
-        "--grid",
-        "6x12",
-        "--triangles",
-        "20000",
-    ]);
-    let pkg = dir.path().join("lod.motu");
+    let (grid, pkg) = gen_lod_grid(dir.path(), "grid", "6x12", "lod.motu", "4");
     let scene = std::fs::read_to_string(grid.join("scene.pbrt")).unwrap();
-    motu_ok(&[
-        "import",
-        s(&grid.join("scene.pbrt")),
-        "-o",
-        s(&pkg),
-        "--lod",
-        "4",
-    ]);
     // The generated camera: `LookAt eye look up`.
     let look_at: Vec<f32> = scene
         .split("LookAt")

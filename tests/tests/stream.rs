@@ -6,7 +6,7 @@
 //! fewer triangles than rebuilding everything per frame.
 
 use motu_tests::{
-    check_probe_rounds, gen_island, gpu_available, json_u64 as u, motu_json, motu_ok,
+    check_probe_rounds, gpu_available, gpu_island, json_u64 as u, motu_json, motu_ok,
     render as render_with, render_env, report_json, report_peak_and_floor, s,
 };
 use std::path::{Path, PathBuf};
@@ -23,11 +23,9 @@ fn render(pkg: &Path, aov: &Path, extra: &[&str]) -> serde_json::Value {
 
 #[test]
 fn island_streams_under_a_quarter_of_its_full_build_with_the_same_aov() {
-    if !gpu_available() {
+    let Some((dir, pkg)) = gpu_island(None) else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
-    let pkg = gen_island(dir.path(), None);
+    };
     let full_aov = dir.path().join("full.aov");
     let size = ["--width", "64", "--height", "36"];
     let full = render(&pkg, &full_aov, &size);
@@ -106,11 +104,9 @@ fn island_streams_under_a_quarter_of_its_full_build_with_the_same_aov() {
 
 #[test]
 fn island_camera_path_needs_about_one_pass_per_frame_under_the_budget() {
-    if !gpu_available() {
+    let Some((dir, pkg)) = gpu_island(None) else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
-    let pkg = gen_island(dir.path(), None);
+    };
     let frames = 30u64;
     // An eighth of the report's full-build peak (about twice the floor): palmsCam sees a
     // small part of the island, and at a quarter nothing is ever evicted along the path.
@@ -322,11 +318,9 @@ fn probe_pass_marks_keep_what_rays_pass_and_change_no_pixel() {
 /// the room a budget leaves, it bounds the passes a frame takes (BENCHMARKS.md, session 27).
 #[test]
 fn probe_need_is_what_the_next_frame_hits_and_passes() {
-    if !gpu_available() {
+    let Some((dir, pkg)) = gpu_island(None) else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
-    let pkg = gen_island(dir.path(), None);
+    };
     let (peak, _) = report_peak_and_floor(&pkg, "64", "36");
     let path = |name: &str, backend: &str, rows: &str| {
         let (st, _) = shot_path(
@@ -733,11 +727,7 @@ impl ShotFixture {
     /// `None` without a ray-tracing device (said loudly by `gpu_available`). Every fraction
     /// of the peak down to a quarter is checked to be above the floor.
     fn new() -> Option<ShotFixture> {
-        if !gpu_available() {
-            return None;
-        }
-        let dir = tempfile::tempdir().unwrap();
-        let pkg = gen_island(dir.path(), None);
+        let (dir, pkg) = gpu_island(None)?;
         let (peak, floor) = report_peak_and_floor(&pkg, "64", "36");
         assert!(
             peak / 4 >= floor,
@@ -879,12 +869,10 @@ impl<'d> SmallStreamed<'d> {
 /// without it (`--no-proxy-boxes`, what older motu wrote). Every image is the full build's.
 #[test]
 fn proxy_boxes_stored_at_import_start_streamed_renders_and_bad_ones_are_made_again() {
-    if !gpu_available() {
+    let Some((dir, pkg)) = gpu_island(None) else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
+    };
     let d = dir.path();
-    let pkg = gen_island(d, None);
     let small = SmallStreamed::new(d, &pkg);
     let streamed = |pkg: &Path, name: &str| small.render(pkg, name, &[]);
     let (st, stderr, stored_aov) = streamed(&pkg, "stored");
@@ -953,12 +941,10 @@ fn report_without_path(pkg: &Path) -> (serde_json::Value, serde_json::Value) {
 /// Every image and every report is the same.
 #[test]
 fn proxy_clusters_stored_at_import_start_streamed_renders_and_bad_ones_are_made_again() {
-    if !gpu_available() {
+    let Some((dir, pkg)) = gpu_island(None) else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
+    };
     let d = dir.path();
-    let pkg = gen_island(d, None);
     let old = d.join("old.motu");
     motu_tests::import(
         &d.join("island").join("scene.pbrt"),

@@ -7,8 +7,7 @@
 //! visibility and for the shaded default (shadow and AO rays) alike, exact.
 
 use motu_tests::{
-    check_probe_rounds, gen_island, gpu_available, json_u64 as u, motu, motu_ok,
-    report_peak_and_floor, s,
+    check_probe_rounds, gpu_island, json_u64 as u, motu, motu_ok, report_peak_and_floor, s,
 };
 use std::path::{Path, PathBuf};
 
@@ -56,12 +55,10 @@ fn read_json(p: &Path) -> serde_json::Value {
 
 #[test]
 fn a_frame_build_budget_shows_the_counted_fallback_and_converges_to_the_full_build() {
-    if !gpu_available() {
+    let Some((dir, pkg)) = gpu_island(None) else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
+    };
     let d = dir.path();
-    let pkg = gen_island(d, None);
     let path = still_path(d);
     let full = d.join("full.aov");
     motu_ok(&[
@@ -225,19 +222,35 @@ fn a_frame_build_budget_shows_the_counted_fallback_and_converges_to_the_full_bui
 }
 
 /// The default island (`gen island --scale 0.002`, the scene of `stream_floor.rs`; default
-/// import) and a quarter of its report's full-build peak at the test size.
-fn quarter_budget_island(d: &Path) -> (PathBuf, u64, u64) {
-    quarter_budget(d, Some("0.002"))
+/// import) and a quarter of its report's full-build peak at the test size (see
+/// [`quarter_budget`]).
+fn quarter_budget_island() -> Option<QuarterBudget> {
+    quarter_budget(Some("0.002"))
+}
+
+/// A streaming test's island and its budgets: the directory (kept alive while the package is
+/// used), the package, the report's full-build peak at the test size and a quarter of it.
+struct QuarterBudget {
+    dir: tempfile::TempDir,
+    pkg: PathBuf,
+    peak: u64,
+    budget: u64,
 }
 
 /// `gen island` at `scale` (None: the generator's default), default import, and a quarter of
-/// its report's full-build peak at the test size.
-fn quarter_budget(d: &Path, scale: Option<&str>) -> (PathBuf, u64, u64) {
-    let pkg = gen_island(d, scale);
+/// its report's full-build peak at the test size (checked to be above the floor); `None`
+/// without a ray-tracing device ([`gpu_island`]).
+fn quarter_budget(scale: Option<&str>) -> Option<QuarterBudget> {
+    let (dir, pkg) = gpu_island(scale)?;
     let (peak, floor) = report_peak_and_floor(&pkg, W, H);
     let budget = peak / 4;
     assert!(budget >= floor, "a quarter is above the floor ({floor})");
-    (pkg, peak, budget)
+    Some(QuarterBudget {
+        dir,
+        pkg,
+        peak,
+        budget,
+    })
 }
 
 /// Streams the default 30-frame camera path from `palmsCam` (`--frames 30`: a yaw sweep with a
@@ -372,12 +385,13 @@ fn max_resident(st: &serde_json::Value) -> u64 {
 #[test]
 fn default_island_camera_path_at_a_quarter_budget_needs_at_most_1_3_passes_per_frame_for_primary_visibility(
 ) {
-    if !gpu_available() {
+    let Some(QuarterBudget {
+        dir, pkg, budget, ..
+    }) = quarter_budget_island()
+    else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
+    };
     let d = dir.path();
-    let (pkg, _, budget) = quarter_budget_island(d);
     let st = stream_path(&pkg, d, "ids", budget, &["--view", "ids"]);
     let mean = mean_after_first(&st);
     assert!(mean <= 1.3, "mean passes after the first frame: {mean}");
@@ -389,12 +403,13 @@ fn default_island_camera_path_at_a_quarter_budget_needs_at_most_1_3_passes_per_f
 /// with the mark walk).
 #[test]
 fn unscaled_island_shaded_camera_path_at_a_quarter_needs_at_most_1_3_passes_per_frame() {
-    if !gpu_available() {
+    let Some(QuarterBudget {
+        dir, pkg, budget, ..
+    }) = quarter_budget(None)
+    else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
+    };
     let d = dir.path();
-    let (pkg, _, budget) = quarter_budget(d, None);
     let st = stream_path(&pkg, d, "unscaled-shaded", budget, &[]);
     let mean = mean_after_first(&st);
     assert!(mean <= 1.3, "mean passes after the first frame: {mean}");
@@ -420,12 +435,13 @@ fn unscaled_island_shaded_camera_path_at_a_quarter_needs_at_most_1_3_passes_per_
 /// full build, AOV and colours.
 #[test]
 fn default_island_wide_view_at_a_quarter_reports_its_room_and_traces_secondary_rays_ahead() {
-    if !gpu_available() {
+    let Some(QuarterBudget {
+        dir, pkg, budget, ..
+    }) = quarter_budget_island()
+    else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
+    };
     let d = dir.path();
-    let (pkg, _, budget) = quarter_budget_island(d);
     let st = stream_path_from(&pkg, d, "wide", budget, &["--bounces", "0"]);
     let frames = st["stream"]["frames"].as_array().expect("frames");
     let over: Vec<&serde_json::Value> = frames
@@ -554,12 +570,17 @@ fn write_path(p: &Path, poses: Vec<serde_json::Value>) {
 #[test]
 fn default_island_shaded_camera_path_needs_one_pass_per_frame_with_room_and_the_probe_and_is_exact_at_a_quarter(
 ) {
-    if !gpu_available() {
+    let Some(QuarterBudget {
+        dir,
+        pkg,
+        peak,
+        budget,
+        ..
+    }) = quarter_budget_island()
+    else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
+    };
     let d = dir.path();
-    let (pkg, peak, budget) = quarter_budget_island(d);
     let roomy = stream_path(&pkg, d, "shaded-roomy", peak, &[]);
     let unprobed = stream_path(
         &pkg,
@@ -671,12 +692,13 @@ fn default_island_shaded_camera_path_needs_one_pass_per_frame_with_room_and_the_
 /// pixel for pixel on both backends.
 #[test]
 fn large_tlases_are_split_at_load_and_rebuilt_piece_by_piece_exactly() {
-    if !gpu_available() {
+    let Some(QuarterBudget {
+        dir, pkg, budget, ..
+    }) = quarter_budget_island()
+    else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
+    };
     let d = dir.path();
-    let (pkg, _, budget) = quarter_budget_island(d);
     // Eight frames of the default path (every frame complete, under the budget: checked there).
     let stream = |split: &str, name: &str| {
         stream_frames(

@@ -3,8 +3,8 @@
 //! replay identically in both; without a display the viewer must point at `motu render`.
 
 use motu_tests::{
-    gen_forest, gen_island, gpu_available, has_ray_query, motu, motu_ok, motu_on_display,
-    motu_on_wayland, report_peak_and_floor, s, weston, xvfb,
+    gen_forest, gen_island, gen_lod_grid, gpu_available, has_ray_query, motu, motu_ok,
+    motu_on_display, motu_on_wayland, report_peak_and_floor, s, weston, xvfb,
 };
 use std::path::{Path, PathBuf};
 
@@ -42,26 +42,7 @@ fn view_lod_modes_equal_render_per_pixel() {
     };
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let grid = d.join("grid");
-    motu_ok(&[
-        "gen",
-        "lod-grid",
-        "-o",
-        s(&grid),
-        "--grid",
-        "6x12",
-        "--triangles",
-        "20000",
-    ]);
-    let pkg = d.join("lod.motu");
-    motu_ok(&[
-        "import",
-        s(&grid.join("scene.pbrt")),
-        "-o",
-        s(&pkg),
-        "--lod",
-        "4",
-    ]);
+    let (_, pkg) = gen_lod_grid(d, "grid", "6x12", "lod.motu", "4");
     for (mode, traces_max) in [("instance", 1.05), ("traversal", f64::INFINITY)] {
         let (vaov, vstats, raov) = (
             d.join(format!("view-{mode}.aov")),
@@ -88,22 +69,12 @@ fn view_lod_modes_equal_render_per_pixel() {
         }
         view_ok(&x.display, &args);
         let png = d.join(format!("render-{mode}.png"));
-        motu_ok(&[
-            "render",
-            s(&pkg),
-            "-o",
-            s(&png),
-            "--aov",
-            s(&raov),
-            "--width",
-            "96",
-            "--backend",
-            "pipeline",
-            "--view",
-            "lod",
-            "--lod-mode",
-            mode,
-        ]);
+        render_full(
+            &pkg,
+            &png,
+            &raov,
+            &["--width", "96", "--view", "lod", "--lod-mode", mode],
+        );
         compare_exact(&vaov, &raov);
         let st = read_json(&vstats);
         assert_eq!(st["lod_mode"], mode, "{st}");
@@ -152,18 +123,7 @@ fn view_on_wayland_equals_render_per_pixel() {
     assert!(out.status.success(), "motu view on Wayland failed:\n{err}");
     assert!(!err.contains("ERROR"), "{err}");
     let (rpng, raov) = (d.join("render.png"), d.join("render.aov"));
-    motu_ok(&[
-        "render",
-        s(&pkg),
-        "-o",
-        s(&rpng),
-        "--aov",
-        s(&raov),
-        "--width",
-        "96",
-        "--backend",
-        "pipeline",
-    ]);
+    render_full(&pkg, &rpng, &raov, &["--width", "96"]);
     compare_exact(&vaov, &raov);
     assert!(
         decode_png(&vpng) == decode_png(&rpng),
@@ -172,6 +132,23 @@ fn view_on_wayland_equals_render_per_pixel() {
     let st = read_json(&vstats);
     assert_eq!(st["frames"], 3, "{st}");
     assert_eq!(st["window"]["presented_via"], "swapchain", "{st}");
+}
+
+/// `motu render PKG -o PNG --aov AOV --backend pipeline EXTRA...`: the full build the
+/// viewer's image is compared with.
+fn render_full(pkg: &Path, png: &Path, aov: &Path, extra: &[&str]) {
+    let mut args = vec![
+        "render",
+        s(pkg),
+        "-o",
+        s(png),
+        "--aov",
+        s(aov),
+        "--backend",
+        "pipeline",
+    ];
+    args.extend_from_slice(extra);
+    motu_ok(&args);
 }
 
 fn compare_exact(a: &Path, b: &Path) {
@@ -417,22 +394,19 @@ fn a_recorded_camera_path_replays_identically_in_view_and_render() {
         );
         assert!(err.contains(&format!("{frames} frames shown")), "{err}");
         let rstats = d.join(format!("render-{frames}.json"));
-        motu_ok(&[
-            "render",
-            s(&pkg),
-            "-o",
-            s(&d.join(format!("render-{frames}.png"))),
-            "--aov",
-            s(&raov),
-            "--backend",
-            "pipeline",
-            "--camera-path",
-            s(&path),
-            "--frames",
-            frames,
-            "--stats",
-            s(&rstats),
-        ]);
+        render_full(
+            &pkg,
+            &d.join(format!("render-{frames}.png")),
+            &raov,
+            &[
+                "--camera-path",
+                s(&path),
+                "--frames",
+                frames,
+                "--stats",
+                s(&rstats),
+            ],
+        );
         compare_exact(&vaov, &raov);
         let st = read_json(&rstats);
         assert_eq!(st["frames"].as_u64(), frames.parse().ok(), "{st}");
@@ -490,18 +464,12 @@ fn a_recorded_camera_path_replays_identically_in_view_and_render() {
     let mut p = read_json(&path);
     p["frames"] = serde_json::json!([p["frames"][0].clone()]);
     std::fs::write(&one, p.to_string()).unwrap();
-    motu_ok(&[
-        "render",
-        s(&pkg),
-        "-o",
-        s(&d.join("first.png")),
-        "--aov",
-        s(&first),
-        "--backend",
-        "pipeline",
-        "--camera-path",
-        s(&one),
-    ]);
+    render_full(
+        &pkg,
+        &d.join("first.png"),
+        &first,
+        &["--camera-path", s(&one)],
+    );
     let out = motu(&[
         "compare",
         s(&first),
@@ -547,18 +515,7 @@ fn view_streams_under_a_vram_budget_with_the_full_builds_image() {
             s(&vstats),
         ],
     );
-    motu_ok(&[
-        "render",
-        s(&pkg),
-        "-o",
-        s(&d.join("r.png")),
-        "--aov",
-        s(&raov),
-        "--width",
-        "64",
-        "--backend",
-        "pipeline",
-    ]);
+    render_full(&pkg, &d.join("r.png"), &raov, &["--width", "64"]);
     compare_exact(&vaov, &raov);
     let st = read_json(&vstats);
     assert_eq!(st["streaming"], true, "{st}");
@@ -609,18 +566,7 @@ fn streaming_refines_over_frames_and_never_writes_an_unfinished_frame() {
     let st = read_json(&vstats);
     assert_eq!(st["detail"]["complete"], true, "{st}");
     assert!(st["vram_used_bytes"].as_u64().unwrap() <= 3 << 20, "{st}");
-    motu_ok(&[
-        "render",
-        s(&pkg),
-        "-o",
-        s(&d.join("r.png")),
-        "--aov",
-        s(&raov),
-        "--width",
-        "64",
-        "--backend",
-        "pipeline",
-    ]);
+    render_full(&pkg, &d.join("r.png"), &raov, &["--width", "64"]);
     compare_exact(&vaov, &raov);
 }
 
@@ -684,20 +630,12 @@ fn view_subsets_equal_render_subsets() {
     let d = dir.path();
     let pkg = gen_island(d, None);
     let raov = d.join("r.aov");
-    motu_ok(&[
-        "render",
-        s(&pkg),
-        "-o",
-        s(&d.join("r.png")),
-        "--aov",
-        s(&raov),
-        "--width",
-        "64",
-        "--backend",
-        "pipeline",
-        "--subset",
-        "isBeach,isMountainA",
-    ]);
+    render_full(
+        &pkg,
+        &d.join("r.png"),
+        &raov,
+        &["--width", "64", "--subset", "isBeach,isMountainA"],
+    );
     // The full build, the hand-over of a budget that holds the subset, and the streamer.
     for extra in [
         &[][..],
@@ -737,45 +675,31 @@ fn bad_camera_paths_fail_with_the_reason() {
     let d = dir.path();
     let pkg = forest(d);
     let bad = d.join("bad.json");
-    std::fs::write(
-        &bad,
-        "{\"format\": \"motu-camera-path\",\n \"version\": 1, \"frames\": [}",
-    )
-    .unwrap();
-    let out = motu(&[
-        "render",
-        s(&pkg),
-        "-o",
-        s(&d.join("x.png")),
-        "--backend",
-        "cpu",
-        "--camera-path",
-        s(&bad),
-    ]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    // Renders the camera path `text`: it fails, writes no image, and its message is returned.
+    let refused = |text: &str| -> String {
+        std::fs::write(&bad, text).unwrap();
+        let out = motu(&[
+            "render",
+            s(&pkg),
+            "-o",
+            s(&d.join("x.png")),
+            "--backend",
+            "cpu",
+            "--camera-path",
+            s(&bad),
+        ]);
+        assert!(!out.status.success());
+        assert!(!d.join("x.png").exists(), "no output on bad input");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let err = refused("{\"format\": \"motu-camera-path\",\n \"version\": 1, \"frames\": [}");
     assert!(
         err.contains("camera path") && err.contains("line 2"),
         "{err}"
     );
-    assert!(!d.join("x.png").exists(), "no output on bad input");
-    std::fs::write(
-        &bad,
+    let err = refused(
         r#"{"format":"motu-camera-path","version":1,"frames":[{"eye":[0,0,0],"forward":[0,0,0],"up":[0,1,0],"fov_deg":40}]}"#,
-    )
-    .unwrap();
-    let out = motu(&[
-        "render",
-        s(&pkg),
-        "-o",
-        s(&d.join("x.png")),
-        "--backend",
-        "cpu",
-        "--camera-path",
-        s(&bad),
-    ]);
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    );
     assert!(err.contains("frame 0") && err.contains("forward"), "{err}");
 }
 

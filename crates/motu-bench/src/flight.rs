@@ -209,7 +209,8 @@ fn run_streaming(
     let cams: Vec<_> = (0..n).map(|f| path.sample(f, n).params(w, h)).collect();
     // The hierarchy the streamer renders (large TLASes split into pieces; the split the import
     // stored when `view` is the package's own), as `render --stream`.
-    let split = motu_render::package_stream_split(meshes.0, view, a.stream_bounds.split_instances)?;
+    let (cap, _) = motu_render::package_split_cap(meshes.0, a.stream_bounds.split_instances);
+    let split = motu_render::package_stream_split(meshes.0, view, cap)?;
     let view = &split.as_ref().map_or(*view, |s| s.view(view));
     if warmup > 0 {
         let mut sr = motu_gpu::StreamingRenderer::new(ctx, *view, meshes, &opts).map_err(

@@ -378,8 +378,8 @@ impl<'a> StreamingRenderer<'a> {
     #[cfg(test)]
     pub(crate) fn defragment_now(&mut self, thin_out: bool) -> Result<defrag::Drained> {
         if thin_out {
-            let resident: Vec<usize> = (0..self.res.blas.len())
-                .filter(|&b| self.res.blas[b].is_some() && self.topo.buildable(b))
+            let resident: Vec<usize> = (0..self.res.blases().len())
+                .filter(|&b| self.res.has_blas(b) && self.topo.buildable(b))
                 .collect();
             for b in resident.into_iter().step_by(2) {
                 self.evict(b);
@@ -415,7 +415,7 @@ impl<'a> StreamingRenderer<'a> {
 
     /// Whether BLAS `b` / TLAS `t` of the hierarchy is resident now.
     pub fn blas_resident(&self, b: u32) -> bool {
-        self.res.blas.get(b as usize).is_some_and(|a| a.is_some())
+        self.res.has_blas(b as usize)
     }
 
     pub fn tlas_resident(&self, t: u32) -> bool {

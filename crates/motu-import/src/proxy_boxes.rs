@@ -25,22 +25,19 @@ pub(crate) fn write_proxy_boxes(
     writer: &mut PackageWriter,
     view: &HierarchyView<'_>,
 ) -> Result<(), ImportError> {
-    let t = std::time::Instant::now();
     // Chunks read at once: one per core, at most 16 (64 MiB each by default, and about as much
     // again of triangle boxes while their BLASes wait).
     let batch = rayon::current_num_threads().clamp(2, 16);
-    let table = make_table(view, batch, |c| writer.read_back_chunk(c))?;
-    let made_ms = t.elapsed().as_secs_f64() * 1e3;
-    let bytes = encode_section(&table);
-    writer.add_section(motu_pack::SECTION_PROXY_BOXES, "proxy_boxes", 1, &bytes)?;
-    tracing::info!(
-        blases = table.entries.len(),
-        boxes = table.boxes.len(),
-        section_bytes = bytes.len(),
-        made_ms,
-        "proxy boxes stored"
-    );
-    Ok(())
+    crate::split::add_timed_section(
+        writer,
+        motu_pack::SECTION_PROXY_BOXES,
+        "proxy_boxes",
+        |writer| {
+            let table = make_table(view, batch, |c| writer.read_back_chunk(c))?;
+            let counts = format!("blases={} boxes={}", table.entries.len(), table.boxes.len());
+            Ok((encode_section(&table), counts))
+        },
+    )
 }
 
 /// The table of every BLAS with boxes ([`has_boxes`]), reading each chunk its meshes lie in

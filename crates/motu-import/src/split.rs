@@ -62,25 +62,22 @@ pub(crate) fn write_proxy_clusters(
     writer: &mut PackageWriter,
     streamed: &HierarchyView<'_>,
 ) -> Result<(), ImportError> {
-    let t = std::time::Instant::now();
     let streamed = *streamed;
-    let clusters = proxy_clusters::all_clusters(&streamed);
-    let table = proxy_clusters::StoredProxyClusters::new(&streamed, &clusters);
-    let bytes = proxy_clusters::encode_section(&table);
-    writer.add_section(
+    add_timed_section(
+        writer,
         motu_pack::SECTION_PROXY_CLUSTERS,
         "proxy_clusters",
-        1,
-        &bytes,
-    )?;
-    tracing::info!(
-        tlases = table.tlases.len(),
-        clusters = table.clusters.len(),
-        section_bytes = bytes.len(),
-        made_ms = t.elapsed().as_secs_f64() * 1e3,
-        "proxy clusters stored"
-    );
-    Ok(())
+        |_| {
+            let clusters = proxy_clusters::all_clusters(&streamed);
+            let table = proxy_clusters::StoredProxyClusters::new(&streamed, &clusters);
+            let counts = format!(
+                "tlases={} clusters={}",
+                table.tlases.len(),
+                table.clusters.len()
+            );
+            Ok((proxy_clusters::encode_section(&table), counts))
+        },
+    )
 }
 
 /// Counts, per TLAS of the package's own hierarchy, the BLASes its instances place
@@ -90,16 +87,43 @@ pub(crate) fn write_blas_counts(
     writer: &mut PackageWriter,
     view: &HierarchyView<'_>,
 ) -> Result<(), ImportError> {
+    add_timed_section(
+        writer,
+        motu_pack::SECTION_BLAS_COUNTS,
+        "blas_counts",
+        |_| {
+            let counts = motu_compile::blas_counts::BlasCounts::of(view);
+            let bytes = motu_compile::blas_counts::encode_section(view, &counts);
+            let logged = format!(
+                "tlases={} entries={}",
+                view.tlases.len(),
+                counts.entries.len()
+            );
+            Ok((bytes, logged))
+        },
+    )
+}
+
+/// Makes a derived section with `make` (its bytes and the counts its log line names, as
+/// `key=value` words; `make` may read back what `writer` holds), adds it to the package as
+/// `name` (one-byte elements) and logs how long making it took and its size: the one shape of
+/// every table import derives and stores (`proxy_clusters`, `blas_counts`, `proxy_boxes`).
+pub(crate) fn add_timed_section(
+    writer: &mut PackageWriter,
+    kind: motu_package::SectionKind,
+    name: &'static str,
+    make: impl FnOnce(&PackageWriter) -> Result<(Vec<u8>, String), ImportError>,
+) -> Result<(), ImportError> {
     let t = std::time::Instant::now();
-    let counts = motu_compile::blas_counts::BlasCounts::of(view);
-    let bytes = motu_compile::blas_counts::encode_section(view, &counts);
-    writer.add_section(motu_pack::SECTION_BLAS_COUNTS, "blas_counts", 1, &bytes)?;
+    let (bytes, counts) = make(writer)?;
+    let made_ms = t.elapsed().as_secs_f64() * 1e3;
+    writer.add_section(kind, name, 1, &bytes)?;
     tracing::info!(
-        tlases = view.tlases.len(),
-        entries = counts.entries.len(),
+        section = name,
         section_bytes = bytes.len(),
-        made_ms = t.elapsed().as_secs_f64() * 1e3,
-        "BLAS counts stored"
+        made_ms,
+        counts = %counts,
+        "derived section stored"
     );
     Ok(())
 }

@@ -68,8 +68,8 @@ pub use settings::{
 pub use shading::{scene_shading, ShadingOptions, AO_DISTANCE_OF_DIAGONAL};
 pub use stats::StreamStartup;
 pub use stream::{
-    package_split_cap, package_stream_split, stored_stream_split, stream_split, SplitCapSource,
-    StreamBounds,
+    package_split_cap, package_stream_split, stored_stream_split, stored_stream_split_or_none,
+    stream_split, SplitCapSource, StreamBounds,
 };
 
 use motu_alloc::format_size;

@@ -140,45 +140,58 @@ pub fn package_split_cap(
     }
 }
 
-/// [`stream_split`] of `pkg`'s own hierarchy, read back from the split the import stored for
-/// this cap (FORMAT.md sections 13–17) instead of made again: a binned SAH over every instance
-/// of a large root (10 s of island 0.63's start on the H200 host) becomes a table read. Any
-/// other view (a subset), another cap, or a package written before splits were stored is
-/// split here, as before. `split_instances` `None`: the package's cap ([`package_split_cap`]).
+/// [`stream_split`] of `pkg`'s own hierarchy at the resolved cap `cap`
+/// ([`package_split_cap`]), read back from the split the import stored for this cap (FORMAT.md
+/// sections 13–17) instead of made again: a binned SAH over every instance of a large root
+/// (10 s of island 0.63's start on the H200 host) becomes a table read. Any other view (a
+/// subset), another cap, or a package written before splits were stored is split here, as
+/// before.
 pub fn package_stream_split(
     pkg: &motu_pack::ScenePackage,
     view: &HierarchyView<'_>,
-    split_instances: Option<u32>,
+    cap: u32,
 ) -> Result<Option<motu_compile::StreamSplit>, RenderError> {
-    let (cap, _) = package_split_cap(pkg, split_instances);
-    let split_instances = Some(cap);
-    if cap == 0 {
-        return Ok(None);
-    }
+    let t0 = std::time::Instant::now();
     // The stored split indexes the package's own tables: only a view that is those tables
     // (the same memory, not a copy or a subset) may use it.
     let own = pkg
         .view()
         .map_err(|source| RenderError::StoredSplitRead { cap, source })?;
-    if !own.same_instancing(view) {
-        return stream_split(view, split_instances);
-    }
-    let t0 = std::time::Instant::now();
-    let split = match stored_stream_split(pkg, view, cap)? {
-        None => return stream_split(view, split_instances),
-        Some(None) => return Ok(None), // stored: no TLAS over the cap
-        Some(Some(split)) => split,
+    let known = if own.same_instancing(view) {
+        stored_stream_split_or_none(pkg, view, cap)?
+    } else {
+        None
     };
-    let (tlases, pieces) = split.counts();
-    let split_ms = t0.elapsed().as_secs_f64() * 1e3;
-    tracing::info!(
-        cap,
-        tlases,
-        pieces,
-        split_ms,
-        "TLASes split for streaming (stored at import)"
-    );
-    Ok(Some(split))
+    let Some(split) = known else {
+        return stream_split(view, Some(cap));
+    };
+    if let Some(s) = &split {
+        let (tlases, pieces) = s.counts();
+        let split_ms = t0.elapsed().as_secs_f64() * 1e3;
+        tracing::info!(
+            cap,
+            tlases,
+            pieces,
+            split_ms,
+            "TLASes split for streaming (stored at import)"
+        );
+    }
+    Ok(split)
+}
+
+/// The split of `pkg`'s own `view` at `cap` when nothing must be split to know it: `Some(None)`
+/// when `cap` is 0 (no TLAS is split) or the import stored that no TLAS is over it,
+/// `Some(Some(_))` the split it stored ([`stored_stream_split`]), `None` when it must be
+/// computed ([`stream_split`]). `motu report` tells its stored split from a computed one by it.
+pub fn stored_stream_split_or_none(
+    pkg: &motu_pack::ScenePackage,
+    view: &HierarchyView<'_>,
+    cap: u32,
+) -> Result<Option<Option<motu_compile::StreamSplit>>, RenderError> {
+    if cap == 0 {
+        return Ok(Some(None));
+    }
+    stored_stream_split(pkg, view, cap)
 }
 
 /// The split the import stored in `pkg` for `cap` instances, made into a [`motu_compile::StreamSplit`] of
@@ -292,8 +305,7 @@ pub(crate) fn render_streaming(
     let (cap, cap_source) = package_split_cap(pkg, stream.bounds.split_instances);
     startup.split_instances = cap;
     startup.split_instances_source = cap_source.as_str();
-    let split =
-        tracing::info_span!("split").in_scope(|| package_stream_split(pkg, view, Some(cap)))?;
+    let split = tracing::info_span!("split").in_scope(|| package_stream_split(pkg, view, cap))?;
     startup.split_ms = ms_since(t);
     (startup.split_tlases, startup.split_pieces) = split.as_ref().map_or((0, 0), |s| s.counts());
     let view = &split.as_ref().map_or(*view, |sp| sp.view(view));

@@ -1219,7 +1219,7 @@ fn a_stored_stream_split_reads_back_and_changes_no_number() {
     // The renderer's entry point reads the stored split for the package's own view, and
     // splits afresh for any other (here the compiled scene's tables in memory): both equal.
     for v in [view, s.view()] {
-        let r = motu_render::package_stream_split(&pkg, &v, Some(cap))
+        let r = motu_render::package_stream_split(&pkg, &v, cap)
             .expect("split")
             .expect("over the cap");
         let c = r.view(&v);
@@ -1322,4 +1322,70 @@ mod props {
             prop_assert_eq!(b.scene_fits, full.total().peak_bytes <= budget);
         }
     }
+}
+
+/// The report's JSON as `motu report --json` writes it (keys in its order), each phase's time
+/// at 0 (the phases stay: which ran, in what order, is compared too) and the package path
+/// made relative.
+fn snapshot_json(r: &Report) -> String {
+    let mut r = r.clone();
+    r.package = "<package>".into();
+    r.provenance.timings_ms = r.provenance.timings_ms.zeroed();
+    serde_json::to_string_pretty(&r).expect("json")
+}
+
+/// `motu report --json`'s bytes stay what they were (but its phases' milliseconds) over
+/// scenes of shared, nested, split and heavily instanced placements, from tables and from
+/// packages that stored their split (cap 3) or none: the snapshot `report/snapshot.txt` was
+/// written by the report before it was split into phases (`report/build.rs`). A deliberate
+/// change rewrites it with `MOTU_UPDATE_SNAPSHOTS=1`.
+#[test]
+fn report_json_matches_its_snapshot() {
+    let dir = tempfile::tempdir().expect("tmp");
+    let h200 = ModelSizes::new(&NVIDIA_H200);
+    let mut text = String::new();
+    let mut add = |name: &str, r: &Report| {
+        text += &format!("{name}\n{}\n", snapshot_json(r));
+    };
+    add("forest", &forest().report(&lavapipe(), Some(1 << 20)));
+    add("three_levels", &three_levels().report(&lavapipe(), None));
+    add("buddha_like", &buddha_like().report(&h200, Some(64 << 20)));
+    for (name, cap) in [("forest_package", None), ("forest_split_package", Some(3))] {
+        let mut s = forest();
+        let path = dir.path().join(format!("{name}.motu"));
+        let meta = cap.map(|cap_instances| motu_pack::StreamSplitMeta {
+            cap_instances,
+            ..Default::default()
+        });
+        write_package(&mut s, &path, meta);
+        let pkg = motu_pack::ScenePackage::open(&path).expect("open");
+        add(
+            name,
+            &build_report(&pkg, &lavapipe(), Some(1 << 20)).expect("report"),
+        );
+    }
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/report/snapshot.txt");
+    if std::env::var_os("MOTU_UPDATE_SNAPSHOTS").is_some() {
+        std::fs::write(&path, &text).expect("writing the snapshot");
+    }
+    let want = std::fs::read_to_string(&path).expect("reading the snapshot");
+    assert!(
+        text == want,
+        "the report's JSON changed (MOTU_UPDATE_SNAPSHOTS=1 rewrites {}):\n{}",
+        path.display(),
+        first_difference(&want, &text)
+    );
+}
+
+/// The first line where `a` and `b` differ, with its number.
+fn first_difference(a: &str, b: &str) -> String {
+    let (mut la, mut lb) = (a.lines(), b.lines());
+    for n in 1.. {
+        match (la.next(), lb.next()) {
+            (None, None) => break,
+            (x, y) if x != y => return format!("line {n}: {x:?} against {y:?}"),
+            _ => {}
+        }
+    }
+    "no line differs".into()
 }

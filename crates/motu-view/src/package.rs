@@ -244,11 +244,9 @@ impl<'p> PackageSource<'p> {
         if let Some(b) = self.split_base {
             return Ok(b);
         }
-        let split = motu_render::package_stream_split(
-            self.meshes.0,
-            &self.base,
-            stream.bounds.split_instances,
-        )?;
+        let pkg = self.meshes.0;
+        let (cap, _) = motu_render::package_split_cap(pkg, stream.bounds.split_instances);
+        let split = motu_render::package_stream_split(pkg, &self.base, cap)?;
         let b = match split {
             Some(split) => {
                 let split: &'p motu_render::StreamSplit = Box::leak(Box::new(split));

@@ -12,13 +12,19 @@
 //!
 //! The state lives in one owned part, [`Reuse`]: which BLASes were ever built (so rebuilds are
 //! counted whether or not a cache is attached) and the cache with its keys.
+//!
+//! Invariants ([`Reuse`], fields private to this file): a BLAS once built (or restored) stays
+//! counted as built ([`Reuse::mark_built`] never unmarks); a key is made once per BLAS and
+//! names its records, the scene's content and the driver, so an entry is only ever used for
+//! the structure it was made from; at most one transfer buffer is kept per direction
+//! ([`Reuse::keep_transfer`] hands back the one it replaces, to free).
 
 use std::sync::Arc;
 use std::time::Instant;
 
 use motu_abi::blob::{BlobReader, BlobWriter};
 use motu_ascache::{AsCache, CacheKey, CacheKeyBuilder, CacheStats, Tier, SERIALIZED_HEADER_BYTES};
-use motu_vk::{AsLevel, SerializedHeader, SizeQueries, SERIALIZED_ALIGNMENT};
+use motu_vk::{AsLevel, HeapBuffer, SerializedHeader, SizeQueries, SERIALIZED_ALIGNMENT};
 use rayon::prelude::*;
 
 use super::clones::{HostCacheMode, Restored, TakenClone};
@@ -67,10 +73,10 @@ impl StructureCache {
 #[derive(Default)]
 pub(super) struct Reuse {
     /// Per BLAS: built (or restored) at least once by this renderer.
-    pub(super) built_once: Vec<bool>,
+    built_once: Vec<bool>,
     cache: Option<Attached>,
     /// Host-visible buffers kept between store and restore batches (`transfer.rs`).
-    pub(super) transfer: TransferBuffers,
+    transfer: TransferBuffers,
 }
 
 struct Attached {
@@ -132,6 +138,22 @@ impl Reuse {
 
     pub(super) fn stats(&self) -> Option<CacheStats> {
         self.cache.as_ref().map(|a| a.cache.stats())
+    }
+
+    /// BLAS `b` was just built (or restored): whether it had been before (a rebuild).
+    pub(super) fn mark_built(&mut self, b: usize) -> bool {
+        std::mem::replace(&mut self.built_once[b], true)
+    }
+
+    /// The transfer buffer kept for `t`, taken out (`None`: none kept).
+    pub(super) fn take_transfer(&mut self, t: Transfer) -> Option<HeapBuffer> {
+        self.transfer.slot(t).take()
+    }
+
+    /// Keeps `buf` for `t`'s next batch; returns the buffer it replaces, for the caller to
+    /// free.
+    pub(super) fn keep_transfer(&mut self, t: Transfer, buf: HeapBuffer) -> Option<HeapBuffer> {
+        self.transfer.slot(t).replace(buf)
     }
 }
 
@@ -455,7 +477,7 @@ impl StreamingRenderer<'_> {
             if held.cache.cache.contains(&key).is_some() {
                 continue;
             }
-            let from = if let Some(a) = self.res.blas[b].take() {
+            let from = if let Some(a) = self.res.take_blas(b) {
                 Home::Resident(a)
             } else if let Some(c) = self.clones.take(b) {
                 Home::Clone(c)
@@ -464,6 +486,10 @@ impl StreamingRenderer<'_> {
             };
             taken.push(TakenOut { blas: b, key, from });
         }
+        let from_clones = taken
+            .iter()
+            .filter(|t| matches!(t.from, Home::Clone(_)))
+            .count() as u64;
         // Counted into the totals below, not into a frame: none is rendering.
         let aside = self.frame.set_stats_aside();
         let todo: Vec<ToStore<'_>> = taken
@@ -482,7 +508,7 @@ impl StreamingRenderer<'_> {
         drop(todo);
         for TakenOut { blas, from, .. } in taken {
             match from {
-                Home::Resident(a) => self.res.blas[blas] = Some(a),
+                Home::Resident(a) => self.res.put_back_blas(blas, a),
                 Home::Clone(c) => self.clones.put_back(blas, c),
             }
         }
@@ -500,6 +526,9 @@ impl StreamingRenderer<'_> {
         tot.transfer_batches += counted.transfer_batches;
         tot.transfer_allocations += counted.transfer_allocations;
         tot.persist_ms += ms_since(t);
+        if stored.is_ok() {
+            tot.persisted_from_clone += from_clones;
+        }
         stored
     }
 

@@ -176,7 +176,7 @@ impl StreamingRenderer<'_> {
         let todo: Vec<usize> = victims
             .iter()
             .copied()
-            .filter(|&b| self.res.blas.get(b).is_some_and(Option::is_some))
+            .filter(|&b| self.res.has_blas(b))
             .filter(|&b| !self.clones.holds(b))
             .collect();
         if todo.is_empty() {
@@ -185,7 +185,7 @@ impl StreamingRenderer<'_> {
         let ctx = self.ctx.clone();
         let mut made: Vec<(usize, AccelStruct)> = Vec::with_capacity(todo.len());
         for b in todo {
-            let size = self.res.blas[b].as_ref().map_or(0, |a| a.size_bytes);
+            let size = self.res.blas(b).map_or(0, |a| a.size_bytes);
             if size > self.clones.bound_bytes {
                 self.frame.stats_mut().clone_skipped += 1;
                 continue;
@@ -212,7 +212,7 @@ impl StreamingRenderer<'_> {
             return Ok(());
         }
         let made = self.clone_copies("clone evicted blases to host", made, |s, b| {
-            s.res.blas[b].as_ref().expect("resident").target()
+            s.res.blas(b).expect("resident").target()
         })?;
         for (b, a) in made {
             self.frame.stats_mut().cloned_blases += 1;

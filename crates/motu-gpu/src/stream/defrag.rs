@@ -113,7 +113,7 @@ impl<'a> StreamingRenderer<'a> {
     /// references: its records are patched on residency changes only), meshes and textures.
     fn movable_owners(&self) -> HashMap<AllocationId, Owner> {
         let mut owners = HashMap::new();
-        for (b, a) in self.res.blas.iter().enumerate() {
+        for (b, a) in self.res.blases().iter().enumerate() {
             let Some(a) = a else { continue };
             if !self.topo.buildable(b)
                 || self
@@ -128,7 +128,7 @@ impl<'a> StreamingRenderer<'a> {
                 owners.insert(id, Owner::Blas(b));
             }
         }
-        for (m, g) in self.res.meshes.iter().enumerate() {
+        for (m, g) in self.res.meshes().iter().enumerate() {
             if let Some(g) = g {
                 owners.insert(g.buffer.id(), Owner::Mesh(m));
             }
@@ -152,7 +152,7 @@ impl<'a> StreamingRenderer<'a> {
         for &o in movers {
             let placed = match o {
                 Owner::Blas(b) => {
-                    let size = self.res.blas[b].as_ref().map_or(0, |a| a.size_bytes);
+                    let size = self.res.blas(b).map_or(0, |a| a.size_bytes);
                     AccelStruct::new(
                         &ctx,
                         &mut self.heap,
@@ -163,7 +163,7 @@ impl<'a> StreamingRenderer<'a> {
                     .map(|a| blas_new.push((b, a)))
                     .map_err(Into::into)
                 }
-                Owner::Mesh(m) => match self.res.meshes[m].as_ref() {
+                Owner::Mesh(m) => match self.res.mesh(m) {
                     Some(g) => g
                         .alloc_move_target(&mut self.heap, m)
                         .map(|buf| mesh_new.push((m, buf))),
@@ -184,7 +184,7 @@ impl<'a> StreamingRenderer<'a> {
         let copied = (|| -> Result<()> {
             let mut rec = ctx.record("defragment")?;
             for (m, buf) in &mesh_new {
-                if let Some(g) = self.res.meshes[*m].as_ref() {
+                if let Some(g) = self.res.mesh(*m) {
                     rec.copy_buffer(&g.buffer, 0, buf, 0, g.buffer.size_bytes())?;
                 }
             }
@@ -194,7 +194,7 @@ impl<'a> StreamingRenderer<'a> {
                 }
             }
             for (b, dst) in &blas_new {
-                if let Some(src) = self.res.blas[*b].as_ref() {
+                if let Some(src) = self.res.blas(*b) {
                     // Both structures live until the fenced submission returns; dst was
                     // created with src's size and level.
                     rec.copy_acceleration_structure(
@@ -223,7 +223,7 @@ impl<'a> StreamingRenderer<'a> {
             freed_bytes: 0,
         };
         for (b, a) in blas_new {
-            if let Some(old) = self.res.blas[b].replace(a) {
+            if let Some(old) = self.res.moved_blas(b, a) {
                 old.release(&mut self.heap);
             }
             // Its instance records hold the old address.
@@ -234,7 +234,7 @@ impl<'a> StreamingRenderer<'a> {
             self.heap.free(old);
         }
         for (m, buf) in mesh_new {
-            if let Some(g) = self.res.meshes[m].as_mut() {
+            if let Some(g) = self.res.mesh_to_move(m) {
                 let old = g.moved_to(buf)?;
                 self.heap.free(old);
             } else {

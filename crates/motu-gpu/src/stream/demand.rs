@@ -116,7 +116,7 @@ impl<'a> StreamingRenderer<'a> {
                     // Referenced before loading: evicting a BLAS that shares it keeps it.
                     self.take_mesh_ref(m);
                     taken.push(m);
-                    if self.res.meshes[m].is_some() {
+                    if self.res.mesh(m).is_some() {
                         continue;
                     }
                     let rec = self.view.meshes[m];
@@ -149,7 +149,7 @@ impl<'a> StreamingRenderer<'a> {
                     let st = self.frame.stats_mut();
                     st.bytes_streamed += bytes + texture_bytes;
                     st.built_bytes += bytes + texture_bytes;
-                    self.res.meshes[m] = Some(g);
+                    self.res.loaded_mesh(m, g);
                 }
             }
             let ctx = self.ctx.clone();
@@ -229,15 +229,13 @@ impl<'a> StreamingRenderer<'a> {
                 .blas_meshes(b)
                 .into_iter()
                 .map(|m| {
-                    self.res.meshes[m]
-                        .as_ref()
-                        .map_or(0, |g| self.mesh_budget_bytes(g))
+                    self.res
+                        .mesh(m)
+                        .map_or(0, |g| self.res.mesh_budget_bytes(g))
                 })
                 .sum();
             let bytes = accel.size_bytes + mesh_bytes;
-            self.res.blas_bytes[b] = bytes;
-            self.res.used_in_frame[b] = self.frame.number();
-            let rebuilt = self.reuse.built_once[b];
+            let rebuilt = self.reuse.mark_built(b);
             let triangles = u64::from(self.view.blases[b].primitive_count);
             let st = self.frame.stats_mut();
             if restored {
@@ -253,10 +251,8 @@ impl<'a> StreamingRenderer<'a> {
                 st.blas_structure_bytes += accel.size_bytes;
                 st.triangles_built += triangles;
             }
-            self.reuse.built_once[b] = true;
-            self.res.admit(b, accel, bytes, self.frame.stamp());
-            self.res.pinned[b] = true;
-            self.res.built_now.push(b as u32);
+            let (stamp, frame) = (self.frame.stamp(), self.frame.number());
+            self.res.admit_built(b, accel, bytes, stamp, frame);
             built_ids.insert(b as u32);
             self.dirty_parents(b);
         }
@@ -284,7 +280,7 @@ impl<'a> StreamingRenderer<'a> {
         let mut i = 0;
         // Group size carries over between steps: a full budget keeps failing large groups,
         // and each failure streams their meshes for nothing.
-        let mut chunk = self.res.group_hint.clamp(1, 64);
+        let mut chunk = self.res.group_hint().clamp(1, 64);
         let mut relaxed = false;
         // Room for the TLAS rebuilds of this step, kept free while building: a step that
         // fills the budget with BLASes would give them back one by one to fit the rebuild
@@ -326,14 +322,14 @@ impl<'a> StreamingRenderer<'a> {
                     short = need.saturating_sub(self.free_budget_bytes().saturating_sub(reserve));
                 }
             }
-            if !self.res.built_now.is_empty()
+            if !self.res.built_now().is_empty()
                 && need > self.free_budget_bytes().saturating_sub(reserve)
             {
                 // Built next to the step's builds, it would squeeze out the TLAS rebuild:
                 // smaller, or in a later pass.
                 if group.len() > 1 {
                     chunk = group.len() / 2;
-                    self.res.group_hint = chunk;
+                    self.res.set_group_hint(chunk);
                     continue;
                 }
                 tracing::debug!(
@@ -349,20 +345,20 @@ impl<'a> StreamingRenderer<'a> {
             match self.build_group(group, evict) {
                 Ok(()) => {
                     for &b in group {
-                        if self.res.blas[b as usize].is_some() {
+                        if self.res.has_blas(b as usize) {
                             self.topo.add_instance_counts(b, &mut counts);
                         }
                     }
                     i += group.len();
                     chunk = (chunk * 2).min(64);
-                    self.res.group_hint = chunk;
+                    self.res.set_group_hint(chunk);
                 }
                 Err(GpuError::Budget(_)) if group.len() > 1 => {
                     chunk = group.len() / 2;
-                    self.res.group_hint = chunk;
+                    self.res.set_group_hint(chunk);
                 }
                 Err(GpuError::Budget(msg)) => {
-                    if !self.res.built_now.is_empty() || !must_progress {
+                    if !self.res.built_now().is_empty() || !must_progress {
                         tracing::debug!(
                             blas = queue[i],
                             left = queue.len() - i,
@@ -375,7 +371,7 @@ impl<'a> StreamingRenderer<'a> {
                         // Nothing fits next to what the incomplete pixels hold: let those go
                         // (their pixels find them again later) rather than fail.
                         relaxed = true;
-                        self.unpin_pass_pins();
+                        self.res.unpin_pass_pins();
                         continue;
                     }
                     if self.drop_persistent() {
@@ -396,7 +392,7 @@ impl<'a> StreamingRenderer<'a> {
     /// `group`: every TLAS dirty now or parent of a BLAS of `group` or built this step.
     pub(super) fn tlas_reserve(&self, counts: &[u64], group: &[u32]) -> Result<u64> {
         let mut touched: BTreeSet<u32> = self.tlases.dirty().clone();
-        for &b in group.iter().chain(&self.res.built_now) {
+        for &b in group.iter().chain(self.res.built_now()) {
             touched.extend(self.topo.parents(b as usize).iter().copied());
         }
         let mut with_group = counts.to_vec();
@@ -422,7 +418,7 @@ impl<'a> StreamingRenderer<'a> {
     /// triangle) plus ~128 bytes a triangle for the structure and its scratch.
     pub(super) fn blas_estimate_bytes(&self, b: u32) -> u64 {
         let tris = u64::from(self.view.blases[b as usize].primitive_count);
-        let meshes = if self.res.meshes_budgeted {
+        let meshes = if self.res.meshes_budgeted() {
             self.missing_mesh_bytes(b, 32, 16)
         } else {
             0
@@ -435,7 +431,7 @@ impl<'a> StreamingRenderer<'a> {
     pub(super) fn missing_mesh_bytes(&self, b: u32, per_vertex: u64, per_triangle: u64) -> u64 {
         self.blas_meshes(b as usize)
             .into_iter()
-            .filter(|&m| self.res.meshes[m].is_none())
+            .filter(|&m| self.res.mesh(m).is_none())
             .map(|m| {
                 let r = &self.view.meshes[m];
                 u64::from(r.vertex_count) * per_vertex + u64::from(r.triangle_count) * per_triangle
@@ -455,7 +451,7 @@ impl<'a> StreamingRenderer<'a> {
             })
             .sum();
         let report = self.heap.report();
-        let meshes = if self.res.meshes_budgeted {
+        let meshes = if self.res.meshes_budgeted() {
             format!("{mesh_bytes} bytes of meshes plus its")
         } else {
             format!("its {mesh_bytes} bytes of meshes in host memory aside,")
@@ -481,22 +477,15 @@ impl<'a> StreamingRenderer<'a> {
     pub(super) fn make_resident(&mut self, demand: &Demand, prefetch: bool) -> Result<()> {
         let t0 = Instant::now();
         self.frame.kept_mut().start_step(t0);
-        self.res.pinned = if prefetch {
-            let first = self.frame_first_stamp();
-            (0..self.item_count())
-                .map(|i| self.res.last_seen[i] >= first)
-                .collect()
-        } else {
-            vec![false; self.item_count()]
-        };
-        self.res.built_now.clear();
+        let seen_since = prefetch.then(|| self.frame_first_stamp());
+        self.res.start_step(self.item_count(), seen_since);
         for r in demand.all() {
-            self.res.last_seen[r.blas as usize] = self.frame.stamp();
+            self.res.seen_at(r.blas as usize, self.frame.stamp());
         }
         let queue = |v: &[Request]| -> Vec<u32> {
             v.iter()
                 .map(|r| r.blas)
-                .filter(|&b| self.res.blas[b as usize].is_none() && self.topo.buildable(b as usize))
+                .filter(|&b| !self.res.has_blas(b as usize) && self.topo.buildable(b as usize))
                 .collect()
         };
         let (needed, later) = (queue(demand.needed()), queue(demand.later()));
@@ -513,7 +502,7 @@ impl<'a> StreamingRenderer<'a> {
         self.frame.stats_mut().tables_ms += t_tables.elapsed().as_secs_f64() * 1e3;
         self.frame.stats_mut().build_steps += 1;
         if prefetch {
-            let built = self.res.built_now.len() as u32;
+            let built = self.res.built_now().len() as u32;
             self.frame.stats_mut().prefetched += built;
             let wanted = (needed.len() + later.len()) as u32;
             self.frame.stats_mut().prefetch_skipped += wanted.saturating_sub(built);
@@ -524,7 +513,7 @@ impl<'a> StreamingRenderer<'a> {
         self.frame.stats_mut().build_ms += t0.elapsed().as_secs_f64() * 1e3;
         tracing::debug!(
             demanded = demand.len(),
-            built = self.res.built_now.len(),
+            built = self.res.built_now().len(),
             deferred,
             prefetch,
             "build step"

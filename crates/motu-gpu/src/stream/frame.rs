@@ -342,7 +342,7 @@ impl<'a> StreamingRenderer<'a> {
             if let Some(t) = self.frame.tracer.take() {
                 t.tracer.release(&mut self.heap);
             }
-            self.res.pinned = vec![false; self.item_count()];
+            self.res.unpin_all(self.item_count());
             let t = self
                 .with_eviction_or_rebuilt_tlases(|s| {
                     // Streamed TLASes keep every PI in the hardware walk (no box lists).
@@ -367,8 +367,8 @@ impl<'a> StreamingRenderer<'a> {
         opts: &RenderOptions,
         guard_len: usize,
     ) -> Result<FrameBuffers> {
-        let params = frame_params(camera, opts, self.view.root_tlas, self.shading.address);
-        self.res.pinned = vec![false; self.item_count()];
+        let params = frame_params(camera, opts, self.view.root_tlas, self.shading.address());
+        self.res.unpin_all(self.item_count());
         let fb = self.frame_buffers(
             camera.width,
             camera.height,
@@ -377,7 +377,7 @@ impl<'a> StreamingRenderer<'a> {
             &opts.shading,
         )?;
         if self.tlases.any_dirty() {
-            self.res.built_now.clear();
+            self.res.forget_built_now();
             if let Err(e) = self
                 .rebuild_dirty()
                 .and_then(|()| self.upload_tlas_addresses())
@@ -393,21 +393,17 @@ impl<'a> StreamingRenderer<'a> {
     /// The working set of the frame's rays (before the prefetch builds for the next).
     fn measure_working_set(&mut self) {
         let mut working_meshes = std::collections::BTreeSet::new();
-        for (b, &f) in self.res.used_in_frame.iter().enumerate() {
+        for (b, &f) in self.res.used_in_frame().iter().enumerate() {
             if f == self.frame.number() {
                 self.frame.stats.working_set_blases += 1;
-                self.frame.stats.working_set_bytes += self.res.blas_bytes[b];
+                self.frame.stats.working_set_bytes += self.res.blas_bytes(b);
                 working_meshes.extend(self.blas_meshes(b));
             }
         }
         // Of working_set_bytes: what the meshes take from the budget (0 in host memory).
         self.frame.stats.working_set_mesh_bytes = working_meshes
             .into_iter()
-            .filter_map(|m| {
-                self.res.meshes[m]
-                    .as_ref()
-                    .map(|g| self.mesh_budget_bytes(g))
-            })
+            .filter_map(|m| self.res.mesh(m).map(|g| self.res.mesh_budget_bytes(g)))
             .sum();
     }
 
@@ -471,7 +467,7 @@ impl<'a> StreamingRenderer<'a> {
         let st = &mut self.frame.stats;
         st.resident_textures = resident_textures;
         let (mut streamed_blases, mut streamed_bytes, mut skeleton_bytes) = (0u32, 0u64, 0u64);
-        for (a, &buildable) in self.res.blas.iter().zip(self.topo.buildable_all()) {
+        for (a, &buildable) in self.res.blases().iter().zip(self.topo.buildable_all()) {
             if let Some(a) = a {
                 if buildable {
                     streamed_blases += 1;
@@ -481,8 +477,8 @@ impl<'a> StreamingRenderer<'a> {
                 }
             }
         }
-        for g in self.res.meshes.iter().flatten() {
-            if self.res.meshes_budgeted {
+        for g in self.res.meshes().iter().flatten() {
+            if self.res.meshes_budgeted() {
                 streamed_bytes += g.size_bytes();
             } else {
                 st.resident_host_mesh_bytes += g.size_bytes();
@@ -535,7 +531,7 @@ impl<'a> StreamingRenderer<'a> {
                 exposure_ev,
                 as_bytes: self
                     .res
-                    .blas
+                    .blases()
                     .iter()
                     .flatten()
                     .map(|a| a.size_bytes)
@@ -592,7 +588,7 @@ impl<'a> StreamingRenderer<'a> {
         while !merged
             && !open.is_empty()
             && self.frame.stats.probe_rounds < self.opts.probe_rounds
-            && needed.iter().any(|&b| self.res.blas[b as usize].is_some())
+            && needed.iter().any(|&b| self.res.has_blas(b as usize))
             && !self.frame_build_spent()
         {
             let Some(ProbeFound {

@@ -301,10 +301,10 @@ impl<'a> StreamingRenderer<'a> {
             if v >> 2 != self.frame.stamp() {
                 continue;
             }
-            self.res.last_seen[b] = self.frame.stamp();
-            if self.res.blas[b].is_some() {
+            self.res.seen_at(b, self.frame.stamp());
+            if self.res.has_blas(b) {
                 if this_frame {
-                    self.res.used_in_frame[b] = self.frame.number();
+                    self.res.used_in(b, self.frame.number());
                 }
                 if self.topo.buildable(b) {
                     self.res.saw(b, self.frame.stamp());
@@ -338,7 +338,7 @@ impl<'a> StreamingRenderer<'a> {
         self.frame.next_stamp(STAMP_LIMIT)?;
         // Every resident BLAS is walked by every ray of this pass that reaches its box in
         // front of its best hit: a ray that started by now needs it no more.
-        let resident = (0..nb).filter(|&b| self.res.blas[b].is_some() && self.topo.buildable(b));
+        let resident = (0..nb).filter(|&b| self.res.has_blas(b) && self.topo.buildable(b));
         self.gpu.write_walked(resident, self.frame.stamp())?;
         let walked = self.gpu.walked_table()?;
         fb.pixel_list.write(0, list)?;

@@ -104,7 +104,7 @@ impl<'a> StreamingRenderer<'a> {
         // A later round (open pixels, or a verifying round over every pixel) adds to the
         // first round's sightings, need and marks.
         let later = again.is_some() || verify;
-        let params = frame_params(next, opts, self.view.root_tlas, self.shading.address);
+        let params = frame_params(next, opts, self.view.root_tlas, self.shading.address());
         crate::render::write_params(&fb.params, &params, &opts.shading)?;
         let pixels = u64::from(next.width) * u64::from(next.height);
         let stride = self.opts.probe_stride.max(1);
@@ -136,7 +136,7 @@ impl<'a> StreamingRenderer<'a> {
             ))
         };
         self.frame.stats_mut().probe_pass_rows = pass_rows;
-        let resident: Vec<bool> = self.res.blas.iter().map(Option::is_some).collect();
+        let resident: Vec<bool> = self.res.blases().iter().map(Option::is_some).collect();
         let PassReadback {
             stamps,
             requests,
@@ -153,9 +153,9 @@ impl<'a> StreamingRenderer<'a> {
                 stamp - 1
             };
             for (b, &v) in stamps.iter().enumerate() {
-                if passed_mark(v, stamp) && self.res.blas[b].is_some() && self.topo.buildable(b) {
+                if passed_mark(v, stamp) && self.res.has_blas(b) && self.topo.buildable(b) {
                     self.res.saw(b, at);
-                    self.res.last_seen[b] = self.res.last_seen[b].max(at);
+                    self.res.seen_by(b, at);
                     self.frame.stats_mut().probe_pass_marks += 1;
                 }
             }
@@ -192,16 +192,15 @@ impl<'a> StreamingRenderer<'a> {
         let mut need = self.frame.take_probe_need(first);
         for (b, &v) in stamps.iter().enumerate() {
             let used = v >> 2 == stamp || passed_mark(v, stamp);
-            let Some(a) = self.res.blas[b]
-                .as_ref()
-                .filter(|_| used && self.topo.buildable(b))
-            else {
+            let Some(a) = self.res.blas(b).filter(|_| used && self.topo.buildable(b)) else {
                 continue;
             };
             need.blases.entry(b).or_insert(a.size_bytes);
             for m in self.blas_meshes(b) {
-                if let Some(g) = self.res.meshes[m].as_ref() {
-                    need.meshes.entry(m).or_insert(self.mesh_budget_bytes(g));
+                if let Some(g) = self.res.mesh(m) {
+                    need.meshes
+                        .entry(m)
+                        .or_insert(self.res.mesh_budget_bytes(g));
                 }
             }
         }

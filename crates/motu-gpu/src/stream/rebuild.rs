@@ -24,7 +24,7 @@ impl<'a> StreamingRenderer<'a> {
         let mut sizes = Vec::with_capacity(ids.len());
         let mut order = Vec::with_capacity(ids.len());
         for &b in ids {
-            let meshes = &self.res.meshes;
+            let meshes = self.res.meshes();
             let Some((g, c, shape)) =
                 blas_geometry(&self.view, b, |m| meshes[m].as_ref(), aabb_base)?
             else {
@@ -72,8 +72,8 @@ impl<'a> StreamingRenderer<'a> {
         for &t in ids {
             // The proxy and the marks (each present when it has a box).
             let cl = self.topo.clusters(t as usize);
-            let proxy = cl.iter().any(|c| self.res.blas[c.blas as usize].is_none());
-            let marks = cl.iter().any(|c| self.res.blas[c.blas as usize].is_some());
+            let proxy = cl.iter().any(|c| !self.res.has_blas(c.blas as usize));
+            let marks = cl.iter().any(|c| self.res.has_blas(c.blas as usize));
             let n = (counts[t as usize] + u64::from(proxy) + u64::from(marks)).max(1);
             records += n;
             let s = self.ctx.tlas_build_sizes(
@@ -129,7 +129,7 @@ impl<'a> StreamingRenderer<'a> {
     /// Per TLAS: instance records of resident BLASes now (what its rebuild holds).
     pub(super) fn resident_instance_counts(&self) -> Vec<u64> {
         let mut counts = vec![0u64; self.view.tlases.len()];
-        for (b, a) in self.res.blas.iter().enumerate() {
+        for (b, a) in self.res.blases().iter().enumerate() {
             if a.is_some() {
                 self.topo.add_instance_counts(b as u32, &mut counts);
             }
@@ -254,16 +254,16 @@ impl<'a> StreamingRenderer<'a> {
                 s.build_tlases(&now)
             }) {
                 Ok(()) => self.frame.stats_mut().tlas_rebuilt += rebuilt,
-                Err(GpuError::Budget(_)) if self.unpin_pass_pins() => {}
+                Err(GpuError::Budget(_)) if self.res.unpin_pass_pins() => {}
                 Err(GpuError::Budget(msg)) => {
                     // Give back about a 32nd of the budget of this step's builds per round
                     // (least requested first): one at a time would re-encode every instance
                     // record once per structure.
                     let step = (self.build_opts.budget_bytes / 32).max(1);
                     let mut given = 0u64;
-                    while given < step && self.res.built_now.len() > 1 {
-                        let b = self.res.built_now.pop().unwrap_or_default();
-                        given += self.res.blas_bytes[b as usize];
+                    while given < step && self.res.built_now().len() > 1 {
+                        let b = self.res.pop_built_now().unwrap_or_default();
+                        given += self.res.blas_bytes(b as usize);
                         self.frame.stats_mut().deferred += 1;
                         if self.res.holds(b) {
                             self.clone_out(&[b as usize])?;
@@ -271,7 +271,7 @@ impl<'a> StreamingRenderer<'a> {
                             self.frame.stats_mut().evicted -= 1;
                         }
                     }
-                    let Some(last) = self.res.built_now.pop() else {
+                    let Some(last) = self.res.pop_built_now() else {
                         let report = self.heap.report();
                         return Err(GpuError::Budget(msg.explained(format!(
                             "streaming: rebuilding {} TLAS(es) does not fit under the budget of \

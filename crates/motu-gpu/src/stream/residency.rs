@@ -1,6 +1,15 @@
 //! Residency: the part that says what of the streamed state is resident ([`Resident`]); LRU
 //! eviction under the budget, pins, mesh reference counts, and quarantine of TLASes left
 //! inconsistent by a failed build step.
+//!
+//! Invariants: a streamed BLAS is resident (its structure set) exactly when the LRU order
+//! holds it, with its structure's and meshes' bytes ([`Resident::admit_built`] sets both,
+//! `evict` clears both; [`Resident::take_blas`] takes a structure out only until
+//! [`Resident::put_back_blas`], with no eviction between); a mesh's reference count is the
+//! number of resident (or loading) BLASes that use it, and the mesh is resident only while it
+//! is above 0; pinned items are never evicted in the current build step, and what the step
+//! built stays pinned until the step ends or gives it back; the eviction count never
+//! decreases. The fields are private: other parts of `stream/` go through the methods here.
 
 use motu_abi::BLAS_TRIANGLES;
 use motu_alloc::{ItemId, MemoryClass, Residency};
@@ -23,58 +32,218 @@ pub(super) enum EvictWhy {
 /// The residency part: the streamed BLASes and meshes resident now, and what chooses what
 /// goes (the LRU order by last sighting, the pins of a build step, the sizes and working set).
 ///
-/// Invariants: a streamed BLAS is resident (`blas[b]` set) exactly when `residency` holds it,
-/// with its structure's and meshes' bytes; `mesh_refs[m]` counts the resident BLASes using mesh
-/// `m`, which is resident exactly while that is above 0; pinned items are never evicted in the
-/// current build step; `evictions` never decreases.
+/// Its invariants are the module docs'.
 pub(super) struct Resident {
     /// Per BLAS (streamed and skeleton alike): its structure when resident.
-    pub blas: Vec<Option<AccelStruct>>,
+    blas: Vec<Option<AccelStruct>>,
     /// Per mesh: its geometry when resident, and how many resident BLASes use it.
-    pub meshes: Vec<Option<MeshGpu>>,
+    meshes: Vec<Option<MeshGpu>>,
     mesh_refs: Vec<u32>,
     /// The memory streamed meshes are allocated in ([`StreamOptions::mesh_memory`] resolved)
     /// and whether it counts against the budget.
     ///
     /// [`StreamOptions::mesh_memory`]: super::StreamOptions::mesh_memory
     mesh_class: MemoryClass,
-    pub meshes_budgeted: bool,
+    meshes_budgeted: bool,
     /// The streamed BLASes resident, with their bytes, in LRU order.
     residency: Residency,
     /// Per item (BLAS, then TLAS): the last pass stamp that saw it.
-    pub last_seen: Vec<u32>,
+    last_seen: Vec<u32>,
     /// Per BLAS: bytes it held when last resident (structure plus meshes), and the last frame
     /// whose rays used it (walked while resident and seen, or built for them): the frame's
     /// working set.
-    pub blas_bytes: Vec<u64>,
-    pub used_in_frame: Vec<u64>,
+    blas_bytes: Vec<u64>,
+    used_in_frame: Vec<u64>,
     /// Pins of the current build step (items that must not be evicted): what the latest
     /// pass's incomplete pixels need (or, when prefetching, everything this frame saw), plus
     /// what the step built.
-    pub pinned: Vec<bool>,
+    pinned: Vec<bool>,
     /// Items the current build step made resident, in build (priority) order.
-    pub built_now: Vec<u32>,
+    built_now: Vec<u32>,
     /// BLASes per build group to try first (see `build_blas_queue`).
-    pub group_hint: usize,
+    group_hint: usize,
     /// BLASes evicted since the renderer started (also those given back; never decremented):
     /// whether a prefetch removed anything since a probe.
     evictions: u64,
 }
 
 impl Resident {
-    /// Makes streamed BLAS `b` resident: its structure, and its bytes (structure and meshes)
-    /// in the LRU order, seen at pass stamp `stamp`.
-    pub fn admit(&mut self, b: usize, accel: AccelStruct, bytes: u64, stamp: u32) {
+    /// Makes streamed BLAS `b`, just built (or restored) for frame `frame`, resident: its
+    /// structure, and its bytes (structure and meshes) in the LRU order, seen at pass stamp
+    /// `stamp`; it is pinned and counted as the step's build.
+    pub fn admit_built(
+        &mut self,
+        b: usize,
+        accel: AccelStruct,
+        bytes: u64,
+        stamp: u32,
+        frame: u64,
+    ) {
+        self.blas_bytes[b] = bytes;
+        self.used_in_frame[b] = frame;
         self.blas[b] = Some(accel);
         let _ = self
             .residency
             .insert(ItemId(b as u32), bytes, u64::from(stamp));
+        self.pinned[b] = true;
+        self.built_now.push(b as u32);
+    }
+
+    /// Puts skeleton BLAS `b` (never evicted: not in the LRU order) in place.
+    pub fn place_skeleton_blas(&mut self, b: usize, accel: AccelStruct) {
+        self.blas[b] = Some(accel);
+    }
+
+    /// Takes BLAS `b`'s structure out to read it (serialising it into the cache); it must come
+    /// back with [`put_back_blas`](Self::put_back_blas) before anything is evicted or built.
+    pub fn take_blas(&mut self, b: usize) -> Option<AccelStruct> {
+        self.blas.get_mut(b).and_then(Option::take)
+    }
+
+    /// Puts back a structure [`take_blas`](Self::take_blas) took out.
+    pub fn put_back_blas(&mut self, b: usize, accel: AccelStruct) {
+        self.blas[b] = Some(accel);
+    }
+
+    /// Puts `accel` (a copy of resident BLAS `b` in other memory: defragmentation) in the
+    /// place of its structure and returns the old one, for the caller to release.
+    pub fn moved_blas(&mut self, b: usize, accel: AccelStruct) -> Option<AccelStruct> {
+        self.blas[b].replace(accel)
+    }
+
+    /// Mesh `m`'s geometry, just loaded for a BLAS that holds a reference to it.
+    pub fn loaded_mesh(&mut self, m: usize, g: MeshGpu) {
+        debug_assert!(self.mesh_refs[m] > 0, "mesh {m} loaded with no reference");
+        self.meshes[m] = Some(g);
+    }
+
+    /// Mesh `m`'s geometry to move (defragmentation), when resident.
+    pub fn mesh_to_move(&mut self, m: usize) -> Option<&mut MeshGpu> {
+        self.meshes.get_mut(m).and_then(Option::as_mut)
     }
 
     /// Resident streamed BLAS `b` was seen at `stamp` (it moves up the LRU order).
     pub fn saw(&mut self, b: usize, stamp: u32) {
         self.residency
             .mark_visible(ItemId(b as u32), u64::from(stamp));
+    }
+
+    /// Item `i` (BLAS, then TLAS) was seen by the pass of stamp `stamp`.
+    pub fn seen_at(&mut self, i: usize, stamp: u32) {
+        self.last_seen[i] = stamp;
+    }
+
+    /// Item `i` was seen at `stamp` or later (a probe's stamps are older than the frame's).
+    pub fn seen_by(&mut self, i: usize, stamp: u32) {
+        self.last_seen[i] = self.last_seen[i].max(stamp);
+    }
+
+    /// Resident BLAS `b`'s structure was walked by the rays of frame `frame`.
+    pub fn used_in(&mut self, b: usize, frame: u64) {
+        self.used_in_frame[b] = frame;
+    }
+
+    /// Per BLAS, the last frame whose rays used it.
+    pub fn used_in_frame(&self) -> &[u64] {
+        &self.used_in_frame
+    }
+
+    /// Bytes BLAS `b` held when last resident (structure plus meshes).
+    pub fn blas_bytes(&self, b: usize) -> u64 {
+        self.blas_bytes[b]
+    }
+
+    /// Starts a build step over `items` items: pinned are those seen at `seen_since` or later
+    /// (a prefetch keeps what the frame saw) or none; nothing is built yet.
+    pub fn start_step(&mut self, items: usize, seen_since: Option<u32>) {
+        self.pinned = match seen_since {
+            Some(first) => (0..items).map(|i| self.last_seen[i] >= first).collect(),
+            None => vec![false; items],
+        };
+        self.built_now.clear();
+    }
+
+    /// Drops every pin of `items` items (what the step built stays counted as built).
+    pub fn unpin_all(&mut self, items: usize) {
+        self.pinned = vec![false; items];
+    }
+
+    /// Forgets what the current step built (a rebuild outside any build step).
+    pub fn forget_built_now(&mut self) {
+        self.built_now.clear();
+    }
+
+    /// Drops the pins that are not this step's builds (the incomplete pixels' best hits: they
+    /// are found again later). Returns false if there were none.
+    pub fn unpin_pass_pins(&mut self) -> bool {
+        let mut keep = vec![false; self.pinned.len()];
+        for &i in &self.built_now {
+            if let Some(k) = keep.get_mut(i as usize) {
+                *k = true;
+            }
+        }
+        let changed = self.pinned.iter().zip(&keep).any(|(&p, &k)| p && !k);
+        self.pinned = keep;
+        changed
+    }
+
+    /// Bytes mesh `g` takes from the budget: 0 where streamed meshes live outside it (host
+    /// memory of a discrete GPU, [`super::MeshMemory`]).
+    pub fn mesh_budget_bytes(&self, g: &MeshGpu) -> u64 {
+        if self.meshes_budgeted {
+            g.size_bytes()
+        } else {
+            0
+        }
+    }
+
+    /// Items the current build step made resident, in build (priority) order.
+    pub fn built_now(&self) -> &[u32] {
+        &self.built_now
+    }
+
+    /// The latest of the step's builds, no longer counted as the step's (it is given back).
+    pub fn pop_built_now(&mut self) -> Option<u32> {
+        self.built_now.pop()
+    }
+
+    /// BLASes per build group to try first; `set_group_hint` keeps the size that worked.
+    pub fn group_hint(&self) -> usize {
+        self.group_hint
+    }
+
+    pub fn set_group_hint(&mut self, blases: usize) {
+        self.group_hint = blases;
+    }
+
+    /// BLAS `b`'s structure when resident (streamed or skeleton).
+    pub fn blas(&self, b: usize) -> Option<&AccelStruct> {
+        self.blas.get(b).and_then(Option::as_ref)
+    }
+
+    /// Whether BLAS `b` (streamed or skeleton) has its structure now.
+    pub fn has_blas(&self, b: usize) -> bool {
+        self.blas(b).is_some()
+    }
+
+    /// Per BLAS, its structure when resident.
+    pub fn blases(&self) -> &[Option<AccelStruct>] {
+        &self.blas
+    }
+
+    /// Mesh `m`'s geometry when resident.
+    pub fn mesh(&self, m: usize) -> Option<&MeshGpu> {
+        self.meshes.get(m).and_then(Option::as_ref)
+    }
+
+    /// Per mesh, its geometry when resident.
+    pub fn meshes(&self) -> &[Option<MeshGpu>] {
+        &self.meshes
+    }
+
+    /// Whether streamed meshes count against the budget.
+    pub fn meshes_budgeted(&self) -> bool {
+        self.meshes_budgeted
     }
 
     /// Whether streamed BLAS `b` is resident (and so evictable).
@@ -120,16 +289,6 @@ impl Resident {
 }
 
 impl<'a> StreamingRenderer<'a> {
-    /// Bytes mesh `g` takes from the budget: 0 where streamed meshes live outside it (host
-    /// memory of a discrete GPU, [`super::MeshMemory`]).
-    pub(super) fn mesh_budget_bytes(&self, g: &MeshGpu) -> u64 {
-        if self.res.meshes_budgeted {
-            g.size_bytes()
-        } else {
-            0
-        }
-    }
-
     /// Evicts least-recently-visible unpinned structures (at least `bytes` of them, or all that
     /// are left). Returns false when nothing could be evicted.
     pub(super) fn evict_some(&mut self, bytes: u64, why: EvictWhy) -> Result<bool> {
@@ -287,20 +446,6 @@ impl<'a> StreamingRenderer<'a> {
         } else {
             f(self)
         }
-    }
-
-    /// Drops the pins that are not this step's builds (the incomplete pixels' best hits: they
-    /// are found again later). Returns false if there were none.
-    pub(super) fn unpin_pass_pins(&mut self) -> bool {
-        let mut keep = vec![false; self.res.pinned.len()];
-        for &i in &self.res.built_now {
-            if let Some(k) = keep.get_mut(i as usize) {
-                *k = true;
-            }
-        }
-        let changed = self.res.pinned.iter().zip(&keep).any(|(&p, &k)| p && !k);
-        self.res.pinned = keep;
-        changed
     }
 
     /// After a failed build step, a TLAS left dirty (absent, or referencing evicted BLASes)

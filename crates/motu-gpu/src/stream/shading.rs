@@ -4,6 +4,12 @@
 //! each texture's mip chain streams with the meshes whose materials sample it (a reference per
 //! resident mesh: loaded with the first, freed with the last). The per-mesh attribute table
 //! and the per-texture address table the shaders read are rewritten as meshes come and go.
+//!
+//! Invariants ([`StreamShading`], fields private to this file): a texture's chain is resident
+//! exactly while its reference count (the resident meshes that sample it) is above 0; the
+//! per-texture address table is queued again whenever a chain came, went or moved since it
+//! was last queued; `address` and the two table indices are set once, by `init_shading`.
+
 use motu_vk::HeapBuffer;
 
 use super::StreamingRenderer;
@@ -16,7 +22,7 @@ pub(super) struct StreamShading {
     /// `FrameParams::shading` (the `ShadingRef` header), 0 before [`init_shading`].
     ///
     /// [`init_shading`]: StreamingRenderer::init_shading
-    pub(super) address: u64,
+    address: u64,
     /// Index in the renderer's `tables` of the per-mesh attribute-address table.
     mesh_attrs_table: Option<usize>,
     /// Index in the renderer's `tables` of the per-texture address table.
@@ -30,6 +36,12 @@ pub(super) struct StreamShading {
 }
 
 impl StreamShading {
+    /// `FrameParams::shading`: the address of the `ShadingRef` header (0 before
+    /// [`init_shading`](StreamingRenderer::init_shading)).
+    pub(super) fn address(&self) -> u64 {
+        self.address
+    }
+
     /// Textures resident now.
     pub(super) fn resident_textures(&self) -> u32 {
         self.textures.iter().filter(|t| t.is_some()).count() as u32
@@ -157,8 +169,8 @@ impl<'a> StreamingRenderer<'a> {
     pub(super) fn queue_mesh_attrs(&mut self) -> Result<()> {
         let ctx = self.ctx.clone();
         if let Some(table) = self.shading.mesh_attrs_table {
-            let mut attrs = vec![0u64; 2 * self.res.meshes.len()];
-            for (m, g) in self.res.meshes.iter().enumerate() {
+            let mut attrs = vec![0u64; 2 * self.res.meshes().len()];
+            for (m, g) in self.res.meshes().iter().enumerate() {
                 if let Some(g) = g {
                     attrs[2 * m] = g.normals_address;
                     attrs[2 * m + 1] = g.uvs_address;

@@ -325,7 +325,7 @@ impl<'a> StreamingRenderer<'a> {
                     .collect();
                 let built = self.build_blas_set(&ids, base)?;
                 for (b, a) in built {
-                    self.res.blas[b] = Some(a);
+                    self.res.place_skeleton_blas(b, a);
                 }
                 Ok(())
             })();
@@ -386,8 +386,8 @@ impl<'a> StreamingRenderer<'a> {
         let addrs: Vec<u64> = (0..self.view.tlases.len() as u32)
             .map(|t| self.tlases.get(t).map_or(0, |t| t.accel.address))
             .collect();
-        let mut mesh_geo = vec![0u64; 2 * self.res.meshes.len()];
-        for (m, g) in self.res.meshes.iter().enumerate() {
+        let mut mesh_geo = vec![0u64; 2 * self.res.meshes().len()];
+        for (m, g) in self.res.meshes().iter().enumerate() {
             if let Some(g) = g {
                 mesh_geo[2 * m] = g.positions_address;
                 mesh_geo[2 * m + 1] = g.indices_address;

@@ -316,6 +316,8 @@ pub struct StreamTotals {
     pub persisted_blases: u64,
     pub persisted_bytes: u64,
     pub persist_ms: f64,
+    /// Of `persisted_blases`: those serialised from a host clone (evicted, not resident).
+    pub persisted_from_clone: u64,
     /// Triangles of every buildable triangle BLAS: what one full build costs.
     pub scene_triangles: u64,
     /// Bytes the skeleton (tables, PI BLASes, root TLAS, proxies) took at start.

@@ -165,7 +165,7 @@ impl<'a> StreamingRenderer<'a> {
         b.times.probe_ms = b.times.lap();
         b.addrs =
             b.r.res
-                .blas
+                .blases()
                 .iter()
                 .map(|a| a.as_ref().map_or(0, |a| a.address))
                 .collect();

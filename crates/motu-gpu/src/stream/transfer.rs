@@ -55,7 +55,7 @@ pub(super) struct TransferBuffers {
 }
 
 impl TransferBuffers {
-    fn slot(&mut self, t: Transfer) -> &mut Option<HeapBuffer> {
+    pub(super) fn slot(&mut self, t: Transfer) -> &mut Option<HeapBuffer> {
         match t {
             Transfer::Readback => &mut self.readback,
             Transfer::Upload => &mut self.upload,
@@ -86,7 +86,7 @@ impl StreamingRenderer<'_> {
         size_bytes: u64,
     ) -> motu_vk::Result<HeapBuffer> {
         self.frame.stats_mut().transfer_batches += 1;
-        if let Some(b) = self.reuse.transfer.slot(t).take() {
+        if let Some(b) = self.reuse.take_transfer(t) {
             if b.size_bytes() >= size_bytes {
                 return Ok(b);
             }
@@ -112,7 +112,7 @@ impl StreamingRenderer<'_> {
     /// frees it.
     pub(super) fn put_back_transfer(&mut self, t: Transfer, buf: HeapBuffer) {
         if self.keeps_transfer_buffers() && buf.size_bytes() <= TRANSFER_CAP_BYTES {
-            if let Some(old) = self.reuse.transfer.slot(t).replace(buf) {
+            if let Some(old) = self.reuse.keep_transfer(t, buf) {
                 self.heap.free(old);
             }
         } else {

@@ -173,6 +173,7 @@ mirror! {
         persisted_blases: u64,
         persisted_bytes: u64,
         persist_ms: f64,
+        persisted_from_clone: u64,
         scene_triangles: u64,
         skeleton_bytes: u64,
         proxy_boxes: u64,
