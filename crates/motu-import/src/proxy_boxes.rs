@@ -93,7 +93,7 @@ pub(crate) fn make_table<E: Send>(
                     read_chunk(ChunkId(c))?
                 };
                 Ok(by_chunk[&c]
-                    .iter()
+                    .par_iter()
                     .map(|&m| (m, mesh_triangles(view, m, &raw)))
                     .collect())
             })
@@ -108,16 +108,20 @@ pub(crate) fn make_table<E: Send>(
             .par_iter()
             .map(|&b| {
                 let f = fan(view.blases[b].primitive_count) as usize;
-                let mut all: Vec<TriangleBox> =
-                    Vec::with_capacity(view.blases[b].primitive_count as usize);
+                let mut parts: Vec<&[TriangleBox]> = Vec::new();
                 for m in meshes_of(b) {
                     match tris.get(&m) {
-                        Some(Some(t)) => all.extend_from_slice(t),
+                        Some(Some(t)) => parts.push(t),
                         // As the streamer does for a mesh it cannot read.
                         _ => return (b, blas_boxes(view, b, f, |_| Err::<MeshSlices<'_>, _>(()))),
                     }
                 }
-                (b, boxes_from_triangles(&mut all, f))
+                // One mesh's triangles are split where they lie; several are joined first.
+                let boxes = match parts[..] {
+                    [one] => boxes_from_triangles(one, f),
+                    _ => boxes_from_triangles(&parts.concat(), f),
+                };
+                (b, boxes)
             })
             .collect();
         for &b in &ready {
@@ -144,33 +148,37 @@ pub(crate) fn make_table<E: Send>(
 }
 
 /// Mesh `m`'s triangle boxes from its chunk's raw bytes; `None` when its arrays do not lie in
-/// them.
+/// them. The arrays are read in place where they are aligned (they are: the writer aligns
+/// them to 16 bytes), else copied out.
 fn mesh_triangles(view: &HierarchyView<'_>, m: u32, raw: &[u8]) -> Option<Vec<TriangleBox>> {
     let r = view.meshes.get(m as usize)?;
-    let words = |offset: u64, count: u64| -> Option<Vec<u32>> {
+    let bytes = |offset: u64, count: u64| -> Option<&[u8]> {
         let start = usize::try_from(offset).ok()?;
         let end = start.checked_add(usize::try_from(count.checked_mul(4)?).ok()?)?;
-        let bytes = raw.get(start..end)?;
-        Some(
-            bytes
-                .chunks_exact(4)
-                .map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]]))
-                .collect(),
-        )
+        raw.get(start..end)
     };
-    let positions: Vec<[f32; 3]> = words(r.positions_offset, 3 * u64::from(r.vertex_count))?
-        .chunks_exact(3)
-        .map(|p| {
-            [
-                f32::from_bits(p[0]),
-                f32::from_bits(p[1]),
-                f32::from_bits(p[2]),
-            ]
-        })
-        .collect();
-    let indices = words(r.indices_offset, 3 * u64::from(r.triangle_count))?;
+    let positions = bytes(r.positions_offset, 3 * u64::from(r.vertex_count))?;
+    let indices = bytes(r.indices_offset, 3 * u64::from(r.triangle_count))?;
     let mut out = Vec::with_capacity(r.triangle_count as usize);
-    push_triangle_boxes(&positions, &indices, &mut out);
+    let in_place = (
+        bytemuck::try_cast_slice::<u8, [f32; 3]>(positions),
+        bytemuck::try_cast_slice::<u8, u32>(indices),
+    );
+    match in_place {
+        (Ok(p), Ok(i)) if cfg!(target_endian = "little") => push_triangle_boxes(p, i, &mut out),
+        _ => {
+            let words = |b: &[u8]| -> Vec<u32> {
+                b.chunks_exact(4)
+                    .map(|w| u32::from_le_bytes([w[0], w[1], w[2], w[3]]))
+                    .collect()
+            };
+            let p: Vec<[f32; 3]> = words(positions)
+                .chunks_exact(3)
+                .map(|p| std::array::from_fn(|a| f32::from_bits(p[a])))
+                .collect();
+            push_triangle_boxes(&p, &words(indices), &mut out);
+        }
+    }
     Some(out)
 }
 

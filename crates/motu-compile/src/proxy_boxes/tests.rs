@@ -200,7 +200,7 @@ fn blas_boxes_of_meshes_equal_boxes_from_their_triangles() {
             let (p, i) = mesh(g.mesh);
             push_triangle_boxes(&p, &i, &mut tris);
         }
-        let stored = boxes_from_triangles(&mut tris, f);
+        let stored = boxes_from_triangles(&tris, f);
         assert_eq!(
             bytemuck::cast_slice::<Box6, u32>(&runtime),
             bytemuck::cast_slice::<Box6, u32>(&stored)
@@ -210,4 +210,81 @@ fn blas_boxes_of_meshes_equal_boxes_from_their_triangles() {
     // A mesh that cannot be read: the padded bounds as the only top box and leaf.
     let failed = blas_boxes(&view, 2, 1, |_| Err::<MeshSlices<'_>, _>("gone"));
     assert_eq!(failed, vec![padded([0.0, 0.0, 0.0, 1.0, 1.0, 1.0]); 2]);
+}
+
+/// The boxes as they were made before the splits moved keys (each triangle's centroid and
+/// box reordered in place): earlier packages' stored tables hold these.
+fn boxes_moving_triangles(tris: &mut [TriangleBox], fan: usize) -> Vec<Box6> {
+    let mut out = vec![EMPTY; fan + fan * fan];
+    let mut leaves = Vec::with_capacity(fan * fan);
+    split(tris, 2 * fan.trailing_zeros(), 0, &mut leaves);
+    let leaf_boxes: Vec<Box6> = leaves
+        .iter()
+        .map(|r| {
+            let mut bx = EMPTY;
+            for t in &tris[r.clone()] {
+                grow(&mut bx, &t.1[..3], &t.1[3..]);
+            }
+            bx
+        })
+        .collect();
+    let pad_nonempty = |bx: Box6| if bx[0] <= bx[3] { padded(bx) } else { bx };
+    for (k, group) in leaf_boxes.chunks_exact(fan).enumerate() {
+        let mut top = EMPTY;
+        for (j, leaf) in group.iter().enumerate() {
+            grow(&mut top, &leaf[..3], &leaf[3..]);
+            out[fan + k * fan + j] = pad_nonempty(*leaf);
+        }
+        out[k] = pad_nonempty(top);
+    }
+    out
+}
+
+#[test]
+fn splitting_keys_makes_the_boxes_splitting_the_triangles_made() {
+    // A terrain-like grid (many centroids tied along each axis: the median falls inside runs of
+    // equal keys, where which triangle goes left depends on the selection's moves), a jittered
+    // cloud, a flat sheet and a degenerate pile, at every fan.
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+    let mut jitter = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let tri = |x: f32, y: f32, z: f32, w: f32| {
+        let bx = [x, y, z, x + w, y + 0.5 * w, z + w];
+        (std::array::from_fn(|a| 0.5 * (bx[a] + bx[3 + a])), bx)
+    };
+    let grid: Vec<TriangleBox> = (0..9000)
+        .map(|i| {
+            tri(
+                (i % 97) as f32,
+                ((i / 97) % 3) as f32,
+                (i / 291) as f32,
+                1.0,
+            )
+        })
+        .collect();
+    let cloud: Vec<TriangleBox> = (0..20_000)
+        .map(|_| tri(100.0 * jitter(), 10.0 * jitter(), 50.0 * jitter(), jitter()))
+        .collect();
+    let sheet: Vec<TriangleBox> = (0..3000)
+        .map(|i| tri((i % 50) as f32 * 0.5, 0.0, (i / 50) as f32 * 0.5, 0.0))
+        .collect();
+    let pile: Vec<TriangleBox> = (0..700).map(|_| tri(1.0, 2.0, 3.0, 0.0)).collect();
+    for tris in [&grid, &cloud, &sheet, &pile] {
+        for fan in [1usize, 2, 4, 8, 16] {
+            let before = tris.clone();
+            let keyed = boxes_from_triangles(tris, fan);
+            assert_eq!(*tris, before, "the triangles are left as they were");
+            let moved = boxes_moving_triangles(&mut tris.clone(), fan);
+            assert_eq!(
+                bytemuck::cast_slice::<Box6, u32>(&keyed),
+                bytemuck::cast_slice::<Box6, u32>(&moved),
+                "fan {fan}, {} triangles",
+                tris.len()
+            );
+        }
+    }
 }

@@ -1,6 +1,6 @@
 use super::*;
 use motu_abi::{BlasRecord, GeometryRecord, MeshRecord, BLAS_AABBS, BLAS_TRIANGLES};
-use motu_compile::proxy_boxes::{decode_section, Box6, Stored};
+use motu_compile::proxy_boxes::{decode_section, Box6, Stored, TriangleBox};
 use motu_package::WriterOptions;
 
 /// Mesh `i` of `n` triangles: scattered positions (deterministic), an index out of range.
@@ -128,4 +128,127 @@ fn boxes_made_a_chunk_at_a_time_equal_the_streamers_bit_for_bit() {
 
 fn bytemuck_bits(boxes: &[Box6]) -> Vec<u32> {
     boxes.iter().flatten().map(|v| v.to_bits()).collect()
+}
+
+#[test]
+fn a_mesh_read_in_place_and_one_copied_out_of_unaligned_bytes_give_the_same_triangles() {
+    let (p, ix) = mesh(3, 200);
+    let mut raw = le_bytes(p.iter().flatten().map(|v| v.to_bits()));
+    let indices_offset = raw.len() as u64;
+    raw.extend(le_bytes(ix.iter().copied()));
+    let record = |shift: u64| MeshRecord {
+        vertex_count: p.len() as u32,
+        triangle_count: 200,
+        positions_offset: shift,
+        indices_offset: indices_offset + shift,
+        ..MeshRecord::default()
+    };
+    // The same bytes one byte further on: no longer 4-aligned, so copied out.
+    let mut shifted = vec![0u8];
+    shifted.extend_from_slice(&raw);
+    let view_of = |meshes: &[MeshRecord]| -> Option<Vec<TriangleBox>> {
+        let view = HierarchyView {
+            meshes,
+            ..HierarchyView::default()
+        };
+        let bytes = if meshes[0].positions_offset == 0 {
+            &raw
+        } else {
+            &shifted
+        };
+        mesh_triangles(&view, 0, bytes)
+    };
+    let in_place = view_of(&[record(0)]).unwrap();
+    let copied = view_of(&[record(1)]).unwrap();
+    // The in-place read is the one taken for `raw` (4-aligned), the copy for `shifted`.
+    assert!(bytemuck::try_cast_slice::<u8, u32>(&raw).is_ok());
+    assert!(bytemuck::try_cast_slice::<u8, u32>(&shifted[1..]).is_err());
+    // An index out of range drops only its vertex: every triangle keeps a box.
+    assert_eq!(in_place.len(), 200);
+    assert_eq!(in_place, copied);
+    let mut expected = Vec::new();
+    push_triangle_boxes(&p, &ix, &mut expected);
+    assert_eq!(in_place, expected);
+    // Arrays that do not fit the chunk's bytes: unreadable.
+    let mut long = record(0);
+    long.triangle_count = 10_000;
+    assert_eq!(view_of(&[long]), None);
+}
+
+/// A pbrt `trianglemesh` of an `n` × `m` grid of unit quads at `x0` (their centroids tie along
+/// both axes of the grid: the median splits fall inside runs of equal keys).
+fn grid_shape(n: u32, m: u32, x0: f32) -> String {
+    let mut p = String::new();
+    for j in 0..=m {
+        for i in 0..=n {
+            let (x, z) = (x0 + i as f32, j as f32);
+            p += &format!("{x} {} {z} ", 0.25 * (x * 0.3).sin());
+        }
+    }
+    let mut ix = String::new();
+    for j in 0..m {
+        for i in 0..n {
+            let v = j * (n + 1) + i;
+            ix += &format!(
+                "{} {} {} {} {} {} ",
+                v,
+                v + 1,
+                v + n + 1,
+                v + 1,
+                v + n + 2,
+                v + n + 1
+            );
+        }
+    }
+    format!("Shape \"trianglemesh\" \"point3 P\" [{p}] \"integer indices\" [{ix}]\n")
+}
+
+#[test]
+fn an_imported_packages_stored_boxes_equal_the_boxes_made_from_its_meshes() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("scene.pbrt");
+    let text = format!(
+        "WorldBegin\nObjectBegin \"rocks\"\n{}{}{}ObjectEnd\n\
+         AttributeBegin\nTranslate 0 0 5\nObjectInstance \"rocks\"\nAttributeEnd\n\
+         AttributeBegin\nTranslate 3 0 5\nObjectInstance \"rocks\"\nAttributeEnd\n{}",
+        grid_shape(12, 9, 0.0),
+        grid_shape(5, 30, 20.0),
+        grid_shape(8, 3, 40.0),
+        grid_shape(100, 100, -150.0),
+    );
+    std::fs::write(&scene, text).unwrap();
+    // The automatic bound (the large grid cut while parsing), a given one, compressed chunks.
+    let runs = [(None, None), (Some(8192), Some(1))];
+    for (bound, zstd) in runs {
+        let out = dir.path().join("scene.motu");
+        let o = crate::ImportOptions {
+            max_blas_triangles: bound,
+            zstd_level: zstd,
+            chunk_bytes: 1 << 16,
+            ..Default::default()
+        };
+        crate::import(&scene, &out, &o).unwrap();
+        let pkg = motu_pack::ScenePackage::open(&out).unwrap();
+        let view = pkg.view().unwrap();
+        let stored = decode_section(pkg.stored_proxy_boxes().unwrap().unwrap()).unwrap();
+        let (mut checked, mut joined, mut widest) = (0, 0, 0);
+        for b in (0..view.blases.len()).filter(|&b| has_boxes(&view.blases[b])) {
+            let f = fan(view.blases[b].primitive_count);
+            let made = blas_boxes(&view, b, f as usize, |m| pkg.mesh_slices(m));
+            let Stored::Valid(boxes) = stored.boxes_of(&view, b) else {
+                panic!("bound {bound:?}: BLAS {b} has no valid stored entry");
+            };
+            assert_eq!(bytemuck_bits(boxes), bytemuck_bits(&made), "BLAS {b}");
+            checked += 1;
+            joined += usize::from(view.blases[b].item_count > 1);
+            widest = widest.max(f);
+        }
+        assert_eq!(checked, stored.entries.len(), "bound {bound:?}");
+        // The scene reaches the paths it is for: several meshes in one BLAS, fans over 2.
+        assert!(
+            joined > 0 && widest >= 4,
+            "bound {bound:?}: {joined} joined, fan {widest}"
+        );
+        std::fs::remove_file(&out).unwrap();
+    }
 }
