@@ -253,6 +253,11 @@ fn run_streaming(
             "tlas_ms": st.tlas_ms,
             "tlas_builds": st.tlas_builds,
             "tlas_updates": st.tlas_updates,
+            // Records the host wrote for rebuilds, those the GPU compacted from the kept
+            // ones (`--stream-tlas-records gpu`), and that pass's milliseconds.
+            "tlas_instances_written": st.tlas_instances_written,
+            "tlas_records_compacted": st.tlas_records_compacted,
+            "tlas_compact_ms": st.tlas_compact_ms,
             // Rebuilds run in groups (a split root piece by piece): their transient is one
             // group's.
             "tlas_rebuild_groups": st.tlas_rebuild_groups,
@@ -325,6 +330,8 @@ fn run_streaming(
         "mean_build_ms": mean("build_ms", 0),
         "mean_tlas_ms": mean("tlas_ms", 0),
         "tlas_mode": totals.tlas_mode,
+        "tlas_records_mode": totals.tlas_records_mode,
+        "tlas_records_kept_bytes": totals.tlas_records_kept_bytes,
         "mesh_memory": totals.mesh_memory,
         "host_mesh_peak_bytes": totals.host_mesh_peak_bytes,
         "mean_trace_ms": mean("trace_ms", 0),
