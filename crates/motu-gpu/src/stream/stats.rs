@@ -358,11 +358,11 @@ pub struct StreamTotals {
     /// full residency, update scratch, and records where host memory counts).
     pub tlas_mode: &'static str,
     /// Where rebuilt TLASes' records came from (`gpu` or `host`, `--stream-tlas-records`), the
-    /// most bytes kept for the GPU path, and whether the kept records were given up for room
-    /// (then every later rebuild wrote from the host).
+    /// most bytes kept for the GPU path, and how often a refused allocation with nothing else
+    /// to evict released them (rebuilds then wrote from the host until room was free again).
     pub tlas_records_mode: &'static str,
     pub tlas_records_kept_bytes: u64,
-    pub tlas_records_given_up: bool,
+    pub tlas_records_released: u32,
     pub persistent_tlases: u32,
     pub persistent_tlas_bytes: u64,
     /// A BLAS did not fit next to the persistent TLASes, so they were dropped and TLASes

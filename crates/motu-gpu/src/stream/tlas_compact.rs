@@ -10,10 +10,10 @@
 //! Invariants: a kept buffer holds TLAS `t`'s `instance_count` records in instance order and
 //! is never written after its encode; the kept bytes (records, BLAS address table, chunk
 //! table) count against the budget as part of the skeleton (`Tlases::size_bytes`); kept
-//! records are made only by [`StreamingRenderer::prepare_kept_records`], which never fails a
-//! rebuild for want of room (the TLAS is then written from the host), and are given up, all of
-//! them and for the rest of the run, when a refused allocation finds nothing else to evict
-//! ([`KeptRecords::give_up`]).
+//! records are made only by [`StreamingRenderer::prepare_kept_records`], in free budget
+//! (never evicting a structure for them), which never fails a rebuild for want of room (the
+//! TLAS is then written from the host); they are all released when a refused allocation finds
+//! nothing else to evict ([`KeptRecords::give_up`]) and made again where room is free.
 
 use motu_abi::tlas_compact::{chunk_firsts, TlasCompactPush, TLAS_COMPACT_CHUNK};
 use motu_alloc::{AllocKind, MemoryClass};
@@ -47,8 +47,6 @@ pub(super) struct KeptRecords {
     pipeline: Option<ComputePipeline>,
     /// Bytes of the kept records and the tables.
     bytes: u64,
-    /// The kept records were given up for room: every rebuild writes from the host.
-    given_up: bool,
 }
 
 impl KeptRecords {
@@ -70,15 +68,13 @@ impl KeptRecords {
         self.kept.get(t as usize).is_some_and(Option::is_some)
     }
 
-    /// Whether the kept records were given up for room.
-    pub fn given_up(&self) -> bool {
-        self.given_up
+    fn has_tables(&self) -> bool {
+        self.tables.is_some()
     }
 
-    /// Releases every kept record and table for the rest of the run (a refused allocation
-    /// found nothing else to evict). Returns whether anything was released.
+    /// Releases every kept record and table (a refused allocation found nothing else to
+    /// evict). Returns whether anything was released.
     pub fn give_up(&mut self, heap: &mut GpuHeap) -> bool {
-        self.given_up = true;
         let mut any = false;
         for b in self.kept.iter_mut().filter_map(Option::take) {
             heap.free(b);
@@ -109,18 +105,15 @@ fn storage_usage() -> BufferUsage {
 
 impl StreamingRenderer<'_> {
     /// Per TLAS of `ids` (rebuilt, not persistent): whether its records are compacted on the
-    /// GPU this rebuild. Kept records are made where missing (evicting for their room like any
-    /// allocation); where they do not fit, the TLAS is written from the host
-    /// (`tlas_records_host_fallbacks`). Called before the rebuild reads the residency.
+    /// GPU this rebuild. Kept records are made where missing, in free budget (they never evict
+    /// a structure); where they do not fit, the TLAS is written from the host
+    /// (`tlas_records_host_fallbacks`).
     pub(super) fn prepare_kept_records(&mut self, ids: &[u32]) -> Result<Vec<bool>> {
         let mut gpu = vec![false; ids.len()];
         if self.opts.tlas_records != TlasRecordsMode::Gpu {
             return Ok(gpu);
         }
         for (k, &t) in ids.iter().enumerate() {
-            if self.tlases.records().given_up() {
-                break;
-            }
             let n = self.view.tlases[t as usize].instance_count;
             if n == 0 {
                 continue;
@@ -130,66 +123,53 @@ impl StreamingRenderer<'_> {
                 self.frame.stats_mut().tlas_records_host_fallbacks += 1;
             }
         }
-        // Giving up (for a later TLAS's room) drops the earlier ones' records too.
-        for (k, &t) in ids.iter().enumerate() {
-            gpu[k] &= self.tlases.records().has(t);
-        }
         let bytes = self.tlases.records().bytes();
         self.frame.stats_mut().tlas_records_kept_bytes = bytes;
         self.totals.tlas_records_kept_bytes = self.totals.tlas_records_kept_bytes.max(bytes);
         Ok(gpu)
     }
 
-    /// A refused allocation found nothing else to evict: the kept records go, for the rest of
-    /// the run (rebuilds then write from the host). Returns whether any bytes were released.
+    /// A refused allocation found nothing else to evict: the kept records go (rebuilds write
+    /// from the host until room is free for them again). Returns whether any bytes were
+    /// released.
     pub(super) fn give_up_kept_records(&mut self) -> bool {
-        if self.tlases.records().given_up() {
-            return false;
-        }
         let bytes = self.tlases.records().bytes();
         let any = self.tlases.records_mut().give_up(&mut self.heap);
         if any {
-            tracing::info!(
+            tracing::debug!(
                 kept_bytes = bytes,
                 "the budget refused an allocation with nothing else to evict: kept TLAS records \
-                 released, rebuilds write their records from the host from now on"
+                 released"
             );
-            self.totals.tlas_records_given_up = true;
+            self.totals.tlas_records_released += 1;
         }
         any
     }
 
-    /// Makes TLAS `t`'s kept records (and the tables and pipeline, the first time). Returns
-    /// false where the budget refuses them.
+    /// Makes TLAS `t`'s kept records (and the tables and pipeline, the first time) in free
+    /// budget: they never evict a structure. Returns false where the budget refuses them.
     fn make_kept(&mut self, t: u32) -> Result<bool> {
-        if self.tlases.records().tables.is_none() {
+        if !self.tlases.records().has_tables() {
             match self.make_tables() {
-                Ok(true) => {}
-                Ok(false) | Err(GpuError::Budget(_)) => return Ok(false),
+                Ok(()) => {}
+                Err(GpuError::Budget(_)) => return Ok(false),
                 Err(e) => return Err(e),
             }
         }
         let n = u64::from(self.view.tlases[t as usize].instance_count);
-        let alloc = self.with_eviction(|s| {
-            Ok(s.heap.alloc_buffer(
-                "stream-tlas-kept-records",
-                n * RECORD_BYTES as u64,
-                storage_usage(),
-                AllocKind::InstanceBuffer,
-                MemoryClass::DeviceLocal,
-                16,
-            )?)
-        });
+        let alloc = self.heap.alloc_buffer(
+            "stream-tlas-kept-records",
+            n * RECORD_BYTES as u64,
+            storage_usage(),
+            AllocKind::InstanceBuffer,
+            MemoryClass::DeviceLocal,
+            16,
+        );
         let buf = match alloc {
             Ok(b) => b,
-            Err(GpuError::Budget(_)) => return Ok(false),
-            Err(e) => return Err(e),
+            Err(motu_vk::VkError::Budget(_)) => return Ok(false),
+            Err(e) => return Err(e.into()),
         };
-        if self.tlases.records().given_up() {
-            // Given up while evicting for this very buffer.
-            self.heap.free(buf);
-            return Ok(false);
-        }
         if let Err(e) = self.encode_kept(t, &buf) {
             self.heap.free(buf);
             return Err(e);
@@ -202,9 +182,8 @@ impl StreamingRenderer<'_> {
     }
 
     /// The compaction's pipeline and its tables: the BLAS address table and the chunk table
-    /// (a slot per chunk of every TLAS). Returns false when the kept records were given up
-    /// while evicting for them.
-    fn make_tables(&mut self) -> Result<bool> {
+    /// (a slot per chunk of every TLAS).
+    fn make_tables(&mut self) -> Result<()> {
         if self.tlases.records().pipeline.is_none() {
             let pipeline = ComputePipeline::new(
                 &self.ctx,
@@ -225,38 +204,29 @@ impl StreamingRenderer<'_> {
             chunks += rec.instance_count.div_ceil(TLAS_COMPACT_CHUNK);
         }
         let nb = self.view.blases.len().max(1) as u64;
-        let blas_addresses = self.with_eviction(|s| {
-            Ok(s.heap.alloc_buffer(
-                "stream-tlas-blas-addresses",
-                nb * 8,
-                storage_usage(),
-                AllocKind::NodeTable,
-                MemoryClass::DeviceLocal,
-                16,
-            )?)
-        })?;
-        let chunk_table = self.with_eviction(|s| {
-            Ok(s.heap.alloc_buffer(
-                "stream-tlas-chunk-firsts",
-                u64::from(chunks.max(1)) * 4,
-                storage_usage(),
-                AllocKind::NodeTable,
-                MemoryClass::DeviceLocal,
-                16,
-            )?)
-        });
+        let blas_addresses = self.heap.alloc_buffer(
+            "stream-tlas-blas-addresses",
+            nb * 8,
+            storage_usage(),
+            AllocKind::NodeTable,
+            MemoryClass::DeviceLocal,
+            16,
+        )?;
+        let chunk_table = self.heap.alloc_buffer(
+            "stream-tlas-chunk-firsts",
+            u64::from(chunks.max(1)) * 4,
+            storage_usage(),
+            AllocKind::NodeTable,
+            MemoryClass::DeviceLocal,
+            16,
+        );
         let chunk_table = match chunk_table {
             Ok(b) => b,
             Err(e) => {
                 self.heap.free(blas_addresses);
-                return Err(e);
+                return Err(e.into());
             }
         };
-        if self.tlases.records().given_up() {
-            self.heap.free(blas_addresses);
-            self.heap.free(chunk_table);
-            return Ok(false);
-        }
         let kept = self.tlases.records_mut();
         kept.bytes += blas_addresses.size_bytes() + chunk_table.size_bytes();
         kept.tables = Some(CompactTables {
@@ -264,7 +234,7 @@ impl StreamingRenderer<'_> {
             chunk_firsts: chunk_table,
             chunk_base,
         });
-        Ok(true)
+        Ok(())
     }
 
     /// Encodes every instance of TLAS `t` into `buf` through the ring, a region at a time.

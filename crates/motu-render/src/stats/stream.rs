@@ -190,7 +190,7 @@ mirror! {
         tlas_mode: &'static str,
         tlas_records_mode: &'static str,
         tlas_records_kept_bytes: u64,
-        tlas_records_given_up: bool,
+        tlas_records_released: u32,
         persistent_tlases: u32,
         persistent_tlas_bytes: u64,
         persistent_dropped: bool,
