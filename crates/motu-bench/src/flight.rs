@@ -253,11 +253,6 @@ fn run_streaming(
             "tlas_ms": st.tlas_ms,
             "tlas_builds": st.tlas_builds,
             "tlas_updates": st.tlas_updates,
-            // Records the host wrote for rebuilds, those the GPU compacted from the kept
-            // ones (`--stream-tlas-records gpu`), and that pass's milliseconds.
-            "tlas_instances_written": st.tlas_instances_written,
-            "tlas_records_compacted": st.tlas_records_compacted,
-            "tlas_compact_ms": st.tlas_compact_ms,
             // Rebuilds run in groups (a split root piece by piece): their transient is one
             // group's.
             "tlas_rebuild_groups": st.tlas_rebuild_groups,
