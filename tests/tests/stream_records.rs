@@ -2,7 +2,7 @@
 //! instance records on the GPU and writes a rebuild's records with a compute pass; `host`
 //! encodes them on the host per rebuild. Along the default island's camera path, its root
 //! split into pieces and rebuilt (not updated), both give the full build's AOV at several
-//! budgets, and with `gpu` the host writes only the proxy and marks records of each rebuild
+//! budgets (the same path with room for everything is the reference), and with `gpu` the host writes only the proxy and marks records of each rebuild
 //! after the first frame (where the kept records are encoded once).
 
 use motu_tests::{
@@ -62,13 +62,14 @@ fn gpu_kept_records_give_the_full_builds_aov_and_leave_the_host_only_the_tails()
     let d = dir.path();
     let pkg = gen_island(d, None);
     let (peak, floor) = report_peak_and_floor(&pkg, W, H);
-    // The full build along the same path.
-    let full = d.join("full.aov");
-    render(
+    // The reference frames: the same path with room for everything (the streamed image of
+    // the full build, as the other stream tests' `ShotFixture`), written from the host.
+    let (_, full) = path(
         &pkg,
-        "pipeline",
-        &full,
-        &["--width", W, "--height", H, "--frames", FRAMES],
+        d,
+        "everything",
+        peak * 2,
+        &["--stream-tlas-records", "host"],
     );
     let same = |aov: &Path| motu_ok(&["compare", s(&full), s(aov), "--max-mismatch", "0"]);
 

@@ -47,6 +47,9 @@ pub(super) struct KeptRecords {
     pipeline: Option<ComputePipeline>,
     /// Bytes of the kept records and the tables.
     bytes: u64,
+    /// The frame in which they were last released: none is made again in that frame (a
+    /// refused build retried would otherwise make and release them round after round).
+    released_in_frame: Option<u64>,
 }
 
 impl KeptRecords {
@@ -113,12 +116,14 @@ impl StreamingRenderer<'_> {
         if self.opts.tlas_records != TlasRecordsMode::Gpu {
             return Ok(gpu);
         }
+        let frame = self.frame.stats().frame;
+        let may_make = self.tlases.records().released_in_frame != Some(frame);
         for (k, &t) in ids.iter().enumerate() {
             let n = self.view.tlases[t as usize].instance_count;
             if n == 0 {
                 continue;
             }
-            gpu[k] = self.tlases.records().has(t) || self.make_kept(t)?;
+            gpu[k] = self.tlases.records().has(t) || (may_make && self.make_kept(t)?);
             if !gpu[k] {
                 self.frame.stats_mut().tlas_records_host_fallbacks += 1;
             }
@@ -142,6 +147,8 @@ impl StreamingRenderer<'_> {
                  released"
             );
             self.totals.tlas_records_released += 1;
+            let frame = self.frame.stats().frame;
+            self.tlases.records_mut().released_in_frame = Some(frame);
         }
         any
     }
