@@ -976,15 +976,20 @@ fn tlas_records_written_through_a_small_ring_in_windows_match_the_full_build() {
             "{st:?}"
         );
         if mode == crate::TlasRecordsMode::Gpu {
-            // Every resident record from the GPU; the host wrote each rebuild's tail (a proxy
-            // and a marks record at most) and the kept records once.
-            assert!(st.tlas_records_compacted > 0, "{st:?}");
-            assert_eq!(st.tlas_records_host_fallbacks, 0, "{st:?}");
+            // Each rebuild compacted on the GPU (the host writing its tail: a proxy and a
+            // marks record at most) or, at this eighth, written from the host where a refusal
+            // with nothing else to evict released the kept records this frame.
             assert!(
-                st.tlas_instances_written <= 2 * u64::from(st.tlas_builds),
+                st.tlas_records_compacted > 0 || st.tlas_records_host_fallbacks > 0,
                 "{st:?}"
             );
-            assert!(st.tlas_records_kept_bytes >= 2_500 * 64, "{st:?}");
+            if st.tlas_records_host_fallbacks == 0 {
+                assert!(
+                    st.tlas_instances_written <= 2 * u64::from(st.tlas_builds),
+                    "{st:?}"
+                );
+                assert!(st.tlas_records_kept_bytes >= 2_500 * 64, "{st:?}");
+            }
         } else {
             assert_eq!(st.tlas_records_compacted, 0, "{st:?}");
         }
