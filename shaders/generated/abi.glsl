@@ -27,6 +27,9 @@
 #define AOV_MISS 4294967295u
 #define AOV_LOD_FALLBACK 254u
 #define AOV_RECORD_BYTES 16u
+#define TLAS_COMPACT_GROUP 256
+#define TLAS_COMPACT_PER_THREAD 4
+#define TLAS_COMPACT_CHUNK 1024
 
 // 48 bytes
 struct TlasRecord {
@@ -166,6 +169,16 @@ struct LodParams {
     float shadow_bias;
     uint stochastic;
     int forced_lod;
+};
+
+// 48 bytes
+struct TlasCompactPush {
+    uvec2 kept;
+    uvec2 dst;
+    uvec2 chunk_first;
+    uvec2 blas_addresses;
+    uint instance_count;
+    uint _pad[3];
 };
 
 #endif

@@ -6,6 +6,9 @@ use crate::aov::AovRecord;
 use crate::camera::CameraParams;
 use crate::lod::LodParams;
 use crate::lod_instance::LodSlotRecord;
+use crate::tlas_compact::{
+    TlasCompactPush, TLAS_COMPACT_CHUNK, TLAS_COMPACT_GROUP, TLAS_COMPACT_PER_THREAD,
+};
 use crate::*;
 use std::mem::{offset_of, size_of};
 
@@ -213,6 +216,17 @@ pub fn structs() -> Vec<StructDef> {
                 (Int, forced_lod)
             ]
         ),
+        def!(
+            TlasCompactPush,
+            [
+                (U64, kept),
+                (U64, dst),
+                (U64, chunk_first),
+                (U64, blas_addresses),
+                (Uint, instance_count),
+                (UintArray(3), _pad)
+            ]
+        ),
     ]
 }
 
@@ -246,6 +260,13 @@ pub fn constants() -> Vec<(&'static str, String)> {
         ("AOV_MISS", format!("{}u", aov::MISS)),
         ("AOV_LOD_FALLBACK", format!("{}u", aov::LOD_FALLBACK)),
         ("AOV_RECORD_BYTES", format!("{}u", size_of::<AovRecord>())),
+        // Plain ints: the workgroup size is a layout qualifier.
+        ("TLAS_COMPACT_GROUP", format!("{TLAS_COMPACT_GROUP}")),
+        (
+            "TLAS_COMPACT_PER_THREAD",
+            format!("{TLAS_COMPACT_PER_THREAD}"),
+        ),
+        ("TLAS_COMPACT_CHUNK", format!("{TLAS_COMPACT_CHUNK}")),
     ]
 }
 

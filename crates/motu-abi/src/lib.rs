@@ -51,6 +51,7 @@ pub mod ptex;
 mod records;
 pub mod sampling;
 pub mod shade;
+pub mod tlas_compact;
 
 pub use records::*;
 

@@ -326,6 +326,8 @@ fn run_streaming(
         "mean_build_ms": mean("build_ms", 0),
         "mean_tlas_ms": mean("tlas_ms", 0),
         "tlas_mode": totals.tlas_mode,
+        "tlas_records_mode": totals.tlas_records_mode,
+        "tlas_records_kept_bytes": totals.tlas_records_kept_bytes,
         "mesh_memory": totals.mesh_memory,
         "host_mesh_peak_bytes": totals.host_mesh_peak_bytes,
         "mean_trace_ms": mean("trace_ms", 0),

@@ -154,5 +154,5 @@ pub use stream::{
     streaming_floor_planned, ClustersSource, FloorSizes, FrameStreamStats, FullBuildFit,
     HostCacheMode, MeshMemory, PassMarks, PassStats, PersistentEstimate, ProbeLater,
     StreamFallback, StreamFloor, StreamOptions, StreamPlan, StreamTotals, StreamingRenderer,
-    StructureCache, TlasUpdate, AUTO_PASS_FRAMES, AUTO_PASS_ROWS, PI_EMPTY_BLAS,
+    StructureCache, TlasRecordsMode, TlasUpdate, AUTO_PASS_FRAMES, AUTO_PASS_ROWS, PI_EMPTY_BLAS,
 };

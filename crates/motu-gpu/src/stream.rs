@@ -134,6 +134,7 @@ mod skeleton;
 mod stats;
 mod tables;
 mod tlas_build;
+mod tlas_compact;
 mod tlas_records;
 mod tlases;
 mod topology;
@@ -147,8 +148,8 @@ pub use floor::{
     FloorSizes, StreamFloor,
 };
 pub use options::{
-    MeshMemory, PassMarks, ProbeLater, StreamFallback, StreamOptions, AUTO_PASS_FRAMES,
-    AUTO_PASS_ROWS,
+    MeshMemory, PassMarks, ProbeLater, StreamFallback, StreamOptions, TlasRecordsMode,
+    AUTO_PASS_FRAMES, AUTO_PASS_ROWS,
 };
 pub use stats::{FrameStreamStats, PassStats, StreamTotals};
 pub use topology::{ClustersSource, StreamPlan};
@@ -292,6 +293,7 @@ impl<'a> StreamingRenderer<'a> {
             meshes_budgeted: setup.meshes_budgeted,
             host_memory_counted: setup.host_counts,
             derived_ms,
+            tlas_records_mode: opts.tlas_records.name(),
             ..Default::default()
         };
         let mut r = StreamingRenderer {

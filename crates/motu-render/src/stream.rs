@@ -41,6 +41,8 @@ pub struct StreamBounds {
     pub mesh_memory: motu_gpu::MeshMemory,
     /// `--stream-host-cache`: how evicted BLASes are kept in host memory.
     pub host_cache_mode: motu_gpu::HostCacheMode,
+    /// `--stream-tlas-records`: where rebuilt TLASes' instance records come from.
+    pub tlas_records: motu_gpu::TlasRecordsMode,
 }
 
 impl StreamBounds {
@@ -60,6 +62,7 @@ impl StreamBounds {
             defrag: self.defrag,
             mesh_memory: self.mesh_memory,
             host_cache_mode: self.host_cache_mode,
+            tlas_records: self.tlas_records,
             ..d
         }
     }
@@ -94,6 +97,7 @@ impl StreamBounds {
             || self.defrag
             || self.mesh_memory != motu_gpu::MeshMemory::Auto
             || self.host_cache_mode != motu_gpu::HostCacheMode::Auto
+            || self.tlas_records != motu_gpu::TlasRecordsMode::Gpu
     }
 }
 

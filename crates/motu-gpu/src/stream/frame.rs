@@ -535,7 +535,7 @@ impl<'a> StreamingRenderer<'a> {
                     .iter()
                     .flatten()
                     .map(|a| a.size_bytes)
-                    .chain(self.tlases.resident().map(|t| t.accel.size_bytes))
+                    .chain(self.tlases.resident().map(|t| t.accel().size_bytes))
                     .sum(),
                 alloc: report,
                 passes: self.frame.stats.passes,

@@ -94,6 +94,36 @@ pub struct StreamOptions {
     /// How evicted BLASes are kept in host memory when a structure cache is attached
     /// (`--stream-host-cache`; see [`HostCacheMode`](super::HostCacheMode)).
     pub host_cache_mode: super::HostCacheMode,
+    /// Where a streamed TLAS rebuild's instance records come from (`--stream-tlas-records`;
+    /// see [`TlasRecordsMode`]).
+    pub tlas_records: TlasRecordsMode,
+}
+
+/// Where a rebuilt streamed TLAS's instance records come from ([`StreamOptions::tlas_records`],
+/// `--stream-tlas-records`; `tlas_compact.rs`). A split root's pieces are rebuilt several times
+/// a frame as the probe's prefetches bring BLASes in (island 0.3 at a quarter on an H100: 43
+/// rebuilds writing 29.8M records, ~1.1 s of a 2.5 s frame), and the host path's cost is per
+/// record: encoding into the staging ring, the copy, the build.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TlasRecordsMode {
+    /// Every instance's record is kept on the GPU (encoded once, the BLAS id where the address
+    /// goes) and a compute pass writes a rebuild's records from it with the resident BLASes'
+    /// addresses; the host writes only the proxy and marks records. A piece whose kept
+    /// records do not fit the budget is written from the host (`tlas_records_host` per frame).
+    #[default]
+    Gpu,
+    /// The host encodes every resident instance's record into the staging ring per rebuild.
+    Host,
+}
+
+impl TlasRecordsMode {
+    /// The name `--stats` reports (`stream.totals.tlas_records_mode`).
+    pub fn name(self) -> &'static str {
+        match self {
+            TlasRecordsMode::Gpu => "gpu",
+            TlasRecordsMode::Host => "host",
+        }
+    }
 }
 
 /// Where the streaming renderer keeps its meshes ([`StreamOptions::mesh_memory`]). After a
@@ -236,6 +266,7 @@ impl Default for StreamOptions {
             defrag: false,
             mesh_memory: MeshMemory::Auto,
             host_cache_mode: super::HostCacheMode::Auto,
+            tlas_records: TlasRecordsMode::Gpu,
         }
     }
 }

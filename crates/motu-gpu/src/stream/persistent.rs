@@ -471,7 +471,8 @@ impl StreamingRenderer<'_> {
             )));
         };
         let r = (|| -> Result<u64> {
-            let p = g.persistent.as_mut().ok_or_else(|| {
+            let (accel, p) = g.update_parts();
+            let p = p.ok_or_else(|| {
                 GpuError::InvalidRequest(format!("streaming: TLAS {t} is not persistent"))
             })?;
             let want: Vec<u64> = (0..addrs.len())
@@ -512,7 +513,7 @@ impl StreamingRenderer<'_> {
                     n + 2
                 },
             )?;
-            self.record_tlas_build(&g.accel, &p.records, &p.scratch, p.record_count, true)?;
+            self.record_tlas_build(accel, &p.records, &p.scratch, p.record_count, true)?;
             p.written = want;
             Ok(rewritten)
         })();

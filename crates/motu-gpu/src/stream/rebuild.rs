@@ -153,7 +153,7 @@ impl<'a> StreamingRenderer<'a> {
         let need = count * RECORD_BYTES as u64
             + s.acceleration_structure_size_bytes
             + s.build_scratch_size_bytes;
-        let old = self.tlases.get(t).map_or(0, |g| g.accel.size_bytes);
+        let old = self.tlases.get(t).map_or(0, |g| g.accel().size_bytes);
         Ok((need + need / 4).saturating_sub(old))
     }
 

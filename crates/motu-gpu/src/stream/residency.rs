@@ -415,6 +415,10 @@ impl<'a> StreamingRenderer<'a> {
                     if self.evict_some(step, EvictWhy::Refused)? {
                         continue;
                     }
+                    // The TLAS records kept for the GPU path (`tlas_compact.rs`) go last.
+                    if self.give_up_kept_records() {
+                        continue;
+                    }
                     return Err(GpuError::Budget(msg));
                 }
                 r => return r,

@@ -368,9 +368,7 @@ impl<'a> StreamingRenderer<'a> {
         self.totals.persistent_tlas_bytes = self
             .tlases
             .resident()
-            .filter_map(|g| {
-                Some(g.accel.size_bytes + g.persistent.as_ref()?.size_bytes(host_counts))
-            })
+            .filter_map(|g| Some(g.accel().size_bytes + g.persistent()?.size_bytes(host_counts)))
             .sum::<u64>()
             + self.tlases.placeholders().bytes;
         Ok(())
@@ -384,7 +382,7 @@ impl<'a> StreamingRenderer<'a> {
         use bytemuck::cast_slice;
         let ctx = self.ctx.clone();
         let addrs: Vec<u64> = (0..self.view.tlases.len() as u32)
-            .map(|t| self.tlases.get(t).map_or(0, |t| t.accel.address))
+            .map(|t| self.tlases.get(t).map_or(0, |t| t.accel().address))
             .collect();
         let mut mesh_geo = vec![0u64; 2 * self.res.meshes().len()];
         for (m, g) in self.res.meshes().iter().enumerate() {

@@ -167,6 +167,21 @@ pub struct FrameStreamStats {
     /// records written for them (for persistent TLASes: the records patched).
     pub tlas_builds: u32,
     pub tlas_instances_written: u64,
+    /// Of the rebuilds' records: those the compaction pass wrote on the GPU from the kept
+    /// records (`--stream-tlas-records gpu`; `tlas_instances_written` is then the host's:
+    /// the proxy and marks records, and the records of TLASes written from the host), and the
+    /// milliseconds of those passes (tables' upload, dispatch and wait).
+    pub tlas_records_compacted: u64,
+    pub tlas_compact_ms: f64,
+    /// Rebuilds of a TLAS whose kept records did not fit the budget, so the host wrote its
+    /// records (`--stream-tlas-records gpu`).
+    pub tlas_records_host_fallbacks: u32,
+    /// Records the host encoded into kept records (once per TLAS, at its first rebuild with
+    /// `gpu`; not in `tlas_instances_written`).
+    pub tlas_records_kept_written: u64,
+    /// Bytes of the kept records and their tables after the frame's last rebuild (0 in a
+    /// frame without rebuilds); part of the skeleton.
+    pub tlas_records_kept_bytes: u64,
     /// Of `tlas_builds`: updates of persistent TLASes (a refit over every instance, no new
     /// structure; see `StreamOptions::tlas_update`).
     pub tlas_updates: u32,
@@ -348,6 +363,12 @@ pub struct StreamTotals {
     /// the persistent ones, and the VRAM they and their placeholders keep (structures at
     /// full residency, update scratch, and records where host memory counts).
     pub tlas_mode: &'static str,
+    /// Where rebuilt TLASes' records came from (`gpu` or `host`, `--stream-tlas-records`), the
+    /// most bytes kept for the GPU path, and how often a refused allocation with nothing else
+    /// to evict released them (rebuilds then wrote from the host until room was free again).
+    pub tlas_records_mode: &'static str,
+    pub tlas_records_kept_bytes: u64,
+    pub tlas_records_released: u32,
     pub persistent_tlases: u32,
     pub persistent_tlas_bytes: u64,
     /// A BLAS did not fit next to the persistent TLASes, so they were dropped and TLASes

@@ -139,6 +139,9 @@ struct TlasBuild<'r, 'a> {
     /// Resident BLAS addresses (0: not resident): the clusters' residency, read by the
     /// parallel record encoder.
     addrs: Vec<u64>,
+    /// Per TLAS of the rebuild (not persistent, in the order of its ids): its records are
+    /// compacted on the GPU from the kept ones (`tlas_compact.rs`), else written by the host.
+    gpu: Vec<bool>,
     times: PhaseTimes,
 }
 
@@ -153,6 +156,7 @@ impl<'a> StreamingRenderer<'a> {
             r: self,
             ctx,
             addrs: Vec::new(),
+            gpu: Vec::new(),
             times: PhaseTimes::new(),
         };
         b.release_old(ids);
@@ -160,6 +164,9 @@ impl<'a> StreamingRenderer<'a> {
         let (persistent_ids, rebuild_ids): (Vec<u32>, Vec<u32>) =
             ids.iter().partition(|&&t| b.r.tlases.in_persistent_mode(t));
         if !rebuild_ids.is_empty() {
+            // Kept records are made first (they may evict for their room, so before the
+            // residency is read); the probe then asks for the rebuild's transient.
+            b.gpu = b.r.prepare_kept_records(&rebuild_ids)?;
             b.r.probe_tlas_room(&rebuild_ids)?;
         }
         b.times.probe_ms = b.times.lap();
@@ -363,15 +370,8 @@ impl TlasBuild<'_, '_> {
                 r.build_persistent(t, addrs, tail)
                     .map(|(accel, p)| {
                         let n = p.record_count();
-                        r.tlases.put_persistent(
-                            t,
-                            TlasGpu {
-                                accel,
-                                proxy: None,
-                                marks: None,
-                                persistent: Some(p),
-                            },
-                        );
+                        r.tlases
+                            .put_persistent(t, TlasGpu::persistent_over(accel, p));
                         r.frame.stats_mut().tlas_builds += 1;
                         r.frame.stats_mut().tlas_instances_written += u64::from(n);
                     })
@@ -408,11 +408,12 @@ impl TlasBuild<'_, '_> {
         ctx: &Context,
         addrs: &'s [u64],
         ids: &[u32],
+        gpu: &[bool],
         proxies: &Proxies,
     ) -> Result<RebuildRecords<'s>> {
         let view: motu_abi::HierarchyView<'s> = r.view;
         let ring_region = r.up_mut()?.region_bytes();
-        let records = TlasRecords::count(view, addrs, ids, ring_region, |t| {
+        let records = TlasRecords::count(view, addrs, ids, gpu, ring_region, |t| {
             // The proxy's and the marks' records follow the TLAS's own (see
             // `StreamingRenderer::new`); only probe passes' rays see the marks.
             proxies.tail_records(t, view.tlases[t as usize].instance_count)
@@ -434,7 +435,8 @@ impl TlasBuild<'_, '_> {
         }
         let st = r.frame.stats_mut();
         st.tlas_builds += ids.len() as u32;
-        st.tlas_instances_written += total_bytes / RECORD_BYTES as u64;
+        st.tlas_instances_written += records.host_written();
+        st.tlas_records_compacted += records.compacted();
         let transient = sizes
             .iter()
             .fold(total_bytes, |t, s| t + s.result_bytes + s.scratch_bytes);
@@ -463,12 +465,15 @@ impl TlasBuild<'_, '_> {
             sizes,
             offsets,
             total_bytes,
-        } = Self::count_records(r, &ctx, &self.addrs, ids, proxies)?;
+        } = Self::count_records(r, &ctx, &self.addrs, ids, &self.gpu, proxies)?;
         times.encode_ms = times.lap();
         let inst_buf = r.heap.alloc_buffer(
             "stream-tlas-instances",
             total_bytes.max(64),
-            BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT | BufferUsage::TRANSFER_DST,
+            BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT
+                | BufferUsage::TRANSFER_DST
+                | BufferUsage::STORAGE
+                | BufferUsage::DEVICE_ADDRESS,
             AllocKind::InstanceBuffer,
             MemoryClass::DeviceLocal,
             16,
@@ -481,7 +486,11 @@ impl TlasBuild<'_, '_> {
                 return Err(e);
             }
             up.flush(&ctx)?;
-            Ok(inst_buf.device_address()?.0)
+            let inst_addr = inst_buf.device_address()?.0;
+            // The GPU TLASes' own records, between the host's.
+            let ms = r.compact_records(&records.gpu_jobs(&offsets), &self.addrs, inst_addr)?;
+            r.frame.stats_mut().tlas_compact_ms += ms;
+            Ok(inst_addr)
         })();
         // Freed as soon as the TLASes are built (`inputs_done`), before their compacted copies
         // are allocated: the records are read by the build only.
@@ -563,12 +572,7 @@ impl TlasBuild<'_, '_> {
         for (k, accel) in built {
             let t = rebuilt[k];
             let (proxy, marks) = (proxies.take(t, false), proxies.take(t, true));
-            let g = TlasGpu {
-                accel,
-                proxy,
-                marks,
-                persistent: None,
-            };
+            let g = TlasGpu::rebuilt_with(accel, proxy, marks);
             r.tlases.rebuilt(t, g, &mut r.heap);
         }
         for t in updated {

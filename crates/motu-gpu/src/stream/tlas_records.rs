@@ -11,9 +11,11 @@ use motu_abi::{HierarchyView, InstanceRecord, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
 use motu_vk::{Context, HeapBuffer};
 use rayon::prelude::*;
 
+use super::tlas_compact::CompactJob;
 use super::TRIANGLE_MASK;
 use crate::error::{GpuError, Result};
 use crate::scene::{encode_instance, set_instance_mask, Uploader};
+use motu_abi::tlas_compact::TLAS_COMPACT_CHUNK;
 
 /// Bytes of one encoded instance record (`VkAccelerationStructureInstanceKHR`).
 pub(super) const RECORD_BYTES: usize = 64;
@@ -23,7 +25,9 @@ const MAX_CHUNK_INSTANCES: usize = 1 << 14;
 
 /// What a rebuild of some TLASes writes: per TLAS, the resident records of each chunk of its
 /// instance range, then its tail (proxy and marks records, or one inactive record when the
-/// TLAS would otherwise be empty).
+/// TLAS would otherwise be empty). The resident records of a TLAS marked `gpu` are written by
+/// the compaction pass from its kept records (`tlas_compact.rs`, chunks of
+/// [`TLAS_COMPACT_CHUNK`]); the host writes only its tail.
 pub(super) struct TlasRecords<'r> {
     view: HierarchyView<'r>,
     /// BLAS device addresses, 0 where not resident.
@@ -36,6 +40,9 @@ pub(super) struct TlasRecords<'r> {
 /// One TLAS's records in a rebuild.
 struct TlasRecordCounts {
     tlas: u32,
+    /// Its resident records are compacted on the GPU (chunks of [`TLAS_COMPACT_CHUNK`]),
+    /// else encoded by the host (chunks of `TlasRecords::chunk_instances`).
+    gpu: bool,
     /// Resident records per chunk of its instance range.
     per_chunk: Vec<u32>,
     /// The records after its own (proxy and marks, or one inactive record).
@@ -43,12 +50,14 @@ struct TlasRecordCounts {
 }
 
 impl<'r> TlasRecords<'r> {
-    /// Counts the resident records of TLASes `ids` (in parallel); `tail(t)` gives the
-    /// records that follow TLAS `t`'s own. `ring_region_bytes` bounds a chunk's bytes.
+    /// Counts the resident records of TLASes `ids` (in parallel); `gpu[k]`: those of
+    /// `ids[k]` are compacted on the GPU; `tail(t)` gives the records that follow TLAS `t`'s
+    /// own. `ring_region_bytes` bounds a host chunk's bytes.
     pub(super) fn count(
         view: HierarchyView<'r>,
         addrs: &'r [u64],
         ids: &[u32],
+        gpu: &[bool],
         ring_region_bytes: u64,
         mut tail: impl FnMut(u32) -> Vec<[u8; RECORD_BYTES]>,
     ) -> Self {
@@ -56,9 +65,16 @@ impl<'r> TlasRecords<'r> {
             ((ring_region_bytes / RECORD_BYTES as u64) as usize).clamp(1, MAX_CHUNK_INSTANCES);
         let tlases = ids
             .iter()
-            .map(|&t| {
+            .enumerate()
+            .map(|(k, &t)| {
+                let gpu = gpu.get(k).copied().unwrap_or(false);
+                let chunk = if gpu {
+                    TLAS_COMPACT_CHUNK as usize
+                } else {
+                    chunk_instances
+                };
                 let counts: Vec<u32> = instances_of(&view, t)
-                    .par_chunks(chunk_instances)
+                    .par_chunks(chunk)
                     .map(|c| c.iter().filter(|i| addrs[i.blas as usize] != 0).count() as u32)
                     .collect();
                 let mut tail = tail(t);
@@ -68,6 +84,7 @@ impl<'r> TlasRecords<'r> {
                 }
                 TlasRecordCounts {
                     tlas: t,
+                    gpu,
                     per_chunk: counts,
                     tail,
                 }
@@ -89,9 +106,50 @@ impl<'r> TlasRecords<'r> {
             .collect()
     }
 
-    /// Encodes every TLAS's records into `dst` at `offsets` (bytes, in the order of `ids`)
-    /// through the ring, a window of whole chunks at a time, the chunks of a window in
-    /// parallel. Leaves the copies queued (the caller flushes).
+    /// Records the host writes (a host TLAS's all, a GPU one's tail).
+    pub(super) fn host_written(&self) -> u64 {
+        self.tlases
+            .iter()
+            .map(|r| {
+                let own = if r.gpu {
+                    0
+                } else {
+                    r.per_chunk.iter().map(|&n| u64::from(n)).sum()
+                };
+                own + r.tail.len() as u64
+            })
+            .sum()
+    }
+
+    /// Records the compaction writes (the GPU TLASes' resident ones).
+    pub(super) fn compacted(&self) -> u64 {
+        self.tlases
+            .iter()
+            .filter(|r| r.gpu)
+            .flat_map(|r| &r.per_chunk)
+            .map(|&n| u64::from(n))
+            .sum()
+    }
+
+    /// The compaction's jobs: each GPU TLAS with resident records, placed at `offsets`
+    /// (bytes, in the order of `ids`).
+    pub(super) fn gpu_jobs(&self, offsets: &[u64]) -> Vec<CompactJob<'_>> {
+        self.tlases
+            .iter()
+            .zip(offsets)
+            .filter(|(r, _)| r.gpu && r.per_chunk.iter().any(|&n| n > 0))
+            .map(|(r, &at)| CompactJob {
+                tlas: r.tlas,
+                first_record: (at / RECORD_BYTES as u64) as u32,
+                per_chunk: &r.per_chunk,
+            })
+            .collect()
+    }
+
+    /// Encodes every host TLAS's records into `dst` at `offsets` (bytes, in the order of
+    /// `ids`) through the ring, a window of whole chunks at a time, the chunks of a window in
+    /// parallel, and every TLAS's tail after its own records (a GPU TLAS's own are the
+    /// compaction's). Leaves the copies queued (the caller flushes).
     pub(super) fn upload(
         &self,
         ctx: &Context,
@@ -105,6 +163,10 @@ impl<'r> TlasRecords<'r> {
             let range = instances_of(&self.view, r.tlas);
             let mut at = base;
             let mut c = 0;
+            if r.gpu {
+                at += counts.iter().map(|&n| u64::from(n)).sum::<u64>() * RECORD_BYTES as u64;
+                c = counts.len();
+            }
             while c < counts.len() {
                 // Whole chunks up to the ring's region.
                 let first = c;
@@ -189,6 +251,20 @@ pub(super) fn instance_record(
     if !aabbs {
         set_instance_mask(&mut enc, TRIANGLE_MASK);
     }
+    enc
+}
+
+/// The record of `inst` (index `index` in its TLAS) as kept on the GPU (`tlas_compact.rs`):
+/// [`instance_record`]'s with the BLAS id where the address goes (the compaction writes the
+/// address, or leaves the instance out where its BLAS is not resident).
+pub(super) fn kept_record(
+    view: &HierarchyView<'_>,
+    inst: &InstanceRecord,
+    index: u32,
+) -> [u8; RECORD_BYTES] {
+    // Any non-zero address: the mask is an active instance's.
+    let mut enc = instance_record(view, inst, index, 1);
+    enc[56..64].copy_from_slice(&u64::from(inst.blas).to_le_bytes());
     enc
 }
 

@@ -13,6 +13,7 @@ use std::collections::BTreeSet;
 use motu_vk::GpuHeap;
 
 use super::persistent::{Persistent, Placeholders};
+use super::tlas_compact::KeptRecords;
 use crate::scene::AccelStruct;
 
 /// The TLASes of a [`StreamingRenderer`](super::StreamingRenderer) (see the module docs).
@@ -27,6 +28,8 @@ pub(super) struct Tlases {
     persistent_mode: Vec<bool>,
     /// Resident TLASes whose instance set changed since their build.
     dirty: BTreeSet<u32>,
+    /// The rebuilt TLASes' instance records kept on the GPU (`tlas_compact.rs`).
+    records: KeptRecords,
 }
 
 impl Tlases {
@@ -37,7 +40,17 @@ impl Tlases {
             placeholders: Default::default(),
             persistent_mode: vec![false; count],
             dirty: BTreeSet::new(),
+            records: KeptRecords::new(count),
         }
+    }
+
+    /// The instance records kept on the GPU for rebuilds (`tlas_compact.rs`).
+    pub fn records(&self) -> &KeptRecords {
+        &self.records
+    }
+
+    pub fn records_mut(&mut self) -> &mut KeptRecords {
+        &mut self.records
     }
 
     /// TLAS `t`, where resident (`None` too for an id out of range).
@@ -172,28 +185,71 @@ impl Tlases {
         self.dirty.remove(&t);
     }
 
-    /// Bytes the TLASes, their proxies, marks and persistent parts, and the placeholders
-    /// hold (`host_counts`: whether host-visible memory counts against the budget).
+    /// Bytes the TLASes, their proxies, marks and persistent parts, the placeholders and the
+    /// kept instance records hold (`host_counts`: whether host-visible memory counts against
+    /// the budget).
     pub fn size_bytes(&self, host_counts: bool) -> u64 {
         self.resident()
             .map(|t| t.size_bytes(host_counts))
             .sum::<u64>()
             + self.placeholders.bytes
+            + self.records.bytes()
     }
 }
 
 /// A resident TLAS with its proxy BLAS (present while it has non-resident triangle instances).
+/// The fields are private: a TLAS is made rebuilt ([`Self::rebuilt_with`]) or persistent
+/// ([`Self::persistent_over`]) and its proxy and marks change only through [`Tlases`].
 pub(super) struct TlasGpu {
-    pub accel: AccelStruct,
-    pub proxy: Option<AccelStruct>,
+    accel: AccelStruct,
+    proxy: Option<AccelStruct>,
     /// The resident clusters' boxes (instance mask [`MARKS_MASK`](super::MARKS_MASK)): only probe passes' rays
     /// meet them, to mark what they pass through (present while some cluster is resident).
-    pub marks: Option<AccelStruct>,
+    marks: Option<AccelStruct>,
     /// Present when the TLAS is persistent (every instance, updated: `persistent.rs`).
-    pub persistent: Option<Persistent>,
+    persistent: Option<Persistent>,
 }
 
 impl TlasGpu {
+    /// A TLAS rebuilt over the resident instances, with its proxy and marks.
+    pub fn rebuilt_with(
+        accel: AccelStruct,
+        proxy: Option<AccelStruct>,
+        marks: Option<AccelStruct>,
+    ) -> TlasGpu {
+        TlasGpu {
+            accel,
+            proxy,
+            marks,
+            persistent: None,
+        }
+    }
+
+    /// A persistent TLAS built over every instance (its proxy and marks come with its update).
+    pub fn persistent_over(accel: AccelStruct, p: Persistent) -> TlasGpu {
+        TlasGpu {
+            accel,
+            proxy: None,
+            marks: None,
+            persistent: Some(p),
+        }
+    }
+
+    /// The structure the shaders trace.
+    pub fn accel(&self) -> &AccelStruct {
+        &self.accel
+    }
+
+    /// Its persistent part, when persistent.
+    pub fn persistent(&self) -> Option<&Persistent> {
+        self.persistent.as_ref()
+    }
+
+    /// The structure and the persistent part, to update the one from the other.
+    pub fn update_parts(&mut self) -> (&AccelStruct, Option<&mut Persistent>) {
+        (&self.accel, self.persistent.as_mut())
+    }
+
     pub fn release(self, heap: &mut GpuHeap) {
         self.accel.release(heap);
         for a in [self.proxy, self.marks].into_iter().flatten() {

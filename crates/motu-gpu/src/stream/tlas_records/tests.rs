@@ -70,7 +70,7 @@ fn chunks_encoded_in_place_equal_the_records_in_order_and_empty_tlases_get_one_i
         ..Default::default()
     };
     let tail = [7u8; RECORD_BYTES];
-    let records = TlasRecords::count(view, &addrs, &[0, 1], 3 * RECORD_BYTES as u64, |t| {
+    let records = TlasRecords::count(view, &addrs, &[0, 1], &[], 3 * RECORD_BYTES as u64, |t| {
         if t == 1 {
             vec![tail]
         } else {
@@ -106,4 +106,77 @@ fn chunks_encoded_in_place_equal_the_records_in_order_and_empty_tlases_get_one_i
     }
     assert_eq!(got, expected);
     assert_eq!(t1_tail, &vec![tail]);
+}
+
+#[test]
+fn the_gpu_compaction_of_kept_records_writes_the_host_paths_records() {
+    // One TLAS over more than two compaction chunks, a third of its BLASes' instances not
+    // resident: the shader's rule (motu_abi::tlas_compact::compact_order, kept records with
+    // the address patched in) gives the host path's bytes, and the counts place the tail.
+    let blases = [
+        BlasRecord {
+            kind: BLAS_TRIANGLES,
+            ..Default::default()
+        },
+        BlasRecord {
+            kind: BLAS_AABBS,
+            ..Default::default()
+        },
+        BlasRecord {
+            kind: BLAS_TRIANGLES,
+            ..Default::default()
+        },
+    ];
+    let addrs = [0x1000u64, 0, 0x3000];
+    let n = 2 * TLAS_COMPACT_CHUNK + 300;
+    let instances: Vec<InstanceRecord> = (0..n)
+        .map(|j| {
+            let mut m = [0f32; 12];
+            m[7] = j as f32;
+            InstanceRecord {
+                tlas_from_blas: m,
+                blas: [0, 2, 1, 0, 2, 1, 1][(j as usize * 7 / 5) % 7],
+                flags: if j % 3 == 0 { FLAG_NEEDS_ANY_HIT } else { 0 },
+                ..Default::default()
+            }
+        })
+        .collect();
+    let tlases = [TlasRecord {
+        instance_base: 0,
+        instance_count: n,
+        ..Default::default()
+    }];
+    let view = HierarchyView {
+        tlases: &tlases,
+        instances: &instances,
+        blases: &blases,
+        ..Default::default()
+    };
+    let kept: Vec<[u8; RECORD_BYTES]> = instances
+        .iter()
+        .enumerate()
+        .map(|(j, inst)| kept_record(&view, inst, j as u32))
+        .collect();
+    let resident: Vec<bool> = instances
+        .iter()
+        .map(|i| addrs[i.blas as usize] != 0)
+        .collect();
+    let mut got = Vec::new();
+    for i in motu_abi::tlas_compact::compact_order(&resident) {
+        let mut rec = kept[i as usize];
+        let blas = u64::from_le_bytes(rec[56..64].try_into().unwrap());
+        rec[56..64].copy_from_slice(&addrs[blas as usize].to_le_bytes());
+        got.extend_from_slice(&rec);
+    }
+    let want = naive(&view, &addrs, 0);
+    assert!(want.len() > RECORD_BYTES * 1000 && want.len() < n as usize * RECORD_BYTES);
+    assert_eq!(got, want);
+    // Counted in compaction chunks; the host writes only the tail.
+    let tail = [9u8; RECORD_BYTES];
+    let records = TlasRecords::count(view, &addrs, &[0], &[true], 1 << 20, |_| vec![tail]);
+    assert_eq!(records.tlases[0].per_chunk.len(), 3);
+    assert_eq!(records.compacted(), (want.len() / RECORD_BYTES) as u64);
+    assert_eq!(records.host_written(), 1);
+    let jobs = records.gpu_jobs(&[128]);
+    assert_eq!((jobs.len(), jobs[0].first_record), (1, 2));
 }

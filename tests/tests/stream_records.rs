@@ -1,0 +1,144 @@
+//! Issue 45 item 5: `--stream-tlas-records gpu` (the default) keeps every rebuilt TLAS's
+//! instance records on the GPU and writes a rebuild's records with a compute pass; `host`
+//! encodes them on the host per rebuild. Along the default island's camera path, its root
+//! split into pieces and rebuilt (not updated), both give the full build's AOV at several
+//! budgets (the same path with room for everything is the reference), and with `gpu` the host writes only the proxy and marks records of each rebuild
+//! after the first frame (where the kept records are encoded once).
+
+use motu_tests::{
+    gen_island, gpu_available, json_u64 as u, motu_ok, render, report_peak_and_floor, s,
+};
+use std::path::{Path, PathBuf};
+
+const W: &str = "48";
+const H: &str = "27";
+const FRAMES: &str = "5";
+
+/// The default camera's path streamed under `budget` bytes (pieces of 3000 instances, rebuilt)
+/// with `extra` flags: the statistics and the AOV.
+fn path(
+    pkg: &Path,
+    dir: &Path,
+    name: &str,
+    budget: u64,
+    extra: &[&str],
+) -> (serde_json::Value, PathBuf) {
+    let aov = dir.join(format!("{name}.aov"));
+    let budget = budget.to_string();
+    let mut args = vec![
+        "--width",
+        W,
+        "--height",
+        H,
+        "--frames",
+        FRAMES,
+        "--stream",
+        "--stream-always",
+        "--stream-split-instances",
+        "3000",
+        "--stream-tlas",
+        "rebuild",
+        "--vram-budget",
+        &budget,
+    ];
+    args.extend(extra);
+    (render(pkg, "pipeline", &aov, &args), aov)
+}
+
+fn frames(st: &serde_json::Value) -> Vec<serde_json::Value> {
+    st["stream"]["frames"].as_array().expect("frames").clone()
+}
+
+fn total(st: &serde_json::Value, k: &str) -> u64 {
+    frames(st).iter().map(|f| u(&f[k])).sum()
+}
+
+#[test]
+fn gpu_kept_records_give_the_full_builds_aov_and_leave_the_host_only_the_tails() {
+    if !gpu_available() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let pkg = gen_island(d, None);
+    let (peak, floor) = report_peak_and_floor(&pkg, W, H);
+    // The reference frames: the same path with room for everything (the streamed image of
+    // the full build, as the other stream tests' `ShotFixture`), written from the host.
+    let (_, full) = path(
+        &pkg,
+        d,
+        "everything",
+        peak * 2,
+        &["--stream-tlas-records", "host"],
+    );
+    let same = |aov: &Path| motu_ok(&["compare", s(&full), s(aov), "--max-mismatch", "0"]);
+
+    let (host, host_aov) = path(
+        &pkg,
+        d,
+        "host",
+        peak / 4,
+        &["--stream-tlas-records", "host"],
+    );
+    same(&host_aov);
+    assert_eq!(host["stream"]["totals"]["tlas_records_mode"], "host");
+    assert_eq!(total(&host, "tlas_records_compacted"), 0);
+    assert_eq!(total(&host, "tlas_records_kept_bytes"), 0);
+
+    // A quarter of the peak, and a budget an eighth of the way from the floor to the peak.
+    for (name, budget) in [("quarter", peak / 4), ("tight", floor + (peak - floor) / 8)] {
+        let (gpu, aov) = path(&pkg, d, name, budget, &[]);
+        same(&aov);
+        let totals = &gpu["stream"]["totals"];
+        assert_eq!(totals["tlas_records_mode"], "gpu", "{name}");
+        assert_eq!(totals["incomplete_frames"], 0, "{name}: {totals}");
+        let fr = frames(&gpu);
+        eprintln!(
+            "{name} ({budget} bytes, floor {floor}, peak {peak}): host wrote {} records \
+             ({} with --stream-tlas-records host at a quarter), the GPU {} in {:.1} ms; \
+             kept {} bytes, host fallbacks {}, released {}; rebuilds {}",
+            total(&gpu, "tlas_instances_written"),
+            total(&host, "tlas_instances_written"),
+            total(&gpu, "tlas_records_compacted"),
+            fr.iter()
+                .map(|f| f["tlas_compact_ms"].as_f64().unwrap_or(0.0))
+                .sum::<f64>(),
+            totals["tlas_records_kept_bytes"],
+            total(&gpu, "tlas_records_host_fallbacks"),
+            totals["tlas_records_released"],
+            total(&gpu, "tlas_builds"),
+        );
+        assert!(
+            total(&gpu, "tlas_records_compacted") > 0,
+            "{name}: {totals}"
+        );
+        assert!(u(&totals["tlas_records_kept_bytes"]) > 0, "{name}");
+        for (i, f) in fr.iter().enumerate().skip(1) {
+            // After the first frame (which encodes the kept records), each rebuild's host
+            // records are its tail: a proxy and a marks record at most.
+            let builds = u(&f["tlas_builds"]);
+            if u(&f["tlas_records_host_fallbacks"]) == 0 {
+                assert!(
+                    u(&f["tlas_instances_written"]) <= 2 * builds,
+                    "{name} frame {i}: {f}"
+                );
+            }
+        }
+        // Where the pieces rebuilt after the first frame, the GPU wrote their records.
+        let later: u64 = fr.iter().skip(1).map(|f| u(&f["tlas_builds"])).sum();
+        let later_compacted: u64 = fr
+            .iter()
+            .skip(1)
+            .map(|f| u(&f["tlas_records_compacted"]))
+            .sum();
+        if later > 0 {
+            assert!(later_compacted > 0, "{name}: {later} later rebuilds");
+        }
+        if name == "quarter" {
+            assert!(
+                total(&gpu, "tlas_instances_written") < total(&host, "tlas_instances_written"),
+                "the host writes fewer records with gpu"
+            );
+        }
+    }
+}
