@@ -135,6 +135,7 @@ mod stats;
 mod tables;
 mod tlas_build;
 mod tlas_compact;
+mod tlas_encode;
 mod tlas_records;
 mod tlases;
 mod topology;

@@ -7,6 +7,11 @@ use super::params::{StreamParams, CARRY_BYTES};
 use crate::error::{GpuError, Result};
 use crate::render::STAT_WORDS;
 
+/// The error of a step that needs the staging ring after the renderer released it.
+pub(super) fn staging_released() -> GpuError {
+    GpuError::InvalidRequest("streaming: staging ring released".into())
+}
+
 /// Buffers of one frame, freed at its end.
 pub(super) struct FrameBuffers {
     pub(super) params: HeapBuffer,

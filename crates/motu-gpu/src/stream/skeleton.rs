@@ -7,6 +7,7 @@ use motu_abi::{HierarchyView, BLAS_AABBS};
 use motu_alloc::{AllocKind, AllocLimits, MemoryClass, MIB};
 use motu_vk::{BufferUsage, Context, GpuHeap, HeapBuffer};
 
+use super::buffers::staging_released;
 use super::persistent::{auto_persistent, persistent_estimate, persistent_records, TlasUpdate};
 use super::proxy_boxes::Box6;
 use super::topology::SkeletonRecords;
@@ -405,10 +406,6 @@ impl<'a> StreamingRenderer<'a> {
         }
         up.flush(&ctx)
     }
-}
-
-pub(super) fn staging_released() -> GpuError {
-    GpuError::InvalidRequest("streaming: staging ring released".into())
 }
 
 pub(super) fn ms_since(t: std::time::Instant) -> f64 {

@@ -7,7 +7,7 @@ use motu_abi::PiRecord;
 use motu_alloc::{AllocKind, BuildSize, MemoryClass};
 use motu_vk::{AsBuildFlags, AsGeometry, AsLevel, BufferUsage, Context};
 
-use super::skeleton::staging_released;
+use super::buffers::staging_released;
 use super::tlas_records::{tail_record, TlasRecords, RECORD_BYTES};
 use super::tlases::TlasGpu;
 use super::topology::{proxy_blas_record, proxy_pi};

@@ -20,8 +20,8 @@ use motu_alloc::{AllocKind, MemoryClass};
 use motu_vk::{BufferUsage, ComputePipeline, ComputePipelineDesc, GpuHeap, HeapBuffer};
 use rayon::prelude::*;
 
-use super::skeleton::staging_released;
-use super::tlas_records::{kept_record, RECORD_BYTES};
+use super::buffers::staging_released;
+use super::tlas_encode::{kept_record, RECORD_BYTES};
 use super::{StreamingRenderer, TlasRecordsMode};
 use crate::error::{GpuError, Result};
 

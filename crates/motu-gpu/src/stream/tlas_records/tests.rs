@@ -1,4 +1,5 @@
 use super::*;
+use crate::stream::tlas_encode::kept_record;
 use motu_abi::{BlasRecord, TlasRecord, BLAS_TRIANGLES};
 
 /// The straightforward encoding the in-place one replaces: every resident instance in
