@@ -1,6 +1,7 @@
 use super::*;
 use crate::stream::tlas_encode::kept_record;
 use motu_abi::{BlasRecord, TlasRecord, BLAS_TRIANGLES};
+use motu_abi::{BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
 
 /// The straightforward encoding the in-place one replaces: every resident instance in
 /// order, its index in the TLAS as custom index, triangle instances masked.
