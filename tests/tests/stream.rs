@@ -518,7 +518,7 @@ fn merged_probe_rounds_rebuild_fewer_tlases_at_no_more_passes() {
             "--stream-probe-later",
             later,
             // Records written from the host: the rebuilds' records are what the policy saves
-            // (with the default `gpu` the host writes only the tails).
+            // (with `--stream-tlas-records gpu` the host writes only the tails).
             "--stream-tlas-records",
             "host",
         ];
