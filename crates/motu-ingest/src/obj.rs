@@ -228,7 +228,12 @@ fn mtllibs(path: &Path) -> Vec<(usize, PathBuf)> {
         .map_while(Result::ok)
         .enumerate()
         .filter_map(|(i, l)| {
-            let rest = l.trim_start().strip_prefix("mtllib ")?.trim();
+            // As tobj reads it: the first whitespace-separated word is the keyword (a form
+            // feed separates it too), the name is what follows the line's first space.
+            if l.split_whitespace().next() != Some("mtllib") {
+                return None;
+            }
+            let rest = l.split_once(' ').map_or("", |(_, r)| r).trim();
             (!rest.is_empty()).then(|| (i + 1, dir.join(rest)))
         })
         .collect()

@@ -87,6 +87,17 @@ fn regression_special_file_as_mtllib_is_named_and_never_read() {
         assert!(e.contains("t.obj:1") && e.contains(what), "{dev}: {e}");
         assert!(!e.contains("missing"), "{dev}: {e}");
     }
+    // Found by the fuzzer: tobj takes a keyword followed by form feeds and other bytes, and
+    // the name after the line's first space; the check must see the same name.
+    let e = import(
+        &format!("mtllib\x0c\x0c\x1f\0\x0c /dev/zero\n{TRI}f 1 2 3\n"),
+        true,
+    )
+    .unwrap_err();
+    assert!(
+        e.contains("t.obj:1") && e.contains("a character device"),
+        "{e}"
+    );
     let dir = tempfile::tempdir().unwrap();
     let fifo = dir.path().join("lib.mtl");
     if std::process::Command::new("mkfifo")
