@@ -88,12 +88,16 @@ pub fn boxes_from_triangles(tris: &[TriangleBox], fan: usize) -> Vec<Box6> {
             SplitKey(t.0, i as u32)
         })
         .collect();
-    boxes_from_keys(keys, bounds, fan, |i| tris[i as usize].1)
+    boxes_from_keys(keys, bounds, fan, tris.len(), |grow_leaf| {
+        for (i, t) in tris.iter().enumerate() {
+            grow_leaf(i, &t.1);
+        }
+    })
 }
 
 /// A BLAS's boxes (as [`boxes_from_triangles`]) from its meshes' positions and indices, in
 /// geometry order, without a box per triangle in between: each triangle's box is made from
-/// its vertices when its key is made and again when its leaf is grown (two reads of three
+/// its vertices when its key is made and again, front to back, when the leaves grow (two reads of three
 /// vertices cost less than writing and reading 36 bytes a triangle, fresh memory each BLAS).
 pub fn boxes_from_meshes(meshes: &[(&[[f32; 3]], &[u32])], fan: usize) -> Vec<Box6> {
     // Each mesh's first triangle in the BLAS's numbering (a key's `u32`).
@@ -115,16 +119,14 @@ pub fn boxes_from_meshes(meshes: &[(&[[f32; 3]], &[u32])], fan: usize) -> Vec<Bo
             }
         }
     }
-    boxes_from_keys(keys, bounds, fan, |i| {
-        let i = i as usize;
-        // The mesh holding triangle `i`: the last whose first triangle is at most `i`.
-        let m = match meshes.len() {
-            1 => 0,
-            _ => starts.partition_point(|&s| s <= i) - 1,
-        };
-        let (positions, indices) = meshes[m];
-        let t = i - starts[m];
-        triangle_box(positions, &indices[3 * t..3 * t + 3]).unwrap_or(EMPTY)
+    boxes_from_keys(keys, bounds, fan, total, |grow_leaf| {
+        for (m, (positions, indices)) in meshes.iter().enumerate() {
+            for (t, tri) in indices.chunks_exact(3).enumerate() {
+                if let Some(bx) = triangle_box(positions, tri) {
+                    grow_leaf(starts[m] + t, &bx);
+                }
+            }
+        }
     })
 }
 
@@ -140,35 +142,47 @@ fn triangle_box(positions: &[[f32; 3]], tri: &[u32]) -> Option<Box6> {
     (bx[0] <= bx[3]).then_some(bx)
 }
 
-/// The boxes of `fan` from the split keys (`bounds`: their centroids' bounds) and each key's
-/// triangle box (`tri_box`).
+/// The boxes of `fan` from the split keys (`bounds`: their centroids' bounds; a key's `u32`
+/// numbers its triangle below `triangles`) and every triangle's box, in the keys' numbering,
+/// from `each_box` (triangles without a key are passed over): each leaf grows by its
+/// triangles in their own order, reading the meshes front to back.
 fn boxes_from_keys(
     mut keys: Vec<SplitKey>,
     bounds: Box6,
     fan: usize,
-    tri_box: impl Fn(u32) -> Box6,
+    triangles: usize,
+    each_box: impl FnOnce(&mut dyn FnMut(usize, &Box6)),
 ) -> Vec<Box6> {
     let mut out = vec![EMPTY; fan + fan * fan];
     let mut leaves = Vec::with_capacity(fan * fan);
-    split(
+    let mut scratch = Vec::new();
+    split_with(
         &mut keys,
+        &mut scratch,
         2 * fan.trailing_zeros(),
         0,
         Some(bounds),
         &mut leaves,
     );
-    // Each leaf's triangles once; a top box is the union of its leaves.
-    let leaf_boxes: Vec<Box6> = leaves
-        .iter()
-        .map(|r| {
-            let mut bx = EMPTY;
-            for k in &keys[r.clone()] {
-                let t = tri_box(k.1);
-                grow(&mut bx, &t[..3], &t[3..]);
-            }
-            bx
-        })
-        .collect();
+    drop(scratch);
+    // Each triangle's leaf (at most MAX_FAN² = 256 leaves; `u16::MAX`: none).
+    let mut leaf_of = vec![u16::MAX; triangles];
+    for (l, r) in leaves.iter().enumerate() {
+        for k in &keys[r.clone()] {
+            leaf_of[k.1 as usize] = l as u16;
+        }
+    }
+    drop(keys);
+    // A top box is the union of its leaves.
+    let mut leaf_boxes = vec![EMPTY; leaves.len()];
+    each_box(&mut |i, t| {
+        if let Some(bx) = leaf_of
+            .get(i)
+            .and_then(|&l| leaf_boxes.get_mut(usize::from(l)))
+        {
+            grow(bx, &t[..3], &t[3..]);
+        }
+    });
     let pad_nonempty = |bx: Box6| if bx[0] <= bx[3] { padded(bx) } else { bx };
     for (k, group) in leaf_boxes.chunks_exact(fan).enumerate() {
         let mut top = EMPTY;
@@ -270,8 +284,21 @@ fn grow(bx: &mut Box6, lo: &[f32], hi: &[f32]) {
 /// and grows both halves' centroid bounds, where the exact median took a bounds pass and a
 /// selection (two to three passes) per level. The halves' sizes differ by a few percent; the
 /// boxes still hold every triangle (what a streamed render needs of them).
-fn split<T: Centroid>(
+#[cfg(test)]
+fn split<T: Centroid + Copy>(
     tris: &mut [T],
+    depth: u32,
+    base: usize,
+    bounds: Option<Box6>,
+    leaves: &mut Vec<Range<usize>>,
+) {
+    split_with(tris, &mut Vec::new(), depth, base, bounds, leaves);
+}
+
+/// [`split`] with a scratch buffer for the partitions.
+fn split_with<T: Centroid + Copy>(
+    tris: &mut [T],
+    scratch: &mut Vec<T>,
     depth: u32,
     base: usize,
     bounds: Option<Box6>,
@@ -288,7 +315,7 @@ fn split<T: Centroid>(
         .max_by(|&x, &y| (c[3 + x] - c[x]).total_cmp(&(c[3 + y] - c[y])))
         .unwrap_or(0);
     let sampled = if tris.len() > EXACT_MEDIAN_BELOW {
-        sampled_partition(tris, axis)
+        sampled_partition(tris, scratch, axis)
     } else {
         None
     };
@@ -303,8 +330,8 @@ fn split<T: Centroid>(
         }
     };
     let (l, r) = tris.split_at_mut(mid);
-    split(l, depth - 1, base, halves[0], leaves);
-    split(r, depth - 1, base + mid, halves[1], leaves);
+    split_with(l, scratch, depth - 1, base, halves[0], leaves);
+    split_with(r, scratch, depth - 1, base + mid, halves[1], leaves);
 }
 
 /// Ranges of at most this many items split at their exact centroid median.
@@ -323,39 +350,37 @@ fn centroid_bounds<T: Centroid>(tris: &[T]) -> Box6 {
 }
 
 /// Moves the items whose centroid on `axis` lies below the median of evenly spaced ones
-/// ([`PIVOT_SAMPLE_STRIDE`]) before the rest, growing both sides' centroid bounds on the way;
-/// returns the split and the bounds, or `None` when a side would be empty (ties, NaN: the
-/// caller splits at the exact median).
-fn sampled_partition<T: Centroid>(tris: &mut [T], axis: usize) -> Option<(usize, Box6, Box6)> {
+/// ([`PIVOT_SAMPLE_STRIDE`]) before the rest (those after in reverse order), growing both
+/// sides' centroid bounds on the way; returns the split and the bounds, or `None` when a side
+/// would be empty (ties, NaN: the caller splits at the exact median). Without branches on the
+/// data: each item is copied out to `scratch`, then written back to both sides' next free
+/// slots, and only its side's cursor moves.
+fn sampled_partition<T: Centroid + Copy>(
+    tris: &mut [T],
+    scratch: &mut Vec<T>,
+    axis: usize,
+) -> Option<(usize, Box6, Box6)> {
     let n = tris.len();
     let samples = (n / PIVOT_SAMPLE_STRIDE).max(MIN_PIVOT_SAMPLES).min(n);
     let mut sample: Vec<f32> = (0..samples)
         .map(|i| tris[(2 * i + 1) * n / (2 * samples)].centroid()[axis])
         .collect();
     let (_, &mut pivot, _) = sample.select_nth_unstable_by(samples / 2, f32::total_cmp);
-    let below = |t: &T| t.centroid()[axis] < pivot;
-    let (mut lb, mut rb) = (EMPTY, EMPTY);
-    let (mut i, mut j) = (0usize, n);
-    loop {
-        while i < j && below(&tris[i]) {
-            grow(&mut lb, tris[i].centroid(), tris[i].centroid());
-            i += 1;
-        }
-        while i < j && !below(&tris[j - 1]) {
-            grow(&mut rb, tris[j - 1].centroid(), tris[j - 1].centroid());
-            j -= 1;
-        }
-        if i >= j {
-            break;
-        }
-        // tris[i] is not below, tris[j - 1] is: swapped, each side holds its own.
-        tris.swap(i, j - 1);
-        grow(&mut lb, tris[i].centroid(), tris[i].centroid());
-        grow(&mut rb, tris[j - 1].centroid(), tris[j - 1].centroid());
-        i += 1;
-        j -= 1;
+    scratch.clear();
+    scratch.extend_from_slice(tris);
+    let mut sides = [EMPTY, EMPTY];
+    let (mut lo, mut hi) = (0usize, n);
+    for t in scratch.iter() {
+        // Before each item lo < hi: slots below lo and from hi on are taken.
+        let c = t.centroid();
+        let right = usize::from(!(c[axis] < pivot));
+        tris[lo] = *t;
+        tris[hi - 1] = *t;
+        lo += 1 - right;
+        hi -= right;
+        grow(&mut sides[right], c, c);
     }
-    (i > 0 && i < n).then_some((i, lb, rb))
+    (lo > 0 && lo < n).then_some((lo, sides[0], sides[1]))
 }
 
 /// What BLAS `b`'s boxes are made from, hashed: the box maths' constants, its record, its
