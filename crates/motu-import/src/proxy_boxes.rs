@@ -33,7 +33,7 @@ pub(crate) fn write_proxy_boxes(
         motu_pack::SECTION_PROXY_BOXES,
         "proxy_boxes",
         |writer| {
-            let table = make_table(view, batch, |c| writer.read_back_chunk(c))?;
+            let table = make_table(view, batch, |c, buf| writer.read_back_chunk_into(c, buf))?;
             let counts = format!("blases={} boxes={}", table.entries.len(), table.boxes.len());
             Ok((encode_section(&table), counts))
         },
@@ -41,12 +41,13 @@ pub(crate) fn write_proxy_boxes(
 }
 
 /// The table of every BLAS with boxes ([`has_boxes`]), reading each chunk its meshes lie in
-/// once through `read_chunk` (whole raw bytes), `batch` chunks at a time. A chunk's bytes are
-/// kept until the last BLAS that reads them is made; the meshes are read in place.
+/// once through `read_chunk` (whole raw bytes, into the buffer it is given), `batch` chunks at
+/// a time. A chunk's bytes are kept until the last BLAS that reads them is made (the meshes
+/// are read in place), then its buffer takes a later chunk.
 pub(crate) fn make_table<E: Send>(
     view: &HierarchyView<'_>,
     batch: usize,
-    read_chunk: impl Fn(ChunkId) -> Result<Vec<u8>, E> + Sync,
+    read_chunk: impl Fn(ChunkId, &mut Vec<u8>) -> Result<(), E> + Sync,
 ) -> Result<StoredProxyBoxes, E> {
     let meshes_of = |b: usize| {
         let r = &view.blases[b];
@@ -80,17 +81,23 @@ pub(crate) fn make_table<E: Send>(
     let mut pending = pending.into_iter().peekable();
     // Raw bytes of the chunks read so far whose BLASes are not all made.
     let mut raw: HashMap<u32, Vec<u8>> = HashMap::new();
+    // Buffers of chunks no BLAS reads any more.
+    let mut free: Vec<Vec<u8>> = Vec::new();
     let mut made: Vec<(usize, Vec<[f32; 6]>)> = Vec::with_capacity(blases.len());
     for group in chunks.chunks(batch.max(1)) {
+        let buffers: Vec<Vec<u8>> = group
+            .iter()
+            .map(|_| free.pop().unwrap_or_default())
+            .collect();
         let read: Vec<(u32, Vec<u8>)> = group
             .par_iter()
-            .map(|&c| {
+            .zip(buffers)
+            .map(|(&c, mut bytes)| {
                 // A mesh record naming no chunk (u32::MAX) reads as unreadable.
-                let bytes = if c == u32::MAX {
-                    Vec::new()
-                } else {
-                    read_chunk(ChunkId(c))?
-                };
+                bytes.clear();
+                if c != u32::MAX {
+                    read_chunk(ChunkId(c), &mut bytes)?;
+                }
                 Ok((c, bytes))
             })
             .collect::<Result<_, E>>()?;
@@ -121,7 +128,7 @@ pub(crate) fn make_table<E: Send>(
                 let n = users.get_mut(&c).expect("counted");
                 *n -= 1;
                 if *n == 0 {
-                    raw.remove(&c);
+                    free.extend(raw.remove(&c));
                 }
             }
         }

@@ -91,9 +91,9 @@ fn boxes_made_a_chunk_at_a_time_equal_the_streamers_bit_for_bit() {
     let mut tables = Vec::new();
     for batch in [1, 2, 8] {
         reads.store(0, std::sync::atomic::Ordering::Relaxed);
-        let t = make_table(&view, batch, |c| {
+        let t = make_table(&view, batch, |c, buf| {
             reads.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            w.read_back_chunk(c)
+            w.read_back_chunk_into(c, buf)
         })
         .unwrap();
         // Each of the three chunks read once.
