@@ -268,9 +268,11 @@ pub fn padded(b: [f32; 6]) -> [f32; 6] {
 }
 
 fn grow(bx: &mut Box6, lo: &[f32], hi: &[f32]) {
+    // Selects, not `f32::min`/`max`: one instruction each (a NaN bound is passed over either
+    // way, as `bx` never holds one).
     for a in 0..3 {
-        bx[a] = bx[a].min(lo[a]);
-        bx[3 + a] = bx[3 + a].max(hi[a]);
+        bx[a] = if lo[a] < bx[a] { lo[a] } else { bx[a] };
+        bx[3 + a] = if hi[a] > bx[3 + a] { hi[a] } else { bx[3 + a] };
     }
 }
 
@@ -280,9 +282,9 @@ fn grow(bx: &mut Box6, lo: &[f32], hi: &[f32]) {
 /// here).
 ///
 /// A range of more than [`EXACT_MEDIAN_BELOW`] items splits at the median of an evenly spaced
-/// eighth of its centroids (not the exact median): one pass partitions it
-/// and grows both halves' centroid bounds, where the exact median took a bounds pass and a
-/// selection (two to three passes) per level. The halves' sizes differ by a few percent; the
+/// eighth of its centroids (not the exact median), and its halves choose their axes by the
+/// bounds of those sampled centroids: one branch-free pass partitions it, where the exact
+/// median took a bounds pass and a selection (two to three passes) per level. The halves' sizes differ by a few percent; the
 /// boxes still hold every triangle (what a streamed render needs of them).
 #[cfg(test)]
 fn split<T: Centroid + Copy>(
@@ -350,11 +352,11 @@ fn centroid_bounds<T: Centroid>(tris: &[T]) -> Box6 {
 }
 
 /// Moves the items whose centroid on `axis` lies below the median of evenly spaced ones
-/// ([`PIVOT_SAMPLE_STRIDE`]) before the rest (those after in reverse order), growing both
-/// sides' centroid bounds on the way; returns the split and the bounds, or `None` when a side
-/// would be empty (ties, NaN: the caller splits at the exact median). Without branches on the
-/// data: each item is copied out to `scratch`, then written back to both sides' next free
-/// slots, and only its side's cursor moves.
+/// ([`PIVOT_SAMPLE_STRIDE`]) before the rest (those after in reverse order); returns the split
+/// and the bounds of the sampled centroids on either side (what the halves choose their axis
+/// by), or `None` when a side would be empty (ties, NaN: the caller splits at the exact
+/// median). Without branches on the data: each item is copied out to `scratch`, then written
+/// back to both sides' next free slots, and only its side's cursor moves.
 fn sampled_partition<T: Centroid + Copy>(
     tris: &mut [T],
     scratch: &mut Vec<T>,
@@ -362,23 +364,26 @@ fn sampled_partition<T: Centroid + Copy>(
 ) -> Option<(usize, Box6, Box6)> {
     let n = tris.len();
     let samples = (n / PIVOT_SAMPLE_STRIDE).max(MIN_PIVOT_SAMPLES).min(n);
-    let mut sample: Vec<f32> = (0..samples)
-        .map(|i| tris[(2 * i + 1) * n / (2 * samples)].centroid()[axis])
+    let mut sample: Vec<[f32; 3]> = (0..samples)
+        .map(|i| *tris[(2 * i + 1) * n / (2 * samples)].centroid())
         .collect();
-    let (_, &mut pivot, _) = sample.select_nth_unstable_by(samples / 2, f32::total_cmp);
+    let (_, &mut pivot, _) =
+        sample.select_nth_unstable_by(samples / 2, |x, y| x[axis].total_cmp(&y[axis]));
+    let pivot = pivot[axis];
+    let mut sides = [EMPTY, EMPTY];
+    for c in &sample {
+        grow(&mut sides[usize::from(!(c[axis] < pivot))], c, c);
+    }
     scratch.clear();
     scratch.extend_from_slice(tris);
-    let mut sides = [EMPTY, EMPTY];
     let (mut lo, mut hi) = (0usize, n);
     for t in scratch.iter() {
         // Before each item lo < hi: slots below lo and from hi on are taken.
-        let c = t.centroid();
-        let right = usize::from(!(c[axis] < pivot));
+        let right = usize::from(!(t.centroid()[axis] < pivot));
         tris[lo] = *t;
         tris[hi - 1] = *t;
         lo += 1 - right;
         hi -= right;
-        grow(&mut sides[right], c, c);
     }
     (lo > 0 && lo < n).then_some((lo, sides[0], sides[1]))
 }
