@@ -375,14 +375,15 @@ fn sampled_partition<T: Centroid + Copy>(
     let pivot = pivot[axis];
     let mut sides = [EMPTY, EMPTY];
     for c in &sample {
-        grow(&mut sides[usize::from(!(c[axis] < pivot))], c, c);
+        grow(&mut sides[1 - usize::from(c[axis] < pivot)], c, c);
     }
     scratch.clear();
     scratch.extend_from_slice(tris);
     let (mut lo, mut hi) = (0usize, n);
     for t in scratch.iter() {
         // Before each item lo < hi: slots below lo and from hi on are taken.
-        let right = usize::from(!(t.centroid()[axis] < pivot));
+        // Not below (NaN included): right.
+        let right = 1 - usize::from(t.centroid()[axis] < pivot);
         tris[lo] = *t;
         tris[hi - 1] = *t;
         lo += 1 - right;
