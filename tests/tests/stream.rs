@@ -889,7 +889,7 @@ fn proxy_boxes_stored_at_import_start_streamed_renders_and_bad_ones_are_made_aga
 
     // One bit flipped inside the section: its checksum fails; made from the meshes.
     let bytes = std::fs::read(&pkg).unwrap();
-    let magic = b"motu pboxes v1\0\0";
+    let magic = b"motu pboxes v2\0\0";
     let at = bytes
         .windows(magic.len())
         .position(|w| w == magic)

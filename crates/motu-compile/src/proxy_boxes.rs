@@ -68,14 +68,7 @@ pub fn box_count(fan: u32) -> usize {
 /// indices reach a position (an index out of range is skipped: the build reports it).
 pub fn push_triangle_boxes(positions: &[[f32; 3]], indices: &[u32], out: &mut Vec<TriangleBox>) {
     for t in indices.chunks_exact(3) {
-        let mut bx = EMPTY;
-        for &i in t {
-            let Some(p) = positions.get(i as usize) else {
-                continue;
-            };
-            grow(&mut bx, p, p);
-        }
-        if bx[0] <= bx[3] {
+        if let Some(bx) = triangle_box(positions, t) {
             let c = std::array::from_fn(|a| 0.5 * (bx[a] + bx[3 + a]));
             out.push((c, bx));
         }
@@ -84,31 +77,113 @@ pub fn push_triangle_boxes(positions: &[[f32; 3]], indices: &[u32], out: &mut Ve
 
 /// A BLAS's boxes ([`box_count`] of `fan`) from its triangles ([`push_triangle_boxes`] over
 /// its geometries in order): `fan` top boxes then `fan` leaves per top box, in BLAS space,
-/// padded. The splits move 16-byte keys (centroid, triangle), not the triangles (36 bytes):
-/// the same comparisons on the same order, so the same leaves as when the triangles themselves
-/// were reordered (the stored tables of earlier packages stay equal), at about two thirds of
-/// the time, and the caller's triangles are left as they were (no copy of a mesh's).
+/// padded. The same boxes as [`boxes_from_meshes`] makes from the meshes themselves.
 pub fn boxes_from_triangles(tris: &[TriangleBox], fan: usize) -> Vec<Box6> {
-    let mut out = vec![EMPTY; fan + fan * fan];
-    let mut keys: Vec<SplitKey> = tris
+    let mut bounds = EMPTY;
+    let keys: Vec<SplitKey> = tris
         .iter()
         .enumerate()
-        .map(|(i, t)| SplitKey(t.0, i as u32))
-        .collect();
-    let mut leaves = Vec::with_capacity(fan * fan);
-    split(&mut keys, 2 * fan.trailing_zeros(), 0, &mut leaves);
-    // Each leaf's triangles once; a top box is the union of its leaves.
-    let leaf_boxes: Vec<Box6> = leaves
-        .iter()
-        .map(|r| {
-            let mut bx = EMPTY;
-            for k in &keys[r.clone()] {
-                let t = &tris[k.1 as usize];
-                grow(&mut bx, &t.1[..3], &t.1[3..]);
-            }
-            bx
+        .map(|(i, t)| {
+            grow(&mut bounds, &t.0, &t.0);
+            SplitKey(t.0, i as u32)
         })
         .collect();
+    boxes_from_keys(keys, bounds, fan, tris.len(), |grow_leaf| {
+        for (i, t) in tris.iter().enumerate() {
+            grow_leaf(i, &t.1);
+        }
+    })
+}
+
+/// A BLAS's boxes (as [`boxes_from_triangles`]) from its meshes' positions and indices, in
+/// geometry order, without a box per triangle in between: each triangle's box is made from
+/// its vertices when its key is made and again, front to back, when the leaves grow (two
+/// reads of three vertices cost less than writing and reading 36 bytes a triangle, in fresh
+/// memory each BLAS).
+pub fn boxes_from_meshes(meshes: &[(&[[f32; 3]], &[u32])], fan: usize) -> Vec<Box6> {
+    // Each mesh's first triangle in the BLAS's numbering (a key's `u32`).
+    let mut starts = Vec::with_capacity(meshes.len() + 1);
+    let mut total = 0usize;
+    for (_, indices) in meshes {
+        starts.push(total);
+        total += indices.len() / 3;
+    }
+    starts.push(total);
+    let mut bounds = EMPTY;
+    let mut keys: Vec<SplitKey> = Vec::with_capacity(total);
+    for (m, (positions, indices)) in meshes.iter().enumerate() {
+        for (t, tri) in indices.chunks_exact(3).enumerate() {
+            if let Some(bx) = triangle_box(positions, tri) {
+                let c = std::array::from_fn(|a| 0.5 * (bx[a] + bx[3 + a]));
+                grow(&mut bounds, &c, &c);
+                keys.push(SplitKey(c, (starts[m] + t) as u32));
+            }
+        }
+    }
+    boxes_from_keys(keys, bounds, fan, total, |grow_leaf| {
+        for (m, (positions, indices)) in meshes.iter().enumerate() {
+            for (t, tri) in indices.chunks_exact(3).enumerate() {
+                if let Some(bx) = triangle_box(positions, tri) {
+                    grow_leaf(starts[m] + t, &bx);
+                }
+            }
+        }
+    })
+}
+
+/// The box of a triangle's vertices that lie in `positions` (`None`: none does; the build
+/// reports the index).
+fn triangle_box(positions: &[[f32; 3]], tri: &[u32]) -> Option<Box6> {
+    let mut bx = EMPTY;
+    for &i in tri {
+        if let Some(p) = positions.get(i as usize) {
+            grow(&mut bx, p, p);
+        }
+    }
+    (bx[0] <= bx[3]).then_some(bx)
+}
+
+/// The boxes of `fan` from the split keys (`bounds`: their centroids' bounds; a key's `u32`
+/// numbers its triangle below `triangles`) and every triangle's box, in the keys' numbering,
+/// from `each_box` (triangles without a key are passed over): each leaf grows by its
+/// triangles in their own order, reading the meshes front to back.
+fn boxes_from_keys(
+    mut keys: Vec<SplitKey>,
+    bounds: Box6,
+    fan: usize,
+    triangles: usize,
+    each_box: impl FnOnce(&mut dyn FnMut(usize, &Box6)),
+) -> Vec<Box6> {
+    let mut out = vec![EMPTY; fan + fan * fan];
+    let mut leaves = Vec::with_capacity(fan * fan);
+    let mut scratch = Vec::new();
+    split_with(
+        &mut keys,
+        &mut scratch,
+        2 * fan.trailing_zeros(),
+        0,
+        Some(bounds),
+        &mut leaves,
+    );
+    drop(scratch);
+    // Each triangle's leaf (at most MAX_FAN² = 256 leaves; `u16::MAX`: none).
+    let mut leaf_of = vec![u16::MAX; triangles];
+    for (l, r) in leaves.iter().enumerate() {
+        for k in &keys[r.clone()] {
+            leaf_of[k.1 as usize] = l as u16;
+        }
+    }
+    drop(keys);
+    // A top box is the union of its leaves.
+    let mut leaf_boxes = vec![EMPTY; leaves.len()];
+    each_box(&mut |i, t| {
+        if let Some(bx) = leaf_of
+            .get(i)
+            .and_then(|&l| leaf_boxes.get_mut(usize::from(l)))
+        {
+            grow(bx, &t[..3], &t[3..]);
+        }
+    });
     let pad_nonempty = |bx: Box6| if bx[0] <= bx[3] { padded(bx) } else { bx };
     for (k, group) in leaf_boxes.chunks_exact(fan).enumerate() {
         let mut top = EMPTY;
@@ -121,11 +196,11 @@ pub fn boxes_from_triangles(tris: &[TriangleBox], fan: usize) -> Vec<Box6> {
     out
 }
 
-/// What [`split`] reorders: a centroid and the index of its triangle.
+/// What [`split_with`] reorders: a centroid and the index of its triangle.
 #[derive(Clone, Copy, Debug)]
 struct SplitKey([f32; 3], u32);
 
-/// Something with a centroid [`split`] can order.
+/// Something with a centroid [`split_with`] can order.
 trait Centroid {
     fn centroid(&self) -> &[f32; 3];
 }
@@ -155,19 +230,21 @@ pub fn blas_boxes<'m, E>(
     mut mesh: impl FnMut(u32) -> Result<MeshSlices<'m>, E>,
 ) -> Vec<Box6> {
     let r = &view.blases[b];
-    let mut tris: Vec<TriangleBox> = Vec::with_capacity(r.primitive_count as usize);
     let range = r.item_base as usize..(r.item_base + r.item_count) as usize;
+    let mut meshes: Vec<MeshSlices<'m>> = Vec::with_capacity(range.len());
     for g in &view.geometries[range] {
-        let Ok((positions, indices)) = mesh(g.mesh) else {
+        let Ok(slices) = mesh(g.mesh) else {
             let mut out = vec![EMPTY; fan + fan * fan];
             let bounds = padded(r.bounds_box());
             out[0] = bounds;
             out[fan] = bounds;
             return out;
         };
-        push_triangle_boxes(&positions, &indices, &mut tris);
+        meshes.push(slices);
     }
-    boxes_from_triangles(&tris, fan)
+    let borrowed: Vec<(&[[f32; 3]], &[u32])> =
+        meshes.iter().map(|(p, i)| (&p[..], &i[..])).collect();
+    boxes_from_meshes(&borrowed, fan)
 }
 
 /// `b` grown by a little more than float error: a proxy box only has to contain what it
@@ -192,36 +269,127 @@ pub fn padded(b: [f32; 6]) -> [f32; 6] {
 }
 
 fn grow(bx: &mut Box6, lo: &[f32], hi: &[f32]) {
+    // Selects, not `f32::min`/`max`: one instruction each (a NaN bound is passed over either
+    // way, as `bx` never holds one).
     for a in 0..3 {
-        bx[a] = bx[a].min(lo[a]);
-        bx[3 + a] = bx[3 + a].max(hi[a]);
+        bx[a] = if lo[a] < bx[a] { lo[a] } else { bx[a] };
+        bx[3 + a] = if hi[a] > bx[3 + a] { hi[a] } else { bx[3 + a] };
     }
+}
+
+/// [`split_with`] with a scratch buffer of its own.
+#[cfg(test)]
+fn split<T: Centroid + Copy>(
+    tris: &mut [T],
+    depth: u32,
+    base: usize,
+    bounds: Option<Box6>,
+    leaves: &mut Vec<Range<usize>>,
+) {
+    split_with(tris, &mut Vec::new(), depth, base, bounds, leaves);
 }
 
 /// Appends `2^depth` leaf ranges (absolute, from `base`) of centroid-median splits along the
 /// widest centroid axis, depth first, so leaf `j`'s ancestor `d` levels up is `j >> d`; a range
-/// too small to split ends in empty leaves.
-fn split<T: Centroid>(tris: &mut [T], depth: u32, base: usize, leaves: &mut Vec<Range<usize>>) {
+/// too small to split ends in empty leaves. `bounds` are the centroids' bounds (or `None`: made
+/// here); `scratch` holds a range while it is partitioned.
+///
+/// A range of more than [`EXACT_MEDIAN_BELOW`] items splits at the median of an evenly spaced
+/// eighth of its centroids (not the exact median), and its halves choose their axes by the
+/// bounds of those sampled centroids: one branch-free pass partitions it, where the exact
+/// median took a bounds pass and a selection (two to three passes) per level. The halves'
+/// sizes differ by a few percent; the boxes still hold every triangle (all a streamed render
+/// needs of them), and on island 0.02 their leaves' area is 10% smaller (all of a run of tied
+/// centroids goes to one side).
+fn split_with<T: Centroid + Copy>(
+    tris: &mut [T],
+    scratch: &mut Vec<T>,
+    depth: u32,
+    base: usize,
+    bounds: Option<Box6>,
+    leaves: &mut Vec<Range<usize>>,
+) {
     if depth == 0 || tris.len() < 2 {
         leaves.push(base..base + tris.len());
         let end = base + tris.len();
         leaves.extend((1..1usize << depth).map(|_| end..end));
         return;
     }
-    let mut c = EMPTY;
-    for t in tris.iter() {
-        grow(&mut c, t.centroid(), t.centroid());
-    }
+    let c = bounds.unwrap_or_else(|| centroid_bounds(tris));
     let axis = (0..3)
         .max_by(|&x, &y| (c[3 + x] - c[x]).total_cmp(&(c[3 + y] - c[y])))
         .unwrap_or(0);
-    let mid = tris.len() / 2;
-    tris.select_nth_unstable_by(mid, |x, y| {
-        x.centroid()[axis].total_cmp(&y.centroid()[axis])
-    });
+    let sampled = if tris.len() > EXACT_MEDIAN_BELOW {
+        sampled_partition(tris, scratch, axis)
+    } else {
+        None
+    };
+    let (mid, halves) = match sampled {
+        Some((mid, l, r)) => (mid, [Some(l), Some(r)]),
+        None => {
+            let mid = tris.len() / 2;
+            tris.select_nth_unstable_by(mid, |x, y| {
+                x.centroid()[axis].total_cmp(&y.centroid()[axis])
+            });
+            (mid, [None, None])
+        }
+    };
     let (l, r) = tris.split_at_mut(mid);
-    split(l, depth - 1, base, leaves);
-    split(r, depth - 1, base + mid, leaves);
+    split_with(l, scratch, depth - 1, base, halves[0], leaves);
+    split_with(r, scratch, depth - 1, base + mid, halves[1], leaves);
+}
+
+/// Ranges of at most this many items split at their exact centroid median.
+const EXACT_MEDIAN_BELOW: usize = 512;
+/// A larger range's pivot is the median of one centroid in this many (at least
+/// [`MIN_PIVOT_SAMPLES`]): the halves' sizes then differ by about `3 / sqrt(len)` of the range.
+const PIVOT_SAMPLE_STRIDE: usize = 8;
+const MIN_PIVOT_SAMPLES: usize = 63;
+
+fn centroid_bounds<T: Centroid>(tris: &[T]) -> Box6 {
+    let mut c = EMPTY;
+    for t in tris {
+        grow(&mut c, t.centroid(), t.centroid());
+    }
+    c
+}
+
+/// Moves the items whose centroid on `axis` lies below the median of evenly spaced ones
+/// ([`PIVOT_SAMPLE_STRIDE`]) before the rest (those after in reverse order); returns the split
+/// and the bounds of the sampled centroids on either side (what the halves choose their axis
+/// by), or `None` when a side would be empty (ties, NaN: the caller splits at the exact
+/// median). Without branches on the data: each item is copied out to `scratch`, then written
+/// back to both sides' next free slots, and only its side's cursor moves.
+fn sampled_partition<T: Centroid + Copy>(
+    tris: &mut [T],
+    scratch: &mut Vec<T>,
+    axis: usize,
+) -> Option<(usize, Box6, Box6)> {
+    let n = tris.len();
+    let samples = (n / PIVOT_SAMPLE_STRIDE).max(MIN_PIVOT_SAMPLES).min(n);
+    let mut sample: Vec<[f32; 3]> = (0..samples)
+        .map(|i| *tris[(2 * i + 1) * n / (2 * samples)].centroid())
+        .collect();
+    let (_, &mut pivot, _) =
+        sample.select_nth_unstable_by(samples / 2, |x, y| x[axis].total_cmp(&y[axis]));
+    let pivot = pivot[axis];
+    let mut sides = [EMPTY, EMPTY];
+    for c in &sample {
+        grow(&mut sides[1 - usize::from(c[axis] < pivot)], c, c);
+    }
+    scratch.clear();
+    scratch.extend_from_slice(tris);
+    let (mut lo, mut hi) = (0usize, n);
+    for t in scratch.iter() {
+        // Before each item lo < hi: slots below lo and from hi on are taken.
+        // Not below (NaN included): right.
+        let right = 1 - usize::from(t.centroid()[axis] < pivot);
+        tris[lo] = *t;
+        tris[hi - 1] = *t;
+        lo += 1 - right;
+        hi -= right;
+    }
+    (lo > 0 && lo < n).then_some((lo, sides[0], sides[1]))
 }
 
 /// What BLAS `b`'s boxes are made from, hashed: the box maths' constants, its record, its
@@ -247,8 +415,12 @@ pub fn blas_hash(view: &HierarchyView<'_>, b: usize) -> u64 {
 
 const HASH_DOMAIN: &[u8] = b"motu-proxy-boxes-blas-v1";
 
-/// The `proxy_boxes` section's first bytes (FORMAT.md): the name and the version.
-pub const SECTION_MAGIC: &[u8; 16] = b"motu pboxes v1\0\0";
+/// The `proxy_boxes` section's first bytes (FORMAT.md): the name and the version. Version 2's
+/// large ranges split at sampled medians ([`split_with`]).
+pub const SECTION_MAGIC: &[u8; 16] = b"motu pboxes v2\0\0";
+/// Version 1's magic (exact medians): its boxes hold their triangles as well, so a package
+/// written before reads as it did (its entries are still checked against the records).
+pub const SECTION_MAGIC_V1: &[u8; 16] = b"motu pboxes v1\0\0";
 
 /// One BLAS's entry of a stored table: its id, fan, first box, and [`blas_hash`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, bytemuck::Pod, bytemuck::Zeroable)]
@@ -323,10 +495,12 @@ pub fn encode_section(t: &StoredProxyBoxes) -> Vec<u8> {
     w.finish()
 }
 
-/// Reads what [`encode_section`] wrote; `None` for another magic (another version), a cut or
-/// long section, entries out of BLAS order or boxes out of range.
+/// Reads what [`encode_section`] wrote (or version 1's section, the same layout); `None` for
+/// another magic (another version), a cut or long section, entries out of BLAS order or boxes
+/// out of range.
 pub fn decode_section(bytes: &[u8]) -> Option<StoredProxyBoxes> {
-    let mut r = BlobReader::new(bytes, SECTION_MAGIC)?;
+    let mut r = BlobReader::new(bytes, SECTION_MAGIC)
+        .or_else(|| BlobReader::new(bytes, SECTION_MAGIC_V1))?;
     let n_entries = usize::try_from(r.u64()?).ok()?;
     let n_boxes = usize::try_from(r.u64()?).ok()?;
     // Counts checked against the bytes before anything is allocated.

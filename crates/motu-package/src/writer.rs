@@ -308,7 +308,20 @@ impl PackageWriter {
     /// (and decompression) per chunk for a pass over every mesh (an importer's proxy boxes).
     /// Takes `&self`, so several chunks may be read at once.
     pub fn read_back_chunk(&self, chunk: ChunkId) -> Result<Vec<u8>, PackageError> {
+        let mut out = Vec::new();
+        self.read_back_chunk_into(chunk, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`Self::read_back_chunk`] into `out` (replacing what it held): a buffer read into again
+    /// is not faulted in and zeroed by the kernel again.
+    pub fn read_back_chunk_into(
+        &self,
+        chunk: ChunkId,
+        out: &mut Vec<u8>,
+    ) -> Result<(), PackageError> {
         self.check_usable()?;
+        out.clear();
         for open in self
             .streams
             .iter()
@@ -316,7 +329,8 @@ impl PackageWriter {
             .filter_map(|s| s.open.as_ref())
         {
             if open.id == chunk {
-                return Ok(open.data.clone());
+                out.extend_from_slice(&open.data);
+                return Ok(());
             }
         }
         let entry = self.chunks.get(chunk.0 as usize).copied().flatten().ok_or(
@@ -328,19 +342,18 @@ impl PackageWriter {
         let temp = self.temp.as_ref().ok_or_else(|| {
             PackageError::InvalidArgument("the package writer is already finished".into())
         })?;
-        let mut stored = vec![0u8; entry.stored_len as usize];
+        out.resize(entry.stored_len as usize, 0);
         {
             use std::os::unix::fs::FileExt;
             temp.file()
-                .read_exact_at(&mut stored, entry.offset)
+                .read_exact_at(out, entry.offset)
                 .map_err(|e| PackageError::io("read back a chunk of", &self.target, e))?;
         }
         if entry.codec == Codec::Zstd.id() {
-            zstd::bulk::decompress(&stored, entry.raw_len as usize)
-                .map_err(|e| PackageError::io("decompress a chunk of", &self.target, e))
-        } else {
-            Ok(stored)
+            *out = zstd::bulk::decompress(out, entry.raw_len as usize)
+                .map_err(|e| PackageError::io("decompress a chunk of", &self.target, e))?;
         }
+        Ok(())
     }
 
     /// Bytes in the stream's open (not yet written) chunk: what the stream holds in memory.

@@ -822,6 +822,17 @@ fn read_back_and_oversized_blobs() {
         );
         assert_eq!(w.read_back(b.chunk, 0, b.len_bytes).unwrap(), big);
         assert!(w.read_back(b.chunk, 19_999, 2).is_err());
+        // Into a buffer that held another chunk (longer, then shorter): the chunk alone.
+        let mut buf = vec![7u8; 50_000];
+        w.read_back_chunk_into(b.chunk, &mut buf).unwrap();
+        assert_eq!(buf, w.read_back_chunk(b.chunk).unwrap());
+        assert_eq!(&buf[..big.len()], &big[..]);
+        w.read_back_chunk_into(a.chunk, &mut buf).unwrap();
+        assert_eq!(buf, w.read_back_chunk(a.chunk).unwrap());
+        assert_eq!(
+            &buf[a.offset_in_chunk as usize..][..small.len()],
+            &small[..]
+        );
         w.close_stream(s).unwrap();
         w.finish().unwrap();
         let p = Package::open(&path).unwrap();

@@ -37,7 +37,7 @@ fn every_triangle_lies_in_a_leaf_of_a_top_box_that_holds_it() {
     {
         let mut work = all.clone();
         let mut leaves = Vec::new();
-        split(&mut work, 2 * fan.trailing_zeros(), 0, &mut leaves);
+        split(&mut work, 2 * fan.trailing_zeros(), 0, None, &mut leaves);
         assert_eq!(leaves.len(), fan * fan);
         assert_eq!(leaves.iter().map(|r| r.len()).sum::<usize>(), all.len());
         let union = |rs: &[Range<usize>]| {
@@ -73,6 +73,60 @@ fn every_triangle_lies_in_a_leaf_of_a_top_box_that_holds_it() {
     // Finer fans hug the sheet: the leaves' volume shrinks.
     assert!(volumes.windows(2).all(|w| w[1] < w[0]), "{volumes:?}");
     assert!(volumes[3] < 0.5 * volumes[0], "{volumes:?}");
+}
+
+#[test]
+fn sampled_medians_keep_leaves_near_even_and_ties_still_split() {
+    // 20,000 scattered triangles (deterministic): the upper levels split at sampled medians.
+    let scattered: Vec<TriangleBox> = (0..20_000u32)
+        .map(|i| {
+            let f = i as f32;
+            let c = [
+                (f * 0.618).fract() * 50.0,
+                (f * 0.377).sin() * 3.0,
+                (f * 0.123).fract(),
+            ];
+            (c, [c[0], c[1], c[2], c[0] + 0.1, c[1] + 0.1, c[2] + 0.1])
+        })
+        .collect();
+    // Every centroid equal (no pivot parts them), and a few NaN among equal ones.
+    let same = vec![([1.0f32; 3], [1.0f32, 1.0, 1.0, 1.0, 1.0, 1.0]); 3_000];
+    let mut nan = same.clone();
+    for t in nan.iter_mut().step_by(7) {
+        t.0 = [f32::NAN; 3];
+    }
+    for (name, all) in [("scattered", &scattered), ("same", &same), ("nan", &nan)] {
+        let mut work = all.clone();
+        let mut leaves = Vec::new();
+        split(&mut work, 8, 0, None, &mut leaves);
+        assert_eq!(leaves.len(), 256, "{name}");
+        // Consecutive, covering every item once.
+        assert_eq!(leaves[0].start, 0, "{name}");
+        assert!(leaves.windows(2).all(|w| w[0].end == w[1].start), "{name}");
+        assert_eq!(leaves[255].end, all.len(), "{name}");
+        let even = all.len() as f64 / 256.0;
+        let (lo, hi) = leaves.iter().fold((usize::MAX, 0), |(lo, hi), r| {
+            (lo.min(r.len()), hi.max(r.len()))
+        });
+        assert!(
+            lo as f64 >= 0.5 * even && hi as f64 <= 1.6 * even,
+            "{name}: leaves of {lo}..{hi} items, {even} even"
+        );
+    }
+    // The sampled splits order the scattered set along each split's axis: a leaf's centroids
+    // lie on one side of its sibling's on the root's axis (x, the widest).
+    let mut work = scattered.clone();
+    let mut leaves = Vec::new();
+    split(&mut work, 1, 0, None, &mut leaves);
+    let max_left = work[leaves[0].clone()]
+        .iter()
+        .map(|t| t.0[0])
+        .fold(f32::MIN, f32::max);
+    let min_right = work[leaves[1].clone()]
+        .iter()
+        .map(|t| t.0[0])
+        .fold(f32::MAX, f32::min);
+    assert!(max_left <= min_right, "{max_left} > {min_right}");
 }
 
 /// Two meshes, a triangle BLAS over both, an AABB BLAS and a triangle BLAS over the second.
@@ -160,9 +214,13 @@ fn a_stored_table_round_trips_and_is_used_only_for_the_records_it_was_made_for()
     let mut long = bytes.clone();
     long.push(0);
     assert_eq!(decode_section(&long), None);
-    let mut v2 = bytes.clone();
-    v2[13] = b'2';
-    assert_eq!(decode_section(&v2), None);
+    let mut v3 = bytes.clone();
+    v3[13] = b'3';
+    assert_eq!(decode_section(&v3), None);
+    // Version 1 (exact medians, the same layout) is still read.
+    let mut v1 = bytes.clone();
+    v1[13] = b'1';
+    assert_eq!(decode_section(&v1).as_ref(), Some(&stored));
     let mut swapped = stored.clone();
     swapped.entries.swap(0, 1);
     assert_eq!(decode_section(&encode_section(&swapped)), None);
@@ -212,12 +270,12 @@ fn blas_boxes_of_meshes_equal_boxes_from_their_triangles() {
     assert_eq!(failed, vec![padded([0.0, 0.0, 0.0, 1.0, 1.0, 1.0]); 2]);
 }
 
-/// The boxes as they were made before the splits moved keys (each triangle's centroid and
-/// box reordered in place): earlier packages' stored tables hold these.
+/// The boxes made by splitting the triangles themselves (each triangle's centroid and box
+/// reordered in place): the splits see the same centroids in the same order either way.
 fn boxes_moving_triangles(tris: &mut [TriangleBox], fan: usize) -> Vec<Box6> {
     let mut out = vec![EMPTY; fan + fan * fan];
     let mut leaves = Vec::with_capacity(fan * fan);
-    split(tris, 2 * fan.trailing_zeros(), 0, &mut leaves);
+    split(tris, 2 * fan.trailing_zeros(), 0, None, &mut leaves);
     let leaf_boxes: Vec<Box6> = leaves
         .iter()
         .map(|r| {
