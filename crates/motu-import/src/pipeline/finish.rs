@@ -109,12 +109,15 @@ pub(super) fn finish(
         ptex_max: o.ptex_max,
     };
     let textures = crate::textures::write_textures(&mut writer, scene, caps, &mut meta.warnings)?;
+    crate::memory::log_phase("textures");
     drop(owned);
+    crate::memory::log_phase("scene dropped");
     let t = Instant::now();
     let (split_meta, split) =
         crate::split::write_stream_split(&mut writer, compiled, o.stream_split_instances)?;
     meta.stream_split = Some(split_meta);
     let split_ms = t.elapsed().as_secs_f64() * 1e3;
+    crate::memory::log_phase("stream split");
     let mut view = compiled.view();
     view.textures = &textures;
     view.texels = &[];
@@ -131,6 +134,7 @@ pub(super) fn finish(
         crate::proxy_boxes::write_proxy_boxes(&mut writer, &streamed)?;
     }
     let proxy_boxes_ms = t.elapsed().as_secs_f64() * 1e3;
+    crate::memory::log_phase("proxy boxes");
     let t = Instant::now();
     if o.proxy_clusters {
         crate::split::write_proxy_clusters(&mut writer, &streamed)?;
@@ -138,15 +142,15 @@ pub(super) fn finish(
     drop(streamed_split);
     drop(split);
     let proxy_clusters_ms = t.elapsed().as_secs_f64() * 1e3;
+    crate::memory::log_phase("proxy clusters");
     // What `motu report` walks instead of every instance (the package's own tables).
     crate::split::write_blas_counts(&mut writer, &view)?;
+    crate::memory::log_phase("blas counts");
     motu_pack::write_hierarchy_after_texels(&mut writer, &view, &meta)?;
-    Ok((
-        writer.finish().map_err(ImportError::FinishPackage)?,
-        split_ms,
-        proxy_boxes_ms,
-        proxy_clusters_ms,
-    ))
+    crate::memory::log_phase("hierarchy");
+    let written = writer.finish().map_err(ImportError::FinishPackage)?;
+    crate::memory::log_phase("finish");
+    Ok((written, split_ms, proxy_boxes_ms, proxy_clusters_ms))
 }
 
 /// Per-element counts: each element's root edges and root meshes, and everything they reach.
