@@ -147,8 +147,8 @@ pub use partition::{
 pub use split::sah_partition;
 
 pub use tlas_split::{
-    split_for_streaming, stored_stream_split, stored_stream_split_in_place, StoredStreamSplit,
-    StreamSplit, STREAM_SPLIT_INSTANCES,
+    split_for_streaming, stored_stream_split, stored_stream_split_in_place,
+    stream_split_taking_instances, StoredStreamSplit, StreamSplit, STREAM_SPLIT_INSTANCES,
 };
 pub use validate::{validate, validate_with, Limits, ValidateError};
 
