@@ -96,7 +96,9 @@
 //! `split_for_streaming`, on a package's view: TLASes over `STREAM_SPLIT_INSTANCES` moved to the
 //! instance table's tail, split, finalized; `stored_stream_split`/`StreamSplit::from_stored`: the
 //! split as a package stores it — tables whole, instances as a map into the package's — and rebuilt
-//! in O(instances); `split/tests/reference.rs` (tests only): the partitioners before their speed-ups,
+//! in O(instances); `stream_split_taking_instances`/`StreamSplit::give_back`: the import's split,
+//! holding the package's instance table while the proxy tables are made over it (no second
+//! table); `split/tests/reference.rs` (tests only): the partitioners before their speed-ups,
 //! which the fast ones must equal; `tables.rs` holds the table helpers emit, split and finalize
 //! share), `ml`/`sl`/`N`/`auto` levels (`auto`, in `analyze.rs` `plan_auto_inlining`: grouping
 //! levels of ≤ 256 entries inlined, and small instanced prototypes — ≤ 2^17 triangles with their
@@ -147,8 +149,8 @@ pub use partition::{
 pub use split::sah_partition;
 
 pub use tlas_split::{
-    split_for_streaming, stored_stream_split, stored_stream_split_in_place, StoredStreamSplit,
-    StreamSplit, STREAM_SPLIT_INSTANCES,
+    split_for_streaming, stored_stream_split, stored_stream_split_in_place,
+    stream_split_taking_instances, StoredStreamSplit, StreamSplit, STREAM_SPLIT_INSTANCES,
 };
 pub use validate::{validate, validate_with, Limits, ValidateError};
 

@@ -223,12 +223,39 @@ pub struct StreamSplit {
 }
 
 impl StreamSplit {
-    /// The split hierarchy's view; `base` is the view it was made from (its texels).
+    /// The split hierarchy's view; `base` is the view it was made from (its textures and
+    /// texels: a split never changes them).
     pub fn view<'a>(&'a self, base: &HierarchyView<'a>) -> HierarchyView<'a> {
         HierarchyView {
+            textures: base.textures,
             texels: base.texels,
             ..self.scene.view()
         }
+    }
+
+    /// Puts the instance table [`stream_split_taking_instances`] took back into `compiled`, in
+    /// its order (`stored`: the split's map, which that call returned with `self`).
+    pub fn give_back(
+        self,
+        compiled: &mut CompiledScene,
+        stored: &StoredStreamSplit,
+    ) -> Result<(), CompileError> {
+        let mut instances = self.scene.instances;
+        let source = &stored.instance_source;
+        if instances.len() != source.len() || stored.extra_instances.len() > source.len() {
+            return Err(CompileError::Internal(format!(
+                "the stream split's map names {} instances ({} extra) for {}",
+                source.len(),
+                stored.extra_instances.len(),
+                instances.len()
+            )));
+        }
+        for (r, &s) in instances.iter_mut().zip(source) {
+            r._pad = if s == NONE_U32 { 0 } else { s + 1 };
+        }
+        let n = source.len() - stored.extra_instances.len();
+        compiled.instances = untag_in_order(instances, n)?;
+        Ok(())
     }
 
     /// TLASes split, and pieces made.
@@ -406,6 +433,23 @@ pub fn stored_stream_split_in_place(
     compiled: &mut CompiledScene,
     cap: u32,
 ) -> Result<Option<StoredStreamSplit>, CompileError> {
+    let Some((stored, split)) = stream_split_taking_instances(compiled, cap)? else {
+        return Ok(None);
+    };
+    split.give_back(compiled, &stored)?;
+    Ok(Some(stored))
+}
+
+/// [`stored_stream_split_in_place`] that keeps the split for the caller: `compiled`'s instance
+/// table is moved into the split, in the split's order and with the records a reader's
+/// [`StreamSplit::from_stored`] rebuilds, and `compiled.instances` stays empty until
+/// [`StreamSplit::give_back`] puts the table back in its order. The import makes the proxy
+/// boxes and clusters over the split this way, without a second instance table beside the
+/// package's (64 bytes an instance at its peak).
+pub fn stream_split_taking_instances(
+    compiled: &mut CompiledScene,
+    cap: u32,
+) -> Result<Option<(StoredStreamSplit, StreamSplit)>, CompileError> {
     let Some(over) = over_cap(&compiled.tlases, cap) else {
         return Ok(None);
     };
@@ -418,10 +462,13 @@ pub fn stored_stream_split_in_place(
         ..tables_of(&view)
     };
     split_tagged_scene(&mut out, over, cap)?;
-    let split = StreamSplit { scene: out };
+    let mut split = StreamSplit { scene: out };
     let stored = split.stored(n);
-    compiled.instances = untag_in_order(split.scene.instances, n)?;
-    Ok(Some(stored))
+    // The origins are in `stored`; the records become the reader's (`_pad` 0, as in a package).
+    for r in &mut split.scene.instances {
+        r._pad = 0;
+    }
+    Ok(Some((stored, split)))
 }
 
 /// The TLASes of over `cap` instances (`None`: none is).

@@ -3,8 +3,29 @@
 
 /// Peak resident memory of this process so far (Linux `VmHWM`), if known.
 pub fn peak_rss_bytes() -> Option<u64> {
+    status_kib("VmHWM:").map(|k| k * 1024)
+}
+
+/// Resident memory of this process now (Linux `VmRSS`), if known.
+pub fn rss_bytes() -> Option<u64> {
+    status_kib("VmRSS:").map(|k| k * 1024)
+}
+
+fn status_kib(key: &str) -> Option<u64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024)
+    let line = status.lines().find(|l| l.starts_with(key))?;
+    line.split_whitespace().nth(1)?.parse().ok()
+}
+
+/// Logs (debug) the resident and peak resident memory at the end of an import phase: where
+/// the peak is reached, by phase (`RUST_LOG=motu_import=debug`).
+pub(crate) fn log_phase(phase: &'static str) {
+    if tracing::enabled!(tracing::Level::DEBUG) {
+        tracing::debug!(
+            phase,
+            rss_bytes = rss_bytes().unwrap_or(0),
+            peak_rss_bytes = peak_rss_bytes().unwrap_or(0),
+            "memory at phase end"
+        );
+    }
 }

@@ -255,6 +255,7 @@ pub fn import(
     warn_on_count_overflow(&scene, &mut report);
     let parse_ms = t0.elapsed().as_secs_f64() * 1e3;
     tracing::info!(parse_ms, peak_rss_bytes = crate::peak_rss_bytes(), "parsed");
+    crate::memory::log_phase("parse");
 
     let element_names: Vec<String> = scene.elements().iter().map(|e| e.name.clone()).collect();
     let subset_ids = resolve_subset(&o.subset, &element_names)?;
@@ -538,6 +539,7 @@ fn compile_into(
         peak_rss_bytes = crate::peak_rss_bytes(),
         "compiled"
     );
+    crate::memory::log_phase("compile");
     for (i, m) in compiled.meshes.iter_mut().enumerate() {
         let at = if let Some(&at) = made_locations.get(&(i as u32)) {
             at

@@ -5,25 +5,33 @@
 
 use crate::ImportError;
 use motu_abi::HierarchyView;
-use motu_compile::{proxy_clusters, CompiledScene, StoredStreamSplit};
+use motu_compile::{proxy_clusters, CompiledScene, StoredStreamSplit, StreamSplit};
 use motu_package::PackageWriter;
 
 /// Splits `compiled`'s TLASes over `cap` instances (`--stream-split-instances`, by default
 /// [`motu_compile::STREAM_SPLIT_INSTANCES`]; 0: none) as `motu render --stream` does, writes
 /// the split's sections and returns the meta entry that describes them (with the cap: the
 /// renderer's default for this package), and the split (`None`: no TLAS over the cap). Split
-/// in place: the instance table is not copied (`compiled` ends as it was).
+/// in place: the instance table is not copied; the split holds it until
+/// [`motu_compile::StreamSplit::give_back`] (`compiled.instances` is empty until then).
 pub(crate) fn write_stream_split(
     writer: &mut PackageWriter,
     compiled: &mut CompiledScene,
     cap: u32,
-) -> Result<(motu_pack::StreamSplitMeta, Option<StoredStreamSplit>), ImportError> {
+) -> Result<
+    (
+        motu_pack::StreamSplitMeta,
+        Option<(StoredStreamSplit, StreamSplit)>,
+    ),
+    ImportError,
+> {
     let t = std::time::Instant::now();
-    let stored = if cap == 0 {
+    let split = if cap == 0 {
         None
     } else {
-        motu_compile::stored_stream_split_in_place(compiled, cap).map_err(ImportError::Compile)?
+        motu_compile::stream_split_taking_instances(compiled, cap).map_err(ImportError::Compile)?
     };
+    let stored = split.as_ref().map(|(s, _)| s);
     let mut meta = motu_pack::StreamSplitMeta {
         cap_instances: cap,
         tlases_split: 0,
@@ -51,7 +59,7 @@ pub(crate) fn write_stream_split(
         peak_rss_bytes = crate::peak_rss_bytes(),
         "stream split stored"
     );
-    Ok((meta, stored))
+    Ok((meta, split))
 }
 
 /// Makes the proxy clusters of every TLAS of `streamed` (the hierarchy a streamed render draws:

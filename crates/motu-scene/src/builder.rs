@@ -277,24 +277,23 @@ impl SceneBuilder {
                 p.edge_range = (counts[i], counts[i + 1]);
             }
             let sorted = self.edge_parent.windows(2).all(|w| w[0] <= w[1]);
-            let edges = if sorted {
-                self.edges
-            } else {
+            let mut edges = self.edges;
+            if !sorted {
+                // Each edge's slot, in `edge_parent`'s own buffer (same size: reused in
+                // place), then the edges permuted in place: no second edge table, which
+                // would double the import's largest table at its peak.
                 let mut cursor = counts.clone();
-                let mut out = vec![
-                    Edge {
-                        parent_from_child: Transform34::IDENTITY,
-                        child: PrototypeId(0)
-                    };
-                    self.edges.len()
-                ];
-                for (e, p) in self.edges.into_iter().zip(&self.edge_parent) {
-                    let slot = &mut cursor[p.index()];
-                    out[*slot as usize] = e;
-                    *slot += 1;
-                }
-                out
-            };
+                let mut slot: Vec<u32> = self
+                    .edge_parent
+                    .into_iter()
+                    .map(|p| {
+                        let s = &mut cursor[p.index()];
+                        *s += 1;
+                        *s - 1
+                    })
+                    .collect();
+                permute_in_place(&mut edges, &mut slot);
+            }
             (edges, self.edge_elements)
         };
 
@@ -335,6 +334,19 @@ impl SceneBuilder {
         scene.topo_order = topo_order(&scene)?;
         scene.bounds = compute_bounds(&scene);
         Ok(scene)
+    }
+}
+
+/// Moves `items[i]` to `items[slot[i]]` for every `i` (`slot` a permutation), in place: each
+/// swap puts one item where it belongs. `slot` ends as the identity.
+fn permute_in_place<T>(items: &mut [T], slot: &mut [u32]) {
+    debug_assert_eq!(items.len(), slot.len());
+    for i in 0..items.len() {
+        while slot[i] as usize != i {
+            let to = slot[i] as usize;
+            items.swap(i, to);
+            slot.swap(i, to);
+        }
     }
 }
 

@@ -1045,6 +1045,20 @@ fn a_stored_stream_split_rebuilds_the_same_split() {
         assert_eq!(a.pis, b.pis);
         assert_eq!(a.meshes, b.meshes);
         assert_eq!(made.counts(), back.counts());
+        // Kept by the caller, holding the table (the import's proxy tables are made over
+        // it): the reader's records, and the table given back in its order.
+        let mut taken = whole.clone();
+        let (s, kept) = crate::stream_split_taking_instances(&mut taken, cap)
+            .unwrap()
+            .expect("a TLAS over the cap");
+        assert_eq!(s, stored);
+        assert!(taken.instances.is_empty());
+        let k = kept.view(&whole.view());
+        assert_eq!(k.instances, b.instances);
+        assert_eq!((k.tlases, k.blases, k.pis), (b.tlases, b.blases, b.pis));
+        assert_eq!(kept.counts(), back.counts());
+        kept.give_back(&mut taken, &s).unwrap();
+        assert_eq!(taken.instances, whole.instances);
         let mut bad = stored.clone();
         bad.instance_source[0] = whole.instances.len() as u32;
         assert!(crate::StreamSplit::from_stored(&whole.view(), &bad).is_err());

@@ -109,44 +109,54 @@ pub(super) fn finish(
         ptex_max: o.ptex_max,
     };
     let textures = crate::textures::write_textures(&mut writer, scene, caps, &mut meta.warnings)?;
+    crate::memory::log_phase("textures");
     drop(owned);
+    crate::memory::log_phase("scene dropped");
     let t = Instant::now();
     let (split_meta, split) =
         crate::split::write_stream_split(&mut writer, compiled, o.stream_split_instances)?;
     meta.stream_split = Some(split_meta);
     let split_ms = t.elapsed().as_secs_f64() * 1e3;
-    let mut view = compiled.view();
-    view.textures = &textures;
-    view.texels = &[];
+    crate::memory::log_phase("stream split");
     let t = Instant::now();
     // The hierarchy a streamed render draws (the split's pieces in place of a large root):
     // the boxes and clusters are made over it, so their records and hashes are the reader's.
-    let streamed_split = split
-        .as_ref()
-        .map(|s| motu_compile::StreamSplit::from_stored(&view, s))
-        .transpose()
-        .map_err(ImportError::Compile)?;
-    let streamed = streamed_split.as_ref().map_or(view, |s| s.view(&view));
+    // The split holds the instance table meanwhile (no copy of it).
+    let base = motu_abi::HierarchyView {
+        textures: &textures,
+        texels: &[],
+        ..compiled.view()
+    };
+    let streamed = split.as_ref().map_or(base, |(_, s)| s.view(&base));
     if o.proxy_boxes {
         crate::proxy_boxes::write_proxy_boxes(&mut writer, &streamed)?;
     }
     let proxy_boxes_ms = t.elapsed().as_secs_f64() * 1e3;
+    crate::memory::log_phase("proxy boxes");
     let t = Instant::now();
     if o.proxy_clusters {
         crate::split::write_proxy_clusters(&mut writer, &streamed)?;
     }
-    drop(streamed_split);
-    drop(split);
     let proxy_clusters_ms = t.elapsed().as_secs_f64() * 1e3;
+    let t = Instant::now();
+    if let Some((stored, split)) = split {
+        split
+            .give_back(compiled, &stored)
+            .map_err(ImportError::Compile)?;
+    }
+    let split_ms = split_ms + t.elapsed().as_secs_f64() * 1e3;
+    crate::memory::log_phase("proxy clusters");
+    let mut view = compiled.view();
+    view.textures = &textures;
+    view.texels = &[];
     // What `motu report` walks instead of every instance (the package's own tables).
     crate::split::write_blas_counts(&mut writer, &view)?;
+    crate::memory::log_phase("blas counts");
     motu_pack::write_hierarchy_after_texels(&mut writer, &view, &meta)?;
-    Ok((
-        writer.finish().map_err(ImportError::FinishPackage)?,
-        split_ms,
-        proxy_boxes_ms,
-        proxy_clusters_ms,
-    ))
+    crate::memory::log_phase("hierarchy");
+    let written = writer.finish().map_err(ImportError::FinishPackage)?;
+    crate::memory::log_phase("finish");
+    Ok((written, split_ms, proxy_boxes_ms, proxy_clusters_ms))
 }
 
 /// Per-element counts: each element's root edges and root meshes, and everything they reach.

@@ -81,6 +81,48 @@ fn interleaved_edges_are_sorted_into_csr_in_import_order() {
     assert_eq!(s.root_edge_elements().len(), 2);
 }
 
+/// The in-place CSR sort (no second edge table) equals a stable sort by parent, on many
+/// parents interleaved pseudo-randomly.
+#[test]
+fn many_interleaved_edges_sort_in_place_as_a_stable_sort_would() {
+    let mut b = SceneBuilder::default();
+    let main = Scene::MAIN_ELEMENT;
+    let protos: Vec<PrototypeId> = (0..7)
+        .map(|i| b.add_prototype(&format!("p{i}"), main).unwrap())
+        .collect();
+    let leaf = b.add_prototype("leaf", main).unwrap();
+    let mut parents = vec![b.root()];
+    parents.extend(&protos);
+    let mut expected: Vec<(PrototypeId, f32)> = Vec::new();
+    let mut x = 12345u32;
+    for i in 0..5000 {
+        x = x.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+        let p = parents[(x >> 16) as usize % parents.len()];
+        b.add_instance(
+            p,
+            leaf,
+            Transform34::from_translation(Vec3::X * i as f32),
+            main,
+        )
+        .unwrap();
+        expected.push((p, i as f32));
+    }
+    let s = b.finish().unwrap();
+    expected.sort_by_key(|&(p, _)| p.0);
+    let got: Vec<(PrototypeId, f32)> = parents
+        .iter()
+        .flat_map(|&p| {
+            s.edges(p)
+                .iter()
+                .map(move |e| (p, e.parent_from_child.rows[0][3]))
+        })
+        .collect();
+    let mut by_id = got.clone();
+    by_id.sort_by_key(|&(p, _)| p.0);
+    assert_eq!(by_id, expected);
+    assert_eq!(s.all_edges().len(), 5000);
+}
+
 #[test]
 fn cycles_are_rejected() {
     let mut b = SceneBuilder::default();
