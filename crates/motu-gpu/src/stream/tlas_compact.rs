@@ -22,7 +22,8 @@
 //! [`StreamingRenderer::prepare_kept_records`], in free budget beyond the rebuild's own room
 //! (never evicting a structure for them), at a TLAS's second rebuild or later (a piece rebuilt
 //! once never pays back its encode), and never in a frame in which records were
-//! released for room (they would be made and released round after round); making them never
+//! released for room (they would be made and released round after round), nor for a few
+//! frames after records made again were released again (a back-off); making them never
 //! fails a rebuild for want of room (the TLAS is then written from the host).
 
 use motu_abi::tlas_compact::{chunk_firsts, TlasCompactPush, TLAS_COMPACT_CHUNK};
@@ -65,9 +66,14 @@ pub(super) struct KeptRecords {
     pipeline: Option<ComputePipeline>,
     /// Bytes of the kept records and the tables.
     bytes: u64,
-    /// The frame in which some were last released for room: none is made again in that frame
-    /// (a refused build retried would otherwise make and release them round after round).
+    /// The frame in which some were last released for room, and the first frame in which
+    /// records are made again: none is made in the frame of a release (a refused build retried
+    /// would otherwise make and release them round after round), and records released again
+    /// soon after they were made wait twice as long each time (up to 16 frames): re-encoding
+    /// them every frame would write more records than the host path.
     released_in_frame: Option<u64>,
+    make_from_frame: u64,
+    backoff_frames: u64,
 }
 
 impl KeptRecords {
@@ -122,8 +128,17 @@ impl KeptRecords {
                 heap.free(t.chunk_firsts);
             }
         }
-        if freed > 0 {
+        if freed > 0 && self.released_in_frame != Some(frame) {
+            let soon = self
+                .released_in_frame
+                .is_some_and(|p| frame <= p + self.backoff_frames + 1);
+            self.backoff_frames = if soon {
+                (self.backoff_frames * 2).clamp(1, 16)
+            } else {
+                1
+            };
             self.released_in_frame = Some(frame);
+            self.make_from_frame = frame + self.backoff_frames;
         }
         self.bytes = self.bytes.saturating_sub(freed);
         (freed, tlases)
@@ -159,7 +174,7 @@ impl StreamingRenderer<'_> {
             return Ok(gpu);
         }
         let frame = self.frame.stats().frame;
-        let may_make = self.tlases.records().released_in_frame != Some(frame);
+        let may_make = frame >= self.tlases.records().make_from_frame;
         for (k, &t) in ids.iter().enumerate() {
             let n = self.view.tlases[t as usize].instance_count;
             let kept = self.tlases.records_mut();
