@@ -97,7 +97,7 @@ impl StreamBounds {
             || self.defrag
             || self.mesh_memory != motu_gpu::MeshMemory::Auto
             || self.host_cache_mode != motu_gpu::HostCacheMode::Auto
-            || self.tlas_records != motu_gpu::TlasRecordsMode::Gpu
+            || self.tlas_records != motu_gpu::TlasRecordsMode::Host
     }
 }
 
