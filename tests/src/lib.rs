@@ -372,6 +372,47 @@ fn render_unpinned(
         .expect("stats JSON")
 }
 
+/// The image size and frame count of a streamed camera path ([`streamed_path`]).
+#[derive(Clone, Copy, Debug)]
+pub struct PathShape {
+    pub width: &'static str,
+    pub height: &'static str,
+    pub frames: &'static str,
+}
+
+/// The default camera's path in `shape` streamed under `budget` bytes on `backend`
+/// (`--stream --stream-always`: the streamer itself, also at budgets that hold the whole
+/// scene) with `extra` flags and `env`, its AOV written to `dir/name.aov`: the statistics and
+/// the AOV's path. The stream tests' shot paths (`stream.rs`) and `stream_records.rs` run it.
+#[allow(clippy::too_many_arguments)]
+pub fn streamed_path(
+    pkg: &Path,
+    dir: &Path,
+    name: &str,
+    budget: u64,
+    backend: &str,
+    shape: PathShape,
+    extra: &[&str],
+    env: &[(&str, &str)],
+) -> (serde_json::Value, PathBuf) {
+    let aov = dir.join(format!("{name}.aov"));
+    let budget = budget.to_string();
+    let mut args = vec![
+        "--width",
+        shape.width,
+        "--height",
+        shape.height,
+        "--frames",
+        shape.frames,
+        "--stream",
+        "--stream-always",
+        "--vram-budget",
+        &budget,
+    ];
+    args.extend(extra);
+    (render_env(pkg, backend, &aov, &args, env), aov)
+}
+
 /// Checks a streamed camera path's probe rounds (`render --stream --stats` JSON `st`, at most
 /// `max_rounds` a frame besides the verifying ones): every frame but the last probes its
 /// successor's pixels once and then, in later rounds, only pixels left open (fewer than all

@@ -7,7 +7,7 @@
 
 use motu_tests::{
     check_probe_rounds, gpu_available, gpu_island, json_u64 as u, motu_json, motu_ok,
-    render as render_with, render_env, report_json, report_peak_and_floor, s,
+    render as render_with, report_json, report_peak_and_floor, s, streamed_path, PathShape,
 };
 use std::path::{Path, PathBuf};
 
@@ -778,23 +778,12 @@ fn shot_path_env(
     extra: &[&str],
     env: &[(&str, &str)],
 ) -> (serde_json::Value, PathBuf) {
-    let aov = dir.join(format!("{name}.aov"));
-    let budget = budget.to_string();
-    let mut args = vec![
-        "--width",
-        "64",
-        "--height",
-        "36",
-        "--frames",
-        "8",
-        "--stream",
-        // The streamer itself, also at budgets that hold the whole scene ("everything").
-        "--stream-always",
-        "--vram-budget",
-        &budget,
-    ];
-    args.extend(extra);
-    (render_env(pkg, backend, &aov, &args, env), aov)
+    let shape = PathShape {
+        width: "64",
+        height: "36",
+        frames: "8",
+    };
+    streamed_path(pkg, dir, name, budget, backend, shape, extra, env)
 }
 
 /// Streamed 48×27 renders of one scene (`--stream-always` on the pipeline backend from

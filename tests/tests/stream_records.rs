@@ -1,18 +1,22 @@
-//! Issue 45 item 5: `--stream-tlas-records gpu` (opt-in; `host` is the default) keeps every rebuilt TLAS's
-//! instance records on the GPU and writes a rebuild's records with a compute pass; `host`
-//! encodes them on the host per rebuild. Along the default island's camera path, its root
-//! split into pieces and rebuilt (not updated), both give the full build's AOV at several
-//! budgets (the same path with room for everything is the reference), and with `gpu` the host writes only the proxy and marks records of each rebuild
-//! after the first frame (where the kept records are encoded once).
+//! Issue 45 item 5: `--stream-tlas-records gpu` (opt-in; `host` is the default) keeps the instance records of
+//! every TLAS rebuilt more than once on the GPU and writes a rebuild's records with a
+//! compute pass; `host` encodes them on the host per rebuild. Along the default island's camera
+//! path, its root split into pieces and rebuilt (not updated), both give the full build's AOV
+//! at several budgets (the same path with room for everything is the reference); the kept
+//! records yield to structures; and with `gpu` a rebuild of a TLAS with kept records leaves the host only
+//! its proxy and marks records.
 
 use motu_tests::{
-    gen_island, gpu_available, json_u64 as u, motu_ok, render, report_peak_and_floor, s,
+    gen_island, gpu_available, json_u64 as u, motu_ok, report_peak_and_floor, s, streamed_path,
+    PathShape,
 };
 use std::path::{Path, PathBuf};
 
-const W: &str = "48";
-const H: &str = "27";
-const FRAMES: &str = "5";
+const SHAPE: PathShape = PathShape {
+    width: "48",
+    height: "27",
+    frames: "5",
+};
 
 /// The default camera's path streamed under `budget` bytes (pieces of 3000 instances, rebuilt)
 /// with `extra` flags: the statistics and the AOV.
@@ -23,26 +27,14 @@ fn path(
     budget: u64,
     extra: &[&str],
 ) -> (serde_json::Value, PathBuf) {
-    let aov = dir.join(format!("{name}.aov"));
-    let budget = budget.to_string();
     let mut args = vec![
-        "--width",
-        W,
-        "--height",
-        H,
-        "--frames",
-        FRAMES,
-        "--stream",
-        "--stream-always",
         "--stream-split-instances",
         "3000",
         "--stream-tlas",
         "rebuild",
-        "--vram-budget",
-        &budget,
     ];
     args.extend(extra);
-    (render(pkg, "pipeline", &aov, &args), aov)
+    streamed_path(pkg, dir, name, budget, "pipeline", SHAPE, &args, &[])
 }
 
 fn frames(st: &serde_json::Value) -> Vec<serde_json::Value> {
@@ -61,7 +53,7 @@ fn gpu_kept_records_give_the_full_builds_aov_and_leave_the_host_only_the_tails()
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let pkg = gen_island(d, None);
-    let (peak, floor) = report_peak_and_floor(&pkg, W, H);
+    let (peak, floor) = report_peak_and_floor(&pkg, SHAPE.width, SHAPE.height);
     // The reference frames: the same path with room for everything (the streamed image of
     // the full build, as the other stream tests' `ShotFixture`), written from the host.
     let (_, full) = path(
@@ -135,6 +127,16 @@ fn gpu_kept_records_give_the_full_builds_aov_and_leave_the_host_only_the_tails()
             assert!(later_compacted > 0, "{name}: {later} later rebuilds");
         }
         if name == "quarter" {
+            // The kept records yield to structures, so the passes are mostly host's (not
+            // asserted equal: one frame of this path took one pass more, session 37).
+            let passes = |st: &serde_json::Value| -> Vec<u64> {
+                frames(st).iter().map(|f| u(&f["passes"])).collect()
+            };
+            eprintln!(
+                "passes per frame: gpu {:?}, host {:?}",
+                passes(&gpu),
+                passes(&host)
+            );
             assert!(
                 total(&gpu, "tlas_instances_written") < total(&host, "tlas_instances_written"),
                 "the host writes fewer records with gpu"

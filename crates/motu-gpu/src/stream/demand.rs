@@ -295,7 +295,9 @@ impl<'a> StreamingRenderer<'a> {
             }
             let mut n = self.group_within_frame_budget(&queue[i..], chunk);
             let reserve = self.tlas_reserve(&counts, &queue[i..i + n])?;
-            let free = self.free_budget_bytes().saturating_sub(reserve);
+            // Kept TLAS records count as free: they yield to structures (`tlas_compact.rs`).
+            let free =
+                (self.free_budget_bytes() + self.tlases.records().bytes()).saturating_sub(reserve);
             if !evict_groups {
                 // Free memory only: a group the budget cannot hold would stream its meshes for
                 // nothing.
@@ -313,6 +315,12 @@ impl<'a> StreamingRenderer<'a> {
             let group = &queue[i..i + n];
             let evict = evict_groups || group.len() == 1;
             let need: u64 = group.iter().map(|&b| self.blas_estimate_bytes(b)).sum();
+            // The group's room next to the TLAS reserve: kept TLAS records yield first (where
+            // nothing is evicted, only when that makes the room).
+            let short = need.saturating_sub(self.free_budget_bytes().saturating_sub(reserve));
+            if evict || short <= self.tlases.records().bytes() {
+                self.release_kept_records_for_room(short);
+            }
             if evict {
                 // The room the whole group needs, made before its meshes stream (a BLAS's
                 // bytes count meshes other BLASes may still hold, so an eviction may free

@@ -493,7 +493,10 @@ impl<'a> StreamingRenderer<'a> {
         st.vram_budget_bytes = report.budget_bytes;
         st.heap_block_bytes = report.budget_block_bytes;
         st.heap_in_use_bytes = report.budget_in_use_bytes;
-        let fixed_bytes = report.budget_in_use_bytes.saturating_sub(streamed_bytes);
+        // Kept TLAS records are not fixed: they yield to structures (`tlas_compact.rs`).
+        let fixed_bytes = report
+            .budget_in_use_bytes
+            .saturating_sub(streamed_bytes + self.tlases.records().bytes());
         st.room_bytes = report.budget_bytes.saturating_sub(fixed_bytes);
     }
 

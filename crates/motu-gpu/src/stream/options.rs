@@ -109,9 +109,10 @@ pub enum TlasRecordsMode {
     /// Every instance's record is kept on the GPU (encoded once, the BLAS id where the address
     /// goes) and a compute pass writes a rebuild's records from it with the resident BLASes'
     /// addresses; the host writes only the proxy and marks records. A piece whose kept
-    /// records do not fit the budget is written from the host (`tlas_records_host` per frame).
-    /// Opt-in until timed on a GPU: the kept records take room, and on lavapipe a quarter
-    /// budget's paths took more passes with them (1.29 → 1.43 after the first, session 36).
+    /// records do not fit the budget is written from the host (`tlas_records_host_fallbacks`
+    /// per frame). The kept records yield to structures (released before any is evicted); on
+    /// lavapipe (session 37) 7 of 8 paths took `Host`'s passes frame by frame, but a split
+    /// root's path at a quarter took one pass more in one of 5 frames, so it stays opt-in.
     Gpu,
     /// The host encodes every resident instance's record into the staging ring per rebuild.
     #[default]

@@ -217,6 +217,11 @@ impl<'a> StreamingRenderer<'a> {
             // A few rounds at most: evicted items free whole blocks only when they empty
             // them, so this could otherwise evict everything unpinned.
             let mut short = need.saturating_sub(free(self));
+            if short > 0 {
+                // Kept TLAS records yield first (`tlas_compact.rs`).
+                self.release_kept_records_for_room(short);
+                short = need.saturating_sub(free(self));
+            }
             if short > 0 && self.opts.defrag {
                 // Whole blocks freed by moving what sparse ones hold, before evicting.
                 self.defragment(short)?;

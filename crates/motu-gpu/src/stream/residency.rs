@@ -291,7 +291,19 @@ impl Resident {
 impl<'a> StreamingRenderer<'a> {
     /// Evicts least-recently-visible unpinned structures (at least `bytes` of them, or all that
     /// are left). Returns false when nothing could be evicted.
+    /// Kept TLAS records (`tlas_compact.rs`) go first: they yield to structures, so when
+    /// they free `bytes` nothing is evicted.
     pub(super) fn evict_some(&mut self, bytes: u64, why: EvictWhy) -> Result<bool> {
+        let released = self.release_kept_records_for_room(bytes.max(1));
+        if released >= bytes.max(1) {
+            return Ok(true);
+        }
+        let evicted = self.evict_structures(bytes - released, why)?;
+        Ok(evicted || released > 0)
+    }
+
+    /// [`evict_some`](Self::evict_some) for structures alone.
+    fn evict_structures(&mut self, bytes: u64, why: EvictWhy) -> Result<bool> {
         let t0 = std::time::Instant::now();
         let before = self.frame.stats().evicted;
         let r = self.evict_some_untimed(bytes);
@@ -408,15 +420,16 @@ impl<'a> StreamingRenderer<'a> {
                     // What refused (`MOTU_LOG`): the numbers behind `evicted_on_refusal`.
                     tracing::debug!(%msg, "refused; evicting");
                     let step = (self.build_opts.budget_bytes / 32).max(1);
+                    // Kept TLAS records yield first (`tlas_compact.rs`): a structure never
+                    // gives way to them, nor is a block drained for them.
+                    if self.release_kept_records_for_room(step) > 0 {
+                        continue;
+                    }
                     // A refusal is for a new block: whole blocks drained first, if any.
                     if self.opts.defrag && self.defragment(step)?.freed_bytes > 0 {
                         continue;
                     }
-                    if self.evict_some(step, EvictWhy::Refused)? {
-                        continue;
-                    }
-                    // The TLAS records kept for the GPU path (`tlas_compact.rs`) go last.
-                    if self.give_up_kept_records() {
+                    if self.evict_structures(step, EvictWhy::Refused)? {
                         continue;
                     }
                     return Err(GpuError::Budget(msg));
@@ -439,16 +452,27 @@ impl<'a> StreamingRenderer<'a> {
         }
     }
 
-    /// [`with_eviction`](Self::with_eviction) when `evict`, else `f` once.
+    /// [`with_eviction`](Self::with_eviction) when `evict`, else `f` in free room: nothing is
+    /// evicted, but kept TLAS records, which count as free room (`tlas_compact.rs`), are
+    /// released while the budget refuses.
     pub(super) fn maybe_evicting<T>(
         &mut self,
         evict: bool,
         mut f: impl FnMut(&mut Self) -> Result<T>,
     ) -> Result<T> {
         if evict {
-            self.with_eviction(f)
-        } else {
-            f(self)
+            return self.with_eviction(f);
+        }
+        loop {
+            match f(self) {
+                Err(GpuError::Budget(msg)) => {
+                    let step = (self.build_opts.budget_bytes / 32).max(1);
+                    if self.release_kept_records_for_room(step) == 0 {
+                        return Err(GpuError::Budget(msg));
+                    }
+                }
+                r => return r,
+            }
         }
     }
 

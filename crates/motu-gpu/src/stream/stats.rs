@@ -173,8 +173,9 @@ pub struct FrameStreamStats {
     /// milliseconds of those passes (tables' upload, dispatch and wait).
     pub tlas_records_compacted: u64,
     pub tlas_compact_ms: f64,
-    /// Rebuilds of a TLAS whose kept records did not fit the budget, so the host wrote its
-    /// records (`--stream-tlas-records gpu`).
+    /// Rebuilds of a TLAS without kept records, so the host wrote its records
+    /// (`--stream-tlas-records gpu`): at its first rebuild (they are made at a second), or
+    /// where they did not fit or were released for room.
     pub tlas_records_host_fallbacks: u32,
     /// Records the host encoded into kept records (once per TLAS, at its first rebuild with
     /// `gpu`; not in `tlas_instances_written`).
@@ -182,6 +183,9 @@ pub struct FrameStreamStats {
     /// Bytes of the kept records and their tables after the frame's last rebuild (0 in a
     /// frame without rebuilds); part of the skeleton.
     pub tlas_records_kept_bytes: u64,
+    /// TLASes whose kept records were released for a structure's room this frame (they yield
+    /// to structures; none is made again in the frame).
+    pub tlas_records_released: u32,
     /// Of `tlas_builds`: updates of persistent TLASes (a refit over every instance, no new
     /// structure; see `StreamOptions::tlas_update`).
     pub tlas_updates: u32,
@@ -364,8 +368,9 @@ pub struct StreamTotals {
     /// full residency, update scratch, and records where host memory counts).
     pub tlas_mode: &'static str,
     /// Where rebuilt TLASes' records came from (`gpu` or `host`, `--stream-tlas-records`), the
-    /// most bytes kept for the GPU path, and how often a refused allocation with nothing else
-    /// to evict released them (rebuilds then wrote from the host until room was free again).
+    /// most bytes kept for the GPU path, and how many TLASes' kept records were released for a
+    /// structure's room (they yield to structures; rebuilds then wrote from the host until a
+    /// later frame made them again).
     pub tlas_records_mode: &'static str,
     pub tlas_records_kept_bytes: u64,
     pub tlas_records_released: u32,

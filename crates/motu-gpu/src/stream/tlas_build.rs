@@ -164,10 +164,15 @@ impl<'a> StreamingRenderer<'a> {
         let (persistent_ids, rebuild_ids): (Vec<u32>, Vec<u32>) =
             ids.iter().partition(|&&t| b.r.tlases.in_persistent_mode(t));
         if !rebuild_ids.is_empty() {
-            // Kept records are made first (they may evict for their room, so before the
-            // residency is read); the probe then asks for the rebuild's transient.
-            b.gpu = b.r.prepare_kept_records(&rebuild_ids)?;
+            // The rebuild's transient is probed first; kept records are then made only in free
+            // budget beyond what the rebuild needs (they never evict, nor take its room).
             b.r.probe_tlas_room(&rebuild_ids)?;
+            let counts = b.r.resident_instance_counts();
+            let mut room_bytes = 0u64;
+            for &t in &rebuild_ids {
+                room_bytes += b.r.tlas_rebuild_bytes(t, counts[t as usize])?;
+            }
+            b.gpu = b.r.prepare_kept_records(&rebuild_ids, room_bytes)?;
         }
         b.times.probe_ms = b.times.lap();
         b.addrs =

@@ -7,13 +7,24 @@
 //! BLAS address table, and writes only the tail (proxy and marks) records. The records are
 //! the host path's, byte for byte and in the same order, so the TLAS and the image are too.
 //!
+//! Kept records live in room no structure wants: they yield to structures. Whenever room is
+//! made for a BLAS (a build, a restore, a texture) or a TLAS rebuild, kept records are
+//! released first, one TLAS at a time, least recently rebuilt first
+//! ([`StreamingRenderer::release_kept_records_for_room`], counted in
+//! `tlas_records_released`), before any structure is evicted or a block drained; and the
+//! room the streamer sizes non-evicting work by counts them as free. So a frame's structures
+//! see the room they see with `host` records, and the passes are the same.
+//!
 //! Invariants: a kept buffer holds TLAS `t`'s `instance_count` records in instance order and
 //! is never written after its encode; the kept bytes (records, BLAS address table, chunk
-//! table) count against the budget as part of the skeleton (`Tlases::size_bytes`); kept
-//! records are made only by [`StreamingRenderer::prepare_kept_records`], in free budget
-//! (never evicting a structure for them), which never fails a rebuild for want of room (the
-//! TLAS is then written from the host); they are all released when a refused allocation finds
-//! nothing else to evict ([`KeptRecords::give_up`]) and made again where room is free.
+//! table) count against the budget as part of the skeleton (`Tlases::size_bytes`) but not in
+//! a frame's `room_bytes`; kept records are made only by
+//! [`StreamingRenderer::prepare_kept_records`], in free budget beyond the rebuild's own room
+//! (never evicting a structure for them), at a TLAS's second rebuild or later (a piece rebuilt
+//! once never pays back its encode), and never in a frame in which records were
+//! released for room (they would be made and released round after round), nor for a few
+//! frames after records made again were released again (a back-off); making them never
+//! fails a rebuild for want of room (the TLAS is then written from the host).
 
 use motu_abi::tlas_compact::{chunk_firsts, TlasCompactPush, TLAS_COMPACT_CHUNK};
 use motu_alloc::{AllocKind, MemoryClass};
@@ -43,13 +54,26 @@ struct CompactTables {
 pub(super) struct KeptRecords {
     /// Per TLAS: its records, once made.
     kept: Vec<Option<HeapBuffer>>,
+    /// Per TLAS: the rebuild stamp of its last rebuild with kept records (the release order:
+    /// least recently rebuilt first).
+    used_at: Vec<u64>,
+    /// Per TLAS: whether it was rebuilt before (records are made only at a second rebuild: a
+    /// TLAS rebuilt once never pays back the encode).
+    rebuilt_before: Vec<bool>,
+    /// Counts rebuilds (the stamps of `used_at`).
+    stamp: u64,
     tables: Option<CompactTables>,
     pipeline: Option<ComputePipeline>,
     /// Bytes of the kept records and the tables.
     bytes: u64,
-    /// The frame in which they were last released: none is made again in that frame (a
-    /// refused build retried would otherwise make and release them round after round).
+    /// The frame in which some were last released for room, and the first frame in which
+    /// records are made again: none is made in the frame of a release (a refused build retried
+    /// would otherwise make and release them round after round), and records released again
+    /// soon after they were made wait twice as long each time (up to 16 frames): re-encoding
+    /// them every frame would write more records than the host path.
     released_in_frame: Option<u64>,
+    make_from_frame: u64,
+    backoff_frames: u64,
 }
 
 impl KeptRecords {
@@ -57,6 +81,8 @@ impl KeptRecords {
     pub fn new(tlases: usize) -> KeptRecords {
         KeptRecords {
             kept: (0..tlases).map(|_| None).collect(),
+            used_at: vec![0; tlases],
+            rebuilt_before: vec![false; tlases],
             ..Default::default()
         }
     }
@@ -75,21 +101,47 @@ impl KeptRecords {
         self.tables.is_some()
     }
 
-    /// Releases every kept record and table (a refused allocation found nothing else to
-    /// evict). Returns whether anything was released.
-    pub fn give_up(&mut self, heap: &mut GpuHeap) -> bool {
-        let mut any = false;
-        for b in self.kept.iter_mut().filter_map(Option::take) {
-            heap.free(b);
-            any = true;
+    /// Releases kept records, least recently rebuilt TLAS first, until at least `bytes` are
+    /// released or none is left (the tables go with the last records); `frame`: the frame
+    /// that needed the room (none is made again in it). Returns the bytes released and the
+    /// TLASes whose records went.
+    pub fn release_for_room(&mut self, bytes: u64, frame: u64, heap: &mut GpuHeap) -> (u64, u32) {
+        let mut order: Vec<usize> = (0..self.kept.len())
+            .filter(|&t| self.kept[t].is_some())
+            .collect();
+        order.sort_by_key(|&t| (self.used_at[t], t));
+        let (mut freed, mut tlases) = (0u64, 0u32);
+        for t in order {
+            if freed >= bytes {
+                break;
+            }
+            if let Some(b) = self.kept[t].take() {
+                freed += b.size_bytes();
+                tlases += 1;
+                heap.free(b);
+            }
         }
-        if let Some(t) = self.tables.take() {
-            heap.free(t.blas_addresses);
-            heap.free(t.chunk_firsts);
-            any = true;
+        if freed < bytes || self.kept.iter().all(Option::is_none) {
+            if let Some(t) = self.tables.take() {
+                freed += t.blas_addresses.size_bytes() + t.chunk_firsts.size_bytes();
+                heap.free(t.blas_addresses);
+                heap.free(t.chunk_firsts);
+            }
         }
-        self.bytes = 0;
-        any
+        if freed > 0 && self.released_in_frame != Some(frame) {
+            let soon = self
+                .released_in_frame
+                .is_some_and(|p| frame <= p + self.backoff_frames + 1);
+            self.backoff_frames = if soon {
+                (self.backoff_frames * 2).clamp(1, 16)
+            } else {
+                1
+            };
+            self.released_in_frame = Some(frame);
+            self.make_from_frame = frame + self.backoff_frames;
+        }
+        self.bytes = self.bytes.saturating_sub(freed);
+        (freed, tlases)
     }
 }
 
@@ -108,23 +160,34 @@ fn storage_usage() -> BufferUsage {
 
 impl StreamingRenderer<'_> {
     /// Per TLAS of `ids` (rebuilt, not persistent): whether its records are compacted on the
-    /// GPU this rebuild. Kept records are made where missing, in free budget (they never evict
-    /// a structure); where they do not fit, the TLAS is written from the host
-    /// (`tlas_records_host_fallbacks`).
-    pub(super) fn prepare_kept_records(&mut self, ids: &[u32]) -> Result<Vec<bool>> {
+    /// GPU this rebuild. Kept records are made where missing for a TLAS rebuilt before, in
+    /// free budget beyond `room_bytes` (what the rebuild itself needs): they
+    /// never evict a structure, nor take the rebuild's room. A TLAS without them is written
+    /// from the host (`tlas_records_host_fallbacks`).
+    pub(super) fn prepare_kept_records(
+        &mut self,
+        ids: &[u32],
+        room_bytes: u64,
+    ) -> Result<Vec<bool>> {
         let mut gpu = vec![false; ids.len()];
         if self.opts.tlas_records != TlasRecordsMode::Gpu {
             return Ok(gpu);
         }
         let frame = self.frame.stats().frame;
-        let may_make = self.tlases.records().released_in_frame != Some(frame);
+        let may_make = frame >= self.tlases.records().make_from_frame;
         for (k, &t) in ids.iter().enumerate() {
             let n = self.view.tlases[t as usize].instance_count;
+            let kept = self.tlases.records_mut();
+            let earlier = std::mem::replace(&mut kept.rebuilt_before[t as usize], true);
             if n == 0 {
                 continue;
             }
-            gpu[k] = self.tlases.records().has(t) || (may_make && self.make_kept(t)?);
-            if !gpu[k] {
+            gpu[k] = kept.has(t) || (may_make && earlier && self.make_kept(t, room_bytes)?);
+            let kept = self.tlases.records_mut();
+            if gpu[k] {
+                kept.stamp += 1;
+                kept.used_at[t as usize] = kept.stamp;
+            } else {
                 self.frame.stats_mut().tlas_records_host_fallbacks += 1;
             }
         }
@@ -134,28 +197,38 @@ impl StreamingRenderer<'_> {
         Ok(gpu)
     }
 
-    /// A refused allocation found nothing else to evict: the kept records go (rebuilds write
-    /// from the host until room is free for them again). Returns whether any bytes were
-    /// released.
-    pub(super) fn give_up_kept_records(&mut self) -> bool {
-        let bytes = self.tlases.records().bytes();
-        let any = self.tlases.records_mut().give_up(&mut self.heap);
-        if any {
-            tracing::debug!(
-                kept_bytes = bytes,
-                "the budget refused an allocation with nothing else to evict: kept TLAS records \
-                 released"
-            );
-            self.totals.tlas_records_released += 1;
-            let frame = self.frame.stats().frame;
-            self.tlases.records_mut().released_in_frame = Some(frame);
+    /// Room of at least `bytes` is wanted for a structure: kept records go first, least
+    /// recently rebuilt TLAS first (see the module docs). Returns the bytes released.
+    pub(super) fn release_kept_records_for_room(&mut self, bytes: u64) -> u64 {
+        if bytes == 0 || self.tlases.records().bytes() == 0 {
+            return 0;
         }
-        any
+        let frame = self.frame.stats().frame;
+        let (freed, tlases) =
+            self.tlases
+                .records_mut()
+                .release_for_room(bytes, frame, &mut self.heap);
+        if freed > 0 {
+            tracing::debug!(
+                wanted_bytes = bytes,
+                freed_bytes = freed,
+                tlases,
+                "kept TLAS records released for a structure's room"
+            );
+            self.totals.tlas_records_released += tlases;
+            self.frame.stats_mut().tlas_records_released += tlases;
+        }
+        freed
     }
 
     /// Makes TLAS `t`'s kept records (and the tables and pipeline, the first time) in free
-    /// budget: they never evict a structure. Returns false where the budget refuses them.
-    fn make_kept(&mut self, t: u32) -> Result<bool> {
+    /// budget beyond `room_bytes`: they never evict a structure. Returns false where they do
+    /// not fit.
+    fn make_kept(&mut self, t: u32, room_bytes: u64) -> Result<bool> {
+        let n = u64::from(self.view.tlases[t as usize].instance_count);
+        if self.free_budget_bytes() < room_bytes + n * RECORD_BYTES as u64 {
+            return Ok(false);
+        }
         if !self.tlases.records().has_tables() {
             match self.make_tables() {
                 Ok(()) => {}
@@ -163,7 +236,6 @@ impl StreamingRenderer<'_> {
                 Err(e) => return Err(e),
             }
         }
-        let n = u64::from(self.view.tlases[t as usize].instance_count);
         let alloc = self.heap.alloc_buffer(
             "stream-tlas-kept-records",
             n * RECORD_BYTES as u64,

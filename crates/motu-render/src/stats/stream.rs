@@ -87,6 +87,7 @@ mirror! {
         tlas_records_host_fallbacks: u32,
         tlas_records_kept_written: u64,
         tlas_records_kept_bytes: u64,
+        tlas_records_released: u32,
         tlas_updates: u32,
         tlas_rebuild_transient_bytes: u64,
         defrag_moves: u32,
