@@ -167,12 +167,17 @@ impl<'a> StreamingRenderer<'a> {
             // The rebuild's transient is probed first; kept records are then made only in free
             // budget beyond what the rebuild needs (they never evict, nor take its room).
             b.r.probe_tlas_room(&rebuild_ids)?;
-            let counts = b.r.resident_instance_counts();
-            let mut room_bytes = 0u64;
-            for &t in &rebuild_ids {
-                room_bytes += b.r.tlas_rebuild_bytes(t, counts[t as usize])?;
+            if b.r.opts.tlas_records == super::TlasRecordsMode::Gpu {
+                // The host path skips this sizing: it keeps nothing.
+                let counts = b.r.resident_instance_counts();
+                let mut room_bytes = 0u64;
+                for &t in &rebuild_ids {
+                    room_bytes += b.r.tlas_rebuild_bytes(t, counts[t as usize])?;
+                }
+                b.gpu = b.r.prepare_kept_records(&rebuild_ids, room_bytes)?;
+            } else {
+                b.gpu = vec![false; rebuild_ids.len()];
             }
-            b.gpu = b.r.prepare_kept_records(&rebuild_ids, room_bytes)?;
         }
         b.times.probe_ms = b.times.lap();
         b.addrs =
