@@ -148,11 +148,13 @@ pub struct StreamBoundArgs {
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, default_value = "auto")]
     pub stream_host_cache: HostCacheArg,
     /// Streaming: where a rebuilt TLAS's instance records come from. `gpu` (opt-in): every
-    /// instance's record is kept on the GPU (encoded once, at the TLAS's second rebuild) and a compute pass writes a rebuild's records from it with the resident BLASes'
-    /// addresses; the host writes only the proxy and marks records. The kept records take free
-    /// budget only (64 bytes an instance) and are released before any structure is evicted, so
-    /// the passes are mostly `host`'s; a TLAS without them is written from the host. `host`
-    /// (default): the host encodes every resident instance's record per rebuild and uploads it.
+    /// instance's record is kept on the GPU (encoded once, at the TLAS's second rebuild) and a
+    /// compute pass writes a rebuild's records from it with the resident BLASes' addresses; the
+    /// host writes only the proxy and marks records. The kept records take free budget only (64
+    /// bytes an instance) and are released before any structure is evicted, so the passes are
+    /// mostly `host`'s; a TLAS without them is written from the host. `host` (default): the
+    /// host encodes every resident instance's record per rebuild and uploads it (H100, island
+    /// 0.3 at a quarter, before records yielded: `gpu` raised TLAS time 217 → 398 ms a frame).
     /// Both give the same image. --stats: stream.totals.tlas_records_mode,
     /// tlas_records_released, per frame tlas_instances_written (the host's),
     /// tlas_records_compacted, tlas_compact_ms, tlas_records_kept_bytes,
