@@ -217,3 +217,49 @@ fn the_sky_maps_scale_is_honoured() {
         "a quarter of the sky is darker: {sums:?}"
     );
 }
+
+/// `--ao-reach`: ambient-occlusion rays reach that fraction of the scene's diagonal. A reach
+/// far below the default leaves less of the sky occluded (a brighter image at a fixed
+/// exposure, never a darker pixel on average), and a value outside (0, 1000] is refused with
+/// the range named.
+#[test]
+fn a_shorter_ao_reach_occludes_less_sky() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = motu_tests::gen_forest(dir.path(), &[]);
+    let pkg = dir.path().join("f.motu");
+    motu_ok(&["import", s(&scene), "-o", s(&pkg)]);
+    let at = |name: &str| dir.path().join(name);
+    let base = [
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--exposure",
+        "0",
+        "--ao-samples",
+        "4",
+    ];
+    render(&pkg, "cpu", &at("far.aov"), &base);
+    let mut short = base.to_vec();
+    short.extend(["--ao-reach", "0.0005"]);
+    render(&pkg, "cpu", &at("near.aov"), &short);
+    let luma = |px: &[[u8; 3]]| {
+        px.iter()
+            .map(|p| 0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64)
+            .sum::<f64>()
+            / px.len() as f64
+    };
+    let (far, near) = (read_png(&at("far.png")), read_png(&at("near.png")));
+    assert_ne!(far, near, "--ao-reach 0.0005 changed no pixel");
+    assert!(
+        luma(&near) > luma(&far),
+        "a shorter AO reach should occlude less sky: mean luma {:.2} against {:.2}",
+        luma(&near),
+        luma(&far)
+    );
+    let out = motu_tests::motu(&["render", s(&pkg), "-o", s(&at("x.png")), "--ao-reach", "0"]);
+    assert!(!out.status.success(), "--ao-reach 0 was accepted");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("outside (0, 1000]"), "stderr: {err}");
+    assert!(!at("x.png").exists(), "a refused render wrote its image");
+}

@@ -36,12 +36,19 @@ fn render_library_defaults_are_the_render_flags_defaults() {
     let a = render_args(&[]);
     let o = motu_render::ShadingOptions::default();
     assert_eq!(
-        (o.ao_samples, o.spp, o.auto_exposure, o.bounces),
+        (
+            o.ao_samples,
+            o.spp,
+            o.auto_exposure,
+            o.bounces,
+            o.ao_reach_of_diagonal
+        ),
         (
             a.ao_samples,
             a.spp,
             a.exposure == cli::ExposureArg::Auto,
-            a.bounces
+            a.bounces,
+            a.ao_reach
         )
     );
     let b = cmd::render::stream_bounds(&a.stream_bounds);

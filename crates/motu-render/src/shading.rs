@@ -20,6 +20,11 @@ pub struct ShadingOptions {
     /// `--bounces N`: diffuse bounces after each camera hit (every renderer, streaming
     /// included).
     pub bounces: u32,
+    /// `--ao-reach F`: ambient-occlusion rays reach F × the scene's diagonal (default
+    /// [`AO_DISTANCE_OF_DIAGONAL`]). Shorter reach: AO rays meet fewer far structures, so a
+    /// streamed frame's working set shrinks; the image changes (compare against a full build
+    /// with the same setting).
+    pub ao_reach_of_diagonal: f32,
 }
 
 impl Default for ShadingOptions {
@@ -30,13 +35,14 @@ impl Default for ShadingOptions {
             exposure_ev: 0.0,
             auto_exposure: true,
             bounces: 1,
+            ao_reach_of_diagonal: AO_DISTANCE_OF_DIAGONAL,
         }
     }
 }
 
 /// How the shaded view is lit: the scene's lights (the brightest `MAX_LIGHTS`; infinite
-/// lights become the sky colour), ambient occlusion reaching [`AO_DISTANCE_OF_DIAGONAL`] of the
-/// scene's diagonal, and the sampling and exposure options. A scene without lights gets the
+/// lights become the sky colour), ambient occlusion reaching `ao_reach_of_diagonal` (default
+/// [`AO_DISTANCE_OF_DIAGONAL`]) of the scene's diagonal, and the sampling and exposure options. A scene without lights gets the
 /// renderers' key light and sky.
 pub fn scene_shading(
     o: ShadingOptions,
@@ -49,6 +55,7 @@ pub fn scene_shading(
         exposure_ev: exposure,
         auto_exposure,
         bounces,
+        ao_reach_of_diagonal,
     } = o;
     use motu_abi::shade::{
         Shading, LIGHT_AREA, LIGHT_DISTANT, LIGHT_POINT, LIGHT_SPOT, MAX_LIGHTS,
@@ -65,7 +72,7 @@ pub fn scene_shading(
     if let Some(root) = view.tlases.get(view.root_tlas as usize) {
         let d = Vec3::from_array(root.bounds_max) - Vec3::from_array(root.bounds_min);
         if d.is_finite() && d.length() > 0.0 {
-            sh.ao_distance = AO_DISTANCE_OF_DIAGONAL * d.length();
+            sh.ao_distance = ao_reach_of_diagonal * d.length();
         }
     }
     let mut lights = Vec::new();

@@ -156,6 +156,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         allow_truncated: false,
         spp: 1,
         ao_samples: 1,
+        ao_reach: motu_render::AO_DISTANCE_OF_DIAGONAL,
         exposure: crate::cli::ExposureArg::Auto,
         bounces: motu_render::ShadingOptions::default().bounces,
         denoise: false,

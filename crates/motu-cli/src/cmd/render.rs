@@ -295,6 +295,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             },
             auto_exposure: a.exposure == crate::cli::ExposureArg::Auto,
             bounces: a.bounces,
+            ao_reach_of_diagonal: a.ao_reach,
         },
         camera: motu_render::CameraRequest {
             name: a.camera.clone(),
