@@ -26,6 +26,8 @@ pub struct FlightOptions {
     pub stream: bool,
     pub vram_budget: Option<u64>,
     pub stream_bounds: StreamBounds,
+    /// How the frames are lit (`--ao-reach`, `--bounces`); default: `motu render`'s.
+    pub shading: motu_render::ShadingOptions,
 }
 
 /// A measured flight: the JSON report and the text the CLI prints without `--json`.
@@ -85,9 +87,9 @@ pub fn run_flight(a: &FlightOptions) -> Result<Flight, BenchError> {
         "opening a Vulkan device for ray tracing (`motu devices` lists them)",
     ))?;
     let meshes = PackageMeshes(&pkg);
-    // Lit like `motu render`'s default shaded view (its default AO ray included), so a flight's
-    // frames cost what rendered frames cost.
-    let shading = motu_render::scene_shading(Default::default(), &pkg, &view);
+    // Lit like `motu render`'s shaded view with the same options (its default AO ray
+    // included), so a flight's frames cost what rendered frames cost.
+    let shading = motu_render::scene_shading(a.shading, &pkg, &view);
     if a.stream || a.vram_budget.is_some() {
         return run_streaming(
             a,

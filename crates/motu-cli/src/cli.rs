@@ -327,6 +327,13 @@ pub struct ViewArgs {
     pub backend: Option<BackendArg>,
     #[arg(help_heading = HEADING_SHADING, long, value_enum, default_value = "shaded")]
     pub view: ViewArg,
+    /// How far ambient-occlusion rays reach, as a fraction of the scene's diagonal, as `motu
+    /// render --ao-reach` (default 0.2; a shorter reach: a smaller streamed working set).
+    #[arg(help_heading = HEADING_SHADING, long, value_name = "FRACTION", default_value_t = motu_render::AO_DISTANCE_OF_DIAGONAL, value_parser = parse_ao_reach)]
+    pub ao_reach: f32,
+    /// Diffuse bounces at the start, as `motu render --bounces` (the panel changes it live).
+    #[arg(help_heading = HEADING_SHADING, long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=8))]
+    pub bounces: u32,
     /// Stream structures under this VRAM budget (implies --stream).
     #[arg(help_heading = HEADING_DEVICE, long, value_parser = parse_budget)]
     pub vram_budget: Option<u64>,
@@ -513,6 +520,13 @@ pub struct BenchArgs {
     /// With --camera-path --stream: the VRAM budget (default: unlimited).
     #[arg(long, value_parser = parse_budget, requires = "camera_path")]
     pub vram_budget: Option<u64>,
+    /// With --camera-path: ambient-occlusion reach as a fraction of the scene's diagonal, as
+    /// `motu render --ao-reach` (default 0.2).
+    #[arg(long, value_name = "FRACTION", value_parser = parse_ao_reach, requires = "camera_path")]
+    pub ao_reach: Option<f32>,
+    /// With --camera-path: diffuse bounces, as `motu render --bounces` (default 1).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=8), requires = "camera_path")]
+    pub bounces: Option<u32>,
     #[command(flatten)]
     pub stream_bounds: StreamBoundArgs,
     /// Internal: render one package and write its measurements (the child process of a render step).

@@ -53,6 +53,38 @@ fn render_library_defaults_are_the_render_flags_defaults() {
     );
     let b = cmd::render::stream_bounds(&a.stream_bounds);
     assert!(!b.given());
+    // The viewer's lighting flags default as render's, and take the same values.
+    let view = |flags: &[&str]| {
+        let args = ["motu", "view", "pkg"].iter().chain(flags);
+        match cli::Cli::try_parse_from(args).map(|c| c.command) {
+            Ok(cli::Command::View(v)) => Ok((v.ao_reach, v.bounces)),
+            Ok(_) => panic!("not view"),
+            Err(e) => Err(e.to_string()),
+        }
+    };
+    assert_eq!(view(&[]), Ok((a.ao_reach, a.bounces)));
+    assert_eq!(
+        view(&["--ao-reach", "0.05", "--bounces", "0"]),
+        Ok((0.05, 0))
+    );
+    assert!(view(&["--ao-reach", "0"]).is_err());
+    // A flight's: only with --camera-path.
+    let bench = |flags: &[&str]| {
+        let args = ["motu", "bench"].iter().chain(flags);
+        cli::Cli::try_parse_from(args)
+            .map(|_| ())
+            .map_err(|e| e.to_string())
+    };
+    let fly = [
+        "--camera-path",
+        "p.json",
+        "--package",
+        "pkg",
+        "--ao-reach",
+        "0.05",
+    ];
+    assert_eq!(bench(&fly), Ok(()));
+    assert!(bench(&["--ao-reach", "0.05"]).is_err());
     let a = render_args(&[
         "--stream-fallback",
         "coarse",

@@ -30,6 +30,14 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
             stream: a.stream,
             vram_budget: a.vram_budget,
             stream_bounds: super::render::stream_bounds(&a.stream_bounds),
+            shading: {
+                let d = motu_render::ShadingOptions::default();
+                motu_render::ShadingOptions {
+                    ao_reach_of_diagonal: a.ao_reach.unwrap_or(d.ao_reach_of_diagonal),
+                    bounces: a.bounces.unwrap_or(d.bounces),
+                    ..d
+                }
+            },
         };
         let flight = motu_bench::run_flight(&opts)?;
         if a.json {

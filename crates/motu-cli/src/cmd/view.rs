@@ -122,8 +122,17 @@ pub fn run(a: ViewArgs) -> anyhow::Result<()> {
         stack_size: a.stack_size,
         frames: 1,
         // The scene's lights with `motu render`'s defaults (one AO ray, one sample, exposure
-        // 0), so a view frame equals a render of the same camera.
-        shading: motu_render::scene_shading(Default::default(), &pkg, &base),
+        // 0) and the same --ao-reach/--bounces, so a view frame equals a render of the same
+        // camera.
+        shading: motu_render::scene_shading(
+            motu_render::ShadingOptions {
+                ao_reach_of_diagonal: a.ao_reach,
+                bounces: a.bounces,
+                ..Default::default()
+            },
+            &pkg,
+            &base,
+        ),
         ..Default::default()
     };
     if !(a.lod_r_max.is_finite() && a.lod_r_max > 0.0) {
