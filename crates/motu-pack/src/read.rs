@@ -255,7 +255,44 @@ pub fn read_mesh_blob(
     })
 }
 
+/// `bytes` as a slice of `T`: borrowed where `borrowed` (the chunk lives in the map) and the
+/// bytes are aligned for `T`, else copied.
+fn borrow_or_copy<T: bytemuck::Pod>(bytes: &[u8], borrowed: bool) -> std::borrow::Cow<'_, [T]> {
+    match bytemuck::try_cast_slice(bytes) {
+        Ok(values) if borrowed => std::borrow::Cow::Borrowed(values),
+        _ => std::borrow::Cow::Owned(bytemuck::pod_collect_to_vec(bytes)),
+    }
+}
+
 impl ScenePackage {
+    /// The distinct chunks holding mesh records `mesh_records`, in first-seen order (a record
+    /// out of range is skipped: reading it reports the error).
+    pub fn mesh_chunks(&self, mesh_records: &[u32]) -> Vec<ChunkId> {
+        let Ok(meshes) = self.package.section_as::<MeshRecord>(SECTION_MESHES) else {
+            return Vec::new();
+        };
+        let mut seen = std::collections::HashSet::new();
+        mesh_records
+            .iter()
+            .filter_map(|&m| meshes.get(m as usize))
+            .map(|r| ChunkId(r.chunk))
+            .filter(|c| seen.insert(c.0))
+            .collect()
+    }
+
+    /// Hints the kernel to read chunk `id` ahead ([`motu_package::Package::prefetch_chunk`]);
+    /// advice only.
+    pub fn prefetch_chunk(&self, id: ChunkId) {
+        let _ = self.package.prefetch_chunk(id);
+    }
+
+    /// Checks chunk `id`'s checksum now, if no read has yet (its first touch: callers
+    /// verify several chunks in parallel before reading meshes from them). A failure is left
+    /// for the read, which reports it.
+    pub fn verify_chunk(&self, id: ChunkId) {
+        let _ = self.package.chunk_stored(id);
+    }
+
     /// A compiled mesh's positions and indices: borrowed from the map for raw chunks (zero
     /// copy, straight into a staging buffer), decoded copies for compressed ones.
     #[allow(clippy::type_complexity)]
@@ -316,7 +353,7 @@ impl ScenePackage {
     }
 
     /// A compiled mesh's per-vertex normals and texture coordinates, where it has them
-    /// (borrowed from raw chunks, copied from compressed ones).
+    /// (borrowed from raw chunks where aligned, else copied).
     #[allow(clippy::type_complexity)]
     pub fn mesh_shading_slices(
         &self,
@@ -344,6 +381,7 @@ impl ScenePackage {
         }
         let vc = m.vertex_count as u64;
         let chunk = self.package.chunk(ChunkId(m.chunk))?;
+        let borrowed = matches!(chunk, motu_package::ChunkBytes::Borrowed(_));
         let get = |at: u64, n: u64| -> Result<&[u8], PackError> {
             chunk
                 .get(at as usize..(at + n) as usize)
@@ -351,13 +389,13 @@ impl ScenePackage {
         };
         let normals = if has_n {
             let b = get(m.normals_offset, vc * 12)?;
-            Some(Cow::Owned(bytemuck::pod_collect_to_vec(b)))
+            Some(borrow_or_copy(b, borrowed))
         } else {
             None
         };
         let uvs = if has_uv {
             let b = get(m.uvs_offset, vc * 8)?;
-            Some(Cow::Owned(bytemuck::pod_collect_to_vec(b)))
+            Some(borrow_or_copy(b, borrowed))
         } else {
             None
         };
