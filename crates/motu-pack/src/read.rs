@@ -264,6 +264,41 @@ fn borrow_or_copy<T: bytemuck::Pod>(bytes: &[u8], borrowed: bool) -> std::borrow
     }
 }
 
+/// A mesh's normals and texture coordinates (where `m` has them) in `chunk`, its chunk's raw
+/// bytes: borrowed where `borrowed` and aligned ([`borrow_or_copy`]).
+#[allow(clippy::type_complexity)]
+fn shading_slices<'c>(
+    chunk: &'c [u8],
+    borrowed: bool,
+    m: &MeshRecord,
+    mesh_record: u32,
+) -> Result<
+    (
+        Option<std::borrow::Cow<'c, [[f32; 3]]>>,
+        Option<std::borrow::Cow<'c, [[f32; 2]]>>,
+    ),
+    PackError,
+> {
+    let get = |at: u64, n: u64| -> Result<&'c [u8], PackError> {
+        chunk
+            .get(at as usize..(at + n) as usize)
+            .ok_or_else(|| PackError::Mesh {
+                mesh: mesh_record,
+                reason: "blob outside its chunk".into(),
+            })
+    };
+    let vc = m.vertex_count as u64;
+    let normals = match m.normals_offset != NONE_U64 {
+        true => Some(borrow_or_copy(get(m.normals_offset, vc * 12)?, borrowed)),
+        false => None,
+    };
+    let uvs = match m.flags & motu_abi::FLAG_HAS_UVS != 0 {
+        true => Some(borrow_or_copy(get(m.uvs_offset, vc * 8)?, borrowed)),
+        false => None,
+    };
+    Ok((normals, uvs))
+}
+
 impl ScenePackage {
     /// The distinct chunks holding mesh records `mesh_records`, in first-seen order (a record
     /// out of range is skipped: reading it reports the error).
@@ -365,7 +400,6 @@ impl ScenePackage {
         ),
         PackError,
     > {
-        use std::borrow::Cow;
         let meshes: &[MeshRecord] = self.package.section_as(SECTION_MESHES)?;
         let err = |reason: String| PackError::Mesh {
             mesh: mesh_record,
@@ -379,27 +413,19 @@ impl ScenePackage {
         if !has_n && !has_uv {
             return Ok((None, None));
         }
-        let vc = m.vertex_count as u64;
-        let chunk = self.package.chunk(ChunkId(m.chunk))?;
-        let borrowed = matches!(chunk, motu_package::ChunkBytes::Borrowed(_));
-        let get = |at: u64, n: u64| -> Result<&[u8], PackError> {
-            chunk
-                .get(at as usize..(at + n) as usize)
-                .ok_or_else(|| err("blob outside its chunk".into()))
-        };
-        let normals = if has_n {
-            let b = get(m.normals_offset, vc * 12)?;
-            Some(borrow_or_copy(b, borrowed))
-        } else {
-            None
-        };
-        let uvs = if has_uv {
-            let b = get(m.uvs_offset, vc * 8)?;
-            Some(borrow_or_copy(b, borrowed))
-        } else {
-            None
-        };
-        Ok((normals, uvs))
+        // Borrowed from the map where the chunk is raw; else from the decoded copy, copied.
+        match self.package.chunk(ChunkId(m.chunk))? {
+            motu_package::ChunkBytes::Borrowed(bytes) => {
+                shading_slices(bytes, true, m, mesh_record)
+            }
+            owned => {
+                let (n, u) = shading_slices(&owned, false, m, mesh_record)?;
+                fn own<T: Clone>(c: std::borrow::Cow<'_, [T]>) -> std::borrow::Cow<'static, [T]> {
+                    std::borrow::Cow::Owned(c.into_owned())
+                }
+                Ok((n.map(own), u.map(own)))
+            }
+        }
     }
 
     /// A cluster's primitive map (`FLAG_PRIMITIVE_MAP`): borrowed from raw chunks, copied from
