@@ -51,7 +51,8 @@ pub(crate) use tables::{
     set_instance_mask, MAX_PI_CAPACITY,
 };
 pub(crate) use upload::{
-    streamed_attribute_bytes, streamed_mesh_bytes, MeshGpu, MeshStager, Uploader,
+    streamed_attribute_bytes, streamed_mesh_bytes, upload_streamed_group, MeshGpu, MeshStager,
+    Uploader,
 };
 
 pub use crate::error::MeshSourceError;
@@ -90,6 +91,11 @@ pub trait MeshBlobSource: Sync {
     > {
         Ok((None, None))
     }
+
+    /// Mesh records `mesh_records` are read next (a build group's): a source may start
+    /// reading them ahead (a package: the kernel reads their chunks ahead, and the chunks'
+    /// first-touch checksums run in parallel). Advice only; errors surface when reading.
+    fn prepare(&self, _mesh_records: &[u32]) {}
 
     /// The boxes inside triangle BLASes stored with the meshes (a package's `proxy_boxes`
     /// section, `motu_compile::proxy_boxes::encode_section`), where the source has them. The

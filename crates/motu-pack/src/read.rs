@@ -255,7 +255,79 @@ pub fn read_mesh_blob(
     })
 }
 
+/// `bytes` as a slice of `T`: borrowed where `borrowed` (the chunk lives in the map) and the
+/// bytes are aligned for `T`, else copied.
+fn borrow_or_copy<T: bytemuck::Pod>(bytes: &[u8], borrowed: bool) -> std::borrow::Cow<'_, [T]> {
+    match bytemuck::try_cast_slice(bytes) {
+        Ok(values) if borrowed => std::borrow::Cow::Borrowed(values),
+        _ => std::borrow::Cow::Owned(bytemuck::pod_collect_to_vec(bytes)),
+    }
+}
+
+/// A mesh's normals and texture coordinates (where `m` has them) in `chunk`, its chunk's raw
+/// bytes: borrowed where `borrowed` and aligned ([`borrow_or_copy`]).
+#[allow(clippy::type_complexity)]
+fn shading_slices<'c>(
+    chunk: &'c [u8],
+    borrowed: bool,
+    m: &MeshRecord,
+    mesh_record: u32,
+) -> Result<
+    (
+        Option<std::borrow::Cow<'c, [[f32; 3]]>>,
+        Option<std::borrow::Cow<'c, [[f32; 2]]>>,
+    ),
+    PackError,
+> {
+    let get = |at: u64, n: u64| -> Result<&'c [u8], PackError> {
+        chunk
+            .get(at as usize..(at + n) as usize)
+            .ok_or_else(|| PackError::Mesh {
+                mesh: mesh_record,
+                reason: "blob outside its chunk".into(),
+            })
+    };
+    let vc = m.vertex_count as u64;
+    let normals = match m.normals_offset != NONE_U64 {
+        true => Some(borrow_or_copy(get(m.normals_offset, vc * 12)?, borrowed)),
+        false => None,
+    };
+    let uvs = match m.flags & motu_abi::FLAG_HAS_UVS != 0 {
+        true => Some(borrow_or_copy(get(m.uvs_offset, vc * 8)?, borrowed)),
+        false => None,
+    };
+    Ok((normals, uvs))
+}
+
 impl ScenePackage {
+    /// The distinct chunks holding mesh records `mesh_records`, in first-seen order (a record
+    /// out of range is skipped: reading it reports the error).
+    pub fn mesh_chunks(&self, mesh_records: &[u32]) -> Vec<ChunkId> {
+        let Ok(meshes) = self.package.section_as::<MeshRecord>(SECTION_MESHES) else {
+            return Vec::new();
+        };
+        let mut seen = std::collections::HashSet::new();
+        mesh_records
+            .iter()
+            .filter_map(|&m| meshes.get(m as usize))
+            .map(|r| ChunkId(r.chunk))
+            .filter(|c| seen.insert(c.0))
+            .collect()
+    }
+
+    /// Hints the kernel to read chunk `id` ahead ([`motu_package::Package::prefetch_chunk`]);
+    /// advice only.
+    pub fn prefetch_chunk(&self, id: ChunkId) {
+        let _ = self.package.prefetch_chunk(id);
+    }
+
+    /// Checks chunk `id`'s checksum now, if no read has yet (its first touch: callers
+    /// verify several chunks in parallel before reading meshes from them). A failure is left
+    /// for the read, which reports it.
+    pub fn verify_chunk(&self, id: ChunkId) {
+        let _ = self.package.chunk_stored(id);
+    }
+
     /// A compiled mesh's positions and indices: borrowed from the map for raw chunks (zero
     /// copy, straight into a staging buffer), decoded copies for compressed ones.
     #[allow(clippy::type_complexity)]
@@ -316,7 +388,7 @@ impl ScenePackage {
     }
 
     /// A compiled mesh's per-vertex normals and texture coordinates, where it has them
-    /// (borrowed from raw chunks, copied from compressed ones).
+    /// (borrowed from raw chunks where aligned, else copied).
     #[allow(clippy::type_complexity)]
     pub fn mesh_shading_slices(
         &self,
@@ -328,7 +400,6 @@ impl ScenePackage {
         ),
         PackError,
     > {
-        use std::borrow::Cow;
         let meshes: &[MeshRecord] = self.package.section_as(SECTION_MESHES)?;
         let err = |reason: String| PackError::Mesh {
             mesh: mesh_record,
@@ -342,26 +413,19 @@ impl ScenePackage {
         if !has_n && !has_uv {
             return Ok((None, None));
         }
-        let vc = m.vertex_count as u64;
-        let chunk = self.package.chunk(ChunkId(m.chunk))?;
-        let get = |at: u64, n: u64| -> Result<&[u8], PackError> {
-            chunk
-                .get(at as usize..(at + n) as usize)
-                .ok_or_else(|| err("blob outside its chunk".into()))
-        };
-        let normals = if has_n {
-            let b = get(m.normals_offset, vc * 12)?;
-            Some(Cow::Owned(bytemuck::pod_collect_to_vec(b)))
-        } else {
-            None
-        };
-        let uvs = if has_uv {
-            let b = get(m.uvs_offset, vc * 8)?;
-            Some(Cow::Owned(bytemuck::pod_collect_to_vec(b)))
-        } else {
-            None
-        };
-        Ok((normals, uvs))
+        // Borrowed from the map where the chunk is raw; else from the decoded copy, copied.
+        match self.package.chunk(ChunkId(m.chunk))? {
+            motu_package::ChunkBytes::Borrowed(bytes) => {
+                shading_slices(bytes, true, m, mesh_record)
+            }
+            owned => {
+                let (n, u) = shading_slices(&owned, false, m, mesh_record)?;
+                fn own<T: Clone>(c: std::borrow::Cow<'_, [T]>) -> std::borrow::Cow<'static, [T]> {
+                    std::borrow::Cow::Owned(c.into_owned())
+                }
+                Ok((n.map(own), u.map(own)))
+            }
+        }
     }
 
     /// A cluster's primitive map (`FLAG_PRIMITIVE_MAP`): borrowed from raw chunks, copied from

@@ -76,6 +76,18 @@ impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
             .map_err(MeshSourceError::from)
     }
 
+    /// Starts reading the chunks of a build group's meshes: the kernel is told to read them
+    /// ahead, then their first-touch checksums run on rayon threads (one chunk per thread,
+    /// instead of whichever mesh touches it first checking it alone).
+    fn prepare(&self, mesh_records: &[u32]) {
+        use rayon::prelude::*;
+        let chunks = self.0.mesh_chunks(mesh_records);
+        for &c in &chunks {
+            self.0.prefetch_chunk(c);
+        }
+        chunks.par_iter().for_each(|&c| self.0.verify_chunk(c));
+    }
+
     /// The package's `proxy_boxes` section; one that cannot be read (its checksum fails) is a
     /// warning, and the streamer makes the boxes from the meshes.
     fn stored_proxy_boxes(&self) -> Option<&[u8]> {

@@ -89,8 +89,8 @@ pub use limits::{
     ENV_MAX_INSTANCE_COUNT, ENV_MAX_PRIMITIVE_COUNT, ENV_MAX_STORAGE_BUFFER_RANGE,
 };
 pub use memory::{
-    Buffer, BufferDesc, BufferUsage, DeviceAddress, DeviceMemory, MemoryLocation,
-    MemoryRequirements,
+    with_mapped_ranges_mut, Buffer, BufferDesc, BufferUsage, DeviceAddress, DeviceMemory,
+    MappedRange, MemoryLocation, MemoryRequirements,
 };
 pub use panel::PanelPaint;
 pub use pipeline::{BindingSet, ComputePipeline, ComputePipelineDesc};

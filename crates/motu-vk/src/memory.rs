@@ -101,6 +101,9 @@ pub struct MemoryRequirements {
     pub memory_type_bits: u32,
 }
 
+mod ranges;
+pub use ranges::{with_mapped_ranges_mut, MappedRange};
+
 struct Mapping(*mut u8);
 // SAFETY: the pointer is into a persistently mapped VkDeviceMemory owned by the same
 // DeviceMemory; all host access goes through the Mutex around it.

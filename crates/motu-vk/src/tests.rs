@@ -158,6 +158,91 @@ fn buffers_sub_allocated_in_one_block_copy_on_the_gpu() {
 }
 
 #[test]
+fn mapped_ranges_of_one_block_are_lent_at_once_disjoint_and_filled_exactly() {
+    let Some(ctx) = context_or_skip("mapped_ranges", Requirement::Compute) else {
+        return;
+    };
+    let desc = BufferDesc {
+        size_bytes: 4096,
+        usage: BufferUsage::TRANSFER_SRC,
+    };
+    let mut a = Buffer::new(&ctx, "a", &desc).expect("a");
+    let mut b = Buffer::new(&ctx, "b", &desc).expect("b");
+    let r = a.memory_requirements();
+    let type_index = ctx
+        .memory_type_index(MemoryLocation::Upload, r.memory_type_bits)
+        .expect("host-visible type");
+    let offset_b = r.size_bytes.next_multiple_of(r.alignment_bytes);
+    let block = DeviceMemory::allocate(
+        &ctx,
+        offset_b + r.size_bytes,
+        type_index,
+        MemoryLocation::Upload,
+    )
+    .expect("block");
+    a.bind(&block, 0).expect("bind a");
+    b.bind(&block, offset_b).expect("bind b");
+    a.write_bytes(0, &[0u8; 4096]).expect("zero a");
+    b.write_bytes(0, &[0u8; 4096]).expect("zero b");
+    // Ranges in both buffers of the block, out of order, each filled from its own thread with
+    // its index: every byte of every range is written once, nothing outside them.
+    let ranges = [(&b, 1000, 24), (&a, 0, 100), (&a, 100, 3000), (&b, 0, 1000)];
+    let list: Vec<MappedRange<'_>> = ranges
+        .iter()
+        .map(|&(buffer, offset, len)| MappedRange {
+            buffer,
+            offset,
+            len,
+        })
+        .collect();
+    let lens = with_mapped_ranges_mut(&list, |slices| {
+        std::thread::scope(|s| {
+            for (i, slice) in slices.iter_mut().enumerate() {
+                s.spawn(move || {
+                    for byte in slice.iter_mut() {
+                        *byte += i as u8 + 1;
+                    }
+                });
+            }
+        });
+        slices.iter().map(|s| s.len()).collect::<Vec<_>>()
+    })
+    .expect("disjoint ranges");
+    assert_eq!(lens, vec![24, 100, 3000, 1000], "slices in the order given");
+    let (mut got_a, mut got_b) = (vec![0u8; 4096], vec![0u8; 4096]);
+    a.read_bytes(0, &mut got_a).expect("read a");
+    b.read_bytes(0, &mut got_b).expect("read b");
+    let mut want_a = vec![0u8; 4096];
+    want_a[..100].fill(2);
+    want_a[100..3100].fill(3);
+    let mut want_b = vec![0u8; 4096];
+    want_b[..1000].fill(4);
+    want_b[1000..1024].fill(1);
+    assert!(
+        got_a == want_a && got_b == want_b,
+        "each range filled exactly once"
+    );
+    // Overlap (inside one buffer) and a range past its buffer's end are refused unfilled.
+    for (bad, why) in [
+        ([(&a, 0, 100), (&a, 99, 10)], "overlap"),
+        ([(&b, 0, 10), (&b, 4090, 10)], "exceeds"),
+    ] {
+        let list: Vec<MappedRange<'_>> = bad
+            .iter()
+            .map(|&(buffer, offset, len)| MappedRange {
+                buffer,
+                offset,
+                len,
+            })
+            .collect();
+        let err = with_mapped_ranges_mut(&list, |_| panic!("filled despite {why}")).expect_err(why);
+        assert!(err.to_string().contains(why), "{why}: {err}");
+    }
+    drop((a, b, block));
+    assert_no_validation_errors(&ctx);
+}
+
+#[test]
 fn device_address_is_stable_and_offset_in_a_block() {
     let Some(ctx) = context_or_skip("device_address", Requirement::Compute) else {
         return;

@@ -7,7 +7,10 @@ use motu_alloc::{AllocKind, MemoryClass};
 use motu_vk::{BufferCopy, BufferUsage, CommandRecorder, Context, GpuHeap, HeapBuffer};
 
 use super::{BatchStager, MeshBlobSource};
+
+mod group;
 use crate::error::{GpuError, Result};
+pub(crate) use group::upload_streamed_group;
 
 /// Bounded host-visible staging ring: copies are queued and flushed (one fenced submission)
 /// whenever the ring is full, so host memory never holds more than the ring.
@@ -460,49 +463,14 @@ impl MeshGpu {
         Ok(std::mem::replace(&mut self.buffer, buffer))
     }
 
-    /// [`MeshGpu::upload`] plus the shading attributes of a mesh from
-    /// [`MeshGpu::alloc_streamed`]; an attribute the source lacks (or gives at the wrong
-    /// length) is dropped, as the full build's shading tables drop it.
-    pub(crate) fn upload_streamed(
-        &mut self,
-        ctx: &Context,
-        up: &mut Uploader,
-        source: &dyn MeshBlobSource,
-        m: usize,
-    ) -> Result<u64> {
-        use bytemuck::cast_slice;
-        let mut bytes = self.upload(ctx, up, source, m)?;
-        if self.normals_address == 0 && self.uvs_address == 0 {
-            return Ok(bytes);
-        }
-        let (normals, uvs) = source
-            .mesh_shading(m as u32)
-            .map_err(GpuError::mesh_source(m))?;
-        let vc = self.vertex_count as usize;
-        let base = self.positions_address;
-        match normals.as_deref().filter(|n| n.len() == vc) {
-            Some(n) if self.normals_address != 0 => {
-                self.put(ctx, up, self.normals_address - base, cast_slice(n))?;
-                bytes += (n.len() * 12) as u64;
-            }
-            _ => self.normals_address = 0,
-        }
-        match uvs.as_deref().filter(|u| u.len() == vc) {
-            Some(u) if self.uvs_address != 0 => {
-                self.put(ctx, up, self.uvs_address - base, cast_slice(u))?;
-                bytes += (u.len() * 8) as u64;
-            }
-            _ => self.uvs_address = 0,
-        }
-        Ok(bytes)
-    }
-
     /// Bytes of its buffer.
     pub(crate) fn size_bytes(&self) -> u64 {
         self.buffer.size_bytes()
     }
 
-    /// Loads mesh record `m` from `source`, checks it against the record and queues its upload.
+    /// Loads mesh record `m` from `source`, checks it against the record and queues its upload
+    /// (a mesh from [`MeshGpu::alloc`]: its geometry; streamed meshes go through
+    /// [`upload_streamed_group`]).
     pub(crate) fn upload(
         &self,
         ctx: &Context,
@@ -510,56 +478,13 @@ impl MeshGpu {
         source: &dyn MeshBlobSource,
         m: usize,
     ) -> Result<u64> {
-        use bytemuck::cast_slice;
-        let (positions, indices) = source
-            .mesh_data(m as u32)
-            .map_err(GpuError::mesh_source(m))?;
-        if positions.len() != self.vertex_count as usize
-            || indices.len() != 3 * self.triangle_count as usize
-        {
-            return Err(GpuError::InvalidRequest(format!(
-                "mesh record {m}: {} positions and {} indices, the record says {} and {}",
-                positions.len(),
-                indices.len(),
-                self.vertex_count,
-                3 * self.triangle_count
-            )));
+        let bytes = self.read_bytes(source, m)?;
+        let mut pieces = Vec::new();
+        self.pieces(&bytes, &mut pieces);
+        for p in &pieces {
+            self.put(ctx, up, p.dst_offset, p.src)?;
         }
-        if let Some(bad) = indices.iter().find(|&&i| i >= self.vertex_count) {
-            return Err(GpuError::InvalidRequest(format!(
-                "mesh record {m}: index {bad} >= vertex count {}",
-                self.vertex_count
-            )));
-        }
-        let map = source
-            .primitive_map(m as u32)
-            .map_err(GpuError::mesh_source(m))?;
-        let map_len = match (&map, self.has_primitive_map) {
-            (Some(map), true) if map.len() == self.triangle_count as usize => map.len(),
-            (None, false) => 0,
-            (got, _) => {
-                return Err(GpuError::InvalidRequest(format!(
-                    "mesh record {m}: the record {} a primitive map of {} entries, the source \
-                     gave {}",
-                    if self.has_primitive_map {
-                        "needs"
-                    } else {
-                        "has no"
-                    },
-                    self.triangle_count,
-                    got.as_ref()
-                        .map_or("none".to_string(), |g| g.len().to_string())
-                )))
-            }
-        };
-        self.put(ctx, up, 0, cast_slice(&positions[..]))?;
-        let idx_off = self.indices_address - self.positions_address;
-        self.put(ctx, up, idx_off, cast_slice(&indices[..]))?;
-        if let Some(map) = &map {
-            let map_off = idx_off + u64::from(self.triangle_count) * 12;
-            self.put(ctx, up, map_off, cast_slice(&map[..]))?;
-        }
-        Ok((positions.len() * 12 + indices.len() * 4 + map_len * 4) as u64)
+        Ok(bytes.len_bytes())
     }
 }
 

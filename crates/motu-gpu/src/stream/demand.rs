@@ -8,7 +8,7 @@ use super::clones::Restored;
 use super::residency::EvictWhy;
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
-use crate::scene::{AccelStruct, MeshGpu};
+use crate::scene::{upload_streamed_group, AccelStruct, MeshGpu};
 use motu_vk::BudgetRefusal;
 
 /// One structure a build step may build: BLAS `blas`, and how many pixels' rays requested it
@@ -110,49 +110,49 @@ impl<'a> StreamingRenderer<'a> {
         let mut taken: Vec<usize> = Vec::new();
         self.frame.stats_mut().build_groups += 1;
         let t_mesh = Instant::now();
+        // Allocated for the group, not resident yet: uploaded together (`upload_streamed_group`,
+        // in parallel), then made resident one by one with their textures.
+        let mut fresh: Vec<(usize, MeshGpu)> = Vec::new();
         let loaded = (|| -> Result<()> {
+            let mut in_fresh = std::collections::HashSet::new();
             for &b in group {
                 for m in self.blas_meshes(b as usize) {
                     // Referenced before loading: evicting a BLAS that shares it keeps it.
                     self.take_mesh_ref(m);
                     taken.push(m);
-                    if self.res.mesh(m).is_some() {
+                    if self.res.mesh(m).is_some() || !in_fresh.insert(m) {
                         continue;
                     }
                     let rec = self.view.meshes[m];
-                    let mut g = self.maybe_evicting(evict, |s| {
+                    let g = self.maybe_evicting(evict, |s| {
                         MeshGpu::alloc_streamed(&mut s.heap, m, &rec, s.res.mesh_class())
                     })?;
-                    let ctx = self.ctx.clone();
-                    let source = self.source;
-                    let up = self.up_mut()?;
-                    let bytes = match g.upload_streamed(&ctx, up, source, m) {
-                        Ok(n) => n,
-                        Err(e) => {
-                            // Queued copies into it must land before it is destroyed.
-                            let _ = up.flush(&ctx);
-                            self.heap.free(g.buffer);
-                            return Err(e);
-                        }
-                    };
-                    // Its material's textures come with it (a mesh is resident exactly
-                    // while it holds its texture references).
-                    let texture_bytes = match self.acquire_mesh_textures(m, evict) {
-                        Ok(n) => n,
-                        Err(e) => {
-                            let ctx = self.ctx.clone();
-                            let _ = self.up_mut()?.flush(&ctx);
-                            self.heap.free(g.buffer);
-                            return Err(e);
-                        }
-                    };
-                    let st = self.frame.stats_mut();
-                    st.bytes_streamed += bytes + texture_bytes;
-                    st.built_bytes += bytes + texture_bytes;
-                    self.res.loaded_mesh(m, g);
+                    fresh.push((m, g));
                 }
             }
             let ctx = self.ctx.clone();
+            let source = self.source;
+            let sizes = upload_streamed_group(&ctx, self.up_mut()?, source, &mut fresh)?;
+            let mut rest = std::mem::take(&mut fresh).into_iter();
+            for bytes in sizes {
+                let Some((m, g)) = rest.next() else { break };
+                // Its material's textures come with it (a mesh is resident exactly while it
+                // holds its texture references).
+                let texture_bytes = match self.acquire_mesh_textures(m, evict) {
+                    Ok(n) => n,
+                    Err(e) => {
+                        // Queued copies into them must land before they are destroyed.
+                        let _ = self.up_mut()?.flush(&ctx);
+                        self.heap.free(g.buffer);
+                        fresh.extend(rest);
+                        return Err(e);
+                    }
+                };
+                let st = self.frame.stats_mut();
+                st.bytes_streamed += bytes + texture_bytes;
+                st.built_bytes += bytes + texture_bytes;
+                self.res.loaded_mesh(m, g);
+            }
             self.up_mut()?.flush(&ctx)
         })();
         if loaded.is_err() {
@@ -161,6 +161,11 @@ impl<'a> StreamingRenderer<'a> {
             if let Some(up) = self.up.as_mut() {
                 up.flush(&ctx)?;
             }
+        }
+        // Allocated but not resident (an error before they were loaded): nothing refers to
+        // them once the queued copies landed.
+        for (_, g) in fresh.drain(..) {
+            self.heap.free(g.buffer);
         }
         self.frame.stats_mut().mesh_ms += t_mesh.elapsed().as_secs_f64() * 1e3;
         let t_blas = Instant::now();
