@@ -102,7 +102,16 @@ fn a_path_that_returns_restores_from_the_host_cache() {
         &["--host-cache", "0", "--no-as-cache"],
         &[],
     );
-    let (on, on_aov) = path(&f, "host-on", "query", &budget, &["--no-as-cache"], &[]);
+    // Every BLAS stored (`always`): the host tier's restores themselves. Whether they pay is
+    // the store rule's call (`measured`, below).
+    let (on, on_aov) = path(
+        &f,
+        "host-on",
+        "query",
+        &budget,
+        &["--no-as-cache", "--stream-host-cache-policy", "always"],
+        &[],
+    );
     let (t0, t1) = (totals(&off), totals(&on));
     eprintln!("without: {t0}\nwith: {t1}");
     assert!(
@@ -126,8 +135,46 @@ fn a_path_that_returns_restores_from_the_host_cache() {
     // Unified memory: serialised as built, no clones.
     assert_eq!(t1["host_cache_mode"], "serialize", "{t1}");
     assert_eq!(json_u64(&t1["cloned_blases"]), 0, "{t1}");
+    assert_eq!(json_u64(&t1["host_cache_skipped_stores"]), 0, "{t1}");
+    assert_eq!(t1["store_policy"]["policy"], "always", "{t1}");
     f.same_as_reference(&off_aov);
     f.same_as_reference(&on_aov);
+
+    // The default rule (`measured`): each BLAS built is stored or skipped by this process's
+    // own rates (lavapipe under load: restores and stores each cost about what a rebuild
+    // does, so it stores few); its counts add up, and the image is the full build's.
+    let (m, m_aov) = path(
+        &f,
+        "host-measured",
+        "query",
+        &budget,
+        &["--no-as-cache"],
+        &[],
+    );
+    let tm = totals(&m);
+    let p = &tm["store_policy"];
+    eprintln!("measured: {tm}");
+    assert_eq!(p["policy"], "measured", "{p}");
+    // Every build and restore is a sample or a count of the rule.
+    assert!(json_u64(&p["build_batches"]) >= 3, "{p}");
+    assert_eq!(
+        json_u64(&p["built_blases"]) + json_u64(&p["returns"]),
+        json_u64(&tm["blas_built"]) + json_u64(&tm["restored_blases"]),
+        "{tm}"
+    );
+    assert_eq!(
+        json_u64(&p["returns"]),
+        json_u64(&tm["rebuilt_blases"]) + json_u64(&tm["restored_blases"]),
+        "{tm}"
+    );
+    // Each BLAS built was stored or skipped by the rule, at most once (one a cache held
+    // already, its restore refused for room, is neither).
+    let decided = json_u64(&tm["cache_stored"]) + json_u64(&tm["host_cache_skipped_stores"]);
+    assert!(
+        decided > 0 && decided <= json_u64(&tm["blas_built"]),
+        "{tm}"
+    );
+    f.same_as_reference(&m_aov);
 
     // Host memory apart from the budget (a discrete GPU): an evicted BLAS is cloned into host
     // memory by the device and cloned back when it returns; nothing is serialised while the

@@ -11,8 +11,8 @@ mod stream;
 pub use gen::{GenArgs, GenFormatArg, GenKindArg};
 pub use import::{CurvesArg, ImportArgs, LevelsArg};
 pub use stream::{
-    AsCacheArgs, FallbackArg, HostCacheArg, MeshMemoryArg, StreamBoundArgs, StreamTlasArg,
-    TlasRecordsArg,
+    AsCacheArgs, FallbackArg, HostCacheArg, HostCachePolicyArg, MeshMemoryArg, StreamBoundArgs,
+    StreamTlasArg, TlasRecordsArg,
 };
 
 // `render`/`view` flags under help headings (issue 46: 38 flags in one list were not a CLI a

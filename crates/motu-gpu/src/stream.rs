@@ -132,6 +132,7 @@ mod residency;
 mod shading;
 mod skeleton;
 mod stats;
+mod store_policy;
 mod tables;
 mod tlas_build;
 mod tlas_compact;
@@ -153,6 +154,7 @@ pub use options::{
     AUTO_PASS_FRAMES, AUTO_PASS_ROWS,
 };
 pub use stats::{FrameStreamStats, PassStats, StreamTotals};
+pub use store_policy::{HostStorePolicy, StorePolicyStats};
 pub use topology::{ClustersSource, StreamPlan};
 
 /// Whether BLAS `b` is streamed (built on demand, evicted under the budget): a triangle BLAS
@@ -297,6 +299,7 @@ impl<'a> StreamingRenderer<'a> {
             tlas_records_mode: opts.tlas_records.name(),
             ..Default::default()
         };
+        let host_store_policy = opts.host_store_policy;
         let mut r = StreamingRenderer {
             res: residency::Resident::new(
                 nb,
@@ -316,7 +319,7 @@ impl<'a> StreamingRenderer<'a> {
             source,
             opts,
             build_opts,
-            reuse: cache::Reuse::new(nb),
+            reuse: cache::Reuse::new(nb, host_store_policy),
             clones: clones::HostClones::default(),
             poisoned: None,
             totals,
@@ -408,6 +411,7 @@ impl<'a> StreamingRenderer<'a> {
     pub fn totals(&self) -> StreamTotals {
         let mut t = self.totals.clone();
         t.vram_peak_bytes = self.heap.report().peak_block_bytes;
+        t.store_policy = self.reuse.policy_stats();
         t
     }
 

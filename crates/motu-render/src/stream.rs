@@ -41,6 +41,8 @@ pub struct StreamBounds {
     pub mesh_memory: motu_gpu::MeshMemory,
     /// `--stream-host-cache`: how evicted BLASes are kept in host memory.
     pub host_cache_mode: motu_gpu::HostCacheMode,
+    /// `--stream-host-cache-policy`: which built BLASes the serialised host tier stores.
+    pub host_store_policy: motu_gpu::HostStorePolicy,
     /// `--stream-tlas-records`: where rebuilt TLASes' instance records come from.
     pub tlas_records: motu_gpu::TlasRecordsMode,
 }
@@ -62,6 +64,7 @@ impl StreamBounds {
             defrag: self.defrag,
             mesh_memory: self.mesh_memory,
             host_cache_mode: self.host_cache_mode,
+            host_store_policy: self.host_store_policy,
             tlas_records: self.tlas_records,
             ..d
         }
@@ -97,6 +100,7 @@ impl StreamBounds {
             || self.defrag
             || self.mesh_memory != motu_gpu::MeshMemory::Auto
             || self.host_cache_mode != motu_gpu::HostCacheMode::Auto
+            || self.host_store_policy != motu_gpu::HostStorePolicy::Measured
             || self.tlas_records != motu_gpu::TlasRecordsMode::Host
     }
 }

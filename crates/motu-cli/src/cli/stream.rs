@@ -147,6 +147,19 @@ pub struct StreamBoundArgs {
     /// cloned_blases, restored_from_clone, persisted_blases, persist_ms.
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, default_value = "auto")]
     pub stream_host_cache: HostCacheArg,
+    /// Streaming: which built BLASes the serialised host tier (`--host-cache`) stores for
+    /// their return. `measured` (default): a BLAS is stored only where its expected restores
+    /// save more than its store costs, by this process's own rates (builds, restores and
+    /// stores timed per batch, fixed cost per BLAS plus a rate; returns counted per BLAS
+    /// built), starting from the H100's rates (restores ~2.7 GB/s, no faster than rebuilds at
+    /// ~2.9 GB/s: nothing stored) until each has 3 batches; on lavapipe restores are far
+    /// cheaper than builds and everything pays. A writable cache directory (`--as-cache`)
+    /// still takes every BLAS built, for the next process. `always`: every BLAS built is
+    /// stored (the behaviour before). Same images either way. --stats: per frame
+    /// host_cache_skipped_stores, host_cache_skipped_store_bytes; stream.totals.store_policy
+    /// (the estimates), store_gb_per_s.
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, default_value = "measured")]
+    pub stream_host_cache_policy: HostCachePolicyArg,
     /// Streaming: where a rebuilt TLAS's instance records come from. `gpu` (opt-in): every
     /// instance's record is kept on the GPU (encoded once, at the TLAS's second rebuild) and a
     /// compute pass writes a rebuild's records from it with the resident BLASes' addresses; the
@@ -175,6 +188,22 @@ impl From<TlasRecordsArg> for motu_gpu::TlasRecordsMode {
         match a {
             TlasRecordsArg::Gpu => motu_gpu::TlasRecordsMode::Gpu,
             TlasRecordsArg::Host => motu_gpu::TlasRecordsMode::Host,
+        }
+    }
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum HostCachePolicyArg {
+    #[default]
+    Measured,
+    Always,
+}
+
+impl From<HostCachePolicyArg> for motu_gpu::HostStorePolicy {
+    fn from(a: HostCachePolicyArg) -> Self {
+        match a {
+            HostCachePolicyArg::Measured => motu_gpu::HostStorePolicy::Measured,
+            HostCachePolicyArg::Always => motu_gpu::HostStorePolicy::Always,
         }
     }
 }

@@ -136,6 +136,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             stream_defrag: false,
             stream_mesh_memory: crate::cli::MeshMemoryArg::Auto,
             stream_host_cache: crate::cli::HostCacheArg::Auto,
+            stream_host_cache_policy: crate::cli::HostCachePolicyArg::Measured,
             stream_tlas_records: crate::cli::TlasRecordsArg::Gpu,
         },
         as_cache: crate::cli::AsCacheArgs {

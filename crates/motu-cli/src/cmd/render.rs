@@ -36,6 +36,7 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         defrag: b.stream_defrag,
         mesh_memory: b.stream_mesh_memory.into(),
         host_cache_mode: b.stream_host_cache.into(),
+        host_store_policy: b.stream_host_cache_policy.into(),
         tlas_records: b.stream_tlas_records.into(),
     }
 }

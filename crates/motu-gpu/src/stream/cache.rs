@@ -2,7 +2,10 @@
 //!
 //! Every triangle BLAS the streamer builds is serialised (Vulkan's `SERIALIZE` copy of the
 //! compacted structure) into a [`motu_ascache::AsCache`]: a byte-bounded LRU in host memory,
-//! written through to a cache directory. When the BLAS is needed again, after an eviction or in
+//! written through to a cache directory. Where no writable directory takes them, the host tier
+//! alone would, and only the BLASes whose expected restores save more than their store costs
+//! are serialised (`--stream-host-cache-policy measured`, the rule and its self-measured rates
+//! in `store_policy.rs`). When the BLAS is needed again, after an eviction or in
 //! a later process, it is deserialised by copy instead of rebuilt from its meshes (which are
 //! streamed as before: hits still shade from them). Keys name the scene's content (the
 //! package's checksums), the BLAS and its records, the build flags and the driver; the driver
@@ -30,6 +33,7 @@ use rayon::prelude::*;
 use super::clones::{HostCacheMode, Restored, TakenClone};
 use super::proxy_boxes::{self, Box6};
 use super::skeleton::ms_since;
+use super::store_policy::{self, HostStorePolicy, StoreEstimator, StorePolicyStats};
 use super::transfer::{Transfer, TransferBuffers, TRANSFER_CAP_BYTES};
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
@@ -70,10 +74,11 @@ impl StructureCache {
 }
 
 /// What the streamer keeps to reuse built structures: see the module docs.
-#[derive(Default)]
 pub(super) struct Reuse {
-    /// Per BLAS: built (or restored) at least once by this renderer.
-    built_once: Vec<bool>,
+    /// Which BLASes were built (or restored) before, how often they return, and the rates
+    /// the host tier's store rule decides from (`store_policy.rs`).
+    estimates: StoreEstimator,
+    policy: HostStorePolicy,
     cache: Option<Attached>,
     /// Host-visible buffers kept between store and restore batches (`transfer.rs`).
     transfer: TransferBuffers,
@@ -128,9 +133,10 @@ impl Home {
 const KEY_DOMAIN: &str = "motu-blas-v1";
 
 impl Reuse {
-    pub(super) fn new(blases: usize) -> Reuse {
+    pub(super) fn new(blases: usize, policy: HostStorePolicy) -> Reuse {
         Reuse {
-            built_once: vec![false; blases],
+            estimates: StoreEstimator::new(blases, store_policy::PRIOR),
+            policy,
             cache: None,
             transfer: TransferBuffers::default(),
         }
@@ -140,9 +146,21 @@ impl Reuse {
         self.cache.as_ref().map(|a| a.cache.stats())
     }
 
-    /// BLAS `b` was just built (or restored): whether it had been before (a rebuild).
+    /// BLAS `b` was just built (or restored): whether it had been before (a rebuild, or a
+    /// return the store rule counts).
     pub(super) fn mark_built(&mut self, b: usize) -> bool {
-        std::mem::replace(&mut self.built_once[b], true)
+        self.estimates.note_made(b)
+    }
+
+    /// A batch of `blases` BLAS builds (with compaction), `bytes` of structures together,
+    /// took `ms`: a sample of the store rule's build cost.
+    pub(super) fn note_builds(&mut self, blases: usize, bytes: u64, ms: f64) {
+        self.estimates.build.add(blases as u64, bytes, ms);
+    }
+
+    /// The store rule and its estimates now (`stream.totals.store_policy`).
+    pub(super) fn policy_stats(&self) -> StorePolicyStats {
+        self.estimates.stats(self.policy)
     }
 
     /// The transfer buffer kept for `t`, taken out (`None`: none kept).
@@ -402,6 +420,12 @@ impl StreamingRenderer<'_> {
             rec.barrier();
             rec.submit_and_wait()?;
             self.frame.stats_mut().restore_gpu_ms += ms_since(gpu);
+            // A sample of the store rule's restore cost (disk reads excluded: the host tier's).
+            let bytes = hits.iter().map(|h| h.header.deserialized_bytes).sum();
+            self.reuse
+                .estimates
+                .restore
+                .add(hits.len() as u64, bytes, ms_since(t));
             Ok(())
         })();
         self.put_back_transfer(Transfer::Upload, staging);
@@ -417,33 +441,60 @@ impl StreamingRenderer<'_> {
     }
 
     /// Serialises the newly built BLASes of `built` into the cache (those it does not hold
-    /// yet). A cache that cannot take them (no room for the readback) is skipped, counted.
+    /// yet, and, where only the host tier would keep them, those the store rule says pay:
+    /// `store_policy.rs`). A cache that cannot take them (no room for the readback) is
+    /// skipped, counted.
     pub(super) fn store_built(&mut self, built: &[(usize, AccelStruct)]) -> Result<()> {
         // With host clones the directory is written after the frames (`persist_cache`).
         if self.reuse.cache.is_none() || built.is_empty() || self.clones.on() {
             return Ok(());
         }
         let t = Instant::now();
+        let ruled = self.store_rule_applies();
         let mut todo: Vec<ToStore<'_>> = Vec::new();
         for (b, accel) in built {
             let Some(key) = self.blas_key(*b) else {
                 continue;
             };
             let held = self.reuse.cache.as_ref().expect("attached");
-            if held.cache.cache.contains(&key).is_none() {
-                todo.push(ToStore {
-                    blas: *b,
-                    accel,
-                    key,
-                });
+            if held.cache.cache.contains(&key).is_some() {
+                continue;
             }
+            let est = &self.reuse.estimates;
+            if ruled && !est.should_store(accel.size_bytes, est.returned_before(*b)) {
+                let st = self.frame.stats_mut();
+                st.host_cache_skipped_stores += 1;
+                st.host_cache_skipped_store_bytes += accel.size_bytes;
+                continue;
+            }
+            todo.push(ToStore {
+                blas: *b,
+                accel,
+                key,
+            });
         }
         if todo.is_empty() {
             return Ok(());
         }
         self.store_some(&todo)?;
+        let bytes = todo.iter().map(|t| t.accel.size_bytes).sum();
+        self.reuse
+            .estimates
+            .store
+            .add(todo.len() as u64, bytes, ms_since(t));
         self.frame.stats_mut().cache_store_ms += ms_since(t);
         Ok(())
+    }
+
+    /// Whether the store rule decides what [`Self::store_built`] stores: with the `measured`
+    /// policy, unless a writable cache directory takes every BLAS (for the next process).
+    fn store_rule_applies(&self) -> bool {
+        let disk_writable = self
+            .reuse
+            .cache
+            .as_ref()
+            .is_some_and(|a| a.cache.cache.disk().is_some_and(|d| d.writable()));
+        self.reuse.policy == HostStorePolicy::Measured && !disk_writable
     }
 
     /// Writes to the cache directory, serialised, every BLAS this renderer holds (resident or

@@ -38,8 +38,9 @@ pub enum HostCacheMode {
     /// Device-side clones in host memory (outside the budget only on a discrete GPU; on unified
     /// memory a clone takes the room its eviction made).
     Clone,
-    /// Serialised copies (`vkCmdCopyAccelerationStructureToMemoryKHR`) of every BLAS built,
-    /// in host memory and written through to the cache directory as they are built.
+    /// Serialised copies (`vkCmdCopyAccelerationStructureToMemoryKHR`) of the BLASes built, in
+    /// host memory and written through to the cache directory as they are built (every one
+    /// where a directory is written; else those the store rule picks, `store_policy.rs`).
     Serialize,
 }
 

@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use super::clones::Restored;
 use super::residency::EvictWhy;
+use super::skeleton::ms_since;
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
 use crate::scene::{upload_streamed_group, AccelStruct, MeshGpu};
@@ -175,7 +176,14 @@ impl<'a> StreamingRenderer<'a> {
                 built: restored,
                 rest,
             } = self.restore_cached(&ids, evict)?;
-            let built = match self.maybe_evicting(evict, |s| s.build_blas_set(&rest, 0)) {
+            let built = match self.maybe_evicting(evict, |s| {
+                // Each successful batch is a sample of the store rule's build cost.
+                let t = Instant::now();
+                let built = s.build_blas_set(&rest, 0)?;
+                let bytes = built.iter().map(|(_, a)| a.size_bytes).sum();
+                s.reuse.note_builds(built.len(), bytes, ms_since(t));
+                Ok(built)
+            }) {
                 Ok(b) => b,
                 Err(e) => {
                     for (_, a) in restored {

@@ -94,6 +94,9 @@ pub struct StreamOptions {
     /// How evicted BLASes are kept in host memory when a structure cache is attached
     /// (`--stream-host-cache`; see [`HostCacheMode`](super::HostCacheMode)).
     pub host_cache_mode: super::HostCacheMode,
+    /// Which built BLASes the serialised host tier stores (`--stream-host-cache-policy`; see
+    /// [`HostStorePolicy`](super::HostStorePolicy)).
+    pub host_store_policy: super::HostStorePolicy,
     /// Where a streamed TLAS rebuild's instance records come from (`--stream-tlas-records`;
     /// see [`TlasRecordsMode`]).
     pub tlas_records: TlasRecordsMode,
@@ -269,6 +272,7 @@ impl Default for StreamOptions {
             defrag: false,
             mesh_memory: MeshMemory::Auto,
             host_cache_mode: super::HostCacheMode::Auto,
+            host_store_policy: super::HostStorePolicy::Measured,
             tlas_records: TlasRecordsMode::Host,
         }
     }

@@ -116,6 +116,10 @@ pub struct FrameStreamStats {
     pub cache_stored_bytes: u64,
     pub cache_store_ms: f64,
     pub cache_skipped: u32,
+    /// BLASes built that the host tier's store rule did not store (restoring them was not
+    /// expected to save their store's cost: `store_policy.rs`), and their structure bytes.
+    pub host_cache_skipped_stores: u32,
+    pub host_cache_skipped_store_bytes: u64,
     /// Of `cache_store_ms`: size queries, the readback buffer and the GPU's serialise copies;
     /// the host's copies out of the readback buffer; handing the blobs to the cache (with the
     /// disk writer's queue waits).
@@ -305,6 +309,14 @@ pub struct StreamTotals {
     pub cache_stored: u64,
     pub cache_stored_bytes: u64,
     pub cache_store_ms: f64,
+    /// Serialised bytes stored over the stores' time (GB/s; 0 with none).
+    pub store_gb_per_s: f64,
+    /// Over all frames (as [`FrameStreamStats`]): BLASes the store rule did not store, and
+    /// their structure bytes.
+    pub host_cache_skipped_stores: u64,
+    pub host_cache_skipped_store_bytes: u64,
+    /// The host tier's store rule and the estimates it decided from at the end of the run.
+    pub store_policy: super::StorePolicyStats,
     /// Bytes of the BLASes built, over all frames, and the rate they were built at: those
     /// bytes over the BLAS steps' time less their restores and cache stores (GB/s).
     pub blas_structure_bytes: u64,
@@ -416,6 +428,13 @@ impl StreamTotals {
         tot.cache_stored += u64::from(st.cache_stored);
         tot.cache_stored_bytes += st.cache_stored_bytes;
         tot.cache_store_ms += st.cache_store_ms;
+        tot.store_gb_per_s = if tot.cache_store_ms > 0.0 {
+            tot.cache_stored_bytes as f64 / (tot.cache_store_ms * 1e6)
+        } else {
+            0.0
+        };
+        tot.host_cache_skipped_stores += u64::from(st.host_cache_skipped_stores);
+        tot.host_cache_skipped_store_bytes += st.host_cache_skipped_store_bytes;
         tot.blas_structure_bytes += st.blas_structure_bytes;
         tot.blas_ms += st.blas_ms;
         let building_ms = tot.blas_ms - tot.restore_ms - tot.cache_store_ms;

@@ -55,6 +55,8 @@ mirror! {
         cache_stored_bytes: u64,
         cache_store_ms: f64,
         cache_skipped: u32,
+        host_cache_skipped_stores: u32,
+        host_cache_skipped_store_bytes: u64,
         store_serialize_ms: f64,
         store_copy_ms: f64,
         store_put_ms: f64,
@@ -159,6 +161,10 @@ mirror! {
         cache_stored: u64,
         cache_stored_bytes: u64,
         cache_store_ms: f64,
+        store_gb_per_s: f64,
+        host_cache_skipped_stores: u64,
+        host_cache_skipped_store_bytes: u64,
+        store_policy: StorePolicyStats,
         blas_structure_bytes: u64,
         blas_build_gb_per_s: f64,
         blas_ms: f64,
@@ -203,6 +209,30 @@ mirror! {
         host_mesh_peak_bytes: u64,
         vram_peak_bytes: u64,
         vram_budget_bytes: u64,
+    }
+}
+
+mirror! {
+    /// `motu_gpu::StorePolicyStats` as JSON.
+    StorePolicyStats from motu_gpu::StorePolicyStats {
+        policy: &'static str,
+        build_batches: u32,
+        build_ms_per_blas: f64,
+        build_gb_per_s: f64,
+        build_mean_gb_per_s: f64,
+        restore_batches: u32,
+        restore_ms_per_blas: f64,
+        restore_gb_per_s: f64,
+        restore_mean_gb_per_s: f64,
+        store_batches: u32,
+        store_ms_per_blas: f64,
+        store_gb_per_s: f64,
+        store_mean_gb_per_s: f64,
+        built_blases: u64,
+        returns: u64,
+        returned_blases: u64,
+        returns_per_blas: f64,
+        returns_after_return: f64,
     }
 }
 
