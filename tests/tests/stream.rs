@@ -661,6 +661,94 @@ fn meshes_in_host_memory_make_quarter_budget_paths_one_pass() {
     }
 }
 
+/// Issue 45 item 5: churn within a frame is counted (`returned_in_frame`: structures a frame
+/// evicted and made resident again itself; `evicted_in_prefetch`; `returned_after_prefetch`),
+/// and `--stream-prefetch-keeps-frame` (opt-in) keeps a frame's working set through the
+/// prefetch for the next camera while it fits its room. Along the default camera's path at
+/// a third of the default island's full build (default bounce) the working set fits, so the
+/// prefetch keeps it on frames after the first; the counters agree with each other on both
+/// runs, and both are the full build's image. (Lavapipe, 64×36, frames after the first, off
+/// → on: 1.286 → 1.143 passes, 55 → 53 evicted, 9 → 8 returned within their frame, 5 → 4
+/// after the prefetch; without a structure cache (`--no-as-cache`) 1.000 passes either way,
+/// 186 → 188 evicted, 65 → 73 returned, nearly all within the prefetch's own probe rounds:
+/// no pass or count claim is made here.)
+#[test]
+fn churn_within_a_frame_is_counted_and_the_prefetch_may_keep_the_frame() {
+    let Some(ShotFixture {
+        dir,
+        pkg,
+        peak,
+        reference,
+        ..
+    }) = ShotFixture::new()
+    else {
+        return;
+    };
+    let budget_bytes = peak / 3;
+    let (default, default_aov) = shot_path(&pkg, dir.path(), "default", budget_bytes, "query", &[]);
+    let (kept, kept_aov) = shot_path(
+        &pkg,
+        dir.path(),
+        "kept",
+        budget_bytes,
+        "query",
+        &["--stream-prefetch-keeps-frame"],
+    );
+    let frames =
+        |st: &serde_json::Value| st["stream"]["frames"].as_array().expect("frames").clone();
+    let after_first = |st: &serde_json::Value, k: &str| -> u64 {
+        frames(st).iter().skip(1).map(|f| u(&f[k])).sum()
+    };
+    eprintln!(
+        "1/3: passes after the first {} default, {} kept; evicted {} / {}; returned within \
+         the frame {} / {}; after the prefetch {} / {}",
+        passes(&default),
+        passes(&kept),
+        after_first(&default, "evicted"),
+        after_first(&kept, "evicted"),
+        after_first(&default, "returned_in_frame"),
+        after_first(&kept, "returned_in_frame"),
+        after_first(&default, "returned_after_prefetch"),
+        after_first(&kept, "returned_after_prefetch"),
+    );
+    for st in [&default, &kept] {
+        assert_eq!(st["stream"]["totals"]["incomplete_frames"], 0, "{st}");
+        let mut evicted_so_far = 0;
+        for f in frames(st) {
+            let made_resident = u(&f["blas_built"]) + u(&f["restored_blases"]);
+            assert!(u(&f["evicted_in_prefetch"]) <= u(&f["evicted"]), "{f}");
+            // Each return was evicted (or given back, counted as deferred) earlier in the
+            // frame and made resident again.
+            let gone = u(&f["evicted"]) + u(&f["deferred"]);
+            assert!(u(&f["returned_in_frame"]) <= gone.min(made_resident), "{f}");
+            assert_eq!(
+                u(&f["returned_in_frame"]) == 0,
+                u(&f["returned_in_frame_bytes"]) == 0,
+                "{f}"
+            );
+            // Only what an earlier frame's prefetch evicted can return after it.
+            assert!(u(&f["returned_after_prefetch"]) <= evicted_so_far, "{f}");
+            evicted_so_far += u(&f["evicted_in_prefetch"]);
+        }
+    }
+    assert!(
+        frames(&default)
+            .iter()
+            .all(|f| f["prefetch_kept_frame"] == false),
+        "off by default"
+    );
+    assert!(
+        frames(&kept)
+            .iter()
+            .skip(1)
+            .any(|f| f["prefetch_kept_frame"] == true),
+        "the working set fits: the prefetch keeps it"
+    );
+    for aov in [&default_aov, &kept_aov] {
+        motu_ok(&["compare", s(&reference), s(aov), "--max-mismatch", "0"]);
+    }
+}
+
 /// `--stream-defrag`: before evicting on a refused allocation or for a TLAS rebuild's room, the
 /// streamer drains part-used memory blocks (their BLASes, meshes and textures copied into
 /// other blocks' free space). Along the default camera's path at a quarter of the full build it moves

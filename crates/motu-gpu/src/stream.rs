@@ -366,8 +366,10 @@ impl<'a> StreamingRenderer<'a> {
         }
     }
 
-    fn frame_first_stamp(&self) -> u32 {
-        self.frame.first_stamp()
+    /// The first stamp whose sightings a prefetch step pins (see
+    /// [`FrameState::prefetch_pins_from`](frame::FrameState::prefetch_pins_from)).
+    fn prefetch_pins_from(&self) -> u32 {
+        self.frame.prefetch_pins_from()
     }
 
     /// Names the camera of the next frame (a camera path's, a flight's): after the next

@@ -37,6 +37,9 @@ pub struct StreamBounds {
     pub split_instances: Option<u32>,
     /// `--stream-defrag`: drain part-used memory blocks before evicting (off by default).
     pub defrag: bool,
+    /// `--stream-prefetch-keeps-frame`: the prefetch also keeps the frame's working set while
+    /// it fits (off by default).
+    pub prefetch_keeps_frame: bool,
     /// `--stream-mesh-memory`: where streamed meshes live.
     pub mesh_memory: motu_gpu::MeshMemory,
     /// `--stream-host-cache`: how evicted BLASes are kept in host memory.
@@ -62,6 +65,7 @@ impl StreamBounds {
             pass_marks: self.pass_marks.unwrap_or(d.pass_marks),
             tlas_update: self.tlas_update,
             defrag: self.defrag,
+            prefetch_keeps_frame: self.prefetch_keeps_frame,
             mesh_memory: self.mesh_memory,
             host_cache_mode: self.host_cache_mode,
             host_store_policy: self.host_store_policy,
@@ -98,6 +102,7 @@ impl StreamBounds {
             || self.tlas_update != motu_gpu::TlasUpdate::Auto
             || self.split_instances.is_some()
             || self.defrag
+            || self.prefetch_keeps_frame
             || self.mesh_memory != motu_gpu::MeshMemory::Auto
             || self.host_cache_mode != motu_gpu::HostCacheMode::Auto
             || self.host_store_policy != motu_gpu::HostStorePolicy::Measured

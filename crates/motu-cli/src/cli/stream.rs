@@ -125,6 +125,14 @@ pub struct StreamBoundArgs {
     /// passes after the first, the same image), not yet on a GPU.
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long)]
     pub stream_defrag: bool,
+    /// Streaming: the prefetch after a frame also keeps what the frame's own passes used
+    /// while the frame's working set fits its room beside the TLAS rebuilds' transient
+    /// (prefetch_kept_frame per frame in --stats), and prefetches for the next camera into the
+    /// rest; the next frame's passes evict what it does not use. Off by default: the prefetch
+    /// keeps only what the probe of the next camera met. returned_in_frame per frame in
+    /// --stats counts what a frame evicted and built back. Measured on lavapipe only.
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long)]
+    pub stream_prefetch_keeps_frame: bool,
     /// Streaming: where streamed meshes (positions, indices, shading attributes) live. `host`:
     /// host memory the GPU reads over the bus (only hits and BLAS builds read meshes), outside
     /// the VRAM budget, which then holds acceleration structures and textures alone; `device`:

@@ -265,6 +265,21 @@ impl<'a> StreamingRenderer<'a> {
                 st.triangles_built += triangles;
             }
             let (stamp, frame) = (self.frame.stamp(), self.frame.number());
+            let (evicted_in, by_prefetch) = self.res.last_eviction(b);
+            let prefetching = self.frame.prefetching();
+            let st = self.frame.stats_mut();
+            if evicted_in == frame {
+                tracing::trace!(
+                    blas = b,
+                    by_prefetch,
+                    prefetching,
+                    "returned within the frame"
+                );
+                st.returned_in_frame += 1;
+                st.returned_in_frame_bytes += bytes;
+            } else if evicted_in + 1 == frame && by_prefetch && !prefetching {
+                st.returned_after_prefetch += 1;
+            }
             self.res.admit_built(b, accel, bytes, stamp, frame);
             built_ids.insert(b as u32);
             self.dirty_parents(b);
@@ -498,7 +513,7 @@ impl<'a> StreamingRenderer<'a> {
     pub(super) fn make_resident(&mut self, demand: &Demand, prefetch: bool) -> Result<()> {
         let t0 = Instant::now();
         self.frame.kept_mut().start_step(t0);
-        let seen_since = prefetch.then(|| self.frame_first_stamp());
+        let seen_since = prefetch.then(|| self.prefetch_pins_from());
         self.res.start_step(self.item_count(), seen_since);
         for r in demand.all() {
             self.res.seen_at(r.blas as usize, self.frame.stamp());

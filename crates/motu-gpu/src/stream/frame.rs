@@ -37,6 +37,13 @@ pub(super) struct FrameState {
     /// The last frame after which [`PassMarks::auto_wanted`](super::PassMarks::auto_wanted)
     /// held (0: none yet).
     pass_marks_held: u64,
+    /// The frame's passes are over: what it builds or evicts now is its prefetch.
+    prefetching: bool,
+    /// The stamp of the frame's first pass.
+    pass_first_stamp: u32,
+    /// The prefetch keeps what the frame's own passes saw (its working set fits its room,
+    /// `StreamOptions::prefetch_keeps_frame`), beside what the probe met.
+    keeps_frame: bool,
     /// The next frame's camera, probed after this frame (`set_next_camera`).
     next_camera: Option<CameraParams>,
     /// Per BLAS, what the last probe saw (`PROBE_MET`, `PROBE_RESIDENT` bits), kept for the
@@ -181,7 +188,33 @@ impl FrameState {
             ..Default::default()
         };
         self.first_stamp = self.stamp + 1;
+        self.pass_first_stamp = self.first_stamp;
+        self.prefetching = false;
+        self.keeps_frame = false;
         self.kept.end_step();
+    }
+
+    /// The frame's passes are over: what follows is its prefetch for the next frame, which
+    /// keeps what the frame's passes saw when `keeps_frame`.
+    pub fn start_prefetch(&mut self, keeps_frame: bool) {
+        self.prefetching = true;
+        self.keeps_frame = keeps_frame;
+        self.stats.prefetch_kept_frame = keeps_frame;
+    }
+
+    /// The first stamp whose sightings the prefetch's build steps pin: the frame's first
+    /// pass's when it keeps the frame's working set, else [`Self::first_stamp`].
+    pub fn prefetch_pins_from(&self) -> u32 {
+        if self.keeps_frame {
+            self.pass_first_stamp.min(self.first_stamp)
+        } else {
+            self.first_stamp
+        }
+    }
+
+    /// Whether the frame's passes are over (its prefetch runs).
+    pub fn prefetching(&self) -> bool {
+        self.prefetching
     }
 
     /// The next pass's stamp (stamps only grow), or the limit when stamps would reach
@@ -224,6 +257,9 @@ impl FrameState {
             stamp: 0,
             first_stamp: 1,
             pass_marks_held: 0,
+            prefetching: false,
+            pass_first_stamp: 1,
+            keeps_frame: false,
             next_camera: None,
             probe_sighting: Vec::new(),
             probe_need: Default::default(),
@@ -409,9 +445,39 @@ impl<'a> StreamingRenderer<'a> {
 
     /// Prefetch: what the guard band saw, evicting only what this frame did not see (what
     /// does not fit is skipped), within what is left of the frame's build budget. With a
-    /// probe of the next camera, what its rays need comes first, and only what the probe
-    /// saw is kept: this frame is done, the next one is what the room is for.
+    /// probe of the next camera, what its rays need comes first; what the probe saw is kept
+    /// (with `StreamOptions::prefetch_keeps_frame`, also what this frame's passes saw while
+    /// the frame's working set fits its room; otherwise this frame is done, the next one is
+    /// what the room is for).
     fn prefetch_after_frame(
+        &mut self,
+        guard_demand: Demand,
+        probe: Option<FirstProbe>,
+        opts: &RenderOptions,
+    ) -> Result<()> {
+        // With `prefetch_keeps_frame`, a frame whose working set fits its room keeps it: the
+        // next camera's set is mostly this one's (one-sample bounce rays meet a different
+        // fringe of it each frame, which no probe sees), and what it does not need goes in the
+        // next frame's passes, least recently seen first.
+        // Fits: beside the frame's largest TLAS rebuild transient and the free space inside
+        // blocks that only requests fitting its ranges can use.
+        let report = self.heap.report();
+        let fragments = report
+            .budget_block_bytes
+            .saturating_sub(report.budget_in_use_bytes);
+        let st = &self.frame.stats;
+        let keeps = self.opts.prefetch_keeps_frame
+            && st.working_set_bytes + st.tlas_rebuild_transient_bytes + fragments
+                <= self.room_bytes(&report);
+        self.frame.start_prefetch(keeps);
+        let evicted_before = self.frame.stats.evicted;
+        let r = self.prefetch_steps(guard_demand, probe, opts);
+        self.frame.stats.evicted_in_prefetch = self.frame.stats.evicted - evicted_before;
+        r
+    }
+
+    /// [`Self::prefetch_after_frame`]'s build steps.
+    fn prefetch_steps(
         &mut self,
         mut guard_demand: Demand,
         probe: Option<FirstProbe>,
@@ -464,6 +530,7 @@ impl<'a> StreamingRenderer<'a> {
     /// skeleton's BLASes and TLASes.
     fn measure_residency(&mut self, report: &motu_alloc::AllocReport) {
         let resident_textures = self.shading.resident_textures();
+        let room_bytes = self.room_bytes(report);
         let st = &mut self.frame.stats;
         st.resident_textures = resident_textures;
         let (mut streamed_blases, mut streamed_bytes, mut skeleton_bytes) = (0u32, 0u64, 0u64);
@@ -493,11 +560,36 @@ impl<'a> StreamingRenderer<'a> {
         st.vram_budget_bytes = report.budget_bytes;
         st.heap_block_bytes = report.budget_block_bytes;
         st.heap_in_use_bytes = report.budget_in_use_bytes;
+        st.room_bytes = room_bytes;
+    }
+
+    /// Budget bytes resident streamed BLASes and their budgeted meshes hold now.
+    fn streamed_bytes(&self) -> u64 {
+        let blases: u64 = (self.res.blases().iter().zip(self.topo.buildable_all()))
+            .filter_map(|(a, &buildable)| a.as_ref().filter(|_| buildable))
+            .map(|a| a.size_bytes)
+            .sum();
+        let meshes: u64 = if self.res.meshes_budgeted() {
+            self.res
+                .meshes()
+                .iter()
+                .flatten()
+                .map(|g| g.size_bytes())
+                .sum()
+        } else {
+            0
+        };
+        blases + meshes
+    }
+
+    /// The budget less what stays in use beside streamed BLASes and their meshes, by the
+    /// allocator's `report` now (`FrameStreamStats::room_bytes`).
+    fn room_bytes(&self, report: &motu_alloc::AllocReport) -> u64 {
         // Kept TLAS records are not fixed: they yield to structures (`tlas_compact.rs`).
         let fixed_bytes = report
             .budget_in_use_bytes
-            .saturating_sub(streamed_bytes + self.tlases.records().bytes());
-        st.room_bytes = report.budget_bytes.saturating_sub(fixed_bytes);
+            .saturating_sub(self.streamed_bytes() + self.tlases.records().bytes());
+        report.budget_bytes.saturating_sub(fixed_bytes)
     }
 
     /// The frame's image, AOVs and render statistics.

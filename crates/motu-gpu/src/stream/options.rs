@@ -88,6 +88,22 @@ pub struct StreamOptions {
     /// 1.857 → 1.571 passes after the first, evictions on refusal 3.6 → 0 a frame; a quarter
     /// unchanged; every image equal to the full build's), not yet on a GPU.
     pub defrag: bool,
+    /// The prefetch after a frame keeps what the frame's passes saw, beside what the probe of
+    /// the next camera met, while the frame's working set fits its room next to its largest
+    /// TLAS rebuild transient and the free space inside blocks: it prefetches into the rest
+    /// and skips what does not fit, and the next frame's passes evict, least recently seen
+    /// first, what that frame does not use (`--stream-prefetch-keeps-frame`). Off (the
+    /// default), the prefetch keeps only what the probe met and may evict, for its room, what
+    /// the frame used (one-sample bounce rays meet a different fringe of it each frame, which
+    /// no probe sees; rays pass through structures without a hit). Opt-in until a GPU
+    /// measures it (H100, island 0.3 at a quarter, default: frame 7 evicted 855 MB and
+    /// brought back 662 MB while its working set fit). Lavapipe, the default island along
+    /// shotCam at 64×36, frames after the first, off → on: a third of the 64×36 report's full
+    /// build 1.000 passes either way, 186 → 188 evicted, 65 → 73 built back within their
+    /// frame; a third of the default-size report's 1.143 → 1.000 passes, 139 → 131 evicted,
+    /// 11 → 12 built back; a quarter (where the working set fits only now and then) 2.143
+    /// passes either way, 479 → 348 evicted, 252 → 173 built back, 157 → 126 MB built.
+    pub prefetch_keeps_frame: bool,
     /// Where streamed meshes (positions, indices, primitive maps, shading attributes) live
     /// (`--stream-mesh-memory`; see [`MeshMemory`]).
     pub mesh_memory: MeshMemory,
@@ -270,6 +286,7 @@ impl Default for StreamOptions {
             frame_build_ms: 0.0,
             tlas_update: TlasUpdate::Auto,
             defrag: false,
+            prefetch_keeps_frame: false,
             mesh_memory: MeshMemory::Auto,
             host_cache_mode: super::HostCacheMode::Auto,
             host_store_policy: super::HostStorePolicy::Measured,

@@ -65,6 +65,10 @@ pub(super) struct Resident {
     /// BLASes evicted since the renderer started (also those given back; never decremented):
     /// whether a prefetch removed anything since a probe.
     evictions: u64,
+    /// Per BLAS: the frame that last evicted it (0: never) and whether that frame's prefetch
+    /// did (`returned_in_frame`, `returned_after_prefetch`).
+    evicted_in: Vec<u64>,
+    evicted_by_prefetch: Vec<bool>,
 }
 
 impl Resident {
@@ -251,6 +255,11 @@ impl Resident {
         self.residency.contains(ItemId(b))
     }
 
+    /// The frame that last evicted BLAS `b` (0: never) and whether its prefetch did.
+    pub fn last_eviction(&self, b: usize) -> (u64, bool) {
+        (self.evicted_in[b], self.evicted_by_prefetch[b])
+    }
+
     /// BLASes evicted since the renderer started (never decreases).
     pub fn evictions(&self) -> u64 {
         self.evictions
@@ -284,6 +293,8 @@ impl Resident {
             built_now: Vec::new(),
             group_hint: 16,
             evictions: 0,
+            evicted_in: vec![0; blases],
+            evicted_by_prefetch: vec![false; blases],
         }
     }
 }
@@ -306,7 +317,7 @@ impl<'a> StreamingRenderer<'a> {
     fn evict_structures(&mut self, bytes: u64, why: EvictWhy) -> Result<bool> {
         let t0 = std::time::Instant::now();
         let before = self.frame.stats().evicted;
-        let r = self.evict_some_untimed(bytes);
+        let r = self.evict_some_untimed(bytes, why);
         let n = self.frame.stats().evicted - before;
         match why {
             EvictWhy::BuildRoom => {}
@@ -317,7 +328,7 @@ impl<'a> StreamingRenderer<'a> {
         r
     }
 
-    fn evict_some_untimed(&mut self, bytes: u64) -> Result<bool> {
+    fn evict_some_untimed(&mut self, bytes: u64, why: EvictWhy) -> Result<bool> {
         let pins = &self.res.pinned;
         let pinned = |id: ItemId| pins.get(id.0 as usize).copied().unwrap_or(true);
         let victims = match self
@@ -340,6 +351,8 @@ impl<'a> StreamingRenderer<'a> {
             victims = ?victims.iter().map(|v| (v.0, self.res.last_seen.get(v.0 as usize).copied().unwrap_or(0))).collect::<Vec<_>>(),
             stamp = self.frame.stamp(),
             first = self.frame.first_stamp(),
+            ?why,
+            prefetching = self.frame.prefetching(),
             "evicting (BLAS, last seen)"
         );
         let ids: Vec<usize> = victims.iter().map(|v| v.0 as usize).collect();
@@ -357,6 +370,8 @@ impl<'a> StreamingRenderer<'a> {
         let bytes = self.res.residency.remove(ItemId(b as u32)).unwrap_or(0);
         self.frame.stats_mut().evicted += 1;
         self.res.evictions += 1;
+        self.res.evicted_in[b] = self.frame.number();
+        self.res.evicted_by_prefetch[b] = self.frame.prefetching();
         self.frame.stats_mut().evicted_bytes += bytes;
         if let Some(a) = self.res.blas.get_mut(b).and_then(Option::take) {
             a.release(&mut self.heap);
@@ -410,20 +425,30 @@ impl<'a> StreamingRenderer<'a> {
 
     /// Runs `f`, evicting unpinned structures and retrying while the budget refuses it;
     /// returns the budget error once nothing unpinned is left.
-    pub(super) fn with_eviction<T>(
+    pub(super) fn with_eviction<T>(&mut self, f: impl FnMut(&mut Self) -> Result<T>) -> Result<T> {
+        self.retry_refused(true, f)
+    }
+
+    /// Runs `f`, retrying while the budget refuses it after making room: kept TLAS records
+    /// first (they yield to structures, `tlas_compact.rs`: a structure never gives way to
+    /// them, nor is a block drained for them), then, when `evict`, drained blocks and evicted
+    /// unpinned structures. Returns the budget error once nothing more gives way.
+    fn retry_refused<T>(
         &mut self,
+        evict: bool,
         mut f: impl FnMut(&mut Self) -> Result<T>,
     ) -> Result<T> {
         loop {
             match f(self) {
                 Err(GpuError::Budget(msg)) => {
                     // What refused (`MOTU_LOG`): the numbers behind `evicted_on_refusal`.
-                    tracing::debug!(%msg, "refused; evicting");
+                    tracing::debug!(%msg, evict, "refused; making room");
                     let step = (self.build_opts.budget_bytes / 32).max(1);
-                    // Kept TLAS records yield first (`tlas_compact.rs`): a structure never
-                    // gives way to them, nor is a block drained for them.
                     if self.release_kept_records_for_room(step) > 0 {
                         continue;
+                    }
+                    if !evict {
+                        return Err(GpuError::Budget(msg));
                     }
                     // A refusal is for a new block: whole blocks drained first, if any.
                     if self.opts.defrag && self.defragment(step)?.freed_bytes > 0 {
@@ -458,22 +483,9 @@ impl<'a> StreamingRenderer<'a> {
     pub(super) fn maybe_evicting<T>(
         &mut self,
         evict: bool,
-        mut f: impl FnMut(&mut Self) -> Result<T>,
+        f: impl FnMut(&mut Self) -> Result<T>,
     ) -> Result<T> {
-        if evict {
-            return self.with_eviction(f);
-        }
-        loop {
-            match f(self) {
-                Err(GpuError::Budget(msg)) => {
-                    let step = (self.build_opts.budget_bytes / 32).max(1);
-                    if self.release_kept_records_for_room(step) == 0 {
-                        return Err(GpuError::Budget(msg));
-                    }
-                }
-                r => return r,
-            }
-        }
+        self.retry_refused(evict, f)
     }
 
     /// After a failed build step, a TLAS left dirty (absent, or referencing evicted BLASes)

@@ -39,6 +39,10 @@ pub struct FrameStreamStats {
     /// resident and the TLAS rebuilds' reserve (the next frame's first pass opens those its
     /// rays need).
     pub prefetch_skipped: u32,
+    /// The prefetch kept what this frame's passes saw beside what the probe met: the frame's
+    /// working set fit its room next to its `tlas_rebuild_transient_bytes` and the free space
+    /// inside blocks (`StreamOptions::prefetch_keeps_frame`).
+    pub prefetch_kept_frame: bool,
     /// Rays of the probe of the next frame's camera (its pixels' primary rays; 0: no probe),
     /// and the probe's trace time (not in `trace_ms`).
     pub probe_rays: u64,
@@ -85,6 +89,17 @@ pub struct FrameStreamStats {
     /// room for BLAS build groups by estimate.
     pub evicted_for_tlas: u32,
     pub evicted_on_refusal: u32,
+    /// Of `evicted`: made by the prefetch after the frame's passes (room for what the guard
+    /// band and the probe of the next camera met).
+    pub evicted_in_prefetch: u32,
+    /// BLASes this frame evicted and then made resident again (built or restored, by a later
+    /// pass or by its prefetch), and their bytes (structures plus meshes): churn within one
+    /// frame. A frame whose working set fits its `room_bytes` should have none.
+    pub returned_in_frame: u32,
+    pub returned_in_frame_bytes: u64,
+    /// BLASes this frame's passes made resident again that the previous frame's prefetch
+    /// evicted (a prefetch that gave up what the next frame's rays needed).
+    pub returned_after_prefetch: u32,
     /// Demanded structures left unbuilt in a pass because they did not fit next to what the
     /// pass's incomplete pixels need (built in a later pass, once those pixels completed).
     pub deferred: u32,
