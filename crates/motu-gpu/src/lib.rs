@@ -152,7 +152,7 @@ pub use scene::{
 pub use stream::{
     full_build_fits, persistent_tlas_estimate, streamed_mesh_total_bytes, streaming_floor,
     streaming_floor_planned, ClustersSource, FloorSizes, FrameStreamStats, FullBuildFit,
-    HostCacheMode, MeshMemory, PassMarks, PassStats, PersistentEstimate, ProbeLater,
+    HostCacheMode, MeshMemory, PassMarks, PassStats, PersistentEstimate, ProbeLater, ProbePaths,
     StreamFallback, StreamFloor, StreamOptions, StreamPlan, StreamTotals, StreamingRenderer,
     StructureCache, TlasRecordsMode, TlasUpdate, AUTO_PASS_FRAMES, AUTO_PASS_ROWS, PI_EMPTY_BLAS,
 };

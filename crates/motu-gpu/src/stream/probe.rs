@@ -142,7 +142,14 @@ impl<'a> StreamingRenderer<'a> {
             requests,
             incomplete,
             trace_ms,
-        } = self.trace_pass(fb, pixels, full, &list, false, probe_flags(pass_rows))?;
+        } = self.trace_pass(
+            fb,
+            pixels,
+            full,
+            &list,
+            false,
+            probe_flags(pass_rows, self.opts.probe_paths),
+        )?;
         let stamp = self.frame.stamp();
         if pass_rows > 0 {
             // Passed by a final ray only: as recent as the frame's last pass (a later round:
