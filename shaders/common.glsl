@@ -57,6 +57,11 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 // pixel's rays, primary and secondary, run to the end against what is resident, marking what
 // they meet open (the nearest needed and counted) and writing nothing else.
 #define STREAM_PROBE_PASS 1u
+// StreamParams.flags of a probe pass (StreamOptions::probe_paths `stop`): a probe ray of a
+// closest-hit link (primary, bounce) whose nearest open structure lies in front of its resident
+// hit ends its pixel's path there, instead of sending that hit's secondary rays and bounce from
+// a point the frame's rays may never leave from; the next probe round goes on once it is built.
+#define STREAM_PROBE_STOP 2u
 // StreamParams.flags >> STREAM_PASS_ROWS_SHIFT: N > 0: in a probe pass, the pixels of every
 // N-th row also take a pass-mark walk (STREAM_PASS_WALK). Whole rows: a launch's subgroups are
 // runs of one row, so sampling within rows would cost every subgroup the whole walk.

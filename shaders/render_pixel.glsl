@@ -416,9 +416,13 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                     c.ns.xyz = hs.ns;
                     c.albedo.xyz = hs.albedo;
                 }
+                g_probe_link_open = false;
                 if (!cut && stream_still_open(c.hit.x)) {
                     open = true;  // the next vertex waits until the bounce's hit is final
                     break;
+                }
+                if (g_probe_stop && g_probe_link_open) {
+                    break;  // a probe: the path goes on in the next round (STREAM_PROBE_STOP)
                 }
                 if (c.hit.x >= T_INFINITY) {
                     c.st.x = 5u;  // escaped: the path ends (see the full build's branch)
@@ -504,6 +508,9 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                     c.albedo.xyz = hs.albedo;
                 }
             }
+#ifdef MOTU_STREAMED
+            g_probe_link_open = false;
+#endif
             if (!cut && stream_still_open(c.hit.x)) {
 #ifdef MOTU_STREAMED
                 if (shaded && c.hit.x < T_INFINITY) {
@@ -526,6 +533,11 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 open = true;  // shading waits until the primary hit is final
                 break;
             }
+#ifdef MOTU_STREAMED
+            if (g_probe_stop && g_probe_link_open) {
+                break;  // a probe: the path goes on in the next round (STREAM_PROBE_STOP)
+            }
+#endif
             if (smp == 0u && c.hit.x < T_INFINITY) {
                 c.aov = uvec4(c.rec.x, c.rec.y, floatBitsToUint(c.hit.x), min(c.rec.z, 255u));
             }
@@ -649,6 +661,7 @@ void render_stream_item(uint i) {
     uint pass_rows = s.flags >> STREAM_PASS_ROWS_SHIFT;
     g_probe_pass_marks = g_probe && !guard && pass_rows != 0u && uint(y) % pass_rows == 0u;
     g_probe_open = false;
+    g_probe_stop = g_probe && (s.flags & STREAM_PROBE_STOP) != 0u;
 #ifdef MOTU_STREAMED
     // Every first walk tests triangles and proxies; what the rays pass (the marks BLASes
     // included) is marked by the mark walk that follows it (traverse.glsl).

@@ -49,6 +49,10 @@ bool g_probe_pass_marks = false;
 // A probe ray of this pixel met an open structure in front of its hit: the pixel goes on the
 // pass's incomplete list (its only write), so the next probe round traces it alone.
 bool g_probe_open = false;
+// STREAM_PROBE_STOP: a probe ray left open ends its pixel's path (closest-hit links only).
+bool g_probe_stop = false;
+// The last stream_still_open call of a probe ray found it open (reset by the caller).
+bool g_probe_link_open = false;
 uint g_stamp = 0u;      // this pass's stamp
 uint g_start = 0u;      // the stamp of the pass this ray (primary or shadow) started in
 float g_best_t = T_INFINITY;  // the carried best hit's t (culls this walk)
@@ -91,6 +95,7 @@ bool stream_still_open(float best_t) {
     stream_mark_as(s.blas_stamps, g_empty_id, STREAM_NEEDED);
     atomicAdd(StampTable(s.requests).r[g_empty_id], 1u);
     g_probe_open = g_probe_open || g_probe;
+    g_probe_link_open = g_probe;
     return !g_probe;
 }
 

@@ -136,6 +136,7 @@ fn render_and_view_help_group_their_flags() {
         "--stream-probe-rounds",
         "--stream-probe-verify",
         "--stream-probe-pass-rows",
+        "--stream-probe-paths",
         "--stream-tlas",
         "--stream-split-instances",
         "--stream-defrag",

@@ -153,7 +153,7 @@ pub use stream::{
     full_build_fits, persistent_tlas_estimate, streamed_mesh_total_bytes, streaming_floor,
     streaming_floor_planned, ClustersSource, FloorSizes, FrameStreamStats, FullBuildFit,
     HostCacheMode, HostStorePolicy, MeshMemory, PassMarks, PassStats, PersistentEstimate,
-    ProbeLater, StorePolicyStats, StreamFallback, StreamFloor, StreamOptions, StreamPlan,
-    StreamTotals, StreamingRenderer, StructureCache, TlasRecordsMode, TlasUpdate, AUTO_PASS_FRAMES,
-    AUTO_PASS_ROWS, PI_EMPTY_BLAS,
+    ProbeLater, ProbePaths, StorePolicyStats, StreamFallback, StreamFloor, StreamOptions,
+    StreamPlan, StreamTotals, StreamingRenderer, StructureCache, TlasRecordsMode, TlasUpdate,
+    AUTO_PASS_FRAMES, AUTO_PASS_ROWS, PI_EMPTY_BLAS,
 };

@@ -150,7 +150,7 @@ pub use floor::{
     FloorSizes, StreamFloor,
 };
 pub use options::{
-    MeshMemory, PassMarks, ProbeLater, StreamFallback, StreamOptions, TlasRecordsMode,
+    MeshMemory, PassMarks, ProbeLater, ProbePaths, StreamFallback, StreamOptions, TlasRecordsMode,
     AUTO_PASS_FRAMES, AUTO_PASS_ROWS,
 };
 pub use stats::{FrameStreamStats, PassStats, StreamTotals};

@@ -28,6 +28,8 @@ pub struct StreamBounds {
     /// `--stream-probe-later`: the rounds after the first when its prefetch evicted (`None`:
     /// the default).
     pub probe_later: Option<motu_gpu::ProbeLater>,
+    /// `--stream-probe-paths`: where a probe round's open paths end (`None`: the default).
+    pub probe_paths: Option<motu_gpu::ProbePaths>,
     /// `--stream-probe-pass-rows`: the probe's pass marks (`None`: the default, auto).
     pub pass_marks: Option<motu_gpu::PassMarks>,
     /// `--stream-tlas`: how TLASes follow residency.
@@ -62,6 +64,7 @@ impl StreamBounds {
             probe_rounds: self.probe_rounds.unwrap_or(d.probe_rounds),
             probe_verify_rounds: self.probe_verify.unwrap_or(d.probe_verify_rounds),
             probe_later: self.probe_later.unwrap_or(d.probe_later),
+            probe_paths: self.probe_paths.unwrap_or(d.probe_paths),
             pass_marks: self.pass_marks.unwrap_or(d.pass_marks),
             tlas_update: self.tlas_update,
             defrag: self.defrag,
@@ -98,6 +101,7 @@ impl StreamBounds {
             || self.probe_rounds.is_some()
             || self.probe_verify.is_some()
             || self.probe_later.is_some()
+            || self.probe_paths.is_some()
             || self.pass_marks.is_some()
             || self.tlas_update != motu_gpu::TlasUpdate::Auto
             || self.split_instances.is_some()

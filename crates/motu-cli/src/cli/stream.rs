@@ -88,6 +88,14 @@ pub struct StreamBoundArgs {
     /// both kinds would have found something (probe_later_merged per frame).
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, value_name = "WHAT")]
     pub stream_probe_later: Option<ProbeLaterArg>,
+    /// Streaming: where a probe ray of the primary or a bounce ray goes when a structure that
+    /// is not resident lies in front of its resident hit (it is requested either way).
+    /// `through` (default): on from that hit, as if it were final. `stop`: the pixel's path
+    /// ends there and the next probe round (--stream-probe-rounds) goes on from the
+    /// structure's own hits once it is built, so no round prefetches what rays from a point
+    /// the frame never reaches meet.
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, value_name = "WHERE")]
+    pub stream_probe_paths: Option<ProbePathsArg>,
     /// Streaming: the probe's pixels of every N-th row also mark the resident structures their
     /// rays pass through without hitting, so the prefetch evicts those last (it never skips a
     /// build to keep them). Fewer second passes where the prefetch evicts for room (a third
@@ -264,6 +272,22 @@ impl From<ProbeLaterArg> for motu_gpu::ProbeLater {
         match a {
             ProbeLaterArg::Open => motu_gpu::ProbeLater::Open,
             ProbeLaterArg::Verify => motu_gpu::ProbeLater::Verify,
+        }
+    }
+}
+
+/// `--stream-probe-paths`.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ProbePathsArg {
+    Through,
+    Stop,
+}
+
+impl From<ProbePathsArg> for motu_gpu::ProbePaths {
+    fn from(a: ProbePathsArg) -> Self {
+        match a {
+            ProbePathsArg::Through => motu_gpu::ProbePaths::Through,
+            ProbePathsArg::Stop => motu_gpu::ProbePaths::Stop,
         }
     }
 }

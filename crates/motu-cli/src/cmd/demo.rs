@@ -130,6 +130,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             stream_probe_rounds: None,
             stream_probe_verify: None,
             stream_probe_later: None,
+            stream_probe_paths: None,
             stream_probe_pass_rows: None,
             stream_tlas: crate::cli::StreamTlasArg::Auto,
             stream_split_instances: None,

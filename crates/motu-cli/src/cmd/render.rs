@@ -30,6 +30,7 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         probe_rounds: b.stream_probe_rounds,
         probe_verify: b.stream_probe_verify,
         probe_later: b.stream_probe_later.map(Into::into),
+        probe_paths: b.stream_probe_paths.map(Into::into),
         pass_marks: b.stream_probe_pass_rows,
         tlas_update: b.stream_tlas.into(),
         split_instances: b.stream_split_instances,

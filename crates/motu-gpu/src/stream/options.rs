@@ -69,6 +69,8 @@ pub struct StreamOptions {
     /// What the rounds after the first do when the first round's prefetch evicted
     /// (`--stream-probe-later`, see [`ProbeLater`]).
     pub probe_later: ProbeLater,
+    /// Where a probe round's paths end (`--stream-probe-paths`, see [`ProbePaths`]).
+    pub probe_paths: ProbePaths,
     /// Pass marks of the probe (see [`PassMarks`]); [`PassMarks::Auto`] by default.
     pub pass_marks: PassMarks,
     /// Bytes (meshes plus acceleration structures) one frame may build; 0: unbounded. At least
@@ -249,6 +251,23 @@ pub enum ProbeLater {
     Verify,
 }
 
+/// Where a probe ray of a closest-hit link (the primary ray, a bounce ray) goes on when a
+/// structure that is not resident lies in front of its resident hit
+/// ([`StreamOptions::probe_paths`], `--stream-probe-paths`). Either way the structure is
+/// requested and its pixel listed for the next round, which goes on from the structure's own
+/// hits once the prefetch built it; the image never depends on it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ProbePaths {
+    /// The path goes on as if the resident hit were final: that hit's secondary rays and its
+    /// bounce leave from a point the frame's rays may never leave from, and what they meet
+    /// is prefetched too.
+    #[default]
+    Through,
+    /// The pixel's path ends there (`STREAM_PROBE_STOP`): a round prefetches only what paths
+    /// that are right so far meet, and the later rounds go one link deeper each.
+    Stop,
+}
+
 /// See [`StreamOptions::fallback`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum StreamFallback {
@@ -279,6 +298,7 @@ impl Default for StreamOptions {
             probe_stride: 1,
             probe_rounds: 2,
             probe_verify_rounds: 2,
+            probe_paths: ProbePaths::Through,
             probe_later: ProbeLater::Open,
             pass_marks: PassMarks::Auto,
             fallback: StreamFallback::Off,

@@ -30,8 +30,8 @@ pub(super) struct StreamParams {
     /// space) a ray must also enter to open one (`proxy_boxes.rs`); 0: none.
     pub(super) proxy_box_index: u64,
     pub(super) proxy_boxes: u64,
-    /// [`STREAM_PROBE_PASS`] or 0, with a probe's pass-mark row stride `<<`
-    /// [`STREAM_PASS_ROWS_SHIFT`].
+    /// [`STREAM_PROBE_PASS`] or 0 (with [`STREAM_PROBE_STOP`]), with a probe's pass-mark row
+    /// stride `<<` [`STREAM_PASS_ROWS_SHIFT`].
     pub(super) flags: u32,
     pub(super) _pad: u32,
 }
@@ -39,6 +39,10 @@ pub(super) struct StreamParams {
 /// `STREAM_PROBE_PASS` of `common.glsl`: the pass probes the next frame's camera (every
 /// pixel's rays run against what is resident and only mark what they meet).
 pub(super) const STREAM_PROBE_PASS: u32 = 1;
+
+/// `STREAM_PROBE_STOP` of `common.glsl`: a probe ray of a closest-hit link left open ends its
+/// pixel's path ([`ProbePaths::Stop`](super::ProbePaths::Stop)).
+pub(super) const STREAM_PROBE_STOP: u32 = 2;
 
 /// `STREAM_PASS_ROWS_SHIFT` of `common.glsl`: `flags >> it` is the probe's pass-mark row
 /// stride (0: none; `StreamOptions::pass_marks`).
@@ -53,8 +57,13 @@ pub(super) const MAX_PASS_ROWS: u32 = u32::MAX >> STREAM_PASS_ROWS_SHIFT;
 pub(super) const STAMP_LIMIT: u32 = 1 << 29;
 
 /// The `flags` of a probe pass marking what the rays of every `pass_rows`-th row pass.
-pub(super) fn probe_flags(pass_rows: u32) -> u32 {
-    STREAM_PROBE_PASS | pass_rows.min(MAX_PASS_ROWS) << STREAM_PASS_ROWS_SHIFT
+pub(super) fn probe_flags(pass_rows: u32, paths: super::ProbePaths) -> u32 {
+    let stop = if paths == super::ProbePaths::Stop {
+        STREAM_PROBE_STOP
+    } else {
+        0
+    };
+    STREAM_PROBE_PASS | stop | pass_rows.min(MAX_PASS_ROWS) << STREAM_PASS_ROWS_SHIFT
 }
 
 /// Whether a stamp-table value is a pass-mark walk's mark of pass `stamp`

@@ -1,4 +1,5 @@
 use super::*;
+use crate::stream::ProbePaths;
 
 const COMMON: &str = include_str!("../../../../../shaders/common.glsl");
 
@@ -23,6 +24,7 @@ fn define(name: &str) -> u32 {
 #[test]
 fn stream_params_match_common_glsl() {
     assert_eq!(define("STREAM_PROBE_PASS"), STREAM_PROBE_PASS);
+    assert_eq!(define("STREAM_PROBE_STOP"), STREAM_PROBE_STOP);
     assert_eq!(define("STREAM_PASS_ROWS_SHIFT"), STREAM_PASS_ROWS_SHIFT);
     assert_eq!(define("STREAM_START_STAMP") + 1, STAMP_LIMIT);
     for bit in ["STREAM_GUARD_RAY", "STREAM_MARK_WALK", "STREAM_PASS_WALK"] {
@@ -77,13 +79,26 @@ fn stream_params_match_common_glsl() {
 
 #[test]
 fn probe_flags_carry_the_pass_rows_and_passed_marks_are_one_below_the_pass() {
-    assert_eq!(probe_flags(0), STREAM_PROBE_PASS);
-    assert_eq!(probe_flags(3) >> STREAM_PASS_ROWS_SHIFT, 3);
+    assert_eq!(probe_flags(0, ProbePaths::Through), STREAM_PROBE_PASS);
     assert_eq!(
-        probe_flags(u32::MAX) >> STREAM_PASS_ROWS_SHIFT,
+        probe_flags(3, ProbePaths::Through) >> STREAM_PASS_ROWS_SHIFT,
+        3
+    );
+    assert_eq!(
+        probe_flags(u32::MAX, ProbePaths::Through) >> STREAM_PASS_ROWS_SHIFT,
         MAX_PASS_ROWS
     );
-    assert_eq!(probe_flags(u32::MAX) & STREAM_PROBE_PASS, STREAM_PROBE_PASS);
+    assert_eq!(
+        probe_flags(u32::MAX, ProbePaths::Through) & STREAM_PROBE_PASS,
+        STREAM_PROBE_PASS
+    );
+    assert_eq!(probe_flags(3, ProbePaths::Through) & STREAM_PROBE_STOP, 0);
+    let stop = probe_flags(3, ProbePaths::Stop);
+    assert_eq!(
+        stop & (STREAM_PROBE_PASS | STREAM_PROBE_STOP),
+        STREAM_PROBE_PASS | STREAM_PROBE_STOP
+    );
+    assert_eq!(stop >> STREAM_PASS_ROWS_SHIFT, 3);
     // Level 3 of the stamp before: above every mark of earlier passes, below this one's.
     assert!(passed_mark(4 * 7 - 1, 7));
     for level in 0..3 {
