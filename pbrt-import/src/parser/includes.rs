@@ -442,6 +442,9 @@ impl<'s> Parser<'s> {
                             scope.spawn(move |_| {
                                 let piece = src.bytes().get(start..end).unwrap_or_default();
                                 worker_slot.put(parallel::parse_neutral(piece, &worker_snap));
+                                // Parsed: the piece's text leaves the resident set while the
+                                // window waits for its replay (it faults back if read again).
+                                src.release(start, end);
                             });
                             slots.push(slot);
                         }
