@@ -5,13 +5,12 @@
 //! [`EdgeTable::release_pages`] drops them (they stay in the page cache and fault back in
 //! when read again), so the compiler keeps only the edges it is walking.
 
-use crate::scene::Edge;
 use std::io::Write;
 use std::path::Path;
 
 /// Where a scene's edges are: every scene starts on the heap; an import moves them to a file.
-pub(crate) enum EdgeTable {
-    Heap(Vec<Edge>),
+pub(crate) enum EdgeTable<T> {
+    Heap(Vec<T>),
     Mapped(MappedEdges),
 }
 
@@ -22,20 +21,20 @@ pub(crate) struct MappedEdges {
     len: usize,
 }
 
-impl std::ops::Deref for EdgeTable {
-    type Target = [Edge];
-    fn deref(&self) -> &[Edge] {
+impl<T: bytemuck::Pod> std::ops::Deref for EdgeTable<T> {
+    type Target = [T];
+    fn deref(&self) -> &[T] {
         match self {
             EdgeTable::Heap(v) => v,
             EdgeTable::Mapped(m) => {
-                let bytes = m.map.get(..m.len * std::mem::size_of::<Edge>());
+                let bytes = m.map.get(..m.len * std::mem::size_of::<T>());
                 bytemuck::cast_slice(bytes.unwrap_or_default())
             }
         }
     }
 }
 
-impl EdgeTable {
+impl<T: bytemuck::Pod> EdgeTable<T> {
     /// Moves heap edges into an unnamed file in `dir`, mapped read-only; the heap table is
     /// freed. Already mapped or empty tables stay as they are. On error the table is
     /// unchanged.
@@ -92,47 +91,4 @@ impl EdgeTable {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::{PrototypeId, Transform34};
-
-    fn edge(i: u32) -> Edge {
-        let mut t = Transform34::IDENTITY;
-        t.rows[0][3] = i as f32;
-        Edge {
-            parent_from_child: t,
-            child: PrototypeId(i % 7),
-        }
-    }
-
-    #[test]
-    fn mapped_edges_read_as_the_heap_ones_before_and_after_release() {
-        let heap: Vec<Edge> = (0..100_000).map(edge).collect();
-        let mut t = EdgeTable::Heap(heap.clone());
-        let dir = tempfile::tempdir().unwrap();
-        t.move_to_file(dir.path()).unwrap();
-        assert!(t.is_mapped());
-        assert_eq!(&t[..], &heap[..]);
-        t.release_pages().unwrap();
-        assert_eq!(&t[..], &heap[..]);
-        // The file has no name: the directory stays empty.
-        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
-        // Moving again is a no-op; an empty table stays on the heap.
-        t.move_to_file(dir.path()).unwrap();
-        assert_eq!(&t[..], &heap[..]);
-        let mut empty = EdgeTable::Heap(Vec::new());
-        empty.move_to_file(dir.path()).unwrap();
-        assert!(!empty.is_mapped() && empty.is_empty());
-    }
-
-    #[test]
-    fn a_missing_directory_is_an_error_and_keeps_the_heap_table() {
-        let mut t = EdgeTable::Heap(vec![edge(1)]);
-        let err = t
-            .move_to_file(Path::new("/nonexistent/motu-edges"))
-            .unwrap_err();
-        assert_eq!(err.kind(), std::io::ErrorKind::NotFound);
-        assert!(!t.is_mapped());
-        assert_eq!(&t[..], &[edge(1)]);
-    }
-}
+mod tests;

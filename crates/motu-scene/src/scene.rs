@@ -89,7 +89,7 @@ pub struct SceneStats {
 pub struct Scene {
     pub(crate) prototypes: Vec<Prototype>,
     pub(crate) proto_meshes: Vec<MeshId>,
-    pub(crate) edges: crate::edge_file::EdgeTable,
+    pub(crate) edges: crate::edge_file::EdgeTable<Edge>,
     pub(crate) root_edge_elements: Vec<ElementId>,
     pub(crate) root_mesh_elements: Vec<ElementId>,
     pub(crate) meshes: Vec<MeshInfo>,
