@@ -98,6 +98,7 @@ pub(crate) fn parse_entry(
     let span = tracing::info_span!("pbrt_parse");
     let _guard = span.enter();
     let (path, base_dir, owned_src);
+    let mut source = None;
     let bytes: &[u8] = match entry {
         Entry::Path(p) => {
             owned_src = SourceBytes::open(p).map_err(|source| Error::Io {
@@ -106,6 +107,7 @@ pub(crate) fn parse_entry(
             })?;
             path = p.to_path_buf();
             base_dir = p.parent().map(Path::to_path_buf).unwrap_or_default();
+            source = Some(&owned_src);
             owned_src.bytes()
         }
         Entry::Text {
@@ -130,9 +132,12 @@ pub(crate) fn parse_entry(
             .push(entry.canonicalize().unwrap_or_else(|_| entry.to_path_buf()));
     }
     p.sink.material(&p.gs.material)?;
-    p.run_file(path, bytes, Via::Entry, None, None)?;
+    p.run_file(path, bytes, source, Via::Entry, None, None)?;
     p.finish()
 }
+
+/// Text parsed between releases of a mapped file's pages already read (`parse_tokens`).
+const RELEASE_TEXT_BYTES: usize = 4 << 20;
 
 struct Parser<'s> {
     opts: &'s ParseOptions,
@@ -284,6 +289,7 @@ impl<'s> Parser<'s> {
         &mut self,
         path: PathBuf,
         bytes: &[u8],
+        source: Option<&SourceBytes>,
         via: Via,
         element: Option<ElementId>,
         replay: Option<Vec<Parsed>>,
@@ -314,13 +320,17 @@ impl<'s> Parser<'s> {
         self.sink.file_enter(&event)?;
         if self.opts.share_repeated_includes {
             self.include_counts.push(count_includes(bytes));
+            // The count read the whole file: its pages leave the resident set again.
+            if let Some(s) = source {
+                s.release(0, bytes.len());
+            }
         }
         let _span =
             tracing::debug_span!("pbrt_file", path = %path.display(), size_bytes = bytes.len())
                 .entered();
         let parsed = match replay {
             Some(pieces) => self.replay(pieces, file),
-            None => self.parse_tokens(bytes, file),
+            None => self.parse_tokens(bytes, source, file),
         };
         if self.opts.share_repeated_includes {
             self.include_counts.pop();
@@ -402,9 +412,22 @@ impl<'s> Parser<'s> {
 
     // ---- main loop ----------------------------------------------------------------------
 
-    fn parse_tokens(&mut self, bytes: &[u8], file: FileId) -> Result<()> {
+    /// Parses `bytes` directive by directive. A mapped file's text already read leaves the
+    /// resident set every [`RELEASE_TEXT_BYTES`] (a multi-gigabyte instance file would
+    /// otherwise stay resident whole until it is closed).
+    fn parse_tokens(
+        &mut self,
+        bytes: &[u8],
+        source: Option<&SourceBytes>,
+        file: FileId,
+    ) -> Result<()> {
         let mut lx = Lexer::new(bytes, file);
+        let mut released = 0usize;
         while let Some(tok) = lx.next_token().map_err(|e| self.lex_err(e))? {
+            if let Some(s) = source.filter(|_| lx.offset() >= released + RELEASE_TEXT_BYTES) {
+                s.release(released, lx.offset());
+                released = lx.offset();
+            }
             if tok.kind != TokenKind::Word {
                 return Err(self.err(
                     &tok,

@@ -132,6 +132,25 @@ impl SourceBytes {
         Ok(SourceBytes::Mapped(map))
     }
 
+    /// Drops the pages of a mapped file's bytes `start..end` from this process's resident set
+    /// (a no-op for owned bytes): a parser that has read them calls it so a large file does
+    /// not stay resident whole while it is parsed. They stay in the page cache and fault back
+    /// in, unchanged, if read again. A failed hint costs only memory and is ignored.
+    pub fn release(&self, start: usize, end: usize) {
+        if let SourceBytes::Mapped(m) = self {
+            let end = end.min(m.len());
+            if start >= end {
+                return;
+            }
+            // SAFETY: the map is read-only (nothing private to discard): MADV_DONTNEED only
+            // unmaps its pages, and later reads fault the file's same bytes back in (a file
+            // truncated meanwhile faults SIGBUS, as any read of the map would; see `open`).
+            let _ = unsafe {
+                m.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, start, end - start)
+            };
+        }
+    }
+
     /// The file contents.
     pub fn bytes(&self) -> &[u8] {
         match self {

@@ -73,6 +73,11 @@ const UNSAFE_OUTSIDE_THE_DEVICE_LAYER: &[(&str, &str)] = &[
         "mmap of a scene file (a truncated input's SIGBUS becomes an error in motu-cli)",
     ),
     (
+        "crates/motu-scene/src/edge_file.rs",
+        "mmap of an import's own unnamed edge file, and MADV_DONTNEED on it (read-only, \
+         nobody else can write it: dropped pages fault back unchanged)",
+    ),
+    (
         "crates/motu-package/src/reader/storage.rs",
         "mmap of a package (offsets validated against the mapped length, chunks checksummed)",
     ),

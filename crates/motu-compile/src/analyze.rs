@@ -172,6 +172,9 @@ impl<'s> Plan<'s> {
             plan.plan_auto_inlining();
         }
         plan.estimate_instances()?;
+        // The passes above read every edge: file-held edges (an import's) leave the resident
+        // set until the emitter walks them.
+        crate::release_edge_pages(scene);
         Ok(plan)
     }
 

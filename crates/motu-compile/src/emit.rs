@@ -58,7 +58,13 @@ pub(crate) struct Emitter<'p, 's, 'k, 'f> {
     frames: Vec<Frame>,
     root_element: u32,
     instance_cap: usize,
+    /// Edges walked so far: every [`RELEASE_EVERY_EDGES`], file-held edges already read
+    /// leave the resident set (the instance table grows meanwhile).
+    walked_edges: u64,
 }
+
+/// How many walked edges between releases of file-held edge pages (3.4 MB of edges).
+const RELEASE_EVERY_EDGES: u64 = 1 << 16;
 
 impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
     pub fn new(
@@ -105,6 +111,7 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
             frames: Vec::new(),
             root_element: root_element(plan),
             instance_cap: usize::try_from(plan.opts.effective_instance_cap()).unwrap_or(usize::MAX),
+            walked_edges: 0,
         }
     }
 
@@ -131,6 +138,7 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
             // Children got consecutive ids; push reversed so the first is emitted next.
             jobs.extend(self.new_children.drain(..).rev());
         }
+        crate::release_edge_pages(self.plan.scene);
         let bound = self.bound();
         let r = &mut self.out.report;
         r.dropped_degenerate_instances += self.plan.dropped_degenerate;
@@ -238,6 +246,10 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
             }
             let i = top.next_edge;
             top.next_edge += 1;
+            self.walked_edges += 1;
+            if self.walked_edges % RELEASE_EVERY_EDGES == 0 {
+                crate::release_edge_pages(scene);
+            }
             let (parent, tlas_from_parent) = (top.proto, top.tlas_from_proto);
             let mut element = top.element;
             let e = &edges[i];

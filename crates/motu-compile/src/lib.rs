@@ -517,6 +517,14 @@ pub fn compile_with_sources(
     Ok(out)
 }
 
+/// Drops file-held edge pages from the resident set ([`Scene::release_edge_pages`]); a failed
+/// hint costs only memory, so it is logged, not returned.
+fn release_edge_pages(scene: &Scene) {
+    if let Err(error) = scene.release_edge_pages() {
+        tracing::debug!(%error, "could not release the edge map's pages");
+    }
+}
+
 fn check_options(opts: &CompileOptions) -> Result<(), CompileError> {
     if opts.effective_instance_cap() < 2 {
         return Err(CompileError::InvalidOptions(format!(

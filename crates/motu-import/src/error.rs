@@ -35,6 +35,12 @@ pub enum ImportError {
         #[source]
         source: PackageError,
     },
+    #[error("moving the scene's instance edges to a scratch file in {} (the import keeps them out of memory; that directory must be writable, with room for 52 bytes an instance)", dir.display())]
+    EdgeFile {
+        dir: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
     #[error("importing {}", path.display())]
     Ingest {
         path: PathBuf,

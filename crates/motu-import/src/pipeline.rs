@@ -19,7 +19,7 @@ const LOD_GROUP: u32 = u32::MAX - 1;
 
 mod finish;
 pub use finish::element_stats;
-use finish::{finish, summary};
+use finish::{finish, summary, SceneCounts};
 
 pub struct ImportOptions {
     pub levels: Levels,
@@ -242,7 +242,7 @@ pub fn import(
         parallel: o.parallel,
         curve_ribbons: o.curve_ribbons,
     };
-    let (scene, mut report) = motu_ingest::ingest_file(scene_path, &ingest_opts, store)
+    let (mut scene, mut report) = motu_ingest::ingest_file(scene_path, &ingest_opts, store)
         .map_err(|source| ImportError::Ingest { path, source })?;
     if let Some(p) = &precut {
         p.finish().map_err(|source| ImportError::Cut { source })?;
@@ -256,6 +256,20 @@ pub fn import(
     let parse_ms = t0.elapsed().as_secs_f64() * 1e3;
     tracing::info!(parse_ms, peak_rss_bytes = crate::peak_rss_bytes(), "parsed");
     crate::memory::log_phase("parse");
+    // The edges leave the heap for a scratch file beside the package (unnamed: nothing is left
+    // behind), so the compiler's instance table does not sit beside them (issue 48 item 1).
+    let dir = match out.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    scene
+        .move_edges_to_file(dir)
+        .map_err(|source| ImportError::EdgeFile {
+            dir: dir.to_path_buf(),
+            source,
+        })?;
+    let counts = SceneCounts::of(&scene);
+    crate::memory::log_phase("edges to file");
 
     let element_names: Vec<String> = scene.elements().iter().map(|e| e.name.clone()).collect();
     let subset_ids = resolve_subset(&o.subset, &element_names)?;
@@ -308,9 +322,24 @@ pub fn import(
             })?;
         let t2 = Instant::now();
         let writer = geometry.take_writer()?;
-        let st = scene.stats();
-        let s = finish(writer, scene, &st, &mut compiled, &report, scene_path, o)?;
-        let mut sum = summary(s, &st, &compiled, &report, parse_ms, compile_ms, t2);
+        let s = finish(
+            writer,
+            scene,
+            &counts,
+            &mut compiled,
+            &report,
+            scene_path,
+            o,
+        )?;
+        let mut sum = summary(
+            s,
+            &counts.stats,
+            &compiled,
+            &report,
+            parse_ms,
+            compile_ms,
+            t2,
+        );
         (sum.cut_ms, sum.cut_wait_ms, sum.cut_triangles) =
             precut.as_ref().map_or((0.0, 0.0, 0), |p| p.cut_report());
         return Ok(sum);
@@ -357,10 +386,23 @@ pub fn import(
             })?;
         let t2 = Instant::now();
         let writer = final_geo.take_writer()?;
-        let st = scene.stats();
-        let s = finish(writer, scene, &st, &mut compiled, &report, scene_path, o)?;
+        let s = finish(
+            writer,
+            scene,
+            &counts,
+            &mut compiled,
+            &report,
+            scene_path,
+            o,
+        )?;
         Ok(summary(
-            s, &st, &compiled, &report, parse_ms, compile_ms, t2,
+            s,
+            &counts.stats,
+            &compiled,
+            &report,
+            parse_ms,
+            compile_ms,
+            t2,
         ))
     })();
     let _ = std::fs::remove_file(&first_target);

@@ -76,8 +76,12 @@ pub(crate) fn write_proxy_clusters(
         motu_pack::SECTION_PROXY_CLUSTERS,
         "proxy_clusters",
         |_| {
-            let clusters = proxy_clusters::all_clusters(&streamed);
-            let table = proxy_clusters::StoredProxyClusters::new(&streamed, &clusters);
+            // The clusters' member lists go once the table holds its copy of them (they
+            // would otherwise sit beside the table and its encoding: 4 bytes an instance).
+            let table = {
+                let clusters = proxy_clusters::all_clusters(&streamed);
+                proxy_clusters::StoredProxyClusters::new(&streamed, &clusters)
+            };
             let counts = format!(
                 "tlases={} clusters={}",
                 table.tlases.len(),

@@ -294,7 +294,7 @@ impl SceneBuilder {
                     .collect();
                 permute_in_place(&mut edges, &mut slot);
             }
-            (edges, self.edge_elements)
+            (crate::edge_file::EdgeTable::Heap(edges), self.edge_elements)
         };
 
         // CSR for meshes (few enough that a sort of ids is fine). Root meshes keep their order so

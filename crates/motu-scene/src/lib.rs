@@ -24,6 +24,7 @@
 
 mod builder;
 mod camera;
+mod edge_file;
 mod geometry;
 mod ids;
 mod look;

@@ -89,7 +89,7 @@ pub struct SceneStats {
 pub struct Scene {
     pub(crate) prototypes: Vec<Prototype>,
     pub(crate) proto_meshes: Vec<MeshId>,
-    pub(crate) edges: Vec<Edge>,
+    pub(crate) edges: crate::edge_file::EdgeTable<Edge>,
     pub(crate) root_edge_elements: Vec<ElementId>,
     pub(crate) root_mesh_elements: Vec<ElementId>,
     pub(crate) meshes: Vec<MeshInfo>,
@@ -156,6 +156,28 @@ impl Scene {
 
     pub fn all_edges(&self) -> &[Edge] {
         &self.edges
+    }
+
+    /// Moves the instance edges out of the heap into an unnamed file in `dir` (created there,
+    /// never named, so nothing is left behind whatever ends the process), read back through a
+    /// read-only map: what an import does once parsing is done, so the edges need not sit in
+    /// memory beside the compiled instance table (issue 48 item 1). The edges read the same;
+    /// [`Scene::release_edge_pages`] then drops the pages read so far from the resident set.
+    /// On error the edges stay on the heap.
+    pub fn move_edges_to_file(&mut self, dir: &std::path::Path) -> std::io::Result<()> {
+        self.edges.move_to_file(dir)
+    }
+
+    /// Whether the edges are in a file ([`Scene::move_edges_to_file`]).
+    pub fn edges_in_file(&self) -> bool {
+        self.edges.is_mapped()
+    }
+
+    /// Drops the pages of file-held edges from this process's resident memory (a no-op for
+    /// heap edges): they fault back in, unchanged, when read again. Walks over every edge call
+    /// it as they go so that only the edges being walked stay resident.
+    pub fn release_edge_pages(&self) -> std::io::Result<()> {
+        self.edges.release_pages()
     }
 
     pub fn meshes_of(&self, id: PrototypeId) -> &[MeshId] {

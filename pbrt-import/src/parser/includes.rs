@@ -251,7 +251,7 @@ impl<'s> Parser<'s> {
                 (Some((snap, Some(pieces))), Some(now)) if snap.same_as(&now) => Some(pieces),
                 _ => None,
             };
-            return self.run_include(path, canonical, src.bytes(), via, element, replay);
+            return self.run_include(path, canonical, &src, via, element, replay);
         };
         // First inclusion of a shared file: its content becomes an object defined in the
         // include's frame, placed by an instance; later inclusions add instances only.
@@ -271,7 +271,7 @@ impl<'s> Parser<'s> {
         let (saved_gs, saved_xs) = (self.gs.clone(), self.xs);
         self.xs.ctm = [math::IDENTITY; 2];
         self.current_object = Some(object);
-        let r = self.run_include(path, canonical.clone(), src.bytes(), via, element, None);
+        let r = self.run_include(path, canonical.clone(), &src, via, element, None);
         self.current_object = None;
         self.gs = saved_gs;
         self.xs = saved_xs;
@@ -353,7 +353,7 @@ impl<'s> Parser<'s> {
         &mut self,
         path: PathBuf,
         canonical: PathBuf,
-        bytes: &[u8],
+        src: &SourceBytes,
         via: Via,
         element: Option<ElementId>,
         replay: Option<Vec<Parsed>>,
@@ -364,7 +364,7 @@ impl<'s> Parser<'s> {
         }
         self.open_files.push(canonical);
         self.depth += 1;
-        let r = self.run_file(path, bytes, via, element, replay);
+        let r = self.run_file(path, src.bytes(), Some(src), via, element, replay);
         self.depth -= 1;
         self.open_files.pop();
         if via == Via::Import {
@@ -442,6 +442,9 @@ impl<'s> Parser<'s> {
                             scope.spawn(move |_| {
                                 let piece = src.bytes().get(start..end).unwrap_or_default();
                                 worker_slot.put(parallel::parse_neutral(piece, &worker_snap));
+                                // Parsed: the piece's text leaves the resident set while the
+                                // window waits for its replay (it faults back if read again).
+                                src.release(start, end);
                             });
                             slots.push(slot);
                         }

@@ -11,6 +11,26 @@ use motu_scene::{ElementId, PrototypeId, Scene};
 use std::path::Path;
 use std::time::Instant;
 
+/// The scene's counts a package's meta records, taken before compiling (they read every edge;
+/// file-held edges then leave the resident set before the compiler's instance table grows).
+pub(super) struct SceneCounts {
+    pub stats: motu_scene::SceneStats,
+    pub elements: Vec<ElementMeta>,
+}
+
+impl SceneCounts {
+    pub fn of(scene: &Scene) -> Self {
+        let counts = Self {
+            stats: scene.stats(),
+            elements: element_stats(scene),
+        };
+        if let Err(error) = scene.release_edge_pages() {
+            tracing::debug!(%error, "could not release the edge map's pages");
+        }
+        counts
+    }
+}
+
 pub(super) fn summary(
     (s, split_ms, proxy_boxes_ms, proxy_clusters_ms): (WriteSummary, f64, f64, f64),
     st: &motu_scene::SceneStats,
@@ -55,7 +75,7 @@ pub(super) fn summary(
 pub(super) fn finish(
     mut writer: PackageWriter,
     scene: Scene,
-    stats: &motu_scene::SceneStats,
+    counts: &SceneCounts,
     compiled: &mut CompiledScene,
     report: &IngestReport,
     source: &Path,
@@ -64,8 +84,8 @@ pub(super) fn finish(
     let owned = scene;
     let scene = &owned;
     // A subset package describes only what it holds.
-    let mut elements = element_stats(scene);
-    let mut scene_stats = stats.clone();
+    let mut elements = counts.elements.clone();
+    let mut scene_stats = counts.stats.clone();
     if !o.subset.is_empty() {
         elements.retain(|e| o.subset.contains(&e.name));
         scene_stats.instances = elements.iter().map(|e| e.instances).sum();
