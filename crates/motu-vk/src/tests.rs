@@ -186,15 +186,17 @@ fn mapped_ranges_of_one_block_are_lent_at_once_disjoint_and_filled_exactly() {
     b.write_bytes(0, &[0u8; 4096]).expect("zero b");
     // Ranges in both buffers of the block, out of order, each filled from its own thread with
     // its index: every byte of every range is written once, nothing outside them.
-    let ranges = [(&b, 1000, 24), (&a, 0, 100), (&a, 100, 3000), (&b, 0, 1000)];
-    let list: Vec<MappedRange<'_>> = ranges
-        .iter()
-        .map(|&(buffer, offset, len)| MappedRange {
-            buffer,
-            offset,
-            len,
-        })
-        .collect();
+    fn mapped<'b>(ranges: &[(&'b Buffer, u64, usize)]) -> Vec<MappedRange<'b>> {
+        ranges
+            .iter()
+            .map(|&(buffer, offset, len)| MappedRange {
+                buffer,
+                offset,
+                len,
+            })
+            .collect()
+    }
+    let list = mapped(&[(&b, 1000, 24), (&a, 0, 100), (&a, 100, 3000), (&b, 0, 1000)]);
     let lens = with_mapped_ranges_mut(&list, |slices| {
         std::thread::scope(|s| {
             for (i, slice) in slices.iter_mut().enumerate() {
@@ -227,14 +229,7 @@ fn mapped_ranges_of_one_block_are_lent_at_once_disjoint_and_filled_exactly() {
         ([(&a, 0, 100), (&a, 99, 10)], "overlap"),
         ([(&b, 0, 10), (&b, 4090, 10)], "exceeds"),
     ] {
-        let list: Vec<MappedRange<'_>> = bad
-            .iter()
-            .map(|&(buffer, offset, len)| MappedRange {
-                buffer,
-                offset,
-                len,
-            })
-            .collect();
+        let list = mapped(&bad);
         let err = with_mapped_ranges_mut(&list, |_| panic!("filled despite {why}")).expect_err(why);
         assert!(err.to_string().contains(why), "{why}: {err}");
     }
