@@ -120,6 +120,7 @@ mod demand;
 mod fits;
 mod floor;
 mod frame;
+mod instance_table;
 mod options;
 mod params;
 mod passes;

@@ -3,17 +3,18 @@
 //! [`StreamingRenderer::new`] in phases ([`StreamingRenderer::raise_skeleton`]); the address
 //! tables rewritten as structures come and go.
 
-use motu_abi::{HierarchyView, BLAS_AABBS};
+use motu_abi::{HierarchyView, InstanceRecord, BLAS_AABBS};
 use motu_alloc::{AllocKind, AllocLimits, MemoryClass, MIB};
 use motu_vk::{BufferUsage, Context, GpuHeap, HeapBuffer};
 
 use super::buffers::staging_released;
+use super::instance_table::InstanceTable;
 use super::persistent::{auto_persistent, persistent_estimate, persistent_records, TlasUpdate};
 use super::proxy_boxes::Box6;
 use super::topology::SkeletonRecords;
 use super::{MeshMemory, StreamOptions, StreamingRenderer};
 use crate::error::{GpuError, Result};
-use crate::scene::{upload_node_table, Slot, Uploader};
+use crate::scene::{table_usage, upload_node_table, Slot, Uploader};
 
 /// The heap a streamer allocates from and the options as the budget bounds them.
 pub(super) struct HeapSetup {
@@ -223,9 +224,8 @@ impl<'a> StreamingRenderer<'a> {
         use bytemuck::cast_slice;
         let ctx = self.ctx.clone();
         let view = self.view;
-        let (gpu_tlases, gpu_instances, gpu_blases, gpu_pis, cluster_members) = (
+        let (gpu_tlases, gpu_blases, gpu_pis, cluster_members) = (
             &records.tlases,
-            &records.instances,
             &records.blases,
             &records.pis,
             &records.members,
@@ -233,9 +233,8 @@ impl<'a> StreamingRenderer<'a> {
         let (box_index, boxes) = (&boxes.index, &boxes.boxes);
         let mesh_geo = vec![0u64; 2 * view.meshes.len()];
         let tlas_addrs = vec![0u64; view.tlases.len()];
-        let tables: [(Slot, &[u8]); 11] = [
+        let tables: [(Slot, &[u8]); 10] = [
             (Slot::Tlases, cast_slice(gpu_tlases)),
-            (Slot::Instances, cast_slice(gpu_instances)),
             (Slot::Blases, cast_slice(gpu_blases)),
             (Slot::Geometries, cast_slice(view.geometries)),
             (Slot::Pis, cast_slice(gpu_pis)),
@@ -254,6 +253,10 @@ impl<'a> StreamingRenderer<'a> {
                 self.upload_table(&ctx, &format!("stream-table-{slot:?}"), bytes)?;
             self.gpu.keep_slot(slot, buf, address);
         }
+        if records.instances.len() > 0 {
+            let (buf, address) = self.upload_instance_table(&ctx, &records.instances)?;
+            self.gpu.keep_slot(Slot::Instances, buf, address);
+        }
         if !cluster_members.is_empty() {
             let (buf, address) =
                 self.upload_table(&ctx, "stream-cluster-members", cast_slice(cluster_members))?;
@@ -265,6 +268,46 @@ impl<'a> StreamingRenderer<'a> {
             self.gpu.keep_proxy_boxes(index, boxes);
         }
         Ok(())
+    }
+
+    /// The instance table, written into the staging ring a region at a time by several
+    /// threads straight from the view (`instance_table.rs`).
+    fn upload_instance_table(
+        &mut self,
+        ctx: &Context,
+        table: &InstanceTable,
+    ) -> Result<(HeapBuffer, u64)> {
+        let record_bytes = std::mem::size_of::<InstanceRecord>();
+        let buf = self.heap.alloc_buffer(
+            "stream-table-Instances",
+            (table.len() * record_bytes) as u64,
+            table_usage(),
+            AllocKind::NodeTable,
+            MemoryClass::DeviceLocal,
+            16,
+        )?;
+        let address = buf.device_address()?.0;
+        let view = self.view.instances;
+        let up = self.up.as_mut().ok_or_else(staging_released)?;
+        let per_upload = (up.region_bytes() as usize / record_bytes).max(1);
+        let mut first = 0;
+        while first < table.len() {
+            let n = per_upload.min(table.len() - first);
+            let offset = (first * record_bytes) as u64;
+            up.upload_in_place(ctx, &buf, offset, n * record_bytes, |bytes| {
+                match bytemuck::try_cast_slice_mut::<u8, InstanceRecord>(bytes) {
+                    Ok(out) => table.write_parallel(view, first, out),
+                    // The ring's regions are 16-byte aligned; a copy only if a map is not.
+                    Err(_) => {
+                        let mut out = vec![InstanceRecord::default(); n];
+                        table.write_parallel(view, first, &mut out);
+                        bytes.copy_from_slice(bytemuck::cast_slice(&out));
+                    }
+                }
+            })?;
+            first += n;
+        }
+        Ok((buf, address))
     }
 
     /// The per-BLAS stamp buffers: cleared stamps the shaders write, walked stamps the host

@@ -8,13 +8,12 @@
 //! nothing here is written after [`Topology::derive`] (the cluster member ranges are set
 //! there), so the GPU slots it names stay valid for the renderer's life.
 
-use motu_abi::{
-    BlasRecord, HierarchyView, InstanceRecord, PiRecord, TlasRecord, BLAS_AABBS, NONE_U32,
-};
+use motu_abi::{BlasRecord, HierarchyView, PiRecord, TlasRecord, BLAS_AABBS, NONE_U32};
 
 use motu_compile::proxy_clusters::{tlas_clusters, Cluster};
 
-use super::{IDENTITY, PI_EMPTY_BLAS};
+use super::instance_table::InstanceTable;
+use super::PI_EMPTY_BLAS;
 use crate::error::{GpuError, Result};
 
 /// One proxy box: a spatially coherent cluster of a TLAS's instances of one triangle BLAS
@@ -156,7 +155,9 @@ pub(super) struct Topology {
 /// member table: what the skeleton uploads.
 pub(super) struct SkeletonRecords {
     pub tlases: Vec<TlasRecord>,
-    pub instances: Vec<InstanceRecord>,
+    /// Each TLAS's instances, then its proxy and marks instances (written into the upload
+    /// ring from the view, never copied whole).
+    pub instances: InstanceTable,
     pub blases: Vec<BlasRecord>,
     pub pis: Vec<PiRecord>,
     /// Per cluster, its instances' global indices in the GPU instance table.
@@ -222,7 +223,7 @@ impl Topology {
         let nt = view.tlases.len();
         let mut out = SkeletonRecords {
             tlases: Vec::with_capacity(nt),
-            instances: Vec::with_capacity(view.instances.len() + nt),
+            instances: InstanceTable::default(),
             blases: view.blases.to_vec(),
             pis: view.pis.to_vec(),
             members,
@@ -230,11 +231,10 @@ impl Topology {
         self.proxy_pi_base = vec![NONE_U32; nt];
         self.marks_blas = vec![NONE_U32; nt];
         for (t, rec) in view.tlases.iter().enumerate() {
-            let base = u32::try_from(out.instances.len()).map_err(|_| too_many("instances"))?;
             let range = rec.instance_range();
-            out.instances.extend_from_slice(&view.instances[range]);
             let mut count = rec.instance_count;
             let clusters = &self.clusters[t];
+            let mut proxy_blas = None;
             if !clusters.is_empty() {
                 let pi_base = u32::try_from(out.pis.len()).map_err(|_| too_many("PIs"))?;
                 let blas_id = u32::try_from(out.blases.len()).map_err(|_| too_many("BLASes"))?;
@@ -247,17 +247,11 @@ impl Topology {
                 out.blases.push(proxy_blas_record(rec, pi_base, n));
                 out.blases.push(proxy_blas_record(rec, pi_base + n, 0));
                 self.marks_blas[t] = blas_id + 1;
-                for id in [blas_id, blas_id + 1] {
-                    out.instances.push(InstanceRecord {
-                        tlas_from_blas: IDENTITY,
-                        blas: id,
-                        flags: 0,
-                        element: NONE_U32,
-                        _pad: 0,
-                    });
-                }
+                proxy_blas = Some(blas_id);
                 count += 2;
             }
+            let base = out.instances.push(range.start, range.len(), proxy_blas);
+            let base = u32::try_from(base).map_err(|_| too_many("instances"))?;
             out.tlases.push(TlasRecord {
                 instance_base: base,
                 instance_count: count,

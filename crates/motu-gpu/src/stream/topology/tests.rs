@@ -1,4 +1,5 @@
 use super::*;
+use motu_abi::InstanceRecord;
 
 /// Parents and instance counts per BLAS: each TLAS once, in order, however its instances
 /// interleave BLASes.
