@@ -27,6 +27,7 @@
 //! needs it too) or `--subset` (its scratch package has no spill file).
 
 use motu_compile::partition::Cluster;
+use motu_compile::proxy_boxes::{boxes_from_meshes, fan, Box6};
 use motu_compile::ClusterShape;
 use motu_pack::PackageGeometry;
 use motu_scene::{GeometryStore, MeshData, MeshId, MeshLocation, StoreError};
@@ -59,11 +60,22 @@ struct Job {
     bound: u32,
 }
 
-/// What the cutting thread sends back, in queue order: each mesh's clusters as they are cut,
-/// then the milliseconds its cut took.
+/// What the cutting thread sends back, in queue order: each mesh's clusters as they are cut
+/// (with their proxy boxes when asked for), then the milliseconds its cut took.
 enum Cut {
-    Cluster(Cluster),
+    Cluster(Cluster, Option<Vec<Box6>>),
     Done(f64),
+}
+
+/// A cluster's proxy boxes as a BLAS of it alone has them (`motu_compile::proxy_boxes`'s
+/// `blas_boxes` over one mesh: the same operations on the same data, so the same bits): made
+/// from the cluster in memory, they spare the import reading it back from the package.
+#[derive(Clone, Debug)]
+pub(crate) struct ClusterBoxes {
+    pub chunk: u32,
+    pub vertex_count: u32,
+    pub triangle_count: u32,
+    pub boxes: Vec<Box6>,
 }
 
 /// Clusters cut but not yet appended, at most (each up to a cluster: ~2.5 MiB at 2^16
@@ -86,7 +98,7 @@ struct Cutter {
 }
 
 impl Cutter {
-    fn spawn() -> Result<Self, StoreError> {
+    fn spawn(boxes: bool) -> Result<Self, StoreError> {
         let (jobs, job_rx) = channel::<Job>();
         let (done_tx, done) = sync_channel::<Cut>(CLUSTERS_IN_FLIGHT);
         let thread = std::thread::Builder::new()
@@ -97,7 +109,14 @@ impl Cutter {
                     let sent = motu_compile::partition::partition_mesh(
                         &job.data,
                         job.bound,
-                        &mut |c: Cluster| done_tx.send(Cut::Cluster(c)).map_err(|_| ()),
+                        &mut |c: Cluster| {
+                            let b = boxes.then(|| {
+                                let f = fan(c.data.triangle_count() as u32) as usize;
+                                let mesh = (&c.data.positions[..], &c.data.indices[..]);
+                                boxes_from_meshes(&[mesh], f)
+                            });
+                            done_tx.send(Cut::Cluster(c, b)).map_err(|_| ())
+                        },
                     );
                     drop(job.data);
                     let ms = t.elapsed().as_secs_f64() * 1e3;
@@ -136,6 +155,11 @@ struct State {
     waiting: Vec<(MeshId, MeshLocation, usize)>,
     /// Per source mesh cut: the bound and its clusters' shapes and locations, in cut order.
     cut: HashMap<u32, (u32, Vec<(ClusterShape, MeshLocation)>)>,
+    /// Whether clusters get their proxy boxes as they are cut, and those made, by cluster
+    /// location, then by mesh record once the compiler numbered them ([`Self::clusters`]).
+    make_boxes: bool,
+    boxes: HashMap<(u64, u64), Vec<Box6>>,
+    record_boxes: HashMap<u32, ClusterBoxes>,
     /// Source-mesh bytes queued at most (0: each mesh is cut before its store returns).
     queue_bytes: u64,
     /// Meshes queued for the cutting thread, oldest first, and their bytes.
@@ -166,6 +190,9 @@ impl PrecutGeometry {
                 stored_triangles: 0,
                 waiting: Vec::new(),
                 cut: HashMap::new(),
+                make_boxes: false,
+                boxes: HashMap::new(),
+                record_boxes: HashMap::new(),
                 queue_bytes,
                 pending: VecDeque::new(),
                 pending_bytes: 0,
@@ -195,7 +222,7 @@ impl PrecutGeometry {
         bound: u32,
     ) -> Result<(), StoreError> {
         if st.cutter.is_none() {
-            st.cutter = Some(Cutter::spawn()?);
+            st.cutter = Some(Cutter::spawn(st.make_boxes)?);
         }
         let bytes = data.size_bytes();
         let triangles = data.triangle_count() as u64;
@@ -237,8 +264,8 @@ impl PrecutGeometry {
                 .recv()
                 .map_err(|_| "the cutting thread stopped")?;
             st.wait_ms += t.elapsed().as_secs_f64() * 1e3;
-            let c = match next {
-                Cut::Cluster(c) => c,
+            let (c, boxes) = match next {
+                Cut::Cluster(c, boxes) => (c, boxes),
                 Cut::Done(ms) => {
                     st.cut_ms += ms;
                     break;
@@ -253,6 +280,9 @@ impl PrecutGeometry {
                 has_normals: c.data.normals.is_some(),
                 bounds: c.bounds,
             };
+            if let Some(b) = boxes {
+                st.boxes.insert((at.a, at.b), b);
+            }
             placed.push((shape, at));
         }
         st.cut.insert(p.id.0, (p.bound, placed));
@@ -292,15 +322,45 @@ impl PrecutGeometry {
         first: u32,
         locations: &mut HashMap<u32, MeshLocation>,
     ) -> Option<Vec<ClusterShape>> {
-        let st = self.state.lock().ok()?;
+        let mut st = self.state.lock().ok()?;
+        let st = &mut *st;
         let (b, clusters) = st.cut.get(&m.0)?;
         if *b != bound {
             return None;
         }
-        for (k, (_, at)) in clusters.iter().enumerate() {
-            locations.insert(first + k as u32, *at);
+        for (k, (shape, at)) in clusters.iter().enumerate() {
+            let record = first + k as u32;
+            locations.insert(record, *at);
+            if let Some(boxes) = st.boxes.get(&(at.a, at.b)) {
+                let made = ClusterBoxes {
+                    chunk: at.a as u32,
+                    vertex_count: shape.vertex_count,
+                    triangle_count: shape.triangle_count,
+                    boxes: boxes.clone(),
+                };
+                st.record_boxes.insert(record, made);
+            }
         }
         Some(clusters.iter().map(|c| c.0).collect())
+    }
+
+    /// Clusters get their proxy boxes as they are cut ([`Self::take_record_boxes`]).
+    pub fn with_boxes(self) -> Self {
+        if let Ok(mut st) = self.state.lock() {
+            st.make_boxes = true;
+        }
+        self
+    }
+
+    /// The proxy boxes of the clusters [`Self::clusters`] numbered, by mesh record.
+    pub fn take_record_boxes(&self) -> HashMap<u32, ClusterBoxes> {
+        self.state.lock().map_or_else(
+            |_| HashMap::new(),
+            |mut st| {
+                st.boxes = HashMap::new();
+                std::mem::take(&mut st.record_boxes)
+            },
+        )
     }
 
     /// Milliseconds the cutting thread spent cutting, milliseconds the parser waited for it,
