@@ -31,6 +31,7 @@ use motu_compile::proxy_boxes::{boxes_from_meshes, fan, Box6};
 use motu_compile::ClusterShape;
 use motu_pack::PackageGeometry;
 use motu_scene::{GeometryStore, MeshData, MeshId, MeshLocation, StoreError};
+use rayon::prelude::*;
 use std::collections::{HashMap, VecDeque};
 use std::sync::mpsc::{channel, sync_channel, Receiver, Sender};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -78,6 +79,12 @@ pub(crate) struct ClusterBoxes {
     pub boxes: Vec<Box6>,
 }
 
+/// A cluster's boxes as a BLAS of it alone has them (fan by its triangles).
+fn cluster_boxes(c: &Cluster) -> Vec<Box6> {
+    let f = fan(c.data.triangle_count() as u32) as usize;
+    boxes_from_meshes(&[(&c.data.positions[..], &c.data.indices[..])], f)
+}
+
 /// Clusters cut but not yet appended, at most (each up to a cluster: ~2.5 MiB at 2^16
 /// triangles), so a mesh far larger than the queue is never held as clusters whole.
 const CLUSTERS_IN_FLIGHT: usize = 8;
@@ -104,20 +111,34 @@ impl Cutter {
         let thread = std::thread::Builder::new()
             .name("motu-cut".into())
             .spawn(move || {
+                // Clusters whose boxes are made together, on all cores.
+                let batch = rayon::current_num_threads().clamp(1, CLUSTERS_IN_FLIGHT);
+                let mut cut: Vec<Cluster> = Vec::with_capacity(batch);
+                let send = |cut: &mut Vec<Cluster>| -> Result<(), ()> {
+                    let made: Vec<Option<Vec<Box6>>> = if boxes {
+                        cut.par_iter().map(|c| Some(cluster_boxes(c))).collect()
+                    } else {
+                        vec![None; cut.len()]
+                    };
+                    for (c, b) in cut.drain(..).zip(made) {
+                        done_tx.send(Cut::Cluster(c, b)).map_err(|_| ())?;
+                    }
+                    Ok(())
+                };
                 for job in job_rx {
                     let t = std::time::Instant::now();
                     let sent = motu_compile::partition::partition_mesh(
                         &job.data,
                         job.bound,
                         &mut |c: Cluster| {
-                            let b = boxes.then(|| {
-                                let f = fan(c.data.triangle_count() as u32) as usize;
-                                let mesh = (&c.data.positions[..], &c.data.indices[..]);
-                                boxes_from_meshes(&[mesh], f)
-                            });
-                            done_tx.send(Cut::Cluster(c, b)).map_err(|_| ())
+                            cut.push(c);
+                            if cut.len() < batch {
+                                return Ok(());
+                            }
+                            send(&mut cut)
                         },
-                    );
+                    )
+                    .and_then(|()| send(&mut cut));
                     drop(job.data);
                     let ms = t.elapsed().as_secs_f64() * 1e3;
                     // The receiver is gone: the import stopped.
