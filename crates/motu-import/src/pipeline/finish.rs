@@ -74,6 +74,8 @@ pub(super) fn summary(
 /// Writes the package's sections and finishes it. Takes the scene: it is dropped once the
 /// meta and textures are made, before the stream split (the import's peak: the scene's edges
 /// need not be held beside it).
+// The import's state at its end, each piece from a different step: no struct holds them.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn finish(
     mut writer: PackageWriter,
     scene: Scene,
