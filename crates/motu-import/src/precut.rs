@@ -352,12 +352,14 @@ impl PrecutGeometry {
         for (k, (shape, at)) in clusters.iter().enumerate() {
             let record = first + k as u32;
             locations.insert(record, *at);
-            if let Some(boxes) = st.boxes.get(&(at.a, at.b)) {
+            // Moved, not copied: the compiler numbers a mesh's clusters once (a second call
+            // finds none, and the import makes those boxes from the package).
+            if let Some(boxes) = st.boxes.remove(&(at.a, at.b)) {
                 let made = ClusterBoxes {
                     chunk: at.a as u32,
                     vertex_count: shape.vertex_count,
                     triangle_count: shape.triangle_count,
-                    boxes: boxes.clone(),
+                    boxes,
                 };
                 st.record_boxes.insert(record, made);
             }
