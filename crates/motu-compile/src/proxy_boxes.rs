@@ -15,6 +15,7 @@
 //! a time): the same operations in the same order, so the boxes are equal bit for bit.
 
 use std::borrow::Cow;
+#[cfg(test)]
 use std::ops::Range;
 
 use motu_abi::blob::{BlobReader, BlobWriter};
@@ -155,27 +156,26 @@ fn boxes_from_keys(
     each_box: impl FnOnce(&mut dyn FnMut(usize, &Box6)),
 ) -> Vec<Box6> {
     let mut out = vec![EMPTY; fan + fan * fan];
-    let mut leaves = Vec::with_capacity(fan * fan);
-    let mut scratch = Vec::new();
-    split_with(
-        &mut keys,
-        &mut scratch,
-        2 * fan.trailing_zeros(),
-        0,
-        Some(bounds),
-        &mut leaves,
-    );
-    drop(scratch);
     // Each triangle's leaf (at most MAX_FAN² = 256 leaves; `u16::MAX`: none).
     let mut leaf_of = vec![u16::MAX; triangles];
-    for (l, r) in leaves.iter().enumerate() {
-        for k in &keys[r.clone()] {
-            leaf_of[k.1 as usize] = l as u16;
-        }
-    }
+    let mut room = keys.clone();
+    let mut leaves = 0;
+    split_into(
+        &mut keys,
+        &mut room,
+        2 * fan.trailing_zeros(),
+        Some(bounds),
+        &mut leaves,
+        &mut |l, keys| {
+            for k in keys {
+                leaf_of[k.1 as usize] = l as u16;
+            }
+        },
+    );
     drop(keys);
+    drop(room);
     // A top box is the union of its leaves.
-    let mut leaf_boxes = vec![EMPTY; leaves.len()];
+    let mut leaf_boxes = vec![EMPTY; leaves];
     each_box(&mut |i, t| {
         if let Some(bx) = leaf_of
             .get(i)
@@ -277,6 +277,56 @@ fn grow(bx: &mut Box6, lo: &[f32], hi: &[f32]) {
     }
 }
 
+/// [`split_with`]'s splits, the same items in the same leaves in the same order, without
+/// copying each range out before partitioning it: the items lie in `a` and `b` is room of the
+/// same length; a sampled partition writes from one into the other and the halves go on from
+/// where it wrote them (island 0.0127's import spent ~1% of its CPU on those copies). Calls
+/// `leaf(j, items)` for each leaf `j` holding items, in order; `next` is the next leaf's number
+/// (it ends at the leaf count: `2^depth` more than it started at).
+fn split_into<T: Centroid + Copy>(
+    a: &mut [T],
+    b: &mut [T],
+    depth: u32,
+    bounds: Option<Box6>,
+    next: &mut usize,
+    leaf: &mut dyn FnMut(usize, &[T]),
+) {
+    if depth == 0 || a.len() < 2 {
+        leaf(*next, a);
+        *next += 1 << depth;
+        return;
+    }
+    let c = bounds.unwrap_or_else(|| centroid_bounds(a));
+    let axis = (0..3)
+        .max_by(|&x, &y| (c[3 + x] - c[x]).total_cmp(&(c[3 + y] - c[y])))
+        .unwrap_or(0);
+    let n = a.len();
+    let exact = |items: &mut [T]| {
+        items.select_nth_unstable_by(n / 2, |x, y| {
+            x.centroid()[axis].total_cmp(&y.centroid()[axis])
+        });
+    };
+    // Where the items lie after this level, the room beside them, the split and the halves'
+    // sampled bounds.
+    let (items, room, mid, halves) = if n > EXACT_MEDIAN_BELOW {
+        match sampled_partition_into(a, b, axis) {
+            Some((mid, l, r)) => (b, a, mid, [Some(l), Some(r)]),
+            // One side took everything (in `b`, as `split_with` leaves it): exact median.
+            None => {
+                exact(b);
+                (b, a, n / 2, [None, None])
+            }
+        }
+    } else {
+        exact(a);
+        (a, b, n / 2, [None, None])
+    };
+    let (il, ir) = items.split_at_mut(mid);
+    let (rl, rr) = room.split_at_mut(mid);
+    split_into(il, rl, depth - 1, halves[0], next, leaf);
+    split_into(ir, rr, depth - 1, halves[1], next, leaf);
+}
+
 /// [`split_with`] with a scratch buffer of its own.
 #[cfg(test)]
 fn split<T: Centroid + Copy>(
@@ -301,6 +351,7 @@ fn split<T: Centroid + Copy>(
 /// sizes differ by a few percent; the boxes still hold every triangle (all a streamed render
 /// needs of them), and on island 0.02 their leaves' area is 10% smaller (all of a run of tied
 /// centroids goes to one side).
+#[cfg(test)]
 fn split_with<T: Centroid + Copy>(
     tris: &mut [T],
     scratch: &mut Vec<T>,
@@ -360,15 +411,27 @@ fn centroid_bounds<T: Centroid>(tris: &[T]) -> Box6 {
 /// by), or `None` when a side would be empty (ties, NaN: the caller splits at the exact
 /// median). Without branches on the data: each item is copied out to `scratch`, then written
 /// back to both sides' next free slots, and only its side's cursor moves.
+#[cfg(test)]
 fn sampled_partition<T: Centroid + Copy>(
     tris: &mut [T],
     scratch: &mut Vec<T>,
     axis: usize,
 ) -> Option<(usize, Box6, Box6)> {
-    let n = tris.len();
+    scratch.clear();
+    scratch.extend_from_slice(tris);
+    sampled_partition_into(scratch, tris, axis)
+}
+
+/// [`sampled_partition`] of `src` written into `dst` (as long), `src` left as it was.
+fn sampled_partition_into<T: Centroid + Copy>(
+    src: &[T],
+    dst: &mut [T],
+    axis: usize,
+) -> Option<(usize, Box6, Box6)> {
+    let n = src.len();
     let samples = (n / PIVOT_SAMPLE_STRIDE).max(MIN_PIVOT_SAMPLES).min(n);
     let mut sample: Vec<[f32; 3]> = (0..samples)
-        .map(|i| *tris[(2 * i + 1) * n / (2 * samples)].centroid())
+        .map(|i| *src[(2 * i + 1) * n / (2 * samples)].centroid())
         .collect();
     let (_, &mut pivot, _) =
         sample.select_nth_unstable_by(samples / 2, |x, y| x[axis].total_cmp(&y[axis]));
@@ -377,15 +440,13 @@ fn sampled_partition<T: Centroid + Copy>(
     for c in &sample {
         grow(&mut sides[1 - usize::from(c[axis] < pivot)], c, c);
     }
-    scratch.clear();
-    scratch.extend_from_slice(tris);
     let (mut lo, mut hi) = (0usize, n);
-    for t in scratch.iter() {
+    for t in src {
         // Before each item lo < hi: slots below lo and from hi on are taken.
         // Not below (NaN included): right.
         let right = 1 - usize::from(t.centroid()[axis] < pivot);
-        tris[lo] = *t;
-        tris[hi - 1] = *t;
+        dst[lo] = *t;
+        dst[hi - 1] = *t;
         lo += 1 - right;
         hi -= right;
     }

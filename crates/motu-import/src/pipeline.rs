@@ -322,6 +322,7 @@ pub fn import(
             })?;
         let t2 = Instant::now();
         let writer = geometry.take_writer()?;
+        let cut_boxes = precut.as_ref().map(PrecutGeometry::take_record_boxes);
         let s = finish(
             writer,
             scene,
@@ -330,6 +331,7 @@ pub fn import(
             &report,
             scene_path,
             o,
+            &cut_boxes.unwrap_or_default(),
         )?;
         let mut sum = summary(
             s,
@@ -394,6 +396,7 @@ pub fn import(
             &report,
             scene_path,
             o,
+            &HashMap::new(),
         )?;
         Ok(summary(
             s,
@@ -468,7 +471,7 @@ fn precut_store(
         return None;
     }
     let cap = motu_compile::DEFAULT_MAX_PER_NODE;
-    Some(match o.max_blas_triangles {
+    let store = match o.max_blas_triangles {
         Some(0) => return None,
         Some(b) => PrecutGeometry::new(
             geometry.clone(),
@@ -488,6 +491,12 @@ fn precut_store(
                 .unwrap_or(settles);
             PrecutGeometry::new(geometry.clone(), None, Some(settles), o.cut_queue_bytes)
         }
+    };
+    // The clusters' proxy boxes made as they are cut, from memory (`proxy_boxes.rs`).
+    Some(if o.proxy_boxes {
+        store.with_boxes()
+    } else {
+        store
     })
 }
 

@@ -27,9 +27,11 @@
 //! needs it too) or `--subset` (its scratch package has no spill file).
 
 use motu_compile::partition::Cluster;
+use motu_compile::proxy_boxes::{boxes_from_meshes, fan, Box6};
 use motu_compile::ClusterShape;
 use motu_pack::PackageGeometry;
 use motu_scene::{GeometryStore, MeshData, MeshId, MeshLocation, StoreError};
+use rayon::prelude::*;
 use std::collections::{HashMap, VecDeque};
 use std::sync::mpsc::{channel, sync_channel, Receiver, Sender};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -59,11 +61,28 @@ struct Job {
     bound: u32,
 }
 
-/// What the cutting thread sends back, in queue order: each mesh's clusters as they are cut,
-/// then the milliseconds its cut took.
+/// What the cutting thread sends back, in queue order: each mesh's clusters as they are cut
+/// (with their proxy boxes when asked for), then the milliseconds its cut took.
 enum Cut {
-    Cluster(Cluster),
+    Cluster(Cluster, Option<Vec<Box6>>),
     Done(f64),
+}
+
+/// A cluster's proxy boxes as a BLAS of it alone has them (`motu_compile::proxy_boxes`'s
+/// `blas_boxes` over one mesh: the same operations on the same data, so the same bits): made
+/// from the cluster in memory, they spare the import reading it back from the package.
+#[derive(Clone, Debug)]
+pub(crate) struct ClusterBoxes {
+    pub chunk: u32,
+    pub vertex_count: u32,
+    pub triangle_count: u32,
+    pub boxes: Vec<Box6>,
+}
+
+/// A cluster's boxes as a BLAS of it alone has them (fan by its triangles).
+fn cluster_boxes(c: &Cluster) -> Vec<Box6> {
+    let f = fan(c.data.triangle_count() as u32) as usize;
+    boxes_from_meshes(&[(&c.data.positions[..], &c.data.indices[..])], f)
 }
 
 /// Clusters cut but not yet appended, at most (each up to a cluster: ~2.5 MiB at 2^16
@@ -86,19 +105,40 @@ struct Cutter {
 }
 
 impl Cutter {
-    fn spawn() -> Result<Self, StoreError> {
+    fn spawn(boxes: bool) -> Result<Self, StoreError> {
         let (jobs, job_rx) = channel::<Job>();
         let (done_tx, done) = sync_channel::<Cut>(CLUSTERS_IN_FLIGHT);
         let thread = std::thread::Builder::new()
             .name("motu-cut".into())
             .spawn(move || {
+                // Clusters whose boxes are made together, on all cores.
+                let batch = rayon::current_num_threads().clamp(1, CLUSTERS_IN_FLIGHT);
+                let mut cut: Vec<Cluster> = Vec::with_capacity(batch);
+                let send = |cut: &mut Vec<Cluster>| -> Result<(), ()> {
+                    let made: Vec<Option<Vec<Box6>>> = if boxes {
+                        cut.par_iter().map(|c| Some(cluster_boxes(c))).collect()
+                    } else {
+                        vec![None; cut.len()]
+                    };
+                    for (c, b) in cut.drain(..).zip(made) {
+                        done_tx.send(Cut::Cluster(c, b)).map_err(|_| ())?;
+                    }
+                    Ok(())
+                };
                 for job in job_rx {
                     let t = std::time::Instant::now();
                     let sent = motu_compile::partition::partition_mesh(
                         &job.data,
                         job.bound,
-                        &mut |c: Cluster| done_tx.send(Cut::Cluster(c)).map_err(|_| ()),
-                    );
+                        &mut |c: Cluster| {
+                            cut.push(c);
+                            if cut.len() < batch {
+                                return Ok(());
+                            }
+                            send(&mut cut)
+                        },
+                    )
+                    .and_then(|()| send(&mut cut));
                     drop(job.data);
                     let ms = t.elapsed().as_secs_f64() * 1e3;
                     // The receiver is gone: the import stopped.
@@ -136,6 +176,11 @@ struct State {
     waiting: Vec<(MeshId, MeshLocation, usize)>,
     /// Per source mesh cut: the bound and its clusters' shapes and locations, in cut order.
     cut: HashMap<u32, (u32, Vec<(ClusterShape, MeshLocation)>)>,
+    /// Whether clusters get their proxy boxes as they are cut, and those made, by cluster
+    /// location, then by mesh record once the compiler numbered them ([`Self::clusters`]).
+    make_boxes: bool,
+    boxes: HashMap<(u64, u64), Vec<Box6>>,
+    record_boxes: HashMap<u32, ClusterBoxes>,
     /// Source-mesh bytes queued at most (0: each mesh is cut before its store returns).
     queue_bytes: u64,
     /// Meshes queued for the cutting thread, oldest first, and their bytes.
@@ -166,6 +211,9 @@ impl PrecutGeometry {
                 stored_triangles: 0,
                 waiting: Vec::new(),
                 cut: HashMap::new(),
+                make_boxes: false,
+                boxes: HashMap::new(),
+                record_boxes: HashMap::new(),
                 queue_bytes,
                 pending: VecDeque::new(),
                 pending_bytes: 0,
@@ -195,7 +243,7 @@ impl PrecutGeometry {
         bound: u32,
     ) -> Result<(), StoreError> {
         if st.cutter.is_none() {
-            st.cutter = Some(Cutter::spawn()?);
+            st.cutter = Some(Cutter::spawn(st.make_boxes)?);
         }
         let bytes = data.size_bytes();
         let triangles = data.triangle_count() as u64;
@@ -237,8 +285,8 @@ impl PrecutGeometry {
                 .recv()
                 .map_err(|_| "the cutting thread stopped")?;
             st.wait_ms += t.elapsed().as_secs_f64() * 1e3;
-            let c = match next {
-                Cut::Cluster(c) => c,
+            let (c, boxes) = match next {
+                Cut::Cluster(c, boxes) => (c, boxes),
                 Cut::Done(ms) => {
                     st.cut_ms += ms;
                     break;
@@ -253,6 +301,9 @@ impl PrecutGeometry {
                 has_normals: c.data.normals.is_some(),
                 bounds: c.bounds,
             };
+            if let Some(b) = boxes {
+                st.boxes.insert((at.a, at.b), b);
+            }
             placed.push((shape, at));
         }
         st.cut.insert(p.id.0, (p.bound, placed));
@@ -292,15 +343,47 @@ impl PrecutGeometry {
         first: u32,
         locations: &mut HashMap<u32, MeshLocation>,
     ) -> Option<Vec<ClusterShape>> {
-        let st = self.state.lock().ok()?;
+        let mut st = self.state.lock().ok()?;
+        let st = &mut *st;
         let (b, clusters) = st.cut.get(&m.0)?;
         if *b != bound {
             return None;
         }
-        for (k, (_, at)) in clusters.iter().enumerate() {
-            locations.insert(first + k as u32, *at);
+        for (k, (shape, at)) in clusters.iter().enumerate() {
+            let record = first + k as u32;
+            locations.insert(record, *at);
+            // Moved, not copied: the compiler numbers a mesh's clusters once (a second call
+            // finds none, and the import makes those boxes from the package).
+            if let Some(boxes) = st.boxes.remove(&(at.a, at.b)) {
+                let made = ClusterBoxes {
+                    chunk: at.a as u32,
+                    vertex_count: shape.vertex_count,
+                    triangle_count: shape.triangle_count,
+                    boxes,
+                };
+                st.record_boxes.insert(record, made);
+            }
         }
         Some(clusters.iter().map(|c| c.0).collect())
+    }
+
+    /// Clusters get their proxy boxes as they are cut ([`Self::take_record_boxes`]).
+    pub fn with_boxes(self) -> Self {
+        if let Ok(mut st) = self.state.lock() {
+            st.make_boxes = true;
+        }
+        self
+    }
+
+    /// The proxy boxes of the clusters [`Self::clusters`] numbered, by mesh record.
+    pub fn take_record_boxes(&self) -> HashMap<u32, ClusterBoxes> {
+        self.state.lock().map_or_else(
+            |_| HashMap::new(),
+            |mut st| {
+                st.boxes = HashMap::new();
+                std::mem::take(&mut st.record_boxes)
+            },
+        )
     }
 
     /// Milliseconds the cutting thread spent cutting, milliseconds the parser waited for it,

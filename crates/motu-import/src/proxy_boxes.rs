@@ -2,7 +2,10 @@
 //! stored in the package's `proxy_boxes` section (FORMAT.md), so a streamed render's cold start
 //! does not read every mesh for them (about 6 s of island 0.63's on the H200 host).
 //!
-//! Each chunk is read back whole once (a batch of chunks at a time, on all cores), and each
+//! A BLAS of one cluster cut while parsing takes the boxes made from the cluster in memory
+//! then (`precut.rs`, [`ClusterBoxes`]: the same maths on the same data, so the same bits);
+//! the island 0.0127 set read its 285 MB of chunks back for them. For the other BLASes,
+//! each chunk is read back whole once (a batch of chunks at a time, on all cores), and each
 //! BLAS's boxes made from its meshes in place (`boxes_from_meshes`) as soon as every chunk it
 //! reads was seen; a chunk's bytes are dropped when its last BLAS is done, so memory stays
 //! about a batch of chunks.
@@ -12,18 +15,20 @@ use std::collections::HashMap;
 
 use motu_abi::HierarchyView;
 use motu_compile::proxy_boxes::{
-    blas_boxes, blas_hash, encode_section, fan, has_boxes, MeshSlices, StoredProxyBoxes,
+    blas_boxes, blas_hash, box_count, encode_section, fan, has_boxes, MeshSlices, StoredProxyBoxes,
 };
 use motu_package::{ChunkId, PackageWriter};
 use rayon::prelude::*;
 
+use crate::precut::ClusterBoxes;
 use crate::ImportError;
 
-/// Makes the table for `view` from the meshes `writer` holds and adds it as the package's
-/// `proxy_boxes` section.
+/// Makes the table for `view` from the meshes `writer` holds (and the boxes of clusters made
+/// as they were cut, by mesh record) and adds it as the package's `proxy_boxes` section.
 pub(crate) fn write_proxy_boxes(
     writer: &mut PackageWriter,
     view: &HierarchyView<'_>,
+    cut_boxes: &HashMap<u32, ClusterBoxes>,
 ) -> Result<(), ImportError> {
     // Chunks read at once: one per core, at most 16 (64 MiB each by default, and about as much
     // again of triangle boxes while their BLASes wait).
@@ -33,20 +38,24 @@ pub(crate) fn write_proxy_boxes(
         motu_pack::SECTION_PROXY_BOXES,
         "proxy_boxes",
         |writer| {
-            let table = make_table(view, batch, |c, buf| writer.read_back_chunk_into(c, buf))?;
+            let table = make_table(view, batch, cut_boxes, |c, buf| {
+                writer.read_back_chunk_into(c, buf)
+            })?;
             let counts = format!("blases={} boxes={}", table.entries.len(), table.boxes.len());
             Ok((encode_section(&table), counts))
         },
     )
 }
 
-/// The table of every BLAS with boxes ([`has_boxes`]), reading each chunk its meshes lie in
-/// once through `read_chunk` (whole raw bytes, into the buffer it is given), `batch` chunks at
-/// a time. A chunk's bytes are kept until the last BLAS that reads them is made (the meshes
-/// are read in place), then its buffer takes a later chunk.
+/// The table of every BLAS with boxes ([`has_boxes`]): a BLAS of one mesh record that
+/// `cut_boxes` has (made for that record's chunk and counts) takes those; the others read
+/// each chunk their meshes lie in once through `read_chunk` (whole raw bytes, into the buffer
+/// it is given), `batch` chunks at a time. A chunk's bytes are kept until the last BLAS that
+/// reads them is made (the meshes are read in place), then its buffer takes a later chunk.
 pub(crate) fn make_table<E: Send>(
     view: &HierarchyView<'_>,
     batch: usize,
+    cut_boxes: &HashMap<u32, ClusterBoxes>,
     read_chunk: impl Fn(ChunkId, &mut Vec<u8>) -> Result<(), E> + Sync,
 ) -> Result<StoredProxyBoxes, E> {
     let meshes_of = |b: usize| {
@@ -62,8 +71,16 @@ pub(crate) fn make_table<E: Send>(
         mine.dedup();
         mine
     };
+    let mut made: Vec<(usize, Vec<[f32; 6]>)> = Vec::new();
     let blases: Vec<usize> = (0..view.blases.len())
         .filter(|&b| has_boxes(&view.blases[b]))
+        .filter(|&b| match known_boxes(view, b, cut_boxes) {
+            Some(boxes) => {
+                made.push((b, boxes.to_vec()));
+                false
+            }
+            None => true,
+        })
         .collect();
     // Per chunk, the BLASes still to make that read it.
     let mut users: HashMap<u32, u32> = HashMap::new();
@@ -83,7 +100,7 @@ pub(crate) fn make_table<E: Send>(
     let mut raw: HashMap<u32, Vec<u8>> = HashMap::new();
     // Buffers of chunks no BLAS reads any more.
     let mut free: Vec<Vec<u8>> = Vec::new();
-    let mut made: Vec<(usize, Vec<[f32; 6]>)> = Vec::with_capacity(blases.len());
+    made.reserve(blases.len());
     for group in chunks.chunks(batch.max(1)) {
         let buffers: Vec<Vec<u8>> = group
             .iter()
@@ -141,6 +158,27 @@ pub(crate) fn make_table<E: Send>(
         table.push(b as u32, f, blas_hash(view, b), &boxes);
     }
     Ok(table)
+}
+
+/// BLAS `b`'s boxes from `cut_boxes`: when it is one mesh record's, made for that record's
+/// chunk and counts, and as many as its fan gives.
+fn known_boxes<'a>(
+    view: &HierarchyView<'_>,
+    b: usize,
+    cut_boxes: &'a HashMap<u32, ClusterBoxes>,
+) -> Option<&'a [[f32; 6]]> {
+    let r = &view.blases[b];
+    if r.item_count != 1 {
+        return None;
+    }
+    let m = view.geometries.get(r.item_base as usize)?.mesh;
+    let rec = view.meshes.get(m as usize)?;
+    let k = cut_boxes.get(&m)?;
+    let same = (k.chunk, k.vertex_count, k.triangle_count)
+        == (rec.chunk, rec.vertex_count, rec.triangle_count)
+        && rec.triangle_count == r.primitive_count
+        && k.boxes.len() == box_count(fan(r.primitive_count));
+    same.then_some(&k.boxes[..])
 }
 
 /// Mesh `m`'s positions and indices in its chunk's raw bytes; `None` when its arrays do not

@@ -2,12 +2,14 @@
 //! after compiling, the import's summary, and the per-element counts.
 
 use super::{ImportOptions, ImportSummary};
+use crate::precut::ClusterBoxes;
 use crate::ImportError;
 use motu_compile::CompiledScene;
 use motu_ingest::IngestReport;
 use motu_pack::{ElementMeta, PackageMeta};
 use motu_package::{PackageWriter, WriteSummary};
 use motu_scene::{ElementId, PrototypeId, Scene};
+use std::collections::HashMap;
 use std::path::Path;
 use std::time::Instant;
 
@@ -72,6 +74,8 @@ pub(super) fn summary(
 /// Writes the package's sections and finishes it. Takes the scene: it is dropped once the
 /// meta and textures are made, before the stream split (the import's peak: the scene's edges
 /// need not be held beside it).
+// The import's state at its end, each piece from a different step: no struct holds them.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn finish(
     mut writer: PackageWriter,
     scene: Scene,
@@ -80,6 +84,7 @@ pub(super) fn finish(
     report: &IngestReport,
     source: &Path,
     o: &ImportOptions,
+    cut_boxes: &HashMap<u32, ClusterBoxes>,
 ) -> Result<(WriteSummary, f64, f64, f64), ImportError> {
     let owned = scene;
     let scene = &owned;
@@ -149,7 +154,7 @@ pub(super) fn finish(
     };
     let streamed = split.as_ref().map_or(base, |(_, s)| s.view(&base));
     if o.proxy_boxes {
-        crate::proxy_boxes::write_proxy_boxes(&mut writer, &streamed)?;
+        crate::proxy_boxes::write_proxy_boxes(&mut writer, &streamed, cut_boxes)?;
     }
     let proxy_boxes_ms = t.elapsed().as_secs_f64() * 1e3;
     crate::memory::log_phase("proxy boxes");

@@ -91,7 +91,7 @@ fn boxes_made_a_chunk_at_a_time_equal_the_streamers_bit_for_bit() {
     let mut tables = Vec::new();
     for batch in [1, 2, 8] {
         reads.store(0, std::sync::atomic::Ordering::Relaxed);
-        let t = make_table(&view, batch, |c, buf| {
+        let t = make_table(&view, batch, &HashMap::new(), |c, buf| {
             reads.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             w.read_back_chunk_into(c, buf)
         })
@@ -105,6 +105,40 @@ fn boxes_made_a_chunk_at_a_time_equal_the_streamers_bit_for_bit() {
         tables.push(t);
     }
     assert!(tables.windows(2).all(|t| t[0] == t[1]));
+    // A BLAS of one cluster takes the boxes made as it was cut: the same bits.
+    let cut = |m: u32, triangle_count: u32, boxes: Vec<Box6>| {
+        let r = &meshes[m as usize];
+        let k = crate::precut::ClusterBoxes {
+            chunk: r.chunk,
+            vertex_count: r.vertex_count,
+            triangle_count,
+            boxes,
+        };
+        HashMap::from([(m, k)])
+    };
+    let (p, i) = mesh(1, counts[1]);
+    let made =
+        motu_compile::proxy_boxes::boxes_from_meshes(&[(&p[..], &i[..])], fan(counts[1]) as usize);
+    let t = make_table(&view, 2, &cut(1, counts[1], made.clone()), |c, buf| {
+        w.read_back_chunk_into(c, buf)
+    })
+    .unwrap();
+    assert_eq!(t, tables[0]);
+    // Taken, not made again (other boxes show it); not taken when made for other counts.
+    let other = vec![[7.0f32; 6]; made.len()];
+    let t = make_table(&view, 2, &cut(1, counts[1], other.clone()), |c, buf| {
+        w.read_back_chunk_into(c, buf)
+    })
+    .unwrap();
+    assert_eq!(
+        t.boxes[t.entries[1].first_box as usize..][..made.len()],
+        other[..]
+    );
+    let t = make_table(&view, 2, &cut(1, counts[1] + 1, other), |c, buf| {
+        w.read_back_chunk_into(c, buf)
+    })
+    .unwrap();
+    assert_eq!(t, tables[0]);
     // Through the section's bytes, against what the streamer makes from each mesh.
     let stored = decode_section(&encode_section(&tables[0])).unwrap();
     assert_eq!(stored.entries.len(), 4);
