@@ -818,14 +818,16 @@ fn a_refining_frames_last_pass_traces_only_pixels_whose_structures_arrived() {
                     }
                 }
                 if p.last_pass {
-                    // No secondary rays ahead of open primary (or bounce) rays.
-                    let image = if i == 0 {
-                        p.traced - st.guard_rays
-                    } else {
-                        p.traced
+                    // No secondary rays ahead of open primary (or bounce) rays: only the pixels
+                    // it traced whose closest-hit ray ended trace any (those left waiting
+                    // before it count in its open_closest but were not traced).
+                    let (image, waited) = match i {
+                        0 => (p.traced - st.guard_rays, 0),
+                        _ => (p.traced, st.pass_log[i - 1].left_waiting),
                     };
+                    let still_open = p.open_closest - waited;
                     assert!(
-                        p.secondary_rays <= per_pixel * (image - p.open_closest.min(image)),
+                        p.secondary_rays <= per_pixel * (image - still_open),
                         "{p:?}"
                     );
                 }
