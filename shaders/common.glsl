@@ -26,6 +26,11 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 #define STAT_HITS 3
 #define STAT_TRUNCATED_RAYS 4
 #define STAT_MISSING_TEXTURES 5
+// Streamed passes only (MOTU_STREAMED; motu-gpu stream PassStats): TLAS walks of the rays'
+// walks, mark walks, and the TLAS walks of those mark walks.
+#define STAT_TLAS_WALKS 6
+#define STAT_MARK_WALKS 7
+#define STAT_MARK_TLAS_WALKS 8
 
 #define T_INFINITY 3.0e38
 
@@ -66,6 +71,14 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 // N-th row also take a pass-mark walk (STREAM_PASS_WALK). Whole rows: a launch's subgroups are
 // runs of one row, so sampling within rows would cost every subgroup the whole walk.
 #define STREAM_PASS_ROWS_SHIFT 8u
+// StreamParams.flags of a frame's last pass (motu-gpu stream/passes.rs: its pass cap or build
+// budget ends the frame after it): a pixel left open stays unfinished, so an open primary ray
+// traces no secondary rays ahead (SPECULATIVE in render_pixel.glsl), which only a later pass
+// of the same frame could use.
+#define STREAM_LAST_PASS 4u
+// StreamParams.flags of a last pass after which nothing is built (the frame's build budget is
+// spent): no ray takes a mark walk (traverse.glsl), whose marks only steer that build.
+#define STREAM_NO_MARK_WALK 8u
 // Ray cull masks (Rust: stream::MARKS_MASK, stream::TRIANGLE_MASK). Every instance has mask
 // 0xFF except in a streamed TLAS its triangle instances (0x01) and its *marks* BLAS (0x02: the
 // boxes of its resident clusters), which only probe passes' mark walks see: there a ray passing
@@ -84,7 +97,8 @@ struct StreamParams {
     uint64_t blas_stamps;   // u32 per BLAS: 4 × stamp + STREAM_* level
     uint64_t walked;        // u32 per BLAS: the latest stamp of a pass it was resident in
     uint64_t pixel_list;    // u32 packed (x + GUARD_BIAS) | (y + GUARD_BIAS) << 16
-    uint64_t incomplete;    // u32 count, then u32 packed pixels (unbiased x | y << 16)
+    uint64_t incomplete;    // u32 count, u32 packed pixels (unbiased x | y << 16); from index
+                            // width × height, u32 per listed pixel: the structure it waits for
     uint stamp;
     uint full_count;        // items [0, full_count) are the image's pixels in row order
     uint list_count;        // items [full_count, full_count + list_count) come from pixel_list

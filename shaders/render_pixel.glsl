@@ -113,20 +113,53 @@ void stream_write_fallback(uvec2 px, uint pixel, Carry c) {
                                               : encode_srgb8(colour);
 }
 
-// Puts pixel `px` on the pass's incomplete list (packed x | y << 16).
+// Puts pixel `px` on the pass's incomplete list (packed x | y << 16); streamed, with the
+// structure it waits for (`blocker`, NONE_U32: none named) in the list's second half.
+#ifdef MOTU_STREAMED
+void stream_list_incomplete(uvec2 px, uint blocker) {
+#else
 void stream_list_incomplete(uvec2 px) {
+#endif
     IncompleteList l = IncompleteList(StreamRef(push.stream).s.incomplete);
     uint k = atomicAdd(l.count, 1u);
     l.r[k] = px.x | (px.y << 16u);
+#ifdef MOTU_STREAMED
+    CameraParams cam = push.frame.f.camera;
+    l.r[cam.width * cam.height + k] = blocker;
+#endif
 }
 
 // Streaming: an open pixel keeps its state and goes on the next pass's list; it writes only its
-// fallback.
+// fallback. Streamed, a pixel whose closest-hit ray (primary, state 1 or 3; bounce, state 4)
+// is open names that ray's nearest open structure: until it is resident the ray stays open
+// (whatever else is built lies behind that structure's entry, so no hit of it can close the
+// ray), so a frame's last pass leaves the pixel as it is (motu-gpu stream/passes.rs). A pixel
+// waiting on secondary rays only names none (an occluder built behind a ray's nearest open
+// structure may finish it).
 void stream_defer(uvec2 px, uint pixel, Carry c) {
     stream_write_fallback(px, pixel, c);
     CarryTable(StreamRef(push.stream).s.carry).r[pixel] = c;
+#ifdef MOTU_STREAMED
+    bool closest = c.st.x == 1u || c.st.x == 3u || c.st.x == 4u;
+    stream_list_incomplete(px, closest ? g_empty_id : NONE_U32);
+#else
     stream_list_incomplete(px);
+#endif
 }
+
+#ifdef MOTU_STREAMED
+// Adds this invocation's walks to the pass's counters: `walks` TLAS walks of its rays' walks,
+// and its mark walks (STAT_TLAS_WALKS, STAT_MARK_WALKS, STAT_MARK_TLAS_WALKS).
+void stream_count_walks(uint walks) {
+    if (walks != 0u) {
+        atomicAdd(push.stats.n[STAT_TLAS_WALKS], walks);
+    }
+    if (g_mark_walks != 0u) {
+        atomicAdd(push.stats.n[STAT_MARK_WALKS], g_mark_walks);
+        atomicAdd(push.stats.n[STAT_MARK_TLAS_WALKS], g_mark_tlas_walks);
+    }
+}
+#endif
 
 // The frame's sample `smp` in the pixel's sequence (a progressive frame starts at
 // `first_sample`): what the random numbers are drawn with; `smp` itself counts the frame's
@@ -188,6 +221,9 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         }
         traces = c.st.z;
     }
+#ifdef MOTU_STREAMED
+    uint traces_before = traces;  // the carried count: this pass's walks are what it adds
+#endif
     bool open = false;
     // Diffuse bounces (state 4 of Carry.st.x: the bounce ray is next, 5: the path ended): the
     // current vertex's incoming ray (p_org, p_dir; the camera ray at vertex 0), the vertex's
@@ -399,6 +435,9 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
             // the pixel ends here and is counted as truncated.
             bool cut = g_truncated || overflows != 0u;
             if (guard) {
+#ifdef MOTU_STREAMED
+                stream_count_walks(traces - traces_before);
+#endif
                 return;  // a probe marks what it passed, nothing else
             }
 #ifdef MOTU_STREAMED
@@ -516,6 +555,9 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 if (shaded && c.hit.x < T_INFINITY) {
                     primary_empty_id = g_empty_id;
                     primary_empty_t = g_empty_t;
+                }
+                // Not in the frame's last pass: the pixel stays open whatever they find.
+                if (shaded && c.hit.x < T_INFINITY && !g_last_pass) {
                     if (c.st.x == 1u) {
                         // Trace the secondary rays ahead from this hit, starting now.
                         c.cur = vec4(push.materials.r[c.rec.w].emission, 0.0);
@@ -572,11 +614,18 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         bounce = 0u;
         thru = vec3(1.0);
     }
+#ifdef MOTU_STREAMED
+    stream_count_walks(traces - traces_before);
+#endif
     if (g_probe) {
         // A probe of the next frame marks what its rays met; a pixel that needs a structure
         // not resident is listed for the next probe round (after the prefetch built it).
         if (g_probe_open && !guard) {
+#ifdef MOTU_STREAMED
+            stream_list_incomplete(px, NONE_U32);
+#else
             stream_list_incomplete(px);
+#endif
         }
         return;
     }
@@ -663,6 +712,10 @@ void render_stream_item(uint i) {
     g_probe_open = false;
     g_probe_stop = g_probe && (s.flags & STREAM_PROBE_STOP) != 0u;
 #ifdef MOTU_STREAMED
+    g_last_pass = (s.flags & STREAM_LAST_PASS) != 0u;
+    g_no_mark_walk = (s.flags & STREAM_NO_MARK_WALK) != 0u;
+    g_mark_walks = 0u;
+    g_mark_tlas_walks = 0u;
     // Every first walk tests triangles and proxies; what the rays pass (the marks BLASes
     // included) is marked by the mark walk that follows it (traverse.glsl).
     g_cull_mask = CULL_MASK_WALK;

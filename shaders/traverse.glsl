@@ -77,6 +77,13 @@ float g_t_max = T_INFINITY;
 // truncates nothing.
 bool g_mark_walk = false;
 bool g_pass_walk = false;  // this mark walk is a final ray's pass-mark walk
+// This invocation's mark walks and their TLAS walks (STAT_MARK_WALKS, STAT_MARK_TLAS_WALKS).
+uint g_mark_walks = 0u;
+uint g_mark_tlas_walks = 0u;
+// The pass is its frame's last (STREAM_LAST_PASS): no secondary rays are traced ahead.
+bool g_last_pass = false;
+// No mark walks this pass (STREAM_NO_MARK_WALK): nothing is built after it.
+bool g_no_mark_walk = false;
 #endif
 
 // Records `id` at `level` in this pass.
@@ -281,6 +288,7 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
 #ifdef MOTU_STREAMED
         if (g_mark_walk) {
             // What the mark walk counted is not the ray's: the first walk's counts stand.
+            g_mark_tlas_walks += traces - traces_at_start;
             traces = walk_counts.x;
             overflows = walk_counts.y;
             truncations = walk_counts.z;
@@ -290,7 +298,7 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
         // Open: a structure in front of the hit may hold a nearer one (an occluded shadow ray
         // is final whatever lies in front of its occluder).
         bool open = g_empty_t < hit.t && !(first_hit && hit.tlas != NONE_U32);
-        if (!g_streaming || g_truncated || overflows != 0u ||
+        if (!g_streaming || g_truncated || overflows != 0u || g_no_mark_walk ||
             !(g_guard || open || g_probe_pass_marks)) {
             break;  // final, or cut short: nothing to mark
         }
@@ -298,6 +306,7 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
         walk_truncated = g_truncated;
         traces_at_start = traces;
         g_mark_walk = true;
+        g_mark_walks += 1u;
         g_pass_walk = !(g_guard || open);
         g_cull_mask = CULL_MASK_MARK_WALK | (g_probe ? CULL_MASK_MARKS : 0u);
         first_hit = false;

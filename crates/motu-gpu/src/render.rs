@@ -22,7 +22,8 @@ pub(crate) use frame::{alloc_frame, frame_bytes, run_frames, Frame, FrameResult}
 pub use options::{Backend, RenderOptions, View};
 use output::RENDER_STAT_WORDS;
 pub(crate) use output::{
-    check_texture_residency, frame_outputs, FrameMeasure, STAT_TRUNCATED_RAYS, STAT_WORDS,
+    check_texture_residency, frame_outputs, FrameMeasure, STAT_MARK_TLAS_WALKS, STAT_MARK_WALKS,
+    STAT_SHADOW_RAYS, STAT_TLAS_WALKS, STAT_TRUNCATED_RAYS, STAT_WORDS,
 };
 pub use output::{heat_colour, RayCounts, RenderOutput, RenderStats};
 pub(crate) use params::{frame_params, params_bytes, write_params, FrameParams};

@@ -61,7 +61,7 @@ pub(crate) struct FrameMeasure<'a> {
 
 impl RenderStats {
     pub(crate) fn measured(opts: &RenderOptions, m: FrameMeasure<'_>) -> Self {
-        let shadow = u64::from(m.counters[2]);
+        let shadow = u64::from(m.counters[STAT_SHADOW_RAYS]);
         let rays = m.primary_rays + shadow;
         let traces: u64 = m.aov.records.iter().map(|r| u64::from(r.traces)).sum();
         let ms = m.ms_per_frame;
@@ -106,12 +106,19 @@ pub struct RenderOutput {
 
 /// Stats words of every renderer's buffers (full builds, streaming, the viewer), indexed by
 /// the `STAT_*` of `common.glsl`.
-pub(crate) const STAT_WORDS: usize = 6;
+pub(crate) const STAT_WORDS: usize = 9;
 pub(super) const RENDER_STAT_WORDS: usize = STAT_WORDS;
+/// Secondary rays traced (shadow, AO, bounce).
+pub(crate) const STAT_SHADOW_RAYS: usize = 2;
 /// Rays cut short by a stack overflow or the trace cap.
 pub(crate) const STAT_TRUNCATED_RAYS: usize = 4;
 /// Texture reads that found a streamed texture not resident.
 pub(crate) const STAT_MISSING_TEXTURES: usize = 5;
+/// Streamed passes only: TLAS walks of the rays' walks, mark walks, and the TLAS walks of
+/// those mark walks (`stream::PassStats`).
+pub(crate) const STAT_TLAS_WALKS: usize = 6;
+pub(crate) const STAT_MARK_WALKS: usize = 7;
+pub(crate) const STAT_MARK_TLAS_WALKS: usize = 8;
 
 /// Fails a frame whose shading read a texture that was not resident: the pixel would show the
 /// material's constant colour, a wrong image. A resident mesh holds its textures, so this is a

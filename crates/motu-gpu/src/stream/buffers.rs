@@ -52,7 +52,8 @@ fn frame_buffer_specs(pixels: u64, guard_count: u64, items: u64, params_size: u6
     let dev = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS | BufferUsage::TRANSFER_SRC;
     let host = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS;
     let stamps_bytes = (items * 4).div_ceil(16) * 16;
-    let inc_bytes = 4 + 4 * pixels;
+    // The count, the packed pixels, then what each waits for (`passes.rs`).
+    let inc_bytes = 4 + 8 * pixels;
     let readback_bytes =
         (2 * stamps_bytes + inc_bytes).div_ceil(16) * 16 + pixels * 20 + (STAT_WORDS as u64) * 4;
     [

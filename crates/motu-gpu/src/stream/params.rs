@@ -44,6 +44,14 @@ pub(super) const STREAM_PROBE_PASS: u32 = 1;
 /// pixel's path ([`ProbePaths::Stop`](super::ProbePaths::Stop)).
 pub(super) const STREAM_PROBE_STOP: u32 = 2;
 
+/// `STREAM_LAST_PASS` of `common.glsl`: the frame's last pass (its pass cap or build budget
+/// ends the frame after it): an open primary ray traces no secondary rays ahead.
+pub(super) const STREAM_LAST_PASS: u32 = 4;
+
+/// `STREAM_NO_MARK_WALK` of `common.glsl`: a last pass after which nothing is built (the
+/// frame's build budget spent): no mark walks, whose marks only steer that build.
+pub(super) const STREAM_NO_MARK_WALK: u32 = 8;
+
 /// `STREAM_PASS_ROWS_SHIFT` of `common.glsl`: `flags >> it` is the probe's pass-mark row
 /// stride (0: none; `StreamOptions::pass_marks`).
 pub(super) const STREAM_PASS_ROWS_SHIFT: u32 = 8;

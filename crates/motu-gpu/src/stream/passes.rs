@@ -7,10 +7,14 @@ use motu_abi::aov::AovRecord;
 
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
-use super::params::{StreamParams, CARRY_BYTES, STAMP_LIMIT};
+use super::params::{
+    StreamParams, CARRY_BYTES, STAMP_LIMIT, STREAM_LAST_PASS, STREAM_NO_MARK_WALK,
+};
 use super::{FrameStreamStats, PassStats, StreamFallback, StreamingRenderer, GUARD_BIAS};
 use crate::error::{GpuError, Result};
-use crate::render::{Tracer, STAT_WORDS};
+use crate::render::{
+    Tracer, STAT_MARK_TLAS_WALKS, STAT_MARK_WALKS, STAT_SHADOW_RAYS, STAT_TLAS_WALKS, STAT_WORDS,
+};
 use crate::scene::Slot;
 
 /// Stamp levels of `common.glsl` (`STREAM_*`).
@@ -44,31 +48,36 @@ impl<'a> StreamingRenderer<'a> {
         h: u32,
         guard: &[u32],
     ) -> Result<FrameImage> {
-        let nb = self.view.blases.len();
         let pixels = u64::from(w) * u64::from(h);
-        let stamps_bytes = (nb * 4) as u64;
-        let req_off = stamps_bytes.div_ceil(16) * 16;
-        let inc_off = req_off + req_off;
-        let final_off = (inc_off + 4 + 4 * pixels).div_ceil(16) * 16;
+        let final_off = ReadbackLayout::new(self.view.blases.len(), pixels).final_off;
         let mut full_count = pixels as u32;
         let mut list: Vec<u32> = guard.to_vec();
         self.frame.stats_mut().guard_rays = guard.len() as u64;
         let mut guard_demand = Demand::default();
         let max_passes = self.frame_pass_cap();
+        // The pass about to run is the frame's last (its cap, or the build budget spent).
+        let mut last = max_passes <= 1;
+        // Open pixels the last pass leaves as they are (unbiased; see `split_waiting`).
+        let mut waiting: Vec<u32> = Vec::new();
+        let mut shader_before = ShaderCounters::default();
         loop {
             let pass_t0 = Instant::now();
             let before = PassCounters::of(self.frame.stats());
             let traced = u64::from(full_count) + list.len() as u64;
             self.frame.stats_mut().passes += 1;
             let first = self.frame.stats().passes == 1;
-            let PassReadback {
-                stamps,
-                requests,
-                incomplete,
-                trace_ms,
-            } = self.trace_pass(fb, pixels, full_count, &list, first, 0)?;
+            let flags = self.frame_pass_flags(last);
+            let (
+                PassReadback {
+                    stamps,
+                    requests,
+                    incomplete,
+                    trace_ms,
+                },
+                extra,
+            ) = self.trace_pass_with(fb, pixels, full_count, &list, first, flags)?;
             self.frame.stats_mut().trace_ms += trace_ms;
-            let count = incomplete.len() as u32;
+            let count = (incomplete.len() + waiting.len()) as u32;
             // Resident BLASes seen refresh their LRU age; empty ones are needed (some pixel's
             // nearest open one), open (needed later) or, in pass 1, prefetch candidates (the
             // guard band saw them).
@@ -97,8 +106,17 @@ impl<'a> StreamingRenderer<'a> {
                 open_pixels: u64::from(count),
                 needed: demand.needed().len() as u32,
                 later: demand.later().len() as u32,
+                open_closest: (extra
+                    .blockers
+                    .iter()
+                    .filter(|&&b| b != NONE_BLOCKER)
+                    .count()
+                    + waiting.len()) as u64,
+                last_pass: last,
                 ..Default::default()
             };
+            extra.counters.since(&shader_before, &mut pass);
+            shader_before = extra.counters;
             let host_before_build = pass_t0.elapsed().as_secs_f64() * 1e3;
             let log_pass = |s: &mut Self, mut pass: PassStats, host_extra: f64| {
                 before.since(s.frame.stats(), &mut pass);
@@ -131,6 +149,7 @@ impl<'a> StreamingRenderer<'a> {
                     );
                 }
                 list = incomplete;
+                list.append(&mut waiting);
                 log_pass(self, pass, 0.0);
                 break;
             }
@@ -139,10 +158,29 @@ impl<'a> StreamingRenderer<'a> {
                 return Err(e);
             }
             let t_list = Instant::now();
-            self.frame.stats_mut().reshot_pixels += u64::from(count);
+            last = self.frame.stats().passes + 1 >= max_passes || self.frame_build_spent();
+            let retrace = if last {
+                let (retrace, wait) = self.split_waiting(&incomplete, &extra.blockers);
+                waiting = wait;
+                retrace
+            } else {
+                incomplete
+            };
+            pass.left_waiting = waiting.len() as u64;
+            if retrace.is_empty() {
+                // Every open pixel waits for a structure still missing: the pass that would
+                // come could change none of them, so the frame ends here.
+                let spent = self.frame_build_spent();
+                let st = self.frame.stats_mut();
+                st.incomplete_pixels = waiting.len() as u64;
+                st.build_budget_spent = spent;
+                list = std::mem::take(&mut waiting);
+                log_pass(self, pass, t_list.elapsed().as_secs_f64() * 1e3);
+                break;
+            }
+            self.frame.stats_mut().reshot_pixels += retrace.len() as u64;
             full_count = 0;
-            list = relist(&incomplete);
-            pass.open_pixels = u64::from(count);
+            list = relist(&retrace);
             log_pass(self, pass, t_list.elapsed().as_secs_f64() * 1e3);
         }
         guard_demand.sort();
@@ -211,6 +249,37 @@ impl<'a> StreamingRenderer<'a> {
 }
 
 impl<'a> StreamingRenderer<'a> {
+    /// The flags of a frame pass: its last (`last`) traces no secondary rays ahead of open
+    /// primary rays; a last pass after which nothing is built (the build budget spent) takes
+    /// no mark walks, whose marks would steer nothing.
+    fn frame_pass_flags(&self, last: bool) -> u32 {
+        match (last, last && self.frame_build_spent()) {
+            (true, true) => STREAM_LAST_PASS | STREAM_NO_MARK_WALK,
+            (true, false) => STREAM_LAST_PASS,
+            _ => 0,
+        }
+    }
+
+    /// Splits a pass's open pixels `incomplete` (with what each waits for, `blockers`) before
+    /// the frame's last pass: those to trace again, and those left as they are because their
+    /// closest-hit ray waits for a structure still not resident. Such a ray stays open in any
+    /// pass before that structure arrives (everything else built lies behind its entry), so
+    /// its pixel would stay unfinished and write the same fallback: tracing it again is work
+    /// for nothing. Pixels that name none (secondary rays open) are traced again.
+    fn split_waiting(&self, incomplete: &[u32], blockers: &[u32]) -> (Vec<u32>, Vec<u32>) {
+        let mut retrace = Vec::with_capacity(incomplete.len());
+        let mut waiting = Vec::new();
+        for (i, &px) in incomplete.iter().enumerate() {
+            let b = blockers.get(i).copied().unwrap_or(NONE_BLOCKER) as usize;
+            if b < self.view.blases.len() && !self.res.has_blas(b) {
+                waiting.push(px);
+            } else {
+                retrace.push(px);
+            }
+        }
+        (retrace, waiting)
+    }
+
     /// Counts why the first pass's needed structures were missing (see
     /// `FrameStreamStats::first_pass_missed_evicted`), from the last probe's sightings, which
     /// it then forgets.
@@ -272,6 +341,68 @@ impl PassCounters {
     }
 }
 
+/// What a pixel on the incomplete list names when it waits for no one structure
+/// (`NONE_U32` of the shaders).
+const NONE_BLOCKER: u32 = u32::MAX;
+
+/// The shaders' counters of a frame's passes so far (the stats words, cumulative over the
+/// frame's passes): what a pass added is its `PassStats`'.
+#[derive(Clone, Copy, Default)]
+pub(super) struct ShaderCounters {
+    secondary_rays: u32,
+    tlas_walks: u32,
+    mark_walks: u32,
+    mark_tlas_walks: u32,
+}
+
+impl ShaderCounters {
+    fn of(words: &[u32]) -> Self {
+        let at = |i: usize| words.get(i).copied().unwrap_or(0);
+        ShaderCounters {
+            secondary_rays: at(STAT_SHADOW_RAYS),
+            tlas_walks: at(STAT_TLAS_WALKS),
+            mark_walks: at(STAT_MARK_WALKS),
+            mark_tlas_walks: at(STAT_MARK_TLAS_WALKS),
+        }
+    }
+
+    /// Fills `pass` with what the counters grew by since `before`.
+    fn since(&self, before: &Self, pass: &mut PassStats) {
+        pass.secondary_rays = u64::from(self.secondary_rays.wrapping_sub(before.secondary_rays));
+        pass.tlas_walks = u64::from(self.tlas_walks.wrapping_sub(before.tlas_walks));
+        pass.mark_walks = u64::from(self.mark_walks.wrapping_sub(before.mark_walks));
+        pass.mark_tlas_walks = u64::from(self.mark_tlas_walks.wrapping_sub(before.mark_tlas_walks));
+    }
+}
+
+/// Offsets in the frame's readback buffer: stamps at 0, requests, the incomplete list (count,
+/// pixels, what each waits for), then the final image (AOV, colour, stats words).
+struct ReadbackLayout {
+    req_off: u64,
+    inc_off: u64,
+    final_off: u64,
+}
+
+impl ReadbackLayout {
+    fn new(blases: usize, pixels: u64) -> Self {
+        let stamps_bytes = (blases * 4) as u64;
+        let req_off = stamps_bytes.div_ceil(16) * 16;
+        let inc_off = req_off + req_off;
+        ReadbackLayout {
+            req_off,
+            inc_off,
+            final_off: (inc_off + 4 + 8 * pixels).div_ceil(16) * 16,
+        }
+    }
+}
+
+/// What a frame's own pass reads back beside [`PassReadback`]: what each incomplete pixel
+/// waits for, and the shaders' counters so far.
+pub(super) struct PassExtra {
+    pub(super) blockers: Vec<u32>,
+    pub(super) counters: ShaderCounters,
+}
+
 /// A non-resident buildable BLAS a pass met, with the stamp level it met it at
 /// (`LEVEL_NEEDED`: some ray's nearest open structure, `LEVEL_OPEN`: open for some ray, lower:
 /// passed through). Plain data (`pub(super)` fields): no invariant ties the two.
@@ -331,10 +462,28 @@ impl<'a> StreamingRenderer<'a> {
         first: bool,
         flags: u32,
     ) -> Result<PassReadback> {
+        self.trace_pass_with(fb, pixels, full_count, list, first, flags)
+            .map(|(r, _)| r)
+    }
+
+    /// [`Self::trace_pass`], also reading back what each incomplete pixel waits for and the
+    /// shaders' counters.
+    fn trace_pass_with(
+        &mut self,
+        fb: &FrameBuffers,
+        pixels: u64,
+        full_count: u32,
+        list: &[u32],
+        first: bool,
+        flags: u32,
+    ) -> Result<(PassReadback, PassExtra)> {
         let nb = self.view.blases.len();
         let stamps_bytes = (nb * 4) as u64;
-        let req_off = stamps_bytes.div_ceil(16) * 16;
-        let inc_off = req_off + req_off;
+        let ReadbackLayout {
+            req_off,
+            inc_off,
+            final_off,
+        } = ReadbackLayout::new(nb, pixels);
         self.frame.next_stamp(STAMP_LIMIT)?;
         // Every resident BLAS is walked by every ray of this pass that reaches its box in
         // front of its best hit: a ray that started by now needs it no more.
@@ -404,7 +553,16 @@ impl<'a> StreamingRenderer<'a> {
                 rec.copy_buffer(&fb.requests, 0, &fb.readback, req_off, stamps_bytes)?;
             }
         }
-        rec.copy_buffer(&fb.incomplete, 0, &fb.readback, inc_off, 4 + 4 * pixels)?;
+        rec.copy_buffer(&fb.incomplete, 0, &fb.readback, inc_off, 4 + 8 * pixels)?;
+        // The counters so far, where the final image's stats words go (read_image overwrites).
+        let counters_off = final_off + pixels * 20;
+        rec.copy_buffer(
+            &fb.stats,
+            0,
+            &fb.readback,
+            counters_off,
+            (STAT_WORDS * 4) as u64,
+        )?;
         rec.submit_and_wait()?;
         let trace_ms = t0.elapsed().as_secs_f64() * 1e3;
         let stamps: Vec<u32> = fb.readback.read_vec(0, nb)?;
@@ -417,12 +575,22 @@ impl<'a> StreamingRenderer<'a> {
             .unwrap_or(0);
         let count = count.min(pixels as u32);
         let incomplete: Vec<u32> = fb.readback.read_vec(inc_off + 4, count as usize)?;
-        Ok(PassReadback {
-            stamps,
-            requests,
-            incomplete,
-            trace_ms,
-        })
+        let blockers: Vec<u32> = fb
+            .readback
+            .read_vec(inc_off + 4 + 4 * pixels, count as usize)?;
+        let words: Vec<u32> = fb.readback.read_vec(counters_off, STAT_WORDS)?;
+        Ok((
+            PassReadback {
+                stamps,
+                requests,
+                incomplete,
+                trace_ms,
+            },
+            PassExtra {
+                blockers,
+                counters: ShaderCounters::of(&words),
+            },
+        ))
     }
 }
 

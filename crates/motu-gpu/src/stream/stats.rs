@@ -292,6 +292,22 @@ pub struct PassStats {
     /// Of `evicted`: up front for TLAS rebuilds, after a refused allocation.
     pub evicted_for_tlas: u32,
     pub evicted_on_refusal: u32,
+    /// The pass was its frame's last (its pass cap, or its build budget spent): an open
+    /// primary ray traced no secondary rays ahead of its hit.
+    pub last_pass: bool,
+    /// Of `open_pixels`: those whose primary or bounce ray is open (waiting for the
+    /// structure it names), not only secondary rays.
+    pub open_closest: u64,
+    /// Of `open_pixels`: left as they are for the frame's last pass (not traced again): their
+    /// primary or bounce ray waits for a structure that is still not resident.
+    pub left_waiting: u64,
+    /// The shaders' counts (device-independent): secondary rays traced (shadow, AO, bounce),
+    /// TLAS walks of the rays' walks, the mark walks of rays left open (and guard rays), and
+    /// those mark walks' TLAS walks.
+    pub secondary_rays: u64,
+    pub tlas_walks: u64,
+    pub mark_walks: u64,
+    pub mark_tlas_walks: u64,
 }
 
 /// Totals over all frames rendered so far.

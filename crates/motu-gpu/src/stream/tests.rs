@@ -750,6 +750,112 @@ fn a_frame_build_budget_shows_the_fallback_then_converges_to_the_full_build() {
     assert_no_validation_errors(&ctx);
 }
 
+/// Issue 45 items 5 and 6: a refining frame (its build budget spent after its first pass)
+/// traces again, in its last pass, only the open pixels whose structures could have arrived:
+/// a pixel whose primary ray waits for a structure still not built is left as it is (its
+/// fallback stays, counted). Its last pass traces no secondary rays ahead of an open primary
+/// ray (progressive frames: their one pass is the last). The counts are the shaders' own, and
+/// both modes still converge to the full build's image at rest.
+#[test]
+fn a_refining_frames_last_pass_traces_only_pixels_whose_structures_arrived() {
+    let Some(ctx) = context_or_skip("stream_refine", Requirement::RayTracing) else {
+        return;
+    };
+    let h = field(10, 16, 30);
+    let blobs = Blobs(&h);
+    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
+    let shading = motu_abi::shade::Shading {
+        spp: 1,
+        ..full_shading()
+    };
+    // Secondary rays a pixel whose primary ray is final may trace in one pass (spp 1, no
+    // bounce): its lights' shadow rays and its AO rays, each once.
+    let per_pixel = u64::from(shading.light_count + shading.ao_samples);
+    let opts = RenderOptions {
+        shading,
+        ..ids_opts(backend(&ctx))
+    };
+    let cam = base_pose().params(SIZE, SIZE);
+    let reference = render(&ctx, &full, &cam, &opts).expect("full render");
+    for progressive in [false, true] {
+        let mut sr = StreamingRenderer::new(
+            &ctx,
+            h.view(),
+            &blobs,
+            &StreamOptions {
+                budget_bytes: full_build_needs(&full) / 2,
+                fallback: crate::StreamFallback::Coarse,
+                frame_build_bytes: 64 * 1024,
+                ..Default::default()
+            },
+        )
+        .expect("streaming renderer");
+        let (mut left_waiting, mut marked_walks) = (0u64, 0u64);
+        let mut last = None;
+        for _ in 0..200 {
+            let (out, st) = if progressive {
+                sr.render_progressive(&cam, &opts)
+            } else {
+                sr.render_frame(&cam, &opts)
+            }
+            .expect("frame");
+            assert_eq!(st.passes as usize, st.pass_log.len(), "{st:?}");
+            let final_pass = st.pass_log.last().expect("a pass");
+            assert!(final_pass.tlas_walks > 0, "{st:?}");
+            if !st.complete {
+                assert!(final_pass.last_pass, "{st:?}");
+                assert_eq!(st.fallback_pixels, st.incomplete_pixels, "{st:?}");
+            }
+            for (i, p) in st.pass_log.iter().enumerate() {
+                marked_walks += p.mark_walks;
+                assert!(p.open_closest <= p.open_pixels, "{p:?}");
+                if let Some(next) = st.pass_log.get(i + 1) {
+                    // The next pass traces the open pixels less those left waiting.
+                    assert_eq!(next.traced + p.left_waiting, p.open_pixels, "{st:?}");
+                    left_waiting += p.left_waiting;
+                    if p.left_waiting > 0 {
+                        assert!(next.last_pass, "only a last pass leaves pixels: {st:?}");
+                    }
+                }
+                if p.last_pass {
+                    // No secondary rays ahead of open primary (or bounce) rays: only the pixels
+                    // it traced whose closest-hit ray ended trace any (those left waiting
+                    // before it count in its open_closest but were not traced).
+                    let (image, waited) = match i {
+                        0 => (p.traced - st.guard_rays, 0),
+                        _ => (p.traced, st.pass_log[i - 1].left_waiting),
+                    };
+                    let still_open = p.open_closest - waited;
+                    assert!(
+                        p.secondary_rays <= per_pixel * (image - still_open),
+                        "{p:?}"
+                    );
+                }
+            }
+            let done = st.complete;
+            last = Some((out, st));
+            if done {
+                break;
+            }
+        }
+        eprintln!(
+            "progressive {progressive}: left waiting {left_waiting}, mark walks {marked_walks}"
+        );
+        if !progressive {
+            assert!(left_waiting > 0, "no pixel was left waiting");
+        }
+        assert!(marked_walks > 0);
+        let (out, st) = last.expect("a frame");
+        assert!(
+            st.complete && st.fallback_pixels == 0,
+            "never converged: {st:?}"
+        );
+        assert_same_aov(&reference.aov, &out.aov, "refined at rest");
+        assert_shaded_equal(&reference.rgba8, &out.rgba8, "refined at rest");
+    }
+    assert_no_validation_errors(&ctx);
+}
+
 /// `count` distinct sphere meshes, each its own BLAS placed by a root instance (so the full
 /// build has no PI at all); `place(k)` gives sphere k's colour, UV-sphere resolution and
 /// instance transform.

@@ -137,6 +137,13 @@ mirror! {
         evicted_bytes: u64,
         evicted_for_tlas: u32,
         evicted_on_refusal: u32,
+        last_pass: bool,
+        open_closest: u64,
+        left_waiting: u64,
+        secondary_rays: u64,
+        tlas_walks: u64,
+        mark_walks: u64,
+        mark_tlas_walks: u64,
     }
 }
 

@@ -21,6 +21,10 @@ fn stat_words_match_common_glsl() {
     };
     assert_eq!(index("TRUNCATED_RAYS"), STAT_TRUNCATED_RAYS);
     assert_eq!(index("MISSING_TEXTURES"), STAT_MISSING_TEXTURES);
+    assert_eq!(index("SHADOW_RAYS"), STAT_SHADOW_RAYS);
+    assert_eq!(index("TLAS_WALKS"), STAT_TLAS_WALKS);
+    assert_eq!(index("MARK_WALKS"), STAT_MARK_WALKS);
+    assert_eq!(index("MARK_TLAS_WALKS"), STAT_MARK_TLAS_WALKS);
     assert_eq!(defines.len(), STAT_WORDS, "{defines:?}");
     assert!(defines.iter().all(|&(_, i)| i < STAT_WORDS), "{defines:?}");
 }
