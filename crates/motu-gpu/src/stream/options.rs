@@ -88,7 +88,8 @@ pub struct StreamOptions {
     /// budget (`defrag.rs`; `defrag_*` per frame in `--stats`). Off by default: measured on
     /// lavapipe only (the default island along shotCam at a third of its full build, 64×36:
     /// 1.857 → 1.571 passes after the first, evictions on refusal 3.6 → 0 a frame; a quarter
-    /// unchanged; every image equal to the full build's), not yet on a GPU.
+    /// unchanged; every image equal to the full build's), not yet on a GPU. The prefetch after
+    /// a frame drains on a refused allocation either way (`residency.rs`, `drains_on_refusal`).
     pub defrag: bool,
     /// The prefetch after a frame keeps what the frame's passes saw, beside what the probe of
     /// the next camera met, while the frame's working set fits its room next to its largest

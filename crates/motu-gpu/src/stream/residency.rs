@@ -450,8 +450,9 @@ impl<'a> StreamingRenderer<'a> {
                     if !evict {
                         return Err(GpuError::Budget(msg));
                     }
-                    // A refusal is for a new block: whole blocks drained first, if any.
-                    if self.opts.defrag && self.defragment(step)?.freed_bytes > 0 {
+                    // A refusal is for a new block: whole blocks drained first, if any (in
+                    // the prefetch always, see `drains_on_refusal`).
+                    if self.drains_on_refusal() && self.defragment(step)?.freed_bytes > 0 {
                         continue;
                     }
                     if self.evict_structures(step, EvictWhy::Refused)? {
@@ -462,6 +463,20 @@ impl<'a> StreamingRenderer<'a> {
                 r => return r,
             }
         }
+    }
+
+    /// Whether a refused allocation drains blocks before it evicts: with
+    /// `StreamOptions::defrag`, and in the prefetch after a frame always. There, evicting
+    /// frees space inside blocks, scattered over all of them least recently seen first, and
+    /// rarely a whole block, so the retry loop went on a 32nd of the budget at a time through
+    /// structures the probe's later rounds then met and built again (`returned_in_frame`).
+    /// Lavapipe, island 0.002 at a quarter of its full build along the default path (64×36, 8
+    /// frames, the bounce, `--no-as-cache`), frames after the first, alternated runs (they
+    /// vary run to run): evicted 417–498 → 303–304, returned within the frame 218–289 →
+    /// 126–144, built 190–334 → 141–181 MB, passes after the first 2.29–2.86 → 2.29–2.43;
+    /// the same image (`tests/tests/stream_prefetch_churn.rs`).
+    fn drains_on_refusal(&self) -> bool {
+        self.opts.defrag || self.frame.prefetching()
     }
 
     /// [`with_eviction`](Self::with_eviction) for what the floor counts as always resident
