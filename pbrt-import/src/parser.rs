@@ -319,11 +319,13 @@ impl<'s> Parser<'s> {
         };
         self.sink.file_enter(&event)?;
         if self.opts.share_repeated_includes {
-            self.include_counts.push(count_includes(bytes));
-            // The count read the whole file: its pages leave the resident set again.
-            if let Some(s) = source {
-                s.release(0, bytes.len());
-            }
+            // The count reads the whole file: its pages leave the resident set as it goes.
+            self.include_counts
+                .push(count_includes(bytes, |start, end| {
+                    if let Some(s) = source {
+                        s.release(start, end);
+                    }
+                }));
         }
         let _span =
             tracing::debug_span!("pbrt_file", path = %path.display(), size_bytes = bytes.len())

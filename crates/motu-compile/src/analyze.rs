@@ -107,7 +107,7 @@ impl<'s> Plan<'s> {
             plan.g_mesh_count[p.index()] = g;
             let base = scene.edge_base(p) as usize;
             let mut child_geometry = false;
-            for (i, e) in scene.edges(p).iter().enumerate() {
+            for (i, e) in scene.walk_edges(p).enumerate() {
                 child_geometry |= plan.edge_kept(p, base + i, edge_ref!(e));
             }
             plan.has_geometry[p.index()] = lod + g > 0 || child_geometry;
@@ -123,7 +123,7 @@ impl<'s> Plan<'s> {
                 continue;
             }
             let base = scene.edge_base(p) as usize;
-            for (i, e) in scene.edges(p).iter().enumerate() {
+            for (i, e) in scene.walk_edges(p).enumerate() {
                 let c = e.child.index();
                 if !plan.element_ok(p, base + i) || !plan.has_geometry[c] {
                     continue;
@@ -155,7 +155,7 @@ impl<'s> Plan<'s> {
             }
             let base = scene.edge_base(p) as usize;
             let mut below = 0u32;
-            for (i, e) in scene.edges(p).iter().enumerate() {
+            for (i, e) in scene.walk_edges(p).enumerate() {
                 if !plan.edge_kept(p, base + i, edge_ref!(e)) {
                     continue;
                 }
@@ -294,7 +294,7 @@ impl<'s> Plan<'s> {
             });
             let mut kept_edges = 0u64;
             let base = scene.edge_base(p) as usize;
-            for (k, e) in scene.edges(p).iter().enumerate() {
+            for (k, e) in scene.walk_edges(p).enumerate() {
                 if !self.edge_kept(p, base + k, edge_ref!(e)) {
                     continue;
                 }
@@ -375,7 +375,7 @@ impl<'s> Plan<'s> {
             let mut i = self.g_blas_estimate(p);
             let mut q = u64::from(self.lod_mesh_count[p.index()]);
             let base = scene.edge_base(p) as usize;
-            for (k, e) in scene.edges(p).iter().enumerate() {
+            for (k, e) in scene.walk_edges(p).enumerate() {
                 if !self.edge_kept(p, base + k, edge_ref!(e)) {
                     continue;
                 }

@@ -439,7 +439,7 @@ fn root_element(plan: &Plan<'_>) -> u32 {
         Some(f) if f != e => mixed = true,
         _ => {}
     };
-    for (i, e) in scene.edges(root).iter().enumerate() {
+    for (i, e) in scene.walk_edges(root).enumerate() {
         if plan.edge_kept(root, base + i, edge_ref!(e)) {
             if let Some(el) = scene.root_edge_elements().get(i) {
                 see(el.0);

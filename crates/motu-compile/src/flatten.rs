@@ -18,7 +18,7 @@ pub fn flatten_source(scene: &Scene) -> Vec<(Transform34, MeshId)> {
                 out.push((world_from_p, m));
             }
         }
-        for e in scene.edges(p) {
+        for e in scene.walk_edges(p) {
             if xform::is_invertible(&e.parent_from_child) {
                 stack.push((e.child, xform::compose(&world_from_p, &e.parent_from_child)));
             }

@@ -186,22 +186,57 @@ impl StoredProxyClusters {
             ..Default::default()
         };
         for (list, hash) in clusters.iter().zip(hashes) {
-            out.tlases.push(StoredTlas {
-                hash,
-                first_cluster: out.clusters.len() as u64,
-                cluster_count: list.len() as u64,
-            });
-            for c in list {
-                out.member_first.push(out.members.len() as u64);
-                out.clusters.push(StoredCluster {
-                    blas: c.blas,
-                    member_count: c.members.len() as u32,
-                    bounds: c.bounds,
-                });
-                out.members.extend_from_slice(&c.members);
-            }
+            out.push_tlas(hash, list);
         }
         out
+    }
+
+    /// The table of every TLAS of `view`: [`StoredProxyClusters::new`] over [`all_clusters`],
+    /// the same table, but made a batch of TLASes at a time (in parallel within a batch), each
+    /// batch's clusters folded in and dropped before the next: an import holds the flat table
+    /// (~6.5 bytes an instance), not every cluster's own member list beside it (issue 48 item
+    /// 1).
+    pub fn of_view(view: &HierarchyView<'_>) -> StoredProxyClusters {
+        use rayon::prelude::*;
+        let bh = blases_hash(view);
+        let mut out = StoredProxyClusters {
+            instance_count: view.instances.len() as u64,
+            ..Default::default()
+        };
+        let n = view.tlases.len();
+        // A few TLASes a thread per batch: a large one among small ones does not idle the rest.
+        let batch = 4 * rayon::current_num_threads().max(1);
+        let mut first = 0;
+        while first < n {
+            let end = (first + batch).min(n);
+            let made: Vec<(u64, Vec<Cluster>)> = (first..end)
+                .into_par_iter()
+                .map(|t| (tlas_hash(view, t, bh), tlas_clusters(view, t)))
+                .collect();
+            for (hash, list) in made {
+                out.push_tlas(hash, &list);
+            }
+            first = end;
+        }
+        out
+    }
+
+    /// Appends a TLAS's entry (`hash`) and its clusters.
+    fn push_tlas(&mut self, hash: u64, list: &[Cluster]) {
+        self.tlases.push(StoredTlas {
+            hash,
+            first_cluster: self.clusters.len() as u64,
+            cluster_count: list.len() as u64,
+        });
+        for c in list {
+            self.member_first.push(self.members.len() as u64);
+            self.clusters.push(StoredCluster {
+                blas: c.blas,
+                member_count: c.members.len() as u32,
+                bounds: c.bounds,
+            });
+            self.members.extend_from_slice(&c.members);
+        }
     }
 
     /// Whether the table was made for a view of `view`'s shape (TLAS and instance counts): a
@@ -244,20 +279,46 @@ impl StoredProxyClusters {
 /// The section's bytes: [`SECTION_MAGIC`], the instance, TLAS, cluster and member counts (u64
 /// each), the TLAS entries (24 bytes each), the clusters (32 bytes each), the members (u32).
 pub fn encode_section(t: &StoredProxyClusters) -> Vec<u8> {
-    let mut w = BlobWriter::new(
-        SECTION_MAGIC,
-        32 + std::mem::size_of_val(&t.tlases[..])
-            + std::mem::size_of_val(&t.clusters[..])
-            + std::mem::size_of_val(&t.members[..]),
-    );
-    w.u64(t.instance_count)
+    let mut out = Vec::with_capacity(section_bytes(t));
+    let _ = write_section(t, |piece| {
+        out.extend_from_slice(piece);
+        Ok::<(), std::convert::Infallible>(())
+    });
+    out
+}
+
+/// The length of [`encode_section`]'s bytes.
+pub fn section_bytes(t: &StoredProxyClusters) -> usize {
+    SECTION_MAGIC.len()
+        + 32
+        + std::mem::size_of_val(&t.tlases[..])
+        + std::mem::size_of_val(&t.clusters[..])
+        + std::mem::size_of_val(&t.members[..])
+}
+
+/// [`encode_section`]'s bytes handed to `write` piece by piece (a few MiB at most each), so a
+/// writer can store the section without a copy of the table beside it.
+pub fn write_section<E>(
+    t: &StoredProxyClusters,
+    mut write: impl FnMut(&[u8]) -> Result<(), E>,
+) -> Result<(), E> {
+    let mut head = BlobWriter::new(SECTION_MAGIC, 32);
+    head.u64(t.instance_count)
         .u64(t.tlases.len() as u64)
         .u64(t.clusters.len() as u64)
-        .u64(t.members.len() as u64)
-        .pods(&t.tlases)
-        .pods(&t.clusters)
-        .pods(&t.members);
-    w.finish()
+        .u64(t.members.len() as u64);
+    write(&head.finish())?;
+    const PIECE_BYTES: usize = 4 << 20;
+    for bytes in [
+        bytemuck::cast_slice::<_, u8>(&t.tlases),
+        bytemuck::cast_slice(&t.clusters),
+        bytemuck::cast_slice(&t.members),
+    ] {
+        for piece in bytes.chunks(PIECE_BYTES) {
+            write(piece)?;
+        }
+    }
+    Ok(())
 }
 
 /// Reads what [`encode_section`] wrote; `None` for another magic (another version), a cut or

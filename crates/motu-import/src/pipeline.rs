@@ -228,6 +228,12 @@ pub fn import(
     // The bar's total: the scene text beside the entry file (an estimate: files there that the
     // scene never includes count too, and PLY data is not in it).
     let total = scene_text_bytes(scene_path.parent().unwrap_or(Path::new(".")));
+    // The instance edges' scratch files go beside the package (unnamed: nothing is left
+    // behind): written as they are parsed, they never sit in memory whole (issue 48 item 1).
+    let dir = match out.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
     let ingest_opts = IngestOptions {
         progress: o.progress.clone().map(|report| {
             motu_ingest::ProgressFn(std::sync::Arc::new(move |bytes, _files| {
@@ -241,6 +247,7 @@ pub fn import(
         pbrt_version: o.pbrt_version,
         parallel: o.parallel,
         curve_ribbons: o.curve_ribbons,
+        edge_spill_dir: Some(dir.to_path_buf()),
     };
     let (mut scene, mut report) = motu_ingest::ingest_file(scene_path, &ingest_opts, store)
         .map_err(|source| ImportError::Ingest { path, source })?;
@@ -256,12 +263,7 @@ pub fn import(
     let parse_ms = t0.elapsed().as_secs_f64() * 1e3;
     tracing::info!(parse_ms, peak_rss_bytes = crate::peak_rss_bytes(), "parsed");
     crate::memory::log_phase("parse");
-    // The edges leave the heap for a scratch file beside the package (unnamed: nothing is left
-    // behind), so the compiler's instance table does not sit beside them (issue 48 item 1).
-    let dir = match out.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
+    // Edges too few to fill a chunk were kept on the heap: they go to the file now.
     scene
         .move_edges_to_file(dir)
         .map_err(|source| ImportError::EdgeFile {

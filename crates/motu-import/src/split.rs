@@ -70,26 +70,24 @@ pub(crate) fn write_proxy_clusters(
     writer: &mut PackageWriter,
     streamed: &HierarchyView<'_>,
 ) -> Result<(), ImportError> {
-    let streamed = *streamed;
-    add_timed_section(
-        writer,
-        motu_pack::SECTION_PROXY_CLUSTERS,
-        "proxy_clusters",
-        |_| {
-            // The clusters' member lists go once the table holds its copy of them (they
-            // would otherwise sit beside the table and its encoding: 4 bytes an instance).
-            let table = {
-                let clusters = proxy_clusters::all_clusters(&streamed);
-                proxy_clusters::StoredProxyClusters::new(&streamed, &clusters)
-            };
-            let counts = format!(
-                "tlases={} clusters={}",
-                table.tlases.len(),
-                table.clusters.len()
-            );
-            Ok((proxy_clusters::encode_section(&table), counts))
-        },
-    )
+    let t = std::time::Instant::now();
+    // Made a batch of TLASes at a time and written piece by piece: no TLAS's cluster list
+    // outlives its batch, and the section's bytes are not copied out of the table (each would
+    // sit beside the instance table at the import's peak: issue 48 item 1).
+    let table = proxy_clusters::StoredProxyClusters::of_view(streamed);
+    let made_ms = t.elapsed().as_secs_f64() * 1e3;
+    let mut section =
+        writer.begin_section(motu_pack::SECTION_PROXY_CLUSTERS, "proxy_clusters", 1)?;
+    proxy_clusters::write_section(&table, |piece| section.write(piece))?;
+    section.finish()?;
+    tracing::info!(
+        section = "proxy_clusters",
+        section_bytes = proxy_clusters::section_bytes(&table),
+        made_ms,
+        counts = %format!("tlases={} clusters={}", table.tlases.len(), table.clusters.len()),
+        "derived section stored"
+    );
+    Ok(())
 }
 
 /// Counts, per TLAS of the package's own hierarchy, the BLASes its instances place
@@ -119,7 +117,8 @@ pub(crate) fn write_blas_counts(
 /// Makes a derived section with `make` (its bytes and the counts its log line names, as
 /// `key=value` words; `make` may read back what `writer` holds), adds it to the package as
 /// `name` (one-byte elements) and logs how long making it took and its size: the one shape of
-/// every table import derives and stores (`proxy_clusters`, `blas_counts`, `proxy_boxes`).
+/// every table import derives and stores (`blas_counts`, `proxy_boxes`; `proxy_clusters` is
+/// written piece by piece with the same log line).
 pub(crate) fn add_timed_section(
     writer: &mut PackageWriter,
     kind: motu_package::SectionKind,

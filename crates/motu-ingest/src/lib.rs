@@ -107,6 +107,10 @@ pub struct IngestOptions {
     pub parallel: bool,
     /// Tessellate `curve` shapes into flat ribbons (otherwise they are counted and skipped).
     pub curve_ribbons: bool,
+    /// Write the instance edges to an unnamed scratch file in this directory as they are
+    /// parsed ([`motu_scene::SceneBuilder::spill_edges_to`]; an import's: its output's
+    /// directory); `None` keeps them on the heap.
+    pub edge_spill_dir: Option<std::path::PathBuf>,
 }
 
 /// What an import saw, for `motu import` and `motu info`.

@@ -630,8 +630,12 @@ pub fn ingest_moana_json(
 
 impl Adapter {
     fn new(options: &IngestOptions, geometry: Box<dyn GeometryStore>) -> Self {
+        let mut b = SceneBuilder::new(geometry);
+        if let Some(dir) = &options.edge_spill_dir {
+            b.spill_edges_to(dir);
+        }
         Adapter {
-            b: SceneBuilder::new(geometry),
+            b,
             objects: HashMap::new(),
             materials: HashMap::new(),
             derived: HashMap::new(),

@@ -1,6 +1,7 @@
 //! Incremental construction: importers add things in document order; `finish` sorts edges into
 //! CSR order with a counting sort (O(n), no per-edge allocation), checks the graph and computes
-//! bounds once.
+//! bounds once. An import's builder spills its edges to a scratch file as they come
+//! ([`SceneBuilder::spill_edges_to`]).
 
 use crate::scene::{Edge, Prototype};
 use crate::{
@@ -8,13 +9,20 @@ use crate::{
     Material, MaterialId, MeshData, MeshId, MeshInfo, PrototypeId, Scene, SceneError, Transform34,
 };
 
+/// Edges a spilling builder holds before writing them to its file (~3.4 MB of 52-byte edges).
+pub const SPILL_CHUNK_EDGES: usize = 1 << 16;
+
 pub struct SceneBuilder {
     prototypes: Vec<Prototype>,
     mesh_owner: Vec<PrototypeId>,
     meshes: Vec<MeshInfo>,
     root_mesh_elements: Vec<ElementId>,
-    edge_parent: Vec<PrototypeId>,
+    /// Whose the edges are, in import order: (parent, count) runs of consecutive edges.
+    edge_runs: Vec<crate::edge_file::Run>,
+    /// Every edge, or with a spill file the ones not yet written to it (under a chunk).
     edges: Vec<Edge>,
+    edge_count: usize,
+    spill: Option<crate::edge_file::EdgeSpill>,
     edge_elements: Vec<ElementId>,
     materials: Vec<Material>,
     cameras: Vec<Camera>,
@@ -28,7 +36,7 @@ pub struct SceneBuilder {
 impl std::fmt::Debug for SceneBuilder {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("SceneBuilder")
-            .field("edges", &self.edges.len())
+            .field("edges", &self.edge_count)
             .finish_non_exhaustive()
     }
 }
@@ -59,8 +67,10 @@ impl SceneBuilder {
             mesh_owner: Vec::new(),
             meshes: Vec::new(),
             root_mesh_elements: Vec::new(),
-            edge_parent: Vec::new(),
+            edge_runs: Vec::new(),
             edges: Vec::new(),
+            edge_count: 0,
+            spill: None,
             edge_elements: Vec::new(),
             materials: vec![Material::default()],
             cameras: Vec::new(),
@@ -76,6 +86,16 @@ impl SceneBuilder {
 
     pub fn root(&self) -> PrototypeId {
         Scene::ROOT
+    }
+
+    /// Writes the instance edges to an unnamed scratch file in `dir` (made at the first full
+    /// chunk) as they are added, [`SPILL_CHUNK_EDGES`] at a time, rather than holding them on
+    /// the heap until [`SceneBuilder::finish`] (issue 48 item 1: an import's peak memory);
+    /// the scene then reads them through a map ([`Scene::edges_in_file`]). A scene whose edges
+    /// never fill a chunk keeps them on the heap. Call before adding edges.
+    pub fn spill_edges_to(&mut self, dir: &std::path::Path) {
+        debug_assert_eq!(self.edge_count, 0, "spill_edges_to after edges were added");
+        self.spill = Some(crate::edge_file::EdgeSpill::new(dir.to_path_buf()));
     }
 
     /// The default material every builder starts with.
@@ -213,14 +233,29 @@ impl SceneBuilder {
                 child: self.prototypes[child.index()].name.clone(),
             });
         }
-        checked_id(self.edges.len() + 1, "instance edges")?;
-        self.edge_parent.push(parent);
+        checked_id(self.edge_count + 1, "instance edges")?;
+        match self.edge_runs.last_mut() {
+            Some((p, n)) if *p == parent.0 => *n += 1,
+            _ => self.edge_runs.push((parent.0, 1)),
+        }
+        self.edge_count += 1;
         self.edges.push(Edge {
             parent_from_child,
             child,
         });
         if parent == Scene::ROOT {
             self.edge_elements.push(element);
+        }
+        if let Some(spill) = &mut self.spill {
+            if self.edges.len() >= SPILL_CHUNK_EDGES {
+                spill
+                    .append(&self.edges)
+                    .map_err(|source| SceneError::EdgeFile {
+                        dir: spill.dir().to_path_buf(),
+                        source,
+                    })?;
+                self.edges.clear();
+            }
         }
         Ok(())
     }
@@ -267,8 +302,8 @@ impl SceneBuilder {
         // CSR for edges: counting sort by parent, stable, so import order is kept per parent.
         let (edges, root_edge_elements) = {
             let mut counts = vec![0u32; n + 1];
-            for p in &self.edge_parent {
-                counts[p.index() + 1] += 1;
+            for &(p, k) in &self.edge_runs {
+                counts[p as usize + 1] += k;
             }
             for i in 0..n {
                 counts[i + 1] += counts[i];
@@ -276,25 +311,36 @@ impl SceneBuilder {
             for (i, p) in prototypes.iter_mut().enumerate() {
                 p.edge_range = (counts[i], counts[i + 1]);
             }
-            let sorted = self.edge_parent.windows(2).all(|w| w[0] <= w[1]);
+            let sorted = self.edge_runs.windows(2).all(|w| w[0].0 <= w[1].0);
             let mut edges = self.edges;
-            if !sorted {
-                // Each edge's slot, in `edge_parent`'s own buffer (same size: reused in
-                // place), then the edges permuted in place: no second edge table, which
-                // would double the import's largest table at its peak.
-                let mut cursor = counts.clone();
-                let mut slot: Vec<u32> = self
-                    .edge_parent
-                    .into_iter()
-                    .map(|p| {
-                        let s = &mut cursor[p.index()];
-                        *s += 1;
-                        *s - 1
-                    })
-                    .collect();
-                permute_in_place(&mut edges, &mut slot);
-            }
-            (crate::edge_file::EdgeTable::Heap(edges), self.edge_elements)
+            let table = match self.spill {
+                Some(mut spill) if spill.edge_count() > 0 => {
+                    let dir = spill.dir().to_path_buf();
+                    let err = |source| SceneError::EdgeFile {
+                        dir: dir.clone(),
+                        source,
+                    };
+                    spill.append(&edges).map_err(err)?;
+                    drop(edges);
+                    spill.into_table(&self.edge_runs, sorted).map_err(err)?
+                }
+                _ => {
+                    if !sorted {
+                        // Each edge's slot, then the edges permuted in place: no second edge
+                        // table, which would double the import's largest table at its peak.
+                        let mut cursor = counts.clone();
+                        let mut slot: Vec<u32> = Vec::with_capacity(edges.len());
+                        for &(p, k) in &self.edge_runs {
+                            let s = &mut cursor[p as usize];
+                            slot.extend(*s..*s + k);
+                            *s += k;
+                        }
+                        permute_in_place(&mut edges, &mut slot);
+                    }
+                    crate::edge_file::EdgeTable::Heap(edges)
+                }
+            };
+            (table, self.edge_elements)
         };
 
         // CSR for meshes (few enough that a sort of ids is fine). Root meshes keep their order so
@@ -357,7 +403,7 @@ fn topo_order(scene: &Scene) -> Result<Vec<PrototypeId>, SceneError> {
     let mut pending_children = vec![0u32; n];
     let mut parents_of: Vec<Vec<u32>> = vec![Vec::new(); n];
     for p in scene.prototype_ids() {
-        for e in scene.edges(p) {
+        for e in scene.walk_edges(p) {
             pending_children[p.index()] += 1;
             // One entry per edge would be 30M+ small pushes for Moana; dedupe consecutive ones.
             let list = &mut parents_of[e.child.index()];
@@ -404,7 +450,7 @@ fn compute_bounds(scene: &Scene) -> Vec<Aabb> {
         for &m in scene.meshes_of(p) {
             b = b.union(&scene.mesh(m).bounds);
         }
-        for e in scene.edges(p) {
+        for e in scene.walk_edges(p) {
             b = b.union(&bounds[e.child.index()].transformed(&e.parent_from_child));
         }
         bounds[p.index()] = b;

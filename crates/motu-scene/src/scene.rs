@@ -25,6 +25,12 @@ pub enum SceneError {
     Store(#[source] crate::StoreError),
     #[error("too many {what} for 32-bit ids: {count}")]
     TooMany { what: &'static str, count: u64 },
+    #[error("instance edges' scratch file in {}: {source}", dir.display())]
+    EdgeFile {
+        dir: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
 }
 
 /// A named instance definition.
@@ -154,6 +160,21 @@ impl Scene {
         self.prototype(id).edge_range.0
     }
 
+    /// [`Scene::edges`] for walks over every edge: with file-held edges, the pages the walk
+    /// has passed are dropped from the resident set every few hundred thousand edges, so a
+    /// walk over a Moana-sized skeleton keeps only a window of it resident (issue 48 item 1).
+    /// The same edges in the same order.
+    pub fn walk_edges(&self, id: PrototypeId) -> WalkEdges<'_> {
+        let (begin, end) = self.prototype(id).edge_range;
+        WalkEdges {
+            table: &self.edges,
+            edges: self.edges[begin as usize..end as usize].iter(),
+            next: begin as usize,
+            released: begin as usize,
+            mapped: self.edges.is_mapped(),
+        }
+    }
+
     pub fn all_edges(&self) -> &[Edge] {
         &self.edges
     }
@@ -269,7 +290,7 @@ impl Scene {
             if n == 0 {
                 continue;
             }
-            for e in self.edges(p) {
+            for e in self.walk_edges(p) {
                 let c = &mut paths[e.child.index()];
                 *c = c.saturating_add(n);
             }
@@ -301,13 +322,54 @@ impl Scene {
         let mut depth = vec![0u32; self.prototypes.len()];
         for &p in &self.topo_order {
             depth[p.index()] = self
-                .edges(p)
-                .iter()
+                .walk_edges(p)
                 .map(|e| depth[e.child.index()] + 1)
                 .max()
                 .unwrap_or(0);
         }
         s.max_depth = depth[Self::ROOT.index()];
         s
+    }
+}
+
+/// The edges of one prototype in order ([`Scene::walk_edges`]), dropping file-held pages as
+/// they are passed.
+pub struct WalkEdges<'a> {
+    table: &'a crate::edge_file::EdgeTable<Edge>,
+    edges: std::slice::Iter<'a, Edge>,
+    /// The table index of the next edge and of the first whose pages were not dropped.
+    next: usize,
+    released: usize,
+    mapped: bool,
+}
+
+impl<'a> Iterator for WalkEdges<'a> {
+    type Item = &'a Edge;
+
+    fn next(&mut self) -> Option<&'a Edge> {
+        if self.mapped && self.next - self.released >= crate::edge_file::RELEASE_EVERY_EDGES {
+            // A failed drop leaves pages resident; the walk reads the same edges either way.
+            let _ = self.table.release_range(self.released, self.next);
+            self.released = self.next;
+        }
+        let e = self.edges.next()?;
+        self.next += 1;
+        Some(e)
+    }
+
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        self.edges.size_hint()
+    }
+}
+
+impl ExactSizeIterator for WalkEdges<'_> {}
+
+impl Drop for WalkEdges<'_> {
+    fn drop(&mut self) {
+        if self.mapped {
+            // Short walks add up (many small prototypes): the table drops every page once
+            // enough edges were walked since it last did.
+            self.table.note_walked(self.next - self.released);
+        }
     }
 }

@@ -8,19 +8,43 @@ use crate::prescan::mentions_include;
 /// How often each raw `Include`/`Import` file name occurs in `bytes`. A heuristic that
 /// only decides whether sharing is attempted (a wrong count costs a prototype or a copy,
 /// never correctness); files without either word are not tokenized.
-pub(super) fn count_includes(bytes: &[u8]) -> HashMap<Vec<u8>, u32> {
+pub(super) fn count_includes(
+    bytes: &[u8],
+    mut release: impl FnMut(usize, usize),
+) -> HashMap<Vec<u8>, u32> {
     let mut counts = HashMap::new();
-    if !mentions_include(bytes) {
+    // A window at a time, each window's pages released once scanned: a file of millions of
+    // instances is never resident whole (issue 48 item 1). Windows overlap by a word's
+    // length so a word across a boundary is found.
+    const OVERLAP: usize = "Include".len() - 1;
+    let mut at = 0;
+    let mut mentioned = false;
+    while at < bytes.len() {
+        let end = (at + super::RELEASE_TEXT_BYTES).min(bytes.len());
+        if mentions_include(&bytes[at..(end + OVERLAP).min(bytes.len())]) {
+            mentioned = true;
+            break;
+        }
+        release(at, end);
+        at = end;
+    }
+    if !mentioned {
         return counts;
     }
     let mut lx = Lexer::new(bytes, FileId(0));
     let mut after_include = false;
+    let mut released = 0;
     while let Ok(Some(t)) = lx.next_token() {
         if after_include && t.kind == TokenKind::String {
             *counts.entry(t.bytes.to_vec()).or_insert(0) += 1;
         }
         after_include = t.kind == TokenKind::Word && matches!(t.bytes, b"Include" | b"Import");
+        if lx.offset() >= released + super::RELEASE_TEXT_BYTES {
+            release(released, lx.offset());
+            released = lx.offset();
+        }
     }
+    release(released, bytes.len());
     counts
 }
 
@@ -607,3 +631,6 @@ impl<'s> Parser<'s> {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests;

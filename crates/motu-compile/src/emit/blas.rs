@@ -111,7 +111,7 @@ impl Emitter<'_, '_, '_, '_> {
                 }
             }
             let base = scene.edge_base(q) as usize;
-            for (k, e) in scene.edges(q).iter().enumerate() {
+            for (k, e) in scene.walk_edges(q).enumerate() {
                 if self.plan.edge_kept(q, base + k, edge_ref!(e)) {
                     stack.push((e.child, xform::compose(&proto_from_q, &e.parent_from_child)));
                 }

@@ -153,3 +153,33 @@ fn a_damaged_section_is_refused() {
     assert!(decode_section(&count).is_none());
     assert!(decode_section(&[]).is_none());
 }
+
+/// The table made a batch of TLASes at a time is the one made from every TLAS's clusters at
+/// once, on more TLASes than a batch holds; its section written piece by piece is
+/// [`encode_section`]'s bytes.
+#[test]
+fn the_table_made_in_batches_is_the_table_of_all_clusters() {
+    let mut t = tables();
+    let base = t.tlases[0];
+    // Many TLASes over overlapping ranges of the same instances.
+    t.tlases = (0..700u32)
+        .map(|i| TlasRecord {
+            instance_base: i % 290,
+            instance_count: 10 + i % 50,
+            ..base
+        })
+        .collect();
+    let v = view(&t);
+    let batched = StoredProxyClusters::of_view(&v);
+    assert_eq!(batched, StoredProxyClusters::new(&v, &all_clusters(&v)));
+    assert_eq!(batched.tlases.len(), 700);
+    let mut pieces = Vec::new();
+    write_section(&batched, |p| {
+        pieces.extend_from_slice(p);
+        Ok::<(), ()>(())
+    })
+    .unwrap();
+    assert_eq!(pieces, encode_section(&batched));
+    assert_eq!(pieces.len(), section_bytes(&batched));
+    assert_eq!(decode_section(&pieces).unwrap(), batched);
+}

@@ -188,7 +188,6 @@ pub(super) fn finish(
 pub fn element_stats(scene: &Scene) -> Vec<ElementMeta> {
     let n_proto = scene.prototypes().len();
     let root = scene.root();
-    let root_edges = scene.edges(root);
     let root_meshes = scene.meshes_of(root);
     let tris = |p: PrototypeId| -> u64 {
         scene
@@ -214,7 +213,7 @@ pub fn element_stats(scene: &Scene) -> Vec<ElementMeta> {
         .map(|(ei, e)| {
             let ei = ElementId(ei as u32);
             let mut paths = vec![0u64; n_proto];
-            for (edge, &el) in root_edges.iter().zip(scene.root_edge_elements()) {
+            for (edge, &el) in scene.walk_edges(root).zip(scene.root_edge_elements()) {
                 if el == ei {
                     paths[edge.child.index()] = paths[edge.child.index()].saturating_add(1);
                 }
@@ -225,7 +224,7 @@ pub fn element_stats(scene: &Scene) -> Vec<ElementMeta> {
                     continue;
                 }
                 let n = paths[p.index()];
-                for edge in scene.edges(p) {
+                for edge in scene.walk_edges(p) {
                     paths[edge.child.index()] = paths[edge.child.index()].saturating_add(n);
                 }
             }

@@ -181,3 +181,103 @@ fn bad_input_is_an_error_not_a_panic() {
     let p = b.add_prototype("p", main).unwrap();
     assert!(b.add_instance(b.root(), p, nan, main).is_err());
 }
+
+/// The same edges added to a heap builder and to one that spills them to a file chunk by
+/// chunk, with parents interleaved (`interleave`) or in id order (the file is then the
+/// table); returns both scenes.
+fn heap_and_spilled(dir: &std::path::Path, n: usize, interleave: bool) -> (Scene, Scene) {
+    let build = |spill: bool| {
+        let mut b = SceneBuilder::default();
+        if spill {
+            b.spill_edges_to(dir);
+        }
+        let main = Scene::MAIN_ELEMENT;
+        let other = b.element("other").unwrap();
+        let leaf = b.add_prototype("leaf", main).unwrap();
+        b.add_mesh(leaf, "quad", b.default_material(), main, &quad())
+            .unwrap();
+        let groups: Vec<PrototypeId> = (0..5)
+            .map(|i| b.add_prototype(&format!("g{i}"), main).unwrap())
+            .collect();
+        for &g in &groups {
+            b.add_instance(b.root(), g, Transform34::IDENTITY, main)
+                .unwrap();
+        }
+        let mut x = 777u32;
+        for i in 0..n {
+            x = x.wrapping_mul(1_103_515_245).wrapping_add(12_345);
+            // Runs of a few edges of one parent, as a scene file's blocks make them.
+            let g = if interleave {
+                (x >> 16) as usize % 6
+            } else {
+                i * 6 / n
+            };
+            let t = Transform34::from_translation(Vec3::new(i as f32, g as f32, 0.0));
+            if g == 0 {
+                let el = if i % 3 == 0 { other } else { main };
+                b.add_instance(b.root(), leaf, t, el).unwrap();
+            } else {
+                b.add_instance(groups[g - 1], leaf, t, main).unwrap();
+            }
+        }
+        b.finish().unwrap()
+    };
+    (build(false), build(true))
+}
+
+/// A spilling builder's scene reads exactly as a heap builder's: every prototype's edges in
+/// CSR order (interleaved parents sorted through a second file), the root's elements, the
+/// bounds and counts; the walks read the same edges; the files have no names.
+#[test]
+fn spilled_edges_read_as_heap_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 3 * SPILL_CHUNK_EDGES + 123;
+    for interleave in [true, false] {
+        let (heap, spilled) = heap_and_spilled(dir.path(), n, interleave);
+        assert!(!heap.edges_in_file());
+        assert!(spilled.edges_in_file(), "interleave {interleave}");
+        assert_eq!(heap.all_edges().len(), n + 5);
+        assert_eq!(heap.all_edges(), spilled.all_edges());
+        assert_eq!(heap.prototypes(), spilled.prototypes());
+        assert_eq!(heap.root_edge_elements(), spilled.root_edge_elements());
+        assert_eq!(heap.stats(), spilled.stats());
+        assert_eq!(heap.world_bounds(), spilled.world_bounds());
+        for p in spilled.prototype_ids() {
+            let walked: Vec<Edge> = spilled.walk_edges(p).copied().collect();
+            assert_eq!(walked, spilled.edges(p));
+        }
+        spilled.release_edge_pages().unwrap();
+        assert_eq!(heap.all_edges(), spilled.all_edges());
+    }
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
+
+/// Fewer edges than a chunk stay on the heap (the import moves them after parsing).
+#[test]
+fn a_spilling_builder_under_a_chunk_keeps_its_edges_on_the_heap() {
+    let dir = tempfile::tempdir().unwrap();
+    let (heap, spilled) = heap_and_spilled(dir.path(), 1000, true);
+    assert!(!spilled.edges_in_file());
+    assert_eq!(heap.all_edges(), spilled.all_edges());
+}
+
+/// A spill directory that cannot hold the file is an error naming it when the first chunk is
+/// written, not a panic.
+#[test]
+fn an_unwritable_spill_directory_is_an_error() {
+    let mut b = SceneBuilder::default();
+    let missing = std::path::Path::new("/nonexistent/motu-spill");
+    b.spill_edges_to(missing);
+    let leaf = b.add_prototype("leaf", Scene::MAIN_ELEMENT).unwrap();
+    let err = (0..SPILL_CHUNK_EDGES)
+        .map(|_| b.add_instance(b.root(), leaf, Transform34::IDENTITY, Scene::MAIN_ELEMENT))
+        .find_map(Result::err)
+        .expect("the chunk's write fails");
+    match err {
+        SceneError::EdgeFile { dir, source } => {
+            assert_eq!(dir, missing);
+            assert_eq!(source.kind(), std::io::ErrorKind::NotFound);
+        }
+        other => panic!("{other}"),
+    }
+}
