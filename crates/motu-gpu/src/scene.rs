@@ -247,16 +247,27 @@ pub(crate) fn upload_node_table(
     label: &str,
     bytes: &[u8],
 ) -> Result<(HeapBuffer, u64)> {
+    let (buf, address) = alloc_node_table(heap, label, bytes.len() as u64)?;
+    up.upload(ctx, &buf, 0, bytes)?;
+    Ok((buf, address))
+}
+
+/// A device-local node table of `size_bytes`, not yet filled: the buffer and its device
+/// address.
+pub(crate) fn alloc_node_table(
+    heap: &mut GpuHeap,
+    label: &str,
+    size_bytes: u64,
+) -> Result<(HeapBuffer, u64)> {
     let buf = heap.alloc_buffer(
         label,
-        bytes.len() as u64,
+        size_bytes,
         table_usage(),
         AllocKind::NodeTable,
         MemoryClass::DeviceLocal,
         16,
     )?;
     let address = buf.device_address()?.0;
-    up.upload(ctx, &buf, 0, bytes)?;
     Ok((buf, address))
 }
 

@@ -14,7 +14,7 @@ use super::proxy_boxes::Box6;
 use super::topology::SkeletonRecords;
 use super::{MeshMemory, StreamOptions, StreamingRenderer};
 use crate::error::{GpuError, Result};
-use crate::scene::{table_usage, upload_node_table, Slot, Uploader};
+use crate::scene::{alloc_node_table, upload_node_table, Slot, Uploader};
 
 /// The heap a streamer allocates from and the options as the budget bounds them.
 pub(super) struct HeapSetup {
@@ -278,15 +278,11 @@ impl<'a> StreamingRenderer<'a> {
         table: &InstanceTable,
     ) -> Result<(HeapBuffer, u64)> {
         let record_bytes = std::mem::size_of::<InstanceRecord>();
-        let buf = self.heap.alloc_buffer(
+        let (buf, address) = alloc_node_table(
+            &mut self.heap,
             "stream-table-Instances",
             (table.len() * record_bytes) as u64,
-            table_usage(),
-            AllocKind::NodeTable,
-            MemoryClass::DeviceLocal,
-            16,
         )?;
-        let address = buf.device_address()?.0;
         let view = self.view.instances;
         let up = self.up.as_mut().ok_or_else(staging_released)?;
         let per_upload = (up.region_bytes() as usize / record_bytes).max(1);
