@@ -126,6 +126,10 @@ fn island_camera_path_needs_about_one_pass_per_frame_under_the_budget() {
             &path_budget_bytes.to_string(),
             "--frames",
             "30",
+            // Two open-pixel rounds (the default is one since session 40): the second round
+            // is checked below.
+            "--stream-probe-rounds",
+            "2",
         ],
     );
     let stream = &st["stream"];
@@ -195,7 +199,7 @@ fn island_camera_path_needs_about_one_pass_per_frame_under_the_budget() {
         u(&totals["vram_peak_bytes"]) <= path_budget_bytes,
         "{totals}"
     );
-    // Probe rounds (default two): the first probes every pixel of the next camera, a second
+    // Probe rounds (two here): the first probes every pixel of the next camera, a second
     // only the pixels the first left open.
     assert!(
         check_probe_rounds(&st, 2) > 0,
@@ -390,7 +394,7 @@ fn probe_need_is_what_the_next_frame_hits_and_passes() {
     );
 }
 
-/// Verifying probe rounds (`--stream-probe-verify`, two by default): after the prefetch, every
+/// Verifying probe rounds (`--stream-probe-verify 2`; none by default): after the prefetch, every
 /// pixel of the next camera is probed again against what it left resident, and what the
 /// prefetch evicted although the next frame's rays pass through it is brought back. Along the
 /// default camera's path at a third and at half of the full build (where the path's one-pass
@@ -420,14 +424,25 @@ fn verifying_probe_rounds_make_frames_one_pass_where_they_fit() {
         // back what the prefetch evicted for room (host meshes, a discrete GPU's default,
         // leave little to evict at these budgets).
         let device = ["--stream-mesh-memory", "device"];
-        let (on, aov) = shot_path(&pkg, dir.path(), &name, budget_bytes, backend, &device);
+        // The rounds as they were the default until session 40 (one round and no verifying
+        // round since: shorter frames on the H100, more passes).
+        let rounds = ["--stream-probe-rounds", "2"];
+        let on_flags = [&rounds[..], &["--stream-probe-verify", "2"], &device].concat();
+        let (on, aov) = shot_path(&pkg, dir.path(), &name, budget_bytes, backend, &on_flags);
         let (off, _) = shot_path(
             &pkg,
             dir.path(),
             &format!("{name}-off"),
             budget_bytes,
             backend,
-            &["--stream-probe-verify", "0", device[0], device[1]],
+            &[
+                rounds[0],
+                rounds[1],
+                "--stream-probe-verify",
+                "0",
+                device[0],
+                device[1],
+            ],
         );
         eprintln!(
             "1/{fraction} {backend}: passes after the first {} with verifying rounds, {} \
@@ -517,6 +532,11 @@ fn merged_probe_rounds_rebuild_fewer_tlases_at_no_more_passes() {
             "--no-as-cache",
             "--stream-probe-later",
             later,
+            // The rounds that were the default until session 40: what `verify` merges.
+            "--stream-probe-rounds",
+            "2",
+            "--stream-probe-verify",
+            "2",
             // Records written from the host: the rebuilds' records are what the policy saves
             // (with `--stream-tlas-records gpu` the host writes only the tails).
             "--stream-tlas-records",
@@ -578,14 +598,15 @@ fn merged_probe_rounds_rebuild_fewer_tlases_at_no_more_passes() {
 /// builds read a BLAS's meshes, so on a discrete GPU (`auto`) they live in host memory outside
 /// the VRAM budget, which then holds structures and textures alone: along the default
 /// camera's path at a quarter of the default island's full build the frames after the first
-/// take at most 1.3 passes on average (H200, island 0.3: 2.182 → 1.000, BENCHMARKS.md session
-/// 29), fewer than with device-local meshes, on both backends, each frame the full build's
-/// image and the budget never exceeded. Lavapipe's host memory is its device memory, so it
+/// take fewer passes than with device-local meshes, on both backends, each frame the full
+/// build's image and the budget never exceeded (H200, island 0.3: 2.182 → 1.000 with two probe
+/// and two verifying rounds, BENCHMARKS.md session 29; with session 40's default of one probe
+/// round lavapipe's frames take at most 2 passes on average, 1.86 when measured). Lavapipe's host memory is its device memory, so it
 /// counts against the budget there (`auto` keeps meshes device-local; `host` changes nothing
 /// but where they are written); `MOTU_SIMULATE_DISCRETE_MEMORY=1` counts it apart, as a
 /// discrete GPU's is.
 #[test]
-fn meshes_in_host_memory_make_quarter_budget_paths_one_pass() {
+fn meshes_in_host_memory_take_fewer_passes_on_quarter_budget_paths() {
     let Some(ShotFixture {
         dir,
         pkg,
@@ -653,7 +674,7 @@ fn meshes_in_host_memory_make_quarter_budget_paths_one_pass() {
             passes(&unified),
             u(&ht["host_mesh_peak_bytes"]),
         );
-        assert!(passes(&host) <= 1.3, "1/4 {backend}: {}", passes(&host));
+        assert!(passes(&host) <= 2.0, "1/4 {backend}: {}", passes(&host));
         assert!(
             passes(&host) < passes(&device),
             "1/4 {backend}: fewer passes"

@@ -105,11 +105,11 @@ fn render_library_defaults_are_the_render_flags_defaults() {
     let b = cmd::render::stream_bounds(&render_args(&["--stream-probe", "0"]).stream_bounds);
     assert!(b.given(), "--stream-probe needs --stream");
     assert_eq!(b.options().probe_stride, 0);
-    // Probe rounds: two by default, any count from 1.
-    assert_eq!(d.probe_rounds, 2);
-    let b = cmd::render::stream_bounds(&render_args(&["--stream-probe-rounds", "1"]).stream_bounds);
+    // Probe rounds: one by default, any count from 1.
+    assert_eq!(d.probe_rounds, 1);
+    let b = cmd::render::stream_bounds(&render_args(&["--stream-probe-rounds", "2"]).stream_bounds);
     assert!(b.given(), "--stream-probe-rounds needs --stream");
-    assert_eq!(b.options().probe_rounds, 1);
+    assert_eq!(b.options().probe_rounds, 2);
     // A flag's value clap refuses: the error names the flag.
     let refused = |flag: &str, value: &str| {
         let args = ["motu", "render", "pkg", "-o", "x.png", flag, value];
@@ -117,11 +117,11 @@ fn render_library_defaults_are_the_render_flags_defaults() {
         assert!(e.contains(flag), "{e}");
     };
     refused("--stream-probe-rounds", "0");
-    // Verifying rounds: two by default, 0 turns them off.
-    assert_eq!(d.probe_verify_rounds, 2);
-    let b = cmd::render::stream_bounds(&render_args(&["--stream-probe-verify", "0"]).stream_bounds);
+    // Verifying rounds: none by default, any count turns them on.
+    assert_eq!(d.probe_verify_rounds, 0);
+    let b = cmd::render::stream_bounds(&render_args(&["--stream-probe-verify", "2"]).stream_bounds);
     assert!(b.given(), "--stream-probe-verify needs --stream");
-    assert_eq!(b.options().probe_verify_rounds, 0);
+    assert_eq!(b.options().probe_verify_rounds, 2);
     // Later rounds: open-pixel rounds first by default; verify merges them into the verifying
     // rounds; any other value is refused by name.
     assert_eq!(d.probe_later, motu_gpu::ProbeLater::Open);

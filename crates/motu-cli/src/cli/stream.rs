@@ -62,14 +62,16 @@ pub struct StreamBoundArgs {
     /// probe. Default 1 (every pixel).
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_name = "STRIDE")]
     pub stream_probe: Option<u32>,
-    /// Streaming: probe rounds after a frame, at most (default 2). A probe ray stops at the
+    /// Streaming: probe rounds after a frame, at most (default 1). A probe ray stops at the
     /// first structure that is not resident; once the prefetch built it, the ray may hit in
     /// it and its shadow and AO rays need structures no probe saw. Each later round probes
     /// only the pixels the round before left open and prefetches what they need, at the cost
-    /// of a TLAS rebuild or update (probe_rounds per frame). 1: one probe.
+    /// of a TLAS rebuild or update (probe_rounds per frame). 2 with --stream-probe-verify 2 for
+    /// fewer passes; the default for shorter frames (H100, island 0.3 at a quarter: 2.57 passes
+    /// after the first and 1.6 s a frame against 1.86 and 2.3 s with 2 and 2).
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..))]
     pub stream_probe_rounds: Option<u32>,
-    /// Streaming: verifying probe rounds after those, at most (default 2; 0: none). The
+    /// Streaming: verifying probe rounds after those, at most (default 0: none). The
     /// prefetch evicts for room what no probe ray met, and the next frame's rays may pass
     /// through some of it on their way to their hits; a verifying round probes every pixel
     /// again against what the prefetch left resident and prefetches what is now missing, so
@@ -77,7 +79,7 @@ pub struct StreamBoundArgs {
     /// quarter of its full build, primary visibility: 1.909 → 1.091 passes after the first at
     /// about the same frame time; shaded at half 1.182 → 1.000, frames +12%; at a third
     /// 1.182 → 1.000, frames +53%). Each round costs a probe trace and, when it finds
-    /// something, a build step (probe_verify_rounds per frame); 0 for throughput.
+    /// something, a build step (probe_verify_rounds per frame).
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_name = "N")]
     pub stream_probe_verify: Option<u32>,
     /// Streaming: what the probe rounds after the first do when the first round's prefetch

@@ -50,7 +50,11 @@ pub struct StreamOptions {
     /// Each round after the first costs a TLAS rebuild or update; two rounds took the passes
     /// a third did on the H200 (island 0.3 along shotCam: at half the full build 1.455 →
     /// 1.182 passes after the first at the same frame time; at a quarter 2.636 → 2.364, the
-    /// image 13% sooner and the whole frame 19% longer; BENCHMARKS.md, session 22).
+    /// image 13% sooner and the whole frame 19% longer; BENCHMARKS.md, session 22). One by
+    /// default since session 40: with the bounce light, the rounds' TLAS rebuilds cost more
+    /// than the passes they save (H100, island 0.3 along the default path, with the verifying
+    /// rounds off too: at a quarter 1.86 → 2.57 passes after the first but 2.25–2.38 → 1.61–1.64 s
+    /// a frame; at an eighth 5.85 → 4.40 s).
     pub probe_rounds: u32,
     /// Verifying probe rounds after those (`--stream-probe-verify`; 0: none): every pixel of
     /// the next camera probed again against what the prefetch left resident, and what its
@@ -58,8 +62,9 @@ pub struct StreamOptions {
     /// builds nothing, or this many ran. The prefetch evicts for room what no probe ray met,
     /// and some of that the next frame's rays pass through on their way to their hits; a
     /// verifying round finds it before the frame does. A round's own prefetch may evict
-    /// another such structure, so the default is two: one round left the H200's third at
-    /// 1.455 passes after the first, two at 1.000. H200, island 0.3 along shotCam, two rounds
+    /// another such structure, so two are what fewer passes need: one round left the H200's
+    /// third at 1.455 passes after the first, two at 1.000. None by default since session 40
+    /// (see `probe_rounds`: frames are shorter without them). H200, island 0.3 along shotCam, two rounds
     /// against none (BENCHMARKS.md, session 28): primary visibility at a quarter of the full
     /// build 1.909 → 1.091 passes after the first at about the same frame time; shaded at half
     /// 1.182 → 1.000 (frames +12%), at a third 1.182 → 1.000 (+53%), at a quarter 2.364 →
@@ -297,8 +302,8 @@ impl Default for StreamOptions {
             blas_build: motu_vk::BlasBuild::Small,
             build_open_early: true,
             probe_stride: 1,
-            probe_rounds: 2,
-            probe_verify_rounds: 2,
+            probe_rounds: 1,
+            probe_verify_rounds: 0,
             probe_paths: ProbePaths::Through,
             probe_later: ProbeLater::Open,
             pass_marks: PassMarks::Auto,
