@@ -248,11 +248,19 @@ impl StoredProxyClusters {
     pub fn of_view(view: &HierarchyView<'_>) -> StoredProxyClusters {
         use rayon::prelude::*;
         let bh = blases_hash(view);
+        let n = view.tlases.len();
+        // Room for the most members the table can take (one per instance of every TLAS) and
+        // clusters of 8 on average (16 at most; 10-13 on the island and the grid), so it
+        // seldom grows by copying; pages never written are never resident.
+        let most: usize = view.tlases.iter().map(|t| t.instance_count as usize).sum();
+        let clusters = most / (CLUSTER_INSTANCES / 2) + n;
         let mut out = StoredProxyClusters {
             instance_count: view.instances.len() as u64,
-            ..Default::default()
+            tlases: Vec::with_capacity(n),
+            clusters: Vec::with_capacity(clusters),
+            members: Vec::with_capacity(most),
+            member_first: Vec::with_capacity(clusters),
         };
-        let n = view.tlases.len();
         // A few TLASes a thread per batch (a large one among small ones does not idle the
         // rest), and at most `BATCH_INSTANCES` instances but for a batch of one TLAS: a TLAS's
         // clusters take ~30 bytes an instance while they are made (a large TLAS is made on
