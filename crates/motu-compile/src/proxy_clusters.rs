@@ -80,12 +80,16 @@ pub fn tlas_clusters(view: &HierarchyView<'_>, t: usize) -> Vec<Cluster> {
         .collect()
 }
 
+/// A TLAS's clusters in the stored table's form ([`tlas_cluster_table`]): the clusters, and
+/// their members one cluster after another.
+pub type ClusterTable = (Vec<StoredCluster>, Vec<u32>);
+
 /// [`tlas_clusters`] in the stored table's form: the clusters, and their members one cluster
 /// after another. The instances of each BLAS take one span of a single items array (counted
 /// first, so nothing grows by doubling) that the SAH permutes in place; its ranges tile the
 /// span in order, so the permuted items are the member table. About 30 bytes an instance of
 /// the TLAS while it is made (an index, its bounds, a cluster per 16).
-pub fn tlas_cluster_table(view: &HierarchyView<'_>, t: usize) -> (Vec<StoredCluster>, Vec<u32>) {
+pub fn tlas_cluster_table(view: &HierarchyView<'_>, t: usize) -> ClusterTable {
     let rec = &view.tlases[t];
     let instances = &view.instances[rec.instance_range()];
     // Per BLAS with boxes, its instances' count, then the start of its span (BLAS order).
@@ -275,7 +279,7 @@ impl StoredProxyClusters {
                 instances += count(end);
                 end += 1;
             }
-            let made: Vec<(u64, (Vec<StoredCluster>, Vec<u32>))> = (first..end)
+            let made: Vec<(u64, ClusterTable)> = (first..end)
                 .into_par_iter()
                 .map(|t| (tlas_hash(view, t, bh), tlas_cluster_table(view, t)))
                 .collect();
