@@ -26,6 +26,10 @@ use crate::proxy_boxes::{has_boxes, padded, Box6, EMPTY};
 /// a build when a ray passes between the instances before the BLAS was walked.
 pub const CLUSTER_INSTANCES: usize = 16;
 
+/// Instances a batch of [`StoredProxyClusters::of_view`] holds at most (but for a batch of one
+/// TLAS): its temporaries, ~30 bytes an instance, stay ~32 MB however many threads run.
+const BATCH_INSTANCES: usize = 1 << 20;
+
 /// One proxy box: a spatially coherent cluster of a TLAS's instances of one triangle BLAS.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Cluster {
@@ -57,42 +61,91 @@ pub fn transformed_box(m: &[f32; 12], lo: [f32; 3], hi: [f32; 3]) -> Box6 {
 
 /// The proxy clusters of TLAS `t`: its instances of each BLAS with boxes ([`has_boxes`]: what
 /// a streamer streams), cut by the binned SAH over instance bounds into pieces of at most
-/// [`CLUSTER_INSTANCES`], in BLAS order.
+/// [`CLUSTER_INSTANCES`], in BLAS order ([`tlas_cluster_table`] as a list).
 pub fn tlas_clusters(view: &HierarchyView<'_>, t: usize) -> Vec<Cluster> {
+    let (clusters, members) = tlas_cluster_table(view, t);
+    let mut first = 0;
+    clusters
+        .iter()
+        .map(|c| {
+            let end = first + c.member_count as usize;
+            let members = members[first..end].to_vec();
+            first = end;
+            Cluster {
+                blas: c.blas,
+                bounds: c.bounds,
+                members,
+            }
+        })
+        .collect()
+}
+
+/// A TLAS's clusters in the stored table's form ([`tlas_cluster_table`]): the clusters, and
+/// their members one cluster after another.
+pub type ClusterTable = (Vec<StoredCluster>, Vec<u32>);
+
+/// [`tlas_clusters`] in the stored table's form: the clusters, and their members one cluster
+/// after another. The instances of each BLAS take one span of a single items array (counted
+/// first, so nothing grows by doubling) that the SAH permutes in place; its ranges tile the
+/// span in order, so the permuted items are the member table. About 30 bytes an instance of
+/// the TLAS while it is made (an index, its bounds, a cluster per 16).
+pub fn tlas_cluster_table(view: &HierarchyView<'_>, t: usize) -> ClusterTable {
     let rec = &view.tlases[t];
-    type Bounds = ([f32; 3], [f32; 3]);
-    let mut by_blas: std::collections::BTreeMap<u32, (Vec<u32>, Vec<Bounds>)> = Default::default();
-    for (local, inst) in view.instances[rec.instance_range()].iter().enumerate() {
+    let instances = &view.instances[rec.instance_range()];
+    // Per BLAS with boxes, its instances' count, then the start of its span (BLAS order).
+    let mut next: std::collections::BTreeMap<u32, usize> = Default::default();
+    for inst in instances {
+        if has_boxes(&view.blases[inst.blas as usize]) {
+            *next.entry(inst.blas).or_default() += 1;
+        }
+    }
+    let mut spans = Vec::with_capacity(next.len());
+    let mut total = 0;
+    for (&blas, slot) in next.iter_mut() {
+        let count = *slot;
+        spans.push((blas, total, total + count));
+        *slot = total;
+        total += count;
+    }
+    let mut items = vec![0u32; total];
+    let mut bounds: Vec<([f32; 3], [f32; 3])> = vec![([0.0; 3], [0.0; 3]); total];
+    for (local, inst) in instances.iter().enumerate() {
         let br = &view.blases[inst.blas as usize];
         if !has_boxes(br) {
             continue;
         }
+        let slot = next.get_mut(&inst.blas).expect("counted");
         let x = transformed_box(&inst.tlas_from_blas, br.bounds_min, br.bounds_max);
-        let entry = by_blas.entry(inst.blas).or_default();
-        entry.0.push(local as u32);
-        entry.1.push(([x[0], x[1], x[2]], [x[3], x[4], x[5]]));
+        items[*slot] = local as u32;
+        bounds[*slot] = ([x[0], x[1], x[2]], [x[3], x[4], x[5]]);
+        *slot += 1;
     }
-    let mut out = Vec::new();
+    let mut clusters = Vec::new();
     let mut ranges = Vec::new();
-    for (blas, (mut items, mut bounds)) in by_blas {
+    for (blas, begin, end) in spans {
         ranges.clear();
-        crate::sah_partition(&mut items, &mut bounds, CLUSTER_INSTANCES, &mut ranges);
-        for &(begin, end) in &ranges {
-            let mut b = EMPTY;
-            for (lo, hi) in &bounds[begin..end] {
+        crate::sah_partition(
+            &mut items[begin..end],
+            &mut bounds[begin..end],
+            CLUSTER_INSTANCES,
+            &mut ranges,
+        );
+        for &(b, e) in &ranges {
+            let mut bx = EMPTY;
+            for (lo, hi) in &bounds[begin + b..begin + e] {
                 for a in 0..3 {
-                    b[a] = b[a].min(lo[a]);
-                    b[3 + a] = b[3 + a].max(hi[a]);
+                    bx[a] = bx[a].min(lo[a]);
+                    bx[3 + a] = bx[3 + a].max(hi[a]);
                 }
             }
-            out.push(Cluster {
+            clusters.push(StoredCluster {
                 blas,
-                bounds: padded(b),
-                members: items[begin..end].to_vec(),
+                member_count: (e - b) as u32,
+                bounds: padded(bx),
             });
         }
     }
-    out
+    (clusters, items)
 }
 
 /// [`tlas_clusters`] of every TLAS, the TLASes in parallel.
@@ -199,26 +252,60 @@ impl StoredProxyClusters {
     pub fn of_view(view: &HierarchyView<'_>) -> StoredProxyClusters {
         use rayon::prelude::*;
         let bh = blases_hash(view);
+        let n = view.tlases.len();
+        // Room for the most members the table can take (one per instance of every TLAS) and
+        // clusters of 8 on average (16 at most; 10-13 on the island and the grid), so it
+        // seldom grows by copying; pages never written are never resident.
+        let most: usize = view.tlases.iter().map(|t| t.instance_count as usize).sum();
+        let clusters = most / (CLUSTER_INSTANCES / 2) + n;
         let mut out = StoredProxyClusters {
             instance_count: view.instances.len() as u64,
-            ..Default::default()
+            tlases: Vec::with_capacity(n),
+            clusters: Vec::with_capacity(clusters),
+            members: Vec::with_capacity(most),
+            member_first: Vec::with_capacity(clusters),
         };
-        let n = view.tlases.len();
-        // A few TLASes a thread per batch: a large one among small ones does not idle the rest.
+        // A few TLASes a thread per batch (a large one among small ones does not idle the
+        // rest), and at most `BATCH_INSTANCES` instances but for a batch of one TLAS: a TLAS's
+        // clusters take ~30 bytes an instance while they are made (a large TLAS is made on
+        // all threads by the SAH itself).
         let batch = 4 * rayon::current_num_threads().max(1);
+        let count = |t: usize| view.tlases[t].instance_count as usize;
         let mut first = 0;
         while first < n {
-            let end = (first + batch).min(n);
-            let made: Vec<(u64, Vec<Cluster>)> = (first..end)
+            let mut end = first + 1;
+            let mut instances = count(first);
+            while end < n && end - first < batch && instances + count(end) <= BATCH_INSTANCES {
+                instances += count(end);
+                end += 1;
+            }
+            let made: Vec<(u64, ClusterTable)> = (first..end)
                 .into_par_iter()
-                .map(|t| (tlas_hash(view, t, bh), tlas_clusters(view, t)))
+                .map(|t| (tlas_hash(view, t, bh), tlas_cluster_table(view, t)))
                 .collect();
-            for (hash, list) in made {
-                out.push_tlas(hash, &list);
+            for (hash, (clusters, members)) in made {
+                out.push_table(hash, &clusters, &members);
             }
             first = end;
         }
         out
+    }
+
+    /// Appends a TLAS's entry (`hash`) and its clusters in the table's form
+    /// ([`tlas_cluster_table`]).
+    fn push_table(&mut self, hash: u64, clusters: &[StoredCluster], members: &[u32]) {
+        self.tlases.push(StoredTlas {
+            hash,
+            first_cluster: self.clusters.len() as u64,
+            cluster_count: clusters.len() as u64,
+        });
+        let mut first = self.members.len() as u64;
+        for c in clusters {
+            self.member_first.push(first);
+            first += u64::from(c.member_count);
+        }
+        self.clusters.extend_from_slice(clusters);
+        self.members.extend_from_slice(members);
     }
 
     /// Appends a TLAS's entry (`hash`) and its clusters.

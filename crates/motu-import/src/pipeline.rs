@@ -263,6 +263,9 @@ pub fn import(
     let parse_ms = t0.elapsed().as_secs_f64() * 1e3;
     tracing::info!(parse_ms, peak_rss_bytes = crate::peak_rss_bytes(), "parsed");
     crate::memory::log_phase("parse");
+    // What the parser's threads freed goes back before the compiler's tables grow.
+    crate::memory::release_free_heap();
+    crate::memory::log_phase("heap trimmed");
     // Edges too few to fill a chunk were kept on the heap: they go to the file now.
     scene
         .move_edges_to_file(dir)

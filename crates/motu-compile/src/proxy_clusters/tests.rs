@@ -183,3 +183,93 @@ fn the_table_made_in_batches_is_the_table_of_all_clusters() {
     assert_eq!(pieces.len(), section_bytes(&batched));
     assert_eq!(decode_section(&pieces).unwrap(), batched);
 }
+
+/// [`tlas_clusters`] as it was made before the flat table (session 40): per BLAS its own
+/// growing lists, each cut by the SAH and copied out cluster by cluster. The reference the
+/// flat form must equal.
+fn reference_tlas_clusters(view: &HierarchyView<'_>, t: usize) -> Vec<Cluster> {
+    let rec = &view.tlases[t];
+    type Bounds = ([f32; 3], [f32; 3]);
+    let mut by_blas: std::collections::BTreeMap<u32, (Vec<u32>, Vec<Bounds>)> = Default::default();
+    for (local, inst) in view.instances[rec.instance_range()].iter().enumerate() {
+        let br = &view.blases[inst.blas as usize];
+        if !has_boxes(br) {
+            continue;
+        }
+        let x = transformed_box(&inst.tlas_from_blas, br.bounds_min, br.bounds_max);
+        let entry = by_blas.entry(inst.blas).or_default();
+        entry.0.push(local as u32);
+        entry.1.push(([x[0], x[1], x[2]], [x[3], x[4], x[5]]));
+    }
+    let mut out = Vec::new();
+    let mut ranges = Vec::new();
+    for (blas, (mut items, mut bounds)) in by_blas {
+        ranges.clear();
+        crate::sah_partition(&mut items, &mut bounds, CLUSTER_INSTANCES, &mut ranges);
+        for &(begin, end) in &ranges {
+            let mut b = EMPTY;
+            for (lo, hi) in &bounds[begin..end] {
+                for a in 0..3 {
+                    b[a] = b[a].min(lo[a]);
+                    b[3 + a] = b[3 + a].max(hi[a]);
+                }
+            }
+            out.push(Cluster {
+                blas,
+                bounds: padded(b),
+                members: items[begin..end].to_vec(),
+            });
+        }
+    }
+    out
+}
+
+/// The clusters made in one flat items array per TLAS are the ones made per BLAS in their own
+/// lists: on the small tables, and on a TLAS large enough for the SAH's parallel path
+/// (three BLASes interleaved, one without boxes); the batched table (batches bounded by
+/// instances) is the table of all clusters.
+#[test]
+fn flat_clusters_are_the_per_blas_clusters() {
+    let t = tables();
+    let v = view(&t);
+    for tl in 0..v.tlases.len() {
+        assert_eq!(tlas_clusters(&v, tl), reference_tlas_clusters(&v, tl));
+    }
+    let mut big = tables();
+    let n = 3 * crate::split::PARALLEL_ITEMS as u32 + 77;
+    let proto = big.instances[0];
+    big.instances = (0..n)
+        .map(|i| {
+            let mut r = proto;
+            let (x, z) = ((i % 700) as f32 * 2.5, (i / 700) as f32 * 2.5);
+            r.tlas_from_blas[3] = x;
+            r.tlas_from_blas[11] = z + (i % 7) as f32 * 0.25;
+            r.blas = [0, 1, 0, 2, 1][(i % 5) as usize];
+            r
+        })
+        .collect();
+    let base = big.tlases[0];
+    big.tlases = vec![
+        TlasRecord {
+            instance_base: 0,
+            instance_count: n,
+            ..base
+        },
+        TlasRecord {
+            instance_base: 5,
+            instance_count: 1000,
+            ..base
+        },
+    ];
+    let v = view(&big);
+    for tl in 0..2 {
+        let flat = tlas_clusters(&v, tl);
+        // Every instance of the two BLASes with boxes in a cluster of at most 16.
+        assert!(flat.len() * CLUSTER_INSTANCES >= v.tlases[tl].instance_count as usize * 3 / 5);
+        assert_eq!(flat, reference_tlas_clusters(&v, tl));
+    }
+    assert_eq!(
+        StoredProxyClusters::of_view(&v),
+        StoredProxyClusters::new(&v, &all_clusters(&v))
+    );
+}

@@ -136,6 +136,7 @@ pub(super) fn finish(
     let textures = crate::textures::write_textures(&mut writer, scene, caps, &mut meta.warnings)?;
     crate::memory::log_phase("textures");
     drop(owned);
+    crate::memory::release_free_heap();
     crate::memory::log_phase("scene dropped");
     let t = Instant::now();
     let (split_meta, split) =
