@@ -1146,13 +1146,28 @@ fn rebuilds_keep_unchanged_proxies_and_fast_build_tlases_match_the_full_build() 
         for &t in &with_clusters {
             sr.tlases.instances_changed(t);
         }
+        let phases = |st: &crate::FrameStreamStats| {
+            st.tlas_gpu_ms
+                + st.tlas_upload_ms
+                + st.tlas_proxy_ms
+                + st.tlas_swap_ms
+                + st.tlas_room_ms
+                + st.tlas_encode_ms
+        };
         let before = (
             sr.frame.stats().tlas_proxies_built,
             sr.frame.stats().tlas_proxies_kept,
             sr.frame.stats().tlas_builds,
         );
+        let (phases_before, tlas_ms_before) = (phases(sr.frame.stats()), sr.frame.stats().tlas_ms);
         sr.rebuild_dirty().expect("rebuild");
         let st = sr.frame.stats();
+        // The phases are parts of `tlas_ms`.
+        let (phases_ms, tlas_ms) = (phases(st) - phases_before, st.tlas_ms - tlas_ms_before);
+        assert!(
+            phases_ms > 0.0 && phases_ms <= tlas_ms * 1.001 + 0.01,
+            "{phases_ms} of {tlas_ms}"
+        );
         assert_eq!(st.tlas_proxies_built, before.0, "none built: {st:?}");
         assert!(
             st.tlas_proxies_kept >= before.1 + with_clusters.len() as u32,
