@@ -135,9 +135,9 @@ pub use motu_vk::{
     Buffer, BufferDesc, BufferUsage, Caps, CommandRecorder, ComputePipeline, ComputePipelineDesc,
     Context, ContextOptions, DeviceAddress, DeviceMemory, DeviceReport, GpuHeap, HeapBuffer,
     HeapReport, LimitOverrides, Limits, MemoryLocation, MemoryRequirements, PanelPaint, Presented,
-    Presenter, RawDisplayHandle, RawWindowHandle, Requirement, TimestampQueries, ValidationRequest,
-    VkError, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT, ENV_DEVICE, ENV_MAX_ALLOCATIONS,
-    ENV_MAX_ALLOCATION_SIZE, ENV_MAX_INSTANCE_COUNT, ENV_MAX_PRIMITIVE_COUNT,
+    Presenter, RawDisplayHandle, RawWindowHandle, Requirement, TimestampQueries, TlasBuild,
+    ValidationRequest, VkError, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT, ENV_DEVICE,
+    ENV_MAX_ALLOCATIONS, ENV_MAX_ALLOCATION_SIZE, ENV_MAX_INSTANCE_COUNT, ENV_MAX_PRIMITIVE_COUNT,
     ENV_MAX_STORAGE_BUFFER_RANGE, ENV_VALIDATION, INSTANCE_RECORD_SIZE_BYTES,
 };
 

@@ -25,7 +25,7 @@ use std::time::Instant;
 
 use motu_abi::{HierarchyView, BLAS_AABBS, BLAS_TRIANGLES, FLAG_NEEDS_ANY_HIT};
 use motu_alloc::{AllocKind, AllocLimits, AllocReport, BuildSize, MemoryClass, MIB};
-use motu_vk::{AsBuildFlags, AsGeometry, AsLevel, BufferUsage, Context, GpuHeap, HeapBuffer};
+use motu_vk::{AsGeometry, AsLevel, BufferUsage, Context, GpuHeap, HeapBuffer};
 
 use crate::error::{GpuError, Result};
 
@@ -133,8 +133,18 @@ pub struct BuildOptions {
     pub staging_bytes: u64,
     /// Compact acceleration structures after building.
     pub compact: bool,
-    /// How BLASes are built (their size queries use the same flags; TLASes: fast trace).
+    /// How BLASes are built (their size queries use the same flags).
     pub blas_build: motu_vk::BlasBuild,
+    /// How TLASes are built (the full build's: fast trace; `--stream-tlas-build` for the
+    /// streamer's rebuilt ones).
+    pub tlas_build: motu_vk::TlasBuild,
+}
+
+impl BuildOptions {
+    /// The flags TLASes are built with (the size query and the build must agree).
+    pub fn tlas_flags(&self) -> motu_vk::AsBuildFlags {
+        self.tlas_build.flags(self.compact)
+    }
 }
 
 impl Default for BuildOptions {
@@ -147,6 +157,7 @@ impl Default for BuildOptions {
             staging_bytes: FULL_BUILD_STAGING_CAP_BYTES,
             compact: true,
             blas_build: motu_vk::BlasBuild::FastTrace,
+            tlas_build: motu_vk::TlasBuild::FastTrace,
         }
     }
 }
@@ -656,7 +667,7 @@ impl GpuScene {
         let count = |t: usize| hardware_instances[t];
         let mut sizes = Vec::with_capacity(view.tlases.len());
         for t in 0..view.tlases.len() {
-            let s = ctx.tlas_build_sizes(count(t), AsBuildFlags::tlas(opts.compact))?;
+            let s = ctx.tlas_build_sizes(count(t), opts.tlas_flags())?;
             sizes.push(BuildSize {
                 result_bytes: s.acceleration_structure_size_bytes,
                 scratch_bytes: s.build_scratch_size_bytes,

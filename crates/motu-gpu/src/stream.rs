@@ -278,6 +278,7 @@ impl<'a> StreamingRenderer<'a> {
             staging_bytes: opts.staging_bytes,
             compact: opts.compact,
             blas_build: opts.blas_build,
+            tlas_build: opts.tlas_build,
         };
         let scene_triangles = view
             .blases
@@ -298,6 +299,7 @@ impl<'a> StreamingRenderer<'a> {
             host_memory_counted: setup.host_counts,
             derived_ms,
             tlas_records_mode: opts.tlas_records.name(),
+            tlas_build: opts.tlas_build.name(),
             ..Default::default()
         };
         let host_store_policy = opts.host_store_policy;

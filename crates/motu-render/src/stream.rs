@@ -50,6 +50,8 @@ pub struct StreamBounds {
     pub host_store_policy: motu_gpu::HostStorePolicy,
     /// `--stream-tlas-records`: where rebuilt TLASes' instance records come from.
     pub tlas_records: motu_gpu::TlasRecordsMode,
+    /// `--stream-tlas-build`: what rebuilt streamed TLASes are built for.
+    pub tlas_build: motu_gpu::TlasBuild,
 }
 
 impl StreamBounds {
@@ -73,6 +75,7 @@ impl StreamBounds {
             host_cache_mode: self.host_cache_mode,
             host_store_policy: self.host_store_policy,
             tlas_records: self.tlas_records,
+            tlas_build: self.tlas_build,
             ..d
         }
     }
@@ -111,6 +114,7 @@ impl StreamBounds {
             || self.host_cache_mode != motu_gpu::HostCacheMode::Auto
             || self.host_store_policy != motu_gpu::HostStorePolicy::Measured
             || self.tlas_records != motu_gpu::TlasRecordsMode::Host
+            || self.tlas_build != motu_gpu::TlasBuild::FastTrace
     }
 }
 

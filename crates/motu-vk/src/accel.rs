@@ -47,10 +47,7 @@ impl AsBuildFlags {
     /// A TLAS's flags: fast trace, compaction allowed when it will be compacted (the size
     /// query and the build must agree).
     pub fn tlas(compact: bool) -> Self {
-        AsBuildFlags {
-            allow_compaction: compact,
-            ..AsBuildFlags::default()
-        }
+        TlasBuild::FastTrace.flags(compact)
     }
 }
 
@@ -67,7 +64,7 @@ impl Default for AsBuildFlags {
 }
 
 /// How triangle BLASes (and the streamer's proxy boxes) are built: what the driver is asked
-/// to favour. TLASes are always built for fast trace.
+/// to favour. TLASes: [`TlasBuild`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum BlasBuild {
     /// Fast trace, compacted: the full build's default, where everything is resident once and
@@ -100,6 +97,39 @@ impl BlasBuild {
         match self {
             BlasBuild::FastTrace => "fast-trace",
             BlasBuild::Small => "small",
+        }
+    }
+}
+
+/// How TLASes are built: what the driver is asked to favour (`--stream-tlas-build` for the
+/// streamer's rebuilt TLASes; the full build's and persistent TLASes are fast trace).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TlasBuild {
+    /// Fast trace: the full build's, where a TLAS is built once and traced every frame.
+    #[default]
+    FastTrace,
+    /// Fast build: a streamed TLAS is rebuilt whenever its resident instances change (tens of
+    /// times a frame, millions of records each), and traced by a few passes only.
+    FastBuild,
+}
+
+impl TlasBuild {
+    /// The build flags, compaction allowed when the TLAS will be compacted (the same for the
+    /// size query and the build).
+    pub fn flags(self, compact: bool) -> AsBuildFlags {
+        AsBuildFlags {
+            prefer_fast_trace: self == TlasBuild::FastTrace,
+            prefer_fast_build: self == TlasBuild::FastBuild,
+            allow_compaction: compact,
+            ..AsBuildFlags::default()
+        }
+    }
+
+    /// The name `--stream-tlas-build` takes and `--stats` reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            TlasBuild::FastTrace => "fast-trace",
+            TlasBuild::FastBuild => "fast-build",
         }
     }
 }

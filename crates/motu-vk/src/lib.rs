@@ -73,7 +73,7 @@ mod tests;
 
 pub use accel::{
     AsBuild, AsBuildFlags, AsBuildMode, AsBuildSizes, AsCopyMode, AsGeometry, AsLevel, AsTarget,
-    BlasBuild, BlasGeometry, InstanceHit, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
+    BlasBuild, BlasGeometry, InstanceHit, TlasBuild, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
     INSTANCE_RECORD_SIZE_BYTES,
 };
 pub use barrier::MemoryScope;

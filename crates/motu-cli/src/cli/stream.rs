@@ -192,6 +192,30 @@ pub struct StreamBoundArgs {
     /// tlas_records_host_fallbacks, tlas_records_released.
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, default_value = "host")]
     pub stream_tlas_records: TlasRecordsArg,
+    /// Streaming: what rebuilt TLASes (those `--stream-tlas` does not update in place) are
+    /// built for. A streamed TLAS is rebuilt whenever its resident instances change (island
+    /// 0.3 at a quarter on an H100: 40 rebuilds and 27.5M records a frame, ~1.1 s of a 2.3 s
+    /// frame) and traced by a frame's few passes. `fast-trace` (default): the full build's
+    /// choice; `fast-build`: the driver builds faster, traces may be slower. Same image either
+    /// way. --stats: stream.totals.tlas_build, per frame tlas_gpu_ms.
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, default_value = "fast-trace")]
+    pub stream_tlas_build: TlasBuildArg,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum TlasBuildArg {
+    #[default]
+    FastTrace,
+    FastBuild,
+}
+
+impl From<TlasBuildArg> for motu_gpu::TlasBuild {
+    fn from(a: TlasBuildArg) -> Self {
+        match a {
+            TlasBuildArg::FastTrace => motu_gpu::TlasBuild::FastTrace,
+            TlasBuildArg::FastBuild => motu_gpu::TlasBuild::FastBuild,
+        }
+    }
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]

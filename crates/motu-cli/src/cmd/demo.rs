@@ -140,6 +140,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             stream_host_cache: crate::cli::HostCacheArg::Auto,
             stream_host_cache_policy: crate::cli::HostCachePolicyArg::Measured,
             stream_tlas_records: crate::cli::TlasRecordsArg::Gpu,
+            stream_tlas_build: crate::cli::TlasBuildArg::FastTrace,
         },
         as_cache: crate::cli::AsCacheArgs {
             host_cache: None,

@@ -109,7 +109,7 @@ pub(crate) fn build_pipelined(
         }
     };
     let (kind, flags) = match ty {
-        AsLevel::Top => ("tlas", AsBuildFlags::tlas(opts.compact)),
+        AsLevel::Top => ("tlas", opts.tlas_flags()),
         AsLevel::Bottom => ("blas", opts.blas_build.flags()),
     };
     let mut run = PipelinedBuild {

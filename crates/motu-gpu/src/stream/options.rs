@@ -124,6 +124,9 @@ pub struct StreamOptions {
     /// Where a streamed TLAS rebuild's instance records come from (`--stream-tlas-records`;
     /// see [`TlasRecordsMode`]).
     pub tlas_records: TlasRecordsMode,
+    /// What rebuilt (not persistent) streamed TLASes are built for (`--stream-tlas-build`):
+    /// fast trace (default) or fast build; their size queries use the same flags.
+    pub tlas_build: motu_vk::TlasBuild,
 }
 
 /// Where a rebuilt streamed TLAS's instance records come from ([`StreamOptions::tlas_records`],
@@ -317,6 +320,7 @@ impl Default for StreamOptions {
             host_cache_mode: super::HostCacheMode::Auto,
             host_store_policy: super::HostStorePolicy::Measured,
             tlas_records: TlasRecordsMode::Host,
+            tlas_build: motu_vk::TlasBuild::FastTrace,
         }
     }
 }

@@ -2,9 +2,7 @@
 //! instance set changed, in groups that fit (the build itself: `tlas_build.rs`).
 
 use motu_alloc::{AllocKind, BuildSize, MemoryClass};
-use motu_vk::{
-    AsBuildFlags, AsLevel, BufferUsage, FitRequest, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
-};
+use motu_vk::{AsLevel, BufferUsage, FitRequest, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT};
 
 use super::residency::EvictWhy;
 use super::tlas_records::RECORD_BYTES;
@@ -65,20 +63,18 @@ impl<'a> StreamingRenderer<'a> {
     /// two thirds of the frame's 13.4 s of TLAS time. Asked, not allocated: allocating and
     /// freeing those buffers (dedicated blocks of up to a gigabyte) took 36–116 ms a rebuild
     /// on the H200, 6% of a frame at a quarter of island 0.3 (BENCHMARKS.md, session 18).
-    pub(super) fn probe_tlas_room(&mut self, ids: &[u32]) -> Result<()> {
+    /// `tails[k]`: the records after `ids[k]`'s own (its proxy and marks, each present when it
+    /// has a box: the build's plan knows).
+    pub(super) fn probe_tlas_room(&mut self, ids: &[u32], tails: &[u64]) -> Result<()> {
         let counts = self.resident_instance_counts();
         let mut records = 0u64;
         let mut largest = (0u64, 0u64);
-        for &t in ids {
-            // The proxy and the marks (each present when it has a box).
-            let cl = self.topo.clusters(t as usize);
-            let proxy = cl.iter().any(|c| !self.res.has_blas(c.blas as usize));
-            let marks = cl.iter().any(|c| self.res.has_blas(c.blas as usize));
-            let n = (counts[t as usize] + u64::from(proxy) + u64::from(marks)).max(1);
+        for (&t, &tail) in ids.iter().zip(tails) {
+            let n = (counts[t as usize] + tail).max(1);
             records += n;
             let s = self.ctx.tlas_build_sizes(
                 u32::try_from(n).unwrap_or(u32::MAX),
-                AsBuildFlags::tlas(self.build_opts.compact),
+                self.build_opts.tlas_flags(),
             )?;
             if s.acceleration_structure_size_bytes > largest.0 {
                 largest = (
@@ -148,7 +144,7 @@ impl<'a> StreamingRenderer<'a> {
         let count = count + 2;
         let s = self.ctx.tlas_build_sizes(
             u32::try_from(count).unwrap_or(u32::MAX),
-            AsBuildFlags::tlas(self.build_opts.compact),
+            self.build_opts.tlas_flags(),
         )?;
         let need = count * RECORD_BYTES as u64
             + s.acceleration_structure_size_bytes

@@ -172,6 +172,22 @@ pub struct FrameStreamStats {
     pub blas_ms: f64,
     /// Of `build_ms`: TLAS (and proxy BLAS) rebuilds, including their evict-and-retry rounds.
     pub tlas_ms: f64,
+    /// Of `tlas_ms`, its rebuilds' phases (`tlas_build.rs`; the rest is evict-and-retry
+    /// rounds): the records' GPU builds, waited (and persistent TLASes' updates); the records'
+    /// copies to the device; the proxy and marks BLASes (boxes planned, uploaded and built);
+    /// the PI slots rewritten and the new structures swapped in (old ones released); the
+    /// room probe (and kept records' sizing); the records counted and sized.
+    pub tlas_gpu_ms: f64,
+    pub tlas_upload_ms: f64,
+    pub tlas_proxy_ms: f64,
+    pub tlas_swap_ms: f64,
+    pub tlas_room_ms: f64,
+    pub tlas_encode_ms: f64,
+    /// Proxy and marks BLASes the rebuilds built, and those they kept from the TLAS's last
+    /// build because its clusters' residency had not changed (a BLAS under it moved, or was
+    /// evicted and built back).
+    pub tlas_proxies_built: u32,
+    pub tlas_proxies_kept: u32,
     /// Of `build_ms`: choosing and releasing eviction victims.
     pub evict_ms: f64,
     /// Of `build_ms`: rewriting the per-step tables (TLAS and mesh addresses, shading).
@@ -415,6 +431,8 @@ pub struct StreamTotals {
     /// structure's room (they yield to structures; rebuilds then wrote from the host until a
     /// later frame made them again).
     pub tlas_records_mode: &'static str,
+    /// What rebuilt TLASes were built for (`fast-trace` or `fast-build`, `--stream-tlas-build`).
+    pub tlas_build: &'static str,
     pub tlas_records_kept_bytes: u64,
     pub tlas_records_released: u32,
     pub persistent_tlases: u32,

@@ -1104,6 +1104,87 @@ fn tlas_records_written_through_a_small_ring_in_windows_match_the_full_build() {
     assert_no_validation_errors(&ctx);
 }
 
+/// A rebuild of TLASes whose clusters' residency did not change (a BLAS under them moved, or
+/// was evicted and built back) keeps their proxy and marks BLASes: none is built, the next
+/// frame equals the full build. TLASes built for fast build (`--stream-tlas-build`) too.
+#[test]
+fn rebuilds_keep_unchanged_proxies_and_fast_build_tlases_match_the_full_build() {
+    let Some(ctx) = context_or_skip("stream_tlas_proxies_kept", Requirement::RayTracing) else {
+        return;
+    };
+    let h = instanced_grid(50, 7);
+    let blobs = Blobs(&h);
+    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
+    let cam = base_pose().params(32, 32);
+    let opts = RenderOptions {
+        backend: backend(&ctx),
+        view: View::Ids,
+        ..Default::default()
+    };
+    let reference = render(&ctx, &full, &cam, &opts).expect("full render");
+    let budget = full_build_needs(&full) / 8;
+    for tlas_build in [motu_vk::TlasBuild::FastTrace, motu_vk::TlasBuild::FastBuild] {
+        let mut sr = StreamingRenderer::new(
+            &ctx,
+            h.view(),
+            &blobs,
+            &StreamOptions {
+                tlas_build,
+                ..small_stream_options(budget)
+            },
+        )
+        .expect("streaming renderer");
+        let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
+        assert!(st.complete, "{st:?}");
+        assert!(st.tlas_proxies_built > 0 && st.tlas_gpu_ms > 0.0, "{st:?}");
+        assert_same_aov(&reference.aov, &out.aov, &format!("{tlas_build:?}: {st:?}"));
+        // Every resident TLAS dirty with nothing changed: rebuilt, its pair kept.
+        let with_clusters = (0..h.view().tlases.len() as u32)
+            .filter(|&t| sr.tlases.get(t).is_some() && !sr.topo.clusters(t as usize).is_empty())
+            .collect::<Vec<_>>();
+        assert!(!with_clusters.is_empty());
+        for &t in &with_clusters {
+            sr.tlases.instances_changed(t);
+        }
+        let phases = |st: &crate::FrameStreamStats| {
+            st.tlas_gpu_ms
+                + st.tlas_upload_ms
+                + st.tlas_proxy_ms
+                + st.tlas_swap_ms
+                + st.tlas_room_ms
+                + st.tlas_encode_ms
+        };
+        let before = (
+            sr.frame.stats().tlas_proxies_built,
+            sr.frame.stats().tlas_proxies_kept,
+            sr.frame.stats().tlas_builds,
+        );
+        let (phases_before, tlas_ms_before) = (phases(sr.frame.stats()), sr.frame.stats().tlas_ms);
+        sr.rebuild_dirty().expect("rebuild");
+        let st = sr.frame.stats();
+        // The phases are parts of `tlas_ms`.
+        let (phases_ms, tlas_ms) = (phases(st) - phases_before, st.tlas_ms - tlas_ms_before);
+        assert!(
+            phases_ms > 0.0 && phases_ms <= tlas_ms * 1.001 + 0.01,
+            "{phases_ms} of {tlas_ms}"
+        );
+        assert_eq!(st.tlas_proxies_built, before.0, "none built: {st:?}");
+        assert!(
+            st.tlas_proxies_kept >= before.1 + with_clusters.len() as u32,
+            "{before:?} {st:?}"
+        );
+        assert!(st.tlas_builds > before.2, "{st:?}");
+        let (out, st) = sr.render_frame(&cam, &opts).expect("frame at rest");
+        assert!(st.complete, "{st:?}");
+        assert_same_aov(
+            &reference.aov,
+            &out.aov,
+            &format!("{tlas_build:?} kept: {st:?}"),
+        );
+    }
+    assert_no_validation_errors(&ctx);
+}
+
 /// Persistent TLASes (`StreamOptions::tlas_update`, `stream/persistent.rs`): the root is built
 /// once over all its 2,500 instances (non-resident ones on placeholders under mask 0) and
 /// updated in place as BLASes come and go. Under an eighth of the full build (evictions within

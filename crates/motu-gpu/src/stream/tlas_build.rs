@@ -1,15 +1,17 @@
 //! (Re)building TLASes with their proxy and marks BLASes ([`StreamingRenderer::build_tlases`]):
-//! a [`TlasBuild`] runs one method per phase (old structures out, room probed, proxies
-//! planned and built, persistent TLASes updated, the others' records encoded, uploaded and
-//! built, everything swapped in), each phase's products named structs.
+//! a [`TlasBuild`] runs one method per phase (old structures out, proxies planned, room
+//! probed, proxies built, persistent TLASes updated, the others' records encoded, uploaded
+//! and built, everything swapped in), each phase's products named structs. A TLAS whose
+//! clusters' residency did not change keeps its proxy and marks BLASes (same boxes, same PI
+//! slots): a BLAS moved, or evicted and built back, rebuilds only the TLAS.
 
 use motu_abi::PiRecord;
 use motu_alloc::{AllocKind, BuildSize, MemoryClass};
-use motu_vk::{AsBuildFlags, AsGeometry, AsLevel, BufferUsage, Context};
+use motu_vk::{AsGeometry, AsLevel, BufferUsage, Context};
 
 use super::buffers::staging_released;
 use super::tlas_records::{tail_record, TlasRecords, RECORD_BYTES};
-use super::tlases::TlasGpu;
+use super::tlases::{ProxyPair, TlasGpu};
 use super::topology::{proxy_blas_record, proxy_pi};
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
@@ -25,11 +27,13 @@ struct ProxyItem {
 }
 
 /// TLAS `tlas`'s clusters in box order: the `non_resident` first (the proxy's boxes and PI
-/// slots), then the resident ones (the marks'), each in cluster order.
+/// slots), then the resident ones (the marks'), each in cluster order; `key` holds the
+/// residency bits the order comes from ([`ProxyPair::key`]).
 struct ClusterOrder {
     tlas: u32,
     order: Vec<u32>,
     non_resident: u32,
+    key: Vec<u64>,
 }
 
 /// What the proxies of a build are: the BLASes to build and, per TLAS, its boxes' order.
@@ -43,52 +47,53 @@ struct ProxyPlan {
     box_count: u32,
 }
 
-/// A built proxy or marks BLAS of TLAS `tlas`.
-struct BuiltProxy {
-    tlas: u32,
-    marks: bool,
-    accel: AccelStruct,
-}
-
-/// The proxies a build made, until each is installed in its TLAS (or all released when the
-/// build fails).
+/// The proxy and marks BLASes of the build's TLASes (built, or kept from their last build),
+/// until each pair is installed in its TLAS (or all released when the build fails).
 #[derive(Default)]
-struct Proxies(Vec<BuiltProxy>);
+struct Proxies(Vec<(u32, ProxyPair)>);
 
 impl Proxies {
+    fn pair(&self, t: u32) -> Option<&ProxyPair> {
+        self.0.iter().find(|(u, _)| *u == t).map(|(_, p)| p)
+    }
+
     /// Device address of TLAS `t`'s proxy (`marks` false) or marks BLAS; 0: none.
     fn address(&self, t: u32, marks: bool) -> u64 {
-        self.0
-            .iter()
-            .find(|p| p.tlas == t && p.marks == marks)
-            .map_or(0, |p| p.accel.address)
+        self.pair(t)
+            .and_then(|p| if marks { &p.marks } else { &p.proxy }.as_ref())
+            .map_or(0, |a| a.address)
     }
 
     /// The records following TLAS `t`'s own (`count` instances): its proxy's and marks'.
     fn tail_records(&self, t: u32, count: u32) -> Vec<[u8; RECORD_BYTES]> {
-        self.0
-            .iter()
-            .filter(|p| p.tlas == t)
-            .map(|p| tail_record(count, p.marks, p.accel.address))
+        [false, true]
+            .into_iter()
+            .filter_map(|marks| {
+                let a = self.address(t, marks);
+                (a != 0).then(|| tail_record(count, marks, a))
+            })
             .collect()
     }
 
-    fn take(&mut self, t: u32, marks: bool) -> Option<AccelStruct> {
-        let p = self
-            .0
-            .iter()
-            .position(|p| p.tlas == t && p.marks == marks)?;
-        Some(self.0.swap_remove(p).accel)
+    /// TLAS `t`'s pair (none: an empty one).
+    fn take(&mut self, t: u32) -> ProxyPair {
+        match self.0.iter().position(|(u, _)| *u == t) {
+            Some(k) => self.0.swap_remove(k).1,
+            None => ProxyPair::default(),
+        }
     }
 
     fn release(self, heap: &mut motu_vk::GpuHeap) {
-        self.0.into_iter().for_each(|p| p.accel.release(heap));
+        self.0.into_iter().for_each(|(_, p)| p.release(heap));
     }
 }
 
-/// Milliseconds of each phase, for the debug line at the end (`MOTU_LOG`).
+/// Milliseconds of each phase, for `--stats` (`tlas_*_ms` per frame) and the debug line at the
+/// end (`MOTU_LOG`).
 struct PhaseTimes {
     clock: std::time::Instant,
+    /// Old structures out, the PI slots' flush and the new structures in.
+    swap_ms: f64,
     probe_ms: f64,
     proxy_host_ms: f64,
     proxy_build_ms: f64,
@@ -96,12 +101,17 @@ struct PhaseTimes {
     encode_ms: f64,
     upload_ms: f64,
     build_ms: f64,
+    records: u64,
+    proxy_boxes: u32,
+    proxies_built: u32,
+    proxies_kept: u32,
 }
 
 impl PhaseTimes {
     fn new() -> Self {
         PhaseTimes {
             clock: std::time::Instant::now(),
+            swap_ms: 0.0,
             probe_ms: 0.0,
             proxy_host_ms: 0.0,
             proxy_build_ms: 0.0,
@@ -109,6 +119,10 @@ impl PhaseTimes {
             encode_ms: 0.0,
             upload_ms: 0.0,
             build_ms: 0.0,
+            records: 0,
+            proxy_boxes: 0,
+            proxies_built: 0,
+            proxies_kept: 0,
         }
     }
 
@@ -117,6 +131,35 @@ impl PhaseTimes {
         let d = self.clock.elapsed().as_secs_f64() * 1e3;
         self.clock = std::time::Instant::now();
         d
+    }
+
+    /// The phases into the frame's stats and the debug line (a failed build's too: its time
+    /// is part of `tlas_ms`).
+    fn record(mut self, st: &mut super::FrameStreamStats) {
+        self.swap_ms += self.lap();
+        st.tlas_gpu_ms += self.build_ms + self.update_ms;
+        st.tlas_upload_ms += self.upload_ms;
+        st.tlas_proxy_ms += self.proxy_host_ms + self.proxy_build_ms;
+        st.tlas_swap_ms += self.swap_ms;
+        st.tlas_room_ms += self.probe_ms;
+        st.tlas_encode_ms += self.encode_ms;
+        st.tlas_proxies_built += self.proxies_built;
+        st.tlas_proxies_kept += self.proxies_kept;
+        tracing::debug!(
+            records = self.records,
+            probe_ms = self.probe_ms,
+            update_ms = self.update_ms,
+            proxy_boxes = self.proxy_boxes,
+            proxies_built = self.proxies_built,
+            proxies_kept = self.proxies_kept,
+            proxy_host_ms = self.proxy_host_ms,
+            proxy_build_ms = self.proxy_build_ms,
+            encode_ms = self.encode_ms,
+            upload_ms = self.upload_ms,
+            build_ms = self.build_ms,
+            swap_ms = self.swap_ms,
+            "TLAS rebuild phases"
+        );
     }
 }
 
@@ -142,6 +185,8 @@ struct TlasBuild<'r, 'a> {
     /// Per TLAS of the rebuild (not persistent, in the order of its ids): its records are
     /// compacted on the GPU from the kept ones (`tlas_compact.rs`), else written by the host.
     gpu: Vec<bool>,
+    /// The old proxy and marks BLASes of the build's TLASes, until planned (kept or released).
+    old_proxies: Vec<(u32, ProxyPair)>,
     times: PhaseTimes,
 }
 
@@ -157,103 +202,150 @@ impl<'a> StreamingRenderer<'a> {
             ctx,
             addrs: Vec::new(),
             gpu: Vec::new(),
+            old_proxies: Vec::new(),
             times: PhaseTimes::new(),
         };
-        b.release_old(ids);
-        // Persistent TLASes are updated (or built once over every instance); the rest rebuilt.
-        let (persistent_ids, rebuild_ids): (Vec<u32>, Vec<u32>) =
-            ids.iter().partition(|&&t| b.r.tlases.in_persistent_mode(t));
-        if !rebuild_ids.is_empty() {
-            // The rebuild's transient is probed first; kept records are then made only in free
-            // budget beyond what the rebuild needs (they never evict, nor take its room).
-            b.r.probe_tlas_room(&rebuild_ids)?;
-            if b.r.opts.tlas_records == super::TlasRecordsMode::Gpu {
-                // The host path skips this sizing: it keeps nothing.
-                let counts = b.r.resident_instance_counts();
-                let mut room_bytes = 0u64;
-                for &t in &rebuild_ids {
-                    room_bytes += b.r.tlas_rebuild_bytes(t, counts[t as usize])?;
-                }
-                b.gpu = b.r.prepare_kept_records(&rebuild_ids, room_bytes)?;
-            } else {
-                b.gpu = vec![false; rebuild_ids.len()];
-            }
-        }
-        b.times.probe_ms = b.times.lap();
-        b.addrs =
-            b.r.res
-                .blases()
-                .iter()
-                .map(|a| a.as_ref().map_or(0, |a| a.address))
-                .collect();
-        let plan = b.plan_proxies(ids);
-        b.times.proxy_host_ms = b.times.lap();
-        let mut proxies = b.build_proxies(&plan)?;
-        b.times.proxy_build_ms = b.times.lap();
-        let updated = match b.update_persistent_tlases(&persistent_ids, &proxies) {
-            Ok(u) => u,
-            Err(e) => {
-                proxies.release(&mut b.r.heap);
-                return Err(e);
-            }
-        };
-        b.times.update_ms = b.times.lap();
-        let (built, records) = match b.rebuild(&rebuild_ids, &proxies) {
-            Ok(r) => r,
-            Err(e) => {
-                proxies.release(&mut b.r.heap);
-                return Err(e);
-            }
-        };
-        b.times.build_ms = b.times.lap();
-        b.rewrite_proxy_records(&plan)?;
-        b.swap_in(&rebuild_ids, built, updated, &mut proxies);
-        let t = &mut b.times;
-        tracing::debug!(
-            records,
-            probe_ms = t.probe_ms,
-            update_ms = t.update_ms,
-            proxy_boxes = plan.box_count,
-            proxy_host_ms = t.proxy_host_ms,
-            proxy_build_ms = t.proxy_build_ms,
-            encode_ms = t.encode_ms,
-            upload_ms = t.upload_ms,
-            build_ms = t.build_ms,
-            swap_ms = t.clock.elapsed().as_secs_f64() * 1e3,
-            "TLAS rebuild phases"
-        );
-        Ok(())
+        let result = b.run(ids);
+        let TlasBuild { r, times, .. } = b;
+        times.record(r.frame.stats_mut());
+        result
     }
 }
 
 impl TlasBuild<'_, '_> {
-    /// Phase 0: the old structures go. A persistent TLAS's structure stays; its old proxy and
-    /// marks go, as a rebuilt TLAS's whole build does (dirty: never traced until updated).
+    /// The phases in order (see the module docs).
+    fn run(&mut self, ids: &[u32]) -> Result<()> {
+        self.release_old(ids);
+        self.times.swap_ms = self.times.lap();
+        self.addrs = self
+            .r
+            .res
+            .blases()
+            .iter()
+            .map(|a| a.as_ref().map_or(0, |a| a.address))
+            .collect();
+        let (plan, mut proxies) = self.plan_proxies(ids);
+        self.times.proxy_host_ms = self.times.lap();
+        // Persistent TLASes are updated (or built once over every instance); the rest rebuilt.
+        let (persistent_ids, rebuild_ids): (Vec<u32>, Vec<u32>) = ids
+            .iter()
+            .partition(|&&t| self.r.tlases.in_persistent_mode(t));
+        if let Err(e) = self.probe_room(&rebuild_ids, &plan, &proxies) {
+            proxies.release(&mut self.r.heap);
+            return Err(e);
+        }
+        self.times.probe_ms = self.times.lap();
+        if let Err(e) = self.build_proxies(&plan, &mut proxies) {
+            proxies.release(&mut self.r.heap);
+            return Err(e);
+        }
+        self.times.proxy_build_ms = self.times.lap();
+        let updated = match self.update_persistent_tlases(&persistent_ids, &proxies) {
+            Ok(u) => u,
+            Err(e) => {
+                proxies.release(&mut self.r.heap);
+                return Err(e);
+            }
+        };
+        self.times.update_ms = self.times.lap();
+        let (built, records) = match self.rebuild(&rebuild_ids, &proxies) {
+            Ok(r) => r,
+            Err(e) => {
+                proxies.release(&mut self.r.heap);
+                return Err(e);
+            }
+        };
+        self.times.build_ms = self.times.lap();
+        self.times.records = records;
+        self.times.proxy_boxes = plan.box_count;
+        self.swap_in(&rebuild_ids, built, updated, &mut proxies);
+        Ok(())
+    }
+
+    /// The rebuild's transient probed first; kept records are then made only in free budget
+    /// beyond what the rebuild needs (they never evict, nor take its room).
+    fn probe_room(&mut self, rebuild_ids: &[u32], plan: &ProxyPlan, kept: &Proxies) -> Result<()> {
+        if rebuild_ids.is_empty() {
+            return Ok(());
+        }
+        let tails: Vec<u64> = rebuild_ids
+            .iter()
+            .map(|&t| {
+                let planned = plan.items.iter().filter(|i| i.tlas == t).count() as u64;
+                planned + kept.pair(t).map_or(0, ProxyPair::count)
+            })
+            .collect();
+        let r = &mut *self.r;
+        r.probe_tlas_room(rebuild_ids, &tails)?;
+        if r.opts.tlas_records == super::TlasRecordsMode::Gpu {
+            // The host path skips this sizing: it keeps nothing.
+            let counts = r.resident_instance_counts();
+            let mut room_bytes = 0u64;
+            for &t in rebuild_ids {
+                room_bytes += r.tlas_rebuild_bytes(t, counts[t as usize])?;
+            }
+            self.gpu = r.prepare_kept_records(rebuild_ids, room_bytes)?;
+        } else {
+            self.gpu = vec![false; rebuild_ids.len()];
+        }
+        Ok(())
+    }
+
+    /// Phase 0: the old structures go (dirty: never traced until rebuilt or updated). A
+    /// persistent TLAS's structure stays. Their proxy and marks BLASes wait for the plan,
+    /// which keeps those whose boxes are the same and releases the others.
     fn release_old(&mut self, ids: &[u32]) {
         let r = &mut *self.r;
         for &t in ids {
-            r.tlases.start_rebuild(t, &mut r.heap);
+            if let Some(pair) = r.tlases.start_rebuild(t, &mut r.heap) {
+                self.old_proxies.push((t, pair));
+            }
         }
     }
 
     /// Phase 1 on the host: which proxy BLASes (the clusters of non-resident BLASes) and marks
-    /// BLASes (the resident ones) TLASes `ids` get, and the order of their boxes.
-    fn plan_proxies(&self, ids: &[u32]) -> ProxyPlan {
+    /// BLASes (the resident ones) TLASes `ids` get, and the order of their boxes. A TLAS whose
+    /// clusters' residency is that of its old pair's build keeps the pair (returned); the
+    /// other old pairs are released.
+    fn plan_proxies(&mut self, ids: &[u32]) -> (ProxyPlan, Proxies) {
         let view = self.r.view;
         let mut plan = ProxyPlan::default();
+        let mut kept = Proxies::default();
+        let mut old = std::mem::take(&mut self.old_proxies);
         for &t in ids {
+            let clusters = self.r.topo.clusters(t as usize);
+            let mut key = vec![0u64; clusters.len().div_ceil(64)];
+            let mut non_resident = 0u32;
+            for (i, c) in clusters.iter().enumerate() {
+                if self.addrs[c.blas as usize] != 0 {
+                    key[i / 64] |= 1 << (i % 64);
+                } else {
+                    non_resident += 1;
+                }
+            }
+            let old_pair = old
+                .iter()
+                .position(|(u, _)| *u == t)
+                .map(|k| old.swap_remove(k).1);
+            match old_pair {
+                Some(pair) if pair.key == key && !key.is_empty() => {
+                    self.times.proxies_kept += pair.count() as u32;
+                    kept.0.push((t, pair));
+                    continue;
+                }
+                Some(pair) => pair.release(&mut self.r.heap),
+                None => {}
+            }
             // The marks' custom index (the TLAS's instance count + 1) must fit the 24 bits of
             // an instance's; a TLAS at the device cap goes without (the prefetch then sees only
             // its hits, as before the marks: slower, never wrong).
             let with_marks = view.tlases[t as usize].instance_count + 1 < 1 << 24;
-            let clusters = self.r.topo.clusters(t as usize);
-            let resident = |i: &u32| self.addrs[clusters[*i as usize].blas as usize] != 0;
+            let resident = |i: u32| key[i as usize / 64] >> (i % 64) & 1 != 0;
             let all = 0..clusters.len() as u32;
             let mut order: Vec<u32> = Vec::with_capacity(clusters.len());
-            order.extend(all.clone().filter(|i| !resident(i)));
-            let non_resident = order.len() as u32;
+            order.extend(all.clone().filter(|&i| !resident(i)));
             if with_marks {
-                order.extend(all.filter(resident));
+                order.extend(all.filter(|&i| resident(i)));
             }
             let marks = order.len() as u32 - non_resident;
             let first = plan.box_count;
@@ -276,21 +368,27 @@ impl TlasBuild<'_, '_> {
                     tlas: t,
                     order,
                     non_resident,
+                    key,
                 });
             }
         }
-        plan
+        // Old pairs of TLASes not planned (none: `ids` are the released ones).
+        old.into_iter()
+            .for_each(|(_, p)| p.release(&mut self.r.heap));
+        (plan, kept)
     }
 
     /// Phase 1 on the device: the planned proxy and marks BLASes, built compacted from a box
-    /// buffer freed after.
-    fn build_proxies(&mut self, plan: &ProxyPlan) -> Result<Proxies> {
-        let mut proxies = Proxies::default();
+    /// buffer freed after, into `proxies`. The planned TLASes' PI slots and marks records are
+    /// rewritten to their new order in the same flush as the boxes (nothing traces a TLAS
+    /// being rebuilt: it is absent or dirty until swapped in).
+    fn build_proxies(&mut self, plan: &ProxyPlan, proxies: &mut Proxies) -> Result<()> {
         if plan.box_count == 0 {
-            return Ok(proxies);
+            return Ok(());
         }
         let ctx = &self.ctx;
         let r = &mut *self.r;
+        let view = r.view;
         let buf = r.heap.alloc_buffer(
             "proxy-aabbs",
             u64::from(plan.box_count) * 24,
@@ -300,14 +398,38 @@ impl TlasBuild<'_, '_> {
             16,
         )?;
         let built = (|| -> Result<Vec<(usize, AccelStruct)>> {
+            let pis_buf = r.gpu.pis();
+            let blases_buf = r.gpu.blases();
             let up = r.up.as_mut().ok_or_else(staging_released)?;
             let mut at = 0u64;
             for o in &plan.orders {
-                let clusters = r.topo.clusters(o.tlas as usize);
+                let t = o.tlas as usize;
+                let clusters = r.topo.clusters(t);
                 let order = &o.order;
-                let uploaded = up.upload_with(ctx, &buf, at, order.len(), |k| {
-                    clusters[order[k] as usize].bounds
-                });
+                let (base, marks_blas) = r.topo.proxy_slots(t);
+                let marks = proxy_blas_record(
+                    &view.tlases[t],
+                    base + o.non_resident,
+                    order.len() as u32 - o.non_resident,
+                );
+                let marks_offset =
+                    u64::from(marks_blas) * std::mem::size_of::<motu_abi::BlasRecord>() as u64;
+                let uploaded = up
+                    .upload_with(ctx, &buf, at, order.len(), |k| {
+                        clusters[order[k] as usize].bounds
+                    })
+                    .and_then(|()| {
+                        up.upload_with(
+                            ctx,
+                            pis_buf,
+                            u64::from(base) * std::mem::size_of::<PiRecord>() as u64,
+                            order.len(),
+                            |k| proxy_pi(&clusters[order[k] as usize]),
+                        )
+                    })
+                    .and_then(|()| {
+                        up.upload(ctx, blases_buf, marks_offset, bytemuck::bytes_of(&marks))
+                    });
                 if let Err(e) = uploaded {
                     // Copies queued for the box buffer must not outlive it.
                     up.abandon();
@@ -350,15 +472,32 @@ impl TlasBuild<'_, '_> {
             )
         })();
         r.heap.free(buf);
-        for (k, accel) in built? {
+        let built = built?;
+        self.times.proxies_built += built.len() as u32;
+        let first = proxies.0.len();
+        proxies.0.extend(plan.orders.iter().map(|o| {
+            let key = o.key.clone();
+            (
+                o.tlas,
+                ProxyPair {
+                    key,
+                    ..ProxyPair::default()
+                },
+            )
+        }));
+        for (k, accel) in built {
             let item = &plan.items[k];
-            proxies.0.push(BuiltProxy {
-                tlas: item.tlas,
-                marks: item.marks,
-                accel,
-            });
+            let Some((_, pair)) = proxies.0[first..].iter_mut().find(|(t, _)| *t == item.tlas)
+            else {
+                unreachable!("every planned item's TLAS has an order")
+            };
+            *if item.marks {
+                &mut pair.marks
+            } else {
+                &mut pair.proxy
+            } = Some(accel);
         }
-        Ok(proxies)
+        Ok(())
     }
 
     /// Phase 2a: persistent TLASes `ids`, their records patched where residency changed, then
@@ -431,7 +570,7 @@ impl TlasBuild<'_, '_> {
         let counts = records.record_counts();
         let mut sizes = Vec::with_capacity(ids.len());
         for &n in &counts {
-            let s = ctx.tlas_build_sizes(n, AsBuildFlags::tlas(r.build_opts.compact))?;
+            let s = ctx.tlas_build_sizes(n, r.build_opts.tlas_flags())?;
             sizes.push(BuildSize {
                 result_bytes: s.acceleration_structure_size_bytes,
                 scratch_bytes: s.build_scratch_size_bytes,
@@ -537,39 +676,7 @@ impl TlasBuild<'_, '_> {
         Ok((built?, total_bytes / RECORD_BYTES as u64))
     }
 
-    /// Phase 3a: the proxy PI slots and the marks' BLAS records rewritten to the new order.
-    fn rewrite_proxy_records(&mut self, plan: &ProxyPlan) -> Result<()> {
-        let ctx = &self.ctx;
-        let r = &mut *self.r;
-        let view = r.view;
-        for o in &plan.orders {
-            let t = o.tlas as usize;
-            let (base, marks_blas) = r.topo.proxy_slots(t);
-            let marks = proxy_blas_record(
-                &view.tlases[t],
-                base + o.non_resident,
-                o.order.len() as u32 - o.non_resident,
-            );
-            let marks_offset =
-                u64::from(marks_blas) * std::mem::size_of::<motu_abi::BlasRecord>() as u64;
-            let pis_buf = r.gpu.pis();
-            let blases_buf = r.gpu.blases();
-            let clusters = r.topo.clusters(t);
-            let order = &o.order;
-            let up = r.up.as_mut().ok_or_else(staging_released)?;
-            up.upload_with(
-                ctx,
-                pis_buf,
-                u64::from(base) * std::mem::size_of::<PiRecord>() as u64,
-                order.len(),
-                |k| proxy_pi(&clusters[order[k] as usize]),
-            )?;
-            up.upload(ctx, blases_buf, marks_offset, bytemuck::bytes_of(&marks))?;
-        }
-        r.up_mut()?.flush(ctx)
-    }
-
-    /// Phase 3b: the rebuilt TLASes (`built`, indices into `rebuilt`) and the `updated`
+    /// Phase 3: the rebuilt TLASes (`built`, indices into `rebuilt`) and the `updated`
     /// persistent ones take their proxies and are clean.
     fn swap_in(
         &mut self,
@@ -581,13 +688,13 @@ impl TlasBuild<'_, '_> {
         let r = &mut *self.r;
         for (k, accel) in built {
             let t = rebuilt[k];
-            let (proxy, marks) = (proxies.take(t, false), proxies.take(t, true));
-            let g = TlasGpu::rebuilt_with(accel, proxy, marks);
+            let g = TlasGpu::rebuilt_with(accel, proxies.take(t));
             r.tlases.rebuilt(t, g, &mut r.heap);
         }
         for t in updated {
-            let (proxy, marks) = (proxies.take(t, false), proxies.take(t, true));
-            r.tlases.updated(t, proxy, marks);
+            r.tlases.updated(t, proxies.take(t), &mut r.heap);
         }
+        // Pairs of TLASes neither rebuilt nor updated (none unless a build came back short).
+        std::mem::take(proxies).release(&mut r.heap);
     }
 }

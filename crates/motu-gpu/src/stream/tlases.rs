@@ -136,19 +136,21 @@ impl Tlases {
     }
 
     /// TLAS `t` is about to be rebuilt or updated: dirty until it is. A persistent TLAS keeps
-    /// its structure and loses its proxy and marks; another loses its whole build.
-    pub fn start_rebuild(&mut self, t: u32, heap: &mut GpuHeap) {
-        if self.is_persistent(t) {
-            if let Some(g) = self.tlas[t as usize].as_mut() {
-                for a in [g.proxy.take(), g.marks.take()].into_iter().flatten() {
-                    a.release(heap);
-                }
-            }
-            self.dirty.insert(t);
-        } else if let Some(old) = self.tlas[t as usize].take() {
+    /// its structure and hands over its proxy and marks; another releases its structure and
+    /// hands them over. The caller reuses them where its clusters' residency is unchanged
+    /// (same boxes, same order) and releases them otherwise.
+    pub fn start_rebuild(&mut self, t: u32, heap: &mut GpuHeap) -> Option<ProxyPair> {
+        let pair = if self.is_persistent(t) {
+            let g = self.tlas[t as usize].as_mut()?;
+            ProxyPair::take_from(g)
+        } else {
+            let mut old = self.tlas[t as usize].take()?;
+            let pair = ProxyPair::take_from(&mut old);
             old.release(heap);
-            self.dirty.insert(t);
-        }
+            pair
+        };
+        self.dirty.insert(t);
+        Some(pair)
     }
 
     /// Persistent TLAS `t` built over every instance (its first build; the update that follows
@@ -177,10 +179,13 @@ impl Tlases {
     }
 
     /// Persistent TLAS `t` updated in place, with its new proxy and marks: clean.
-    pub fn updated(&mut self, t: u32, proxy: Option<AccelStruct>, marks: Option<AccelStruct>) {
+    pub fn updated(&mut self, t: u32, pair: ProxyPair, heap: &mut GpuHeap) {
         if let Some(g) = self.tlas[t as usize].as_mut() {
-            g.proxy = proxy;
-            g.marks = marks;
+            g.proxy = pair.proxy;
+            g.marks = pair.marks;
+            g.proxy_key = pair.key;
+        } else {
+            pair.release(heap);
         }
         self.dirty.remove(&t);
     }
@@ -197,6 +202,37 @@ impl Tlases {
     }
 }
 
+/// A TLAS's proxy and marks BLASes with the key of the boxes they were built over: one bit a
+/// cluster, set where its BLAS was resident (the bits give the boxes' order: the
+/// non-resident clusters', then the resident ones', each in cluster order).
+#[derive(Default)]
+pub(super) struct ProxyPair {
+    pub key: Vec<u64>,
+    pub proxy: Option<AccelStruct>,
+    pub marks: Option<AccelStruct>,
+}
+
+impl ProxyPair {
+    fn take_from(g: &mut TlasGpu) -> ProxyPair {
+        ProxyPair {
+            key: std::mem::take(&mut g.proxy_key),
+            proxy: g.proxy.take(),
+            marks: g.marks.take(),
+        }
+    }
+
+    /// How many of the two it holds.
+    pub fn count(&self) -> u64 {
+        u64::from(self.proxy.is_some()) + u64::from(self.marks.is_some())
+    }
+
+    pub fn release(self, heap: &mut GpuHeap) {
+        for a in [self.proxy, self.marks].into_iter().flatten() {
+            a.release(heap);
+        }
+    }
+}
+
 /// A resident TLAS with its proxy BLAS (present while it has non-resident triangle instances).
 /// The fields are private: a TLAS is made rebuilt ([`Self::rebuilt_with`]) or persistent
 /// ([`Self::persistent_over`]) and its proxy and marks change only through [`Tlases`].
@@ -208,20 +244,19 @@ pub(super) struct TlasGpu {
     marks: Option<AccelStruct>,
     /// Present when the TLAS is persistent (every instance, updated: `persistent.rs`).
     persistent: Option<Persistent>,
+    /// The key of the boxes `proxy` and `marks` were built over ([`ProxyPair::key`]).
+    proxy_key: Vec<u64>,
 }
 
 impl TlasGpu {
     /// A TLAS rebuilt over the resident instances, with its proxy and marks.
-    pub fn rebuilt_with(
-        accel: AccelStruct,
-        proxy: Option<AccelStruct>,
-        marks: Option<AccelStruct>,
-    ) -> TlasGpu {
+    pub fn rebuilt_with(accel: AccelStruct, pair: ProxyPair) -> TlasGpu {
         TlasGpu {
             accel,
-            proxy,
-            marks,
+            proxy: pair.proxy,
+            marks: pair.marks,
             persistent: None,
+            proxy_key: pair.key,
         }
     }
 
@@ -232,6 +267,7 @@ impl TlasGpu {
             proxy: None,
             marks: None,
             persistent: Some(p),
+            proxy_key: Vec::new(),
         }
     }
 

@@ -24,6 +24,24 @@ fn blas_build_modes_ask_for_what_they_name() {
     assert_eq!(BlasBuild::FastTrace.name(), "fast-trace");
 }
 
+#[test]
+fn tlas_build_modes_ask_for_what_they_name() {
+    use vk::BuildAccelerationStructureFlagsKHR as F;
+    // Fast trace is the TLAS flags every build had before the choice.
+    assert_eq!(TlasBuild::FastTrace.flags(true), AsBuildFlags::tlas(true));
+    assert_eq!(
+        build_flags(TlasBuild::FastTrace.flags(true)),
+        F::PREFER_FAST_TRACE | F::ALLOW_COMPACTION
+    );
+    assert_eq!(
+        build_flags(TlasBuild::FastBuild.flags(false)),
+        F::PREFER_FAST_BUILD
+    );
+    assert_eq!(TlasBuild::default(), TlasBuild::FastTrace);
+    assert_eq!(TlasBuild::FastBuild.name(), "fast-build");
+    assert_eq!(TlasBuild::FastTrace.name(), "fast-trace");
+}
+
 fn tris(n: u32) -> BlasGeometry {
     BlasGeometry::Triangles {
         vertex_count: n * 3,
