@@ -35,7 +35,7 @@ uint source_primitive(MeshRecord m, uint mesh_record, uint primitive) {
 struct Carry {
     vec4 hit;     // current sample: x best t (T_INFINITY: none), yzw geometric normal facing the ray
     vec4 ns;      // xyz shading normal (same side); w the secondary window's masks (exact float)
-    vec4 albedo;  // xyz textured base colour; w (streamed, state 3): the speculative window's
+    vec4 albedo;  // xyz textured base colour; w (streamed, states 3 and 6): the speculative window's
                   // start stamp (uintBitsToFloat)
     uvec4 rec;    // current sample: source mesh, primitive, LOD level, material
     uvec4 aov;    // sample 0's AOV record (without the trace count)
@@ -45,7 +45,9 @@ struct Carry {
     // rays traced ahead from its best hit so far (streamed: see SPECULATIVE below); y: stamp of
     // the pass the open ray (or window; state 3: the primary) started in; z: traces; w: sample |
     // the window's first secondary ray << 16; 4 (bounces): the bounce ray open, its best hit so
-    // far in hit/rec/ns/albedo; 5: the sample's path ended
+    // far in hit/rec/ns/albedo; 5: the sample's path ended; 6 (streamed): as 4, with its
+    // vertex's secondary rays traced ahead from that best hit (albedo.w: their window's start
+    // stamp, as 3)
     uvec4 st;
 #ifdef MOTU_STREAMED
     // Streamed only (full builds keep the path in locals, their SPIR-V unchanged):
@@ -140,7 +142,7 @@ void stream_defer(uvec2 px, uint pixel, Carry c) {
     stream_write_fallback(px, pixel, c);
     CarryTable(StreamRef(push.stream).s.carry).r[pixel] = c;
 #ifdef MOTU_STREAMED
-    bool closest = c.st.x == 1u || c.st.x == 3u || c.st.x == 4u;
+    bool closest = c.st.x == 1u || c.st.x == 3u || c.st.x == 4u || c.st.x == 6u;
     stream_list_incomplete(px, closest ? g_empty_id : NONE_U32);
 #else
     stream_list_incomplete(px);
@@ -277,7 +279,8 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         vec3 v_org = bounce > 0u ? p_org : org;
         vec3 v_dir = bounce > 0u ? p_dir : dir;
         uint v_smp = seq_sample(smp) | (bounce << 20u);
-        bouncing = c.st.x == 4u;
+        // State 6: the bounce ray open with its vertex's secondary rays traced ahead (as 3).
+        bouncing = (c.st.x == 4u || c.st.x == 6u) && !spec;
         // The ray to trace: origin, direction, reach (w).
         vec3 r_org = org;
         vec4 r_dir = vec4(dir, T_INFINITY);
@@ -454,9 +457,31 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                     c.hit.yzw = hs.ng;
                     c.ns.xyz = hs.ns;
                     c.albedo.xyz = hs.albedo;
+                    if (c.st.x == 6u) {
+                        c.st.x = 4u;  // a closer hit: the rays traced ahead from the old one go
+                    }
                 }
                 g_probe_link_open = false;
                 if (!cut && stream_still_open(c.hit.x)) {
+                    // As a primary ray's (SPECULATIVE): the next vertex's secondary rays are
+                    // traced ahead from the bounce's best hit so far, against what is resident
+                    // now, instead of a pass after the bounce is final (what they need may be
+                    // evicted by then for the bounce's structure: in-frame returns).
+                    if (c.hit.x < T_INFINITY && !g_last_pass && !g_probe) {
+                        primary_empty_id = g_empty_id;
+                        primary_empty_t = g_empty_t;
+                        if (c.st.x == 4u) {
+                            c.cur = vec4(0.0);
+                            c.ns.w = 0.0;
+                            c.albedo.w = uintBitsToFloat(g_stamp);
+                            c.st.x = 6u;
+                            c.st.w = smp;
+                        }
+                        if ((c.st.w >> 16u) < secondary_ray_count()) {
+                            spec = true;
+                            continue;
+                        }
+                    }
                     open = true;  // the next vertex waits until the bounce's hit is final
                     break;
                 }
@@ -465,6 +490,12 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 }
                 if (c.hit.x >= T_INFINITY) {
                     c.st.x = 5u;  // escaped: the path ends (see the full build's branch)
+                    continue;
+                }
+                if (c.st.x == 6u) {
+                    // Final, the hit they were traced ahead from: the secondary rays go on
+                    // from where they are, from their window's start.
+                    c.st.xy = uvec2(2u, floatBitsToUint(c.albedo.w));
                     continue;
                 }
                 // Final: the next vertex's secondary rays start now, from their first window.
@@ -638,8 +669,8 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         c.path_org = vec4(p_org, float(bounce));
         c.path_dir = vec4(p_dir, uintBitsToFloat(bounce_lod));
         c.thru = vec4(thru, 0.0);
-        if (c.st.x == 3u) {
-            g_empty_id = primary_empty_id;  // the fallback shows the primary ray's
+        if (c.st.x == 3u || c.st.x == 6u) {
+            g_empty_id = primary_empty_id;  // the fallback and blocker: the closest-hit ray's
             g_empty_t = primary_empty_t;
         }
 #endif

@@ -553,7 +553,20 @@ impl<'a> StreamingRenderer<'a> {
                 rec.copy_buffer(&fb.requests, 0, &fb.readback, req_off, stamps_bytes)?;
             }
         }
-        rec.copy_buffer(&fb.incomplete, 0, &fb.readback, inc_off, 4 + 8 * pixels)?;
+        // The incomplete list holds at most one entry per item traced: its count, then that
+        // many pixels and what each waits for (not the whole frame's list).
+        let listed = (u64::from(full_count) + list.len() as u64).min(pixels);
+        rec.copy_buffer(&fb.incomplete, 0, &fb.readback, inc_off, 4 + 4 * listed)?;
+        if listed > 0 {
+            let blockers_off = 4 + 4 * pixels;
+            rec.copy_buffer(
+                &fb.incomplete,
+                blockers_off,
+                &fb.readback,
+                inc_off + blockers_off,
+                4 * listed,
+            )?;
+        }
         // The counters so far, where the final image's stats words go (read_image overwrites).
         let counters_off = final_off + pixels * 20;
         rec.copy_buffer(
@@ -573,7 +586,7 @@ impl<'a> StreamingRenderer<'a> {
             .first()
             .copied()
             .unwrap_or(0);
-        let count = count.min(pixels as u32);
+        let count = count.min(listed as u32);
         let incomplete: Vec<u32> = fb.readback.read_vec(inc_off + 4, count as usize)?;
         let blockers: Vec<u32> = fb
             .readback
