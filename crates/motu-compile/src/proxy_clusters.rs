@@ -26,9 +26,11 @@ use crate::proxy_boxes::{has_boxes, padded, Box6, EMPTY};
 /// a build when a ray passes between the instances before the BLAS was walked.
 pub const CLUSTER_INSTANCES: usize = 16;
 
-/// Instances a batch of [`StoredProxyClusters::of_view`] holds at most (but for a batch of one
-/// TLAS): its temporaries, ~30 bytes an instance, stay ~32 MB however many threads run.
-const BATCH_INSTANCES: usize = 1 << 20;
+/// Instances a batch of [`StoredProxyClusters::of_view`] holds at most a thread (but for a
+/// batch of one TLAS, and at least 1M a batch): its temporaries, ~30 bytes an instance, stay
+/// ~16 MB a thread. A bound of 1M whatever the threads made island 0.63's clusters one
+/// 1M-instance root piece at a time: 1.4 → 11.4 s on a 16-core host (session 40).
+const BATCH_INSTANCES_PER_THREAD: usize = 1 << 19;
 
 /// One proxy box: a spatially coherent cluster of a TLAS's instances of one triangle BLAS.
 #[derive(Clone, Debug, PartialEq)]
@@ -266,16 +268,18 @@ impl StoredProxyClusters {
             member_first: Vec::with_capacity(clusters),
         };
         // A few TLASes a thread per batch (a large one among small ones does not idle the
-        // rest), and at most `BATCH_INSTANCES` instances but for a batch of one TLAS: a TLAS's
+        // rest), and at most `BATCH_INSTANCES_PER_THREAD` instances a thread but for a batch of one TLAS: a TLAS's
         // clusters take ~30 bytes an instance while they are made (a large TLAS is made on
         // all threads by the SAH itself).
-        let batch = 4 * rayon::current_num_threads().max(1);
+        let threads = rayon::current_num_threads().max(1);
+        let batch = 4 * threads;
+        let batch_instances = (threads * BATCH_INSTANCES_PER_THREAD).max(1 << 20);
         let count = |t: usize| view.tlases[t].instance_count as usize;
         let mut first = 0;
         while first < n {
             let mut end = first + 1;
             let mut instances = count(first);
-            while end < n && end - first < batch && instances + count(end) <= BATCH_INSTANCES {
+            while end < n && end - first < batch && instances + count(end) <= batch_instances {
                 instances += count(end);
                 end += 1;
             }
