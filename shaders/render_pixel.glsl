@@ -161,6 +161,20 @@ void stream_count_walks(uint walks) {
         atomicAdd(push.stats.n[STAT_MARK_TLAS_WALKS], g_mark_tlas_walks);
     }
 }
+
+// The secondary rays traced ahead from an open ray's best hit so far (SPECULATIVE): an open
+// ray in state `open_state` (1: primary, 4: bounce) starts them in state `ahead` (3, 6), from
+// `emission`, their window starting in this pass; true while any is left to trace.
+bool trace_ahead(inout Carry c, uint open_state, uint ahead, vec3 emission, uint smp) {
+    if (c.st.x == open_state) {
+        c.cur = vec4(emission, 0.0);
+        c.ns.w = 0.0;
+        c.albedo.w = uintBitsToFloat(g_stamp);
+        c.st.x = ahead;
+        c.st.w = smp;
+    }
+    return (c.st.w >> 16u) < secondary_ray_count();
+}
 #endif
 
 // The frame's sample `smp` in the pixel's sequence (a progressive frame starts at
@@ -470,14 +484,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                     if (c.hit.x < T_INFINITY && !g_last_pass && !g_probe) {
                         primary_empty_id = g_empty_id;
                         primary_empty_t = g_empty_t;
-                        if (c.st.x == 4u) {
-                            c.cur = vec4(0.0);
-                            c.ns.w = 0.0;
-                            c.albedo.w = uintBitsToFloat(g_stamp);
-                            c.st.x = 6u;
-                            c.st.w = smp;
-                        }
-                        if ((c.st.w >> 16u) < secondary_ray_count()) {
+                        if (trace_ahead(c, 4u, 6u, vec3(0.0), smp)) {
                             spec = true;
                             continue;
                         }
@@ -589,15 +596,9 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 }
                 // Not in the frame's last pass: the pixel stays open whatever they find.
                 if (shaded && c.hit.x < T_INFINITY && !g_last_pass) {
-                    if (c.st.x == 1u) {
-                        // Trace the secondary rays ahead from this hit, starting now.
-                        c.cur = vec4(push.materials.r[c.rec.w].emission, 0.0);
-                        c.ns.w = 0.0;
-                        c.albedo.w = uintBitsToFloat(g_stamp);
-                        c.st.x = 3u;
-                        c.st.w = smp;
-                    }
-                    if ((c.st.w >> 16u) < secondary_ray_count()) {
+                    // Trace the secondary rays ahead from this hit, starting now.
+                    vec3 emission = push.materials.r[c.rec.w].emission;
+                    if (trace_ahead(c, 1u, 3u, emission, smp)) {
                         spec = true;
                         continue;
                     }
