@@ -461,13 +461,24 @@ pub(crate) fn render_streaming(
         frames.push(st);
         last = Some((out, cam));
     }
-    // The cache leaves with the image (its queued directory writes finish after the outputs).
-    // With host clones nothing was serialised while rendering: taking the cache writes this
-    // run's structures to the directory first, once, after the frames and before the totals
-    // below count them (a failure is a warning: a cache never fails a render).
-    let cache = tracing::info_span!("persist_cache").in_scope(|| sr.take_cache());
     let (out, last_camera) = last.ok_or(RenderError::NoFrame)?;
     let written = frames.last();
+    // The image goes out before the structures are persisted, where nothing after this changes
+    // or refuses it (`--denoise` filters it; a cut ray refuses it unless allowed: session.rs).
+    let truncated = written.map_or(0, |f| f.truncated_rays) > 0 || out.stats.stack_overflows > 0;
+    let denoised = s.denoise && matches!(s.view, motu_gpu::View::Shaded);
+    if !denoised && (!truncated || s.limits.allow_truncated) {
+        progress(RenderEvent::Image {
+            aov: &out.aov,
+            rgba8: &out.rgba8,
+        });
+    }
+    // The cache leaves with the image (its queued directory writes finish after the outputs).
+    // Structures are serialised at eviction by default and not at all with host clones:
+    // taking the cache writes this run's remaining structures to the directory, once, after
+    // the image and before the totals below count them (a failure is a warning: a cache never
+    // fails a render).
+    let cache = tracing::info_span!("persist_cache").in_scope(|| sr.take_cache());
     let after_first: Vec<f64> = frames.iter().skip(1).map(|f| f64::from(f.passes)).collect();
     let stats = PathStats {
         // The last frame is the image written: its cut rays decide (render's common check).

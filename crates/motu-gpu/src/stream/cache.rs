@@ -106,8 +106,8 @@ struct Hit {
     header: SerializedHeader,
 }
 
-/// A BLAS [`StreamingRenderer::persist_cache`] took out of the renderer to serialise, and
-/// where it goes back.
+/// A BLAS taken out of the renderer to serialise (at eviction, or by
+/// [`StreamingRenderer::persist_cache`]), and where it goes back.
 struct TakenOut {
     blas: usize,
     key: CacheKey,
@@ -186,13 +186,16 @@ impl StreamingRenderer<'_> {
             HostCacheMode::Serialize => false,
             // Serialised: on an H100 (island 0.63 at 8 GiB, one warm machine) a cold start took
             // 25.4 s to the PNG serialising and 37.2 s cloning (clones into host memory ran at
-            // ~4 GB/s at eviction), a warm one 19.7 against 25.0 s (BENCHMARKS.md, session 34).
+            // ~4 GB/s at eviction), a warm one 19.7 against 25.0 s (BENCHMARKS.md, session 34);
+            // at eviction and after the frames (`stores_deferred`).
             HostCacheMode::Auto => false,
         };
-        self.totals.host_cache_mode = match (host_bytes, clone) {
-            (0, _) => "off",
-            (_, true) => "clone",
-            (_, false) => "serialize",
+        let auto = self.opts.host_cache_mode == HostCacheMode::Auto;
+        self.totals.host_cache_mode = match (host_bytes, clone, auto) {
+            (0, _, _) => "off",
+            (_, true, _) => "clone",
+            (_, false, true) => "deferred",
+            (_, false, false) => "serialize",
         };
         if clone && host_bytes > 0 {
             // The host's bytes go to clones; serialised blobs then only pass through to the
@@ -440,33 +443,35 @@ impl StreamingRenderer<'_> {
         }
     }
 
+    /// Whether stores wait for eviction and the end of the frames (`HostCacheMode::Auto`): a
+    /// BLAS is serialised when it is evicted (a later pass or frame may restore it), and the
+    /// ones still resident after the last frame by [`Self::persist_cache`], after the image.
+    /// `Serialize` stores as it builds, inside the frame (the behaviour before).
+    fn stores_deferred(&self) -> bool {
+        self.opts.host_cache_mode == HostCacheMode::Auto && !self.clones.on()
+    }
+
     /// Serialises the newly built BLASes of `built` into the cache (those it does not hold
     /// yet, and, where only the host tier would keep them, those the store rule says pay:
-    /// `store_policy.rs`). A cache that cannot take them (no room for the readback) is
-    /// skipped, counted.
+    /// `store_policy.rs`), with `--stream-host-cache serialize`; by default stores wait for
+    /// eviction ([`Self::store_evicted`]). A cache that cannot take them (no room for the
+    /// readback) is skipped, counted.
     pub(super) fn store_built(&mut self, built: &[(usize, AccelStruct)]) -> Result<()> {
         // With host clones the directory is written after the frames (`persist_cache`).
-        if self.reuse.cache.is_none() || built.is_empty() || self.clones.on() {
+        if self.reuse.cache.is_none()
+            || built.is_empty()
+            || self.clones.on()
+            || self.stores_deferred()
+        {
             return Ok(());
         }
         let t = Instant::now();
         let ruled = self.store_rule_applies();
         let mut todo: Vec<ToStore<'_>> = Vec::new();
         for (b, accel) in built {
-            let Some(key) = self.blas_key(*b) else {
+            let Some(key) = self.store_key(*b, accel.size_bytes, ruled) else {
                 continue;
             };
-            let held = self.reuse.cache.as_ref().expect("attached");
-            if held.cache.cache.contains(&key).is_some() {
-                continue;
-            }
-            let est = &self.reuse.estimates;
-            if ruled && !est.should_store(accel.size_bytes, est.returned_before(*b)) {
-                let st = self.frame.stats_mut();
-                st.host_cache_skipped_stores += 1;
-                st.host_cache_skipped_store_bytes += accel.size_bytes;
-                continue;
-            }
             todo.push(ToStore {
                 blas: *b,
                 accel,
@@ -486,48 +491,130 @@ impl StreamingRenderer<'_> {
         Ok(())
     }
 
+    /// BLAS `b`'s key where it is to be stored: the cache lacks it and, where `ruled`, the
+    /// store rule says its `size_bytes` pay (a skip is counted in the frame).
+    fn store_key(&mut self, b: usize, size_bytes: u64, ruled: bool) -> Option<CacheKey> {
+        let key = self.blas_key(b)?;
+        let held = self.reuse.cache.as_ref().expect("attached");
+        if held.cache.cache.contains(&key).is_some() {
+            return None;
+        }
+        let est = &self.reuse.estimates;
+        if ruled && !est.should_store(size_bytes, est.returned_before(b)) {
+            let st = self.frame.stats_mut();
+            st.host_cache_skipped_stores += 1;
+            st.host_cache_skipped_store_bytes += size_bytes;
+            return None;
+        }
+        Some(key)
+    }
+
+    /// Before BLASes `victims` are evicted (their structures still resident): serialises into
+    /// the cache those it lacks, by the rules [`Self::store_built`] applies at build time,
+    /// where stores are deferred ([`Self::stores_deferred`]). Counted in the frame as stores
+    /// (`cache_store_ms`).
+    pub(super) fn store_evicted(&mut self, victims: &[usize]) -> Result<()> {
+        if self.reuse.cache.is_none() || !self.stores_deferred() {
+            return Ok(());
+        }
+        let t = Instant::now();
+        let ruled = self.store_rule_applies();
+        let mut ids = Vec::with_capacity(victims.len());
+        for &b in victims {
+            let Some(size_bytes) = self.res.blas(b).map(|a| a.size_bytes) else {
+                continue;
+            };
+            if let Some(key) = self.store_key(b, size_bytes, ruled) {
+                ids.push((b, key, size_bytes));
+            }
+        }
+        if ids.is_empty() {
+            return Ok(());
+        }
+        let bytes = ids.iter().map(|i| i.2).sum();
+        let n = ids.len() as u64;
+        let keyed: Vec<(usize, CacheKey)> = ids.into_iter().map(|(b, k, _)| (b, k)).collect();
+        self.store_held(keyed)?;
+        self.reuse.estimates.store.add(n, bytes, ms_since(t));
+        self.frame.stats_mut().cache_store_ms += ms_since(t);
+        Ok(())
+    }
+
     /// Whether the store rule decides what [`Self::store_built`] stores: with the `measured`
     /// policy, unless a writable cache directory takes every BLAS (for the next process).
     fn store_rule_applies(&self) -> bool {
-        let disk_writable = self
-            .reuse
+        self.reuse.policy == HostStorePolicy::Measured && !self.cache_dir_writable()
+    }
+
+    fn cache_dir_writable(&self) -> bool {
+        self.reuse
             .cache
             .as_ref()
-            .is_some_and(|a| a.cache.cache.disk().is_some_and(|d| d.writable()));
-        self.reuse.policy == HostStorePolicy::Measured && !disk_writable
+            .is_some_and(|a| a.cache.cache.disk().is_some_and(|d| d.writable()))
     }
 
     /// Writes to the cache directory, serialised, every BLAS this renderer holds (resident or
-    /// as a host clone) that the cache lacks: with host clones (`clones.rs`) nothing is
-    /// serialised while frames render, so a caller that wants the next process warm calls
-    /// this after its last frame (the viewer at exit), or takes the cache
-    /// ([`Self::take_cache`] calls this once: `motu render` after the frames). Counted
-    /// in [`StreamTotals`](super::StreamTotals) (`persisted_*`). Without clones the blobs were
-    /// stored as they were built and this does nothing.
+    /// as a host clone) that the cache lacks. Stores wait for eviction by default and nothing
+    /// is serialised while frames render with host clones, so a caller that wants the next
+    /// process warm calls this after its last frame and after its image is out (the viewer
+    /// at exit), or takes the cache ([`Self::take_cache`] calls this once: `motu render` after
+    /// writing the image). Counted in [`StreamTotals`](super::StreamTotals) (`persisted_*`).
+    /// With `--stream-host-cache serialize` the blobs were stored as they were built and this
+    /// finds nothing to do.
     pub fn persist_cache(&mut self) -> Result<()> {
-        let writable = self
-            .reuse
-            .cache
-            .as_ref()
-            .is_some_and(|a| a.cache.cache.disk().is_some_and(|d| d.writable()));
-        if !self.clones.on() || !writable {
+        if !self.cache_dir_writable() {
             return Ok(());
         }
         let t = Instant::now();
         let n = self.view.blases.len();
-        // Taken out for the serialise copies and put back after, whatever happens.
-        let mut taken: Vec<TakenOut> = Vec::new();
+        let mut keyed = Vec::new();
         for b in 0..n {
-            if !self.topo.buildable(b) {
+            if !self.topo.buildable(b) || !(self.res.has_blas(b) || self.clones.holds(b)) {
                 continue;
             }
             let Some(key) = self.blas_key(b) else {
                 continue;
             };
             let held = self.reuse.cache.as_ref().expect("attached");
-            if held.cache.cache.contains(&key).is_some() {
-                continue;
+            if held.cache.cache.contains(&key).is_none() {
+                keyed.push((b, key));
             }
+        }
+        // Counted into the totals below, not into a frame: none is rendering.
+        let aside = self.frame.set_stats_aside();
+        let stored = self.store_held(keyed);
+        let counted = self.frame.put_stats_back(aside);
+        let tot = &mut self.totals;
+        let count = u64::from(counted.cache_stored);
+        let bytes = counted.cache_stored_bytes;
+        tot.persisted_blases += count;
+        tot.persisted_bytes += bytes;
+        tot.cache_stored += count;
+        tot.cache_stored_bytes += bytes;
+        if counted.cache_skipped > 0 {
+            tracing::warn!(
+                skipped = counted.cache_skipped,
+                "structure cache: no room to serialise some structures after the frames; not cached"
+            );
+        }
+        tot.store_serialize_ms += counted.store_serialize_ms;
+        tot.store_copy_ms += counted.store_copy_ms;
+        tot.store_put_ms += counted.store_put_ms;
+        tot.transfer_batches += counted.transfer_batches;
+        tot.transfer_allocations += counted.transfer_allocations;
+        tot.persist_ms += ms_since(t);
+        if let Ok(from_clones) = stored {
+            tot.persisted_from_clone += from_clones;
+        }
+        stored.map(|_| ())
+    }
+
+    /// Serialises BLASes `keyed` (id, key) that this renderer holds, resident or as a host
+    /// clone (others are passed over): each is taken out for the serialise copies and put
+    /// back after, whatever happens. Returns how many came from clones.
+    fn store_held(&mut self, keyed: Vec<(usize, CacheKey)>) -> Result<u64> {
+        let mut taken: Vec<TakenOut> = Vec::with_capacity(keyed.len());
+        for (b, key) in keyed {
             let from = if let Some(a) = self.res.take_blas(b) {
                 Home::Resident(a)
             } else if let Some(c) = self.clones.take(b) {
@@ -541,8 +628,6 @@ impl StreamingRenderer<'_> {
             .iter()
             .filter(|t| matches!(t.from, Home::Clone(_)))
             .count() as u64;
-        // Counted into the totals below, not into a frame: none is rendering.
-        let aside = self.frame.set_stats_aside();
         let todo: Vec<ToStore<'_>> = taken
             .iter()
             .map(|t| ToStore {
@@ -563,24 +648,7 @@ impl StreamingRenderer<'_> {
                 Home::Clone(c) => self.clones.put_back(blas, c),
             }
         }
-        let counted = self.frame.put_stats_back(aside);
-        let tot = &mut self.totals;
-        let count = u64::from(counted.cache_stored);
-        let bytes = counted.cache_stored_bytes;
-        tot.persisted_blases += count;
-        tot.persisted_bytes += bytes;
-        tot.cache_stored += count;
-        tot.cache_stored_bytes += bytes;
-        tot.store_serialize_ms += counted.store_serialize_ms;
-        tot.store_copy_ms += counted.store_copy_ms;
-        tot.store_put_ms += counted.store_put_ms;
-        tot.transfer_batches += counted.transfer_batches;
-        tot.transfer_allocations += counted.transfer_allocations;
-        tot.persist_ms += ms_since(t);
-        if stored.is_ok() {
-            tot.persisted_from_clone += from_clones;
-        }
-        stored
+        stored.map(|()| from_clones)
     }
 
     /// Serialises `todo`: their sizes in one query, then in batches of at most
