@@ -408,6 +408,8 @@ pub(crate) fn render_streaming(
         let cam = camera_at(f);
         // The path's next camera is known: the frame ends with a probe of it (prefetch).
         sr.set_next_camera((f + 1 < frame_count).then(|| camera_at(f + 1)));
+        // The last frame builds nothing for a next one (its image goes out sooner).
+        sr.set_last_frame(f + 1 == frame_count);
         let t = Instant::now();
         let (out, st) = tracing::info_span!("frame", index = f)
             .in_scope(|| sr.render_frame(&cam, &ropts))
