@@ -387,7 +387,7 @@ impl<'a> StreamingRenderer<'a> {
     /// path's end): no prefetch follows its passes (what its guard band saw, or a probe, is
     /// for a frame that will not come). Used by one frame.
     pub fn set_last_frame(&mut self, last: bool) {
-        self.frame.set_last_frame(last);
+        self.frame.last_frame = last;
     }
 
     /// Drains every block it can now (`defrag.rs`), after evicting every other resident

@@ -47,7 +47,7 @@ pub(super) struct FrameState {
     /// The next frame's camera, probed after this frame (`set_next_camera`).
     next_camera: Option<CameraParams>,
     /// The caller renders no frame after this one (`set_last_frame`): no prefetch.
-    last_frame: bool,
+    pub(super) last_frame: bool,
     /// Per BLAS, what the last probe saw (`PROBE_MET`, `PROBE_RESIDENT` bits), kept for the
     /// next frame's first pass to say why it missed what it missed; empty when no probe ran.
     probe_sighting: Vec<u8>,
@@ -159,11 +159,6 @@ impl FrameState {
     /// Names the next frame's camera (see `StreamingRenderer::set_next_camera`).
     pub fn set_next_camera(&mut self, camera: Option<CameraParams>) {
         self.next_camera = camera;
-    }
-
-    /// Says the next frame is the caller's last (see `StreamingRenderer::set_last_frame`).
-    pub fn set_last_frame(&mut self, last: bool) {
-        self.last_frame = last;
     }
 
     /// The current frame's number (frames started so far).
