@@ -2,7 +2,8 @@
 //!
 //! Every triangle BLAS the streamer builds is serialised (Vulkan's `SERIALIZE` copy of the
 //! compacted structure) into a [`motu_ascache::AsCache`]: a byte-bounded LRU in host memory,
-//! written through to a cache directory. Where no writable directory takes them, the host tier
+//! written through to a cache directory; by default when it is evicted, or after the frames
+//! and their image for those still resident, not inside the frame (`cache/store.rs`). Where no writable directory takes them, the host tier
 //! alone would, and only the BLASes whose expected restores save more than their store costs
 //! are serialised (`--stream-host-cache-policy measured`, the rule and its self-measured rates
 //! in `store_policy.rs`). When the BLAS is needed again, after an eviction or in
