@@ -174,7 +174,7 @@ fn print_event(e: motu_render::RenderEvent<'_>, allow_incomplete: bool) {
         RenderEvent::TruncatedWritten { what } => {
             eprintln!("warning: {what}; written anyway (--allow-truncated)");
         }
-        // Written by the caller (`write_image`).
+        // Written by the caller (`ImageOut::write`).
         RenderEvent::Image { .. } => {}
     }
 }
