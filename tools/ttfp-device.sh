@@ -41,7 +41,8 @@ step "report"
 /usr/bin/time -v "$MOTU" report "$PKG" --json --width "$W" --height "$H" >"$OUT/report.json" \
     2>"$OUT/report.time" || die "report failed"
 
-# One process: wall seconds from start to exit (the PNG is its last output), its --stats kept.
+# One process: wall seconds from start to its PNG and to exit (after the PNG: the structure
+# cache persisted, --stats, the cache's queued disk writes), its --stats kept.
 timed() {
     local name=$1
     shift
@@ -55,7 +56,8 @@ timed() {
 import json, os, sys
 st = json.load(open(sys.argv[1]))
 wall = float(sys.argv[4]) - float(sys.argv[3])
-# The PNG's last write (the render commits its outputs, then the cache's queued writes finish).
+# The PNG's write (its mtime): a streamed render writes and commits the image before it persists
+# the structure cache (persist_ms) and writes --stats; then the cache's queued writes finish.
 to_png = os.path.getmtime(sys.argv[5]) - float(sys.argv[3])
 s = st.get("stream") or {}
 up = s.get("startup") or {}

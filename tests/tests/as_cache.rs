@@ -132,7 +132,8 @@ fn a_path_that_returns_restores_from_the_host_cache() {
         t0["rebuilt_bytes"]
     );
     assert!(json_u64(&t1["restored_bytes"]) > 0 && t1["restore_gb_per_s"].as_f64().unwrap() > 0.0);
-    // Unified memory: serialised as built, no clones.
+    // Unified memory: serialised as built (the readback at eviction would take the room the
+    // eviction makes), no clones.
     assert_eq!(t1["host_cache_mode"], "serialize", "{t1}");
     assert_eq!(json_u64(&t1["cloned_blases"]), 0, "{t1}");
     assert_eq!(json_u64(&t1["host_cache_skipped_stores"]), 0, "{t1}");
@@ -352,6 +353,119 @@ fn a_second_process_with_a_warm_cache_rebuilds_nothing_it_cached() {
         );
         f.same_as_reference(&cold_aov);
         f.same_as_reference(&warm_aov);
+    }
+}
+
+/// One still frame (`--frames 1`) streamed at 64×36 under `budget` with a cache directory,
+/// host memory counted apart from the budget as on a discrete GPU (`--stats` beside the AOV).
+fn still(f: &Fixture, name: &str, budget: &str, extra: &[&str]) -> (serde_json::Value, PathBuf) {
+    let aov = f.dir.path().join(format!("{name}.aov"));
+    let mut args = vec![
+        "--width",
+        "64",
+        "--height",
+        "36",
+        "--frames",
+        "1",
+        "--stream",
+        "--vram-budget",
+        budget,
+    ];
+    args.extend(extra);
+    let discrete = [("MOTU_SIMULATE_DISCRETE_MEMORY", "1")];
+    (render_env(&f.pkg, "pipeline", &aov, &args, &discrete), aov)
+}
+
+fn frame0(st: &serde_json::Value) -> &serde_json::Value {
+    &st["stream"]["frames"][0]
+}
+
+/// Entry files' names (their keys) of a cache directory's serialised structures.
+fn entry_names(cache: &Path) -> Vec<String> {
+    let mut out: Vec<String> = entries(cache)
+        .iter()
+        .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+        .collect();
+    out.sort();
+    out
+}
+
+#[test]
+fn a_still_frame_stores_only_evicted_blases_in_frame_and_the_rest_after_its_image() {
+    let Some(f) = Fixture::new() else { return };
+    // A quarter of the peak: the frame evicts structures (some return in later passes).
+    let budget = (f.peak / 4).to_string();
+    // The full build's image of the same camera.
+    let reference = f.dir.path().join("still-reference.aov");
+    render_env(
+        &f.pkg,
+        "pipeline",
+        &reference,
+        &["--width", "64", "--height", "36", "--frames", "1"],
+        &[],
+    );
+    let same = |aov: &Path| {
+        motu_ok(&["compare", s(&reference), s(aov), "--max-mismatch", "0"]);
+    };
+    // As built, inside the frame (`--stream-host-cache serialize`, the behaviour before).
+    let built_dir = f.dir.path().join("cache-as-built");
+    let as_built = [
+        "--as-cache",
+        s(&built_dir),
+        "--stream-host-cache",
+        "serialize",
+    ];
+    let (a, a_aov) = still(&f, "still-as-built", &budget, &as_built);
+    // The default: at eviction, and the rest after the image.
+    let deferred_dir = f.dir.path().join("cache-deferred");
+    let deferred = ["--as-cache", s(&deferred_dir)];
+    let (d, d_aov) = still(&f, "still-deferred", &budget, &deferred);
+    let (fa, fd, td) = (frame0(&a), frame0(&d), totals(&d));
+    eprintln!("as built: {fa}\ndeferred: {fd}\ntotals: {td}");
+    assert_eq!(totals(&a)["host_cache_mode"], "serialize");
+    assert_eq!(td["host_cache_mode"], "deferred", "{td}");
+    assert!(json_u64(&fd["evicted"]) > 0, "the frame evicts: {fd}");
+    // In the frame only evicted BLASes were serialised; those resident at its end after it.
+    let in_frame = json_u64(&fd["cache_stored"]);
+    assert!(in_frame <= json_u64(&fd["evicted"]), "{fd}");
+    assert!(
+        in_frame < json_u64(&fa["cache_stored"]),
+        "fewer stores in the frame: {in_frame} against {}",
+        fa["cache_stored"]
+    );
+    assert!(
+        json_u64(&fd["cache_stored_bytes"]) < json_u64(&fa["cache_stored_bytes"]),
+        "{fd}"
+    );
+    let persisted = json_u64(&td["persisted_blases"]);
+    assert!(
+        persisted > 0 && json_u64(&td["persisted_bytes"]) > 0,
+        "{td}"
+    );
+    assert_eq!(json_u64(&td["cache_stored"]), in_frame + persisted, "{td}");
+    assert_eq!(json_u64(&totals(&a)["persisted_blases"]), 0);
+    // The next process is as warm: the same entries, one per BLAS built.
+    let (na, nd) = (entry_names(&built_dir), entry_names(&deferred_dir));
+    assert_eq!(json_u64(&fd["cache_skipped"]), 0, "{fd}");
+    assert_eq!(
+        nd.len() as u64,
+        json_u64(&td["store_policy"]["built_blases"]),
+        "one entry per BLAS built: {td}"
+    );
+    assert_eq!(na, nd, "the same entries as stored as built");
+    // A second process rebuilds nothing and restores every entry.
+    let (w, w_aov) = still(&f, "still-deferred-warm", &budget, &deferred);
+    let tw = totals(&w);
+    eprintln!("warm: {tw}");
+    assert_eq!(json_u64(&tw["blas_built"]), 0, "nothing rebuilt: {tw}");
+    assert!(
+        json_u64(&w["stream"]["cache"]["disk_hits"]) >= nd.len() as u64,
+        "{}",
+        w["stream"]["cache"]
+    );
+    assert_eq!(json_u64(&tw["persisted_blases"]), 0, "{tw}");
+    for aov in [&a_aov, &d_aov, &w_aov] {
+        same(aov);
     }
 }
 

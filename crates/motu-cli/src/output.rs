@@ -77,7 +77,8 @@ pub fn check_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> any
 /// A command's outputs, all or nothing: checked (as [`check_outputs`]) and their temp files
 /// created before any work, so an unwritable directory fails before the work and before any
 /// target is touched; written into the temp files; renamed into place only when every one is
-/// written and fsynced ([`commit`](Self::commit)). Dropped uncommitted (an error, a full disk),
+/// written and fsynced ([`commit`](Self::commit); a group of them may go first,
+/// [`commit_some`](Self::commit_some)). Dropped uncommitted (an error, a full disk),
 /// every temp file is removed and every target keeps its old contents.
 pub struct Outputs {
     files: Vec<(String, std::path::PathBuf, motu_package::atomic::AtomicFile)>,
@@ -124,6 +125,21 @@ impl Outputs {
         let png = motu_trace::encode_png(width, height, rgba8)
             .with_context(|| format!("encoding {}", path.display()))?;
         self.write(path, &png)
+    }
+
+    /// Renames the outputs `paths` into place now (each written and fsynced by `write`), the
+    /// others staying for [`commit`](Self::commit): a render's image before its slower
+    /// bookkeeping. A failure leaves those not renamed yet for the drop to remove.
+    pub fn commit_some(&mut self, paths: &[&Path]) -> anyhow::Result<()> {
+        let (now, rest): (Vec<_>, Vec<_>) = std::mem::take(&mut self.files)
+            .into_iter()
+            .partition(|(_, p, _)| paths.contains(&p.as_path()));
+        self.files = rest;
+        for (option, path, f) in now {
+            f.commit()
+                .with_context(|| format!("writing {option} {}", path.display()))?;
+        }
+        Ok(())
     }
 
     /// Renames every output into place (each was written and fsynced by `write`).

@@ -383,6 +383,13 @@ impl<'a> StreamingRenderer<'a> {
         self.frame.set_next_camera(camera);
     }
 
+    /// Says whether the next [`Self::render_frame`] is the caller's last (a still frame, a
+    /// path's end): no prefetch follows its passes (what its guard band saw, or a probe, is
+    /// for a frame that will not come). Used by one frame.
+    pub fn set_last_frame(&mut self, last: bool) {
+        self.frame.last_frame = last;
+    }
+
     /// Drains every block it can now (`defrag.rs`), after evicting every other resident
     /// streamed BLAS when `thin_out` (free ranges inside the blocks). Tests: the next frame
     /// must be unchanged.

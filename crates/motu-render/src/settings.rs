@@ -2,6 +2,7 @@
 //! while it runs.
 
 use crate::{Backend, ShadingOptions, StreamBounds};
+use motu_abi::aov::Aov;
 use motu_abi::lod::LodParams;
 
 /// One render's settings: the backend, what it draws, the device and its budget, and for
@@ -96,4 +97,9 @@ pub enum RenderEvent<'a> {
     StreamFullBuild { budget_bytes: u64, upper_bytes: u64 },
     /// The full build chosen for `--stream` did not fit after all (`what`): streamed instead.
     StreamFullBuildRefused { what: &'a str },
+    /// A streamed render's final image (no denoising or check left to change or refuse it),
+    /// before the streamer writes its structures to the cache directory for the next process
+    /// (`persist_cache`, seconds at scale): the caller may write it now. The same image comes
+    /// back in [`Rendered`](crate::Rendered).
+    Image { aov: &'a Aov, rgba8: &'a [u8] },
 }

@@ -408,6 +408,8 @@ pub(crate) fn render_streaming(
         let cam = camera_at(f);
         // The path's next camera is known: the frame ends with a probe of it (prefetch).
         sr.set_next_camera((f + 1 < frame_count).then(|| camera_at(f + 1)));
+        // The last frame builds nothing for a next one (its image goes out sooner).
+        sr.set_last_frame(f + 1 == frame_count);
         let t = Instant::now();
         let (out, st) = tracing::info_span!("frame", index = f)
             .in_scope(|| sr.render_frame(&cam, &ropts))
@@ -461,13 +463,24 @@ pub(crate) fn render_streaming(
         frames.push(st);
         last = Some((out, cam));
     }
-    // The cache leaves with the image (its queued directory writes finish after the outputs).
-    // With host clones nothing was serialised while rendering: taking the cache writes this
-    // run's structures to the directory first, once, after the frames and before the totals
-    // below count them (a failure is a warning: a cache never fails a render).
-    let cache = tracing::info_span!("persist_cache").in_scope(|| sr.take_cache());
     let (out, last_camera) = last.ok_or(RenderError::NoFrame)?;
     let written = frames.last();
+    // The image goes out before the structures are persisted, where nothing after this changes
+    // or refuses it (`--denoise` filters it; a cut ray refuses it unless allowed: session.rs).
+    let truncated = written.map_or(0, |f| f.truncated_rays) > 0 || out.stats.stack_overflows > 0;
+    let denoised = s.denoise && matches!(s.view, motu_gpu::View::Shaded);
+    if !denoised && (!truncated || s.limits.allow_truncated) {
+        progress(RenderEvent::Image {
+            aov: &out.aov,
+            rgba8: &out.rgba8,
+        });
+    }
+    // The cache leaves with the image (its queued directory writes finish after the outputs).
+    // Structures are serialised at eviction by default and not at all with host clones:
+    // taking the cache writes this run's remaining structures to the directory, once, after
+    // the image and before the totals below count them (a failure is a warning: a cache never
+    // fails a render).
+    let cache = tracing::info_span!("persist_cache").in_scope(|| sr.take_cache());
     let after_first: Vec<f64> = frames.iter().skip(1).map(|f| f64::from(f.passes)).collect();
     let stats = PathStats {
         // The last frame is the image written: its cut rays decide (render's common check).

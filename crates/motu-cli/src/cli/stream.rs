@@ -160,9 +160,11 @@ pub struct StreamBoundArgs {
     /// return. `serialize`: every BLAS built is serialised into host memory and the cache
     /// directory as it is built; `clone`: the device copies an evicted BLAS into host memory
     /// and back (no host work; the directory is written after the frames); `auto` (default):
-    /// serialize, measured faster on an H100 (island 0.63 at 8 GiB, cold: 25.4 s to the PNG
-    /// against 37.2 s; warm 19.7 against 25.0 s). --stats: stream.totals.host_cache_mode,
-    /// cloned_blases, restored_from_clone, persisted_blases, persist_ms.
+    /// serialised, measured faster on an H100 (island 0.63 at 8 GiB, cold: 25.4 s to the PNG
+    /// against 37.2 s; warm 19.7 against 25.0 s), but when a BLAS is evicted, and those
+    /// resident after the last frame after the image is written (`serialize` where host
+    /// memory counts against the budget). --stats: stream.totals.host_cache_mode, cloned_blases,
+    /// restored_from_clone, persisted_blases, persisted_bytes, persist_ms.
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, default_value = "auto")]
     pub stream_host_cache: HostCacheArg,
     /// Streaming: which built BLASes the serialised host tier (`--host-cache`) stores for

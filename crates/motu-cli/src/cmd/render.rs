@@ -174,6 +174,40 @@ fn print_event(e: motu_render::RenderEvent<'_>, allow_incomplete: bool) {
         RenderEvent::TruncatedWritten { what } => {
             eprintln!("warning: {what}; written anyway (--allow-truncated)");
         }
+        // Written by the caller (`ImageOut::write`).
+        RenderEvent::Image { .. } => {}
+    }
+}
+
+/// The image outputs (`-o`, `--aov`) of a render, written and committed together: as soon as
+/// a streamed render has its final image (before its structure cache is persisted), else
+/// after the render. `--stats` is committed after the render.
+struct ImageOut<'a> {
+    png: &'a std::path::Path,
+    aov: Option<&'a std::path::Path>,
+    width: u32,
+    height: u32,
+    /// The write's milliseconds, once written (`stream.startup.write_ms`), or its error.
+    written: Option<anyhow::Result<f64>>,
+}
+
+impl ImageOut<'_> {
+    fn write(&mut self, outs: &mut output::Outputs, aov: &Aov, rgba8: &[u8]) {
+        if self.written.is_some() {
+            return;
+        }
+        let t = std::time::Instant::now();
+        let r = (|| -> anyhow::Result<f64> {
+            outs.write_png(self.png, self.width, self.height, rgba8)?;
+            if let Some(p) = self.aov {
+                outs.write(p, &aov.to_bytes())?;
+            }
+            let mut paths = vec![self.png];
+            paths.extend(self.aov);
+            outs.commit_some(&paths)?;
+            Ok(t.elapsed().as_secs_f64() * 1e3)
+        })();
+        self.written = Some(r);
     }
 }
 
@@ -182,8 +216,9 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
     let mut outputs = vec![("-o", a.output.as_path())];
     outputs.extend(a.aov.as_deref().map(|p| ("--aov", p)));
     outputs.extend(a.stats.as_deref().map(|p| ("--stats", p)));
-    // Every output is checked and its temp file created before any work; none is renamed into
-    // place until all are written (a failed AOV never leaves a new PNG beside an old AOV).
+    // Every output is checked and its temp file created before any work; the image's (PNG and
+    // AOV) are renamed into place together once both are written (a failed AOV never leaves a
+    // new PNG beside an old AOV), `--stats` after the render.
     let mut outs = output::Outputs::begin(&[("package", &a.package)], &outputs)?;
     if let Some(p) = &a.camera_path {
         output::check_input("--camera-path", p, Some(CAMERA_PATH_MAX_BYTES))?;
@@ -331,17 +366,26 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
         lod: &lod_choice,
         started: Some(started),
     };
-    let mut out = motu_render::render(&job, &settings, &mut |e| print_event(e, a.allow_incomplete))
+    let mut image = ImageOut {
+        png: &a.output,
+        aov: a.aov.as_deref(),
+        width: camera.width,
+        height: camera.height,
+        written: None,
+    };
+    let rendered = motu_render::render(&job, &settings, &mut |e| match e {
+        // A streamed image is written before the structure cache is persisted (seconds).
+        motu_render::RenderEvent::Image { aov, rgba8 } => image.write(&mut outs, aov, rgba8),
+        e => print_event(e, a.allow_incomplete),
+    });
+    let mut out = rendered
         .map_err(|e| below_floor_hint(e, &a, &pkg))
         .map_err(|e| package_changed_hint(e, &a.package, &opened))?;
-    let written = std::time::Instant::now();
-    outs.write_png(&a.output, camera.width, camera.height, &out.rgba8)?;
-    if let Some(p) = &a.aov {
-        outs.write(p, &out.aov.to_bytes())?;
-    }
+    image.write(&mut outs, &out.aov, &out.rgba8);
+    let write_ms = image.written.take().expect("written above")?;
     if let Some(stream) = &mut out.stats.stream {
         // The image's write closes the time to first pixel the render measured.
-        stream.startup.write_ms = Some(written.elapsed().as_secs_f64() * 1e3);
+        stream.startup.write_ms = Some(write_ms);
     }
     if let Some(p) = &a.stats {
         outs.write(p, serde_json::to_string_pretty(&out.stats)?.as_bytes())?;

@@ -2,7 +2,8 @@
 //!
 //! Every triangle BLAS the streamer builds is serialised (Vulkan's `SERIALIZE` copy of the
 //! compacted structure) into a [`motu_ascache::AsCache`]: a byte-bounded LRU in host memory,
-//! written through to a cache directory. Where no writable directory takes them, the host tier
+//! written through to a cache directory; by default when it is evicted, or after the frames
+//! and their image for those still resident, not inside the frame (`cache/store.rs`). Where no writable directory takes them, the host tier
 //! alone would, and only the BLASes whose expected restores save more than their store costs
 //! are serialised (`--stream-host-cache-policy measured`, the rule and its self-measured rates
 //! in `store_policy.rs`). When the BLAS is needed again, after an eviction or in
@@ -27,10 +28,10 @@ use std::time::Instant;
 
 use motu_abi::blob::{BlobReader, BlobWriter};
 use motu_ascache::{AsCache, CacheKey, CacheKeyBuilder, CacheStats, Tier, SERIALIZED_HEADER_BYTES};
-use motu_vk::{AsLevel, HeapBuffer, SerializedHeader, SizeQueries, SERIALIZED_ALIGNMENT};
+use motu_vk::{AsLevel, HeapBuffer, SerializedHeader, SERIALIZED_ALIGNMENT};
 use rayon::prelude::*;
 
-use super::clones::{HostCacheMode, Restored, TakenClone};
+use super::clones::{HostCacheMode, Restored};
 use super::proxy_boxes::{self, Box6};
 use super::skeleton::ms_since;
 use super::store_policy::{self, HostStorePolicy, StoreEstimator, StorePolicyStats};
@@ -91,42 +92,11 @@ struct Attached {
     driver: String,
 }
 
-/// A built BLAS to serialise into the cache under `key`.
-struct ToStore<'s> {
-    /// Its id (`debug` logs name it).
-    blas: usize,
-    accel: &'s AccelStruct,
-    key: CacheKey,
-}
-
 /// A cache entry found for BLAS `blas`: its serialised structure and that blob's header.
 struct Hit {
     blas: usize,
     blob: Arc<[u8]>,
     header: SerializedHeader,
-}
-
-/// A BLAS [`StreamingRenderer::persist_cache`] took out of the renderer to serialise, and
-/// where it goes back.
-struct TakenOut {
-    blas: usize,
-    key: CacheKey,
-    from: Home,
-}
-
-/// Where a taken-out BLAS lives: resident, or a host clone with its recency.
-enum Home {
-    Resident(AccelStruct),
-    Clone(TakenClone),
-}
-
-impl Home {
-    fn accel(&self) -> &AccelStruct {
-        match self {
-            Home::Resident(a) => a,
-            Home::Clone(c) => c.accel(),
-        }
-    }
 }
 
 /// Keys' format: bump when what a key covers changes.
@@ -186,13 +156,17 @@ impl StreamingRenderer<'_> {
             HostCacheMode::Serialize => false,
             // Serialised: on an H100 (island 0.63 at 8 GiB, one warm machine) a cold start took
             // 25.4 s to the PNG serialising and 37.2 s cloning (clones into host memory ran at
-            // ~4 GB/s at eviction), a warm one 19.7 against 25.0 s (BENCHMARKS.md, session 34).
+            // ~4 GB/s at eviction), a warm one 19.7 against 25.0 s (BENCHMARKS.md, session 34);
+            // at eviction and after the frames (`stores_deferred`).
             HostCacheMode::Auto => false,
         };
-        self.totals.host_cache_mode = match (host_bytes, clone) {
-            (0, _) => "off",
-            (_, true) => "clone",
-            (_, false) => "serialize",
+        let auto = self.opts.host_cache_mode == HostCacheMode::Auto
+            && !self.heap.host_visible_counts_against_budget();
+        self.totals.host_cache_mode = match (host_bytes, clone, auto) {
+            (0, _, _) => "off",
+            (_, true, _) => "clone",
+            (_, false, true) => "deferred",
+            (_, false, false) => "serialize",
         };
         if clone && host_bytes > 0 {
             // The host's bytes go to clones; serialised blobs then only pass through to the
@@ -439,238 +413,6 @@ impl StreamingRenderer<'_> {
             }
         }
     }
-
-    /// Serialises the newly built BLASes of `built` into the cache (those it does not hold
-    /// yet, and, where only the host tier would keep them, those the store rule says pay:
-    /// `store_policy.rs`). A cache that cannot take them (no room for the readback) is
-    /// skipped, counted.
-    pub(super) fn store_built(&mut self, built: &[(usize, AccelStruct)]) -> Result<()> {
-        // With host clones the directory is written after the frames (`persist_cache`).
-        if self.reuse.cache.is_none() || built.is_empty() || self.clones.on() {
-            return Ok(());
-        }
-        let t = Instant::now();
-        let ruled = self.store_rule_applies();
-        let mut todo: Vec<ToStore<'_>> = Vec::new();
-        for (b, accel) in built {
-            let Some(key) = self.blas_key(*b) else {
-                continue;
-            };
-            let held = self.reuse.cache.as_ref().expect("attached");
-            if held.cache.cache.contains(&key).is_some() {
-                continue;
-            }
-            let est = &self.reuse.estimates;
-            if ruled && !est.should_store(accel.size_bytes, est.returned_before(*b)) {
-                let st = self.frame.stats_mut();
-                st.host_cache_skipped_stores += 1;
-                st.host_cache_skipped_store_bytes += accel.size_bytes;
-                continue;
-            }
-            todo.push(ToStore {
-                blas: *b,
-                accel,
-                key,
-            });
-        }
-        if todo.is_empty() {
-            return Ok(());
-        }
-        self.store_some(&todo)?;
-        let bytes = todo.iter().map(|t| t.accel.size_bytes).sum();
-        self.reuse
-            .estimates
-            .store
-            .add(todo.len() as u64, bytes, ms_since(t));
-        self.frame.stats_mut().cache_store_ms += ms_since(t);
-        Ok(())
-    }
-
-    /// Whether the store rule decides what [`Self::store_built`] stores: with the `measured`
-    /// policy, unless a writable cache directory takes every BLAS (for the next process).
-    fn store_rule_applies(&self) -> bool {
-        let disk_writable = self
-            .reuse
-            .cache
-            .as_ref()
-            .is_some_and(|a| a.cache.cache.disk().is_some_and(|d| d.writable()));
-        self.reuse.policy == HostStorePolicy::Measured && !disk_writable
-    }
-
-    /// Writes to the cache directory, serialised, every BLAS this renderer holds (resident or
-    /// as a host clone) that the cache lacks: with host clones (`clones.rs`) nothing is
-    /// serialised while frames render, so a caller that wants the next process warm calls
-    /// this after its last frame (the viewer at exit), or takes the cache
-    /// ([`Self::take_cache`] calls this once: `motu render` after the frames). Counted
-    /// in [`StreamTotals`](super::StreamTotals) (`persisted_*`). Without clones the blobs were
-    /// stored as they were built and this does nothing.
-    pub fn persist_cache(&mut self) -> Result<()> {
-        let writable = self
-            .reuse
-            .cache
-            .as_ref()
-            .is_some_and(|a| a.cache.cache.disk().is_some_and(|d| d.writable()));
-        if !self.clones.on() || !writable {
-            return Ok(());
-        }
-        let t = Instant::now();
-        let n = self.view.blases.len();
-        // Taken out for the serialise copies and put back after, whatever happens.
-        let mut taken: Vec<TakenOut> = Vec::new();
-        for b in 0..n {
-            if !self.topo.buildable(b) {
-                continue;
-            }
-            let Some(key) = self.blas_key(b) else {
-                continue;
-            };
-            let held = self.reuse.cache.as_ref().expect("attached");
-            if held.cache.cache.contains(&key).is_some() {
-                continue;
-            }
-            let from = if let Some(a) = self.res.take_blas(b) {
-                Home::Resident(a)
-            } else if let Some(c) = self.clones.take(b) {
-                Home::Clone(c)
-            } else {
-                continue;
-            };
-            taken.push(TakenOut { blas: b, key, from });
-        }
-        let from_clones = taken
-            .iter()
-            .filter(|t| matches!(t.from, Home::Clone(_)))
-            .count() as u64;
-        // Counted into the totals below, not into a frame: none is rendering.
-        let aside = self.frame.set_stats_aside();
-        let todo: Vec<ToStore<'_>> = taken
-            .iter()
-            .map(|t| ToStore {
-                blas: t.blas,
-                accel: t.from.accel(),
-                key: t.key,
-            })
-            .collect();
-        let stored = if todo.is_empty() {
-            Ok(())
-        } else {
-            self.store_some(&todo)
-        };
-        drop(todo);
-        for TakenOut { blas, from, .. } in taken {
-            match from {
-                Home::Resident(a) => self.res.put_back_blas(blas, a),
-                Home::Clone(c) => self.clones.put_back(blas, c),
-            }
-        }
-        let counted = self.frame.put_stats_back(aside);
-        let tot = &mut self.totals;
-        let count = u64::from(counted.cache_stored);
-        let bytes = counted.cache_stored_bytes;
-        tot.persisted_blases += count;
-        tot.persisted_bytes += bytes;
-        tot.cache_stored += count;
-        tot.cache_stored_bytes += bytes;
-        tot.store_serialize_ms += counted.store_serialize_ms;
-        tot.store_copy_ms += counted.store_copy_ms;
-        tot.store_put_ms += counted.store_put_ms;
-        tot.transfer_batches += counted.transfer_batches;
-        tot.transfer_allocations += counted.transfer_allocations;
-        tot.persist_ms += ms_since(t);
-        if stored.is_ok() {
-            tot.persisted_from_clone += from_clones;
-        }
-        stored
-    }
-
-    /// Serialises `todo`: their sizes in one query, then in batches of at most
-    /// [`TRANSFER_CAP_BYTES`] (see `transfer.rs`).
-    fn store_some(&mut self, todo: &[ToStore<'_>]) -> Result<()> {
-        let ctx = self.ctx.clone();
-        let t = Instant::now();
-        let queries = SizeQueries::serialization(&ctx, todo.len() as u32)?;
-        let targets: Vec<_> = todo.iter().map(|t| t.accel.target()).collect();
-        let mut rec = ctx.record("serialised sizes")?;
-        rec.barrier();
-        rec.write_serialization_sizes(&targets, &queries)?;
-        rec.submit_and_wait()?;
-        let sizes = queries.read(todo.len() as u32)?;
-        self.frame.stats_mut().store_serialize_ms += ms_since(t);
-        self.store_sized(todo, &sizes)
-    }
-
-    /// Serialises `todo` (serialised sizes `sizes`) in one readback; above the transfer cap,
-    /// or where the budget has no room for it, in halves (a single structure that does not fit
-    /// is skipped, counted).
-    fn store_sized(&mut self, todo: &[ToStore<'_>], sizes: &[u64]) -> Result<()> {
-        let ctx = self.ctx.clone();
-        let t = Instant::now();
-        let align = |v: u64| v.div_ceil(SERIALIZED_ALIGNMENT) * SERIALIZED_ALIGNMENT;
-        let total: u64 = sizes.iter().map(|&s| align(s)).sum();
-        let halves = |s: &mut Self| -> Result<()> {
-            let k = todo.len() / 2;
-            s.store_sized(&todo[..k], &sizes[..k])?;
-            s.store_sized(&todo[k..], &sizes[k..])
-        };
-        if total > TRANSFER_CAP_BYTES && todo.len() > 1 {
-            return halves(self);
-        }
-        let readback = match self.transfer_buffer(Transfer::Readback, total) {
-            Ok(buf) => buf,
-            Err(motu_vk::VkError::Budget(why)) if todo.len() > 1 => {
-                tracing::debug!(%why, n = todo.len(), "structure cache: serialising in halves");
-                return halves(self);
-            }
-            Err(motu_vk::VkError::Budget(why)) => {
-                // The cache is an optimisation: no room to read back is a skip, not a failure.
-                let blas = todo.first().map(|t| t.blas);
-                tracing::debug!(%why, ?blas, "structure cache: no room to serialise; not cached");
-                self.frame.stats_mut().cache_skipped += 1;
-                return Ok(());
-            }
-            Err(e) => return Err(e.into()),
-        };
-        let result = (|| -> Result<Vec<Arc<[u8]>>> {
-            let base = readback.device_address()?;
-            let mut rec = ctx.record("serialise blases")?;
-            let mut at = 0u64;
-            let mut offsets = Vec::with_capacity(todo.len());
-            for (t, &size) in todo.iter().zip(sizes) {
-                rec.serialize_acceleration_structure(t.accel.target(), base.offset(at))?;
-                offsets.push(at);
-                at += align(size);
-            }
-            rec.barrier();
-            rec.submit_and_wait()?;
-            self.frame.stats_mut().store_serialize_ms += ms_since(t);
-            let copy = Instant::now();
-            // Each blob copied once, straight into the shared allocation the cache keeps (no
-            // zero fill), on all cores: one thread's reads of pinned memory held storing to
-            // about 1 GB/s.
-            let blobs = readback.with_mapped_mut(0, at as usize, |bytes| {
-                let bytes: &[u8] = bytes;
-                offsets
-                    .par_iter()
-                    .zip(sizes)
-                    .map(|(&off, &size)| Arc::<[u8]>::from(&bytes[off as usize..][..size as usize]))
-                    .collect::<Vec<_>>()
-            })?;
-            self.frame.stats_mut().store_copy_ms += ms_since(copy);
-            Ok(blobs)
-        })();
-        self.put_back_transfer(Transfer::Readback, readback);
-        let blobs = result?;
-        let put = Instant::now();
-        let a = self.reuse.cache.as_mut().expect("attached");
-        let st = self.frame.stats_mut();
-        for (t, blob) in todo.iter().zip(blobs) {
-            st.cache_stored_bytes += blob.len() as u64;
-            st.cache_stored += 1;
-            a.cache.cache.put(t.key, blob);
-        }
-        self.frame.stats_mut().store_put_ms += ms_since(put);
-        Ok(())
-    }
 }
 
 /// The first bytes of a proxy-box table's cache entry: where a serialised structure has its
@@ -766,5 +508,6 @@ impl StreamingRenderer<'_> {
     }
 }
 
+mod store;
 #[cfg(test)]
 mod tests;

@@ -32,15 +32,20 @@ use crate::scene::AccelStruct;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum HostCacheMode {
     /// Serialised (measured faster than clones on an H100, island 0.63: BENCHMARKS.md, session
-    /// 34); kept apart from `Serialize` so the policy can follow later measurements.
+    /// 34), but not inside the frame where no pass needs it: a BLAS is serialised when it is
+    /// evicted (a later pass may restore it), and the ones resident after the last frame are
+    /// written to the cache directory after the image
+    /// ([`StreamingRenderer::persist_cache`](super::StreamingRenderer::persist_cache)), so a
+    /// still frame's cold start does not store its structures before its pixels.
     #[default]
     Auto,
     /// Device-side clones in host memory (outside the budget only on a discrete GPU; on unified
     /// memory a clone takes the room its eviction made).
     Clone,
     /// Serialised copies (`vkCmdCopyAccelerationStructureToMemoryKHR`) of the BLASes built, in
-    /// host memory and written through to the cache directory as they are built (every one
-    /// where a directory is written; else those the store rule picks, `store_policy.rs`).
+    /// host memory and written through to the cache directory as they are built, inside the
+    /// frame (every one where a directory is written; else those the store rule picks,
+    /// `store_policy.rs`): the behaviour before `Auto` deferred them.
     Serialize,
 }
 
@@ -166,12 +171,14 @@ impl HostClones {
 }
 
 impl StreamingRenderer<'_> {
-    /// Before BLASes `victims` are evicted: clones into host memory those resident without a
-    /// clone yet, in one submission. A clone that does not fit (host memory refused, or larger
-    /// than the bound) is skipped, counted: the BLAS is rebuilt when it returns.
-    pub(super) fn clone_out(&mut self, victims: &[usize]) -> Result<()> {
+    /// Before BLASes `victims` are evicted: keeps them for their return. With clones, clones
+    /// into host memory those resident without a clone yet, in one submission (a clone that
+    /// does not fit, host memory refused or larger than the bound, is skipped, counted: the
+    /// BLAS is rebuilt when it returns); else serialises them into the structure cache where
+    /// stores wait for eviction (`cache.rs`, `store_evicted`).
+    pub(super) fn keep_evicted(&mut self, victims: &[usize]) -> Result<()> {
         if !self.clones.on() {
-            return Ok(());
+            return self.store_evicted(victims);
         }
         let t = Instant::now();
         let todo: Vec<usize> = victims

@@ -46,6 +46,8 @@ pub(super) struct FrameState {
     keeps_frame: bool,
     /// The next frame's camera, probed after this frame (`set_next_camera`).
     next_camera: Option<CameraParams>,
+    /// The caller renders no frame after this one (`set_last_frame`): no prefetch.
+    pub(super) last_frame: bool,
     /// Per BLAS, what the last probe saw (`PROBE_MET`, `PROBE_RESIDENT` bits), kept for the
     /// next frame's first pass to say why it missed what it missed; empty when no probe ran.
     probe_sighting: Vec<u8>,
@@ -261,6 +263,7 @@ impl FrameState {
             pass_first_stamp: 1,
             keeps_frame: false,
             next_camera: None,
+            last_frame: false,
             probe_sighting: Vec::new(),
             probe_need: Default::default(),
             tracer: None,
@@ -318,6 +321,7 @@ impl<'a> StreamingRenderer<'a> {
         let guard = guard_pixels(w, h, self.opts.guard_band_px);
         let fb = self.prepare_frame_buffers(camera, opts, guard.len())?;
         let next = self.frame.next_camera.take();
+        let last = std::mem::take(&mut self.frame.last_frame);
         let result = self.run_passes(&fb, w, h, &guard).and_then(|image| {
             // A camera at rest after a one-pass frame: its next frame needs what this one had
             // resident at once, so a probe would only find it again.
@@ -355,7 +359,10 @@ impl<'a> StreamingRenderer<'a> {
         });
         self.measure_working_set();
         let guard_demand = std::mem::take(&mut image.guard_demand);
-        self.prefetch_after_frame(guard_demand, probe, opts)?;
+        // No frame follows the last: what the guard band saw would be built for none.
+        if !last {
+            self.prefetch_after_frame(guard_demand, probe, opts)?;
+        }
         self.note_pass_marks();
         let report = self.heap.report();
         self.frame.stats.frame_ms = frame_t0.elapsed().as_secs_f64() * 1e3;

@@ -267,7 +267,7 @@ impl<'a> StreamingRenderer<'a> {
                         given += self.res.blas_bytes(b as usize);
                         self.frame.stats_mut().deferred += 1;
                         if self.res.holds(b) {
-                            self.clone_out(&[b as usize])?;
+                            self.keep_evicted(&[b as usize])?;
                             self.evict(b as usize);
                             self.frame.stats_mut().evicted -= 1;
                         }
@@ -286,7 +286,7 @@ impl<'a> StreamingRenderer<'a> {
                     };
                     self.frame.stats_mut().deferred += 1;
                     if self.res.holds(last) {
-                        self.clone_out(&[last as usize])?;
+                        self.keep_evicted(&[last as usize])?;
                         self.evict(last as usize);
                         // Given back, not evicted for room: count it as deferred only.
                         self.frame.stats_mut().evicted -= 1;

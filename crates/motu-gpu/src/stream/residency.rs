@@ -356,8 +356,9 @@ impl<'a> StreamingRenderer<'a> {
             "evicting (BLAS, last seen)"
         );
         let ids: Vec<usize> = victims.iter().map(|v| v.0 as usize).collect();
-        // Kept in host memory first (`clones.rs`), so a return is a copy, not a build.
-        self.clone_out(&ids)?;
+        // Kept first (a host clone, `clones.rs`, or serialised, `cache.rs`), so a return is a
+        // copy, not a build.
+        self.keep_evicted(&ids)?;
         for b in ids {
             self.evict(b);
         }

@@ -125,8 +125,9 @@ pub struct FrameStreamStats {
     /// their structure bytes: what a cache saves.
     pub rebuilt_blases: u32,
     pub rebuilt_bytes: u64,
-    /// BLASes serialised into the structure cache after their builds, the bytes, the time
-    /// (part of `build_ms`), and those skipped for want of room to read them back.
+    /// BLASes serialised into the structure cache in the frame (at eviction by default; after
+    /// their builds with `--stream-host-cache serialize`), the bytes, the time (part of
+    /// `build_ms`), and those skipped for want of room to read them back.
     pub cache_stored: u32,
     pub cache_stored_bytes: u64,
     pub cache_store_ms: f64,
@@ -380,7 +381,8 @@ pub struct StreamTotals {
     pub transfer_batches: u32,
     pub transfer_allocations: u32,
     /// How evicted BLASes were kept in host memory: "clone" (device-side clones, `clones.rs`),
-    /// "serialize" (serialised as built), "off" (no host bytes), "" (no cache attached).
+    /// "deferred" (serialised at eviction and after the frames, the default), "serialize"
+    /// (serialised as built), "off" (no host bytes), "" (no cache attached).
     pub host_cache_mode: &'static str,
     /// Over all frames (as [`FrameStreamStats`]): clones made, their bytes and time, and the
     /// BLASes cloned back; the clones' bytes held after the last frame.
@@ -389,8 +391,8 @@ pub struct StreamTotals {
     pub clone_ms: f64,
     pub restored_from_clone: u64,
     pub host_clone_bytes: u64,
-    /// Written to the cache directory after the frames (`persist_cache`, with host clones):
-    /// BLASes, serialised bytes, milliseconds.
+    /// Written to the cache directory after the frames (`persist_cache`: the structures still
+    /// resident, and with host clones the clones): BLASes, serialised bytes, milliseconds.
     pub persisted_blases: u64,
     pub persisted_bytes: u64,
     pub persist_ms: f64,
