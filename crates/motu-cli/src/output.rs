@@ -78,10 +78,15 @@ pub fn check_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> any
 /// created before any work, so an unwritable directory fails before the work and before any
 /// target is touched; written into the temp files; renamed into place only when every one is
 /// written and fsynced ([`commit`](Self::commit); a group of them may go first,
-/// [`commit_some`](Self::commit_some)). Dropped uncommitted (an error, a full disk),
-/// every temp file is removed and every target keeps its old contents.
+/// [`commit_some`](Self::commit_some), their old contents kept until then). Dropped
+/// uncommitted (an error, a full disk), every temp file is removed and every target keeps (or
+/// gets back) its old contents.
 pub struct Outputs {
     files: Vec<(String, std::path::PathBuf, motu_package::atomic::AtomicFile)>,
+    /// Outputs renamed into place early ([`commit_some`](Self::commit_some)), each with a hard
+    /// link to the target's old contents (`None`: there was none), put back if the command
+    /// fails before [`commit`](Self::commit): all or nothing still holds.
+    early: Vec<(std::path::PathBuf, Option<std::path::PathBuf>)>,
 }
 
 impl Outputs {
@@ -98,7 +103,10 @@ impl Outputs {
             })?;
             files.push((option.to_string(), path.to_path_buf(), f));
         }
-        Ok(Outputs { files })
+        Ok(Outputs {
+            files,
+            early: Vec::new(),
+        })
     }
 
     /// Writes the whole contents of the output `path` (one of those given to `begin`).
@@ -129,27 +137,103 @@ impl Outputs {
 
     /// Renames the outputs `paths` into place now (each written and fsynced by `write`), the
     /// others staying for [`commit`](Self::commit): a render's image before its slower
-    /// bookkeeping. A failure leaves those not renamed yet for the drop to remove.
-    pub fn commit_some(&mut self, paths: &[&Path]) -> anyhow::Result<()> {
+    /// bookkeeping. Each target's old contents are kept as a hard link beside it until the
+    /// final commit, and put back if the command fails before it (the drop). Returns false,
+    /// renaming nothing, where such a link cannot be made (the final commit renames them).
+    pub fn commit_some(&mut self, paths: &[&Path]) -> anyhow::Result<bool> {
+        let mut backups = Vec::new();
+        for &path in paths {
+            match backup_of(path) {
+                Ok(b) => backups.push((path.to_path_buf(), b)),
+                Err(e) => {
+                    tracing::debug!(path = %path.display(), %e, "no early commit: cannot keep the old file");
+                    for (_, b) in backups {
+                        if let Some(b) = b {
+                            let _ = std::fs::remove_file(b);
+                        }
+                    }
+                    return Ok(false);
+                }
+            }
+        }
         let (now, rest): (Vec<_>, Vec<_>) = std::mem::take(&mut self.files)
             .into_iter()
             .partition(|(_, p, _)| paths.contains(&p.as_path()));
         self.files = rest;
+        // Recorded before the renames: a failure puts back whatever was renamed.
+        self.early.extend(backups);
         for (option, path, f) in now {
             f.commit()
                 .with_context(|| format!("writing {option} {}", path.display()))?;
         }
-        Ok(())
+        Ok(true)
     }
 
     /// Renames every output into place (each was written and fsynced by `write`).
-    pub fn commit(self) -> anyhow::Result<()> {
-        for (option, path, f) in self.files {
+    pub fn commit(mut self) -> anyhow::Result<()> {
+        for (option, path, f) in std::mem::take(&mut self.files) {
             f.commit()
                 .with_context(|| format!("writing {option} {}", path.display()))?;
         }
+        for (_, backup) in std::mem::take(&mut self.early) {
+            if let Some(b) = backup {
+                let _ = std::fs::remove_file(b);
+            }
+        }
         Ok(())
     }
+}
+
+impl Drop for Outputs {
+    /// Uncommitted: the outputs renamed early get their old contents back (or are removed
+    /// where there were none); the temp files of the others are removed by their own drops.
+    fn drop(&mut self) {
+        for (path, backup) in std::mem::take(&mut self.early) {
+            let r = match &backup {
+                Some(b) => std::fs::rename(b, &path),
+                None => std::fs::remove_file(&path),
+            };
+            if let Err(e) = r {
+                eprintln!(
+                    "warning: {}: could not restore its old contents: {e}",
+                    path.display()
+                );
+            }
+        }
+    }
+}
+
+/// A hard link to `target`'s current contents beside it, named as a motu temp file of this
+/// process (`.NAME.PID.oldN.motu-tmp`: a later write removes it if this process dies), or
+/// `None` where the target does not exist.
+fn backup_of(target: &Path) -> std::io::Result<Option<std::path::PathBuf>> {
+    match std::fs::symlink_metadata(target) {
+        Ok(m) if m.is_file() => {}
+        Ok(_) => {
+            return Err(std::io::Error::other("not a regular file"));
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(e),
+    }
+    let name = target
+        .file_name()
+        .ok_or_else(|| std::io::Error::other("no file name"))?
+        .to_string_lossy()
+        .into_owned();
+    let dir = motu_package::atomic::parent_dir(target);
+    for n in 0..64 {
+        let b = dir.join(format!(
+            ".{name}.{}.old{n}{}",
+            std::process::id(),
+            motu_package::atomic::TEMP_SUFFIX
+        ));
+        match std::fs::hard_link(target, &b) {
+            Ok(()) => return Ok(Some(b)),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(e),
+        }
+    }
+    Err(std::io::Error::other("no free backup name"))
 }
 
 /// An output directory written whole (`motu gen`): checked before any work (not a file, a

@@ -181,7 +181,8 @@ fn print_event(e: motu_render::RenderEvent<'_>, allow_incomplete: bool) {
 
 /// The image outputs (`-o`, `--aov`) of a render, written and committed together: as soon as
 /// a streamed render has its final image (before its structure cache is persisted), else
-/// after the render. `--stats` is committed after the render.
+/// after the render. `--stats` is committed after the render; should that fail, the image's
+/// targets get their old contents back (`Outputs`): the outputs stay all or nothing.
 struct ImageOut<'a> {
     png: &'a std::path::Path,
     aov: Option<&'a std::path::Path>,

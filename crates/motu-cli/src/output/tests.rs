@@ -69,6 +69,46 @@ fn regression_outputs_are_all_or_nothing() {
     assert!(temps(dir.path()).is_empty(), "{:?}", temps(dir.path()));
 }
 
+/// A render commits its image before persisting its structure cache (`commit_some`); a
+/// failure after that (its `--stats` unwritten) must still leave every target as it was.
+#[test]
+fn outputs_committed_early_are_put_back_when_the_command_fails() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = dir.path().join("out.png");
+    let fresh = dir.path().join("new.aov");
+    let stats = dir.path().join("stats.json");
+    std::fs::write(&png, b"old png").unwrap();
+    {
+        let mut outs =
+            Outputs::begin(&[], &[("-o", &png), ("--aov", &fresh), ("--stats", &stats)]).unwrap();
+        outs.write(&png, b"new png").unwrap();
+        outs.write(&fresh, b"new aov").unwrap();
+        assert!(outs.commit_some(&[&png, &fresh]).unwrap());
+        // Visible at once, the old contents kept aside.
+        assert_eq!(std::fs::read(&png).unwrap(), b"new png");
+        assert_eq!(std::fs::read(&fresh).unwrap(), b"new aov");
+        // Dropped before the final commit: the stats were never written.
+    }
+    assert_eq!(std::fs::read(&png).unwrap(), b"old png");
+    assert!(
+        !fresh.exists(),
+        "an output that did not exist before is removed"
+    );
+    assert!(!stats.exists());
+    assert!(temps(dir.path()).is_empty(), "{:?}", temps(dir.path()));
+    // Committed in full: every output new, no old copy left behind.
+    let mut outs =
+        Outputs::begin(&[], &[("-o", &png), ("--aov", &fresh), ("--stats", &stats)]).unwrap();
+    outs.write(&png, b"new png").unwrap();
+    outs.write(&fresh, b"new aov").unwrap();
+    assert!(outs.commit_some(&[&png, &fresh]).unwrap());
+    outs.write(&stats, b"{}").unwrap();
+    outs.commit().unwrap();
+    assert_eq!(std::fs::read(&png).unwrap(), b"new png");
+    assert_eq!(std::fs::read(&stats).unwrap(), b"{}");
+    assert!(temps(dir.path()).is_empty(), "{:?}", temps(dir.path()));
+}
+
 #[test]
 fn regression_output_dir_refuses_non_empty_without_replace() {
     let dir = tempfile::tempdir().unwrap();
