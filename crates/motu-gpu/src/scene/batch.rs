@@ -110,7 +110,7 @@ pub(crate) fn build_pipelined(
     };
     let (kind, flags) = match ty {
         AsLevel::Top => ("tlas", opts.tlas_flags()),
-        AsLevel::Bottom => ("blas", opts.blas_build.flags()),
+        AsLevel::Bottom => ("blas", opts.blas_flags()),
     };
     let mut run = PipelinedBuild {
         ctx,
