@@ -145,15 +145,6 @@ impl BuildOptions {
     pub fn tlas_flags(&self) -> motu_vk::AsBuildFlags {
         self.tlas_build.flags(self.compact)
     }
-
-    /// The flags BLASes are built with: `blas_build`'s, compaction allowed only when they are
-    /// compacted (the size query and the build must agree).
-    pub fn blas_flags(&self) -> motu_vk::AsBuildFlags {
-        motu_vk::AsBuildFlags {
-            allow_compaction: self.compact,
-            ..self.blas_build.flags()
-        }
-    }
 }
 
 impl Default for BuildOptions {
