@@ -1600,6 +1600,7 @@ fn uncompacted_rebuilt_tlases_match_the_full_build_and_rebuild_once_a_step() {
         )
         .expect("streaming renderer");
         let (mut mismatched, mut total) = (0u64, 0u64);
+        let mut rebuilt_by_when = 0u32;
         for f in 0..=frames {
             // The last frame at rest where the path ended.
             let cam =
@@ -1610,10 +1611,9 @@ fn uncompacted_rebuilt_tlases_match_the_full_build_and_rebuild_once_a_step() {
             assert!(st.tlas_rebuilt > 0 || f > 0, "{what}");
             let by_when =
                 st.tlas_rebuilt_at_start + st.tlas_rebuilt_in_passes + st.tlas_rebuilt_in_prefetch;
-            assert!(
-                by_when >= st.tlas_rebuilt && by_when <= st.tlas_builds,
-                "{what}"
-            );
+            // Every rebuild that swapped a TLAS in, of those attempted.
+            assert!(by_when <= st.tlas_builds, "{what}");
+            rebuilt_by_when += by_when;
             assert_eq!(st.tlas_rebuilt_again, 0, "{what}");
             // Once a step at most: before the first pass, after each pass but the last, and
             // in each prefetch step.
@@ -1647,6 +1647,7 @@ fn uncompacted_rebuilt_tlases_match_the_full_build_and_rebuild_once_a_step() {
             mismatched as f64 <= 0.001 * total as f64,
             "{mismatched} of {total}"
         );
+        assert!(rebuilt_by_when > 0);
         assert_eq!(sr.totals().tlas_compact, tlas_compact);
         assert_eq!(sr.totals().tlas_rebuilt_again, 0);
     }

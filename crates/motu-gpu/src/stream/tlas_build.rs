@@ -202,6 +202,9 @@ enum RebuildWhy {
     Prefetch,
 }
 
+/// Built structures: (build index, structure, bytes compaction saved on it).
+type Built = Vec<(usize, AccelStruct, u64)>;
+
 /// One [`StreamingRenderer::build_tlases`] call.
 struct TlasBuild<'r, 'a> {
     r: &'r mut StreamingRenderer<'a>,
@@ -434,7 +437,7 @@ impl TlasBuild<'_, '_> {
             MemoryClass::DeviceLocal,
             16,
         )?;
-        let built = (|| -> Result<Vec<(usize, AccelStruct, u64)>> {
+        let built = (|| -> Result<Built> {
             let pis_buf = r.gpu.pis();
             let blases_buf = r.gpu.blases();
             let up = r.up.as_mut().ok_or_else(staging_released)?;
@@ -641,11 +644,7 @@ impl TlasBuild<'_, '_> {
 
     /// Phase 2b: TLASes `ids` rebuilt over the resident BLASes plus their proxy and marks
     /// instances. Returns the new structures (indices into `ids`) and the records written.
-    fn rebuild(
-        &mut self,
-        ids: &[u32],
-        proxies: &Proxies,
-    ) -> Result<(Vec<(usize, AccelStruct, u64)>, u64)> {
+    fn rebuild(&mut self, ids: &[u32], proxies: &Proxies) -> Result<(Built, u64)> {
         let ctx = self.ctx.clone();
         let (r, times) = (&mut *self.r, &mut self.times);
         let RebuildRecords {
@@ -721,13 +720,7 @@ impl TlasBuild<'_, '_> {
 
     /// Phase 3: the rebuilt TLASes (`built`, indices into `rebuilt`) and the `updated`
     /// persistent ones take their proxies and are clean.
-    fn swap_in(
-        &mut self,
-        rebuilt: &[u32],
-        built: Vec<(usize, AccelStruct, u64)>,
-        updated: Vec<u32>,
-        proxies: &mut Proxies,
-    ) {
+    fn swap_in(&mut self, rebuilt: &[u32], built: Built, updated: Vec<u32>, proxies: &mut Proxies) {
         let r = &mut *self.r;
         let stamp = r.frame.stamp();
         let why = if r.frame.prefetching() {
@@ -766,10 +759,7 @@ impl TlasBuild<'_, '_> {
 
 /// `built` (build index, structure) with the bytes compaction saved on each: its built size
 /// (`sizes`) less what it holds (0: not compacted).
-fn with_saved_bytes(
-    built: Vec<(usize, AccelStruct)>,
-    sizes: &[BuildSize],
-) -> Vec<(usize, AccelStruct, u64)> {
+fn with_saved_bytes(built: Vec<(usize, AccelStruct)>, sizes: &[BuildSize]) -> Built {
     built
         .into_iter()
         .map(|(k, a)| {
