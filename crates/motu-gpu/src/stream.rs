@@ -300,6 +300,7 @@ impl<'a> StreamingRenderer<'a> {
             derived_ms,
             tlas_records_mode: opts.tlas_records.name(),
             tlas_build: opts.tlas_build.name(),
+            tlas_compact: opts.tlas_compact && opts.compact,
             ..Default::default()
         };
         let host_store_policy = opts.host_store_policy;

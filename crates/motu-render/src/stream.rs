@@ -52,6 +52,9 @@ pub struct StreamBounds {
     pub tlas_records: motu_gpu::TlasRecordsMode,
     /// `--stream-tlas-build`: what rebuilt streamed TLASes are built for.
     pub tlas_build: motu_gpu::TlasBuild,
+    /// `--stream-tlas-compact`: whether rebuilt TLASes and their proxies are compacted (None:
+    /// the default, on).
+    pub tlas_compact: Option<bool>,
 }
 
 impl StreamBounds {
@@ -76,6 +79,7 @@ impl StreamBounds {
             host_store_policy: self.host_store_policy,
             tlas_records: self.tlas_records,
             tlas_build: self.tlas_build,
+            tlas_compact: self.tlas_compact.unwrap_or(d.tlas_compact),
             ..d
         }
     }
@@ -115,6 +119,7 @@ impl StreamBounds {
             || self.host_store_policy != motu_gpu::HostStorePolicy::Measured
             || self.tlas_records != motu_gpu::TlasRecordsMode::Host
             || self.tlas_build != motu_gpu::TlasBuild::FastTrace
+            || self.tlas_compact == Some(false)
     }
 }
 

@@ -41,6 +41,7 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         host_store_policy: b.stream_host_cache_policy.into(),
         tlas_records: b.stream_tlas_records.into(),
         tlas_build: b.stream_tlas_build.into(),
+        tlas_compact: Some(b.stream_tlas_compact == crate::cli::OnOffArg::On),
     }
 }
 

@@ -28,6 +28,17 @@ pub(crate) trait BatchStager {
     fn abandon(&mut self);
 }
 
+impl BuildOptions {
+    /// The flags BLASes are built with: `blas_build`'s, compaction allowed only when they are
+    /// compacted (the size query and the build must agree).
+    pub(crate) fn blas_flags(&self) -> motu_vk::AsBuildFlags {
+        AsBuildFlags {
+            allow_compaction: self.compact,
+            ..self.blas_build.flags()
+        }
+    }
+}
+
 /// Builds `sizes.len()` structures in batches under the scratch budget, compacting each
 /// batch before the next. `geometry(k)` describes build k (addresses valid once
 /// `prepare(heap, batch_range)` ran for its batch). `inputs_done(heap)` runs once, when the
@@ -110,7 +121,7 @@ pub(crate) fn build_pipelined(
     };
     let (kind, flags) = match ty {
         AsLevel::Top => ("tlas", opts.tlas_flags()),
-        AsLevel::Bottom => ("blas", opts.blas_build.flags()),
+        AsLevel::Bottom => ("blas", opts.blas_flags()),
     };
     let mut run = PipelinedBuild {
         ctx,

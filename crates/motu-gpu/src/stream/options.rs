@@ -127,6 +127,11 @@ pub struct StreamOptions {
     /// What rebuilt (not persistent) streamed TLASes are built for (`--stream-tlas-build`):
     /// fast trace (default) or fast build; their size queries use the same flags.
     pub tlas_build: motu_vk::TlasBuild,
+    /// Compact rebuilt TLASes and their proxy and marks BLASes (`--stream-tlas-compact`): a
+    /// compacted-size query, a second allocation and a copy per rebuild, for structures that
+    /// live only until the next rebuild. Off: built without compaction, larger by what
+    /// `tlas_compact_saved_bytes` reports with it on. Triangle BLASes follow `compact`.
+    pub tlas_compact: bool,
 }
 
 /// Where a rebuilt streamed TLAS's instance records come from ([`StreamOptions::tlas_records`],
@@ -321,6 +326,7 @@ impl Default for StreamOptions {
             host_store_policy: super::HostStorePolicy::Measured,
             tlas_records: TlasRecordsMode::Host,
             tlas_build: motu_vk::TlasBuild::FastTrace,
+            tlas_compact: true,
         }
     }
 }

@@ -74,7 +74,7 @@ impl<'a> StreamingRenderer<'a> {
             records += n;
             let s = self.ctx.tlas_build_sizes(
                 u32::try_from(n).unwrap_or(u32::MAX),
-                self.build_opts.tlas_flags(),
+                self.rebuild_opts().tlas_flags(),
             )?;
             if s.acceleration_structure_size_bytes > largest.0 {
                 largest = (
@@ -118,7 +118,10 @@ impl<'a> StreamingRenderer<'a> {
     pub(super) fn rebuild_dirty(&mut self) -> Result<()> {
         let t0 = std::time::Instant::now();
         let r = self.rebuild_dirty_untimed();
-        self.frame.stats_mut().tlas_ms += t0.elapsed().as_secs_f64() * 1e3;
+        let saved = self.tlases.compact_saved_bytes();
+        let st = self.frame.stats_mut();
+        st.tlas_ms += t0.elapsed().as_secs_f64() * 1e3;
+        st.tlas_compact_resident_saved_bytes = st.tlas_compact_resident_saved_bytes.max(saved);
         r
     }
 
@@ -144,7 +147,7 @@ impl<'a> StreamingRenderer<'a> {
         let count = count + 2;
         let s = self.ctx.tlas_build_sizes(
             u32::try_from(count).unwrap_or(u32::MAX),
-            self.build_opts.tlas_flags(),
+            self.rebuild_opts().tlas_flags(),
         )?;
         let need = count * RECORD_BYTES as u64
             + s.acceleration_structure_size_bytes

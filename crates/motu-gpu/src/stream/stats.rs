@@ -189,6 +189,21 @@ pub struct FrameStreamStats {
     /// evicted and built back).
     pub tlas_proxies_built: u32,
     pub tlas_proxies_kept: u32,
+    /// Rebuilt TLASes and proxy and marks BLASes copied to their compacted size
+    /// (`--stream-tlas-compact on`; none where compaction gains nothing, as on lavapipe), the
+    /// bytes that saved summed over the frame's rebuilds, and the most it saved at once on the
+    /// resident ones after a build step (the room `--stream-tlas-compact off` would take more).
+    pub tlas_compactions: u32,
+    pub tlas_compact_saved_bytes: u64,
+    pub tlas_compact_resident_saved_bytes: u64,
+    /// TLAS rebuilds and updates by when they ran: before the frame's first pass (what the
+    /// frame buffers evicted, or the previous frame's steps left dirty), in the build steps
+    /// between passes, in the prefetch after them. Of all those, `tlas_rebuilt_again`: a TLAS
+    /// rebuilt again with no trace since its last rebuild (the first one wasted).
+    pub tlas_rebuilt_at_start: u32,
+    pub tlas_rebuilt_in_passes: u32,
+    pub tlas_rebuilt_in_prefetch: u32,
+    pub tlas_rebuilt_again: u32,
     /// Of `build_ms`: choosing and releasing eviction victims.
     pub evict_ms: f64,
     /// Of `build_ms`: rewriting the per-step tables (TLAS and mesh addresses, shading).
@@ -435,6 +450,10 @@ pub struct StreamTotals {
     pub tlas_records_mode: &'static str,
     /// What rebuilt TLASes were built for (`fast-trace` or `fast-build`, `--stream-tlas-build`).
     pub tlas_build: &'static str,
+    /// Whether rebuilt TLASes and their proxies were compacted (`--stream-tlas-compact`), and
+    /// the frames' `tlas_rebuilt_again` summed.
+    pub tlas_compact: bool,
+    pub tlas_rebuilt_again: u64,
     pub tlas_records_kept_bytes: u64,
     pub tlas_records_released: u32,
     pub persistent_tlases: u32,
@@ -464,6 +483,7 @@ impl StreamTotals {
         tot.blas_built += u64::from(st.blas_built);
         tot.tlas_built += u64::from(st.tlas_built);
         tot.tlas_rebuilt += u64::from(st.tlas_rebuilt);
+        tot.tlas_rebuilt_again += u64::from(st.tlas_rebuilt_again);
         tot.tlas_rebuild_groups += u64::from(st.tlas_rebuild_groups);
         tot.evicted += u64::from(st.evicted);
         tot.deferred += u64::from(st.deferred);

@@ -1569,3 +1569,87 @@ fn streamed_bounces_match_the_full_build_on_both_backends() {
     }
     assert_no_validation_errors(&ctx);
 }
+
+/// Rebuilt TLASes and their proxy and marks BLASes built without compaction
+/// (`StreamOptions::tlas_compact` off, `--stream-tlas-compact off`): no compaction copy, and
+/// the frames along a path under an eighth of the full build (evictions mid-frame) match the
+/// full build as compacted ones do. Either way every TLAS rebuild is counted by when it ran
+/// (before the first pass, between passes, in the prefetch), and no TLAS is rebuilt twice
+/// with no trace between: per frame, a TLAS is rebuilt at most once a build step.
+#[test]
+fn uncompacted_rebuilt_tlases_match_the_full_build_and_rebuild_once_a_step() {
+    let Some(ctx) = context_or_skip("stream_tlas_compact", Requirement::RayTracing) else {
+        return;
+    };
+    let h = field(10, 16, 30);
+    let blobs = Blobs(&h);
+    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
+    let budget = full_build_needs(&full) / 8;
+    let opts = ids_opts(backend(&ctx));
+    let tlases = h.view().tlases.len() as u32;
+    let frames = 5;
+    for tlas_compact in [true, false] {
+        let mut sr = StreamingRenderer::new(
+            &ctx,
+            h.view(),
+            &blobs,
+            &StreamOptions {
+                tlas_compact,
+                ..small_stream_options(budget)
+            },
+        )
+        .expect("streaming renderer");
+        let (mut mismatched, mut total) = (0u64, 0u64);
+        let mut rebuilt_by_when = 0u32;
+        for f in 0..=frames {
+            // The last frame at rest where the path ended.
+            let cam =
+                camera_path(&base_pose(), &SWEEP, f.min(frames - 1), frames).params(SIZE, SIZE);
+            let (out, st) = sr.render_frame(&cam, &opts).expect("frame");
+            let what = format!("compact {tlas_compact}, frame {f}: {st:?}");
+            assert!(st.complete, "{what}");
+            assert!(st.tlas_rebuilt > 0 || f > 0, "{what}");
+            let by_when =
+                st.tlas_rebuilt_at_start + st.tlas_rebuilt_in_passes + st.tlas_rebuilt_in_prefetch;
+            // Every rebuild that swapped a TLAS in, of those attempted.
+            assert!(by_when <= st.tlas_builds, "{what}");
+            rebuilt_by_when += by_when;
+            assert_eq!(st.tlas_rebuilt_again, 0, "{what}");
+            // Once a step at most: before the first pass, after each pass but the last, and
+            // in each prefetch step.
+            assert!(st.tlas_rebuilt_at_start <= tlases, "{what}");
+            assert!(
+                st.tlas_rebuilt_in_passes <= tlases * st.passes.saturating_sub(1),
+                "{what}"
+            );
+            if !tlas_compact {
+                assert_eq!(st.tlas_compactions, 0, "{what}");
+                assert_eq!(st.tlas_compact_saved_bytes, 0, "{what}");
+                assert_eq!(st.tlas_compact_resident_saved_bytes, 0, "{what}");
+            }
+            assert!(
+                st.tlas_compact_saved_bytes >= st.tlas_compactions as u64,
+                "{what}"
+            );
+            if f >= frames - 1 {
+                let reference = render(&ctx, &full, &cam, &opts).expect("full render");
+                if f == frames {
+                    assert_same_aov(&reference.aov, &out.aov, &what);
+                }
+                let cmp =
+                    motu_trace::compare(&reference.aov, &out.aov, motu_trace::DEFAULT_REL_EPS)
+                        .expect("sizes");
+                mismatched += cmp.mismatched;
+                total += cmp.total;
+            }
+        }
+        assert!(
+            mismatched as f64 <= 0.001 * total as f64,
+            "{mismatched} of {total}"
+        );
+        assert!(rebuilt_by_when > 0);
+        assert_eq!(sr.totals().tlas_compact, tlas_compact);
+        assert_eq!(sr.totals().tlas_rebuilt_again, 0);
+    }
+    assert_no_validation_errors(&ctx);
+}

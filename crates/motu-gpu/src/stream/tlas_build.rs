@@ -15,7 +15,7 @@ use super::tlases::{ProxyPair, TlasGpu};
 use super::topology::{proxy_blas_record, proxy_pi};
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
-use crate::scene::{aabbs_geometry, build_batched, AccelStruct, ResourceReport};
+use crate::scene::{aabbs_geometry, build_batched, AccelStruct, BuildOptions, ResourceReport};
 
 /// One proxy BLAS (`marks` false: a TLAS's non-resident clusters) or marks BLAS (its
 /// resident ones) to build over boxes `first_box..first_box + box_count` of the box buffer.
@@ -105,6 +105,9 @@ struct PhaseTimes {
     proxy_boxes: u32,
     proxies_built: u32,
     proxies_kept: u32,
+    /// Structures copied to their compacted size, and the bytes that saved.
+    compactions: u32,
+    compact_saved_bytes: u64,
 }
 
 impl PhaseTimes {
@@ -123,6 +126,16 @@ impl PhaseTimes {
             proxy_boxes: 0,
             proxies_built: 0,
             proxies_kept: 0,
+            compactions: 0,
+            compact_saved_bytes: 0,
+        }
+    }
+
+    /// Structures of `built` (with the bytes compaction saved on each) that were compacted.
+    fn count_compactions(&mut self, built: &[(usize, AccelStruct, u64)]) {
+        for &(_, _, saved) in built {
+            self.compactions += u32::from(saved > 0);
+            self.compact_saved_bytes += saved;
         }
     }
 
@@ -145,6 +158,8 @@ impl PhaseTimes {
         st.tlas_encode_ms += self.encode_ms;
         st.tlas_proxies_built += self.proxies_built;
         st.tlas_proxies_kept += self.proxies_kept;
+        st.tlas_compactions += self.compactions;
+        st.tlas_compact_saved_bytes += self.compact_saved_bytes;
         tracing::debug!(
             records = self.records,
             probe_ms = self.probe_ms,
@@ -152,6 +167,8 @@ impl PhaseTimes {
             proxy_boxes = self.proxy_boxes,
             proxies_built = self.proxies_built,
             proxies_kept = self.proxies_kept,
+            compactions = self.compactions,
+            compact_saved_bytes = self.compact_saved_bytes,
             proxy_host_ms = self.proxy_host_ms,
             proxy_build_ms = self.proxy_build_ms,
             encode_ms = self.encode_ms,
@@ -175,6 +192,19 @@ struct RebuildRecords<'r> {
     total_bytes: u64,
 }
 
+/// When a TLAS was rebuilt (`--stats`: `tlas_rebuilt_at_start`, `_in_passes`,
+/// `_in_prefetch`): before the frame's first pass, in a build step between its passes, or in
+/// the prefetch after them.
+#[derive(Clone, Copy)]
+enum RebuildWhy {
+    Start,
+    Pass,
+    Prefetch,
+}
+
+/// Built structures: (build index, structure, bytes compaction saved on it).
+type Built = Vec<(usize, AccelStruct, u64)>;
+
 /// One [`StreamingRenderer::build_tlases`] call.
 struct TlasBuild<'r, 'a> {
     r: &'r mut StreamingRenderer<'a>,
@@ -191,6 +221,15 @@ struct TlasBuild<'r, 'a> {
 }
 
 impl<'a> StreamingRenderer<'a> {
+    /// How rebuilt TLASes and their proxy and marks BLASes are built (their size queries
+    /// too): compacted only with `--stream-tlas-compact on` ([`super::StreamOptions::tlas_compact`]).
+    pub(super) fn rebuild_opts(&self) -> BuildOptions {
+        BuildOptions {
+            compact: self.build_opts.compact && self.opts.tlas_compact,
+            ..self.build_opts
+        }
+    }
+
     /// (Re)builds TLASes `ids` with their proxies from the current residency. The old ones are
     /// released first (old and new together would double the largest transient of a small
     /// budget, the root's); on failure they stay absent and dirty for the caller to retry with
@@ -389,6 +428,7 @@ impl TlasBuild<'_, '_> {
         let ctx = &self.ctx;
         let r = &mut *self.r;
         let view = r.view;
+        let rb = r.rebuild_opts();
         let buf = r.heap.alloc_buffer(
             "proxy-aabbs",
             u64::from(plan.box_count) * 24,
@@ -397,7 +437,7 @@ impl TlasBuild<'_, '_> {
             MemoryClass::DeviceLocal,
             16,
         )?;
-        let built = (|| -> Result<Vec<(usize, AccelStruct)>> {
+        let built = (|| -> Result<Built> {
             let pis_buf = r.gpu.pis();
             let blases_buf = r.gpu.blases();
             let up = r.up.as_mut().ok_or_else(staging_released)?;
@@ -451,7 +491,7 @@ impl TlasBuild<'_, '_> {
                         aabb_count: item.box_count,
                         opaque: false,
                     }],
-                    r.build_opts.blas_build.flags(),
+                    rb.blas_flags(),
                 )?;
                 sizes.push(BuildSize {
                     result_bytes: sz.acceleration_structure_size_bytes,
@@ -459,21 +499,23 @@ impl TlasBuild<'_, '_> {
                 });
             }
             let mut report = ResourceReport::default();
-            build_batched(
+            let built = build_batched(
                 ctx,
                 &mut r.heap,
                 &mut report,
                 &sizes,
                 AsLevel::Bottom,
-                &r.build_opts,
+                &rb,
                 |k| (descs[k].0.clone(), descs[k].1.clone()),
                 |_, _| Ok(()),
                 &mut |_| {},
-            )
+            )?;
+            Ok(with_saved_bytes(built, &sizes))
         })();
         r.heap.free(buf);
         let built = built?;
         self.times.proxies_built += built.len() as u32;
+        self.times.count_compactions(&built);
         let first = proxies.0.len();
         proxies.0.extend(plan.orders.iter().map(|o| {
             let key = o.key.clone();
@@ -485,12 +527,13 @@ impl TlasBuild<'_, '_> {
                 },
             )
         }));
-        for (k, accel) in built {
+        for (k, accel, saved_bytes) in built {
             let item = &plan.items[k];
             let Some((_, pair)) = proxies.0[first..].iter_mut().find(|(t, _)| *t == item.tlas)
             else {
                 unreachable!("every planned item's TLAS has an order")
             };
+            pair.saved_bytes += saved_bytes;
             *if item.marks {
                 &mut pair.marks
             } else {
@@ -570,7 +613,7 @@ impl TlasBuild<'_, '_> {
         let counts = records.record_counts();
         let mut sizes = Vec::with_capacity(ids.len());
         for &n in &counts {
-            let s = ctx.tlas_build_sizes(n, r.build_opts.tlas_flags())?;
+            let s = ctx.tlas_build_sizes(n, r.rebuild_opts().tlas_flags())?;
             sizes.push(BuildSize {
                 result_bytes: s.acceleration_structure_size_bytes,
                 scratch_bytes: s.build_scratch_size_bytes,
@@ -601,11 +644,7 @@ impl TlasBuild<'_, '_> {
 
     /// Phase 2b: TLASes `ids` rebuilt over the resident BLASes plus their proxy and marks
     /// instances. Returns the new structures (indices into `ids`) and the records written.
-    fn rebuild(
-        &mut self,
-        ids: &[u32],
-        proxies: &Proxies,
-    ) -> Result<(Vec<(usize, AccelStruct)>, u64)> {
+    fn rebuild(&mut self, ids: &[u32], proxies: &Proxies) -> Result<(Built, u64)> {
         let ctx = self.ctx.clone();
         let (r, times) = (&mut *self.r, &mut self.times);
         let RebuildRecords {
@@ -627,6 +666,7 @@ impl TlasBuild<'_, '_> {
             MemoryClass::DeviceLocal,
             16,
         )?;
+        let rb = r.rebuild_opts();
         let uploaded = (|| -> Result<u64> {
             let up = r.up.as_mut().ok_or_else(staging_released)?;
             if let Err(e) = records.upload(&ctx, up, &inst_buf, &offsets) {
@@ -653,7 +693,7 @@ impl TlasBuild<'_, '_> {
                 &mut report,
                 &sizes,
                 AsLevel::Top,
-                &r.build_opts,
+                &rb,
                 |k| {
                     (
                         vec![AsGeometry::Instances {
@@ -673,22 +713,40 @@ impl TlasBuild<'_, '_> {
         if let Some(b) = inst_buf.take() {
             r.heap.free(b);
         }
-        Ok((built?, total_bytes / RECORD_BYTES as u64))
+        let built = with_saved_bytes(built?, &sizes);
+        times.count_compactions(&built);
+        Ok((built, total_bytes / RECORD_BYTES as u64))
     }
 
     /// Phase 3: the rebuilt TLASes (`built`, indices into `rebuilt`) and the `updated`
     /// persistent ones take their proxies and are clean.
-    fn swap_in(
-        &mut self,
-        rebuilt: &[u32],
-        built: Vec<(usize, AccelStruct)>,
-        updated: Vec<u32>,
-        proxies: &mut Proxies,
-    ) {
+    fn swap_in(&mut self, rebuilt: &[u32], built: Built, updated: Vec<u32>, proxies: &mut Proxies) {
         let r = &mut *self.r;
-        for (k, accel) in built {
+        let stamp = r.frame.stamp();
+        let why = if r.frame.prefetching() {
+            RebuildWhy::Prefetch
+        } else if r.frame.stats().passes == 0 {
+            RebuildWhy::Start
+        } else {
+            RebuildWhy::Pass
+        };
+        let ts = built
+            .iter()
+            .map(|b| rebuilt[b.0])
+            .chain(updated.iter().copied());
+        for t in ts.collect::<Vec<_>>() {
+            let again = r.tlases.note_rebuilt(t, stamp);
+            let st = r.frame.stats_mut();
+            *match why {
+                RebuildWhy::Start => &mut st.tlas_rebuilt_at_start,
+                RebuildWhy::Pass => &mut st.tlas_rebuilt_in_passes,
+                RebuildWhy::Prefetch => &mut st.tlas_rebuilt_in_prefetch,
+            } += 1;
+            st.tlas_rebuilt_again += u32::from(again);
+        }
+        for (k, accel, saved_bytes) in built {
             let t = rebuilt[k];
-            let g = TlasGpu::rebuilt_with(accel, proxies.take(t));
+            let g = TlasGpu::rebuilt_with(accel, proxies.take(t), saved_bytes);
             r.tlases.rebuilt(t, g, &mut r.heap);
         }
         for t in updated {
@@ -697,4 +755,16 @@ impl TlasBuild<'_, '_> {
         // Pairs of TLASes neither rebuilt nor updated (none unless a build came back short).
         std::mem::take(proxies).release(&mut r.heap);
     }
+}
+
+/// `built` (build index, structure) with the bytes compaction saved on each: its built size
+/// (`sizes`) less what it holds (0: not compacted).
+fn with_saved_bytes(built: Vec<(usize, AccelStruct)>, sizes: &[BuildSize]) -> Built {
+    built
+        .into_iter()
+        .map(|(k, a)| {
+            let saved = sizes[k].result_bytes.saturating_sub(a.size_bytes);
+            (k, a, saved)
+        })
+        .collect()
 }

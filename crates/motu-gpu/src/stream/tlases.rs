@@ -30,6 +30,9 @@ pub(super) struct Tlases {
     dirty: BTreeSet<u32>,
     /// The rebuilt TLASes' instance records kept on the GPU (`tlas_compact.rs`).
     records: KeptRecords,
+    /// Per TLAS: the pass stamp of its last rebuild or update (a stamp is taken by every
+    /// trace, so an equal stamp means no trace saw the one before).
+    rebuilt_at: Vec<Option<u32>>,
 }
 
 impl Tlases {
@@ -41,6 +44,7 @@ impl Tlases {
             persistent_mode: vec![false; count],
             dirty: BTreeSet::new(),
             records: KeptRecords::new(count),
+            rebuilt_at: vec![None; count],
         }
     }
 
@@ -178,12 +182,19 @@ impl Tlases {
         self.dirty.remove(&t);
     }
 
+    /// TLAS `t` was rebuilt or updated at pass stamp `stamp`; returns whether it was already
+    /// at that stamp (rebuilt twice with no trace between).
+    pub fn note_rebuilt(&mut self, t: u32, stamp: u32) -> bool {
+        self.rebuilt_at[t as usize].replace(stamp) == Some(stamp)
+    }
+
     /// Persistent TLAS `t` updated in place, with its new proxy and marks: clean.
     pub fn updated(&mut self, t: u32, pair: ProxyPair, heap: &mut GpuHeap) {
         if let Some(g) = self.tlas[t as usize].as_mut() {
             g.proxy = pair.proxy;
             g.marks = pair.marks;
             g.proxy_key = pair.key;
+            g.proxy_saved_bytes = pair.saved_bytes;
         } else {
             pair.release(heap);
         }
@@ -200,6 +211,14 @@ impl Tlases {
             + self.placeholders.bytes
             + self.records.bytes()
     }
+
+    /// Bytes compaction saved on the resident TLASes and their proxy and marks BLASes: the
+    /// room they would take more built without it (`--stream-tlas-compact off`).
+    pub fn compact_saved_bytes(&self) -> u64 {
+        self.resident()
+            .map(|g| g.saved_bytes + g.proxy_saved_bytes)
+            .sum()
+    }
 }
 
 /// A TLAS's proxy and marks BLASes with the key of the boxes they were built over: one bit a
@@ -210,6 +229,8 @@ pub(super) struct ProxyPair {
     pub key: Vec<u64>,
     pub proxy: Option<AccelStruct>,
     pub marks: Option<AccelStruct>,
+    /// Bytes compaction saved on the two (their built sizes less their compacted ones).
+    pub saved_bytes: u64,
 }
 
 impl ProxyPair {
@@ -218,6 +239,7 @@ impl ProxyPair {
             key: std::mem::take(&mut g.proxy_key),
             proxy: g.proxy.take(),
             marks: g.marks.take(),
+            saved_bytes: std::mem::take(&mut g.proxy_saved_bytes),
         }
     }
 
@@ -246,17 +268,23 @@ pub(super) struct TlasGpu {
     persistent: Option<Persistent>,
     /// The key of the boxes `proxy` and `marks` were built over ([`ProxyPair::key`]).
     proxy_key: Vec<u64>,
+    /// Bytes compaction saved on `accel`, and on `proxy` and `marks`.
+    saved_bytes: u64,
+    proxy_saved_bytes: u64,
 }
 
 impl TlasGpu {
-    /// A TLAS rebuilt over the resident instances, with its proxy and marks.
-    pub fn rebuilt_with(accel: AccelStruct, pair: ProxyPair) -> TlasGpu {
+    /// A TLAS rebuilt over the resident instances, with its proxy and marks; `saved_bytes`:
+    /// what compaction saved on it.
+    pub fn rebuilt_with(accel: AccelStruct, pair: ProxyPair, saved_bytes: u64) -> TlasGpu {
         TlasGpu {
             accel,
             proxy: pair.proxy,
             marks: pair.marks,
             persistent: None,
             proxy_key: pair.key,
+            saved_bytes,
+            proxy_saved_bytes: pair.saved_bytes,
         }
     }
 
@@ -268,6 +296,8 @@ impl TlasGpu {
             marks: None,
             persistent: Some(p),
             proxy_key: Vec::new(),
+            saved_bytes: 0,
+            proxy_saved_bytes: 0,
         }
     }
 
