@@ -50,8 +50,7 @@ struct Carry {
     // stamp, as 3); 7 (streamed, bounces): as 3 with every window done ahead, vertex 0's light in
     // cur.xyz, and its bounce ray traced ahead too (BOUNCE AHEAD below): hit/rec/ns/albedo hold
     // the bounce's best hit, albedo.w its start stamp, thru.w the primary's best t, aov
-    // (sample 0) the primary's record; 8 (sample 0): as 7 with the bounce's hit final, vertex 0's
-    // light in sum, the next vertex's secondary rays traced ahead (cur, ns.w, albedo.w as in 6)
+    // (sample 0) the primary's record
     uvec4 st;
 #ifdef MOTU_STREAMED
     // Streamed only (full builds keep the path in locals, their SPIR-V unchanged):
@@ -74,7 +73,7 @@ void stream_write_fallback(uvec2 px, uint pixel, Carry c) {
     uvec4 rec;
     vec3 colour;
 #ifdef MOTU_STREAMED
-    if ((c.st.x == 1u || c.st.x == 3u || c.st.x >= 7u) && (c.st.w & 0xffffu) == 0u) {  // ahead
+    if ((c.st.x == 1u || c.st.x == 3u || c.st.x == 7u) && (c.st.w & 0xffffu) == 0u) {  // ahead
 #else
     if (c.st.x == 1u && (c.st.w & 0xffffu) == 0u) {
 #endif
@@ -146,7 +145,7 @@ void stream_defer(uvec2 px, uint pixel, Carry c) {
     stream_write_fallback(px, pixel, c);
     CarryTable(StreamRef(push.stream).s.carry).r[pixel] = c;
 #ifdef MOTU_STREAMED
-    bool closest = c.st.x == 1u || c.st.x == 3u || c.st.x == 4u || c.st.x >= 6u;
+    bool closest = c.st.x == 1u || c.st.x == 3u || c.st.x == 4u || c.st.x >= 6u;  // 6, 7
     stream_list_incomplete(px, closest ? g_empty_id : NONE_U32);
 #else
     stream_list_incomplete(px);
@@ -179,6 +178,11 @@ bool trace_ahead(inout Carry c, uint open_state, uint ahead, vec3 emission, uint
     }
     return (c.st.w >> 16u) < secondary_ray_count();
 }
+#endif
+
+#ifdef MOTU_STREAMED
+// Off (STREAM_NO_BOUNCE_AHEAD, tests only): no bounce ray traced ahead (BOUNCE AHEAD below).
+bool g_bounce_ahead = true;
 #endif
 
 // The frame's sample `smp` in the pixel's sequence (a progressive frame starts at
@@ -256,7 +260,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
     vec3 p_dir = c.path_dir.xyz;
     vec3 thru = c.thru.xyz;
     uint bounce_lod = floatBitsToUint(c.path_dir.w);
-    float spec_t = c.thru.w;  // states 7, 8: the primary ray's best t (c.hit: the bounce's)
+    float spec_t = c.thru.w;  // state 7: the primary ray's best t (c.hit: the bounce's)
 #else
     uint bounce = 0u;
     vec3 p_org = org;
@@ -280,16 +284,15 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
     // are all done, that vertex's bounce ray is traced ahead too, from the same hit, so what it
     // needs is requested in the pass the primary's structures are, not passes after the primary
     // is final. A closer primary hit drops it (state 1); a final one adds vertex 0's light and
-    // continues the bounce ray (state 4) from its start stamp. Sample 0 goes on: a bounce hit
-    // final against what is resident has its vertex's secondary rays traced ahead too (state 8;
-    // the primary final: state 2 from their window's start, closer: state 1). What it costs the
-    // Carry: none (the primary's t in thru.w, its record in aov; vertex 0's light in cur, or in
-    // sum, 0 before sample 0).
+    // continues the bounce ray (state 4) from its start stamp. What it costs the Carry: none
+    // (the primary's t in thru.w, its record in aov, vertex 0's light in cur). The bounce's
+    // vertex's own secondary rays are not traced ahead of the primary: tried (sample 0), they
+    // requested more than they saved (notes/ahead.md: more in-frame returns at 1/16).
     uint primary_empty_id = 0u;  // the primary ray's nearest open structure (fallback)
     float primary_empty_t = T_INFINITY;
 #endif
 #ifdef MOTU_STREAMED
-#define PRIMARY_T (c.st.x >= 7u ? spec_t : c.hit.x)
+#define PRIMARY_T (c.st.x == 7u ? spec_t : c.hit.x)
 #else
 #define PRIMARY_T c.hit.x
 #endif
@@ -297,7 +300,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         uint smp = c.st.w & 0xffffu;
         vec3 dir = guard ? guard_dir : sample_dir(px, pixel, smp);
 #ifdef MOTU_STREAMED
-        bool primary = (c.st.x == 1u || c.st.x == 3u || c.st.x >= 7u) && !spec;
+        bool primary = (c.st.x == 1u || c.st.x == 3u || c.st.x == 7u) && !spec;
 #else
         bool primary = c.st.x == 1u;
 #endif
@@ -378,7 +381,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                     c.st.w = smp | (n << 16u);
                     vec3 bounce_dir;
                     vec3 weight;
-                    if (c.st.x == 3u && push.frame.f.bounces > 0u &&
+                    if (c.st.x == 3u && g_bounce_ahead && push.frame.f.bounces > 0u &&
                         bounce_ray(si, c.rec.w, pixel, seq_sample(smp) | (1u << 20u), bounce_dir,
                                    weight)) {
                         // BOUNCE AHEAD: vertex 0's light (thru is 1 here: exactly the term the
@@ -519,17 +522,6 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 }
                 g_probe_link_open = false;
                 if (c.st.x == 7u) {
-                    if (!cut && !stream_still_open(c.hit.x) && c.hit.x < T_INFINITY &&
-                        smp == 0u) {
-                        // Final against what is resident: vertex 0's light goes to sum
-                        // (0 before it) and the next vertex's secondary rays are traced ahead.
-                        c.sum.xyz += c.cur.xyz;
-                        c.cur = vec4(0.0);
-                        c.ns.w = 0.0;
-                        c.albedo.w = uintBitsToFloat(g_stamp);
-                        c.st.xw = uvec2(8u, smp);
-                        continue;
-                    }
                     open = true;  // traced ahead: what follows waits until the primary is final
                     break;
                 }
@@ -633,10 +625,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
 #ifdef MOTU_STREAMED
                 if (c.st.x == 3u) {
                     c.st.x = 1u;  // a closer hit: the rays traced ahead from the old one go
-                } else if (c.st.x >= 7u) {
-                    if (c.st.x == 8u) {
-                        c.sum = vec4(0.0);  // vertex 0's light (sample 0: sum was 0)
-                    }
+                } else if (c.st.x == 7u) {
                     c.st.x = 1u;  // and the bounce traced ahead from it
                     bounce = 0u;
                     thru = vec3(1.0);
@@ -662,8 +651,8 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 }
                 // Not in the frame's last pass: the pixel stays open whatever they find.
                 if (shaded && PRIMARY_T < T_INFINITY && !g_last_pass) {
-                    if (c.st.x >= 7u) {
-                        spec = true;  // its bounce ray (8: its vertex's rays), ahead, goes on
+                    if (c.st.x == 7u) {
+                        spec = true;  // its bounce ray, traced ahead, goes on
                         continue;
                     }
                     // Trace the secondary rays ahead from this hit, starting now.
@@ -683,7 +672,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
             }
 #endif
 #ifdef MOTU_STREAMED
-            if (smp == 0u && c.hit.x < T_INFINITY && c.st.x < 7u) {  // 7, 8: set when started
+            if (smp == 0u && c.hit.x < T_INFINITY && c.st.x != 7u) {  // 7: set when it started
 #else
             if (smp == 0u && c.hit.x < T_INFINITY) {
 #endif
@@ -704,12 +693,6 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 // (as the full build adds it) and the bounce ray goes on from its start.
                 c.sum.xyz += c.cur.xyz;
                 c.st.xy = uvec2(4u, floatBitsToUint(c.albedo.w));
-                continue;
-            }
-            if (c.st.x == 8u) {
-                // Final, with its bounce's vertex (final too) and that vertex's rays ahead: they
-                // go on from their window's start.
-                c.st.xy = uvec2(2u, floatBitsToUint(c.albedo.w));
                 continue;
             }
 #endif
@@ -757,7 +740,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         c.path_org = vec4(p_org, float(bounce));
         c.path_dir = vec4(p_dir, uintBitsToFloat(bounce_lod));
         c.thru = vec4(thru, spec_t);
-        if (c.st.x == 3u || c.st.x >= 6u) {
+        if (c.st.x == 3u || c.st.x == 6u || c.st.x == 7u) {
             g_empty_id = primary_empty_id;  // the fallback and blocker: the closest-hit ray's
             g_empty_t = primary_empty_t;
         }
@@ -832,6 +815,7 @@ void render_stream_item(uint i) {
     g_probe_stop = g_probe && (s.flags & STREAM_PROBE_STOP) != 0u;
 #ifdef MOTU_STREAMED
     g_last_pass = (s.flags & STREAM_LAST_PASS) != 0u;
+    g_bounce_ahead = (s.flags & STREAM_NO_BOUNCE_AHEAD) == 0u;
     g_no_mark_walk = (s.flags & STREAM_NO_MARK_WALK) != 0u;
     g_mark_walks = 0u;
     g_mark_tlas_walks = 0u;
