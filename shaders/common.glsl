@@ -79,9 +79,6 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 // StreamParams.flags of a last pass after which nothing is built (the frame's build budget is
 // spent): no ray takes a mark walk (traverse.glsl), whose marks only steer that build.
 #define STREAM_NO_MARK_WALK 8u
-// StreamParams.flags (tests only, motu-gpu stream/passes.rs): no bounce ray traced ahead of an
-// open primary ray (BOUNCE AHEAD in render_pixel.glsl), to count the passes it saves.
-#define STREAM_NO_BOUNCE_AHEAD 16u
 // Ray cull masks (Rust: stream::MARKS_MASK, stream::TRIANGLE_MASK). Every instance has mask
 // 0xFF except in a streamed TLAS its triangle instances (0x01) and its *marks* BLAS (0x02: the
 // boxes of its resident clusters), which only probe passes' mark walks see: there a ray passing

@@ -47,16 +47,13 @@ struct Carry {
     // the window's first secondary ray << 16; 4 (bounces): the bounce ray open, its best hit so
     // far in hit/rec/ns/albedo; 5: the sample's path ended; 6 (streamed): as 4, with its
     // vertex's secondary rays traced ahead from that best hit (albedo.w: their window's start
-    // stamp, as 3); 7 (streamed, bounces): as 3 with every window done ahead, vertex 0's light in
-    // cur.xyz, and its bounce ray traced ahead too (BOUNCE AHEAD below): hit/rec/ns/albedo hold
-    // the bounce's best hit, albedo.w its start stamp, thru.w the primary's best t, aov
-    // (sample 0) the primary's record
+    // stamp, as 3)
     uvec4 st;
 #ifdef MOTU_STREAMED
     // Streamed only (full builds keep the path in locals, their SPIR-V unchanged):
     vec4 path_org;  // xyz: the current vertex's incoming ray's origin; w: the vertex (exact float)
     vec4 path_dir;  // xyz: its direction; w: the LOD of the vertex the bounce ray left (bits)
-    vec4 thru;      // xyz: the path's throughput; w (state 7): the primary ray's best t
+    vec4 thru;      // xyz: the path's throughput
 #endif
 };
 layout(buffer_reference, std430, buffer_reference_align = 16) buffer CarryTable { Carry r[]; };
@@ -73,7 +70,7 @@ void stream_write_fallback(uvec2 px, uint pixel, Carry c) {
     uvec4 rec;
     vec3 colour;
 #ifdef MOTU_STREAMED
-    if ((c.st.x == 1u || c.st.x == 3u || c.st.x == 7u) && (c.st.w & 0xffffu) == 0u) {  // ahead
+    if ((c.st.x == 1u || c.st.x == 3u) && (c.st.w & 0xffffu) == 0u) {  // 3: rays ahead
 #else
     if (c.st.x == 1u && (c.st.w & 0xffffu) == 0u) {
 #endif
@@ -145,7 +142,7 @@ void stream_defer(uvec2 px, uint pixel, Carry c) {
     stream_write_fallback(px, pixel, c);
     CarryTable(StreamRef(push.stream).s.carry).r[pixel] = c;
 #ifdef MOTU_STREAMED
-    bool closest = c.st.x == 1u || c.st.x == 3u || c.st.x == 4u || c.st.x >= 6u;  // 6, 7
+    bool closest = c.st.x == 1u || c.st.x == 3u || c.st.x == 4u || c.st.x == 6u;
     stream_list_incomplete(px, closest ? g_empty_id : NONE_U32);
 #else
     stream_list_incomplete(px);
@@ -178,11 +175,6 @@ bool trace_ahead(inout Carry c, uint open_state, uint ahead, vec3 emission, uint
     }
     return (c.st.w >> 16u) < secondary_ray_count();
 }
-#endif
-
-#ifdef MOTU_STREAMED
-// Off (STREAM_NO_BOUNCE_AHEAD, tests only): no bounce ray traced ahead (BOUNCE AHEAD below).
-bool g_bounce_ahead = true;
 #endif
 
 // The frame's sample `smp` in the pixel's sequence (a progressive frame starts at
@@ -260,7 +252,6 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
     vec3 p_dir = c.path_dir.xyz;
     vec3 thru = c.thru.xyz;
     uint bounce_lod = floatBitsToUint(c.path_dir.w);
-    float spec_t = c.thru.w;  // state 7: the primary ray's best t (c.hit: the bounce's)
 #else
     uint bounce = 0u;
     vec3 p_org = org;
@@ -280,27 +271,14 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
     // since their window started, as any deferred ray does; a closer primary hit drops them.
     // `spec`: this invocation's primary ray stayed open and the window's rays come next.
     bool spec = false;
-    // BOUNCE AHEAD (state 7): once the windows traced ahead from an open primary ray's best hit
-    // are all done, that vertex's bounce ray is traced ahead too, from the same hit, so what it
-    // needs is requested in the pass the primary's structures are, not passes after the primary
-    // is final. A closer primary hit drops it (state 1); a final one adds vertex 0's light and
-    // continues the bounce ray (state 4) from its start stamp. What it costs the Carry: none
-    // (the primary's t in thru.w, its record in aov, vertex 0's light in cur). The bounce's
-    // vertex's own secondary rays are not traced ahead of the primary: tried (sample 0), they
-    // requested more than they saved (notes/ahead.md: more in-frame returns at 1/16).
     uint primary_empty_id = 0u;  // the primary ray's nearest open structure (fallback)
     float primary_empty_t = T_INFINITY;
-#endif
-#ifdef MOTU_STREAMED
-#define PRIMARY_T (c.st.x == 7u ? spec_t : c.hit.x)
-#else
-#define PRIMARY_T c.hit.x
 #endif
     while (true) {
         uint smp = c.st.w & 0xffffu;
         vec3 dir = guard ? guard_dir : sample_dir(px, pixel, smp);
 #ifdef MOTU_STREAMED
-        bool primary = (c.st.x == 1u || c.st.x == 3u || c.st.x == 7u) && !spec;
+        bool primary = (c.st.x == 1u || c.st.x == 3u) && !spec;
 #else
         bool primary = c.st.x == 1u;
 #endif
@@ -316,14 +294,14 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
         vec3 v_dir = bounce > 0u ? p_dir : dir;
         uint v_smp = seq_sample(smp) | (bounce << 20u);
         // State 6: the bounce ray open with its vertex's secondary rays traced ahead (as 3).
-        bouncing = ((c.st.x == 4u || c.st.x == 6u) && !spec) || (c.st.x == 7u && spec);
+        bouncing = (c.st.x == 4u || c.st.x == 6u) && !spec;
         // The ray to trace: origin, direction, reach (w).
         vec3 r_org = org;
         vec4 r_dir = vec4(dir, T_INFINITY);
         bool sample_done = c.st.x == 5u;
         uint ray_bit = 0u;
         if (primary) {
-            g_best_t = PRIMARY_T;
+            g_best_t = c.hit.x;
         } else if (bouncing) {
             // The bounce ray, against its best hit so far (none when it started).
             r_org = p_org;
@@ -379,29 +357,6 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                     // Every window done ahead: the sample ends once its primary hit is final
                     // (an empty window at `n` then adds its terms, below).
                     c.st.w = smp | (n << 16u);
-                    vec3 bounce_dir;
-                    vec3 weight;
-                    if (c.st.x == 3u && g_bounce_ahead && push.frame.f.bounces > 0u &&
-                        bounce_ray(si, c.rec.w, pixel, seq_sample(smp) | (1u << 20u), bounce_dir,
-                                   weight)) {
-                        // BOUNCE AHEAD: vertex 0's light (thru is 1 here: exactly the term the
-                        // final hit adds), then its bounce ray, starting now.
-                        c.cur.xyz = thru * (c.cur.xyz + sky_term(si, c.rec.w, uint(c.cur.w)));
-                        if (smp == 0u) {
-                            c.aov = uvec4(c.rec.x, c.rec.y, floatBitsToUint(c.hit.x),
-                                          min(c.rec.z, 255u));
-                        }
-                        spec_t = c.hit.x;
-                        p_org = secondary_start(v_org, v_dir, c.hit.x, si.ng);
-                        p_dir = bounce_dir;
-                        thru *= weight;
-                        bounce = 1u;
-                        bounce_lod = c.rec.z;
-                        c.hit.x = T_INFINITY;
-                        c.albedo.w = uintBitsToFloat(g_stamp);
-                        c.st.x = 7u;
-                        continue;
-                    }
                     open = true;
                     break;
                 }
@@ -521,10 +476,6 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                     }
                 }
                 g_probe_link_open = false;
-                if (c.st.x == 7u) {
-                    open = true;  // traced ahead: what follows waits until the primary is final
-                    break;
-                }
                 if (!cut && stream_still_open(c.hit.x)) {
                     // As a primary ray's (SPECULATIVE): the next vertex's secondary rays are
                     // traced ahead from the bounce's best hit so far, against what is resident
@@ -625,12 +576,6 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
 #ifdef MOTU_STREAMED
                 if (c.st.x == 3u) {
                     c.st.x = 1u;  // a closer hit: the rays traced ahead from the old one go
-                } else if (c.st.x == 7u) {
-                    c.st.x = 1u;  // and the bounce traced ahead from it
-                    bounce = 0u;
-                    thru = vec3(1.0);
-                    p_org = org;
-                    p_dir = vec3(0.0);
                 }
 #endif
                 if (resolve) {
@@ -643,18 +588,14 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
 #ifdef MOTU_STREAMED
             g_probe_link_open = false;
 #endif
-            if (!cut && stream_still_open(PRIMARY_T)) {
+            if (!cut && stream_still_open(c.hit.x)) {
 #ifdef MOTU_STREAMED
-                if (shaded && PRIMARY_T < T_INFINITY) {
+                if (shaded && c.hit.x < T_INFINITY) {
                     primary_empty_id = g_empty_id;
                     primary_empty_t = g_empty_t;
                 }
                 // Not in the frame's last pass: the pixel stays open whatever they find.
-                if (shaded && PRIMARY_T < T_INFINITY && !g_last_pass) {
-                    if (c.st.x == 7u) {
-                        spec = true;  // its bounce ray, traced ahead, goes on
-                        continue;
-                    }
+                if (shaded && c.hit.x < T_INFINITY && !g_last_pass) {
                     // Trace the secondary rays ahead from this hit, starting now.
                     vec3 emission = push.materials.r[c.rec.w].emission;
                     if (trace_ahead(c, 1u, 3u, emission, smp)) {
@@ -671,11 +612,7 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 break;  // a probe: the path goes on in the next round (STREAM_PROBE_STOP)
             }
 #endif
-#ifdef MOTU_STREAMED
-            if (smp == 0u && c.hit.x < T_INFINITY && c.st.x != 7u) {  // 7: set when it started
-#else
             if (smp == 0u && c.hit.x < T_INFINITY) {
-#endif
                 c.aov = uvec4(c.rec.x, c.rec.y, floatBitsToUint(c.hit.x), min(c.rec.z, 255u));
             }
             if (!shaded) {
@@ -686,13 +623,6 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                 // Final, the hit it was traced ahead from: its secondary rays go on from where
                 // they are, from their window's start.
                 c.st.xy = uvec2(2u, floatBitsToUint(c.albedo.w));
-                continue;
-            }
-            if (c.st.x == 7u) {
-                // Final, the hit its bounce was traced ahead from: vertex 0's light is added
-                // (as the full build adds it) and the bounce ray goes on from its start.
-                c.sum.xyz += c.cur.xyz;
-                c.st.xy = uvec2(4u, floatBitsToUint(c.albedo.w));
                 continue;
             }
 #endif
@@ -739,8 +669,8 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
 #ifdef MOTU_STREAMED
         c.path_org = vec4(p_org, float(bounce));
         c.path_dir = vec4(p_dir, uintBitsToFloat(bounce_lod));
-        c.thru = vec4(thru, spec_t);
-        if (c.st.x == 3u || c.st.x == 6u || c.st.x == 7u) {
+        c.thru = vec4(thru, 0.0);
+        if (c.st.x == 3u || c.st.x == 6u) {
             g_empty_id = primary_empty_id;  // the fallback and blocker: the closest-hit ray's
             g_empty_t = primary_empty_t;
         }
@@ -815,7 +745,6 @@ void render_stream_item(uint i) {
     g_probe_stop = g_probe && (s.flags & STREAM_PROBE_STOP) != 0u;
 #ifdef MOTU_STREAMED
     g_last_pass = (s.flags & STREAM_LAST_PASS) != 0u;
-    g_bounce_ahead = (s.flags & STREAM_NO_BOUNCE_AHEAD) == 0u;
     g_no_mark_walk = (s.flags & STREAM_NO_MARK_WALK) != 0u;
     g_mark_walks = 0u;
     g_mark_tlas_walks = 0u;

@@ -52,11 +52,6 @@ pub(super) const STREAM_LAST_PASS: u32 = 4;
 /// frame's build budget spent): no mark walks, whose marks only steer that build.
 pub(super) const STREAM_NO_MARK_WALK: u32 = 8;
 
-/// `STREAM_NO_BOUNCE_AHEAD` of `common.glsl` (tests only): no bounce ray traced ahead of an
-/// open primary ray, to count the passes that saves.
-#[cfg(test)]
-pub(super) const STREAM_NO_BOUNCE_AHEAD: u32 = 16;
-
 /// `STREAM_PASS_ROWS_SHIFT` of `common.glsl`: `flags >> it` is the probe's pass-mark row
 /// stride (0: none; `StreamOptions::pass_marks`).
 pub(super) const STREAM_PASS_ROWS_SHIFT: u32 = 8;

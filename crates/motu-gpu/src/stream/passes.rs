@@ -248,28 +248,16 @@ impl<'a> StreamingRenderer<'a> {
     }
 }
 
-#[cfg(test)]
-thread_local! {
-    /// Tests: this thread's frame passes trace no bounce ray ahead (`STREAM_NO_BOUNCE_AHEAD`),
-    /// to count the passes that saves.
-    pub(super) static NO_BOUNCE_AHEAD: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
-}
-
 impl<'a> StreamingRenderer<'a> {
     /// The flags of a frame pass: its last (`last`) traces no secondary rays ahead of open
     /// primary rays; a last pass after which nothing is built (the build budget spent) takes
     /// no mark walks, whose marks would steer nothing.
     fn frame_pass_flags(&self, last: bool) -> u32 {
-        let flags = match (last, last && self.frame_build_spent()) {
+        match (last, last && self.frame_build_spent()) {
             (true, true) => STREAM_LAST_PASS | STREAM_NO_MARK_WALK,
             (true, false) => STREAM_LAST_PASS,
             _ => 0,
-        };
-        #[cfg(test)]
-        if NO_BOUNCE_AHEAD.with(std::cell::Cell::get) {
-            return flags | super::params::STREAM_NO_BOUNCE_AHEAD;
         }
-        flags
     }
 
     /// Splits a pass's open pixels `incomplete` (with what each waits for, `blockers`) before

@@ -27,15 +27,13 @@ fn stream_params_match_common_glsl() {
     assert_eq!(define("STREAM_PROBE_STOP"), STREAM_PROBE_STOP);
     assert_eq!(define("STREAM_LAST_PASS"), STREAM_LAST_PASS);
     assert_eq!(define("STREAM_NO_MARK_WALK"), STREAM_NO_MARK_WALK);
-    assert_eq!(define("STREAM_NO_BOUNCE_AHEAD"), STREAM_NO_BOUNCE_AHEAD);
     let flags = [
         STREAM_PROBE_PASS,
         STREAM_PROBE_STOP,
         STREAM_LAST_PASS,
         STREAM_NO_MARK_WALK,
-        STREAM_NO_BOUNCE_AHEAD,
     ];
-    assert_eq!(flags.iter().fold(0, |a, f| a | f).count_ones(), 5);
+    assert_eq!(flags.iter().fold(0, |a, f| a | f).count_ones(), 4);
     assert!(flags.iter().all(|&f| f < 1 << STREAM_PASS_ROWS_SHIFT));
     assert_eq!(define("STREAM_PASS_ROWS_SHIFT"), STREAM_PASS_ROWS_SHIFT);
     assert_eq!(define("STREAM_START_STAMP") + 1, STAMP_LIMIT);
