@@ -119,7 +119,7 @@ impl StreamBounds {
             || self.host_store_policy != motu_gpu::HostStorePolicy::Measured
             || self.tlas_records != motu_gpu::TlasRecordsMode::Host
             || self.tlas_build != motu_gpu::TlasBuild::FastTrace
-            || self.tlas_compact == Some(false)
+            || self.tlas_compact == Some(true)
     }
 }
 

@@ -141,7 +141,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             stream_host_cache_policy: crate::cli::HostCachePolicyArg::Measured,
             stream_tlas_records: crate::cli::TlasRecordsArg::Gpu,
             stream_tlas_build: crate::cli::TlasBuildArg::FastTrace,
-            stream_tlas_compact: crate::cli::OnOffArg::On,
+            stream_tlas_compact: crate::cli::OnOffArg::Off,
         },
         as_cache: crate::cli::AsCacheArgs {
             host_cache: None,

@@ -129,8 +129,10 @@ pub struct StreamOptions {
     pub tlas_build: motu_vk::TlasBuild,
     /// Compact rebuilt TLASes and their proxy and marks BLASes (`--stream-tlas-compact`): a
     /// compacted-size query, a second allocation and a copy per rebuild, for structures that
-    /// live only until the next rebuild. Off: built without compaction, larger by what
-    /// `tlas_compact_saved_bytes` reports with it on. Triangle BLASes follow `compact`.
+    /// live only until the next rebuild. Off (default: on an H100, island 0.3's frames 9–18%
+    /// shorter, `tlas_gpu_ms` halved, for 26–30 MB more resident, BENCHMARKS.md session 41):
+    /// built without compaction, larger by what `tlas_compact_saved_bytes` reports with it on.
+    /// Triangle BLASes follow `compact`.
     pub tlas_compact: bool,
 }
 
@@ -326,7 +328,7 @@ impl Default for StreamOptions {
             host_store_policy: super::HostStorePolicy::Measured,
             tlas_records: TlasRecordsMode::Host,
             tlas_build: motu_vk::TlasBuild::FastTrace,
-            tlas_compact: true,
+            tlas_compact: false,
         }
     }
 }
