@@ -54,6 +54,21 @@ impl Fixture {
     }
 }
 
+/// A streamed render of `frames` frames at 64×36 under `budget`.
+fn streamed_args<'a>(frames: &'a str, budget: &'a str) -> Vec<&'a str> {
+    vec![
+        "--width",
+        "64",
+        "--height",
+        "36",
+        "--frames",
+        frames,
+        "--stream",
+        "--vram-budget",
+        budget,
+    ]
+}
+
 /// The default 8-frame streamed path at 64×36 (`--stats` beside the AOV).
 fn path(
     f: &Fixture,
@@ -64,19 +79,9 @@ fn path(
     env: &[(&str, &str)],
 ) -> (serde_json::Value, PathBuf) {
     let aov = f.dir.path().join(format!("{name}.aov"));
-    let mut args = vec![
-        "--width",
-        "64",
-        "--height",
-        "36",
-        "--frames",
-        "8",
-        "--stream",
-        // The streamer and its cache, also at budgets that hold the whole scene.
-        "--stream-always",
-        "--vram-budget",
-        budget,
-    ];
+    let mut args = streamed_args("8", budget);
+    // The streamer and its cache, also at budgets that hold the whole scene.
+    args.push("--stream-always");
     args.extend(extra);
     (render_env(&f.pkg, backend, &aov, &args, env), aov)
 }
@@ -360,17 +365,7 @@ fn a_second_process_with_a_warm_cache_rebuilds_nothing_it_cached() {
 /// host memory counted apart from the budget as on a discrete GPU (`--stats` beside the AOV).
 fn still(f: &Fixture, name: &str, budget: &str, extra: &[&str]) -> (serde_json::Value, PathBuf) {
     let aov = f.dir.path().join(format!("{name}.aov"));
-    let mut args = vec![
-        "--width",
-        "64",
-        "--height",
-        "36",
-        "--frames",
-        "1",
-        "--stream",
-        "--vram-budget",
-        budget,
-    ];
+    let mut args = streamed_args("1", budget);
     args.extend(extra);
     let discrete = [("MOTU_SIMULATE_DISCRETE_MEMORY", "1")];
     (render_env(&f.pkg, "pipeline", &aov, &args, &discrete), aov)

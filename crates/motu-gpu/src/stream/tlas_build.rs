@@ -734,7 +734,7 @@ impl TlasBuild<'_, '_> {
             .iter()
             .map(|b| rebuilt[b.0])
             .chain(updated.iter().copied());
-        for t in ts.collect::<Vec<_>>() {
+        for t in ts {
             let again = r.tlases.note_rebuilt(t, stamp);
             let st = r.frame.stats_mut();
             *match why {

@@ -95,12 +95,15 @@ impl StreamingRenderer<'_> {
         }
         self.store_some(&todo)?;
         let bytes = todo.iter().map(|t| t.accel.size_bytes).sum();
-        self.reuse
-            .estimates
-            .store
-            .add(todo.len() as u64, bytes, ms_since(t));
-        self.frame.stats_mut().cache_store_ms += ms_since(t);
+        self.note_stored(todo.len() as u64, bytes, t);
         Ok(())
+    }
+
+    /// `count` structures of `bytes` stored in the frame since `t`: a sample of the store
+    /// rule's store cost (`store_policy.rs`), and the frame's `cache_store_ms`.
+    fn note_stored(&mut self, count: u64, bytes: u64, t: Instant) {
+        self.reuse.estimates.store.add(count, bytes, ms_since(t));
+        self.frame.stats_mut().cache_store_ms += ms_since(t);
     }
 
     /// BLAS `b`'s key where it is to be stored: the cache lacks it and, where `ruled`, the
@@ -147,8 +150,7 @@ impl StreamingRenderer<'_> {
         let n = ids.len() as u64;
         let keyed: Vec<(usize, CacheKey)> = ids.into_iter().map(|(b, k, _)| (b, k)).collect();
         self.store_held(keyed)?;
-        self.reuse.estimates.store.add(n, bytes, ms_since(t));
-        self.frame.stats_mut().cache_store_ms += ms_since(t);
+        self.note_stored(n, bytes, t);
         Ok(())
     }
 
