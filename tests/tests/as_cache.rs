@@ -459,7 +459,35 @@ fn a_still_frame_stores_only_evicted_blases_in_frame_and_the_rest_after_its_imag
         w["stream"]["cache"]
     );
     assert_eq!(json_u64(&tw["persisted_blases"]), 0, "{tw}");
-    for aov in [&a_aov, &d_aov, &w_aov] {
+    // Staged transfers (`MOTU_AS_TRANSFER=staged`): the same entries through the device-local
+    // staging buffer, and a second process restores them all through it.
+    let staged_dir = f.dir.path().join("cache-staged");
+    let staged_flags = ["--as-cache", s(&staged_dir)];
+    let staged = |name: &str| {
+        let aov = f.dir.path().join(format!("{name}.aov"));
+        let mut args = streamed_args("1", &budget);
+        args.extend(staged_flags);
+        let env = [
+            ("MOTU_SIMULATE_DISCRETE_MEMORY", "1"),
+            ("MOTU_AS_TRANSFER", "staged"),
+        ];
+        (render_env(&f.pkg, "pipeline", &aov, &args, &env), aov)
+    };
+    let (sc, sc_aov) = staged("still-staged");
+    let (sw, sw_aov) = staged("still-staged-warm");
+    let (tsc, tsw) = (totals(&sc), totals(&sw));
+    eprintln!("staged: {tsc}\nstaged warm: {tsw}");
+    assert!(json_u64(&tsc["transfer_staged_runs"]) > 0, "{tsc}");
+    assert!(json_u64(&tsw["transfer_staged_runs"]) > 0, "{tsw}");
+    // One entry per BLAS built (the staging buffer's room may change which are built).
+    assert_eq!(
+        entry_names(&staged_dir).len() as u64,
+        json_u64(&tsc["store_policy"]["built_blases"]),
+        "{tsc}"
+    );
+    assert_eq!(json_u64(&tsw["blas_built"]), 0, "nothing rebuilt: {tsw}");
+    assert!(json_u64(&tsw["restored_blases"]) > 0, "{tsw}");
+    for aov in [&a_aov, &d_aov, &w_aov, &sc_aov, &sw_aov] {
         same(aov);
     }
 }

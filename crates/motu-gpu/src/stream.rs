@@ -333,6 +333,7 @@ impl<'a> StreamingRenderer<'a> {
             r.attach_cache(cache);
         }
         r.raise_skeleton(&records)?;
+        r.reserve_transfer_staging();
         Ok(r)
     }
 

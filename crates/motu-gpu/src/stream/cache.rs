@@ -35,7 +35,7 @@ use super::clones::{HostCacheMode, Restored};
 use super::proxy_boxes::{self, Box6};
 use super::skeleton::ms_since;
 use super::store_policy::{self, HostStorePolicy, StoreEstimator, StorePolicyStats};
-use super::transfer::{Transfer, TransferBuffers, TRANSFER_CAP_BYTES};
+use super::transfer::{staged_runs, Transfer, TransferBuffers, TRANSFER_CAP_BYTES};
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
 use crate::scene::AccelStruct;
@@ -346,6 +346,13 @@ impl StreamingRenderer<'_> {
         let align = |v: u64| v.div_ceil(SERIALIZED_ALIGNMENT) * SERIALIZED_ALIGNMENT;
         let total: u64 = hits.iter().map(|h| align(h.blob.len() as u64)).sum();
         let staging = self.transfer_buffer(Transfer::Upload, total)?;
+        let device_staging = match self.transfer_staging() {
+            Ok(s) => s,
+            Err(e) => {
+                self.put_back_transfer(Transfer::Upload, staging);
+                return Err(e.into());
+            }
+        };
         let mut out: Vec<(usize, AccelStruct)> = Vec::with_capacity(hits.len());
         let result = (|| -> Result<()> {
             let base = staging.device_address()?;
@@ -388,8 +395,34 @@ impl StreamingRenderer<'_> {
             self.frame.stats_mut().restore_upload_ms += ms_since(t);
             let gpu = Instant::now();
             let mut rec = ctx.record("restore blases")?;
-            for ((_, accel), &off) in out.iter().zip(&offsets) {
-                rec.deserialize_acceleration_structure(base.offset(off), accel.target())?;
+            match &device_staging {
+                None => {
+                    for ((_, accel), &off) in out.iter().zip(&offsets) {
+                        rec.deserialize_acceleration_structure(base.offset(off), accel.target())?;
+                    }
+                }
+                Some(st) => {
+                    // One bus copy a run into device memory, deserialised from there
+                    // (transfer.rs).
+                    let st_base = st.device_address()?;
+                    let sizes: Vec<u64> = hits.iter().map(|h| h.blob.len() as u64).collect();
+                    for run in staged_runs(&offsets, &sizes, st.size_bytes()) {
+                        if run.staged {
+                            rec.barrier();
+                            rec.copy_buffer(&staging, run.start_bytes, st, 0, run.len_bytes)?;
+                            rec.barrier();
+                            self.frame.stats_mut().transfer_staged_runs += 1;
+                        }
+                        for i in run.blobs.clone() {
+                            let src = if run.staged {
+                                st_base.offset(offsets[i] - run.start_bytes)
+                            } else {
+                                base.offset(offsets[i])
+                            };
+                            rec.deserialize_acceleration_structure(src, out[i].1.target())?;
+                        }
+                    }
+                }
             }
             rec.barrier();
             rec.submit_and_wait()?;
@@ -403,6 +436,9 @@ impl StreamingRenderer<'_> {
             Ok(())
         })();
         self.put_back_transfer(Transfer::Upload, staging);
+        if let Some(st) = device_staging {
+            self.put_back_transfer(Transfer::Staging, st);
+        }
         match result {
             Ok(()) => Ok(out),
             Err(e) => {

@@ -159,6 +159,9 @@ pub struct FrameStreamStats {
     /// reused on a discrete GPU: far fewer than batches; `transfer.rs`).
     pub transfer_batches: u32,
     pub transfer_allocations: u32,
+    /// Runs of blobs moved through the device-local staging buffer (staged transfers,
+    /// `transfer.rs`; 0 with direct transfers, the default).
+    pub transfer_staged_runs: u32,
     pub build_ms: f64,
     /// Wall time of the trace submissions.
     pub trace_ms: f64,
@@ -395,6 +398,7 @@ pub struct StreamTotals {
     pub restore_gpu_ms: f64,
     pub transfer_batches: u32,
     pub transfer_allocations: u32,
+    pub transfer_staged_runs: u32,
     /// How evicted BLASes were kept in host memory: "clone" (device-side clones, `clones.rs`),
     /// "deferred" (serialised at eviction and after the frames, the default), "serialize"
     /// (serialised as built), "off" (no host bytes), "" (no cache attached).
@@ -522,6 +526,7 @@ impl StreamTotals {
         tot.restore_gpu_ms += st.restore_gpu_ms;
         tot.transfer_batches += st.transfer_batches;
         tot.transfer_allocations += st.transfer_allocations;
+        tot.transfer_staged_runs += st.transfer_staged_runs;
         tot.cloned_blases += u64::from(st.cloned_blases);
         tot.cloned_bytes += st.cloned_bytes;
         tot.clone_ms += st.clone_ms;

@@ -8,6 +8,12 @@
 //! (grown to the largest batch seen, at most the cap). On unified memory (lavapipe, integrated
 //! GPUs) host-visible memory is the budget's own: buffers are freed after each batch as before.
 //! A blob larger than the cap gets a buffer of its own, freed after use.
+//!
+//! Staged transfers (`MOTU_AS_TRANSFER=staged`, discrete GPUs only, an A/B switch until the
+//! device measures it): the GPU serialises into, and deserialises from, a small device-local
+//! buffer ([`staging_bytes`], kept) and a buffer copy moves the bytes across the bus, instead
+//! of the structure copies reading and writing host memory themselves. A staging buffer the
+//! budget refuses means direct transfers, as without the switch.
 
 use motu_alloc::{AllocKind, MemoryClass, MIB};
 use motu_vk::{BufferUsage, HeapBuffer, SERIALIZED_ALIGNMENT};
@@ -16,6 +22,17 @@ use super::StreamingRenderer;
 
 /// The most bytes one serialise or deserialise batch moves (and a kept buffer holds).
 pub(super) const TRANSFER_CAP_BYTES: u64 = 256 * MIB;
+
+/// The most bytes of the device-local staging buffer of staged transfers (module docs): a
+/// 128th of an 8 GiB budget. Smaller budgets get a 128th of theirs ([`staging_bytes`]); blobs
+/// larger than it go direct.
+pub(super) const STAGING_MAX_BYTES: u64 = 64 * MIB;
+
+/// The staging buffer's size under a budget of `budget_bytes`: a 128th of it, at least 1 MiB,
+/// at most [`STAGING_MAX_BYTES`].
+pub(super) fn staging_bytes(budget_bytes: u64) -> u64 {
+    (budget_bytes / 128).clamp(MIB, STAGING_MAX_BYTES)
+}
 
 /// The least a kept buffer is allocated with, so small batches do not grow it step by step.
 const TRANSFER_MIN_BYTES: u64 = 16 * MIB;
@@ -27,6 +44,9 @@ pub(super) enum Transfer {
     Readback,
     /// Serialised structures, written by the host and read by the GPU (restoring).
     Upload,
+    /// Device-local staging between the structure copies and the host buffers (staged
+    /// transfers, module docs).
+    Staging,
 }
 
 impl Transfer {
@@ -34,17 +54,34 @@ impl Transfer {
         match self {
             Transfer::Readback => "serialised blases",
             Transfer::Upload => "restore blobs",
+            Transfer::Staging => "structure transfer staging",
         }
     }
 
     fn usage(self) -> BufferUsage {
         match self {
             Transfer::Readback => BufferUsage::DEVICE_ADDRESS.union(BufferUsage::TRANSFER_DST),
-            Transfer::Upload => {
-                BufferUsage::DEVICE_ADDRESS.union(BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT)
-            }
+            Transfer::Upload => BufferUsage::DEVICE_ADDRESS
+                .union(BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT)
+                .union(BufferUsage::TRANSFER_SRC),
+            Transfer::Staging => BufferUsage::DEVICE_ADDRESS
+                .union(BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT)
+                .union(BufferUsage::TRANSFER_SRC)
+                .union(BufferUsage::TRANSFER_DST),
         }
     }
+
+    fn class(self) -> MemoryClass {
+        match self {
+            Transfer::Readback | Transfer::Upload => MemoryClass::HostVisible,
+            Transfer::Staging => MemoryClass::DeviceLocal,
+        }
+    }
+}
+
+/// Whether `MOTU_AS_TRANSFER=staged` asks for staged transfers (module docs).
+fn staged_asked() -> bool {
+    std::env::var("MOTU_AS_TRANSFER").is_ok_and(|v| v == "staged")
 }
 
 /// The kept buffers (none on unified memory).
@@ -52,6 +89,7 @@ impl Transfer {
 pub(super) struct TransferBuffers {
     readback: Option<HeapBuffer>,
     upload: Option<HeapBuffer>,
+    staging: Option<HeapBuffer>,
 }
 
 impl TransferBuffers {
@@ -59,8 +97,44 @@ impl TransferBuffers {
         match t {
             Transfer::Readback => &mut self.readback,
             Transfer::Upload => &mut self.upload,
+            Transfer::Staging => &mut self.staging,
         }
     }
+}
+
+/// One run of a staged transfer: blobs `blobs` (indices into the batch), staged together
+/// through the staging buffer from the batch buffer's offset `start_bytes` on, `len_bytes`
+/// long; or, `staged` false, one blob larger than the staging buffer, copied direct.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(super) struct StagedRun {
+    pub(super) blobs: std::ops::Range<usize>,
+    pub(super) start_bytes: u64,
+    pub(super) len_bytes: u64,
+    pub(super) staged: bool,
+}
+
+/// Cuts a batch of blobs at `offsets` (ascending, in one buffer) of `sizes` bytes into runs
+/// whose bytes fit `cap_bytes` from their first blob's offset ([`StagedRun`]).
+pub(super) fn staged_runs(offsets: &[u64], sizes: &[u64], cap_bytes: u64) -> Vec<StagedRun> {
+    let mut runs = Vec::new();
+    let mut i = 0;
+    while i < offsets.len() {
+        let start_bytes = offsets[i];
+        let mut j = i;
+        while j < offsets.len() && offsets[j] + sizes[j] - start_bytes <= cap_bytes {
+            j += 1;
+        }
+        let staged = j > i;
+        let j = j.max(i + 1);
+        runs.push(StagedRun {
+            blobs: i..j,
+            start_bytes,
+            len_bytes: offsets[j - 1] + sizes[j - 1] - start_bytes,
+            staged,
+        });
+        i = j;
+    }
+    runs
 }
 
 /// Bytes a kept buffer is allocated with for a batch of `size_bytes`: a power of two between
@@ -85,14 +159,18 @@ impl StreamingRenderer<'_> {
         t: Transfer,
         size_bytes: u64,
     ) -> motu_vk::Result<HeapBuffer> {
-        self.frame.stats_mut().transfer_batches += 1;
+        if !matches!(t, Transfer::Staging) {
+            self.frame.stats_mut().transfer_batches += 1;
+        }
         if let Some(b) = self.reuse.take_transfer(t) {
             if b.size_bytes() >= size_bytes {
                 return Ok(b);
             }
             self.heap.free(b);
         }
-        let alloc_bytes = if self.keeps_transfer_buffers() && size_bytes <= TRANSFER_CAP_BYTES {
+        let alloc_bytes = if matches!(t, Transfer::Staging) {
+            size_bytes
+        } else if self.keeps_transfer_buffers() && size_bytes <= TRANSFER_CAP_BYTES {
             kept_size_bytes(size_bytes)
         } else {
             size_bytes
@@ -103,9 +181,40 @@ impl StreamingRenderer<'_> {
             alloc_bytes,
             t.usage(),
             AllocKind::Staging,
-            MemoryClass::HostVisible,
+            t.class(),
             SERIALIZED_ALIGNMENT,
         )
+    }
+
+    /// With a structure cache and staged transfers asked for: allocates the staging buffer
+    /// now, after the floor and before frames fill the budget (a store at eviction finds the
+    /// budget full), and keeps it. No room: transfers go direct.
+    pub(super) fn reserve_transfer_staging(&mut self) {
+        if self.cache_stats().is_none() {
+            return;
+        }
+        match self.transfer_staging() {
+            Ok(Some(st)) => self.put_back_transfer(Transfer::Staging, st),
+            Ok(None) => {}
+            Err(e) => tracing::warn!(error = %e, "structure transfers: no staging buffer; direct"),
+        }
+    }
+
+    /// The device-local staging buffer of staged transfers (module docs), where they are
+    /// asked for, the GPU is discrete and the budget has room for it; else `None` (direct).
+    pub(super) fn transfer_staging(&mut self) -> motu_vk::Result<Option<HeapBuffer>> {
+        if !staged_asked() || !self.keeps_transfer_buffers() {
+            return Ok(None);
+        }
+        let bytes = staging_bytes(self.opts.budget_bytes);
+        match self.transfer_buffer(Transfer::Staging, bytes) {
+            Ok(b) => Ok(Some(b)),
+            Err(motu_vk::VkError::Budget(why)) => {
+                tracing::debug!(%why, "structure transfers: no room for staging; direct");
+                Ok(None)
+            }
+            Err(e) => Err(e),
+        }
     }
 
     /// Keeps `buf` for the next batch where that is the policy (see the module docs), else

@@ -12,7 +12,7 @@ use rayon::prelude::*;
 use super::super::clones::{HostCacheMode, TakenClone};
 use super::super::skeleton::ms_since;
 use super::super::store_policy::HostStorePolicy;
-use super::super::transfer::{Transfer, TRANSFER_CAP_BYTES};
+use super::super::transfer::{staged_runs, Transfer, TRANSFER_CAP_BYTES};
 use super::super::StreamingRenderer;
 use crate::error::Result;
 use crate::scene::AccelStruct;
@@ -216,6 +216,7 @@ impl StreamingRenderer<'_> {
         tot.store_put_ms += counted.store_put_ms;
         tot.transfer_batches += counted.transfer_batches;
         tot.transfer_allocations += counted.transfer_allocations;
+        tot.transfer_staged_runs += counted.transfer_staged_runs;
         tot.persist_ms += ms_since(t);
         if let Ok(from_clones) = stored {
             tot.persisted_from_clone += from_clones;
@@ -312,15 +313,48 @@ impl StreamingRenderer<'_> {
             }
             Err(e) => return Err(e.into()),
         };
+        let staging = match self.transfer_staging() {
+            Ok(s) => s,
+            Err(e) => {
+                self.put_back_transfer(Transfer::Readback, readback);
+                return Err(e.into());
+            }
+        };
         let result = (|| -> Result<Vec<Arc<[u8]>>> {
             let base = readback.device_address()?;
-            let mut rec = ctx.record("serialise blases")?;
-            let mut at = 0u64;
             let mut offsets = Vec::with_capacity(todo.len());
-            for (t, &size) in todo.iter().zip(sizes) {
-                rec.serialize_acceleration_structure(t.accel.target(), base.offset(at))?;
+            let mut at = 0u64;
+            for &size in sizes {
                 offsets.push(at);
                 at += align(size);
+            }
+            let mut rec = ctx.record("serialise blases")?;
+            match &staging {
+                None => {
+                    for (t, &off) in todo.iter().zip(&offsets) {
+                        rec.serialize_acceleration_structure(t.accel.target(), base.offset(off))?;
+                    }
+                }
+                Some(st) => {
+                    // Serialised into device memory, then one bus copy a run (transfer.rs).
+                    let st_base = st.device_address()?;
+                    for run in staged_runs(&offsets, sizes, st.size_bytes()) {
+                        for i in run.blobs.clone() {
+                            let dst = if run.staged {
+                                st_base.offset(offsets[i] - run.start_bytes)
+                            } else {
+                                base.offset(offsets[i])
+                            };
+                            rec.serialize_acceleration_structure(todo[i].accel.target(), dst)?;
+                        }
+                        if run.staged {
+                            rec.barrier();
+                            rec.copy_buffer(st, 0, &readback, run.start_bytes, run.len_bytes)?;
+                            rec.barrier();
+                            self.frame.stats_mut().transfer_staged_runs += 1;
+                        }
+                    }
+                }
             }
             rec.barrier();
             rec.submit_and_wait()?;
@@ -341,6 +375,9 @@ impl StreamingRenderer<'_> {
             Ok(blobs)
         })();
         self.put_back_transfer(Transfer::Readback, readback);
+        if let Some(st) = staging {
+            self.put_back_transfer(Transfer::Staging, st);
+        }
         let blobs = result?;
         let put = Instant::now();
         let a = self.reuse.cache.as_mut().expect("attached");
