@@ -160,7 +160,7 @@ pub struct FrameStreamStats {
     pub transfer_batches: u32,
     pub transfer_allocations: u32,
     /// Runs of blobs moved through the device-local staging buffer (staged transfers,
-    /// `transfer.rs`; 0 with direct transfers, the default).
+    /// `transfer.rs`; 0 with direct transfers: unified memory, `MOTU_AS_TRANSFER=direct`).
     pub transfer_staged_runs: u32,
     pub build_ms: f64,
     /// Wall time of the trace submissions.
