@@ -52,6 +52,11 @@ impl Stash {
         let (count, capacity) = (instances.len() - base, instances.capacity());
         instances.truncate(base);
         instances.shrink_to_fit();
+        tracing::debug!(
+            instances = count,
+            bytes = count * std::mem::size_of::<InstanceRecord>(),
+            "split by key: the records wait in a scratch file"
+        );
         Ok(Self {
             file,
             dir: dir.to_path_buf(),
