@@ -98,7 +98,10 @@
 //! split as a package stores it — tables whole, instances as a map into the package's — and rebuilt
 //! in O(instances); `stream_split_taking_instances`/`StreamSplit::give_back`: the import's split,
 //! holding the package's instance table while the proxy tables are made over it (no second
-//! table); `split/tests/reference.rs` (tests only): the partitioners before their speed-ups,
+//! table); `tlas_split/stash.rs`: with `CompileOptions::split_scratch_dir` (the import's), a range
+//! of 1M+ instances is split by key — its records in an unnamed file, the partition over indices,
+//! the records put back in its order: the same split, without the table and the partition's arrays
+//! resident together; `split/tests/reference.rs` (tests only): the partitioners before their speed-ups,
 //! which the fast ones must equal; `tables.rs` holds the table helpers emit, split and finalize
 //! share), `ml`/`sl`/`N`/`auto` levels (`auto`, in `analyze.rs` `plan_auto_inlining`: grouping
 //! levels of ≤ 256 entries inlined, and small instanced prototypes — ≤ 2^17 triangles with their
@@ -150,7 +153,8 @@ pub use split::sah_partition;
 
 pub use tlas_split::{
     split_for_streaming, stored_stream_split, stored_stream_split_in_place,
-    stream_split_taking_instances, StoredStreamSplit, StreamSplit, STREAM_SPLIT_INSTANCES,
+    stream_split_taking_instances, stream_split_taking_instances_in, StoredStreamSplit,
+    StreamSplit, STREAM_SPLIT_INSTANCES,
 };
 pub use validate::{validate, validate_with, Limits, ValidateError};
 
@@ -218,6 +222,11 @@ pub struct CompileOptions {
     /// its meshes' copies become triangle BLASes (with a primitive map to the source triangle),
     /// so a ray reaches it with no traversal-shader hop. 0 turns baking off.
     pub auto_bake_max_triangles: u64,
+    /// A directory for unnamed scratch files: a TLAS over the cap of at least 2^16 instances
+    /// is split by key there (its records in a file while the partition moves indices; the
+    /// same split, without the table and the partition's arrays resident together). `None`:
+    /// split in memory.
+    pub split_scratch_dir: Option<std::path::PathBuf>,
 }
 
 impl Default for CompileOptions {
@@ -242,6 +251,7 @@ impl Default for CompileOptions {
             // A forest tree of 8,732 eight-triangle leaves (70k triangles, ~5 MB of BLAS) bakes;
             // the flake levels of a depth-4 sphereflake (787k) and Moana's plants do not.
             auto_bake_max_triangles: 1 << 17,
+            split_scratch_dir: None,
         }
     }
 }
@@ -296,6 +306,14 @@ pub enum CompileError {
     },
     #[error("internal compiler error: {0}")]
     Internal(String),
+    /// A split's scratch file (`CompileOptions::split_scratch_dir`) could not be written or
+    /// read back.
+    #[error("TLAS split scratch file in {dir}: {source}")]
+    Scratch {
+        dir: std::path::PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
     /// The compiled hierarchy references out of range (a compiler bug, not bad input).
     #[error("internal compiler error: {0}")]
     References(#[source] motu_abi::HierarchyError),

@@ -8,6 +8,9 @@ use motu_abi::{
     BlasRecord, HierarchyView, InstanceRecord, PiRecord, TlasRecord, BLAS_AABBS, NONE_U32, PI_TLAS,
 };
 use motu_scene::{Aabb, Transform34};
+use std::path::Path;
+
+mod stash;
 
 /// Splits `tlas` until its instance count fits `cap` (see the crate docs): the few instances
 /// large against the whole (terrain, ocean) stay in `tlas` itself, traced with it, and the
@@ -18,12 +21,15 @@ use motu_scene::{Aabb, Transform34};
 /// filters on. `tlas`'s instance range must be the instance table's tail.
 /// `new_aabb_blas(element)` is told of each AABB BLAS made (with the element its pieces share,
 /// or `NONE_U32`); `root`: `tlas` is the root, whose instances carry elements.
+/// `scratch`: a directory for [`stash`]: a TLAS of at least [`stash::MIN_INSTANCES`] is split
+/// by key (its records wait in an unnamed file there while the partition moves indices).
 pub(crate) fn split_tlas(
     out: &mut CompiledScene,
     tlas: u32,
     cap: usize,
     per_blas: usize,
     root: bool,
+    scratch: Option<&Path>,
     new_aabb_blas: &mut dyn FnMut(u32),
 ) -> Result<(), CompileError> {
     let mut ranges: Vec<(usize, usize)> = Vec::new();
@@ -38,50 +44,71 @@ pub(crate) fn split_tlas(
         // The range is the table's tail (just emitted, or the previous round's output), so
         // what stays direct can sit at its end and the new AABB instances follow it.
         debug_assert_eq!(base + count, out.instances.len());
-        let mut bounds: Vec<([f32; 3], [f32; 3])> = {
-            use rayon::prelude::*;
-            let blases = &out.blases;
-            out.instances[base..]
-                .par_iter()
-                .map(|inst| {
-                    let b = instance_bounds(blases, inst);
-                    (b.min, b.max)
-                })
-                .collect()
+        if first_round {
+            out.report.split_tlases += 1;
+        }
+        // A large range is partitioned as indices (4 bytes, not a 64-byte record, beside its
+        // bounds) while its records wait in a file, read back for their bounds: the table and
+        // the partition's arrays are never resident together (issue 48 item 1: the import's
+        // peak where a root is split).
+        let mut stashed = match scratch {
+            Some(dir) if count >= stash::MIN_INSTANCES => {
+                Some(stash::Stash::take_tail(&mut out.instances, base, dir)?)
+            }
+            _ => None,
+        };
+        let blases = &out.blases;
+        let bounds_of = |inst: &InstanceRecord| {
+            let b = instance_bounds(blases, inst);
+            (b.min, b.max)
+        };
+        let mut bounds: Vec<([f32; 3], [f32; 3])> = match stashed.as_mut() {
+            Some(s) => s.map_records(bounds_of)?,
+            None => {
+                use rayon::prelude::*;
+                out.instances[base..].par_iter().map(bounds_of).collect()
+            }
         };
         ranges.clear();
-        let direct = if first_round {
-            out.report.split_tlases += 1;
-            let large = keep_large_at_end(&mut out.instances[base..], &mut bounds, cap);
-            // Beside the large ones, the TLAS keeps as many instances as the cap leaves
-            // room for next to its pieces' AABB instances: rays into that part take one
-            // trace, and only the densest clusters become pieces.
-            let rest = count - large;
-            let kept = split_keeping_direct(
-                &mut out.instances[base..base + rest],
-                &mut bounds[..rest],
+        let (direct, order) = if stashed.is_some() {
+            let mut order: Vec<u32> = (0..next_id(count, "instances")?).collect();
+            let direct = partition_round(
+                &mut order,
+                &mut bounds,
+                first_round,
                 cap,
-                |pieces| cap.saturating_sub(large + pieces.div_ceil(per_blas.max(1))),
+                per_blas,
                 &mut ranges,
             );
-            large + kept
+            (direct, order)
         } else {
-            sah_partition(
+            let direct = partition_round(
                 &mut out.instances[base..],
-                &mut bounds[..],
+                &mut bounds,
+                first_round,
                 cap,
+                per_blas,
                 &mut ranges,
             );
-            0
+            (direct, Vec::new())
         };
         first_round = false;
+        // The instances' bounds were permuted with them: a piece's are its range's.
+        let piece_bounds: Vec<Aabb> = ranges
+            .iter()
+            .map(|&(x, y)| {
+                bounds[x..y].iter().fold(Aabb::EMPTY, |acc, &(min, max)| {
+                    acc.union(&Aabb { min, max })
+                })
+            })
+            .collect();
+        drop(bounds);
+        if let Some(s) = stashed {
+            s.put_back(&mut out.instances, order)?;
+        }
         let split_end = base + count - direct;
         let first_piece = out.tlases.len();
-        for &(x, y) in &ranges {
-            // The instances' bounds were permuted with them: a piece's are its range's.
-            let piece_bounds = bounds[x..y].iter().fold(Aabb::EMPTY, |acc, &(min, max)| {
-                acc.union(&Aabb { min, max })
-            });
+        for (&(x, y), piece_bounds) in ranges.iter().zip(&piece_bounds) {
             let (x, y) = (base + x, base + y);
             next_id(out.tlases.len(), "TLASes")?;
             let insts = &out.instances[x..y];
@@ -94,7 +121,7 @@ pub(crate) fn split_tlas(
                 },
                 ..Default::default()
             };
-            set_bounds(&mut rec.bounds_min, &mut rec.bounds_max, &piece_bounds);
+            set_bounds(&mut rec.bounds_min, &mut rec.bounds_max, piece_bounds);
             out.tlases.push(rec);
         }
         let piece_end = out.tlases.len();
@@ -139,6 +166,37 @@ pub(crate) fn split_tlas(
     }
 }
 
+/// One round of [`split_tlas`] over `items` (records, or their indices) and their bounds,
+/// permuted together: the first keeps the large instances and the sparse part direct
+/// (returns how many stay, at the range's end), later rounds cut everything into pieces.
+fn partition_round<T: Copy + Send>(
+    items: &mut [T],
+    bounds: &mut [([f32; 3], [f32; 3])],
+    first_round: bool,
+    cap: usize,
+    per_blas: usize,
+    ranges: &mut Vec<(usize, usize)>,
+) -> usize {
+    if !first_round {
+        sah_partition(items, bounds, cap, ranges);
+        return 0;
+    }
+    let count = items.len();
+    let large = keep_large_at_end(items, bounds, cap);
+    // Beside the large ones, the TLAS keeps as many instances as the cap leaves room for
+    // next to its pieces' AABB instances: rays into that part take one trace, and only the
+    // densest clusters become pieces.
+    let rest = count - large;
+    let kept = split_keeping_direct(
+        &mut items[..rest],
+        &mut bounds[..rest],
+        cap,
+        |pieces| cap.saturating_sub(large + pieces.div_ceil(per_blas.max(1))),
+        ranges,
+    );
+    large + kept
+}
+
 /// Appends an AABB BLAS over PIs `begin..end` (bounds from their boxes) and returns its id.
 pub(crate) fn push_aabb_blas(
     out: &mut CompiledScene,
@@ -173,8 +231,8 @@ fn common_element(mut elements: impl Iterator<Item = u32>) -> Option<u32> {
 /// alongside) and returns how many: those with a surface area of at least the whole's over
 /// the piece count, the largest first, at most a quarter of `cap`, so the parent keeps room
 /// for the pieces' AABB instances.
-fn keep_large_at_end(
-    instances: &mut [InstanceRecord],
+fn keep_large_at_end<T>(
+    instances: &mut [T],
     bounds: &mut [([f32; 3], [f32; 3])],
     cap: usize,
 ) -> usize {
@@ -450,6 +508,16 @@ pub fn stream_split_taking_instances(
     compiled: &mut CompiledScene,
     cap: u32,
 ) -> Result<Option<(StoredStreamSplit, StreamSplit)>, CompileError> {
+    stream_split_taking_instances_in(compiled, cap, None)
+}
+
+/// [`stream_split_taking_instances`] whose large TLASes are split by key, their records
+/// waiting in an unnamed file in `scratch` meanwhile (the same split: see `stash`).
+pub fn stream_split_taking_instances_in(
+    compiled: &mut CompiledScene,
+    cap: u32,
+    scratch: Option<&Path>,
+) -> Result<Option<(StoredStreamSplit, StreamSplit)>, CompileError> {
     let Some(over) = over_cap(&compiled.tlases, cap) else {
         return Ok(None);
     };
@@ -461,7 +529,7 @@ pub fn stream_split_taking_instances(
         instances,
         ..tables_of(&view)
     };
-    split_tagged_scene(&mut out, over, cap)?;
+    split_tagged_scene(&mut out, over, cap, scratch)?;
     let mut split = StreamSplit { scene: out };
     let stored = split.stored(n);
     // The origins are in `stored`; the records become the reader's (`_pad` 0, as in a package).
@@ -564,7 +632,7 @@ fn split_tagged(view: &HierarchyView<'_>, cap: u32) -> Result<Option<StreamSplit
         instances,
         ..tables_of(view)
     };
-    split_tagged_scene(&mut out, over, cap)?;
+    split_tagged_scene(&mut out, over, cap, None)?;
     Ok(Some(StreamSplit { scene: out }))
 }
 
@@ -573,6 +641,7 @@ fn split_tagged_scene(
     out: &mut CompiledScene,
     over: Vec<u32>,
     cap: u32,
+    scratch: Option<&Path>,
 ) -> Result<(), CompileError> {
     let cap = cap.max(2) as usize;
     let _span = tracing::info_span!("split for streaming", tlases = over.len()).entered();
@@ -583,7 +652,7 @@ fn split_tagged_scene(
     for t in over {
         move_range_to_tail(out, t)?;
         let root = t == out.root_tlas;
-        split_tlas(out, t, cap, per_blas, root, &mut |_| {})?;
+        split_tlas(out, t, cap, per_blas, root, scratch, &mut |_| {})?;
     }
     // Levels (two more under each split TLAS) and bounds (the pieces', their PIs').
     crate::finalize::finalize(out)

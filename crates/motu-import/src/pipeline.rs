@@ -291,6 +291,9 @@ pub fn import(
         lod_levels: o.lod_levels,
         lod_triangle_threshold: o.lod_min_triangles,
         subset: (!direct).then(|| subset_ids.iter().map(|&i| ElementId(i)).collect()),
+        // A root over the device's cap (island 0.63 and up) is split by key, its records in a
+        // scratch file beside the package meanwhile (issue 48 item 1: the compile's peak).
+        split_scratch_dir: Some(dir.to_path_buf()),
         ..Default::default()
     };
 
@@ -337,6 +340,7 @@ pub fn import(
             scene_path,
             o,
             &cut_boxes.unwrap_or_default(),
+            dir,
         )?;
         let mut sum = summary(
             s,
@@ -402,6 +406,7 @@ pub fn import(
             scene_path,
             o,
             &HashMap::new(),
+            dir,
         )?;
         Ok(summary(
             s,

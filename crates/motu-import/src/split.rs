@@ -14,10 +14,13 @@ use motu_package::PackageWriter;
 /// renderer's default for this package), and the split (`None`: no TLAS over the cap). Split
 /// in place: the instance table is not copied; the split holds it until
 /// [`motu_compile::StreamSplit::give_back`] (`compiled.instances` is empty until then).
+/// A large TLAS is split by key, its records in an unnamed file in `scratch_dir` meanwhile
+/// (the same split without the table and the partition's arrays resident together).
 pub(crate) fn write_stream_split(
     writer: &mut PackageWriter,
     compiled: &mut CompiledScene,
     cap: u32,
+    scratch_dir: &std::path::Path,
 ) -> Result<
     (
         motu_pack::StreamSplitMeta,
@@ -29,7 +32,8 @@ pub(crate) fn write_stream_split(
     let split = if cap == 0 {
         None
     } else {
-        motu_compile::stream_split_taking_instances(compiled, cap).map_err(ImportError::Compile)?
+        motu_compile::stream_split_taking_instances_in(compiled, cap, Some(scratch_dir))
+            .map_err(ImportError::Compile)?
     };
     let stored = split.as_ref().map(|(s, _)| s);
     let mut meta = motu_pack::StreamSplitMeta {

@@ -265,6 +265,7 @@ impl Emitter<'_, '_, '_, '_> {
             self.instance_cap,
             per_blas,
             self.in_root,
+            self.plan.opts.split_scratch_dir.as_deref(),
             &mut |element| {
                 flags.push(0);
                 elements.push(element);

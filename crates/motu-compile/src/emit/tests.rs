@@ -1067,3 +1067,60 @@ fn a_stored_stream_split_rebuilds_the_same_split() {
         assert!(crate::StreamSplit::from_stored(&whole.view(), &bad).is_err());
     }
 }
+
+/// A TLAS split by key (its records in a scratch file, the partition over their indices:
+/// `tlas_split/stash.rs`) is the split made in memory, bit for bit: at compile time (one
+/// round, and several under a tiny cap; scattered and coincident instances) and the import's
+/// stream split, whose table then goes back in its order.
+#[test]
+fn keyed_splits_equal_splits_in_memory() {
+    fn bytes<T: bytemuck::Pod>(t: &[T]) -> &[u8] {
+        bytemuck::cast_slice(t)
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let keyed = |o: &CompileOptions| CompileOptions {
+        split_scratch_dir: Some(dir.path().to_path_buf()),
+        ..o.clone()
+    };
+    for (scene, cap) in [
+        (scattered(10_000, false), 1000),
+        (scattered(2000, false), 30),
+        (scattered(500, true), 40),
+    ] {
+        let o = CompileOptions {
+            max_instances_per_tlas: cap,
+            ..Default::default()
+        };
+        let (a, b) = (check_flatten(&scene, &o), check_flatten(&scene, &keyed(&o)));
+        assert_eq!(a.report.split_tlases, 1);
+        assert!(a.tlases.len() > 2);
+        assert_eq!(bytes(&a.instances), bytes(&b.instances));
+        assert_eq!(bytes(&a.tlases), bytes(&b.tlases));
+        assert_eq!(bytes(&a.blases), bytes(&b.blases));
+        assert_eq!(bytes(&a.pis), bytes(&b.pis));
+        let counts = |c: &crate::CompiledScene| {
+            let r = &c.report;
+            (r.split_pieces, r.split_aabb_blases, r.max_level)
+        };
+        assert_eq!(counts(&a), counts(&b));
+    }
+    let whole = check_flatten(&scattered(10_000, false), &CompileOptions::default());
+    for cap in [1000, 3000] {
+        let (mut a, mut b) = (whole.clone(), whole.clone());
+        let (sa, ka) = crate::stream_split_taking_instances(&mut a, cap)
+            .unwrap()
+            .expect("a TLAS over the cap");
+        let (sb, kb) = crate::stream_split_taking_instances_in(&mut b, cap, Some(dir.path()))
+            .unwrap()
+            .expect("a TLAS over the cap");
+        assert_eq!(sa, sb);
+        let (va, vb) = (ka.view(&whole.view()), kb.view(&whole.view()));
+        assert_eq!(bytes(va.instances), bytes(vb.instances));
+        assert_eq!(bytes(va.tlases), bytes(vb.tlases));
+        assert_eq!(bytes(va.pis), bytes(vb.pis));
+        kb.give_back(&mut b, &sb).unwrap();
+        assert_eq!(bytes(&b.instances), bytes(&whole.instances));
+    }
+    // Nothing is left in the scratch directory (the files are unnamed).
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}

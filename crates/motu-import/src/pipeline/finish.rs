@@ -85,6 +85,7 @@ pub(super) fn finish(
     source: &Path,
     o: &ImportOptions,
     cut_boxes: &HashMap<u32, ClusterBoxes>,
+    scratch_dir: &Path,
 ) -> Result<(WriteSummary, f64, f64, f64), ImportError> {
     let owned = scene;
     let scene = &owned;
@@ -139,8 +140,12 @@ pub(super) fn finish(
     crate::memory::release_free_heap();
     crate::memory::log_phase("scene dropped");
     let t = Instant::now();
-    let (split_meta, split) =
-        crate::split::write_stream_split(&mut writer, compiled, o.stream_split_instances)?;
+    let (split_meta, split) = crate::split::write_stream_split(
+        &mut writer,
+        compiled,
+        o.stream_split_instances,
+        scratch_dir,
+    )?;
     meta.stream_split = Some(split_meta);
     let split_ms = t.elapsed().as_secs_f64() * 1e3;
     crate::memory::log_phase("stream split");

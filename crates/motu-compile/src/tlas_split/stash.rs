@@ -1,0 +1,135 @@
+//! A split TLAS's records parked in an unnamed scratch file while its partition runs over
+//! indices (issue 48 item 1). Splitting a range of `n` instances in memory holds the records
+//! (64 bytes each) beside their bounds (24) and the permutation's arrays (5): 93 bytes an
+//! instance at once, the import's peak where the root is split (island 0.63: 17.5M instances
+//! over the 2^24 − 1 cap). Keyed, the partition holds bounds and indices (33 bytes), and the
+//! records come back from the file into their places (68 bytes: the records and where each
+//! goes). The partition looks at bounds only, so it permutes indices exactly as it would
+//! permute records: the same split, bit for bit.
+
+use crate::CompileError;
+use motu_abi::InstanceRecord;
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+/// Ranges of fewer instances are split in memory: their records (under 64 MiB) would stay in
+/// the allocator's arenas when freed (glibc maps only blocks over 32 MiB apart and gives
+/// those back), so parking them saves nothing.
+#[cfg(not(test))]
+pub(crate) const MIN_INSTANCES: usize = 1 << 20;
+/// Every range in tests, so small scenes take the keyed path.
+#[cfg(test)]
+pub(crate) const MIN_INSTANCES: usize = 1;
+
+/// Records read back at a time (4 MiB).
+const READ_RECORDS: usize = 1 << 16;
+
+/// The tail of an instance table, in a file.
+pub(crate) struct Stash {
+    file: File,
+    dir: PathBuf,
+    count: usize,
+    /// The table's capacity before: given back with the records, so the emitter's one
+    /// reservation holds.
+    capacity: usize,
+}
+
+impl Stash {
+    /// Moves `instances[base..]` to an unnamed file in `dir` and frees its memory.
+    pub(crate) fn take_tail(
+        instances: &mut Vec<InstanceRecord>,
+        base: usize,
+        dir: &Path,
+    ) -> Result<Self, CompileError> {
+        let err = |source| CompileError::Scratch {
+            dir: dir.to_path_buf(),
+            source,
+        };
+        let mut file = tempfile::tempfile_in(dir).map_err(err)?;
+        file.write_all(bytemuck::cast_slice(&instances[base..]))
+            .map_err(err)?;
+        let (count, capacity) = (instances.len() - base, instances.capacity());
+        instances.truncate(base);
+        instances.shrink_to_fit();
+        tracing::debug!(
+            instances = count,
+            bytes = count * std::mem::size_of::<InstanceRecord>(),
+            "split by key: the records wait in a scratch file"
+        );
+        Ok(Self {
+            file,
+            dir: dir.to_path_buf(),
+            count,
+            capacity,
+        })
+    }
+
+    /// `f` of every stashed record, in order (read back a chunk at a time, each chunk's
+    /// records mapped on the thread pool).
+    pub(crate) fn map_records<B: Send>(
+        &mut self,
+        f: impl Fn(&InstanceRecord) -> B + Sync,
+    ) -> Result<Vec<B>, CompileError> {
+        use rayon::prelude::*;
+        let err = |source| CompileError::Scratch {
+            dir: self.dir.clone(),
+            source,
+        };
+        self.file.seek(SeekFrom::Start(0)).map_err(err)?;
+        let mut out = Vec::with_capacity(self.count);
+        let mut buf = vec![InstanceRecord::default(); READ_RECORDS.min(self.count)];
+        let mut left = self.count;
+        while left > 0 {
+            let records = &mut buf[..READ_RECORDS.min(left)];
+            self.file
+                .read_exact(bytemuck::cast_slice_mut(records))
+                .map_err(err)?;
+            out.par_extend(records.par_iter().map(&f));
+            left -= records.len();
+        }
+        Ok(out)
+    }
+
+    /// Appends the stashed records to `instances` in the partition's order: `order[j]` is the
+    /// stashed record that goes to place `j` (a permutation of `0..count`). The file is read
+    /// in order and each record written to its place.
+    pub(crate) fn put_back(
+        mut self,
+        instances: &mut Vec<InstanceRecord>,
+        order: Vec<u32>,
+    ) -> Result<(), CompileError> {
+        if order.len() != self.count {
+            return Err(CompileError::Internal(format!(
+                "a keyed split ordered {} of {} instances",
+                order.len(),
+                self.count
+            )));
+        }
+        let mut place = vec![0u32; self.count];
+        for (j, &from) in order.iter().enumerate() {
+            place[from as usize] = j as u32;
+        }
+        drop(order);
+        let base = instances.len();
+        instances.reserve_exact(self.capacity.max(base + self.count) - base);
+        instances.resize(base + self.count, bytemuck::Zeroable::zeroed());
+        let dir = self.dir;
+        let err = |source| CompileError::Scratch {
+            dir: dir.clone(),
+            source,
+        };
+        self.file.seek(SeekFrom::Start(0)).map_err(err)?;
+        let mut buf = vec![InstanceRecord::default(); READ_RECORDS.min(self.count)];
+        for chunk in place.chunks(READ_RECORDS) {
+            let records = &mut buf[..chunk.len()];
+            self.file
+                .read_exact(bytemuck::cast_slice_mut(records))
+                .map_err(err)?;
+            for (r, &to) in records.iter().zip(chunk) {
+                instances[base + to as usize] = *r;
+            }
+        }
+        Ok(())
+    }
+}
