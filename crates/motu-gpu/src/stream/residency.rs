@@ -394,8 +394,9 @@ impl<'a> StreamingRenderer<'a> {
     /// into pieces (or several TLASes) see a difference: under one TLAS every victim is free.
     /// Lavapipe, island 0.01 split into ~10 pieces (`--stream-split-instances 30000`), 64×36,
     /// 6 frames, frames after the first, 3 alternated runs: at ⅛ `tlas_rebuilt_again`
-    /// 5–15 → 2–6, TLAS builds 331–340 → 322–336; at ¼ 1–2 → 0 for one more pass in 5 frames
-    /// (15 → 16, `returned_in_frame` 87–91 → 96); at 1/16 unchanged (no TLAS-room evictions).
+    /// 10–15 → 1, TLAS builds 335–341 → 319–327, passes 32 → 31, `returned_in_frame`
+    /// 322–330 → 310–313; at ¼ 1 → 0 for one more pass in 5 frames (15 → 16, returned
+    /// 89–92 → 96–97); at 1/16 unchanged (TLAS-room evictions 0–3; BENCHMARKS.md, session 42).
     fn victims_sparing_clean_tlases(&self, bytes: u64) -> Vec<ItemId> {
         let order = self.lru_victims(u64::MAX);
         let mut dirty: Vec<bool> = (0..self.view.tlases.len() as u32)
