@@ -115,9 +115,13 @@ impl<'a> StreamingRenderer<'a> {
     /// Rebuilds every dirty TLAS, in groups ([`Self::next_rebuild_group`]). When the budget
     /// refuses even with everything unpinned evicted, gives back structures this step built,
     /// least requested first (their pixels stay incomplete); fails only when none is left.
+    /// Meanwhile evictions (for a group's room or on a refused build) spare clean TLASes
+    /// (`victims_sparing_clean_tlases`): a group's room does not dirty a group rebuilt before.
     pub(super) fn rebuild_dirty(&mut self) -> Result<()> {
         let t0 = std::time::Instant::now();
+        self.res.set_rebuilding(true);
         let r = self.rebuild_dirty_untimed();
+        self.res.set_rebuilding(false);
         let saved = self.tlases.compact_saved_bytes();
         let st = self.frame.stats_mut();
         st.tlas_ms += t0.elapsed().as_secs_f64() * 1e3;

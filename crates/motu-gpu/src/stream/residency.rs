@@ -69,6 +69,9 @@ pub(super) struct Resident {
     /// did (`returned_in_frame`, `returned_after_prefetch`).
     evicted_in: Vec<u64>,
     evicted_by_prefetch: Vec<bool>,
+    /// Set while the dirty TLASes are rebuilt (`rebuild_dirty`): evictions then spare clean
+    /// TLASes ([`StreamingRenderer::victims_sparing_clean_tlases`]).
+    rebuilding: bool,
 }
 
 impl Resident {
@@ -170,6 +173,11 @@ impl Resident {
     /// Drops every pin of `items` items (what the step built stays counted as built).
     pub fn unpin_all(&mut self, items: usize) {
         self.pinned = vec![false; items];
+    }
+
+    /// The dirty TLASes are being rebuilt (`on`) or are no longer.
+    pub fn set_rebuilding(&mut self, on: bool) {
+        self.rebuilding = on;
     }
 
     /// Forgets what the current step built (a rebuild outside any build step).
@@ -295,6 +303,7 @@ impl Resident {
             evictions: 0,
             evicted_in: vec![0; blases],
             evicted_by_prefetch: vec![false; blases],
+            rebuilding: false,
         }
     }
 }
@@ -329,20 +338,12 @@ impl<'a> StreamingRenderer<'a> {
     }
 
     fn evict_some_untimed(&mut self, bytes: u64, why: EvictWhy) -> Result<bool> {
-        let pins = &self.res.pinned;
-        let pinned = |id: ItemId| pins.get(id.0 as usize).copied().unwrap_or(true);
-        let victims = match self
-            .res
-            .residency
-            .choose_victims_excluding(bytes.max(1), pinned)
-        {
-            Ok(v) => v,
-            Err(e) if e.evictable_bytes > 0 => self
-                .res
-                .residency
-                .choose_victims_excluding(e.evictable_bytes, pinned)
-                .unwrap_or_default(),
-            Err(_) => Vec::new(),
+        // Evictions while TLASes are rebuilt (for their room, or on a refused build) spare
+        // clean TLASes; others go least recently seen first.
+        let victims = if why == EvictWhy::TlasRoom || self.res.rebuilding {
+            self.victims_sparing_clean_tlases(bytes.max(1))
+        } else {
+            self.lru_victims(bytes.max(1))
         };
         if victims.is_empty() {
             return Ok(false);
@@ -364,6 +365,77 @@ impl<'a> StreamingRenderer<'a> {
         }
         tracing::debug!(resident = self.res.residency.len(), "evicted");
         Ok(true)
+    }
+
+    /// Unpinned streamed BLASes, least recently seen first, until they hold `bytes` (all of
+    /// them when they hold less).
+    pub(super) fn lru_victims(&self, bytes: u64) -> Vec<ItemId> {
+        let pins = &self.res.pinned;
+        let pinned = |id: ItemId| pins.get(id.0 as usize).copied().unwrap_or(true);
+        match self.res.residency.choose_victims_excluding(bytes, pinned) {
+            Ok(v) => v,
+            Err(e) if e.evictable_bytes > 0 => self
+                .res
+                .residency
+                .choose_victims_excluding(e.evictable_bytes, pinned)
+                .unwrap_or_default(),
+            Err(_) => Vec::new(),
+        }
+    }
+
+    /// [`lru_victims`](Self::lru_victims) that dirty as few clean TLASes as they can: first the
+    /// BLASes whose parent TLASes are all dirty already (or not resident), which the step
+    /// rebuilds anyway, least recently seen first; when they hold too little, the one of the
+    /// rest with the fewest clean parents (least recently seen first among equals), whose
+    /// parents then count as dirty (so the BLASes under them come next), and so on. Evicting
+    /// for a later rebuild group's room thus takes BLASes of TLASes still to rebuild rather
+    /// than of TLASes this step already rebuilt (each of those was rebuilt again:
+    /// `tlas_rebuilt_again`) or left clean; pins hold as for every eviction. Only TLASes split
+    /// into pieces (or several TLASes) see a difference: under one TLAS every victim is free.
+    /// Lavapipe, island 0.01 split into ~10 pieces (`--stream-split-instances 30000`), 64×36,
+    /// 6 frames, frames after the first, 3 alternated runs: at ⅛ `tlas_rebuilt_again`
+    /// 10–15 → 1, TLAS builds 335–341 → 319–327, passes 32 → 31, `returned_in_frame`
+    /// 322–330 → 310–313; at ¼ 1 → 0 for one more pass in 5 frames (15 → 16, returned
+    /// 89–92 → 96–97); at 1/16 unchanged (TLAS-room evictions 0–3; BENCHMARKS.md, session 42).
+    fn victims_sparing_clean_tlases(&self, bytes: u64) -> Vec<ItemId> {
+        let order = self.lru_victims(u64::MAX);
+        let mut dirty: Vec<bool> = (0..self.view.tlases.len() as u32)
+            .map(|t| self.tlases.dirty().contains(&t) || self.tlases.get(t).is_none())
+            .collect();
+        let mut taken = vec![false; order.len()];
+        let mut victims = Vec::new();
+        let mut freed = 0u64;
+        loop {
+            for (k, id) in order.iter().enumerate() {
+                if freed >= bytes {
+                    return victims;
+                }
+                let parents = self.topo.parents(id.0 as usize);
+                if !taken[k] && parents.iter().all(|&p| dirty[p as usize]) {
+                    taken[k] = true;
+                    freed += self.res.blas_bytes(id.0 as usize);
+                    victims.push(*id);
+                }
+            }
+            if freed >= bytes {
+                return victims;
+            }
+            // The one that dirties the fewest clean TLASes, least recently seen first among
+            // equals. Each round dirties at least one more: at most one round per TLAS.
+            let clean = |id: &ItemId| {
+                let parents = self.topo.parents(id.0 as usize);
+                parents.iter().filter(|&&p| !dirty[p as usize]).count()
+            };
+            let Some(k) = (0..order.len())
+                .filter(|&k| !taken[k])
+                .min_by_key(|&k| (clean(&order[k]), k))
+            else {
+                return victims;
+            };
+            for &p in self.topo.parents(order[k].0 as usize) {
+                dirty[p as usize] = true;
+            }
+        }
     }
 
     /// Releases BLAS `b` with the meshes only it used; its resident parents become dirty.

@@ -1653,3 +1653,69 @@ fn uncompacted_rebuilt_tlases_match_the_full_build_and_rebuild_once_a_step() {
     }
     assert_no_validation_errors(&ctx);
 }
+
+/// Evictions for a TLAS rebuild's room spare clean TLASes (`victims_sparing_clean_tlases`):
+/// with one row's TLAS dirty and the least recently seen BLAS under another, making room for
+/// less than that row holds evicts only under it (no clean TLAS becomes dirty: none would be
+/// rebuilt again in the step), and room for more than it holds dirties one more TLAS, not one
+/// per victim; the next frame rebuilds them and equals the full build.
+#[test]
+fn evictions_for_tlas_room_spare_clean_tlases_and_the_frame_matches_the_full_build() {
+    use super::residency::EvictWhy;
+    let Some(ctx) = context_or_skip("stream_tlas_room_victims", Requirement::RayTracing) else {
+        return;
+    };
+    let h = field(10, 16, 30);
+    let blobs = Blobs(&h);
+    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
+    let opts = ids_opts(backend(&ctx));
+    let cam = camera_path(&base_pose(), &SWEEP, 0, 1).params(SIZE, SIZE);
+    // Room for everything: the frame leaves every BLAS it met resident.
+    let budget = 4 * full_build_needs(&full);
+    let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
+        .expect("streaming renderer");
+    let (_, st) = sr.render_frame(&cam, &opts).expect("frame");
+    assert!(st.complete && !sr.tlases.any_dirty(), "{st:?}");
+    sr.res.unpin_all(sr.item_count());
+    let lru = sr.lru_victims(1);
+    let first = lru.first().expect("a resident BLAS").0 as usize;
+    // Resident BLASes (and their bytes) per row TLAS that is not the first victim's parent.
+    let mut under = std::collections::BTreeMap::<u32, Vec<u64>>::new();
+    for id in sr.lru_victims(u64::MAX) {
+        let b = id.0 as usize;
+        let parents = sr.topo.parents(b);
+        if parents.len() == 1 && !sr.topo.parents(first).contains(&parents[0]) {
+            under
+                .entry(parents[0])
+                .or_default()
+                .push(sr.res.blas_bytes(b));
+        }
+    }
+    let (&row, bytes) = under
+        .iter()
+        .max_by_key(|(_, v)| v.len())
+        .expect("a row with resident BLASes");
+    assert!(bytes.len() >= 3, "{under:?}");
+    let row_bytes: u64 = bytes.iter().sum();
+    sr.tlases.instances_changed(row);
+    // Least recently seen first would take `first` and dirty its row.
+    let (before, before_bytes) = (sr.frame.stats().evicted, sr.frame.stats().evicted_bytes);
+    assert!(sr.evict_some(bytes[0], EvictWhy::TlasRoom).expect("evict"));
+    let dirty: Vec<u32> = sr.tlases.dirty().iter().copied().collect();
+    assert_eq!(dirty, [row], "victims under the dirty row only");
+    assert!(sr.res.holds(first as u32));
+    assert!(sr.frame.stats().evicted > before);
+    // A byte more than the row still holds: its BLASes, then one of one more TLAS.
+    let left = row_bytes - (sr.frame.stats().evicted_bytes - before_bytes);
+    assert!(sr.evict_some(left + 1, EvictWhy::TlasRoom).expect("evict"));
+    assert_eq!(sr.tlases.dirty().len(), 2, "{:?}", sr.tlases.dirty());
+    assert!(sr.tlases.dirty().contains(&row));
+    // The next frame rebuilds the two before its first trace.
+    let (out, st) = sr
+        .render_frame(&cam, &opts)
+        .expect("frame after the evictions");
+    assert!(st.complete && st.tlas_rebuilt >= 2, "{st:?}");
+    let reference = render(&ctx, &full, &cam, &opts).expect("full render");
+    assert_same_aov(&reference.aov, &out.aov, "after evictions for TLAS room");
+    assert_no_validation_errors(&ctx);
+}
