@@ -333,7 +333,8 @@ impl<'a> StreamingRenderer<'a> {
             r.attach_cache(cache);
         }
         r.raise_skeleton(&records)?;
-        r.reserve_transfer_staging();
+        let room_bytes = r.room_bytes(&r.heap.report());
+        r.reserve_transfer_staging(room_bytes);
         Ok(r)
     }
 

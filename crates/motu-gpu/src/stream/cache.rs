@@ -346,13 +346,7 @@ impl StreamingRenderer<'_> {
         let align = |v: u64| v.div_ceil(SERIALIZED_ALIGNMENT) * SERIALIZED_ALIGNMENT;
         let total: u64 = hits.iter().map(|h| align(h.blob.len() as u64)).sum();
         let staging = self.transfer_buffer(Transfer::Upload, total)?;
-        let device_staging = match self.transfer_staging() {
-            Ok(s) => s,
-            Err(e) => {
-                self.put_back_transfer(Transfer::Upload, staging);
-                return Err(e.into());
-            }
-        };
+        let device_staging = self.transfer_staging();
         let mut out: Vec<(usize, AccelStruct)> = Vec::with_capacity(hits.len());
         let result = (|| -> Result<()> {
             let base = staging.device_address()?;

@@ -591,7 +591,7 @@ impl<'a> StreamingRenderer<'a> {
 
     /// The budget less what stays in use beside streamed BLASes and their meshes, by the
     /// allocator's `report` now (`FrameStreamStats::room_bytes`).
-    fn room_bytes(&self, report: &motu_alloc::AllocReport) -> u64 {
+    pub(super) fn room_bytes(&self, report: &motu_alloc::AllocReport) -> u64 {
         // Kept TLAS records are not fixed: they yield to structures (`tlas_compact.rs`).
         let fixed_bytes = report
             .budget_in_use_bytes

@@ -319,7 +319,8 @@ impl<'a> StreamingRenderer<'a> {
             return Ok(true);
         }
         let evicted = self.evict_structures(bytes - released, why)?;
-        Ok(evicted || released > 0)
+        // The staging buffer of staged transfers yields last (`transfer.rs`).
+        Ok(evicted || released > 0 || self.release_staging_for_room())
     }
 
     /// [`evict_some`](Self::evict_some) for structures alone.

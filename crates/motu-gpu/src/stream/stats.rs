@@ -162,6 +162,9 @@ pub struct FrameStreamStats {
     /// Runs of blobs moved through the device-local staging buffer (staged transfers,
     /// `transfer.rs`; 0 with direct transfers: unified memory, `MOTU_AS_TRANSFER=direct`).
     pub transfer_staged_runs: u32,
+    /// The staging buffer freed for a structure's room (nothing else could be evicted); 1 at
+    /// most in a renderer's life.
+    pub transfer_staging_released: u32,
     pub build_ms: f64,
     /// Wall time of the trace submissions.
     pub trace_ms: f64,
@@ -399,6 +402,7 @@ pub struct StreamTotals {
     pub transfer_batches: u32,
     pub transfer_allocations: u32,
     pub transfer_staged_runs: u32,
+    pub transfer_staging_released: u32,
     /// How evicted BLASes were kept in host memory: "clone" (device-side clones, `clones.rs`),
     /// "deferred" (serialised at eviction and after the frames, the default), "serialize"
     /// (serialised as built), "off" (no host bytes), "" (no cache attached).
@@ -527,6 +531,7 @@ impl StreamTotals {
         tot.transfer_batches += st.transfer_batches;
         tot.transfer_allocations += st.transfer_allocations;
         tot.transfer_staged_runs += st.transfer_staged_runs;
+        tot.transfer_staging_released += st.transfer_staging_released;
         tot.cloned_blases += u64::from(st.cloned_blases);
         tot.cloned_bytes += st.cloned_bytes;
         tot.clone_ms += st.clone_ms;

@@ -9,9 +9,10 @@
 //! GPUs) host-visible memory is the budget's own: buffers are freed after each batch as before.
 //! A blob larger than the cap gets a buffer of its own, freed after use.
 //!
-//! Staged transfers (the default on discrete GPUs; `MOTU_AS_TRANSFER=direct` turns them off,
-//! for A/B measurements): the GPU serialises into, and deserialises from, a small
-//! device-local buffer ([`staging_bytes`], allocated after the floor and kept) and one buffer
+//! Staged transfers (the default on discrete GPUs where the room allows; `MOTU_AS_TRANSFER=direct`
+//! turns them off for A/B measurements, `=staged` forces them for tests of small scenes): the GPU serialises into, and deserialises from, a small
+//! device-local buffer ([`staging_bytes`], allocated after the floor and kept; it yields to structures
+//! where nothing else can be evicted) and one buffer
 //! copy a run moves the bytes across the bus, instead of the structure copies writing and
 //! reading host memory themselves. On an H100 (island 0.63 at 8 GiB, alternated with direct)
 //! serialising took 713–760 against 860 ms a frame and deserialising 382–387 / 797–800 against
@@ -27,14 +28,18 @@ use super::StreamingRenderer;
 pub(super) const TRANSFER_CAP_BYTES: u64 = 256 * MIB;
 
 /// The most bytes of the device-local staging buffer of staged transfers (module docs): a
-/// 128th of an 8 GiB budget. Smaller budgets get a 128th of theirs ([`staging_bytes`]); blobs
-/// larger than it go direct.
+/// 128th of an 8 GiB budget.
 pub(super) const STAGING_MAX_BYTES: u64 = 64 * MIB;
 
-/// The staging buffer's size under a budget of `budget_bytes`: a 128th of it, at least 1 MiB,
-/// at most [`STAGING_MAX_BYTES`].
-pub(super) fn staging_bytes(budget_bytes: u64) -> u64 {
-    (budget_bytes / 128).clamp(MIB, STAGING_MAX_BYTES)
+/// The staging buffer's size under a budget of `budget_bytes` with `room_bytes` of it left for
+/// streamed structures before the first frame: a 128th of the budget and at most a 32nd of the
+/// room (at the floor it would cost passes: the default island at its floor took 17 passes against
+/// 11 with a 1 MiB buffer), at most [`STAGING_MAX_BYTES`]; `None` below 1 MiB (direct).
+pub(super) fn staging_bytes(budget_bytes: u64, room_bytes: u64) -> Option<u64> {
+    let bytes = (budget_bytes / 128)
+        .min(room_bytes / 32)
+        .min(STAGING_MAX_BYTES);
+    (bytes >= MIB).then_some(bytes)
 }
 
 /// The least a kept buffer is allocated with, so small batches do not grow it step by step.
@@ -82,9 +87,22 @@ impl Transfer {
     }
 }
 
-/// Whether staged transfers are on (module docs): unless `MOTU_AS_TRANSFER=direct`.
-fn staged_asked() -> bool {
-    std::env::var("MOTU_AS_TRANSFER").map_or(true, |v| v != "direct")
+/// `MOTU_AS_TRANSFER`: `direct` (no staging), `staged` (a staging buffer of a 128th of the
+/// budget, at least 1 MiB, whatever the room: for tests of small scenes), else the default
+/// ([`staging_bytes`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum StagingMode {
+    Direct,
+    Auto,
+    Forced,
+}
+
+fn staging_mode() -> StagingMode {
+    match std::env::var("MOTU_AS_TRANSFER").as_deref() {
+        Ok("direct") => StagingMode::Direct,
+        Ok("staged") => StagingMode::Forced,
+        _ => StagingMode::Auto,
+    }
 }
 
 /// The kept buffers (none on unified memory).
@@ -189,34 +207,49 @@ impl StreamingRenderer<'_> {
         )
     }
 
-    /// With a structure cache and staged transfers (on a discrete GPU): allocates the staging buffer
-    /// now, after the floor and before frames fill the budget (a store at eviction finds the
-    /// budget full), and keeps it. No room: transfers go direct.
-    pub(super) fn reserve_transfer_staging(&mut self) {
-        if self.cache_stats().is_none() {
+    /// With a structure cache and staged transfers (on a discrete GPU): allocates the staging
+    /// buffer now, after the floor and before frames fill the budget (a store at eviction finds
+    /// the budget full), and keeps it, where the room left allows ([`staging_bytes`]). No
+    /// room: transfers go direct.
+    pub(super) fn reserve_transfer_staging(&mut self, room_bytes: u64) {
+        if self.cache_stats().is_none() || !self.keeps_transfer_buffers() {
             return;
         }
-        match self.transfer_staging() {
-            Ok(Some(st)) => self.put_back_transfer(Transfer::Staging, st),
-            Ok(None) => {}
-            Err(e) => tracing::warn!(error = %e, "structure transfers: no staging buffer; direct"),
+        let budget_bytes = self.opts.budget_bytes;
+        let bytes = match staging_mode() {
+            StagingMode::Direct => None,
+            StagingMode::Auto => staging_bytes(budget_bytes, room_bytes),
+            StagingMode::Forced => Some((budget_bytes / 128).clamp(MIB, STAGING_MAX_BYTES)),
+        };
+        let Some(bytes) = bytes else {
+            return;
+        };
+        match self.transfer_buffer(Transfer::Staging, bytes) {
+            Ok(st) => self.put_back_transfer(Transfer::Staging, st),
+            Err(e) => tracing::debug!(error = %e, "structure transfers: no staging buffer; direct"),
         }
     }
 
-    /// The device-local staging buffer of staged transfers (module docs), where they are on,
-    /// the GPU is discrete and the budget has room for it; else `None` (direct).
-    pub(super) fn transfer_staging(&mut self) -> motu_vk::Result<Option<HeapBuffer>> {
-        if !staged_asked() || !self.keeps_transfer_buffers() {
-            return Ok(None);
-        }
-        let bytes = staging_bytes(self.opts.budget_bytes);
-        match self.transfer_buffer(Transfer::Staging, bytes) {
-            Ok(b) => Ok(Some(b)),
-            Err(motu_vk::VkError::Budget(why)) => {
-                tracing::debug!(%why, "structure transfers: no room for staging; direct");
-                Ok(None)
+    /// The kept staging buffer of staged transfers (module docs), taken for one transfer
+    /// (give it back with [`Self::put_back_transfer`]); `None`: transfers go direct.
+    pub(super) fn transfer_staging(&mut self) -> Option<HeapBuffer> {
+        self.reuse.take_transfer(Transfer::Staging)
+    }
+
+    /// Frees the kept staging buffer for a structure's room, where nothing else can be
+    /// evicted (transfers go direct from then on). Returns whether it held one.
+    pub(super) fn release_staging_for_room(&mut self) -> bool {
+        match self.reuse.take_transfer(Transfer::Staging) {
+            Some(st) => {
+                tracing::debug!(
+                    bytes = st.size_bytes(),
+                    "structure transfers: staging released for room"
+                );
+                self.heap.free(st);
+                self.frame.stats_mut().transfer_staging_released += 1;
+                true
             }
-            Err(e) => Err(e),
+            None => false,
         }
     }
 

@@ -313,13 +313,7 @@ impl StreamingRenderer<'_> {
             }
             Err(e) => return Err(e.into()),
         };
-        let staging = match self.transfer_staging() {
-            Ok(s) => s,
-            Err(e) => {
-                self.put_back_transfer(Transfer::Readback, readback);
-                return Err(e.into());
-            }
-        };
+        let staging = self.transfer_staging();
         let result = (|| -> Result<Vec<Arc<[u8]>>> {
             let base = readback.device_address()?;
             let mut offsets = Vec::with_capacity(todo.len());

@@ -37,9 +37,13 @@ fn staged_runs_fill_the_staging_buffer_and_send_larger_blobs_direct() {
 }
 
 #[test]
-fn the_staging_buffer_is_a_128th_of_the_budget_within_bounds() {
-    assert_eq!(staging_bytes(8 * 1024 * MIB), STAGING_MAX_BYTES);
-    assert_eq!(staging_bytes(64 * 1024 * MIB), STAGING_MAX_BYTES);
-    assert_eq!(staging_bytes(512 * MIB), 4 * MIB);
-    assert_eq!(staging_bytes(16 * MIB), MIB);
+fn the_staging_buffer_is_a_128th_of_the_budget_and_a_32nd_of_the_room() {
+    let gib = 1024 * MIB;
+    assert_eq!(staging_bytes(8 * gib, 6 * gib), Some(STAGING_MAX_BYTES));
+    assert_eq!(staging_bytes(64 * gib, 60 * gib), Some(STAGING_MAX_BYTES));
+    assert_eq!(staging_bytes(512 * MIB, 400 * MIB), Some(4 * MIB));
+    assert_eq!(staging_bytes(512 * MIB, 64 * MIB), Some(2 * MIB));
+    // At the floor (little room) and under small budgets: direct.
+    assert_eq!(staging_bytes(8 * gib, 16 * MIB), None);
+    assert_eq!(staging_bytes(64 * MIB, 60 * MIB), None);
 }
