@@ -128,6 +128,7 @@ pub mod blas_counts;
 mod emit;
 mod finalize;
 mod flatten;
+mod instance_map;
 mod lod;
 pub mod partition;
 pub mod proxy_boxes;

@@ -166,7 +166,12 @@ pub(super) fn finish(
     crate::memory::log_phase("proxy boxes");
     let t = Instant::now();
     if o.proxy_clusters {
-        crate::split::write_proxy_clusters(&mut writer, &streamed)?;
+        let release = || {
+            if let Some((_, s)) = &split {
+                s.release_instance_pages();
+            }
+        };
+        crate::split::write_proxy_clusters(&mut writer, &streamed, &release)?;
     }
     let proxy_clusters_ms = t.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
