@@ -78,6 +78,11 @@ const UNSAFE_OUTSIDE_THE_DEVICE_LAYER: &[(&str, &str)] = &[
          nobody else can write it: dropped pages fault back unchanged)",
     ),
     (
+        "crates/motu-compile/src/instance_map.rs",
+        "mmap of an import's own unnamed file of the stream split's instances, and MADV_DONTNEED \
+         on it (read-only, nobody else can write it: dropped pages fault back unchanged)",
+    ),
+    (
         "crates/motu-package/src/reader/storage.rs",
         "mmap of a package (offsets validated against the mapped length, chunks checksummed)",
     ),

@@ -13,11 +13,12 @@ use std::path::{Path, PathBuf};
 /// the mapped scene text is released as it is scanned and parsed; the proxy clusters are
 /// made a batch of TLASes at a time and written without a copy. The peak is in the pack: the
 /// package's instance table (64 bytes an instance) with the stream split's map and the
-/// clusters' table beside it. Measured on this scene (20k → 220k instances, release): 88–93
-/// bytes an instance, main 96–100 before (session 39); 99–101 in session 38, 125 before
-/// (edges and the compiled instance table side by side), 174 before session 37's copy-free
-/// stream split. 102 leaves room for allocator rounding without letting either come back.
-const MAX_BYTES_PER_INSTANCE: f64 = 102.0;
+/// clusters' table beside it. Measured on this scene (20k → 220k instances, release): 82–85
+/// bytes an instance with the heap trimmed after the clusters (session 42, 88 before), 88–93
+/// in session 39 (main 96–100 before); 99–101 in session 38, 125 before (edges and the
+/// compiled instance table side by side), 174 before session 37's copy-free stream split. 96
+/// leaves room for allocator rounding without letting either come back.
+const MAX_BYTES_PER_INSTANCE: f64 = 96.0;
 
 /// A pbrt scene of `n` instances: a one-triangle object placed `n` times, half of them at the
 /// root and half inside a group object that the root places once, the two interleaved in the

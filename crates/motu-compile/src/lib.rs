@@ -101,7 +101,9 @@
 //! table); `tlas_split/stash.rs`: with `CompileOptions::split_scratch_dir` (the import's), a range
 //! of 1M+ instances is split by key — its records in an unnamed file, the partition over indices,
 //! the records put back in its order: the same split, without the table and the partition's arrays
-//! resident together; `split/tests/reference.rs` (tests only): the partitioners before their speed-ups,
+//! resident together; `instance_map.rs`: `StreamSplit::park_instances` moves the import's
+//! split table to a mapped unnamed file while the proxy clusters read it (pages dropped after
+//! each batch, `StoredProxyClusters::of_view_then`); `split/tests/reference.rs` (tests only): the partitioners before their speed-ups,
 //! which the fast ones must equal; `tables.rs` holds the table helpers emit, split and finalize
 //! share), `ml`/`sl`/`N`/`auto` levels (`auto`, in `analyze.rs` `plan_auto_inlining`: grouping
 //! levels of ≤ 256 entries inlined, and small instanced prototypes — ≤ 2^17 triangles with their
@@ -128,6 +130,7 @@ pub mod blas_counts;
 mod emit;
 mod finalize;
 mod flatten;
+mod instance_map;
 mod lod;
 pub mod partition;
 pub mod proxy_boxes;

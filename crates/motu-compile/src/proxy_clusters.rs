@@ -252,6 +252,16 @@ impl StoredProxyClusters {
     /// (~6.5 bytes an instance), not every cluster's own member list beside it (issue 48 item
     /// 1).
     pub fn of_view(view: &HierarchyView<'_>) -> StoredProxyClusters {
+        Self::of_view_then(view, &mut || {})
+    }
+
+    /// [`StoredProxyClusters::of_view`] calling `after_batch` once each batch of TLASes is
+    /// made (the import drops the pages of a mapped instance table read so far there:
+    /// `StreamSplit::release_instance_pages`).
+    pub fn of_view_then(
+        view: &HierarchyView<'_>,
+        after_batch: &mut dyn FnMut(),
+    ) -> StoredProxyClusters {
         use rayon::prelude::*;
         let bh = blases_hash(view);
         let n = view.tlases.len();
@@ -290,6 +300,7 @@ impl StoredProxyClusters {
             for (hash, (clusters, members)) in made {
                 out.push_table(hash, &clusters, &members);
             }
+            after_batch();
             first = end;
         }
         out

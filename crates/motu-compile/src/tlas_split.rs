@@ -278,6 +278,9 @@ pub const STREAM_SPLIT_INSTANCES: u32 = 1_000_000;
 #[derive(Debug)]
 pub struct StreamSplit {
     scene: CompiledScene,
+    /// The instance table moved off the heap ([`StreamSplit::park_instances`]); `scene`'s is
+    /// empty then.
+    parked: Option<crate::instance_map::InstanceMap>,
 }
 
 impl StreamSplit {
@@ -287,7 +290,47 @@ impl StreamSplit {
         HierarchyView {
             textures: base.textures,
             texels: base.texels,
+            instances: self.instances(),
             ..self.scene.view()
+        }
+    }
+
+    /// The split's instance table, on the heap or parked.
+    fn instances(&self) -> &[InstanceRecord] {
+        match &self.parked {
+            Some(m) => m.records(),
+            None => &self.scene.instances,
+        }
+    }
+
+    /// Moves the split's instance table (of at least a million records; smaller tables stay,
+    /// their memory would only go back to the allocator's arenas) into an unnamed file in
+    /// `dir`, mapped read-only: [`StreamSplit::view`] reads the map and
+    /// [`StreamSplit::release_instance_pages`] drops what was read from the resident set, so
+    /// an import holds no instance table while it makes the proxy clusters (issue 48 item 1).
+    /// Returns whether it parked the table; on an error the table stays on the heap.
+    pub fn park_instances(&mut self, dir: &Path) -> Result<bool, CompileError> {
+        if self.parked.is_some() || self.scene.instances.len() < stash::MIN_INSTANCES {
+            return Ok(false);
+        }
+        let map = crate::instance_map::InstanceMap::write(&self.scene.instances, dir).map_err(
+            |source| CompileError::Scratch {
+                dir: dir.to_path_buf(),
+                source,
+            },
+        )?;
+        self.scene.instances = Vec::new();
+        self.parked = Some(map);
+        Ok(true)
+    }
+
+    /// Drops a parked table's pages from the resident set (they fault back in, unchanged,
+    /// when read again; a no-op on the heap). A failed hint costs only memory: logged.
+    pub fn release_instance_pages(&self) {
+        if let Some(m) = &self.parked {
+            if let Err(error) = m.release_pages() {
+                tracing::debug!(%error, "could not release the parked instances' pages");
+            }
         }
     }
 
@@ -298,20 +341,24 @@ impl StreamSplit {
         compiled: &mut CompiledScene,
         stored: &StoredStreamSplit,
     ) -> Result<(), CompileError> {
-        let mut instances = self.scene.instances;
         let source = &stored.instance_source;
-        if instances.len() != source.len() || stored.extra_instances.len() > source.len() {
+        let len = self.instances().len();
+        if len != source.len() || stored.extra_instances.len() > source.len() {
             return Err(CompileError::Internal(format!(
-                "the stream split's map names {} instances ({} extra) for {}",
+                "the stream split's map names {} instances ({} extra) for {len}",
                 source.len(),
                 stored.extra_instances.len(),
-                instances.len()
             )));
         }
+        let n = source.len() - stored.extra_instances.len();
+        if let Some(map) = &self.parked {
+            compiled.instances = gather_in_order(map, source, n)?;
+            return Ok(());
+        }
+        let mut instances = self.scene.instances;
         for (r, &s) in instances.iter_mut().zip(source) {
             r._pad = if s == NONE_U32 { 0 } else { s + 1 };
         }
-        let n = source.len() - stored.extra_instances.len();
         compiled.instances = untag_in_order(instances, n)?;
         Ok(())
     }
@@ -326,9 +373,9 @@ impl StreamSplit {
     /// hierarchy of `n` instances; `self` must come from [`split_tagged`] (origins in `_pad`).
     fn stored(&self, n: usize) -> StoredStreamSplit {
         let (tlases_split, pieces) = self.counts();
-        let mut source = Vec::with_capacity(self.scene.instances.len());
+        let mut source = Vec::with_capacity(self.instances().len());
         let mut extra_instances = Vec::new();
-        for inst in &self.scene.instances {
+        for inst in self.instances() {
             // `split_for_streaming` tags each copied instance with its index + 1 (in `_pad`);
             // the split's own AABB-BLAS instances carry 0.
             if inst._pad != 0 && (inst._pad as usize) <= n {
@@ -382,7 +429,10 @@ impl StreamSplit {
             .view()
             .check_references()
             .map_err(CompileError::StoredSplit)?;
-        Ok(StreamSplit { scene })
+        Ok(StreamSplit {
+            scene,
+            parked: None,
+        })
     }
 }
 
@@ -530,7 +580,10 @@ pub fn stream_split_taking_instances_in(
         ..tables_of(&view)
     };
     split_tagged_scene(&mut out, over, cap, scratch)?;
-    let mut split = StreamSplit { scene: out };
+    let mut split = StreamSplit {
+        scene: out,
+        parked: None,
+    };
     let stored = split.stored(n);
     // The origins are in `stored`; the records become the reader's (`_pad` 0, as in a package).
     for r in &mut split.scene.instances {
@@ -620,6 +673,39 @@ fn untag_in_order(
     Ok(instances)
 }
 
+/// [`untag_in_order`] of a parked split table whose origins are `source` (index per record,
+/// `NONE_U32` for the split's own): each origin's first record in the split's order put in its
+/// place, reading the map in order and dropping its pages behind.
+fn gather_in_order(
+    map: &crate::instance_map::InstanceMap,
+    source: &[u32],
+    n: usize,
+) -> Result<Vec<InstanceRecord>, CompileError> {
+    use crate::instance_map::RELEASE_EVERY_RECORDS;
+    let mut out = vec![InstanceRecord::default(); n];
+    let mut seen = vec![false; n];
+    let mut placed = 0usize;
+    for (j, (r, &s)) in map.records().iter().zip(source).enumerate() {
+        if j > 0 && j % RELEASE_EVERY_RECORDS == 0 {
+            // A failed drop leaves pages resident; the records read the same either way.
+            let _ = map.release_range(j - RELEASE_EVERY_RECORDS, j);
+        }
+        let s = s as usize;
+        if s < n && !seen[s] {
+            seen[s] = true;
+            out[s] = InstanceRecord { _pad: 0, ..*r };
+            placed += 1;
+        }
+    }
+    let _ = map.release_pages();
+    if placed != n {
+        return Err(CompileError::Internal(format!(
+            "the stream split kept {placed} of {n} instances"
+        )));
+    }
+    Ok(out)
+}
+
 /// [`split_for_streaming`] with each instance's origin left in `_pad` (index + 1; 0 for the
 /// split's own AABB-BLAS instances).
 fn split_tagged(view: &HierarchyView<'_>, cap: u32) -> Result<Option<StreamSplit>, CompileError> {
@@ -633,7 +719,10 @@ fn split_tagged(view: &HierarchyView<'_>, cap: u32) -> Result<Option<StreamSplit
         ..tables_of(view)
     };
     split_tagged_scene(&mut out, over, cap, None)?;
-    Ok(Some(StreamSplit { scene: out }))
+    Ok(Some(StreamSplit {
+        scene: out,
+        parked: None,
+    }))
 }
 
 /// Splits the TLASes `over` of `out` (instances tagged with their origins) over `cap`.

@@ -35,6 +35,15 @@ pub(crate) fn write_stream_split(
         motu_compile::stream_split_taking_instances_in(compiled, cap, Some(scratch_dir))
             .map_err(ImportError::Compile)?
     };
+    let mut split = split;
+    let mut parked = false;
+    if let Some((_, s)) = &mut split {
+        // The split's table off the heap while the proxy tables are made over it (issue 48
+        // item 1): the clusters read it a batch at a time, dropping its pages behind.
+        parked = s
+            .park_instances(scratch_dir)
+            .map_err(ImportError::Compile)?;
+    }
     let stored = split.as_ref().map(|(s, _)| s);
     let mut meta = motu_pack::StreamSplitMeta {
         cap_instances: cap,
@@ -60,6 +69,7 @@ pub(crate) fn write_stream_split(
         cap,
         tlases = meta.tlases_split,
         pieces = meta.pieces,
+        parked,
         peak_rss_bytes = crate::peak_rss_bytes(),
         "stream split stored"
     );
@@ -70,15 +80,18 @@ pub(crate) fn write_stream_split(
 /// the package's with the stream split just stored) and adds them as the package's
 /// `proxy_clusters` section (FORMAT.md), so neither a streamed start nor `motu report`'s floor
 /// runs the binned SAH over every instance.
+/// `release` drops the pages of a mapped instance table read so far (called after each batch).
 pub(crate) fn write_proxy_clusters(
     writer: &mut PackageWriter,
     streamed: &HierarchyView<'_>,
+    release: &dyn Fn(),
 ) -> Result<(), ImportError> {
     let t = std::time::Instant::now();
     // Made a batch of TLASes at a time and written piece by piece: no TLAS's cluster list
     // outlives its batch, and the section's bytes are not copied out of the table (each would
     // sit beside the instance table at the import's peak: issue 48 item 1).
-    let table = proxy_clusters::StoredProxyClusters::of_view(streamed);
+    let table = proxy_clusters::StoredProxyClusters::of_view_then(streamed, &mut || release());
+    release();
     let made_ms = t.elapsed().as_secs_f64() * 1e3;
     let mut section =
         writer.begin_section(motu_pack::SECTION_PROXY_CLUSTERS, "proxy_clusters", 1)?;

@@ -1124,3 +1124,73 @@ fn keyed_splits_equal_splits_in_memory() {
     // Nothing is left in the scratch directory (the files are unnamed).
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
 }
+
+/// A stream split whose instance table is parked in a mapped scratch file
+/// (`StreamSplit::park_instances`, the import's while it makes the proxy clusters) reads the
+/// same records, makes the same proxy clusters with its pages dropped after every batch, and
+/// gives the table back in its order, bit for bit; the file leaves no name behind.
+#[test]
+fn parked_stream_split_reads_and_gives_back_the_same_table() {
+    fn bytes<T: bytemuck::Pod>(t: &[T]) -> &[u8] {
+        bytemuck::cast_slice(t)
+    }
+    let dir = tempfile::tempdir().unwrap();
+    for (whole, cap) in [
+        (
+            check_flatten(&scattered(10_000, false), &CompileOptions::default()),
+            1000,
+        ),
+        (
+            check_flatten(&scattered(2000, true), &CompileOptions::default()),
+            300,
+        ),
+    ] {
+        let (mut a, mut b) = (whole.clone(), whole.clone());
+        let (sa, ka) = crate::stream_split_taking_instances(&mut a, cap)
+            .unwrap()
+            .expect("a TLAS over the cap");
+        let (sb, mut kb) = crate::stream_split_taking_instances_in(&mut b, cap, Some(dir.path()))
+            .unwrap()
+            .expect("a TLAS over the cap");
+        assert_eq!(sa, sb);
+        assert!(kb.park_instances(dir.path()).unwrap());
+        assert!(!kb.park_instances(dir.path()).unwrap(), "parked once");
+        let (va, vb) = (ka.view(&whole.view()), kb.view(&whole.view()));
+        assert_eq!(bytes(va.instances), bytes(vb.instances));
+        assert_eq!(bytes(va.tlases), bytes(vb.tlases));
+        let mut batches = 0;
+        let clusters = crate::proxy_clusters::StoredProxyClusters::of_view_then(&vb, &mut || {
+            batches += 1;
+            kb.release_instance_pages();
+        });
+        assert!(batches > 0);
+        assert_eq!(
+            clusters,
+            crate::proxy_clusters::StoredProxyClusters::of_view(&va)
+        );
+        assert_eq!(bytes(vb.instances), bytes(va.instances), "after the drops");
+        kb.give_back(&mut b, &sb).unwrap();
+        ka.give_back(&mut a, &sa).unwrap();
+        assert_eq!(bytes(&b.instances), bytes(&whole.instances));
+        assert_eq!(bytes(&a.instances), bytes(&whole.instances));
+        // A map that names fewer origins than the table holds is an error, not a short table.
+        let (mut c, (sc, mut kc)) = {
+            let mut c = whole.clone();
+            let s = crate::stream_split_taking_instances(&mut c, cap)
+                .unwrap()
+                .unwrap();
+            (c, s)
+        };
+        kc.park_instances(dir.path()).unwrap();
+        let mut bad = sc.clone();
+        let first = bad
+            .instance_source
+            .iter()
+            .position(|&s| s != NONE_U32)
+            .unwrap();
+        bad.instance_source[first] = NONE_U32;
+        bad.extra_instances.push(Default::default());
+        assert!(kc.give_back(&mut c, &bad).is_err());
+    }
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}

@@ -166,10 +166,18 @@ pub(super) fn finish(
     crate::memory::log_phase("proxy boxes");
     let t = Instant::now();
     if o.proxy_clusters {
-        crate::split::write_proxy_clusters(&mut writer, &streamed)?;
+        let release = || {
+            if let Some((_, s)) = &split {
+                s.release_instance_pages();
+            }
+        };
+        crate::split::write_proxy_clusters(&mut writer, &streamed, &release)?;
     }
     let proxy_clusters_ms = t.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
+    // The clusters' tables and batches are freed: their pages go back to the system before
+    // the instance table comes back to the heap (a parked split's gather), not beside it.
+    crate::memory::release_free_heap();
     if let Some((stored, split)) = split {
         split
             .give_back(compiled, &stored)
