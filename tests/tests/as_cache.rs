@@ -49,6 +49,14 @@ impl Fixture {
         Some(f)
     }
 
+    /// The full build's still frame (the default camera, 64×36) as AOV file `name`.aov.
+    fn still_reference(&self, name: &str) -> PathBuf {
+        let aov = self.dir.path().join(format!("{name}.aov"));
+        let args = ["--width", "64", "--height", "36", "--frames", "1"];
+        render_env(&self.pkg, "pipeline", &aov, &args, &[]);
+        aov
+    }
+
     fn same_as_reference(&self, aov: &Path) {
         motu_ok(&["compare", s(&self.reference), s(aov), "--max-mismatch", "0"]);
     }
@@ -390,15 +398,7 @@ fn a_still_frame_stores_only_evicted_blases_in_frame_and_the_rest_after_its_imag
     let Some(f) = Fixture::new() else { return };
     // A quarter of the peak: the frame evicts structures (some return in later passes).
     let budget = (f.peak / 4).to_string();
-    // The full build's image of the same camera.
-    let reference = f.dir.path().join("still-reference.aov");
-    render_env(
-        &f.pkg,
-        "pipeline",
-        &reference,
-        &["--width", "64", "--height", "36", "--frames", "1"],
-        &[],
-    );
+    let reference = f.still_reference("still-reference");
     let same = |aov: &Path| {
         motu_ok(&["compare", s(&reference), s(aov), "--max-mismatch", "0"]);
     };
@@ -698,14 +698,7 @@ fn is_root() -> bool {
 fn a_staging_buffer_at_the_floor_yields_to_structures() {
     let Some(f) = Fixture::new() else { return };
     let (_peak, floor) = report_peak_and_floor(&f.pkg, "64", "36");
-    let reference = f.dir.path().join("floor-reference.aov");
-    render_env(
-        &f.pkg,
-        "pipeline",
-        &reference,
-        &["--width", "64", "--height", "36", "--frames", "1"],
-        &[],
-    );
+    let reference = f.still_reference("floor-reference");
     let aov = f.dir.path().join("floor-staged.aov");
     let budget = floor.to_string();
     let mut args = streamed_args("1", &budget);
