@@ -6,6 +6,7 @@
 //! back in unchanged when read again), so the import keeps only the batch it is reading.
 
 use motu_abi::InstanceRecord;
+use std::fs::File;
 use std::io::Write;
 use std::path::Path;
 
@@ -29,21 +30,28 @@ impl std::fmt::Debug for InstanceMap {
     }
 }
 
+/// Writes `records` to a new unnamed file in `dir` (through a short buffer, so the dirty page
+/// cache flows to disk as it is written) and returns it: an [`InstanceMap`]'s, and a keyed
+/// split's stash (`tlas_split/stash.rs`).
+pub(crate) fn write_scratch(records: &[InstanceRecord], dir: &Path) -> std::io::Result<File> {
+    let file = tempfile::tempfile_in(dir)?;
+    {
+        let mut w = std::io::BufWriter::with_capacity(1 << 20, &file);
+        for piece in records.chunks(1 << 14) {
+            w.write_all(bytemuck::cast_slice(piece))?;
+        }
+        w.flush()?;
+    }
+    Ok(file)
+}
+
 impl InstanceMap {
-    /// Writes `records` to an unnamed file in `dir` (through a short buffer, so the dirty page
-    /// cache flows to disk as it is written) and maps it read-only.
+    /// Writes `records` to an unnamed file in `dir` ([`write_scratch`]) and maps it read-only.
     pub(crate) fn write(records: &[InstanceRecord], dir: &Path) -> std::io::Result<Self> {
         if records.is_empty() {
             return Ok(Self { map: None, len: 0 });
         }
-        let file = tempfile::tempfile_in(dir)?;
-        {
-            let mut w = std::io::BufWriter::with_capacity(1 << 20, &file);
-            for piece in records.chunks(1 << 14) {
-                w.write_all(bytemuck::cast_slice(piece))?;
-            }
-            w.flush()?;
-        }
+        let file = write_scratch(records, dir)?;
         let bytes = std::mem::size_of_val(records);
         // SAFETY: the file is unnamed (O_TMPFILE or unlinked at creation), only this process
         // wrote it, completely, before mapping: nobody can truncate or change it under the

@@ -225,7 +225,7 @@ pub struct CompileOptions {
     /// its meshes' copies become triangle BLASes (with a primitive map to the source triangle),
     /// so a ray reaches it with no traversal-shader hop. 0 turns baking off.
     pub auto_bake_max_triangles: u64,
-    /// A directory for unnamed scratch files: a TLAS over the cap of at least 2^16 instances
+    /// A directory for unnamed scratch files: a TLAS over the cap of at least 2^20 instances
     /// is split by key there (its records in a file while the partition moves indices; the
     /// same split, without the table and the partition's arrays resident together). `None`:
     /// split in memory.

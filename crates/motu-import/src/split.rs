@@ -29,13 +29,12 @@ pub(crate) fn write_stream_split(
     ImportError,
 > {
     let t = std::time::Instant::now();
-    let split = if cap == 0 {
+    let mut split = if cap == 0 {
         None
     } else {
         motu_compile::stream_split_taking_instances_in(compiled, cap, Some(scratch_dir))
             .map_err(ImportError::Compile)?
     };
-    let mut split = split;
     let mut parked = false;
     if let Some((_, s)) = &mut split {
         // The split's table off the heap while the proxy tables are made over it (issue 48

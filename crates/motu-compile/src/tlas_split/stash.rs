@@ -10,7 +10,7 @@
 use crate::CompileError;
 use motu_abi::InstanceRecord;
 use std::fs::File;
-use std::io::{Read, Seek, SeekFrom, Write};
+use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
 /// Ranges of fewer instances are split in memory: their records (under 64 MiB) would stay in
@@ -46,9 +46,7 @@ impl Stash {
             dir: dir.to_path_buf(),
             source,
         };
-        let mut file = tempfile::tempfile_in(dir).map_err(err)?;
-        file.write_all(bytemuck::cast_slice(&instances[base..]))
-            .map_err(err)?;
+        let file = crate::instance_map::write_scratch(&instances[base..], dir).map_err(err)?;
         let (count, capacity) = (instances.len() - base, instances.capacity());
         instances.truncate(base);
         instances.shrink_to_fit();

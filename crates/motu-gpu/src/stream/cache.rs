@@ -408,11 +408,7 @@ impl StreamingRenderer<'_> {
                             self.frame.stats_mut().transfer_staged_runs += 1;
                         }
                         for i in run.blobs.clone() {
-                            let src = if run.staged {
-                                st_base.offset(offsets[i] - run.start_bytes)
-                            } else {
-                                base.offset(offsets[i])
-                            };
+                            let src = run.address(offsets[i], st_base, base);
                             rec.deserialize_acceleration_structure(src, out[i].1.target())?;
                         }
                     }

@@ -9,15 +9,15 @@
 //! GPUs) host-visible memory is the budget's own: buffers are freed after each batch as before.
 //! A blob larger than the cap gets a buffer of its own, freed after use.
 //!
-//! Staged transfers (the default on discrete GPUs where the room allows; `MOTU_AS_TRANSFER=direct`
-//! turns them off for A/B measurements, `=staged` forces them for tests of small scenes): the GPU serialises into, and deserialises from, a small
-//! device-local buffer ([`staging_bytes`], allocated after the floor and kept; it yields to structures
-//! where nothing else can be evicted) and one buffer
+//! Staged transfers (the default on discrete GPUs where the room allows): the GPU serialises
+//! into, and deserialises from, a small device-local buffer ([`staging_bytes`], allocated after
+//! the floor and kept; it yields to structures where nothing else can be evicted) and one buffer
 //! copy a run moves the bytes across the bus, instead of the structure copies writing and
 //! reading host memory themselves. On an H100 (island 0.63 at 8 GiB, alternated with direct)
 //! serialising took 713–760 against 860 ms a frame and deserialising 382–387 / 797–800 against
 //! 432 / 966 ms (cold / warm); cold 14.7 against 15.7 s to the PNG, warm 14.2 against 14.4 s
-//! (BENCHMARKS.md, session 42). A staging buffer the budget refuses means direct transfers.
+//! (BENCHMARKS.md, session 42). `MOTU_AS_TRANSFER=direct` turns staging off (A/B measurements),
+//! `=staged` forces it (tests of small scenes).
 
 use motu_alloc::{AllocKind, MemoryClass, MIB};
 use motu_vk::{BufferUsage, HeapBuffer, SERIALIZED_ALIGNMENT};
@@ -134,6 +134,24 @@ pub(super) struct StagedRun {
     pub(super) staged: bool,
 }
 
+impl StagedRun {
+    /// Where blob `i` (at `offset_bytes` in the batch buffer at `batch`) lies for the
+    /// structure copy: in the staging buffer at `staging` when the run is staged, else in the
+    /// batch buffer.
+    pub(super) fn address(
+        &self,
+        offset_bytes: u64,
+        staging: motu_vk::DeviceAddress,
+        batch: motu_vk::DeviceAddress,
+    ) -> motu_vk::DeviceAddress {
+        if self.staged {
+            staging.offset(offset_bytes - self.start_bytes)
+        } else {
+            batch.offset(offset_bytes)
+        }
+    }
+}
+
 /// Cuts a batch of blobs at `offsets` (ascending, in one buffer) of `sizes` bytes into runs
 /// whose bytes fit `cap_bytes` from their first blob's offset ([`StagedRun`]).
 pub(super) fn staged_runs(offsets: &[u64], sizes: &[u64], cap_bytes: u64) -> Vec<StagedRun> {
@@ -180,18 +198,14 @@ impl StreamingRenderer<'_> {
         t: Transfer,
         size_bytes: u64,
     ) -> motu_vk::Result<HeapBuffer> {
-        if !matches!(t, Transfer::Staging) {
-            self.frame.stats_mut().transfer_batches += 1;
-        }
+        self.frame.stats_mut().transfer_batches += 1;
         if let Some(b) = self.reuse.take_transfer(t) {
             if b.size_bytes() >= size_bytes {
                 return Ok(b);
             }
             self.heap.free(b);
         }
-        let alloc_bytes = if matches!(t, Transfer::Staging) {
-            size_bytes
-        } else if self.keeps_transfer_buffers() && size_bytes <= TRANSFER_CAP_BYTES {
+        let alloc_bytes = if self.keeps_transfer_buffers() && size_bytes <= TRANSFER_CAP_BYTES {
             kept_size_bytes(size_bytes)
         } else {
             size_bytes
@@ -224,8 +238,17 @@ impl StreamingRenderer<'_> {
         let Some(bytes) = bytes else {
             return;
         };
-        match self.transfer_buffer(Transfer::Staging, bytes) {
-            Ok(st) => self.put_back_transfer(Transfer::Staging, st),
+        let t = Transfer::Staging;
+        let st = self.heap.alloc_buffer(
+            t.label(),
+            bytes,
+            t.usage(),
+            AllocKind::Staging,
+            t.class(),
+            SERIALIZED_ALIGNMENT,
+        );
+        match st {
+            Ok(st) => self.put_back_transfer(t, st),
             Err(e) => tracing::debug!(error = %e, "structure transfers: no staging buffer; direct"),
         }
     }

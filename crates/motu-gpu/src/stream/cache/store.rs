@@ -334,11 +334,7 @@ impl StreamingRenderer<'_> {
                     let st_base = st.device_address()?;
                     for run in staged_runs(&offsets, sizes, st.size_bytes()) {
                         for i in run.blobs.clone() {
-                            let dst = if run.staged {
-                                st_base.offset(offsets[i] - run.start_bytes)
-                            } else {
-                                base.offset(offsets[i])
-                            };
+                            let dst = run.address(offsets[i], st_base, base);
                             rec.serialize_acceleration_structure(todo[i].accel.target(), dst)?;
                         }
                         if run.staged {
