@@ -14,6 +14,8 @@ use std::ops::Deref;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard, Weak};
 use std::time::Duration;
 
+use crate::stats::PoolStats;
+
 /// Buffers shorter than this are not pooled: small allocations come from the allocator's
 /// heap, whose memory is mostly touched already.
 pub const MIN_POOLED_BYTES: usize = 64 << 10;
@@ -55,33 +57,6 @@ impl Default for PoolOptions {
             fill_threads: (cores / 4).clamp(1, 4),
         }
     }
-}
-
-/// A pool's counters (`AsCache::pool_stats`).
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct PoolStats {
-    /// Free buffers held now, and their bytes (capacity).
-    pub free_buffers: u64,
-    pub free_bytes: u64,
-    /// The bound on free bytes now (the host tier's room; 0 before one is set).
-    pub bound_bytes: u64,
-    /// Buffers taken from the pool (pre-faulted or recycled), and the blob bytes they held.
-    pub hits: u64,
-    pub hit_bytes: u64,
-    /// Buffers taken fresh from the allocator (nothing free fit), and their bytes.
-    pub misses: u64,
-    pub miss_bytes: u64,
-    /// Buffers the filler threads pre-faulted, and their bytes.
-    pub prefaulted: u64,
-    pub prefaulted_bytes: u64,
-    /// Buffers of dropped blobs kept for reuse, and their bytes.
-    pub recycled: u64,
-    pub recycled_bytes: u64,
-    /// Buffers freed because the pool was at its bound or reserve.
-    pub released: u64,
-    pub released_bytes: u64,
-    /// Milliseconds the filler threads spent pre-faulting, together.
-    pub prefault_ms: f64,
 }
 
 struct State {

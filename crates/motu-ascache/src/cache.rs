@@ -1,11 +1,11 @@
 //! Both tiers behind one `get`/`put`.
 
-use crate::blob::{Blob, BlobPool, PoolStats};
+use crate::blob::{Blob, BlobPool};
 use crate::compat::Compatibility;
 use crate::disk::DiskCache;
 use crate::host::HostCache;
 use crate::key::CacheKey;
-use crate::stats::{CacheStats, Tier};
+use crate::stats::{CacheStats, PoolStats, Tier};
 
 /// The host tier in front of an optional disk tier.
 ///
@@ -212,6 +212,7 @@ impl AsCache {
         CacheStats {
             host: self.host.stats(),
             disk: self.disk.as_ref().map(DiskCache::stats),
+            pool: self.pool.stats(),
             ..self.stats
         }
     }

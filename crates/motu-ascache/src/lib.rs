@@ -113,7 +113,7 @@ mod stats;
 mod writer;
 
 pub use blob::{
-    Blob, BlobBuf, BlobPool, PoolOptions, PoolStats, DEFAULT_RESERVE_BYTES, MIN_POOLED_BYTES,
+    Blob, BlobBuf, BlobPool, PoolOptions, DEFAULT_RESERVE_BYTES, MIN_POOLED_BYTES,
     POOL_GRANULE_BYTES,
 };
 pub use cache::AsCache;
@@ -129,7 +129,7 @@ pub use host::{
     FALLBACK_HOST_CACHE_BYTES,
 };
 pub use key::{CacheKey, CacheKeyBuilder, KeyParseError};
-pub use stats::{CacheStats, DiskStats, HostStats, Tier, WarningCounts, WarningReason};
+pub use stats::{CacheStats, DiskStats, HostStats, PoolStats, Tier, WarningCounts, WarningReason};
 
 #[cfg(test)]
 mod tests;

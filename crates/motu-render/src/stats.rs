@@ -21,7 +21,7 @@ mod tests;
 pub use devices::{Caps, DeviceList, DeviceReport, HeapReport, Limits};
 pub use resources::{AllocReport, ClassStats, KindStats, ResourceReport};
 pub use stream::{
-    CacheStats, DiskStats, FrameStreamStats, FullBuildOverhead, HostStats, PassStats,
+    CacheStats, DiskStats, FrameStreamStats, FullBuildOverhead, HostStats, PassStats, PoolStats,
     PersistentEstimate, StreamFloor, StreamTotals, WarningCounts,
 };
 
