@@ -21,8 +21,8 @@ mod tests;
 pub use devices::{Caps, DeviceList, DeviceReport, HeapReport, Limits};
 pub use resources::{AllocReport, ClassStats, KindStats, ResourceReport};
 pub use stream::{
-    CacheStats, DiskStats, FrameStreamStats, FullBuildOverhead, HostStats, PassStats, PoolStats,
-    PersistentEstimate, StreamFloor, StreamTotals, WarningCounts,
+    CacheStats, DiskStats, FrameStreamStats, FullBuildOverhead, HostStats, PassStats,
+    PersistentEstimate, PoolStats, StreamFloor, StreamTotals, WarningCounts,
 };
 
 use mirror::mirror;
