@@ -1,12 +1,11 @@
 //! Both tiers behind one `get`/`put`.
 
-use std::sync::Arc;
-
+use crate::blob::{Blob, BlobPool};
 use crate::compat::Compatibility;
 use crate::disk::DiskCache;
 use crate::host::HostCache;
 use crate::key::CacheKey;
-use crate::stats::{CacheStats, Tier};
+use crate::stats::{CacheStats, PoolStats, Tier};
 
 /// The host tier in front of an optional disk tier.
 ///
@@ -21,9 +20,16 @@ use crate::stats::{CacheStats, Tier};
 ///
 /// Blobs in the host tier are trusted as this process's device wrote them (one `AsCache` per
 /// device); only the disk tier asks [`Compatibility`].
+///
+/// Blobs read from the directory, and those a caller makes with [`pool`](Self::pool), live in
+/// a [`BlobPool`]'s buffers: recycled from dropped blobs or pre-faulted after a burst
+/// ([`BlobPool::refill`]), its free bytes bounded by the room the host tier has left (so the
+/// two together never hold more than `--host-cache`) and by
+/// [`PoolOptions::reserve_bytes`](crate::PoolOptions::reserve_bytes).
 pub struct AsCache {
     host: HostCache,
     disk: Option<DiskCache>,
+    pool: BlobPool,
     stats: CacheStats,
 }
 
@@ -38,16 +44,37 @@ impl std::fmt::Debug for AsCache {
 impl AsCache {
     /// Both tiers (`disk`: `None` for `--no-as-cache` or when there is no default directory).
     pub fn new(host: HostCache, disk: Option<DiskCache>) -> Self {
+        Self::with_pool(host, disk, BlobPool::default())
+    }
+
+    /// [`new`](Self::new) with blobs in `pool`'s buffers.
+    pub fn with_pool(mut host: HostCache, mut disk: Option<DiskCache>, pool: BlobPool) -> Self {
+        if let Some(d) = disk.as_mut() {
+            d.set_pool(pool.clone());
+        }
+        host.set_pool(pool.clone());
         Self {
             host,
             disk,
+            pool,
             stats: CacheStats::default(),
         }
     }
 
+    /// Where blobs' buffers come from: take one for a blob to [`put`](Self::put)
+    /// ([`BlobPool::take`], [`BlobPool::copy`]), and [`BlobPool::refill`] it after a burst.
+    pub fn pool(&self) -> &BlobPool {
+        &self.pool
+    }
+
+    /// The pool's counters.
+    pub fn pool_stats(&self) -> PoolStats {
+        self.pool.stats()
+    }
+
     /// The blob of `key` and the tier that held it; `None` when neither did (the caller
     /// builds). `compat` checks a disk entry's serialization header.
-    pub fn get(&mut self, key: &CacheKey, compat: &dyn Compatibility) -> Option<(Arc<[u8]>, Tier)> {
+    pub fn get(&mut self, key: &CacheKey, compat: &dyn Compatibility) -> Option<(Blob, Tier)> {
         let found = match self.host.get(key) {
             Some(blob) => Some((blob, Tier::Host)),
             None => self
@@ -79,8 +106,8 @@ impl AsCache {
         &mut self,
         keys: &[CacheKey],
         compat: &(dyn Compatibility + Sync),
-    ) -> Vec<Option<(Arc<[u8]>, Tier)>> {
-        let mut found: Vec<Option<(Arc<[u8]>, Tier)>> = keys
+    ) -> Vec<Option<(Blob, Tier)>> {
+        let mut found: Vec<Option<(Blob, Tier)>> = keys
             .iter()
             .map(|k| self.host.get(k).map(|b| (b, Tier::Host)))
             .collect();
@@ -106,6 +133,10 @@ impl AsCache {
                 None => self.stats.misses += 1,
             }
         }
+        if found.iter().any(|f| matches!(f, Some((_, Tier::Disk)))) {
+            // A burst of reads is over: page in memory for the next one.
+            self.pool.refill();
+        }
         found
     }
 
@@ -113,7 +144,8 @@ impl AsCache {
     /// directory unless this process knows an entry for `key` there already. Never fails: a
     /// blob over the host bound is refused there and still written to disk, and a failed
     /// write is a counted warning (see [`DiskCache::put`]).
-    pub fn put(&mut self, key: CacheKey, blob: Arc<[u8]>) {
+    pub fn put(&mut self, key: CacheKey, blob: impl Into<Blob>) {
+        let blob: Blob = blob.into();
         self.stats.puts += 1;
         self.stats.put_bytes += blob.len() as u64;
         if let Some(disk) = self.disk.as_mut() {
@@ -126,9 +158,9 @@ impl AsCache {
 
     /// Keeps `blob` in host memory, unless the host tier holds nothing (a bound of 0: the
     /// caller keeps structures in host memory another way, so no refusal is counted).
-    fn promote(&mut self, key: CacheKey, blob: &Arc<[u8]>) {
+    fn promote(&mut self, key: CacheKey, blob: &Blob) {
         if self.host.capacity_bytes() > 0 {
-            self.host.insert(key, Arc::clone(blob));
+            self.host.insert(key, blob.clone());
         }
     }
 
@@ -180,6 +212,7 @@ impl AsCache {
         CacheStats {
             host: self.host.stats(),
             disk: self.disk.as_ref().map(DiskCache::stats),
+            pool: self.pool.stats(),
             ..self.stats
         }
     }

@@ -7,11 +7,11 @@ use std::ffi::OsString;
 use std::fs::{self, File};
 use std::io::{self, Read};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 use std::time::{Duration, SystemTime};
 
 use xxhash_rust::xxh3::xxh3_64;
 
+use crate::blob::{Blob, BlobPool};
 use crate::compat::{serialized_header, Compatibility, SERIALIZED_HEADER_BYTES};
 use crate::entry::{
     decode_header, entry_key, entry_path, temp_owner, EntryError, ENTRY_HEADER_BYTES, VERSION_DIR,
@@ -197,6 +197,8 @@ pub struct DiskCache {
     stats: DiskStats,
     /// With [`DiskOptions::background`]: the thread that writes entries.
     writer: Option<Writer>,
+    /// Where read blobs' buffers come from ([`set_pool`](Self::set_pool)).
+    pool: BlobPool,
 }
 
 impl std::fmt::Debug for DiskCache {
@@ -222,6 +224,10 @@ impl DiskCache {
             readable: true,
             read_warned: false,
             writer: None,
+            pool: BlobPool::new(crate::blob::PoolOptions {
+                reserve_bytes: 0,
+                fill_threads: 0,
+            }),
             options,
             stats: DiskStats::default(),
         };
@@ -347,6 +353,11 @@ impl DiskCache {
         }
     }
 
+    /// Reads blobs into `pool`'s buffers (by default, fresh ones: a pool that keeps nothing).
+    pub fn set_pool(&mut self, pool: BlobPool) {
+        self.pool = pool;
+    }
+
     /// The directory given to [`open`](Self::open).
     pub fn root(&self) -> &Path {
         &self.root
@@ -371,7 +382,7 @@ impl DiskCache {
     /// The blob of `key`'s entry when it is whole, matches its checksums and `compat` accepts
     /// its serialization header; its file becomes the most recently used. Anything else is
     /// `None`: a bad entry is warned about, counted by reason and removed.
-    pub fn get(&mut self, key: &CacheKey, compat: &dyn Compatibility) -> Option<Arc<[u8]>> {
+    pub fn get(&mut self, key: &CacheKey, compat: &dyn Compatibility) -> Option<Blob> {
         self.drain();
         if let Some(blob) = self.pending_hit(key) {
             return Some(blob);
@@ -381,7 +392,7 @@ impl DiskCache {
             return None;
         }
         let path = entry_path(&self.root, key);
-        let read = read_and_touch(&path, key, compat);
+        let read = read_and_touch(&path, key, compat, &self.pool);
         self.apply_read(key, &path, read)
     }
 
@@ -392,9 +403,9 @@ impl DiskCache {
         &mut self,
         keys: &[CacheKey],
         compat: &(dyn Compatibility + Sync),
-    ) -> Vec<Option<Arc<[u8]>>> {
+    ) -> Vec<Option<Blob>> {
         self.drain();
-        let mut out: Vec<Option<Arc<[u8]>>> = keys.iter().map(|k| self.pending_hit(k)).collect();
+        let mut out: Vec<Option<Blob>> = keys.iter().map(|k| self.pending_hit(k)).collect();
         if !self.readable {
             let missing = out.iter().filter(|o| o.is_none()).count();
             self.stats.misses += missing as u64;
@@ -410,6 +421,7 @@ impl DiskCache {
             .min(todo.len())
             .max(1);
         let next = std::sync::atomic::AtomicUsize::new(0);
+        let pool = &self.pool;
         let mut reads: Vec<Option<ReadResult>> = (0..todo.len()).map(|_| None).collect();
         std::thread::scope(|scope| {
             let workers: Vec<_> = (0..threads)
@@ -421,7 +433,7 @@ impl DiskCache {
                             if j >= todo.len() {
                                 break done;
                             }
-                            done.push((j, read_and_touch(&paths[j], &keys[todo[j]], compat)));
+                            done.push((j, read_and_touch(&paths[j], &keys[todo[j]], compat, pool)));
                         }
                     })
                 })
@@ -441,7 +453,7 @@ impl DiskCache {
     }
 
     /// A hit on a blob the background writer still holds.
-    fn pending_hit(&mut self, key: &CacheKey) -> Option<Arc<[u8]>> {
+    fn pending_hit(&mut self, key: &CacheKey) -> Option<Blob> {
         let blob = self.writer.as_ref()?.pending_blob(key)?;
         // Written by this process a moment ago and not on disk yet: the same bytes.
         self.index(*key, blob.len() as u64 + ENTRY_HEADER_BYTES as u64);
@@ -451,7 +463,7 @@ impl DiskCache {
     }
 
     /// Counts and indexes one read of `key`'s entry at `path`.
-    fn apply_read(&mut self, key: &CacheKey, path: &Path, read: ReadResult) -> Option<Arc<[u8]>> {
+    fn apply_read(&mut self, key: &CacheKey, path: &Path, read: ReadResult) -> Option<Blob> {
         match read {
             Ok(blob) => {
                 self.index(*key, blob.len() as u64 + ENTRY_HEADER_BYTES as u64);
@@ -519,11 +531,11 @@ impl DiskCache {
 
     /// [`put`](Self::put) of a shared blob: the background writer keeps a reference instead
     /// of a copy.
-    pub fn put_shared(&mut self, key: &CacheKey, blob: &Arc<[u8]>) -> bool {
+    pub fn put_shared(&mut self, key: &CacheKey, blob: &Blob) -> bool {
         self.put_inner(key, blob, Some(blob))
     }
 
-    fn put_inner(&mut self, key: &CacheKey, blob: &[u8], shared: Option<&Arc<[u8]>>) -> bool {
+    fn put_inner(&mut self, key: &CacheKey, blob: &[u8], shared: Option<&Blob>) -> bool {
         self.drain();
         let file_bytes = blob.len() as u64 + ENTRY_HEADER_BYTES as u64;
         if !self.writable
@@ -539,7 +551,7 @@ impl DiskCache {
             w.submit(Job {
                 key: *key,
                 root: self.root.clone(),
-                blob: shared.map_or_else(|| Arc::from(blob), Arc::clone),
+                blob: shared.map_or_else(|| self.pool.copy(blob), Blob::clone),
                 sync: self.options.sync,
                 fail_with: self.options.fail_writes_with,
             });
@@ -641,25 +653,32 @@ impl DiskCache {
 /// Threads [`DiskCache::get_many`] reads entries on, at most.
 pub const READ_THREADS: usize = 8;
 
-type ReadResult = Result<Arc<[u8]>, ReadMiss>;
+type ReadResult = Result<Blob, ReadMiss>;
 
 /// [`read_entry`], and a hit's file becomes the most recently used: recency for this and
 /// every later process (a file we may not touch, another user's or in a read-only directory,
 /// keeps its old time).
-fn read_and_touch(path: &Path, key: &CacheKey, compat: &dyn Compatibility) -> ReadResult {
-    let (blob, file) = read_entry(path, key, compat)?;
+fn read_and_touch(
+    path: &Path,
+    key: &CacheKey,
+    compat: &dyn Compatibility,
+    pool: &BlobPool,
+) -> ReadResult {
+    let (blob, file) = read_entry(path, key, compat, pool)?;
     if let Err(e) = file.set_modified(SystemTime::now()) {
         tracing::trace!(path = %path.display(), error = %e, "hit not touched");
     }
     Ok(blob)
 }
 
-/// Reads and checks `key`'s entry at `path`; returns its blob and the open file (to touch).
+/// Reads and checks `key`'s entry at `path` into a buffer of `pool`; returns its blob and the
+/// open file (to touch).
 fn read_entry(
     path: &Path,
     key: &CacheKey,
     compat: &dyn Compatibility,
-) -> Result<(Arc<[u8]>, File), ReadMiss> {
+    pool: &BlobPool,
+) -> Result<(Blob, File), ReadMiss> {
     let mut file = match File::open(path) {
         Ok(f) => f,
         // A shard path that is a file holds no entry either.
@@ -695,16 +714,17 @@ fn read_entry(
             "entry larger than the address space",
         ))
     })?;
-    // Collected straight into the Arc's allocation (a trusted-length iterator): no second copy.
-    let mut blob: Arc<[u8]> = std::iter::repeat_n(0u8, len).collect();
-    let Some(buf) = Arc::get_mut(&mut blob) else {
-        unreachable!("a fresh Arc is unique")
-    };
-    match file.read_exact(buf) {
-        Ok(()) => {}
+    // Read straight into the buffer's spare capacity (`File` reads into uninitialised memory:
+    // no zero fill), one already paged in when the pool had one.
+    let mut buf = pool.take(len);
+    match (&mut file)
+        .take(header.blob_bytes)
+        .read_to_end(buf.bytes_mut())
+    {
+        Ok(n) if n == len => {}
         // The file shrank after its length was read (another process rewriting it in place
         // would not: entries are only ever renamed into place).
-        Err(e) if e.kind() == io::ErrorKind::UnexpectedEof => {
+        Ok(_) => {
             return Err(bad(EntryError::Truncated {
                 file_bytes,
                 expected_bytes: file_bytes,
@@ -712,6 +732,7 @@ fn read_entry(
         }
         Err(e) => return Err(ReadMiss::Io(e)),
     }
+    let blob = buf.freeze();
     let computed = xxh3_64(&blob);
     if computed != header.blob_xxh3 {
         return Err(bad(EntryError::BlobChecksum {

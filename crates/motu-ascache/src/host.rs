@@ -1,7 +1,6 @@
 //! Tier 1: serialized structures in host memory, least recently used evicted first.
 
-use std::sync::Arc;
-
+use crate::blob::{Blob, BlobPool};
 use crate::key::CacheKey;
 use crate::lru::ByteLru;
 use crate::stats::HostStats;
@@ -50,11 +49,13 @@ pub fn default_host_cache_bytes() -> u64 {
 /// Serialized structures in host memory, bounded by their bytes; the least recently used
 /// (inserted or read) is evicted first.
 ///
-/// Blobs are shared `Arc<[u8]>`: a `get` hands out a reference, so an evicted blob stays alive
+/// Blobs are shared ([`Blob`]): a `get` hands out a reference, so an evicted blob stays alive
 /// as long as the caller still uploads from it (its bytes then no longer count here).
 pub struct HostCache {
-    lru: ByteLru<CacheKey, Arc<[u8]>>,
+    lru: ByteLru<CacheKey, Blob>,
     stats: HostStats,
+    /// The pool whose free bytes this tier's room bounds ([`set_pool`](Self::set_pool)).
+    pool: Option<BlobPool>,
 }
 
 impl std::fmt::Debug for HostCache {
@@ -71,6 +72,20 @@ impl HostCache {
         Self {
             lru: ByteLru::new(capacity_bytes),
             stats: HostStats::default(),
+            pool: None,
+        }
+    }
+
+    /// Bounds `pool`'s free bytes by the room this tier has left (its bound less the bytes
+    /// it holds), from now on: the two together hold no more than the bound.
+    pub fn set_pool(&mut self, pool: BlobPool) {
+        self.pool = Some(pool);
+        self.bound_pool();
+    }
+
+    fn bound_pool(&self) {
+        if let Some(pool) = &self.pool {
+            pool.set_bound(self.lru.capacity().saturating_sub(self.lru.bytes()));
         }
     }
 
@@ -78,7 +93,7 @@ impl HostCache {
     /// blobs until it fits, and returns whether it was stored. A blob larger than the whole
     /// bound is refused (counted in `refused`); the cache is then unchanged. A blob already
     /// under `key` is replaced.
-    pub fn insert(&mut self, key: CacheKey, blob: Arc<[u8]>) -> bool {
+    pub fn insert(&mut self, key: CacheKey, blob: Blob) -> bool {
         let size = blob.len() as u64;
         match self.lru.insert(key, blob, size) {
             Ok(evicted) => {
@@ -89,6 +104,7 @@ impl HostCache {
                 }
                 self.stats.inserted += 1;
                 self.stats.inserted_bytes += size;
+                self.bound_pool();
                 true
             }
             Err(_) => {
@@ -106,11 +122,11 @@ impl HostCache {
     }
 
     /// The blob under `key`, made the most recently used; counts a hit or a miss.
-    pub fn get(&mut self, key: &CacheKey) -> Option<Arc<[u8]>> {
+    pub fn get(&mut self, key: &CacheKey) -> Option<Blob> {
         match self.lru.get(key) {
             Some(blob) => {
                 self.stats.hits += 1;
-                Some(Arc::clone(blob))
+                Some(blob.clone())
             }
             None => {
                 self.stats.misses += 1;
@@ -125,13 +141,15 @@ impl HostCache {
     }
 
     /// The blob under `key` without making it recent or counting: for inspection.
-    pub fn peek(&self, key: &CacheKey) -> Option<&Arc<[u8]>> {
+    pub fn peek(&self, key: &CacheKey) -> Option<&Blob> {
         self.lru.peek(key)
     }
 
     /// Removes `key` (e.g. a blob the device refused to deserialize); returns its blob.
-    pub fn remove(&mut self, key: &CacheKey) -> Option<Arc<[u8]>> {
-        self.lru.remove(key).map(|(blob, _)| blob)
+    pub fn remove(&mut self, key: &CacheKey) -> Option<Blob> {
+        let removed = self.lru.remove(key).map(|(blob, _)| blob);
+        self.bound_pool();
+        removed
     }
 
     /// Changes the bound, evicting the least recently used blobs until the cache fits it.
@@ -140,6 +158,7 @@ impl HostCache {
             self.stats.evicted_entries += 1;
             self.stats.evicted_bytes += e.weight;
         }
+        self.bound_pool();
     }
 
     /// The bound.

@@ -37,7 +37,6 @@
 //!
 //! # Use from the GPU layer
 //! ```
-//! use std::sync::Arc;
 //! use motu_ascache::*;
 //!
 //! # let dir = tempfile::tempdir()?;
@@ -60,7 +59,8 @@
 //!     Some((blob, tier)) => { /* deserialize `blob`: restored from `tier` */ }
 //!     None => {
 //!         // build, compact, serialize, then:
-//!         let serialized: Arc<[u8]> = vec![7u8; 4096].into();
+//!         // (or filled into `cache.pool().take(len)`: memory already paged in)
+//!         let serialized: Blob = vec![7u8; 4096].into();
 //!         cache.put(key, serialized);
 //!     }
 //! }
@@ -91,13 +91,16 @@
 //! stats are read)); a bad entry
 //! (truncated, corrupt, foreign, incompatible) is a miss, a warning and a removed file; a read-only
 //! or full directory a counted warning that turns writes off — nothing here returns an error.
-//! Files, lowest first: `key`, `compat`, `stats`, `lru`, `host`, `entry`, `file`, `disk`, `writer`,
-//! `cache`.
+//! Blobs (`blob.rs`) are shared immutable buffers from a `BlobPool`: recycled from dropped blobs or
+//! pre-faulted on threads of its own after a burst, so copies and reads into them run at touched-memory
+//! speed; its free bytes bounded by the host tier's room. Files, lowest first: `key`, `compat`,
+//! `stats`, `lru`, `blob`, `host`, `entry`, `file`, `disk`, `writer`, `cache`.
 //!
-//! Key types: `AsCache`, `HostCache`, `DiskCache`, `DiskOptions`, `CacheKey`, `CacheKeyBuilder`,
+//! Key types: `AsCache`, `HostCache`, `DiskCache`, `DiskOptions`, `Blob`, `BlobPool`, `CacheKey`, `CacheKeyBuilder`,
 //! `Compatibility`, `CacheStats`, `Tier`, `WarningReason`, `default_dir`,
 //! `default_host_cache_bytes`.
 
+mod blob;
 mod cache;
 mod compat;
 mod disk;
@@ -109,6 +112,10 @@ mod lru;
 mod stats;
 mod writer;
 
+pub use blob::{
+    Blob, BlobBuf, BlobPool, PoolOptions, DEFAULT_RESERVE_BYTES, MIN_POOLED_BYTES,
+    POOL_GRANULE_BYTES,
+};
 pub use cache::AsCache;
 pub use compat::{serialized_header, AnyDevice, Compatibility, SERIALIZED_HEADER_BYTES};
 pub use disk::{
@@ -122,7 +129,7 @@ pub use host::{
     FALLBACK_HOST_CACHE_BYTES,
 };
 pub use key::{CacheKey, CacheKeyBuilder, KeyParseError};
-pub use stats::{CacheStats, DiskStats, HostStats, Tier, WarningCounts, WarningReason};
+pub use stats::{CacheStats, DiskStats, HostStats, PoolStats, Tier, WarningCounts, WarningReason};
 
 #[cfg(test)]
 mod tests;

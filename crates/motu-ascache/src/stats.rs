@@ -213,6 +213,37 @@ pub struct CacheStats {
     pub host: HostStats,
     /// The disk tier (`None` when there is none: `--no-as-cache`, or no default directory).
     pub disk: Option<DiskStats>,
+    /// The pool the blobs' memory comes from.
+    pub pool: PoolStats,
+}
+
+/// A [`BlobPool`](crate::BlobPool)'s counters (`CacheStats::pool`, `AsCache::pool_stats`).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PoolStats {
+    /// Free buffers held now, and their bytes (capacity).
+    pub free_buffers: u64,
+    pub free_bytes: u64,
+    /// The bound on free bytes now (the host tier's room; 0 before one is set).
+    pub bound_bytes: u64,
+    /// Buffers for blobs of at least [`MIN_POOLED_BYTES`](crate::MIN_POOLED_BYTES) (smaller
+    /// ones come from the allocator's heap, uncounted) taken from the pool (pre-faulted or
+    /// recycled), and the blob bytes they held.
+    pub hits: u64,
+    pub hit_bytes: u64,
+    /// Buffers taken fresh from the allocator (nothing free fit), and their bytes.
+    pub misses: u64,
+    pub miss_bytes: u64,
+    /// Buffers the filler threads pre-faulted, and their bytes.
+    pub prefaulted: u64,
+    pub prefaulted_bytes: u64,
+    /// Buffers of dropped blobs kept for reuse, and their bytes.
+    pub recycled: u64,
+    pub recycled_bytes: u64,
+    /// Buffers freed because the pool was at its bound or reserve.
+    pub released: u64,
+    pub released_bytes: u64,
+    /// Milliseconds the filler threads spent pre-faulting, together.
+    pub prefault_ms: f64,
 }
 
 impl CacheStats {

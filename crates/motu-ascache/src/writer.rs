@@ -16,6 +16,8 @@ use std::collections::VecDeque;
 use std::io;
 use std::path::PathBuf;
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+
+use crate::blob::Blob;
 use std::thread::JoinHandle;
 
 use crate::file::{io_reason, write_entry_file};
@@ -26,7 +28,7 @@ use crate::stats::WarningCounts;
 pub(crate) struct Job {
     pub key: CacheKey,
     pub root: PathBuf,
-    pub blob: Arc<[u8]>,
+    pub blob: Blob,
     pub sync: bool,
     pub fail_with: Option<io::ErrorKind>,
 }
@@ -54,7 +56,7 @@ struct State {
     queue: VecDeque<Job>,
     /// The job being written: its key and blob (still answerable), and whether it was
     /// cancelled meanwhile (its file is removed once written).
-    in_flight: Option<(CacheKey, Arc<[u8]>, bool)>,
+    in_flight: Option<(CacheKey, Blob, bool)>,
     /// Blob bytes queued or in flight.
     pending_bytes: u64,
     done: Done,
@@ -72,14 +74,14 @@ impl State {
         let queued: u64 = self
             .queue
             .iter()
-            .filter(|j| Arc::strong_count(&j.blob) == 1)
+            .filter(|j| Blob::strong_count(&j.blob) == 1)
             .map(|j| j.blob.len() as u64)
             .sum();
         // The state's copy plus the thread's job: 2 when no one else holds it.
         let in_flight = self
             .in_flight
             .as_ref()
-            .filter(|(_, b, _)| Arc::strong_count(b) <= 2)
+            .filter(|(_, b, _)| Blob::strong_count(b) <= 2)
             .map_or(0, |(_, b, _)| b.len() as u64);
         queued + in_flight
     }
@@ -151,18 +153,18 @@ impl Writer {
     }
 
     /// The blob of `key` if its write is queued or under way.
-    pub fn pending_blob(&self, key: &CacheKey) -> Option<Arc<[u8]>> {
+    pub fn pending_blob(&self, key: &CacheKey) -> Option<Blob> {
         let s = self.shared.lock();
         if let Some((k, blob, false)) = &s.in_flight {
             if k == key {
-                return Some(Arc::clone(blob));
+                return Some(blob.clone());
             }
         }
         s.queue
             .iter()
             .rev()
             .find(|j| j.key == *key)
-            .map(|j| Arc::clone(&j.blob))
+            .map(|j| j.blob.clone())
     }
 
     /// Drops `key`'s queued write; one under way has its file removed once it is written.
@@ -256,7 +258,7 @@ fn run(shared: &Shared) {
                 shared.changed.notify_all();
                 continue;
             }
-            s.in_flight = Some((job.key, Arc::clone(&job.blob), false));
+            s.in_flight = Some((job.key, job.blob.clone(), false));
         }
         let t = std::time::Instant::now();
         let result = write_entry_file(&job.root, &job.key, &job.blob, job.sync, job.fail_with);

@@ -22,7 +22,7 @@ pub use devices::{Caps, DeviceList, DeviceReport, HeapReport, Limits};
 pub use resources::{AllocReport, ClassStats, KindStats, ResourceReport};
 pub use stream::{
     CacheStats, DiskStats, FrameStreamStats, FullBuildOverhead, HostStats, PassStats,
-    PersistentEstimate, StreamFloor, StreamTotals, WarningCounts,
+    PersistentEstimate, PoolStats, StreamFloor, StreamTotals, WarningCounts,
 };
 
 use mirror::mirror;

@@ -8,7 +8,7 @@ fn key(i: u8) -> CacheKey {
 }
 
 /// A fake serialized structure: a 32-byte header of `driver`, then `len` bytes.
-fn blob(driver: u8, len: usize) -> Arc<[u8]> {
+fn blob(driver: u8, len: usize) -> Blob {
     let mut v = vec![driver; 32];
     v.extend((0..len).map(|i| (i * 7 + usize::from(driver)) as u8));
     v.into()
@@ -141,4 +141,54 @@ fn disk_removal_makes_both_tiers_forget() {
     c.remove(&key(5));
     assert!(!path.exists());
     assert_eq!(c.contains(&key(5)), None);
+}
+
+#[test]
+fn the_pool_is_bounded_by_the_host_tier_s_room_and_disk_reads_land_in_it() {
+    const MIB: usize = 1 << 20;
+    let dir = tempfile::tempdir().unwrap();
+    let big_disk = || {
+        DiskCache::open(
+            dir.path(),
+            DiskOptions {
+                capacity_bytes: Some(64 << 20),
+                ..DiskOptions::default()
+            },
+        )
+    };
+    let pool = || {
+        BlobPool::new(crate::blob::PoolOptions {
+            reserve_bytes: 1 << 30,
+            fill_threads: 1,
+        })
+    };
+    let mut c = AsCache::with_pool(HostCache::new(16 << 20), Some(big_disk()), pool());
+    assert_eq!(c.pool_stats().bound_bytes, 16 << 20);
+    let blobs: Vec<Blob> = (0..4).map(|i| blob(i, 2 * MIB + usize::from(i))).collect();
+    for (i, b) in blobs.iter().enumerate() {
+        c.put(key(i as u8), c.pool().copy(b));
+    }
+    let held = c.host().bytes();
+    assert_eq!(c.pool_stats().bound_bytes, (16 << 20) - held);
+    c.flush();
+
+    // The next process reads them from disk into its pool's buffers, then pre-faults as many
+    // for the next burst: the pool and the host tier together stay within the bound.
+    let mut next = AsCache::with_pool(HostCache::new(12 << 20), Some(big_disk()), pool());
+    let keys: Vec<CacheKey> = (0..4).map(key).collect();
+    let found = next.get_many(&keys, &AnyDevice);
+    for (f, b) in found.iter().zip(&blobs) {
+        let (got, tier) = f.as_ref().unwrap();
+        assert_eq!((*tier, &got[..]), (Tier::Disk, &b[..]));
+    }
+    next.pool().wait_filled();
+    let s = next.pool_stats();
+    assert_eq!(s.misses, 4, "an empty pool: fresh buffers");
+    let room = (12 << 20) - next.host().bytes();
+    assert_eq!(s.bound_bytes, room);
+    assert!(s.free_bytes <= room && s.prefaulted >= 1, "{s:?}");
+    // Shrinking the host tier shrinks the pool with it.
+    let held = next.host().bytes();
+    next.host_mut().set_capacity_bytes(held);
+    assert_eq!(next.pool_stats().free_bytes, 0);
 }

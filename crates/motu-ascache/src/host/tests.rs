@@ -5,7 +5,7 @@ fn key(i: u8) -> CacheKey {
     CacheKey([i; 32])
 }
 
-fn blob(len: usize, fill: u8) -> Arc<[u8]> {
+fn blob(len: usize, fill: u8) -> Blob {
     vec![fill; len].into()
 }
 

@@ -1,9 +1,9 @@
 //! The background writer, through the disk tier that owns it.
 
+use crate::blob::Blob;
 use std::fs;
 use std::io;
 use std::path::Path;
-use std::sync::Arc;
 
 use crate::compat::AnyDevice;
 use crate::disk::{DiskCache, DiskOptions};
@@ -14,7 +14,7 @@ fn key(i: u32) -> CacheKey {
     CacheKeyBuilder::new("writer tests").u32(i).finish()
 }
 
-fn blob(i: u32, len: usize) -> Arc<[u8]> {
+fn blob(i: u32, len: usize) -> Blob {
     let mut v = vec![7u8; 32];
     v.extend((0..len).map(|j| (j as u32 * 13 + i) as u8));
     v.into()
@@ -174,7 +174,7 @@ fn blobs_held_elsewhere_do_not_count_against_the_queue_bound() {
     // The bound is smaller than one blob, but the host tier (here: `held`) keeps every blob
     // alive, so queueing them costs no memory of the queue's own: no put waits.
     let mut c = background(dir.path(), 1 << 26, 100);
-    let held: Vec<Arc<[u8]>> = (0..30).map(|i| blob(i, 20_000)).collect();
+    let held: Vec<Blob> = (0..30).map(|i| blob(i, 20_000)).collect();
     for (i, b) in held.iter().enumerate() {
         c.put_shared(&key(i as u32), b);
     }

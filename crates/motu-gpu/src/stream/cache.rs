@@ -23,11 +23,12 @@
 //! the structure it was made from; at most one transfer buffer is kept per direction
 //! ([`Reuse::keep_transfer`] hands back the one it replaces, to free).
 
-use std::sync::Arc;
 use std::time::Instant;
 
 use motu_abi::blob::{BlobReader, BlobWriter};
-use motu_ascache::{AsCache, CacheKey, CacheKeyBuilder, CacheStats, Tier, SERIALIZED_HEADER_BYTES};
+use motu_ascache::{
+    AsCache, Blob, CacheKey, CacheKeyBuilder, CacheStats, Tier, SERIALIZED_HEADER_BYTES,
+};
 use motu_vk::{AsLevel, HeapBuffer, SerializedHeader, SERIALIZED_ALIGNMENT};
 use rayon::prelude::*;
 
@@ -95,7 +96,7 @@ struct Attached {
 /// A cache entry found for BLAS `blas`: its serialised structure and that blob's header.
 struct Hit {
     blas: usize,
-    blob: Arc<[u8]>,
+    blob: Blob,
     header: SerializedHeader,
 }
 
@@ -450,7 +451,7 @@ const PROXY_BOXES_DOMAIN: &str = "motu-proxy-boxes-v1";
 
 /// A proxy-box table as a cache blob: the magic, the index's and the table's lengths (u64
 /// each), the index (`[first, fan]` per BLAS), the boxes.
-fn encode_proxy_boxes(index: &[[u32; 2]], boxes: &[Box6]) -> Arc<[u8]> {
+fn encode_proxy_boxes(index: &[[u32; 2]], boxes: &[Box6]) -> Blob {
     let mut w = BlobWriter::new(
         &PROXY_BOXES_MAGIC,
         16 + std::mem::size_of_val(index) + std::mem::size_of_val(boxes),

@@ -10,11 +10,9 @@
 //! back is the plan [`StreamPlan::new`] would make; a blob that does not decode to this view's
 //! shape is made again with a warning.
 
-use std::sync::Arc;
-
 use motu_abi::blob::{BlobReader, BlobWriter};
 use motu_abi::HierarchyView;
-use motu_ascache::{CacheKey, CacheKeyBuilder, SERIALIZED_HEADER_BYTES};
+use motu_ascache::{Blob, CacheKey, CacheKeyBuilder, SERIALIZED_HEADER_BYTES};
 use motu_compile::proxy_clusters::{blases_hash, decode_section, Stored};
 use rayon::prelude::*;
 
@@ -175,7 +173,7 @@ fn plan_key(view: &HierarchyView<'_>, scene_identity: &[u8]) -> CacheKey {
 /// The magic, the TLAS and instance counts (u64), then per TLAS its cluster count (u64) and
 /// per cluster its BLAS, member start (u32 each), bounds (6 f32), member count (u64) and
 /// members (u32).
-fn encode(plan: &StreamPlan) -> Arc<[u8]> {
+fn encode(plan: &StreamPlan) -> Blob {
     let mut w = BlobWriter::new(&MAGIC, 0);
     w.u64(plan.clusters.len() as u64).u64(plan.instances as u64);
     for tlas in &plan.clusters {

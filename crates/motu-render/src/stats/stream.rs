@@ -322,6 +322,27 @@ mirror! {
         put_bytes: u64,
         host: HostStats,
         disk: Option<DiskStats>,
+        pool: PoolStats,
+    }
+}
+
+mirror! {
+    /// `motu_ascache::PoolStats` as JSON: where the blobs' memory came from.
+    PoolStats from motu_ascache::PoolStats {
+        free_buffers: u64,
+        free_bytes: u64,
+        bound_bytes: u64,
+        hits: u64,
+        hit_bytes: u64,
+        misses: u64,
+        miss_bytes: u64,
+        prefaulted: u64,
+        prefaulted_bytes: u64,
+        recycled: u64,
+        recycled_bytes: u64,
+        released: u64,
+        released_bytes: u64,
+        prefault_ms: f64,
     }
 }
 

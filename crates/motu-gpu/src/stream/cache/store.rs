@@ -2,10 +2,9 @@
 //! serialize`), when evicted (the default where host memory lies apart from the budget), and
 //! what is resident or a host clone after the frames ([`StreamingRenderer::persist_cache`]).
 
-use std::sync::Arc;
 use std::time::Instant;
 
-use motu_ascache::CacheKey;
+use motu_ascache::{Blob, CacheKey};
 use motu_vk::{SizeQueries, SERIALIZED_ALIGNMENT};
 use rayon::prelude::*;
 
@@ -314,7 +313,20 @@ impl StreamingRenderer<'_> {
             Err(e) => return Err(e.into()),
         };
         let staging = self.transfer_staging();
-        let result = (|| -> Result<Vec<Arc<[u8]>>> {
+        // The blobs' memory is paged in on the pool's threads while the device serialises
+        // (what is not ready in time is allocated fresh by the copy, as before).
+        let pool = self
+            .reuse
+            .cache
+            .as_ref()
+            .expect("attached")
+            .cache
+            .cache
+            .pool()
+            .clone();
+        let lens: Vec<usize> = sizes.iter().map(|&s| s as usize).collect();
+        pool.prefault(&lens);
+        let result = (|| -> Result<Vec<Blob>> {
             let base = readback.device_address()?;
             let mut offsets = Vec::with_capacity(todo.len());
             let mut at = 0u64;
@@ -350,15 +362,15 @@ impl StreamingRenderer<'_> {
             rec.submit_and_wait()?;
             self.frame.stats_mut().store_serialize_ms += ms_since(t);
             let copy = Instant::now();
-            // Each blob copied once, straight into the shared allocation the cache keeps (no
-            // zero fill), on all cores: one thread's reads of pinned memory held storing to
-            // about 1 GB/s.
+            // Each blob copied once, straight into the buffer the cache keeps (no zero fill;
+            // paged in already where the pool had one), on all cores: one thread's reads of
+            // pinned memory held storing to about 1 GB/s.
             let blobs = readback.with_mapped_mut(0, at as usize, |bytes| {
                 let bytes: &[u8] = bytes;
                 offsets
                     .par_iter()
                     .zip(sizes)
-                    .map(|(&off, &size)| Arc::<[u8]>::from(&bytes[off as usize..][..size as usize]))
+                    .map(|(&off, &size)| pool.copy(&bytes[off as usize..][..size as usize]))
                     .collect::<Vec<_>>()
             })?;
             self.frame.stats_mut().store_copy_ms += ms_since(copy);
@@ -377,6 +389,8 @@ impl StreamingRenderer<'_> {
             st.cache_stored += 1;
             a.cache.cache.put(t.key, blob);
         }
+        // The burst is over: page in memory for the next one while the device works.
+        a.cache.cache.pool().refill();
         self.frame.stats_mut().store_put_ms += ms_since(put);
         Ok(())
     }
