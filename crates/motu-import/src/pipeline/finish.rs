@@ -185,18 +185,16 @@ pub(super) fn finish(
     }
     let proxy_clusters_ms = t.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
+    // The package's table is in its own file: the split (its map, file and tables) goes.
+    let split = if table.is_some() { None } else { split };
     // The clusters' tables and batches are freed: their pages go back to the system before
     // the instance table comes back to the heap (a parked split's gather, where the package's
     // table was not parked itself), not beside it.
     crate::memory::release_free_heap();
-    match split {
-        // The package's table is in its own file: the split (its map, file and tables) is
-        // dropped.
-        Some(s) if table.is_some() => drop(s),
-        Some((stored, split)) => split
+    if let Some((stored, split)) = split {
+        split
             .give_back(compiled, &stored)
-            .map_err(ImportError::Compile)?,
-        None => {}
+            .map_err(ImportError::Compile)?;
     }
     let split_ms = split_ms + t.elapsed().as_secs_f64() * 1e3;
     crate::memory::log_phase("proxy clusters");
