@@ -34,33 +34,64 @@ pub struct BlasCounts {
 /// TLASes of more instances than this are counted in parallel pieces.
 const PIECE_INSTANCES: usize = 1 << 16;
 
+/// Pieces a thread counts between two `after_batch` calls of [`BlasCounts::of_then`] (16 MiB
+/// of records a thread).
+const BATCH_PIECES: usize = 4;
+
 impl BlasCounts {
     /// Counts every TLAS's instances (parallel over TLASes and over large TLASes' pieces).
     /// O(instances / threads + entries · log).
     pub fn of(view: &HierarchyView<'_>) -> BlasCounts {
-        let per_tlas: Vec<Vec<BlasCount>> = view
-            .tlases
-            .par_iter()
-            .map(|rec| {
-                let instances = view.instances.get(rec.instance_range()).unwrap_or(&[]);
-                if instances.len() <= PIECE_INSTANCES {
-                    count_sorted(instances.iter().map(|i| (i.blas, i.element, 1)).collect())
-                } else {
-                    let pieces: Vec<BlasCount> = instances
-                        .par_chunks(PIECE_INSTANCES)
-                        .flat_map_iter(|piece| {
-                            count_sorted(piece.iter().map(|i| (i.blas, i.element, 1)).collect())
-                        })
-                        .collect();
-                    count_sorted(
-                        pieces
-                            .into_iter()
-                            .map(|e| (e.blas, e.element, e.count))
-                            .collect(),
-                    )
-                }
-            })
-            .collect();
+        Self::of_then(view, &mut || {})
+    }
+
+    /// [`BlasCounts::of`] read a batch of instances at a time (small TLASes together, a large
+    /// one in groups of pieces, at most [`BATCH_PIECES`] pieces a thread), calling
+    /// `after_batch` once each batch is counted: the import drops the pages of a mapped
+    /// instance table read so far there (issue 48 item 1). The same table.
+    pub fn of_then(view: &HierarchyView<'_>, after_batch: &mut dyn FnMut()) -> BlasCounts {
+        let count_small = |rec: &motu_abi::TlasRecord| {
+            let instances = view.instances.get(rec.instance_range()).unwrap_or(&[]);
+            count_sorted(instances.iter().map(|i| (i.blas, i.element, 1)).collect())
+        };
+        let batch = rayon::current_num_threads().max(1) * BATCH_PIECES * PIECE_INSTANCES;
+        let count = |t: usize| view.tlases[t].instance_count as usize;
+        let n = view.tlases.len();
+        let mut per_tlas: Vec<Vec<BlasCount>> = Vec::with_capacity(n);
+        let mut t = 0;
+        while t < n {
+            // Small TLASes, as many as the batch holds.
+            let (mut end, mut instances) = (t, 0usize);
+            while end < n && count(end) <= PIECE_INSTANCES && instances + count(end) <= batch {
+                instances += count(end);
+                end += 1;
+            }
+            if end > t {
+                per_tlas.par_extend(view.tlases[t..end].par_iter().map(count_small));
+                after_batch();
+                t = end;
+                continue;
+            }
+            // A large TLAS: pieces counted in parallel a group at a time, then merged.
+            let instances = view
+                .instances
+                .get(view.tlases[t].instance_range())
+                .unwrap_or(&[]);
+            let mut pieces: Vec<BlasCount> = Vec::new();
+            for group in instances.chunks(batch) {
+                pieces.par_extend(group.par_chunks(PIECE_INSTANCES).flat_map_iter(|piece| {
+                    count_sorted(piece.iter().map(|i| (i.blas, i.element, 1)).collect())
+                }));
+                after_batch();
+            }
+            per_tlas.push(count_sorted(
+                pieces
+                    .into_iter()
+                    .map(|e| (e.blas, e.element, e.count))
+                    .collect(),
+            ));
+            t += 1;
+        }
         let mut first = Vec::with_capacity(per_tlas.len() + 1);
         let mut entries = Vec::with_capacity(per_tlas.iter().map(Vec::len).sum());
         for e in per_tlas {

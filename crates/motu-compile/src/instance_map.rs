@@ -1,9 +1,10 @@
-//! A stream split's instance table moved off the heap into an unnamed file, mapped read-only
-//! (issue 48 item 1: an import's peak memory; the crate's one `unsafe`). While the import makes
-//! the proxy clusters over the split, the split's table (64 bytes an instance, 1.1 GB at island
-//! 0.63) would sit on the heap beside the clusters' tables; mapped, its pages count as resident
+//! An instance table moved off the heap into an unnamed file, mapped read-only (issue 48 item 1:
+//! an import's peak memory; the crate's one `unsafe`): the stream split's (split order) while
+//! the import makes the proxy clusters over it, and the package's own ([`park_table`]) from the
+//! stream split to the end of the import. On the heap either would sit beside the clusters'
+//! tables (64 bytes an instance, 1.1 GB at island 0.63); mapped, its pages count as resident
 //! only until [`InstanceMap::release_pages`] drops them (they stay in the page cache and fault
-//! back in unchanged when read again), so the import keeps only the batch it is reading.
+//! back in unchanged when read again), so the import keeps only the piece it is reading.
 
 use motu_abi::InstanceRecord;
 use std::fs::File;
@@ -15,8 +16,16 @@ use std::path::Path;
 /// window showed (16 MiB on island 0.05 and the grid at 2^18 records).
 pub(crate) const RELEASE_EVERY_RECORDS: usize = 1 << 15;
 
+/// Tables of fewer records stay on the heap ([`park_table`]): 4 MiB, the size below which the
+/// file and its writes cost more than the memory they free.
+#[cfg(not(test))]
+pub const PARK_MIN_INSTANCES: usize = 1 << 16;
+/// Every table in tests, so small scenes take the mapped path.
+#[cfg(test)]
+pub const PARK_MIN_INSTANCES: usize = 1;
+
 /// Instance records in an unnamed file (gone with the map, whatever ends the process).
-pub(crate) struct InstanceMap {
+pub struct InstanceMap {
     /// `None` for an empty table (nothing to map).
     map: Option<memmap2::Mmap>,
     len: usize,
@@ -45,9 +54,27 @@ pub(crate) fn write_scratch(records: &[InstanceRecord], dir: &Path) -> std::io::
     Ok(file)
 }
 
+/// `records` (a table of at least [`PARK_MIN_INSTANCES`]) written to an unnamed file in `dir`
+/// and mapped read-only ([`InstanceMap::write`]); `None` for a smaller table, which stays where
+/// it is. The caller frees its copy.
+pub fn park_table(
+    records: &[InstanceRecord],
+    dir: &Path,
+) -> Result<Option<InstanceMap>, crate::CompileError> {
+    if records.len() < PARK_MIN_INSTANCES {
+        return Ok(None);
+    }
+    InstanceMap::write(records, dir)
+        .map(Some)
+        .map_err(|source| crate::CompileError::Scratch {
+            dir: dir.to_path_buf(),
+            source,
+        })
+}
+
 impl InstanceMap {
     /// Writes `records` to an unnamed file in `dir` ([`write_scratch`]) and maps it read-only.
-    pub(crate) fn write(records: &[InstanceRecord], dir: &Path) -> std::io::Result<Self> {
+    pub fn write(records: &[InstanceRecord], dir: &Path) -> std::io::Result<Self> {
         if records.is_empty() {
             return Ok(Self { map: None, len: 0 });
         }
@@ -69,8 +96,18 @@ impl InstanceMap {
         })
     }
 
+    /// How many records the map holds.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether the map holds no record.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
     /// The records (the map is page-aligned, so they are aligned too).
-    pub(crate) fn records(&self) -> &[InstanceRecord] {
+    pub fn records(&self) -> &[InstanceRecord] {
         match &self.map {
             Some(m) => bytemuck::cast_slice(&m[..]),
             None => &[],
@@ -79,7 +116,7 @@ impl InstanceMap {
 
     /// Drops the pages of records `begin..end` (those wholly inside and the one `begin` starts
     /// in) from the resident set.
-    pub(crate) fn release_range(&self, begin: usize, end: usize) -> std::io::Result<()> {
+    pub fn release_range(&self, begin: usize, end: usize) -> std::io::Result<()> {
         let (Some(m), end) = (&self.map, end.min(self.len)) else {
             return Ok(());
         };
@@ -100,7 +137,7 @@ impl InstanceMap {
     }
 
     /// Drops every page of the map from the resident set.
-    pub(crate) fn release_pages(&self) -> std::io::Result<()> {
+    pub fn release_pages(&self) -> std::io::Result<()> {
         self.release_range(0, self.len)
     }
 }

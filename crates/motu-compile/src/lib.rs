@@ -148,6 +148,7 @@ mod testutil;
 mod tests;
 
 pub use flatten::{flatten_compiled, flatten_compiled_records, flatten_source};
+pub use instance_map::{park_table, InstanceMap, PARK_MIN_INSTANCES};
 pub use partition::{
     auto_bound, auto_bound_settles_at_triangles, auto_max_blas_triangles,
     DEFAULT_MAX_BLAS_TRIANGLES, MIN_AUTO_MAX_BLAS_TRIANGLES,

@@ -303,14 +303,16 @@ impl StreamSplit {
         }
     }
 
-    /// Moves the split's instance table (of at least a million records; smaller tables stay,
-    /// their memory would only go back to the allocator's arenas) into an unnamed file in
+    /// Moves the split's instance table (of at least [`crate::PARK_MIN_INSTANCES`] records;
+    /// smaller tables stay) into an unnamed file in
     /// `dir`, mapped read-only: [`StreamSplit::view`] reads the map and
     /// [`StreamSplit::release_instance_pages`] drops what was read from the resident set, so
     /// an import holds no instance table while it makes the proxy clusters (issue 48 item 1).
     /// Returns whether it parked the table; on an error the table stays on the heap.
     pub fn park_instances(&mut self, dir: &Path) -> Result<bool, CompileError> {
-        if self.parked.is_some() || self.scene.instances.len() < stash::MIN_INSTANCES {
+        if self.parked.is_some()
+            || self.scene.instances.len() < crate::instance_map::PARK_MIN_INSTANCES
+        {
             return Ok(false);
         }
         let map = crate::instance_map::InstanceMap::write(&self.scene.instances, dir).map_err(

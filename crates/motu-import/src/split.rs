@@ -16,25 +16,29 @@ use motu_package::PackageWriter;
 /// [`motu_compile::StreamSplit::give_back`] (`compiled.instances` is empty until then).
 /// A large TLAS is split by key, its records in an unnamed file in `scratch_dir` meanwhile
 /// (the same split without the table and the partition's arrays resident together).
+/// The package's instance table (of at least [`motu_compile::PARK_MIN_INSTANCES`]) is first
+/// written to an unnamed file there and returned mapped: the split is then dropped instead of
+/// given back, and `compiled.instances` stays empty (issue 48 item 1: no table comes back to
+/// the heap for the package's last sections).
 pub(crate) fn write_stream_split(
     writer: &mut PackageWriter,
     compiled: &mut CompiledScene,
     cap: u32,
     scratch_dir: &std::path::Path,
-) -> Result<
-    (
-        motu_pack::StreamSplitMeta,
-        Option<(StoredStreamSplit, StreamSplit)>,
-    ),
-    ImportError,
-> {
+) -> Result<StreamSplitWritten, ImportError> {
     let t = std::time::Instant::now();
+    let table =
+        motu_compile::park_table(&compiled.instances, scratch_dir).map_err(ImportError::Compile)?;
     let mut split = if cap == 0 {
         None
     } else {
         motu_compile::stream_split_taking_instances_in(compiled, cap, Some(scratch_dir))
             .map_err(ImportError::Compile)?
     };
+    if table.is_some() {
+        // The map holds the table in the package's order; a split took the heap's copy.
+        compiled.instances = Vec::new();
+    }
     let mut parked = false;
     if let Some((_, s)) = &mut split {
         // The split's table off the heap while the proxy tables are made over it (issue 48
@@ -69,10 +73,19 @@ pub(crate) fn write_stream_split(
         tlases = meta.tlases_split,
         pieces = meta.pieces,
         parked,
+        table_parked = table.is_some(),
         peak_rss_bytes = crate::peak_rss_bytes(),
         "stream split stored"
     );
-    Ok((meta, split))
+    Ok(StreamSplitWritten { meta, split, table })
+}
+
+/// What [`write_stream_split`] returns: the meta entry, the split (`None`: no TLAS over the
+/// cap) and the package's instance table when it was moved to a mapped file.
+pub(crate) struct StreamSplitWritten {
+    pub meta: motu_pack::StreamSplitMeta,
+    pub split: Option<(StoredStreamSplit, StreamSplit)>,
+    pub table: Option<motu_compile::InstanceMap>,
 }
 
 /// Makes the proxy clusters of every TLAS of `streamed` (the hierarchy a streamed render draws:
@@ -109,16 +122,19 @@ pub(crate) fn write_proxy_clusters(
 /// Counts, per TLAS of the package's own hierarchy, the BLASes its instances place
 /// (`motu_compile::blas_counts`) and adds them as the package's `blas_counts` section
 /// (FORMAT.md), so `motu report` walks those entries instead of every instance.
+/// `release` drops the pages of a mapped instance table read so far (called after each batch).
 pub(crate) fn write_blas_counts(
     writer: &mut PackageWriter,
     view: &HierarchyView<'_>,
+    release: &dyn Fn(),
 ) -> Result<(), ImportError> {
     add_timed_section(
         writer,
         motu_pack::SECTION_BLAS_COUNTS,
         "blas_counts",
         |_| {
-            let counts = motu_compile::blas_counts::BlasCounts::of(view);
+            let counts = motu_compile::blas_counts::BlasCounts::of_then(view, &mut || release());
+            release();
             let bytes = motu_compile::blas_counts::encode_section(view, &counts);
             let logged = format!(
                 "tlases={} entries={}",

@@ -37,8 +37,8 @@ pub use read::{read_mesh_blob, MeshGeometry, ScenePackage};
 pub use sections::*;
 pub use store::{place_mesh_record, PackageGeometry};
 pub use write::{
-    begin_texels, write_hierarchy, write_hierarchy_after_texels, write_stream_split,
-    StreamSplitTables,
+    begin_texels, write_hierarchy, write_hierarchy_after_texels, write_hierarchy_after_texels_then,
+    write_stream_split, StreamSplitTables, INSTANCE_PIECE_RECORDS,
 };
 
 /// Errors reading or writing the package schema.

@@ -13,7 +13,7 @@ pub fn write_hierarchy(
     view: &HierarchyView<'_>,
     meta: &PackageMeta,
 ) -> Result<(), PackError> {
-    write_tables(writer, view, meta, true)
+    write_tables(writer, view, meta, true, &mut |_, _| {})
 }
 
 /// [`write_hierarchy`] for a caller that already wrote the texels section itself, texture by
@@ -24,7 +24,25 @@ pub fn write_hierarchy_after_texels(
     view: &HierarchyView<'_>,
     meta: &PackageMeta,
 ) -> Result<(), PackError> {
-    write_tables(writer, view, meta, false)
+    write_tables(writer, view, meta, false, &mut |_, _| {})
+}
+
+/// Instance records written between two `after_piece` calls of
+/// [`write_hierarchy_after_texels_then`] (2 MiB).
+pub const INSTANCE_PIECE_RECORDS: usize = 1 << 15;
+
+/// [`write_hierarchy_after_texels`] writing the instance table a piece of
+/// [`INSTANCE_PIECE_RECORDS`] at a time, calling `after_piece(begin, end)` once records
+/// `begin..end` are written: an importer whose table is a mapped file drops the pages read
+/// there, so writing the section never makes the whole map resident (issue 48 item 1). The
+/// same bytes.
+pub fn write_hierarchy_after_texels_then(
+    writer: &mut PackageWriter,
+    view: &HierarchyView<'_>,
+    meta: &PackageMeta,
+    after_piece: &mut dyn FnMut(usize, usize),
+) -> Result<(), PackError> {
+    write_tables(writer, view, meta, false, after_piece)
 }
 
 /// Starts the texels section (`u32` RGBA8 texels, every texture's mip chain back to back):
@@ -40,6 +58,7 @@ fn write_tables(
     view: &HierarchyView<'_>,
     meta: &PackageMeta,
     with_texels: bool,
+    after_instance_piece: &mut dyn FnMut(usize, usize),
 ) -> Result<(), PackError> {
     let _span = tracing::info_span!(
         "pack_sections",
@@ -48,7 +67,14 @@ fn write_tables(
     )
     .entered();
     writer.add_section_slice(SECTION_TLASES, "tlases", view.tlases)?;
-    writer.add_section_slice(SECTION_INSTANCES, "instances", view.instances)?;
+    let element_size = std::mem::size_of::<motu_abi::InstanceRecord>() as u32;
+    let mut section = writer.begin_section(SECTION_INSTANCES, "instances", element_size)?;
+    for (k, piece) in view.instances.chunks(INSTANCE_PIECE_RECORDS).enumerate() {
+        section.write(bytemuck::cast_slice(piece))?;
+        let begin = k * INSTANCE_PIECE_RECORDS;
+        after_instance_piece(begin, begin + piece.len());
+    }
+    section.finish()?;
     writer.add_section_slice(SECTION_BLASES, "blases", view.blases)?;
     writer.add_section_slice(SECTION_GEOMETRIES, "geometries", view.geometries)?;
     writer.add_section_slice(SECTION_PIS, "pis", view.pis)?;
@@ -98,3 +124,6 @@ pub fn write_stream_split(
     )?;
     Ok(())
 }
+
+#[cfg(test)]
+mod tests;

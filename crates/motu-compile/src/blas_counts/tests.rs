@@ -68,3 +68,37 @@ fn counts_pairs_per_tlas_and_round_trips() {
     };
     assert_eq!(decode_section(&bytes, &fewer), None);
 }
+
+/// Counted a batch at a time (small TLASes together, a large one in groups of pieces), the
+/// table is the one counted at once, and every batch is announced.
+#[test]
+fn counted_in_batches_is_the_same_table() {
+    let big = PIECE_INSTANCES as u32 * 2 + 3;
+    let mut instances: Vec<InstanceRecord> = (0..big).map(|i| inst(i % 7, NONE_U32)).collect();
+    let mut tlases = vec![TlasRecord {
+        instance_base: 0,
+        instance_count: big,
+        ..Default::default()
+    }];
+    for t in 0..10u32 {
+        tlases.push(TlasRecord {
+            instance_base: instances.len() as u32,
+            instance_count: t + 1,
+            ..Default::default()
+        });
+        instances.extend((0..=t).map(|i| inst(i % 3, t % 2)));
+    }
+    let blases = vec![motu_abi::BlasRecord::default(); 7];
+    let view = HierarchyView {
+        tlases: &tlases,
+        instances: &instances,
+        blases: &blases,
+        ..Default::default()
+    };
+    let mut batches = 0;
+    let c = BlasCounts::of_then(&view, &mut || batches += 1);
+    assert!(batches >= 2, "{batches} batches");
+    assert_eq!(c, BlasCounts::of(&view));
+    assert!(c.fits(&view));
+    assert_eq!(c.tlas(0).len(), 7);
+}

@@ -1146,6 +1146,11 @@ fn parked_stream_split_reads_and_gives_back_the_same_table() {
         ),
     ] {
         let (mut a, mut b) = (whole.clone(), whole.clone());
+        // The import parks the package's own table before the split and drops the split
+        // instead of giving it back: the map is the table given back.
+        let package = crate::park_table(&b.instances, dir.path())
+            .unwrap()
+            .expect("parked");
         let (sa, ka) = crate::stream_split_taking_instances(&mut a, cap)
             .unwrap()
             .expect("a TLAS over the cap");
@@ -1173,6 +1178,11 @@ fn parked_stream_split_reads_and_gives_back_the_same_table() {
         ka.give_back(&mut a, &sa).unwrap();
         assert_eq!(bytes(&b.instances), bytes(&whole.instances));
         assert_eq!(bytes(&a.instances), bytes(&whole.instances));
+        assert_eq!(bytes(package.records()), bytes(&whole.instances));
+        assert_eq!(package.len(), whole.instances.len());
+        package.release_pages().unwrap();
+        assert_eq!(bytes(package.records()), bytes(&whole.instances));
+        drop(package);
         // A map that names fewer origins than the table holds is an error, not a short table.
         let (mut c, (sc, mut kc)) = {
             let mut c = whole.clone();

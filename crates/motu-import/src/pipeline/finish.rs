@@ -140,7 +140,11 @@ pub(super) fn finish(
     crate::memory::release_free_heap();
     crate::memory::log_phase("scene dropped");
     let t = Instant::now();
-    let (split_meta, split) = crate::split::write_stream_split(
+    let crate::split::StreamSplitWritten {
+        meta: split_meta,
+        split,
+        table,
+    } = crate::split::write_stream_split(
         &mut writer,
         compiled,
         o.stream_split_instances,
@@ -156,6 +160,9 @@ pub(super) fn finish(
     let base = motu_abi::HierarchyView {
         textures: &textures,
         texels: &[],
+        instances: table
+            .as_ref()
+            .map_or(&compiled.instances[..], |m| m.records()),
         ..compiled.view()
     };
     let streamed = split.as_ref().map_or(base, |(_, s)| s.view(&base));
@@ -170,13 +177,19 @@ pub(super) fn finish(
             if let Some((_, s)) = &split {
                 s.release_instance_pages();
             }
+            if let Some(m) = &table {
+                let _ = m.release_pages();
+            }
         };
         crate::split::write_proxy_clusters(&mut writer, &streamed, &release)?;
     }
     let proxy_clusters_ms = t.elapsed().as_secs_f64() * 1e3;
     let t = Instant::now();
+    // The package's table is in its own file: the split (its map, file and tables) goes.
+    let split = if table.is_some() { None } else { split };
     // The clusters' tables and batches are freed: their pages go back to the system before
-    // the instance table comes back to the heap (a parked split's gather), not beside it.
+    // the instance table comes back to the heap (a parked split's gather, where the package's
+    // table was not parked itself), not beside it.
     crate::memory::release_free_heap();
     if let Some((stored, split)) = split {
         split
@@ -188,10 +201,25 @@ pub(super) fn finish(
     let mut view = compiled.view();
     view.textures = &textures;
     view.texels = &[];
+    if let Some(m) = &table {
+        view.instances = m.records();
+    }
+    // A mapped table is read a piece at a time, its pages dropped behind (a failed hint costs
+    // only memory).
+    let release = || {
+        if let Some(m) = &table {
+            let _ = m.release_pages();
+        }
+    };
     // What `motu report` walks instead of every instance (the package's own tables).
-    crate::split::write_blas_counts(&mut writer, &view)?;
+    crate::split::write_blas_counts(&mut writer, &view, &release)?;
     crate::memory::log_phase("blas counts");
-    motu_pack::write_hierarchy_after_texels(&mut writer, &view, &meta)?;
+    motu_pack::write_hierarchy_after_texels_then(&mut writer, &view, &meta, &mut |begin, end| {
+        if let Some(m) = &table {
+            let _ = m.release_range(begin, end);
+        }
+    })?;
+    drop(table);
     crate::memory::log_phase("hierarchy");
     let written = writer.finish().map_err(ImportError::FinishPackage)?;
     crate::memory::log_phase("finish");
