@@ -316,6 +316,7 @@ impl<'a> StreamingRenderer<'a> {
         );
         let _g = span.enter();
         let frame_t0 = std::time::Instant::now();
+        let (submits0, waits0) = (self.ctx.submit_count(), self.ctx.fence_wait_count());
         self.begin_frame();
         self.ensure_tracer(opts)?;
         let guard = guard_pixels(w, h, self.opts.guard_band_px);
@@ -366,6 +367,8 @@ impl<'a> StreamingRenderer<'a> {
         self.note_pass_marks();
         let report = self.heap.report();
         self.frame.stats.frame_ms = frame_t0.elapsed().as_secs_f64() * 1e3;
+        self.frame.stats.submits = self.ctx.submit_count() - submits0;
+        self.frame.stats.fence_waits = self.ctx.fence_wait_count() - waits0;
         self.measure_residency(&report);
         self.totals.add_frame(&self.frame.stats, &report);
         self.totals.host_clone_bytes = self.clones.bytes();
