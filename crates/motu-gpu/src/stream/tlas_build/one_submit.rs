@@ -12,9 +12,10 @@
 //! runs instead (its peak is lower: the box buffer and the proxies' scratch are gone before
 //! the records' buffer is allocated).
 
+use motu_alloc::BuildSize;
 use motu_vk::{
-    AsBuild, AsBuildMode, AsGeometry, AsLevel, BufferUsage, GpuHeap, HeapBuffer, MemoryScope,
-    VkError,
+    AsBuild, AsBuildMode, AsGeometry, AsLevel, AsTarget, BufferUsage, Context, GpuHeap, HeapBuffer,
+    MemoryScope, VkError,
 };
 
 use super::{
@@ -22,7 +23,7 @@ use super::{
     Built, Proxies, ProxyPlan, TlasBuild,
 };
 use crate::error::{GpuError, Result};
-use crate::scene::{plan_one_batch, AccelStruct};
+use crate::scene::{plan_one_batch, AccelStruct, Uploader};
 use crate::stream::buffers::staging_released;
 
 /// What the one submission holds until it is waited on (or released on failure).
@@ -153,26 +154,10 @@ impl TlasBuild<'_, '_> {
             };
             held.boxes = Some(b);
         }
-        let mut built: Built = Vec::with_capacity(plan.items.len());
-        for (k, size) in proxy_sizes.iter().enumerate() {
-            let label = format!("blas-{k}");
-            let made = AccelStruct::new(
-                &ctx,
-                &mut r.heap,
-                &label,
-                size.result_bytes,
-                AsLevel::Bottom,
-            );
-            match fits(made) {
-                Ok(Some(a)) => built.push((k, a, 0)),
-                other => {
-                    built
-                        .into_iter()
-                        .for_each(|(_, a, _)| a.release(&mut r.heap));
-                    return other.map(|_| None);
-                }
-            }
-        }
+        let Some(built) = alloc_structures(&ctx, &mut r.heap, &proxy_sizes, AsLevel::Bottom)?
+        else {
+            return Ok(None);
+        };
         let proxy_targets: Vec<_> = built.iter().map(|(_, a, _)| a.target()).collect();
         proxies.install(plan, built);
         // TLASes: records counted over the new proxies, one batch, their buffers.
@@ -199,14 +184,10 @@ impl TlasBuild<'_, '_> {
             return Ok(None);
         };
         let scratch = &*held.scratch.insert(scratch);
-        for (k, size) in rr.sizes.iter().enumerate() {
-            let label = format!("tlas-{k}");
-            let made = AccelStruct::new(&ctx, &mut r.heap, &label, size.result_bytes, AsLevel::Top);
-            let Some(a) = fits(made)? else {
-                return Ok(None);
-            };
-            held.tlases.push(a);
-        }
+        let Some(tlases) = alloc_structures(&ctx, &mut r.heap, &rr.sizes, AsLevel::Top)? else {
+            return Ok(None);
+        };
+        held.tlases = tlases.into_iter().map(|(_, a, _)| a).collect();
         // Committed: no fallback from here (a failure releases all and returns the error).
         rr.note(r.frame.stats_mut());
         self.times.proxies_built += proxy_targets.len() as u32;
@@ -234,23 +215,14 @@ impl TlasBuild<'_, '_> {
             .iter()
             .map(|item| proxy_geometry(boxes_addr, item))
             .collect();
-        let proxy_builds: Vec<AsBuild<'_>> = proxy_geoms
-            .iter()
-            .zip(&proxy_targets)
-            .enumerate()
-            .map(|(k, ((g, counts), &dst))| AsBuild {
-                level: AsLevel::Bottom,
-                flags: rb.blas_flags(),
-                mode: AsBuildMode::Build,
-                dst,
-                geometries: g,
-                primitive_counts: counts,
-                scratch_address: scratch_base
-                    + proxy_plan
-                        .as_ref()
-                        .map_or(0, |p| p.scratch_offsets_bytes[k]),
-            })
-            .collect();
+        let proxy_offsets = proxy_plan.as_ref().map(|p| &p.scratch_offsets_bytes[..]);
+        let proxy_builds = level_builds(
+            (AsLevel::Bottom, rb.blas_flags()),
+            &proxy_geoms,
+            &proxy_targets,
+            scratch_base,
+            proxy_offsets.unwrap_or(&[]),
+        );
         let tlas_geoms: Vec<(Vec<AsGeometry>, Vec<u32>)> = rr
             .offsets
             .iter()
@@ -264,34 +236,98 @@ impl TlasBuild<'_, '_> {
                 )
             })
             .collect();
-        let tlas_builds: Vec<AsBuild<'_>> = tlas_geoms
-            .iter()
-            .zip(&held.tlases)
-            .enumerate()
-            .map(|(k, ((g, counts), a))| AsBuild {
-                level: AsLevel::Top,
-                flags: rb.tlas_flags(),
-                mode: AsBuildMode::Build,
-                dst: a.target(),
-                geometries: g,
-                primitive_counts: counts,
-                scratch_address: scratch_base + tlas_plan.scratch_offsets_bytes[k],
-            })
-            .collect();
+        let tlas_targets: Vec<_> = held.tlases.iter().map(AccelStruct::target).collect();
+        let tlas_builds = level_builds(
+            (AsLevel::Top, rb.tlas_flags()),
+            &tlas_geoms,
+            &tlas_targets,
+            scratch_base,
+            &tlas_plan.scratch_offsets_bytes,
+        );
         // Every buffer and structure named lives in `held` or `proxies` until the wait.
-        let mut rec = ctx.record("stream TLAS rebuild")?;
         let up = r.up.as_mut().ok_or_else(staging_released)?;
-        if up.record_pending(&mut rec)? {
-            rec.memory_barrier(MemoryScope::TransferWrites, MemoryScope::BuildReads);
-        }
-        rec.barrier();
-        rec.build_acceleration_structures(&proxy_builds)?;
-        // The TLAS builds read the proxies and reuse the scratch.
-        rec.barrier();
-        rec.build_acceleration_structures(&tlas_builds)?;
-        rec.barrier();
-        rec.submit_and_wait()?;
+        submit_levels(&ctx, up, &proxy_builds, &tlas_builds)?;
         self.times.build_ms = self.times.lap();
         Ok(Some(rr.total_bytes / super::RECORD_BYTES as u64))
     }
+}
+
+/// Structures of `level` of `sizes` (build index, structure, 0 saved), or `None` when the
+/// budget refuses one (those made are released).
+fn alloc_structures(
+    ctx: &Context,
+    heap: &mut GpuHeap,
+    sizes: &[BuildSize],
+    level: AsLevel,
+) -> Result<Option<Built>> {
+    let kind = match level {
+        AsLevel::Top => "tlas",
+        AsLevel::Bottom => "blas",
+    };
+    let mut made: Built = Vec::with_capacity(sizes.len());
+    for (k, size) in sizes.iter().enumerate() {
+        let label = format!("{kind}-{k}");
+        match fits(AccelStruct::new(
+            ctx,
+            heap,
+            &label,
+            size.result_bytes,
+            level,
+        )) {
+            Ok(Some(a)) => made.push((k, a, 0)),
+            other => {
+                made.into_iter().for_each(|(_, a, _)| a.release(heap));
+                return other.map(|_| None);
+            }
+        }
+    }
+    Ok(Some(made))
+}
+
+/// One level's builds: `geoms[k]` into `dsts[k]` with scratch at `scratch_base +
+/// offsets[k]`, built with `level`'s `flags` (those its sizes were queried with).
+fn level_builds<'g>(
+    (level, flags): (AsLevel, motu_vk::AsBuildFlags),
+    geoms: &'g [(Vec<AsGeometry>, Vec<u32>)],
+    dsts: &[AsTarget],
+    scratch_base: u64,
+    offsets: &[u64],
+) -> Vec<AsBuild<'g>> {
+    geoms
+        .iter()
+        .zip(dsts)
+        .enumerate()
+        .map(|(k, ((g, counts), &dst))| AsBuild {
+            level,
+            flags,
+            mode: AsBuildMode::Build,
+            dst,
+            geometries: g,
+            primitive_counts: counts,
+            scratch_address: scratch_base + offsets.get(k).copied().unwrap_or(0),
+        })
+        .collect()
+}
+
+/// The ring's queued copies, then the proxies' builds, then the TLASes' over them (the scratch
+/// reused after a barrier), in one command buffer, waited on. The caller keeps every
+/// destination, input and the scratch alive until this returns.
+fn submit_levels(
+    ctx: &Context,
+    up: &mut Uploader,
+    proxies: &[AsBuild<'_>],
+    tlases: &[AsBuild<'_>],
+) -> Result<()> {
+    let mut rec = ctx.record("stream TLAS rebuild")?;
+    if up.record_pending(&mut rec)? {
+        rec.memory_barrier(MemoryScope::TransferWrites, MemoryScope::BuildReads);
+    }
+    rec.barrier();
+    rec.build_acceleration_structures(proxies)?;
+    // The TLAS builds read the proxies and reuse the scratch.
+    rec.barrier();
+    rec.build_acceleration_structures(tlases)?;
+    rec.barrier();
+    rec.submit_and_wait()?;
+    Ok(())
 }
