@@ -568,3 +568,28 @@ impl StreamTotals {
         tot.host_mesh_peak_bytes = tot.host_mesh_peak_bytes.max(st.resident_host_mesh_bytes);
     }
 }
+
+/// A frame's start: the clock and the context's submission and fence-wait counts, for the
+/// frame's [`FrameStreamStats::frame_ms`], `submits` and `fence_waits`.
+pub(super) struct FrameMark {
+    t0: std::time::Instant,
+    submits: u64,
+    fence_waits: u64,
+}
+
+impl FrameMark {
+    pub(super) fn now(ctx: &motu_vk::Context) -> FrameMark {
+        FrameMark {
+            t0: std::time::Instant::now(),
+            submits: ctx.submit_count(),
+            fence_waits: ctx.fence_wait_count(),
+        }
+    }
+
+    /// The frame's milliseconds, submissions and waits since the mark, into `st`.
+    pub(super) fn note(self, ctx: &motu_vk::Context, st: &mut FrameStreamStats) {
+        st.frame_ms = self.t0.elapsed().as_secs_f64() * 1e3;
+        st.submits = ctx.submit_count() - self.submits;
+        st.fence_waits = ctx.fence_wait_count() - self.fence_waits;
+    }
+}
