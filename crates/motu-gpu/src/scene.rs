@@ -37,7 +37,7 @@ mod structures;
 mod tables;
 mod upload;
 
-pub(crate) use batch::{build_batched, build_pipelined, BatchStager};
+pub(crate) use batch::{build_batched, build_pipelined, plan_one_batch, BatchStager};
 pub(crate) use budget::{
     allocator_slack_bytes, block_bytes_for_budget, staging_bytes_for_budget, usable_budget_bytes,
     FULL_BUILD_STAGING_CAP_BYTES,

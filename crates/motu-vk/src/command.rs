@@ -14,6 +14,7 @@
 //! command buffer.
 
 use std::marker::PhantomData;
+use std::sync::atomic::Ordering;
 
 use ash::vk;
 
@@ -534,6 +535,7 @@ impl<'a> CommandRecorder<'a> {
                 }
             })?;
         }
+        self.ctx.shared.submits.fetch_add(1, Ordering::Relaxed);
         self.submitted = true;
         Ok(Submitted { rec: self })
     }
@@ -549,6 +551,11 @@ impl Submitted<'_> {
     /// Waits on the submission's fence (not on the queue).
     pub fn wait(self) -> Result<()> {
         let device = &self.rec.ctx.shared.device;
+        self.rec
+            .ctx
+            .shared
+            .fence_waits
+            .fetch_add(1, Ordering::Relaxed);
         // SAFETY: the fence was submitted by `CommandRecorder::submit`.
         unsafe { device.wait_for_fences(&[self.rec.fence], true, u64::MAX) }.map_err(|result| {
             // Name the phase, not just the code (VK_ERROR_DEVICE_LOST otherwise says nothing).

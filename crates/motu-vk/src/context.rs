@@ -74,6 +74,9 @@ pub(crate) struct DeviceShared {
     pub(crate) live_allocations: AtomicU32,
     pub(crate) peak_allocations: AtomicU32,
     pub(crate) allocated_bytes: AtomicU64,
+    /// `vkQueueSubmit` calls and fence waits on them ([`Context::submit_count`]).
+    pub(crate) submits: AtomicU64,
+    pub(crate) fence_waits: AtomicU64,
     /// Dropped after the device (field order), so the instance outlives it.
     pub(crate) instance: InstanceShared,
 }
@@ -225,6 +228,8 @@ impl Context {
                 lowered,
                 live_allocations: AtomicU32::new(0),
                 peak_allocations: AtomicU32::new(0),
+                submits: AtomicU64::new(0),
+                fence_waits: AtomicU64::new(0),
                 allocated_bytes: AtomicU64::new(0),
                 instance,
             }),
@@ -320,6 +325,17 @@ impl Context {
     /// Highest `allocation_count` seen.
     pub fn peak_allocation_count(&self) -> u32 {
         self.shared.peak_allocations.load(Ordering::Relaxed)
+    }
+
+    /// `vkQueueSubmit` calls made through this context so far (every one-shot submission and
+    /// every presented frame): callers diff it around a phase to count its submissions.
+    pub fn submit_count(&self) -> u64 {
+        self.shared.submits.load(Ordering::Relaxed)
+    }
+
+    /// Fence waits on those submissions so far (each blocks the CPU until the GPU is done).
+    pub fn fence_wait_count(&self) -> u64 {
+        self.shared.fence_waits.load(Ordering::Relaxed)
     }
 
     /// Bytes currently held in `vkAllocateMemory` allocations made through this context.

@@ -12,6 +12,7 @@
 //! One frame in flight: `present` waits for its own submission, which keeps buffer reuse
 //! trivially safe; the renderer's own fence already serialises the frame.
 
+use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
 use ash::vk;
@@ -573,6 +574,8 @@ impl Presenter {
             // (reset after each wait); every handle recorded lives in `self`.
             unsafe { device.queue_submit(*queue, &[submit], self.fence) }
                 .map_err(VkError::vk("vkQueueSubmit"))?;
+            shared.submits.fetch_add(1, Ordering::Relaxed);
+            shared.fence_waits.fetch_add(1, Ordering::Relaxed);
             // SAFETY: as above; the image was acquired from this swapchain.
             unsafe { self.swapchain_fn.queue_present(*queue, &present) }
         };

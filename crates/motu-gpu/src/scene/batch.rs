@@ -39,6 +39,33 @@ impl BuildOptions {
     }
 }
 
+/// The limits [`build_batched`] plans its batches under: `opts`' scratch budget and batch
+/// results, the heap's budget for the pool.
+fn batch_limits(ctx: &Context, heap: &GpuHeap, opts: &BuildOptions) -> BatchLimits {
+    BatchLimits {
+        scratch_budget_bytes: opts.scratch_budget_bytes,
+        scratch_alignment_bytes: ctx.limits().scratch_alignment_bytes(),
+        scratch_pool_max_bytes: heap.limits().budget_bytes,
+        max_batch_result_bytes: Some(opts.max_batch_result_bytes),
+    }
+}
+
+/// The plan [`build_batched`] would follow for `sizes` when it is one batch (its scratch
+/// offsets and pool), else `None` (several batches, or no plan: the caller builds through
+/// [`build_batched`], which waits on each batch). A caller recording the builds into its own
+/// command buffer (the streamer's TLAS rebuilds: proxies and TLASes in one submission) uses it
+/// to stay within the same scratch and batch limits.
+pub(crate) fn plan_one_batch(
+    ctx: &Context,
+    heap: &GpuHeap,
+    sizes: &[BuildSize],
+    opts: &BuildOptions,
+) -> Option<BatchPlan> {
+    plan_build_batches(sizes, batch_limits(ctx, heap, opts))
+        .ok()
+        .filter(|p| p.batches.len() <= 1)
+}
+
 /// Builds `sizes.len()` structures in batches under the scratch budget, compacting each
 /// batch before the next. `geometry(k)` describes build k (addresses valid once
 /// `prepare(heap, batch_range)` ran for its batch). `inputs_done(heap)` runs once, when the
@@ -93,16 +120,8 @@ pub(crate) fn build_pipelined(
         return Ok(Vec::new());
     }
     let scratch_align = ctx.limits().scratch_alignment_bytes();
-    let plan = plan_build_batches(
-        sizes,
-        BatchLimits {
-            scratch_budget_bytes: opts.scratch_budget_bytes,
-            scratch_alignment_bytes: scratch_align,
-            scratch_pool_max_bytes: heap.limits().budget_bytes,
-            max_batch_result_bytes: Some(opts.max_batch_result_bytes),
-        },
-    )
-    .map_err(|e| GpuError::Budget(BudgetRefusal::from_cause(e)))?;
+    let plan = plan_build_batches(sizes, batch_limits(ctx, heap, opts))
+        .map_err(|e| GpuError::Budget(BudgetRefusal::from_cause(e)))?;
     let pool = heap.alloc_buffer(
         "scratch-pool",
         plan.scratch_pool_bytes.max(scratch_align),

@@ -315,8 +315,7 @@ impl<'a> StreamingRenderer<'a> {
             height = h
         );
         let _g = span.enter();
-        let frame_t0 = std::time::Instant::now();
-        self.begin_frame();
+        let mark = self.begin_frame();
         self.ensure_tracer(opts)?;
         let guard = guard_pixels(w, h, self.opts.guard_band_px);
         let fb = self.prepare_frame_buffers(camera, opts, guard.len())?;
@@ -365,16 +364,18 @@ impl<'a> StreamingRenderer<'a> {
         }
         self.note_pass_marks();
         let report = self.heap.report();
-        self.frame.stats.frame_ms = frame_t0.elapsed().as_secs_f64() * 1e3;
+        mark.note(&self.ctx, &mut self.frame.stats);
         self.measure_residency(&report);
         self.totals.add_frame(&self.frame.stats, &report);
         self.totals.host_clone_bytes = self.clones.bytes();
         self.frame_output(camera, image, opts, report)
     }
 
-    /// A new frame's counters: its number, its statistics, its first stamp, its build clock.
-    fn begin_frame(&mut self) {
+    /// A new frame's counters: its number, its statistics, its first stamp, its build clock;
+    /// returns its start (time, submissions) for `frame_ms` and `submits`.
+    fn begin_frame(&mut self) -> super::stats::FrameMark {
         self.frame.begin();
+        super::stats::FrameMark::now(&self.ctx)
     }
 
     /// The trace pipeline of `opts`'s backend and stack size, made (evicting for room) when

@@ -186,6 +186,18 @@ pub struct FrameStreamStats {
     /// room probe (and kept records' sizing); the records counted and sized.
     pub tlas_gpu_ms: f64,
     pub tlas_upload_ms: f64,
+    /// Queue submissions of the frame (every one-shot command buffer: uploads, builds,
+    /// compactions, traces, readbacks) and the fence waits on them (the CPU blocked until the
+    /// GPU finished); of those, the TLAS rebuilds' (`tlas_build.rs`: proxy boxes' and records'
+    /// uploads, proxy, marks and TLAS builds, compaction copies, GPU records).
+    pub submits: u64,
+    pub fence_waits: u64,
+    pub tlas_submits: u64,
+    pub tlas_fence_waits: u64,
+    /// TLAS rebuild calls whose proxy and marks BLASes and TLASes went in one submission
+    /// (`tlas_build/one_submit.rs`; the others: compaction on, a persistent TLAS updated, a
+    /// level over one batch, or that path's allocations refused).
+    pub tlas_one_submission: u32,
     pub tlas_proxy_ms: f64,
     pub tlas_swap_ms: f64,
     pub tlas_room_ms: f64,
@@ -357,6 +369,11 @@ pub struct StreamTotals {
     pub tlas_built: u64,
     pub tlas_rebuilt: u64,
     pub tlas_rebuild_groups: u64,
+    /// The frames' `submits`, `fence_waits`, `tlas_submits` and `tlas_fence_waits` summed.
+    pub submits: u64,
+    pub fence_waits: u64,
+    pub tlas_submits: u64,
+    pub tlas_fence_waits: u64,
     pub evicted: u64,
     pub deferred: u64,
     /// Frames that ran out of passes with pixels still incomplete.
@@ -493,6 +510,10 @@ impl StreamTotals {
         tot.tlas_rebuilt += u64::from(st.tlas_rebuilt);
         tot.tlas_rebuilt_again += u64::from(st.tlas_rebuilt_again);
         tot.tlas_rebuild_groups += u64::from(st.tlas_rebuild_groups);
+        tot.submits += st.submits;
+        tot.fence_waits += st.fence_waits;
+        tot.tlas_submits += st.tlas_submits;
+        tot.tlas_fence_waits += st.tlas_fence_waits;
         tot.evicted += u64::from(st.evicted);
         tot.deferred += u64::from(st.deferred);
         tot.incomplete_frames += u64::from(!st.complete);
@@ -545,5 +566,30 @@ impl StreamTotals {
         tot.build_ms += st.build_ms;
         tot.vram_peak_bytes = report.peak_block_bytes;
         tot.host_mesh_peak_bytes = tot.host_mesh_peak_bytes.max(st.resident_host_mesh_bytes);
+    }
+}
+
+/// A frame's start: the clock and the context's submission and fence-wait counts, for the
+/// frame's [`FrameStreamStats::frame_ms`], `submits` and `fence_waits`.
+pub(super) struct FrameMark {
+    t0: std::time::Instant,
+    submits: u64,
+    fence_waits: u64,
+}
+
+impl FrameMark {
+    pub(super) fn now(ctx: &motu_vk::Context) -> FrameMark {
+        FrameMark {
+            t0: std::time::Instant::now(),
+            submits: ctx.submit_count(),
+            fence_waits: ctx.fence_wait_count(),
+        }
+    }
+
+    /// The frame's milliseconds, submissions and waits since the mark, into `st`.
+    pub(super) fn note(self, ctx: &motu_vk::Context, st: &mut FrameStreamStats) {
+        st.frame_ms = self.t0.elapsed().as_secs_f64() * 1e3;
+        st.submits = ctx.submit_count() - self.submits;
+        st.fence_waits = ctx.fence_wait_count() - self.fence_waits;
     }
 }

@@ -1654,6 +1654,73 @@ fn uncompacted_rebuilt_tlases_match_the_full_build_and_rebuild_once_a_step() {
     assert_no_validation_errors(&ctx);
 }
 
+/// A TLAS rebuild group's proxies and TLASes go in one submission (`tlas_build/one_submit.rs`):
+/// along a path under an eighth of the full build, the rebuilds submit at most twice a group
+/// (once, plus a ring flush when the records outgrow the staging ring), fewer than the
+/// sequential path (compaction on: boxes' flush, proxies' batch, records' flush, TLASes'
+/// batch), and the frames equal the full build.
+#[test]
+fn a_rebuild_group_submits_its_proxies_and_tlases_once() {
+    let Some(ctx) = context_or_skip("stream_tlas_one_submission", Requirement::RayTracing) else {
+        return;
+    };
+    let h = field(10, 16, 30);
+    let blobs = Blobs(&h);
+    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
+    let budget = full_build_needs(&full) / 8;
+    let opts = ids_opts(backend(&ctx));
+    let frames = 4;
+    let mut submits = Vec::new();
+    for tlas_compact in [false, true] {
+        let mut one_submission = 0u32;
+        let mut sr = StreamingRenderer::new(
+            &ctx,
+            h.view(),
+            &blobs,
+            &StreamOptions {
+                tlas_compact,
+                ..small_stream_options(budget)
+            },
+        )
+        .expect("streaming renderer");
+        for f in 0..=frames {
+            let cam =
+                camera_path(&base_pose(), &SWEEP, f.min(frames - 1), frames).params(SIZE, SIZE);
+            let (out, st) = sr.render_frame(&cam, &opts).expect("frame");
+            let what = format!("compact {tlas_compact}, frame {f}: {st:?}");
+            assert!(st.complete, "{what}");
+            assert!(st.tlas_submits <= st.submits, "{what}");
+            assert!(st.tlas_fence_waits <= st.fence_waits, "{what}");
+            assert!(st.fence_waits <= st.submits, "{what}");
+            one_submission += st.tlas_one_submission;
+            if tlas_compact {
+                assert_eq!(st.tlas_one_submission, 0, "{what}");
+            } else {
+                assert!(
+                    st.tlas_submits <= 2 * u64::from(st.tlas_rebuild_groups),
+                    "{what}"
+                );
+            }
+            if f == frames {
+                let reference = render(&ctx, &full, &cam, &opts).expect("full render");
+                assert_same_aov(&reference.aov, &out.aov, &what);
+            }
+        }
+        let t = sr.totals();
+        eprintln!(
+            "compact {tlas_compact}: {} TLAS submits, {} waits, {} groups, {} submits",
+            t.tlas_submits, t.tlas_fence_waits, t.tlas_rebuild_groups, t.submits
+        );
+        assert!(t.tlas_rebuild_groups > 0 && t.tlas_submits > 0, "{t:?}");
+        assert_eq!(one_submission > 0, !tlas_compact, "{t:?}");
+        submits.push((t.tlas_submits, t.tlas_rebuild_groups));
+    }
+    let (one, seq) = (submits[0], submits[1]);
+    // Per group: at most 2 in one submission; at least 2 (proxies kept) sequentially.
+    assert!(one.0 * seq.1 < seq.0 * one.1, "{one:?} against {seq:?}");
+    assert_no_validation_errors(&ctx);
+}
+
 /// Evictions for a TLAS rebuild's room spare clean TLASes (`victims_sparing_clean_tlases`):
 /// with one row's TLAS dirty and the least recently seen BLAS under another, making room for
 /// less than that row holds evicts only under it (no clean TLAS becomes dirty: none would be

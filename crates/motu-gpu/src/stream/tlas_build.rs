@@ -5,17 +5,22 @@
 //! clusters' residency did not change keeps its proxy and marks BLASes (same boxes, same PI
 //! slots): a BLAS moved, or evicted and built back, rebuilds only the TLAS.
 
-use motu_abi::PiRecord;
-use motu_alloc::{AllocKind, BuildSize, MemoryClass};
-use motu_vk::{AsGeometry, AsLevel, BufferUsage, Context};
+use motu_alloc::BuildSize;
+use motu_vk::{AsGeometry, AsLevel, Context};
 
 use super::buffers::staging_released;
 use super::tlas_records::{tail_record, TlasRecords, RECORD_BYTES};
 use super::tlases::{ProxyPair, TlasGpu};
-use super::topology::{proxy_blas_record, proxy_pi};
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
-use crate::scene::{aabbs_geometry, build_batched, AccelStruct, BuildOptions, ResourceReport};
+use crate::scene::{build_batched, AccelStruct, BuildOptions, ResourceReport};
+
+mod inputs;
+mod one_submit;
+
+use inputs::{
+    alloc_box_buffer, alloc_instance_buffer, proxy_geometry, proxy_sizes, queue_proxy_uploads,
+};
 
 /// One proxy BLAS (`marks` false: a TLAS's non-resident clusters) or marks BLAS (its
 /// resident ones) to build over boxes `first_box..first_box + box_count` of the box buffer.
@@ -85,6 +90,34 @@ impl Proxies {
 
     fn release(self, heap: &mut motu_vk::GpuHeap) {
         self.0.into_iter().for_each(|(_, p)| p.release(heap));
+    }
+
+    /// The planned TLASes' new pairs (their boxes' residency key), holding the `built` proxy
+    /// and marks BLASes (build indices into `plan.items`).
+    fn install(&mut self, plan: &ProxyPlan, built: Built) {
+        let first = self.0.len();
+        self.0.extend(plan.orders.iter().map(|o| {
+            let key = o.key.clone();
+            (
+                o.tlas,
+                ProxyPair {
+                    key,
+                    ..ProxyPair::default()
+                },
+            )
+        }));
+        for (k, accel, saved_bytes) in built {
+            let item = &plan.items[k];
+            let Some((_, pair)) = self.0[first..].iter_mut().find(|(t, _)| *t == item.tlas) else {
+                unreachable!("every planned item's TLAS has an order")
+            };
+            pair.saved_bytes += saved_bytes;
+            *if item.marks {
+                &mut pair.marks
+            } else {
+                &mut pair.proxy
+            } = Some(accel);
+        }
     }
 }
 
@@ -192,6 +225,19 @@ struct RebuildRecords<'r> {
     total_bytes: u64,
 }
 
+impl RebuildRecords<'_> {
+    /// Counts the rebuild into the frame's stats (once, when its structures are built).
+    fn note(&self, st: &mut super::FrameStreamStats) {
+        st.tlas_builds += self.counts.len() as u32;
+        st.tlas_instances_written += self.records.host_written();
+        st.tlas_records_compacted += self.records.compacted();
+        let transient = self.sizes.iter().fold(self.total_bytes, |t, s| {
+            t + s.result_bytes + s.scratch_bytes
+        });
+        st.tlas_rebuild_transient_bytes = st.tlas_rebuild_transient_bytes.max(transient);
+    }
+}
+
 /// When a TLAS was rebuilt (`--stats`: `tlas_rebuilt_at_start`, `_in_passes`,
 /// `_in_prefetch`): before the frame's first pass, in a build step between its passes, or in
 /// the prefetch after them.
@@ -244,9 +290,13 @@ impl<'a> StreamingRenderer<'a> {
             old_proxies: Vec::new(),
             times: PhaseTimes::new(),
         };
+        let (submits0, waits0) = (b.ctx.submit_count(), b.ctx.fence_wait_count());
         let result = b.run(ids);
-        let TlasBuild { r, times, .. } = b;
-        times.record(r.frame.stats_mut());
+        let TlasBuild { r, times, ctx, .. } = b;
+        let st = r.frame.stats_mut();
+        st.tlas_submits += ctx.submit_count() - submits0;
+        st.tlas_fence_waits += ctx.fence_wait_count() - waits0;
+        times.record(st);
         result
     }
 }
@@ -274,6 +324,23 @@ impl TlasBuild<'_, '_> {
             return Err(e);
         }
         self.times.probe_ms = self.times.lap();
+        if persistent_ids.is_empty() {
+            // Proxies and TLASes in one submission where it applies (`one_submit.rs`).
+            match self.one_submission(&rebuild_ids, &plan, &mut proxies) {
+                Ok(Some((built, records))) => {
+                    self.r.frame.stats_mut().tlas_one_submission += 1;
+                    self.times.records = records;
+                    self.times.proxy_boxes = plan.box_count;
+                    self.swap_in(&rebuild_ids, built, Vec::new(), &mut proxies);
+                    return Ok(());
+                }
+                Ok(None) => {}
+                Err(e) => {
+                    proxies.release(&mut self.r.heap);
+                    return Err(e);
+                }
+            }
+        }
         if let Err(e) = self.build_proxies(&plan, &mut proxies) {
             proxies.release(&mut self.r.heap);
             return Err(e);
@@ -427,77 +494,13 @@ impl TlasBuild<'_, '_> {
         }
         let ctx = &self.ctx;
         let r = &mut *self.r;
-        let view = r.view;
         let rb = r.rebuild_opts();
-        let buf = r.heap.alloc_buffer(
-            "proxy-aabbs",
-            u64::from(plan.box_count) * 24,
-            BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT | BufferUsage::TRANSFER_DST,
-            AllocKind::Geometry,
-            MemoryClass::DeviceLocal,
-            16,
-        )?;
+        let buf = alloc_box_buffer(&mut r.heap, plan)?;
         let built = (|| -> Result<Built> {
-            let pis_buf = r.gpu.pis();
-            let blases_buf = r.gpu.blases();
-            let up = r.up.as_mut().ok_or_else(staging_released)?;
-            let mut at = 0u64;
-            for o in &plan.orders {
-                let t = o.tlas as usize;
-                let clusters = r.topo.clusters(t);
-                let order = &o.order;
-                let (base, marks_blas) = r.topo.proxy_slots(t);
-                let marks = proxy_blas_record(
-                    &view.tlases[t],
-                    base + o.non_resident,
-                    order.len() as u32 - o.non_resident,
-                );
-                let marks_offset =
-                    u64::from(marks_blas) * std::mem::size_of::<motu_abi::BlasRecord>() as u64;
-                let uploaded = up
-                    .upload_with(ctx, &buf, at, order.len(), |k| {
-                        clusters[order[k] as usize].bounds
-                    })
-                    .and_then(|()| {
-                        up.upload_with(
-                            ctx,
-                            pis_buf,
-                            u64::from(base) * std::mem::size_of::<PiRecord>() as u64,
-                            order.len(),
-                            |k| proxy_pi(&clusters[order[k] as usize]),
-                        )
-                    })
-                    .and_then(|()| {
-                        up.upload(ctx, blases_buf, marks_offset, bytemuck::bytes_of(&marks))
-                    });
-                if let Err(e) = uploaded {
-                    // Copies queued for the box buffer must not outlive it.
-                    up.abandon();
-                    return Err(e);
-                }
-                at += order.len() as u64 * 24;
-            }
-            up.flush(ctx)?;
+            queue_proxy_uploads(ctx, r, plan, &buf)?;
+            r.up.as_mut().ok_or_else(staging_released)?.flush(ctx)?;
             let base = buf.device_address()?.0;
-            let mut descs = Vec::new();
-            let mut sizes = Vec::new();
-            for item in &plan.items {
-                descs.push((
-                    vec![aabbs_geometry(base + u64::from(item.first_box) * 24, false)],
-                    vec![item.box_count],
-                ));
-                let sz = ctx.blas_build_sizes(
-                    &[motu_vk::BlasGeometry::Aabbs {
-                        aabb_count: item.box_count,
-                        opaque: false,
-                    }],
-                    rb.blas_flags(),
-                )?;
-                sizes.push(BuildSize {
-                    result_bytes: sz.acceleration_structure_size_bytes,
-                    scratch_bytes: sz.build_scratch_size_bytes,
-                });
-            }
+            let sizes = proxy_sizes(ctx, plan, &rb)?;
             let mut report = ResourceReport::default();
             let built = build_batched(
                 ctx,
@@ -506,7 +509,7 @@ impl TlasBuild<'_, '_> {
                 &sizes,
                 AsLevel::Bottom,
                 &rb,
-                |k| (descs[k].0.clone(), descs[k].1.clone()),
+                |k| proxy_geometry(base, &plan.items[k]),
                 |_, _| Ok(()),
                 &mut |_| {},
             )?;
@@ -516,30 +519,7 @@ impl TlasBuild<'_, '_> {
         let built = built?;
         self.times.proxies_built += built.len() as u32;
         self.times.count_compactions(&built);
-        let first = proxies.0.len();
-        proxies.0.extend(plan.orders.iter().map(|o| {
-            let key = o.key.clone();
-            (
-                o.tlas,
-                ProxyPair {
-                    key,
-                    ..ProxyPair::default()
-                },
-            )
-        }));
-        for (k, accel, saved_bytes) in built {
-            let item = &plan.items[k];
-            let Some((_, pair)) = proxies.0[first..].iter_mut().find(|(t, _)| *t == item.tlas)
-            else {
-                unreachable!("every planned item's TLAS has an order")
-            };
-            pair.saved_bytes += saved_bytes;
-            *if item.marks {
-                &mut pair.marks
-            } else {
-                &mut pair.proxy
-            } = Some(accel);
-        }
+        proxies.install(plan, built);
         Ok(())
     }
 
@@ -625,14 +605,6 @@ impl TlasBuild<'_, '_> {
             offsets.push(total_bytes);
             total_bytes += u64::from(n) * RECORD_BYTES as u64;
         }
-        let st = r.frame.stats_mut();
-        st.tlas_builds += ids.len() as u32;
-        st.tlas_instances_written += records.host_written();
-        st.tlas_records_compacted += records.compacted();
-        let transient = sizes
-            .iter()
-            .fold(total_bytes, |t, s| t + s.result_bytes + s.scratch_bytes);
-        st.tlas_rebuild_transient_bytes = st.tlas_rebuild_transient_bytes.max(transient);
         Ok(RebuildRecords {
             records,
             counts,
@@ -647,25 +619,17 @@ impl TlasBuild<'_, '_> {
     fn rebuild(&mut self, ids: &[u32], proxies: &Proxies) -> Result<(Built, u64)> {
         let ctx = self.ctx.clone();
         let (r, times) = (&mut *self.r, &mut self.times);
+        let rr = Self::count_records(r, &ctx, &self.addrs, ids, &self.gpu, proxies)?;
+        rr.note(r.frame.stats_mut());
         let RebuildRecords {
             records,
             counts,
             sizes,
             offsets,
             total_bytes,
-        } = Self::count_records(r, &ctx, &self.addrs, ids, &self.gpu, proxies)?;
+        } = rr;
         times.encode_ms = times.lap();
-        let inst_buf = r.heap.alloc_buffer(
-            "stream-tlas-instances",
-            total_bytes.max(64),
-            BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT
-                | BufferUsage::TRANSFER_DST
-                | BufferUsage::STORAGE
-                | BufferUsage::DEVICE_ADDRESS,
-            AllocKind::InstanceBuffer,
-            MemoryClass::DeviceLocal,
-            16,
-        )?;
+        let inst_buf = alloc_instance_buffer(&mut r.heap, total_bytes)?;
         let rb = r.rebuild_opts();
         let uploaded = (|| -> Result<u64> {
             let up = r.up.as_mut().ok_or_else(staging_released)?;
