@@ -6,8 +6,9 @@
 //! need only the proxies' device addresses, known once their structures are allocated.
 //!
 //! Taken when nothing is compacted (`--stream-tlas-compact off`, the default: a compacted
-//! proxy moves), no persistent TLAS is updated in the group (updates read the built proxies)
-//! and each level is one batch under the scratch limits. Everything is allocated before any
+//! proxy moves), the records are the host's (`--stream-tlas-records host`, the default), no
+//! persistent TLAS is updated in the group (updates read the built proxies) and each level is
+//! one batch under the scratch limits. Everything is allocated before any
 //! copy is queued: a refused allocation releases what this path took and the sequential path
 //! runs instead (its peak is lower: the box buffer and the proxies' scratch are gone before
 //! the records' buffer is allocated).
@@ -88,7 +89,13 @@ impl TlasBuild<'_, '_> {
         plan: &ProxyPlan,
         proxies: &mut Proxies,
     ) -> Result<Option<(Built, u64)>> {
-        if ids.is_empty() || self.r.rebuild_opts().compact {
+        // The opt-in GPU-kept records (`--stream-tlas-records gpu`) keep the step-by-step path:
+        // their compaction pass writes the records the host would, which this path does not
+        // order after it (stream_records.rs: the host wrote more records with it than without).
+        if ids.is_empty()
+            || self.r.rebuild_opts().compact
+            || self.r.opts.tlas_records == crate::stream::TlasRecordsMode::Gpu
+        {
             return Ok(None);
         }
         let first = proxies.0.len();
