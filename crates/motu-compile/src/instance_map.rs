@@ -43,11 +43,23 @@ impl std::fmt::Debug for InstanceMap {
 /// cache flows to disk as it is written) and returns it: an [`InstanceMap`]'s, and a keyed
 /// split's stash (`tlas_split/stash.rs`).
 pub(crate) fn write_scratch(records: &[InstanceRecord], dir: &Path) -> std::io::Result<File> {
+    write_scratch_then(records, dir, &mut |_, _| {})
+}
+
+/// [`write_scratch`] that calls `release(begin, end)` after records `begin..end` are written,
+/// every [`RELEASE_EVERY_RECORDS`] (`records` in a mapped table: its pages dropped behind).
+pub(crate) fn write_scratch_then(
+    records: &[InstanceRecord],
+    dir: &Path,
+    release: &mut dyn FnMut(usize, usize),
+) -> std::io::Result<File> {
     let file = tempfile::tempfile_in(dir)?;
     {
         let mut w = std::io::BufWriter::with_capacity(1 << 20, &file);
-        for piece in records.chunks(1 << 14) {
+        for (k, piece) in records.chunks(RELEASE_EVERY_RECORDS).enumerate() {
             w.write_all(bytemuck::cast_slice(piece))?;
+            let begin = k * RELEASE_EVERY_RECORDS;
+            release(begin, begin + piece.len());
         }
         w.flush()?;
     }

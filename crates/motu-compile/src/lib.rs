@@ -131,6 +131,7 @@ mod emit;
 mod finalize;
 mod flatten;
 mod instance_map;
+mod instance_table;
 mod lod;
 pub mod partition;
 pub mod proxy_boxes;
@@ -149,6 +150,7 @@ mod tests;
 
 pub use flatten::{flatten_compiled, flatten_compiled_records, flatten_source};
 pub use instance_map::{park_table, InstanceMap, PARK_MIN_INSTANCES};
+pub use instance_table::InstanceTable;
 pub use partition::{
     auto_bound, auto_bound_settles_at_triangles, auto_max_blas_triangles,
     DEFAULT_MAX_BLAS_TRIANGLES, MIN_AUTO_MAX_BLAS_TRIANGLES,
@@ -163,8 +165,8 @@ pub use tlas_split::{
 pub use validate::{validate, validate_with, Limits, ValidateError};
 
 use motu_abi::{
-    BlasRecord, GeometryRecord, HierarchyView, InstanceRecord, LodSelectorRecord, MaterialRecord,
-    MeshRecord, PiRecord, TlasRecord,
+    BlasRecord, GeometryRecord, HierarchyView, LodSelectorRecord, MaterialRecord, MeshRecord,
+    PiRecord, TlasRecord,
 };
 use motu_scene::{ElementId, MeshData, Scene};
 
@@ -404,7 +406,7 @@ pub struct CompilePhases {
 pub struct CompiledScene {
     pub root_tlas: u32,
     pub tlases: Vec<TlasRecord>,
-    pub instances: Vec<InstanceRecord>,
+    pub instances: InstanceTable,
     pub blases: Vec<BlasRecord>,
     pub geometries: Vec<GeometryRecord>,
     pub pis: Vec<PiRecord>,

@@ -1,8 +1,10 @@
 //! Splitting a TLAS over an instance cap into spatial pieces (compile time, and at load time
 //! for streaming: [`split_for_streaming`]).
 
+use crate::instance_map::RELEASE_EVERY_RECORDS;
 use crate::split::{sah_partition, split_keeping_direct};
 use crate::tables::{instance_bounds, next_id, set_bounds};
+use crate::InstanceTable;
 use crate::{xform, CompileError, CompiledScene};
 use motu_abi::{
     BlasRecord, HierarchyView, InstanceRecord, PiRecord, TlasRecord, BLAS_AABBS, NONE_U32, PI_TLAS,
@@ -111,11 +113,10 @@ pub(crate) fn split_tlas(
         for (&(x, y), piece_bounds) in ranges.iter().zip(&piece_bounds) {
             let (x, y) = (base + x, base + y);
             next_id(out.tlases.len(), "TLASes")?;
-            let insts = &out.instances[x..y];
             let mut rec = TlasRecord {
                 instance_base: x as u32,
                 instance_count: (y - x) as u32,
-                element: match common_element(insts.iter().map(|i| i.element)) {
+                element: match common_element_released(&out.instances, x, y) {
                     Some(e) if e != NONE_U32 => e,
                     _ => t.element,
                 },
@@ -157,7 +158,7 @@ pub(crate) fn split_tlas(
                 flags: 0,
                 element: if root { element } else { NONE_U32 },
                 _pad: 0,
-            });
+            })?;
             piece = group_end;
         }
         let t = &mut out.tlases[tlas as usize];
@@ -218,6 +219,23 @@ pub(crate) fn push_aabb_blas(
     set_bounds(&mut rec.bounds_min, &mut rec.bounds_max, &bounds);
     out.blases.push(rec);
     Ok(id)
+}
+
+/// [`common_element`] of records `x..y` of `table`, read a piece at a time (a mapped table's
+/// pages dropped behind).
+fn common_element_released(table: &InstanceTable, x: usize, y: usize) -> Option<u32> {
+    let first = table.get(x)?.element;
+    let mut at = x;
+    while at < y {
+        let end = (at + RELEASE_EVERY_RECORDS).min(y);
+        let same = table[at..end].iter().all(|i| i.element == first);
+        table.release_range(at, end);
+        if !same {
+            return None;
+        }
+        at = end;
+    }
+    Some(first)
 }
 
 /// The one element all of `elements` carry (`NONE_U32` ones included as such), if any.
@@ -299,7 +317,7 @@ impl StreamSplit {
     fn instances(&self) -> &[InstanceRecord] {
         match &self.parked {
             Some(m) => m.records(),
-            None => &self.scene.instances,
+            None => &self.scene.instances[..],
         }
     }
 
@@ -321,7 +339,7 @@ impl StreamSplit {
                 source,
             },
         )?;
-        self.scene.instances = Vec::new();
+        self.scene.instances = InstanceTable::new();
         self.parked = Some(map);
         Ok(true)
     }
@@ -354,14 +372,14 @@ impl StreamSplit {
         }
         let n = source.len() - stored.extra_instances.len();
         if let Some(map) = &self.parked {
-            compiled.instances = gather_in_order(map, source, n)?;
+            compiled.instances = gather_in_order(map, source, n)?.into();
             return Ok(());
         }
-        let mut instances = self.scene.instances;
+        let mut instances = self.scene.instances.into_vec();
         for (r, &s) in instances.iter_mut().zip(source) {
             r._pad = if s == NONE_U32 { 0 } else { s + 1 };
         }
-        compiled.instances = untag_in_order(instances, n)?;
+        compiled.instances = untag_in_order(instances, n)?.into();
         Ok(())
     }
 
@@ -377,7 +395,10 @@ impl StreamSplit {
         let (tlases_split, pieces) = self.counts();
         let mut source = Vec::with_capacity(self.instances().len());
         let mut extra_instances = Vec::new();
-        for inst in self.instances() {
+        for (i, inst) in self.instances().iter().enumerate() {
+            if i > 0 && i % RELEASE_EVERY_RECORDS == 0 {
+                self.release_instance_range(i - RELEASE_EVERY_RECORDS, i);
+            }
             // `split_for_streaming` tags each copied instance with its index + 1 (in `_pad`);
             // the split's own AABB-BLAS instances carry 0.
             if inst._pad != 0 && (inst._pad as usize) <= n {
@@ -398,6 +419,17 @@ impl StreamSplit {
         }
     }
 
+    /// Drops the pages of records `begin..end` of a mapped table (the split's own or a parked
+    /// one) from the resident set.
+    fn release_instance_range(&self, begin: usize, end: usize) {
+        match &self.parked {
+            Some(m) => {
+                let _ = m.release_range(begin, end);
+            }
+            None => self.scene.instances.release_range(begin, end),
+        }
+    }
+
     /// The split a package stored ([`StreamSplit::stored`]), rebuilt over `view` (the
     /// package's hierarchy) without splitting anything: O(instances). Checks that the stored
     /// tables fit `view` (every source index in range, as many extra instances as named,
@@ -411,7 +443,7 @@ impl StreamSplit {
         let scene = CompiledScene {
             root_tlas: view.root_tlas,
             tlases: stored.tlases.clone(),
-            instances,
+            instances: instances.into(),
             blases: stored.blases.clone(),
             geometries: view.geometries.to_vec(),
             pis: stored.pis.clone(),
@@ -587,10 +619,9 @@ pub fn stream_split_taking_instances_in(
         parked: None,
     };
     let stored = split.stored(n);
+    split.release_instance_range(0, split.instances().len());
     // The origins are in `stored`; the records become the reader's (`_pad` 0, as in a package).
-    for r in &mut split.scene.instances {
-        r._pad = 0;
-    }
+    for_each_released(&mut split.scene.instances, |_, r| r._pad = 0);
     Ok(Some((stored, split)))
 }
 
@@ -605,17 +636,29 @@ fn over_cap(tlases: &[TlasRecord], cap: u32) -> Option<Vec<u32>> {
 
 /// Each instance remembers where it came from (its index + 1 in `_pad`, always 0 in a package)
 /// so that [`StreamSplit::stored`] can store the split as a map.
-fn tag_origins(instances: &mut [InstanceRecord]) -> Result<(), CompileError> {
+fn tag_origins(instances: &mut InstanceTable) -> Result<(), CompileError> {
     if instances.len() >= NONE_U32 as usize {
         return Err(CompileError::TooMany {
             what: "instances",
             count: instances.len() as u64,
         });
     }
-    for (i, inst) in instances.iter_mut().enumerate() {
-        inst._pad = i as u32 + 1;
-    }
+    for_each_released(instances, |i, inst| inst._pad = i as u32 + 1);
     Ok(())
+}
+
+/// `f(index, record)` over every record of `table`, a piece at a time (a mapped table's pages
+/// dropped behind).
+fn for_each_released(table: &mut InstanceTable, mut f: impl FnMut(usize, &mut InstanceRecord)) {
+    let mut at = 0;
+    while at < table.len() {
+        let end = (at + RELEASE_EVERY_RECORDS).min(table.len());
+        for (k, r) in table[at..end].iter_mut().enumerate() {
+            f(at + k, r);
+        }
+        table.release_range(at, end);
+        at = end;
+    }
 }
 
 /// Every table of `view` but the instances (left empty), copied.
@@ -623,7 +666,7 @@ fn tables_of(view: &HierarchyView<'_>) -> CompiledScene {
     CompiledScene {
         root_tlas: view.root_tlas,
         tlases: view.tlases.to_vec(),
-        instances: Vec::new(),
+        instances: InstanceTable::new(),
         blases: view.blases.to_vec(),
         geometries: view.geometries.to_vec(),
         pis: view.pis.to_vec(),
@@ -714,7 +757,7 @@ fn split_tagged(view: &HierarchyView<'_>, cap: u32) -> Result<Option<StreamSplit
     let Some(over) = over_cap(view.tlases, cap) else {
         return Ok(None);
     };
-    let mut instances = view.instances.to_vec();
+    let mut instances: InstanceTable = view.instances.to_vec().into();
     tag_origins(&mut instances)?;
     let mut out = CompiledScene {
         instances,
@@ -741,7 +784,7 @@ fn split_tagged_scene(
         .map_err(CompileError::References)?;
     let per_blas = crate::CompileOptions::default().max_primitives_per_blas as usize;
     for t in over {
-        move_range_to_tail(out, t)?;
+        move_range_to_tail(out, t, scratch)?;
         let root = t == out.root_tlas;
         split_tlas(out, t, cap, per_blas, root, scratch, &mut |_| {})?;
     }
@@ -751,14 +794,16 @@ fn split_tagged_scene(
 
 /// Clears the origins [`split_tagged`] left in the instances' `_pad` (0 in every package).
 fn clear_origins(split: &mut StreamSplit) {
-    for inst in &mut split.scene.instances {
-        inst._pad = 0;
-    }
+    for_each_released(&mut split.scene.instances, |_, inst| inst._pad = 0);
 }
 
 /// Makes TLAS `t`'s instance range the table's tail, which [`split_tlas`] needs: rotated there
 /// (later TLASes' ranges shifted down), or copied when another TLAS shares a part of it.
-fn move_range_to_tail(out: &mut CompiledScene, t: u32) -> Result<(), CompileError> {
+fn move_range_to_tail(
+    out: &mut CompiledScene,
+    t: u32,
+    scratch: Option<&Path>,
+) -> Result<(), CompileError> {
     let rec = out.tlases[t as usize];
     let (base, count) = (rec.instance_base as usize, rec.instance_count as usize);
     let (end, len) = (base + count, out.instances.len());
@@ -771,16 +816,53 @@ fn move_range_to_tail(out: &mut CompiledScene, t: u32) -> Result<(), CompileErro
     });
     if shared {
         next_id(len + count, "instances")?;
-        out.instances.extend_from_within(base..end);
+        out.instances.extend_from_within(base..end)?;
         out.tlases[t as usize].instance_base = next_id(len, "instances")?;
         return Ok(());
     }
-    out.instances[base..].rotate_left(count);
+    rotate_to_tail(&mut out.instances, base, count, scratch)?;
     for (u, r) in out.tlases.iter_mut().enumerate() {
         if u != t as usize && r.instance_base as usize >= end {
             r.instance_base -= count as u32;
         }
     }
     out.tlases[t as usize].instance_base = next_id(len - count, "instances")?;
+    Ok(())
+}
+
+/// `table[base..].rotate_left(count)`: records `base..base + count` moved to the end. A mapped
+/// table's range waits in an unnamed file in `scratch` (else on the heap) while the rest moves
+/// down a piece at a time, so no more of the table is resident than a piece.
+fn rotate_to_tail(
+    table: &mut InstanceTable,
+    base: usize,
+    count: usize,
+    scratch: Option<&Path>,
+) -> Result<(), CompileError> {
+    let len = table.len();
+    let (Some(dir), true) = (scratch, table.is_mapped()) else {
+        table[base..].rotate_left(count);
+        return Ok(());
+    };
+    use std::io::{Read, Seek, SeekFrom};
+    let err = |source| CompileError::Scratch {
+        dir: dir.to_path_buf(),
+        source,
+    };
+    let mut file =
+        crate::instance_map::write_scratch_then(&table[base..base + count], dir, &mut |b, e| {
+            table.release_range(base + b, base + e)
+        })
+        .map_err(err)?;
+    table.copy_within_released(base + count..len, base);
+    file.seek(SeekFrom::Start(0)).map_err(err)?;
+    let mut at = len - count;
+    while at < len {
+        let end = (at + RELEASE_EVERY_RECORDS).min(len);
+        file.read_exact(bytemuck::cast_slice_mut(&mut table[at..end]))
+            .map_err(err)?;
+        table.release_range(at, end);
+        at = end;
+    }
     Ok(())
 }
