@@ -123,6 +123,14 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         let reserve =
             estimate + estimate / (self.plan.opts.effective_instance_cap().max(4) / 4) + 64;
         let reserve = reserve.min(u64::from(u32::MAX)) as usize;
+        // With a scratch directory (an import's), a table of at least `PARK_MIN_INSTANCES`
+        // is an unnamed file mapped shared, its pages released as it is written and read:
+        // on the heap it is the compile's peak (64 bytes an instance; issue 48 item 1).
+        if let Some(dir) = &self.plan.opts.split_scratch_dir {
+            if reserve >= crate::PARK_MIN_INSTANCES {
+                self.out.instances = crate::InstanceTable::in_file(dir)?;
+            }
+        }
         self.out.instances.try_reserve_exact(reserve)?;
         let root = self.tlas_for_proto(Scene::ROOT)?;
         self.out.root_tlas = root;

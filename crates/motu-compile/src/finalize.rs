@@ -89,9 +89,7 @@ fn pieces(range: std::ops::Range<usize>) -> impl Iterator<Item = (usize, usize)>
 
 pub(crate) fn finalize(out: &mut CompiledScene) -> Result<(), CompileError> {
     let _span = tracing::info_span!("finalize").entered();
-    out.view()
-        .check_references()
-        .map_err(CompileError::References)?;
+    crate::check_references(out).map_err(CompileError::References)?;
     let nt = out.tlases.len();
     let n = nt + out.blases.len();
     // Kahn's algorithm: a topological order and longest-path levels.

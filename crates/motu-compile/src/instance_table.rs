@@ -327,6 +327,21 @@ impl InstanceTable {
         }
     }
 
+    /// A mapped table as a read-only [`crate::InstanceMap`] of its records, with no copy (the
+    /// table stops writing); a heap table is given back (`Err`).
+    pub(crate) fn into_map(self) -> Result<Result<crate::InstanceMap, CompileError>, Self> {
+        match self.store {
+            Store::Heap(v) => Err(v.into()),
+            Store::File(f) => Ok(match f.map {
+                None => Ok(crate::InstanceMap::from_map_empty()),
+                Some(m) => m
+                    .make_read_only()
+                    .map(|m| crate::InstanceMap::from_map(m, f.len))
+                    .map_err(|source| CompileError::Scratch { dir: f.dir, source }),
+            }),
+        }
+    }
+
     /// The records as a `Vec` (a heap table's own; a mapped one's copied).
     pub fn into_vec(self) -> Vec<InstanceRecord> {
         match self.store {

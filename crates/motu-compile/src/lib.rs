@@ -230,8 +230,9 @@ pub struct CompileOptions {
     pub auto_bake_max_triangles: u64,
     /// A directory for unnamed scratch files: a TLAS over the cap of at least 2^20 instances
     /// is split by key there (its records in a file while the partition moves indices; the
-    /// same split, without the table and the partition's arrays resident together). `None`:
-    /// split in memory.
+    /// same split, without the table and the partition's arrays resident together), and an
+    /// instance table of at least [`PARK_MIN_INSTANCES`] is an unnamed file there, mapped
+    /// ([`InstanceTable::in_file`]). `None`: split in memory, the table on the heap.
     pub split_scratch_dir: Option<std::path::PathBuf>,
 }
 
@@ -539,6 +540,13 @@ pub fn compile_with_sources(
         "compiled"
     );
     Ok(out)
+}
+
+/// [`HierarchyView::check_references`] of `out`, a mapped instance table's pages dropped
+/// behind the check.
+fn check_references(out: &CompiledScene) -> Result<(), motu_abi::HierarchyError> {
+    out.view()
+        .check_references_then(&mut |b, e| out.instances.release_range(b, e))
 }
 
 /// Drops file-held edge pages from the resident set ([`Scene::release_edge_pages`]); a failed

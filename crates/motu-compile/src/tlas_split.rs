@@ -322,24 +322,31 @@ impl StreamSplit {
     }
 
     /// Moves the split's instance table (of at least [`crate::PARK_MIN_INSTANCES`] records;
-    /// smaller tables stay) into an unnamed file in
-    /// `dir`, mapped read-only: [`StreamSplit::view`] reads the map and
-    /// [`StreamSplit::release_instance_pages`] drops what was read from the resident set, so
-    /// an import holds no instance table while it makes the proxy clusters (issue 48 item 1).
-    /// Returns whether it parked the table; on an error the table stays on the heap.
+    /// smaller tables stay) into an unnamed file in `dir`, mapped read-only (a table already
+    /// in a mapped file, [`InstanceTable::in_file`], stops writing: no copy):
+    /// [`StreamSplit::view`] reads the map and [`StreamSplit::release_instance_pages`] drops
+    /// what was read from the resident set, so an import holds no instance table while it
+    /// makes the proxy clusters (issue 48 item 1). Returns whether it parked the table; on an
+    /// error a heap table stays on the heap (a mapped one is lost: the caller fails).
     pub fn park_instances(&mut self, dir: &Path) -> Result<bool, CompileError> {
         if self.parked.is_some()
             || self.scene.instances.len() < crate::instance_map::PARK_MIN_INSTANCES
         {
             return Ok(false);
         }
-        let map = crate::instance_map::InstanceMap::write(&self.scene.instances, dir).map_err(
-            |source| CompileError::Scratch {
-                dir: dir.to_path_buf(),
-                source,
-            },
-        )?;
-        self.scene.instances = InstanceTable::new();
+        let map = match std::mem::take(&mut self.scene.instances).into_map() {
+            Ok(map) => map?,
+            Err(heap) => {
+                let map = crate::instance_map::InstanceMap::write(&heap, dir);
+                self.scene.instances = heap;
+                let map = map.map_err(|source| CompileError::Scratch {
+                    dir: dir.to_path_buf(),
+                    source,
+                })?;
+                self.scene.instances = InstanceTable::new();
+                map
+            }
+        };
         self.parked = Some(map);
         Ok(true)
     }
@@ -779,9 +786,7 @@ fn split_tagged_scene(
 ) -> Result<(), CompileError> {
     let cap = cap.max(2) as usize;
     let _span = tracing::info_span!("split for streaming", tlases = over.len()).entered();
-    out.view()
-        .check_references()
-        .map_err(CompileError::References)?;
+    crate::check_references(out).map_err(CompileError::References)?;
     let per_blas = crate::CompileOptions::default().max_primitives_per_blas as usize;
     for t in over {
         move_range_to_tail(out, t, scratch)?;
@@ -833,7 +838,7 @@ fn move_range_to_tail(
 /// `table[base..].rotate_left(count)`: records `base..base + count` moved to the end. A mapped
 /// table's range waits in an unnamed file in `scratch` (else on the heap) while the rest moves
 /// down a piece at a time, so no more of the table is resident than a piece.
-fn rotate_to_tail(
+pub(crate) fn rotate_to_tail(
     table: &mut InstanceTable,
     base: usize,
     count: usize,

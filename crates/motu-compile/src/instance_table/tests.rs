@@ -108,3 +108,26 @@ fn pushes_release_pages_behind() {
     assert!(resident_bytes(addr) <= 4 * window);
     assert!((0..n as u32).all(|i| t[n / 2 + i as usize] == record(i)));
 }
+
+/// The stream split's rotate of a range to the table's tail: a mapped table's through a
+/// scratch file, a piece at a time, the same records as a slice's `rotate_left`.
+#[test]
+fn rotate_to_tail_through_a_file_is_rotate_left() {
+    let dir = tempfile::tempdir().unwrap();
+    let n = 3 * RELEASE_EVERY_RECORDS + 5;
+    for (base, count) in [
+        (0, 7),
+        (10, n - 10),
+        (3, 2 * RELEASE_EVERY_RECORDS + 1),
+        (0, n),
+    ] {
+        let mut heap: InstanceTable = (0..n as u32).map(record).collect();
+        let mut file = InstanceTable::in_file(dir.path()).unwrap();
+        for r in heap.iter() {
+            file.push(*r).unwrap();
+        }
+        heap[base..].rotate_left(count);
+        crate::tlas_split::rotate_to_tail(&mut file, base, count, Some(dir.path())).unwrap();
+        assert!(heap == file, "base {base} count {count}");
+    }
+}
