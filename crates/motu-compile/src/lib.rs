@@ -100,10 +100,13 @@
 //! holding the package's instance table while the proxy tables are made over it (no second
 //! table); `tlas_split/stash.rs`: with `CompileOptions::split_scratch_dir` (the import's), a range
 //! of 1M+ instances is split by key — its records in an unnamed file, the partition over indices,
-//! the records put back in its order: the same split, without the table and the partition's arrays
-//! resident together; `instance_map.rs`: `StreamSplit::park_instances` moves the import's
-//! split table to a mapped unnamed file while the proxy clusters read it (pages dropped after
-//! each batch, `StoredProxyClusters::of_view_then`); `split/tests/reference.rs` (tests only): the partitioners before their speed-ups,
+//! the records put back in its order (a bucket of places per read when mapped): the same split,
+//! without the table and the partition's arrays resident together; `instance_table.rs`:
+//! `InstanceTable`, `CompiledScene::instances` on the heap or (with `split_scratch_dir`) in a
+//! growable shared map of an unnamed file, its pages released behind every pass
+//! (`tlas_split/order.rs`: the split's reorders a piece at a time); `instance_map.rs`:
+//! `StreamSplit::park_instances` makes the import's split table a read-only map while the proxy
+//! clusters read it (pages dropped after each batch, `StoredProxyClusters::of_view_then`); `split/tests/reference.rs` (tests only): the partitioners before their speed-ups,
 //! which the fast ones must equal; `tables.rs` holds the table helpers emit, split and finalize
 //! share), `ml`/`sl`/`N`/`auto` levels (`auto`, in `analyze.rs` `plan_auto_inlining`: grouping
 //! levels of ≤ 256 entries inlined, and small instanced prototypes — ≤ 2^17 triangles with their
