@@ -15,7 +15,9 @@ use std::path::Path;
 mod order;
 mod stash;
 
-pub(crate) use order::{for_each_released, rotate_to_tail};
+use order::for_each_released;
+#[cfg(test)]
+pub(crate) use order::rotate_to_tail;
 use order::{gather_in_order, move_range_to_tail, tag_origins, untag_in_order};
 
 /// Splits `tlas` until its instance count fits `cap` (see the crate docs): the few instances
@@ -56,9 +58,15 @@ pub(crate) fn split_tlas(
         // A large range is partitioned as indices (4 bytes, not a 64-byte record, beside its
         // bounds) while its records wait in a file, read back for their bounds: the table and
         // the partition's arrays are never resident together (issue 48 item 1: the import's
-        // peak where a root is split).
+        // peak where a root is split). A mapped table's range goes from a smaller size: in
+        // memory its records would all be resident while the partition moves them.
+        let keyed_from = if out.instances.is_mapped() {
+            crate::PARK_MIN_INSTANCES.min(stash::MIN_INSTANCES)
+        } else {
+            stash::MIN_INSTANCES
+        };
         let mut stashed = match scratch {
-            Some(dir) if count >= stash::MIN_INSTANCES => {
+            Some(dir) if count >= keyed_from => {
                 Some(stash::Stash::take_tail(&mut out.instances, base, dir)?)
             }
             _ => None,
