@@ -78,6 +78,11 @@ const UNSAFE_OUTSIDE_THE_DEVICE_LAYER: &[(&str, &str)] = &[
          nobody else can write it: dropped pages fault back unchanged)",
     ),
     (
+        "crates/motu-compile/src/instance_table.rs",
+        "shared writable mmap of the compile's own unnamed instance file, grown by remapping, and \
+         MADV_DONTNEED on it (dropped pages keep their data in the page cache and fault back)",
+    ),
+    (
         "crates/motu-compile/src/instance_map.rs",
         "mmap of an import's own unnamed file of the stream split's instances, and MADV_DONTNEED \
          on it (read-only, nobody else can write it: dropped pages fault back unchanged)",

@@ -10,17 +10,19 @@ use std::path::{Path, PathBuf};
 
 /// What an instance may cost at the import's peak. The edges go to a scratch file as they are
 /// parsed (the heap holds a chunk) and are read through a map whose pages every walk drops;
-/// the mapped scene text is released as it is scanned and parsed; the proxy clusters are
-/// made a batch of TLASes at a time and written without a copy; after the stream split the
-/// package's instance table is a mapped file read a piece at a time. The peak is in the
-/// compile and the stream split: the instance table (64 bytes an instance) on the heap.
-/// Measured on this scene (20k → 220k instances): 76–77 bytes an instance with the table
-/// parked from the split on (session 43: release 75.7–76.7, test profile 76.5; main 84), 82–85
-/// with the heap trimmed after the clusters (session 42, 88 before), 88–93 in session 39 (main
-/// 96–100 before); 99–101 in session 38, 125 before (edges and the compiled instance table side
-/// by side), 174 before session 37's copy-free stream split. 88 leaves room for allocator
-/// rounding without letting the gathered table come back.
-const MAX_BYTES_PER_INSTANCE: f64 = 88.0;
+/// the mapped scene text is released as it is scanned and parsed; the compile's instance table
+/// is a mapped file from the emitter on, its pages released behind every pass, and the stream
+/// split partitions indices while the records wait in a file; the proxy clusters are made a
+/// batch of TLASes at a time and written without a copy; after the stream split the package's
+/// instance table is a mapped file read a piece at a time. The peak is now the parse.
+/// Measured on this scene (20k → 220k instances): 61–64 bytes an instance with the compile's
+/// table mapped (session 44: release 64.2, test profile 61.2; main 74.8), 76–77 with the table
+/// parked from the split on (session 43), 82–85 with the heap trimmed after the clusters
+/// (session 42, 88 before), 88–93 in session 39 (main 96–100 before); 99–101 in session 38, 125
+/// before (edges and the compiled instance table side by side), 174 before session 37's
+/// copy-free stream split. 76 leaves room for the loaded machine's parse (its include workers)
+/// without letting the compile's table come back to the heap.
+const MAX_BYTES_PER_INSTANCE: f64 = 76.0;
 
 /// A pbrt scene of `n` instances: a one-triangle object placed `n` times, half of them at the
 /// root and half inside a group object that the root places once, the two interleaved in the

@@ -352,6 +352,16 @@ impl HierarchyView<'_> {
 
     /// Checks every cross-table reference is in range, so traversal can index without panics.
     pub fn check_references(&self) -> Result<(), HierarchyError> {
+        self.check_references_then(&mut |_, _| {})
+    }
+
+    /// [`HierarchyView::check_references`] that calls `read(begin, end)` after instances
+    /// `begin..end` were checked, every 2^15 (a caller whose table is a mapped file drops the
+    /// pages read).
+    pub fn check_references_then(
+        &self,
+        read: &mut dyn FnMut(usize, usize),
+    ) -> Result<(), HierarchyError> {
         let err = |table, index, reason: String| {
             Err(HierarchyError {
                 table,
@@ -373,7 +383,11 @@ impl HierarchyView<'_> {
                 return err("tlases", i, "instance range out of bounds".into());
             }
         }
+        const PIECE: usize = 1 << 15;
         for (i, inst) in self.instances.iter().enumerate() {
+            if i > 0 && i % PIECE == 0 {
+                read(i - PIECE, i);
+            }
             if inst.blas as usize >= self.blases.len() {
                 return err("instances", i, format!("BLAS {} out of range", inst.blas));
             }
@@ -390,6 +404,7 @@ impl HierarchyView<'_> {
                 );
             }
         }
+        read(self.instances.len() / PIECE * PIECE, self.instances.len());
         for (i, b) in self.blases.iter().enumerate() {
             let len = if b.kind == BLAS_TRIANGLES {
                 self.geometries.len()

@@ -123,13 +123,15 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
         let reserve =
             estimate + estimate / (self.plan.opts.effective_instance_cap().max(4) / 4) + 64;
         let reserve = reserve.min(u64::from(u32::MAX)) as usize;
-        self.out
-            .instances
-            .try_reserve_exact(reserve)
-            .map_err(|_| CompileError::OutOfMemory {
-                what: "instances",
-                bytes: reserve as u64 * std::mem::size_of::<InstanceRecord>() as u64,
-            })?;
+        // With a scratch directory (an import's), a table of at least `PARK_MIN_INSTANCES`
+        // is an unnamed file mapped shared, its pages released as it is written and read:
+        // on the heap it is the compile's peak (64 bytes an instance; issue 48 item 1).
+        if let Some(dir) = &self.plan.opts.split_scratch_dir {
+            if reserve >= crate::PARK_MIN_INSTANCES {
+                self.out.instances = crate::InstanceTable::in_file(dir)?;
+            }
+        }
+        self.out.instances.try_reserve_exact(reserve)?;
         let root = self.tlas_for_proto(Scene::ROOT)?;
         self.out.root_tlas = root;
         let mut jobs = std::mem::take(&mut self.new_children);
@@ -194,8 +196,7 @@ impl<'p, 's, 'k, 'f> Emitter<'p, 's, 'k, 'f> {
             flags: self.blas_flags[blas as usize],
             element,
             _pad: 0,
-        });
-        Ok(())
+        })
     }
 
     fn push_pi(&mut self, pi: PiRecord, element: u32) -> Result<(), CompileError> {

@@ -2,6 +2,7 @@
 //! BLASes odd) and exact bounds, computed bottom-up from the compiled tables themselves so that
 //! `validate` recomputes bit-identical PI boxes.
 
+use crate::instance_map::RELEASE_EVERY_RECORDS;
 use crate::{xform, CompileError, CompiledScene};
 use motu_abi::{HierarchyView, BLAS_AABBS, BLAS_TRIANGLES, PI_LOD_SELECTOR, PI_TLAS};
 use motu_scene::Aabb;
@@ -58,11 +59,37 @@ pub(crate) fn pi_target_bounds(
     Some(child.transformed(&parent_from_child))
 }
 
+/// [`for_each_child`] that reads a TLAS's instances a piece at a time, the pages of a mapped
+/// instance table dropped behind (`out` is the table `v` views).
+fn for_each_child_released(
+    out: &CompiledScene,
+    v: &HierarchyView<'_>,
+    node: usize,
+    mut f: impl FnMut(usize),
+) {
+    let nt = v.tlases.len();
+    if node >= nt {
+        return for_each_child(v, node, f);
+    }
+    for (begin, end) in pieces(v.tlases[node].instance_range()) {
+        for inst in &v.instances[begin..end] {
+            f(nt + inst.blas as usize);
+        }
+        out.instances.release_range(begin, end);
+    }
+}
+
+/// `range` in pieces of [`RELEASE_EVERY_RECORDS`] records.
+fn pieces(range: std::ops::Range<usize>) -> impl Iterator<Item = (usize, usize)> {
+    range
+        .clone()
+        .step_by(RELEASE_EVERY_RECORDS)
+        .map(move |b| (b, (b + RELEASE_EVERY_RECORDS).min(range.end)))
+}
+
 pub(crate) fn finalize(out: &mut CompiledScene) -> Result<(), CompileError> {
     let _span = tracing::info_span!("finalize").entered();
-    out.view()
-        .check_references()
-        .map_err(CompileError::References)?;
+    crate::check_references(out).map_err(CompileError::References)?;
     let nt = out.tlases.len();
     let n = nt + out.blases.len();
     // Kahn's algorithm: a topological order and longest-path levels.
@@ -70,7 +97,7 @@ pub(crate) fn finalize(out: &mut CompiledScene) -> Result<(), CompileError> {
     {
         let v = out.view();
         for node in 0..n {
-            for_each_child(&v, node, |c| pending[c] += 1);
+            for_each_child_released(out, &v, node, |c| pending[c] += 1);
         }
     }
     if let Some(src) = (0..n).find(|&i| pending[i] == 0 && i != out.root_tlas as usize) {
@@ -86,7 +113,7 @@ pub(crate) fn finalize(out: &mut CompiledScene) -> Result<(), CompileError> {
             let node = order[head] as usize;
             head += 1;
             let next = level[node] + 1;
-            for_each_child(&v, node, |c| {
+            for_each_child_released(out, &v, node, |c| {
                 level[c] = level[c].max(next);
                 pending[c] -= 1;
                 if pending[c] == 0 {
@@ -113,9 +140,13 @@ pub(crate) fn finalize(out: &mut CompiledScene) -> Result<(), CompileError> {
         if node < nt {
             let t = out.tlases[node];
             let range = t.instance_range();
-            let b = out.instances[range].iter().fold(Aabb::EMPTY, |acc, inst| {
-                acc.union(&crate::tables::instance_bounds(&out.blases, inst))
-            });
+            let mut b = Aabb::EMPTY;
+            for (begin, end) in pieces(range) {
+                b = out.instances[begin..end].iter().fold(b, |acc, inst| {
+                    acc.union(&crate::tables::instance_bounds(&out.blases, inst))
+                });
+                out.instances.release_range(begin, end);
+            }
             let t = &mut out.tlases[node];
             (t.bounds_min, t.bounds_max) = (b.min, b.max);
             continue;

@@ -41,30 +41,39 @@ impl std::fmt::Debug for InstanceMap {
 
 /// Writes `records` to a new unnamed file in `dir` (through a short buffer, so the dirty page
 /// cache flows to disk as it is written) and returns it: an [`InstanceMap`]'s, and a keyed
-/// split's stash (`tlas_split/stash.rs`).
-pub(crate) fn write_scratch(records: &[InstanceRecord], dir: &Path) -> std::io::Result<File> {
+/// split's stash (`tlas_split/stash.rs`). Calls `release(begin, end)` after records
+/// `begin..end` are written, every [`RELEASE_EVERY_RECORDS`] (`records` in a mapped table:
+/// its pages dropped behind).
+pub(crate) fn write_scratch_then(
+    records: &[InstanceRecord],
+    dir: &Path,
+    release: &mut dyn FnMut(usize, usize),
+) -> std::io::Result<File> {
     let file = tempfile::tempfile_in(dir)?;
     {
         let mut w = std::io::BufWriter::with_capacity(1 << 20, &file);
-        for piece in records.chunks(1 << 14) {
+        for (k, piece) in records.chunks(RELEASE_EVERY_RECORDS).enumerate() {
             w.write_all(bytemuck::cast_slice(piece))?;
+            let begin = k * RELEASE_EVERY_RECORDS;
+            release(begin, begin + piece.len());
         }
         w.flush()?;
     }
     Ok(file)
 }
 
-/// `records` (a table of at least [`PARK_MIN_INSTANCES`]) written to an unnamed file in `dir`
-/// and mapped read-only ([`InstanceMap::write`]); `None` for a smaller table, which stays where
-/// it is. The caller frees its copy.
+/// A copy of `table` (of at least [`PARK_MIN_INSTANCES`] records) written to an unnamed file
+/// in `dir` and mapped read-only ([`InstanceMap::write`]; a mapped table's pages released as
+/// they are read); `None` for a smaller table, which stays where it is. The caller frees or
+/// reuses the table.
 pub fn park_table(
-    records: &[InstanceRecord],
+    table: &crate::InstanceTable,
     dir: &Path,
 ) -> Result<Option<InstanceMap>, crate::CompileError> {
-    if records.len() < PARK_MIN_INSTANCES {
+    if table.len() < PARK_MIN_INSTANCES {
         return Ok(None);
     }
-    InstanceMap::write(records, dir)
+    InstanceMap::write_then(table, dir, &mut |b, e| table.release_range(b, e))
         .map(Some)
         .map_err(|source| crate::CompileError::Scratch {
             dir: dir.to_path_buf(),
@@ -73,12 +82,22 @@ pub fn park_table(
 }
 
 impl InstanceMap {
-    /// Writes `records` to an unnamed file in `dir` ([`write_scratch`]) and maps it read-only.
+    /// Writes `records` to an unnamed file in `dir` ([`write_scratch_then`]) and maps it read-only.
     pub fn write(records: &[InstanceRecord], dir: &Path) -> std::io::Result<Self> {
+        Self::write_then(records, dir, &mut |_, _| {})
+    }
+
+    /// [`InstanceMap::write`] that calls `release(begin, end)` behind the records written
+    /// ([`write_scratch_then`]).
+    fn write_then(
+        records: &[InstanceRecord],
+        dir: &Path,
+        release: &mut dyn FnMut(usize, usize),
+    ) -> std::io::Result<Self> {
         if records.is_empty() {
             return Ok(Self { map: None, len: 0 });
         }
-        let file = write_scratch(records, dir)?;
+        let file = write_scratch_then(records, dir, release)?;
         let bytes = std::mem::size_of_val(records);
         // SAFETY: the file is unnamed (O_TMPFILE or unlinked at creation), only this process
         // wrote it, completely, before mapping: nobody can truncate or change it under the
@@ -96,6 +115,21 @@ impl InstanceMap {
         })
     }
 
+    /// The first `len` records of `map` (a mapped [`crate::InstanceTable`] that stopped
+    /// writing: no copy).
+    pub(crate) fn from_map(map: memmap2::Mmap, len: usize) -> Self {
+        assert!(len * std::mem::size_of::<InstanceRecord>() <= map.len());
+        Self {
+            map: Some(map),
+            len,
+        }
+    }
+
+    /// A map of no record.
+    pub(crate) fn from_map_empty() -> Self {
+        Self { map: None, len: 0 }
+    }
+
     /// How many records the map holds.
     pub fn len(&self) -> usize {
         self.len
@@ -109,7 +143,7 @@ impl InstanceMap {
     /// The records (the map is page-aligned, so they are aligned too).
     pub fn records(&self) -> &[InstanceRecord] {
         match &self.map {
-            Some(m) => bytemuck::cast_slice(&m[..]),
+            Some(m) => bytemuck::cast_slice(&m[..self.len * std::mem::size_of::<InstanceRecord>()]),
             None => &[],
         }
     }

@@ -100,10 +100,13 @@
 //! holding the package's instance table while the proxy tables are made over it (no second
 //! table); `tlas_split/stash.rs`: with `CompileOptions::split_scratch_dir` (the import's), a range
 //! of 1M+ instances is split by key — its records in an unnamed file, the partition over indices,
-//! the records put back in its order: the same split, without the table and the partition's arrays
-//! resident together; `instance_map.rs`: `StreamSplit::park_instances` moves the import's
-//! split table to a mapped unnamed file while the proxy clusters read it (pages dropped after
-//! each batch, `StoredProxyClusters::of_view_then`); `split/tests/reference.rs` (tests only): the partitioners before their speed-ups,
+//! the records put back in its order (a bucket of places per read when mapped): the same split,
+//! without the table and the partition's arrays resident together; `instance_table.rs`:
+//! `InstanceTable`, `CompiledScene::instances` on the heap or (with `split_scratch_dir`) in a
+//! growable shared map of an unnamed file, its pages released behind every pass
+//! (`tlas_split/order.rs`: the split's reorders a piece at a time); `instance_map.rs`:
+//! `StreamSplit::park_instances` makes the import's split table a read-only map while the proxy
+//! clusters read it (pages dropped after each batch, `StoredProxyClusters::of_view_then`); `split/tests/reference.rs` (tests only): the partitioners before their speed-ups,
 //! which the fast ones must equal; `tables.rs` holds the table helpers emit, split and finalize
 //! share), `ml`/`sl`/`N`/`auto` levels (`auto`, in `analyze.rs` `plan_auto_inlining`: grouping
 //! levels of ≤ 256 entries inlined, and small instanced prototypes — ≤ 2^17 triangles with their
@@ -131,6 +134,7 @@ mod emit;
 mod finalize;
 mod flatten;
 mod instance_map;
+mod instance_table;
 mod lod;
 pub mod partition;
 pub mod proxy_boxes;
@@ -149,6 +153,7 @@ mod tests;
 
 pub use flatten::{flatten_compiled, flatten_compiled_records, flatten_source};
 pub use instance_map::{park_table, InstanceMap, PARK_MIN_INSTANCES};
+pub use instance_table::InstanceTable;
 pub use partition::{
     auto_bound, auto_bound_settles_at_triangles, auto_max_blas_triangles,
     DEFAULT_MAX_BLAS_TRIANGLES, MIN_AUTO_MAX_BLAS_TRIANGLES,
@@ -163,8 +168,8 @@ pub use tlas_split::{
 pub use validate::{validate, validate_with, Limits, ValidateError};
 
 use motu_abi::{
-    BlasRecord, GeometryRecord, HierarchyView, InstanceRecord, LodSelectorRecord, MaterialRecord,
-    MeshRecord, PiRecord, TlasRecord,
+    BlasRecord, GeometryRecord, HierarchyView, LodSelectorRecord, MaterialRecord, MeshRecord,
+    PiRecord, TlasRecord,
 };
 use motu_scene::{ElementId, MeshData, Scene};
 
@@ -228,8 +233,9 @@ pub struct CompileOptions {
     pub auto_bake_max_triangles: u64,
     /// A directory for unnamed scratch files: a TLAS over the cap of at least 2^20 instances
     /// is split by key there (its records in a file while the partition moves indices; the
-    /// same split, without the table and the partition's arrays resident together). `None`:
-    /// split in memory.
+    /// same split, without the table and the partition's arrays resident together), and an
+    /// instance table of at least [`PARK_MIN_INSTANCES`] is an unnamed file there, mapped
+    /// ([`InstanceTable::in_file`]). `None`: split in memory, the table on the heap.
     pub split_scratch_dir: Option<std::path::PathBuf>,
 }
 
@@ -404,7 +410,7 @@ pub struct CompilePhases {
 pub struct CompiledScene {
     pub root_tlas: u32,
     pub tlases: Vec<TlasRecord>,
-    pub instances: Vec<InstanceRecord>,
+    pub instances: InstanceTable,
     pub blases: Vec<BlasRecord>,
     pub geometries: Vec<GeometryRecord>,
     pub pis: Vec<PiRecord>,
@@ -537,6 +543,13 @@ pub fn compile_with_sources(
         "compiled"
     );
     Ok(out)
+}
+
+/// [`HierarchyView::check_references`] of `out`, a mapped instance table's pages dropped
+/// behind the check.
+fn check_references(out: &CompiledScene) -> Result<(), motu_abi::HierarchyError> {
+    out.view()
+        .check_references_then(&mut |b, e| out.instances.release_range(b, e))
 }
 
 /// Drops file-held edge pages from the resident set ([`Scene::release_edge_pages`]); a failed

@@ -1,8 +1,10 @@
 //! Splitting a TLAS over an instance cap into spatial pieces (compile time, and at load time
 //! for streaming: [`split_for_streaming`]).
 
+use crate::instance_map::RELEASE_EVERY_RECORDS;
 use crate::split::{sah_partition, split_keeping_direct};
 use crate::tables::{instance_bounds, next_id, set_bounds};
+use crate::InstanceTable;
 use crate::{xform, CompileError, CompiledScene};
 use motu_abi::{
     BlasRecord, HierarchyView, InstanceRecord, PiRecord, TlasRecord, BLAS_AABBS, NONE_U32, PI_TLAS,
@@ -10,7 +12,13 @@ use motu_abi::{
 use motu_scene::{Aabb, Transform34};
 use std::path::Path;
 
+mod order;
 mod stash;
+
+use order::for_each_released;
+#[cfg(test)]
+pub(crate) use order::rotate_to_tail;
+use order::{gather_in_order, move_range_to_tail, tag_origins, untag_in_order};
 
 /// Splits `tlas` until its instance count fits `cap` (see the crate docs): the few instances
 /// large against the whole (terrain, ocean) stay in `tlas` itself, traced with it, and the
@@ -50,9 +58,15 @@ pub(crate) fn split_tlas(
         // A large range is partitioned as indices (4 bytes, not a 64-byte record, beside its
         // bounds) while its records wait in a file, read back for their bounds: the table and
         // the partition's arrays are never resident together (issue 48 item 1: the import's
-        // peak where a root is split).
+        // peak where a root is split). A mapped table's range goes from a smaller size: in
+        // memory its records would all be resident while the partition moves them.
+        let keyed_from = if out.instances.is_mapped() {
+            crate::PARK_MIN_INSTANCES.min(stash::MIN_INSTANCES)
+        } else {
+            stash::MIN_INSTANCES
+        };
         let mut stashed = match scratch {
-            Some(dir) if count >= stash::MIN_INSTANCES => {
+            Some(dir) if count >= keyed_from => {
                 Some(stash::Stash::take_tail(&mut out.instances, base, dir)?)
             }
             _ => None,
@@ -111,11 +125,10 @@ pub(crate) fn split_tlas(
         for (&(x, y), piece_bounds) in ranges.iter().zip(&piece_bounds) {
             let (x, y) = (base + x, base + y);
             next_id(out.tlases.len(), "TLASes")?;
-            let insts = &out.instances[x..y];
             let mut rec = TlasRecord {
                 instance_base: x as u32,
                 instance_count: (y - x) as u32,
-                element: match common_element(insts.iter().map(|i| i.element)) {
+                element: match common_element_released(&out.instances, x, y) {
                     Some(e) if e != NONE_U32 => e,
                     _ => t.element,
                 },
@@ -157,7 +170,7 @@ pub(crate) fn split_tlas(
                 flags: 0,
                 element: if root { element } else { NONE_U32 },
                 _pad: 0,
-            });
+            })?;
             piece = group_end;
         }
         let t = &mut out.tlases[tlas as usize];
@@ -218,6 +231,23 @@ pub(crate) fn push_aabb_blas(
     set_bounds(&mut rec.bounds_min, &mut rec.bounds_max, &bounds);
     out.blases.push(rec);
     Ok(id)
+}
+
+/// [`common_element`] of records `x..y` of `table`, read a piece at a time (a mapped table's
+/// pages dropped behind).
+fn common_element_released(table: &InstanceTable, x: usize, y: usize) -> Option<u32> {
+    let first = table.get(x)?.element;
+    let mut at = x;
+    while at < y {
+        let end = (at + RELEASE_EVERY_RECORDS).min(y);
+        let same = table[at..end].iter().all(|i| i.element == first);
+        table.release_range(at, end);
+        if !same {
+            return None;
+        }
+        at = end;
+    }
+    Some(first)
 }
 
 /// The one element all of `elements` carry (`NONE_U32` ones included as such), if any.
@@ -299,29 +329,36 @@ impl StreamSplit {
     fn instances(&self) -> &[InstanceRecord] {
         match &self.parked {
             Some(m) => m.records(),
-            None => &self.scene.instances,
+            None => &self.scene.instances[..],
         }
     }
 
     /// Moves the split's instance table (of at least [`crate::PARK_MIN_INSTANCES`] records;
-    /// smaller tables stay) into an unnamed file in
-    /// `dir`, mapped read-only: [`StreamSplit::view`] reads the map and
-    /// [`StreamSplit::release_instance_pages`] drops what was read from the resident set, so
-    /// an import holds no instance table while it makes the proxy clusters (issue 48 item 1).
-    /// Returns whether it parked the table; on an error the table stays on the heap.
+    /// smaller tables stay) into an unnamed file in `dir`, mapped read-only (a table already
+    /// in a mapped file, [`InstanceTable::in_file`], stops writing: no copy):
+    /// [`StreamSplit::view`] reads the map and [`StreamSplit::release_instance_pages`] drops
+    /// what was read from the resident set, so an import holds no instance table while it
+    /// makes the proxy clusters (issue 48 item 1). Returns whether it parked the table; on an
+    /// error a heap table stays on the heap (a mapped one is lost: the caller fails).
     pub fn park_instances(&mut self, dir: &Path) -> Result<bool, CompileError> {
         if self.parked.is_some()
             || self.scene.instances.len() < crate::instance_map::PARK_MIN_INSTANCES
         {
             return Ok(false);
         }
-        let map = crate::instance_map::InstanceMap::write(&self.scene.instances, dir).map_err(
-            |source| CompileError::Scratch {
-                dir: dir.to_path_buf(),
-                source,
-            },
-        )?;
-        self.scene.instances = Vec::new();
+        let map = match std::mem::take(&mut self.scene.instances).into_map() {
+            Ok(map) => map?,
+            Err(heap) => {
+                let map = crate::instance_map::InstanceMap::write(&heap, dir);
+                self.scene.instances = heap;
+                let map = map.map_err(|source| CompileError::Scratch {
+                    dir: dir.to_path_buf(),
+                    source,
+                })?;
+                self.scene.instances = InstanceTable::new();
+                map
+            }
+        };
         self.parked = Some(map);
         Ok(true)
     }
@@ -354,14 +391,14 @@ impl StreamSplit {
         }
         let n = source.len() - stored.extra_instances.len();
         if let Some(map) = &self.parked {
-            compiled.instances = gather_in_order(map, source, n)?;
+            compiled.instances = gather_in_order(map, source, n)?.into();
             return Ok(());
         }
-        let mut instances = self.scene.instances;
+        let mut instances = self.scene.instances.into_vec();
         for (r, &s) in instances.iter_mut().zip(source) {
             r._pad = if s == NONE_U32 { 0 } else { s + 1 };
         }
-        compiled.instances = untag_in_order(instances, n)?;
+        compiled.instances = untag_in_order(instances, n)?.into();
         Ok(())
     }
 
@@ -377,7 +414,10 @@ impl StreamSplit {
         let (tlases_split, pieces) = self.counts();
         let mut source = Vec::with_capacity(self.instances().len());
         let mut extra_instances = Vec::new();
-        for inst in self.instances() {
+        for (i, inst) in self.instances().iter().enumerate() {
+            if i > 0 && i % RELEASE_EVERY_RECORDS == 0 {
+                self.release_instance_range(i - RELEASE_EVERY_RECORDS, i);
+            }
             // `split_for_streaming` tags each copied instance with its index + 1 (in `_pad`);
             // the split's own AABB-BLAS instances carry 0.
             if inst._pad != 0 && (inst._pad as usize) <= n {
@@ -398,6 +438,17 @@ impl StreamSplit {
         }
     }
 
+    /// Drops the pages of records `begin..end` of a mapped table (the split's own or a parked
+    /// one) from the resident set.
+    fn release_instance_range(&self, begin: usize, end: usize) {
+        match &self.parked {
+            Some(m) => {
+                let _ = m.release_range(begin, end);
+            }
+            None => self.scene.instances.release_range(begin, end),
+        }
+    }
+
     /// The split a package stored ([`StreamSplit::stored`]), rebuilt over `view` (the
     /// package's hierarchy) without splitting anything: O(instances). Checks that the stored
     /// tables fit `view` (every source index in range, as many extra instances as named,
@@ -411,7 +462,7 @@ impl StreamSplit {
         let scene = CompiledScene {
             root_tlas: view.root_tlas,
             tlases: stored.tlases.clone(),
-            instances,
+            instances: instances.into(),
             blases: stored.blases.clone(),
             geometries: view.geometries.to_vec(),
             pis: stored.pis.clone(),
@@ -587,10 +638,9 @@ pub fn stream_split_taking_instances_in(
         parked: None,
     };
     let stored = split.stored(n);
+    split.release_instance_range(0, split.instances().len());
     // The origins are in `stored`; the records become the reader's (`_pad` 0, as in a package).
-    for r in &mut split.scene.instances {
-        r._pad = 0;
-    }
+    for_each_released(&mut split.scene.instances, |_, r| r._pad = 0);
     Ok(Some((stored, split)))
 }
 
@@ -603,27 +653,12 @@ fn over_cap(tlases: &[TlasRecord], cap: u32) -> Option<Vec<u32>> {
     (!over.is_empty()).then_some(over)
 }
 
-/// Each instance remembers where it came from (its index + 1 in `_pad`, always 0 in a package)
-/// so that [`StreamSplit::stored`] can store the split as a map.
-fn tag_origins(instances: &mut [InstanceRecord]) -> Result<(), CompileError> {
-    if instances.len() >= NONE_U32 as usize {
-        return Err(CompileError::TooMany {
-            what: "instances",
-            count: instances.len() as u64,
-        });
-    }
-    for (i, inst) in instances.iter_mut().enumerate() {
-        inst._pad = i as u32 + 1;
-    }
-    Ok(())
-}
-
 /// Every table of `view` but the instances (left empty), copied.
 fn tables_of(view: &HierarchyView<'_>) -> CompiledScene {
     CompiledScene {
         root_tlas: view.root_tlas,
         tlases: view.tlases.to_vec(),
-        instances: Vec::new(),
+        instances: InstanceTable::new(),
         blases: view.blases.to_vec(),
         geometries: view.geometries.to_vec(),
         pis: view.pis.to_vec(),
@@ -637,84 +672,13 @@ fn tables_of(view: &HierarchyView<'_>) -> CompiledScene {
     }
 }
 
-/// The `n` tagged instances of a split back in their original order, untagged: the split's
-/// own AABB-BLAS instances and copies of shared ranges dropped, then each record swapped to
-/// its index (every origin is there once, so each swap places one record for good).
-fn untag_in_order(
-    mut instances: Vec<InstanceRecord>,
-    n: usize,
-) -> Result<Vec<InstanceRecord>, CompileError> {
-    let mut seen = vec![false; n];
-    instances.retain(|r| {
-        let t = r._pad as usize;
-        let keep = (1..=n).contains(&t) && !seen[t - 1];
-        if keep {
-            seen[t - 1] = true;
-        }
-        keep
-    });
-    if instances.len() != n {
-        return Err(CompileError::Internal(format!(
-            "the stream split kept {} of {n} instances",
-            instances.len()
-        )));
-    }
-    for i in 0..n {
-        loop {
-            let t = instances[i]._pad as usize - 1;
-            if t == i {
-                break;
-            }
-            instances.swap(i, t);
-        }
-    }
-    for r in &mut instances {
-        r._pad = 0;
-    }
-    instances.shrink_to_fit();
-    Ok(instances)
-}
-
-/// [`untag_in_order`] of a parked split table whose origins are `source` (index per record,
-/// `NONE_U32` for the split's own): each origin's first record in the split's order put in its
-/// place, reading the map in order and dropping its pages behind.
-fn gather_in_order(
-    map: &crate::instance_map::InstanceMap,
-    source: &[u32],
-    n: usize,
-) -> Result<Vec<InstanceRecord>, CompileError> {
-    use crate::instance_map::RELEASE_EVERY_RECORDS;
-    let mut out = vec![InstanceRecord::default(); n];
-    let mut seen = vec![false; n];
-    let mut placed = 0usize;
-    for (j, (r, &s)) in map.records().iter().zip(source).enumerate() {
-        if j > 0 && j % RELEASE_EVERY_RECORDS == 0 {
-            // A failed drop leaves pages resident; the records read the same either way.
-            let _ = map.release_range(j - RELEASE_EVERY_RECORDS, j);
-        }
-        let s = s as usize;
-        if s < n && !seen[s] {
-            seen[s] = true;
-            out[s] = InstanceRecord { _pad: 0, ..*r };
-            placed += 1;
-        }
-    }
-    let _ = map.release_pages();
-    if placed != n {
-        return Err(CompileError::Internal(format!(
-            "the stream split kept {placed} of {n} instances"
-        )));
-    }
-    Ok(out)
-}
-
 /// [`split_for_streaming`] with each instance's origin left in `_pad` (index + 1; 0 for the
 /// split's own AABB-BLAS instances).
 fn split_tagged(view: &HierarchyView<'_>, cap: u32) -> Result<Option<StreamSplit>, CompileError> {
     let Some(over) = over_cap(view.tlases, cap) else {
         return Ok(None);
     };
-    let mut instances = view.instances.to_vec();
+    let mut instances: InstanceTable = view.instances.to_vec().into();
     tag_origins(&mut instances)?;
     let mut out = CompiledScene {
         instances,
@@ -736,12 +700,10 @@ fn split_tagged_scene(
 ) -> Result<(), CompileError> {
     let cap = cap.max(2) as usize;
     let _span = tracing::info_span!("split for streaming", tlases = over.len()).entered();
-    out.view()
-        .check_references()
-        .map_err(CompileError::References)?;
+    crate::check_references(out).map_err(CompileError::References)?;
     let per_blas = crate::CompileOptions::default().max_primitives_per_blas as usize;
     for t in over {
-        move_range_to_tail(out, t)?;
+        move_range_to_tail(out, t, scratch)?;
         let root = t == out.root_tlas;
         split_tlas(out, t, cap, per_blas, root, scratch, &mut |_| {})?;
     }
@@ -751,36 +713,5 @@ fn split_tagged_scene(
 
 /// Clears the origins [`split_tagged`] left in the instances' `_pad` (0 in every package).
 fn clear_origins(split: &mut StreamSplit) {
-    for inst in &mut split.scene.instances {
-        inst._pad = 0;
-    }
-}
-
-/// Makes TLAS `t`'s instance range the table's tail, which [`split_tlas`] needs: rotated there
-/// (later TLASes' ranges shifted down), or copied when another TLAS shares a part of it.
-fn move_range_to_tail(out: &mut CompiledScene, t: u32) -> Result<(), CompileError> {
-    let rec = out.tlases[t as usize];
-    let (base, count) = (rec.instance_base as usize, rec.instance_count as usize);
-    let (end, len) = (base + count, out.instances.len());
-    if end == len {
-        return Ok(());
-    }
-    let shared = out.tlases.iter().enumerate().any(|(u, r)| {
-        let (b, n) = (r.instance_base as usize, r.instance_count as usize);
-        u != t as usize && n > 0 && b < end && base < b + n
-    });
-    if shared {
-        next_id(len + count, "instances")?;
-        out.instances.extend_from_within(base..end);
-        out.tlases[t as usize].instance_base = next_id(len, "instances")?;
-        return Ok(());
-    }
-    out.instances[base..].rotate_left(count);
-    for (u, r) in out.tlases.iter_mut().enumerate() {
-        if u != t as usize && r.instance_base as usize >= end {
-            r.instance_base -= count as u32;
-        }
-    }
-    out.tlases[t as usize].instance_base = next_id(len - count, "instances")?;
-    Ok(())
+    for_each_released(&mut split.scene.instances, |_, inst| inst._pad = 0);
 }

@@ -37,7 +37,7 @@ pub(crate) fn write_stream_split(
     };
     if table.is_some() {
         // The map holds the table in the package's order; a split took the heap's copy.
-        compiled.instances = Vec::new();
+        compiled.instances = Default::default();
     }
     let mut parked = false;
     if let Some((_, s)) = &mut split {

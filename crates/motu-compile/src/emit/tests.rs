@@ -1092,6 +1092,8 @@ fn keyed_splits_equal_splits_in_memory() {
             ..Default::default()
         };
         let (a, b) = (check_flatten(&scene, &o), check_flatten(&scene, &keyed(&o)));
+        // With a scratch directory the table is a mapped file (tests: every table).
+        assert!(!a.instances.is_mapped() && b.instances.is_mapped());
         assert_eq!(a.report.split_tlases, 1);
         assert!(a.tlases.len() > 2);
         assert_eq!(bytes(&a.instances), bytes(&b.instances));
@@ -1105,8 +1107,9 @@ fn keyed_splits_equal_splits_in_memory() {
         assert_eq!(counts(&a), counts(&b));
     }
     let whole = check_flatten(&scattered(10_000, false), &CompileOptions::default());
+    let mapped = |c: &crate::CompiledScene| mapped_copy(c, dir.path());
     for cap in [1000, 3000] {
-        let (mut a, mut b) = (whole.clone(), whole.clone());
+        let (mut a, mut b, mut c) = (whole.clone(), whole.clone(), mapped(&whole));
         let (sa, ka) = crate::stream_split_taking_instances(&mut a, cap)
             .unwrap()
             .expect("a TLAS over the cap");
@@ -1120,9 +1123,28 @@ fn keyed_splits_equal_splits_in_memory() {
         assert_eq!(bytes(va.pis), bytes(vb.pis));
         kb.give_back(&mut b, &sb).unwrap();
         assert_eq!(bytes(&b.instances), bytes(&whole.instances));
+        // A mapped table (the import's), split by key and rotated through a scratch file.
+        let (sc, kc) = crate::stream_split_taking_instances_in(&mut c, cap, Some(dir.path()))
+            .unwrap()
+            .expect("a TLAS over the cap");
+        assert_eq!(sa, sc);
+        assert_eq!(bytes(va.instances), bytes(kc.view(&whole.view()).instances));
+        kc.give_back(&mut c, &sc).unwrap();
+        assert_eq!(bytes(&c.instances), bytes(&whole.instances));
     }
     // Nothing is left in the scratch directory (the files are unnamed).
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
+
+/// `c` with its instance table in a mapped file in `dir` (the import's).
+fn mapped_copy(c: &crate::CompiledScene, dir: &std::path::Path) -> crate::CompiledScene {
+    let mut c = c.clone();
+    let mut t = crate::InstanceTable::in_file(dir).unwrap();
+    for r in c.instances.iter() {
+        t.push(*r).unwrap();
+    }
+    c.instances = t;
+    c
 }
 
 /// A stream split whose instance table is parked in a mapped scratch file
@@ -1145,7 +1167,8 @@ fn parked_stream_split_reads_and_gives_back_the_same_table() {
             300,
         ),
     ] {
-        let (mut a, mut b) = (whole.clone(), whole.clone());
+        // `b`'s table is a mapped file, as the import's: split in place, parked with no copy.
+        let (mut a, mut b) = (whole.clone(), mapped_copy(&whole, dir.path()));
         // The import parks the package's own table before the split and drops the split
         // instead of giving it back: the map is the table given back.
         let package = crate::park_table(&b.instances, dir.path())

@@ -7,10 +7,10 @@
 //! goes). The partition looks at bounds only, so it permutes indices exactly as it would
 //! permute records: the same split, bit for bit.
 
-use crate::CompileError;
+use crate::{CompileError, InstanceTable};
 use motu_abi::InstanceRecord;
 use std::fs::File;
-use std::io::{Read, Seek, SeekFrom};
+use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
 /// Ranges of fewer instances are split in memory: their records (under 64 MiB) would stay in
@@ -25,6 +25,17 @@ pub(crate) const MIN_INSTANCES: usize = 1;
 /// Records read back at a time (4 MiB).
 const READ_RECORDS: usize = 1 << 16;
 
+/// Places of a mapped table written at a time by a put-back (64 MiB resident; 27 buckets at
+/// scale 1's 28M instances).
+#[cfg(not(test))]
+const BUCKET_RECORDS: usize = 1 << 20;
+/// Several buckets in tests' small scenes.
+#[cfg(test)]
+const BUCKET_RECORDS: usize = 1 << 9;
+
+/// Each bucket file's write buffer while the put-back deals records into them.
+const DEAL_BUFFER_BYTES: usize = 1 << 18;
+
 /// The tail of an instance table, in a file.
 pub(crate) struct Stash {
     file: File,
@@ -36,9 +47,10 @@ pub(crate) struct Stash {
 }
 
 impl Stash {
-    /// Moves `instances[base..]` to an unnamed file in `dir` and frees its memory.
+    /// Moves `instances[base..]` to an unnamed file in `dir` and frees its memory (a mapped
+    /// table's pages released as they are written).
     pub(crate) fn take_tail(
-        instances: &mut Vec<InstanceRecord>,
+        instances: &mut InstanceTable,
         base: usize,
         dir: &Path,
     ) -> Result<Self, CompileError> {
@@ -46,7 +58,10 @@ impl Stash {
             dir: dir.to_path_buf(),
             source,
         };
-        let file = crate::instance_map::write_scratch(&instances[base..], dir).map_err(err)?;
+        let file = crate::instance_map::write_scratch_then(&instances[base..], dir, &mut |b, e| {
+            instances.release_range(base + b, base + e)
+        })
+        .map_err(err)?;
         let (count, capacity) = (instances.len() - base, instances.capacity());
         instances.truncate(base);
         instances.shrink_to_fit();
@@ -91,10 +106,13 @@ impl Stash {
 
     /// Appends the stashed records to `instances` in the partition's order: `order[j]` is the
     /// stashed record that goes to place `j` (a permutation of `0..count`). The file is read
-    /// in order and each record written to its place.
+    /// in order and each record written to its place. In a mapped table random writes over
+    /// the whole range would make all of it resident, so the places go in buckets of
+    /// [`BUCKET_RECORDS`]: one read of the stash deals each record (with its place) into its
+    /// bucket's unnamed file, then each bucket is written from its file and its pages released.
     pub(crate) fn put_back(
         mut self,
-        instances: &mut Vec<InstanceRecord>,
+        instances: &mut InstanceTable,
         order: Vec<u32>,
     ) -> Result<(), CompileError> {
         if order.len() != self.count {
@@ -110,23 +128,67 @@ impl Stash {
         }
         drop(order);
         let base = instances.len();
-        instances.reserve_exact(self.capacity.max(base + self.count) - base);
-        instances.resize(base + self.count, bytemuck::Zeroable::zeroed());
-        let dir = self.dir;
+        instances.try_reserve_exact(self.capacity.max(base + self.count) - base)?;
+        instances.resize(base + self.count, bytemuck::Zeroable::zeroed())?;
+        let dir = self.dir.clone();
         let err = |source| CompileError::Scratch {
             dir: dir.clone(),
             source,
         };
         self.file.seek(SeekFrom::Start(0)).map_err(err)?;
         let mut buf = vec![InstanceRecord::default(); READ_RECORDS.min(self.count)];
+        let buckets = self.count.div_ceil(BUCKET_RECORDS);
+        if !instances.is_mapped() || buckets <= 1 {
+            for chunk in place.chunks(READ_RECORDS) {
+                let records = &mut buf[..chunk.len()];
+                self.file
+                    .read_exact(bytemuck::cast_slice_mut(records))
+                    .map_err(err)?;
+                for (r, &to) in records.iter().zip(chunk) {
+                    instances[base + to as usize] = *r;
+                }
+            }
+            instances.release_range(base, base + self.count);
+            return Ok(());
+        }
+        // Deal: each record with its place into its bucket's file.
+        let mut files = Vec::with_capacity(buckets);
+        for _ in 0..buckets {
+            let f = tempfile::tempfile_in(&dir).map_err(err)?;
+            files.push(std::io::BufWriter::with_capacity(DEAL_BUFFER_BYTES, f));
+        }
         for chunk in place.chunks(READ_RECORDS) {
             let records = &mut buf[..chunk.len()];
             self.file
                 .read_exact(bytemuck::cast_slice_mut(records))
                 .map_err(err)?;
             for (r, &to) in records.iter().zip(chunk) {
-                instances[base + to as usize] = *r;
+                let w = &mut files[to as usize / BUCKET_RECORDS];
+                w.write_all(&to.to_le_bytes()).map_err(err)?;
+                w.write_all(bytemuck::bytes_of(r)).map_err(err)?;
             }
+        }
+        drop(place);
+        drop(self.file);
+        // Place: a bucket at a time, read back in pieces.
+        const DEALT: usize = 4 + std::mem::size_of::<InstanceRecord>();
+        let mut bytes = vec![0u8; DEALT * READ_RECORDS];
+        for (b, w) in files.into_iter().enumerate() {
+            let mut f = w.into_inner().map_err(|e| err(e.into_error()))?;
+            let len = f.stream_position().map_err(err)? as usize;
+            f.seek(SeekFrom::Start(0)).map_err(err)?;
+            let mut left = len;
+            while left > 0 {
+                let piece = &mut bytes[..left.min(DEALT * READ_RECORDS)];
+                f.read_exact(piece).map_err(err)?;
+                for e in piece.chunks_exact(DEALT) {
+                    let to = u32::from_le_bytes([e[0], e[1], e[2], e[3]]) as usize;
+                    instances[base + to] = bytemuck::pod_read_unaligned(&e[4..]);
+                }
+                left -= piece.len();
+            }
+            let first = base + b * BUCKET_RECORDS;
+            instances.release_range(first, (first + BUCKET_RECORDS).min(base + self.count));
         }
         Ok(())
     }

@@ -173,14 +173,7 @@ pub(super) fn finish(
     crate::memory::log_phase("proxy boxes");
     let t = Instant::now();
     if o.proxy_clusters {
-        let release = || {
-            if let Some((_, s)) = &split {
-                s.release_instance_pages();
-            }
-            if let Some(m) = &table {
-                let _ = m.release_pages();
-            }
-        };
+        let release = || release_tables(split.as_ref().map(|(_, s)| s), table.as_ref());
         crate::split::write_proxy_clusters(&mut writer, &streamed, &release)?;
     }
     let proxy_clusters_ms = t.elapsed().as_secs_f64() * 1e3;
@@ -204,13 +197,8 @@ pub(super) fn finish(
     if let Some(m) = &table {
         view.instances = m.records();
     }
-    // A mapped table is read a piece at a time, its pages dropped behind (a failed hint costs
-    // only memory).
-    let release = || {
-        if let Some(m) = &table {
-            let _ = m.release_pages();
-        }
-    };
+    // A mapped table is read a piece at a time, its pages dropped behind.
+    let release = || release_tables(None, table.as_ref());
     // What `motu report` walks instead of every instance (the package's own tables).
     crate::split::write_blas_counts(&mut writer, &view, &release)?;
     crate::memory::log_phase("blas counts");
@@ -224,6 +212,20 @@ pub(super) fn finish(
     let written = writer.finish().map_err(ImportError::FinishPackage)?;
     crate::memory::log_phase("finish");
     Ok((written, split_ms, proxy_boxes_ms, proxy_clusters_ms))
+}
+
+/// Drops the pages of the mapped instance tables, the split's (`split`) and the package's
+/// (`table`), read so far from the resident set (a failed hint costs only memory).
+fn release_tables(
+    split: Option<&motu_compile::StreamSplit>,
+    table: Option<&motu_compile::InstanceMap>,
+) {
+    if let Some(s) = split {
+        s.release_instance_pages();
+    }
+    if let Some(m) = table {
+        let _ = m.release_pages();
+    }
 }
 
 /// Per-element counts: each element's root edges and root meshes, and everything they reach.
