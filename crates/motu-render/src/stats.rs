@@ -21,7 +21,7 @@ mod tests;
 
 pub use devices::{Caps, DeviceList, DeviceReport, HeapReport, Limits};
 pub(crate) use pipelines::captured as captured_pipelines;
-pub use pipelines::{ExecutableStats, PipelineStats, StatisticStats};
+pub use pipelines::{ExecutableStats, PipelineStats, RepresentationStats, StatisticStats};
 pub use resources::{AllocReport, ClassStats, KindStats, ResourceReport};
 pub use stream::{
     CacheStats, DiskStats, FrameStreamStats, FullBuildOverhead, HostStats, PassStats,

@@ -97,8 +97,8 @@ pub use memory::{
 pub use panel::PanelPaint;
 pub use pipeline::{BindingSet, ComputePipeline, ComputePipelineDesc};
 pub use pipeline_stats::{
-    CapturedPipeline, PipelineExecutable, PipelineExecutableStats, PipelineStatistic,
-    StatisticValue,
+    CapturedPipeline, InternalRepresentation, PipelineExecutable, PipelineExecutableStats,
+    PipelineStatistic, StatisticValue,
 };
 pub use present::{Presented, Presenter, RawDisplayHandle, RawWindowHandle};
 pub use query::TimestampQueries;

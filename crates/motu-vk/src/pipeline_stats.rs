@@ -50,6 +50,24 @@ pub struct PipelineStatistic {
     pub value: StatisticValue,
 }
 
+/// One internal representation of an executable as the driver gives it (e.g. an IR or a
+/// disassembly with its code size): text (without the terminating NUL) or opaque bytes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct InternalRepresentation {
+    pub name: String,
+    pub description: String,
+    pub is_text: bool,
+    pub data: Vec<u8>,
+}
+
+impl InternalRepresentation {
+    /// The text of a text representation (lossy UTF-8), `None` for binary data.
+    pub fn text(&self) -> Option<String> {
+        self.is_text
+            .then(|| String::from_utf8_lossy(&self.data).into_owned())
+    }
+}
+
 /// One compiled executable of a pipeline (a shader stage, or several the driver merged).
 #[derive(Clone, Debug, PartialEq)]
 pub struct PipelineExecutable {
@@ -59,6 +77,8 @@ pub struct PipelineExecutable {
     pub stages: Vec<&'static str>,
     pub subgroup_size: u32,
     pub statistics: Vec<PipelineStatistic>,
+    /// What the driver offers beyond the statistics (often none).
+    pub internal_representations: Vec<InternalRepresentation>,
 }
 
 /// Every executable of one pipeline with its statistics.
@@ -96,10 +116,12 @@ impl PipelineStatsState {
         }
     }
 
-    /// The creation flag to add: capture statistics when they can be read.
+    /// The creation flags to add: capture statistics and internal representations when they
+    /// can be read.
     pub(crate) fn create_flags(&self) -> vk::PipelineCreateFlags {
         if self.loader.is_some() {
             vk::PipelineCreateFlags::CAPTURE_STATISTICS_KHR
+                | vk::PipelineCreateFlags::CAPTURE_INTERNAL_REPRESENTATIONS_KHR
         } else {
             vk::PipelineCreateFlags::empty()
         }
@@ -140,6 +162,12 @@ impl PipelineStatsState {
                     stages = %e.stages.join("|"),
                     subgroup_size = e.subgroup_size,
                     statistics = %statistics_line(&e.statistics),
+                    internal_representations = %e
+                        .internal_representations
+                        .iter()
+                        .map(|r| format!("{} ({} bytes)", r.name, r.data.len()))
+                        .collect::<Vec<_>>()
+                        .join(", "),
                     "pipeline executable"
                 );
             }
@@ -182,15 +210,74 @@ fn read(
             .executable_index(i as u32);
         // SAFETY: `i` is below the executable count just returned for this live pipeline.
         let stats = unsafe { loader.get_pipeline_executable_statistics(&exe) }?;
+        // Internal representations are extra: a driver that fails them still gives statistics.
+        let internal_representations = internal_representations(loader, &exe)
+            .map_err(|e| tracing::warn!(error = %e, "reading internal representations failed"))
+            .unwrap_or_default();
         executables.push(PipelineExecutable {
             name: c_text(p.name_as_c_str()),
             description: c_text(p.description_as_c_str()),
             stages: stage_names(p.stages),
             subgroup_size: p.subgroup_size,
             statistics: stats.iter().map(statistic).collect(),
+            internal_representations,
         });
     }
     Ok(PipelineExecutableStats { executables })
+}
+
+/// The executable's internal representations: their sizes first, then their data.
+fn internal_representations(
+    loader: &ash::khr::pipeline_executable_properties::Device,
+    exe: &vk::PipelineExecutableInfoKHR<'_>,
+) -> Result<Vec<InternalRepresentation>, vk::Result> {
+    // SAFETY: `exe` names an executable of a live pipeline created with
+    // CAPTURE_INTERNAL_REPRESENTATIONS; with null data pointers only sizes are written.
+    let mut reps = unsafe { loader.get_pipeline_executable_internal_representations(exe) }?;
+    if reps.is_empty() {
+        return Ok(Vec::new());
+    }
+    let mut data: Vec<Vec<u8>> = reps.iter().map(|r| vec![0u8; r.data_size]).collect();
+    for (r, d) in reps.iter_mut().zip(&mut data) {
+        r.p_data = d.as_mut_ptr().cast();
+    }
+    let mut count = reps.len() as u32;
+    // SAFETY: `reps` holds `count` structs each pointing to `data_size` writable bytes that
+    // outlive the call; the driver writes at most that much and updates `data_size`.
+    let result = unsafe {
+        (loader
+            .fp()
+            .get_pipeline_executable_internal_representations_khr)(
+            loader.device(),
+            exe,
+            &mut count,
+            reps.as_mut_ptr(),
+        )
+    };
+    if result != vk::Result::SUCCESS && result != vk::Result::INCOMPLETE {
+        return Err(result);
+    }
+    Ok(reps
+        .iter()
+        .zip(data)
+        .take(count as usize)
+        .map(|(r, mut d)| {
+            d.truncate(r.data_size);
+            let is_text = r.is_text == vk::TRUE;
+            if is_text {
+                // Text ends with its NUL terminator (counted in the size).
+                while d.last() == Some(&0) {
+                    d.pop();
+                }
+            }
+            InternalRepresentation {
+                name: c_text(r.name_as_c_str()),
+                description: c_text(r.description_as_c_str()),
+                is_text,
+                data: d,
+            }
+        })
+        .collect())
 }
 
 fn c_text(r: Result<&std::ffi::CStr, std::ffi::FromBytesUntilNulError>) -> String {

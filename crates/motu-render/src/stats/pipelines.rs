@@ -24,6 +24,17 @@ pub struct ExecutableStats {
     pub stages: Vec<&'static str>,
     pub subgroup_size: u32,
     pub statistics: Vec<StatisticStats>,
+    /// The driver's internal representations (often none): IR or disassembly text.
+    pub internal_representations: Vec<RepresentationStats>,
+}
+
+/// One internal representation: its text (`null` for binary data) and size.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RepresentationStats {
+    pub name: String,
+    pub description: String,
+    pub size_bytes: u64,
+    pub text: Option<String>,
 }
 
 /// One statistic as the driver named it; `value` is a number (or a bool) of `format`
@@ -58,6 +69,16 @@ impl From<&motu_gpu::PipelineExecutable> for ExecutableStats {
             stages: e.stages.clone(),
             subgroup_size: e.subgroup_size,
             statistics: e.statistics.iter().map(Into::into).collect(),
+            internal_representations: e
+                .internal_representations
+                .iter()
+                .map(|r| RepresentationStats {
+                    name: r.name.clone(),
+                    description: r.description.clone(),
+                    size_bytes: r.data.len() as u64,
+                    text: r.text(),
+                })
+                .collect(),
         }
     }
 }

@@ -163,6 +163,12 @@ fn pipeline_stats() -> PipelineStats {
             description: "registers per thread".into(),
             value: motu_gpu::StatisticValue::U64(1),
         }],
+        internal_representations: vec![motu_gpu::InternalRepresentation {
+            name: "SASS".into(),
+            description: "disassembly".into(),
+            is_text: true,
+            data: b"NOP".to_vec(),
+        }],
     };
     (&motu_gpu::CapturedPipeline {
         label: "trace full".into(),
