@@ -261,23 +261,29 @@ fn internal_representations(
         .iter()
         .zip(data)
         .take(count as usize)
-        .map(|(r, mut d)| {
-            d.truncate(r.data_size);
-            let is_text = r.is_text == vk::TRUE;
-            if is_text {
-                // Text ends with its NUL terminator (counted in the size).
-                while d.last() == Some(&0) {
-                    d.pop();
-                }
-            }
-            InternalRepresentation {
-                name: c_text(r.name_as_c_str()),
-                description: c_text(r.description_as_c_str()),
-                is_text,
-                data: d,
-            }
-        })
+        .map(|(r, d)| representation(r, d))
         .collect())
+}
+
+/// One representation from the driver's struct and the bytes read into its buffer: the
+/// `data_size` written, less a text's NUL terminator.
+pub(crate) fn representation(
+    r: &vk::PipelineExecutableInternalRepresentationKHR<'_>,
+    mut data: Vec<u8>,
+) -> InternalRepresentation {
+    data.truncate(r.data_size);
+    let is_text = r.is_text == vk::TRUE;
+    if is_text {
+        while data.last() == Some(&0) {
+            data.pop();
+        }
+    }
+    InternalRepresentation {
+        name: c_text(r.name_as_c_str()),
+        description: c_text(r.description_as_c_str()),
+        is_text,
+        data,
+    }
 }
 
 fn c_text(r: Result<&std::ffi::CStr, std::ffi::FromBytesUntilNulError>) -> String {

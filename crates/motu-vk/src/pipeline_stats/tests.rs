@@ -105,3 +105,21 @@ fn pipeline_stats_option_opens_on_any_device() {
     assert!(ctx.captured_pipelines().is_empty());
     crate::testutil::assert_no_validation_errors(&ctx);
 }
+
+#[test]
+fn representations_keep_the_written_bytes_and_drop_a_text_terminator() {
+    let raw =
+        |is_text: vk::Bool32, data_size: usize| vk::PipelineExecutableInternalRepresentationKHR {
+            name: fixed("SASS"),
+            description: fixed("disassembly"),
+            is_text,
+            data_size,
+            ..Default::default()
+        };
+    let text = representation(&raw(vk::TRUE, 5), b"NOP;\0\0\0".to_vec());
+    assert_eq!((text.name.as_str(), text.is_text), ("SASS", true));
+    assert_eq!(text.text().as_deref(), Some("NOP;"));
+    let binary = representation(&raw(vk::FALSE, 3), vec![1, 0, 0, 9]);
+    assert_eq!(binary.data, [1, 0, 0]);
+    assert_eq!(binary.text(), None);
+}
