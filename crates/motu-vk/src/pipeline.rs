@@ -132,12 +132,20 @@ impl ComputePipeline {
             stage = stage.specialization_info(&spec);
         }
         let info = vk::ComputePipelineCreateInfo::default()
-            .flags(shared.pipeline_stats.create_flags())
             .stage(stage)
             .layout(pipe.layout);
-        // SAFETY: module and layout are live; the stage info points to data alive for the call.
-        let result =
-            unsafe { device.create_compute_pipelines(vk::PipelineCache::null(), &[info], None) };
+        let create = |flags: vk::PipelineCreateFlags| {
+            // SAFETY: module and layout are live; the stage info points to data alive for the
+            // call.
+            unsafe {
+                device.create_compute_pipelines(
+                    vk::PipelineCache::null(),
+                    &[info.flags(flags)],
+                    None,
+                )
+            }
+        };
+        let (result, captured) = shared.pipeline_stats.create(desc.label, create);
         // SAFETY: the module is only needed during pipeline creation.
         unsafe { device.destroy_shader_module(module, None) };
         pipe.pipeline = result.map_err(|(_, e)| VkError::Vulkan {
@@ -145,9 +153,12 @@ impl ComputePipeline {
             result: e,
         })?[0];
         shared.set_name(pipe.pipeline, desc.label);
-        pipe.stats = shared
-            .pipeline_stats
-            .capture(pipe.pipeline, desc.label, "compute", None);
+        pipe.stats = shared.pipeline_stats.capture(
+            captured.then_some(pipe.pipeline),
+            desc.label,
+            "compute",
+            None,
+        );
         tracing::debug!(label = desc.label, "compute pipeline created");
         Ok(pipe)
     }

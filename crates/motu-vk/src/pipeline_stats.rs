@@ -118,7 +118,7 @@ impl PipelineStatsState {
 
     /// The creation flags to add: capture statistics and internal representations when they
     /// can be read.
-    pub(crate) fn create_flags(&self) -> vk::PipelineCreateFlags {
+    fn create_flags(&self) -> vk::PipelineCreateFlags {
         if self.loader.is_some() {
             vk::PipelineCreateFlags::CAPTURE_STATISTICS_KHR
                 | vk::PipelineCreateFlags::CAPTURE_INTERNAL_REPRESENTATIONS_KHR
@@ -127,12 +127,36 @@ impl PipelineStatsState {
         }
     }
 
-    /// After creating `pipeline` (with [`Self::create_flags`]): its statistics, logged and
-    /// kept in the log. `None` when not asked for (nothing logged), or asked for on a device
-    /// without the extension (then logged with no statistics).
+    /// Creates a pipeline with `create(flags)`: with the capture flags when statistics can be
+    /// read, and again without them should that fail (the diagnostic never fails a render).
+    /// Returns the result and whether the pipeline captures.
+    pub(crate) fn create<T, E: std::fmt::Debug>(
+        &self,
+        label: &str,
+        create: impl Fn(vk::PipelineCreateFlags) -> Result<T, E>,
+    ) -> (Result<T, E>, bool) {
+        let flags = self.create_flags();
+        let result = create(flags);
+        match result {
+            Err(e) if !flags.is_empty() => {
+                tracing::warn!(
+                    label,
+                    error = ?e,
+                    "creating the pipeline capturing statistics failed: made without them"
+                );
+                (create(vk::PipelineCreateFlags::empty()), false)
+            }
+            r => (r, !flags.is_empty()),
+        }
+    }
+
+    /// After creating a pipeline through [`Self::create`]: its statistics (`pipeline`: it,
+    /// when it captures), logged and kept in the log. `None` when not asked for (nothing
+    /// logged), or asked for on a device without the extension (then logged with no
+    /// statistics).
     pub(crate) fn capture(
         &self,
-        pipeline: vk::Pipeline,
+        pipeline: Option<vk::Pipeline>,
         label: &str,
         kind: &'static str,
         raygen_stack_bytes: Option<u64>,
@@ -140,13 +164,17 @@ impl PipelineStatsState {
         if !self.requested {
             return None;
         }
-        let stats = self.loader.as_ref().and_then(|l| {
-            read(l, pipeline)
-                .map_err(
-                    |e| tracing::warn!(label, error = %e, "reading pipeline statistics failed"),
-                )
-                .ok()
-        });
+        let stats = self
+            .loader
+            .as_ref()
+            .zip(pipeline)
+            .and_then(|(l, pipeline)| {
+                read(l, pipeline)
+                    .map_err(
+                        |e| tracing::warn!(label, error = %e, "reading pipeline statistics failed"),
+                    )
+                    .ok()
+            });
         if let Some(bytes) = raygen_stack_bytes {
             tracing::info!(
                 pipeline = label,

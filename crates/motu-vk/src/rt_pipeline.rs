@@ -271,21 +271,23 @@ impl RtPipeline {
             .collect();
         let groups = shader_groups();
         let info = vk::RayTracingPipelineCreateInfoKHR::default()
-            .flags(shared.pipeline_stats.create_flags())
             .stages(&stages)
             .groups(&groups)
             .max_pipeline_ray_recursion_depth(1)
             .layout(self.layout);
-        // SAFETY: modules, layout and infos are live for the call; recursion depth 1 (raygen
-        // traces, no hit shader does).
-        let result = unsafe {
-            self.rt.create_ray_tracing_pipelines(
-                vk::DeferredOperationKHR::null(),
-                vk::PipelineCache::null(),
-                &[info],
-                None,
-            )
+        let create = |flags: vk::PipelineCreateFlags| {
+            // SAFETY: modules, layout and infos are live for the call; recursion depth 1
+            // (raygen traces, no hit shader does).
+            unsafe {
+                self.rt.create_ray_tracing_pipelines(
+                    vk::DeferredOperationKHR::null(),
+                    vk::PipelineCache::null(),
+                    &[info.flags(flags)],
+                    None,
+                )
+            }
         };
+        let (result, captured) = shared.pipeline_stats.create(&self.label, create);
         drop(modules);
         self.pipeline = result.map_err(|(_, e)| VkError::Vulkan {
             call: "vkCreateRayTracingPipelinesKHR",
@@ -304,7 +306,7 @@ impl RtPipeline {
         };
         tracing::debug!(raygen_stack_bytes, "traversal pipeline created");
         self.stats = shared.pipeline_stats.capture(
-            self.pipeline,
+            captured.then_some(self.pipeline),
             &self.label,
             "ray_tracing",
             Some(raygen_stack_bytes),
