@@ -23,8 +23,8 @@
 //! skipping without a device).
 //!
 //! Files, lowest first: `error`, `instance`, `limits`, `capabilities` (what a physical device
-//! offers), `report`, `context`, `memory`, `heap`, `query`, `pipeline`, `pipeline_stats`
-//! (the driver's statistics of compiled pipelines), `rt_pipeline`, `accel`
+//! offers), `report`, `pipeline_stats` (the driver's statistics of compiled pipelines, kept by
+//! the context), `context`, `memory`, `heap`, `query`, `pipeline`, `rt_pipeline`, `accel`
 //! (AS types), `barrier`, `conv` (motu → Vulkan conversions of what is recorded),
 //! `build_sizes` (AS size queries), `structure` (AS objects), `command` (typed recording),
 //! `present`.
