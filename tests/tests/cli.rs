@@ -282,3 +282,89 @@ fn json_outputs_write_every_key_cli_md_names() {
         assert_eq!(v["width"], 16, "{name}: {v}");
     }
 }
+
+/// Issue 45 item 5: `render --pipeline-stats` lists the trace pipeline it made (`trace full`
+/// for a full build, `trace streamed` streamed, per backend) in `pipeline_executables`, with
+/// the driver's statistics where the device has VK_KHR_pipeline_executable_properties and
+/// `executables: null` (a warning, not an error) where it has not; without the flag the key is
+/// absent.
+#[test]
+fn render_pipeline_stats_lists_the_trace_pipelines() {
+    if !gpu_available() {
+        eprintln!("SKIPPED: no Vulkan device: render_pipeline_stats_lists_the_trace_pipelines");
+        return;
+    }
+    let devices = motu_json(&["devices", "--json"]);
+    let dev = &devices["devices"][0];
+    let captures = dev["caps"]["pipeline_executable_info"] == true;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let gen = d.join("flake");
+    motu_ok(&["gen", "sphereflake", "--depth", "1", "-o", s(&gen)]);
+    let pkg = d.join("flake.motu");
+    motu_ok(&["import", s(&gen.join("scene.pbrt")), "-o", s(&pkg)]);
+    let mut runs = vec![
+        ("plain", "pipeline", vec![], None),
+        (
+            "full",
+            "pipeline",
+            vec!["--pipeline-stats"],
+            Some("trace full"),
+        ),
+        (
+            "streamed",
+            "pipeline",
+            vec!["--pipeline-stats", "--stream", "--stream-always"],
+            Some("trace streamed"),
+        ),
+    ];
+    if dev["ray_query"] == true {
+        runs.push((
+            "query",
+            "query",
+            vec!["--pipeline-stats"],
+            Some("trace full"),
+        ));
+    }
+    for (name, backend, flags, label) in runs {
+        let stats = d.join(format!("{name}.json"));
+        let png = d.join(format!("{name}.png"));
+        let mut all = vec!["render", s(&pkg), "-o", s(&png), "--width", "16"];
+        all.extend(["--height", "16", "--backend", backend, "--stats", s(&stats)]);
+        all.extend(flags);
+        motu_ok(&all);
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+        let Some(label) = label else {
+            assert!(v.get("pipeline_executables").is_none(), "{name}: {v}");
+            continue;
+        };
+        let made = v["pipeline_executables"].as_array().expect("an array");
+        let trace: Vec<_> = made.iter().filter(|p| p["label"] == label).collect();
+        assert_eq!(trace.len(), 1, "{name}: one {label:?} pipeline: {made:?}");
+        let kind = if backend == "query" {
+            "compute"
+        } else {
+            "ray_tracing"
+        };
+        assert_eq!(trace[0]["kind"], kind, "{name}");
+        match trace[0]["executables"].as_array() {
+            Some(exes) => {
+                assert!(captures, "{name}: statistics without the extension");
+                assert!(!exes.is_empty(), "{name}: no executable");
+                assert!(
+                    exes.iter()
+                        .any(|e| e["statistics"].as_array().is_some_and(|s| !s.is_empty())),
+                    "{name}: no statistic: {exes:?}"
+                );
+            }
+            None => {
+                assert!(!captures, "{name}: the device captures, none written");
+                eprintln!(
+                    "{name}: {} lacks VK_KHR_pipeline_executable_properties: executables null",
+                    dev["name"]
+                );
+            }
+        }
+    }
+}

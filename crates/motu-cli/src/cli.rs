@@ -275,6 +275,11 @@ pub struct RenderArgs {
     /// a counted warning instead of an error.
     #[arg(help_heading = HEADING_DEBUG, long)]
     pub allow_truncated: bool,
+    /// Capture the driver's statistics of every pipeline made (registers, spills, instruction
+    /// counts: VK_KHR_pipeline_executable_properties), logged at info and written as
+    /// `pipeline_executables` in --stats. A device without the extension warns (no statistics).
+    #[arg(help_heading = HEADING_DEBUG, long)]
+    pub pipeline_stats: bool,
     /// Samples per pixel of the shaded view (the first, at the pixel centre, gives the AOV).
     #[arg(help_heading = HEADING_SHADING, long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub spp: u32,

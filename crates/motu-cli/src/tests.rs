@@ -235,3 +235,23 @@ fn import_split_cap_parses_as_renders() {
         .to_string();
     assert!(e.contains("at least 2 instances"), "{e}");
 }
+
+/// `--pipeline-stats` is off by default and reaches the device request.
+#[test]
+fn pipeline_stats_flag_parses_into_the_device_request() {
+    let off = render_args(&[]);
+    assert!(!off.pipeline_stats);
+    assert!(!cmd::render::device_request(&off).pipeline_stats);
+    let on = render_args(&["--pipeline-stats", "--stats", "s.json"]);
+    assert!(on.pipeline_stats);
+    assert!(cmd::render::device_request(&on).pipeline_stats);
+    assert!(cli::Cli::try_parse_from([
+        "motu",
+        "render",
+        "pkg",
+        "-o",
+        "x.png",
+        "--pipeline-stats=1"
+    ])
+    .is_err());
+}

@@ -132,12 +132,14 @@ pub use live::LiveRenderer;
 // The device layer's API as the crates above knew it.
 pub use motu_vk::{
     list_devices, parse_size, AsBuildFlags, AsBuildSizes, BindingSet, BlasBuild, BlasGeometry,
-    Buffer, BufferDesc, BufferUsage, Caps, CommandRecorder, ComputePipeline, ComputePipelineDesc,
-    Context, ContextOptions, DeviceAddress, DeviceMemory, DeviceReport, GpuHeap, HeapBuffer,
-    HeapReport, LimitOverrides, Limits, MemoryLocation, MemoryRequirements, PanelPaint, Presented,
-    Presenter, RawDisplayHandle, RawWindowHandle, Requirement, TimestampQueries, TlasBuild,
-    ValidationRequest, VkError, ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT, ENV_DEVICE,
-    ENV_MAX_ALLOCATIONS, ENV_MAX_ALLOCATION_SIZE, ENV_MAX_INSTANCE_COUNT, ENV_MAX_PRIMITIVE_COUNT,
+    Buffer, BufferDesc, BufferUsage, Caps, CapturedPipeline, CommandRecorder, ComputePipeline,
+    ComputePipelineDesc, Context, ContextOptions, DeviceAddress, DeviceMemory, DeviceReport,
+    GpuHeap, HeapBuffer, HeapReport, InternalRepresentation, LimitOverrides, Limits,
+    MemoryLocation, MemoryRequirements, PanelPaint, PipelineExecutable, PipelineExecutableStats,
+    PipelineStatistic, Presented, Presenter, RawDisplayHandle, RawWindowHandle, Requirement,
+    StatisticValue, TimestampQueries, TlasBuild, ValidationRequest, VkError,
+    ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT, ENV_DEVICE, ENV_MAX_ALLOCATIONS,
+    ENV_MAX_ALLOCATION_SIZE, ENV_MAX_INSTANCE_COUNT, ENV_MAX_PRIMITIVE_COUNT,
     ENV_MAX_STORAGE_BUFFER_RANGE, ENV_VALIDATION, INSTANCE_RECORD_SIZE_BYTES,
 };
 

@@ -25,6 +25,8 @@ pub(crate) struct PathStats {
     pub fallback_pixels: Option<u64>,
     pub stream: Option<StreamRunStats>,
     pub stream_fit: Option<crate::stats::StreamFitStats>,
+    /// `--pipeline-stats`: the pipelines the path made.
+    pub pipeline_executables: Option<Vec<crate::stats::PipelineStats>>,
 }
 
 impl PathStats {
@@ -38,6 +40,7 @@ impl PathStats {
             fallback_pixels: None,
             stream: None,
             stream_fit: None,
+            pipeline_executables: None,
         }
     }
 }
@@ -57,6 +60,7 @@ pub(crate) fn gpu_context(
             Backend::Query => Requirement::RayQuery,
             _ => Requirement::RayPipeline,
         },
+        pipeline_stats: s.device.pipeline_stats,
         ..Default::default()
     })
     .map_err(|e| RenderError::Device(e.into()))?;
@@ -199,6 +203,7 @@ pub(crate) fn render_gpu(
     let stats = PathStats {
         truncated_rays: Some(counts.truncated_rays),
         full_build: Some(FullBuildStats::of(&scene)),
+        pipeline_executables: crate::stats::captured_pipelines(&ctx),
         ..PathStats::new(FrameStats::gpu(&out.stats))
     };
     drop(scene);
@@ -246,6 +251,7 @@ pub(crate) fn render_gpu_path(
     let stats = PathStats {
         full_build: Some(FullBuildStats::of(live.scene())),
         path_ms_per_frame: Some(times),
+        pipeline_executables: crate::stats::captured_pipelines(&ctx),
         ..PathStats::new(frame)
     };
     drop(live);

@@ -126,6 +126,7 @@ pub fn render(
         fallback_pixels,
         stream,
         stream_fit,
+        pipeline_executables,
     } = path;
     // A `--stream` render whose budget held the scene built it as the full build does.
     let blas_build = match &stream_fit {
@@ -145,6 +146,7 @@ pub fn render(
         blas_build: blas_build.name(),
         subset: job.subset.to_vec(),
         package: job.package_path.display().to_string(),
+        pipeline_executables,
     };
     // A truncated traversal is a wrong image: an error unless explicitly allowed.
     let truncated = stats.truncated_rays.unwrap_or(0);

@@ -51,6 +51,9 @@ pub struct DeviceRequest {
     pub max_allocations: Option<u32>,
     /// `--blas-build` (`None`: fast trace for a full build, small when streaming).
     pub blas_build: Option<motu_gpu::BlasBuild>,
+    /// `--pipeline-stats`: capture the driver's statistics of every pipeline made
+    /// (`pipeline_executables` in `--stats`; a device without the extension warns).
+    pub pipeline_stats: bool,
 }
 
 /// `--stream`'s own settings: the pass cap (`--stream-max-passes`; `None`: sized from the

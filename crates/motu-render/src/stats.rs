@@ -13,12 +13,15 @@
 
 mod devices;
 mod mirror;
+mod pipelines;
 mod resources;
 mod stream;
 #[cfg(test)]
 mod tests;
 
 pub use devices::{Caps, DeviceList, DeviceReport, HeapReport, Limits};
+pub(crate) use pipelines::captured as captured_pipelines;
+pub use pipelines::{ExecutableStats, PipelineStats, RepresentationStats, StatisticStats};
 pub use resources::{AllocReport, ClassStats, KindStats, ResourceReport};
 pub use stream::{
     CacheStats, DiskStats, FrameStreamStats, FullBuildOverhead, HostStats, PassStats,
@@ -82,6 +85,10 @@ pub struct RenderStats {
     pub subset: Vec<String>,
     /// The package's path.
     pub package: String,
+    /// `--pipeline-stats`: every pipeline the render made with the driver's statistics of its
+    /// executables (absent without the flag).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pipeline_executables: Option<Vec<PipelineStats>>,
 }
 
 impl RenderStats {

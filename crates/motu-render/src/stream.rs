@@ -503,6 +503,7 @@ pub(crate) fn render_streaming(
                 .then(|| after_first.iter().sum::<f64>() / after_first.len() as f64),
         }),
         stream_fit,
+        pipeline_executables: crate::stats::captured_pipelines(&ctx),
         ..PathStats::new(FrameStats::gpu(&out.stats))
     };
     drop(sr);

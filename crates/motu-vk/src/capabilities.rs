@@ -35,6 +35,9 @@ pub struct Caps {
     pub host_query_reset: bool,
     /// Timestamps on the queue motu uses (`timestampValidBits > 0`).
     pub timestamps: bool,
+    /// `VK_KHR_pipeline_executable_properties` with `pipelineExecutableInfo`: the driver's
+    /// statistics of compiled shaders (`ContextOptions::pipeline_stats`).
+    pub pipeline_executable_info: bool,
 }
 
 /// One memory heap with its `VK_EXT_memory_budget` numbers (`None` without the extension).
@@ -82,6 +85,7 @@ pub(crate) struct FeatureSet {
     pub(crate) accel: vk::PhysicalDeviceAccelerationStructureFeaturesKHR<'static>,
     pub(crate) rt: vk::PhysicalDeviceRayTracingPipelineFeaturesKHR<'static>,
     pub(crate) rq: vk::PhysicalDeviceRayQueryFeaturesKHR<'static>,
+    pub(crate) pe: vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR<'static>,
 }
 
 impl PhysicalInfo {
@@ -215,6 +219,7 @@ struct Support<'e> {
     has_rt: bool,
     has_rq: bool,
     has_m4: bool,
+    has_pe: bool,
 }
 
 impl<'e> Support<'e> {
@@ -229,6 +234,7 @@ impl<'e> Support<'e> {
             has_rt: has(ash::khr::ray_tracing_pipeline::NAME),
             has_rq: has(ash::khr::ray_query::NAME),
             has_m4: v13 || has(ash::khr::maintenance4::NAME),
+            has_pe: has(ash::khr::pipeline_executable_properties::NAME),
         }
     }
 
@@ -269,6 +275,7 @@ impl<'e> Support<'e> {
             shader_int64: f.f10.shader_int64 == vk::TRUE,
             host_query_reset: v12 && f.f12.host_query_reset == vk::TRUE,
             timestamps: timestamp_valid_bits > 0,
+            pipeline_executable_info: self.has_pe && f.pe.pipeline_executable_info == vk::TRUE,
         }
     }
 }
@@ -388,6 +395,7 @@ impl FeatureSet {
         let mut f_rt = vk::PhysicalDeviceRayTracingPipelineFeaturesKHR::default();
         let mut f_rq = vk::PhysicalDeviceRayQueryFeaturesKHR::default();
         let mut f_m4 = vk::PhysicalDeviceMaintenance4Features::default();
+        let mut f_pe = vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR::default();
         let f10;
         {
             let mut f2 = vk::PhysicalDeviceFeatures2::default();
@@ -407,6 +415,9 @@ impl FeatureSet {
             }
             if support.has_rq {
                 f2 = f2.push_next(&mut f_rq);
+            }
+            if support.has_pe {
+                f2 = f2.push_next(&mut f_pe);
             }
             // SAFETY: as for the properties chain.
             unsafe { instance.get_physical_device_features2(handle, &mut f2) };
@@ -441,6 +452,10 @@ impl FeatureSet {
             rq: vk::PhysicalDeviceRayQueryFeaturesKHR {
                 p_next: std::ptr::null_mut(),
                 ..f_rq
+            },
+            pe: vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR {
+                p_next: std::ptr::null_mut(),
+                ..f_pe
             },
         }
     }

@@ -10,6 +10,7 @@ use crate::capabilities::{self, Caps, HeapReport, PhysicalInfo};
 use crate::error::{Result, VkError};
 use crate::instance::{version_string, InstanceShared, ValidationRequest};
 use crate::limits::{LimitOverrides, Limits};
+use crate::pipeline_stats::{CapturedPipeline, PipelineStatsState};
 use crate::report::DeviceReport;
 
 /// Environment variable selecting the device by index (as listed by `motu devices`).
@@ -60,6 +61,11 @@ pub struct ContextOptions {
     /// Open for presenting to windows of this display (`motu view`): enables the surface
     /// extensions on the instance and `VK_KHR_swapchain` on the device.
     pub presentation: Option<raw_window_handle::RawDisplayHandle>,
+    /// Capture the driver's statistics of every pipeline made (`VK_KHR_pipeline_executable_properties`:
+    /// registers, spills, instruction counts, …), logged at `info` and kept for
+    /// [`Context::captured_pipelines`]. A device without the extension logs a warning and
+    /// captures nothing (never an error). Off by default: capturing costs compile time.
+    pub pipeline_stats: bool,
 }
 
 pub(crate) struct DeviceShared {
@@ -77,6 +83,8 @@ pub(crate) struct DeviceShared {
     /// `vkQueueSubmit` calls and fence waits on them ([`Context::submit_count`]).
     pub(crate) submits: AtomicU64,
     pub(crate) fence_waits: AtomicU64,
+    /// `ContextOptions::pipeline_stats`: the extension's functions and the pipelines' log.
+    pub(crate) pipeline_stats: PipelineStatsState,
     /// Dropped after the device (field order), so the instance outlives it.
     pub(crate) instance: InstanceShared,
 }
@@ -170,7 +178,13 @@ impl Context {
             return Err(VkError::NoDevice);
         }
         let info = select(&infos, index, options.require)?;
-        Self::open(instance, info, &overrides, options.presentation.is_some())
+        Self::open(
+            instance,
+            info,
+            &overrides,
+            options.presentation.is_some(),
+            options.pipeline_stats,
+        )
     }
 
     /// Opens the default device with validation as the environment says (`MOTU_VALIDATION`).
@@ -183,6 +197,7 @@ impl Context {
         info: PhysicalInfo,
         overrides: &LimitOverrides,
         present: bool,
+        pipeline_stats: bool,
     ) -> Result<Self> {
         let span = tracing::info_span!("open_device", device = %info.name, index = info.index);
         let _guard = span.enter();
@@ -193,8 +208,16 @@ impl Context {
                     name: info.name.clone(),
                     reason: "no compute queue".into(),
                 })?;
-        let ext_names = device_extensions(&info, present)?;
-        let device = create_device(&instance, &info, queue_family_index, &ext_names)?;
+        let capture = pipeline_stats && info.caps.pipeline_executable_info;
+        if pipeline_stats && !capture {
+            tracing::warn!(
+                device = %info.name,
+                "pipeline statistics asked for, but the device lacks \
+                 VK_KHR_pipeline_executable_properties (pipelineExecutableInfo): none captured"
+            );
+        }
+        let ext_names = device_extensions(&info, present, capture)?;
+        let device = create_device(&instance, &info, queue_family_index, &ext_names, capture)?;
         let caps = &info.caps;
         // SAFETY: queue 0 of the family we requested exists.
         let queue = unsafe { device.get_device_queue(queue_family_index, 0) };
@@ -202,6 +225,13 @@ impl Context {
             .acceleration_structure
             .then(|| ash::khr::acceleration_structure::Device::new(&instance.instance, &device));
 
+        let pipeline_stats = PipelineStatsState {
+            requested: pipeline_stats,
+            loader: capture.then(|| {
+                ash::khr::pipeline_executable_properties::Device::new(&instance.instance, &device)
+            }),
+            ..PipelineStatsState::off()
+        };
         let debug_utils = instance
             .has_debug_utils()
             .then(|| ash::ext::debug_utils::Device::new(&instance.instance, &device));
@@ -230,6 +260,7 @@ impl Context {
                 peak_allocations: AtomicU32::new(0),
                 submits: AtomicU64::new(0),
                 fence_waits: AtomicU64::new(0),
+                pipeline_stats,
                 allocated_bytes: AtomicU64::new(0),
                 instance,
             }),
@@ -343,6 +374,29 @@ impl Context {
         self.shared.allocated_bytes.load(Ordering::Relaxed)
     }
 
+    /// Whether pipeline statistics were asked for ([`ContextOptions::pipeline_stats`]).
+    pub fn pipeline_stats_requested(&self) -> bool {
+        self.shared.pipeline_stats.requested
+    }
+
+    /// Whether pipelines are created capturing the driver's statistics: asked for, and the
+    /// device has `VK_KHR_pipeline_executable_properties`.
+    pub fn pipeline_stats_enabled(&self) -> bool {
+        self.shared.pipeline_stats.loader.is_some()
+    }
+
+    /// Every pipeline made through this context while statistics were asked for, in creation
+    /// order, with its statistics (`None` on a device without the extension). Empty when
+    /// they were not asked for.
+    pub fn captured_pipelines(&self) -> Vec<CapturedPipeline> {
+        self.shared
+            .pipeline_stats
+            .log
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
+    }
+
     /// Waits until the device is idle. For teardown and tests; normal paths wait on fences.
     pub fn wait_idle(&self) -> Result<()> {
         let _queue = self.shared.queue();
@@ -353,7 +407,11 @@ impl Context {
 
 /// The device extensions to enable: the ray-tracing ones the device has, the memory budget,
 /// maintenance4 before Vulkan 1.3, and the swapchain when it presents (or why it cannot).
-fn device_extensions(info: &PhysicalInfo, present: bool) -> Result<Vec<&'static CStr>> {
+fn device_extensions(
+    info: &PhysicalInfo,
+    present: bool,
+    pipeline_stats: bool,
+) -> Result<Vec<&'static CStr>> {
     let caps = &info.caps;
     let v13 = info.api_version >= vk::API_VERSION_1_3;
     let mut ext_names: Vec<&CStr> = Vec::new();
@@ -376,6 +434,9 @@ fn device_extensions(info: &PhysicalInfo, present: bool) -> Result<Vec<&'static 
     if !v13 && caps.maintenance4 {
         ext_names.push(ash::khr::maintenance4::NAME);
     }
+    if pipeline_stats {
+        ext_names.push(ash::khr::pipeline_executable_properties::NAME);
+    }
     if present {
         let name = ash::khr::swapchain::NAME;
         if !info.extensions.contains(name) {
@@ -397,6 +458,7 @@ fn create_device(
     info: &PhysicalInfo,
     queue_family_index: u32,
     ext_names: &[&CStr],
+    pipeline_stats: bool,
 ) -> Result<ash::Device> {
     let caps = &info.caps;
     let v13 = info.api_version >= vk::API_VERSION_1_3;
@@ -448,6 +510,8 @@ fn create_device(
             .ray_tracing_pipeline_trace_rays_indirect))
         .ray_traversal_primitive_culling(yes(s.rt.ray_traversal_primitive_culling));
     let mut f_rq = vk::PhysicalDeviceRayQueryFeaturesKHR::default().ray_query(yes(s.rq.ray_query));
+    let mut f_pe = vk::PhysicalDevicePipelineExecutablePropertiesFeaturesKHR::default()
+        .pipeline_executable_info(true);
     let mut f2 = vk::PhysicalDeviceFeatures2::default()
         .features(f10)
         .push_next(&mut f11)
@@ -465,6 +529,9 @@ fn create_device(
     }
     if caps.ray_query {
         f2 = f2.push_next(&mut f_rq);
+    }
+    if pipeline_stats {
+        f2 = f2.push_next(&mut f_pe);
     }
 
     let priorities = [1.0f32];

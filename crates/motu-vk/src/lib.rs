@@ -23,7 +23,8 @@
 //! skipping without a device).
 //!
 //! Files, lowest first: `error`, `instance`, `limits`, `capabilities` (what a physical device
-//! offers), `report`, `context`, `memory`, `heap`, `query`, `pipeline`, `rt_pipeline`, `accel`
+//! offers), `report`, `pipeline_stats` (the driver's statistics of compiled pipelines, kept by
+//! the context), `context`, `memory`, `heap`, `query`, `pipeline`, `rt_pipeline`, `accel`
 //! (AS types), `barrier`, `conv` (motu → Vulkan conversions of what is recorded),
 //! `build_sizes` (AS size queries), `structure` (AS objects), `command` (typed recording),
 //! `present`.
@@ -60,6 +61,7 @@ mod limits;
 mod memory;
 mod panel;
 mod pipeline;
+mod pipeline_stats;
 mod present;
 mod query;
 mod report;
@@ -94,6 +96,10 @@ pub use memory::{
 };
 pub use panel::PanelPaint;
 pub use pipeline::{BindingSet, ComputePipeline, ComputePipelineDesc};
+pub use pipeline_stats::{
+    CapturedPipeline, InternalRepresentation, PipelineExecutable, PipelineExecutableStats,
+    PipelineStatistic, StatisticValue,
+};
 pub use present::{Presented, Presenter, RawDisplayHandle, RawWindowHandle};
 pub use query::TimestampQueries;
 pub use report::{list_devices, DeviceReport};

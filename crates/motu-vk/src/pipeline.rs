@@ -8,6 +8,7 @@ use ash::vk;
 use crate::context::{Context, DeviceShared};
 use crate::error::{Result, VkError};
 use crate::memory::{Buffer, BufferUsage};
+use crate::pipeline_stats::PipelineExecutableStats;
 
 /// What a compute pipeline looks like to the host.
 #[derive(Clone, Debug)]
@@ -32,6 +33,8 @@ pub struct ComputePipeline {
     storage_buffer_count: u32,
     push_constant_size_bytes: u32,
     label: String,
+    /// The driver's statistics, when the context captures them.
+    stats: Option<PipelineExecutableStats>,
 }
 
 impl std::fmt::Debug for ComputePipeline {
@@ -70,6 +73,7 @@ impl ComputePipeline {
             storage_buffer_count: desc.storage_buffer_count,
             push_constant_size_bytes: desc.push_constant_size_bytes,
             label: desc.label.to_string(),
+            stats: None,
         };
         let bindings: Vec<_> = (0..desc.storage_buffer_count)
             .map(|b| {
@@ -130,9 +134,18 @@ impl ComputePipeline {
         let info = vk::ComputePipelineCreateInfo::default()
             .stage(stage)
             .layout(pipe.layout);
-        // SAFETY: module and layout are live; the stage info points to data alive for the call.
-        let result =
-            unsafe { device.create_compute_pipelines(vk::PipelineCache::null(), &[info], None) };
+        let create = |flags: vk::PipelineCreateFlags| {
+            // SAFETY: module and layout are live; the stage info points to data alive for the
+            // call.
+            unsafe {
+                device.create_compute_pipelines(
+                    vk::PipelineCache::null(),
+                    &[info.flags(flags)],
+                    None,
+                )
+            }
+        };
+        let (result, captured) = shared.pipeline_stats.create(desc.label, create);
         // SAFETY: the module is only needed during pipeline creation.
         unsafe { device.destroy_shader_module(module, None) };
         pipe.pipeline = result.map_err(|(_, e)| VkError::Vulkan {
@@ -140,12 +153,24 @@ impl ComputePipeline {
             result: e,
         })?[0];
         shared.set_name(pipe.pipeline, desc.label);
+        pipe.stats = shared.pipeline_stats.capture(
+            captured.then_some(pipe.pipeline),
+            desc.label,
+            "compute",
+            None,
+        );
         tracing::debug!(label = desc.label, "compute pipeline created");
         Ok(pipe)
     }
 
     pub fn label(&self) -> &str {
         &self.label
+    }
+
+    /// The driver's statistics of its executable: `Some` only when the context was opened
+    /// with `pipeline_stats` on a device with `VK_KHR_pipeline_executable_properties`.
+    pub fn executable_stats(&self) -> Option<&PipelineExecutableStats> {
+        self.stats.as_ref()
     }
 
     pub(crate) fn handle(&self) -> vk::Pipeline {

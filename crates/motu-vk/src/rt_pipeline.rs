@@ -13,6 +13,7 @@ use crate::context::Context;
 use crate::error::{Result, VkError};
 use crate::heap::{GpuHeap, HeapBuffer};
 use crate::memory::BufferUsage;
+use crate::pipeline_stats::PipelineExecutableStats;
 
 /// The push-constant bytes every stage sees (the shaders' table addresses).
 pub const PUSH_CONSTANT_BYTES: u32 = 128;
@@ -46,6 +47,9 @@ pub struct RtPipeline {
     /// raygen, miss, hit, callable (empty).
     pub(crate) regions: [vk::StridedDeviceAddressRegionKHR; 4],
     sbt: Option<HeapBuffer>,
+    label: String,
+    /// The driver's statistics, when the context captures them.
+    stats: Option<PipelineExecutableStats>,
 }
 
 /// The hit groups' count: raygen, miss, triangle hit group, procedural hit group.
@@ -158,11 +162,13 @@ impl SbtLayout {
 }
 
 impl RtPipeline {
-    /// `specialization`: (constant id, value) pairs for every stage; `shaders`: the stages'
-    /// SPIR-V (validated by the embedding crate's build).
+    /// `label` names it (validation messages, pipeline statistics); `specialization`:
+    /// (constant id, value) pairs for every stage; `shaders`: the stages' SPIR-V (validated by
+    /// the embedding crate's build).
     pub fn new(
         ctx: &Context,
         heap: &mut GpuHeap,
+        label: &str,
         specialization: &[(u32, u32)],
         shaders: &RtShaders<'_>,
     ) -> Result<RtPipeline> {
@@ -182,6 +188,8 @@ impl RtPipeline {
             layout: vk::PipelineLayout::null(),
             regions: [vk::StridedDeviceAddressRegionKHR::default(); 4],
             sbt: None,
+            label: label.to_string(),
+            stats: None,
         };
         p.create_layout()?;
         p.create_pipeline(specialization, shaders)?;
@@ -267,22 +275,25 @@ impl RtPipeline {
             .groups(&groups)
             .max_pipeline_ray_recursion_depth(1)
             .layout(self.layout);
-        // SAFETY: modules, layout and infos are live for the call; recursion depth 1 (raygen
-        // traces, no hit shader does).
-        let result = unsafe {
-            self.rt.create_ray_tracing_pipelines(
-                vk::DeferredOperationKHR::null(),
-                vk::PipelineCache::null(),
-                &[info],
-                None,
-            )
+        let create = |flags: vk::PipelineCreateFlags| {
+            // SAFETY: modules, layout and infos are live for the call; recursion depth 1
+            // (raygen traces, no hit shader does).
+            unsafe {
+                self.rt.create_ray_tracing_pipelines(
+                    vk::DeferredOperationKHR::null(),
+                    vk::PipelineCache::null(),
+                    &[info.flags(flags)],
+                    None,
+                )
+            }
         };
+        let (result, captured) = shared.pipeline_stats.create(&self.label, create);
         drop(modules);
         self.pipeline = result.map_err(|(_, e)| VkError::Vulkan {
             call: "vkCreateRayTracingPipelinesKHR",
             result: e,
         })?[0];
-        shared.set_name(self.pipeline, "traversal pipeline");
+        shared.set_name(self.pipeline, &self.label);
         // The raygen's stack (what stays live across its traceRayEXT calls, the traversal
         // stack included): each TLAS hop saves and restores it, so it is what hop cost tracks.
         // SAFETY: the pipeline is live; group 0 is the raygen (general) group.
@@ -294,6 +305,12 @@ impl RtPipeline {
             )
         };
         tracing::debug!(raygen_stack_bytes, "traversal pipeline created");
+        self.stats = shared.pipeline_stats.capture(
+            captured.then_some(self.pipeline),
+            &self.label,
+            "ray_tracing",
+            Some(raygen_stack_bytes),
+        );
         Ok(())
     }
 
@@ -323,6 +340,17 @@ impl RtPipeline {
         self.regions = layout.regions(sbt.device_address()?.0);
         self.sbt = Some(sbt);
         Ok(())
+    }
+
+    pub fn label(&self) -> &str {
+        &self.label
+    }
+
+    /// The driver's statistics of its executables (one a stage, or as the driver merged them):
+    /// `Some` only when the context was opened with `pipeline_stats` on a device with
+    /// `VK_KHR_pipeline_executable_properties`.
+    pub fn executable_stats(&self) -> Option<&PipelineExecutableStats> {
+        self.stats.as_ref()
     }
 
     /// Returns the SBT's memory to the heap (call before dropping when the heap lives on).

@@ -159,6 +159,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
         stack_size: 16,
         max_traces_per_ray: motu_abi::DEFAULT_MAX_TRACES_PER_RAY,
         allow_truncated: false,
+        pipeline_stats: false,
         spp: 1,
         ao_samples: 1,
         ao_reach: motu_render::AO_DISTANCE_OF_DIAGONAL,

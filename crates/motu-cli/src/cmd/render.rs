@@ -76,6 +76,18 @@ fn recorded_cameras(
 
 /// `query` where a device has ray queries (usually fastest on RTX), else `pipeline`, else the CPU
 /// ([`motu_render::best_backend`]) as `--backend`'s value.
+/// The device flags: `--device`, `--vram-budget`, `--max-allocations`, `--blas-build`,
+/// `--pipeline-stats`.
+pub(crate) fn device_request(a: &RenderArgs) -> motu_render::DeviceRequest {
+    motu_render::DeviceRequest {
+        index: a.device,
+        vram_budget_bytes: a.vram_budget,
+        max_allocations: a.max_allocations,
+        blas_build: a.blas_build.map(Into::into),
+        pipeline_stats: a.pipeline_stats,
+    }
+}
+
 pub fn best_backend(devices: &[motu_gpu::DeviceReport]) -> BackendArg {
     match motu_render::best_backend(devices) {
         motu_render::Backend::Query => BackendArg::Query,
@@ -343,12 +355,7 @@ pub fn run(a: RenderArgs) -> anyhow::Result<()> {
             width: a.width,
             height: a.height,
         },
-        device: motu_render::DeviceRequest {
-            index: a.device,
-            vram_budget_bytes: a.vram_budget,
-            max_allocations: a.max_allocations,
-            blas_build: a.blas_build.map(Into::into),
-        },
+        device: device_request(&a),
         stream: a.stream.then(|| motu_render::StreamSettings {
             max_passes: a.stream_max_passes,
             bounds: stream_bounds(&a.stream_bounds),

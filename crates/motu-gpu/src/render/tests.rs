@@ -705,3 +705,113 @@ fn glsl_camera_and_lod_mirror_the_rust_functions() {
     assert!(differ <= 4, "{differ} LOD levels differ");
     assert_no_validation_errors(&ctx);
 }
+
+/// `ContextOptions::pipeline_stats`: every trace pipeline made (both backends, full and
+/// streamed variants) is in the context's log under its label; with
+/// `VK_KHR_pipeline_executable_properties` each has executables with statistics, without it
+/// (lavapipe, Mesa 25.0) each has none and the context says so (a warning, never an error).
+#[test]
+fn pipeline_stats_per_backend_and_variant() {
+    let Some(probe) = ctx_or_skip("pipeline_stats_per_backend_and_variant") else {
+        return;
+    };
+    let validation = if probe.validation_enabled() {
+        ValidationRequest::Required
+    } else {
+        ValidationRequest::Off
+    };
+    drop(probe);
+    let ctx = Context::new(&ContextOptions {
+        validation,
+        require: Requirement::RayTracing,
+        pipeline_stats: true,
+        ..Default::default()
+    })
+    .expect("context");
+    assert!(ctx.pipeline_stats_requested());
+    assert_eq!(
+        ctx.pipeline_stats_enabled(),
+        ctx.caps().pipeline_executable_info
+    );
+    let h = two_level();
+    let scene =
+        GpuScene::build(&ctx, &h.view(), &Blobs(&h), &BuildOptions::default()).expect("build");
+    let cam = camera([0.5, 1.0, 7.0], [0.0, 0.0, 0.0], 16);
+    let backends = backends(&ctx);
+    for &backend in &backends {
+        let opts = RenderOptions {
+            backend,
+            ..Default::default()
+        };
+        render(&ctx, &scene, &cam, &opts).expect("render");
+        // The streamed variant, made as the stream renderer's `ensure_tracer` makes it.
+        let mut heap = scene.heap();
+        let t = super::Tracer::new(&ctx, &mut heap, &opts, 4, true).expect("streamed tracer");
+        let own = match &t {
+            super::Tracer::Pipeline(p) => p.executable_stats().cloned(),
+            super::Tracer::Query(q) => q.executable_stats().cloned(),
+        };
+        t.release(&mut heap);
+        assert_eq!(own.is_some(), ctx.pipeline_stats_enabled(), "{backend:?}");
+    }
+    let captured = ctx.captured_pipelines();
+    for label in ["trace full", "trace streamed"] {
+        let made: Vec<_> = captured.iter().filter(|p| p.label == label).collect();
+        let kinds: Vec<_> = made.iter().map(|p| p.kind).collect();
+        let want: Vec<_> = backends
+            .iter()
+            .map(|b| match b {
+                Backend::Pipeline => "ray_tracing",
+                Backend::Query => "compute",
+            })
+            .collect();
+        assert_eq!(kinds, want, "{label}: one pipeline a backend");
+        for p in made {
+            assert_eq!(p.raygen_stack_bytes.is_some(), p.kind == "ray_tracing");
+            eprintln!(
+                "{label} ({}) on {}: raygen stack {:?} bytes",
+                p.kind,
+                ctx.device_name(),
+                p.raygen_stack_bytes
+            );
+            match &p.stats {
+                Some(s) => {
+                    assert!(!s.executables.is_empty(), "{label} {}", p.kind);
+                    assert!(
+                        s.executables.iter().any(|e| !e.statistics.is_empty()),
+                        "{label} {}: no statistic",
+                        p.kind
+                    );
+                    for e in &s.executables {
+                        eprintln!("  {} {:?}: {:?}", e.name, e.stages, e.statistics);
+                    }
+                }
+                None => assert!(!ctx.pipeline_stats_enabled(), "{label}: none captured"),
+            }
+        }
+    }
+    if !ctx.pipeline_stats_enabled() {
+        eprintln!(
+            "pipeline stats: {} lacks VK_KHR_pipeline_executable_properties: checked the \
+             warning/None path only (pipelines logged without statistics)",
+            ctx.device_name()
+        );
+    }
+    drop(scene);
+    assert_no_validation_errors(&ctx);
+}
+
+/// Without the option nothing is captured or logged.
+#[test]
+fn pipeline_stats_off_by_default() {
+    let Some(ctx) = ctx_or_skip("pipeline_stats_off_by_default") else {
+        return;
+    };
+    assert!(!ctx.pipeline_stats_requested() && !ctx.pipeline_stats_enabled());
+    let h = two_level();
+    let scene =
+        GpuScene::build(&ctx, &h.view(), &Blobs(&h), &BuildOptions::default()).expect("build");
+    let cam = camera([0.5, 1.0, 7.0], [0.0, 0.0, 0.0], 8);
+    render(&ctx, &scene, &cam, &RenderOptions::default()).expect("render");
+    assert!(ctx.captured_pipelines().is_empty());
+}

@@ -40,6 +40,12 @@ impl Tracer {
                 opts.stack_size, opts.max_traces_per_ray
             )));
         }
+        // The label names the pipeline in validation messages and `--pipeline-stats`.
+        let label = if streamed {
+            "trace streamed"
+        } else {
+            "trace full"
+        };
         let spec = [
             (0, opts.stack_size),
             (1, opts.max_traces_per_ray),
@@ -65,7 +71,9 @@ impl Tracer {
                         shaders::PIPELINE_PI_RAHIT
                     },
                 };
-                Tracer::Pipeline(Box::new(RtPipeline::new(ctx, heap, &spec, &shaders)?))
+                Tracer::Pipeline(Box::new(RtPipeline::new(
+                    ctx, heap, label, &spec, &shaders,
+                )?))
             }
             Backend::Query => {
                 if !ctx.caps().ray_query {
@@ -78,7 +86,7 @@ impl Tracer {
                 Tracer::Query(ComputePipeline::new(
                     ctx,
                     &ComputePipelineDesc {
-                        label: "traversal query",
+                        label,
                         spirv: if streamed {
                             shaders::QUERY_TRACE_STREAM_COMP
                         } else {

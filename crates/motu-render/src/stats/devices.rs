@@ -68,6 +68,7 @@ mirror! {
         shader_int64: bool,
         host_query_reset: bool,
         timestamps: bool,
+        pipeline_executable_info: bool,
     }
 }
 

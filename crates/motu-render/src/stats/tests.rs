@@ -146,7 +146,39 @@ fn full_render_stats() -> RenderStats {
         blas_build: "fast-trace",
         subset: vec!["main".into()],
         package: "scene.motu".into(),
+        pipeline_executables: Some(vec![pipeline_stats()]),
     }
+}
+
+/// A pipeline with one executable and one statistic (the other formats write `value` as a
+/// float or a bool).
+fn pipeline_stats() -> PipelineStats {
+    let exe = motu_gpu::PipelineExecutable {
+        name: "raygen".into(),
+        description: "ray generation".into(),
+        stages: vec!["raygen"],
+        subgroup_size: 32,
+        statistics: vec![motu_gpu::PipelineStatistic {
+            name: "Registers".into(),
+            description: "registers per thread".into(),
+            value: motu_gpu::StatisticValue::U64(1),
+        }],
+        internal_representations: vec![motu_gpu::InternalRepresentation {
+            name: "SASS".into(),
+            description: "disassembly".into(),
+            is_text: true,
+            data: b"NOP".to_vec(),
+        }],
+    };
+    (&motu_gpu::CapturedPipeline {
+        label: "trace full".into(),
+        kind: "ray_tracing",
+        raygen_stack_bytes: Some(1),
+        stats: Some(motu_gpu::PipelineExecutableStats {
+            executables: vec![exe],
+        }),
+    })
+        .into()
 }
 
 fn view_stats(detail: ViewDetail) -> ViewStats {
@@ -244,6 +276,7 @@ fn documents() -> Vec<(&'static str, Value)> {
         stream: None,
         stream_fit: None,
         denoise: None,
+        pipeline_executables: None,
         ..full_render_stats()
     };
     let persistent = motu_gpu::PersistentEstimate {
