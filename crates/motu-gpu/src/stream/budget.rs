@@ -148,6 +148,7 @@ impl<'a> StreamingRenderer<'a> {
         self.with_eviction_or_rebuilt_tlases(|s| {
             alloc_frame_buffers(
                 &mut s.heap,
+                w,
                 pixels,
                 guard_len as u64,
                 nitems,

@@ -527,10 +527,7 @@ impl<'a> StreamingRenderer<'a> {
             ));
         };
         let (dims, groups) = match tracer {
-            Tracer::Pipeline(_) => {
-                let width = n.clamp(1, 4096);
-                ([width, n.div_ceil(width).max(1)], None)
-            }
+            Tracer::Pipeline(_) => (super::buffers::launch_dims(n, fb.launch_row_items), None),
             Tracer::Query(_) => {
                 let g = n.div_ceil(64).max(1);
                 ([0, 0], Some([g.min(65535), g.div_ceil(65535)]))

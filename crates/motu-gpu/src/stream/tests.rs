@@ -1786,3 +1786,15 @@ fn evictions_for_tlas_room_spare_clean_tlases_and_the_frame_matches_the_full_bui
     assert_same_aov(&reference.aov, &out.aov, "after evictions for TLAS room");
     assert_no_validation_errors(&ctx);
 }
+
+#[test]
+fn a_pass_launch_folds_its_items_into_image_rows() {
+    use super::buffers::launch_dims;
+    assert_eq!(launch_dims(640 * 360, 640), [640, 360]);
+    assert_eq!(launch_dims(640 * 360 + 100, 640), [640, 361]);
+    assert_eq!(launch_dims(37, 640), [37, 1]);
+    assert_eq!(launch_dims(0, 640), [1, 1]);
+    // Wider than the widest row: folded at 4096.
+    assert_eq!(launch_dims(10_000, 8192), [4096, 3]);
+    assert_eq!(launch_dims(5, 0), [1, 5]);
+}
