@@ -472,6 +472,31 @@ impl<'a> IntoIterator for &'a mut InstanceTable {
     }
 }
 
+/// Where a partition's arrays are: on the heap ([`Pages::HEAP`]), or in shared file maps
+/// ([`ScratchArray::pages`]) whose pages its passes drop behind them, so a keyed split of tens
+/// of millions of instances holds its bounds and indices in the page cache, not the resident
+/// set (issue 48 item 1). Mapped pages may be handed only slices of mapped [`ScratchArray`]s
+/// (the partition's items, bounds and scratch); on the heap a release would zero the items
+/// (valid values, `Zeroable`, but not theirs).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Pages {
+    mapped: bool,
+}
+
+impl Pages {
+    /// Arrays on the heap: nothing is released.
+    pub(crate) const HEAP: Self = Self { mapped: false };
+
+    /// Drops the pages of `items` (a part of the partition's arrays) from the resident set.
+    pub(crate) fn release<T: bytemuck::Zeroable>(self, items: &[T]) {
+        if self.mapped {
+            // SAFETY: mapped pages come from a mapped `ScratchArray` for arrays that all are
+            // (see above): shared file maps.
+            unsafe { release_mapped(items) }
+        }
+    }
+}
+
 /// A fixed-length array of `T` on the heap, or in an unnamed file mapped shared and writable
 /// ([`FileTable`], the mapped instance table's store): the keyed split's per-instance bounds and
 /// indices (issue 48 item 1: 28 bytes an instance on the heap while the root is partitioned).
@@ -527,6 +552,14 @@ impl<T: ScratchItem> ScratchArray<T> {
     /// Whether the items are in a mapped file (passes may release their pages).
     pub(crate) fn is_mapped(&self) -> bool {
         matches!(self.0, ScratchStore::File(..))
+    }
+
+    /// The [`Pages`] of a partition over this array and others where it is: mapped ones only
+    /// if every other array handed to it is a mapped `ScratchArray` too.
+    pub(crate) fn pages(&self) -> Pages {
+        Pages {
+            mapped: self.is_mapped(),
+        }
     }
 }
 

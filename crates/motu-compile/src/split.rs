@@ -10,6 +10,8 @@
 //! piece it enters, and median splits of centres made pieces whose boxes overlapped wherever
 //! large instances straddled the median (issue 15: 4.4 traces/ray on a split island).
 
+pub(crate) use crate::instance_table::Pages;
+
 /// Partitions `items` in place into consecutive ranges of at most `cap` items (`cap ≥ 1`),
 /// appended to `out` as `(begin, end)` in spatial order (left half before right half).
 pub(crate) fn median_partition<T: Send>(
@@ -136,37 +138,6 @@ pub(crate) const PARALLEL_ITEMS: usize = 1 << 16;
 /// it (768 KiB of bounds).
 pub(crate) const RELEASE_ITEMS: usize = 1 << 15;
 
-/// Where a partition's arrays are: on the heap, or in shared file maps
-/// ([`crate::instance_table::ScratchArray`]) whose pages its passes drop behind them, so a
-/// keyed split of tens of millions of instances holds its bounds and indices in the page cache,
-/// not the resident set (issue 48 item 1).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Pages {
-    mapped: bool,
-}
-
-impl Pages {
-    /// Arrays on the heap: nothing is released.
-    pub(crate) const HEAP: Self = Self { mapped: false };
-
-    /// Arrays in shared file maps.
-    ///
-    /// # Safety
-    /// Every slice a partition given these pages is handed (items, bounds, scratch) must lie
-    /// in a shared file map (see [`crate::instance_table::release_mapped`]).
-    pub(crate) unsafe fn mapped() -> Self {
-        Self { mapped: true }
-    }
-
-    /// Drops the pages of `items` (a part of the partition's arrays) from the resident set.
-    pub(crate) fn release<T>(self, items: &[T]) {
-        if self.mapped {
-            // SAFETY: `Pages::mapped`'s contract: the partition's arrays are file maps.
-            unsafe { crate::instance_table::release_mapped(items) }
-        }
-    }
-}
-
 /// Partitions `items` (with `bounds[i]` = `(min, max)` of `items[i]`, permuted alongside) in
 /// place into consecutive ranges of at most `cap` items (`cap ≥ 1`), appended to `out` as
 /// `(begin, end)` in spatial order. Each step takes the binned-SAH split (area × count of both
@@ -175,7 +146,7 @@ impl Pages {
 /// middle index, so every step shrinks both sides and the partition always terminates. Large
 /// ranges are split in parallel (`PARALLEL_ITEMS`): a streamer splits a Moana-sized root
 /// (tens of millions of instances) when it loads the package.
-pub fn sah_partition<T: Send>(
+pub fn sah_partition<T: Send + bytemuck::Zeroable>(
     items: &mut [T],
     bounds: &mut [Bounds],
     cap: usize,
@@ -186,7 +157,7 @@ pub fn sah_partition<T: Send>(
 
 /// [`sah_partition`] of arrays in `pages` (the same ranges; mapped arrays' pages released
 /// behind each pass).
-pub(crate) fn sah_partition_paged<T: Send>(
+pub(crate) fn sah_partition_paged<T: Send + bytemuck::Zeroable>(
     items: &mut [T],
     bounds: &mut [Bounds],
     cap: usize,
@@ -198,7 +169,7 @@ pub(crate) fn sah_partition_paged<T: Send>(
 }
 
 /// [`sah_partition`] of a range that starts at `offset` in the whole: its ranges, in order.
-fn sah_ranges<T: Send>(
+fn sah_ranges<T: Send + bytemuck::Zeroable>(
     items: &mut [T],
     bounds: &mut [Bounds],
     cap: usize,
@@ -332,7 +303,7 @@ fn fill_bins(
 
 /// One step of [`sah_partition`] over a range of more than `cap` items: reorders `items` and
 /// `bounds` so the split's left side comes first and returns its length (`0 < mid < len`).
-fn sah_split<T>(items: &mut [T], bounds: &mut [Bounds], pages: Pages) -> usize {
+fn sah_split<T: bytemuck::Zeroable>(items: &mut [T], bounds: &mut [Bounds], pages: Pages) -> usize {
     let len = items.len();
     let (lo, hi) = centroid_bounds_paged(bounds, pages);
     let min_side = (len / SAH_MIN_SIDE_FRACTION).max(1);
@@ -424,7 +395,7 @@ const DIRECT_LEAVES: usize = 8;
 /// consecutive ranges in spatial order), then the kept items; returns the count kept, which
 /// is 0 when even no kept item leaves enough room.
 #[cfg(test)]
-pub fn split_keeping_direct<T: Copy + Send>(
+pub fn split_keeping_direct<T: Copy + Send + bytemuck::Zeroable>(
     items: &mut [T],
     bounds: &mut [Bounds],
     cap: usize,
@@ -442,7 +413,7 @@ pub(crate) type Scratch<'a, T> = (&'a mut [T], &'a mut [Bounds]);
 /// the pieces and kept leaves are copied out in their new order and back, two sequential
 /// passes that release their pages behind them (mapped arrays), where the in-place permutation
 /// would touch them all at once (and hold 5 bytes an item of its own).
-pub(crate) fn split_keeping_direct_paged<T: Copy + Send>(
+pub(crate) fn split_keeping_direct_paged<T: Copy + Send + bytemuck::Zeroable>(
     items: &mut [T],
     bounds: &mut [Bounds],
     cap: usize,
@@ -558,7 +529,7 @@ pub(crate) fn split_keeping_direct_paged<T: Copy + Send>(
 }
 
 /// `dst.copy_from_slice(src)` a piece at a time, both sides' pages released behind (mapped).
-fn copy_released<U: Copy>(dst: &mut [U], src: &[U], pages: Pages) {
+fn copy_released<U: Copy + bytemuck::Zeroable>(dst: &mut [U], src: &[U], pages: Pages) {
     for (d, s) in dst.chunks_mut(RELEASE_ITEMS).zip(src.chunks(RELEASE_ITEMS)) {
         d.copy_from_slice(s);
         pages.release(d);

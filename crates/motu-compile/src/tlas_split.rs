@@ -93,13 +93,8 @@ pub(crate) fn split_tlas(
         let (direct, order, bounds) = if let Some(s) = stashed.as_mut() {
             let mut bounds = ScratchArray::<Bounds>::zeroed(count, map_dir)?;
             let mut order = ScratchArray::<u32>::zeroed(count, map_dir)?;
-            let pages = if bounds.is_mapped() {
-                // SAFETY: the bounds, the indices and the first round's scratch are all
-                // mapped (`map_dir`): shared file maps.
-                unsafe { Pages::mapped() }
-            } else {
-                Pages::HEAP
-            };
+            // The bounds, the indices and the first round's scratch are all mapped, or none.
+            let pages = bounds.pages();
             s.map_records_into(&mut bounds, pages, bounds_of)?;
             next_id(count, "instances")?;
             for (k, chunk) in order.chunks_mut(RELEASE_ITEMS).enumerate() {
@@ -229,7 +224,7 @@ pub(crate) fn split_tlas(
 /// permuted together: the first keeps the large instances and the sparse part direct
 /// (returns how many stay, at the range's end), later rounds cut everything into pieces.
 #[allow(clippy::too_many_arguments)]
-fn partition_round<T: Copy + Send>(
+fn partition_round<T: Copy + Send + bytemuck::Zeroable>(
     items: &mut [T],
     bounds: &mut [Bounds],
     first_round: bool,
@@ -313,7 +308,7 @@ fn common_element(mut elements: impl Iterator<Item = u32>) -> Option<u32> {
 /// alongside) and returns how many: those with a surface area of at least the whole's over
 /// the piece count, the largest first, at most a quarter of `cap`, so the parent keeps room
 /// for the pieces' AABB instances.
-fn keep_large_at_end<T>(
+fn keep_large_at_end<T: bytemuck::Zeroable>(
     instances: &mut [T],
     bounds: &mut [Bounds],
     cap: usize,

@@ -338,8 +338,8 @@ fn mapped_arrays_split_as_on_the_heap() {
         *id = k as u32;
     }
     bounds.copy_from_slice(&boxes);
-    // SAFETY: every array is a mapped `ScratchArray`.
-    let pages = unsafe { Pages::mapped() };
+    // Every array is a mapped `ScratchArray`.
+    let pages = bounds.pages();
     let mut out = Vec::new();
     let kept = split_keeping_direct_paged(
         &mut ids,

@@ -82,7 +82,7 @@ impl Stash {
     /// `f` of every stashed record, in order, into `out` (as long as the stash): read back a
     /// chunk at a time, each chunk's records mapped on the thread pool and its places' pages
     /// released after (`pages`: `out` is mapped).
-    pub(crate) fn map_records_into<B: Send>(
+    pub(crate) fn map_records_into<B: Send + bytemuck::Zeroable>(
         &mut self,
         out: &mut [B],
         pages: Pages,
