@@ -43,7 +43,9 @@ impl Default for Store {
     }
 }
 
-struct FileTable {
+/// Records of `T` in an unnamed file mapped shared and writable, grown by
+/// [`FileTable::grow_to`] (the instance table's, and the keyed split's arrays: [`ScratchArray`]).
+struct FileTable<T: bytemuck::Pod = InstanceRecord> {
     file: File,
     dir: PathBuf,
     /// `None` while the capacity is 0.
@@ -52,9 +54,29 @@ struct FileTable {
     capacity: usize,
     /// [`InstanceTable::push`] released the pages of the records below this index last.
     released_to: usize,
+    _records: std::marker::PhantomData<T>,
 }
 
-impl FileTable {
+impl<T: bytemuck::Pod> FileTable<T> {
+    const ITEM_BYTES: usize = std::mem::size_of::<T>();
+
+    /// An empty table in a new unnamed file in `dir`.
+    fn create(dir: &Path) -> Result<Self, CompileError> {
+        let file = tempfile::tempfile_in(dir).map_err(|source| CompileError::Scratch {
+            dir: dir.to_path_buf(),
+            source,
+        })?;
+        Ok(Self {
+            file,
+            dir: dir.to_path_buf(),
+            map: None,
+            len: 0,
+            capacity: 0,
+            released_to: 0,
+            _records: std::marker::PhantomData,
+        })
+    }
+
     fn err(&self, source: std::io::Error) -> CompileError {
         CompileError::Scratch {
             dir: self.dir.clone(),
@@ -68,16 +90,17 @@ impl FileTable {
         if capacity <= self.capacity {
             return Ok(());
         }
-        let bytes = capacity
-            .checked_mul(RECORD_BYTES)
-            .ok_or_else(|| CompileError::TooMany {
-                what: "instances",
-                count: capacity as u64,
-            })?;
+        let bytes =
+            capacity
+                .checked_mul(Self::ITEM_BYTES)
+                .ok_or_else(|| CompileError::TooMany {
+                    what: "instances",
+                    count: capacity as u64,
+                })?;
         self.map = None;
         let (from, add) = (
-            self.capacity * RECORD_BYTES,
-            bytes - self.capacity * RECORD_BYTES,
+            self.capacity * Self::ITEM_BYTES,
+            bytes - self.capacity * Self::ITEM_BYTES,
         );
         match rustix::fs::fallocate(
             &self.file,
@@ -122,22 +145,22 @@ impl FileTable {
         unsafe {
             m.unchecked_advise_range(
                 memmap2::UncheckedAdvice::DontNeed,
-                begin * RECORD_BYTES,
-                (end - begin) * RECORD_BYTES,
+                begin * Self::ITEM_BYTES,
+                (end - begin) * Self::ITEM_BYTES,
             )
         }
     }
 
-    fn records(&self) -> &[InstanceRecord] {
+    fn records(&self) -> &[T] {
         match &self.map {
-            Some(m) => bytemuck::cast_slice(&m[..self.len * RECORD_BYTES]),
+            Some(m) => bytemuck::cast_slice(&m[..self.len * Self::ITEM_BYTES]),
             None => &[],
         }
     }
 
-    fn records_mut(&mut self) -> &mut [InstanceRecord] {
+    fn records_mut(&mut self) -> &mut [T] {
         match &mut self.map {
-            Some(m) => bytemuck::cast_slice_mut(&mut m[..self.len * RECORD_BYTES]),
+            Some(m) => bytemuck::cast_slice_mut(&mut m[..self.len * Self::ITEM_BYTES]),
             None => &mut [],
         }
     }
@@ -152,19 +175,8 @@ impl InstanceTable {
     /// An empty table in a new unnamed file in `dir` (gone with the table, whatever ends the
     /// process).
     pub fn in_file(dir: &Path) -> Result<Self, CompileError> {
-        let file = tempfile::tempfile_in(dir).map_err(|source| CompileError::Scratch {
-            dir: dir.to_path_buf(),
-            source,
-        })?;
         Ok(Self {
-            store: Store::File(FileTable {
-                file,
-                dir: dir.to_path_buf(),
-                map: None,
-                len: 0,
-                capacity: 0,
-                released_to: 0,
-            }),
+            store: Store::File(FileTable::create(dir)?),
         })
     }
 
@@ -458,6 +470,156 @@ impl<'a> IntoIterator for &'a mut InstanceTable {
     fn into_iter(self) -> Self::IntoIter {
         self.iter_mut()
     }
+}
+
+/// Where a partition's arrays are: on the heap ([`Pages::HEAP`]), or in shared file maps
+/// ([`ScratchArray::pages`]) whose pages its passes drop behind them, so a keyed split of tens
+/// of millions of instances holds its bounds and indices in the page cache, not the resident
+/// set (issue 48 item 1). Mapped pages may be handed only slices of mapped [`ScratchArray`]s
+/// (the partition's items, bounds and scratch); on the heap a release would zero the items
+/// (valid values, `Zeroable`, but not theirs).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Pages {
+    mapped: bool,
+}
+
+impl Pages {
+    /// Arrays on the heap: nothing is released.
+    pub(crate) const HEAP: Self = Self { mapped: false };
+
+    /// Drops the pages of `items` (a part of the partition's arrays) from the resident set.
+    pub(crate) fn release<T: bytemuck::Zeroable>(self, items: &[T]) {
+        if self.mapped {
+            // SAFETY: mapped pages come from a mapped `ScratchArray` for arrays that all are
+            // (see above): shared file maps.
+            unsafe { release_mapped(items) }
+        }
+    }
+}
+
+/// A fixed-length array of `T` on the heap, or in an unnamed file mapped shared and writable
+/// ([`FileTable`], the mapped instance table's store): the keyed split's per-instance bounds and
+/// indices (issue 48 item 1: 28 bytes an instance on the heap while the root is partitioned).
+/// Mapped, the passes over it drop their pages behind them ([`release_mapped`]).
+pub(crate) struct ScratchArray<T: ScratchItem>(ScratchStore<T>);
+
+enum ScratchStore<T: ScratchItem> {
+    Heap(Vec<T>),
+    /// `T`s as words (`len` of them).
+    File(FileTable<u32>, usize),
+}
+
+/// An item a [`ScratchArray`] may hold in a file.
+///
+/// # Safety
+/// Every bit pattern is a valid `T`, it has no padding, its alignment is at most 4 and its size
+/// a multiple of 4 (so a file of words is a slice of `T`).
+pub(crate) unsafe trait ScratchItem: Copy + bytemuck::Zeroable {}
+// SAFETY: a word.
+unsafe impl ScratchItem for u32 {}
+// SAFETY: six `f32`s (any bits are a float) in 24 bytes, their sum: no padding (checked in
+// `ScratchArray::zeroed`), aligned to 4.
+unsafe impl ScratchItem for ([f32; 3], [f32; 3]) {}
+
+impl<T: ScratchItem> ScratchArray<T> {
+    const WORDS: usize = std::mem::size_of::<T>() / 4;
+
+    /// `len` zeroed items: in a new unnamed file in `dir` (its blocks allocated) when given,
+    /// else on the heap.
+    pub(crate) fn zeroed(len: usize, dir: Option<&Path>) -> Result<Self, CompileError> {
+        let Some(dir) = dir else {
+            return Ok(Self(ScratchStore::Heap(vec![T::zeroed(); len])));
+        };
+        assert!(
+            std::mem::size_of::<T>() % 4 == 0 && std::mem::align_of::<T>() <= 4,
+            "not a scratch item"
+        );
+        let words = len.checked_mul(Self::WORDS).ok_or(CompileError::TooMany {
+            what: "instances",
+            count: len as u64,
+        })?;
+        let mut f = FileTable::<u32>::create(dir)?;
+        f.grow_to(words.max(1))?;
+        f.len = words;
+        Ok(Self(ScratchStore::File(f, len)))
+    }
+
+    /// `v` on the heap.
+    pub(crate) fn from_vec(v: Vec<T>) -> Self {
+        Self(ScratchStore::Heap(v))
+    }
+
+    /// Whether the items are in a mapped file (passes may release their pages).
+    pub(crate) fn is_mapped(&self) -> bool {
+        matches!(self.0, ScratchStore::File(..))
+    }
+
+    /// The [`Pages`] of a partition over this array and others where it is: mapped ones only
+    /// if every other array handed to it is a mapped `ScratchArray` too.
+    pub(crate) fn pages(&self) -> Pages {
+        Pages {
+            mapped: self.is_mapped(),
+        }
+    }
+}
+
+impl<T: ScratchItem> Deref for ScratchArray<T> {
+    type Target = [T];
+    fn deref(&self) -> &[T] {
+        match &self.0 {
+            ScratchStore::Heap(v) => v,
+            ScratchStore::File(f, len) => {
+                let words = f.records();
+                assert_eq!(words.len(), len * Self::WORDS);
+                // SAFETY: `ScratchItem`: `len` items are exactly these words, any bits valid,
+                // aligned as words; the borrow of `self` keeps the map alive.
+                unsafe { std::slice::from_raw_parts(words.as_ptr().cast::<T>(), *len) }
+            }
+        }
+    }
+}
+
+impl<T: ScratchItem> DerefMut for ScratchArray<T> {
+    fn deref_mut(&mut self) -> &mut [T] {
+        match &mut self.0 {
+            ScratchStore::Heap(v) => v,
+            ScratchStore::File(f, len) => {
+                let len = *len;
+                let words = f.records_mut();
+                assert_eq!(words.len(), len * Self::WORDS);
+                // SAFETY: as in `deref`, borrowed mutably from `self`.
+                unsafe { std::slice::from_raw_parts_mut(words.as_mut_ptr().cast::<T>(), len) }
+            }
+        }
+    }
+}
+
+/// Drops the pages `items` touch from the resident set (`MADV_DONTNEED`, rounded out to whole
+/// pages). A failed hint costs only memory.
+///
+/// # Safety
+/// `items` must lie in a shared map of a file (a mapped [`ScratchArray`] or [`InstanceTable`]):
+/// there the pages' data stays in the page cache and file and faults back in when read again
+/// (even pages another thread is writing: its stores land in the page cache either way); on the
+/// heap (a private anonymous map) the data would read back as zeros.
+pub(crate) unsafe fn release_mapped<T>(items: &[T]) {
+    if items.is_empty() {
+        return;
+    }
+    let page = rustix::param::page_size();
+    let start = items.as_ptr() as usize;
+    let end = start + std::mem::size_of_val(items);
+    let (first, last) = (start / page * page, end.div_ceil(page) * page);
+    // SAFETY: a shared file map starts on a page and its last page is mapped whole, so the
+    // rounded range stays inside it; MADV_DONTNEED there only unmaps the pages from this
+    // process's page tables (their data stays in the page cache, dirty pages included).
+    let _ = unsafe {
+        rustix::mm::madvise(
+            first as *mut std::ffi::c_void,
+            last - first,
+            rustix::mm::Advice::LinuxDontNeed,
+        )
+    };
 }
 
 #[cfg(test)]

@@ -10,6 +10,8 @@
 //! piece it enters, and median splits of centres made pieces whose boxes overlapped wherever
 //! large instances straddled the median (issue 15: 4.4 traces/ray on a split island).
 
+pub(crate) use crate::instance_table::Pages;
+
 /// Partitions `items` in place into consecutive ranges of at most `cap` items (`cap ≥ 1`),
 /// appended to `out` as `(begin, end)` in spatial order (left half before right half).
 pub(crate) fn median_partition<T: Send>(
@@ -132,6 +134,10 @@ pub(crate) type Bounds = ([f32; 3], [f32; 3]);
 /// (minima, maxima, counts).
 pub(crate) const PARALLEL_ITEMS: usize = 1 << 16;
 
+/// Items a partition's pass over mapped arrays walks between two releases of the pages behind
+/// it (768 KiB of bounds).
+pub(crate) const RELEASE_ITEMS: usize = 1 << 15;
+
 /// Partitions `items` (with `bounds[i]` = `(min, max)` of `items[i]`, permuted alongside) in
 /// place into consecutive ranges of at most `cap` items (`cap ≥ 1`), appended to `out` as
 /// `(begin, end)` in spatial order. Each step takes the binned-SAH split (area × count of both
@@ -140,22 +146,35 @@ pub(crate) const PARALLEL_ITEMS: usize = 1 << 16;
 /// middle index, so every step shrinks both sides and the partition always terminates. Large
 /// ranges are split in parallel (`PARALLEL_ITEMS`): a streamer splits a Moana-sized root
 /// (tens of millions of instances) when it loads the package.
-pub fn sah_partition<T: Send>(
+pub fn sah_partition<T: Send + bytemuck::Zeroable>(
     items: &mut [T],
     bounds: &mut [Bounds],
     cap: usize,
     out: &mut Vec<(usize, usize)>,
 ) {
+    sah_partition_paged(items, bounds, cap, out, Pages::HEAP);
+}
+
+/// [`sah_partition`] of arrays in `pages` (the same ranges; mapped arrays' pages released
+/// behind each pass).
+pub(crate) fn sah_partition_paged<T: Send + bytemuck::Zeroable>(
+    items: &mut [T],
+    bounds: &mut [Bounds],
+    cap: usize,
+    out: &mut Vec<(usize, usize)>,
+    pages: Pages,
+) {
     assert_eq!(items.len(), bounds.len());
-    out.extend(sah_ranges(items, bounds, cap.max(1), 0));
+    out.extend(sah_ranges(items, bounds, cap.max(1), 0, pages));
 }
 
 /// [`sah_partition`] of a range that starts at `offset` in the whole: its ranges, in order.
-fn sah_ranges<T: Send>(
+fn sah_ranges<T: Send + bytemuck::Zeroable>(
     items: &mut [T],
     bounds: &mut [Bounds],
     cap: usize,
     offset: usize,
+    pages: Pages,
 ) -> Vec<(usize, usize)> {
     let len = items.len();
     if len <= cap {
@@ -175,19 +194,22 @@ fn sah_ranges<T: Send>(
                 }
                 continue;
             }
-            let mid = begin + sah_split(&mut items[begin..end], &mut bounds[begin..end]);
+            let mid =
+                begin + sah_split(&mut items[begin..end], &mut bounds[begin..end], Pages::HEAP);
             // Right first so the left half is popped (and emitted) first.
             stack.push((mid, end));
             stack.push((begin, mid));
         }
+        pages.release(items);
+        pages.release(bounds);
         return out;
     }
-    let mid = sah_split(items, bounds);
+    let mid = sah_split(items, bounds, pages);
     let (left_items, right_items) = items.split_at_mut(mid);
     let (left_bounds, right_bounds) = bounds.split_at_mut(mid);
     let (mut left, right) = rayon::join(
-        || sah_ranges(left_items, left_bounds, cap, offset),
-        || sah_ranges(right_items, right_bounds, cap, offset + mid),
+        || sah_ranges(left_items, left_bounds, cap, offset, pages),
+        || sah_ranges(right_items, right_bounds, cap, offset + mid, pages),
     );
     left.extend(right);
     left
@@ -198,7 +220,13 @@ pub(crate) fn centroid(b: &Bounds, k: usize) -> f32 {
 }
 
 /// The finite centroids' bounds of `bs`, per axis (`lo`, `hi`).
+#[cfg(test)]
 pub(crate) fn centroid_bounds(bs: &[Bounds]) -> ([f32; 3], [f32; 3]) {
+    centroid_bounds_paged(bs, Pages::HEAP)
+}
+
+/// `centroid_bounds` of bounds in `pages` (released behind the pass).
+fn centroid_bounds_paged(bs: &[Bounds], pages: Pages) -> ([f32; 3], [f32; 3]) {
     let fold = |(mut lo, mut hi): ([f32; 3], [f32; 3]), b: &Bounds| {
         for k in 0..3 {
             let c = centroid(b, k);
@@ -215,7 +243,11 @@ pub(crate) fn centroid_bounds(bs: &[Bounds]) -> ([f32; 3], [f32; 3]) {
     }
     use rayon::prelude::*;
     bs.par_chunks(PARALLEL_ITEMS / 4)
-        .map(|c| c.iter().fold(empty, fold))
+        .map(|c| {
+            let folded = c.iter().fold(empty, fold);
+            pages.release(c);
+            folded
+        })
         .reduce(
             || empty,
             |(a_lo, a_hi), (b_lo, b_hi)| {
@@ -233,6 +265,7 @@ fn fill_bins(
     bs: &[Bounds],
     axes: [bool; 3],
     bin_of: impl Fn(&Bounds, usize) -> usize + Sync,
+    pages: Pages,
 ) -> [[Bin; SAH_BINS]; 3] {
     // A loop over arrays in place (a fold moving the 32 bins per item took twice the time).
     let fill = |chunk: &[Bounds]| {
@@ -250,7 +283,12 @@ fn fill_bins(
         return fill(bs);
     }
     use rayon::prelude::*;
-    bs.par_chunks(PARALLEL_ITEMS / 4).map(fill).reduce(
+    let fill_released = |chunk: &[Bounds]| {
+        let bins = fill(chunk);
+        pages.release(chunk);
+        bins
+    };
+    bs.par_chunks(PARALLEL_ITEMS / 4).map(fill_released).reduce(
         || [[Bin::EMPTY; SAH_BINS]; 3],
         |mut a, b| {
             for (xa, ya) in a.iter_mut().zip(&b) {
@@ -265,9 +303,9 @@ fn fill_bins(
 
 /// One step of [`sah_partition`] over a range of more than `cap` items: reorders `items` and
 /// `bounds` so the split's left side comes first and returns its length (`0 < mid < len`).
-fn sah_split<T>(items: &mut [T], bounds: &mut [Bounds]) -> usize {
+fn sah_split<T: bytemuck::Zeroable>(items: &mut [T], bounds: &mut [Bounds], pages: Pages) -> usize {
     let len = items.len();
-    let (lo, hi) = centroid_bounds(bounds);
+    let (lo, hi) = centroid_bounds_paged(bounds, pages);
     let min_side = (len / SAH_MIN_SIDE_FRACTION).max(1);
     let axes: [bool; 3] = std::array::from_fn(|k| {
         let extent = hi[k] - lo[k];
@@ -278,7 +316,7 @@ fn sah_split<T>(items: &mut [T], bounds: &mut [Bounds]) -> usize {
     let bin_of = |b: &Bounds, axis: usize| {
         (((centroid(b, axis) - lo[axis]) * scale[axis]) as usize).min(SAH_BINS - 1)
     };
-    let all_bins = fill_bins(bounds, axes, bin_of);
+    let all_bins = fill_bins(bounds, axes, bin_of, pages);
     // (cost, axis, first bin of the right side)
     let mut best: Option<(f32, usize, usize)> = None;
     for axis in (0..3).filter(|&k| axes[k]) {
@@ -311,17 +349,31 @@ fn sah_split<T>(items: &mut [T], bounds: &mut [Bounds]) -> usize {
     let Some((_, axis, split)) = best else {
         return len / 2;
     };
-    // Hoare-style partition of both arrays: bins < split to the left.
+    // Hoare-style partition of both arrays: bins < split to the left. The items behind `i`
+    // and past `j` are in place: mapped pages there are released as the ends move.
     let (mut i, mut j) = (0, len);
+    let (mut i_released, mut j_released) = (0, len);
     while i < j {
         if bin_of(&bounds[i], axis) < split {
             i += 1;
+            if i - i_released >= RELEASE_ITEMS {
+                pages.release(&items[i_released..i]);
+                pages.release(&bounds[i_released..i]);
+                i_released = i;
+            }
         } else {
             j -= 1;
             items.swap(i, j);
             bounds.swap(i, j);
+            if j_released - j >= RELEASE_ITEMS {
+                pages.release(&items[j..j_released]);
+                pages.release(&bounds[j..j_released]);
+                j_released = j;
+            }
         }
     }
+    pages.release(&items[i_released..j_released]);
+    pages.release(&bounds[i_released..j_released]);
     i
 }
 
@@ -342,29 +394,55 @@ const DIRECT_LEAVES: usize = 8;
 /// wherever they reach any piece. Reorders `items` to pieces first (appended to `out` as
 /// consecutive ranges in spatial order), then the kept items; returns the count kept, which
 /// is 0 when even no kept item leaves enough room.
-pub fn split_keeping_direct<T: Copy + Send>(
+#[cfg(test)]
+pub fn split_keeping_direct<T: Copy + Send + bytemuck::Zeroable>(
     items: &mut [T],
     bounds: &mut [Bounds],
     cap: usize,
     room: impl Fn(usize) -> usize,
     out: &mut Vec<(usize, usize)>,
 ) -> usize {
+    split_keeping_direct_paged(items, bounds, cap, room, out, Pages::HEAP, None)
+}
+
+/// Arrays as long as a partition's items and bounds, that [`split_keeping_direct_paged`] moves
+/// them through instead of permuting them in place.
+pub(crate) type Scratch<'a, T> = (&'a mut [T], &'a mut [Bounds]);
+
+/// `split_keeping_direct` of arrays in `pages` (the same split and order): with `scratch`
+/// the pieces and kept leaves are copied out in their new order and back, two sequential
+/// passes that release their pages behind them (mapped arrays), where the in-place permutation
+/// would touch them all at once (and hold 5 bytes an item of its own).
+pub(crate) fn split_keeping_direct_paged<T: Copy + Send + bytemuck::Zeroable>(
+    items: &mut [T],
+    bounds: &mut [Bounds],
+    cap: usize,
+    room: impl Fn(usize) -> usize,
+    out: &mut Vec<(usize, usize)>,
+    pages: Pages,
+    scratch: Option<Scratch<'_, T>>,
+) -> usize {
     assert_eq!(items.len(), bounds.len());
     let n = items.len();
     let mut leaves = Vec::new();
-    sah_partition(
+    sah_partition_paged(
         items,
         bounds,
         n.div_ceil(DIRECT_LEAVES).clamp(1, cap.max(1)),
         &mut leaves,
+        pages,
     );
     let area_per_item: Vec<f32> = leaves
         .iter()
         .map(|&(a, b)| {
             let mut bin = Bin::EMPTY;
-            for bb in &bounds[a..b] {
+            for (k, bb) in bounds[a..b].iter().enumerate() {
                 bin.grow(bb.0, bb.1, 1);
+                if (k + 1) % RELEASE_ITEMS == 0 {
+                    pages.release(&bounds[a + k + 1 - RELEASE_ITEMS..a + k + 1]);
+                }
             }
+            pages.release(&bounds[a + (b - a) / RELEASE_ITEMS * RELEASE_ITEMS..b]);
             let area = surface_area(bin.min, bin.max);
             // Non-finite boxes (NaN, infinite) go last: never worth a piece first.
             if area.is_finite() {
@@ -390,6 +468,28 @@ pub fn split_keeping_direct<T: Copy + Send>(
         piece[l] = true;
         kept -= leaves[l].1 - leaves[l].0;
         pieces += 1;
+    }
+    if let Some((s_items, s_bounds)) = scratch {
+        assert!(
+            s_items.len() >= n && s_bounds.len() >= n,
+            "scratch too short"
+        );
+        let mut w = 0;
+        for want_piece in [true, false] {
+            for (l, &(a, b)) in leaves.iter().enumerate() {
+                if piece[l] == want_piece {
+                    if want_piece {
+                        out.push((w, w + b - a));
+                    }
+                    copy_released(&mut s_items[w..w + b - a], &items[a..b], pages);
+                    copy_released(&mut s_bounds[w..w + b - a], &bounds[a..b], pages);
+                    w += b - a;
+                }
+            }
+        }
+        copy_released(items, &s_items[..n], pages);
+        copy_released(bounds, &s_bounds[..n], pages);
+        return kept;
     }
     // src[j]: the current index of the item that goes to position j (pieces in leaf order,
     // then the kept leaves).
@@ -426,6 +526,15 @@ pub fn split_keeping_direct<T: Copy + Send>(
         }
     }
     kept
+}
+
+/// `dst.copy_from_slice(src)` a piece at a time, both sides' pages released behind (mapped).
+fn copy_released<U: Copy + bytemuck::Zeroable>(dst: &mut [U], src: &[U], pages: Pages) {
+    for (d, s) in dst.chunks_mut(RELEASE_ITEMS).zip(src.chunks(RELEASE_ITEMS)) {
+        d.copy_from_slice(s);
+        pages.release(d);
+        pages.release(s);
+    }
 }
 
 #[cfg(test)]

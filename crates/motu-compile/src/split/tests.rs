@@ -74,7 +74,7 @@ fn serial_sah(
         }
         return;
     }
-    let mid = sah_split(items, bounds);
+    let mid = sah_split(items, bounds, Pages::HEAP);
     let (li, ri) = items.split_at_mut(mid);
     let (lb, rb) = bounds.split_at_mut(mid);
     serial_sah(li, lb, cap, offset, out);
@@ -298,4 +298,74 @@ fn fast_partitions_equal_the_reference() {
         let ids = |v: &[(u32, [f32; 3])]| v.iter().map(|c| c.0).collect::<Vec<_>>();
         assert_eq!(ids(&x), ids(&y), "median order, n {n} cap {cap}");
     }
+}
+
+/// Arrays in mapped files, their pages released behind every pass, moved through mapped
+/// scratch: the same split, order and bounds as on the heap (the keyed split's mapped path).
+#[test]
+fn mapped_arrays_split_as_on_the_heap() {
+    use crate::instance_table::ScratchArray;
+    let n = 3 * PARALLEL_ITEMS + 12_345;
+    let mut seed = 0x9e37_79b9u32;
+    let mut next = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 17;
+        seed ^= seed << 5;
+        (seed % 100_000) as f32 / 100.0
+    };
+    let boxes: Vec<Bounds> = (0..n)
+        .map(|i| {
+            let c = [next(), next() * if i % 3 == 0 { 0.1 } else { 1.0 }, next()];
+            let r = next() / 200.0;
+            (c.map(|x| x - r), c.map(|x| x + r))
+        })
+        .collect();
+    let dir = tempfile::tempdir().unwrap();
+    let (cap, per_group) = (40_000usize, 64usize);
+    let room = |pieces: usize| cap - pieces.div_ceil(per_group);
+
+    let mut heap_ids: Vec<u32> = (0..n as u32).collect();
+    let mut heap_bounds = boxes.clone();
+    let mut heap_out = Vec::new();
+    let heap_kept = split_keeping_direct(&mut heap_ids, &mut heap_bounds, cap, room, &mut heap_out);
+
+    let mut ids = ScratchArray::<u32>::zeroed(n, Some(dir.path())).unwrap();
+    let mut bounds = ScratchArray::<Bounds>::zeroed(n, Some(dir.path())).unwrap();
+    let mut s_ids = ScratchArray::<u32>::zeroed(n, Some(dir.path())).unwrap();
+    let mut s_bounds = ScratchArray::<Bounds>::zeroed(n, Some(dir.path())).unwrap();
+    assert!(ids.is_mapped() && bounds.is_mapped());
+    for (k, id) in ids.iter_mut().enumerate() {
+        *id = k as u32;
+    }
+    bounds.copy_from_slice(&boxes);
+    // Every array is a mapped `ScratchArray`.
+    let pages = bounds.pages();
+    let mut out = Vec::new();
+    let kept = split_keeping_direct_paged(
+        &mut ids,
+        &mut bounds,
+        cap,
+        room,
+        &mut out,
+        pages,
+        Some((&mut s_ids, &mut s_bounds)),
+    );
+    assert_eq!((kept, &out), (heap_kept, &heap_out));
+    assert!(!out.is_empty() && kept > 0);
+    assert_eq!(&ids[..], &heap_ids[..]);
+    let bits = |b: &[Bounds]| -> Vec<[u32; 6]> {
+        b.iter()
+            .map(|(l, h)| [l[0], l[1], l[2], h[0], h[1], h[2]].map(f32::to_bits))
+            .collect()
+    };
+    assert_eq!(bits(&bounds), bits(&heap_bounds));
+
+    // Later rounds: the plain SAH partition of mapped arrays.
+    let mut heap_out = Vec::new();
+    sah_partition(&mut heap_ids, &mut heap_bounds, 5_000, &mut heap_out);
+    let mut out = Vec::new();
+    sah_partition_paged(&mut ids, &mut bounds, 5_000, &mut out, pages);
+    assert_eq!(out, heap_out);
+    assert_eq!(&ids[..], &heap_ids[..]);
+    assert_eq!(bits(&bounds), bits(&heap_bounds));
 }

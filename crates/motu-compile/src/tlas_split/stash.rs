@@ -7,6 +7,7 @@
 //! goes). The partition looks at bounds only, so it permutes indices exactly as it would
 //! permute records: the same split, bit for bit.
 
+use crate::split::Pages;
 use crate::{CompileError, InstanceTable};
 use motu_abi::InstanceRecord;
 use std::fs::File;
@@ -78,30 +79,41 @@ impl Stash {
         })
     }
 
-    /// `f` of every stashed record, in order (read back a chunk at a time, each chunk's
-    /// records mapped on the thread pool).
-    pub(crate) fn map_records<B: Send>(
+    /// `f` of every stashed record, in order, into `out` (as long as the stash): read back a
+    /// chunk at a time, each chunk's records mapped on the thread pool and its places' pages
+    /// released after (`pages`: `out` is mapped).
+    pub(crate) fn map_records_into<B: Send + bytemuck::Zeroable>(
         &mut self,
+        out: &mut [B],
+        pages: Pages,
         f: impl Fn(&InstanceRecord) -> B + Sync,
-    ) -> Result<Vec<B>, CompileError> {
+    ) -> Result<(), CompileError> {
         use rayon::prelude::*;
         let err = |source| CompileError::Scratch {
             dir: self.dir.clone(),
             source,
         };
+        if out.len() != self.count {
+            return Err(CompileError::Internal(format!(
+                "{} places for {} stashed instances",
+                out.len(),
+                self.count
+            )));
+        }
         self.file.seek(SeekFrom::Start(0)).map_err(err)?;
-        let mut out = Vec::with_capacity(self.count);
         let mut buf = vec![InstanceRecord::default(); READ_RECORDS.min(self.count)];
-        let mut left = self.count;
-        while left > 0 {
-            let records = &mut buf[..READ_RECORDS.min(left)];
+        for chunk in out.chunks_mut(READ_RECORDS) {
+            let records = &mut buf[..chunk.len()];
             self.file
                 .read_exact(bytemuck::cast_slice_mut(records))
                 .map_err(err)?;
-            out.par_extend(records.par_iter().map(&f));
-            left -= records.len();
+            chunk
+                .par_iter_mut()
+                .zip(records.par_iter())
+                .for_each(|(o, r)| *o = f(r));
+            pages.release(chunk);
         }
-        Ok(out)
+        Ok(())
     }
 
     /// Appends the stashed records to `instances` in the partition's order: `order[j]` is the
@@ -113,7 +125,8 @@ impl Stash {
     pub(crate) fn put_back(
         mut self,
         instances: &mut InstanceTable,
-        order: Vec<u32>,
+        order: &[u32],
+        pages: Pages,
     ) -> Result<(), CompileError> {
         if order.len() != self.count {
             return Err(CompileError::Internal(format!(
@@ -123,10 +136,12 @@ impl Stash {
             )));
         }
         let mut place = vec![0u32; self.count];
-        for (j, &from) in order.iter().enumerate() {
-            place[from as usize] = j as u32;
+        for (k, chunk) in order.chunks(READ_RECORDS).enumerate() {
+            for (j, &from) in chunk.iter().enumerate() {
+                place[from as usize] = (k * READ_RECORDS + j) as u32;
+            }
+            pages.release(chunk);
         }
-        drop(order);
         let base = instances.len();
         instances.try_reserve_exact(self.capacity.max(base + self.count) - base)?;
         instances.resize(base + self.count, bytemuck::Zeroable::zeroed())?;
