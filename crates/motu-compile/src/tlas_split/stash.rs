@@ -89,10 +89,6 @@ impl Stash {
         f: impl Fn(&InstanceRecord) -> B + Sync,
     ) -> Result<(), CompileError> {
         use rayon::prelude::*;
-        let err = |source| CompileError::Scratch {
-            dir: self.dir.clone(),
-            source,
-        };
         if out.len() != self.count {
             return Err(CompileError::Internal(format!(
                 "{} places for {} stashed instances",
@@ -100,18 +96,35 @@ impl Stash {
                 self.count
             )));
         }
-        self.file.seek(SeekFrom::Start(0)).map_err(err)?;
-        let mut buf = vec![InstanceRecord::default(); READ_RECORDS.min(self.count)];
-        for chunk in out.chunks_mut(READ_RECORDS) {
-            let records = &mut buf[..chunk.len()];
-            self.file
-                .read_exact(bytemuck::cast_slice_mut(records))
-                .map_err(err)?;
+        self.read_chunks(|start, records| {
+            let chunk = &mut out[start..start + records.len()];
             chunk
                 .par_iter_mut()
                 .zip(records.par_iter())
                 .for_each(|(o, r)| *o = f(r));
             pages.release(chunk);
+            Ok(())
+        })
+    }
+
+    /// Reads the stash from its start a chunk of [`READ_RECORDS`] at a time, giving `each` the
+    /// index of the chunk's first record and its records.
+    fn read_chunks(
+        &mut self,
+        mut each: impl FnMut(usize, &[InstanceRecord]) -> Result<(), CompileError>,
+    ) -> Result<(), CompileError> {
+        let err = |source| CompileError::Scratch {
+            dir: self.dir.clone(),
+            source,
+        };
+        self.file.seek(SeekFrom::Start(0)).map_err(err)?;
+        let mut buf = vec![InstanceRecord::default(); READ_RECORDS.min(self.count)];
+        for start in (0..self.count).step_by(READ_RECORDS) {
+            let records = &mut buf[..READ_RECORDS.min(self.count - start)];
+            self.file
+                .read_exact(bytemuck::cast_slice_mut(records))
+                .map_err(err)?;
+            each(start, records)?;
         }
         Ok(())
     }
@@ -150,19 +163,14 @@ impl Stash {
             dir: dir.clone(),
             source,
         };
-        self.file.seek(SeekFrom::Start(0)).map_err(err)?;
-        let mut buf = vec![InstanceRecord::default(); READ_RECORDS.min(self.count)];
         let buckets = self.count.div_ceil(BUCKET_RECORDS);
         if !instances.is_mapped() || buckets <= 1 {
-            for chunk in place.chunks(READ_RECORDS) {
-                let records = &mut buf[..chunk.len()];
-                self.file
-                    .read_exact(bytemuck::cast_slice_mut(records))
-                    .map_err(err)?;
-                for (r, &to) in records.iter().zip(chunk) {
+            self.read_chunks(|start, records| {
+                for (r, &to) in records.iter().zip(&place[start..]) {
                     instances[base + to as usize] = *r;
                 }
-            }
+                Ok(())
+            })?;
             instances.release_range(base, base + self.count);
             return Ok(());
         }
@@ -172,17 +180,14 @@ impl Stash {
             let f = tempfile::tempfile_in(&dir).map_err(err)?;
             files.push(std::io::BufWriter::with_capacity(DEAL_BUFFER_BYTES, f));
         }
-        for chunk in place.chunks(READ_RECORDS) {
-            let records = &mut buf[..chunk.len()];
-            self.file
-                .read_exact(bytemuck::cast_slice_mut(records))
-                .map_err(err)?;
-            for (r, &to) in records.iter().zip(chunk) {
+        self.read_chunks(|start, records| {
+            for (r, &to) in records.iter().zip(&place[start..]) {
                 let w = &mut files[to as usize / BUCKET_RECORDS];
                 w.write_all(&to.to_le_bytes()).map_err(err)?;
                 w.write_all(bytemuck::bytes_of(r)).map_err(err)?;
             }
-        }
+            Ok(())
+        })?;
         drop(place);
         drop(self.file);
         // Place: a bucket at a time, read back in pieces.
