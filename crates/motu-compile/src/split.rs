@@ -43,6 +43,20 @@ fn median_ranges<T: Send>(
         left.extend(right);
         return left;
     }
+    serial_ranges(len, cap, offset, |begin, end| {
+        median_split(&mut items[begin..end], centre)
+    })
+}
+
+/// The ranges of at most `cap` items that halving `0..len` leaves, in order, moved by
+/// `offset`: `split(begin, end)` partitions `begin..end` and returns where its right half
+/// starts (from `begin`).
+fn serial_ranges(
+    len: usize,
+    cap: usize,
+    offset: usize,
+    mut split: impl FnMut(usize, usize) -> usize,
+) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
     let mut stack = vec![(0usize, len)];
     while let Some((begin, end)) = stack.pop() {
@@ -52,7 +66,7 @@ fn median_ranges<T: Send>(
             }
             continue;
         }
-        let mid = begin + median_split(&mut items[begin..end], centre);
+        let mid = begin + split(begin, end);
         // Right first so the left half is popped (and emitted) first.
         stack.push((mid, end));
         stack.push((begin, mid));
@@ -185,21 +199,9 @@ fn sah_ranges<T: Send + bytemuck::Zeroable>(
         };
     }
     if len < PARALLEL_ITEMS {
-        let mut out = Vec::new();
-        let mut stack = vec![(0usize, len)];
-        while let Some((begin, end)) = stack.pop() {
-            if end - begin <= cap {
-                if end > begin {
-                    out.push((offset + begin, offset + end));
-                }
-                continue;
-            }
-            let mid =
-                begin + sah_split(&mut items[begin..end], &mut bounds[begin..end], Pages::HEAP);
-            // Right first so the left half is popped (and emitted) first.
-            stack.push((mid, end));
-            stack.push((begin, mid));
-        }
+        let out = serial_ranges(len, cap, offset, |begin, end| {
+            sah_split(&mut items[begin..end], &mut bounds[begin..end], Pages::HEAP)
+        });
         pages.release(items);
         pages.release(bounds);
         return out;
