@@ -2,8 +2,95 @@
 //! `SKIPPED: no Vulkan device: …` without a device, and fails under `MOTU_REQUIRE_GPU=1`.
 //! These need the embedded shaders; the device layer's own tests are motu-vk's.
 
+use std::borrow::Cow;
+
+use motu_trace::testutil::OwnedHierarchy;
+use motu_trace::MeshGeometry;
+
 use crate::testutil::{assert_no_validation_errors, context_or_skip};
 use crate::*;
+
+/// The crate's GPU tests build motu-trace's test hierarchies: each is its own mesh source
+/// (positions and indices, and the normals and texture coordinates a mesh has).
+impl MeshBlobSource for OwnedHierarchy {
+    fn mesh_data(
+        &self,
+        mesh_record: u32,
+    ) -> std::result::Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), MeshSourceError> {
+        let g = geometry(self, mesh_record)?;
+        Ok((Cow::Borrowed(&g.positions), Cow::Borrowed(&g.indices)))
+    }
+
+    #[allow(clippy::type_complexity)]
+    fn mesh_shading(
+        &self,
+        mesh_record: u32,
+    ) -> std::result::Result<
+        (Option<Cow<'_, [[f32; 3]]>>, Option<Cow<'_, [[f32; 2]]>>),
+        MeshSourceError,
+    > {
+        let g = geometry(self, mesh_record)?;
+        Ok((
+            g.normals.as_deref().map(Cow::Borrowed),
+            g.uvs.as_deref().map(Cow::Borrowed),
+        ))
+    }
+}
+
+/// A buffer a mirror test's shader reads its cases from or writes its results to (by device
+/// address), readable by the host.
+pub(crate) fn mirror_buffer(ctx: &Context, label: &str, size_bytes: u64) -> Buffer {
+    Buffer::new_dedicated(
+        ctx,
+        label,
+        &BufferDesc {
+            size_bytes,
+            usage: BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
+        },
+        MemoryLocation::Readback,
+    )
+    .expect("buffer")
+}
+
+/// Runs a mirror test's compute shader (`label`) over `groups` workgroups and waits: its push
+/// constants are `buffers`' device addresses, then `values`.
+pub(crate) fn run_mirror(
+    ctx: &Context,
+    label: &str,
+    spirv: &[u32],
+    buffers: &[&Buffer],
+    values: &[u32],
+    groups: u32,
+) {
+    let mut push = Vec::new();
+    for b in buffers {
+        push.extend_from_slice(&b.device_address().expect("address").0.to_le_bytes());
+    }
+    for v in values {
+        push.extend_from_slice(&v.to_le_bytes());
+    }
+    let pipe = ComputePipeline::new(
+        ctx,
+        &ComputePipelineDesc {
+            label,
+            spirv,
+            storage_buffer_count: 0,
+            push_constant_size_bytes: push.len() as u32,
+            specialization: &[],
+        },
+    )
+    .expect("pipeline");
+    let mut rec = ctx.record(label).expect("record");
+    rec.dispatch(&pipe, None, &push, [groups, 1, 1])
+        .expect("dispatch");
+    rec.submit_and_wait().expect("submit");
+}
+
+fn geometry(h: &OwnedHierarchy, mesh_record: u32) -> std::result::Result<&MeshGeometry, String> {
+    h.geometry
+        .get(mesh_record as usize)
+        .ok_or_else(|| format!("no mesh {mesh_record}"))
+}
 
 fn smoke_expected(input: &[u32]) -> Vec<u32> {
     input

@@ -31,22 +31,6 @@ mod glam_free {
     }
 }
 
-struct Blobs<'a>(&'a OwnedHierarchy);
-
-impl MeshBlobSource for Blobs<'_> {
-    fn mesh_data(
-        &self,
-        mesh_record: u32,
-    ) -> Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), MeshSourceError> {
-        let g = self
-            .0
-            .geometry
-            .get(mesh_record as usize)
-            .ok_or_else(|| format!("no mesh {mesh_record}"))?;
-        Ok((Cow::Borrowed(&g.positions), Cow::Borrowed(&g.indices)))
-    }
-}
-
 /// Root TLAS: a ground-ish sphere (triangles) and a BLAS of PIs, each a rotated/scaled copy of
 /// a leaf TLAS (two spheres) or a LOD selector over two sphere resolutions.
 fn two_level() -> OwnedHierarchy {
@@ -80,6 +64,24 @@ fn two_level() -> OwnedHierarchy {
 
 fn ctx_or_skip(test: &str) -> Option<Context> {
     context_or_skip(test, Requirement::RayTracing)
+}
+
+/// A ray-tracing context opened with `options`, validation on wherever [`ctx_or_skip`]'s
+/// context has it (`None` where that skips).
+fn ctx_with(test: &str, options: ContextOptions) -> Option<Context> {
+    let probe = ctx_or_skip(test)?;
+    let validation = if probe.validation_enabled() {
+        ValidationRequest::Required
+    } else {
+        ValidationRequest::Off
+    };
+    drop(probe);
+    let options = ContextOptions {
+        validation,
+        require: Requirement::RayTracing,
+        ..options
+    };
+    Some(Context::new(&options).expect("context"))
 }
 
 fn cpu_render(
@@ -121,8 +123,7 @@ fn two_level_hierarchy_matches_the_cpu_oracle_on_both_backends() {
         return;
     };
     let h = two_level();
-    let scene =
-        GpuScene::build(&ctx, &h.view(), &Blobs(&h), &BuildOptions::default()).expect("build");
+    let scene = GpuScene::build(&ctx, &h.view(), &h, &BuildOptions::default()).expect("build");
     let cam = camera([0.5, 1.0, 7.0], [0.0, 0.0, 0.0], 48);
     let lod = LodParams {
         r_max_px: 12.0,
@@ -194,8 +195,7 @@ fn ids_view_uses_the_cpu_palette() {
         return;
     };
     let h = two_level();
-    let scene =
-        GpuScene::build(&ctx, &h.view(), &Blobs(&h), &BuildOptions::default()).expect("build");
+    let scene = GpuScene::build(&ctx, &h.view(), &h, &BuildOptions::default()).expect("build");
     let cam = camera([0.5, 1.0, 7.0], [0.0, 0.0, 0.0], 32);
     let backend = backends(&ctx)[0];
     let out = render(
@@ -296,8 +296,7 @@ fn stack_overflow_is_counted_and_a_larger_stack_removes_it() {
         return;
     };
     let h = row_of_pis(12);
-    let scene =
-        GpuScene::build(&ctx, &h.view(), &Blobs(&h), &BuildOptions::default()).expect("build");
+    let scene = GpuScene::build(&ctx, &h.view(), &h, &BuildOptions::default()).expect("build");
     // Odd size: the centre ray runs down the row's axis through every ring.
     let cam = camera([0.0, 0.0, 6.0], [0.0, 0.0, -10.0], 15);
     let cpu = cpu_render(&h, &cam, View::Ids, LodParams::default());
@@ -346,33 +345,23 @@ fn stack_overflow_is_counted_and_a_larger_stack_removes_it() {
 
 #[test]
 fn budget_cap_and_compaction() {
-    let Some(probe) = ctx_or_skip("budget_cap_and_compaction") else {
-        return;
-    };
-    let validation = if probe.validation_enabled() {
-        ValidationRequest::Required
-    } else {
-        ValidationRequest::Off
-    };
-    drop(probe);
-    let ctx = Context::new(&ContextOptions {
-        validation,
-        require: Requirement::RayTracing,
+    let options = ContextOptions {
         limit_overrides: LimitOverrides {
             max_memory_allocation_count: Some(8),
             ..Default::default()
         },
         ..Default::default()
-    })
-    .expect("context");
+    };
+    let Some(ctx) = ctx_with("budget_cap_and_compaction", options) else {
+        return;
+    };
     let h = two_level();
     let small = BuildOptions {
         budget_bytes: 64 * 1024,
         max_allocations: 8,
         ..Default::default()
     };
-    let err =
-        GpuScene::build(&ctx, &h.view(), &Blobs(&h), &small).expect_err("64 KiB cannot hold it");
+    let err = GpuScene::build(&ctx, &h.view(), &h, &small).expect_err("64 KiB cannot hold it");
     assert!(matches!(err, GpuError::Budget(_)), "{err}");
     assert!(err.to_string().contains("budget"), "{err}");
     assert_eq!(
@@ -386,7 +375,7 @@ fn budget_cap_and_compaction() {
         staging_bytes: 1 << 20,
         ..Default::default()
     };
-    let scene = GpuScene::build(&ctx, &h.view(), &Blobs(&h), &opts).expect("64 MiB");
+    let scene = GpuScene::build(&ctx, &h.view(), &h, &opts).expect("64 MiB");
     let r = scene.report();
     assert!(
         r.peak_allocation_count <= 8 && ctx.peak_allocation_count() <= 8,
@@ -455,7 +444,7 @@ fn uploads_overlap_blas_builds_across_batches() {
         staging_bytes: 64 * 1024,
         ..Default::default()
     };
-    let scene = GpuScene::build(&ctx, &h.view(), &Blobs(&h), &opts).expect("build");
+    let scene = GpuScene::build(&ctx, &h.view(), &h, &opts).expect("build");
     let r = scene.report();
     assert_eq!(r.blas_count, 6, "{r:?}");
     // Six BLAS batches and one TLAS batch.
@@ -502,7 +491,7 @@ fn uploads_overlap_blas_builds_across_batches() {
 
 /// Fails to load one mesh: with one build per batch, that mesh is staged while an earlier
 /// batch is on the GPU.
-struct FailingBlobs<'a>(Blobs<'a>, u32);
+struct FailingBlobs<'a>(&'a OwnedHierarchy, u32);
 
 impl MeshBlobSource for FailingBlobs<'_> {
     fn mesh_data(
@@ -535,7 +524,7 @@ fn a_load_failure_while_a_batch_builds_releases_everything() {
         max_batch_result_bytes: 1,
         ..Default::default()
     };
-    let err = GpuScene::build(&ctx, &h.view(), &FailingBlobs(Blobs(&h), 2), &opts)
+    let err = GpuScene::build(&ctx, &h.view(), &FailingBlobs(&h, 2), &opts)
         .expect_err("mesh 2 cannot load");
     assert!(
         err.to_string().contains("mesh record 2") && err.to_string().contains("checksum"),
@@ -546,7 +535,7 @@ fn a_load_failure_while_a_batch_builds_releases_everything() {
         0,
         "a failed build releases everything"
     );
-    let scene = GpuScene::build(&ctx, &h.view(), &Blobs(&h), &opts).expect("second build");
+    let scene = GpuScene::build(&ctx, &h.view(), &h, &opts).expect("second build");
     assert_eq!(scene.report().blas_count, 4);
     assert_eq!(scene.report().upload_build_overlap_batches, 3);
     drop(scene);
@@ -569,9 +558,7 @@ struct LodCase {
 
 #[test]
 fn glsl_camera_and_lod_mirror_the_rust_functions() {
-    use crate::{
-        Buffer, BufferDesc, BufferUsage, ComputePipeline, ComputePipelineDesc, MemoryLocation,
-    };
+    use crate::tests::{mirror_buffer, run_mirror};
     let Some(ctx) = context_or_skip("glsl_camera_lod_mirror", Requirement::Compute) else {
         return;
     };
@@ -613,19 +600,7 @@ fn glsl_camera_and_lod_mirror_the_rust_functions() {
             _pad: 0,
         })
         .collect();
-    let usage = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS;
-    let mk = |label: &str, bytes: u64| {
-        Buffer::new_dedicated(
-            &ctx,
-            label,
-            &BufferDesc {
-                size_bytes: bytes,
-                usage,
-            },
-            MemoryLocation::Readback,
-        )
-        .expect("buffer")
-    };
+    let mk = |label: &str, bytes: u64| mirror_buffer(&ctx, label, bytes);
     let cam_buf = mk("cams", (cams.len() * 64) as u64);
     cam_buf.write(0, &cams).expect("write");
     let case_buf = mk("cases", (cases.len() * 48) as u64);
@@ -633,33 +608,14 @@ fn glsl_camera_and_lod_mirror_the_rust_functions() {
     let n_dirs = cams.len() as u32 * per_cam;
     let dir_buf = mk("dirs", u64::from(n_dirs) * 16);
     let lvl_buf = mk("levels", (cases.len() * 4) as u64);
-    let pipe = ComputePipeline::new(
+    run_mirror(
         &ctx,
-        &ComputePipelineDesc {
-            label: "abi mirror",
-            spirv: crate::shaders::TEST_ABI_MIRROR_COMP,
-            storage_buffer_count: 0,
-            push_constant_size_bytes: 48,
-            specialization: &[],
-        },
-    )
-    .expect("pipeline");
-    let mut push = Vec::new();
-    for b in [&cam_buf, &case_buf, &dir_buf, &lvl_buf] {
-        push.extend_from_slice(&b.device_address().expect("address").0.to_le_bytes());
-    }
-    for v in [cams.len() as u32, per_cam, cases.len() as u32, 0] {
-        push.extend_from_slice(&v.to_le_bytes());
-    }
-    let mut rec = ctx.record("abi mirror").expect("record");
-    rec.dispatch(
-        &pipe,
-        None,
-        &push,
-        [n_dirs.max(cases.len() as u32).div_ceil(64), 1, 1],
-    )
-    .expect("dispatch");
-    rec.submit_and_wait().expect("submit");
+        "abi mirror",
+        crate::shaders::TEST_ABI_MIRROR_COMP,
+        &[&cam_buf, &case_buf, &dir_buf, &lvl_buf],
+        &[cams.len() as u32, per_cam, cases.len() as u32, 0],
+        n_dirs.max(cases.len() as u32).div_ceil(64),
+    );
     let dirs: Vec<[f32; 4]> = dir_buf.read_vec(0, n_dirs as usize).expect("read");
     let mut max_err = 0f32;
     for (i, d) in dirs.iter().enumerate() {
@@ -712,30 +668,20 @@ fn glsl_camera_and_lod_mirror_the_rust_functions() {
 /// (lavapipe, Mesa 25.0) each has none and the context says so (a warning, never an error).
 #[test]
 fn pipeline_stats_per_backend_and_variant() {
-    let Some(probe) = ctx_or_skip("pipeline_stats_per_backend_and_variant") else {
-        return;
-    };
-    let validation = if probe.validation_enabled() {
-        ValidationRequest::Required
-    } else {
-        ValidationRequest::Off
-    };
-    drop(probe);
-    let ctx = Context::new(&ContextOptions {
-        validation,
-        require: Requirement::RayTracing,
+    let options = ContextOptions {
         pipeline_stats: true,
         ..Default::default()
-    })
-    .expect("context");
+    };
+    let Some(ctx) = ctx_with("pipeline_stats_per_backend_and_variant", options) else {
+        return;
+    };
     assert!(ctx.pipeline_stats_requested());
     assert_eq!(
         ctx.pipeline_stats_enabled(),
         ctx.caps().pipeline_executable_info
     );
     let h = two_level();
-    let scene =
-        GpuScene::build(&ctx, &h.view(), &Blobs(&h), &BuildOptions::default()).expect("build");
+    let scene = GpuScene::build(&ctx, &h.view(), &h, &BuildOptions::default()).expect("build");
     let cam = camera([0.5, 1.0, 7.0], [0.0, 0.0, 0.0], 16);
     let backends = backends(&ctx);
     for &backend in &backends {
@@ -809,8 +755,7 @@ fn pipeline_stats_off_by_default() {
     };
     assert!(!ctx.pipeline_stats_requested() && !ctx.pipeline_stats_enabled());
     let h = two_level();
-    let scene =
-        GpuScene::build(&ctx, &h.view(), &Blobs(&h), &BuildOptions::default()).expect("build");
+    let scene = GpuScene::build(&ctx, &h.view(), &h, &BuildOptions::default()).expect("build");
     let cam = camera([0.5, 1.0, 7.0], [0.0, 0.0, 0.0], 8);
     render(&ctx, &scene, &cam, &RenderOptions::default()).expect("render");
     assert!(ctx.captured_pipelines().is_empty());

@@ -5,10 +5,7 @@
 use std::collections::HashMap;
 
 use crate::testutil::{assert_no_validation_errors, context_or_skip};
-use crate::{
-    Buffer, BufferDesc, BufferUsage, ComputePipeline, ComputePipelineDesc, MemoryLocation,
-    Requirement,
-};
+use crate::Requirement;
 use motu_abi::sampling::{sample_bits, SAMPLE_INDEX_BITS};
 
 /// A SPIR-V module's call graph by debug name (glslang does not inline: each GLSL call
@@ -148,49 +145,17 @@ fn glsl_sample_sequence_equals_the_rust_one_bit_for_bit() {
         let vertex = (i / 7) % 9;
         cases.push([pixel, index | vertex << SAMPLE_INDEX_BITS, i % 19, 0]);
     }
-    let usage = BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS;
-    let mk = |label: &str, bytes: u64| {
-        Buffer::new_dedicated(
-            &ctx,
-            label,
-            &BufferDesc {
-                size_bytes: bytes,
-                usage,
-            },
-            MemoryLocation::Readback,
-        )
-        .expect("buffer")
-    };
-    let case_buf = mk("cases", (cases.len() * 16) as u64);
+    let case_buf = crate::tests::mirror_buffer(&ctx, "cases", (cases.len() * 16) as u64);
     case_buf.write(0, &cases).expect("write");
-    let bits_buf = mk("bits", (cases.len() * 4) as u64);
-    let pipe = ComputePipeline::new(
+    let bits_buf = crate::tests::mirror_buffer(&ctx, "bits", (cases.len() * 4) as u64);
+    crate::tests::run_mirror(
         &ctx,
-        &ComputePipelineDesc {
-            label: "sampling mirror",
-            spirv: crate::shaders::TEST_SAMPLING_MIRROR_COMP,
-            storage_buffer_count: 0,
-            push_constant_size_bytes: 24,
-            specialization: &[],
-        },
-    )
-    .expect("pipeline");
-    let mut push = Vec::new();
-    for b in [&case_buf, &bits_buf] {
-        push.extend_from_slice(&b.device_address().expect("address").0.to_le_bytes());
-    }
-    for v in [cases.len() as u32, 0] {
-        push.extend_from_slice(&v.to_le_bytes());
-    }
-    let mut rec = ctx.record("sampling mirror").expect("record");
-    rec.dispatch(
-        &pipe,
-        None,
-        &push,
-        [(cases.len() as u32).div_ceil(64), 1, 1],
-    )
-    .expect("dispatch");
-    rec.submit_and_wait().expect("submit");
+        "sampling mirror",
+        crate::shaders::TEST_SAMPLING_MIRROR_COMP,
+        &[&case_buf, &bits_buf],
+        &[cases.len() as u32, 0],
+        (cases.len() as u32).div_ceil(64),
+    );
     let gpu: Vec<u32> = bits_buf.read_vec(0, cases.len()).expect("read");
     let differ: Vec<String> = cases
         .iter()

@@ -22,12 +22,7 @@ impl MeshBlobSource for WithTable<'_> {
         &self,
         mesh_record: u32,
     ) -> Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), MeshSourceError> {
-        let g = self
-            .h
-            .geometry
-            .get(mesh_record as usize)
-            .ok_or_else(|| format!("no mesh {mesh_record}"))?;
-        Ok((Cow::Borrowed(&g.positions), Cow::Borrowed(&g.indices)))
+        self.h.mesh_data(mesh_record)
     }
 
     fn stored_proxy_boxes(&self) -> Option<&[u8]> {
