@@ -3,6 +3,8 @@
 
 use serde::Serialize;
 
+use super::mirror::{mirror, Mirror};
+
 /// One pipeline: its label (`trace full`, `trace streamed`, a compute pass's name), its kind
 /// (`ray_tracing` or `compute`) and its executables (`null` where the device lacks
 /// `VK_KHR_pipeline_executable_properties`).
@@ -16,16 +18,17 @@ pub struct PipelineStats {
     pub executables: Option<Vec<ExecutableStats>>,
 }
 
-/// One compiled executable (a stage, or stages the driver merged) and its statistics.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct ExecutableStats {
-    pub name: String,
-    pub description: String,
-    pub stages: Vec<&'static str>,
-    pub subgroup_size: u32,
-    pub statistics: Vec<StatisticStats>,
-    /// The driver's internal representations (often none): IR or disassembly text.
-    pub internal_representations: Vec<RepresentationStats>,
+mirror! {
+    /// One compiled executable (a stage, or stages the driver merged) and its statistics.
+    ExecutableStats from motu_gpu::PipelineExecutable {
+        name: String,
+        description: String,
+        stages: Vec<&'static str>,
+        subgroup_size: u32,
+        statistics: Vec<StatisticStats>,
+        /// The driver's internal representations (often none): IR or disassembly text.
+        internal_representations: Vec<RepresentationStats>,
+    }
 }
 
 /// One internal representation: its text (`null` for binary data) and size.
@@ -53,38 +56,26 @@ impl From<&motu_gpu::CapturedPipeline> for PipelineStats {
             label: p.label.clone(),
             kind: p.kind,
             raygen_stack_bytes: p.raygen_stack_bytes,
-            executables: p
-                .stats
-                .as_ref()
-                .map(|s| s.executables.iter().map(Into::into).collect()),
+            executables: p.stats.as_ref().map(|s| Mirror::mirror(&s.executables)),
         }
     }
 }
 
-impl From<&motu_gpu::PipelineExecutable> for ExecutableStats {
-    fn from(e: &motu_gpu::PipelineExecutable) -> Self {
+/// Its size and its text (`null` for binary data), not its bytes.
+impl Mirror<motu_gpu::InternalRepresentation> for RepresentationStats {
+    fn mirror(r: &motu_gpu::InternalRepresentation) -> Self {
         Self {
-            name: e.name.clone(),
-            description: e.description.clone(),
-            stages: e.stages.clone(),
-            subgroup_size: e.subgroup_size,
-            statistics: e.statistics.iter().map(Into::into).collect(),
-            internal_representations: e
-                .internal_representations
-                .iter()
-                .map(|r| RepresentationStats {
-                    name: r.name.clone(),
-                    description: r.description.clone(),
-                    size_bytes: r.data.len() as u64,
-                    text: r.text(),
-                })
-                .collect(),
+            name: r.name.clone(),
+            description: r.description.clone(),
+            size_bytes: r.data.len() as u64,
+            text: r.text(),
         }
     }
 }
 
-impl From<&motu_gpu::PipelineStatistic> for StatisticStats {
-    fn from(s: &motu_gpu::PipelineStatistic) -> Self {
+/// The value as a JSON number (or bool) with its format's name.
+impl Mirror<motu_gpu::PipelineStatistic> for StatisticStats {
+    fn mirror(s: &motu_gpu::PipelineStatistic) -> Self {
         use motu_gpu::StatisticValue as V;
         let value = match s.value {
             V::Bool(b) => serde_json::Value::from(b),
