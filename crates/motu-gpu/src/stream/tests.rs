@@ -3,49 +3,15 @@
 //! and a camera path whose later frames need ~1 pass and build far fewer triangles than
 //! rebuilding everything per frame.
 
-use std::borrow::Cow;
-
 use motu_abi::aov::{Aov, MISS};
 use motu_abi::camera::{camera_path, CameraPath, CameraPose};
 use motu_trace::testutil::{srt, uv_sphere, HierarchyBuilder, OwnedHierarchy, PiTarget};
 
 use crate::testutil::{assert_no_validation_errors, context_or_skip};
 use crate::{
-    render, Backend, BuildOptions, Context, GpuScene, MeshBlobSource, MeshSourceError,
-    RenderOptions, Requirement, StreamOptions, StreamingRenderer, View,
+    render, Backend, BuildOptions, Context, FrameStreamStats, GpuScene, RenderOptions,
+    RenderOutput, Requirement, StreamOptions, StreamingRenderer, View,
 };
-
-struct Blobs<'a>(&'a OwnedHierarchy);
-
-impl MeshBlobSource for Blobs<'_> {
-    fn mesh_data(
-        &self,
-        mesh_record: u32,
-    ) -> Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), MeshSourceError> {
-        let g = self
-            .0
-            .geometry
-            .get(mesh_record as usize)
-            .ok_or_else(|| format!("no mesh {mesh_record}"))?;
-        Ok((Cow::Borrowed(&g.positions), Cow::Borrowed(&g.indices)))
-    }
-
-    #[allow(clippy::type_complexity)]
-    fn mesh_shading(
-        &self,
-        mesh_record: u32,
-    ) -> Result<(Option<Cow<'_, [[f32; 3]]>>, Option<Cow<'_, [[f32; 2]]>>), MeshSourceError> {
-        let g = self
-            .0
-            .geometry
-            .get(mesh_record as usize)
-            .ok_or_else(|| format!("no mesh {mesh_record}"))?;
-        Ok((
-            g.normals.as_deref().map(Cow::Borrowed),
-            g.uvs.as_deref().map(Cow::Borrowed),
-        ))
-    }
-}
 
 /// `field` made to exercise the whole shading model: every sphere gets smooth normals and
 /// texture coordinates, every other material an 8×8 checker texture with mips (2 levels), and
@@ -333,14 +299,75 @@ fn device_meshes(budget: u64) -> StreamOptions {
     }
 }
 
+/// A test's context, hierarchy and the hierarchy's full build (what streamed frames are
+/// compared with).
+struct Fixture {
+    ctx: Context,
+    h: OwnedHierarchy,
+    full: GpuScene,
+}
+
+impl Fixture {
+    /// `None` where no device runs the tests (`context_or_skip` says so).
+    fn new(test: &str, h: OwnedHierarchy) -> Option<Self> {
+        let ctx = context_or_skip(test, Requirement::RayTracing)?;
+        let full = GpuScene::build(&ctx, &h.view(), &h, &BuildOptions::default()).expect("full");
+        Some(Self { ctx, h, full })
+    }
+}
+
+/// A streaming renderer of `h` (its own mesh source).
+fn streamer<'a>(
+    ctx: &Context,
+    h: &'a OwnedHierarchy,
+    opts: &StreamOptions,
+) -> StreamingRenderer<'a> {
+    StreamingRenderer::new(ctx, h.view(), h, opts).expect("streaming renderer")
+}
+
+/// `View::Ids` (mesh and primitive ids, no shading) on `backend`.
+fn ids_view_opts(backend: Backend) -> RenderOptions {
+    RenderOptions {
+        backend,
+        view: View::Ids,
+        ..Default::default()
+    }
+}
+
+/// Half the full build with the coarse fallback and a frame build budget of about two small
+/// spheres: a frame of the field stops early and later frames of the same camera refine.
+fn refining_options(full: &GpuScene) -> StreamOptions {
+    StreamOptions {
+        budget_bytes: full_build_needs(full) / 2,
+        fallback: crate::StreamFallback::Coarse,
+        frame_build_bytes: 64 * 1024,
+        ..Default::default()
+    }
+}
+
+/// The next frame of a camera at rest: a whole frame, or a progressive one (one trace, then a
+/// bounded build for the next frame).
+fn refine(
+    sr: &mut StreamingRenderer<'_>,
+    progressive: bool,
+    cam: &motu_abi::camera::CameraParams,
+    opts: &RenderOptions,
+) -> (RenderOutput, FrameStreamStats) {
+    if progressive {
+        sr.render_progressive(cam, opts)
+    } else {
+        sr.render_frame(cam, opts)
+    }
+    .expect("frame")
+}
+
 #[test]
 fn streaming_under_a_quarter_of_the_full_build_matches_it_on_both_backends() {
-    let Some(ctx) = context_or_skip("streaming_matches_full_build", Requirement::RayTracing) else {
+    let Some(Fixture { ctx, h, full }) =
+        Fixture::new("streaming_matches_full_build", textured_field(10, 16, 30))
+    else {
         return;
     };
-    let h = textured_field(10, 16, 30);
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let full_needs = full_build_needs(&full);
     let budget = full_needs / 4;
     eprintln!("full build needs {full_needs} bytes; streaming budget {budget} bytes");
@@ -356,8 +383,7 @@ fn streaming_under_a_quarter_of_the_full_build_matches_it_on_both_backends() {
             .filter(|r| r.mesh != MISS)
             .count();
         assert!(hits > 400, "the camera sees the field: {hits}");
-        let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
-            .expect("streaming renderer");
+        let mut sr = streamer(&ctx, &h, &small_stream_options(budget));
         let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
         eprintln!("{be:?}: {st:?}");
         assert!(st.complete, "{st:?}");
@@ -386,16 +412,14 @@ fn streaming_under_a_quarter_of_the_full_build_matches_it_on_both_backends() {
         let small = base_pose().params(32, 32);
         let full_shaded = render(&ctx, &full, &small, &shaded).expect("full shaded render");
         // A cold renderer: its secondary rays meet structures not built yet and are deferred.
-        let mut cold = StreamingRenderer::new(
+        let mut cold = streamer(
             &ctx,
-            h.view(),
-            &blobs,
+            &h,
             &StreamOptions {
                 guard_band_px: 0,
                 ..small_stream_options(budget)
             },
-        )
-        .expect("streaming renderer");
+        );
         let (out_shaded, st_shaded) = cold.render_frame(&small, &shaded).expect("stream shaded");
         drop(cold);
         assert!(st_shaded.passes >= 2, "{st_shaded:?}");
@@ -439,16 +463,15 @@ fn streaming_under_a_quarter_of_the_full_build_matches_it_on_both_backends() {
 /// were let go with evicted meshes, and every frame's hits and colours equal the full build's.
 #[test]
 fn textures_stream_with_the_meshes_that_sample_them() {
-    let Some(ctx) = context_or_skip("stream_textures", Requirement::RayTracing) else {
+    let Some(Fixture { ctx, h, full }) = Fixture::new(
+        "stream_textures",
+        per_material_textures(textured_field(10, 16, 30)),
+    ) else {
         return;
     };
-    let h = per_material_textures(textured_field(10, 16, 30));
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let budget = full_build_needs(&full) / 4;
     let shaded = textured_opts(backend(&ctx));
-    let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
-        .expect("streaming renderer");
+    let mut sr = streamer(&ctx, &h, &small_stream_options(budget));
     let path = SWEEP;
     let frames = 4;
     let mut resident_textures = Vec::new();
@@ -489,17 +512,14 @@ fn textures_stream_with_the_meshes_that_sample_them() {
 
 #[test]
 fn camera_path_reuses_last_frames_structures_and_evicts_under_the_budget() {
-    let Some(ctx) = context_or_skip("stream_camera_path", Requirement::RayTracing) else {
+    let Some(Fixture { ctx, h, full }) = Fixture::new("stream_camera_path", field(10, 16, 30))
+    else {
         return;
     };
-    let h = field(10, 16, 30);
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let budget = full_build_needs(&full) / 4;
     let be = backend(&ctx);
     let opts = ids_opts(be);
-    let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
-        .expect("streaming renderer");
+    let mut sr = streamer(&ctx, &h, &small_stream_options(budget));
     let frames = 30;
     let path = SWEEP;
     let mut passes_after_first = 0u32;
@@ -574,12 +594,10 @@ fn camera_path_reuses_last_frames_structures_and_evicts_under_the_budget() {
 /// already-completed pixels used, and the image equals the full build's.
 #[test]
 fn a_frame_under_a_sixteenth_of_the_full_build_evicts_mid_frame_and_completes() {
-    let Some(ctx) = context_or_skip("stream_pass_over_budget", Requirement::RayTracing) else {
+    let Some(Fixture { ctx, h, full }) = Fixture::new("stream_pass_over_budget", field(10, 16, 30))
+    else {
         return;
     };
-    let h = field(10, 16, 30);
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let budget = full_build_needs(&full) / 16;
     let opts = ids_opts(backend(&ctx));
     let cam = base_pose().params(SIZE, SIZE);
@@ -587,7 +605,7 @@ fn a_frame_under_a_sixteenth_of_the_full_build_evicts_mid_frame_and_completes() 
     let mut sr = StreamingRenderer::new(
         &ctx,
         h.view(),
-        &blobs,
+        &h,
         &StreamOptions {
             budget_bytes: budget,
             ..Default::default()
@@ -670,38 +688,18 @@ fn a_frame_under_a_sixteenth_of_the_full_build_evicts_mid_frame_and_completes() 
 /// (one trace, then a bounded build for the next frame) converges the same way.
 #[test]
 fn a_frame_build_budget_shows_the_fallback_then_converges_to_the_full_build() {
-    let Some(ctx) = context_or_skip("stream_fallback", Requirement::RayTracing) else {
+    let Some(Fixture { ctx, h, full }) = Fixture::new("stream_fallback", field(10, 16, 30)) else {
         return;
     };
-    let h = field(10, 16, 30);
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let opts = ids_opts(backend(&ctx));
     let cam = base_pose().params(SIZE, SIZE);
     let reference = render(&ctx, &full, &cam, &opts).expect("full render");
     for progressive in [false, true] {
-        let mut sr = StreamingRenderer::new(
-            &ctx,
-            h.view(),
-            &blobs,
-            &StreamOptions {
-                budget_bytes: full_build_needs(&full) / 2,
-                fallback: crate::StreamFallback::Coarse,
-                // About two small spheres per frame.
-                frame_build_bytes: 64 * 1024,
-                ..Default::default()
-            },
-        )
-        .expect("streaming renderer");
+        let mut sr = streamer(&ctx, &h, &refining_options(&full));
         let mut frames = Vec::new();
         let mut last = None;
         for _ in 0..200 {
-            let (out, st) = if progressive {
-                sr.render_progressive(&cam, &opts)
-            } else {
-                sr.render_frame(&cam, &opts)
-            }
-            .expect("frame");
+            let (out, st) = refine(&mut sr, progressive, &cam, &opts);
             assert!(st.built_bytes > 0 || st.complete, "{st:?}");
             let done = st.complete;
             if frames.is_empty() {
@@ -758,12 +756,9 @@ fn a_frame_build_budget_shows_the_fallback_then_converges_to_the_full_build() {
 /// both modes still converge to the full build's image at rest.
 #[test]
 fn a_refining_frames_last_pass_traces_only_pixels_whose_structures_arrived() {
-    let Some(ctx) = context_or_skip("stream_refine", Requirement::RayTracing) else {
+    let Some(Fixture { ctx, h, full }) = Fixture::new("stream_refine", field(10, 16, 30)) else {
         return;
     };
-    let h = field(10, 16, 30);
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let shading = motu_abi::shade::Shading {
         spp: 1,
         ..full_shading()
@@ -778,27 +773,11 @@ fn a_refining_frames_last_pass_traces_only_pixels_whose_structures_arrived() {
     let cam = base_pose().params(SIZE, SIZE);
     let reference = render(&ctx, &full, &cam, &opts).expect("full render");
     for progressive in [false, true] {
-        let mut sr = StreamingRenderer::new(
-            &ctx,
-            h.view(),
-            &blobs,
-            &StreamOptions {
-                budget_bytes: full_build_needs(&full) / 2,
-                fallback: crate::StreamFallback::Coarse,
-                frame_build_bytes: 64 * 1024,
-                ..Default::default()
-            },
-        )
-        .expect("streaming renderer");
+        let mut sr = streamer(&ctx, &h, &refining_options(&full));
         let (mut left_waiting, mut marked_walks) = (0u64, 0u64);
         let mut last = None;
         for _ in 0..200 {
-            let (out, st) = if progressive {
-                sr.render_progressive(&cam, &opts)
-            } else {
-                sr.render_frame(&cam, &opts)
-            }
-            .expect("frame");
+            let (out, st) = refine(&mut sr, progressive, &cam, &opts);
             assert_eq!(st.passes as usize, st.pass_log.len(), "{st:?}");
             let final_pass = st.pass_log.last().expect("a pass");
             assert!(final_pass.tlas_walks > 0, "{st:?}");
@@ -896,23 +875,18 @@ fn shells_around_the_camera() -> OwnedHierarchy {
 /// are now ordered by (t_near, PI index), so ties are re-walked, never dropped.
 #[test]
 fn rays_starting_inside_more_boxes_than_a_candidate_list_holds_match_the_full_build() {
-    let Some(ctx) = context_or_skip("stream_ties_at_t_zero", Requirement::RayTracing) else {
+    let Some(Fixture { ctx, h, full }) =
+        Fixture::new("stream_ties_at_t_zero", shells_around_the_camera())
+    else {
         return;
     };
-    let h = shells_around_the_camera();
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     // A twelfth: a few shells resident at a time, the rest evicted after their pass (before
     // the fix, 156 of 576 pixels differed here on lavapipe with the frame complete).
     let budget = full_build_needs(&full) / 12;
     let cam = base_pose().params(24, 24);
     let backends = available_backends(&ctx);
     for be in backends {
-        let opts = RenderOptions {
-            backend: be,
-            view: View::Ids,
-            ..Default::default()
-        };
+        let opts = ids_view_opts(be);
         let reference = render(&ctx, &full, &cam, &opts).expect("full render");
         let meshes: std::collections::BTreeSet<u32> =
             reference.aov.records.iter().map(|r| r.mesh).collect();
@@ -920,8 +894,7 @@ fn rays_starting_inside_more_boxes_than_a_candidate_list_holds_match_the_full_bu
             meshes.len() >= 4 && !meshes.contains(&MISS),
             "each shell is the nearest for some pixels: {meshes:?}"
         );
-        let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &device_meshes(budget))
-            .expect("streaming renderer");
+        let mut sr = streamer(&ctx, &h, &device_meshes(budget));
         let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
         eprintln!("{be:?}: {st:?}");
         assert!(st.complete, "{st:?}");
@@ -957,27 +930,21 @@ fn receding_spheres(count: u32) -> OwnedHierarchy {
 /// frame's traces equal the pixels traced over its passes (guard probes write no record).
 #[test]
 fn rays_crossing_many_proxy_boxes_walk_their_tlas_once_per_pass() {
-    let Some(ctx) = context_or_skip("stream_proxy_walks", Requirement::RayTracing) else {
+    let count = 40u32;
+    let Some(Fixture { ctx, h, full }) =
+        Fixture::new("stream_proxy_walks", receding_spheres(count))
+    else {
         return;
     };
-    let count = 40u32;
-    let h = receding_spheres(count);
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let budget = full_build_needs(&full) / 3;
     let cam = base_pose().params(24, 24);
     for be in available_backends(&ctx) {
-        let opts = RenderOptions {
-            backend: be,
-            view: View::Ids,
-            ..Default::default()
-        };
+        let opts = ids_view_opts(be);
         let reference = render(&ctx, &full, &cam, &opts).expect("full render");
         let meshes: std::collections::BTreeSet<u32> =
             reference.aov.records.iter().map(|r| r.mesh).collect();
         assert!(meshes.len() >= 6, "rings of many spheres show: {meshes:?}");
-        let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
-            .expect("streaming renderer");
+        let mut sr = streamer(&ctx, &h, &small_stream_options(budget));
         let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
         eprintln!("{be:?}: {st:?}");
         assert!(st.complete, "{st:?}");
@@ -1036,22 +1003,16 @@ fn instanced_grid(side: u32, kinds: u32) -> OwnedHierarchy {
 /// still equals the full build, pixel by pixel.
 #[test]
 fn tlas_records_written_through_a_small_ring_in_windows_match_the_full_build() {
-    let Some(ctx) = context_or_skip("stream_tlas_record_windows", Requirement::RayTracing) else {
-        return;
-    };
     let h = instanced_grid(50, 7);
     assert_eq!(
         h.view().tlases[h.view().root_tlas as usize].instance_count,
         2_500
     );
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
-    let cam = base_pose().params(32, 32);
-    let opts = RenderOptions {
-        backend: backend(&ctx),
-        view: View::Ids,
-        ..Default::default()
+    let Some(Fixture { ctx, h, full }) = Fixture::new("stream_tlas_record_windows", h) else {
+        return;
     };
+    let cam = base_pose().params(32, 32);
+    let opts = ids_view_opts(backend(&ctx));
     let reference = render(&ctx, &full, &cam, &opts).expect("full render");
     let kinds: std::collections::BTreeSet<u32> =
         reference.aov.records.iter().map(|r| r.mesh).collect();
@@ -1060,17 +1021,15 @@ fn tlas_records_written_through_a_small_ring_in_windows_match_the_full_build() {
     // Written by the host (chunks in ring windows), and compacted on the GPU from the kept
     // records (`tlas_compact.rs`: chunks of 1,024, the host writing only the tails).
     for mode in [crate::TlasRecordsMode::Host, crate::TlasRecordsMode::Gpu] {
-        let mut sr = StreamingRenderer::new(
+        let mut sr = streamer(
             &ctx,
-            h.view(),
-            &blobs,
+            &h,
             &StreamOptions {
                 staging_bytes: 64 << 10, // the ring's least size
                 tlas_records: mode,
                 ..small_stream_options(budget)
             },
-        )
-        .expect("streaming renderer");
+        );
         let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
         eprintln!("{mode:?}: {st:?}");
         assert!(st.complete, "{st:?}");
@@ -1109,31 +1068,24 @@ fn tlas_records_written_through_a_small_ring_in_windows_match_the_full_build() {
 /// frame equals the full build. TLASes built for fast build (`--stream-tlas-build`) too.
 #[test]
 fn rebuilds_keep_unchanged_proxies_and_fast_build_tlases_match_the_full_build() {
-    let Some(ctx) = context_or_skip("stream_tlas_proxies_kept", Requirement::RayTracing) else {
+    let Some(Fixture { ctx, h, full }) =
+        Fixture::new("stream_tlas_proxies_kept", instanced_grid(50, 7))
+    else {
         return;
     };
-    let h = instanced_grid(50, 7);
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let cam = base_pose().params(32, 32);
-    let opts = RenderOptions {
-        backend: backend(&ctx),
-        view: View::Ids,
-        ..Default::default()
-    };
+    let opts = ids_view_opts(backend(&ctx));
     let reference = render(&ctx, &full, &cam, &opts).expect("full render");
     let budget = full_build_needs(&full) / 8;
     for tlas_build in [motu_vk::TlasBuild::FastTrace, motu_vk::TlasBuild::FastBuild] {
-        let mut sr = StreamingRenderer::new(
+        let mut sr = streamer(
             &ctx,
-            h.view(),
-            &blobs,
+            &h,
             &StreamOptions {
                 tlas_build,
                 ..small_stream_options(budget)
             },
-        )
-        .expect("streaming renderer");
+        );
         let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
         assert!(st.complete, "{st:?}");
         assert!(st.tlas_proxies_built > 0 && st.tlas_gpu_ms > 0.0, "{st:?}");
@@ -1193,12 +1145,11 @@ fn rebuilds_keep_unchanged_proxies_and_fast_build_tlases_match_the_full_build() 
 /// small scenes rebuilt.
 #[test]
 fn persistent_tlases_updated_in_place_match_the_full_build_on_both_backends() {
-    let Some(ctx) = context_or_skip("stream_persistent_tlas", Requirement::RayTracing) else {
+    let Some(Fixture { ctx, h, full }) =
+        Fixture::new("stream_persistent_tlas", instanced_grid(50, 7))
+    else {
         return;
     };
-    let h = instanced_grid(50, 7);
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let budget = full_build_needs(&full) / 8;
     let path = CameraPath {
         yaw_sweep_deg: 40.0,
@@ -1207,16 +1158,14 @@ fn persistent_tlases_updated_in_place_match_the_full_build_on_both_backends() {
     let frames = 4;
     for be in available_backends(&ctx) {
         let opts = ids_opts(be);
-        let mut sr = StreamingRenderer::new(
+        let mut sr = streamer(
             &ctx,
-            h.view(),
-            &blobs,
+            &h,
             &StreamOptions {
                 tlas_update: crate::TlasUpdate::Update,
                 ..small_stream_options(budget)
             },
-        )
-        .expect("streaming renderer");
+        );
         let totals = sr.totals();
         assert_eq!(totals.tlas_mode, "update", "{totals:?}");
         assert_eq!(totals.persistent_tlases, 1, "{totals:?}");
@@ -1278,8 +1227,7 @@ fn persistent_tlases_updated_in_place_match_the_full_build_on_both_backends() {
         assert!(!sr.totals().persistent_dropped);
     }
     // `Auto` on a scene of 2,500 instances: rebuilt (a rebuild takes milliseconds there).
-    let sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
-        .expect("streaming renderer");
+    let sr = streamer(&ctx, &h, &small_stream_options(budget));
     assert_eq!(sr.totals().tlas_mode, "rebuild");
     assert_eq!(sr.totals().persistent_tlases, 0);
     drop(sr);
@@ -1291,12 +1239,11 @@ fn persistent_tlases_updated_in_place_match_the_full_build_on_both_backends() {
 /// floor's guarantee holds whatever `--stream-tlas` says; the frame equals the full build.
 #[test]
 fn forced_persistent_tlases_at_the_floor_give_way_and_the_frame_completes() {
-    let Some(ctx) = context_or_skip("stream_persistent_floor", Requirement::RayTracing) else {
+    let Some(Fixture { ctx, h, full }) =
+        Fixture::new("stream_persistent_floor", instanced_grid(50, 7))
+    else {
         return;
     };
-    let h = instanced_grid(50, 7);
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let cam = base_pose().params(32, 32);
     let opts = ids_opts(backend(&ctx));
     let reference = render(&ctx, &full, &cam, &opts).expect("full render");
@@ -1308,7 +1255,7 @@ fn forced_persistent_tlases_at_the_floor_give_way_and_the_frame_completes() {
     let mut sr = StreamingRenderer::new(
         &ctx,
         h.view(),
-        &blobs,
+        &h,
         &StreamOptions {
             tlas_update: crate::TlasUpdate::Update,
             ..small_stream_options(budget)
@@ -1342,10 +1289,8 @@ fn the_pass_stamp_limit_is_refused_by_name() {
         return;
     };
     let h = field(2, 2, 4);
-    let blobs = Blobs(&h);
     let opts = ids_opts(backend(&ctx));
-    let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(64 << 20))
-        .expect("streaming renderer");
+    let mut sr = streamer(&ctx, &h, &small_stream_options(64 << 20));
     let cam = base_pose().params(SIZE, SIZE);
     let (_, st) = sr
         .render_frame(&cam, &opts)
@@ -1394,16 +1339,15 @@ fn auto_pass_marks_mark_after_build_room_evictions_with_nothing_skipped() {
 /// build's, hits and shaded colours (textured).
 #[test]
 fn drained_blocks_free_budget_and_the_next_frame_is_unchanged() {
-    let Some(ctx) = context_or_skip("stream_defrag", Requirement::RayTracing) else {
+    let Some(Fixture { ctx, h, full }) = Fixture::new(
+        "stream_defrag",
+        per_material_textures(textured_field(10, 16, 30)),
+    ) else {
         return;
     };
-    let h = per_material_textures(textured_field(10, 16, 30));
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let budget = full_build_needs(&full) / 4;
     let shaded = textured_opts(backend(&ctx));
-    let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &device_meshes(budget))
-        .expect("streaming renderer");
+    let mut sr = streamer(&ctx, &h, &device_meshes(budget));
     let path = SWEEP;
     let frames = 4;
     let mut cam = base_pose().params(32, 32);
@@ -1465,16 +1409,13 @@ fn drained_blocks_free_budget_and_the_next_frame_is_unchanged() {
 /// is probed, and the frames at rest still equal the full build.
 #[test]
 fn a_camera_at_rest_skips_the_next_camera_probe() {
-    let Some(ctx) = context_or_skip("stream_probe_at_rest", Requirement::RayTracing) else {
+    let Some(Fixture { ctx, h, full }) = Fixture::new("stream_probe_at_rest", field(4, 6, 12))
+    else {
         return;
     };
-    let h = field(4, 6, 12);
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let opts = ids_opts(backend(&ctx));
     let budget = full_build_needs(&full) * 2;
-    let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
-        .expect("streaming renderer");
+    let mut sr = streamer(&ctx, &h, &small_stream_options(budget));
     let cam = camera_path(&base_pose(), &SWEEP, 0, 4).params(SIZE, SIZE);
     let moved = camera_path(&base_pose(), &SWEEP, 2, 4).params(SIZE, SIZE);
     let mut stats = Vec::new();
@@ -1506,14 +1447,12 @@ fn a_camera_at_rest_skips_the_next_camera_probe() {
 /// and 1 bounces give different images).
 #[test]
 fn streamed_bounces_match_the_full_build_on_both_backends() {
-    let Some(ctx) = context_or_skip("stream_bounces", Requirement::RayTracing) else {
+    let t0 = std::time::Instant::now();
+    let h = textured(field_with_ground(10, 16, 30, true));
+    let Some(Fixture { ctx, h, full }) = Fixture::new("stream_bounces", h) else {
         return;
     };
-    let t0 = std::time::Instant::now();
     let cam = base_pose().params(24, 24);
-    let h = textured(field_with_ground(10, 16, 30, true));
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let budget = full_build_needs(&full) / 16;
     for (k, be) in available_backends(&ctx).into_iter().enumerate() {
         let opts = |bounces| RenderOptions {
@@ -1540,16 +1479,14 @@ fn streamed_bounces_match_the_full_build_on_both_backends() {
                 lit > 24 * 24 / 10,
                 "{what}: the bounce changes {lit} pixels only"
             );
-            let mut cold = StreamingRenderer::new(
+            let mut cold = streamer(
                 &ctx,
-                h.view(),
-                &blobs,
+                &h,
                 &StreamOptions {
                     guard_band_px: 0,
                     ..small_stream_options(budget)
                 },
-            )
-            .expect("streaming renderer");
+            );
             let (out, st) = cold.render_frame(&cam, &opts(bounces)).expect("frame");
             eprintln!(
                 "{what}: {lit} pixels lit by the bounce; streamed in {} passes, {} evicted, {} \
@@ -1578,27 +1515,23 @@ fn streamed_bounces_match_the_full_build_on_both_backends() {
 /// with no trace between: per frame, a TLAS is rebuilt at most once a build step.
 #[test]
 fn uncompacted_rebuilt_tlases_match_the_full_build_and_rebuild_once_a_step() {
-    let Some(ctx) = context_or_skip("stream_tlas_compact", Requirement::RayTracing) else {
+    let Some(Fixture { ctx, h, full }) = Fixture::new("stream_tlas_compact", field(10, 16, 30))
+    else {
         return;
     };
-    let h = field(10, 16, 30);
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let budget = full_build_needs(&full) / 8;
     let opts = ids_opts(backend(&ctx));
     let tlases = h.view().tlases.len() as u32;
     let frames = 5;
     for tlas_compact in [true, false] {
-        let mut sr = StreamingRenderer::new(
+        let mut sr = streamer(
             &ctx,
-            h.view(),
-            &blobs,
+            &h,
             &StreamOptions {
                 tlas_compact,
                 ..small_stream_options(budget)
             },
-        )
-        .expect("streaming renderer");
+        );
         let (mut mismatched, mut total) = (0u64, 0u64);
         let mut rebuilt_by_when = 0u32;
         for f in 0..=frames {
@@ -1661,28 +1594,25 @@ fn uncompacted_rebuilt_tlases_match_the_full_build_and_rebuild_once_a_step() {
 /// batch), and the frames equal the full build.
 #[test]
 fn a_rebuild_group_submits_its_proxies_and_tlases_once() {
-    let Some(ctx) = context_or_skip("stream_tlas_one_submission", Requirement::RayTracing) else {
+    let Some(Fixture { ctx, h, full }) =
+        Fixture::new("stream_tlas_one_submission", field(10, 16, 30))
+    else {
         return;
     };
-    let h = field(10, 16, 30);
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let budget = full_build_needs(&full) / 8;
     let opts = ids_opts(backend(&ctx));
     let frames = 4;
     let mut submits = Vec::new();
     for tlas_compact in [false, true] {
         let mut one_submission = 0u32;
-        let mut sr = StreamingRenderer::new(
+        let mut sr = streamer(
             &ctx,
-            h.view(),
-            &blobs,
+            &h,
             &StreamOptions {
                 tlas_compact,
                 ..small_stream_options(budget)
             },
-        )
-        .expect("streaming renderer");
+        );
         for f in 0..=frames {
             let cam =
                 camera_path(&base_pose(), &SWEEP, f.min(frames - 1), frames).params(SIZE, SIZE);
@@ -1729,18 +1659,16 @@ fn a_rebuild_group_submits_its_proxies_and_tlases_once() {
 #[test]
 fn evictions_for_tlas_room_spare_clean_tlases_and_the_frame_matches_the_full_build() {
     use super::residency::EvictWhy;
-    let Some(ctx) = context_or_skip("stream_tlas_room_victims", Requirement::RayTracing) else {
+    let Some(Fixture { ctx, h, full }) =
+        Fixture::new("stream_tlas_room_victims", field(10, 16, 30))
+    else {
         return;
     };
-    let h = field(10, 16, 30);
-    let blobs = Blobs(&h);
-    let full = GpuScene::build(&ctx, &h.view(), &blobs, &BuildOptions::default()).expect("full");
     let opts = ids_opts(backend(&ctx));
     let cam = camera_path(&base_pose(), &SWEEP, 0, 1).params(SIZE, SIZE);
     // Room for everything: the frame leaves every BLAS it met resident.
     let budget = 4 * full_build_needs(&full);
-    let mut sr = StreamingRenderer::new(&ctx, h.view(), &blobs, &small_stream_options(budget))
-        .expect("streaming renderer");
+    let mut sr = streamer(&ctx, &h, &small_stream_options(budget));
     let (_, st) = sr.render_frame(&cam, &opts).expect("frame");
     assert!(st.complete && !sr.tlases.any_dirty(), "{st:?}");
     sr.res.unpin_all(sr.item_count());
