@@ -299,6 +299,21 @@ fn device_meshes(budget: u64) -> StreamOptions {
     }
 }
 
+/// [`small_stream_options`] with no guard band (no prefetch): a cold renderer's first pass
+/// builds nothing ahead of what the image's own rays meet.
+fn no_guard_band(budget: u64) -> StreamOptions {
+    StreamOptions {
+        guard_band_px: 0,
+        ..small_stream_options(budget)
+    }
+}
+
+/// Frame `f` of the [`SWEEP`] path in `frames` frames, and from `f = frames` on at rest where
+/// the path ended.
+fn sweep_then_rest(f: u32, frames: u32) -> motu_abi::camera::CameraParams {
+    camera_path(&base_pose(), &SWEEP, f.min(frames - 1), frames).params(SIZE, SIZE)
+}
+
 /// A test's context, hierarchy and the hierarchy's full build (what streamed frames are
 /// compared with).
 struct Fixture {
@@ -412,14 +427,7 @@ fn streaming_under_a_quarter_of_the_full_build_matches_it_on_both_backends() {
         let small = base_pose().params(32, 32);
         let full_shaded = render(&ctx, &full, &small, &shaded).expect("full shaded render");
         // A cold renderer: its secondary rays meet structures not built yet and are deferred.
-        let mut cold = streamer(
-            &ctx,
-            &h,
-            &StreamOptions {
-                guard_band_px: 0,
-                ..small_stream_options(budget)
-            },
-        );
+        let mut cold = streamer(&ctx, &h, &no_guard_band(budget));
         let (out_shaded, st_shaded) = cold.render_frame(&small, &shaded).expect("stream shaded");
         drop(cold);
         assert!(st_shaded.passes >= 2, "{st_shaded:?}");
@@ -1479,14 +1487,7 @@ fn streamed_bounces_match_the_full_build_on_both_backends() {
                 lit > 24 * 24 / 10,
                 "{what}: the bounce changes {lit} pixels only"
             );
-            let mut cold = streamer(
-                &ctx,
-                &h,
-                &StreamOptions {
-                    guard_band_px: 0,
-                    ..small_stream_options(budget)
-                },
-            );
+            let mut cold = streamer(&ctx, &h, &no_guard_band(budget));
             let (out, st) = cold.render_frame(&cam, &opts(bounces)).expect("frame");
             eprintln!(
                 "{what}: {lit} pixels lit by the bounce; streamed in {} passes, {} evicted, {} \
@@ -1535,9 +1536,7 @@ fn uncompacted_rebuilt_tlases_match_the_full_build_and_rebuild_once_a_step() {
         let (mut mismatched, mut total) = (0u64, 0u64);
         let mut rebuilt_by_when = 0u32;
         for f in 0..=frames {
-            // The last frame at rest where the path ended.
-            let cam =
-                camera_path(&base_pose(), &SWEEP, f.min(frames - 1), frames).params(SIZE, SIZE);
+            let cam = sweep_then_rest(f, frames);
             let (out, st) = sr.render_frame(&cam, &opts).expect("frame");
             let what = format!("compact {tlas_compact}, frame {f}: {st:?}");
             assert!(st.complete, "{what}");
@@ -1614,8 +1613,7 @@ fn a_rebuild_group_submits_its_proxies_and_tlases_once() {
             },
         );
         for f in 0..=frames {
-            let cam =
-                camera_path(&base_pose(), &SWEEP, f.min(frames - 1), frames).params(SIZE, SIZE);
+            let cam = sweep_then_rest(f, frames);
             let (out, st) = sr.render_frame(&cam, &opts).expect("frame");
             let what = format!("compact {tlas_compact}, frame {f}: {st:?}");
             assert!(st.complete, "{what}");
