@@ -62,6 +62,13 @@ fn two_level() -> OwnedHierarchy {
     b.finish(root)
 }
 
+/// [`two_level`] and its GPU scene.
+fn two_level_scene(ctx: &Context) -> (OwnedHierarchy, GpuScene) {
+    let h = two_level();
+    let scene = GpuScene::build(ctx, &h.view(), &h, &BuildOptions::default()).expect("build");
+    (h, scene)
+}
+
 fn ctx_or_skip(test: &str) -> Option<Context> {
     context_or_skip(test, Requirement::RayTracing)
 }
@@ -122,8 +129,7 @@ fn two_level_hierarchy_matches_the_cpu_oracle_on_both_backends() {
     let Some(ctx) = ctx_or_skip("two_level_matches_cpu") else {
         return;
     };
-    let h = two_level();
-    let scene = GpuScene::build(&ctx, &h.view(), &h, &BuildOptions::default()).expect("build");
+    let (h, scene) = two_level_scene(&ctx);
     let cam = camera([0.5, 1.0, 7.0], [0.0, 0.0, 0.0], 48);
     let lod = LodParams {
         r_max_px: 12.0,
@@ -194,8 +200,7 @@ fn ids_view_uses_the_cpu_palette() {
     let Some(ctx) = ctx_or_skip("ids_view_palette") else {
         return;
     };
-    let h = two_level();
-    let scene = GpuScene::build(&ctx, &h.view(), &h, &BuildOptions::default()).expect("build");
+    let (h, scene) = two_level_scene(&ctx);
     let cam = camera([0.5, 1.0, 7.0], [0.0, 0.0, 0.0], 32);
     let backend = backends(&ctx)[0];
     let out = render(
@@ -680,8 +685,7 @@ fn pipeline_stats_per_backend_and_variant() {
         ctx.pipeline_stats_enabled(),
         ctx.caps().pipeline_executable_info
     );
-    let h = two_level();
-    let scene = GpuScene::build(&ctx, &h.view(), &h, &BuildOptions::default()).expect("build");
+    let (_, scene) = two_level_scene(&ctx);
     let cam = camera([0.5, 1.0, 7.0], [0.0, 0.0, 0.0], 16);
     let backends = backends(&ctx);
     for &backend in &backends {
@@ -754,8 +758,7 @@ fn pipeline_stats_off_by_default() {
         return;
     };
     assert!(!ctx.pipeline_stats_requested() && !ctx.pipeline_stats_enabled());
-    let h = two_level();
-    let scene = GpuScene::build(&ctx, &h.view(), &h, &BuildOptions::default()).expect("build");
+    let (_, scene) = two_level_scene(&ctx);
     let cam = camera([0.5, 1.0, 7.0], [0.0, 0.0, 0.0], 8);
     render(&ctx, &scene, &cam, &RenderOptions::default()).expect("render");
     assert!(ctx.captured_pipelines().is_empty());
