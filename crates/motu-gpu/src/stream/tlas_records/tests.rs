@@ -17,24 +17,19 @@ fn naive(view: &HierarchyView<'_>, addrs: &[u64], t: u32) -> Vec<u8> {
     out
 }
 
+/// BLASes 0 and 2 of triangles, 1 of boxes.
+fn three_blases() -> [BlasRecord; 3] {
+    [BLAS_TRIANGLES, BLAS_AABBS, BLAS_TRIANGLES].map(|kind| BlasRecord {
+        kind,
+        ..Default::default()
+    })
+}
+
 #[test]
 fn chunks_encoded_in_place_equal_the_records_in_order_and_empty_tlases_get_one_inactive() {
     // Two TLASes: the second's 50 instances (over three BLASes, one of boxes, one not
     // resident) span several chunks of 3; the first has only non-resident instances.
-    let blases = [
-        BlasRecord {
-            kind: BLAS_TRIANGLES,
-            ..Default::default()
-        },
-        BlasRecord {
-            kind: BLAS_AABBS,
-            ..Default::default()
-        },
-        BlasRecord {
-            kind: BLAS_TRIANGLES,
-            ..Default::default()
-        },
-    ];
+    let blases = three_blases();
     let addrs = [0x1000u64, 0x2000, 0];
     let mut instances = vec![
         InstanceRecord {
@@ -115,20 +110,7 @@ fn the_gpu_compaction_of_kept_records_writes_the_host_paths_records() {
     // One TLAS over more than two compaction chunks, a third of its BLASes' instances not
     // resident: the shader's rule (motu_abi::tlas_compact::compact_order, kept records with
     // the address patched in) gives the host path's bytes, and the counts place the tail.
-    let blases = [
-        BlasRecord {
-            kind: BLAS_TRIANGLES,
-            ..Default::default()
-        },
-        BlasRecord {
-            kind: BLAS_AABBS,
-            ..Default::default()
-        },
-        BlasRecord {
-            kind: BLAS_TRIANGLES,
-            ..Default::default()
-        },
-    ];
+    let blases = three_blases();
     let addrs = [0x1000u64, 0, 0x3000];
     let n = 2 * TLAS_COMPACT_CHUNK + 300;
     let instances: Vec<InstanceRecord> = (0..n)
