@@ -166,6 +166,7 @@ mirror! {
         tlas_walks: u64,
         mark_walks: u64,
         mark_tlas_walks: u64,
+        proxy_walks: u64,
     }
 }
 
