@@ -456,7 +456,11 @@ impl<'s> Parser<'s> {
                     let mut job = None;
                     if let (Some((_, src)), Some(snap)) = (&item.src, self.snapshot()) {
                         window_bytes += src.bytes().len() as u64;
-                        let starts = parallel::split_points(src.bytes(), chunk_bytes);
+                        // The scan's pages leave the resident set behind it; the workers
+                        // fault their pieces back from the page cache.
+                        let starts = parallel::split_points(src.bytes(), chunk_bytes, |a, b| {
+                            src.release(a, b)
+                        });
                         let mut slots = Vec::with_capacity(starts.len());
                         for (i, &start) in starts.iter().enumerate() {
                             let end = starts.get(i + 1).copied().unwrap_or(src.bytes().len());
