@@ -161,9 +161,9 @@ pub struct ParseOptions {
     /// `ObjectInstance`s, with transforms and `ReverseOrientation` only inside balanced
     /// blocks (Moana's and `motu gen island`'s placement files); anything else, and any
     /// error, is parsed sequentially (same messages and positions). Runs of consecutive
-    /// includes are processed as a sliding window of at most 256 MiB of input; files are
-    /// cut into pieces of about [`ParseOptions::parallel_chunk_bytes`] at directive lines,
-    /// one worker each; files over 128 MiB (and `.gz`) are parsed sequentially.
+    /// includes are processed as a sliding window of 16 MiB of input per pool thread (64 to
+    /// 256 MiB); files are cut into pieces of about [`ParseOptions::parallel_chunk_bytes`] at
+    /// directive lines, one worker each; files over 128 MiB (and `.gz`) are parsed sequentially.
     pub parallel_includes: bool,
     /// Target size of the pieces a file is cut into for [`ParseOptions::parallel_includes`].
     pub parallel_chunk_bytes: usize,

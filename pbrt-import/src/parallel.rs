@@ -343,11 +343,27 @@ fn numbers<const N: usize>(lx: &mut Lexer<'_>) -> Option<[f64; N]> {
 /// then ends in an unterminated string or array, an argument-less directive or an open
 /// block, and its worker gives up, so the whole file is parsed sequentially. Pieces of a
 /// neutral file each start at block depth 0, where the state is the include's.
-pub(crate) fn split_points(bytes: &[u8], target: usize) -> Vec<usize> {
+///
+/// Finding a cut can read far past `target` (a file of a few huge `Shape`s is scanned line by
+/// line to the next one): `release` is called on the ranges read, every
+/// [`SCAN_RELEASE_BYTES`], so a file waiting in the window for its workers is not resident whole
+/// (issue 48 item 1: island 0.1's parse held ~180 MiB of such text).
+pub(crate) fn split_points(
+    bytes: &[u8],
+    target: usize,
+    mut release: impl FnMut(usize, usize),
+) -> Vec<usize> {
     let mut starts = vec![0];
     let mut pos = target;
+    // Start of the bytes read and not yet released.
+    let mut read_from = pos;
     while pos < bytes.len() {
+        if pos >= read_from + SCAN_RELEASE_BYTES {
+            release(read_from, pos);
+            read_from = pos;
+        }
         let Some(nl) = bytes[pos..].iter().position(|&b| b == b'\n') else {
+            pos = bytes.len();
             break;
         };
         let next = pos + nl + 1;
@@ -362,13 +378,24 @@ pub(crate) fn split_points(bytes: &[u8], target: usize) -> Vec<usize> {
         .any(|w| rest.starts_with(w))
         {
             starts.push(next);
+            release(read_from, (next + WORD_BYTES).min(bytes.len()));
             pos = next + target;
+            read_from = pos;
         } else {
             pos = next;
         }
     }
+    if read_from < pos.min(bytes.len()) {
+        release(read_from, pos.min(bytes.len()));
+    }
     starts
 }
+
+/// How much text [`split_points`] reads between releases.
+const SCAN_RELEASE_BYTES: usize = 4 << 20;
+
+/// The longest directive word [`split_points`] looks at after a newline.
+const WORD_BYTES: usize = "AttributeBegin".len();
 
 /// Cheap byte-level filter: `false` when `bytes` cannot be neutral. Looks only at bare
 /// words that start with an upper-case letter (directives), skipping strings, comments

@@ -70,15 +70,38 @@ fn prescan_rejects_state_changes_and_definitions() {
 fn split_points_cut_at_directive_lines() {
     let text = "AttributeBegin\n  Translate 1 2 3\n  Shape \"sphere\"\nAttributeEnd\n\
                     Shape \"disk\"\n# Comment\nObjectInstance \"a\"\n";
-    let cuts = split_points(text.as_bytes(), 1);
+    let cuts = split_points(text.as_bytes(), 1, |_, _| {});
     let lines: Vec<&str> = cuts[1..]
         .iter()
         .map(|&c| text[c..].lines().next().unwrap_or(""))
         .collect();
     assert_eq!(cuts[0], 0);
     assert_eq!(lines, ["Shape \"disk\"", "ObjectInstance \"a\""]);
-    assert_eq!(split_points(text.as_bytes(), 1 << 20), [0]);
-    assert_eq!(split_points(b"", 4), [0]);
+    assert_eq!(split_points(text.as_bytes(), 1 << 20, |_, _| {}), [0]);
+    assert_eq!(split_points(b"", 4, |_, _| {}), [0]);
+}
+
+#[test]
+fn split_points_release_what_they_scan() {
+    // One huge shape, then another: the scan reads line by line from `target` to the second.
+    let mut text = String::from("Shape \"trianglemesh\" \"integer indices\" [\n");
+    for i in 0..400_000 {
+        text.push_str(&format!("  {i} {i} {i}\n"));
+    }
+    text.push_str("]\nShape \"disk\"\n");
+    let mut ranges = Vec::new();
+    let cuts = split_points(text.as_bytes(), 100, |a, b| ranges.push((a, b)));
+    assert_eq!(cuts.len(), 2);
+    assert!(text[cuts[1]..].starts_with("Shape \"disk\""));
+    // Released in order, within the file, covering everything from `target` to the cut.
+    let mut at = 100;
+    for &(a, b) in &ranges {
+        assert!(a >= at && a <= b && b <= text.len(), "{a}..{b} after {at}");
+        at = b;
+    }
+    assert_eq!(ranges.first().map(|r| r.0), Some(100));
+    assert!(at >= cuts[1], "released up to {at}, cut at {}", cuts[1]);
+    assert!(ranges.len() >= 2, "{ranges:?}");
 }
 
 #[test]

@@ -84,9 +84,27 @@ fn shareable(bytes: &[u8]) -> bool {
     any && blocks.is_empty()
 }
 
-/// Input bytes of the files in flight in a parallel include run (buffered events take
+/// Input bytes of the files in flight in a parallel include run at most (buffered events take
 /// less than their text); files over half of it are parsed sequentially (streaming).
 const PARALLEL_WINDOW_BYTES: u64 = 256 << 20;
+
+/// Input bytes in flight per thread of the pool: the window is this times the threads, at
+/// least [`MIN_WINDOW_BYTES`] and at most [`PARALLEL_WINDOW_BYTES`]. What a worker parsed waits
+/// in the window, as events and meshes, until its file is replayed: on island 0.1 with 2
+/// threads a 256 MiB window held ~80 MiB more of them at the parse's peak than a 64 MiB one,
+/// which kept both workers busy as well (issue 48 item 1).
+const WINDOW_BYTES_PER_THREAD: u64 = 16 << 20;
+
+/// The smallest window: a few pieces ([`crate::ParseOptions::parallel_chunk_bytes`]) per
+/// worker even for files cut at huge shapes.
+const MIN_WINDOW_BYTES: u64 = 64 << 20;
+
+/// The window of a parallel include run on a pool of `threads`.
+fn window_bytes_for(threads: usize) -> u64 {
+    (threads as u64)
+        .saturating_mul(WINDOW_BYTES_PER_THREAD)
+        .clamp(MIN_WINDOW_BYTES, PARALLEL_WINDOW_BYTES)
+}
 
 /// An `Include`/`Import` directive found while looking ahead in a parallel run.
 struct RunItem<'b> {
@@ -420,7 +438,8 @@ impl<'s> Parser<'s> {
     /// A run of consecutive `Include`/`Import` directives starting with the one just read.
     /// A sliding window of the following files is parsed on the rayon pool while the main
     /// thread replays finished ones in document order (see [`crate::parallel`]). The window
-    /// holds at most [`PARALLEL_WINDOW_BYTES`] of input and a few files per thread.
+    /// holds at most [`window_bytes_for`] the pool's threads of input (and one more file) and
+    /// a few files per thread.
     fn include_run<'b>(
         &mut self,
         lx: &mut Lexer<'b>,
@@ -429,6 +448,7 @@ impl<'s> Parser<'s> {
         stok: Token<'b>,
     ) -> Result<()> {
         let max_files = rayon::current_num_threads().saturating_mul(4).max(4);
+        let max_window_bytes = window_bytes_for(rayon::current_num_threads());
         let chunk_bytes = self.opts.parallel_chunk_bytes.max(1);
         let mut cursor = lx.clone();
         let mut first = Some(RunItem {
@@ -446,8 +466,7 @@ impl<'s> Parser<'s> {
             loop {
                 // Refill: state can only change at a sequential fallback, which `same_as`
                 // detects at replay, so the current state is the guess for every file.
-                while !exhausted && window.len() < max_files && window_bytes < PARALLEL_WINDOW_BYTES
-                {
+                while !exhausted && window.len() < max_files && window_bytes < max_window_bytes {
                     let next = first.take().or_else(|| self.next_item(&mut cursor));
                     let Some(item) = next.map(|item| self.open_item(item)) else {
                         exhausted = true;
@@ -456,7 +475,11 @@ impl<'s> Parser<'s> {
                     let mut job = None;
                     if let (Some((_, src)), Some(snap)) = (&item.src, self.snapshot()) {
                         window_bytes += src.bytes().len() as u64;
-                        let starts = parallel::split_points(src.bytes(), chunk_bytes);
+                        // The scan's pages leave the resident set behind it; the workers
+                        // fault their pieces back from the page cache.
+                        let starts = parallel::split_points(src.bytes(), chunk_bytes, |a, b| {
+                            src.release(a, b)
+                        });
                         let mut slots = Vec::with_capacity(starts.len());
                         for (i, &start) in starts.iter().enumerate() {
                             let end = starts.get(i + 1).copied().unwrap_or(src.bytes().len());

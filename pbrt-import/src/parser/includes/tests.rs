@@ -28,3 +28,13 @@ fn a_text_without_includes_is_released_window_by_window() {
     assert_eq!(released.len(), text.len().div_ceil(RELEASE_TEXT_BYTES));
     assert_eq!(released.last().map(|r| r.1), Some(text.len()));
 }
+
+/// The window grows with the pool's threads between its floor and its cap.
+#[test]
+fn the_window_follows_the_threads() {
+    assert_eq!(window_bytes_for(0), MIN_WINDOW_BYTES);
+    assert_eq!(window_bytes_for(2), MIN_WINDOW_BYTES);
+    assert_eq!(window_bytes_for(8), 128 << 20);
+    assert_eq!(window_bytes_for(16), PARALLEL_WINDOW_BYTES);
+    assert_eq!(window_bytes_for(128), PARALLEL_WINDOW_BYTES);
+}
