@@ -31,8 +31,6 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 #define STAT_TLAS_WALKS 6
 #define STAT_MARK_WALKS 7
 #define STAT_MARK_TLAS_WALKS 8
-// Streamed passes only: the first walks' proxy walks (traverse.glsl g_proxy_walk).
-#define STAT_PROXY_WALKS 9
 
 #define T_INFINITY 3.0e38
 
@@ -81,19 +79,15 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 // StreamParams.flags of a last pass after which nothing is built (the frame's build budget is
 // spent): no ray takes a mark walk (traverse.glsl), whose marks only steer that build.
 #define STREAM_NO_MARK_WALK 8u
-// Ray cull masks (Rust: stream::TRIANGLE_MASK, MARKS_MASK, PROXY_MASK, PI_MASK). Every instance
-// has mask 0xFF except in a streamed TLAS its triangle instances (0x01), its programmable
-// instances (0xF7: every walk but a proxy walk), its *proxy* BLAS (0x0C: the boxes of its
-// non-resident clusters, met by proxy walks and mark walks, never by a first walk) and its
-// *marks* BLAS (0x02: the boxes of its resident clusters), which only probe passes' mark walks
-// see: there a ray passing through a resident BLAS without hitting it marks it seen, so the
-// prefetch keeps it (the hardware walk reports no such pass). A mark walk
-// (CULL_MASK_MARK_WALK) meets PI and proxy boxes only: no triangle is tested twice; a proxy
-// walk (CULL_MASK_PROXIES, traverse.glsl) proxy boxes only.
+// Ray cull masks (Rust: stream::MARKS_MASK, stream::TRIANGLE_MASK). Every instance has mask
+// 0xFF except in a streamed TLAS its triangle instances (0x01) and its *marks* BLAS (0x02: the
+// boxes of its resident clusters), which only probe passes' mark walks see: there a ray passing
+// through a resident BLAS without hitting it marks it seen, so the prefetch keeps it (the
+// hardware walk reports no such pass). A mark walk (CULL_MASK_MARK_WALK) meets PI and proxy
+// boxes only: no triangle is tested twice.
 #define CULL_MASK_WALK 0x01u
 #define CULL_MASK_MARKS 0x02u
 #define CULL_MASK_MARK_WALK 0x04u
-#define CULL_MASK_PROXIES 0x08u
 #define CULL_MASK_PROBE 0xFFu
 uint g_cull_mask = CULL_MASK_WALK;
 

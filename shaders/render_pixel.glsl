@@ -151,14 +151,10 @@ void stream_defer(uvec2 px, uint pixel, Carry c) {
 
 #ifdef MOTU_STREAMED
 // Adds this invocation's walks to the pass's counters: `walks` TLAS walks of its rays' walks,
-// its mark walks and its proxy walks (STAT_TLAS_WALKS, STAT_MARK_WALKS, STAT_MARK_TLAS_WALKS,
-// STAT_PROXY_WALKS).
+// and its mark walks (STAT_TLAS_WALKS, STAT_MARK_WALKS, STAT_MARK_TLAS_WALKS).
 void stream_count_walks(uint walks) {
     if (walks != 0u) {
         atomicAdd(push.stats.n[STAT_TLAS_WALKS], walks);
-    }
-    if (g_proxy_walks != 0u) {
-        atomicAdd(push.stats.n[STAT_PROXY_WALKS], g_proxy_walks);
     }
     if (g_mark_walks != 0u) {
         atomicAdd(push.stats.n[STAT_MARK_WALKS], g_mark_walks);
@@ -751,7 +747,6 @@ void render_stream_item(uint i) {
     g_last_pass = (s.flags & STREAM_LAST_PASS) != 0u;
     g_no_mark_walk = (s.flags & STREAM_NO_MARK_WALK) != 0u;
     g_mark_walks = 0u;
-    g_proxy_walks = 0u;
     g_mark_tlas_walks = 0u;
     // Every first walk tests triangles and proxies; what the rays pass (the marks BLASes
     // included) is marked by the mark walk that follows it (traverse.glsl).

@@ -77,15 +77,6 @@ float g_t_max = T_INFINITY;
 // truncates nothing.
 bool g_mark_walk = false;
 bool g_pass_walk = false;  // this mark walk is a final ray's pass-mark walk
-// The current walk is a *proxy walk*: a TLAS the first walk walked, walked again over its proxy
-// boxes only (the non-resident clusters, CULL_MASK_PROXIES) with t_max the ray's final hit, so
-// the member tests run only for boxes in front of that hit (traverse()).
-bool g_proxy_walk = false;
-// This invocation's proxy walks (STAT_PROXY_WALKS).
-uint g_proxy_walks = 0u;
-// TLAS walks of one ray whose proxy walks wait for its final hit; past them a walk meets its
-// proxy boxes itself.
-#define DEFERRED_PROXY_WALKS 4u
 // This invocation's mark walks and their TLAS walks (STAT_MARK_WALKS, STAT_MARK_TLAS_WALKS).
 uint g_mark_walks = 0u;
 uint g_mark_tlas_walks = 0u;
@@ -141,15 +132,12 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
     hit.lod = NONE_U32;
     uint traces_at_start = traces;
 #ifdef MOTU_STREAMED
-    // Walk 0 is the ray's walk, then its proxy walks (see g_proxy_walk), then its mark walk
-    // (see g_mark_walk): the same loop, so the traversal is inlined once.
+    // Walk 0 is the ray's walk, walk 1 its mark walk (see g_mark_walk): the same loop, so the
+    // traversal is inlined once.
     uint walk_cull_mask = g_cull_mask;
     uvec3 walk_counts = uvec3(0u);  // traces, overflows, truncations of the first walk
     bool walk_truncated = false;
-    // The first walk's TLAS walks whose proxy boxes are walked once the ray's hit is final.
-    Entry deferred[DEFERRED_PROXY_WALKS];
-    uint n_deferred = 0u;
-    for (uint walk = 0u; walk < 3u; ++walk) {
+    for (uint walk = 0u; walk < 2u; ++walk) {
 #endif
     while (sp > 0u) {
         sp -= 1u;
@@ -174,23 +162,9 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
 #ifdef MOTU_STREAMED
         pl.stream_start |= g_mark_walk ? STREAM_MARK_WALK : 0u;
         pl.stream_start |= g_pass_walk ? STREAM_PASS_WALK : 0u;
-        uint cull_mask = g_cull_mask;
-        if (!g_mark_walk && !g_proxy_walk && !g_guard && e.t_floor < 0.0) {
-            // Its proxy boxes later, against the final hit; this walk tests triangles and PIs.
-            // Past the list's capacity a walk meets its proxies itself, as before.
-            if (n_deferred < DEFERRED_PROXY_WALKS) {
-                deferred[n_deferred] = e;
-                n_deferred += 1u;
-            } else {
-                g_cull_mask = cull_mask | CULL_MASK_PROXIES;
-            }
-        }
 #endif
         backend_trace(e.tlas, xform_point(e.tlas_from_world, org), 0.0,
                       xform_vector(e.tlas_from_world, dir), hit.t, first_hit);
-#ifdef MOTU_STREAMED
-        g_cull_mask = cull_mask;
-#endif
         if (pl.open_t < g_empty_t) {
             // The walk met a non-resident BLAS in front of its hits (candidates.glsl
             // `record_proxy`): the nearest is the pixel's request if it stays open.
@@ -215,11 +189,7 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
         // re-walk finds what the hardware list truncated, which never holds these).
         PiCandidate boxes[BOX_LIST_CAPACITY];
         uint nb = 0u;
-        bool box_list_walk = e.t_floor < 0.0;
-#ifdef MOTU_STREAMED
-        box_list_walk = box_list_walk && !g_proxy_walk;  // a proxy walk meets proxies only
-#endif
-        if (box_list_walk) {
+        if (e.t_floor < 0.0) {
             TlasRecord tr = push.tlases.r[e.tlas];
             if (tr.box_list_instances != 0u) {
                 vec3 o = xform_point(e.tlas_from_world, org);
@@ -325,41 +295,9 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
             g_truncated = walk_truncated;
             break;
         }
-        bool occluded = first_hit && hit.tlas != NONE_U32;
-        if (g_proxy_walk) {
-            // What the proxy walks counted is not the ray's either.
-            g_proxy_walks += traces - traces_at_start;
-            traces = walk_counts.x;
-            overflows = walk_counts.y;
-            truncations = walk_counts.z;
-            g_truncated = walk_truncated;
-            g_proxy_walk = false;
-            g_cull_mask = walk_cull_mask;
-        } else if (n_deferred != 0u && !occluded && !g_truncated) {
-            // The proxy walks: each deferred TLAS walk again over its proxy boxes only
-            // (CULL_MASK_PROXIES), t_max the ray's final hit. Met during the first walk, every
-            // box in front of the closest triangle committed *so far* ran the member tests
-            // (candidates.glsl `record_proxy`), most of them behind the ray's hit: 85% of an
-            // all-resident streamed frame's trace on an H100 (BENCHMARKS.md, session 45). An
-            // occluded shadow ray needs none: it is final whatever lies in front of its occluder.
-            walk_counts = uvec3(traces, overflows, truncations);
-            walk_truncated = g_truncated;
-            traces_at_start = traces;
-            g_proxy_walk = true;
-            g_cull_mask = CULL_MASK_PROXIES;
-            sp = 0u;
-            for (uint i = 0u; i < n_deferred; ++i) {
-                if (deferred[i].t_near < hit.t) {
-                    stack[sp] = deferred[i];
-                    sp += 1u;
-                }
-            }
-            n_deferred = 0u;
-            continue;
-        }
         // Open: a structure in front of the hit may hold a nearer one (an occluded shadow ray
         // is final whatever lies in front of its occluder).
-        bool open = g_empty_t < hit.t && !occluded;
+        bool open = g_empty_t < hit.t && !(first_hit && hit.tlas != NONE_U32);
         if (!g_streaming || g_truncated || overflows != 0u || g_no_mark_walk ||
             !(g_guard || open || g_probe_pass_marks)) {
             break;  // final, or cut short: nothing to mark

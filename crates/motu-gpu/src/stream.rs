@@ -183,14 +183,8 @@ const IDENTITY: [f32; 12] = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1
 /// (`CULL_MASK_MARK_WALK | CULL_MASK_MARKS`) do.
 pub(super) const MARKS_MASK: u8 = 0x02;
 /// Instance mask of a streamed TLAS's triangle instances: bit 0 only, so a ray's mark walk
-/// (`CULL_MASK_MARK_WALK`, bit 2) and proxy walk (`CULL_MASK_PROXIES`, bit 3) test no triangle.
+/// (`CULL_MASK_MARK_WALK`, bit 2: PI and proxy instances keep 0xFF) tests no triangle twice.
 pub(super) const TRIANGLE_MASK: u8 = 0x01;
-/// Instance mask of a streamed TLAS's proxy BLAS (its non-resident clusters' boxes):
-/// `CULL_MASK_MARK_WALK | CULL_MASK_PROXIES`, not bit 0: a first walk never meets them; the
-/// ray's proxy walks do, with t_max its final hit (traverse.glsl), and its mark walk.
-pub(super) const PROXY_MASK: u8 = 0x0C;
-/// Instance mask of a streamed TLAS's programmable instances: every walk's but a proxy walk's.
-pub(super) const PI_MASK: u8 = 0xF7;
 
 /// Renders a hierarchy whose acceleration structures need not fit the budget: see the module
 /// docs. Holds the view and the mesh source for its lifetime. Its state lives in parts, each

@@ -13,8 +13,7 @@ use super::params::{
 use super::{FrameStreamStats, PassStats, StreamFallback, StreamingRenderer, GUARD_BIAS};
 use crate::error::{GpuError, Result};
 use crate::render::{
-    Tracer, STAT_MARK_TLAS_WALKS, STAT_MARK_WALKS, STAT_PROXY_WALKS, STAT_SHADOW_RAYS,
-    STAT_TLAS_WALKS, STAT_WORDS,
+    Tracer, STAT_MARK_TLAS_WALKS, STAT_MARK_WALKS, STAT_SHADOW_RAYS, STAT_TLAS_WALKS, STAT_WORDS,
 };
 use crate::scene::Slot;
 
@@ -354,7 +353,6 @@ pub(super) struct ShaderCounters {
     tlas_walks: u32,
     mark_walks: u32,
     mark_tlas_walks: u32,
-    proxy_walks: u32,
 }
 
 impl ShaderCounters {
@@ -365,7 +363,6 @@ impl ShaderCounters {
             tlas_walks: at(STAT_TLAS_WALKS),
             mark_walks: at(STAT_MARK_WALKS),
             mark_tlas_walks: at(STAT_MARK_TLAS_WALKS),
-            proxy_walks: at(STAT_PROXY_WALKS),
         }
     }
 
@@ -375,7 +372,6 @@ impl ShaderCounters {
         pass.tlas_walks = u64::from(self.tlas_walks.wrapping_sub(before.tlas_walks));
         pass.mark_walks = u64::from(self.mark_walks.wrapping_sub(before.mark_walks));
         pass.mark_tlas_walks = u64::from(self.mark_tlas_walks.wrapping_sub(before.mark_tlas_walks));
-        pass.proxy_walks = u64::from(self.proxy_walks.wrapping_sub(before.proxy_walks));
     }
 }
 

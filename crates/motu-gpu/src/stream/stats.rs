@@ -358,10 +358,6 @@ pub struct PassStats {
     pub tlas_walks: u64,
     pub mark_walks: u64,
     pub mark_tlas_walks: u64,
-    /// The rays' proxy walks: a TLAS their first walk walked, walked again over its
-    /// non-resident clusters' boxes only, up to the ray's final hit (none for an occluded
-    /// shadow ray or a guard ray).
-    pub proxy_walks: u64,
 }
 
 /// Totals over all frames rendered so far.

@@ -972,17 +972,6 @@ fn rays_crossing_many_proxy_boxes_walk_their_tlas_once_per_pass() {
             st.passes
         );
         assert_eq!(out.stats.pi_list_overflows, 0, "{be:?}");
-        // Proxy boxes are met in proxy walks only, after the ray's hit is final: at most one
-        // per TLAS walk (none when nothing non-resident lies on the way), and pass 1, with
-        // nothing resident, takes them.
-        for p in &st.pass_log {
-            assert!(p.proxy_walks <= p.tlas_walks, "{be:?}: {p:?}");
-        }
-        assert!(
-            st.pass_log[0].proxy_walks > 0,
-            "{be:?}: {:?}",
-            st.pass_log[0]
-        );
         assert_same_aov(&reference.aov, &out.aov, &format!("{be:?} ({st:?})"));
     }
     assert_no_validation_errors(&ctx);

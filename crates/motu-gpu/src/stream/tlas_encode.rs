@@ -4,7 +4,7 @@
 
 use motu_abi::{HierarchyView, InstanceRecord, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
 
-use super::{PI_MASK, TRIANGLE_MASK};
+use super::TRIANGLE_MASK;
 use crate::scene::{encode_instance, set_instance_mask};
 
 /// Bytes of one encoded instance record (`VkAccelerationStructureInstanceKHR`).
@@ -12,8 +12,7 @@ pub(super) const RECORD_BYTES: usize = 64;
 
 /// The record of `inst`, index `index` in its TLAS (the custom index the shaders read),
 /// referencing `addr` (its resident BLAS, or a persistent TLAS's placeholder): flags and shader
-/// offset from its BLAS's kind, triangle instances under [`TRIANGLE_MASK`], programmable
-/// instances under [`PI_MASK`].
+/// offset from its BLAS's kind, triangle instances under [`TRIANGLE_MASK`].
 pub(super) fn instance_record(
     view: &HierarchyView<'_>,
     inst: &InstanceRecord,
@@ -30,8 +29,6 @@ pub(super) fn instance_record(
     );
     if !aabbs {
         set_instance_mask(&mut enc, TRIANGLE_MASK);
-    } else if addr != 0 {
-        set_instance_mask(&mut enc, PI_MASK);
     }
     enc
 }
@@ -51,8 +48,7 @@ pub(super) fn kept_record(
 }
 
 /// The record of a streamed TLAS's proxy (`marks` false) or marks BLAS at `addr`: they follow
-/// the TLAS's `instance_count` own records; only probe passes' rays see the marks, and the
-/// proxies only proxy walks and mark walks ([`PROXY_MASK`](super::PROXY_MASK)).
+/// the TLAS's `instance_count` own records; only probe passes' rays see the marks.
 pub(super) fn tail_record(instance_count: u32, marks: bool, addr: u64) -> [u8; RECORD_BYTES] {
     let mut inst = encode_instance(
         &super::IDENTITY,
@@ -61,16 +57,8 @@ pub(super) fn tail_record(instance_count: u32, marks: bool, addr: u64) -> [u8; R
         addr,
         instance_count + u32::from(marks),
     );
-    if addr != 0 {
-        let mask = if marks {
-            super::MARKS_MASK
-        } else {
-            super::PROXY_MASK
-        };
-        set_instance_mask(&mut inst, mask);
+    if marks {
+        set_instance_mask(&mut inst, super::MARKS_MASK);
     }
     inst
 }
-
-#[cfg(test)]
-mod tests;

@@ -166,7 +166,6 @@ mirror! {
         tlas_walks: u64,
         mark_walks: u64,
         mark_tlas_walks: u64,
-        proxy_walks: u64,
     }
 }
 
