@@ -67,10 +67,41 @@ float proxy_boxes_entry(uint64_t table, uint first_box, uint fan, Affine tlas_fr
     return t_leaf;
 }
 
+// The nearest entry in [t_min, t_hi) of the ray into member instance `instance` (global
+// index) of a BLAS with bounds `br` (its bounds under the member's tlas_from_blas, padded as
+// the CPU pads proxy boxes, and one of the boxes inside the BLAS where it has them,
+// proxy_boxes.rs); -1 when it enters none. member_boxes.rs mirrors the box's arithmetic.
+float member_entry(StreamParams s, BlasRecord br, uint instance, uint first_box, uint fan,
+                   vec3 org, vec3 dir, float t_min, float t_hi) {
+    vec3 centre = 0.5 * (br.bounds_min + br.bounds_max);
+    vec3 half_size = 0.5 * (br.bounds_max - br.bounds_min);
+    InstanceRecord ir = push.instances.r[instance];
+    Affine m = affine_from_array(ir.tlas_from_blas);
+    vec3 c = xform_point(m, centre);
+    vec3 h = vec3(dot(abs(m.r0.xyz), half_size), dot(abs(m.r1.xyz), half_size),
+                  dot(abs(m.r2.xyz), half_size));
+    vec3 lo = c - h;
+    vec3 hi = c + h;
+    // Transformed-box rounding plus the CPU's proxy padding (`padded`): conservative.
+    float extent = 2.0 * max(max(h.x, h.y), h.z);
+    float magnitude = max(max(max(abs(lo.x), abs(lo.y)), abs(lo.z)),
+                          max(max(abs(hi.x), abs(hi.y)), abs(hi.z)));
+    float pad = 1e-3 * extent + 2e-5 * magnitude;
+    float t = slab_near(org, dir, lo - pad, hi + pad, t_min, t_hi);
+    if (t >= 0.0 && fan != 0u) {
+        t = proxy_boxes_entry(s.proxy_boxes, first_box, fan, m, org, dir, t_min, t_hi,
+                              pad + 2e-5 * magnitude);
+    }
+    return t;
+}
+
 // The nearest entry in [t_min, t_hi) of the ray into a member instance of proxy PI `r`'s
-// cluster (each member's BLAS bounds under its tlas_from_blas, padded as the CPU pads proxy
-// boxes, and one of the boxes inside the BLAS where it has them, proxy_boxes.rs); T_INFINITY
-// when it enters none.
+// cluster (member_entry); T_INFINITY when it enters none. Each member's box is first tested
+// quantised (8 bits an axis against a box grown from the proxy box, rounded outward:
+// member_boxes.rs, which computes the reference box the same way), read contiguously from the
+// cluster's words; only a member whose quantised box the ray enters (or one stored as ALWAYS,
+// lo.x > hi.x) reads its instance record for the exact test, so the result is the exact
+// test's.
 float proxy_entry(StreamParams s, PiRecord r, vec3 org, vec3 dir, float t_min, float t_hi) {
     uint blas = r.target;
     uint first = floatBitsToUint(r.child_from_parent[0]);
@@ -83,28 +114,32 @@ float proxy_entry(StreamParams s, PiRecord r, vec3 org, vec3 dir, float t_min, f
         fan = ix.r[2u * blas + 1u];
     }
     BlasRecord br = push.blases.r[blas];
-    vec3 centre = 0.5 * (br.bounds_min + br.bounds_max);
-    vec3 half_size = 0.5 * (br.bounds_max - br.bounds_min);
-    U32Table members = U32Table(s.cluster_members);
+    U32Table words = U32Table(s.cluster_members);
+    // The reference box (member_boxes.rs `reference`).
+    vec3 ext = r.aabb_max - r.aabb_min;
+    float cmag = max(max(max(abs(r.aabb_min.x), abs(r.aabb_min.y)), abs(r.aabb_min.z)),
+                     max(max(abs(r.aabb_max.x), abs(r.aabb_max.y)), abs(r.aabb_max.z)));
+    float cext = max(max(ext.x, ext.y), ext.z);
+    float grow = 2e-3 * cext + 4e-5 * cmag;
+    vec3 origin = r.aabb_min - grow;
+    vec3 step = (ext + 2.0 * grow) * (1.0 / 255.0);
+    float qpad = 1e-5 * (cmag + cext);
     float t_best = T_INFINITY;
     for (uint i = 0u; i < count; ++i) {
-        InstanceRecord ir = push.instances.r[members.r[first + i]];
-        Affine m = affine_from_array(ir.tlas_from_blas);
-        vec3 c = xform_point(m, centre);
-        vec3 h = vec3(dot(abs(m.r0.xyz), half_size), dot(abs(m.r1.xyz), half_size),
-                      dot(abs(m.r2.xyz), half_size));
-        vec3 lo = c - h;
-        vec3 hi = c + h;
-        // Transformed-box rounding plus the CPU's proxy padding (`padded`): conservative.
-        float extent = 2.0 * max(max(h.x, h.y), h.z);
-        float magnitude = max(max(max(abs(lo.x), abs(lo.y)), abs(lo.z)),
-                              max(max(abs(hi.x), abs(hi.y)), abs(hi.z)));
-        float pad = 1e-3 * extent + 2e-5 * magnitude;
-        float t = slab_near(org, dir, lo - pad, hi + pad, t_min, min(t_hi, t_best));
-        if (t >= 0.0 && fan != 0u) {
-            t = proxy_boxes_entry(s.proxy_boxes, first_box, fan, m, org, dir, t_min,
-                                  min(t_hi, t_best), pad + 2e-5 * magnitude);
+        uint w0 = words.r[first + 2u * i];
+        uint w1 = words.r[first + 2u * i + 1u];
+        uvec3 qlo = uvec3(w0 & 255u, (w0 >> 8u) & 255u, (w0 >> 16u) & 255u);
+        uvec3 qhi = uvec3(w0 >> 24u, w1 & 255u, (w1 >> 8u) & 255u);
+        float t_max = min(t_hi, t_best);
+        if (qlo.x <= qhi.x) {
+            vec3 lo = origin + vec3(qlo) * step - qpad;
+            vec3 hi = origin + vec3(qhi) * step + qpad;
+            if (slab_near(org, dir, lo, hi, t_min, t_max) < 0.0) {
+                continue;  // outside the quantised box, so outside the exact one
+            }
         }
+        float t = member_entry(s, br, words.r[first + 2u * count + i], first_box, fan, org, dir,
+                               t_min, t_max);
         if (t >= 0.0) {
             t_best = min(t_best, t);
         }

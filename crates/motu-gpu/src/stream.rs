@@ -121,6 +121,7 @@ mod fits;
 mod floor;
 mod frame;
 mod instance_table;
+mod member_boxes;
 mod options;
 mod params;
 mod passes;

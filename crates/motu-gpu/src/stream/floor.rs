@@ -358,8 +358,8 @@ fn table_bytes(view: &HierarchyView<'_>, proxies: u64, members: u64) -> u64 {
         )
         + rec_bytes(view.meshes.len() as u64, 16)
         + rec_bytes(nt, 8)
-        // The proxy clusters' member table (u32 an instance).
-        + rec_bytes(members, 4)
+        // The proxy clusters' member table (a quantised box and an index a member).
+        + rec_bytes(members, 4 * super::member_boxes::MEMBER_WORDS as u64)
         // The boxes inside streamable BLASes and their index.
         + proxy_box_bytes
         + 2 * rec_bytes(nb.max(1), 4)

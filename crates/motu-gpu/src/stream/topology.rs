@@ -12,7 +12,10 @@ use motu_abi::{BlasRecord, HierarchyView, PiRecord, TlasRecord, BLAS_AABBS, NONE
 
 use motu_compile::proxy_clusters::{tlas_clusters, Cluster};
 
+use rayon::prelude::*;
+
 use super::instance_table::InstanceTable;
+use super::member_boxes::{member_box, quantised, MEMBER_WORDS};
 use super::PI_EMPTY_BLAS;
 use crate::error::{GpuError, Result};
 
@@ -25,9 +28,10 @@ pub(super) struct ProxyCluster {
     pub bounds: [f32; 6],
     /// The member instances: indices in the TLAS's instance range (= their custom index).
     pub members: Vec<u32>,
-    /// Where `members` start in the GPU member table (global instance-table indices): a ray
-    /// that enters the box tests the members' boxes, so a BLAS is demanded only by rays that
-    /// enter one of its instances' boxes (set by [`Topology::derive`]).
+    /// The cluster's first word in the GPU member table (its members' quantised boxes, then
+    /// their global instance-table indices, `member_boxes.rs`): a ray that enters the box
+    /// tests the members' boxes, so a BLAS is demanded only by rays that enter one of its
+    /// instances' boxes (set by [`Topology::derive`]).
     pub member_first: u32,
 }
 
@@ -160,7 +164,8 @@ pub(super) struct SkeletonRecords {
     pub instances: InstanceTable,
     pub blases: Vec<BlasRecord>,
     pub pis: Vec<PiRecord>,
-    /// Per cluster, its instances' global indices in the GPU instance table.
+    /// Per cluster, its members' quantised boxes and global indices in the GPU instance table
+    /// (`member_boxes.rs`).
     pub members: Vec<u32>,
 }
 
@@ -308,23 +313,59 @@ impl Topology {
     }
 }
 
-/// The member table: per cluster, its instances' global indices in the GPU instance table
-/// (each TLAS's range there starts at the running total of the ranges before it, each grown
-/// by its proxy and marks instances). Sets each cluster's `member_first`.
+/// The member table: per cluster, its members' quantised boxes, then their global indices in
+/// the GPU instance table (`member_boxes.rs` has the layout; each TLAS's range in the instance
+/// table starts at the running total of the ranges before it, each grown by its proxy and
+/// marks instances). Sets each cluster's `member_first` (its first word). The boxes of each
+/// TLAS are made on the pool: 17M members on one thread would cost about a second.
 fn member_table(view: &HierarchyView<'_>, clusters: &mut [Vec<ProxyCluster>]) -> Result<Vec<u32>> {
-    let mut members: Vec<u32> = Vec::new();
+    let mut first_word = 0usize;
     let mut gpu_base = 0u32;
+    let mut tlas_firsts = Vec::with_capacity(view.tlases.len());
     for (t, rec) in view.tlases.iter().enumerate() {
+        tlas_firsts.push((first_word, gpu_base));
         for c in &mut clusters[t] {
-            c.member_first = u32::try_from(members.len()).map_err(|_| too_many("instances"))?;
-            members.extend(c.members.iter().map(|&local| gpu_base + local));
+            c.member_first = u32::try_from(first_word).map_err(|_| too_many("instances"))?;
+            first_word += MEMBER_WORDS * c.members.len();
         }
         let grown = rec.instance_count + 2 * u32::from(!clusters[t].is_empty());
         gpu_base = gpu_base
             .checked_add(grown)
             .ok_or_else(|| too_many("instances"))?;
     }
-    Ok(members)
+    u32::try_from(first_word).map_err(|_| too_many("instances"))?;
+    let mut words = vec![0u32; first_word];
+    // Each TLAS's words, split off in order.
+    let mut parts = Vec::with_capacity(view.tlases.len());
+    let mut rest = words.as_mut_slice();
+    for (t, tlas_clusters) in clusters.iter().enumerate() {
+        let n: usize = tlas_clusters
+            .iter()
+            .map(|c| MEMBER_WORDS * c.members.len())
+            .sum();
+        let (part, tail) = rest.split_at_mut(n);
+        parts.push((t, part));
+        rest = tail;
+    }
+    parts.into_par_iter().for_each(|(t, part)| {
+        let rec = &view.tlases[t];
+        let instances = &view.instances[rec.instance_range()];
+        let (tlas_first, gpu_base) = tlas_firsts[t];
+        for c in &clusters[t] {
+            let at = c.member_first as usize - tlas_first;
+            let n = c.members.len();
+            let blas = &view.blases[c.blas as usize];
+            for (i, &local) in c.members.iter().enumerate() {
+                let inst = &instances[local as usize];
+                let b = member_box(&inst.tlas_from_blas, blas.bounds_min, blas.bounds_max);
+                let q = quantised(&c.bounds, &b);
+                part[at + 2 * i] = q[0];
+                part[at + 2 * i + 1] = q[1];
+                part[at + 2 * n + i] = gpu_base + local;
+            }
+        }
+    });
+    Ok(words)
 }
 
 /// The GPU BLAS record of TLAS `rec`'s proxy or marks BLAS: `n` PI slots from `item_base`.
@@ -343,7 +384,7 @@ pub(super) fn proxy_blas_record(rec: &TlasRecord, item_base: u32, n: u32) -> Bla
 
 /// The PI record of cluster `c`'s proxy box. A proxy has no child transform: its first two
 /// words (`child_from_parent[0..2]`, read as u32 by `candidates.glsl`'s `record_proxy`)
-/// carry the cluster's member range in the member table.
+/// carry the cluster's first word in the member table and its member count.
 pub(super) fn proxy_pi(c: &ProxyCluster) -> PiRecord {
     let b = &c.bounds;
     let mut child_from_parent = [0.0f32; 12];
