@@ -28,6 +28,13 @@ void record_candidate(uint pi, float t_near) {
 }
 
 #ifdef MOTU_STREAMED
+// This invocation's member tests (proxy_entry): quantised boxes tested, and exact tests (an
+// instance record read). Flushed by render_pixel.glsl's stream_count_walks where the walk runs
+// in the invocation that flushes (the query backend, MOTU_COUNT_MEMBER_TESTS); an any-hit
+// shader's globals end with its invocation, so the pipeline backend counts none.
+uint g_member_tests = 0u;
+uint g_exact_tests = 0u;
+
 // The nearest entry in [t_min, t_max] of the ray into a leaf box of a BLAS placed by
 // `tlas_from_blas` (boxes from `first_box`: `fan` top boxes, then `fan` leaves per top box,
 // BLAS space, transformed as member boxes are and padded by `pad` more), testing only the
@@ -131,6 +138,7 @@ float proxy_entry(StreamParams s, PiRecord r, vec3 org, vec3 dir, float t_min, f
         uvec3 qlo = uvec3(w0 & 255u, (w0 >> 8u) & 255u, (w0 >> 16u) & 255u);
         uvec3 qhi = uvec3(w0 >> 24u, w1 & 255u, (w1 >> 8u) & 255u);
         float t_max = min(t_hi, t_best);
+        g_member_tests += 1u;
         if (qlo.x <= qhi.x) {
             vec3 lo = origin + vec3(qlo) * step - qpad;
             vec3 hi = origin + vec3(qhi) * step + qpad;
@@ -138,6 +146,7 @@ float proxy_entry(StreamParams s, PiRecord r, vec3 org, vec3 dir, float t_min, f
                 continue;  // outside the quantised box, so outside the exact one
             }
         }
+        g_exact_tests += 1u;
         float t = member_entry(s, br, words.r[first + 2u * count + i], first_box, fan, org, dir,
                                t_min, t_max);
         if (t >= 0.0) {

@@ -31,6 +31,10 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 #define STAT_TLAS_WALKS 6
 #define STAT_MARK_WALKS 7
 #define STAT_MARK_TLAS_WALKS 8
+// Streamed passes of the query backend only (candidates.glsl `proxy_entry`): member boxes
+// tested (quantised), and exact member tests (an instance record read) among them.
+#define STAT_PROXY_MEMBER_TESTS 9
+#define STAT_PROXY_EXACT_TESTS 10
 
 #define T_INFINITY 3.0e38
 

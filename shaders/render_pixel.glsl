@@ -160,6 +160,12 @@ void stream_count_walks(uint walks) {
         atomicAdd(push.stats.n[STAT_MARK_WALKS], g_mark_walks);
         atomicAdd(push.stats.n[STAT_MARK_TLAS_WALKS], g_mark_tlas_walks);
     }
+#ifdef MOTU_COUNT_MEMBER_TESTS
+    if (g_member_tests != 0u) {
+        atomicAdd(push.stats.n[STAT_PROXY_MEMBER_TESTS], g_member_tests);
+        atomicAdd(push.stats.n[STAT_PROXY_EXACT_TESTS], g_exact_tests);
+    }
+#endif
 }
 
 // The secondary rays traced ahead from an open ray's best hit so far (SPECULATIVE): an open

@@ -9,6 +9,9 @@ layout(local_size_x = 8, local_size_y = 8) in;
 #include "common.glsl"
 
 Payload pl;
+// The traversal loop runs in this invocation, so candidates.glsl's member-test counters reach
+// the stats words (render_pixel.glsl).
+#define MOTU_COUNT_MEMBER_TESTS
 #include "candidates.glsl"
 #include "texture.glsl"
 

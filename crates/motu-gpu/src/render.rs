@@ -23,7 +23,8 @@ pub use options::{Backend, RenderOptions, View};
 use output::RENDER_STAT_WORDS;
 pub(crate) use output::{
     check_texture_residency, frame_outputs, FrameMeasure, STAT_MARK_TLAS_WALKS, STAT_MARK_WALKS,
-    STAT_SHADOW_RAYS, STAT_TLAS_WALKS, STAT_TRUNCATED_RAYS, STAT_WORDS,
+    STAT_PROXY_EXACT_TESTS, STAT_PROXY_MEMBER_TESTS, STAT_SHADOW_RAYS, STAT_TLAS_WALKS,
+    STAT_TRUNCATED_RAYS, STAT_WORDS,
 };
 pub use output::{heat_colour, RayCounts, RenderOutput, RenderStats};
 pub(crate) use params::{frame_params, params_bytes, write_params, FrameParams};

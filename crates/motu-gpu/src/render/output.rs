@@ -106,7 +106,7 @@ pub struct RenderOutput {
 
 /// Stats words of every renderer's buffers (full builds, streaming, the viewer), indexed by
 /// the `STAT_*` of `common.glsl`.
-pub(crate) const STAT_WORDS: usize = 9;
+pub(crate) const STAT_WORDS: usize = 11;
 pub(super) const RENDER_STAT_WORDS: usize = STAT_WORDS;
 /// Secondary rays traced (shadow, AO, bounce).
 pub(crate) const STAT_SHADOW_RAYS: usize = 2;
@@ -119,6 +119,10 @@ pub(crate) const STAT_MISSING_TEXTURES: usize = 5;
 pub(crate) const STAT_TLAS_WALKS: usize = 6;
 pub(crate) const STAT_MARK_WALKS: usize = 7;
 pub(crate) const STAT_MARK_TLAS_WALKS: usize = 8;
+/// Streamed passes of the query backend only: proxy member boxes tested (quantised), and the
+/// exact member tests among them (`stream::PassStats`).
+pub(crate) const STAT_PROXY_MEMBER_TESTS: usize = 9;
+pub(crate) const STAT_PROXY_EXACT_TESTS: usize = 10;
 
 /// Fails a frame whose shading read a texture that was not resident: the pixel would show the
 /// material's constant colour, a wrong image. A resident mesh holds its textures, so this is a

@@ -13,7 +13,8 @@ use super::params::{
 use super::{FrameStreamStats, PassStats, StreamFallback, StreamingRenderer, GUARD_BIAS};
 use crate::error::{GpuError, Result};
 use crate::render::{
-    Tracer, STAT_MARK_TLAS_WALKS, STAT_MARK_WALKS, STAT_SHADOW_RAYS, STAT_TLAS_WALKS, STAT_WORDS,
+    Tracer, STAT_MARK_TLAS_WALKS, STAT_MARK_WALKS, STAT_PROXY_EXACT_TESTS, STAT_PROXY_MEMBER_TESTS,
+    STAT_SHADOW_RAYS, STAT_TLAS_WALKS, STAT_WORDS,
 };
 use crate::scene::Slot;
 
@@ -353,6 +354,8 @@ pub(super) struct ShaderCounters {
     tlas_walks: u32,
     mark_walks: u32,
     mark_tlas_walks: u32,
+    proxy_member_tests: u32,
+    proxy_exact_tests: u32,
 }
 
 impl ShaderCounters {
@@ -363,6 +366,8 @@ impl ShaderCounters {
             tlas_walks: at(STAT_TLAS_WALKS),
             mark_walks: at(STAT_MARK_WALKS),
             mark_tlas_walks: at(STAT_MARK_TLAS_WALKS),
+            proxy_member_tests: at(STAT_PROXY_MEMBER_TESTS),
+            proxy_exact_tests: at(STAT_PROXY_EXACT_TESTS),
         }
     }
 
@@ -372,6 +377,9 @@ impl ShaderCounters {
         pass.tlas_walks = u64::from(self.tlas_walks.wrapping_sub(before.tlas_walks));
         pass.mark_walks = u64::from(self.mark_walks.wrapping_sub(before.mark_walks));
         pass.mark_tlas_walks = u64::from(self.mark_tlas_walks.wrapping_sub(before.mark_tlas_walks));
+        let grown = |now: u32, then: u32| u64::from(now.wrapping_sub(then));
+        pass.proxy_member_tests = grown(self.proxy_member_tests, before.proxy_member_tests);
+        pass.proxy_exact_tests = grown(self.proxy_exact_tests, before.proxy_exact_tests);
     }
 }
 

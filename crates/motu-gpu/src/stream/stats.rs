@@ -358,6 +358,12 @@ pub struct PassStats {
     pub tlas_walks: u64,
     pub mark_walks: u64,
     pub mark_tlas_walks: u64,
+    /// The query backend's count (device-independent; 0 on the pipeline backend, whose
+    /// any-hit shader cannot carry counts out): proxy member boxes tested in their quantised
+    /// form, and the exact tests (an instance record read) they let through
+    /// (`stream/member_boxes.rs`).
+    pub proxy_member_tests: u64,
+    pub proxy_exact_tests: u64,
 }
 
 /// Totals over all frames rendered so far.

@@ -1004,6 +1004,50 @@ fn instanced_grid(side: u32, kinds: u32) -> OwnedHierarchy {
     b.finish(root_tlas)
 }
 
+/// Issue 45 item 5: a ray that enters a proxy box tests its members' boxes quantised to a byte
+/// an axis (`member_boxes.rs`, read contiguously) and reads a member's instance record for the
+/// exact test only where it enters the quantised box. The query backend counts both
+/// (device-independent counts); the pipeline backend's any-hit cannot and counts none. Either
+/// way the frame equals the full build.
+#[test]
+fn member_tests_read_an_instance_record_only_where_the_quantised_box_is_entered() {
+    let Some(Fixture { ctx, h, full }) = Fixture::new("stream_member_tests", instanced_grid(50, 7))
+    else {
+        return;
+    };
+    let cam = base_pose().params(32, 32);
+    let budget = full_build_needs(&full) / 8;
+    let backends = available_backends(&ctx);
+    if !backends.contains(&Backend::Query) {
+        eprintln!(
+            "stream_member_tests: NOT COUNTED: this device has no ray queries, and only the \
+             query backend counts member tests"
+        );
+    }
+    for be in backends {
+        let opts = ids_view_opts(be);
+        let reference = render(&ctx, &full, &cam, &opts).expect("full render");
+        let mut sr = streamer(&ctx, &h, &small_stream_options(budget));
+        let (out, st) = sr.render_frame(&cam, &opts).expect("stream frame");
+        assert!(st.complete, "{st:?}");
+        assert_same_aov(&reference.aov, &out.aov, &format!("{be:?} ({st:?})"));
+        let tested: u64 = st.pass_log.iter().map(|p| p.proxy_member_tests).sum();
+        let exact: u64 = st.pass_log.iter().map(|p| p.proxy_exact_tests).sum();
+        eprintln!("{be:?}: {tested} member boxes tested, {exact} exact tests");
+        if be == Backend::Pipeline {
+            assert_eq!((tested, exact), (0, 0), "the pipeline backend counts none");
+            continue;
+        }
+        // Rays cross clusters of up to 16 spheres and enter few of them: most member tests
+        // end at the quantised box, and those that pass it are the exact tests.
+        assert!(
+            exact > 0 && tested > 4 * exact,
+            "{tested} tested, {exact} exact"
+        );
+    }
+    assert_no_validation_errors(&ctx);
+}
+
 /// The TLAS instance records are counted, then encoded in place in the staging ring a window
 /// of whole chunks at a time (`stream/tlas_records.rs`). With the smallest ring (1,024 records
 /// a chunk and a window) a root of 2,500 instances spans three chunks, and with only some of

@@ -166,6 +166,8 @@ mirror! {
         tlas_walks: u64,
         mark_walks: u64,
         mark_tlas_walks: u64,
+        proxy_member_tests: u64,
+        proxy_exact_tests: u64,
     }
 }
 

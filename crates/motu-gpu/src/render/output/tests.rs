@@ -25,6 +25,8 @@ fn stat_words_match_common_glsl() {
     assert_eq!(index("TLAS_WALKS"), STAT_TLAS_WALKS);
     assert_eq!(index("MARK_WALKS"), STAT_MARK_WALKS);
     assert_eq!(index("MARK_TLAS_WALKS"), STAT_MARK_TLAS_WALKS);
+    assert_eq!(index("PROXY_MEMBER_TESTS"), STAT_PROXY_MEMBER_TESTS);
+    assert_eq!(index("PROXY_EXACT_TESTS"), STAT_PROXY_EXACT_TESTS);
     assert_eq!(defines.len(), STAT_WORDS, "{defines:?}");
     assert!(defines.iter().all(|&(_, i)| i < STAT_WORDS), "{defines:?}");
 }
