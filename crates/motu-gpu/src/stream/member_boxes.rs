@@ -103,47 +103,77 @@ fn dequantised(reference: &([f32; 3], [f32; 3], f32), a: usize, q: u8, upper: bo
     }
 }
 
-/// Member box `b` quantised against proxy box `bounds`, rounded outward so the shader's
-/// dequantised box holds `b`; [`ALWAYS`] where it cannot (a box outside the reference, or
-/// anything not finite).
-pub(super) fn quantised(bounds: &[f32; 6], b: &[f32; 6]) -> [u32; 2] {
-    if !bounds.iter().chain(b).all(|v| v.is_finite()) {
-        return ALWAYS;
-    }
-    let r = reference(bounds);
-    if !r.0.iter().chain(&r.1).all(|v| v.is_finite()) {
-        return ALWAYS;
-    }
-    let mut q = [0u8; 6];
-    for a in 0..3 {
-        let (origin, step) = (r.0[a], r.1[a]);
-        let guess = |v: f32| -> i64 {
-            if step > 0.0 {
-                ((f64::from(v) - f64::from(origin)) / f64::from(step)).floor() as i64
-            } else {
-                0
-            }
-        };
-        // The largest q whose level is at or below b's lower bound, and the smallest whose
-        // level is at or above its upper one: the shader's pad is then all margin.
-        let mut lo = guess(b[a]).clamp(0, 255);
-        while lo > 0 && level(&r, a, lo as u8) > b[a] {
-            lo -= 1;
+/// Member box `b` quantised against proxy box `bounds` ([`Quantiser::quantise`]).
+#[cfg(test)]
+fn quantised(bounds: &[f32; 6], b: &[f32; 6]) -> [u32; 2] {
+    Quantiser::new(bounds).quantise(b)
+}
+
+/// Quantises the member boxes of one proxy box: its reference box made once (a cluster's
+/// members share it; island 0.63 has 17M members to quantise at the start).
+pub(super) struct Quantiser {
+    reference: ([f32; 3], [f32; 3], f32),
+    /// `1 / step` per axis (0 for a flat axis), for the first guess only.
+    inverse_step: [f32; 3],
+    /// The proxy box and its reference are finite.
+    finite: bool,
+}
+
+impl Quantiser {
+    pub(super) fn new(bounds: &[f32; 6]) -> Quantiser {
+        let reference = reference(bounds);
+        let finite = bounds
+            .iter()
+            .chain(&reference.0)
+            .chain(&reference.1)
+            .all(|v| v.is_finite());
+        let inverse_step = reference.1.map(|s| if s > 0.0 { 1.0 / s } else { 0.0 });
+        Quantiser {
+            reference,
+            inverse_step,
+            finite,
         }
-        let mut hi = (guess(b[3 + a]) + 1).clamp(0, 255);
-        while hi < 255 && level(&r, a, hi as u8) < b[3 + a] {
-            hi += 1;
-        }
-        if level(&r, a, lo as u8) > b[a] || level(&r, a, hi as u8) < b[3 + a] {
+    }
+
+    /// Member box `b` quantised, rounded outward so the shader's dequantised box holds `b`;
+    /// [`ALWAYS`] where it cannot (a box outside the reference, or anything not finite).
+    pub(super) fn quantise(&self, b: &[f32; 6]) -> [u32; 2] {
+        if !self.finite || !b.iter().all(|v| v.is_finite()) {
             return ALWAYS;
         }
-        q[a] = lo as u8;
-        q[3 + a] = hi as u8;
+        let r = &self.reference;
+        let mut q = [0u8; 6];
+        for a in 0..3 {
+            // A first guess (any rounding is corrected below), clamped to the byte.
+            let guess = |v: f32| {
+                ((v - r.0[a]) * self.inverse_step[a])
+                    .floor()
+                    .clamp(0.0, 255.0) as i32
+            };
+            // The largest q whose level is at or below b's lower bound, and the smallest
+            // whose level is at or above its upper one: the shader's pad is then all margin.
+            let mut lo = guess(b[a]);
+            while lo > 0 && level(r, a, lo as u8) > b[a] {
+                lo -= 1;
+            }
+            let mut hi = (guess(b[3 + a]) + 1).min(255);
+            while hi > 0 && level(r, a, (hi - 1) as u8) >= b[3 + a] {
+                hi -= 1;
+            }
+            while hi < 255 && level(r, a, hi as u8) < b[3 + a] {
+                hi += 1;
+            }
+            if level(r, a, lo as u8) > b[a] || level(r, a, hi as u8) < b[3 + a] {
+                return ALWAYS;
+            }
+            q[a] = lo as u8;
+            q[3 + a] = hi as u8;
+        }
+        [
+            u32::from_le_bytes([q[0], q[1], q[2], q[3]]),
+            u32::from_le_bytes([q[4], q[5], 0, 0]),
+        ]
     }
-    [
-        u32::from_le_bytes([q[0], q[1], q[2], q[3]]),
-        u32::from_le_bytes([q[4], q[5], 0, 0]),
-    ]
 }
 
 #[cfg(test)]
