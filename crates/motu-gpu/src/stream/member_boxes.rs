@@ -144,12 +144,10 @@ impl Quantiser {
         let r = &self.reference;
         let mut q = [0u8; 6];
         for a in 0..3 {
-            // A first guess (any rounding is corrected below), clamped to the byte.
-            let guess = |v: f32| {
-                ((v - r.0[a]) * self.inverse_step[a])
-                    .floor()
-                    .clamp(0.0, 255.0) as i32
-            };
+            // A first guess (any rounding is corrected below), clamped to the byte first so
+            // the cast's truncation is a floor (and a NaN becomes 0): `floor` is a libm call
+            // on the baseline x86-64 target.
+            let guess = |v: f32| ((v - r.0[a]) * self.inverse_step[a]).clamp(0.0, 255.0) as i32;
             // The largest q whose level is at or below b's lower bound, and the smallest
             // whose level is at or above its upper one: the shader's pad is then all margin.
             let mut lo = guess(b[a]);
