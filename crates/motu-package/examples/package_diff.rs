@@ -25,9 +25,11 @@ fn main() -> Result<(), motu_package::PackageError> {
     }
     // Chunks written by several threads may lie in another order in the file: their bytes,
     // tag and group are compared, and where they lie only counted.
-    let mut moved = 0usize;
+    let mut moved = std::collections::BTreeMap::<u32, usize>::new();
     for (x, y) in ca.iter().zip(cb) {
-        moved += usize::from(x.offset != y.offset);
+        if x.offset != y.offset {
+            *moved.entry(x.group).or_default() += 1;
+        }
         let same = pa.chunk_stored(x.id)? == pb.chunk_stored(y.id)?
             && (x.raw_len, x.tag, x.group) == (y.raw_len, y.tag, y.group);
         if !same {
@@ -38,7 +40,10 @@ fn main() -> Result<(), motu_package::PackageError> {
             differ += 1;
         }
     }
-    println!("{moved} chunks lie at other offsets");
+    println!(
+        "{} chunks lie at other offsets (by chunk group: {moved:?})",
+        moved.values().sum::<usize>()
+    );
     let mut compared = 0usize;
     for s in pa.sections() {
         if skip.contains(&s.name.as_str()) {
