@@ -220,7 +220,12 @@ impl PackageGeometry {
             .writer
             .take()
             .ok_or_else(|| store_err("package writer already taken"))?;
-        for (_, s) in inner.streams.drain() {
+        // Closing a stream writes its open chunk: in group order, so the chunks lie where they
+        // lay in the last run (a map's order differs from process to process, and so did the
+        // package's bytes: island 0.05 put 16 of its 33 chunks at other offsets each run).
+        let mut streams: Vec<(u32, StreamId)> = inner.streams.drain().collect();
+        streams.sort_unstable_by_key(|&(group, _)| group);
+        for (_, s) in streams {
             writer.close_stream(s)?;
         }
         Ok(writer)

@@ -369,3 +369,60 @@ fn mapped_arrays_split_as_on_the_heap() {
     assert_eq!(&ids[..], &heap_ids[..]);
     assert_eq!(bits(&bounds), bits(&heap_bounds));
 }
+
+/// The median splits' bounds are made with selects, not `f32::min`/`max` folds: on centres
+/// drawn from signed zeros, infinities, NaN and ties (flat and zero-extent axes included) the
+/// ranges and the order equal the reference's, which folds; the bounds equal the folds' but
+/// for the sign of a zero.
+#[test]
+fn select_bounds_split_as_the_min_max_folds() {
+    use self::reference::median_partition_serial;
+    const VALUES: [f32; 9] = [
+        0.0,
+        -0.0,
+        1.0,
+        -1.0,
+        2.5,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::NAN,
+        1e30,
+    ];
+    let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+    let mut pick = move |n: usize| {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 33) as usize % n
+    };
+    for (len, spread, cap) in [
+        (5_000usize, 9usize, 7usize),
+        (3_000, 2, 5),
+        (70_000, 9, 300),
+    ] {
+        let centres: Vec<(u32, [f32; 3])> = (0..len as u32)
+            .map(|i| {
+                // `spread` 2: only the zeros, so every axis is flat or signed-zero-wide.
+                (i, std::array::from_fn(|_| VALUES[pick(spread)]))
+            })
+            .collect();
+        let (mut x, mut y) = (centres.clone(), centres.clone());
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        median_partition(&mut x, |c| c.1, cap, &mut a);
+        median_partition_serial(&mut y, |c| c.1, cap, &mut b);
+        assert_eq!(a, b, "ranges, len {len} spread {spread}");
+        let ids = |v: &[(u32, [f32; 3])]| v.iter().map(|c| c.0).collect::<Vec<_>>();
+        assert_eq!(ids(&x), ids(&y), "order, len {len} spread {spread}");
+
+        let (lo, hi) = centre_bounds(&centres, &|c: &(u32, [f32; 3])| c.1);
+        for k in 0..3 {
+            let fold_lo = centres.iter().fold(f32::INFINITY, |m, c| m.min(c.1[k]));
+            let fold_hi = centres.iter().fold(f32::NEG_INFINITY, |m, c| m.max(c.1[k]));
+            // Equal as numbers (0.0 == -0.0), never NaN.
+            assert!(
+                lo[k] == fold_lo && hi[k] == fold_hi,
+                "axis {k}: {lo:?} {hi:?}"
+            );
+        }
+    }
+}

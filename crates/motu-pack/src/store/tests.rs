@@ -61,3 +61,26 @@ fn the_spill_bound_rises_once_enough_triangles_were_stored() {
     // 15, 30 stored: over 10 spills; 45 ≥ 40: the bound is 20 from the third mesh on.
     assert_eq!(spilled, vec![true, true, false, false, true]);
 }
+
+/// The streams' open chunks are written in group order when the writer is taken, whatever
+/// order the groups were opened in: two imports of one scene put every chunk at the same
+/// offset (they did not while a map's order decided).
+#[test]
+fn open_chunks_are_written_in_group_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("p.motu");
+    let mut g =
+        PackageGeometry::new(PackageWriter::create(&out, WriterOptions::default()).unwrap());
+    let groups = [7u32, 3, 12, 0, 9, 1, 15, 4, 11, 6];
+    for (i, &group) in groups.iter().enumerate() {
+        g.store(MeshId(i as u32), group, &mesh(5)).unwrap();
+    }
+    let s = g.take_writer().unwrap().finish().unwrap();
+    let pkg = motu_package::Package::open(&s.path).unwrap();
+    let mut by_offset: Vec<(u64, u32)> = pkg.chunks().iter().map(|c| (c.offset, c.group)).collect();
+    by_offset.sort_unstable();
+    let in_file: Vec<u32> = by_offset.iter().map(|&(_, group)| group).collect();
+    let mut sorted = groups.to_vec();
+    sorted.sort_unstable();
+    assert_eq!(in_file, sorted);
+}
