@@ -18,7 +18,7 @@ if [ -f /usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json ]; then
   export __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
 fi
 S=${S:-0.3}; W=${W:-640}; H=${H:-360}; FR=${FR:-6}
-VARS=${VARS:-"motu motu-qmb motu-q4"}
+VARS=${VARS:-"motu motu-qmb motu-rint"}
 WORK=/tmp/w; mkdir -p $WORK
 T0=$(date +%s)
 step() { echo "== [$(($(date +%s) - T0)) s] $*" | tee -a $OUT/summary.txt; }
