@@ -65,11 +65,15 @@ fn gpu_kept_records_give_the_full_builds_aov_and_leave_the_host_only_the_tails()
     );
     let same = |aov: &Path| motu_ok(&["compare", s(&full), s(aov), "--max-mismatch", "0"]);
 
+    // A quarter of the way from the floor to the peak: the room does not shrink when the floor
+    // grows (it grew with the quantised member boxes, session 46: at `peak / 4` the kept
+    // records then fell back to the host's 76 times and the host wrote more).
+    let quarter = floor + (peak - floor) / 4;
     let (host, host_aov) = path(
         &pkg,
         d,
         "host",
-        peak / 4,
+        quarter,
         &["--stream-tlas-records", "host"],
     );
     same(&host_aov);
@@ -77,8 +81,8 @@ fn gpu_kept_records_give_the_full_builds_aov_and_leave_the_host_only_the_tails()
     assert_eq!(total(&host, "tlas_records_compacted"), 0);
     assert_eq!(total(&host, "tlas_records_kept_bytes"), 0);
 
-    // A quarter of the peak, and a budget an eighth of the way from the floor to the peak.
-    for (name, budget) in [("quarter", peak / 4), ("tight", floor + (peak - floor) / 8)] {
+    // A quarter and an eighth of the way from the floor to the peak.
+    for (name, budget) in [("quarter", quarter), ("tight", floor + (peak - floor) / 8)] {
         let (gpu, aov) = path(&pkg, d, name, budget, &["--stream-tlas-records", "gpu"]);
         same(&aov);
         let totals = &gpu["stream"]["totals"];
