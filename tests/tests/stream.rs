@@ -496,9 +496,10 @@ fn verifying_probe_rounds_make_frames_one_pass_where_they_fit() {
 /// prefetch evicted, the verifying rounds probe the pixels it left open with every other
 /// instead of an open-pixel round first, so a build step, with the TLAS rebuilds of every root
 /// piece holding an instance of what it built or evicted, is saved. Along the default camera's
-/// path a sixth of the way from the floor to the full build, the root split into pieces as island 0.3's is (about
-/// nine) and host memory counted apart as on a discrete GPU: fewer TLAS rebuilds and instance
-/// records written than `open`, no more passes after the first, the full build's image.
+/// path a sixth of the way from the floor to the full build, the root split into pieces as
+/// island 0.3's is (about nine) and host memory counted apart as on a discrete GPU: fewer TLAS
+/// rebuilds and instance records written than `open`, no more passes after the first, the full
+/// build's image.
 #[test]
 fn merged_probe_rounds_rebuild_fewer_tlases_at_no_more_passes() {
     let Some(ShotFixture {

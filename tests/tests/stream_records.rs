@@ -69,13 +69,7 @@ fn gpu_kept_records_give_the_full_builds_aov_and_leave_the_host_only_the_tails()
     // grows (it grew with the quantised member boxes, session 46: at `peak / 4` the kept
     // records then fell back to the host's 76 times and the host wrote more).
     let quarter = floor + (peak - floor) / 4;
-    let (host, host_aov) = path(
-        &pkg,
-        d,
-        "host",
-        quarter,
-        &["--stream-tlas-records", "host"],
-    );
+    let (host, host_aov) = path(&pkg, d, "host", quarter, &["--stream-tlas-records", "host"]);
     same(&host_aov);
     assert_eq!(host["stream"]["totals"]["tlas_records_mode"], "host");
     assert_eq!(total(&host, "tlas_records_compacted"), 0);
