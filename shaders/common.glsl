@@ -50,6 +50,15 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 #define STREAM_SEEN 0u
 #define STREAM_OPEN 1u
 #define STREAM_NEEDED 2u
+// Kinds of ray a resident BLAS's hits came from, or-ed per pass into its request word (the
+// host splits the frame's working set by them).
+#define STREAM_HIT_CAMERA 1u
+#define STREAM_HIT_GUARD 2u
+#define STREAM_HIT_OCCLUSION 4u
+#define STREAM_HIT_BOUNCE 8u
+// Request word bit of a non-resident BLAS some camera ray's nearest open structure is (the
+// low bits count the rays): the host builds these first (`stream/demand.rs`).
+#define STREAM_REQUEST_CAMERA 0x80000000u
 // Payload.stream_start bit of a guard-band ray (stamps stay below 2^29, STREAM_START_STAMP).
 #define STREAM_GUARD_RAY 0x80000000u
 // Payload.stream_start bit of a streamed ray's *mark walk* (traverse.glsl, MOTU_STREAMED): the

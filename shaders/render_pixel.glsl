@@ -449,6 +449,10 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
 #endif
             }
             float lod_u = primary ? (guard ? 0.5 : pixel_dither(px.x, px.y)) : 0.0;
+            g_hit_kind = guard     ? STREAM_HIT_GUARD
+                         : primary ? STREAM_HIT_CAMERA
+                         : bouncing ? STREAM_HIT_BOUNCE
+                                    : STREAM_HIT_OCCLUSION;
             TraceHit h = traverse(push.frame.f.root_tlas, r_org, r_dir.xyz,
                                   primary ? RAY_PRIMARY : RAY_SHADOW, lodp,
                                   push.frame.f.camera.pixels_per_unit_at_1, lod_u,

@@ -41,6 +41,9 @@ struct Entry {
 // non-resident BLAS in front of the best hit is *open* unless it was resident in a pass since
 // this ray started (`walked` ≥ g_start): that pass walked it, so its hits are already carried.
 bool g_streaming = false;
+// The kind of the ray being traced (STREAM_HIT_*): or-ed into the request word of the
+// resident BLAS holding its hit.
+uint g_hit_kind = STREAM_HIT_CAMERA;
 bool g_guard = false;   // a guard-band ray (prefetch probe): marks only
 bool g_probe = false;   // a probe pass of the next frame: marks, never defers nor writes
 // A probe ray of a pass-mark row (StreamParams.flags' pass rows): its mark walk runs even when
@@ -100,7 +103,12 @@ bool stream_still_open(float best_t) {
     }
     StreamParams s = StreamRef(push.stream).s;
     stream_mark_as(s.blas_stamps, g_empty_id, STREAM_NEEDED);
-    atomicAdd(StampTable(s.requests).r[g_empty_id], 1u);
+    StampTable requests = StampTable(s.requests);
+    atomicAdd(requests.r[g_empty_id], 1u);
+    if (g_hit_kind == STREAM_HIT_CAMERA && requests.r[g_empty_id] < STREAM_REQUEST_CAMERA) {
+        // A camera ray waits for it: built ahead of what only secondary rays wait for.
+        atomicOr(requests.r[g_empty_id], STREAM_REQUEST_CAMERA);
+    }
     g_probe_open = g_probe_open || g_probe;
     g_probe_link_open = g_probe;
     return !g_probe;
@@ -319,8 +327,16 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
 #endif
     if (g_streaming && hit.tlas != NONE_U32) {
         // Resident triangle BLASes are walked by the hardware without a shader callback: the
-        // one hit is what refreshes its BLAS's LRU age (see the stream module).
-        stream_mark_as(StreamRef(push.stream).s.blas_stamps, hit_blas(hit), STREAM_SEEN);
+        // one hit is what refreshes its BLAS's LRU age (see the stream module). The kind of
+        // ray is or-ed into its request word (a resident BLAS is never requested): the host
+        // splits the frame's working set by kind (`working_set_camera_bytes`, ...).
+        StreamParams s = StreamRef(push.stream).s;
+        uint b = hit_blas(hit);
+        stream_mark_as(s.blas_stamps, b, STREAM_SEEN);
+        StampTable kinds = StampTable(s.requests);
+        if ((kinds.r[b] & g_hit_kind) == 0u) {
+            atomicOr(kinds.r[b], g_hit_kind);
+        }
     }
     return hit;
 }

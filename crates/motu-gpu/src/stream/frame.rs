@@ -436,11 +436,25 @@ impl<'a> StreamingRenderer<'a> {
 
     /// The working set of the frame's rays (before the prefetch builds for the next).
     fn measure_working_set(&mut self) {
+        use super::params::{HIT_BOUNCE, HIT_CAMERA, HIT_GUARD, HIT_OCCLUSION};
         let mut working_meshes = std::collections::BTreeSet::new();
         for (b, &f) in self.res.used_in_frame().iter().enumerate() {
             if f == self.frame.number() {
-                self.frame.stats.working_set_blases += 1;
-                self.frame.stats.working_set_bytes += self.res.blas_bytes(b);
+                let bytes = self.res.blas_bytes(b);
+                let kinds = u32::from(self.res.hit_kinds()[b]);
+                let st = &mut self.frame.stats;
+                st.working_set_blases += 1;
+                st.working_set_bytes += bytes;
+                let of = |kind: u32| if kinds & kind != 0 { bytes } else { 0 };
+                st.working_set_camera_bytes += of(HIT_CAMERA);
+                st.working_set_occlusion_bytes += of(HIT_OCCLUSION);
+                st.working_set_bounce_bytes += of(HIT_BOUNCE);
+                if kinds != 0 && kinds & (HIT_CAMERA | HIT_GUARD) == 0 {
+                    st.working_set_secondary_only_bytes += bytes;
+                }
+                if kinds == 0 {
+                    st.working_set_unhit_bytes += bytes;
+                }
                 working_meshes.extend(self.blas_meshes(b));
             }
         }

@@ -18,7 +18,9 @@ pub(super) struct StreamParams {
     pub(super) full_count: u32,
     pub(super) list_count: u32,
     pub(super) blas_count: u32,
-    /// u32 per BLAS: pixels of the pass whose nearest open structure it is (build priority).
+    /// u32 per BLAS: pixels of the pass whose nearest open structure it is (build priority),
+    /// with [`REQUEST_CAMERA`] where a camera ray's; for a resident BLAS, the kinds of ray
+    /// whose closest hit it held (`HIT_*`).
     pub(super) requests: u64,
     /// [`CARRY_BYTES`] per pixel: the state carried across passes (`Carry` of
     /// `render_pixel.glsl`).
@@ -85,3 +87,14 @@ pub(super) const CARRY_BYTES: u64 = 176;
 
 #[cfg(test)]
 mod tests;
+
+/// `STREAM_HIT_*` of `common.glsl`: the kinds of ray whose closest hit lay in a resident BLAS,
+/// or-ed per pass into its word of the requests buffer (a resident BLAS is never requested).
+pub(super) const HIT_CAMERA: u32 = 1;
+pub(super) const HIT_GUARD: u32 = 2;
+pub(super) const HIT_OCCLUSION: u32 = 4;
+pub(super) const HIT_BOUNCE: u32 = 8;
+
+/// `STREAM_REQUEST_CAMERA` of `common.glsl`: the request word's bit of a non-resident BLAS
+/// that some camera ray's nearest open structure is (the low bits count the rays).
+pub(super) const REQUEST_CAMERA: u32 = 0x8000_0000;

@@ -8,7 +8,7 @@ use motu_abi::aov::AovRecord;
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
 use super::params::{
-    StreamParams, CARRY_BYTES, STAMP_LIMIT, STREAM_LAST_PASS, STREAM_NO_MARK_WALK,
+    StreamParams, CARRY_BYTES, REQUEST_CAMERA, STAMP_LIMIT, STREAM_LAST_PASS, STREAM_NO_MARK_WALK,
 };
 use super::{FrameStreamStats, PassStats, StreamFallback, StreamingRenderer, GUARD_BIAS};
 use crate::error::{GpuError, Result};
@@ -83,7 +83,7 @@ impl<'a> StreamingRenderer<'a> {
             // nearest open one), open (needed later) or, in pass 1, prefetch candidates (the
             // guard band saw them).
             let mut demand = Demand::default();
-            for Sighting { blas: b, level } in self.sightings(&stamps, true) {
+            for Sighting { blas: b, level } in self.sightings(&stamps, &requests, true) {
                 let n = requests.get(b as usize).copied().unwrap_or(0);
                 match level {
                     LEVEL_NEEDED => demand.need(b, n),
@@ -107,6 +107,11 @@ impl<'a> StreamingRenderer<'a> {
                 open_pixels: u64::from(count),
                 needed: demand.needed().len() as u32,
                 later: demand.later().len() as u32,
+                needed_camera: demand
+                    .needed()
+                    .iter()
+                    .filter(|r| r.requests & REQUEST_CAMERA != 0)
+                    .count() as u32,
                 open_closest: (extra
                     .blockers
                     .iter()
@@ -433,8 +438,14 @@ impl<'a> StreamingRenderer<'a> {
     /// What the pass just traced (the current stamp) met, from its readback `stamps`: every
     /// BLAS it met is seen now (`last_seen`); a resident one refreshes its LRU age and, when
     /// `this_frame` (the frame's own passes, not the probe of the next frame), counts in the
-    /// frame's working set. Returns the non-resident buildable ones with their stamp level.
-    pub(super) fn sightings(&mut self, stamps: &[u32], this_frame: bool) -> Vec<Sighting> {
+    /// frame's working set with the kinds of ray whose closest hit it held (its word in
+    /// `requests`, `HIT_*`). Returns the non-resident buildable ones with their stamp level.
+    pub(super) fn sightings(
+        &mut self,
+        stamps: &[u32],
+        requests: &[u32],
+        this_frame: bool,
+    ) -> Vec<Sighting> {
         let mut out = Vec::new();
         for (b, &v) in stamps.iter().enumerate() {
             if v >> 2 != self.frame.stamp() {
@@ -442,8 +453,9 @@ impl<'a> StreamingRenderer<'a> {
             }
             self.res.seen_at(b, self.frame.stamp());
             if self.res.has_blas(b) {
+                let hit_kinds = requests.get(b).copied().unwrap_or(0);
                 if this_frame {
-                    self.res.used_in(b, self.frame.number());
+                    self.res.used_in(b, self.frame.number(), hit_kinds);
                 }
                 if self.topo.buildable(b) {
                     self.res.saw(b, self.frame.stamp());

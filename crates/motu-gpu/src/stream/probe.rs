@@ -189,7 +189,7 @@ impl<'a> StreamingRenderer<'a> {
         self.frame.stats_mut().probe_ms += trace_ms;
         self.frame.stats_mut().probe_rounds += 1;
         let mut demand = Demand::default();
-        for Sighting { blas: b, level } in self.sightings(&stamps, false) {
+        for Sighting { blas: b, level } in self.sightings(&stamps, &requests, false) {
             // Needed (a ray's nearest) first by request count; then everything else it met.
             let n = if level == LEVEL_NEEDED {
                 requests.get(b as usize).copied().unwrap_or(0).max(1)

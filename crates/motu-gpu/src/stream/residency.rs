@@ -54,6 +54,9 @@ pub(super) struct Resident {
     /// working set.
     blas_bytes: Vec<u64>,
     used_in_frame: Vec<u64>,
+    /// Per BLAS, the kinds of ray (`HIT_*` of `params.rs`) whose closest hit it held in the
+    /// frame `used_in_frame` names (0: built for its rays, hit by none).
+    hit_kinds: Vec<u8>,
     /// Pins of the current build step (items that must not be evicted): what the latest
     /// pass's incomplete pixels need (or, when prefetching, everything this frame saw), plus
     /// what the step built.
@@ -87,6 +90,9 @@ impl Resident {
         frame: u64,
     ) {
         self.blas_bytes[b] = bytes;
+        if self.used_in_frame[b] != frame {
+            self.hit_kinds[b] = 0;
+        }
         self.used_in_frame[b] = frame;
         self.blas[b] = Some(accel);
         let _ = self
@@ -145,9 +151,19 @@ impl Resident {
         self.last_seen[i] = self.last_seen[i].max(stamp);
     }
 
-    /// Resident BLAS `b`'s structure was walked by the rays of frame `frame`.
-    pub fn used_in(&mut self, b: usize, frame: u64) {
+    /// Resident BLAS `b`'s structure was walked by the rays of frame `frame`, and held the
+    /// closest hit of rays of the kinds `hit_kinds` (`HIT_*`).
+    pub fn used_in(&mut self, b: usize, frame: u64, hit_kinds: u32) {
+        if self.used_in_frame[b] != frame {
+            self.hit_kinds[b] = 0;
+        }
         self.used_in_frame[b] = frame;
+        self.hit_kinds[b] |= hit_kinds as u8;
+    }
+
+    /// Per BLAS, the kinds of ray whose closest hit it held in its `used_in_frame`.
+    pub fn hit_kinds(&self) -> &[u8] {
+        &self.hit_kinds
     }
 
     /// Per BLAS, the last frame whose rays used it.
@@ -297,6 +313,7 @@ impl Resident {
             last_seen: vec![0; blases + tlases],
             blas_bytes: vec![0; blases],
             used_in_frame: vec![0; blases],
+            hit_kinds: vec![0; blases],
             pinned: vec![false; blases + tlases],
             built_now: Vec::new(),
             group_hint: 16,

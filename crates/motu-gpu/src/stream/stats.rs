@@ -281,6 +281,16 @@ pub struct FrameStreamStats {
     /// less its `probe_need_mesh_bytes` plus this: only BLASes rays hit need their meshes
     /// (`tools/stream-need.sh` prints that bound).
     pub working_set_mesh_bytes: u64,
+    /// Of `working_set_bytes`, by the kinds of ray whose closest hit a BLAS held in the frame
+    /// (one BLAS may count under several): camera rays, shadow and AO rays, bounce rays; those
+    /// only secondary rays (shadow, AO, bounce) hit, neither camera nor guard-band rays; and
+    /// those built for the frame's rays that none hit (rays passed through them). The rest is
+    /// what only guard-band rays hit.
+    pub working_set_camera_bytes: u64,
+    pub working_set_occlusion_bytes: u64,
+    pub working_set_bounce_bytes: u64,
+    pub working_set_secondary_only_bytes: u64,
+    pub working_set_unhit_bytes: u64,
     /// Why the first pass found structures missing (each one needed by some pixel, so the
     /// frame takes another pass), judged against the previous frame's probe of this camera:
     /// resident while the probe ran but met by none of its rays (passed without a hit: the
@@ -328,6 +338,8 @@ pub struct PassStats {
     /// Structures the pass demanded (nearest open) and saw open behind those.
     pub needed: u32,
     pub later: u32,
+    /// Of `needed`: those some camera ray waits for (built first).
+    pub needed_camera: u32,
     pub trace_ms: f64,
     pub host_ms: f64,
     /// Its build step (0 after the last pass).
