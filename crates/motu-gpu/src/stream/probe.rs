@@ -84,7 +84,7 @@ use motu_abi::camera::CameraParams;
 
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
-use super::params::{passed_mark, probe_flags};
+use super::params::{passed_mark, probe_flags, REQUEST_CAMERA};
 use super::passes::{pack_biased, relist, PassReadback, Sighting, LEVEL_NEEDED};
 use super::StreamingRenderer;
 use crate::error::Result;
@@ -191,8 +191,10 @@ impl<'a> StreamingRenderer<'a> {
         let mut demand = Demand::default();
         for Sighting { blas: b, level } in self.sightings(&stamps, &requests, false) {
             // Needed (a ray's nearest) first by request count; then everything else it met.
+            // By count alone: the prefetch builds for the next frame's first pass, where every
+            // pixel starts over (`REQUEST_CAMERA` orders a frame's own passes).
             let n = if level == LEVEL_NEEDED {
-                requests.get(b as usize).copied().unwrap_or(0).max(1)
+                (requests.get(b as usize).copied().unwrap_or(0) & !REQUEST_CAMERA).max(1)
             } else {
                 0
             };
