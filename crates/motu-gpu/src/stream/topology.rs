@@ -335,15 +335,12 @@ fn member_table(view: &HierarchyView<'_>, clusters: &mut [Vec<ProxyCluster>]) ->
     }
     u32::try_from(first_word).map_err(|_| too_many("instances"))?;
     let mut words = vec![0u32; first_word];
-    // Each TLAS's words, split off in order.
+    // Each TLAS's words, split off in order (each TLAS's first word from the loop above).
     let mut parts = Vec::with_capacity(view.tlases.len());
     let mut rest = words.as_mut_slice();
-    for (t, tlas_clusters) in clusters.iter().enumerate() {
-        let n: usize = tlas_clusters
-            .iter()
-            .map(|c| MEMBER_WORDS * c.members.len())
-            .sum();
-        let (part, tail) = rest.split_at_mut(n);
+    for t in 0..view.tlases.len() {
+        let end = tlas_firsts.get(t + 1).map_or(first_word, |&(w, _)| w);
+        let (part, tail) = rest.split_at_mut(end - tlas_firsts[t].0);
         parts.push((t, part));
         rest = tail;
     }
