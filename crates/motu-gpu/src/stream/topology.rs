@@ -243,6 +243,15 @@ impl Topology {
             if !clusters.is_empty() {
                 let pi_base = u32::try_from(out.pis.len()).map_err(|_| too_many("PIs"))?;
                 let blas_id = u32::try_from(out.blases.len()).map_err(|_| too_many("BLASes"))?;
+                // The proxy and marks instances carry their BLAS record in the 24-bit custom
+                // index (`tlas_encode.rs`).
+                if blas_id + 1 >= 1 << 24 {
+                    return Err(GpuError::InvalidRequest(format!(
+                        "streaming: BLAS record {} of a proxy is over the instance custom \
+                         index's limit 2^24 - 1",
+                        blas_id + 1
+                    )));
+                }
                 self.proxy_pi_base[t] = pi_base;
                 for c in clusters {
                     out.pis.push(proxy_pi(c));
@@ -297,6 +306,15 @@ impl Topology {
     /// `NONE_U32` without clusters).
     pub fn proxy_slots(&self, t: usize) -> (u32, u32) {
         (self.proxy_pi_base[t], self.marks_blas[t])
+    }
+
+    /// The GPU BLAS records of TLAS `t`'s proxy and marks BLASes (the custom index of their
+    /// instances, `tlas_encode.rs`); `NONE_U32` each without clusters.
+    pub fn proxy_blas_records(&self, t: usize) -> (u32, u32) {
+        match self.marks_blas[t] {
+            NONE_U32 => (NONE_U32, NONE_U32),
+            marks => (marks - 1, marks),
+        }
     }
 
     /// Streamed BLASes: how many there are.
