@@ -80,13 +80,6 @@ float member_entry(StreamParams s, BlasRecord br, uint instance, uint first_box,
     return t;
 }
 
-// The nearest entry in [t_min, t_hi) of the ray into a member instance of proxy PI `r`'s
-// cluster (member_entry); T_INFINITY when it enters none. Each member's box is first tested
-// quantised (8 bits an axis against a box grown from the proxy box, rounded outward:
-// member_boxes.rs, which computes the reference box the same way), read contiguously from the
-// cluster's words; only a member whose quantised box the ray enters (or one stored as ALWAYS,
-// lo.x > hi.x) reads its instance record for the exact test, so the result is the exact
-// test's.
 // The reference box member boxes are quantised against (member_boxes.rs `reference`, the
 // same arithmetic): a quantised value q stands for origin + q × step, less or plus qpad.
 struct QuantRef {
