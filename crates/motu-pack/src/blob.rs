@@ -127,12 +127,24 @@ impl MeshBlobLayout {
 
     /// Serialises `mesh` and its primitive map (must match this layout).
     pub fn encode_mapped(&self, mesh: &MeshData, primitive_map: Option<&[u32]>) -> Vec<u8> {
-        let mut out = self.encode(mesh);
+        let mut out = vec![0u8; self.len as usize];
+        self.encode_mapped_into(mesh, primitive_map, &mut out);
+        out
+    }
+
+    /// [`Self::encode_mapped`] into `out` (this layout's `len` bytes, zeroed: the gaps
+    /// between the arrays are left as they are).
+    pub fn encode_mapped_into(
+        &self,
+        mesh: &MeshData,
+        primitive_map: Option<&[u32]>,
+        out: &mut [u8],
+    ) {
+        self.encode_into(mesh, out);
         if let Some(map) = primitive_map {
             let at = self.primitive_map as usize;
             out[at..at + map.len() * 4].copy_from_slice(bytemuck::cast_slice(map));
         }
-        out
     }
 
     /// Reads a cluster's primitive map back from a blob (`None` when the layout has none).
@@ -155,22 +167,23 @@ impl MeshBlobLayout {
     /// Serialises `mesh` (must match this layout).
     pub fn encode(&self, mesh: &MeshData) -> Vec<u8> {
         let mut out = vec![0u8; self.len as usize];
-        let put = |out: &mut Vec<u8>, at: u64, bytes: &[u8]| {
+        self.encode_into(mesh, &mut out);
+        out
+    }
+
+    /// [`Self::encode`] into `out` (this layout's `len` bytes, zeroed).
+    pub fn encode_into(&self, mesh: &MeshData, out: &mut [u8]) {
+        let put = |out: &mut [u8], at: u64, bytes: &[u8]| {
             out[at as usize..at as usize + bytes.len()].copy_from_slice(bytes);
         };
-        put(
-            &mut out,
-            self.positions,
-            bytemuck::cast_slice(&mesh.positions),
-        );
-        put(&mut out, self.indices, bytemuck::cast_slice(&mesh.indices));
+        put(out, self.positions, bytemuck::cast_slice(&mesh.positions));
+        put(out, self.indices, bytemuck::cast_slice(&mesh.indices));
         if let Some(n) = &mesh.normals {
-            put(&mut out, self.normals, bytemuck::cast_slice(n));
+            put(out, self.normals, bytemuck::cast_slice(n));
         }
         if let (true, Some(uv)) = (self.has_uvs, &mesh.uvs) {
-            put(&mut out, self.uvs, bytemuck::cast_slice(uv));
+            put(out, self.uvs, bytemuck::cast_slice(uv));
         }
-        out
     }
 
     /// Reads a mesh back from a blob (copies; readers that want zero-copy slice the chunk).
