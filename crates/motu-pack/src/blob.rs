@@ -132,6 +132,44 @@ impl MeshBlobLayout {
         out
     }
 
+    /// Pushes [`Self::encode_mapped`]'s `len` bytes onto `out`: the arrays in offset order
+    /// with zeros between them, each byte written once (no zeroing pass before the copies).
+    pub fn encode_mapped_onto(
+        &self,
+        mesh: &MeshData,
+        primitive_map: Option<&[u32]>,
+        out: &mut Vec<u8>,
+    ) {
+        let uvs = mesh.uvs.as_ref().filter(|_| self.has_uvs);
+        let pieces: [Option<(u64, &[u8])>; 5] = [
+            Some((self.positions, bytemuck::cast_slice(&mesh.positions))),
+            Some((self.indices, bytemuck::cast_slice(&mesh.indices))),
+            mesh.normals
+                .as_ref()
+                .map(|n| (self.normals, bytemuck::cast_slice(n))),
+            uvs.map(|uv| (self.uvs, bytemuck::cast_slice(uv))),
+            primitive_map.map(|m| (self.primitive_map, bytemuck::cast_slice(m))),
+        ];
+        let start = out.len();
+        let mut end = 0u64;
+        let in_order = pieces.iter().flatten().all(|&(at, bytes)| {
+            let ok = at >= end && at + bytes.len() as u64 <= self.len;
+            end = at + bytes.len() as u64;
+            ok
+        });
+        if !in_order {
+            // A layout that does not fit the mesh: the indexed writes (and their checks).
+            out.resize(start + self.len as usize, 0);
+            self.encode_mapped_into(mesh, primitive_map, &mut out[start..]);
+            return;
+        }
+        for (at, bytes) in pieces.into_iter().flatten() {
+            out.resize(start + at as usize, 0);
+            out.extend_from_slice(bytes);
+        }
+        out.resize(start + self.len as usize, 0);
+    }
+
     /// [`Self::encode_mapped`] into `out` (this layout's `len` bytes, zeroed: the gaps
     /// between the arrays are left as they are).
     pub fn encode_mapped_into(

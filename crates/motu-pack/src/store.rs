@@ -138,7 +138,7 @@ impl PackageGeometry {
         let loc = sp
             .writer
             .append_with(stream, layout.len, MESH_BLOB_ALIGN, &mut |out| {
-                layout.encode_into(data, out)
+                layout.encode_mapped_onto(data, None, out)
             })?;
         sp.writer.seal_chunk(stream)?;
         let at = location(loc.chunk, loc.offset_in_chunk);
@@ -194,7 +194,7 @@ impl PackageGeometry {
             .or_insert_with(|| writer.open_stream(0, group));
         // Encoded straight into the open chunk (no blob buffer zeroed, filled and copied).
         let loc = writer.append_with(stream, layout.len, MESH_BLOB_ALIGN, &mut |out| {
-            layout.encode_mapped_into(data, primitive_map, out)
+            layout.encode_mapped_onto(data, primitive_map, out)
         })?;
         let at = location(loc.chunk, loc.offset_in_chunk);
         layouts.insert((at.a, at.b), layout);

@@ -76,24 +76,28 @@ struct OpenChunk {
     data: Vec<u8>,
 }
 
-/// What an append puts in its chunk: bytes to copy, or a fill of zeroed bytes in place.
+/// What an append puts in its chunk: bytes to copy, or a fill that pushes them itself.
 enum Put<'a> {
     Bytes(&'a [u8]),
-    Fill(&'a mut dyn FnMut(&mut [u8])),
+    Fill(&'a mut dyn FnMut(&mut Vec<u8>)),
 }
 
 impl Put<'_> {
-    /// Appends the `len` bytes to `out`.
-    fn onto(&mut self, out: &mut Vec<u8>, len: usize) {
+    /// Pushes the bytes onto `out`; returns how many it pushed.
+    fn onto(&mut self, out: &mut Vec<u8>) -> u64 {
+        let start = out.len();
         match self {
             Put::Bytes(bytes) => out.extend_from_slice(bytes),
-            Put::Fill(fill) => {
-                let start = out.len();
-                out.resize(start + len, 0);
-                fill(&mut out[start..]);
-            }
+            Put::Fill(fill) => fill(out),
         }
+        (out.len() - start) as u64
     }
+}
+
+fn fill_error(pushed: u64, promised: u64) -> PackageError {
+    PackageError::InvalidArgument(format!(
+        "an append's fill pushed {pushed} bytes of the {promised} it promised"
+    ))
 }
 
 /// Writes one package file. Dropping it without calling [`finish`](Self::finish) removes the
@@ -196,15 +200,16 @@ impl PackageWriter {
         self.append_by(stream, bytes.len() as u64, align, Put::Bytes(bytes))
     }
 
-    /// [`Self::append`] of `len_bytes` that `fill` writes into the chunk in place (given them
-    /// zeroed): a blob encoded straight into its chunk, not into a buffer copied in after
-    /// (an import's 1.2 GB of cluster blobs were zeroed, encoded and copied again).
+    /// [`Self::append`] of `len_bytes` that `fill` pushes onto the chunk's buffer itself (it
+    /// must push exactly that many): a blob encoded straight into its chunk, not into a buffer
+    /// copied in after (an import's 1.2 GB of cluster blobs were zeroed, encoded and copied
+    /// again). A fill that pushes another length fails the writer.
     pub fn append_with(
         &mut self,
         stream: StreamId,
         len_bytes: u64,
         align: u64,
-        fill: &mut dyn FnMut(&mut [u8]),
+        fill: &mut dyn FnMut(&mut Vec<u8>),
     ) -> Result<Locator, PackageError> {
         self.append_by(stream, len_bytes, align, Put::Fill(fill))
     }
@@ -242,8 +247,8 @@ impl PackageWriter {
             let entry = match put {
                 Put::Bytes(bytes) => self.write_chunk(bytes, tag, group)?,
                 Put::Fill(_) => {
-                    let mut blob = Vec::new();
-                    put.onto(&mut blob, len_bytes as usize);
+                    let mut blob = Vec::with_capacity(len_bytes as usize);
+                    self.put_checked(&mut put, &mut blob, len_bytes)?;
                     self.write_chunk(&blob, tag, group)?
                 }
             };
@@ -283,7 +288,14 @@ impl PackageWriter {
         // `fits` or a fresh chunk guarantee start + len <= target, which fits in usize.
         let start = align_up(open.data.len() as u64, align).unwrap_or(u64::MAX) as usize;
         open.data.resize(start, 0);
-        put.onto(&mut open.data, len_bytes as usize);
+        let pushed = put.onto(&mut open.data);
+        if pushed != len_bytes {
+            self.failed = true;
+            return Err(fill_error(pushed, len_bytes));
+        }
+        let open = self.stream_mut(stream)?.open.as_mut().ok_or_else(|| {
+            PackageError::InvalidArgument("internal: stream has no open chunk".into())
+        })?;
         let chunk = open.id;
         if opened {
             self.chunks.push(None);
@@ -293,6 +305,21 @@ impl PackageWriter {
             offset_in_chunk: start as u64,
             len_bytes,
         })
+    }
+
+    /// [`Put::onto`] `out` that fails the writer when the put pushed other than `len_bytes`.
+    fn put_checked(
+        &mut self,
+        put: &mut Put<'_>,
+        out: &mut Vec<u8>,
+        len_bytes: u64,
+    ) -> Result<(), PackageError> {
+        let pushed = put.onto(out);
+        if pushed != len_bytes {
+            self.failed = true;
+            return Err(fill_error(pushed, len_bytes));
+        }
+        Ok(())
     }
 
     /// Writes the stream's open chunk to the file; the next append starts a new chunk.

@@ -908,8 +908,7 @@ fn blobs_filled_in_place_equal_blobs_appended() {
                 if filled {
                     writer
                         .append_with(stream, b.len() as u64, align, &mut |out| {
-                            assert!(out.iter().all(|&x| x == 0), "given unzeroed bytes");
-                            out.copy_from_slice(b)
+                            out.extend_from_slice(b)
                         })
                         .unwrap()
                 } else {
@@ -934,4 +933,19 @@ fn blobs_filled_in_place_equal_blobs_appended() {
     let chunk = f.chunk(last.chunk).unwrap();
     let at = last.offset_in_chunk as usize;
     assert_eq!(&chunk[at..at + 7], &ramp(7)[..]);
+}
+
+/// A fill that pushes other than the length it promised fails the append and the writer.
+#[test]
+fn a_fill_of_the_wrong_length_fails_the_writer() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut writer =
+        PackageWriter::create(dir.path().join("a.motu"), WriterOptions::default()).unwrap();
+    let stream = writer.open_stream(0, 0);
+    let short = writer.append_with(stream, 8, 1, &mut |out| out.extend_from_slice(&[1; 7]));
+    assert!(
+        matches!(short, Err(PackageError::InvalidArgument(_))),
+        "{short:?}"
+    );
+    assert!(writer.append(stream, &[1; 8], 1).is_err());
 }
