@@ -230,7 +230,7 @@ impl Adapter {
             }
             let (proto, material, element) = key;
             self.b
-                .add_mesh(proto, "curves", material, element, &data)
+                .add_mesh_owned(proto, "curves", material, element, data)
                 .map_err(sink_err)?;
             self.report.meshes += 1;
         }

@@ -397,7 +397,6 @@ impl PackageWriter {
         out: &mut Vec<u8>,
     ) -> Result<(), PackageError> {
         self.check_usable()?;
-        out.clear();
         for open in self
             .streams
             .iter()
@@ -405,6 +404,7 @@ impl PackageWriter {
             .filter_map(|s| s.open.as_ref())
         {
             if open.id == chunk {
+                out.clear();
                 out.extend_from_slice(&open.data);
                 return Ok(());
             }
@@ -418,6 +418,9 @@ impl PackageWriter {
         let temp = self.temp.as_ref().ok_or_else(|| {
             PackageError::InvalidArgument("the package writer is already finished".into())
         })?;
+        // The read overwrites every byte: only room the buffer never held is zeroed (a
+        // cleared buffer was zeroed whole before each read, the size of a package).
+        out.truncate(entry.stored_len as usize);
         out.resize(entry.stored_len as usize, 0);
         {
             use std::os::unix::fs::FileExt;

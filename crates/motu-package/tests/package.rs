@@ -833,6 +833,10 @@ fn read_back_and_oversized_blobs() {
             &buf[a.offset_in_chunk as usize..][..small.len()],
             &small[..]
         );
+        // A buffer shorter than the chunk, holding other bytes (not zeroed before the read).
+        let mut short = vec![9u8; 100];
+        w.read_back_chunk_into(b.chunk, &mut short).unwrap();
+        assert_eq!(short, big);
         w.close_stream(s).unwrap();
         w.finish().unwrap();
         let p = Package::open(&path).unwrap();
