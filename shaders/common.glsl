@@ -42,6 +42,9 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 // non-resident triangle BLAS (`target`) in its TLAS's proxy BLAS; meeting it in front of the
 // best hit leaves the ray open until a pass walks that BLAS.
 #define PI_EMPTY_BLAS 2u
+// The instance SBT offset of a streamed TLAS's proxy and marks instances (motu-vk
+// `InstanceHit::Proxy`: hit group 2), whose custom index is their BLAS's record.
+#define PROXY_SBT_OFFSET 2u
 // Packed pixel coordinates of a pass's pixel list are biased by this (guard-band pixels lie
 // outside the image).
 #define GUARD_BIAS 4096

@@ -8,7 +8,9 @@
 #
 #   OUT=$OUT VARS="motu motu-qmb" bash tools/variants-device.sh
 #
-# Environment: S (0.3), W, H (640x360), FR (1/4 path frames, 6), VARS, Q4, OUT (required).
+# Environment: S (0.3), W, H (640x360), FR (1/4 path frames, 6), ROUNDS (all-resident rounds, 2),
+# EIGHTH (0: skip the 1/8 path), VARS, Q4, OUT (required). Binaries may come xz-compressed in
+# .devx/NAME.xz (the carry limit): they are unpacked into .dev first.
 # Writes summary.txt and stats.tgz (every run's --stats) into $OUT.
 set -uo pipefail
 ROOT=$PWD
@@ -17,6 +19,7 @@ if [ -f /usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json ]; then
   export VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
   export __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
 fi
+for f in .devx/*.xz; do [ -f "$f" ] || continue; mkdir -p .dev; n=$(basename $f .xz); xz -dc $f > .dev/$n && chmod +x .dev/$n; done
 S=${S:-0.3}; W=${W:-640}; H=${H:-360}; FR=${FR:-6}
 VARS=${VARS:-"motu motu-qmb motu-rint"}
 WORK=/tmp/w; mkdir -p $WORK
@@ -50,7 +53,7 @@ R motu warm --frames 2
 R motu full --frames 4 --stats $WORK/full.json
 python3 -c "import json; print('  full ms_per_frame', json.load(open('$WORK/full.json'))['ms_per_frame'])" | tee -a $OUT/summary.txt
 BIG=$((PEAK * 5 / 4))
-for round in 1 2; do
+for round in $(seq 1 ${ROUNDS:-2}); do
   for v in $VARS; do
     for view in shaded heatmap; do
       step "all resident $v $view round $round"
@@ -64,7 +67,7 @@ for v in $VARS; do
   R $v q-$v --stream --vram-budget $((PEAK / 4)) --no-as-cache --frames $FR --stats $WORK/q-$v.json
   summ $WORK/q-$v.json
 done
-for v in $VARS; do
+for v in $( [ "${EIGHTH:-1}" = 1 ] && echo $VARS ); do
   step "eighth $v"
   R $v e-$v --stream --vram-budget $((PEAK / 8)) --no-as-cache --frames 4 --stats $WORK/e-$v.json
   summ $WORK/e-$v.json

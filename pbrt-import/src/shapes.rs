@@ -26,12 +26,28 @@ fn take_ints(params: &mut ParamList<'_>, name: &str) -> Option<Vec<i32>> {
     }
 }
 
-fn to3(v: &[f32]) -> Vec<[f32; 3]> {
-    v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
+/// `v` (of a multiple of `N` values) as `N`-tuples, in its own allocation where it can be
+/// (trimmed to its length, then reinterpreted): a Moana-scale parse's vertex arrays were
+/// copied here, fresh pages for every vertex (issue 48 item 1). Copied when the allocator
+/// cannot trim in place.
+fn to_tuples<const N: usize>(mut v: Vec<f32>) -> Vec<[f32; N]>
+where
+    [f32; N]: bytemuck::Pod,
+{
+    v.shrink_to_fit();
+    bytemuck::allocation::try_cast_vec(v).unwrap_or_else(|(_, v)| {
+        v.chunks_exact(N)
+            .map(|c| std::array::from_fn(|k| c[k]))
+            .collect()
+    })
 }
 
-fn to2(v: &[f32]) -> Vec<[f32; 2]> {
-    v.chunks_exact(2).map(|c| [c[0], c[1]]).collect()
+fn to3(v: Vec<f32>) -> Vec<[f32; 3]> {
+    to_tuples(v)
+}
+
+fn to2(v: Vec<f32>) -> Vec<[f32; 2]> {
+    to_tuples(v)
 }
 
 /// Shared vertex attributes: `P`, `N`, `uv`/`st`. Mismatched optional arrays are dropped
@@ -41,12 +57,11 @@ fn vertices(params: &mut ParamList<'_>, notes: &mut Vec<String>) -> Result<Mesh,
     if p.len() % 3 != 0 {
         return Err(format!("\"P\" has {} values, not a multiple of 3", p.len()));
     }
-    let positions = to3(&p);
-    drop(p);
+    let positions = to3(p);
     let n_verts = positions.len();
     let normals = take_nums(params, "N").and_then(|n| {
         if n.len() == n_verts * 3 {
-            Some(to3(&n))
+            Some(to3(n))
         } else {
             notes.push(format!(
                 "\"N\" has {} values for {n_verts} vertices; ignored",
@@ -58,7 +73,7 @@ fn vertices(params: &mut ParamList<'_>, notes: &mut Vec<String>) -> Result<Mesh,
     let uv = take_nums(params, "uv").or_else(|| take_nums(params, "st"));
     let uvs = uv.and_then(|uv| {
         if uv.len() == n_verts * 2 {
-            Some(to2(&uv))
+            Some(to2(uv))
         } else {
             notes.push(format!(
                 "\"uv\" has {} values for {n_verts} vertices; ignored",
@@ -291,12 +306,12 @@ pub(crate) fn curve(params: &mut ParamList<'_>) -> Result<Curve, String> {
         ));
     }
     let width = params.float("width").unwrap_or(1.0);
-    let normals = take_nums(params, "N").map(|n| to3(&n));
+    let normals = take_nums(params, "N").map(to3);
     Ok(Curve {
         basis,
         curve_type: params.string("type").unwrap_or("flat").to_owned(),
         degree: degree as u32,
-        control_points: to3(&p),
+        control_points: to3(p),
         width0: params.float("width0").unwrap_or(width),
         width1: params.float("width1").unwrap_or(width),
         normals,

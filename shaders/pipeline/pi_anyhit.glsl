@@ -17,11 +17,7 @@ void main() {
     // every box entered beyond it (regression test: pipeline_matches_cpu_on_a_forest_package).
     uint pi = pi_index(pl.tlas, gl_InstanceCustomIndexEXT, gl_PrimitiveID);
     PiRecord r = push.pis.r[pi];
-    if (r.kind == PI_EMPTY_BLAS) {
-        record_proxy(r, gl_ObjectRayOriginEXT, gl_ObjectRayDirectionEXT, gl_RayTminEXT,
-                     min(pl.t_max, committed_t));
-        ignoreIntersectionEXT;
-    }
+    // Never a proxy: proxy boxes have their own hit group (pipeline/proxy_stream.rahit).
     float t_near = slab_near(gl_ObjectRayOriginEXT, gl_ObjectRayDirectionEXT, r.aabb_min,
                              r.aabb_max, gl_RayTminEXT, pl.t_max);
     if (t_near >= 0.0) {

@@ -23,7 +23,13 @@ void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool
     while (rayQueryProceedEXT(rq)) {
         if (rayQueryGetIntersectionTypeEXT(rq, false) == gl_RayQueryCandidateIntersectionAABBEXT) {
             uint instance = rayQueryGetIntersectionInstanceCustomIndexEXT(rq, false);
-            uint pi = pi_index(tlas, instance, rayQueryGetIntersectionPrimitiveIndexEXT(rq, false));
+            uint primitive = rayQueryGetIntersectionPrimitiveIndexEXT(rq, false);
+            // A proxy box's instance (SBT offset PROXY_SBT_OFFSET) names its proxy (or marks)
+            // BLAS's record in the custom index (stream/tlas_encode.rs).
+            bool proxy = rayQueryGetIntersectionInstanceShaderBindingTableRecordOffsetEXT(
+                             rq, false) == PROXY_SBT_OFFSET;
+            uint pi = proxy ? push.blases.r[instance].item_base + primitive
+                            : pi_index(tlas, instance, primitive);
             PiRecord r = push.pis.r[pi];
             float t_hi = rayQueryGetIntersectionTypeEXT(rq, true) ==
                                  gl_RayQueryCommittedIntersectionTriangleEXT

@@ -32,6 +32,7 @@ use motu_compile::ClusterShape;
 use motu_pack::PackageGeometry;
 use motu_scene::{GeometryStore, MeshData, MeshId, MeshLocation, StoreError};
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::collections::{HashMap, VecDeque};
 use std::sync::mpsc::{channel, sync_channel, Receiver, Sender};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -402,6 +403,40 @@ impl GeometryStore for PrecutGeometry {
         group: u32,
         data: &MeshData,
     ) -> Result<MeshLocation, StoreError> {
+        self.store_cow(id, group, Cow::Borrowed(data))
+    }
+
+    /// The parser's meshes go to the cutting thread as they are (a copy was a second fresh
+    /// set of pages for every triangle cut: issue 48 item 1).
+    fn store_owned(
+        &mut self,
+        id: MeshId,
+        group: u32,
+        data: MeshData,
+    ) -> Result<MeshLocation, StoreError> {
+        self.store_cow(id, group, Cow::Owned(data))
+    }
+
+    fn load(&self, id: MeshId, at: MeshLocation) -> Result<MeshData, StoreError> {
+        if at.a & CUT_BIT != 0 {
+            return Err(format!(
+                "{id} was cut into clusters while parsing; its whole data is not kept"
+            )
+            .into());
+        }
+        self.geometry.load(id, at)
+    }
+}
+
+impl PrecutGeometry {
+    /// [`GeometryStore::store`], cutting a mesh over the bound on the cutting thread (a
+    /// borrowed mesh copied for it) and storing the others whole.
+    fn store_cow(
+        &mut self,
+        id: MeshId,
+        group: u32,
+        data: Cow<'_, MeshData>,
+    ) -> Result<MeshLocation, StoreError> {
         let this = self.clone();
         let mut st = this.lock()?;
         let triangles = data.triangle_count();
@@ -415,27 +450,17 @@ impl GeometryStore for PrecutGeometry {
             }
         }
         if let Some(bound) = st.bound.filter(|&b| triangles > b as usize) {
-            this.cut(&mut st, id, data.clone(), bound)?;
+            this.cut(&mut st, id, data.into_owned(), bound)?;
             return Ok(MeshLocation {
                 a: CUT_BIT | u64::from(id.0),
                 b: 0,
             });
         }
-        let at = self.geometry.store(id, group, data)?;
+        let at = self.geometry.store(id, group, &data)?;
         if st.bound.is_none() && PackageGeometry::is_spilled(at) {
             st.waiting.push((id, at, triangles));
         }
         Ok(at)
-    }
-
-    fn load(&self, id: MeshId, at: MeshLocation) -> Result<MeshData, StoreError> {
-        if at.a & CUT_BIT != 0 {
-            return Err(format!(
-                "{id} was cut into clusters while parsing; its whole data is not kept"
-            )
-            .into());
-        }
-        self.geometry.load(id, at)
     }
 }
 

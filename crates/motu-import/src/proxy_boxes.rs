@@ -50,8 +50,9 @@ pub(crate) fn write_proxy_boxes(
 /// The table of every BLAS with boxes ([`has_boxes`]): a BLAS of one mesh record that
 /// `cut_boxes` has (made for that record's chunk and counts) takes those; the others read
 /// each chunk their meshes lie in once through `read_chunk` (whole raw bytes, into the buffer
-/// it is given), `batch` chunks at a time. A chunk's bytes are kept until the last BLAS that
-/// reads them is made (the meshes are read in place), then its buffer takes a later chunk.
+/// it is given, replacing what it held), `batch` chunks at a time. A chunk's bytes are kept
+/// until the last BLAS that reads them is made (the meshes are read in place), then its buffer
+/// takes a later chunk.
 pub(crate) fn make_table<E: Send>(
     view: &HierarchyView<'_>,
     batch: usize,
@@ -110,9 +111,12 @@ pub(crate) fn make_table<E: Send>(
             .par_iter()
             .zip(buffers)
             .map(|(&c, mut bytes)| {
-                // A mesh record naming no chunk (u32::MAX) reads as unreadable.
-                bytes.clear();
-                if c != u32::MAX {
+                // A mesh record naming no chunk (u32::MAX) reads as unreadable. A read
+                // replaces the buffer's bytes: not cleared first, so the reader zeroes only
+                // room the buffer never had.
+                if c == u32::MAX {
+                    bytes.clear();
+                } else {
                     read_chunk(ChunkId(c), &mut bytes)?;
                 }
                 Ok((c, bytes))

@@ -210,7 +210,7 @@ pub fn ingest_obj(
             .material_id
             .and_then(|i| mat_ids.get(i).copied())
             .unwrap_or(b.default_material());
-        b.add_mesh(b.root(), &model.name, mat, Scene::MAIN_ELEMENT, &data)
+        b.add_mesh_owned(b.root(), &model.name, mat, Scene::MAIN_ELEMENT, data)
             .map_err(scene_err)?;
         report.meshes += 1;
     }

@@ -230,7 +230,7 @@ impl Adapter {
             }
             let (proto, material, element) = key;
             self.b
-                .add_mesh(proto, "curves", material, element, &data)
+                .add_mesh_owned(proto, "curves", material, element, data)
                 .map_err(sink_err)?;
             self.report.meshes += 1;
         }
@@ -302,24 +302,25 @@ impl SceneSink for Adapter {
             self.report.degenerate_meshes += 1;
             return Ok(());
         }
-        let positions = mesh
-            .positions
-            .iter()
-            .map(|p| m.transform_point3(Vec3::from_array(*p)).to_array())
-            .collect();
         let normal_m = Mat3::from_mat4(m).inverse().transpose();
         let mut mesh = mesh;
+        // Smooth normals from the shape's own positions, before they are transformed.
         if mesh.normals.is_none() && asks_for_smooth_normals(&s.kind) {
             mesh.normals = Some(smooth_normals(&mesh.positions, &mesh.indices));
         }
-        let normals = mesh.normals.map(|ns| {
-            ns.iter()
-                .map(|n| {
-                    (normal_m * Vec3::from_array(*n))
-                        .normalize_or_zero()
-                        .to_array()
-                })
-                .collect()
+        // Transformed in place: the parser's arrays become the mesh's (a copy was fresh pages
+        // for every vertex of a Moana-scale parse: issue 48 item 1).
+        let mut positions = mesh.positions;
+        for p in &mut positions {
+            *p = m.transform_point3(Vec3::from_array(*p)).to_array();
+        }
+        let normals = mesh.normals.map(|mut ns| {
+            for n in &mut ns {
+                *n = (normal_m * Vec3::from_array(*n))
+                    .normalize_or_zero()
+                    .to_array();
+            }
+            ns
         });
         let face_ids = mesh.face_ids.take();
         let data = MeshData {
@@ -395,13 +396,14 @@ impl SceneSink for Adapter {
                 .unwrap_or_default(),
             None => format!("{}@{}", s.kind, at),
         };
-        match self.b.add_mesh(proto, &name, material, element, &data) {
+        let triangle_count = data.triangle_count();
+        match self.b.add_mesh_owned(proto, &name, material, element, data) {
             Ok(id) => {
                 self.report.meshes += 1;
                 // Face ids matter only where a Ptex texture is sampled.
                 let ptex = self.b.material(material).ptex.is_some();
                 if let (true, Some(ids)) = (ptex, face_ids) {
-                    if ids.len() == data.triangle_count() {
+                    if ids.len() == triangle_count {
                         if let Some(f) = motu_scene::PtexFaces::from_ids(&ids) {
                             self.b.set_ptex_faces(id, f);
                         }

@@ -127,12 +127,62 @@ impl MeshBlobLayout {
 
     /// Serialises `mesh` and its primitive map (must match this layout).
     pub fn encode_mapped(&self, mesh: &MeshData, primitive_map: Option<&[u32]>) -> Vec<u8> {
-        let mut out = self.encode(mesh);
+        let mut out = vec![0u8; self.len as usize];
+        self.encode_mapped_into(mesh, primitive_map, &mut out);
+        out
+    }
+
+    /// Pushes [`Self::encode_mapped`]'s `len` bytes onto `out`: the arrays in offset order
+    /// with zeros between them, each byte written once (no zeroing pass before the copies).
+    pub fn encode_mapped_onto(
+        &self,
+        mesh: &MeshData,
+        primitive_map: Option<&[u32]>,
+        out: &mut Vec<u8>,
+    ) {
+        let uvs = mesh.uvs.as_ref().filter(|_| self.has_uvs);
+        let pieces: [Option<(u64, &[u8])>; 5] = [
+            Some((self.positions, bytemuck::cast_slice(&mesh.positions))),
+            Some((self.indices, bytemuck::cast_slice(&mesh.indices))),
+            mesh.normals
+                .as_ref()
+                .map(|n| (self.normals, bytemuck::cast_slice(n))),
+            uvs.map(|uv| (self.uvs, bytemuck::cast_slice(uv))),
+            primitive_map.map(|m| (self.primitive_map, bytemuck::cast_slice(m))),
+        ];
+        let start = out.len();
+        let mut end = 0u64;
+        let in_order = pieces.iter().flatten().all(|&(at, bytes)| {
+            let ok = at >= end && at + bytes.len() as u64 <= self.len;
+            end = at + bytes.len() as u64;
+            ok
+        });
+        if !in_order {
+            // A layout that does not fit the mesh: the indexed writes (and their checks).
+            out.resize(start + self.len as usize, 0);
+            self.encode_mapped_into(mesh, primitive_map, &mut out[start..]);
+            return;
+        }
+        for (at, bytes) in pieces.into_iter().flatten() {
+            out.resize(start + at as usize, 0);
+            out.extend_from_slice(bytes);
+        }
+        out.resize(start + self.len as usize, 0);
+    }
+
+    /// [`Self::encode_mapped`] into `out` (this layout's `len` bytes, zeroed: the gaps
+    /// between the arrays are left as they are).
+    pub fn encode_mapped_into(
+        &self,
+        mesh: &MeshData,
+        primitive_map: Option<&[u32]>,
+        out: &mut [u8],
+    ) {
+        self.encode_into(mesh, out);
         if let Some(map) = primitive_map {
             let at = self.primitive_map as usize;
             out[at..at + map.len() * 4].copy_from_slice(bytemuck::cast_slice(map));
         }
-        out
     }
 
     /// Reads a cluster's primitive map back from a blob (`None` when the layout has none).
@@ -155,22 +205,23 @@ impl MeshBlobLayout {
     /// Serialises `mesh` (must match this layout).
     pub fn encode(&self, mesh: &MeshData) -> Vec<u8> {
         let mut out = vec![0u8; self.len as usize];
-        let put = |out: &mut Vec<u8>, at: u64, bytes: &[u8]| {
+        self.encode_into(mesh, &mut out);
+        out
+    }
+
+    /// [`Self::encode`] into `out` (this layout's `len` bytes, zeroed).
+    pub fn encode_into(&self, mesh: &MeshData, out: &mut [u8]) {
+        let put = |out: &mut [u8], at: u64, bytes: &[u8]| {
             out[at as usize..at as usize + bytes.len()].copy_from_slice(bytes);
         };
-        put(
-            &mut out,
-            self.positions,
-            bytemuck::cast_slice(&mesh.positions),
-        );
-        put(&mut out, self.indices, bytemuck::cast_slice(&mesh.indices));
+        put(out, self.positions, bytemuck::cast_slice(&mesh.positions));
+        put(out, self.indices, bytemuck::cast_slice(&mesh.indices));
         if let Some(n) = &mesh.normals {
-            put(&mut out, self.normals, bytemuck::cast_slice(n));
+            put(out, self.normals, bytemuck::cast_slice(n));
         }
         if let (true, Some(uv)) = (self.has_uvs, &mesh.uvs) {
-            put(&mut out, self.uvs, bytemuck::cast_slice(uv));
+            put(out, self.uvs, bytemuck::cast_slice(uv));
         }
-        out
     }
 
     /// Reads a mesh back from a blob (copies; readers that want zero-copy slice the chunk).

@@ -132,11 +132,14 @@ impl PackageGeometry {
             return Ok(None);
         }
         let layout = MeshBlobLayout::of(data);
-        let blob = layout.encode(data);
         let stream = *sp
             .stream
             .get_or_insert_with(|| sp.writer.open_stream(0, u32::MAX));
-        let loc = sp.writer.append(stream, &blob, MESH_BLOB_ALIGN)?;
+        let loc = sp
+            .writer
+            .append_with(stream, layout.len, MESH_BLOB_ALIGN, &mut |out| {
+                layout.encode_mapped_onto(data, None, out)
+            })?;
         sp.writer.seal_chunk(stream)?;
         let at = location(loc.chunk, loc.offset_in_chunk);
         let at = MeshLocation {
@@ -176,7 +179,6 @@ impl PackageGeometry {
             }
         }
         let layout = MeshBlobLayout::of_mapped(data, primitive_map);
-        let blob = layout.encode_mapped(data, primitive_map);
         let mut inner = self.lock()?;
         let Inner {
             writer,
@@ -190,7 +192,10 @@ impl PackageGeometry {
         let stream = *streams
             .entry(group)
             .or_insert_with(|| writer.open_stream(0, group));
-        let loc = writer.append(stream, &blob, MESH_BLOB_ALIGN)?;
+        // Encoded straight into the open chunk (no blob buffer zeroed, filled and copied).
+        let loc = writer.append_with(stream, layout.len, MESH_BLOB_ALIGN, &mut |out| {
+            layout.encode_mapped_onto(data, primitive_map, out)
+        })?;
         let at = location(loc.chunk, loc.offset_in_chunk);
         layouts.insert((at.a, at.b), layout);
         // One open chunk per element could hold elements × 64 MiB in memory: past the budget,

@@ -833,6 +833,10 @@ fn read_back_and_oversized_blobs() {
             &buf[a.offset_in_chunk as usize..][..small.len()],
             &small[..]
         );
+        // A buffer shorter than the chunk, holding other bytes (not zeroed before the read).
+        let mut short = vec![9u8; 100];
+        w.read_back_chunk_into(b.chunk, &mut short).unwrap();
+        assert_eq!(short, big);
         w.close_stream(s).unwrap();
         w.finish().unwrap();
         let p = Package::open(&path).unwrap();
@@ -874,4 +878,78 @@ fn a_section_written_piece_by_piece_reads_back_like_one_added_whole() {
     drop(w.begin_section(NODES, "nodes", 4).unwrap());
     assert!(w.finish().is_err());
     assert!(!c.exists());
+}
+
+/// A blob filled in place lands where the same bytes appended would, with the same bytes
+/// around it (alignment gaps zero), in a shared chunk, a new one and one of its own.
+#[test]
+fn blobs_filled_in_place_equal_blobs_appended() {
+    let blobs = [
+        noise(1, 10),
+        noise(2, 10),
+        noise(3, 930),
+        noise(4, 1001),
+        ramp(7),
+    ];
+    let aligns = [1, 64, 8, 1, 16];
+    let dir = tempfile::tempdir().unwrap();
+    let mut packages = Vec::new();
+    for filled in [false, true] {
+        let path = dir.path().join(format!("{filled}.motu"));
+        let mut writer = PackageWriter::create(
+            &path,
+            WriterOptions {
+                target_chunk_bytes: 1000,
+                zstd_level: None,
+            },
+        )
+        .unwrap();
+        let stream = writer.open_stream(0, 0);
+        let locators: Vec<Locator> = blobs
+            .iter()
+            .zip(aligns)
+            .map(|(b, align)| {
+                if filled {
+                    writer
+                        .append_with(stream, b.len() as u64, align, &mut |out| {
+                            out.extend_from_slice(b)
+                        })
+                        .unwrap()
+                } else {
+                    writer.append(stream, b, align).unwrap()
+                }
+            })
+            .collect();
+        writer.close_stream(stream).unwrap();
+        writer.finish().unwrap();
+        packages.push((locators, Package::open(&path).unwrap()));
+    }
+    let ((appended, a), (filled, f)) = (&packages[0], &packages[1]);
+    assert_eq!(appended, filled);
+    assert_eq!(appended.iter().map(|l| l.chunk.0).max(), Some(3));
+    for id in 0..4 {
+        assert_eq!(
+            a.chunk(ChunkId(id)).unwrap()[..],
+            f.chunk(ChunkId(id)).unwrap()[..]
+        );
+    }
+    let last = filled[4];
+    let chunk = f.chunk(last.chunk).unwrap();
+    let at = last.offset_in_chunk as usize;
+    assert_eq!(&chunk[at..at + 7], &ramp(7)[..]);
+}
+
+/// A fill that pushes other than the length it promised fails the append and the writer.
+#[test]
+fn a_fill_of_the_wrong_length_fails_the_writer() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut writer =
+        PackageWriter::create(dir.path().join("a.motu"), WriterOptions::default()).unwrap();
+    let stream = writer.open_stream(0, 0);
+    let short = writer.append_with(stream, 8, 1, &mut |out| out.extend_from_slice(&[1; 7]));
+    assert!(
+        matches!(short, Err(PackageError::InvalidArgument(_))),
+        "{short:?}"
+    );
+    assert!(writer.append(stream, &[1; 8], 1).is_err());
 }

@@ -8,6 +8,7 @@ use crate::{
     Aabb, Camera, CameraId, Element, ElementId, GeometryStore, InMemoryGeometry, Light, LightId,
     Material, MaterialId, MeshData, MeshId, MeshInfo, PrototypeId, Scene, SceneError, Transform34,
 };
+use std::borrow::Cow;
 
 /// Edges a spilling builder holds before writing them to its file (~3.4 MB of 52-byte edges).
 pub const SPILL_CHUNK_EDGES: usize = 1 << 16;
@@ -157,6 +158,30 @@ impl SceneBuilder {
         element: ElementId,
         data: &MeshData,
     ) -> Result<MeshId, SceneError> {
+        self.add_mesh_cow(proto, name, material, element, Cow::Borrowed(data))
+    }
+
+    /// [`Self::add_mesh`] of data the caller gives away: the store may keep it without a copy
+    /// ([`GeometryStore::store_owned`]).
+    pub fn add_mesh_owned(
+        &mut self,
+        proto: PrototypeId,
+        name: &str,
+        material: MaterialId,
+        element: ElementId,
+        data: MeshData,
+    ) -> Result<MeshId, SceneError> {
+        self.add_mesh_cow(proto, name, material, element, Cow::Owned(data))
+    }
+
+    fn add_mesh_cow(
+        &mut self,
+        proto: PrototypeId,
+        name: &str,
+        material: MaterialId,
+        element: ElementId,
+        data: Cow<'_, MeshData>,
+    ) -> Result<MeshId, SceneError> {
         data.validate().map_err(|reason| SceneError::BadMesh {
             name: name.into(),
             reason,
@@ -168,10 +193,16 @@ impl SceneBuilder {
         } else {
             self.prototypes[proto.index()].element
         };
-        let location = self
-            .geometry
-            .store(id, group.0, data)
-            .map_err(SceneError::Store)?;
+        // Read before the store may take the data (checked after it, as they always were).
+        let vertex_count = checked_id(data.positions.len(), "vertices");
+        let triangle_count = checked_id(data.triangle_count(), "triangles");
+        let (bounds, has_normals, has_uvs) =
+            (data.bounds(), data.normals.is_some(), data.uvs.is_some());
+        let location = match data {
+            Cow::Borrowed(d) => self.geometry.store(id, group.0, d),
+            Cow::Owned(d) => self.geometry.store_owned(id, group.0, d),
+        }
+        .map_err(SceneError::Store)?;
         self.add_stored_mesh(
             proto,
             element,
@@ -179,11 +210,11 @@ impl SceneBuilder {
                 name: name.into(),
                 prototype: proto,
                 material,
-                vertex_count: checked_id(data.positions.len(), "vertices")?,
-                triangle_count: checked_id(data.triangle_count(), "triangles")?,
-                bounds: data.bounds(),
-                has_normals: data.normals.is_some(),
-                has_uvs: data.uvs.is_some(),
+                vertex_count: vertex_count?,
+                triangle_count: triangle_count?,
+                bounds,
+                has_normals,
+                has_uvs,
                 location,
             },
         )

@@ -86,6 +86,17 @@ pub trait GeometryStore: Send + Sync {
         group: u32,
         data: &MeshData,
     ) -> Result<MeshLocation, StoreError>;
+    /// [`Self::store`] of data the caller gives away: a store that keeps or forwards whole
+    /// meshes (the import's cutting thread, [`InMemoryGeometry`]) takes them without a copy
+    /// (a Moana-scale parse's meshes are gigabytes of fresh pages when copied).
+    fn store_owned(
+        &mut self,
+        id: MeshId,
+        group: u32,
+        data: MeshData,
+    ) -> Result<MeshLocation, StoreError> {
+        self.store(id, group, &data)
+    }
     /// Reads a mesh back.
     fn load(&self, id: MeshId, at: MeshLocation) -> Result<MeshData, StoreError>;
 }
@@ -105,11 +116,20 @@ impl InMemoryGeometry {
 impl GeometryStore for InMemoryGeometry {
     fn store(
         &mut self,
-        _id: MeshId,
-        _group: u32,
+        id: MeshId,
+        group: u32,
         data: &MeshData,
     ) -> Result<MeshLocation, StoreError> {
-        self.meshes.push(data.clone());
+        self.store_owned(id, group, data.clone())
+    }
+
+    fn store_owned(
+        &mut self,
+        _id: MeshId,
+        _group: u32,
+        data: MeshData,
+    ) -> Result<MeshLocation, StoreError> {
+        self.meshes.push(data);
         Ok(MeshLocation {
             a: (self.meshes.len() - 1) as u64,
             b: 0,

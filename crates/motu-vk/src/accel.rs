@@ -185,6 +185,9 @@ pub enum InstanceHit {
     Triangles { any_hit: bool },
     /// Programmable instances' boxes (hit group 1), never opaque.
     Procedural,
+    /// A streamed TLAS's proxy boxes (hit group 2: their own intersection and any-hit
+    /// shaders), never opaque.
+    Proxy,
 }
 
 /// One structure to build into `dst`: `geometries[i]` holds `primitive_counts[i]` primitives;

@@ -128,6 +128,7 @@ pub fn encode_instance(
 ) -> [u8; 64] {
     let (sbt, flags) = match hit {
         InstanceHit::Procedural => (1u32, vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE),
+        InstanceHit::Proxy => (2u32, vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE),
         InstanceHit::Triangles { any_hit: true } => (
             0,
             vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE,

@@ -3,7 +3,9 @@
 //! Groups: raygen (motu-gpu's `pipeline/trace.rgen`), miss, hit group 0 = triangles (closest-hit, and
 //! an any-hit alpha test that only non-opaque geometry runs; opaque instances `FORCE_OPAQUE`,
 //! SBT offset 0), hit group 1 = programmable instances
-//! (intersection + any-hit; instances `FORCE_NO_OPAQUE`, SBT offset 1). No descriptor sets:
+//! (intersection + any-hit; instances `FORCE_NO_OPAQUE`, SBT offset 1), hit group 2 = a
+//! streamed TLAS's proxy boxes (their own intersection + any-hit, SBT offset 2; the full
+//! build's pipelines have no proxies and give the group the PI shaders). No descriptor sets:
 //! everything is reached through 128 bytes of push-constant device addresses.
 
 use ash::vk;
@@ -18,7 +20,7 @@ use crate::pipeline_stats::PipelineExecutableStats;
 /// The push-constant bytes every stage sees (the shaders' table addresses).
 pub const PUSH_CONSTANT_BYTES: u32 = 128;
 
-/// The SPIR-V of the pipeline's six stages (entry point `main` each), which the crate above
+/// The SPIR-V of the pipeline's eight stages (entry point `main` each), which the crate above
 /// embeds: it picks full-build or streamed variants.
 #[derive(Clone, Copy, Debug)]
 pub struct RtShaders<'s> {
@@ -28,6 +30,8 @@ pub struct RtShaders<'s> {
     pub triangle_any_hit: &'s [u32],
     pub pi_intersection: &'s [u32],
     pub pi_any_hit: &'s [u32],
+    pub proxy_intersection: &'s [u32],
+    pub proxy_any_hit: &'s [u32],
 }
 
 pub(crate) fn rt_stages() -> vk::ShaderStageFlags {
@@ -53,7 +57,7 @@ pub struct RtPipeline {
 }
 
 /// The hit groups' count: raygen, miss, triangle hit group, procedural hit group.
-const GROUP_COUNT: u32 = 4;
+const GROUP_COUNT: u32 = 5;
 
 /// Shader modules live for the pipeline's creation only: destroyed when this drops.
 struct ShaderModules<'d> {
@@ -119,7 +123,7 @@ impl SbtLayout {
             raygen_stride: align(stride),
             miss_off,
             hit_off,
-            total: hit_off + 2 * stride,
+            total: hit_off + 3 * stride,
         }
     }
 
@@ -135,6 +139,7 @@ impl SbtLayout {
         put(self.miss_off, 1);
         put(self.hit_off, 2);
         put(self.hit_off + self.stride, 3);
+        put(self.hit_off + 2 * self.stride, 4);
         bytes
     }
 
@@ -154,7 +159,7 @@ impl SbtLayout {
             vk::StridedDeviceAddressRegionKHR {
                 device_address: base + self.hit_off,
                 stride: self.stride,
-                size: 2 * self.stride,
+                size: 3 * self.stride,
             },
             vk::StridedDeviceAddressRegionKHR::default(),
         ]
@@ -215,7 +220,7 @@ impl RtPipeline {
         Ok(())
     }
 
-    /// The pipeline: six stages (specialised alike) in the four groups of the module docs.
+    /// The pipeline: eight stages (specialised alike) in the five groups of the module docs.
     fn create_pipeline(
         &mut self,
         specialization: &[(u32, u32)],
@@ -229,6 +234,8 @@ impl RtPipeline {
             vk::ShaderStageFlags::INTERSECTION_KHR,
             vk::ShaderStageFlags::ANY_HIT_KHR,
             vk::ShaderStageFlags::ANY_HIT_KHR,
+            vk::ShaderStageFlags::INTERSECTION_KHR,
+            vk::ShaderStageFlags::ANY_HIT_KHR,
         ];
         let modules = ShaderModules::new(
             &shared.device,
@@ -239,6 +246,8 @@ impl RtPipeline {
                 shaders.pi_intersection,
                 shaders.pi_any_hit,
                 shaders.triangle_any_hit,
+                shaders.proxy_intersection,
+                shaders.proxy_any_hit,
             ],
         )?;
         let spec_entries: Vec<vk::SpecializationMapEntry> = specialization
@@ -373,6 +382,15 @@ fn shader_groups() -> [vk::RayTracingShaderGroupCreateInfoKHR<'static>; GROUP_CO
             .any_hit_shader(unused)
             .intersection_shader(unused)
     };
+    // A box hit group: its intersection and any-hit stages (PIs, then proxies).
+    let procedural = |intersection: u32, any_hit: u32| {
+        vk::RayTracingShaderGroupCreateInfoKHR::default()
+            .ty(vk::RayTracingShaderGroupTypeKHR::PROCEDURAL_HIT_GROUP)
+            .general_shader(unused)
+            .closest_hit_shader(unused)
+            .any_hit_shader(any_hit)
+            .intersection_shader(intersection)
+    };
     [
         general(0),
         general(1),
@@ -382,12 +400,8 @@ fn shader_groups() -> [vk::RayTracingShaderGroupCreateInfoKHR<'static>; GROUP_CO
             .closest_hit_shader(2)
             .any_hit_shader(5)
             .intersection_shader(unused),
-        vk::RayTracingShaderGroupCreateInfoKHR::default()
-            .ty(vk::RayTracingShaderGroupTypeKHR::PROCEDURAL_HIT_GROUP)
-            .general_shader(unused)
-            .closest_hit_shader(unused)
-            .any_hit_shader(4)
-            .intersection_shader(3),
+        procedural(3, 4),
+        procedural(6, 7),
     ]
 }
 

@@ -58,6 +58,12 @@ fn encoded_instances_pick_hit_group_and_opacity() {
         1 | (vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE.as_raw() << 24),
         "hit group 1, never opaque"
     );
+    let proxy = encode_instance(&m, InstanceHit::Proxy, 0x1000, 7);
+    assert_eq!(
+        word(&proxy, 52),
+        2 | (vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE.as_raw() << 24),
+        "hit group 2, never opaque"
+    );
     let inactive = encode_instance(&m, InstanceHit::Triangles { any_hit: true }, 0, 3);
     assert_eq!(word(&inactive, 48) >> 24, 0, "no BLAS: mask 0");
     assert_eq!(

@@ -93,3 +93,34 @@ fn index_errors_name_the_first_offending_index() {
     assert_eq!(e, "vertex index -4 out of range (3 vertices)");
     assert!(checked_indices(vec![3], 3).is_err());
 }
+
+/// The vertex arrays become tuples in their own allocation (no second copy of a mesh's
+/// vertices), in order, whatever spare capacity the lexer left; a length that is not a
+/// multiple of the tuple drops its tail, as the copy did.
+#[test]
+fn vertex_arrays_become_tuples_in_place() {
+    let v: Vec<f32> = (0..12).map(|i| i as f32).collect();
+    let (ptr, v) = (v.as_ptr() as usize, v);
+    let t = to3(v);
+    assert_eq!(t.as_ptr() as usize, ptr, "copied instead of reinterpreted");
+    assert_eq!(
+        t,
+        [
+            [0.0, 1.0, 2.0],
+            [3.0, 4.0, 5.0],
+            [6.0, 7.0, 8.0],
+            [9.0, 10.0, 11.0]
+        ]
+    );
+    let mut spare = Vec::with_capacity(64);
+    spare.extend((0..6).map(|i| i as f32));
+    assert_eq!(to2(spare), [[0.0, 1.0], [2.0, 3.0], [4.0, 5.0]]);
+    assert_eq!(to3(vec![1.0, 2.0, 3.0, 4.0]), [[1.0, 2.0, 3.0]]);
+    let mut notes = Vec::new();
+    let mut p = params(r#""integer indices" [0 1 2] "point P" [0 0 0 1 0 0 0 1 0]"#);
+    let m = triangle_mesh(&mut p, &mut notes).unwrap();
+    assert_eq!(
+        m.positions,
+        [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+    );
+}

@@ -70,6 +70,18 @@ impl Tracer {
                     } else {
                         shaders::PIPELINE_PI_RAHIT
                     },
+                    // Proxy boxes exist only in streamed TLASes; the full build's pipelines
+                    // give their (unused) group the PI shaders.
+                    proxy_intersection: if streamed {
+                        shaders::PIPELINE_PROXY_STREAM_RINT
+                    } else {
+                        shaders::PIPELINE_PI_RINT
+                    },
+                    proxy_any_hit: if streamed {
+                        shaders::PIPELINE_PROXY_STREAM_RAHIT
+                    } else {
+                        shaders::PIPELINE_PI_RAHIT
+                    },
                 };
                 Tracer::Pipeline(Box::new(RtPipeline::new(
                     ctx, heap, label, &spec, &shaders,

@@ -378,11 +378,11 @@ impl ShaderCounters {
 
     /// Fills `pass` with what the counters grew by since `before`.
     fn since(&self, before: &Self, pass: &mut PassStats) {
-        pass.secondary_rays = u64::from(self.secondary_rays.wrapping_sub(before.secondary_rays));
-        pass.tlas_walks = u64::from(self.tlas_walks.wrapping_sub(before.tlas_walks));
-        pass.mark_walks = u64::from(self.mark_walks.wrapping_sub(before.mark_walks));
-        pass.mark_tlas_walks = u64::from(self.mark_tlas_walks.wrapping_sub(before.mark_tlas_walks));
         let grown = |now: u32, then: u32| u64::from(now.wrapping_sub(then));
+        pass.secondary_rays = grown(self.secondary_rays, before.secondary_rays);
+        pass.tlas_walks = grown(self.tlas_walks, before.tlas_walks);
+        pass.mark_walks = grown(self.mark_walks, before.mark_walks);
+        pass.mark_tlas_walks = grown(self.mark_tlas_walks, before.mark_tlas_walks);
         pass.proxy_member_tests = grown(self.proxy_member_tests, before.proxy_member_tests);
         pass.proxy_exact_tests = grown(self.proxy_exact_tests, before.proxy_exact_tests);
     }

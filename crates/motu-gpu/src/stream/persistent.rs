@@ -252,11 +252,12 @@ impl StreamingRenderer<'_> {
     /// The proxy's (`marks` false) or marks' record of persistent TLAS `t`: `addr`, or the
     /// empty placeholder under mask 0 when absent.
     fn persistent_tail(&self, t: u32, marks: bool, addr: u64) -> [u8; RECORD_BYTES] {
-        let count = self.view.tlases[t as usize].instance_count;
+        let (proxy, marks_blas) = self.topo.proxy_blas_records(t as usize);
+        let blas_record = if marks { marks_blas } else { proxy };
         if addr != 0 {
-            return tail_record(count, marks, addr);
+            return tail_record(blas_record, marks, addr);
         }
-        let mut inst = tail_record(count, marks, self.tlases.placeholders().empty);
+        let mut inst = tail_record(blas_record, marks, self.tlases.placeholders().empty);
         set_instance_mask(&mut inst, 0);
         inst
     }

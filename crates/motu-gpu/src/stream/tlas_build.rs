@@ -69,13 +69,19 @@ impl Proxies {
             .map_or(0, |a| a.address)
     }
 
-    /// The records following TLAS `t`'s own (`count` instances): its proxy's and marks'.
-    fn tail_records(&self, t: u32, count: u32) -> Vec<[u8; RECORD_BYTES]> {
+    /// The records following TLAS `t`'s own: its proxy's and marks' (`blas_records`, their
+    /// GPU BLAS records).
+    fn tail_records(&self, t: u32, blas_records: (u32, u32)) -> Vec<[u8; RECORD_BYTES]> {
         [false, true]
             .into_iter()
             .filter_map(|marks| {
                 let a = self.address(t, marks);
-                (a != 0).then(|| tail_record(count, marks, a))
+                let blas = if marks {
+                    blas_records.1
+                } else {
+                    blas_records.0
+                };
+                (a != 0).then(|| tail_record(blas, marks, a))
             })
             .collect()
     }
@@ -585,10 +591,11 @@ impl TlasBuild<'_, '_> {
     ) -> Result<RebuildRecords<'s>> {
         let view: motu_abi::HierarchyView<'s> = r.view;
         let ring_region = r.up_mut()?.region_bytes();
+        let topo = &r.topo;
         let records = TlasRecords::count(view, addrs, ids, gpu, ring_region, |t| {
             // The proxy's and the marks' records follow the TLAS's own (see
             // `StreamingRenderer::new`); only probe passes' rays see the marks.
-            proxies.tail_records(t, view.tlases[t as usize].instance_count)
+            proxies.tail_records(t, topo.proxy_blas_records(t as usize))
         });
         let counts = records.record_counts();
         let mut sizes = Vec::with_capacity(ids.len());

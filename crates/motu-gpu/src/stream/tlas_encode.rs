@@ -5,6 +5,8 @@
 use motu_abi::{HierarchyView, InstanceRecord, BLAS_AABBS, FLAG_NEEDS_ANY_HIT};
 
 use super::TRIANGLE_MASK;
+use motu_vk::InstanceHit;
+
 use crate::scene::{encode_instance, set_instance_mask};
 
 /// Bytes of one encoded instance record (`VkAccelerationStructureInstanceKHR`).
@@ -47,16 +49,14 @@ pub(super) fn kept_record(
     enc
 }
 
-/// The record of a streamed TLAS's proxy (`marks` false) or marks BLAS at `addr`: they follow
-/// the TLAS's `instance_count` own records; only probe passes' rays see the marks.
-pub(super) fn tail_record(instance_count: u32, marks: bool, addr: u64) -> [u8; RECORD_BYTES] {
-    let mut inst = encode_instance(
-        &super::IDENTITY,
-        true,
-        false,
-        addr,
-        instance_count + u32::from(marks),
-    );
+/// The record of a streamed TLAS's proxy (`marks` false) or marks BLAS at `addr`, whose GPU
+/// BLAS record is `blas_record`: they follow the TLAS's own records; only probe passes' rays
+/// see the marks. Their hit group is the proxies' own (`InstanceHit::Proxy`), whose shaders
+/// read the PI record through the custom index, the BLAS record (an intersection shader
+/// cannot read the payload's walked TLAS).
+pub(super) fn tail_record(blas_record: u32, marks: bool, addr: u64) -> [u8; RECORD_BYTES] {
+    let mut inst =
+        motu_vk::encode_instance(&super::IDENTITY, InstanceHit::Proxy, addr, blas_record);
     if marks {
         set_instance_mask(&mut inst, super::MARKS_MASK);
     }

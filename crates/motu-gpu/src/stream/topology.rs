@@ -243,6 +243,15 @@ impl Topology {
             if !clusters.is_empty() {
                 let pi_base = u32::try_from(out.pis.len()).map_err(|_| too_many("PIs"))?;
                 let blas_id = u32::try_from(out.blases.len()).map_err(|_| too_many("BLASes"))?;
+                // The proxy and marks instances carry their BLAS record in the 24-bit custom
+                // index (`tlas_encode.rs`).
+                if blas_id + 1 >= 1 << 24 {
+                    return Err(GpuError::InvalidRequest(format!(
+                        "streaming: BLAS record {} of a proxy is over the instance custom \
+                         index's limit 2^24 - 1",
+                        blas_id + 1
+                    )));
+                }
                 self.proxy_pi_base[t] = pi_base;
                 for c in clusters {
                     out.pis.push(proxy_pi(c));
@@ -299,6 +308,15 @@ impl Topology {
         (self.proxy_pi_base[t], self.marks_blas[t])
     }
 
+    /// The GPU BLAS records of TLAS `t`'s proxy and marks BLASes (the custom index of their
+    /// instances, `tlas_encode.rs`); `NONE_U32` each without clusters.
+    pub fn proxy_blas_records(&self, t: usize) -> (u32, u32) {
+        match self.marks_blas[t] {
+            NONE_U32 => (NONE_U32, NONE_U32),
+            marks => (marks - 1, marks),
+        }
+    }
+
     /// Streamed BLASes: how many there are.
     pub fn buildable_count(&self) -> usize {
         self.buildable.iter().filter(|&&b| b).count()
@@ -335,15 +353,12 @@ fn member_table(view: &HierarchyView<'_>, clusters: &mut [Vec<ProxyCluster>]) ->
     }
     u32::try_from(first_word).map_err(|_| too_many("instances"))?;
     let mut words = vec![0u32; first_word];
-    // Each TLAS's words, split off in order.
+    // Each TLAS's words, split off in order (each TLAS's first word from the loop above).
     let mut parts = Vec::with_capacity(view.tlases.len());
     let mut rest = words.as_mut_slice();
-    for (t, tlas_clusters) in clusters.iter().enumerate() {
-        let n: usize = tlas_clusters
-            .iter()
-            .map(|c| MEMBER_WORDS * c.members.len())
-            .sum();
-        let (part, tail) = rest.split_at_mut(n);
+    for t in 0..view.tlases.len() {
+        let end = tlas_firsts.get(t + 1).map_or(first_word, |&(w, _)| w);
+        let (part, tail) = rest.split_at_mut(end - tlas_firsts[t].0);
         parts.push((t, part));
         rest = tail;
     }

@@ -42,3 +42,33 @@ fn mapped_blob_round_trip() {
     assert_eq!(l.decode_primitive_map(&blob).unwrap(), Some(map.to_vec()));
     assert!(l.decode_primitive_map(&blob[..84]).is_err());
 }
+
+/// A blob pushed onto a buffer (the arrays in offset order, zeros between) is the indexed
+/// encoding's bytes, after what the buffer held, with or without normals, uvs and a map.
+#[test]
+fn blobs_pushed_in_order_equal_indexed_ones() {
+    let m = MeshData {
+        positions: vec![[0.5, 1.0, 2.0], [3.0, 4.0, 5.0], [6.0, 7.0, 8.0], [9.0; 3]],
+        normals: None,
+        uvs: None,
+        indices: vec![0, 1, 2, 2, 1, 3, 3, 0, 1],
+    };
+    let with_n = MeshData {
+        normals: Some(vec![[0.0, 0.0, 1.0]; 4]),
+        ..m.clone()
+    };
+    let with_uv = MeshData {
+        uvs: Some(vec![[0.25, 0.75]; 4]),
+        ..with_n.clone()
+    };
+    let map = [5u32, 6, 7];
+    for mesh in [&m, &with_n, &with_uv] {
+        for pm in [None, Some(&map[..])] {
+            let l = MeshBlobLayout::of_mapped(mesh, pm);
+            let mut out = vec![0xAB; 5];
+            l.encode_mapped_onto(mesh, pm, &mut out);
+            assert_eq!(out[..5], [0xAB; 5]);
+            assert_eq!(out[5..], l.encode_mapped(mesh, pm)[..]);
+        }
+    }
+}

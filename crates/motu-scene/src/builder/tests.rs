@@ -281,3 +281,30 @@ fn an_unwritable_spill_directory_is_an_error() {
         other => panic!("{other}"),
     }
 }
+
+/// A mesh given away is stored as one lent: the same record, the same data back, and a bad
+/// one still refused before the store sees it.
+#[test]
+fn owned_meshes_are_stored_as_lent_ones() {
+    let mut b = SceneBuilder::default();
+    let (m, main) = (b.default_material(), Scene::MAIN_ELEMENT);
+    let lent = b.add_mesh(b.root(), "quad", m, main, &quad()).unwrap();
+    let owned = b.add_mesh_owned(b.root(), "quad", m, main, quad()).unwrap();
+    let bad = MeshData {
+        positions: vec![[0.0; 3]],
+        indices: vec![0, 1, 2],
+        ..Default::default()
+    };
+    assert!(b.add_mesh_owned(b.root(), "bad", m, main, bad).is_err());
+    let scene = b.finish().unwrap();
+    assert_eq!(scene.meshes().len(), 2);
+    let (a, o) = (scene.mesh(lent), scene.mesh(owned));
+    assert_eq!(
+        (a.vertex_count, a.triangle_count, a.bounds, a.has_normals),
+        (o.vertex_count, o.triangle_count, o.bounds, o.has_normals)
+    );
+    let g = scene.geometry();
+    assert_eq!(g.load(owned, o.location).unwrap(), quad());
+    assert_eq!(g.load(lent, a.location).unwrap(), quad());
+    assert_ne!(a.location, o.location);
+}
