@@ -371,8 +371,9 @@ fn member_table(view: &HierarchyView<'_>, clusters: &mut [Vec<ProxyCluster>]) ->
 /// TLAS `t`'s words of the member table (`part`, from word `first` of the table; its instances
 /// from `gpu_base` in the GPU instance table). The instances are read in their own order: read
 /// cluster by cluster, each member's record was a cache and TLB miss in the mapped package
-/// (~250 ns a member on the 2-core box, 0.35 s of island 0.05's start); the members are first
-/// located by instance (8 bytes an instance, for this TLAS only).
+/// (~250 ns a member on the 2-core box, 0.35 s of island 0.05's start). Their boxes are
+/// quantised on the pool in instance order (one TLAS may hold most instances: the root's
+/// pieces are few), then placed cluster by cluster (8 bytes an instance, this TLAS only).
 fn tlas_member_words(
     view: &HierarchyView<'_>,
     t: usize,
@@ -381,28 +382,37 @@ fn tlas_member_words(
     part: &mut [u32],
 ) {
     let instances = &view.instances[view.tlases[t].instance_range()];
-    // Per instance: its cluster and its place among the cluster's members (NONE_U32: none).
-    let mut place = vec![(NONE_U32, 0u32); instances.len()];
+    // Per instance: its cluster (NONE_U32: none).
+    let mut cluster_of = vec![NONE_U32; instances.len()];
     for (ci, c) in clusters.iter().enumerate() {
-        let at = c.member_first as usize - first;
-        let n = c.members.len();
-        for (i, &local) in c.members.iter().enumerate() {
-            place[local as usize] = (ci as u32, i as u32);
-            part[at + 2 * n + i] = gpu_base + local;
+        for &local in &c.members {
+            cluster_of[local as usize] = ci as u32;
         }
     }
     let quantisers: Vec<Quantiser> = clusters.iter().map(|c| Quantiser::new(&c.bounds)).collect();
-    for (inst, &(ci, i)) in instances.iter().zip(&place) {
-        if ci == NONE_U32 {
-            continue;
+    let boxes: Vec<[u32; 2]> = instances
+        .par_iter()
+        .zip(cluster_of.par_iter())
+        .with_min_len(4096)
+        .map(|(inst, &ci)| {
+            if ci == NONE_U32 {
+                return [0; 2];
+            }
+            let blas = &view.blases[clusters[ci as usize].blas as usize];
+            let b = member_box(&inst.tlas_from_blas, blas.bounds_min, blas.bounds_max);
+            quantisers[ci as usize].quantise(&b)
+        })
+        .collect();
+    drop(cluster_of);
+    for c in clusters {
+        let at = c.member_first as usize - first;
+        let n = c.members.len();
+        for (i, &local) in c.members.iter().enumerate() {
+            let q = boxes[local as usize];
+            part[at + 2 * i] = q[0];
+            part[at + 2 * i + 1] = q[1];
+            part[at + 2 * n + i] = gpu_base + local;
         }
-        let c = &clusters[ci as usize];
-        let blas = &view.blases[c.blas as usize];
-        let b = member_box(&inst.tlas_from_blas, blas.bounds_min, blas.bounds_max);
-        let q = quantisers[ci as usize].quantise(&b);
-        let at = c.member_first as usize - first + 2 * i as usize;
-        part[at] = q[0];
-        part[at + 1] = q[1];
     }
 }
 
