@@ -51,6 +51,12 @@ impl Demand {
         &self.needed
     }
 
+    /// How many needed structures some camera ray waits for (`REQUEST_CAMERA`).
+    pub(super) fn needed_camera(&self) -> u32 {
+        let camera = |r: &&Request| r.requests & super::params::REQUEST_CAMERA != 0;
+        self.needed().iter().filter(camera).count() as u32
+    }
+
     /// The structures built when they fit, in order.
     pub(super) fn later(&self) -> &[Request] {
         &self.later

@@ -8,7 +8,7 @@ use motu_abi::aov::AovRecord;
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
 use super::params::{
-    StreamParams, CARRY_BYTES, REQUEST_CAMERA, STAMP_LIMIT, STREAM_LAST_PASS, STREAM_NO_MARK_WALK,
+    StreamParams, CARRY_BYTES, STAMP_LIMIT, STREAM_LAST_PASS, STREAM_NO_MARK_WALK,
 };
 use super::{FrameStreamStats, PassStats, StreamFallback, StreamingRenderer, GUARD_BIAS};
 use crate::error::{GpuError, Result};
@@ -107,11 +107,7 @@ impl<'a> StreamingRenderer<'a> {
                 open_pixels: u64::from(count),
                 needed: demand.needed().len() as u32,
                 later: demand.later().len() as u32,
-                needed_camera: demand
-                    .needed()
-                    .iter()
-                    .filter(|r| r.requests & REQUEST_CAMERA != 0)
-                    .count() as u32,
+                needed_camera: demand.needed_camera(),
                 open_closest: (extra
                     .blockers
                     .iter()
