@@ -252,8 +252,7 @@ impl StreamingRenderer<'_> {
     /// The proxy's (`marks` false) or marks' record of persistent TLAS `t`: `addr`, or the
     /// empty placeholder under mask 0 when absent.
     fn persistent_tail(&self, t: u32, marks: bool, addr: u64) -> [u8; RECORD_BYTES] {
-        let (proxy, marks_blas) = self.topo.proxy_blas_records(t as usize);
-        let blas_record = if marks { marks_blas } else { proxy };
+        let blas_record = self.topo.proxy_blas_record(t as usize, marks);
         if addr != 0 {
             return tail_record(blas_record, marks, addr);
         }

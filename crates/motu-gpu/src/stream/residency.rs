@@ -90,10 +90,7 @@ impl Resident {
         frame: u64,
     ) {
         self.blas_bytes[b] = bytes;
-        if self.used_in_frame[b] != frame {
-            self.hit_kinds[b] = 0;
-        }
-        self.used_in_frame[b] = frame;
+        self.used_in(b, frame, 0);
         self.blas[b] = Some(accel);
         let _ = self
             .residency

@@ -11,6 +11,7 @@ use motu_vk::{AsGeometry, AsLevel, Context};
 use super::buffers::staging_released;
 use super::tlas_records::{tail_record, TlasRecords, RECORD_BYTES};
 use super::tlases::{ProxyPair, TlasGpu};
+use super::topology::Topology;
 use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
 use crate::scene::{build_batched, AccelStruct, BuildOptions, ResourceReport};
@@ -69,19 +70,14 @@ impl Proxies {
             .map_or(0, |a| a.address)
     }
 
-    /// The records following TLAS `t`'s own: its proxy's and marks' (`blas_records`, their
-    /// GPU BLAS records).
-    fn tail_records(&self, t: u32, blas_records: (u32, u32)) -> Vec<[u8; RECORD_BYTES]> {
+    /// The records following TLAS `t`'s own: its proxy's and marks' (their GPU BLAS records
+    /// from `topo`).
+    fn tail_records(&self, t: u32, topo: &Topology) -> Vec<[u8; RECORD_BYTES]> {
         [false, true]
             .into_iter()
             .filter_map(|marks| {
                 let a = self.address(t, marks);
-                let blas = if marks {
-                    blas_records.1
-                } else {
-                    blas_records.0
-                };
-                (a != 0).then(|| tail_record(blas, marks, a))
+                (a != 0).then(|| tail_record(topo.proxy_blas_record(t as usize, marks), marks, a))
             })
             .collect()
     }
@@ -595,7 +591,7 @@ impl TlasBuild<'_, '_> {
         let records = TlasRecords::count(view, addrs, ids, gpu, ring_region, |t| {
             // The proxy's and the marks' records follow the TLAS's own (see
             // `StreamingRenderer::new`); only probe passes' rays see the marks.
-            proxies.tail_records(t, topo.proxy_blas_records(t as usize))
+            proxies.tail_records(t, topo)
         });
         let counts = records.record_counts();
         let mut sizes = Vec::with_capacity(ids.len());

@@ -308,12 +308,12 @@ impl Topology {
         (self.proxy_pi_base[t], self.marks_blas[t])
     }
 
-    /// The GPU BLAS records of TLAS `t`'s proxy and marks BLASes (the custom index of their
-    /// instances, `tlas_encode.rs`); `NONE_U32` each without clusters.
-    pub fn proxy_blas_records(&self, t: usize) -> (u32, u32) {
+    /// The GPU BLAS record of TLAS `t`'s proxy (`marks` false) or marks BLAS (the custom
+    /// index of its instance, `tlas_encode.rs`); `NONE_U32` without clusters.
+    pub fn proxy_blas_record(&self, t: usize, marks: bool) -> u32 {
         match self.marks_blas[t] {
-            NONE_U32 => (NONE_U32, NONE_U32),
-            marks => (marks - 1, marks),
+            NONE_U32 => NONE_U32,
+            marks_blas => marks_blas - u32::from(!marks),
         }
     }
 
