@@ -396,8 +396,9 @@ fn entry_names(cache: &Path) -> Vec<String> {
 #[test]
 fn a_still_frame_stores_only_evicted_blases_in_frame_and_the_rest_after_its_image() {
     let Some(f) = Fixture::new() else { return };
-    // A quarter of the peak: the frame evicts structures (some return in later passes).
-    let budget = (f.peak / 4).to_string();
+    // A sixth of the peak: the frame evicts structures (some return in later passes). (At a
+    // quarter its working set fits since pass 1 builds only what pixels wait for first.)
+    let budget = (f.peak / 6).to_string();
     let reference = f.still_reference("still-reference");
     let same = |aov: &Path| {
         motu_ok(&["compare", s(&reference), s(aov), "--max-mismatch", "0"]);

@@ -424,12 +424,14 @@ fn unscaled_island_shaded_camera_path_at_a_quarter_needs_at_most_1_3_passes_per_
 }
 
 /// Issue 14 item 6 along a wide view: the default island's own camera (`shotCam`, the whole
-/// island in view) at a quarter. Its frames' rays need about all the room (`room_bytes`, the
-/// budget less the skeleton, tables and frame buffers; up to 1.11× it here, 1.6–2× at 160×90),
-/// and a frame that needs more than the room is never one pass: the cost is reported per frame.
-/// Secondary rays traced ahead of their primary hit (while the primary ray waits on a
-/// structure in front of it) save passes: mean after the first frame 2.414 before, 2.241 with
-/// them (lavapipe, pipeline backend). The path is timed with `--bounces 0`: bounce rays are not
+/// island in view) at a quarter. Its frames' rays need most of the room (`room_bytes`, the
+/// budget less the skeleton, tables and frame buffers; up to 0.87× it here since a pass builds
+/// the structures open behind its pixels' nearest only once few pixels are open, up to 1.11×
+/// before, 1.6–2× at 160×90), and a frame that needs more than the room is never one pass: the
+/// cost is reported per frame. Secondary rays traced ahead of their primary hit (while the
+/// primary ray waits on a structure in front of it) save passes: mean after the first frame
+/// 2.414 before, 2.241 with them, 2.069 with the open structures built late (lavapipe,
+/// pipeline backend). The path is timed with `--bounces 0`: bounce rays are not
 /// traced ahead, and the default bounce's rays need more than the room in more frames (2.83
 /// passes after the first). One frame on each backend, with the default bounce, equals the
 /// full build, AOV and colours.
@@ -444,19 +446,21 @@ fn default_island_wide_view_at_a_quarter_reports_its_room_and_traces_secondary_r
     let d = dir.path();
     let st = stream_path_from(&pkg, d, "wide", budget, &["--bounces", "0"]);
     let frames = st["stream"]["frames"].as_array().expect("frames");
-    let over: Vec<&serde_json::Value> = frames
-        .iter()
-        .filter(|f| u(&f["working_set_bytes"]) > u(&f["room_bytes"]))
-        .collect();
+    // Every frame reports its working set against its room, and most need more than half of
+    // it; one that needs more than the room is never one pass.
+    let ratio = |f: &serde_json::Value| {
+        u(&f["working_set_bytes"]) as f64 / u(&f["room_bytes"]).max(1) as f64
+    };
+    let most = frames.iter().map(ratio).fold(0.0f64, f64::max);
     assert!(
-        !over.is_empty(),
-        "some frame of the wide view needs more than the room"
+        most > 0.5,
+        "the wide view needs most of the room: {most:.2}"
     );
-    for f in &over {
+    for f in frames.iter().filter(|f| ratio(f) > 1.0) {
         assert!(u(&f["passes"]) >= 2, "more than the room in one pass: {f}");
     }
     let mean = mean_after_first(&st);
-    assert!(mean <= 2.33, "mean passes after the first frame: {mean}");
+    assert!(mean <= 2.2, "mean passes after the first frame: {mean}");
     streamed_frame_equals_the_full_build(&pkg, d, "wide", budget, &[]);
 }
 

@@ -12,6 +12,15 @@ use crate::error::{GpuError, Result};
 use crate::scene::{upload_streamed_group, AccelStruct, MeshGpu};
 use motu_vk::BudgetRefusal;
 
+/// A pass's build step also builds the structures open behind its pixels' nearest ones
+/// (`Demand::later`, with `StreamOptions::build_open_early`) only while at most one pixel in
+/// this many is open. With most of the image open (a cold frame's first passes) most of them
+/// are never hit, since the nearest structure holds the hit: island 0.63 at 24 GiB on an H100,
+/// 10.9 of the 30.3 GB its first frame built were never hit, and building none early took the
+/// frame from 8.1 to 5.5 s (4 → 7 passes; BENCHMARKS.md, session 48). With few pixels open
+/// the next pass's TLAS rebuilds cost more than those builds, so they are built then.
+const OPEN_EARLY_PIXEL_SHARE: u64 = 16;
+
 /// One structure a build step may build: BLAS `blas`, and how many pixels' rays requested it
 /// as their nearest open structure (0: open or seen, no ray's nearest), with
 /// `REQUEST_CAMERA` (`params.rs`) set where one of them was a camera ray.
@@ -32,6 +41,9 @@ pub(super) struct Demand {
     /// Open for some pixel but not its nearest: built when they fit, so later passes have
     /// less to do.
     later: Vec<Request>,
+    /// The step builds only `needed` ([`Demand::defer_later_when_open`]); `later` still counts
+    /// as seen.
+    later_deferred: bool,
 }
 
 impl Demand {
@@ -60,6 +72,17 @@ impl Demand {
     /// The structures built when they fit, in order.
     pub(super) fn later(&self) -> &[Request] {
         &self.later
+    }
+
+    /// This step builds none of [`Demand::later`] when more than one pixel in
+    /// [`OPEN_EARLY_PIXEL_SHARE`] of the image's `pixels` is `open` (they stay seen, so they
+    /// are not evicted first).
+    pub(super) fn defer_later_when_open(&mut self, open: u64, pixels: u64) {
+        self.later_deferred = open * OPEN_EARLY_PIXEL_SHARE > pixels;
+    }
+
+    pub(super) fn later_deferred(&self) -> bool {
+        self.later_deferred
     }
 
     /// Every structure of the demand: the needed ones, then the later ones.
@@ -539,7 +562,11 @@ impl<'a> StreamingRenderer<'a> {
         let (needed, later) = (queue(demand.needed()), queue(demand.later()));
         tracing::trace!(?needed, ?later, prefetch, "build step queues");
         let deferred = self.build_blas_queue(&needed, !prefetch, !prefetch)?;
-        if deferred == 0 && !later.is_empty() && self.opts.build_open_early {
+        if deferred == 0
+            && !later.is_empty()
+            && self.opts.build_open_early
+            && !demand.later_deferred()
+        {
             // What fits of the rest, without giving up anything built above.
             self.build_blas_queue(&later, false, false)?;
         }

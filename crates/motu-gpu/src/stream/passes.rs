@@ -99,6 +99,7 @@ impl<'a> StreamingRenderer<'a> {
                 }
             }
             demand.sort();
+            demand.defer_later_when_open(u64::from(count), pixels);
             if first {
                 self.classify_first_pass_misses(&demand);
             }
@@ -107,6 +108,7 @@ impl<'a> StreamingRenderer<'a> {
                 open_pixels: u64::from(count),
                 needed: demand.needed().len() as u32,
                 later: demand.later().len() as u32,
+                later_deferred: demand.later_deferred(),
                 needed_camera: demand.needed_camera(),
                 open_closest: (extra
                     .blockers

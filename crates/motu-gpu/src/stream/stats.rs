@@ -338,6 +338,9 @@ pub struct PassStats {
     /// Structures the pass demanded (nearest open) and saw open behind those.
     pub needed: u32,
     pub later: u32,
+    /// Its step built none of `later`: more than a 16th of the image's pixels were open
+    /// (`stream/demand.rs`, `OPEN_EARLY_PIXEL_SHARE`).
+    pub later_deferred: bool,
     /// Of `needed`: those some camera ray waits for (built first).
     pub needed_camera: u32,
     pub trace_ms: f64,

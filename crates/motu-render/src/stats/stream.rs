@@ -154,6 +154,7 @@ mirror! {
         open_pixels: u64,
         needed: u32,
         later: u32,
+        later_deferred: bool,
         needed_camera: u32,
         trace_ms: f64,
         host_ms: f64,
