@@ -146,24 +146,34 @@ impl Uploader {
     }
 
     /// Queues `count` values, `value(k)` for k in `0..count`, for `dst` at `dst_offset`, each
-    /// written in place in the ring a region at a time (no host array of them is built).
-    pub(crate) fn upload_with<T: bytemuck::Pod>(
+    /// written in place in the ring a region at a time (no host array of them is built), by
+    /// the rayon pool (`value` is called once per index, from any thread): a TLAS rebuild's
+    /// proxy boxes and PI records, tens of thousands a piece, are on its critical path.
+    pub(crate) fn upload_with<T: bytemuck::Pod + Send>(
         &mut self,
         ctx: &Context,
         dst: &HeapBuffer,
         dst_offset: u64,
         count: usize,
-        mut value: impl FnMut(usize) -> T,
+        value: impl Fn(usize) -> T + Sync,
     ) -> Result<()> {
+        use rayon::prelude::*;
+        // Values a task writes: small enough to spread a piece's few thousand boxes.
+        const TASK_VALUES: usize = 1024;
         let size = std::mem::size_of::<T>();
         let per_region = (self.region_bytes() as usize / size.max(1)).max(1);
         let mut k = 0;
         while k < count {
             let n = per_region.min(count - k);
             self.upload_in_place(ctx, dst, dst_offset + (k * size) as u64, n * size, |out| {
-                for (j, slot) in out.chunks_exact_mut(size).enumerate() {
-                    slot.copy_from_slice(bytemuck::bytes_of(&value(k + j)));
-                }
+                out.par_chunks_mut(TASK_VALUES * size.max(1))
+                    .enumerate()
+                    .for_each(|(task, part)| {
+                        let first = k + task * TASK_VALUES;
+                        for (j, slot) in part.chunks_exact_mut(size).enumerate() {
+                            slot.copy_from_slice(bytemuck::bytes_of(&value(first + j)));
+                        }
+                    });
             })?;
             k += n;
         }

@@ -18,10 +18,13 @@ use crate::scene::{build_batched, AccelStruct, BuildOptions, ResourceReport};
 
 mod inputs;
 mod one_submit;
+mod plan;
+mod times;
 
 use inputs::{
     alloc_box_buffer, alloc_instance_buffer, proxy_geometry, proxy_sizes, queue_proxy_uploads,
 };
+use times::PhaseTimes;
 
 /// One proxy BLAS (`marks` false: a TLAS's non-resident clusters) or marks BLAS (its
 /// resident ones) to build over boxes `first_box..first_box + box_count` of the box buffer.
@@ -120,98 +123,6 @@ impl Proxies {
                 &mut pair.proxy
             } = Some(accel);
         }
-    }
-}
-
-/// Milliseconds of each phase, for `--stats` (`tlas_*_ms` per frame) and the debug line at the
-/// end (`MOTU_LOG`).
-struct PhaseTimes {
-    clock: std::time::Instant,
-    /// Old structures out, the PI slots' flush and the new structures in.
-    swap_ms: f64,
-    probe_ms: f64,
-    proxy_host_ms: f64,
-    proxy_build_ms: f64,
-    update_ms: f64,
-    encode_ms: f64,
-    upload_ms: f64,
-    build_ms: f64,
-    records: u64,
-    proxy_boxes: u32,
-    proxies_built: u32,
-    proxies_kept: u32,
-    /// Structures copied to their compacted size, and the bytes that saved.
-    compactions: u32,
-    compact_saved_bytes: u64,
-}
-
-impl PhaseTimes {
-    fn new() -> Self {
-        PhaseTimes {
-            clock: std::time::Instant::now(),
-            swap_ms: 0.0,
-            probe_ms: 0.0,
-            proxy_host_ms: 0.0,
-            proxy_build_ms: 0.0,
-            update_ms: 0.0,
-            encode_ms: 0.0,
-            upload_ms: 0.0,
-            build_ms: 0.0,
-            records: 0,
-            proxy_boxes: 0,
-            proxies_built: 0,
-            proxies_kept: 0,
-            compactions: 0,
-            compact_saved_bytes: 0,
-        }
-    }
-
-    /// Structures of `built` (with the bytes compaction saved on each) that were compacted.
-    fn count_compactions(&mut self, built: &[(usize, AccelStruct, u64)]) {
-        for &(_, _, saved) in built {
-            self.compactions += u32::from(saved > 0);
-            self.compact_saved_bytes += saved;
-        }
-    }
-
-    /// Milliseconds since the last lap.
-    fn lap(&mut self) -> f64 {
-        let d = self.clock.elapsed().as_secs_f64() * 1e3;
-        self.clock = std::time::Instant::now();
-        d
-    }
-
-    /// The phases into the frame's stats and the debug line (a failed build's too: its time
-    /// is part of `tlas_ms`).
-    fn record(mut self, st: &mut super::FrameStreamStats) {
-        self.swap_ms += self.lap();
-        st.tlas_gpu_ms += self.build_ms + self.update_ms;
-        st.tlas_upload_ms += self.upload_ms;
-        st.tlas_proxy_ms += self.proxy_host_ms + self.proxy_build_ms;
-        st.tlas_swap_ms += self.swap_ms;
-        st.tlas_room_ms += self.probe_ms;
-        st.tlas_encode_ms += self.encode_ms;
-        st.tlas_proxies_built += self.proxies_built;
-        st.tlas_proxies_kept += self.proxies_kept;
-        st.tlas_compactions += self.compactions;
-        st.tlas_compact_saved_bytes += self.compact_saved_bytes;
-        tracing::debug!(
-            records = self.records,
-            probe_ms = self.probe_ms,
-            update_ms = self.update_ms,
-            proxy_boxes = self.proxy_boxes,
-            proxies_built = self.proxies_built,
-            proxies_kept = self.proxies_kept,
-            compactions = self.compactions,
-            compact_saved_bytes = self.compact_saved_bytes,
-            proxy_host_ms = self.proxy_host_ms,
-            proxy_build_ms = self.proxy_build_ms,
-            encode_ms = self.encode_ms,
-            upload_ms = self.upload_ms,
-            build_ms = self.build_ms,
-            swap_ms = self.swap_ms,
-            "TLAS rebuild phases"
-        );
     }
 }
 
@@ -404,11 +315,13 @@ impl TlasBuild<'_, '_> {
     /// which keeps those whose boxes are the same and releases the others.
     fn release_old(&mut self, ids: &[u32]) {
         let r = &mut *self.r;
+        let t0 = std::time::Instant::now();
         for &t in ids {
             if let Some(pair) = r.tlases.start_rebuild(t, &mut r.heap) {
                 self.old_proxies.push((t, pair));
             }
         }
+        self.times.free_ms += t0.elapsed().as_secs_f64() * 1e3;
     }
 
     /// Phase 1 on the host: which proxy BLASes (the clusters of non-resident BLASes) and marks
@@ -422,15 +335,7 @@ impl TlasBuild<'_, '_> {
         let mut old = std::mem::take(&mut self.old_proxies);
         for &t in ids {
             let clusters = self.r.topo.clusters(t as usize);
-            let mut key = vec![0u64; clusters.len().div_ceil(64)];
-            let mut non_resident = 0u32;
-            for (i, c) in clusters.iter().enumerate() {
-                if self.addrs[c.blas as usize] != 0 {
-                    key[i / 64] |= 1 << (i % 64);
-                } else {
-                    non_resident += 1;
-                }
-            }
+            let (key, non_resident) = plan::residency_key(clusters, &self.addrs);
             let old_pair = old
                 .iter()
                 .position(|(u, _)| *u == t)
@@ -448,13 +353,7 @@ impl TlasBuild<'_, '_> {
             // an instance's; a TLAS at the device cap goes without (the prefetch then sees only
             // its hits, as before the marks: slower, never wrong).
             let with_marks = view.tlases[t as usize].instance_count + 1 < 1 << 24;
-            let resident = |i: u32| key[i as usize / 64] >> (i % 64) & 1 != 0;
-            let all = 0..clusters.len() as u32;
-            let mut order: Vec<u32> = Vec::with_capacity(clusters.len());
-            order.extend(all.clone().filter(|&i| !resident(i)));
-            if with_marks {
-                order.extend(all.filter(|&i| resident(i)));
-            }
+            let order = plan::cluster_order(&key, clusters.len(), non_resident, with_marks);
             let marks = order.len() as u32 - non_resident;
             let first = plan.box_count;
             for (is_marks, first_box, box_count) in [

@@ -5,8 +5,9 @@ use crate::testutil::{assert_no_validation_errors, context_or_skip, test_heap};
 use motu_vk::BufferUsage;
 use motu_vk::Requirement;
 
-/// Values written in place by `upload_with` land in order across several ring regions,
-/// at an offset, next to a plain upload queued before them.
+/// Values written in place by `upload_with` land in order across several ring regions, each
+/// region's written by several pool tasks (the last ones partial), at an offset, next to a
+/// plain upload queued before them.
 #[test]
 fn values_written_in_place_span_ring_regions_in_order() {
     let Some(ctx) = context_or_skip("upload_with_regions", Requirement::Compute) else {
@@ -15,7 +16,8 @@ fn values_written_in_place_span_ring_regions_in_order() {
     let mut heap = test_heap(&ctx, 64 << 20);
     let mut up = Uploader::new(&mut heap, 64 << 10).expect("ring");
     assert_eq!(up.region_bytes(), 64 << 10);
-    // 40,000 [u32; 6] values: 960,000 bytes, 15 regions, the last one partial.
+    // 40,000 [u32; 6] values: 960,000 bytes, 15 regions of 2,730 values (3 tasks each), the
+    // last one partial.
     let count = 40_000usize;
     let dst = heap
         .alloc_buffer(

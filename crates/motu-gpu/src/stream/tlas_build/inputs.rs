@@ -38,6 +38,8 @@ pub(super) fn queue_proxy_uploads(
         );
         let marks_offset =
             u64::from(marks_blas) * std::mem::size_of::<motu_abi::BlasRecord>() as u64;
+        // Written by the pool: a piece's boxes and PI records were a serial loop on the
+        // rebuild's critical path.
         let uploaded = up
             .upload_with(ctx, buf, at, order.len(), |k| {
                 clusters[order[k] as usize].bounds

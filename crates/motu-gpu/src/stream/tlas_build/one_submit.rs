@@ -21,7 +21,7 @@ use motu_vk::{
 
 use super::{
     alloc_box_buffer, alloc_instance_buffer, proxy_geometry, proxy_sizes, queue_proxy_uploads,
-    Built, Proxies, ProxyPlan, TlasBuild,
+    Built, PhaseTimes, Proxies, ProxyPlan, TlasBuild,
 };
 use crate::error::{GpuError, Result};
 use crate::scene::{plan_one_batch, AccelStruct, Uploader};
@@ -104,7 +104,7 @@ impl TlasBuild<'_, '_> {
         let r = &mut *self.r;
         match result {
             Ok(Some(done)) => {
-                held.free_inputs(&mut r.heap);
+                PhaseTimes::timed(&mut self.times.free_ms, || held.free_inputs(&mut r.heap));
                 let built = held
                     .tlases
                     .into_iter()
@@ -156,23 +156,31 @@ impl TlasBuild<'_, '_> {
         };
         let proxy_scratch = proxy_plan.as_ref().map_or(0, |p| p.scratch_pool_bytes);
         if plan.box_count > 0 {
-            let Some(b) = fits_gpu(alloc_box_buffer(&mut r.heap, plan))? else {
+            let boxes = PhaseTimes::timed(&mut self.times.alloc_ms, || {
+                alloc_box_buffer(&mut r.heap, plan)
+            });
+            let Some(b) = fits_gpu(boxes)? else {
                 return Ok(None);
             };
             held.boxes = Some(b);
         }
-        let Some(built) = alloc_structures(&ctx, &mut r.heap, &proxy_sizes, AsLevel::Bottom)?
-        else {
+        let built = PhaseTimes::timed(&mut self.times.alloc_ms, || {
+            alloc_structures(&ctx, &mut r.heap, &proxy_sizes, AsLevel::Bottom)
+        });
+        let Some(built) = built? else {
             return Ok(None);
         };
         let proxy_targets: Vec<_> = built.iter().map(|(_, a, _)| a.target()).collect();
         proxies.install(plan, built);
         // TLASes: records counted over the new proxies, one batch, their buffers.
-        let rr = Self::count_records(r, &ctx, &self.addrs, ids, &self.gpu, proxies)?;
+        let rr = PhaseTimes::timed(&mut self.times.count_ms, || {
+            Self::count_records(r, &ctx, &self.addrs, ids, &self.gpu, proxies)
+        })?;
         self.times.encode_ms = self.times.lap();
         let Some(tlas_plan) = plan_one_batch(&ctx, &r.heap, &rr.sizes, &rb) else {
             return Ok(None);
         };
+        let t_alloc = std::time::Instant::now();
         let Some(inst) = fits_gpu(alloc_instance_buffer(&mut r.heap, rr.total_bytes))? else {
             return Ok(None);
         };
@@ -194,13 +202,16 @@ impl TlasBuild<'_, '_> {
         let Some(tlases) = alloc_structures(&ctx, &mut r.heap, &rr.sizes, AsLevel::Top)? else {
             return Ok(None);
         };
+        self.times.alloc_ms += t_alloc.elapsed().as_secs_f64() * 1e3;
         held.tlases = tlases.into_iter().map(|(_, a, _)| a).collect();
         // Committed: no fallback from here (a failure releases all and returns the error).
         rr.note(r.frame.stats_mut());
         self.times.proxies_built += proxy_targets.len() as u32;
         self.times.proxy_build_ms = self.times.lap();
         if let Some(b) = &held.boxes {
-            queue_proxy_uploads(&ctx, r, plan, b)?;
+            PhaseTimes::timed(&mut self.times.proxy_upload_ms, || {
+                queue_proxy_uploads(&ctx, r, plan, b)
+            })?;
         }
         {
             let up = r.up.as_mut().ok_or_else(staging_released)?;
