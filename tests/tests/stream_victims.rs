@@ -35,9 +35,11 @@ fn after_first(st: &serde_json::Value, k: &str) -> u64 {
     frames.iter().skip(1).map(|f| u(&f[k])).sum()
 }
 
-/// Island 0.002 at a third of its full build, where the frames' working set about fits the room (like
-/// the H100's quarter of island 0.3). Measured (lavapipe, the same path, frames after the
-/// first): see BENCHMARKS.md session 48. The image is the full build's either way.
+/// Island 0.002 at a third of its full build, where the frames' working set is 0.8–1.0 of
+/// the room (the H100's quarter of island 0.3: 0.75–0.80). Measured (lavapipe, the same path,
+/// frames after the first, 3 runs each over both backends): rebuilt or restored 443–481 →
+/// 239–293, evicted 547–599 → 333–381, built again within the frame 245–282 → 87–135. The
+/// image is the full build's either way.
 #[test]
 fn victims_least_often_used_first_rebuild_fewer_blases() {
     let Some((dir, pkg)) = gpu_island(Some("0.002")) else {
@@ -55,24 +57,32 @@ fn victims_least_often_used_first_rebuild_fewer_blases() {
         &["--stream-victims-by-recency"],
     );
     let (new, new_aov) = path(&pkg, dir.path(), "frequency", budget, &[]);
+    // A BLAS that comes back is built again or restored from a host copy (`clones.rs`), which
+    // one varies run to run: count both.
+    let returns = |st: &serde_json::Value| {
+        after_first(st, "rebuilt_blases") + after_first(st, "restored_blases")
+    };
     for (name, st) in [("recency", &old), ("frequency", &new)] {
         eprintln!(
-            "{name}: rebuilt {}, built {} bytes, evicted {}, passes after the first {}",
+            "{name}: rebuilt {}, restored {}, built {} bytes, evicted {}, passes after the first {}",
             after_first(st, "rebuilt_blases"),
+            after_first(st, "restored_blases"),
             after_first(st, "built_bytes"),
             after_first(st, "evicted"),
             st["stream"]["mean_passes_after_first"],
         );
         assert_eq!(st["stream"]["totals"]["incomplete_frames"], 0, "{st}");
     }
-    let (rebuilt_old, rebuilt_new) = (
-        after_first(&old, "rebuilt_blases"),
-        after_first(&new, "rebuilt_blases"),
-    );
+    let (returns_old, returns_new) = (returns(&old), returns(&new));
     assert!(
-        rebuilt_new * 4 <= rebuilt_old * 3,
-        "least often used first rebuilds at most 3/4 of what least recently seen first \
-         does: {rebuilt_new} vs {rebuilt_old}"
+        returns_new * 4 <= returns_old * 3,
+        "least often used first brings back (rebuilds or restores) at most 3/4 of what least \
+         recently seen first does: {returns_new} vs {returns_old}"
+    );
+    let (evicted_old, evicted_new) = (after_first(&old, "evicted"), after_first(&new, "evicted"));
+    assert!(
+        evicted_new < evicted_old,
+        "fewer evictions: {evicted_new} vs {evicted_old}"
     );
     motu_ok(&["compare", s(&reference), s(&old_aov), "--max-mismatch", "0"]);
     motu_ok(&["compare", s(&reference), s(&new_aov), "--max-mismatch", "0"]);
