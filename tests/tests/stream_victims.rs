@@ -2,8 +2,8 @@
 //! of the scene's fringe each frame; evicting least recently seen first threw out a BLAS met
 //! every second or third frame just before it returned (`rebuilt_blases`: built before,
 //! evicted, built again), while the room could hold the often met part of the fringe. The
-//! default now ranks victims by the frames of the last 16 that used them, least recently seen
-//! first among equals; `--stream-victims-by-recency` keeps the old rule for comparison.
+//! `--stream-victims-by-frequency` ranks victims by the frames of the last 16 that used them,
+//! least recently seen first among equals (opt-in: see `residency.rs` `lru_victims`).
 
 use motu_tests::PathShape;
 use motu_tests::{gpu_island, json_u64 as u, motu_ok, report_peak_and_floor, s, streamed_path};
@@ -49,14 +49,14 @@ fn victims_least_often_used_first_rebuild_fewer_blases() {
     let budget = peak / 3;
     assert!(budget >= floor, "a third of the peak is above the floor");
     let (_, reference) = path(&pkg, dir.path(), "everything", peak * 2, &[]);
-    let (old, old_aov) = path(
+    let (old, old_aov) = path(&pkg, dir.path(), "recency", budget, &[]);
+    let (new, new_aov) = path(
         &pkg,
         dir.path(),
-        "recency",
+        "frequency",
         budget,
-        &["--stream-victims-by-recency"],
+        &["--stream-victims-by-frequency"],
     );
-    let (new, new_aov) = path(&pkg, dir.path(), "frequency", budget, &[]);
     // A BLAS that comes back is built again or restored from a host copy (`clones.rs`), which
     // one varies run to run: count both.
     let returns = |st: &serde_json::Value| {

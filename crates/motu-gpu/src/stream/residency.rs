@@ -407,18 +407,22 @@ impl<'a> StreamingRenderer<'a> {
     }
 
     /// Unpinned streamed BLASes until they hold `bytes` (all of them when they hold less):
-    /// used in the fewest of the last [`MET_FRAMES`] frames first, least recently seen first
-    /// among equals ([`StreamOptions::victims_by_recency`]: least recently seen first alone).
+    /// least recently seen first, or, with [`StreamOptions::victims_by_frequency`], used in the
+    /// fewest of the last [`MET_FRAMES`] frames first, least recently seen first among equals.
     /// One-sample bounce rays meet a different part of the scene's fringe each frame: least
     /// recently seen alone evicts a BLAS met every second or third frame before it returns,
     /// while the room could hold the often met part of the fringe. Lavapipe, island 0.002
-    /// along the default path, budget need/2.75, frames after the first: see BENCHMARKS.md.
+    /// along the default path, frames after the first (rebuilt plus restored; 1–3 runs):
+    /// a third of the full build 443–481 → 239–293, 1/2.75 212–270 → 175–179, a quarter
+    /// 462–494 → 394–426; island 0.01 at 1/2.75 unchanged (125 → 132). Opt-in: at an eighth
+    /// (working set over the room) passes after the first went 30 → 31 and the merged probe
+    /// rounds' TLAS rebuilds 215 → 233 (`tests/tests/stream.rs`), and no GPU has measured it.
     ///
-    /// [`StreamOptions::victims_by_recency`]: super::StreamOptions::victims_by_recency
+    /// [`StreamOptions::victims_by_frequency`]: super::StreamOptions::victims_by_frequency
     pub(super) fn lru_victims(&self, bytes: u64) -> Vec<ItemId> {
         let pins = &self.res.pinned;
         let pinned = |id: ItemId| pins.get(id.0 as usize).copied().unwrap_or(true);
-        if self.opts.victims_by_recency {
+        if !self.opts.victims_by_frequency {
             return match self.res.residency.choose_victims_excluding(bytes, pinned) {
                 Ok(v) => v,
                 Err(e) if e.evictable_bytes > 0 => self
