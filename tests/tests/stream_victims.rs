@@ -64,7 +64,7 @@ fn victims_least_often_used_first_rebuild_fewer_blases() {
     };
     for (name, st) in [("recency", &old), ("frequency", &new)] {
         eprintln!(
-            "{name}: rebuilt {}, restored {}, built {} bytes, evicted {}, passes after the first {}",
+            "{name}: rebuilt {}, restored {}, built {} bytes, evicted {}, passes after frame 1 {}",
             after_first(st, "rebuilt_blases"),
             after_first(st, "restored_blases"),
             after_first(st, "built_bytes"),
