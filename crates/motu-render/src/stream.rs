@@ -42,6 +42,8 @@ pub struct StreamBounds {
     /// `--stream-prefetch-keeps-frame`: the prefetch also keeps the frame's working set while
     /// it fits (off by default).
     pub prefetch_keeps_frame: bool,
+    /// `--stream-victims-by-frequency`: evict the least often used of the last 16 frames first.
+    pub victims_by_frequency: bool,
     /// `--stream-mesh-memory`: where streamed meshes live.
     pub mesh_memory: motu_gpu::MeshMemory,
     /// `--stream-host-cache`: how evicted BLASes are kept in host memory.
@@ -74,6 +76,7 @@ impl StreamBounds {
             tlas_update: self.tlas_update,
             defrag: self.defrag,
             prefetch_keeps_frame: self.prefetch_keeps_frame,
+            victims_by_frequency: self.victims_by_frequency,
             mesh_memory: self.mesh_memory,
             host_cache_mode: self.host_cache_mode,
             host_store_policy: self.host_store_policy,
@@ -114,6 +117,7 @@ impl StreamBounds {
             || self.split_instances.is_some()
             || self.defrag
             || self.prefetch_keeps_frame
+            || self.victims_by_frequency
             || self.mesh_memory != motu_gpu::MeshMemory::Auto
             || self.host_cache_mode != motu_gpu::HostCacheMode::Auto
             || self.host_store_policy != motu_gpu::HostStorePolicy::Measured

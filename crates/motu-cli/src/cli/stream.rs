@@ -143,6 +143,12 @@ pub struct StreamBoundArgs {
     /// --stats counts what a frame evicted and built back. Measured on lavapipe only.
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long)]
     pub stream_prefetch_keeps_frame: bool,
+    /// Streaming: evictions take the structures used in the fewest of the last 16 frames
+    /// first, least recently seen first among equals, so that what bounce rays meet every few
+    /// frames stays (rebuilt_blases, restored_blases per frame in --stats count what comes
+    /// back). Off by default: least recently seen first. Measured on lavapipe only.
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long)]
+    pub stream_victims_by_frequency: bool,
     /// Streaming: where streamed meshes (positions, indices, shading attributes) live. `host`:
     /// host memory the GPU reads over the bus (only hits and BLAS builds read meshes), outside
     /// the VRAM budget, which then holds acceleration structures and textures alone; `device`:

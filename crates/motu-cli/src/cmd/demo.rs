@@ -136,6 +136,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             stream_split_instances: None,
             stream_defrag: false,
             stream_prefetch_keeps_frame: false,
+            stream_victims_by_frequency: false,
             stream_mesh_memory: crate::cli::MeshMemoryArg::Auto,
             stream_host_cache: crate::cli::HostCacheArg::Auto,
             stream_host_cache_policy: crate::cli::HostCachePolicyArg::Measured,

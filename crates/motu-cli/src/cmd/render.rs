@@ -36,6 +36,7 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         split_instances: b.stream_split_instances,
         defrag: b.stream_defrag,
         prefetch_keeps_frame: b.stream_prefetch_keeps_frame,
+        victims_by_frequency: b.stream_victims_by_frequency,
         mesh_memory: b.stream_mesh_memory.into(),
         host_cache_mode: b.stream_host_cache.into(),
         host_store_policy: b.stream_host_cache_policy.into(),

@@ -112,6 +112,11 @@ pub struct StreamOptions {
     /// 11 → 12 built back; a quarter (where the working set fits only now and then) 2.143
     /// passes either way, 479 → 348 evicted, 252 → 173 built back, 157 → 126 MB built.
     pub prefetch_keeps_frame: bool,
+    /// Evictions take the least often used of the last 16 frames first, least recently seen
+    /// first among equals, so that the part of the bounce rays' fringe met every few frames
+    /// stays (`--stream-victims-by-frequency`; `residency.rs` `lru_victims` has the counts).
+    /// Off (the default): least recently seen first, however often used.
+    pub victims_by_frequency: bool,
     /// Where streamed meshes (positions, indices, primitive maps, shading attributes) live
     /// (`--stream-mesh-memory`; see [`MeshMemory`]).
     pub mesh_memory: MeshMemory,
@@ -323,6 +328,7 @@ impl Default for StreamOptions {
             tlas_update: TlasUpdate::Auto,
             defrag: false,
             prefetch_keeps_frame: false,
+            victims_by_frequency: false,
             mesh_memory: MeshMemory::Auto,
             host_cache_mode: super::HostCacheMode::Auto,
             host_store_policy: super::HostStorePolicy::Measured,

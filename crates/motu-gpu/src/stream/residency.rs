@@ -18,6 +18,9 @@ use super::StreamingRenderer;
 use crate::error::{GpuError, Result};
 use crate::scene::{AccelStruct, MeshGpu};
 
+/// Frames of history a BLAS's use count covers (the bits of `Resident::met_mask`).
+const MET_FRAMES: u32 = 16;
+
 /// Why structures are evicted (`FrameStreamStats` counts each).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) enum EvictWhy {
@@ -54,6 +57,9 @@ pub(super) struct Resident {
     /// working set.
     blas_bytes: Vec<u64>,
     used_in_frame: Vec<u64>,
+    /// Per BLAS, the frames among the last [`MET_FRAMES`] it was used in: bit k for frame
+    /// `used_in_frame - k`. Victims go least often used first ([`Resident::frames_met`]).
+    met_mask: Vec<u16>,
     /// Per BLAS, the kinds of ray (`HIT_*` of `params.rs`) whose closest hit it held in the
     /// frame `used_in_frame` names (0: built for its rays, hit by none).
     hit_kinds: Vec<u8>,
@@ -153,9 +159,26 @@ impl Resident {
     pub fn used_in(&mut self, b: usize, frame: u64, hit_kinds: u32) {
         if self.used_in_frame[b] != frame {
             self.hit_kinds[b] = 0;
+            let shift = frame.saturating_sub(self.used_in_frame[b]);
+            self.met_mask[b] = if shift >= u64::from(MET_FRAMES) {
+                0
+            } else {
+                self.met_mask[b] << shift
+            };
         }
+        self.met_mask[b] |= 1;
         self.used_in_frame[b] = frame;
         self.hit_kinds[b] |= hit_kinds as u8;
+    }
+
+    /// In how many of the [`MET_FRAMES`] frames up to `frame` BLAS `b` was used (walked while
+    /// resident, or built for the frame's rays).
+    pub fn frames_met(&self, b: usize, frame: u64) -> u32 {
+        let age = frame.saturating_sub(self.used_in_frame[b]);
+        if age >= u64::from(MET_FRAMES) {
+            return 0;
+        }
+        ((u32::from(self.met_mask[b]) << age) & 0xffff).count_ones()
     }
 
     /// Per BLAS, the kinds of ray whose closest hit it held in its `used_in_frame`.
@@ -310,6 +333,7 @@ impl Resident {
             last_seen: vec![0; blases + tlases],
             blas_bytes: vec![0; blases],
             used_in_frame: vec![0; blases],
+            met_mask: vec![0; blases],
             hit_kinds: vec![0; blases],
             pinned: vec![false; blases + tlases],
             built_now: Vec::new(),
@@ -382,12 +406,38 @@ impl<'a> StreamingRenderer<'a> {
         Ok(true)
     }
 
-    /// Unpinned streamed BLASes, least recently seen first, until they hold `bytes` (all of
-    /// them when they hold less).
+    /// Unpinned streamed BLASes until they hold `bytes` (all of them when they hold less):
+    /// least recently seen first, or, with [`StreamOptions::victims_by_frequency`], used in the
+    /// fewest of the last [`MET_FRAMES`] frames first, least recently seen first among equals.
+    /// One-sample bounce rays meet a different part of the scene's fringe each frame: least
+    /// recently seen alone evicts a BLAS met every second or third frame before it returns,
+    /// while the room could hold the often met part of the fringe. Lavapipe, island 0.002
+    /// along the default path, frames after the first (rebuilt plus restored; 1–3 runs):
+    /// a third of the full build 443–481 → 239–293, 1/2.75 212–270 → 175–179, a quarter
+    /// 462–494 → 394–426; island 0.01 at 1/2.75 unchanged (125 → 132). Opt-in: at an eighth
+    /// (working set over the room) passes after the first went 30 → 31 and the merged probe
+    /// rounds' TLAS rebuilds 215 → 233 (`tests/tests/stream.rs`), and no GPU has measured it.
+    ///
+    /// [`StreamOptions::victims_by_frequency`]: super::StreamOptions::victims_by_frequency
     pub(super) fn lru_victims(&self, bytes: u64) -> Vec<ItemId> {
         let pins = &self.res.pinned;
         let pinned = |id: ItemId| pins.get(id.0 as usize).copied().unwrap_or(true);
-        match self.res.residency.choose_victims_excluding(bytes, pinned) {
+        if !self.opts.victims_by_frequency {
+            return match self.res.residency.choose_victims_excluding(bytes, pinned) {
+                Ok(v) => v,
+                Err(e) if e.evictable_bytes > 0 => self
+                    .res
+                    .residency
+                    .choose_victims_excluding(e.evictable_bytes, pinned)
+                    .unwrap_or_default(),
+                Err(_) => Vec::new(),
+            };
+        }
+        let mut order = match self
+            .res
+            .residency
+            .choose_victims_excluding(u64::MAX, pinned)
+        {
             Ok(v) => v,
             Err(e) if e.evictable_bytes > 0 => self
                 .res
@@ -395,7 +445,21 @@ impl<'a> StreamingRenderer<'a> {
                 .choose_victims_excluding(e.evictable_bytes, pinned)
                 .unwrap_or_default(),
             Err(_) => Vec::new(),
-        }
+        };
+        // Stable: least recently seen first among equal counts.
+        let frame = self.frame.number();
+        order.sort_by_key(|id| self.res.frames_met(id.0 as usize, frame));
+        let mut freed = 0u64;
+        let n = order
+            .iter()
+            .take_while(|id| {
+                let more = freed < bytes;
+                freed += self.res.blas_bytes(id.0 as usize);
+                more
+            })
+            .count();
+        order.truncate(n);
+        order
     }
 
     /// [`lru_victims`](Self::lru_victims) that dirty as few clean TLASes as they can: first the
