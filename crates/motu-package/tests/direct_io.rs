@@ -60,7 +60,7 @@ fn write(path: &Path, direct_io: bool, zstd_level: Option<i32>) -> bool {
     for (at, blob) in &written {
         let chunk = p.chunk(at.chunk).unwrap();
         let start = at.offset_in_chunk as usize;
-        assert!(&chunk[start..start + blob.len()] == &blob[..], "{at:?}");
+        assert!(chunk[start..start + blob.len()] == blob[..], "{at:?}");
     }
     direct
 }
