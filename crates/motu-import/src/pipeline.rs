@@ -155,6 +155,9 @@ fn writer_options(o: &ImportOptions) -> WriterOptions {
     WriterOptions {
         target_chunk_bytes: o.chunk_bytes,
         zstd_level: o.zstd_level,
+        // The package is written once and read back little during the import: past the page
+        // cache its writes cost little system time (`motu-package`'s `sink.rs`).
+        direct_io: true,
     }
 }
 
@@ -443,7 +446,14 @@ fn create_geometry(
     // Once the bound is known, meshes over it are cut as they are stored instead (`precut`).
     let geometry = if direct {
         let spill_path = out.with_extension("partition-spill.motu");
-        let spill = PackageWriter::create(&spill_path, writer_options(o)).map_err(|source| {
+        // The spill is read back whole while compiling: through the page cache, where a
+        // direct write's pages would have to come back from the disk (kernel `_copy_to_iter`
+        // 0.2% → 5.3% of an import's CPU samples when the spill was written direct too).
+        let spill_options = WriterOptions {
+            direct_io: false,
+            ..writer_options(o)
+        };
+        let spill = PackageWriter::create(&spill_path, spill_options).map_err(|source| {
             ImportError::CreateScratch {
                 path: out.to_path_buf(),
                 source,

@@ -49,6 +49,7 @@ fn write_package(path: &Path, chunks: usize, zstd_level: Option<i32>, section_by
     let options = WriterOptions {
         target_chunk_bytes: CHUNK_BYTES as u64,
         zstd_level,
+        direct_io: false,
     };
     let mut writer = PackageWriter::create(path, options).expect("create bench package");
     let stream = writer.open_stream(0, 0);

@@ -38,6 +38,7 @@ mod error;
 pub mod format;
 pub mod identity;
 mod reader;
+mod sink;
 mod writer;
 
 pub use error::{FormatVersion, PackageError, Part};

@@ -73,6 +73,7 @@ fn write_sample(path: &Path, zstd: bool) -> Sample {
     let options = WriterOptions {
         target_chunk_bytes: 8192,
         zstd_level: zstd.then_some(3),
+        direct_io: false,
     };
     let mut writer = PackageWriter::create(path, options).unwrap();
     let a = writer.open_stream(10, 0);
@@ -179,6 +180,7 @@ fn locators_respect_alignment_and_chunk_target() {
         WriterOptions {
             target_chunk_bytes: 1000,
             zstd_level: None,
+            direct_io: false,
         },
     )
     .unwrap();
@@ -226,6 +228,7 @@ fn writer_rejects_bad_sections_and_options() {
     let options = WriterOptions {
         target_chunk_bytes: 0,
         zstd_level: None,
+        direct_io: false,
     };
     assert!(matches!(
         PackageWriter::create(&path, options),
@@ -293,7 +296,7 @@ proptest! {
     ) {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("p.motu");
-        let options = WriterOptions { target_chunk_bytes, zstd_level: zstd.then_some(1) };
+        let options = WriterOptions { target_chunk_bytes, zstd_level: zstd.then_some(1), direct_io: false };
         let mut writer = PackageWriter::create(&path, options).unwrap();
         let streams: Vec<_> = (0..3).map(|i| writer.open_stream(i, 100 + i)).collect();
         let mut written = Vec::new();
@@ -800,6 +803,7 @@ fn read_back_and_oversized_blobs() {
         let opts = WriterOptions {
             target_chunk_bytes: 4096,
             zstd_level,
+            direct_io: false,
         };
         let mut w = PackageWriter::create(&path, opts).unwrap();
         let s = w.open_stream(1, 2);
@@ -901,6 +905,7 @@ fn blobs_filled_in_place_equal_blobs_appended() {
             WriterOptions {
                 target_chunk_bytes: 1000,
                 zstd_level: None,
+                direct_io: false,
             },
         )
         .unwrap();
