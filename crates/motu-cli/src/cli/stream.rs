@@ -146,7 +146,10 @@ pub struct StreamBoundArgs {
     /// Streaming: evictions take the structures used in the fewest of the last 16 frames
     /// first, least recently seen first among equals, so that what bounce rays meet every few
     /// frames stays (rebuilt_blases, restored_blases per frame in --stats count what comes
-    /// back). Off by default: least recently seen first. Measured on lavapipe only.
+    /// back). Off by default: least recently seen first. Lavapipe (island 0.002, a third of
+    /// its need): structures built back 443 → 239; H100 (island 0.3, a quarter, 8 frames):
+    /// slower, 1,147 against 1,068 ms a frame, 2.86 against 2.57 passes (BENCHMARKS.md,
+    /// session 48).
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long)]
     pub stream_victims_by_frequency: bool,
     /// Streaming: where streamed meshes (positions, indices, shading attributes) live. `host`:
