@@ -416,14 +416,16 @@ impl<'a> StreamingRenderer<'a> {
     /// a third of the full build 443–481 → 239–293, 1/2.75 212–270 → 175–179, a quarter
     /// 462–494 → 394–426; island 0.01 at 1/2.75 unchanged (125 → 132). Opt-in: at an eighth
     /// (working set over the room) passes after the first went 30 → 31 and the merged probe
-    /// rounds' TLAS rebuilds 215 → 233 (`tests/tests/stream.rs`), and no GPU has measured it.
+    /// rounds' TLAS rebuilds 215 → 233 (`tests/tests/stream.rs`); on an H100 at a quarter of
+    /// island 0.3 frames were slower (1,147 against 1,068 ms; BENCHMARKS.md, session 48).
     ///
     /// [`StreamOptions::victims_by_frequency`]: super::StreamOptions::victims_by_frequency
     pub(super) fn lru_victims(&self, bytes: u64) -> Vec<ItemId> {
         let pins = &self.res.pinned;
         let pinned = |id: ItemId| pins.get(id.0 as usize).copied().unwrap_or(true);
-        if !self.opts.victims_by_frequency {
-            return match self.res.residency.choose_victims_excluding(bytes, pinned) {
+        // Least recently seen first until `want` bytes (all that is evictable when less).
+        let least_recent =
+            |want: u64| match self.res.residency.choose_victims_excluding(want, pinned) {
                 Ok(v) => v,
                 Err(e) if e.evictable_bytes > 0 => self
                     .res
@@ -432,20 +434,10 @@ impl<'a> StreamingRenderer<'a> {
                     .unwrap_or_default(),
                 Err(_) => Vec::new(),
             };
+        if !self.opts.victims_by_frequency {
+            return least_recent(bytes);
         }
-        let mut order = match self
-            .res
-            .residency
-            .choose_victims_excluding(u64::MAX, pinned)
-        {
-            Ok(v) => v,
-            Err(e) if e.evictable_bytes > 0 => self
-                .res
-                .residency
-                .choose_victims_excluding(e.evictable_bytes, pinned)
-                .unwrap_or_default(),
-            Err(_) => Vec::new(),
-        };
+        let mut order = least_recent(u64::MAX);
         // Stable: least recently seen first among equal counts.
         let frame = self.frame.number();
         order.sort_by_key(|id| self.res.frames_met(id.0 as usize, frame));
