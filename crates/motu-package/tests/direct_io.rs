@@ -5,18 +5,8 @@ use std::path::Path;
 
 use motu_package::{Package, PackageWriter, WriterOptions};
 
-/// Deterministic pseudo-random bytes (xorshift).
-fn noise(seed: u64, len: usize) -> Vec<u8> {
-    let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-    (0..len)
-        .map(|_| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state as u8
-        })
-        .collect()
-}
+mod common;
+use common::noise;
 
 /// Writes blobs across several 2 MiB stages (chunks of ~0.75 MiB, some larger than the
 /// target, odd lengths and alignments), reading back every sealed chunk as it goes; returns

@@ -9,22 +9,12 @@ use motu_package::{
 };
 use proptest::prelude::*;
 
+mod common;
+use common::noise;
+
 const NODES: SectionKind = SectionKind(1);
 const TRANSFORMS: SectionKind = SectionKind(2);
 const NAMES: SectionKind = SectionKind(3);
-
-/// Deterministic pseudo-random bytes (xorshift), so tests need no RNG state.
-fn noise(seed: u64, len: usize) -> Vec<u8> {
-    let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
-    (0..len)
-        .map(|_| {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state as u8
-        })
-        .collect()
-}
 
 /// Compressible bytes: a repeating ramp, like quantised vertex data.
 fn ramp(len: usize) -> Vec<u8> {
