@@ -264,31 +264,42 @@ Affine affine_from_array(float m[12]) {
                   vec4(m[8], m[9], m[10], m[11]));
 }
 
+// The transforms below are `precise` (no fused multiply-adds) and spell out their dot products,
+// so every shader module rounds them alike: NVIDIA's compiler otherwise fuses differently in
+// the full build's and the streamed ray-generation shaders, and secondary rays from the same
+// hit then started a few ulps apart (9 of 230,400 pixels differed on an H100, session 49).
 vec3 xform_point(Affine m, vec3 p) {
-    return vec3(dot(m.r0.xyz, p) + m.r0.w, dot(m.r1.xyz, p) + m.r1.w, dot(m.r2.xyz, p) + m.r2.w);
+    precise vec3 r = vec3(((m.r0.x * p.x + m.r0.y * p.y) + m.r0.z * p.z) + m.r0.w,
+                          ((m.r1.x * p.x + m.r1.y * p.y) + m.r1.z * p.z) + m.r1.w,
+                          ((m.r2.x * p.x + m.r2.y * p.y) + m.r2.z * p.z) + m.r2.w);
+    return r;
 }
 
 vec3 xform_vector(Affine m, vec3 v) {
-    return vec3(dot(m.r0.xyz, v), dot(m.r1.xyz, v), dot(m.r2.xyz, v));
+    precise vec3 r = vec3((m.r0.x * v.x + m.r0.y * v.y) + m.r0.z * v.z,
+                          (m.r1.x * v.x + m.r1.y * v.y) + m.r1.z * v.z,
+                          (m.r2.x * v.x + m.r2.y * v.y) + m.r2.z * v.z);
+    return r;
 }
 
 // mᵀ n for the linear part: the normal transform by object_from_world without inverting.
 vec3 transpose_vector(Affine m, vec3 n) {
-    return m.r0.xyz * n.x + m.r1.xyz * n.y + m.r2.xyz * n.z;
+    precise vec3 r = (m.r0.xyz * n.x + m.r1.xyz * n.y) + m.r2.xyz * n.z;
+    return r;
 }
 
 // a ∘ b (apply b first).
 Affine compose(Affine a, Affine b) {
     mat3 la = mat3(a.r0.xyz, a.r1.xyz, a.r2.xyz);  // columns = rows of a: la is aᵀ
     mat3 lb = mat3(b.r0.xyz, b.r1.xyz, b.r2.xyz);
-    mat3 l = lb * la;  // (a·b)ᵀ = bᵀ·aᵀ
-    vec3 t = xform_vector(a, vec3(b.r0.w, b.r1.w, b.r2.w)) + vec3(a.r0.w, a.r1.w, a.r2.w);
+    precise mat3 l = lb * la;  // (a·b)ᵀ = bᵀ·aᵀ
+    precise vec3 t = xform_vector(a, vec3(b.r0.w, b.r1.w, b.r2.w)) + vec3(a.r0.w, a.r1.w, a.r2.w);
     return Affine(vec4(l[0], t.x), vec4(l[1], t.y), vec4(l[2], t.z));
 }
 
 Affine affine_inverse(Affine m) {
     mat3 lt = mat3(m.r0.xyz, m.r1.xyz, m.r2.xyz);  // transpose of the linear part
-    mat3 inv_t = inverse(lt);                       // = (L⁻¹)ᵀ: its columns are rows of L⁻¹
+    precise mat3 inv_t = inverse(lt);               // = (L⁻¹)ᵀ: its columns are rows of L⁻¹
     vec3 t = vec3(m.r0.w, m.r1.w, m.r2.w);
     Affine r = Affine(vec4(inv_t[0], 0.0), vec4(inv_t[1], 0.0), vec4(inv_t[2], 0.0));
     vec3 it = -xform_vector(r, t);
@@ -352,9 +363,9 @@ uint encode_srgb8(vec3 c) {
 // motu_trace::render::shadow_offset. `reach` (largest |origin| component + hit distance) bounds
 // the error of p = origin + t·dir, which W&B alone (made for exact p) does not cover: without it
 // far hits on a plane at y = 0 shadowed themselves (speckled ground at 1080p).
-vec3 shadow_offset(vec3 p, vec3 n, float reach) {
-    p += n * (reach * (1.0 / 262144.0));
-    vec3 o;
+vec3 shadow_offset(vec3 p_in, vec3 n, float reach) {
+    precise vec3 p = p_in + n * (reach * (1.0 / 262144.0));
+    precise vec3 o;
     for (int a = 0; a < 3; ++a) {
         if (abs(p[a]) < 1.0 / 32.0) {
             o[a] = p[a] + (1.0 / 65536.0) * n[a];

@@ -137,14 +137,15 @@ float shininess(float roughness) {
 
 vec3 cosine_direction(vec3 n, float u1, float u2) {
     float s = n.z >= 0.0 ? 1.0 : -1.0;
-    float a = -1.0 / (s + n.z);
-    float b = n.x * n.y * a;
-    vec3 t = vec3(1.0 + s * n.x * n.x * a, s * b, -s * n.x);
-    vec3 bt = vec3(b, s + n.y * n.y * a, -n.y);
+    precise float a = -1.0 / (s + n.z);
+    precise float b = n.x * n.y * a;
+    precise vec3 t = vec3(1.0 + s * n.x * n.x * a, s * b, -s * n.x);
+    precise vec3 bt = vec3(b, s + n.y * n.y * a, -n.y);
     float r = sqrt(u1);
     float phi = 6.28318530718 * u2;
     float z = sqrt(max(1.0 - u1, 0.0));
-    return r * cos(phi) * t + r * sin(phi) * bt + z * n;
+    precise vec3 d = (r * cos(phi) * t + r * sin(phi) * bt) + z * n;
+    return d;
 }
 
 vec3 barycentrics(vec3 v0, vec3 v1, vec3 v2, vec3 p) {
@@ -193,8 +194,15 @@ ShadePoint surface_point(TraceHit h, uint mesh, vec3 org, vec3 dir) {
     vec3 v2 = load_vec3(pos, tri.z);
     Affine object_from_world =
         compose(affine_inverse(affine_from_array(inst.tlas_from_blas)), h.tlas_from_world);
-    sp.p = org + dir * h.t;
-    vec3 ng = normalize(transpose_vector(object_from_world, cross(v1 - v0, v2 - v0)));
+    precise vec3 p = org + dir * h.t;
+    sp.p = p;
+    precise vec3 e1 = v1 - v0;
+    precise vec3 e2 = v2 - v0;
+    precise vec3 n_obj = vec3(e1.y * e2.z - e1.z * e2.y, e1.z * e2.x - e1.x * e2.z,
+                              e1.x * e2.y - e1.y * e2.x);
+    precise vec3 n_world = transpose_vector(object_from_world, n_obj);
+    precise float len2 = (n_world.x * n_world.x + n_world.y * n_world.y) + n_world.z * n_world.z;
+    precise vec3 ng = n_world * (1.0 / sqrt(len2));
     if (dot(ng, dir) > 0.0) {
         ng = -ng;
     }
@@ -333,7 +341,7 @@ const uint RAY_OPEN = 2u;
 // Where the secondary rays of a hit at distance `t` along (org, dir) start (geometric normal
 // `ng` facing the ray).
 vec3 secondary_start(vec3 org, vec3 dir, float t, vec3 ng) {
-    vec3 p = org + dir * t;
+    precise vec3 p = org + dir * t;
     float reach = max(max(abs(org.x), abs(org.y)), abs(org.z)) + t;
     return shadow_offset(p, ng, reach);
 }
