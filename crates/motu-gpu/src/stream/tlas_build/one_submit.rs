@@ -64,7 +64,7 @@ impl Held {
 
 /// `Ok(None)` for a budget refusal (the caller falls back), the value or other errors as they
 /// are.
-pub(super) fn fits<T>(r: std::result::Result<T, VkError>) -> Result<Option<T>> {
+fn fits<T>(r: std::result::Result<T, VkError>) -> Result<Option<T>> {
     match r {
         Ok(v) => Ok(Some(v)),
         Err(VkError::Budget(_)) => Ok(None),

@@ -15,7 +15,7 @@
 //! absent with its storage freed, as before.
 
 use motu_alloc::BuildSize;
-use motu_vk::{AsLevel, Context, GpuHeap};
+use motu_vk::{AsLevel, Context, GpuHeap, VkError};
 
 use super::{PhaseTimes, TlasBuild};
 use crate::error::{GpuError, Result};
@@ -91,17 +91,15 @@ pub(super) fn tlas_structures(
             None => {}
         }
         let label = format!("tlas-{k}");
-        match super::one_submit::fits(AccelStruct::new(
-            ctx,
-            heap,
-            &label,
-            size.result_bytes,
-            AsLevel::Top,
-        )) {
-            Ok(Some(a)) => made.push(a),
-            other => {
-                made.into_iter().for_each(|a: AccelStruct| a.release(heap));
-                return other.map(|_| None);
+        match AccelStruct::new(ctx, heap, &label, size.result_bytes, AsLevel::Top) {
+            Ok(a) => made.push(a),
+            Err(e) => {
+                made.into_iter().for_each(|a| a.release(heap));
+                // A budget refusal: the caller falls back.
+                return match e {
+                    VkError::Budget(_) => Ok(None),
+                    e => Err(e.into()),
+                };
             }
         }
     }
@@ -139,13 +137,23 @@ impl TlasBuild<'_, '_> {
         let est = self.r.tlas_estimates(ids, tails)?;
         if !self.old_storage.is_empty() {
             let (old, heap) = (&mut self.old_storage, &mut self.r.heap);
+            let (mut grew, mut shrank) = (0u32, 0u32);
             PhaseTimes::timed(&mut self.times.free_ms, || {
                 old.retain(heap, |t, capacity_bytes| {
-                    ids.iter()
-                        .position(|&u| u == t)
-                        .is_some_and(|k| reusable(capacity_bytes, est[k].1.result_bytes))
+                    let Some(k) = ids.iter().position(|&u| u == t) else {
+                        return false;
+                    };
+                    let need_bytes = est[k].1.result_bytes;
+                    let keep = reusable(capacity_bytes, need_bytes);
+                    grew += u32::from(!keep && need_bytes > capacity_bytes);
+                    shrank += u32::from(!keep && need_bytes <= capacity_bytes);
+                    keep
                 })
             });
+            // Why storage was not reused (the debug line): how often pieces outgrow theirs
+            // decides whether headroom on fresh allocations would pay.
+            self.times.storage_grew += grew;
+            self.times.storage_shrank += shrank;
         }
         let held: Vec<bool> = ids.iter().map(|&t| self.old_storage.holds(t)).collect();
         match self.r.probe_tlas_room(&est, &held) {

@@ -34,6 +34,10 @@ pub(super) struct PhaseTimes {
     /// fresh storage (`storage.rs`).
     pub(super) storage_reused: u32,
     pub(super) storage_allocated: u32,
+    /// Old structures the room probe released instead of reusing: the piece outgrew its
+    /// storage, or shrank by more than the slack (the debug line only).
+    pub(super) storage_grew: u32,
+    pub(super) storage_shrank: u32,
 }
 
 impl PhaseTimes {
@@ -60,6 +64,8 @@ impl PhaseTimes {
             proxy_upload_ms: 0.0,
             storage_reused: 0,
             storage_allocated: 0,
+            storage_grew: 0,
+            storage_shrank: 0,
         }
     }
 
@@ -123,6 +129,8 @@ impl PhaseTimes {
             proxy_upload_ms = self.proxy_upload_ms,
             storage_reused = self.storage_reused,
             storage_allocated = self.storage_allocated,
+            storage_grew = self.storage_grew,
+            storage_shrank = self.storage_shrank,
             "TLAS rebuild phases"
         );
     }
