@@ -125,14 +125,13 @@ impl TlasBuild<'_, '_> {
         let (old, heap) = (&mut self.old_storage, &mut self.r.heap);
         PhaseTimes::timed(&mut self.times.free_ms, || old.release(heap));
     }
-}
 
-impl TlasBuild<'_, '_> {
-    /// The room probe ([`probe_tlas_room`](crate::stream::StreamingRenderer::probe_tlas_room)) of rebuilding `ids` (`tails`:
-    /// the records after each one's own): the held old structures the estimated sizes would
-    /// not reuse are released first, and those held are not asked for again (the shadow
-    /// allocator keeps them, so asking would count them twice). Refused with storage held, it
-    /// releases it and asks as without reuse: never refusing what it let through before.
+    /// The room probe of rebuilding `ids`
+    /// ([`probe_tlas_room`](crate::stream::StreamingRenderer::probe_tlas_room); `tails`: the
+    /// records after each one's own): the held old structures the estimated sizes would not
+    /// reuse are released first, and those held are not asked for again (the shadow allocator
+    /// keeps them, so asking would count them twice). Refused with storage held, it releases
+    /// it and asks as without reuse: never refusing what it let through before.
     pub(super) fn probe_with_storage(&mut self, ids: &[u32], tails: &[u64]) -> Result<()> {
         let est = self.r.tlas_estimates(ids, tails)?;
         if !self.old_storage.is_empty() {
