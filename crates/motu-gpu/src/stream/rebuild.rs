@@ -53,38 +53,62 @@ impl<'a> StreamingRenderer<'a> {
         Ok(built.into_iter().map(|(k, a)| (order[k], a)).collect())
     }
 
-    /// Fails fast with the budget's refusal when rebuilding TLASes `ids` cannot fit now:
+    /// Per TLAS `ids[k]` of a rebuild: its records (the resident BLASes' instance records plus
+    /// `tails[k]`, the records after its own: its proxy and marks, each present when it has a
+    /// box) and its build sizes, estimated from what is resident now.
+    pub(super) fn tlas_estimates(
+        &self,
+        ids: &[u32],
+        tails: &[u64],
+    ) -> Result<Vec<(u64, BuildSize)>> {
+        let counts = self.resident_instance_counts();
+        let mut est = Vec::with_capacity(ids.len());
+        for (&t, &tail) in ids.iter().zip(tails) {
+            let n = (counts[t as usize] + tail).max(1);
+            let s = self.ctx.tlas_build_sizes(
+                u32::try_from(n).unwrap_or(u32::MAX),
+                self.rebuild_opts().tlas_flags(),
+            )?;
+            est.push((
+                n,
+                BuildSize {
+                    result_bytes: s.acceleration_structure_size_bytes,
+                    scratch_bytes: s.build_scratch_size_bytes,
+                },
+            ));
+        }
+        Ok(est)
+    }
+
+    /// Fails fast with the budget's refusal when rebuilding TLASes of estimates `est`
+    /// ([`Self::tlas_estimates`]) cannot fit now:
     /// asks the allocator whether what every attempt holds at once fits (the instance buffer,
-    /// the largest TLAS's build scratch and its structure: a subset of the real peak, so a
-    /// refusal here is one the build would meet). A refused attempt is retried after evicting
+    /// the largest TLAS's build scratch and the largest structure not `held`: a subset of the
+    /// real peak, so a refusal here is one the build would meet). `held[k]`: TLAS `k`'s new
+    /// structure reuses its old one's storage, which the heap holds already
+    /// (`tlas_build/storage.rs`). A refused attempt is retried after evicting
     /// (`with_eviction`, `rebuild_dirty`'s give-back rounds) and used to refuse only after
     /// encoding, uploading every resident instance record and building the proxies: at ⅛ of
     /// the 0.3 island (2.8M resident records per rebuild) 46 TLAS builds for 14 rebuilds,
     /// two thirds of the frame's 13.4 s of TLAS time. Asked, not allocated: allocating and
     /// freeing those buffers (dedicated blocks of up to a gigabyte) took 36–116 ms a rebuild
     /// on the H200, 6% of a frame at a quarter of island 0.3 (BENCHMARKS.md, session 18).
-    /// `tails[k]`: the records after `ids[k]`'s own (its proxy and marks, each present when it
-    /// has a box: the build's plan knows).
-    pub(super) fn probe_tlas_room(&mut self, ids: &[u32], tails: &[u64]) -> Result<()> {
-        let counts = self.resident_instance_counts();
-        let mut records = 0u64;
-        let mut largest = (0u64, 0u64);
-        for (&t, &tail) in ids.iter().zip(tails) {
-            let n = (counts[t as usize] + tail).max(1);
-            records += n;
-            let s = self.ctx.tlas_build_sizes(
-                u32::try_from(n).unwrap_or(u32::MAX),
-                self.rebuild_opts().tlas_flags(),
-            )?;
-            if s.acceleration_structure_size_bytes > largest.0 {
-                largest = (
-                    s.acceleration_structure_size_bytes,
-                    s.build_scratch_size_bytes,
-                );
-            }
-        }
+    pub(super) fn probe_tlas_room(
+        &mut self,
+        est: &[(u64, BuildSize)],
+        held: &[bool],
+    ) -> Result<()> {
+        let records: u64 = est.iter().map(|e| e.0).sum();
+        let largest = |skip_held: bool| {
+            est.iter()
+                .zip(held)
+                .filter(|(_, &h)| !(skip_held && h))
+                .map(|(e, _)| e.1)
+                .max_by_key(|s| s.result_bytes)
+        };
+        let scratch_bytes = largest(false).map_or(0, |s| s.scratch_bytes);
         let scratch_align = self.ctx.limits().scratch_alignment_bytes();
-        Ok(self.heap.try_fit(&[
+        let mut asks = vec![
             FitRequest {
                 label: "stream-tlas-probe-instances",
                 size_bytes: (records * RECORD_BYTES as u64).max(64),
@@ -95,21 +119,24 @@ impl<'a> StreamingRenderer<'a> {
             },
             FitRequest {
                 label: "stream-tlas-probe-scratch",
-                size_bytes: largest.1.max(scratch_align),
+                size_bytes: scratch_bytes.max(scratch_align),
                 usage: BufferUsage::STORAGE | BufferUsage::DEVICE_ADDRESS,
                 kind: AllocKind::Scratch,
                 class: MemoryClass::DeviceLocal,
                 alignment: scratch_align,
             },
-            FitRequest {
+        ];
+        if let Some(s) = largest(true) {
+            asks.push(FitRequest {
                 label: "stream-tlas-probe",
-                size_bytes: largest.0.max(256),
+                size_bytes: s.result_bytes.max(256),
                 usage: BufferUsage::ACCELERATION_STRUCTURE_STORAGE,
                 kind: AllocKind::TlasStorage,
                 class: MemoryClass::DeviceLocal,
                 alignment: ACCELERATION_STRUCTURE_OFFSET_ALIGNMENT,
-            },
-        ])?)
+            });
+        }
+        Ok(self.heap.try_fit(&asks)?)
     }
 
     /// Rebuilds every dirty TLAS, in groups ([`Self::next_rebuild_group`]). When the budget

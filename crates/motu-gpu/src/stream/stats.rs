@@ -198,6 +198,10 @@ pub struct FrameStreamStats {
     /// (`tlas_build/one_submit.rs`; the others: compaction on, a persistent TLAS updated, a
     /// level over one batch, or that path's allocations refused).
     pub tlas_one_submission: u32,
+    /// Rebuilt TLASes built into the storage of the structure they replaced (no allocation
+    /// and no free: `tlas_build/storage.rs`), and those given fresh storage.
+    pub tlas_storage_reused: u32,
+    pub tlas_storage_allocated: u32,
     pub tlas_proxy_ms: f64,
     pub tlas_swap_ms: f64,
     pub tlas_room_ms: f64,
@@ -390,6 +394,9 @@ pub struct StreamTotals {
     pub tlas_built: u64,
     pub tlas_rebuilt: u64,
     pub tlas_rebuild_groups: u64,
+    /// The frames' `tlas_storage_reused` and `tlas_storage_allocated` summed.
+    pub tlas_storage_reused: u64,
+    pub tlas_storage_allocated: u64,
     /// The frames' `submits`, `fence_waits`, `tlas_submits` and `tlas_fence_waits` summed.
     pub submits: u64,
     pub fence_waits: u64,
@@ -531,6 +538,8 @@ impl StreamTotals {
         tot.tlas_rebuilt += u64::from(st.tlas_rebuilt);
         tot.tlas_rebuilt_again += u64::from(st.tlas_rebuilt_again);
         tot.tlas_rebuild_groups += u64::from(st.tlas_rebuild_groups);
+        tot.tlas_storage_reused += u64::from(st.tlas_storage_reused);
+        tot.tlas_storage_allocated += u64::from(st.tlas_storage_allocated);
         tot.submits += st.submits;
         tot.fence_waits += st.fence_waits;
         tot.tlas_submits += st.tlas_submits;

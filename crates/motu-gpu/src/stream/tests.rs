@@ -1634,7 +1634,8 @@ fn uncompacted_rebuilt_tlases_match_the_full_build_and_rebuild_once_a_step() {
 /// along a path under an eighth of the full build, the rebuilds submit at most twice a group
 /// (once, plus a ring flush when the records outgrow the staging ring), fewer than the
 /// sequential path (compaction on: boxes' flush, proxies' batch, records' flush, TLASes'
-/// batch), and the frames equal the full build.
+/// batch), and the frames equal the full build. Without compaction some rebuilt TLASes are
+/// built into the storage of the structure they replace (`tlas_build/storage.rs`), none with.
 #[test]
 fn a_rebuild_group_submits_its_proxies_and_tlases_once() {
     let Some(Fixture { ctx, h, full }) =
@@ -1648,6 +1649,7 @@ fn a_rebuild_group_submits_its_proxies_and_tlases_once() {
     let mut submits = Vec::new();
     for tlas_compact in [false, true] {
         let mut one_submission = 0u32;
+        let (mut reused, mut allocated, mut builds) = (0u32, 0u32, 0u32);
         let mut sr = streamer(
             &ctx,
             &h,
@@ -1665,6 +1667,13 @@ fn a_rebuild_group_submits_its_proxies_and_tlases_once() {
             assert!(st.tlas_fence_waits <= st.fence_waits, "{what}");
             assert!(st.fence_waits <= st.submits, "{what}");
             one_submission += st.tlas_one_submission;
+            reused += st.tlas_storage_reused;
+            allocated += st.tlas_storage_allocated;
+            builds += st.tlas_builds;
+            assert!(
+                st.tlas_storage_reused + st.tlas_storage_allocated <= st.tlas_builds,
+                "{what}"
+            );
             if tlas_compact {
                 assert_eq!(st.tlas_one_submission, 0, "{what}");
             } else {
@@ -1685,6 +1694,10 @@ fn a_rebuild_group_submits_its_proxies_and_tlases_once() {
         );
         assert!(t.tlas_rebuild_groups > 0 && t.tlas_submits > 0, "{t:?}");
         assert_eq!(one_submission > 0, !tlas_compact, "{t:?}");
+        eprintln!("compact {tlas_compact}: storage reused {reused}, allocated {allocated}, {builds} builds");
+        assert_eq!(reused > 0, !tlas_compact, "{t:?}");
+        assert_eq!(u64::from(reused), t.tlas_storage_reused);
+        assert_eq!(u64::from(allocated), t.tlas_storage_allocated);
         submits.push((t.tlas_submits, t.tlas_rebuild_groups));
     }
     let (one, seq) = (submits[0], submits[1]);

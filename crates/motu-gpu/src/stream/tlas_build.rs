@@ -19,6 +19,7 @@ use crate::scene::{build_batched, AccelStruct, BuildOptions, ResourceReport};
 mod inputs;
 mod one_submit;
 mod plan;
+mod storage;
 mod times;
 
 use inputs::{
@@ -176,6 +177,8 @@ struct TlasBuild<'r, 'a> {
     gpu: Vec<bool>,
     /// The old proxy and marks BLASes of the build's TLASes, until planned (kept or released).
     old_proxies: Vec<(u32, ProxyPair)>,
+    /// The old structures of the build's TLASes held for the new ones to reuse (`storage.rs`).
+    old_storage: storage::OldStorage,
     times: PhaseTimes,
 }
 
@@ -201,10 +204,13 @@ impl<'a> StreamingRenderer<'a> {
             addrs: Vec::new(),
             gpu: Vec::new(),
             old_proxies: Vec::new(),
+            old_storage: storage::OldStorage::default(),
             times: PhaseTimes::new(),
         };
         let (submits0, waits0) = (b.ctx.submit_count(), b.ctx.fence_wait_count());
         let result = b.run(ids);
+        // Old storage no path took (a refusal, an error): released, the TLAS absent as before.
+        b.release_old_storage();
         let TlasBuild { r, times, ctx, .. } = b;
         let st = r.frame.stats_mut();
         st.tlas_submits += ctx.submit_count() - submits0;
@@ -237,8 +243,14 @@ impl TlasBuild<'_, '_> {
             return Err(e);
         }
         self.times.probe_ms = self.times.lap();
-        if persistent_ids.is_empty() {
-            // Proxies and TLASes in one submission where it applies (`one_submit.rs`).
+        // Proxies and TLASes in one submission where it applies (`one_submit.rs`); refused
+        // with old storage held, tried once more without it (the room it had before reuse).
+        let tries = if persistent_ids.is_empty() {
+            1 + u32::from(!self.old_storage.is_empty())
+        } else {
+            0
+        };
+        for _ in 0..tries {
             match self.one_submission(&rebuild_ids, &plan, &mut proxies) {
                 Ok(Some((built, records))) => {
                     self.r.frame.stats_mut().tlas_one_submission += 1;
@@ -247,13 +259,15 @@ impl TlasBuild<'_, '_> {
                     self.swap_in(&rebuild_ids, built, Vec::new(), &mut proxies);
                     return Ok(());
                 }
-                Ok(None) => {}
+                Ok(None) => self.release_old_storage(),
                 Err(e) => {
                     proxies.release(&mut self.r.heap);
                     return Err(e);
                 }
             }
         }
+        // The step-by-step path allocates its own structures.
+        self.release_old_storage();
         if let Err(e) = self.build_proxies(&plan, &mut proxies) {
             proxies.release(&mut self.r.heap);
             return Err(e);
@@ -277,6 +291,7 @@ impl TlasBuild<'_, '_> {
         self.times.build_ms = self.times.lap();
         self.times.records = records;
         self.times.proxy_boxes = plan.box_count;
+        self.times.storage_allocated += built.len() as u32;
         self.swap_in(&rebuild_ids, built, updated, &mut proxies);
         Ok(())
     }
@@ -294,8 +309,8 @@ impl TlasBuild<'_, '_> {
                 planned + kept.pair(t).map_or(0, ProxyPair::count)
             })
             .collect();
+        self.probe_with_storage(rebuild_ids, &tails)?;
         let r = &mut *self.r;
-        r.probe_tlas_room(rebuild_ids, &tails)?;
         if r.opts.tlas_records == super::TlasRecordsMode::Gpu {
             // The host path skips this sizing: it keeps nothing.
             let counts = r.resident_instance_counts();
@@ -312,13 +327,19 @@ impl TlasBuild<'_, '_> {
 
     /// Phase 0: the old structures go (dirty: never traced until rebuilt or updated). A
     /// persistent TLAS's structure stays. Their proxy and marks BLASes wait for the plan,
-    /// which keeps those whose boxes are the same and releases the others.
+    /// which keeps those whose boxes are the same and releases the others. Where the
+    /// one-submission path can take the rebuild, the structures are held for the new ones to
+    /// be built into instead (`storage.rs`).
     fn release_old(&mut self, ids: &[u32]) {
+        let keep = self.keeps_storage(ids);
         let r = &mut *self.r;
         let t0 = std::time::Instant::now();
         for &t in ids {
-            if let Some(pair) = r.tlases.start_rebuild(t, &mut r.heap) {
+            if let Some((pair, storage)) = r.tlases.start_rebuild(t, keep, &mut r.heap) {
                 self.old_proxies.push((t, pair));
+                if let Some(a) = storage {
+                    self.old_storage.push(t, a);
+                }
             }
         }
         self.times.free_ms += t0.elapsed().as_secs_f64() * 1e3;

@@ -142,19 +142,32 @@ impl Tlases {
     /// TLAS `t` is about to be rebuilt or updated: dirty until it is. A persistent TLAS keeps
     /// its structure and hands over its proxy and marks; another releases its structure and
     /// hands them over. The caller reuses them where its clusters' residency is unchanged
-    /// (same boxes, same order) and releases them otherwise.
-    pub fn start_rebuild(&mut self, t: u32, heap: &mut GpuHeap) -> Option<ProxyPair> {
-        let pair = if self.is_persistent(t) {
+    /// (same boxes, same order) and releases them otherwise. With `keep_storage` a rebuilt
+    /// (not persistent, not compacted) TLAS's structure is handed over too, unreleased, for
+    /// the new one to be built into its storage (`tlas_build/storage.rs`); it is out of the
+    /// TLAS either way (absent until swapped in: nothing traces it).
+    pub fn start_rebuild(
+        &mut self,
+        t: u32,
+        keep_storage: bool,
+        heap: &mut GpuHeap,
+    ) -> Option<(ProxyPair, Option<AccelStruct>)> {
+        let taken = if self.is_persistent(t) {
             let g = self.tlas[t as usize].as_mut()?;
-            ProxyPair::take_from(g)
+            (ProxyPair::take_from(g), None)
         } else {
             let mut old = self.tlas[t as usize].take()?;
             let pair = ProxyPair::take_from(&mut old);
-            old.release(heap);
-            pair
+            let storage = if keep_storage && old.saved_bytes == 0 && old.persistent.is_none() {
+                Some(old.accel)
+            } else {
+                old.release(heap);
+                None
+            };
+            (pair, storage)
         };
         self.dirty.insert(t);
-        Some(pair)
+        Some(taken)
     }
 
     /// Persistent TLAS `t` built over every instance (its first build; the update that follows

@@ -19,6 +19,7 @@ use motu_vk::{
     MemoryScope, VkError,
 };
 
+use super::storage::tlas_structures;
 use super::{
     alloc_box_buffer, alloc_instance_buffer, proxy_geometry, proxy_sizes, queue_proxy_uploads,
     Built, PhaseTimes, Proxies, ProxyPlan, TlasBuild,
@@ -33,8 +34,10 @@ struct Held {
     boxes: Option<HeapBuffer>,
     instances: Option<HeapBuffer>,
     scratch: Option<HeapBuffer>,
-    /// The new TLASes, one per rebuilt id.
+    /// The new TLASes, one per rebuilt id, and how many of them are built into the storage
+    /// of the structure they replace (`storage.rs`).
     tlases: Vec<AccelStruct>,
+    reused: u32,
 }
 
 impl Held {
@@ -105,6 +108,8 @@ impl TlasBuild<'_, '_> {
         match result {
             Ok(Some(done)) => {
                 PhaseTimes::timed(&mut self.times.free_ms, || held.free_inputs(&mut r.heap));
+                self.times.storage_reused += held.reused;
+                self.times.storage_allocated += held.tlases.len() as u32 - held.reused;
                 let built = held
                     .tlases
                     .into_iter()
@@ -199,11 +204,13 @@ impl TlasBuild<'_, '_> {
             return Ok(None);
         };
         let scratch = &*held.scratch.insert(scratch);
-        let Some(tlases) = alloc_structures(&ctx, &mut r.heap, &rr.sizes, AsLevel::Top)? else {
+        let old = &mut self.old_storage;
+        let Some((tlases, reused)) = tlas_structures(&ctx, &mut r.heap, old, ids, &rr.sizes)?
+        else {
             return Ok(None);
         };
         self.times.alloc_ms += t_alloc.elapsed().as_secs_f64() * 1e3;
-        held.tlases = tlases.into_iter().map(|(_, a, _)| a).collect();
+        (held.tlases, held.reused) = (tlases, reused);
         // Committed: no fallback from here (a failure releases all and returns the error).
         rr.note(r.frame.stats_mut());
         self.times.proxies_built += proxy_targets.len() as u32;

@@ -30,6 +30,14 @@ pub(super) struct PhaseTimes {
     pub(super) free_ms: f64,
     pub(super) count_ms: f64,
     pub(super) proxy_upload_ms: f64,
+    /// Rebuilt TLASes built into the storage of the structure they replace, and those given
+    /// fresh storage (`storage.rs`).
+    pub(super) storage_reused: u32,
+    pub(super) storage_allocated: u32,
+    /// Old structures the room probe released instead of reusing: the piece outgrew its
+    /// storage, or shrank by more than the slack (the debug line only).
+    pub(super) storage_grew: u32,
+    pub(super) storage_shrank: u32,
 }
 
 impl PhaseTimes {
@@ -54,6 +62,10 @@ impl PhaseTimes {
             free_ms: 0.0,
             count_ms: 0.0,
             proxy_upload_ms: 0.0,
+            storage_reused: 0,
+            storage_allocated: 0,
+            storage_grew: 0,
+            storage_shrank: 0,
         }
     }
 
@@ -94,6 +106,8 @@ impl PhaseTimes {
         st.tlas_proxies_kept += self.proxies_kept;
         st.tlas_compactions += self.compactions;
         st.tlas_compact_saved_bytes += self.compact_saved_bytes;
+        st.tlas_storage_reused += self.storage_reused;
+        st.tlas_storage_allocated += self.storage_allocated;
         tracing::debug!(
             records = self.records,
             probe_ms = self.probe_ms,
@@ -113,6 +127,10 @@ impl PhaseTimes {
             free_ms = self.free_ms,
             count_ms = self.count_ms,
             proxy_upload_ms = self.proxy_upload_ms,
+            storage_reused = self.storage_reused,
+            storage_allocated = self.storage_allocated,
+            storage_grew = self.storage_grew,
+            storage_shrank = self.storage_shrank,
             "TLAS rebuild phases"
         );
     }
