@@ -262,7 +262,8 @@ impl<'a> StreamingRenderer<'a> {
                 s.build_tlases(&now)
             }) {
                 Ok(()) => self.frame.stats_mut().tlas_rebuilt += rebuilt,
-                Err(GpuError::Budget(_)) if self.res.unpin_pass_pins() => {}
+                Err(GpuError::Budget(_))
+                    if self.unpins_before_giving_back() && self.res.unpin_pass_pins() => {}
                 Err(GpuError::Budget(msg)) => {
                     // Give back about a 32nd of the budget of this step's builds per round
                     // (least requested first): one at a time would re-encode every instance
@@ -303,6 +304,21 @@ impl<'a> StreamingRenderer<'a> {
             }
         }
         Ok(())
+    }
+}
+
+impl<'a> StreamingRenderer<'a> {
+    /// Whether a refused TLAS rebuild drops the step's pins before it gives back what the step
+    /// built. In a frame's passes the pins are the open pixels' best hits, found again later.
+    /// In the prefetch after a frame they are what the probe of the next camera met, which
+    /// that frame's first pass needs: dropped, the rebuild evicted them (least recently seen
+    /// first among them) and kept the prefetch's own builds, the least requested of which no
+    /// probe ray waited for. Lavapipe, island 0.002 at a quarter of its full build along the
+    /// default path: every prefetch ended so, evicting the same 4 camera-ray structures,
+    /// which the next frame's first pass then built again (see `notes`). So the prefetch
+    /// gives back its latest builds first and unpins only when it has none left.
+    fn unpins_before_giving_back(&self) -> bool {
+        !self.frame.prefetching() || self.res.built_now().is_empty()
     }
 }
 
