@@ -137,6 +137,15 @@ impl FrameState {
         }
     }
 
+    /// Whether a probe round of this frame met BLAS `b` while it was resident (false when
+    /// none ran): the next frame's rays need it where it is.
+    pub fn probe_met_resident(&self, b: usize) -> bool {
+        let both = PROBE_MET | PROBE_RESIDENT;
+        self.probe_sighting
+            .get(b)
+            .is_some_and(|&s| s & both == both)
+    }
+
     /// What the last probe saw (empty when none ran since), forgotten here: the next frame's
     /// first pass reads it once.
     pub fn take_probe_sighting(&mut self) -> Vec<u8> {

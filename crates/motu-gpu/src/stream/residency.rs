@@ -516,6 +516,9 @@ impl<'a> StreamingRenderer<'a> {
         self.res.evictions += 1;
         self.res.evicted_in[b] = self.frame.number();
         self.res.evicted_by_prefetch[b] = self.frame.prefetching();
+        if self.frame.prefetching() && self.frame.probe_met_resident(b) {
+            self.frame.stats_mut().evicted_probe_met_in_prefetch += 1;
+        }
         self.frame.stats_mut().evicted_bytes += bytes;
         if let Some(a) = self.res.blas.get_mut(b).and_then(Option::take) {
             a.release(&mut self.heap);

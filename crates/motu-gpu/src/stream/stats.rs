@@ -92,6 +92,11 @@ pub struct FrameStreamStats {
     /// Of `evicted`: made by the prefetch after the frame's passes (room for what the guard
     /// band and the probe of the next camera met).
     pub evicted_in_prefetch: u32,
+    /// Of `evicted_in_prefetch`: structures resident while a probe round of the next camera
+    /// ran and met by it (the next frame's rays need them; the prefetch's own builds given
+    /// back are not counted). The prefetch pins those, so only a TLAS rebuild that finds no
+    /// other room gives them up (`rebuild.rs`, `unpins_before_giving_back`).
+    pub evicted_probe_met_in_prefetch: u32,
     /// BLASes this frame evicted and then made resident again (built or restored, by a later
     /// pass or by its prefetch), and their bytes (structures plus meshes): churn within one
     /// frame. A frame whose working set fits its `room_bytes` should have none.

@@ -40,6 +40,7 @@ mirror! {
         evicted_for_tlas: u32,
         evicted_on_refusal: u32,
         evicted_in_prefetch: u32,
+        evicted_probe_met_in_prefetch: u32,
         returned_in_frame: u32,
         returned_in_frame_bytes: u64,
         returned_after_prefetch: u32,
