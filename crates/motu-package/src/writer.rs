@@ -15,6 +15,9 @@ use crate::format::{
 };
 use crate::{ChunkId, PackageError, SectionKind};
 
+mod chunk;
+use chunk::{fill_error, OpenChunk, Put};
+
 /// Default upper bound on one chunk's raw size.
 pub const DEFAULT_TARGET_CHUNK_BYTES: u64 = 64 << 20;
 
@@ -74,50 +77,6 @@ struct Stream {
     tag: u32,
     group: u32,
     open: Option<OpenChunk>,
-}
-
-struct OpenChunk {
-    id: ChunkId,
-    /// `pad` zero bytes, then the chunk's bytes: with direct writes the pad puts them on a
-    /// page boundary, so the sink writes them in place (`sink.rs`); 0 otherwise.
-    data: Vec<u8>,
-    pad: usize,
-}
-
-impl OpenChunk {
-    /// The chunk's bytes so far.
-    fn bytes(&self) -> &[u8] {
-        &self.data[self.pad..]
-    }
-
-    /// How many bytes the chunk holds so far.
-    fn len(&self) -> usize {
-        self.data.len() - self.pad
-    }
-}
-
-/// What an append puts in its chunk: bytes to copy, or a fill that pushes them itself.
-enum Put<'a> {
-    Bytes(&'a [u8]),
-    Fill(&'a mut dyn FnMut(&mut Vec<u8>)),
-}
-
-impl Put<'_> {
-    /// Pushes the bytes onto `out`; returns how many it pushed.
-    fn onto(&mut self, out: &mut Vec<u8>) -> u64 {
-        let start = out.len();
-        match self {
-            Put::Bytes(bytes) => out.extend_from_slice(bytes),
-            Put::Fill(fill) => fill(out),
-        }
-        (out.len() - start) as u64
-    }
-}
-
-fn fill_error(pushed: u64, promised: u64) -> PackageError {
-    PackageError::InvalidArgument(format!(
-        "an append's fill pushed {pushed} bytes of the {promised} it promised"
-    ))
 }
 
 /// Writes one package file. Dropping it without calling [`finish`](Self::finish) removes the
