@@ -362,7 +362,8 @@ pub(crate) fn split_points(
             release(read_from, pos);
             read_from = pos;
         }
-        let Some(nl) = bytes[pos..].iter().position(|&b| b == b'\n') else {
+        // `memchr`: vectorised, where a byte loop here was 2.5% of island 0.0127's import.
+        let Some(nl) = memchr::memchr(b'\n', &bytes[pos..]) else {
             pos = bytes.len();
             break;
         };

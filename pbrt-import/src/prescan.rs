@@ -1,6 +1,6 @@
 //! Byte scanners that look at a file before it is parsed: does it use pbrt-v4 constructs,
-//! does it mention `Include`/`Import` (SWAR, 8 bytes a step, so number-only files cost next to
-//! nothing). Used by the parser and by the parallel include workers.
+//! does it mention `Include`/`Import` (vectorised substring searches, so number-only files cost
+//! next to nothing). Used by the parser and by the parallel include workers.
 
 use crate::lexer::is_word_end_byte;
 
@@ -65,10 +65,7 @@ pub(crate) fn prescan_is_v4(bytes: &[u8]) -> bool {
 /// The end of the comment or line at `pos` (its newline, or the end of `bytes`).
 #[inline]
 pub(crate) fn line_end(bytes: &[u8], pos: usize) -> usize {
-    pos + bytes[pos..]
-        .iter()
-        .position(|&c| c == b'\n')
-        .unwrap_or(bytes.len() - pos)
+    pos + memchr::memchr(b'\n', &bytes[pos..]).unwrap_or(bytes.len() - pos)
 }
 
 /// Where the string whose text starts at `start` ends: its closing quote, or the newline or
@@ -127,31 +124,13 @@ pub(crate) fn swar_interesting(x: u64) -> bool {
     quote || hash || upper
 }
 
-/// Whether `bytes` contain `Import` or `Include` anywhere: a SWAR scan for `I`, 8 bytes a
-/// step, so the huge number-only files Moana is made of cost next to nothing.
+/// Whether `bytes` contain `Import` or `Include` anywhere: two vectorised substring searches
+/// (`memchr::memmem`), so the huge number-only files Moana is made of cost next to nothing.
+/// (A SWAR scan for `I` did a byte-by-byte check at every instance line, whose
+/// `ObjectInstance` has one.)
 pub(crate) fn mentions_include(bytes: &[u8]) -> bool {
-    const LO: u64 = 0x0101_0101_0101_0101;
-    const HI: u64 = 0x8080_8080_8080_8080;
-    let mut pos = 0;
-    while pos < bytes.len() {
-        if let Some(chunk) = bytes.get(pos..pos + 8) {
-            let x =
-                u64::from_le_bytes(chunk.try_into().unwrap_or([b'I'; 8])) ^ (LO * u64::from(b'I'));
-            if x.wrapping_sub(LO) & !x & HI == 0 {
-                pos += 8;
-                continue;
-            }
-        }
-        let end = (pos + 8).min(bytes.len());
-        for i in pos..end {
-            let rest = &bytes[i..];
-            if rest.starts_with(b"Import") || rest.starts_with(b"Include") {
-                return true;
-            }
-        }
-        pos = end;
-    }
-    false
+    memchr::memmem::find(bytes, b"Include").is_some()
+        || memchr::memmem::find(bytes, b"Import").is_some()
 }
 
 /// Parameter type spellings only pbrt-v4 uses (a parameter declaration starts with one).

@@ -16,7 +16,7 @@ use std::path::Path;
 
 /// What `O_DIRECT` asks to be aligned (buffer address, file offset, length): 4096 covers
 /// every logical block size in use.
-const BLOCK_BYTES: usize = 4096;
+pub(crate) const BLOCK_BYTES: usize = 4096;
 
 /// One direct write's size: large enough to run at the disk's speed (`dd bs=2M
 /// oflag=direct`: 1.2 GB/s on the 2-core box), small enough to cost little resident memory
@@ -74,6 +74,29 @@ impl Sink {
             return file.write_all_at(bytes, pos);
         };
         debug_assert_eq!(d.base + d.len as u64, pos);
+        // Bytes that start on a block boundary both in memory and in the file (a chunk the
+        // writer laid out page-aligned) are written from where they lie, their whole blocks at
+        // least: no copy through the stage (~3% of island 0.0127's import CPU copied its 327
+        // MB there). What is staged goes first; `pos` on a block boundary makes it whole blocks.
+        let whole = bytes.len() / BLOCK_BYTES * BLOCK_BYTES;
+        if whole > 0
+            && bytes.as_ptr().align_offset(BLOCK_BYTES) == 0
+            && pos % BLOCK_BYTES as u64 == 0
+        {
+            let staged = &d.buf[d.at..d.at + d.len];
+            let refused = (!staged.is_empty() && d.file.write_all_at(staged, d.base).is_err())
+                || d.file.write_all_at(&bytes[..whole], pos).is_err();
+            if refused {
+                // As below: the page cache from here on, these bytes included (rewriting any
+                // that did go direct is harmless: the same bytes at the same place).
+                file.write_all_at(staged, d.base)?;
+                self.direct = None;
+                return file.write_all_at(bytes, pos);
+            }
+            d.base = pos + whole as u64;
+            d.len = 0;
+            bytes = &bytes[whole..];
+        }
         while !bytes.is_empty() {
             let n = (STAGE_BYTES - d.len).min(bytes.len());
             let at = d.at + d.len;

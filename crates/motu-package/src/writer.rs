@@ -7,13 +7,16 @@
 use std::path::{Path, PathBuf};
 
 use crate::atomic::AtomicFile;
-use crate::sink::Sink;
+use crate::sink::{Sink, BLOCK_BYTES};
 
 use crate::format::{
     self, align_up, ChunkEntry, Codec, Header, ManifestHeader, SectionEntry, Trailer, CHUNK_ALIGN,
     MANIFEST_ALIGN, MAX_CHUNK_BYTES, SECTION_ALIGN, TRAILER_MAGIC,
 };
 use crate::{ChunkId, PackageError, SectionKind};
+
+mod chunk;
+use chunk::{fill_error, OpenChunk, Put};
 
 /// Default upper bound on one chunk's raw size.
 pub const DEFAULT_TARGET_CHUNK_BYTES: u64 = 64 << 20;
@@ -74,35 +77,6 @@ struct Stream {
     tag: u32,
     group: u32,
     open: Option<OpenChunk>,
-}
-
-struct OpenChunk {
-    id: ChunkId,
-    data: Vec<u8>,
-}
-
-/// What an append puts in its chunk: bytes to copy, or a fill that pushes them itself.
-enum Put<'a> {
-    Bytes(&'a [u8]),
-    Fill(&'a mut dyn FnMut(&mut Vec<u8>)),
-}
-
-impl Put<'_> {
-    /// Pushes the bytes onto `out`; returns how many it pushed.
-    fn onto(&mut self, out: &mut Vec<u8>) -> u64 {
-        let start = out.len();
-        match self {
-            Put::Bytes(bytes) => out.extend_from_slice(bytes),
-            Put::Fill(fill) => fill(out),
-        }
-        (out.len() - start) as u64
-    }
-}
-
-fn fill_error(pushed: u64, promised: u64) -> PackageError {
-    PackageError::InvalidArgument(format!(
-        "an append's fill pushed {pushed} bytes of the {promised} it promised"
-    ))
 }
 
 /// Writes one package file. Dropping it without calling [`finish`](Self::finish) removes the
@@ -281,7 +255,7 @@ impl PackageWriter {
         let fits = {
             let state = self.stream_mut(stream)?;
             match &state.open {
-                Some(open) => align_up(open.data.len() as u64, align)
+                Some(open) => align_up(open.len() as u64, align)
                     .and_then(|start| start.checked_add(len_bytes))
                     .is_some_and(|end| end <= target),
                 None => true,
@@ -297,16 +271,31 @@ impl PackageWriter {
         if opened {
             let mut data = std::mem::take(&mut self.spare);
             data.clear();
-            // Virtual reservation only: pages are committed as they are written.
-            data.reserve_exact(target as usize);
-            self.stream_mut(stream)?.open = Some(OpenChunk { id: next_id, data });
+            // Virtual reservation only: pages are committed as they are written. The chunk
+            // never outgrows it (`fits`), so the bytes stay where the pad put them.
+            let pad_room = if self.sink.is_direct() {
+                BLOCK_BYTES
+            } else {
+                0
+            };
+            data.reserve_exact(target as usize + pad_room);
+            let pad = match data.as_ptr().align_offset(BLOCK_BYTES) {
+                pad if pad < pad_room => pad,
+                _ => 0,
+            };
+            data.resize(pad, 0);
+            self.stream_mut(stream)?.open = Some(OpenChunk {
+                id: next_id,
+                data,
+                pad,
+            });
         }
         let open = self.stream_mut(stream)?.open.as_mut().ok_or_else(|| {
             PackageError::InvalidArgument("internal: stream has no open chunk".into())
         })?;
         // `fits` or a fresh chunk guarantee start + len <= target, which fits in usize.
-        let start = align_up(open.data.len() as u64, align).unwrap_or(u64::MAX) as usize;
-        open.data.resize(start, 0);
+        let start = align_up(open.len() as u64, align).unwrap_or(u64::MAX) as usize;
+        open.data.resize(open.pad + start, 0);
         let pushed = put.onto(&mut open.data);
         if pushed != len_bytes {
             self.failed = true;
@@ -350,7 +339,7 @@ impl PackageWriter {
             return Ok(None);
         };
         let (tag, group) = (state.tag, state.group);
-        let result = self.write_chunk(&open.data, tag, group);
+        let result = self.write_chunk(open.bytes(), tag, group);
         let id = open.id;
         let mut data = open.data;
         data.clear();
@@ -392,7 +381,7 @@ impl PackageWriter {
             .filter_map(|s| s.open.as_ref())
         {
             if open.id == chunk {
-                return Ok(open.data[range(open.data.len())?].to_vec());
+                return Ok(open.bytes()[range(open.len())?].to_vec());
             }
         }
         let raw = self.read_back_chunk(chunk)?;
@@ -424,7 +413,7 @@ impl PackageWriter {
         {
             if open.id == chunk {
                 out.clear();
-                out.extend_from_slice(&open.data);
+                out.extend_from_slice(open.bytes());
                 return Ok(());
             }
         }
@@ -459,7 +448,7 @@ impl PackageWriter {
             .get(stream.0 as usize)
             .and_then(|s| s.as_ref())
             .and_then(|s| s.open.as_ref())
-            .map_or(0, |o| o.data.len() as u64)
+            .map_or(0, |o| o.len() as u64)
     }
 
     /// Seals the stream's open chunk and frees its buffer; the id becomes invalid.

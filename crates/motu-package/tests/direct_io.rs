@@ -8,12 +8,13 @@ use motu_package::{Package, PackageWriter, WriterOptions};
 mod common;
 use common::noise;
 
-/// Writes blobs across several 2 MiB stages (chunks of ~0.75 MiB, some larger than the
-/// target, odd lengths and alignments), reading back every sealed chunk as it goes; returns
-/// whether the writes were direct. Panics where a read-back differs from what was written.
-fn write(path: &Path, direct_io: bool, zstd_level: Option<i32>) -> bool {
+/// Writes blobs across several 2 MiB stages (chunks of about `target` bytes, some blobs
+/// larger than it, odd lengths and alignments), reading back every sealed chunk as it goes;
+/// returns whether the writes were direct. Panics where a read-back differs from what was
+/// written.
+fn write(path: &Path, direct_io: bool, zstd_level: Option<i32>, target: u64) -> bool {
     let options = WriterOptions {
-        target_chunk_bytes: 768 << 10,
+        target_chunk_bytes: target,
         zstd_level,
         direct_io,
     };
@@ -58,10 +59,12 @@ fn write(path: &Path, direct_io: bool, zstd_level: Option<i32>) -> bool {
 #[test]
 fn direct_writes_make_the_same_file_as_buffered_ones() {
     let dir = tempfile::tempdir().unwrap();
-    for zstd in [None, Some(1)] {
+    // Raw chunks go to the file in place (page-aligned chunk buffers), smaller and larger
+    // than a stage; zstd chunks through the stage.
+    for (zstd, target) in [(None, 768 << 10), (None, 3 << 20), (Some(1), 768 << 10)] {
         let (a, b) = (dir.path().join("a.motu"), dir.path().join("b.motu"));
-        assert!(!write(&a, false, zstd), "buffered writes asked for");
-        let direct = write(&b, true, zstd);
+        assert!(!write(&a, false, zstd, target), "buffered writes asked for");
+        let direct = write(&b, true, zstd, target);
         if !direct {
             eprintln!(
                 "{}: O_DIRECT refused here; compared buffered with buffered",
@@ -72,7 +75,7 @@ fn direct_writes_make_the_same_file_as_buffered_ones() {
         assert_eq!(a.len(), b.len());
         assert!(
             a == b,
-            "direct and buffered packages differ (zstd {zstd:?})"
+            "direct and buffered packages differ (zstd {zstd:?}, target {target})"
         );
     }
 }
