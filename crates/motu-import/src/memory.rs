@@ -50,3 +50,45 @@ pub(crate) fn release_free_heap() {
         }
     }
 }
+
+/// Scene text parsed between two heap trims while parsing ([`TrimEvery`]).
+pub(crate) const TRIM_EVERY_BYTES: u64 = 256 << 20;
+
+/// Trims the heap ([`release_free_heap`]) each time a byte count passes another multiple of
+/// a step: the parser's threads free mesh arrays and parsed pieces of many sizes, and glibc
+/// keeps the holes resident in their arenas, so without trims the resident set grows with
+/// the scene's size even though what is live does not (island 0.05 → 0.1: the peak grows
+/// ~60 MB while the heap left after a trim stays at ~150 MB).
+pub(crate) struct TrimEvery {
+    step_bytes: u64,
+    next_bytes: std::sync::atomic::AtomicU64,
+}
+
+impl TrimEvery {
+    pub(crate) fn new(step_bytes: u64) -> Self {
+        Self {
+            step_bytes: step_bytes.max(1),
+            next_bytes: std::sync::atomic::AtomicU64::new(step_bytes.max(1)),
+        }
+    }
+
+    /// Trims if `bytes` passed the next mark; returns whether it did.
+    pub(crate) fn at(&self, bytes: u64) -> bool {
+        use std::sync::atomic::Ordering;
+        let next = self.next_bytes.load(Ordering::Relaxed);
+        if bytes < next {
+            return false;
+        }
+        let after = (bytes / self.step_bytes + 1).saturating_mul(self.step_bytes);
+        // One caller trims per mark passed, whichever thread reports it.
+        if self
+            .next_bytes
+            .compare_exchange(next, after, Ordering::Relaxed, Ordering::Relaxed)
+            .is_err()
+        {
+            return false;
+        }
+        release_free_heap();
+        true
+    }
+}

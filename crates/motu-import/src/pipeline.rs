@@ -237,15 +237,23 @@ pub fn import(
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
+    // Called at each file the parser enters: reports progress and, every
+    // `TRIM_EVERY_BYTES` of scene text, hands the heap's free pages back (the parse's peak
+    // is mostly freed but resident heap, growing with the scene: issue 48 item 1).
+    let report = o.progress.clone();
+    let trim = crate::memory::TrimEvery::new(crate::memory::TRIM_EVERY_BYTES);
     let ingest_opts = IngestOptions {
-        progress: o.progress.clone().map(|report| {
-            motu_ingest::ProgressFn(std::sync::Arc::new(move |bytes, _files| {
-                report(ImportProgress::Parsing {
-                    bytes,
-                    total_bytes: total.max(bytes),
-                });
-            }))
-        }),
+        progress: Some(motu_ingest::ProgressFn(std::sync::Arc::new(
+            move |bytes, _files| {
+                trim.at(bytes);
+                if let Some(report) = &report {
+                    report(ImportProgress::Parsing {
+                        bytes,
+                        total_bytes: total.max(bytes),
+                    });
+                }
+            },
+        ))),
         allow_missing: o.allow_missing,
         pbrt_version: o.pbrt_version,
         parallel: o.parallel,

@@ -122,3 +122,14 @@ fn subsets_name_known_elements() {
     let e = resolve_subset(&[" ".into()], &known).unwrap_err();
     assert!(matches!(e, ImportError::EmptySubsetName { .. }), "{e}");
 }
+
+#[test]
+fn the_heap_is_trimmed_once_per_step_of_scene_text() {
+    let trim = crate::memory::TrimEvery::new(100);
+    // Before the first mark: no trim; at each mark passed, one trim, however far past it.
+    let trims: Vec<bool> = [0, 99, 100, 150, 199, 450, 460, 500]
+        .iter()
+        .map(|&b| trim.at(b))
+        .collect();
+    assert_eq!(trims, [false, false, true, false, false, true, false, true]);
+}
