@@ -413,6 +413,43 @@ pub fn streamed_path(
     (render_env(pkg, backend, &aov, &args, env), aov)
 }
 
+/// The TLAS piece tests' path shape (`stream_records.rs`, `stream_tlas_storage.rs`).
+pub const PIECES_SHAPE: PathShape = PathShape {
+    width: "48",
+    height: "27",
+    frames: "5",
+};
+
+/// The default camera's path in [`PIECES_SHAPE`] streamed on `pipeline` under `budget` bytes,
+/// its root split into pieces of 3000 instances that are rebuilt (not updated), with `extra`
+/// flags: the statistics and the AOV.
+pub fn pieces_path(
+    pkg: &Path,
+    dir: &Path,
+    name: &str,
+    budget: u64,
+    extra: &[&str],
+) -> (serde_json::Value, PathBuf) {
+    let mut args = vec![
+        "--stream-split-instances",
+        "3000",
+        "--stream-tlas",
+        "rebuild",
+    ];
+    args.extend(extra);
+    streamed_path(pkg, dir, name, budget, "pipeline", PIECES_SHAPE, &args, &[])
+}
+
+/// The per-frame statistics of a streamed render (`--stats` JSON `st`).
+pub fn stream_frames(st: &serde_json::Value) -> Vec<serde_json::Value> {
+    st["stream"]["frames"].as_array().expect("frames").clone()
+}
+
+/// Key `k` summed over a streamed render's frames.
+pub fn stream_total(st: &serde_json::Value, k: &str) -> u64 {
+    stream_frames(st).iter().map(|f| json_u64(&f[k])).sum()
+}
+
 /// Checks a streamed camera path's probe rounds (`render --stream --stats` JSON `st`, at most
 /// `max_rounds` a frame besides the verifying ones): every frame but the last probes its
 /// successor's pixels once and then, in later rounds, only pixels left open (fewer than all

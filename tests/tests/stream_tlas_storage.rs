@@ -7,37 +7,15 @@
 //! the AOV is the full build's.
 
 use motu_tests::{
-    gen_island, gpu_available, json_u64 as u, motu_ok, report_peak_and_floor, s, streamed_path,
-    PathShape,
+    gen_island, gpu_available, json_u64 as u, motu_ok, pieces_path, report_peak_and_floor, s,
+    stream_total as total, PIECES_SHAPE as SHAPE,
 };
 use std::path::{Path, PathBuf};
-
-const SHAPE: PathShape = PathShape {
-    width: "48",
-    height: "27",
-    frames: "5",
-};
 
 /// The default camera's path streamed under `budget` bytes (pieces of 3000 instances,
 /// rebuilt, the host's records): the statistics and the AOV.
 fn path(pkg: &Path, dir: &Path, name: &str, budget: u64) -> (serde_json::Value, PathBuf) {
-    let args = [
-        "--stream-split-instances",
-        "3000",
-        "--stream-tlas",
-        "rebuild",
-        "--stream-tlas-records",
-        "host",
-    ];
-    streamed_path(pkg, dir, name, budget, "pipeline", SHAPE, &args, &[])
-}
-
-fn frames(st: &serde_json::Value) -> Vec<serde_json::Value> {
-    st["stream"]["frames"].as_array().expect("frames").clone()
-}
-
-fn total(st: &serde_json::Value, k: &str) -> u64 {
-    frames(st).iter().map(|f| u(&f[k])).sum()
+    pieces_path(pkg, dir, name, budget, &["--stream-tlas-records", "host"])
 }
 
 #[test]
