@@ -4,8 +4,7 @@
 //! image is the streamer's with room for everything, on both backends.
 
 use motu_tests::{
-    gen_island, gpu_available, json_u64 as u, motu_ok, report_peak_and_floor, s, streamed_path,
-    PathShape,
+    gpu_island, json_u64 as u, motu_ok, report_peak_and_floor, s, streamed_path, PathShape,
 };
 
 const SHAPE: PathShape = PathShape {
@@ -16,12 +15,10 @@ const SHAPE: PathShape = PathShape {
 
 #[test]
 fn a_cold_frame_builds_what_lies_behind_the_nearest_only_once_few_pixels_are_open() {
-    if !gpu_available() {
+    let Some((dir, pkg)) = gpu_island(None) else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
+    };
     let d = dir.path();
-    let pkg = gen_island(d, None);
     let (peak, _floor) = report_peak_and_floor(&pkg, SHAPE.width, SHAPE.height);
     let pixels = 64 * 36;
     for backend in ["pipeline", "query"] {

@@ -6,8 +6,8 @@
 //! equals the path streamed with room for everything, and the probe still runs its rounds.
 
 use motu_tests::{
-    check_probe_rounds, gen_island, gpu_available, json_u64 as u, motu_ok, report_peak_and_floor,
-    s, streamed_path, PathShape,
+    check_probe_rounds, gpu_island, json_u64 as u, motu_ok, report_peak_and_floor, s,
+    streamed_path, PathShape,
 };
 
 const SHAPE: PathShape = PathShape {
@@ -18,12 +18,10 @@ const SHAPE: PathShape = PathShape {
 
 #[test]
 fn stopped_probe_paths_give_the_full_builds_aov() {
-    if !gpu_available() {
+    let Some((dir, pkg)) = gpu_island(None) else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
+    };
     let d = dir.path();
-    let pkg = gen_island(d, None);
     let (peak, floor) = report_peak_and_floor(&pkg, SHAPE.width, SHAPE.height);
     let budget = peak / 8;
     assert!(

@@ -7,19 +7,17 @@
 //! its proxy and marks records.
 
 use motu_tests::{
-    gen_island, gpu_available, json_u64 as u, motu_ok, pieces_path as path, report_peak_and_floor,
-    s, stream_frames as frames, stream_total as total, PIECES_SHAPE as SHAPE,
+    gpu_island, json_u64 as u, motu_ok, pieces_path as path, report_peak_and_floor, s,
+    stream_frames as frames, stream_total as total, PIECES_SHAPE as SHAPE,
 };
 use std::path::Path;
 
 #[test]
 fn gpu_kept_records_give_the_full_builds_aov_and_leave_the_host_only_the_tails() {
-    if !gpu_available() {
+    let Some((dir, pkg)) = gpu_island(None) else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
+    };
     let d = dir.path();
-    let pkg = gen_island(d, None);
     let (peak, floor) = report_peak_and_floor(&pkg, SHAPE.width, SHAPE.height);
     // The reference frames: the same path with room for everything (the streamed image of
     // the full build, as the other stream tests' `ShotFixture`), written from the host.

@@ -7,7 +7,7 @@
 //! the AOV is the full build's.
 
 use motu_tests::{
-    gen_island, gpu_available, json_u64 as u, motu_ok, pieces_path, report_peak_and_floor, s,
+    gpu_island, json_u64 as u, motu_ok, pieces_path, report_peak_and_floor, s,
     stream_total as total, PIECES_SHAPE as SHAPE,
 };
 use std::path::{Path, PathBuf};
@@ -20,12 +20,10 @@ fn path(pkg: &Path, dir: &Path, name: &str, budget: u64) -> (serde_json::Value, 
 
 #[test]
 fn rebuilt_tlas_pieces_reuse_their_storage_and_give_the_full_builds_aov() {
-    if !gpu_available() {
+    let Some((dir, pkg)) = gpu_island(None) else {
         return;
-    }
-    let dir = tempfile::tempdir().unwrap();
+    };
     let d = dir.path();
-    let pkg = gen_island(d, None);
     let (peak, floor) = report_peak_and_floor(&pkg, SHAPE.width, SHAPE.height);
     // The reference frames: the same path with room for everything.
     let (_, full) = path(&pkg, d, "everything", peak * 2);
