@@ -157,5 +157,5 @@ pub use stream::{
     HostCacheMode, HostStorePolicy, MeshMemory, PassMarks, PassStats, PersistentEstimate,
     ProbeLater, ProbePaths, StorePolicyStats, StreamFallback, StreamFloor, StreamOptions,
     StreamPlan, StreamTotals, StreamingRenderer, StructureCache, TlasRecordsMode, TlasUpdate,
-    AUTO_PASS_FRAMES, AUTO_PASS_ROWS, PI_EMPTY_BLAS,
+    AUTO_PASS_FRAMES, AUTO_PASS_ROWS, DEFAULT_TLAS_HEADROOM, MAX_TLAS_HEADROOM, PI_EMPTY_BLAS,
 };

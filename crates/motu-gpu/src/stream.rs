@@ -153,7 +153,7 @@ pub use floor::{
 };
 pub use options::{
     MeshMemory, PassMarks, ProbeLater, ProbePaths, StreamFallback, StreamOptions, TlasRecordsMode,
-    AUTO_PASS_FRAMES, AUTO_PASS_ROWS,
+    AUTO_PASS_FRAMES, AUTO_PASS_ROWS, DEFAULT_TLAS_HEADROOM, MAX_TLAS_HEADROOM,
 };
 pub use stats::{FrameStreamStats, PassStats, StreamTotals};
 pub use store_policy::{HostStorePolicy, StorePolicyStats};

@@ -57,6 +57,8 @@ pub struct StreamBounds {
     /// `--stream-tlas-compact`: whether rebuilt TLASes and their proxies are compacted (None:
     /// the default, on).
     pub tlas_compact: Option<bool>,
+    /// `--stream-tlas-headroom`: spare storage of rebuilt TLAS pieces (None: the default).
+    pub tlas_headroom: Option<f64>,
 }
 
 impl StreamBounds {
@@ -83,6 +85,7 @@ impl StreamBounds {
             tlas_records: self.tlas_records,
             tlas_build: self.tlas_build,
             tlas_compact: self.tlas_compact.unwrap_or(d.tlas_compact),
+            tlas_headroom: self.tlas_headroom.unwrap_or(d.tlas_headroom),
             ..d
         }
     }
@@ -124,6 +127,7 @@ impl StreamBounds {
             || self.tlas_records != motu_gpu::TlasRecordsMode::Host
             || self.tlas_build != motu_gpu::TlasBuild::FastTrace
             || self.tlas_compact == Some(true)
+            || self.tlas_headroom.is_some()
     }
 }
 

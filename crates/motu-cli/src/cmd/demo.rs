@@ -143,6 +143,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             stream_tlas_records: crate::cli::TlasRecordsArg::Gpu,
             stream_tlas_build: crate::cli::TlasBuildArg::FastTrace,
             stream_tlas_compact: crate::cli::OnOffArg::Off,
+            stream_tlas_headroom: None,
         },
         as_cache: crate::cli::AsCacheArgs {
             host_cache: None,

@@ -43,6 +43,7 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         tlas_records: b.stream_tlas_records.into(),
         tlas_build: b.stream_tlas_build.into(),
         tlas_compact: Some(b.stream_tlas_compact == crate::cli::OnOffArg::On),
+        tlas_headroom: b.stream_tlas_headroom,
     }
 }
 

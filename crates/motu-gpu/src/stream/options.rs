@@ -139,7 +139,21 @@ pub struct StreamOptions {
     /// built without compaction, larger by what `tlas_compact_saved_bytes` reports with it on.
     /// Triangle BLASes follow `compact`.
     pub tlas_compact: bool,
+    /// Spare storage a rebuilt TLAS piece's fresh structure gets, as a fraction of its size
+    /// (`--stream-tlas-headroom`; default 1/16, at most 1/9, 0: exact): a piece that grows by
+    /// less is rebuilt into the same storage next time instead of a new allocation. Taken only
+    /// where the budget has room for it, so it never refuses a rebuild.
+    pub tlas_headroom: f64,
 }
+
+/// [`StreamOptions::tlas_headroom`]'s default: pieces at a quarter of island 0.3 grow by a few
+/// percent between rebuilds (a frame's new BLASes add instances to nearly every piece).
+pub const DEFAULT_TLAS_HEADROOM: f64 = 1.0 / 16.0;
+
+/// The most [`StreamOptions::tlas_headroom`] may be: with more, a piece rebuilt at its old
+/// size would leave more than an eighth of its storage spare, which the rebuild releases
+/// (`tlas_build/storage.rs`).
+pub const MAX_TLAS_HEADROOM: f64 = 1.0 / 9.0;
 
 /// Where a rebuilt streamed TLAS's instance records come from ([`StreamOptions::tlas_records`],
 /// `--stream-tlas-records`; `tlas_compact.rs`). A split root's pieces are rebuilt several times
@@ -335,6 +349,7 @@ impl Default for StreamOptions {
             tlas_records: TlasRecordsMode::Host,
             tlas_build: motu_vk::TlasBuild::FastTrace,
             tlas_compact: false,
+            tlas_headroom: DEFAULT_TLAS_HEADROOM,
         }
     }
 }

@@ -207,6 +207,9 @@ pub struct FrameStreamStats {
     /// and no free: `tlas_build/storage.rs`), and those given fresh storage.
     pub tlas_storage_reused: u32,
     pub tlas_storage_allocated: u32,
+    /// Old structures released because their piece had outgrown them (the misses that
+    /// `--stream-tlas-headroom` exists for).
+    pub tlas_storage_grew: u32,
     pub tlas_proxy_ms: f64,
     pub tlas_swap_ms: f64,
     pub tlas_room_ms: f64,
@@ -399,9 +402,11 @@ pub struct StreamTotals {
     pub tlas_built: u64,
     pub tlas_rebuilt: u64,
     pub tlas_rebuild_groups: u64,
-    /// The frames' `tlas_storage_reused` and `tlas_storage_allocated` summed.
+    /// The frames' `tlas_storage_reused`, `tlas_storage_allocated` and `tlas_storage_grew`
+    /// summed.
     pub tlas_storage_reused: u64,
     pub tlas_storage_allocated: u64,
+    pub tlas_storage_grew: u64,
     /// The frames' `submits`, `fence_waits`, `tlas_submits` and `tlas_fence_waits` summed.
     pub submits: u64,
     pub fence_waits: u64,
@@ -545,6 +550,7 @@ impl StreamTotals {
         tot.tlas_rebuild_groups += u64::from(st.tlas_rebuild_groups);
         tot.tlas_storage_reused += u64::from(st.tlas_storage_reused);
         tot.tlas_storage_allocated += u64::from(st.tlas_storage_allocated);
+        tot.tlas_storage_grew += u64::from(st.tlas_storage_grew);
         tot.submits += st.submits;
         tot.fence_waits += st.fence_waits;
         tot.tlas_submits += st.tlas_submits;

@@ -205,7 +205,8 @@ impl TlasBuild<'_, '_> {
         };
         let scratch = &*held.scratch.insert(scratch);
         let old = &mut self.old_storage;
-        let Some((tlases, reused)) = tlas_structures(&ctx, &mut r.heap, old, ids, &rr.sizes)?
+        let Some((tlases, reused)) =
+            tlas_structures(&ctx, &mut r.heap, old, ids, &rr.sizes, r.opts.tlas_headroom)?
         else {
             return Ok(None);
         };

@@ -35,7 +35,8 @@ pub(super) struct PhaseTimes {
     pub(super) storage_reused: u32,
     pub(super) storage_allocated: u32,
     /// Old structures the room probe released instead of reusing: the piece outgrew its
-    /// storage, or shrank by more than the slack (the debug line only).
+    /// storage (also `tlas_storage_grew` in the frame stats), or shrank by more than the slack
+    /// (the debug line only).
     pub(super) storage_grew: u32,
     pub(super) storage_shrank: u32,
 }
@@ -108,6 +109,7 @@ impl PhaseTimes {
         st.tlas_compact_saved_bytes += self.compact_saved_bytes;
         st.tlas_storage_reused += self.storage_reused;
         st.tlas_storage_allocated += self.storage_allocated;
+        st.tlas_storage_grew += self.storage_grew;
         tracing::debug!(
             records = self.records,
             probe_ms = self.probe_ms,
