@@ -161,8 +161,8 @@ pub struct ParseOptions {
     /// `ObjectInstance`s, with transforms and `ReverseOrientation` only inside balanced
     /// blocks (Moana's and `motu gen island`'s placement files); anything else, and any
     /// error, is parsed sequentially (same messages and positions). Runs of consecutive
-    /// includes are processed as a sliding window of 16 MiB of input per pool thread (64 to
-    /// 256 MiB); files are cut into pieces of about [`ParseOptions::parallel_chunk_bytes`] at
+    /// includes are processed as a sliding window of 4 pieces of input per pool thread (16 to
+    /// 32 pieces: 64 to 128 MiB at the default pieces, whatever the thread count); files are cut into pieces of about [`ParseOptions::parallel_chunk_bytes`] at
     /// directive lines, one worker each; files over 128 MiB (and `.gz`) are parsed sequentially.
     pub parallel_includes: bool,
     /// Target size of the pieces a file is cut into for [`ParseOptions::parallel_includes`].
@@ -222,6 +222,9 @@ pub struct ParseStats {
     /// Included files whose events came from a worker thread
     /// ([`ParseOptions::parallel_includes`]).
     pub parallel_files: u64,
+    /// The most input bytes a parallel include run held in its window at once (files admitted,
+    /// not yet replayed); 0 without parallel runs.
+    pub parallel_window_peak_bytes: u64,
     /// Missing files (only non-empty with `allow_missing`).
     pub missing: Vec<MissingFile>,
 }

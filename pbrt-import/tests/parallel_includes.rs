@@ -110,6 +110,7 @@ fn assert_same(path: &Path, base: &ParseOptions) -> Result<ParseStats, String> {
             assert_eq!(s.parallel_files, 0);
             let mut p2 = p.clone();
             p2.parallel_files = 0;
+            p2.parallel_window_peak_bytes = 0;
             assert_eq!(*s, p2);
         }
         (Err(s), Err(p)) => assert_eq!(s, p),
@@ -241,6 +242,50 @@ fn write_island(dir: &Path, v4: bool) {
         entry.insert_str(0, "ColorSpace \"srgb\"\n");
     }
     std::fs::write(dir.join("island.pbrt"), entry).unwrap();
+}
+
+/// On a pool of many threads the window of a parallel run stops at its cap (32 pieces),
+/// plus the one file that crosses the line: with 64 threads the old per-thread window
+/// (4 pieces each, 256 here) would hold 8× as much of this run.
+#[test]
+fn the_window_stays_bounded_for_many_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    let names = ["leaf"];
+    let mut entry = String::from(
+        "WorldBegin\nObjectBegin \"leaf\"\nShape \"trianglemesh\" \"integer indices\" \
+         [0 1 2] \"point P\" [0 0 0 1 0 0 0 1 0]\nObjectEnd\n",
+    );
+    let (mut largest, mut total) = (0u64, 0u64);
+    for f in 0..120 {
+        let body = placement(&names, f * 100, 10 + f % 13);
+        largest = largest.max(body.len() as u64);
+        total += body.len() as u64;
+        std::fs::write(dir.path().join(format!("p{f}.pbrt")), body).unwrap();
+        let _ = writeln!(entry, "Include \"p{f}.pbrt\"");
+    }
+    std::fs::write(dir.path().join("scene.pbrt"), entry).unwrap();
+    let piece_bytes = 100;
+    let opts = ParseOptions {
+        parallel_chunk_bytes: piece_bytes,
+        ..ParseOptions::default()
+    };
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(64)
+        .build()
+        .unwrap();
+    let stats = pool
+        .install(|| parse_file(&dir.path().join("scene.pbrt"), &opts, &mut Log::default()))
+        .unwrap();
+    assert_eq!(stats.parallel_files, 120);
+    let cap = 32 * piece_bytes as u64;
+    // The run needs more than the cap, so the cap is what stops it.
+    assert!(total > 64 * 4 * piece_bytes as u64, "{total}");
+    let peak = stats.parallel_window_peak_bytes;
+    assert!(peak >= cap, "window peaked at {peak} under its cap {cap}");
+    assert!(
+        peak < cap + largest,
+        "window peaked at {peak}: over the cap {cap} plus one file ({largest})"
+    );
 }
 
 #[test]

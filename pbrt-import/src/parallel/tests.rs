@@ -23,8 +23,10 @@ fn snap(version: PbrtVersion) -> Snapshot {
     }
 }
 
+/// What the old byte prescan let through, the worker parses.
 #[test]
-fn prescan_accepts_placements_and_shapes() {
+fn worker_accepts_placements_and_shapes() {
+    let v3 = snap(PbrtVersion::V3);
     let yes: &[&str] = &[
         "AttributeBegin Transform [1 0 0 0 0 1 0 0 0 0 1 0 5 6 7 1] ObjectInstance \"a\" AttributeEnd\n",
         "# c\nShape \"sphere\" \"float radius\" 2\nObjectInstance \"Material\"",
@@ -33,12 +35,18 @@ fn prescan_accepts_placements_and_shapes() {
         "Shape \"trianglemesh\" \"point P\" [0.5 1e-3 2 3 4 5 6 7 8 9 10 11 12 13 14]",
     ];
     for t in yes {
-        assert!(prescan_neutral(t.as_bytes()), "{t}");
+        assert!(
+            matches!(parse_neutral(t.as_bytes(), &v3), Outcome::Parsed(_)),
+            "{t}"
+        );
     }
 }
 
+/// What the old byte prescan rejected, the worker falls back on: state changes, definitions,
+/// unbalanced blocks, malformed text, and pieces with no shape or instance.
 #[test]
-fn prescan_rejects_state_changes_and_definitions() {
+fn worker_rejects_state_changes_and_definitions() {
+    let v3 = snap(PbrtVersion::V3);
     let no: &[&str] = &[
         "Material \"matte\" Shape \"sphere\"",
         "AttributeBegin Material \"matte\" Shape \"sphere\" AttributeEnd",
@@ -59,10 +67,14 @@ fn prescan_rejects_state_changes_and_definitions() {
         "Shape \"sphere\" WorldEnd",
         "Shape \"sphere\" \"string x\" \"unterminated\n",
         "# only a comment\n",
+        "AttributeBegin Translate 1 2 3 AttributeEnd",
         "",
     ];
     for t in no {
-        assert!(!prescan_neutral(t.as_bytes()), "{t}");
+        assert!(
+            matches!(parse_neutral(t.as_bytes(), &v3), Outcome::Fallback),
+            "{t}"
+        );
     }
 }
 

@@ -84,26 +84,43 @@ fn shareable(bytes: &[u8]) -> bool {
     any && blocks.is_empty()
 }
 
-/// Input bytes of the files in flight in a parallel include run at most (buffered events take
-/// less than their text); files over half of it are parsed sequentially (streaming).
-const PARALLEL_WINDOW_BYTES: u64 = 256 << 20;
+/// Files over this are parsed sequentially (streaming), whatever the window: a worker's buffer
+/// of a bigger file would outweigh the window itself.
+const MAX_PARALLEL_FILE_BYTES: u64 = 128 << 20;
 
-/// Input bytes in flight per thread of the pool: the window is this times the threads, at
-/// least [`MIN_WINDOW_BYTES`] and at most [`PARALLEL_WINDOW_BYTES`]. What a worker parsed waits
-/// in the window, as events and meshes, until its file is replayed: on island 0.1 with 2
-/// threads a 256 MiB window held ~80 MiB more of them at the parse's peak than a 64 MiB one,
-/// which kept both workers busy as well (issue 48 item 1).
-const WINDOW_BYTES_PER_THREAD: u64 = 16 << 20;
+/// The window of a parallel include run, in pieces ([`crate::ParseOptions::parallel_chunk_bytes`],
+/// 4 MiB by default): this many per pool thread, between [`MIN_WINDOW_PIECES`] and
+/// [`MAX_WINDOW_PIECES`]. What a worker parsed waits in the window, as events and meshes, until
+/// its file is replayed: on island 0.1 with 2 threads a 256 MiB window held ~80 MiB more of
+/// them at the parse's peak than a 64 MiB one, which kept both workers busy as well (issue 48
+/// item 1).
+const WINDOW_PIECES_PER_THREAD: u64 = 4;
 
-/// The smallest window: a few pieces ([`crate::ParseOptions::parallel_chunk_bytes`]) per
-/// worker even for files cut at huge shapes.
-const MIN_WINDOW_BYTES: u64 = 64 << 20;
+/// The smallest window (64 MiB at the default pieces): a few pieces per worker even for files
+/// cut at huge shapes.
+const MIN_WINDOW_PIECES: u64 = 16;
 
-/// The window of a parallel include run on a pool of `threads`.
-fn window_bytes_for(threads: usize) -> u64 {
+/// The largest window, whatever the thread count (128 MiB at the default pieces; it was
+/// 256 MiB at 16 threads and more, session 49). Why this keeps a 16-thread parse fed: the
+/// main thread replays in document order and is the slower side by far: a worker parses
+/// placement text at ~0.8 GB/s (island 0.0127: `parse_neutral` ~20% of 2.4 s of CPU for
+/// 382 MB) while the replay and the sink behind it take ~0.2 GB/s (island 0.05's parse phase,
+/// 1.9 GB in ~9 s on 2 cores). The replay waits only when the file at the head is not parsed
+/// yet; one worker alone parses ~4× faster than the replay consumes, so the head is ready as
+/// long as the window holds the next file or two (island files are ≤ 75 MB), and 32 pieces are
+/// still 2 per worker at 16 threads (one parsed, one queued). More pieces in flight would only
+/// hold more parsed buffers (about half their text's bytes): at 16 threads the old 256 MiB
+/// window plus the one file that crosses its line could hold ~330 MB of text at a time.
+const MAX_WINDOW_PIECES: u64 = 32;
+
+/// The window of a parallel include run, in bytes of input, on a pool of `threads` cutting
+/// pieces of `piece_bytes`. The run admits files while it holds less than this, so at most
+/// this plus one file (≤ [`MAX_PARALLEL_FILE_BYTES`]) is in flight.
+fn window_bytes_for(threads: usize, piece_bytes: usize) -> u64 {
     (threads as u64)
-        .saturating_mul(WINDOW_BYTES_PER_THREAD)
-        .clamp(MIN_WINDOW_BYTES, PARALLEL_WINDOW_BYTES)
+        .saturating_mul(WINDOW_PIECES_PER_THREAD)
+        .clamp(MIN_WINDOW_PIECES, MAX_WINDOW_PIECES)
+        .saturating_mul(piece_bytes.max(1) as u64)
 }
 
 /// An `Include`/`Import` directive found while looking ahead in a parallel run.
@@ -439,7 +456,8 @@ impl<'s> Parser<'s> {
     /// A sliding window of the following files is parsed on the rayon pool while the main
     /// thread replays finished ones in document order (see [`crate::parallel`]). The window
     /// holds at most [`window_bytes_for`] the pool's threads of input (and one more file) and
-    /// a few files per thread.
+    /// a few files per thread; the most it held is counted in
+    /// [`crate::ParseStats::parallel_window_peak_bytes`].
     fn include_run<'b>(
         &mut self,
         lx: &mut Lexer<'b>,
@@ -448,8 +466,8 @@ impl<'s> Parser<'s> {
         stok: Token<'b>,
     ) -> Result<()> {
         let max_files = rayon::current_num_threads().saturating_mul(4).max(4);
-        let max_window_bytes = window_bytes_for(rayon::current_num_threads());
         let chunk_bytes = self.opts.parallel_chunk_bytes.max(1);
+        let max_window_bytes = window_bytes_for(rayon::current_num_threads(), chunk_bytes);
         let mut cursor = lx.clone();
         let mut first = Some(RunItem {
             via,
@@ -499,6 +517,8 @@ impl<'s> Parser<'s> {
                     }
                     window.push_back(InFlight { item, job });
                 }
+                let peak = &mut self.stats.parallel_window_peak_bytes;
+                *peak = (*peak).max(window_bytes);
                 let Some(InFlight { item, job }) = window.pop_front() else {
                     return Ok(());
                 };
@@ -562,7 +582,7 @@ impl<'s> Parser<'s> {
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("gz"));
         let fits = std::fs::metadata(&path)
-            .is_ok_and(|m| m.is_file() && m.len() <= PARALLEL_WINDOW_BYTES / 2);
+            .is_ok_and(|m| m.is_file() && m.len() <= MAX_PARALLEL_FILE_BYTES);
         if fits && !gz {
             item.src = SourceBytes::open(&path)
                 .ok()

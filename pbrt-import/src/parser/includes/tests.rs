@@ -29,12 +29,18 @@ fn a_text_without_includes_is_released_window_by_window() {
     assert_eq!(released.last().map(|r| r.1), Some(text.len()));
 }
 
-/// The window grows with the pool's threads between its floor and its cap.
+/// The window grows with the pool's threads between its floor and its cap, in pieces, and
+/// stops growing at 8 threads: 64 to 128 MiB at the default 4 MiB pieces.
 #[test]
-fn the_window_follows_the_threads() {
-    assert_eq!(window_bytes_for(0), MIN_WINDOW_BYTES);
-    assert_eq!(window_bytes_for(2), MIN_WINDOW_BYTES);
-    assert_eq!(window_bytes_for(8), 128 << 20);
-    assert_eq!(window_bytes_for(16), PARALLEL_WINDOW_BYTES);
-    assert_eq!(window_bytes_for(128), PARALLEL_WINDOW_BYTES);
+fn the_window_follows_the_threads_up_to_a_cap() {
+    let piece = 4 << 20;
+    assert_eq!(window_bytes_for(0, piece), 64 << 20);
+    assert_eq!(window_bytes_for(2, piece), 64 << 20);
+    assert_eq!(window_bytes_for(6, piece), 96 << 20);
+    assert_eq!(window_bytes_for(8, piece), 128 << 20);
+    for threads in [16, 64, 1 << 20, usize::MAX] {
+        assert_eq!(window_bytes_for(threads, piece), 128 << 20, "{threads}");
+    }
+    assert_eq!(window_bytes_for(64, 100), MAX_WINDOW_PIECES * 100);
+    assert_eq!(window_bytes_for(64, 0), MAX_WINDOW_PIECES);
 }
