@@ -8,6 +8,7 @@
 #   S=0.63 bash tools/ttfp-device.sh
 #
 # Environment: S, BUDGETS (GiB, default "8 24"), SIZE (default 640x360), ROUNDS (default 1),
+# NOCACHE (default 1: each budget also runs once with --no-as-cache, before the cold cache),
 # EXTRA (flags added to every streamed render, e.g. "--stream-host-cache serialize" for an A/B;
 # TAG names those runs apart), OUT (default ./ttfp-out), TTFP_WORK (scenes, default target/motu-ttfp), KEEP_PBRT=1 keeps the
 # generated pbrt files (they are deleted after the import to leave disk for the package).
@@ -98,6 +99,10 @@ for r in $(seq 1 "$ROUNDS"); do
     for b in $BUDGETS; do
         CACHE=$WORK/as-cache-$b-$r
         rm -rf "$CACHE"
+        if [ "${NOCACHE:-1}" = 1 ]; then
+            step "round $r: streamed at $b GiB, no structure cache"
+            timed "s$b${TAG:-}-none-$r" --stream --vram-budget "${b}GiB" --no-as-cache ${EXTRA:-}
+        fi
         step "round $r: streamed at $b GiB, cold cache"
         timed "s$b${TAG:-}-cold-$r" --stream --vram-budget "${b}GiB" --as-cache "$CACHE" ${EXTRA:-}
         step "round $r: streamed at $b GiB, warm cache"
