@@ -146,6 +146,35 @@ pub fn gen_forest(dir: &Path, flags: &[&str]) -> PathBuf {
     gen.join("scene.pbrt")
 }
 
+/// The generated island's `shotCam` (DIR/island/cameras/shotCam.pbrt: its `LookAt` and fov)
+/// as a camera-path pose, its eye moved `dolly` of the way toward the `LookAt` target (0: the
+/// camera itself).
+pub fn shot_cam_pose(dir: &Path, dolly: f64) -> serde_json::Value {
+    let cam = std::fs::read_to_string(dir.join("island/cameras/shotCam.pbrt")).expect("shotCam");
+    let nums: Vec<f64> = cam
+        .split_whitespace()
+        .skip_while(|t| *t != "LookAt")
+        .skip(1)
+        .take(9)
+        .map(|t| t.parse().expect("LookAt number"))
+        .collect();
+    let fov: f64 = cam
+        .split("\"float fov\" [")
+        .nth(1)
+        .and_then(|r| r.split(']').next())
+        .and_then(|v| v.trim().parse().ok())
+        .expect("fov");
+    let f: Vec<f64> = (0..3).map(|i| nums[3 + i] - nums[i]).collect();
+    let len = f.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let eye: Vec<f64> = (0..3).map(|i| nums[i] + f[i] * dolly).collect();
+    serde_json::json!({
+        "eye": eye,
+        "forward": f.iter().map(|v| v / len).collect::<Vec<_>>(),
+        "up": &nums[6..9],
+        "fov_deg": fov,
+    })
+}
+
 /// `motu report --json` of `pkg` for a `width` × `height` image.
 pub fn report_json(pkg: &Path, width: &str, height: &str) -> serde_json::Value {
     motu_json(&[

@@ -143,3 +143,153 @@ fn bench_gpu_plan_is_the_thesis_suite() {
         "island scale {scale} is too small to overflow 2^24"
     );
 }
+
+/// A camera path over the generated island: `shotCam`, then its eye a fifth of the way toward
+/// its target (a dolly), at 64×36.
+fn dolly_path(dir: &std::path::Path) -> std::path::PathBuf {
+    let file = serde_json::json!({
+        "format": "motu-camera-path", "version": 1, "width": 64, "height": 36,
+        "frames": [motu_tests::shot_cam_pose(dir, 0.0), motu_tests::shot_cam_pose(dir, 0.2)],
+    });
+    let p = dir.join("dolly.json");
+    std::fs::write(&p, serde_json::to_string_pretty(&file).unwrap()).unwrap();
+    p
+}
+
+/// The per-frame keys of a streaming flight that say where a frame's time went (issue 45.6).
+const PHASE_KEYS: [&str; 12] = [
+    "frame_ms",
+    "host_ms",
+    "tables_ms",
+    "mesh_ms",
+    "blas_ms",
+    "tlas_rebuilt",
+    "tlas_submits",
+    "tlas_fence_waits",
+    "submits",
+    "fence_waits",
+    "mark_walks",
+    "first_pass_trace_ms",
+];
+
+/// `motu bench --camera-path … --stream` on the default island along a dolly, with a
+/// per-frame build budget and the coarse fallback: `--stream-passes 1` flies as the viewer
+/// does (one pass a frame, the extrapolated next camera), a still tail converges and says
+/// when; without it frames take their passes as before. Every row has the phase columns.
+#[test]
+fn bench_stream_passes_one_measures_the_viewers_flying_mode() {
+    let Some((dir, pkg)) = motu_tests::gpu_island(None) else {
+        return;
+    };
+    let d = dir.path();
+    let path = dolly_path(d);
+    let flight = |extra: &[&str]| -> serde_json::Value {
+        let mut args = vec![
+            "bench",
+            "--camera-path",
+            s(&path),
+            "--package",
+            s(&pkg),
+            "--stream",
+            "--stream-fallback",
+            "coarse",
+            "--stream-build-budget",
+            "2MiB",
+            "--frames",
+            "4",
+            // No warm-up renderer: on lavapipe each new trace pipeline is a fresh LLVM compile.
+            "--warmup",
+            "0",
+            "--backend",
+            "pipeline",
+            "--json",
+        ];
+        args.extend(extra);
+        motu_json(&args)
+    };
+    let u = motu_tests::json_u64;
+    let still = 16;
+    let b = flight(&[
+        "--stream-passes",
+        "1",
+        "--next-camera",
+        "extrapolated",
+        "--still-frames",
+        "16",
+    ]);
+    assert_eq!(b["progressive"], true, "{b}");
+    assert_eq!(b["stream_passes"], 1, "{b}");
+    assert_eq!(b["next_camera"], "extrapolated", "{b}");
+    let rows = b["per_frame"].as_array().expect("per_frame");
+    assert_eq!(rows.len(), 4 + still, "{b}");
+    for r in rows {
+        assert_eq!(r["passes"], 1, "one pass a frame: {r}");
+        for k in PHASE_KEYS {
+            assert!(r[k].is_number(), "{k}: {r}");
+        }
+        // The trace alone is a submission waited for; the TLAS rebuilds' are the frame's.
+        assert!(u(&r["fence_waits"]) >= 1, "{r}");
+        assert!(u(&r["tlas_fence_waits"]) <= u(&r["fence_waits"]), "{r}");
+        assert!(u(&r["tlas_submits"]) <= u(&r["submits"]), "{r}");
+        assert!(r["frame_ms"].as_f64() >= r["trace_ms"].as_f64(), "{r}");
+    }
+    // Nothing is resident at the start: the first frame is all fallback, counted.
+    assert!(u(&rows[0]["fallback_pixels"]) > 0, "{}", rows[0]);
+    assert_eq!(rows[0]["complete"], false, "{}", rows[0]);
+    // The viewer's next camera: none before a previous frame or while still, one while moving.
+    let named: Vec<bool> = rows.iter().map(|r| r["next_camera"] == true).collect();
+    assert_eq!(named[..4], [false, true, true, true], "{named:?}");
+    assert!(named[4..].iter().all(|n| !n), "{named:?}");
+    assert!(b["median_fallback_pixels"].is_number(), "{b}");
+    // At rest the frames refine to complete, and the report says after how many.
+    let k = u(&b["still_frames_to_complete"]) as usize;
+    assert!((1..=still).contains(&k), "{b}");
+    assert_eq!(rows[3 + k]["complete"], true, "{b}");
+    assert!(rows[4..3 + k].iter().all(|r| r["complete"] == false), "{b}");
+    assert_eq!(rows.last().unwrap()["complete"], true, "{b}");
+
+    // Without --stream-passes: `render_frame` as before, the path's next pose named.
+    let b = flight(&[]);
+    assert_eq!(b["progressive"], false, "{b}");
+    assert!(b["stream_passes"].is_null(), "{b}");
+    assert!(b["still_frames_to_complete"].is_null(), "{b}");
+    let rows = b["per_frame"].as_array().expect("per_frame");
+    assert_eq!(rows.len(), 4, "{b}");
+    // The cold start's pass left pixels open, the step built, a last pass traced them again.
+    assert!(u(&rows[0]["passes"]) >= 2, "{}", rows[0]);
+    let named: Vec<bool> = rows.iter().map(|r| r["next_camera"] == true).collect();
+    assert_eq!(named, [true, true, true, false], "{b}");
+    for r in rows {
+        for k in PHASE_KEYS {
+            assert!(r[k].is_number(), "{k}: {r}");
+        }
+    }
+
+    // The viewer's options need streaming; no pass is no frame.
+    let out = motu(&[
+        "bench",
+        "--camera-path",
+        s(&path),
+        "--package",
+        s(&pkg),
+        "--stream-passes",
+        "1",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("need --stream"),
+        "{err}"
+    );
+    let out = motu(&[
+        "bench",
+        "--camera-path",
+        s(&path),
+        "--package",
+        s(&pkg),
+        "--stream",
+        "--stream-passes",
+        "0",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("at least 1"), "{err}");
+}

@@ -8,6 +8,7 @@
 
 use motu_tests::{
     check_probe_rounds, gpu_island, json_u64 as u, motu, motu_ok, report_peak_and_floor, s,
+    shot_cam_pose,
 };
 use std::path::{Path, PathBuf};
 
@@ -17,28 +18,7 @@ const H: &str = "36";
 /// A camera path holding one pose: the generated island's `shotCam` (its pbrt `LookAt` and
 /// fov), so every frame of the path sees the same image.
 fn still_path(dir: &Path) -> PathBuf {
-    let cam = std::fs::read_to_string(dir.join("island/cameras/shotCam.pbrt")).expect("shotCam");
-    let nums: Vec<f64> = cam
-        .split_whitespace()
-        .skip_while(|t| *t != "LookAt")
-        .skip(1)
-        .take(9)
-        .map(|t| t.parse().expect("LookAt number"))
-        .collect();
-    let fov: f64 = cam
-        .split("\"float fov\" [")
-        .nth(1)
-        .and_then(|r| r.split(']').next())
-        .and_then(|v| v.trim().parse().ok())
-        .expect("fov");
-    let f: Vec<f64> = (0..3).map(|i| nums[3 + i] - nums[i]).collect();
-    let len = f.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let pose = serde_json::json!({
-        "eye": &nums[0..3],
-        "forward": f.iter().map(|v| v / len).collect::<Vec<_>>(),
-        "up": &nums[6..9],
-        "fov_deg": fov,
-    });
+    let pose = shot_cam_pose(dir, 0.0);
     let file = serde_json::json!({
         "format": "motu-camera-path", "version": 1,
         "width": W.parse::<u32>().unwrap(), "height": H.parse::<u32>().unwrap(),

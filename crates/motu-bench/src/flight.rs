@@ -28,6 +28,37 @@ pub struct FlightOptions {
     pub stream_bounds: StreamBounds,
     /// How the frames are lit (`--ao-reach`, `--bounces`); default: `motu render`'s.
     pub shading: motu_render::ShadingOptions,
+    /// Streaming: build–trace passes per frame (`--stream-passes`, as `motu view`'s). `Some(1)`:
+    /// the viewer's flying mode, `render_progressive` (one trace with what is resident, then
+    /// one build step toward the next frame; 30 ms of building when no build bound is given,
+    /// as the viewer). `None`: `render_frame` under the default pass cap.
+    pub stream_passes: Option<u32>,
+    /// Streaming: the camera each frame names as the next one (its probe and prefetch).
+    pub next_camera: NextCamera,
+    /// Streaming: the path's last pose rendered this many more times after the path (a camera
+    /// come to rest): the report says after how many of them a frame was complete.
+    pub still_frames: u32,
+}
+
+/// The camera a streaming flight's frame names as the next one (`--next-camera`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum NextCamera {
+    /// The path's next pose, known in a recorded flight (none after the last frame).
+    #[default]
+    Path,
+    /// The viewer's guess (`motu view`): the camera one more step along the motion from the
+    /// previous frame's (`CameraParams::extrapolated_from`); none on the first frame and
+    /// while the camera stays where it was.
+    Extrapolated,
+}
+
+impl NextCamera {
+    pub fn name(self) -> &'static str {
+        match self {
+            NextCamera::Path => "path",
+            NextCamera::Extrapolated => "extrapolated",
+        }
+    }
 }
 
 /// A measured flight: the JSON report and the text the CLI prints without `--json`.
@@ -49,6 +80,16 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
 /// Builds the structures once (or streams them), renders every frame of the path after untimed
 /// warm-up frames, and reports GPU times per frame.
 pub fn run_flight(a: &FlightOptions) -> Result<Flight, BenchError> {
+    // Before any work: the streaming-only options need streaming.
+    let streaming = a.stream || a.vram_budget.is_some();
+    if !streaming
+        && (a.stream_passes.is_some() || a.next_camera != NextCamera::Path || a.still_frames > 0)
+    {
+        bail!("--stream-passes, --next-camera and --still-frames need --stream");
+    }
+    if a.stream_passes == Some(0) {
+        bail!("--stream-passes must be at least 1 (1: the viewer's flying mode)");
+    }
     let (package, path_file) = (a.package.as_path(), a.camera_path.as_path());
     let path = motu_render::load_camera_path(path_file)?;
     let pkg = motu_pack::ScenePackage::open(package).map_err(|source| BenchError::Package {
@@ -90,7 +131,7 @@ pub fn run_flight(a: &FlightOptions) -> Result<Flight, BenchError> {
     // Lit like `motu render`'s shaded view with the same options (its default AO ray
     // included), so a flight's frames cost what rendered frames cost.
     let shading = motu_render::scene_shading(a.shading, &pkg, &view);
-    if a.stream || a.vram_budget.is_some() {
+    if streaming {
         return run_streaming(
             a,
             package,
@@ -185,8 +226,10 @@ pub fn run_flight(a: &FlightOptions) -> Result<Flight, BenchError> {
 }
 
 /// A flight through the streaming renderer: per-frame rows (passes, bytes built, build and
-/// trace ms, GPU ms, fallback pixels) and their means. Warm-up frames run on a renderer that is
-/// then dropped, so the timed flight starts with nothing resident, as a user's would.
+/// trace ms, GPU ms, fallback pixels, where the frame's time went) and their means. Warm-up
+/// frames run on a renderer that is then dropped, so the timed flight starts with nothing
+/// resident, as a user's would. `--stream-passes 1` renders each frame as the viewer flies
+/// (`render_progressive`); `--still-frames K` repeats the last pose K times after the path.
 #[allow(clippy::too_many_arguments)]
 fn run_streaming(
     a: &FlightOptions,
@@ -199,28 +242,40 @@ fn run_streaming(
     (backend, shading): (motu_gpu::Backend, motu_abi::shade::Shading),
     (w, h, n, warmup): (u32, u32, u32, u32),
 ) -> Result<Flight, BenchError> {
+    let progressive = a.stream_passes == Some(1);
+    let bounded = opts_with_passes(a);
     let opts = motu_gpu::StreamOptions {
         budget_bytes: a.vram_budget.unwrap_or(u64::MAX),
-        ..a.stream_bounds.options()
+        ..bounded
     };
     let ropts = motu_gpu::RenderOptions {
         backend,
         shading,
         ..Default::default()
     };
-    let cams: Vec<_> = (0..n).map(|f| path.sample(f, n).params(w, h)).collect();
+    let mut cams: Vec<_> = (0..n).map(|f| path.sample(f, n).params(w, h)).collect();
+    // A camera come to rest: the last pose again, as a viewer's still frames.
+    let rest = cams[cams.len() - 1];
+    cams.extend(std::iter::repeat_n(rest, a.still_frames as usize));
     // The hierarchy the streamer renders (large TLASes split into pieces; the split the import
     // stored when `view` is the package's own), as `render --stream`.
     let (cap, _) = motu_render::package_split_cap(meshes.0, a.stream_bounds.split_instances);
     let split = motu_render::package_stream_split(meshes.0, view, cap)?;
     let view = &split.as_ref().map_or(*view, |s| s.view(view));
+    // The viewer's flying mode traces once and builds toward the next frame.
+    let frame = |sr: &mut motu_gpu::StreamingRenderer<'_>, cam: &motu_abi::camera::CameraParams| {
+        if progressive {
+            sr.render_progressive(cam, &ropts)
+        } else {
+            sr.render_frame(cam, &ropts)
+        }
+    };
     if warmup > 0 {
         let mut sr = motu_gpu::StreamingRenderer::new(ctx, *view, meshes, &opts).map_err(
             gpu_err("setting up streaming (the resident skeleton must fit the budget)"),
         )?;
         for _ in 0..warmup {
-            sr.render_frame(&cams[0], &ropts)
-                .map_err(gpu_err("warm-up frame"))?;
+            frame(&mut sr, &cams[0]).map_err(gpu_err("warm-up frame"))?;
         }
     }
     let mut sr = motu_gpu::StreamingRenderer::new(ctx, *view, meshes, &opts).map_err(gpu_err(
@@ -229,75 +284,39 @@ fn run_streaming(
     let mut rows = Vec::with_capacity(cams.len());
     for (f, cam) in cams.iter().enumerate() {
         let t0 = std::time::Instant::now();
-        // The flight's next camera is known: each frame ends with a probe of it (prefetch).
-        sr.set_next_camera(cams.get(f + 1).copied());
-        let (out, st) = sr
-            .render_frame(cam, &ropts)
-            .map_err(|source| BenchError::GpuFrame {
-                what: format!("flight frame {f}"),
-                source,
-            })?;
+        // Each frame ends with a probe of the camera it names as the next one (prefetch): the
+        // path's next pose, or the viewer's extrapolation of the motion (none while still).
+        let next = match a.next_camera {
+            NextCamera::Path => cams.get(f + 1).copied(),
+            NextCamera::Extrapolated => f
+                .checked_sub(1)
+                .map(|p| cams[p])
+                .filter(|p| p != cam)
+                .map(|p| cam.extrapolated_from(&p)),
+        };
+        sr.set_next_camera(next);
+        let (out, st) = frame(&mut sr, cam).map_err(|source| BenchError::GpuFrame {
+            what: format!("flight frame {f}"),
+            source,
+        })?;
         let wall_ms = t0.elapsed().as_secs_f64() * 1e3;
-        rows.push(json!({
-            "frame": f,
-            "passes": st.passes,
-            "complete": st.complete,
-            "incomplete_pixels": st.incomplete_pixels,
-            "fallback_pixels": st.fallback_pixels,
-            "built_bytes": st.built_bytes,
-            "bytes_streamed": st.bytes_streamed,
-            "blas_built": st.blas_built,
-            "evicted": st.evicted,
-            "evicted_bytes": st.evicted_bytes,
-            "evicted_for_tlas": st.evicted_for_tlas,
-            "evicted_on_refusal": st.evicted_on_refusal,
-            "build_ms": st.build_ms,
-            // Of build_ms: TLAS rebuilds, or updates of persistent TLASes (`--stream-tlas`).
-            "tlas_ms": st.tlas_ms,
-            "tlas_builds": st.tlas_builds,
-            "tlas_updates": st.tlas_updates,
-            // Rebuilds run in groups (a split root piece by piece): their transient is one
-            // group's.
-            "tlas_rebuild_groups": st.tlas_rebuild_groups,
-            "tlas_rebuild_transient_bytes": st.tlas_rebuild_transient_bytes,
-            "trace_ms": st.trace_ms,
-            "probe_rays": st.probe_rays,
-            "probe_ms": st.probe_ms,
-            "probe_rounds": st.probe_rounds,
-            "probe_verify_rounds": st.probe_verify_rounds,
-            // Pass marks (`--stream-probe-pass-rows`, auto by default): the probe's row
-            // stride (0: none) and the resident structures its rows passed and refreshed.
-            "probe_pass_rows": st.probe_pass_rows,
-            "probe_pass_marks": st.probe_pass_marks,
-            // What of the resident set the probe's rays used: the next frame's one-pass need
-            // when everything is resident and every row marks.
-            "probe_need_blases": st.probe_need_blases,
-            "probe_need_bytes": st.probe_need_bytes,
-            "probe_need_mesh_bytes": st.probe_need_mesh_bytes,
-            "wall_ms": wall_ms,
-            "gpu_ms": out.stats.ms_per_frame,
-            "vram_peak_bytes": st.vram_peak_bytes,
-            // Meshes in host memory outside the budget (`--stream-mesh-memory`).
-            "resident_host_mesh_bytes": st.resident_host_mesh_bytes,
-            // Above the room, the frame's rays cannot all be served in one pass.
-            "working_set_bytes": st.working_set_bytes,
-            "working_set_mesh_bytes": st.working_set_mesh_bytes,
-            "room_bytes": st.room_bytes,
-            // Why the first pass missed what it needed (another pass follows).
-            "first_pass_missed_evicted": st.first_pass_missed_evicted,
-            "first_pass_missed_unprobed": st.first_pass_missed_unprobed,
-            "first_pass_missed_probed": st.first_pass_missed_probed,
-            // What the prefetch built, and what it wanted but found no room for.
-            "prefetched": st.prefetched,
-            "prefetch_skipped": st.prefetch_skipped,
-        }));
+        rows.push(stream_row(
+            f,
+            &st,
+            out.stats.ms_per_frame,
+            wall_ms,
+            next.is_some(),
+        ));
     }
     let totals = sr.totals();
     drop(sr);
     ctx.check_validation()
         .map_err(gpu_err("Vulkan validation reported errors"))?;
+    // The means are the path's frames' (the still tail has its own count below).
+    let moving = &rows[..n as usize];
+    let still = &rows[n as usize..];
     let mean = |key: &str, skip: usize| -> f64 {
-        let v: Vec<f64> = rows
+        let v: Vec<f64> = moving
             .iter()
             .skip(skip)
             .filter_map(|r| r[key].as_f64())
@@ -308,8 +327,23 @@ fn run_streaming(
             v.iter().sum::<f64>() / v.len() as f64
         }
     };
-    let incomplete = rows.iter().filter(|r| r["complete"] == false).count();
-    let report = json!({
+    let sorted = |key: &str, skip: usize| -> Vec<f64> {
+        let mut v: Vec<f64> = moving
+            .iter()
+            .skip(skip)
+            .filter_map(|r| r[key].as_f64())
+            .collect();
+        v.sort_by(f64::total_cmp);
+        v
+    };
+    let incomplete = moving.iter().filter(|r| r["complete"] == false).count();
+    // Frames of the still tail until one is complete (1: the first still frame); None: none.
+    let still_to_complete = still
+        .iter()
+        .position(|r| r["complete"] == true)
+        .map(|i| i + 1);
+    let wall_after_first = sorted("wall_ms", 1);
+    let mut report = json!({
         "kind": "flight-stream",
         "package": package.display().to_string(),
         "camera_path": path_file.display().to_string(),
@@ -341,19 +375,49 @@ fn run_streaming(
         "totals": motu_render::stats::StreamTotals::from(&totals),
         "per_frame": rows,
     });
+    // One object more: `json!` nests too deep for one.
+    let mode = json!({
+        // How frames were rendered: `progressive` is the viewer's flying mode
+        // (`--stream-passes 1`), else `render_frame` under `max_passes`.
+        "stream_passes": a.stream_passes,
+        "progressive": progressive,
+        "max_passes": opts.max_passes,
+        "frame_build_ms": opts.frame_build_ms,
+        "frame_build_bytes": opts.frame_build_bytes,
+        "next_camera": a.next_camera.name(),
+        // Of the path's frames after the first (the cold start): what a flight's frames cost.
+        "median_wall_ms_after_first": percentile(&wall_after_first, 0.5),
+        "p95_wall_ms_after_first": percentile(&wall_after_first, 0.95),
+        "median_frame_ms_after_first": percentile(&sorted("frame_ms", 1), 0.5),
+        "median_fallback_pixels": percentile(&sorted("fallback_pixels", 0), 0.5),
+        "still_frames": a.still_frames,
+        "still_frames_to_complete": still_to_complete,
+    });
+    if let (Value::Object(r), Value::Object(m)) = (&mut report, mode) {
+        r.extend(m);
+    }
     // Writing to a String cannot fail.
     let mut text = String::new();
     {
         let _ = writeln!(
             text,
-            "streaming flight {} on {} ({}, {}×{}, budget {}): {} frames",
+            "streaming flight {} on {} ({}, {}×{}, budget {}): {} frames{}, {}",
             path_file.display(),
             ctx.device_name(),
             backend_name(backend),
             w,
             h,
             motu_report::format_size(totals.vram_budget_bytes),
-            n
+            n,
+            match a.still_frames {
+                0 => String::new(),
+                k => format!(" + {k} still"),
+            },
+            if progressive {
+                "one pass a frame (the viewer's flying mode)"
+            } else {
+                "passes until complete or the build budget is spent"
+            },
         );
         text.push_str(&frame_table(&rows));
         let _ = writeln!(
@@ -367,8 +431,140 @@ fn run_streaming(
             mean("wall_ms", 0),
             incomplete
         );
+        let _ = writeln!(
+            text,
+            "after the first frame: median {:.2} ms, p95 {:.2} ms wall; median fallback {} px",
+            percentile(&wall_after_first, 0.5),
+            percentile(&wall_after_first, 0.95),
+            percentile(&sorted("fallback_pixels", 0), 0.5),
+        );
+        if a.still_frames > 0 {
+            let _ = writeln!(
+                text,
+                "at rest: {}",
+                match still_to_complete {
+                    Some(k) => format!("complete after {k} of {} still frames", a.still_frames),
+                    None => format!("not complete after {} still frames", a.still_frames),
+                }
+            );
+        }
     }
     Ok(Flight { report, text })
+}
+
+/// The stream options of `a` with its pass cap: `--stream-passes N` as the viewer takes it
+/// (`N` passes; 1 also gives a flying frame the viewer's build budget when none is given).
+fn opts_with_passes(a: &FlightOptions) -> motu_gpu::StreamOptions {
+    let o = a.stream_bounds.options();
+    let b = &a.stream_bounds;
+    motu_gpu::StreamOptions {
+        max_passes: a.stream_passes.unwrap_or(o.max_passes),
+        frame_build_ms: if a.stream_passes == Some(1)
+            && b.frame_build_bytes.is_none()
+            && b.frame_build_ms.is_none()
+        {
+            motu_render::INTERACTIVE_BUILD_MS
+        } else {
+            o.frame_build_ms
+        },
+        ..o
+    }
+}
+
+/// One streaming frame's row: what it built and evicted, and where its time went.
+fn stream_row(
+    f: usize,
+    st: &motu_gpu::FrameStreamStats,
+    gpu_ms: f64,
+    wall_ms: f64,
+    next_camera: bool,
+) -> Value {
+    let first = st.pass_log.first();
+    let mut row = json!({
+        "frame": f,
+        "passes": st.passes,
+        "complete": st.complete,
+        "incomplete_pixels": st.incomplete_pixels,
+        "fallback_pixels": st.fallback_pixels,
+        "build_budget_spent": st.build_budget_spent,
+        "built_bytes": st.built_bytes,
+        "bytes_streamed": st.bytes_streamed,
+        "blas_built": st.blas_built,
+        "evicted": st.evicted,
+        "evicted_bytes": st.evicted_bytes,
+        "evicted_for_tlas": st.evicted_for_tlas,
+        "evicted_on_refusal": st.evicted_on_refusal,
+        "build_ms": st.build_ms,
+        // Of build_ms: TLAS rebuilds, or updates of persistent TLASes (`--stream-tlas`).
+        "tlas_ms": st.tlas_ms,
+        "tlas_builds": st.tlas_builds,
+        "tlas_updates": st.tlas_updates,
+        "trace_ms": st.trace_ms,
+        "probe_rays": st.probe_rays,
+        "probe_ms": st.probe_ms,
+        "probe_rounds": st.probe_rounds,
+        "probe_verify_rounds": st.probe_verify_rounds,
+        // Pass marks (`--stream-probe-pass-rows`, auto by default): the probe's row
+        // stride (0: none) and the resident structures its rows passed and refreshed.
+        "probe_pass_rows": st.probe_pass_rows,
+        "probe_pass_marks": st.probe_pass_marks,
+        // What of the resident set the probe's rays used: the next frame's one-pass need
+        // when everything is resident and every row marks.
+        "probe_need_blases": st.probe_need_blases,
+        "probe_need_bytes": st.probe_need_bytes,
+        "probe_need_mesh_bytes": st.probe_need_mesh_bytes,
+        "wall_ms": wall_ms,
+        "gpu_ms": gpu_ms,
+        "vram_peak_bytes": st.vram_peak_bytes,
+        // Meshes in host memory outside the budget (`--stream-mesh-memory`).
+        "resident_host_mesh_bytes": st.resident_host_mesh_bytes,
+        // Above the room, the frame's rays cannot all be served in one pass.
+        "working_set_bytes": st.working_set_bytes,
+        "working_set_mesh_bytes": st.working_set_mesh_bytes,
+        "room_bytes": st.room_bytes,
+        // Why the first pass missed what it needed (another pass follows).
+        "first_pass_missed_evicted": st.first_pass_missed_evicted,
+        "first_pass_missed_unprobed": st.first_pass_missed_unprobed,
+        "first_pass_missed_probed": st.first_pass_missed_probed,
+        // What the prefetch built, and what it wanted but found no room for.
+        "prefetched": st.prefetched,
+        "prefetch_skipped": st.prefetch_skipped,
+    });
+    // Where the frame's time went (one object more: `json!` nests too deep for one).
+    let phases = json!({
+        // TLASes (split roots' pieces) rebuilt, and the queue submissions and fence waits of
+        // those rebuilds (of `submits` and `fence_waits`: every one of the frame).
+        "tlas_rebuilt": st.tlas_rebuilt,
+        "tlas_submits": st.tlas_submits,
+        "tlas_fence_waits": st.tlas_fence_waits,
+        "submits": st.submits,
+        "fence_waits": st.fence_waits,
+        // Rebuilds run in groups (a split root piece by piece): their transient is one
+        // group's.
+        "tlas_rebuild_groups": st.tlas_rebuild_groups,
+        "tlas_rebuild_transient_bytes": st.tlas_rebuild_transient_bytes,
+        // The renderer's own clock of the frame (wall_ms adds the image's conversion), its
+        // host work outside traces and builds, and of build_ms: meshes streamed, BLAS builds,
+        // the per-step tables.
+        "frame_ms": st.frame_ms,
+        "host_ms": st.host_ms,
+        "mesh_ms": st.mesh_ms,
+        "blas_ms": st.blas_ms,
+        "tables_ms": st.tables_ms,
+        "build_steps": st.build_steps,
+        "build_groups": st.build_groups,
+        // The first pass: its trace, and the mark walks of its rays left open (a progressive
+        // frame's one pass is last but its build budget is not yet spent, so it marks).
+        "first_pass_trace_ms": first.map_or(0.0, |p| p.trace_ms),
+        "mark_walks": first.map_or(0, |p| p.mark_walks),
+        "mark_tlas_walks": first.map_or(0, |p| p.mark_tlas_walks),
+        // The frame named a next camera (a probe of it follows a complete frame).
+        "next_camera": next_camera,
+    });
+    if let (Value::Object(r), Value::Object(p)) = (&mut row, phases) {
+        r.extend(p);
+    }
+    row
 }
 
 /// The per-frame rows of a streaming flight as a text table.
@@ -377,25 +573,30 @@ fn frame_table(rows: &[Value]) -> String {
     let mut text = String::new();
     let _ = writeln!(
         text,
-        "frame  passes  working set  room         built        build ms  TLAS ms  trace ms  wall ms  fallback px"
+        "frame  passes  working set  room         built        build ms  TLAS ms  trace ms  wall ms  fallback px  host ms  TLASes  fences"
     );
     for r in rows {
         let bytes = |k: &str| motu_report::format_size(r[k].as_u64().unwrap_or(0));
+        let ms = |k: &str| r[k].as_f64().unwrap_or(0.0);
         let _ = writeln!(
             text,
-            "{:>5}  {:>6}  {:>11}  {:>11}  {:>11}  {:>8.2}  {:>7.2}  {:>8.2}  {:>7.2}  {:>11}",
-            r["frame"],
-            r["passes"],
+            "{:>5}  {:>6}  {:>11}  {:>11}  {:>11}  {:>8.2}  {:>7.2}  {:>8.2}  {:>7.2}  {:>11}  {:>7.2}  {:>6}  {:>6}",
+            r["frame"].as_u64().unwrap_or(0),
+            r["passes"].as_u64().unwrap_or(0),
             // A working set above its room cannot be resident at once: passes follow.
             bytes("working_set_bytes"),
             bytes("room_bytes"),
             bytes("built_bytes"),
-            r["build_ms"].as_f64().unwrap_or(0.0),
+            ms("build_ms"),
             // Of the build: the TLASes' rebuilds or updates.
-            r["tlas_ms"].as_f64().unwrap_or(0.0),
-            r["trace_ms"].as_f64().unwrap_or(0.0),
-            r["wall_ms"].as_f64().unwrap_or(0.0),
-            r["fallback_pixels"],
+            ms("tlas_ms"),
+            ms("trace_ms"),
+            ms("wall_ms"),
+            r["fallback_pixels"].as_u64().unwrap_or(0),
+            ms("host_ms"),
+            // TLASes rebuilt, and the frame's fence waits (each a CPU–GPU round trip).
+            r["tlas_rebuilt"].as_u64().unwrap_or(0),
+            r["fence_waits"].as_u64().unwrap_or(0),
         );
     }
     text

@@ -41,7 +41,7 @@ mod tables;
 
 pub use child::{child_render, ChildRender};
 pub use error::BenchError;
-pub use flight::{run_flight, Flight, FlightOptions};
+pub use flight::{run_flight, Flight, FlightOptions, NextCamera};
 pub use plan::{
     best_backend, Backend, ConfigSpec, SceneSpec, Settings, Source, SuiteKind, SuiteOptions,
 };

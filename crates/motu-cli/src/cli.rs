@@ -532,6 +532,23 @@ pub struct BenchArgs {
     /// With --camera-path: diffuse bounces, as `motu render --bounces` (default 1).
     #[arg(long, value_parser = clap::value_parser!(u32).range(0..=8), requires = "camera_path")]
     pub bounces: Option<u32>,
+    /// With --camera-path --stream: build–trace passes per frame, as `motu view
+    /// --stream-passes`. 1: the viewer's flying mode (one trace with what is resident, then one
+    /// build step toward the next frame; 30 ms of building unless --stream-build-ms or
+    /// --stream-build-budget says otherwise). Default: passes until the frame is complete or its
+    /// build budget is spent (then one more pass).
+    #[arg(long, value_name = "N", requires = "camera_path")]
+    pub stream_passes: Option<u32>,
+    /// With --camera-path --stream: the camera each frame probes and prefetches for. `path`
+    /// (default): the path's next pose; `extrapolated`: the viewer's guess, one more step along
+    /// the motion from the previous frame (none on the first frame or while still).
+    #[arg(long, value_enum, value_name = "WHICH", requires = "camera_path")]
+    pub next_camera: Option<NextCameraArg>,
+    /// With --camera-path --stream: render the path's last pose K more times (a camera come to
+    /// rest); the report says after how many of them a frame was complete
+    /// (still_frames_to_complete).
+    #[arg(long, value_name = "K", requires = "camera_path")]
+    pub still_frames: Option<u32>,
     #[command(flatten)]
     pub stream_bounds: StreamBoundArgs,
     /// Internal: render one package and write its measurements (the child process of a render step).
@@ -543,6 +560,22 @@ pub struct BenchArgs {
     /// Internal: where the child writes the last frame (PNG).
     #[arg(long, hide = true)]
     pub child_png: Option<PathBuf>,
+}
+
+/// `motu bench --next-camera`.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NextCameraArg {
+    Path,
+    Extrapolated,
+}
+
+impl From<NextCameraArg> for motu_bench::NextCamera {
+    fn from(a: NextCameraArg) -> Self {
+        match a {
+            NextCameraArg::Path => motu_bench::NextCamera::Path,
+            NextCameraArg::Extrapolated => motu_bench::NextCamera::Extrapolated,
+        }
+    }
 }
 
 #[derive(Args, Debug)]

@@ -69,7 +69,7 @@ pub use shading::{scene_shading, ShadingOptions, AO_DISTANCE_OF_DIAGONAL};
 pub use stats::StreamStartup;
 pub use stream::{
     package_split_cap, package_stream_split, stored_stream_split, stored_stream_split_or_none,
-    stream_split, SplitCapSource, StreamBounds,
+    stream_split, SplitCapSource, StreamBounds, INTERACTIVE_BUILD_MS,
 };
 
 use motu_alloc::format_size;

@@ -11,6 +11,11 @@ use motu_abi::HierarchyView;
 use motu_gpu::MeshBlobSource as _;
 use std::time::Instant;
 
+/// Milliseconds of building per frame while flying (one trace with what is resident, then a
+/// build step) when no build budget is given: `motu view`'s flying default, and `motu bench
+/// --stream-passes 1`'s, which measures the viewer (at least one structure is built per frame).
+pub const INTERACTIVE_BUILD_MS: f64 = 30.0;
+
 /// What one streaming frame may build, and what it shows for what it did not build.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct StreamBounds {

@@ -13,11 +13,9 @@ use motu_abi::{HierarchyView, RootSubset};
 use motu_gpu::MeshBlobSource as _;
 use motu_pack::ScenePackage;
 use motu_render::stats::ViewDetail;
-use motu_render::{choose_lod_mode, LodMode, PackageMeshes, RenderError, StreamBounds};
-
-/// Milliseconds of building per frame while flying when no build budget is given (at least
-/// one structure is built per frame).
-const INTERACTIVE_BUILD_MS: f64 = 30.0;
+use motu_render::{
+    choose_lod_mode, LodMode, PackageMeshes, RenderError, StreamBounds, INTERACTIVE_BUILD_MS,
+};
 
 /// How the package source renders (`motu view`'s flags, typed).
 #[derive(Clone, Debug)]

@@ -26,3 +26,54 @@ fn the_frame_table_shows_each_frames_working_set_beside_its_room() {
     );
     assert!(head.contains("build ms  TLAS ms  trace ms"), "{t}");
 }
+
+fn flight_options(stream_passes: Option<u32>, bounds: StreamBounds) -> FlightOptions {
+    FlightOptions {
+        package: PathBuf::from("p.motu"),
+        camera_path: PathBuf::from("path.json"),
+        width: None,
+        height: None,
+        frames: None,
+        warmup: None,
+        backend: None,
+        stream: true,
+        vram_budget: None,
+        stream_bounds: bounds,
+        shading: Default::default(),
+        stream_passes,
+        next_camera: NextCamera::Path,
+        still_frames: 0,
+    }
+}
+
+#[test]
+fn stream_passes_one_takes_the_viewers_build_budget_unless_one_is_given() {
+    let d = motu_gpu::StreamOptions::default();
+    // The default: render_frame's pass cap and no build bound, as before.
+    let o = opts_with_passes(&flight_options(None, StreamBounds::default()));
+    assert_eq!((o.max_passes, o.frame_build_ms), (d.max_passes, 0.0));
+    // The viewer's flying mode: one pass and, with no bound given, the viewer's 30 ms.
+    let o = opts_with_passes(&flight_options(Some(1), StreamBounds::default()));
+    assert_eq!(
+        (o.max_passes, o.frame_build_ms),
+        (1, motu_render::INTERACTIVE_BUILD_MS)
+    );
+    // A bound given is kept (bytes alone too: no millisecond bound is added).
+    let ms = StreamBounds {
+        frame_build_ms: Some(12.5),
+        ..Default::default()
+    };
+    assert_eq!(
+        opts_with_passes(&flight_options(Some(1), ms)).frame_build_ms,
+        12.5
+    );
+    let bytes = StreamBounds {
+        frame_build_bytes: Some(1 << 20),
+        ..Default::default()
+    };
+    let o = opts_with_passes(&flight_options(Some(1), bytes));
+    assert_eq!((o.frame_build_ms, o.frame_build_bytes), (0.0, 1 << 20));
+    // More passes than one: render_frame under that cap, no budget added.
+    let o = opts_with_passes(&flight_options(Some(3), StreamBounds::default()));
+    assert_eq!((o.max_passes, o.frame_build_ms), (3, 0.0));
+}

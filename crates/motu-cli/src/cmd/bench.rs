@@ -30,6 +30,9 @@ pub fn run(a: BenchArgs) -> anyhow::Result<()> {
             stream: a.stream,
             vram_budget: a.vram_budget,
             stream_bounds: super::render::stream_bounds(&a.stream_bounds),
+            stream_passes: a.stream_passes,
+            next_camera: a.next_camera.map(Into::into).unwrap_or_default(),
+            still_frames: a.still_frames.unwrap_or(0),
             shading: {
                 let d = motu_render::ShadingOptions::default();
                 motu_render::ShadingOptions {
