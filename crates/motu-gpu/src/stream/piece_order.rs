@@ -211,7 +211,7 @@ pub(super) fn tlas_meets_view(c: &CameraParams, t: &TlasRecord) -> bool {
 
 /// [`tlas_meets_view`] for the box `lo`–`hi`.
 pub(super) fn box_meets_view(c: &CameraParams, lo: [f32; 3], hi: [f32; 3]) -> bool {
-    if (0..3).any(|k| !(lo[k] <= hi[k])) {
+    if !(0..3).all(|k| lo[k] <= hi[k]) {
         return false;
     }
     let add =
