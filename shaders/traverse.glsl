@@ -103,6 +103,14 @@ bool stream_still_open(float best_t) {
     }
     StreamParams s = StreamRef(push.stream).s;
     stream_mark_as(s.blas_stamps, g_empty_id, STREAM_NEEDED);
+    if (StampTable(s.walked).r[g_empty_id] == s.stamp) {
+        // Resident, met in a stale TLAS's proxy (motu-gpu stream/piece_order.rs): open until
+        // that TLAS is rebuilt, nothing to build. Its request word holds the kinds of ray
+        // whose closest hit it held (HIT_*), which a count would corrupt.
+        g_probe_open = g_probe_open || g_probe;
+        g_probe_link_open = g_probe;
+        return !g_probe;
+    }
     StampTable requests = StampTable(s.requests);
     atomicAdd(requests.r[g_empty_id], 1u);
     if (g_hit_kind == STREAM_HIT_CAMERA && requests.r[g_empty_id] < STREAM_REQUEST_CAMERA) {

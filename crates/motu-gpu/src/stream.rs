@@ -126,6 +126,7 @@ mod options;
 mod params;
 mod passes;
 mod persistent;
+mod piece_order;
 mod plan_cache;
 mod probe;
 mod proxy_boxes;

@@ -465,7 +465,9 @@ pub(crate) fn render_streaming(
             stats: &st,
         });
         // A wrong image never exits 0 silently (fallback pixels are opt-in and counted).
-        if !st.complete && st.fallback_pixels == 0 && !stream.allow_incomplete {
+        // A frame left not complete only by stale TLASes (no pixel open) is exact.
+        let open = st.incomplete_pixels > 0;
+        if !st.complete && open && st.fallback_pixels == 0 && !stream.allow_incomplete {
             let cause = if st.build_budget_spent {
                 "its build budget (--stream-build-budget/--stream-build-ms) spent".to_string()
             } else {

@@ -112,6 +112,9 @@ pub struct SourceStats {
     /// Pixels left unfinished by the frame's pass cap (streaming; refined by later frames).
     /// Shown while flying; a scripted run fails if its last frame has any.
     pub incomplete_pixels: u64,
+    /// Streaming: TLAS pieces left stale by the frame (`tlas_pieces_stale`: rebuilt by later
+    /// frames within their build budget; their new structures' pixels show the fallback).
+    pub tlas_pieces_stale: u32,
     /// How LOD ran: `instance`, `traversal` or `none` (no LOD selectors); empty if unknown.
     pub lod_mode: &'static str,
     /// Streaming: whether the budget held the whole scene, so the full build draws it

@@ -415,6 +415,7 @@ impl<'p> PackageSource<'p> {
                     passes: 1,
                     streaming: None,
                     incomplete_pixels: 0,
+                    tlas_pieces_stale: 0,
                     lod_mode,
                     stream_fit,
                 };
@@ -451,6 +452,7 @@ impl<'p> PackageSource<'p> {
                     } else {
                         st.incomplete_pixels.max(1)
                     },
+                    tlas_pieces_stale: st.tlas_pieces_stale,
                     lod_mode,
                     stream_fit,
                 };

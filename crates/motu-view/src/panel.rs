@@ -171,10 +171,15 @@ fn memory(ui: &mut Ui, info: &PanelInfo) {
     ));
     ui.label(match s.streaming {
         Some((built, evicted)) => format!(
-            "streaming: {} passes, {built} built, {evicted} evicted{}",
+            "streaming: {} passes, {built} built, {evicted} evicted{}{}",
             s.passes,
             if s.incomplete_pixels > 0 {
                 format!(", {} px refining", s.incomplete_pixels)
+            } else {
+                String::new()
+            },
+            if s.tlas_pieces_stale > 0 {
+                format!(", {} TLAS pieces stale", s.tlas_pieces_stale)
             } else {
                 String::new()
             }

@@ -169,13 +169,21 @@ fn print_event(e: motu_render::RenderEvent<'_>, allow_incomplete: bool) {
                 // Opt-in (--stream-fallback): loud and counted, refined by later frames.
                 eprintln!(
                     "WARNING: frame {f}: {} pixels show the coarse FALLBACK (bounds of structures not \
-                     resident yet{}): this frame is not exact (--stream-fallback coarse)",
+                     resident yet{}{}): this frame is not exact (--stream-fallback coarse)",
                     st.fallback_pixels,
                     if st.build_budget_spent {
                         "; the frame's build budget is spent"
                     } else {
                         ""
-                    }
+                    },
+                    stale_note(st.stale_blocked_pixels, st.tlas_pieces_stale),
+                );
+            } else if !st.complete && st.incomplete_pixels == 0 && st.tlas_pieces_stale > 0 {
+                // Exact, but later frames still rebuild TLASes (--stream-build-ms).
+                eprintln!(
+                    "warning: frame {f}: exact, but {} TLAS pieces are left stale for later frames \
+                     to rebuild (--stream-build-ms)",
+                    st.tlas_pieces_stale
                 );
             } else if !st.complete && allow_incomplete {
                 // Without --allow-incomplete the library refuses the frame after this line.
@@ -613,3 +621,14 @@ fn evicted_causes(for_tlas: u32, on_refusal: u32) -> String {
 
 #[cfg(test)]
 mod tests;
+
+/// The fallback warning's note on stale TLAS pieces (frames with `--stream-build-ms`): pixels
+/// waiting for a resident structure's TLAS piece to be rebuilt, and the pieces left stale.
+fn stale_note(blocked_pixels: u64, pieces: u32) -> String {
+    if pieces == 0 && blocked_pixels == 0 {
+        return String::new();
+    }
+    format!(
+        "; {blocked_pixels} of them wait for a stale TLAS piece, {pieces} left stale for later frames"
+    )
+}

@@ -30,6 +30,12 @@ pub(super) struct Kept {
     step_start: Option<Instant>,
     /// Pass cap of the running frame when set ([`StreamingRenderer::render_progressive`]).
     pass_cap: Option<u32>,
+    /// The running frame's camera: stale TLASes it sees are rebuilt first
+    /// (`piece_order.rs`).
+    camera: Option<CameraParams>,
+    /// Open pixels the running frame's passes left waiting (not traced again) because their
+    /// blocker was resident under a stale TLAS (`stale_blocked_pixels`).
+    stale_waiting: u64,
 }
 
 impl Kept {
@@ -42,6 +48,24 @@ impl Kept {
     /// The running build step is over (its time is in the frame's `build_ms`).
     pub(super) fn end_step(&mut self) {
         self.step_start = None;
+    }
+
+    /// The running frame's camera (`piece_order.rs`).
+    pub(super) fn set_camera(&mut self, camera: CameraParams) {
+        self.camera = Some(camera);
+    }
+
+    pub(super) fn camera(&self) -> Option<&CameraParams> {
+        self.camera.as_ref()
+    }
+
+    /// Open pixels left waiting under stale TLASes by the running frame's passes so far.
+    pub(super) fn set_stale_waiting(&mut self, pixels: u64) {
+        self.stale_waiting = pixels;
+    }
+
+    pub(super) fn stale_waiting(&self) -> u64 {
+        self.stale_waiting
     }
 
     /// Milliseconds the running build step has taken so far (0 when none runs).

@@ -317,7 +317,8 @@ impl<'a> StreamingRenderer<'a> {
             }
             self.res.admit_built(b, accel, bytes, stamp, frame);
             built_ids.insert(b as u32);
-            self.dirty_parents(b);
+            // Added, not removed: its parents may stay stale (`piece_order.rs`).
+            self.stale_parents(b);
         }
         // A BLAS with nothing to build keeps no references.
         for &b in group {
@@ -570,8 +571,9 @@ impl<'a> StreamingRenderer<'a> {
             // What fits of the rest, without giving up anything built above.
             self.build_blas_queue(&later, false, false)?;
         }
-        // Parents whose instance set changed (builds or evictions).
-        self.rebuild_dirty()?;
+        // Parents whose instance set changed (builds or evictions); with a frame build budget
+        // in milliseconds, stale ones only while it holds (`piece_order.rs`).
+        self.rebuild_step()?;
         let t_tables = Instant::now();
         self.upload_tlas_addresses()?;
         self.frame.stats_mut().tables_ms += t_tables.elapsed().as_secs_f64() * 1e3;

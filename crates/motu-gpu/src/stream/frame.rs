@@ -333,6 +333,7 @@ impl<'a> StreamingRenderer<'a> {
         let next = self.frame.next_camera.take();
         let last = std::mem::take(&mut self.frame.last_frame);
         let result = self.run_passes(&fb, w, h, &guard).and_then(|image| {
+            self.settle_stale_after_passes()?;
             // A camera at rest after a one-pass frame: its next frame needs what this one had
             // resident at once, so a probe would only find it again.
             let still = next == Some(*camera) && self.frame.stats.passes == 1;
@@ -374,6 +375,7 @@ impl<'a> StreamingRenderer<'a> {
             self.prefetch_after_frame(guard_demand, probe, opts)?;
         }
         self.note_pass_marks();
+        self.note_stale_tlases();
         let report = self.heap.report();
         mark.note(&self.ctx, &mut self.frame.stats);
         self.measure_residency(&report);
@@ -431,10 +433,11 @@ impl<'a> StreamingRenderer<'a> {
             &params,
             &opts.shading,
         )?;
-        if self.tlases.any_dirty() {
+        self.frame.kept_mut().set_camera(*camera);
+        if self.dirty_before_trace() {
             self.res.forget_built_now();
             if let Err(e) = self
-                .rebuild_dirty()
+                .rebuild_before_trace()
                 .and_then(|()| self.upload_tlas_addresses())
             {
                 fb.release(&mut self.heap);

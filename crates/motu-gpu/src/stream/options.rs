@@ -84,6 +84,11 @@ pub struct StreamOptions {
     pub frame_build_bytes: u64,
     /// Milliseconds of building one frame may spend; 0: unbounded (same rules).
     pub frame_build_ms: f64,
+    /// With `frame_build_ms`, TLASes dirty only because BLASes under them were built are
+    /// traced as they are and rebuilt while the frame's budget holds (`piece_order.rs`);
+    /// `false`: every dirty TLAS is rebuilt at each build step's end, as without a budget
+    /// (for comparisons). Default `true`; no effect without `frame_build_ms`.
+    pub defer_stale_tlases: bool,
     /// Whether TLASes are persistent and updated as residency changes, or rebuilt over their
     /// resident instances (`--stream-tlas`; see `persistent.rs`).
     pub tlas_update: TlasUpdate,
@@ -339,6 +344,7 @@ impl Default for StreamOptions {
             fallback: StreamFallback::Off,
             frame_build_bytes: 0,
             frame_build_ms: 0.0,
+            defer_stale_tlases: true,
             tlas_update: TlasUpdate::Auto,
             defrag: false,
             prefetch_keeps_frame: false,

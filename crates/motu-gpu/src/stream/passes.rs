@@ -110,12 +110,7 @@ impl<'a> StreamingRenderer<'a> {
                 later: demand.later().len() as u32,
                 later_deferred: demand.later_deferred(),
                 needed_camera: demand.needed_camera(),
-                open_closest: (extra
-                    .blockers
-                    .iter()
-                    .filter(|&&b| b != NONE_BLOCKER)
-                    .count()
-                    + waiting.len()) as u64,
+                open_closest: self.note_blockers(&extra.blockers, waiting.len()),
                 last_pass: last,
                 ..Default::default()
             };
@@ -269,18 +264,28 @@ impl<'a> StreamingRenderer<'a> {
     /// closest-hit ray waits for a structure still not resident. Such a ray stays open in any
     /// pass before that structure arrives (everything else built lies behind its entry), so
     /// its pixel would stay unfinished and write the same fallback: tracing it again is work
-    /// for nothing. Pixels that name none (secondary rays open) are traced again.
-    fn split_waiting(&self, incomplete: &[u32], blockers: &[u32]) -> (Vec<u32>, Vec<u32>) {
+    /// for nothing. So are pixels whose structure is resident under a TLAS still stale (a
+    /// frame with a build budget in ms; `piece_order.rs`): the stale proxy keeps their ray
+    /// open until that TLAS is rebuilt. Pixels that name none (secondary rays open) are
+    /// traced again.
+    fn split_waiting(&mut self, incomplete: &[u32], blockers: &[u32]) -> (Vec<u32>, Vec<u32>) {
         let mut retrace = Vec::with_capacity(incomplete.len());
         let mut waiting = Vec::new();
+        let mut stale = 0u64;
         for (i, &px) in incomplete.iter().enumerate() {
             let b = blockers.get(i).copied().unwrap_or(NONE_BLOCKER) as usize;
-            if b < self.view.blases.len() && !self.res.has_blas(b) {
+            if b >= self.view.blases.len() {
+                retrace.push(px);
+            } else if !self.res.has_blas(b) {
                 waiting.push(px);
+            } else if self.under_stale_tlas(b) {
+                waiting.push(px);
+                stale += 1;
             } else {
                 retrace.push(px);
             }
         }
+        self.frame.kept_mut().set_stale_waiting(stale);
         (retrace, waiting)
     }
 

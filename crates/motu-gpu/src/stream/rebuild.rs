@@ -145,9 +145,14 @@ impl<'a> StreamingRenderer<'a> {
     /// Meanwhile evictions (for a group's room or on a refused build) spare clean TLASes
     /// (`victims_sparing_clean_tlases`): a group's room does not dirty a group rebuilt before.
     pub(super) fn rebuild_dirty(&mut self) -> Result<()> {
+        self.rebuild_timed(|s| s.rebuild_while(|s| s.next_rebuild_group(|_| true)))
+    }
+
+    /// Runs TLAS rebuilds `f` timed (`tlas_ms`), as rebuilds (evictions spare clean TLASes).
+    pub(super) fn rebuild_timed(&mut self, f: impl FnOnce(&mut Self) -> Result<()>) -> Result<()> {
         let t0 = std::time::Instant::now();
         self.res.set_rebuilding(true);
-        let r = self.rebuild_dirty_untimed();
+        let r = f(self);
         self.res.set_rebuilding(false);
         let saved = self.tlases.compact_saved_bytes();
         let st = self.frame.stats_mut();
@@ -187,18 +192,21 @@ impl<'a> StreamingRenderer<'a> {
         Ok((need + need / 4).saturating_sub(old))
     }
 
-    fn rebuild_dirty_untimed(&mut self) -> Result<()> {
+    /// Rebuilds the groups `next` names (with the room each needs) until it names none.
+    pub(super) fn rebuild_while(
+        &mut self,
+        mut next: impl FnMut(&mut Self) -> Result<Option<(Vec<u32>, u64)>>,
+    ) -> Result<()> {
         // Each group's rebuild settles (or fails) on its own; evictions for one group may
         // dirty TLASes another group rebuilt, which the next round picks up.
         let mut rounds = 0usize;
-        while self.tlases.any_dirty() {
+        while let Some((group, need)) = next(self)? {
             rounds += 1;
             if rounds > 64 + 4 * (self.view.tlases.len() + self.item_count()) {
                 return Err(GpuError::InvalidRequest(
                     "streaming: TLAS rebuilds do not settle".into(),
                 ));
             }
-            let (group, need) = self.next_rebuild_group()?;
             self.rebuild_group(&group, need)?;
             self.frame.stats_mut().tlas_rebuild_groups += 1;
         }
@@ -215,19 +223,26 @@ impl<'a> StreamingRenderer<'a> {
     /// against 1.9 GB rebuilt at once, 2.6 passes and 1.2 s a frame against 3.5 passes and
     /// 4.5 s; BENCHMARKS.md, session 21). Small TLASes still share one batch (one submission,
     /// one instance buffer).
+    /// Of the dirty TLASes only those `which` takes; `None` when it takes none.
     /// Returns the group and the room its rebuilds need together.
-    fn next_rebuild_group(&self) -> Result<(Vec<u32>, u64)> {
+    pub(super) fn next_rebuild_group(
+        &self,
+        which: impl Fn(u32) -> bool,
+    ) -> Result<Option<(Vec<u32>, u64)>> {
         let counts = self.resident_instance_counts();
         let mut need: Vec<(u64, u32)> = Vec::with_capacity(self.tlases.dirty().len());
-        for &t in self.tlases.dirty() {
+        for &t in self.tlases.dirty().iter().filter(|&&t| which(t)) {
             need.push((self.tlas_rebuild_bytes(t, counts[t as usize])?, t));
         }
-        Ok(group_by_need(need, self.build_opts.budget_bytes))
+        if need.is_empty() {
+            return Ok(None);
+        }
+        Ok(Some(group_by_need(need, self.build_opts.budget_bytes)))
     }
 
     /// Rebuilds the TLASes of `group` that are dirty (see [`Self::rebuild_dirty`]); `need`: the
     /// room their rebuilds take ([`Self::next_rebuild_group`], all of them dirty when chosen).
-    fn rebuild_group(&mut self, group: &[u32], need: u64) -> Result<()> {
+    pub(super) fn rebuild_group(&mut self, group: &[u32], need: u64) -> Result<()> {
         let target = |s: &Self| -> Vec<u32> {
             group
                 .iter()
@@ -356,7 +371,7 @@ impl<'a> StreamingRenderer<'a> {
 /// Of dirty TLASes given as (room its rebuild needs, TLAS), those to rebuild together: the
 /// largest, then the next largest while the sum stays within that one's need or a 64th of
 /// `budget_bytes` (see `next_rebuild_group`); with the group's need summed.
-fn group_by_need(mut need: Vec<(u64, u32)>, budget_bytes: u64) -> (Vec<u32>, u64) {
+pub(super) fn group_by_need(mut need: Vec<(u64, u32)>, budget_bytes: u64) -> (Vec<u32>, u64) {
     // Largest first, ties by index (a stable order across runs).
     need.sort_by_key(|&(n, t)| (std::cmp::Reverse(n), t));
     let cap = need.first().map_or(0, |&(n, _)| n.max(budget_bytes / 64));

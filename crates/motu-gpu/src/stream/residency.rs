@@ -653,7 +653,8 @@ impl<'a> StreamingRenderer<'a> {
     /// After a failed build step, a TLAS left dirty (absent, or referencing evicted BLASes)
     /// must never be traced: every TLAS is part of the skeleton, so the renderer is poisoned.
     pub(super) fn quarantine_after_failure(&mut self, e: &GpuError) {
-        if self.tlases.any_dirty() {
+        // A stale TLAS (frames with a build budget in ms) is safe to trace (`piece_order.rs`).
+        if self.dirty_before_trace() {
             self.poisoned = Some(e.to_string());
         }
     }

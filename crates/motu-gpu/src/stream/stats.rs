@@ -15,6 +15,18 @@ pub struct FrameStreamStats {
     pub incomplete_pixels: u64,
     /// Of those, pixels shown by the fallback (`StreamOptions::fallback`): not exact.
     pub fallback_pixels: u64,
+    /// TLASes left *stale* after the frame (its prefetch included): dirty only because
+    /// BLASes under them were built, traced as they are (their proxies keep those BLASes'
+    /// rays open, on the fallback) and rebuilt by later frames within their build budget.
+    /// Only frames with a build budget in milliseconds leave any (`stream/piece_order.rs`);
+    /// a frame that leaves any is not `complete`.
+    pub tlas_pieces_stale: u32,
+    /// Of `incomplete_pixels`: those whose closest-hit ray waits for a BLAS that was resident
+    /// (its box met in a stale TLAS's proxy). Pixels open only for secondary rays name no
+    /// structure and are not counted here.
+    pub stale_blocked_pixels: u64,
+    /// Stale TLASes rebuilt by the frame's build steps within the budget (of `tlas_rebuilt`).
+    pub tlas_stale_rebuilt: u32,
     /// The frame stopped because its build budget (`frame_build_bytes`/`frame_build_ms`) was
     /// spent.
     pub build_budget_spent: bool,

@@ -4,11 +4,14 @@
 //! Invariants: after the start every TLAS is resident (TLASes are never evicted; one is
 //! absent only between a failed build and the caller's retry, never traced so); a TLAS is
 //! `dirty` when its instance records no longer match the resident BLASes (a BLAS of it was
-//! built, evicted or moved) and is rebuilt or updated before the next trace; a TLAS marked
+//! built, evicted or moved) and is rebuilt or updated before the next trace, except a
+//! *stale* one (dirty only because BLASes of it were built: `stale ⊆ dirty`), which a frame
+//! with a build budget may trace as it is (`piece_order.rs`): it references only resident
+//! BLASes, and its proxy still holds the new BLASes' boxes, so their rays stay open; a TLAS marked
 //! persistent in `persistent_mode` holds a [`Persistent`] once built, and leaves the mode for
 //! good when it does not fit (then it is rebuilt like the others).
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 
 use motu_vk::GpuHeap;
 
@@ -28,6 +31,10 @@ pub(super) struct Tlases {
     persistent_mode: Vec<bool>,
     /// Resident TLASes whose instance set changed since their build.
     dirty: BTreeSet<u32>,
+    /// Of `dirty`: those whose instance set only grew (BLASes built, none evicted or moved)
+    /// since their build, with the build step that first made them so (oldest first). Never
+    /// a persistent TLAS (its update is not split this way).
+    stale: BTreeMap<u32, u64>,
     /// The rebuilt TLASes' instance records kept on the GPU (`tlas_compact.rs`).
     records: KeptRecords,
     /// Per TLAS: the pass stamp of its last rebuild or update (a stamp is taken by every
@@ -43,6 +50,7 @@ impl Tlases {
             placeholders: Default::default(),
             persistent_mode: vec![false; count],
             dirty: BTreeSet::new(),
+            stale: BTreeMap::new(),
             records: KeptRecords::new(count),
             rebuilt_at: vec![None; count],
         }
@@ -107,6 +115,7 @@ impl Tlases {
                 g.release(heap);
             }
             self.dirty.insert(t as u32);
+            self.stale.remove(&(t as u32));
         }
         any
     }
@@ -131,12 +140,44 @@ impl Tlases {
         &self.dirty
     }
 
-    /// A BLAS under resident TLAS `t` came, went or moved: its records are stale. A TLAS not
-    /// resident is built over the resident BLASes anyway.
+    /// A BLAS under resident TLAS `t` went or moved: its records name a structure no longer
+    /// there, so it is rebuilt before any trace (a *must* rebuild, stale or not before). A
+    /// TLAS not resident is built over the resident BLASes anyway.
     pub fn instances_changed(&mut self, t: u32) {
         if self.tlas[t as usize].is_some() {
             self.dirty.insert(t);
+            self.stale.remove(&t);
         }
+    }
+
+    /// A BLAS under resident TLAS `t` was built (in build step `step`): a TLAS dirty by
+    /// nothing else becomes stale (safe to trace as it is; see the module docs). A persistent
+    /// TLAS becomes dirty as by [`Self::instances_changed`].
+    pub fn instances_added(&mut self, t: u32, step: u64) {
+        if self.tlas[t as usize].is_none() {
+            return;
+        }
+        if self.is_persistent(t) || self.persistent_mode[t as usize] {
+            self.instances_changed(t);
+        } else if self.dirty.insert(t) {
+            self.stale.insert(t, step);
+        }
+    }
+
+    /// Whether some TLAS is dirty and not stale (rebuilt before any trace, whatever the
+    /// frame's budget).
+    pub fn any_must(&self) -> bool {
+        self.dirty.len() > self.stale.len()
+    }
+
+    /// Whether dirty TLAS `t` is stale (may be traced as it is).
+    pub fn is_stale(&self, t: u32) -> bool {
+        self.stale.contains_key(&t)
+    }
+
+    /// The stale TLASes with the build step that made each stale, in TLAS order.
+    pub fn stale(&self) -> &BTreeMap<u32, u64> {
+        &self.stale
     }
 
     /// TLAS `t` is about to be rebuilt or updated: dirty until it is. A persistent TLAS keeps
@@ -166,7 +207,9 @@ impl Tlases {
             };
             (pair, storage)
         };
+        // Absent until swapped in: a must rebuild should this one fail.
         self.dirty.insert(t);
+        self.stale.remove(&t);
         Some(taken)
     }
 
@@ -193,6 +236,7 @@ impl Tlases {
             old.release(heap);
         }
         self.dirty.remove(&t);
+        self.stale.remove(&t);
     }
 
     /// TLAS `t` was rebuilt or updated at pass stamp `stamp`; returns whether it was already
@@ -212,6 +256,7 @@ impl Tlases {
             pair.release(heap);
         }
         self.dirty.remove(&t);
+        self.stale.remove(&t);
     }
 
     /// Bytes the TLASes, their proxies, marks and persistent parts, the placeholders and the

@@ -21,6 +21,7 @@ fn info() -> PanelInfo {
             passes: 4,
             streaming: Some((5, 2)),
             incomplete_pixels: 0,
+            tlas_pieces_stale: 0,
             lod_mode: "instance",
             stream_fit: None,
         },
@@ -204,4 +205,19 @@ fn a_streaming_budget_that_holds_the_scene_says_the_full_build_draws_it() {
         all.iter().any(|t| t == "full build (no streaming)"),
         "{all:?}"
     );
+}
+
+#[test]
+fn a_refining_frame_names_its_stale_tlas_pieces() {
+    let ctx = egui::Context::default();
+    let mut ctl = crate::testutil::controls();
+    let h = History::default();
+    let mut i = info();
+    i.stats.incomplete_pixels = 10;
+    i.stats.tlas_pieces_stale = 3;
+    let _ = ctx.run(input(vec![]), |c| build(c, &i, &h, &mut ctl));
+    let out = ctx.run(input(vec![]), |c| build(c, &i, &h, &mut ctl));
+    let all: Vec<String> = texts(&out.shapes).into_iter().map(|t| t.0).collect();
+    let want = "streaming: 4 passes, 5 built, 2 evicted, 10 px refining, 3 TLAS pieces stale";
+    assert!(all.iter().any(|t| t == want), "no {want:?} in {all:?}");
 }
