@@ -21,7 +21,8 @@ const MAIN_EVERYTHING: [(u64, u64, u64); 5] =
 const MAIN_QUARTER: [(u64, u64, u64); 5] =
     [(3, 56, 21), (2, 21, 11), (2, 8, 16), (2, 6, 13), (1, 0, 0)];
 /// Main's TLAS rebuilds per frame with `--stream-build-ms 0.001 --stream-fallback coarse` and
-/// room for everything (the same numbers in two runs).
+/// room for everything (the same numbers in two runs). Since a frame whose pixels wait on stale
+/// pieces rebuilds one stale group past its budget, fewer pieces stay stale while moving.
 const MAIN_MICROSECOND_TLAS_REBUILT: [u64; 5] = [4, 8, 10, 7, 10];
 
 fn per_frame(st: &serde_json::Value) -> Vec<(u64, u64, u64)> {
@@ -41,8 +42,11 @@ fn pieces_rebuild_as_before_without_a_budget_in_ms_and_may_stay_stale_with_one()
     let pkg = gen_island(d, None);
     let (peak, floor) = report_peak_and_floor(&pkg, SHAPE.width, SHAPE.height);
     let quarter = floor + (peak - floor) / 4;
-    let (everything, full) = pieces_path(&pkg, d, "everything", peak * 2, &[]);
-    let (at_quarter, q) = pieces_path(&pkg, d, "quarter", quarter, &[]);
+    // Main's numbers were recorded before TLAS storage got headroom (which changes what a
+    // quarter evicts): these runs turn it off, so they compare the rebuild scheduling alone.
+    let exact = ["--stream-tlas-headroom", "0"];
+    let (everything, full) = pieces_path(&pkg, d, "everything", peak * 2, &exact);
+    let (at_quarter, q) = pieces_path(&pkg, d, "quarter", quarter, &exact);
     eprintln!(
         "peak {peak}, floor {floor}: everything {:?}, quarter {:?}",
         per_frame(&everything),

@@ -65,7 +65,7 @@ impl<'a> StreamingRenderer<'a> {
     /// in milliseconds every must one, then stale ones (those the frame's camera sees first,
     /// then the oldest) while the budget holds, at least one group in a frame that built or
     /// restored no BLAS and rebuilt no stale TLAS yet (so a camera at rest reaches the
-    /// exact image). Evictions for their room make must rebuilds, done before the next
+    /// exact image) or whose pixels wait on stale TLASes (so a moving one refines). Evictions for their room make must rebuilds, done before the next
     /// stale one.
     pub(super) fn rebuild_step(&mut self) -> Result<()> {
         if !self.defers_stale_tlases() {
@@ -81,7 +81,11 @@ impl<'a> StreamingRenderer<'a> {
                 }
                 let st = s.frame.stats();
                 let progressed = st.blas_built + st.restored_blases + st.tlas_stale_rebuilt > 0;
-                if s.frame_build_spent() && progressed {
+                // While pixels wait on stale pieces, one stale group a frame even past the
+                // budget: else a moving camera, whose every frame spends its budget on BLASes,
+                // would see the new BLASes only once it stops (the fallback meanwhile).
+                let owed = st.tlas_stale_rebuilt == 0 && st.stale_blocked_pixels > 0;
+                if s.frame_build_spent() && progressed && !owed {
                     return Ok(None);
                 }
                 while next < order.len() && !s.tlases.is_stale(order[next]) {
