@@ -260,7 +260,8 @@ impl<'a> StreamingRenderer<'a> {
     /// secondary rays it would trace ahead of an open primary ray are lost when the pixel
     /// waits past the frame's build step (`split_waiting`; the carry starts afresh each frame),
     /// while a pixel whose structure arrives traces them in the next pass, as after a last
-    /// pass. Its open pixels, fallbacks and requests are what they would be.
+    /// pass. Its open pixels and fallbacks are what they would be; only the requests of those
+    /// secondary rays go, so what primary rays wait for leads the next step's needed list.
     fn frame_pass_flags(&self, last: bool) -> u32 {
         if self.refining_first_pass() {
             return STREAM_LAST_PASS | STREAM_NO_MARK_WALK;
