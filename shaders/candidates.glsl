@@ -48,10 +48,16 @@ void record_proxy(PiRecord r, vec3 org, vec3 dir, float t_min, float t_hi) {
     if (t_box < 0.0) {
         return;
     }
+    bool mark_walk = (pl.stream_start & STREAM_MARK_WALK) != 0u;
+    if (!mark_walk && t_box >= pl.open_t) {
+        // The first walk keeps only the nearest open entry, and no member of this box is
+        // entered before the box: its member tests (proxy_entry) would change nothing. An open
+        // ray's walk meets every box to its far end, most behind its nearest open one.
+        return;
+    }
     StreamParams s = StreamRef(push.stream).s;
     uint blas = r.target;
     bool guard = (pl.stream_start & STREAM_GUARD_RAY) != 0u;
-    bool mark_walk = (pl.stream_start & STREAM_MARK_WALK) != 0u;
     if (guard && !mark_walk) {
         return;  // a guard ray only marks, in its mark walk
     }

@@ -36,6 +36,9 @@ pub(super) struct Kept {
     /// Open pixels the running frame's passes left waiting (not traced again) because their
     /// blocker was resident under a stale TLAS (`stale_blocked_pixels`).
     stale_waiting: u64,
+    /// The last frame stopped with pixels open: under a frame build budget (a refining
+    /// frame), the running one most likely spends its budget in its first build step too.
+    pub(super) refining: bool,
 }
 
 impl Kept {
@@ -114,6 +117,17 @@ impl<'a> StreamingRenderer<'a> {
     /// Milliseconds built this frame, including the running step.
     fn frame_build_ms_now(&self) -> f64 {
         self.frame.stats().build_ms + self.frame.kept().step_ms_now()
+    }
+
+    /// Whether the running frame's first pass is a refining frame's (under a frame build
+    /// budget, the last frame stopped with pixels open): its marks would steer nothing. They name structures in
+    /// front of open rays' hits besides the nearest (`Demand::later`), which a step builds only
+    /// when few pixels are open and the budget is left after the needed ones, and the guard
+    /// band's prefetch, which runs only after a complete frame. The nearest open structure of
+    /// each open ray, what refines the image, is requested by its first walk, not its mark walk.
+    pub(super) fn refining_first_pass(&self) -> bool {
+        let budget = self.opts.frame_build_bytes > 0 || self.opts.frame_build_ms > 0.0;
+        budget && self.frame.kept().refining && self.frame.stats().passes <= 1
     }
 
     /// Whether this frame's build budget is spent.

@@ -195,6 +195,7 @@ impl FrameState {
     /// A new frame: its number, fresh statistics, its first stamp (the next pass's), no
     /// build clock yet.
     pub fn begin(&mut self) {
+        self.kept.refining = self.number > 0 && !self.stats.complete;
         self.number += 1;
         self.stats = FrameStreamStats {
             frame: self.number,

@@ -52,8 +52,8 @@ impl<'a> StreamingRenderer<'a> {
         let pixels = u64::from(w) * u64::from(h);
         let final_off = ReadbackLayout::new(self.view.blases.len(), pixels).final_off;
         let mut full_count = pixels as u32;
-        let mut list: Vec<u32> = guard.to_vec();
-        self.frame.stats_mut().guard_rays = guard.len() as u64;
+        let mut list: Vec<u32> = self.pass_one_guard(guard).to_vec();
+        self.frame.stats_mut().guard_rays = list.len() as u64;
         let mut guard_demand = Demand::default();
         let max_passes = self.frame_pass_cap();
         // The pass about to run is the frame's last (its cap, or the build budget spent).
@@ -250,12 +250,32 @@ impl<'a> StreamingRenderer<'a> {
 impl<'a> StreamingRenderer<'a> {
     /// The flags of a frame pass: its last (`last`) traces no secondary rays ahead of open
     /// primary rays; a last pass after which nothing is built (the build budget spent) takes
-    /// no mark walks, whose marks would steer nothing.
+    /// no mark walks, whose marks would steer nothing. A refining frame's first pass
+    /// (`refining_first_pass`) takes neither: its marks would steer nothing either, and the
+    /// secondary rays it would trace ahead of an open primary ray are lost when the pixel
+    /// waits past the frame's build step (`split_waiting`; the carry starts afresh each frame),
+    /// while a pixel whose structure arrives traces them in the next pass, as after a last
+    /// pass. Its open pixels and fallbacks are what they would be; only the requests of those
+    /// secondary rays go, so what primary rays wait for leads the next step's needed list.
     fn frame_pass_flags(&self, last: bool) -> u32 {
+        if self.refining_first_pass() {
+            return STREAM_LAST_PASS | STREAM_NO_MARK_WALK;
+        }
         match (last, last && self.frame_build_spent()) {
             (true, true) => STREAM_LAST_PASS | STREAM_NO_MARK_WALK,
             (true, false) => STREAM_LAST_PASS,
             _ => 0,
+        }
+    }
+
+    /// The guard band pass 1 traces: none in a refining frame (`refining_first_pass`), whose
+    /// guard rays would only mark (for the prefetch after a complete frame), in mark walks it
+    /// does not take.
+    fn pass_one_guard<'g>(&self, guard: &'g [u32]) -> &'g [u32] {
+        if self.refining_first_pass() {
+            &[]
+        } else {
+            guard
         }
     }
 

@@ -783,10 +783,23 @@ fn a_refining_frames_last_pass_traces_only_pixels_whose_structures_arrived() {
     for progressive in [false, true] {
         let mut sr = streamer(&ctx, &h, &refining_options(&full));
         let (mut left_waiting, mut marked_walks) = (0u64, 0u64);
-        let mut last = None;
+        let mut last: Option<(RenderOutput, FrameStreamStats)> = None;
+        let mut refining_frames = 0u32;
         for _ in 0..200 {
             let (out, st) = refine(&mut sr, progressive, &cam, &opts);
             assert_eq!(st.passes as usize, st.pass_log.len(), "{st:?}");
+            if last.as_ref().is_some_and(|(_, prev)| !prev.complete) {
+                // A refining frame (the last one left pixels open): its first pass takes no
+                // mark walk and no guard ray, and traces no secondary ray ahead of an open
+                // primary ray (their work was lost when the pixel waits past the build step).
+                let p = &st.pass_log[0];
+                assert_eq!((p.mark_walks, st.guard_rays), (0, 0), "{st:?}");
+                assert!(
+                    p.secondary_rays <= per_pixel * (p.traced - p.open_closest),
+                    "{p:?}"
+                );
+                refining_frames += 1;
+            }
             let final_pass = st.pass_log.last().expect("a pass");
             assert!(final_pass.tlas_walks > 0, "{st:?}");
             if !st.complete {
@@ -832,6 +845,7 @@ fn a_refining_frames_last_pass_traces_only_pixels_whose_structures_arrived() {
             assert!(left_waiting > 0, "no pixel was left waiting");
         }
         assert!(marked_walks > 0);
+        assert!(refining_frames > 0, "no refining frame");
         let (out, st) = last.expect("a frame");
         assert!(
             st.complete && st.fallback_pixels == 0,
