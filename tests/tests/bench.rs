@@ -222,8 +222,17 @@ fn bench_stream_passes_one_measures_the_viewers_flying_mode() {
     assert_eq!(b["next_camera"], "extrapolated", "{b}");
     let rows = b["per_frame"].as_array().expect("per_frame");
     assert_eq!(rows.len(), 4 + still, "{b}");
-    for r in rows {
-        assert_eq!(r["passes"], 1, "one pass a frame: {r}");
+    // One pass a frame while moving, and at rest (from the path's last frame, its pose) until
+    // two frames there were incomplete (then a still camera settles: `render_progressive`,
+    // tests/tests/stream_settle.rs).
+    let mut still_incomplete = 0;
+    for (f, r) in rows.iter().enumerate() {
+        if f < 3 || still_incomplete < 2 {
+            assert_eq!(r["passes"], 1, "one pass a frame: {r}");
+        }
+        if f >= 3 && r["complete"] != true {
+            still_incomplete += 1;
+        }
         for k in PHASE_KEYS {
             assert!(r[k].is_number(), "{k}: {r}");
         }

@@ -39,6 +39,13 @@ pub(super) struct Kept {
     /// The last frame stopped with pixels open: under a frame build budget (a refining
     /// frame), the running one most likely spends its budget in its first build step too.
     pub(super) refining: bool,
+    /// The last progressive frame's camera, and how many progressive frames there were
+    /// incomplete since it came there ([`StreamingRenderer::render_progressive`]).
+    progressive_camera: Option<CameraParams>,
+    still_incomplete: u32,
+    /// The running frame settles a camera at rest: no frame build budget, so it takes passes
+    /// until complete ([`StreamingRenderer::render_progressive`]).
+    settling: bool,
 }
 
 impl Kept {
@@ -85,15 +92,44 @@ impl<'a> StreamingRenderer<'a> {
     /// magenta), then one build step for what they need, within the frame's build budget
     /// (`frame_build_bytes`/`frame_build_ms`). The next call traces with what was built, so a
     /// viewer stays responsive and the image refines over frames; a frame is exact when
-    /// [`FrameStreamStats::complete`].
+    /// [`FrameStreamStats::complete`]. A camera at rest settles: after
+    /// [`StreamOptions::settle_after_still_frames`](super::StreamOptions::settle_after_still_frames)
+    /// incomplete frames at the same camera, each further one
+    /// there takes passes until complete, without the frame build budget (until the camera
+    /// moves), so a still view reaches the exact image and stays there even where one pass a
+    /// frame, or a budget a frame, would churn.
     pub fn render_progressive(
         &mut self,
         camera: &CameraParams,
         opts: &RenderOptions,
     ) -> Result<(RenderOutput, FrameStreamStats)> {
-        self.frame.kept_mut().pass_cap = Some(1);
+        // A settling frame's cap: the options' when above one, else the automatic one (the
+        // viewer's flying mode sets one pass in its options).
+        let settle_cap = match self.opts.max_passes {
+            n if n > 1 => n,
+            _ => (self.topo.buildable_count() as u32)
+                .saturating_mul(4)
+                .saturating_add(16),
+        };
+        let after = self.opts.settle_after_still_frames;
+        let k = self.frame.kept_mut();
+        let still = k.progressive_camera.as_ref() == Some(camera);
+        if !still {
+            k.still_incomplete = 0;
+        }
+        let settle = still && after > 0 && k.still_incomplete >= after;
+        k.pass_cap = Some(if settle { settle_cap } else { 1 });
+        k.settling = settle;
+        k.progressive_camera = Some(*camera);
         let r = self.render_frame(camera, opts);
-        self.frame.kept_mut().pass_cap = None;
+        let k = self.frame.kept_mut();
+        k.pass_cap = None;
+        k.settling = false;
+        // Counted until the camera moves (a complete frame does not reset it): once settled,
+        // a still view stays exact instead of going back to one pass and churning again.
+        if matches!(&r, Ok((_, st)) if !st.complete) {
+            k.still_incomplete += 1;
+        }
         r
     }
 
@@ -126,22 +162,32 @@ impl<'a> StreamingRenderer<'a> {
     /// band's prefetch, which runs only after a complete frame. The nearest open structure of
     /// each open ray, what refines the image, is requested by its first walk, not its mark walk.
     pub(super) fn refining_first_pass(&self) -> bool {
-        let budget = self.opts.frame_build_bytes > 0 || self.opts.frame_build_ms > 0.0;
+        let (bytes, ms) = self.frame_budget();
+        let budget = bytes > 0 || ms > 0.0;
         budget && self.frame.kept().refining && self.frame.stats().passes <= 1
     }
 
     /// Whether this frame's build budget is spent.
     pub(super) fn frame_build_spent(&self) -> bool {
-        let o = &self.opts;
-        (o.frame_build_bytes > 0 && self.frame.stats().built_bytes >= o.frame_build_bytes)
-            || (o.frame_build_ms > 0.0 && self.frame_build_ms_now() >= o.frame_build_ms)
+        let (bytes, ms) = self.frame_budget();
+        (bytes > 0 && self.frame.stats().built_bytes >= bytes)
+            || (ms > 0.0 && self.frame_build_ms_now() >= ms)
+    }
+
+    /// The running frame's build budget, bytes and milliseconds (0: none): the options', or
+    /// none while a camera at rest settles.
+    pub(super) fn frame_budget(&self) -> (u64, f64) {
+        if self.frame.kept().settling {
+            return (0, 0.0);
+        }
+        (self.opts.frame_build_bytes, self.opts.frame_build_ms)
     }
 
     /// How many BLASes of `queue` (from its start, at most `max`) fit in what is left of the
     /// frame's byte budget by estimate (meshes plus ~64 bytes of structure per triangle); at
     /// least one.
     pub(super) fn group_within_frame_budget(&self, queue: &[u32], max: usize) -> usize {
-        let budget = self.opts.frame_build_bytes;
+        let budget = self.frame_budget().0;
         if budget == 0 {
             return max.min(queue.len());
         }

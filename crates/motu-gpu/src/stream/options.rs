@@ -149,6 +149,12 @@ pub struct StreamOptions {
     /// less is rebuilt into the same storage next time instead of a new allocation. Taken only
     /// where the budget has room for it, so it never refuses a rebuild.
     pub tlas_headroom: f64,
+    /// Progressive frames at one camera left incomplete before the next ones there take
+    /// passes until complete without the frame build budget (`render_progressive`; 0: never,
+    /// for tests of the refinement itself). One pass a frame can churn at rest, each build
+    /// step evicting what the next frame's pass needs: ¼ of the default island at 64×36 never
+    /// completed in 8 still frames, flickering between 11 and 592 fallback pixels.
+    pub settle_after_still_frames: u32,
 }
 
 /// [`StreamOptions::tlas_headroom`]'s default: pieces at a quarter of island 0.3 grow by a few
@@ -356,6 +362,7 @@ impl Default for StreamOptions {
             tlas_build: motu_vk::TlasBuild::FastTrace,
             tlas_compact: false,
             tlas_headroom: DEFAULT_TLAS_HEADROOM,
+            settle_after_still_frames: 2,
         }
     }
 }

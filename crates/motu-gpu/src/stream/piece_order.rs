@@ -27,7 +27,7 @@ impl<'a> StreamingRenderer<'a> {
     /// Whether this frame may trace stale TLASes (a frame build budget in milliseconds, and
     /// `StreamOptions::defer_stale_tlases`).
     pub(super) fn defers_stale_tlases(&self) -> bool {
-        self.opts.frame_build_ms > 0.0 && self.opts.defer_stale_tlases
+        self.frame_budget().1 > 0.0 && self.opts.defer_stale_tlases
     }
 
     /// BLAS `b` was built: its resident parents' instance sets grew (stale, see the module).

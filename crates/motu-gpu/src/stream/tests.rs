@@ -356,6 +356,8 @@ fn refining_options(full: &GpuScene) -> StreamOptions {
         budget_bytes: full_build_needs(full) / 2,
         fallback: crate::StreamFallback::Coarse,
         frame_build_bytes: 64 * 1024,
+        // These tests follow the refinement frame by frame at a camera at rest.
+        settle_after_still_frames: 0,
         ..Default::default()
     }
 }
@@ -1821,6 +1823,7 @@ fn stale_tlases_wait_for_the_frame_build_budget_and_a_camera_at_rest_converges()
             fallback: crate::StreamFallback::Coarse,
             frame_build_ms: 1e-3,
             defer_stale_tlases: defer,
+            settle_after_still_frames: 0,
             ..Default::default()
         };
         let mut sr = streamer(&ctx, &h, &o);
