@@ -150,14 +150,7 @@ pub fn gen_forest(dir: &Path, flags: &[&str]) -> PathBuf {
 /// as a camera-path pose, its eye moved `dolly` of the way toward the `LookAt` target (0: the
 /// camera itself).
 pub fn shot_cam_pose(dir: &Path, dolly: f64) -> serde_json::Value {
-    let cam = std::fs::read_to_string(dir.join("island/cameras/shotCam.pbrt")).expect("shotCam");
-    let nums: Vec<f64> = cam
-        .split_whitespace()
-        .skip_while(|t| *t != "LookAt")
-        .skip(1)
-        .take(9)
-        .map(|t| t.parse().expect("LookAt number"))
-        .collect();
+    let (cam, nums) = island_camera(dir, "shotCam");
     let fov: f64 = cam
         .split("\"float fov\" [")
         .nth(1)
@@ -173,6 +166,34 @@ pub fn shot_cam_pose(dir: &Path, dolly: f64) -> serde_json::Value {
         "up": &nums[6..9],
         "fov_deg": fov,
     })
+}
+
+/// The generated island's camera `name` (DIR/island/cameras/NAME.pbrt): its text and the nine
+/// numbers of its `LookAt` (eye, target, up).
+pub fn island_camera(dir: &Path, name: &str) -> (String, Vec<f64>) {
+    let cam = std::fs::read_to_string(dir.join(format!("island/cameras/{name}.pbrt")))
+        .unwrap_or_else(|e| panic!("{name}: {e}"));
+    let nums = cam
+        .split_whitespace()
+        .skip_while(|t| *t != "LookAt")
+        .skip(1)
+        .take(9)
+        .map(|t| t.parse().expect("LookAt number"))
+        .collect();
+    (cam, nums)
+}
+
+/// A 64×36 camera path over the generated island in DIR: `shotCam`, then its eye `dolly` of
+/// the way toward its target ([`shot_cam_pose`]), written to DIR/dolly.json.
+pub fn shot_cam_dolly_path(dir: &Path, dolly: f64) -> PathBuf {
+    let file = serde_json::json!({
+        "format": "motu-camera-path", "version": 1, "width": 64, "height": 36,
+        "frames": [shot_cam_pose(dir, 0.0), shot_cam_pose(dir, dolly)],
+    });
+    let p = dir.join("dolly.json");
+    std::fs::write(&p, serde_json::to_string_pretty(&file).expect("path JSON"))
+        .expect("dolly.json");
+    p
 }
 
 /// `motu report --json` of `pkg` for a `width` × `height` image.

@@ -147,13 +147,7 @@ fn bench_gpu_plan_is_the_thesis_suite() {
 /// A camera path over the generated island: `shotCam`, then its eye a fifth of the way toward
 /// its target (a dolly), at 64×36.
 fn dolly_path(dir: &std::path::Path) -> std::path::PathBuf {
-    let file = serde_json::json!({
-        "format": "motu-camera-path", "version": 1, "width": 64, "height": 36,
-        "frames": [motu_tests::shot_cam_pose(dir, 0.0), motu_tests::shot_cam_pose(dir, 0.2)],
-    });
-    let p = dir.join("dolly.json");
-    std::fs::write(&p, serde_json::to_string_pretty(&file).unwrap()).unwrap();
-    p
+    motu_tests::shot_cam_dolly_path(dir, 0.2)
 }
 
 /// The per-frame keys of a streaming flight that say where a frame's time went (issue 45.6).

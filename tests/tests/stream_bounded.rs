@@ -502,14 +502,7 @@ fn streamed_frame_equals_the_full_build(
 /// The palmsCam pose of the generated island, turned by `yaw_deg` about its up vector, as a
 /// camera-path pose.
 fn palms_pose(d: &Path, yaw_deg: f64) -> serde_json::Value {
-    let cam = std::fs::read_to_string(d.join("island/cameras/palmsCam.pbrt")).expect("palmsCam");
-    let n: Vec<f64> = cam
-        .split_whitespace()
-        .skip_while(|t| *t != "LookAt")
-        .skip(1)
-        .take(9)
-        .map(|t| t.parse().expect("LookAt number"))
-        .collect();
+    let (_, n) = motu_tests::island_camera(d, "palmsCam");
     let f: Vec<f64> = (0..3).map(|i| n[3 + i] - n[i]).collect();
     let len = f.iter().map(|v| v * v).sum::<f64>().sqrt();
     let f: Vec<f64> = f.iter().map(|v| v / len).collect();

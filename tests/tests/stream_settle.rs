@@ -7,7 +7,9 @@
 //! frame build budget; the frames before stay at one pass, and once complete every later still
 //! frame is.
 
-use motu_tests::{gpu_island, json_u64 as u, motu_json, report_peak_and_floor, s, shot_cam_pose};
+use motu_tests::{
+    gpu_island, json_u64 as u, motu_json, report_peak_and_floor, s, shot_cam_dolly_path,
+};
 
 #[test]
 fn a_still_camera_settles_to_the_exact_image_where_one_pass_a_frame_churns() {
@@ -15,12 +17,7 @@ fn a_still_camera_settles_to_the_exact_image_where_one_pass_a_frame_churns() {
         return;
     };
     let d = dir.path();
-    let path = d.join("dolly.json");
-    let file = serde_json::json!({
-        "format": "motu-camera-path", "version": 1, "width": 64, "height": 36,
-        "frames": [shot_cam_pose(d, 0.0), shot_cam_pose(d, 0.3)],
-    });
-    std::fs::write(&path, serde_json::to_string_pretty(&file).unwrap()).unwrap();
+    let path = shot_cam_dolly_path(d, 0.3);
     let (peak, floor) = report_peak_and_floor(&pkg, "64", "36");
     let budget = (peak / 4).to_string();
     assert!(

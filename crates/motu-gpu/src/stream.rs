@@ -349,6 +349,11 @@ impl<'a> StreamingRenderer<'a> {
         if self.opts.max_passes > 0 {
             return self.opts.max_passes;
         }
+        self.automatic_pass_cap()
+    }
+
+    /// The pass cap when the options set none: four passes a streamed BLAS, plus 16.
+    pub(super) fn automatic_pass_cap(&self) -> u32 {
         let n = self.topo.buildable_count() as u32;
         n.saturating_mul(4).saturating_add(16)
     }

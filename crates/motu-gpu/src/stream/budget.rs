@@ -107,9 +107,7 @@ impl<'a> StreamingRenderer<'a> {
         // viewer's flying mode sets one pass in its options).
         let settle_cap = match self.opts.max_passes {
             n if n > 1 => n,
-            _ => (self.topo.buildable_count() as u32)
-                .saturating_mul(4)
-                .saturating_add(16),
+            _ => self.automatic_pass_cap(),
         };
         let after = self.opts.settle_after_still_frames;
         let k = self.frame.kept_mut();
