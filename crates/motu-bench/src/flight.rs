@@ -47,8 +47,8 @@ pub enum NextCamera {
     #[default]
     Path,
     /// The viewer's guess (`motu view`): the camera one more step along the motion from the
-    /// previous frame's (`CameraParams::extrapolated_from`); none on the first frame and
-    /// while the camera stays where it was.
+    /// previous frame's (`CameraParams::extrapolated_from`, the camera itself at rest); none on the first frame, the camera
+    /// itself while it stays where it was.
     Extrapolated,
 }
 
@@ -285,14 +285,10 @@ fn run_streaming(
     for (f, cam) in cams.iter().enumerate() {
         let t0 = std::time::Instant::now();
         // Each frame ends with a probe of the camera it names as the next one (prefetch): the
-        // path's next pose, or the viewer's extrapolation of the motion (none while still).
+        // path's next pose, or the viewer's extrapolation of the motion (the camera itself while still).
         let next = match a.next_camera {
             NextCamera::Path => cams.get(f + 1).copied(),
-            NextCamera::Extrapolated => f
-                .checked_sub(1)
-                .map(|p| cams[p])
-                .filter(|p| p != cam)
-                .map(|p| cam.extrapolated_from(&p)),
+            NextCamera::Extrapolated => f.checked_sub(1).map(|p| cam.extrapolated_from(&cams[p])),
         };
         sr.set_next_camera(next);
         let (out, st) = frame(&mut sr, cam).map_err(|source| BenchError::GpuFrame {

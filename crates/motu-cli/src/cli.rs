@@ -541,7 +541,7 @@ pub struct BenchArgs {
     pub stream_passes: Option<u32>,
     /// With --camera-path --stream: the camera each frame probes and prefetches for. `path`
     /// (default): the path's next pose; `extrapolated`: the viewer's guess, one more step along
-    /// the motion from the previous frame (none on the first frame or while still).
+    /// the motion from the previous frame (none on the first frame, itself while still).
     #[arg(long, value_enum, value_name = "WHICH", requires = "camera_path")]
     pub next_camera: Option<NextCameraArg>,
     /// With --camera-path --stream: render the path's last pose K more times (a camera come to

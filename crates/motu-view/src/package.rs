@@ -427,9 +427,10 @@ impl<'p> PackageSource<'p> {
                 })
             }
             Renderer::Stream(Some(sr)) => {
-                // A moving camera is probed where it is heading (one more step alike).
-                let moving = self.prev_camera.filter(|p| p != camera);
-                sr.set_next_camera(moving.map(|p| camera.extrapolated_from(&p)));
+                // A moving camera is probed where it is heading (one more step alike); one at
+                // rest names itself, so a frame that left resident all it saw skips the probe
+                // and one that did not prefetches what this camera needs.
+                sr.set_next_camera(self.prev_camera.map(|p| camera.extrapolated_from(&p)));
                 self.prev_camera = Some(*camera);
                 let (out, st) = if progressive {
                     // Trace with what is resident, build toward the next frame (bounded).

@@ -335,9 +335,10 @@ impl<'a> StreamingRenderer<'a> {
         let last = std::mem::take(&mut self.frame.last_frame);
         let result = self.run_passes(&fb, w, h, &guard).and_then(|image| {
             self.settle_stale_after_passes()?;
-            // A camera at rest after a one-pass frame: its next frame needs what this one had
-            // resident at once, so a probe would only find it again.
-            let still = next == Some(*camera) && self.frame.stats.passes == 1;
+            // A camera at rest whose frame left resident all it saw (one pass, or no eviction
+            // of what it saw): the probe's primary rays would only find it again.
+            let still = next == Some(*camera)
+                && (self.frame.stats.passes == 1 || self.seen_evicted_in_frame() == 0);
             self.frame.stats.probe_skipped_still = still;
             // The probe of the next frame's camera (its buffers are this frame's: same size).
             let probe = match next.filter(|_| !still) {

@@ -59,8 +59,9 @@ pub struct FrameStreamStats {
     /// and the probe's trace time (not in `trace_ms`).
     pub probe_rays: u64,
     pub probe_ms: f64,
-    /// The next frame's camera was this frame's and the frame took one pass (all it needed
-    /// resident at once), so the probe, which could only meet what this frame met, was skipped.
+    /// The next frame's camera was this frame's and all the frame saw is still resident (it
+    /// took one pass, or no later pass evicted what an earlier one saw), so the probe, which
+    /// could only meet what this frame met, was skipped.
     pub probe_skipped_still: bool,
     /// Probe rounds run after this frame (`StreamOptions::probe_rounds`): the first probes
     /// the next camera's pixels, each later one only the pixels the round before left open,

@@ -1472,8 +1472,8 @@ fn drained_blocks_free_budget_and_the_next_frame_is_unchanged() {
     assert_no_validation_errors(&ctx);
 }
 
-/// A camera at rest (the next frame's camera is this frame's) after a one-pass frame skips the
-/// probe of the next camera: it could only meet what the frame had resident. A moved camera
+/// A camera at rest (the next frame's camera is this frame's) whose frame left resident all it
+/// saw skips the probe of the next camera: it could only meet what the frame had resident. A moved camera
 /// is probed, and the frames at rest still equal the full build.
 #[test]
 fn a_camera_at_rest_skips_the_next_camera_probe() {
@@ -1494,8 +1494,13 @@ fn a_camera_at_rest_skips_the_next_camera_probe() {
         assert_same_aov(&reference.aov, &out.aov, "a frame at rest");
         stats.push(st);
     }
-    // The first frame builds (several passes are possible); once everything is resident the
-    // camera at rest takes one pass and skips its probe; the moved camera is probed.
+    // The cold first frame builds between passes; the budget evicts nothing it saw, so the
+    // probe of the same camera is skipped there too. Once everything is resident the camera at
+    // rest takes one pass and skips its probe; the moved camera is probed.
+    let cold = &stats[0];
+    assert!(cold.passes > 1 && cold.evicted == 0, "{cold:?}");
+    assert!(cold.probe_skipped_still, "{cold:?}");
+    assert_eq!(cold.probe_rays, 0, "{cold:?}");
     let at_rest = &stats[1];
     assert_eq!(at_rest.passes, 1, "{at_rest:?}");
     assert!(at_rest.probe_skipped_still, "{at_rest:?}");

@@ -35,6 +35,14 @@ impl<'a> StreamingRenderer<'a> {
             .sum();
     }
 
+    /// BLASes this frame's rays saw that are no longer resident (evicted by a later pass).
+    pub(super) fn seen_evicted_in_frame(&self) -> usize {
+        let frame = self.frame.number();
+        (self.res.used_in_frame().iter().zip(self.res.blases()))
+            .filter(|(&f, a)| f == frame && a.is_none())
+            .count()
+    }
+
     /// The frame's residency statistics, from the allocator's `report` now. Resident bytes
     /// are split once: streamed BLASes and their meshes (what the room is for) beside the
     /// skeleton's BLASes and TLASes.
