@@ -23,17 +23,7 @@ WORK=${STREAM_WORK:-$ROOT/target/motu-stream}
 NAME=stream-device
 . "$ROOT/tools/device-env.sh"
 
-PKG=$WORK/island-$S.motu
-if [ ! -f "$PKG" ]; then
-    step "gen island --scale $S; import (default flags)"
-    "$MOTU" gen island --scale "$S" -o "$WORK/island-$S" --force >/dev/null || die "gen failed"
-    /usr/bin/time -v "$MOTU" import "$WORK/island-$S/scene.pbrt" -o "$PKG" 2>"$OUT/import.time" >/dev/null ||
-        die "import failed"
-fi
-"$MOTU" report "$PKG" --json --width "$W" --height "$H" >"$OUT/report.json" || die "report failed"
-PEAK=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['variants'][0]['cost']['peak_bytes'])" "$OUT/report.json")
-BUDGET=$((PEAK / FRACTION))
-step "peak $PEAK B, budget $BUDGET B (1/$FRACTION)"
+. "$ROOT/tools/device-scene.sh"
 
 render() {
     "$MOTU" render "$PKG" -o "$WORK/$1.png" --backend pipeline --width "$W" --height "$H" "${@:2}"
