@@ -101,26 +101,27 @@ fn open_rays_test_no_proxy_members_behind_their_nearest_open_entry() {
         }
         let (t_off, t_on) = (member_tests(&off), member_tests(&on));
         eprintln!("{be}: [member tests, open, traced, mark walks] per pass, unbounded {t_off:?}, bounded {t_on:?}");
-        // Mark walks skip BLASes other rays marked already (timing-dependent); first walks
-        // test the same boxes in the same order run after run.
+        // Mark walks skip BLASes other rays marked already (timing: a few tests either way);
+        // first walks test the same boxes in the same order run after run.
+        let slack = |p: &[u64; 4]| if p[3] > 0 { p[0] / 1000 } else { 0 };
         assert!(
             t_on.iter()
                 .zip(&t_off)
-                .all(|(a, b)| b[3] > 0 || a[0] <= b[0]),
+                .all(|(a, b)| a[0] <= b[0] + slack(b)),
             "{be}: never more member tests"
         );
-        // Passes with a quarter or more of their pixels open are where the bound cuts.
+        // Passes with an eighth or more of their pixels open are where the bound cuts.
         let open =
-            |t: &[[u64; 4]]| -> u64 { t.iter().filter(|p| 4 * p[1] >= p[2]).map(|p| p[0]).sum() };
+            |t: &[[u64; 4]]| -> u64 { t.iter().filter(|p| 8 * p[1] >= p[2]).map(|p| p[0]).sum() };
         let (o_off, o_on) = (open(&t_off), open(&t_on));
         assert!(o_off > 0, "{be}: such passes, counted");
-        eprintln!("{be}: member tests of passes with a quarter open {o_off} -> {o_on}");
-        // Lavapipe, frames 1-6: pipeline -27%; the query backend's walk always read the
-        // payload's bound, and its rays here walk one TLAS each.
-        let at_most = if be == "pipeline" { 85 } else { 100 };
+        eprintln!("{be}: member tests of passes with an eighth open {o_off} -> {o_on}");
+        // Lavapipe: pipeline -20% (1,205,235 -> 967,187 over two passes); the query backend's
+        // walk always read the payload's bound, and its rays here walk one TLAS each.
+        let at_most = if be == "pipeline" { 850 } else { 1001 };
         assert!(
-            o_on * 100 <= o_off * at_most,
-            "{be}: {o_off} -> {o_on} member tests (at most {at_most}%)"
+            o_on * 1000 <= o_off * at_most,
+            "{be}: {o_off} -> {o_on} member tests (at most {at_most}‰)"
         );
     }
 }
