@@ -69,8 +69,7 @@ fn a_frame_clock_out_of_time_builds_one_blas_a_frame_and_the_camera_settles_at_r
     // Moving, and at rest until the camera settles (two incomplete frames at the pose the
     // still frames repeat, the path's last one included): one pass, at most one BLAS, every
     // open pixel on the fallback and none complete with one open.
-    let settles_at = frames
-        - 1
+    let settles_at = frames - 1
         + summary[frames - 1..]
             .iter()
             .scan(0, |incomplete, f| {
