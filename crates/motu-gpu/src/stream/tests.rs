@@ -859,6 +859,65 @@ fn a_frame_clock_builds_one_blas_a_frame_and_a_camera_at_rest_converges() {
     assert_no_validation_errors(&ctx);
 }
 
+/// notes/flight.md D6 (in part): on the clock, a complete frame probes the next camera only
+/// when a probe round fits: with counts as `FrameCaps::probe` says, and never on a clock out of
+/// time (a microsecond); off the clock it probes as before.
+#[test]
+fn a_complete_frame_on_the_clock_probes_only_when_a_round_fits() {
+    let Some(Fixture { ctx, h, full }) = Fixture::new("stream_clock_probe", field(4, 6, 12))
+    else {
+        return;
+    };
+    let opts = ids_opts(backend(&ctx));
+    let cam = camera_path(&base_pose(), &SWEEP, 0, 4).params(SIZE, SIZE);
+    let moved = camera_path(&base_pose(), &SWEEP, 2, 4).params(SIZE, SIZE);
+    let reference = render(&ctx, &full, &cam, &opts).expect("full render");
+    // The first complete progressive frame at `cam` with `moved` named next.
+    let first_complete = |o: StreamOptions| {
+        let o = StreamOptions {
+            frame_ms: o.frame_ms,
+            frame_caps: o.frame_caps,
+            settle_after_still_frames: 0,
+            ..small_stream_options(full_build_needs(&full) * 2)
+        };
+        let mut sr = streamer(&ctx, &h, &o);
+        for _ in 0..200 {
+            sr.set_next_camera(Some(moved));
+            let (out, st) = sr.render_progressive(&cam, &opts).expect("frame");
+            if st.complete {
+                assert_same_aov(&reference.aov, &out.aov, "a complete frame");
+                return st;
+            }
+        }
+        panic!("never complete");
+    };
+    let caps = |probe| StreamOptions {
+        frame_caps: Some(crate::FrameCaps {
+            blases: 1000,
+            pieces: 1000,
+            probe,
+        }),
+        ..Default::default()
+    };
+    let off = first_complete(StreamOptions::default());
+    let allowed = first_complete(caps(true));
+    let refused = first_complete(caps(false));
+    let timed = first_complete(StreamOptions {
+        frame_ms: 1e-3,
+        ..Default::default()
+    });
+    for (what, st, probed) in [
+        ("off the clock", &off, true),
+        ("caps with the probe", &allowed, true),
+        ("caps without it", &refused, false),
+        ("out of time", &timed, false),
+    ] {
+        assert!(!st.probe_skipped_still, "{what}: {st:?}");
+        assert_eq!(st.probe_rays > 0, probed, "{what}: {st:?}");
+    }
+    assert_no_validation_errors(&ctx);
+}
+
 /// The clock's estimates steer nothing off the clock: a renderer whose estimates say every
 /// build, piece and tail takes hours renders a frame build budget's frames (bytes; progressive
 /// and whole frames) with the same per-frame counts as a fresh one.
