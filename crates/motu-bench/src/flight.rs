@@ -380,6 +380,7 @@ fn run_streaming(
         "max_passes": opts.max_passes,
         "frame_build_ms": opts.frame_build_ms,
         "frame_build_bytes": opts.frame_build_bytes,
+        "frame_ms": opts.frame_ms,
         "next_camera": a.next_camera.name(),
         // Of the path's frames after the first (the cold start): what a flight's frames cost.
         "median_wall_ms_after_first": percentile(&wall_after_first, 0.5),
@@ -455,10 +456,7 @@ fn opts_with_passes(a: &FlightOptions) -> motu_gpu::StreamOptions {
     let b = &a.stream_bounds;
     motu_gpu::StreamOptions {
         max_passes: a.stream_passes.unwrap_or(o.max_passes),
-        frame_build_ms: if a.stream_passes == Some(1)
-            && b.frame_build_bytes.is_none()
-            && b.frame_build_ms.is_none()
-        {
+        frame_build_ms: if a.stream_passes == Some(1) && b.build_unbounded() {
             motu_render::INTERACTIVE_BUILD_MS
         } else {
             o.frame_build_ms

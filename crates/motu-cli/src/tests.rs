@@ -98,6 +98,24 @@ fn render_library_defaults_are_the_render_flags_defaults() {
     assert_eq!(o.fallback, motu_gpu::StreamFallback::Coarse);
     assert_eq!(o.frame_build_bytes, 1 << 20);
     assert_eq!(o.frame_build_ms, 2.5);
+    assert_eq!(o.frame_ms, 0.0);
+    // The whole-frame clock: a positive number of milliseconds.
+    let a = render_args(&["--stream-frame-ms", "50"]);
+    let b = cmd::render::stream_bounds(&a.stream_bounds);
+    assert!(b.given());
+    assert_eq!(b.options().frame_ms, 50.0);
+    for bad in ["0", "-1", "nan"] {
+        let args = [
+            "motu",
+            "render",
+            "pkg",
+            "-o",
+            "x.png",
+            "--stream-frame-ms",
+            bad,
+        ];
+        assert!(cli::Cli::try_parse_from(args).is_err(), "{bad}");
+    }
     assert_eq!(o.max_passes, motu_gpu::StreamOptions::default().max_passes);
     // The probe: every pixel unless --stream-probe says otherwise (0: off).
     let d = motu_gpu::StreamOptions::default();

@@ -153,7 +153,7 @@ pub use scene::{
 };
 pub use stream::{
     full_build_fits, persistent_tlas_estimate, streamed_mesh_total_bytes, streaming_floor,
-    streaming_floor_planned, ClustersSource, FloorSizes, FrameStreamStats, FullBuildFit,
+    streaming_floor_planned, ClustersSource, FloorSizes, FrameCaps, FrameStreamStats, FullBuildFit,
     HostCacheMode, HostStorePolicy, MeshMemory, PassMarks, PassStats, PersistentEstimate,
     ProbeLater, ProbePaths, StorePolicyStats, StreamFallback, StreamFloor, StreamOptions,
     StreamPlan, StreamTotals, StreamingRenderer, StructureCache, TlasRecordsMode, TlasUpdate,

@@ -114,6 +114,7 @@
 mod budget;
 mod buffers;
 mod cache;
+mod clock;
 mod clones;
 mod defrag;
 mod demand;
@@ -153,8 +154,8 @@ pub use floor::{
     FloorSizes, StreamFloor,
 };
 pub use options::{
-    MeshMemory, PassMarks, ProbeLater, ProbePaths, StreamFallback, StreamOptions, TlasRecordsMode,
-    AUTO_PASS_FRAMES, AUTO_PASS_ROWS, DEFAULT_TLAS_HEADROOM, MAX_TLAS_HEADROOM,
+    FrameCaps, MeshMemory, PassMarks, ProbeLater, ProbePaths, StreamFallback, StreamOptions,
+    TlasRecordsMode, AUTO_PASS_FRAMES, AUTO_PASS_ROWS, DEFAULT_TLAS_HEADROOM, MAX_TLAS_HEADROOM,
 };
 pub use stats::{FrameStreamStats, PassStats, StreamTotals};
 pub use store_policy::{HostStorePolicy, StorePolicyStats};

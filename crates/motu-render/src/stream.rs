@@ -1,6 +1,6 @@
 //! `--stream`: the streaming frame loop (build only what rays touch, evict under the budget,
 //! frame by frame along a camera path) and its per-frame bounds (`--stream-fallback`,
-//! `--stream-build-budget`, `--stream-build-ms`).
+//! `--stream-build-budget`, `--stream-build-ms`, `--stream-frame-ms`).
 
 use crate::gpu::{gpu_context, gpu_render_options, PathStats, Rendered};
 use crate::settings::{RenderEvent, RenderSettings, StreamSettings};
@@ -24,6 +24,9 @@ pub struct StreamBounds {
     pub frame_build_bytes: Option<u64>,
     /// Milliseconds of building one frame may spend (`None`: unbounded).
     pub frame_build_ms: Option<f64>,
+    /// `--stream-frame-ms`: milliseconds a whole frame aims at (`None`: no clock; see
+    /// [`motu_gpu::StreamOptions::frame_ms`]).
+    pub frame_ms: Option<f64>,
     /// `--stream-probe`: the next camera's probe stride (`None`: the default; 0: no probe).
     pub probe_stride: Option<u32>,
     /// `--stream-probe-rounds`: most probe rounds after a frame (`None`: the default).
@@ -74,6 +77,7 @@ impl StreamBounds {
             fallback: self.fallback,
             frame_build_bytes: self.frame_build_bytes.unwrap_or(0),
             frame_build_ms: self.frame_build_ms.unwrap_or(0.0),
+            frame_ms: self.frame_ms.unwrap_or(0.0),
             probe_stride: self.probe_stride.unwrap_or(d.probe_stride),
             probe_rounds: self.probe_rounds.unwrap_or(d.probe_rounds),
             probe_verify_rounds: self.probe_verify.unwrap_or(d.probe_verify_rounds),
@@ -93,6 +97,13 @@ impl StreamBounds {
             tlas_headroom: self.tlas_headroom.unwrap_or(d.tlas_headroom),
             ..d
         }
+    }
+
+    /// Whether no bound limits a frame's building (no build budget, no frame clock): a
+    /// flying frame then gets [`INTERACTIVE_BUILD_MS`] (`motu view`, `motu bench
+    /// --stream-passes 1`).
+    pub fn build_unbounded(&self) -> bool {
+        self.frame_build_bytes.is_none() && self.frame_build_ms.is_none() && self.frame_ms.is_none()
     }
 
     /// Bounds that contradict each other, as the message to refuse them with.
@@ -115,6 +126,7 @@ impl StreamBounds {
         self.fallback != motu_gpu::StreamFallback::Off
             || self.frame_build_bytes.is_some()
             || self.frame_build_ms.is_some()
+            || self.frame_ms.is_some()
             || self.probe_stride.is_some()
             || self.probe_rounds.is_some()
             || self.probe_verify.is_some()

@@ -73,10 +73,7 @@ impl ViewStreamSettings {
         motu_gpu::StreamOptions {
             // Flying with no build budget given: one frame's worth of building per
             // frame, so the window stays responsive while structures arrive.
-            frame_build_ms: if self.progressive()
-                && self.bounds.frame_build_bytes.is_none()
-                && self.bounds.frame_build_ms.is_none()
-            {
+            frame_build_ms: if self.progressive() && self.bounds.build_unbounded() {
                 INTERACTIVE_BUILD_MS
             } else {
                 opts.frame_build_ms

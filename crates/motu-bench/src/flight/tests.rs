@@ -73,6 +73,13 @@ fn stream_passes_one_takes_the_viewers_build_budget_unless_one_is_given() {
     };
     let o = opts_with_passes(&flight_options(Some(1), bytes));
     assert_eq!((o.frame_build_ms, o.frame_build_bytes), (0.0, 1 << 20));
+    // A frame clock given: it bounds the frame, no build budget is added.
+    let clock = StreamBounds {
+        frame_ms: Some(50.0),
+        ..Default::default()
+    };
+    let o = opts_with_passes(&flight_options(Some(1), clock));
+    assert_eq!((o.frame_build_ms, o.frame_ms), (0.0, 50.0));
     // More passes than one: render_frame under that cap, no budget added.
     let o = opts_with_passes(&flight_options(Some(3), StreamBounds::default()));
     assert_eq!((o.max_passes, o.frame_build_ms), (3, 0.0));

@@ -55,6 +55,13 @@ pub struct StreamBoundArgs {
     /// Streaming: milliseconds of building one frame may spend (same rules). Default: unbounded.
     #[arg(help_heading = HEADING_STREAMING, long, value_parser = parse_build_ms)]
     pub stream_build_ms: Option<f64>,
+    /// Streaming: milliseconds a whole frame aims at: its trace, building and readback share
+    /// them. A frame builds, rebuilds waiting TLAS pieces and probes the next camera only
+    /// while what is left covers that work by estimate (measured on this device as frames
+    /// go), and builds at least one structure when it built none yet, so a camera at rest
+    /// still converges; what is not built shows the fallback. Default: none.
+    #[arg(help_heading = HEADING_STREAMING, long, value_parser = parse_build_ms, value_name = "MS")]
+    pub stream_frame_ms: Option<f64>,
     /// Streaming: after each frame whose next camera is known (a camera path, a flight; the
     /// viewer extrapolates it), trace every ray of every STRIDE-th pixel of the next camera
     /// against what is resident and prefetch what they meet, so the next frame mostly

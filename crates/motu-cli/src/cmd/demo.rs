@@ -126,6 +126,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             stream_fallback: crate::cli::FallbackArg::Off,
             stream_build_budget: None,
             stream_build_ms: None,
+            stream_frame_ms: None,
             stream_probe: None,
             stream_probe_rounds: None,
             stream_probe_verify: None,

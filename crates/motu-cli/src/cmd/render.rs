@@ -15,6 +15,7 @@ pub use motu_render::{
 };
 
 /// The streaming bounds of `--stream-fallback`, `--stream-build-budget`, `--stream-build-ms`,
+/// `--stream-frame-ms`,
 /// `--stream-probe`, `--stream-probe-rounds`, `--stream-probe-verify`,
 /// `--stream-probe-pass-rows`, `--stream-tlas`, `--stream-split-instances`, `--stream-defrag`
 /// and `--stream-mesh-memory`.
@@ -26,6 +27,7 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         },
         frame_build_bytes: b.stream_build_budget,
         frame_build_ms: b.stream_build_ms,
+        frame_ms: b.stream_frame_ms,
         probe_stride: b.stream_probe,
         probe_rounds: b.stream_probe_rounds,
         probe_verify: b.stream_probe_verify,

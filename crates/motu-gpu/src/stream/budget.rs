@@ -7,6 +7,7 @@ use std::time::Instant;
 use motu_abi::camera::CameraParams;
 
 use super::buffers::{alloc_frame_buffers, FrameBuffers};
+use super::clock::FrameClock;
 use super::{FrameStreamStats, StreamFallback, StreamingRenderer};
 use crate::error::Result;
 use crate::render::{FrameParams, RenderOptions, RenderOutput};
@@ -46,9 +47,28 @@ pub(super) struct Kept {
     /// The running frame settles a camera at rest: no frame build budget, so it takes passes
     /// until complete ([`StreamingRenderer::render_progressive`]).
     settling: bool,
+    /// The whole-frame clock: the running frame's start and this device's estimates
+    /// (`StreamOptions::frame_ms`, `clock.rs`).
+    clock: FrameClock,
 }
 
 impl Kept {
+    /// A frame starts: its clock starts, no build step runs yet.
+    pub(super) fn begin_frame(&mut self) {
+        self.step_start = None;
+        self.clock.begin(Instant::now());
+    }
+
+    /// The whole-frame clock.
+    pub(super) fn clock(&self) -> &FrameClock {
+        &self.clock
+    }
+
+    /// The whole-frame clock, to sample.
+    pub(super) fn clock_mut(&mut self) -> &mut FrameClock {
+        &mut self.clock
+    }
+
     /// A build step starts at `t0`: its time counts against the frame's build budget while it
     /// runs.
     pub(super) fn start_step(&mut self, t0: Instant) {
@@ -145,6 +165,8 @@ impl<'a> StreamingRenderer<'a> {
         self.opts.fallback != StreamFallback::Off
             || self.opts.frame_build_bytes > 0
             || self.opts.frame_build_ms > 0.0
+            || self.opts.frame_ms > 0.0
+            || self.opts.frame_caps.is_some()
             || self.frame.kept().pass_cap.is_some()
     }
 
@@ -161,15 +183,96 @@ impl<'a> StreamingRenderer<'a> {
     /// each open ray, what refines the image, is requested by its first walk, not its mark walk.
     pub(super) fn refining_first_pass(&self) -> bool {
         let (bytes, ms) = self.frame_budget();
-        let budget = bytes > 0 || ms > 0.0;
+        let budget = bytes > 0 || ms > 0.0 || self.clocked();
         budget && self.frame.kept().refining && self.frame.stats().passes <= 1
     }
 
-    /// Whether this frame's build budget is spent.
+    /// Whether this frame's build budget is spent, or its clock
+    /// ([`Self::clocked`]: no time left, or its BLAS cap built).
     pub(super) fn frame_build_spent(&self) -> bool {
         let (bytes, ms) = self.frame_budget();
         (bytes > 0 && self.frame.stats().built_bytes >= bytes)
             || (ms > 0.0 && self.frame_build_ms_now() >= ms)
+            || self.clock_spent()
+    }
+
+    /// Whether the running frame is on the whole-frame clock (`StreamOptions::frame_ms` or
+    /// `frame_caps`; `clock.rs`): never while a camera at rest settles, which takes passes
+    /// until complete.
+    pub(super) fn clocked(&self) -> bool {
+        !self.frame.kept().settling && (self.opts.frame_ms > 0.0 || self.opts.frame_caps.is_some())
+    }
+
+    /// Milliseconds left of the running frame by its clock, its tail's estimate taken off
+    /// (infinite off the clock or with counts for times).
+    pub(super) fn frame_time_left_ms(&self) -> f64 {
+        if !self.clocked() || self.opts.frame_caps.is_some() || self.opts.frame_ms <= 0.0 {
+            return f64::INFINITY;
+        }
+        let clock = self.frame.kept().clock();
+        clock.time_left_ms(self.opts.frame_ms, clock.elapsed_ms())
+    }
+
+    /// Whether the clock ends the frame's building: its BLAS cap built, or no time left,
+    /// once the frame made something resident or rebuilt a stale piece. Before that its
+    /// build step still runs, for the one BLAS or piece a frame must take (a trace longer
+    /// than the whole frame's time would otherwise stop every frame's refinement).
+    fn clock_spent(&self) -> bool {
+        if !self.clocked() || !self.frame_progressed() {
+            return false;
+        }
+        match self.opts.frame_caps {
+            Some(c) => self.frame.stats().blas_built >= c.blases,
+            None => self.frame_time_left_ms() <= 0.0,
+        }
+    }
+
+    /// Whether the running frame built or restored a BLAS or rebuilt a stale TLAS piece.
+    pub(super) fn frame_progressed(&self) -> bool {
+        let st = self.frame.stats();
+        st.blas_built + st.restored_blases + st.tlas_stale_rebuilt > 0
+    }
+
+    /// Whether a complete frame may probe the next camera: its build budget left and, on
+    /// the clock, a probe round fits what is left (with counts: `FrameCaps::probe`).
+    pub(super) fn probe_within_budget(&self) -> bool {
+        if self.frame_build_spent() {
+            return false;
+        }
+        if !self.clocked() {
+            return true;
+        }
+        match self.opts.frame_caps {
+            Some(c) => c.probe,
+            None => self
+                .frame
+                .kept()
+                .clock()
+                .probe_fits(self.frame_time_left_ms()),
+        }
+    }
+
+    /// BLAS build group `group` took from `t0` to now: a sample of the clock's build cost.
+    pub(super) fn note_build_time(&mut self, group: &[u32], t0: Instant) {
+        let triangles = group
+            .iter()
+            .map(|&b| u64::from(self.view.blases[b as usize].primitive_count))
+            .sum();
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        self.frame.kept_mut().clock_mut().note_build(ms, triangles);
+    }
+
+    /// The running frame ends (its outputs made): its tail and probe rounds are samples of
+    /// the clock.
+    pub(super) fn end_frame_clock(&mut self) {
+        let (rounds, probe_ms) = (self.frame.stats().probe_rounds, self.frame.stats().probe_ms);
+        let clock = self.frame.kept_mut().clock_mut();
+        if rounds > 0 {
+            clock.note_probe(probe_ms / f64::from(rounds));
+            // The probe came after the frame's last build decision: not a tail's sample.
+            clock.decided(None);
+        }
+        clock.end(Instant::now());
     }
 
     /// The running frame's build budget, bytes and milliseconds (0: none): the options', or
@@ -181,10 +284,45 @@ impl<'a> StreamingRenderer<'a> {
         (self.opts.frame_build_bytes, self.opts.frame_build_ms)
     }
 
+    /// How many BLASes of `queue` (from its start, at most `max`) the next build group takes:
+    /// those that fit in what is left of the frame's byte budget (at least one), and on the
+    /// clock of those the ones that fit what is left of its time (or its BLAS cap) next to one
+    /// stale piece's rebuild, which may be none; at least one when `must_progress` and the
+    /// frame built none yet, so a camera at rest converges (notes/flight.md D3).
+    pub(super) fn group_within_frame_budget(
+        &self,
+        queue: &[u32],
+        max: usize,
+        must_progress: bool,
+    ) -> usize {
+        let n = self.group_within_byte_budget(queue, max);
+        if !self.clocked() {
+            return n;
+        }
+        let built = self.frame.stats().blas_built;
+        let must = must_progress && built == 0;
+        if let Some(c) = self.opts.frame_caps {
+            let left = c.blases.saturating_sub(built) as usize;
+            return n.min(left.max(usize::from(must)));
+        }
+        // Time for one stale piece kept: the BLASes built make their parents stale, and
+        // pixels behind them wait on those rebuilds.
+        let clock = self.frame.kept().clock();
+        let reserve_ms = if self.defers_stale_tlases() {
+            clock.piece_estimate_ms()
+        } else {
+            0.0
+        };
+        let triangles = queue[..n]
+            .iter()
+            .map(|&b| u64::from(self.view.blases[b as usize].primitive_count));
+        clock.blases_within(triangles, self.frame_time_left_ms(), reserve_ms, must)
+    }
+
     /// How many BLASes of `queue` (from its start, at most `max`) fit in what is left of the
     /// frame's byte budget by estimate (meshes plus ~64 bytes of structure per triangle); at
     /// least one.
-    pub(super) fn group_within_frame_budget(&self, queue: &[u32], max: usize) -> usize {
+    fn group_within_byte_budget(&self, queue: &[u32], max: usize) -> usize {
         let budget = self.frame_budget().0;
         if budget == 0 {
             return max.min(queue.len());

@@ -357,7 +357,13 @@ impl<'a> StreamingRenderer<'a> {
                 self.frame.stats_mut().build_budget_spent = true;
                 return Ok(queue.len() - i);
             }
-            let mut n = self.group_within_frame_budget(&queue[i..], chunk);
+            let t_group = Instant::now();
+            let mut n = self.group_within_frame_budget(&queue[i..], chunk, must_progress);
+            if n == 0 {
+                // The frame's clock has no time left for the next BLAS.
+                self.frame.stats_mut().build_budget_spent = true;
+                return Ok(queue.len() - i);
+            }
             let reserve = self.tlas_reserve(&counts, &queue[i..i + n])?;
             // Kept TLAS records count as free: they yield to structures (`tlas_compact.rs`).
             let free =
@@ -416,6 +422,7 @@ impl<'a> StreamingRenderer<'a> {
             }
             match self.build_group(group, evict) {
                 Ok(()) => {
+                    self.note_build_time(group, t_group);
                     for &b in group {
                         if self.res.has_blas(b as usize) {
                             self.topo.add_instance_counts(b, &mut counts);
@@ -574,6 +581,11 @@ impl<'a> StreamingRenderer<'a> {
         // Parents whose instance set changed (builds or evictions); with a frame build budget
         // in milliseconds, stale ones only while it holds (`piece_order.rs`).
         self.rebuild_step()?;
+        // A pass's step took the frame's last build decision so far; a prefetch's is no tail.
+        self.frame
+            .kept_mut()
+            .clock_mut()
+            .decided((!prefetch).then(Instant::now));
         let t_tables = Instant::now();
         self.upload_tlas_addresses()?;
         self.frame.stats_mut().tables_ms += t_tables.elapsed().as_secs_f64() * 1e3;

@@ -192,8 +192,8 @@ impl FrameState {
         self.pass_marks_held
     }
 
-    /// A new frame: its number, fresh statistics, its first stamp (the next pass's), no
-    /// build clock yet.
+    /// A new frame: its number, fresh statistics, its first stamp (the next pass's), its
+    /// clock started.
     pub fn begin(&mut self) {
         self.kept.refining = self.number > 0 && !self.stats.complete;
         self.number += 1;
@@ -205,7 +205,7 @@ impl FrameState {
         self.pass_first_stamp = self.first_stamp;
         self.prefetching = false;
         self.keeps_frame = false;
-        self.kept.end_step();
+        self.kept.begin_frame();
     }
 
     /// The frame's passes are over: what follows is its prefetch for the next frame, which
@@ -346,7 +346,7 @@ impl<'a> StreamingRenderer<'a> {
                     if self.opts.probe_stride > 0
                         && (n.width, n.height) == (w, h)
                         && self.frame.stats.complete
-                        && !self.frame_build_spent() =>
+                        && self.probe_within_budget() =>
                 {
                     Some(FirstProbe {
                         camera: n,
@@ -384,6 +384,7 @@ impl<'a> StreamingRenderer<'a> {
         self.totals.add_frame(&self.frame.stats, &report);
         self.totals.host_clone_bytes = self.clones.bytes();
         self.frame_output(camera, image, opts, report)
+            .inspect(|_| self.end_frame_clock())
     }
 
     /// A new frame's counters: its number, its statistics, its first stamp, its build clock;

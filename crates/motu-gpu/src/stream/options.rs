@@ -84,6 +84,18 @@ pub struct StreamOptions {
     pub frame_build_bytes: u64,
     /// Milliseconds of building one frame may spend; 0: unbounded (same rules).
     pub frame_build_ms: f64,
+    /// Milliseconds a whole frame aims at (`--stream-frame-ms`; 0: no clock): its trace, build
+    /// step, stale TLAS piece rebuilds and readback share them. A frame builds BLAS groups,
+    /// rebuilds stale pieces and probes the next camera only while what is left of them, less
+    /// its tail by estimate, covers that work by estimate (`clock.rs`: averages measured on
+    /// this renderer's device), and at least one BLAS when it built none yet, so a camera at
+    /// rest still converges. Like `frame_build_ms` it makes stale TLAS pieces wait
+    /// (`defer_stale_tlases`), and a camera at rest settles without it. What it cannot bound
+    /// (a pass's trace, a must rebuild before it) may still overrun it.
+    pub frame_ms: f64,
+    /// Counts in place of [`Self::frame_ms`]'s time estimates (for tests: counts repeat, times
+    /// do not): `Some` puts frames on the clock with these limits, whatever `frame_ms`.
+    pub frame_caps: Option<FrameCaps>,
     /// With `frame_build_ms`, TLASes dirty only because BLASes under them were built are
     /// traced as they are and rebuilt while the frame's budget holds (`piece_order.rs`);
     /// `false`: every dirty TLAS is rebuilt at each build step's end, as without a budget
@@ -176,6 +188,18 @@ fn proxy_tests_from_env() -> (bool, bool) {
     let v = std::env::var("MOTU_PROXY_TESTS").unwrap_or_default();
     let has = |w: &str| v.split(',').any(|x| x.trim() == w);
     (!has("unbounded"), has("count"))
+}
+
+/// What a frame on the clock may do, as counts ([`StreamOptions::frame_caps`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FrameCaps {
+    /// BLASes a frame builds (at least one when it built none yet).
+    pub blases: u32,
+    /// Stale TLAS pieces a frame rebuilds (at least one group in a frame that built nothing,
+    /// or whose pixels wait on stale pieces and rebuilt none yet).
+    pub pieces: u32,
+    /// Whether a complete frame probes the next camera.
+    pub probe: bool,
 }
 
 /// [`StreamOptions::tlas_headroom`]'s default: pieces at a quarter of island 0.3 grow by a few
@@ -372,6 +396,8 @@ impl Default for StreamOptions {
             fallback: StreamFallback::Off,
             frame_build_bytes: 0,
             frame_build_ms: 0.0,
+            frame_ms: 0.0,
+            frame_caps: None,
             defer_stale_tlases: true,
             tlas_update: TlasUpdate::Auto,
             defrag: false,

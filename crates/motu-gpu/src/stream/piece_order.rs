@@ -24,10 +24,10 @@ use super::StreamingRenderer;
 use crate::error::Result;
 
 impl<'a> StreamingRenderer<'a> {
-    /// Whether this frame may trace stale TLASes (a frame build budget in milliseconds, and
-    /// `StreamOptions::defer_stale_tlases`).
+    /// Whether this frame may trace stale TLASes (a frame build budget in milliseconds or the
+    /// frame's clock, and `StreamOptions::defer_stale_tlases`).
     pub(super) fn defers_stale_tlases(&self) -> bool {
-        self.frame_budget().1 > 0.0 && self.opts.defer_stale_tlases
+        (self.frame_budget().1 > 0.0 || self.clocked()) && self.opts.defer_stale_tlases
     }
 
     /// BLAS `b` was built: its resident parents' instance sets grew (stale, see the module).
@@ -66,52 +66,109 @@ impl<'a> StreamingRenderer<'a> {
     /// then the oldest) while the budget holds, at least one group in a frame that built or
     /// restored no BLAS and rebuilt no stale TLAS yet (so a camera at rest reaches the
     /// exact image) or, for up to the budget's time again, whose pixels wait on stale TLASes
-    /// (so a moving one refines). Evictions for their room make must rebuilds, done before the next
-    /// stale one.
+    /// (so a moving one refines). On the frame's clock (`StreamOptions::frame_ms`) stale ones
+    /// while its time left covers them by estimate, with the same guarantees of one group cut
+    /// to one piece (`stale_within_clock`). Evictions for their room make must rebuilds, done
+    /// before the next stale one. Each rebuild group's wall is a sample of the clock's piece
+    /// estimate.
     pub(super) fn rebuild_step(&mut self) -> Result<()> {
         if !self.defers_stale_tlases() {
             return self.rebuild_dirty();
         }
         let order = self.stale_order();
         let mut next = 0usize;
-        let mut stale_since: Option<std::time::Instant> = None;
+        let mut stale_since: Option<Instant> = None;
+        // The running group: its start and the frame's rebuild count then.
+        let mut lap: Option<(Instant, u32)> = None;
         self.rebuild_timed(|s| {
             s.rebuild_while(|s| {
-                let must = |t| !s.tlases.is_stale(t);
-                if let Some(g) = s.next_rebuild_group(must)? {
-                    return Ok(Some(g));
+                if let Some((t0, before)) = lap.take() {
+                    let ms = t0.elapsed().as_secs_f64() * 1e3;
+                    let pieces = s.frame.stats().tlas_rebuilt.saturating_sub(before);
+                    s.frame.kept_mut().clock_mut().note_pieces(ms, pieces);
                 }
-                let st = s.frame.stats();
-                let progressed = st.blas_built + st.restored_blases + st.tlas_stale_rebuilt > 0;
-                // While pixels wait on stale pieces, stale groups past the budget for up to
-                // the frame build budget's time again (at least one group): else a moving
-                // camera, whose every frame spends its budget on BLASes, would see new BLASes
-                // only once it stops. With one group a frame, an H100 flying island 0.3 at a
-                // quarter kept ~85k of 230k pixels on the fallback against ~45k rebuilding
-                // every piece (session 50).
-                let stale_ms = stale_since.map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3);
-                let owed = st.stale_blocked_pixels > 0
-                    && (st.tlas_stale_rebuilt == 0 || stale_ms < s.frame_budget().1);
-                if s.frame_build_spent() && progressed && !owed {
-                    return Ok(None);
+                let g = s.next_step_group(&order, &mut next, &mut stale_since)?;
+                if g.is_some() {
+                    lap = Some((Instant::now(), s.frame.stats().tlas_rebuilt));
                 }
-                while next < order.len() && !s.tlases.is_stale(order[next]) {
-                    next += 1;
-                }
-                let Some(g) = s.stale_group(&order[next..])? else {
-                    return Ok(None);
-                };
-                s.frame.stats_mut().tlas_stale_rebuilt += g.0.len() as u32;
-                stale_since.get_or_insert_with(std::time::Instant::now);
-                Ok(Some(g))
+                Ok(g)
             })
         })
     }
 
-    /// The next stale group from `order` (priority order; those no longer stale skipped):
-    /// its first, then the next ones while the group's rebuilds need no more room than that
-    /// one's or a 64th of the budget (as `group_by_need`, in priority order).
-    fn stale_group(&self, order: &[u32]) -> Result<Option<(Vec<u32>, u64)>> {
+    /// [`Self::rebuild_step`]'s next group: a must one, else a stale one from `order` (from
+    /// `*next` on) while the budget or the clock allows; `stale_since`: when the frame's first
+    /// stale group was taken.
+    fn next_step_group(
+        &mut self,
+        order: &[u32],
+        next: &mut usize,
+        stale_since: &mut Option<Instant>,
+    ) -> Result<Option<(Vec<u32>, u64)>> {
+        let must = |t| !self.tlases.is_stale(t);
+        if let Some(g) = self.next_rebuild_group(must)? {
+            return Ok(Some(g));
+        }
+        let max = if self.clocked() {
+            self.stale_within_clock()
+        } else {
+            let progressed = self.frame_progressed();
+            let st = self.frame.stats();
+            // While pixels wait on stale pieces, stale groups past the budget for up to
+            // the frame build budget's time again (at least one group): else a moving
+            // camera, whose every frame spends its budget on BLASes, would see new BLASes
+            // only once it stops. With one group a frame, an H100 flying island 0.3 at a
+            // quarter kept ~85k of 230k pixels on the fallback against ~45k rebuilding
+            // every piece (session 50).
+            let stale_ms = stale_since.map_or(0.0, |t| t.elapsed().as_secs_f64() * 1e3);
+            let owed = st.stale_blocked_pixels > 0
+                && (st.tlas_stale_rebuilt == 0 || stale_ms < self.frame_budget().1);
+            if self.frame_build_spent() && progressed && !owed {
+                return Ok(None);
+            }
+            usize::MAX
+        };
+        if max == 0 {
+            return Ok(None);
+        }
+        while *next < order.len() && !self.tlases.is_stale(order[*next]) {
+            *next += 1;
+        }
+        let Some(g) = self.stale_group(&order[*next..], max)? else {
+            return Ok(None);
+        };
+        self.frame.stats_mut().tlas_stale_rebuilt += g.0.len() as u32;
+        stale_since.get_or_insert_with(Instant::now);
+        Ok(Some(g))
+    }
+
+    /// How many stale pieces the frame's clock allows next: those its time left covers by
+    /// the piece estimate (with counts: `FrameCaps::pieces` less those rebuilt), at least
+    /// one in a frame that made nothing resident and rebuilt no stale piece yet (a camera at
+    /// rest converges) or whose pixels wait on stale pieces and rebuilt none yet (a moving
+    /// camera refines; the BLAS groups kept one piece's time for it).
+    fn stale_within_clock(&self) -> usize {
+        let st = self.frame.stats();
+        let must =
+            !self.frame_progressed() || (st.stale_blocked_pixels > 0 && st.tlas_stale_rebuilt == 0);
+        match self.opts.frame_caps {
+            Some(c) => {
+                let left = c.pieces.saturating_sub(st.tlas_stale_rebuilt) as usize;
+                left.max(usize::from(must))
+            }
+            None => self
+                .frame
+                .kept()
+                .clock()
+                .pieces_within(self.frame_time_left_ms(), must),
+        }
+    }
+
+    /// The next stale group from `order` (priority order; those no longer stale skipped),
+    /// at most `max` TLASes: its first, then the next ones while the group's rebuilds need no
+    /// more room than that one's or a 64th of the budget (as `group_by_need`, in priority
+    /// order).
+    fn stale_group(&self, order: &[u32], max: usize) -> Result<Option<(Vec<u32>, u64)>> {
         let counts = self.resident_instance_counts();
         let mut group = Vec::new();
         let (mut sum, mut cap) = (0u64, 0u64);
@@ -119,7 +176,7 @@ impl<'a> StreamingRenderer<'a> {
             let n = self.tlas_rebuild_bytes(t, counts[t as usize])?;
             if group.is_empty() {
                 cap = n.max(self.build_opts.budget_bytes / 64);
-            } else if sum + n > cap {
+            } else if sum + n > cap || group.len() >= max {
                 break;
             }
             sum += n;

@@ -34,6 +34,11 @@ fn flying_without_a_build_bound_builds_an_interactive_frame_time() {
         o.max_allocations,
         motu_gpu::StreamOptions::default().max_allocations
     );
+    // A frame clock given: it bounds the flying frame, no build budget is added.
+    let mut clocked = stream(None, None);
+    clocked.bounds.frame_ms = Some(50.0);
+    let o = clocked.options(1 << 30, None);
+    assert_eq!((o.frame_build_ms, o.frame_ms), (0.0, 50.0));
     assert_eq!(
         stream(Some(3), Some(2)).options(1, None).frame_build_ms,
         0.0
