@@ -715,3 +715,145 @@ fn a_staging_buffer_at_the_floor_yields_to_structures() {
     assert_eq!(json_u64(&t["transfer_staging_released"]), 1, "{t}");
     motu_ok(&["compare", s(&reference), s(&aov), "--max-mismatch", "0"]);
 }
+
+/// The rates file a process wrote in `cache` (`rates-v1/<device>.txt`, one device here) and the
+/// device identity in it.
+fn rates_file(cache: &Path) -> (PathBuf, String) {
+    let dir = cache.join(motu_ascache::rates::RATES_DIR);
+    let files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(files.len(), 1, "{files:?}");
+    let text = std::fs::read_to_string(&files[0]).unwrap();
+    let device = text
+        .lines()
+        .find_map(|l| l.strip_prefix("device "))
+        .expect("a device line")
+        .to_string();
+    (files[0].clone(), device)
+}
+
+fn policy(st: &serde_json::Value) -> &serde_json::Value {
+    &totals(st)["store_policy"]
+}
+
+/// Issue 45.3: restores and directory writes follow this device's measured rates, kept in the
+/// cache directory for the next process. A cold process records its rates; a warm one starts
+/// from them (lavapipe: restores beat CPU builds, so it restores everything); rates that say
+/// building is faster (written into the file as another device's measurements would be)
+/// decline every restore and every write; a corrupt file is a warning and the priors. Every
+/// image is the full build's.
+#[test]
+fn measured_rates_decide_restores_and_writes_across_processes() {
+    let Some(f) = Fixture::new() else { return };
+    let budget = (f.peak * 2).to_string();
+    let reference = f.still_reference("rates-reference");
+    let same = |aov: &Path| {
+        motu_ok(&["compare", s(&reference), s(aov), "--max-mismatch", "0"]);
+    };
+    let cache = f.dir.path().join("cache-rates");
+    let flags = ["--stream-always", "--as-cache", s(&cache)];
+    let (cold, cold_aov) = still(&f, "rates-cold", &budget, &flags);
+    let (tc, pc) = (totals(&cold), policy(&cold));
+    eprintln!("cold: {tc}");
+    assert_eq!(pc["rates_file"], "missing", "{pc}");
+    assert_eq!(pc["rates_saved"], true, "{pc}");
+    let written = json_u64(&tc["cache_stored"]);
+    assert!(
+        written > 0 && json_u64(&tc["disk_store_skipped"]) == 0,
+        "{tc}"
+    );
+    let (file, device) = rates_file(&cache);
+    let saved =
+        motu_ascache::rates::decode_rates(&std::fs::read_to_string(&file).unwrap(), &device)
+            .expect("a valid rates file");
+    assert!(saved.build.is_some(), "the cold process built: {saved:?}");
+
+    // Warm: the build rate from the file, restores measured here; all restored.
+    let (warm, warm_aov) = still(&f, "rates-warm", &budget, &flags);
+    let (tw, pw) = (totals(&warm), policy(&warm));
+    eprintln!("warm: {tw}");
+    assert_eq!(pw["rates_file"], "loaded", "{pw}");
+    assert_eq!(json_u64(&tw["blas_built"]), 0, "nothing rebuilt: {tw}");
+    assert_eq!(json_u64(&tw["restored_blases"]), written, "{tw}");
+    assert_eq!(json_u64(&tw["disk_restore_declined"]), 0, "{tw}");
+
+    // Rates saying a restore is far slower than a build (a device with fast builds and a slow
+    // disk): nothing is read, everything built.
+    let slow = motu_ascache::Rate {
+        batches: 10,
+        per_blas_ms: 1e3,
+        gb_per_s: 1e-6,
+    };
+    let forged = motu_ascache::DeviceRates {
+        restore: Some(slow),
+        disk_read: Some(slow),
+        ..saved
+    };
+    std::fs::write(&file, motu_ascache::rates::encode_rates(&device, &forged)).unwrap();
+    let (declined, declined_aov) = still(&f, "rates-declined", &budget, &flags);
+    let (td, pd) = (totals(&declined), policy(&declined));
+    eprintln!("declined: {td}");
+    assert_eq!(pd["rates_file"], "loaded", "{pd}");
+    assert_eq!(json_u64(&td["restored_blases"]), 0, "{td}");
+    assert_eq!(json_u64(&td["disk_restore_declined"]), written, "{td}");
+    assert!(json_u64(&td["disk_restore_declined_bytes"]) > 0, "{td}");
+    assert_eq!(json_u64(&td["blas_built"]), written, "{td}");
+    // Declined entries are never read (the start's tables still are).
+    assert_eq!(
+        json_u64(&declined["stream"]["cache"]["disk_hits"]) + written,
+        json_u64(&warm["stream"]["cache"]["disk_hits"]),
+        "{}",
+        declined["stream"]["cache"]
+    );
+
+    // A cold process in a fresh directory that has those rates writes no structure there.
+    let fresh = f.dir.path().join("cache-rates-fresh");
+    std::fs::create_dir_all(fresh.join(motu_ascache::rates::RATES_DIR)).unwrap();
+    let fresh_file = fresh
+        .join(motu_ascache::rates::RATES_DIR)
+        .join(file.file_name().unwrap());
+    std::fs::write(
+        &fresh_file,
+        motu_ascache::rates::encode_rates(&device, &forged),
+    )
+    .unwrap();
+    let fresh_flags = ["--stream-always", "--as-cache", s(&fresh)];
+    let (skip, skip_aov) = still(&f, "rates-skip", &budget, &fresh_flags);
+    let ts = totals(&skip);
+    eprintln!("cold with slow restores: {ts}");
+    assert_eq!(
+        json_u64(&ts["disk_store_skipped"]),
+        json_u64(&ts["blas_built"]),
+        "{ts}"
+    );
+    assert!(json_u64(&ts["disk_store_skipped_bytes"]) > 0, "{ts}");
+    assert!(entries(&fresh).is_empty(), "no structure written");
+
+    // A corrupt rates file: a warning, the priors (unknown: restore), and rewritten.
+    let mut bytes = std::fs::read(&file).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x01;
+    std::fs::write(&file, &bytes).unwrap();
+    let aov = f.dir.path().join("rates-corrupt.aov");
+    let mut args = streamed_args("1", &budget);
+    args.extend(flags);
+    let st = render_env(
+        &f.pkg,
+        "pipeline",
+        &aov,
+        &args,
+        &[("MOTU_SIMULATE_DISCRETE_MEMORY", "1")],
+    );
+    let (tb, pb) = (totals(&st), policy(&st));
+    eprintln!("corrupt rates: {tb}");
+    assert_eq!(pb["rates_file"], "corrupt", "{pb}");
+    assert_eq!(json_u64(&tb["restored_blases"]), written, "{tb}");
+    assert_eq!(pb["rates_saved"], true, "{pb}");
+    motu_ascache::rates::decode_rates(&std::fs::read_to_string(&file).unwrap(), &device)
+        .expect("rewritten whole");
+    for aov in [&cold_aov, &warm_aov, &declined_aov, &skip_aov, &aov] {
+        same(aov);
+    }
+}

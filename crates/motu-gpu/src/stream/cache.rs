@@ -1,14 +1,18 @@
 //! Built BLASes that survive eviction and the process (`--host-cache`, `--as-cache`).
 //!
-//! Every triangle BLAS the streamer builds is serialised (Vulkan's `SERIALIZE` copy of the
+//! A triangle BLAS the streamer builds is serialised (Vulkan's `SERIALIZE` copy of the
 //! compacted structure) into a [`motu_ascache::AsCache`]: a byte-bounded LRU in host memory,
 //! written through to a cache directory; by default when it is evicted, or after the frames
-//! and their image for those still resident, not inside the frame (`cache/store.rs`). Where no writable directory takes them, the host tier
-//! alone would, and only the BLASes whose expected restores save more than their store costs
-//! are serialised (`--stream-host-cache-policy measured`, the rule and its self-measured rates
-//! in `store_policy.rs`). When the BLAS is needed again, after an eviction or in
-//! a later process, it is deserialised by copy instead of rebuilt from its meshes (which are
-//! streamed as before: hits still shade from them). Keys name the scene's content (the
+//! and their image for those still resident, not inside the frame (`cache/store.rs`). It is
+//! written to the directory where restoring it in the next process would beat building it, by
+//! this device's measured rates (`restore_rule.rs`; unknown rates: every BLAS, as before);
+//! otherwise the host tier alone may keep it, and only the BLASes whose expected restores save
+//! more than their store costs are serialised for it (`--stream-host-cache-policy measured`,
+//! the rule and its self-measured rates in `store_policy.rs`). When the BLAS is needed again,
+//! after an eviction or in a later process, it is deserialised by copy instead of rebuilt from
+//! its meshes where the restore rule says that is faster (its directory reads run beside the
+//! group's mesh uploads, `cache/reads.rs`; the meshes are streamed as before: hits still
+//! shade from them). Keys name the scene's content (the
 //! package's checksums), the BLAS and its records, the build flags and the driver; the driver
 //! judges each entry's compatibility data before it is used, so a cache of another device or
 //! driver is a miss with a warning (`motu-ascache`), never a wrong structure. A deserialised

@@ -170,8 +170,9 @@ pub struct FrameStreamStats {
     pub store_serialize_ms: f64,
     pub store_copy_ms: f64,
     pub store_put_ms: f64,
-    /// Of `restore_ms`: finding and reading the entries (disk reads); the staging buffer and
-    /// the host's copies into it; the GPU's deserialise copies.
+    /// Of `restore_ms`: finding and reading the entries (disk reads: what the frame's thread
+    /// waited for, the reads beside the mesh uploads included); the staging buffer and the
+    /// host's copies into it; the GPU's deserialise copies.
     pub restore_read_ms: f64,
     pub restore_upload_ms: f64,
     pub restore_gpu_ms: f64,

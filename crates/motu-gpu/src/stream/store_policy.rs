@@ -25,11 +25,13 @@
 //! is the prior [`PRIOR`]: the H100's rates above, which store nothing until this device's
 //! builds measure slower than its restores.
 //!
-//! The policy decides only what the *host tier alone* would keep. A writable cache directory
-//! is written every BLAS as before (it serves the next process: its write-through needs the
+//! The policy decides only what the *host tier alone* would keep. A BLAS written to a
+//! writable cache directory (for the next process, where its restore there would pay:
+//! `restore_rule.rs`) is stored whatever this rule says (the write-through needs the
 //! serialised copy anyway, and the host tier then keeps the same blob at no extra cost); a
 //! host tier of 0 bytes stores nothing for the host; `always` stores every BLAS built (the
-//! behaviour before the policy). Skipped stores are counted (`host_cache_skipped_stores`) and
+//! behaviour before the policy). The priors below give way to the rates the cache directory
+//! recorded for this device, where it has them. Skipped stores are counted (`host_cache_skipped_stores`) and
 //! the estimates reported (`stream.totals.store_policy`).
 
 /// Which built BLASes the serialised host tier stores (`--stream-host-cache-policy`).
