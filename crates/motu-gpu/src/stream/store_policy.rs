@@ -40,7 +40,8 @@ pub enum HostStorePolicy {
     /// Those whose expected restores save more than their store costs (the module docs).
     #[default]
     Measured,
-    /// Every BLAS built (the behaviour before the policy).
+    /// Every BLAS built, written to a cache directory too, and every cached BLAS restored
+    /// (the behaviour before the policy and the restore rule, `restore_rule.rs`).
     Always,
 }
 

@@ -10,6 +10,7 @@ use std::time::Instant;
 use motu_ascache::{Blob, CacheKey, ReadPlan, ReadsDone, Tier};
 
 use super::super::skeleton::ms_since;
+use super::super::store_policy::HostStorePolicy;
 use super::super::StreamingRenderer;
 
 /// What [`StreamingRenderer::read_cached_ahead`] decided for a build group (consumed by its
@@ -66,10 +67,13 @@ impl StreamingRenderer<'_> {
         let Some((tier, bytes)) = a.cache.cache.entry_bytes(&key) else {
             return Decision::Unknown(key);
         };
-        if self
-            .reuse
-            .rule
-            .restore_pays(&self.reuse.estimates, bytes, tier)
+        // `--stream-host-cache-policy always`: every cached BLAS restored, as before the rule.
+        let always = self.reuse.policy == HostStorePolicy::Always;
+        if always
+            || self
+                .reuse
+                .rule
+                .restore_pays(&self.reuse.estimates, bytes, tier)
         {
             return Decision::Restore(key, tier);
         }
