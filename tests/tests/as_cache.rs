@@ -200,7 +200,14 @@ fn a_path_that_returns_restores_from_the_host_cache() {
     // restores from them and the entries persisted from them are all checked here.
     let discrete = [("MOTU_SIMULATE_DISCRETE_MEMORY", "1")];
     let cache = f.dir.path().join("cache-clones");
-    let clone_flags = ["--as-cache", s(&cache), "--stream-host-cache", "clone"];
+    let clone_flags = [
+        "--as-cache",
+        s(&cache),
+        "--stream-host-cache",
+        "clone",
+        "--stream-host-cache-policy",
+        "always",
+    ];
     let (cl, cl_aov) = path(
         &f,
         "host-clone",
@@ -286,7 +293,16 @@ fn a_second_process_with_a_warm_cache_rebuilds_nothing_it_cached() {
         } else {
             "clone"
         };
-        let flags = [dir[0], dir[1], "--stream-host-cache", mode];
+        // Every cached BLAS restored (`always`): the cache itself, whatever this device's rates
+        // say (lavapipe's restores cost about what its builds do: the restore rule may build).
+        let flags = [
+            dir[0],
+            dir[1],
+            "--stream-host-cache",
+            mode,
+            "--stream-host-cache-policy",
+            "always",
+        ];
         let (cold, cold_aov) = path(
             &f,
             &format!("cold-{backend}"),
@@ -414,7 +430,13 @@ fn a_still_frame_stores_only_evicted_blases_in_frame_and_the_rest_after_its_imag
     let (a, a_aov) = still(&f, "still-as-built", &budget, &as_built);
     // The default: at eviction, and the rest after the image.
     let deferred_dir = f.dir.path().join("cache-deferred");
-    let deferred = ["--as-cache", s(&deferred_dir)];
+    // `always`: every cached BLAS restored by the warm process below, whatever the rates say.
+    let deferred = [
+        "--as-cache",
+        s(&deferred_dir),
+        "--stream-host-cache-policy",
+        "always",
+    ];
     let (d, d_aov) = still(&f, "still-deferred", &budget, &deferred);
     let (fa, fd, td) = (frame0(&a), frame0(&d), totals(&d));
     eprintln!("as built: {fa}\ndeferred: {fd}\ntotals: {td}");
@@ -468,7 +490,12 @@ fn a_still_frame_stores_only_evicted_blases_in_frame_and_the_rest_after_its_imag
         assert_eq!(json_u64(&st["transfer_staged_runs"]), 0, "{st}");
     }
     let staged_dir = f.dir.path().join("cache-staged");
-    let staged_flags = ["--as-cache", s(&staged_dir)];
+    let staged_flags = [
+        "--as-cache",
+        s(&staged_dir),
+        "--stream-host-cache-policy",
+        "always",
+    ];
     // Half the peak: at a quarter the staging buffer yields to structures in the frame (the
     // floor test below).
     let half = (f.peak / 2).to_string();
@@ -555,7 +582,15 @@ fn corrupt_truncated_and_foreign_entries_are_rebuilt_with_a_warning() {
     let Some(f) = Fixture::new() else { return };
     let budget = (f.peak * 2).to_string();
     let cache = f.dir.path().join("cache");
-    let dir = ["--host-cache", "0", "--as-cache", s(&cache)];
+    // `always`: every good entry restored, whatever this device's rates say.
+    let dir = [
+        "--host-cache",
+        "0",
+        "--as-cache",
+        s(&cache),
+        "--stream-host-cache-policy",
+        "always",
+    ];
     let (cold, _) = path(&f, "cold", "pipeline", &budget, &dir, &[]);
     let stored = json_u64(&totals(&cold)["cache_stored"]);
     let files = entries(&cache);
@@ -609,6 +644,8 @@ fn corrupt_truncated_and_foreign_entries_are_rebuilt_with_a_warning() {
         "0",
         "--as-cache",
         s(&cache),
+        "--stream-host-cache-policy",
+        "always",
         // As the cold run (`path` pins it): bounce rays would need structures it never built.
         "--bounces",
         "0",
@@ -714,4 +751,160 @@ fn a_staging_buffer_at_the_floor_yields_to_structures() {
     assert_eq!(fr["complete"], true, "{fr}");
     assert_eq!(json_u64(&t["transfer_staging_released"]), 1, "{t}");
     motu_ok(&["compare", s(&reference), s(&aov), "--max-mismatch", "0"]);
+}
+
+/// The rates file a process wrote in `cache` (`rates-v1/<device>.txt`, one device here) and the
+/// device identity in it.
+fn rates_file(cache: &Path) -> (PathBuf, String) {
+    let dir = cache.join(motu_ascache::rates::RATES_DIR);
+    let files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(files.len(), 1, "{files:?}");
+    let text = std::fs::read_to_string(&files[0]).unwrap();
+    let device = text
+        .lines()
+        .find_map(|l| l.strip_prefix("device "))
+        .expect("a device line")
+        .to_string();
+    (files[0].clone(), device)
+}
+
+fn policy(st: &serde_json::Value) -> &serde_json::Value {
+    &totals(st)["store_policy"]
+}
+
+/// Issue 45.3: restores and directory writes follow this device's measured rates, kept in the
+/// cache directory for the next process. A cold process records its rates; a warm one starts
+/// from them (lavapipe: restores beat CPU builds, so it restores everything); rates that say
+/// building is faster (written into the file as another device's measurements would be)
+/// decline every restore and every write; a corrupt file is a warning and the priors. Every
+/// image is the full build's.
+#[test]
+fn measured_rates_decide_restores_and_writes_across_processes() {
+    let Some(f) = Fixture::new() else { return };
+    let budget = (f.peak * 2).to_string();
+    let reference = f.still_reference("rates-reference");
+    let same = |aov: &Path| {
+        motu_ok(&["compare", s(&reference), s(aov), "--max-mismatch", "0"]);
+    };
+    let cache = f.dir.path().join("cache-rates");
+    let flags = ["--stream-always", "--as-cache", s(&cache)];
+    let (cold, cold_aov) = still(&f, "rates-cold", &budget, &flags);
+    let (tc, pc) = (totals(&cold), policy(&cold));
+    eprintln!("cold: {tc}");
+    assert_eq!(pc["rates_file"], "missing", "{pc}");
+    assert_eq!(pc["rates_saved"], true, "{pc}");
+    let written = json_u64(&tc["cache_stored"]);
+    assert!(
+        written > 0 && json_u64(&tc["disk_store_skipped"]) == 0,
+        "{tc}"
+    );
+    let (file, device) = rates_file(&cache);
+    let saved =
+        motu_ascache::rates::decode_rates(&std::fs::read_to_string(&file).unwrap(), &device)
+            .expect("a valid rates file");
+    assert!(saved.build.is_some(), "the cold process built: {saved:?}");
+
+    // Warm: the build rate from the file, restores unknown, so the first ones are restored and
+    // measured; then each is restored or declined by the rates (on lavapipe restores cost
+    // about what builds do: either); a declined one is built, nothing else is.
+    let (warm, warm_aov) = still(&f, "rates-warm", &budget, &flags);
+    let (tw, pw) = (totals(&warm), policy(&warm));
+    eprintln!("warm: {tw}");
+    assert_eq!(pw["rates_file"], "loaded", "{pw}");
+    let declined_warm = json_u64(&tw["disk_restore_declined"]);
+    assert!(json_u64(&tw["restored_blases"]) > 0, "{tw}");
+    assert_eq!(
+        json_u64(&tw["restored_blases"]) + declined_warm,
+        written,
+        "{tw}"
+    );
+    assert_eq!(json_u64(&tw["blas_built"]), declined_warm, "{tw}");
+
+    // Rates saying a restore is far slower than a build (a device with fast builds and a slow
+    // disk): nothing is read, everything built.
+    let slow = motu_ascache::Rate {
+        batches: 10,
+        per_blas_ms: 1e3,
+        gb_per_s: 1e-6,
+    };
+    let forged = motu_ascache::DeviceRates {
+        restore: Some(slow),
+        disk_read: Some(slow),
+        ..saved
+    };
+    std::fs::write(&file, motu_ascache::rates::encode_rates(&device, &forged)).unwrap();
+    let (declined, declined_aov) = still(&f, "rates-declined", &budget, &flags);
+    let (td, pd) = (totals(&declined), policy(&declined));
+    eprintln!("declined: {td}");
+    assert_eq!(pd["rates_file"], "loaded", "{pd}");
+    assert_eq!(json_u64(&td["restored_blases"]), 0, "{td}");
+    assert_eq!(json_u64(&td["disk_restore_declined"]), written, "{td}");
+    let warm_disk_hits = json_u64(&warm["stream"]["cache"]["disk_hits"]);
+    assert!(json_u64(&td["disk_restore_declined_bytes"]) > 0, "{td}");
+    assert_eq!(json_u64(&td["blas_built"]), written, "{td}");
+    // Declined entries are never read (the start's tables still are).
+    assert_eq!(
+        json_u64(&declined["stream"]["cache"]["disk_hits"]) + written,
+        warm_disk_hits + declined_warm,
+        "{}",
+        declined["stream"]["cache"]
+    );
+
+    // A cold process in a fresh directory that has those rates writes no structure there.
+    let fresh = f.dir.path().join("cache-rates-fresh");
+    std::fs::create_dir_all(fresh.join(motu_ascache::rates::RATES_DIR)).unwrap();
+    let fresh_file = fresh
+        .join(motu_ascache::rates::RATES_DIR)
+        .join(file.file_name().unwrap());
+    std::fs::write(
+        &fresh_file,
+        motu_ascache::rates::encode_rates(&device, &forged),
+    )
+    .unwrap();
+    let fresh_flags = ["--stream-always", "--as-cache", s(&fresh)];
+    let (skip, skip_aov) = still(&f, "rates-skip", &budget, &fresh_flags);
+    let ts = totals(&skip);
+    eprintln!("cold with slow restores: {ts}");
+    assert_eq!(
+        json_u64(&ts["disk_store_skipped"]),
+        json_u64(&ts["blas_built"]),
+        "{ts}"
+    );
+    assert!(json_u64(&ts["disk_store_skipped_bytes"]) > 0, "{ts}");
+    assert!(entries(&fresh).is_empty(), "no structure written");
+
+    // A corrupt rates file: a warning, the priors (unknown: restore), and rewritten.
+    let mut bytes = std::fs::read(&file).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x01;
+    std::fs::write(&file, &bytes).unwrap();
+    let aov = f.dir.path().join("rates-corrupt.aov");
+    let mut args = streamed_args("1", &budget);
+    args.extend(flags);
+    let st = render_env(
+        &f.pkg,
+        "pipeline",
+        &aov,
+        &args,
+        &[("MOTU_SIMULATE_DISCRETE_MEMORY", "1")],
+    );
+    let (tb, pb) = (totals(&st), policy(&st));
+    eprintln!("corrupt rates: {tb}");
+    assert_eq!(pb["rates_file"], "corrupt", "{pb}");
+    // Unknown rates: restored (and measured) until this process's fits decide.
+    assert!(json_u64(&tb["restored_blases"]) > 0, "{tb}");
+    assert_eq!(
+        json_u64(&tb["restored_blases"]) + json_u64(&tb["disk_restore_declined"]),
+        written,
+        "{tb}"
+    );
+    assert_eq!(pb["rates_saved"], true, "{pb}");
+    motu_ascache::rates::decode_rates(&std::fs::read_to_string(&file).unwrap(), &device)
+        .expect("rewritten whole");
+    for aov in [&cold_aov, &warm_aov, &declined_aov, &skip_aov, &aov] {
+        same(aov);
+    }
 }

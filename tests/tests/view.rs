@@ -906,6 +906,9 @@ fn a_second_viewer_restores_structures_from_the_cache_directory() {
                 "1",
                 "--as-cache",
                 s(&cache),
+                // Every cached BLAS restored, whatever this device's rates say.
+                "--stream-host-cache-policy",
+                "always",
                 "--aov",
                 s(&aov),
                 "--stats",

@@ -5,6 +5,7 @@ use crate::compat::Compatibility;
 use crate::disk::DiskCache;
 use crate::host::HostCache;
 use crate::key::CacheKey;
+use crate::reads::{ReadPlan, ReadsDone};
 use crate::stats::{CacheStats, PoolStats, Tier};
 
 /// The host tier in front of an optional disk tier.
@@ -138,6 +139,58 @@ impl AsCache {
             self.pool.refill();
         }
         found
+    }
+
+    /// Where `key` is (host first) and its blob's bytes, without reading, counting or
+    /// refreshing it (the disk answer is this process's view, as [`contains`](Self::contains)).
+    pub fn entry_bytes(&self, key: &CacheKey) -> Option<(Tier, u64)> {
+        if let Some(blob) = self.host.peek(key) {
+            return Some((Tier::Host, blob.len() as u64));
+        }
+        let disk = self.disk.as_ref()?.entry_bytes(key)?;
+        Some((Tier::Disk, disk))
+    }
+
+    /// The directory reads of `keys` (none without a disk tier), to run on any thread
+    /// ([`ReadPlan::run`]) while the caller does other work, then hand to
+    /// [`finish_disk_reads`](Self::finish_disk_reads). Host memory is not asked: for keys the
+    /// caller knows to be on disk only ([`entry_bytes`](Self::entry_bytes)).
+    pub fn plan_disk_reads(&mut self, keys: &[CacheKey]) -> Option<ReadPlan> {
+        Some(self.disk.as_mut()?.plan_reads(keys))
+    }
+
+    /// What `done` read (in its plan's order), counted as [`get_many`](Self::get_many) counts
+    /// disk hits and misses, each hit promoted to host memory.
+    pub fn finish_disk_reads(&mut self, done: ReadsDone) -> Vec<Option<Blob>> {
+        let Some(disk) = self.disk.as_mut() else {
+            return Vec::new();
+        };
+        let keys = done.keys.clone();
+        let found = disk.finish_reads(done);
+        for (key, blob) in keys.iter().zip(&found) {
+            match blob {
+                Some(blob) => {
+                    self.promote(*key, blob);
+                    self.stats.disk_hits += 1;
+                    self.stats.hit_bytes += blob.len() as u64;
+                }
+                None => self.stats.misses += 1,
+            }
+        }
+        if found.iter().any(Option::is_some) {
+            // A burst of reads is over: page in memory for the next one.
+            self.pool.refill();
+        }
+        found
+    }
+
+    /// Stores `blob` in host memory only, not in the directory: for a structure whose restore
+    /// pays within this process but would not in the next one (the caller's rule).
+    pub fn put_host(&mut self, key: CacheKey, blob: impl Into<Blob>) {
+        let blob: Blob = blob.into();
+        self.stats.puts += 1;
+        self.stats.put_bytes += blob.len() as u64;
+        self.promote(key, &blob);
     }
 
     /// Stores `blob` (a serialized structure) under `key`: in host memory, and in the

@@ -4,22 +4,23 @@
 //! `tracing::warn!` naming the file and the reason, and a count in [`DiskStats::warnings`].
 
 use std::ffi::OsString;
-use std::fs::{self, File};
-use std::io::{self, Read};
+use std::fs;
+use std::io;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, SystemTime};
 
-use xxhash_rust::xxh3::xxh3_64;
-
 use crate::blob::{Blob, BlobPool};
-use crate::compat::{serialized_header, Compatibility, SERIALIZED_HEADER_BYTES};
+use crate::compat::{Compatibility, SERIALIZED_HEADER_BYTES};
 use crate::entry::{
-    decode_header, entry_key, entry_path, temp_owner, EntryError, ENTRY_HEADER_BYTES, VERSION_DIR,
+    entry_key, entry_path, temp_owner, EntryError, ENTRY_HEADER_BYTES, VERSION_DIR,
 };
 pub use crate::file::io_reason;
 use crate::file::{create_private_dir_all, write_entry_file};
 use crate::key::CacheKey;
 use crate::lru::ByteLru;
+use crate::rates::{load_rates, rates_path, save_rates, DeviceRates, RatesError};
+pub use crate::reads::READ_THREADS;
+use crate::reads::{file_id, read_and_touch, FileId, ReadMiss, ReadPlan, ReadResult, ReadsDone};
 use crate::stats::DiskStats;
 use crate::writer::{Job, Writer};
 
@@ -132,32 +133,6 @@ fn process_alive(pid: u32) -> Option<bool> {
         return None;
     }
     Some(proc.join(pid.to_string()).exists())
-}
-
-/// Why a read returned nothing.
-enum ReadMiss {
-    Absent,
-    /// A bad entry, and the identity of the file that was read.
-    Bad(EntryError, Option<FileId>),
-    Io(io::Error),
-}
-
-/// A file's identity (device, inode): a bad entry is removed only while its name still
-/// points at the file that was read, never at an entry another process renamed over it since.
-#[derive(Clone, Copy, PartialEq, Eq)]
-struct FileId(u64, u64);
-
-fn file_id(meta: &fs::Metadata) -> Option<FileId> {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::MetadataExt;
-        Some(FileId(meta.dev(), meta.ino()))
-    }
-    #[cfg(not(unix))]
-    {
-        let _ = meta;
-        None
-    }
 }
 
 /// A file found by the scan at open.
@@ -397,59 +372,102 @@ impl DiskCache {
     }
 
     /// [`get`](Self::get) of every key of `keys`, in order: entries are read and checked on up
-    /// to [`READ_THREADS`] threads (one thread read the H200 host's ~3 MB entries at
-    /// 0.6 GB/s, checksums included), then indexed in order as `get` would.
+    /// to [`READ_THREADS`] threads, then indexed in order as `get` would
+    /// ([`plan_reads`](Self::plan_reads), [`ReadPlan::run`], [`finish_reads`](Self::finish_reads)).
     pub fn get_many(
         &mut self,
         keys: &[CacheKey],
         compat: &(dyn Compatibility + Sync),
     ) -> Vec<Option<Blob>> {
+        let plan = self.plan_reads(keys);
+        self.finish_reads(plan.run(compat))
+    }
+
+    /// The reads [`get_many`](Self::get_many) would make of `keys`, to run on any thread
+    /// ([`ReadPlan::run`]) and hand back to [`finish_reads`](Self::finish_reads); keys the
+    /// background writer still holds are answered now.
+    pub fn plan_reads(&mut self, keys: &[CacheKey]) -> ReadPlan {
         self.drain();
-        let mut out: Vec<Option<Blob>> = keys.iter().map(|k| self.pending_hit(k)).collect();
-        if !self.readable {
-            let missing = out.iter().filter(|o| o.is_none()).count();
-            self.stats.misses += missing as u64;
-            return out;
+        let found: Vec<Option<Blob>> = keys.iter().map(|k| self.pending_hit(k)).collect();
+        let todo = if self.readable {
+            (0..keys.len())
+                .filter(|&i| found[i].is_none())
+                .map(|i| (i, entry_path(&self.root, &keys[i])))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        ReadPlan {
+            keys: keys.to_vec(),
+            found,
+            todo,
+            pool: self.pool.clone(),
         }
-        let todo: Vec<usize> = (0..keys.len()).filter(|&i| out[i].is_none()).collect();
-        let paths: Vec<PathBuf> = todo
-            .iter()
-            .map(|&i| entry_path(&self.root, &keys[i]))
-            .collect();
-        let threads = READ_THREADS
-            .min(std::thread::available_parallelism().map_or(1, usize::from))
-            .min(todo.len())
-            .max(1);
-        let next = std::sync::atomic::AtomicUsize::new(0);
-        let pool = &self.pool;
-        let mut reads: Vec<Option<ReadResult>> = (0..todo.len()).map(|_| None).collect();
-        std::thread::scope(|scope| {
-            let workers: Vec<_> = (0..threads)
-                .map(|_| {
-                    scope.spawn(|| {
-                        let mut done = Vec::new();
-                        loop {
-                            let j = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                            if j >= todo.len() {
-                                break done;
-                            }
-                            done.push((j, read_and_touch(&paths[j], &keys[todo[j]], compat, pool)));
-                        }
-                    })
-                })
-                .collect();
-            for w in workers {
-                // A panicking reader is a bug; its keys stay misses (rebuilt).
-                for (j, r) in w.join().unwrap_or_default() {
-                    reads[j] = Some(r);
-                }
+    }
+
+    /// What `done` read, indexed and counted in order as [`get`](Self::get) would: per key of
+    /// its plan, the blob or `None` (absent, bad: warned about and removed).
+    pub fn finish_reads(&mut self, done: ReadsDone) -> Vec<Option<Blob>> {
+        let ReadsDone {
+            keys,
+            mut found,
+            reads,
+            ..
+        } = done;
+        let mut read = vec![false; keys.len()];
+        for (i, path, result) in reads {
+            read[i] = true;
+            found[i] = self.apply_read(&keys[i], &path, result);
+        }
+        // Not read (an unreadable directory) and not answered from the writer's queue.
+        let missing = (0..keys.len())
+            .filter(|&i| !read[i] && found[i].is_none())
+            .count();
+        self.stats.misses += missing as u64;
+        found
+    }
+
+    /// The blob bytes of `key`'s entry as this process knows it (`None`: not known here; a
+    /// file another process wrote since open may still be there).
+    pub fn entry_bytes(&self, key: &CacheKey) -> Option<u64> {
+        self.lru
+            .weight(key)
+            .map(|w| w.saturating_sub(ENTRY_HEADER_BYTES as u64))
+    }
+
+    /// `device`'s rates as the last process that measured them here wrote them
+    /// ([`rates`](crate::rates)): a missing file is logged, an unreadable, corrupt or foreign
+    /// one is a warning; either way the caller goes on from its priors.
+    pub fn device_rates(&self, device: &str) -> Result<DeviceRates, RatesError> {
+        let loaded = load_rates(&self.root, device);
+        let path = rates_path(&self.root, device);
+        match &loaded {
+            Ok(_) => tracing::debug!(path = %path.display(), "device rates read"),
+            Err(RatesError::Missing) => {
+                tracing::info!(path = %path.display(), "no device rates in the cache directory yet; deciding restores from priors")
             }
-        });
-        for ((&i, path), read) in todo.iter().zip(&paths).zip(reads) {
-            let read = read.unwrap_or(Err(ReadMiss::Absent));
-            out[i] = self.apply_read(&keys[i], path, read);
+            Err(e) => tracing::warn!(
+                path = %path.display(),
+                error = %e,
+                "device rates not used; deciding restores from priors (the file is rewritten at the end)"
+            ),
         }
-        out
+        loaded
+    }
+
+    /// Writes `device`'s `rates` for the next process (atomically); false when writes are off
+    /// or the write failed (a warning: the rates are only a head start).
+    pub fn save_device_rates(&self, device: &str, rates: &DeviceRates) -> bool {
+        if !self.writable {
+            return false;
+        }
+        match save_rates(&self.root, device, rates) {
+            Ok(()) => true,
+            Err(e) => {
+                tracing::warn!(root = %self.root.display(), error = %e, "device rates not written");
+                false
+            }
+        }
     }
 
     /// A hit on a blob the background writer still holds.
@@ -647,102 +665,6 @@ impl DiskCache {
             });
         }
         s
-    }
-}
-
-/// Threads [`DiskCache::get_many`] reads entries on, at most.
-pub const READ_THREADS: usize = 8;
-
-type ReadResult = Result<Blob, ReadMiss>;
-
-/// [`read_entry`], and a hit's file becomes the most recently used: recency for this and
-/// every later process (a file we may not touch, another user's or in a read-only directory,
-/// keeps its old time).
-fn read_and_touch(
-    path: &Path,
-    key: &CacheKey,
-    compat: &dyn Compatibility,
-    pool: &BlobPool,
-) -> ReadResult {
-    let (blob, file) = read_entry(path, key, compat, pool)?;
-    if let Err(e) = file.set_modified(SystemTime::now()) {
-        tracing::trace!(path = %path.display(), error = %e, "hit not touched");
-    }
-    Ok(blob)
-}
-
-/// Reads and checks `key`'s entry at `path` into a buffer of `pool`; returns its blob and the
-/// open file (to touch).
-fn read_entry(
-    path: &Path,
-    key: &CacheKey,
-    compat: &dyn Compatibility,
-    pool: &BlobPool,
-) -> Result<(Blob, File), ReadMiss> {
-    let mut file = match File::open(path) {
-        Ok(f) => f,
-        // A shard path that is a file holds no entry either.
-        Err(e)
-            if matches!(
-                e.kind(),
-                io::ErrorKind::NotFound | io::ErrorKind::NotADirectory
-            ) =>
-        {
-            return Err(ReadMiss::Absent)
-        }
-        Err(e) => return Err(ReadMiss::Io(e)),
-    };
-    let meta = file.metadata().map_err(ReadMiss::Io)?;
-    let (file_bytes, id) = (meta.len(), file_id(&meta));
-    let bad = |e: EntryError| ReadMiss::Bad(e, id);
-    if file_bytes < ENTRY_HEADER_BYTES as u64 {
-        return Err(bad(EntryError::Truncated {
-            file_bytes,
-            expected_bytes: ENTRY_HEADER_BYTES as u64,
-        }));
-    }
-    let mut h = [0u8; ENTRY_HEADER_BYTES];
-    file.read_exact(&mut h).map_err(ReadMiss::Io)?;
-    // The length is checked against the file's before any allocation of that size.
-    let header = decode_header(&h, key, file_bytes).map_err(bad)?;
-    if header.blob_bytes < SERIALIZED_HEADER_BYTES as u64 {
-        return Err(bad(EntryError::NoSerializationHeader(header.blob_bytes)));
-    }
-    let len = usize::try_from(header.blob_bytes).map_err(|_| {
-        ReadMiss::Io(io::Error::new(
-            io::ErrorKind::OutOfMemory,
-            "entry larger than the address space",
-        ))
-    })?;
-    // Read straight into the buffer's spare capacity (`File` reads into uninitialised memory:
-    // no zero fill), one already paged in when the pool had one.
-    let mut buf = pool.take(len);
-    match (&mut file)
-        .take(header.blob_bytes)
-        .read_to_end(buf.bytes_mut())
-    {
-        Ok(n) if n == len => {}
-        // The file shrank after its length was read (another process rewriting it in place
-        // would not: entries are only ever renamed into place).
-        Ok(_) => {
-            return Err(bad(EntryError::Truncated {
-                file_bytes,
-                expected_bytes: file_bytes,
-            }))
-        }
-        Err(e) => return Err(ReadMiss::Io(e)),
-    }
-    let blob = buf.freeze();
-    let computed = xxh3_64(&blob);
-    if computed != header.blob_xxh3 {
-        return Err(bad(EntryError::BlobChecksum {
-            stored: header.blob_xxh3,
-            computed,
-        }));
-    }
-    match serialized_header(&blob) {
-        Some(h) if compat.compatible(h) => Ok((blob, file)),
-        _ => Err(bad(EntryError::Incompatible)),
     }
 }
 

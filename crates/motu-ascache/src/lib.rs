@@ -94,7 +94,7 @@
 //! Blobs (`blob.rs`) are shared immutable buffers from a `BlobPool`: recycled from dropped blobs or
 //! pre-faulted on threads of its own after a burst, so copies and reads into them run at touched-memory
 //! speed; its free bytes bounded by the host tier's room. Files, lowest first: `key`, `compat`,
-//! `stats`, `lru`, `blob`, `host`, `entry`, `file`, `disk`, `writer`, `cache`.
+//! `stats`, `lru`, `blob`, `host`, `entry`, `file`, `rates`, `reads`, `disk`, `writer`, `cache`.
 //!
 //! Key types: `AsCache`, `HostCache`, `DiskCache`, `DiskOptions`, `Blob`, `BlobPool`, `CacheKey`, `CacheKeyBuilder`,
 //! `Compatibility`, `CacheStats`, `Tier`, `WarningReason`, `default_dir`,
@@ -109,6 +109,8 @@ mod file;
 mod host;
 mod key;
 mod lru;
+pub mod rates;
+mod reads;
 mod stats;
 mod writer;
 
@@ -129,6 +131,8 @@ pub use host::{
     FALLBACK_HOST_CACHE_BYTES,
 };
 pub use key::{CacheKey, CacheKeyBuilder, KeyParseError};
+pub use rates::{DeviceRates, Rate, RatesError};
+pub use reads::{ReadPlan, ReadsDone};
 pub use stats::{CacheStats, DiskStats, HostStats, PoolStats, Tier, WarningCounts, WarningReason};
 
 #[cfg(test)]

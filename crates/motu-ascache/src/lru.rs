@@ -107,6 +107,11 @@ impl<K: Hash + Eq + Clone, V> ByteLru<K, V> {
         self.map.get(key).map(|s| &s.value)
     }
 
+    /// The entry's weight, recency unchanged.
+    pub fn weight(&self, key: &K) -> Option<u64> {
+        self.map.get(key).map(|s| s.weight)
+    }
+
     pub fn remove(&mut self, key: &K) -> Option<(V, u64)> {
         let slot = self.map.remove(key)?;
         self.order.remove(&slot.tick);

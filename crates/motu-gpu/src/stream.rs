@@ -133,6 +133,7 @@ mod probe;
 mod proxy_boxes;
 mod rebuild;
 mod residency;
+mod restore_rule;
 mod shading;
 mod skeleton;
 mod stats;

@@ -192,3 +192,41 @@ fn the_pool_is_bounded_by_the_host_tier_s_room_and_disk_reads_land_in_it() {
     next.host_mut().set_capacity_bytes(held);
     assert_eq!(next.pool_stats().free_bytes, 0);
 }
+
+#[test]
+fn planned_disk_reads_run_on_another_thread_and_count_as_get_many() {
+    let dir = tempfile::tempdir().unwrap();
+    {
+        let mut c = AsCache::new(HostCache::new(1 << 20), Some(disk(dir.path())));
+        for i in 0..6 {
+            c.put(key(i), blob(1, 100 * usize::from(i + 1)));
+        }
+    }
+    let mut c = AsCache::new(HostCache::new(1 << 20), Some(disk(dir.path())));
+    // Sizes known without a read: the directory's index (blob bytes, not the file's).
+    assert_eq!(c.entry_bytes(&key(2)), Some((Tier::Disk, 332)));
+    assert_eq!(c.entry_bytes(&key(9)), None);
+    // Kept in host memory only: never written to the directory.
+    c.put_host(key(7), blob(1, 10));
+    assert_eq!(c.entry_bytes(&key(7)), Some((Tier::Host, 42)));
+    assert_eq!(c.stats().disk.unwrap().written, 0);
+    let keys = [key(0), key(9), key(5)];
+    let plan = c.plan_disk_reads(&keys).expect("a disk tier");
+    assert_eq!(plan.files(), 3);
+    let done = std::thread::spawn(move || plan.run(&driver(1)))
+        .join()
+        .unwrap();
+    assert!(done.read_ms >= 0.0);
+    let got = c.finish_disk_reads(done);
+    assert_eq!(got.len(), 3);
+    assert_eq!(got[0].as_deref(), Some(&*blob(1, 100)));
+    assert!(got[1].is_none());
+    assert_eq!(got[2].as_deref(), Some(&*blob(1, 600)));
+    let s = c.stats();
+    assert_eq!((s.host_hits, s.disk_hits, s.misses, s.puts), (0, 2, 1, 1));
+    // Promoted to host memory, as get_many promotes.
+    assert_eq!(c.contains(&key(5)), Some(Tier::Host));
+    // No disk tier: nothing to plan.
+    let mut host_only = AsCache::new(HostCache::new(1 << 20), None);
+    assert!(host_only.plan_disk_reads(&keys).is_none());
+}

@@ -189,11 +189,14 @@ pub struct StreamBoundArgs {
     /// stores timed per batch, fixed cost per BLAS plus a rate; returns counted per BLAS
     /// built), starting from the H100's rates (restores ~2.7 GB/s, no faster than rebuilds at
     /// ~2.9 GB/s: nothing stored) until each has 3 batches; on lavapipe restores are far
-    /// cheaper than builds and everything pays. A writable cache directory (`--as-cache`)
-    /// still takes every BLAS built, for the next process. `always`: every BLAS built is
-    /// stored (the behaviour before). Same images either way. --stats: per frame
-    /// host_cache_skipped_stores, host_cache_skipped_store_bytes; stream.totals.store_policy
-    /// (the estimates), store_gb_per_s.
+    /// cheaper than builds and everything pays. A cache directory (`--as-cache`) takes a BLAS
+    /// where the next process would restore it faster than it builds it, and a cached BLAS is
+    /// restored only where that beats building it, by this device's rates (recorded in the
+    /// directory for the next process; unknown rates: restore and write). `always`: every BLAS
+    /// built is stored and written, every cached one restored (the behaviour before). Same
+    /// images either way. --stats: per frame host_cache_skipped_stores,
+    /// host_cache_skipped_store_bytes, disk_restore_declined, disk_store_skipped;
+    /// stream.totals.store_policy (the estimates, rates_file), store_gb_per_s.
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, default_value = "measured")]
     pub stream_host_cache_policy: HostCachePolicyArg,
     /// Streaming: where a rebuilt TLAS's instance records come from. `gpu` (opt-in): every

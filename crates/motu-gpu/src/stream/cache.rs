@@ -1,14 +1,18 @@
 //! Built BLASes that survive eviction and the process (`--host-cache`, `--as-cache`).
 //!
-//! Every triangle BLAS the streamer builds is serialised (Vulkan's `SERIALIZE` copy of the
+//! A triangle BLAS the streamer builds is serialised (Vulkan's `SERIALIZE` copy of the
 //! compacted structure) into a [`motu_ascache::AsCache`]: a byte-bounded LRU in host memory,
 //! written through to a cache directory; by default when it is evicted, or after the frames
-//! and their image for those still resident, not inside the frame (`cache/store.rs`). Where no writable directory takes them, the host tier
-//! alone would, and only the BLASes whose expected restores save more than their store costs
-//! are serialised (`--stream-host-cache-policy measured`, the rule and its self-measured rates
-//! in `store_policy.rs`). When the BLAS is needed again, after an eviction or in
-//! a later process, it is deserialised by copy instead of rebuilt from its meshes (which are
-//! streamed as before: hits still shade from them). Keys name the scene's content (the
+//! and their image for those still resident, not inside the frame (`cache/store.rs`). It is
+//! written to the directory where restoring it in the next process would beat building it, by
+//! this device's measured rates (`restore_rule.rs`; unknown rates: every BLAS, as before);
+//! otherwise the host tier alone may keep it, and only the BLASes whose expected restores save
+//! more than their store costs are serialised for it (`--stream-host-cache-policy measured`,
+//! the rule and its self-measured rates in `store_policy.rs`). When the BLAS is needed again,
+//! after an eviction or in a later process, it is deserialised by copy instead of rebuilt from
+//! its meshes where the restore rule says that is faster (its directory reads run beside the
+//! group's mesh uploads, `cache/reads.rs`; the meshes are streamed as before: hits still
+//! shade from them). Keys name the scene's content (the
 //! package's checksums), the BLAS and its records, the build flags and the driver; the driver
 //! judges each entry's compatibility data before it is used, so a cache of another device or
 //! driver is a miss with a warning (`motu-ascache`), never a wrong structure. A deserialised
@@ -23,6 +27,7 @@
 //! the structure it was made from; at most one transfer buffer is kept per direction
 //! ([`Reuse::keep_transfer`] hands back the one it replaces, to free).
 
+use std::collections::HashSet;
 use std::time::Instant;
 
 use motu_abi::blob::{BlobReader, BlobWriter};
@@ -34,6 +39,7 @@ use rayon::prelude::*;
 
 use super::clones::{HostCacheMode, Restored};
 use super::proxy_boxes::{self, Box6};
+use super::restore_rule::RestoreRule;
 use super::skeleton::ms_since;
 use super::store_policy::{self, HostStorePolicy, StoreEstimator, StorePolicyStats};
 use super::transfer::{staged_runs, Transfer, TransferBuffers, TRANSFER_CAP_BYTES};
@@ -80,6 +86,9 @@ pub(super) struct Reuse {
     /// Which BLASes were built (or restored) before, how often they return, and the rates
     /// the host tier's store rule decides from (`store_policy.rs`).
     estimates: StoreEstimator,
+    /// Which cached BLASes are restored and which built ones written to the directory, by
+    /// this device's rates (`restore_rule.rs`).
+    rule: RestoreRule,
     policy: HostStorePolicy,
     cache: Option<Attached>,
     /// Host-visible buffers kept between store and restore batches (`transfer.rs`).
@@ -100,6 +109,10 @@ struct Hit {
     header: SerializedHeader,
 }
 
+/// A BLAS looked up in the cache, its key, and its entry with the tier that held it (`None`:
+/// neither tier).
+type Found = (usize, CacheKey, Option<(Blob, Tier)>);
+
 /// Keys' format: bump when what a key covers changes.
 const KEY_DOMAIN: &str = "motu-blas-v1";
 
@@ -107,6 +120,7 @@ impl Reuse {
     pub(super) fn new(blases: usize, policy: HostStorePolicy) -> Reuse {
         Reuse {
             estimates: StoreEstimator::new(blases, store_policy::PRIOR),
+            rule: RestoreRule::default(),
             policy,
             cache: None,
             transfer: TransferBuffers::default(),
@@ -131,7 +145,21 @@ impl Reuse {
 
     /// The store rule and its estimates now (`stream.totals.store_policy`).
     pub(super) fn policy_stats(&self) -> StorePolicyStats {
-        self.estimates.stats(self.policy)
+        let mut st = self.estimates.stats(self.policy);
+        self.rule.add_stats(&mut st);
+        st
+    }
+
+    /// Writes this run's rates to the cache directory for the next process
+    /// (`restore_rule.rs`); nothing without a writable directory.
+    pub(super) fn save_rates(&mut self) {
+        let Some(a) = self.cache.as_ref() else { return };
+        let Some(disk) = a.cache.cache.disk() else {
+            return;
+        };
+        if disk.save_device_rates(&a.driver, &self.rule.to_save(&self.estimates)) {
+            self.rule.note_saved();
+        }
     }
 
     /// The transfer buffer kept for `t`, taken out (`None`: none kept).
@@ -177,10 +205,16 @@ impl StreamingRenderer<'_> {
         } else {
             cache.cache.host_mut().set_capacity_bytes(host_bytes);
         }
+        let driver = self.ctx.driver_identity();
+        // The rates the last process measured on this device, where the directory has them.
+        if let Some(disk) = cache.cache.disk() {
+            self.reuse.rule = RestoreRule::from_file(disk.device_rates(&driver));
+            self.reuse.estimates.set_prior(self.reuse.rule.prior());
+        }
         self.reuse.cache = Some(Attached {
             cache,
             keys: vec![None; n],
-            driver: self.ctx.driver_identity(),
+            driver,
         });
     }
 
@@ -224,11 +258,17 @@ impl StreamingRenderer<'_> {
         Some(key)
     }
 
-    /// Restores what the cache holds of BLASes `ids` (their meshes resident): returns the
-    /// restored structures and the ids left to build. Anything that goes wrong (a bad entry,
-    /// no room for the copy) leaves those BLASes to be built, as without a cache; only a
-    /// device error fails.
-    pub(super) fn restore_cached(&mut self, ids: &[usize], evict: bool) -> Result<Restored> {
+    /// Restores what the cache holds of BLASes `ids` (their meshes resident), where the restore
+    /// rule says it pays (`restore_rule.rs`; `ahead`: decided and read while the meshes loaded,
+    /// `cache/reads.rs`): returns the restored structures and the ids left to build. Anything
+    /// that goes wrong (a bad entry, no room for the copy) leaves those BLASes to be built, as
+    /// without a cache; only a device error fails.
+    pub(super) fn restore_cached(
+        &mut self,
+        ids: &[usize],
+        evict: bool,
+        ahead: Option<GroupReads>,
+    ) -> Result<Restored> {
         if self.reuse.cache.is_none() || ids.is_empty() {
             return Ok(Restored {
                 built: Vec::new(),
@@ -240,57 +280,51 @@ impl StreamingRenderer<'_> {
         if from_clones.rest.is_empty() {
             return Ok(from_clones);
         }
-        let mut restored = self.restore_serialized(&from_clones.rest, evict)?;
+        let mut restored =
+            self.restore_serialized(&from_clones.rest, evict, ahead.unwrap_or_default())?;
         restored.built.extend(from_clones.built);
         Ok(restored)
     }
 
     /// [`Self::restore_cached`] from the serialised tiers (host memory, then the directory).
-    fn restore_serialized(&mut self, ids: &[usize], evict: bool) -> Result<Restored> {
+    fn restore_serialized(
+        &mut self,
+        ids: &[usize],
+        evict: bool,
+        ahead: GroupReads,
+    ) -> Result<Restored> {
         let t = Instant::now();
-        let ctx = self.ctx.clone();
-        let compatible = |h: &[u8; 32]| ctx.acceleration_structure_compatible(h).unwrap_or(false);
-        let mut hits: Vec<Hit> = Vec::new();
-        let mut rest = Vec::new();
+        let wanted: HashSet<usize> = ids.iter().copied().collect();
+        let covered = ahead.covered();
+        let mut rest: Vec<usize> = ahead
+            .declined()
+            .iter()
+            .copied()
+            .filter(|b| wanted.contains(b))
+            .collect();
+        // Those not decided ahead: host hits, unknown keys, and any a clone did not restore.
         let mut keyed: Vec<(usize, CacheKey)> = Vec::with_capacity(ids.len());
-        for &b in ids {
-            match self.blas_key(b) {
-                Some(key) => keyed.push((b, key)),
-                None => rest.push(b),
+        for &b in ids.iter().filter(|b| !covered.contains(b)) {
+            match self.decide_restore(b) {
+                Decision::Restore(key, _) | Decision::Unknown(key) => keyed.push((b, key)),
+                Decision::Build => rest.push(b),
             }
         }
-        let keys: Vec<CacheKey> = keyed.iter().map(|k| k.1).collect();
-        let a = self.reuse.cache.as_mut().expect("attached");
-        // One call for the whole set: entries on disk are read on several threads.
-        let read = Instant::now();
-        let found = a.cache.cache.get_many(&keys, &compatible);
-        self.frame.stats_mut().restore_read_ms += ms_since(read);
-        for ((b, key), found) in keyed.into_iter().zip(found) {
-            match found {
-                Some((blob, tier)) => match SerializedHeader::read(&blob) {
-                    Some(h)
-                        if h.serialized_bytes == blob.len() as u64 && h.deserialized_bytes > 0 =>
-                    {
-                        match tier {
-                            Tier::Host => self.frame.stats_mut().restored_from_host += 1,
-                            Tier::Disk => self.frame.stats_mut().restored_from_disk += 1,
-                        }
-                        hits.push(Hit {
-                            blas: b,
-                            blob,
-                            header: h,
-                        });
-                    }
-                    _ => {
-                        tracing::warn!(blas = b, "structure cache: an entry whose serialised header does not match its length; rebuilt");
-                        a.cache.cache.remove(&key);
-                        rest.push(b);
-                    }
-                },
+        let mut found: Vec<Found> = self
+            .finish_group_reads(ahead, &wanted)
+            .into_iter()
+            .map(|(b, k, blob)| (b, k, blob.map(|blob| (blob, Tier::Disk))))
+            .collect();
+        found.extend(self.get_now(keyed));
+        let mut hits: Vec<Hit> = Vec::new();
+        for (b, key, got) in found {
+            match got {
+                Some((blob, tier)) => self.accept_hit(b, key, blob, tier, &mut hits, &mut rest),
                 None => rest.push(b),
             }
         }
         if hits.is_empty() {
+            rest.sort_unstable();
             return Ok(Restored {
                 built: Vec::new(),
                 rest,
@@ -304,6 +338,66 @@ impl StreamingRenderer<'_> {
             built: restored,
             rest,
         })
+    }
+
+    /// The cache's blobs of `keyed` now (host memory, else the directory on this thread): a
+    /// sample of the restore rule's disk reads where any came from there.
+    fn get_now(&mut self, keyed: Vec<(usize, CacheKey)>) -> Vec<Found> {
+        if keyed.is_empty() {
+            return Vec::new();
+        }
+        let ctx = self.ctx.clone();
+        let compatible = |h: &[u8; 32]| ctx.acceleration_structure_compatible(h).unwrap_or(false);
+        let keys: Vec<CacheKey> = keyed.iter().map(|k| k.1).collect();
+        let a = self.reuse.cache.as_mut().expect("attached");
+        // One call for the whole set: entries on disk are read on several threads.
+        let read = Instant::now();
+        let found = a.cache.cache.get_many(&keys, &compatible);
+        let ms = ms_since(read);
+        self.frame.stats_mut().restore_read_ms += ms;
+        let (n, bytes) = found
+            .iter()
+            .flatten()
+            .filter(|(_, tier)| *tier == Tier::Disk)
+            .fold((0u64, 0u64), |(n, s), (b, _)| (n + 1, s + b.len() as u64));
+        self.reuse.rule.disk_read.add(n, bytes, ms);
+        keyed
+            .into_iter()
+            .zip(found)
+            .map(|((b, key), got)| (b, key, got))
+            .collect()
+    }
+
+    /// Takes `blob` (BLAS `b`'s entry from `tier`) into `hits` when its serialised header
+    /// matches its length; else removes the entry and leaves `b` to `rest`, with a warning.
+    fn accept_hit(
+        &mut self,
+        b: usize,
+        key: CacheKey,
+        blob: Blob,
+        tier: Tier,
+        hits: &mut Vec<Hit>,
+        rest: &mut Vec<usize>,
+    ) {
+        match SerializedHeader::read(&blob) {
+            Some(h) if h.serialized_bytes == blob.len() as u64 && h.deserialized_bytes > 0 => {
+                match tier {
+                    Tier::Host => self.frame.stats_mut().restored_from_host += 1,
+                    Tier::Disk => self.frame.stats_mut().restored_from_disk += 1,
+                }
+                hits.push(Hit {
+                    blas: b,
+                    blob,
+                    header: h,
+                });
+            }
+            _ => {
+                tracing::warn!(blas = b, "structure cache: an entry whose serialised header does not match its length; rebuilt");
+                let a = self.reuse.cache.as_mut().expect("attached");
+                a.cache.cache.remove(&key);
+                rest.push(b);
+            }
+        }
     }
 
     /// Deserialises `hits` in one submission; where the budget has no room for their copies,
@@ -535,6 +629,9 @@ impl StreamingRenderer<'_> {
     }
 }
 
+mod reads;
 mod store;
+use reads::Decision;
+pub(super) use reads::GroupReads;
 #[cfg(test)]
 mod tests;

@@ -145,6 +145,8 @@ impl<'a> StreamingRenderer<'a> {
     pub(super) fn build_group(&mut self, group: &[u32], evict: bool) -> Result<()> {
         let mut taken: Vec<usize> = Vec::new();
         self.frame.stats_mut().build_groups += 1;
+        // Cached entries read from the directory while the meshes load (`cache/reads.rs`).
+        let ahead = self.read_cached_ahead(group);
         let t_mesh = Instant::now();
         // Allocated for the group, not resident yet: uploaded together (`upload_streamed_group`,
         // in parallel), then made resident one by one with their textures.
@@ -210,7 +212,7 @@ impl<'a> StreamingRenderer<'a> {
             let Restored {
                 built: restored,
                 rest,
-            } = self.restore_cached(&ids, evict)?;
+            } = self.restore_cached(&ids, evict, ahead)?;
             let built = match self.maybe_evicting(evict, |s| {
                 // Each successful batch is a sample of the store rule's build cost.
                 let t = Instant::now();

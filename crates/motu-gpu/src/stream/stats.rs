@@ -139,6 +139,12 @@ pub struct FrameStreamStats {
     /// Cached BLASes built instead of restored: no room for their copy next to what the
     /// step must keep.
     pub restore_skipped: u32,
+    /// Cached BLASes built because the restore rule said building is faster on this device
+    /// (`restore_rule.rs`): held in host memory; held only in the directory (never read), and
+    /// their entries' bytes.
+    pub host_restore_declined: u32,
+    pub disk_restore_declined: u32,
+    pub disk_restore_declined_bytes: u64,
     /// Of `blas_built`: BLASes this renderer had built (or restored) before, built again, and
     /// their structure bytes: what a cache saves.
     pub rebuilt_blases: u32,
@@ -154,17 +160,27 @@ pub struct FrameStreamStats {
     /// expected to save their store's cost: `store_policy.rs`), and their structure bytes.
     pub host_cache_skipped_stores: u32,
     pub host_cache_skipped_store_bytes: u64,
+    /// BLASes not written to the cache directory because the restore rule said the next
+    /// process would rather build them (`restore_rule.rs`; the host tier's own rule may still
+    /// have kept them in host memory), and their structure bytes.
+    pub disk_store_skipped: u32,
+    pub disk_store_skipped_bytes: u64,
     /// Of `cache_store_ms`: size queries, the readback buffer and the GPU's serialise copies;
     /// the host's copies out of the readback buffer; handing the blobs to the cache (with the
     /// disk writer's queue waits).
     pub store_serialize_ms: f64,
     pub store_copy_ms: f64,
     pub store_put_ms: f64,
-    /// Of `restore_ms`: finding and reading the entries (disk reads); the staging buffer and
-    /// the host's copies into it; the GPU's deserialise copies.
+    /// Of `restore_ms`: finding and reading the entries (disk reads: what the frame's thread
+    /// waited for, the reads beside the mesh uploads included); the staging buffer and the
+    /// host's copies into it; the GPU's deserialise copies.
     pub restore_read_ms: f64,
     pub restore_upload_ms: f64,
     pub restore_gpu_ms: f64,
+    /// Wall milliseconds of the directory reads run beside the build groups' mesh uploads
+    /// (`cache/reads.rs`; on their own thread: of it, only what the frame waited for is in
+    /// `restore_read_ms`).
+    pub restore_read_background_ms: f64,
     /// Evicted BLASes cloned into host memory (`clones.rs`), their bytes and the time (part of
     /// `build_ms`); clones refused (host memory, or larger than the bound); and of
     /// `restored_blases` (and of `restored_from_host`), those cloned back.
@@ -453,7 +469,15 @@ pub struct StreamTotals {
     /// their structure bytes.
     pub host_cache_skipped_stores: u64,
     pub host_cache_skipped_store_bytes: u64,
-    /// The host tier's store rule and the estimates it decided from at the end of the run.
+    /// Over all frames (as [`FrameStreamStats`]), and for `disk_store_skipped` also after
+    /// them (`persist_cache`): the restore rule's decisions (`restore_rule.rs`).
+    pub host_restore_declined: u64,
+    pub disk_restore_declined: u64,
+    pub disk_restore_declined_bytes: u64,
+    pub disk_store_skipped: u64,
+    pub disk_store_skipped_bytes: u64,
+    /// The host tier's store rule and the estimates it decided from at the end of the run
+    /// (with the restore rule's disk reads and the rates file).
     pub store_policy: super::StorePolicyStats,
     /// Bytes of the BLASes built, over all frames, and the rate they were built at: those
     /// bytes over the BLAS steps' time less their restores and cache stores (GB/s).
@@ -468,6 +492,7 @@ pub struct StreamTotals {
     pub restore_read_ms: f64,
     pub restore_upload_ms: f64,
     pub restore_gpu_ms: f64,
+    pub restore_read_background_ms: f64,
     pub transfer_batches: u32,
     pub transfer_allocations: u32,
     pub transfer_staged_runs: u32,
@@ -590,6 +615,11 @@ impl StreamTotals {
         };
         tot.host_cache_skipped_stores += u64::from(st.host_cache_skipped_stores);
         tot.host_cache_skipped_store_bytes += st.host_cache_skipped_store_bytes;
+        tot.host_restore_declined += u64::from(st.host_restore_declined);
+        tot.disk_restore_declined += u64::from(st.disk_restore_declined);
+        tot.disk_restore_declined_bytes += st.disk_restore_declined_bytes;
+        tot.disk_store_skipped += u64::from(st.disk_store_skipped);
+        tot.disk_store_skipped_bytes += st.disk_store_skipped_bytes;
         tot.blas_structure_bytes += st.blas_structure_bytes;
         tot.blas_ms += st.blas_ms;
         let building_ms = tot.blas_ms - tot.restore_ms - tot.cache_store_ms;
@@ -604,6 +634,7 @@ impl StreamTotals {
         tot.restore_read_ms += st.restore_read_ms;
         tot.restore_upload_ms += st.restore_upload_ms;
         tot.restore_gpu_ms += st.restore_gpu_ms;
+        tot.restore_read_background_ms += st.restore_read_background_ms;
         tot.transfer_batches += st.transfer_batches;
         tot.transfer_allocations += st.transfer_allocations;
         tot.transfer_staged_runs += st.transfer_staged_runs;

@@ -25,11 +25,13 @@
 //! is the prior [`PRIOR`]: the H100's rates above, which store nothing until this device's
 //! builds measure slower than its restores.
 //!
-//! The policy decides only what the *host tier alone* would keep. A writable cache directory
-//! is written every BLAS as before (it serves the next process: its write-through needs the
+//! The policy decides only what the *host tier alone* would keep. A BLAS written to a
+//! writable cache directory (for the next process, where its restore there would pay:
+//! `restore_rule.rs`) is stored whatever this rule says (the write-through needs the
 //! serialised copy anyway, and the host tier then keeps the same blob at no extra cost); a
 //! host tier of 0 bytes stores nothing for the host; `always` stores every BLAS built (the
-//! behaviour before the policy). Skipped stores are counted (`host_cache_skipped_stores`) and
+//! behaviour before the policy). The priors below give way to the rates the cache directory
+//! recorded for this device, where it has them. Skipped stores are counted (`host_cache_skipped_stores`) and
 //! the estimates reported (`stream.totals.store_policy`).
 
 /// Which built BLASes the serialised host tier stores (`--stream-host-cache-policy`).
@@ -38,7 +40,8 @@ pub enum HostStorePolicy {
     /// Those whose expected restores save more than their store costs (the module docs).
     #[default]
     Measured,
-    /// Every BLAS built (the behaviour before the policy).
+    /// Every BLAS built, written to a cache directory too, and every cached BLAS restored
+    /// (the behaviour before the policy and the restore rule, `restore_rule.rs`).
     Always,
 }
 
@@ -167,6 +170,15 @@ impl CostFit {
         }
     }
 
+    /// The fit once it has [`MIN_BATCHES`] batches (`None` before: not measured here).
+    pub(super) fn measured(&self) -> Option<Cost> {
+        (self.batches >= MIN_BATCHES).then(|| self.cost(Cost::rate(f64::INFINITY)))
+    }
+
+    pub(super) fn batches(&self) -> u32 {
+        self.batches
+    }
+
     /// Bytes over milliseconds of every batch (GB/s; 0 with none).
     pub(super) fn mean_gb_per_s(&self) -> f64 {
         if self.ms > 0.0 {
@@ -209,6 +221,12 @@ impl StoreEstimator {
             returned_blases: 0,
             returns_again: 0,
         }
+    }
+
+    /// Decides from `prior` until this process measured its own rates (the rates file's,
+    /// `restore_rule.rs`).
+    pub(super) fn set_prior(&mut self, prior: Prior) {
+        self.prior = prior;
     }
 
     /// BLAS `b` was just built or restored: returns whether it had been before (a return).
@@ -285,6 +303,7 @@ impl StoreEstimator {
             returned_blases: self.returned_blases,
             returns_per_blas: self.expected_returns(false),
             returns_after_return: self.expected_returns(true),
+            ..StorePolicyStats::default()
         }
     }
 }
@@ -315,6 +334,17 @@ pub struct StorePolicyStats {
     pub returned_blases: u64,
     pub returns_per_blas: f64,
     pub returns_after_return: f64,
+    /// The restore rule's own rate (`restore_rule.rs`): reading an entry from the cache
+    /// directory (what the frame's thread waited for), as the others; 0s while unknown.
+    pub disk_read_batches: u32,
+    pub disk_read_ms_per_blas: f64,
+    pub disk_read_gb_per_s: f64,
+    pub disk_read_mean_gb_per_s: f64,
+    /// The cache directory's rates file at the start: `loaded`, `missing`, `corrupt`,
+    /// `foreign`, `unreadable`, or `none` (no cache directory); and whether this run wrote
+    /// its rates there for the next process.
+    pub rates_file: &'static str,
+    pub rates_saved: bool,
 }
 
 #[cfg(test)]

@@ -4,7 +4,7 @@
 
 use std::time::Instant;
 
-use motu_ascache::{Blob, CacheKey};
+use motu_ascache::{Blob, CacheKey, Tier};
 use motu_vk::{SizeQueries, SERIALIZED_ALIGNMENT};
 use rayon::prelude::*;
 
@@ -22,13 +22,19 @@ struct ToStore<'s> {
     blas: usize,
     accel: &'s AccelStruct,
     key: CacheKey,
+    /// Written through to the cache directory too (else kept in host memory only).
+    to_disk: bool,
 }
+
+/// A BLAS to store: its id, key, and whether to the directory too ([`ToStore::to_disk`]).
+type Keyed = (usize, CacheKey, bool);
 
 /// A BLAS taken out of the renderer to serialise (at eviction, or by
 /// [`StreamingRenderer::persist_cache`]), and where it goes back.
 struct TakenOut {
     blas: usize,
     key: CacheKey,
+    to_disk: bool,
     from: Home,
 }
 
@@ -77,16 +83,16 @@ impl StreamingRenderer<'_> {
             return Ok(());
         }
         let t = Instant::now();
-        let ruled = self.store_rule_applies();
         let mut todo: Vec<ToStore<'_>> = Vec::new();
         for (b, accel) in built {
-            let Some(key) = self.store_key(*b, accel.size_bytes, ruled) else {
+            let Some((key, to_disk)) = self.store_key(*b, accel.size_bytes) else {
                 continue;
             };
             todo.push(ToStore {
                 blas: *b,
                 accel,
                 key,
+                to_disk,
             });
         }
         if todo.is_empty() {
@@ -105,22 +111,41 @@ impl StreamingRenderer<'_> {
         self.frame.stats_mut().cache_store_ms += ms_since(t);
     }
 
-    /// BLAS `b`'s key where it is to be stored: the cache lacks it and, where `ruled`, the
-    /// store rule says its `size_bytes` pay (a skip is counted in the frame).
-    fn store_key(&mut self, b: usize, size_bytes: u64, ruled: bool) -> Option<CacheKey> {
+    /// BLAS `b`'s key where it is to be stored, and whether to the cache directory too: there
+    /// when the directory lacks it and the restore rule says the next process would restore
+    /// it (`restore_rule.rs`; every one with `--stream-host-cache-policy always`), else in host
+    /// memory alone where the host tier's rule says its returns pay (`store_policy.rs`). Each
+    /// skip is counted in the frame.
+    fn store_key(&mut self, b: usize, size_bytes: u64) -> Option<(CacheKey, bool)> {
         let key = self.blas_key(b)?;
         let held = self.reuse.cache.as_ref().expect("attached");
-        if held.cache.cache.contains(&key).is_some() {
+        let host_room = held.cache.cache.host().capacity_bytes() > 0;
+        let on_disk = match held.cache.cache.contains(&key) {
+            Some(Tier::Host) => return None,
+            Some(Tier::Disk) => true,
+            None => false,
+        };
+        let always = self.reuse.policy == HostStorePolicy::Always;
+        if !on_disk && self.cache_dir_writable() {
+            let est = &self.reuse.estimates;
+            if always || self.reuse.rule.write_pays(est, size_bytes) {
+                return Some((key, true));
+            }
+            let st = self.frame.stats_mut();
+            st.disk_store_skipped += 1;
+            st.disk_store_skipped_bytes += size_bytes;
+        }
+        if !host_room || (on_disk && always) {
             return None;
         }
         let est = &self.reuse.estimates;
-        if ruled && !est.should_store(size_bytes, est.returned_before(b)) {
+        if !always && !est.should_store(size_bytes, est.returned_before(b)) {
             let st = self.frame.stats_mut();
             st.host_cache_skipped_stores += 1;
             st.host_cache_skipped_store_bytes += size_bytes;
             return None;
         }
-        Some(key)
+        Some((key, false))
     }
 
     /// Before BLASes `victims` are evicted (their structures still resident): serialises into
@@ -132,31 +157,24 @@ impl StreamingRenderer<'_> {
             return Ok(());
         }
         let t = Instant::now();
-        let ruled = self.store_rule_applies();
         let mut ids = Vec::with_capacity(victims.len());
         for &b in victims {
             let Some(size_bytes) = self.res.blas(b).map(|a| a.size_bytes) else {
                 continue;
             };
-            if let Some(key) = self.store_key(b, size_bytes, ruled) {
-                ids.push((b, key, size_bytes));
+            if let Some((key, to_disk)) = self.store_key(b, size_bytes) {
+                ids.push((b, key, to_disk, size_bytes));
             }
         }
         if ids.is_empty() {
             return Ok(());
         }
-        let bytes = ids.iter().map(|i| i.2).sum();
+        let bytes = ids.iter().map(|i| i.3).sum();
         let n = ids.len() as u64;
-        let keyed: Vec<(usize, CacheKey)> = ids.into_iter().map(|(b, k, _)| (b, k)).collect();
+        let keyed: Vec<Keyed> = ids.into_iter().map(|(b, k, d, _)| (b, k, d)).collect();
         self.store_held(keyed)?;
         self.note_stored(n, bytes, t);
         Ok(())
-    }
-
-    /// Whether the store rule decides what [`Self::store_built`] stores: with the `measured`
-    /// policy, unless a writable cache directory takes every BLAS (for the next process).
-    fn store_rule_applies(&self) -> bool {
-        self.reuse.policy == HostStorePolicy::Measured && !self.cache_dir_writable()
     }
 
     fn cache_dir_writable(&self) -> bool {
@@ -179,20 +197,7 @@ impl StreamingRenderer<'_> {
             return Ok(());
         }
         let t = Instant::now();
-        let n = self.view.blases.len();
-        let mut keyed = Vec::new();
-        for b in 0..n {
-            if !self.topo.buildable(b) || !(self.res.has_blas(b) || self.clones.holds(b)) {
-                continue;
-            }
-            let Some(key) = self.blas_key(b) else {
-                continue;
-            };
-            let held = self.reuse.cache.as_ref().expect("attached");
-            if held.cache.cache.contains(&key).is_none() {
-                keyed.push((b, key));
-            }
-        }
+        let keyed = self.persist_list();
         // Counted into the totals below, not into a frame: none is rendering.
         let aside = self.frame.set_stats_aside();
         let stored = self.store_held(keyed);
@@ -220,15 +225,53 @@ impl StreamingRenderer<'_> {
         if let Ok(from_clones) = stored {
             tot.persisted_from_clone += from_clones;
         }
+        // The next process starts from this one's rates (`restore_rule.rs`).
+        self.reuse.save_rates();
         stored.map(|_| ())
+    }
+
+    /// What [`Self::persist_cache`] writes: the BLASes held (resident or as host clones) that
+    /// the directory lacks and the restore rule says the next process would restore (the rest
+    /// counted in the totals as `disk_store_skipped`).
+    fn persist_list(&mut self) -> Vec<Keyed> {
+        let always = self.reuse.policy == HostStorePolicy::Always;
+        let mut keyed = Vec::new();
+        for b in 0..self.view.blases.len() {
+            if !self.topo.buildable(b) {
+                continue;
+            }
+            let size_bytes = match (self.res.blas(b), self.clones.get(b)) {
+                (Some(a), _) | (None, Some(a)) => a.size_bytes,
+                (None, None) => continue,
+            };
+            let Some(key) = self.blas_key(b) else {
+                continue;
+            };
+            let held = self.reuse.cache.as_ref().expect("attached");
+            if held.cache.cache.contains(&key).is_some() {
+                continue;
+            }
+            if always
+                || self
+                    .reuse
+                    .rule
+                    .write_pays(&self.reuse.estimates, size_bytes)
+            {
+                keyed.push((b, key, true));
+            } else {
+                self.totals.disk_store_skipped += 1;
+                self.totals.disk_store_skipped_bytes += size_bytes;
+            }
+        }
+        keyed
     }
 
     /// Serialises BLASes `keyed` (id, key) that this renderer holds, resident or as a host
     /// clone (others are passed over): each is taken out for the serialise copies and put
     /// back after, whatever happens. Returns how many came from clones.
-    fn store_held(&mut self, keyed: Vec<(usize, CacheKey)>) -> Result<u64> {
+    fn store_held(&mut self, keyed: Vec<Keyed>) -> Result<u64> {
         let mut taken: Vec<TakenOut> = Vec::with_capacity(keyed.len());
-        for (b, key) in keyed {
+        for (b, key, to_disk) in keyed {
             let from = if let Some(a) = self.res.take_blas(b) {
                 Home::Resident(a)
             } else if let Some(c) = self.clones.take(b) {
@@ -236,7 +279,12 @@ impl StreamingRenderer<'_> {
             } else {
                 continue;
             };
-            taken.push(TakenOut { blas: b, key, from });
+            taken.push(TakenOut {
+                blas: b,
+                key,
+                to_disk,
+                from,
+            });
         }
         let from_clones = taken
             .iter()
@@ -248,6 +296,7 @@ impl StreamingRenderer<'_> {
                 blas: t.blas,
                 accel: t.from.accel(),
                 key: t.key,
+                to_disk: t.to_disk,
             })
             .collect();
         let stored = if todo.is_empty() {
@@ -387,7 +436,11 @@ impl StreamingRenderer<'_> {
         for (t, blob) in todo.iter().zip(blobs) {
             st.cache_stored_bytes += blob.len() as u64;
             st.cache_stored += 1;
-            a.cache.cache.put(t.key, blob);
+            if t.to_disk {
+                a.cache.cache.put(t.key, blob);
+            } else {
+                a.cache.cache.put_host(t.key, blob);
+            }
         }
         // The burst is over: page in memory for the next one while the device works.
         a.cache.cache.pool().refill();
