@@ -864,8 +864,7 @@ fn a_frame_clock_builds_one_blas_a_frame_and_a_camera_at_rest_converges() {
 /// time (a microsecond); off the clock it probes as before.
 #[test]
 fn a_complete_frame_on_the_clock_probes_only_when_a_round_fits() {
-    let Some(Fixture { ctx, h, full }) = Fixture::new("stream_clock_probe", field(4, 6, 12))
-    else {
+    let Some(Fixture { ctx, h, full }) = Fixture::new("stream_clock_probe", field(4, 6, 12)) else {
         return;
     };
     let opts = ids_opts(backend(&ctx));
