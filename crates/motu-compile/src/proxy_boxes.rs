@@ -70,8 +70,7 @@ pub fn box_count(fan: u32) -> usize {
 pub fn push_triangle_boxes(positions: &[[f32; 3]], indices: &[u32], out: &mut Vec<TriangleBox>) {
     for t in indices.chunks_exact(3) {
         if let Some(bx) = triangle_box(positions, t) {
-            let c = std::array::from_fn(|a| 0.5 * (bx[a] + bx[3 + a]));
-            out.push((c, bx));
+            out.push((centre(&bx), bx));
         }
     }
 }
@@ -89,11 +88,14 @@ pub fn boxes_from_triangles(tris: &[TriangleBox], fan: usize) -> Vec<Box6> {
             SplitKey(t.0, i as u32)
         })
         .collect();
-    boxes_from_keys(keys, bounds, fan, tris.len(), |grow_leaf| {
-        for (i, t) in tris.iter().enumerate() {
-            grow_leaf(i, &t.1);
+    let leaf_of = leaves_of_keys(keys, bounds, fan, tris.len());
+    let mut leaf_boxes = vec![EMPTY; fan * fan];
+    for (t, &l) in tris.iter().zip(&leaf_of) {
+        if let Some(bx) = leaf_boxes.get_mut(usize::from(l)) {
+            grow(bx, &t.1[..3], &t.1[3..]);
         }
-    })
+    }
+    boxes_of_leaves(&leaf_boxes, fan)
 }
 
 /// A BLAS's boxes (as [`boxes_from_triangles`]) from its meshes' positions and indices, in
@@ -102,34 +104,71 @@ pub fn boxes_from_triangles(tris: &[TriangleBox], fan: usize) -> Vec<Box6> {
 /// reads of three vertices cost less than writing and reading 36 bytes a triangle, in fresh
 /// memory each BLAS).
 pub fn boxes_from_meshes(meshes: &[(&[[f32; 3]], &[u32])], fan: usize) -> Vec<Box6> {
-    // Each mesh's first triangle in the BLAS's numbering (a key's `u32`).
-    let mut starts = Vec::with_capacity(meshes.len() + 1);
-    let mut total = 0usize;
-    for (_, indices) in meshes {
-        starts.push(total);
-        total += indices.len() / 3;
+    let total: usize = meshes.iter().map(|(_, indices)| indices.len() / 3).sum();
+    // A key's `u32` numbers its triangle in the BLAS: a mesh's triangles follow the meshes
+    // before it. Written in place (a push's capacity check kept the loop's state in memory);
+    // triangles without a box have no key.
+    let mut keys = vec![SplitKey([0.0; 3], 0); total];
+    let mut made = 0usize;
+    let mut first = 0usize;
+    for (positions, indices) in meshes {
+        each_triangle_box(positions, indices, |t, bx| {
+            keys[made] = SplitKey(centre(&bx), (first + t) as u32);
+            made += 1;
+        });
+        first += indices.len() / 3;
     }
-    starts.push(total);
-    let mut bounds = EMPTY;
-    let mut keys: Vec<SplitKey> = Vec::with_capacity(total);
-    for (m, (positions, indices)) in meshes.iter().enumerate() {
+    keys.truncate(made);
+    let bounds = centroid_bounds(&keys);
+    let leaf_of = leaves_of_keys(keys, bounds, fan, total);
+    let mut leaf_boxes = vec![EMPTY; fan * fan];
+    let mut first = 0usize;
+    for (positions, indices) in meshes {
+        let count = indices.len() / 3;
+        let mine = &leaf_of[first..first + count];
+        each_triangle_box(positions, indices, |t, bx| {
+            if let Some(leaf) = leaf_boxes.get_mut(usize::from(mine[t])) {
+                grow(leaf, &bx[..3], &bx[3..]);
+            }
+        });
+        first += count;
+    }
+    boxes_of_leaves(&leaf_boxes, fan)
+}
+
+/// Calls `f(t, box)` for each triangle `t` of a mesh (`indices` in threes) in order, with the
+/// box [`triangle_box`] makes, for those it makes one for. When every index reaches a position
+/// (the usual mesh) the box is made without looking for missing vertices: the same grows in
+/// the same order from [`EMPTY`], so the same bits.
+#[inline(always)]
+fn each_triangle_box(positions: &[[f32; 3]], indices: &[u32], mut f: impl FnMut(usize, Box6)) {
+    // A max over the indices vectorises; `all` would stop early and not.
+    let max_index = indices.iter().fold(0u32, |m, &i| m.max(i));
+    if (max_index as usize) < positions.len() {
+        for (t, tri) in indices.chunks_exact(3).enumerate() {
+            let mut bx = EMPTY;
+            for &i in tri {
+                let p = &positions[i as usize];
+                grow(&mut bx, p, p);
+            }
+            // All of a triangle's x NaN: no box (as `triangle_box`).
+            if bx[0] <= bx[3] {
+                f(t, bx);
+            }
+        }
+    } else {
         for (t, tri) in indices.chunks_exact(3).enumerate() {
             if let Some(bx) = triangle_box(positions, tri) {
-                let c = std::array::from_fn(|a| 0.5 * (bx[a] + bx[3 + a]));
-                grow(&mut bounds, &c, &c);
-                keys.push(SplitKey(c, (starts[m] + t) as u32));
+                f(t, bx);
             }
         }
     }
-    boxes_from_keys(keys, bounds, fan, total, |grow_leaf| {
-        for (m, (positions, indices)) in meshes.iter().enumerate() {
-            for (t, tri) in indices.chunks_exact(3).enumerate() {
-                if let Some(bx) = triangle_box(positions, tri) {
-                    grow_leaf(starts[m] + t, &bx);
-                }
-            }
-        }
-    })
+}
+
+/// A box's centre, the centroid the splits order triangles by.
+#[inline(always)]
+fn centre(bx: &Box6) -> [f32; 3] {
+    std::array::from_fn(|a| 0.5 * (bx[a] + bx[3 + a]))
 }
 
 /// The box of a triangle's vertices that lie in `positions` (`None`: none does; the build
@@ -144,19 +183,11 @@ fn triangle_box(positions: &[[f32; 3]], tri: &[u32]) -> Option<Box6> {
     (bx[0] <= bx[3]).then_some(bx)
 }
 
-/// The boxes of `fan` from the split keys (`bounds`: their centroids' bounds; a key's `u32`
-/// numbers its triangle below `triangles`) and every triangle's box, in the keys' numbering,
-/// from `each_box` (triangles without a key are passed over): each leaf grows by its
-/// triangles in their own order, reading the meshes front to back.
-fn boxes_from_keys(
-    mut keys: Vec<SplitKey>,
-    bounds: Box6,
-    fan: usize,
-    triangles: usize,
-    each_box: impl FnOnce(&mut dyn FnMut(usize, &Box6)),
-) -> Vec<Box6> {
-    let mut out = vec![EMPTY; fan + fan * fan];
-    // Each triangle's leaf (at most MAX_FAN² = 256 leaves; `u16::MAX`: none).
+/// Each triangle's leaf (below `fan²`; `u16::MAX`: none, a triangle without a key) from the
+/// split keys (`bounds`: their centroids' bounds; a key's `u32` numbers its triangle below
+/// `triangles`).
+fn leaves_of_keys(mut keys: Vec<SplitKey>, bounds: Box6, fan: usize, triangles: usize) -> Vec<u16> {
+    // At most MAX_FAN² = 256 leaves.
     let mut leaf_of = vec![u16::MAX; triangles];
     let mut room = keys.clone();
     let mut leaves = 0;
@@ -172,18 +203,13 @@ fn boxes_from_keys(
             }
         },
     );
-    drop(keys);
-    drop(room);
-    // A top box is the union of its leaves.
-    let mut leaf_boxes = vec![EMPTY; leaves];
-    each_box(&mut |i, t| {
-        if let Some(bx) = leaf_of
-            .get(i)
-            .and_then(|&l| leaf_boxes.get_mut(usize::from(l)))
-        {
-            grow(bx, &t[..3], &t[3..]);
-        }
-    });
+    leaf_of
+}
+
+/// The table's boxes from the leaves' (unpadded) boxes, `fan` per top box: a top box is the
+/// union of its leaves; non-empty boxes are padded.
+fn boxes_of_leaves(leaf_boxes: &[Box6], fan: usize) -> Vec<Box6> {
+    let mut out = vec![EMPTY; fan + fan * fan];
     let pad_nonempty = |bx: Box6| if bx[0] <= bx[3] { padded(bx) } else { bx };
     for (k, group) in leaf_boxes.chunks_exact(fan).enumerate() {
         let mut top = EMPTY;
@@ -397,12 +423,20 @@ const EXACT_MEDIAN_BELOW: usize = 512;
 const PIVOT_SAMPLE_STRIDE: usize = 8;
 const MIN_PIVOT_SAMPLES: usize = 63;
 
+/// The centroids' bounds, grown in order as [`grow`] grows them (one accumulator per bound, so
+/// they stay in registers).
 fn centroid_bounds<T: Centroid>(tris: &[T]) -> Box6 {
-    let mut c = EMPTY;
+    let [mut x0, mut y0, mut z0, mut x1, mut y1, mut z1] = EMPTY;
     for t in tris {
-        grow(&mut c, t.centroid(), t.centroid());
+        let [x, y, z] = *t.centroid();
+        x0 = if x < x0 { x } else { x0 };
+        y0 = if y < y0 { y } else { y0 };
+        z0 = if z < z0 { z } else { z0 };
+        x1 = if x > x1 { x } else { x1 };
+        y1 = if y > y1 { y } else { y1 };
+        z1 = if z > z1 { z } else { z1 };
     }
-    c
+    [x0, y0, z0, x1, y1, z1]
 }
 
 /// Moves the items whose centroid on `axis` lies below the median of evenly spaced ones
@@ -410,7 +444,7 @@ fn centroid_bounds<T: Centroid>(tris: &[T]) -> Box6 {
 /// and the bounds of the sampled centroids on either side (what the halves choose their axis
 /// by), or `None` when a side would be empty (ties, NaN: the caller splits at the exact
 /// median). Without branches on the data: each item is copied out to `scratch`, then written
-/// back to both sides' next free slots, and only its side's cursor moves.
+/// to its side's next free slot (a select), and only its side's cursor moves.
 #[cfg(test)]
 fn sampled_partition<T: Centroid + Copy>(
     tris: &mut [T],
@@ -430,9 +464,20 @@ fn sampled_partition_into<T: Centroid + Copy>(
 ) -> Option<(usize, Box6, Box6)> {
     let n = src.len();
     let samples = (n / PIVOT_SAMPLE_STRIDE).max(MIN_PIVOT_SAMPLES).min(n);
-    let mut sample: Vec<[f32; 3]> = (0..samples)
-        .map(|i| *src[(2 * i + 1) * n / (2 * samples)].centroid())
-        .collect();
+    // Item (2i + 1) n / (2 samples) for each sample i, stepped without a division each.
+    let den = 2 * samples;
+    let (step, step_rem) = ((2 * n) / den, (2 * n) % den);
+    let (mut at, mut rem) = (n / den, n % den);
+    let mut sample: Vec<[f32; 3]> = Vec::with_capacity(samples);
+    for _ in 0..samples {
+        sample.push(*src[at].centroid());
+        at += step;
+        rem += step_rem;
+        if rem >= den {
+            rem -= den;
+            at += 1;
+        }
+    }
     let (_, &mut pivot, _) =
         sample.select_nth_unstable_by(samples / 2, |x, y| x[axis].total_cmp(&y[axis]));
     let pivot = pivot[axis];
@@ -440,17 +485,33 @@ fn sampled_partition_into<T: Centroid + Copy>(
     for c in &sample {
         grow(&mut sides[1 - usize::from(c[axis] < pivot)], c, c);
     }
-    let (mut lo, mut hi) = (0usize, n);
-    for t in src {
-        // Before each item lo < hi: slots below lo and from hi on are taken.
-        // Not below (NaN included): right.
-        let right = 1 - usize::from(t.centroid()[axis] < pivot);
-        dst[lo] = *t;
-        dst[hi - 1] = *t;
-        lo += 1 - right;
-        hi -= right;
-    }
+    // One loop per axis: the axis's coordinate is then a fixed offset in each item.
+    let lo = match axis {
+        0 => partition_by::<T, 0>(src, dst, pivot),
+        1 => partition_by::<T, 1>(src, dst, pivot),
+        _ => partition_by::<T, 2>(src, dst, pivot),
+    };
     (lo > 0 && lo < n).then_some((lo, sides[0], sides[1]))
+}
+
+/// Writes the items of `src` whose centroid on `AXIS` lies below `pivot` to the front of `dst`
+/// in order, the rest to its back in reverse order; returns how many went to the front.
+fn partition_by<T: Centroid + Copy, const AXIS: usize>(
+    src: &[T],
+    dst: &mut [T],
+    pivot: f32,
+) -> usize {
+    let (mut lo, mut hi) = (0usize, dst.len());
+    for t in src {
+        // Before each item lo < hi: slots below lo and from hi on are taken. The item goes to
+        // its side's next free slot, chosen without a branch. Not below (NaN included): right.
+        let left = t.centroid()[AXIS] < pivot;
+        let slot = if left { lo } else { hi - 1 };
+        dst[slot] = *t;
+        lo += usize::from(left);
+        hi -= usize::from(!left);
+    }
+    lo
 }
 
 /// What BLAS `b`'s boxes are made from, hashed: the box maths' constants, its record, its

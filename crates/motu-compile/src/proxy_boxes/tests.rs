@@ -346,3 +346,94 @@ fn splitting_keys_makes_the_boxes_splitting_the_triangles_made() {
         }
     }
 }
+
+mod reference;
+
+/// Deterministic xorshift numbers in [0, 1).
+fn unit_numbers(mut seed: u64) -> impl FnMut() -> f32 {
+    move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+/// A coordinate that is often tied, sometimes a zero of either sign, now and then NaN or
+/// infinite: what the splits must treat exactly as before.
+fn awkward(r: &mut impl FnMut() -> f32, spread: f32) -> f32 {
+    match (r() * 40.0) as u32 {
+        0 => f32::NAN,
+        1 => -0.0,
+        2 => 0.0,
+        3 => f32::INFINITY,
+        4..=15 => (r() * 6.0).floor(),
+        _ => (r() - 0.3) * spread,
+    }
+}
+
+#[test]
+fn the_one_write_partition_moves_items_as_the_two_write_partition_did() {
+    let mut r = unit_numbers(0x2545_f491_4f6c_dd1d);
+    for n in [513usize, 514, 700, 1023, 4096, 9999] {
+        let src: Vec<SplitKey> = (0..n as u32)
+            .map(|i| SplitKey(std::array::from_fn(|_| awkward(&mut r, 50.0)), i))
+            .collect();
+        for axis in 0..3 {
+            let mut new = vec![SplitKey([0.0; 3], u32::MAX); n];
+            let mut old = new.clone();
+            let made = sampled_partition_into(&src, &mut new, axis);
+            let was = reference::sampled_partition_into(&src, &mut old, axis);
+            let bits = |o: &Option<(usize, Box6, Box6)>| {
+                o.map(|(m, l, r)| (m, l.map(f32::to_bits), r.map(f32::to_bits)))
+            };
+            assert_eq!(bits(&made), bits(&was), "n {n} axis {axis}");
+            let ids = |v: &[SplitKey]| v.iter().map(|k| k.1).collect::<Vec<_>>();
+            assert_eq!(ids(&new), ids(&old), "n {n} axis {axis}");
+        }
+    }
+}
+
+#[test]
+fn boxes_from_meshes_are_main_s_boxes_bit_for_bit() {
+    let mut r = unit_numbers(0x9e37_79b9_7f4a_7c15);
+    // Meshes of awkward positions (ties, signed zeros, NaN, infinities), one with indices out
+    // of range, at sizes that reach every fan and the sampled splits.
+    for (tris, spread, out_of_range) in [
+        (40usize, 1.0f32, false),
+        (300, 10.0, true),
+        (2_000, 100.0, false),
+        (9_000, 0.01, true),
+        (20_000, 1e4, false),
+    ] {
+        let verts = tris + 7;
+        let mut mesh = |m: u32| -> (Vec<[f32; 3]>, Vec<u32>) {
+            let positions: Vec<[f32; 3]> = (0..verts)
+                .map(|_| std::array::from_fn(|_| awkward(&mut r, spread)))
+                .collect();
+            let mut indices: Vec<u32> = (0..3 * tris)
+                .map(|_| (r() * verts as f32) as u32 % verts as u32)
+                .collect();
+            if out_of_range && m == 1 {
+                indices[4] = verts as u32;
+                indices[9] = u32::MAX;
+            }
+            (positions, indices)
+        };
+        let meshes = [mesh(0), mesh(1)];
+        let slices: Vec<(&[[f32; 3]], &[u32])> =
+            meshes.iter().map(|(p, i)| (&p[..], &i[..])).collect();
+        for fan in [1usize, 2, 4, 8, 16] {
+            let new = boxes_from_meshes(&slices, fan);
+            let old = reference::boxes_from_meshes(&slices, fan);
+            let bits = |b: &[Box6]| b.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&new), bits(&old), "{tris} triangles, fan {fan}");
+            let mut each = Vec::new();
+            for (p, i) in &slices {
+                push_triangle_boxes(p, i, &mut each);
+            }
+            let stored = boxes_from_triangles(&each, fan);
+            assert_eq!(bits(&stored), bits(&old), "{tris} triangles, fan {fan}");
+        }
+    }
+}
