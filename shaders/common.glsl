@@ -31,10 +31,8 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 #define STAT_TLAS_WALKS 6
 #define STAT_MARK_WALKS 7
 #define STAT_MARK_TLAS_WALKS 8
-// Streamed passes (candidates.glsl `proxy_entry`, proxy_members.glsl): member boxes tested
-// (quantised), and exact member tests (an instance record read) among them. The query backend
-// always counts them; the pipeline backend, whose tests run in intersection and any-hit
-// shaders, only under STREAM_COUNT_PROXY_TESTS (an atomic per shader call).
+// Streamed passes of the query backend only (candidates.glsl `proxy_entry`): member boxes
+// tested (quantised), and exact member tests (an instance record read) among them.
 #define STAT_PROXY_MEMBER_TESTS 9
 #define STAT_PROXY_EXACT_TESTS 10
 
@@ -97,22 +95,6 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 // StreamParams.flags of a last pass after which nothing is built (the frame's build budget is
 // spent): no ray takes a mark walk (traverse.glsl), whose marks only steer that build.
 #define STREAM_NO_MARK_WALK 8u
-// StreamParams.flags: a ray's walks after its first start from its nearest open entry so far
-// (Payload.open_t = g_empty_t, traverse.glsl), so their proxy boxes behind it test no member;
-// on the pipeline backend the proxy intersection shader reads the current walk's bound too
-// (pipeline/open_bound.glsl). Off: each walk starts from T_INFINITY and the intersection
-// shader tests up to the committed triangle (motu-gpu StreamOptions::open_bound, comparisons).
-#define STREAM_OPEN_BOUND 16u
-// The carry buffer (StreamParams.carry): CARRY_WORDS u32 a pixel (render_pixel.glsl `Carry`,
-// Rust CARRY_BYTES). Word CARRY_OPEN_BOUND_WORD of a slot (Carry.thru.w) is no part of any
-// pixel's state (never read nor written as one): during a pipeline pass, slot i's holds launch
-// item i's open bound (pipeline/open_bound.glsl), so the bound takes no memory of its own.
-#define CARRY_WORDS 44u
-#define CARRY_OPEN_BOUND_WORD 43u
-// StreamParams.flags: the pipeline backend's proxy intersection and any-hit shaders add their
-// member tests to STAT_PROXY_MEMBER_TESTS / STAT_PROXY_EXACT_TESTS (StreamOptions::
-// count_proxy_tests: an atomic per shader call, for tests and diagnosis).
-#define STREAM_COUNT_PROXY_TESTS 32u
 // Ray cull masks (Rust: stream::MARKS_MASK, stream::TRIANGLE_MASK). Every instance has mask
 // 0xFF except in a streamed TLAS its triangle instances (0x01) and its *marks* BLAS (0x02: the
 // boxes of its resident clusters), which only probe passes' mark walks see: there a ray passing
@@ -142,7 +124,7 @@ struct StreamParams {
     uint64_t cluster_members;  // u32 global instance indices of the proxy clusters' members
     uint64_t proxy_box_index;  // uvec2 (first, fan) per BLAS into proxy_boxes (fan 0: none)
     uint64_t proxy_boxes;   // float[6] (min, max; BLAS space): fan top boxes, then fan leaves each
-    uint flags;             // STREAM_PROBE_PASS, ...
+    uint flags;             // STREAM_PROBE_PASS
     uint _pad;
 };
 

@@ -87,8 +87,6 @@ uint g_mark_tlas_walks = 0u;
 bool g_last_pass = false;
 // No mark walks this pass (STREAM_NO_MARK_WALK): nothing is built after it.
 bool g_no_mark_walk = false;
-// STREAM_OPEN_BOUND: a walk starts from the ray's nearest open entry so far.
-bool g_open_bound = false;
 #endif
 
 // Records `id` at `level` in this pass.
@@ -175,14 +173,7 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
         pl.t_max = hit.t;
         pl.truncated = 0u;
         pl.hit_t = -1.0;
-#ifdef MOTU_STREAMED
-        // Only the ray's nearest open entry over all its walks counts (g_empty_t, then
-        // stream_still_open), so a first walk starts from the nearest found so far and its
-        // proxy boxes behind it test no member (record_proxy). A mark walk records none.
-        pl.open_t = g_open_bound && !g_mark_walk ? g_empty_t : T_INFINITY;
-#else
         pl.open_t = T_INFINITY;
-#endif
         pl.stream_start = g_start | (g_guard ? STREAM_GUARD_RAY : 0u);
 #ifdef MOTU_STREAMED
         pl.stream_start |= g_mark_walk ? STREAM_MARK_WALK : 0u;

@@ -167,27 +167,6 @@ pub struct StreamOptions {
     /// step evicting what the next frame's pass needs: ¼ of the default island at 64×36 never
     /// completed in 8 still frames, flickering between 11 and 592 fallback pixels.
     pub settle_after_still_frames: u32,
-    /// A ray's walks start from its nearest open entry so far, and the pipeline backend's
-    /// proxy intersection shader reads the current walk's (`STREAM_OPEN_BOUND`,
-    /// `shaders/pipeline/open_bound.glsl`): proxy boxes behind it test no member, where before
-    /// that shader, which cannot read the payload, tested the members of every box in front
-    /// of the committed triangle (for an open ray, every box to the walk's far end). Images,
-    /// walks and requests are unchanged; only member tests go. `false` for comparisons
-    /// (`MOTU_PROXY_TESTS=unbounded`).
-    pub open_bound: bool,
-    /// The pipeline backend counts its proxy member tests (`proxy_member_tests`,
-    /// `proxy_exact_tests` per pass in `--stats`) as the query backend always does: an atomic
-    /// per proxy shader call, for tests and diagnosis (`MOTU_PROXY_TESTS=count`).
-    pub count_proxy_tests: bool,
-}
-
-/// `MOTU_PROXY_TESTS` (comma-separated words): `count` sets
-/// [`StreamOptions::count_proxy_tests`], `unbounded` clears [`StreamOptions::open_bound`]; the
-/// defaults' `(open_bound, count_proxy_tests)`.
-fn proxy_tests_from_env() -> (bool, bool) {
-    let v = std::env::var("MOTU_PROXY_TESTS").unwrap_or_default();
-    let has = |w: &str| v.split(',').any(|x| x.trim() == w);
-    (!has("unbounded"), has("count"))
 }
 
 /// What a frame on the clock may do, as counts ([`StreamOptions::frame_caps`]).
@@ -372,7 +351,6 @@ pub enum StreamFallback {
 
 impl Default for StreamOptions {
     fn default() -> Self {
-        let (open_bound, count_proxy_tests) = proxy_tests_from_env();
         Self {
             budget_bytes: 512 * MIB,
             max_allocations: 4096,
@@ -411,8 +389,6 @@ impl Default for StreamOptions {
             tlas_compact: false,
             tlas_headroom: DEFAULT_TLAS_HEADROOM,
             settle_after_still_frames: 2,
-            open_bound,
-            count_proxy_tests,
         }
     }
 }

@@ -8,8 +8,7 @@ use motu_abi::aov::AovRecord;
 use super::buffers::FrameBuffers;
 use super::demand::Demand;
 use super::params::{
-    StreamParams, CARRY_BYTES, STAMP_LIMIT, STREAM_COUNT_PROXY_TESTS, STREAM_LAST_PASS,
-    STREAM_NO_MARK_WALK, STREAM_OPEN_BOUND,
+    StreamParams, CARRY_BYTES, STAMP_LIMIT, STREAM_LAST_PASS, STREAM_NO_MARK_WALK,
 };
 use super::{FrameStreamStats, PassStats, StreamFallback, StreamingRenderer, GUARD_BIAS};
 use crate::error::{GpuError, Result};
@@ -267,22 +266,6 @@ impl<'a> StreamingRenderer<'a> {
             (true, false) => STREAM_LAST_PASS,
             _ => 0,
         }
-    }
-
-    /// The flags every pass adds: [`StreamOptions::open_bound`](super::StreamOptions::open_bound)'s
-    /// and [`StreamOptions::count_proxy_tests`](super::StreamOptions::count_proxy_tests)'.
-    fn proxy_test_flags(&self) -> u32 {
-        let bound = if self.opts.open_bound {
-            STREAM_OPEN_BOUND
-        } else {
-            0
-        };
-        let count = if self.opts.count_proxy_tests {
-            STREAM_COUNT_PROXY_TESTS
-        } else {
-            0
-        };
-        bound | count
     }
 
     /// The guard band pass 1 traces: none in a refining frame (`refining_first_pass`), whose
@@ -569,7 +552,7 @@ impl<'a> StreamingRenderer<'a> {
             cluster_members,
             proxy_box_index,
             proxy_boxes,
-            flags: flags | self.proxy_test_flags(),
+            flags,
             _pad: 0,
         };
         fb.stream.write(0, std::slice::from_ref(&sp))?;

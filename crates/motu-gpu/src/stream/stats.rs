@@ -414,11 +414,10 @@ pub struct PassStats {
     pub tlas_walks: u64,
     pub mark_walks: u64,
     pub mark_tlas_walks: u64,
-    /// Proxy member boxes tested in their quantised form, and the exact tests (an instance
-    /// record read) they let through (`stream/member_boxes.rs`). The query backend always
-    /// counts them; the pipeline backend, whose tests run in intersection and any-hit shaders,
-    /// only with [`StreamOptions::count_proxy_tests`](super::StreamOptions::count_proxy_tests)
-    /// (else 0), and counts the intersection shader's quantised tests as well as the any-hit's.
+    /// The query backend's count (device-independent; 0 on the pipeline backend, whose
+    /// any-hit shader cannot carry counts out): proxy member boxes tested in their quantised
+    /// form, and the exact tests (an instance record read) they let through
+    /// (`stream/member_boxes.rs`).
     pub proxy_member_tests: u64,
     pub proxy_exact_tests: u64,
 }
