@@ -196,6 +196,61 @@ pub fn shot_cam_dolly_path(dir: &Path, dolly: f64) -> PathBuf {
     p
 }
 
+/// The default island's shotCam dolly ([`shot_cam_dolly_path`], 0.3 of the way) flown by
+/// `motu bench --camera-path … --stream` as the viewer flies (one pass a frame, the coarse
+/// fallback) at a quarter of its full build's peak, checked above the floor.
+pub struct QuarterFlight {
+    pub dir: tempfile::TempDir,
+    pub pkg: PathBuf,
+    pub path: PathBuf,
+    pub budget: String,
+}
+
+impl QuarterFlight {
+    /// `None` without a ray-tracing device (said loudly by [`gpu_available`]).
+    pub fn new() -> Option<QuarterFlight> {
+        let (dir, pkg) = gpu_island(None)?;
+        let path = shot_cam_dolly_path(dir.path(), 0.3);
+        let (peak, floor) = report_peak_and_floor(&pkg, "64", "36");
+        assert!(
+            peak / 4 > floor,
+            "a quarter of {peak} is above the floor {floor}"
+        );
+        Some(QuarterFlight {
+            dir,
+            pkg,
+            path,
+            budget: (peak / 4).to_string(),
+        })
+    }
+
+    /// The flight's `bench --json` report with `extra` flags (its build budget, frames, …),
+    /// no warm-up renderer (on lavapipe each new trace pipeline is a fresh LLVM compile).
+    pub fn bench(&self, extra: &[&str]) -> serde_json::Value {
+        let mut args = vec![
+            "bench",
+            "--camera-path",
+            s(&self.path),
+            "--package",
+            s(&self.pkg),
+            "--stream",
+            "--vram-budget",
+            &self.budget,
+            "--stream-fallback",
+            "coarse",
+            "--stream-passes",
+            "1",
+            "--warmup",
+            "0",
+            "--backend",
+            "pipeline",
+            "--json",
+        ];
+        args.extend(extra);
+        motu_json(&args)
+    }
+}
+
 /// `motu report --json` of `pkg` for a `width` × `height` image.
 pub fn report_json(pkg: &Path, width: &str, height: &str) -> serde_json::Value {
     motu_json(&[

@@ -4,48 +4,21 @@
 //! not times, on any device. Its open pixels stay on the counted fallback, no frame with open
 //! pixels is complete, and a camera at rest still settles to the exact image.
 
-use motu_tests::{
-    gpu_island, json_u64 as u, motu_json, report_peak_and_floor, s, shot_cam_dolly_path,
-};
+use motu_tests::{json_u64 as u, QuarterFlight};
 
 #[test]
 fn a_frame_clock_out_of_time_builds_one_blas_a_frame_and_the_camera_settles_at_rest() {
-    let Some((dir, pkg)) = gpu_island(None) else {
+    let Some(flight) = QuarterFlight::new() else {
         return;
     };
-    let d = dir.path();
-    let path = shot_cam_dolly_path(d, 0.3);
-    let (peak, floor) = report_peak_and_floor(&pkg, "64", "36");
-    let budget = (peak / 4).to_string();
-    assert!(
-        peak / 4 > floor,
-        "a quarter of {peak} is above the floor {floor}"
-    );
     let (frames, still) = (6usize, 8usize);
-    let b = motu_json(&[
-        "bench",
-        "--camera-path",
-        s(&path),
-        "--package",
-        s(&pkg),
-        "--stream",
-        "--vram-budget",
-        &budget,
+    let b = flight.bench(&[
         "--stream-frame-ms",
         "0.001",
-        "--stream-fallback",
-        "coarse",
-        "--stream-passes",
-        "1",
         "--frames",
         &frames.to_string(),
         "--still-frames",
         &still.to_string(),
-        "--warmup",
-        "0",
-        "--backend",
-        "pipeline",
-        "--json",
     ]);
     // The clock replaces the viewer's 30 ms build budget, which is not added.
     assert_eq!(b["frame_ms"], 0.001, "{b}");

@@ -7,48 +7,21 @@
 //! frame build budget; the frames before stay at one pass, and once complete every later still
 //! frame is.
 
-use motu_tests::{
-    gpu_island, json_u64 as u, motu_json, report_peak_and_floor, s, shot_cam_dolly_path,
-};
+use motu_tests::{json_u64 as u, QuarterFlight};
 
 #[test]
 fn a_still_camera_settles_to_the_exact_image_where_one_pass_a_frame_churns() {
-    let Some((dir, pkg)) = gpu_island(None) else {
+    let Some(flight) = QuarterFlight::new() else {
         return;
     };
-    let d = dir.path();
-    let path = shot_cam_dolly_path(d, 0.3);
-    let (peak, floor) = report_peak_and_floor(&pkg, "64", "36");
-    let budget = (peak / 4).to_string();
-    assert!(
-        peak / 4 > floor,
-        "a quarter of {peak} is above the floor {floor}"
-    );
     let still = 8usize;
-    let b = motu_json(&[
-        "bench",
-        "--camera-path",
-        s(&path),
-        "--package",
-        s(&pkg),
-        "--stream",
-        "--vram-budget",
-        &budget,
+    let b = flight.bench(&[
         "--stream-build-budget",
         "8MiB",
-        "--stream-fallback",
-        "coarse",
-        "--stream-passes",
-        "1",
         "--frames",
         "4",
         "--still-frames",
         "8",
-        "--warmup",
-        "0",
-        "--backend",
-        "pipeline",
-        "--json",
     ]);
     let rows = b["per_frame"].as_array().expect("per_frame");
     assert_eq!(rows.len(), 4 + still, "{b}");
