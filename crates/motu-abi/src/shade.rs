@@ -199,13 +199,23 @@ pub fn luminance(c: [f32; 3]) -> f32 {
 /// without light keeps 0.
 pub fn auto_exposure_ev(pixels: impl Iterator<Item = [f32; 3]>) -> f32 {
     let (mut sum, mut n) = (0.0f64, 0u64);
-    for c in pixels {
-        let l = luminance(c);
-        if l > 1e-6 {
-            sum += (l as f64).ln();
-            n += 1;
-        }
+    for l in pixels.filter_map(log_luminance) {
+        sum += l;
+        n += 1;
     }
+    exposure_ev_of_log_sum(sum, n)
+}
+
+/// One pixel's term of [`auto_exposure_ev`]'s log average: the log of its luminance, or `None`
+/// for a pixel without light. Callers that compute the terms in parallel sum them in pixel
+/// order, so their exposure is this function's to the bit.
+pub fn log_luminance(c: [f32; 3]) -> Option<f64> {
+    let l = luminance(c);
+    (l > 1e-6).then(|| (l as f64).ln())
+}
+
+/// [`auto_exposure_ev`] from the sum of `n` lit pixels' [`log_luminance`]s.
+pub fn exposure_ev_of_log_sum(sum: f64, n: u64) -> f32 {
     if n == 0 {
         return 0.0;
     }
