@@ -477,6 +477,30 @@ fn render_unpinned(
         .expect("stats JSON")
 }
 
+/// `--stream-rates` for tests that compare counts between runs or against recorded numbers:
+/// the restore and store rules decide from these rates instead of this machine's measured
+/// ones, which follow its load (lavapipe's restores cost about what its CPU builds do, so a
+/// measured rule restores or builds by the noise: notes/rates52.md). Lavapipe-like, the
+/// behaviour before the rules: restores (host or directory) far cheaper than builds, so every
+/// cached BLAS is restored and every one built written; the same decisions on every run.
+pub const PINNED_RATES: [&str; 2] = ["--stream-rates", "build=0.5,restore=4,disk_read=8,store=4"];
+
+/// The per-frame counts of a streamed render (`--stats` JSON `st`): every integer and boolean
+/// of each frame but its pass log (times are floats), as `(frame, key, value)`. With pinned
+/// rates ([`PINNED_RATES`]) two runs of one command give the same.
+pub fn stream_frame_counts(st: &serde_json::Value) -> Vec<(usize, String, serde_json::Value)> {
+    let mut out = Vec::new();
+    for (i, f) in stream_frames(st).iter().enumerate() {
+        let obj = f.as_object().expect("a frame object");
+        for (k, v) in obj {
+            if v.is_u64() || v.is_boolean() {
+                out.push((i, k.clone(), v.clone()));
+            }
+        }
+    }
+    out
+}
+
 /// The image size and frame count of a streamed camera path ([`streamed_path`]).
 #[derive(Clone, Copy, Debug)]
 pub struct PathShape {
@@ -489,6 +513,8 @@ pub struct PathShape {
 /// (`--stream --stream-always`: the streamer itself, also at budgets that hold the whole
 /// scene) with `extra` flags and `env`, its AOV written to `dir/name.aov`: the statistics and
 /// the AOV's path. The stream tests' shot paths (`stream.rs`) and `stream_records.rs` run it.
+/// Its rates are pinned ([`PINNED_RATES`]): these tests compare counts between runs and
+/// against recorded numbers.
 #[allow(clippy::too_many_arguments)]
 pub fn streamed_path(
     pkg: &Path,
@@ -514,6 +540,7 @@ pub fn streamed_path(
         "--vram-budget",
         &budget,
     ];
+    args.extend(PINNED_RATES);
     args.extend(extra);
     (render_env(pkg, backend, &aov, &args, env), aov)
 }

@@ -421,11 +421,15 @@ fn a_still_frame_stores_only_evicted_blases_in_frame_and_the_rest_after_its_imag
     };
     // As built, inside the frame (`--stream-host-cache serialize`, the behaviour before).
     let built_dir = f.dir.path().join("cache-as-built");
+    // Fixed rates (every cached BLAS restored, as the deferred run's `always`): the frame's
+    // returns then do not follow this machine's timing, so the two runs build the same.
     let as_built = [
         "--as-cache",
         s(&built_dir),
         "--stream-host-cache",
         "serialize",
+        motu_tests::PINNED_RATES[0],
+        motu_tests::PINNED_RATES[1],
     ];
     let (a, a_aov) = still(&f, "still-as-built", &budget, &as_built);
     // The default: at eviction, and the rest after the image.
@@ -906,5 +910,77 @@ fn measured_rates_decide_restores_and_writes_across_processes() {
         .expect("rewritten whole");
     for aov in [&cold_aov, &warm_aov, &declined_aov, &skip_aov, &aov] {
         same(aov);
+    }
+}
+
+/// Fixed rates (`--stream-rates`, notes/rates52.md): the restore and store rules decide from
+/// them alone, never from this machine's timing, so one command run twice gives the same
+/// counts frame by frame while the rule restores some cached structures and declines others.
+/// A cold process whose rates say restores pay writes what it builds; two warm processes over
+/// that directory, whose rates add a fixed cost to each restore that only structures above the
+/// entries' mean size repay, restore those from the directory and build the rest, count for
+/// count the same along a path that evicts and returns. No process reads or writes a rates
+/// file; every image is the full build's.
+#[test]
+fn fixed_rates_decide_the_same_on_every_run() {
+    let Some(f) = Fixture::new() else { return };
+    let budget = (f.peak / 4).to_string();
+    let cache = f.dir.path().join("cache-fixed");
+    let run = |name: &str, rates: &str| {
+        let extra = ["--as-cache", s(&cache), "--stream-rates", rates];
+        path(&f, name, "query", &budget, &extra, &[])
+    };
+    let no_rates_file = |st: &serde_json::Value| {
+        assert_eq!(policy(st)["rates_file"], "fixed", "{}", policy(st));
+        assert_eq!(policy(st)["rates_saved"], false, "{}", policy(st));
+        assert!(!cache.join(motu_ascache::rates::RATES_DIR).exists());
+    };
+    let (cold, cold_aov) = run("fixed-cold", motu_tests::PINNED_RATES[1]);
+    let tc = totals(&cold);
+    eprintln!("cold: {tc}");
+    no_rates_file(&cold);
+    assert_eq!(json_u64(&tc["disk_store_skipped"]), 0, "{tc}");
+    assert_eq!(json_u64(&tc["host_restore_declined"]), 0, "{tc}");
+    assert!(
+        json_u64(&tc["restored_blases"]) > 0,
+        "the path returns: {tc}"
+    );
+    let sizes: Vec<u64> = entries(&cache)
+        .iter()
+        .map(|p| std::fs::metadata(p).unwrap().len())
+        .collect();
+    assert!(sizes.len() >= 3, "{sizes:?}");
+    // Builds at 1 GB/s, restores and reads free but for a fixed cost per structure: a cached
+    // structure of S bytes is restored when S ≥ the mean entry's bytes.
+    let mean = sizes.iter().sum::<u64>() / sizes.len() as u64;
+    let split = format!(
+        "build=1,restore=inf+{},disk_read=inf,store=inf",
+        mean as f64 / 1e6
+    );
+    let (w1, w1_aov) = run("fixed-warm-1", &split);
+    let (w2, w2_aov) = run("fixed-warm-2", &split);
+    let t1 = totals(&w1);
+    eprintln!("warm (split at {mean} B): {t1}");
+    for st in [&w1, &w2] {
+        no_rates_file(st);
+    }
+    assert!(
+        motu_tests::stream_total(&w1, "restored_from_disk") > 0,
+        "{t1}"
+    );
+    assert!(json_u64(&t1["disk_restore_declined"]) > 0, "{t1}");
+    assert!(json_u64(&t1["blas_built"]) > 0, "{t1}");
+    let (c1, c2) = (
+        motu_tests::stream_frame_counts(&w1),
+        motu_tests::stream_frame_counts(&w2),
+    );
+    assert!(c1.len() > 8 * 50, "counts of every frame: {}", c1.len());
+    let differ: Vec<_> = c1.iter().zip(&c2).filter(|(a, b)| a != b).collect();
+    assert!(
+        differ.is_empty() && c1.len() == c2.len(),
+        "two runs with fixed rates differ: {differ:?}"
+    );
+    for aov in [&cold_aov, &w1_aov, &w2_aov] {
+        f.same_as_reference(aov);
     }
 }

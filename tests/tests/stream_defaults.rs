@@ -79,7 +79,17 @@ fn streams_as_the_full_build(test: &str, extra: &[&str]) -> Option<Vec<u8>> {
     };
     let (fpng, faov, _) = render("full", &[]);
     let b = budget.to_string();
-    let (spng, saov, st) = render("stream", &["--stream", "--vram-budget", &b]);
+    // Fixed rates: the frame's evictions return (restored or built) as on every machine.
+    let (spng, saov, st) = render(
+        "stream",
+        &[
+            "--stream",
+            "--vram-budget",
+            &b,
+            motu_tests::PINNED_RATES[0],
+            motu_tests::PINNED_RATES[1],
+        ],
+    );
     let frame = &st["stream"]["frames"][0];
     assert_eq!(frame["complete"], true, "{frame}");
     assert!(u(&frame["passes"]) >= 3, "several passes: {frame}");

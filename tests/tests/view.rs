@@ -546,6 +546,10 @@ fn streaming_refines_over_frames_and_never_writes_an_unfinished_frame() {
         "--vram-budget",
         "3MiB",
         "--stream-always",
+        // What the frames evict and need again is restored or built by fixed rates, not by
+        // this machine's timing (the passes decide whether the frame completes).
+        motu_tests::PINNED_RATES[0],
+        motu_tests::PINNED_RATES[1],
     ];
     let (vaov, vstats, raov) = (d.join("v.aov"), d.join("v.json"), d.join("r.aov"));
     // With carried hits this small forest completes within two passes at this budget, so the

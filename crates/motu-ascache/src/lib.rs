@@ -131,7 +131,7 @@ pub use host::{
     FALLBACK_HOST_CACHE_BYTES,
 };
 pub use key::{CacheKey, CacheKeyBuilder, KeyParseError};
-pub use rates::{DeviceRates, Rate, RatesError};
+pub use rates::{parse_rates, DeviceRates, Rate, RatesError, RatesSpecError};
 pub use reads::{ReadPlan, ReadsDone};
 pub use stats::{CacheStats, DiskStats, HostStats, PoolStats, Tier, WarningCounts, WarningReason};
 

@@ -95,6 +95,57 @@ impl RatesError {
     }
 }
 
+/// Why a `--stream-rates` list ([`parse_rates`]) was refused.
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum RatesSpecError {
+    #[error("{0:?} is not OP=GB/S or OP=GB/S+MS (OP: build, restore, disk_read or store)")]
+    Malformed(String),
+    #[error("{0:?} names no operation: build, restore, disk_read or store")]
+    UnknownOperation(String),
+    #[error(
+        "{0:?}: a rate is a number of GB/s above 0 (inf: no per-byte cost), the fixed part \
+             milliseconds per structure, 0 or more"
+    )]
+    BadNumber(String),
+    #[error("{0:?} is named twice")]
+    Twice(String),
+}
+
+/// Rates written by hand (`motu render --stream-rates`), comma-separated `OP=GB/S` or
+/// `OP=GB/S+MS` with OP one of `build`, `restore`, `disk_read`, `store`, GB/S the rate (GB of
+/// structure a second; `inf`: no per-byte cost) and MS a fixed milliseconds per structure:
+/// `build=0.5,restore=4+0.1`. An operation not named stays `None`; `batches` is 0 (none
+/// measured).
+pub fn parse_rates(spec: &str) -> Result<DeviceRates, RatesSpecError> {
+    let mut rates = DeviceRates::default();
+    for item in spec.split(',').map(str::trim) {
+        let (name, value) = item
+            .split_once('=')
+            .ok_or_else(|| RatesSpecError::Malformed(item.into()))?;
+        let name = name.trim();
+        let slot = rates
+            .field_mut(name)
+            .ok_or_else(|| RatesSpecError::UnknownOperation(name.into()))?;
+        if slot.is_some() {
+            return Err(RatesSpecError::Twice(name.into()));
+        }
+        let (gb, ms) = value.split_once('+').unwrap_or((value, "0"));
+        let bad = || RatesSpecError::BadNumber(item.into());
+        let gb_per_s: f64 = gb.trim().parse().map_err(|_| bad())?;
+        let per_blas_ms: f64 = ms.trim().parse().map_err(|_| bad())?;
+        // As `decode_rates` accepts them: a rate of 0 would divide by zero.
+        if gb_per_s.is_nan() || gb_per_s <= 0.0 || !per_blas_ms.is_finite() || per_blas_ms < 0.0 {
+            return Err(bad());
+        }
+        *slot = Some(Rate {
+            batches: 0,
+            per_blas_ms,
+            gb_per_s,
+        });
+    }
+    Ok(rates)
+}
+
 /// `device` on one line (an identity with line breaks would otherwise split the file).
 fn one_line(device: &str) -> String {
     device.replace(['\n', '\r'], " ")

@@ -12,7 +12,7 @@ pub use gen::{GenArgs, GenFormatArg, GenKindArg};
 pub use import::{CurvesArg, ImportArgs, LevelsArg};
 pub use stream::{
     AsCacheArgs, FallbackArg, HostCacheArg, HostCachePolicyArg, MeshMemoryArg, OnOffArg,
-    StreamBoundArgs, StreamTlasArg, TlasBuildArg, TlasRecordsArg,
+    StreamBoundArgs, StreamRatesArg, StreamTlasArg, TlasBuildArg, TlasRecordsArg,
 };
 
 // `render`/`view` flags under help headings (issue 46: 38 flags in one list were not a CLI a

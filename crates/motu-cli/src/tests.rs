@@ -273,3 +273,40 @@ fn pipeline_stats_flag_parses_into_the_device_request() {
     ])
     .is_err());
 }
+
+#[test]
+fn stream_rates_default_to_measured_and_fix_what_they_name() {
+    let rates = |flags: &[&str]| cmd::render::stream_bounds(&render_args(flags).stream_bounds);
+    // Default: measured (no fixed rates), not a streaming flag given.
+    let b = rates(&[]);
+    assert_eq!((b.fixed_rates, b.options().fixed_rates), (None, None));
+    assert_eq!(rates(&["--stream-rates", "measured"]), b);
+    // Fixed: what is named, the rest unknown; needs --stream.
+    let b = rates(&["--stream-rates", "build=0.5,restore=4+0.1"]);
+    assert!(b.given());
+    let r = b.options().fixed_rates.expect("fixed");
+    assert_eq!(
+        r.build.map(|r| (r.per_blas_ms, r.gb_per_s)),
+        Some((0.0, 0.5))
+    );
+    assert_eq!(
+        r.restore.map(|r| (r.per_blas_ms, r.gb_per_s)),
+        Some((0.1, 4.0))
+    );
+    assert_eq!((r.disk_read, r.store), (None, None));
+    let b = rates(&["--stream-rates", "unmeasured"]);
+    assert_eq!(b.fixed_rates, Some(motu_gpu::DeviceRates::default()));
+    for bad in ["", "fast", "build=0", "build=1,build=2", "read=1"] {
+        let args = [
+            "motu",
+            "render",
+            "pkg",
+            "-o",
+            "x.png",
+            "--stream-rates",
+            bad,
+        ];
+        let e = cli::Cli::try_parse_from(args).map(|_| ()).unwrap_err();
+        assert!(e.to_string().contains("measured, unmeasured"), "{bad}: {e}");
+    }
+}

@@ -159,3 +159,5 @@ pub use stream::{
     StreamPlan, StreamTotals, StreamingRenderer, StructureCache, TlasRecordsMode, TlasUpdate,
     AUTO_PASS_FRAMES, AUTO_PASS_ROWS, DEFAULT_TLAS_HEADROOM, MAX_TLAS_HEADROOM, PI_EMPTY_BLAS,
 };
+// Fixed rates for the restore and store rules (`StreamOptions::fixed_rates`, `--stream-rates`).
+pub use motu_ascache::{parse_rates, DeviceRates, RatesSpecError};

@@ -307,7 +307,6 @@ impl<'a> StreamingRenderer<'a> {
             tlas_compact: opts.tlas_compact && opts.compact,
             ..Default::default()
         };
-        let host_store_policy = opts.host_store_policy;
         let mut r = StreamingRenderer {
             res: residency::Resident::new(
                 nb,
@@ -327,7 +326,7 @@ impl<'a> StreamingRenderer<'a> {
             source,
             opts,
             build_opts,
-            reuse: cache::Reuse::new(nb, host_store_policy),
+            reuse: cache::Reuse::new(nb, opts.host_store_policy, opts.fixed_rates),
             clones: clones::HostClones::default(),
             poisoned: None,
             totals,

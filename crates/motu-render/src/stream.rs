@@ -58,6 +58,9 @@ pub struct StreamBounds {
     pub host_cache_mode: motu_gpu::HostCacheMode,
     /// `--stream-host-cache-policy`: which built BLASes the serialised host tier stores.
     pub host_store_policy: motu_gpu::HostStorePolicy,
+    /// `--stream-rates`: rates the restore and store rules decide from instead of measuring
+    /// them (`None`: measured).
+    pub fixed_rates: Option<motu_gpu::DeviceRates>,
     /// `--stream-tlas-records`: where rebuilt TLASes' instance records come from.
     pub tlas_records: motu_gpu::TlasRecordsMode,
     /// `--stream-tlas-build`: what rebuilt streamed TLASes are built for.
@@ -91,6 +94,7 @@ impl StreamBounds {
             mesh_memory: self.mesh_memory,
             host_cache_mode: self.host_cache_mode,
             host_store_policy: self.host_store_policy,
+            fixed_rates: self.fixed_rates,
             tlas_records: self.tlas_records,
             tlas_build: self.tlas_build,
             tlas_compact: self.tlas_compact.unwrap_or(d.tlas_compact),
@@ -141,6 +145,7 @@ impl StreamBounds {
             || self.mesh_memory != motu_gpu::MeshMemory::Auto
             || self.host_cache_mode != motu_gpu::HostCacheMode::Auto
             || self.host_store_policy != motu_gpu::HostStorePolicy::Measured
+            || self.fixed_rates.is_some()
             || self.tlas_records != motu_gpu::TlasRecordsMode::Host
             || self.tlas_build != motu_gpu::TlasBuild::FastTrace
             || self.tlas_compact == Some(true)

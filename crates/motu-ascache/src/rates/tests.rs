@@ -119,3 +119,57 @@ fn malformed_rates_are_corrupt_even_with_a_good_checksum() {
         f64::INFINITY
     );
 }
+
+#[test]
+fn hand_written_rates_parse_as_the_file_keeps_them() {
+    let r = |per_blas_ms, gb_per_s| {
+        Some(Rate {
+            batches: 0,
+            per_blas_ms,
+            gb_per_s,
+        })
+    };
+    assert_eq!(
+        parse_rates("build=0.5, restore=4+0.125,disk_read=inf+2,store=2.4").unwrap(),
+        DeviceRates {
+            build: r(0.0, 0.5),
+            restore: r(0.125, 4.0),
+            disk_read: r(2.0, f64::INFINITY),
+            store: r(0.0, 2.4),
+        }
+    );
+    // What is not named stays unknown.
+    assert_eq!(
+        parse_rates("restore=1").unwrap(),
+        DeviceRates {
+            restore: r(0.0, 1.0),
+            ..DeviceRates::default()
+        }
+    );
+    // A parsed set survives the file's round trip (a test may forge a file from it).
+    let forged = parse_rates("build=0.5,restore=4+0.125,disk_read=inf").unwrap();
+    assert_eq!(
+        decode_rates(&encode_rates(DEVICE, &forged), DEVICE).unwrap(),
+        forged
+    );
+}
+
+#[test]
+fn malformed_hand_written_rates_are_refused_by_name() {
+    use RatesSpecError::*;
+    for (spec, want) in [
+        ("", Malformed(String::new())),
+        ("build", Malformed("build".into())),
+        ("build=1,", Malformed(String::new())),
+        ("bulid=1", UnknownOperation("bulid".into())),
+        ("build=0", BadNumber("build=0".into())),
+        ("build=-1", BadNumber("build=-1".into())),
+        ("build=nan", BadNumber("build=nan".into())),
+        ("build=1+-2", BadNumber("build=1+-2".into())),
+        ("build=1+inf", BadNumber("build=1+inf".into())),
+        ("build=fast", BadNumber("build=fast".into())),
+        ("build=1,build=2", Twice("build".into())),
+    ] {
+        assert_eq!(parse_rates(spec), Err(want), "{spec:?}");
+    }
+}

@@ -199,6 +199,18 @@ pub struct StreamBoundArgs {
     /// stream.totals.store_policy (the estimates, rates_file), store_gb_per_s.
     #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_enum, default_value = "measured")]
     pub stream_host_cache_policy: HostCachePolicyArg,
+    /// Streaming: the rates the restore and store decisions above are made from. `measured`
+    /// (default): this process's own, else those the cache directory recorded for this
+    /// device, so what is restored or built, stored and written may differ between two runs
+    /// of the same command. A list `OP=GB/S` or `OP=GB/S+MS` (OP: build, restore, disk_read,
+    /// store; GB of structure a second, `inf` for none, plus a fixed milliseconds per
+    /// structure), e.g. `build=0.5,restore=4+0.1,disk_read=8`: decisions from these alone,
+    /// the same on every run and machine (tests, comparisons); the directory's rates file is
+    /// neither read nor written (rates_file `fixed`). An operation not named is unknown
+    /// (cached structures restored and written; the host tier's store rule takes the H100's
+    /// rates); `unmeasured`: every one unknown.
+    #[arg(help_heading = HEADING_STREAMING_EXPERT, hide_short_help = true, long, value_name = "RATES", value_parser = parse_stream_rates, default_value = "measured")]
+    pub stream_rates: StreamRatesArg,
     /// Streaming: where a rebuilt TLAS's instance records come from. `gpu` (opt-in): every
     /// instance's record is kept on the GPU (encoded once, at the TLAS's second rebuild) and a
     /// compute pass writes a rebuild's records from it with the resident BLASes' addresses; the
@@ -292,6 +304,20 @@ impl From<HostCachePolicyArg> for motu_gpu::HostStorePolicy {
             HostCachePolicyArg::Measured => motu_gpu::HostStorePolicy::Measured,
             HostCachePolicyArg::Always => motu_gpu::HostStorePolicy::Always,
         }
+    }
+}
+
+/// `--stream-rates`: fixed rates (`None`: measured, the default).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StreamRatesArg(pub Option<motu_gpu::DeviceRates>);
+
+fn parse_stream_rates(s: &str) -> Result<StreamRatesArg, String> {
+    match s {
+        "measured" => Ok(StreamRatesArg(None)),
+        "unmeasured" => Ok(StreamRatesArg(Some(motu_gpu::DeviceRates::default()))),
+        _ => motu_gpu::parse_rates(s)
+            .map(|r| StreamRatesArg(Some(r)))
+            .map_err(|e| format!("{e} (or measured, unmeasured)")),
     }
 }
 

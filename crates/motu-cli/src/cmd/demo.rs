@@ -141,6 +141,7 @@ pub fn run(a: DemoArgs) -> anyhow::Result<()> {
             stream_mesh_memory: crate::cli::MeshMemoryArg::Auto,
             stream_host_cache: crate::cli::HostCacheArg::Auto,
             stream_host_cache_policy: crate::cli::HostCachePolicyArg::Measured,
+            stream_rates: crate::cli::StreamRatesArg::default(),
             stream_tlas_records: crate::cli::TlasRecordsArg::Gpu,
             stream_tlas_build: crate::cli::TlasBuildArg::FastTrace,
             stream_tlas_compact: crate::cli::OnOffArg::Off,

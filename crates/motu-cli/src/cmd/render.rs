@@ -42,6 +42,7 @@ pub fn stream_bounds(b: &crate::cli::StreamBoundArgs) -> motu_render::StreamBoun
         mesh_memory: b.stream_mesh_memory.into(),
         host_cache_mode: b.stream_host_cache.into(),
         host_store_policy: b.stream_host_cache_policy.into(),
+        fixed_rates: b.stream_rates.0,
         tlas_records: b.stream_tlas_records.into(),
         tlas_build: b.stream_tlas_build.into(),
         tlas_compact: Some(b.stream_tlas_compact == crate::cli::OnOffArg::On),

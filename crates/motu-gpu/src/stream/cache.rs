@@ -117,10 +117,24 @@ type Found = (usize, CacheKey, Option<(Blob, Tier)>);
 const KEY_DOMAIN: &str = "motu-blas-v1";
 
 impl Reuse {
-    pub(super) fn new(blases: usize, policy: HostStorePolicy) -> Reuse {
+    /// `fixed`: decide from these rates alone (`--stream-rates`, `restore_rule.rs`).
+    pub(super) fn new(
+        blases: usize,
+        policy: HostStorePolicy,
+        fixed: Option<motu_ascache::DeviceRates>,
+    ) -> Reuse {
+        let mut estimates = StoreEstimator::new(blases, store_policy::PRIOR);
+        let rule = match fixed {
+            Some(rates) => {
+                let rule = RestoreRule::fixed(rates);
+                estimates.fix_prior(rule.prior());
+                rule
+            }
+            None => RestoreRule::default(),
+        };
         Reuse {
-            estimates: StoreEstimator::new(blases, store_policy::PRIOR),
-            rule: RestoreRule::default(),
+            estimates,
+            rule,
             policy,
             cache: None,
             transfer: TransferBuffers::default(),
@@ -151,8 +165,12 @@ impl Reuse {
     }
 
     /// Writes this run's rates to the cache directory for the next process
-    /// (`restore_rule.rs`); nothing without a writable directory.
+    /// (`restore_rule.rs`); nothing without a writable directory, or with fixed rates (which
+    /// it did not measure).
     pub(super) fn save_rates(&mut self) {
+        if self.rule.is_fixed() {
+            return;
+        }
         let Some(a) = self.cache.as_ref() else { return };
         let Some(disk) = a.cache.cache.disk() else {
             return;
@@ -206,8 +224,9 @@ impl StreamingRenderer<'_> {
             cache.cache.host_mut().set_capacity_bytes(host_bytes);
         }
         let driver = self.ctx.driver_identity();
-        // The rates the last process measured on this device, where the directory has them.
-        if let Some(disk) = cache.cache.disk() {
+        // The rates the last process measured on this device, where the directory has them
+        // (fixed rates, `--stream-rates`, ignore them).
+        if let Some(disk) = cache.cache.disk().filter(|_| !self.reuse.rule.is_fixed()) {
             self.reuse.rule = RestoreRule::from_file(disk.device_rates(&driver));
             self.reuse.estimates.set_prior(self.reuse.rule.prior());
         }

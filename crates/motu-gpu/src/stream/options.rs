@@ -143,6 +143,9 @@ pub struct StreamOptions {
     /// Which built BLASes the serialised host tier stores (`--stream-host-cache-policy`; see
     /// [`HostStorePolicy`](super::HostStorePolicy)).
     pub host_store_policy: super::HostStorePolicy,
+    /// Rates the restore and store rules decide from instead of measuring them
+    /// (`--stream-rates`; `None`, the default: measured; see `restore_rule.rs`).
+    pub fixed_rates: Option<motu_ascache::DeviceRates>,
     /// Where a streamed TLAS rebuild's instance records come from (`--stream-tlas-records`;
     /// see [`TlasRecordsMode`]).
     pub tlas_records: TlasRecordsMode,
@@ -384,6 +387,7 @@ impl Default for StreamOptions {
             mesh_memory: MeshMemory::Auto,
             host_cache_mode: super::HostCacheMode::Auto,
             host_store_policy: super::HostStorePolicy::Measured,
+            fixed_rates: None,
             tlas_records: TlasRecordsMode::Host,
             tlas_build: motu_vk::TlasBuild::FastTrace,
             tlas_compact: false,

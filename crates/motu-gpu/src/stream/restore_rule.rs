@@ -25,6 +25,14 @@
 //! it builds; the next one restores until its own fits replace the file's). A decision changes
 //! only whether a BLAS is restored or built, never what is traced: a restored structure is the
 //! one that was built.
+//!
+//! **Fixed rates** (`--stream-rates`, [`StreamOptions::fixed_rates`](super::StreamOptions::fixed_rates)):
+//! the rule, and the host tier's store rule, decide from the given rates alone, never from
+//! this process's fits or the rates file (neither read nor written), and an operation not
+//! given stays unknown (the store rule: its prior). Measured rates follow this machine's load
+//! and timing, so counts (BLASes built or restored, what stays resident) may differ between
+//! two runs of the same command; with fixed rates the decisions depend only on sizes and
+//! counts, the same on every run and machine (tests, comparisons between machines).
 
 use motu_ascache::{DeviceRates, Rate, RatesError, Tier};
 
@@ -39,6 +47,8 @@ pub(super) struct RestoreRule {
     /// Reads of entries from the directory: waited milliseconds per batch.
     pub disk_read: CostFit,
     saved: bool,
+    /// `file` holds fixed rates (`--stream-rates`): no fit replaces them.
+    fixed: bool,
 }
 
 impl Default for RestoreRule {
@@ -48,6 +58,7 @@ impl Default for RestoreRule {
             file_state: "none",
             disk_read: CostFit::default(),
             saved: false,
+            fixed: false,
         }
     }
 }
@@ -85,7 +96,24 @@ impl RestoreRule {
         }
     }
 
-    /// The host tier's priors: the file's rates where it has them, else [`PRIOR`].
+    /// The rule deciding from `rates` alone (`--stream-rates`; see the module docs): reported
+    /// as rates file `fixed`.
+    pub(super) fn fixed(rates: DeviceRates) -> RestoreRule {
+        RestoreRule {
+            file: rates,
+            file_state: "fixed",
+            fixed: true,
+            ..RestoreRule::default()
+        }
+    }
+
+    /// Whether the rates are fixed (`--stream-rates`): no rates file is read or written.
+    pub(super) fn is_fixed(&self) -> bool {
+        self.fixed
+    }
+
+    /// The host tier's priors: the file's (or the fixed) rates where it has them, else
+    /// [`PRIOR`].
     pub(super) fn prior(&self) -> Prior {
         Prior {
             build: cost(self.file.build).unwrap_or(PRIOR.build),
@@ -95,21 +123,25 @@ impl RestoreRule {
         }
     }
 
-    /// This process's fit of `fit`, else the file's `rate`, else `None` (unknown).
-    fn known(fit: &CostFit, rate: Option<Rate>) -> Option<Cost> {
+    /// This process's fit of `fit`, else the file's `rate`, else `None` (unknown); with
+    /// fixed rates, `rate` alone.
+    fn known(&self, fit: &CostFit, rate: Option<Rate>) -> Option<Cost> {
+        if self.fixed {
+            return cost(rate);
+        }
         fit.measured().or(cost(rate))
     }
 
     /// Whether a cached BLAS of `bytes` held by `tier` is restored rather than built.
     pub(super) fn restore_pays(&self, est: &StoreEstimator, bytes: u64, tier: Tier) -> bool {
-        let build = Self::known(&est.build, self.file.build);
-        let restore = Self::known(&est.restore, self.file.restore);
+        let build = self.known(&est.build, self.file.build);
+        let restore = self.known(&est.restore, self.file.restore);
         let read = match tier {
             Tier::Host => Some(Cost {
                 per_blas_ms: 0.0,
                 gb_per_s: f64::INFINITY,
             }),
-            Tier::Disk => Self::known(&self.disk_read, self.file.disk_read),
+            Tier::Disk => self.known(&self.disk_read, self.file.disk_read),
         };
         match (build, restore, read) {
             (Some(build), Some(restore), Some(read)) => {
@@ -142,7 +174,7 @@ impl RestoreRule {
 
     /// `st` with the rule's disk reads and rates file.
     pub(super) fn add_stats(&self, st: &mut StorePolicyStats) {
-        let read = Self::known(&self.disk_read, self.file.disk_read);
+        let read = self.known(&self.disk_read, self.file.disk_read);
         let finite = |v: f64| if v.is_finite() { v } else { 0.0 };
         st.disk_read_batches = self.disk_read.batches();
         st.disk_read_ms_per_blas = read.map_or(0.0, |c| c.per_blas_ms);

@@ -193,6 +193,9 @@ impl CostFit {
 #[derive(Clone, Debug)]
 pub(super) struct StoreEstimator {
     prior: Prior,
+    /// Decide from `prior` whatever is measured (`--stream-rates`, `restore_rule.rs`); the
+    /// fits are still made and reported.
+    fixed: bool,
     pub build: CostFit,
     pub restore: CostFit,
     pub store: CostFit,
@@ -211,6 +214,7 @@ impl StoreEstimator {
     pub(super) fn new(blases: usize, prior: Prior) -> StoreEstimator {
         StoreEstimator {
             prior,
+            fixed: false,
             build: CostFit::default(),
             restore: CostFit::default(),
             store: CostFit::default(),
@@ -227,6 +231,13 @@ impl StoreEstimator {
     /// `restore_rule.rs`).
     pub(super) fn set_prior(&mut self, prior: Prior) {
         self.prior = prior;
+    }
+
+    /// Decides from `prior` alone from now on, whatever this process measures (fixed rates,
+    /// `--stream-rates`: the same decisions on every run).
+    pub(super) fn fix_prior(&mut self, prior: Prior) {
+        self.prior = prior;
+        self.fixed = true;
     }
 
     /// BLAS `b` was just built or restored: returns whether it had been before (a return).
@@ -265,6 +276,9 @@ impl StoreEstimator {
     }
 
     pub(super) fn costs(&self) -> (Cost, Cost, Cost) {
+        if self.fixed {
+            return (self.prior.build, self.prior.restore, self.prior.store);
+        }
         (
             self.build.cost(self.prior.build),
             self.restore.cost(self.prior.restore),

@@ -1,6 +1,6 @@
 //! The restore rule with injected rates: no GPU.
 
-use super::super::store_policy::MIN_BATCHES;
+use super::super::store_policy::{HostStorePolicy, MIN_BATCHES};
 use super::*;
 
 const MB: u64 = 1 << 20;
@@ -156,4 +156,80 @@ fn unmeasured_operations_keep_the_file_s_rates() {
     // The host tier's store rule starts from them too.
     let p = rule.prior();
     assert_eq!((p.build.gb_per_s, p.restore.gb_per_s), (10.7, 12.0));
+}
+
+/// `est` as the fixed-rates renderer makes it (`cache.rs`, `Reuse::new`).
+fn fixed_estimator(rule: &RestoreRule) -> StoreEstimator {
+    let mut est = StoreEstimator::new(10, PRIOR);
+    est.fix_prior(rule.prior());
+    est
+}
+
+#[test]
+fn fixed_rates_decide_whatever_this_process_measures() {
+    // Fixed: restores pay (lavapipe-like). Measured: far slower restores and reads, which
+    // would decline every restore and write with the rates measured (the test above).
+    let fixed = DeviceRates {
+        build: Some(rate(0.5, 0.05)),
+        restore: Some(rate(0.1, 2.0)),
+        disk_read: Some(rate(0.05, 1.0)),
+        store: Some(rate(0.1, 1.0)),
+    };
+    let mut rule = RestoreRule::fixed(fixed);
+    let mut est = fixed_estimator(&rule);
+    let decide = |rule: &RestoreRule, est: &StoreEstimator| {
+        [MB, 64 * MB].map(|bytes| {
+            (
+                rule.restore_pays(est, bytes, Tier::Disk),
+                rule.restore_pays(est, bytes, Tier::Host),
+                rule.write_pays(est, bytes),
+                est.should_store(bytes, false),
+            )
+        })
+    };
+    let before = decide(&rule, &est);
+    assert_eq!(before, [(true, true, true, true); 2]);
+    feed(&mut est.build, 2 * MIN_BATCHES, 10.0);
+    feed(&mut est.restore, 2 * MIN_BATCHES, 0.01);
+    feed(&mut est.store, 2 * MIN_BATCHES, 0.01);
+    feed(&mut rule.disk_read, 2 * MIN_BATCHES, 0.01);
+    assert_eq!(
+        decide(&rule, &est),
+        before,
+        "the fits do not move fixed rates"
+    );
+    // The same fits decide the other way when measured.
+    let mut measured = RestoreRule::from_file(Ok(fixed));
+    measured.disk_read = rule.disk_read;
+    let mut m_est = StoreEstimator::new(10, measured.prior());
+    (m_est.build, m_est.restore, m_est.store) = (est.build, est.restore, est.store);
+    assert_eq!(decide(&measured, &m_est), [(false, false, false, false); 2]);
+    // Reported as fixed, with the fixed rates; never saved for the next process.
+    assert!(rule.is_fixed() && !measured.is_fixed());
+    let mut st = est.stats(HostStorePolicy::Measured);
+    rule.add_stats(&mut st);
+    assert_eq!((st.rates_file, st.rates_saved), ("fixed", false));
+    assert_eq!((st.build_gb_per_s, st.restore_gb_per_s), (0.05, 2.0));
+    assert_eq!(st.disk_read_gb_per_s, 1.0);
+    assert_eq!(
+        st.build_batches,
+        2 * MIN_BATCHES,
+        "fits still made and reported"
+    );
+}
+
+#[test]
+fn fixed_unmeasured_rates_restore_write_and_keep_the_store_prior() {
+    let mut rule = RestoreRule::fixed(DeviceRates::default());
+    let mut est = fixed_estimator(&rule);
+    // Builds measured far slower than the prior's restores: measured, the store rule would
+    // store; fixed, its prior (the H100's: restores no faster than builds) stores nothing.
+    feed(&mut est.build, 2 * MIN_BATCHES, 0.01);
+    feed(&mut est.restore, 2 * MIN_BATCHES, 0.01);
+    feed(&mut rule.disk_read, 2 * MIN_BATCHES, 0.01);
+    assert!(rule.restore_pays(&est, MB, Tier::Disk));
+    assert!(rule.restore_pays(&est, MB, Tier::Host));
+    assert!(rule.write_pays(&est, MB));
+    assert!(!est.should_store(MB, false));
+    assert_eq!(rule.prior(), PRIOR);
 }
