@@ -99,10 +99,11 @@ impl TrimEvery {
 /// parsed pieces of included files, replayed and dropped on the parsing thread). The freed
 /// blocks stay resident in their own thread's arena, and an arena's top is only handed back
 /// when its free part passes glibc's trim threshold, which rises to 64 MiB once a large
-/// block has been freed: island 0.05 at 16 threads peaked at 530–546 MB with the default
-/// arenas against 410–433 MB with 4 (2-core box), island 0.63 on the 16-core host 1.39–1.42 GB
-/// against 1.16 GB (issue 48 item 1). The import makes ~200,000 allocations on island 0.05,
-/// so 16 threads sharing 4 arenas' locks cost nothing measurable.
+/// block has been freed: at 16 threads island 0.05 peaked at 495–547 MB with the default
+/// arenas against 392–436 MB with 4, island 0.1 at 632–656 against 445–501 MB (2-core box,
+/// alternated, the same CPU time); island 0.63 on the 16-core host 1.42 GB against 1.16 GB in
+/// one pair (`MALLOC_ARENA_MAX=4`; issue 48 item 1). The import makes only ~220,000 heap
+/// allocations on island 0.05, so 16 threads sharing 4 arenas' locks rarely meet.
 pub const IMPORT_MALLOC_ARENAS: usize = 4;
 
 /// Caps the number of glibc malloc arenas for the rest of the process (`mallopt(M_ARENA_MAX)`).
