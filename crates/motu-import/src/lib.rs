@@ -31,11 +31,12 @@ mod split;
 mod textures;
 
 pub use error::ImportError;
-pub use memory::peak_rss_bytes;
+pub use memory::{cap_malloc_arenas, peak_rss_bytes, IMPORT_MALLOC_ARENAS};
 pub use pipeline::{
     element_stats, import, resolve_subset, ImportOptions, ImportProgress, ImportSummary, ProgressFn,
 };
 pub use precut::DEFAULT_CUT_QUEUE_BYTES;
+pub use proxy_boxes::DEFAULT_PROXY_READBACK_BYTES;
 pub use textures::DEFAULT_PTEX_MAX;
 
 #[cfg(test)]

@@ -62,6 +62,10 @@ pub struct ImportOptions {
     /// Source-mesh bytes the cutting thread may lag behind the parser by (the memory that
     /// overlapping cutting with parsing costs); 0 cuts each mesh before the parser goes on.
     pub cut_queue_bytes: u64,
+    /// Chunk bytes `write_proxy_boxes` reads back at once for BLASes not cut while parsing
+    /// (at least two chunks, at most one per pool thread up to 16): with 64 MiB chunks a
+    /// 16-thread pool read 1 GiB at once before this bound (issue 48 item 1).
+    pub proxy_readback_bytes: u64,
 }
 
 /// `motu import`'s defaults (`shared/CLI.md`): `--levels ml`, the device's 2^24 − 1 instances
@@ -92,6 +96,7 @@ impl Default for ImportOptions {
             progress: None,
             cut_while_parsing: true,
             cut_queue_bytes: crate::precut::DEFAULT_CUT_QUEUE_BYTES,
+            proxy_readback_bytes: crate::proxy_boxes::DEFAULT_PROXY_READBACK_BYTES,
         }
     }
 }

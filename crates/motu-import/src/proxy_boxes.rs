@@ -23,16 +23,35 @@ use rayon::prelude::*;
 use crate::precut::ClusterBoxes;
 use crate::ImportError;
 
+/// Chunk bytes read back at once by default ([`crate::ImportOptions::proxy_readback_bytes`]):
+/// four 64 MiB chunks. Before this bound the batch was one chunk per pool thread, so a
+/// 16-thread host held 1 GiB of chunk bytes (and about as much again of triangle boxes while
+/// their BLASes waited) whenever many BLASes needed read-back.
+pub const DEFAULT_PROXY_READBACK_BYTES: u64 = 256 << 20;
+
+/// Chunks read back at once: one per pool thread (2 to 16), at most `readback_bytes` of
+/// `chunk_bytes` chunks, never fewer than two (one chunk alone would leave a BLAS whose meshes
+/// span two chunks waiting, and the pool with one read at a time).
+pub(crate) fn readback_batch(threads: usize, readback_bytes: u64, chunk_bytes: u64) -> usize {
+    let by_bytes = readback_bytes / chunk_bytes.max(1);
+    threads
+        .clamp(2, 16)
+        .min(usize::try_from(by_bytes).unwrap_or(usize::MAX))
+        .max(2)
+}
+
 /// Makes the table for `view` from the meshes `writer` holds (and the boxes of clusters made
-/// as they were cut, by mesh record) and adds it as the package's `proxy_boxes` section.
+/// as they were cut, by mesh record) and adds it as the package's `proxy_boxes` section,
+/// reading back at most [`readback_batch`] chunks (of the writer's target size `chunk_bytes`)
+/// at once.
 pub(crate) fn write_proxy_boxes(
     writer: &mut PackageWriter,
     view: &HierarchyView<'_>,
     cut_boxes: &HashMap<u32, ClusterBoxes>,
+    readback_bytes: u64,
+    chunk_bytes: u64,
 ) -> Result<(), ImportError> {
-    // Chunks read at once: one per core, at most 16 (64 MiB each by default, and about as much
-    // again of triangle boxes while their BLASes wait).
-    let batch = rayon::current_num_threads().clamp(2, 16);
+    let batch = readback_batch(rayon::current_num_threads(), readback_bytes, chunk_bytes);
     crate::split::add_timed_section(
         writer,
         motu_pack::SECTION_PROXY_BOXES,

@@ -133,3 +133,17 @@ fn the_heap_is_trimmed_once_per_step_of_scene_text() {
         .collect();
     assert_eq!(trims, [false, false, true, false, false, true, false, true]);
 }
+
+#[test]
+fn malloc_arenas_are_capped_where_glibc_takes_the_cap_and_the_user_chose_none() {
+    // 0 is no cap. With glibc (and no arena count of the user's), mallopt accepts the cap:
+    // a wrong parameter number would make it refuse, and the import's peak would be glibc's.
+    assert!(!crate::cap_malloc_arenas(0));
+    let user_chose = std::env::var_os("MALLOC_ARENA_MAX").is_some()
+        || std::env::var("GLIBC_TUNABLES").is_ok_and(|t| t.contains("arena_max"));
+    let glibc = cfg!(all(target_os = "linux", target_env = "gnu"));
+    assert_eq!(
+        crate::cap_malloc_arenas(crate::IMPORT_MALLOC_ARENAS),
+        glibc && !user_chose
+    );
+}

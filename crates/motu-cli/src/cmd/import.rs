@@ -22,6 +22,16 @@ pub fn run(a: ImportArgs) -> anyhow::Result<()> {
 
 fn import_checked(a: ImportArgs) -> anyhow::Result<()> {
     crate::output::check_outputs(&[("scene", &a.scene)], &[("-o", &a.output)])?;
+    // Before any pool thread exists (issue 48 item 1: peak RSS); A/B switch
+    // MOTU_IMPORT_MALLOC_ARENAS=default (glibc's own count) or a count.
+    let arenas = match std::env::var("MOTU_IMPORT_MALLOC_ARENAS") {
+        Ok(v) if v.trim() == "default" => 0,
+        Ok(v) => v.trim().parse().map_err(|e| {
+            anyhow::anyhow!("MOTU_IMPORT_MALLOC_ARENAS={v}: not a count or `default` ({e})")
+        })?,
+        Err(_) => motu_import::IMPORT_MALLOC_ARENAS,
+    };
+    motu_import::cap_malloc_arenas(arenas);
     if let Some(t) = a.threads {
         rayon::ThreadPoolBuilder::new()
             .num_threads(cap_threads("--threads", t)?)
@@ -87,6 +97,14 @@ fn import_checked(a: ImportArgs) -> anyhow::Result<()> {
             0
         } else {
             motu_import::DEFAULT_CUT_QUEUE_BYTES
+        },
+        // A/B knob (issue 48): chunk bytes the proxy boxes read back at once (main's batch
+        // was one 64 MiB chunk per thread, up to 16: 1073741824 at 16 threads).
+        proxy_readback_bytes: match std::env::var("MOTU_IMPORT_PROXY_READBACK_BYTES") {
+            Ok(v) => v.trim().parse().map_err(|e| {
+                anyhow::anyhow!("MOTU_IMPORT_PROXY_READBACK_BYTES={v}: not a byte count ({e})")
+            })?,
+            Err(_) => motu_import::DEFAULT_PROXY_READBACK_BYTES,
         },
     };
     let s = pipeline::import(&a.scene, &a.output, &o)?;

@@ -167,7 +167,13 @@ pub(super) fn finish(
     };
     let streamed = split.as_ref().map_or(base, |(_, s)| s.view(&base));
     if o.proxy_boxes {
-        crate::proxy_boxes::write_proxy_boxes(&mut writer, &streamed, cut_boxes)?;
+        crate::proxy_boxes::write_proxy_boxes(
+            &mut writer,
+            &streamed,
+            cut_boxes,
+            o.proxy_readback_bytes,
+            o.chunk_bytes,
+        )?;
     }
     let proxy_boxes_ms = t.elapsed().as_secs_f64() * 1e3;
     crate::memory::log_phase("proxy boxes");

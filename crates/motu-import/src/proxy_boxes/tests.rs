@@ -296,3 +296,27 @@ fn an_imported_packages_stored_boxes_equal_the_boxes_made_from_its_meshes() {
         std::fs::remove_file(&out).unwrap();
     }
 }
+
+#[test]
+fn the_read_back_batch_is_bounded_by_bytes_and_threads() {
+    let mib = 1u64 << 20;
+    // The default bound: four 64 MiB chunks, whatever the pool (main read 16 at 16 threads).
+    assert_eq!(
+        readback_batch(16, DEFAULT_PROXY_READBACK_BYTES, 64 * mib),
+        4
+    );
+    assert_eq!(
+        readback_batch(64, DEFAULT_PROXY_READBACK_BYTES, 64 * mib),
+        4
+    );
+    // A small pool still reads one chunk per thread, at least two.
+    assert_eq!(readback_batch(3, DEFAULT_PROXY_READBACK_BYTES, 64 * mib), 3);
+    assert_eq!(readback_batch(1, DEFAULT_PROXY_READBACK_BYTES, 64 * mib), 2);
+    // Small chunks: the thread count (at most 16) bounds it.
+    assert_eq!(readback_batch(16, DEFAULT_PROXY_READBACK_BYTES, mib), 16);
+    assert_eq!(readback_batch(32, DEFAULT_PROXY_READBACK_BYTES, mib), 16);
+    // A bound under two chunks still reads two; 1 GiB gives main's batch back.
+    assert_eq!(readback_batch(16, 0, 64 * mib), 2);
+    assert_eq!(readback_batch(16, 1 << 30, 64 * mib), 16);
+    assert_eq!(readback_batch(16, u64::MAX, 0), 16);
+}
