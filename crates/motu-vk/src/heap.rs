@@ -103,6 +103,9 @@ pub struct GpuHeap {
     type_index: [u32; 2],
     /// The memory location of host-visible blocks ([`host_location`]).
     host_location: MemoryLocation,
+    /// Blocks created (each a `vkAllocateMemory`, mapped where host-visible) and their bytes,
+    /// per class: what a streamer's uploads paid for fresh memory ([`GpuHeap::created_blocks`]).
+    created: [(u64, u64); 2],
 }
 
 impl std::fmt::Debug for GpuHeap {
@@ -161,6 +164,7 @@ impl GpuHeap {
             blocks: HashMap::new(),
             type_index: [device_local, upload],
             host_location,
+            created: [(0, 0); 2],
         })
     }
 
@@ -275,6 +279,8 @@ impl GpuHeap {
                     match DeviceMemory::allocate(&self.ctx, size_bytes, type_index, location) {
                         Ok(memory) => {
                             self.blocks.insert(block, memory);
+                            let c = &mut self.created[class as usize];
+                            *c = (c.0 + 1, c.1 + size_bytes);
                         }
                         Err(e) => {
                             let _ = self.allocator.forget_block(block);
@@ -320,6 +326,12 @@ impl GpuHeap {
 
     pub fn limits(&self) -> AllocLimits {
         self.allocator.limits()
+    }
+
+    /// Blocks of `class` created so far and their bytes (each a `vkAllocateMemory`: memory
+    /// no earlier buffer of this heap touched).
+    pub fn created_blocks(&self, class: MemoryClass) -> (u64, u64) {
+        self.created[class as usize]
     }
 
     /// Live `VkDeviceMemory` blocks of this heap.

@@ -222,6 +222,7 @@ impl Package {
         Ok(Package {
             chunk_verified: bitset(chunks.len()),
             section_verified: bitset(sections.len()),
+            decoded: Default::default(),
             storage,
             path: None,
             version,
