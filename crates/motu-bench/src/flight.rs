@@ -553,6 +553,7 @@ fn stream_row(
         "mesh_upload_bytes": st.mesh_upload_bytes,
         "mesh_blocks_created": st.mesh_blocks_created,
         "mesh_block_bytes_created": st.mesh_block_bytes_created,
+        "mesh_blocks_from_spare": st.mesh_blocks_from_spare,
         "mesh_read_faults": st.mesh_read_faults,
         "mesh_copy_faults": st.mesh_copy_faults,
         "mesh_chunk_decodes": st.mesh_chunk_decodes,

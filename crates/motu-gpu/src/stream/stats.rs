@@ -226,6 +226,9 @@ pub struct FrameStreamStats {
     pub mesh_upload_bytes: u64,
     pub mesh_blocks_created: u32,
     pub mesh_block_bytes_created: u64,
+    /// Of `mesh_blocks_created`: host blocks made ahead on a thread of their own or kept
+    /// from a destroyed one (`GpuHeap::set_host_blocks_ahead`), not allocated in the frame.
+    pub mesh_blocks_from_spare: u32,
     pub mesh_read_faults: u64,
     pub mesh_copy_faults: u64,
     pub mesh_chunk_decodes: u64,
@@ -679,12 +682,13 @@ impl FrameStreamStats {
     /// `GpuHeap::created_blocks` counts them) and `split`.
     pub(super) fn note_mesh_upload(
         &mut self,
-        (alloc_ms, before, after): (f64, (u64, u64), (u64, u64)),
+        (alloc_ms, before, after): (f64, motu_vk::BlockCounts, motu_vk::BlockCounts),
         split: &crate::scene::UploadSplit,
     ) {
         self.mesh_alloc_ms += alloc_ms;
-        self.mesh_blocks_created += (after.0 - before.0) as u32;
-        self.mesh_block_bytes_created += after.1 - before.1;
+        self.mesh_blocks_created += (after.created - before.created) as u32;
+        self.mesh_block_bytes_created += after.bytes - before.bytes;
+        self.mesh_blocks_from_spare += (after.from_spare - before.from_spare) as u32;
         self.mesh_prepare_ms += split.prepare_ms;
         self.mesh_read_ms += split.read_ms;
         self.mesh_copy_ms += split.copy_ms;

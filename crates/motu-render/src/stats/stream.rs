@@ -100,6 +100,7 @@ mirror! {
         mesh_upload_bytes: u64,
         mesh_blocks_created: u32,
         mesh_block_bytes_created: u64,
+        mesh_blocks_from_spare: u32,
         mesh_read_faults: u64,
         mesh_copy_faults: u64,
         mesh_chunk_decodes: u64,
