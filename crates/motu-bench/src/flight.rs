@@ -557,6 +557,8 @@ fn stream_row(
         "mesh_read_faults": st.mesh_read_faults,
         "mesh_copy_faults": st.mesh_copy_faults,
         "mesh_chunk_decodes": st.mesh_chunk_decodes,
+        "mesh_chunk_checks": st.mesh_chunk_checks,
+        "mesh_chunk_checked_bytes": st.mesh_chunk_checked_bytes,
         "blas_ms": st.blas_ms,
         "tables_ms": st.tables_ms,
         "build_steps": st.build_steps,

@@ -56,7 +56,7 @@ pub(crate) use upload::{
 };
 
 pub use crate::error::MeshSourceError;
-pub use source::MeshBlobSource;
+pub use source::{ChunkReads, MeshBlobSource};
 
 /// The least allocation cap under which a budgeted full build uses small blocks (see
 /// `GpuScene::build`): twice the most it can take (64 blocks, 1,024 dedicated items, a few

@@ -349,6 +349,12 @@ impl ScenePackage {
         self.package.chunk_decodes()
     }
 
+    /// First-touch chunk checksums so far and their bytes
+    /// ([`motu_package::Package::chunk_checks`]).
+    pub fn chunk_checks(&self) -> (u64, u64) {
+        self.package.chunk_checks()
+    }
+
     /// Checks chunk `id`'s checksum now, if no read has yet (its first touch: callers
     /// verify several chunks in parallel before reading meshes from them). A failure is left
     /// for the read, which reports it.

@@ -41,6 +41,9 @@ pub struct Package {
     section_verified: Vec<AtomicU64>,
     /// Recently decoded zstd chunks ([`Package::chunk_shared`]) and the decode count.
     decoded: decoded::DecodedChunks,
+    /// First-touch chunk checksums run by reads, and their stored bytes
+    /// ([`Package::chunk_checks`]).
+    chunk_checks: [AtomicU64; 2],
 }
 
 impl fmt::Debug for Package {
@@ -136,6 +139,8 @@ impl Package {
         if !is_set(&self.chunk_verified, id.0 as usize) {
             check_chunk_checksum(&info, stored)?;
             set(&self.chunk_verified, id.0 as usize);
+            self.chunk_checks[0].fetch_add(1, Ordering::Relaxed);
+            self.chunk_checks[1].fetch_add(info.stored_len, Ordering::Relaxed);
         }
         if info.codec == Codec::Zstd {
             self.decoded.counted();
@@ -158,6 +163,15 @@ impl Package {
             Ok(raw)
         })?;
         Ok(ChunkBytes::Shared(bytes))
+    }
+
+    /// First-touch chunk checksums reads ran so far, and the stored bytes they read (a chunk
+    /// is checked whole, however little of it a read wants).
+    pub fn chunk_checks(&self) -> (u64, u64) {
+        (
+            self.chunk_checks[0].load(Ordering::Relaxed),
+            self.chunk_checks[1].load(Ordering::Relaxed),
+        )
     }
 
     /// Chunks decompressed so far by [`chunk`](Self::chunk) and
@@ -199,6 +213,8 @@ impl Package {
         if !is_set(&self.chunk_verified, id.0 as usize) {
             check_chunk_checksum(&info, stored)?;
             set(&self.chunk_verified, id.0 as usize);
+            self.chunk_checks[0].fetch_add(1, Ordering::Relaxed);
+            self.chunk_checks[1].fetch_add(info.stored_len, Ordering::Relaxed);
         }
         Ok(stored)
     }

@@ -91,8 +91,13 @@ impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
         ahead.par_iter().for_each(|&c| self.0.decode_chunk_ahead(c));
     }
 
-    fn chunk_decodes(&self) -> u64 {
-        self.0.chunk_decodes()
+    fn chunk_reads(&self) -> motu_gpu::ChunkReads {
+        let (checks, checked_bytes) = self.0.chunk_checks();
+        motu_gpu::ChunkReads {
+            decodes: self.0.chunk_decodes(),
+            checks,
+            checked_bytes,
+        }
     }
 
     /// The package's `proxy_boxes` section; one that cannot be read (its checksum fails) is a

@@ -4,6 +4,16 @@ use std::borrow::Cow;
 
 use crate::error::MeshSourceError;
 
+/// Counts of a [`MeshBlobSource`]'s chunk reads so far ([`MeshBlobSource::chunk_reads`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ChunkReads {
+    /// Chunks decompressed (a compressed package's).
+    pub decodes: u64,
+    /// First-touch checksums of whole chunks, and the stored bytes they read.
+    pub checks: u64,
+    pub checked_bytes: u64,
+}
+
 /// Geometry of one compiled mesh, by its index in the hierarchy's mesh table (e.g. slices of a
 /// mapped package chunk, borrowed). `Sync`: the streaming renderer reads meshes from several
 /// threads when it starts (the boxes inside BLASes).
@@ -45,10 +55,10 @@ pub trait MeshBlobSource: Sync {
     /// threads of their own). Advice only; errors surface when reading.
     fn prepare(&self, _mesh_records: &[u32]) {}
 
-    /// Chunks decompressed so far (a compressed package's: the frame's `mesh_chunk_decodes`
-    /// counts them; 0 for sources that decode nothing).
-    fn chunk_decodes(&self) -> u64 {
-        0
+    /// What reading chunks cost so far (a package's: the frame's `mesh_chunk_*` count it;
+    /// nothing for sources without chunks).
+    fn chunk_reads(&self) -> ChunkReads {
+        ChunkReads::default()
     }
 
     /// The boxes inside triangle BLASes stored with the meshes (a package's `proxy_boxes`

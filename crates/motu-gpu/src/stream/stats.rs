@@ -232,6 +232,11 @@ pub struct FrameStreamStats {
     pub mesh_read_faults: u64,
     pub mesh_copy_faults: u64,
     pub mesh_chunk_decodes: u64,
+    /// First-touch checksums of whole chunks the meshes' reads ran (in `mesh_prepare_ms`),
+    /// and the chunks' stored bytes: a small mesh in a chunk no read touched yet costs all of
+    /// its chunk (64 MiB by default).
+    pub mesh_chunk_checks: u64,
+    pub mesh_chunk_checked_bytes: u64,
     /// Of `build_ms`: triangle BLAS builds (with compaction).
     pub blas_ms: f64,
     /// Of `build_ms`: TLAS (and proxy BLAS) rebuilds, including their evict-and-retry rounds.
@@ -697,6 +702,8 @@ impl FrameStreamStats {
         self.mesh_read_faults += split.read_faults;
         self.mesh_copy_faults += split.copy_faults;
         self.mesh_chunk_decodes += split.chunk_decodes;
+        self.mesh_chunk_checks += split.chunk_checks;
+        self.mesh_chunk_checked_bytes += split.chunk_checked_bytes;
     }
 }
 

@@ -104,6 +104,8 @@ mirror! {
         mesh_read_faults: u64,
         mesh_copy_faults: u64,
         mesh_chunk_decodes: u64,
+        mesh_chunk_checks: u64,
+        mesh_chunk_checked_bytes: u64,
         blas_ms: f64,
         tlas_ms: f64,
         tlas_gpu_ms: f64,

@@ -275,24 +275,28 @@ pub(crate) struct UploadSplit {
     /// The process's page faults (minor and major) while reading and while copying.
     pub(crate) read_faults: u64,
     pub(crate) copy_faults: u64,
-    /// Chunks the source decompressed ([`MeshBlobSource::chunk_decodes`]).
+    /// Chunks the source decompressed, and first-touch chunk checksums with their bytes
+    /// ([`MeshBlobSource::chunk_reads`]).
     pub(crate) chunk_decodes: u64,
+    pub(crate) chunk_checks: u64,
+    pub(crate) chunk_checked_bytes: u64,
 }
 
-/// The process's page faults so far (minor and major; every thread's): 0 where unknown.
+/// The process's page faults so far (minor and major, every thread's, from
+/// `/proc/self/stat`): 0 where unknown (not Linux).
 pub(crate) fn page_faults() -> u64 {
-    #[cfg(unix)]
-    {
-        let mut ru = std::mem::MaybeUninit::<libc::rusage>::zeroed();
-        // SAFETY: `ru` is a valid, writable rusage; getrusage only writes it.
-        let rc = unsafe { libc::getrusage(libc::RUSAGE_SELF, ru.as_mut_ptr()) };
-        if rc == 0 {
-            // SAFETY: getrusage succeeded, so it filled the struct (zeroed before anyway).
-            let ru = unsafe { ru.assume_init() };
-            return (ru.ru_minflt as u64).saturating_add(ru.ru_majflt as u64);
-        }
-    }
-    0
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0;
+    };
+    // Fields after the command's closing parenthesis: state is field 3, minflt 10, majflt 12.
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let field = |n: usize| -> u64 {
+        rest.split_whitespace()
+            .nth(n - 3)
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0)
+    };
+    field(10) + field(12)
 }
 
 fn ms_since(t: Instant) -> f64 {
@@ -317,7 +321,7 @@ pub(crate) fn upload_streamed_group(
     }
     let _span = tracing::debug_span!("upload_streamed_group", meshes = meshes.len()).entered();
     let records: Vec<u32> = meshes.iter().map(|&(m, _)| m as u32).collect();
-    let (t, decodes) = (Instant::now(), source.chunk_decodes());
+    let (t, reads) = (Instant::now(), source.chunk_reads());
     tracing::debug_span!("mesh_prepare").in_scope(|| source.prepare(&records));
     split.prepare_ms = ms_since(t);
     let (t, faults) = (Instant::now(), page_faults());
@@ -329,7 +333,10 @@ pub(crate) fn upload_streamed_group(
     })?;
     split.read_ms = ms_since(t);
     split.read_faults = page_faults().saturating_sub(faults);
-    split.chunk_decodes = source.chunk_decodes().saturating_sub(decodes);
+    let after = source.chunk_reads();
+    split.chunk_decodes = after.decodes.saturating_sub(reads.decodes);
+    split.chunk_checks = after.checks.saturating_sub(reads.checks);
+    split.chunk_checked_bytes = after.checked_bytes.saturating_sub(reads.checked_bytes);
     for ((_, g), b) in meshes.iter_mut().zip(&loaded) {
         g.keep_attributes_of(b);
     }
