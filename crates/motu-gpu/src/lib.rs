@@ -148,7 +148,7 @@ pub use render::{
     RenderStats, View, MAX_STACK_SIZE,
 };
 pub use scene::{
-    full_build_overhead, BuildOptions, FullBuildOverhead, GpuScene, MeshBlobSource,
+    full_build_overhead, BuildOptions, ChunkReads, FullBuildOverhead, GpuScene, MeshBlobSource,
     MeshSourceError, ResourceReport,
 };
 pub use stream::{

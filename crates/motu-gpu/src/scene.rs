@@ -19,7 +19,6 @@
 //! `scene/structures.rs` the table slots (AS objects and size queries are motu-vk's), `scene/tables.rs` the
 //! encoding of BLAS geometry, TLAS instances and PI AABBs, `scene/budget.rs` the usable budget.
 
-use std::borrow::Cow;
 use std::sync::{Mutex, MutexGuard};
 use std::time::Instant;
 
@@ -33,6 +32,7 @@ mod batch;
 mod budget;
 mod lod_pass;
 pub(crate) mod shading;
+mod source;
 mod structures;
 mod tables;
 mod upload;
@@ -52,65 +52,11 @@ pub(crate) use tables::{
 };
 pub(crate) use upload::{
     streamed_attribute_bytes, streamed_mesh_bytes, upload_streamed_group, MeshGpu, MeshStager,
-    Uploader,
+    UploadSplit, Uploader,
 };
 
 pub use crate::error::MeshSourceError;
-
-/// Geometry of one compiled mesh, by its index in the hierarchy's mesh table (e.g. slices of a
-/// mapped package chunk, borrowed). `Sync`: the streaming renderer reads meshes from several
-/// threads when it starts (the boxes inside BLASes).
-pub trait MeshBlobSource: Sync {
-    /// Positions (`vertex_count` of them) and `3 × triangle_count` indices.
-    #[allow(clippy::type_complexity)]
-    fn mesh_data(
-        &self,
-        mesh_record: u32,
-    ) -> std::result::Result<(Cow<'_, [[f32; 3]]>, Cow<'_, [u32]>), MeshSourceError>;
-
-    /// The primitive map (`triangle_count` source triangle ids) of a mesh record with
-    /// `FLAG_PRIMITIVE_MAP` (a cluster of a partitioned mesh). Sources without clusters keep
-    /// the default; a record with the flag then fails to upload rather than report cluster
-    /// primitive ids as source ones.
-    fn primitive_map(
-        &self,
-        _mesh_record: u32,
-    ) -> std::result::Result<Option<Cow<'_, [u32]>>, MeshSourceError> {
-        Ok(None)
-    }
-
-    /// Per-vertex normals and texture coordinates for shading, where the mesh has them
-    /// (default: none, so shading uses geometric normals and constant colours).
-    #[allow(clippy::type_complexity)]
-    fn mesh_shading(
-        &self,
-        _mesh_record: u32,
-    ) -> std::result::Result<
-        (Option<Cow<'_, [[f32; 3]]>>, Option<Cow<'_, [[f32; 2]]>>),
-        MeshSourceError,
-    > {
-        Ok((None, None))
-    }
-
-    /// Mesh records `mesh_records` are read next (a build group's): a source may start
-    /// reading them ahead (a package: the kernel reads their chunks ahead, and the chunks'
-    /// first-touch checksums run in parallel). Advice only; errors surface when reading.
-    fn prepare(&self, _mesh_records: &[u32]) {}
-
-    /// The boxes inside triangle BLASes stored with the meshes (a package's `proxy_boxes`
-    /// section, `motu_compile::proxy_boxes::encode_section`), where the source has them. The
-    /// streamer checks each BLAS's entry against its records before using it.
-    fn stored_proxy_boxes(&self) -> Option<&[u8]> {
-        None
-    }
-
-    /// The proxy clusters of every TLAS stored with the meshes (a package's `proxy_clusters`
-    /// section, `motu_compile::proxy_clusters::encode_section`), where the source has them.
-    /// [`crate::StreamPlan::load`] checks each TLAS's entry against the view before using it.
-    fn stored_proxy_clusters(&self) -> Option<&[u8]> {
-        None
-    }
-}
+pub use source::{ChunkReads, MeshBlobSource};
 
 /// The least allocation cap under which a budgeted full build uses small blocks (see
 /// `GpuScene::build`): twice the most it can take (64 blocks, 1,024 dedicated items, a few

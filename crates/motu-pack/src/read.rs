@@ -321,6 +321,40 @@ impl ScenePackage {
         let _ = self.package.prefetch_chunk(id);
     }
 
+    /// Of `ids`, the compressed chunks worth decoding ahead of a group's reads (each once, on
+    /// threads of their own: [`ScenePackage::decode_chunk_ahead`]), in order, as many as the
+    /// package's cache of decoded chunks holds ([`motu_package::DECODED_CACHE_BYTES`]).
+    pub fn chunks_to_decode_ahead(&self, ids: &[ChunkId]) -> Vec<ChunkId> {
+        let mut held = 0u64;
+        ids.iter()
+            .copied()
+            .filter(|&c| {
+                self.package.chunk_info(c).is_ok_and(|i| {
+                    let zstd = i.codec == motu_package::Codec::Zstd;
+                    held += if zstd { i.raw_len } else { 0 };
+                    zstd && held <= motu_package::DECODED_CACHE_BYTES
+                })
+            })
+            .collect()
+    }
+
+    /// Decodes chunk `id` into the package's cache of decoded chunks (the mesh reads then take
+    /// their pieces from it); a failure is left for the read, which reports it.
+    pub fn decode_chunk_ahead(&self, id: ChunkId) {
+        let _ = self.package.chunk_shared(id);
+    }
+
+    /// Chunks decompressed so far ([`motu_package::Package::chunk_decodes`]).
+    pub fn chunk_decodes(&self) -> u64 {
+        self.package.chunk_decodes()
+    }
+
+    /// First-touch chunk checksums so far and their bytes
+    /// ([`motu_package::Package::chunk_checks`]).
+    pub fn chunk_checks(&self) -> (u64, u64) {
+        self.package.chunk_checks()
+    }
+
     /// Checks chunk `id`'s checksum now, if no read has yet (its first touch: callers
     /// verify several chunks in parallel before reading meshes from them). A failure is left
     /// for the read, which reports it.
@@ -351,7 +385,7 @@ impl ScenePackage {
             .get(mesh_record as usize)
             .ok_or_else(|| err(format!("only {} meshes", meshes.len())))?;
         let (vb, ib) = (m.vertex_count as u64 * 12, m.triangle_count as u64 * 12);
-        match self.package.chunk(ChunkId(m.chunk))? {
+        match self.package.chunk_shared(ChunkId(m.chunk))? {
             motu_package::ChunkBytes::Borrowed(bytes) => {
                 let slice = |at: u64, n: u64| -> Result<&[u8], PackError> {
                     bytes
@@ -414,7 +448,7 @@ impl ScenePackage {
             return Ok((None, None));
         }
         // Borrowed from the map where the chunk is raw; else from the decoded copy, copied.
-        match self.package.chunk(ChunkId(m.chunk))? {
+        match self.package.chunk_shared(ChunkId(m.chunk))? {
             motu_package::ChunkBytes::Borrowed(bytes) => {
                 shading_slices(bytes, true, m, mesh_record)
             }
@@ -448,7 +482,7 @@ impl ScenePackage {
         }
         let (at, n) = (m.primitive_map_offset, m.triangle_count as u64 * 4);
         let range = at as usize..(at + n) as usize;
-        match self.package.chunk(ChunkId(m.chunk))? {
+        match self.package.chunk_shared(ChunkId(m.chunk))? {
             motu_package::ChunkBytes::Borrowed(b) => {
                 let bytes = b
                     .get(range)

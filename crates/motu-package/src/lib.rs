@@ -43,7 +43,9 @@ mod writer;
 
 pub use error::{FormatVersion, PackageError, Part};
 pub use format::Codec;
-pub use reader::{AlignedBytes, ChunkBytes, ChunkInfo, Package, SectionInfo, VerifyReport};
+pub use reader::{
+    AlignedBytes, ChunkBytes, ChunkInfo, Package, SectionInfo, VerifyReport, DECODED_CACHE_BYTES,
+};
 pub use writer::{
     ChunkWriter, Locator, PackageWriter, SectionWriter, StreamId, WriteSummary, WriterOptions,
     DEFAULT_TARGET_CHUNK_BYTES,

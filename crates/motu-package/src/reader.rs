@@ -4,6 +4,7 @@
 //! and its reads.
 
 mod decode;
+mod decoded;
 mod manifest;
 mod storage;
 mod verify;
@@ -18,6 +19,7 @@ use crate::format::Codec;
 use crate::{ChunkId, FormatVersion, PackageError, SectionKind};
 
 use decode::{check_chunk_checksum, check_section_checksum, decode_chunk, decompress_exact};
+pub use decoded::DECODED_CACHE_BYTES;
 use manifest::check_min_len;
 pub use manifest::{ChunkInfo, SectionInfo};
 use storage::Storage;
@@ -37,6 +39,11 @@ pub struct Package {
     /// Bit `i` set once chunk `i`'s checksum has matched.
     chunk_verified: Vec<AtomicU64>,
     section_verified: Vec<AtomicU64>,
+    /// Recently decoded zstd chunks ([`Package::chunk_shared`]) and the decode count.
+    decoded: decoded::DecodedChunks,
+    /// First-touch chunk checksums run by reads, and their stored bytes
+    /// ([`Package::chunk_checks`]).
+    chunk_checks: [AtomicU64; 2],
 }
 
 impl fmt::Debug for Package {
@@ -132,8 +139,45 @@ impl Package {
         if !is_set(&self.chunk_verified, id.0 as usize) {
             check_chunk_checksum(&info, stored)?;
             set(&self.chunk_verified, id.0 as usize);
+            self.chunk_checks[0].fetch_add(1, Ordering::Relaxed);
+            self.chunk_checks[1].fetch_add(info.stored_len, Ordering::Relaxed);
+        }
+        if info.codec == Codec::Zstd {
+            self.decoded.counted();
         }
         decode_chunk(&info, stored)
+    }
+
+    /// [`chunk`](Self::chunk), but a zstd chunk is decoded once and shared while it stays among
+    /// the recently decoded ([`DECODED_CACHE_BYTES`]): for readers that take many small pieces
+    /// of one chunk (a streamed build group's meshes), from many threads.
+    pub fn chunk_shared(&self, id: ChunkId) -> Result<ChunkBytes<'_>, PackageError> {
+        let info = *self.chunk_info(id)?;
+        if info.codec != Codec::Zstd {
+            return self.chunk(id);
+        }
+        let stored = self.chunk_stored(id)?;
+        let bytes = self.decoded.get_or_decode(id.0, info.raw_len, || {
+            let mut raw = AlignedBytes::zeroed(info.raw_len as usize);
+            decompress_exact(&info, stored, raw.as_mut_slice())?;
+            Ok(raw)
+        })?;
+        Ok(ChunkBytes::Shared(bytes))
+    }
+
+    /// First-touch chunk checksums reads ran so far, and the stored bytes they read (a chunk
+    /// is checked whole, however little of it a read wants).
+    pub fn chunk_checks(&self) -> (u64, u64) {
+        (
+            self.chunk_checks[0].load(Ordering::Relaxed),
+            self.chunk_checks[1].load(Ordering::Relaxed),
+        )
+    }
+
+    /// Chunks decompressed so far by [`chunk`](Self::chunk) and
+    /// [`chunk_shared`](Self::chunk_shared) (the latter's reuses not counted).
+    pub fn chunk_decodes(&self) -> u64 {
+        self.decoded.decodes()
     }
 
     /// Decodes a chunk into `dst` (e.g. a mapped staging buffer), avoiding the allocation of
@@ -153,7 +197,10 @@ impl Package {
         let dst = &mut dst[..raw_len];
         match info.codec {
             Codec::Raw => dst.copy_from_slice(stored),
-            Codec::Zstd => decompress_exact(&info, stored, dst)?,
+            Codec::Zstd => {
+                self.decoded.counted();
+                decompress_exact(&info, stored, dst)?
+            }
         }
         Ok(raw_len)
     }
@@ -166,6 +213,8 @@ impl Package {
         if !is_set(&self.chunk_verified, id.0 as usize) {
             check_chunk_checksum(&info, stored)?;
             set(&self.chunk_verified, id.0 as usize);
+            self.chunk_checks[0].fetch_add(1, Ordering::Relaxed);
+            self.chunk_checks[1].fetch_add(info.stored_len, Ordering::Relaxed);
         }
         Ok(stored)
     }

@@ -78,7 +78,8 @@ impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
 
     /// Starts reading the chunks of a build group's meshes: the kernel is told to read them
     /// ahead, then their first-touch checksums run on rayon threads (one chunk per thread,
-    /// instead of whichever mesh touches it first checking it alone).
+    /// instead of whichever mesh touches it first checking it alone), and compressed chunks
+    /// are decoded there once (before, each mesh read decoded its whole chunk, three times).
     fn prepare(&self, mesh_records: &[u32]) {
         use rayon::prelude::*;
         let chunks = self.0.mesh_chunks(mesh_records);
@@ -86,6 +87,17 @@ impl motu_gpu::MeshBlobSource for PackageMeshes<'_> {
             self.0.prefetch_chunk(c);
         }
         chunks.par_iter().for_each(|&c| self.0.verify_chunk(c));
+        let ahead = self.0.chunks_to_decode_ahead(&chunks);
+        ahead.par_iter().for_each(|&c| self.0.decode_chunk_ahead(c));
+    }
+
+    fn chunk_reads(&self) -> motu_gpu::ChunkReads {
+        let (checks, checked_bytes) = self.0.chunk_checks();
+        motu_gpu::ChunkReads {
+            decodes: self.0.chunk_decodes(),
+            checks,
+            checked_bytes,
+        }
     }
 
     /// The package's `proxy_boxes` section; one that cannot be read (its checksum fails) is a

@@ -64,6 +64,15 @@ const ALL_USAGES: BufferUsage = BufferUsage::TRANSFER_SRC
     .union(BufferUsage::ACCELERATION_STRUCTURE_BUILD_INPUT)
     .union(BufferUsage::SHADER_BINDING_TABLE);
 
+/// Blocks a heap created ([`GpuHeap::created_blocks`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BlockCounts {
+    pub created: u64,
+    pub bytes: u64,
+    /// Of `created`: taken from the spare (made ahead, or a destroyed block kept).
+    pub from_spare: u64,
+}
+
 /// One buffer of a [`GpuHeap::try_fit`] question.
 #[derive(Clone, Copy, Debug)]
 pub struct FitRequest<'l> {
@@ -103,7 +112,17 @@ pub struct GpuHeap {
     type_index: [u32; 2],
     /// The memory location of host-visible blocks ([`host_location`]).
     host_location: MemoryLocation,
+    /// Blocks created (each a `vkAllocateMemory`, mapped where host-visible) and their bytes,
+    /// per class: what a streamer's uploads paid for fresh memory ([`GpuHeap::created_blocks`]).
+    created: [(u64, u64); 2],
+    /// Host-visible standard blocks made ahead or kept ([`GpuHeap::set_host_blocks_ahead`]):
+    /// whether on, the block in waiting, and the blocks taken from it.
+    ahead: bool,
+    spare: Option<spare::Spare>,
+    spares_taken: u64,
 }
+
+mod spare;
 
 impl std::fmt::Debug for GpuHeap {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -161,6 +180,10 @@ impl GpuHeap {
             blocks: HashMap::new(),
             type_index: [device_local, upload],
             host_location,
+            created: [(0, 0); 2],
+            ahead: false,
+            spare: None,
+            spares_taken: 0,
         })
     }
 
@@ -265,16 +288,32 @@ impl GpuHeap {
                     block,
                     size_bytes,
                     class,
-                    ..
+                    dedicated,
                 } => {
                     let location = match class {
                         MemoryClass::DeviceLocal => MemoryLocation::DeviceLocal,
                         MemoryClass::HostVisible => self.host_location,
                     };
                     let type_index = self.type_index[class as usize];
-                    match DeviceMemory::allocate(&self.ctx, size_bytes, type_index, location) {
+                    let made_ahead = match class {
+                        MemoryClass::HostVisible if !dedicated => self.take_spare(size_bytes),
+                        _ => None,
+                    };
+                    let made = match made_ahead {
+                        Some(memory) => Ok(memory),
+                        None => DeviceMemory::allocate(&self.ctx, size_bytes, type_index, location),
+                    };
+                    match made {
                         Ok(memory) => {
                             self.blocks.insert(block, memory);
+                            let c = &mut self.created[class as usize];
+                            *c = (c.0 + 1, c.1 + size_bytes);
+                            let more = self.ahead && self.spare.is_none() && !dedicated;
+                            if class == MemoryClass::HostVisible && more {
+                                self.spare = spare::Spare::allocate(
+                                    &self.ctx, size_bytes, type_index, location,
+                                );
+                            }
                         }
                         Err(e) => {
                             let _ = self.allocator.forget_block(block);
@@ -283,9 +322,16 @@ impl GpuHeap {
                         }
                     }
                 }
-                BlockEvent::Destroyed { block, .. } => {
+                BlockEvent::Destroyed { block, class, .. } => {
                     // Buffers bound to it hold their own Arc; none is live (policy invariant).
-                    self.blocks.remove(&block);
+                    let memory = self.blocks.remove(&block);
+                    // A host block destroyed while none waits is kept as the next one (its
+                    // pages pinned, mapped and touched); dedicated ones differ in size and
+                    // are dropped when taken.
+                    let keep = self.ahead && class == MemoryClass::HostVisible;
+                    if let (Some(m), true, None) = (memory, keep, &self.spare) {
+                        self.spare = spare::Spare::kept(&self.ctx, m);
+                    }
                 }
             }
         }
@@ -322,9 +368,54 @@ impl GpuHeap {
         self.allocator.limits()
     }
 
+    /// Blocks of `class` the policy created so far, their bytes, and of them those that came
+    /// from the spare ([`GpuHeap::set_host_blocks_ahead`]); the others were each a
+    /// `vkAllocateMemory` in the caller's time.
+    pub fn created_blocks(&self, class: MemoryClass) -> BlockCounts {
+        let (created, bytes) = self.created[class as usize];
+        BlockCounts {
+            created,
+            bytes,
+            from_spare: match class {
+                MemoryClass::HostVisible => self.spares_taken,
+                MemoryClass::DeviceLocal => 0,
+            },
+        }
+    }
+
+    /// Makes each host-visible standard block ahead (on a thread of its own, pages touched)
+    /// after the policy makes one, and keeps a destroyed one for the next instead of freeing
+    /// it (`spare.rs`): for a streamer whose meshes live in host memory. Off: drops the spare.
+    pub fn set_host_blocks_ahead(&mut self, on: bool) {
+        self.ahead = on;
+        if !on {
+            if let Some(s) = self.spare.take() {
+                s.finish();
+            }
+        }
+    }
+
+    fn take_spare(&mut self, size_bytes: u64) -> Option<Arc<DeviceMemory>> {
+        if !self.spare.as_ref()?.ready() {
+            return None;
+        }
+        let memory = self.spare.take()?.take(size_bytes)?;
+        self.spares_taken += 1;
+        Some(memory)
+    }
+
     /// Live `VkDeviceMemory` blocks of this heap.
     pub fn block_count(&self) -> usize {
         self.blocks.len()
+    }
+}
+
+impl Drop for GpuHeap {
+    fn drop(&mut self) {
+        // A block still being made ahead is waited for (and freed with its thread's Arc).
+        if let Some(s) = self.spare.take() {
+            s.finish();
+        }
     }
 }
 

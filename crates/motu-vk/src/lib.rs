@@ -84,7 +84,7 @@ pub use command::{BufferCopy, BufferTarget, CommandRecorder, Submitted};
 pub use context::{Context, ContextOptions, Requirement, ENV_DEVICE};
 pub use conv::encode_instance;
 pub use error::{BudgetRefusal, LoaderFault, Result, SizeParseError, VkError};
-pub use heap::{FitRequest, GpuHeap, HeapBuffer};
+pub use heap::{BlockCounts, FitRequest, GpuHeap, HeapBuffer};
 pub use instance::{ValidationRequest, ENV_VALIDATION};
 pub use limits::{
     parse_size, LimitOverrides, Limits, ENV_MAX_ALLOCATIONS, ENV_MAX_ALLOCATION_SIZE,

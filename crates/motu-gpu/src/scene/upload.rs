@@ -10,7 +10,7 @@ use super::{BatchStager, MeshBlobSource};
 
 mod group;
 use crate::error::{GpuError, Result};
-pub(crate) use group::upload_streamed_group;
+pub(crate) use group::{upload_streamed_group, UploadSplit};
 
 /// Bounded host-visible staging ring: copies are queued and flushed (one fenced submission)
 /// whenever the ring is full, so host memory never holds more than the ring.

@@ -153,6 +153,10 @@ impl<'a> StreamingRenderer<'a> {
         let mut fresh: Vec<(usize, MeshGpu)> = Vec::new();
         let loaded = (|| -> Result<()> {
             let mut in_fresh = std::collections::HashSet::new();
+            let (t_alloc, blocks) = (
+                Instant::now(),
+                self.heap.created_blocks(self.res.mesh_class()),
+            );
             for &b in group {
                 for m in self.blas_meshes(b as usize) {
                     // Referenced before loading: evicting a BLAS that shares it keeps it.
@@ -170,7 +174,13 @@ impl<'a> StreamingRenderer<'a> {
             }
             let ctx = self.ctx.clone();
             let source = self.source;
-            let sizes = upload_streamed_group(&ctx, self.up_mut()?, source, &mut fresh)?;
+            let alloc = (
+                ms_since(t_alloc),
+                blocks,
+                self.heap.created_blocks(self.res.mesh_class()),
+            );
+            let (sizes, split) = upload_streamed_group(&ctx, self.up_mut()?, source, &mut fresh)?;
+            self.frame.stats_mut().note_mesh_upload(alloc, &split);
             let mut rest = std::mem::take(&mut fresh).into_iter();
             for bytes in sizes {
                 let Some((m, g)) = rest.next() else { break };

@@ -82,7 +82,7 @@ impl HeapSetup {
         // Structures, meshes and their transients come and go in sizes up to about a block:
         // from half a block each gets its own (freed whole when evicted), or the free space
         // they strand inside shared blocks, up to a quarter of the budget, fits nothing.
-        let heap = GpuHeap::with_blocks(ctx, limits, Some(block), Some(block / 2))?;
+        let mut heap = GpuHeap::with_blocks(ctx, limits, Some(block), Some(block / 2))?;
         let host_counts = heap.host_visible_counts_against_budget();
         let mesh_class = match opts.mesh_memory {
             MeshMemory::Device => MemoryClass::DeviceLocal,
@@ -91,6 +91,12 @@ impl HeapSetup {
             MeshMemory::Auto => MemoryClass::HostVisible,
         };
         let meshes_budgeted = mesh_class == MemoryClass::DeviceLocal || host_counts;
+        // Meshes in host memory outside the budget: each host block made ahead, off the frame
+        // (`heap/spare.rs`: one block more than the policy holds, so not where host blocks
+        // count against the budget); `MOTU_HOST_BLOCKS_AHEAD=0` makes them in the frame as
+        // before (A/B measurements).
+        let ahead = std::env::var("MOTU_HOST_BLOCKS_AHEAD").map_or(true, |v| v != "0");
+        heap.set_host_blocks_ahead(ahead && !meshes_budgeted);
         Ok(HeapSetup {
             opts: *opts,
             budget_bytes: budget,

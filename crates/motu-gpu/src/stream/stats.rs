@@ -209,6 +209,34 @@ pub struct FrameStreamStats {
     pub host_ms: f64,
     /// Of `build_ms`: streaming meshes (and their textures) from the source to the device.
     pub mesh_ms: f64,
+    /// Of `mesh_ms` (`scene/upload/group.rs`): the buffers allocated (with evictions for
+    /// them and new memory blocks); the source told what comes (read-ahead advice, first-touch
+    /// chunk checksums); the meshes read and checked (page faults on the package's map,
+    /// decompression); copied into host-mapped buffers; staged through the ring. The rest of
+    /// `mesh_ms`: textures, the last flush.
+    pub mesh_alloc_ms: f64,
+    pub mesh_prepare_ms: f64,
+    pub mesh_read_ms: f64,
+    pub mesh_copy_ms: f64,
+    pub mesh_staged_ms: f64,
+    /// Bytes the mesh uploads copied; memory blocks made for the meshes (each a fresh
+    /// `vkAllocateMemory`, mapped where host-visible) and their bytes; the process's page
+    /// faults while the meshes were read and while they were copied; chunks the source
+    /// decompressed for them (a compressed package's).
+    pub mesh_upload_bytes: u64,
+    pub mesh_blocks_created: u32,
+    pub mesh_block_bytes_created: u64,
+    /// Of `mesh_blocks_created`: host blocks made ahead on a thread of their own or kept
+    /// from a destroyed one (`GpuHeap::set_host_blocks_ahead`), not allocated in the frame.
+    pub mesh_blocks_from_spare: u32,
+    pub mesh_read_faults: u64,
+    pub mesh_copy_faults: u64,
+    pub mesh_chunk_decodes: u64,
+    /// First-touch checksums of whole chunks the meshes' reads ran (in `mesh_prepare_ms`),
+    /// and the chunks' stored bytes: a small mesh in a chunk no read touched yet costs all of
+    /// its chunk (64 MiB by default).
+    pub mesh_chunk_checks: u64,
+    pub mesh_chunk_checked_bytes: u64,
     /// Of `build_ms`: triangle BLAS builds (with compaction).
     pub blas_ms: f64,
     /// Of `build_ms`: TLAS (and proxy BLAS) rebuilds, including their evict-and-retry rounds.
@@ -651,6 +679,31 @@ impl StreamTotals {
         tot.build_ms += st.build_ms;
         tot.vram_peak_bytes = report.peak_block_bytes;
         tot.host_mesh_peak_bytes = tot.host_mesh_peak_bytes.max(st.resident_host_mesh_bytes);
+    }
+}
+
+impl FrameStreamStats {
+    /// A build group's mesh upload: its allocations (`(ms, blocks before, blocks after)`, as
+    /// `GpuHeap::created_blocks` counts them) and `split`.
+    pub(super) fn note_mesh_upload(
+        &mut self,
+        (alloc_ms, before, after): (f64, motu_vk::BlockCounts, motu_vk::BlockCounts),
+        split: &crate::scene::UploadSplit,
+    ) {
+        self.mesh_alloc_ms += alloc_ms;
+        self.mesh_blocks_created += (after.created - before.created) as u32;
+        self.mesh_block_bytes_created += after.bytes - before.bytes;
+        self.mesh_blocks_from_spare += (after.from_spare - before.from_spare) as u32;
+        self.mesh_prepare_ms += split.prepare_ms;
+        self.mesh_read_ms += split.read_ms;
+        self.mesh_copy_ms += split.copy_ms;
+        self.mesh_staged_ms += split.staged_ms;
+        self.mesh_upload_bytes += split.bytes;
+        self.mesh_read_faults += split.read_faults;
+        self.mesh_copy_faults += split.copy_faults;
+        self.mesh_chunk_decodes += split.chunk_decodes;
+        self.mesh_chunk_checks += split.chunk_checks;
+        self.mesh_chunk_checked_bytes += split.chunk_checked_bytes;
     }
 }
 

@@ -222,6 +222,8 @@ impl Package {
         Ok(Package {
             chunk_verified: bitset(chunks.len()),
             section_verified: bitset(sections.len()),
+            decoded: Default::default(),
+            chunk_checks: Default::default(),
             storage,
             path: None,
             version,

@@ -49,6 +49,8 @@ impl fmt::Debug for AlignedBytes {
 pub enum ChunkBytes<'a> {
     Borrowed(&'a [u8]),
     Owned(AlignedBytes),
+    /// A decoded chunk shared with the package's cache of them (`Package::chunk_shared`).
+    Shared(std::sync::Arc<AlignedBytes>),
 }
 
 impl ChunkBytes<'_> {
@@ -71,6 +73,7 @@ impl Deref for ChunkBytes<'_> {
         match self {
             ChunkBytes::Borrowed(bytes) => bytes,
             ChunkBytes::Owned(bytes) => bytes,
+            ChunkBytes::Shared(bytes) => bytes,
         }
     }
 }

@@ -73,3 +73,53 @@ fn try_fit_answers_as_allocating_would_without_allocating() {
     heap.free(held);
     assert_no_validation_errors(&ctx);
 }
+
+/// With blocks made ahead (`spare.rs`), the host block the policy makes after the first one
+/// is the spare, not a `vkAllocateMemory` of the caller's; a destroyed block is kept as the
+/// next one; device-local blocks never come from it.
+#[test]
+fn host_blocks_made_ahead_are_taken_by_the_next_block() {
+    let Some(ctx) = context_or_skip("heap_host_blocks_ahead", Requirement::Compute) else {
+        return;
+    };
+    const MIB: u64 = 1 << 20;
+    // Standard blocks of 4 MiB (a 16th of the budget); 3 MiB buffers take one each.
+    let mut heap = test_heap(&ctx, 64 * MIB);
+    heap.set_host_blocks_ahead(true);
+    let alloc = |heap: &mut GpuHeap, class| {
+        heap.alloc_buffer(
+            "b",
+            3 * MIB,
+            BufferUsage::STORAGE,
+            AllocKind::Other,
+            class,
+            16,
+        )
+        .expect("3 MiB of 64")
+    };
+    let wait_ready = |heap: &GpuHeap| {
+        while !heap.spare.as_ref().is_some_and(|s| s.ready()) {
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+    };
+    let first = alloc(&mut heap, MemoryClass::HostVisible);
+    assert_eq!(heap.created_blocks(MemoryClass::HostVisible).from_spare, 0);
+    wait_ready(&heap);
+    let second = alloc(&mut heap, MemoryClass::HostVisible);
+    let counts = heap.created_blocks(MemoryClass::HostVisible);
+    assert_eq!((counts.created, counts.from_spare), (2, 1), "{counts:?}");
+    second.write_bytes(0, &[7u8; 64]).expect("mapped");
+    let device = alloc(&mut heap, MemoryClass::DeviceLocal);
+    assert_eq!(heap.created_blocks(MemoryClass::DeviceLocal).from_spare, 0);
+    // A third host block: the spare made after the second, or the one made in time.
+    wait_ready(&heap);
+    let third = alloc(&mut heap, MemoryClass::HostVisible);
+    assert_eq!(heap.created_blocks(MemoryClass::HostVisible).from_spare, 2);
+    heap.free(third);
+    heap.free(second);
+    heap.free(first);
+    heap.free(device);
+    heap.set_host_blocks_ahead(false);
+    assert!(heap.spare.is_none());
+    assert_no_validation_errors(&ctx);
+}

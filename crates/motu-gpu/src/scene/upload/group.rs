@@ -7,6 +7,7 @@
 //! index check and the copies all ran in turn.
 
 use std::borrow::Cow;
+use std::time::Instant;
 
 use motu_vk::{with_mapped_ranges_mut, BufferCopy, Context, HeapBuffer, MappedRange};
 use rayon::prelude::*;
@@ -256,27 +257,86 @@ impl MeshGpu {
     }
 }
 
+/// Where one build group's upload went ([`upload_streamed_group`]), for the frame's
+/// `mesh_*` stats: nobody knew why an H100 host uploaded 60–80 MB a frame at ~1.3 GB/s.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct UploadSplit {
+    /// [`MeshBlobSource::prepare`]: read-ahead advice and first-touch chunk checksums.
+    pub(crate) prepare_ms: f64,
+    /// The meshes read and checked on rayon threads: page faults on the package's map,
+    /// decompression and the copies out of decompressed chunks, the index checks.
+    pub(crate) read_ms: f64,
+    /// Copies into host-mapped buffers (first touches of fresh memory fault here).
+    pub(crate) copy_ms: f64,
+    /// Copies through the staging ring (device-local buffers), flushes when it fills.
+    pub(crate) staged_ms: f64,
+    /// Bytes copied.
+    pub(crate) bytes: u64,
+    /// The process's page faults (minor and major) while reading and while copying.
+    pub(crate) read_faults: u64,
+    pub(crate) copy_faults: u64,
+    /// Chunks the source decompressed, and first-touch chunk checksums with their bytes
+    /// ([`MeshBlobSource::chunk_reads`]).
+    pub(crate) chunk_decodes: u64,
+    pub(crate) chunk_checks: u64,
+    pub(crate) chunk_checked_bytes: u64,
+}
+
+/// The process's page faults so far (minor and major, every thread's, from
+/// `/proc/self/stat`): 0 where unknown (not Linux).
+pub(crate) fn page_faults() -> u64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0;
+    };
+    // Fields after the command's closing parenthesis: state is field 3, minflt 10, majflt 12.
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let field = |n: usize| -> u64 {
+        rest.split_whitespace()
+            .nth(n - 3)
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0)
+    };
+    field(10) + field(12)
+}
+
+fn ms_since(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}
+
 /// Uploads the meshes `(record, mesh)` of one build group (buffers from
 /// [`MeshGpu::alloc_streamed`], nothing queued into them yet): the source is told what comes
 /// ([`MeshBlobSource::prepare`]), each mesh is read and checked on rayon threads, then every
 /// mesh is copied from several threads; an attribute the source lacks is dropped. Returns the
-/// bytes copied per mesh. On an error, copies may be queued in `up` for some of the buffers:
-/// flush before freeing them.
+/// bytes copied per mesh and where the time went. On an error, copies may be queued in `up`
+/// for some of the buffers: flush before freeing them.
 pub(crate) fn upload_streamed_group(
     ctx: &Context,
     up: &mut Uploader,
     source: &dyn MeshBlobSource,
     meshes: &mut [(usize, MeshGpu)],
-) -> Result<Vec<u64>> {
+) -> Result<(Vec<u64>, UploadSplit)> {
+    let mut split = UploadSplit::default();
     if meshes.is_empty() {
-        return Ok(Vec::new());
+        return Ok((Vec::new(), split));
     }
+    let _span = tracing::debug_span!("upload_streamed_group", meshes = meshes.len()).entered();
     let records: Vec<u32> = meshes.iter().map(|&(m, _)| m as u32).collect();
-    source.prepare(&records);
-    let loaded = meshes
-        .par_iter()
-        .map(|(m, g)| g.read_bytes(source, *m))
-        .collect::<Result<Vec<_>>>()?;
+    let (t, reads) = (Instant::now(), source.chunk_reads());
+    tracing::debug_span!("mesh_prepare").in_scope(|| source.prepare(&records));
+    split.prepare_ms = ms_since(t);
+    let (t, faults) = (Instant::now(), page_faults());
+    let loaded = tracing::debug_span!("mesh_read").in_scope(|| {
+        meshes
+            .par_iter()
+            .map(|(m, g)| g.read_bytes(source, *m))
+            .collect::<Result<Vec<_>>>()
+    })?;
+    split.read_ms = ms_since(t);
+    split.read_faults = page_faults().saturating_sub(faults);
+    let after = source.chunk_reads();
+    split.chunk_decodes = after.decodes.saturating_sub(reads.decodes);
+    split.chunk_checks = after.checks.saturating_sub(reads.checks);
+    split.chunk_checked_bytes = after.checked_bytes.saturating_sub(reads.checked_bytes);
     for ((_, g), b) in meshes.iter_mut().zip(&loaded) {
         g.keep_attributes_of(b);
     }
@@ -287,7 +347,14 @@ pub(crate) fn upload_streamed_group(
     let (mapped, staged): (Vec<Piece<'_>>, Vec<Piece<'_>>) = cut(&pieces, PIECE_BYTES)
         .into_iter()
         .partition(|p| p.dst.is_host_mapped());
-    write_mapped_parallel(&mapped)?;
-    up.upload_pieces(ctx, &staged)?;
-    Ok(loaded.iter().map(MeshBytes::len_bytes).collect())
+    let (t, faults) = (Instant::now(), page_faults());
+    tracing::debug_span!("mesh_copy").in_scope(|| write_mapped_parallel(&mapped))?;
+    split.copy_ms = ms_since(t);
+    split.copy_faults = page_faults().saturating_sub(faults);
+    let t = Instant::now();
+    tracing::debug_span!("mesh_staged").in_scope(|| up.upload_pieces(ctx, &staged))?;
+    split.staged_ms = ms_since(t);
+    let sizes: Vec<u64> = loaded.iter().map(MeshBytes::len_bytes).collect();
+    split.bytes = sizes.iter().sum();
+    Ok((sizes, split))
 }
