@@ -581,7 +581,8 @@ impl<'a> StreamingRenderer<'a> {
         Ok((RenderOutput { aov, rgba8, stats }, self.frame.stats.clone()))
     }
 
-    /// Later probe rounds (`StreamOptions::probe_rounds`; on the clock `clocked_probe`'s) of `rounds.camera`: the pixels
+    /// Later probe rounds (`StreamOptions::probe_rounds`; on the clock `clocked_probe`'s) of
+    /// `rounds.camera`: the pixels
     /// `rounds.open` the round before left open are probed again against what the prefetch
     /// just built, and what they need is prefetched, while the prefetch built some structure a
     /// round's rays `rounds.needed` first (the
