@@ -570,6 +570,10 @@ fn stream_row(
         "mark_tlas_walks": first.map_or(0, |p| p.mark_tlas_walks),
         // The frame named a next camera (a probe of it follows a complete frame).
         "next_camera": next_camera,
+        // On the clock while moving: build queues stopped at the free room (nothing is
+        // evicted), and a complete frame's probe the clock had no room for.
+        "flying_no_room": st.flying_no_room,
+        "probe_skipped_clock": st.probe_skipped_clock,
     });
     if let (Value::Object(r), Value::Object(p)) = (&mut row, phases) {
         r.extend(p);

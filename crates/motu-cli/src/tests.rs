@@ -128,6 +128,17 @@ fn render_library_defaults_are_the_render_flags_defaults() {
     let b = cmd::render::stream_bounds(&render_args(&["--stream-probe-rounds", "2"]).stream_bounds);
     assert!(b.given(), "--stream-probe-rounds needs --stream");
     assert_eq!(b.options().probe_rounds, 2);
+    // On the clock a cheaper probe (a 4th of each axis, one round, no verifying round); each
+    // setting given wins.
+    assert_eq!(o.clocked_probe, Some(motu_gpu::CLOCKED_PROBE));
+    let given = ["--stream-probe", "2", "--stream-probe-rounds", "3"];
+    let b = cmd::render::stream_bounds(&render_args(&given).stream_bounds);
+    let want = motu_gpu::ProbeSettings {
+        stride: 2,
+        rounds: 3,
+        ..motu_gpu::CLOCKED_PROBE
+    };
+    assert_eq!(b.options().clocked_probe, Some(want));
     // A flag's value clap refuses: the error names the flag.
     let refused = |flag: &str, value: &str| {
         let args = ["motu", "render", "pkg", "-o", "x.png", flag, value];

@@ -120,6 +120,7 @@ mod defrag;
 mod demand;
 mod fits;
 mod floor;
+mod flying;
 mod frame;
 mod instance_table;
 mod member_boxes;
@@ -155,8 +156,9 @@ pub use floor::{
     FloorSizes, StreamFloor,
 };
 pub use options::{
-    FrameCaps, MeshMemory, PassMarks, ProbeLater, ProbePaths, StreamFallback, StreamOptions,
-    TlasRecordsMode, AUTO_PASS_FRAMES, AUTO_PASS_ROWS, DEFAULT_TLAS_HEADROOM, MAX_TLAS_HEADROOM,
+    FrameCaps, MeshMemory, PassMarks, ProbeLater, ProbePaths, ProbeSettings, StreamFallback,
+    StreamOptions, TlasRecordsMode, AUTO_PASS_FRAMES, AUTO_PASS_ROWS, CLOCKED_PROBE,
+    DEFAULT_TLAS_HEADROOM, MAX_TLAS_HEADROOM,
 };
 pub use stats::{FrameStreamStats, PassStats, StreamTotals};
 pub use store_policy::{HostStorePolicy, StorePolicyStats};

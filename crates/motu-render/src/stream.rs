@@ -84,6 +84,14 @@ impl StreamBounds {
             probe_stride: self.probe_stride.unwrap_or(d.probe_stride),
             probe_rounds: self.probe_rounds.unwrap_or(d.probe_rounds),
             probe_verify_rounds: self.probe_verify.unwrap_or(d.probe_verify_rounds),
+            // On the clock a cheaper probe, except where a setting was given.
+            clocked_probe: Some(motu_gpu::ProbeSettings {
+                stride: self.probe_stride.unwrap_or(motu_gpu::CLOCKED_PROBE.stride),
+                rounds: self.probe_rounds.unwrap_or(motu_gpu::CLOCKED_PROBE.rounds),
+                verify_rounds: self
+                    .probe_verify
+                    .unwrap_or(motu_gpu::CLOCKED_PROBE.verify_rounds),
+            }),
             probe_later: self.probe_later.unwrap_or(d.probe_later),
             probe_paths: self.probe_paths.unwrap_or(d.probe_paths),
             pass_marks: self.pass_marks.unwrap_or(d.pass_marks),

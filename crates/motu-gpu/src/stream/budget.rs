@@ -50,12 +50,16 @@ pub(super) struct Kept {
     /// The whole-frame clock: the running frame's start and this device's estimates
     /// (`StreamOptions::frame_ms`, `clock.rs`).
     clock: FrameClock,
+    /// The running frame is progressive and names a next camera other than its own: on the
+    /// clock it flies (`flying.rs`).
+    moving: bool,
 }
 
 impl Kept {
     /// A frame starts: its clock starts, no build step runs yet.
     pub(super) fn begin_frame(&mut self) {
         self.step_start = None;
+        self.moving = false;
         self.clock.begin(Instant::now());
     }
 
@@ -78,6 +82,18 @@ impl Kept {
     /// The running build step is over (its time is in the frame's `build_ms`).
     pub(super) fn end_step(&mut self) {
         self.step_start = None;
+    }
+
+    /// The running frame names `next` as the next frame's camera: it moves when it is a
+    /// progressive frame ([`StreamingRenderer::render_progressive`]) and `next` is another
+    /// camera than its own (set by [`Self::set_camera`] first).
+    pub(super) fn set_next(&mut self, next: Option<&CameraParams>) {
+        self.moving = self.pass_cap.is_some() && next.is_some() && next != self.camera.as_ref();
+    }
+
+    /// Whether the running frame moves (see [`Self::set_next`]).
+    pub(super) fn moving(&self) -> bool {
+        self.moving
     }
 
     /// The running frame's camera (`piece_order.rs`).
@@ -190,10 +206,14 @@ impl<'a> StreamingRenderer<'a> {
     /// Whether this frame's build budget is spent, or its clock
     /// ([`Self::clocked`]: no time left, or its BLAS cap built).
     pub(super) fn frame_build_spent(&self) -> bool {
+        self.build_budget_spent() || self.clock_spent()
+    }
+
+    /// Whether this frame's build budget (`frame_build_bytes`, `frame_build_ms`) is spent.
+    pub(super) fn build_budget_spent(&self) -> bool {
         let (bytes, ms) = self.frame_budget();
         (bytes > 0 && self.frame.stats().built_bytes >= bytes)
             || (ms > 0.0 && self.frame_build_ms_now() >= ms)
-            || self.clock_spent()
     }
 
     /// Whether the running frame is on the whole-frame clock (`StreamOptions::frame_ms` or

@@ -347,12 +347,15 @@ impl<'a> StreamingRenderer<'a> {
     /// only single BLASes evict. Stops at the first single BLAS that does not fit (left for a
     /// later pass) and returns how many were left. `must_progress`: when nothing was built
     /// yet, evict the current pass's pins too before giving up, then fail with the numbers.
+    /// A flying frame (`flying.rs`) evicts nothing: it stops where the free room ends.
     pub(super) fn build_blas_queue(
         &mut self,
         queue: &[u32],
         must_progress: bool,
         evict_groups: bool,
     ) -> Result<usize> {
+        let flying = self.flying();
+        let evict_groups = evict_groups && !flying;
         let mut i = 0;
         // Group size carries over between steps: a full budget keeps failing large groups,
         // and each failure streams their meshes for nothing.
@@ -395,8 +398,13 @@ impl<'a> StreamingRenderer<'a> {
                 n = k.max(1);
             }
             let group = &queue[i..i + n];
-            let evict = evict_groups || group.len() == 1;
+            let evict = !flying && (evict_groups || group.len() == 1);
             let need: u64 = group.iter().map(|&b| self.blas_estimate_bytes(b)).sum();
+            if flying && need > free {
+                // One BLAS (a longer group was cut to fit), over the free room by estimate:
+                // streaming its meshes would only be refused.
+                return Ok(self.flying_no_room(group[0], queue.len() - i));
+            }
             // The group's room next to the TLAS reserve: kept TLAS records yield first (where
             // nothing is evicted, only when that makes the room).
             let short = need.saturating_sub(self.free_budget_bytes().saturating_sub(reserve));
@@ -430,6 +438,9 @@ impl<'a> StreamingRenderer<'a> {
                     left = queue.len() - i,
                     "build queue stops: no room next to the step's builds and the TLAS reserve"
                 );
+                if flying {
+                    return Ok(self.flying_no_room(group[0], queue.len() - i));
+                }
                 return Ok(queue.len() - i);
             }
             match self.build_group(group, evict) {
@@ -447,6 +458,9 @@ impl<'a> StreamingRenderer<'a> {
                 Err(GpuError::Budget(_)) if group.len() > 1 => {
                     chunk = group.len() / 2;
                     self.res.set_group_hint(chunk);
+                }
+                Err(GpuError::Budget(_)) if flying => {
+                    return Ok(self.flying_no_room(group[0], queue.len() - i));
                 }
                 Err(GpuError::Budget(msg)) => {
                     if !self.res.built_now().is_empty() || !must_progress {

@@ -332,6 +332,7 @@ impl<'a> StreamingRenderer<'a> {
         let guard = guard_pixels(w, h, self.opts.guard_band_px);
         let fb = self.prepare_frame_buffers(camera, opts, guard.len())?;
         let next = self.frame.next_camera.take();
+        self.frame.kept.set_next(next.as_ref());
         let last = std::mem::take(&mut self.frame.last_frame);
         let result = self.run_passes(&fb, w, h, &guard).and_then(|image| {
             self.settle_stale_after_passes()?;
@@ -342,17 +343,10 @@ impl<'a> StreamingRenderer<'a> {
             self.frame.stats.probe_skipped_still = still;
             // The probe of the next frame's camera (its buffers are this frame's: same size).
             let probe = match next.filter(|_| !still) {
-                Some(n)
-                    if self.opts.probe_stride > 0
-                        && (n.width, n.height) == (w, h)
-                        && self.frame.stats.complete
-                        && self.probe_within_budget() =>
-                {
-                    Some(FirstProbe {
-                        camera: n,
-                        found: self.probe_next_camera(&fb, &n, opts, None, false)?,
-                    })
-                }
+                Some(n) if self.may_probe(&n, w, h) => Some(FirstProbe {
+                    camera: n,
+                    found: self.probe_next_camera(&fb, &n, opts, None, false)?,
+                }),
                 _ => None,
             };
             Ok((image, probe))
@@ -587,7 +581,8 @@ impl<'a> StreamingRenderer<'a> {
         Ok((RenderOutput { aov, rgba8, stats }, self.frame.stats.clone()))
     }
 
-    /// Later probe rounds (`StreamOptions::probe_rounds`) of `rounds.camera`: the pixels
+    /// Later probe rounds (`StreamOptions::probe_rounds`; on the clock `clocked_probe`'s) of
+    /// `rounds.camera`: the pixels
     /// `rounds.open` the round before left open are probed again against what the prefetch
     /// just built, and what they need is prefetched, while the prefetch built some structure a
     /// round's rays `rounds.needed` first (the
@@ -608,22 +603,23 @@ impl<'a> StreamingRenderer<'a> {
         } = rounds;
         let next = &camera;
         let mut settled = open.is_empty();
+        let probe = self.probe_settings();
         // `ProbeLater::Verify`: the prefetch evicted, so verifying rounds follow; they probe
         // the open pixels too, one build step for both.
         let merged = self.opts.probe_later == super::ProbeLater::Verify
-            && self.opts.probe_verify_rounds > 0
+            && probe.verify_rounds > 0
             && self.res.evictions() != evictions_at_probe;
         // Merged, the verifying rounds may go as deep as the open-pixel rounds would have.
-        let verify_rounds = self.opts.probe_verify_rounds
+        let verify_rounds = probe.verify_rounds
             + if merged && !open.is_empty() {
-                self.opts.probe_rounds.saturating_sub(1)
+                probe.rounds.saturating_sub(1)
             } else {
                 0
             };
         self.frame.stats.probe_later_merged = merged;
         while !merged
             && !open.is_empty()
-            && self.frame.stats.probe_rounds < self.opts.probe_rounds
+            && self.frame.stats.probe_rounds < probe.rounds
             && needed.iter().any(|&b| self.res.has_blas(b as usize))
             && !self.frame_build_spent()
         {

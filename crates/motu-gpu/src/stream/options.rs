@@ -96,6 +96,14 @@ pub struct StreamOptions {
     /// Counts in place of [`Self::frame_ms`]'s time estimates (for tests: counts repeat, times
     /// do not): `Some` puts frames on the clock with these limits, whatever `frame_ms`.
     pub frame_caps: Option<FrameCaps>,
+    /// How a frame on the clock probes the next camera, in place of `probe_stride`,
+    /// `probe_rounds` and `probe_verify_rounds` (`None`: as those say). By default
+    /// [`CLOCKED_PROBE`]: every 4th pixel of each axis, one round, no verifying round, so a
+    /// complete frame while flying pays about a sixteenth of a full probe's trace (~100 ms on
+    /// an H100 at ¼ of island 0.3: notes/flight.md D6). The CLI sets each of the three from
+    /// `--stream-probe`, `--stream-probe-rounds` and `--stream-probe-verify` where given:
+    /// explicit settings win.
+    pub clocked_probe: Option<ProbeSettings>,
     /// With `frame_build_ms`, TLASes dirty only because BLASes under them were built are
     /// traced as they are and rebuilt while the frame's budget holds (`piece_order.rs`);
     /// `false`: every dirty TLAS is rebuilt at each build step's end, as without a budget
@@ -183,6 +191,25 @@ pub struct FrameCaps {
     /// Whether a complete frame probes the next camera.
     pub probe: bool,
 }
+
+/// How the probe of the next camera runs ([`StreamOptions::clocked_probe`]): the stride of
+/// its pixels on each axis (0: no probe), its most rounds, its most verifying rounds (as
+/// `probe_stride`, `probe_rounds`, `probe_verify_rounds`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ProbeSettings {
+    pub stride: u32,
+    pub rounds: u32,
+    pub verify_rounds: u32,
+}
+
+/// [`StreamOptions::clocked_probe`]'s default: a sixteenth of the pixels, one round, none
+/// verifying. The next frame's first pass opens what the skipped pixels' rays need (on the
+/// counted fallback while flying), which costs less than probing it when a frame has ~50 ms.
+pub const CLOCKED_PROBE: ProbeSettings = ProbeSettings {
+    stride: 4,
+    rounds: 1,
+    verify_rounds: 0,
+};
 
 /// [`StreamOptions::tlas_headroom`]'s default: pieces at a quarter of island 0.3 grow by a few
 /// percent between rebuilds (a frame's new BLASes add instances to nearly every piece).
@@ -379,6 +406,7 @@ impl Default for StreamOptions {
             frame_build_ms: 0.0,
             frame_ms: 0.0,
             frame_caps: None,
+            clocked_probe: Some(CLOCKED_PROBE),
             defer_stale_tlases: true,
             tlas_update: TlasUpdate::Auto,
             defrag: false,

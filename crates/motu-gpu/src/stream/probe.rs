@@ -121,7 +121,8 @@ impl<'a> StreamingRenderer<'a> {
         let params = frame_params(next, opts, self.view.root_tlas, self.shading.address());
         crate::render::write_params(&fb.params, &params, &opts.shading)?;
         let pixels = u64::from(next.width) * u64::from(next.height);
-        let stride = self.opts.probe_stride.max(1);
+        // On the clock `StreamOptions::clocked_probe`'s (`flying.rs`).
+        let stride = self.probe_settings().stride.max(1);
         let (full, list) = if let Some(again) = again {
             (0, relist(again))
         } else if stride == 1 {

@@ -30,6 +30,11 @@ pub struct FrameStreamStats {
     /// The frame stopped because its build budget (`frame_build_bytes`/`frame_build_ms`) was
     /// spent.
     pub build_budget_spent: bool,
+    /// Build queues of this frame that stopped because the next BLAS did not fit the free
+    /// room while the frame flew (on the clock, progressive, its next camera another:
+    /// `flying.rs`), where it evicts nothing; what they left shows the fallback until the
+    /// camera rests.
+    pub flying_no_room: u32,
     /// Pixels whose traversal was cut short this frame (a stack overflow or the trace cap).
     pub truncated_rays: u64,
     /// Pixels traced again in passes after the first.
@@ -63,6 +68,9 @@ pub struct FrameStreamStats {
     /// took one pass, or no later pass evicted what an earlier one saw), so the probe, which
     /// could only meet what this frame met, was skipped.
     pub probe_skipped_still: bool,
+    /// The frame was complete and named a next camera, but on the clock no probe round fit
+    /// what was left of it (with counts: `FrameCaps::probe` false), so no probe ran (0 or 1).
+    pub probe_skipped_clock: u32,
     /// Probe rounds run after this frame (`StreamOptions::probe_rounds`): the first probes
     /// the next camera's pixels, each later one only the pixels the round before left open,
     /// after the prefetch built what they needed.

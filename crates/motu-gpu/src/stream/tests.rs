@@ -859,9 +859,12 @@ fn a_frame_clock_builds_one_blas_a_frame_and_a_camera_at_rest_converges() {
     assert_no_validation_errors(&ctx);
 }
 
-/// notes/flight.md D6 (in part): on the clock, a complete frame probes the next camera only
-/// when a probe round fits: with counts as `FrameCaps::probe` says, and never on a clock out of
-/// time (a microsecond); off the clock it probes as before.
+/// notes/flight.md D6: on the clock, a complete frame probes the next camera only when a
+/// probe round fits: with counts as `FrameCaps::probe` says, and never on a clock out of time
+/// (a microsecond), those skipped counted (`probe_skipped_clock`); off the clock it probes as
+/// before. A probe on the clock takes `StreamOptions::clocked_probe`'s settings: by default
+/// every 4th pixel of each axis (a sixteenth), one round, no verifying round, whatever
+/// `probe_stride`, `probe_rounds` and `probe_verify_rounds` say; settings given for it win.
 #[test]
 fn a_complete_frame_on_the_clock_probes_only_when_a_round_fits() {
     let Some(Fixture { ctx, h, full }) = Fixture::new("stream_clock_probe", field(4, 6, 12)) else {
@@ -876,6 +879,9 @@ fn a_complete_frame_on_the_clock_probes_only_when_a_round_fits() {
         let o = StreamOptions {
             frame_ms: o.frame_ms,
             frame_caps: o.frame_caps,
+            probe_rounds: o.probe_rounds,
+            probe_verify_rounds: o.probe_verify_rounds,
+            clocked_probe: o.clocked_probe,
             settle_after_still_frames: 0,
             ..small_stream_options(full_build_needs(&full) * 2)
         };
@@ -898,22 +904,62 @@ fn a_complete_frame_on_the_clock_probes_only_when_a_round_fits() {
         }),
         ..Default::default()
     };
-    let off = first_complete(StreamOptions::default());
-    let allowed = first_complete(caps(true));
+    // Full probes everywhere they are not replaced: every pixel, rounds and verifying rounds.
+    let full_probe = |o: StreamOptions| StreamOptions {
+        probe_rounds: 3,
+        probe_verify_rounds: 2,
+        ..o
+    };
+    let off = first_complete(full_probe(StreamOptions::default()));
+    let allowed = first_complete(full_probe(caps(true)));
     let refused = first_complete(caps(false));
     let timed = first_complete(StreamOptions {
         frame_ms: 1e-3,
         ..Default::default()
+    });
+    // Given settings win: a whole probe of one round on the clock.
+    let given = first_complete(StreamOptions {
+        clocked_probe: Some(crate::ProbeSettings {
+            stride: 1,
+            rounds: 1,
+            verify_rounds: 0,
+        }),
+        ..caps(true)
     });
     for (what, st, probed) in [
         ("off the clock", &off, true),
         ("caps with the probe", &allowed, true),
         ("caps without it", &refused, false),
         ("out of time", &timed, false),
+        ("caps with given settings", &given, true),
     ] {
         assert!(!st.probe_skipped_still, "{what}: {st:?}");
         assert_eq!(st.probe_rays > 0, probed, "{what}: {st:?}");
+        // Complete, with a next camera and a stride: only the clock skips the probe.
+        assert_eq!(st.probe_skipped_clock, u32::from(!probed), "{what}: {st:?}");
     }
+    // View::Ids: one probe ray a probed pixel. On the clock a sixteenth of the pixels in one
+    // round; off it every pixel in the first round alone.
+    let pixels = u64::from(SIZE * SIZE);
+    eprintln!(
+        "probe rays: off the clock {} in {} rounds ({} verifying), on it {} in {} ({}), \
+         given settings {}",
+        off.probe_rays,
+        off.probe_rounds,
+        off.probe_verify_rounds,
+        allowed.probe_rays,
+        allowed.probe_rounds,
+        allowed.probe_verify_rounds,
+        given.probe_rays
+    );
+    assert!(off.probe_rays >= pixels, "{off:?}");
+    assert!(allowed.probe_rays <= pixels.div_ceil(16), "{allowed:?}");
+    assert_eq!(
+        (allowed.probe_rounds, allowed.probe_verify_rounds),
+        (1, 0),
+        "{allowed:?}"
+    );
+    assert_eq!(given.probe_rays, pixels, "{given:?}");
     assert_no_validation_errors(&ctx);
 }
 
@@ -968,6 +1014,101 @@ fn frames_off_the_clock_ignore_its_estimates() {
             "progressive {progressive}"
         );
     }
+    assert_no_validation_errors(&ctx);
+}
+
+/// notes/flight.md D5A: on the clock, a progressive frame whose next camera is another builds
+/// only into free room. Along the sweep at a sixteenth of the full build, where the same frames
+/// off the clock evict, no moving frame evicts; some stop their build queue at the free room
+/// (`flying_no_room`, what they left on the counted fallback); the camera at rest evicts again
+/// as it must and converges to the full build's image. (At a quarter and an eighth the clock's
+/// frames, which build fewer BLASes than those off it, never filled the room along 12 frames.)
+#[test]
+fn flying_frames_on_the_clock_evict_nothing_and_a_camera_at_rest_converges() {
+    let Some(Fixture { ctx, h, full }) = Fixture::new("stream_flying", field(10, 16, 30)) else {
+        return;
+    };
+    let opts = ids_opts(backend(&ctx));
+    // Frames 0..MOVING-1 name the next pose of the sweep; from MOVING-1 on the camera rests.
+    const MOVING: u32 = 12;
+    let rest = sweep_then_rest(MOVING, MOVING);
+    let reference = render(&ctx, &full, &rest, &opts).expect("full render");
+    let run = |frame_caps: Option<crate::FrameCaps>| {
+        let o = StreamOptions {
+            fallback: crate::StreamFallback::Coarse,
+            frame_caps,
+            ..small_stream_options(full_build_needs(&full) / 16)
+        };
+        let mut sr = streamer(&ctx, &h, &o);
+        let (mut frames, mut last) = (Vec::new(), None);
+        for f in 0..MOVING + 40 {
+            sr.set_next_camera(Some(sweep_then_rest(f + 1, MOVING)));
+            let (out, st) = sr
+                .render_progressive(&sweep_then_rest(f, MOVING), &opts)
+                .expect("frame");
+            let done = f >= MOVING && st.complete;
+            frames.push(st);
+            last = Some(out);
+            if done {
+                break;
+            }
+        }
+        (frames, last.expect("a frame"))
+    };
+    let moving = (MOVING - 1) as usize;
+    let counts = |frames: &[FrameStreamStats]| -> Vec<(u32, u32, u32, u64, bool)> {
+        frames
+            .iter()
+            .map(|f| {
+                (
+                    f.passes,
+                    f.blas_built,
+                    f.evicted,
+                    f.fallback_pixels,
+                    f.complete,
+                )
+            })
+            .collect()
+    };
+    // Off the clock: the budget makes moving frames evict (main's counts, notes/flight52.md).
+    let (off, off_out) = run(None);
+    eprintln!(
+        "off the clock (passes, blas_built, evicted, fallback_pixels, complete): {:?}",
+        counts(&off)
+    );
+    assert!(off[..moving].iter().any(|f| f.evicted > 0), "{off:?}");
+    assert!(off.iter().all(|f| f.flying_no_room == 0), "{off:?}");
+    assert_same_aov(&reference.aov, &off_out.aov, "off the clock at rest");
+    // On the clock with counts for times, every BLAS the frame wants (within the free room
+    // while flying) and the probe.
+    let caps = crate::FrameCaps {
+        blases: 1000,
+        pieces: 1000,
+        probe: true,
+    };
+    let (on, out) = run(Some(caps));
+    eprintln!(
+        "on the clock (passes, blas_built, evicted, fallback_pixels, complete): {:?}, no room \
+         {:?}",
+        counts(&on),
+        on.iter().map(|f| f.flying_no_room).collect::<Vec<_>>()
+    );
+    for f in &on[..moving] {
+        assert_eq!(f.evicted, 0, "a moving frame evicted: {f:?}");
+        assert_eq!(f.passes, 1, "{f:?}");
+        assert_eq!(f.fallback_pixels, f.incomplete_pixels, "{f:?}");
+    }
+    assert!(
+        on[..moving].iter().any(|f| f.flying_no_room > 0),
+        "no moving frame ran out of free room: {on:?}"
+    );
+    assert!(on[moving..].iter().all(|f| f.flying_no_room == 0), "{on:?}");
+    let st = on.last().expect("a frame");
+    assert!(
+        st.complete && st.fallback_pixels == 0,
+        "never converged: {st:?}"
+    );
+    assert_same_aov(&reference.aov, &out.aov, "on the clock at rest");
     assert_no_validation_errors(&ctx);
 }
 
