@@ -486,13 +486,15 @@ fn render_unpinned(
 pub const PINNED_RATES: [&str; 2] = ["--stream-rates", "build=0.5,restore=4,disk_read=8,store=4"];
 
 /// The per-frame counts of a streamed render (`--stats` JSON `st`): every integer and boolean
-/// of each frame but its pass log (times are floats), as `(frame, key, value)`. With pinned
-/// rates ([`PINNED_RATES`]) two runs of one command give the same.
+/// of each frame but its pass log (times are floats) and page faults, as `(frame, key,
+/// value)`. With pinned rates ([`PINNED_RATES`]) two runs of one command give the same.
 pub fn stream_frame_counts(st: &serde_json::Value) -> Vec<(usize, String, serde_json::Value)> {
     let mut out = Vec::new();
     for (i, f) in stream_frames(st).iter().enumerate() {
         let obj = f.as_object().expect("a frame object");
-        for (k, v) in obj {
+        // Page faults (`mesh_read_faults`, `mesh_copy_faults`) follow the OS's page cache,
+        // not the streamer's decisions.
+        for (k, v) in obj.iter().filter(|(k, _)| !k.ends_with("_faults")) {
             if v.is_u64() || v.is_boolean() {
                 out.push((i, k.clone(), v.clone()));
             }

@@ -60,9 +60,11 @@ pub struct StreamBoundArgs {
     /// while what is left covers that work by estimate (measured on this device as frames
     /// go), and builds at least one structure when it built none yet, so a camera at rest
     /// still converges; what is not built shows the fallback. While the camera moves it
-    /// evicts nothing (it builds into free room; flying_no_room per frame), and it probes every
-    /// 4th pixel of each axis in one round with no verifying round unless --stream-probe,
-    /// --stream-probe-rounds or --stream-probe-verify is given. Default: none.
+    /// evicts nothing (it builds into free room; flying_no_room per frame). Default: none.
+    ///
+    /// Its probe takes every 4th pixel of each axis in one round with no verifying round,
+    /// except for the probe settings given (--stream-probe, --stream-probe-rounds,
+    /// --stream-probe-verify).
     #[arg(help_heading = HEADING_STREAMING, long, value_parser = parse_build_ms, value_name = "MS")]
     pub stream_frame_ms: Option<f64>,
     /// Streaming: after each frame whose next camera is known (a camera path, a flight; the
