@@ -198,24 +198,24 @@ pub fn luminance(c: [f32; 3]) -> f32 {
 /// found no light) those would drag the average down until every lit pixel clips. An image
 /// without light keeps 0.
 pub fn auto_exposure_ev(pixels: impl Iterator<Item = [f32; 3]>) -> f32 {
-    let (mut sum, mut n) = (0.0f64, 0u64);
-    for l in pixels.filter_map(log_luminance) {
-        sum += l;
-        n += 1;
-    }
-    exposure_ev_of_log_sum(sum, n)
+    exposure_ev_of_logs(pixels.filter_map(log_luminance))
 }
 
 /// One pixel's term of [`auto_exposure_ev`]'s log average: the log of its luminance, or `None`
-/// for a pixel without light. Callers that compute the terms in parallel sum them in pixel
-/// order, so their exposure is this function's to the bit.
+/// for a pixel without light. Callers that compute the terms in parallel pass them to
+/// [`exposure_ev_of_logs`] in pixel order, so their exposure is [`auto_exposure_ev`]'s to the bit.
 pub fn log_luminance(c: [f32; 3]) -> Option<f64> {
     let l = luminance(c);
     (l > 1e-6).then(|| (l as f64).ln())
 }
 
-/// [`auto_exposure_ev`] from the sum of `n` lit pixels' [`log_luminance`]s.
-pub fn exposure_ev_of_log_sum(sum: f64, n: u64) -> f32 {
+/// [`auto_exposure_ev`] from the lit pixels' [`log_luminance`]s, summed in the order given.
+pub fn exposure_ev_of_logs(logs: impl IntoIterator<Item = f64>) -> f32 {
+    let (mut sum, mut n) = (0.0f64, 0u64);
+    for l in logs {
+        sum += l;
+        n += 1;
+    }
     if n == 0 {
         return 0.0;
     }

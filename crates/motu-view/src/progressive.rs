@@ -12,7 +12,7 @@
 
 use motu_abi::aov::Aov;
 use motu_abi::camera::CameraParams;
-use motu_abi::shade::{exposure_ev_of_log_sum, log_luminance, srgb_to_linear, tone_map};
+use motu_abi::shade::{exposure_ev_of_logs, log_luminance, srgb_to_linear, tone_map};
 use motu_gpu::{RenderOptions, RenderOutput, View};
 use rayon::prelude::*;
 
@@ -117,12 +117,7 @@ impl Accumulator {
                 .par_iter()
                 .map(|s| log_luminance(mean(s)))
                 .collect();
-            let (mut sum, mut n) = (0.0f64, 0u64);
-            for l in logs.into_iter().flatten() {
-                sum += l;
-                n += 1;
-            }
-            exposure_ev_of_log_sum(sum, n)
+            exposure_ev_of_logs(logs.into_iter().flatten())
         } else {
             opts.shading.exposure_ev
         };

@@ -185,7 +185,7 @@ pub(crate) fn frame_outputs(
 /// 640×360 frame on the host after the GPU was done (three `powf` and a `ln` a pixel), a
 /// quarter of a 20 frames/s budget.
 pub(crate) fn resolve_auto_exposure_parallel(rgba8: &mut [u8]) -> f32 {
-    use motu_abi::shade::{decode_rgb9e5, exposure_ev_of_log_sum, log_luminance, tone_map};
+    use motu_abi::shade::{decode_rgb9e5, exposure_ev_of_logs, log_luminance, tone_map};
     use rayon::prelude::*;
     const PIXELS_PER_TASK: usize = 4096;
     let word = |p: &[u8]| u32::from_le_bytes([p[0], p[1], p[2], p[3]]);
@@ -193,12 +193,7 @@ pub(crate) fn resolve_auto_exposure_parallel(rgba8: &mut [u8]) -> f32 {
         .par_chunks_exact(4)
         .map(|p| log_luminance(decode_rgb9e5(word(p))))
         .collect();
-    let (mut sum, mut n) = (0.0f64, 0u64);
-    for l in logs.into_iter().flatten() {
-        sum += l;
-        n += 1;
-    }
-    let ev = exposure_ev_of_log_sum(sum, n);
+    let ev = exposure_ev_of_logs(logs.into_iter().flatten());
     let scale = ev.exp2();
     let whole = rgba8.len() / 4 * 4;
     rgba8[..whole]
