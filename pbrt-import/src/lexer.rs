@@ -10,6 +10,8 @@ use std::borrow::Cow;
 
 use crate::FileId;
 
+mod blocks;
+
 /// Token category.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TokenKind {
@@ -129,6 +131,7 @@ const CLASS: [u8; 256] = {
     t
 };
 
+#[inline]
 fn is_word_end(b: u8) -> bool {
     CLASS[b as usize] != 0
 }
@@ -446,6 +449,9 @@ impl<'a> Lexer<'a> {
     /// Hot path for mesh arrays: no tokens, one pass, fast float parsing.
     pub fn read_f32_array(&mut self, out: &mut Vec<f32>) -> Result<(), LexError> {
         loop {
+            self.array_run(out, word_f32, |lx, at| lx.read_f32_at(at).ok());
+            // Where the run stopped (`]`, a comment, the input's last bytes, an error): one
+            // step of the general reader, which reports errors with their positions.
             self.skip_ws();
             let start = self.pos;
             let Some(&b) = self.bytes.get(start) else {
@@ -522,6 +528,15 @@ impl<'a> Lexer<'a> {
     /// at its position.
     fn read_int_array<T: TryFrom<i64>>(&mut self, out: &mut Vec<T>) -> Result<(), LexError> {
         loop {
+            self.array_run(
+                out,
+                |bytes, at| {
+                    let (v, end) = word_uint(bytes, at)?;
+                    Some((T::try_from(i64::from(v)).ok()?, end))
+                },
+                |lx, at| T::try_from(lx.read_i64_at(at).ok()?).ok(),
+            );
+            // As in `read_f32_array`: one general step where the run stopped.
             self.skip_ws();
             let start = self.pos;
             let Some(&b) = self.bytes.get(start) else {
