@@ -311,3 +311,84 @@ fn an_unreadable_ply_keeps_its_io_error() {
     assert!(cause.downcast_ref::<std::io::Error>().is_some(), "{cause}");
     assert!(e.to_string().starts_with("PLY: cannot read: "), "{e}");
 }
+
+/// Runs of binary triangles are read straight into the index buffer (`triangle_run`); where
+/// a run stops (a quad, a degenerate face, an index out of range or negative, a truncated
+/// face) the generic reader takes over and must give the ASCII reader's mesh, report and
+/// errors, naming the face where the run stopped.
+#[test]
+fn binary_triangle_runs_match_the_generic_reader() {
+    let vertices = 5usize;
+    let file = |format: &str, item: &str, faces: &[Vec<i32>]| {
+        let mut b = format!(
+            "ply\nformat {format} 1.0\nelement vertex {vertices}\nproperty float x\nproperty float y\n\
+             property float z\nelement face {}\nproperty list uchar {item} vertex_indices\nend_header\n",
+            faces.len()
+        )
+        .into_bytes();
+        let le = format == "binary_little_endian";
+        for v in 0..vertices {
+            let p = [v as f32, (v * v) as f32, 0.5];
+            for c in p {
+                if format == "ascii" {
+                    b.extend_from_slice(format!("{c} ").as_bytes());
+                } else {
+                    b.extend_from_slice(&if le { c.to_le_bytes() } else { c.to_be_bytes() });
+                }
+            }
+            if format == "ascii" {
+                b.push(b'\n');
+            }
+        }
+        for f in faces {
+            if format == "ascii" {
+                let list: Vec<String> = f.iter().map(i32::to_string).collect();
+                b.extend_from_slice(format!("{} {}\n", f.len(), list.join(" ")).as_bytes());
+                continue;
+            }
+            b.push(f.len() as u8);
+            for i in f {
+                b.extend_from_slice(&if le { i.to_le_bytes() } else { i.to_be_bytes() });
+            }
+        }
+        b
+    };
+    let mut faces: Vec<Vec<i32>> = (0..40)
+        .map(|i| vec![i % 5, (i + 1) % 5, (i + 3) % 5])
+        .collect();
+    faces.insert(7, vec![0, 1, 2, 3, 4]);
+    faces.insert(20, vec![1, 2]);
+    let want = parse_ply_report(&file("ascii", "int", &faces)).unwrap();
+    assert_eq!(want.0.indices.len(), (40 + 3) * 3);
+    assert_eq!(want.1.dropped_faces, 1);
+    for format in ["binary_little_endian", "binary_big_endian"] {
+        for item in ["int", "uint"] {
+            let (mesh, report) = parse_ply_report(&file(format, item, &faces)).unwrap();
+            assert_eq!(mesh, want.0);
+            // Binary faces have no line to name.
+            assert_eq!(report.dropped_faces, want.1.dropped_faces);
+            assert_eq!(report.first_dropped, Some((20, None)));
+            for bad in [-1, 5, i32::MAX] {
+                let mut faces = faces.clone();
+                faces[30][1] = bad;
+                let e = parse_ply(&file(format, item, &faces))
+                    .unwrap_err()
+                    .to_string();
+                let a = parse_ply(&file("ascii", "int", &faces))
+                    .unwrap_err()
+                    .to_string();
+                assert!(e.contains("out of range") && e.contains("30"), "{e}");
+                // The same words as the generic reader's, less ASCII's line number (a `uint`
+                // -1 is 4294967295 in binary).
+                if item == "int" {
+                    assert_eq!(e.split(':').last(), a.split(':').last(), "{e} / {a}");
+                }
+            }
+            let whole = file(format, item, &faces);
+            let e = parse_ply(&whole[..whole.len() - 2])
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("truncated") && e.contains("41"), "{e}");
+        }
+    }
+}
