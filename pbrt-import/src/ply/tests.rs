@@ -381,7 +381,7 @@ fn binary_triangle_runs_match_the_generic_reader() {
                 // The same words as the generic reader's, less ASCII's line number (a `uint`
                 // -1 is 4294967295 in binary).
                 if item == "int" {
-                    assert_eq!(e.split(':').last(), a.split(':').last(), "{e} / {a}");
+                    assert_eq!(e.rsplit(':').next(), a.rsplit(':').next(), "{e} / {a}");
                 }
             }
             let whole = file(format, item, &faces);
