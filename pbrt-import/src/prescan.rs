@@ -124,13 +124,16 @@ pub(crate) fn swar_interesting(x: u64) -> bool {
     quote || hash || upper
 }
 
-/// Whether `bytes` contain `Import` or `Include` anywhere: two vectorised substring searches
-/// (`memchr::memmem`), so the huge number-only files Moana is made of cost next to nothing.
-/// (A SWAR scan for `I` did a byte-by-byte check at every instance line, whose
-/// `ObjectInstance` has one.)
+/// Whether `bytes` contain `Import` or `Include` anywhere: one vectorised search for `I`
+/// (`memchr`), each hit checked for the rest of either word, so the huge number-only files
+/// Moana is made of cost next to nothing. (A SWAR scan for `I` did a byte-by-byte check at
+/// every instance line, whose `ObjectInstance` has one; two `memmem` passes, one a word,
+/// cost 358M instructions on the minipbrt set's 382 MB, 1.5% of its import.)
 pub(crate) fn mentions_include(bytes: &[u8]) -> bool {
-    memchr::memmem::find(bytes, b"Include").is_some()
-        || memchr::memmem::find(bytes, b"Import").is_some()
+    memchr::memchr_iter(b'I', bytes).any(|i| {
+        let rest = &bytes[i + 1..];
+        rest.starts_with(b"nclude") || rest.starts_with(b"mport")
+    })
 }
 
 /// Parameter type spellings only pbrt-v4 uses (a parameter declaration starts with one).

@@ -98,3 +98,34 @@ fn prescan_matches_the_token_definition() {
         );
     }
 }
+
+/// The one-pass search answers as the two substring searches it replaced, on texts made of
+/// pieces of the words (near misses everywhere, words at both ends).
+#[test]
+fn mentions_include_is_the_two_substring_searches() {
+    let pieces: [&[u8]; 10] = [
+        b"I", b"In", b"Incl", b"Include", b"Import", b"Impor", b"nclude", b"mport", b" ", b"x",
+    ];
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut found = 0;
+    for n in 0..20_000usize {
+        let mut text = Vec::new();
+        for _ in 0..n % 12 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            text.extend_from_slice(pieces[(state % pieces.len() as u64) as usize]);
+        }
+        let want = memchr::memmem::find(&text, b"Include").is_some()
+            || memchr::memmem::find(&text, b"Import").is_some();
+        found += usize::from(want);
+        assert_eq!(
+            mentions_include(&text),
+            want,
+            "{}",
+            String::from_utf8_lossy(&text)
+        );
+    }
+    // Both answers occur often.
+    assert!((2_000..18_000).contains(&found), "{found}");
+}
