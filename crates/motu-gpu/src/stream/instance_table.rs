@@ -28,6 +28,22 @@ impl Piece {
     }
 }
 
+/// `MOTU_STREAM_INSTANCE_TABLE=host`: the streamer keeps the instance table in host memory the
+/// GPU reads over the bus (as it keeps meshes on a discrete GPU), outside the VRAM budget,
+/// which then has its 64 bytes an instance for structures. Opt-in until a device measures
+/// what the trace pays for it (member tests and every hit read the table); `device` (the
+/// default) keeps it in VRAM. Where host memory counts against the budget (unified memory)
+/// it changes nothing but where the bytes live.
+pub(super) fn instance_table_in_host() -> bool {
+    std::env::var("MOTU_STREAM_INSTANCE_TABLE").is_ok_and(|v| v == "host")
+}
+
+/// Bytes of the streamer's instance table for `view` at most (its own instances and a proxy
+/// and marks instance a TLAS).
+pub(super) fn instance_table_bytes_bound(view: &motu_abi::HierarchyView<'_>) -> u64 {
+    ((view.instances.len() + 2 * view.tlases.len()) * std::mem::size_of::<InstanceRecord>()) as u64
+}
+
 /// See the module docs.
 #[derive(Debug, Default)]
 pub(super) struct InstanceTable {

@@ -70,6 +70,12 @@ impl HeapSetup {
                 // Meshes in host memory: at most every mesh at once, twice over for the free
                 // space their comings and goings strand in shared blocks (a cap, not a
                 // reservation: blocks are made as meshes arrive).
+                // The instance table in host memory (opt-in): one dedicated block.
+                + if super::instance_table::instance_table_in_host() {
+                    super::instance_table::instance_table_bytes_bound(view)
+                } else {
+                    0
+                }
                 + if opts.mesh_memory == MeshMemory::Device {
                     0
                 } else {
@@ -284,6 +290,9 @@ impl<'a> StreamingRenderer<'a> {
         table: &InstanceTable,
     ) -> Result<(HeapBuffer, u64)> {
         let record_bytes = std::mem::size_of::<InstanceRecord>();
+        if super::instance_table::instance_table_in_host() {
+            return self.write_host_instance_table(table);
+        }
         let (buf, address) = alloc_node_table(
             &mut self.heap,
             "stream-table-Instances",
@@ -310,6 +319,43 @@ impl<'a> StreamingRenderer<'a> {
             first += n;
         }
         Ok((buf, address))
+    }
+
+    /// The instance table in host memory the GPU reads (`instance_table_in_host`), written in
+    /// place by several threads.
+    fn write_host_instance_table(&mut self, table: &InstanceTable) -> Result<(HeapBuffer, u64)> {
+        let record_bytes = std::mem::size_of::<InstanceRecord>();
+        let bytes = table.len() * record_bytes;
+        let buf = self.heap.alloc_buffer(
+            "stream-table-Instances-host",
+            bytes as u64,
+            crate::scene::table_usage(),
+            AllocKind::NodeTable,
+            MemoryClass::HostVisible,
+            16,
+        )?;
+        let view = self.view.instances;
+        let written = buf.with_mapped_mut(0, bytes, |out| {
+            match bytemuck::try_cast_slice_mut::<u8, InstanceRecord>(out) {
+                Ok(records) => table.write_parallel(view, 0, records),
+                // Mapped memory is aligned far beyond a record; a copy only if it were not.
+                Err(_) => {
+                    let mut records = vec![InstanceRecord::default(); table.len()];
+                    table.write_parallel(view, 0, &mut records);
+                    out.copy_from_slice(bytemuck::cast_slice(&records));
+                }
+            }
+        });
+        let address = written
+            .map_err(GpuError::from)
+            .and_then(|()| Ok(buf.device_address()?.0));
+        match address {
+            Ok(a) => Ok((buf, a)),
+            Err(e) => {
+                self.heap.free(buf);
+                Err(e)
+            }
+        }
     }
 
     /// The per-BLAS stamp buffers: cleared stamps the shaders write, walked stamps the host
