@@ -8,7 +8,7 @@ use motu_alloc::{AllocKind, AllocLimits, MemoryClass, MIB};
 use motu_vk::{BufferUsage, Context, GpuHeap, HeapBuffer};
 
 use super::buffers::staging_released;
-use super::instance_table::InstanceTable;
+use super::instance_table::{InstanceTable, TableMemory};
 use super::persistent::{auto_persistent, persistent_estimate, persistent_records, TlasUpdate};
 use super::proxy_boxes::Box6;
 use super::topology::SkeletonRecords;
@@ -70,12 +70,8 @@ impl HeapSetup {
                 // Meshes in host memory: at most every mesh at once, twice over for the free
                 // space their comings and goings strand in shared blocks (a cap, not a
                 // reservation: blocks are made as meshes arrive).
-                // The instance table in host memory (opt-in): one dedicated block.
-                + if super::instance_table::instance_table_in_host() {
-                    super::instance_table::instance_table_bytes_bound(view)
-                } else {
-                    0
-                }
+                // Tables in host memory (opt-in, `MOTU_STREAM_TABLES`): dedicated blocks.
+                + TableMemory::from_env().host_bytes_bound(view)
                 + if opts.mesh_memory == MeshMemory::Device {
                     0
                 } else {
@@ -269,17 +265,58 @@ impl<'a> StreamingRenderer<'a> {
             let (buf, address) = self.upload_instance_table(&ctx, &records.instances)?;
             self.gpu.keep_slot(Slot::Instances, buf, address);
         }
+        // Read by member tests only: in host memory with `MOTU_STREAM_TABLES=host`.
+        let host = TableMemory::from_env().proxy_tables_in_host();
         if !cluster_members.is_empty() {
-            let (buf, address) =
-                self.upload_table(&ctx, "stream-cluster-members", cast_slice(cluster_members))?;
+            let (buf, address) = self.upload_table_in(
+                &ctx,
+                "stream-cluster-members",
+                cast_slice(cluster_members),
+                host,
+            )?;
             self.gpu.keep_cluster_members(buf, address);
         }
         if !boxes.is_empty() {
-            let index = self.upload_table(&ctx, "stream-proxy-box-index", cast_slice(box_index))?;
-            let boxes = self.upload_table(&ctx, "stream-proxy-boxes", cast_slice(boxes))?;
+            let index =
+                self.upload_table_in(&ctx, "stream-proxy-box-index", cast_slice(box_index), host)?;
+            let boxes =
+                self.upload_table_in(&ctx, "stream-proxy-boxes", cast_slice(boxes), host)?;
             self.gpu.keep_proxy_boxes(index, boxes);
         }
         Ok(())
+    }
+
+    /// [`Self::upload_table`], or with `host` written in place into host memory the GPU reads
+    /// (`MOTU_STREAM_TABLES`).
+    fn upload_table_in(
+        &mut self,
+        ctx: &Context,
+        label: &str,
+        bytes: &[u8],
+        host: bool,
+    ) -> Result<(HeapBuffer, u64)> {
+        if !host {
+            return self.upload_table(ctx, label, bytes);
+        }
+        let buf = self.heap.alloc_buffer(
+            label,
+            bytes.len() as u64,
+            crate::scene::table_usage(),
+            AllocKind::NodeTable,
+            MemoryClass::HostVisible,
+            16,
+        )?;
+        let address = buf
+            .write_bytes(0, bytes)
+            .map_err(GpuError::from)
+            .and_then(|()| Ok(buf.device_address()?.0));
+        match address {
+            Ok(a) => Ok((buf, a)),
+            Err(e) => {
+                self.heap.free(buf);
+                Err(e)
+            }
+        }
     }
 
     /// The instance table, written into the staging ring a region at a time by several
@@ -290,7 +327,7 @@ impl<'a> StreamingRenderer<'a> {
         table: &InstanceTable,
     ) -> Result<(HeapBuffer, u64)> {
         let record_bytes = std::mem::size_of::<InstanceRecord>();
-        if super::instance_table::instance_table_in_host() {
+        if TableMemory::from_env().instances_in_host() {
             return self.write_host_instance_table(table);
         }
         let (buf, address) = alloc_node_table(
