@@ -132,6 +132,8 @@ pub struct Allocator {
     next_allocation: u64,
     events: Vec<BlockEvent>,
     kinds: [KindStats; 9],
+    /// Live bytes per class and kind (`[class][kind]`): what each kind holds of a budget.
+    class_kind_bytes: [[u64; 9]; 2],
     peak_block_count: u32,
     peak_budgeted_block_bytes: u64,
     peak_budgeted_in_use_bytes: u64,
@@ -185,6 +187,7 @@ impl Allocator {
             next_allocation: 0,
             events: Vec::new(),
             kinds: Default::default(),
+            class_kind_bytes: Default::default(),
             peak_block_count: 0,
             peak_budgeted_block_bytes: 0,
             peak_budgeted_in_use_bytes: 0,
@@ -254,6 +257,18 @@ impl Allocator {
         self.budget_group(class)
             .map(|c| self.pools[c.index()].in_use_bytes)
             .sum()
+    }
+
+    /// Bytes of live allocations that count against the same budget as `class`, per kind
+    /// (in [`AllocKind::ALL`]'s order): they sum to [`in_use_bytes`](Self::in_use_bytes).
+    pub fn in_use_bytes_by_kind(&self, class: MemoryClass) -> [u64; 9] {
+        let mut by_kind = [0u64; 9];
+        for c in self.budget_group(class) {
+            for (sum, bytes) in by_kind.iter_mut().zip(self.class_kind_bytes[c.index()]) {
+                *sum += bytes;
+            }
+        }
+        by_kind
     }
 
     /// The standard (shared) blocks of `class`, emptiest first: what a caller that moves
@@ -372,6 +387,7 @@ impl Allocator {
             next_allocation: self.next_allocation,
             events: Vec::new(),
             kinds: self.kinds,
+            class_kind_bytes: self.class_kind_bytes,
             peak_block_count: self.peak_block_count,
             peak_budgeted_block_bytes: self.peak_budgeted_block_bytes,
             peak_budgeted_in_use_bytes: self.peak_budgeted_in_use_bytes,
@@ -457,6 +473,7 @@ impl Allocator {
         };
         self.live.insert(id, allocation);
         self.kinds[kind.index()].add(size_bytes);
+        self.class_kind_bytes[class.index()][kind.index()] += size_bytes;
         let pool = &mut self.pools[class.index()];
         pool.in_use_bytes += size_bytes;
         pool.peak_in_use_bytes = pool.peak_in_use_bytes.max(pool.in_use_bytes);

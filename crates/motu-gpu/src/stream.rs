@@ -135,6 +135,7 @@ mod proxy_boxes;
 mod rebuild;
 mod residency;
 mod restore_rule;
+mod room_split;
 mod shading;
 mod skeleton;
 mod stats;
@@ -160,7 +161,7 @@ pub use options::{
     StreamOptions, TlasRecordsMode, AUTO_PASS_FRAMES, AUTO_PASS_ROWS, CLOCKED_PROBE,
     DEFAULT_TLAS_HEADROOM, MAX_TLAS_HEADROOM,
 };
-pub use stats::{FrameStreamStats, PassStats, StreamTotals};
+pub use stats::{FrameStreamStats, PassStats, RoomSplit, StreamTotals};
 pub use store_policy::{HostStorePolicy, StorePolicyStats};
 pub use topology::{ClustersSource, StreamPlan};
 

@@ -359,6 +359,14 @@ impl GpuHeap {
         self.allocator.set_fit_only(fit_only);
     }
 
+    /// Bytes of live allocations counted against the VRAM budget, per kind (in
+    /// [`AllocKind::ALL`](motu_alloc::AllocKind::ALL)'s order); they sum to the report's
+    /// `budget_in_use_bytes`.
+    pub fn budget_in_use_by_kind(&self) -> [u64; 9] {
+        self.allocator
+            .in_use_bytes_by_kind(MemoryClass::DeviceLocal)
+    }
+
     /// The policy's statistics (per kind, peaks, budget).
     pub fn report(&self) -> AllocReport {
         self.allocator.report()

@@ -14,6 +14,7 @@ impl Allocator {
     pub(super) fn release_range(&mut self, allocation: &Allocation) {
         let class = allocation.class;
         self.kinds[allocation.kind.index()].remove(allocation.size_bytes);
+        self.class_kind_bytes[class.index()][allocation.kind.index()] -= allocation.size_bytes;
         let pool = &mut self.pools[class.index()];
         pool.in_use_bytes -= allocation.size_bytes;
         let Some(block) = self.blocks.get_mut(&allocation.block) else {

@@ -133,6 +133,16 @@ impl Allocator {
         if live_bytes != kind_bytes || self.live.len() as u64 != kind_count {
             return Err("per-kind totals disagree with live allocations".to_owned());
         }
+        for (c, by_kind) in self.class_kind_bytes.iter().enumerate() {
+            if by_kind.iter().sum::<u64>() != pool_used[c] {
+                return Err(format!("class {c}: per-kind bytes disagree with block use"));
+            }
+        }
+        for (k, stats) in self.kinds.iter().enumerate() {
+            if self.class_kind_bytes.iter().map(|b| b[k]).sum::<u64>() != stats.bytes {
+                return Err(format!("kind {k}: per-class bytes disagree with its total"));
+            }
+        }
         if live_bytes != pool_used.iter().sum::<u64>() {
             return Err("live allocations disagree with block use".to_owned());
         }

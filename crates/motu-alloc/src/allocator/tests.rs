@@ -517,6 +517,22 @@ impl Model {
             assert_eq!(stats.bytes, live.map(|(a, _)| a.size_bytes).sum::<u64>());
             assert!(stats.peak_bytes >= stats.bytes);
         }
+        // Per kind within a budget: what each kind holds of it, summing to its use.
+        for class in MemoryClass::ALL {
+            let by_kind = allocator.in_use_bytes_by_kind(class);
+            for (i, kind) in AllocKind::ALL.into_iter().enumerate() {
+                let same_budget = |c: MemoryClass| {
+                    allocator.counts_against_budget(c) == allocator.counts_against_budget(class)
+                };
+                let live = self.live.iter().filter(|(a, _)| a.kind == kind);
+                let expected: u64 = live
+                    .filter(|(a, _)| same_budget(a.class))
+                    .map(|(a, _)| a.size_bytes)
+                    .sum();
+                assert_eq!(by_kind[i], expected, "{class} {kind}");
+            }
+            assert_eq!(by_kind.iter().sum::<u64>(), allocator.in_use_bytes(class));
+        }
         assert!(report.peak_block_bytes <= limits.budget_bytes);
         assert!(report.peak_allocation_count <= limits.max_allocation_count);
         for stats in report.classes.values() {

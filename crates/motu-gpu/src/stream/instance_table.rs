@@ -28,6 +28,62 @@ impl Piece {
     }
 }
 
+/// Where the streamer keeps its large static tables (`MOTU_STREAM_TABLES`): host memory the GPU
+/// reads over the bus (as it keeps meshes on a discrete GPU) is outside the VRAM budget, which
+/// then has their bytes for structures. Where host memory counts against the budget (unified
+/// memory) it changes nothing but where the bytes live. Opt-in until a device measures what
+/// the trace pays for it: member tests read the instance table, the member table and the boxes
+/// inside BLASes for every proxy box a ray enters; every hit reads its instance record.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum TableMemory {
+    /// `device` (default): every table in VRAM.
+    Device,
+    /// `instances`: the instance table (64 bytes an instance) in host memory.
+    Instances,
+    /// `host`: the instance table, the clusters' member table and the boxes inside BLASes.
+    Host,
+}
+
+impl TableMemory {
+    /// `MOTU_STREAM_TABLES` (`device`, `instances`, `host`; anything else is `device`).
+    pub fn from_env() -> TableMemory {
+        match std::env::var("MOTU_STREAM_TABLES").as_deref() {
+            Ok("instances") => TableMemory::Instances,
+            Ok("host") => TableMemory::Host,
+            _ => TableMemory::Device,
+        }
+    }
+
+    /// Whether the instance table lives in host memory.
+    pub fn instances_in_host(self) -> bool {
+        self != TableMemory::Device
+    }
+
+    /// Whether the member table and the boxes inside BLASes live in host memory.
+    pub fn proxy_tables_in_host(self) -> bool {
+        self == TableMemory::Host
+    }
+
+    /// Host bytes these tables take for `view` at most: the instance table (its own instances
+    /// and a proxy and marks instance a TLAS), a member a clustered instance (4 bytes) and the
+    /// boxes inside streamable BLASes (with their index), each 16-byte aligned.
+    pub fn host_bytes_bound(self, view: &motu_abi::HierarchyView<'_>) -> u64 {
+        let record = std::mem::size_of::<InstanceRecord>();
+        let instances = ((view.instances.len() + 2 * view.tlases.len()) * record) as u64;
+        let proxy = || {
+            let (index, boxes) =
+                super::proxy_boxes::layout(view, |b| super::streamable(&view.blases[b]));
+            let box_bytes = std::mem::size_of::<super::proxy_boxes::Box6>();
+            (view.instances.len() * 4 + index.len() * 8 + boxes * box_bytes + 3 * 16) as u64
+        };
+        match self {
+            TableMemory::Device => 0,
+            TableMemory::Instances => instances,
+            TableMemory::Host => instances + proxy(),
+        }
+    }
+}
+
 /// See the module docs.
 #[derive(Debug, Default)]
 pub(super) struct InstanceTable {

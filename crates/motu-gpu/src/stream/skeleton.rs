@@ -8,7 +8,7 @@ use motu_alloc::{AllocKind, AllocLimits, MemoryClass, MIB};
 use motu_vk::{BufferUsage, Context, GpuHeap, HeapBuffer};
 
 use super::buffers::staging_released;
-use super::instance_table::InstanceTable;
+use super::instance_table::{InstanceTable, TableMemory};
 use super::persistent::{auto_persistent, persistent_estimate, persistent_records, TlasUpdate};
 use super::proxy_boxes::Box6;
 use super::topology::SkeletonRecords;
@@ -70,6 +70,8 @@ impl HeapSetup {
                 // Meshes in host memory: at most every mesh at once, twice over for the free
                 // space their comings and goings strand in shared blocks (a cap, not a
                 // reservation: blocks are made as meshes arrive).
+                // Tables in host memory (opt-in, `MOTU_STREAM_TABLES`): dedicated blocks.
+                + TableMemory::from_env().host_bytes_bound(view)
                 + if opts.mesh_memory == MeshMemory::Device {
                     0
                 } else {
@@ -263,17 +265,58 @@ impl<'a> StreamingRenderer<'a> {
             let (buf, address) = self.upload_instance_table(&ctx, &records.instances)?;
             self.gpu.keep_slot(Slot::Instances, buf, address);
         }
+        // Read by member tests only: in host memory with `MOTU_STREAM_TABLES=host`.
+        let host = TableMemory::from_env().proxy_tables_in_host();
         if !cluster_members.is_empty() {
-            let (buf, address) =
-                self.upload_table(&ctx, "stream-cluster-members", cast_slice(cluster_members))?;
+            let (buf, address) = self.upload_table_in(
+                &ctx,
+                "stream-cluster-members",
+                cast_slice(cluster_members),
+                host,
+            )?;
             self.gpu.keep_cluster_members(buf, address);
         }
         if !boxes.is_empty() {
-            let index = self.upload_table(&ctx, "stream-proxy-box-index", cast_slice(box_index))?;
-            let boxes = self.upload_table(&ctx, "stream-proxy-boxes", cast_slice(boxes))?;
+            let index =
+                self.upload_table_in(&ctx, "stream-proxy-box-index", cast_slice(box_index), host)?;
+            let boxes =
+                self.upload_table_in(&ctx, "stream-proxy-boxes", cast_slice(boxes), host)?;
             self.gpu.keep_proxy_boxes(index, boxes);
         }
         Ok(())
+    }
+
+    /// [`Self::upload_table`], or with `host` written in place into host memory the GPU reads
+    /// (`MOTU_STREAM_TABLES`).
+    fn upload_table_in(
+        &mut self,
+        ctx: &Context,
+        label: &str,
+        bytes: &[u8],
+        host: bool,
+    ) -> Result<(HeapBuffer, u64)> {
+        if !host {
+            return self.upload_table(ctx, label, bytes);
+        }
+        let buf = self.heap.alloc_buffer(
+            label,
+            bytes.len() as u64,
+            crate::scene::table_usage(),
+            AllocKind::NodeTable,
+            MemoryClass::HostVisible,
+            16,
+        )?;
+        let address = buf
+            .write_bytes(0, bytes)
+            .map_err(GpuError::from)
+            .and_then(|()| Ok(buf.device_address()?.0));
+        match address {
+            Ok(a) => Ok((buf, a)),
+            Err(e) => {
+                self.heap.free(buf);
+                Err(e)
+            }
+        }
     }
 
     /// The instance table, written into the staging ring a region at a time by several
@@ -284,6 +327,9 @@ impl<'a> StreamingRenderer<'a> {
         table: &InstanceTable,
     ) -> Result<(HeapBuffer, u64)> {
         let record_bytes = std::mem::size_of::<InstanceRecord>();
+        if TableMemory::from_env().instances_in_host() {
+            return self.write_host_instance_table(table);
+        }
         let (buf, address) = alloc_node_table(
             &mut self.heap,
             "stream-table-Instances",
@@ -310,6 +356,43 @@ impl<'a> StreamingRenderer<'a> {
             first += n;
         }
         Ok((buf, address))
+    }
+
+    /// The instance table in host memory the GPU reads (`instance_table_in_host`), written in
+    /// place by several threads.
+    fn write_host_instance_table(&mut self, table: &InstanceTable) -> Result<(HeapBuffer, u64)> {
+        let record_bytes = std::mem::size_of::<InstanceRecord>();
+        let bytes = table.len() * record_bytes;
+        let buf = self.heap.alloc_buffer(
+            "stream-table-Instances-host",
+            bytes as u64,
+            crate::scene::table_usage(),
+            AllocKind::NodeTable,
+            MemoryClass::HostVisible,
+            16,
+        )?;
+        let view = self.view.instances;
+        let written = buf.with_mapped_mut(0, bytes, |out| {
+            match bytemuck::try_cast_slice_mut::<u8, InstanceRecord>(out) {
+                Ok(records) => table.write_parallel(view, 0, records),
+                // Mapped memory is aligned far beyond a record; a copy only if it were not.
+                Err(_) => {
+                    let mut records = vec![InstanceRecord::default(); table.len()];
+                    table.write_parallel(view, 0, &mut records);
+                    out.copy_from_slice(bytemuck::cast_slice(&records));
+                }
+            }
+        });
+        let address = written
+            .map_err(GpuError::from)
+            .and_then(|()| Ok(buf.device_address()?.0));
+        match address {
+            Ok(a) => Ok((buf, a)),
+            Err(e) => {
+                self.heap.free(buf);
+                Err(e)
+            }
+        }
     }
 
     /// The per-BLAS stamp buffers: cleared stamps the shaders write, walked stamps the host

@@ -3,6 +3,8 @@
 //! Their JSON is `motu_render::stats` (`stream` in `--stats`), whose conversion names every
 //! field: a field added here gets its key there.
 
+pub use super::room_split::RoomSplit;
+
 /// Per-frame streaming statistics (`--stats`, one entry per frame).
 #[derive(Clone, Debug, Default)]
 pub struct FrameStreamStats {
@@ -403,6 +405,8 @@ pub struct FrameStreamStats {
     /// at once. A pass walks only what is resident, so a frame whose `working_set_bytes` is
     /// above it needs at least `ceil(working_set_bytes / room_bytes)` passes at this budget.
     pub room_bytes: u64,
+    /// `vram_budget_bytes − room_bytes` by what holds it (the parts sum to it exactly).
+    pub room_split: RoomSplit,
 }
 
 /// One pass of a frame (`FrameStreamStats::pass_log`).

@@ -36,6 +36,9 @@ pub(super) struct GpuTables {
     /// Per BLAS: the latest pass stamp it was resident in (host copy of `walked_buf`).
     walked: Vec<u32>,
     walked_buf: Option<HeapBuffer>,
+    /// Bytes of the instance table (`Slot::Instances`), and whether it is in host memory.
+    instance_table_bytes: u64,
+    instance_table_in_host: bool,
 }
 
 impl GpuTables {
@@ -52,6 +55,10 @@ impl GpuTables {
     pub fn keep_slot(&mut self, slot: Slot, buf: HeapBuffer, address: u64) {
         let at = self.buffers.len();
         match slot {
+            Slot::Instances => {
+                self.instance_table_bytes = buf.size_bytes();
+                self.instance_table_in_host = buf.is_host_mapped();
+            }
             Slot::Pis => self.pis_table = at,
             Slot::Blases => self.blases_table = at,
             Slot::MeshGeo => self.mesh_geo_table = at,
@@ -104,6 +111,16 @@ impl GpuTables {
 
     pub fn tlas_addresses(&self) -> &HeapBuffer {
         &self.buffers[self.tlas_addr_table]
+    }
+
+    /// Bytes the instance table holds of the budget (`host_counts`: whether host memory counts
+    /// against it).
+    pub fn instance_table_budget_bytes(&self, host_counts: bool) -> u64 {
+        if self.instance_table_in_host && !host_counts {
+            0
+        } else {
+            self.instance_table_bytes
+        }
     }
 
     /// The tables' addresses by slot (0: empty), for a pass's push constants.

@@ -92,6 +92,11 @@ impl KeptRecords {
         self.bytes
     }
 
+    /// Of [`Self::bytes`]: the records alone (instance buffers; the rest are tables).
+    pub fn record_bytes(&self) -> u64 {
+        self.kept.iter().flatten().map(|b| b.size_bytes()).sum()
+    }
+
     /// Whether TLAS `t` has kept records.
     pub fn has(&self, t: u32) -> bool {
         self.kept.get(t as usize).is_some_and(Option::is_some)

@@ -270,6 +270,15 @@ impl Tlases {
             + self.records.bytes()
     }
 
+    /// Bytes the resident TLASes' proxy and marks BLASes hold.
+    pub fn proxy_bytes(&self) -> u64 {
+        self.resident()
+            .flat_map(|t| [&t.proxy, &t.marks])
+            .flatten()
+            .map(|a| a.size_bytes)
+            .sum()
+    }
+
     /// Bytes compaction saved on the resident TLASes and their proxy and marks BLASes: the
     /// room they would take more built without it (`--stream-tlas-compact off`).
     pub fn compact_saved_bytes(&self) -> u64 {

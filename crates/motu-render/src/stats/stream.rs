@@ -173,6 +173,24 @@ mirror! {
         heap_block_bytes: u64,
         heap_in_use_bytes: u64,
         room_bytes: u64,
+        room_split: RoomSplit,
+    }
+}
+
+mirror! {
+    /// `motu_gpu::RoomSplit` as JSON: `vram_budget_bytes − room_bytes` by what holds it.
+    RoomSplit from motu_gpu::RoomSplit {
+        skeleton_blas_bytes: u64,
+        proxy_blas_bytes: u64,
+        tlas_bytes: u64,
+        instance_buffer_bytes: u64,
+        table_bytes: u64,
+        instance_table_bytes: u64,
+        geometry_bytes: u64,
+        texture_bytes: u64,
+        scratch_bytes: u64,
+        staging_bytes: u64,
+        other_bytes: u64,
     }
 }
 

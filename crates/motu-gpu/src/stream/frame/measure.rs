@@ -1,6 +1,7 @@
 //! A frame's measures: its working set (split by the kinds of ray that hit it) and what is
 //! resident against the room (`FrameStreamStats`).
 
+use crate::stream::room_split::{RoomHolders, RoomSplit};
 use crate::stream::StreamingRenderer;
 
 impl<'a> StreamingRenderer<'a> {
@@ -49,6 +50,7 @@ impl<'a> StreamingRenderer<'a> {
     pub(super) fn measure_residency(&mut self, report: &motu_alloc::AllocReport) {
         let resident_textures = self.shading.resident_textures();
         let room_bytes = self.room_bytes(report);
+        let room_split = self.room_split();
         let st = &mut self.frame.stats;
         st.resident_textures = resident_textures;
         let (mut streamed_blases, mut streamed_bytes, mut skeleton_bytes) = (0u32, 0u64, 0u64);
@@ -79,10 +81,33 @@ impl<'a> StreamingRenderer<'a> {
         st.heap_block_bytes = report.budget_block_bytes;
         st.heap_in_use_bytes = report.budget_in_use_bytes;
         st.room_bytes = room_bytes;
+        st.room_split = room_split;
+    }
+
+    /// `budget − room_bytes` by what holds it, from the heap's per-kind use now.
+    fn room_split(&self) -> RoomSplit {
+        let (streamed_blas_bytes, budgeted_mesh_bytes) = self.streamed_parts();
+        let records = self.tlases.records();
+        let holders = RoomHolders {
+            streamed_blas_bytes,
+            budgeted_mesh_bytes,
+            kept_record_bytes: records.record_bytes(),
+            kept_table_bytes: records.bytes() - records.record_bytes(),
+            proxy_blas_bytes: self.tlases.proxy_bytes(),
+            instance_table_bytes: (self.gpu)
+                .instance_table_budget_bytes(self.heap.host_visible_counts_against_budget()),
+        };
+        RoomSplit::of(self.heap.budget_in_use_by_kind(), &holders)
     }
 
     /// Budget bytes resident streamed BLASes and their budgeted meshes hold now.
     fn streamed_bytes(&self) -> u64 {
+        let (blases, meshes) = self.streamed_parts();
+        blases + meshes
+    }
+
+    /// [`Self::streamed_bytes`]'s two parts: BLASes, meshes.
+    fn streamed_parts(&self) -> (u64, u64) {
         let blases: u64 = (self.res.blases().iter().zip(self.topo.buildable_all()))
             .filter_map(|(a, &buildable)| a.as_ref().filter(|_| buildable))
             .map(|a| a.size_bytes)
@@ -97,7 +122,7 @@ impl<'a> StreamingRenderer<'a> {
         } else {
             0
         };
-        blases + meshes
+        (blases, meshes)
     }
 
     /// The budget less what stays in use beside streamed BLASes and their meshes, by the
