@@ -38,6 +38,34 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 
 #define T_INFINITY 3.0e38
 
+// Counting mode of the streamed shaders (motu-gpu `StreamOptions::count_proxy_calls`,
+// `MOTU_PROXY_TESTS=count`): where a pass's proxy work goes, per ray kind and outcome. A
+// specialisation constant, so a pipeline made without it has no counting code left to run;
+// full builds never declare it. With it, the stats buffer the shaders write is a longer one
+// (motu-gpu `stream/proxy_count.rs`): after the STAT_* words, PROXY_COUNT_WORDS counters
+// (kind-major, then outcome, then field), then PROXY_ITEM_WORDS words per launch item where the
+// pipeline's proxy intersection and any-hit shaders, which cannot reach the payload, add up
+// what the item's current ray costs until raygen (traverse.glsl) takes them.
+#ifdef MOTU_STREAMED
+layout(constant_id = 3) const uint COUNT_PROXY = 0u;
+#endif
+#define PROXY_COUNT_BASE 11u    // = Rust STAT_WORDS
+// Kinds: camera (primary), guard, shadow (light), AO, bounce. Outcomes: open (a structure it
+// has not walked lies in front of its best hit), closed (hit, or occluded), miss (clear).
+#define PROXY_KIND_CAMERA 0u
+#define PROXY_KIND_GUARD 1u
+#define PROXY_KIND_SHADOW 2u
+#define PROXY_KIND_AO 3u
+#define PROXY_KIND_BOUNCE 4u
+#define PROXY_KINDS 5u
+#define PROXY_OUTCOMES 3u
+// Fields: rays, intersection-shader calls (query: proxy candidates), reports (any-hit calls;
+// query: = calls), quantised member tests, exact member tests.
+#define PROXY_FIELDS 5u
+#define PROXY_COUNT_WORDS 75u
+#define PROXY_ITEM_WORDS 4u
+
+
 // Streaming (motu-gpu's stream module): a programmable instance of this kind stands for a
 // non-resident triangle BLAS (`target`) in its TLAS's proxy BLAS; meeting it in front of the
 // best hit leaves the ray open until a pass walks that BLAS.

@@ -453,6 +453,16 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                          : primary ? STREAM_HIT_CAMERA
                          : bouncing ? STREAM_HIT_BOUNCE
                                     : STREAM_HIT_OCCLUSION;
+#ifdef MOTU_STREAMED
+            if (COUNT_PROXY != 0u) {
+                g_count_kind = guard      ? PROXY_KIND_GUARD
+                               : primary  ? PROXY_KIND_CAMERA
+                               : bouncing ? PROXY_KIND_BOUNCE
+                               : cursor < min(push.frame.f.light_count, uint(MAX_LIGHTS))
+                                   ? PROXY_KIND_SHADOW
+                                   : PROXY_KIND_AO;
+            }
+#endif
             TraceHit h = traverse(push.frame.f.root_tlas, r_org, r_dir.xyz,
                                   primary ? RAY_PRIMARY : RAY_SHADOW, lodp,
                                   push.frame.f.camera.pixels_per_unit_at_1, lod_u,

@@ -17,6 +17,18 @@ void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool
                 org, t_min, dir, t_max, 0);
 }
 
+#ifdef MOTU_STREAMED
+#include "pipeline/proxy_count.glsl"
+
+// Counting mode (COUNT_PROXY): the item's words, taken (left at 0).
+uvec4 backend_proxy_take() {
+    uint w = proxy_item_word();
+    return uvec4(atomicExchange(push.stats.n[w], 0u), atomicExchange(push.stats.n[w + 1u], 0u),
+                 atomicExchange(push.stats.n[w + 2u], 0u),
+                 atomicExchange(push.stats.n[w + 3u], 0u));
+}
+#endif
+
 #include "render_pixel.glsl"
 
 void main() {

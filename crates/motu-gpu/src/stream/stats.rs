@@ -456,6 +456,13 @@ pub struct PassStats {
     /// (`stream/member_boxes.rs`).
     pub proxy_member_tests: u64,
     pub proxy_exact_tests: u64,
+    /// Counting mode only ([`StreamOptions::count_proxy_calls`](super::StreamOptions::count_proxy_calls),
+    /// else all 0): the pass's proxy work by ray kind and outcome (`stream/proxy_count.rs`).
+    pub proxy_calls_camera: super::ProxyCalls,
+    pub proxy_calls_guard: super::ProxyCalls,
+    pub proxy_calls_shadow: super::ProxyCalls,
+    pub proxy_calls_ao: super::ProxyCalls,
+    pub proxy_calls_bounce: super::ProxyCalls,
 }
 
 /// Totals over all frames rendered so far.
