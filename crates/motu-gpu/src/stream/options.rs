@@ -183,6 +183,13 @@ pub struct StreamOptions {
     /// tests: its counters are atomics per ray and per proxy shader call, and its buffer's
     /// room shifts residency a little against a run without it.
     pub count_proxy_calls: bool,
+    /// The pipeline backend's proxy intersection shader reads the current walk's nearest open
+    /// entry so far (`STREAM_OPEN_BOUND`, `shaders/pipeline/open_bound.glsl`): proxy boxes
+    /// behind it test no member, where before that shader, which cannot read the payload,
+    /// tested the members of every box in front of the committed triangle (for an open ray,
+    /// every box to the walk's far end). Images, walks, requests and residency are unchanged;
+    /// only member tests go. `false` for comparisons (`MOTU_PROXY_TESTS=unbounded`).
+    pub open_bound: bool,
 }
 
 /// Whether `MOTU_PROXY_TESTS` (comma-separated words) has `word`.
@@ -435,6 +442,7 @@ impl Default for StreamOptions {
             tlas_headroom: DEFAULT_TLAS_HEADROOM,
             settle_after_still_frames: 2,
             count_proxy_calls: proxy_tests_env_has("count"),
+            open_bound: !proxy_tests_env_has("unbounded"),
         }
     }
 }

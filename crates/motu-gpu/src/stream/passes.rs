@@ -9,6 +9,7 @@ use super::buffers::FrameBuffers;
 use super::demand::Demand;
 use super::params::{
     StreamParams, CARRY_BYTES, STAMP_LIMIT, STREAM_LAST_PASS, STREAM_NO_MARK_WALK,
+    STREAM_OPEN_BOUND,
 };
 use super::proxy_count::{self, PROXY_COUNT_WORDS};
 use super::{FrameStreamStats, PassStats, StreamFallback, StreamingRenderer, GUARD_BIAS};
@@ -266,6 +267,15 @@ impl<'a> StreamingRenderer<'a> {
             (true, true) => STREAM_LAST_PASS | STREAM_NO_MARK_WALK,
             (true, false) => STREAM_LAST_PASS,
             _ => 0,
+        }
+    }
+
+    /// The flags every pass adds: [`StreamOptions::open_bound`](super::StreamOptions::open_bound)'s.
+    fn proxy_test_flags(&self) -> u32 {
+        if self.opts.open_bound {
+            STREAM_OPEN_BOUND
+        } else {
+            0
         }
     }
 
@@ -558,7 +568,7 @@ impl<'a> StreamingRenderer<'a> {
             cluster_members,
             proxy_box_index,
             proxy_boxes,
-            flags,
+            flags: flags | self.proxy_test_flags(),
             _pad: 0,
         };
         fb.stream.write(0, std::slice::from_ref(&sp))?;

@@ -111,6 +111,13 @@ pub(super) fn fill_pass(now: &[u32], before: &[u32], pass: &mut PassStats) {
     pass.proxy_calls_shadow = calls(2);
     pass.proxy_calls_ao = calls(3);
     pass.proxy_calls_bounce = calls(4);
+    if pass.proxy_member_tests == 0 {
+        // The pipeline backend counts member tests only here (the query backend's STAT words
+        // hold the same sums).
+        let all = pass.proxy_calls_by_kind().map(|(_, c)| c.total());
+        pass.proxy_member_tests = all.iter().map(|w| w.member_tests).sum();
+        pass.proxy_exact_tests = all.iter().map(|w| w.exact_tests).sum();
+    }
 }
 
 /// Words of the counting stats buffer for passes of up to `items` launch items.
