@@ -2,11 +2,13 @@
 //! (`StreamOptions::open_bound`, shaders/pipeline/open_bound.glsl). The pipeline backend's proxy
 //! intersection shader cannot read the payload, so it tested the members of every box in front
 //! of the committed triangle: for an open ray, every box to the far end of its walk. It now
-//! reads the walk's open bound (a per-launch-item word raygen and the any-hit keep), and every
-//! walk after a ray's first starts from its nearest open entry so far (both backends). Only
-//! member tests go: every other count, the AOV and the colour stay byte-equal, and the refined
-//! frames still converge to the full build. `MOTU_PROXY_TESTS=count` makes the pipeline count
-//! its member tests, `unbounded` turns the bound off (the comparison).
+//! reads the walk's open bound (a per-launch-item word raygen and the any-hit keep). Each walk
+//! starts from no bound (trace51 started a ray's later walks from its nearest open entry so far,
+//! which changed residency on the probe-rounds fixture: calls53). Only member tests go: every
+//! other count, the AOV and the colour stay byte-equal, and the refined frames still converge
+//! to the full build. `MOTU_PROXY_TESTS=count` makes the pipeline count its member tests (the
+//! counting mode), `unbounded` turns the bound off (the comparison); the query backend's walk
+//! always read the payload's bound, so there nothing changes.
 
 use motu_tests::{
     gpu_island, has_ray_query, json_u64 as u, motu_ok, render_env, report_peak_and_floor, s,

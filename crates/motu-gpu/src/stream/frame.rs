@@ -74,7 +74,7 @@ pub(super) struct FrameTracer {
     stack_size: u32,
     tracer: Tracer,
     /// Counting mode's stats buffer (`proxy_count.rs`), made by the first pass that needs it.
-    counts: Option<motu_vk::HeapBuffer>,
+    counts: Option<super::proxy_count::CountBuffers>,
 }
 
 impl FrameState {
@@ -170,12 +170,12 @@ impl FrameState {
     }
 
     /// Counting mode's stats buffer, once a pass made it.
-    pub fn proxy_counts(&self) -> Option<&motu_vk::HeapBuffer> {
+    pub fn proxy_counts(&self) -> Option<&super::proxy_count::CountBuffers> {
         self.tracer.as_ref().and_then(|t| t.counts.as_ref())
     }
 
     /// Where counting mode's stats buffer is kept (with the trace pipeline, made for it).
-    pub fn proxy_counts_slot(&mut self) -> Option<&mut Option<motu_vk::HeapBuffer>> {
+    pub fn proxy_counts_slot(&mut self) -> Option<&mut Option<super::proxy_count::CountBuffers>> {
         self.tracer.as_mut().map(|t| &mut t.counts)
     }
 
@@ -408,7 +408,7 @@ impl<'a> StreamingRenderer<'a> {
             if let Some(t) = self.frame.tracer.take() {
                 t.tracer.release(&mut self.heap);
                 if let Some(b) = t.counts {
-                    self.heap.free(b);
+                    b.release(&mut self.heap);
                 }
             }
             self.res.unpin_all(self.item_count());

@@ -213,7 +213,7 @@ impl<'a> StreamingRenderer<'a> {
             pixels * 4,
         )?;
         rec.copy_buffer(
-            self.frame.proxy_counts().unwrap_or(&fb.stats),
+            self.frame.proxy_counts().map_or(&fb.stats, |c| &c.counts),
             0,
             &fb.readback,
             final_off + pixels * 20,
@@ -627,13 +627,7 @@ impl<'a> StreamingRenderer<'a> {
         }
         // The counters so far, where the final image's stats words go (read_image overwrites).
         let counters_off = final_off + pixels * 20;
-        rec.copy_buffer(
-            stats,
-            0,
-            &fb.readback,
-            counters_off,
-            (STAT_WORDS * 4) as u64,
-        )?;
+        self.record_counter_copies(&mut rec, stats, &fb.readback, counters_off)?;
         rec.submit_and_wait()?;
         let trace_ms = t0.elapsed().as_secs_f64() * 1e3;
         let stamps: Vec<u32> = fb.readback.read_vec(0, nb)?;
@@ -681,15 +675,32 @@ impl StreamingRenderer<'_> {
     /// a frame's first pass clears (counting mode: all, its launch items' words included).
     fn pass_stats_buffer<'b>(&'b self, fb: &'b FrameBuffers) -> (&'b motu_vk::HeapBuffer, u64) {
         match self.frame.proxy_counts() {
-            Some(b) => (b, b.size_bytes()),
+            Some(c) => (&c.counts, c.counts.size_bytes()),
             None => (&fb.stats, (STAT_WORDS * 4) as u64),
         }
     }
 
-    /// Counting mode's counters so far (read from its host-visible buffer; empty without it).
+    /// Records the copies of a pass's counters: the stats words to `readback` at `offset`, and
+    /// counting mode's counters to its own read-back.
+    fn record_counter_copies<'r>(
+        &'r self,
+        rec: &mut motu_vk::CommandRecorder<'r>,
+        stats: &'r motu_vk::HeapBuffer,
+        readback: &'r motu_vk::HeapBuffer,
+        offset: u64,
+    ) -> Result<()> {
+        rec.copy_buffer(stats, 0, readback, offset, (STAT_WORDS * 4) as u64)?;
+        if let Some(c) = self.frame.proxy_counts() {
+            let words = (4 * PROXY_COUNT_WORDS) as u64;
+            rec.copy_buffer(&c.counts, (STAT_WORDS * 4) as u64, &c.readback, 0, words)?;
+        }
+        Ok(())
+    }
+
+    /// Counting mode's counters so far (its read-back, copied by the pass; empty without it).
     fn read_proxy_counts(&self) -> Result<Vec<u32>> {
         match self.frame.proxy_counts() {
-            Some(b) => Ok(b.read_vec((STAT_WORDS * 4) as u64, PROXY_COUNT_WORDS)?),
+            Some(c) => Ok(c.readback.read_vec(0, PROXY_COUNT_WORDS)?),
             None => Ok(Vec::new()),
         }
     }

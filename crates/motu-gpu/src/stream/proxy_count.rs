@@ -7,9 +7,10 @@
 //! than the frame's: the `STAT_*` words, [`PROXY_COUNT_WORDS`] counters, then
 //! [`PROXY_ITEM_WORDS`] words per launch item where the pipeline's proxy intersection and
 //! any-hit shaders add up what the item's current ray costs (they cannot reach the payload);
-//! raygen moves those into the counters after each ray. That buffer is host-visible (read
-//! without a copy) and allocated beside the frame's only in counting mode, so its room shifts
-//! residency a little against a run without counts: compare counted runs with counted runs.
+//! raygen moves those into the counters after each ray. That buffer (device-local, with a
+//! host-visible copy of the counters each pass) is allocated beside the frame's only in
+//! counting mode, so its room shifts residency a little against a run without counts: compare
+//! counted runs with counted runs.
 //!
 //! [`StreamOptions::count_proxy_calls`]: super::StreamOptions::count_proxy_calls
 
@@ -120,24 +121,40 @@ pub(super) fn fill_pass(now: &[u32], before: &[u32], pass: &mut PassStats) {
     }
 }
 
+/// Counting mode's buffers: the stats buffer its shaders write, and the counters' read-back.
+pub(in crate::stream) struct CountBuffers {
+    pub(super) counts: HeapBuffer,
+    pub(super) readback: HeapBuffer,
+}
+
+impl CountBuffers {
+    pub(super) fn release(self, heap: &mut GpuHeap) {
+        heap.free(self.counts);
+        heap.free(self.readback);
+    }
+}
+
 /// Words of the counting stats buffer for passes of up to `items` launch items.
 pub(super) fn count_buffer_words(items: u64) -> u64 {
     (STAT_WORDS + PROXY_COUNT_WORDS) as u64 + PROXY_ITEM_WORDS as u64 * items
 }
 
 /// The counting stats buffer, grown to hold passes of `items` launch items (`slot`: the one
-/// kept so far, released when too small).
+/// kept so far, released when too small). Device-local: the shaders add to it per proxy call.
 pub(super) fn ensure_count_buffer(
     heap: &mut GpuHeap,
-    slot: &mut Option<HeapBuffer>,
+    slot: &mut Option<CountBuffers>,
     items: u64,
 ) -> Result<()> {
     let bytes = 4 * count_buffer_words(items);
-    if slot.as_ref().is_some_and(|b| b.size_bytes() >= bytes) {
+    if slot
+        .as_ref()
+        .is_some_and(|b| b.counts.size_bytes() >= bytes)
+    {
         return Ok(());
     }
     if let Some(old) = slot.take() {
-        heap.free(old);
+        old.release(heap);
     }
     // Some headroom, so a pass with a few more items does not reallocate.
     let bytes = 4 * count_buffer_words(items + items / 4 + 64);
@@ -145,15 +162,32 @@ pub(super) fn ensure_count_buffer(
         | BufferUsage::DEVICE_ADDRESS
         | BufferUsage::TRANSFER_SRC
         | BufferUsage::TRANSFER_DST;
-    *slot = Some(heap.alloc_buffer(
+    let counts = heap.alloc_buffer(
         "proxy-counts",
         bytes,
         usage,
         AllocKind::Other,
+        MemoryClass::DeviceLocal,
+        16,
+    )?;
+    let readback = heap.alloc_buffer(
+        "proxy-counts-readback",
+        (4 * PROXY_COUNT_WORDS) as u64,
+        BufferUsage::TRANSFER_DST,
+        AllocKind::Staging,
         MemoryClass::HostVisible,
         16,
-    )?);
-    Ok(())
+    );
+    match readback {
+        Ok(readback) => {
+            *slot = Some(CountBuffers { counts, readback });
+            Ok(())
+        }
+        Err(e) => {
+            heap.free(counts);
+            Err(e.into())
+        }
+    }
 }
 
 #[cfg(test)]
