@@ -31,12 +31,42 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 #define STAT_TLAS_WALKS 6
 #define STAT_MARK_WALKS 7
 #define STAT_MARK_TLAS_WALKS 8
-// Streamed passes of the query backend only (candidates.glsl `proxy_entry`): member boxes
-// tested (quantised), and exact member tests (an instance record read) among them.
+// Streamed passes (candidates.glsl `proxy_entry`, proxy_members.glsl): member boxes tested
+// (quantised), and exact member tests (an instance record read) among them. The query backend
+// always counts them; the pipeline backend, whose tests run in intersection and any-hit
+// shaders, in counting mode only (COUNT_PROXY; by ray kind, motu-gpu `stream/proxy_count.rs`).
 #define STAT_PROXY_MEMBER_TESTS 9
 #define STAT_PROXY_EXACT_TESTS 10
 
 #define T_INFINITY 3.0e38
+
+// Counting mode of the streamed shaders (motu-gpu `StreamOptions::count_proxy_calls`,
+// `MOTU_PROXY_TESTS=count`): where a pass's proxy work goes, per ray kind and outcome. A
+// specialisation constant, so a pipeline made without it has no counting code left to run;
+// full builds never declare it. With it, the stats buffer the shaders write is a longer one
+// (motu-gpu `stream/proxy_count.rs`): after the STAT_* words, PROXY_COUNT_WORDS counters
+// (kind-major, then outcome, then field), then PROXY_ITEM_WORDS words per launch item where the
+// pipeline's proxy intersection and any-hit shaders, which cannot reach the payload, add up
+// what the item's current ray costs until raygen (traverse.glsl) takes them.
+#ifdef MOTU_STREAMED
+layout(constant_id = 3) const uint COUNT_PROXY = 0u;
+#endif
+#define PROXY_COUNT_BASE 11u    // = Rust STAT_WORDS
+// Kinds: camera (primary), guard, shadow (light), AO, bounce. Outcomes: open (a structure it
+// has not walked lies in front of its best hit), closed (hit, or occluded), miss (clear).
+#define PROXY_KIND_CAMERA 0u
+#define PROXY_KIND_GUARD 1u
+#define PROXY_KIND_SHADOW 2u
+#define PROXY_KIND_AO 3u
+#define PROXY_KIND_BOUNCE 4u
+#define PROXY_KINDS 5u
+#define PROXY_OUTCOMES 3u
+// Fields: rays, intersection-shader calls (query: proxy candidates), reports (any-hit calls;
+// query: = calls), quantised member tests, exact member tests.
+#define PROXY_FIELDS 5u
+#define PROXY_COUNT_WORDS 75u
+#define PROXY_ITEM_WORDS 4u
+
 
 // Streaming (motu-gpu's stream module): a programmable instance of this kind stands for a
 // non-resident triangle BLAS (`target`) in its TLAS's proxy BLAS; meeting it in front of the
@@ -95,6 +125,20 @@ layout(constant_id = 2) const uint PI_CAPACITY = 8u;
 // StreamParams.flags of a last pass after which nothing is built (the frame's build budget is
 // spent): no ray takes a mark walk (traverse.glsl), whose marks only steer that build.
 #define STREAM_NO_MARK_WALK 8u
+// StreamParams.flags, pipeline backend: the proxy intersection shader reads the current walk's
+// nearest open entry so far (pipeline/open_bound.glsl), so an open ray's proxy boxes behind it
+// test no member. Each walk starts from T_INFINITY as before: trace51's start from the ray's
+// nearest open entry over its earlier walks (g_empty_t) changed residency on the probe-rounds
+// fixture, deterministically (calls53: instance records 51,810 -> 53,126, the bound alone
+// 51,810). Off: the intersection shader tests up to the committed triangle (motu-gpu
+// StreamOptions::open_bound, comparisons).
+#define STREAM_OPEN_BOUND 16u
+// The carry buffer (StreamParams.carry): CARRY_WORDS u32 a pixel (render_pixel.glsl `Carry`,
+// Rust CARRY_BYTES). Word CARRY_OPEN_BOUND_WORD of a slot (Carry.thru.w) is no part of any
+// pixel's state (never read nor written as one): during a pipeline pass, slot i's holds launch
+// item i's open bound (pipeline/open_bound.glsl), so the bound takes no memory of its own.
+#define CARRY_WORDS 44u
+#define CARRY_OPEN_BOUND_WORD 43u
 // Ray cull masks (Rust: stream::MARKS_MASK, stream::TRIANGLE_MASK). Every instance has mask
 // 0xFF except in a streamed TLAS its triangle instances (0x01) and its *marks* BLAS (0x02: the
 // boxes of its resident clusters), which only probe passes' mark walks see: there a ray passing
@@ -124,7 +168,7 @@ struct StreamParams {
     uint64_t cluster_members;  // u32 global instance indices of the proxy clusters' members
     uint64_t proxy_box_index;  // uvec2 (first, fan) per BLAS into proxy_boxes (fan 0: none)
     uint64_t proxy_boxes;   // float[6] (min, max; BLAS space): fan top boxes, then fan leaves each
-    uint flags;             // STREAM_PROBE_PASS
+    uint flags;             // STREAM_PROBE_PASS, ...
     uint _pad;
 };
 

@@ -53,10 +53,49 @@ struct Carry {
     // Streamed only (full builds keep the path in locals, their SPIR-V unchanged):
     vec4 path_org;  // xyz: the current vertex's incoming ray's origin; w: the vertex (exact float)
     vec4 path_dir;  // xyz: its direction; w: the LOD of the vertex the bounce ray left (bits)
-    vec4 thru;      // xyz: the path's throughput
+    vec4 thru;      // xyz: the path's throughput; w: no pixel's (CARRY_OPEN_BOUND_WORD)
 #endif
 };
 layout(buffer_reference, std430, buffer_reference_align = 16) buffer CarryTable { Carry r[]; };
+
+#ifdef MOTU_STREAMED
+// A pixel's carried state, read and written field by field without thru.w: the word
+// CARRY_OPEN_BOUND_WORD of common.glsl, which another launch item may be writing as its open
+// bound (pipeline/open_bound.glsl). Full builds keep whole-struct copies (their SPIR-V as it was).
+Carry carry_load(uint pixel) {
+    CarryTable t = CarryTable(StreamRef(push.stream).s.carry);
+    Carry c;
+    c.hit = t.r[pixel].hit;
+    c.ns = t.r[pixel].ns;
+    c.albedo = t.r[pixel].albedo;
+    c.rec = t.r[pixel].rec;
+    c.aov = t.r[pixel].aov;
+    c.sum = t.r[pixel].sum;
+    c.cur = t.r[pixel].cur;
+    c.st = t.r[pixel].st;
+    c.path_org = t.r[pixel].path_org;
+    c.path_dir = t.r[pixel].path_dir;
+    c.thru = vec4(t.r[pixel].thru.x, t.r[pixel].thru.y, t.r[pixel].thru.z, 0.0);
+    return c;
+}
+
+void carry_store(uint pixel, Carry c) {
+    CarryTable t = CarryTable(StreamRef(push.stream).s.carry);
+    t.r[pixel].hit = c.hit;
+    t.r[pixel].ns = c.ns;
+    t.r[pixel].albedo = c.albedo;
+    t.r[pixel].rec = c.rec;
+    t.r[pixel].aov = c.aov;
+    t.r[pixel].sum = c.sum;
+    t.r[pixel].cur = c.cur;
+    t.r[pixel].st = c.st;
+    t.r[pixel].path_org = c.path_org;
+    t.r[pixel].path_dir = c.path_dir;
+    t.r[pixel].thru.x = c.thru.x;  // component stores: thru.w is not this pixel's
+    t.r[pixel].thru.y = c.thru.y;
+    t.r[pixel].thru.z = c.thru.z;
+}
+#endif
 
 // Streaming fallback (`--stream-fallback coarse`, motu-gpu stream/budget.rs): what an open
 // pixel shows if its frame stops before its structures arrive. Primary ray open: the bounds of
@@ -140,7 +179,11 @@ void stream_list_incomplete(uvec2 px) {
 // structure may finish it).
 void stream_defer(uvec2 px, uint pixel, Carry c) {
     stream_write_fallback(px, pixel, c);
+#ifdef MOTU_STREAMED
+    carry_store(pixel, c);
+#else
     CarryTable(StreamRef(push.stream).s.carry).r[pixel] = c;
+#endif
 #ifdef MOTU_STREAMED
     bool closest = c.st.x == 1u || c.st.x == 3u || c.st.x == 4u || c.st.x == 6u;
     stream_list_incomplete(px, closest ? g_empty_id : NONE_U32);
@@ -237,7 +280,11 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
     c.thru = vec4(1.0);
 #endif
     if (g_streaming && !guard && !g_probe) {
+#ifdef MOTU_STREAMED
+        Carry old = carry_load(pixel);
+#else
         Carry old = CarryTable(StreamRef(push.stream).s.carry).r[pixel];
+#endif
         if (old.st.x != 0u) {
             c = old;
         }
@@ -453,6 +500,16 @@ void render_pixel_impl(uvec2 px, bool guard, vec3 guard_dir) {
                          : primary ? STREAM_HIT_CAMERA
                          : bouncing ? STREAM_HIT_BOUNCE
                                     : STREAM_HIT_OCCLUSION;
+#ifdef MOTU_STREAMED
+            if (COUNT_PROXY != 0u) {
+                g_count_kind = guard      ? PROXY_KIND_GUARD
+                               : primary  ? PROXY_KIND_CAMERA
+                               : bouncing ? PROXY_KIND_BOUNCE
+                               : cursor < min(push.frame.f.light_count, uint(MAX_LIGHTS))
+                                   ? PROXY_KIND_SHADOW
+                                   : PROXY_KIND_AO;
+            }
+#endif
             TraceHit h = traverse(push.frame.f.root_tlas, r_org, r_dir.xyz,
                                   primary ? RAY_PRIMARY : RAY_SHADOW, lodp,
                                   push.frame.f.camera.pixels_per_unit_at_1, lod_u,

@@ -4,6 +4,8 @@
 // Contract: before including this file, a backend declares `Payload pl` (rayPayloadEXT in the
 // pipeline backend) and defines
 //     void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool first_hit)
+// and, streamed (MOTU_STREAMED), `uvec4 backend_proxy_take()`: the proxy work of the walks
+// since its last call (calls, reports, quantised and exact member tests; counting mode only)
 // which walks TLAS `tlas` (its address is push.tlas_addresses.r[tlas]) with the ray already
 // in that TLAS's space, t in [t_min, t_max], and fills `pl`: the closest triangle hit (hit_*) and
 // up to PI_CAPACITY programmable-instance candidates after (pl.t_floor, pl.floor_pi) in
@@ -87,6 +89,25 @@ uint g_mark_tlas_walks = 0u;
 bool g_last_pass = false;
 // No mark walks this pass (STREAM_NO_MARK_WALK): nothing is built after it.
 bool g_no_mark_walk = false;
+// Counting mode (COUNT_PROXY): the kind of the ray being traced (PROXY_KIND_*).
+uint g_count_kind = PROXY_KIND_CAMERA;
+
+// Counting mode: adds a ray that ended with `hit_t` (`hit_found`: a triangle of this trace) and
+// what its walks cost (`d`: backend_proxy_take) to its kind's and outcome's counters. Open as
+// stream_still_open judges it; closed: a hit (this trace's or the carried one) or occluded;
+// miss: neither.
+void proxy_count_ray(uvec4 d, float hit_t, bool hit_found, bool first_hit) {
+    bool open = !g_guard && g_empty_t < hit_t && !(first_hit && hit_found);
+    bool closed = !open && (hit_found || g_best_t < g_t_max);
+    uint outcome = open ? 0u : (closed ? 1u : 2u);
+    uint w = PROXY_COUNT_BASE + PROXY_FIELDS * (PROXY_OUTCOMES * g_count_kind + outcome);
+    atomicAdd(push.stats.n[w], 1u);
+    for (uint f = 0u; f < 4u; ++f) {
+        if (d[f] != 0u) {
+            atomicAdd(push.stats.n[w + 1u + f], d[f]);
+        }
+    }
+}
 #endif
 
 // Records `id` at `level` in this pass.
@@ -151,6 +172,10 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
     // Walk 0 is the ray's walk, walk 1 its mark walk (see g_mark_walk): the same loop, so the
     // traversal is inlined once.
     uint walk_cull_mask = g_cull_mask;
+    bool count_first_hit = first_hit;
+    if (COUNT_PROXY != 0u && g_streaming) {
+        backend_proxy_take();  // nothing of an earlier ray's is left; counted from here
+    }
     uvec3 walk_counts = uvec3(0u);  // traces, overflows, truncations of the first walk
     bool walk_truncated = false;
     for (uint walk = 0u; walk < 2u; ++walk) {
@@ -332,6 +357,9 @@ TraceHit traverse(uint root_tlas, vec3 org, vec3 dir, uint ray_kind, LodParams l
     g_mark_walk = false;
     g_pass_walk = false;
     g_cull_mask = walk_cull_mask;
+    if (COUNT_PROXY != 0u && g_streaming) {
+        proxy_count_ray(backend_proxy_take(), hit.t, hit.tlas != NONE_U32, count_first_hit);
+    }
 #endif
     if (g_streaming && hit.tlas != NONE_U32) {
         // Resident triangle BLASes are walked by the hardware without a shader callback: the

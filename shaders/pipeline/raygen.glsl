@@ -9,13 +9,33 @@
 #include "common.glsl"
 
 layout(location = 0) rayPayloadEXT Payload pl;
+#ifdef MOTU_STREAMED
+#include "pipeline/open_bound.glsl"
+#endif
 
 void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool first_hit) {
     uint flags = first_hit ? gl_RayFlagsTerminateOnFirstHitEXT : gl_RayFlagsNoneEXT;
+#ifdef MOTU_STREAMED
+    if (push.stream != 0ul) {
+        open_bound_publish(pl.stream_start, pl.open_t);  // where the proxy intersection reads it
+    }
+#endif
     // SBT: hit group 0 = triangles (instance SBT offset 0), 1 = programmable instances.
     traceRayEXT(accelerationStructureEXT(push.tlas_addresses.r[tlas]), flags, g_cull_mask, 0u, 0u, 0u,
                 org, t_min, dir, t_max, 0);
 }
+
+#ifdef MOTU_STREAMED
+#include "pipeline/proxy_count.glsl"
+
+// Counting mode (COUNT_PROXY): the item's words, taken (left at 0).
+uvec4 backend_proxy_take() {
+    uint w = proxy_item_word();
+    return uvec4(atomicExchange(push.stats.n[w], 0u), atomicExchange(push.stats.n[w + 1u], 0u),
+                 atomicExchange(push.stats.n[w + 2u], 0u),
+                 atomicExchange(push.stats.n[w + 3u], 0u));
+}
+#endif
 
 #include "render_pixel.glsl"
 

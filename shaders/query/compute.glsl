@@ -15,6 +15,21 @@ Payload pl;
 #include "candidates.glsl"
 #include "texture.glsl"
 
+#ifdef MOTU_STREAMED
+// Counting mode (COUNT_PROXY): proxy candidates met, and what backend_proxy_take last took.
+uint g_proxy_calls = 0u;
+uvec4 g_proxy_taken = uvec4(0u);
+
+// The walks' proxy work since the last take: calls = reports (every candidate runs
+// record_proxy here), quantised and exact member tests.
+uvec4 backend_proxy_take() {
+    uvec4 now = uvec4(g_proxy_calls, g_proxy_calls, g_member_tests, g_exact_tests);
+    uvec4 d = now - g_proxy_taken;
+    g_proxy_taken = now;
+    return d;
+}
+#endif
+
 void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool first_hit) {
     rayQueryEXT rq;
     uint flags = first_hit ? gl_RayFlagsTerminateOnFirstHitEXT : gl_RayFlagsNoneEXT;
@@ -38,6 +53,11 @@ void backend_trace(uint tlas, vec3 org, float t_min, vec3 dir, float t_max, bool
             vec3 o = rayQueryGetIntersectionObjectRayOriginEXT(rq, false);
             vec3 d = rayQueryGetIntersectionObjectRayDirectionEXT(rq, false);
             if (r.kind == PI_EMPTY_BLAS) {
+#ifdef MOTU_STREAMED
+                if (COUNT_PROXY != 0u) {
+                    g_proxy_calls += 1u;
+                }
+#endif
                 record_proxy(r, o, d, t_min, t_hi);
                 continue;
             }

@@ -568,6 +568,9 @@ fn stream_row(
         "first_pass_trace_ms": first.map_or(0.0, |p| p.trace_ms),
         "mark_walks": first.map_or(0, |p| p.mark_walks),
         "mark_tlas_walks": first.map_or(0, |p| p.mark_tlas_walks),
+        // Counting mode only (MOTU_PROXY_TESTS=count; else null): the first pass's proxy
+        // work by ray kind and outcome.
+        "first_pass_proxy_calls": first.map_or(Value::Null, proxy_calls_json),
         // The frame named a next camera (a probe of it follows a complete frame).
         "next_camera": next_camera,
         // On the clock while moving: build queues stopped at the free room (nothing is
@@ -579,6 +582,30 @@ fn stream_row(
         r.extend(p);
     }
     row
+}
+
+/// A pass's counting-mode counts (`motu_gpu::PassStats::proxy_calls_*`) as
+/// `{kind: {outcome: {rays, calls, reports, member_tests, exact_tests}}}`; null when the pass
+/// counted nothing (no counting mode).
+fn proxy_calls_json(p: &motu_gpu::PassStats) -> Value {
+    let kinds = p.proxy_calls_by_kind();
+    if kinds.iter().all(|(_, c)| c.total().rays == 0) {
+        return Value::Null;
+    }
+    let work = |w: motu_gpu::ProxyWork| {
+        json!({"rays": w.rays, "calls": w.calls, "reports": w.reports,
+               "member_tests": w.member_tests, "exact_tests": w.exact_tests})
+    };
+    Value::Object(
+        kinds
+            .iter()
+            .map(|(k, c)| {
+                let v =
+                    json!({"open": work(c.open), "closed": work(c.closed), "miss": work(c.miss)});
+                (k.to_string(), v)
+            })
+            .collect(),
+    )
 }
 
 /// The per-frame rows of a streaming flight as a text table.

@@ -155,9 +155,9 @@ pub use stream::{
     full_build_fits, persistent_tlas_estimate, streamed_mesh_total_bytes, streaming_floor,
     streaming_floor_planned, ClustersSource, FloorSizes, FrameCaps, FrameStreamStats, FullBuildFit,
     HostCacheMode, HostStorePolicy, MeshMemory, PassMarks, PassStats, PersistentEstimate,
-    ProbeLater, ProbePaths, ProbeSettings, RoomSplit, StorePolicyStats, StreamFallback,
-    StreamFloor, StreamOptions, StreamPlan, StreamTotals, StreamingRenderer, StructureCache,
-    TlasRecordsMode, TlasUpdate, AUTO_PASS_FRAMES, AUTO_PASS_ROWS, CLOCKED_PROBE,
+    ProbeLater, ProbePaths, ProbeSettings, ProxyCalls, ProxyWork, RoomSplit, StorePolicyStats,
+    StreamFallback, StreamFloor, StreamOptions, StreamPlan, StreamTotals, StreamingRenderer,
+    StructureCache, TlasRecordsMode, TlasUpdate, AUTO_PASS_FRAMES, AUTO_PASS_ROWS, CLOCKED_PROBE,
     DEFAULT_TLAS_HEADROOM, MAX_TLAS_HEADROOM, PI_EMPTY_BLAS,
 };
 // Fixed rates for the restore and store rules (`StreamOptions::fixed_rates`, `--stream-rates`).

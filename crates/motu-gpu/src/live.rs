@@ -66,7 +66,7 @@ impl LiveRenderer {
                 if let Some((_, _, t)) = self.tracer.take() {
                     t.release(&mut heap);
                 }
-                let t = Tracer::new(&ctx, &mut heap, opts, self.scene.pi_capacity, false)?;
+                let t = Tracer::new(&ctx, &mut heap, opts, self.scene.pi_capacity, false, false)?;
                 self.tracer = Some((opts.backend, opts.stack_size, t));
             }
             match &self.frame {

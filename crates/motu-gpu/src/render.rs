@@ -65,7 +65,7 @@ pub fn render_counted(
     let pixels = u64::from(w) * u64::from(h);
     let frames = opts.frames.max(1);
     let mut heap = scene.heap();
-    let tracer = Tracer::new(ctx, &mut heap, opts, scene.pi_capacity, false)?;
+    let tracer = Tracer::new(ctx, &mut heap, opts, scene.pi_capacity, false, false)?;
     let frame = match alloc_frame(&mut heap, pixels, &params, &opts.shading) {
         Ok(f) => f,
         Err(e) => {

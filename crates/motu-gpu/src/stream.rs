@@ -132,6 +132,7 @@ mod piece_order;
 mod plan_cache;
 mod probe;
 mod proxy_boxes;
+mod proxy_count;
 mod rebuild;
 mod residency;
 mod restore_rule;
@@ -161,6 +162,7 @@ pub use options::{
     StreamOptions, TlasRecordsMode, AUTO_PASS_FRAMES, AUTO_PASS_ROWS, CLOCKED_PROBE,
     DEFAULT_TLAS_HEADROOM, MAX_TLAS_HEADROOM,
 };
+pub use proxy_count::{ProxyCalls, ProxyWork};
 pub use stats::{FrameStreamStats, PassStats, RoomSplit, StreamTotals};
 pub use store_policy::{HostStorePolicy, StorePolicyStats};
 pub use topology::{ClustersSource, StreamPlan};

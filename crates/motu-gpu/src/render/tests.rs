@@ -696,7 +696,8 @@ fn pipeline_stats_per_backend_and_variant() {
         render(&ctx, &scene, &cam, &opts).expect("render");
         // The streamed variant, made as the stream renderer's `ensure_tracer` makes it.
         let mut heap = scene.heap();
-        let t = super::Tracer::new(&ctx, &mut heap, &opts, 4, true).expect("streamed tracer");
+        let t =
+            super::Tracer::new(&ctx, &mut heap, &opts, 4, true, false).expect("streamed tracer");
         let own = match &t {
             super::Tracer::Pipeline(p) => p.executable_stats().cloned(),
             super::Tracer::Query(q) => q.executable_stats().cloned(),

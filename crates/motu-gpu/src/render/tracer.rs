@@ -22,6 +22,7 @@ pub(crate) enum Tracer {
 impl Tracer {
     /// The pipeline of `opts.backend` (its SBT, if any, from `heap`).
     /// `pi_capacity`: the payload's candidate slots ([`crate::scene::pi_capacity`]).
+    /// `count_proxy`: with `streamed`, the counting mode's shaders (`stream/proxy_count.rs`).
     /// `streamed`: the trace shaders' streamed variant (`trace_stream.rgen` /
     /// `trace_stream.comp`, MOTU_STREAMED: a sample's secondary rays traced in windows, so its
     /// shadow and AO rays wait on their structures' builds together rather than one after
@@ -33,6 +34,7 @@ impl Tracer {
         opts: &RenderOptions,
         pi_capacity: u32,
         streamed: bool,
+        count_proxy: bool,
     ) -> Result<Tracer> {
         if !(1..=MAX_STACK_SIZE).contains(&opts.stack_size) || opts.max_traces_per_ray == 0 {
             return Err(GpuError::InvalidRequest(format!(
@@ -50,6 +52,8 @@ impl Tracer {
             (0, opts.stack_size),
             (1, opts.max_traces_per_ray),
             (2, pi_capacity.clamp(1, crate::scene::MAX_PI_CAPACITY)),
+            // COUNT_PROXY of common.glsl: streamed shaders only (`stream/proxy_count.rs`).
+            (3, u32::from(streamed && count_proxy)),
         ];
         Ok(match opts.backend {
             Backend::Pipeline => {

@@ -73,6 +73,8 @@ pub(super) struct FrameTracer {
     backend: Backend,
     stack_size: u32,
     tracer: Tracer,
+    /// Counting mode's stats buffer (`proxy_count.rs`), made by the first pass that needs it.
+    counts: Option<super::proxy_count::CountBuffers>,
 }
 
 impl FrameState {
@@ -165,6 +167,16 @@ impl FrameState {
     /// The trace pipeline of the current frame, once `ensure_tracer` made it.
     pub fn tracer(&self) -> Option<&Tracer> {
         self.tracer.as_ref().map(|t| &t.tracer)
+    }
+
+    /// Counting mode's stats buffer, once a pass made it.
+    pub fn proxy_counts(&self) -> Option<&super::proxy_count::CountBuffers> {
+        self.tracer.as_ref().and_then(|t| t.counts.as_ref())
+    }
+
+    /// Where counting mode's stats buffer is kept (with the trace pipeline, made for it).
+    pub fn proxy_counts_slot(&mut self) -> Option<&mut Option<super::proxy_count::CountBuffers>> {
+        self.tracer.as_mut().map(|t| &mut t.counts)
     }
 
     /// Names the next frame's camera (see `StreamingRenderer::set_next_camera`).
@@ -395,19 +407,24 @@ impl<'a> StreamingRenderer<'a> {
         if need_tracer {
             if let Some(t) = self.frame.tracer.take() {
                 t.tracer.release(&mut self.heap);
+                if let Some(b) = t.counts {
+                    b.release(&mut self.heap);
+                }
             }
             self.res.unpin_all(self.item_count());
             let t = self
                 .with_eviction_or_rebuilt_tlases(|s| {
                     // Streamed TLASes keep every PI in the hardware walk (no box lists).
                     let slots = crate::scene::pi_capacity(&s.view, false);
-                    Tracer::new(&s.ctx.clone(), &mut s.heap, opts, slots, true)
+                    let count = s.opts.count_proxy_calls;
+                    Tracer::new(&s.ctx.clone(), &mut s.heap, opts, slots, true, count)
                 })
                 .map_err(|e| self.skeleton_error("the trace pipeline", e))?;
             self.frame.tracer = Some(FrameTracer {
                 backend: opts.backend,
                 stack_size: opts.stack_size,
                 tracer: t,
+                counts: None,
             });
         }
         Ok(())

@@ -178,6 +178,26 @@ pub struct StreamOptions {
     /// step evicting what the next frame's pass needs: ¼ of the default island at 64×36 never
     /// completed in 8 still frames, flickering between 11 and 592 fallback pixels.
     pub settle_after_still_frames: u32,
+    /// Counting mode (`MOTU_PROXY_TESTS=count`): each pass counts its proxy work by ray kind
+    /// and outcome (`PassStats::proxy_calls_*`, `stream/proxy_count.rs`). For diagnosis and
+    /// tests: its counters are atomics per ray and per proxy shader call, and its buffer's
+    /// room shifts residency a little against a run without it.
+    pub count_proxy_calls: bool,
+    /// The pipeline backend's proxy intersection shader reads the current walk's nearest open
+    /// entry so far (`STREAM_OPEN_BOUND`, `shaders/pipeline/open_bound.glsl`): proxy boxes
+    /// behind it test no member, where before that shader, which cannot read the payload,
+    /// tested the members of every box in front of the committed triangle (for an open ray,
+    /// every box to the walk's far end). Images, walks, requests and residency are unchanged;
+    /// only member tests go. `false` for comparisons (`MOTU_PROXY_TESTS=unbounded`).
+    pub open_bound: bool,
+}
+
+/// Whether `MOTU_PROXY_TESTS` (comma-separated words) has `word`.
+pub(super) fn proxy_tests_env_has(word: &str) -> bool {
+    std::env::var("MOTU_PROXY_TESTS")
+        .unwrap_or_default()
+        .split(',')
+        .any(|w| w.trim() == word)
 }
 
 /// What a frame on the clock may do, as counts ([`StreamOptions::frame_caps`]).
@@ -421,6 +441,8 @@ impl Default for StreamOptions {
             tlas_compact: false,
             tlas_headroom: DEFAULT_TLAS_HEADROOM,
             settle_after_still_frames: 2,
+            count_proxy_calls: proxy_tests_env_has("count"),
+            open_bound: !proxy_tests_env_has("unbounded"),
         }
     }
 }

@@ -33,7 +33,7 @@ pub(super) struct StreamParams {
     pub(super) proxy_box_index: u64,
     pub(super) proxy_boxes: u64,
     /// [`STREAM_PROBE_PASS`] or 0 (with [`STREAM_PROBE_STOP`]), with a probe's pass-mark row
-    /// stride `<<` [`STREAM_PASS_ROWS_SHIFT`].
+    /// stride `<<` [`STREAM_PASS_ROWS_SHIFT`], and [`STREAM_OPEN_BOUND`].
     pub(super) flags: u32,
     pub(super) _pad: u32,
 }
@@ -53,6 +53,11 @@ pub(super) const STREAM_LAST_PASS: u32 = 4;
 /// `STREAM_NO_MARK_WALK` of `common.glsl`: a last pass after which nothing is built (the
 /// frame's build budget spent): no mark walks, whose marks only steer that build.
 pub(super) const STREAM_NO_MARK_WALK: u32 = 8;
+
+/// `STREAM_OPEN_BOUND` of `common.glsl`: a ray's walks after its first start from its
+/// nearest open entry so far, and the pipeline's proxy intersection shader reads the current
+/// walk's from the carry buffer ([`StreamOptions::open_bound`](super::StreamOptions::open_bound)).
+pub(super) const STREAM_OPEN_BOUND: u32 = 16;
 
 /// `STREAM_PASS_ROWS_SHIFT` of `common.glsl`: `flags >> it` is the probe's pass-mark row
 /// stride (0: none; `StreamOptions::pass_marks`).

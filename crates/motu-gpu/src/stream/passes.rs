@@ -9,7 +9,9 @@ use super::buffers::FrameBuffers;
 use super::demand::Demand;
 use super::params::{
     StreamParams, CARRY_BYTES, STAMP_LIMIT, STREAM_LAST_PASS, STREAM_NO_MARK_WALK,
+    STREAM_OPEN_BOUND,
 };
+use super::proxy_count::{self, PROXY_COUNT_WORDS};
 use super::{FrameStreamStats, PassStats, StreamFallback, StreamingRenderer, GUARD_BIAS};
 use crate::error::{GpuError, Result};
 use crate::render::{
@@ -115,7 +117,7 @@ impl<'a> StreamingRenderer<'a> {
                 ..Default::default()
             };
             extra.counters.since(&shader_before, &mut pass);
-            shader_before = extra.counters;
+            shader_before = extra.counters.clone();
             let host_before_build = pass_t0.elapsed().as_secs_f64() * 1e3;
             let log_pass = |s: &mut Self, mut pass: PassStats, host_extra: f64| {
                 before.since(s.frame.stats(), &mut pass);
@@ -211,7 +213,7 @@ impl<'a> StreamingRenderer<'a> {
             pixels * 4,
         )?;
         rec.copy_buffer(
-            &fb.stats,
+            self.frame.proxy_counts().map_or(&fb.stats, |c| &c.counts),
             0,
             &fb.readback,
             final_off + pixels * 20,
@@ -265,6 +267,15 @@ impl<'a> StreamingRenderer<'a> {
             (true, true) => STREAM_LAST_PASS | STREAM_NO_MARK_WALK,
             (true, false) => STREAM_LAST_PASS,
             _ => 0,
+        }
+    }
+
+    /// The flags every pass adds: [`StreamOptions::open_bound`](super::StreamOptions::open_bound)'s.
+    fn proxy_test_flags(&self) -> u32 {
+        if self.opts.open_bound {
+            STREAM_OPEN_BOUND
+        } else {
+            0
         }
     }
 
@@ -376,7 +387,7 @@ const NONE_BLOCKER: u32 = u32::MAX;
 
 /// The shaders' counters of a frame's passes so far (the stats words, cumulative over the
 /// frame's passes): what a pass added is its `PassStats`'.
-#[derive(Clone, Copy, Default)]
+#[derive(Clone, Default)]
 pub(super) struct ShaderCounters {
     secondary_rays: u32,
     tlas_walks: u32,
@@ -384,10 +395,12 @@ pub(super) struct ShaderCounters {
     mark_tlas_walks: u32,
     proxy_member_tests: u32,
     proxy_exact_tests: u32,
+    /// Counting mode's counters (`proxy_count.rs`; empty without it).
+    proxy: Vec<u32>,
 }
 
 impl ShaderCounters {
-    fn of(words: &[u32]) -> Self {
+    fn of(words: &[u32], proxy: Vec<u32>) -> Self {
         let at = |i: usize| words.get(i).copied().unwrap_or(0);
         ShaderCounters {
             secondary_rays: at(STAT_SHADOW_RAYS),
@@ -396,6 +409,7 @@ impl ShaderCounters {
             mark_tlas_walks: at(STAT_MARK_TLAS_WALKS),
             proxy_member_tests: at(STAT_PROXY_MEMBER_TESTS),
             proxy_exact_tests: at(STAT_PROXY_EXACT_TESTS),
+            proxy,
         }
     }
 
@@ -408,6 +422,7 @@ impl ShaderCounters {
         pass.mark_tlas_walks = grown(self.mark_tlas_walks, before.mark_tlas_walks);
         pass.proxy_member_tests = grown(self.proxy_member_tests, before.proxy_member_tests);
         pass.proxy_exact_tests = grown(self.proxy_exact_tests, before.proxy_exact_tests);
+        proxy_count::fill_pass(&self.proxy, &before.proxy, pass);
     }
 }
 
@@ -527,6 +542,7 @@ impl<'a> StreamingRenderer<'a> {
             inc_off,
             final_off,
         } = ReadbackLayout::new(nb, pixels);
+        self.ensure_proxy_counts(u64::from(full_count) + list.len() as u64)?;
         self.frame.next_stamp(STAMP_LIMIT)?;
         // Every resident BLAS is walked by every ray of this pass that reaches its box in
         // front of its best hit: a ray that started by now needs it no more.
@@ -552,7 +568,7 @@ impl<'a> StreamingRenderer<'a> {
             cluster_members,
             proxy_box_index,
             proxy_boxes,
-            flags,
+            flags: flags | self.proxy_test_flags(),
             _pad: 0,
         };
         fb.stream.write(0, std::slice::from_ref(&sp))?;
@@ -560,7 +576,9 @@ impl<'a> StreamingRenderer<'a> {
         addresses[Slot::Frame as usize] = fb.params.device_address()?.0;
         addresses[Slot::Aov as usize] = fb.aov.device_address()?.0;
         addresses[Slot::Rgba as usize] = fb.rgba.device_address()?.0;
-        addresses[Slot::Stats as usize] = fb.stats.device_address()?.0;
+        // Counting mode's shaders write a longer stats buffer of their own (proxy_count.rs).
+        let (stats, stats_clear) = self.pass_stats_buffer(fb);
+        addresses[Slot::Stats as usize] = stats.device_address()?.0;
         addresses[Slot::Stream as usize] = fb.stream.device_address()?.0;
         let push_bytes: &[u8] = bytemuck::cast_slice(&addresses);
         let n = full_count + list.len() as u32;
@@ -579,7 +597,7 @@ impl<'a> StreamingRenderer<'a> {
         let t0 = Instant::now();
         let mut rec = self.ctx.record("stream pass")?;
         if first {
-            rec.fill_buffer(&fb.stats, 0, (STAT_WORDS * 4) as u64, 0)?;
+            rec.fill_buffer(stats, 0, stats_clear, 0)?;
             rec.fill_buffer(&fb.carry, 0, pixels * CARRY_BYTES, 0)?;
         }
         rec.fill_buffer(&fb.incomplete, 0, 4, 0)?;
@@ -609,13 +627,7 @@ impl<'a> StreamingRenderer<'a> {
         }
         // The counters so far, where the final image's stats words go (read_image overwrites).
         let counters_off = final_off + pixels * 20;
-        rec.copy_buffer(
-            &fb.stats,
-            0,
-            &fb.readback,
-            counters_off,
-            (STAT_WORDS * 4) as u64,
-        )?;
+        self.record_counter_copies(&mut rec, stats, &fb.readback, counters_off)?;
         rec.submit_and_wait()?;
         let trace_ms = t0.elapsed().as_secs_f64() * 1e3;
         let stamps: Vec<u32> = fb.readback.read_vec(0, nb)?;
@@ -641,9 +653,56 @@ impl<'a> StreamingRenderer<'a> {
             },
             PassExtra {
                 blockers,
-                counters: ShaderCounters::of(&words),
+                counters: ShaderCounters::of(&words, self.read_proxy_counts()?),
             },
         ))
+    }
+}
+
+impl StreamingRenderer<'_> {
+    /// Counting mode: makes or grows its stats buffer for a pass of `items` launch items.
+    fn ensure_proxy_counts(&mut self, items: u64) -> Result<()> {
+        if !self.opts.count_proxy_calls {
+            return Ok(());
+        }
+        match self.frame.proxy_counts_slot() {
+            Some(slot) => proxy_count::ensure_count_buffer(&mut self.heap, slot, items),
+            None => Ok(()),
+        }
+    }
+
+    /// The stats buffer a pass's shaders write (the frame's, or counting mode's) and the bytes
+    /// a frame's first pass clears (counting mode: all, its launch items' words included).
+    fn pass_stats_buffer<'b>(&'b self, fb: &'b FrameBuffers) -> (&'b motu_vk::HeapBuffer, u64) {
+        match self.frame.proxy_counts() {
+            Some(c) => (&c.counts, c.counts.size_bytes()),
+            None => (&fb.stats, (STAT_WORDS * 4) as u64),
+        }
+    }
+
+    /// Records the copies of a pass's counters: the stats words to `readback` at `offset`, and
+    /// counting mode's counters to its own read-back.
+    fn record_counter_copies<'r>(
+        &'r self,
+        rec: &mut motu_vk::CommandRecorder<'r>,
+        stats: &'r motu_vk::HeapBuffer,
+        readback: &'r motu_vk::HeapBuffer,
+        offset: u64,
+    ) -> Result<()> {
+        rec.copy_buffer(stats, 0, readback, offset, (STAT_WORDS * 4) as u64)?;
+        if let Some(c) = self.frame.proxy_counts() {
+            let words = (4 * PROXY_COUNT_WORDS) as u64;
+            rec.copy_buffer(&c.counts, (STAT_WORDS * 4) as u64, &c.readback, 0, words)?;
+        }
+        Ok(())
+    }
+
+    /// Counting mode's counters so far (its read-back, copied by the pass; empty without it).
+    fn read_proxy_counts(&self) -> Result<Vec<u32>> {
+        match self.frame.proxy_counts() {
+            Some(c) => Ok(c.readback.read_vec(0, PROXY_COUNT_WORDS)?),
+            None => Ok(Vec::new()),
+        }
     }
 }
 

@@ -454,12 +454,20 @@ pub struct PassStats {
     pub tlas_walks: u64,
     pub mark_walks: u64,
     pub mark_tlas_walks: u64,
-    /// The query backend's count (device-independent; 0 on the pipeline backend, whose
-    /// any-hit shader cannot carry counts out): proxy member boxes tested in their quantised
-    /// form, and the exact tests (an instance record read) they let through
-    /// (`stream/member_boxes.rs`).
+    /// Proxy member boxes tested in their quantised form, and the exact tests (an instance
+    /// record read) they let through (`stream/member_boxes.rs`; device-independent). The query
+    /// backend always counts them; the pipeline backend, whose tests run in intersection and
+    /// any-hit shaders, only in counting mode
+    /// ([`StreamOptions::count_proxy_calls`](super::StreamOptions::count_proxy_calls), else 0).
     pub proxy_member_tests: u64,
     pub proxy_exact_tests: u64,
+    /// Counting mode only ([`StreamOptions::count_proxy_calls`](super::StreamOptions::count_proxy_calls),
+    /// else all 0): the pass's proxy work by ray kind and outcome (`stream/proxy_count.rs`).
+    pub proxy_calls_camera: super::ProxyCalls,
+    pub proxy_calls_guard: super::ProxyCalls,
+    pub proxy_calls_shadow: super::ProxyCalls,
+    pub proxy_calls_ao: super::ProxyCalls,
+    pub proxy_calls_bounce: super::ProxyCalls,
 }
 
 /// Totals over all frames rendered so far.

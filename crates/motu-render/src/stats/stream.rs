@@ -222,6 +222,31 @@ mirror! {
         mark_tlas_walks: u64,
         proxy_member_tests: u64,
         proxy_exact_tests: u64,
+        proxy_calls_camera: ProxyCalls,
+        proxy_calls_guard: ProxyCalls,
+        proxy_calls_shadow: ProxyCalls,
+        proxy_calls_ao: ProxyCalls,
+        proxy_calls_bounce: ProxyCalls,
+    }
+}
+
+mirror! {
+    /// `motu_gpu::ProxyCalls` as JSON (counting mode, `MOTU_PROXY_TESTS=count`).
+    ProxyCalls from motu_gpu::ProxyCalls {
+        open: ProxyWork,
+        closed: ProxyWork,
+        miss: ProxyWork,
+    }
+}
+
+mirror! {
+    /// `motu_gpu::ProxyWork` as JSON.
+    ProxyWork from motu_gpu::ProxyWork {
+        rays: u64,
+        calls: u64,
+        reports: u64,
+        member_tests: u64,
+        exact_tests: u64,
     }
 }
 

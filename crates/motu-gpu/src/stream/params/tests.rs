@@ -27,13 +27,15 @@ fn stream_params_match_common_glsl() {
     assert_eq!(define("STREAM_PROBE_STOP"), STREAM_PROBE_STOP);
     assert_eq!(define("STREAM_LAST_PASS"), STREAM_LAST_PASS);
     assert_eq!(define("STREAM_NO_MARK_WALK"), STREAM_NO_MARK_WALK);
+    assert_eq!(define("STREAM_OPEN_BOUND"), STREAM_OPEN_BOUND);
     let flags = [
         STREAM_PROBE_PASS,
         STREAM_PROBE_STOP,
         STREAM_LAST_PASS,
         STREAM_NO_MARK_WALK,
+        STREAM_OPEN_BOUND,
     ];
-    assert_eq!(flags.iter().fold(0, |a, f| a | f).count_ones(), 4);
+    assert_eq!(flags.iter().fold(0, |a, f| a | f).count_ones(), 5);
     assert!(flags.iter().all(|&f| f < 1 << STREAM_PASS_ROWS_SHIFT));
     assert_eq!(define("STREAM_PASS_ROWS_SHIFT"), STREAM_PASS_ROWS_SHIFT);
     assert_eq!(define("STREAM_START_STAMP") + 1, STAMP_LIMIT);
@@ -116,4 +118,32 @@ fn probe_flags_carry_the_pass_rows_and_passed_marks_are_one_below_the_pass() {
         assert!(!passed_mark(4 * 6 + level, 7));
     }
     assert!(!passed_mark(0, 0));
+}
+
+/// The carry buffer's layout as the open bound uses it: `CARRY_WORDS` of `common.glsl` is
+/// [`CARRY_BYTES`] / 4 and `CARRY_OPEN_BOUND_WORD` the last word of the streamed `Carry`, whose
+/// last field is `vec4 thru` (its `w`, no pixel's state: `pipeline/open_bound.glsl`).
+#[test]
+fn the_open_bound_word_is_the_streamed_carrys_thru_w() {
+    const RENDER_PIXEL: &str = include_str!("../../../../../shaders/render_pixel.glsl");
+    assert_eq!(u64::from(define("CARRY_WORDS")) * 4, CARRY_BYTES);
+    assert_eq!(define("CARRY_OPEN_BOUND_WORD") + 1, define("CARRY_WORDS"));
+    let body = RENDER_PIXEL
+        .split("struct Carry {")
+        .nth(1)
+        .and_then(|s| s.split("};").next())
+        .expect("render_pixel.glsl has struct Carry");
+    let fields: Vec<&str> = body
+        .lines()
+        .map(|l| l.split("//").next().unwrap_or("").trim())
+        .filter(|l| l.ends_with(';'))
+        .collect();
+    assert!(
+        fields
+            .iter()
+            .all(|f| f.starts_with("vec4 ") || f.starts_with("uvec4 ")),
+        "{fields:?}"
+    );
+    assert_eq!(fields.len() as u64 * 16, CARRY_BYTES, "{fields:?}");
+    assert_eq!(fields.last(), Some(&"vec4 thru;"));
 }
